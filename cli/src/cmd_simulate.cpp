@@ -1,0 +1,184 @@
+// arena simulate SCENE.json [--facets G --points K --dt S --reduce MODE]
+//                           [--trajectory FILE.csv]
+// The contract is SCENE.md: one JSON object on stdout; ok=false and a
+// non-zero exit on any error.
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <fstream>
+#include <iomanip>
+#include <optional>
+#include <sstream>
+#include <string>
+
+#include <nlohmann/json.hpp>
+
+#include "arena/mechanics/scene_json.hpp"
+#include "arena/mechanics/simulate.hpp"
+#include "commands.hpp"
+
+namespace arena::cli {
+namespace {
+
+using mechanics::ContactMode;
+using nlohmann::json;
+
+struct SimulateOptions {
+  std::string scene_path;
+  std::optional<int> facets;
+  std::optional<int> points;
+  std::optional<double> dt;
+  std::optional<std::string> reduce;
+  std::string trajectory_path;
+};
+
+json Vec(const Eigen::Vector3d& v) { return json::array({v.x(), v.y(), v.z()}); }
+
+// Roll-pitch-yaw about fixed x, y, z (R = Rz(yaw) Ry(pitch) Rx(roll)).
+Eigen::Vector3d Rpy(const Eigen::Quaterniond& q) {
+  const Eigen::Matrix3d R = q.normalized().toRotationMatrix();
+  const double pitch = std::asin(std::clamp(-R(2, 0), -1.0, 1.0));
+  const double roll = std::atan2(R(2, 1), R(2, 2));
+  const double yaw = std::atan2(R(1, 0), R(0, 0));
+  return {roll, pitch, yaw};
+}
+
+int PrintError(const std::string& error, int exit_code) {
+  std::printf("%s\n", json({{"ok", false}, {"error", error}}).dump().c_str());
+  return exit_code;
+}
+
+std::string ReadFile(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) throw CommandError(kExitBadInput, "scene: cannot open '" + path + "'");
+  std::ostringstream text;
+  text << in.rdbuf();
+  return text.str();
+}
+
+void WriteTrajectory(const std::string& path, const mechanics::Scene& scene,
+                     const mechanics::SimulationResult& result) {
+  std::ofstream out(path);
+  if (!out) throw CommandError(kExitBadInput, "--trajectory: cannot write '" + path + "'");
+  out << "t,x,y,z,qw,qx,qy,qz,vx,vy,vz,wx,wy,wz,pusher_fx,pusher_fy,pusher_fz";
+  std::vector<std::string> names;
+  for (const auto& f : scene.fingers) names.push_back(f.name);
+  if (scene.pusher) names.push_back("pusher");
+  for (const auto& n : names) out << ',' << n << "_fn," << n << "_ft," << n << "_mode";
+  out << '\n' << std::setprecision(10);
+  for (const auto& s : result.samples) {
+    const auto& q = s.orientation;
+    out << s.t << ',' << s.position.x() << ',' << s.position.y() << ',' << s.position.z() << ','
+        << q.w() << ',' << q.x() << ',' << q.y() << ',' << q.z() << ',' << s.velocity.x() << ','
+        << s.velocity.y() << ',' << s.velocity.z() << ',' << s.angular_velocity.x() << ','
+        << s.angular_velocity.y() << ',' << s.angular_velocity.z() << ',' << s.pusher_force.x()
+        << ',' << s.pusher_force.y() << ',' << s.pusher_force.z();
+    for (const auto& c : s.contacts) {
+      out << ',' << c.normal_force << ',' << c.tangential_force.norm() << ','
+          << mechanics::ToString(c.mode);
+    }
+    out << '\n';
+  }
+  if (!out) throw CommandError(kExitFailure, "--trajectory: write to '" + path + "' failed");
+}
+
+int RunSimulate(const SimulateOptions& opt) {
+  mechanics::Scene scene;
+  try {
+    scene = mechanics::ParseScene(ReadFile(opt.scene_path));
+    if (opt.facets) scene.model.facets = *opt.facets;
+    if (opt.points) scene.model.points = *opt.points;
+    if (opt.dt) scene.model.dt = *opt.dt;
+    if (opt.reduce) {
+      if (*opt.reduce == "auto") scene.model.reduce = mechanics::Reduce::kAuto;
+      else if (*opt.reduce == "full") scene.model.reduce = mechanics::Reduce::kFull;
+      else if (*opt.reduce == "planar") scene.model.reduce = mechanics::Reduce::kPlanar;
+      else throw mechanics::SceneError("--reduce", "must be auto, full or planar, got '" + *opt.reduce + "'");
+    }
+    mechanics::ValidateScene(scene);  // the overrides too
+  } catch (const mechanics::SceneError& e) {
+    return PrintError(e.what(), kExitBadInput);
+  } catch (const CommandError& e) {
+    return PrintError(e.what(), e.exit_code());
+  }
+
+  const mechanics::SimulationResult result = mechanics::Simulate(scene);
+  if (result.status != mechanics::SimulationStatus::kOk) {
+    return PrintError(result.error, result.status == mechanics::SimulationStatus::kInvalidScene
+                                        ? kExitBadInput
+                                        : kExitFailure);
+  }
+  if (!opt.trajectory_path.empty()) {
+    try {
+      WriteTrajectory(opt.trajectory_path, scene, result);
+    } catch (const CommandError& e) {
+      return PrintError(e.what(), e.exit_code());
+    }
+  }
+
+  const auto& last = result.samples.back();
+  json contacts = json::array();
+  for (size_t i = 0; i < last.contacts.size(); ++i) {
+    const auto& c = last.contacts[i];
+    const std::string name = i < scene.fingers.size() ? scene.fingers[i].name : "pusher";
+    contacts.push_back({{"name", name},
+                        {"mode", mechanics::ToString(c.mode)},
+                        {"normal_force", c.normal_force},
+                        {"tangential_force", Vec(c.tangential_force)}});
+  }
+  Eigen::Vector3d mean_pusher = Eigen::Vector3d::Zero();
+  double max_pusher = 0;
+  for (const auto& s : result.samples) {
+    mean_pusher += s.pusher_force;
+    max_pusher = std::max(max_pusher, s.pusher_force.norm());
+  }
+  mean_pusher /= static_cast<double>(result.samples.size());
+
+  json out = {
+      {"ok", true},
+      {"model",
+       {{"dof", result.model.dof},
+        {"facets", result.model.facets},
+        {"points", result.model.points},
+        {"dt", result.model.dt},
+        {"unknowns", result.model.unknowns}}},
+      {"final",
+       {{"position", Vec(last.position)},
+        {"rpy", Vec(Rpy(last.orientation))},
+        {"velocity", json::array({last.velocity.x(), last.velocity.y(), last.velocity.z(),
+                                  last.angular_velocity.x(), last.angular_velocity.y(),
+                                  last.angular_velocity.z()})}}},
+      {"pusher_force", {{"mean", Vec(mean_pusher)}, {"max_norm", max_pusher}}},
+      {"contacts", contacts},
+      {"residuals",
+       {{"force_balance", result.residuals.force_balance},
+        {"complementarity", result.residuals.complementarity},
+        {"cone", result.residuals.cone}}},
+      {"solver",
+       {{"steps", result.solver.steps},
+        {"max_pivots", result.solver.max_pivots},
+        {"failures", result.solver.failures}}},
+      {"wall_s", result.wall_s}};
+  std::printf("%s\n", out.dump().c_str());
+  return kExitOk;
+}
+
+}  // namespace
+
+void AddSimulateCommand(CLI::App& app, Action* action) {
+  auto opt = std::make_shared<SimulateOptions>();
+  CLI::App* cmd = app.add_subcommand("simulate", "Simulate one scene with the contact model");
+  cmd->footer(
+      "Example:\n  arena simulate examples/scenes/canonical.json --facets 16 --trajectory out.csv\n"
+      "Prints one JSON object (SCENE.md); exit 0 on success, 2 on a bad scene, 1 on a solver "
+      "failure.");
+  cmd->add_option("scene", opt->scene_path, "Scene JSON file (SCENE.md)")->required();
+  cmd->add_option("--facets", opt->facets, "Edges of the polyhedral friction cone (overrides model.facets)");
+  cmd->add_option("--points", opt->points, "Constituent points per line/patch (overrides model.points)");
+  cmd->add_option("--dt", opt->dt, "Time step in s (overrides model.dt)");
+  cmd->add_option("--reduce", opt->reduce, "auto, full or planar (overrides model.reduce)");
+  cmd->add_option("--trajectory", opt->trajectory_path, "Write the 250 Hz trajectory as CSV");
+  cmd->callback([opt, action] { *action = [opt] { return RunSimulate(*opt); }; });
+}
+
+}  // namespace arena::cli

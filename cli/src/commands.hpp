@@ -1,0 +1,41 @@
+// The arena binary's subcommands. Each Add*Command() registers one CLI11
+// subcommand; when it is chosen on the command line its callback stores the
+// action to run in *action, and main() runs it once parsing is done, so that
+// every error is reported in one place (main) with its exit code.
+#pragma once
+
+#include <functional>
+#include <stdexcept>
+#include <string>
+
+#include <CLI/CLI.hpp>
+
+namespace arena::cli {
+
+// Exit codes (documented in README.md).
+enum ExitCode : int {
+  kExitOk = 0,
+  kExitFailure = 1,       // the command ran and failed (a solver failure, a failed campaign)
+  kExitBadInput = 2,      // invalid arguments, scene, campaign or query
+  kExitStore = 3,         // the store cannot be opened, is read-only, full or corrupt
+  kExitCommunication = 4, // DDS set-up failed, no cell answered in time
+  kExitInterrupted = 130, // stopped by SIGINT / SIGTERM before finishing
+};
+
+// An error a command reports to the user: the message says what went wrong and
+// what to do next; main() prints it to stderr and exits with exit_code.
+class CommandError : public std::runtime_error {
+ public:
+  CommandError(int exit_code, const std::string& message)
+      : std::runtime_error(message), exit_code_(exit_code) {}
+  int exit_code() const { return exit_code_; }
+
+ private:
+  int exit_code_;
+};
+
+using Action = std::function<int()>;
+
+void AddSimulateCommand(CLI::App& app, Action* action);
+
+}  // namespace arena::cli

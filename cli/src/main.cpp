@@ -1,0 +1,42 @@
+// arena: one binary, many subcommands (DESIGN.md, cli room).
+#include <cstdio>
+#include <exception>
+#include <string>
+
+#include <CLI/CLI.hpp>
+
+#include "arena/cli/version.hpp"
+#include "commands.hpp"
+
+int main(int argc, char** argv) {
+  using namespace arena::cli;
+  CLI::App app{"arena: autonomous prehensile-pushing experiment campaigns", "arena"};
+  app.require_subcommand(0, 1);
+  app.set_version_flag("--version", std::string("arena ") + arena::Version() + " (commit " +
+                                        arena::GitCommit() + ")");
+  app.footer("Run 'arena COMMAND --help' for a command's options and an example.");
+
+  Action action;
+  AddSimulateCommand(app, &action);
+
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& e) {
+    // CLI11 prints help/version itself (exit 0); other parse errors are usage errors.
+    const int rc = app.exit(e);
+    return rc == 0 ? kExitOk : kExitBadInput;
+  }
+  if (!action) {
+    std::fputs(app.help().c_str(), stdout);
+    return kExitOk;
+  }
+  try {
+    return action();
+  } catch (const CommandError& e) {
+    std::fprintf(stderr, "arena: %s\n", e.what());
+    return e.exit_code();
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "arena: internal error: %s\n", e.what());
+    return kExitFailure;
+  }
+}

@@ -1,0 +1,77 @@
+// Scene: one prehensile-pushing setup (SCENE.md is the contract).
+//
+// Plain structs, SI units, everything in the gripper frame at t = 0. A Scene
+// that came out of ParseScene() is valid; code that builds one by hand should
+// call ValidateScene() before simulating it.
+#pragma once
+
+#include <optional>
+#include <string>
+#include <vector>
+
+#include <Eigen/Core>
+
+namespace arena::mechanics {
+
+enum class ObjectShape { kBox, kCylinder };
+enum class ContactType { kPoint, kLine, kPatch };
+// kAuto: model only what the scene requires; kFull: always 6 DOF;
+// kPlanar: 3 DOF, refuse a scene that is not planar.
+enum class Reduce { kAuto, kFull, kPlanar };
+
+struct Pose {
+  Eigen::Vector3d position = Eigen::Vector3d::Zero();  // m
+  Eigen::Vector3d rpy = Eigen::Vector3d::Zero();       // rad, about fixed x, y, z
+};
+
+struct ObjectSpec {
+  ObjectShape shape = ObjectShape::kBox;
+  Eigen::Vector3d size = Eigen::Vector3d::Zero();  // box: full extents (m)
+  double radius = 0;                                // cylinder (m)
+  double height = 0;                                // cylinder (m), along object z
+  double mass = 0;                                  // kg, > 0
+  std::optional<Eigen::Matrix3d> inertia;           // kg m^2 about the centre of mass
+  Pose pose;
+};
+
+struct ContactSpec {
+  std::string name;
+  ContactType type = ContactType::kPoint;
+  Eigen::Vector3d position = Eigen::Vector3d::Zero();  // on the object surface (m)
+  Eigen::Vector3d normal = Eigen::Vector3d::UnitX();   // unit, into the object
+  Eigen::Vector3d axis = Eigen::Vector3d::UnitZ();     // line: unit direction
+  double length = 0;                                   // line (m)
+  double radius = 0;                                   // patch (m)
+  double mu = 0;                                       // friction coefficient, >= 0
+};
+
+struct PusherMotion {
+  Eigen::Vector3d velocity = Eigen::Vector3d::Zero();          // m/s, relative to the gripper
+  Eigen::Vector3d angular_velocity = Eigen::Vector3d::Zero();  // rad/s, about the contact point
+};
+
+struct PusherSpec : ContactSpec {
+  PusherMotion motion;
+};
+
+struct ModelOptions {
+  int facets = 8;        // edges of the inscribed polyhedral friction cone, >= 3
+  int points = 3;        // constituent points per line (patch)
+  double dt = 0.004;     // time step (s)
+  Reduce reduce = Reduce::kAuto;
+};
+
+struct Scene {
+  ObjectSpec object;
+  Eigen::Vector3d gravity = Eigen::Vector3d::Zero();  // m/s^2; zero = no gravity rows
+  double duration = 1.0;                               // s
+  double grip_force = 0;                               // N per finger (sum over constituents)
+  std::vector<ContactSpec> fingers;
+  std::optional<PusherSpec> pusher;
+  ModelOptions model;
+};
+
+const char* ToString(ContactType type);
+const char* ToString(Reduce reduce);
+
+}  // namespace arena::mechanics

@@ -1,0 +1,31 @@
+#!/usr/bin/env bash
+# The README's two quick-start commands.
+#
+#   scripts/quickstart.sh run        install what is missing, build, run the example campaign
+#   scripts/quickstart.sh test       install what is missing, build, run the test suite
+#   scripts/quickstart.sh sanitize   the same test suite under ASan + UBSan (build-asan/)
+set -euo pipefail
+here="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+cd "$here"
+what="${1:-run}"
+case "$what" in
+  run)
+    scripts/setup.sh "$here/build"
+    mkdir -p out
+    exec build/bin/arena simulate examples/scenes/canonical.json --trajectory out/canonical.csv
+    ;;
+  test)
+    scripts/setup.sh "$here/build"
+    exec ctest --test-dir build --output-on-failure -j 2 --timeout 600
+    ;;
+  sanitize)
+    scripts/setup.sh "$here/build-asan" -DCMAKE_BUILD_TYPE=RelWithDebInfo -DARENA_SANITIZE=ON \
+      -DARENA_BUILD_BENCH=OFF
+    export ASAN_OPTIONS="detect_leaks=1:abort_on_error=0" UBSAN_OPTIONS="print_stacktrace=1"
+    exec ctest --test-dir build-asan --output-on-failure -j 2 --timeout 900 "${@:2}"
+    ;;
+  *)
+    echo "usage: scripts/quickstart.sh run|test|sanitize" >&2
+    exit 2
+    ;;
+esac

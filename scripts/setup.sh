@@ -1,0 +1,44 @@
+#!/usr/bin/env bash
+# Installs what is missing, configures and builds arena. Idempotent: when
+# every package is there and nothing changed, it only asks ninja, which
+# answers "no work to do".
+#
+#   scripts/setup.sh [BUILD_DIR] [extra cmake args...]
+#
+# Environment: ARENA_JOBS (default 2).
+set -euo pipefail
+here="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+build="${1:-$here/build}"
+shift || true
+jobs="${ARENA_JOBS:-2}"
+
+packages=(
+  build-essential cmake ninja-build git pkg-config ccache
+  libeigen3-dev libsqlite3-dev sqlite3
+  libfastrtps-dev libfastcdr-dev fastddsgen fastdds-tools
+  nlohmann-json3-dev libspdlog-dev libcli11-dev
+  libgtest-dev libgmock-dev libbenchmark-dev libhdf5-dev
+  iproute2 procps
+)
+
+missing=()
+for p in "${packages[@]}"; do
+  if ! dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed"; then
+    missing+=("$p")
+  fi
+done
+if ((${#missing[@]})); then
+  echo "setup: installing ${missing[*]}" >&2
+  sudo=""
+  if [ "$(id -u)" -ne 0 ]; then sudo="sudo"; fi
+  export DEBIAN_FRONTEND=noninteractive
+  $sudo apt-get update -qq
+  $sudo apt-get install -y -qq --no-install-recommends "${missing[@]}" >/dev/null
+fi
+
+if [ ! -f "$build/build.ninja" ]; then
+  cmake -S "$here" -B "$build" -G Ninja -DCMAKE_BUILD_TYPE=Release "$@" >/dev/null
+elif (($#)); then
+  cmake "$build" "$@" >/dev/null
+fi
+cmake --build "$build" -j "$jobs"
