@@ -15,7 +15,8 @@
 //   TrialStatus   reliable, keep-all, volatile: a cell re-sends a final status
 //                 when it sees a command again (idempotency), so nothing needs
 //                 to be kept for late joiners.
-//   GroundTruth   reliable, keep-all, bounded history (kGroundTruthMaxBatches);
+//   GroundTruth   reliable, keep-all, bounded history (the writer waits for
+//                 acknowledgements every kGroundTruthMaxBatches/4 batches);
 //                 a short heartbeat period so lost fragments are repaired fast.
 //                 It is a log, not telemetry: a full history blocks the writer
 //                 (Write returns false after max_blocking_time) instead of
@@ -71,7 +72,7 @@ class DdsError : public std::runtime_error {
 };
 
 inline constexpr double kCellLivelinessLease_s = 1.0;
-inline constexpr int kGroundTruthMaxBatches = 256;   // writer/reader history bound
+inline constexpr int kGroundTruthMaxBatches = 256;   // unacknowledged batches at most
 inline constexpr double kGroundTruthHeartbeat_s = 0.05;
 
 struct NetworkOptions {
