@@ -190,6 +190,10 @@ void ApplyTopicQos(const std::string& topic, fdds::ReliabilityQosPolicy* reliabi
   }
 }
 
+// Topics that cells write: their writers assert liveliness, their readers
+// track it.
+bool CellWritten(const std::string& topic) { return topic != "TrialCommand"; }
+
 std::string Describe(const fdds::ReliabilityQosPolicy& r, const fdds::DurabilityQosPolicy& d,
                      const fdds::HistoryQosPolicy& h, const fdds::ResourceLimitsQosPolicy& l,
                      const fdds::LivelinessQosPolicy& lv) {
@@ -320,10 +324,8 @@ void ApplyNetwork(const ParticipantOptions& opt, fdds::DomainParticipantQos* qos
     const HostPort hp = SplitHostPort(peer, "--peers");
     builtin.initialPeersList.push_back(UdpLocator(ResolveIPv4(hp.host, "--peers"), hp.port));
   }
-  if (local_only) {
-    qos->wire_protocol().default_unicast_locator_list.clear();
-    qos->wire_protocol().default_unicast_locator_list.push_back(UdpLocator("127.0.0.1", 0));
-  }
+  // User data goes to every transport's default locators: shared memory
+  // between processes of this host, UDPv4 (127.0.0.1 only when local).
 
   if (!net.discovery_server.empty()) {
     std::string entry = net.discovery_server;
@@ -495,7 +497,7 @@ Writer<T>::Writer(Participant& participant, const WriterOptions& options)
                 &qos.resource_limits());
   qos.reliability().max_blocking_time = Duration_t(options.max_blocking_s);
   impl_->max_blocking_s = options.max_blocking_s;
-  if (options.cell_liveliness) {
+  if (CellWritten(topic)) {
     qos.liveliness().kind = fdds::AUTOMATIC_LIVELINESS_QOS;
     qos.liveliness().lease_duration = Duration_t(kCellLivelinessLease_s);
     qos.liveliness().announcement_period = Duration_t(kCellLivelinessLease_s / 4.0);
@@ -628,9 +630,10 @@ Reader<T>::Reader(Participant& participant, const ReaderOptions& options)
   if (topic == "CellAnnounce") {
     qos.resource_limits().max_samples_per_instance = 1;
   }
-  // Accept any offered lease; tracking uses the writer's own lease.
+  // Fast DDS tracks a writer's liveliness only for a finite requested lease.
   qos.liveliness().kind = fdds::AUTOMATIC_LIVELINESS_QOS;
-  qos.liveliness().lease_duration = eprosima::fastrtps::c_TimeInfinite;
+  qos.liveliness().lease_duration = CellWritten(topic) ? Duration_t(kCellLivelinessLease_s)
+                                                       : eprosima::fastrtps::c_TimeInfinite;
   if (topic == "GroundTruth") {
     qos.reliable_reader_qos().times.heartbeatResponseDelay = Duration_t(0.0);
   }

@@ -39,7 +39,6 @@ TEST(DdsParticipant, GroundTruthArrivesCompleteAndInOrder) {
   dds::Participant a(Named("arena.test.a", 1));
   dds::Participant b(Named("arena.test.b", 1));
   dds::WriterOptions cell;
-  cell.cell_liveliness = true;
   dds::Writer<msg::GroundTruth> writer(a, cell);
   dds::Reader<msg::GroundTruth> reader(b);
   ASSERT_TRUE(writer.WaitForMatched(1, 10s));
@@ -73,7 +72,6 @@ TEST(DdsParticipant, GroundTruthArrivesCompleteAndInOrder) {
 TEST(DdsParticipant, LateReaderGetsTheLastAnnouncement) {
   dds::Participant a(Named("arena.test.cell", 2));
   dds::WriterOptions cell;
-  cell.cell_liveliness = true;
   dds::Writer<msg::CellAnnounce> writer(a, cell);
   msg::CellAnnounce first;
   first.cell_id("c1");

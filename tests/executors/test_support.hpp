@@ -154,8 +154,17 @@ struct Driver {
     return c;
   }
 
+  bool Send(msg::TrialCommand c) { return commands.Write(c); }
+
   // The next status for (trial, attempt) whose state is not ACCEPTED.
   std::optional<msg::TrialStatus> FinalStatus(std::uint64_t trial, std::chrono::milliseconds timeout) {
+    for (auto it = other_statuses.begin(); it != other_statuses.end(); ++it) {
+      if (it->trial_id() == trial && it->state() != msg::STATE_ACCEPTED) {
+        msg::TrialStatus s = *it;
+        other_statuses.erase(it);
+        return s;
+      }
+    }
     const auto deadline = std::chrono::steady_clock::now() + timeout;
     while (true) {
       const auto left = deadline - std::chrono::steady_clock::now();
@@ -163,7 +172,7 @@ struct Driver {
       auto s = statuses.Take(std::chrono::duration_cast<std::chrono::milliseconds>(left));
       if (!s) return std::nullopt;
       if (s->trial_id() == trial && s->state() != msg::STATE_ACCEPTED) return s;
-      other_statuses.push_back(*s);
+      if (s->state() != msg::STATE_ACCEPTED) other_statuses.push_back(*s);
     }
   }
 

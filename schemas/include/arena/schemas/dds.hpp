@@ -21,8 +21,10 @@
 //                 It is a log, not telemetry: a full history blocks the writer
 //                 (Write returns false after max_blocking_time) instead of
 //                 dropping a sample.
-//   Cell writers  automatic liveliness, lease kCellLivelinessLease_s: a reader
-//                 sees a dead cell within that lease.
+//   Cell topics   (CellAnnounce, TrialStatus, GroundTruth) writers assert
+//                 automatic liveliness with lease kCellLivelinessLease_s and
+//                 readers request it: a reader sees a dead cell within that
+//                 lease. (A writer offering a longer lease does not match.)
 //   Participants  lease ParticipantOptions::lease_s (2.5 s, not Fast DDS's 20 s).
 //
 // Transports (secure by default)
@@ -151,8 +153,6 @@ class Participant {
 };
 
 struct WriterOptions {
-  // Cell-side writers assert automatic liveliness with kCellLivelinessLease_s.
-  bool cell_liveliness = false;
   // How long Write() may block on a full history (s).
   double max_blocking_s = 1.0;
 };
