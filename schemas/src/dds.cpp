@@ -7,6 +7,7 @@
 #include <sys/socket.h>
 
 #include <algorithm>
+#include <cstdlib>
 #include <atomic>
 #include <condition_variable>
 #include <map>
@@ -32,6 +33,7 @@
 #include <fastdds/rtps/transport/UDPv4TransportDescriptor.h>
 #include <fastdds/rtps/transport/shared_mem/SharedMemTransportDescriptor.h>
 #include <fastrtps/utils/IPLocator.h>
+#include <fastrtps/xmlparser/XMLProfileManager.h>
 #include <spdlog/spdlog.h>
 
 #include "arena/schemas/arena.h"
@@ -381,6 +383,16 @@ Participant::Participant(const ParticipantOptions& options)
     throw DdsError("dds: participant lease must be in (0.2, 3600] s");
   }
   auto* factory = fdds::DomainParticipantFactory::get_instance();
+  // Fast DDS 2.9.1 deadlocks when a writer delivers intra-process while the
+  // liveliness protocol asserts (seen in bench_dds: WLP assertion against
+  // StatefulWriter::deliver_sample_to_intraprocesses). Participants of one
+  // process therefore talk through the transports like any other.
+  static std::once_flag library_once;
+  std::call_once(library_once, [] {
+    eprosima::fastrtps::LibrarySettingsAttributes library;
+    library.intraprocess_delivery = eprosima::fastrtps::INTRAPROCESS_OFF;
+    eprosima::fastrtps::xmlparser::XMLProfileManager::library_settings(library);
+  });
   // Profiles first, then our overrides, then log what is in effect.
   if (!options.network.profile_xml.empty()) {
     if (factory->load_XML_profiles_file(options.network.profile_xml) != ReturnCode_t::RETCODE_OK) {
@@ -506,8 +518,6 @@ Writer<T>::Writer(Participant& participant, const WriterOptions& options)
     impl_->window = kGroundTruthMaxBatches / 4;
     auto& times = qos.reliable_writer_qos().times;
     times.heartbeatPeriod = Duration_t(kGroundTruthHeartbeat_s);
-    times.nackResponseDelay = Duration_t(0.0);
-    times.nackSupressionDuration = Duration_t(0.0);
   }
   impl_->writer = core.publisher->create_datawriter(t, qos, nullptr);
   if (impl_->writer == nullptr) throw DdsError("dds: create_datawriter(" + topic + ") failed");
@@ -634,9 +644,6 @@ Reader<T>::Reader(Participant& participant, const ReaderOptions& options)
   qos.liveliness().kind = fdds::AUTOMATIC_LIVELINESS_QOS;
   qos.liveliness().lease_duration = CellWritten(topic) ? Duration_t(kCellLivelinessLease_s)
                                                        : eprosima::fastrtps::c_TimeInfinite;
-  if (topic == "GroundTruth") {
-    qos.reliable_reader_qos().times.heartbeatResponseDelay = Duration_t(0.0);
-  }
   fdds::StatusMask mask = fdds::StatusMask::data_available();
   mask << fdds::StatusMask::liveliness_changed();
   impl_->reader = core.subscriber->create_datareader(t, qos, impl_.get(), mask);

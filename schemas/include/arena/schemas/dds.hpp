@@ -92,7 +92,7 @@ struct NetworkOptions {
 };
 
 // Participants tried per host (well-known ports) when a peer has no port.
-inline constexpr int kPeerParticipantRange = 32;
+inline constexpr int kPeerParticipantRange = 64;
 
 // "a,b:7410, c" -> {"a", "b:7410", "c"}; validates every entry.
 // @throws DdsError("--peers: ...") naming the bad entry.
