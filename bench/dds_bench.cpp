@@ -82,7 +82,6 @@ Result Stream(int cells, int batches, int samples, std::chrono::microseconds per
   }
   for (auto& w : writers) w->WaitForMatched(1, 10s);
   reader.WaitForMatched(cells, 10s);
-  const int run = 0;
   Result r;
   r.expected = static_cast<std::uint64_t>(cells) * batches * samples;
   std::atomic<bool> done{false};
@@ -94,7 +93,7 @@ Result Stream(int cells, int batches, int samples, std::chrono::microseconds per
       if (!g) continue;
       const std::uint64_t now = NowNs();
       r.latency_ms.push_back((now - g->sent_unix_ns()) * 1e-6);
-      auto& n = next[static_cast<size_t>(g->trial_id() % 100)];
+      auto& n = next[static_cast<size_t>(g->trial_id())];
       if (g->first_sample() != n) {
         ++r.out_of_order;
         
@@ -113,7 +112,7 @@ Result Stream(int cells, int batches, int samples, std::chrono::microseconds per
     producers.emplace_back([&, c] {
       auto next_due = std::chrono::steady_clock::now();
       for (int b = 0; b < batches; ++b) {
-        auto g = MakeBatch(static_cast<std::uint64_t>(c) + 100 * run, static_cast<std::uint32_t>(b), samples);
+        auto g = MakeBatch(static_cast<std::uint64_t>(c), static_cast<std::uint32_t>(b), samples);
         if (period.count() > 0) {
           next_due += period;
           std::this_thread::sleep_until(next_due);
