@@ -15,6 +15,7 @@
 #include <nlohmann/json.hpp>
 
 #include "arena/mechanics/scene_json.hpp"
+#include "arena/mechanics/simulate.hpp"
 #include "arena/orchestrator/campaign.hpp"
 
 namespace arena::orchestrator {
@@ -60,6 +61,20 @@ TEST(Campaign, SmokeExamplePlansAbout40ValidTrialsOverAllContactTypes) {
   EXPECT_EQ(pusher_y.size(), 2u);  // a straight and a pivoting push
   EXPECT_LT(total_duration, 10.0);
   EXPECT_EQ(json::parse(c.defects_json)["latency_s"], 0.004);
+}
+
+// The first campaign a new user runs must run: every trial simulates, and so
+// does its prediction (the timing of the whole set is in the report, not here).
+TEST(Campaign, SmokeExampleTrialsSimulateWithTheModel) {
+  const Campaign c = Smoke();
+  for (int64_t i = 0; i < TrialCount(c); i += c.replicates) {
+    const PlannedTrial t = PlanTrial(c, i);
+    const auto truth = mechanics::Simulate(t.scene);
+    EXPECT_EQ(truth.status, mechanics::SimulationStatus::kOk) << i << ": " << truth.error;
+    const auto prediction = mechanics::Simulate(PredictionScene(c, t));
+    EXPECT_EQ(prediction.status, mechanics::SimulationStatus::kOk) << i << ": " << prediction.error;
+    EXPECT_EQ(prediction.model.facets, 4);
+  }
 }
 
 TEST(Campaign, LargerExampleResolvesFilesAndPlansValidScenes) {
