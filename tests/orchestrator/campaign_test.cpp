@@ -60,7 +60,7 @@ TEST(Campaign, SmokeExamplePlansAbout40ValidTrialsOverAllContactTypes) {
   EXPECT_EQ(types.size(), 3u);
   EXPECT_EQ(pusher_y.size(), 2u);  // a straight and a pivoting push
   EXPECT_LT(total_duration, 10.0);
-  EXPECT_EQ(json::parse(c.defects_json)["latency_s"], 0.004);
+  EXPECT_EQ(json::parse(c.defects_json)["latency_ms"], 4);
 }
 
 // The first campaign a new user runs must run: every trial simulates, and so
@@ -82,7 +82,7 @@ TEST(Campaign, LargerExampleResolvesFilesAndPlansValidScenes) {
   EXPECT_EQ(c.sampler, SamplerKind::kSobol);
   EXPECT_EQ(TrialCount(c), 2048);
   EXPECT_EQ(c.defects_file, "lab_defects.json");
-  EXPECT_EQ(json::parse(c.defects_json)["drop_rate"], 0.002);
+  EXPECT_EQ(json::parse(c.defects_json)["drop_probability"], 0.002);
   // The stored source is self-contained: scene and defects inlined.
   const json source = json::parse(c.source_json);
   EXPECT_TRUE(source["scene"].is_object());
