@@ -170,7 +170,7 @@ struct Service::Impl {
 
   // Predictions computed before their reset finished, waiting for it.
   std::map<std::int64_t, PredictionDone> waiting_predictions;
-  // Campaign model settings: campaign id -> spec "model" (or null).
+  // Campaign model settings: campaign id -> spec "prediction" (or null).
   std::map<std::int64_t, nlohmann::json> campaign_models;
 
   Impl(const ServiceOptions& o)
@@ -245,7 +245,7 @@ struct Service::Impl {
       nlohmann::json model;
       try {
         const auto spec = nlohmann::json::parse(store->GetCampaign(campaign_id).spec_json);
-        if (spec.is_object() && spec.contains("model")) model = spec["model"];
+        if (spec.is_object() && spec.contains("prediction")) model = spec["prediction"];
       } catch (const std::exception& e) {
         spdlog::warn("campaign {}: spec unreadable ({}), predicting with the scene's model", campaign_id,
                      e.what());
