@@ -37,5 +37,6 @@ class CommandError : public std::runtime_error {
 using Action = std::function<int()>;
 
 void AddSimulateCommand(CLI::App& app, Action* action);
+void AddCellCommand(CLI::App& app, Action* action);
 
 }  // namespace arena::cli
