@@ -18,6 +18,7 @@ int main(int argc, char** argv) {
 
   Action action;
   AddSimulateCommand(app, &action);
+  AddQueryCommand(app, &action);
 
   try {
     app.parse(argc, argv);
