@@ -19,6 +19,7 @@ int main(int argc, char** argv) {
   Action action;
   AddSimulateCommand(app, &action);
   AddQueryCommand(app, &action);
+  AddExportCommand(app, &action);
 
   try {
     app.parse(argc, argv);
