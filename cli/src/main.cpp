@@ -19,6 +19,8 @@ int main(int argc, char** argv) {
   Action action;
   AddSimulateCommand(app, &action);
   AddCellCommand(app, &action);
+  AddQueryCommand(app, &action);
+  AddExportCommand(app, &action);
 
   try {
     app.parse(argc, argv);
