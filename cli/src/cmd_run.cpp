@@ -95,6 +95,12 @@ int Run(RunOptions opt) {
   if (opt.domain < 0) opt.domain = 100 + static_cast<int>(getpid() % 100);
   if (opt.domain > 232) throw CommandError(kExitBadInput, "--domain: must be 0..232, got " + std::to_string(opt.domain));
 
+  // Signals first: the log's flusher, the cells and DDS threads inherit the blocked mask.
+  std::atomic<orchestrator::Service*> running{nullptr};
+  SignalWatcher signals([&running](int) {
+    if (auto* s = running.load()) s->Stop();
+  });
+
   orchestrator::Campaign campaign;
   try {
     campaign = orchestrator::LoadCampaignFile(opt.campaign_path);
@@ -119,11 +125,6 @@ int Run(RunOptions opt) {
                  static_cast<long long>(campaign_id), campaign.name.c_str(), static_cast<long long>(trials),
                  opt.cells, opt.domain, orchestrator::ServiceLogPath(opt.db_path).c_str());
 
-  // Signals first: the cells and DDS threads inherit the blocked mask.
-  std::atomic<orchestrator::Service*> running{nullptr};
-  SignalWatcher signals([&running](int) {
-    if (auto* s = running.load()) s->Stop();
-  });
 
   std::vector<ChildProcess> cells;
   const std::string self = SelfExecutable();

@@ -25,6 +25,13 @@ struct ServeCliOptions {
 };
 
 int RunServe(ServeCliOptions opt) {
+  // Before any thread exists (the log's flusher, DDS): threads inherit the
+  // blocked signals, so only the watcher ever sees SIGTERM.
+  std::atomic<orchestrator::Service*> running{nullptr};
+  SignalWatcher signals([&running](int sig) {
+    spdlog::info("{} received", sig == SIGINT ? "SIGINT" : "SIGTERM");
+    if (auto* s = running.load()) s->Stop();
+  });
   try {
     if (!opt.peers.empty()) opt.service.network.peers = dds::ParsePeers(opt.peers);
     orchestrator::SetUpServiceLog(opt.service.db_path, opt.log_level);
@@ -36,11 +43,6 @@ int RunServe(ServeCliOptions opt) {
     throw CommandError(kExitStore, std::string("cannot write the log next to the store: ") + e.what());
   }
   std::unique_ptr<orchestrator::Service> service;
-  std::atomic<orchestrator::Service*> running{nullptr};
-  SignalWatcher signals([&running](int sig) {
-    spdlog::info("{} received", sig == SIGINT ? "SIGINT" : "SIGTERM");
-    if (auto* s = running.load()) s->Stop();
-  });
   try {
     service = std::make_unique<orchestrator::Service>(opt.service);
   } catch (const db::StoreError& e) {

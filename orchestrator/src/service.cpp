@@ -145,6 +145,8 @@ struct Service::Impl {
     std::string id;
     bool alive = true;
     bool quarantined = false;
+    int execute_failures = 0;    // consecutive failed EXECUTE phases
+    int reset_failures = 0;      // consecutive failed RESET phases
     double speed = 1.0;          // the cell's announced pacing (wall s per simulated s)
     CellPhase phase = CellPhase::kIdle;
     std::int64_t trial_id = 0;
@@ -302,9 +304,20 @@ struct Service::Impl {
     }
   }
 
-  // Counts a phase result; quarantines the cell after too many failures in a row.
+  // Counts a phase result; quarantines the cell after quarantine_after
+  // failures with no fully clean trial between them. A success of one phase
+  // does not excuse failures of the other: a cell whose every reset fails
+  // while its executes succeed is still broken.
   void CellResult(CellRun& cell, bool ok, const std::string& reason) {
-    const int failures = store->RecordCellResult(cell.id, ok);
+    int& streak = cell.phase == CellPhase::kResetting ? cell.reset_failures : cell.execute_failures;
+    const int other = cell.phase == CellPhase::kResetting ? cell.execute_failures : cell.reset_failures;
+    if (ok) {
+      streak = 0;
+      if (other == 0) store->RecordCellResult(cell.id, true);
+      return;
+    }
+    ++streak;
+    const int failures = store->RecordCellResult(cell.id, false);
     if (!ok && failures >= opt.quarantine_after) {
       const std::string why = std::to_string(failures) + " failures in a row, last: " + reason;
       store->QuarantineCell(cell.id, why);
