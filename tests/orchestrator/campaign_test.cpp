@@ -101,6 +101,16 @@ TEST(Campaign, LargerExampleResolvesFilesAndPlansValidScenes) {
   }
 }
 
+TEST(Campaign, ReadmeExampleIsValid) {
+  const std::string readme = ReadText(kSourceDir / "orchestrator/README.md");
+  const auto start = readme.find("```json\n");
+  ASSERT_NE(start, std::string::npos);
+  const auto end = readme.find("```", start + 8);
+  const Campaign c = ParseCampaign(readme.substr(start + 8, end - start - 8),
+                                   (kSourceDir / "examples/campaigns").string());
+  EXPECT_EQ(TrialCount(c), 36);
+}
+
 TEST(Campaign, PlanningIsDeterministic) {
   const Campaign a = Smoke();
   const Campaign b = Smoke();
