@@ -380,6 +380,21 @@ TEST(SceneJson, OversizedInputIsRefusedBeforeParsing) {
   fs::remove_all(dir);
 }
 
+// Inputs the fuzzer (scripts/fuzz.sh) once crashed on: each must now be
+// parsed or refused with a SceneError.
+TEST(SceneJson, FuzzCrashersAreHandled) {
+  const fs::path dir = kSourceDir / "tests/fuzz/crashers/scene_fuzz";
+  if (!fs::exists(dir)) GTEST_SKIP() << "no crashers recorded";
+  for (const auto& entry : fs::directory_iterator(dir)) {
+    SCOPED_TRACE(entry.path().string());
+    try {
+      const Scene s = ParseScene(ReadText(entry.path()));
+      EXPECT_EQ(SceneToJson(ParseScene(SceneToJson(s))), SceneToJson(s));
+    } catch (const SceneError&) {
+    }
+  }
+}
+
 TEST(SceneJson, MissingFileIsRefused) {
   EXPECT_THROW(LoadSceneFile("/nonexistent/scene.json"), SceneError);
 }

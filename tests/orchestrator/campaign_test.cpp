@@ -226,6 +226,23 @@ TEST(Campaign, BadInputCorpusIsRefusedAtTheManifestField) {
   EXPECT_GE(checked, 30);
 }
 
+// Inputs the fuzzer (scripts/fuzz.sh) once crashed on: each must now be
+// parsed or refused with a CampaignError.
+TEST(Campaign, FuzzCrashersAreHandled) {
+  const fs::path dir = kSourceDir / "tests/fuzz/crashers/campaign_fuzz";
+  if (!fs::exists(dir)) GTEST_SKIP() << "no crashers recorded";
+  for (const auto& entry : fs::directory_iterator(dir)) {
+    SCOPED_TRACE(entry.path().string());
+    try {
+      const Campaign c = ParseCampaign(ReadText(entry.path()), "/nonexistent-arena-fuzz-dir");
+      if (TrialCount(c) > 0) {
+        EXPECT_NO_THROW(mechanics::ValidateScene(PlanTrial(c, 0).scene));
+      }
+    } catch (const CampaignError&) {
+    }
+  }
+}
+
 TEST(Campaign, OversizedFileIsRefusedBeforeReading) {
   const fs::path dir = fs::temp_directory_path() / ("arena_campaign_test_" + std::to_string(::getpid()));
   fs::create_directories(dir);
