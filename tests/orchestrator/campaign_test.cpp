@@ -177,6 +177,17 @@ TEST(Campaign, GridCoversEveryCombinationOnce) {
   EXPECT_EQ(first["grip_force"], 8.0);  // a range's grid includes its ends
 }
 
+TEST(Campaign, ReloadingCanSkipTheConditionCheck) {
+  json doc = json::parse(ReadText(kSourceDir / "examples/campaigns/smoke.json"));
+  doc["variations"]["pivot_offset"] = {{"choices", {0, 0.05}}};  // off the object for half the conditions
+  EXPECT_THROW(ParseCampaign(doc.dump()), CampaignError);
+  const Campaign c = ParseCampaign(doc.dump(), "", ConditionCheck::kBaseScene);
+  EXPECT_EQ(TrialCount(c), 36);
+  const Campaign smoke = Smoke();
+  const Campaign reloaded = ParseCampaign(smoke.source_json, "", ConditionCheck::kBaseScene);
+  EXPECT_EQ(Fingerprint(PlanTrial(reloaded, 35)), Fingerprint(PlanTrial(smoke, 35)));
+}
+
 TEST(Campaign, OutOfRangeIndexIsAnError) {
   const Campaign c = Smoke();
   EXPECT_THROW(PlanTrial(c, -1), std::out_of_range);
