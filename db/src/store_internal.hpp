@@ -4,6 +4,7 @@
 #include <cstdint>
 #include <optional>
 #include <string>
+#include <vector>
 
 #include "sqlite_util.hpp"
 
@@ -27,6 +28,11 @@ void CheckEdge(TrialState from, TrialState to, std::int64_t trial_id, const char
 void WriteTransition(const Store::Impl& impl, std::int64_t trial_id, int attempt, TrialState from,
                      TrialState to, const std::string& cell_id, const std::string& reason,
                      const char* function);
+
+// The samples of one stream, in order; no transaction of its own (the caller's
+// read transaction gives the snapshot). @throws kCorrupt on a count mismatch.
+std::vector<Sample> ReadStreamSamples(const Store::Impl& impl, std::int64_t stream_id,
+                                      std::int64_t expected, const char* function);
 
 }  // namespace arena::db::internal
 

@@ -109,20 +109,15 @@ struct Cell::Impl {
     p.lease_s = o.participant_lease_s;
     return p;
   }
-  static dds::WriterOptions CellWriter() {
-    dds::WriterOptions w;
-    w.cell_liveliness = true;
-    return w;
-  }
 
   Impl(const CellOptions& o, MechanicsBackend m)
       : options(o),
         mechanics(std::move(m)),
         reset_params(EffectiveResetParams(o.defects)),
         participant(ParticipantFor(o)),
-        announce(participant, CellWriter()),
-        status(participant, CellWriter()),
-        ground_truth(participant, CellWriter()),
+        announce(participant),
+        status(participant),
+        ground_truth(participant),
         commands(participant, dds::ReaderOptions{false}) {}
 
   bool Stopping() {

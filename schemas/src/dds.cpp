@@ -177,12 +177,22 @@ void ApplyTopicQos(const std::string& topic, fdds::ReliabilityQosPolicy* reliabi
     history->depth = 1;
   } else if (topic == "GroundTruth") {
     // Bounded: a slow reader throttles the writer rather than growing memory.
-    limits->max_samples = kGroundTruthMaxBatches;
-    limits->max_instances = 16;
-    limits->max_samples_per_instance = kGroundTruthMaxBatches;
+    // One instance per trial; the bound is on samples in flight, whatever
+    // their instance.
+    // Fast DDS 2.9 never reuses the slot of a finished trial (instance), so
+    // instance-limited histories would stall after a few trials; the history
+    // is bounded instead by the writer's acknowledgement window
+    // (kGroundTruthMaxBatches unacknowledged batches at most, see Write()).
+    limits->max_instances = 0;
+    limits->max_samples_per_instance = 0;
+    limits->max_samples = 0;
     limits->allocated_samples = 32;
   }
 }
+
+// Topics that cells write: their writers assert liveliness, their readers
+// track it.
+bool CellWritten(const std::string& topic) { return topic != "TrialCommand"; }
 
 std::string Describe(const fdds::ReliabilityQosPolicy& r, const fdds::DurabilityQosPolicy& d,
                      const fdds::HistoryQosPolicy& h, const fdds::ResourceLimitsQosPolicy& l,
@@ -314,10 +324,8 @@ void ApplyNetwork(const ParticipantOptions& opt, fdds::DomainParticipantQos* qos
     const HostPort hp = SplitHostPort(peer, "--peers");
     builtin.initialPeersList.push_back(UdpLocator(ResolveIPv4(hp.host, "--peers"), hp.port));
   }
-  if (local_only) {
-    qos->wire_protocol().default_unicast_locator_list.clear();
-    qos->wire_protocol().default_unicast_locator_list.push_back(UdpLocator("127.0.0.1", 0));
-  }
+  // User data goes to every transport's default locators: shared memory
+  // between processes of this host, UDPv4 (127.0.0.1 only when local).
 
   if (!net.discovery_server.empty()) {
     std::string entry = net.discovery_server;
@@ -467,6 +475,9 @@ template <class T>
 struct Writer<T>::Impl {
   std::shared_ptr<detail::ParticipantCore> core;
   fdds::DataWriter* writer = nullptr;
+  double max_blocking_s = 1.0;
+  int window = 0;          // GroundTruth: batches written before an acknowledgement check
+  int unconfirmed = 0;
 
   ~Impl() {
     if (writer != nullptr) core->publisher->delete_datawriter(writer);
@@ -485,12 +496,14 @@ Writer<T>::Writer(Participant& participant, const WriterOptions& options)
   ApplyTopicQos(topic, &qos.reliability(), &qos.durability(), &qos.history(),
                 &qos.resource_limits());
   qos.reliability().max_blocking_time = Duration_t(options.max_blocking_s);
-  if (options.cell_liveliness) {
+  impl_->max_blocking_s = options.max_blocking_s;
+  if (CellWritten(topic)) {
     qos.liveliness().kind = fdds::AUTOMATIC_LIVELINESS_QOS;
     qos.liveliness().lease_duration = Duration_t(kCellLivelinessLease_s);
     qos.liveliness().announcement_period = Duration_t(kCellLivelinessLease_s / 4.0);
   }
   if (topic == "GroundTruth") {
+    impl_->window = kGroundTruthMaxBatches / 4;
     auto& times = qos.reliable_writer_qos().times;
     times.heartbeatPeriod = Duration_t(kGroundTruthHeartbeat_s);
     times.nackResponseDelay = Duration_t(0.0);
@@ -510,7 +523,18 @@ Writer<T>::~Writer() = default;
 template <class T>
 bool Writer<T>::Write(T& sample) {
   sample.schema_version(msg::SCHEMA_VERSION);
-  return impl_->writer->write(&sample);
+  if (impl_->window > 0 && impl_->unconfirmed >= impl_->window) {
+    // Bounded history: at most `window` batches unacknowledged; a reader that
+    // does not keep up throttles us here (false = try again later).
+    if (impl_->writer->wait_for_acknowledgments(Duration_t(impl_->max_blocking_s)) !=
+        ReturnCode_t::RETCODE_OK) {
+      return false;
+    }
+    impl_->unconfirmed = 0;
+  }
+  if (!impl_->writer->write(&sample)) return false;
+  ++impl_->unconfirmed;
+  return true;
 }
 
 template <class T>
@@ -606,9 +630,10 @@ Reader<T>::Reader(Participant& participant, const ReaderOptions& options)
   if (topic == "CellAnnounce") {
     qos.resource_limits().max_samples_per_instance = 1;
   }
-  // Accept any offered lease; tracking uses the writer's own lease.
+  // Fast DDS tracks a writer's liveliness only for a finite requested lease.
   qos.liveliness().kind = fdds::AUTOMATIC_LIVELINESS_QOS;
-  qos.liveliness().lease_duration = eprosima::fastrtps::c_TimeInfinite;
+  qos.liveliness().lease_duration = CellWritten(topic) ? Duration_t(kCellLivelinessLease_s)
+                                                       : eprosima::fastrtps::c_TimeInfinite;
   if (topic == "GroundTruth") {
     qos.reliable_reader_qos().times.heartbeatResponseDelay = Duration_t(0.0);
   }

@@ -15,13 +15,16 @@
 //   TrialStatus   reliable, keep-all, volatile: a cell re-sends a final status
 //                 when it sees a command again (idempotency), so nothing needs
 //                 to be kept for late joiners.
-//   GroundTruth   reliable, keep-all, bounded history (kGroundTruthMaxBatches);
+//   GroundTruth   reliable, keep-all, bounded history (the writer waits for
+//                 acknowledgements every kGroundTruthMaxBatches/4 batches);
 //                 a short heartbeat period so lost fragments are repaired fast.
 //                 It is a log, not telemetry: a full history blocks the writer
 //                 (Write returns false after max_blocking_time) instead of
 //                 dropping a sample.
-//   Cell writers  automatic liveliness, lease kCellLivelinessLease_s: a reader
-//                 sees a dead cell within that lease.
+//   Cell topics   (CellAnnounce, TrialStatus, GroundTruth) writers assert
+//                 automatic liveliness with lease kCellLivelinessLease_s and
+//                 readers request it: a reader sees a dead cell within that
+//                 lease. (A writer offering a longer lease does not match.)
 //   Participants  lease ParticipantOptions::lease_s (2.5 s, not Fast DDS's 20 s).
 //
 // Transports (secure by default)
@@ -71,7 +74,7 @@ class DdsError : public std::runtime_error {
 };
 
 inline constexpr double kCellLivelinessLease_s = 1.0;
-inline constexpr int kGroundTruthMaxBatches = 256;   // writer/reader history bound
+inline constexpr int kGroundTruthMaxBatches = 256;   // unacknowledged batches at most
 inline constexpr double kGroundTruthHeartbeat_s = 0.05;
 
 struct NetworkOptions {
@@ -150,8 +153,6 @@ class Participant {
 };
 
 struct WriterOptions {
-  // Cell-side writers assert automatic liveliness with kCellLivelinessLease_s.
-  bool cell_liveliness = false;
   // How long Write() may block on a full history (s).
   double max_blocking_s = 1.0;
 };
