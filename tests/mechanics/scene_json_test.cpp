@@ -241,6 +241,13 @@ TEST(SceneJson, EachRuleNamesItsField) {
       {"inertia impossible",
        [](json& j) { j["object"]["inertia"] = {{1e-4, 0, 0}, {0, 1e-4, 0}, {0, 0, 3e-4}}; }, "object.inertia",
        "triangle inequality"},
+      {"one finger", [](json& j) { j["fingers"].erase(1); }, "fingers", "do not balance"},
+      {"fingers on one side",
+       [](json& j) {
+         j["fingers"][1]["position"] = {-0.025, 0, 0.03};
+         j["fingers"][1]["normal"] = {1, 0, 0};
+       },
+       "fingers", "do not balance"},
       {"unknown top key", [](json& j) { j["gravity_"] = {0, 0, 0}; }, "gravity_", "unknown key"},
   };
   for (const Rule& rule : rules) {
