@@ -17,7 +17,7 @@ packages=(
   libeigen3-dev libsqlite3-dev sqlite3
   libfastrtps-dev libfastcdr-dev fastddsgen fastdds-tools
   nlohmann-json3-dev libspdlog-dev libcli11-dev
-  libgtest-dev libgmock-dev libbenchmark-dev libhdf5-dev
+  libgtest-dev libgmock-dev libbenchmark-dev libhdf5-dev libtinyxml2-dev
   iproute2 procps
 )
 

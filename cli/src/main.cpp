@@ -18,6 +18,9 @@ int main(int argc, char** argv) {
 
   Action action;
   AddSimulateCommand(app, &action);
+  AddCellCommand(app, &action);
+  AddQueryCommand(app, &action);
+  AddExportCommand(app, &action);
 
   try {
     app.parse(argc, argv);

@@ -1,7 +1,30 @@
 // Reading and writing scene JSON (SCENE.md). This is the edge of the
 // mechanics room: the model itself never sees JSON.
+//
+// Validation rules (SCENE.md leaves these open; this list is their reference):
+//  - Input: at most kMaxSceneBytes bytes of UTF-8 JSON, nesting at most
+//    kMaxSceneDepth levels, arrays at most kMaxSceneArray elements, no
+//    duplicate keys, no unknown keys (typo protection: every key must be one
+//    SCENE.md defines). Malformed JSON names the byte offset and the path
+//    where it broke ("fingers[0].mu: invalid JSON at byte 212: ...").
+//  - Required: object.shape, object.mass, the shape's dimensions, duration,
+//    grip_force, fingers (1..kMaxFingers), and for each contact type,
+//    position, normal, mu (+ axis, length for a line; radius for a patch).
+//    Optional with defaults: object.pose (identity), object.inertia (from
+//    shape), gravity (zero), pusher (none), pusher.motion (zero), model and
+//    each of its fields (ModelOptions defaults).
+//  - Directions: ParseScene accepts a normal / axis whose norm is 1 within
+//    1e-3 (hand-written 0.7071 values) and normalises it; a line axis must be
+//    perpendicular to the normal within 1e-3 and is projected exactly onto the
+//    contact plane. ValidateScene (scenes built in code) demands both within
+//    1e-6.
+//  - Geometry: every contact position (and both ends of a line) lies on the
+//    object's surface within 1% of the object's size; normals point into the
+//    object; constituent points of different contacts (and of one line or
+//    patch) must be at least 1e-6 of the object's size apart (coincident).
 #pragma once
 
+#include <optional>
 #include <stdexcept>
 #include <string>
 #include <string_view>
@@ -10,26 +33,69 @@
 
 namespace arena::mechanics {
 
+inline constexpr std::size_t kMaxSceneBytes = 1 << 20;  // 1 MiB of JSON
+inline constexpr int kMaxSceneDepth = 16;               // nesting levels
+inline constexpr std::size_t kMaxSceneArray = 4096;     // elements per array
+inline constexpr int kMaxFingers = 16;
+inline constexpr int kMaxFacets = 64;
+inline constexpr int kMaxPoints = 32;
+inline constexpr double kMaxDuration = 3600.0;  // s: one trial is not an hour
+inline constexpr double kMaxSteps = 1e7;        // duration / dt: bounds run time
+inline constexpr std::size_t kMaxNameLength = 64;
+
 // A scene that is missing a field, has a field of the wrong type, a
 // non-finite number or a value out of range. field() is the JSON path
-// ("fingers[1].mu"), what() is "fingers[1].mu: must be >= 0, got -0.2".
+// ("fingers[1].mu"; empty for the document as a whole), what() is
+// "fingers[1].mu: must be >= 0, got -0.2" ("scene: ..." when field() is empty).
 class SceneError : public std::runtime_error {
  public:
   SceneError(std::string field, const std::string& reason);
   const std::string& field() const { return field_; }
+  const std::string& reason() const { return reason_; }
 
  private:
   std::string field_;
+  std::string reason_;
 };
 
 // @throws SceneError naming the first offending field.
 Scene ParseScene(std::string_view json_text);
 
+// Limits and problems of JSON text in general (campaigns use them too).
+struct JsonLimits {
+  std::size_t max_bytes = kMaxSceneBytes;
+  int max_depth = kMaxSceneDepth;
+  std::size_t max_array = kMaxSceneArray;
+};
+struct JsonProblem {
+  std::string path;    // where ("fingers[0].mu"; empty: the document)
+  std::string reason;  // "invalid JSON at byte offset 212: ...", "duplicate key", ...
+};
+// The first problem of `text`: malformed JSON or non-UTF-8 (with its byte
+// offset), a duplicate key, or a limit exceeded; nullopt when it is fine.
+// Memory stays bounded by a small multiple of limits.max_bytes.
+std::optional<JsonProblem> FindJsonProblem(std::string_view text, const JsonLimits& limits = {});
+
+// Reads a scene file; refuses files larger than kMaxSceneBytes before
+// reading them. @throws SceneError (field "") when the file cannot be read.
+Scene LoadSceneFile(const std::string& path);
+
 // Checks ranges and consistency of a scene built in code.
 // @throws SceneError naming the first offending field.
 void ValidateScene(const Scene& scene);
 
-// The scene as SCENE.md JSON; ParseScene(SceneToJson(s)) reproduces s.
-std::string SceneToJson(const Scene& scene);
+// The scene as SCENE.md JSON (compact when indent < 0);
+// ParseScene(SceneToJson(s)) reproduces s bit for bit.
+std::string SceneToJson(const Scene& scene, int indent = -1);
+
+// "box" / "cylinder"; "point" / "line" / "patch"; "auto" / "full" / "planar".
+const char* ToString(ObjectShape shape);
+std::optional<ObjectShape> ObjectShapeFromString(std::string_view text);
+std::optional<ContactType> ContactTypeFromString(std::string_view text);
+std::optional<Reduce> ReduceFromString(std::string_view text);
+
+// The scene's length scale (m): the largest extent of the object (box: its
+// largest side; cylinder: max(diameter, height)). Tolerances scale with it.
+double ObjectExtent(const ObjectSpec& object);
 
 }  // namespace arena::mechanics

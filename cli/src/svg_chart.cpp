@@ -1,0 +1,207 @@
+#include "svg_chart.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <cctype>
+#include <cstdio>
+#include <limits>
+#include <sstream>
+
+namespace arena::cli {
+
+namespace {
+
+std::string Escape(const std::string& s) {
+  std::string out;
+  for (char c : s) {
+    switch (c) {
+      case '&': out += "&amp;"; break;
+      case '<': out += "&lt;"; break;
+      case '>': out += "&gt;"; break;
+      case '"': out += "&quot;"; break;
+      default: out += c;
+    }
+  }
+  return out;
+}
+
+std::string Id(const std::string& s) {
+  std::string out;
+  for (char c : s) out += std::isalnum(static_cast<unsigned char>(c)) ? c : '_';
+  return out;
+}
+
+std::string Num(double v) {
+  char buf[32];
+  std::snprintf(buf, sizeof buf, "%.2f", v);
+  return buf;
+}
+
+std::string TickLabel(double v) {
+  char buf[32];
+  if (v != 0 && (std::fabs(v) < 1e-3 || std::fabs(v) >= 1e5)) {
+    std::snprintf(buf, sizeof buf, "%.0e", v);
+  } else {
+    std::snprintf(buf, sizeof buf, "%g", v);
+  }
+  return buf;
+}
+
+struct Range {
+  double lo = std::numeric_limits<double>::infinity();
+  double hi = -std::numeric_limits<double>::infinity();
+  void Add(double v) {
+    lo = std::min(lo, v);
+    hi = std::max(hi, v);
+  }
+  bool empty() const { return !(lo <= hi); }
+};
+
+// Axis mapping; log axes map log10(v) and drop non-positive values.
+struct Axis {
+  bool log = false;
+  double lo = 0, hi = 1;
+  bool Usable(double v) const { return std::isfinite(v) && (!log || v > 0); }
+  double T(double v) const { return log ? std::log10(v) : v; }
+  double Frac(double v) const { return (T(v) - lo) / (hi - lo); }
+};
+
+Axis MakeAxis(Range r, bool log) {
+  Axis a;
+  a.log = log;
+  if (r.empty()) r = {log ? 1.0 : 0.0, log ? 10.0 : 1.0};
+  a.lo = log ? std::log10(r.lo) : r.lo;
+  a.hi = log ? std::log10(r.hi) : r.hi;
+  if (a.hi - a.lo < 1e-12 * std::max(1.0, std::fabs(a.hi))) {
+    const double pad = log ? 0.5 : std::max(1e-9, std::fabs(a.hi) * 0.1 + 1e-9);
+    a.lo -= pad;
+    a.hi += pad;
+  } else if (!log) {
+    const double pad = 0.05 * (a.hi - a.lo);
+    a.lo -= pad;
+    a.hi += pad;
+  }
+  return a;
+}
+
+std::vector<double> Ticks(const Axis& a) {
+  if (!a.log) return NiceTicks(a.lo, a.hi);
+  std::vector<double> t;
+  for (double e = std::ceil(a.lo); e <= std::floor(a.hi); e += 1) t.push_back(std::pow(10.0, e));
+  if (t.size() < 2) return {std::pow(10.0, a.lo), std::pow(10.0, a.hi)};
+  return t;
+}
+
+}  // namespace
+
+std::vector<double> NiceTicks(double lo, double hi, int count) {
+  if (!(hi > lo) || !std::isfinite(lo) || !std::isfinite(hi)) return {lo};
+  const double raw = (hi - lo) / std::max(count, 2);
+  const double mag = std::pow(10.0, std::floor(std::log10(raw)));
+  double step = mag;
+  for (double m : {1.0, 2.0, 2.5, 5.0, 10.0}) {
+    step = m * mag;
+    if (step >= raw) break;
+  }
+  std::vector<double> ticks;
+  for (double v = std::ceil(lo / step) * step; v <= hi + 1e-9 * step; v += step) {
+    ticks.push_back(std::fabs(v) < 1e-12 * step ? 0.0 : v);
+  }
+  return ticks;
+}
+
+std::string RenderSvg(const Chart& chart) {
+  const int left = 80, right = 190, top = 40, gap = 50, bottom = 50;
+  const int plot_w = chart.width - left - right;
+  const int n = static_cast<int>(chart.panels.size());
+  const int height = top + n * chart.panel_height + (n - 1) * gap + bottom;
+
+  Range xr;
+  for (const auto& p : chart.panels)
+    for (const auto& s : p.series)
+      for (double x : s.x)
+        if (std::isfinite(x) && (!chart.log_x || x > 0)) xr.Add(x);
+  const Axis xa = MakeAxis(xr, chart.log_x);
+
+  std::ostringstream svg;
+  svg << "<?xml version=\"1.0\" encoding=\"UTF-8\"?>\n"
+      << "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"" << chart.width << "\" height=\""
+      << height << "\" viewBox=\"0 0 " << chart.width << ' ' << height
+      << "\" font-family=\"sans-serif\" font-size=\"12\">\n"
+      << "<rect width=\"100%\" height=\"100%\" fill=\"white\"/>\n"
+      << "<text x=\"" << chart.width / 2 << "\" y=\"22\" text-anchor=\"middle\" font-size=\"15\">"
+      << Escape(chart.title) << "</text>\n";
+
+  for (int pi = 0; pi < n; ++pi) {
+    const Panel& panel = chart.panels[pi];
+    const int y0 = top + pi * (chart.panel_height + gap);
+    const int h = chart.panel_height;
+    Range yr;
+    for (const auto& s : panel.series)
+      for (size_t i = 0; i < s.y.size() && i < s.x.size(); ++i)
+        if (std::isfinite(s.y[i]) && (!panel.log_y || s.y[i] > 0)) yr.Add(s.y[i]);
+    const Axis ya = MakeAxis(yr, panel.log_y);
+    auto px = [&](double x) { return left + xa.Frac(x) * plot_w; };
+    auto py = [&](double y) { return y0 + h - ya.Frac(y) * h; };
+
+    svg << "<g class=\"panel\" data-title=\"" << Escape(panel.title) << "\">\n"
+        << "<text x=\"" << left << "\" y=\"" << y0 - 8 << "\" font-size=\"13\">"
+        << Escape(panel.title) << "</text>\n"
+        << "<rect x=\"" << left << "\" y=\"" << y0 << "\" width=\"" << plot_w << "\" height=\"" << h
+        << "\" fill=\"none\" stroke=\"#444\"/>\n";
+    for (double t : Ticks(ya)) {
+      if (!ya.Usable(t)) continue;
+      const double y = py(t);
+      if (y < y0 - 0.5 || y > y0 + h + 0.5) continue;
+      svg << "<line x1=\"" << left << "\" x2=\"" << left + plot_w << "\" y1=\"" << Num(y)
+          << "\" y2=\"" << Num(y) << "\" stroke=\"#ddd\"/>"
+          << "<text x=\"" << left - 6 << "\" y=\"" << Num(y + 4) << "\" text-anchor=\"end\">"
+          << TickLabel(t) << "</text>\n";
+    }
+    for (double t : Ticks(xa)) {
+      if (!xa.Usable(t)) continue;
+      const double x = px(t);
+      if (x < left - 0.5 || x > left + plot_w + 0.5) continue;
+      svg << "<line x1=\"" << Num(x) << "\" x2=\"" << Num(x) << "\" y1=\"" << y0 << "\" y2=\""
+          << y0 + h << "\" stroke=\"#eee\"/>"
+          << "<text x=\"" << Num(x) << "\" y=\"" << y0 + h + 16 << "\" text-anchor=\"middle\">"
+          << TickLabel(t) << "</text>\n";
+    }
+    svg << "<text transform=\"translate(" << left - 55 << ',' << y0 + h / 2
+        << ") rotate(-90)\" text-anchor=\"middle\">" << Escape(panel.y_label) << "</text>\n";
+
+    int legend_y = y0 + 12;
+    for (const auto& s : panel.series) {
+      svg << "<g class=\"series\" id=\"p" << pi << '_' << Id(s.name) << "\" data-name=\""
+          << Escape(s.name) << "\">\n";
+      if (s.markers) {
+        for (size_t i = 0; i < s.x.size() && i < s.y.size(); ++i) {
+          if (!xa.Usable(s.x[i]) || !ya.Usable(s.y[i])) continue;
+          svg << "<circle cx=\"" << Num(px(s.x[i])) << "\" cy=\"" << Num(py(s.y[i]))
+              << "\" r=\"2.5\" fill=\"" << s.color << "\"/>\n";
+        }
+      } else {
+        svg << "<polyline fill=\"none\" stroke=\"" << s.color << "\" stroke-width=\"1.5\""
+            << (s.dashed ? " stroke-dasharray=\"6 3\"" : "") << " points=\"";
+        for (size_t i = 0; i < s.x.size() && i < s.y.size(); ++i) {
+          if (!xa.Usable(s.x[i]) || !ya.Usable(s.y[i])) continue;
+          svg << Num(px(s.x[i])) << ',' << Num(py(s.y[i])) << ' ';
+        }
+        svg << "\"/>\n";
+      }
+      svg << "</g>\n";
+      svg << "<line x1=\"" << left + plot_w + 12 << "\" x2=\"" << left + plot_w + 32 << "\" y1=\""
+          << legend_y - 4 << "\" y2=\"" << legend_y - 4 << "\" stroke=\"" << s.color
+          << "\" stroke-width=\"3\"" << (s.dashed ? " stroke-dasharray=\"6 3\"" : "") << "/>"
+          << "<text x=\"" << left + plot_w + 38 << "\" y=\"" << legend_y << "\">" << Escape(s.name)
+          << "</text>\n";
+      legend_y += 16;
+    }
+    svg << "</g>\n";
+  }
+  svg << "<text x=\"" << left + plot_w / 2 << "\" y=\"" << height - 12
+      << "\" text-anchor=\"middle\">" << Escape(chart.x_label) << "</text>\n</svg>\n";
+  return svg.str();
+}
+
+}  // namespace arena::cli

@@ -1,0 +1,42 @@
+// Line and scatter charts as standalone SVG (no runtime dependency): what
+// `arena plot` draws. A chart is a stack of panels sharing the x axis; each
+// panel has series of (x, y) points drawn as lines or markers.
+#pragma once
+
+#include <string>
+#include <vector>
+
+namespace arena::cli {
+
+struct Series {
+  std::string name;                 // legend entry; also the SVG id (sanitised)
+  std::vector<double> x, y;         // same length; non-finite points are skipped
+  std::string color = "#1f77b4";
+  bool markers = false;             // markers instead of a polyline
+  bool dashed = false;
+};
+
+struct Panel {
+  std::string title;
+  std::string y_label;
+  bool log_y = false;
+  std::vector<Series> series;
+};
+
+struct Chart {
+  std::string title;
+  std::string x_label;
+  bool log_x = false;
+  std::vector<Panel> panels;
+  int width = 900;
+  int panel_height = 260;
+};
+
+// The SVG document. Every series is a <g class="series" id="..."> with a
+// data-name attribute, so tests and scripts can find it.
+std::string RenderSvg(const Chart& chart);
+
+// "Nice" axis ticks covering [lo, hi] (about `count` of them).
+std::vector<double> NiceTicks(double lo, double hi, int count = 6);
+
+}  // namespace arena::cli

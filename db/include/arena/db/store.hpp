@@ -1,0 +1,450 @@
+// arena's store: campaigns, trials, their state machine, ground truth,
+// predictions and cells in one SQLite file (WAL). db/README.md documents
+// every table and column; this header is the API the service and the CLI use.
+//
+// ## Contract
+//
+// * One `Store` is one SQLite connection. It is NOT thread-safe: use one
+//   Store per thread (several Stores, in several threads or processes, on the
+//   same file are fine: SQLite's locking serialises writers, WAL lets readers
+//   run beside the writer). An `Ingest` borrows its Store and must not
+//   outlive it.
+// * Every public write is one SQLite transaction: it happens entirely or not
+//   at all. Writes use BEGIN IMMEDIATE, so two writers never deadlock; a
+//   writer waits up to `busy_timeout_ms` for the lock, then throws kBusy.
+// * Misuse and bad input throw `StoreError` whose message starts with the
+//   function's name; nothing is written in that case.
+//
+// ## Invariants (checked by the code that writes them, tested in tests/db)
+//
+// 1. A trial's state changes only along the edges drawn below, each edge by
+//    exactly one function (table below), and each change writes one row to
+//    `trial_transitions` in the same transaction.
+// 2. A trial's `attempt` only grows; a call naming another attempt than the
+//    trial's current one is refused (kStaleAttempt): late messages from an
+//    earlier attempt cannot move a trial.
+// 3. A trial's ground truth becomes visible (trials.gt_stream_id set) in the
+//    same transaction that moves it to `executed`; a reader that follows
+//    trials.gt_stream_id never sees a half-written stream.
+// 4. Re-ingesting a (trial, attempt) replaces its stream; there is at most
+//    one stream per (trial, attempt) with complete = 1.
+// 5. No NaN or infinity is ever stored: inputs are checked and refused.
+//
+// ## Trial state machine
+//
+//                 ClaimNextTrial                Ingest::Finish
+//    planned ─────────────────────▶ dispatched ───────────────▶ executed
+//      ▲  │                            │  │                        │
+//      │  │ CancelCampaign   RetryTrial│  │FailTrial       BeginReset
+//      │  ▼                 (attempt+1)│  ▼                        ▼
+//      │ cancelled                     │ failed ◀── FailTrial ── resetting ◀──┐
+//      └───────────────────────────────┘  (from any non-terminal)  │   │      │BeginReset
+//         also RecoverAfterRestart                  CompleteReset ok│   │fail  │(retry)
+//                                                                   ▼   ▼      │
+//                                                       reset_done   reset_failed
+//                                                             │         │
+//                                                RecordPrediction (either)
+//                                                             ▼         ▼
+//                                                            predicted ───▶ done
+//                                                                FinishTrial
+//
+//   terminal: done, failed, cancelled.  "running" = dispatched .. predicted.
+//
+// | from                      | to           | function                         |
+// |---------------------------|--------------|----------------------------------|
+// | planned                   | dispatched   | ClaimNextTrial                   |
+// | planned                   | cancelled    | CancelCampaign                   |
+// | dispatched                | executed     | Ingest::Finish                   |
+// | dispatched                | planned (+1) | RetryTrial, RecoverAfterRestart  |
+// | dispatched                | failed       | RetryTrial (attempts exhausted)  |
+// | executed, reset_failed    | resetting    | BeginReset                       |
+// | resetting                 | reset_done   | CompleteReset (ok)               |
+// | resetting                 | reset_failed | CompleteReset (!ok), RecoverAfterRestart |
+// | reset_done, reset_failed  | predicted    | RecordPrediction                 |
+// | predicted                 | done         | FinishTrial                      |
+// | any non-terminal          | failed       | FailTrial                        |
+//
+// A failed reset does not spoil the trial (its ground truth is complete); it
+// counts against the cell and leaves the next start state to be observed.
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <functional>
+#include <memory>
+#include <optional>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include "arena/db/sample.hpp"
+
+namespace arena::db {
+
+// ---------------------------------------------------------------- errors
+
+class StoreError : public std::runtime_error {
+ public:
+  enum class Kind {
+    kBadInput,           // a field is missing, out of range, NaN or infinite
+    kNotFound,           // no such campaign / trial / cell
+    kIllegalTransition,  // the state machine does not have this edge
+    kStaleAttempt,       // the call names an attempt that is not the trial's current one
+    kReadOnly,           // a write through a read-only store or query
+    kBusy,               // the database stayed locked past busy_timeout_ms
+    kTooNew,             // the file's schema is newer than this binary
+    kCorrupt,            // integrity check failed, malformed block, not a database
+    kFull,               // disk or SQLite size limit full
+    kIo,                 // cannot open / read / write the file
+  };
+  StoreError(Kind kind, const std::string& message) : std::runtime_error(message), kind_(kind) {}
+  Kind kind() const { return kind_; }
+
+ private:
+  Kind kind_;
+};
+
+// ---------------------------------------------------------------- enums
+
+enum class TrialState {
+  kPlanned, kDispatched, kExecuted, kResetting, kResetDone, kResetFailed, kPredicted,
+  kDone, kFailed, kCancelled,
+};
+const char* ToString(TrialState state);
+std::optional<TrialState> ParseTrialState(const std::string& text);
+bool IsTerminal(TrialState state);
+// The edges of the diagram above (RetryTrial's dispatched->planned included).
+bool IsLegalTransition(TrialState from, TrialState to);
+
+enum class CampaignState { kActive, kPaused, kCancelled, kDone };
+const char* ToString(CampaignState state);
+
+enum class CellState { kHealthy, kQuarantined, kGone };
+const char* ToString(CellState state);
+
+// Contact types a trial needs / a cell offers, as a bit mask.
+enum ContactTypeBit : int { kPointBit = 1, kLineBit = 2, kPatchBit = 4 };
+// "point" -> kPointBit, ...; throws StoreError(kBadInput) for another name.
+int ContactTypeMask(const std::vector<std::string>& types);
+
+// ---------------------------------------------------------------- records
+
+struct StoreOptions {
+  bool read_only = false;        // SQLITE_OPEN_READONLY: every write fails with kReadOnly
+  bool create = true;            // read-write only: create the file if missing
+  // FULL: a commit is on disk when it returns (survives power loss).
+  // NORMAL (default): a commit survives any process crash (SIGKILL); an OS
+  // crash or power loss may roll back the last commits since the last WAL
+  // checkpoint, never corrupting the file. README: "What survives which crash".
+  bool synchronous_full = false;
+  int busy_timeout_ms = 5000;
+  // Seconds since the Unix epoch; tests inject a clock. Default: system clock.
+  std::function<double()> clock;
+};
+
+struct NewCampaign {
+  std::string name;                    // non-empty
+  std::string spec_json;               // the submitted campaign, as validated (JSON object)
+  int priority = 0;                    // higher runs first
+  std::uint64_t seed = 0;              // the campaign seed
+  std::string sampler_state_json = "{}";  // where the sampler stands after the planned trials
+};
+
+struct PlannedTrial {
+  int condition = 0;                   // condition index (>= 0)
+  int replicate = 0;                   // replicate of that condition (>= 0)
+  std::uint64_t seed = 0;              // per-trial seed: re-runs the trial bit for bit
+  std::string scene_json;              // SCENE.md scene (JSON object); parameter columns come from it
+  std::string params_json = "{}";      // the sampler's own parameter values (JSON object)
+  std::string defects_json = "{}";     // the campaign's defect profile for this trial
+};
+
+struct Campaign {
+  std::int64_t id = 0;
+  std::string name;
+  std::string spec_json;
+  CampaignState state = CampaignState::kActive;
+  int priority = 0;
+  std::uint64_t seed = 0;
+  std::string sampler_state_json;
+  double created_at = 0;               // s since epoch
+  double updated_at = 0;
+};
+
+struct Trial {
+  std::int64_t id = 0;
+  std::int64_t campaign_id = 0;
+  int index = 0;                       // 0.. within the campaign
+  int condition = 0;
+  int replicate = 0;
+  std::uint64_t seed = 0;
+  TrialState state = TrialState::kPlanned;
+  int attempt = 1;                     // 1 for the first execution
+  std::string cell_id;                 // last cell it was dispatched to ("" if never)
+  std::string scene_json;
+  std::string params_json;
+  std::string defects_json;
+  std::string outcome;                 // "" until set: ok, solver_failure, refused, failed, cancelled
+  std::optional<std::int64_t> gt_stream_id;  // the published ground truth
+  double not_before = 0;               // s since epoch: a retry waits until then
+  double created_at = 0;
+  double updated_at = 0;
+};
+
+// What ClaimNextTrial hands the service: everything it needs to send EXECUTE.
+struct ClaimedTrial {
+  std::int64_t trial_id = 0;
+  std::int64_t campaign_id = 0;
+  int attempt = 1;
+  std::uint64_t seed = 0;
+  std::string scene_json;
+  std::string defects_json;
+};
+
+struct Transition {
+  std::int64_t trial_id = 0;
+  int attempt = 0;
+  std::string from_state;              // "" for the insert that created the trial
+  std::string to_state;
+  double at = 0;                       // s since epoch
+  std::string cell_id;
+  std::string reason;
+};
+
+// A cell's reset report (TrialStatus of a RESET phase).
+struct ResetReport {
+  bool ok = false;
+  std::array<double, 7> observed_pose{0, 0, 0, 1, 0, 0, 0};  // object start pose it saw (m, quat)
+  double position_error = 0;           // m, the cell's own observed-vs-target
+  double angle_error = 0;              // rad
+  int reset_attempts = 1;
+  std::string reason;                  // why it failed ("" if ok)
+};
+
+struct Prediction {
+  std::string model_key;               // fidelity label, e.g. "g8_k3_dt0.004" (non-empty)
+  std::string model_json = "{}";       // the model settings used
+  std::string status = "ok";           // ok, solver_failure, invalid_scene, error
+  std::optional<double> final_position_error;  // m, predicted vs true final object position
+  std::optional<double> final_angle_error;     // rad
+  std::optional<double> force_error;           // N, RMS over samples and contacts
+  std::optional<double> mode_agreement;        // [0, 1], fraction of contact-samples with same mode
+  double wall_s = 0;                   // predictor wall time (s), >= 0
+  std::string detail_json = "{}";      // residuals, solver statistics
+};
+
+struct CellInfo {
+  std::string id;
+  CellState state = CellState::kHealthy;
+  double last_seen = 0;
+  int consecutive_failures = 0;
+  int total_failures = 0;
+  std::string capabilities_json;
+  std::string quarantine_reason;
+};
+
+struct CampaignStatus {
+  std::int64_t id = 0;
+  std::string name;
+  CampaignState state = CampaignState::kActive;
+  int priority = 0;
+  std::int64_t planned = 0;            // all trials of the campaign
+  std::int64_t pending = 0;            // state planned
+  std::int64_t running = 0;            // dispatched .. predicted
+  std::int64_t done = 0;
+  std::int64_t failed = 0;
+  std::int64_t cancelled = 0;
+  double rate_per_hour = 0;            // finished (done+failed) trials per hour, recent window
+  std::optional<double> eta_s;         // (pending+running)/rate; absent when rate is 0
+};
+
+// Start state observed after the reset that preceded each trial, against the
+// trial's nominal start pose: the reset's bias per campaign and cell.
+struct StartStateDrift {
+  std::int64_t campaign_id = 0;
+  std::string cell_id;
+  std::int64_t trials = 0;
+  double mean_dx = 0, mean_dy = 0, mean_dz = 0;   // m, observed - nominal (bias)
+  double mean_position_error = 0;                 // m
+  double max_position_error = 0;                  // m
+  double mean_angle_error = 0;                    // rad
+  double max_angle_error = 0;                     // rad
+};
+
+struct StatusSummary {
+  std::vector<CampaignStatus> campaigns;
+  std::vector<CellInfo> cells;
+  std::vector<StartStateDrift> drift;
+};
+
+struct RecoveryReport {
+  std::vector<std::int64_t> requeued;       // dispatched -> planned, attempt+1
+  std::vector<std::int64_t> reset_failed;   // resetting -> reset_failed
+  std::int64_t orphan_streams_deleted = 0;  // incomplete ground truth of requeued attempts
+};
+
+struct GroundTruth {
+  std::int64_t trial_id = 0;
+  int attempt = 0;
+  std::string cell_id;
+  std::vector<Sample> samples;
+};
+
+struct IngestOptions {
+  int samples_per_chunk = 250;         // samples per BLOB row (1 s at 250 Hz)
+  int samples_per_commit = 2000;       // commit when this many samples are buffered
+  double max_commit_interval_s = 0.5;  // ... or when the oldest buffered sample is this old
+};
+
+class Store;
+
+// Buffers the ground truth of one (trial, attempt) and writes it in batched
+// transactions (prepared statements, BLOB chunks). Nothing it writes is
+// visible to readers until Finish() publishes it. Not thread-safe.
+class Ingest {
+ public:
+  ~Ingest();  // an unfinished stream stays unpublished (cleaned up on re-ingest/recovery)
+  Ingest(const Ingest&) = delete;
+  Ingest& operator=(const Ingest&) = delete;
+
+  // @throws StoreError(kBadInput) naming the sample index and field for NaN /
+  //   infinity / sizes; nothing of that call is buffered then.
+  void Add(const Sample& sample);
+  void Add(const std::vector<Sample>& samples);
+  // Commits buffered samples if max_commit_interval_s has passed (call from a timer).
+  void Poll();
+  // Commits buffered samples now.
+  void Flush();
+  // Commits the rest, writes the per-trial summary, publishes the stream and
+  // moves the trial dispatched -> executed (or, on a re-ingest of a trial
+  // already past executed at this attempt, swaps the stream in) -- all in one
+  // transaction. `outcome` is the cell's result ("ok" normally).
+  // @returns the number of samples published.
+  std::int64_t Finish(const std::string& outcome = "ok");
+  std::int64_t samples() const;
+
+ private:
+  friend class Store;
+  struct Impl;
+  explicit Ingest(std::unique_ptr<Impl> impl);
+  std::unique_ptr<Impl> impl_;
+};
+
+class Store {
+ public:
+  // Opens (and in read-write mode creates and migrates) the store at `path`.
+  // @throws StoreError(kTooNew) when the file was written by a newer arena,
+  //   kIo when it cannot be opened, kCorrupt when it is not a database,
+  //   kNotFound when read-only and the file does not exist.
+  static std::unique_ptr<Store> Open(const std::string& path, const StoreOptions& options = {});
+  ~Store();
+  Store(const Store&) = delete;
+  Store& operator=(const Store&) = delete;
+
+  static int SchemaVersion();            // the schema this binary writes
+  int FileSchemaVersion() const;         // PRAGMA user_version of the open file
+  bool read_only() const;
+  const std::string& path() const;
+  double Now() const;
+  // "ok" or SQLite's list of problems (PRAGMA integrity_check).
+  std::string IntegrityCheck() const;
+  // The state machine's invariants over the whole file (e.g. a trial at or
+  // past executed has a complete stream of its attempt; done has a
+  // prediction; the last audit row of each trial matches its state).
+  // @returns one message per violation; empty when all hold.
+  std::vector<std::string> CheckInvariants() const;
+
+  // ---- campaigns
+  // Inserts the campaign and its planned trials in one transaction.
+  // @returns the campaign id. @throws kBadInput naming the trial and field.
+  std::int64_t CreateCampaign(const NewCampaign& campaign, const std::vector<PlannedTrial>& trials);
+  // Adds more planned trials (a budget-driven sampler) and stores the sampler's new position.
+  void AppendPlannedTrials(std::int64_t campaign_id, const std::vector<PlannedTrial>& trials,
+                           const std::string& sampler_state_json);
+  Campaign GetCampaign(std::int64_t campaign_id) const;
+  std::vector<Campaign> ListCampaigns() const;
+  void PauseCampaign(std::int64_t campaign_id);    // active -> paused
+  void ResumeCampaign(std::int64_t campaign_id);   // paused -> active
+  // -> cancelled; its planned trials become cancelled, running ones run out.
+  void CancelCampaign(std::int64_t campaign_id);
+  // Marks active campaigns whose trials are all terminal as done; returns their ids.
+  std::vector<std::int64_t> CompleteFinishedCampaigns();
+
+  // ---- trial state machine (see the table above)
+  // Atomically picks the next planned trial, by campaign priority (then
+  // campaign id, then trial index), of an active campaign, whose contact
+  // types the cell offers and whose not_before has passed; moves it to
+  // dispatched on `cell_id`, copies the cell's last observed start state into
+  // it. The write is committed before this returns, so the caller acts after.
+  // @returns nullopt when nothing is pending or the cell is not healthy.
+  std::optional<ClaimedTrial> ClaimNextTrial(const std::string& cell_id);
+  // What ClaimNextTrial would return now, without writing (to aim a reset).
+  std::optional<ClaimedTrial> PeekNextTrial(const std::string& cell_id) const;
+  // dispatched -> planned with attempt+1 and not_before = now + backoff_s; or
+  // -> failed (outcome "failed") when attempt >= max_attempts.
+  // @returns the new state.
+  TrialState RetryTrial(std::int64_t trial_id, int attempt, const std::string& reason,
+                        int max_attempts, double backoff_s);
+  // any non-terminal -> failed, outcome `outcome` (e.g. "refused").
+  void FailTrial(std::int64_t trial_id, int attempt, const std::string& reason,
+                 const std::string& outcome = "failed");
+  // executed | reset_failed -> resetting.
+  void BeginReset(std::int64_t trial_id, int attempt);
+  // resetting -> reset_done | reset_failed; stores the observed start state on
+  // the cell (the next trial claimed there inherits it) and the report on the trial.
+  void CompleteReset(std::int64_t trial_id, int attempt, const ResetReport& report);
+  // Stores a prediction (replacing one with the same model_key for this
+  // attempt); reset_done | reset_failed -> predicted on the first one.
+  // Allowed in reset_done, reset_failed, predicted.
+  void RecordPrediction(std::int64_t trial_id, int attempt, const Prediction& prediction);
+  // predicted -> done.
+  void FinishTrial(std::int64_t trial_id, int attempt);
+  // After a crash: dispatched -> planned (attempt+1), resetting -> reset_failed,
+  // incomplete streams of the old attempts deleted. Idempotent.
+  RecoveryReport RecoverAfterRestart(const std::string& reason = "service restarted");
+
+  Trial GetTrial(std::int64_t trial_id) const;
+  std::vector<Trial> ListTrials(std::int64_t campaign_id) const;
+  std::vector<Transition> ListTransitions(std::int64_t trial_id) const;
+  std::vector<Prediction> ListPredictions(std::int64_t trial_id) const;
+
+  // ---- ground truth
+  // @throws kNotFound / kStaleAttempt / kIllegalTransition unless the trial is
+  //   dispatched (or past executed with its ground truth) at `attempt`.
+  std::unique_ptr<Ingest> BeginIngest(std::int64_t trial_id, int attempt,
+                                      const IngestOptions& options = {});
+  // The published stream of the trial, read in one snapshot.
+  // @throws kNotFound when the trial has no published ground truth.
+  GroundTruth ReadGroundTruth(std::int64_t trial_id) const;
+
+  // ---- cells
+  // A cell announced itself: insert or refresh it (capabilities, last_seen).
+  // A gone cell comes back healthy; a quarantined one stays quarantined.
+  void UpsertCell(const std::string& cell_id, const std::vector<std::string>& contact_types,
+                  const std::string& capabilities_json = "{}",
+                  const std::string& defects_json = "{}");
+  void TouchCell(const std::string& cell_id);
+  // Counts a phase result against the cell; @returns consecutive failures now.
+  int RecordCellResult(const std::string& cell_id, bool ok);
+  void QuarantineCell(const std::string& cell_id, const std::string& reason);
+  void ReleaseCell(const std::string& cell_id);    // quarantined|gone -> healthy, failures reset
+  void MarkCellGone(const std::string& cell_id, const std::string& reason);
+  CellInfo GetCell(const std::string& cell_id) const;
+  std::vector<CellInfo> ListCells() const;
+
+  // ---- read side
+  StatusSummary Status() const;
+  std::vector<StartStateDrift> Drift(std::optional<std::int64_t> campaign_id = {}) const;
+
+  // For the query and export code in this room.
+  struct Impl;
+  Impl& impl() { return *impl_; }
+  const Impl& impl() const { return *impl_; }
+
+ private:
+  explicit Store(std::unique_ptr<Impl> impl);
+  std::unique_ptr<Impl> impl_;
+  friend class Ingest;
+};
+
+}  // namespace arena::db

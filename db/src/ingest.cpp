@@ -1,0 +1,335 @@
+// Ground-truth ingest: samples are encoded as they arrive, written as BLOB
+// chunks in batched transactions, and published together with the trial's
+// move to `executed` (store.hpp, invariants 3 and 4).
+#include <chrono>
+#include <cmath>
+#include <string>
+#include <vector>
+
+#include "arena/db/store.hpp"
+#include "sqlite_util.hpp"
+#include "store_internal.hpp"
+
+namespace arena::db {
+
+using detail::Tx;
+using internal::CheckAttempt;
+using internal::LoadTrialRow;
+
+namespace {
+
+bool HasGroundTruthState(TrialState s) {
+  switch (s) {
+    case TrialState::kExecuted:
+    case TrialState::kResetting:
+    case TrialState::kResetDone:
+    case TrialState::kResetFailed:
+    case TrialState::kPredicted:
+    case TrialState::kDone: return true;
+    default: return false;
+  }
+}
+
+// Refuses unless the trial can take ground truth of `attempt`: dispatched
+// (first ingest), or already past executed at the same attempt (re-ingest).
+internal::TrialRow CheckIngestable(const Store::Impl& impl, std::int64_t trial_id, int attempt,
+                                   const char* function) {
+  const auto row = LoadTrialRow(impl, trial_id, function);
+  CheckAttempt(row, trial_id, attempt, function);
+  if (row.state != TrialState::kDispatched && !HasGroundTruthState(row.state)) {
+    throw StoreError(StoreError::Kind::kIllegalTransition,
+                     std::string(function) + ": trial " + std::to_string(trial_id) + " is " +
+                         ToString(row.state) + "; ground truth is taken only while dispatched");
+  }
+  return row;
+}
+
+double Norm3(const std::array<double, 3>& v) { return std::sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]); }
+
+double QuatAngle(const double* a, const double* b) {
+  const double na = std::sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2] + a[3] * a[3]);
+  const double nb = std::sqrt(b[0] * b[0] + b[1] * b[1] + b[2] * b[2] + b[3] * b[3]);
+  if (na == 0 || nb == 0) return 0;
+  const double d = std::abs(a[0] * b[0] + a[1] * b[1] + a[2] * b[2] + a[3] * b[3]) / (na * nb);
+  return 2 * std::acos(std::min(1.0, d));
+}
+
+struct Chunk {
+  std::int64_t first_sample = 0;
+  std::uint32_t samples = 0;
+  double t_first = 0, t_last = 0;
+  std::string data;
+};
+
+}  // namespace
+
+struct Ingest::Impl {
+  Store::Impl* store = nullptr;
+  std::int64_t trial_id = 0;
+  int attempt = 0;
+  std::int64_t stream_id = 0;
+  bool has_pusher = false;
+  IngestOptions options;
+  bool finished = false;
+
+  // The chunk being encoded and the closed chunks not yet committed.
+  std::string body;
+  Chunk open;
+  std::vector<Chunk> ready;
+  std::int64_t buffered = 0;
+  std::int64_t next_seq = 0;
+  std::int64_t total = 0;
+  std::chrono::steady_clock::time_point oldest{};
+
+  // Per-trial summary, accumulated as samples arrive.
+  double last_t = -INFINITY;
+  std::array<double, 7> first_pose{}, last_pose{};
+  std::int64_t observed = 0;
+  double max_contact_force = 0, max_pusher_force = 0;
+  std::int64_t modes[3] = {0, 0, 0};
+  double obs_sq_sum = 0, obs_max = 0;
+
+  void CloseChunk() {
+    if (open.samples == 0) return;
+    std::string blob;
+    blob.reserve(body.size() + 8);
+    EncodeBlockHeader(open.samples, &blob);
+    blob += body;
+    open.data = std::move(blob);
+    ready.push_back(std::move(open));
+    open = Chunk{};
+    body.clear();
+  }
+
+  void WriteReady() {
+    auto s = store->Prepare(
+        "INSERT INTO gt_chunks(stream_id, seq, first_sample, samples, t_first, t_last, data)"
+        " VALUES(?,?,?,?,?,?,?)");
+    for (const auto& c : ready) {
+      s->Bind(1, stream_id).Bind(2, next_seq++).Bind(3, c.first_sample)
+          .Bind(4, static_cast<std::int64_t>(c.samples)).Bind(5, c.t_first).Bind(6, c.t_last)
+          .BindBlob(7, c.data.data(), c.data.size());
+      s->Run();
+      s->Reset();
+    }
+    ready.clear();
+    buffered = 0;
+  }
+
+  void Flush() {
+    CloseChunk();
+    if (ready.empty()) return;
+    Tx tx(store->db, true);
+    WriteReady();
+    tx.Commit();
+  }
+};
+
+Ingest::Ingest(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
+Ingest::~Ingest() = default;
+
+std::int64_t Ingest::samples() const { return impl_->total; }
+
+void Ingest::Add(const Sample& s) {
+  auto& m = *impl_;
+  if (m.finished) throw StoreError(StoreError::Kind::kBadInput, "Ingest::Add: the stream is finished");
+  const std::string bad = CheckSample(s);
+  if (!bad.empty()) {
+    throw StoreError(StoreError::Kind::kBadInput,
+                     "Ingest::Add: trial " + std::to_string(m.trial_id) + " sample " +
+                         std::to_string(m.total) + ": " + bad + "; sample refused");
+  }
+  if (s.t < m.last_t) {
+    throw StoreError(StoreError::Kind::kBadInput,
+                     "Ingest::Add: trial " + std::to_string(m.trial_id) + " sample " +
+                         std::to_string(m.total) + ": t = " + std::to_string(s.t) +
+                         " s is before the previous sample's " + std::to_string(m.last_t) +
+                         " s (out of order); sample refused");
+  }
+  if (m.total == 0) m.first_pose = s.object_pose;
+  m.last_pose = s.object_pose;
+  m.last_t = s.t;
+  for (std::size_t c = 0; c < s.contacts.size(); ++c) {
+    const double f = Norm3(s.contacts[c].force);
+    m.max_contact_force = std::max(m.max_contact_force, f);
+    if (m.has_pusher && c + 1 == s.contacts.size()) m.max_pusher_force = std::max(m.max_pusher_force, f);
+    ++m.modes[static_cast<int>(s.contacts[c].mode)];
+  }
+  if (s.observed_valid) {
+    ++m.observed;
+    double sq = 0;
+    for (int i = 0; i < 3; ++i) {
+      const double d = s.observed_object_pose[i] - s.object_pose[i];
+      sq += d * d;
+    }
+    m.obs_sq_sum += sq;
+    m.obs_max = std::max(m.obs_max, std::sqrt(sq));
+  }
+  if (m.open.samples == 0) {
+    m.open.first_sample = m.total;
+    m.open.t_first = s.t;
+    if (m.buffered == 0) m.oldest = std::chrono::steady_clock::now();
+  }
+  EncodeSampleBody(s, &m.body);
+  m.open.t_last = s.t;
+  ++m.open.samples;
+  ++m.buffered;
+  ++m.total;
+  if (static_cast<int>(m.open.samples) >= m.options.samples_per_chunk) m.CloseChunk();
+  if (m.buffered >= m.options.samples_per_commit) m.Flush();
+}
+
+void Ingest::Add(const std::vector<Sample>& samples) {
+  for (const auto& s : samples) Add(s);
+}
+
+void Ingest::Poll() {
+  auto& m = *impl_;
+  if (m.buffered == 0) return;
+  const double age = std::chrono::duration<double>(std::chrono::steady_clock::now() - m.oldest).count();
+  if (age >= m.options.max_commit_interval_s) m.Flush();
+}
+
+void Ingest::Flush() { impl_->Flush(); }
+
+std::int64_t Ingest::Finish(const std::string& outcome) {
+  auto& m = *impl_;
+  if (m.finished) throw StoreError(StoreError::Kind::kBadInput, "Ingest::Finish: already finished");
+  if (outcome.empty()) throw StoreError(StoreError::Kind::kBadInput, "Ingest::Finish: outcome is empty");
+  m.CloseChunk();
+  Tx tx(m.store->db, true);
+  const auto row = CheckIngestable(*m.store, m.trial_id, m.attempt, "Ingest::Finish");
+  m.WriteReady();
+  const double now = m.store->Now();
+  {
+    auto u = m.store->Prepare("UPDATE trials SET gt_stream_id = ? WHERE id = ?");
+    u->Bind(1, m.stream_id).Bind(2, m.trial_id).Run();
+  }
+  {  // Replace, never duplicate: drop every other stream of this (trial, attempt).
+    auto d = m.store->Prepare("DELETE FROM gt_streams WHERE trial_id = ? AND attempt = ? AND id != ?");
+    d->Bind(1, m.trial_id).Bind(2, m.attempt).Bind(3, m.stream_id).Run();
+  }
+  {
+    auto u = m.store->Prepare("UPDATE gt_streams SET complete = 1, samples = ?, completed_at = ? WHERE id = ?");
+    u->Bind(1, m.total).Bind(2, now).Bind(3, m.stream_id).Run();
+  }
+  {
+    auto s = m.store->Prepare(
+        "INSERT INTO gt_summary(stream_id, trial_id, attempt, samples, observed_samples, duration_s,"
+        " final_x, final_y, final_z, final_qw, final_qx, final_qy, final_qz, displacement_m,"
+        " rotation_rad, max_contact_force_n, max_pusher_force_n, stick_fraction, slide_fraction,"
+        " separate_fraction, observed_position_rmse_m, observed_position_max_error_m)"
+        " VALUES(?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?)");
+    detail::Binder b(*s);
+    b << m.stream_id << m.trial_id << m.attempt << m.total << m.observed
+      << (m.total > 0 ? m.last_t : 0.0);
+    if (m.total > 0) {
+      for (double v : m.last_pose) b << v;
+      const double dx = m.last_pose[0] - m.first_pose[0], dy = m.last_pose[1] - m.first_pose[1],
+                   dz = m.last_pose[2] - m.first_pose[2];
+      b << std::sqrt(dx * dx + dy * dy + dz * dz)
+        << QuatAngle(m.first_pose.data() + 3, m.last_pose.data() + 3);
+    } else {
+      for (int i = 0; i < 9; ++i) b << std::nullopt;
+    }
+    b << m.max_contact_force << m.max_pusher_force;
+    const double contact_samples = static_cast<double>(m.modes[0] + m.modes[1] + m.modes[2]);
+    for (int i = 0; i < 3; ++i) {
+      if (contact_samples > 0) b << m.modes[i] / contact_samples; else b << std::nullopt;
+    }
+    if (m.observed > 0) {
+      b << std::sqrt(m.obs_sq_sum / m.observed) << m.obs_max;
+    } else {
+      b << std::nullopt << std::nullopt;
+    }
+    s->Run();
+  }
+  if (row.state == TrialState::kDispatched) {
+    internal::WriteTransition(*m.store, m.trial_id, m.attempt, row.state, TrialState::kExecuted,
+                              row.cell_id,
+                              "ground truth complete (" + std::to_string(m.total) + " samples)",
+                              "Ingest::Finish");
+    auto u = m.store->Prepare("UPDATE trials SET outcome = ?, executed_at = ? WHERE id = ?");
+    u->Bind(1, outcome).Bind(2, now).Bind(3, m.trial_id).Run();
+  }
+  tx.Commit();
+  m.finished = true;
+  return m.total;
+}
+
+std::unique_ptr<Ingest> Store::BeginIngest(std::int64_t trial_id, int attempt,
+                                           const IngestOptions& options) {
+  impl_->RequireWritable("BeginIngest");
+  if (options.samples_per_chunk < 1 || options.samples_per_chunk > 100000) {
+    throw StoreError(StoreError::Kind::kBadInput, "BeginIngest: samples_per_chunk must be in [1, 100000]");
+  }
+  if (options.samples_per_commit < 1) {
+    throw StoreError(StoreError::Kind::kBadInput, "BeginIngest: samples_per_commit must be >= 1");
+  }
+  if (!std::isfinite(options.max_commit_interval_s) || options.max_commit_interval_s < 0) {
+    throw StoreError(StoreError::Kind::kBadInput, "BeginIngest: max_commit_interval_s must be finite and >= 0");
+  }
+  auto m = std::make_unique<Ingest::Impl>();
+  m->store = impl_.get();
+  m->trial_id = trial_id;
+  m->attempt = attempt;
+  m->options = options;
+  Tx tx(impl_->db, true);
+  const auto row = CheckIngestable(*impl_, trial_id, attempt, "BeginIngest");
+  {
+    auto p = impl_->Prepare("SELECT pusher_type IS NOT NULL FROM trials WHERE id = ?");
+    p->Bind(1, trial_id);
+    p->Step();
+    m->has_pusher = p->Int(0) != 0;
+  }
+  auto s = impl_->Prepare(
+      "INSERT INTO gt_streams(trial_id, attempt, cell_id, complete, samples, started_at) VALUES(?,?,?,0,0,?)");
+  s->Bind(1, trial_id).Bind(2, attempt).Bind(3, row.cell_id).Bind(4, impl_->Now()).Run();
+  m->stream_id = static_cast<std::int64_t>(sqlite3_last_insert_rowid(impl_->db));
+  tx.Commit();
+  return std::unique_ptr<Ingest>(new Ingest(std::move(m)));
+}
+
+std::vector<Sample> internal::ReadStreamSamples(const Store::Impl& impl, std::int64_t stream_id,
+                                                std::int64_t expected, const char* function) {
+  std::vector<Sample> out;
+  out.reserve(static_cast<std::size_t>(expected));
+  auto c = impl.Prepare("SELECT data FROM gt_chunks WHERE stream_id = ? ORDER BY seq");
+  c->Bind(1, stream_id);
+  while (c->Step()) {
+    auto part = DecodeSamples(c->Blob(0), static_cast<std::size_t>(c->Bytes(0)));
+    for (auto& s : part) out.push_back(std::move(s));
+  }
+  if (static_cast<std::int64_t>(out.size()) != expected) {
+    throw StoreError(StoreError::Kind::kCorrupt,
+                     std::string(function) + ": stream " + std::to_string(stream_id) + " has " +
+                         std::to_string(out.size()) + " samples, expected " + std::to_string(expected));
+  }
+  return out;
+}
+
+GroundTruth Store::ReadGroundTruth(std::int64_t trial_id) const {
+  Tx tx(impl_->db, false);  // one snapshot: the stream cannot change under us
+  auto t = impl_->Prepare(
+      "SELECT t.gt_stream_id, g.attempt, g.cell_id, g.samples FROM trials t"
+      " LEFT JOIN gt_streams g ON g.id = t.gt_stream_id WHERE t.id = ?");
+  t->Bind(1, trial_id);
+  if (!t->Step()) {
+    throw StoreError(StoreError::Kind::kNotFound, "ReadGroundTruth: no trial " + std::to_string(trial_id));
+  }
+  if (t->IsNull(0)) {
+    throw StoreError(StoreError::Kind::kNotFound,
+                     "ReadGroundTruth: trial " + std::to_string(trial_id) + " has no ground truth yet");
+  }
+  GroundTruth gt;
+  gt.trial_id = trial_id;
+  const std::int64_t stream = t->Int(0);
+  gt.attempt = static_cast<int>(t->Int(1));
+  gt.cell_id = t->Text(2);
+  const std::int64_t expected = t->Int(3);
+  gt.samples = internal::ReadStreamSamples(*impl_, stream, expected, "ReadGroundTruth");
+  tx.Commit();
+  return gt;
+}
+
+}  // namespace arena::db

@@ -1,0 +1,349 @@
+// Opening the store and its versioned migrations (db/README.md documents
+// each table). PRAGMA user_version is the schema version; each migration
+// runs in one transaction together with the bump of user_version and its row
+// in schema_migrations, so a crash mid-migration leaves the previous version.
+#include <filesystem>
+#include <string>
+#include <vector>
+
+#include "sqlite_util.hpp"
+
+namespace arena::db {
+namespace {
+
+using detail::Exec;
+
+struct Migration {
+  int version;
+  const char* what;
+  const char* sql;
+};
+
+// Append only: a released migration is never edited.
+const std::vector<Migration>& Migrations() {
+  static const std::vector<Migration> kMigrations = {
+      {1, "campaigns, cells, trials, transitions, ground truth, predictions", R"sql(
+CREATE TABLE schema_migrations(
+  version    INTEGER PRIMARY KEY,
+  what       TEXT NOT NULL,
+  applied_at REAL NOT NULL
+);
+
+CREATE TABLE campaigns(
+  id                 INTEGER PRIMARY KEY,
+  name               TEXT NOT NULL,
+  spec_json          TEXT NOT NULL,
+  state              TEXT NOT NULL DEFAULT 'active'
+                     CHECK (state IN ('active','paused','cancelled','done')),
+  priority           INTEGER NOT NULL DEFAULT 0,
+  seed               INTEGER NOT NULL,
+  sampler_state_json TEXT NOT NULL DEFAULT '{}',
+  created_at         REAL NOT NULL,
+  updated_at         REAL NOT NULL
+);
+
+CREATE TABLE cells(
+  id                   TEXT PRIMARY KEY,
+  state                TEXT NOT NULL DEFAULT 'healthy'
+                       CHECK (state IN ('healthy','quarantined','gone')),
+  contact_mask         INTEGER NOT NULL DEFAULT 0,
+  capabilities_json    TEXT NOT NULL DEFAULT '{}',
+  defects_json         TEXT NOT NULL DEFAULT '{}',
+  last_seen            REAL NOT NULL,
+  consecutive_failures INTEGER NOT NULL DEFAULT 0,
+  total_failures       INTEGER NOT NULL DEFAULT 0,
+  quarantine_reason    TEXT NOT NULL DEFAULT '',
+  start_x REAL, start_y REAL, start_z REAL,
+  start_qw REAL, start_qx REAL, start_qy REAL, start_qz REAL,
+  start_observed_at    REAL,
+  created_at           REAL NOT NULL,
+  updated_at           REAL NOT NULL
+);
+
+CREATE TABLE trials(
+  id            INTEGER PRIMARY KEY,
+  campaign_id   INTEGER NOT NULL REFERENCES campaigns(id),
+  idx           INTEGER NOT NULL CHECK (idx >= 0),
+  condition     INTEGER NOT NULL CHECK (condition >= 0),
+  replicate     INTEGER NOT NULL CHECK (replicate >= 0),
+  seed          INTEGER NOT NULL,
+  state         TEXT NOT NULL DEFAULT 'planned'
+                CHECK (state IN ('planned','dispatched','executed','resetting','reset_done',
+                                 'reset_failed','predicted','done','failed','cancelled')),
+  attempt       INTEGER NOT NULL DEFAULT 1 CHECK (attempt >= 1),
+  cell_id       TEXT REFERENCES cells(id),
+  outcome       TEXT,
+  not_before    REAL NOT NULL DEFAULT 0,
+  object_shape  TEXT,
+  object_mass   REAL,
+  grip_force    REAL,
+  finger_type   TEXT,
+  finger_count  INTEGER,
+  finger_mu     REAL,
+  pusher_type   TEXT,
+  pusher_mu     REAL,
+  pusher_speed  REAL,
+  pusher_angular_speed REAL,
+  duration      REAL,
+  contact_mask  INTEGER NOT NULL DEFAULT 0,
+  nominal_x REAL NOT NULL DEFAULT 0, nominal_y REAL NOT NULL DEFAULT 0,
+  nominal_z REAL NOT NULL DEFAULT 0, nominal_qw REAL NOT NULL DEFAULT 1,
+  nominal_qx REAL NOT NULL DEFAULT 0, nominal_qy REAL NOT NULL DEFAULT 0,
+  nominal_qz REAL NOT NULL DEFAULT 0,
+  start_x REAL, start_y REAL, start_z REAL,
+  start_qw REAL, start_qx REAL, start_qy REAL, start_qz REAL,
+  start_position_error REAL,
+  start_angle_error    REAL,
+  reset_ok             INTEGER,
+  reset_position_error REAL,
+  reset_angle_error    REAL,
+  reset_attempts       INTEGER,
+  reset_reason         TEXT,
+  scene_json        TEXT NOT NULL,
+  params_json       TEXT NOT NULL DEFAULT '{}',
+  defects_json      TEXT NOT NULL DEFAULT '{}',
+  cell_defects_json TEXT,
+  gt_stream_id  INTEGER REFERENCES gt_streams(id),
+  created_at    REAL NOT NULL,
+  updated_at    REAL NOT NULL,
+  dispatched_at REAL,
+  executed_at   REAL,
+  finished_at   REAL,
+  UNIQUE (campaign_id, idx)
+);
+CREATE INDEX trials_by_state ON trials(state, campaign_id, idx);
+CREATE INDEX trials_by_campaign_state ON trials(campaign_id, state);
+CREATE INDEX trials_by_grip_force ON trials(grip_force);
+CREATE INDEX trials_by_finger_mu ON trials(finger_mu);
+CREATE INDEX trials_by_object_mass ON trials(object_mass);
+CREATE INDEX trials_by_pusher_speed ON trials(pusher_speed);
+CREATE INDEX trials_by_types ON trials(finger_type, pusher_type);
+CREATE INDEX trials_by_outcome ON trials(outcome);
+CREATE INDEX trials_by_cell ON trials(cell_id, campaign_id);
+
+CREATE TABLE trial_transitions(
+  id         INTEGER PRIMARY KEY,
+  trial_id   INTEGER NOT NULL REFERENCES trials(id),
+  attempt    INTEGER NOT NULL,
+  from_state TEXT NOT NULL,
+  to_state   TEXT NOT NULL,
+  at         REAL NOT NULL,
+  cell_id    TEXT NOT NULL DEFAULT '',
+  reason     TEXT NOT NULL DEFAULT ''
+);
+CREATE INDEX trial_transitions_by_trial ON trial_transitions(trial_id, id);
+
+CREATE TABLE gt_streams(
+  id           INTEGER PRIMARY KEY,
+  trial_id     INTEGER NOT NULL REFERENCES trials(id),
+  attempt      INTEGER NOT NULL,
+  cell_id      TEXT NOT NULL DEFAULT '',
+  complete     INTEGER NOT NULL DEFAULT 0 CHECK (complete IN (0, 1)),
+  samples      INTEGER NOT NULL DEFAULT 0,
+  started_at   REAL NOT NULL,
+  completed_at REAL
+);
+CREATE INDEX gt_streams_by_trial ON gt_streams(trial_id, attempt);
+CREATE UNIQUE INDEX gt_streams_one_complete ON gt_streams(trial_id, attempt) WHERE complete = 1;
+
+CREATE TABLE gt_chunks(
+  id           INTEGER PRIMARY KEY,
+  stream_id    INTEGER NOT NULL REFERENCES gt_streams(id) ON DELETE CASCADE,
+  seq          INTEGER NOT NULL,
+  first_sample INTEGER NOT NULL,
+  samples      INTEGER NOT NULL,
+  t_first      REAL NOT NULL,
+  t_last       REAL NOT NULL,
+  data         BLOB NOT NULL,
+  UNIQUE (stream_id, seq)
+);
+
+CREATE TABLE gt_summary(
+  stream_id    INTEGER PRIMARY KEY REFERENCES gt_streams(id) ON DELETE CASCADE,
+  trial_id     INTEGER NOT NULL REFERENCES trials(id),
+  attempt      INTEGER NOT NULL,
+  samples      INTEGER NOT NULL,
+  observed_samples INTEGER NOT NULL,
+  duration_s   REAL NOT NULL,
+  final_x REAL, final_y REAL, final_z REAL,
+  final_qw REAL, final_qx REAL, final_qy REAL, final_qz REAL,
+  displacement_m       REAL,
+  rotation_rad         REAL,
+  max_contact_force_n  REAL,
+  max_pusher_force_n   REAL,
+  stick_fraction       REAL,
+  slide_fraction       REAL,
+  separate_fraction    REAL,
+  observed_position_rmse_m      REAL,
+  observed_position_max_error_m REAL
+);
+CREATE INDEX gt_summary_by_trial ON gt_summary(trial_id);
+
+CREATE TABLE predictions(
+  id          INTEGER PRIMARY KEY,
+  trial_id    INTEGER NOT NULL REFERENCES trials(id),
+  attempt     INTEGER NOT NULL,
+  model_key   TEXT NOT NULL,
+  model_json  TEXT NOT NULL DEFAULT '{}',
+  status      TEXT NOT NULL,
+  final_position_error REAL,
+  final_angle_error    REAL,
+  force_error          REAL,
+  mode_agreement       REAL,
+  wall_s      REAL NOT NULL CHECK (wall_s >= 0),
+  detail_json TEXT NOT NULL DEFAULT '{}',
+  created_at  REAL NOT NULL,
+  UNIQUE (trial_id, attempt, model_key)
+);
+CREATE INDEX predictions_by_model ON predictions(model_key);
+
+CREATE VIEW start_state_drift AS
+  SELECT campaign_id, cell_id, count(*) AS trials,
+         avg(start_x - nominal_x) AS mean_dx, avg(start_y - nominal_y) AS mean_dy,
+         avg(start_z - nominal_z) AS mean_dz,
+         avg(start_position_error) AS mean_position_error,
+         max(start_position_error) AS max_position_error,
+         avg(start_angle_error) AS mean_angle_error,
+         max(start_angle_error) AS max_angle_error
+  FROM trials WHERE start_position_error IS NOT NULL AND cell_id IS NOT NULL
+  GROUP BY campaign_id, cell_id;
+
+CREATE VIEW trial_results AS
+  SELECT t.id AS trial_id, t.campaign_id, t.idx, t.condition, t.replicate, t.state, t.attempt,
+         t.cell_id, t.outcome, t.object_shape, t.object_mass, t.grip_force, t.finger_type,
+         t.finger_count, t.finger_mu, t.pusher_type, t.pusher_mu, t.pusher_speed,
+         t.pusher_angular_speed, t.duration, t.start_position_error, t.start_angle_error,
+         s.samples, s.observed_samples, s.duration_s, s.displacement_m, s.rotation_rad,
+         s.max_contact_force_n, s.max_pusher_force_n, s.stick_fraction, s.slide_fraction,
+         s.separate_fraction, s.observed_position_rmse_m
+  FROM trials t LEFT JOIN gt_summary s ON s.stream_id = t.gt_stream_id;
+)sql"},
+  };
+  return kMigrations;
+}
+
+int UserVersion(sqlite3* db) {
+  detail::Stmt s(db, "PRAGMA user_version");
+  s.Step();
+  return static_cast<int>(s.Int(0));
+}
+
+void Migrate(Store::Impl& impl) {
+  sqlite3* db = impl.db;
+  const int target = Store::SchemaVersion();
+  if (UserVersion(db) == target) return;
+  detail::Tx tx(db, /*immediate=*/true);
+  // Re-read under the write lock: another process may have migrated meanwhile.
+  const int current = UserVersion(db);
+  if (current > target) {
+    throw StoreError(StoreError::Kind::kTooNew,
+                     "Store::Open: '" + impl.path + "' has schema version " +
+                         std::to_string(current) + ", newer than this arena's " +
+                         std::to_string(target) + "; use a newer arena binary");
+  }
+  for (const auto& m : Migrations()) {
+    if (m.version <= current) continue;
+    Exec(db, m.sql, "Store::Open: migration " + std::to_string(m.version));
+    detail::Stmt ins(db, "INSERT INTO schema_migrations(version, what, applied_at) VALUES(?,?,?)");
+    ins.Bind(1, m.version).Bind(2, m.what).Bind(3, impl.Now()).Run();
+    Exec(db, "PRAGMA user_version = " + std::to_string(m.version), "Store::Open: user_version");
+  }
+  tx.Commit();
+}
+
+}  // namespace
+
+int Store::SchemaVersion() { return Migrations().back().version; }
+
+Store::Store(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
+Store::~Store() = default;
+
+std::unique_ptr<Store> Store::Open(const std::string& path, const StoreOptions& options) {
+  auto impl = std::make_unique<Impl>();
+  impl->path = path;
+  impl->options = options;
+  if (options.read_only && !std::filesystem::exists(path)) {
+    throw StoreError(StoreError::Kind::kNotFound,
+                     "Store::Open: no store at '" + path + "' (create one with 'arena submit')");
+  }
+  int flags = SQLITE_OPEN_NOMUTEX;  // one connection per thread (documented)
+  if (options.read_only) {
+    flags |= SQLITE_OPEN_READONLY;
+  } else {
+    flags |= SQLITE_OPEN_READWRITE | (options.create ? SQLITE_OPEN_CREATE : 0);
+  }
+  const int rc = sqlite3_open_v2(path.c_str(), &impl->db, flags, nullptr);
+  if (rc != SQLITE_OK) {
+    std::string msg = "Store::Open: cannot open '" + path + "': " +
+                      (impl->db ? sqlite3_errmsg(impl->db) : sqlite3_errstr(rc));
+    throw StoreError(detail::KindOf(rc) == StoreError::Kind::kCorrupt ? StoreError::Kind::kCorrupt
+                                                                       : StoreError::Kind::kIo,
+                     msg);
+  }
+  sqlite3* db = impl->db;
+  sqlite3_extended_result_codes(db, 1);
+  sqlite3_busy_timeout(db, options.busy_timeout_ms);
+  const std::string ctx = "Store::Open '" + path + "'";
+  try {
+    Exec(db, "PRAGMA foreign_keys = ON", ctx);
+    if (options.read_only) {
+      Exec(db, "PRAGMA query_only = ON", ctx);
+    } else {
+      // WAL: readers never block the writer and the writer never blocks readers.
+      std::string mode;
+      {
+        detail::Stmt wal(db, "PRAGMA journal_mode = WAL");
+        wal.Step();
+        mode = wal.Text(0);
+      }
+      if (mode != "wal") {
+        throw StoreError(StoreError::Kind::kIo,
+                         ctx + ": cannot switch to WAL mode (got '" + mode + "')");
+      }
+      Exec(db, options.synchronous_full ? "PRAGMA synchronous = FULL" : "PRAGMA synchronous = NORMAL",
+           ctx);
+      Migrate(*impl);
+    }
+    const int version = UserVersion(db);
+    if (version > SchemaVersion()) {
+      throw StoreError(StoreError::Kind::kTooNew,
+                       "Store::Open: '" + path + "' has schema version " + std::to_string(version) +
+                           ", newer than this arena's " + std::to_string(SchemaVersion()) +
+                           "; use a newer arena binary");
+    }
+    if (version < SchemaVersion()) {
+      throw StoreError(StoreError::Kind::kNotFound,
+                       "Store::Open: '" + path + "' has schema version " + std::to_string(version) +
+                           " (this arena writes " + std::to_string(SchemaVersion()) +
+                           "); open it read-write once (e.g. 'arena serve') to migrate it");
+    }
+  } catch (const StoreError& e) {
+    if (e.kind() == StoreError::Kind::kBadInput) {
+      // "file is not a database" and friends surface as generic errors here.
+      throw StoreError(StoreError::Kind::kCorrupt, e.what());
+    }
+    throw;
+  }
+  return std::unique_ptr<Store>(new Store(std::move(impl)));
+}
+
+int Store::FileSchemaVersion() const { return UserVersion(impl_->db); }
+bool Store::read_only() const { return impl_->options.read_only; }
+const std::string& Store::path() const { return impl_->path; }
+double Store::Now() const { return impl_->Now(); }
+
+std::string Store::IntegrityCheck() const {
+  detail::Stmt s(impl_->db, "PRAGMA integrity_check");
+  std::string out;
+  while (s.Step()) {
+    if (!out.empty()) out += "; ";
+    out += s.Text(0);
+  }
+  detail::Stmt fk(impl_->db, "PRAGMA foreign_key_check");
+  while (fk.Step()) {
+    out += "; foreign key violation in " + fk.Text(0) + " rowid " + std::to_string(fk.Int(1));
+  }
+  return out;
+}
+
+}  // namespace arena::db

@@ -1,0 +1,1052 @@
+// Campaigns, the trial state machine, cells and the status summary.
+// The state machine's diagram and its transition table are in store.hpp.
+#include "arena/db/store.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+#include <nlohmann/json.hpp>
+
+#include "sqlite_util.hpp"
+#include "store_internal.hpp"
+
+namespace arena::db {
+
+using detail::StmtRef;
+using detail::Tx;
+using nlohmann::json;
+
+// ---------------------------------------------------------------- enums
+
+const char* ToString(TrialState s) {
+  switch (s) {
+    case TrialState::kPlanned: return "planned";
+    case TrialState::kDispatched: return "dispatched";
+    case TrialState::kExecuted: return "executed";
+    case TrialState::kResetting: return "resetting";
+    case TrialState::kResetDone: return "reset_done";
+    case TrialState::kResetFailed: return "reset_failed";
+    case TrialState::kPredicted: return "predicted";
+    case TrialState::kDone: return "done";
+    case TrialState::kFailed: return "failed";
+    case TrialState::kCancelled: return "cancelled";
+  }
+  return "?";
+}
+
+std::optional<TrialState> ParseTrialState(const std::string& text) {
+  for (int i = 0; i <= static_cast<int>(TrialState::kCancelled); ++i) {
+    const auto s = static_cast<TrialState>(i);
+    if (text == ToString(s)) return s;
+  }
+  return std::nullopt;
+}
+
+bool IsTerminal(TrialState s) {
+  return s == TrialState::kDone || s == TrialState::kFailed || s == TrialState::kCancelled;
+}
+
+bool IsLegalTransition(TrialState from, TrialState to) {
+  using S = TrialState;
+  if (to == S::kFailed) return !IsTerminal(from);
+  switch (from) {
+    case S::kPlanned: return to == S::kDispatched || to == S::kCancelled;
+    case S::kDispatched: return to == S::kExecuted || to == S::kPlanned;
+    case S::kExecuted: return to == S::kResetting;
+    case S::kResetting: return to == S::kResetDone || to == S::kResetFailed;
+    case S::kResetDone: return to == S::kPredicted;
+    case S::kResetFailed: return to == S::kResetting || to == S::kPredicted;
+    case S::kPredicted: return to == S::kDone;
+    default: return false;
+  }
+}
+
+const char* ToString(CampaignState s) {
+  switch (s) {
+    case CampaignState::kActive: return "active";
+    case CampaignState::kPaused: return "paused";
+    case CampaignState::kCancelled: return "cancelled";
+    case CampaignState::kDone: return "done";
+  }
+  return "?";
+}
+
+const char* ToString(CellState s) {
+  switch (s) {
+    case CellState::kHealthy: return "healthy";
+    case CellState::kQuarantined: return "quarantined";
+    case CellState::kGone: return "gone";
+  }
+  return "?";
+}
+
+namespace {
+
+CampaignState ParseCampaignState(const std::string& t) {
+  for (auto s : {CampaignState::kActive, CampaignState::kPaused, CampaignState::kCancelled,
+                 CampaignState::kDone}) {
+    if (t == ToString(s)) return s;
+  }
+  throw StoreError(StoreError::Kind::kCorrupt, "campaigns.state has unknown value '" + t + "'");
+}
+
+CellState ParseCellState(const std::string& t) {
+  for (auto s : {CellState::kHealthy, CellState::kQuarantined, CellState::kGone}) {
+    if (t == ToString(s)) return s;
+  }
+  throw StoreError(StoreError::Kind::kCorrupt, "cells.state has unknown value '" + t + "'");
+}
+
+TrialState MustParseTrialState(const std::string& t) {
+  auto s = ParseTrialState(t);
+  if (!s) throw StoreError(StoreError::Kind::kCorrupt, "trials.state has unknown value '" + t + "'");
+  return *s;
+}
+
+[[noreturn]] void BadInput(const std::string& msg) { throw StoreError(StoreError::Kind::kBadInput, msg); }
+
+// Seeds are uint64; SQLite integers are int64: stored bit for bit.
+std::int64_t SeedToDb(std::uint64_t v) {
+  std::int64_t out;
+  std::memcpy(&out, &v, 8);
+  return out;
+}
+std::uint64_t SeedFromDb(std::int64_t v) {
+  std::uint64_t out;
+  std::memcpy(&out, &v, 8);
+  return out;
+}
+
+json ParseObject(const std::string& text, const std::string& what) {
+  json j;
+  try {
+    j = json::parse(text);
+  } catch (const json::exception& e) {  // parse errors and number overflow (1e999)
+    BadInput(what + " is not valid JSON: " + e.what());
+  }
+  if (!j.is_object()) BadInput(what + " must be a JSON object");
+  return j;
+}
+
+void RequireFinite(double v, const std::string& what) {
+  if (!std::isfinite(v)) BadInput(what + " is " + (std::isnan(v) ? "NaN" : "infinite"));
+}
+
+// The indexed parameter columns, read from the scene JSON (SCENE.md).
+struct SceneColumns {
+  std::optional<std::string> object_shape, finger_type, pusher_type;
+  std::optional<double> object_mass, grip_force, finger_mu, pusher_mu, pusher_speed,
+      pusher_angular_speed, duration;
+  int finger_count = 0;
+  int contact_mask = 0;
+  std::array<double, 7> nominal{0, 0, 0, 1, 0, 0, 0};
+};
+
+std::optional<double> Num(const json& j, const char* key, const std::string& where) {
+  if (!j.is_object() || !j.contains(key)) return std::nullopt;
+  const auto& v = j.at(key);
+  if (!v.is_number()) BadInput(where + "." + key + " must be a number");
+  const double d = v.get<double>();
+  RequireFinite(d, where + "." + key);
+  return d;
+}
+
+std::optional<double> Norm3(const json& j, const char* key, const std::string& where) {
+  if (!j.is_object() || !j.contains(key)) return std::nullopt;
+  const auto& v = j.at(key);
+  if (!v.is_array() || v.size() != 3) BadInput(where + "." + key + " must be an array of 3 numbers");
+  double sum = 0;
+  for (int i = 0; i < 3; ++i) {
+    if (!v[i].is_number()) BadInput(where + "." + key + " must be an array of 3 numbers");
+    const double d = v[i].get<double>();
+    RequireFinite(d, where + "." + key + "[" + std::to_string(i) + "]");
+    sum += d * d;
+  }
+  return std::sqrt(sum);
+}
+
+int TypeBit(const std::string& t, const std::string& where) {
+  if (t == "point") return kPointBit;
+  if (t == "line") return kLineBit;
+  if (t == "patch") return kPatchBit;
+  BadInput(where + " is '" + t + "'; expected point, line or patch");
+}
+
+SceneColumns ReadSceneColumns(const std::string& scene_text, const std::string& where) {
+  const json scene = ParseObject(scene_text, where);
+  SceneColumns c;
+  if (scene.contains("object")) {
+    const auto& o = scene.at("object");
+    if (o.contains("shape") && o.at("shape").is_string()) c.object_shape = o.at("shape").get<std::string>();
+    c.object_mass = Num(o, "mass", where + ".object");
+    if (o.contains("pose") && o.at("pose").is_object()) {
+      const auto& pose = o.at("pose");
+      std::array<double, 3> p{0, 0, 0}, rpy{0, 0, 0};
+      for (auto [key, dst] : {std::pair{"position", &p}, std::pair{"rpy", &rpy}}) {
+        if (!pose.contains(key)) continue;
+        const auto& v = pose.at(key);
+        if (!v.is_array() || v.size() != 3) BadInput(where + ".object.pose." + key + " must be 3 numbers");
+        for (int i = 0; i < 3; ++i) {
+          if (!v[i].is_number()) BadInput(where + ".object.pose." + key + " must be 3 numbers");
+          (*dst)[i] = v[i].get<double>();
+          RequireFinite((*dst)[i], where + ".object.pose." + key);
+        }
+      }
+      // R = Rz(yaw) Ry(pitch) Rx(roll) (SCENE.md: rpy about fixed x, y, z).
+      const double cr = std::cos(rpy[0] / 2), sr = std::sin(rpy[0] / 2);
+      const double cp = std::cos(rpy[1] / 2), sp = std::sin(rpy[1] / 2);
+      const double cy = std::cos(rpy[2] / 2), sy = std::sin(rpy[2] / 2);
+      c.nominal = {p[0], p[1], p[2],
+                   cr * cp * cy + sr * sp * sy, sr * cp * cy - cr * sp * sy,
+                   cr * sp * cy + sr * cp * sy, cr * cp * sy - sr * sp * cy};
+    }
+  }
+  c.grip_force = Num(scene, "grip_force", where);
+  c.duration = Num(scene, "duration", where);
+  if (scene.contains("fingers")) {
+    const auto& fingers = scene.at("fingers");
+    if (!fingers.is_array()) BadInput(where + ".fingers must be an array");
+    double mu_sum = 0;
+    int mu_n = 0;
+    for (std::size_t i = 0; i < fingers.size(); ++i) {
+      const std::string fw = where + ".fingers[" + std::to_string(i) + "]";
+      const auto& f = fingers[i];
+      const std::string type = f.contains("type") && f.at("type").is_string()
+                                   ? f.at("type").get<std::string>() : "point";
+      c.contact_mask |= TypeBit(type, fw + ".type");
+      if (!c.finger_type) c.finger_type = type;
+      else if (*c.finger_type != type) c.finger_type = "mixed";
+      if (auto mu = Num(f, "mu", fw)) {
+        mu_sum += *mu;
+        ++mu_n;
+      }
+    }
+    c.finger_count = static_cast<int>(fingers.size());
+    if (mu_n > 0) c.finger_mu = mu_sum / mu_n;
+  }
+  if (scene.contains("pusher") && scene.at("pusher").is_object()) {
+    const auto& p = scene.at("pusher");
+    const std::string type = p.contains("type") && p.at("type").is_string()
+                                 ? p.at("type").get<std::string>() : "point";
+    c.contact_mask |= TypeBit(type, where + ".pusher.type");
+    c.pusher_type = type;
+    c.pusher_mu = Num(p, "mu", where + ".pusher");
+    if (p.contains("motion")) {
+      c.pusher_speed = Norm3(p.at("motion"), "velocity", where + ".pusher.motion");
+      c.pusher_angular_speed = Norm3(p.at("motion"), "angular_velocity", where + ".pusher.motion");
+    }
+  }
+  return c;
+}
+
+// Angle between two unit quaternions (rad, in [0, pi]).
+double QuatAngle(const double* a, const double* b) {
+  const double na = std::sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2] + a[3] * a[3]);
+  const double nb = std::sqrt(b[0] * b[0] + b[1] * b[1] + b[2] * b[2] + b[3] * b[3]);
+  if (na == 0 || nb == 0) return 0;
+  double d = std::abs(a[0] * b[0] + a[1] * b[1] + a[2] * b[2] + a[3] * b[3]) / (na * nb);
+  return 2 * std::acos(std::min(1.0, d));
+}
+
+}  // namespace
+
+namespace internal {
+
+TrialRow LoadTrialRow(const Store::Impl& impl, std::int64_t trial_id, const char* function) {
+  auto s = impl.Prepare(
+      "SELECT state, attempt, IFNULL(cell_id,''), campaign_id, gt_stream_id FROM trials WHERE id = ?");
+  s->Bind(1, trial_id);
+  if (!s->Step()) {
+    throw StoreError(StoreError::Kind::kNotFound,
+                     std::string(function) + ": no trial " + std::to_string(trial_id));
+  }
+  TrialRow r;
+  r.state = MustParseTrialState(s->Text(0));
+  r.attempt = static_cast<int>(s->Int(1));
+  r.cell_id = s->Text(2);
+  r.campaign_id = s->Int(3);
+  if (!s->IsNull(4)) r.gt_stream_id = s->Int(4);
+  return r;
+}
+
+void CheckAttempt(const TrialRow& row, std::int64_t trial_id, int attempt, const char* function) {
+  if (row.attempt != attempt) {
+    throw StoreError(StoreError::Kind::kStaleAttempt,
+                     std::string(function) + ": trial " + std::to_string(trial_id) + " is at attempt " +
+                         std::to_string(row.attempt) + ", not " + std::to_string(attempt) +
+                         " (a late message from an earlier attempt?)");
+  }
+}
+
+void CheckEdge(TrialState from, TrialState to, std::int64_t trial_id, const char* function) {
+  if (!IsLegalTransition(from, to)) {
+    throw StoreError(StoreError::Kind::kIllegalTransition,
+                     std::string(function) + ": trial " + std::to_string(trial_id) + " cannot go " +
+                         ToString(from) + " -> " + ToString(to));
+  }
+}
+
+void WriteTransition(const Store::Impl& impl, std::int64_t trial_id, int attempt, TrialState from,
+                     TrialState to, const std::string& cell_id, const std::string& reason,
+                     const char* function) {
+  CheckEdge(from, to, trial_id, function);
+  const double now = impl.Now();
+  {
+    auto u = impl.Prepare(
+        "UPDATE trials SET state = ?, updated_at = ?,"
+        " finished_at = CASE WHEN ? THEN ? ELSE finished_at END WHERE id = ?");
+    u->Bind(1, ToString(to)).Bind(2, now).Bind(3, IsTerminal(to) ? 1 : 0).Bind(4, now).Bind(5, trial_id);
+    u->Run();
+  }
+  auto a = impl.Prepare(
+      "INSERT INTO trial_transitions(trial_id, attempt, from_state, to_state, at, cell_id, reason)"
+      " VALUES(?,?,?,?,?,?,?)");
+  a->Bind(1, trial_id).Bind(2, attempt).Bind(3, ToString(from)).Bind(4, ToString(to)).Bind(5, now)
+      .Bind(6, cell_id).Bind(7, reason);
+  a->Run();
+}
+
+}  // namespace internal
+
+using internal::CheckAttempt;
+using internal::LoadTrialRow;
+using internal::WriteTransition;
+
+int ContactTypeMask(const std::vector<std::string>& types) {
+  int mask = 0;
+  for (const auto& t : types) mask |= TypeBit(t, "ContactTypeMask: contact type");
+  return mask;
+}
+
+// ---------------------------------------------------------------- campaigns
+
+namespace {
+
+void InsertPlannedTrials(const Store::Impl& impl, std::int64_t campaign_id, int first_index,
+                         const std::vector<PlannedTrial>& trials, const char* function) {
+  const double now = impl.Now();
+  auto ins = impl.Prepare(
+      "INSERT INTO trials(campaign_id, idx, condition, replicate, seed, state, attempt,"
+      " object_shape, object_mass, grip_force, finger_type, finger_count, finger_mu, pusher_type,"
+      " pusher_mu, pusher_speed, pusher_angular_speed, duration, contact_mask,"
+      " nominal_x, nominal_y, nominal_z, nominal_qw, nominal_qx, nominal_qy, nominal_qz,"
+      " scene_json, params_json, defects_json, created_at, updated_at)"
+      " VALUES(?,?,?,?,?,'planned',1,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?)");
+  auto audit = impl.Prepare(
+      "INSERT INTO trial_transitions(trial_id, attempt, from_state, to_state, at, reason)"
+      " VALUES(?,1,'','planned',?,'sampled')");
+  for (std::size_t i = 0; i < trials.size(); ++i) {
+    const auto& t = trials[i];
+    const std::string where = std::string(function) + ": trial " + std::to_string(i);
+    if (t.condition < 0) BadInput(where + ": condition must be >= 0");
+    if (t.replicate < 0) BadInput(where + ": replicate must be >= 0");
+    const SceneColumns c = ReadSceneColumns(t.scene_json, where + ": scene");
+    ParseObject(t.params_json, where + ": params_json");
+    ParseObject(t.defects_json, where + ": defects_json");
+    if (c.contact_mask == 0) BadInput(where + ": scene has no fingers or pusher");
+    auto& s = *ins;
+    detail::Binder b(s);
+    b << campaign_id << first_index + static_cast<int>(i) << t.condition << t.replicate
+      << SeedToDb(t.seed) << c.object_shape << c.object_mass << c.grip_force << c.finger_type
+      << c.finger_count << c.finger_mu << c.pusher_type << c.pusher_mu << c.pusher_speed
+      << c.pusher_angular_speed << c.duration << c.contact_mask;
+    for (double v : c.nominal) b << v;
+    b << t.scene_json << t.params_json << t.defects_json << now << now;
+    s.Run();
+    s.Reset();
+    audit->Bind(1, static_cast<std::int64_t>(sqlite3_last_insert_rowid(impl.db))).Bind(2, now).Run();
+    audit->Reset();
+  }
+}
+
+Campaign ReadCampaign(const detail::Stmt& s) {
+  Campaign c;
+  c.id = s.Int(0);
+  c.name = s.Text(1);
+  c.spec_json = s.Text(2);
+  c.state = ParseCampaignState(s.Text(3));
+  c.priority = static_cast<int>(s.Int(4));
+  c.seed = SeedFromDb(s.Int(5));
+  c.sampler_state_json = s.Text(6);
+  c.created_at = s.Real(7);
+  c.updated_at = s.Real(8);
+  return c;
+}
+
+constexpr const char* kCampaignCols =
+    "SELECT id, name, spec_json, state, priority, seed, sampler_state_json, created_at, updated_at"
+    " FROM campaigns";
+
+}  // namespace
+
+std::int64_t Store::CreateCampaign(const NewCampaign& campaign, const std::vector<PlannedTrial>& trials) {
+  impl_->RequireWritable("CreateCampaign");
+  if (campaign.name.empty()) BadInput("CreateCampaign: name is empty");
+  ParseObject(campaign.spec_json, "CreateCampaign: spec_json");
+  ParseObject(campaign.sampler_state_json, "CreateCampaign: sampler_state_json");
+  Tx tx(impl_->db, true);
+  const double now = impl_->Now();
+  auto s = impl_->Prepare(
+      "INSERT INTO campaigns(name, spec_json, state, priority, seed, sampler_state_json, created_at,"
+      " updated_at) VALUES(?,?,'active',?,?,?,?,?)");
+  s->Bind(1, campaign.name).Bind(2, campaign.spec_json).Bind(3, campaign.priority)
+      .Bind(4, SeedToDb(campaign.seed)).Bind(5, campaign.sampler_state_json).Bind(6, now).Bind(7, now);
+  s->Run();
+  const std::int64_t id = static_cast<std::int64_t>(sqlite3_last_insert_rowid(impl_->db));
+  InsertPlannedTrials(*impl_, id, 0, trials, "CreateCampaign");
+  tx.Commit();
+  return id;
+}
+
+void Store::AppendPlannedTrials(std::int64_t campaign_id, const std::vector<PlannedTrial>& trials,
+                                const std::string& sampler_state_json) {
+  impl_->RequireWritable("AppendPlannedTrials");
+  ParseObject(sampler_state_json, "AppendPlannedTrials: sampler_state_json");
+  Tx tx(impl_->db, true);
+  const Campaign c = GetCampaign(campaign_id);
+  if (c.state == CampaignState::kCancelled || c.state == CampaignState::kDone) {
+    BadInput("AppendPlannedTrials: campaign " + std::to_string(campaign_id) + " is " + ToString(c.state));
+  }
+  auto n = impl_->Prepare("SELECT IFNULL(MAX(idx) + 1, 0) FROM trials WHERE campaign_id = ?");
+  n->Bind(1, campaign_id);
+  n->Step();
+  const int first = static_cast<int>(n->Int(0));
+  InsertPlannedTrials(*impl_, campaign_id, first, trials, "AppendPlannedTrials");
+  auto u = impl_->Prepare("UPDATE campaigns SET sampler_state_json = ?, updated_at = ? WHERE id = ?");
+  u->Bind(1, sampler_state_json).Bind(2, impl_->Now()).Bind(3, campaign_id).Run();
+  tx.Commit();
+}
+
+Campaign Store::GetCampaign(std::int64_t campaign_id) const {
+  auto s = impl_->Prepare(std::string(kCampaignCols) + " WHERE id = ?");
+  s->Bind(1, campaign_id);
+  if (!s->Step()) {
+    throw StoreError(StoreError::Kind::kNotFound,
+                     "GetCampaign: no campaign " + std::to_string(campaign_id) + " (see 'arena list')");
+  }
+  return ReadCampaign(*s);
+}
+
+std::vector<Campaign> Store::ListCampaigns() const {
+  auto s = impl_->Prepare(std::string(kCampaignCols) + " ORDER BY id");
+  std::vector<Campaign> out;
+  while (s->Step()) out.push_back(ReadCampaign(*s));
+  return out;
+}
+
+namespace {
+
+void SetCampaignState(Store::Impl& impl, std::int64_t id, const char* function,
+                      std::initializer_list<CampaignState> from, CampaignState to) {
+  impl.RequireWritable(function);
+  Tx tx(impl.db, true);
+  auto s = impl.Prepare("SELECT state FROM campaigns WHERE id = ?");
+  s->Bind(1, id);
+  if (!s->Step()) {
+    throw StoreError(StoreError::Kind::kNotFound,
+                     std::string(function) + ": no campaign " + std::to_string(id));
+  }
+  const CampaignState cur = ParseCampaignState(s->Text(0));
+  if (cur == to) return;  // idempotent: pausing a paused campaign is a no-op
+  if (std::find(from.begin(), from.end(), cur) == from.end()) {
+    throw StoreError(StoreError::Kind::kIllegalTransition,
+                     std::string(function) + ": campaign " + std::to_string(id) + " is " +
+                         ToString(cur) + ", cannot become " + ToString(to));
+  }
+  auto u = impl.Prepare("UPDATE campaigns SET state = ?, updated_at = ? WHERE id = ?");
+  u->Bind(1, ToString(to)).Bind(2, impl.Now()).Bind(3, id).Run();
+  if (to == CampaignState::kCancelled) {
+    auto q = impl.Prepare("SELECT id, attempt FROM trials WHERE campaign_id = ? AND state = 'planned'");
+    q->Bind(1, id);
+    std::vector<std::pair<std::int64_t, int>> planned;
+    while (q->Step()) planned.emplace_back(q->Int(0), static_cast<int>(q->Int(1)));
+    for (auto [tid, attempt] : planned) {
+      WriteTransition(impl, tid, attempt, TrialState::kPlanned, TrialState::kCancelled, "",
+                      "campaign cancelled", function);
+      auto o = impl.Prepare("UPDATE trials SET outcome = 'cancelled' WHERE id = ?");
+      o->Bind(1, tid).Run();
+    }
+  }
+  tx.Commit();
+}
+
+}  // namespace
+
+void Store::PauseCampaign(std::int64_t id) {
+  SetCampaignState(*impl_, id, "PauseCampaign", {CampaignState::kActive}, CampaignState::kPaused);
+}
+void Store::ResumeCampaign(std::int64_t id) {
+  SetCampaignState(*impl_, id, "ResumeCampaign", {CampaignState::kPaused}, CampaignState::kActive);
+}
+void Store::CancelCampaign(std::int64_t id) {
+  SetCampaignState(*impl_, id, "CancelCampaign", {CampaignState::kActive, CampaignState::kPaused},
+                   CampaignState::kCancelled);
+}
+
+std::vector<std::int64_t> Store::CompleteFinishedCampaigns() {
+  impl_->RequireWritable("CompleteFinishedCampaigns");
+  Tx tx(impl_->db, true);
+  auto s = impl_->Prepare(
+      "SELECT c.id FROM campaigns c WHERE c.state = 'active' AND NOT EXISTS ("
+      " SELECT 1 FROM trials t WHERE t.campaign_id = c.id"
+      " AND t.state NOT IN ('done','failed','cancelled'))");
+  std::vector<std::int64_t> ids;
+  while (s->Step()) ids.push_back(s->Int(0));
+  for (auto id : ids) {
+    auto u = impl_->Prepare("UPDATE campaigns SET state = 'done', updated_at = ? WHERE id = ?");
+    u->Bind(1, impl_->Now()).Bind(2, id).Run();
+  }
+  tx.Commit();
+  return ids;
+}
+
+// ---------------------------------------------------------------- state machine
+
+namespace {
+
+constexpr const char* kNextTrialSql =
+    "SELECT t.id, t.campaign_id, t.attempt, t.seed, t.scene_json, t.defects_json"
+    " FROM trials t JOIN campaigns c ON c.id = t.campaign_id"
+    " WHERE t.state = 'planned' AND c.state = 'active' AND t.not_before <= ?"
+    " AND (t.contact_mask & ~?) = 0"
+    " ORDER BY c.priority DESC, c.id, t.idx LIMIT 1";
+
+std::optional<ClaimedTrial> FindNext(const Store::Impl& impl, const std::string& cell_id,
+                                     const char* function) {
+  auto cell = impl.Prepare("SELECT state, contact_mask FROM cells WHERE id = ?");
+  cell->Bind(1, cell_id);
+  if (!cell->Step()) {
+    throw StoreError(StoreError::Kind::kNotFound,
+                     std::string(function) + ": unknown cell '" + cell_id + "' (UpsertCell first)");
+  }
+  if (cell->Text(0) != "healthy") return std::nullopt;
+  const std::int64_t mask = cell->Int(1);
+  auto s = impl.Prepare(kNextTrialSql);
+  s->Bind(1, impl.Now()).Bind(2, mask);
+  if (!s->Step()) return std::nullopt;
+  ClaimedTrial t;
+  t.trial_id = s->Int(0);
+  t.campaign_id = s->Int(1);
+  t.attempt = static_cast<int>(s->Int(2));
+  t.seed = SeedFromDb(s->Int(3));
+  t.scene_json = s->Text(4);
+  t.defects_json = s->Text(5);
+  return t;
+}
+
+}  // namespace
+
+std::optional<ClaimedTrial> Store::PeekNextTrial(const std::string& cell_id) const {
+  Tx tx(impl_->db, false);
+  auto t = FindNext(*impl_, cell_id, "PeekNextTrial");
+  tx.Commit();
+  return t;
+}
+
+std::optional<ClaimedTrial> Store::ClaimNextTrial(const std::string& cell_id) {
+  impl_->RequireWritable("ClaimNextTrial");
+  Tx tx(impl_->db, true);  // the write lock makes find + update one atomic step
+  auto t = FindNext(*impl_, cell_id, "ClaimNextTrial");
+  if (!t) return std::nullopt;
+  const double now = impl_->Now();
+  WriteTransition(*impl_, t->trial_id, t->attempt, TrialState::kPlanned, TrialState::kDispatched,
+                  cell_id, "claimed", "ClaimNextTrial");
+  // The start state this trial begins from: the cell's last observed reset result.
+  auto u = impl_->Prepare(
+      "UPDATE trials SET cell_id = ?1, dispatched_at = ?2,"
+      " cell_defects_json = (SELECT defects_json FROM cells WHERE id = ?1),"
+      " start_x = c.start_x, start_y = c.start_y, start_z = c.start_z, start_qw = c.start_qw,"
+      " start_qx = c.start_qx, start_qy = c.start_qy, start_qz = c.start_qz"
+      " FROM (SELECT * FROM cells WHERE id = ?1) AS c WHERE trials.id = ?3");
+  u->Bind(1, cell_id).Bind(2, now).Bind(3, t->trial_id).Run();
+  auto r = impl_->Prepare(
+      "SELECT start_x, start_y, start_z, start_qw, start_qx, start_qy, start_qz,"
+      " nominal_x, nominal_y, nominal_z, nominal_qw, nominal_qx, nominal_qy, nominal_qz"
+      " FROM trials WHERE id = ?");
+  r->Bind(1, t->trial_id);
+  r->Step();
+  if (!r->IsNull(0)) {
+    double v[14];
+    for (int i = 0; i < 14; ++i) v[i] = r->Real(i);
+    const double dp = std::sqrt((v[0] - v[7]) * (v[0] - v[7]) + (v[1] - v[8]) * (v[1] - v[8]) +
+                                (v[2] - v[9]) * (v[2] - v[9]));
+    const double da = QuatAngle(v + 3, v + 10);
+    auto e = impl_->Prepare("UPDATE trials SET start_position_error = ?, start_angle_error = ? WHERE id = ?");
+    e->Bind(1, dp).Bind(2, da).Bind(3, t->trial_id).Run();
+  }
+  tx.Commit();
+  return t;
+}
+
+TrialState Store::RetryTrial(std::int64_t trial_id, int attempt, const std::string& reason,
+                             int max_attempts, double backoff_s) {
+  impl_->RequireWritable("RetryTrial");
+  RequireFinite(backoff_s, "RetryTrial: backoff_s");
+  if (backoff_s < 0) BadInput("RetryTrial: backoff_s must be >= 0");
+  if (max_attempts < 1) BadInput("RetryTrial: max_attempts must be >= 1");
+  Tx tx(impl_->db, true);
+  const auto row = LoadTrialRow(*impl_, trial_id, "RetryTrial");
+  CheckAttempt(row, trial_id, attempt, "RetryTrial");
+  if (row.state != TrialState::kDispatched) {
+    internal::CheckEdge(row.state, TrialState::kPlanned, trial_id, "RetryTrial");
+  }
+  TrialState to;
+  if (attempt >= max_attempts) {
+    to = TrialState::kFailed;
+    WriteTransition(*impl_, trial_id, attempt, row.state, to, row.cell_id,
+                    reason + " (attempt " + std::to_string(attempt) + " of " +
+                        std::to_string(max_attempts) + ": giving up)",
+                    "RetryTrial");
+    auto o = impl_->Prepare("UPDATE trials SET outcome = 'failed' WHERE id = ?");
+    o->Bind(1, trial_id).Run();
+  } else {
+    to = TrialState::kPlanned;
+    WriteTransition(*impl_, trial_id, attempt, row.state, to, row.cell_id, reason, "RetryTrial");
+    auto u = impl_->Prepare("UPDATE trials SET attempt = attempt + 1, not_before = ? WHERE id = ?");
+    u->Bind(1, impl_->Now() + backoff_s).Bind(2, trial_id).Run();
+  }
+  tx.Commit();
+  return to;
+}
+
+void Store::FailTrial(std::int64_t trial_id, int attempt, const std::string& reason,
+                      const std::string& outcome) {
+  impl_->RequireWritable("FailTrial");
+  if (outcome.empty()) BadInput("FailTrial: outcome is empty");
+  Tx tx(impl_->db, true);
+  const auto row = LoadTrialRow(*impl_, trial_id, "FailTrial");
+  CheckAttempt(row, trial_id, attempt, "FailTrial");
+  WriteTransition(*impl_, trial_id, attempt, row.state, TrialState::kFailed, row.cell_id, reason,
+                  "FailTrial");
+  auto o = impl_->Prepare("UPDATE trials SET outcome = ? WHERE id = ?");
+  o->Bind(1, outcome).Bind(2, trial_id).Run();
+  tx.Commit();
+}
+
+void Store::BeginReset(std::int64_t trial_id, int attempt) {
+  impl_->RequireWritable("BeginReset");
+  Tx tx(impl_->db, true);
+  const auto row = LoadTrialRow(*impl_, trial_id, "BeginReset");
+  CheckAttempt(row, trial_id, attempt, "BeginReset");
+  WriteTransition(*impl_, trial_id, attempt, row.state, TrialState::kResetting, row.cell_id,
+                  row.state == TrialState::kResetFailed ? "reset retried" : "reset sent", "BeginReset");
+  tx.Commit();
+}
+
+void Store::CompleteReset(std::int64_t trial_id, int attempt, const ResetReport& report) {
+  impl_->RequireWritable("CompleteReset");
+  for (int i = 0; i < 7; ++i) {
+    RequireFinite(report.observed_pose[i], "CompleteReset: observed_pose[" + std::to_string(i) + "]");
+  }
+  RequireFinite(report.position_error, "CompleteReset: position_error");
+  RequireFinite(report.angle_error, "CompleteReset: angle_error");
+  Tx tx(impl_->db, true);
+  const auto row = LoadTrialRow(*impl_, trial_id, "CompleteReset");
+  CheckAttempt(row, trial_id, attempt, "CompleteReset");
+  const TrialState to = report.ok ? TrialState::kResetDone : TrialState::kResetFailed;
+  WriteTransition(*impl_, trial_id, attempt, row.state, to, row.cell_id,
+                  report.ok ? "reset verified" : report.reason, "CompleteReset");
+  auto u = impl_->Prepare(
+      "UPDATE trials SET reset_ok = ?, reset_position_error = ?, reset_angle_error = ?,"
+      " reset_attempts = ?, reset_reason = ? WHERE id = ?");
+  u->Bind(1, report.ok ? 1 : 0).Bind(2, report.position_error).Bind(3, report.angle_error)
+      .Bind(4, report.reset_attempts).Bind(5, report.reason).Bind(6, trial_id).Run();
+  if (!row.cell_id.empty()) {
+    // The pose the cell observed is where the next trial on this cell starts, ok or not.
+    auto c = impl_->Prepare(
+        "UPDATE cells SET start_x = ?, start_y = ?, start_z = ?, start_qw = ?, start_qx = ?,"
+        " start_qy = ?, start_qz = ?, start_observed_at = ?, updated_at = ? WHERE id = ?");
+    detail::Binder b(*c);
+    for (double v : report.observed_pose) b << v;
+    const double now = impl_->Now();
+    b << now << now << row.cell_id;
+    c->Run();
+  }
+  tx.Commit();
+}
+
+void Store::RecordPrediction(std::int64_t trial_id, int attempt, const Prediction& p) {
+  impl_->RequireWritable("RecordPrediction");
+  if (p.model_key.empty()) BadInput("RecordPrediction: model_key is empty");
+  if (p.status.empty()) BadInput("RecordPrediction: status is empty");
+  ParseObject(p.model_json, "RecordPrediction: model_json");
+  ParseObject(p.detail_json, "RecordPrediction: detail_json");
+  for (auto [v, name] : {std::pair{p.final_position_error, "final_position_error"},
+                         std::pair{p.final_angle_error, "final_angle_error"},
+                         std::pair{p.force_error, "force_error"},
+                         std::pair{p.mode_agreement, "mode_agreement"}}) {
+    if (v) RequireFinite(*v, std::string("RecordPrediction: ") + name);
+  }
+  RequireFinite(p.wall_s, "RecordPrediction: wall_s");
+  if (p.wall_s < 0) BadInput("RecordPrediction: wall_s must be >= 0");
+  if (p.mode_agreement && (*p.mode_agreement < 0 || *p.mode_agreement > 1)) {
+    BadInput("RecordPrediction: mode_agreement must be in [0, 1]");
+  }
+  Tx tx(impl_->db, true);
+  const auto row = LoadTrialRow(*impl_, trial_id, "RecordPrediction");
+  CheckAttempt(row, trial_id, attempt, "RecordPrediction");
+  if (row.state != TrialState::kPredicted) {
+    WriteTransition(*impl_, trial_id, attempt, row.state, TrialState::kPredicted, row.cell_id,
+                    "predicted (" + p.model_key + ")", "RecordPrediction");
+  }
+  auto s = impl_->Prepare(
+      "INSERT INTO predictions(trial_id, attempt, model_key, model_json, status, final_position_error,"
+      " final_angle_error, force_error, mode_agreement, wall_s, detail_json, created_at)"
+      " VALUES(?,?,?,?,?,?,?,?,?,?,?,?)"
+      " ON CONFLICT(trial_id, attempt, model_key) DO UPDATE SET model_json = excluded.model_json,"
+      " status = excluded.status, final_position_error = excluded.final_position_error,"
+      " final_angle_error = excluded.final_angle_error, force_error = excluded.force_error,"
+      " mode_agreement = excluded.mode_agreement, wall_s = excluded.wall_s,"
+      " detail_json = excluded.detail_json, created_at = excluded.created_at");
+  s->Bind(1, trial_id).Bind(2, attempt).Bind(3, p.model_key).Bind(4, p.model_json).Bind(5, p.status)
+      .Bind(6, p.final_position_error).Bind(7, p.final_angle_error).Bind(8, p.force_error)
+      .Bind(9, p.mode_agreement).Bind(10, p.wall_s).Bind(11, p.detail_json).Bind(12, impl_->Now());
+  s->Run();
+  tx.Commit();
+}
+
+void Store::FinishTrial(std::int64_t trial_id, int attempt) {
+  impl_->RequireWritable("FinishTrial");
+  Tx tx(impl_->db, true);
+  const auto row = LoadTrialRow(*impl_, trial_id, "FinishTrial");
+  CheckAttempt(row, trial_id, attempt, "FinishTrial");
+  WriteTransition(*impl_, trial_id, attempt, row.state, TrialState::kDone, row.cell_id, "done",
+                  "FinishTrial");
+  tx.Commit();
+}
+
+RecoveryReport Store::RecoverAfterRestart(const std::string& reason) {
+  impl_->RequireWritable("RecoverAfterRestart");
+  Tx tx(impl_->db, true);
+  RecoveryReport report;
+  std::vector<std::pair<std::int64_t, int>> dispatched, resetting;
+  {
+    auto s = impl_->Prepare("SELECT id, attempt, state FROM trials WHERE state IN ('dispatched','resetting')");
+    while (s->Step()) {
+      (s->Text(2) == "dispatched" ? dispatched : resetting).emplace_back(s->Int(0), static_cast<int>(s->Int(1)));
+    }
+  }
+  for (auto [id, attempt] : dispatched) {
+    const auto row = LoadTrialRow(*impl_, id, "RecoverAfterRestart");
+    WriteTransition(*impl_, id, attempt, TrialState::kDispatched, TrialState::kPlanned, row.cell_id,
+                    reason + ": execute not confirmed, re-run as attempt " + std::to_string(attempt + 1),
+                    "RecoverAfterRestart");
+    auto u = impl_->Prepare("UPDATE trials SET attempt = attempt + 1, not_before = 0 WHERE id = ?");
+    u->Bind(1, id).Run();
+    report.requeued.push_back(id);
+  }
+  for (auto [id, attempt] : resetting) {
+    const auto row = LoadTrialRow(*impl_, id, "RecoverAfterRestart");
+    WriteTransition(*impl_, id, attempt, TrialState::kResetting, TrialState::kResetFailed, row.cell_id,
+                    reason + ": reset not confirmed", "RecoverAfterRestart");
+    report.reset_failed.push_back(id);
+  }
+  // Streams never published (their ingest died with the service) hold partial data only.
+  auto d = impl_->Prepare(
+      "DELETE FROM gt_streams WHERE complete = 0"
+      " AND id NOT IN (SELECT gt_stream_id FROM trials WHERE gt_stream_id IS NOT NULL)");
+  d->Run();
+  report.orphan_streams_deleted = sqlite3_changes(impl_->db);
+  tx.Commit();
+  return report;
+}
+
+// ---------------------------------------------------------------- reads
+
+namespace {
+
+constexpr const char* kTrialCols =
+    "SELECT id, campaign_id, idx, condition, replicate, seed, state, attempt, IFNULL(cell_id,''),"
+    " scene_json, params_json, defects_json, IFNULL(outcome,''), gt_stream_id, not_before,"
+    " created_at, updated_at FROM trials";
+
+Trial ReadTrial(const detail::Stmt& s) {
+  Trial t;
+  t.id = s.Int(0);
+  t.campaign_id = s.Int(1);
+  t.index = static_cast<int>(s.Int(2));
+  t.condition = static_cast<int>(s.Int(3));
+  t.replicate = static_cast<int>(s.Int(4));
+  t.seed = SeedFromDb(s.Int(5));
+  t.state = MustParseTrialState(s.Text(6));
+  t.attempt = static_cast<int>(s.Int(7));
+  t.cell_id = s.Text(8);
+  t.scene_json = s.Text(9);
+  t.params_json = s.Text(10);
+  t.defects_json = s.Text(11);
+  t.outcome = s.Text(12);
+  if (!s.IsNull(13)) t.gt_stream_id = s.Int(13);
+  t.not_before = s.Real(14);
+  t.created_at = s.Real(15);
+  t.updated_at = s.Real(16);
+  return t;
+}
+
+}  // namespace
+
+Trial Store::GetTrial(std::int64_t trial_id) const {
+  auto s = impl_->Prepare(std::string(kTrialCols) + " WHERE id = ?");
+  s->Bind(1, trial_id);
+  if (!s->Step()) {
+    throw StoreError(StoreError::Kind::kNotFound, "GetTrial: no trial " + std::to_string(trial_id));
+  }
+  return ReadTrial(*s);
+}
+
+std::vector<Trial> Store::ListTrials(std::int64_t campaign_id) const {
+  auto s = impl_->Prepare(std::string(kTrialCols) + " WHERE campaign_id = ? ORDER BY idx");
+  s->Bind(1, campaign_id);
+  std::vector<Trial> out;
+  while (s->Step()) out.push_back(ReadTrial(*s));
+  return out;
+}
+
+std::vector<Transition> Store::ListTransitions(std::int64_t trial_id) const {
+  auto s = impl_->Prepare(
+      "SELECT trial_id, attempt, from_state, to_state, at, cell_id, reason FROM trial_transitions"
+      " WHERE trial_id = ? ORDER BY id");
+  s->Bind(1, trial_id);
+  std::vector<Transition> out;
+  while (s->Step()) {
+    out.push_back({s->Int(0), static_cast<int>(s->Int(1)), s->Text(2), s->Text(3), s->Real(4),
+                   s->Text(5), s->Text(6)});
+  }
+  return out;
+}
+
+std::vector<Prediction> Store::ListPredictions(std::int64_t trial_id) const {
+  auto s = impl_->Prepare(
+      "SELECT model_key, model_json, status, final_position_error, final_angle_error, force_error,"
+      " mode_agreement, wall_s, detail_json FROM predictions WHERE trial_id = ? ORDER BY id");
+  s->Bind(1, trial_id);
+  std::vector<Prediction> out;
+  while (s->Step()) {
+    Prediction p;
+    p.model_key = s->Text(0);
+    p.model_json = s->Text(1);
+    p.status = s->Text(2);
+    p.final_position_error = s->OptReal(3);
+    p.final_angle_error = s->OptReal(4);
+    p.force_error = s->OptReal(5);
+    p.mode_agreement = s->OptReal(6);
+    p.wall_s = s->Real(7);
+    p.detail_json = s->Text(8);
+    out.push_back(std::move(p));
+  }
+  return out;
+}
+
+std::vector<std::string> Store::CheckInvariants() const {
+  std::vector<std::string> out;
+  const std::pair<const char*, const char*> checks[] = {
+      {"a trial at or past executed has a complete stream of its attempt",
+       "SELECT t.id FROM trials t LEFT JOIN gt_streams g ON g.id = t.gt_stream_id"
+       " WHERE t.state IN ('executed','resetting','reset_done','reset_failed','predicted','done')"
+       " AND (g.id IS NULL OR g.complete = 0 OR g.attempt != t.attempt OR g.trial_id != t.id)"},
+      {"a done trial has a prediction of its attempt",
+       "SELECT t.id FROM trials t WHERE t.state = 'done' AND NOT EXISTS"
+       " (SELECT 1 FROM predictions p WHERE p.trial_id = t.id AND p.attempt = t.attempt)"},
+      {"the last audit row of a trial matches its state and attempt",
+       "SELECT t.id FROM trials t JOIN trial_transitions a ON a.id ="
+       " (SELECT MAX(id) FROM trial_transitions WHERE trial_id = t.id)"
+       " WHERE a.to_state != t.state OR a.attempt > t.attempt"},
+      {"every trial has an audit row", "SELECT t.id FROM trials t WHERE NOT EXISTS"
+       " (SELECT 1 FROM trial_transitions a WHERE a.trial_id = t.id)"},
+      {"a published stream's sample count equals its chunks'",
+       "SELECT g.id FROM gt_streams g WHERE g.complete = 1 AND g.samples !="
+       " (SELECT IFNULL(SUM(samples), 0) FROM gt_chunks c WHERE c.stream_id = g.id)"},
+      {"a dispatched trial names its cell",
+       "SELECT id FROM trials WHERE state = 'dispatched' AND cell_id IS NULL"},
+  };
+  Tx tx(impl_->db, false);
+  for (const auto& [what, sql] : checks) {
+    detail::Stmt s(impl_->db, sql);
+    while (s.Step()) out.push_back(std::string(what) + ": violated by id " + std::to_string(s.Int(0)));
+  }
+  tx.Commit();
+  return out;
+}
+
+// ---------------------------------------------------------------- cells
+
+void Store::UpsertCell(const std::string& cell_id, const std::vector<std::string>& contact_types,
+                       const std::string& capabilities_json, const std::string& defects_json) {
+  impl_->RequireWritable("UpsertCell");
+  if (cell_id.empty()) BadInput("UpsertCell: cell_id is empty");
+  const int mask = ContactTypeMask(contact_types);
+  ParseObject(capabilities_json, "UpsertCell: capabilities_json");
+  ParseObject(defects_json, "UpsertCell: defects_json");
+  Tx tx(impl_->db, true);
+  const double now = impl_->Now();
+  auto s = impl_->Prepare(
+      "INSERT INTO cells(id, state, contact_mask, capabilities_json, defects_json, last_seen,"
+      " created_at, updated_at) VALUES(?1,'healthy',?2,?3,?4,?5,?5,?5)"
+      " ON CONFLICT(id) DO UPDATE SET contact_mask = ?2, capabilities_json = ?3, defects_json = ?4,"
+      " last_seen = ?5, updated_at = ?5,"
+      " state = CASE WHEN state = 'gone' THEN 'healthy' ELSE state END,"
+      " quarantine_reason = CASE WHEN state = 'gone' THEN '' ELSE quarantine_reason END");
+  s->Bind(1, cell_id).Bind(2, mask).Bind(3, capabilities_json).Bind(4, defects_json).Bind(5, now).Run();
+  tx.Commit();
+}
+
+namespace {
+void RequireCellChanged(sqlite3* db, const char* function, const std::string& cell_id) {
+  if (sqlite3_changes(db) == 0) {
+    throw StoreError(StoreError::Kind::kNotFound,
+                     std::string(function) + ": unknown cell '" + cell_id + "'");
+  }
+}
+}  // namespace
+
+void Store::TouchCell(const std::string& cell_id) {
+  impl_->RequireWritable("TouchCell");
+  auto s = impl_->Prepare("UPDATE cells SET last_seen = ? WHERE id = ?");
+  s->Bind(1, impl_->Now()).Bind(2, cell_id).Run();
+  RequireCellChanged(impl_->db, "TouchCell", cell_id);
+}
+
+int Store::RecordCellResult(const std::string& cell_id, bool ok) {
+  impl_->RequireWritable("RecordCellResult");
+  Tx tx(impl_->db, true);
+  auto s = impl_->Prepare(
+      ok ? "UPDATE cells SET consecutive_failures = 0, last_seen = ?, updated_at = ? WHERE id = ?"
+         : "UPDATE cells SET consecutive_failures = consecutive_failures + 1,"
+           " total_failures = total_failures + 1, last_seen = ?, updated_at = ? WHERE id = ?");
+  const double now = impl_->Now();
+  s->Bind(1, now).Bind(2, now).Bind(3, cell_id).Run();
+  RequireCellChanged(impl_->db, "RecordCellResult", cell_id);
+  auto q = impl_->Prepare("SELECT consecutive_failures FROM cells WHERE id = ?");
+  q->Bind(1, cell_id);
+  q->Step();
+  const int n = static_cast<int>(q->Int(0));
+  tx.Commit();
+  return n;
+}
+
+void Store::QuarantineCell(const std::string& cell_id, const std::string& reason) {
+  impl_->RequireWritable("QuarantineCell");
+  auto s = impl_->Prepare(
+      "UPDATE cells SET state = 'quarantined', quarantine_reason = ?, updated_at = ? WHERE id = ?");
+  s->Bind(1, reason).Bind(2, impl_->Now()).Bind(3, cell_id).Run();
+  RequireCellChanged(impl_->db, "QuarantineCell", cell_id);
+}
+
+void Store::ReleaseCell(const std::string& cell_id) {
+  impl_->RequireWritable("ReleaseCell");
+  auto s = impl_->Prepare(
+      "UPDATE cells SET state = 'healthy', quarantine_reason = '', consecutive_failures = 0,"
+      " updated_at = ? WHERE id = ?");
+  s->Bind(1, impl_->Now()).Bind(2, cell_id).Run();
+  RequireCellChanged(impl_->db, "ReleaseCell", cell_id);
+}
+
+void Store::MarkCellGone(const std::string& cell_id, const std::string& reason) {
+  impl_->RequireWritable("MarkCellGone");
+  auto s = impl_->Prepare(
+      "UPDATE cells SET state = CASE WHEN state = 'quarantined' THEN state ELSE 'gone' END,"
+      " quarantine_reason = CASE WHEN state = 'quarantined' THEN quarantine_reason ELSE ? END,"
+      " updated_at = ? WHERE id = ?");
+  s->Bind(1, reason).Bind(2, impl_->Now()).Bind(3, cell_id).Run();
+  RequireCellChanged(impl_->db, "MarkCellGone", cell_id);
+}
+
+namespace {
+constexpr const char* kCellCols =
+    "SELECT id, state, last_seen, consecutive_failures, total_failures, capabilities_json,"
+    " quarantine_reason FROM cells";
+CellInfo ReadCell(const detail::Stmt& s) {
+  CellInfo c;
+  c.id = s.Text(0);
+  c.state = ParseCellState(s.Text(1));
+  c.last_seen = s.Real(2);
+  c.consecutive_failures = static_cast<int>(s.Int(3));
+  c.total_failures = static_cast<int>(s.Int(4));
+  c.capabilities_json = s.Text(5);
+  c.quarantine_reason = s.Text(6);
+  return c;
+}
+}  // namespace
+
+CellInfo Store::GetCell(const std::string& cell_id) const {
+  auto s = impl_->Prepare(std::string(kCellCols) + " WHERE id = ?");
+  s->Bind(1, cell_id);
+  if (!s->Step()) throw StoreError(StoreError::Kind::kNotFound, "GetCell: unknown cell '" + cell_id + "'");
+  return ReadCell(*s);
+}
+
+std::vector<CellInfo> Store::ListCells() const {
+  auto s = impl_->Prepare(std::string(kCellCols) + " ORDER BY id");
+  std::vector<CellInfo> out;
+  while (s->Step()) out.push_back(ReadCell(*s));
+  return out;
+}
+
+// ---------------------------------------------------------------- status
+
+std::vector<StartStateDrift> Store::Drift(std::optional<std::int64_t> campaign_id) const {
+  auto s = impl_->Prepare(
+      "SELECT campaign_id, cell_id, trials, mean_dx, mean_dy, mean_dz, mean_position_error,"
+      " max_position_error, mean_angle_error, max_angle_error FROM start_state_drift"
+      " WHERE ?1 IS NULL OR campaign_id = ?1 ORDER BY campaign_id, cell_id");
+  if (campaign_id) s->Bind(1, *campaign_id); else s->BindNull(1);
+  std::vector<StartStateDrift> out;
+  while (s->Step()) {
+    StartStateDrift d;
+    d.campaign_id = s->Int(0);
+    d.cell_id = s->Text(1);
+    d.trials = s->Int(2);
+    d.mean_dx = s->Real(3);
+    d.mean_dy = s->Real(4);
+    d.mean_dz = s->Real(5);
+    d.mean_position_error = s->Real(6);
+    d.max_position_error = s->Real(7);
+    d.mean_angle_error = s->Real(8);
+    d.max_angle_error = s->Real(9);
+    out.push_back(d);
+  }
+  return out;
+}
+
+StatusSummary Store::Status() const {
+  constexpr double kRateWindowS = 900;  // recent rate: the last 15 minutes
+  Tx tx(impl_->db, false);               // one snapshot for the whole summary
+  StatusSummary out;
+  const double now = impl_->Now();
+  auto s = impl_->Prepare(
+      "SELECT c.id, c.name, c.state, c.priority, COUNT(t.id),"
+      " SUM(t.state = 'planned'),"
+      " SUM(t.state IN ('dispatched','executed','resetting','reset_done','reset_failed','predicted')),"
+      " SUM(t.state = 'done'), SUM(t.state = 'failed'), SUM(t.state = 'cancelled'),"
+      " SUM(t.state IN ('done','failed') AND t.finished_at >= ?1),"
+      " MIN(t.dispatched_at)"
+      " FROM campaigns c LEFT JOIN trials t ON t.campaign_id = c.id GROUP BY c.id ORDER BY c.id");
+  s->Bind(1, now - kRateWindowS);
+  while (s->Step()) {
+    CampaignStatus c;
+    c.id = s->Int(0);
+    c.name = s->Text(1);
+    c.state = ParseCampaignState(s->Text(2));
+    c.priority = static_cast<int>(s->Int(3));
+    c.planned = s->Int(4);
+    c.pending = s->Int(5);
+    c.running = s->Int(6);
+    c.done = s->Int(7);
+    c.failed = s->Int(8);
+    c.cancelled = s->Int(9);
+    const std::int64_t recent = s->Int(10);
+    if (!s->IsNull(11) && recent > 0) {
+      const double span = std::min(kRateWindowS, now - s->Real(11));
+      if (span > 0) c.rate_per_hour = recent * 3600.0 / span;
+    }
+    if (c.rate_per_hour > 0 && c.state == CampaignState::kActive) {
+      c.eta_s = (c.pending + c.running) * 3600.0 / c.rate_per_hour;
+    }
+    out.campaigns.push_back(c);
+  }
+  out.cells = ListCells();
+  out.drift = Drift();
+  tx.Commit();
+  return out;
+}
+
+}  // namespace arena::db

@@ -1,0 +1,43 @@
+// Helpers shared by the store's translation units (private).
+#pragma once
+
+#include <cstdint>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "sqlite_util.hpp"
+
+namespace arena::db::internal {
+
+struct TrialRow {
+  TrialState state = TrialState::kPlanned;
+  int attempt = 1;
+  std::string cell_id;
+  std::int64_t campaign_id = 0;
+  std::optional<std::int64_t> gt_stream_id;
+};
+
+// @throws kNotFound naming `function`.
+TrialRow LoadTrialRow(const Store::Impl& impl, std::int64_t trial_id, const char* function);
+// @throws kStaleAttempt unless row.attempt == attempt.
+void CheckAttempt(const TrialRow& row, std::int64_t trial_id, int attempt, const char* function);
+// @throws kIllegalTransition unless IsLegalTransition(from, to).
+void CheckEdge(TrialState from, TrialState to, std::int64_t trial_id, const char* function);
+// Checks the edge, updates trials.state and appends the audit row. Call inside a write transaction.
+void WriteTransition(const Store::Impl& impl, std::int64_t trial_id, int attempt, TrialState from,
+                     TrialState to, const std::string& cell_id, const std::string& reason,
+                     const char* function);
+
+// The samples of one stream, in order; no transaction of its own (the caller's
+// read transaction gives the snapshot). @throws kCorrupt on a count mismatch.
+std::vector<Sample> ReadStreamSamples(const Store::Impl& impl, std::int64_t stream_id,
+                                      std::int64_t expected, const char* function);
+
+}  // namespace arena::db::internal
+
+namespace arena::db {
+// Block codec pieces (sample.cpp) used by the ingest to encode as samples arrive.
+void EncodeSampleBody(const Sample& s, std::string* out);
+void EncodeBlockHeader(std::uint32_t count, std::string* out);
+}  // namespace arena::db

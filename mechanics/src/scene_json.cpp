@@ -1,0 +1,828 @@
+// Scene JSON: reading (with paths in every error), validation, writing.
+//
+// Reading is two passes. A SAX handler builds the document while it tracks
+// the JSON path, so a syntax error, a non-UTF-8 byte, a number that
+// overflows, a duplicate key, too deep a nesting or too long an array is
+// reported at its path and byte offset, and no input can make it allocate
+// more than a small multiple of kMaxSceneBytes. Then a typed reader walks the
+// document: unknown keys, missing fields and wrong types, and finally
+// ValidateScene() checks ranges and geometry (shared with scenes built in
+// code).
+#include "arena/mechanics/scene_json.hpp"
+
+#include <algorithm>
+#include <array>
+#include <charconv>
+#include <cmath>
+#include <fstream>
+#include <initializer_list>
+#include <limits>
+#include <numbers>
+#include <sstream>
+#include <vector>
+
+#include <Eigen/Eigenvalues>
+#include <Eigen/Geometry>
+#include <nlohmann/json.hpp>
+
+namespace arena::mechanics {
+
+SceneError::SceneError(std::string field, const std::string& reason)
+    : std::runtime_error((field.empty() ? std::string("scene") : field) + ": " + reason),
+      field_(std::move(field)),
+      reason_(reason) {}
+
+const char* ToString(ContactType type) {
+  switch (type) {
+    case ContactType::kPoint: return "point";
+    case ContactType::kLine: return "line";
+    case ContactType::kPatch: return "patch";
+  }
+  return "?";
+}
+
+const char* ToString(Reduce reduce) {
+  switch (reduce) {
+    case Reduce::kAuto: return "auto";
+    case Reduce::kFull: return "full";
+    case Reduce::kPlanar: return "planar";
+  }
+  return "?";
+}
+
+const char* ToString(ObjectShape shape) {
+  switch (shape) {
+    case ObjectShape::kBox: return "box";
+    case ObjectShape::kCylinder: return "cylinder";
+  }
+  return "?";
+}
+
+std::optional<ObjectShape> ObjectShapeFromString(std::string_view text) {
+  if (text == "box") return ObjectShape::kBox;
+  if (text == "cylinder") return ObjectShape::kCylinder;
+  return std::nullopt;
+}
+
+std::optional<ContactType> ContactTypeFromString(std::string_view text) {
+  if (text == "point") return ContactType::kPoint;
+  if (text == "line") return ContactType::kLine;
+  if (text == "patch") return ContactType::kPatch;
+  return std::nullopt;
+}
+
+std::optional<Reduce> ReduceFromString(std::string_view text) {
+  if (text == "auto") return Reduce::kAuto;
+  if (text == "full") return Reduce::kFull;
+  if (text == "planar") return Reduce::kPlanar;
+  return std::nullopt;
+}
+
+double ObjectExtent(const ObjectSpec& object) {
+  if (object.shape == ObjectShape::kBox) return object.size.maxCoeff();
+  return std::max(2 * object.radius, object.height);
+}
+
+namespace {
+
+using nlohmann::json;
+
+constexpr double kParseUnitTolerance = 1e-3;     // hand-written directions
+constexpr double kValidateUnitTolerance = 1e-6;  // directions built in code
+constexpr double kSurfaceTolerance = 1e-2;       // of the object's extent
+constexpr double kCoincidentTolerance = 1e-6;    // of the object's extent
+
+// Shortest text that reads back to the same double ("-0.2", "1e-09").
+std::string Num(double value) {
+  if (std::isnan(value)) return "NaN";
+  if (std::isinf(value)) return value > 0 ? "Infinity" : "-Infinity";
+  std::array<char, 32> buf{};
+  const auto res = std::to_chars(buf.data(), buf.data() + buf.size(), value);
+  return std::string(buf.data(), res.ptr);
+}
+
+// Text from the input in a message: printable ASCII only (an error message
+// must itself be valid UTF-8, and JSON-printable), bounded in length.
+std::string Printable(std::string_view text, size_t max_bytes) {
+  std::string out;
+  for (size_t i = 0; i < text.size() && i < max_bytes; ++i) {
+    const unsigned char c = static_cast<unsigned char>(text[i]);
+    out += (c < 0x20 || c >= 0x7f) ? '?' : static_cast<char>(c);
+  }
+  if (text.size() > max_bytes) out += "...";
+  return out;
+}
+
+std::string Quote(std::string_view text) { return "\"" + Printable(text, 40) + "\""; }
+
+std::string Join(const std::string& path, std::string_view key) {
+  const std::string safe = Printable(key, 64);  // keys are user input too
+  return path.empty() ? safe : path + "." + safe;
+}
+std::string Index(const std::string& path, size_t i) {
+  return path + "[" + std::to_string(i) + "]";
+}
+
+// ---------------------------------------------------------------------------
+// Pass 1: SAX builder that knows where it is.
+
+class PathTrackingBuilder {
+ public:
+  explicit PathTrackingBuilder(const JsonLimits& limits) : limits_(limits) {}
+
+  using number_integer_t = json::number_integer_t;
+  using number_unsigned_t = json::number_unsigned_t;
+  using number_float_t = json::number_float_t;
+  using string_t = json::string_t;
+  using binary_t = json::binary_t;
+
+  json root;
+  std::string error_path;
+  std::string error_reason;
+
+  bool null() { return Add(json(nullptr)) != nullptr; }
+  bool boolean(bool v) { return Add(json(v)) != nullptr; }
+  bool number_integer(number_integer_t v) { return Add(json(v)) != nullptr; }
+  bool number_unsigned(number_unsigned_t v) { return Add(json(v)) != nullptr; }
+  bool number_float(number_float_t v, const string_t&) { return Add(json(v)) != nullptr; }
+  bool string(string_t& v) { return Add(json(std::move(v))) != nullptr; }
+  bool binary(binary_t&) { return Fail(ChildPath(), "binary values are not JSON"); }
+
+  bool start_object(std::size_t) { return Open(json::object()); }
+  bool start_array(std::size_t) { return Open(json::array()); }
+  bool end_object() { return Close(); }
+  bool end_array() { return Close(); }
+
+  bool key(string_t& k) {
+    const Frame& top = stack_.back();
+    if (top.value->contains(k)) {
+      return Fail(Join(top.path, k), "duplicate key");
+    }
+    key_ = std::move(k);
+    have_key_ = true;
+    return true;
+  }
+
+  bool parse_error(std::size_t position, const std::string&, const nlohmann::detail::exception& ex) {
+    std::string what = ex.what();
+    // "[json.exception.parse_error.101] parse error at line 1, column 5: ..." -> after "]".
+    if (const auto close = what.find("] "); close != std::string::npos) what = what.substr(close + 2);
+    return Fail(ChildPath(), "invalid JSON at byte offset " + std::to_string(position > 0 ? position - 1 : 0) +
+                                 ": " + Printable(what, 200));
+  }
+
+ private:
+  struct Frame {
+    json* value;
+    std::string path;
+  };
+
+  bool Fail(std::string path, std::string reason) {
+    if (error_reason.empty()) {  // the first failure is the one to report
+      error_path = std::move(path);
+      error_reason = std::move(reason);
+    }
+    return false;
+  }
+
+  // Path of the value that comes next.
+  std::string ChildPath() const {
+    if (stack_.empty()) return "";
+    const Frame& top = stack_.back();
+    if (top.value->is_array()) return Index(top.path, top.value->size());
+    return have_key_ ? Join(top.path, key_) : top.path;
+  }
+
+  json* Add(json&& value) {
+    if (stack_.empty()) {
+      root = std::move(value);
+      return &root;
+    }
+    Frame& top = stack_.back();
+    if (top.value->is_array()) {
+      if (top.value->size() >= limits_.max_array) {
+        Fail(top.path, "array longer than " + std::to_string(limits_.max_array) + " elements");
+        return nullptr;
+      }
+      top.value->push_back(std::move(value));
+      return &top.value->back();
+    }
+    have_key_ = false;
+    json& slot = (*top.value)[key_];
+    slot = std::move(value);
+    return &slot;
+  }
+
+  bool Open(json&& container) {
+    const std::string path = ChildPath();
+    if (static_cast<int>(stack_.size()) >= limits_.max_depth) {
+      return Fail(path, "nested deeper than " + std::to_string(limits_.max_depth) + " levels");
+    }
+    json* slot = Add(std::move(container));
+    if (!slot) return false;
+    stack_.push_back({slot, path});
+    return true;
+  }
+
+  bool Close() {
+    stack_.pop_back();
+    have_key_ = false;
+    return true;
+  }
+
+  JsonLimits limits_;
+  std::vector<Frame> stack_;
+  std::string key_;
+  bool have_key_ = false;
+};
+
+// ---------------------------------------------------------------------------
+// Pass 2: typed reading.
+
+std::string TypeName(const json& v) {
+  if (v.is_number()) return "a number";
+  if (v.is_string()) return "a string";
+  if (v.is_boolean()) return "a boolean";
+  if (v.is_null()) return "null";
+  if (v.is_array()) return "an array";
+  return "an object";
+}
+
+// A JSON object being read: refuses keys it does not know, names the path.
+class Obj {
+ public:
+  Obj(const json& value, std::string path, std::initializer_list<std::string_view> known)
+      : value_(value), path_(std::move(path)) {
+    if (!value.is_object()) throw SceneError(path_, "must be an object, got " + TypeName(value));
+    for (const auto& [key, unused] : value.items()) {
+      (void)unused;
+      if (std::find(known.begin(), known.end(), key) == known.end()) {
+        std::string list;
+        for (auto k : known) list += (list.empty() ? "" : ", ") + std::string(k);
+        throw SceneError(At(key), "unknown key (expected one of: " + list + ")");
+      }
+    }
+  }
+
+  std::string At(std::string_view key) const { return Join(path_, key); }
+  const json* Find(std::string_view key) const {
+    const auto it = value_.find(key);
+    return it == value_.end() ? nullptr : &*it;
+  }
+  const json& Require(std::string_view key) const {
+    const json* v = Find(key);
+    if (!v) throw SceneError(At(key), "is required");
+    return *v;
+  }
+  void Forbid(std::string_view key, const std::string& why) const {
+    if (Find(key)) throw SceneError(At(key), why);
+  }
+
+ private:
+  const json& value_;
+  std::string path_;
+};
+
+double Number(const json& v, const std::string& path) {
+  if (!v.is_number()) throw SceneError(path, "must be a number, got " + TypeName(v));
+  const double x = v.get<double>();
+  if (!std::isfinite(x)) throw SceneError(path, "must be finite, got " + Num(x));
+  return x;
+}
+
+int Integer(const json& v, const std::string& path, int lo, int hi) {
+  const std::string range = "an integer in [" + std::to_string(lo) + ", " + std::to_string(hi) + "]";
+  if (!v.is_number()) throw SceneError(path, "must be " + range + ", got " + TypeName(v));
+  const double x = v.get<double>();
+  if (std::floor(x) != x) throw SceneError(path, "must be " + range + ", got " + Num(x));
+  if (x < lo || x > hi) throw SceneError(path, "must be " + range + ", got " + Num(x));
+  return static_cast<int>(x);
+}
+
+std::string String(const json& v, const std::string& path) {
+  if (!v.is_string()) throw SceneError(path, "must be a string, got " + TypeName(v));
+  return v.get<std::string>();
+}
+
+Eigen::Vector3d Vec3(const json& v, const std::string& path) {
+  if (!v.is_array()) throw SceneError(path, "must be an array of 3 numbers, got " + TypeName(v));
+  if (v.size() != 3) {
+    throw SceneError(path, "must be an array of 3 numbers, got " + std::to_string(v.size()) + " elements");
+  }
+  return {Number(v[0], Index(path, 0)), Number(v[1], Index(path, 1)), Number(v[2], Index(path, 2))};
+}
+
+// A direction: accepted when its norm is 1 within kParseUnitTolerance, then
+// made exactly unit.
+Eigen::Vector3d Direction(const json& v, const std::string& path) {
+  const Eigen::Vector3d d = Vec3(v, path);
+  const double n = d.norm();
+  if (n == 0) throw SceneError(path, "must be a unit vector, got the zero vector");
+  if (std::abs(n - 1) > kParseUnitTolerance) {
+    throw SceneError(path, "must be a unit vector (norm 1 within 1e-3), got norm " + Num(n));
+  }
+  // Already unit to rounding: keep the bits, so that writing and reading a
+  // scene reproduces it exactly.
+  return std::abs(n - 1) > 1e-12 ? Eigen::Vector3d(d / n) : d;
+}
+
+Pose ReadPose(const json& v, const std::string& path) {
+  Obj o(v, path, {"position", "rpy"});
+  Pose pose;
+  if (const json* p = o.Find("position")) pose.position = Vec3(*p, o.At("position"));
+  if (const json* r = o.Find("rpy")) pose.rpy = Vec3(*r, o.At("rpy"));
+  return pose;
+}
+
+ObjectSpec ReadObject(const json& v, const std::string& path) {
+  Obj o(v, path, {"shape", "size", "radius", "height", "mass", "inertia", "pose"});
+  ObjectSpec object;
+  const std::string shape = String(o.Require("shape"), o.At("shape"));
+  const auto parsed = ObjectShapeFromString(shape);
+  if (!parsed) throw SceneError(o.At("shape"), "must be \"box\" or \"cylinder\", got " + Quote(shape));
+  object.shape = *parsed;
+  if (object.shape == ObjectShape::kBox) {
+    o.Forbid("radius", "only for shape \"cylinder\" (a box has size)");
+    o.Forbid("height", "only for shape \"cylinder\" (a box has size)");
+    object.size = Vec3(o.Require("size"), o.At("size"));
+  } else {
+    o.Forbid("size", "only for shape \"box\" (a cylinder has radius and height)");
+    object.radius = Number(o.Require("radius"), o.At("radius"));
+    object.height = Number(o.Require("height"), o.At("height"));
+  }
+  object.mass = Number(o.Require("mass"), o.At("mass"));
+  if (const json* in = o.Find("inertia")) {
+    const std::string ipath = o.At("inertia");
+    if (!in->is_array() || in->size() != 3) {
+      throw SceneError(ipath, "must be a 3x3 array of numbers (3 rows of 3)");
+    }
+    Eigen::Matrix3d inertia;
+    for (int r = 0; r < 3; ++r) {
+      const Eigen::Vector3d row = Vec3((*in)[r], Index(ipath, r));
+      inertia.row(r) = row.transpose();
+    }
+    object.inertia = inertia;
+  }
+  if (const json* p = o.Find("pose")) object.pose = ReadPose(*p, o.At("pose"));
+  return object;
+}
+
+// Fingers and the pusher share the contact fields; the pusher has motion and
+// no name.
+void ReadContact(const Obj& o, ContactSpec* contact) {
+  const std::string type = String(o.Require("type"), o.At("type"));
+  const auto parsed = ContactTypeFromString(type);
+  if (!parsed) {
+    throw SceneError(o.At("type"), "must be \"point\", \"line\" or \"patch\", got " + Quote(type));
+  }
+  contact->type = *parsed;
+  if (contact->type != ContactType::kLine) {
+    o.Forbid("axis", "only for type \"line\"");
+    o.Forbid("length", "only for type \"line\"");
+  }
+  if (contact->type != ContactType::kPatch) o.Forbid("radius", "only for type \"patch\"");
+  contact->position = Vec3(o.Require("position"), o.At("position"));
+  contact->normal = Direction(o.Require("normal"), o.At("normal"));
+  contact->mu = Number(o.Require("mu"), o.At("mu"));
+  if (contact->type == ContactType::kLine) {
+    Eigen::Vector3d axis = Direction(o.Require("axis"), o.At("axis"));
+    const double dot = axis.dot(contact->normal);
+    if (std::abs(dot) > kParseUnitTolerance) {
+      throw SceneError(o.At("axis"), "must be perpendicular to normal (|axis.normal| <= 1e-3), got " + Num(dot));
+    }
+    if (std::abs(dot) > 1e-12) axis = (axis - dot * contact->normal).normalized();  // into the contact plane
+    contact->axis = axis;
+    contact->length = Number(o.Require("length"), o.At("length"));
+  }
+  if (contact->type == ContactType::kPatch) {
+    contact->radius = Number(o.Require("radius"), o.At("radius"));
+  }
+}
+
+ContactSpec ReadFinger(const json& v, const std::string& path) {
+  Obj o(v, path, {"name", "type", "position", "normal", "axis", "length", "radius", "mu"});
+  ContactSpec finger;
+  finger.name = String(o.Require("name"), o.At("name"));
+  ReadContact(o, &finger);
+  return finger;
+}
+
+PusherSpec ReadPusher(const json& v, const std::string& path) {
+  Obj o(v, path, {"type", "position", "normal", "axis", "length", "radius", "mu", "motion"});
+  PusherSpec pusher;
+  pusher.name = "pusher";
+  ReadContact(o, &pusher);
+  if (const json* m = o.Find("motion")) {
+    Obj motion(*m, o.At("motion"), {"velocity", "angular_velocity"});
+    if (const json* vel = motion.Find("velocity")) {
+      pusher.motion.velocity = Vec3(*vel, motion.At("velocity"));
+    }
+    if (const json* w = motion.Find("angular_velocity")) {
+      pusher.motion.angular_velocity = Vec3(*w, motion.At("angular_velocity"));
+    }
+  }
+  return pusher;
+}
+
+ModelOptions ReadModel(const json& v, const std::string& path) {
+  Obj o(v, path, {"facets", "points", "dt", "reduce"});
+  ModelOptions model;
+  if (const json* f = o.Find("facets")) model.facets = Integer(*f, o.At("facets"), 3, kMaxFacets);
+  if (const json* p = o.Find("points")) model.points = Integer(*p, o.At("points"), 2, kMaxPoints);
+  if (const json* dt = o.Find("dt")) model.dt = Number(*dt, o.At("dt"));
+  if (const json* r = o.Find("reduce")) {
+    const std::string text = String(*r, o.At("reduce"));
+    const auto parsed = ReduceFromString(text);
+    if (!parsed) {
+      throw SceneError(o.At("reduce"), "must be \"auto\", \"full\" or \"planar\", got " + Quote(text));
+    }
+    model.reduce = *parsed;
+  }
+  return model;
+}
+
+// ---------------------------------------------------------------------------
+// Validation helpers.
+
+void RequireFinite(double x, const std::string& path) {
+  if (!std::isfinite(x)) throw SceneError(path, "must be finite, got " + Num(x));
+}
+void RequirePositive(double x, const std::string& path) {
+  RequireFinite(x, path);
+  if (!(x > 0)) throw SceneError(path, "must be > 0, got " + Num(x));
+}
+void RequireNonNegative(double x, const std::string& path) {
+  RequireFinite(x, path);
+  if (!(x >= 0)) throw SceneError(path, "must be >= 0, got " + Num(x));
+}
+void RequireFinite(const Eigen::Vector3d& v, const std::string& path) {
+  for (int i = 0; i < 3; ++i) RequireFinite(v[i], Index(path, static_cast<size_t>(i)));
+}
+void RequireUnit(const Eigen::Vector3d& v, const std::string& path) {
+  RequireFinite(v, path);
+  const double n = v.norm();
+  if (std::abs(n - 1) > kValidateUnitTolerance) {
+    throw SceneError(path, "must be a unit vector (norm 1 within 1e-6), got norm " + Num(n));
+  }
+}
+
+// R = Rz(yaw) Ry(pitch) Rx(roll): roll-pitch-yaw about fixed x, y, z.
+Eigen::Matrix3d RotationFromRpy(const Eigen::Vector3d& rpy) {
+  return (Eigen::AngleAxisd(rpy.z(), Eigen::Vector3d::UnitZ()) *
+          Eigen::AngleAxisd(rpy.y(), Eigen::Vector3d::UnitY()) *
+          Eigen::AngleAxisd(rpy.x(), Eigen::Vector3d::UnitX()))
+      .toRotationMatrix();
+}
+
+// Unsigned distance (m) from point p_G (gripper frame) to the object's surface.
+double DistanceToSurface(const ObjectSpec& object, const Eigen::Vector3d& p_G) {
+  const Eigen::Matrix3d R_GO = RotationFromRpy(object.pose.rpy);
+  const Eigen::Vector3d p_O = R_GO.transpose() * (p_G - object.pose.position);
+  // Signed distance of an axis-aligned box with half extents h (2-D or 3-D).
+  auto box_sdf = [](const Eigen::VectorXd& q) {
+    const double outside = q.cwiseMax(0.0).norm();
+    const double inside = std::min(q.maxCoeff(), 0.0);
+    return outside + inside;
+  };
+  if (object.shape == ObjectShape::kBox) {
+    const Eigen::Vector3d q = p_O.cwiseAbs() - object.size / 2;
+    return std::abs(box_sdf(q));
+  }
+  Eigen::Vector2d q(std::hypot(p_O.x(), p_O.y()) - object.radius, std::abs(p_O.z()) - object.height / 2);
+  return std::abs(box_sdf(q));
+}
+
+// SCENE.md tangent basis: t1 from the first of z, y, x with |n.axis| < 0.9.
+Eigen::Vector3d FirstTangent(const Eigen::Vector3d& n) {
+  for (const Eigen::Vector3d& a : {Eigen::Vector3d::UnitZ().eval(), Eigen::Vector3d::UnitY().eval(),
+                                   Eigen::Vector3d::UnitX().eval()}) {
+    if (std::abs(n.dot(a)) < 0.9) return (a - n.dot(a) * n).normalized();
+  }
+  return Eigen::Vector3d::UnitZ();  // unreachable for a unit n
+}
+
+// Where a contact's constituent points lie (an approximation of the model's
+// placement, good enough to catch coincident contacts): a point; `points`
+// points evenly along a line; `points` points on a patch's rim.
+std::vector<Eigen::Vector3d> ConstituentPoints(const ContactSpec& c, int points) {
+  std::vector<Eigen::Vector3d> out;
+  if (c.type == ContactType::kPoint) {
+    out.push_back(c.position);
+  } else if (c.type == ContactType::kLine) {
+    for (int j = 0; j < points; ++j) {
+      const double s = -0.5 + static_cast<double>(j) / (points - 1);
+      out.push_back(c.position + s * c.length * c.axis);
+    }
+  } else {
+    const Eigen::Vector3d t1 = FirstTangent(c.normal);
+    const Eigen::Vector3d t2 = c.normal.cross(t1);
+    for (int j = 0; j < points; ++j) {
+      const double a = 2 * std::numbers::pi * j / points;
+      out.push_back(c.position + c.radius * (std::cos(a) * t1 + std::sin(a) * t2));
+    }
+  }
+  return out;
+}
+
+bool ValidNameChar(char c) {
+  return (c >= 'a' && c <= 'z') || (c >= 'A' && c <= 'Z') || (c >= '0' && c <= '9') || c == '_' ||
+         c == '-' || c == '.';
+}
+
+void ValidateContact(const ContactSpec& c, const std::string& path, const Scene& scene) {
+  RequireFinite(c.position, Join(path, "position"));
+  RequireUnit(c.normal, Join(path, "normal"));
+  RequireNonNegative(c.mu, Join(path, "mu"));
+  const double extent = ObjectExtent(scene.object);
+  const double surface_tol = kSurfaceTolerance * extent;
+  auto on_surface = [&](const Eigen::Vector3d& p, const std::string& field, const std::string& what) {
+    const double d = DistanceToSurface(scene.object, p);
+    if (d > surface_tol) {
+      throw SceneError(field, what + " must lie on the object's surface (distance " + Num(d) +
+                                  " m, tolerance " + Num(surface_tol) + " m = 1% of the object's extent)");
+    }
+  };
+  on_surface(c.position, Join(path, "position"), "the contact point");
+  // An inward normal of a convex body at a surface point has the centre on
+  // its positive side.
+  if (c.normal.dot(scene.object.pose.position - c.position) <= 0) {
+    throw SceneError(Join(path, "normal"), "must point into the object (towards its centre)");
+  }
+  if (c.type == ContactType::kLine) {
+    RequireUnit(c.axis, Join(path, "axis"));
+    const double dot = c.axis.dot(c.normal);
+    if (std::abs(dot) > kValidateUnitTolerance) {
+      throw SceneError(Join(path, "axis"), "must be perpendicular to normal (|axis.normal| <= 1e-6), got " + Num(dot));
+    }
+    RequirePositive(c.length, Join(path, "length"));
+    const double spacing = c.length / (scene.model.points - 1);
+    if (spacing < kCoincidentTolerance * extent) {
+      throw SceneError(Join(path, "length"),
+                       "too short: its " + std::to_string(scene.model.points) + " constituent points would be " +
+                           Num(spacing) + " m apart, coincident (< 1e-6 of the object's extent)");
+    }
+    for (double s : {-0.5, 0.5}) {
+      on_surface(c.position + s * c.length * c.axis, Join(path, "length"), "each end of the line");
+    }
+  }
+  if (c.type == ContactType::kPatch) {
+    RequirePositive(c.radius, Join(path, "radius"));
+    const double spacing = 2 * c.radius * std::sin(std::numbers::pi / scene.model.points);
+    if (spacing < kCoincidentTolerance * extent) {
+      throw SceneError(Join(path, "radius"), "too small: its constituent points would be " + Num(spacing) +
+                                                 " m apart, coincident (< 1e-6 of the object's extent)");
+    }
+    if (c.radius > extent) {
+      throw SceneError(Join(path, "radius"),
+                       "must not exceed the object's extent " + Num(extent) + " m, got " + Num(c.radius));
+    }
+  }
+}
+
+}  // namespace
+
+// ---------------------------------------------------------------------------
+
+void ValidateScene(const Scene& scene) {
+  const ObjectSpec& object = scene.object;
+  if (object.shape == ObjectShape::kBox) {
+    for (int i = 0; i < 3; ++i) RequirePositive(object.size[i], Index("object.size", static_cast<size_t>(i)));
+  } else {
+    RequirePositive(object.radius, "object.radius");
+    RequirePositive(object.height, "object.height");
+  }
+  RequirePositive(object.mass, "object.mass");
+  if (object.inertia) {
+    const Eigen::Matrix3d& I = *object.inertia;
+    for (int r = 0; r < 3; ++r) {
+      for (int c = 0; c < 3; ++c) {
+        RequireFinite(I(r, c), Index(Index("object.inertia", static_cast<size_t>(r)), static_cast<size_t>(c)));
+      }
+    }
+    const double scale = I.cwiseAbs().maxCoeff();
+    if ((I - I.transpose()).cwiseAbs().maxCoeff() > 1e-9 * scale) {
+      throw SceneError("object.inertia", "must be symmetric");
+    }
+    const Eigen::Vector3d moments = Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d>(I).eigenvalues();
+    if (!(moments.minCoeff() > 0)) {
+      throw SceneError("object.inertia", "must be positive definite, smallest principal moment " +
+                                             Num(moments.minCoeff()));
+    }
+    // A rigid body's principal moments satisfy the triangle inequality.
+    if (moments[0] + moments[1] < moments[2] * (1 - 1e-9)) {
+      throw SceneError("object.inertia", "principal moments " + Num(moments[0]) + ", " + Num(moments[1]) + ", " +
+                                             Num(moments[2]) + " violate the triangle inequality (no rigid body has them)");
+    }
+  }
+  RequireFinite(object.pose.position, "object.pose.position");
+  RequireFinite(object.pose.rpy, "object.pose.rpy");
+  RequireFinite(scene.gravity, "gravity");
+  RequirePositive(scene.duration, "duration");
+  if (scene.duration > kMaxDuration) {
+    throw SceneError("duration", "must be <= " + Num(kMaxDuration) + " s, got " + Num(scene.duration));
+  }
+  RequireNonNegative(scene.grip_force, "grip_force");
+
+  const ModelOptions& model = scene.model;
+  if (model.facets < 3 || model.facets > kMaxFacets) {
+    throw SceneError("model.facets", "must be an integer in [3, " + std::to_string(kMaxFacets) + "], got " +
+                                         std::to_string(model.facets));
+  }
+  if (model.points < 2 || model.points > kMaxPoints) {
+    throw SceneError("model.points", "must be an integer in [2, " + std::to_string(kMaxPoints) + "], got " +
+                                         std::to_string(model.points));
+  }
+  RequirePositive(model.dt, "model.dt");
+  if (model.dt > scene.duration) {
+    throw SceneError("model.dt", "must be <= duration (" + Num(scene.duration) + " s), got " + Num(model.dt));
+  }
+  if (scene.duration / model.dt > kMaxSteps) {
+    throw SceneError("model.dt", "too small: duration / dt = " + Num(scene.duration / model.dt) +
+                                     " steps, more than " + Num(kMaxSteps));
+  }
+
+  if (scene.fingers.empty()) throw SceneError("fingers", "must list at least one finger");
+  if (scene.fingers.size() > static_cast<size_t>(kMaxFingers)) {
+    throw SceneError("fingers", "must list at most " + std::to_string(kMaxFingers) + " fingers, got " +
+                                    std::to_string(scene.fingers.size()));
+  }
+  // Lines and patches need enough constituent points to be a line or a patch.
+  auto check_points = [&](const ContactSpec& c, const std::string& path) {
+    if (c.type == ContactType::kPatch && model.points < 3) {
+      throw SceneError("model.points", "must be >= 3 when the scene has a patch contact (" + path + "), got " +
+                                           std::to_string(model.points));
+    }
+  };
+
+  std::vector<std::pair<std::string, std::vector<Eigen::Vector3d>>> constituents;
+  for (size_t i = 0; i < scene.fingers.size(); ++i) {
+    const ContactSpec& f = scene.fingers[i];
+    const std::string path = Index("fingers", i);
+    if (f.name.empty()) throw SceneError(Join(path, "name"), "must not be empty");
+    if (f.name.size() > kMaxNameLength) {
+      throw SceneError(Join(path, "name"), "must be at most " + std::to_string(kMaxNameLength) + " characters");
+    }
+    if (!std::all_of(f.name.begin(), f.name.end(), ValidNameChar)) {
+      throw SceneError(Join(path, "name"), "may contain only letters, digits, '_', '-' and '.', got " + Quote(f.name));
+    }
+    if (f.name == "pusher") throw SceneError(Join(path, "name"), "\"pusher\" is reserved for the pusher");
+    for (size_t j = 0; j < i; ++j) {
+      if (scene.fingers[j].name == f.name) {
+        throw SceneError(Join(path, "name"), "duplicates the name of fingers[" + std::to_string(j) + "], " + Quote(f.name));
+      }
+    }
+    check_points(f, path);
+    ValidateContact(f, path, scene);
+    constituents.emplace_back(path, ConstituentPoints(f, model.points));
+  }
+  if (scene.pusher) {
+    const PusherSpec& p = *scene.pusher;
+    check_points(p, "pusher");
+    ValidateContact(p, "pusher", scene);
+    RequireFinite(p.motion.velocity, "pusher.motion.velocity");
+    RequireFinite(p.motion.angular_velocity, "pusher.motion.angular_velocity");
+    constituents.emplace_back("pusher", ConstituentPoints(p, model.points));
+  }
+
+  // Two contacts whose constituent points (nearly) coincide make a
+  // degenerate grasp matrix: refuse them rather than let the solver guess.
+  const double coincident = kCoincidentTolerance * ObjectExtent(object);
+  for (size_t a = 0; a < constituents.size(); ++a) {
+    for (size_t b = 0; b < a; ++b) {
+      double closest = std::numeric_limits<double>::infinity();
+      for (const auto& pa : constituents[a].second) {
+        for (const auto& pb : constituents[b].second) closest = std::min(closest, (pa - pb).norm());
+      }
+      if (closest < coincident) {
+        throw SceneError(Join(constituents[a].first, "position"),
+                         "coincides with " + constituents[b].first + " (constituent points " + Num(closest) +
+                             " m apart, tolerance " + Num(coincident) + " m = 1e-6 of the object's extent)");
+      }
+    }
+  }
+}
+
+namespace {
+// Pass 1 for any document: the tree, or the first problem with its path.
+json BuildDocument(std::string_view text, const JsonLimits& limits, std::optional<JsonProblem>* problem) {
+  if (text.size() > limits.max_bytes) {
+    *problem = JsonProblem{"", "is " + std::to_string(text.size()) + " bytes, larger than the limit of " +
+                                   std::to_string(limits.max_bytes) + " bytes"};
+    return nullptr;
+  }
+  PathTrackingBuilder builder(limits);
+  const bool ok = json::sax_parse(text.begin(), text.end(), &builder, json::input_format_t::json,
+                                  /*strict=*/true, /*ignore_comments=*/false);
+  if (!ok || !builder.error_reason.empty()) {
+    *problem = JsonProblem{builder.error_path, builder.error_reason.empty() ? "invalid JSON" : builder.error_reason};
+    return nullptr;
+  }
+  return std::move(builder.root);
+}
+}  // namespace
+
+std::optional<JsonProblem> FindJsonProblem(std::string_view text, const JsonLimits& limits) {
+  std::optional<JsonProblem> problem;
+  BuildDocument(text, limits, &problem);
+  return problem;
+}
+
+Scene ParseScene(std::string_view json_text) {
+  std::optional<JsonProblem> problem;
+  const json doc = BuildDocument(json_text, JsonLimits{}, &problem);
+  if (problem) throw SceneError(problem->path, problem->reason);
+
+  Obj root(doc, "", {"object", "gravity", "duration", "grip_force", "fingers", "pusher", "model"});
+  Scene scene;
+  scene.object = ReadObject(root.Require("object"), "object");
+  if (const json* g = root.Find("gravity")) scene.gravity = Vec3(*g, "gravity");
+  scene.duration = Number(root.Require("duration"), "duration");
+  scene.grip_force = Number(root.Require("grip_force"), "grip_force");
+  const json& fingers = root.Require("fingers");
+  if (!fingers.is_array()) throw SceneError("fingers", "must be an array of fingers, got " + TypeName(fingers));
+  if (fingers.empty()) throw SceneError("fingers", "must list at least one finger");
+  if (fingers.size() > static_cast<size_t>(kMaxFingers)) {
+    throw SceneError("fingers", "must list at most " + std::to_string(kMaxFingers) + " fingers, got " +
+                                    std::to_string(fingers.size()));
+  }
+  for (size_t i = 0; i < fingers.size(); ++i) scene.fingers.push_back(ReadFinger(fingers[i], Index("fingers", i)));
+  if (const json* p = root.Find("pusher")) scene.pusher = ReadPusher(*p, "pusher");
+  if (const json* m = root.Find("model")) scene.model = ReadModel(*m, "model");
+  ValidateScene(scene);
+  return scene;
+}
+
+Scene LoadSceneFile(const std::string& path) {
+  std::ifstream in(path, std::ios::binary | std::ios::ate);
+  if (!in) throw SceneError("", "cannot open '" + path + "'");
+  const std::streamoff size = in.tellg();
+  if (size < 0) throw SceneError("", "cannot read '" + path + "'");
+  if (static_cast<std::uintmax_t>(size) > kMaxSceneBytes) {
+    throw SceneError("", "'" + path + "' is " + std::to_string(size) + " bytes, larger than the limit of " +
+                             std::to_string(kMaxSceneBytes) + " bytes (1 MiB)");
+  }
+  in.seekg(0);
+  std::string text(static_cast<size_t>(size), '\0');
+  in.read(text.data(), size);
+  if (!in) throw SceneError("", "cannot read '" + path + "'");
+  return ParseScene(text);
+}
+
+namespace {
+nlohmann::ordered_json Vec(const Eigen::Vector3d& v) { return nlohmann::ordered_json::array({v.x(), v.y(), v.z()}); }
+
+nlohmann::ordered_json ContactJson(const ContactSpec& c, bool with_name) {
+  nlohmann::ordered_json j;
+  if (with_name) j["name"] = c.name;
+  j["type"] = ToString(c.type);
+  j["position"] = Vec(c.position);
+  j["normal"] = Vec(c.normal);
+  if (c.type == ContactType::kLine) {
+    j["axis"] = Vec(c.axis);
+    j["length"] = c.length;
+  }
+  if (c.type == ContactType::kPatch) j["radius"] = c.radius;
+  j["mu"] = c.mu;
+  return j;
+}
+}  // namespace
+
+std::string SceneToJson(const Scene& scene, int indent) {
+  using ojson = nlohmann::ordered_json;
+  ojson object;
+  object["shape"] = ToString(scene.object.shape);
+  if (scene.object.shape == ObjectShape::kBox) {
+    object["size"] = Vec(scene.object.size);
+  } else {
+    object["radius"] = scene.object.radius;
+    object["height"] = scene.object.height;
+  }
+  object["mass"] = scene.object.mass;
+  if (scene.object.inertia) {
+    const Eigen::Matrix3d& I = *scene.object.inertia;
+    object["inertia"] = ojson::array();
+    for (int r = 0; r < 3; ++r) object["inertia"].push_back(ojson::array({I(r, 0), I(r, 1), I(r, 2)}));
+  }
+  object["pose"] = {{"position", Vec(scene.object.pose.position)}, {"rpy", Vec(scene.object.pose.rpy)}};
+
+  ojson j;
+  j["object"] = std::move(object);
+  j["gravity"] = Vec(scene.gravity);
+  j["duration"] = scene.duration;
+  j["grip_force"] = scene.grip_force;
+  j["fingers"] = ojson::array();
+  for (const auto& f : scene.fingers) j["fingers"].push_back(ContactJson(f, true));
+  if (scene.pusher) {
+    ojson p = ContactJson(*scene.pusher, false);
+    p["motion"] = {{"velocity", Vec(scene.pusher->motion.velocity)},
+                   {"angular_velocity", Vec(scene.pusher->motion.angular_velocity)}};
+    j["pusher"] = std::move(p);
+  }
+  j["model"] = {{"facets", scene.model.facets},
+                {"points", scene.model.points},
+                {"dt", scene.model.dt},
+                {"reduce", ToString(scene.model.reduce)}};
+  return j.dump(indent);
+}
+
+}  // namespace arena::mechanics
