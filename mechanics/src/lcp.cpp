@@ -37,31 +37,36 @@ bool AllFinite(const Eigen::VectorXd& v) { return v.allFinite(); }
 // A_bb z_b = -b_b, all other z zero. False when that basis is singular.
 bool SolveBasis(const Eigen::MatrixXd& A, const Eigen::VectorXd& b, const std::vector<char>& basis,
                 Eigen::VectorXd& z, Eigen::VectorXd& w) {
+  // Called on every warm-started step: keep the work space between calls.
+  thread_local std::vector<Eigen::Index> idx;
+  thread_local Eigen::MatrixXd Abb;
+  thread_local Eigen::VectorXd bb, zb;
+  thread_local Eigen::PartialPivLU<Eigen::MatrixXd> lu;
   const Eigen::Index n = b.size();
-  std::vector<Eigen::Index> idx;
+  idx.clear();
   for (Eigen::Index i = 0; i < n; ++i) {
     if (basis[static_cast<size_t>(i)]) idx.push_back(i);
   }
-  z = Eigen::VectorXd::Zero(n);
+  z.setZero(n);
   if (!idx.empty()) {
     const auto m = static_cast<Eigen::Index>(idx.size());
-    Eigen::MatrixXd Abb(m, m);
-    Eigen::VectorXd bb(m);
-    for (Eigen::Index r = 0; r < m; ++r) {
-      bb[r] = -b[idx[static_cast<size_t>(r)]];
-      for (Eigen::Index c = 0; c < m; ++c) {
-        Abb(r, c) = A(idx[static_cast<size_t>(r)], idx[static_cast<size_t>(c)]);
-      }
+    Abb.resize(m, m);
+    bb.resize(m);
+    for (Eigen::Index c = 0; c < m; ++c) {
+      const Eigen::Index col = idx[static_cast<size_t>(c)];
+      bb[c] = -b[col];
+      for (Eigen::Index r = 0; r < m; ++r) Abb(r, c) = A(idx[static_cast<size_t>(r)], col);
     }
-    Eigen::PartialPivLU<Eigen::MatrixXd> lu(Abb);
-    const Eigen::VectorXd zb = lu.solve(bb);
+    lu.compute(Abb);
+    zb = lu.solve(bb);
     if (!AllFinite(zb)) return false;
     // A singular basis shows as a large solve residual.
     const double scale = 1.0 + bb.lpNorm<Eigen::Infinity>();
     if ((Abb * zb - bb).lpNorm<Eigen::Infinity>() > 1e-9 * scale) return false;
     for (Eigen::Index r = 0; r < m; ++r) z[idx[static_cast<size_t>(r)]] = zb[r];
   }
-  w = A * z + b;
+  w.noalias() = A * z;
+  w += b;
   return AllFinite(w);
 }
 

@@ -91,6 +91,9 @@ Eigen::Matrix3d ObjectInertia(const ObjectSpec& object) {
 namespace {
 
 constexpr double kPlaneTolerance = 1e-9;
+// Reduced-coordinate quantities (3 or 6 rows) without heap allocation.
+using SmallMatrix = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, 0, 6, 6>;
+using SmallVector = Eigen::Matrix<double, Eigen::Dynamic, 1, 0, 6, 1>;
 // A step whose physical residuals (relative to the force scale) exceed this
 // is a solver failure, not a result.
 constexpr double kAcceptedResidual = 1e-8;
@@ -525,12 +528,12 @@ StepReport ContactModel::Impl::Step() {
   Eigen::Matrix<double, 6, 6> M6 = Eigen::Matrix<double, 6, 6>::Zero();
   M6.topLeftCorner<3, 3>() = mass * Eigen::Matrix3d::Identity();
   M6.bottomRightCorner<3, 3>() = Iw;
-  const Eigen::MatrixXd Mr = P.transpose() * M6 * P;
-  const Eigen::MatrixXd Minv = Mr.llt().solve(Eigen::MatrixXd::Identity(nd, nd));
+  const SmallMatrix Mr = P.transpose() * M6 * P;
+  const SmallMatrix Minv = Mr.llt().solve(SmallMatrix::Identity(nd, nd));
 
   Eigen::Matrix<double, 6, 1> tw;
   tw << v, w;
-  const Eigen::VectorXd vr = P.transpose() * tw;
+  const SmallVector vr = P.transpose() * tw;
 
   // Known wrench: gravity and point fingers' normal forces. The gyroscopic
   // torque -ω × Iω is left out: it is second order in the slow turning rates
@@ -545,8 +548,8 @@ StepReport ContactModel::Impl::Step() {
       known.tail<3>() += (ct.points[0].p - c).cross(f);
     }
   }
-  const Eigen::VectorXd Q = P.transpose() * known;
-  const Eigen::VectorXd vfree = vr + dt * Minv * Q;
+  const SmallVector Q = P.transpose() * known;
+  const SmallVector vfree = vr + dt * Minv * Q;
 
   // Columns of the grasp map for every force unknown, in reduced coordinates.
   Jc.resize(nd, nf);
@@ -609,7 +612,8 @@ StepReport ContactModel::Impl::Step() {
   // Solve (warm from the last basis), then check the physical residuals; a
   // warm-started answer that fails them is solved again cold.
   LcpResult sol;
-  Eigen::VectorXd f, vr_new;
+  Eigen::VectorXd f;
+  SmallVector vr_new;
   Eigen::Vector3d v_new, w_new;
   Residuals res;
   auto object_velocity = [&](const Eigen::Vector3d& p) -> Eigen::Vector3d {
@@ -645,7 +649,7 @@ StepReport ContactModel::Impl::Step() {
     // Residuals, recomputed from the physical quantities (not the solver's w).
     res = Residuals{};
     {
-      const Eigen::VectorXd newton = Mr * (vr_new - vr) / dt - (Jc * f + Q);
+      const SmallVector newton = Mr * (vr_new - vr) / dt - (Jc * f + Q);
       for (int i = 0; i < nd; ++i) {
         const bool torque = planar ? i == 2 : i >= 3;
         res.force_balance = std::max(res.force_balance, std::abs(newton[i]) / (Fs * (torque ? L : 1.0)));
