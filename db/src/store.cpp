@@ -370,12 +370,13 @@ Campaign ReadCampaign(const detail::Stmt& s) {
   c.sampler_state_json = s.Text(6);
   c.created_at = s.Real(7);
   c.updated_at = s.Real(8);
+  c.state_reason = s.Text(9);
   return c;
 }
 
 constexpr const char* kCampaignCols =
-    "SELECT id, name, spec_json, state, priority, seed, sampler_state_json, created_at, updated_at"
-    " FROM campaigns";
+    "SELECT id, name, spec_json, state, priority, seed, sampler_state_json, created_at, updated_at,"
+    " state_reason FROM campaigns";
 
 }  // namespace
 
@@ -437,7 +438,8 @@ std::vector<Campaign> Store::ListCampaigns() const {
 namespace {
 
 void SetCampaignState(Store::Impl& impl, std::int64_t id, const char* function,
-                      std::initializer_list<CampaignState> from, CampaignState to) {
+                      std::initializer_list<CampaignState> from, CampaignState to,
+                      const std::string& reason) {
   impl.RequireWritable(function);
   Tx tx(impl.db, true);
   auto s = impl.Prepare("SELECT state FROM campaigns WHERE id = ?");
@@ -453,8 +455,8 @@ void SetCampaignState(Store::Impl& impl, std::int64_t id, const char* function,
                      std::string(function) + ": campaign " + std::to_string(id) + " is " +
                          ToString(cur) + ", cannot become " + ToString(to));
   }
-  auto u = impl.Prepare("UPDATE campaigns SET state = ?, updated_at = ? WHERE id = ?");
-  u->Bind(1, ToString(to)).Bind(2, impl.Now()).Bind(3, id).Run();
+  auto u = impl.Prepare("UPDATE campaigns SET state = ?, state_reason = ?, updated_at = ? WHERE id = ?");
+  u->Bind(1, ToString(to)).Bind(2, reason).Bind(3, impl.Now()).Bind(4, id).Run();
   if (to == CampaignState::kCancelled) {
     auto q = impl.Prepare("SELECT id, attempt FROM trials WHERE campaign_id = ? AND state = 'planned'");
     q->Bind(1, id);
@@ -462,7 +464,7 @@ void SetCampaignState(Store::Impl& impl, std::int64_t id, const char* function,
     while (q->Step()) planned.emplace_back(q->Int(0), static_cast<int>(q->Int(1)));
     for (auto [tid, attempt] : planned) {
       WriteTransition(impl, tid, attempt, TrialState::kPlanned, TrialState::kCancelled, "",
-                      "campaign cancelled", function);
+                      "campaign cancelled: " + reason, function);
       auto o = impl.Prepare("UPDATE trials SET outcome = 'cancelled' WHERE id = ?");
       o->Bind(1, tid).Run();
     }
@@ -472,15 +474,16 @@ void SetCampaignState(Store::Impl& impl, std::int64_t id, const char* function,
 
 }  // namespace
 
-void Store::PauseCampaign(std::int64_t id) {
-  SetCampaignState(*impl_, id, "PauseCampaign", {CampaignState::kActive}, CampaignState::kPaused);
+void Store::PauseCampaign(std::int64_t id, const std::string& reason) {
+  SetCampaignState(*impl_, id, "PauseCampaign", {CampaignState::kActive}, CampaignState::kPaused,
+                   reason);
 }
 void Store::ResumeCampaign(std::int64_t id) {
-  SetCampaignState(*impl_, id, "ResumeCampaign", {CampaignState::kPaused}, CampaignState::kActive);
+  SetCampaignState(*impl_, id, "ResumeCampaign", {CampaignState::kPaused}, CampaignState::kActive, "");
 }
-void Store::CancelCampaign(std::int64_t id) {
+void Store::CancelCampaign(std::int64_t id, const std::string& reason) {
   SetCampaignState(*impl_, id, "CancelCampaign", {CampaignState::kActive, CampaignState::kPaused},
-                   CampaignState::kCancelled);
+                   CampaignState::kCancelled, reason);
 }
 
 std::vector<std::int64_t> Store::CompleteFinishedCampaigns() {
@@ -758,7 +761,7 @@ namespace {
 constexpr const char* kTrialCols =
     "SELECT id, campaign_id, idx, condition, replicate, seed, state, attempt, IFNULL(cell_id,''),"
     " scene_json, params_json, defects_json, IFNULL(outcome,''), gt_stream_id, not_before,"
-    " created_at, updated_at FROM trials";
+    " created_at, updated_at, dispatched_at, executed_at, finished_at FROM trials";
 
 Trial ReadTrial(const detail::Stmt& s) {
   Trial t;
@@ -779,6 +782,9 @@ Trial ReadTrial(const detail::Stmt& s) {
   t.not_before = s.Real(14);
   t.created_at = s.Real(15);
   t.updated_at = s.Real(16);
+  t.dispatched_at = s.OptReal(17);
+  t.executed_at = s.OptReal(18);
+  t.finished_at = s.OptReal(19);
   return t;
 }
 
@@ -798,6 +804,16 @@ std::vector<Trial> Store::ListTrials(std::int64_t campaign_id) const {
   s->Bind(1, campaign_id);
   std::vector<Trial> out;
   while (s->Step()) out.push_back(ReadTrial(*s));
+  return out;
+}
+
+std::vector<Trial> Store::ListTrialsByState(const std::vector<TrialState>& states) const {
+  std::string in;
+  for (auto st : states) in += std::string(in.empty() ? "'" : ",'") + ToString(st) + "'";
+  std::vector<Trial> out;
+  if (in.empty()) return out;
+  detail::Stmt s(impl_->db, std::string(kTrialCols) + " WHERE state IN (" + in + ") ORDER BY id");
+  while (s.Step()) out.push_back(ReadTrial(s));
   return out;
 }
 

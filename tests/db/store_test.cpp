@@ -8,6 +8,8 @@
 #include <set>
 #include <thread>
 
+#include <unistd.h>
+
 #include "db_test_util.hpp"
 
 namespace arena::db {
@@ -558,6 +560,74 @@ TEST(StoreStatus, CountsRateAndEta) {
   ASSERT_EQ(s.cells.size(), 1u);
   EXPECT_EQ(s.cells[0].id, "c");
   EXPECT_EQ(s.drift.size(), 1u);
+}
+
+TEST(StoreFaults, FullStoreRefusesWriteAndKeepsEarlierTrials) {
+  TempDir dir;
+  StoreOptions small;
+  small.max_pages = 400;  // 1.6 MB: room for a couple of trials of ground truth
+  auto store = Store::Open(dir.File("full.db"), small);
+  store->UpsertCell("c", {"point"});
+  store->CreateCampaign(MakeCampaign(), MakeTrials(20));
+  int done = 0;
+  bool full = false;
+  while (!full) {
+    auto t = store->ClaimNextTrial("c");
+    ASSERT_TRUE(t) << "the store never filled up";
+    try {
+      RunTrialToDone(*store, *t, 1000);
+      ++done;
+    } catch (const StoreError& e) {
+      EXPECT_EQ(e.kind(), K::kFull) << e.what();
+      EXPECT_NE(std::string(e.what()).find("free disk space"), std::string::npos) << e.what();
+      full = true;
+      // The trial that hit the limit is still dispatched, without ground truth.
+      EXPECT_EQ(store->GetTrial(t->trial_id).state, TrialState::kDispatched);
+      EXPECT_FALSE(store->GetTrial(t->trial_id).gt_stream_id.has_value());
+    }
+  }
+  EXPECT_GE(done, 1);
+  // Every finished trial is intact; the file is consistent; a restart recovers.
+  for (const auto& t : store->ListTrials(1)) {
+    if (t.state == TrialState::kDone) {
+      EXPECT_EQ(store->ReadGroundTruth(t.id).samples.size(), 1000u);
+    }
+  }
+  store.reset();
+  auto again = Store::Open(dir.File("full.db"));  // no limit now: the disk "was freed"
+  const auto report = again->RecoverAfterRestart();
+  EXPECT_EQ(report.requeued.size(), 1u);
+  ExpectHealthy(*again);
+}
+
+TEST(StoreFaults, WriteProtectedFileIsRefusedClearly) {
+  if (::geteuid() == 0) GTEST_SKIP() << "root ignores file permissions";
+  TempDir dir;
+  const auto path = dir.File("ro.db");
+  Store::Open(path)->CreateCampaign(MakeCampaign(), MakeTrials(1));
+  std::filesystem::permissions(path, std::filesystem::perms::owner_read | std::filesystem::perms::group_read);
+  EXPECT_STORE_ERROR(Store::Open(path), K::kReadOnly);
+  StoreOptions ro;
+  ro.read_only = true;
+  EXPECT_EQ(Store::Open(path, ro)->ListCampaigns().size(), 1u);  // reading still works
+}
+
+TEST(StoreCampaign, PauseReasonAndTrialsByState) {
+  TempDir dir;
+  auto store = Store::Open(dir.File("s.db"));
+  store->UpsertCell("c", {"point"});
+  const auto id = store->CreateCampaign(MakeCampaign(), MakeTrials(3));
+  store->PauseCampaign(id, "suspended: 3 reset failures in a row");
+  EXPECT_EQ(store->GetCampaign(id).state_reason, "suspended: 3 reset failures in a row");
+  store->ResumeCampaign(id);
+  EXPECT_EQ(store->GetCampaign(id).state_reason, "");
+  auto t = store->ClaimNextTrial("c");
+  const auto running = store->ListTrialsByState({TrialState::kDispatched, TrialState::kResetting});
+  ASSERT_EQ(running.size(), 1u);
+  EXPECT_EQ(running[0].id, t->trial_id);
+  EXPECT_TRUE(running[0].dispatched_at.has_value());
+  EXPECT_FALSE(running[0].finished_at.has_value());
+  EXPECT_EQ(store->ListTrialsByState({TrialState::kPlanned}).size(), 2u);
 }
 
 }  // namespace
