@@ -18,6 +18,7 @@ int main(int argc, char** argv) {
 
   Action action;
   AddSimulateCommand(app, &action);
+  AddCellCommand(app, &action);
   AddQueryCommand(app, &action);
   AddExportCommand(app, &action);
 

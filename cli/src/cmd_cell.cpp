@@ -1,0 +1,105 @@
+// arena cell --id ID --domain D [--defects FILE] [--speed X] [--batch N]
+//            [--peers H[:P],...] [--discovery-server [ID@]H:P] [--profile-xml F]
+// Runs one simulated cell until SIGINT or SIGTERM (executors/README.md).
+#include <signal.h>
+
+#include <cstdio>
+#include <fstream>
+#include <memory>
+#include <sstream>
+#include <string>
+
+#include <spdlog/sinks/stdout_color_sinks.h>
+#include <spdlog/spdlog.h>
+
+#include "arena/executors/cell.hpp"
+#include "commands.hpp"
+
+namespace arena::cli {
+namespace {
+
+struct CellCliOptions {
+  executors::CellOptions cell;
+  std::string defects_path;
+  std::string peers;
+  bool verbose = false;
+};
+
+std::string ReadText(const std::string& path, const char* option) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) throw CommandError(kExitBadInput, std::string(option) + ": cannot open '" + path + "'");
+  std::ostringstream text;
+  text << in.rdbuf();
+  return text.str();
+}
+
+int RunCell(CellCliOptions opt) {
+  auto logger = spdlog::stderr_color_mt("cell");
+  spdlog::set_default_logger(logger);
+  spdlog::set_level(opt.verbose ? spdlog::level::debug : spdlog::level::info);
+  try {
+    if (!opt.defects_path.empty()) {
+      opt.cell.defects = executors::ParseDefectProfile(ReadText(opt.defects_path, "--defects"));
+    }
+    if (!opt.peers.empty()) opt.cell.network.peers = dds::ParsePeers(opt.peers);
+    executors::ValidateCellOptions(opt.cell);
+  } catch (const executors::DefectError& e) {
+    throw CommandError(kExitBadInput, "--defects " + opt.defects_path + ": " + e.what());
+  } catch (const dds::DdsError& e) {
+    throw CommandError(kExitBadInput, e.what());
+  } catch (const std::invalid_argument& e) {
+    throw CommandError(kExitBadInput, e.what());
+  }
+
+  // SIGINT/SIGTERM are blocked before any thread starts (DDS threads inherit
+  // the mask); this thread then waits for them with sigwait, so no signal
+  // handler runs at all and shutdown happens on an ordinary thread.
+  sigset_t signals;
+  sigemptyset(&signals);
+  sigaddset(&signals, SIGINT);
+  sigaddset(&signals, SIGTERM);
+  pthread_sigmask(SIG_BLOCK, &signals, nullptr);
+
+  std::unique_ptr<executors::Cell> cell;
+  try {
+    cell = std::make_unique<executors::Cell>(opt.cell, executors::DefaultMechanics());
+  } catch (const dds::DdsError& e) {
+    throw CommandError(kExitCommunication, e.what());
+  }
+  int sig = 0;
+  sigwait(&signals, &sig);
+  spdlog::info("cell {}: {} received, shutting down", opt.cell.id, sig == SIGINT ? "SIGINT" : "SIGTERM");
+  cell->Stop();
+  cell.reset();
+  return kExitOk;
+}
+
+}  // namespace
+
+void AddCellCommand(CLI::App& app, Action* action) {
+  auto opt = std::make_shared<CellCliOptions>();
+  CLI::App* cmd = app.add_subcommand("cell", "Run a simulated robot cell that serves trials over DDS");
+  cmd->footer(
+      "Example:\n  arena cell --id c1 --domain 42 --defects examples/defects/noisy.json --speed 0\n"
+      "Without --peers or --discovery-server the cell is reachable from this host only.\n"
+      "Stops cleanly on SIGINT/SIGTERM (exit 0).");
+  cmd->add_option("--id", opt->cell.id, "Cell id, unique in the deployment ([A-Za-z0-9_.-])")->required();
+  cmd->add_option("--domain", opt->cell.domain_id, "DDS domain id (0..232)")->required();
+  cmd->add_option("--defects", opt->defects_path, "Defect profile JSON (executors/README.md)");
+  cmd->add_option("--speed", opt->cell.speed,
+                  "Wall seconds per simulated second: 0 = as fast as possible, 1 = real time")
+      ->capture_default_str();
+  cmd->add_option("--batch", opt->cell.batch_samples, "Ground-truth samples per message (1..256)")
+      ->capture_default_str();
+  cmd->add_option("--peers", opt->peers, "Reach other hosts: initial peers host[:port],...");
+  cmd->add_option("--discovery-server", opt->cell.network.discovery_server,
+                  "Reach other hosts through a Fast DDS discovery server [id@]host:port");
+  cmd->add_option("--profile-xml", opt->cell.network.profile_xml,
+                  "Fast DDS XML profile file (its default participant profile sets transports)");
+  cmd->add_flag("--no-shm", [opt](std::int64_t) { opt->cell.network.shared_memory = false; },
+                "Do not use the shared-memory transport (UDP only)");
+  cmd->add_flag("-v,--verbose", opt->verbose, "Debug log (QoS in effect, discovery)");
+  cmd->callback([opt, action] { *action = [opt] { return RunCell(*opt); }; });
+}
+
+}  // namespace arena::cli

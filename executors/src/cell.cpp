@@ -1,0 +1,438 @@
+#include "arena/executors/cell.hpp"
+
+#include <chrono>
+#include <cmath>
+#include <condition_variable>
+#include <map>
+#include <mutex>
+#include <stdexcept>
+#include <thread>
+#include <tuple>
+
+#include <nlohmann/json.hpp>
+#include <spdlog/spdlog.h>
+
+#include "arena/mechanics/scene_json.hpp"
+#include "arena/reset/reset.hpp"
+#include "arena/schemas/arena.h"
+#include "arena/schemas/ground_truth.hpp"
+
+namespace arena::executors {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+using nlohmann::json;
+
+std::uint64_t UnixNanos() {
+  return static_cast<std::uint64_t>(std::chrono::duration_cast<std::chrono::nanoseconds>(
+                                        std::chrono::system_clock::now().time_since_epoch())
+                                        .count());
+}
+
+reset::Pose ToResetPose(const mechanics::Pose& p) {
+  reset::Pose out;
+  out.position = p.position;
+  out.orientation = Eigen::AngleAxisd(p.rpy.z(), Eigen::Vector3d::UnitZ()) *
+                    Eigen::AngleAxisd(p.rpy.y(), Eigen::Vector3d::UnitY()) *
+                    Eigen::AngleAxisd(p.rpy.x(), Eigen::Vector3d::UnitX());
+  return out;
+}
+
+bool SamePusher(const std::optional<mechanics::PusherSpec>& a,
+                const std::optional<mechanics::PusherSpec>& b) {
+  if (a.has_value() != b.has_value()) return false;
+  if (!a) return true;
+  return a->type == b->type && a->length == b->length && a->radius == b->radius &&
+         a->axis == b->axis && a->normal == b->normal && a->position == b->position;
+}
+
+std::string ModeName(mechanics::SimulationStatus s) {
+  switch (s) {
+    case mechanics::SimulationStatus::kOk: return "ok";
+    case mechanics::SimulationStatus::kSolverFailure: return "solver failure";
+    case mechanics::SimulationStatus::kInvalidScene: return "invalid scene";
+  }
+  return "?";
+}
+
+}  // namespace
+
+void ValidateCellOptions(const CellOptions& o) {
+  if (o.id.empty() || o.id.size() > 64) throw std::invalid_argument("--id: must be 1..64 characters");
+  for (char c : o.id) {
+    if (!(std::isalnum(static_cast<unsigned char>(c)) || c == '_' || c == '-' || c == '.')) {
+      throw std::invalid_argument("--id: only letters, digits, '_', '-' and '.' are allowed");
+    }
+  }
+  if (!std::isfinite(o.speed) || o.speed < 0 || o.speed > 1000) {
+    throw std::invalid_argument("--speed: must be in [0, 1000] (0 = as fast as possible, 1 = wall clock)");
+  }
+  if (o.batch_samples < 1 || o.batch_samples > 256) {
+    throw std::invalid_argument("--batch: must be 1..256 samples");
+  }
+  if (o.fidelity.facets < 3 || o.fidelity.points < 1 || !(o.fidelity.dt > 0)) {
+    throw std::invalid_argument("fidelity: facets >= 3, points >= 1, dt > 0");
+  }
+  ValidateDefectProfile(o.defects);
+}
+
+struct Cell::Impl {
+  CellOptions options;
+  MechanicsBackend mechanics;
+  reset::ResetParams reset_params;
+  dds::Participant participant;
+  dds::Writer<msg::CellAnnounce> announce;
+  dds::Writer<msg::TrialStatus> status;
+  dds::Writer<msg::GroundTruth> ground_truth;
+  dds::Reader<msg::TrialCommand> commands;
+
+  std::mutex mutex;
+  std::condition_variable wake;
+  bool stop = false;
+  bool finished = false;
+  CellCounters counters;
+
+  // Worker-only state.
+  using Key = std::tuple<std::uint64_t, std::uint32_t, int>;  // trial, attempt, phase
+  std::map<Key, msg::TrialStatus> done;
+  reset::Pose true_pose;       // where the object really is now
+  reset::Pose observed_pose;   // where the sensors saw it last
+  std::optional<mechanics::PusherSpec> pusher;  // the pusher mounted now
+  std::thread worker;
+
+  static dds::ParticipantOptions ParticipantFor(const CellOptions& o) {
+    ValidateCellOptions(o);
+    dds::ParticipantOptions p;
+    p.domain_id = o.domain_id;
+    p.name = dds::CellParticipantName(o.id);
+    p.network = o.network;
+    p.lease_s = o.participant_lease_s;
+    return p;
+  }
+
+  Impl(const CellOptions& o, MechanicsBackend m)
+      : options(o),
+        mechanics(std::move(m)),
+        reset_params(EffectiveResetParams(o.defects)),
+        participant(ParticipantFor(o)),
+        announce(participant),
+        status(participant),
+        ground_truth(participant),
+        commands(participant, dds::ReaderOptions{false}) {}
+
+  bool Stopping() {
+    std::lock_guard<std::mutex> lock(mutex);
+    return stop;
+  }
+  // Sleeps until `until` or Stop(); @returns false when stopping.
+  bool SleepUntil(Clock::time_point until) {
+    std::unique_lock<std::mutex> lock(mutex);
+    return !wake.wait_until(lock, until, [&] { return stop; });
+  }
+
+  void Announce() {
+    msg::CellAnnounce a;
+    a.cell_id(options.id);
+    a.arena_version("0.1.0");
+    for (auto t : options.defects.contact_types) {
+      a.contact_types().push_back(t == mechanics::ContactType::kPoint  ? "point"
+                                  : t == mechanics::ContactType::kLine ? "line"
+                                                                       : "patch");
+    }
+    for (int k = 0; k < 3; ++k) {
+      a.workspace_min()[k] = options.defects.workspace_min[k];
+      a.workspace_max()[k] = options.defects.workspace_max[k];
+    }
+    a.max_pusher_speed(options.defects.max_pusher_speed);
+    a.speed(options.speed);
+    a.defects_json(DefectProfileToJson(options.defects));
+    a.started_unix_ns(UnixNanos());
+    if (!announce.Write(a)) throw dds::DdsError("cell: announcing the cell failed");
+  }
+
+  msg::TrialStatus BaseStatus(const msg::TrialCommand& c, msg::TrialState state) {
+    msg::TrialStatus s;
+    s.trial_id(c.trial_id());
+    s.attempt(c.attempt());
+    s.cell_id(options.id);
+    s.phase(c.phase());
+    s.state(state);
+    s.observed_pose() = {observed_pose.position.x(), observed_pose.position.y(),
+                         observed_pose.position.z(), observed_pose.orientation.w(),
+                         observed_pose.orientation.x(), observed_pose.orientation.y(),
+                         observed_pose.orientation.z()};
+    return s;
+  }
+
+  void Send(msg::TrialStatus& s) {
+    // A status is small and the history keep-all; retry through a stall.
+    for (int i = 0; i < 10 && !status.Write(s); ++i) {
+      spdlog::warn("cell {}: status write for trial {} timed out, retrying", options.id, s.trial_id());
+    }
+  }
+
+  void Finish(const msg::TrialCommand& c, msg::TrialStatus s) {
+    Send(s);
+    done[{c.trial_id(), c.attempt(), static_cast<int>(c.phase())}] = s;
+    std::lock_guard<std::mutex> lock(mutex);
+    switch (s.state()) {
+      case msg::STATE_EXECUTED: ++counters.executed; break;
+      case msg::STATE_RESET_DONE: ++counters.resets; break;
+      case msg::STATE_REFUSED: ++counters.refused; break;
+      default: ++counters.failed; break;
+    }
+  }
+
+  void Refuse(const msg::TrialCommand& c, const std::string& reason) {
+    spdlog::info("cell {}: refused trial {} attempt {}: {}", options.id, c.trial_id(), c.attempt(), reason);
+    auto s = BaseStatus(c, msg::STATE_REFUSED);
+    s.reason(reason);
+    Finish(c, s);
+  }
+
+  void Handle(const msg::TrialCommand& c) {
+    const Key key{c.trial_id(), c.attempt(), static_cast<int>(c.phase())};
+    if (auto it = done.find(key); it != done.end()) {
+      spdlog::info("cell {}: trial {} attempt {} already finished; re-sending its status", options.id,
+                   c.trial_id(), c.attempt());
+      msg::TrialStatus s = it->second;
+      Send(s);
+      std::lock_guard<std::mutex> lock(mutex);
+      ++counters.duplicates;
+      return;
+    }
+    if (c.phase() == msg::PHASE_EXECUTE) Execute(c);
+    else if (c.phase() == msg::PHASE_RESET) Reset(c);
+    else Refuse(c, "phase: unknown value");
+  }
+
+  void Execute(const msg::TrialCommand& c) {
+    const auto started = Clock::now();
+    mechanics::Scene scene;
+    try {
+      scene = mechanics.parse(c.scene_json());
+    } catch (const std::exception& e) {
+      return Refuse(c, std::string("scene: ") + e.what());
+    }
+    if (std::string why = CheckCapabilities(options.defects, scene); !why.empty()) {
+      return Refuse(c, why);
+    }
+    if (!std::isfinite(c.deadline_s()) || c.deadline_s() < 0) {
+      return Refuse(c, "deadline_s: must be finite and >= 0 (0 = none)");
+    }
+    auto accepted = BaseStatus(c, msg::STATE_ACCEPTED);
+    Send(accepted);
+
+    const TrialPerturbation perturbation = DrawPerturbation(options.defects, c.seed(), c.trial_id());
+    mechanics::Scene actual = ApplyPerturbation(scene, perturbation);
+    actual.model.facets = std::max(actual.model.facets, options.fidelity.facets);
+    actual.model.points = std::max(actual.model.points, options.fidelity.points);
+    actual.model.dt = std::min(actual.model.dt, options.fidelity.dt);
+    const mechanics::SimulationResult result = mechanics.simulate(actual);
+    if (result.status != mechanics::SimulationStatus::kOk || result.samples.empty()) {
+      auto s = BaseStatus(c, msg::STATE_FAILED);
+      s.reason("simulation: " + ModeName(result.status) + ": " + result.error);
+      s.phase_wall_s(std::chrono::duration<double>(Clock::now() - started).count());
+      return Finish(c, s);
+    }
+    const auto observed = Observe(result.samples, actual, options.defects, c.seed(), c.trial_id());
+
+    // Stream, paced: a batch leaves when its last sample is due.
+    const auto stream_start = Clock::now();
+    const auto deadline = c.deadline_s() > 0
+                              ? started + std::chrono::duration_cast<Clock::duration>(
+                                              std::chrono::duration<double>(c.deadline_s()))
+                              : Clock::time_point::max();
+    const size_t n = result.samples.size();
+    std::uint32_t batch_index = 0;
+    std::string failure;
+    size_t dropped = 0;
+    for (const auto& o : observed) dropped += o.valid ? 0 : 1;
+    for (size_t first = 0; first < n && failure.empty();) {
+      const size_t count = std::min<size_t>(options.batch_samples, n - first);
+      msg::GroundTruth batch;
+      batch.trial_id(c.trial_id());
+      batch.attempt(c.attempt());
+      batch.cell_id(options.id);
+      batch.batch(batch_index);
+      batch.first_sample(static_cast<std::uint32_t>(first));
+      batch.last(first + count == n);
+      batch.samples().resize(count);
+      for (size_t i = 0; i < count; ++i) {
+        const auto& truth = result.samples[first + i];
+        dds::EncodeSample(truth, PusherAt(actual, truth), observed[first + i], &batch.samples()[i]);
+      }
+      if (options.speed > 0) {
+        const double due_s = result.samples[first + count - 1].t * options.speed;
+        const auto due = stream_start + std::chrono::duration_cast<Clock::duration>(
+                                            std::chrono::duration<double>(due_s));
+        if (due > deadline) {
+          SleepUntil(deadline);
+        } else if (!SleepUntil(due)) {
+          failure = "interrupted: cell shutting down";
+          break;
+        }
+      }
+      // Ground truth is a log: a full history throttles us, it never drops.
+      while (!ground_truth.Write(batch)) {
+        if (Stopping()) {
+          failure = "interrupted: cell shutting down";
+          break;
+        }
+        if (Clock::now() > deadline) break;
+        spdlog::warn("cell {}: ground-truth history full (a slow reader?), retrying", options.id);
+      }
+      if (Clock::now() > deadline) {
+        failure = "deadline: " + std::to_string(c.deadline_s()) + " s exceeded after " +
+                  std::to_string(first + count) + " of " + std::to_string(n) + " samples";
+      }
+      if (failure.empty()) {
+        std::lock_guard<std::mutex> lock(mutex);
+        counters.samples += count;
+      }
+      first += count;
+      ++batch_index;
+      if (Stopping() && failure.empty() && first < n) failure = "interrupted: cell shutting down";
+    }
+
+    const auto& last = result.samples.back();
+    true_pose.position = last.position;
+    true_pose.orientation = last.orientation;
+    // The sensors' last valid view of the end state.
+    for (auto it = observed.rbegin(); it != observed.rend(); ++it) {
+      if (it->valid) {
+        observed_pose.position = it->position;
+        observed_pose.orientation = it->orientation;
+        break;
+      }
+    }
+    pusher = scene.pusher;
+
+    auto s = BaseStatus(c, failure.empty() ? msg::STATE_EXECUTED : msg::STATE_FAILED);
+    s.reason(failure);
+    s.samples(static_cast<std::uint32_t>(n));
+    s.phase_wall_s(std::chrono::duration<double>(Clock::now() - started).count());
+    json detail = {
+        {"mu_scale", perturbation.mu_scale},
+        {"velocity_scale", perturbation.velocity_scale},
+        {"velocity_offset", {perturbation.velocity_offset.x(), perturbation.velocity_offset.y(),
+                             perturbation.velocity_offset.z()}},
+        {"dropped_observations", dropped},
+        {"batches", batch_index},
+        {"model", {{"dof", result.model.dof}, {"facets", result.model.facets},
+                   {"points", result.model.points}, {"dt", result.model.dt},
+                   {"unknowns", result.model.unknowns}}},
+        {"residuals", {{"force_balance", result.residuals.force_balance},
+                       {"complementarity", result.residuals.complementarity},
+                       {"cone", result.residuals.cone}}},
+        {"solver", {{"steps", result.solver.steps}, {"max_pivots", result.solver.max_pivots},
+                    {"failures", result.solver.failures}}},
+        {"simulate_wall_s", result.wall_s}};
+    s.detail_json(detail.dump());
+    if (!failure.empty()) {
+      spdlog::warn("cell {}: trial {} attempt {} failed: {}", options.id, c.trial_id(), c.attempt(), failure);
+    }
+    Finish(c, s);
+  }
+
+  void Reset(const msg::TrialCommand& c) {
+    const auto started = Clock::now();
+    reset::ResetRequest request;
+    request.observed_end = observed_pose;
+    request.true_end = true_pose;
+    std::optional<mechanics::PusherSpec> next_pusher = pusher;
+    if (!c.scene_json().empty()) {
+      mechanics::Scene next;
+      try {
+        next = mechanics.parse(c.scene_json());
+      } catch (const std::exception& e) {
+        return Refuse(c, std::string("scene: ") + e.what());
+      }
+      if (std::string why = CheckCapabilities(options.defects, next); !why.empty()) {
+        return Refuse(c, why);
+      }
+      request.target = ToResetPose(next.object.pose);
+      next_pusher = next.pusher;
+    }
+    request.swap_pusher = !SamePusher(pusher, next_pusher);
+    auto accepted = BaseStatus(c, msg::STATE_ACCEPTED);
+    Send(accepted);
+
+    const reset::ResetOutcome out = reset::ExecuteReset(request, reset_params, c.seed(), c.trial_id());
+    // The reset's own (simulated) duration is paced like a trial.
+    if (options.speed > 0) {
+      SleepUntil(started + std::chrono::duration_cast<Clock::duration>(
+                               std::chrono::duration<double>(out.time_s * options.speed)));
+    }
+    true_pose = out.final_true;
+    observed_pose = out.final_observed;
+    if (out.success) pusher = next_pusher;
+    auto s = BaseStatus(c, out.success ? msg::STATE_RESET_DONE : msg::STATE_FAILED);
+    s.reason(out.failure);
+    s.reset_position_error(out.position_error);
+    s.reset_angle_error(out.angle_error);
+    s.reset_attempts(static_cast<std::uint32_t>(out.attempts));
+    s.phase_wall_s(std::chrono::duration<double>(Clock::now() - started).count());
+    json plan = json::array();
+    for (const auto& p : out.plan) {
+      plan.push_back({{"primitive", reset::ToString(p.kind)}, {"duration_s", p.duration_s}});
+    }
+    s.detail_json(json({{"plan", plan},
+                        {"time_s", out.time_s},
+                        {"swap_pusher", request.swap_pusher},
+                        {"retryable", out.retryable}})
+                      .dump());
+    Finish(c, s);
+  }
+
+  void Run() {
+    while (!Stopping()) {
+      auto command = commands.Take(dds::Millis(100));
+      if (!command || command->cell_id() != options.id) continue;
+      try {
+        Handle(*command);
+      } catch (const std::exception& e) {
+        // A bug or a DDS failure in one command must not take the cell down
+        // silently: report it and go on.
+        spdlog::error("cell {}: trial {}: {}", options.id, command->trial_id(), e.what());
+        auto s = BaseStatus(*command, msg::STATE_FAILED);
+        s.reason(std::string("internal error: ") + e.what());
+        Finish(*command, s);
+      }
+    }
+    std::lock_guard<std::mutex> lock(mutex);
+    finished = true;
+    wake.notify_all();
+  }
+};
+
+Cell::Cell(const CellOptions& options, MechanicsBackend mechanics)
+    : impl_(std::make_unique<Impl>(options, std::move(mechanics))) {
+  impl_->Announce();
+  spdlog::info("cell {}: up on domain {} (speed {}, {} samples per batch)", options.id,
+               options.domain_id, options.speed, options.batch_samples);
+  impl_->worker = std::thread([this] { impl_->Run(); });
+}
+
+Cell::~Cell() {
+  Stop();
+  if (impl_->worker.joinable()) impl_->worker.join();
+}
+
+void Cell::Stop() {
+  std::lock_guard<std::mutex> lock(impl_->mutex);
+  impl_->stop = true;
+  impl_->wake.notify_all();
+}
+
+void Cell::Wait() {
+  std::unique_lock<std::mutex> lock(impl_->mutex);
+  impl_->wake.wait(lock, [&] { return impl_->finished; });
+}
+
+CellCounters Cell::counters() const {
+  std::lock_guard<std::mutex> lock(impl_->mutex);
+  return impl_->counters;
+}
+
+}  // namespace arena::executors

@@ -1,0 +1,39 @@
+// Linear complementarity problems: find z >= 0 with w = A z + b >= 0 and
+// z_i w_i = 0. Solved by Lemke's complementary pivoting (covering vector of
+// ones, lexicographic ratio test against cycling on degenerate problems),
+// with a bounded pivot count and an optional warm start from a previous
+// basis. The model (model.hpp) hands it nondimensional problems, so the
+// tolerances here are relative by construction.
+#pragma once
+
+#include <string>
+#include <vector>
+
+#include <Eigen/Core>
+
+namespace arena::mechanics {
+
+struct LcpOptions {
+  int max_pivots = 0;             // 0: 50 n + 200
+  double pivot_tolerance = 1e-12; // smallest usable pivot (nondimensional)
+  double feasibility = 1e-9;      // accepted negativity of z, w (nondimensional)
+};
+
+struct LcpResult {
+  bool ok = false;
+  std::string reason;            // why not ok: "pivot limit", "ray termination", ...
+  Eigen::VectorXd z;
+  Eigen::VectorXd w;             // A z + b
+  std::vector<char> basis;       // basis[i] != 0: z_i is basic (a warm start for the next solve)
+  int pivots = 0;                // Lemke pivots (0 for a trivial or warm-started solve)
+  bool warm_start_used = false;  // the previous basis solved the problem directly
+  double natural_residual = 0;   // max_i |min(z_i, w_i)|
+};
+
+// Never throws; never returns non-finite z or w when ok.
+// warm_basis: the basis of a previous solve of a problem of the same size
+// (may be null or empty).
+LcpResult SolveLcp(const Eigen::MatrixXd& A, const Eigen::VectorXd& b,
+                   const std::vector<char>* warm_basis = nullptr, const LcpOptions& options = {});
+
+}  // namespace arena::mechanics

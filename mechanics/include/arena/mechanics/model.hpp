@@ -1,0 +1,115 @@
+// The contact model of one scene, stepped in time (Simulate() drives it;
+// benchmarks and tests may step it directly).
+//
+// Formulation (velocity-level time stepping with inertia, DESIGN.md Mechanics):
+//   M (v+ - v) / dt = G f + w_known          (Newton-Euler; v the object twist
+//                                              in the gripper frame, which is
+//                                              the inertial reference)
+//   per constituent point j: a_n = n.(u_obj(p_j) - u_body(p_j)) + gap/dt >= 0 ⊥ λ_n >= 0
+//   friction (Stewart-Trinkle, facets edges D inscribed in the Coulomb cone):
+//     μ λ_n - eᵀβ >= 0 ⊥ ξ >= 0,   ξ e + Dᵀ u_rel >= 0 ⊥ β >= 0
+//   fingers are force-controlled rigid pads with one free normal velocity v_f:
+//     u_body = v_f n, Σ_j λ_nj = grip_force (equality paired with free v_f);
+//     a point finger therefore has λ_n = grip_force and no normal row.
+//   the pusher is velocity-controlled (virtual 6-DOF actuator, J_ext1 = I6):
+//     u_body(p) = v_p + ω_p × (p - pusher contact point).
+// Substituting v+ leaves a mixed LCP in forces (λ, β), slacks ξ and pad
+// velocities (v_f = y⁺ - y⁻); it is nondimensionalised by the scene's
+// force, mass and time-step scales and solved with SolveLcp (lcp.hpp).
+//
+// Geometry: fingers stay where they are in the gripper frame (their pads
+// follow the object along their normals); the pusher's contact points move
+// with its motion; contact points on the object are taken where the contacts
+// are, so the object slides under them. Line constituent points are spread
+// evenly over the line; patch constituent points sit on a ring of radius
+// 2R/3 (which gives a uniformly pressed disk's torsional friction 2/3 μ N R
+// when the points share the load) starting along t1, a single point at the
+// centre when points = 1.
+#pragma once
+
+#include <memory>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include <Eigen/Core>
+#include <Eigen/Geometry>
+
+#include "arena/mechanics/scene.hpp"
+#include "arena/mechanics/simulate.hpp"
+
+namespace arena::mechanics {
+
+// SCENE.md tangent basis: t1 is the normalised projection onto the contact
+// plane of the first of the gripper's z, y, x axes with |n·axis| < 0.9.
+Eigen::Vector3d FirstTangent(const Eigen::Vector3d& normal);
+
+// Unit edge directions of the inscribed polyhedral cone: angle 2πj/facets
+// from t1 towards t2 = n × t1.
+std::vector<Eigen::Vector3d> ConeEdges(const Eigen::Vector3d& normal, int facets);
+
+// Constituent points of a contact as offsets from its position (gripper frame).
+std::vector<Eigen::Vector3d> ConstituentOffsets(const ContactSpec& contact, int points);
+
+// Rotation of roll-pitch-yaw about fixed x, y, z: Rz(yaw) Ry(pitch) Rx(roll).
+Eigen::Matrix3d RotationFromRpy(const Eigen::Vector3d& rpy);
+
+// Inertia about the centre of mass in the object frame (kg m^2).
+Eigen::Matrix3d ObjectInertia(const ObjectSpec& object);
+
+// Planarity: the scene is planar when one plane (normal `normal`, through the
+// object's centre of mass) contains every contact point, normal, line axis,
+// gravity and pusher velocity, the pusher turns about the plane normal only,
+// the plane normal is a principal axis of the object's inertia, no patch has
+// more than one point, and each friction cone (when μ > 0) has edges along
+// both in-plane tangents and is symmetric about the plane (so that the full
+// polyhedral model produces no out-of-plane force on in-plane motion).
+struct PlaneCheck {
+  bool planar = false;
+  Eigen::Vector3d normal = Eigen::Vector3d::UnitY();
+  std::string reason;  // why not planar
+};
+PlaneCheck FindPlane(const Scene& scene);
+
+// One step's diagnostics (nondimensional residuals, see Residuals).
+struct StepReport {
+  bool ok = true;
+  std::string error;
+  int pivots = 0;
+  bool warm_start_used = false;
+  Residuals residuals;
+};
+
+class ContactModel {
+ public:
+  // status() != kOk when the scene cannot be modelled (reason in error()).
+  explicit ContactModel(const Scene& scene);
+  ~ContactModel();
+  ContactModel(const ContactModel&) = delete;
+  ContactModel& operator=(const ContactModel&) = delete;
+
+  SimulationStatus status() const;
+  const std::string& error() const;
+  const ModelInfo& info() const;
+
+  // Advances the state by one dt. On failure the state is left unchanged.
+  StepReport Step();
+
+  double time() const;                          // s
+  const Eigen::Vector3d& position() const;      // object centre of mass (m)
+  Eigen::Quaterniond orientation() const;
+  const Eigen::Vector3d& velocity() const;      // m/s (of the last step)
+  const Eigen::Vector3d& angular_velocity() const;
+  Eigen::Vector3d pusher_position() const;      // pusher contact point at time()
+  // Contact states of the last step: fingers in scene order, then the pusher.
+  const std::vector<ContactState>& contacts() const;
+  Eigen::Vector3d pusher_force() const;         // on the object (N), last step
+  double force_scale() const;                   // N, residuals are relative to it
+  double velocity_scale() const;                // m/s
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace arena::mechanics

@@ -1,0 +1,223 @@
+// The one DDS set-up every arena process shares (Fast DDS 2.9).
+//
+// Definitions
+//   participant  one Fast DDS DomainParticipant per process, named
+//                "arena.<role>.<id>" (e.g. "arena.cell.c1", "arena.service");
+//                the name is how peers recognise each other in discovery.
+//   topic        one of CellAnnounce, TrialCommand, TrialStatus, GroundTruth
+//                (schemas/arena.idl); one type per topic, same name.
+//
+// QoS (DESIGN.md, section DDS) and why
+//   CellAnnounce  reliable, transient-local, keep-last 1 per cell: a service
+//                 that starts after the cell still learns of it.
+//   TrialCommand  reliable, keep-all, volatile: a restarted cell gets no stale
+//                 commands; the service re-sends what is still pending.
+//   TrialStatus   reliable, keep-all, volatile: a cell re-sends a final status
+//                 when it sees a command again (idempotency), so nothing needs
+//                 to be kept for late joiners.
+//   GroundTruth   reliable, keep-all, bounded history (the writer waits for
+//                 acknowledgements every kGroundTruthMaxBatches/4 batches);
+//                 a short heartbeat period so lost fragments are repaired fast.
+//                 It is a log, not telemetry: a full history blocks the writer
+//                 (Write returns false after max_blocking_time) instead of
+//                 dropping a sample.
+//   Cell topics   (CellAnnounce, TrialStatus, GroundTruth) writers assert
+//                 automatic liveliness with lease kCellLivelinessLease_s and
+//                 readers request it: a reader sees a dead cell within that
+//                 lease. (A writer offering a longer lease does not match.)
+//   Participants  lease ParticipantOptions::lease_s (2.5 s, not Fast DDS's 20 s).
+//
+// Transports (secure by default)
+//   No network option: Fast DDS's built-in transports are off; shared memory
+//   plus UDPv4 restricted to 127.0.0.1; discovery is unicast to 127.0.0.1 (no
+//   multicast at all). Nothing leaves this host and no other host sees us.
+//   --peers h[:p],...  adds UDPv4 on every interface and unicast discovery to
+//                      those peers (still no multicast).
+//   --discovery-server [id@]h:p  makes this participant a client of a Fast
+//                      DDS discovery server (`fastdds discovery -i id -l h -p p`).
+//   --profile-xml F    loads a Fast DDS XML profile file first; its default
+//                      participant profile decides the transports.
+//   --security DIR     reserved for DDS-Security (issue 8): applied as the
+//                      last step of MakeParticipantQos; refused until then.
+//
+// Invariants
+//   1. Every entity is created through Participant / Writer / Reader; a null
+//      from Fast DDS throws DdsError naming the step.
+//   2. A Writer or Reader keeps its Participant's internals alive; the
+//      participant is torn down with delete_contained_entities() when the
+//      last of them goes.
+//   3. Listener callbacks never run user code: they take samples
+//      (take_next_sample, valid_data only, known schema_version only) into a
+//      queue and notify a condition variable; user threads call Take().
+//   4. Every wait has a timeout.
+#pragma once
+
+#include <chrono>
+#include <cstddef>
+#include <cstdint>
+#include <deque>
+#include <memory>
+#include <optional>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+namespace arena::dds {
+
+using Millis = std::chrono::milliseconds;
+
+// Fast DDS refused to create or configure an entity, or an option is invalid.
+// what() starts with the step or the option ("--peers: ...").
+class DdsError : public std::runtime_error {
+ public:
+  using std::runtime_error::runtime_error;
+};
+
+inline constexpr double kCellLivelinessLease_s = 1.0;
+inline constexpr int kGroundTruthMaxBatches = 256;   // unacknowledged batches at most
+inline constexpr double kGroundTruthHeartbeat_s = 0.05;
+
+struct NetworkOptions {
+  // "host" or "host:port" (the peer's metatraffic unicast port; without one,
+  // the well-known ports of the first kPeerParticipantRange participants of
+  // the domain are tried). Empty: stay on this host.
+  std::vector<std::string> peers;
+  // "[id@]host:port" of a Fast DDS discovery server; empty: simple discovery.
+  std::string discovery_server;
+  // Fast DDS XML profile file, loaded before anything else; empty: none.
+  std::string profile_xml;
+  bool shared_memory = true;
+  // DDS-Security directory (issue 8); empty: no security.
+  std::string security_dir;
+};
+
+// Participants tried per host (well-known ports) when a peer has no port.
+inline constexpr int kPeerParticipantRange = 32;
+
+// "a,b:7410, c" -> {"a", "b:7410", "c"}; validates every entry.
+// @throws DdsError("--peers: ...") naming the bad entry.
+std::vector<std::string> ParsePeers(const std::string& text);
+
+struct ParticipantOptions {
+  int domain_id = 0;           // 0..232 (Fast DDS port arithmetic)
+  std::string name;            // "arena.cell.<id>", "arena.service", ...
+  NetworkOptions network;
+  double lease_s = 2.5;        // participant lease (s); announcements every lease/5
+};
+
+// Something a peer did, as seen by this participant's discovery or by one of
+// its readers' liveliness tracking.
+struct PeerEvent {
+  enum class Kind {
+    kParticipantJoined,   // discovered a participant
+    kParticipantLeft,     // participant removed (clean exit) or dropped (lease expired)
+    kWriterLost,          // a writer's liveliness lease expired
+    kWriterAlive,         // a writer became alive (again)
+  };
+  Kind kind = Kind::kParticipantJoined;
+  std::string participant;   // the peer's participant name ("" if not yet known)
+  std::string topic;         // kWriter*: the topic of the reader that saw it
+  std::chrono::steady_clock::time_point when{};
+};
+const char* ToString(PeerEvent::Kind kind);
+
+class Participant;
+namespace detail {
+struct ParticipantCore;
+}
+
+// One DomainParticipant with the four types registered, one publisher and one
+// subscriber. Thread-safe.
+class Participant {
+ public:
+  // @throws DdsError when an option is invalid or Fast DDS refuses.
+  explicit Participant(const ParticipantOptions& options);
+  ~Participant();
+  Participant(const Participant&) = delete;
+  Participant& operator=(const Participant&) = delete;
+
+  const std::string& name() const;
+  int domain_id() const;
+
+  // Next discovery/liveliness event, waiting up to timeout.
+  std::optional<PeerEvent> NextPeerEvent(Millis timeout);
+  // Names of the participants currently known (discovered and not left).
+  std::vector<std::string> Peers() const;
+  // Waits until a participant with this name is known. @returns false on timeout.
+  bool WaitForPeer(const std::string& name, Millis timeout);
+
+  std::shared_ptr<detail::ParticipantCore> core() const { return core_; }
+
+ private:
+  std::shared_ptr<detail::ParticipantCore> core_;
+};
+
+struct WriterOptions {
+  // How long Write() may block on a full history (s).
+  double max_blocking_s = 1.0;
+};
+
+// A typed DataWriter on the topic of T (one of the four arena::msg types).
+template <class T>
+class Writer {
+ public:
+  // @throws DdsError when Fast DDS refuses.
+  explicit Writer(Participant& participant, const WriterOptions& options = {});
+  ~Writer();
+  Writer(const Writer&) = delete;
+  Writer& operator=(const Writer&) = delete;
+
+  // Sets schema_version and publishes. @returns false when the history stayed
+  // full for max_blocking_s or the writer failed; the sample was not sent.
+  bool Write(T& sample);
+  // Number of matched readers.
+  int Matched() const;
+  // @returns false on timeout.
+  bool WaitForMatched(int readers, Millis timeout) const;
+  // Waits until every matched reader acknowledged everything written.
+  bool WaitForAcknowledgments(Millis timeout) const;
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
+struct ReaderOptions {
+  // Track writers' liveliness and report kWriterLost / kWriterAlive as
+  // participant PeerEvents.
+  bool report_liveliness = true;
+};
+
+// A typed DataReader on the topic of T; samples are queued by the listener
+// and taken by the caller's thread.
+template <class T>
+class Reader {
+ public:
+  // @throws DdsError when Fast DDS refuses.
+  explicit Reader(Participant& participant, const ReaderOptions& options = {});
+  ~Reader();
+  Reader(const Reader&) = delete;
+  Reader& operator=(const Reader&) = delete;
+
+  // Next sample in arrival order, waiting up to timeout.
+  std::optional<T> Take(Millis timeout);
+  // Every queued sample, without waiting.
+  std::vector<T> TakeAll();
+  int Matched() const;
+  bool WaitForMatched(int writers, Millis timeout) const;
+  // Samples dropped because their schema_version is unknown.
+  std::uint64_t rejected_version() const;
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
+// Topic name of each message type ("CellAnnounce", ...).
+template <class T>
+const char* TopicName();
+
+// Participant names by role; cells are "arena.cell.<cell id>".
+std::string CellParticipantName(const std::string& cell_id);
+
+}  // namespace arena::dds

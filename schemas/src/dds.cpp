@@ -1,0 +1,700 @@
+// The shared Fast DDS set-up: contract and QoS rationale in
+// schemas/include/arena/schemas/dds.hpp.
+#include "arena/schemas/dds.hpp"
+
+#include <netdb.h>
+#include <arpa/inet.h>
+#include <sys/socket.h>
+
+#include <algorithm>
+#include <atomic>
+#include <condition_variable>
+#include <map>
+#include <mutex>
+#include <sstream>
+#include <thread>
+
+#include <fastdds/dds/domain/DomainParticipant.hpp>
+#include <fastdds/dds/domain/DomainParticipantFactory.hpp>
+#include <fastdds/dds/domain/DomainParticipantListener.hpp>
+#include <fastdds/dds/publisher/DataWriter.hpp>
+#include <fastdds/dds/publisher/Publisher.hpp>
+#include <fastdds/dds/publisher/qos/DataWriterQos.hpp>
+#include <fastdds/dds/subscriber/DataReader.hpp>
+#include <fastdds/dds/subscriber/DataReaderListener.hpp>
+#include <fastdds/dds/subscriber/SampleInfo.hpp>
+#include <fastdds/dds/subscriber/Subscriber.hpp>
+#include <fastdds/dds/subscriber/qos/DataReaderQos.hpp>
+#include <fastdds/dds/topic/Topic.hpp>
+#include <fastdds/dds/topic/TypeSupport.hpp>
+#include <fastdds/rtps/attributes/ServerAttributes.h>
+#include <fastdds/rtps/common/InstanceHandle.h>
+#include <fastdds/rtps/transport/UDPv4TransportDescriptor.h>
+#include <fastdds/rtps/transport/shared_mem/SharedMemTransportDescriptor.h>
+#include <fastrtps/utils/IPLocator.h>
+#include <spdlog/spdlog.h>
+
+#include "arena/schemas/arena.h"
+#include "arena/schemas/arenaPubSubTypes.h"
+
+namespace arena::dds {
+
+namespace fdds = eprosima::fastdds::dds;
+namespace frtps = eprosima::fastrtps::rtps;
+using eprosima::fastrtps::Duration_t;
+
+// ---------------------------------------------------------------------------
+// Options
+
+namespace {
+
+struct HostPort {
+  std::string host;
+  int port = 0;  // 0 = not given
+};
+
+HostPort SplitHostPort(const std::string& entry, const std::string& option) {
+  HostPort hp;
+  const auto colon = entry.rfind(':');
+  hp.host = entry.substr(0, colon);
+  if (colon != std::string::npos) {
+    const std::string port = entry.substr(colon + 1);
+    char* end = nullptr;
+    const long value = std::strtol(port.c_str(), &end, 10);
+    if (port.empty() || *end != '\0' || value < 1 || value > 65535) {
+      throw DdsError(option + ": bad port in '" + entry + "' (want host:1..65535)");
+    }
+    hp.port = static_cast<int>(value);
+  }
+  if (hp.host.empty()) throw DdsError(option + ": empty host in '" + entry + "'");
+  return hp;
+}
+
+// Resolves a host name or dotted quad to a dotted quad (IPv4).
+std::string ResolveIPv4(const std::string& host, const std::string& option) {
+  in_addr addr{};
+  if (inet_pton(AF_INET, host.c_str(), &addr) == 1) return host;
+  addrinfo hints{};
+  hints.ai_family = AF_INET;
+  addrinfo* result = nullptr;
+  if (getaddrinfo(host.c_str(), nullptr, &hints, &result) != 0 || result == nullptr) {
+    throw DdsError(option + ": cannot resolve host '" + host + "'");
+  }
+  char buf[INET_ADDRSTRLEN] = {};
+  inet_ntop(AF_INET, &reinterpret_cast<sockaddr_in*>(result->ai_addr)->sin_addr, buf, sizeof buf);
+  freeaddrinfo(result);
+  return buf;
+}
+
+frtps::Locator_t UdpLocator(const std::string& address, int port) {
+  frtps::Locator_t loc;
+  loc.kind = LOCATOR_KIND_UDPv4;
+  eprosima::fastrtps::rtps::IPLocator::setIPv4(loc, address);
+  loc.port = static_cast<uint32_t>(port);
+  return loc;
+}
+
+std::string Trim(const std::string& s) {
+  const auto b = s.find_first_not_of(" \t");
+  if (b == std::string::npos) return "";
+  const auto e = s.find_last_not_of(" \t");
+  return s.substr(b, e - b + 1);
+}
+
+}  // namespace
+
+std::vector<std::string> ParsePeers(const std::string& text) {
+  std::vector<std::string> peers;
+  std::stringstream in(text);
+  std::string entry;
+  while (std::getline(in, entry, ',')) {
+    entry = Trim(entry);
+    if (entry.empty()) throw DdsError("--peers: empty entry in '" + text + "'");
+    SplitHostPort(entry, "--peers");  // validates
+    peers.push_back(entry);
+  }
+  if (peers.empty()) throw DdsError("--peers: no peer given");
+  return peers;
+}
+
+std::string CellParticipantName(const std::string& cell_id) { return "arena.cell." + cell_id; }
+
+const char* ToString(PeerEvent::Kind kind) {
+  switch (kind) {
+    case PeerEvent::Kind::kParticipantJoined: return "participant-joined";
+    case PeerEvent::Kind::kParticipantLeft: return "participant-left";
+    case PeerEvent::Kind::kWriterLost: return "writer-lost";
+    case PeerEvent::Kind::kWriterAlive: return "writer-alive";
+  }
+  return "?";
+}
+
+// ---------------------------------------------------------------------------
+// Topic traits
+
+template <class T>
+struct Traits;
+template <>
+struct Traits<msg::CellAnnounce> {
+  using PubSub = msg::CellAnnouncePubSubType;
+  static constexpr const char* kTopic = "CellAnnounce";
+};
+template <>
+struct Traits<msg::TrialCommand> {
+  using PubSub = msg::TrialCommandPubSubType;
+  static constexpr const char* kTopic = "TrialCommand";
+};
+template <>
+struct Traits<msg::TrialStatus> {
+  using PubSub = msg::TrialStatusPubSubType;
+  static constexpr const char* kTopic = "TrialStatus";
+};
+template <>
+struct Traits<msg::GroundTruth> {
+  using PubSub = msg::GroundTruthPubSubType;
+  static constexpr const char* kTopic = "GroundTruth";
+};
+
+template <class T>
+const char* TopicName() {
+  return Traits<T>::kTopic;
+}
+
+// ---------------------------------------------------------------------------
+// QoS per topic
+
+namespace {
+
+void ApplyTopicQos(const std::string& topic, fdds::ReliabilityQosPolicy* reliability,
+                   fdds::DurabilityQosPolicy* durability, fdds::HistoryQosPolicy* history,
+                   fdds::ResourceLimitsQosPolicy* limits) {
+  reliability->kind = fdds::RELIABLE_RELIABILITY_QOS;
+  durability->kind = fdds::VOLATILE_DURABILITY_QOS;
+  history->kind = fdds::KEEP_ALL_HISTORY_QOS;
+  if (topic == "CellAnnounce") {
+    durability->kind = fdds::TRANSIENT_LOCAL_DURABILITY_QOS;
+    history->kind = fdds::KEEP_LAST_HISTORY_QOS;
+    history->depth = 1;
+  } else if (topic == "GroundTruth") {
+    // Bounded: a slow reader throttles the writer rather than growing memory.
+    // One instance per trial; the bound is on samples in flight, whatever
+    // their instance.
+    // Fast DDS 2.9 never reuses the slot of a finished trial (instance), so
+    // instance-limited histories would stall after a few trials; the history
+    // is bounded instead by the writer's acknowledgement window
+    // (kGroundTruthMaxBatches unacknowledged batches at most, see Write()).
+    limits->max_instances = 0;
+    limits->max_samples_per_instance = 0;
+    limits->max_samples = 0;
+    limits->allocated_samples = 32;
+  }
+}
+
+// Topics that cells write: their writers assert liveliness, their readers
+// track it.
+bool CellWritten(const std::string& topic) { return topic != "TrialCommand"; }
+
+std::string Describe(const fdds::ReliabilityQosPolicy& r, const fdds::DurabilityQosPolicy& d,
+                     const fdds::HistoryQosPolicy& h, const fdds::ResourceLimitsQosPolicy& l,
+                     const fdds::LivelinessQosPolicy& lv) {
+  std::ostringstream out;
+  out << (r.kind == fdds::RELIABLE_RELIABILITY_QOS ? "reliable" : "best-effort") << ", "
+      << (d.kind == fdds::TRANSIENT_LOCAL_DURABILITY_QOS ? "transient-local"
+          : d.kind == fdds::VOLATILE_DURABILITY_QOS      ? "volatile"
+                                                         : "other-durability")
+      << ", "
+      << (h.kind == fdds::KEEP_ALL_HISTORY_QOS ? std::string("keep-all")
+                                               : "keep-last " + std::to_string(h.depth))
+      << ", max_samples " << l.max_samples << ", liveliness "
+      << (lv.kind == fdds::AUTOMATIC_LIVELINESS_QOS ? "automatic" : "manual") << " lease "
+      << (lv.lease_duration == eprosima::fastrtps::c_TimeInfinite
+              ? std::string("inf")
+              : std::to_string(lv.lease_duration.to_ns() * 1e-9) + " s");
+  return out.str();
+}
+
+}  // namespace
+
+// ---------------------------------------------------------------------------
+// Participant core
+
+namespace detail {
+
+struct ParticipantCore : public fdds::DomainParticipantListener {
+  std::string name;
+  int domain_id = 0;
+  fdds::DomainParticipant* participant = nullptr;
+  fdds::Publisher* publisher = nullptr;
+  fdds::Subscriber* subscriber = nullptr;
+  std::map<std::string, fdds::Topic*> topics;
+
+  mutable std::mutex mutex;
+  std::condition_variable changed;
+  std::deque<PeerEvent> events;
+  std::map<frtps::GuidPrefix_t, std::string> peers;  // discovered participants
+
+  ~ParticipantCore() override {
+    if (participant != nullptr) {
+      participant->set_listener(nullptr);
+      participant->delete_contained_entities();
+      fdds::DomainParticipantFactory::get_instance()->delete_participant(participant);
+    }
+  }
+
+  void Push(PeerEvent event) {
+    event.when = std::chrono::steady_clock::now();
+    {
+      std::lock_guard<std::mutex> lock(mutex);
+      events.push_back(std::move(event));
+    }
+    changed.notify_all();
+  }
+
+  std::string PeerName(const frtps::GuidPrefix_t& prefix) const {
+    std::lock_guard<std::mutex> lock(mutex);
+    auto it = peers.find(prefix);
+    return it == peers.end() ? std::string() : it->second;
+  }
+
+  void on_participant_discovery(fdds::DomainParticipant*,
+                                frtps::ParticipantDiscoveryInfo&& info) override {
+    using S = frtps::ParticipantDiscoveryInfo::DISCOVERY_STATUS;
+    const std::string peer = info.info.m_participantName.to_string();
+    const auto prefix = info.info.m_guid.guidPrefix;
+    if (info.status == S::DISCOVERED_PARTICIPANT) {
+      {
+        std::lock_guard<std::mutex> lock(mutex);
+        peers[prefix] = peer;
+      }
+      spdlog::debug("dds: {} discovered participant {}", name, peer);
+      Push({PeerEvent::Kind::kParticipantJoined, peer, "", {}});
+    } else if (info.status == S::REMOVED_PARTICIPANT || info.status == S::DROPPED_PARTICIPANT) {
+      {
+        std::lock_guard<std::mutex> lock(mutex);
+        peers.erase(prefix);
+      }
+      spdlog::debug("dds: {} lost participant {} ({})", name, peer,
+                    info.status == S::DROPPED_PARTICIPANT ? "lease expired" : "removed");
+      Push({PeerEvent::Kind::kParticipantLeft, peer, "", {}});
+    }
+  }
+
+  fdds::Topic* TopicFor(const std::string& topic, const std::string& type) {
+    std::lock_guard<std::mutex> lock(mutex);
+    auto it = topics.find(topic);
+    if (it != topics.end()) return it->second;
+    fdds::Topic* t = participant->create_topic(topic, type, fdds::TOPIC_QOS_DEFAULT);
+    if (t == nullptr) throw DdsError("dds: create_topic(" + topic + ") failed");
+    topics[topic] = t;
+    return t;
+  }
+};
+
+}  // namespace detail
+
+namespace {
+
+void ApplyNetwork(const ParticipantOptions& opt, fdds::DomainParticipantQos* qos) {
+  const NetworkOptions& net = opt.network;
+  auto& builtin = qos->wire_protocol().builtin;
+  const bool local_only = net.peers.empty() && net.discovery_server.empty();
+
+  qos->transport().use_builtin_transports = false;
+  qos->transport().user_transports.clear();
+  if (net.shared_memory) {
+    qos->transport().user_transports.push_back(
+        std::make_shared<eprosima::fastdds::rtps::SharedMemTransportDescriptor>());
+  }
+  auto udp = std::make_shared<eprosima::fastdds::rtps::UDPv4TransportDescriptor>();
+  udp->maxInitialPeersRange = kPeerParticipantRange;
+  if (local_only) udp->interfaceWhiteList.push_back("127.0.0.1");
+  qos->transport().user_transports.push_back(udp);
+
+  // A metatraffic unicast locator of our own means Fast DDS creates no
+  // multicast discovery locators; port 0 = the well-known port of this
+  // participant (moved along when taken).
+  builtin.metatrafficMulticastLocatorList.clear();
+  builtin.metatrafficUnicastLocatorList.clear();
+  builtin.initialPeersList.clear();
+  builtin.metatrafficUnicastLocatorList.push_back(
+      UdpLocator(local_only ? "127.0.0.1" : "0.0.0.0", 0));
+  // Same-host peers are always found through loopback.
+  builtin.initialPeersList.push_back(UdpLocator("127.0.0.1", 0));
+  for (const std::string& peer : net.peers) {
+    const HostPort hp = SplitHostPort(peer, "--peers");
+    builtin.initialPeersList.push_back(UdpLocator(ResolveIPv4(hp.host, "--peers"), hp.port));
+  }
+  // User data goes to every transport's default locators: shared memory
+  // between processes of this host, UDPv4 (127.0.0.1 only when local).
+
+  if (!net.discovery_server.empty()) {
+    std::string entry = net.discovery_server;
+    int server_id = 0;
+    if (auto at = entry.find('@'); at != std::string::npos) {
+      const std::string id = entry.substr(0, at);
+      char* end = nullptr;
+      const long v = std::strtol(id.c_str(), &end, 10);
+      if (id.empty() || *end != '\0' || v < 0 || v > 255) {
+        throw DdsError("--discovery-server: bad server id '" + id + "' (want 0..255)");
+      }
+      server_id = static_cast<int>(v);
+      entry = entry.substr(at + 1);
+    }
+    const HostPort hp = SplitHostPort(entry, "--discovery-server");
+    frtps::RemoteServerAttributes server;
+    if (!eprosima::fastdds::rtps::get_server_client_default_guidPrefix(server_id, server.guidPrefix)) {
+      throw DdsError("--discovery-server: server id " + std::to_string(server_id) + " not usable");
+    }
+    server.metatrafficUnicastLocatorList.push_back(
+        UdpLocator(ResolveIPv4(hp.host, "--discovery-server"), hp.port == 0 ? 11811 : hp.port));
+    builtin.discovery_config.discoveryProtocol = frtps::DiscoveryProtocol_t::CLIENT;
+    builtin.discovery_config.m_DiscoveryServers.push_back(server);
+    builtin.initialPeersList.clear();
+  }
+}
+
+// The last step of the chain: DDS-Security (issue 8) fills the participant's
+// property policy from DIR (identity CA, certificate, key, governance,
+// permissions) here.
+void ApplySecurity(const NetworkOptions& net, fdds::DomainParticipantQos*) {
+  if (!net.security_dir.empty()) {
+    throw DdsError("--security: DDS-Security is not available in this build of arena yet");
+  }
+}
+
+template <class T>
+void Register(fdds::DomainParticipant* participant) {
+  fdds::TypeSupport type(new typename Traits<T>::PubSub());
+  if (type.register_type(participant) != ReturnCode_t::RETCODE_OK) {
+    throw DdsError(std::string("dds: register_type(") + Traits<T>::kTopic + ") failed");
+  }
+}
+
+}  // namespace
+
+Participant::Participant(const ParticipantOptions& options)
+    : core_(std::make_shared<detail::ParticipantCore>()) {
+  if (options.domain_id < 0 || options.domain_id > 232) {
+    throw DdsError("--domain: must be 0..232, got " + std::to_string(options.domain_id));
+  }
+  if (!(options.lease_s > 0.2) || options.lease_s > 3600) {
+    throw DdsError("dds: participant lease must be in (0.2, 3600] s");
+  }
+  auto* factory = fdds::DomainParticipantFactory::get_instance();
+  // Profiles first, then our overrides, then log what is in effect.
+  if (!options.network.profile_xml.empty()) {
+    if (factory->load_XML_profiles_file(options.network.profile_xml) != ReturnCode_t::RETCODE_OK) {
+      throw DdsError("--profile-xml: cannot load '" + options.network.profile_xml + "'");
+    }
+  }
+  fdds::DomainParticipantQos qos = factory->get_default_participant_qos();
+  qos.name(options.name);
+  auto& discovery = qos.wire_protocol().builtin.discovery_config;
+  discovery.leaseDuration = Duration_t(options.lease_s);
+  discovery.leaseDuration_announcementperiod = Duration_t(options.lease_s / 5.0);
+  if (options.network.profile_xml.empty()) ApplyNetwork(options, &qos);
+  ApplySecurity(options.network, &qos);
+
+  core_->name = options.name;
+  core_->domain_id = options.domain_id;
+  const fdds::StatusMask mask = fdds::StatusMask::none();  // participant discovery only
+  core_->participant = factory->create_participant(options.domain_id, qos, core_.get(), mask);
+  if (core_->participant == nullptr) {
+    throw DdsError("dds: create_participant(domain " + std::to_string(options.domain_id) +
+                   ") failed (see Fast DDS log above)");
+  }
+  Register<msg::CellAnnounce>(core_->participant);
+  Register<msg::TrialCommand>(core_->participant);
+  Register<msg::TrialStatus>(core_->participant);
+  Register<msg::GroundTruth>(core_->participant);
+  core_->publisher = core_->participant->create_publisher(fdds::PUBLISHER_QOS_DEFAULT);
+  if (core_->publisher == nullptr) throw DdsError("dds: create_publisher failed");
+  core_->subscriber = core_->participant->create_subscriber(fdds::SUBSCRIBER_QOS_DEFAULT);
+  if (core_->subscriber == nullptr) throw DdsError("dds: create_subscriber failed");
+
+  const auto& effective = core_->participant->get_qos();
+  spdlog::debug("dds: participant {} domain {} lease {} s, transports: {}{}, peers {}, {}",
+                options.name, options.domain_id, options.lease_s,
+                options.network.shared_memory ? "shm+" : "",
+                options.network.peers.empty() && options.network.discovery_server.empty()
+                    ? "udpv4@127.0.0.1"
+                    : "udpv4",
+                effective.wire_protocol().builtin.initialPeersList.size(),
+                options.network.discovery_server.empty()
+                    ? "simple discovery"
+                    : "discovery server " + options.network.discovery_server);
+}
+
+Participant::~Participant() = default;
+
+const std::string& Participant::name() const { return core_->name; }
+int Participant::domain_id() const { return core_->domain_id; }
+
+std::optional<PeerEvent> Participant::NextPeerEvent(Millis timeout) {
+  std::unique_lock<std::mutex> lock(core_->mutex);
+  if (!core_->changed.wait_for(lock, timeout, [&] { return !core_->events.empty(); })) {
+    return std::nullopt;
+  }
+  PeerEvent e = std::move(core_->events.front());
+  core_->events.pop_front();
+  return e;
+}
+
+std::vector<std::string> Participant::Peers() const {
+  std::lock_guard<std::mutex> lock(core_->mutex);
+  std::vector<std::string> names;
+  for (const auto& [prefix, name] : core_->peers) names.push_back(name);
+  return names;
+}
+
+bool Participant::WaitForPeer(const std::string& name, Millis timeout) {
+  std::unique_lock<std::mutex> lock(core_->mutex);
+  return core_->changed.wait_for(lock, timeout, [&] {
+    for (const auto& [prefix, n] : core_->peers) {
+      if (n == name) return true;
+    }
+    return false;
+  });
+}
+
+namespace {
+bool PollUntil(Millis timeout, const std::function<bool()>& done) {
+  const auto deadline = std::chrono::steady_clock::now() + timeout;
+  while (!done()) {
+    if (std::chrono::steady_clock::now() >= deadline) return false;
+    std::this_thread::sleep_for(Millis(5));
+  }
+  return true;
+}
+}  // namespace
+
+// ---------------------------------------------------------------------------
+// Writer
+
+template <class T>
+struct Writer<T>::Impl {
+  std::shared_ptr<detail::ParticipantCore> core;
+  fdds::DataWriter* writer = nullptr;
+  double max_blocking_s = 1.0;
+  int window = 0;          // GroundTruth: batches written before an acknowledgement check
+  int unconfirmed = 0;
+
+  ~Impl() {
+    if (writer != nullptr) core->publisher->delete_datawriter(writer);
+  }
+};
+
+template <class T>
+Writer<T>::Writer(Participant& participant, const WriterOptions& options)
+    : impl_(std::make_unique<Impl>()) {
+  impl_->core = participant.core();
+  auto& core = *impl_->core;
+  const std::string topic = Traits<T>::kTopic;
+  fdds::Topic* t = core.TopicFor(topic, typename Traits<T>::PubSub().getName());
+
+  fdds::DataWriterQos qos = core.publisher->get_default_datawriter_qos();
+  ApplyTopicQos(topic, &qos.reliability(), &qos.durability(), &qos.history(),
+                &qos.resource_limits());
+  qos.reliability().max_blocking_time = Duration_t(options.max_blocking_s);
+  impl_->max_blocking_s = options.max_blocking_s;
+  if (CellWritten(topic)) {
+    qos.liveliness().kind = fdds::AUTOMATIC_LIVELINESS_QOS;
+    qos.liveliness().lease_duration = Duration_t(kCellLivelinessLease_s);
+    qos.liveliness().announcement_period = Duration_t(kCellLivelinessLease_s / 4.0);
+  }
+  if (topic == "GroundTruth") {
+    impl_->window = kGroundTruthMaxBatches / 4;
+    auto& times = qos.reliable_writer_qos().times;
+    times.heartbeatPeriod = Duration_t(kGroundTruthHeartbeat_s);
+    times.nackResponseDelay = Duration_t(0.0);
+    times.nackSupressionDuration = Duration_t(0.0);
+  }
+  impl_->writer = core.publisher->create_datawriter(t, qos, nullptr);
+  if (impl_->writer == nullptr) throw DdsError("dds: create_datawriter(" + topic + ") failed");
+  const auto q = impl_->writer->get_qos();
+  spdlog::debug("dds: {} writer {}: {}", core.name, topic,
+                Describe(q.reliability(), q.durability(), q.history(), q.resource_limits(),
+                         q.liveliness()));
+}
+
+template <class T>
+Writer<T>::~Writer() = default;
+
+template <class T>
+bool Writer<T>::Write(T& sample) {
+  sample.schema_version(msg::SCHEMA_VERSION);
+  if (impl_->window > 0 && impl_->unconfirmed >= impl_->window) {
+    // Bounded history: at most `window` batches unacknowledged; a reader that
+    // does not keep up throttles us here (false = try again later).
+    if (impl_->writer->wait_for_acknowledgments(Duration_t(impl_->max_blocking_s)) !=
+        ReturnCode_t::RETCODE_OK) {
+      return false;
+    }
+    impl_->unconfirmed = 0;
+  }
+  if (!impl_->writer->write(&sample)) return false;
+  ++impl_->unconfirmed;
+  return true;
+}
+
+template <class T>
+int Writer<T>::Matched() const {
+  fdds::PublicationMatchedStatus status;
+  impl_->writer->get_publication_matched_status(status);
+  return status.current_count;
+}
+
+template <class T>
+bool Writer<T>::WaitForMatched(int readers, Millis timeout) const {
+  return PollUntil(timeout, [&] { return Matched() >= readers; });
+}
+
+template <class T>
+bool Writer<T>::WaitForAcknowledgments(Millis timeout) const {
+  return impl_->writer->wait_for_acknowledgments(Duration_t(timeout.count() * 1e-3)) ==
+         ReturnCode_t::RETCODE_OK;
+}
+
+// ---------------------------------------------------------------------------
+// Reader
+
+template <class T>
+struct Reader<T>::Impl : public fdds::DataReaderListener {
+  std::shared_ptr<detail::ParticipantCore> core;
+  fdds::DataReader* reader = nullptr;
+  bool report_liveliness = true;
+
+  std::mutex mutex;
+  std::condition_variable arrived;
+  std::deque<T> queue;
+  std::atomic<std::uint64_t> rejected{0};
+
+  ~Impl() override {
+    if (reader != nullptr) {
+      reader->set_listener(nullptr);
+      core->subscriber->delete_datareader(reader);
+    }
+  }
+
+  void on_data_available(fdds::DataReader* r) override {
+    T sample;
+    fdds::SampleInfo info;
+    std::vector<T> taken;
+    while (r->take_next_sample(&sample, &info) == ReturnCode_t::RETCODE_OK) {
+      if (!info.valid_data) continue;  // instance disposed / no writers: not a message
+      if (sample.schema_version() != msg::SCHEMA_VERSION) {
+        if (rejected.fetch_add(1) == 0) {
+          spdlog::warn("dds: {} dropped a {} message of schema version {} (known: {})",
+                       core->name, Traits<T>::kTopic, sample.schema_version(),
+                       msg::SCHEMA_VERSION);
+        }
+        continue;
+      }
+      taken.push_back(std::move(sample));
+      sample = T();
+    }
+    if (taken.empty()) return;
+    {
+      std::lock_guard<std::mutex> lock(mutex);
+      for (auto& s : taken) queue.push_back(std::move(s));
+    }
+    arrived.notify_all();
+  }
+
+  void on_liveliness_changed(fdds::DataReader*,
+                             const fdds::LivelinessChangedStatus& status) override {
+    if (!report_liveliness) return;
+    const frtps::GUID_t guid = frtps::iHandle2GUID(status.last_publication_handle);
+    const std::string peer = core->PeerName(guid.guidPrefix);
+    if (status.not_alive_count_change > 0 || status.alive_count_change < 0) {
+      core->Push({PeerEvent::Kind::kWriterLost, peer, Traits<T>::kTopic, {}});
+    }
+    if (status.alive_count_change > 0) {
+      core->Push({PeerEvent::Kind::kWriterAlive, peer, Traits<T>::kTopic, {}});
+    }
+  }
+};
+
+template <class T>
+Reader<T>::Reader(Participant& participant, const ReaderOptions& options)
+    : impl_(std::make_unique<Impl>()) {
+  impl_->core = participant.core();
+  impl_->report_liveliness = options.report_liveliness;
+  auto& core = *impl_->core;
+  const std::string topic = Traits<T>::kTopic;
+  fdds::Topic* t = core.TopicFor(topic, typename Traits<T>::PubSub().getName());
+
+  fdds::DataReaderQos qos = core.subscriber->get_default_datareader_qos();
+  ApplyTopicQos(topic, &qos.reliability(), &qos.durability(), &qos.history(),
+                &qos.resource_limits());
+  if (topic == "CellAnnounce") {
+    qos.resource_limits().max_samples_per_instance = 1;
+  }
+  // Fast DDS tracks a writer's liveliness only for a finite requested lease.
+  qos.liveliness().kind = fdds::AUTOMATIC_LIVELINESS_QOS;
+  qos.liveliness().lease_duration = CellWritten(topic) ? Duration_t(kCellLivelinessLease_s)
+                                                       : eprosima::fastrtps::c_TimeInfinite;
+  if (topic == "GroundTruth") {
+    qos.reliable_reader_qos().times.heartbeatResponseDelay = Duration_t(0.0);
+  }
+  fdds::StatusMask mask = fdds::StatusMask::data_available();
+  mask << fdds::StatusMask::liveliness_changed();
+  impl_->reader = core.subscriber->create_datareader(t, qos, impl_.get(), mask);
+  if (impl_->reader == nullptr) throw DdsError("dds: create_datareader(" + topic + ") failed");
+  const auto q = impl_->reader->get_qos();
+  spdlog::debug("dds: {} reader {}: {}", core.name, topic,
+                Describe(q.reliability(), q.durability(), q.history(), q.resource_limits(),
+                         q.liveliness()));
+}
+
+template <class T>
+Reader<T>::~Reader() = default;
+
+template <class T>
+std::optional<T> Reader<T>::Take(Millis timeout) {
+  std::unique_lock<std::mutex> lock(impl_->mutex);
+  if (!impl_->arrived.wait_for(lock, timeout, [&] { return !impl_->queue.empty(); })) {
+    return std::nullopt;
+  }
+  T sample = std::move(impl_->queue.front());
+  impl_->queue.pop_front();
+  return sample;
+}
+
+template <class T>
+std::vector<T> Reader<T>::TakeAll() {
+  std::lock_guard<std::mutex> lock(impl_->mutex);
+  std::vector<T> all(std::make_move_iterator(impl_->queue.begin()),
+                     std::make_move_iterator(impl_->queue.end()));
+  impl_->queue.clear();
+  return all;
+}
+
+template <class T>
+int Reader<T>::Matched() const {
+  fdds::SubscriptionMatchedStatus status;
+  impl_->reader->get_subscription_matched_status(status);
+  return status.current_count;
+}
+
+template <class T>
+bool Reader<T>::WaitForMatched(int writers, Millis timeout) const {
+  return PollUntil(timeout, [&] { return Matched() >= writers; });
+}
+
+template <class T>
+std::uint64_t Reader<T>::rejected_version() const {
+  return impl_->rejected.load();
+}
+
+#define ARENA_DDS_INSTANTIATE(T)             \
+  template class Writer<T>;                  \
+  template class Reader<T>;                  \
+  template const char* TopicName<T>();
+ARENA_DDS_INSTANTIATE(msg::CellAnnounce)
+ARENA_DDS_INSTANTIATE(msg::TrialCommand)
+ARENA_DDS_INSTANTIATE(msg::TrialStatus)
+ARENA_DDS_INSTANTIATE(msg::GroundTruth)
+#undef ARENA_DDS_INSTANTIATE
+
+}  // namespace arena::dds

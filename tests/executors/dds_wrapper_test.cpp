@@ -1,0 +1,111 @@
+// The shared DDS set-up in one process: two participants on a test-unique
+// domain over the local-only transports.
+#include <gtest/gtest.h>
+
+#include "arena/schemas/arena.h"
+#include "arena/schemas/dds.hpp"
+#include "test_support.hpp"
+
+namespace arena {
+namespace {
+
+using namespace std::chrono_literals;
+
+dds::ParticipantOptions Named(const std::string& name, int salt) {
+  dds::ParticipantOptions o;
+  o.domain_id = test::TestDomain(salt);
+  o.name = name;
+  return o;
+}
+
+TEST(DdsParticipant, PeersAreParsedAndBadOnesNamed) {
+  EXPECT_EQ(dds::ParsePeers("10.0.0.2, hostb:7410"), (std::vector<std::string>{"10.0.0.2", "hostb:7410"}));
+  EXPECT_THROW(dds::ParsePeers(""), dds::DdsError);
+  try {
+    dds::ParsePeers("a:99999");
+    FAIL();
+  } catch (const dds::DdsError& e) {
+    EXPECT_NE(std::string(e.what()).find("--peers"), std::string::npos) << e.what();
+  }
+  dds::ParticipantOptions bad = Named("x", 0);
+  bad.domain_id = 300;
+  EXPECT_THROW(dds::Participant p(bad), dds::DdsError);
+  bad.domain_id = 5;
+  bad.network.security_dir = "/nonexistent";
+  EXPECT_THROW(dds::Participant p(bad), dds::DdsError);
+}
+
+TEST(DdsParticipant, GroundTruthArrivesCompleteAndInOrder) {
+  dds::Participant a(Named("arena.test.a", 1));
+  dds::Participant b(Named("arena.test.b", 1));
+  dds::WriterOptions cell;
+  dds::Writer<msg::GroundTruth> writer(a, cell);
+  dds::Reader<msg::GroundTruth> reader(b);
+  ASSERT_TRUE(writer.WaitForMatched(1, 10s));
+  ASSERT_TRUE(reader.WaitForMatched(1, 10s));
+  ASSERT_TRUE(b.WaitForPeer("arena.test.a", 10s));
+  // More batches than the bounded history, spread over more trials
+  // (instances) than it holds: the writer must be throttled, never lose.
+  const int kBatches = 600;
+  for (int i = 0; i < kBatches; ++i) {
+    msg::GroundTruth g;
+    g.trial_id(1 + i / 30);
+    g.batch(static_cast<std::uint32_t>(i));
+    g.first_sample(static_cast<std::uint32_t>(25 * i));
+    g.samples().resize(25);
+    for (int k = 0; k < 25; ++k) {
+      g.samples()[k].t((25 * i + k) / 250.0);
+      g.samples()[k].object_pose() = {0, 0, 0, 1, 0, 0, 0};
+      g.samples()[k].pusher_pose() = {0, 0, 0, 1, 0, 0, 0};
+    }
+    ASSERT_TRUE(writer.Write(g)) << "batch " << i;
+  }
+  for (int i = 0; i < kBatches; ++i) {
+    auto g = reader.Take(10s);
+    ASSERT_TRUE(g) << "batch " << i << " missing";
+    EXPECT_EQ(g->batch(), static_cast<std::uint32_t>(i));
+    EXPECT_EQ(g->schema_version(), msg::SCHEMA_VERSION);
+  }
+  EXPECT_FALSE(reader.Take(50ms));
+}
+
+TEST(DdsParticipant, LateReaderGetsTheLastAnnouncement) {
+  dds::Participant a(Named("arena.test.cell", 2));
+  dds::WriterOptions cell;
+  dds::Writer<msg::CellAnnounce> writer(a, cell);
+  msg::CellAnnounce first;
+  first.cell_id("c1");
+  first.speed(1);
+  ASSERT_TRUE(writer.Write(first));
+  msg::CellAnnounce second = first;
+  second.speed(2);
+  ASSERT_TRUE(writer.Write(second));
+
+  dds::Participant b(Named("arena.test.service", 2));
+  dds::Reader<msg::CellAnnounce> reader(b);
+  auto got = reader.Take(10s);
+  ASSERT_TRUE(got);
+  EXPECT_EQ(got->cell_id(), "c1");
+  EXPECT_EQ(got->speed(), 2);  // keep-last 1
+  EXPECT_FALSE(reader.Take(200ms));
+}
+
+TEST(DdsParticipant, ParticipantLeavingIsReported) {
+  dds::Participant b(Named("arena.test.watch", 3));
+  dds::Reader<msg::TrialStatus> reader(b);
+  {
+    dds::Participant a(Named("arena.test.leaver", 3));
+    dds::Writer<msg::TrialStatus> writer(a);
+    ASSERT_TRUE(b.WaitForPeer("arena.test.leaver", 10s));
+  }
+  const auto deadline = std::chrono::steady_clock::now() + 5s;
+  bool left = false;
+  while (!left && std::chrono::steady_clock::now() < deadline) {
+    auto e = b.NextPeerEvent(100ms);
+    left = e && e->kind == dds::PeerEvent::Kind::kParticipantLeft && e->participant == "arena.test.leaver";
+  }
+  EXPECT_TRUE(left);
+}
+
+}  // namespace
+}  // namespace arena

@@ -1,0 +1,117 @@
+// The Lemke solver on problems with known answers, degenerate ties, and
+// the failures it must report instead of hanging or returning NaN.
+#include <cmath>
+#include <limits>
+#include <random>
+
+#include <gtest/gtest.h>
+
+#include "arena/mechanics/lcp.hpp"
+
+namespace arena::mechanics {
+namespace {
+
+void ExpectSolution(const Eigen::MatrixXd& A, const Eigen::VectorXd& b, const LcpResult& r, double tol = 1e-12) {
+  ASSERT_TRUE(r.ok) << r.reason;
+  const Eigen::VectorXd w = A * r.z + b;
+  for (Eigen::Index i = 0; i < b.size(); ++i) {
+    EXPECT_GE(r.z[i], -tol);
+    EXPECT_GE(w[i], -tol);
+    EXPECT_LE(std::abs(r.z[i] * w[i]), tol);
+  }
+}
+
+TEST(Lemke, SolvesKnownTwoByTwo) {
+  Eigen::MatrixXd A(2, 2);
+  A << 2, 1, 1, 2;
+  Eigen::VectorXd b(2);
+  b << -5, -6;
+  const LcpResult r = SolveLcp(A, b);
+  ExpectSolution(A, b, r);
+  EXPECT_NEAR(r.z[0], 4.0 / 3.0, 1e-14);
+  EXPECT_NEAR(r.z[1], 7.0 / 3.0, 1e-14);
+}
+
+TEST(Lemke, NonnegativeDataNeedsNoPivot) {
+  const Eigen::MatrixXd A = Eigen::MatrixXd::Identity(3, 3);
+  const Eigen::VectorXd b = Eigen::VectorXd::Ones(3);
+  const LcpResult r = SolveLcp(A, b);
+  ExpectSolution(A, b, r);
+  EXPECT_EQ(r.pivots, 0);
+  EXPECT_EQ(r.z.norm(), 0.0);
+}
+
+TEST(Lemke, DegenerateTiesAreResolved) {
+  // Every first-step ratio ties and the matrix is singular.
+  const Eigen::MatrixXd A = Eigen::MatrixXd::Ones(4, 4);
+  const Eigen::VectorXd b = -Eigen::VectorXd::Ones(4);
+  const LcpResult r = SolveLcp(A, b);
+  ExpectSolution(A, b, r);
+  EXPECT_NEAR(r.z.sum(), 1.0, 1e-12);
+}
+
+TEST(Lemke, InfeasibleProblemEndsOnARay) {
+  Eigen::MatrixXd A(1, 1);
+  A << -1;
+  Eigen::VectorXd b(1);
+  b << -1;
+  const LcpResult r = SolveLcp(A, b);
+  EXPECT_FALSE(r.ok);
+  EXPECT_NE(r.reason.find("ray termination"), std::string::npos) << r.reason;
+}
+
+TEST(Lemke, NonFiniteDataIsRefused) {
+  Eigen::MatrixXd A = Eigen::MatrixXd::Identity(2, 2);
+  A(0, 1) = std::numeric_limits<double>::quiet_NaN();
+  const Eigen::VectorXd b = -Eigen::VectorXd::Ones(2);
+  const LcpResult r = SolveLcp(A, b);
+  EXPECT_FALSE(r.ok);
+  EXPECT_NE(r.reason.find("non-finite"), std::string::npos) << r.reason;
+}
+
+TEST(Lemke, PivotLimitIsReported) {
+  std::mt19937 rng(3);
+  std::normal_distribution<double> N;
+  const int n = 20;
+  Eigen::MatrixXd B(n, n);
+  for (int i = 0; i < n; ++i)
+    for (int j = 0; j < n; ++j) B(i, j) = N(rng);
+  const Eigen::MatrixXd A = B.transpose() * B + Eigen::MatrixXd::Identity(n, n);
+  const Eigen::VectorXd b = -Eigen::VectorXd::Ones(n);
+  LcpOptions opt;
+  opt.max_pivots = 2;
+  const LcpResult r = SolveLcp(A, b, nullptr, opt);
+  EXPECT_FALSE(r.ok);
+  EXPECT_NE(r.reason.find("pivot limit"), std::string::npos) << r.reason;
+}
+
+// Random monotone problems (PSD plus skew part, like a frictionless contact
+// problem with bilateral terms) all solve, and a warm start from the
+// solution's basis solves the same problem without pivoting.
+TEST(Lemke, RandomMonotoneProblemsAndWarmStart) {
+  std::mt19937 rng(7);
+  std::normal_distribution<double> N;
+  for (int trial = 0; trial < 200; ++trial) {
+    const int n = 2 + trial % 40;
+    Eigen::MatrixXd B(n, n), S(n, n);
+    for (int i = 0; i < n; ++i)
+      for (int j = 0; j < n; ++j) {
+        B(i, j) = N(rng);
+        S(i, j) = N(rng);
+      }
+    const Eigen::MatrixXd A = B.transpose() * B + 0.01 * Eigen::MatrixXd::Identity(n, n) + (S - S.transpose());
+    Eigen::VectorXd b(n);
+    for (int i = 0; i < n; ++i) b[i] = N(rng);
+    const LcpResult r = SolveLcp(A, b);
+    ExpectSolution(A, b, r, 1e-8);
+    const LcpResult warm = SolveLcp(A, b, &r.basis);
+    ExpectSolution(A, b, warm, 1e-8);
+    if (b.minCoeff() < 0) {
+      EXPECT_TRUE(warm.warm_start_used);
+      EXPECT_EQ(warm.pivots, 0);
+    }
+  }
+}
+
+}  // namespace
+}  // namespace arena::mechanics

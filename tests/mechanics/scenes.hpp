@@ -1,0 +1,61 @@
+// Scenes built in code for the mechanics tests (SCENE.md's canonical scene
+// and the textbook set-ups of the validation tests).
+#pragma once
+
+#include "arena/mechanics/scene.hpp"
+
+namespace arena::mechanics::testing {
+
+inline ContactSpec Finger(const char* name, ContactType type, Eigen::Vector3d position,
+                          Eigen::Vector3d normal, double mu) {
+  ContactSpec f;
+  f.name = name;
+  f.type = type;
+  f.position = position;
+  f.normal = normal;
+  f.mu = mu;
+  return f;
+}
+
+// SCENE.md's example: a point finger and a line finger, pusher from below.
+inline Scene CanonicalScene() {
+  Scene s;
+  s.object.shape = ObjectShape::kBox;
+  s.object.size = {0.05, 0.03, 0.10};
+  s.object.mass = 0.2;
+  s.gravity = {0, 0, -9.81};
+  s.duration = 1.0;
+  s.grip_force = 10.0;
+  s.fingers.push_back(Finger("left", ContactType::kPoint, {-0.025, 0, 0}, {1, 0, 0}, 0.5));
+  ContactSpec right = Finger("right", ContactType::kLine, {0.025, 0, 0}, {-1, 0, 0}, 0.5);
+  right.axis = {0, 0, 1};
+  right.length = 0.02;
+  s.fingers.push_back(right);
+  PusherSpec p;
+  p.name = "pusher";
+  p.type = ContactType::kPoint;
+  p.position = {0, 0, -0.05};
+  p.normal = {0, 0, 1};
+  p.mu = 0.3;
+  p.motion.velocity = {0, 0, 0.01};
+  s.pusher = p;
+  s.model = {8, 3, 0.004, Reduce::kAuto};
+  return s;
+}
+
+// Two point fingers along ±x holding a box, no pusher.
+inline Scene HeldBox(double mass, double grip, double mu, int facets = 8) {
+  Scene s;
+  s.object.shape = ObjectShape::kBox;
+  s.object.size = {0.05, 0.03, 0.10};
+  s.object.mass = mass;
+  s.gravity = {0, 0, -9.81};
+  s.duration = 0.2;
+  s.grip_force = grip;
+  s.fingers.push_back(Finger("left", ContactType::kPoint, {-0.025, 0, 0}, {1, 0, 0}, mu));
+  s.fingers.push_back(Finger("right", ContactType::kPoint, {0.025, 0, 0}, {-1, 0, 0}, mu));
+  s.model = {facets, 3, 0.004, Reduce::kAuto};
+  return s;
+}
+
+}  // namespace arena::mechanics::testing

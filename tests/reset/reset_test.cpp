@@ -1,0 +1,150 @@
+// Reset planning and the simulated reset executor.
+#include <gtest/gtest.h>
+
+#include "arena/reset/reset.hpp"
+#include "arena/reset/rng.hpp"
+
+namespace arena::reset {
+namespace {
+
+Pose At(double x, double y, double z, double yaw = 0) {
+  Pose p;
+  p.position = Eigen::Vector3d(x, y, z);
+  p.orientation = Eigen::AngleAxisd(yaw, Eigen::Vector3d::UnitZ());
+  return p;
+}
+
+std::vector<PrimitiveKind> Kinds(const std::vector<Primitive>& plan) {
+  std::vector<PrimitiveKind> k;
+  for (const auto& p : plan) k.push_back(p.kind);
+  return k;
+}
+
+TEST(ResetPlan, NothingToDoWithinTolerance) {
+  ResetParams params;
+  EXPECT_TRUE(PlanReset(At(0.0005, 0, 0), At(0, 0, 0), false, params).empty());
+}
+
+TEST(ResetPlan, TranslationRotationAndPusherSwap) {
+  ResetParams params;
+  using K = PrimitiveKind;
+  EXPECT_EQ(Kinds(PlanReset(At(0.01, 0, 0), At(0, 0, 0), false, params)),
+            (std::vector<K>{K::kRelease, K::kTranslate, K::kRegrasp}));
+  EXPECT_EQ(Kinds(PlanReset(At(0, 0, 0, 0.3), At(0, 0, 0), false, params)),
+            (std::vector<K>{K::kRelease, K::kRotate, K::kRegrasp}));
+  const auto plan = PlanReset(At(0.02, 0, 0, 0.3), At(0, 0, 0), true, params);
+  EXPECT_EQ(Kinds(plan), (std::vector<K>{K::kSwapPusher, K::kRelease, K::kRotate, K::kTranslate, K::kRegrasp}));
+  // Durations follow from distances and speeds: 0.02 m at 0.05 m/s + a grasp.
+  EXPECT_NEAR(plan[3].duration_s, params.grasp_time + 0.02 / params.translate_speed, 1e-12);
+  EXPECT_NEAR(plan[2].duration_s, params.grasp_time + 0.3 / params.rotate_speed, 1e-9);
+  EXPECT_TRUE(plan.back().target.position.isApprox(Eigen::Vector3d::Zero()));
+}
+
+TEST(ResetExecute, SucceedsWithinToleranceAndReportsTime) {
+  ResetParams params;
+  ResetRequest r;
+  r.observed_end = At(0.01, 0.002, 0.0, 0.1);
+  r.true_end = r.observed_end;
+  r.target = At(0, 0, 0);
+  const ResetOutcome out = ExecuteReset(r, params, 1, 2);
+  ASSERT_TRUE(out.success) << out.failure;
+  EXPECT_EQ(out.attempts, 1);
+  EXPECT_LE(out.position_error, params.position_tolerance);
+  EXPECT_LE(out.angle_error, params.angle_tolerance);
+  double planned = 0;
+  for (const auto& p : out.plan) planned += p.duration_s;
+  EXPECT_DOUBLE_EQ(out.time_s, planned);
+  EXPECT_TRUE(out.failure.empty());
+}
+
+TEST(ResetExecute, ObjectOutsideTheWorkspaceFailsWithoutRetry) {
+  ResetParams params;
+  ResetRequest r;
+  r.true_end = At(0.4, 0, 0);
+  r.observed_end = r.true_end;
+  const ResetOutcome out = ExecuteReset(r, params, 1, 2);
+  EXPECT_FALSE(out.success);
+  EXPECT_FALSE(out.retryable);
+  EXPECT_NE(out.failure.find("left the workspace"), std::string::npos) << out.failure;
+}
+
+TEST(ResetExecute, AlwaysFailingResetIsRetriedThenReported) {
+  ResetParams params;
+  params.failure_probability = 1.0;
+  params.max_attempts = 4;
+  ResetRequest r;
+  r.true_end = At(0.01, 0, 0);
+  r.observed_end = r.true_end;
+  const ResetOutcome out = ExecuteReset(r, params, 3, 4);
+  EXPECT_FALSE(out.success);
+  EXPECT_TRUE(out.retryable);
+  EXPECT_EQ(out.attempts, 4);
+  EXPECT_NE(out.failure.find("after 4 attempts"), std::string::npos) << out.failure;
+  EXPECT_NE(out.failure.find("slipped"), std::string::npos) << out.failure;
+  EXPECT_GT(out.time_s, 0);
+}
+
+TEST(ResetExecute, NoisySensingNeedsRetriesAtTheRateTheToleranceImplies) {
+  // Verification sees the pose with 1 mm noise per axis against a 2 mm
+  // tolerance: |e| of a 3-D Gaussian (sigma 1 mm) exceeds 2 mm with
+  // probability ~0.26 (chi with 3 dof), so about a quarter of the first
+  // attempts fail verification.
+  ResetParams params;
+  params.sensing_position_std = 0.001;
+  params.placement_position_std = 0;
+  params.placement_angle_std = 0;
+  params.max_attempts = 1;
+  int failed = 0;
+  const int n = 2000;
+  for (int trial = 0; trial < n; ++trial) {
+    ResetRequest r;
+    r.true_end = At(0.01, 0, 0);
+    r.observed_end = r.true_end;
+    failed += ExecuteReset(r, params, 9, static_cast<std::uint64_t>(trial)).success ? 0 : 1;
+  }
+  EXPECT_NEAR(failed / static_cast<double>(n), 0.2615, 0.03);
+}
+
+TEST(ResetExecute, DeterministicFromSeedAndTrial) {
+  ResetParams params;
+  params.failure_probability = 0.5;
+  ResetRequest r;
+  r.true_end = At(0.01, 0.01, 0, 0.2);
+  r.observed_end = r.true_end;
+  const ResetOutcome a = ExecuteReset(r, params, 42, 7);
+  const ResetOutcome b = ExecuteReset(r, params, 42, 7);
+  EXPECT_EQ(a.success, b.success);
+  EXPECT_EQ(a.attempts, b.attempts);
+  EXPECT_EQ(a.final_true.position, b.final_true.position);
+  EXPECT_EQ(a.time_s, b.time_s);
+}
+
+TEST(ResetParams, BadFieldsAreNamed) {
+  ResetParams p;
+  p.max_attempts = 0;
+  try {
+    ValidateResetParams(p);
+    FAIL();
+  } catch (const std::invalid_argument& e) {
+    EXPECT_EQ(std::string(e.what()).rfind("reset.max_attempts:", 0), 0u) << e.what();
+  }
+}
+
+TEST(Rng, NormalHasUnitVarianceAndStreamsDiffer) {
+  Rng a(1, 2, StreamPurpose::kPoseNoise), b(1, 2, StreamPurpose::kDrops);
+  double sum = 0, sum2 = 0;
+  int same = 0;
+  const int n = 100000;
+  for (int i = 0; i < n; ++i) {
+    const double x = a.Normal();
+    sum += x;
+    sum2 += x * x;
+    same += a.Next() == b.Next();
+  }
+  EXPECT_NEAR(sum / n, 0, 0.015);
+  EXPECT_NEAR(sum2 / n, 1, 0.015);
+  EXPECT_EQ(same, 0);
+}
+
+}  // namespace
+}  // namespace arena::reset
