@@ -264,7 +264,7 @@ std::unique_ptr<Store> Store::Open(const std::string& path, const StoreOptions& 
   impl->path = path;
   impl->options = options;
   if (options.read_only && !std::filesystem::exists(path)) {
-    throw StoreError(StoreError::Kind::kNotFound,
+    throw StoreError(StoreError::Kind::kIo,
                      "Store::Open: no store at '" + path + "' (create one with 'arena submit')");
   }
   int flags = SQLITE_OPEN_NOMUTEX;  // one connection per thread (documented)
@@ -322,7 +322,7 @@ std::unique_ptr<Store> Store::Open(const std::string& path, const StoreOptions& 
                            "; use a newer arena binary");
     }
     if (version < SchemaVersion()) {
-      throw StoreError(StoreError::Kind::kNotFound,
+      throw StoreError(StoreError::Kind::kIo,
                        "Store::Open: '" + path + "' has schema version " + std::to_string(version) +
                            " (this arena writes " + std::to_string(SchemaVersion()) +
                            "); open it read-write once (e.g. 'arena serve') to migrate it");

@@ -90,7 +90,7 @@ TEST(StoreOpen, ReadOnlyRefusesEveryWriteAndMissingFile) {
   const auto path = dir.File("ro.db");
   StoreOptions ro;
   ro.read_only = true;
-  EXPECT_STORE_ERROR(Store::Open(path, ro), K::kNotFound);
+  EXPECT_STORE_ERROR(Store::Open(path, ro), K::kIo);
   Store::Open(path)->CreateCampaign(MakeCampaign(), MakeTrials(1));
   auto store = Store::Open(path, ro);
   EXPECT_TRUE(store->read_only());

@@ -342,8 +342,9 @@ class Store {
  public:
   // Opens (and in read-write mode creates and migrates) the store at `path`.
   // @throws StoreError(kTooNew) when the file was written by a newer arena,
-  //   kIo when it cannot be opened, kCorrupt when it is not a database,
-  //   kNotFound when read-only and the file does not exist.
+  //   kIo when it cannot be opened (read-only: also when it does not exist or
+  //   has an older schema that only a read-write open migrates), kCorrupt when
+  //   it is not a database, kReadOnly when read-write but the file is write-protected.
   static std::unique_ptr<Store> Open(const std::string& path, const StoreOptions& options = {});
   ~Store();
   Store(const Store&) = delete;
