@@ -562,6 +562,11 @@ std::optional<ClaimedTrial> Store::ClaimNextTrial(const std::string& cell_id) {
       " start_qx = c.start_qx, start_qy = c.start_qy, start_qz = c.start_qz"
       " FROM (SELECT * FROM cells WHERE id = ?1) AS c WHERE trials.id = ?3");
   u->Bind(1, cell_id).Bind(2, now).Bind(3, t->trial_id).Run();
+  // The trial will move the object: the cell's start state is consumed.
+  auto clear = impl_->Prepare(
+      "UPDATE cells SET start_x = NULL, start_y = NULL, start_z = NULL, start_qw = NULL,"
+      " start_qx = NULL, start_qy = NULL, start_qz = NULL, start_observed_at = NULL WHERE id = ?");
+  clear->Bind(1, cell_id).Run();
   auto r = impl_->Prepare(
       "SELECT start_x, start_y, start_z, start_qw, start_qx, start_qy, start_qz,"
       " nominal_x, nominal_y, nominal_z, nominal_qw, nominal_qx, nominal_qy, nominal_qz"
@@ -655,14 +660,18 @@ void Store::CompleteReset(std::int64_t trial_id, int attempt, const ResetReport&
   u->Bind(1, report.ok ? 1 : 0).Bind(2, report.position_error).Bind(3, report.angle_error)
       .Bind(4, report.reset_attempts).Bind(5, report.reason).Bind(6, trial_id).Run();
   if (!row.cell_id.empty()) {
-    // The pose the cell observed is where the next trial on this cell starts, ok or not.
+    // The pose the cell observed is where the next trial on this cell starts,
+    // ok or not; without an observation that start is unknown (NULL).
     auto c = impl_->Prepare(
         "UPDATE cells SET start_x = ?, start_y = ?, start_z = ?, start_qw = ?, start_qx = ?,"
         " start_qy = ?, start_qz = ?, start_observed_at = ?, updated_at = ? WHERE id = ?");
     detail::Binder b(*c);
-    for (double v : report.observed_pose) b << v;
     const double now = impl_->Now();
-    b << now << now << row.cell_id;
+    for (double v : report.observed_pose) {
+      if (report.pose_observed) b << v; else b << std::nullopt;
+    }
+    if (report.pose_observed) b << now; else b << std::nullopt;
+    b << now << row.cell_id;
     c->Run();
   }
   tx.Commit();
@@ -742,6 +751,14 @@ RecoveryReport Store::RecoverAfterRestart(const std::string& reason) {
     const auto row = LoadTrialRow(*impl_, id, "RecoverAfterRestart");
     WriteTransition(*impl_, id, attempt, TrialState::kResetting, TrialState::kResetFailed, row.cell_id,
                     reason + ": reset not confirmed", "RecoverAfterRestart");
+    auto u = impl_->Prepare(
+        "UPDATE trials SET reset_ok = 0, reset_reason = ? WHERE id = ?");
+    u->Bind(1, reason + ": reset not confirmed").Bind(2, id).Run();
+    // Where the interrupted reset left the object is unknown.
+    auto c = impl_->Prepare(
+        "UPDATE cells SET start_x = NULL, start_y = NULL, start_z = NULL, start_qw = NULL,"
+        " start_qx = NULL, start_qy = NULL, start_qz = NULL, start_observed_at = NULL WHERE id = ?");
+    c->Bind(1, row.cell_id).Run();
     report.reset_failed.push_back(id);
   }
   // Streams never published (their ingest died with the service) hold partial data only.

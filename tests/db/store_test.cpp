@@ -312,7 +312,7 @@ TEST(StoreTrial, ResetFailureStillLetsTrialFinishAndRecordsStartState) {
   TempDir dir;
   auto store = Store::Open(dir.File("s.db"));
   store->UpsertCell("c", {"point"});
-  store->CreateCampaign(MakeCampaign(), MakeTrials(2));
+  store->CreateCampaign(MakeCampaign(), MakeTrials(4));
   auto t = store->ClaimNextTrial("c");
   auto ingest = store->BeginIngest(t->trial_id, 1);
   ingest->Add(MakeSample(0));
@@ -342,6 +342,27 @@ TEST(StoreTrial, ResetFailureStillLetsTrialFinishAndRecordsStartState) {
   EXPECT_NEAR(drift[0].mean_position_error, 0.005, 1e-12);
   EXPECT_NEAR(drift[0].mean_dx, 0.003, 1e-12);
   EXPECT_NEAR(drift[0].mean_angle_error, 0.1, 1e-9);
+  // The claim consumed the start state: a trial claimed without a reset in
+  // between has none, and a reset that observed nothing leaves none.
+  store->RetryTrial(next->trial_id, next->attempt, "cell lost", 3, 0);
+  auto unknown = store->ClaimNextTrial("c");
+  ASSERT_TRUE(unknown);
+  EXPECT_EQ(store->Drift()[0].trials, 0 + 1);  // still only the first observation
+  auto in = store->BeginIngest(unknown->trial_id, unknown->attempt);
+  in->Add(MakeSample(0));
+  in->Finish();
+  store->BeginReset(unknown->trial_id, unknown->attempt);
+  ResetReport blind;
+  blind.ok = false;
+  blind.pose_observed = false;
+  blind.observed_pose = {9, 9, 9, 1, 0, 0, 0};  // ignored
+  blind.reason = "service restarted before the reset";
+  store->CompleteReset(unknown->trial_id, unknown->attempt, blind);
+  store->RecordPrediction(unknown->trial_id, unknown->attempt, p);
+  store->FinishTrial(unknown->trial_id, unknown->attempt);
+  ASSERT_TRUE(store->ClaimNextTrial("c"));
+  EXPECT_EQ(store->Drift()[0].trials, 1);
+  EXPECT_NEAR(store->Drift()[0].max_position_error, 0.005, 1e-12);
   ExpectHealthy(*store);
 }
 

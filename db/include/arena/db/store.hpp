@@ -227,6 +227,9 @@ struct ResetReport {
   double angle_error = 0;              // rad
   int reset_attempts = 1;
   std::string reason;                  // why it failed ("" if ok)
+  // false: nothing was observed (e.g. the service restarted mid-reset), so
+  // observed_pose is ignored and the next trial on the cell has no known start state.
+  bool pose_observed = true;
 };
 
 struct Prediction {
@@ -402,7 +405,8 @@ class Store {
   // executed | reset_failed -> resetting.
   void BeginReset(std::int64_t trial_id, int attempt);
   // resetting -> reset_done | reset_failed; stores the observed start state on
-  // the cell (the next trial claimed there inherits it) and the report on the trial.
+  // the cell (the next trial claimed there inherits it; a claim consumes it)
+  // and the report on the trial.
   void CompleteReset(std::int64_t trial_id, int attempt, const ResetReport& report);
   // Stores a prediction (replacing one with the same model_key for this
   // attempt); reset_done | reset_failed -> predicted on the first one.
