@@ -44,6 +44,14 @@ Sample MakeSample(int i) {
   return s;
 }
 
+NewCampaign MakeNewCampaign(const char* name, int priority) {
+  NewCampaign nc;
+  nc.name = name;
+  nc.spec_json = std::string(R"({"name": "bench"})");
+  nc.priority = priority;
+  return nc;
+}
+
 struct BenchStore {
   fs::path dir;
   std::unique_ptr<Store> store;
@@ -55,9 +63,7 @@ struct BenchStore {
     o.synchronous_full = full_sync;
     store = Store::Open((dir / "bench.db").string(), o);
     for (int c = 0; c < cells; ++c) store->UpsertCell("cell" + std::to_string(c), {"point", "line"});
-    NewCampaign nc{};
-    nc.name = "bench";
-    nc.spec_json = "{}";
+    const NewCampaign nc = MakeNewCampaign("bench", 0);
     std::vector<PlannedTrial> planned(static_cast<std::size_t>(trials));
     for (auto& p : planned) p.scene_json = Scene();
     store->CreateCampaign(nc, planned);
@@ -131,6 +137,21 @@ void BM_SixteenCells250Hz(benchmark::State& state) {
   state.SetItemsProcessed(state.iterations() * kCells * kRateHz * kSimSeconds);
 }
 BENCHMARK(BM_SixteenCells250Hz)->Iterations(3)->Unit(benchmark::kMillisecond);
+
+// One claim (find + transition + audit row, committed) with 100 000 planned
+// trials over 3 campaigns: the scheduler's cost per dispatched trial.
+void BM_ClaimNextTrial(benchmark::State& state) {
+  BenchStore b(100000, 1, false);
+  std::vector<PlannedTrial> planned(1000);
+  for (auto& p : planned) p.scene_json = Scene();
+  b.store->CreateCampaign(MakeNewCampaign("more", 1), planned);
+  for (auto& p : planned) {
+    p.scene_json = R"({"fingers": [{"type": "patch"}], "pusher": {"type": "patch"}})";
+  }
+  b.store->CreateCampaign(MakeNewCampaign("patch-only", 2), planned);  // highest priority, but cell0 cannot host it
+  for (auto _ : state) benchmark::DoNotOptimize(b.store->ClaimNextTrial("cell0"));
+}
+BENCHMARK(BM_ClaimNextTrial)->Iterations(2000)->Unit(benchmark::kMicrosecond);
 
 }  // namespace
 
