@@ -48,14 +48,6 @@ int PrintError(const std::string& error, int exit_code) {
   return exit_code;
 }
 
-std::string ReadFile(const std::string& path) {
-  std::ifstream in(path, std::ios::binary);
-  if (!in) throw CommandError(kExitBadInput, "scene: cannot open '" + path + "'");
-  std::ostringstream text;
-  text << in.rdbuf();
-  return text.str();
-}
-
 void WriteTrajectory(const std::string& path, const mechanics::Scene& scene,
                      const mechanics::SimulationResult& result) {
   std::ofstream out(path);
@@ -85,7 +77,7 @@ void WriteTrajectory(const std::string& path, const mechanics::Scene& scene,
 int RunSimulate(const SimulateOptions& opt) {
   mechanics::Scene scene;
   try {
-    scene = mechanics::ParseScene(ReadFile(opt.scene_path));
+    scene = mechanics::LoadSceneFile(opt.scene_path);  // refuses > 1 MiB before reading
     if (opt.facets) scene.model.facets = *opt.facets;
     if (opt.points) scene.model.points = *opt.points;
     if (opt.dt) scene.model.dt = *opt.dt;

@@ -17,8 +17,13 @@ int main(int argc, char** argv) {
   app.footer("Run 'arena COMMAND --help' for a command's options and an example.");
 
   Action action;
+  AddRunCommand(app, &action);
+  AddCampaignCommands(app, &action);
+  AddServeCommand(app, &action);
   AddSimulateCommand(app, &action);
   AddCellCommand(app, &action);
+  AddQueryCommand(app, &action);
+  AddExportCommand(app, &action);
 
   try {
     app.parse(argc, argv);

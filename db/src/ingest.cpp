@@ -91,14 +91,11 @@ struct Ingest::Impl {
 
   void CloseChunk() {
     if (open.samples == 0) return;
-    std::string blob;
-    blob.reserve(body.size() + 8);
-    EncodeBlockHeader(open.samples, &blob);
-    blob += body;
-    open.data = std::move(blob);
+    PatchBlockCount(open.samples, &body);
+    open.data = std::move(body);
     ready.push_back(std::move(open));
     open = Chunk{};
-    body.clear();
+    body = std::string();
   }
 
   void WriteReady() {
@@ -166,6 +163,9 @@ void Ingest::Add(const Sample& s) {
     m.obs_max = std::max(m.obs_max, std::sqrt(sq));
   }
   if (m.open.samples == 0) {
+    // The block header goes first; its count is patched when the chunk closes.
+    m.body.reserve(8 + static_cast<std::size_t>(m.options.samples_per_chunk) * 600);
+    EncodeBlockHeader(0, &m.body);
     m.open.first_sample = m.total;
     m.open.t_first = s.t;
     if (m.buffered == 0) m.oldest = std::chrono::steady_clock::now();
@@ -290,6 +290,24 @@ std::unique_ptr<Ingest> Store::BeginIngest(std::int64_t trial_id, int attempt,
   return std::unique_ptr<Ingest>(new Ingest(std::move(m)));
 }
 
+std::vector<Sample> internal::ReadStreamSamples(const Store::Impl& impl, std::int64_t stream_id,
+                                                std::int64_t expected, const char* function) {
+  std::vector<Sample> out;
+  out.reserve(static_cast<std::size_t>(expected));
+  auto c = impl.Prepare("SELECT data FROM gt_chunks WHERE stream_id = ? ORDER BY seq");
+  c->Bind(1, stream_id);
+  while (c->Step()) {
+    auto part = DecodeSamples(c->Blob(0), static_cast<std::size_t>(c->Bytes(0)));
+    for (auto& s : part) out.push_back(std::move(s));
+  }
+  if (static_cast<std::int64_t>(out.size()) != expected) {
+    throw StoreError(StoreError::Kind::kCorrupt,
+                     std::string(function) + ": stream " + std::to_string(stream_id) + " has " +
+                         std::to_string(out.size()) + " samples, expected " + std::to_string(expected));
+  }
+  return out;
+}
+
 GroundTruth Store::ReadGroundTruth(std::int64_t trial_id) const {
   Tx tx(impl_->db, false);  // one snapshot: the stream cannot change under us
   auto t = impl_->Prepare(
@@ -309,20 +327,8 @@ GroundTruth Store::ReadGroundTruth(std::int64_t trial_id) const {
   gt.attempt = static_cast<int>(t->Int(1));
   gt.cell_id = t->Text(2);
   const std::int64_t expected = t->Int(3);
-  auto c = impl_->Prepare("SELECT data FROM gt_chunks WHERE stream_id = ? ORDER BY seq");
-  c->Bind(1, stream);
-  gt.samples.reserve(static_cast<std::size_t>(expected));
-  while (c->Step()) {
-    auto part = DecodeSamples(c->Blob(0), static_cast<std::size_t>(c->Bytes(0)));
-    for (auto& s : part) gt.samples.push_back(std::move(s));
-  }
+  gt.samples = internal::ReadStreamSamples(*impl_, stream, expected, "ReadGroundTruth");
   tx.Commit();
-  if (static_cast<std::int64_t>(gt.samples.size()) != expected) {
-    throw StoreError(StoreError::Kind::kCorrupt,
-                     "ReadGroundTruth: trial " + std::to_string(trial_id) + " stream has " +
-                         std::to_string(gt.samples.size()) + " samples, expected " +
-                         std::to_string(expected));
-  }
   return gt;
 }
 

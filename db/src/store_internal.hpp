@@ -4,6 +4,7 @@
 #include <cstdint>
 #include <optional>
 #include <string>
+#include <vector>
 
 #include "sqlite_util.hpp"
 
@@ -28,10 +29,17 @@ void WriteTransition(const Store::Impl& impl, std::int64_t trial_id, int attempt
                      TrialState to, const std::string& cell_id, const std::string& reason,
                      const char* function);
 
+// The samples of one stream, in order; no transaction of its own (the caller's
+// read transaction gives the snapshot). @throws kCorrupt on a count mismatch.
+std::vector<Sample> ReadStreamSamples(const Store::Impl& impl, std::int64_t stream_id,
+                                      std::int64_t expected, const char* function);
+
 }  // namespace arena::db::internal
 
 namespace arena::db {
 // Block codec pieces (sample.cpp) used by the ingest to encode as samples arrive.
 void EncodeSampleBody(const Sample& s, std::string* out);
 void EncodeBlockHeader(std::uint32_t count, std::string* out);
+// Sets the sample count of a block that started with EncodeBlockHeader(0, ...).
+void PatchBlockCount(std::uint32_t count, std::string* block);
 }  // namespace arena::db

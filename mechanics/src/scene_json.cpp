@@ -128,6 +128,8 @@ std::string Index(const std::string& path, size_t i) {
 
 class PathTrackingBuilder {
  public:
+  explicit PathTrackingBuilder(const JsonLimits& limits) : limits_(limits) {}
+
   using number_integer_t = json::number_integer_t;
   using number_unsigned_t = json::number_unsigned_t;
   using number_float_t = json::number_float_t;
@@ -198,8 +200,8 @@ class PathTrackingBuilder {
     }
     Frame& top = stack_.back();
     if (top.value->is_array()) {
-      if (top.value->size() >= kMaxSceneArray) {
-        Fail(top.path, "array longer than " + std::to_string(kMaxSceneArray) + " elements");
+      if (top.value->size() >= limits_.max_array) {
+        Fail(top.path, "array longer than " + std::to_string(limits_.max_array) + " elements");
         return nullptr;
       }
       top.value->push_back(std::move(value));
@@ -213,8 +215,8 @@ class PathTrackingBuilder {
 
   bool Open(json&& container) {
     const std::string path = ChildPath();
-    if (static_cast<int>(stack_.size()) >= kMaxSceneDepth) {
-      return Fail(path, "nested deeper than " + std::to_string(kMaxSceneDepth) + " levels");
+    if (static_cast<int>(stack_.size()) >= limits_.max_depth) {
+      return Fail(path, "nested deeper than " + std::to_string(limits_.max_depth) + " levels");
     }
     json* slot = Add(std::move(container));
     if (!slot) return false;
@@ -228,6 +230,7 @@ class PathTrackingBuilder {
     return true;
   }
 
+  JsonLimits limits_;
   std::vector<Frame> stack_;
   std::string key_;
   bool have_key_ = false;
@@ -697,21 +700,50 @@ void ValidateScene(const Scene& scene) {
       }
     }
   }
+  // Grip forces are prescribed (each finger pushes grip_force along its
+  // normal), so unless they cancel the grasp itself accelerates the object
+  // without bound: one finger, or fingers that do not oppose, is no grasp.
+  if (scene.grip_force > 0) {
+    Eigen::Vector3d sum = Eigen::Vector3d::Zero();
+    for (const auto& f : scene.fingers) sum += f.normal;
+    const double tolerance = 1e-3 * static_cast<double>(scene.fingers.size());
+    if (sum.norm() > tolerance) {
+      throw SceneError("fingers", "the grip forces do not balance: the finger normals sum to (" + Num(sum.x()) + ", " +
+                                      Num(sum.y()) + ", " + Num(sum.z()) + "), norm " + Num(sum.norm()) +
+                                      " > " + Num(tolerance) + " (opposing fingers' normals must cancel)");
+    }
+  }
+}
+
+namespace {
+// Pass 1 for any document: the tree, or the first problem with its path.
+json BuildDocument(std::string_view text, const JsonLimits& limits, std::optional<JsonProblem>* problem) {
+  if (text.size() > limits.max_bytes) {
+    *problem = JsonProblem{"", "is " + std::to_string(text.size()) + " bytes, larger than the limit of " +
+                                   std::to_string(limits.max_bytes) + " bytes"};
+    return nullptr;
+  }
+  PathTrackingBuilder builder(limits);
+  const bool ok = json::sax_parse(text.begin(), text.end(), &builder, json::input_format_t::json,
+                                  /*strict=*/true, /*ignore_comments=*/false);
+  if (!ok || !builder.error_reason.empty()) {
+    *problem = JsonProblem{builder.error_path, builder.error_reason.empty() ? "invalid JSON" : builder.error_reason};
+    return nullptr;
+  }
+  return std::move(builder.root);
+}
+}  // namespace
+
+std::optional<JsonProblem> FindJsonProblem(std::string_view text, const JsonLimits& limits) {
+  std::optional<JsonProblem> problem;
+  BuildDocument(text, limits, &problem);
+  return problem;
 }
 
 Scene ParseScene(std::string_view json_text) {
-  if (json_text.size() > kMaxSceneBytes) {
-    throw SceneError("", "is " + std::to_string(json_text.size()) + " bytes, larger than the limit of " +
-                             std::to_string(kMaxSceneBytes) + " bytes (1 MiB)");
-  }
-  PathTrackingBuilder builder;
-  const bool ok = json::sax_parse(json_text.begin(), json_text.end(), &builder, json::input_format_t::json,
-                                  /*strict=*/true, /*ignore_comments=*/false);
-  if (!ok || !builder.error_reason.empty()) {
-    throw SceneError(builder.error_path,
-                     builder.error_reason.empty() ? "invalid JSON" : builder.error_reason);
-  }
-  const json& doc = builder.root;
+  std::optional<JsonProblem> problem;
+  const json doc = BuildDocument(json_text, JsonLimits{}, &problem);
+  if (problem) throw SceneError(problem->path, problem->reason);
 
   Obj root(doc, "", {"object", "gravity", "duration", "grip_force", "fingers", "pusher", "model"});
   Scene scene;

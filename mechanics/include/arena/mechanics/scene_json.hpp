@@ -22,6 +22,9 @@
 //    object's surface within 1% of the object's size; normals point into the
 //    object; constituent points of different contacts (and of one line or
 //    patch) must be at least 1e-6 of the object's size apart (coincident).
+//  - Grasp: with grip_force > 0 the finger normals must cancel (|sum| <=
+//    1e-3 per finger): grip forces are prescribed, so an unbalanced grasp
+//    (one finger, or fingers that do not oppose) would fling the object.
 #pragma once
 
 #include <optional>
@@ -60,6 +63,21 @@ class SceneError : public std::runtime_error {
 
 // @throws SceneError naming the first offending field.
 Scene ParseScene(std::string_view json_text);
+
+// Limits and problems of JSON text in general (campaigns use them too).
+struct JsonLimits {
+  std::size_t max_bytes = kMaxSceneBytes;
+  int max_depth = kMaxSceneDepth;
+  std::size_t max_array = kMaxSceneArray;
+};
+struct JsonProblem {
+  std::string path;    // where ("fingers[0].mu"; empty: the document)
+  std::string reason;  // "invalid JSON at byte offset 212: ...", "duplicate key", ...
+};
+// The first problem of `text`: malformed JSON or non-UTF-8 (with its byte
+// offset), a duplicate key, or a limit exceeded; nullopt when it is fine.
+// Memory stays bounded by a small multiple of limits.max_bytes.
+std::optional<JsonProblem> FindJsonProblem(std::string_view text, const JsonLimits& limits = {});
 
 // Reads a scene file; refuses files larger than kMaxSceneBytes before
 // reading them. @throws SceneError (field "") when the file cannot be read.

@@ -1,0 +1,70 @@
+// arena query --db FILE ["SQL"] [--campaign ID] [--where EXPR] [--outcome X]
+//              [--format table|csv|json]
+// Read-only SQL over the store; tables and columns are in db/README.md.
+#include <cstdio>
+#include <string>
+
+#include "arena/db/query.hpp"
+#include "arena/db/store.hpp"
+#include "commands.hpp"
+#include "store_errors.hpp"
+
+namespace arena::cli {
+namespace {
+
+struct QueryOptions {
+  std::string db_path;
+  std::string sql;
+  std::int64_t campaign = -1;
+  std::string where;
+  std::string outcome;
+  std::string format = "table";
+};
+
+int RunQueryCommand(const QueryOptions& o) {
+  try {
+    db::StoreOptions so;
+    so.read_only = true;
+    auto store = db::Store::Open(o.db_path, so);
+    db::QueryFilter filter;
+    if (o.campaign >= 0) filter.campaign_id = o.campaign;
+    filter.where = o.where;
+    filter.outcome = o.outcome;
+    const auto result = db::RunQuery(*store, o.sql, filter);
+    const std::string text = o.format == "csv"    ? db::FormatCsv(result)
+                             : o.format == "json" ? db::FormatJson(result)
+                                                  : db::FormatTable(result);
+    std::fwrite(text.data(), 1, text.size(), stdout);
+    return kExitOk;
+  } catch (const db::StoreError& e) {
+    // A query that would write is the user's input, not a broken store.
+    if (e.kind() == db::StoreError::Kind::kReadOnly) throw CommandError(kExitBadInput, e.what());
+    throw StoreCommandError(e);
+  }
+}
+
+}  // namespace
+
+void AddQueryCommand(CLI::App& app, Action* action) {
+  auto o = std::make_shared<QueryOptions>();
+  auto* cmd = app.add_subcommand("query", "Run a read-only SQL query over the store");
+  cmd->add_option("--db", o->db_path, "Store file")->required();
+  cmd->add_option("sql", o->sql,
+                  "One SELECT statement (default: every trial with its ground-truth summary, "
+                  "from the view trial_results)");
+  cmd->add_option("--campaign", o->campaign, "Only rows whose campaign_id is ID")->check(CLI::NonNegativeNumber);
+  cmd->add_option("--where", o->where, "An SQL condition on the result's columns, e.g. 'grip_force > 5'");
+  cmd->add_option("--outcome", o->outcome, "Only rows whose outcome is X (ok, failed, refused, ...)");
+  cmd->add_option("--format", o->format, "Output format")
+      ->check(CLI::IsMember({"table", "csv", "json"}));
+  cmd->footer(
+      "Examples:\n"
+      "  arena query --db lab.db --campaign 1 --where 'grip_force > 5' --format csv\n"
+      "  arena query --db lab.db \"SELECT cell_id, COUNT(*) FROM trials GROUP BY cell_id\"\n"
+      "  arena query --db lab.db \"SELECT * FROM start_state_drift\"\n"
+      "The store is opened read-only: a statement that would write is refused (exit 2).\n"
+      "Tables and columns: db/README.md.\n");
+  cmd->callback([o, action] { *action = [o] { return RunQueryCommand(*o); }; });
+}
+
+}  // namespace arena::cli

@@ -1,0 +1,149 @@
+// Campaigns: what to vary, how to sample it, how often to repeat it.
+//
+// A campaign is a base scene (SCENE.md) plus a variation space. Each
+// *condition* is one point of that space, i.e. one concrete scene; each
+// condition is run `replicates` times with identical initial conditions (only
+// the per-trial seed, which drives a cell's defects, differs). The format is
+// described in orchestrator/README.md and schemas/campaign.schema.json.
+//
+// Usage (all plain structs and free functions; nothing here holds state):
+//
+//   Campaign c = LoadCampaignFile("examples/campaigns/smoke.json");  // throws CampaignError
+//   for (int64_t i = next_index; i < TrialCount(c); ++i) {
+//     PlannedTrial t = PlanTrial(c, i);    // a pure function of (c, i): resumable
+//     ... store t.index, t.condition, t.replicate, t.seed, SceneToJson(t.scene) ...
+//   }
+//
+// Thread safety: all functions are pure; a Campaign may be shared read-only.
+#pragma once
+
+#include <cstdint>
+#include <limits>
+#include <stdexcept>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "arena/mechanics/scene.hpp"
+
+namespace arena::orchestrator {
+
+inline constexpr std::size_t kMaxCampaignBytes = 1 << 20;  // 1 MiB of JSON
+inline constexpr int64_t kMaxConditions = 1'000'000;
+inline constexpr int kMaxReplicates = 1000;
+inline constexpr int64_t kMaxTrials = 1'000'000;
+inline constexpr int kMaxChoices = 1000;
+inline constexpr int kMaxGridLevels = 1000;
+
+// Invalid campaign: field() is the JSON path ("variations.grip_force.min";
+// "scene.fingers[0].mu" inside the base scene; empty for the whole document),
+// what() is "<field>: <reason>" ("campaign: <reason>" when field() is empty).
+class CampaignError : public std::runtime_error {
+ public:
+  CampaignError(std::string field, const std::string& reason);
+  const std::string& field() const { return field_; }
+  const std::string& reason() const { return reason_; }
+
+ private:
+  std::string field_;
+  std::string reason_;
+};
+
+enum class SamplerKind { kGrid, kUniform, kLatinHypercube, kSobol };
+const char* ToString(SamplerKind kind);  // "grid", "uniform", "latin_hypercube", "sobol"
+
+// What a variation's values are.
+enum class ValueType {
+  kNumber,       // a scalar in SI units
+  kContactType,  // "point", "line" or "patch"
+  kVector,       // a 3-vector in the gripper frame (a direction; normalised)
+};
+
+// One value of a variation; only the member matching its ValueType is used.
+struct VariationValue {
+  double number = std::numeric_limits<double>::quiet_NaN();
+  mechanics::ContactType contact_type = mechanics::ContactType::kPoint;
+  Eigen::Vector3d vector = Eigen::Vector3d::Zero();
+};
+
+// One axis of the variation space. Names and meanings: see kVariationNames
+// in campaign.cpp / orchestrator/README.md (e.g. "grip_force", "finger_type").
+struct Variation {
+  enum class Kind { kFixed, kRange, kChoices };
+  std::string name;
+  ValueType type = ValueType::kNumber;
+  Kind kind = Kind::kFixed;
+  double min = 0, max = 0;   // kRange (SI units)
+  bool log_scale = false;    // kRange: sample log(value) uniformly (min > 0)
+  int levels = 0;            // kRange under the grid sampler: evenly spaced values incl. ends
+  std::vector<VariationValue> choices;  // kChoices; kFixed holds its one value here
+
+  // A sampled axis: a range with min < max, or two or more choices.
+  bool IsSampled() const {
+    return (kind == Kind::kRange && min < max) || (kind == Kind::kChoices && choices.size() > 1);
+  }
+};
+
+struct Campaign {
+  std::string name;          // [A-Za-z0-9_.-]{1,64}
+  std::string description;   // free text, optional
+  uint64_t seed = 0;         // all sampling and per-trial seeds derive from it
+  int priority = 0;          // higher runs first; [-1000, 1000]
+  mechanics::Scene scene;    // the base scene; the cells simulate with its model settings
+  std::vector<Variation> variations;  // in canonical order (kVariationNames), only those given
+  SamplerKind sampler = SamplerKind::kSobol;
+  int64_t conditions = 1;    // distinct sampled scenes
+  int replicates = 1;        // trials per condition (same scene, different seed)
+  mechanics::ModelOptions prediction;  // model settings the predictor uses
+  std::string defects_json = "{}";     // defect profile (a JSON object), passed to cells as is
+  std::string defects_file;            // when given as a path (relative to the campaign file)
+  std::string source_json;  // the campaign as given, scene/defects files inlined (compact JSON)
+};
+
+// One trial of a campaign's plan. Replicates of a condition have the same
+// scene and parameters, bit for bit.
+struct PlannedTrial {
+  int64_t index = 0;      // position in the campaign's sequence, [0, TrialCount)
+  int64_t condition = 0;  // index / replicates
+  int replicate = 0;      // index % replicates
+  uint64_t seed = 0;      // per-trial seed (defects, noise), from (campaign seed, condition, replicate)
+  mechanics::Scene scene;            // what the cell runs (valid)
+  std::string parameters_json;       // {"grip_force": 12.5, "finger_type": "line", ...}: the sampled values
+};
+
+// How much of the plan ParseCampaign checks. kAllConditions builds and
+// validates every condition's scene (about 10 us each: 10 s for a million);
+// kBaseScene checks only the base scene and prediction settings, for
+// reloading a campaign that was validated when it was submitted.
+enum class ConditionCheck { kAllConditions, kBaseScene };
+
+// Parses and validates a campaign, by default including every condition's
+// scene (a campaign that would produce one invalid scene is refused up front).
+// "scene" and "defects" may be file paths, resolved against base_dir (the
+// current directory when empty); source_json then holds their contents.
+// @throws CampaignError naming the first offending field.
+Campaign ParseCampaign(std::string_view json_text, const std::string& base_dir = "",
+                       ConditionCheck check = ConditionCheck::kAllConditions);
+
+// Reads a campaign file (at most kMaxCampaignBytes); file paths inside it are
+// relative to the campaign file. @throws CampaignError.
+Campaign LoadCampaignFile(const std::string& path);
+
+int64_t TrialCount(const Campaign& campaign);  // conditions * replicates
+
+// The index-th trial. Pure: depends only on (campaign, index), so a resumed
+// campaign continues the same sequence from a stored index.
+// @pre 0 <= index < TrialCount(campaign), else std::out_of_range.
+PlannedTrial PlanTrial(const Campaign& campaign, int64_t index);
+
+// The condition's point in the unit hypercube, one coordinate in [0, 1) per
+// sampled variation (in campaign.variations order). Grid: level / levels.
+std::vector<double> ConditionPoint(const Campaign& campaign, int64_t condition);
+
+// The scene the predictor runs for a trial: its scene with the campaign's
+// prediction model settings.
+mechanics::Scene PredictionScene(const Campaign& campaign, const PlannedTrial& trial);
+
+}  // namespace arena::orchestrator

@@ -1,0 +1,98 @@
+// The campaign service (`arena serve`): schedules the pending trials of every
+// active campaign onto idle healthy cells, drives each through EXECUTE and
+// RESET over DDS, ingests the ground truth, predicts the trial with the
+// campaign's model settings, scores the prediction and marks the trial done.
+//
+// One trial, as the service drives it (store states in brackets; every
+// transition is written to the store BEFORE the service acts on it):
+//
+//   idle cell --ClaimNextTrial--> [dispatched] --send EXECUTE--> cell
+//   GroundTruth batches ---------> Ingest (batched transactions, unpublished)
+//   TrialStatus EXECUTED + all samples --Ingest::Finish--> [executed]
+//   --BeginReset--> [resetting] --send RESET (aimed at the next trial's start)
+//   TrialStatus RESET_DONE/FAILED --CompleteReset--> [reset_done|reset_failed]
+//   prediction (worker thread) --RecordPrediction--> [predicted]
+//   --FinishTrial--> [done]
+//
+// Failures: a REFUSED/FAILED execute, a malformed or out-of-order stream, a
+// missed deadline or a cell that died (liveliness lost, participant gone)
+// send the trial back to planned with attempt + 1 after a backoff
+// (RetryTrial; lineage kept), or to failed when attempts run out. A cell that
+// fails `quarantine_after` phases in a row, or whose reset keeps failing, is
+// quarantined and gets no more trials. A late message from an older attempt
+// is ignored (the store refuses stale attempts).
+//
+// Crash safety: at start the service calls RecoverAfterRestart (dispatched ->
+// planned with attempt + 1, resetting -> reset_failed) and then finishes every
+// trial left between executed and predicted, so a SIGKILL at any moment loses
+// and duplicates nothing. Stop() (SIGTERM) stops dispatching, lets phases in
+// flight finish for up to drain_timeout_s, and exits; anything still in
+// flight is re-run after the next start.
+#pragma once
+
+#include <atomic>
+#include <cstdint>
+#include <functional>
+#include <memory>
+#include <string>
+
+#include "arena/schemas/dds.hpp"
+
+namespace arena::orchestrator {
+
+struct ServiceOptions {
+  std::string db_path;                  // the SQLite store (created if missing)
+  int domain_id = 0;                    // DDS domain, 0..232
+  dds::NetworkOptions network;          // default: this host only
+  int max_attempts = 3;                 // executions per trial before it fails
+  double retry_backoff_s = 1.0;         // first retry waits this long; doubles per attempt
+  int quarantine_after = 3;             // consecutive failed phases of a cell
+  double execute_timeout_s = 30.0;      // wall-clock budget of EXECUTE beyond the trial's
+                                        //   duration x the cell's speed
+  double reset_timeout_s = 60.0;        // wall-clock budget of RESET
+  double stream_grace_s = 5.0;          // after EXECUTED: wait this long for missing batches
+  double drain_timeout_s = 30.0;        // on Stop(): how long phases in flight may finish
+  int predictor_threads = 1;            // worker threads predicting trials
+  bool exit_when_done = false;          // `arena run`: stop when no active campaign is left
+  std::int64_t only_campaign = 0;       // > 0: exit_when_done looks at this campaign only
+};
+
+// What the service has done since it started (for `arena run`'s summary and tests).
+struct ServiceCounters {
+  std::int64_t dispatched = 0;          // EXECUTE commands sent
+  std::int64_t executed = 0;            // streams published
+  std::int64_t done = 0;                // trials finished
+  std::int64_t retried = 0;             // attempts sent back to planned
+  std::int64_t failed = 0;              // trials that ran out of attempts or were refused
+  std::int64_t resets_failed = 0;
+  std::int64_t quarantined = 0;         // cells quarantined
+  std::int64_t recovered = 0;           // trials picked up after a restart
+  std::int64_t samples = 0;             // ground-truth samples ingested
+  int cells_known = 0;                  // cells that announced themselves
+  int cells_usable = 0;                 // of those: alive and not quarantined
+};
+
+class Service {
+ public:
+  // Opens the store and joins the domain.
+  // @throws db::StoreError, dds::DdsError, std::invalid_argument (bad options).
+  explicit Service(const ServiceOptions& options);
+  ~Service();
+  Service(const Service&) = delete;
+  Service& operator=(const Service&) = delete;
+
+  // Runs until Stop() (or, with exit_when_done, until the campaigns are done).
+  // @returns 0 on a clean stop.
+  int Run();
+  // Thread-safe and async-signal-safe (sets a flag): stop dispatching and drain.
+  void Stop();
+  ServiceCounters counters() const;
+  // Called from Run()'s thread about every 100 ms (progress bars).
+  void OnTick(std::function<void(const ServiceCounters&)> callback);
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace arena::orchestrator

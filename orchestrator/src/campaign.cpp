@@ -1,0 +1,770 @@
+// Campaign parsing, validation and planning (format: orchestrator/README.md).
+#include "arena/orchestrator/campaign.hpp"
+
+#include <algorithm>
+#include <array>
+#include <charconv>
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <initializer_list>
+#include <map>
+#include <sstream>
+
+#include <Eigen/Geometry>
+#include <nlohmann/json.hpp>
+
+#include "arena/mechanics/scene_json.hpp"
+#include "arena/orchestrator/sampler.hpp"
+
+namespace arena::orchestrator {
+
+using mechanics::ContactSpec;
+using mechanics::ContactType;
+using mechanics::Scene;
+using nlohmann::json;
+
+CampaignError::CampaignError(std::string field, const std::string& reason)
+    : std::runtime_error((field.empty() ? std::string("campaign") : field) + ": " + reason),
+      field_(std::move(field)),
+      reason_(reason) {}
+
+const char* ToString(SamplerKind kind) {
+  switch (kind) {
+    case SamplerKind::kGrid: return "grid";
+    case SamplerKind::kUniform: return "uniform";
+    case SamplerKind::kLatinHypercube: return "latin_hypercube";
+    case SamplerKind::kSobol: return "sobol";
+  }
+  return "?";
+}
+
+namespace {
+
+constexpr int kMaxJsonDepth = 16;
+constexpr std::size_t kMaxJsonArray = 4096;
+
+// The variation space: every name a campaign may vary, in canonical order
+// (the order they are applied to the base scene and the sampler's dimension
+// order). lower/strict: the value must be > lower (strict) or >= lower.
+struct VariationInfo {
+  const char* name;
+  ValueType type;
+  double lower;
+  bool strict;
+};
+constexpr double kNoBound = -std::numeric_limits<double>::infinity();
+constexpr std::array<VariationInfo, 20> kVariationCatalog = {{
+    {"object_size_x", ValueType::kNumber, 0, true},   // box extents (m)
+    {"object_size_y", ValueType::kNumber, 0, true},
+    {"object_size_z", ValueType::kNumber, 0, true},
+    {"object_radius", ValueType::kNumber, 0, true},   // cylinder (m)
+    {"object_height", ValueType::kNumber, 0, true},
+    {"object_mass", ValueType::kNumber, 0, true},     // kg
+    {"finger_type", ValueType::kContactType, 0, false},
+    {"finger_length", ValueType::kNumber, 0, true},   // line fingers (m)
+    {"finger_radius", ValueType::kNumber, 0, true},   // patch fingers (m)
+    {"finger_mu", ValueType::kNumber, 0, false},
+    {"grip_force", ValueType::kNumber, 0, false},     // N
+    {"pusher_type", ValueType::kContactType, 0, false},
+    {"pusher_length", ValueType::kNumber, 0, true},
+    {"pusher_radius", ValueType::kNumber, 0, true},
+    {"pusher_mu", ValueType::kNumber, 0, false},
+    {"pivot_axis", ValueType::kVector, 0, false},     // unit, in the pusher's contact plane
+    {"pivot_offset", ValueType::kNumber, kNoBound, false},  // m along pivot_axis
+    {"push_direction", ValueType::kVector, 0, false}, // unit, gripper frame
+    {"push_speed", ValueType::kNumber, 0, false},     // m/s
+    {"push_distance", ValueType::kNumber, 0, true},   // m; sets duration = distance / speed
+}};
+
+const VariationInfo* FindVariation(std::string_view name) {
+  for (const auto& v : kVariationCatalog) {
+    if (name == v.name) return &v;
+  }
+  return nullptr;
+}
+
+int CatalogIndex(std::string_view name) {
+  for (size_t i = 0; i < kVariationCatalog.size(); ++i) {
+    if (name == kVariationCatalog[i].name) return static_cast<int>(i);
+  }
+  return static_cast<int>(kVariationCatalog.size());
+}
+
+std::string Num(double value) {
+  std::array<char, 32> buf{};
+  const auto res = std::to_chars(buf.data(), buf.data() + buf.size(), value);
+  return std::string(buf.data(), res.ptr);
+}
+
+std::string Printable(std::string_view text, size_t max_bytes) {
+  std::string out;
+  for (size_t i = 0; i < text.size() && i < max_bytes; ++i) {
+    const unsigned char c = static_cast<unsigned char>(text[i]);
+    out += (c < 0x20 || c >= 0x7f) ? '?' : static_cast<char>(c);
+  }
+  if (text.size() > max_bytes) out += "...";
+  return out;
+}
+
+std::string Join(const std::string& path, std::string_view key) {
+  const std::string safe = Printable(key, 64);
+  return path.empty() ? safe : path + "." + safe;
+}
+std::string Index(const std::string& path, size_t i) { return path + "[" + std::to_string(i) + "]"; }
+
+std::string TypeName(const json& v) {
+  if (v.is_number()) return "a number";
+  if (v.is_string()) return "a string";
+  if (v.is_boolean()) return "a boolean";
+  if (v.is_null()) return "null";
+  if (v.is_array()) return "an array";
+  return "an object";
+}
+
+void RequireObject(const json& v, const std::string& path, std::initializer_list<std::string_view> known) {
+  if (!v.is_object()) throw CampaignError(path, "must be an object, got " + TypeName(v));
+  for (const auto& item : v.items()) {
+    if (std::find(known.begin(), known.end(), item.key()) == known.end()) {
+      std::string list;
+      for (auto k : known) list += (list.empty() ? "" : ", ") + std::string(k);
+      throw CampaignError(Join(path, item.key()), "unknown key (expected one of: " + list + ")");
+    }
+  }
+}
+
+double Number(const json& v, const std::string& path) {
+  if (!v.is_number()) throw CampaignError(path, "must be a number, got " + TypeName(v));
+  const double x = v.get<double>();
+  if (!std::isfinite(x)) throw CampaignError(path, "must be finite");
+  return x;
+}
+
+int64_t Integer(const json& v, const std::string& path, int64_t lo, int64_t hi) {
+  const std::string range = "an integer in [" + std::to_string(lo) + ", " + std::to_string(hi) + "]";
+  if (!v.is_number()) throw CampaignError(path, "must be " + range + ", got " + TypeName(v));
+  const double x = v.get<double>();
+  if (std::floor(x) != x || x < static_cast<double>(lo) || x > static_cast<double>(hi)) {
+    throw CampaignError(path, "must be " + range + ", got " + Num(x));
+  }
+  return static_cast<int64_t>(x);
+}
+
+std::string String(const json& v, const std::string& path) {
+  if (!v.is_string()) throw CampaignError(path, "must be a string, got " + TypeName(v));
+  return v.get<std::string>();
+}
+
+VariationValue ReadValue(const json& v, const std::string& path, const VariationInfo& info) {
+  VariationValue value;
+  switch (info.type) {
+    case ValueType::kNumber: {
+      value.number = Number(v, path);
+      const bool ok = info.strict ? value.number > info.lower : value.number >= info.lower;
+      if (!ok) {
+        throw CampaignError(path, std::string("must be ") + (info.strict ? "> " : ">= ") + Num(info.lower) +
+                                      ", got " + Num(value.number));
+      }
+      break;
+    }
+    case ValueType::kContactType: {
+      const std::string text = String(v, path);
+      const auto type = mechanics::ContactTypeFromString(text);
+      if (!type) {
+        throw CampaignError(path, "must be \"point\", \"line\" or \"patch\", got \"" + Printable(text, 40) + "\"");
+      }
+      value.contact_type = *type;
+      break;
+    }
+    case ValueType::kVector: {
+      if (!v.is_array() || v.size() != 3) throw CampaignError(path, "must be an array of 3 numbers");
+      for (int i = 0; i < 3; ++i) value.vector[i] = Number(v[i], Index(path, static_cast<size_t>(i)));
+      const double n = value.vector.norm();
+      if (!(n > 0)) throw CampaignError(path, "must be a non-zero direction");
+      value.vector /= n;  // a direction: only where it points matters
+      break;
+    }
+  }
+  return value;
+}
+
+Variation ReadVariation(const json& v, const std::string& path, const VariationInfo& info, bool grid) {
+  Variation var;
+  var.name = info.name;
+  var.type = info.type;
+  const bool spec = v.is_object();
+  if (!spec) {  // a bare value: fixed
+    var.kind = Variation::Kind::kFixed;
+    var.choices.push_back(ReadValue(v, path, info));
+    return var;
+  }
+  if (v.contains("choices")) {
+    RequireObject(v, path, {"choices"});
+    const json& c = v["choices"];
+    const std::string cpath = Join(path, "choices");
+    if (!c.is_array() || c.empty()) throw CampaignError(cpath, "must be a non-empty array");
+    if (c.size() > static_cast<size_t>(kMaxChoices)) {
+      throw CampaignError(cpath, "must have at most " + std::to_string(kMaxChoices) + " choices");
+    }
+    var.kind = Variation::Kind::kChoices;
+    for (size_t i = 0; i < c.size(); ++i) var.choices.push_back(ReadValue(c[i], Index(cpath, i), info));
+    return var;
+  }
+  if (v.contains("value")) {
+    RequireObject(v, path, {"value"});
+    var.kind = Variation::Kind::kFixed;
+    var.choices.push_back(ReadValue(v["value"], Join(path, "value"), info));
+    return var;
+  }
+  RequireObject(v, path, {"min", "max", "scale", "levels"});
+  if (info.type != ValueType::kNumber) {
+    throw CampaignError(path, "a range is only possible for numbers; give \"choices\" or a fixed value");
+  }
+  if (!v.contains("min")) throw CampaignError(Join(path, "min"), "is required (or give \"choices\" or \"value\")");
+  if (!v.contains("max")) throw CampaignError(Join(path, "max"), "is required");
+  var.kind = Variation::Kind::kRange;
+  var.min = ReadValue(v["min"], Join(path, "min"), info).number;
+  var.max = ReadValue(v["max"], Join(path, "max"), info).number;
+  if (var.max < var.min) {
+    throw CampaignError(Join(path, "max"), "must be >= min (" + Num(var.min) + "), got " + Num(var.max));
+  }
+  if (v.contains("scale")) {
+    const std::string scale = String(v["scale"], Join(path, "scale"));
+    if (scale == "log") {
+      var.log_scale = true;
+    } else if (scale != "linear") {
+      throw CampaignError(Join(path, "scale"), "must be \"linear\" or \"log\", got \"" + Printable(scale, 40) + "\"");
+    }
+    if (var.log_scale && !(var.min > 0)) {
+      throw CampaignError(Join(path, "min"), "must be > 0 for scale \"log\", got " + Num(var.min));
+    }
+  }
+  if (v.contains("levels")) {
+    var.levels = static_cast<int>(Integer(v["levels"], Join(path, "levels"), 1, kMaxGridLevels));
+  }
+  if (grid && var.min < var.max) {
+    if (var.levels == 0) throw CampaignError(Join(path, "levels"), "is required by the grid sampler");
+    if (var.levels < 2) throw CampaignError(Join(path, "levels"), "must be >= 2 for a range with min < max");
+  }
+  return var;
+}
+
+// ---------------------------------------------------------------------------
+// Applying a condition's values to the base scene.
+
+// SCENE.md tangent basis: t1 from the first of z, y, x with |n.axis| < 0.9.
+Eigen::Vector3d FirstTangent(const Eigen::Vector3d& n) {
+  for (const Eigen::Vector3d& a : {Eigen::Vector3d::UnitZ().eval(), Eigen::Vector3d::UnitY().eval(),
+                                   Eigen::Vector3d::UnitX().eval()}) {
+    if (std::abs(n.dot(a)) < 0.9) return (a - n.dot(a) * n).normalized();
+  }
+  return Eigen::Vector3d::UnitZ();
+}
+
+Eigen::Matrix3d RotationFromRpy(const Eigen::Vector3d& rpy) {
+  return (Eigen::AngleAxisd(rpy.z(), Eigen::Vector3d::UnitZ()) *
+          Eigen::AngleAxisd(rpy.y(), Eigen::Vector3d::UnitY()) *
+          Eigen::AngleAxisd(rpy.x(), Eigen::Vector3d::UnitX()))
+      .toRotationMatrix();
+}
+
+// Stretches the object by k (per axis of the object frame) and carries each
+// contact along: a point on a face stays on that face, normals transform by
+// the inverse transpose, a line keeps its ends on the surface.
+void ScaleContact(ContactSpec* c, const mechanics::Pose& pose, const Eigen::Vector3d& k) {
+  const Eigen::Matrix3d R_GO = RotationFromRpy(pose.rpy);
+  const Eigen::Vector3d p_O = R_GO.transpose() * (c->position - pose.position);
+  c->position = pose.position + R_GO * p_O.cwiseProduct(k);
+  const Eigen::Vector3d n_O = (R_GO.transpose() * c->normal).cwiseQuotient(k);
+  c->normal = R_GO * n_O.normalized();
+  if (c->type == ContactType::kLine) {
+    const Eigen::Vector3d a_O = (R_GO.transpose() * c->axis).cwiseProduct(k);
+    c->length *= a_O.norm();
+    Eigen::Vector3d axis = R_GO * a_O.normalized();
+    c->axis = (axis - axis.dot(c->normal) * c->normal).normalized();
+  }
+}
+
+// Turns a contact into `type`; a new line lies along the contact's first
+// tangent (SCENE.md basis).
+void ChangeType(ContactSpec* c, ContactType type) {
+  if (c->type == type) return;
+  c->type = type;
+  if (type == ContactType::kLine) c->axis = FirstTangent(c->normal);
+}
+
+using Values = std::map<std::string, VariationValue>;
+
+const VariationValue* Get(const Values& values, const char* name) {
+  const auto it = values.find(name);
+  return it == values.end() ? nullptr : &it->second;
+}
+
+// The scene of one condition. @throws CampaignError (variations.*) when the
+// combination cannot be built; the result is not yet validated.
+Scene BuildScene(const Scene& base, const Values& values) {
+  Scene s = base;
+  // Geometry first: contacts move with the surface they sit on.
+  Eigen::Vector3d k = Eigen::Vector3d::Ones();
+  if (s.object.shape == mechanics::ObjectShape::kBox) {
+    const char* names[3] = {"object_size_x", "object_size_y", "object_size_z"};
+    for (int i = 0; i < 3; ++i) {
+      if (const auto* v = Get(values, names[i])) k[i] = v->number / s.object.size[i];
+    }
+    s.object.size = s.object.size.cwiseProduct(k);
+  } else {
+    if (const auto* v = Get(values, "object_radius")) k.x() = k.y() = v->number / s.object.radius;
+    if (const auto* v = Get(values, "object_height")) k.z() = v->number / s.object.height;
+    s.object.radius *= k.x();
+    s.object.height *= k.z();
+  }
+  if (k != Eigen::Vector3d::Ones()) {
+    for (auto& f : s.fingers) ScaleContact(&f, s.object.pose, k);
+    if (s.pusher) ScaleContact(&*s.pusher, s.object.pose, k);
+  }
+  if (const auto* v = Get(values, "object_mass")) {
+    if (s.object.inertia) *s.object.inertia *= v->number / s.object.mass;  // same shape, scaled density
+    s.object.mass = v->number;
+  }
+
+  // Contacts: type, then the parameters of that type.
+  auto apply_contact = [&](ContactSpec* c, const std::string& path, const char* type_name, const char* length_name,
+                           const char* radius_name, const char* mu_name) {
+    if (const auto* v = Get(values, type_name)) {
+      const ContactType before = c->type;
+      ChangeType(c, v->contact_type);
+      if (v->contact_type == ContactType::kLine && before != ContactType::kLine && !Get(values, length_name)) {
+        throw CampaignError(std::string("variations.") + type_name,
+                            std::string("\"line\" needs variations.") + length_name + " (" + path + " is a " +
+                                mechanics::ToString(before) + " in the base scene)");
+      }
+      if (v->contact_type == ContactType::kPatch && before != ContactType::kPatch && !Get(values, radius_name)) {
+        throw CampaignError(std::string("variations.") + type_name,
+                            std::string("\"patch\" needs variations.") + radius_name + " (" + path + " is a " +
+                                mechanics::ToString(before) + " in the base scene)");
+      }
+    }
+    if (const auto* v = Get(values, length_name); v && c->type == ContactType::kLine) c->length = v->number;
+    if (const auto* v = Get(values, radius_name); v && c->type == ContactType::kPatch) c->radius = v->number;
+    if (const auto* v = Get(values, mu_name)) c->mu = v->number;
+  };
+  for (size_t i = 0; i < s.fingers.size(); ++i) {
+    apply_contact(&s.fingers[i], Index("scene.fingers", i), "finger_type", "finger_length", "finger_radius",
+                  "finger_mu");
+  }
+  if (const auto* v = Get(values, "grip_force")) s.grip_force = v->number;
+
+  if (s.pusher) {
+    mechanics::PusherSpec& p = *s.pusher;
+    apply_contact(&p, "scene.pusher", "pusher_type", "pusher_length", "pusher_radius", "pusher_mu");
+    if (const auto* offset = Get(values, "pivot_offset")) {
+      Eigen::Vector3d axis = FirstTangent(p.normal);
+      if (const auto* a = Get(values, "pivot_axis")) axis = a->vector;
+      if (std::abs(axis.dot(p.normal)) > 1e-6) {
+        throw CampaignError("variations.pivot_axis", "must be perpendicular to the pusher's normal (" +
+                                                         Num(p.normal.x()) + ", " + Num(p.normal.y()) + ", " +
+                                                         Num(p.normal.z()) + ")");
+      }
+      p.position += offset->number * axis;
+    }
+    const Eigen::Vector3d base_velocity = p.motion.velocity;
+    const auto* direction = Get(values, "push_direction");
+    const auto* speed = Get(values, "push_speed");
+    if (direction || speed) {
+      const double v = speed ? speed->number : base_velocity.norm();
+      if (!direction && !(base_velocity.norm() > 0)) {
+        throw CampaignError("variations.push_speed",
+                            "needs variations.push_direction (the base scene's pusher does not move)");
+      }
+      const Eigen::Vector3d dir = direction ? direction->vector : Eigen::Vector3d(base_velocity.normalized());
+      p.motion.velocity = v * dir;
+    }
+    if (const auto* distance = Get(values, "push_distance")) {
+      const double v = p.motion.velocity.norm();
+      if (!(v > 0)) {
+        throw CampaignError("variations.push_distance",
+                            "needs a pusher speed > 0 (variations.push_speed or the base scene's velocity)");
+      }
+      s.duration = distance->number / v;
+    }
+  }
+  return s;
+}
+
+json ValueJson(const Variation& var, const VariationValue& v) {
+  switch (var.type) {
+    case ValueType::kNumber: return v.number;
+    case ValueType::kContactType: return mechanics::ToString(v.contact_type);
+    case ValueType::kVector: return json::array({v.vector.x(), v.vector.y(), v.vector.z()});
+  }
+  return nullptr;
+}
+
+VariationValue RangeValue(const Variation& var, double u) {
+  VariationValue v;
+  v.number = var.log_scale ? std::exp(std::log(var.min) + u * (std::log(var.max) - std::log(var.min)))
+                           : var.min + u * (var.max - var.min);
+  v.number = std::clamp(v.number, var.min, var.max);  // rounding only: u is in [0, 1]
+  return v;
+}
+
+// Values of every variation for one condition.
+Values ConditionValues(const Campaign& c, int64_t condition) {
+  Values values;
+  if (c.sampler == SamplerKind::kGrid) {
+    int64_t rest = condition;  // mixed radix, first sampled variation fastest
+    for (const auto& var : c.variations) {
+      if (!var.IsSampled()) {
+        values[var.name] = var.kind == Variation::Kind::kRange ? RangeValue(var, 0) : var.choices[0];
+        continue;
+      }
+      const int64_t radix = var.kind == Variation::Kind::kRange ? var.levels : static_cast<int64_t>(var.choices.size());
+      const int64_t digit = rest % radix;
+      rest /= radix;
+      values[var.name] = var.kind == Variation::Kind::kRange
+                             ? RangeValue(var, static_cast<double>(digit) / static_cast<double>(radix - 1))
+                             : var.choices[static_cast<size_t>(digit)];
+    }
+    return values;
+  }
+  const std::vector<double> point = ConditionPoint(c, condition);
+  size_t d = 0;
+  for (const auto& var : c.variations) {
+    if (!var.IsSampled()) {
+      values[var.name] = var.kind == Variation::Kind::kRange ? RangeValue(var, 0) : var.choices[0];
+      continue;
+    }
+    const double u = point[d++];
+    if (var.kind == Variation::Kind::kRange) {
+      values[var.name] = RangeValue(var, u);
+    } else {
+      const auto n = var.choices.size();
+      values[var.name] = var.choices[std::min(n - 1, static_cast<size_t>(u * static_cast<double>(n)))];
+    }
+  }
+  return values;
+}
+
+std::string ParametersJson(const Campaign& c, const Values& values) {
+  json out = json::object();
+  for (const auto& var : c.variations) out[var.name] = ValueJson(var, values.at(var.name));
+  return out.dump();
+}
+
+std::string ReadFileLimited(const std::filesystem::path& path, const std::string& field) {
+  std::ifstream in(path, std::ios::binary | std::ios::ate);
+  if (!in) throw CampaignError(field, "cannot open '" + path.string() + "'");
+  const std::streamoff size = in.tellg();
+  if (size < 0) throw CampaignError(field, "cannot read '" + path.string() + "'");
+  if (static_cast<std::uintmax_t>(size) > kMaxCampaignBytes) {
+    throw CampaignError(field, "'" + path.string() + "' is " + std::to_string(size) +
+                                   " bytes, larger than the limit of " + std::to_string(kMaxCampaignBytes) +
+                                   " bytes (1 MiB)");
+  }
+  in.seekg(0);
+  std::string text(static_cast<size_t>(size), '\0');
+  in.read(text.data(), size);
+  if (!in) throw CampaignError(field, "cannot read '" + path.string() + "'");
+  return text;
+}
+
+// Parses a document whose paths are reported under `field`. The first pass
+// (FindJsonProblem) names the path of a syntax error, a non-UTF-8 byte or a
+// duplicate key and bounds size, nesting and array length.
+json ParseJson(std::string_view text, const std::string& field) {
+  const mechanics::JsonLimits limits{kMaxCampaignBytes, kMaxJsonDepth, kMaxJsonArray};
+  if (const auto problem = mechanics::FindJsonProblem(text, limits)) {
+    const std::string path = problem->path.empty() ? field
+                             : field.empty()       ? problem->path
+                             : problem->path[0] == '[' ? field + problem->path
+                                                       : field + "." + problem->path;
+    throw CampaignError(path, problem->reason);
+  }
+  return json::parse(text.begin(), text.end());
+}
+
+mechanics::Scene WithModel(mechanics::Scene scene, const mechanics::ModelOptions& model) {
+  scene.model = model;
+  return scene;
+}
+
+bool ValidName(const std::string& name) {
+  if (name.empty() || name.size() > 64) return false;
+  return std::all_of(name.begin(), name.end(), [](char ch) {
+    return (ch >= 'a' && ch <= 'z') || (ch >= 'A' && ch <= 'Z') || (ch >= '0' && ch <= '9') || ch == '_' ||
+           ch == '-' || ch == '.';
+  });
+}
+
+}  // namespace
+
+// ---------------------------------------------------------------------------
+
+Campaign ParseCampaign(std::string_view json_text, const std::string& base_dir, ConditionCheck check) {
+  json doc = ParseJson(json_text, "");
+  RequireObject(doc, "", {"name", "description", "seed", "priority", "scene", "variations", "sampler", "conditions",
+                          "trials", "replicates", "prediction", "defects"});
+  const std::filesystem::path dir = base_dir.empty() ? std::filesystem::path(".") : std::filesystem::path(base_dir);
+  Campaign c;
+
+  if (!doc.contains("name")) throw CampaignError("name", "is required");
+  c.name = String(doc["name"], "name");
+  if (!ValidName(c.name)) {
+    throw CampaignError("name", "must be 1 to 64 letters, digits, '_', '-' or '.', got \"" + Printable(c.name, 40) + "\"");
+  }
+  if (doc.contains("description")) c.description = String(doc["description"], "description");
+  if (!doc.contains("seed")) throw CampaignError("seed", "is required (sampling is deterministic from it)");
+  {
+    const json& seed = doc["seed"];
+    if (!seed.is_number_integer() || (seed.is_number_integer() && !seed.is_number_unsigned())) {
+      throw CampaignError("seed", "must be a non-negative integer below 2^64, got " +
+                                      (seed.is_number() ? Printable(seed.dump(), 40) : TypeName(seed)));
+    }
+    c.seed = seed.get<uint64_t>();
+  }
+  if (doc.contains("priority")) c.priority = static_cast<int>(Integer(doc["priority"], "priority", -1000, 1000));
+
+  // The base scene: inline or a file.
+  if (!doc.contains("scene")) throw CampaignError("scene", "is required (a SCENE.md scene or a path to one)");
+  try {
+    if (doc["scene"].is_string()) {
+      const std::filesystem::path path = dir / doc["scene"].get<std::string>();
+      const std::string text = ReadFileLimited(path, "scene");
+      c.scene = mechanics::ParseScene(text);
+      doc["scene"] = ParseJson(text, "scene");
+    } else if (doc["scene"].is_object()) {
+      c.scene = mechanics::ParseScene(doc["scene"].dump());
+    } else {
+      throw CampaignError("scene", "must be a scene object or a file path, got " + TypeName(doc["scene"]));
+    }
+  } catch (const mechanics::SceneError& e) {
+    throw CampaignError(e.field().empty() ? "scene" : "scene." + e.field(), e.reason());
+  }
+
+  // Sampler and counts.
+  if (doc.contains("sampler")) {
+    const std::string s = String(doc["sampler"], "sampler");
+    if (s == "grid") c.sampler = SamplerKind::kGrid;
+    else if (s == "uniform") c.sampler = SamplerKind::kUniform;
+    else if (s == "latin_hypercube") c.sampler = SamplerKind::kLatinHypercube;
+    else if (s == "sobol") c.sampler = SamplerKind::kSobol;
+    else {
+      throw CampaignError("sampler", "must be \"grid\", \"uniform\", \"latin_hypercube\" or \"sobol\", got \"" +
+                                         Printable(s, 40) + "\"");
+    }
+  }
+  const bool grid = c.sampler == SamplerKind::kGrid;
+
+  // Variations, in canonical order.
+  if (doc.contains("variations")) {
+    const json& vars = doc["variations"];
+    if (!vars.is_object()) throw CampaignError("variations", "must be an object, got " + TypeName(vars));
+    std::vector<std::pair<int, Variation>> read;
+    for (const auto& item : vars.items()) {
+      const std::string path = Join("variations", item.key());
+      const VariationInfo* info = FindVariation(item.key());
+      if (!info) {
+        std::string list;
+        for (const auto& v : kVariationCatalog) list += (list.empty() ? "" : ", ") + std::string(v.name);
+        throw CampaignError(path, "unknown variation (expected one of: " + list + ")");
+      }
+      read.emplace_back(CatalogIndex(item.key()), ReadVariation(item.value(), path, *info, grid));
+    }
+    std::sort(read.begin(), read.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
+    for (auto& [index, var] : read) c.variations.push_back(std::move(var));
+  }
+  // What the base scene must offer for a variation to make sense.
+  const bool box = c.scene.object.shape == mechanics::ObjectShape::kBox;
+  for (const auto& var : c.variations) {
+    const std::string path = "variations." + var.name;
+    if (var.name.rfind("object_size_", 0) == 0 && !box) {
+      throw CampaignError(path, "only for a box (the base scene's object is a cylinder)");
+    }
+    if ((var.name == "object_radius" || var.name == "object_height") && box) {
+      throw CampaignError(path, "only for a cylinder (the base scene's object is a box)");
+    }
+    if (var.name.rfind("object_", 0) == 0 && var.name != "object_mass" && c.scene.object.inertia) {
+      throw CampaignError(path, "the base scene gives object.inertia explicitly; remove it so that inertia "
+                                "follows from the varied shape");
+    }
+    const bool pusher_var = var.name.rfind("pusher_", 0) == 0 || var.name.rfind("push_", 0) == 0 ||
+                            var.name.rfind("pivot_", 0) == 0;
+    if (pusher_var && !c.scene.pusher) throw CampaignError(path, "the base scene has no pusher");
+  }
+
+  // Counts.
+  int64_t sampled_levels = 1;  // grid: number of conditions
+  int sampled_dims = 0;
+  for (const auto& var : c.variations) {
+    if (!var.IsSampled()) continue;
+    ++sampled_dims;
+    const int64_t radix = var.kind == Variation::Kind::kRange ? var.levels : static_cast<int64_t>(var.choices.size());
+    if (grid) {
+      if (sampled_levels > kMaxConditions / radix) {
+        throw CampaignError("variations", "the grid has more than " + std::to_string(kMaxConditions) + " conditions");
+      }
+      sampled_levels *= radix;
+    }
+  }
+  if (c.sampler == SamplerKind::kSobol && sampled_dims > kMaxSobolDimensions) {
+    throw CampaignError("variations", "sobol supports at most " + std::to_string(kMaxSobolDimensions) +
+                                          " varied dimensions, got " + std::to_string(sampled_dims));
+  }
+  if (doc.contains("replicates")) {
+    c.replicates = static_cast<int>(Integer(doc["replicates"], "replicates", 1, kMaxReplicates));
+  }
+  const bool has_conditions = doc.contains("conditions");
+  const bool has_trials = doc.contains("trials");
+  if (has_conditions && has_trials) {
+    throw CampaignError("trials", "give either conditions or trials (= conditions x replicates), not both");
+  }
+  int64_t conditions = 0;
+  if (has_conditions) conditions = Integer(doc["conditions"], "conditions", 1, kMaxConditions);
+  if (has_trials) {
+    const int64_t trials = Integer(doc["trials"], "trials", 1, kMaxTrials);
+    if (trials % c.replicates != 0) {
+      throw CampaignError("trials", "must be a multiple of replicates (" + std::to_string(c.replicates) + "), got " +
+                                        std::to_string(trials));
+    }
+    conditions = trials / c.replicates;
+  }
+  if (grid) {
+    if (conditions != 0 && conditions != sampled_levels) {
+      throw CampaignError(has_trials ? "trials" : "conditions",
+                          "the grid has " + std::to_string(sampled_levels) + " conditions (x " +
+                              std::to_string(c.replicates) + " replicates); leave it out or match it");
+    }
+    conditions = sampled_levels;
+  } else if (conditions == 0) {
+    throw CampaignError("conditions", "is required for sampler " + std::string(ToString(c.sampler)) +
+                                          " (or give trials)");
+  }
+  c.conditions = conditions;
+  if (c.conditions * c.replicates > kMaxTrials) {
+    throw CampaignError("replicates", "conditions x replicates must be <= " + std::to_string(kMaxTrials));
+  }
+
+  // Prediction model: the base scene's model, overridden field by field.
+  c.prediction = c.scene.model;
+  if (doc.contains("prediction")) {
+    const json& p = doc["prediction"];
+    RequireObject(p, "prediction", {"facets", "points", "dt", "reduce"});
+    if (p.contains("facets")) {
+      c.prediction.facets = static_cast<int>(Integer(p["facets"], "prediction.facets", 3, mechanics::kMaxFacets));
+    }
+    if (p.contains("points")) {
+      c.prediction.points = static_cast<int>(Integer(p["points"], "prediction.points", 2, mechanics::kMaxPoints));
+    }
+    if (p.contains("dt")) c.prediction.dt = Number(p["dt"], "prediction.dt");
+    if (p.contains("reduce")) {
+      const std::string r = String(p["reduce"], "prediction.reduce");
+      const auto reduce = mechanics::ReduceFromString(r);
+      if (!reduce) {
+        throw CampaignError("prediction.reduce", "must be \"auto\", \"full\" or \"planar\", got \"" +
+                                                     Printable(r, 40) + "\"");
+      }
+      c.prediction.reduce = *reduce;
+    }
+  }
+
+  // Defect profile: an object passed through, or a file holding one.
+  if (doc.contains("defects")) {
+    json& d = doc["defects"];
+    if (d.is_string()) {
+      c.defects_file = d.get<std::string>();
+      d = ParseJson(ReadFileLimited(dir / c.defects_file, "defects"), "defects");
+      if (!d.is_object()) throw CampaignError("defects", "the file must hold a JSON object, got " + TypeName(d));
+    } else if (!d.is_object()) {
+      throw CampaignError("defects", "must be an object or a file path, got " + TypeName(d));
+    }
+    c.defects_json = d.dump();
+  }
+  c.source_json = doc.dump();
+
+  // Every condition must give a valid scene, for the cells and for the
+  // predictor: refuse the campaign now rather than fail trial 9,000.
+  try {
+    mechanics::ValidateScene(WithModel(c.scene, c.prediction));
+  } catch (const mechanics::SceneError& e) {
+    std::string field = e.field();
+    if (field.rfind("model.", 0) == 0) field = "prediction." + field.substr(6);
+    else field = field.empty() ? "scene" : "scene." + field;
+    throw CampaignError(field, e.reason());
+  }
+  const int64_t checked = check == ConditionCheck::kAllConditions ? c.conditions : 0;
+  for (int64_t condition = 0; condition < checked; ++condition) {
+    const Values values = ConditionValues(c, condition);
+    const Scene scene = BuildScene(c.scene, values);
+    try {
+      mechanics::ValidateScene(scene);
+      mechanics::ValidateScene(WithModel(scene, c.prediction));
+    } catch (const mechanics::SceneError& e) {
+      throw CampaignError("variations", "condition " + std::to_string(condition) + " " + ParametersJson(c, values) +
+                                            " gives an invalid scene: " + e.what());
+    }
+  }
+  return c;
+}
+
+Campaign LoadCampaignFile(const std::string& path) {
+  const std::string text = ReadFileLimited(path, "");
+  return ParseCampaign(text, std::filesystem::path(path).parent_path().string());
+}
+
+int64_t TrialCount(const Campaign& campaign) { return campaign.conditions * campaign.replicates; }
+
+std::vector<double> ConditionPoint(const Campaign& c, int64_t condition) {
+  if (condition < 0 || condition >= c.conditions) {
+    throw std::out_of_range("ConditionPoint: condition " + std::to_string(condition) + " not in [0, " +
+                            std::to_string(c.conditions) + ")");
+  }
+  std::vector<double> point;
+  int64_t rest = condition;
+  int dim = 0;
+  for (const auto& var : c.variations) {
+    if (!var.IsSampled()) continue;
+    const auto i = static_cast<uint64_t>(condition);
+    switch (c.sampler) {
+      case SamplerKind::kGrid: {
+        const int64_t radix = var.kind == Variation::Kind::kRange ? var.levels : static_cast<int64_t>(var.choices.size());
+        point.push_back(static_cast<double>(rest % radix) / static_cast<double>(radix));
+        rest /= radix;
+        break;
+      }
+      case SamplerKind::kUniform:
+        point.push_back(UniformFromCounter(Mix64(c.seed ^ Mix64(0xd1ULL + static_cast<uint64_t>(dim))), i));
+        break;
+      case SamplerKind::kLatinHypercube:
+        point.push_back(LatinHypercubeCoordinate(i, static_cast<uint64_t>(c.conditions), dim, c.seed));
+        break;
+      case SamplerKind::kSobol:
+        point.push_back(ScrambledSobolCoordinate(static_cast<uint32_t>(i), dim, c.seed));
+        break;
+    }
+    ++dim;
+  }
+  return point;
+}
+
+PlannedTrial PlanTrial(const Campaign& c, int64_t index) {
+  if (index < 0 || index >= TrialCount(c)) {
+    throw std::out_of_range("PlanTrial: index " + std::to_string(index) + " not in [0, " +
+                            std::to_string(TrialCount(c)) + ")");
+  }
+  PlannedTrial t;
+  t.index = index;
+  t.condition = index / c.replicates;
+  t.replicate = static_cast<int>(index % c.replicates);
+  t.seed = Mix64(Mix64(Mix64(c.seed ^ 0x7419a1ULL) + static_cast<uint64_t>(t.condition)) +
+                 static_cast<uint64_t>(t.replicate));
+  const Values values = ConditionValues(c, t.condition);
+  t.scene = BuildScene(c.scene, values);
+  t.parameters_json = ParametersJson(c, values);
+  return t;
+}
+
+mechanics::Scene PredictionScene(const Campaign& campaign, const PlannedTrial& trial) {
+  return WithModel(trial.scene, campaign.prediction);
+}
+
+}  // namespace arena::orchestrator

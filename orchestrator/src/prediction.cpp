@@ -1,0 +1,111 @@
+#include "arena/orchestrator/prediction.hpp"
+
+#include <chrono>
+#include <cstdio>
+
+#include <nlohmann/json.hpp>
+
+#include "arena/mechanics/scene_json.hpp"
+#include "arena/orchestrator/scoring.hpp"
+
+namespace arena::orchestrator {
+
+mechanics::Scene ApplyModelSettings(const mechanics::Scene& scene, const nlohmann::json& model) {
+  mechanics::Scene out = scene;
+  if (model.is_null()) return out;
+  if (!model.is_object()) throw mechanics::SceneError("model", "must be an object");
+  auto number = [&](const char* key) -> const nlohmann::json* {
+    if (!model.contains(key)) return nullptr;
+    const auto& v = model[key];
+    if (!v.is_number()) throw mechanics::SceneError(std::string("model.") + key, "must be a number");
+    return &v;
+  };
+  if (const auto* v = number("facets")) {
+    if (!v->is_number_integer()) throw mechanics::SceneError("model.facets", "must be an integer");
+    out.model.facets = v->get<int>();
+  }
+  if (const auto* v = number("points")) {
+    if (!v->is_number_integer()) throw mechanics::SceneError("model.points", "must be an integer");
+    out.model.points = v->get<int>();
+  }
+  if (const auto* v = number("dt")) out.model.dt = v->get<double>();
+  if (model.contains("reduce")) {
+    const auto& r = model["reduce"];
+    const std::string s = r.is_string() ? r.get<std::string>() : "";
+    if (s == "auto") out.model.reduce = mechanics::Reduce::kAuto;
+    else if (s == "full") out.model.reduce = mechanics::Reduce::kFull;
+    else if (s == "planar") out.model.reduce = mechanics::Reduce::kPlanar;
+    else throw mechanics::SceneError("model.reduce", "must be auto, full or planar");
+  }
+  mechanics::ValidateScene(out);
+  return out;
+}
+
+std::string ModelKey(const mechanics::ModelOptions& m) {
+  char buf[96];
+  std::snprintf(buf, sizeof buf, "g%d_k%d_dt%g_%s", m.facets, m.points, m.dt, mechanics::ToString(m.reduce));
+  return buf;
+}
+
+db::Prediction PredictionFailure(const std::string& status, const std::string& reason) {
+  db::Prediction p;
+  p.model_key = "unknown";
+  p.status = status;
+  p.detail_json = nlohmann::json({{"error", reason}}).dump();
+  return p;
+}
+
+db::Prediction PredictTrial(const mechanics::Scene& scene,
+                            const std::vector<mechanics::TrajectorySample>& truth) {
+  db::Prediction p;
+  p.model_key = ModelKey(scene.model);
+  p.model_json = nlohmann::json({{"facets", scene.model.facets},
+                                 {"points", scene.model.points},
+                                 {"dt", scene.model.dt},
+                                 {"reduce", mechanics::ToString(scene.model.reduce)}})
+                     .dump();
+  const auto start = std::chrono::steady_clock::now();
+  const mechanics::SimulationResult result = mechanics::Simulate(scene);
+  p.wall_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  nlohmann::json detail = {
+      {"residuals",
+       {{"force_balance", result.residuals.force_balance},
+        {"complementarity", result.residuals.complementarity},
+        {"cone", result.residuals.cone}}},
+      {"solver",
+       {{"steps", result.solver.steps},
+        {"max_pivots", result.solver.max_pivots},
+        {"failures", result.solver.failures}}},
+      {"unknowns", result.model.unknowns},
+      {"dof", result.model.dof}};
+  switch (result.status) {
+    case mechanics::SimulationStatus::kOk:
+      break;
+    case mechanics::SimulationStatus::kSolverFailure:
+      p.status = "solver_failure";
+      detail["error"] = result.error;
+      p.detail_json = detail.dump();
+      return p;
+    case mechanics::SimulationStatus::kInvalidScene:
+      p.status = "invalid_scene";
+      detail["error"] = result.error;
+      p.detail_json = detail.dump();
+      return p;
+  }
+  try {
+    const PredictionError e = ScorePrediction(result.samples, truth);
+    p.final_position_error = e.final_position;
+    p.final_angle_error = e.final_angle;
+    p.force_error = e.force_rms;
+    p.mode_agreement = e.mode_agreement;
+    detail["samples_compared"] = e.samples_compared;
+    detail["force_scale"] = e.force_scale;
+  } catch (const std::exception& e) {
+    p.status = "error";
+    detail["error"] = e.what();
+  }
+  p.detail_json = detail.dump();
+  return p;
+}
+
+}  // namespace arena::orchestrator

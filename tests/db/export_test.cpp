@@ -1,0 +1,283 @@
+// Export round trips: HDF5 read back through the HDF5 library, CSV and JSONL
+// through parsers, each compared value for value with the store.
+#include <hdf5.h>
+
+#include <fstream>
+#include <nlohmann/json.hpp>
+#include <sstream>
+
+#include "arena/db/export.hpp"
+#include "db_test_util.hpp"
+
+namespace arena::db {
+namespace {
+
+using testing::MakeCampaign;
+using testing::MakeTrials;
+using testing::RunTrialToDone;
+using testing::TempDir;
+namespace fs = std::filesystem;
+
+// The columns the dataset promises, rebuilt here independently of export.cpp.
+std::vector<double> TrueRow(const Sample& s) {
+  std::vector<double> r{s.t};
+  for (double v : s.object_pose) r.push_back(v);
+  for (double v : s.object_twist) r.push_back(v);
+  for (double v : s.pusher_pose) r.push_back(v);
+  for (double v : s.pusher_twist) r.push_back(v);
+  for (const auto& c : s.contacts) {
+    for (double v : c.force) r.push_back(v);
+    for (double v : c.torque) r.push_back(v);
+    r.push_back(static_cast<double>(c.mode));
+  }
+  return r;
+}
+
+std::vector<double> ObservedRow(const Sample& s) {
+  std::vector<double> r{s.t, s.observed_valid ? 1.0 : 0.0};
+  for (double v : s.observed_object_pose) r.push_back(v);
+  for (double v : s.observed_pusher_wrench) r.push_back(v);
+  for (double v : s.observed_finger_wrenches) r.push_back(v);
+  return r;
+}
+
+std::string ReadAll(const fs::path& p) {
+  std::ifstream in(p, std::ios::binary);
+  std::ostringstream s;
+  s << in.rdbuf();
+  return s.str();
+}
+
+// Minimal RFC 4180 reader (quotes, doubled quotes, commas inside quotes).
+std::vector<std::vector<std::string>> ParseCsv(const std::string& text) {
+  std::vector<std::vector<std::string>> rows;
+  std::vector<std::string> row;
+  std::string field;
+  bool quoted = false;
+  for (std::size_t i = 0; i < text.size(); ++i) {
+    const char c = text[i];
+    if (quoted) {
+      if (c == '"' && i + 1 < text.size() && text[i + 1] == '"') {
+        field += '"';
+        ++i;
+      } else if (c == '"') {
+        quoted = false;
+      } else {
+        field += c;
+      }
+    } else if (c == '"') {
+      quoted = true;
+    } else if (c == ',') {
+      row.push_back(field);
+      field.clear();
+    } else if (c == '\n') {
+      row.push_back(field);
+      field.clear();
+      rows.push_back(row);
+      row.clear();
+    } else {
+      field += c;
+    }
+  }
+  return rows;
+}
+
+class ExportTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    path_ = dir_.File("e.db");
+    auto store = Store::Open(path_);
+    store->UpsertCell("c", {"point"});
+    campaign_ = store->CreateCampaign(MakeCampaign("export"), MakeTrials(4));
+    const int counts[] = {250, 17, 400};
+    for (int n : counts) {
+      auto t = store->ClaimNextTrial("c");
+      RunTrialToDone(*store, *t, n);
+    }
+    // The 4th trial stays planned: it has no ground truth and is not exported.
+    StoreOptions ro;
+    ro.read_only = true;
+    store_ = Store::Open(path_, ro);
+  }
+
+  ExportReport Export(ExportFormat f, const std::string& name) {
+    ExportOptions o;
+    o.campaign_id = campaign_;
+    o.format = f;
+    o.out_dir = dir_.File(name);
+    o.arena_version = "0.1.0";
+    o.arena_commit = "abc123";
+    return ExportCampaign(*store_, o);
+  }
+
+  nlohmann::json Manifest(const std::string& name) {
+    return nlohmann::json::parse(ReadAll(dir_.path() / name / "manifest.json"));
+  }
+
+  TempDir dir_;
+  std::string path_;
+  std::int64_t campaign_ = 0;
+  std::unique_ptr<Store> store_;
+};
+
+TEST(Sha256, KnownVectors) {
+  EXPECT_EQ(Sha256Hex("", 0), "e3b0c44298fc1c149afbf4c8996fb92427ae41e4649b934ca495991b7852b855");
+  EXPECT_EQ(Sha256Hex("abc", 3), "ba7816bf8f01cfea414140de5dae2223b00361a396177a9cb410ff61f20015ad");
+  const std::string two = "abcdbcdecdefdefgefghfghighijhijkijkljklmklmnlmnomnopnopq";
+  EXPECT_EQ(Sha256Hex(two.data(), two.size()),
+            "248d6a61d20638b8e5c026930c3e6039a33ce45964ff2167f6ecedd419db06c1");
+  const std::string million(1000000, 'a');
+  EXPECT_EQ(Sha256Hex(million.data(), million.size()),
+            "cdc76e5c9914fb9281a1c7e284d73e67f1809a48a497200e046d39ccc7112cd0");
+}
+
+TEST_F(ExportTest, Hdf5RoundTripThroughTheLibrary) {
+  const auto r = Export(ExportFormat::kHdf5, "h5");
+  EXPECT_EQ(r.trials, 3);
+  EXPECT_EQ(r.samples, 250 + 17 + 400);
+  const auto m = Manifest("h5");
+  EXPECT_EQ(m["format_version"], kDatasetFormatVersion);
+  EXPECT_EQ(m["arena_commit"], "abc123");
+  EXPECT_EQ(m["campaign"]["spec"]["name"], "export");
+  EXPECT_NEAR(m["sample_rate_hz"].get<double>(), 250.0, 1e-6);
+  const hid_t file = H5Fopen((dir_.path() / "h5" / "dataset.h5").c_str(), H5F_ACC_RDONLY, H5P_DEFAULT);
+  ASSERT_GE(file, 0);
+  for (const auto& trial : store_->ListTrials(campaign_)) {
+    if (!trial.gt_stream_id) continue;
+    const auto gt = store_->ReadGroundTruth(trial.id);
+    const std::string group = "/trials/" + std::to_string(trial.id);
+    for (const bool observed : {false, true}) {
+      const std::string name = group + (observed ? "/observed" : "/true");
+      const hid_t ds = H5Dopen2(file, name.c_str(), H5P_DEFAULT);
+      ASSERT_GE(ds, 0) << name;
+      const hid_t space = H5Dget_space(ds);
+      hsize_t dims[2];
+      H5Sget_simple_extent_dims(space, dims, nullptr);
+      ASSERT_EQ(dims[0], gt.samples.size());
+      std::vector<double> data(dims[0] * dims[1]);
+      ASSERT_GE(H5Dread(ds, H5T_NATIVE_DOUBLE, H5S_ALL, H5S_ALL, H5P_DEFAULT, data.data()), 0);
+      for (std::size_t i = 0; i < gt.samples.size(); ++i) {
+        const auto expected = observed ? ObservedRow(gt.samples[i]) : TrueRow(gt.samples[i]);
+        ASSERT_EQ(expected.size(), dims[1]);
+        for (std::size_t k = 0; k < expected.size(); ++k) {
+          ASSERT_EQ(data[i * dims[1] + k], expected[k]) << name << " row " << i << " col " << k;
+        }
+      }
+      H5Sclose(space);
+      H5Dclose(ds);
+    }
+    // The index row travels as attributes of the trial's group.
+    const hid_t g = H5Gopen2(file, group.c_str(), H5P_DEFAULT);
+    double grip = 0;
+    const hid_t a = H5Aopen(g, "grip_force", H5P_DEFAULT);
+    ASSERT_GE(a, 0);
+    H5Aread(a, H5T_NATIVE_DOUBLE, &grip);
+    EXPECT_EQ(grip, 5.0 + trial.index);
+    H5Aclose(a);
+    H5Gclose(g);
+  }
+  H5Fclose(file);
+}
+
+TEST_F(ExportTest, CsvRoundTripThroughAParser) {
+  Export(ExportFormat::kCsv, "csv");
+  const auto m = Manifest("csv");
+  const auto index = ParseCsv(ReadAll(dir_.path() / "csv" / "trials.csv"));
+  ASSERT_EQ(index.size(), 4u);  // header + 3 trials
+  const auto& header = index[0];
+  const auto col = [&](const std::string& name) {
+    return static_cast<std::size_t>(std::find(header.begin(), header.end(), name) - header.begin());
+  };
+  for (std::size_t r = 1; r < index.size(); ++r) {
+    const auto trial_id = std::stoll(index[r][col("trial_id")]);
+    const auto gt = store_->ReadGroundTruth(trial_id);
+    EXPECT_EQ(std::stoull(index[r][col("seed")]), store_->GetTrial(trial_id).seed);
+    EXPECT_EQ(std::stoll(index[r][col("samples")]), static_cast<long long>(gt.samples.size()));
+    EXPECT_EQ(index[r][col("final_position_error")], "0.001");
+    for (const bool observed : {false, true}) {
+      const auto file = index[r][col(observed ? "observed_file" : "true_file")];
+      const auto rows = ParseCsv(ReadAll(dir_.path() / "csv" / file));
+      ASSERT_EQ(rows.size(), gt.samples.size() + 1);
+      EXPECT_EQ(rows[0][0], "t");
+      if (!observed) {
+        EXPECT_EQ(rows[0].back(), "pusher_mode");  // the scene names the contacts
+      }
+      for (std::size_t i = 0; i < gt.samples.size(); ++i) {
+        const auto expected = observed ? ObservedRow(gt.samples[i]) : TrueRow(gt.samples[i]);
+        ASSERT_EQ(rows[i + 1].size(), expected.size());
+        for (std::size_t k = 0; k < expected.size(); ++k) {
+          ASSERT_EQ(std::strtod(rows[i + 1][k].c_str(), nullptr), expected[k]) << file << " " << i;
+        }
+      }
+    }
+  }
+  EXPECT_EQ(m["counts"]["files"], 1 + 2 * 3);
+}
+
+TEST_F(ExportTest, JsonlRoundTripThroughAParser) {
+  Export(ExportFormat::kJsonl, "jsonl");
+  const auto m = Manifest("jsonl");
+  std::istringstream index(ReadAll(dir_.path() / "jsonl" / "trials.jsonl"));
+  std::string line;
+  int trials = 0;
+  while (std::getline(index, line)) {
+    const auto t = nlohmann::json::parse(line);
+    ++trials;
+    const auto gt = store_->ReadGroundTruth(t["trial_id"].get<std::int64_t>());
+    const auto cols = m["columns"]["true"];
+    std::istringstream stream(ReadAll(dir_.path() / "jsonl" / t["true_file"].get<std::string>()));
+    std::size_t i = 0;
+    while (std::getline(stream, line)) {
+      const auto s = nlohmann::json::parse(line);
+      const auto expected = TrueRow(gt.samples.at(i));
+      ASSERT_EQ(s.size(), expected.size());
+      for (std::size_t k = 0; k < expected.size(); ++k) {
+        ASSERT_EQ(s[cols[k]["name"].get<std::string>()].get<double>(), expected[k]);
+      }
+      ++i;
+    }
+    EXPECT_EQ(i, gt.samples.size());
+  }
+  EXPECT_EQ(trials, 3);
+}
+
+TEST_F(ExportTest, ManifestListsUnitsAndChecksumsAndVerifyCatchesTampering) {
+  Export(ExportFormat::kCsv, "v");
+  const auto m = Manifest("v");
+  for (const auto& c : m["columns"]["true"]) {
+    EXPECT_TRUE(c.contains("unit")) << c;
+    EXPECT_FALSE(c["meaning"].get<std::string>().empty()) << c;
+  }
+  for (const auto& f : m["files"]) {
+    EXPECT_EQ(f["sha256"], Sha256File((dir_.path() / "v" / f["path"].get<std::string>()).string()));
+  }
+  EXPECT_EQ(VerifyExport(dir_.File("v")).samples, 667);
+  // Flip one byte of a stream: verification names it.
+  const auto victim = dir_.path() / "v" / m["files"][0]["path"].get<std::string>();
+  std::string bytes = ReadAll(victim);
+  bytes[bytes.size() / 2] ^= 1;
+  std::ofstream(victim, std::ios::binary | std::ios::trunc) << bytes;
+  try {
+    VerifyExport(dir_.File("v"));
+    ADD_FAILURE();
+  } catch (const StoreError& e) {
+    EXPECT_EQ(e.kind(), StoreError::Kind::kCorrupt);
+    EXPECT_NE(std::string(e.what()).find("checksum"), std::string::npos) << e.what();
+  }
+  fs::remove(dir_.path() / "v" / "manifest.json");
+  EXPECT_THROW(VerifyExport(dir_.File("v")), StoreError);
+}
+
+TEST_F(ExportTest, RefusesNonEmptyDirectoryAndUnknownCampaign) {
+  fs::create_directories(dir_.path() / "full");
+  std::ofstream(dir_.path() / "full" / "x") << "x";
+  EXPECT_THROW(Export(ExportFormat::kCsv, "full"), StoreError);
+  ExportOptions o;
+  o.campaign_id = 99;
+  o.out_dir = dir_.File("none");
+  EXPECT_THROW(ExportCampaign(*store_, o), StoreError);
+  EXPECT_FALSE(fs::exists(dir_.path() / "none"));
+}
+
+}  // namespace
+}  // namespace arena::db
