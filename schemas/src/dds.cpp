@@ -173,30 +173,20 @@ void ApplyTopicQos(const std::string& topic, fdds::ReliabilityQosPolicy* reliabi
   reliability->kind = fdds::RELIABLE_RELIABILITY_QOS;
   durability->kind = fdds::VOLATILE_DURABILITY_QOS;
   history->kind = fdds::KEEP_ALL_HISTORY_QOS;
+  // Every topic is keyed (cell or trial) and Fast DDS 2.9 never frees an
+  // instance slot, so the default max_instances (10) would stall a service
+  // after ten cells (CellAnnounce, TrialCommand) or ten trials (TrialStatus,
+  // GroundTruth). No instance limit anywhere; the only bound that matters,
+  // ground truth in flight, is the writer's acknowledgement window
+  // (kGroundTruthMaxBatches, see Writer::Write).
+  limits->max_instances = 0;
+  limits->max_samples_per_instance = 0;
+  limits->max_samples = 0;
+  limits->allocated_samples = 32;
   if (topic == "CellAnnounce") {
     durability->kind = fdds::TRANSIENT_LOCAL_DURABILITY_QOS;
     history->kind = fdds::KEEP_LAST_HISTORY_QOS;
     history->depth = 1;
-  } else if (topic == "GroundTruth") {
-    // Bounded: a slow reader throttles the writer rather than growing memory.
-    // One instance per trial; the bound is on samples in flight, whatever
-    // their instance.
-    // Fast DDS 2.9 never reuses the slot of a finished trial (instance), so
-    // instance-limited histories would stall after a few trials; the history
-    // is bounded instead by the writer's acknowledgement window
-    // (kGroundTruthMaxBatches unacknowledged batches at most, see Write()).
-    limits->max_instances = 0;
-    limits->max_samples_per_instance = 0;
-    limits->max_samples = 0;
-    limits->allocated_samples = 32;
-  } else if (topic == "TrialStatus") {
-    // Keyed by trial: every trial is a new instance that Fast DDS 2.9 never
-    // frees, so the default max_instances (10) stalls a service after ten
-    // trials. A handful of statuses per trial; no bound is needed.
-    limits->max_instances = 0;
-    limits->max_samples_per_instance = 0;
-    limits->max_samples = 0;
-    limits->allocated_samples = 32;
   }
 }
 
@@ -645,9 +635,6 @@ Reader<T>::Reader(Participant& participant, const ReaderOptions& options)
   fdds::DataReaderQos qos = core.subscriber->get_default_datareader_qos();
   ApplyTopicQos(topic, &qos.reliability(), &qos.durability(), &qos.history(),
                 &qos.resource_limits());
-  if (topic == "CellAnnounce") {
-    qos.resource_limits().max_samples_per_instance = 1;
-  }
   // Fast DDS tracks a writer's liveliness only for a finite requested lease.
   qos.liveliness().kind = fdds::AUTOMATIC_LIVELINESS_QOS;
   qos.liveliness().lease_duration = CellWritten(topic) ? Duration_t(kCellLivelinessLease_s)
