@@ -37,6 +37,7 @@ struct Reader {
   const unsigned char* p;
   const unsigned char* end;
   void Get(void* dst, std::size_t n) {
+    if (n == 0) return;  // dst may be an empty vector's null data()
     if (static_cast<std::size_t>(end - p) < n) {
       throw StoreError(StoreError::Kind::kCorrupt, "DecodeSamples: block truncated");
     }
@@ -94,6 +95,7 @@ void EncodeSampleBody(const Sample& s, std::string* out) {
   out->resize(offset + EncodedSampleBytes(s));
   char* p = out->data() + offset;
   auto put = [&p](const void* src, std::size_t n) {
+    if (n == 0) return;  // src may be an empty vector's null data()
     std::memcpy(p, src, n);
     p += n;
   };
