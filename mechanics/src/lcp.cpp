@@ -8,6 +8,8 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
+#include <cstdio>
 #include <limits>
 #include <string>
 
@@ -15,6 +17,9 @@
 
 namespace arena::mechanics {
 namespace {
+
+// Pivots between rebuilds of the basis inverse (drift control).
+constexpr int kRefactorInterval = 32;
 
 using RowMatrix = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
 
@@ -32,78 +37,55 @@ bool AllFinite(const Eigen::VectorXd& v) { return v.allFinite(); }
 // A_bb z_b = -b_b, all other z zero. False when that basis is singular.
 bool SolveBasis(const Eigen::MatrixXd& A, const Eigen::VectorXd& b, const std::vector<char>& basis,
                 Eigen::VectorXd& z, Eigen::VectorXd& w) {
+  // Called on every warm-started step: keep the work space between calls.
+  thread_local std::vector<Eigen::Index> idx;
+  thread_local Eigen::MatrixXd Abb;
+  thread_local Eigen::VectorXd bb, zb;
+  thread_local Eigen::PartialPivLU<Eigen::MatrixXd> lu;
   const Eigen::Index n = b.size();
-  std::vector<Eigen::Index> idx;
+  idx.clear();
   for (Eigen::Index i = 0; i < n; ++i) {
     if (basis[static_cast<size_t>(i)]) idx.push_back(i);
   }
-  z = Eigen::VectorXd::Zero(n);
+  z.setZero(n);
   if (!idx.empty()) {
     const auto m = static_cast<Eigen::Index>(idx.size());
-    Eigen::MatrixXd Abb(m, m);
-    Eigen::VectorXd bb(m);
-    for (Eigen::Index r = 0; r < m; ++r) {
-      bb[r] = -b[idx[static_cast<size_t>(r)]];
-      for (Eigen::Index c = 0; c < m; ++c) {
-        Abb(r, c) = A(idx[static_cast<size_t>(r)], idx[static_cast<size_t>(c)]);
-      }
+    Abb.resize(m, m);
+    bb.resize(m);
+    for (Eigen::Index c = 0; c < m; ++c) {
+      const Eigen::Index col = idx[static_cast<size_t>(c)];
+      bb[c] = -b[col];
+      for (Eigen::Index r = 0; r < m; ++r) Abb(r, c) = A(idx[static_cast<size_t>(r)], col);
     }
-    Eigen::PartialPivLU<Eigen::MatrixXd> lu(Abb);
-    const Eigen::VectorXd zb = lu.solve(bb);
+    lu.compute(Abb);
+    zb = lu.solve(bb);
     if (!AllFinite(zb)) return false;
     // A singular basis shows as a large solve residual.
     const double scale = 1.0 + bb.lpNorm<Eigen::Infinity>();
     if ((Abb * zb - bb).lpNorm<Eigen::Infinity>() > 1e-9 * scale) return false;
     for (Eigen::Index r = 0; r < m; ++r) z[idx[static_cast<size_t>(r)]] = zb[r];
   }
-  w = A * z + b;
+  w.noalias() = A * z;
+  w += b;
   return AllFinite(w);
 }
 
 // Accepts a candidate solution when it is finite, nonnegative and
 // complementary within tolerance (nondimensional, relative to the data).
-bool Acceptable(const Eigen::VectorXd& z, const Eigen::VectorXd& w, double tol) {
+bool Acceptable(const Eigen::VectorXd& z, const Eigen::VectorXd& w, const Eigen::VectorXd& b, double tol) {
   if (!AllFinite(z) || !AllFinite(w)) return false;
-  const double scale = std::max({1.0, z.lpNorm<Eigen::Infinity>(), w.lpNorm<Eigen::Infinity>()});
-  return NaturalResidual(z, w) <= tol * scale;
+  // Relative to the data, not to z: a near-singular basis can give a huge z
+  // whose relative residual looks small.
+  return NaturalResidual(z, w) <= tol * std::max(1.0, b.lpNorm<Eigen::Infinity>());
 }
 
-}  // namespace
-
-LcpResult SolveLcp(const Eigen::MatrixXd& A, const Eigen::VectorXd& b,
-                   const std::vector<char>* warm_basis, const LcpOptions& options) {
-  LcpResult out;
+// One run of Lemke's method with covering vector `cover`; fills z, w,
+// basis, pivots and ok/reason of `out`.
+void LemkeOnce(const Eigen::MatrixXd& A, const Eigen::VectorXd& b, const Eigen::VectorXd& cover,
+               const LcpOptions& options, LcpResult& out) {
   const Eigen::Index n = b.size();
+  out.ok = false;
   out.basis.assign(static_cast<size_t>(n), 0);
-  if (A.rows() != n || A.cols() != n) {
-    out.reason = "matrix and vector sizes differ";
-    return out;
-  }
-  if (!A.allFinite() || !b.allFinite()) {
-    out.reason = "non-finite problem data";
-    return out;
-  }
-  if (n == 0 || b.minCoeff() >= 0) {
-    out.ok = true;
-    out.z = Eigen::VectorXd::Zero(n);
-    out.w = b;
-    return out;
-  }
-
-  // Warm start: the previous step's basis usually still holds.
-  if (warm_basis != nullptr && static_cast<Eigen::Index>(warm_basis->size()) == n) {
-    Eigen::VectorXd z, w;
-    if (SolveBasis(A, b, *warm_basis, z, w) && Acceptable(z, w, options.feasibility)) {
-      out.ok = true;
-      out.z = z;
-      out.w = w;
-      out.basis = *warm_basis;
-      out.warm_start_used = true;
-      out.natural_residual = NaturalResidual(z, w);
-      return out;
-    }
-  }
-
   const int max_pivots = options.max_pivots > 0 ? options.max_pivots
                                                 : static_cast<int>(50 * n + 200);
   const double tol = options.pivot_tolerance;
@@ -128,21 +110,45 @@ LcpResult SolveLcp(const Eigen::MatrixXd& A, const Eigen::VectorXd& b,
     return leaving;
   };
 
-  // First pivot: z0 enters (column -1) at the most negative b.
+  // z0 enters with column -cover at the row that needs the largest z0.
   Eigen::Index r = 0;
   for (Eigen::Index i = 1; i < n; ++i) {
-    if (x[i] <= x[r]) r = i;
+    if (x[i] / cover[i] <= x[r] / cover[r]) r = i;
   }
-  d.setConstant(-1.0);
+  d = -cover;
   Eigen::Index leaving = pivot(r, z0);
   int pivots = 1;
-  bool done = false;
   std::vector<Eigen::Index> ties;
-  while (!done) {
+  // Rebuilds the basis inverse from scratch, so rank-one drift does not pile up.
+  Eigen::MatrixXd B(n, n);
+  auto refactor = [&]() -> bool {
+    for (Eigen::Index i = 0; i < n; ++i) {
+      const Eigen::Index v = basis[static_cast<size_t>(i)];
+      if (v < n) {
+        B.col(i) = Eigen::VectorXd::Unit(n, v);
+      } else if (v < 2 * n) {
+        B.col(i) = -A.col(v - n);
+      } else {
+        B.col(i) = -cover;
+      }
+    }
+    Eigen::PartialPivLU<Eigen::MatrixXd> lu(B);
+    const Eigen::MatrixXd inv = lu.inverse();
+    if (!inv.allFinite()) return false;
+    Binv = inv;
+    x.noalias() = Binv * b;
+    return true;
+  };
+  for (;;) {
+    if (pivots % kRefactorInterval == 0 && !refactor()) {
+      out.reason = "singular basis after " + std::to_string(pivots) + " pivots";
+      out.pivots = pivots;
+      return;
+    }
     if (pivots >= max_pivots) {
       out.reason = "pivot limit (" + std::to_string(max_pivots) + ") reached";
       out.pivots = pivots;
-      return out;
+      return;
     }
     const Eigen::Index entering = leaving < n ? leaving + n : leaving - n;
     if (entering < n) {
@@ -151,19 +157,30 @@ LcpResult SolveLcp(const Eigen::MatrixXd& A, const Eigen::VectorXd& b,
       d.noalias() = -(Binv * A.col(entering - n));
     }
     // Minimum ratio over rows where the entering variable decreases a basic one.
+    // Pivots are judged relative to the column (the problem is scaled, but
+    // far-away contacts still make columns of very different sizes).
+    const double dtol = tol * std::max(1.0, d.lpNorm<Eigen::Infinity>());
     double best = std::numeric_limits<double>::infinity();
     for (Eigen::Index i = 0; i < n; ++i) {
-      if (d[i] > tol) best = std::min(best, x[i] / d[i]);
+      if (d[i] > dtol) best = std::min(best, x[i] / d[i]);
     }
     if (!std::isfinite(best)) {
+      // On degenerate problems z0 can reach zero without being chosen to
+      // leave; the point reached is then already a solution. Otherwise this
+      // is a genuine secondary ray.
+      double z0_value = std::numeric_limits<double>::infinity();
+      for (Eigen::Index i = 0; i < n; ++i) {
+        if (basis[static_cast<size_t>(i)] == z0) z0_value = x[i];
+      }
+      if (std::abs(z0_value) <= 1e-9 * std::max(1.0, x.lpNorm<Eigen::Infinity>())) break;
       out.reason = "ray termination after " + std::to_string(pivots) + " pivots";
       out.pivots = pivots;
-      return out;
+      return;
     }
     ties.clear();
     const double slack = 1e-12 * std::max(1.0, std::abs(best));
     for (Eigen::Index i = 0; i < n; ++i) {
-      if (d[i] > tol && x[i] / d[i] <= best + slack) ties.push_back(i);
+      if (d[i] > dtol && x[i] / d[i] <= best + slack) ties.push_back(i);
     }
     // Leaving z0 ends the method; otherwise break ties lexicographically
     // on the rows of the basis inverse scaled by the pivot column.
@@ -191,8 +208,9 @@ LcpResult SolveLcp(const Eigen::MatrixXd& A, const Eigen::VectorXd& b,
     }
     leaving = pivot(r, entering);
     ++pivots;
-    if (leaving == z0) done = true;
+    if (leaving == z0) break;
   }
+  out.pivots = pivots;
 
   Eigen::VectorXd z = Eigen::VectorXd::Zero(n);
   for (Eigen::Index i = 0; i < n; ++i) {
@@ -212,20 +230,87 @@ LcpResult SolveLcp(const Eigen::MatrixXd& A, const Eigen::VectorXd& b,
       w = wp;
     }
   }
-  out.pivots = pivots;
   if (!AllFinite(z) || !AllFinite(w)) {
     out.reason = "non-finite solution after " + std::to_string(pivots) + " pivots";
-    return out;
+    return;
   }
   out.natural_residual = NaturalResidual(z, w);
-  if (!Acceptable(z, w, options.feasibility)) {
-    out.reason = "inaccurate solution (natural residual " + std::to_string(out.natural_residual) +
-                 ") after " + std::to_string(pivots) + " pivots";
-    return out;
+  if (!Acceptable(z, w, b, options.feasibility)) {
+    char buf[96];
+    std::snprintf(buf, sizeof buf, "inaccurate solution (natural residual %.3g) after %d pivots",
+                  out.natural_residual, pivots);
+    out.reason = buf;
+    return;
   }
   out.ok = true;
+  out.reason.clear();
   out.z = z;
   out.w = w;
+}
+
+}  // namespace
+
+LcpResult SolveLcp(const Eigen::MatrixXd& A, const Eigen::VectorXd& b,
+                   const std::vector<char>* warm_basis, const LcpOptions& options) {
+  LcpResult out;
+  const Eigen::Index n = b.size();
+  out.basis.assign(static_cast<size_t>(n), 0);
+  if (A.rows() != n || A.cols() != n) {
+    out.reason = "matrix and vector sizes differ";
+    return out;
+  }
+  if (!A.allFinite() || !b.allFinite()) {
+    out.reason = "non-finite problem data";
+    return out;
+  }
+  if (n == 0 || b.minCoeff() >= 0) {
+    out.ok = true;
+    out.z = Eigen::VectorXd::Zero(n);
+    out.w = b;
+    return out;
+  }
+
+  // Warm start: the previous step's basis usually still holds.
+  if (warm_basis != nullptr && static_cast<Eigen::Index>(warm_basis->size()) == n) {
+    Eigen::VectorXd z, w;
+    if (SolveBasis(A, b, *warm_basis, z, w) && Acceptable(z, w, b, options.feasibility)) {
+      out.ok = true;
+      out.z = z;
+      out.w = w;
+      out.basis = *warm_basis;
+      out.warm_start_used = true;
+      out.natural_residual = NaturalResidual(z, w);
+      return out;
+    }
+  }
+
+  // Lemke's method is only guaranteed for copositive-plus matrices; the
+  // friction rows make ours merely copositive, and a ray can end a run on a
+  // problem that has a solution. Other covering vectors take other paths:
+  // retry with a few fixed pseudo-random ones (deterministic).
+  Eigen::VectorXd cover = Eigen::VectorXd::Ones(n);
+  if (options.covering.size() == n && options.covering.minCoeff() > 0) cover = options.covering;
+  const int attempts = std::max(1, options.covering_attempts);
+  std::uint64_t seed = 0x9E3779B97F4A7C15ull;
+  int total = 0;
+  std::string first_reason;
+  for (int attempt = 0; attempt < attempts; ++attempt) {
+    if (attempt > 0) {
+      for (Eigen::Index i = 0; i < n; ++i) {
+        seed = seed * 6364136223846793005ull + 1442695040888963407ull;
+        cover[i] = 0.5 + static_cast<double>(seed >> 11) * (1.0 / 9007199254740992.0) * 1.5;
+      }
+    }
+    LemkeOnce(A, b, cover, options, out);
+    total += out.pivots;
+    if (out.ok) break;
+    if (attempt == 0) first_reason = out.reason;
+  }
+  out.pivots = total;
+  if (!out.ok) {
+    out.reason = first_reason + "; " + std::to_string(attempts - 1) +
+                 " other covering vectors failed too (last: " + out.reason + ")";
+  }
   return out;
 }
 

@@ -4,6 +4,8 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
+#include <cstdlib>
 #include <limits>
 #include <numbers>
 
@@ -89,6 +91,12 @@ Eigen::Matrix3d ObjectInertia(const ObjectSpec& object) {
 namespace {
 
 constexpr double kPlaneTolerance = 1e-9;
+// Reduced-coordinate quantities (3 or 6 rows) without heap allocation.
+using SmallMatrix = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, 0, 6, 6>;
+using SmallVector = Eigen::Matrix<double, Eigen::Dynamic, 1, 0, 6, 1>;
+// A step whose physical residuals (relative to the force scale) exceed this
+// is a solver failure, not a result.
+constexpr double kAcceptedResidual = 1e-8;
 
 double LengthScale(const ObjectSpec& object) {
   double L = object.shape == ObjectShape::kBox ? object.size.maxCoeff()
@@ -225,6 +233,7 @@ struct Contact {
   bool active = false;       // has rows (a finger with zero grip force has none)
   double known_normal = -1;  // point finger: its normal force (N), else -1
   int y_plus = -1, y_minus = -1;
+  double pad = 0;  // finger: how far its pad has followed the object along n (m)
   std::vector<Point> points;
   Eigen::Vector3d normal = Eigen::Vector3d::UnitX();
   Eigen::Vector3d position = Eigen::Vector3d::Zero();
@@ -336,6 +345,23 @@ std::string BasicCheck(const Scene& s) {
     }
   }
   return {};
+}
+
+// Diagnostics: ARENA_LCP_DUMP=FILE writes a failed step's LCP (n, A, b as
+// text) so that the solver can be studied on it offline.
+void DumpLcp(const Eigen::MatrixXd& A, const Eigen::VectorXd& b) {
+  const char* path = std::getenv("ARENA_LCP_DUMP");
+  if (path == nullptr || *path == 0) return;
+  FILE* f = std::fopen(path, "w");
+  if (f == nullptr) return;
+  std::fprintf(f, "%ld\n", static_cast<long>(b.size()));
+  for (Eigen::Index i = 0; i < A.rows(); ++i) {
+    for (Eigen::Index j = 0; j < A.cols(); ++j) std::fprintf(f, "%.17g ", A(i, j));
+    std::fprintf(f, "\n");
+  }
+  for (Eigen::Index i = 0; i < b.size(); ++i) std::fprintf(f, "%.17g ", b[i]);
+  std::fprintf(f, "\n");
+  std::fclose(f);
 }
 
 }  // namespace
@@ -460,7 +486,7 @@ void ContactModel::Impl::Geometry() {
   for (Contact& ct : contacts) {
     Eigen::Matrix3d Rp = Eigen::Matrix3d::Identity();
     Eigen::Vector3d vp = Eigen::Vector3d::Zero(), wp = Eigen::Vector3d::Zero();
-    ct.position = ct.spec.position;
+    ct.position = ct.spec.position + ct.pad * ct.spec.normal;
     if (ct.pusher) {
       vp = scene.pusher->motion.velocity;
       wp = scene.pusher->motion.angular_velocity;
@@ -502,17 +528,19 @@ StepReport ContactModel::Impl::Step() {
   Eigen::Matrix<double, 6, 6> M6 = Eigen::Matrix<double, 6, 6>::Zero();
   M6.topLeftCorner<3, 3>() = mass * Eigen::Matrix3d::Identity();
   M6.bottomRightCorner<3, 3>() = Iw;
-  const Eigen::MatrixXd Mr = P.transpose() * M6 * P;
-  const Eigen::MatrixXd Minv = Mr.llt().solve(Eigen::MatrixXd::Identity(nd, nd));
+  const SmallMatrix Mr = P.transpose() * M6 * P;
+  const SmallMatrix Minv = Mr.llt().solve(SmallMatrix::Identity(nd, nd));
 
   Eigen::Matrix<double, 6, 1> tw;
   tw << v, w;
-  const Eigen::VectorXd vr = P.transpose() * tw;
+  const SmallVector vr = P.transpose() * tw;
 
-  // Known wrench: gravity, point fingers' normal forces, gyroscopic term.
+  // Known wrench: gravity and point fingers' normal forces. The gyroscopic
+  // torque -ω × Iω is left out: it is second order in the slow turning rates
+  // of pushing (the quasi-dynamic regime of the model), and its explicit
+  // integration pumps energy into a spinning body.
   Eigen::Matrix<double, 6, 1> known = Eigen::Matrix<double, 6, 1>::Zero();
   known.head<3>() = mass * scene.gravity;
-  known.tail<3>() = -w.cross(Iw * w);
   for (const Contact& ct : contacts) {
     if (ct.known_normal > 0) {
       const Eigen::Vector3d f = ct.known_normal * ct.normal;
@@ -520,8 +548,8 @@ StepReport ContactModel::Impl::Step() {
       known.tail<3>() += (ct.points[0].p - c).cross(f);
     }
   }
-  const Eigen::VectorXd Q = P.transpose() * known;
-  const Eigen::VectorXd vfree = vr + dt * Minv * Q;
+  const SmallVector Q = P.transpose() * known;
+  const SmallVector vfree = vr + dt * Minv * Q;
 
   // Columns of the grasp map for every force unknown, in reduced coordinates.
   Jc.resize(nd, nf);
@@ -581,70 +609,97 @@ StepReport ContactModel::Impl::Step() {
     }
   }
 
-  const LcpResult sol = SolveLcp(A, b, basis.empty() ? nullptr : &basis);
-  rep.pivots = sol.pivots;
-  rep.warm_start_used = sol.warm_start_used;
-  if (!sol.ok) {
-    rep.ok = false;
-    rep.error = "LCP (" + std::to_string(n) + " unknowns): " + sol.reason;
-    basis.clear();
-    return rep;
-  }
-  basis = sol.basis;
-
-  // Forces (N) and the new twist.
-  const Eigen::VectorXd f = Fs * sol.z.head(nf);
-  const Eigen::VectorXd vr_new = vfree + dt * (K * f);
-  const Eigen::Matrix<double, 6, 1> tw_new = P * vr_new;
-  const Eigen::Vector3d v_new = tw_new.head<3>();
-  const Eigen::Vector3d w_new = tw_new.tail<3>();
+  // Solve (warm from the last basis), then check the physical residuals; a
+  // warm-started answer that fails them is solved again cold.
+  LcpResult sol;
+  Eigen::VectorXd f;
+  SmallVector vr_new;
+  Eigen::Vector3d v_new, w_new;
+  Residuals res;
   auto object_velocity = [&](const Eigen::Vector3d& p) -> Eigen::Vector3d {
     return v_new + w_new.cross(p - c);
   };
   auto zv = [&](int i) { return i >= 0 ? sol.z[i] * (i < nf ? Fs : Vs) : 0.0; };
-
-  // Residuals, recomputed from the physical quantities (not the solver's w).
-  Residuals res;
-  {
-    const Eigen::VectorXd newton = Mr * (vr_new - vr) / dt - (Jc * f + Q);
-    for (int i = 0; i < nd; ++i) {
-      const bool torque = planar ? i == 2 : i >= 3;
-      res.force_balance = std::max(res.force_balance, std::abs(newton[i]) / (Fs * (torque ? L : 1.0)));
+  for (int attempt = 0;; ++attempt) {
+    sol = SolveLcp(A, b, attempt == 0 && !basis.empty() ? &basis : nullptr);
+    rep.pivots += sol.pivots;
+    rep.warm_start_used = sol.warm_start_used;
+    if (!sol.ok) {
+      DumpLcp(A, b);
+      rep.ok = false;
+      rep.error = "LCP (" + std::to_string(n) + " unknowns): " + sol.reason;
+      basis.clear();
+      return rep;
     }
-  }
-  auto comp = [&](double z_nd, double w_nd) {
-    res.complementarity = std::max(res.complementarity, std::abs(std::min(z_nd, w_nd)));
-  };
-  for (Contact& ct : contacts) {
-    if (!ct.active) continue;
-    const double vf = zv(ct.y_plus) - zv(ct.y_minus);
-    double sum = 0;
-    for (Point& pt : ct.points) {
-      const Eigen::Vector3d urel =
-          object_velocity(pt.p) - (ct.pusher ? pt.body_velocity : Eigen::Vector3d(vf * ct.normal));
-      const double lam = pt.lambda >= 0 ? zv(pt.lambda) : ct.known_normal;
-      sum += lam;
-      if (pt.lambda >= 0) comp(lam / Fs, (ct.normal.dot(urel) + pt.gap / dt) / Vs);
-      if (pt.beta0 >= 0) {
-        const double xi = zv(pt.xi);
-        double bsum = 0;
-        for (int e = 0; e < edges_per_point; ++e) {
-          const double be = zv(pt.beta0 + e);
-          bsum += be;
-          comp(be / Fs, (xi + ct.edges[static_cast<size_t>(e)].dot(urel)) / Vs);
-        }
-        const double slack = ct.spec.mu * lam - bsum;
-        comp(xi / Vs, slack / Fs);
-        res.cone = std::max(res.cone, -slack / Fs);
+    // A pad's velocity is y+ - y-; their common part is a free direction.
+    for (const Contact& ct : contacts) {
+      if (ct.y_plus < 0) continue;
+      const double common = std::min(sol.z[ct.y_plus], sol.z[ct.y_minus]);
+      sol.z[ct.y_plus] -= common;
+      sol.z[ct.y_minus] -= common;
+    }
+
+    // Forces (N) and the new twist.
+    f = Fs * sol.z.head(nf);
+    vr_new = vfree + dt * (K * f);
+    const Eigen::Matrix<double, 6, 1> tw_new = P * vr_new;
+    v_new = tw_new.head<3>();
+    w_new = tw_new.tail<3>();
+
+    // Residuals, recomputed from the physical quantities (not the solver's w).
+    res = Residuals{};
+    {
+      const SmallVector newton = Mr * (vr_new - vr) / dt - (Jc * f + Q);
+      for (int i = 0; i < nd; ++i) {
+        const bool torque = planar ? i == 2 : i >= 3;
+        res.force_balance = std::max(res.force_balance, std::abs(newton[i]) / (Fs * (torque ? L : 1.0)));
       }
     }
-    if (ct.y_plus >= 0) {
-      const double err = (sum - scene.grip_force) / Fs;
-      res.force_balance = std::max(res.force_balance, std::abs(err));
-      comp(zv(ct.y_plus) / Vs, err);
-      comp(zv(ct.y_minus) / Vs, -err);
+    auto comp = [&](double z_nd, double w_nd) {
+      res.complementarity = std::max(res.complementarity, std::abs(std::min(z_nd, w_nd)));
+    };
+    for (Contact& ct : contacts) {
+      if (!ct.active) continue;
+      const double vf = zv(ct.y_plus) - zv(ct.y_minus);
+      double sum = 0;
+      for (Point& pt : ct.points) {
+        const Eigen::Vector3d urel =
+            object_velocity(pt.p) - (ct.pusher ? pt.body_velocity : Eigen::Vector3d(vf * ct.normal));
+        const double lam = pt.lambda >= 0 ? zv(pt.lambda) : ct.known_normal;
+        sum += lam;
+        if (pt.lambda >= 0) comp(lam / Fs, (ct.normal.dot(urel) + pt.gap / dt) / Vs);
+        if (pt.beta0 >= 0) {
+          const double xi = zv(pt.xi);
+          double bsum = 0;
+          for (int e = 0; e < edges_per_point; ++e) {
+            const double be = zv(pt.beta0 + e);
+            bsum += be;
+            comp(be / Fs, (xi + ct.edges[static_cast<size_t>(e)].dot(urel)) / Vs);
+          }
+          const double slack = ct.spec.mu * lam - bsum;
+          comp(xi / Vs, slack / Fs);
+          res.cone = std::max(res.cone, -slack / Fs);
+        }
+      }
+      if (ct.y_plus >= 0) {
+        const double err = (sum - scene.grip_force) / Fs;
+        res.force_balance = std::max(res.force_balance, std::abs(err));
+        comp(zv(ct.y_plus) / Vs, err);
+        comp(zv(ct.y_minus) / Vs, -err);
+      }
     }
+    const double worst = std::max({res.force_balance, res.complementarity, res.cone});
+    if (std::isfinite(worst) && worst <= kAcceptedResidual) break;
+    if (attempt == 0 && sol.warm_start_used) continue;
+    DumpLcp(A, b);
+    char buf[128];
+    std::snprintf(buf, sizeof buf, "LCP (%d unknowns): inaccurate solution (relative residual %.3g)", n, worst);
+    rep.ok = false;
+    rep.error = buf;
+    basis.clear();
+    return rep;
   }
+  basis = sol.basis;
   rep.residuals = res;
 
   // Contact states (on the object, gripper frame) and modes.
@@ -679,10 +734,16 @@ StepReport ContactModel::Impl::Step() {
     states[ci] = st;
   }
 
-  // Integrate (semi-implicit Euler on the new twist).
+  // Integrate (semi-implicit Euler on the new twist). Pressing fingers'
+  // pads follow the object along their normals; the pusher tracks its gaps.
   for (Contact& ct : contacts) {
-    if (!ct.pusher) continue;
-    for (Point& pt : ct.points) pt.gap += dt * ct.normal.dot(object_velocity(pt.p) - pt.body_velocity);
+    if (ct.pusher) {
+      for (Point& pt : ct.points) pt.gap += dt * ct.normal.dot(object_velocity(pt.p) - pt.body_velocity);
+    } else if (ct.active) {
+      const double vf = ct.y_plus >= 0 ? zv(ct.y_plus) - zv(ct.y_minus)
+                                       : ct.normal.dot(object_velocity(ct.points[0].p));
+      ct.pad += dt * vf;
+    }
   }
   v = v_new;
   w = w_new;

@@ -1,8 +1,9 @@
 // Linear complementarity problems: find z >= 0 with w = A z + b >= 0 and
-// z_i w_i = 0. Solved by Lemke's complementary pivoting (covering vector of
-// ones, lexicographic ratio test against cycling on degenerate problems),
-// with a bounded pivot count and an optional warm start from a previous
-// basis. The model (model.hpp) hands it nondimensional problems, so the
+// z_i w_i = 0. Solved by Lemke's complementary pivoting (lexicographic ratio
+// test against cycling on degenerate problems), with a bounded pivot count
+// per run, an optional warm start from a previous basis, and a few runs with
+// other covering vectors when a run ends on a ray (the contact LCP is
+// copositive but not copositive-plus, so one run is not guaranteed). The model (model.hpp) hands it nondimensional problems, so the
 // tolerances here are relative by construction.
 #pragma once
 
@@ -17,6 +18,8 @@ struct LcpOptions {
   int max_pivots = 0;             // 0: 50 n + 200
   double pivot_tolerance = 1e-12; // smallest usable pivot (nondimensional)
   double feasibility = 1e-9;      // accepted negativity of z, w (nondimensional)
+  Eigen::VectorXd covering;       // Lemke's covering vector (> 0); empty: all ones
+  int covering_attempts = 8;      // runs with other covering vectors after a failed one
 };
 
 struct LcpResult {
@@ -25,7 +28,7 @@ struct LcpResult {
   Eigen::VectorXd z;
   Eigen::VectorXd w;             // A z + b
   std::vector<char> basis;       // basis[i] != 0: z_i is basic (a warm start for the next solve)
-  int pivots = 0;                // Lemke pivots (0 for a trivial or warm-started solve)
+  int pivots = 0;                // Lemke pivots over all runs (0: trivial or warm-started)
   bool warm_start_used = false;  // the previous basis solved the problem directly
   double natural_residual = 0;   // max_i |min(z_i, w_i)|
 };

@@ -17,10 +17,11 @@
 // velocities (v_f = y⁺ - y⁻); it is nondimensionalised by the scene's
 // force, mass and time-step scales and solved with SolveLcp (lcp.hpp).
 //
-// Geometry: fingers stay where they are in the gripper frame (their pads
-// follow the object along their normals); the pusher's contact points move
-// with its motion; contact points on the object are taken where the contacts
-// are, so the object slides under them. Line constituent points are spread
+// Geometry: fingers stay where they are in the gripper frame except that
+// their pads follow the object along their normals; the pusher's contact
+// points move with its motion; contact points on the object are taken where
+// the contacts are, so the object slides under them. The gyroscopic torque
+// is neglected (quasi-dynamic regime; explicit integration of it is unstable). Line constituent points are spread
 // evenly over the line; patch constituent points sit on a ring of radius
 // 2R/3 (which gives a uniformly pressed disk's torsional friction 2/3 μ N R
 // when the points share the load) starting along t1, a single point at the

@@ -1,0 +1,114 @@
+// Contact model speed: median time of one step and time of a 2-s trial for
+// canonical scenes (point / line / patch fingers, with and without pusher;
+// planar reduction vs full 6 DOF), with the LCP size of each.
+//
+//   build/bench/mechanics_bench --benchmark_min_time=0.5
+//
+// Trial_*: one Simulate() of 2 s (500 steps at dt 4 ms, 250 Hz samples).
+// Step_*: the same 2-s trial stepped directly; counters give the median and
+// 90th percentile of single steps (µs) over all steps run.
+#include <algorithm>
+#include <chrono>
+#include <fstream>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include <benchmark/benchmark.h>
+
+#include "arena/mechanics/model.hpp"
+#include "arena/mechanics/scene_json.hpp"
+#include "arena/mechanics/simulate.hpp"
+
+namespace {
+
+using namespace arena::mechanics;
+
+Scene Canonical() {
+  std::ifstream in(std::string(ARENA_SOURCE_DIR) + "/examples/scenes/canonical.json");
+  std::stringstream text;
+  text << in.rdbuf();
+  Scene s = ParseScene(text.str());
+  s.duration = 2.0;
+  return s;
+}
+
+enum Variant { kCanonical, kPoints, kLines, kPatches };
+
+Scene Make(Variant v, bool pusher, Reduce reduce) {
+  Scene s = Canonical();
+  for (auto& f : s.fingers) {
+    switch (v) {
+      case kCanonical: break;
+      case kPoints: f.type = ContactType::kPoint; break;
+      case kLines:
+        f.type = ContactType::kLine;
+        f.axis = {0, 0, 1};
+        f.length = 0.02;
+        break;
+      case kPatches:
+        f.type = ContactType::kPatch;
+        f.radius = 0.01;
+        break;
+    }
+  }
+  if (!pusher) s.pusher.reset();
+  s.model.reduce = reduce;
+  return s;
+}
+
+void Trial(benchmark::State& state, Variant v, bool pusher, Reduce reduce) {
+  const Scene s = Make(v, pusher, reduce);
+  SimulationResult r;
+  for (auto _ : state) {
+    r = Simulate(s);
+    benchmark::DoNotOptimize(r);
+  }
+  if (r.status != SimulationStatus::kOk) state.SkipWithError(r.error.c_str());
+  state.counters["unknowns"] = r.model.unknowns;
+  state.counters["dof"] = r.model.dof;
+  state.counters["max_pivots"] = r.solver.max_pivots;
+}
+
+void Step(benchmark::State& state, Variant v, bool pusher, Reduce reduce) {
+  const Scene s = Make(v, pusher, reduce);
+  std::vector<double> us;
+  int unknowns = 0;
+  for (auto _ : state) {
+    ContactModel m(s);
+    unknowns = m.info().unknowns;
+    for (int k = 0; k < 500; ++k) {
+      const auto t0 = std::chrono::steady_clock::now();
+      const StepReport rep = m.Step();
+      const auto t1 = std::chrono::steady_clock::now();
+      if (!rep.ok) {
+        state.SkipWithError(rep.error.c_str());
+        return;
+      }
+      us.push_back(std::chrono::duration<double, std::micro>(t1 - t0).count());
+    }
+  }
+  std::sort(us.begin(), us.end());
+  state.counters["step_median_us"] = us[us.size() / 2];
+  state.counters["step_p90_us"] = us[us.size() * 9 / 10];
+  state.counters["unknowns"] = unknowns;
+}
+
+#define ARENA_MECH_BENCH(name, v, pusher, reduce)                                      \
+  BENCHMARK_CAPTURE(Trial, name, v, pusher, reduce)->Unit(benchmark::kMillisecond); \
+  BENCHMARK_CAPTURE(Step, name, v, pusher, reduce)->Unit(benchmark::kMillisecond)
+
+ARENA_MECH_BENCH(canonical_full, kCanonical, true, Reduce::kFull);
+ARENA_MECH_BENCH(canonical_auto_planar, kCanonical, true, Reduce::kAuto);
+ARENA_MECH_BENCH(points_pusher_full, kPoints, true, Reduce::kFull);
+ARENA_MECH_BENCH(points_pusher_auto, kPoints, true, Reduce::kAuto);
+ARENA_MECH_BENCH(points_no_pusher_full, kPoints, false, Reduce::kFull);
+ARENA_MECH_BENCH(lines_pusher_full, kLines, true, Reduce::kFull);
+ARENA_MECH_BENCH(lines_pusher_auto, kLines, true, Reduce::kAuto);
+ARENA_MECH_BENCH(lines_no_pusher_full, kLines, false, Reduce::kFull);
+ARENA_MECH_BENCH(patches_pusher_full, kPatches, true, Reduce::kFull);
+ARENA_MECH_BENCH(patches_no_pusher_full, kPatches, false, Reduce::kFull);
+
+}  // namespace
+
+BENCHMARK_MAIN();

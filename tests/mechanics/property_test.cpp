@@ -1,0 +1,128 @@
+// (e) Property test: on 1,000+ random scenes every step solves, the
+// residuals stay below 1e-8 relative, the friction cones are never
+// violated and nothing is NaN.
+#include <cmath>
+#include <random>
+#include <sstream>
+
+#include <gtest/gtest.h>
+
+#include "arena/mechanics/simulate.hpp"
+#include "scenes.hpp"
+
+namespace arena::mechanics {
+namespace {
+
+struct Rng {
+  std::mt19937_64 gen;
+  double U(double a, double b) { return std::uniform_real_distribution<double>(a, b)(gen); }
+  int I(int a, int b) { return std::uniform_int_distribution<int>(a, b)(gen); }
+  bool B(double p) { return U(0, 1) < p; }
+  Eigen::Vector3d Dir() {
+    Eigen::Vector3d v;
+    do {
+      v = {std::normal_distribution<double>()(gen), std::normal_distribution<double>()(gen),
+           std::normal_distribution<double>()(gen)};
+    } while (v.norm() < 1e-3);
+    return v.normalized();
+  }
+};
+
+ContactSpec RandomContact(Rng& r, const char* name, Eigen::Vector3d position, Eigen::Vector3d normal) {
+  ContactSpec c;
+  c.name = name;
+  c.type = static_cast<ContactType>(r.I(0, 2));
+  c.position = position;
+  c.normal = normal.normalized();
+  c.mu = r.B(0.1) ? 0.0 : r.U(0.05, 1.5);
+  const Eigen::Vector3d d = r.Dir();
+  c.axis = (d - d.dot(c.normal) * c.normal).normalized();
+  if (!c.axis.allFinite() || c.axis.norm() < 0.5) c.axis = c.normal.unitOrthogonal();
+  c.length = r.U(0.002, 0.05);
+  c.radius = r.U(0.002, 0.02);
+  return c;
+}
+
+Scene RandomScene(Rng& r) {
+  Scene s;
+  s.object.shape = r.B(0.5) ? ObjectShape::kBox : ObjectShape::kCylinder;
+  s.object.size = {r.U(0.01, 0.2), r.U(0.01, 0.2), r.U(0.01, 0.2)};
+  s.object.radius = r.U(0.005, 0.1);
+  s.object.height = r.U(0.01, 0.2);
+  s.object.mass = std::exp(r.U(std::log(0.01), std::log(3.0)));
+  if (r.B(0.3)) s.object.pose.rpy = {r.U(-1, 1), r.U(-1, 1), r.U(-3, 3)};
+  s.object.pose.position = {r.U(-0.01, 0.01), r.U(-0.01, 0.01), r.U(-0.01, 0.01)};
+  s.gravity = r.B(0.2) ? Eigen::Vector3d::Zero() : Eigen::Vector3d(9.81 * (r.B(0.6) ? Eigen::Vector3d(0, 0, -1) : r.Dir()));
+  s.duration = 0.06;
+  s.grip_force = r.B(0.05) ? 0.0 : r.U(0.5, 50);
+  const double half = 0.5 * (s.object.shape == ObjectShape::kBox ? s.object.size.x() : 2 * s.object.radius);
+  // A grasp: two fingers facing each other on one line along x (anywhere on
+  // the faces), their normals tilted a little from ±x.
+  const Eigen::Vector3d offset(0, r.U(-0.01, 0.01), r.U(-0.02, 0.02));
+  const double tilt = r.B(0.4) ? 0.15 : 0.0;
+  auto finger_normal = [&](double sign) { return (Eigen::Vector3d(sign, 0, 0) + tilt * r.Dir()).normalized(); };
+  const Eigen::Vector3d c = s.object.pose.position;
+  s.fingers.push_back(RandomContact(r, "left", c + offset - Eigen::Vector3d(half, 0, 0), finger_normal(1)));
+  s.fingers.push_back(RandomContact(r, "right", c + offset + Eigen::Vector3d(half, 0, 0), finger_normal(-1)));
+  if (r.B(0.15)) s.fingers.pop_back();
+  if (r.B(0.7)) {
+    PusherSpec p;
+    static_cast<ContactSpec&>(p) = RandomContact(r, "pusher", Eigen::Vector3d::Zero(), r.Dir());
+    p.position = -0.05 * p.normal + 0.01 * r.Dir();
+    p.motion.velocity = r.B(0.1) ? Eigen::Vector3d::Zero() : Eigen::Vector3d(r.U(0, 0.05) * (r.B(0.5) ? p.normal : r.Dir()));
+    if (r.B(0.2)) p.motion.angular_velocity = r.U(0, 1.0) * r.Dir();
+    s.pusher = p;
+  }
+  s.model.facets = r.I(3, 16);
+  s.model.points = r.I(1, 5);
+  s.model.dt = r.U(0.001, 0.01);
+  s.model.reduce = r.B(0.5) ? Reduce::kAuto : Reduce::kFull;
+  return s;
+}
+
+std::string Describe(const Scene& s) {
+  std::ostringstream o;
+  o << "mass " << s.object.mass << " grip " << s.grip_force << " facets " << s.model.facets << " points "
+    << s.model.points << " dt " << s.model.dt << " pusher " << (s.pusher ? "yes" : "no") << " fingers";
+  for (const auto& f : s.fingers) o << " [type " << static_cast<int>(f.type) << " mu " << f.mu << "]";
+  return o.str();
+}
+
+bool Finite(const TrajectorySample& x) {
+  bool ok = x.position.allFinite() && x.velocity.allFinite() && x.angular_velocity.allFinite() &&
+            x.pusher_force.allFinite() && x.orientation.coeffs().allFinite();
+  for (const auto& c : x.contacts) ok = ok && std::isfinite(c.normal_force) && c.tangential_force.allFinite() && c.torque.allFinite();
+  return ok;
+}
+
+TEST(RandomScenes, ResidualsBelowOneInTenToTheEight) {
+  Rng r{std::mt19937_64(20261122)};
+  int planar = 0, steps = 0;
+  double worst_fb = 0, worst_comp = 0, worst_cone = 0;
+  const int kScenes = 1200;
+  for (int i = 0; i < kScenes; ++i) {
+    const Scene s = RandomScene(r);
+    const SimulationResult res = Simulate(s);
+    ASSERT_EQ(res.status, SimulationStatus::kOk) << "scene " << i << ": " << res.error << "\n" << Describe(s);
+    EXPECT_LT(res.residuals.force_balance, 1e-8) << "scene " << i << " " << Describe(s);
+    EXPECT_LT(res.residuals.complementarity, 1e-8) << "scene " << i << " " << Describe(s);
+    EXPECT_LE(res.residuals.cone, 1e-10) << "scene " << i << " " << Describe(s);
+    for (const auto& x : res.samples) ASSERT_TRUE(Finite(x)) << "scene " << i;
+    // Point fingers press with exactly the grip force; lines and patches sum to it.
+    if (s.grip_force > 0) {
+      for (size_t f = 0; f < s.fingers.size(); ++f) {
+        EXPECT_NEAR(res.samples.back().contacts[f].normal_force, s.grip_force, 1e-8 * s.grip_force);
+      }
+    }
+    planar += res.model.dof == 3;
+    steps += res.solver.steps;
+    worst_fb = std::max(worst_fb, res.residuals.force_balance);
+    worst_comp = std::max(worst_comp, res.residuals.complementarity);
+    worst_cone = std::max(worst_cone, res.residuals.cone);
+  }
+  std::printf("%d scenes, %d steps, %d planar; worst residuals: force balance %.3g, complementarity %.3g, cone %.3g\n",
+              kScenes, steps, planar, worst_fb, worst_comp, worst_cone);
+}
+
+}  // namespace
+}  // namespace arena::mechanics
