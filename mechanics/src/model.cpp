@@ -482,8 +482,9 @@ void ContactModel::Impl::Setup() {
   Geometry();
 }
 
-// Contact geometry at time t: fingers are fixed in the gripper frame, the
-// pusher translates with its velocity and turns about its contact point.
+// Contact geometry at time t: fingers are fixed in the gripper frame but for
+// their pads' travel along the normal; the pusher translates with its
+// velocity and turns about its contact point.
 void ContactModel::Impl::Geometry() {
   for (Contact& ct : contacts) {
     Eigen::Matrix3d Rp = Eigen::Matrix3d::Identity();
