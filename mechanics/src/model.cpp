@@ -253,6 +253,7 @@ struct ContactModel::Impl {
   bool planar = false;
   Eigen::Vector3d plane_normal = Eigen::Vector3d::UnitY();
   Eigen::Matrix<double, 6, Eigen::Dynamic> P;  // reduced -> full twist
+  Eigen::Matrix<double, 3, 6> Pt3 = Eigen::Matrix<double, 3, 6>::Zero();  // planar: Pᵀ
   int nd = 6;
   int edges_per_point = 0;
 
@@ -402,6 +403,7 @@ void ContactModel::Impl::Setup() {
     P.block<3, 1>(0, 0) = e1;
     P.block<3, 1>(0, 1) = e2;
     P.block<3, 1>(3, 2) = p;
+    Pt3 = P.transpose();
     edges_per_point = 2;
   } else {
     nd = 6;
@@ -564,7 +566,7 @@ StepReport ContactModel::Impl::Step() {
     Eigen::Matrix<double, 6, 1> col;
     col << d, (pt.p - c).cross(d);
     if (planar) {
-      Jc.col(k) = P.transpose() * col;
+      Jc.col(k) = Pt3 * col;  // fixed-size 3x6 projection
     } else {
       Jc.col(k) = col;
     }
