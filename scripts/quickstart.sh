@@ -12,7 +12,7 @@ case "$what" in
   run)
     scripts/setup.sh "$here/build"
     mkdir -p out
-    exec build/bin/arena simulate examples/scenes/canonical.json --trajectory out/canonical.csv
+    exec build/bin/arena run examples/campaigns/smoke.json --db out/smoke.db --cells 2
     ;;
   test)
     scripts/setup.sh "$here/build"

@@ -59,7 +59,7 @@ void AddExportCommand(CLI::App& app, Action* action) {
       "  arena export --db lab.db --campaign 1 --format hdf5 --out datasets/c1\n"
       "Writes trials.csv (index), the true and observed streams of every trial with ground truth,\n"
       "and manifest.json last (units, frames, counts, SHA-256 of every file); then verifies it.\n"
-      "Reads one snapshot of the store: safe while 'arena serve' runs.");
+      "Reads one snapshot of the store: safe while 'arena serve' runs.\n");
   cmd->callback([o, action] { *action = [o] { return RunExport(*o); }; });
 }
 

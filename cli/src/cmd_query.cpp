@@ -37,6 +37,8 @@ int RunQueryCommand(const QueryOptions& o) {
     std::fwrite(text.data(), 1, text.size(), stdout);
     return kExitOk;
   } catch (const db::StoreError& e) {
+    // A query that would write is the user's input, not a broken store.
+    if (e.kind() == db::StoreError::Kind::kReadOnly) throw CommandError(kExitBadInput, e.what());
     throw StoreCommandError(e);
   }
 }
@@ -61,7 +63,7 @@ void AddQueryCommand(CLI::App& app, Action* action) {
       "  arena query --db lab.db \"SELECT cell_id, COUNT(*) FROM trials GROUP BY cell_id\"\n"
       "  arena query --db lab.db \"SELECT * FROM start_state_drift\"\n"
       "The store is opened read-only: a statement that would write is refused (exit 2).\n"
-      "Tables and columns: db/README.md.");
+      "Tables and columns: db/README.md.\n");
   cmd->callback([o, action] { *action = [o] { return RunQueryCommand(*o); }; });
 }
 

@@ -37,6 +37,9 @@ class CommandError : public std::runtime_error {
 using Action = std::function<int()>;
 
 void AddSimulateCommand(CLI::App& app, Action* action);
+void AddServeCommand(CLI::App& app, Action* action);
+void AddRunCommand(CLI::App& app, Action* action);
+void AddCampaignCommands(CLI::App& app, Action* action);  // submit list status pause resume cancel
 void AddCellCommand(CLI::App& app, Action* action);
 void AddQueryCommand(CLI::App& app, Action* action);    // cmd_query.cpp (store room)
 void AddExportCommand(CLI::App& app, Action* action);   // cmd_export.cpp (store room)

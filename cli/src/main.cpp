@@ -17,6 +17,9 @@ int main(int argc, char** argv) {
   app.footer("Run 'arena COMMAND --help' for a command's options and an example.");
 
   Action action;
+  AddRunCommand(app, &action);
+  AddCampaignCommands(app, &action);
+  AddServeCommand(app, &action);
   AddSimulateCommand(app, &action);
   AddCellCommand(app, &action);
   AddQueryCommand(app, &action);

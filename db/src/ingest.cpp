@@ -91,14 +91,11 @@ struct Ingest::Impl {
 
   void CloseChunk() {
     if (open.samples == 0) return;
-    std::string blob;
-    blob.reserve(body.size() + 8);
-    EncodeBlockHeader(open.samples, &blob);
-    blob += body;
-    open.data = std::move(blob);
+    PatchBlockCount(open.samples, &body);
+    open.data = std::move(body);
     ready.push_back(std::move(open));
     open = Chunk{};
-    body.clear();
+    body = std::string();
   }
 
   void WriteReady() {
@@ -166,6 +163,9 @@ void Ingest::Add(const Sample& s) {
     m.obs_max = std::max(m.obs_max, std::sqrt(sq));
   }
   if (m.open.samples == 0) {
+    // The block header goes first; its count is patched when the chunk closes.
+    m.body.reserve(8 + static_cast<std::size_t>(m.options.samples_per_chunk) * 600);
+    EncodeBlockHeader(0, &m.body);
     m.open.first_sample = m.total;
     m.open.t_first = s.t;
     if (m.buffered == 0) m.oldest = std::chrono::steady_clock::now();

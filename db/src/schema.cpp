@@ -35,6 +35,7 @@ CREATE TABLE campaigns(
   spec_json          TEXT NOT NULL,
   state              TEXT NOT NULL DEFAULT 'active'
                      CHECK (state IN ('active','paused','cancelled','done')),
+  state_reason       TEXT NOT NULL DEFAULT '',
   priority           INTEGER NOT NULL DEFAULT 0,
   seed               INTEGER NOT NULL,
   sampler_state_json TEXT NOT NULL DEFAULT '{}',
@@ -263,7 +264,7 @@ std::unique_ptr<Store> Store::Open(const std::string& path, const StoreOptions& 
   impl->path = path;
   impl->options = options;
   if (options.read_only && !std::filesystem::exists(path)) {
-    throw StoreError(StoreError::Kind::kNotFound,
+    throw StoreError(StoreError::Kind::kIo,
                      "Store::Open: no store at '" + path + "' (create one with 'arena submit')");
   }
   int flags = SQLITE_OPEN_NOMUTEX;  // one connection per thread (documented)
@@ -284,8 +285,17 @@ std::unique_ptr<Store> Store::Open(const std::string& path, const StoreOptions& 
   sqlite3_extended_result_codes(db, 1);
   sqlite3_busy_timeout(db, options.busy_timeout_ms);
   const std::string ctx = "Store::Open '" + path + "'";
+  if (!options.read_only && sqlite3_db_readonly(db, "main") == 1) {
+    // SQLite silently opens a write-protected file read-only; say so now.
+    throw StoreError(StoreError::Kind::kReadOnly,
+                     "Store::Open: '" + path + "' is not writable (file or directory permissions, "
+                     "or a read-only file system); fix the permissions or open it read-only");
+  }
   try {
     Exec(db, "PRAGMA foreign_keys = ON", ctx);
+    if (options.max_pages > 0) {
+      Exec(db, "PRAGMA max_page_count = " + std::to_string(options.max_pages), ctx);
+    }
     if (options.read_only) {
       Exec(db, "PRAGMA query_only = ON", ctx);
     } else {
@@ -312,7 +322,7 @@ std::unique_ptr<Store> Store::Open(const std::string& path, const StoreOptions& 
                            "; use a newer arena binary");
     }
     if (version < SchemaVersion()) {
-      throw StoreError(StoreError::Kind::kNotFound,
+      throw StoreError(StoreError::Kind::kIo,
                        "Store::Open: '" + path + "' has schema version " + std::to_string(version) +
                            " (this arena writes " + std::to_string(SchemaVersion()) +
                            "); open it read-write once (e.g. 'arena serve') to migrate it");

@@ -370,12 +370,13 @@ Campaign ReadCampaign(const detail::Stmt& s) {
   c.sampler_state_json = s.Text(6);
   c.created_at = s.Real(7);
   c.updated_at = s.Real(8);
+  c.state_reason = s.Text(9);
   return c;
 }
 
 constexpr const char* kCampaignCols =
-    "SELECT id, name, spec_json, state, priority, seed, sampler_state_json, created_at, updated_at"
-    " FROM campaigns";
+    "SELECT id, name, spec_json, state, priority, seed, sampler_state_json, created_at, updated_at,"
+    " state_reason FROM campaigns";
 
 }  // namespace
 
@@ -437,7 +438,8 @@ std::vector<Campaign> Store::ListCampaigns() const {
 namespace {
 
 void SetCampaignState(Store::Impl& impl, std::int64_t id, const char* function,
-                      std::initializer_list<CampaignState> from, CampaignState to) {
+                      std::initializer_list<CampaignState> from, CampaignState to,
+                      const std::string& reason) {
   impl.RequireWritable(function);
   Tx tx(impl.db, true);
   auto s = impl.Prepare("SELECT state FROM campaigns WHERE id = ?");
@@ -453,8 +455,8 @@ void SetCampaignState(Store::Impl& impl, std::int64_t id, const char* function,
                      std::string(function) + ": campaign " + std::to_string(id) + " is " +
                          ToString(cur) + ", cannot become " + ToString(to));
   }
-  auto u = impl.Prepare("UPDATE campaigns SET state = ?, updated_at = ? WHERE id = ?");
-  u->Bind(1, ToString(to)).Bind(2, impl.Now()).Bind(3, id).Run();
+  auto u = impl.Prepare("UPDATE campaigns SET state = ?, state_reason = ?, updated_at = ? WHERE id = ?");
+  u->Bind(1, ToString(to)).Bind(2, reason).Bind(3, impl.Now()).Bind(4, id).Run();
   if (to == CampaignState::kCancelled) {
     auto q = impl.Prepare("SELECT id, attempt FROM trials WHERE campaign_id = ? AND state = 'planned'");
     q->Bind(1, id);
@@ -462,7 +464,7 @@ void SetCampaignState(Store::Impl& impl, std::int64_t id, const char* function,
     while (q->Step()) planned.emplace_back(q->Int(0), static_cast<int>(q->Int(1)));
     for (auto [tid, attempt] : planned) {
       WriteTransition(impl, tid, attempt, TrialState::kPlanned, TrialState::kCancelled, "",
-                      "campaign cancelled", function);
+                      "campaign cancelled: " + reason, function);
       auto o = impl.Prepare("UPDATE trials SET outcome = 'cancelled' WHERE id = ?");
       o->Bind(1, tid).Run();
     }
@@ -472,15 +474,16 @@ void SetCampaignState(Store::Impl& impl, std::int64_t id, const char* function,
 
 }  // namespace
 
-void Store::PauseCampaign(std::int64_t id) {
-  SetCampaignState(*impl_, id, "PauseCampaign", {CampaignState::kActive}, CampaignState::kPaused);
+void Store::PauseCampaign(std::int64_t id, const std::string& reason) {
+  SetCampaignState(*impl_, id, "PauseCampaign", {CampaignState::kActive}, CampaignState::kPaused,
+                   reason);
 }
 void Store::ResumeCampaign(std::int64_t id) {
-  SetCampaignState(*impl_, id, "ResumeCampaign", {CampaignState::kPaused}, CampaignState::kActive);
+  SetCampaignState(*impl_, id, "ResumeCampaign", {CampaignState::kPaused}, CampaignState::kActive, "");
 }
-void Store::CancelCampaign(std::int64_t id) {
+void Store::CancelCampaign(std::int64_t id, const std::string& reason) {
   SetCampaignState(*impl_, id, "CancelCampaign", {CampaignState::kActive, CampaignState::kPaused},
-                   CampaignState::kCancelled);
+                   CampaignState::kCancelled, reason);
 }
 
 std::vector<std::int64_t> Store::CompleteFinishedCampaigns() {
@@ -504,12 +507,15 @@ std::vector<std::int64_t> Store::CompleteFinishedCampaigns() {
 
 namespace {
 
+// Campaigns in scheduling order, then the first eligible planned trial of
+// each: both walk an index, so a claim costs the same with 10 or 10^6
+// planned trials (one ORDER BY over all planned trials would not).
+constexpr const char* kActiveCampaignsSql =
+    "SELECT id FROM campaigns WHERE state = 'active' ORDER BY priority DESC, id";
 constexpr const char* kNextTrialSql =
-    "SELECT t.id, t.campaign_id, t.attempt, t.seed, t.scene_json, t.defects_json"
-    " FROM trials t JOIN campaigns c ON c.id = t.campaign_id"
-    " WHERE t.state = 'planned' AND c.state = 'active' AND t.not_before <= ?"
-    " AND (t.contact_mask & ~?) = 0"
-    " ORDER BY c.priority DESC, c.id, t.idx LIMIT 1";
+    "SELECT id, campaign_id, attempt, seed, scene_json, defects_json FROM trials"
+    " WHERE state = 'planned' AND campaign_id = ? AND not_before <= ? AND (contact_mask & ~?) = 0"
+    " ORDER BY idx LIMIT 1";
 
 std::optional<ClaimedTrial> FindNext(const Store::Impl& impl, const std::string& cell_id,
                                      const char* function) {
@@ -521,17 +527,26 @@ std::optional<ClaimedTrial> FindNext(const Store::Impl& impl, const std::string&
   }
   if (cell->Text(0) != "healthy") return std::nullopt;
   const std::int64_t mask = cell->Int(1);
-  auto s = impl.Prepare(kNextTrialSql);
-  s->Bind(1, impl.Now()).Bind(2, mask);
-  if (!s->Step()) return std::nullopt;
-  ClaimedTrial t;
-  t.trial_id = s->Int(0);
-  t.campaign_id = s->Int(1);
-  t.attempt = static_cast<int>(s->Int(2));
-  t.seed = SeedFromDb(s->Int(3));
-  t.scene_json = s->Text(4);
-  t.defects_json = s->Text(5);
-  return t;
+  std::vector<std::int64_t> campaigns;
+  {
+    auto c = impl.Prepare(kActiveCampaignsSql);
+    while (c->Step()) campaigns.push_back(c->Int(0));
+  }
+  const double now = impl.Now();
+  for (const auto campaign : campaigns) {
+    auto s = impl.Prepare(kNextTrialSql);
+    s->Bind(1, campaign).Bind(2, now).Bind(3, mask);
+    if (!s->Step()) continue;
+    ClaimedTrial t;
+    t.trial_id = s->Int(0);
+    t.campaign_id = s->Int(1);
+    t.attempt = static_cast<int>(s->Int(2));
+    t.seed = SeedFromDb(s->Int(3));
+    t.scene_json = s->Text(4);
+    t.defects_json = s->Text(5);
+    return t;
+  }
+  return std::nullopt;
 }
 
 }  // namespace
@@ -559,6 +574,11 @@ std::optional<ClaimedTrial> Store::ClaimNextTrial(const std::string& cell_id) {
       " start_qx = c.start_qx, start_qy = c.start_qy, start_qz = c.start_qz"
       " FROM (SELECT * FROM cells WHERE id = ?1) AS c WHERE trials.id = ?3");
   u->Bind(1, cell_id).Bind(2, now).Bind(3, t->trial_id).Run();
+  // The trial will move the object: the cell's start state is consumed.
+  auto clear = impl_->Prepare(
+      "UPDATE cells SET start_x = NULL, start_y = NULL, start_z = NULL, start_qw = NULL,"
+      " start_qx = NULL, start_qy = NULL, start_qz = NULL, start_observed_at = NULL WHERE id = ?");
+  clear->Bind(1, cell_id).Run();
   auto r = impl_->Prepare(
       "SELECT start_x, start_y, start_z, start_qw, start_qx, start_qy, start_qz,"
       " nominal_x, nominal_y, nominal_z, nominal_qw, nominal_qx, nominal_qy, nominal_qz"
@@ -652,14 +672,18 @@ void Store::CompleteReset(std::int64_t trial_id, int attempt, const ResetReport&
   u->Bind(1, report.ok ? 1 : 0).Bind(2, report.position_error).Bind(3, report.angle_error)
       .Bind(4, report.reset_attempts).Bind(5, report.reason).Bind(6, trial_id).Run();
   if (!row.cell_id.empty()) {
-    // The pose the cell observed is where the next trial on this cell starts, ok or not.
+    // The pose the cell observed is where the next trial on this cell starts,
+    // ok or not; without an observation that start is unknown (NULL).
     auto c = impl_->Prepare(
         "UPDATE cells SET start_x = ?, start_y = ?, start_z = ?, start_qw = ?, start_qx = ?,"
         " start_qy = ?, start_qz = ?, start_observed_at = ?, updated_at = ? WHERE id = ?");
     detail::Binder b(*c);
-    for (double v : report.observed_pose) b << v;
     const double now = impl_->Now();
-    b << now << now << row.cell_id;
+    for (double v : report.observed_pose) {
+      if (report.pose_observed) b << v; else b << std::nullopt;
+    }
+    if (report.pose_observed) b << now; else b << std::nullopt;
+    b << now << row.cell_id;
     c->Run();
   }
   tx.Commit();
@@ -739,6 +763,14 @@ RecoveryReport Store::RecoverAfterRestart(const std::string& reason) {
     const auto row = LoadTrialRow(*impl_, id, "RecoverAfterRestart");
     WriteTransition(*impl_, id, attempt, TrialState::kResetting, TrialState::kResetFailed, row.cell_id,
                     reason + ": reset not confirmed", "RecoverAfterRestart");
+    auto u = impl_->Prepare(
+        "UPDATE trials SET reset_ok = 0, reset_reason = ? WHERE id = ?");
+    u->Bind(1, reason + ": reset not confirmed").Bind(2, id).Run();
+    // Where the interrupted reset left the object is unknown.
+    auto c = impl_->Prepare(
+        "UPDATE cells SET start_x = NULL, start_y = NULL, start_z = NULL, start_qw = NULL,"
+        " start_qx = NULL, start_qy = NULL, start_qz = NULL, start_observed_at = NULL WHERE id = ?");
+    c->Bind(1, row.cell_id).Run();
     report.reset_failed.push_back(id);
   }
   // Streams never published (their ingest died with the service) hold partial data only.
@@ -758,7 +790,7 @@ namespace {
 constexpr const char* kTrialCols =
     "SELECT id, campaign_id, idx, condition, replicate, seed, state, attempt, IFNULL(cell_id,''),"
     " scene_json, params_json, defects_json, IFNULL(outcome,''), gt_stream_id, not_before,"
-    " created_at, updated_at FROM trials";
+    " created_at, updated_at, dispatched_at, executed_at, finished_at FROM trials";
 
 Trial ReadTrial(const detail::Stmt& s) {
   Trial t;
@@ -779,6 +811,9 @@ Trial ReadTrial(const detail::Stmt& s) {
   t.not_before = s.Real(14);
   t.created_at = s.Real(15);
   t.updated_at = s.Real(16);
+  t.dispatched_at = s.OptReal(17);
+  t.executed_at = s.OptReal(18);
+  t.finished_at = s.OptReal(19);
   return t;
 }
 
@@ -798,6 +833,16 @@ std::vector<Trial> Store::ListTrials(std::int64_t campaign_id) const {
   s->Bind(1, campaign_id);
   std::vector<Trial> out;
   while (s->Step()) out.push_back(ReadTrial(*s));
+  return out;
+}
+
+std::vector<Trial> Store::ListTrialsByState(const std::vector<TrialState>& states) const {
+  std::string in;
+  for (auto st : states) in += std::string(in.empty() ? "'" : ",'") + ToString(st) + "'";
+  std::vector<Trial> out;
+  if (in.empty()) return out;
+  detail::Stmt s(impl_->db, std::string(kTrialCols) + " WHERE state IN (" + in + ") ORDER BY id");
+  while (s.Step()) out.push_back(ReadTrial(s));
   return out;
 }
 

@@ -40,4 +40,6 @@ namespace arena::db {
 // Block codec pieces (sample.cpp) used by the ingest to encode as samples arrive.
 void EncodeSampleBody(const Sample& s, std::string* out);
 void EncodeBlockHeader(std::uint32_t count, std::string* out);
+// Sets the sample count of a block that started with EncodeBlockHeader(0, ...).
+void PatchBlockCount(std::uint32_t count, std::string* block);
 }  // namespace arena::db

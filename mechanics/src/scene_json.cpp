@@ -700,6 +700,19 @@ void ValidateScene(const Scene& scene) {
       }
     }
   }
+  // Grip forces are prescribed (each finger pushes grip_force along its
+  // normal), so unless they cancel the grasp itself accelerates the object
+  // without bound: one finger, or fingers that do not oppose, is no grasp.
+  if (scene.grip_force > 0) {
+    Eigen::Vector3d sum = Eigen::Vector3d::Zero();
+    for (const auto& f : scene.fingers) sum += f.normal;
+    const double tolerance = 1e-3 * static_cast<double>(scene.fingers.size());
+    if (sum.norm() > tolerance) {
+      throw SceneError("fingers", "the grip forces do not balance: the finger normals sum to (" + Num(sum.x()) + ", " +
+                                      Num(sum.y()) + ", " + Num(sum.z()) + "), norm " + Num(sum.norm()) +
+                                      " > " + Num(tolerance) + " (opposing fingers' normals must cancel)");
+    }
+  }
 }
 
 namespace {

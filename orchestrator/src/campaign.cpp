@@ -500,7 +500,7 @@ bool ValidName(const std::string& name) {
 
 // ---------------------------------------------------------------------------
 
-Campaign ParseCampaign(std::string_view json_text, const std::string& base_dir) {
+Campaign ParseCampaign(std::string_view json_text, const std::string& base_dir, ConditionCheck check) {
   json doc = ParseJson(json_text, "");
   RequireObject(doc, "", {"name", "description", "seed", "priority", "scene", "variations", "sampler", "conditions",
                           "trials", "replicates", "prediction", "defects"});
@@ -691,7 +691,8 @@ Campaign ParseCampaign(std::string_view json_text, const std::string& base_dir) 
     else field = field.empty() ? "scene" : "scene." + field;
     throw CampaignError(field, e.reason());
   }
-  for (int64_t condition = 0; condition < c.conditions; ++condition) {
+  const int64_t checked = check == ConditionCheck::kAllConditions ? c.conditions : 0;
+  for (int64_t condition = 0; condition < checked; ++condition) {
     const Values values = ConditionValues(c, condition);
     const Scene scene = BuildScene(c.scene, values);
     try {

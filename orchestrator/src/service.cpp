@@ -144,6 +144,9 @@ struct Service::Impl {
   struct CellRun {
     std::string id;
     bool alive = true;
+    bool quarantined = false;
+    int execute_failures = 0;    // consecutive failed EXECUTE phases
+    int reset_failures = 0;      // consecutive failed RESET phases
     double speed = 1.0;          // the cell's announced pacing (wall s per simulated s)
     CellPhase phase = CellPhase::kIdle;
     std::int64_t trial_id = 0;
@@ -275,6 +278,7 @@ struct Service::Impl {
                            {"arena_version", a.arena_version()}};
     try {
       store->UpsertCell(id, a.contact_types(), caps.dump(), a.defects_json());
+      cell.quarantined = store->GetCell(id).state == db::CellState::kQuarantined;
       if (!was_alive || cells.size() == 1) spdlog::info("cell {} announced ({} contact types)", id,
                                                          a.contact_types().size());
     } catch (const db::StoreError& e) {
@@ -300,12 +304,24 @@ struct Service::Impl {
     }
   }
 
-  // Counts a phase result; quarantines the cell after too many failures in a row.
+  // Counts a phase result; quarantines the cell after quarantine_after
+  // failures with no fully clean trial between them. A success of one phase
+  // does not excuse failures of the other: a cell whose every reset fails
+  // while its executes succeed is still broken.
   void CellResult(CellRun& cell, bool ok, const std::string& reason) {
-    const int failures = store->RecordCellResult(cell.id, ok);
+    int& streak = cell.phase == CellPhase::kResetting ? cell.reset_failures : cell.execute_failures;
+    const int other = cell.phase == CellPhase::kResetting ? cell.execute_failures : cell.reset_failures;
+    if (ok) {
+      streak = 0;
+      if (other == 0) store->RecordCellResult(cell.id, true);
+      return;
+    }
+    ++streak;
+    const int failures = store->RecordCellResult(cell.id, false);
     if (!ok && failures >= opt.quarantine_after) {
       const std::string why = std::to_string(failures) + " failures in a row, last: " + reason;
       store->QuarantineCell(cell.id, why);
+      cell.quarantined = true;
       Count(&ServiceCounters::quarantined);
       spdlog::error("cell {} quarantined: {}", cell.id, why);
     }
@@ -356,7 +372,7 @@ struct Service::Impl {
     if (stop_requested) return;
     const auto now = Clock::now();
     for (auto& [id, cell] : cells) {
-      if (!cell.alive || cell.phase != CellPhase::kIdle || now < cell.next_claim) continue;
+      if (!cell.alive || cell.quarantined || cell.phase != CellPhase::kIdle || now < cell.next_claim) continue;
       cell.next_claim = now + std::chrono::milliseconds(200);  // poll the store gently when idle
       std::optional<db::ClaimedTrial> claim;
       try {
@@ -511,6 +527,22 @@ struct Service::Impl {
           break;
         }
         default:
+          if (st.reason().rfind("simulation:", 0) == 0) {
+            // A simulated cell's model could not run this scene. The cell is
+            // fine and a re-run is bit-identical, so the trial fails at once.
+            const std::string tag = TrialTag(ex.campaign_id, ex.trial_id, ex.attempt);
+            try {
+              store->FailTrial(ex.trial_id, ex.attempt, "cell " + id + ": " + st.reason(), "solver_failure");
+              Count(&ServiceCounters::failed);
+              spdlog::error("{}: failed on cell {}: {}", tag, id, st.reason());
+            } catch (const db::StoreError& e) {
+              spdlog::error("{}: {}", tag, e.what());
+            }
+            executions.erase(it);
+            cell.phase = CellPhase::kIdle;
+            cell.next_claim = Clock::now();
+            break;
+          }
           AbortPhase(cell, "cell " + id + " failed: " + st.reason(), true);
           break;
       }
@@ -659,8 +691,15 @@ struct Service::Impl {
     return 0;
   }
 
-  ServiceCounters Snapshot() const {
+  ServiceCounters Snapshot() {
+    int known = 0, usable = 0;
+    for (const auto& [id, cell] : cells) {
+      ++known;
+      usable += cell.alive && !cell.quarantined;
+    }
     std::lock_guard lock(counters_mu);
+    counters.cells_known = known;
+    counters.cells_usable = usable;
     return counters;
   }
 };
@@ -678,7 +717,10 @@ Service::~Service() = default;
 
 int Service::Run() { return impl_->Run(); }
 void Service::Stop() { impl_->stop_requested = true; }
-ServiceCounters Service::counters() const { return impl_->Snapshot(); }
+ServiceCounters Service::counters() const {
+  std::lock_guard lock(impl_->counters_mu);
+  return impl_->counters;
+}
 void Service::OnTick(std::function<void(const ServiceCounters&)> callback) {
   impl_->on_tick = std::move(callback);
 }

@@ -187,6 +187,14 @@ void ApplyTopicQos(const std::string& topic, fdds::ReliabilityQosPolicy* reliabi
     limits->max_samples_per_instance = 0;
     limits->max_samples = 0;
     limits->allocated_samples = 32;
+  } else if (topic == "TrialStatus") {
+    // Keyed by trial: every trial is a new instance that Fast DDS 2.9 never
+    // frees, so the default max_instances (10) stalls a service after ten
+    // trials. A handful of statuses per trial; no bound is needed.
+    limits->max_instances = 0;
+    limits->max_samples_per_instance = 0;
+    limits->max_samples = 0;
+    limits->allocated_samples = 32;
   }
 }
 

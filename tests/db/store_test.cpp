@@ -8,6 +8,8 @@
 #include <set>
 #include <thread>
 
+#include <unistd.h>
+
 #include "db_test_util.hpp"
 
 namespace arena::db {
@@ -88,7 +90,7 @@ TEST(StoreOpen, ReadOnlyRefusesEveryWriteAndMissingFile) {
   const auto path = dir.File("ro.db");
   StoreOptions ro;
   ro.read_only = true;
-  EXPECT_STORE_ERROR(Store::Open(path, ro), K::kNotFound);
+  EXPECT_STORE_ERROR(Store::Open(path, ro), K::kIo);
   Store::Open(path)->CreateCampaign(MakeCampaign(), MakeTrials(1));
   auto store = Store::Open(path, ro);
   EXPECT_TRUE(store->read_only());
@@ -310,7 +312,7 @@ TEST(StoreTrial, ResetFailureStillLetsTrialFinishAndRecordsStartState) {
   TempDir dir;
   auto store = Store::Open(dir.File("s.db"));
   store->UpsertCell("c", {"point"});
-  store->CreateCampaign(MakeCampaign(), MakeTrials(2));
+  store->CreateCampaign(MakeCampaign(), MakeTrials(4));
   auto t = store->ClaimNextTrial("c");
   auto ingest = store->BeginIngest(t->trial_id, 1);
   ingest->Add(MakeSample(0));
@@ -340,6 +342,27 @@ TEST(StoreTrial, ResetFailureStillLetsTrialFinishAndRecordsStartState) {
   EXPECT_NEAR(drift[0].mean_position_error, 0.005, 1e-12);
   EXPECT_NEAR(drift[0].mean_dx, 0.003, 1e-12);
   EXPECT_NEAR(drift[0].mean_angle_error, 0.1, 1e-9);
+  // The claim consumed the start state: a trial claimed without a reset in
+  // between has none, and a reset that observed nothing leaves none.
+  store->RetryTrial(next->trial_id, next->attempt, "cell lost", 3, 0);
+  auto unknown = store->ClaimNextTrial("c");
+  ASSERT_TRUE(unknown);
+  EXPECT_EQ(store->Drift()[0].trials, 0 + 1);  // still only the first observation
+  auto in = store->BeginIngest(unknown->trial_id, unknown->attempt);
+  in->Add(MakeSample(0));
+  in->Finish();
+  store->BeginReset(unknown->trial_id, unknown->attempt);
+  ResetReport blind;
+  blind.ok = false;
+  blind.pose_observed = false;
+  blind.observed_pose = {9, 9, 9, 1, 0, 0, 0};  // ignored
+  blind.reason = "service restarted before the reset";
+  store->CompleteReset(unknown->trial_id, unknown->attempt, blind);
+  store->RecordPrediction(unknown->trial_id, unknown->attempt, p);
+  store->FinishTrial(unknown->trial_id, unknown->attempt);
+  ASSERT_TRUE(store->ClaimNextTrial("c"));
+  EXPECT_EQ(store->Drift()[0].trials, 1);
+  EXPECT_NEAR(store->Drift()[0].max_position_error, 0.005, 1e-12);
   ExpectHealthy(*store);
 }
 
@@ -386,8 +409,8 @@ TEST(StoreTrial, RecoverAfterRestartRequeuesWithNextAttempt) {
       in->Finish();
     }
     store->BeginReset(b->trial_id, 1);
-    // "SIGKILL": the store goes away with the ingest unfinished.
-    partial.release();  // leak on purpose: no destructor runs after a crash either
+    // "SIGKILL": the store goes away with the ingest unfinished (~Ingest writes
+    // nothing, so destroying it is the same as a crash for the file).
   }
   auto store = Store::Open(path);
   EXPECT_EQ(RawScalar(path, "SELECT COUNT(*) FROM gt_streams WHERE complete = 0"), "1");
@@ -558,6 +581,74 @@ TEST(StoreStatus, CountsRateAndEta) {
   ASSERT_EQ(s.cells.size(), 1u);
   EXPECT_EQ(s.cells[0].id, "c");
   EXPECT_EQ(s.drift.size(), 1u);
+}
+
+TEST(StoreFaults, FullStoreRefusesWriteAndKeepsEarlierTrials) {
+  TempDir dir;
+  StoreOptions small;
+  small.max_pages = 400;  // 1.6 MB: room for a couple of trials of ground truth
+  auto store = Store::Open(dir.File("full.db"), small);
+  store->UpsertCell("c", {"point"});
+  store->CreateCampaign(MakeCampaign(), MakeTrials(20));
+  int done = 0;
+  bool full = false;
+  while (!full) {
+    auto t = store->ClaimNextTrial("c");
+    ASSERT_TRUE(t) << "the store never filled up";
+    try {
+      RunTrialToDone(*store, *t, 1000);
+      ++done;
+    } catch (const StoreError& e) {
+      EXPECT_EQ(e.kind(), K::kFull) << e.what();
+      EXPECT_NE(std::string(e.what()).find("free disk space"), std::string::npos) << e.what();
+      full = true;
+      // The trial that hit the limit is still dispatched, without ground truth.
+      EXPECT_EQ(store->GetTrial(t->trial_id).state, TrialState::kDispatched);
+      EXPECT_FALSE(store->GetTrial(t->trial_id).gt_stream_id.has_value());
+    }
+  }
+  EXPECT_GE(done, 1);
+  // Every finished trial is intact; the file is consistent; a restart recovers.
+  for (const auto& t : store->ListTrials(1)) {
+    if (t.state == TrialState::kDone) {
+      EXPECT_EQ(store->ReadGroundTruth(t.id).samples.size(), 1000u);
+    }
+  }
+  store.reset();
+  auto again = Store::Open(dir.File("full.db"));  // no limit now: the disk "was freed"
+  const auto report = again->RecoverAfterRestart();
+  EXPECT_EQ(report.requeued.size(), 1u);
+  ExpectHealthy(*again);
+}
+
+TEST(StoreFaults, WriteProtectedFileIsRefusedClearly) {
+  if (::geteuid() == 0) GTEST_SKIP() << "root ignores file permissions";
+  TempDir dir;
+  const auto path = dir.File("ro.db");
+  Store::Open(path)->CreateCampaign(MakeCampaign(), MakeTrials(1));
+  std::filesystem::permissions(path, std::filesystem::perms::owner_read | std::filesystem::perms::group_read);
+  EXPECT_STORE_ERROR(Store::Open(path), K::kReadOnly);
+  StoreOptions ro;
+  ro.read_only = true;
+  EXPECT_EQ(Store::Open(path, ro)->ListCampaigns().size(), 1u);  // reading still works
+}
+
+TEST(StoreCampaign, PauseReasonAndTrialsByState) {
+  TempDir dir;
+  auto store = Store::Open(dir.File("s.db"));
+  store->UpsertCell("c", {"point"});
+  const auto id = store->CreateCampaign(MakeCampaign(), MakeTrials(3));
+  store->PauseCampaign(id, "suspended: 3 reset failures in a row");
+  EXPECT_EQ(store->GetCampaign(id).state_reason, "suspended: 3 reset failures in a row");
+  store->ResumeCampaign(id);
+  EXPECT_EQ(store->GetCampaign(id).state_reason, "");
+  auto t = store->ClaimNextTrial("c");
+  const auto running = store->ListTrialsByState({TrialState::kDispatched, TrialState::kResetting});
+  ASSERT_EQ(running.size(), 1u);
+  EXPECT_EQ(running[0].id, t->trial_id);
+  EXPECT_TRUE(running[0].dispatched_at.has_value());
+  EXPECT_FALSE(running[0].finished_at.has_value());
+  EXPECT_EQ(store->ListTrialsByState({TrialState::kPlanned}).size(), 2u);
 }
 
 }  // namespace

@@ -241,6 +241,13 @@ TEST(SceneJson, EachRuleNamesItsField) {
       {"inertia impossible",
        [](json& j) { j["object"]["inertia"] = {{1e-4, 0, 0}, {0, 1e-4, 0}, {0, 0, 3e-4}}; }, "object.inertia",
        "triangle inequality"},
+      {"one finger", [](json& j) { j["fingers"].erase(1); }, "fingers", "do not balance"},
+      {"fingers on one side",
+       [](json& j) {
+         j["fingers"][1]["position"] = {-0.025, 0, 0.03};
+         j["fingers"][1]["normal"] = {1, 0, 0};
+       },
+       "fingers", "do not balance"},
       {"unknown top key", [](json& j) { j["gravity_"] = {0, 0, 0}; }, "gravity_", "unknown key"},
   };
   for (const Rule& rule : rules) {
@@ -378,6 +385,21 @@ TEST(SceneJson, OversizedInputIsRefusedBeforeParsing) {
     EXPECT_NE(std::string(e.what()).find("100000000 bytes"), std::string::npos) << e.what();
   }
   fs::remove_all(dir);
+}
+
+// Inputs the fuzzer (scripts/fuzz.sh) once crashed on: each must now be
+// parsed or refused with a SceneError.
+TEST(SceneJson, FuzzCrashersAreHandled) {
+  const fs::path dir = kSourceDir / "tests/fuzz/crashers/scene_fuzz";
+  if (!fs::exists(dir)) GTEST_SKIP() << "no crashers recorded";
+  for (const auto& entry : fs::directory_iterator(dir)) {
+    SCOPED_TRACE(entry.path().string());
+    try {
+      const Scene s = ParseScene(ReadText(entry.path()));
+      EXPECT_EQ(SceneToJson(ParseScene(SceneToJson(s))), SceneToJson(s));
+    } catch (const SceneError&) {
+    }
+  }
 }
 
 TEST(SceneJson, MissingFileIsRefused) {

@@ -2,6 +2,7 @@
 // deterministic and resumable, replicates share their scene, and bad
 // campaigns (tests/bad_inputs/campaigns/MANIFEST.tsv) are refused at the
 // field the manifest names.
+#include <cmath>
 #include <filesystem>
 #include <fstream>
 #include <set>
@@ -101,6 +102,16 @@ TEST(Campaign, LargerExampleResolvesFilesAndPlansValidScenes) {
   }
 }
 
+TEST(Campaign, ReadmeExampleIsValid) {
+  const std::string readme = ReadText(kSourceDir / "orchestrator/README.md");
+  const auto start = readme.find("```json\n");
+  ASSERT_NE(start, std::string::npos);
+  const auto end = readme.find("```", start + 8);
+  const Campaign c = ParseCampaign(readme.substr(start + 8, end - start - 8),
+                                   (kSourceDir / "examples/campaigns").string());
+  EXPECT_EQ(TrialCount(c), 36);
+}
+
 TEST(Campaign, PlanningIsDeterministic) {
   const Campaign a = Smoke();
   const Campaign b = Smoke();
@@ -167,6 +178,98 @@ TEST(Campaign, GridCoversEveryCombinationOnce) {
   EXPECT_EQ(first["grip_force"], 8.0);  // a range's grid includes its ends
 }
 
+TEST(Campaign, ReloadingCanSkipTheConditionCheck) {
+  json doc = json::parse(ReadText(kSourceDir / "examples/campaigns/smoke.json"));
+  doc["variations"]["pivot_offset"] = {{"choices", {0, 0.05}}};  // off the object for half the conditions
+  EXPECT_THROW(ParseCampaign(doc.dump()), CampaignError);
+  const Campaign c = ParseCampaign(doc.dump(), "", ConditionCheck::kBaseScene);
+  EXPECT_EQ(TrialCount(c), 36);
+  const Campaign smoke = Smoke();
+  const Campaign reloaded = ParseCampaign(smoke.source_json, "", ConditionCheck::kBaseScene);
+  EXPECT_EQ(Fingerprint(PlanTrial(reloaded, 35)), Fingerprint(PlanTrial(smoke, 35)));
+}
+
+// A rotated box: contacts placed on its rotated faces stay on them when the
+// box is stretched (every condition is validated, surface check included).
+TEST(Campaign, StretchingARotatedBoxCarriesTheContacts) {
+  const double yaw = 0.3, c = std::cos(yaw), s = std::sin(yaw);
+  json scene = json::parse(ReadText(kSourceDir / "examples/scenes/canonical.json"));
+  scene["object"]["pose"] = {{"position", {0.01, 0.02, 0}}, {"rpy", {0, 0, yaw}}};
+  const double hx = 0.025;
+  scene["fingers"][0]["position"] = {0.01 - hx * c, 0.02 - hx * s, 0};
+  scene["fingers"][0]["normal"] = {c, s, 0};
+  scene["fingers"][1]["position"] = {0.01 + hx * c, 0.02 + hx * s, 0};
+  scene["fingers"][1]["normal"] = {-c, -s, 0};
+  scene["pusher"]["position"] = {0.01, 0.02, -0.05};
+  json doc = {{"name", "rotated"}, {"seed", 3}, {"scene", scene}, {"sampler", "latin_hypercube"},
+              {"conditions", 50},
+              {"variations", {{"object_size_x", {{"min", 0.03}, {"max", 0.09}}},
+                              {"object_size_z", {{"min", 0.08}, {"max", 0.2}}},
+                              {"finger_type", {{"choices", {"point", "line", "patch"}}}},
+                              {"finger_length", 0.02}, {"finger_radius", 0.004}}}};
+  const Campaign campaign = ParseCampaign(doc.dump());
+  for (int64_t i = 0; i < TrialCount(campaign); ++i) {
+    const PlannedTrial t = PlanTrial(campaign, i);
+    // The fingers sit at +-size_x/2 along the rotated x axis.
+    const Eigen::Vector3d x_axis(c, s, 0);
+    EXPECT_NEAR((t.scene.fingers[1].position - t.scene.object.pose.position).dot(x_axis),
+                t.scene.object.size.x() / 2, 1e-12);
+    EXPECT_NEAR(t.scene.pusher->position.z(), -t.scene.object.size.z() / 2, 1e-12);
+  }
+}
+
+TEST(Campaign, CylinderRadiusVariationKeepsFingersOnTheSide) {
+  json scene = json::parse(ReadText(kSourceDir / "examples/scenes/canonical.json"));
+  scene["object"] = {{"shape", "cylinder"}, {"radius", 0.02}, {"height", 0.1}, {"mass", 0.3}};
+  scene["fingers"][0]["position"] = {-0.02, 0, 0};
+  scene["fingers"][1]["position"] = {0.02, 0, 0};
+  json doc = {{"name", "cylinder"}, {"seed", 4}, {"scene", scene}, {"sampler", "sobol"}, {"conditions", 32},
+              {"variations", {{"object_radius", {{"min", 0.01}, {"max", 0.04}}}, {"object_height", 0.12}}}};
+  const Campaign campaign = ParseCampaign(doc.dump());
+  for (int64_t i = 0; i < TrialCount(campaign); ++i) {
+    const PlannedTrial t = PlanTrial(campaign, i);
+    EXPECT_NEAR(t.scene.fingers[1].position.x(), t.scene.object.radius, 1e-12);
+    EXPECT_NEAR(t.scene.pusher->position.z(), -0.06, 1e-12);
+  }
+}
+
+// Campaign-level Latin hypercube: n conditions put one value in each of the
+// n equal strata of every range.
+TEST(Campaign, LatinHypercubeConditionsStratifyEachRange) {
+  json doc = json::parse(ReadText(kSourceDir / "examples/campaigns/smoke.json"));
+  doc["sampler"] = "latin_hypercube";
+  doc["conditions"] = 40;
+  doc["variations"]["grip_force"] = {{"min", 5}, {"max", 15}};
+  doc["variations"]["finger_mu"] = {{"min", 0.2}, {"max", 1.0}};
+  const Campaign c = ParseCampaign(doc.dump());
+  std::vector<int> grip(40, 0), mu(40, 0);
+  for (int64_t condition = 0; condition < c.conditions; ++condition) {
+    const json p = json::parse(PlanTrial(c, condition * c.replicates).parameters_json);
+    ++grip[static_cast<size_t>((p["grip_force"].get<double>() - 5) / 10 * 40)];
+    ++mu[static_cast<size_t>((p["finger_mu"].get<double>() - 0.2) / 0.8 * 40)];
+  }
+  for (int k = 0; k < 40; ++k) {
+    EXPECT_EQ(grip[static_cast<size_t>(k)], 1) << k;
+    EXPECT_EQ(mu[static_cast<size_t>(k)], 1) << k;
+  }
+}
+
+TEST(Campaign, LogScaleRangeIsUniformInLog) {
+  json doc = json::parse(ReadText(kSourceDir / "examples/campaigns/smoke.json"));
+  doc["sampler"] = "latin_hypercube";
+  doc["conditions"] = 100;
+  doc["variations"]["grip_force"] = {{"min", 1}, {"max", 100}, {"scale", "log"}};
+  const Campaign c = ParseCampaign(doc.dump());
+  int below_10 = 0;
+  for (int64_t condition = 0; condition < c.conditions; ++condition) {
+    const double g = json::parse(PlanTrial(c, condition * c.replicates).parameters_json)["grip_force"];
+    EXPECT_GE(g, 1.0);
+    EXPECT_LE(g, 100.0);
+    below_10 += g < 10;
+  }
+  EXPECT_EQ(below_10, 50);  // half the strata of log(g) lie below log(10)
+}
+
 TEST(Campaign, OutOfRangeIndexIsAnError) {
   const Campaign c = Smoke();
   EXPECT_THROW(PlanTrial(c, -1), std::out_of_range);
@@ -214,6 +317,23 @@ TEST(Campaign, BadInputCorpusIsRefusedAtTheManifestField) {
     }
   }
   EXPECT_GE(checked, 30);
+}
+
+// Inputs the fuzzer (scripts/fuzz.sh) once crashed on: each must now be
+// parsed or refused with a CampaignError.
+TEST(Campaign, FuzzCrashersAreHandled) {
+  const fs::path dir = kSourceDir / "tests/fuzz/crashers/campaign_fuzz";
+  if (!fs::exists(dir)) GTEST_SKIP() << "no crashers recorded";
+  for (const auto& entry : fs::directory_iterator(dir)) {
+    SCOPED_TRACE(entry.path().string());
+    try {
+      const Campaign c = ParseCampaign(ReadText(entry.path()), "/nonexistent-arena-fuzz-dir");
+      if (TrialCount(c) > 0) {
+        EXPECT_NO_THROW(mechanics::ValidateScene(PlanTrial(c, 0).scene));
+      }
+    } catch (const CampaignError&) {
+    }
+  }
 }
 
 TEST(Campaign, OversizedFileIsRefusedBeforeReading) {

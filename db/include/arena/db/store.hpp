@@ -138,6 +138,10 @@ struct StoreOptions {
   // checkpoint, never corrupting the file. README: "What survives which crash".
   bool synchronous_full = false;
   int busy_timeout_ms = 5000;
+  // 0: no limit. Otherwise PRAGMA max_page_count: the file may not grow past
+  // this many pages (4096 B each); a write that would is refused with kFull.
+  // Lets tests and cautious deployments bound the store's size.
+  std::int64_t max_pages = 0;
   // Seconds since the Unix epoch; tests inject a clock. Default: system clock.
   std::function<double()> clock;
 };
@@ -164,6 +168,7 @@ struct Campaign {
   std::string name;
   std::string spec_json;
   CampaignState state = CampaignState::kActive;
+  std::string state_reason;            // why it is paused / cancelled ("" when active)
   int priority = 0;
   std::uint64_t seed = 0;
   std::string sampler_state_json;
@@ -189,6 +194,9 @@ struct Trial {
   double not_before = 0;               // s since epoch: a retry waits until then
   double created_at = 0;
   double updated_at = 0;
+  std::optional<double> dispatched_at;  // s since epoch, last dispatch (absent if never)
+  std::optional<double> executed_at;
+  std::optional<double> finished_at;    // reached a terminal state
 };
 
 // What ClaimNextTrial hands the service: everything it needs to send EXECUTE.
@@ -219,6 +227,9 @@ struct ResetReport {
   double angle_error = 0;              // rad
   int reset_attempts = 1;
   std::string reason;                  // why it failed ("" if ok)
+  // false: nothing was observed (e.g. the service restarted mid-reset), so
+  // observed_pose is ignored and the next trial on the cell has no known start state.
+  bool pose_observed = true;
 };
 
 struct Prediction {
@@ -334,8 +345,9 @@ class Store {
  public:
   // Opens (and in read-write mode creates and migrates) the store at `path`.
   // @throws StoreError(kTooNew) when the file was written by a newer arena,
-  //   kIo when it cannot be opened, kCorrupt when it is not a database,
-  //   kNotFound when read-only and the file does not exist.
+  //   kIo when it cannot be opened (read-only: also when it does not exist or
+  //   has an older schema that only a read-write open migrates), kCorrupt when
+  //   it is not a database, kReadOnly when read-write but the file is write-protected.
   static std::unique_ptr<Store> Open(const std::string& path, const StoreOptions& options = {});
   ~Store();
   Store(const Store&) = delete;
@@ -363,10 +375,12 @@ class Store {
                            const std::string& sampler_state_json);
   Campaign GetCampaign(std::int64_t campaign_id) const;
   std::vector<Campaign> ListCampaigns() const;
-  void PauseCampaign(std::int64_t campaign_id);    // active -> paused
+  // active -> paused (idempotent). `reason` tells an operator's pause from
+  // an automatic suspension (e.g. "suspended: 3 reset failures in a row").
+  void PauseCampaign(std::int64_t campaign_id, const std::string& reason = "paused by operator");
   void ResumeCampaign(std::int64_t campaign_id);   // paused -> active
   // -> cancelled; its planned trials become cancelled, running ones run out.
-  void CancelCampaign(std::int64_t campaign_id);
+  void CancelCampaign(std::int64_t campaign_id, const std::string& reason = "cancelled by operator");
   // Marks active campaigns whose trials are all terminal as done; returns their ids.
   std::vector<std::int64_t> CompleteFinishedCampaigns();
 
@@ -391,7 +405,8 @@ class Store {
   // executed | reset_failed -> resetting.
   void BeginReset(std::int64_t trial_id, int attempt);
   // resetting -> reset_done | reset_failed; stores the observed start state on
-  // the cell (the next trial claimed there inherits it) and the report on the trial.
+  // the cell (the next trial claimed there inherits it; a claim consumes it)
+  // and the report on the trial.
   void CompleteReset(std::int64_t trial_id, int attempt, const ResetReport& report);
   // Stores a prediction (replacing one with the same model_key for this
   // attempt); reset_done | reset_failed -> predicted on the first one.
@@ -405,6 +420,9 @@ class Store {
 
   Trial GetTrial(std::int64_t trial_id) const;
   std::vector<Trial> ListTrials(std::int64_t campaign_id) const;
+  // Trials of all campaigns in any of `states`, by id (e.g. the running ones
+  // whose phase deadlines a restarted service must track again).
+  std::vector<Trial> ListTrialsByState(const std::vector<TrialState>& states) const;
   std::vector<Transition> ListTransitions(std::int64_t trial_id) const;
   std::vector<Prediction> ListPredictions(std::int64_t trial_id) const;
 

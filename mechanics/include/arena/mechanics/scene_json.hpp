@@ -22,6 +22,9 @@
 //    object's surface within 1% of the object's size; normals point into the
 //    object; constituent points of different contacts (and of one line or
 //    patch) must be at least 1e-6 of the object's size apart (coincident).
+//  - Grasp: with grip_force > 0 the finger normals must cancel (|sum| <=
+//    1e-3 per finger): grip forces are prescribed, so an unbalanced grasp
+//    (one finger, or fingers that do not oppose) would fling the object.
 #pragma once
 
 #include <optional>

@@ -68,6 +68,8 @@ struct ServiceCounters {
   std::int64_t quarantined = 0;         // cells quarantined
   std::int64_t recovered = 0;           // trials picked up after a restart
   std::int64_t samples = 0;             // ground-truth samples ingested
+  int cells_known = 0;                  // cells that announced themselves
+  int cells_usable = 0;                 // of those: alive and not quarantined
 };
 
 class Service {

@@ -1,0 +1,216 @@
+// arena run CAMPAIGN.json [--db FILE] [--cells N]: the embedded default. Starts
+// N simulated cells as child processes on a private DDS domain, runs the
+// service in this process until the campaign is finished, shows progress and
+// prints a summary.
+#include <unistd.h>
+
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <memory>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include <spdlog/spdlog.h>
+
+#include "arena/db/store.hpp"
+#include "arena/orchestrator/campaign.hpp"
+#include "arena/orchestrator/logging.hpp"
+#include "arena/orchestrator/service.hpp"
+#include "arena/orchestrator/submit.hpp"
+#include "campaign_input.hpp"
+#include "child_process.hpp"
+#include "commands.hpp"
+#include "progress.hpp"
+#include "signals.hpp"
+#include "store_errors.hpp"
+
+namespace arena::cli {
+namespace {
+
+struct RunOptions {
+  std::string campaign_path;
+  std::string db_path = "arena.db";
+  int cells = 2;
+  int domain = -1;            // -1: derived from the process id
+  double speed = 0;           // cells' pacing: 0 = as fast as possible
+  std::string defects_path;   // the cells' own profile (workspace, reset); optional
+  std::string log_level = "info";
+  bool quiet = false;
+};
+
+double Median(std::vector<double> v) {
+  if (v.empty()) return NAN;
+  std::sort(v.begin(), v.end());
+  const size_t n = v.size();
+  return n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
+}
+
+void PrintSummary(const std::string& db_path, std::int64_t campaign_id, double wall_s) {
+  db::StoreOptions ro;
+  ro.read_only = true;
+  auto store = db::Store::Open(db_path, ro);
+  const db::Campaign campaign = store->GetCampaign(campaign_id);
+  std::vector<double> pos_err, ang_err, force_err, force_rel, mode, pred_time;
+  std::int64_t done = 0, failed = 0, other = 0, prediction_failures = 0;
+  for (const auto& t : store->ListTrials(campaign_id)) {
+    if (t.state == db::TrialState::kDone) ++done;
+    else if (t.state == db::TrialState::kFailed) ++failed;
+    else ++other;
+    for (const auto& p : store->ListPredictions(t.id)) {
+      if (p.status != "ok") {
+        ++prediction_failures;
+        continue;
+      }
+      if (p.final_position_error) pos_err.push_back(*p.final_position_error);
+      if (p.final_angle_error) ang_err.push_back(*p.final_angle_error);
+      if (p.force_error) force_err.push_back(*p.force_error);
+      if (p.mode_agreement) mode.push_back(*p.mode_agreement);
+      pred_time.push_back(p.wall_s);
+    }
+  }
+  const std::int64_t total = done + failed + other;
+  std::printf("campaign %lld '%s': %s\n", static_cast<long long>(campaign_id), campaign.name.c_str(),
+              db::ToString(campaign.state));
+  std::printf("  trials      %lld: %lld done, %lld failed%s\n", static_cast<long long>(total),
+              static_cast<long long>(done), static_cast<long long>(failed),
+              other ? (", " + std::to_string(other) + " unfinished").c_str() : "");
+  std::printf("  time        %s wall, %.1f trials/min\n", FormatDuration(wall_s).c_str(),
+              wall_s > 0 ? 60.0 * (done + failed) / wall_s : 0.0);
+  std::printf("  model error (median over %zu predictions): final position %.3g mm, final angle %.3g deg,\n"
+              "              contact force %.3g N RMS, contact-mode agreement %.1f %%\n",
+              pos_err.size(), Median(pos_err) * 1e3, Median(ang_err) * 180 / M_PI, Median(force_err),
+              100 * Median(mode));
+  std::printf("  predictor   %.3g ms median per trial%s\n", Median(pred_time) * 1e3,
+              prediction_failures ? (", " + std::to_string(prediction_failures) + " predictions failed").c_str() : "");
+  std::printf("  store       %s  (arena status --db %s; arena query --db %s \"select ...\")\n", db_path.c_str(),
+              db_path.c_str(), db_path.c_str());
+}
+
+int Run(RunOptions opt) {
+  if (opt.cells < 1 || opt.cells > 64) throw CommandError(kExitBadInput, "--cells: must be 1..64, got " + std::to_string(opt.cells));
+  if (!(opt.speed >= 0)) throw CommandError(kExitBadInput, "--speed: must be >= 0");
+  if (opt.domain < 0) opt.domain = 100 + static_cast<int>(getpid() % 100);
+  if (opt.domain > 232) throw CommandError(kExitBadInput, "--domain: must be 0..232, got " + std::to_string(opt.domain));
+
+  // Signals first: the log's flusher, the cells and DDS threads inherit the blocked mask.
+  std::atomic<orchestrator::Service*> running{nullptr};
+  SignalWatcher signals([&running](int) {
+    if (auto* s = running.load()) s->Stop();
+  });
+
+  const orchestrator::Campaign campaign = LoadValidCampaign(opt.campaign_path);
+  std::int64_t campaign_id = 0;
+  try {
+    auto store = db::Store::Open(opt.db_path);
+    campaign_id = orchestrator::SubmitCampaign(*store, campaign);
+  } catch (const db::StoreError& e) {
+    throw StoreCommandError(e);
+  }
+  try {
+    orchestrator::SetUpServiceLog(opt.db_path, opt.log_level, /*to_stderr=*/false);
+  } catch (const std::invalid_argument& e) {
+    throw CommandError(kExitBadInput, e.what());
+  }
+  const std::int64_t trials = orchestrator::TrialCount(campaign);
+  if (!opt.quiet)
+    std::fprintf(stderr, "campaign %lld '%s': %lld trials on %d simulated cells (DDS domain %d, log %s)\n",
+                 static_cast<long long>(campaign_id), campaign.name.c_str(), static_cast<long long>(trials),
+                 opt.cells, opt.domain, orchestrator::ServiceLogPath(opt.db_path).c_str());
+
+
+  std::vector<ChildProcess> cells;
+  const std::string self = SelfExecutable();
+  for (int k = 0; k < opt.cells; ++k) {
+    std::vector<std::string> argv = {self, "cell", "--id", "sim" + std::to_string(k + 1), "--domain",
+                                     std::to_string(opt.domain), "--speed", std::to_string(opt.speed)};
+    if (!opt.defects_path.empty()) argv.insert(argv.end(), {"--defects", opt.defects_path});
+    cells.emplace_back(argv, opt.db_path + ".sim" + std::to_string(k + 1) + ".log");
+  }
+
+  orchestrator::ServiceOptions so;
+  so.db_path = opt.db_path;
+  so.domain_id = opt.domain;
+  so.exit_when_done = true;
+  so.only_campaign = campaign_id;
+  std::unique_ptr<orchestrator::Service> service;
+  try {
+    service = std::make_unique<orchestrator::Service>(so);
+  } catch (const db::StoreError& e) {
+    throw StoreCommandError(e);
+  } catch (const dds::DdsError& e) {
+    throw CommandError(kExitCommunication, e.what());
+  }
+  running = service.get();
+  if (signals.received()) service->Stop();
+
+  const auto start = std::chrono::steady_clock::now();
+  ProgressLine progress(trials, "trials");
+  std::string cells_failed;
+  std::optional<std::chrono::steady_clock::time_point> no_usable_since;
+  service->OnTick([&](const orchestrator::ServiceCounters& c) {
+    int alive = 0;
+    for (auto& cell : cells) alive += !cell.Poll().has_value();
+    if (alive == 0 && cells_failed.empty()) {
+      cells_failed = "every simulated cell exited (see " + opt.db_path + ".sim*.log)";
+      service->Stop();
+    }
+    // Quarantined or lost cells get no trials: with none left the campaign cannot finish.
+    const auto now = std::chrono::steady_clock::now();
+    if (c.cells_known > 0 && c.cells_usable == 0) {
+      if (!no_usable_since) no_usable_since = now;
+      if (now - *no_usable_since > std::chrono::seconds(5) && cells_failed.empty()) {
+        cells_failed = "no usable cell left: every cell is quarantined or lost (arena status --db " +
+                       opt.db_path + "; log " + orchestrator::ServiceLogPath(opt.db_path) + ")";
+        service->Stop();
+      }
+    } else {
+      no_usable_since.reset();
+    }
+    if (!opt.quiet) progress.Update(c.done + c.failed, c.failed, std::to_string(alive) + " cells");
+  });
+  try {
+    service->Run();
+  } catch (const db::StoreError& e) {
+    throw StoreCommandError(e);
+  }
+  progress.Finish();
+  const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  service.reset();
+  running = nullptr;
+  for (auto& cell : cells) cell.Stop();
+  spdlog::default_logger()->flush();
+
+  PrintSummary(opt.db_path, campaign_id, wall);
+  if (!cells_failed.empty()) throw CommandError(kExitCommunication, cells_failed);
+  if (signals.received()) return kExitInterrupted;
+  return kExitOk;
+}
+
+}  // namespace
+
+void AddRunCommand(CLI::App& app, Action* action) {
+  auto opt = std::make_shared<RunOptions>();
+  CLI::App* cmd = app.add_subcommand("run", "Run a campaign end to end on local simulated cells");
+  cmd->footer(
+      "Example:\n  arena run examples/campaigns/smoke.json --db smoke.db --cells 2\n"
+      "Starts the cells as child processes on a private DDS domain (this host only), runs the\n"
+      "service until the campaign is finished, prints a summary. Ctrl-C stops cleanly; run the\n"
+      "same store with `arena serve` to finish what was left.");
+  cmd->add_option("campaign", opt->campaign_path, "Campaign JSON (orchestrator/README.md)")->required();
+  cmd->add_option("--db", opt->db_path, "SQLite store (created if missing)")->capture_default_str();
+  cmd->add_option("--cells", opt->cells, "Simulated cells to start")->capture_default_str();
+  cmd->add_option("--domain", opt->domain, "DDS domain id (default: 100 + pid % 100)");
+  cmd->add_option("--speed", opt->speed, "Cells' pacing: 0 = as fast as possible, 1 = wall clock")
+      ->capture_default_str();
+  cmd->add_option("--cell-defects", opt->defects_path, "Defect profile for the cells (executors/README.md)");
+  cmd->add_option("--log-level", opt->log_level, "Service log level (the log is FILE.log next to the store)")
+      ->capture_default_str();
+  cmd->add_flag("--quiet", opt->quiet, "No progress line");
+  cmd->callback([opt, action] { *action = [opt] { return Run(*opt); }; });
+}
+
+}  // namespace arena::cli

@@ -1,0 +1,103 @@
+// arena serve --db FILE --domain D: the long-running campaign service.
+#include <signal.h>
+
+#include <atomic>
+#include <cstdio>
+#include <memory>
+#include <string>
+
+#include <spdlog/spdlog.h>
+
+#include "arena/db/store.hpp"
+#include "arena/orchestrator/logging.hpp"
+#include "arena/orchestrator/service.hpp"
+#include "commands.hpp"
+#include "signals.hpp"
+#include "store_errors.hpp"
+
+namespace arena::cli {
+namespace {
+
+struct ServeCliOptions {
+  orchestrator::ServiceOptions service;
+  std::string peers;
+  std::string log_level = "info";
+};
+
+int RunServe(ServeCliOptions opt) {
+  // Before any thread exists (the log's flusher, DDS): threads inherit the
+  // blocked signals, so only the watcher ever sees SIGTERM.
+  std::atomic<orchestrator::Service*> running{nullptr};
+  SignalWatcher signals([&running](int sig) {
+    spdlog::info("{} received", sig == SIGINT ? "SIGINT" : "SIGTERM");
+    if (auto* s = running.load()) s->Stop();
+  });
+  try {
+    if (!opt.peers.empty()) opt.service.network.peers = dds::ParsePeers(opt.peers);
+    orchestrator::SetUpServiceLog(opt.service.db_path, opt.log_level);
+  } catch (const dds::DdsError& e) {
+    throw CommandError(kExitBadInput, e.what());
+  } catch (const std::invalid_argument& e) {
+    throw CommandError(kExitBadInput, e.what());
+  } catch (const spdlog::spdlog_ex& e) {
+    throw CommandError(kExitStore, std::string("cannot write the log next to the store: ") + e.what());
+  }
+  std::unique_ptr<orchestrator::Service> service;
+  try {
+    service = std::make_unique<orchestrator::Service>(opt.service);
+  } catch (const db::StoreError& e) {
+    throw StoreCommandError(e);
+  } catch (const dds::DdsError& e) {
+    throw CommandError(kExitCommunication, e.what());
+  } catch (const std::invalid_argument& e) {
+    throw CommandError(kExitBadInput, e.what());
+  }
+  running = service.get();
+  if (signals.received()) service->Stop();  // a signal that came while it was starting
+  spdlog::info("serving store {} on DDS domain {}", opt.service.db_path, opt.service.domain_id);
+  try {
+    service->Run();
+  } catch (const db::StoreError& e) {
+    spdlog::critical("store failure, stopping: {}", e.what());
+    throw StoreCommandError(e);
+  }
+  const auto c = service->counters();
+  spdlog::info("stopped: {} dispatched, {} done, {} retried, {} failed", c.dispatched, c.done, c.retried,
+               c.failed);
+  spdlog::default_logger()->flush();
+  return kExitOk;
+}
+
+}  // namespace
+
+void AddServeCommand(CLI::App& app, Action* action) {
+  auto opt = std::make_shared<ServeCliOptions>();
+  CLI::App* cmd = app.add_subcommand("serve", "Run the campaign service: schedule trials onto cells over DDS");
+  cmd->footer(
+      "Example:\n  arena serve --db lab.db --domain 42 --log-level info\n"
+      "Logs go to FILE.log next to the store (rotated, 16 MiB x 6 at most) and to stderr.\n"
+      "SIGTERM stops dispatching and lets phases in flight finish (up to --drain s).");
+  cmd->add_option("--db", opt->service.db_path, "SQLite store (created if missing)")->required();
+  cmd->add_option("--domain", opt->service.domain_id, "DDS domain id (0..232)")->required();
+  cmd->add_option("--peers", opt->peers, "Reach other hosts: initial peers host[:port],...");
+  cmd->add_option("--discovery-server", opt->service.network.discovery_server,
+                  "Client of a Fast DDS discovery server [id@]host:port");
+  cmd->add_option("--profile-xml", opt->service.network.profile_xml, "Fast DDS XML profile file");
+  cmd->add_option("--log-level", opt->log_level, "trace, debug, info, warn, error, critical, off")
+      ->capture_default_str();
+  cmd->add_option("--max-attempts", opt->service.max_attempts, "Executions per trial before it fails")
+      ->capture_default_str();
+  cmd->add_option("--quarantine-after", opt->service.quarantine_after,
+                  "Consecutive failed phases before a cell is quarantined")
+      ->capture_default_str();
+  cmd->add_option("--execute-timeout", opt->service.execute_timeout_s,
+                  "EXECUTE budget (s) beyond the trial's duration at the cell's speed")
+      ->capture_default_str();
+  cmd->add_option("--reset-timeout", opt->service.reset_timeout_s, "RESET budget (s)")->capture_default_str();
+  cmd->add_option("--drain", opt->service.drain_timeout_s, "On SIGTERM: seconds phases in flight may finish")
+      ->capture_default_str();
+  cmd->add_option("--predictors", opt->service.predictor_threads, "Predictor threads")->capture_default_str();
+  cmd->callback([opt, action] { *action = [opt] { return RunServe(*opt); }; });
+}
+
+}  // namespace arena::cli

@@ -1,0 +1,32 @@
+#include "signals.hpp"
+
+#include <signal.h>
+
+#include <ctime>
+
+namespace arena::cli {
+
+SignalWatcher::SignalWatcher(std::function<void(int)> on_signal) {
+  sigset_t set;
+  sigemptyset(&set);
+  sigaddset(&set, SIGINT);
+  sigaddset(&set, SIGTERM);
+  pthread_sigmask(SIG_BLOCK, &set, nullptr);
+  thread_ = std::thread([this, set, on_signal = std::move(on_signal)] {
+    const timespec tick{0, 100'000'000};  // 100 ms: how soon the destructor is noticed
+    while (!done_) {
+      const int sig = sigtimedwait(&set, nullptr, &tick);
+      if (sig > 0) {
+        received_ = sig;
+        on_signal(sig);
+      }
+    }
+  });
+}
+
+SignalWatcher::~SignalWatcher() {
+  done_ = true;
+  thread_.join();
+}
+
+}  // namespace arena::cli

@@ -1,0 +1,56 @@
+#include "arena/orchestrator/submit.hpp"
+
+#include <algorithm>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include "arena/mechanics/scene_json.hpp"
+
+namespace arena::orchestrator {
+
+namespace {
+std::vector<db::PlannedTrial> PlanChunk(const Campaign& campaign, std::int64_t begin, std::int64_t end) {
+  std::vector<db::PlannedTrial> out;
+  out.reserve(static_cast<size_t>(end - begin));
+  for (std::int64_t i = begin; i < end; ++i) {
+    const PlannedTrial t = PlanTrial(campaign, i);
+    db::PlannedTrial p;
+    p.condition = static_cast<int>(t.condition);
+    p.replicate = t.replicate;
+    p.seed = t.seed;
+    p.scene_json = mechanics::SceneToJson(t.scene);
+    p.params_json = t.parameters_json;
+    p.defects_json = campaign.defects_json;
+    out.push_back(std::move(p));
+  }
+  return out;
+}
+
+std::string SamplerState(const Campaign& campaign, std::int64_t next_index) {
+  return nlohmann::json({{"sampler", ToString(campaign.sampler)},
+                         {"next_index", next_index},
+                         {"trials", TrialCount(campaign)}})
+      .dump();
+}
+}  // namespace
+
+std::int64_t SubmitCampaign(db::Store& store, const Campaign& campaign) {
+  const std::int64_t total = TrialCount(campaign);
+  std::int64_t next = std::min(total, kPlanChunk);
+  db::NewCampaign c;
+  c.name = campaign.name;
+  c.spec_json = campaign.source_json;
+  c.priority = campaign.priority;
+  c.seed = campaign.seed;
+  c.sampler_state_json = SamplerState(campaign, next);
+  const std::int64_t id = store.CreateCampaign(c, PlanChunk(campaign, 0, next));
+  while (next < total) {
+    const std::int64_t end = std::min(total, next + kPlanChunk);
+    store.AppendPlannedTrials(id, PlanChunk(campaign, next, end), SamplerState(campaign, end));
+    next = end;
+  }
+  return id;
+}
+
+}  // namespace arena::orchestrator

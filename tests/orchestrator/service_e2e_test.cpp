@@ -1,0 +1,57 @@
+// End to end: `arena run` starts the service and two simulated cells as
+// processes over DDS on a test-unique domain, runs a 60-trial campaign and
+// leaves a consistent store behind; `arena submit` + `arena serve` do the same
+// from separate processes.
+#include <gtest/gtest.h>
+
+#include "service_support.hpp"
+
+namespace arena::test {
+namespace {
+
+TEST(ServiceEndToEnd, RunsSixtyTrialsOnTwoCells) {
+  TempDir dir;
+  const std::string db = dir / "e2e.db";
+  const int rc = RunArena({"run", TestCampaign("e2e60.json"), "--db", db, "--cells", "2", "--domain",
+                           std::to_string(TestDomain(1)), "--quiet"},
+                          dir / "run.out", std::chrono::seconds(150));
+  ASSERT_EQ(rc, 0) << ReadFile(dir / "run.out") << ReadFile(db + ".log");
+  const auto counts = CountStates(db, 1);
+  EXPECT_EQ(counts.at("done"), 60) << ReadFile(db + ".log");
+  ExpectCampaignConsistent(db, 1, 60);
+  // Both cells took part.
+  auto store = OpenReadOnly(db);
+  std::map<std::string, int> per_cell;
+  for (const auto& t : store->ListTrials(1)) per_cell[t.cell_id]++;
+  EXPECT_EQ(per_cell.size(), 2u);
+  // The summary names the outcome.
+  EXPECT_NE(ReadFile(dir / "run.out").find("60 done"), std::string::npos) << ReadFile(dir / "run.out");
+}
+
+TEST(ServiceEndToEnd, SubmitToARunningServe) {
+  TempDir dir;
+  const std::string db = dir / "serve.db";
+  const std::string domain = std::to_string(TestDomain(2));
+  auto cell1 = StartArena({"cell", "--id", "c1", "--domain", domain, "--speed", "0"}, dir / "c1.log");
+  auto cell2 = StartArena({"cell", "--id", "c2", "--domain", domain, "--speed", "0"}, dir / "c2.log");
+  auto serve = StartArena({"serve", "--db", db, "--domain", domain}, dir / "serve.log");
+  ASSERT_EQ(RunArena({"submit", TestCampaign("e2e60.json"), "--db", db}, dir / "submit.out",
+                     std::chrono::seconds(30)),
+            0)
+      << ReadFile(dir / "submit.out");
+  ASSERT_TRUE(WaitUntil([&] { return CountStates(db, 1)["done"] == 60; }, std::chrono::seconds(120)))
+      << ReadFile(dir / "serve.log");
+  serve->Signal(SIGTERM);
+  auto st = serve->Wait(std::chrono::seconds(40));
+  ASSERT_TRUE(st.has_value()) << "serve did not stop on SIGTERM";
+  EXPECT_TRUE(WIFEXITED(*st) && WEXITSTATUS(*st) == 0);
+  ExpectCampaignConsistent(db, 1, 60);
+  // status --json is what scripts read.
+  ASSERT_EQ(RunArena({"status", "--db", db, "--json"}, dir / "status.json", std::chrono::seconds(20)), 0);
+  const std::string status = ReadFile(dir / "status.json");
+  EXPECT_NE(status.find("\"done\":60"), std::string::npos) << status;
+  EXPECT_NE(status.find("\"id\":\"c1\""), std::string::npos) << status;
+}
+
+}  // namespace
+}  // namespace arena::test

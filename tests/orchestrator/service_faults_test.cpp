@@ -1,0 +1,132 @@
+// Faults with real processes: the service SIGKILLed mid-campaign and
+// restarted, a cell SIGKILLed mid-trial, a cell whose resets keep failing.
+// After each, every trial ends exactly once and the store is consistent.
+#include <fstream>
+
+#include <gtest/gtest.h>
+
+#include "service_support.hpp"
+
+namespace arena::test {
+namespace {
+
+constexpr auto kCampaignTimeout = std::chrono::seconds(150);
+
+struct Cells {
+  std::vector<std::unique_ptr<Child>> procs;
+  Cells(const TempDir& dir, const std::string& domain, const std::string& speed,
+        const std::vector<std::string>& ids, const std::string& defects_for_first = "") {
+    for (size_t i = 0; i < ids.size(); ++i) {
+      std::vector<std::string> args = {"cell", "--id", ids[i], "--domain", domain, "--speed", speed};
+      if (i == 0 && !defects_for_first.empty()) args.insert(args.end(), {"--defects", defects_for_first});
+      procs.push_back(StartArena(args, dir / (ids[i] + ".log")));
+    }
+  }
+};
+
+TEST(ServiceFaults, ServiceKilledMidCampaignLosesAndDuplicatesNothing) {
+  TempDir dir;
+  const std::string db = dir / "kill.db";
+  const std::string domain = std::to_string(TestDomain(11));
+  Cells cells(dir, domain, "0.25", {"c1", "c2"});
+  ASSERT_EQ(RunArena({"submit", TestCampaign("e2e60.json"), "--db", db}, dir / "submit.out",
+                     std::chrono::seconds(30)),
+            0);
+  // Two kills at different points of the campaign, then a clean finish.
+  for (int kill_after : {8, 25}) {
+    auto serve = StartArena({"serve", "--db", db, "--domain", domain}, dir / "serve.log");
+    ASSERT_TRUE(WaitUntil([&] { return CountStates(db, 1)["done"] >= kill_after; }, kCampaignTimeout))
+        << ReadFile(dir / "serve.log");
+    serve->Signal(SIGKILL);
+    ASSERT_TRUE(serve->Wait(std::chrono::seconds(10)).has_value());
+  }
+  auto serve = StartArena({"serve", "--db", db, "--domain", domain}, dir / "serve-final.log");
+  ASSERT_TRUE(WaitUntil(
+      [&] {
+        auto c = CountStates(db, 1);
+        return c["done"] + c["failed"] == 60;
+      },
+      kCampaignTimeout))
+      << ReadFile(dir / "serve-final.log");
+  serve->Signal(SIGTERM);
+  ASSERT_TRUE(serve->Wait(std::chrono::seconds(40)).has_value());
+  EXPECT_EQ(CountStates(db, 1)["done"], 60);
+  ExpectCampaignConsistent(db, 1, 60);
+  EXPECT_NE(ReadFile(dir / "serve.log").find("recovered after restart"), std::string::npos);
+}
+
+TEST(ServiceFaults, CellKilledMidTrialIsSeenAndItsTrialRunsElsewhere) {
+  TempDir dir;
+  const std::string db = dir / "cellkill.db";
+  const std::string domain = std::to_string(TestDomain(12));
+  Cells cells(dir, domain, "0.25", {"c1", "c2"});
+  auto serve = StartArena({"serve", "--db", db, "--domain", domain}, dir / "serve.log");
+  ASSERT_EQ(RunArena({"submit", TestCampaign("e2e60.json"), "--db", db}, dir / "submit.out",
+                     std::chrono::seconds(30)),
+            0);
+  // Kill c1 while it executes a trial (after a few trials have finished).
+  std::int64_t victim = 0;
+  ASSERT_TRUE(WaitUntil(
+      [&] {
+        if (CountStates(db, 1)["done"] < 4) return false;
+        for (const auto& t : OpenReadOnly(db)->ListTrials(1)) {
+          if (t.cell_id == "c1" && t.state == db::TrialState::kDispatched) {
+            victim = t.id;
+            return true;
+          }
+        }
+        return false;
+      },
+      kCampaignTimeout));
+  cells.procs[0]->Signal(SIGKILL);
+  ASSERT_TRUE(WaitUntil(
+      [&] {
+        auto c = CountStates(db, 1);
+        return c["done"] + c["failed"] == 60;
+      },
+      kCampaignTimeout))
+      << ReadFile(dir / "serve.log");
+  ExpectCampaignConsistent(db, 1, 60);
+  auto store = OpenReadOnly(db);
+  const db::Trial t = store->GetTrial(victim);
+  EXPECT_EQ(t.state, db::TrialState::kDone);
+  EXPECT_EQ(t.cell_id, "c2");
+  EXPECT_GE(t.attempt, 2);  // lineage: the killed attempt stays in the log
+  EXPECT_EQ(store->GetCell("c1").state, db::CellState::kGone);
+  serve->Signal(SIGTERM);
+  serve->Wait(std::chrono::seconds(40));
+}
+
+TEST(ServiceFaults, CellWhoseResetsKeepFailingIsQuarantined) {
+  TempDir dir;
+  const std::string db = dir / "reset.db";
+  const std::string domain = std::to_string(TestDomain(13));
+  {
+    std::ofstream(dir / "bad_reset.json") << R"({"reset": {"failure_probability": 1.0, "max_attempts": 2}})";
+  }
+  Cells cells(dir, domain, "0.25", {"c1", "c2"}, dir / "bad_reset.json");
+  auto serve = StartArena({"serve", "--db", db, "--domain", domain, "--quarantine-after", "3"},
+                          dir / "serve.log");
+  ASSERT_EQ(RunArena({"submit", TestCampaign("e2e60.json"), "--db", db}, dir / "submit.out",
+                     std::chrono::seconds(30)),
+            0);
+  ASSERT_TRUE(WaitUntil(
+      [&] {
+        auto c = CountStates(db, 1);
+        return c["done"] + c["failed"] == 60;
+      },
+      kCampaignTimeout))
+      << ReadFile(dir / "serve.log");
+  ExpectCampaignConsistent(db, 1, 60);
+  auto store = OpenReadOnly(db);
+  EXPECT_EQ(store->GetCell("c1").state, db::CellState::kQuarantined) << ReadFile(dir / "serve.log");
+  EXPECT_EQ(store->GetCell("c2").state, db::CellState::kHealthy);
+  int on_c1 = 0;
+  for (const auto& t : store->ListTrials(1)) on_c1 += t.cell_id == "c1";
+  EXPECT_LE(on_c1, 3);  // quarantined after its third failed reset
+  serve->Signal(SIGTERM);
+  serve->Wait(std::chrono::seconds(40));
+}
+
+}  // namespace
+}  // namespace arena::test
