@@ -219,6 +219,33 @@ CREATE VIEW trial_results AS
          s.separate_fraction, s.observed_position_rmse_m
   FROM trials t LEFT JOIN gt_summary s ON s.stream_id = t.gt_stream_id;
 )sql"},
+      {2, "evaluation runs and their per-trial results (arena evaluate)", R"sql(
+CREATE TABLE evaluations(
+  id            INTEGER PRIMARY KEY,
+  campaign_id   INTEGER NOT NULL REFERENCES campaigns(id),
+  created_at    REAL NOT NULL,
+  settings_json TEXT NOT NULL DEFAULT '{}',
+  report_json   TEXT NOT NULL DEFAULT '{}'
+);
+CREATE INDEX evaluations_by_campaign ON evaluations(campaign_id);
+
+CREATE TABLE evaluation_results(
+  evaluation_id INTEGER NOT NULL REFERENCES evaluations(id),
+  trial_id      INTEGER NOT NULL REFERENCES trials(id),
+  attempt       INTEGER NOT NULL,
+  model_key     TEXT NOT NULL,
+  model_json    TEXT NOT NULL DEFAULT '{}',
+  status        TEXT NOT NULL,
+  final_position_error REAL,
+  final_angle_error    REAL,
+  force_error          REAL,
+  mode_agreement       REAL,
+  wall_s        REAL NOT NULL CHECK (wall_s >= 0),
+  detail_json   TEXT NOT NULL DEFAULT '{}',
+  PRIMARY KEY (evaluation_id, trial_id, model_key)
+);
+CREATE INDEX evaluation_results_by_model ON evaluation_results(evaluation_id, model_key);
+)sql"},
   };
   return kMigrations;
 }
