@@ -244,6 +244,7 @@ struct Contact {
 
 struct ContactModel::Impl {
   Scene scene;
+  ContactModel::LcpObserver lcp_observer;
   SimulationStatus status = SimulationStatus::kOk;
   std::string error;
   ModelInfo info;
@@ -292,6 +293,7 @@ SimulationStatus ContactModel::status() const { return impl_->status; }
 const std::string& ContactModel::error() const { return impl_->error; }
 const ModelInfo& ContactModel::info() const { return impl_->info; }
 StepReport ContactModel::Step() { return impl_->Step(); }
+void ContactModel::SetLcpObserver(LcpObserver observer) { impl_->lcp_observer = std::move(observer); }
 double ContactModel::time() const { return impl_->t; }
 const Eigen::Vector3d& ContactModel::position() const { return impl_->c; }
 Eigen::Quaterniond ContactModel::orientation() const { return impl_->q; }
@@ -620,6 +622,7 @@ StepReport ContactModel::Impl::Step() {
     return v_new + w_new.cross(p - c);
   };
   auto zv = [&](int i) { return i >= 0 ? sol.z[i] * (i < nf ? Fs : Vs) : 0.0; };
+  if (lcp_observer) lcp_observer(A, b);
   for (int attempt = 0;; ++attempt) {
     sol = SolveLcp(A, b, attempt == 0 && !basis.empty() ? &basis : nullptr);
     rep.pivots += sol.pivots;
