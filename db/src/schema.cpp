@@ -35,7 +35,6 @@ CREATE TABLE campaigns(
   spec_json          TEXT NOT NULL,
   state              TEXT NOT NULL DEFAULT 'active'
                      CHECK (state IN ('active','paused','cancelled','done')),
-  state_reason       TEXT NOT NULL DEFAULT '',
   priority           INTEGER NOT NULL DEFAULT 0,
   seed               INTEGER NOT NULL,
   sampler_state_json TEXT NOT NULL DEFAULT '{}',
@@ -219,7 +218,10 @@ CREATE VIEW trial_results AS
          s.separate_fraction, s.observed_position_rmse_m
   FROM trials t LEFT JOIN gt_summary s ON s.stream_id = t.gt_stream_id;
 )sql"},
-      {2, "evaluation runs and their per-trial results (arena evaluate)", R"sql(
+      {2, "campaigns.state_reason: why a campaign is paused or cancelled", R"sql(
+ALTER TABLE campaigns ADD COLUMN state_reason TEXT NOT NULL DEFAULT '';
+)sql"},
+      {3, "evaluation runs and their per-trial results (arena evaluate)", R"sql(
 CREATE TABLE evaluations(
   id            INTEGER PRIMARY KEY,
   campaign_id   INTEGER NOT NULL REFERENCES campaigns(id),
