@@ -82,6 +82,7 @@ TEST(StoreOpen, MigratesVersionOneFile) {
     sqlite3_open(path.c_str(), &db);
     ASSERT_EQ(sqlite3_exec(db,
                            "BEGIN; ALTER TABLE campaigns DROP COLUMN state_reason;"
+                           " DROP TABLE evaluation_results; DROP TABLE evaluations;"
                            " DELETE FROM schema_migrations WHERE version > 1; PRAGMA user_version = 1;"
                            " COMMIT;",
                            nullptr, nullptr, nullptr),
