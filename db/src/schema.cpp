@@ -221,6 +221,33 @@ CREATE VIEW trial_results AS
       {2, "campaigns.state_reason: why a campaign is paused or cancelled", R"sql(
 ALTER TABLE campaigns ADD COLUMN state_reason TEXT NOT NULL DEFAULT '';
 )sql"},
+      {3, "evaluation runs and their per-trial results (arena evaluate)", R"sql(
+CREATE TABLE evaluations(
+  id            INTEGER PRIMARY KEY,
+  campaign_id   INTEGER NOT NULL REFERENCES campaigns(id),
+  created_at    REAL NOT NULL,
+  settings_json TEXT NOT NULL DEFAULT '{}',
+  report_json   TEXT NOT NULL DEFAULT '{}'
+);
+CREATE INDEX evaluations_by_campaign ON evaluations(campaign_id);
+
+CREATE TABLE evaluation_results(
+  evaluation_id INTEGER NOT NULL REFERENCES evaluations(id),
+  trial_id      INTEGER NOT NULL REFERENCES trials(id),
+  attempt       INTEGER NOT NULL,
+  model_key     TEXT NOT NULL,
+  model_json    TEXT NOT NULL DEFAULT '{}',
+  status        TEXT NOT NULL,
+  final_position_error REAL,
+  final_angle_error    REAL,
+  force_error          REAL,
+  mode_agreement       REAL,
+  wall_s        REAL NOT NULL CHECK (wall_s >= 0),
+  detail_json   TEXT NOT NULL DEFAULT '{}',
+  PRIMARY KEY (evaluation_id, trial_id, model_key)
+);
+CREATE INDEX evaluation_results_by_model ON evaluation_results(evaluation_id, model_key);
+)sql"},
   };
   return kMigrations;
 }

@@ -5,6 +5,8 @@
 #include <algorithm>
 #include <cmath>
 #include <cstring>
+#include <map>
+#include <set>
 #include <nlohmann/json.hpp>
 
 #include "sqlite_util.hpp"
@@ -689,23 +691,32 @@ void Store::CompleteReset(std::int64_t trial_id, int attempt, const ResetReport&
   tx.Commit();
 }
 
-void Store::RecordPrediction(std::int64_t trial_id, int attempt, const Prediction& p) {
-  impl_->RequireWritable("RecordPrediction");
-  if (p.model_key.empty()) BadInput("RecordPrediction: model_key is empty");
-  if (p.status.empty()) BadInput("RecordPrediction: status is empty");
-  ParseObject(p.model_json, "RecordPrediction: model_json");
-  ParseObject(p.detail_json, "RecordPrediction: detail_json");
+namespace {
+
+// @throws kBadInput naming the field (prefix: "Function: ...").
+void CheckPrediction(const Prediction& p, const std::string& prefix) {
+  if (p.model_key.empty()) BadInput(prefix + "model_key is empty");
+  if (p.status.empty()) BadInput(prefix + "status is empty");
+  ParseObject(p.model_json, prefix + "model_json");
+  ParseObject(p.detail_json, prefix + "detail_json");
   for (auto [v, name] : {std::pair{p.final_position_error, "final_position_error"},
                          std::pair{p.final_angle_error, "final_angle_error"},
                          std::pair{p.force_error, "force_error"},
                          std::pair{p.mode_agreement, "mode_agreement"}}) {
-    if (v) RequireFinite(*v, std::string("RecordPrediction: ") + name);
+    if (v) RequireFinite(*v, prefix + name);
   }
-  RequireFinite(p.wall_s, "RecordPrediction: wall_s");
-  if (p.wall_s < 0) BadInput("RecordPrediction: wall_s must be >= 0");
+  RequireFinite(p.wall_s, prefix + "wall_s");
+  if (p.wall_s < 0) BadInput(prefix + "wall_s must be >= 0");
   if (p.mode_agreement && (*p.mode_agreement < 0 || *p.mode_agreement > 1)) {
-    BadInput("RecordPrediction: mode_agreement must be in [0, 1]");
+    BadInput(prefix + "mode_agreement must be in [0, 1]");
   }
+}
+
+}  // namespace
+
+void Store::RecordPrediction(std::int64_t trial_id, int attempt, const Prediction& p) {
+  impl_->RequireWritable("RecordPrediction");
+  CheckPrediction(p, "RecordPrediction: ");
   Tx tx(impl_->db, true);
   const auto row = LoadTrialRow(*impl_, trial_id, "RecordPrediction");
   CheckAttempt(row, trial_id, attempt, "RecordPrediction");
@@ -727,6 +738,126 @@ void Store::RecordPrediction(std::int64_t trial_id, int attempt, const Predictio
       .Bind(9, p.mode_agreement).Bind(10, p.wall_s).Bind(11, p.detail_json).Bind(12, impl_->Now());
   s->Run();
   tx.Commit();
+}
+
+std::int64_t Store::RecordEvaluation(std::int64_t campaign_id, const std::string& settings_json,
+                                     const std::string& report_json,
+                                     const std::vector<EvaluationResult>& results) {
+  impl_->RequireWritable("RecordEvaluation");
+  ParseObject(settings_json, "RecordEvaluation: settings_json");
+  ParseObject(report_json, "RecordEvaluation: report_json");
+  for (std::size_t i = 0; i < results.size(); ++i) {
+    CheckPrediction(results[i].prediction, "RecordEvaluation: results[" + std::to_string(i) + "].");
+  }
+  Tx tx(impl_->db, true);
+  {
+    auto c = impl_->Prepare("SELECT 1 FROM campaigns WHERE id = ?");
+    c->Bind(1, campaign_id);
+    if (!c->Step()) {
+      throw StoreError(StoreError::Kind::kNotFound,
+                       "RecordEvaluation: no campaign " + std::to_string(campaign_id));
+    }
+  }
+  const double now = impl_->Now();
+  auto e = impl_->Prepare(
+      "INSERT INTO evaluations(campaign_id, created_at, settings_json, report_json) VALUES(?,?,?,?)");
+  e->Bind(1, campaign_id).Bind(2, now).Bind(3, settings_json).Bind(4, report_json).Run();
+  const std::int64_t id = sqlite3_last_insert_rowid(impl_->db);
+  std::map<std::int64_t, bool> checked;
+  std::set<std::pair<std::int64_t, std::string>> seen;
+  auto ins = impl_->Prepare(
+      "INSERT INTO evaluation_results(evaluation_id, trial_id, attempt, model_key, model_json, status,"
+      " final_position_error, final_angle_error, force_error, mode_agreement, wall_s, detail_json)"
+      " VALUES(?,?,?,?,?,?,?,?,?,?,?,?)");
+  for (const auto& r : results) {
+    const Prediction& p = r.prediction;
+    if (!checked.count(r.trial_id)) {
+      const auto row = LoadTrialRow(*impl_, r.trial_id, "RecordEvaluation");
+      if (row.campaign_id != campaign_id) {
+        BadInput("RecordEvaluation: trial " + std::to_string(r.trial_id) + " belongs to campaign " +
+                 std::to_string(row.campaign_id) + ", not " + std::to_string(campaign_id));
+      }
+      CheckAttempt(row, r.trial_id, r.attempt, "RecordEvaluation");
+      if (row.state != TrialState::kDone) {
+        throw StoreError(StoreError::Kind::kIllegalTransition,
+                         "RecordEvaluation: trial " + std::to_string(r.trial_id) + " is " +
+                             ToString(row.state) + "; only done trials are evaluated");
+      }
+      checked[r.trial_id] = true;
+    }
+    if (!seen.emplace(r.trial_id, p.model_key).second) {
+      BadInput("RecordEvaluation: trial " + std::to_string(r.trial_id) + " has two results for " +
+               p.model_key);
+    }
+    ins->Reset();
+    ins->Bind(1, id).Bind(2, r.trial_id).Bind(3, r.attempt).Bind(4, p.model_key).Bind(5, p.model_json)
+        .Bind(6, p.status).Bind(7, p.final_position_error).Bind(8, p.final_angle_error)
+        .Bind(9, p.force_error).Bind(10, p.mode_agreement).Bind(11, p.wall_s).Bind(12, p.detail_json);
+    ins->Run();
+  }
+  tx.Commit();
+  return id;
+}
+
+namespace {
+
+Evaluation ReadEvaluationRow(const detail::Stmt& s) {
+  Evaluation e;
+  e.id = s.Int(0);
+  e.campaign_id = s.Int(1);
+  e.created_at = s.Real(2);
+  e.settings_json = s.Text(3);
+  e.report_json = s.Text(4);
+  return e;
+}
+
+}  // namespace
+
+std::vector<Evaluation> Store::ListEvaluations(std::int64_t campaign_id) const {
+  auto s = impl_->Prepare(
+      "SELECT id, campaign_id, created_at, settings_json, report_json FROM evaluations"
+      " WHERE campaign_id = ? ORDER BY id");
+  s->Bind(1, campaign_id);
+  std::vector<Evaluation> out;
+  while (s->Step()) out.push_back(ReadEvaluationRow(*s));
+  return out;
+}
+
+Evaluation Store::GetEvaluation(std::int64_t evaluation_id) const {
+  auto s = impl_->Prepare(
+      "SELECT id, campaign_id, created_at, settings_json, report_json FROM evaluations WHERE id = ?");
+  s->Bind(1, evaluation_id);
+  if (!s->Step()) {
+    throw StoreError(StoreError::Kind::kNotFound,
+                     "GetEvaluation: no evaluation " + std::to_string(evaluation_id));
+  }
+  return ReadEvaluationRow(*s);
+}
+
+std::vector<EvaluationResult> Store::ListEvaluationResults(std::int64_t evaluation_id) const {
+  auto s = impl_->Prepare(
+      "SELECT trial_id, attempt, model_key, model_json, status, final_position_error, final_angle_error,"
+      " force_error, mode_agreement, wall_s, detail_json FROM evaluation_results"
+      " WHERE evaluation_id = ? ORDER BY trial_id, model_key");
+  s->Bind(1, evaluation_id);
+  std::vector<EvaluationResult> out;
+  while (s->Step()) {
+    EvaluationResult r;
+    r.trial_id = s->Int(0);
+    r.attempt = static_cast<int>(s->Int(1));
+    Prediction& p = r.prediction;
+    p.model_key = s->Text(2);
+    p.model_json = s->Text(3);
+    p.status = s->Text(4);
+    p.final_position_error = s->OptReal(5);
+    p.final_angle_error = s->OptReal(6);
+    p.force_error = s->OptReal(7);
+    p.mode_agreement = s->OptReal(8);
+    p.wall_s = s->Real(9);
+    p.detail_json = s->Text(10);
+    out.push_back(std::move(r));
+  }
+  return out;
 }
 
 void Store::FinishTrial(std::int64_t trial_id, int attempt) {

@@ -246,6 +246,7 @@ struct Contact {
 
 struct ContactModel::Impl {
   Scene scene;
+  ContactModel::LcpObserver lcp_observer;
   SimulationStatus status = SimulationStatus::kOk;
   std::string error;
   ModelInfo info;
@@ -295,6 +296,7 @@ SimulationStatus ContactModel::status() const { return impl_->status; }
 const std::string& ContactModel::error() const { return impl_->error; }
 const ModelInfo& ContactModel::info() const { return impl_->info; }
 StepReport ContactModel::Step() { return impl_->Step(); }
+void ContactModel::SetLcpObserver(LcpObserver observer) { impl_->lcp_observer = std::move(observer); }
 double ContactModel::time() const { return impl_->t; }
 const Eigen::Vector3d& ContactModel::position() const { return impl_->c; }
 Eigen::Quaterniond ContactModel::orientation() const { return impl_->q; }
@@ -625,6 +627,7 @@ StepReport ContactModel::Impl::Step() {
     return v_new + w_new.cross(p - c);
   };
   auto zv = [&](int i) { return i >= 0 ? sol.z[i] * (i < nf ? Fs : Vs) : 0.0; };
+  if (lcp_observer) lcp_observer(A, b);
   int next_covering = 0;
   for (int attempt = 0;; ++attempt) {
     // Attempt 0 may start warm; later attempts start cold, each from another

@@ -82,6 +82,7 @@ TEST(StoreOpen, MigratesVersionOneFile) {
     sqlite3_open(path.c_str(), &db);
     ASSERT_EQ(sqlite3_exec(db,
                            "BEGIN; ALTER TABLE campaigns DROP COLUMN state_reason;"
+                           " DROP TABLE evaluation_results; DROP TABLE evaluations;"
                            " DELETE FROM schema_migrations WHERE version > 1; PRAGMA user_version = 1;"
                            " COMMIT;",
                            nullptr, nullptr, nullptr),
@@ -679,6 +680,69 @@ TEST(StoreCampaign, PauseReasonAndTrialsByState) {
   EXPECT_TRUE(running[0].dispatched_at.has_value());
   EXPECT_FALSE(running[0].finished_at.has_value());
   EXPECT_EQ(store->ListTrialsByState({TrialState::kPlanned}).size(), 2u);
+}
+
+TEST(StoreEvaluation, RunStoredWithResultsOnlyForDoneTrialsAndStatesUntouched) {
+  TempDir dir;
+  auto store = Store::Open(dir.File("s.db"));
+  store->UpsertCell("cell-1", {"point", "line", "patch"});
+  const auto cid = store->CreateCampaign(MakeCampaign(), MakeTrials(2));
+  const auto other = store->CreateCampaign(MakeCampaign("other"), MakeTrials(1));
+  auto first = store->ClaimNextTrial("cell-1");
+  ASSERT_TRUE(first);
+  RunTrialToDone(*store, *first, 50);
+  auto second = store->ClaimNextTrial("cell-1");  // stays dispatched
+  ASSERT_TRUE(second);
+  ASSERT_EQ(second->campaign_id, cid);
+  const auto transitions_before = store->ListTransitions(first->trial_id).size();
+
+  auto result = [](std::int64_t trial, const std::string& key, double err) {
+    EvaluationResult r;
+    r.trial_id = trial;
+    r.attempt = 1;
+    r.prediction.model_key = key;
+    r.prediction.final_position_error = err;
+    r.prediction.wall_s = 0.01;
+    return r;
+  };
+  const auto id = store->RecordEvaluation(
+      cid, R"({"facets":[4,8]})", R"({"recommended":"g8"})",
+      {result(first->trial_id, "g4", 0.002), result(first->trial_id, "g8", 0.001)});
+  const auto runs = store->ListEvaluations(cid);
+  ASSERT_EQ(runs.size(), 1u);
+  EXPECT_EQ(runs[0].id, id);
+  EXPECT_EQ(runs[0].report_json, R"({"recommended":"g8"})");
+  EXPECT_EQ(store->GetEvaluation(id).settings_json, R"({"facets":[4,8]})");
+  const auto rows = store->ListEvaluationResults(id);
+  ASSERT_EQ(rows.size(), 2u);
+  EXPECT_EQ(rows[0].prediction.model_key, "g4");
+  EXPECT_EQ(*rows[1].prediction.final_position_error, 0.001);
+  // The trial's own prediction and state machine are untouched.
+  EXPECT_EQ(store->ListPredictions(first->trial_id).size(), 1u);
+  EXPECT_EQ(store->ListTransitions(first->trial_id).size(), transitions_before);
+
+  // Refused, and nothing written: a trial not done, of another campaign, a
+  // stale attempt, a duplicate key, a NaN, an unknown campaign.
+  const auto other_trial = store->ListTrials(other).at(0).id;
+  EXPECT_STORE_ERROR(store->RecordEvaluation(cid, "{}", "{}", {result(second->trial_id, "g4", 0)}),
+                     K::kIllegalTransition);
+  EXPECT_STORE_ERROR(store->RecordEvaluation(cid, "{}", "{}", {result(other_trial, "g4", 0)}),
+                     K::kBadInput);
+  auto stale = result(first->trial_id, "g4", 0);
+  stale.attempt = 2;
+  EXPECT_STORE_ERROR(store->RecordEvaluation(cid, "{}", "{}", {stale}), K::kStaleAttempt);
+  EXPECT_STORE_ERROR(store->RecordEvaluation(
+                         cid, "{}", "{}", {result(first->trial_id, "g4", 0), result(first->trial_id, "g4", 1)}),
+                     K::kBadInput);
+  EXPECT_STORE_ERROR(store->RecordEvaluation(cid, "{}", "{}",
+                                             {result(first->trial_id, "g4", std::nan(""))}),
+                     K::kBadInput);
+  EXPECT_STORE_ERROR(store->RecordEvaluation(999, "{}", "{}", {}), K::kNotFound);
+  EXPECT_STORE_ERROR(store->RecordEvaluation(cid, "[1]", "{}", {}), K::kBadInput);
+  EXPECT_STORE_ERROR(store->GetEvaluation(999), K::kNotFound);
+  EXPECT_EQ(store->ListEvaluations(cid).size(), 1u);
+  EXPECT_EQ(RawScalar(store->path(), "SELECT COUNT(*) FROM evaluation_results"), "2");
+  ExpectHealthy(*store);
 }
 
 }  // namespace

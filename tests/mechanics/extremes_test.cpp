@@ -10,12 +10,17 @@
 
 #include "arena/mechanics/model.hpp"
 #include "arena/mechanics/simulate.hpp"
+#include "extremes_suite.hpp"
 #include "scenes.hpp"
 
 namespace arena::mechanics {
 namespace {
 
 using testing::CanonicalScene;
+using testing::Extreme;
+using testing::Extremes;
+using testing::PatchScene;
+using testing::ScaleLength;
 
 bool Finite(const SimulationResult& r) {
   for (const auto& x : r.samples) {
@@ -29,80 +34,6 @@ bool Finite(const SimulationResult& r) {
   }
   return std::isfinite(r.residuals.force_balance) && std::isfinite(r.residuals.complementarity) &&
          std::isfinite(r.residuals.cone);
-}
-
-Scene PatchScene() {
-  Scene s = CanonicalScene();
-  s.fingers[0].type = ContactType::kPatch;
-  s.fingers[0].radius = 0.01;
-  s.fingers[1].type = ContactType::kPatch;
-  s.fingers[1].radius = 0.01;
-  s.model.points = 4;
-  return s;
-}
-
-void ScaleLength(Scene& s, double k) {
-  s.object.size *= k;
-  s.object.radius *= k;
-  s.object.height *= k;
-  s.object.pose.position *= k;
-  for (auto& f : s.fingers) {
-    f.position *= k;
-    f.length *= k;
-    f.radius *= k;
-  }
-  if (s.pusher) {
-    s.pusher->position *= k;
-    s.pusher->length *= k;
-    s.pusher->radius *= k;
-  }
-}
-
-struct Extreme {
-  std::string name;
-  std::function<void(Scene&)> apply;
-};
-
-std::vector<Extreme> Extremes() {
-  std::vector<Extreme> e;
-  for (double mu : {1e-6, 1e3}) {
-    e.push_back({"mu " + std::to_string(mu), [mu](Scene& s) {
-                   for (auto& f : s.fingers) f.mu = mu;
-                   s.pusher->mu = mu;
-                 }});
-  }
-  for (double g : {1e-6, 1e6}) e.push_back({"grip " + std::to_string(g), [g](Scene& s) { s.grip_force = g; }});
-  for (double m : {1e-6, 1e3}) e.push_back({"mass " + std::to_string(m), [m](Scene& s) { s.object.mass = m; }});
-  for (double size : {1e-4, 10.0}) {
-    e.push_back({"size " + std::to_string(size), [size](Scene& s) { ScaleLength(s, size / s.object.size.maxCoeff()); }});
-  }
-  e.push_back({"line points 1e-9 m apart", [](Scene& s) {
-                 for (auto& f : s.fingers) {
-                   if (f.type == ContactType::kLine) f.length = 2e-9;
-                   if (f.type == ContactType::kPatch) f.radius = 1.5e-9;
-                 }
-               }});
-  for (double v : {0.0, 10.0}) {
-    e.push_back({"pusher speed " + std::to_string(v), [v](Scene& s) { s.pusher->motion.velocity = {0, 0, v}; }});
-  }
-  e.push_back({"light object, huge grip", [](Scene& s) {
-                 s.object.mass = 1e-6;
-                 s.grip_force = 1e6;
-               }});
-  e.push_back({"heavy object, tiny grip, slippery", [](Scene& s) {
-                 s.object.mass = 1e3;
-                 s.grip_force = 1e-6;
-                 for (auto& f : s.fingers) f.mu = 1e-6;
-               }});
-  e.push_back({"tiny object, fast pusher", [](Scene& s) {
-                 ScaleLength(s, 1e-3);
-                 s.pusher->motion.velocity = {0, 0, 10};
-               }});
-  e.push_back({"huge object, sticky", [](Scene& s) {
-                 ScaleLength(s, 100);
-                 for (auto& f : s.fingers) f.mu = 1e3;
-               }});
-  return e;
 }
 
 TEST(Extremes, SolveWithinToleranceOrTypedError) {

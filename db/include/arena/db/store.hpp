@@ -244,6 +244,25 @@ struct Prediction {
   std::string detail_json = "{}";      // residuals, solver statistics
 };
 
+// One trial's result in an evaluation run (`arena evaluate`): the trial
+// replayed through the model at one fidelity setting, scored against its
+// ground truth. Same fields as a prediction; stored apart from `predictions`
+// so that evaluating never touches a trial's own prediction or its state.
+struct EvaluationResult {
+  std::int64_t trial_id = 0;
+  int attempt = 0;                     // the trial's attempt whose ground truth was used
+  Prediction prediction;               // model_key names the setting
+};
+
+// One evaluation run over a campaign's done trials.
+struct Evaluation {
+  std::int64_t id = 0;
+  std::int64_t campaign_id = 0;
+  double created_at = 0;               // s since epoch
+  std::string settings_json = "{}";    // the grid of settings and the budget asked for
+  std::string report_json = "{}";      // per-setting summary, Pareto front, recommendation
+};
+
 struct CellInfo {
   std::string id;
   CellState state = CellState::kHealthy;
@@ -427,6 +446,23 @@ class Store {
   std::vector<Trial> ListTrialsByState(const std::vector<TrialState>& states) const;
   std::vector<Transition> ListTransitions(std::int64_t trial_id) const;
   std::vector<Prediction> ListPredictions(std::int64_t trial_id) const;
+
+  // ---- evaluations (arena evaluate): never change a trial's state
+  // Stores one run and all its per-trial results in one transaction.
+  // @returns the evaluation id.
+  // @throws kNotFound for an unknown campaign or trial; kBadInput for a trial
+  //   of another campaign, a repeated (trial, model_key), or a bad field (as
+  //   RecordPrediction); kIllegalTransition for a trial that is not done;
+  //   kStaleAttempt when the attempt is not the trial's.
+  std::int64_t RecordEvaluation(std::int64_t campaign_id, const std::string& settings_json,
+                                const std::string& report_json,
+                                const std::vector<EvaluationResult>& results);
+  // The campaign's evaluation runs, oldest first.
+  std::vector<Evaluation> ListEvaluations(std::int64_t campaign_id) const;
+  // @throws kNotFound for an unknown evaluation.
+  Evaluation GetEvaluation(std::int64_t evaluation_id) const;
+  // A run's per-trial results, by trial id then model_key.
+  std::vector<EvaluationResult> ListEvaluationResults(std::int64_t evaluation_id) const;
 
   // ---- ground truth
   // @throws kNotFound / kStaleAttempt / kIllegalTransition unless the trial is

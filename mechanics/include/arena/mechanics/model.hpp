@@ -28,6 +28,7 @@
 // centre when points = 1.
 #pragma once
 
+#include <functional>
 #include <memory>
 #include <optional>
 #include <string>
@@ -95,6 +96,12 @@ class ContactModel {
 
   // Advances the state by one dt. On failure the state is left unchanged.
   StepReport Step();
+
+  // Called by every Step() with the step's nondimensional LCP (w = A z + b,
+  // before any solve), e.g. to collect solver benchmark problems
+  // (bench/lcp_solvers_bench.cpp). Empty: none (the default).
+  using LcpObserver = std::function<void(const Eigen::MatrixXd& A, const Eigen::VectorXd& b)>;
+  void SetLcpObserver(LcpObserver observer);
 
   double time() const;                          // s
   const Eigen::Vector3d& position() const;      // object centre of mass (m)

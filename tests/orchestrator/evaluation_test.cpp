@@ -1,0 +1,182 @@
+// The evaluation logic of `arena evaluate` on known inputs: percentiles,
+// budgets, the Pareto front and the recommendation
+// (orchestrator/include/arena/orchestrator/evaluation.hpp).
+#include <cmath>
+
+#include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
+
+#include "arena/orchestrator/evaluation.hpp"
+#include "arena/orchestrator/prediction.hpp"
+
+namespace arena::orchestrator {
+namespace {
+
+TEST(EvaluationPercentile, InterpolatesBetweenClosestRanks) {
+  EXPECT_DOUBLE_EQ(Percentile({3, 1, 2}, 0.5), 2);
+  EXPECT_DOUBLE_EQ(Percentile({1, 2, 3, 4}, 0.5), 2.5);
+  EXPECT_DOUBLE_EQ(Percentile({7}, 0.95), 7);
+  // numpy.percentile(range(1, 101), 95) == 95.05
+  std::vector<double> v;
+  for (int i = 1; i <= 100; ++i) v.push_back(i);
+  EXPECT_NEAR(Percentile(v, 0.95), 95.05, 1e-12);
+  EXPECT_DOUBLE_EQ(Percentile(v, 0), 1);
+  EXPECT_DOUBLE_EQ(Percentile(v, 1), 100);
+  EXPECT_THROW(Percentile({}, 0.5), std::invalid_argument);
+  EXPECT_THROW(Percentile({1}, 1.5), std::invalid_argument);
+  EXPECT_THROW(Percentile({1}, std::nan("")), std::invalid_argument);
+}
+
+TEST(EvaluationGrid, CrossProductInOrderAndBadListsRefused) {
+  FidelityGrid g;
+  g.facets = {4, 8};
+  g.points = {2, 3, 5};
+  g.dt = {0.004, 0.002};
+  g.reduce = {mechanics::Reduce::kAuto};
+  const auto m = ExpandGrid(g);
+  ASSERT_EQ(m.size(), 12u);
+  EXPECT_EQ(ModelKey(m[0]), "g4_k2_dt0.004_auto");
+  EXPECT_EQ(ModelKey(m[1]), "g4_k2_dt0.002_auto");
+  EXPECT_EQ(ModelKey(m[11]), "g8_k5_dt0.002_auto");
+  auto bad = g;
+  bad.facets = {};
+  EXPECT_THROW(ExpandGrid(bad), std::invalid_argument);
+  bad = g;
+  bad.facets = {2};
+  EXPECT_THROW(ExpandGrid(bad), std::invalid_argument);
+  bad = g;
+  bad.points = {3, 3};
+  EXPECT_THROW(ExpandGrid(bad), std::invalid_argument);
+  bad = g;
+  bad.dt = {-1};
+  EXPECT_THROW(ExpandGrid(bad), std::invalid_argument);
+}
+
+TEST(EvaluationBudget, ParsesShorthandMetricsAndUnits) {
+  auto b = ParseBudget("1mm");
+  EXPECT_EQ(b.metric, ErrorMetric::kPositionMedian);
+  EXPECT_DOUBLE_EQ(b.limit, 1e-3);
+  b = ParseBudget("position_p95=0.005");
+  EXPECT_EQ(b.metric, ErrorMetric::kPositionP95);
+  EXPECT_DOUBLE_EQ(b.limit, 0.005);
+  b = ParseBudget("angle_median=1deg");
+  EXPECT_NEAR(b.limit, M_PI / 180, 1e-15);
+  b = ParseBudget("force_p95=20mN");
+  EXPECT_DOUBLE_EQ(b.limit, 0.02);
+  b = ParseBudget("mode_agreement_median=95%");
+  EXPECT_DOUBLE_EQ(b.limit, 0.95);
+  EXPECT_EQ(FormatBudget(ParseBudget("2mm")), "position_median <= 0.002 m");
+  for (const char* bad : {"", "mm", "1 mm", "1kg", "angle_median=1mm", "speed=1", "-1mm",
+                          "mode_agreement_median=1.5", "nan", "position_median=inf"}) {
+    EXPECT_THROW(ParseBudget(bad), std::invalid_argument) << bad;
+  }
+}
+
+mechanics::ModelOptions Model(int facets) { return mechanics::ModelOptions{facets, 3, 0.004, mechanics::Reduce::kAuto}; }
+
+TrialEvaluation Result(std::int64_t trial, std::size_t setting, double position, double time,
+                       const std::string& status = "ok") {
+  TrialEvaluation r;
+  r.trial_id = trial;
+  r.attempt = 1;
+  r.setting = setting;
+  r.prediction.status = status;
+  r.prediction.wall_s = time;
+  if (status == "ok") {
+    r.prediction.final_position_error = position;
+    r.prediction.final_angle_error = position * 10;
+    r.prediction.force_error = position * 100;
+    r.prediction.mode_agreement = 1 - position;
+  }
+  return r;
+}
+
+// Four settings over three trials (position error m, time s):
+//   g4:  error 4 mm, 1 ms   (front: cheapest)
+//   g8:  error 2 mm, 2 ms   (front)
+//   g16: error 3 mm, 3 ms   (dominated by g8)
+//   g32: error 0.5 mm, 8 ms but fails on one trial (not eligible)
+//   g6:  error 1 mm, 4 ms   (front)
+std::vector<TrialEvaluation> KnownResults() {
+  std::vector<TrialEvaluation> r;
+  for (int t = 1; t <= 3; ++t) {
+    const double jitter = (t - 2) * 1e-4;  // medians are the t = 2 values
+    r.push_back(Result(t, 0, 4e-3 + jitter, 1e-3 + jitter * 1e-2));
+    r.push_back(Result(t, 1, 2e-3 + jitter, 2e-3));
+    r.push_back(Result(t, 2, 3e-3 + jitter, 3e-3));
+    r.push_back(Result(t, 3, 0.5e-3, 8e-3, t == 3 ? "solver_failure" : "ok"));
+    r.push_back(Result(t, 4, 1e-3 + jitter, 4e-3));
+  }
+  return r;
+}
+
+const std::vector<mechanics::ModelOptions> kModels = {Model(4), Model(8), Model(16), Model(32), Model(6)};
+
+TEST(EvaluationSummary, DistributionsParetoFrontAndFailures) {
+  const auto report = Summarise(kModels, KnownResults(), {});
+  EXPECT_EQ(report.trials, 3);
+  ASSERT_EQ(report.settings.size(), 5u);
+  const auto& g4 = report.settings[0];
+  EXPECT_EQ(g4.trials, 3);
+  EXPECT_EQ(g4.ok, 3);
+  EXPECT_NEAR(g4.position->median, 4e-3, 1e-15);
+  EXPECT_NEAR(g4.position->p95, 4e-3 + 0.9e-4, 1e-12);  // rank 1.9 of 3.9, 4.0, 4.1 mm
+  EXPECT_NEAR(g4.angle->median, 4e-2, 1e-14);
+  EXPECT_NEAR(g4.force->median, 0.4, 1e-12);
+  EXPECT_NEAR(g4.time.median, 1e-3, 1e-15);
+  const auto& g32 = report.settings[3];
+  EXPECT_EQ(g32.ok, 2);
+  EXPECT_EQ(g32.failures, 1);
+  EXPECT_FALSE(g32.eligible());
+  std::vector<bool> front;
+  for (const auto& s : report.settings) front.push_back(s.pareto);
+  EXPECT_EQ(front, (std::vector<bool>{true, true, false, false, true}));
+  // No budget: the cheapest setting that predicted every trial.
+  ASSERT_TRUE(report.recommended);
+  EXPECT_EQ(*report.recommended, 0u);
+}
+
+TEST(EvaluationSummary, RecommendsCheapestWithinBudget) {
+  auto report = Summarise(kModels, KnownResults(), {ParseBudget("2.5mm")});
+  ASSERT_TRUE(report.recommended);
+  EXPECT_EQ(report.settings[*report.recommended].model_key, ModelKey(Model(8)));
+  EXPECT_NE(report.recommendation.find("within position_median <= 0.0025 m"), std::string::npos)
+      << report.recommendation;
+  // g32 would meet 0.6 mm but failed on a trial: nothing is within budget.
+  report = Summarise(kModels, KnownResults(), {ParseBudget("0.6mm")});
+  EXPECT_FALSE(report.recommended);
+  EXPECT_NE(report.recommendation.find("none"), std::string::npos);
+  // Two budgets must both hold; the primary metric (Pareto) is the first one's.
+  report = Summarise(kModels, KnownResults(), {ParseBudget("angle_p95=25mrad"), ParseBudget("5mm")});
+  EXPECT_EQ(report.primary, ErrorMetric::kAngleP95);
+  ASSERT_TRUE(report.recommended);
+  EXPECT_EQ(report.settings[*report.recommended].model_key, ModelKey(Model(8)));
+  // Mode agreement is a minimum: of the eligible ones only g6 (median 0.999) reaches 0.9985.
+  report = Summarise(kModels, KnownResults(), {ParseBudget("mode_agreement_median=0.9985")});
+  ASSERT_TRUE(report.recommended);
+  EXPECT_EQ(report.settings[*report.recommended].model_key, ModelKey(Model(6)));
+}
+
+TEST(EvaluationSummary, EmptyCampaignAndJson) {
+  const auto empty = Summarise(kModels, {}, {ParseBudget("1mm")});
+  EXPECT_EQ(empty.trials, 0);
+  EXPECT_FALSE(empty.recommended);
+  EXPECT_FALSE(empty.settings[0].position);
+  for (const auto& s : empty.settings) EXPECT_FALSE(s.pareto);
+  const auto j = ToJson(empty);
+  EXPECT_TRUE(j["settings"][0]["position_error_m"].is_null());
+  EXPECT_TRUE(j["recommended"].is_null());
+
+  const auto full = ToJson(Summarise(kModels, KnownResults(), {ParseBudget("2.5mm")}));
+  EXPECT_EQ(full["recommended"], ModelKey(Model(8)));
+  EXPECT_EQ(full["settings"].size(), 5u);
+  EXPECT_EQ(full["settings"][1]["pareto"], true);
+  EXPECT_EQ(full["settings"][1]["within_budget"], true);
+  EXPECT_NEAR(full["settings"][1]["position_error_m"]["median"].get<double>(), 2e-3, 1e-15);
+  EXPECT_EQ(full["primary_metric"], "position_median");
+  // Parses back (no NaN written).
+  EXPECT_EQ(nlohmann::json::parse(full.dump()), full);
+}
+
+}  // namespace
+}  // namespace arena::orchestrator
