@@ -43,5 +43,6 @@ void AddCampaignCommands(CLI::App& app, Action* action);  // submit list status 
 void AddCellCommand(CLI::App& app, Action* action);
 void AddQueryCommand(CLI::App& app, Action* action);    // cmd_query.cpp (store room)
 void AddExportCommand(CLI::App& app, Action* action);   // cmd_export.cpp (store room)
+void AddPlotCommand(CLI::App& app, Action* action);     // cmd_plot.cpp
 
 }  // namespace arena::cli

@@ -24,6 +24,7 @@ int main(int argc, char** argv) {
   AddCellCommand(app, &action);
   AddQueryCommand(app, &action);
   AddExportCommand(app, &action);
+  AddPlotCommand(app, &action);
 
   try {
     app.parse(argc, argv);

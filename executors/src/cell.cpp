@@ -4,6 +4,7 @@
 #include <cmath>
 #include <condition_variable>
 #include <map>
+#include <limits>
 #include <mutex>
 #include <stdexcept>
 #include <thread>
@@ -222,6 +223,11 @@ struct Cell::Impl {
     }
     auto accepted = BaseStatus(c, msg::STATE_ACCEPTED);
     Send(accepted);
+    if (options.defects.hang_after_accept) {  // fault injection: a hung controller
+      spdlog::warn("cell {}: fault injection: hanging after accepting trial {}", options.id, c.trial_id());
+      SleepUntil(Clock::time_point::max());
+      return;
+    }
 
     const TrialPerturbation perturbation = DrawPerturbation(options.defects, c.seed(), c.trial_id());
     mechanics::Scene actual = ApplyPerturbation(scene, perturbation);
@@ -262,6 +268,10 @@ struct Cell::Impl {
         const auto& truth = result.samples[first + i];
         dds::EncodeSample(truth, PusherAt(actual, truth), observed[first + i], &batch.samples()[i]);
       }
+      // Fault injection (defects.hpp): a malformed sample, or a missing batch.
+      const bool skip_batch = options.defects.corrupt_stream == "gap" && batch_index == 1 && !batch.last();
+      if (options.defects.corrupt_stream == "nan" && batch_index == 0)
+        batch.samples()[0].object_pose()[0] = std::numeric_limits<double>::quiet_NaN();
       if (options.speed > 0) {
         const double due_s = result.samples[first + count - 1].t * options.speed;
         const auto due = stream_start + std::chrono::duration_cast<Clock::duration>(
@@ -274,7 +284,7 @@ struct Cell::Impl {
         }
       }
       // Ground truth is a log: a full history throttles us, it never drops.
-      while (!ground_truth.Write(batch)) {
+      while (!skip_batch && !ground_truth.Write(batch)) {
         if (Stopping()) {
           failure = "interrupted: cell shutting down";
           break;

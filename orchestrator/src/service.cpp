@@ -176,9 +176,15 @@ struct Service::Impl {
   // Campaign model settings: campaign id -> spec "prediction" (or null).
   std::map<std::int64_t, nlohmann::json> campaign_models;
 
+  static db::StoreOptions StoreOptionsFor(const ServiceOptions& o) {
+    db::StoreOptions so;
+    so.max_pages = o.store_max_pages;
+    return so;
+  }
+
   Impl(const ServiceOptions& o)
       : opt(o),
-        store(db::Store::Open(o.db_path)),
+        store(db::Store::Open(o.db_path, StoreOptionsFor(o))),
         participant(dds::ParticipantOptions{o.domain_id, "arena.service", o.network, 2.5}),
         commands(participant),
         announces(participant),

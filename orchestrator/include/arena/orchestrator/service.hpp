@@ -55,6 +55,8 @@ struct ServiceOptions {
   int predictor_threads = 1;            // worker threads predicting trials
   bool exit_when_done = false;          // `arena run`: stop when no active campaign is left
   std::int64_t only_campaign = 0;       // > 0: exit_when_done looks at this campaign only
+  std::int64_t store_max_pages = 0;     // > 0: the store may not grow past this many 4 KiB
+                                        //   pages (db::StoreOptions::max_pages; fault tests)
 };
 
 // What the service has done since it started (for `arena run`'s summary and tests).
