@@ -44,5 +44,6 @@ void AddCellCommand(CLI::App& app, Action* action);
 void AddQueryCommand(CLI::App& app, Action* action);    // cmd_query.cpp (store room)
 void AddExportCommand(CLI::App& app, Action* action);   // cmd_export.cpp (store room)
 void AddPlotCommand(CLI::App& app, Action* action);     // cmd_plot.cpp
+void AddWatchCommand(CLI::App& app, Action* action);    // cmd_watch.cpp
 
 }  // namespace arena::cli

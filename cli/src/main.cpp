@@ -25,6 +25,7 @@ int main(int argc, char** argv) {
   AddQueryCommand(app, &action);
   AddExportCommand(app, &action);
   AddPlotCommand(app, &action);
+  AddWatchCommand(app, &action);
 
   try {
     app.parse(argc, argv);

@@ -1,6 +1,7 @@
 #include "plot_trial.hpp"
 
 #include <cmath>
+#include <cstdio>
 #include <limits>
 
 #include <Eigen/Geometry>
@@ -43,11 +44,12 @@ void Split(const Eigen::Vector3d& f, const Eigen::Vector3d& n, double* normal, d
   *tangential = (f - *normal * n).norm();
 }
 
-Panel PosePanel(const std::string& title, const std::string& unit, const Triple& d) {
+Panel PosePanel(const std::string& title, const std::string& unit, double min_span, const Triple& d) {
   Panel p;
   p.title = title;
   p.y_label = unit;
-  p.series.push_back({"observed", d.t_obs, d.v_obs, "#9ecae1", false, false});
+  p.min_y_span = min_span;
+  p.series.push_back({"observed", d.t_obs, d.v_obs, "#6baed6", true, false});
   p.series.push_back({"true", d.t_true, d.v_true, "#222222", false, false});
   p.series.push_back({"predicted", d.t_pred, d.v_pred, "#e6550d", false, true});
   return p;
@@ -200,19 +202,21 @@ Chart MakeTrialChart(const db::Store& store, std::int64_t trial_id, TrialPlotInf
   chart.panel_height = 150;
   const char* names[3] = {"x", "y", "z"};
   for (int k = 0; k < 3; ++k)
-    chart.panels.push_back(PosePanel(std::string("object position ") + names[k] + " (gripper frame)", "mm", pos[k]));
+    chart.panels.push_back(
+        PosePanel(std::string("object position ") + names[k] + " (gripper frame)", "mm", 1.0, pos[k]));
   char axis_text[96];
   std::snprintf(axis_text, sizeof axis_text, "object rotation from start, about (%.2f, %.2f, %.2f)", axis.x(),
                 axis.y(), axis.z());
-  chart.panels.push_back(PosePanel(axis_text, "deg", angle));
+  chart.panels.push_back(PosePanel(axis_text, "deg", 1.0, angle));
   for (size_t c = 0; c < n_contacts; ++c) {
     Panel p;
     p.title = (c < n_fingers ? "finger " + std::to_string(c) + " (" + mechanics::ToString(scene.fingers[c].type) + ")"
                              : std::string("pusher")) +
               " contact force on the object";
     p.y_label = "N";
-    p.series.push_back({"normal observed", normal[c].t_obs, normal[c].v_obs, "#9ecae1", false, false});
-    p.series.push_back({"tangential observed", tangential[c].t_obs, tangential[c].v_obs, "#fdd0a2", false, false});
+    p.min_y_span = 1.0;
+    p.series.push_back({"normal observed", normal[c].t_obs, normal[c].v_obs, "#6baed6", true, false});
+    p.series.push_back({"tangential observed", tangential[c].t_obs, tangential[c].v_obs, "#fdae6b", true, false});
     p.series.push_back({"normal true", normal[c].t_true, normal[c].v_true, "#08519c", false, false});
     p.series.push_back({"tangential true", tangential[c].t_true, tangential[c].v_true, "#a63603", false, false});
     p.series.push_back({"normal predicted", normal[c].t_pred, normal[c].v_pred, "#3182bd", false, true});

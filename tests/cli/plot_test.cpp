@@ -94,11 +94,13 @@ std::map<std::string, std::vector<std::string>> SeriesByPanel(const tinyxml2::XM
     for (const auto* s = g->FirstChildElement("g"); s; s = s->NextSiblingElement("g")) {
       out[title].push_back(s->Attribute("data-name"));
       if (points) {
+        // A line's points, or a marker series' circles.
         const auto* line = s->FirstChildElement("polyline");
         std::istringstream in(line && line->Attribute("points") ? line->Attribute("points") : "");
         std::string p;
         int n = 0;
         while (in >> p) ++n;
+        for (const auto* c = s->FirstChildElement("circle"); c; c = c->NextSiblingElement("circle")) ++n;
         (*points)[title + "/" + s->Attribute("data-name")] = n;
       }
     }
@@ -148,7 +150,7 @@ TEST_F(PlotTest, ChartHasPosePanelsAndOneForcePanelPerContact) {
   EXPECT_GT(points["pusher contact force on the object/normal predicted"], 0);
 }
 
-int Run(const std::string& args, std::string* err = nullptr) {
+int RunArena(const std::string& args, std::string* err = nullptr) {
   const std::string errfile = std::string("/tmp/arena-plot-test-err-") + std::to_string(getpid());
   const int st = std::system((std::string(ARENA_BINARY) + " " + args + " 2>" + errfile).c_str());
   if (err) {
@@ -164,19 +166,19 @@ int Run(const std::string& args, std::string* err = nullptr) {
 TEST_F(PlotTest, CommandWritesTheSvgAndRefusesWhatItCannotPlot) {
   const std::string out = dir_ + "/t.svg";
   std::string err;
-  ASSERT_EQ(Run("plot --db " + db_ + " " + std::to_string(trial_) + " --out " + out, &err), 0) << err;
+  ASSERT_EQ(RunArena("plot --db " + db_ + " " + std::to_string(trial_) + " --out " + out, &err), 0) << err;
   tinyxml2::XMLDocument doc;
   ASSERT_EQ(doc.LoadFile(out.c_str()), tinyxml2::XML_SUCCESS);
   EXPECT_EQ(SeriesByPanel(doc).size(), 7u);
   EXPECT_FALSE(std::filesystem::exists(out + ".tmp"));
 
-  EXPECT_EQ(Run("plot --db " + db_ + " " + std::to_string(planned_) + " --out " + dir_ + "/p.svg", &err), 2);
+  EXPECT_EQ(RunArena("plot --db " + db_ + " " + std::to_string(planned_) + " --out " + dir_ + "/p.svg", &err), 2);
   EXPECT_NE(err.find("no ground truth yet"), std::string::npos) << err;
   EXPECT_FALSE(std::filesystem::exists(dir_ + "/p.svg"));
-  EXPECT_EQ(Run("plot --db " + db_ + " 99999 --out " + dir_ + "/n.svg", &err), 2);
+  EXPECT_EQ(RunArena("plot --db " + db_ + " 99999 --out " + dir_ + "/n.svg", &err), 2);
   EXPECT_NE(err.find("no trial 99999"), std::string::npos) << err;
-  EXPECT_EQ(Run("plot --db " + dir_ + "/missing.db 1 --out " + dir_ + "/m.svg", &err), 3);
-  EXPECT_EQ(Run("plot --db " + db_ + " " + std::to_string(trial_) + " --out " + dir_ + "/no/such/dir/x.svg", &err), 1);
+  EXPECT_EQ(RunArena("plot --db " + dir_ + "/missing.db 1 --out " + dir_ + "/m.svg", &err), 3);
+  EXPECT_EQ(RunArena("plot --db " + db_ + " " + std::to_string(trial_) + " --out " + dir_ + "/no/such/dir/x.svg", &err), 1);
   EXPECT_NE(err.find("directory"), std::string::npos) << err;
 }
 
