@@ -12,6 +12,7 @@
 #include "arena/db/store.hpp"
 #include "arena/orchestrator/campaign.hpp"
 #include "arena/orchestrator/submit.hpp"
+#include "campaign_input.hpp"
 #include "commands.hpp"
 #include "progress.hpp"
 #include "store_errors.hpp"
@@ -42,12 +43,7 @@ std::string IsoTime(double unix_s) {
 }
 
 int Submit(const std::string& campaign_path, const std::string& db_path) {
-  orchestrator::Campaign campaign;
-  try {
-    campaign = orchestrator::LoadCampaignFile(campaign_path);
-  } catch (const orchestrator::CampaignError& e) {
-    throw CommandError(kExitBadInput, campaign_path + ": " + e.what());
-  }
+  const orchestrator::Campaign campaign = LoadValidCampaign(campaign_path);
   auto store = OpenStore(db_path, false);
   try {
     const std::int64_t id = orchestrator::SubmitCampaign(*store, campaign);

@@ -21,6 +21,7 @@
 #include "arena/orchestrator/logging.hpp"
 #include "arena/orchestrator/service.hpp"
 #include "arena/orchestrator/submit.hpp"
+#include "campaign_input.hpp"
 #include "child_process.hpp"
 #include "commands.hpp"
 #include "progress.hpp"
@@ -101,12 +102,7 @@ int Run(RunOptions opt) {
     if (auto* s = running.load()) s->Stop();
   });
 
-  orchestrator::Campaign campaign;
-  try {
-    campaign = orchestrator::LoadCampaignFile(opt.campaign_path);
-  } catch (const orchestrator::CampaignError& e) {
-    throw CommandError(kExitBadInput, opt.campaign_path + ": " + e.what());
-  }
+  const orchestrator::Campaign campaign = LoadValidCampaign(opt.campaign_path);
   std::int64_t campaign_id = 0;
   try {
     auto store = db::Store::Open(opt.db_path);
