@@ -269,7 +269,8 @@ struct Cell::Impl {
         dds::EncodeSample(truth, PusherAt(actual, truth), observed[first + i], &batch.samples()[i]);
       }
       // Fault injection (defects.hpp): a malformed sample, or a missing batch.
-      const bool skip_batch = options.defects.corrupt_stream == "gap" && batch_index == 1 && !batch.last();
+      if (options.defects.corrupt_stream == "gap" && batch_index == 0)
+        batch.first_sample(static_cast<std::uint32_t>(first + 1));
       if (options.defects.corrupt_stream == "nan" && batch_index == 0)
         batch.samples()[0].object_pose()[0] = std::numeric_limits<double>::quiet_NaN();
       if (options.speed > 0) {
@@ -284,7 +285,7 @@ struct Cell::Impl {
         }
       }
       // Ground truth is a log: a full history throttles us, it never drops.
-      while (!skip_batch && !ground_truth.Write(batch)) {
+      while (!ground_truth.Write(batch)) {
         if (Stopping()) {
           failure = "interrupted: cell shutting down";
           break;

@@ -68,8 +68,9 @@ TEST(FaultSuite, ServiceKilledAtTwentySeededRandomPoints) {
   TempDir dir;
   const std::string db = dir / "kill20.db";
   const std::string domain = std::to_string(TestDomain(21));
-  auto c1 = StartCell(dir, domain, "c1", "0.1");
-  auto c2 = StartCell(dir, domain, "c2", "0.1");
+  // Wall-clock pacing so the campaign outlasts 20 kills (about 40 s of service time).
+  auto c1 = StartCell(dir, domain, "c1", "1");
+  auto c2 = StartCell(dir, domain, "c2", "1");
   ASSERT_EQ(Submit(dir, db), 0) << ReadFile(dir / "submit.out");
   // Seeded: the same 20 kill times on every run (0.3 .. 2.5 s after start:
   // during start-up and recovery, dispatch, ingest, reset and prediction).
@@ -91,6 +92,7 @@ TEST(FaultSuite, ServiceKilledAtTwentySeededRandomPoints) {
     kills += std::to_string(ms) + "ms:" + std::to_string(CountStates(db, 1)["done"]) + " ";
     if (AllFinished(db)) break;
   }
+  EXPECT_EQ(tally.injected, 20) << "the campaign ended before 20 kills: " << kills;
   auto serve = StartArena({"serve", "--db", db, "--domain", domain}, dir / "serve-final.log");
   ASSERT_TRUE(WaitUntil([&] { return AllFinished(db); }, kCampaignTimeout)) << ReadFile(dir / "serve-final.log");
   StopService(*serve);

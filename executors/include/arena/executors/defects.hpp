@@ -59,8 +59,8 @@ struct DefectProfile {
   //     it (no ground truth, no status) while the cell stays alive (its
   //     liveliness and announcements continue): a hung controller.
   //   stream: "nan" puts a NaN into the first sample's object pose; "gap"
-  //     leaves out the second batch of every stream (a sample-index gap, as
-  //     out-of-order delivery would show). "" (default) streams normally.
+  //     numbers the first batch's samples from 1 instead of 0 (a sample-index
+  //     gap, as lost or out-of-order batches show). "" streams normally.
   bool hang_after_accept = false;
   std::string corrupt_stream;
 };

@@ -20,7 +20,10 @@
 // (RetryTrial; lineage kept), or to failed when attempts run out. A cell that
 // fails `quarantine_after` phases in a row, or whose reset keeps failing, is
 // quarantined and gets no more trials. A late message from an older attempt
-// is ignored (the store refuses stale attempts).
+// is ignored (the store refuses stale attempts). A store that can no longer
+// be written (full, read-only, corrupt, I/O error) is nobody's trial or cell
+// fault: Run() throws that db::StoreError and the service stops (`arena
+// serve` exits 3); what was committed stays intact and a restart resumes.
 //
 // Crash safety: at start the service calls RecoverAfterRestart (dispatched ->
 // planned with attempt + 1, resetting -> reset_failed) and then finishes every
