@@ -2,6 +2,8 @@
 
 #include <cmath>
 #include <cstdio>
+#include <fstream>
+#include <memory>
 #include <limits>
 
 #include <Eigen/Geometry>
@@ -56,6 +58,52 @@ Panel PosePanel(const std::string& title, const std::string& unit, double min_sp
 }
 
 }  // namespace
+
+namespace {
+std::unique_ptr<db::Store> OpenReadOnly(const std::string& path) {
+  try {
+    db::StoreOptions so;
+    so.read_only = true;
+    so.create = false;
+    return db::Store::Open(path, so);
+  } catch (const db::StoreError& e) {
+    throw CommandError(ExitCodeFor(e), std::string(e.what()) + " (is --db the store `arena serve` or `arena run` uses?)");
+  }
+}
+
+// Writes next to the target and renames, so a reader never sees half an SVG.
+}  // namespace
+
+void WriteSvgFile(const Chart& chart, const std::string& out) {
+  const std::string svg = RenderSvg(chart);
+  const std::string tmp = out + ".tmp";
+  {
+    std::ofstream f(tmp, std::ios::binary | std::ios::trunc);
+    if (!f) throw CommandError(kExitFailure, "cannot write " + tmp + ": check that its directory exists and is writable");
+    f.write(svg.data(), static_cast<std::streamsize>(svg.size()));
+    f.close();
+    if (!f) throw CommandError(kExitFailure, "cannot write " + tmp + " (disk full?)");
+  }
+  if (std::rename(tmp.c_str(), out.c_str()) != 0) {
+    std::remove(tmp.c_str());
+    throw CommandError(kExitFailure, "cannot rename " + tmp + " to " + out);
+  }
+}
+
+int PlotTrial(const std::string& db_path, std::int64_t trial, const std::string& out) {
+  if (trial < 0)
+    throw CommandError(kExitBadInput, "give a TRIAL id to plot (find ids with `arena query --db " + db_path +
+                                          " --campaign ID`)");
+  auto store = OpenReadOnly(db_path);
+  TrialPlotInfo info;
+  const Chart chart = MakeTrialChart(*store, trial, &info);
+  WriteSvgFile(chart, out);
+  std::fprintf(stderr, "trial %lld: %zu samples, prediction %s (%s) -> %s\n", static_cast<long long>(trial),
+               info.samples, info.model_key.empty() ? "-" : info.model_key.c_str(), info.prediction_status.c_str(),
+               out.c_str());
+  return kExitOk;
+}
+
 
 Chart MakeTrialChart(const db::Store& store, std::int64_t trial_id, TrialPlotInfo* info) {
   db::Trial trial;

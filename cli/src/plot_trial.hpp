@@ -29,4 +29,12 @@ struct TrialPlotInfo {
 //   ground truth yet (the message says what to do), kExitStore for a store failure.
 Chart MakeTrialChart(const db::Store& store, std::int64_t trial_id, TrialPlotInfo* info = nullptr);
 
+// `arena plot --db DB TRIAL --out OUT`: opens the store read-only, builds the
+// chart, writes it atomically (OUT.tmp, then rename), reports on stderr.
+// @returns kExitOk. @throws CommandError (exit code per README).
+int PlotTrial(const std::string& db_path, std::int64_t trial, const std::string& out);
+
+// Writes the chart's SVG to `out` atomically. @throws CommandError(kExitFailure).
+void WriteSvgFile(const Chart& chart, const std::string& out);
+
 }  // namespace arena::cli

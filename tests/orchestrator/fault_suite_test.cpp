@@ -31,10 +31,23 @@ namespace {
 constexpr auto kCampaignTimeout = std::chrono::seconds(120);
 constexpr int kTrials = 30;
 
+// Totals over the tests this process ran; printed once at the end (one line
+// for the whole suite when the binary runs alone, one per test under ctest).
+struct SuiteTotals : ::testing::Environment {
+  static inline int injected = 0, survived = 0, tests = 0;
+  void TearDown() override {
+    std::printf("fault suite: %d faults injected in %d tests, %d survived\n", injected, tests, survived);
+  }
+};
+const auto* const kTotals = ::testing::AddGlobalTestEnvironment(new SuiteTotals);
+
 struct FaultTally {
   int injected = 0;
   int survived = 0;
   ~FaultTally() {
+    SuiteTotals::injected += injected;
+    SuiteTotals::survived += survived;
+    ++SuiteTotals::tests;
     std::printf("fault summary: %d injected, %d survived (%s)\n", injected, survived,
                 ::testing::UnitTest::GetInstance()->current_test_info()
                     ? ::testing::UnitTest::GetInstance()->current_test_info()->name()
