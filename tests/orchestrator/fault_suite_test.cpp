@@ -6,6 +6,7 @@
 //   HungCellIsTimedOutAndQuarantined         a cell that accepts, then hangs
 //   MalformedStream{Nan,Gap}                 a cell whose samples are NaN / skip a batch
 //   StoreRunsOutOfSpace                      the store may not grow (SQLite max_page_count)
+//   StoreOnAFullFileSystem                   the store on a 1 MiB tmpfs (skipped if not mountable)
 //   ReadOnlyStoreFile                        the store file is immutable
 //
 // After each: the service continued (the campaign finished) or stopped with
@@ -223,6 +224,51 @@ TEST(FaultSuite, StoreRunsOutOfSpace) {
   ExpectCampaignConsistent(db, 1, kTrials);
   EXPECT_EQ(CountStates(db, 1)["done"], kTrials);
   std::printf("done before the store filled: %d\n", done_before);
+  if (!::testing::Test::HasFailure()) tally.survived = tally.injected;
+}
+
+// The same on a real file system that fills up: a 1 MiB tmpfs the test
+// mounts (needs root or CAP_SYS_ADMIN; skipped with the reason otherwise).
+// The store, its WAL and the service log all live there.
+TEST(FaultSuite, StoreOnAFullFileSystem) {
+  FaultTally tally;
+  TempDir dir;
+  const std::string mnt = dir / "small";
+  std::filesystem::create_directory(mnt);
+  if (std::system(("mount -t tmpfs -o size=1m tmpfs '" + mnt + "' 2>/dev/null").c_str()) != 0)
+    GTEST_SKIP() << "cannot mount a tmpfs here (not root / no CAP_SYS_ADMIN); StoreRunsOutOfSpace covers the limit";
+  struct Unmount {
+    std::string path;
+    ~Unmount() { std::system(("umount -l '" + path + "' 2>/dev/null").c_str()); }
+  } unmount{mnt};
+  const std::string db = mnt + "/full.db";
+  const std::string domain = std::to_string(TestDomain(28));
+  ASSERT_EQ(Submit(dir, db), 0) << ReadFile(dir / "submit.out");
+  auto c1 = StartCell(dir, domain, "c1", "0.1");
+  auto serve = StartArena({"serve", "--db", db, "--domain", domain}, dir / "serve.log");
+  ++tally.injected;
+  const auto st = serve->Wait(std::chrono::seconds(90));
+  ASSERT_TRUE(st.has_value()) << "serve did not stop on a full file system: " << ReadFile(dir / "serve.log");
+  EXPECT_TRUE(WIFEXITED(*st) && WEXITSTATUS(*st) == 3) << ReadFile(dir / "serve.log");
+  EXPECT_NE(ReadFile(dir / "serve.log").find("full"), std::string::npos) << ReadFile(dir / "serve.log");
+  // Move the store to a roomy file system (as an operator would after
+  // freeing space) and finish there.
+  const std::string moved = dir / "moved.db";
+  for (const char* ext : {"", "-wal", "-shm"}) {
+    std::error_code ec;
+    std::filesystem::copy_file(db + ext, moved + ext, ec);
+  }
+  {
+    auto store = OpenReadOnly(moved);
+    EXPECT_EQ(store->IntegrityCheck(), "ok");
+    const auto violations = store->CheckInvariants();
+    EXPECT_TRUE(violations.empty()) << violations.front();
+  }
+  auto again = StartArena({"serve", "--db", moved, "--domain", domain}, dir / "serve2.log");
+  ASSERT_TRUE(WaitUntil([&] { return AllFinished(moved); }, kCampaignTimeout)) << ReadFile(dir / "serve2.log");
+  StopService(*again);
+  ExpectCampaignConsistent(moved, 1, kTrials);
+  EXPECT_EQ(CountStates(moved, 1)["done"], kTrials);
   if (!::testing::Test::HasFailure()) tally.survived = tally.injected;
 }
 
