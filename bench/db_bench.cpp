@@ -138,6 +138,20 @@ void BM_SixteenCells250Hz(benchmark::State& state) {
 }
 BENCHMARK(BM_SixteenCells250Hz)->Iterations(3)->Unit(benchmark::kMillisecond);
 
+// The store's own per-sample work without SQLite: validation and encoding.
+void BM_CheckAndEncodeSample(benchmark::State& state) {
+  const Sample s = MakeSample(7);
+  std::string block;
+  block.reserve(1 << 20);
+  for (auto _ : state) {
+    if (block.size() > (1 << 19)) block.clear();
+    benchmark::DoNotOptimize(CheckSample(s));
+    EncodeSamples(&s, 1, &block);
+  }
+  state.SetItemsProcessed(state.iterations());
+}
+BENCHMARK(BM_CheckAndEncodeSample);
+
 // One claim (find + transition + audit row, committed) with 100 000 planned
 // trials over 3 campaigns: the scheduler's cost per dispatched trial.
 void BM_ClaimNextTrial(benchmark::State& state) {

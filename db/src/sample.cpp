@@ -37,6 +37,7 @@ struct Reader {
   const unsigned char* p;
   const unsigned char* end;
   void Get(void* dst, std::size_t n) {
+    if (n == 0) return;  // dst may be an empty vector's null data()
     if (static_cast<std::size_t>(end - p) < n) {
       throw StoreError(StoreError::Kind::kCorrupt, "DecodeSamples: block truncated");
     }
@@ -58,7 +59,29 @@ const char* ToString(ContactMode mode) {
   return "?";
 }
 
+namespace {
+// The fast path of CheckSample: no strings unless something is wrong.
+template <std::size_t N>
+bool AllFinite(const std::array<double, N>& a) {
+  bool ok = true;
+  for (double v : a) ok &= std::isfinite(v);
+  return ok;
+}
+bool LooksValid(const Sample& s) {
+  bool ok = std::isfinite(s.t) && AllFinite(s.object_pose) && AllFinite(s.object_twist) &&
+            AllFinite(s.pusher_pose) && AllFinite(s.pusher_twist) &&
+            AllFinite(s.observed_object_pose) && AllFinite(s.observed_pusher_wrench) &&
+            s.contacts.size() <= 255 && s.observed_finger_wrenches.size() <= 255;
+  for (const auto& c : s.contacts) {
+    ok &= AllFinite(c.force) && AllFinite(c.torque) && static_cast<int>(c.mode) <= 2;
+  }
+  for (double v : s.observed_finger_wrenches) ok &= std::isfinite(v);
+  return ok;
+}
+}  // namespace
+
 std::string CheckSample(const Sample& s) {
+  if (LooksValid(s)) return {};
   if (!std::isfinite(s.t)) return std::string("t is ") + (std::isnan(s.t) ? "NaN" : "infinite");
   std::string e;
   if (!(e = CheckArray(s.object_pose, "object_pose")).empty()) return e;
@@ -94,6 +117,7 @@ void EncodeSampleBody(const Sample& s, std::string* out) {
   out->resize(offset + EncodedSampleBytes(s));
   char* p = out->data() + offset;
   auto put = [&p](const void* src, std::size_t n) {
+    if (n == 0) return;  // src may be an empty vector's null data()
     std::memcpy(p, src, n);
     p += n;
   };

@@ -37,7 +37,6 @@ CREATE TABLE campaigns(
   spec_json          TEXT NOT NULL,
   state              TEXT NOT NULL DEFAULT 'active'
                      CHECK (state IN ('active','paused','cancelled','done')),
-  state_reason       TEXT NOT NULL DEFAULT '',
   priority           INTEGER NOT NULL DEFAULT 0,
   seed               INTEGER NOT NULL,
   sampler_state_json TEXT NOT NULL DEFAULT '{}',
@@ -220,6 +219,9 @@ CREATE VIEW trial_results AS
          s.max_contact_force_n, s.max_pusher_force_n, s.stick_fraction, s.slide_fraction,
          s.separate_fraction, s.observed_position_rmse_m
   FROM trials t LEFT JOIN gt_summary s ON s.stream_id = t.gt_stream_id;
+)sql"},
+      {2, "campaigns.state_reason: why a campaign is paused or cancelled", R"sql(
+ALTER TABLE campaigns ADD COLUMN state_reason TEXT NOT NULL DEFAULT '';
 )sql"},
   };
   return kMigrations;

@@ -284,6 +284,7 @@ struct Cell::Impl {
           break;
         }
       }
+      batch.sent_unix_ns(UnixNanos());
       // Ground truth is a log: a full history throttles us, it never drops.
       while (!ground_truth.Write(batch)) {
         if (Stopping()) {

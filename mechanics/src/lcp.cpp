@@ -294,13 +294,15 @@ LcpResult SolveLcp(const Eigen::MatrixXd& A, const Eigen::VectorXd& b,
   std::uint64_t seed = 0x9E3779B97F4A7C15ull;
   int total = 0;
   std::string first_reason;
-  for (int attempt = 0; attempt < attempts; ++attempt) {
-    if (attempt > 0) {
-      for (Eigen::Index i = 0; i < n; ++i) {
-        seed = seed * 6364136223846793005ull + 1442695040888963407ull;
-        cover[i] = 0.5 + static_cast<double>(seed >> 11) * (1.0 / 9007199254740992.0) * 1.5;
-      }
+  auto next_cover = [&] {
+    for (Eigen::Index i = 0; i < n; ++i) {
+      seed = seed * 6364136223846793005ull + 1442695040888963407ull;
+      cover[i] = 0.5 + static_cast<double>(seed >> 11) * (1.0 / 9007199254740992.0) * 1.5;
     }
+  };
+  for (int k = 0; k < options.first_covering; ++k) next_cover();
+  for (int attempt = 0; attempt < attempts; ++attempt) {
+    if (attempt > 0) next_cover();
     LemkeOnce(A, b, cover, options, out);
     total += out.pivots;
     if (out.ok) break;

@@ -97,6 +97,8 @@ using SmallVector = Eigen::Matrix<double, Eigen::Dynamic, 1, 0, 6, 1>;
 // A step whose physical residuals (relative to the force scale) exceed this
 // is a solver failure, not a result.
 constexpr double kAcceptedResidual = 1e-8;
+// Solves of one step before an inaccurate answer is reported as a failure.
+constexpr int kAccuracyAttempts = 4;
 
 double LengthScale(const ObjectSpec& object) {
   double L = object.shape == ObjectShape::kBox ? object.size.maxCoeff()
@@ -251,6 +253,7 @@ struct ContactModel::Impl {
   bool planar = false;
   Eigen::Vector3d plane_normal = Eigen::Vector3d::UnitY();
   Eigen::Matrix<double, 6, Eigen::Dynamic> P;  // reduced -> full twist
+  Eigen::Matrix<double, 3, 6> Pt3 = Eigen::Matrix<double, 3, 6>::Zero();  // planar: Pᵀ
   int nd = 6;
   int edges_per_point = 0;
 
@@ -400,6 +403,7 @@ void ContactModel::Impl::Setup() {
     P.block<3, 1>(0, 0) = e1;
     P.block<3, 1>(0, 1) = e2;
     P.block<3, 1>(3, 2) = p;
+    Pt3 = P.transpose();
     edges_per_point = 2;
   } else {
     nd = 6;
@@ -480,8 +484,9 @@ void ContactModel::Impl::Setup() {
   Geometry();
 }
 
-// Contact geometry at time t: fingers are fixed in the gripper frame, the
-// pusher translates with its velocity and turns about its contact point.
+// Contact geometry at time t: fingers are fixed in the gripper frame but for
+// their pads' travel along the normal; the pusher translates with its
+// velocity and turns about its contact point.
 void ContactModel::Impl::Geometry() {
   for (Contact& ct : contacts) {
     Eigen::Matrix3d Rp = Eigen::Matrix3d::Identity();
@@ -561,7 +566,7 @@ StepReport ContactModel::Impl::Step() {
     Eigen::Matrix<double, 6, 1> col;
     col << d, (pt.p - c).cross(d);
     if (planar) {
-      Jc.col(k) = P.transpose() * col;
+      Jc.col(k) = Pt3 * col;  // fixed-size 3x6 projection
     } else {
       Jc.col(k) = col;
     }
@@ -620,8 +625,16 @@ StepReport ContactModel::Impl::Step() {
     return v_new + w_new.cross(p - c);
   };
   auto zv = [&](int i) { return i >= 0 ? sol.z[i] * (i < nf ? Fs : Vs) : 0.0; };
+  int next_covering = 0;
   for (int attempt = 0;; ++attempt) {
-    sol = SolveLcp(A, b, attempt == 0 && !basis.empty() ? &basis : nullptr);
+    // Attempt 0 may start warm; later attempts start cold, each from another
+    // covering vector, since Lemke's path (and its accuracy on an
+    // ill-conditioned step) depends on it.
+    LcpOptions lcp_options;
+    const bool warm = attempt == 0 && !basis.empty();
+    lcp_options.first_covering = next_covering;
+    sol = SolveLcp(A, b, warm ? &basis : nullptr, lcp_options);
+    if (!sol.warm_start_used) ++next_covering;
     rep.pivots += sol.pivots;
     rep.warm_start_used = sol.warm_start_used;
     if (!sol.ok) {
@@ -690,7 +703,7 @@ StepReport ContactModel::Impl::Step() {
     }
     const double worst = std::max({res.force_balance, res.complementarity, res.cone});
     if (std::isfinite(worst) && worst <= kAcceptedResidual) break;
-    if (attempt == 0 && sol.warm_start_used) continue;
+    if (attempt < kAccuracyAttempts) continue;
     DumpLcp(A, b);
     char buf[128];
     std::snprintf(buf, sizeof buf, "LCP (%d unknowns): inaccurate solution (relative residual %.3g)", n, worst);

@@ -233,7 +233,7 @@ struct Service::Impl {
             store->BeginReset(t.id, t.attempt);
             store->CompleteReset(t.id, t.attempt,
                                  db::ResetReport{false, {0, 0, 0, 1, 0, 0, 0}, 0, 0, 0,
-                                                 "service restarted before the reset"});
+                                                 "service restarted before the reset", /*pose_observed=*/false});
             [[fallthrough]];
           case db::TrialState::kResetDone:
           case db::TrialState::kResetFailed:
@@ -366,7 +366,8 @@ struct Service::Impl {
     } else if (cell.phase == CellPhase::kResetting) {
       try {
         store->CompleteReset(cell.trial_id, cell.attempt,
-                             db::ResetReport{false, {0, 0, 0, 1, 0, 0, 0}, 0, 0, 0, reason});
+                             db::ResetReport{false, {0, 0, 0, 1, 0, 0, 0}, 0, 0, 0, reason,
+                                             /*pose_observed=*/false});
         Count(&ServiceCounters::resets_failed);
         AfterReset(cell.trial_id);
       } catch (const db::StoreError& e) {

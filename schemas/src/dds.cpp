@@ -7,6 +7,7 @@
 #include <sys/socket.h>
 
 #include <algorithm>
+#include <cstdlib>
 #include <atomic>
 #include <condition_variable>
 #include <map>
@@ -32,6 +33,7 @@
 #include <fastdds/rtps/transport/UDPv4TransportDescriptor.h>
 #include <fastdds/rtps/transport/shared_mem/SharedMemTransportDescriptor.h>
 #include <fastrtps/utils/IPLocator.h>
+#include <fastrtps/xmlparser/XMLProfileManager.h>
 #include <spdlog/spdlog.h>
 
 #include "arena/schemas/arena.h"
@@ -171,30 +173,20 @@ void ApplyTopicQos(const std::string& topic, fdds::ReliabilityQosPolicy* reliabi
   reliability->kind = fdds::RELIABLE_RELIABILITY_QOS;
   durability->kind = fdds::VOLATILE_DURABILITY_QOS;
   history->kind = fdds::KEEP_ALL_HISTORY_QOS;
+  // Every topic is keyed (cell or trial) and Fast DDS 2.9 never frees an
+  // instance slot, so the default max_instances (10) would stall a service
+  // after ten cells (CellAnnounce, TrialCommand) or ten trials (TrialStatus,
+  // GroundTruth). No instance limit anywhere; the only bound that matters,
+  // ground truth in flight, is the writer's acknowledgement window
+  // (kGroundTruthMaxBatches, see Writer::Write).
+  limits->max_instances = 0;
+  limits->max_samples_per_instance = 0;
+  limits->max_samples = 0;
+  limits->allocated_samples = 32;
   if (topic == "CellAnnounce") {
     durability->kind = fdds::TRANSIENT_LOCAL_DURABILITY_QOS;
     history->kind = fdds::KEEP_LAST_HISTORY_QOS;
     history->depth = 1;
-  } else if (topic == "GroundTruth") {
-    // Bounded: a slow reader throttles the writer rather than growing memory.
-    // One instance per trial; the bound is on samples in flight, whatever
-    // their instance.
-    // Fast DDS 2.9 never reuses the slot of a finished trial (instance), so
-    // instance-limited histories would stall after a few trials; the history
-    // is bounded instead by the writer's acknowledgement window
-    // (kGroundTruthMaxBatches unacknowledged batches at most, see Write()).
-    limits->max_instances = 0;
-    limits->max_samples_per_instance = 0;
-    limits->max_samples = 0;
-    limits->allocated_samples = 32;
-  } else if (topic == "TrialStatus") {
-    // Keyed by trial: every trial is a new instance that Fast DDS 2.9 never
-    // frees, so the default max_instances (10) stalls a service after ten
-    // trials. A handful of statuses per trial; no bound is needed.
-    limits->max_instances = 0;
-    limits->max_samples_per_instance = 0;
-    limits->max_samples = 0;
-    limits->allocated_samples = 32;
   }
 }
 
@@ -389,6 +381,16 @@ Participant::Participant(const ParticipantOptions& options)
     throw DdsError("dds: participant lease must be in (0.2, 3600] s");
   }
   auto* factory = fdds::DomainParticipantFactory::get_instance();
+  // Fast DDS 2.9.1 deadlocks when a writer delivers intra-process while the
+  // liveliness protocol asserts (seen in bench_dds: WLP assertion against
+  // StatefulWriter::deliver_sample_to_intraprocesses). Participants of one
+  // process therefore talk through the transports like any other.
+  static std::once_flag library_once;
+  std::call_once(library_once, [] {
+    eprosima::fastrtps::LibrarySettingsAttributes library;
+    library.intraprocess_delivery = eprosima::fastrtps::INTRAPROCESS_OFF;
+    eprosima::fastrtps::xmlparser::XMLProfileManager::library_settings(library);
+  });
   // Profiles first, then our overrides, then log what is in effect.
   if (!options.network.profile_xml.empty()) {
     if (factory->load_XML_profiles_file(options.network.profile_xml) != ReturnCode_t::RETCODE_OK) {
@@ -514,8 +516,6 @@ Writer<T>::Writer(Participant& participant, const WriterOptions& options)
     impl_->window = kGroundTruthMaxBatches / 4;
     auto& times = qos.reliable_writer_qos().times;
     times.heartbeatPeriod = Duration_t(kGroundTruthHeartbeat_s);
-    times.nackResponseDelay = Duration_t(0.0);
-    times.nackSupressionDuration = Duration_t(0.0);
   }
   impl_->writer = core.publisher->create_datawriter(t, qos, nullptr);
   if (impl_->writer == nullptr) throw DdsError("dds: create_datawriter(" + topic + ") failed");
@@ -635,16 +635,10 @@ Reader<T>::Reader(Participant& participant, const ReaderOptions& options)
   fdds::DataReaderQos qos = core.subscriber->get_default_datareader_qos();
   ApplyTopicQos(topic, &qos.reliability(), &qos.durability(), &qos.history(),
                 &qos.resource_limits());
-  if (topic == "CellAnnounce") {
-    qos.resource_limits().max_samples_per_instance = 1;
-  }
   // Fast DDS tracks a writer's liveliness only for a finite requested lease.
   qos.liveliness().kind = fdds::AUTOMATIC_LIVELINESS_QOS;
   qos.liveliness().lease_duration = CellWritten(topic) ? Duration_t(kCellLivelinessLease_s)
                                                        : eprosima::fastrtps::c_TimeInfinite;
-  if (topic == "GroundTruth") {
-    qos.reliable_reader_qos().times.heartbeatResponseDelay = Duration_t(0.0);
-  }
   fdds::StatusMask mask = fdds::StatusMask::data_available();
   mask << fdds::StatusMask::liveliness_changed();
   impl_->reader = core.subscriber->create_datareader(t, qos, impl_.get(), mask);

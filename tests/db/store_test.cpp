@@ -71,6 +71,36 @@ TEST(StoreOpen, MigratesEmptyFileAndReopens) {
   ExpectHealthy(*again);
 }
 
+// A file at schema 1 (as the first merged arena wrote it) is migrated on a
+// read-write open, its data kept; a read-only open of it asks for that first.
+TEST(StoreOpen, MigratesVersionOneFile) {
+  TempDir dir;
+  const auto path = dir.File("v1.db");
+  Store::Open(path)->CreateCampaign(MakeCampaign("old"), MakeTrials(2));
+  {
+    sqlite3* db = nullptr;
+    sqlite3_open(path.c_str(), &db);
+    ASSERT_EQ(sqlite3_exec(db,
+                           "BEGIN; ALTER TABLE campaigns DROP COLUMN state_reason;"
+                           " DELETE FROM schema_migrations WHERE version > 1; PRAGMA user_version = 1;"
+                           " COMMIT;",
+                           nullptr, nullptr, nullptr),
+              SQLITE_OK)
+        << sqlite3_errmsg(db);
+    sqlite3_close(db);
+  }
+  StoreOptions ro;
+  ro.read_only = true;
+  EXPECT_STORE_ERROR(Store::Open(path, ro), K::kIo);
+  auto store = Store::Open(path);
+  EXPECT_EQ(store->FileSchemaVersion(), Store::SchemaVersion());
+  EXPECT_EQ(store->GetCampaign(1).name, "old");
+  store->PauseCampaign(1, "why not");
+  EXPECT_EQ(store->GetCampaign(1).state_reason, "why not");
+  EXPECT_EQ(store->ListTrials(1).size(), 2u);
+  ExpectHealthy(*store);
+}
+
 TEST(StoreOpen, RefusesStoreNewerThanBinary) {
   TempDir dir;
   const auto path = dir.File("new.db");

@@ -109,3 +109,45 @@ TEST(DdsParticipant, ParticipantLeavingIsReported) {
 
 }  // namespace
 }  // namespace arena
+
+namespace arena {
+namespace {
+
+using namespace std::chrono_literals;
+
+// Every topic is keyed; Fast DDS's default of 10 instances would stall a
+// deployment after ten cells or ten trials.
+TEST(DdsParticipant, ManyCellsAndTrialsDoNotStall) {
+  dds::ParticipantOptions o;
+  o.domain_id = test::TestDomain(6);
+  o.name = "arena.test.many-cells";
+  dds::Participant a(o);
+  o.name = "arena.test.many-service";
+  dds::Participant b(o);
+  dds::Writer<msg::CellAnnounce> announce(a);
+  dds::Writer<msg::TrialStatus> status(a);
+  dds::Reader<msg::CellAnnounce> announcements(b);
+  dds::Reader<msg::TrialStatus> statuses(b);
+  ASSERT_TRUE(announce.WaitForMatched(1, 10s));
+  ASSERT_TRUE(status.WaitForMatched(1, 10s));
+  for (int i = 0; i < 30; ++i) {
+    msg::CellAnnounce c;
+    std::string id = "c";
+    id += std::to_string(i);  // (operator+ on a literal trips GCC 12's -Wrestrict)
+    c.cell_id(id);
+    ASSERT_TRUE(announce.Write(c)) << i;
+    msg::TrialStatus s;
+    s.trial_id(static_cast<std::uint64_t>(i));
+    s.state(msg::STATE_EXECUTED);
+    ASSERT_TRUE(status.Write(s)) << i;
+  }
+  for (int i = 0; i < 30; ++i) {
+    ASSERT_TRUE(announcements.Take(5s)) << "announcement " << i;
+    auto s = statuses.Take(5s);
+    ASSERT_TRUE(s) << "status " << i;
+    EXPECT_EQ(s->trial_id(), static_cast<std::uint64_t>(i));
+  }
+}
+
+}  // namespace
+}  // namespace arena

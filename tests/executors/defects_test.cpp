@@ -1,6 +1,8 @@
 // Defect profiles: parsing with field-named errors, seeded determinism and
 // the statistics of the noise they ask for.
 #include <cmath>
+#include <fstream>
+#include <sstream>
 
 #include <gtest/gtest.h>
 
@@ -23,6 +25,15 @@ TEST(DefectProfile, EmptyProfileIsAPerfectCell) {
   EXPECT_EQ(p.position_std, Eigen::Vector3d::Zero());
   EXPECT_EQ(p.drop_probability, 0);
   EXPECT_EQ(p.contact_types.size(), 3u);
+}
+
+TEST(DefectProfile, ShippedExampleIsValid) {
+  std::ifstream in(std::string(ARENA_SOURCE_DIR) + "/examples/defects/noisy.json");
+  std::stringstream text;
+  text << in.rdbuf();
+  const DefectProfile p = ParseDefectProfile(text.str());
+  EXPECT_DOUBLE_EQ(p.latency_ms, 8);
+  EXPECT_DOUBLE_EQ(p.force_std.z(), 0.08);
 }
 
 TEST(DefectProfile, BadFieldsAreNamed) {

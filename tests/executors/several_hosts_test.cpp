@@ -14,6 +14,8 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <cerrno>
+#include <csignal>
 #include <cstdio>
 #include <cstdlib>
 #include <memory>
@@ -36,7 +38,7 @@ int Shell(const std::string& command) {
 class Lab {
  public:
   Lab() {
-    const std::string tag = std::to_string(getpid() % 100000);
+    const std::string tag = std::to_string(getpid());
     s_ = "arena" + tag + "s";
     a_ = "arena" + tag + "a";
     b_ = "arena" + tag + "b";
@@ -49,6 +51,7 @@ class Lab {
       return;
     }
     created_ = true;
+    RemoveStale();
     const std::vector<std::string> steps = {
         "ip netns add " + a_,
         "ip netns add " + b_,
@@ -86,6 +89,30 @@ class Lab {
       Shell("ip netns del " + s_);  // removes br0 and the veth ends
     }
   }
+  // Namespaces left by an earlier run of this test that was killed before
+  // its teardown (its pid no longer exists).
+  void RemoveStale() {
+    FILE* list = popen("ip netns list 2>/dev/null", "r");
+    if (list == nullptr) return;
+    char line[256];
+    std::vector<std::string> stale;
+    while (std::fgets(line, sizeof line, list) != nullptr) {
+      std::string name(line);
+      name = name.substr(0, name.find_first_of(" \n"));
+      if (name.size() < 7 || name.rfind("arena", 0) != 0) continue;
+      const std::string digits = name.substr(5, name.size() - 6);
+      const char last = name.back();
+      if (digits.empty() || digits.find_first_not_of("0123456789") != std::string::npos ||
+          (last != 's' && last != 'a' && last != 'b')) {
+        continue;
+      }
+      const int pid = std::atoi(digits.c_str());
+      if (pid != getpid() && kill(pid, 0) != 0 && errno == ESRCH) stale.push_back(name);
+    }
+    pclose(list);
+    for (const auto& name : stale) Shell("ip netns del " + name);
+  }
+
   bool ok() const { return ok_; }
   const std::string& why() const { return why_; }
   const std::string& s() const { return s_; }

@@ -388,8 +388,10 @@ class Store {
   // Atomically picks the next planned trial, by campaign priority (then
   // campaign id, then trial index), of an active campaign, whose contact
   // types the cell offers and whose not_before has passed; moves it to
-  // dispatched on `cell_id`, copies the cell's last observed start state into
-  // it. The write is committed before this returns, so the caller acts after.
+  // dispatched on `cell_id`, moves the cell's last observed start state into
+  // it (the cell's copy is cleared: the trial will move the object) and
+  // computes its error against the trial's nominal start pose. The write is
+  // committed before this returns, so the caller acts after.
   // @returns nullopt when nothing is pending or the cell is not healthy.
   std::optional<ClaimedTrial> ClaimNextTrial(const std::string& cell_id);
   // What ClaimNextTrial would return now, without writing (to aim a reset).

@@ -20,6 +20,7 @@ struct LcpOptions {
   double feasibility = 1e-9;      // accepted negativity of z, w (nondimensional)
   Eigen::VectorXd covering;       // Lemke's covering vector (> 0); empty: all ones
   int covering_attempts = 8;      // runs with other covering vectors after a failed one
+  int first_covering = 0;         // 0: start with `covering`; k > 0: with the k-th alternative
 };
 
 struct LcpResult {

@@ -68,8 +68,9 @@ struct VariationValue {
   Eigen::Vector3d vector = Eigen::Vector3d::Zero();
 };
 
-// One axis of the variation space. Names and meanings: see kVariationNames
-// in campaign.cpp / orchestrator/README.md (e.g. "grip_force", "finger_type").
+// One axis of the variation space. Names and meanings: the table in
+// orchestrator/README.md (kVariationCatalog in campaign.cpp), e.g.
+// "grip_force", "finger_type", "pivot_offset".
 struct Variation {
   enum class Kind { kFixed, kRange, kChoices };
   std::string name;

@@ -15,7 +15,7 @@
 //   TrialStatus   reliable, keep-all, volatile: a cell re-sends a final status
 //                 when it sees a command again (idempotency), so nothing needs
 //                 to be kept for late joiners.
-//   GroundTruth   reliable, keep-all, bounded history (the writer waits for
+//   GroundTruth   reliable, keep-all, bounded in flight (the writer waits for
 //                 acknowledgements every kGroundTruthMaxBatches/4 batches);
 //                 a short heartbeat period so lost fragments are repaired fast.
 //                 It is a log, not telemetry: a full history blocks the writer
@@ -26,6 +26,11 @@
 //                 readers request it: a reader sees a dead cell within that
 //                 lease. (A writer offering a longer lease does not match.)
 //   Participants  lease ParticipantOptions::lease_s (2.5 s, not Fast DDS's 20 s).
+//   Instances     no instance limit on any topic: every topic is keyed (cell or
+//                 trial) and Fast DDS 2.9 never frees an instance slot.
+//   Intra-process delivery is off (it deadlocks against the liveliness
+//                 protocol in Fast DDS 2.9.1); same-process participants use
+//                 the transports.
 //
 // Transports (secure by default)
 //   No network option: Fast DDS's built-in transports are off; shared memory
@@ -92,7 +97,7 @@ struct NetworkOptions {
 };
 
 // Participants tried per host (well-known ports) when a peer has no port.
-inline constexpr int kPeerParticipantRange = 32;
+inline constexpr int kPeerParticipantRange = 64;
 
 // "a,b:7410, c" -> {"a", "b:7410", "c"}; validates every entry.
 // @throws DdsError("--peers: ...") naming the bad entry.
@@ -167,8 +172,12 @@ class Writer {
   Writer(const Writer&) = delete;
   Writer& operator=(const Writer&) = delete;
 
-  // Sets schema_version and publishes. @returns false when the history stayed
-  // full for max_blocking_s or the writer failed; the sample was not sent.
+  // Sets schema_version and publishes. GroundTruth: after every
+  // kGroundTruthMaxBatches/4 batches, first waits up to max_blocking_s for
+  // the readers to acknowledge everything (the bounded history).
+  // @returns false when that wait or the write timed out or failed; the
+  // sample was not sent (try again later).
+  // Not thread-safe: one thread writes through a Writer.
   bool Write(T& sample);
   // Number of matched readers.
   int Matched() const;
