@@ -165,7 +165,7 @@ void AddCampaignCommands(CLI::App& app, Action* action) {
     struct O { std::string db; bool json = false; };
     auto o = std::make_shared<O>();
     auto* cmd = app.add_subcommand("list", "List the campaigns in a store");
-    cmd->footer("Example:\n  arena list --db lab.db");
+    cmd->footer("Example:\n  arena list --db lab.db\n");
     cmd->add_option("--db", o->db, "SQLite store")->required();
     cmd->add_flag("--json", o->json, "JSON instead of a table");
     cmd->callback([o, action] { *action = [o] { return List(o->db, o->json); }; });
@@ -174,7 +174,8 @@ void AddCampaignCommands(CLI::App& app, Action* action) {
     struct O { std::string db; std::int64_t id = 0; bool json = false; };
     auto o = std::make_shared<O>();
     auto* cmd = app.add_subcommand("status", "Campaign progress, cell health and start-state drift");
-    cmd->footer("Example:\n  arena status --db lab.db 3\n  arena status --db lab.db --json");
+    cmd->footer("Example:\n  arena status --db lab.db 3\n  arena status --db lab.db --json\n"
+                "Works from any process or host that can open the store file (README: remote hosts).\n");
     cmd->add_option("id", o->id, "Only this campaign");
     cmd->add_option("--db", o->db, "SQLite store")->required();
     cmd->add_flag("--json", o->json, "JSON for scripts");
@@ -188,7 +189,7 @@ void AddCampaignCommands(CLI::App& app, Action* action) {
                                          : verb == std::string("resume") ? "Resume a paused campaign"
                                                                          : "Cancel a campaign (planned trials are dropped)");
     auto* cmd = app.add_subcommand(verb, help);
-    cmd->footer(std::string("Example:\n  arena ") + verb + " 3 --db lab.db");
+    cmd->footer(std::string("Example:\n  arena ") + verb + " 3 --db lab.db\n");
     cmd->add_option("id", o->id, "Campaign id (see `arena list`)")->required();
     cmd->add_option("--db", o->db, "SQLite store")->required();
     cmd->callback([o, action] { *action = [o] { return Control(o->verb, o->id, o->db); }; });

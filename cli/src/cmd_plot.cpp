@@ -4,7 +4,8 @@
 // Modes (one per plot; add a mode as: an option/flag below, a chart builder
 // in plot_charts.hpp, a branch in RunPlot):
 //   --tradeoff   the speed/accuracy trade of an evaluation run (arena evaluate)
-//   TRIAL        (not yet) one trial's predicted and true trajectory and forces
+//   TRIAL        one trial's pose and contact forces, true vs observed vs
+//                predicted (PlotTrial, plot_trial.hpp)
 #include <algorithm>
 #include <cmath>
 #include <fstream>
@@ -16,6 +17,7 @@
 #include "arena/db/store.hpp"
 #include "commands.hpp"
 #include "plot_charts.hpp"
+#include "plot_trial.hpp"
 #include "store_errors.hpp"
 
 namespace arena::cli {
@@ -78,6 +80,7 @@ struct PlotOptions {
   std::string db_path;
   std::int64_t campaign = -1;
   std::int64_t evaluation = -1;
+  std::int64_t trial = -1;
   bool tradeoff = false;
   std::string out;
 };
@@ -121,12 +124,16 @@ int PlotTradeoff(const db::Store& store, const PlotOptions& o) {
 }
 
 int RunPlot(const PlotOptions& o) {
+  if (o.tradeoff && o.trial >= 0) {
+    throw CommandError(kExitBadInput, "plot: give either a TRIAL or --tradeoff, not both");
+  }
+  if (o.trial >= 0) return PlotTrial(o.db_path, o.trial, o.out);
   try {
     db::StoreOptions so;
     so.read_only = true;
     auto store = db::Store::Open(o.db_path, so);
     if (o.tradeoff) return PlotTradeoff(*store, o);
-    throw CommandError(kExitBadInput, "plot: choose a plot: --tradeoff (the per-trial plot is not built yet)");
+    throw CommandError(kExitBadInput, "plot: choose a plot: a TRIAL id, or --campaign ID --tradeoff");
   } catch (const db::StoreError& e) {
     throw StoreCommandError(e);
   }
@@ -136,8 +143,9 @@ int RunPlot(const PlotOptions& o) {
 
 void AddPlotCommand(CLI::App& app, Action* action) {
   auto o = std::make_shared<PlotOptions>();
-  auto* cmd = app.add_subcommand("plot", "Draw charts from the store as SVG");
-  cmd->add_option("--db", o->db_path, "Store file")->required();
+  auto* cmd = app.add_subcommand("plot", "Draw charts from the store as SVG: a trial, or the speed/accuracy trade");
+  cmd->add_option("trial", o->trial, "Trial id (see `arena query`)")->check(CLI::NonNegativeNumber);
+  cmd->add_option("--db", o->db_path, "Store file (opened read-only)")->required();
   cmd->add_option("--out", o->out, "SVG file to write")->required();
   cmd->add_option("--campaign", o->campaign, "Campaign id")->check(CLI::NonNegativeNumber);
   cmd->add_flag("--tradeoff", o->tradeoff,
@@ -145,6 +153,12 @@ void AddPlotCommand(CLI::App& app, Action* action) {
                 "evaluation (arena evaluate); log axes, Pareto front highlighted");
   cmd->add_option("--evaluation", o->evaluation, "With --tradeoff: this evaluation run instead of the latest")
       ->check(CLI::NonNegativeNumber);
+  cmd->footer(
+      "Examples:\n"
+      "  arena plot --db lab.db 12 --out trial12.svg\n"
+      "  arena plot --db lab.db --campaign 3 --tradeoff --out tradeoff.svg\n"
+      "A trial's prediction is re-run with the campaign's \"prediction\" settings, as `arena serve` ran it.\n"
+      "View the SVG in a browser, or convert it: rsvg-convert trial12.svg -o trial12.png\n");
   cmd->callback([o, action] { *action = [o] { return RunPlot(*o); }; });
 }
 

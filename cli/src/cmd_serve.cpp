@@ -97,6 +97,8 @@ void AddServeCommand(CLI::App& app, Action* action) {
   cmd->add_option("--drain", opt->service.drain_timeout_s, "On SIGTERM: seconds phases in flight may finish")
       ->capture_default_str();
   cmd->add_option("--predictors", opt->service.predictor_threads, "Predictor threads")->capture_default_str();
+  // Hidden: bounds the store's size to emulate a full disk (fault tests).
+  cmd->add_option("--store-max-pages", opt->service.store_max_pages)->group("");
   cmd->callback([opt, action] { *action = [opt] { return RunServe(*opt); }; });
 }
 

@@ -44,6 +44,7 @@ void AddCellCommand(CLI::App& app, Action* action);
 void AddQueryCommand(CLI::App& app, Action* action);    // cmd_query.cpp (store room)
 void AddExportCommand(CLI::App& app, Action* action);   // cmd_export.cpp (store room)
 void AddEvaluateCommand(CLI::App& app, Action* action); // cmd_evaluate.cpp
-void AddPlotCommand(CLI::App& app, Action* action);     // cmd_plot.cpp (--tradeoff; per-trial to come)
+void AddPlotCommand(CLI::App& app, Action* action);     // cmd_plot.cpp (TRIAL or --tradeoff)
+void AddWatchCommand(CLI::App& app, Action* action);    // cmd_watch.cpp
 
 }  // namespace arena::cli

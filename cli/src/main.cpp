@@ -26,6 +26,7 @@ int main(int argc, char** argv) {
   AddExportCommand(app, &action);
   AddEvaluateCommand(app, &action);
   AddPlotCommand(app, &action);
+  AddWatchCommand(app, &action);
 
   try {
     app.parse(argc, argv);

@@ -111,7 +111,7 @@ std::vector<double> NiceTicks(double lo, double hi, int count) {
 }
 
 std::string RenderSvg(const Chart& chart) {
-  const int left = 80, right = 190, top = 40, gap = 50, bottom = 50;
+  const int left = 80, right = 190, top = 58, gap = 50, bottom = 50;
   const int plot_w = chart.width - left - right;
   const int n = static_cast<int>(chart.panels.size());
   const int height = top + n * chart.panel_height + (n - 1) * gap + bottom;
@@ -140,6 +140,11 @@ std::string RenderSvg(const Chart& chart) {
     for (const auto& s : panel.series)
       for (size_t i = 0; i < s.y.size() && i < s.x.size(); ++i)
         if (std::isfinite(s.y[i]) && (!panel.log_y || s.y[i] > 0)) yr.Add(s.y[i]);
+    if (!panel.log_y && panel.min_y_span > 0 && !yr.empty() && yr.hi - yr.lo < panel.min_y_span) {
+      const double mid = 0.5 * (yr.lo + yr.hi);
+      yr.lo = mid - 0.5 * panel.min_y_span;
+      yr.hi = mid + 0.5 * panel.min_y_span;
+    }
     const Axis ya = MakeAxis(yr, panel.log_y);
     auto px = [&](double x) { return left + xa.Frac(x) * plot_w; };
     auto py = [&](double y) { return y0 + h - ya.Frac(y) * h; };
@@ -178,7 +183,7 @@ std::string RenderSvg(const Chart& chart) {
         for (size_t i = 0; i < s.x.size() && i < s.y.size(); ++i) {
           if (!xa.Usable(s.x[i]) || !ya.Usable(s.y[i])) continue;
           svg << "<circle cx=\"" << Num(px(s.x[i])) << "\" cy=\"" << Num(py(s.y[i]))
-              << "\" r=\"2.5\" fill=\"" << s.color << "\"/>\n";
+              << "\" r=\"1.8\" fill=\"" << s.color << "\"/>\n";
         }
       } else {
         svg << "<polyline fill=\"none\" stroke=\"" << s.color << "\" stroke-width=\"1.5\""
@@ -190,10 +195,15 @@ std::string RenderSvg(const Chart& chart) {
         svg << "\"/>\n";
       }
       svg << "</g>\n";
-      svg << "<line x1=\"" << left + plot_w + 12 << "\" x2=\"" << left + plot_w + 32 << "\" y1=\""
-          << legend_y - 4 << "\" y2=\"" << legend_y - 4 << "\" stroke=\"" << s.color
-          << "\" stroke-width=\"3\"" << (s.dashed ? " stroke-dasharray=\"6 3\"" : "") << "/>"
-          << "<text x=\"" << left + plot_w + 38 << "\" y=\"" << legend_y << "\">" << Escape(s.name)
+      if (s.markers) {
+        svg << "<circle cx=\"" << left + plot_w + 22 << "\" cy=\"" << legend_y - 4 << "\" r=\"3\" fill=\""
+            << s.color << "\"/>";
+      } else {
+        svg << "<line x1=\"" << left + plot_w + 12 << "\" x2=\"" << left + plot_w + 32 << "\" y1=\""
+            << legend_y - 4 << "\" y2=\"" << legend_y - 4 << "\" stroke=\"" << s.color
+            << "\" stroke-width=\"3\"" << (s.dashed ? " stroke-dasharray=\"6 3\"" : "") << "/>";
+      }
+      svg << "<text x=\"" << left + plot_w + 38 << "\" y=\"" << legend_y << "\">" << Escape(s.name)
           << "</text>\n";
       legend_y += 16;
     }

@@ -21,6 +21,9 @@ struct Panel {
   std::string y_label;
   bool log_y = false;
   std::vector<Series> series;
+  // Linear axes: the y axis spans at least this much (y units), centred on
+  // the data, so a flat or nearly flat signal is not blown up to noise.
+  double min_y_span = 0;
 };
 
 struct Chart {

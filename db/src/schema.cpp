@@ -4,6 +4,8 @@
 // in schema_migrations, so a crash mid-migration leaves the previous version.
 #include <filesystem>
 #include <string>
+#include <thread>
+#include <chrono>
 #include <vector>
 
 #include "sqlite_util.hpp"
@@ -329,11 +331,22 @@ std::unique_ptr<Store> Store::Open(const std::string& path, const StoreOptions& 
       Exec(db, "PRAGMA query_only = ON", ctx);
     } else {
       // WAL: readers never block the writer and the writer never blocks readers.
+      // Switching a new file to WAL needs an exclusive lock and SQLite does
+      // not always call the busy handler for it: two processes creating the
+      // same store at once (`arena serve` and `arena submit`) saw "database
+      // is locked". Retry for up to busy_timeout_ms.
       std::string mode;
-      {
-        detail::Stmt wal(db, "PRAGMA journal_mode = WAL");
-        wal.Step();
-        mode = wal.Text(0);
+      const auto give_up = std::chrono::steady_clock::now() + std::chrono::milliseconds(options.busy_timeout_ms);
+      for (;;) {
+        try {
+          detail::Stmt wal(db, "PRAGMA journal_mode = WAL");
+          wal.Step();
+          mode = wal.Text(0);
+          break;
+        } catch (const StoreError& e) {
+          if (e.kind() != StoreError::Kind::kBusy || std::chrono::steady_clock::now() > give_up) throw;
+          std::this_thread::sleep_for(std::chrono::milliseconds(10));
+        }
       }
       if (mode != "wal") {
         throw StoreError(StoreError::Kind::kIo,

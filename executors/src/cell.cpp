@@ -4,6 +4,7 @@
 #include <cmath>
 #include <condition_variable>
 #include <map>
+#include <limits>
 #include <mutex>
 #include <stdexcept>
 #include <thread>
@@ -222,6 +223,11 @@ struct Cell::Impl {
     }
     auto accepted = BaseStatus(c, msg::STATE_ACCEPTED);
     Send(accepted);
+    if (options.defects.hang_after_accept) {  // fault injection: a hung controller
+      spdlog::warn("cell {}: fault injection: hanging after accepting trial {}", options.id, c.trial_id());
+      SleepUntil(Clock::time_point::max());
+      return;
+    }
 
     const TrialPerturbation perturbation = DrawPerturbation(options.defects, c.seed(), c.trial_id());
     mechanics::Scene actual = ApplyPerturbation(scene, perturbation);
@@ -262,6 +268,11 @@ struct Cell::Impl {
         const auto& truth = result.samples[first + i];
         dds::EncodeSample(truth, PusherAt(actual, truth), observed[first + i], &batch.samples()[i]);
       }
+      // Fault injection (defects.hpp): a malformed sample, or a missing batch.
+      if (options.defects.corrupt_stream == "gap" && batch_index == 0)
+        batch.first_sample(static_cast<std::uint32_t>(first + 1));
+      if (options.defects.corrupt_stream == "nan" && batch_index == 0)
+        batch.samples()[0].object_pose()[0] = std::numeric_limits<double>::quiet_NaN();
       if (options.speed > 0) {
         const double due_s = result.samples[first + count - 1].t * options.speed;
         const auto due = stream_start + std::chrono::duration_cast<Clock::duration>(

@@ -126,7 +126,7 @@ DefectProfile ParseDefectProfile(std::string_view text) {
   if (!root.is_object()) throw DefectError("(document)", "must be a JSON object");
   CheckKeys(root, "", {"pose_noise", "ft_noise", "actuation_noise", "latency_ms",
                        "drop_probability", "friction_variability", "workspace",
-                       "max_pusher_speed", "contact_types", "reset", "comment"});
+                       "max_pusher_speed", "contact_types", "reset", "comment", "fault_injection"});
   DefectProfile p;
   if (const json* o = Object(root, "pose_noise", "pose_noise")) {
     CheckKeys(*o, "pose_noise", {"position_std", "rotation_std"});
@@ -188,6 +188,19 @@ DefectProfile ParseDefectProfile(std::string_view text) {
     ReadScalar(*o, "grasp_time", "reset.", &r.grasp_time);
     ReadScalar(*o, "swap_time", "reset.", &r.swap_time);
   }
+  if (const json* o = Object(root, "fault_injection", "fault_injection")) {
+    CheckKeys(*o, "fault_injection", {"hang_after_accept", "stream"});
+    if (auto it = o->find("hang_after_accept"); it != o->end()) {
+      if (!it->is_boolean()) throw DefectError("fault_injection.hang_after_accept", "must be true or false");
+      p.hang_after_accept = it->get<bool>();
+    }
+    if (auto it = o->find("stream"); it != o->end()) {
+      const std::string s = it->is_string() ? it->get<std::string>() : "?";
+      if (s != "" && s != "nan" && s != "gap")
+        throw DefectError("fault_injection.stream", "must be \"\", \"nan\" or \"gap\"");
+      p.corrupt_stream = s;
+    }
+  }
   ValidateDefectProfile(p);
   return p;
 }
@@ -218,6 +231,8 @@ std::string DefectProfileToJson(const DefectProfile& p) {
         {"rotate_speed", r.rotate_speed},
         {"grasp_time", r.grasp_time},
         {"swap_time", r.swap_time}}}};
+  if (p.hang_after_accept || !p.corrupt_stream.empty())
+    j["fault_injection"] = {{"hang_after_accept", p.hang_after_accept}, {"stream", p.corrupt_stream}};
   return j.dump();
 }
 

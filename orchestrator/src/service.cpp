@@ -46,6 +46,24 @@ Clock::time_point After(double seconds) {
 }
 
 // A prediction to compute off the service thread.
+// A store that cannot take writes any more (full, read-only, unreadable,
+// corrupt) is not a trial's or a cell's fault: the service stops (Run()
+// rethrows; `arena serve` exits 3 with the message) instead of blaming the
+// cell and retrying into the same wall. Busy and bad-input errors are local.
+bool StoreFailed(const std::exception& e) {
+  const auto* se = dynamic_cast<const db::StoreError*>(&e);
+  if (!se) return false;
+  using K = db::StoreError::Kind;
+  switch (se->kind()) {
+    case K::kFull:
+    case K::kIo:
+    case K::kCorrupt:
+    case K::kReadOnly:
+    case K::kTooNew: return true;
+    default: return false;
+  }
+}
+
 struct PredictionJob {
   std::int64_t trial_id = 0;
   int attempt = 0;
@@ -176,9 +194,15 @@ struct Service::Impl {
   // Campaign model settings: campaign id -> spec "prediction" (or null).
   std::map<std::int64_t, nlohmann::json> campaign_models;
 
+  static db::StoreOptions StoreOptionsFor(const ServiceOptions& o) {
+    db::StoreOptions so;
+    so.max_pages = o.store_max_pages;
+    return so;
+  }
+
   Impl(const ServiceOptions& o)
       : opt(o),
-        store(db::Store::Open(o.db_path)),
+        store(db::Store::Open(o.db_path, StoreOptionsFor(o))),
         participant(dds::ParticipantOptions{o.domain_id, "arena.service", o.network, 2.5}),
         commands(participant),
         announces(participant),
@@ -236,6 +260,7 @@ struct Service::Impl {
       for (const auto& s : gt.samples) job.truth.push_back(ToTrajectorySample(s, normals, scene.pusher.has_value()));
       predictor.Submit(std::move(job));
     } catch (const std::exception& e) {
+      if (StoreFailed(e)) throw;
       spdlog::error("{}: cannot predict: {}", TrialTag(t.campaign_id, t.id, t.attempt), e.what());
       RecordPrediction(PredictionDone{t.id, t.attempt, t.campaign_id,
                                       PredictionFailure("error", e.what())});
@@ -250,6 +275,7 @@ struct Service::Impl {
         const auto spec = nlohmann::json::parse(store->GetCampaign(campaign_id).spec_json);
         if (spec.is_object() && spec.contains("prediction")) model = spec["prediction"];
       } catch (const std::exception& e) {
+        if (StoreFailed(e)) throw;
         spdlog::warn("campaign {}: spec unreadable ({}), predicting with the scene's model", campaign_id,
                      e.what());
       }
@@ -282,6 +308,7 @@ struct Service::Impl {
       if (!was_alive || cells.size() == 1) spdlog::info("cell {} announced ({} contact types)", id,
                                                          a.contact_types().size());
     } catch (const db::StoreError& e) {
+      if (StoreFailed(e)) throw;
       spdlog::error("cell {}: announcement refused: {}", id, e.what());
     }
   }
@@ -300,6 +327,7 @@ struct Service::Impl {
     try {
       store->MarkCellGone(cell.id, reason);
     } catch (const db::StoreError& e) {
+      if (StoreFailed(e)) throw;
       spdlog::error("cell {}: {}", cell.id, e.what());
     }
   }
@@ -343,6 +371,7 @@ struct Service::Impl {
         Count(&ServiceCounters::resets_failed);
         AfterReset(cell.trial_id);
       } catch (const db::StoreError& e) {
+        if (StoreFailed(e)) throw;
         spdlog::error("trial {}: {}", cell.trial_id, e.what());
       }
     }
@@ -364,6 +393,7 @@ struct Service::Impl {
         spdlog::warn("{}: will be retried: {}", tag, reason);
       }
     } catch (const db::StoreError& e) {
+      if (StoreFailed(e)) throw;
       spdlog::error("{}: {}", tag, e.what());
     }
   }
@@ -379,6 +409,7 @@ struct Service::Impl {
       try {
         claim = store->ClaimNextTrial(id);
       } catch (const db::StoreError& e) {
+        if (StoreFailed(e)) throw;
         spdlog::error("cell {}: claim failed: {}", id, e.what());
         continue;
       }
@@ -449,6 +480,7 @@ struct Service::Impl {
       ex.next_sample += static_cast<std::uint32_t>(samples.size());
       Count(&ServiceCounters::samples, static_cast<std::int64_t>(samples.size()));
     } catch (const std::exception& e) {
+      if (StoreFailed(e)) throw;
       FailStream(ex, std::string("ground truth refused: ") + e.what());
       return;
     }
@@ -492,6 +524,7 @@ struct Service::Impl {
       cell.deadline = After(opt.reset_timeout_s + 2.0);
       if (!commands.Write(cmd)) AbortPhase(cell, "RESET command could not be sent", true);
     } catch (const std::exception& e) {
+      if (StoreFailed(e)) throw;
       spdlog::error("{}: {}", tag, e.what());
       AbortPhase(cell, e.what(), true);
     }
@@ -537,6 +570,7 @@ struct Service::Impl {
               Count(&ServiceCounters::failed);
               spdlog::error("{}: failed on cell {}: {}", tag, id, st.reason());
             } catch (const db::StoreError& e) {
+              if (StoreFailed(e)) throw;
               spdlog::error("{}: {}", tag, e.what());
             }
             executions.erase(it);
@@ -567,6 +601,7 @@ struct Service::Impl {
         CellResult(cell, ok, st.reason());
         AfterReset(cell.trial_id);
       } catch (const db::StoreError& e) {
+        if (StoreFailed(e)) throw;
         spdlog::error("trial {}: {}", cell.trial_id, e.what());
       }
       cell.phase = CellPhase::kIdle;
@@ -588,6 +623,7 @@ struct Service::Impl {
     try {
       t = store->GetTrial(done.trial_id);
     } catch (const db::StoreError& e) {
+      if (StoreFailed(e)) throw;
       spdlog::error("trial {}: {}", done.trial_id, e.what());
       return;
     }
@@ -608,6 +644,7 @@ struct Service::Impl {
       spdlog::info("{}: done (prediction {}, final position error {:.3g} m)", tag, done.prediction.status,
                    done.prediction.final_position_error.value_or(NAN));
     } catch (const db::StoreError& e) {
+      if (StoreFailed(e)) throw;
       spdlog::error("{}: {}", tag, e.what());
     }
   }

@@ -47,6 +47,22 @@ TEST(DefectProfile, BadFieldsAreNamed) {
   EXPECT_EQ(ErrorOf(R"({"reset": {"max_attempts": 0}})"), "reset.max_attempts");
   EXPECT_EQ(ErrorOf(R"({"reset": {"failure_probability": 2}})"), "reset.failure_probability");
   EXPECT_EQ(ErrorOf("[1, 2"), "(document)");
+  EXPECT_EQ(ErrorOf(R"({"fault_injection": {"hang_after_accept": 1}})"), "fault_injection.hang_after_accept");
+  EXPECT_EQ(ErrorOf(R"({"fault_injection": {"stream": "garbage"}})"), "fault_injection.stream");
+  EXPECT_EQ(ErrorOf(R"({"fault_injection": {"crash": true}})"), "fault_injection.crash");
+}
+
+// The fault-injection knobs (fault tests only) survive the round trip and are
+// absent from a normal profile's JSON.
+TEST(DefectProfile, FaultInjectionKnobsRoundTrip) {
+  const DefectProfile p =
+      ParseDefectProfile(R"({"fault_injection": {"hang_after_accept": true, "stream": "gap"}})");
+  EXPECT_TRUE(p.hang_after_accept);
+  EXPECT_EQ(p.corrupt_stream, "gap");
+  const DefectProfile q = ParseDefectProfile(DefectProfileToJson(p));
+  EXPECT_TRUE(q.hang_after_accept);
+  EXPECT_EQ(q.corrupt_stream, "gap");
+  EXPECT_EQ(DefectProfileToJson(ParseDefectProfile("{}")).find("fault_injection"), std::string::npos);
 }
 
 TEST(DefectProfile, RoundTripsThroughJson) {

@@ -53,6 +53,16 @@ struct DefectProfile {
       mechanics::ContactType::kPoint, mechanics::ContactType::kLine, mechanics::ContactType::kPatch};
   // Reset phase (workspace and sensing noise are filled from the above).
   reset::ResetParams reset;
+  // Fault injection, for the fault tests only (JSON "fault_injection"; never
+  // set it on a cell that does real work):
+  //   hang_after_accept: EXECUTE is accepted, then nothing more is sent for
+  //     it (no ground truth, no status) while the cell stays alive (its
+  //     liveliness and announcements continue): a hung controller.
+  //   stream: "nan" puts a NaN into the first sample's object pose; "gap"
+  //     numbers the first batch's samples from 1 instead of 0 (a sample-index
+  //     gap, as lost or out-of-order batches show). "" streams normally.
+  bool hang_after_accept = false;
+  std::string corrupt_stream;
 };
 
 // @throws DefectError naming the first bad field.

@@ -20,7 +20,10 @@
 // (RetryTrial; lineage kept), or to failed when attempts run out. A cell that
 // fails `quarantine_after` phases in a row, or whose reset keeps failing, is
 // quarantined and gets no more trials. A late message from an older attempt
-// is ignored (the store refuses stale attempts).
+// is ignored (the store refuses stale attempts). A store that can no longer
+// be written (full, read-only, corrupt, I/O error) is nobody's trial or cell
+// fault: Run() throws that db::StoreError and the service stops (`arena
+// serve` exits 3); what was committed stays intact and a restart resumes.
 //
 // Crash safety: at start the service calls RecoverAfterRestart (dispatched ->
 // planned with attempt + 1, resetting -> reset_failed) and then finishes every
@@ -55,6 +58,8 @@ struct ServiceOptions {
   int predictor_threads = 1;            // worker threads predicting trials
   bool exit_when_done = false;          // `arena run`: stop when no active campaign is left
   std::int64_t only_campaign = 0;       // > 0: exit_when_done looks at this campaign only
+  std::int64_t store_max_pages = 0;     // > 0: the store may not grow past this many 4 KiB
+                                        //   pages (db::StoreOptions::max_pages; fault tests)
 };
 
 // What the service has done since it started (for `arena run`'s summary and tests).
