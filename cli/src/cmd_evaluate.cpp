@@ -152,6 +152,8 @@ void AddEvaluateCommand(CLI::App& app, Action* action) {
   cmd->add_option("--threads", o->threads, "Worker threads (0: one per core)")->capture_default_str();
   cmd->add_flag("--json", o->json, "Print the report as JSON");
   cmd->footer(
+      "Example:\n"
+      "  arena evaluate --db lab.db --campaign 3 --facets 4,8,16 --points 2,3,5 --budget 1mm\n"
       "Every done trial is replayed from its stored scene at each setting of the cross product\n"
       "facets x points x dt x reduce, scored against its stored ground truth, and the run is\n"
       "stored (tables evaluations, evaluation_results). Errors are medians and 95th percentiles\n"

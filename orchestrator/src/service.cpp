@@ -165,6 +165,9 @@ struct Service::Impl {
     bool quarantined = false;
     int execute_failures = 0;    // consecutive failed EXECUTE phases
     int reset_failures = 0;      // consecutive failed RESET phases
+    // The last announcement, to re-register a cell whose liveliness returns.
+    std::vector<std::string> contact_types;
+    std::string capabilities_json = "{}", defects_json = "{}";
     double speed = 1.0;          // the cell's announced pacing (wall s per simulated s)
     CellPhase phase = CellPhase::kIdle;
     std::int64_t trial_id = 0;
@@ -302,6 +305,9 @@ struct Service::Impl {
                            {"max_pusher_speed", a.max_pusher_speed()},
                            {"speed", a.speed()},
                            {"arena_version", a.arena_version()}};
+    cell.contact_types = a.contact_types();
+    cell.capabilities_json = caps.dump();
+    cell.defects_json = a.defects_json();
     try {
       store->UpsertCell(id, a.contact_types(), caps.dump(), a.defects_json());
       cell.quarantined = store->GetCell(id).state == db::CellState::kQuarantined;
@@ -314,10 +320,24 @@ struct Service::Impl {
   }
 
   void OnPeerEvent(const dds::PeerEvent& e) {
-    if (e.kind != dds::PeerEvent::Kind::kParticipantLeft && e.kind != dds::PeerEvent::Kind::kWriterLost) return;
     const std::string id = CellOfParticipant(e.participant);
-    if (id.empty() || !cells.count(id) || !cells[id].alive) return;
-    CellLost(cells[id], std::string("liveliness lost (") + dds::ToString(e.kind) + ")");
+    if (id.empty() || !cells.count(id)) return;
+    CellRun& cell = cells[id];
+    using Kind = dds::PeerEvent::Kind;
+    if ((e.kind == Kind::kParticipantLeft || e.kind == Kind::kWriterLost) && cell.alive) {
+      CellLost(cell, std::string("liveliness lost (") + dds::ToString(e.kind) + ")");
+    } else if (e.kind == Kind::kWriterAlive && !cell.alive) {
+      // The same cell process is back (a liveliness lapse, not a death): a
+      // cell announces itself only once, so its liveliness is what revives it.
+      cell.alive = true;
+      cell.next_claim = Clock::now();
+      try {
+        store->UpsertCell(id, cell.contact_types, cell.capabilities_json, cell.defects_json);  // gone -> healthy
+        spdlog::info("cell {}: alive again", id);
+      } catch (const std::exception& ex) {
+        spdlog::error("cell {}: {}", id, ex.what());
+      }
+    }
   }
 
   void CellLost(CellRun& cell, const std::string& reason) {
