@@ -10,8 +10,12 @@ namespace arena::cli {
 
 std::string FormatDuration(double seconds) {
   if (!std::isfinite(seconds) || seconds < 0) return "--";
-  const long s = std::lround(seconds);
   char buf[32];
+  if (seconds < 10) {  // short runs: "0.4s", not "0s"
+    std::snprintf(buf, sizeof buf, "%.1fs", seconds);
+    return buf;
+  }
+  const long s = std::lround(seconds);
   if (s >= 3600) {
     std::snprintf(buf, sizeof buf, "%ldh%02ldm", s / 3600, (s % 3600) / 60);
   } else if (s >= 60) {
