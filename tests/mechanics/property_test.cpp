@@ -167,7 +167,9 @@ TEST(RandomScenes, ResidualsBelowOneInTenToTheEight) {
     worst_comp = std::max(worst_comp, res.residuals.complementarity);
     worst_cone = std::max(worst_cone, res.residuals.cone);
   }
-  EXPECT_GT(planar_compared, 50);
+  // About one scene in eight is planar; the full-vs-planar comparison must
+  // really have run (50 of the default 1,200, proportionally fewer under ASan).
+  EXPECT_GT(planar_compared, kScenes / 24);
   std::printf("%d scenes, %d steps, %d planar (each also run full); worst residuals: force balance %.3g, complementarity %.3g, cone %.3g\n",
               kScenes, steps, planar, worst_fb, worst_comp, worst_cone);
 }
