@@ -1,5 +1,6 @@
 // arena cell --id ID --domain D [--defects FILE] [--speed X] [--batch N]
 //            [--peers H[:P],...] [--discovery-server [ID@]H:P] [--profile-xml F]
+//            [--security DIR]
 // Runs one simulated cell until SIGINT or SIGTERM (executors/README.md).
 #include <signal.h>
 
@@ -13,6 +14,7 @@
 #include <spdlog/spdlog.h>
 
 #include "arena/executors/cell.hpp"
+#include "arena/schemas/security.hpp"
 #include "commands.hpp"
 
 namespace arena::cli {
@@ -63,6 +65,8 @@ int RunCell(CellCliOptions opt) {
   std::unique_ptr<executors::Cell> cell;
   try {
     cell = std::make_unique<executors::Cell>(opt.cell, executors::DefaultMechanics());
+  } catch (const dds::SecurityError& e) {
+    throw CommandError(kExitBadInput, e.what());
   } catch (const dds::DdsError& e) {
     throw CommandError(kExitCommunication, e.what());
   }
@@ -81,6 +85,7 @@ void AddCellCommand(CLI::App& app, Action* action) {
   CLI::App* cmd = app.add_subcommand("cell", "Run a simulated robot cell that serves trials over DDS");
   cmd->footer(
       "Example:\n  arena cell --id c1 --domain 42 --defects examples/defects/noisy.json --speed 0\n"
+      "  arena cell --id c1 --domain 42 --security lab-pki/c1   (see `arena certs --help`)\n"
       "Without --peers or --discovery-server the cell is reachable from this host only.\n"
       "Stops cleanly on SIGINT/SIGTERM (exit 0).");
   cmd->add_option("--id", opt->cell.id, "Cell id, unique in the deployment ([A-Za-z0-9_.-])")->required();
@@ -96,6 +101,8 @@ void AddCellCommand(CLI::App& app, Action* action) {
                   "Reach other hosts through a Fast DDS discovery server [id@]host:port");
   cmd->add_option("--profile-xml", opt->cell.network.profile_xml,
                   "Fast DDS XML profile file (its default participant profile sets transports)");
+  cmd->add_option("--security", opt->cell.network.security_dir,
+                  "DDS-Security: a 'cell' identity directory from `arena certs issue`");
   cmd->add_flag("--no-shm", [opt](std::int64_t) { opt->cell.network.shared_memory = false; },
                 "Do not use the shared-memory transport (UDP only)");
   cmd->add_flag("-v,--verbose", opt->verbose, "Debug log (QoS in effect, discovery)");

@@ -11,6 +11,7 @@
 #include "arena/db/store.hpp"
 #include "arena/orchestrator/logging.hpp"
 #include "arena/orchestrator/service.hpp"
+#include "arena/schemas/security.hpp"
 #include "commands.hpp"
 #include "signals.hpp"
 #include "store_errors.hpp"
@@ -47,6 +48,8 @@ int RunServe(ServeCliOptions opt) {
     service = std::make_unique<orchestrator::Service>(opt.service);
   } catch (const db::StoreError& e) {
     throw StoreCommandError(e);
+  } catch (const dds::SecurityError& e) {
+    throw CommandError(kExitBadInput, e.what());
   } catch (const dds::DdsError& e) {
     throw CommandError(kExitCommunication, e.what());
   } catch (const std::invalid_argument& e) {
@@ -75,6 +78,7 @@ void AddServeCommand(CLI::App& app, Action* action) {
   CLI::App* cmd = app.add_subcommand("serve", "Run the campaign service: schedule trials onto cells over DDS");
   cmd->footer(
       "Example:\n  arena serve --db lab.db --domain 42 --log-level info\n"
+      "  arena serve --db lab.db --domain 42 --security lab-pki/service   (see `arena certs --help`)\n"
       "Logs go to FILE.log next to the store (rotated, 16 MiB x 6 at most) and to stderr.\n"
       "SIGTERM stops dispatching and lets phases in flight finish (up to --drain s).");
   cmd->add_option("--db", opt->service.db_path, "SQLite store (created if missing)")->required();
@@ -83,6 +87,8 @@ void AddServeCommand(CLI::App& app, Action* action) {
   cmd->add_option("--discovery-server", opt->service.network.discovery_server,
                   "Client of a Fast DDS discovery server [id@]host:port");
   cmd->add_option("--profile-xml", opt->service.network.profile_xml, "Fast DDS XML profile file");
+  cmd->add_option("--security", opt->service.network.security_dir,
+                  "DDS-Security: a 'service' identity directory from `arena certs issue`");
   // The service is the process that gets restarted after a crash. A SIGKILLed
   // process leaves its shared-memory ports claimed in /dev/shm, and a successor
   // that reuses its participant id could then miss the cells' discovery

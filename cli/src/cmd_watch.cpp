@@ -20,6 +20,7 @@
 
 #include "arena/schemas/arena.h"
 #include "arena/schemas/dds.hpp"
+#include "arena/schemas/security.hpp"
 #include "arena/schemas/ground_truth.hpp"
 #include "commands.hpp"
 #include "signals.hpp"
@@ -33,6 +34,7 @@ struct WatchOptions {
   int domain = -1;
   std::string peers;
   std::string discovery_server;
+  std::string security_dir;
   double timeout_s = 30;
 };
 
@@ -67,6 +69,7 @@ int RunWatch(const WatchOptions& o) {
   try {
     if (!o.peers.empty()) po.network.peers = dds::ParsePeers(o.peers);
     po.network.discovery_server = o.discovery_server;
+    po.network.security_dir = o.security_dir;
   } catch (const dds::DdsError& e) {
     throw CommandError(kExitBadInput, e.what());
   }
@@ -75,6 +78,8 @@ int RunWatch(const WatchOptions& o) {
   try {
     participant = std::make_unique<dds::Participant>(po);
     reader = std::make_unique<dds::Reader<msg::GroundTruth>>(*participant, dds::ReaderOptions{false});
+  } catch (const dds::SecurityError& e) {
+    throw CommandError(kExitBadInput, e.what());
   } catch (const dds::DdsError& e) {
     throw CommandError(kExitCommunication, std::string("cannot join DDS domain ") + std::to_string(o.domain) +
                                                ": " + e.what());
@@ -158,6 +163,8 @@ void AddWatchCommand(CLI::App& app, Action* action) {
       ->check(CLI::Range(0, 232));
   cmd->add_option("--peers", o->peers, "Reach cells on other hosts: initial peers host[:port],...");
   cmd->add_option("--discovery-server", o->discovery_server, "Client of a Fast DDS discovery server [id@]host:port");
+  cmd->add_option("--security", o->security_dir,
+                  "DDS-Security: a 'watcher' (or 'service') identity directory from `arena certs issue`");
   cmd->add_option("--timeout", o->timeout_s, "Give up after this many seconds without a batch")
       ->capture_default_str()
       ->check(CLI::PositiveNumber);
@@ -165,6 +172,7 @@ void AddWatchCommand(CLI::App& app, Action* action) {
       "Examples:\n"
       "  arena watch 12 --domain 42\n"
       "  arena watch --cell sim-1 --domain 42 --timeout 60\n"
+      "  arena watch --cell c1 --domain 42 --security lab-pki/alice   (a watcher identity: reads, never commands)\n"
       "Shows the object's position, rotation and each contact's normal force (fingers, then the pusher)\n"
       "as the cell streams them; exits 0 when the trial's last batch arrives, 4 when nothing arrives.\n");
   cmd->callback([o, action] { *action = [o] { return RunWatch(*o); }; });

@@ -46,5 +46,6 @@ void AddExportCommand(CLI::App& app, Action* action);   // cmd_export.cpp (store
 void AddEvaluateCommand(CLI::App& app, Action* action); // cmd_evaluate.cpp
 void AddPlotCommand(CLI::App& app, Action* action);     // cmd_plot.cpp (TRIAL or --tradeoff)
 void AddWatchCommand(CLI::App& app, Action* action);    // cmd_watch.cpp
+void AddCertsCommand(CLI::App& app, Action* action);    // cmd_certs.cpp (init, issue)
 
 }  // namespace arena::cli

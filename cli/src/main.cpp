@@ -27,6 +27,7 @@ int main(int argc, char** argv) {
   AddEvaluateCommand(app, &action);
   AddPlotCommand(app, &action);
   AddWatchCommand(app, &action);
+  AddCertsCommand(app, &action);
 
   try {
     app.parse(argc, argv);
