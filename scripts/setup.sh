@@ -18,6 +18,10 @@ packages=(
   libfastrtps-dev libfastcdr-dev fastddsgen fastdds-tools
   nlohmann-json3-dev libspdlog-dev libcli11-dev
   libgtest-dev libgmock-dev libbenchmark-dev libhdf5-dev libtinyxml2-dev
+  # libssl-dev: `arena certs` makes the lab CA, identities and signed
+  # permissions with OpenSSL's libcrypto (the library Fast DDS's security
+  # plugins use too).
+  libssl-dev
   iproute2 procps
 )
 

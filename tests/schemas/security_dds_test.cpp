@@ -1,0 +1,349 @@
+// Who can command a cell, with DDS-Security on (SECURITY.md, section 4):
+// real `arena cell` / `arena serve` / `arena watch` processes with identities
+// from `arena certs`, on a test-unique domain, and attackers as participants
+// of this test process (which talk to the others over the transports, since
+// intra-process delivery is off):
+//   - one without any security,
+//   - one with a well-formed identity from another lab's CA (same names,
+//     same roles: only the CA differs),
+//   - a watcher of the lab, which may read but not command.
+// Each attack is paired with a positive control in the same test (the lab's
+// service commands the same cell and is heard), so a test cannot pass
+// because nothing worked at all; and one control run without security shows
+// that the same injection does reach an unprotected store.
+#include <algorithm>
+#include <atomic>
+#include <set>
+#include <thread>
+
+#include <gtest/gtest.h>
+
+#include "arena/schemas/security.hpp"
+#include "orchestrator/service_support.hpp"
+
+namespace arena::test {
+namespace {
+
+using namespace std::chrono_literals;
+
+constexpr double kMarker = 7.77;  // object x (m) of every injected sample: never a real one
+
+dds::NetworkOptions Secure(const std::string& identity_dir) {
+  dds::NetworkOptions n;
+  n.security_dir = identity_dir;
+  return n;
+}
+
+dds::ParticipantOptions Named(int domain, const std::string& name, dds::NetworkOptions network = {}) {
+  dds::ParticipantOptions o;
+  o.domain_id = domain;
+  o.name = name;
+  o.network = std::move(network);
+  return o;
+}
+
+// A lab (the cells' and the service's) and a rogue lab whose identities carry
+// the very same names and roles.
+class SecureDomain : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    lab_ = dir_ / "lab";
+    rogue_ = dir_ / "rogue";
+    Certs({"init", lab_});
+    Certs({"issue", lab_, "--role", "service", "--name", "service"});
+    Certs({"issue", lab_, "--role", "cell", "--name", "c1"});
+    Certs({"issue", lab_, "--role", "cell", "--name", "c2"});
+    Certs({"issue", lab_, "--role", "watcher", "--name", "alice"});
+    Certs({"init", rogue_});
+    Certs({"issue", rogue_, "--role", "service", "--name", "service"});
+    Certs({"issue", rogue_, "--role", "cell", "--name", "c1"});
+  }
+  void Certs(std::vector<std::string> args) {
+    args.insert(args.begin(), "certs");
+    ASSERT_EQ(RunArena(args, dir_ / "certs.log", 20s), 0) << ReadFile(dir_ / "certs.log");
+  }
+  std::unique_ptr<Child> SecureCell(const std::string& id, int domain, const std::vector<std::string>& extra = {}) {
+    std::vector<std::string> args = {"cell", "--id", id, "--domain", std::to_string(domain), "--security",
+                                     lab_ + "/" + id};
+    args.insert(args.end(), extra.begin(), extra.end());
+    if (std::find(extra.begin(), extra.end(), "--speed") == extra.end()) args.insert(args.end(), {"--speed", "0"});
+    return StartArena(args, dir_ / (id + ".log"));
+  }
+
+  TempDir dir_;
+  std::string lab_, rogue_;
+};
+
+// Statuses heard by the lab's service until trial `until` is EXECUTED (or
+// the timeout); the trial ids of every status heard.
+std::set<std::uint64_t> StatusesUntilExecuted(Driver& service, std::uint64_t until, std::chrono::milliseconds timeout,
+                                              bool* executed) {
+  std::set<std::uint64_t> heard;
+  *executed = false;
+  const auto deadline = std::chrono::steady_clock::now() + timeout;
+  while (std::chrono::steady_clock::now() < deadline) {
+    auto s = service.statuses.Take(200ms);
+    if (!s) continue;
+    heard.insert(s->trial_id());
+    if (s->trial_id() == until && s->state() == msg::STATE_EXECUTED) {
+      *executed = true;
+      // Anything still in flight behind it.
+      for (const auto& late : service.statuses.TakeAll()) heard.insert(late.trial_id());
+      break;
+    }
+  }
+  return heard;
+}
+
+TEST_F(SecureDomain, ParticipantsWithoutALabCertificateCannotCommandACell) {
+  const int domain = TestDomain(41);
+  auto cell = SecureCell("c1", domain);
+  Driver service(domain, Secure(lab_ + "/service"));
+  ASSERT_TRUE(service.WaitForCells({"c1"}, 30s)) << ReadFile(dir_ / "c1.log");
+  ASSERT_TRUE(service.commands.WaitForMatched(1, 10s));
+  ASSERT_TRUE(service.statuses.WaitForMatched(1, 10s));
+
+  {
+    Driver open(domain);                              // no security at all
+    Driver foreign(domain, Secure(rogue_ + "/service"));  // a service identity from another CA
+    // They cannot even see the cell's announcement, and no command reader matches.
+    EXPECT_FALSE(open.WaitForCells({"c1"}, 4s));
+    EXPECT_FALSE(foreign.WaitForCells({"c1"}, 1s));
+    EXPECT_EQ(open.commands.Matched(), 0);
+    EXPECT_EQ(foreign.commands.Matched(), 0);
+    for (int i = 0; i < 10; ++i) {
+      open.Send(open.Command("c1", 101, msg::PHASE_EXECUTE, CanonicalScene(0.1)));
+      foreign.Send(foreign.Command("c1", 102, msg::PHASE_EXECUTE, CanonicalScene(0.1)));
+      std::this_thread::sleep_for(100ms);
+    }
+  }
+  // The lab's service, listening all along, then commands the same cell: it
+  // hears that trial, and nothing of 101 or 102 (the cell reports every
+  // command it takes, ACCEPTED first).
+  ASSERT_TRUE(service.Send(service.Command("c1", 1, msg::PHASE_EXECUTE, CanonicalScene(0.2))));
+  bool executed = false;
+  const auto heard = StatusesUntilExecuted(service, 1, 30s, &executed);
+  EXPECT_TRUE(executed) << ReadFile(dir_ / "c1.log");
+  EXPECT_EQ(heard.count(101), 0u) << "the cell executed a command of a participant without security";
+  EXPECT_EQ(heard.count(102), 0u) << "the cell executed a command of another CA's service";
+  EXPECT_EQ(heard, std::set<std::uint64_t>{1});
+}
+
+// A watcher of the lab reads the cell's announcement, statuses and ground
+// truth, live (`arena watch` too), but may create no writer at all.
+TEST_F(SecureDomain, AWatcherReadsButCannotCommand) {
+  const int domain = TestDomain(42);
+  auto cell = SecureCell("c1", domain);
+  Driver service(domain, Secure(lab_ + "/service"));
+  dds::Participant watcher(Named(domain, "arena.test-watcher", Secure(lab_ + "/alice")));
+  // Access control refuses every writer the grant does not hold, and a
+  // reader of the commands.
+  EXPECT_THROW(dds::Writer<msg::TrialCommand> w(watcher), dds::DdsError);
+  EXPECT_THROW(dds::Writer<msg::GroundTruth> w(watcher), dds::DdsError);
+  EXPECT_THROW(dds::Writer<msg::CellAnnounce> w(watcher), dds::DdsError);
+  EXPECT_THROW(dds::Writer<msg::TrialStatus> w(watcher), dds::DdsError);
+  EXPECT_THROW(dds::Reader<msg::TrialCommand> r(watcher), dds::DdsError);
+  // A cell may not command either.
+  {
+    dds::Participant cell_identity(Named(domain, "arena.test-cell", Secure(lab_ + "/c2")));
+    EXPECT_THROW(dds::Writer<msg::TrialCommand> w(cell_identity), dds::DdsError);
+  }
+  dds::Reader<msg::CellAnnounce> announcements(watcher);
+  dds::Reader<msg::TrialStatus> statuses(watcher);
+  dds::Reader<msg::GroundTruth> truth(watcher);
+  auto seen = announcements.Take(30s);
+  ASSERT_TRUE(seen.has_value()) << ReadFile(dir_ / "c1.log");
+  EXPECT_EQ(seen->cell_id(), "c1");
+  ASSERT_TRUE(service.WaitForCells({"c1"}, 30s));
+  ASSERT_TRUE(truth.WaitForMatched(1, 10s));
+  ASSERT_TRUE(statuses.WaitForMatched(1, 10s));
+
+  // `arena watch` with the watcher identity follows the next trial of c1.
+  auto watch = StartArena({"watch", "--cell", "c1", "--domain", std::to_string(domain), "--timeout", "40",
+                           "--security", lab_ + "/alice"},
+                          dir_ / "watch.log");
+  ASSERT_TRUE(service.participant.WaitForPeer("arena.watch", 20s)) << ReadFile(dir_ / "watch.log");
+  std::this_thread::sleep_for(2s);  // its reader matching the cell's writer (no signal from outside)
+
+  ASSERT_TRUE(service.Send(service.Command("c1", 1, msg::PHASE_EXECUTE, CanonicalScene(0.4))));
+  auto final = service.FinalStatus(1, 30s);
+  ASSERT_TRUE(final.has_value()) << ReadFile(dir_ / "c1.log");
+  EXPECT_EQ(final->state(), msg::STATE_EXECUTED);
+
+  // The watcher heard the same.
+  std::uint64_t samples = 0;
+  bool last = false;
+  const auto deadline = std::chrono::steady_clock::now() + 10s;
+  while (!last && std::chrono::steady_clock::now() < deadline) {
+    if (auto b = truth.Take(200ms); b && b->trial_id() == 1) {
+      samples += b->samples().size();
+      last = b->last();
+    }
+  }
+  EXPECT_TRUE(last);
+  EXPECT_EQ(samples, final->samples());
+  bool status_seen = false;
+  while (auto s = statuses.Take(1s)) status_seen = status_seen || (s->trial_id() == 1 && s->state() == msg::STATE_EXECUTED);
+  EXPECT_TRUE(status_seen);
+
+  auto st = watch->Wait(20s);
+  ASSERT_TRUE(st.has_value()) << ReadFile(dir_ / "watch.log");
+  EXPECT_TRUE(WIFEXITED(*st) && WEXITSTATUS(*st) == 0) << ReadFile(dir_ / "watch.log");
+  EXPECT_NE(ReadFile(dir_ / "watch.log").find("complete"), std::string::npos) << ReadFile(dir_ / "watch.log");
+}
+
+// Writes forged announcements, statuses and ground truth as fast as a cell
+// would, until stopped: a "ghost" cell, and streams for the campaign's trials
+// in the name of the real cell c1, every sample at x = kMarker.
+class Injector {
+ public:
+  Injector(int domain, const std::string& name, dds::NetworkOptions network)
+      : participant_(Named(domain, name, std::move(network))),
+        announce_(participant_, dds::WriterOptions{0.05}),
+        status_(participant_, dds::WriterOptions{0.05}),
+        truth_(participant_, dds::WriterOptions{0.05}) {
+    thread_ = std::thread([this] { Run(); });
+  }
+  ~Injector() {
+    stop_ = true;
+    thread_.join();
+  }
+  int matched() const { return announce_.Matched() + status_.Matched() + truth_.Matched(); }
+
+ private:
+  void Run() {
+    while (!stop_) {
+      msg::CellAnnounce a;
+      a.cell_id("ghost");
+      a.contact_types({"point", "line", "patch"});
+      a.workspace_min({-1, -1, -1});
+      a.workspace_max({1, 1, 1});
+      a.max_pusher_speed(1);
+      a.defects_json("{}");
+      a.arena_version("0.0.0-ghost");
+      announce_.Write(a);
+      for (std::uint64_t trial = 1; trial <= 6 && !stop_; ++trial) {
+        msg::GroundTruth g;
+        g.trial_id(trial);
+        g.attempt(1);
+        g.cell_id("c1");
+        g.batch(0);
+        g.first_sample(0);
+        g.last(true);
+        g.samples().resize(5);
+        for (int k = 0; k < 5; ++k) {
+          g.samples()[k].t(k / 250.0);
+          g.samples()[k].object_pose() = {kMarker, 0, 0, 1, 0, 0, 0};
+          g.samples()[k].pusher_pose() = {0, 0, 0, 1, 0, 0, 0};
+          g.samples()[k].observed_object_pose() = {kMarker, 0, 0, 1, 0, 0, 0};
+          g.samples()[k].observed_valid(true);
+        }
+        truth_.Write(g);
+        msg::TrialStatus s;
+        s.trial_id(trial);
+        s.attempt(1);
+        s.cell_id("c1");
+        s.phase(msg::PHASE_EXECUTE);
+        s.state(msg::STATE_EXECUTED);
+        s.samples(5);
+        s.observed_pose({kMarker, 0, 0, 1, 0, 0, 0});
+        status_.Write(s);
+      }
+      std::this_thread::sleep_for(20ms);
+    }
+  }
+
+  dds::Participant participant_;
+  dds::Writer<msg::CellAnnounce> announce_;
+  dds::Writer<msg::TrialStatus> status_;
+  dds::Writer<msg::GroundTruth> truth_;
+  std::atomic<bool> stop_{false};
+  std::thread thread_;
+};
+
+bool StoreKnowsCell(const std::string& db, const std::string& id) {
+  for (const auto& c : OpenReadOnly(db)->ListCells()) {
+    if (c.id == id) return true;
+  }
+  return false;
+}
+
+// A secured `arena serve` runs a campaign on a secured cell while two
+// injectors (no security; another CA's cell "c1") flood the domain: the
+// store never learns of them.
+TEST_F(SecureDomain, ParticipantsWithoutALabCertificateCannotInjectGroundTruth) {
+  const int domain = TestDomain(43);
+  const std::string db = dir_ / "lab.db";
+  // Real time: the campaign takes seconds, all of them under attack.
+  auto cell = SecureCell("c1", domain, {"--speed", "1"});
+  auto serve = StartArena({"serve", "--db", db, "--domain", std::to_string(domain), "--security", lab_ + "/service"},
+                          dir_ / "serve.log");
+  {
+    Injector open(domain, "arena.cell.c1", {});
+    Injector foreign(domain, "arena.cell.c1", Secure(rogue_ + "/c1"));
+    const auto attack_start = std::chrono::steady_clock::now();
+    ASSERT_TRUE(WaitUntil([&] { return StoreKnowsCell(db, "c1"); }, 30s)) << ReadFile(dir_ / "serve.log");
+    ASSERT_EQ(RunArena({"submit", TestCampaign("eval6.json"), "--db", db}, dir_ / "submit.log", 30s), 0)
+        << ReadFile(dir_ / "submit.log");
+    ASSERT_TRUE(WaitUntil([&] { return CountStates(db, 1)["done"] == 6; }, 60s))
+        << ReadFile(dir_ / "serve.log") << ReadFile(dir_ / "c1.log");
+    // The control test's ghost reaches an open store in well under a second.
+    std::this_thread::sleep_until(attack_start + 3s);
+    EXPECT_EQ(open.matched(), 0);
+    EXPECT_EQ(foreign.matched(), 0);
+  }
+  serve->Signal(SIGTERM);
+  ASSERT_TRUE(serve->Wait(30s).has_value());
+  ExpectCampaignConsistent(db, 1, 6);
+  EXPECT_FALSE(StoreKnowsCell(db, "ghost"));
+  auto store = OpenReadOnly(db);
+  for (const auto& t : store->ListTrials(1)) {
+    EXPECT_EQ(t.attempt, 1) << "trial " << t.id << " was retried: a forged stream or status got through?";
+    const auto truth = store->ReadGroundTruth(t.id);
+    EXPECT_EQ(truth.cell_id, "c1");
+    EXPECT_GT(truth.samples.size(), 5u);
+    for (const auto& s : truth.samples) {
+      ASSERT_NE(s.object_pose[0], kMarker) << "trial " << t.id << " stored an injected sample";
+    }
+  }
+}
+
+// The control: without security the same injector's ghost cell reaches the
+// store within seconds (so the test above would see a breach).
+TEST_F(SecureDomain, WithoutSecurityTheSameInjectionReachesTheStore) {
+  const int domain = TestDomain(44);
+  const std::string db = dir_ / "open.db";
+  auto serve = StartArena({"serve", "--db", db, "--domain", std::to_string(domain)}, dir_ / "serve.log");
+  Injector open(domain, "arena.cell.ghost", {});
+  EXPECT_TRUE(WaitUntil([&] { return StoreKnowsCell(db, "ghost"); }, 30s)) << ReadFile(dir_ / "serve.log");
+}
+
+// End to end with security on: a secured service (loopback UDP) and two
+// secured cells (one on shared memory + UDP, one UDP only) finish a campaign.
+TEST_F(SecureDomain, SecuredServiceAndCellsFinishACampaign) {
+  const int domain = TestDomain(45);
+  const std::string db = dir_ / "lab.db";
+  // Real time, so that one cell is busy while the other is idle.
+  auto c1 = SecureCell("c1", domain, {"--speed", "1"});
+  auto c2 = SecureCell("c2", domain, {"--speed", "1", "--no-shm"});
+  auto serve = StartArena({"serve", "--db", db, "--domain", std::to_string(domain), "--security", lab_ + "/service"},
+                          dir_ / "serve.log");
+  // Both cells authenticate with the service before the campaign starts.
+  ASSERT_TRUE(WaitUntil([&] { return StoreKnowsCell(db, "c1") && StoreKnowsCell(db, "c2"); }, 30s))
+      << ReadFile(dir_ / "serve.log") << ReadFile(dir_ / "c1.log") << ReadFile(dir_ / "c2.log");
+  ASSERT_EQ(RunArena({"submit", TestCampaign("eval6.json"), "--db", db}, dir_ / "submit.log", 30s), 0)
+      << ReadFile(dir_ / "submit.log");
+  ASSERT_TRUE(WaitUntil([&] { return CountStates(db, 1)["done"] == 6; }, 60s))
+      << ReadFile(dir_ / "serve.log") << ReadFile(dir_ / "c1.log") << ReadFile(dir_ / "c2.log");
+  serve->Signal(SIGTERM);
+  auto st = serve->Wait(30s);
+  ASSERT_TRUE(st.has_value());
+  EXPECT_TRUE(WIFEXITED(*st) && WEXITSTATUS(*st) == 0) << ReadFile(dir_ / "serve.log");
+  ExpectCampaignConsistent(db, 1, 6);
+  std::set<std::string> cells;
+  for (const auto& t : OpenReadOnly(db)->ListTrials(1)) cells.insert(t.cell_id);
+  EXPECT_EQ(cells, (std::set<std::string>{"c1", "c2"})) << "both cells (shared memory and UDP only) took part";
+}
+
+}  // namespace
+}  // namespace arena::test
