@@ -21,6 +21,7 @@
 #include "arena/orchestrator/logging.hpp"
 #include "arena/orchestrator/service.hpp"
 #include "arena/orchestrator/submit.hpp"
+#include "arena/schemas/security.hpp"
 #include "campaign_input.hpp"
 #include "child_process.hpp"
 #include "commands.hpp"
@@ -40,6 +41,7 @@ struct RunOptions {
   std::string defects_path;   // the cells' own profile (workspace, reset); optional
   std::string log_level = "info";
   bool quiet = false;
+  std::string security_lab;   // DDS-Security: LAB/service and LAB/sim1.. (arena certs); "": open domain
 };
 
 double Median(std::vector<double> v) {
@@ -103,6 +105,18 @@ int Run(RunOptions opt) {
   });
 
   const orchestrator::Campaign campaign = LoadValidCampaign(opt.campaign_path);
+  // Every identity checked before anything is stored: a missing one is named here.
+  const auto identity = [&opt](const std::string& name) { return opt.security_lab + "/" + name; };
+  if (!opt.security_lab.empty()) {
+    try {
+      dds::CheckIdentityDir(identity("service"));
+      for (int k = 0; k < opt.cells; ++k) dds::CheckIdentityDir(identity("sim" + std::to_string(k + 1)));
+    } catch (const dds::SecurityError& e) {
+      throw CommandError(kExitBadInput, std::string("--security: ") + e.what() +
+                                            " (issue it with `arena certs issue " + opt.security_lab +
+                                            " --role cell|service --name NAME`)");
+    }
+  }
   std::int64_t campaign_id = 0;
   try {
     auto store = db::Store::Open(opt.db_path);
@@ -128,6 +142,7 @@ int Run(RunOptions opt) {
     std::vector<std::string> argv = {self, "cell", "--id", "sim" + std::to_string(k + 1), "--domain",
                                      std::to_string(opt.domain), "--speed", std::to_string(opt.speed)};
     if (!opt.defects_path.empty()) argv.insert(argv.end(), {"--defects", opt.defects_path});
+    if (!opt.security_lab.empty()) argv.insert(argv.end(), {"--security", identity("sim" + std::to_string(k + 1))});
     cells.emplace_back(argv, opt.db_path + ".sim" + std::to_string(k + 1) + ".log");
   }
 
@@ -136,6 +151,7 @@ int Run(RunOptions opt) {
   so.domain_id = opt.domain;
   so.exit_when_done = true;
   so.only_campaign = campaign_id;
+  if (!opt.security_lab.empty()) so.network.security_dir = identity("service");
   std::unique_ptr<orchestrator::Service> service;
   try {
     service = std::make_unique<orchestrator::Service>(so);
@@ -199,7 +215,9 @@ void AddRunCommand(CLI::App& app, Action* action) {
       "Example:\n  arena run examples/campaigns/smoke.json --db smoke.db --cells 2\n"
       "Starts the cells as child processes on a private DDS domain (this host only), runs the\n"
       "service until the campaign is finished, prints a summary. Ctrl-C stops cleanly; run the\n"
-      "same store with `arena serve` to finish what was left.");
+      "same store with `arena serve` to finish what was left.\n"
+      "  arena run examples/campaigns/smoke.json --db smoke.db --cells 2 --security lab-pki\n"
+      "runs it with DDS-Security: identities lab-pki/service and lab-pki/sim1, sim2 (arena certs).");
   cmd->add_option("campaign", opt->campaign_path, "Campaign JSON (orchestrator/README.md)")->required();
   cmd->add_option("--db", opt->db_path, "SQLite store (created if missing)")->capture_default_str();
   cmd->add_option("--cells", opt->cells, "Simulated cells to start")->capture_default_str();
@@ -210,6 +228,8 @@ void AddRunCommand(CLI::App& app, Action* action) {
   cmd->add_option("--log-level", opt->log_level, "Service log level (the log is FILE.log next to the store)")
       ->capture_default_str();
   cmd->add_flag("--quiet", opt->quiet, "No progress line");
+  cmd->add_option("--security", opt->security_lab,
+                  "DDS-Security: a lab from `arena certs init` holding identities service, sim1..simN");
   cmd->callback([opt, action] { *action = [opt] { return Run(*opt); }; });
 }
 

@@ -345,5 +345,23 @@ TEST_F(SecureDomain, SecuredServiceAndCellsFinishACampaign) {
   EXPECT_EQ(cells, (std::set<std::string>{"c1", "c2"})) << "both cells (shared memory and UDP only) took part";
 }
 
+// `arena run --security LAB`: the service and every simulated cell use
+// their identities from LAB; a missing one is named before anything is stored.
+TEST_F(SecureDomain, RunWithSecurityUsesTheLabsIdentities) {
+  const std::string db = dir_ / "run.db";
+  const std::string domain = std::to_string(TestDomain(46));
+  const std::vector<std::string> run = {"run", TestCampaign("eval6.json"), "--db", db, "--cells", "2",
+                                        "--domain", domain, "--quiet", "--security", lab_};
+  EXPECT_EQ(RunArena(run, dir_ / "run-missing.out", 30s), 2);
+  EXPECT_NE(ReadFile(dir_ / "run-missing.out").find(lab_ + "/sim1: not a directory"), std::string::npos)
+      << ReadFile(dir_ / "run-missing.out");
+  EXPECT_FALSE(std::filesystem::exists(db));
+  Certs({"issue", lab_, "--role", "cell", "--name", "sim1"});
+  Certs({"issue", lab_, "--role", "cell", "--name", "sim2"});
+  ASSERT_EQ(RunArena(run, dir_ / "run.out", 60s), 0) << ReadFile(dir_ / "run.out") << ReadFile(db + ".log");
+  ExpectCampaignConsistent(db, 1, 6);
+  EXPECT_EQ(CountStates(db, 1)["done"], 6);
+}
+
 }  // namespace
 }  // namespace arena::test
