@@ -42,8 +42,11 @@
 //                      DDS discovery server (`fastdds discovery -i id -l h -p p`).
 //   --profile-xml F    loads a Fast DDS XML profile file first; its default
 //                      participant profile decides the transports.
-//   --security DIR     reserved for DDS-Security (issue 8): applied as the
-//                      last step of MakeParticipantQos; refused until then.
+//   --security DIR     DDS-Security (security.hpp): DIR is an identity from
+//                      `arena certs issue`; every file there is checked
+//                      (SecurityError naming it), then the participant's
+//                      dds.sec.* properties point at them. Applied last, on
+//                      top of any of the above (profiles included).
 //
 // Invariants
 //   1. Every entity is created through Participant / Writer / Reader; a null
@@ -92,7 +95,7 @@ struct NetworkOptions {
   // Fast DDS XML profile file, loaded before anything else; empty: none.
   std::string profile_xml;
   bool shared_memory = true;
-  // DDS-Security directory (issue 8); empty: no security.
+  // DDS-Security identity directory (security.hpp); empty: no security.
   std::string security_dir;
 };
 
