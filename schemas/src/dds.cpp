@@ -416,6 +416,11 @@ Participant::Participant(const ParticipantOptions& options)
     if (factory->load_XML_profiles_file(options.network.profile_xml) != ReturnCode_t::RETCODE_OK) {
       throw DdsError("--profile-xml: cannot load '" + options.network.profile_xml + "'");
     }
+    // Fast DDS 2.9's load_XML_profiles_file leaves the factory's default
+    // participant QoS alone; load_profiles() (its first call in a process)
+    // takes the default profile of everything loaded so far into it. Without
+    // this the file's participant profile was silently ignored.
+    factory->load_profiles();
   }
   fdds::DomainParticipantQos qos = factory->get_default_participant_qos();
   qos.name(options.name);

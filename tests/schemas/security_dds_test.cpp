@@ -13,6 +13,8 @@
 // that the same injection does reach an unprotected store.
 #include <algorithm>
 #include <atomic>
+#include <fstream>
+#include <sstream>
 #include <set>
 #include <thread>
 
@@ -361,6 +363,161 @@ TEST_F(SecureDomain, RunWithSecurityUsesTheLabsIdentities) {
   ASSERT_EQ(RunArena(run, dir_ / "run.out", 60s), 0) << ReadFile(dir_ / "run.out") << ReadFile(db + ".log");
   ExpectCampaignConsistent(db, 1, 6);
   EXPECT_EQ(CountStates(db, 1)["done"], 6);
+}
+
+// A Fast DDS profile for a participant that bypasses arena's checks: arena's
+// local-only transports (UDPv4 on 127.0.0.1, unicast discovery there) and
+// the given DDS-Security properties.
+std::string ForgerProfile(const std::vector<std::pair<std::string, std::string>>& properties) {
+  std::ostringstream x;
+  x << R"(<?xml version="1.0" encoding="UTF-8"?>
+<dds xmlns="http://www.eprosima.com/XMLSchemas/fastRTPS_Profiles">
+  <profiles>
+    <transport_descriptors>
+      <transport_descriptor>
+        <transport_id>loopback</transport_id>
+        <type>UDPv4</type>
+        <interfaceWhiteList><address>127.0.0.1</address></interfaceWhiteList>
+        <maxInitialPeersRange>64</maxInitialPeersRange>
+      </transport_descriptor>
+    </transport_descriptors>
+    <participant profile_name="forger" is_default_profile="true">
+      <rtps>
+        <userTransports><transport_id>loopback</transport_id></userTransports>
+        <useBuiltinTransports>false</useBuiltinTransports>
+        <builtin>
+          <metatrafficUnicastLocatorList>
+            <locator><udpv4><address>127.0.0.1</address></udpv4></locator>
+          </metatrafficUnicastLocatorList>
+          <initialPeersList>
+            <locator><udpv4><address>127.0.0.1</address></udpv4></locator>
+          </initialPeersList>
+        </builtin>
+        <propertiesPolicy>
+          <properties>
+)";
+  for (const auto& [name, value] : properties) {
+    x << "            <property><name>" << name << "</name><value>" << value << "</value></property>\n";
+  }
+  x << R"(          </properties>
+        </propertiesPolicy>
+      </rtps>
+    </participant>
+  </profiles>
+</dds>
+)";
+  return x.str();
+}
+
+// A child process (forked before the caller starts any DDS thread: a loaded
+// profile is process-wide) that joins with the Fast DDS profile at
+// profile_path, creates a command writer and commands c1 to run trial
+// `trial`. Exit 0: it wrote, never matched; 3: a cell matched its writer;
+// 2: set-up failed (the participant or the writer was refused).
+pid_t StartForger(int domain, const std::string& profile_path, std::uint64_t trial) {
+  const pid_t pid = fork();
+  if (pid != 0) return pid;
+  prctl(PR_SET_PDEATHSIG, SIGKILL);
+  int rc = 2;
+  try {
+    dds::ParticipantOptions o = Named(domain, "arena.service");
+    o.network.profile_xml = profile_path;
+    dds::Participant p(o);
+    dds::Writer<msg::TrialCommand> commands(p);
+    rc = commands.WaitForMatched(1, 12s) ? 3 : 0;
+    for (int i = 0; i < 20; ++i) {
+      msg::TrialCommand c;
+      c.cell_id("c1");
+      c.trial_id(trial);
+      c.attempt(1);
+      c.phase(msg::PHASE_EXECUTE);
+      c.scene_json(CanonicalScene(0.1));
+      c.deadline_s(30);
+      commands.Write(c);
+      std::this_thread::sleep_for(100ms);
+    }
+    if (commands.Matched() > 0) rc = 3;
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "forger: %s\n", e.what());
+  }
+  _exit(rc);
+}
+
+// A watcher of the lab who bypasses arena (its own Fast DDS configuration)
+// and presents a permissions document granting it TrialCommand, signed by a
+// CA of its own making: its own participant accepts that, so it gets a
+// command writer, but the cell checks the document against the lab's CA and
+// never matches it. (The remote half of access control; the watcher test
+// above covers the local half.)
+TEST_F(SecureDomain, AWatcherWithForgedPermissionsCannotCommand) {
+  if (std::system("openssl version >/dev/null 2>&1") != 0) GTEST_SKIP() << "no openssl command to sign the forgery";
+  std::string permissions = ReadFile(lab_ + "/alice/permissions.xml");
+  const auto rule = permissions.find("<subscribe>");
+  ASSERT_NE(rule, std::string::npos);
+  permissions.insert(rule, "<publish><topics><topic>TrialCommand</topic></topics></publish>\n        ");
+  std::ofstream(dir_ / "forged.xml") << permissions;
+  ASSERT_EQ(std::system(("openssl smime -sign -text -in " + (dir_ / "forged.xml") + " -signer " + rogue_ +
+                         "/ca.cert.pem -inkey " + rogue_ + "/ca.key.pem -out " + (dir_ / "forged.p7s"))
+                            .c_str()),
+            0);
+  const std::string auth = "dds.sec.auth.builtin.PKI-DH.", access = "dds.sec.access.builtin.Access-Permissions.";
+  std::ofstream(dir_ / "forger.xml") << ForgerProfile({
+      {"dds.sec.auth.plugin", "builtin.PKI-DH"},
+      {auth + "identity_ca", "file://" + lab_ + "/ca.cert.pem"},  // a genuine lab identity...
+      {auth + "identity_certificate", "file://" + lab_ + "/alice/identity.cert.pem"},
+      {auth + "private_key", "file://" + lab_ + "/alice/identity.key.pem"},
+      {"dds.sec.access.plugin", "builtin.Access-Permissions"},
+      {access + "permissions_ca", "file://" + rogue_ + "/ca.cert.pem"},  // ...with forged permissions
+      {access + "governance", "file://" + rogue_ + "/governance.p7s"},
+      {access + "permissions", "file://" + (dir_ / "forged.p7s")},
+      {"dds.sec.crypto.plugin", "builtin.AES-GCM-GMAC"},
+  });
+  // Control: the same profile with the lab's genuine service identity does
+  // reach the cell (so the forger's transports and properties work).
+  std::ofstream(dir_ / "genuine.xml") << ForgerProfile({
+      {"dds.sec.auth.plugin", "builtin.PKI-DH"},
+      {auth + "identity_ca", "file://" + lab_ + "/ca.cert.pem"},
+      {auth + "identity_certificate", "file://" + lab_ + "/service/identity.cert.pem"},
+      {auth + "private_key", "file://" + lab_ + "/service/identity.key.pem"},
+      {"dds.sec.access.plugin", "builtin.Access-Permissions"},
+      {access + "permissions_ca", "file://" + lab_ + "/ca.cert.pem"},
+      {access + "governance", "file://" + lab_ + "/governance.p7s"},
+      {access + "permissions", "file://" + lab_ + "/service/permissions.p7s"},
+      {"dds.sec.crypto.plugin", "builtin.AES-GCM-GMAC"},
+  });
+  const int domain = TestDomain(47);
+  const pid_t forger = StartForger(domain, dir_ / "forger.xml", 103);
+  const pid_t genuine = StartForger(domain, dir_ / "genuine.xml", 104);
+  auto cell = SecureCell("c1", domain);
+  Driver service(domain, Secure(lab_ + "/service"));
+  ASSERT_TRUE(service.WaitForCells({"c1"}, 30s)) << ReadFile(dir_ / "c1.log");
+  ASSERT_TRUE(service.statuses.WaitForMatched(1, 10s));
+  std::set<std::uint64_t> heard;
+  const auto deadline = std::chrono::steady_clock::now() + 40s;
+  std::map<pid_t, int> exits;
+  while (exits.size() < 2) {
+    for (const pid_t pid : {forger, genuine}) {
+      int status = 0;
+      if (!exits.count(pid) && waitpid(pid, &status, WNOHANG) == pid) {
+        exits[pid] = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+      }
+    }
+    if (std::chrono::steady_clock::now() > deadline) {
+      for (const pid_t pid : {forger, genuine}) kill(pid, SIGKILL);
+      for (const pid_t pid : {forger, genuine}) waitpid(pid, nullptr, 0);
+      FAIL() << "the forgers did not finish";
+    }
+    if (auto s = service.statuses.Take(100ms)) heard.insert(s->trial_id());
+  }
+  EXPECT_EQ(exits[genuine], 3) << "control: the genuine service identity via the same profile should match";
+  ASSERT_NE(exits[forger], 2) << "the forger could not even set up (profile or forgery broken)";
+  EXPECT_EQ(exits[forger], 0) << "the cell matched a command writer with forged permissions";
+  ASSERT_TRUE(service.Send(service.Command("c1", 1, msg::PHASE_EXECUTE, CanonicalScene(0.2))));
+  bool executed = false;
+  for (const auto id : StatusesUntilExecuted(service, 1, 30s, &executed)) heard.insert(id);
+  EXPECT_TRUE(executed) << ReadFile(dir_ / "c1.log");
+  EXPECT_EQ(heard.count(103), 0u) << "the cell executed a command under forged permissions";
+  EXPECT_EQ(heard.count(104), 1u) << "control: the genuine service's command was executed";
 }
 
 }  // namespace
