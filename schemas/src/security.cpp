@@ -310,7 +310,7 @@ std::string DomainsXml(int min, int max, const char* indent) {
 std::string GovernanceXml(const LabOptions& o) {
   std::ostringstream x;
   x << "<?xml version=\"1.0\" encoding=\"UTF-8\"?>\n"
-    << "<!-- arena lab '" << o.lab_name << "': governance (arena certs init; schemas/include/arena/schemas/security.hpp) -->\n"
+    << "<!-- arena lab governance (arena certs init; schemas/include/arena/schemas/security.hpp) -->\n"
     << "<dds xmlns:xsi=\"http://www.w3.org/2001/XMLSchema-instance\"\n"
     << "     xsi:noNamespaceSchemaLocation=\"http://www.omg.org/spec/DDS-SECURITY/20170901/omg_shared_ca_governance.xsd\">\n"
     << "  <domain_access_rules>\n"
@@ -345,7 +345,7 @@ std::string PermissionsXml(const IdentityOptions& o, const std::string& subject,
   const RoleTopics topics = TopicsOf(o.role);
   std::ostringstream x;
   x << "<?xml version=\"1.0\" encoding=\"UTF-8\"?>\n"
-    << "<!-- arena " << ToString(o.role) << " '" << o.name << "': permissions (arena certs issue) -->\n"
+    << "<!-- arena " << ToString(o.role) << " permissions (arena certs issue) -->\n"
     << "<dds xmlns:xsi=\"http://www.w3.org/2001/XMLSchema-instance\"\n"
     << "     xsi:noNamespaceSchemaLocation=\"http://www.omg.org/spec/DDS-SECURITY/20170901/omg_shared_ca_permissions.xsd\">\n"
     << "  <permissions>\n"
@@ -454,6 +454,12 @@ void InitLab(const std::string& dir, const LabOptions& options) {
     if (fs::exists(path, ec)) {
       throw SecurityError(path + ": this directory holds a lab CA already; refusing to overwrite it "
                           "(issue identities from it with `arena certs issue`)");
+    }
+  }
+  for (const char* file : {kGovernanceXmlFile, kGovernanceFile}) {  // nothing half-made
+    std::error_code ec;
+    if (fs::exists(Join(dir, file), ec)) {
+      throw SecurityError(Join(dir, file) + ": exists already (a lab's remains?); refusing to overwrite it");
     }
   }
   std::error_code ec;

@@ -156,6 +156,11 @@ TEST_F(SecurityCerts, BadOptionsAreNamed) {
   EXPECT_EQ(no_lab.rc, 1);
   EXPECT_NE(no_lab.err.find("nolab/ca.key.pem: missing"), std::string::npos) << no_lab.err;
   EXPECT_EQ(Arena("certs issue " + lab_ + " --role cell --name c1 --domains 5-x").rc, 2);
+  // Names with '--' (not allowed inside XML comments) still make valid documents.
+  o.name = "c--1";
+  const std::string dashes = dds::IssueIdentity(lab_, o);
+  EXPECT_NE(dds::VerifySignedDocument(dashes + "/permissions.p7s", dashes + "/ca.cert.pem").find("CN=c--1"),
+            std::string::npos);
 }
 
 TEST_F(SecurityCerts, EveryBrokenFileIsNamed) {
