@@ -550,5 +550,30 @@ TEST_F(SecureDomain, AWatcherWithForgedPermissionsCannotCommand) {
   EXPECT_EQ(heard.count(104), 1u) << "control: the genuine service's command was executed";
 }
 
+// A secured service SIGKILLed mid-campaign and restarted authenticates
+// afresh with the cells (its predecessor's session is dropped with its
+// lease) and finishes the campaign, nothing lost or duplicated.
+TEST_F(SecureDomain, SecuredServiceKilledAndRestartedFinishesTheCampaign) {
+  const int domain = TestDomain(48);
+  const std::string db = dir_ / "lab.db";
+  auto cell = SecureCell("c1", domain, {"--speed", "1"});
+  ASSERT_EQ(RunArena({"submit", TestCampaign("eval6.json"), "--db", db}, dir_ / "submit.log", 30s), 0)
+      << ReadFile(dir_ / "submit.log");
+  const std::vector<std::string> serve = {"serve", "--db", db, "--domain", std::to_string(domain), "--security",
+                                          lab_ + "/service"};
+  {
+    auto first = StartArena(serve, dir_ / "serve1.log");
+    ASSERT_TRUE(WaitUntil([&] { return CountStates(db, 1)["done"] >= 1; }, 40s)) << ReadFile(dir_ / "serve1.log");
+    first->Signal(SIGKILL);
+    ASSERT_TRUE(first->Wait(10s).has_value());
+  }
+  auto second = StartArena(serve, dir_ / "serve2.log");
+  ASSERT_TRUE(WaitUntil([&] { return CountStates(db, 1)["done"] == 6; }, 60s))
+      << ReadFile(dir_ / "serve2.log") << ReadFile(dir_ / "c1.log");
+  second->Signal(SIGTERM);
+  ASSERT_TRUE(second->Wait(30s).has_value());
+  ExpectCampaignConsistent(db, 1, 6);
+}
+
 }  // namespace
 }  // namespace arena::test
