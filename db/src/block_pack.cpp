@@ -130,13 +130,18 @@ bool PackBlock(const void* agt1, std::size_t size, std::string* out) {
     }
   }
 
-  std::vector<std::uint64_t> v(count), z(count);
-  for (std::uint32_t off : shape.doubles) {
+  // Transpose once, row by row (sequential reads; gathering a column across
+  // rows instead touched a cache line per value and cost twice as much).
+  const std::size_t columns = shape.doubles.size();
+  std::vector<std::uint64_t> matrix(columns * count), z(count);
+  for (std::uint32_t i = 0; i < count; ++i) {
+    const unsigned char* r = rows + i * shape.row;
+    for (std::size_t j = 0; j < columns; ++j) std::memcpy(&matrix[j * count + i], r + shape.doubles[j], 8);
+  }
+  for (std::size_t j = 0; j < columns; ++j) {
+    const std::uint64_t* v = &matrix[j * count];
     bool constant = true;
-    for (std::uint32_t i = 0; i < count; ++i) {
-      std::memcpy(&v[i], rows + i * shape.row + off, 8);
-      constant &= v[i] == v[0];
-    }
+    for (std::uint32_t i = 1; i < count; ++i) constant &= v[i] == v[0];
     if (constant) {
       *p++ = kConstant;
       std::memcpy(p, &v[0], 8);
@@ -231,8 +236,12 @@ std::string UnpackBlock(const void* agt2, std::size_t size) {
     }
   }
 
-  std::vector<std::uint64_t> v(count);
-  for (std::uint32_t off : shape.doubles) {
+  // Columns are decoded into a matrix, then written out row by row
+  // (sequential writes; see PackBlock).
+  const std::size_t columns = shape.doubles.size();
+  std::vector<std::uint64_t> matrix(columns * count);
+  for (std::size_t j = 0; j < columns; ++j) {
+    std::uint64_t* v = &matrix[j * count];
     need(1);
     const unsigned char kind = *p++;
     if (kind == kConstant) {
@@ -240,7 +249,7 @@ std::string UnpackBlock(const void* agt2, std::size_t size) {
       std::uint64_t c;
       std::memcpy(&c, p, 8);
       p += 8;
-      for (std::uint32_t i = 0; i < count; ++i) std::memcpy(rows + i * shape.row + off, &c, 8);
+      for (std::uint32_t i = 0; i < count; ++i) v[i] = c;
       continue;
     }
     if (kind != kDelta1 && kind != kDelta2) Corrupt("has an unknown column kind " + std::to_string(kind));
@@ -259,11 +268,14 @@ std::string UnpackBlock(const void* agt2, std::size_t size) {
         for (int b = 0; b < n; ++b) z |= std::uint64_t{p[b]} << (8 * b);
       }
       p += n;
-      v[i] = Unzigzag(z) + Predict(kind, v.data(), i);
-      std::memcpy(rows + i * shape.row + off, &v[i], 8);
+      v[i] = Unzigzag(z) + Predict(kind, v, i);
     }
   }
   if (p != end) Corrupt("has trailing bytes");
+  for (std::uint32_t i = 0; i < count; ++i) {
+    unsigned char* r = rows + i * shape.row;
+    for (std::size_t j = 0; j < columns; ++j) std::memcpy(r + shape.doubles[j], &matrix[j * count + i], 8);
+  }
   return raw;
 }
 
