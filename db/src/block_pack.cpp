@@ -140,8 +140,9 @@ bool PackBlock(const void* agt1, std::size_t size, std::string* out) {
   }
   for (std::size_t j = 0; j < columns; ++j) {
     const std::uint64_t* v = &matrix[j * count];
-    bool constant = true;
-    for (std::uint32_t i = 1; i < count; ++i) constant &= v[i] == v[0];
+    std::uint32_t same = 1;  // most columns differ at once: stop there
+    while (same < count && v[same] == v[0]) ++same;
+    const bool constant = same == count;
     if (constant) {
       *p++ = kConstant;
       std::memcpy(p, &v[0], 8);
