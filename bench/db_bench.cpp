@@ -3,6 +3,7 @@
 #include <benchmark/benchmark.h>
 
 #include <chrono>
+#include <cstdlib>
 #include <ctime>
 #include <filesystem>
 #include <random>
@@ -101,6 +102,25 @@ std::vector<Sample> MakeRealisticStream(int n, unsigned seed) {
   return out;
 }
 
+// Real ground truth: the first published stream of the store named by
+// ARENA_BENCH_GT_STORE (make one with `arena run bench/long_push_campaign.json
+// --db long.db --cells 2`: simulator + cells with sensor noise, 1876 samples
+// per trial). Empty when the variable is not set.
+std::vector<Sample> LoadRealStream() {
+  const char* path = std::getenv("ARENA_BENCH_GT_STORE");
+  if (path == nullptr || *path == '\0') return {};
+  StoreOptions ro;
+  ro.read_only = true;
+  auto store = Store::Open(path, ro);
+  for (std::int64_t id = 1; id < 1000; ++id) {
+    try {
+      return store->ReadGroundTruth(id).samples;
+    } catch (const StoreError&) {
+    }
+  }
+  return {};
+}
+
 NewCampaign MakeNewCampaign(const char* name, int priority) {
   NewCampaign nc;
   nc.name = name;
@@ -134,13 +154,14 @@ struct BenchStore {
 // Samples per second into a file: each iteration claims a trial and ingests
 // 2500 samples (10 s at 250 Hz) with the default batching, then publishes it.
 // Args: synchronous FULL (1) or NORMAL (0); data 0 = the regular synthetic
-// sample of MakeSample (the first figures), 1 = MakeRealisticStream; chunks
+// sample of MakeSample (the first figures), 1 = MakeRealisticStream, 2 = a
+// real stream (LoadRealStream; skipped without ARENA_BENCH_GT_STORE); chunks
 // packed (AGT2, default) or raw (AGT1); `old`: the settings before
 // 2026-11-22 (4 KiB pages, 4 MiB WAL checkpoints) instead of the defaults.
 void BM_IngestSamples(benchmark::State& state) {
-  constexpr int kSamplesPerTrial = 2500;
   const bool full = state.range(0) != 0;
-  const bool realistic = state.range(1) != 0;
+  const int data = static_cast<int>(state.range(1));
+  const bool realistic = data != 0;
   IngestOptions io;
   io.pack_chunks = state.range(2) != 0;
   const bool old = state.range(3) != 0;
@@ -150,11 +171,18 @@ void BM_IngestSamples(benchmark::State& state) {
     so.wal_autocheckpoint_bytes = 1000 * 4096;
   }
   std::vector<Sample> samples;
-  if (realistic) {
-    samples = MakeRealisticStream(kSamplesPerTrial, 1);
+  if (data == 2) {
+    samples = LoadRealStream();
+    if (samples.empty()) {
+      state.SkipWithError("set ARENA_BENCH_GT_STORE to a store with ground truth (see LoadRealStream)");
+      return;
+    }
+  } else if (realistic) {
+    samples = MakeRealisticStream(2500, 1);
   } else {
-    for (int i = 0; i < kSamplesPerTrial; ++i) samples.push_back(MakeSample(i));
+    for (int i = 0; i < 2500; ++i) samples.push_back(MakeSample(i));
   }
+  const auto kSamplesPerTrial = static_cast<std::int64_t>(samples.size());
   BenchStore b(static_cast<int>(state.max_iterations), 1, full, so);
   for (auto _ : state) {
     auto t = b.store->ClaimNextTrial("cell0");
@@ -168,7 +196,7 @@ void BM_IngestSamples(benchmark::State& state) {
   state.counters["db_MB"] = static_cast<double>(fs::file_size(b.dir / "bench.db")) / 1e6;
   state.counters["db_bytes_per_sample"] = static_cast<double>(fs::file_size(b.dir / "bench.db")) / samples_total;
   state.SetLabel(std::string(full ? "synchronous=FULL" : "synchronous=NORMAL") +
-                 (realistic ? " realistic" : " regular") + (io.pack_chunks ? " packed" : " raw") +
+                 (data == 2 ? " real" : realistic ? " realistic" : " regular") + (io.pack_chunks ? " packed" : " raw") +
                  (old ? " 4KiB-pages 4MiB-checkpoints" : " 8KiB-pages 16MiB-checkpoints"));
 }
 BENCHMARK(BM_IngestSamples)
@@ -177,6 +205,7 @@ BENCHMARK(BM_IngestSamples)
     ->Args({0, 1, 0, 0})->Args({0, 1, 1, 1})   // each change alone (realistic data)
     ->Args({0, 0, 1, 0})->Args({0, 1, 1, 0})   // after: packed, new settings
     ->Args({1, 1, 1, 0})
+    ->Args({0, 2, 0, 1})->Args({0, 2, 1, 0})   // real ground truth: before, after
     ->Iterations(200)->UseRealTime()->Unit(benchmark::kMillisecond);
 
 // 16 cells at 250 Hz, run as fast as possible for 60 simulated seconds: every

@@ -251,6 +251,13 @@ CREATE TABLE evaluation_results(
 );
 CREATE INDEX evaluation_results_by_model ON evaluation_results(evaluation_id, model_key);
 )sql"},
+      // No table changes: the version marks that gt_chunks.data may hold the
+      // packed block format AGT2, so an older arena (which reads only AGT1)
+      // refuses the file up front ("newer than this arena") instead of
+      // failing on the first packed chunk it reads.
+      {4, "ground-truth chunks may be packed (block format AGT2)", R"sql(
+-- gt_chunks.data: "AGT1" (raw) or "AGT2" (packed) blocks; db/README.md.
+)sql"},
   };
   return kMigrations;
 }

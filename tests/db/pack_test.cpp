@@ -295,5 +295,48 @@ TEST(PackedBlock, StoreReadsPackedAndRawChunksAlike) {
   }
 }
 
+// A version-3 store (before AGT2) with raw chunks: a read-write open migrates
+// it to the current version and its ground truth reads the same; new ingest
+// into it is packed.
+TEST(PackedBlock, VersionThreeStoreMigratesAndReads) {
+  testing::TempDir dir;
+  const std::string path = dir.File("v3.db");
+  const auto in = MixedSamples(300, 4);
+  {
+    auto store = Store::Open(path);
+    store->UpsertCell("c", {"point", "line", "patch"});
+    store->CreateCampaign(testing::MakeCampaign(), testing::MakeTrials(2));
+    auto t = store->ClaimNextTrial("c");
+    IngestOptions raw;
+    raw.pack_chunks = false;
+    auto ingest = store->BeginIngest(t->trial_id, t->attempt, raw);
+    for (const auto& s : in) ingest->Add(s);
+    ingest->Finish("ok");
+  }
+  {
+    sqlite3* db = nullptr;
+    sqlite3_open(path.c_str(), &db);
+    ASSERT_EQ(sqlite3_exec(db, "BEGIN; DELETE FROM schema_migrations WHERE version > 3;"
+                               " PRAGMA user_version = 3; COMMIT;", nullptr, nullptr, nullptr), SQLITE_OK);
+    sqlite3_close(db);
+  }
+  StoreOptions ro;
+  ro.read_only = true;
+  EXPECT_THROW(Store::Open(path, ro), StoreError);  // "open it read-write once"
+  auto store = Store::Open(path);
+  EXPECT_EQ(store->FileSchemaVersion(), Store::SchemaVersion());
+  EXPECT_GE(Store::SchemaVersion(), 4);
+  const auto gt = store->ReadGroundTruth(1);
+  ASSERT_EQ(gt.samples.size(), in.size());
+  for (std::size_t i = 0; i < in.size(); ++i) ExpectSameBits(gt.samples[i], in[i], i);
+  auto t = store->ClaimNextTrial("c");
+  ASSERT_TRUE(t);
+  auto ingest = store->BeginIngest(t->trial_id, t->attempt);
+  for (const auto& s : in) ingest->Add(s);
+  ingest->Finish("ok");
+  EXPECT_EQ(store->ReadGroundTruth(t->trial_id).samples.size(), in.size());
+  EXPECT_TRUE(store->CheckInvariants().empty());
+}
+
 }  // namespace
 }  // namespace arena::db
