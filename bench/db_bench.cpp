@@ -102,23 +102,21 @@ std::vector<Sample> MakeRealisticStream(int n, unsigned seed) {
   return out;
 }
 
-// Real ground truth: the first published stream of the store named by
+// Real ground truth: every published stream of the store named by
 // ARENA_BENCH_GT_STORE (make one with `arena run bench/long_push_campaign.json
-// --db long.db --cells 2`: simulator + cells with sensor noise, 1876 samples
-// per trial). Empty when the variable is not set.
-std::vector<Sample> LoadRealStream() {
+// --db long.db --cells 2`: simulator + cells with sensor noise, a straight
+// and a pivoting push of 1876 samples each). Empty when the variable is not set.
+std::vector<std::vector<Sample>> LoadRealStreams() {
+  std::vector<std::vector<Sample>> out;
   const char* path = std::getenv("ARENA_BENCH_GT_STORE");
-  if (path == nullptr || *path == '\0') return {};
+  if (path == nullptr || *path == '\0') return out;
   StoreOptions ro;
   ro.read_only = true;
   auto store = Store::Open(path, ro);
-  for (std::int64_t id = 1; id < 1000; ++id) {
-    try {
-      return store->ReadGroundTruth(id).samples;
-    } catch (const StoreError&) {
-    }
+  for (const auto& t : store->ListTrials(1)) {
+    if (t.gt_stream_id) out.push_back(store->ReadGroundTruth(t.id).samples);
   }
-  return {};
+  return out;
 }
 
 NewCampaign MakeNewCampaign(const char* name, int priority) {
@@ -170,29 +168,32 @@ void BM_IngestSamples(benchmark::State& state) {
     so.new_file_page_size = 4096;
     so.wal_autocheckpoint_bytes = 1000 * 4096;
   }
-  std::vector<Sample> samples;
+  std::vector<std::vector<Sample>> streams(1);  // trial k ingests streams[k % size]
   if (data == 2) {
-    samples = LoadRealStream();
-    if (samples.empty()) {
-      state.SkipWithError("set ARENA_BENCH_GT_STORE to a store with ground truth (see LoadRealStream)");
+    streams = LoadRealStreams();
+    if (streams.empty()) {
+      state.SkipWithError("set ARENA_BENCH_GT_STORE to a store with ground truth (see LoadRealStreams)");
       return;
     }
   } else if (realistic) {
-    samples = MakeRealisticStream(2500, 1);
+    streams[0] = MakeRealisticStream(2500, 1);
   } else {
-    for (int i = 0; i < 2500; ++i) samples.push_back(MakeSample(i));
+    for (int i = 0; i < 2500; ++i) streams[0].push_back(MakeSample(i));
   }
-  const auto kSamplesPerTrial = static_cast<std::int64_t>(samples.size());
+  std::int64_t ingested = 0;
+  std::size_t k = 0;
   BenchStore b(static_cast<int>(state.max_iterations), 1, full, so);
   for (auto _ : state) {
     auto t = b.store->ClaimNextTrial("cell0");
     auto ingest = b.store->BeginIngest(t->trial_id, t->attempt, io);
+    const auto& samples = streams[k++ % streams.size()];
     for (const auto& s : samples) ingest->Add(s);
     benchmark::DoNotOptimize(ingest->Finish());
+    ingested += static_cast<std::int64_t>(samples.size());
   }
-  state.SetItemsProcessed(state.iterations() * kSamplesPerTrial);
+  state.SetItemsProcessed(ingested);
   b.store.reset();  // closes the file: the last checkpoint is in the figure's size
-  const double samples_total = static_cast<double>(state.iterations()) * kSamplesPerTrial;
+  const double samples_total = static_cast<double>(ingested);
   state.counters["db_MB"] = static_cast<double>(fs::file_size(b.dir / "bench.db")) / 1e6;
   state.counters["db_bytes_per_sample"] = static_cast<double>(fs::file_size(b.dir / "bench.db")) / samples_total;
   state.SetLabel(std::string(full ? "synchronous=FULL" : "synchronous=NORMAL") +

@@ -11,6 +11,7 @@
 #include <bit>
 #include <cstdint>
 #include <cstring>
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -67,6 +68,18 @@ Shape MakeShape(int contacts, int finger_values) {
   return s;
 }
 
+// Per-thread scratch that only grows and is never zero-filled: packing runs
+// once per chunk on the ingest path, and clearing ~300 kB of fresh buffers
+// per chunk cost as much as the SQLite writes it saves.
+template <typename T>
+T* Scratch(std::unique_ptr<T[]>* buf, std::size_t* capacity, std::size_t n) {
+  if (*capacity < n) {
+    buf->reset(new T[n]);  // default-initialised: no fill
+    *capacity = n;
+  }
+  return buf->get();
+}
+
 std::uint64_t Zigzag(std::uint64_t r) {
   return (r << 1) ^ (0 - (r >> 63));
 }
@@ -106,9 +119,9 @@ bool PackBlock(const void* agt1, std::size_t size, std::string* out) {
   // value, plus 8 bytes of slack for the unconditional 8-byte stores below.
   const std::size_t worst = kPackedHeader + shape.bytes.size() * (1 + count) +
                             shape.doubles.size() * (1 + (count + 1) / 2 + 8 * std::size_t{count}) + 8;
-  const std::size_t start = out->size();
-  out->resize(start + worst);  // written in place, trimmed at the end
-  unsigned char* const base = reinterpret_cast<unsigned char*>(out->data()) + start;
+  thread_local std::unique_ptr<unsigned char[]> bytes_buf;
+  thread_local std::size_t bytes_capacity = 0;
+  unsigned char* const base = Scratch(&bytes_buf, &bytes_capacity, worst);
   unsigned char* p = base;
   std::memcpy(p, kPackedMagic, 4);
   std::memcpy(p + 4, &count, 4);
@@ -133,7 +146,10 @@ bool PackBlock(const void* agt1, std::size_t size, std::string* out) {
   // Transpose once, row by row (sequential reads; gathering a column across
   // rows instead touched a cache line per value and cost twice as much).
   const std::size_t columns = shape.doubles.size();
-  std::vector<std::uint64_t> matrix(columns * count), z(count);
+  thread_local std::unique_ptr<std::uint64_t[]> words_buf;
+  thread_local std::size_t words_capacity = 0;
+  std::uint64_t* const matrix = Scratch(&words_buf, &words_capacity, (columns + 1) * std::size_t{count});
+  std::uint64_t* const z = matrix + columns * count;
   for (std::uint32_t i = 0; i < count; ++i) {
     const unsigned char* r = rows + i * shape.row;
     for (std::size_t j = 0; j < columns; ++j) std::memcpy(&matrix[j * count + i], r + shape.doubles[j], 8);
@@ -185,11 +201,8 @@ bool PackBlock(const void* agt1, std::size_t size, std::string* out) {
     }
   }
   const std::size_t packed = static_cast<std::size_t>(p - base);
-  if (packed >= size) {  // incompressible: AGT1 is smaller
-    out->resize(start);
-    return false;
-  }
-  out->resize(start + packed);
+  if (packed >= size) return false;  // incompressible: AGT1 is smaller
+  out->append(reinterpret_cast<const char*>(base), packed);
   return true;
 }
 
