@@ -506,6 +506,10 @@ Writer<T>::Writer(Participant& participant, const WriterOptions& options)
   ApplyTopicQos(topic, &qos.reliability(), &qos.durability(), &qos.history(),
                 &qos.resource_limits());
   qos.reliability().max_blocking_time = Duration_t(options.max_blocking_s);
+  // Payload buffers sized to each sample, reused: the preallocating default
+  // sizes every buffer for the type's maximum (1.9 MB for a GroundTruth batch)
+  // and zeroes it, which was most of the service's CPU per trial.
+  qos.endpoint().history_memory_policy = eprosima::fastrtps::rtps::DYNAMIC_REUSABLE_MEMORY_MODE;
   impl_->max_blocking_s = options.max_blocking_s;
   if (CellWritten(topic)) {
     qos.liveliness().kind = fdds::AUTOMATIC_LIVELINESS_QOS;
@@ -635,6 +639,7 @@ Reader<T>::Reader(Participant& participant, const ReaderOptions& options)
   fdds::DataReaderQos qos = core.subscriber->get_default_datareader_qos();
   ApplyTopicQos(topic, &qos.reliability(), &qos.durability(), &qos.history(),
                 &qos.resource_limits());
+  qos.endpoint().history_memory_policy = eprosima::fastrtps::rtps::DYNAMIC_REUSABLE_MEMORY_MODE;  // as writers
   // Fast DDS tracks a writer's liveliness only for a finite requested lease.
   qos.liveliness().kind = fdds::AUTOMATIC_LIVELINESS_QOS;
   qos.liveliness().lease_duration = CellWritten(topic) ? Duration_t(kCellLivelinessLease_s)
