@@ -68,9 +68,10 @@ Shape MakeShape(int contacts, int finger_values) {
   return s;
 }
 
-// Per-thread scratch that only grows and is never zero-filled: packing runs
-// once per chunk on the ingest path, and clearing ~300 kB of fresh buffers
-// per chunk cost as much as the SQLite writes it saves.
+// Per-thread scratch that only grows (about 2.3 x the largest raw chunk
+// packed on the thread: ~330 kB at 250 samples) and is never zero-filled:
+// packing runs once per chunk on the ingest path, and clearing fresh buffers
+// per chunk cost ~7 % of the ingest CPU.
 template <typename T>
 T* Scratch(std::unique_ptr<T[]>* buf, std::size_t* capacity, std::size_t n) {
   if (*capacity < n) {
@@ -143,8 +144,8 @@ bool PackBlock(const void* agt1, std::size_t size, std::string* out) {
     }
   }
 
-  // Transpose once, row by row (sequential reads; gathering a column across
-  // rows instead touched a cache line per value and cost twice as much).
+  // Transpose once, row by row, into column-major scratch (each row is read
+  // sequentially; the column loops below then run over contiguous words).
   const std::size_t columns = shape.doubles.size();
   thread_local std::unique_ptr<std::uint64_t[]> words_buf;
   thread_local std::size_t words_capacity = 0;
