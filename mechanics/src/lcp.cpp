@@ -21,8 +21,6 @@ namespace {
 // Pivots between rebuilds of the basis inverse (drift control).
 constexpr int kRefactorInterval = 32;
 
-using RowMatrix = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
-
 double NaturalResidual(const Eigen::VectorXd& z, const Eigen::VectorXd& w) {
   double worst = 0;
   for (Eigen::Index i = 0; i < z.size(); ++i) {
@@ -90,10 +88,18 @@ void LemkeOnce(const Eigen::MatrixXd& A, const Eigen::VectorXd& b, const Eigen::
                                                 : static_cast<int>(50 * n + 200);
   const double tol = options.pivot_tolerance;
   const Eigen::Index z0 = 2 * n;
-  RowMatrix Binv = RowMatrix::Identity(n, n);
+  // Column-major: while the slack w_v is basic at position i, column v of
+  // the inverse is exactly e_i, and a pivot row is zero on all those columns
+  // but the leaving slack's. The rank-one update below therefore touches
+  // only the columns of the rows no slack covers (k + 1 of n), and the
+  // entering column is formed from them plus the slack positions: O(n k)
+  // per pivot instead of O(n²), with the same arithmetic on what remains.
+  Eigen::MatrixXd Binv = Eigen::MatrixXd::Identity(n, n);
   Eigen::VectorXd x = b;  // values of the basic variables
   std::vector<Eigen::Index> basis(static_cast<size_t>(n));
   for (Eigen::Index i = 0; i < n; ++i) basis[static_cast<size_t>(i)] = i;
+  std::vector<Eigen::Index> slack_pos(static_cast<size_t>(n));  // position of basic w_v, or -1
+  for (Eigen::Index i = 0; i < n; ++i) slack_pos[static_cast<size_t>(i)] = i;
 
   Eigen::VectorXd d(n);
   Eigen::RowVectorXd pivot_row(n);
@@ -104,9 +110,13 @@ void LemkeOnce(const Eigen::MatrixXd& A, const Eigen::VectorXd& b, const Eigen::
     pivot_row = Binv.row(r);
     d[r] = 0;
     x.noalias() -= d * x[r];
-    Binv.noalias() -= d * pivot_row;
+    for (Eigen::Index j = 0; j < n; ++j) {
+      if (pivot_row[j] != 0) Binv.col(j).noalias() -= d * pivot_row[j];
+    }
     const Eigen::Index leaving = basis[static_cast<size_t>(r)];
     basis[static_cast<size_t>(r)] = entering;
+    if (leaving < n) slack_pos[static_cast<size_t>(leaving)] = -1;
+    if (entering < n) slack_pos[static_cast<size_t>(entering)] = r;
     return leaving;
   };
 
@@ -206,7 +216,19 @@ void LemkeOnce(const Eigen::MatrixXd& A, const Eigen::VectorXd& b, const Eigen::
     if (entering < n) {
       d = Binv.col(entering);
     } else {
-      d.noalias() = -(Binv * A.col(entering - n));
+      // d = -Binv a: covered rows contribute a_v e_(slack position).
+      const auto a = A.col(entering - n);
+      d.setZero();
+      for (Eigen::Index j = 0; j < n; ++j) {
+        const double aj = a[j];
+        if (aj == 0) continue;
+        const Eigen::Index sp = slack_pos[static_cast<size_t>(j)];
+        if (sp >= 0) {
+          d[sp] -= aj;
+        } else {
+          d.noalias() -= Binv.col(j) * aj;
+        }
+      }
     }
     // Minimum ratio over rows where the entering variable decreases a basic one.
     // Pivots are judged relative to the column (the problem is scaled, but
