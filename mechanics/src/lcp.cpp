@@ -58,6 +58,10 @@ bool SolveBasis(const Eigen::MatrixXd& A, const Eigen::VectorXd& b, const std::v
     lu.compute(Abb);
     zb = lu.solve(bb);
     if (!AllFinite(zb)) return false;
+    // One step of iterative refinement: the contact blocks can be
+    // ill-conditioned (a 0.1 mm object: entries from 1 to 1e7).
+    zb += lu.solve(bb - Abb * zb);
+    if (!AllFinite(zb)) return false;
     // A singular basis shows as a large solve residual.
     const double scale = 1.0 + bb.lpNorm<Eigen::Infinity>();
     if ((Abb * zb - bb).lpNorm<Eigen::Infinity>() > 1e-9 * scale) return false;
@@ -75,6 +79,38 @@ bool Acceptable(const Eigen::VectorXd& z, const Eigen::VectorXd& w, const Eigen:
   // Relative to the data, not to z: a near-singular basis can give a huge z
   // whose relative residual looks small.
   return NaturalResidual(z, w) <= tol * std::max(1.0, b.lpNorm<Eigen::Infinity>());
+}
+
+// Murty's least-index principal pivoting from a basis that is nearly right:
+// a Lemke run on an ill-conditioned problem can end on a basis a few indices
+// off (drift in the ratio tests), whose exact solution then has slightly
+// negative z or w. Flipping the least violated index and re-solving fixes
+// that in a few steps (finite for P-matrices; here a bounded repair that
+// either reaches an acceptable solution or gives up).
+bool RepairBasis(const Eigen::MatrixXd& A, const Eigen::VectorXd& b, std::vector<char> basis,
+                 double tol, LcpResult& out) {
+  const Eigen::Index n = b.size();
+  const double thr = tol * std::max(1.0, b.lpNorm<Eigen::Infinity>());
+  Eigen::VectorXd z, w;
+  for (Eigen::Index iter = 0; iter < 2 * n + 10; ++iter) {
+    if (!SolveBasis(A, b, basis, z, w)) return false;
+    if (Acceptable(z, w, b, tol)) {
+      out.ok = true;
+      out.reason.clear();
+      out.z = z;
+      out.w = w;
+      out.basis = basis;
+      out.natural_residual = NaturalResidual(z, w);
+      return true;
+    }
+    Eigen::Index flip = -1;
+    for (Eigen::Index i = 0; i < n && flip < 0; ++i) {
+      if (basis[static_cast<size_t>(i)] ? z[i] < -thr : w[i] < -thr) flip = i;
+    }
+    if (flip < 0) return false;  // complementary and feasible but still inaccurate
+    basis[static_cast<size_t>(flip)] = !basis[static_cast<size_t>(flip)];
+  }
+  return false;
 }
 
 // One run of Lemke's method with covering vector `cover`; fills z, w,
@@ -201,11 +237,15 @@ void LemkeOnce(const Eigen::MatrixXd& A, const Eigen::VectorXd& b, const Eigen::
     x.noalias() = Binv * b;
     return x.allFinite();
   };
+  int fresh_at = -1;  // pivot count at the last refactor
   for (;;) {
-    if (pivots % kRefactorInterval == 0 && !refactor()) {
-      out.reason = "singular basis after " + std::to_string(pivots) + " pivots";
-      out.pivots = pivots;
-      return;
+    if (pivots % kRefactorInterval == 0 && pivots != fresh_at) {
+      if (!refactor()) {
+        out.reason = "singular basis after " + std::to_string(pivots) + " pivots";
+        out.pivots = pivots;
+        return;
+      }
+      fresh_at = pivots;
     }
     if (pivots >= max_pivots) {
       out.reason = "pivot limit (" + std::to_string(max_pivots) + ") reached";
@@ -247,6 +287,17 @@ void LemkeOnce(const Eigen::MatrixXd& A, const Eigen::VectorXd& b, const Eigen::
         if (basis[static_cast<size_t>(i)] == z0) z0_value = x[i];
       }
       if (std::abs(z0_value) <= 1e-9 * std::max(1.0, x.lpNorm<Eigen::Infinity>())) break;
+      // A ray seen through a drifted inverse may be an artefact of the
+      // drift: look again with a fresh one (cheap, see refactor) first.
+      if (fresh_at != pivots) {
+        if (!refactor()) {
+          out.reason = "singular basis after " + std::to_string(pivots) + " pivots";
+          out.pivots = pivots;
+          return;
+        }
+        fresh_at = pivots;
+        continue;
+      }
       out.reason = "ray termination after " + std::to_string(pivots) + " pivots";
       out.pivots = pivots;
       return;
@@ -398,6 +449,8 @@ LcpResult SolveLcp(const Eigen::MatrixXd& A, const Eigen::VectorXd& b,
     LemkeOnce(A, b, cover, options, out);
     total += out.pivots;
     if (out.ok) break;
+    // An inaccurate end leaves its basis in out.basis: try to repair it.
+    if (out.reason.rfind("inaccurate", 0) == 0 && RepairBasis(A, b, out.basis, options.feasibility, out)) break;
     if (attempt == 0) first_reason = out.reason;
   }
   out.pivots = total;
