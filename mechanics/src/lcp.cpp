@@ -130,15 +130,23 @@ void LemkeOnce(const Eigen::MatrixXd& A, const Eigen::VectorXd& b, const Eigen::
   // only the columns of the rows no slack covers (k + 1 of n), and the
   // entering column is formed from them plus the slack positions: O(n k)
   // per pivot instead of O(n²), with the same arithmetic on what remains.
-  Eigen::MatrixXd Binv = Eigen::MatrixXd::Identity(n, n);
-  Eigen::VectorXd x = b;  // values of the basic variables
-  std::vector<Eigen::Index> basis(static_cast<size_t>(n));
-  for (Eigen::Index i = 0; i < n; ++i) basis[static_cast<size_t>(i)] = i;
-  std::vector<Eigen::Index> slack_pos(static_cast<size_t>(n));  // position of basic w_v, or -1
-  for (Eigen::Index i = 0; i < n; ++i) slack_pos[static_cast<size_t>(i)] = i;
+  // Work space kept between calls (most solves are small and allocation
+  // was a sixth of their cost).
+  thread_local Eigen::MatrixXd Binv;
+  thread_local Eigen::VectorXd x, d;  // x: values of the basic variables
+  thread_local Eigen::RowVectorXd pivot_row;
+  thread_local std::vector<Eigen::Index> basis, slack_pos;  // slack_pos: position of basic w_v, or -1
+  Binv.setIdentity(n, n);
+  x = b;
+  d.resize(n);
+  pivot_row.resize(n);
+  basis.resize(static_cast<size_t>(n));
+  slack_pos.resize(static_cast<size_t>(n));
+  for (Eigen::Index i = 0; i < n; ++i) {
+    basis[static_cast<size_t>(i)] = i;
+    slack_pos[static_cast<size_t>(i)] = i;
+  }
 
-  Eigen::VectorXd d(n);
-  Eigen::RowVectorXd pivot_row(n);
   auto pivot = [&](Eigen::Index r, Eigen::Index entering) {
     const double p = d[r];
     x[r] /= p;
@@ -164,17 +172,17 @@ void LemkeOnce(const Eigen::MatrixXd& A, const Eigen::VectorXd& b, const Eigen::
   d = -cover;
   Eigen::Index leaving = pivot(r, z0);
   int pivots = 1;
-  std::vector<Eigen::Index> ties;
+  thread_local std::vector<Eigen::Index> ties;
   // Rebuilds the basis inverse from scratch, so rank-one drift does not pile
   // up. Most basic variables are slacks w_v (unit columns e_v), so only the
   // k x k block of the other columns on the rows no slack covers needs a
   // factorisation: with C the k non-unit columns and S those rows,
   //   x_C = C_S⁻¹ y_S,   x_(slack of row r) = y_r - C_r x_C,
   // which costs O(k³ + (n - k) k²) instead of O(n³) for the full inverse.
-  std::vector<Eigen::Index> cpos, srows, urow_of;  // non-unit positions, uncovered rows
-  std::vector<char> covered;
-  Eigen::MatrixXd Cs, Cu, G;
-  Eigen::PartialPivLU<Eigen::MatrixXd> cs_lu;
+  thread_local std::vector<Eigen::Index> cpos, srows;  // non-unit positions, uncovered rows
+  thread_local std::vector<char> covered;
+  thread_local Eigen::MatrixXd Cs, Cu, G;
+  thread_local Eigen::PartialPivLU<Eigen::MatrixXd> cs_lu;
   auto column = [&](Eigen::Index v, Eigen::Index row) {
     return v < 2 * n ? -A(row, v - n) : -cover[row];
   };
