@@ -107,15 +107,15 @@ std::vector<Row> DtSweep() {
 // the sticking closed form. So the sweep reports, per dt: the final angle
 // against (v/d) t with grip 10 N (the validation case, start slip included),
 // whether the first step slipped, the turning rate over the second half
-// (after the start) against v/d, and the final angle with grip 100 N (ten
-// times the friction: the start sticks at every dt listed).
+// (after the start) against v/d, and the final angle with grip 1000 N (a
+// hundred times the friction: the start sticks at every dt listed).
 struct PivotRow {
   double dt;
   bool ok;
   double final_error;     // grip 10 N, |angle - (v/d) t| / ((v/d) t)
   bool start_slipped;     // grip 10 N, a finger slid in the first step
   double rate_error;      // grip 10 N, angle gained over t in [T/2, T] against (v/d) T/2
-  double strong_error;    // grip 100 N, final angle error
+  double strong_error;    // grip 1000 N, final angle error
 };
 
 std::vector<PivotRow> PivotDtSweep() {
@@ -151,7 +151,7 @@ std::vector<PivotRow> PivotDtSweep() {
   for (double dt : {0.008, 0.004, 0.002, 0.001, 0.0005, 0.00025, 0.000125}) {
     PivotRow row{dt, true, 0, false, 0, 0};
     row.final_error = run(dt, 10.0, &row.start_slipped, &row.rate_error);
-    row.strong_error = run(dt, 100.0, nullptr, nullptr);
+    row.strong_error = run(dt, 1000.0, nullptr, nullptr);
     row.ok = row.final_error >= 0 && row.strong_error >= 0;
     rows.push_back(row);
   }
@@ -160,7 +160,7 @@ std::vector<PivotRow> PivotDtSweep() {
 
 void PrintPivotTable(const std::vector<PivotRow>& rows) {
   std::printf("| dt (s) | final angle error, grip 10 N | first step slips | rate error after the start | "
-              "final angle error, grip 100 N |\n|---:|---:|:---:|---:|---:|\n");
+              "final angle error, grip 1000 N |\n|---:|---:|:---:|---:|---:|\n");
   for (const PivotRow& r : rows) {
     if (!r.ok) {
       std::printf("| %g | solver failure | | | |\n", r.dt);
