@@ -49,7 +49,15 @@ double Median(std::vector<double> v) {
   return n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
 }
 
-void PrintSummary(const std::string& db_path, std::int64_t campaign_id, double wall_s) {
+double Percentile(std::vector<double> v, double q) {
+  if (v.empty()) return NAN;
+  std::sort(v.begin(), v.end());
+  return v[static_cast<size_t>(q * static_cast<double>(v.size() - 1) + 0.5)];
+}
+
+// overhead_s: arena's own time per clean trial on its cell (TrialTiming).
+void PrintSummary(const std::string& db_path, std::int64_t campaign_id, double wall_s,
+                  const std::vector<double>& overhead_s) {
   db::StoreOptions ro;
   ro.read_only = true;
   auto store = db::Store::Open(db_path, ro);
@@ -86,6 +94,11 @@ void PrintSummary(const std::string& db_path, std::int64_t campaign_id, double w
               100 * Median(mode));
   std::printf("  predictor   %.3g ms median per trial%s\n", Median(pred_time) * 1e3,
               prediction_failures ? (", " + std::to_string(prediction_failures) + " predictions failed").c_str() : "");
+  if (!overhead_s.empty()) {
+    std::printf("  orchestration %.2f ms median, %.2f ms p95 per trial (cell busy time minus its own execute\n"
+                "              and reset time, %zu clean trials)\n",
+                Median(overhead_s) * 1e3, Percentile(overhead_s, 0.95) * 1e3, overhead_s.size());
+  }
   std::printf("  store       %s  (arena status --db %s; arena query --db %s \"select ...\")\n", db_path.c_str(),
               db_path.c_str(), db_path.c_str());
 }
@@ -147,6 +160,8 @@ int Run(RunOptions opt) {
   running = service.get();
   if (signals.received()) service->Stop();
 
+  std::vector<double> overhead_s;
+  service->OnTrialTiming([&](const orchestrator::TrialTiming& t) { overhead_s.push_back(t.overhead_s); });
   const auto start = std::chrono::steady_clock::now();
   ProgressLine progress(trials, "trials");
   std::string cells_failed;
@@ -184,7 +199,7 @@ int Run(RunOptions opt) {
   for (auto& cell : cells) cell.Stop();
   spdlog::default_logger()->flush();
 
-  PrintSummary(opt.db_path, campaign_id, wall);
+  PrintSummary(opt.db_path, campaign_id, wall, overhead_s);
   if (!cells_failed.empty()) throw CommandError(kExitCommunication, cells_failed);
   if (signals.received()) return kExitInterrupted;
   return kExitOk;

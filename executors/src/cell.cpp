@@ -3,6 +3,7 @@
 #include <chrono>
 #include <cmath>
 #include <condition_variable>
+#include <deque>
 #include <map>
 #include <limits>
 #include <mutex>
@@ -94,8 +95,14 @@ struct Cell::Impl {
   CellCounters counters;
 
   // Worker-only state.
-  using Key = std::tuple<std::uint64_t, std::uint32_t, int>;  // trial, attempt, phase
+  // Phases already finished, to answer a repeated command with its status
+  // instead of running it twice. Keyed by the service's session too: trial
+  // ids restart at 1 in a new store, and a cell outlives stores and services.
+  // Only the latest kRemembered are kept, so months of trials cost no memory.
+  using Key = std::tuple<std::uint64_t, std::uint64_t, std::uint32_t, int>;  // session, trial, attempt, phase
+  static constexpr std::size_t kRemembered = 1024;
   std::map<Key, msg::TrialStatus> done;
+  std::deque<Key> done_order;  // oldest first
   reset::Pose true_pose;       // where the object really is now
   reset::Pose observed_pose;   // where the sensors saw it last
   std::optional<mechanics::PusherSpec> pusher;  // the pusher mounted now
@@ -174,7 +181,12 @@ struct Cell::Impl {
 
   void Finish(const msg::TrialCommand& c, msg::TrialStatus s) {
     Send(s);
-    done[{c.trial_id(), c.attempt(), static_cast<int>(c.phase())}] = s;
+    const Key key{c.service_session(), c.trial_id(), c.attempt(), static_cast<int>(c.phase())};
+    if (done.insert_or_assign(key, s).second) done_order.push_back(key);
+    while (done_order.size() > kRemembered) {
+      done.erase(done_order.front());
+      done_order.pop_front();
+    }
     std::lock_guard<std::mutex> lock(mutex);
     switch (s.state()) {
       case msg::STATE_EXECUTED: ++counters.executed; break;
@@ -192,7 +204,7 @@ struct Cell::Impl {
   }
 
   void Handle(const msg::TrialCommand& c) {
-    const Key key{c.trial_id(), c.attempt(), static_cast<int>(c.phase())};
+    const Key key{c.service_session(), c.trial_id(), c.attempt(), static_cast<int>(c.phase())};
     if (auto it = done.find(key); it != done.end()) {
       spdlog::info("cell {}: trial {} attempt {} already finished; re-sending its status", options.id,
                    c.trial_id(), c.attempt());

@@ -10,6 +10,8 @@
 // code).
 #include "arena/mechanics/scene_json.hpp"
 
+#include "arena/mechanics/json_path.hpp"
+
 #include <algorithm>
 #include <array>
 #include <charconv>
@@ -92,36 +94,12 @@ constexpr double kValidateUnitTolerance = 1e-6;  // directions built in code
 constexpr double kSurfaceTolerance = 1e-2;       // of the object's extent
 constexpr double kCoincidentTolerance = 1e-6;    // of the object's extent
 
-// Shortest text that reads back to the same double ("-0.2", "1e-09").
-std::string Num(double value) {
-  if (std::isnan(value)) return "NaN";
-  if (std::isinf(value)) return value > 0 ? "Infinity" : "-Infinity";
-  std::array<char, 32> buf{};
-  const auto res = std::to_chars(buf.data(), buf.data() + buf.size(), value);
-  return std::string(buf.data(), res.ptr);
-}
-
-// Text from the input in a message: printable ASCII only (an error message
-// must itself be valid UTF-8, and JSON-printable), bounded in length.
-std::string Printable(std::string_view text, size_t max_bytes) {
-  std::string out;
-  for (size_t i = 0; i < text.size() && i < max_bytes; ++i) {
-    const unsigned char c = static_cast<unsigned char>(text[i]);
-    out += (c < 0x20 || c >= 0x7f) ? '?' : static_cast<char>(c);
-  }
-  if (text.size() > max_bytes) out += "...";
-  return out;
-}
+using json_path::Index;
+using json_path::Join;
+using json_path::Num;
+using json_path::Printable;
 
 std::string Quote(std::string_view text) { return "\"" + Printable(text, 40) + "\""; }
-
-std::string Join(const std::string& path, std::string_view key) {
-  const std::string safe = Printable(key, 64);  // keys are user input too
-  return path.empty() ? safe : path + "." + safe;
-}
-std::string Index(const std::string& path, size_t i) {
-  return path + "[" + std::to_string(i) + "]";
-}
 
 // ---------------------------------------------------------------------------
 // Pass 1: SAX builder that knows where it is.

@@ -14,6 +14,7 @@
 #include <Eigen/Geometry>
 #include <nlohmann/json.hpp>
 
+#include "arena/mechanics/json_path.hpp"
 #include "arena/mechanics/scene_json.hpp"
 #include "arena/orchestrator/sampler.hpp"
 
@@ -91,27 +92,10 @@ int CatalogIndex(std::string_view name) {
   return static_cast<int>(kVariationCatalog.size());
 }
 
-std::string Num(double value) {
-  std::array<char, 32> buf{};
-  const auto res = std::to_chars(buf.data(), buf.data() + buf.size(), value);
-  return std::string(buf.data(), res.ptr);
-}
-
-std::string Printable(std::string_view text, size_t max_bytes) {
-  std::string out;
-  for (size_t i = 0; i < text.size() && i < max_bytes; ++i) {
-    const unsigned char c = static_cast<unsigned char>(text[i]);
-    out += (c < 0x20 || c >= 0x7f) ? '?' : static_cast<char>(c);
-  }
-  if (text.size() > max_bytes) out += "...";
-  return out;
-}
-
-std::string Join(const std::string& path, std::string_view key) {
-  const std::string safe = Printable(key, 64);
-  return path.empty() ? safe : path + "." + safe;
-}
-std::string Index(const std::string& path, size_t i) { return path + "[" + std::to_string(i) + "]"; }
+using mechanics::json_path::Index;
+using mechanics::json_path::Join;
+using mechanics::json_path::Num;
+using mechanics::json_path::Printable;
 
 std::string TypeName(const json& v) {
   if (v.is_number()) return "a number";

@@ -7,6 +7,7 @@
 #include <condition_variable>
 #include <deque>
 #include <map>
+#include <random>
 #include <mutex>
 #include <optional>
 #include <set>
@@ -153,10 +154,13 @@ struct Service::Impl {
   dds::Reader<msg::GroundTruth> truth_reader;
   PredictorPool predictor;
 
+  // This run's identity on the command topic (TrialCommand.service_session).
+  const std::uint64_t session = std::random_device{}() * 0x100000000ull + std::random_device{}();
   std::atomic<bool> stop_requested{false};
   mutable std::mutex counters_mu;
   ServiceCounters counters;
   std::function<void(const ServiceCounters&)> on_tick;
+  std::function<void(const TrialTiming&)> on_trial_timing;
 
   enum class CellPhase { kIdle, kExecuting, kResetting };
   struct CellRun {
@@ -170,10 +174,12 @@ struct Service::Impl {
     std::string capabilities_json = "{}", defects_json = "{}";
     double speed = 1.0;          // the cell's announced pacing (wall s per simulated s)
     CellPhase phase = CellPhase::kIdle;
-    std::int64_t trial_id = 0;
+    std::int64_t trial_id = 0, campaign_id = 0;
     int attempt = 0;
     Clock::time_point deadline{};
     Clock::time_point next_claim{};
+    Clock::time_point claimed_at{};  // when the current trial's claim began
+    double execute_wall_s = -1;      // the cell's EXECUTE time of the current trial; -1 unknown
   };
   std::map<std::string, CellRun> cells;
 
@@ -425,6 +431,7 @@ struct Service::Impl {
     for (auto& [id, cell] : cells) {
       if (!cell.alive || cell.quarantined || cell.phase != CellPhase::kIdle || now < cell.next_claim) continue;
       cell.next_claim = now + std::chrono::milliseconds(200);  // poll the store gently when idle
+      const auto claim_started = Clock::now();
       std::optional<db::ClaimedTrial> claim;
       try {
         claim = store->ClaimNextTrial(id);
@@ -434,6 +441,9 @@ struct Service::Impl {
         continue;
       }
       if (!claim) continue;
+      cell.claimed_at = claim_started;
+      cell.campaign_id = claim->campaign_id;
+      cell.execute_wall_s = -1;
       StartExecution(cell, *claim);
     }
   }
@@ -465,6 +475,7 @@ struct Service::Impl {
     cmd.scene_json(claim.scene_json);
     cmd.seed(claim.seed);
     cmd.deadline_s(budget);
+    cmd.service_session(session);
     cell.phase = CellPhase::kExecuting;
     cell.trial_id = claim.trial_id;
     cell.attempt = claim.attempt;
@@ -539,6 +550,7 @@ struct Service::Impl {
       cmd.scene_json(next ? next->scene_json : std::string());
       cmd.seed(next ? next->seed : 0);
       cmd.deadline_s(opt.reset_timeout_s);
+      cmd.service_session(session);
       executions.erase(it);
       cell.phase = CellPhase::kResetting;
       cell.deadline = After(opt.reset_timeout_s + 2.0);
@@ -568,6 +580,7 @@ struct Service::Impl {
         case msg::STATE_ACCEPTED:
           break;
         case msg::STATE_EXECUTED:
+          cell.execute_wall_s = st.phase_wall_s();
           ex.expected = st.samples();
           ex.stream_deadline = After(opt.stream_grace_s);
           MaybeFinishExecution(ex.trial_id);
@@ -619,6 +632,7 @@ struct Service::Impl {
                        id, st.reason());
         }
         CellResult(cell, ok, st.reason());
+        if (ok) ReportTiming(cell, st.phase_wall_s());
         AfterReset(cell.trial_id);
       } catch (const db::StoreError& e) {
         if (StoreFailed(e)) throw;
@@ -627,6 +641,27 @@ struct Service::Impl {
       cell.phase = CellPhase::kIdle;
       cell.next_claim = Clock::now();
     }
+  }
+
+  // The split of a clean trial's time on its cell (TrialTiming). A cell's
+  // reported phase times are its word: non-finite or negative ones give no figure.
+  void ReportTiming(const CellRun& cell, double reset_wall_s) {
+    const double busy = std::chrono::duration<double>(Clock::now() - cell.claimed_at).count();
+    const double exec = cell.execute_wall_s;
+    if (!std::isfinite(exec) || exec < 0 || !std::isfinite(reset_wall_s) || reset_wall_s < 0) return;
+    TrialTiming t;
+    t.trial_id = cell.trial_id;
+    t.attempt = cell.attempt;
+    t.cell_id = cell.id;
+    t.cell_busy_s = busy;
+    t.execute_s = exec;
+    t.reset_s = reset_wall_s;
+    t.overhead_s = busy - exec - reset_wall_s;
+    t.campaign_id = cell.campaign_id;
+    spdlog::debug("trial {} attempt {} on cell {}: busy {:.3f} ms = execute {:.3f} + reset {:.3f} + arena {:.3f}",
+                  t.trial_id, t.attempt, t.cell_id, busy * 1e3, exec * 1e3, reset_wall_s * 1e3,
+                  t.overhead_s * 1e3);
+    if (on_trial_timing) on_trial_timing(t);
   }
 
   // ------------------------------------------------------------ predictions
@@ -781,6 +816,9 @@ ServiceCounters Service::counters() const {
 }
 void Service::OnTick(std::function<void(const ServiceCounters&)> callback) {
   impl_->on_tick = std::move(callback);
+}
+void Service::OnTrialTiming(std::function<void(const TrialTiming&)> callback) {
+  impl_->on_trial_timing = std::move(callback);
 }
 
 }  // namespace arena::orchestrator

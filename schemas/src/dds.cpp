@@ -173,10 +173,11 @@ void ApplyTopicQos(const std::string& topic, fdds::ReliabilityQosPolicy* reliabi
   reliability->kind = fdds::RELIABLE_RELIABILITY_QOS;
   durability->kind = fdds::VOLATILE_DURABILITY_QOS;
   history->kind = fdds::KEEP_ALL_HISTORY_QOS;
-  // Every topic is keyed (cell or trial) and Fast DDS 2.9 never frees an
-  // instance slot, so the default max_instances (10) would stall a service
-  // after ten cells (CellAnnounce, TrialCommand) or ten trials (TrialStatus,
-  // GroundTruth). No instance limit anywhere; the only bound that matters,
+  // CellAnnounce and TrialCommand are keyed by cell, and Fast DDS 2.9 never
+  // frees an instance slot, so the default max_instances (10) would stall a
+  // service after ten cells. (The per-trial topics are unkeyed for the same
+  // reason: one instance per trial grew without bound.) No instance limit
+  // anywhere; the only bound that matters,
   // ground truth in flight, is the writer's acknowledgement window
   // (kGroundTruthMaxBatches, see Writer::Write).
   limits->max_instances = 0;
@@ -506,6 +507,10 @@ Writer<T>::Writer(Participant& participant, const WriterOptions& options)
   ApplyTopicQos(topic, &qos.reliability(), &qos.durability(), &qos.history(),
                 &qos.resource_limits());
   qos.reliability().max_blocking_time = Duration_t(options.max_blocking_s);
+  // Payload buffers sized to each sample, reused: the preallocating default
+  // sizes every buffer for the type's maximum (1.9 MB for a GroundTruth batch)
+  // and zeroes it, which was most of the service's CPU per trial.
+  qos.endpoint().history_memory_policy = eprosima::fastrtps::rtps::DYNAMIC_REUSABLE_MEMORY_MODE;
   impl_->max_blocking_s = options.max_blocking_s;
   if (CellWritten(topic)) {
     qos.liveliness().kind = fdds::AUTOMATIC_LIVELINESS_QOS;
@@ -635,6 +640,7 @@ Reader<T>::Reader(Participant& participant, const ReaderOptions& options)
   fdds::DataReaderQos qos = core.subscriber->get_default_datareader_qos();
   ApplyTopicQos(topic, &qos.reliability(), &qos.durability(), &qos.history(),
                 &qos.resource_limits());
+  qos.endpoint().history_memory_policy = eprosima::fastrtps::rtps::DYNAMIC_REUSABLE_MEMORY_MODE;  // as writers
   // Fast DDS tracks a writer's liveliness only for a finite requested lease.
   qos.liveliness().kind = fdds::AUTOMATIC_LIVELINESS_QOS;
   qos.liveliness().lease_duration = CellWritten(topic) ? Duration_t(kCellLivelinessLease_s)

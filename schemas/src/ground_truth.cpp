@@ -107,8 +107,12 @@ mechanics::TrajectorySample DecodeSample(const msg::GroundTruthSample& in, Pushe
     pusher->velocity = {pt[0], pt[1], pt[2]};
     pusher->angular_velocity = {pt[3], pt[4], pt[5]};
   }
-  if (observed != nullptr) {
-    observed->valid = in.observed_valid();
+  if (observed != nullptr && !in.observed_valid()) {
+    // A dropped observation carries no data; whatever the sender left in the
+    // fields (CheckSample does not look at them) must not leak out as values.
+    *observed = Observation{};
+  } else if (observed != nullptr) {
+    observed->valid = true;
     observed->t = in.observed_t();
     GetPose(in.observed_object_pose(), &observed->position, &observed->orientation);
     for (int k = 0; k < 6; ++k) observed->pusher_wrench[k] = in.observed_pusher_wrench()[k];

@@ -121,6 +121,17 @@ TEST(CellProcess, TwoCellsAndADriverExchangeCommands) {
   EXPECT_EQ(again->samples(), st1->samples());
   EXPECT_FALSE(d.ground_truth.Take(500ms)) << "a finished trial ran again";
 
+  // ... but a new service session (a new store restarts trial ids at 1) is not a
+  // repeat: the same trial id and attempt run again and stream again.
+  auto e1_new_session = e1;
+  e1_new_session.service_session(e1.service_session() + 1);
+  ASSERT_TRUE(d.commands.Write(e1_new_session));
+  Stream rerun = Collect(d, 101, 1, 20s);
+  EXPECT_TRUE(rerun.complete) << "a new session's command was taken for a repeat";
+  auto st_rerun = d.FinalStatus(101, 20s);
+  ASSERT_TRUE(st_rerun);
+  EXPECT_EQ(st_rerun->state(), msg::STATE_EXECUTED) << st_rerun->reason();
+
   // A scene outside c2's workspace is refused with the reason.
   ASSERT_TRUE(d.Send((d.Command("c2", 202, msg::PHASE_EXECUTE,
       R"({"object": {"shape": "box", "size": [0.05, 0.03, 0.10], "mass": 0.2,

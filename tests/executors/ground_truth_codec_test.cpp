@@ -1,10 +1,18 @@
 // The ground-truth codec (schemas/ground_truth.hpp) shared by cell and service.
 #include <cmath>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <iterator>
 #include <limits>
+#include <vector>
 
 #include <gtest/gtest.h>
 
+#include <fastdds/rtps/common/SerializedPayload.h>
+
 #include "arena/schemas/arena.h"
+#include "arena/schemas/arenaPubSubTypes.h"
 #include "arena/schemas/ground_truth.hpp"
 
 namespace arena::dds {
@@ -84,6 +92,66 @@ TEST(GroundTruthCodec, MalformedSamplesAreNamed) {
   EXPECT_EQ(CheckBatch(batch, 25), "");
   batch.samples().push_back(m);  // same t twice
   EXPECT_NE(CheckBatch(batch, 25).find("not increasing"), std::string::npos);
+}
+
+// Found by tests/fuzz/ground_truth_fuzz.cpp: CheckSample does not look at the
+// observed fields of a dropped observation, so DecodeSample must not pass
+// whatever a sender left there on as values.
+TEST(GroundTruthCodec, DroppedObservationDecodesToZeroWhateverTheFieldsHold) {
+  msg::GroundTruthSample m;
+  EncodeSample(Truth(), PusherState{}, Observation{}, &m);
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  m.observed_valid(false);
+  m.observed_t(nan);
+  m.observed_object_pose() = {nan, 1e308, -0.0, 2, 0, 0, 0};
+  m.observed_pusher_wrench() = {nan, nan, std::numeric_limits<double>::infinity(), 0, 0, 0};
+  m.observed_finger_wrenches().assign(12, nan);
+  ASSERT_EQ(CheckSample(m), "");
+  Observation seen;
+  seen.valid = true;
+  seen.finger_wrenches = {Wrench::Ones()};
+  DecodeSample(m, nullptr, &seen);
+  EXPECT_FALSE(seen.valid);
+  EXPECT_EQ(seen.t, 0.0);
+  EXPECT_TRUE(seen.position.isZero());
+  EXPECT_TRUE(seen.pusher_wrench.isZero());
+  EXPECT_TRUE(seen.finger_wrenches.empty());
+}
+
+// Replays what the fuzzer found (tests/fuzz/crashers/ground_truth_fuzz/) along
+// the service's path: CDR bytes -> type support -> CheckBatch -> DecodeSample.
+TEST(GroundTruthCodec, FuzzCrashersAreHandled) {
+  const std::filesystem::path dir =
+      std::filesystem::path(ARENA_SOURCE_DIR) / "tests/fuzz/crashers/ground_truth_fuzz";
+  ASSERT_TRUE(std::filesystem::exists(dir));
+  int replayed = 0;
+  for (const auto& entry : std::filesystem::directory_iterator(dir)) {
+    std::ifstream in(entry.path(), std::ios::binary);
+    const std::vector<char> bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    eprosima::fastrtps::rtps::SerializedPayload_t payload(static_cast<uint32_t>(bytes.size() + 4));
+    payload.data[1] = 0x01;  // CDR, little endian
+    std::memcpy(payload.data + 4, bytes.data(), bytes.size());
+    payload.length = static_cast<uint32_t>(bytes.size() + 4);
+    msg::GroundTruthPubSubType type;
+    msg::GroundTruth batch;
+    bool decoded = false;
+    try {
+      decoded = type.deserialize(&payload, &batch);
+    } catch (const std::exception&) {
+    }
+    ++replayed;
+    if (!decoded || !CheckBatch(batch, batch.first_sample()).empty()) continue;
+    for (const auto& m : batch.samples()) {
+      PusherState pusher;
+      Observation seen;
+      const auto s = DecodeSample(m, &pusher, &seen);
+      EXPECT_TRUE(std::isfinite(s.t) && s.position.allFinite() && s.velocity.allFinite()) << entry.path();
+      EXPECT_TRUE(std::isfinite(seen.t) && seen.position.allFinite() && seen.pusher_wrench.allFinite())
+          << entry.path();
+      for (const auto& w : seen.finger_wrenches) EXPECT_TRUE(w.allFinite()) << entry.path();
+    }
+  }
+  EXPECT_GT(replayed, 0);
 }
 
 }  // namespace

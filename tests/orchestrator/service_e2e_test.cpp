@@ -2,6 +2,8 @@
 // processes over DDS on a test-unique domain, runs a 60-trial campaign and
 // leaves a consistent store behind; `arena submit` + `arena serve` do the same
 // from separate processes.
+#include <cstdio>
+
 #include <gtest/gtest.h>
 
 #include "service_support.hpp"
@@ -25,7 +27,18 @@ TEST(ServiceEndToEnd, RunsSixtyTrialsOnTwoCells) {
   for (const auto& t : store->ListTrials(1)) per_cell[t.cell_id]++;
   EXPECT_EQ(per_cell.size(), 2u);
   // The summary names the outcome.
-  EXPECT_NE(ReadFile(dir / "run.out").find("60 done"), std::string::npos) << ReadFile(dir / "run.out");
+  const std::string out = ReadFile(dir / "run.out");
+  EXPECT_NE(out.find("60 done"), std::string::npos) << out;
+  // ... and arena's own time per trial (TrialTiming): a median over the clean
+  // trials, which nest the cells' execute and reset times, so it is >= 0.
+  const auto at = out.find("orchestration ");
+  ASSERT_NE(at, std::string::npos) << out;
+  double median_ms = -1, p95_ms = -1;
+  ASSERT_EQ(std::sscanf(out.c_str() + at, "orchestration %lf ms median, %lf ms p95", &median_ms, &p95_ms), 2)
+      << out;
+  EXPECT_GE(median_ms, 0.0) << out;
+  EXPECT_GE(p95_ms, median_ms) << out;
+  EXPECT_NE(out.find("clean trials)", at), std::string::npos) << out;
 }
 
 TEST(ServiceEndToEnd, SubmitToARunningServe) {

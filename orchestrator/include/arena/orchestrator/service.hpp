@@ -77,6 +77,21 @@ struct ServiceCounters {
   int cells_usable = 0;                 // of those: alive and not quarantined
 };
 
+// Where one clean trial's time went on its cell, for the orchestration-overhead
+// figure (issue 5): the cell is busy from the claim of the trial until the
+// service has taken its RESET_DONE; the cell reports how long it spent in
+// EXECUTE and RESET itself; the rest is arena's (store transactions, DDS
+// hops, polling).
+struct TrialTiming {
+  std::int64_t trial_id = 0, campaign_id = 0;
+  int attempt = 0;
+  std::string cell_id;
+  double cell_busy_s = 0;   // claim -> RESET_DONE taken, service clock (s)
+  double execute_s = 0;     // the cell's own EXECUTE wall time (s)
+  double reset_s = 0;       // the cell's own RESET wall time (s)
+  double overhead_s = 0;    // cell_busy_s - execute_s - reset_s
+};
+
 class Service {
  public:
   // Opens the store and joins the domain.
@@ -94,6 +109,9 @@ class Service {
   ServiceCounters counters() const;
   // Called from Run()'s thread about every 100 ms (progress bars).
   void OnTick(std::function<void(const ServiceCounters&)> callback);
+  // Called from Run()'s thread once per trial whose EXECUTE and RESET both
+  // succeeded (failed or retried phases have no meaningful split).
+  void OnTrialTiming(std::function<void(const TrialTiming&)> callback);
 
  private:
   struct Impl;
