@@ -3,8 +3,10 @@
 #include <benchmark/benchmark.h>
 
 #include <chrono>
+#include <cstdlib>
 #include <ctime>
 #include <filesystem>
+#include <random>
 #include <string>
 #include <vector>
 
@@ -44,6 +46,79 @@ Sample MakeSample(int i) {
   return s;
 }
 
+// A sample as a cell streams it: smooth but not polynomial true motion and
+// contact forces (every mantissa bit in use, as a solver's output), and the
+// sensors' Gaussian noise on top (examples/campaigns/smoke.json's defects:
+// 0.5 mm, 0.005 rad, 0.05 N; 1 % dropped observations). The bit patterns of
+// noise do not compress; this is the honest input for a packing codec.
+std::vector<Sample> MakeRealisticStream(int n, unsigned seed) {
+  std::mt19937_64 rng(seed);
+  std::normal_distribution<double> gauss(0, 1);
+  std::uniform_real_distribution<double> uniform(0, 1);
+  std::vector<Sample> out;
+  out.reserve(static_cast<std::size_t>(n));
+  int mode_run = 0;
+  ContactMode modes[3] = {ContactMode::kStick, ContactMode::kStick, ContactMode::kSlide};
+  for (int i = 0; i < n; ++i) {
+    const double t = i / 250.0;
+    Sample s;
+    s.t = t;
+    const double z = 0.02 * t - 0.001 * std::sin(3 * t), yaw = 0.05 * std::sin(0.7 * t);
+    s.object_pose = {0.0004 * std::sin(1.3 * t), 0.0002 * std::cos(0.9 * t), z,
+                     std::cos(yaw / 2), 0.001 * std::sin(2 * t), 0.0005 * std::cos(t), std::sin(yaw / 2)};
+    s.object_twist = {0.00052 * std::cos(1.3 * t), -0.00018 * std::sin(0.9 * t), 0.02 - 0.003 * std::cos(3 * t),
+                      0.002 * std::cos(2 * t), -0.0005 * std::sin(t), 0.035 * std::cos(0.7 * t)};
+    s.pusher_pose = {0.0, 0.0, -0.05 + 0.02 * t, 1, 0, 0, 0};  // commanded motion: exact
+    s.pusher_twist = {0, 0, 0.02, 0, 0, 0};
+    if (++mode_run > 100 + static_cast<int>(rng() % 200)) {  // modes change in runs
+      mode_run = 0;
+      modes[rng() % 3] = static_cast<ContactMode>(rng() % 3);
+    }
+    s.contacts.resize(3);
+    for (int c = 0; c < 3; ++c) {
+      const double normal = 10.0 + 0.8 * std::sin(0.5 * t + c) + 0.01 * std::sin(40 * t + 3 * c);
+      s.contacts[static_cast<std::size_t>(c)].force = {(c == 0 ? 1 : -1) * normal, 0.3 * std::sin(t + c),
+                                                       0.49 + 0.2 * std::cos(1.1 * t + c)};
+      s.contacts[static_cast<std::size_t>(c)].torque = {0.001 * std::sin(2 * t + c), 0.0005 * std::cos(t - c),
+                                                        0.002 * std::sin(0.3 * t + c)};
+      s.contacts[static_cast<std::size_t>(c)].mode = modes[c];
+    }
+    s.observed_valid = uniform(rng) >= 0.01;
+    s.observed_object_pose = s.object_pose;
+    for (int k = 0; k < 3; ++k) s.observed_object_pose[static_cast<std::size_t>(k)] += 0.0005 * gauss(rng);
+    for (int k = 3; k < 7; ++k) s.observed_object_pose[static_cast<std::size_t>(k)] += 0.0025 * gauss(rng);
+    const auto& pf = s.contacts[2].force;
+    s.observed_pusher_wrench = {-pf[0] + 0.05 * gauss(rng), -pf[1] + 0.05 * gauss(rng), -pf[2] + 0.05 * gauss(rng),
+                                0.005 * gauss(rng), 0.005 * gauss(rng), 0.005 * gauss(rng)};
+    for (int f = 0; f < 2; ++f) {
+      for (int k = 0; k < 3; ++k) {
+        s.observed_finger_wrenches.push_back(-s.contacts[static_cast<std::size_t>(f)].force[static_cast<std::size_t>(k)] +
+                                             0.05 * gauss(rng));
+      }
+      for (int k = 0; k < 3; ++k) s.observed_finger_wrenches.push_back(0.005 * gauss(rng));
+    }
+    out.push_back(std::move(s));
+  }
+  return out;
+}
+
+// Real ground truth: every published stream of the store named by
+// ARENA_BENCH_GT_STORE (make one with `arena run bench/long_push_campaign.json
+// --db long.db --cells 2`: simulator + cells with sensor noise, a straight
+// and a pivoting push of 1876 samples each). Empty when the variable is not set.
+std::vector<std::vector<Sample>> LoadRealStreams() {
+  std::vector<std::vector<Sample>> out;
+  const char* path = std::getenv("ARENA_BENCH_GT_STORE");
+  if (path == nullptr || *path == '\0') return out;
+  StoreOptions ro;
+  ro.read_only = true;
+  auto store = Store::Open(path, ro);
+  for (const auto& t : store->ListTrials(1)) {
+    if (t.gt_stream_id) out.push_back(store->ReadGroundTruth(t.id).samples);
+  }
+  return out;
+}
+
 NewCampaign MakeNewCampaign(const char* name, int priority) {
   NewCampaign nc;
   nc.name = name;
@@ -55,11 +130,11 @@ NewCampaign MakeNewCampaign(const char* name, int priority) {
 struct BenchStore {
   fs::path dir;
   std::unique_ptr<Store> store;
-  BenchStore(int trials, int cells, bool full_sync) {
+  BenchStore(int trials, int cells, bool full_sync, const StoreOptions& base = {}) {
     dir = fs::temp_directory_path() / ("arena_db_bench_" + std::to_string(::getpid()));
     fs::remove_all(dir);
     fs::create_directories(dir);
-    StoreOptions o;
+    StoreOptions o = base;
     o.synchronous_full = full_sync;
     store = Store::Open((dir / "bench.db").string(), o);
     for (int c = 0; c < cells; ++c) store->UpsertCell("cell" + std::to_string(c), {"point", "line"});
@@ -76,23 +151,63 @@ struct BenchStore {
 
 // Samples per second into a file: each iteration claims a trial and ingests
 // 2500 samples (10 s at 250 Hz) with the default batching, then publishes it.
+// Args: synchronous FULL (1) or NORMAL (0); data 0 = the regular synthetic
+// sample of MakeSample (the first figures), 1 = MakeRealisticStream, 2 = a
+// real stream (LoadRealStream; skipped without ARENA_BENCH_GT_STORE); chunks
+// packed (AGT2, default) or raw (AGT1); `old`: the settings before
+// 2026-11-22 (4 KiB pages, 4 MiB WAL checkpoints) instead of the defaults.
 void BM_IngestSamples(benchmark::State& state) {
-  constexpr int kSamplesPerTrial = 2500;
   const bool full = state.range(0) != 0;
-  std::vector<Sample> samples;
-  for (int i = 0; i < kSamplesPerTrial; ++i) samples.push_back(MakeSample(i));
-  BenchStore b(static_cast<int>(state.max_iterations), 1, full);
+  const int data = static_cast<int>(state.range(1));
+  const bool realistic = data != 0;
+  IngestOptions io;
+  io.pack_chunks = state.range(2) != 0;
+  const bool old = state.range(3) != 0;
+  StoreOptions so;
+  if (old) {
+    so.new_file_page_size = 4096;
+    so.wal_autocheckpoint_bytes = 1000 * 4096;
+  }
+  std::vector<std::vector<Sample>> streams(1);  // trial k ingests streams[k % size]
+  if (data == 2) {
+    streams = LoadRealStreams();
+    if (streams.empty()) {
+      state.SkipWithError("set ARENA_BENCH_GT_STORE to a store with ground truth (see LoadRealStreams)");
+      return;
+    }
+  } else if (realistic) {
+    streams[0] = MakeRealisticStream(2500, 1);
+  } else {
+    for (int i = 0; i < 2500; ++i) streams[0].push_back(MakeSample(i));
+  }
+  std::int64_t ingested = 0;
+  std::size_t k = 0;
+  BenchStore b(static_cast<int>(state.max_iterations), 1, full, so);
   for (auto _ : state) {
     auto t = b.store->ClaimNextTrial("cell0");
-    auto ingest = b.store->BeginIngest(t->trial_id, t->attempt);
+    auto ingest = b.store->BeginIngest(t->trial_id, t->attempt, io);
+    const auto& samples = streams[k++ % streams.size()];
     for (const auto& s : samples) ingest->Add(s);
     benchmark::DoNotOptimize(ingest->Finish());
+    ingested += static_cast<std::int64_t>(samples.size());
   }
-  state.SetItemsProcessed(state.iterations() * kSamplesPerTrial);
+  state.SetItemsProcessed(ingested);
+  b.store.reset();  // closes the file: the last checkpoint is in the figure's size
+  const double samples_total = static_cast<double>(ingested);
   state.counters["db_MB"] = static_cast<double>(fs::file_size(b.dir / "bench.db")) / 1e6;
-  state.SetLabel(full ? "synchronous=FULL" : "synchronous=NORMAL");
+  state.counters["db_bytes_per_sample"] = static_cast<double>(fs::file_size(b.dir / "bench.db")) / samples_total;
+  state.SetLabel(std::string(full ? "synchronous=FULL" : "synchronous=NORMAL") +
+                 (data == 2 ? " real" : realistic ? " realistic" : " regular") + (io.pack_chunks ? " packed" : " raw") +
+                 (old ? " 4KiB-pages 4MiB-checkpoints" : " 8KiB-pages 16MiB-checkpoints"));
 }
-BENCHMARK(BM_IngestSamples)->Arg(0)->Arg(1)->Iterations(200)->UseRealTime()->Unit(benchmark::kMillisecond);
+BENCHMARK(BM_IngestSamples)
+    ->ArgNames({"full", "realistic", "packed", "old"})
+    ->Args({0, 0, 0, 1})->Args({0, 1, 0, 1})   // before: raw chunks, old settings
+    ->Args({0, 1, 0, 0})->Args({0, 1, 1, 1})   // each change alone (realistic data)
+    ->Args({0, 0, 1, 0})->Args({0, 1, 1, 0})   // after: packed, new settings
+    ->Args({1, 1, 1, 0})
+    ->Args({0, 2, 0, 1})->Args({0, 2, 1, 0})   // real ground truth: before, after
+    ->Iterations(200)->UseRealTime()->Unit(benchmark::kMillisecond);
 
 // 16 cells at 250 Hz, run as fast as possible for 60 simulated seconds: every
 // tick each cell delivers one sample, each ingest commits every 0.5 simulated
@@ -151,6 +266,33 @@ void BM_CheckAndEncodeSample(benchmark::State& state) {
   state.SetItemsProcessed(state.iterations());
 }
 BENCHMARK(BM_CheckAndEncodeSample);
+
+// Packing and unpacking one 250-sample chunk (1 s at 250 Hz) of the realistic
+// stream: CPU per sample, and the packed size.
+void BM_PackChunk(benchmark::State& state) {
+  const auto samples = MakeRealisticStream(250, 2);
+  std::string raw;
+  EncodeSamples(samples.data(), samples.size(), &raw);
+  std::string packed;
+  for (auto _ : state) {
+    packed.clear();
+    benchmark::DoNotOptimize(PackBlock(raw.data(), raw.size(), &packed));
+  }
+  state.SetItemsProcessed(state.iterations() * 250);
+  state.counters["raw_bytes_per_sample"] = static_cast<double>(raw.size()) / 250;
+  state.counters["packed_bytes_per_sample"] = static_cast<double>(packed.size()) / 250;
+}
+BENCHMARK(BM_PackChunk);
+
+void BM_UnpackChunk(benchmark::State& state) {
+  const auto samples = MakeRealisticStream(250, 2);
+  std::string raw, packed;
+  EncodeSamples(samples.data(), samples.size(), &raw);
+  PackBlock(raw.data(), raw.size(), &packed);
+  for (auto _ : state) benchmark::DoNotOptimize(DecodeSamples(packed.data(), packed.size()));
+  state.SetItemsProcessed(state.iterations() * 250);
+}
+BENCHMARK(BM_UnpackChunk);
 
 // One claim (find + transition + audit row, committed) with 100 000 planned
 // trials over 3 campaigns: the scheduler's cost per dispatched trial.

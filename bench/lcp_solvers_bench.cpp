@@ -1,13 +1,14 @@
 // LCP solver comparison (issue 7): arena's Lemke (mechanics/src/lcp.cpp)
-// against Siconos numerics' lcp_lexicolemke and Bullet's btLemkeAlgorithm
-// (double precision build), on the same problems: the per-step LCPs of
+// against Siconos numerics' lcp_lexicolemke, Bullet's btLemkeAlgorithm
+// (double precision build) and DART's Lemke (when libdart-dev is installed),
+// on the same problems: the per-step LCPs of
 // arena's own scenes (ContactModel::SetLcpObserver) in families that are hard
 // for pivoting solvers. All solvers are cold-started. Success = the solver
 // says ok AND the natural residual ‖min(z, Mz + q)‖∞ (computed here, the
 // same way for all) is ≤ 1e-8 (1 + ‖q‖∞). Prints Markdown (bench/README.md,
 // section "LCP solvers"). Benchmark-only dependencies (bench/eval.cmake).
 //
-//   build/bench/lcp_solvers_bench [scenes per family, default 20]
+//   build/bench/lcp_solvers_bench [scenes per family, default 20] [family name part]
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -26,6 +27,10 @@
 #include <siconos/numerics/lcp_cst.h>
 
 #include <BulletDynamics/MLCPSolvers/btLemkeAlgorithm.h>
+
+#ifdef ARENA_HAVE_DART
+#include <dart/lcpsolver/Lemke.hpp>
+#endif
 
 #include "arena/mechanics/lcp.hpp"
 #include "arena/mechanics/model.hpp"
@@ -116,6 +121,22 @@ Outcome SolveBullet(const Problem& p) {
   }
   return o;
 }
+
+#ifdef ARENA_HAVE_DART
+// DART 6.12's Lemke (dart/lcpsolver/Lemke.hpp): its own pivot bound
+// (min(1000, 50 n)) and no pivot count in its interface; 0 = success.
+Outcome SolveDart(const Problem& p) {
+  Outcome o;
+  Eigen::VectorXd z(p.q.size());
+  const auto t0 = Clock::now();
+  const int info = dart::lcpsolver::Lemke(p.M, p.q, &z);
+  o.seconds = std::chrono::duration<double>(Clock::now() - t0).count();
+  o.ok = info == 0;
+  o.pivots = -1;  // not reported by DART
+  o.z = z;
+  return o;
+}
+#endif
 
 // Simulates the scene with arena's model and keeps every step's LCP.
 void Collect(const m::Scene& scene, std::vector<Problem>* out) {
@@ -224,17 +245,27 @@ double Quantile(std::vector<double> v, double p) {
 }
 
 constexpr int kBulletMaxSize = 60;
+constexpr int kDartFullSize = 120;
 
 }  // namespace
 
 int main(int argc, char** argv) {
   const int scenes = argc > 1 ? std::max(1, std::atoi(argv[1])) : 20;
   std::mt19937 rng(20261122);
-  const char* solvers[] = {"arena", "siconos lexicolemke", "bullet lemke"};
-  std::function<Outcome(const Problem&)> solve[] = {SolveArena, SolveSiconos, SolveBullet};
+  std::vector<const char*> solvers = {"arena", "siconos lexicolemke", "bullet lemke"};
+  std::vector<std::function<Outcome(const Problem&)>> solve = {SolveArena, SolveSiconos, SolveBullet};
+#ifdef ARENA_HAVE_DART
+  solvers.push_back("dart lemke");
+  solve.push_back(SolveDart);
+#else
+  std::fprintf(stderr, "DART not found at build time (libdart-dev): its rows are left out\n");
+#endif
+  // Optional: only the families whose name contains argv[2] (profiling).
+  const char* only = argc > 2 ? argv[2] : nullptr;
   std::printf("| family | problems | n (median) | solver | success | said ok | median µs | p99 µs | median pivots | p99 pivots |\n");
   std::printf("|---|---:|---:|---|---:|---:|---:|---:|---:|---:|\n");
   for (const Family& family : Families()) {
+    if (only != nullptr && family.name.find(only) == std::string::npos) continue;
     std::vector<Problem> problems;
     for (int i = 0; i < scenes; ++i) {
       try {
@@ -245,7 +276,7 @@ int main(int argc, char** argv) {
     }
     std::vector<double> sizes;
     for (const auto& p : problems) sizes.push_back(static_cast<double>(p.q.size()));
-    for (int s = 0; s < 3; ++s) {
+    for (std::size_t s = 0; s < solvers.size(); ++s) {
       // Bullet's dense Lemke takes ~1 s per solve at n = 94 (and never
       // succeeds there): it is run only on the small families.
       if (s == 2 && Quantile(sizes, 0.5) > kBulletMaxSize) {
@@ -253,20 +284,29 @@ int main(int argc, char** argv) {
                     problems.size(), Quantile(sizes, 0.5), solvers[s], kBulletMaxSize);
         continue;
       }
+      // DART re-factorises its basis on every pivot (seconds per failing
+      // solve at n = 194): on the large families it gets every 10th problem.
+      const bool dart = std::string(solvers[s]) == "dart lemke";
+      const std::size_t stride = dart && Quantile(sizes, 0.5) > kDartFullSize ? 10 : 1;
       Stats st;
-      for (const auto& p : problems) {
+      for (std::size_t k = 0; k < problems.size(); k += stride) {
+        const Problem& p = problems[k];
         const Outcome o = solve[s](p);
         ++st.n;
         st.said_ok += o.ok;
         const double tol = 1e-8 * (1 + p.q.cwiseAbs().maxCoeff());
         st.success += o.ok && NaturalResidual(p, o.z) <= tol;
         st.times.push_back(o.seconds * 1e6);
-        st.pivots.push_back(o.pivots);
+        if (o.pivots >= 0) st.pivots.push_back(o.pivots);
       }
-      std::printf("| %s | %d | %.0f | %s | %.2f %% | %.2f %% | %.1f | %.1f | %.0f | %.0f |\n", family.name.c_str(),
-                  st.n, Quantile(sizes, 0.5), solvers[s], st.n ? 100.0 * st.success / st.n : 0.0,
+      char pivots[64] = "— | —";  // DART does not report its pivots
+      if (!st.pivots.empty()) {
+        std::snprintf(pivots, sizeof pivots, "%.0f | %.0f", Quantile(st.pivots, 0.5), Quantile(st.pivots, 0.99));
+      }
+      std::printf("| %s | %d | %.0f | %s | %.2f %% | %.2f %% | %.1f | %.1f | %s |\n", family.name.c_str(), st.n,
+                  Quantile(sizes, 0.5), solvers[s], st.n ? 100.0 * st.success / st.n : 0.0,
                   st.n ? 100.0 * st.said_ok / st.n : 0.0, Quantile(st.times, 0.5), Quantile(st.times, 0.99),
-                  Quantile(st.pivots, 0.5), Quantile(st.pivots, 0.99));
+                  pivots);
       std::fflush(stdout);
     }
   }

@@ -3,10 +3,19 @@
 # every package is there and nothing changed, it only asks ninja, which
 # answers "no work to do".
 #
-#   scripts/setup.sh [BUILD_DIR] [extra cmake args...]
+#   scripts/setup.sh [--bench-peers] [BUILD_DIR] [extra cmake args...]
+#
+# --bench-peers also installs the peer LCP solvers that only
+# bench/lcp_solvers_bench compares against (Siconos numerics, Bullet, DART;
+# benchmark-only, never runtime dependencies; bench/README.md "LCP solvers").
 #
 # Environment: ARENA_JOBS (default 2).
 set -euo pipefail
+bench_peers=0
+if [ "${1:-}" = "--bench-peers" ]; then
+  bench_peers=1
+  shift
+fi
 here="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 build="${1:-$here/build}"
 shift || true
@@ -24,6 +33,9 @@ packages=(
   libssl-dev
   iproute2 procps
 )
+if ((bench_peers)); then
+  packages+=(libsiconos-numerics-dev libbullet-dev libdart-dev)
+fi
 
 missing=()
 for p in "${packages[@]}"; do

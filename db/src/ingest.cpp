@@ -89,13 +89,22 @@ struct Ingest::Impl {
   std::int64_t modes[3] = {0, 0, 0};
   double obs_sq_sum = 0, obs_max = 0;
 
+  // Shape of the open chunk's samples: only a uniform chunk can be packed.
+  int chunk_contacts = -1, chunk_finger_values = -1;
+  bool chunk_uniform = true;
+
   void CloseChunk() {
     if (open.samples == 0) return;
     PatchBlockCount(open.samples, &body);
-    open.data = std::move(body);
+    if (options.pack_chunks && chunk_uniform && PackBlock(body.data(), body.size(), &open.data)) {
+      body.clear();  // keep its capacity for the next chunk
+    } else {
+      open.data = std::move(body);
+      body = std::string();
+    }
     ready.push_back(std::move(open));
     open = Chunk{};
-    body = std::string();
+    chunk_uniform = true;
   }
 
   void WriteReady() {
@@ -168,6 +177,11 @@ void Ingest::Add(const Sample& s) {
     EncodeBlockHeader(0, &m.body);
     m.open.first_sample = m.total;
     m.open.t_first = s.t;
+    m.chunk_contacts = static_cast<int>(s.contacts.size());
+    m.chunk_finger_values = static_cast<int>(s.observed_finger_wrenches.size());
+  } else if (static_cast<int>(s.contacts.size()) != m.chunk_contacts ||
+             static_cast<int>(s.observed_finger_wrenches.size()) != m.chunk_finger_values) {
+    m.chunk_uniform = false;
     if (m.buffered == 0) m.oldest = std::chrono::steady_clock::now();
   }
   EncodeSampleBody(s, &m.body);
@@ -260,8 +274,9 @@ std::int64_t Ingest::Finish(const std::string& outcome) {
 std::unique_ptr<Ingest> Store::BeginIngest(std::int64_t trial_id, int attempt,
                                            const IngestOptions& options) {
   impl_->RequireWritable("BeginIngest");
-  if (options.samples_per_chunk < 1 || options.samples_per_chunk > 100000) {
-    throw StoreError(StoreError::Kind::kBadInput, "BeginIngest: samples_per_chunk must be in [1, 100000]");
+  if (options.samples_per_chunk < 1 || options.samples_per_chunk > static_cast<int>(kMaxBlockSamples)) {
+    throw StoreError(StoreError::Kind::kBadInput, "BeginIngest: samples_per_chunk must be in [1, " +
+                                                      std::to_string(kMaxBlockSamples) + "]");
   }
   if (options.samples_per_commit < 1) {
     throw StoreError(StoreError::Kind::kBadInput, "BeginIngest: samples_per_commit must be >= 1");

@@ -156,6 +156,10 @@ void EncodeSamples(const Sample* samples, std::size_t count, std::string* out) {
 }
 
 std::vector<Sample> DecodeSamples(const void* data, std::size_t size) {
+  if (size >= 4 && std::memcmp(data, "AGT2", 4) == 0) {
+    const std::string raw = UnpackBlock(data, size);
+    return DecodeSamples(raw.data(), raw.size());
+  }
   Reader r{static_cast<const unsigned char*>(data), static_cast<const unsigned char*>(data) + size};
   char magic[4];
   r.Get(magic, 4);

@@ -174,10 +174,11 @@ void ApplyTopicQos(const std::string& topic, fdds::ReliabilityQosPolicy* reliabi
   reliability->kind = fdds::RELIABLE_RELIABILITY_QOS;
   durability->kind = fdds::VOLATILE_DURABILITY_QOS;
   history->kind = fdds::KEEP_ALL_HISTORY_QOS;
-  // Every topic is keyed (cell or trial) and Fast DDS 2.9 never frees an
-  // instance slot, so the default max_instances (10) would stall a service
-  // after ten cells (CellAnnounce, TrialCommand) or ten trials (TrialStatus,
-  // GroundTruth). No instance limit anywhere; the only bound that matters,
+  // CellAnnounce and TrialCommand are keyed by cell, and Fast DDS 2.9 never
+  // frees an instance slot, so the default max_instances (10) would stall a
+  // service after ten cells. (The per-trial topics are unkeyed for the same
+  // reason: one instance per trial grew without bound.) No instance limit
+  // anywhere; the only bound that matters,
   // ground truth in flight, is the writer's acknowledgement window
   // (kGroundTruthMaxBatches, see Writer::Write).
   limits->max_instances = 0;

@@ -95,8 +95,8 @@ class TempDir {
 };
 
 // Runs one trial through the whole state machine with n samples.
-inline void RunTrialToDone(Store& store, const ClaimedTrial& t, int n) {
-  auto ingest = store.BeginIngest(t.trial_id, t.attempt);
+inline void RunTrialToDone(Store& store, const ClaimedTrial& t, int n, const IngestOptions& options = {}) {
+  auto ingest = store.BeginIngest(t.trial_id, t.attempt, options);
   for (int i = 0; i < n; ++i) ingest->Add(MakeSample(i));
   ingest->Finish("ok");
   store.BeginReset(t.trial_id, t.attempt);

@@ -617,7 +617,9 @@ TEST(StoreStatus, CountsRateAndEta) {
 TEST(StoreFaults, FullStoreRefusesWriteAndKeepsEarlierTrials) {
   TempDir dir;
   StoreOptions small;
-  small.max_pages = 400;  // 1.6 MB: room for a couple of trials of ground truth
+  small.max_pages = 400;  // 1.6 MB: room for a couple of trials of raw ground truth
+  IngestOptions raw;
+  raw.pack_chunks = false;  // MakeSample's regular values would pack ~35x and never fill it
   auto store = Store::Open(dir.File("full.db"), small);
   store->UpsertCell("c", {"point"});
   store->CreateCampaign(MakeCampaign(), MakeTrials(20));
@@ -627,7 +629,7 @@ TEST(StoreFaults, FullStoreRefusesWriteAndKeepsEarlierTrials) {
     auto t = store->ClaimNextTrial("c");
     ASSERT_TRUE(t) << "the store never filled up";
     try {
-      RunTrialToDone(*store, *t, 1000);
+      RunTrialToDone(*store, *t, 1000, raw);
       ++done;
     } catch (const StoreError& e) {
       EXPECT_EQ(e.kind(), K::kFull) << e.what();

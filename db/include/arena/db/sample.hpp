@@ -46,7 +46,24 @@ std::string CheckSample(const Sample& s);
 // The block codec used for the gt_chunks.data BLOB (db/README.md gives the
 // byte layout). Encode appends to *out; Decode throws StoreError(kCorrupt)
 // on a malformed block and never reads past `size`.
+// EncodeSamples writes the raw format "AGT1"; DecodeSamples reads "AGT1"
+// and the packed "AGT2" (PackBlock) alike.
 void EncodeSamples(const Sample* samples, std::size_t count, std::string* out);
 std::vector<Sample> DecodeSamples(const void* data, std::size_t size);
+
+// Samples per block at most (IngestOptions::samples_per_chunk has the same
+// bound), and the largest raw block a packed one may expand to: a corrupt
+// count cannot make a reader allocate more.
+constexpr std::uint32_t kMaxBlockSamples = 100000;
+constexpr std::size_t kMaxBlockBytes = std::size_t{256} << 20;
+
+// Lossless packing of an AGT1 block whose samples all have the same number of
+// contacts and finger values (what one stream delivers): appends the "AGT2"
+// block to *out and returns true, or returns false and leaves *out alone
+// when the block is not uniform, not well formed, or would not get smaller.
+bool PackBlock(const void* agt1, std::size_t size, std::string* out);
+// The AGT1 block a packed block came from, byte for byte.
+// @throws StoreError(kCorrupt) on a malformed block; never reads past `size`.
+std::string UnpackBlock(const void* agt2, std::size_t size);
 
 }  // namespace arena::db

@@ -138,10 +138,20 @@ struct StoreOptions {
   // checkpoint, never corrupting the file. README: "What survives which crash".
   bool synchronous_full = false;
   int busy_timeout_ms = 5000;
-  // 0: no limit. Otherwise PRAGMA max_page_count: the file may not grow past
-  // this many pages (4096 B each); a write that would is refused with kFull.
-  // Lets tests and cautious deployments bound the store's size.
+  // 0: no limit. Otherwise the file may not grow past this many 4096-byte
+  // units (PRAGMA max_page_count, converted to the file's page size, rounded
+  // down); a write that would is refused with kFull. Lets tests and cautious
+  // deployments bound the store's size.
   std::int64_t max_pages = 0;
+  // WAL size (bytes) at which a commit checkpoints it into the database file
+  // (PRAGMA wal_autocheckpoint, converted to pages). Larger: fewer fsyncs
+  // and faster ingest; with synchronous NORMAL, at most about this much of
+  // the latest commits can be rolled back by an OS crash or power loss
+  // (db/README.md, "What survives which crash").
+  std::int64_t wal_autocheckpoint_bytes = std::int64_t{16} << 20;
+  // Page size of a new file (512..65536, a power of two); an existing file
+  // keeps its own. 8192: see db/README.md, "Pragmas".
+  int new_file_page_size = 8192;
   // Seconds since the Unix epoch; tests inject a clock. Default: system clock.
   std::function<double()> clock;
 };
@@ -324,6 +334,9 @@ struct IngestOptions {
   int samples_per_chunk = 250;         // samples per BLOB row (1 s at 250 Hz)
   int samples_per_commit = 2000;       // commit when this many samples are buffered
   double max_commit_interval_s = 0.5;  // ... or when the oldest buffered sample is this old
+  // Store chunks in the packed block format "AGT2" (lossless; db/README.md)
+  // when it is smaller; false writes the raw "AGT1" (both read the same).
+  bool pack_chunks = true;
 };
 
 class Store;

@@ -18,7 +18,7 @@ struct LcpOptions {
   int max_pivots = 0;             // 0: 50 n + 200
   double pivot_tolerance = 1e-12; // smallest usable pivot (nondimensional)
   double feasibility = 1e-9;      // accepted negativity of z, w (nondimensional)
-  Eigen::VectorXd covering;       // Lemke's covering vector (> 0); empty: all ones
+  Eigen::VectorXd covering;       // Lemke's covering vector (> 0); empty: a fixed generic one (lcp.cpp)
   int covering_attempts = 8;      // runs with other covering vectors after a failed one
   int first_covering = 0;         // 0: start with `covering`; k > 0: with the k-th alternative
 };

@@ -26,8 +26,10 @@
 //                 readers request it: a reader sees a dead cell within that
 //                 lease. (A writer offering a longer lease does not match.)
 //   Participants  lease ParticipantOptions::lease_s (2.5 s, not Fast DDS's 20 s).
-//   Instances     no instance limit on any topic: every topic is keyed (cell or
-//                 trial) and Fast DDS 2.9 never frees an instance slot.
+//   Instances     CellAnnounce and TrialCommand are keyed by cell, with no
+//                 instance limit. TrialStatus and GroundTruth have no key:
+//                 Fast DDS 2.9 never frees an instance, so one per trial grew
+//                 a cell by ~14 KB per trial; unkeyed, memory stays flat.
 //   Intra-process delivery is off (it deadlocks against the liveliness
 //                 protocol in Fast DDS 2.9.1); same-process participants use
 //                 the transports.
