@@ -3,6 +3,8 @@
 //            [--security DIR]
 // Runs one simulated cell until SIGINT or SIGTERM (executors/README.md).
 #include <signal.h>
+#include <sys/prctl.h>
+#include <unistd.h>
 
 #include <cstdio>
 #include <fstream>
@@ -25,6 +27,7 @@ struct CellCliOptions {
   std::string defects_path;
   std::string peers;
   bool verbose = false;
+  int parent_pid = 0;  // > 0: stop when that process (arena run) is gone
 };
 
 std::string ReadText(const std::string& path, const char* option) {
@@ -61,6 +64,16 @@ int RunCell(CellCliOptions opt) {
   sigaddset(&signals, SIGINT);
   sigaddset(&signals, SIGTERM);
   pthread_sigmask(SIG_BLOCK, &signals, nullptr);
+  // A cell started by `arena run` must not outlive it, even when it is
+  // SIGKILLed: the kernel sends SIGTERM when the parent dies. A parent that
+  // died before this line is caught by comparing the parent pid.
+  if (opt.parent_pid > 0) {
+    prctl(PR_SET_PDEATHSIG, SIGTERM);
+    if (getppid() != opt.parent_pid) {
+      spdlog::warn("cell {}: the process that started it ({}) is gone; not starting", opt.cell.id, opt.parent_pid);
+      return kExitOk;
+    }
+  }
 
   std::unique_ptr<executors::Cell> cell;
   try {
@@ -105,6 +118,8 @@ void AddCellCommand(CLI::App& app, Action* action) {
                   "DDS-Security: a 'cell' identity directory from `arena certs issue`");
   cmd->add_flag("--no-shm", [opt](std::int64_t) { opt->cell.network.shared_memory = false; },
                 "Do not use the shared-memory transport (UDP only)");
+  cmd->add_option("--parent-pid", opt->parent_pid,
+                  "Stop when this process exits (arena run passes its own pid)");
   cmd->add_flag("-v,--verbose", opt->verbose, "Debug log (QoS in effect, discovery)");
   cmd->callback([opt, action] { *action = [opt] { return RunCell(*opt); }; });
 }

@@ -153,7 +153,8 @@ int Run(RunOptions opt) {
   const std::string self = SelfExecutable();
   for (int k = 0; k < opt.cells; ++k) {
     std::vector<std::string> argv = {self, "cell", "--id", "sim" + std::to_string(k + 1), "--domain",
-                                     std::to_string(opt.domain), "--speed", std::to_string(opt.speed)};
+                                     std::to_string(opt.domain), "--speed", std::to_string(opt.speed),
+                                     "--parent-pid", std::to_string(getpid())};
     if (!opt.defects_path.empty()) argv.insert(argv.end(), {"--defects", opt.defects_path});
     if (!opt.security_lab.empty()) argv.insert(argv.end(), {"--security", identity("sim" + std::to_string(k + 1))});
     cells.emplace_back(argv, opt.db_path + ".sim" + std::to_string(k + 1) + ".log");

@@ -1,7 +1,10 @@
 // Faults with real processes: the service SIGKILLed mid-campaign and
 // restarted, a cell SIGKILLed mid-trial, a cell whose resets keep failing.
 // After each, every trial ends exactly once and the store is consistent.
+#include <filesystem>
 #include <fstream>
+#include <string>
+#include <vector>
 
 #include <gtest/gtest.h>
 
@@ -23,6 +26,46 @@ struct Cells {
     }
   }
 };
+
+// `arena run`'s cells die with it, even when it is SIGKILLed (no orphans
+// holding the domain and the CPU after a crashed run).
+std::vector<pid_t> CellsStartedBy(pid_t parent) {
+  std::vector<pid_t> found;
+  const std::string mark = std::string("--parent-pid") + '\0' + std::to_string(parent) + '\0';
+  for (const auto& entry : std::filesystem::directory_iterator("/proc")) {
+    const std::string name = entry.path().filename();
+    if (name.find_first_not_of("0123456789") != std::string::npos) continue;
+    const std::string cmdline = ReadFile(entry.path() / "cmdline");
+    if (cmdline.find(mark) != std::string::npos) found.push_back(std::stoi(name));
+  }
+  return found;
+}
+
+bool Gone(pid_t pid) {
+  // A dead child of a parent that no longer exists may linger as a zombie.
+  const std::string status = ReadFile("/proc/" + std::to_string(pid) + "/status");
+  return status.empty() || status.find("State:\tZ") != std::string::npos;
+}
+
+TEST(ServiceFaults, RunKilledTakesItsCellsWithIt) {
+  TempDir dir;
+  const std::string db = dir / "orphans.db";
+  auto run = StartArena({"run", TestCampaign("e2e60.json"), "--db", db, "--cells", "2", "--speed", "1",
+                         "--domain", std::to_string(TestDomain(14)), "--quiet"},
+                        dir / "run.out");
+  std::vector<pid_t> cells;
+  ASSERT_TRUE(WaitUntil(
+      [&] {
+        cells = CellsStartedBy(run->pid());
+        return cells.size() == 2 && CountStates(db, 1)["done"] >= 1;
+      },
+      std::chrono::seconds(60)))
+      << ReadFile(dir / "run.out");
+  run->Signal(SIGKILL);
+  ASSERT_TRUE(run->Wait(std::chrono::seconds(10)).has_value());
+  EXPECT_TRUE(WaitUntil([&] { return Gone(cells[0]) && Gone(cells[1]); }, std::chrono::seconds(15)))
+      << "cells outlived the killed arena run";
+}
 
 TEST(ServiceFaults, ServiceKilledMidCampaignLosesAndDuplicatesNothing) {
   TempDir dir;
