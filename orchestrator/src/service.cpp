@@ -146,13 +146,15 @@ class PredictorPool {
 
 struct Service::Impl {
   ServiceOptions opt;
-  std::unique_ptr<db::Store> store;
   dds::Participant participant;
   dds::Writer<msg::TrialCommand> commands;
   dds::Reader<msg::CellAnnounce> announces;
   dds::Reader<msg::TrialStatus> statuses;
   dds::Reader<msg::GroundTruth> truth_reader;
   PredictorPool predictor;
+  // After the participant: a bad network or security setting fails before
+  // the store file is created or touched (bad input changes nothing stored).
+  std::unique_ptr<db::Store> store;
 
   // This run's identity on the command topic (TrialCommand.service_session).
   const std::uint64_t session = std::random_device{}() * 0x100000000ull + std::random_device{}();
@@ -211,13 +213,13 @@ struct Service::Impl {
 
   Impl(const ServiceOptions& o)
       : opt(o),
-        store(db::Store::Open(o.db_path, StoreOptionsFor(o))),
         participant(dds::ParticipantOptions{o.domain_id, "arena.service", o.network, 2.5}),
         commands(participant),
         announces(participant),
         statuses(participant),
         truth_reader(participant),
-        predictor(o.predictor_threads) {}
+        predictor(o.predictor_threads),
+        store(db::Store::Open(o.db_path, StoreOptionsFor(o))) {}
 
   void Count(std::int64_t ServiceCounters::*field, std::int64_t n = 1) {
     std::lock_guard lock(counters_mu);

@@ -252,6 +252,7 @@ TEST_F(SecurityCerts, CommandsNameTheMissingFile) {
   const Result serve = Arena("serve --db " + dir_ + "/s.db --domain 201 --security " + id);
   EXPECT_EQ(serve.rc, 2) << serve.err;
   EXPECT_NE(serve.err.find("identity.key.pem: missing"), std::string::npos) << serve.err;
+  EXPECT_FALSE(fs::exists(dir_ + "/s.db")) << "a refused --security created the store";
 }
 
 }  // namespace
