@@ -56,7 +56,9 @@ TEST(StoreCrash, SigkillWhileWritingLosesNothingCommitted) {
   {
     auto store = Store::Open(path);
     store->UpsertCell("c", {"point"});
-    store->CreateCampaign(MakeCampaign(), MakeTrials(400));
+    // Enough trials that the writer never runs out within the 12 rounds (packed
+    // chunks made ingest fast enough to finish 400 before the kills came).
+    store->CreateCampaign(MakeCampaign(), MakeTrials(6000));
   }
   std::mt19937 rng(2026);
   int kills = 0, finished_early = 0;
