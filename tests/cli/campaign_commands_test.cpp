@@ -15,37 +15,21 @@
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 
+#include "arena_command_test.hpp"
+
 namespace {
 
-std::string Slurp(const std::string& path) {
-  std::ifstream in(path, std::ios::binary);
-  std::ostringstream s;
-  s << in.rdbuf();
-  return s.str();
-}
+using arena::test::Slurp;
+using Result = arena::test::CommandResult;
 
-struct Result {
-  int rc = -1;
-  std::string out, err;
-};
-
-class CampaignCommands : public ::testing::Test {
+class CampaignCommands : public arena::test::ArenaCommandTest {
  protected:
   void SetUp() override {
-    char tmpl[] = "/tmp/arena-cli-test-XXXXXX";
-    dir_ = mkdtemp(tmpl);
+    ArenaCommandTest::SetUp();
     db_ = dir_ + "/lab.db";
   }
-  void TearDown() override {
-    if (!HasFailure()) std::filesystem::remove_all(dir_);
-  }
-  Result Arena(const std::string& args) {
-    const std::string out = dir_ + "/out", err = dir_ + "/err";
-    const int st = std::system((std::string(ARENA_BINARY) + " " + args + " >" + out + " 2>" + err).c_str());
-    return {WIFEXITED(st) ? WEXITSTATUS(st) : -1, Slurp(out), Slurp(err)};
-  }
   std::string Campaign() const { return std::string(ARENA_SOURCE_DIR) + "/tests/orchestrator/data/e2e60.json"; }
-  std::string dir_, db_;
+  std::string db_;
 };
 
 TEST_F(CampaignCommands, SubmitListStatusPauseResumeCancel) {

@@ -14,38 +14,21 @@
 #include <gtest/gtest.h>
 
 #include "arena/schemas/security.hpp"
+#include "arena_command_test.hpp"
 
 namespace arena {
 namespace {
 
 namespace fs = std::filesystem;
 
-std::string Slurp(const std::string& path) {
-  std::ifstream in(path, std::ios::binary);
-  std::ostringstream s;
-  s << in.rdbuf();
-  return s.str();
-}
+using test::Slurp;
+using Result = test::CommandResult;
 
-struct Result {
-  int rc = -1;
-  std::string out, err;
-};
-
-class SecurityCerts : public ::testing::Test {
+class SecurityCerts : public test::ArenaCommandTest {
  protected:
   void SetUp() override {
-    char tmpl[] = "/tmp/arena-certs-test-XXXXXX";
-    dir_ = mkdtemp(tmpl);
+    ArenaCommandTest::SetUp();
     lab_ = dir_ + "/lab";
-  }
-  void TearDown() override {
-    if (!HasFailure()) fs::remove_all(dir_);
-  }
-  Result Arena(const std::string& args) {
-    const std::string out = dir_ + "/out", err = dir_ + "/err";
-    const int st = std::system((std::string(ARENA_BINARY) + " " + args + " >" + out + " 2>" + err).c_str());
-    return {WIFEXITED(st) ? WEXITSTATUS(st) : -1, Slurp(out), Slurp(err)};
   }
   // The error message of CheckIdentityDir(dir), "" when it passes.
   static std::string CheckError(const std::string& dir) {
@@ -56,7 +39,7 @@ class SecurityCerts : public ::testing::Test {
       return e.what();
     }
   }
-  std::string dir_, lab_;
+  std::string lab_;
 };
 
 TEST_F(SecurityCerts, InitMakesACaAndSignedGovernanceAndRefusesToOverwriteIt) {
