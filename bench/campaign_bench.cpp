@@ -42,8 +42,8 @@ BENCHMARK(BM_LoadPivotStudyCampaign)->Unit(benchmark::kMillisecond);
 
 // Per-dispatch cost: one trial of the pivot study (12 variations, Sobol).
 void BM_PlanTrial(benchmark::State& state) {
-  const auto campaign =
-      orchestrator::LoadCampaignFile(std::string(ARENA_SOURCE_DIR) + "/examples/campaigns/pivot_study.json");
+  const auto campaign = orchestrator::LoadCampaignFile(std::string(ARENA_SOURCE_DIR) +
+                                                       "/examples/campaigns/pivot_study.json");
   int64_t i = 0;
   for (auto _ : state) {
     benchmark::DoNotOptimize(orchestrator::PlanTrial(campaign, i));

@@ -18,7 +18,8 @@ namespace m = arena::mechanics;
 
 namespace {
 
-m::PusherSpec Pusher(Eigen::Vector3d position, Eigen::Vector3d normal, Eigen::Vector3d velocity, double mu) {
+m::PusherSpec Pusher(Eigen::Vector3d position, Eigen::Vector3d normal, Eigen::Vector3d velocity,
+                     double mu) {
   m::PusherSpec p;
   p.name = "pusher";
   p.position = position;
@@ -40,8 +41,9 @@ void PrintTable(const char* knob, const std::vector<Row>& rows) {
   for (std::size_t i = 0; i < rows.size(); ++i) {
     char order[32] = "";
     if (i > 0 && rows[i].ok && rows[i - 1].ok && rows[i].error > 0 && rows[i - 1].error > 0) {
-      std::snprintf(order, sizeof order, "%.2f",
-                    std::log(rows[i - 1].error / rows[i].error) / std::log(rows[i - 1].h / rows[i].h));
+      std::snprintf(
+          order, sizeof order, "%.2f",
+          std::log(rows[i - 1].error / rows[i].error) / std::log(rows[i - 1].h / rows[i].h));
     }
     if (!rows[i].ok) {
       std::printf("| %g | solver failure | |\n", rows[i].knob);
@@ -112,10 +114,10 @@ std::vector<Row> DtSweep() {
 struct PivotRow {
   double dt;
   bool ok;
-  double final_error;     // grip 10 N, |angle - (v/d) t| / ((v/d) t)
-  bool start_slipped;     // grip 10 N, a finger slid in the first step
-  double rate_error;      // grip 10 N, angle gained over t in [T/2, T] against (v/d) T/2
-  double strong_error;    // grip 1000 N, final angle error
+  double final_error;   // grip 10 N, |angle - (v/d) t| / ((v/d) t)
+  bool start_slipped;   // grip 10 N, a finger slid in the first step
+  double rate_error;    // grip 10 N, angle gained over t in [T/2, T] against (v/d) T/2
+  double strong_error;  // grip 1000 N, final angle error
 };
 
 std::vector<PivotRow> PivotDtSweep() {
@@ -159,15 +161,16 @@ std::vector<PivotRow> PivotDtSweep() {
 }
 
 void PrintPivotTable(const std::vector<PivotRow>& rows) {
-  std::printf("| dt (s) | final angle error, grip 10 N | first step slips | rate error after the start | "
-              "final angle error, grip 1000 N |\n|---:|---:|:---:|---:|---:|\n");
+  std::printf(
+      "| dt (s) | final angle error, grip 10 N | first step slips | rate error after the start | "
+      "final angle error, grip 1000 N |\n|---:|---:|:---:|---:|---:|\n");
   for (const PivotRow& r : rows) {
     if (!r.ok) {
       std::printf("| %g | solver failure | | | |\n", r.dt);
       continue;
     }
-    std::printf("| %g | %.3e | %s | %.1e | %.1e |\n", r.dt, r.final_error, r.start_slipped ? "yes" : "no",
-                r.rate_error, r.strong_error);
+    std::printf("| %g | %.3e | %s | %.1e | %.1e |\n", r.dt, r.final_error,
+                r.start_slipped ? "yes" : "no", r.rate_error, r.strong_error);
   }
   std::printf("\n");
 }

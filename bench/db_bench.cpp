@@ -65,9 +65,11 @@ std::vector<Sample> MakeRealisticStream(int n, unsigned seed) {
     s.t = t;
     const double z = 0.02 * t - 0.001 * std::sin(3 * t), yaw = 0.05 * std::sin(0.7 * t);
     s.object_pose = {0.0004 * std::sin(1.3 * t), 0.0002 * std::cos(0.9 * t), z,
-                     std::cos(yaw / 2), 0.001 * std::sin(2 * t), 0.0005 * std::cos(t), std::sin(yaw / 2)};
-    s.object_twist = {0.00052 * std::cos(1.3 * t), -0.00018 * std::sin(0.9 * t), 0.02 - 0.003 * std::cos(3 * t),
-                      0.002 * std::cos(2 * t), -0.0005 * std::sin(t), 0.035 * std::cos(0.7 * t)};
+                     std::cos(yaw / 2),          0.001 * std::sin(2 * t),    0.0005 * std::cos(t),
+                     std::sin(yaw / 2)};
+    s.object_twist = {0.00052 * std::cos(1.3 * t),    -0.00018 * std::sin(0.9 * t),
+                      0.02 - 0.003 * std::cos(3 * t), 0.002 * std::cos(2 * t),
+                      -0.0005 * std::sin(t),          0.035 * std::cos(0.7 * t)};
     s.pusher_pose = {0.0, 0.0, -0.05 + 0.02 * t, 1, 0, 0, 0};  // commanded motion: exact
     s.pusher_twist = {0, 0, 0.02, 0, 0, 0};
     if (++mode_run > 100 + static_cast<int>(rng() % 200)) {  // modes change in runs
@@ -77,23 +79,27 @@ std::vector<Sample> MakeRealisticStream(int n, unsigned seed) {
     s.contacts.resize(3);
     for (int c = 0; c < 3; ++c) {
       const double normal = 10.0 + 0.8 * std::sin(0.5 * t + c) + 0.01 * std::sin(40 * t + 3 * c);
-      s.contacts[static_cast<std::size_t>(c)].force = {(c == 0 ? 1 : -1) * normal, 0.3 * std::sin(t + c),
-                                                       0.49 + 0.2 * std::cos(1.1 * t + c)};
-      s.contacts[static_cast<std::size_t>(c)].torque = {0.001 * std::sin(2 * t + c), 0.0005 * std::cos(t - c),
-                                                        0.002 * std::sin(0.3 * t + c)};
+      s.contacts[static_cast<std::size_t>(c)].force = {
+          (c == 0 ? 1 : -1) * normal, 0.3 * std::sin(t + c), 0.49 + 0.2 * std::cos(1.1 * t + c)};
+      s.contacts[static_cast<std::size_t>(c)].torque = {
+          0.001 * std::sin(2 * t + c), 0.0005 * std::cos(t - c), 0.002 * std::sin(0.3 * t + c)};
       s.contacts[static_cast<std::size_t>(c)].mode = modes[c];
     }
     s.observed_valid = uniform(rng) >= 0.01;
     s.observed_object_pose = s.object_pose;
-    for (int k = 0; k < 3; ++k) s.observed_object_pose[static_cast<std::size_t>(k)] += 0.0005 * gauss(rng);
-    for (int k = 3; k < 7; ++k) s.observed_object_pose[static_cast<std::size_t>(k)] += 0.0025 * gauss(rng);
+    for (int k = 0; k < 3; ++k)
+      s.observed_object_pose[static_cast<std::size_t>(k)] += 0.0005 * gauss(rng);
+    for (int k = 3; k < 7; ++k)
+      s.observed_object_pose[static_cast<std::size_t>(k)] += 0.0025 * gauss(rng);
     const auto& pf = s.contacts[2].force;
-    s.observed_pusher_wrench = {-pf[0] + 0.05 * gauss(rng), -pf[1] + 0.05 * gauss(rng), -pf[2] + 0.05 * gauss(rng),
-                                0.005 * gauss(rng), 0.005 * gauss(rng), 0.005 * gauss(rng)};
+    s.observed_pusher_wrench = {-pf[0] + 0.05 * gauss(rng), -pf[1] + 0.05 * gauss(rng),
+                                -pf[2] + 0.05 * gauss(rng), 0.005 * gauss(rng),
+                                0.005 * gauss(rng),         0.005 * gauss(rng)};
     for (int f = 0; f < 2; ++f) {
       for (int k = 0; k < 3; ++k) {
-        s.observed_finger_wrenches.push_back(-s.contacts[static_cast<std::size_t>(f)].force[static_cast<std::size_t>(k)] +
-                                             0.05 * gauss(rng));
+        s.observed_finger_wrenches.push_back(
+            -s.contacts[static_cast<std::size_t>(f)].force[static_cast<std::size_t>(k)] +
+            0.05 * gauss(rng));
       }
       for (int k = 0; k < 3; ++k) s.observed_finger_wrenches.push_back(0.005 * gauss(rng));
     }
@@ -137,7 +143,8 @@ struct BenchStore {
     StoreOptions o = base;
     o.synchronous_full = full_sync;
     store = Store::Open((dir / "bench.db").string(), o);
-    for (int c = 0; c < cells; ++c) store->UpsertCell("cell" + std::to_string(c), {"point", "line"});
+    for (int c = 0; c < cells; ++c)
+      store->UpsertCell("cell" + std::to_string(c), {"point", "line"});
     const NewCampaign nc = MakeNewCampaign("bench", 0);
     std::vector<PlannedTrial> planned(static_cast<std::size_t>(trials));
     for (auto& p : planned) p.scene_json = Scene();
@@ -172,7 +179,8 @@ void BM_IngestSamples(benchmark::State& state) {
   if (data == 2) {
     streams = LoadRealStreams();
     if (streams.empty()) {
-      state.SkipWithError("set ARENA_BENCH_GT_STORE to a store with ground truth (see LoadRealStreams)");
+      state.SkipWithError(
+          "set ARENA_BENCH_GT_STORE to a store with ground truth (see LoadRealStreams)");
       return;
     }
   } else if (realistic) {
@@ -195,19 +203,29 @@ void BM_IngestSamples(benchmark::State& state) {
   b.store.reset();  // closes the file: the last checkpoint is in the figure's size
   const double samples_total = static_cast<double>(ingested);
   state.counters["db_MB"] = static_cast<double>(fs::file_size(b.dir / "bench.db")) / 1e6;
-  state.counters["db_bytes_per_sample"] = static_cast<double>(fs::file_size(b.dir / "bench.db")) / samples_total;
+  state.counters["db_bytes_per_sample"] =
+      static_cast<double>(fs::file_size(b.dir / "bench.db")) / samples_total;
   state.SetLabel(std::string(full ? "synchronous=FULL" : "synchronous=NORMAL") +
-                 (data == 2 ? " real" : realistic ? " realistic" : " regular") + (io.pack_chunks ? " packed" : " raw") +
+                 (data == 2   ? " real"
+                  : realistic ? " realistic"
+                              : " regular") +
+                 (io.pack_chunks ? " packed" : " raw") +
                  (old ? " 4KiB-pages 4MiB-checkpoints" : " 8KiB-pages 16MiB-checkpoints"));
 }
 BENCHMARK(BM_IngestSamples)
     ->ArgNames({"full", "realistic", "packed", "old"})
-    ->Args({0, 0, 0, 1})->Args({0, 1, 0, 1})   // before: raw chunks, old settings
-    ->Args({0, 1, 0, 0})->Args({0, 1, 1, 1})   // each change alone (realistic data)
-    ->Args({0, 0, 1, 0})->Args({0, 1, 1, 0})   // after: packed, new settings
+    ->Args({0, 0, 0, 1})
+    ->Args({0, 1, 0, 1})  // before: raw chunks, old settings
+    ->Args({0, 1, 0, 0})
+    ->Args({0, 1, 1, 1})  // each change alone (realistic data)
+    ->Args({0, 0, 1, 0})
+    ->Args({0, 1, 1, 0})  // after: packed, new settings
     ->Args({1, 1, 1, 0})
-    ->Args({0, 2, 0, 1})->Args({0, 2, 1, 0})   // real ground truth: before, after
-    ->Iterations(200)->UseRealTime()->Unit(benchmark::kMillisecond);
+    ->Args({0, 2, 0, 1})
+    ->Args({0, 2, 1, 0})  // real ground truth: before, after
+    ->Iterations(200)
+    ->UseRealTime()
+    ->Unit(benchmark::kMillisecond);
 
 // 16 cells at 250 Hz, run as fast as possible for 60 simulated seconds: every
 // tick each cell delivers one sample, each ingest commits every 0.5 simulated
@@ -221,7 +239,8 @@ void BM_SixteenCells250Hz(benchmark::State& state) {
   double cpu_total = 0;
   for (auto _ : state) {
     state.PauseTiming();
-    auto b = std::make_unique<BenchStore>(kCells * (kSimSeconds * kRateHz / kTrialTicks + 1), kCells, false);
+    auto b = std::make_unique<BenchStore>(kCells * (kSimSeconds * kRateHz / kTrialTicks + 1),
+                                          kCells, false);
     std::vector<std::unique_ptr<Ingest>> ingests(kCells);
     std::vector<ClaimedTrial> trials(kCells);
     IngestOptions io;
@@ -304,7 +323,8 @@ void BM_ClaimNextTrial(benchmark::State& state) {
   for (auto& p : planned) {
     p.scene_json = R"({"fingers": [{"type": "patch"}], "pusher": {"type": "patch"}})";
   }
-  b.store->CreateCampaign(MakeNewCampaign("patch-only", 2), planned);  // highest priority, but cell0 cannot host it
+  b.store->CreateCampaign(MakeNewCampaign("patch-only", 2),
+                          planned);  // highest priority, but cell0 cannot host it
   for (auto _ : state) benchmark::DoNotOptimize(b.store->ClaimNextTrial("cell0"));
 }
 BENCHMARK(BM_ClaimNextTrial)->Iterations(2000)->Unit(benchmark::kMicrosecond);

@@ -42,7 +42,8 @@ using Clock = std::chrono::system_clock;
 
 std::uint64_t NowNs() {
   return static_cast<std::uint64_t>(
-      std::chrono::duration_cast<std::chrono::nanoseconds>(Clock::now().time_since_epoch()).count());
+      std::chrono::duration_cast<std::chrono::nanoseconds>(Clock::now().time_since_epoch())
+          .count());
 }
 
 int Domain() { return 201 + static_cast<int>(getpid() % 30); }
@@ -112,7 +113,8 @@ struct Result {
 // `cells` writer participants (fresh for every configuration) each send
 // `batches` batches of `samples` samples, one every `period` (0 = flat out).
 // secure: every participant with its lab identity (BenchLab).
-Result StreamHere(int cells, int batches, int samples, std::chrono::microseconds period, bool secure) {
+Result StreamHere(int cells, int batches, int samples, std::chrono::microseconds period,
+                  bool secure) {
   arena::dds::ParticipantOptions ro;
   ro.domain_id = Domain();
   ro.name = "arena.bench.service";
@@ -146,13 +148,13 @@ Result StreamHere(int cells, int batches, int samples, std::chrono::microseconds
       auto& n = next[static_cast<size_t>(g->trial_id())];
       if (g->first_sample() != n) {
         ++r.out_of_order;
-        
       }
       n = g->first_sample() + static_cast<std::uint32_t>(g->samples().size());
       r.received += g->samples().size();
     }
     if (r.received < r.expected) {
-      for (size_t c = 0; c < next.size(); ++c) std::fprintf(stderr, "cell %zu: next sample %u\n", c, next[c]);
+      for (size_t c = 0; c < next.size(); ++c)
+        std::fprintf(stderr, "cell %zu: next sample %u\n", c, next[c]);
     }
     done = true;
   });
@@ -170,7 +172,8 @@ Result StreamHere(int cells, int batches, int samples, std::chrono::microseconds
         g.sent_unix_ns(NowNs());
         int failures = 0;
         while (!writers[static_cast<size_t>(c)]->Write(g)) {
-          if (++failures % 5 == 1) std::fprintf(stderr, "cell %d batch %d: write failed %d times\n", c, b, failures);
+          if (++failures % 5 == 1)
+            std::fprintf(stderr, "cell %d batch %d: write failed %d times\n", c, b, failures);
           if (done) break;
         }
       }
@@ -199,10 +202,11 @@ Result Stream(int cells, int batches, int samples, std::chrono::microseconds per
   if (child == 0) {
     close(fds[0]);
     const Result r = StreamHere(cells, batches, samples, period, secure);
-    const double head[4] = {r.seconds, static_cast<double>(r.expected), static_cast<double>(r.received),
-                            static_cast<double>(r.out_of_order)};
+    const double head[4] = {r.seconds, static_cast<double>(r.expected),
+                            static_cast<double>(r.received), static_cast<double>(r.out_of_order)};
     std::string bytes(reinterpret_cast<const char*>(head), sizeof head);
-    bytes.append(reinterpret_cast<const char*>(r.latency_ms.data()), r.latency_ms.size() * sizeof(double));
+    bytes.append(reinterpret_cast<const char*>(r.latency_ms.data()),
+                 r.latency_ms.size() * sizeof(double));
     for (std::size_t done = 0; done < bytes.size();) {
       const ssize_t n = write(fds[1], bytes.data() + done, bytes.size() - done);
       if (n <= 0) break;
@@ -214,7 +218,8 @@ Result Stream(int cells, int batches, int samples, std::chrono::microseconds per
   close(fds[1]);
   std::string bytes;
   char buf[65536];
-  for (ssize_t n; (n = read(fds[0], buf, sizeof buf)) > 0;) bytes.append(buf, static_cast<std::size_t>(n));
+  for (ssize_t n; (n = read(fds[0], buf, sizeof buf)) > 0;)
+    bytes.append(buf, static_cast<std::size_t>(n));
   close(fds[0]);
   int status = 0;
   waitpid(child, &status, 0);
@@ -230,7 +235,8 @@ Result Stream(int cells, int batches, int samples, std::chrono::microseconds per
   r.received = static_cast<std::uint64_t>(head[2]);
   r.out_of_order = static_cast<std::uint64_t>(head[3]);
   r.latency_ms.resize((bytes.size() - sizeof head) / sizeof(double));
-  std::memcpy(r.latency_ms.data(), bytes.data() + sizeof head, r.latency_ms.size() * sizeof(double));
+  std::memcpy(r.latency_ms.data(), bytes.data() + sizeof head,
+              r.latency_ms.size() * sizeof(double));
   return r;
 }
 
@@ -256,7 +262,8 @@ void BM_GroundTruthPaced(benchmark::State& state) {
   const bool secure = state.range(2) != 0;
   const int batches = 3 * 250 / batch;  // 3 s
   for (auto _ : state) {
-    Report(state, Stream(cells, batches, batch, std::chrono::microseconds(4000 * batch), secure), secure);
+    Report(state, Stream(cells, batches, batch, std::chrono::microseconds(4000 * batch), secure),
+           secure);
   }
 }
 BENCHMARK(BM_GroundTruthPaced)
@@ -270,7 +277,6 @@ BENCHMARK(BM_GroundTruthPaced)
     ->Iterations(1)
     ->Unit(benchmark::kSecond)
     ->UseRealTime();
-
 
 void BM_GroundTruthFlatOut(benchmark::State& state) {
   const int cells = static_cast<int>(state.range(0));

@@ -14,7 +14,9 @@
 namespace m = arena::mechanics;
 
 int main() {
-  std::printf("| base | case | reduce | status | steps | max pivots | force balance | complementarity | cone |\n");
+  std::printf(
+      "| base | case | reduce | status | steps | max pivots | force balance | complementarity | "
+      "cone |\n");
   std::printf("|---|---|---|---|---:|---:|---:|---:|---:|\n");
   int solved = 0, failed = 0, over = 0;
   for (const auto& base : {std::make_pair("canonical", m::testing::CanonicalScene()),
@@ -27,21 +29,26 @@ int main() {
         x.apply(s);
         const m::SimulationResult r = m::Simulate(s);
         const bool ok = r.status == m::SimulationStatus::kOk;
-        std::string status = ok ? "ok" : std::string(m::ToString(r.status)) + " at step " +
-                                              std::to_string(r.failed_step) + ": " + r.error;
+        std::string status = ok ? "ok"
+                                : std::string(m::ToString(r.status)) + " at step " +
+                                      std::to_string(r.failed_step) + ": " + r.error;
         for (auto& ch : status) {
           if (ch == '|') ch = '/';
         }
-        const bool within = r.residuals.force_balance < 1e-8 && r.residuals.complementarity < 1e-8 &&
-                            r.residuals.cone < 1e-8;
-        if (ok) (within ? solved : over)++;
-        else failed++;
-        std::printf("| %s | %s | %s | %s | %d | %d | %.1e | %.1e | %.1e |\n", base.first, x.name.c_str(),
-                    m::ToString(reduce), status.c_str(), r.solver.steps, r.solver.max_pivots,
-                    r.residuals.force_balance, r.residuals.complementarity, r.residuals.cone);
+        const bool within = r.residuals.force_balance < 1e-8 &&
+                            r.residuals.complementarity < 1e-8 && r.residuals.cone < 1e-8;
+        if (ok)
+          (within ? solved : over)++;
+        else
+          failed++;
+        std::printf("| %s | %s | %s | %s | %d | %d | %.1e | %.1e | %.1e |\n", base.first,
+                    x.name.c_str(), m::ToString(reduce), status.c_str(), r.solver.steps,
+                    r.solver.max_pivots, r.residuals.force_balance, r.residuals.complementarity,
+                    r.residuals.cone);
       }
     }
   }
-  std::printf("\n%d solved within 1e-8, %d solved above 1e-8, %d typed failures\n", solved, over, failed);
+  std::printf("\n%d solved within 1e-8, %d solved above 1e-8, %d typed failures\n", solved, over,
+              failed);
   return over == 0 ? 0 : 1;
 }

@@ -47,7 +47,7 @@ struct Problem {
 };
 
 struct Outcome {
-  bool ok = false;       // solver said ok
+  bool ok = false;  // solver said ok
   Eigen::VectorXd z;
   int pivots = 0;
   double seconds = 0;
@@ -142,14 +142,17 @@ Outcome SolveDart(const Problem& p) {
 void Collect(const m::Scene& scene, std::vector<Problem>* out) {
   m::ContactModel model(scene);
   if (model.status() != m::SimulationStatus::kOk) return;
-  model.SetLcpObserver([out](const Eigen::MatrixXd& A, const Eigen::VectorXd& b) { out->push_back({A, b}); });
+  model.SetLcpObserver([out](const Eigen::MatrixXd& A, const Eigen::VectorXd& b) {
+    out->push_back({A, b});
+  });
   const int steps = static_cast<int>(std::lround(scene.duration / scene.model.dt));
   for (int i = 0; i < steps; ++i) {
     if (!model.Step().ok) break;
   }
 }
 
-m::PusherSpec Pusher(Eigen::Vector3d position, Eigen::Vector3d normal, Eigen::Vector3d velocity, double mu) {
+m::PusherSpec Pusher(Eigen::Vector3d position, Eigen::Vector3d normal, Eigen::Vector3d velocity,
+                     double mu) {
   m::PusherSpec p;
   p.name = "pusher";
   p.position = position;
@@ -164,7 +167,9 @@ struct Family {
   std::function<m::Scene(std::mt19937&)> make;  // one random scene of the family
 };
 
-double U(std::mt19937& rng, double lo, double hi) { return std::uniform_real_distribution<double>(lo, hi)(rng); }
+double U(std::mt19937& rng, double lo, double hi) {
+  return std::uniform_real_distribution<double>(lo, hi)(rng);
+}
 
 std::vector<Family> Families() {
   std::vector<Family> f;
@@ -253,7 +258,8 @@ int main(int argc, char** argv) {
   const int scenes = argc > 1 ? std::max(1, std::atoi(argv[1])) : 20;
   std::mt19937 rng(20261122);
   std::vector<const char*> solvers = {"arena", "siconos lexicolemke", "bullet lemke"};
-  std::vector<std::function<Outcome(const Problem&)>> solve = {SolveArena, SolveSiconos, SolveBullet};
+  std::vector<std::function<Outcome(const Problem&)>> solve = {SolveArena, SolveSiconos,
+                                                               SolveBullet};
 #ifdef ARENA_HAVE_DART
   solvers.push_back("dart lemke");
   solve.push_back(SolveDart);
@@ -262,7 +268,9 @@ int main(int argc, char** argv) {
 #endif
   // Optional: only the families whose name contains argv[2] (profiling).
   const char* only = argc > 2 ? argv[2] : nullptr;
-  std::printf("| family | problems | n (median) | solver | success | said ok | median µs | p99 µs | median pivots | p99 pivots |\n");
+  std::printf(
+      "| family | problems | n (median) | solver | success | said ok | median µs | p99 µs | median "
+      "pivots | p99 pivots |\n");
   std::printf("|---|---:|---:|---|---:|---:|---:|---:|---:|---:|\n");
   for (const Family& family : Families()) {
     if (only != nullptr && family.name.find(only) == std::string::npos) continue;
@@ -280,8 +288,9 @@ int main(int argc, char** argv) {
       // Bullet's dense Lemke takes ~1 s per solve at n = 94 (and never
       // succeeds there): it is run only on the small families.
       if (s == 2 && Quantile(sizes, 0.5) > kBulletMaxSize) {
-        std::printf("| %s | %zu | %.0f | %s | not run (n > %d: ~1 s per solve) | | | | | |\n", family.name.c_str(),
-                    problems.size(), Quantile(sizes, 0.5), solvers[s], kBulletMaxSize);
+        std::printf("| %s | %zu | %.0f | %s | not run (n > %d: ~1 s per solve) | | | | | |\n",
+                    family.name.c_str(), problems.size(), Quantile(sizes, 0.5), solvers[s],
+                    kBulletMaxSize);
         continue;
       }
       // DART re-factorises its basis on every pivot (seconds per failing
@@ -301,12 +310,13 @@ int main(int argc, char** argv) {
       }
       char pivots[64] = "— | —";  // DART does not report its pivots
       if (!st.pivots.empty()) {
-        std::snprintf(pivots, sizeof pivots, "%.0f | %.0f", Quantile(st.pivots, 0.5), Quantile(st.pivots, 0.99));
+        std::snprintf(pivots, sizeof pivots, "%.0f | %.0f", Quantile(st.pivots, 0.5),
+                      Quantile(st.pivots, 0.99));
       }
-      std::printf("| %s | %d | %.0f | %s | %.2f %% | %.2f %% | %.1f | %.1f | %s |\n", family.name.c_str(), st.n,
-                  Quantile(sizes, 0.5), solvers[s], st.n ? 100.0 * st.success / st.n : 0.0,
-                  st.n ? 100.0 * st.said_ok / st.n : 0.0, Quantile(st.times, 0.5), Quantile(st.times, 0.99),
-                  pivots);
+      std::printf("| %s | %d | %.0f | %s | %.2f %% | %.2f %% | %.1f | %.1f | %s |\n",
+                  family.name.c_str(), st.n, Quantile(sizes, 0.5), solvers[s],
+                  st.n ? 100.0 * st.success / st.n : 0.0, st.n ? 100.0 * st.said_ok / st.n : 0.0,
+                  Quantile(st.times, 0.5), Quantile(st.times, 0.99), pivots);
       std::fflush(stdout);
     }
   }

@@ -39,8 +39,11 @@ Scene Make(Variant v, bool pusher, Reduce reduce) {
   Scene s = Canonical();
   for (auto& f : s.fingers) {
     switch (v) {
-      case kCanonical: break;
-      case kPoints: f.type = ContactType::kPoint; break;
+      case kCanonical:
+        break;
+      case kPoints:
+        f.type = ContactType::kPoint;
+        break;
       case kLines:
         f.type = ContactType::kLine;
         f.axis = {0, 0, 1};
@@ -94,7 +97,7 @@ void Step(benchmark::State& state, Variant v, bool pusher, Reduce reduce) {
   state.counters["unknowns"] = unknowns;
 }
 
-#define ARENA_MECH_BENCH(name, v, pusher, reduce)                                      \
+#define ARENA_MECH_BENCH(name, v, pusher, reduce)                                   \
   BENCHMARK_CAPTURE(Trial, name, v, pusher, reduce)->Unit(benchmark::kMillisecond); \
   BENCHMARK_CAPTURE(Step, name, v, pusher, reduce)->Unit(benchmark::kMillisecond)
 

@@ -26,8 +26,8 @@
 #include <vector>
 
 #include <benchmark/benchmark.h>
-#include <nlohmann/json.hpp>
 #include <spdlog/spdlog.h>
+#include <nlohmann/json.hpp>
 
 #include "arena/db/store.hpp"
 #include "arena/orchestrator/campaign.hpp"
@@ -45,8 +45,8 @@ namespace fs = std::filesystem;
 class CellProcess {
  public:
   CellProcess(const std::string& id, int domain, const fs::path& log) {
-    std::vector<std::string> args = {ARENA_BINARY, "cell", "--id", id, "--domain", std::to_string(domain),
-                                     "--speed", "0"};
+    std::vector<std::string> args = {ARENA_BINARY,           "cell",    "--id", id, "--domain",
+                                     std::to_string(domain), "--speed", "0"};
     std::vector<char*> argv;
     for (auto& a : args) argv.push_back(a.data());
     argv.push_back(nullptr);
@@ -106,10 +106,11 @@ void BM_CampaignEndToEnd(benchmark::State& state) {
   const int domain = 120 + getpid() % 100;
   std::vector<std::unique_ptr<CellProcess>> processes;
   for (int k = 0; k < cells; ++k) {
-    processes.push_back(std::make_unique<CellProcess>("bench" + std::to_string(k + 1), domain,
-                                                      dir / ("cell" + std::to_string(k + 1) + ".log")));
+    processes.push_back(std::make_unique<CellProcess>(
+        "bench" + std::to_string(k + 1), domain, dir / ("cell" + std::to_string(k + 1) + ".log")));
   }
-  const orchestrator::Campaign campaign = orchestrator::ParseCampaign(SmokeCampaign(10), ARENA_SOURCE_DIR "/examples/campaigns");
+  const orchestrator::Campaign campaign =
+      orchestrator::ParseCampaign(SmokeCampaign(10), ARENA_SOURCE_DIR "/examples/campaigns");
 
   std::vector<double> overhead, busy, execute, reset;
   double trials = 0, wall = 0;
@@ -164,7 +165,12 @@ void BM_CampaignEndToEnd(benchmark::State& state) {
   state.counters["cell_rss_growth_kib_per_1k_trials"] =
       later_trials > 0 ? 1000.0 * static_cast<double>(rss_growth) / later_trials : 0;
 }
-BENCHMARK(BM_CampaignEndToEnd)->Arg(1)->Arg(2)->Iterations(5)->Unit(benchmark::kSecond)->UseRealTime();
+BENCHMARK(BM_CampaignEndToEnd)
+    ->Arg(1)
+    ->Arg(2)
+    ->Iterations(5)
+    ->Unit(benchmark::kSecond)
+    ->UseRealTime();
 
 }  // namespace
 

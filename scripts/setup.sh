@@ -31,6 +31,12 @@ packages=(
   # permissions with OpenSSL's libcrypto (the library Fast DDS's security
   # plugins use too).
   libssl-dev
+  # libmujoco-dev: the independent physics engine behind the `mujoco` cell
+  # backend and predictor; libnlopt-cxx-dev: derivative-free calibration.
+  libmujoco-dev libnlopt-cxx-dev
+  # clang-format: scripts/check_format.sh (run by .ci/run); python3-h5py
+  # reads exported HDF5 datasets back in the export tests.
+  clang-format python3-h5py
   iproute2 procps
 )
 if ((bench_peers)); then

@@ -24,7 +24,7 @@ inline std::string Slurp(const std::string& path) {
 }
 
 struct CommandResult {
-  int rc = -1;             // exit status, -1 when killed by a signal
+  int rc = -1;  // exit status, -1 when killed by a signal
   std::string out, err;
 };
 
@@ -40,7 +40,8 @@ class ArenaCommandTest : public ::testing::Test {
   // args is shell text: quote what needs quoting.
   CommandResult Arena(const std::string& args) {
     const std::string out = dir_ + "/out", err = dir_ + "/err";
-    const int st = std::system((std::string(ARENA_BINARY) + " " + args + " >" + out + " 2>" + err).c_str());
+    const int st =
+        std::system((std::string(ARENA_BINARY) + " " + args + " >" + out + " 2>" + err).c_str());
     return {WIFEXITED(st) ? WEXITSTATUS(st) : -1, Slurp(out), Slurp(err)};
   }
   std::string dir_;

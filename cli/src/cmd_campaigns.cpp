@@ -27,8 +27,10 @@ std::unique_ptr<db::Store> OpenStore(const std::string& path, bool read_only) {
     o.create = !read_only;
     return db::Store::Open(path, o);
   } catch (const db::StoreError& e) {
-    throw CommandError(ExitCodeFor(e), std::string(e.what()) +
-                                           (read_only ? " (is --db the store `arena serve` or `arena run` uses?)" : ""));
+    throw CommandError(
+        ExitCodeFor(e),
+        std::string(e.what()) +
+            (read_only ? " (is --db the store `arena serve` or `arena run` uses?)" : ""));
   }
 }
 
@@ -48,9 +50,9 @@ int Submit(const std::string& campaign_path, const std::string& db_path) {
   try {
     const std::int64_t id = orchestrator::SubmitCampaign(*store, campaign);
     std::printf("%lld\n", static_cast<long long>(id));
-    std::fprintf(stderr, "campaign %lld '%s': %lld trials planned in %s\n", static_cast<long long>(id),
-                 campaign.name.c_str(), static_cast<long long>(orchestrator::TrialCount(campaign)),
-                 db_path.c_str());
+    std::fprintf(stderr, "campaign %lld '%s': %lld trials planned in %s\n",
+                 static_cast<long long>(id), campaign.name.c_str(),
+                 static_cast<long long>(orchestrator::TrialCount(campaign)), db_path.c_str());
   } catch (const db::StoreError& e) {
     throw StoreCommandError(e);
   }
@@ -63,8 +65,11 @@ int List(const std::string& db_path, bool as_json) {
   if (as_json) {
     nlohmann::json out = nlohmann::json::array();
     for (const auto& c : campaigns)
-      out.push_back({{"id", c.id}, {"name", c.name}, {"state", db::ToString(c.state)},
-                     {"priority", c.priority}, {"created", IsoTime(c.created_at)}});
+      out.push_back({{"id", c.id},
+                     {"name", c.name},
+                     {"state", db::ToString(c.state)},
+                     {"priority", c.priority},
+                     {"created", IsoTime(c.created_at)}});
     std::printf("%s\n", out.dump().c_str());
     return kExitOk;
   }
@@ -85,25 +90,38 @@ int Status(const std::string& db_path, std::int64_t only, bool as_json) {
   }
   if (only > 0) {
     std::erase_if(s.campaigns, [&](const db::CampaignStatus& c) { return c.id != only; });
-    if (s.campaigns.empty()) throw CommandError(kExitBadInput, "no campaign " + std::to_string(only) + " in " + db_path + " (see `arena list`)");
+    if (s.campaigns.empty())
+      throw CommandError(kExitBadInput, "no campaign " + std::to_string(only) + " in " + db_path +
+                                            " (see `arena list`)");
   }
   if (as_json) {
-    nlohmann::json out = {{"campaigns", nlohmann::json::array()}, {"cells", nlohmann::json::array()},
+    nlohmann::json out = {{"campaigns", nlohmann::json::array()},
+                          {"cells", nlohmann::json::array()},
                           {"drift", nlohmann::json::array()}};
     for (const auto& c : s.campaigns) {
-      nlohmann::json j = {{"id", c.id},         {"name", c.name},       {"state", db::ToString(c.state)},
-                          {"planned", c.planned}, {"done", c.done},     {"failed", c.failed},
-                          {"running", c.running}, {"pending", c.pending}, {"cancelled", c.cancelled},
+      nlohmann::json j = {{"id", c.id},
+                          {"name", c.name},
+                          {"state", db::ToString(c.state)},
+                          {"planned", c.planned},
+                          {"done", c.done},
+                          {"failed", c.failed},
+                          {"running", c.running},
+                          {"pending", c.pending},
+                          {"cancelled", c.cancelled},
                           {"rate_per_hour", c.rate_per_hour}};
       j["eta_s"] = c.eta_s ? nlohmann::json(*c.eta_s) : nlohmann::json();
       out["campaigns"].push_back(j);
     }
     for (const auto& c : s.cells)
-      out["cells"].push_back({{"id", c.id}, {"state", db::ToString(c.state)}, {"last_seen", IsoTime(c.last_seen)},
+      out["cells"].push_back({{"id", c.id},
+                              {"state", db::ToString(c.state)},
+                              {"last_seen", IsoTime(c.last_seen)},
                               {"consecutive_failures", c.consecutive_failures},
                               {"quarantine_reason", c.quarantine_reason}});
     for (const auto& d : s.drift)
-      out["drift"].push_back({{"campaign", d.campaign_id}, {"cell", d.cell_id}, {"trials", d.trials},
+      out["drift"].push_back({{"campaign", d.campaign_id},
+                              {"cell", d.cell_id},
+                              {"trials", d.trials},
                               {"mean_offset_m", {d.mean_dx, d.mean_dy, d.mean_dz}},
                               {"mean_position_error_m", d.mean_position_error},
                               {"max_position_error_m", d.max_position_error},
@@ -111,24 +129,27 @@ int Status(const std::string& db_path, std::int64_t only, bool as_json) {
     std::printf("%s\n", out.dump().c_str());
     return kExitOk;
   }
-  std::printf("%-5s %-20s %-9s %7s %7s %7s %7s %9s %8s\n", "id", "campaign", "state", "planned", "done",
-              "failed", "running", "rate/h", "ETA");
+  std::printf("%-5s %-20s %-9s %7s %7s %7s %7s %9s %8s\n", "id", "campaign", "state", "planned",
+              "done", "failed", "running", "rate/h", "ETA");
   for (const auto& c : s.campaigns)
-    std::printf("%-5lld %-20s %-9s %7lld %7lld %7lld %7lld %9.1f %8s\n", static_cast<long long>(c.id),
-                c.name.c_str(), db::ToString(c.state), static_cast<long long>(c.planned),
-                static_cast<long long>(c.done), static_cast<long long>(c.failed),
-                static_cast<long long>(c.running), c.rate_per_hour,
-                c.eta_s ? FormatDuration(*c.eta_s).c_str() : "-");
+    std::printf("%-5lld %-20s %-9s %7lld %7lld %7lld %7lld %9.1f %8s\n",
+                static_cast<long long>(c.id), c.name.c_str(), db::ToString(c.state),
+                static_cast<long long>(c.planned), static_cast<long long>(c.done),
+                static_cast<long long>(c.failed), static_cast<long long>(c.running),
+                c.rate_per_hour, c.eta_s ? FormatDuration(*c.eta_s).c_str() : "-");
   std::printf("\n%-16s %-12s %-21s %s\n", "cell", "health", "last seen", "failures in a row");
   for (const auto& c : s.cells)
-    std::printf("%-16s %-12s %-21s %d%s%s\n", c.id.c_str(), db::ToString(c.state), IsoTime(c.last_seen).c_str(),
-                c.consecutive_failures, c.quarantine_reason.empty() ? "" : "  ", c.quarantine_reason.c_str());
+    std::printf("%-16s %-12s %-21s %d%s%s\n", c.id.c_str(), db::ToString(c.state),
+                IsoTime(c.last_seen).c_str(), c.consecutive_failures,
+                c.quarantine_reason.empty() ? "" : "  ", c.quarantine_reason.c_str());
   if (!s.drift.empty()) {
-    std::printf("\nstart-state drift (observed after reset - nominal):\n%-5s %-16s %6s %28s %10s %10s\n", "camp",
-                "cell", "trials", "mean offset x,y,z (mm)", "mean |e| mm", "mean deg");
+    std::printf(
+        "\nstart-state drift (observed after reset - nominal):\n%-5s %-16s %6s %28s %10s %10s\n",
+        "camp", "cell", "trials", "mean offset x,y,z (mm)", "mean |e| mm", "mean deg");
     for (const auto& d : s.drift)
-      std::printf("%-5lld %-16s %6lld %9.3f,%8.3f,%8.3f %10.3f %10.3f\n", static_cast<long long>(d.campaign_id),
-                  d.cell_id.c_str(), static_cast<long long>(d.trials), d.mean_dx * 1e3, d.mean_dy * 1e3,
+      std::printf("%-5lld %-16s %6lld %9.3f,%8.3f,%8.3f %10.3f %10.3f\n",
+                  static_cast<long long>(d.campaign_id), d.cell_id.c_str(),
+                  static_cast<long long>(d.trials), d.mean_dx * 1e3, d.mean_dy * 1e3,
                   d.mean_dz * 1e3, d.mean_position_error * 1e3, d.mean_angle_error * 180 / M_PI);
   }
   return kExitOk;
@@ -137,9 +158,12 @@ int Status(const std::string& db_path, std::int64_t only, bool as_json) {
 int Control(const std::string& verb, std::int64_t id, const std::string& db_path) {
   auto store = OpenStore(db_path, false);
   try {
-    if (verb == "pause") store->PauseCampaign(id);
-    else if (verb == "resume") store->ResumeCampaign(id);
-    else store->CancelCampaign(id);
+    if (verb == "pause")
+      store->PauseCampaign(id);
+    else if (verb == "resume")
+      store->ResumeCampaign(id);
+    else
+      store->CancelCampaign(id);
     std::fprintf(stderr, "campaign %lld: %s\n", static_cast<long long>(id),
                  db::ToString(store->GetCampaign(id).state));
   } catch (const db::StoreError& e) {
@@ -152,17 +176,24 @@ int Control(const std::string& verb, std::int64_t id, const std::string& db_path
 
 void AddCampaignCommands(CLI::App& app, Action* action) {
   {
-    struct O { std::string campaign, db; };
+    struct O {
+      std::string campaign, db;
+    };
     auto o = std::make_shared<O>();
-    auto* cmd = app.add_subcommand("submit", "Validate a campaign and store it with its planned trials");
-    cmd->footer("Example:\n  arena submit examples/campaigns/smoke.json --db lab.db\n"
-                "Prints the campaign id; a running `arena serve --db lab.db` picks it up at once.");
+    auto* cmd =
+        app.add_subcommand("submit", "Validate a campaign and store it with its planned trials");
+    cmd->footer(
+        "Example:\n  arena submit examples/campaigns/smoke.json --db lab.db\n"
+        "Prints the campaign id; a running `arena serve --db lab.db` picks it up at once.");
     cmd->add_option("campaign", o->campaign, "Campaign JSON (orchestrator/README.md)")->required();
     cmd->add_option("--db", o->db, "SQLite store (created if missing)")->required();
     cmd->callback([o, action] { *action = [o] { return Submit(o->campaign, o->db); }; });
   }
   {
-    struct O { std::string db; bool json = false; };
+    struct O {
+      std::string db;
+      bool json = false;
+    };
     auto o = std::make_shared<O>();
     auto* cmd = app.add_subcommand("list", "List the campaigns in a store");
     cmd->footer("Example:\n  arena list --db lab.db\n");
@@ -171,23 +202,34 @@ void AddCampaignCommands(CLI::App& app, Action* action) {
     cmd->callback([o, action] { *action = [o] { return List(o->db, o->json); }; });
   }
   {
-    struct O { std::string db; std::int64_t id = 0; bool json = false; };
+    struct O {
+      std::string db;
+      std::int64_t id = 0;
+      bool json = false;
+    };
     auto o = std::make_shared<O>();
-    auto* cmd = app.add_subcommand("status", "Campaign progress, cell health and start-state drift");
-    cmd->footer("Example:\n  arena status --db lab.db 3\n  arena status --db lab.db --json\n"
-                "Works from any process or host that can open the store file (README: remote hosts).\n");
+    auto* cmd =
+        app.add_subcommand("status", "Campaign progress, cell health and start-state drift");
+    cmd->footer(
+        "Example:\n  arena status --db lab.db 3\n  arena status --db lab.db --json\n"
+        "Works from any process or host that can open the store file (README: remote hosts).\n");
     cmd->add_option("id", o->id, "Only this campaign");
     cmd->add_option("--db", o->db, "SQLite store")->required();
     cmd->add_flag("--json", o->json, "JSON for scripts");
     cmd->callback([o, action] { *action = [o] { return Status(o->db, o->id, o->json); }; });
   }
   for (const char* verb : {"pause", "resume", "cancel"}) {
-    struct O { std::string db; std::int64_t id = 0; std::string verb; };
+    struct O {
+      std::string db;
+      std::int64_t id = 0;
+      std::string verb;
+    };
     auto o = std::make_shared<O>();
     o->verb = verb;
-    const std::string help = std::string(verb == std::string("pause")    ? "Pause a campaign (its running trials finish)"
-                                         : verb == std::string("resume") ? "Resume a paused campaign"
-                                                                         : "Cancel a campaign (planned trials are dropped)");
+    const std::string help = std::string(
+        verb == std::string("pause")    ? "Pause a campaign (its running trials finish)"
+        : verb == std::string("resume") ? "Resume a paused campaign"
+                                        : "Cancel a campaign (planned trials are dropped)");
     auto* cmd = app.add_subcommand(verb, help);
     cmd->footer(std::string("Example:\n  arena ") + verb + " 3 --db lab.db\n");
     cmd->add_option("id", o->id, "Campaign id (see `arena list`)")->required();

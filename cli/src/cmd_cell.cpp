@@ -70,7 +70,8 @@ int RunCell(CellCliOptions opt) {
   if (opt.parent_pid > 0) {
     prctl(PR_SET_PDEATHSIG, SIGTERM);
     if (getppid() != opt.parent_pid) {
-      spdlog::warn("cell {}: the process that started it ({}) is gone; not starting", opt.cell.id, opt.parent_pid);
+      spdlog::warn("cell {}: the process that started it ({}) is gone; not starting", opt.cell.id,
+                   opt.parent_pid);
       return kExitOk;
     }
   }
@@ -85,7 +86,8 @@ int RunCell(CellCliOptions opt) {
   }
   int sig = 0;
   sigwait(&signals, &sig);
-  spdlog::info("cell {}: {} received, shutting down", opt.cell.id, sig == SIGINT ? "SIGINT" : "SIGTERM");
+  spdlog::info("cell {}: {} received, shutting down", opt.cell.id,
+               sig == SIGINT ? "SIGINT" : "SIGTERM");
   cell->Stop();
   cell.reset();
   return kExitOk;
@@ -95,13 +97,15 @@ int RunCell(CellCliOptions opt) {
 
 void AddCellCommand(CLI::App& app, Action* action) {
   auto opt = std::make_shared<CellCliOptions>();
-  CLI::App* cmd = app.add_subcommand("cell", "Run a simulated robot cell that serves trials over DDS");
+  CLI::App* cmd =
+      app.add_subcommand("cell", "Run a simulated robot cell that serves trials over DDS");
   cmd->footer(
       "Example:\n  arena cell --id c1 --domain 42 --defects examples/defects/noisy.json --speed 0\n"
       "  arena cell --id c1 --domain 42 --security lab-pki/c1   (see `arena certs --help`)\n"
       "Without --peers or --discovery-server the cell is reachable from this host only.\n"
       "Stops cleanly on SIGINT/SIGTERM (exit 0).");
-  cmd->add_option("--id", opt->cell.id, "Cell id, unique in the deployment ([A-Za-z0-9_.-])")->required();
+  cmd->add_option("--id", opt->cell.id, "Cell id, unique in the deployment ([A-Za-z0-9_.-])")
+      ->required();
   cmd->add_option("--domain", opt->cell.domain_id, "DDS domain id (0..232)")->required();
   cmd->add_option("--defects", opt->defects_path, "Defect profile JSON (executors/README.md)");
   cmd->add_option("--speed", opt->cell.speed,
@@ -116,8 +120,9 @@ void AddCellCommand(CLI::App& app, Action* action) {
                   "Fast DDS XML profile file (its default participant profile sets transports)");
   cmd->add_option("--security", opt->cell.network.security_dir,
                   "DDS-Security: a 'cell' identity directory from `arena certs issue`");
-  cmd->add_flag("--no-shm", [opt](std::int64_t) { opt->cell.network.shared_memory = false; },
-                "Do not use the shared-memory transport (UDP only)");
+  cmd->add_flag(
+      "--no-shm", [opt](std::int64_t) { opt->cell.network.shared_memory = false; },
+      "Do not use the shared-memory transport (UDP only)");
   cmd->add_option("--parent-pid", opt->parent_pid,
                   "Stop when this process exits (arena run passes its own pid)");
   cmd->add_flag("-v,--verbose", opt->verbose, "Debug log (QoS in effect, discovery)");

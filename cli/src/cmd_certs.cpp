@@ -34,7 +34,8 @@ void ParseDomains(const std::string& text, int* min, int* max) {
       if (used != b.size()) throw std::invalid_argument(b);
     }
   } catch (const std::exception&) {
-    throw CommandError(kExitBadInput, "--domains: want MIN-MAX (e.g. 0-232) or one id, got '" + text + "'");
+    throw CommandError(kExitBadInput,
+                       "--domains: want MIN-MAX (e.g. 0-232) or one id, got '" + text + "'");
   }
 }
 
@@ -49,9 +50,10 @@ int RunInit(CertsOptions o) {
   }
   std::fprintf(stderr,
                "lab '%s': CA and signed governance (domains %d-%d) in %s\n"
-               "keep %s/%s secret; issue identities with `arena certs issue %s --role cell|service|watcher --name NAME`\n",
-               o.lab.lab_name.c_str(), o.lab.domain_min, o.lab.domain_max, o.dir.c_str(), o.dir.c_str(),
-               dds::kCaKeyFile, o.dir.c_str());
+               "keep %s/%s secret; issue identities with `arena certs issue %s --role "
+               "cell|service|watcher --name NAME`\n",
+               o.lab.lab_name.c_str(), o.lab.domain_min, o.lab.domain_max, o.dir.c_str(),
+               o.dir.c_str(), dds::kCaKeyFile, o.dir.c_str());
   return kExitOk;
 }
 
@@ -77,7 +79,8 @@ int RunIssue(CertsOptions o) {
     return s.empty() ? std::string("nothing") : s;
   };
   std::fprintf(stderr, "%s '%s' (%s): publishes %s; subscribes %s; valid %d days\n", o.role.c_str(),
-               o.identity.name.c_str(), dds::CertificateSubject(dir + "/" + dds::kIdentityCertFile).c_str(),
+               o.identity.name.c_str(),
+               dds::CertificateSubject(dir + "/" + dds::kIdentityCertFile).c_str(),
                list(topics.publish).c_str(), list(topics.subscribe).c_str(), o.identity.valid_days);
   std::printf("%s\n", dir.c_str());  // for scripts: the directory to pass to --security
   return kExitOk;
@@ -87,7 +90,8 @@ int RunIssue(CertsOptions o) {
 
 void AddCertsCommand(CLI::App& app, Action* action) {
   auto o = std::make_shared<CertsOptions>();
-  CLI::App* cmd = app.add_subcommand("certs", "DDS-Security: a lab CA, and identities for cells, services, watchers");
+  CLI::App* cmd = app.add_subcommand(
+      "certs", "DDS-Security: a lab CA, and identities for cells, services, watchers");
   cmd->require_subcommand(1);
   cmd->footer(
       "Example:\n"
@@ -96,35 +100,45 @@ void AddCertsCommand(CLI::App& app, Action* action) {
       "  arena certs issue lab-pki --role cell --name c1\n"
       "  arena serve --db lab.db --domain 42 --security lab-pki/service\n"
       "  arena cell --id c1 --domain 42 --security lab-pki/c1\n"
-      "With --security, only participants holding an identity from this lab's CA are matched; a cell\n"
+      "With --security, only participants holding an identity from this lab's CA are matched; a "
+      "cell\n"
       "takes commands only from a 'service' identity, a 'watcher' may read but never command.\n"
       "See SECURITY.md (section 4).");
 
   CLI::App* init = cmd->add_subcommand("init", "Create a lab CA and its signed governance in DIR");
   init->footer(
       "Example:\n  arena certs init lab-pki --lab \"robot lab 2\" --days 3650\n"
-      "Writes ca.key.pem (mode 0600: keep it off the cells' hosts), ca.cert.pem, governance.xml and\n"
+      "Writes ca.key.pem (mode 0600: keep it off the cells' hosts), ca.cert.pem, governance.xml "
+      "and\n"
       "governance.p7s (signed). Refuses to overwrite an existing CA.");
   init->add_option("dir", o->dir, "Lab directory (created if missing)")->required();
-  init->add_option("--lab", o->lab.lab_name, "Lab name: the O= of every certificate")->capture_default_str();
-  init->add_option("--days", o->lab.valid_days, "CA certificate lifetime (days)")->capture_default_str();
-  init->add_option("--domains", o->domains, "DDS domain ids the governance covers: MIN-MAX")->capture_default_str();
+  init->add_option("--lab", o->lab.lab_name, "Lab name: the O= of every certificate")
+      ->capture_default_str();
+  init->add_option("--days", o->lab.valid_days, "CA certificate lifetime (days)")
+      ->capture_default_str();
+  init->add_option("--domains", o->domains, "DDS domain ids the governance covers: MIN-MAX")
+      ->capture_default_str();
   init->callback([o, action] { *action = [o] { return RunInit(*o); }; });
 
-  CLI::App* issue = cmd->add_subcommand("issue", "Issue an identity and its role's permissions into DIR/NAME");
+  CLI::App* issue =
+      cmd->add_subcommand("issue", "Issue an identity and its role's permissions into DIR/NAME");
   issue->footer(
       "Example:\n  arena certs issue lab-pki --role watcher --name alice --days 365\n"
       "Roles: cell (publishes CellAnnounce, TrialStatus, GroundTruth; reads TrialCommand),\n"
-      "service (publishes TrialCommand; reads the rest), watcher (reads CellAnnounce, TrialStatus,\n"
+      "service (publishes TrialCommand; reads the rest), watcher (reads CellAnnounce, "
+      "TrialStatus,\n"
       "GroundTruth; publishes nothing). Prints DIR/NAME, the directory for --security.\n"
       "Refuses to overwrite an identity: remove DIR/NAME to re-issue it.");
   issue->add_option("dir", o->dir, "Lab directory made by `arena certs init`")->required();
   issue->add_option("--role", o->role, "cell, service or watcher")->required();
-  issue->add_option("--name", o->identity.name, "Identity name ([A-Za-z0-9_.-]; a cell's id is a good choice)")
+  issue
+      ->add_option("--name", o->identity.name,
+                   "Identity name ([A-Za-z0-9_.-]; a cell's id is a good choice)")
       ->required();
   issue->add_option("--days", o->identity.valid_days, "Certificate and grant lifetime (days)")
       ->capture_default_str();
-  issue->add_option("--domains", o->domains, "DDS domain ids the grant covers: MIN-MAX")->capture_default_str();
+  issue->add_option("--domains", o->domains, "DDS domain ids the grant covers: MIN-MAX")
+      ->capture_default_str();
   issue->callback([o, action] { *action = [o] { return RunIssue(*o); }; });
 }
 

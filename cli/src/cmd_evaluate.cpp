@@ -32,7 +32,8 @@ struct EvaluateOptions {
   bool json = false;
 };
 
-std::string Milli(const std::optional<orchestrator::Distribution>& d, double scale, const char* fmt) {
+std::string Milli(const std::optional<orchestrator::Distribution>& d, double scale,
+                  const char* fmt) {
   if (!d) return "-";
   char buf[64];
   std::snprintf(buf, sizeof buf, fmt, d->median * scale, d->p95 * scale);
@@ -42,13 +43,14 @@ std::string Milli(const std::optional<orchestrator::Distribution>& d, double sca
 std::string FormatTable(const orchestrator::EvaluationReport& r, std::int64_t evaluation_id) {
   std::ostringstream out;
   char line[512];
-  std::snprintf(line, sizeof line, "campaign %lld: %d done trials replayed at %zu settings (evaluation %lld)\n",
+  std::snprintf(line, sizeof line,
+                "campaign %lld: %d done trials replayed at %zu settings (evaluation %lld)\n",
                 static_cast<long long>(r.campaign_id), r.trials, r.settings.size(),
                 static_cast<long long>(evaluation_id));
   out << line;
   std::snprintf(line, sizeof line, "%-24s %6s %17s %17s %17s %9s %15s %s\n", "setting", "ok",
-                "pos mm med/p95", "angle deg med/p95", "force N med/p95", "mode med", "ms/trial med/p95",
-                "");
+                "pos mm med/p95", "angle deg med/p95", "force N med/p95", "mode med",
+                "ms/trial med/p95", "");
   out << line;
   for (std::size_t i = 0; i < r.settings.size(); ++i) {
     const auto& s = r.settings[i];
@@ -62,12 +64,14 @@ std::string FormatTable(const orchestrator::EvaluationReport& r, std::int64_t ev
     if (s.mode_agreement) std::snprintf(mode, sizeof mode, "%.3f", s.mode_agreement->median);
     char time[48];
     std::snprintf(time, sizeof time, "%.3g/%.3g", s.time.median * 1e3, s.time.p95 * 1e3);
-    std::snprintf(line, sizeof line, "%-24s %6s %17s %17s %17s %9s %15s%s\n", s.model_key.c_str(), ok,
-                  Milli(s.position, 1e3, "%.3g/%.3g").c_str(), Milli(s.angle, 180 / M_PI, "%.3g/%.3g").c_str(),
+    std::snprintf(line, sizeof line, "%-24s %6s %17s %17s %17s %9s %15s%s\n", s.model_key.c_str(),
+                  ok, Milli(s.position, 1e3, "%.3g/%.3g").c_str(),
+                  Milli(s.angle, 180 / M_PI, "%.3g/%.3g").c_str(),
                   Milli(s.force, 1, "%.3g/%.3g").c_str(), mode, time, marks.c_str());
     out << line;
   }
-  out << "Pareto front: " << orchestrator::ToString(r.primary) << " against median time per trial.\n";
+  out << "Pareto front: " << orchestrator::ToString(r.primary)
+      << " against median time per trial.\n";
   out << "recommendation: " << r.recommendation << "\n";
   return out.str();
 }
@@ -79,10 +83,14 @@ int RunEvaluate(const EvaluateOptions& o) {
   eo.grid.dt = o.dt;
   eo.grid.reduce.clear();
   for (const auto& r : o.reduce) {
-    if (r == "auto") eo.grid.reduce.push_back(mechanics::Reduce::kAuto);
-    else if (r == "full") eo.grid.reduce.push_back(mechanics::Reduce::kFull);
-    else if (r == "planar") eo.grid.reduce.push_back(mechanics::Reduce::kPlanar);
-    else throw CommandError(kExitBadInput, "--reduce: must be auto, full or planar, got '" + r + "'");
+    if (r == "auto")
+      eo.grid.reduce.push_back(mechanics::Reduce::kAuto);
+    else if (r == "full")
+      eo.grid.reduce.push_back(mechanics::Reduce::kFull);
+    else if (r == "planar")
+      eo.grid.reduce.push_back(mechanics::Reduce::kPlanar);
+    else
+      throw CommandError(kExitBadInput, "--reduce: must be auto, full or planar, got '" + r + "'");
   }
   if (o.threads < 0) throw CommandError(kExitBadInput, "--threads: must be >= 0 (0: one per core)");
   eo.threads = o.threads;
@@ -134,22 +142,30 @@ int RunEvaluate(const EvaluateOptions& o) {
 
 void AddEvaluateCommand(CLI::App& app, Action* action) {
   auto o = std::make_shared<EvaluateOptions>();
-  auto* cmd = app.add_subcommand(
-      "evaluate", "Replay a campaign's done trials at several model fidelities; report the speed/accuracy trade");
+  auto* cmd = app.add_subcommand("evaluate",
+                                 "Replay a campaign's done trials at several model fidelities; "
+                                 "report the speed/accuracy trade");
   cmd->add_option("--db", o->db_path, "Store file")->required();
-  cmd->add_option("--campaign", o->campaign, "Campaign id")->required()->check(CLI::NonNegativeNumber);
+  cmd->add_option("--campaign", o->campaign, "Campaign id")
+      ->required()
+      ->check(CLI::NonNegativeNumber);
   cmd->add_option("--facets", o->facets, "Friction cone facets to try (comma separated)")
-      ->delimiter(',')->capture_default_str();
+      ->delimiter(',')
+      ->capture_default_str();
   cmd->add_option("--points", o->points, "Constituent points per line/patch to try")
-      ->delimiter(',')->capture_default_str();
+      ->delimiter(',')
+      ->capture_default_str();
   cmd->add_option("--dt", o->dt, "Time steps to try (s)")->delimiter(',')->capture_default_str();
   cmd->add_option("--reduce", o->reduce, "Model reductions to try (auto, full, planar)")
-      ->delimiter(',')->capture_default_str();
-  cmd->add_option("--budget", o->budgets,
-                  "Error budget, repeatable (all must hold): '1mm' = median final position error <= 1 mm, "
-                  "or METRIC=VALUE[UNIT] with METRIC position_median|position_p95|angle_median|angle_p95|"
-                  "force_median|force_p95|mode_agreement_median (a minimum)");
-  cmd->add_option("--threads", o->threads, "Worker threads (0: one per core)")->capture_default_str();
+      ->delimiter(',')
+      ->capture_default_str();
+  cmd->add_option(
+      "--budget", o->budgets,
+      "Error budget, repeatable (all must hold): '1mm' = median final position error <= 1 mm, "
+      "or METRIC=VALUE[UNIT] with METRIC position_median|position_p95|angle_median|angle_p95|"
+      "force_median|force_p95|mode_agreement_median (a minimum)");
+  cmd->add_option("--threads", o->threads, "Worker threads (0: one per core)")
+      ->capture_default_str();
   cmd->add_flag("--json", o->json, "Print the report as JSON");
   cmd->footer(
       "Example:\n"

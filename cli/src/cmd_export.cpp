@@ -34,10 +34,11 @@ int RunExport(const ExportCliOptions& o) {
     eo.arena_version = arena::Version();
     eo.arena_commit = arena::GitCommit();
     const auto r = db::ExportCampaign(*store, eo);
-    std::printf("exported campaign %lld: %lld trials, %lld samples, %zu files + manifest.json -> %s "
-                "(verified)\n",
-                static_cast<long long>(o.campaign), static_cast<long long>(r.trials),
-                static_cast<long long>(r.samples), r.files.size(), r.dir.c_str());
+    std::printf(
+        "exported campaign %lld: %lld trials, %lld samples, %zu files + manifest.json -> %s "
+        "(verified)\n",
+        static_cast<long long>(o.campaign), static_cast<long long>(r.trials),
+        static_cast<long long>(r.samples), r.files.size(), r.dir.c_str());
     return kExitOk;
   } catch (const db::StoreError& e) {
     throw StoreCommandError(e);
@@ -50,9 +51,11 @@ void AddExportCommand(CLI::App& app, Action* action) {
   auto o = std::make_shared<ExportCliOptions>();
   auto* cmd = app.add_subcommand("export", "Export a campaign as a dataset directory");
   cmd->add_option("--db", o->db_path, "Store file")->required();
-  cmd->add_option("--campaign", o->campaign, "Campaign id (see 'arena list')")->required()
+  cmd->add_option("--campaign", o->campaign, "Campaign id (see 'arena list')")
+      ->required()
       ->check(CLI::NonNegativeNumber);
-  cmd->add_option("--format", o->format, "Stream format")->check(CLI::IsMember({"hdf5", "csv", "jsonl"}));
+  cmd->add_option("--format", o->format, "Stream format")
+      ->check(CLI::IsMember({"hdf5", "csv", "jsonl"}));
   cmd->add_option("--out", o->out, "New or empty directory to write")->required();
   cmd->footer(
       "Example:\n"

@@ -27,7 +27,8 @@ Chart TradeoffChart(const nlohmann::json& report) {
     throw std::invalid_argument("evaluation report has no settings list");
   }
   const std::string metric = report.value("primary_metric", "position_median");
-  const std::string recommended = report["recommended"].is_string() ? report["recommended"].get<std::string>() : "";
+  const std::string recommended =
+      report["recommended"].is_string() ? report["recommended"].get<std::string>() : "";
   Series all{"settings", {}, {}, "#1f77b4", true};
   Series failed{"failed settings", {}, {}, "#d62728", true};
   Series recommend{"recommended", {}, {}, "#2ca02c", true};
@@ -61,13 +62,18 @@ Chart TradeoffChart(const nlohmann::json& report) {
     pareto.y.push_back(y);
   }
   Chart chart;
-  chart.title = "campaign " + std::to_string(report.value("campaign_id", 0)) + ": " + metric +
-                " vs model time (" + std::to_string(report.value("trials", 0)) + " trials" +
-                (hidden ? ", " + std::to_string(hidden) + " settings with zero or no error not shown" : "") + ")";
+  chart.title =
+      "campaign " + std::to_string(report.value("campaign_id", 0)) + ": " + metric +
+      " vs model time (" + std::to_string(report.value("trials", 0)) + " trials" +
+      (hidden ? ", " + std::to_string(hidden) + " settings with zero or no error not shown" : "") +
+      ")";
   chart.x_label = "median model time per trial (ms)";
   chart.log_x = true;
   const bool angle = metric.rfind("angle", 0) == 0, force = metric.rfind("force", 0) == 0;
-  const std::string unit = angle ? "rad" : force ? "N" : metric.rfind("mode", 0) == 0 ? "fraction" : "m";
+  const std::string unit = angle                          ? "rad"
+                           : force                        ? "N"
+                           : metric.rfind("mode", 0) == 0 ? "fraction"
+                                                          : "m";
   Panel panel{"prediction error against predictor time", metric + " (" + unit + ")", true, {}};
   panel.series = {all, failed, pareto, recommend};
   chart.panels = {panel};
@@ -99,16 +105,18 @@ int PlotTradeoff(const db::Store& store, const PlotOptions& o) {
   if (o.evaluation >= 0) {
     run = store.GetEvaluation(o.evaluation);
     if (run.campaign_id != o.campaign) {
-      throw CommandError(kExitBadInput, "plot --tradeoff: evaluation " + std::to_string(o.evaluation) +
-                                            " is of campaign " + std::to_string(run.campaign_id));
+      throw CommandError(kExitBadInput, "plot --tradeoff: evaluation " +
+                                            std::to_string(o.evaluation) + " is of campaign " +
+                                            std::to_string(run.campaign_id));
     }
   } else {
     (void)store.GetCampaign(o.campaign);
     const auto runs = store.ListEvaluations(o.campaign);
     if (runs.empty()) {
       throw CommandError(kExitBadInput, "plot --tradeoff: campaign " + std::to_string(o.campaign) +
-                                            " has no evaluation; run `arena evaluate --db " + o.db_path +
-                                            " --campaign " + std::to_string(o.campaign) + "` first");
+                                            " has no evaluation; run `arena evaluate --db " +
+                                            o.db_path + " --campaign " +
+                                            std::to_string(o.campaign) + "` first");
     }
     run = runs.back();
   }
@@ -133,7 +141,8 @@ int RunPlot(const PlotOptions& o) {
     so.read_only = true;
     auto store = db::Store::Open(o.db_path, so);
     if (o.tradeoff) return PlotTradeoff(*store, o);
-    throw CommandError(kExitBadInput, "plot: choose a plot: a TRIAL id, or --campaign ID --tradeoff");
+    throw CommandError(kExitBadInput,
+                       "plot: choose a plot: a TRIAL id, or --campaign ID --tradeoff");
   } catch (const db::StoreError& e) {
     throw StoreCommandError(e);
   }
@@ -143,21 +152,25 @@ int RunPlot(const PlotOptions& o) {
 
 void AddPlotCommand(CLI::App& app, Action* action) {
   auto o = std::make_shared<PlotOptions>();
-  auto* cmd = app.add_subcommand("plot", "Draw charts from the store as SVG: a trial, or the speed/accuracy trade");
+  auto* cmd = app.add_subcommand(
+      "plot", "Draw charts from the store as SVG: a trial, or the speed/accuracy trade");
   cmd->add_option("trial", o->trial, "Trial id (see `arena query`)")->check(CLI::NonNegativeNumber);
   cmd->add_option("--db", o->db_path, "Store file (opened read-only)")->required();
   cmd->add_option("--out", o->out, "SVG file to write")->required();
   cmd->add_option("--campaign", o->campaign, "Campaign id")->check(CLI::NonNegativeNumber);
-  cmd->add_flag("--tradeoff", o->tradeoff,
-                "Prediction error against model time per fidelity setting, from the campaign's latest "
-                "evaluation (arena evaluate); log axes, Pareto front highlighted");
-  cmd->add_option("--evaluation", o->evaluation, "With --tradeoff: this evaluation run instead of the latest")
+  cmd->add_flag(
+      "--tradeoff", o->tradeoff,
+      "Prediction error against model time per fidelity setting, from the campaign's latest "
+      "evaluation (arena evaluate); log axes, Pareto front highlighted");
+  cmd->add_option("--evaluation", o->evaluation,
+                  "With --tradeoff: this evaluation run instead of the latest")
       ->check(CLI::NonNegativeNumber);
   cmd->footer(
       "Examples:\n"
       "  arena plot --db lab.db 12 --out trial12.svg\n"
       "  arena plot --db lab.db --campaign 3 --tradeoff --out tradeoff.svg\n"
-      "A trial's prediction is re-run with the campaign's \"prediction\" settings, as `arena serve` ran it.\n"
+      "A trial's prediction is re-run with the campaign's \"prediction\" settings, as `arena "
+      "serve` ran it.\n"
       "View the SVG in a browser, or convert it: rsvg-convert trial12.svg -o trial12.png\n");
   cmd->callback([o, action] { *action = [o] { return RunPlot(*o); }; });
 }

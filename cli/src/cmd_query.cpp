@@ -52,9 +52,12 @@ void AddQueryCommand(CLI::App& app, Action* action) {
   cmd->add_option("sql", o->sql,
                   "One SELECT statement (default: every trial with its ground-truth summary, "
                   "from the view trial_results)");
-  cmd->add_option("--campaign", o->campaign, "Only rows whose campaign_id is ID")->check(CLI::NonNegativeNumber);
-  cmd->add_option("--where", o->where, "An SQL condition on the result's columns, e.g. 'grip_force > 5'");
-  cmd->add_option("--outcome", o->outcome, "Only rows whose outcome is X (ok, failed, refused, ...)");
+  cmd->add_option("--campaign", o->campaign, "Only rows whose campaign_id is ID")
+      ->check(CLI::NonNegativeNumber);
+  cmd->add_option("--where", o->where,
+                  "An SQL condition on the result's columns, e.g. 'grip_force > 5'");
+  cmd->add_option("--outcome", o->outcome,
+                  "Only rows whose outcome is X (ok, failed, refused, ...)");
   cmd->add_option("--format", o->format, "Output format")
       ->check(CLI::IsMember({"table", "csv", "json"}));
   cmd->footer(

@@ -36,12 +36,13 @@ struct RunOptions {
   std::string campaign_path;
   std::string db_path = "arena.db";
   int cells = 2;
-  int domain = -1;            // -1: derived from the process id
-  double speed = 0;           // cells' pacing: 0 = as fast as possible
-  std::string defects_path;   // the cells' own profile (workspace, reset); optional
+  int domain = -1;           // -1: derived from the process id
+  double speed = 0;          // cells' pacing: 0 = as fast as possible
+  std::string defects_path;  // the cells' own profile (workspace, reset); optional
   std::string log_level = "info";
   bool quiet = false;
-  std::string security_lab;   // DDS-Security: LAB/service and LAB/sim1.. (arena certs); "": open domain
+  std::string
+      security_lab;  // DDS-Security: LAB/service and LAB/sim1.. (arena certs); "": open domain
 };
 
 double Median(std::vector<double> v) {
@@ -67,9 +68,12 @@ void PrintSummary(const std::string& db_path, std::int64_t campaign_id, double w
   std::vector<double> pos_err, ang_err, force_err, force_rel, mode, pred_time;
   std::int64_t done = 0, failed = 0, other = 0, prediction_failures = 0;
   for (const auto& t : store->ListTrials(campaign_id)) {
-    if (t.state == db::TrialState::kDone) ++done;
-    else if (t.state == db::TrialState::kFailed) ++failed;
-    else ++other;
+    if (t.state == db::TrialState::kDone)
+      ++done;
+    else if (t.state == db::TrialState::kFailed)
+      ++failed;
+    else
+      ++other;
     for (const auto& p : store->ListPredictions(t.id)) {
       if (p.status != "ok") {
         ++prediction_failures;
@@ -83,33 +87,41 @@ void PrintSummary(const std::string& db_path, std::int64_t campaign_id, double w
     }
   }
   const std::int64_t total = done + failed + other;
-  std::printf("campaign %lld '%s': %s\n", static_cast<long long>(campaign_id), campaign.name.c_str(),
-              db::ToString(campaign.state));
+  std::printf("campaign %lld '%s': %s\n", static_cast<long long>(campaign_id),
+              campaign.name.c_str(), db::ToString(campaign.state));
   std::printf("  trials      %lld: %lld done, %lld failed%s\n", static_cast<long long>(total),
               static_cast<long long>(done), static_cast<long long>(failed),
               other ? (", " + std::to_string(other) + " unfinished").c_str() : "");
   std::printf("  time        %s wall, %.1f trials/min\n", FormatDuration(wall_s).c_str(),
               wall_s > 0 ? 60.0 * (done + failed) / wall_s : 0.0);
-  std::printf("  model error (median over %zu predictions): final position %.3g mm, final angle %.3g deg,\n"
-              "              contact force %.3g N RMS, contact-mode agreement %.1f %%\n",
-              pos_err.size(), Median(pos_err) * 1e3, Median(ang_err) * 180 / M_PI, Median(force_err),
-              100 * Median(mode));
+  std::printf(
+      "  model error (median over %zu predictions): final position %.3g mm, final angle %.3g deg,\n"
+      "              contact force %.3g N RMS, contact-mode agreement %.1f %%\n",
+      pos_err.size(), Median(pos_err) * 1e3, Median(ang_err) * 180 / M_PI, Median(force_err),
+      100 * Median(mode));
   std::printf("  predictor   %.3g ms median per trial%s\n", Median(pred_time) * 1e3,
-              prediction_failures ? (", " + std::to_string(prediction_failures) + " predictions failed").c_str() : "");
+              prediction_failures
+                  ? (", " + std::to_string(prediction_failures) + " predictions failed").c_str()
+                  : "");
   if (!overhead_s.empty()) {
-    std::printf("  orchestration %.2f ms median, %.2f ms p95 per trial (cell busy time minus its own execute\n"
-                "              and reset time, %zu clean trials)\n",
-                Median(overhead_s) * 1e3, Percentile(overhead_s, 0.95) * 1e3, overhead_s.size());
+    std::printf(
+        "  orchestration %.2f ms median, %.2f ms p95 per trial (cell busy time minus its own "
+        "execute\n"
+        "              and reset time, %zu clean trials)\n",
+        Median(overhead_s) * 1e3, Percentile(overhead_s, 0.95) * 1e3, overhead_s.size());
   }
-  std::printf("  store       %s  (arena status --db %s; arena query --db %s \"select ...\")\n", db_path.c_str(),
-              db_path.c_str(), db_path.c_str());
+  std::printf("  store       %s  (arena status --db %s; arena query --db %s \"select ...\")\n",
+              db_path.c_str(), db_path.c_str(), db_path.c_str());
 }
 
 int Run(RunOptions opt) {
-  if (opt.cells < 1 || opt.cells > 64) throw CommandError(kExitBadInput, "--cells: must be 1..64, got " + std::to_string(opt.cells));
+  if (opt.cells < 1 || opt.cells > 64)
+    throw CommandError(kExitBadInput, "--cells: must be 1..64, got " + std::to_string(opt.cells));
   if (!(opt.speed >= 0)) throw CommandError(kExitBadInput, "--speed: must be >= 0");
   if (opt.domain < 0) opt.domain = 100 + static_cast<int>(getpid() % 100);
-  if (opt.domain > 232) throw CommandError(kExitBadInput, "--domain: must be 0..232, got " + std::to_string(opt.domain));
+  if (opt.domain > 232)
+    throw CommandError(kExitBadInput,
+                       "--domain: must be 0..232, got " + std::to_string(opt.domain));
 
   // Signals first: the log's flusher, the cells and DDS threads inherit the blocked mask.
   std::atomic<orchestrator::Service*> running{nullptr};
@@ -123,10 +135,12 @@ int Run(RunOptions opt) {
   if (!opt.security_lab.empty()) {
     try {
       dds::CheckIdentityDir(identity("service"));
-      for (int k = 0; k < opt.cells; ++k) dds::CheckIdentityDir(identity("sim" + std::to_string(k + 1)));
+      for (int k = 0; k < opt.cells; ++k)
+        dds::CheckIdentityDir(identity("sim" + std::to_string(k + 1)));
     } catch (const dds::SecurityError& e) {
       throw CommandError(kExitBadInput, std::string("--security: ") + e.what() +
-                                            " (issue it with `arena certs issue " + opt.security_lab +
+                                            " (issue it with `arena certs issue " +
+                                            opt.security_lab +
                                             " --role cell|service --name NAME`)");
     }
   }
@@ -144,19 +158,22 @@ int Run(RunOptions opt) {
   }
   const std::int64_t trials = orchestrator::TrialCount(campaign);
   if (!opt.quiet)
-    std::fprintf(stderr, "campaign %lld '%s': %lld trials on %d simulated cells (DDS domain %d, log %s)\n",
-                 static_cast<long long>(campaign_id), campaign.name.c_str(), static_cast<long long>(trials),
-                 opt.cells, opt.domain, orchestrator::ServiceLogPath(opt.db_path).c_str());
-
+    std::fprintf(
+        stderr, "campaign %lld '%s': %lld trials on %d simulated cells (DDS domain %d, log %s)\n",
+        static_cast<long long>(campaign_id), campaign.name.c_str(), static_cast<long long>(trials),
+        opt.cells, opt.domain, orchestrator::ServiceLogPath(opt.db_path).c_str());
 
   std::vector<ChildProcess> cells;
   const std::string self = SelfExecutable();
   for (int k = 0; k < opt.cells; ++k) {
-    std::vector<std::string> argv = {self, "cell", "--id", "sim" + std::to_string(k + 1), "--domain",
-                                     std::to_string(opt.domain), "--speed", std::to_string(opt.speed),
+    std::vector<std::string> argv = {self,           "cell",
+                                     "--id",         "sim" + std::to_string(k + 1),
+                                     "--domain",     std::to_string(opt.domain),
+                                     "--speed",      std::to_string(opt.speed),
                                      "--parent-pid", std::to_string(getpid())};
     if (!opt.defects_path.empty()) argv.insert(argv.end(), {"--defects", opt.defects_path});
-    if (!opt.security_lab.empty()) argv.insert(argv.end(), {"--security", identity("sim" + std::to_string(k + 1))});
+    if (!opt.security_lab.empty())
+      argv.insert(argv.end(), {"--security", identity("sim" + std::to_string(k + 1))});
     cells.emplace_back(argv, opt.db_path + ".sim" + std::to_string(k + 1) + ".log");
   }
 
@@ -178,7 +195,8 @@ int Run(RunOptions opt) {
   if (signals.received()) service->Stop();
 
   std::vector<double> overhead_s;
-  service->OnTrialTiming([&](const orchestrator::TrialTiming& t) { overhead_s.push_back(t.overhead_s); });
+  service->OnTrialTiming(
+      [&](const orchestrator::TrialTiming& t) { overhead_s.push_back(t.overhead_s); });
   const auto start = std::chrono::steady_clock::now();
   ProgressLine progress(trials, "trials");
   std::string cells_failed;
@@ -195,8 +213,9 @@ int Run(RunOptions opt) {
     if (c.cells_known > 0 && c.cells_usable == 0) {
       if (!no_usable_since) no_usable_since = now;
       if (now - *no_usable_since > std::chrono::seconds(5) && cells_failed.empty()) {
-        cells_failed = "no usable cell left: every cell is quarantined or lost (arena status --db " +
-                       opt.db_path + "; log " + orchestrator::ServiceLogPath(opt.db_path) + ")";
+        cells_failed =
+            "no usable cell left: every cell is quarantined or lost (arena status --db " +
+            opt.db_path + "; log " + orchestrator::ServiceLogPath(opt.db_path) + ")";
         service->Stop();
       }
     } else {
@@ -210,7 +229,8 @@ int Run(RunOptions opt) {
     throw StoreCommandError(e);
   }
   progress.Finish();
-  const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  const double wall =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   service.reset();
   running = nullptr;
   for (auto& cell : cells) cell.Stop();
@@ -233,19 +253,24 @@ void AddRunCommand(CLI::App& app, Action* action) {
       "service until the campaign is finished, prints a summary. Ctrl-C stops cleanly; run the\n"
       "same store with `arena serve` to finish what was left.\n"
       "  arena run examples/campaigns/smoke.json --db smoke.db --cells 2 --security lab-pki\n"
-      "runs it with DDS-Security: identities lab-pki/service and lab-pki/sim1, sim2 (arena certs).");
-  cmd->add_option("campaign", opt->campaign_path, "Campaign JSON (orchestrator/README.md)")->required();
+      "runs it with DDS-Security: identities lab-pki/service and lab-pki/sim1, sim2 (arena "
+      "certs).");
+  cmd->add_option("campaign", opt->campaign_path, "Campaign JSON (orchestrator/README.md)")
+      ->required();
   cmd->add_option("--db", opt->db_path, "SQLite store (created if missing)")->capture_default_str();
   cmd->add_option("--cells", opt->cells, "Simulated cells to start")->capture_default_str();
   cmd->add_option("--domain", opt->domain, "DDS domain id (default: 100 + pid % 100)");
   cmd->add_option("--speed", opt->speed, "Cells' pacing: 0 = as fast as possible, 1 = wall clock")
       ->capture_default_str();
-  cmd->add_option("--cell-defects", opt->defects_path, "Defect profile for the cells (executors/README.md)");
-  cmd->add_option("--log-level", opt->log_level, "Service log level (the log is FILE.log next to the store)")
+  cmd->add_option("--cell-defects", opt->defects_path,
+                  "Defect profile for the cells (executors/README.md)");
+  cmd->add_option("--log-level", opt->log_level,
+                  "Service log level (the log is FILE.log next to the store)")
       ->capture_default_str();
   cmd->add_flag("--quiet", opt->quiet, "No progress line");
-  cmd->add_option("--security", opt->security_lab,
-                  "DDS-Security: a lab from `arena certs init` holding identities service, sim1..simN");
+  cmd->add_option(
+      "--security", opt->security_lab,
+      "DDS-Security: a lab from `arena certs init` holding identities service, sim1..simN");
   cmd->callback([opt, action] { *action = [opt] { return Run(*opt); }; });
 }
 

@@ -41,7 +41,8 @@ int RunServe(ServeCliOptions opt) {
   } catch (const std::invalid_argument& e) {
     throw CommandError(kExitBadInput, e.what());
   } catch (const spdlog::spdlog_ex& e) {
-    throw CommandError(kExitStore, std::string("cannot write the log next to the store: ") + e.what());
+    throw CommandError(kExitStore,
+                       std::string("cannot write the log next to the store: ") + e.what());
   }
   std::unique_ptr<orchestrator::Service> service;
   try {
@@ -65,8 +66,8 @@ int RunServe(ServeCliOptions opt) {
     throw StoreCommandError(e);
   }
   const auto c = service->counters();
-  spdlog::info("stopped: {} dispatched, {} done, {} retried, {} failed", c.dispatched, c.done, c.retried,
-               c.failed);
+  spdlog::info("stopped: {} dispatched, {} done, {} retried, {} failed", c.dispatched, c.done,
+               c.retried, c.failed);
   spdlog::default_logger()->flush();
   return kExitOk;
 }
@@ -75,10 +76,12 @@ int RunServe(ServeCliOptions opt) {
 
 void AddServeCommand(CLI::App& app, Action* action) {
   auto opt = std::make_shared<ServeCliOptions>();
-  CLI::App* cmd = app.add_subcommand("serve", "Run the campaign service: schedule trials onto cells over DDS");
+  CLI::App* cmd =
+      app.add_subcommand("serve", "Run the campaign service: schedule trials onto cells over DDS");
   cmd->footer(
       "Example:\n  arena serve --db lab.db --domain 42 --log-level info\n"
-      "  arena serve --db lab.db --domain 42 --security lab-pki/service   (see `arena certs --help`)\n"
+      "  arena serve --db lab.db --domain 42 --security lab-pki/service   (see `arena certs "
+      "--help`)\n"
       "Logs go to FILE.log next to the store (rotated, 16 MiB x 6 at most) and to stderr.\n"
       "SIGTERM stops dispatching and lets phases in flight finish (up to --drain s).");
   cmd->add_option("--db", opt->service.db_path, "SQLite store (created if missing)")->required();
@@ -95,11 +98,13 @@ void AddServeCommand(CLI::App& app, Action* action) {
   // traffic; over loopback UDP it cannot. Ground truth at 16 x 250 Hz is far
   // below what loopback carries.
   opt->service.network.shared_memory = false;
-  cmd->add_flag("--shm", [opt](std::int64_t) { opt->service.network.shared_memory = true; },
-                "Also use shared memory (faster; a restart after a SIGKILL may then be slow to find cells)");
+  cmd->add_flag(
+      "--shm", [opt](std::int64_t) { opt->service.network.shared_memory = true; },
+      "Also use shared memory (faster; a restart after a SIGKILL may then be slow to find cells)");
   cmd->add_option("--log-level", opt->log_level, "trace, debug, info, warn, error, critical, off")
       ->capture_default_str();
-  cmd->add_option("--max-attempts", opt->service.max_attempts, "Executions per trial before it fails")
+  cmd->add_option("--max-attempts", opt->service.max_attempts,
+                  "Executions per trial before it fails")
       ->capture_default_str();
   cmd->add_option("--quarantine-after", opt->service.quarantine_after,
                   "Consecutive failed phases before a cell is quarantined")
@@ -107,10 +112,13 @@ void AddServeCommand(CLI::App& app, Action* action) {
   cmd->add_option("--execute-timeout", opt->service.execute_timeout_s,
                   "EXECUTE budget (s) beyond the trial's duration at the cell's speed")
       ->capture_default_str();
-  cmd->add_option("--reset-timeout", opt->service.reset_timeout_s, "RESET budget (s)")->capture_default_str();
-  cmd->add_option("--drain", opt->service.drain_timeout_s, "On SIGTERM: seconds phases in flight may finish")
+  cmd->add_option("--reset-timeout", opt->service.reset_timeout_s, "RESET budget (s)")
       ->capture_default_str();
-  cmd->add_option("--predictors", opt->service.predictor_threads, "Predictor threads")->capture_default_str();
+  cmd->add_option("--drain", opt->service.drain_timeout_s,
+                  "On SIGTERM: seconds phases in flight may finish")
+      ->capture_default_str();
+  cmd->add_option("--predictors", opt->service.predictor_threads, "Predictor threads")
+      ->capture_default_str();
   // Hidden: bounds the store's size to emulate a full disk (fault tests).
   cmd->add_option("--store-max-pages", opt->service.store_max_pages)->group("");
   cmd->callback([opt, action] { *action = [opt] { return RunServe(*opt); }; });

@@ -82,10 +82,15 @@ int RunSimulate(const SimulateOptions& opt) {
     if (opt.points) scene.model.points = *opt.points;
     if (opt.dt) scene.model.dt = *opt.dt;
     if (opt.reduce) {
-      if (*opt.reduce == "auto") scene.model.reduce = mechanics::Reduce::kAuto;
-      else if (*opt.reduce == "full") scene.model.reduce = mechanics::Reduce::kFull;
-      else if (*opt.reduce == "planar") scene.model.reduce = mechanics::Reduce::kPlanar;
-      else throw mechanics::SceneError("--reduce", "must be auto, full or planar, got '" + *opt.reduce + "'");
+      if (*opt.reduce == "auto")
+        scene.model.reduce = mechanics::Reduce::kAuto;
+      else if (*opt.reduce == "full")
+        scene.model.reduce = mechanics::Reduce::kFull;
+      else if (*opt.reduce == "planar")
+        scene.model.reduce = mechanics::Reduce::kPlanar;
+      else
+        throw mechanics::SceneError("--reduce",
+                                    "must be auto, full or planar, got '" + *opt.reduce + "'");
     }
     mechanics::ValidateScene(scene);  // the overrides too
   } catch (const mechanics::SceneError& e) {
@@ -126,31 +131,30 @@ int RunSimulate(const SimulateOptions& opt) {
   }
   mean_pusher /= static_cast<double>(result.samples.size());
 
-  json out = {
-      {"ok", true},
-      {"model",
-       {{"dof", result.model.dof},
-        {"facets", result.model.facets},
-        {"points", result.model.points},
-        {"dt", result.model.dt},
-        {"unknowns", result.model.unknowns}}},
-      {"final",
-       {{"position", Vec(last.position)},
-        {"rpy", Vec(Rpy(last.orientation))},
-        {"velocity", json::array({last.velocity.x(), last.velocity.y(), last.velocity.z(),
-                                  last.angular_velocity.x(), last.angular_velocity.y(),
-                                  last.angular_velocity.z()})}}},
-      {"pusher_force", {{"mean", Vec(mean_pusher)}, {"max_norm", max_pusher}}},
-      {"contacts", contacts},
-      {"residuals",
-       {{"force_balance", result.residuals.force_balance},
-        {"complementarity", result.residuals.complementarity},
-        {"cone", result.residuals.cone}}},
-      {"solver",
-       {{"steps", result.solver.steps},
-        {"max_pivots", result.solver.max_pivots},
-        {"failures", result.solver.failures}}},
-      {"wall_s", result.wall_s}};
+  json out = {{"ok", true},
+              {"model",
+               {{"dof", result.model.dof},
+                {"facets", result.model.facets},
+                {"points", result.model.points},
+                {"dt", result.model.dt},
+                {"unknowns", result.model.unknowns}}},
+              {"final",
+               {{"position", Vec(last.position)},
+                {"rpy", Vec(Rpy(last.orientation))},
+                {"velocity", json::array({last.velocity.x(), last.velocity.y(), last.velocity.z(),
+                                          last.angular_velocity.x(), last.angular_velocity.y(),
+                                          last.angular_velocity.z()})}}},
+              {"pusher_force", {{"mean", Vec(mean_pusher)}, {"max_norm", max_pusher}}},
+              {"contacts", contacts},
+              {"residuals",
+               {{"force_balance", result.residuals.force_balance},
+                {"complementarity", result.residuals.complementarity},
+                {"cone", result.residuals.cone}}},
+              {"solver",
+               {{"steps", result.solver.steps},
+                {"max_pivots", result.solver.max_pivots},
+                {"failures", result.solver.failures}}},
+              {"wall_s", result.wall_s}};
   std::printf("%s\n", out.dump().c_str());
   return kExitOk;
 }
@@ -165,8 +169,10 @@ void AddSimulateCommand(CLI::App& app, Action* action) {
       "Prints one JSON object (SCENE.md); exit 0 on success, 2 on a bad scene, 1 on a solver "
       "failure.");
   cmd->add_option("scene", opt->scene_path, "Scene JSON file (SCENE.md)")->required();
-  cmd->add_option("--facets", opt->facets, "Edges of the polyhedral friction cone (overrides model.facets)");
-  cmd->add_option("--points", opt->points, "Constituent points per line/patch (overrides model.points)");
+  cmd->add_option("--facets", opt->facets,
+                  "Edges of the polyhedral friction cone (overrides model.facets)");
+  cmd->add_option("--points", opt->points,
+                  "Constituent points per line/patch (overrides model.points)");
   cmd->add_option("--dt", opt->dt, "Time step in s (overrides model.dt)");
   cmd->add_option("--reduce", opt->reduce, "auto, full or planar (overrides model.reduce)");
   cmd->add_option("--trajectory", opt->trajectory_path, "Write the 250 Hz trajectory as CSV");

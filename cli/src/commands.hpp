@@ -15,11 +15,11 @@ namespace arena::cli {
 // Exit codes (documented in README.md).
 enum ExitCode : int {
   kExitOk = 0,
-  kExitFailure = 1,       // the command ran and failed (a solver failure, a failed campaign)
-  kExitBadInput = 2,      // invalid arguments, scene, campaign or query
-  kExitStore = 3,         // the store cannot be opened, is read-only, full or corrupt
-  kExitCommunication = 4, // DDS set-up failed, no cell answered in time
-  kExitInterrupted = 130, // stopped by SIGINT / SIGTERM before finishing
+  kExitFailure = 1,        // the command ran and failed (a solver failure, a failed campaign)
+  kExitBadInput = 2,       // invalid arguments, scene, campaign or query
+  kExitStore = 3,          // the store cannot be opened, is read-only, full or corrupt
+  kExitCommunication = 4,  // DDS set-up failed, no cell answered in time
+  kExitInterrupted = 130,  // stopped by SIGINT / SIGTERM before finishing
 };
 
 // An error a command reports to the user: the message says what went wrong and
@@ -41,11 +41,11 @@ void AddServeCommand(CLI::App& app, Action* action);
 void AddRunCommand(CLI::App& app, Action* action);
 void AddCampaignCommands(CLI::App& app, Action* action);  // submit list status pause resume cancel
 void AddCellCommand(CLI::App& app, Action* action);
-void AddQueryCommand(CLI::App& app, Action* action);    // cmd_query.cpp (store room)
-void AddExportCommand(CLI::App& app, Action* action);   // cmd_export.cpp (store room)
-void AddEvaluateCommand(CLI::App& app, Action* action); // cmd_evaluate.cpp
-void AddPlotCommand(CLI::App& app, Action* action);     // cmd_plot.cpp (TRIAL or --tradeoff)
-void AddWatchCommand(CLI::App& app, Action* action);    // cmd_watch.cpp
-void AddCertsCommand(CLI::App& app, Action* action);    // cmd_certs.cpp (init, issue)
+void AddQueryCommand(CLI::App& app, Action* action);     // cmd_query.cpp (store room)
+void AddExportCommand(CLI::App& app, Action* action);    // cmd_export.cpp (store room)
+void AddEvaluateCommand(CLI::App& app, Action* action);  // cmd_evaluate.cpp
+void AddPlotCommand(CLI::App& app, Action* action);      // cmd_plot.cpp (TRIAL or --tradeoff)
+void AddWatchCommand(CLI::App& app, Action* action);     // cmd_watch.cpp
+void AddCertsCommand(CLI::App& app, Action* action);     // cmd_certs.cpp (init, issue)
 
 }  // namespace arena::cli

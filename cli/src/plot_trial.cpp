@@ -3,8 +3,8 @@
 #include <cmath>
 #include <cstdio>
 #include <fstream>
-#include <memory>
 #include <limits>
+#include <memory>
 
 #include <Eigen/Geometry>
 #include <nlohmann/json.hpp>
@@ -34,7 +34,8 @@ Eigen::Quaterniond Quat(const std::array<double, 7>& pose) {
 
 // Signed rotation from the start orientation q0 about `axis` (rad): the
 // angle of q0^-1 q, negative when its axis points against `axis`.
-double SignedAngle(const Eigen::Quaterniond& q0, const Eigen::Quaterniond& q, const Eigen::Vector3d& axis) {
+double SignedAngle(const Eigen::Quaterniond& q0, const Eigen::Quaterniond& q,
+                   const Eigen::Vector3d& axis) {
   const Eigen::AngleAxisd aa(q0.inverse() * q);
   const double a = aa.angle() > M_PI ? aa.angle() - 2 * M_PI : aa.angle();
   return aa.axis().dot(axis) < 0 ? -a : a;
@@ -46,7 +47,8 @@ void Split(const Eigen::Vector3d& f, const Eigen::Vector3d& n, double* normal, d
   *tangential = (f - *normal * n).norm();
 }
 
-Panel PosePanel(const std::string& title, const std::string& unit, double min_span, const Triple& d) {
+Panel PosePanel(const std::string& title, const std::string& unit, double min_span,
+                const Triple& d) {
   Panel p;
   p.title = title;
   p.y_label = unit;
@@ -67,7 +69,9 @@ std::unique_ptr<db::Store> OpenReadOnly(const std::string& path) {
     so.create = false;
     return db::Store::Open(path, so);
   } catch (const db::StoreError& e) {
-    throw CommandError(ExitCodeFor(e), std::string(e.what()) + " (is --db the store `arena serve` or `arena run` uses?)");
+    throw CommandError(
+        ExitCodeFor(e),
+        std::string(e.what()) + " (is --db the store `arena serve` or `arena run` uses?)");
   }
 }
 
@@ -79,7 +83,9 @@ void WriteSvgFile(const Chart& chart, const std::string& out) {
   const std::string tmp = out + ".tmp";
   {
     std::ofstream f(tmp, std::ios::binary | std::ios::trunc);
-    if (!f) throw CommandError(kExitFailure, "cannot write " + tmp + ": check that its directory exists and is writable");
+    if (!f)
+      throw CommandError(kExitFailure, "cannot write " + tmp +
+                                           ": check that its directory exists and is writable");
     f.write(svg.data(), static_cast<std::streamsize>(svg.size()));
     f.close();
     if (!f) throw CommandError(kExitFailure, "cannot write " + tmp + " (disk full?)");
@@ -92,18 +98,18 @@ void WriteSvgFile(const Chart& chart, const std::string& out) {
 
 int PlotTrial(const std::string& db_path, std::int64_t trial, const std::string& out) {
   if (trial < 0)
-    throw CommandError(kExitBadInput, "give a TRIAL id to plot (find ids with `arena query --db " + db_path +
-                                          " --campaign ID`)");
+    throw CommandError(kExitBadInput, "give a TRIAL id to plot (find ids with `arena query --db " +
+                                          db_path + " --campaign ID`)");
   auto store = OpenReadOnly(db_path);
   TrialPlotInfo info;
   const Chart chart = MakeTrialChart(*store, trial, &info);
   WriteSvgFile(chart, out);
-  std::fprintf(stderr, "trial %lld: %zu samples, prediction %s (%s) -> %s\n", static_cast<long long>(trial),
-               info.samples, info.model_key.empty() ? "-" : info.model_key.c_str(), info.prediction_status.c_str(),
-               out.c_str());
+  std::fprintf(stderr, "trial %lld: %zu samples, prediction %s (%s) -> %s\n",
+               static_cast<long long>(trial), info.samples,
+               info.model_key.empty() ? "-" : info.model_key.c_str(),
+               info.prediction_status.c_str(), out.c_str());
   return kExitOk;
 }
-
 
 Chart MakeTrialChart(const db::Store& store, std::int64_t trial_id, TrialPlotInfo* info) {
   db::Trial trial;
@@ -114,17 +120,20 @@ Chart MakeTrialChart(const db::Store& store, std::int64_t trial_id, TrialPlotInf
     campaign = store.GetCampaign(trial.campaign_id);
   } catch (const db::StoreError& e) {
     if (e.kind() == db::StoreError::Kind::kNotFound)
-      throw CommandError(kExitBadInput, "no trial " + std::to_string(trial_id) + " in " + store.path() +
-                                            " (find trial ids with `arena query --db " + store.path() +
-                                            " --campaign ID`)");
+      throw CommandError(kExitBadInput, "no trial " + std::to_string(trial_id) + " in " +
+                                            store.path() +
+                                            " (find trial ids with `arena query --db " +
+                                            store.path() + " --campaign ID`)");
     throw StoreCommandError(e);
   }
   if (!trial.gt_stream_id) {
-    throw CommandError(kExitBadInput,
-                       "trial " + std::to_string(trial_id) + " has no ground truth yet (state " +
-                           db::ToString(trial.state) +
-                           "); plot it once it has executed (`arena status` shows progress), or watch it live "
-                           "with `arena watch " + std::to_string(trial_id) + "`");
+    throw CommandError(
+        kExitBadInput,
+        "trial " + std::to_string(trial_id) + " has no ground truth yet (state " +
+            db::ToString(trial.state) +
+            "); plot it once it has executed (`arena status` shows progress), or watch it live "
+            "with `arena watch " +
+            std::to_string(trial_id) + "`");
   }
   try {
     gt = store.ReadGroundTruth(trial_id);
@@ -132,13 +141,15 @@ Chart MakeTrialChart(const db::Store& store, std::int64_t trial_id, TrialPlotInf
     throw StoreCommandError(e);
   }
   if (gt.samples.empty())
-    throw CommandError(kExitFailure, "trial " + std::to_string(trial_id) + ": its ground truth has no samples");
+    throw CommandError(kExitFailure,
+                       "trial " + std::to_string(trial_id) + ": its ground truth has no samples");
 
   mechanics::Scene scene;
   try {
     scene = mechanics::ParseScene(trial.scene_json);
   } catch (const std::exception& e) {
-    throw CommandError(kExitStore, "trial " + std::to_string(trial_id) + ": stored scene unreadable: " + e.what());
+    throw CommandError(
+        kExitStore, "trial " + std::to_string(trial_id) + ": stored scene unreadable: " + e.what());
   }
   const auto normals = orchestrator::ContactNormals(scene);
 
@@ -157,11 +168,18 @@ Chart MakeTrialChart(const db::Store& store, std::int64_t trial_id, TrialPlotInf
     inf.model_key = orchestrator::ModelKey(model_scene.model);
     predicted = mechanics::Simulate(model_scene);
     switch (predicted.status) {
-      case mechanics::SimulationStatus::kOk: inf.prediction_status = "ok"; break;
-      case mechanics::SimulationStatus::kSolverFailure: inf.prediction_status = "solver_failure"; break;
-      case mechanics::SimulationStatus::kInvalidScene: inf.prediction_status = "invalid_scene"; break;
+      case mechanics::SimulationStatus::kOk:
+        inf.prediction_status = "ok";
+        break;
+      case mechanics::SimulationStatus::kSolverFailure:
+        inf.prediction_status = "solver_failure";
+        break;
+      case mechanics::SimulationStatus::kInvalidScene:
+        inf.prediction_status = "invalid_scene";
+        break;
     }
-    if (predicted.status != mechanics::SimulationStatus::kOk) prediction_note = "; " + predicted.error;
+    if (predicted.status != mechanics::SimulationStatus::kOk)
+      prediction_note = "; " + predicted.error;
   } catch (const std::exception& e) {
     inf.prediction_status = "error";
     prediction_note = std::string("; ") + e.what();
@@ -193,7 +211,8 @@ Chart MakeTrialChart(const db::Store& store, std::int64_t trial_id, TrialPlotInf
     angle.v_true.push_back(SignedAngle(q0, Quat(s.object_pose), axis) * kRadToDeg);
     for (size_t c = 0; c < n_contacts && c < s.contacts.size(); ++c) {
       double fn, ft;
-      Split({s.contacts[c].force[0], s.contacts[c].force[1], s.contacts[c].force[2]}, normals[c], &fn, &ft);
+      Split({s.contacts[c].force[0], s.contacts[c].force[1], s.contacts[c].force[2]}, normals[c],
+            &fn, &ft);
       normal[c].t_true.push_back(s.t);
       normal[c].v_true.push_back(fn);
       tangential[c].t_true.push_back(s.t);
@@ -206,14 +225,16 @@ Chart MakeTrialChart(const db::Store& store, std::int64_t trial_id, TrialPlotInf
       pos[k].v_obs.push_back(ok ? s.observed_object_pose[k] * 1e3 : kNaN);
     }
     angle.t_obs.push_back(s.t);
-    angle.v_obs.push_back(ok ? SignedAngle(q0, Quat(s.observed_object_pose), axis) * kRadToDeg : kNaN);
+    angle.v_obs.push_back(ok ? SignedAngle(q0, Quat(s.observed_object_pose), axis) * kRadToDeg
+                             : kNaN);
     for (size_t c = 0; c < n_contacts; ++c) {
       Eigen::Vector3d f;
       bool have = ok;
       if (c < n_fingers) {
         have = have && s.observed_finger_wrenches.size() >= 6 * (c + 1);
-        if (have) f = {s.observed_finger_wrenches[6 * c], s.observed_finger_wrenches[6 * c + 1],
-                       s.observed_finger_wrenches[6 * c + 2]};
+        if (have)
+          f = {s.observed_finger_wrenches[6 * c], s.observed_finger_wrenches[6 * c + 1],
+               s.observed_finger_wrenches[6 * c + 2]};
       } else if (have) {
         f = {s.observed_pusher_wrench[0], s.observed_pusher_wrench[1], s.observed_pusher_wrench[2]};
       }
@@ -241,34 +262,42 @@ Chart MakeTrialChart(const db::Store& store, std::int64_t trial_id, TrialPlotInf
   }
 
   Chart chart;
-  chart.title = "trial " + std::to_string(trial.id) + " (campaign " + std::to_string(campaign.id) + " '" +
-                campaign.name + "', attempt " + std::to_string(gt.attempt) +
-                (gt.cell_id.empty() ? "" : ", cell " + gt.cell_id) + ")  prediction " +
-                (inf.model_key.empty() ? "-" : inf.model_key) +
-                (inf.prediction_status == "ok" ? "" : " " + inf.prediction_status + prediction_note);
+  chart.title =
+      "trial " + std::to_string(trial.id) + " (campaign " + std::to_string(campaign.id) + " '" +
+      campaign.name + "', attempt " + std::to_string(gt.attempt) +
+      (gt.cell_id.empty() ? "" : ", cell " + gt.cell_id) + ")  prediction " +
+      (inf.model_key.empty() ? "-" : inf.model_key) +
+      (inf.prediction_status == "ok" ? "" : " " + inf.prediction_status + prediction_note);
   chart.x_label = "time since execute started (s)";
   chart.panel_height = 150;
   const char* names[3] = {"x", "y", "z"};
   for (int k = 0; k < 3; ++k)
-    chart.panels.push_back(
-        PosePanel(std::string("object position ") + names[k] + " (gripper frame)", "mm", 1.0, pos[k]));
+    chart.panels.push_back(PosePanel(
+        std::string("object position ") + names[k] + " (gripper frame)", "mm", 1.0, pos[k]));
   char axis_text[96];
-  std::snprintf(axis_text, sizeof axis_text, "object rotation from start, about (%.2f, %.2f, %.2f)", axis.x(),
-                axis.y(), axis.z());
+  std::snprintf(axis_text, sizeof axis_text, "object rotation from start, about (%.2f, %.2f, %.2f)",
+                axis.x(), axis.y(), axis.z());
   chart.panels.push_back(PosePanel(axis_text, "deg", 1.0, angle));
   for (size_t c = 0; c < n_contacts; ++c) {
     Panel p;
-    p.title = (c < n_fingers ? "finger " + std::to_string(c) + " (" + mechanics::ToString(scene.fingers[c].type) + ")"
+    p.title = (c < n_fingers ? "finger " + std::to_string(c) + " (" +
+                                   mechanics::ToString(scene.fingers[c].type) + ")"
                              : std::string("pusher")) +
               " contact force on the object";
     p.y_label = "N";
     p.min_y_span = 1.0;
-    p.series.push_back({"normal observed", normal[c].t_obs, normal[c].v_obs, "#6baed6", true, false});
-    p.series.push_back({"tangential observed", tangential[c].t_obs, tangential[c].v_obs, "#fdae6b", true, false});
-    p.series.push_back({"normal true", normal[c].t_true, normal[c].v_true, "#08519c", false, false});
-    p.series.push_back({"tangential true", tangential[c].t_true, tangential[c].v_true, "#a63603", false, false});
-    p.series.push_back({"normal predicted", normal[c].t_pred, normal[c].v_pred, "#3182bd", false, true});
-    p.series.push_back({"tangential predicted", tangential[c].t_pred, tangential[c].v_pred, "#e6550d", false, true});
+    p.series.push_back(
+        {"normal observed", normal[c].t_obs, normal[c].v_obs, "#6baed6", true, false});
+    p.series.push_back(
+        {"tangential observed", tangential[c].t_obs, tangential[c].v_obs, "#fdae6b", true, false});
+    p.series.push_back(
+        {"normal true", normal[c].t_true, normal[c].v_true, "#08519c", false, false});
+    p.series.push_back(
+        {"tangential true", tangential[c].t_true, tangential[c].v_true, "#a63603", false, false});
+    p.series.push_back(
+        {"normal predicted", normal[c].t_pred, normal[c].v_pred, "#3182bd", false, true});
+    p.series.push_back({"tangential predicted", tangential[c].t_pred, tangential[c].v_pred,
+                        "#e6550d", false, true});
     chart.panels.push_back(std::move(p));
   }
   return chart;

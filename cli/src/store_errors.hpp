@@ -17,8 +17,10 @@ inline int ExitCodeFor(const db::StoreError& e) {
     case K::kBadInput:
     case K::kNotFound:
     case K::kIllegalTransition:
-    case K::kStaleAttempt: return kExitBadInput;
-    default: return kExitStore;
+    case K::kStaleAttempt:
+      return kExitBadInput;
+    default:
+      return kExitStore;
   }
 }
 

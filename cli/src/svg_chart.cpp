@@ -1,8 +1,8 @@
 #include "svg_chart.hpp"
 
 #include <algorithm>
-#include <cmath>
 #include <cctype>
+#include <cmath>
 #include <cstdio>
 #include <limits>
 #include <sstream>
@@ -15,11 +15,20 @@ std::string Escape(const std::string& s) {
   std::string out;
   for (char c : s) {
     switch (c) {
-      case '&': out += "&amp;"; break;
-      case '<': out += "&lt;"; break;
-      case '>': out += "&gt;"; break;
-      case '"': out += "&quot;"; break;
-      default: out += c;
+      case '&':
+        out += "&amp;";
+        break;
+      case '<':
+        out += "&lt;";
+        break;
+      case '>':
+        out += "&gt;";
+        break;
+      case '"':
+        out += "&quot;";
+        break;
+      default:
+        out += c;
     }
   }
   return out;
@@ -196,8 +205,8 @@ std::string RenderSvg(const Chart& chart) {
       }
       svg << "</g>\n";
       if (s.markers) {
-        svg << "<circle cx=\"" << left + plot_w + 22 << "\" cy=\"" << legend_y - 4 << "\" r=\"3\" fill=\""
-            << s.color << "\"/>";
+        svg << "<circle cx=\"" << left + plot_w + 22 << "\" cy=\"" << legend_y - 4
+            << "\" r=\"3\" fill=\"" << s.color << "\"/>";
       } else {
         svg << "<line x1=\"" << left + plot_w + 12 << "\" x2=\"" << left + plot_w + 32 << "\" y1=\""
             << legend_y - 4 << "\" y2=\"" << legend_y - 4 << "\" stroke=\"" << s.color

@@ -9,10 +9,10 @@
 namespace arena::cli {
 
 struct Series {
-  std::string name;                 // legend entry; also the SVG id (sanitised)
-  std::vector<double> x, y;         // same length; non-finite points are skipped
+  std::string name;          // legend entry; also the SVG id (sanitised)
+  std::vector<double> x, y;  // same length; non-finite points are skipped
   std::string color = "#1f77b4";
-  bool markers = false;             // markers instead of a polyline
+  bool markers = false;  // markers instead of a polyline
   bool dashed = false;
 };
 

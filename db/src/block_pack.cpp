@@ -81,15 +81,9 @@ T* Scratch(std::unique_ptr<T[]>* buf, std::size_t* capacity, std::size_t n) {
   return buf->get();
 }
 
-std::uint64_t Zigzag(std::uint64_t r) {
-  return (r << 1) ^ (0 - (r >> 63));
-}
-std::uint64_t Unzigzag(std::uint64_t z) {
-  return (z >> 1) ^ (0 - (z & 1));
-}
-int ByteLength(std::uint64_t z) {
-  return (std::bit_width(z) + 7) / 8;
-}
+std::uint64_t Zigzag(std::uint64_t r) { return (r << 1) ^ (0 - (r >> 63)); }
+std::uint64_t Unzigzag(std::uint64_t z) { return (z >> 1) ^ (0 - (z & 1)); }
+int ByteLength(std::uint64_t z) { return (std::bit_width(z) + 7) / 8; }
 
 // Residual of value i of a column under a predictor (wrapping arithmetic on
 // the bit patterns: exact and invertible whatever the values are).
@@ -119,7 +113,8 @@ bool PackBlock(const void* agt1, std::size_t size, std::string* out) {
   // Worst case: every column kind byte, every length nibble, 8 bytes per
   // value, plus 8 bytes of slack for the unconditional 8-byte stores below.
   const std::size_t worst = kPackedHeader + shape.bytes.size() * (1 + count) +
-                            shape.doubles.size() * (1 + (count + 1) / 2 + 8 * std::size_t{count}) + 8;
+                            shape.doubles.size() * (1 + (count + 1) / 2 + 8 * std::size_t{count}) +
+                            8;
   thread_local std::unique_ptr<unsigned char[]> bytes_buf;
   thread_local std::size_t bytes_capacity = 0;
   unsigned char* const base = Scratch(&bytes_buf, &bytes_capacity, worst);
@@ -134,7 +129,8 @@ bool PackBlock(const void* agt1, std::size_t size, std::string* out) {
   for (std::uint32_t off : shape.bytes) {
     const unsigned char first = rows[off];
     bool constant = true;
-    for (std::uint32_t i = 1; i < count && constant; ++i) constant = rows[i * shape.row + off] == first;
+    for (std::uint32_t i = 1; i < count && constant; ++i)
+      constant = rows[i * shape.row + off] == first;
     if (constant) {
       *p++ = kConstant;
       *p++ = first;
@@ -149,11 +145,13 @@ bool PackBlock(const void* agt1, std::size_t size, std::string* out) {
   const std::size_t columns = shape.doubles.size();
   thread_local std::unique_ptr<std::uint64_t[]> words_buf;
   thread_local std::size_t words_capacity = 0;
-  std::uint64_t* const matrix = Scratch(&words_buf, &words_capacity, (columns + 1) * std::size_t{count});
+  std::uint64_t* const matrix =
+      Scratch(&words_buf, &words_capacity, (columns + 1) * std::size_t{count});
   std::uint64_t* const z = matrix + columns * count;
   for (std::uint32_t i = 0; i < count; ++i) {
     const unsigned char* r = rows + i * shape.row;
-    for (std::size_t j = 0; j < columns; ++j) std::memcpy(&matrix[j * count + i], r + shape.doubles[j], 8);
+    for (std::size_t j = 0; j < columns; ++j)
+      std::memcpy(&matrix[j * count + i], r + shape.doubles[j], 8);
   }
   for (std::size_t j = 0; j < columns; ++j) {
     const std::uint64_t* v = &matrix[j * count];
@@ -214,7 +212,8 @@ std::string UnpackBlock(const void* agt2, std::size_t size) {
   std::uint32_t count = 0;
   std::memcpy(&count, in + 4, 4);
   if (count == 0 || count > kMaxBlockSamples) {
-    Corrupt("claims " + std::to_string(count) + " samples (allowed 1.." + std::to_string(kMaxBlockSamples) + ")");
+    Corrupt("claims " + std::to_string(count) + " samples (allowed 1.." +
+            std::to_string(kMaxBlockSamples) + ")");
   }
   if (in[10] != 0 || in[11] != 0) Corrupt("has unknown flags");
   const Shape shape = MakeShape(in[8], in[9]);
@@ -267,7 +266,8 @@ std::string UnpackBlock(const void* agt2, std::size_t size) {
       for (std::uint32_t i = 0; i < count; ++i) v[i] = c;
       continue;
     }
-    if (kind != kDelta1 && kind != kDelta2) Corrupt("has an unknown column kind " + std::to_string(kind));
+    if (kind != kDelta1 && kind != kDelta2)
+      Corrupt("has an unknown column kind " + std::to_string(kind));
     need((count + 1) / 2);
     const unsigned char* lengths = p;
     p += (count + 1) / 2;
@@ -289,7 +289,8 @@ std::string UnpackBlock(const void* agt2, std::size_t size) {
   if (p != end) Corrupt("has trailing bytes");
   for (std::uint32_t i = 0; i < count; ++i) {
     unsigned char* r = rows + i * shape.row;
-    for (std::size_t j = 0; j < columns; ++j) std::memcpy(r + shape.doubles[j], &matrix[j * count + i], 8);
+    for (std::size_t j = 0; j < columns; ++j)
+      std::memcpy(r + shape.doubles[j], &matrix[j * count + i], 8);
   }
   return raw;
 }

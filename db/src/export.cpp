@@ -27,9 +27,12 @@ using ojson = nlohmann::ordered_json;
 
 const char* ToString(ExportFormat f) {
   switch (f) {
-    case ExportFormat::kHdf5: return "hdf5";
-    case ExportFormat::kCsv: return "csv";
-    case ExportFormat::kJsonl: return "jsonl";
+    case ExportFormat::kHdf5:
+      return "hdf5";
+    case ExportFormat::kCsv:
+      return "csv";
+    case ExportFormat::kJsonl:
+      return "jsonl";
   }
   return "?";
 }
@@ -37,7 +40,9 @@ const char* ToString(ExportFormat f) {
 namespace {
 
 [[noreturn]] void IoError(const std::string& msg) { throw StoreError(StoreError::Kind::kIo, msg); }
-[[noreturn]] void Corrupt(const std::string& msg) { throw StoreError(StoreError::Kind::kCorrupt, msg); }
+[[noreturn]] void Corrupt(const std::string& msg) {
+  throw StoreError(StoreError::Kind::kCorrupt, msg);
+}
 
 struct Column {
   std::string name;
@@ -61,8 +66,9 @@ StreamShape ShapeFromScene(const std::string& scene_json, const Sample* first) {
     if (scene.contains("fingers") && scene["fingers"].is_array()) {
       for (std::size_t i = 0; i < scene["fingers"].size(); ++i) {
         const auto& f = scene["fingers"][i];
-        fingers.push_back(f.contains("name") && f["name"].is_string() ? f["name"].get<std::string>()
-                                                                      : "finger" + std::to_string(i));
+        fingers.push_back(f.contains("name") && f["name"].is_string()
+                              ? f["name"].get<std::string>()
+                              : "finger" + std::to_string(i));
       }
     }
     pusher = scene.contains("pusher") && scene["pusher"].is_object();
@@ -86,16 +92,22 @@ StreamShape ShapeFromScene(const std::string& scene_json, const Sample* first) {
 }
 
 void AddPose(std::vector<Column>* c, const std::string& p, const std::string& what) {
-  for (const char* a : {"x", "y", "z"}) c->push_back({p + a, "m", what + " position, gripper frame G"});
-  for (const char* a : {"qw", "qx", "qy", "qz"}) c->push_back({p + a, "1", what + " orientation quaternion (w, x, y, z) in G"});
+  for (const char* a : {"x", "y", "z"})
+    c->push_back({p + a, "m", what + " position, gripper frame G"});
+  for (const char* a : {"qw", "qx", "qy", "qz"})
+    c->push_back({p + a, "1", what + " orientation quaternion (w, x, y, z) in G"});
 }
 void AddTwist(std::vector<Column>* c, const std::string& p, const std::string& what) {
-  for (const char* a : {"vx", "vy", "vz"}) c->push_back({p + a, "m/s", what + " linear velocity in G"});
-  for (const char* a : {"wx", "wy", "wz"}) c->push_back({p + a, "rad/s", what + " angular velocity in G"});
+  for (const char* a : {"vx", "vy", "vz"})
+    c->push_back({p + a, "m/s", what + " linear velocity in G"});
+  for (const char* a : {"wx", "wy", "wz"})
+    c->push_back({p + a, "rad/s", what + " angular velocity in G"});
 }
 void AddWrench(std::vector<Column>* c, const std::string& p, const std::string& what) {
-  for (const char* a : {"fx", "fy", "fz"}) c->push_back({p + a, "N", what + " force on the object in G"});
-  for (const char* a : {"tx", "ty", "tz"}) c->push_back({p + a, "N m", what + " torque about the contact point in G"});
+  for (const char* a : {"fx", "fy", "fz"})
+    c->push_back({p + a, "N", what + " force on the object in G"});
+  for (const char* a : {"tx", "ty", "tz"})
+    c->push_back({p + a, "N m", what + " torque about the contact point in G"});
 }
 
 std::vector<Column> TrueColumns(const StreamShape& s) {
@@ -115,7 +127,9 @@ std::vector<Column> TrueColumns(const StreamShape& s) {
 std::vector<Column> ObservedColumns(const StreamShape& s) {
   std::vector<Column> c;
   c.push_back({"t", "s", "time since the execute phase started"});
-  c.push_back({"valid", "1", "1 if the sensors delivered this sample, 0 if dropped (then the values are not measurements)"});
+  c.push_back({"valid", "1",
+               "1 if the sensors delivered this sample, 0 if dropped (then the values are not "
+               "measurements)"});
   AddPose(&c, "", "object as seen by motion capture");
   AddWrench(&c, "pusher_", "pusher F/T sensor");
   for (const auto& n : s.finger_names) AddWrench(&c, n + "_", "finger '" + n + "' F/T sensor");
@@ -129,7 +143,8 @@ void FlattenTrue(const Sample& s, std::size_t contacts, std::vector<double>* row
   row->insert(row->end(), s.object_twist.begin(), s.object_twist.end());
   row->insert(row->end(), s.pusher_pose.begin(), s.pusher_pose.end());
   row->insert(row->end(), s.pusher_twist.begin(), s.pusher_twist.end());
-  if (s.contacts.size() != contacts) Corrupt("export: a sample's contact count changes within the trial");
+  if (s.contacts.size() != contacts)
+    Corrupt("export: a sample's contact count changes within the trial");
   for (const auto& c : s.contacts) {
     row->insert(row->end(), c.force.begin(), c.force.end());
     row->insert(row->end(), c.torque.begin(), c.torque.end());
@@ -173,7 +188,8 @@ void WriteText(const fs::path& p, const std::string& text) {
   if (!out) IoError("export: cannot write '" + p.string() + "' (disk full?)");
 }
 
-std::string StreamCsv(const std::vector<Column>& cols, const std::vector<std::vector<double>>& rows) {
+std::string StreamCsv(const std::vector<Column>& cols,
+                      const std::vector<std::vector<double>>& rows) {
   std::string out;
   for (std::size_t i = 0; i < cols.size(); ++i) {
     if (i) out.push_back(',');
@@ -190,7 +206,8 @@ std::string StreamCsv(const std::vector<Column>& cols, const std::vector<std::ve
   return out;
 }
 
-std::string StreamJsonl(const std::vector<Column>& cols, const std::vector<std::vector<double>>& rows) {
+std::string StreamJsonl(const std::vector<Column>& cols,
+                        const std::vector<std::vector<double>>& rows) {
   std::string out;
   for (const auto& r : rows) {
     out.push_back('{');
@@ -244,12 +261,12 @@ void H5ScalarAttr(hid_t obj, const std::string& name, const Value& v) {
   if (std::holds_alternative<std::monostate>(v)) return;  // missing: no attribute
   H5Handle space(H5Screate(H5S_SCALAR), H5Sclose, "create scalar space");
   if (const auto* i = std::get_if<std::int64_t>(&v)) {
-    H5Handle a(H5Acreate2(obj, name.c_str(), H5T_STD_I64LE, space.id, H5P_DEFAULT, H5P_DEFAULT), H5Aclose,
-               "create attribute " + name);
+    H5Handle a(H5Acreate2(obj, name.c_str(), H5T_STD_I64LE, space.id, H5P_DEFAULT, H5P_DEFAULT),
+               H5Aclose, "create attribute " + name);
     H5Check(H5Awrite(a.id, H5T_NATIVE_INT64, i), "write attribute " + name);
   } else if (const auto* d = std::get_if<double>(&v)) {
-    H5Handle a(H5Acreate2(obj, name.c_str(), H5T_IEEE_F64LE, space.id, H5P_DEFAULT, H5P_DEFAULT), H5Aclose,
-               "create attribute " + name);
+    H5Handle a(H5Acreate2(obj, name.c_str(), H5T_IEEE_F64LE, space.id, H5P_DEFAULT, H5P_DEFAULT),
+               H5Aclose, "create attribute " + name);
     H5Check(H5Awrite(a.id, H5T_NATIVE_DOUBLE, d), "write attribute " + name);
   } else {
     const auto& s = std::get<std::string>(v);
@@ -315,7 +332,8 @@ const std::map<std::string, std::pair<std::string, std::string>>& IndexColumnDoc
       {"pusher_speed", {"m/s", "|pusher velocity| relative to the gripper"}},
       {"pusher_angular_speed", {"rad/s", "|pusher angular velocity|"}},
       {"duration", {"s", "scene duration"}},
-      {"start_position_error", {"m", "observed start position after the preceding reset minus nominal"}},
+      {"start_position_error",
+       {"m", "observed start position after the preceding reset minus nominal"}},
       {"start_angle_error", {"rad", "angle between observed start and nominal orientation"}},
       {"reset_ok", {"1", "1 if the reset after this trial was verified"}},
       {"samples", {"1", "samples in the streams"}},
@@ -341,8 +359,10 @@ const std::map<std::string, std::pair<std::string, std::string>>& IndexColumnDoc
 }
 
 constexpr const char* kIndexSql =
-    "SELECT t.id AS trial_id, t.idx, t.condition, t.replicate, t.seed, t.state, t.attempt, t.cell_id,"
-    " t.outcome, t.object_shape, t.object_mass, t.grip_force, t.finger_type, t.finger_count, t.finger_mu,"
+    "SELECT t.id AS trial_id, t.idx, t.condition, t.replicate, t.seed, t.state, t.attempt, "
+    "t.cell_id,"
+    " t.outcome, t.object_shape, t.object_mass, t.grip_force, t.finger_type, t.finger_count, "
+    "t.finger_mu,"
     " t.pusher_type, t.pusher_mu, t.pusher_speed, t.pusher_angular_speed, t.duration,"
     " t.start_position_error, t.start_angle_error, t.reset_ok, s.samples, s.observed_samples,"
     " s.duration_s, s.displacement_m, s.rotation_rad, s.max_contact_force_n, s.stick_fraction,"
@@ -356,16 +376,21 @@ constexpr const char* kIndexSql =
 
 Value ColumnValue(const detail::Stmt& s, int c) {
   switch (sqlite3_column_type(s.get(), c)) {
-    case SQLITE_NULL: return std::monostate{};
-    case SQLITE_INTEGER: return static_cast<std::int64_t>(s.Int(c));
-    case SQLITE_FLOAT: return s.Real(c);
-    default: return s.Text(c);
+    case SQLITE_NULL:
+      return std::monostate{};
+    case SQLITE_INTEGER:
+      return static_cast<std::int64_t>(s.Int(c));
+    case SQLITE_FLOAT:
+      return s.Real(c);
+    default:
+      return s.Text(c);
   }
 }
 
 ojson ColumnsJson(const std::vector<Column>& cols) {
   ojson a = ojson::array();
-  for (const auto& c : cols) a.push_back({{"name", c.name}, {"unit", c.unit}, {"meaning", c.meaning}});
+  for (const auto& c : cols)
+    a.push_back({{"name", c.name}, {"unit", c.unit}, {"meaning", c.meaning}});
   return a;
 }
 
@@ -445,7 +470,8 @@ ExportReport ExportCampaign(const Store& store, const ExportOptions& o) {
     h5 = std::make_unique<H5Handle>(
         H5Fcreate((dir / "dataset.h5").c_str(), H5F_ACC_EXCL, H5P_DEFAULT, H5P_DEFAULT), H5Fclose,
         "create " + (dir / "dataset.h5").string());
-    H5Handle g(H5Gcreate2(h5->id, "trials", H5P_DEFAULT, H5P_DEFAULT, H5P_DEFAULT), H5Gclose, "create /trials");
+    H5Handle g(H5Gcreate2(h5->id, "trials", H5P_DEFAULT, H5P_DEFAULT, H5P_DEFAULT), H5Gclose,
+               "create /trials");
   }
 
   std::vector<double> row;
@@ -462,7 +488,8 @@ ExportReport ExportCampaign(const Store& store, const ExportOptions& o) {
       obs_cols_first = obs_cols;
     }
     if (sample_rate == 0 && samples.size() >= 2 && samples.back().t > samples.front().t) {
-      sample_rate = static_cast<double>(samples.size() - 1) / (samples.back().t - samples.front().t);
+      sample_rate =
+          static_cast<double>(samples.size() - 1) / (samples.back().t - samples.front().t);
     }
     std::vector<std::vector<double>> true_rows, obs_rows;
     true_rows.reserve(samples.size());
@@ -474,20 +501,24 @@ ExportReport ExportCampaign(const Store& store, const ExportOptions& o) {
       FlattenObserved(s, nfv, &row);
       obs_rows.push_back(row);
     }
-    ojson tm = {{"trial_id", trial_id}, {"samples", samples.size()},
-                {"true_columns", true_cols.size()}, {"observed_columns", obs_cols.size()}};
+    ojson tm = {{"trial_id", trial_id},
+                {"samples", samples.size()},
+                {"true_columns", true_cols.size()},
+                {"observed_columns", obs_cols.size()}};
     const std::string id = std::to_string(trial_id);
     if (o.format == ExportFormat::kHdf5) {
       const std::string gname = "trials/" + id;
       H5Handle g(H5Gcreate2(h5->id, gname.c_str(), H5P_DEFAULT, H5P_DEFAULT, H5P_DEFAULT), H5Gclose,
                  "create group /" + gname);
-      for (std::size_t c = 0; c < index.columns.size(); ++c) H5ScalarAttr(g.id, index.columns[c], irow[c]);
+      for (std::size_t c = 0; c < index.columns.size(); ++c)
+        H5ScalarAttr(g.id, index.columns[c], irow[c]);
       H5Matrix(g.id, "true", true_cols, true_rows);
       H5Matrix(g.id, "observed", obs_cols, obs_rows);
       tm["group"] = "/" + gname;
     } else {
       const std::string ext = o.format == ExportFormat::kCsv ? ".csv" : ".jsonl";
-      const std::string tf = "streams/" + id + "_true" + ext, of = "streams/" + id + "_observed" + ext;
+      const std::string tf = "streams/" + id + "_true" + ext,
+                        of = "streams/" + id + "_observed" + ext;
       if (o.format == ExportFormat::kCsv) {
         WriteText(dir / tf, StreamCsv(true_cols, true_rows));
         WriteText(dir / of, StreamCsv(obs_cols, obs_rows));
@@ -560,14 +591,22 @@ ExportReport ExportCampaign(const Store& store, const ExportOptions& o) {
       {"arena_version", o.arena_version},
       {"arena_commit", o.arena_commit},
       {"store_schema_version", store.FileSchemaVersion()},
-      {"campaign", {{"id", campaign.id}, {"name", campaign.name}, {"state", ToString(campaign.state)},
-                    {"seed", std::to_string(campaign.seed)}, {"spec", spec}}},
-      {"frames", {{"G", "gripper frame at the start of the trial; every pose, twist and wrench is "
-                        "expressed in it; quaternions are (w, x, y, z)"}}},
+      {"campaign",
+       {{"id", campaign.id},
+        {"name", campaign.name},
+        {"state", ToString(campaign.state)},
+        {"seed", std::to_string(campaign.seed)},
+        {"spec", spec}}},
+      {"frames",
+       {{"G",
+         "gripper frame at the start of the trial; every pose, twist and wrench is "
+         "expressed in it; quaternions are (w, x, y, z)"}}},
       {"sample_rate_hz", std::round(sample_rate * 1000) / 1000},
       {"counts", {{"trials", report.trials}, {"samples", report.samples}, {"files", files.size()}}},
-      {"columns", {{"trials", index_cols}, {"true", ColumnsJson(true_cols_first)},
-                   {"observed", ColumnsJson(obs_cols_first)}}},
+      {"columns",
+       {{"trials", index_cols},
+        {"true", ColumnsJson(true_cols_first)},
+        {"observed", ColumnsJson(obs_cols_first)}}},
       {"missing_values", "CSV: empty field; JSON: null; HDF5: attribute absent"},
       {"trials", trials_manifest},
       {"files", files},
@@ -602,7 +641,8 @@ ExportReport VerifyExport(const std::string& dir_text) {
   } catch (const nlohmann::json::exception& e) {
     Corrupt(std::string("verify: manifest.json is not valid JSON: ") + e.what());
   }
-  if (m.value("format", "") != "arena-dataset") Corrupt("verify: manifest.json is not an arena dataset");
+  if (m.value("format", "") != "arena-dataset")
+    Corrupt("verify: manifest.json is not an arena dataset");
   if (m.value("format_version", 0) > kDatasetFormatVersion) {
     Corrupt("verify: dataset format version " + std::to_string(m.value("format_version", 0)) +
             " is newer than this arena's");
@@ -626,7 +666,8 @@ ExportReport VerifyExport(const std::string& dir_text) {
   for (const auto& e : fs::recursive_directory_iterator(dir)) {
     if (!e.is_regular_file()) continue;
     const auto rel = fs::relative(e.path(), dir).generic_string();
-    if (rel != "manifest.json" && !listed.count(rel)) Corrupt("verify: '" + rel + "' is not in the manifest");
+    if (rel != "manifest.json" && !listed.count(rel))
+      Corrupt("verify: '" + rel + "' is not in the manifest");
   }
   const std::string format = m.value("export_format", "");
   std::int64_t samples = 0;
@@ -642,7 +683,8 @@ ExportReport VerifyExport(const std::string& dir_text) {
         hsize_t dims[2] = {0, 0};
         if (H5Sget_simple_extent_ndims(space.id) != 2) Corrupt("verify: " + name + " is not 2-D");
         H5Sget_simple_extent_dims(space.id, dims, nullptr);
-        if (dims[0] != t.at("samples").get<std::uint64_t>()) Corrupt("verify: " + name + " sample count");
+        if (dims[0] != t.at("samples").get<std::uint64_t>())
+          Corrupt("verify: " + name + " sample count");
       }
       samples += t.at("samples").get<std::int64_t>();
     }
@@ -652,7 +694,8 @@ ExportReport VerifyExport(const std::string& dir_text) {
       const auto n = t.at("samples").get<std::uint64_t>();
       for (const char* key : {"true_file", "observed_file"}) {
         const auto path = t.at(key).get<std::string>();
-        if (CountLines(dir / path) != n + (csv ? 1 : 0)) Corrupt("verify: '" + path + "' sample count");
+        if (CountLines(dir / path) != n + (csv ? 1 : 0))
+          Corrupt("verify: '" + path + "' sample count");
       }
       samples += static_cast<std::int64_t>(n);
     }

@@ -25,8 +25,10 @@ bool HasGroundTruthState(TrialState s) {
     case TrialState::kResetDone:
     case TrialState::kResetFailed:
     case TrialState::kPredicted:
-    case TrialState::kDone: return true;
-    default: return false;
+    case TrialState::kDone:
+      return true;
+    default:
+      return false;
   }
 }
 
@@ -44,7 +46,9 @@ internal::TrialRow CheckIngestable(const Store::Impl& impl, std::int64_t trial_i
   return row;
 }
 
-double Norm3(const std::array<double, 3>& v) { return std::sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]); }
+double Norm3(const std::array<double, 3>& v) {
+  return std::sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
+}
 
 double QuatAngle(const double* a, const double* b) {
   const double na = std::sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2] + a[3] * a[3]);
@@ -112,8 +116,12 @@ struct Ingest::Impl {
         "INSERT INTO gt_chunks(stream_id, seq, first_sample, samples, t_first, t_last, data)"
         " VALUES(?,?,?,?,?,?,?)");
     for (const auto& c : ready) {
-      s->Bind(1, stream_id).Bind(2, next_seq++).Bind(3, c.first_sample)
-          .Bind(4, static_cast<std::int64_t>(c.samples)).Bind(5, c.t_first).Bind(6, c.t_last)
+      s->Bind(1, stream_id)
+          .Bind(2, next_seq++)
+          .Bind(3, c.first_sample)
+          .Bind(4, static_cast<std::int64_t>(c.samples))
+          .Bind(5, c.t_first)
+          .Bind(6, c.t_last)
           .BindBlob(7, c.data.data(), c.data.size());
       s->Run();
       s->Reset();
@@ -138,7 +146,8 @@ std::int64_t Ingest::samples() const { return impl_->total; }
 
 void Ingest::Add(const Sample& s) {
   auto& m = *impl_;
-  if (m.finished) throw StoreError(StoreError::Kind::kBadInput, "Ingest::Add: the stream is finished");
+  if (m.finished)
+    throw StoreError(StoreError::Kind::kBadInput, "Ingest::Add: the stream is finished");
   const std::string bad = CheckSample(s);
   if (!bad.empty()) {
     throw StoreError(StoreError::Kind::kBadInput,
@@ -158,7 +167,8 @@ void Ingest::Add(const Sample& s) {
   for (std::size_t c = 0; c < s.contacts.size(); ++c) {
     const double f = Norm3(s.contacts[c].force);
     m.max_contact_force = std::max(m.max_contact_force, f);
-    if (m.has_pusher && c + 1 == s.contacts.size()) m.max_pusher_force = std::max(m.max_pusher_force, f);
+    if (m.has_pusher && c + 1 == s.contacts.size())
+      m.max_pusher_force = std::max(m.max_pusher_force, f);
     ++m.modes[static_cast<int>(s.contacts[c].mode)];
   }
   if (s.observed_valid) {
@@ -200,7 +210,8 @@ void Ingest::Add(const std::vector<Sample>& samples) {
 void Ingest::Poll() {
   auto& m = *impl_;
   if (m.buffered == 0) return;
-  const double age = std::chrono::duration<double>(std::chrono::steady_clock::now() - m.oldest).count();
+  const double age =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - m.oldest).count();
   if (age >= m.options.max_commit_interval_s) m.Flush();
 }
 
@@ -209,7 +220,8 @@ void Ingest::Flush() { impl_->Flush(); }
 std::int64_t Ingest::Finish(const std::string& outcome) {
   auto& m = *impl_;
   if (m.finished) throw StoreError(StoreError::Kind::kBadInput, "Ingest::Finish: already finished");
-  if (outcome.empty()) throw StoreError(StoreError::Kind::kBadInput, "Ingest::Finish: outcome is empty");
+  if (outcome.empty())
+    throw StoreError(StoreError::Kind::kBadInput, "Ingest::Finish: outcome is empty");
   m.CloseChunk();
   Tx tx(m.store->db, true);
   const auto row = CheckIngestable(*m.store, m.trial_id, m.attempt, "Ingest::Finish");
@@ -220,16 +232,19 @@ std::int64_t Ingest::Finish(const std::string& outcome) {
     u->Bind(1, m.stream_id).Bind(2, m.trial_id).Run();
   }
   {  // Replace, never duplicate: drop every other stream of this (trial, attempt).
-    auto d = m.store->Prepare("DELETE FROM gt_streams WHERE trial_id = ? AND attempt = ? AND id != ?");
+    auto d =
+        m.store->Prepare("DELETE FROM gt_streams WHERE trial_id = ? AND attempt = ? AND id != ?");
     d->Bind(1, m.trial_id).Bind(2, m.attempt).Bind(3, m.stream_id).Run();
   }
   {
-    auto u = m.store->Prepare("UPDATE gt_streams SET complete = 1, samples = ?, completed_at = ? WHERE id = ?");
+    auto u = m.store->Prepare(
+        "UPDATE gt_streams SET complete = 1, samples = ?, completed_at = ? WHERE id = ?");
     u->Bind(1, m.total).Bind(2, now).Bind(3, m.stream_id).Run();
   }
   {
     auto s = m.store->Prepare(
-        "INSERT INTO gt_summary(stream_id, trial_id, attempt, samples, observed_samples, duration_s,"
+        "INSERT INTO gt_summary(stream_id, trial_id, attempt, samples, observed_samples, "
+        "duration_s,"
         " final_x, final_y, final_z, final_qw, final_qx, final_qy, final_qz, displacement_m,"
         " rotation_rad, max_contact_force_n, max_pusher_force_n, stick_fraction, slide_fraction,"
         " separate_fraction, observed_position_rmse_m, observed_position_max_error_m)"
@@ -249,7 +264,10 @@ std::int64_t Ingest::Finish(const std::string& outcome) {
     b << m.max_contact_force << m.max_pusher_force;
     const double contact_samples = static_cast<double>(m.modes[0] + m.modes[1] + m.modes[2]);
     for (int i = 0; i < 3; ++i) {
-      if (contact_samples > 0) b << m.modes[i] / contact_samples; else b << std::nullopt;
+      if (contact_samples > 0)
+        b << m.modes[i] / contact_samples;
+      else
+        b << std::nullopt;
     }
     if (m.observed > 0) {
       b << std::sqrt(m.obs_sq_sum / m.observed) << m.obs_max;
@@ -259,10 +277,9 @@ std::int64_t Ingest::Finish(const std::string& outcome) {
     s->Run();
   }
   if (row.state == TrialState::kDispatched) {
-    internal::WriteTransition(*m.store, m.trial_id, m.attempt, row.state, TrialState::kExecuted,
-                              row.cell_id,
-                              "ground truth complete (" + std::to_string(m.total) + " samples)",
-                              "Ingest::Finish");
+    internal::WriteTransition(
+        *m.store, m.trial_id, m.attempt, row.state, TrialState::kExecuted, row.cell_id,
+        "ground truth complete (" + std::to_string(m.total) + " samples)", "Ingest::Finish");
     auto u = m.store->Prepare("UPDATE trials SET outcome = ?, executed_at = ? WHERE id = ?");
     u->Bind(1, outcome).Bind(2, now).Bind(3, m.trial_id).Run();
   }
@@ -274,7 +291,8 @@ std::int64_t Ingest::Finish(const std::string& outcome) {
 std::unique_ptr<Ingest> Store::BeginIngest(std::int64_t trial_id, int attempt,
                                            const IngestOptions& options) {
   impl_->RequireWritable("BeginIngest");
-  if (options.samples_per_chunk < 1 || options.samples_per_chunk > static_cast<int>(kMaxBlockSamples)) {
+  if (options.samples_per_chunk < 1 ||
+      options.samples_per_chunk > static_cast<int>(kMaxBlockSamples)) {
     throw StoreError(StoreError::Kind::kBadInput, "BeginIngest: samples_per_chunk must be in [1, " +
                                                       std::to_string(kMaxBlockSamples) + "]");
   }
@@ -282,7 +300,8 @@ std::unique_ptr<Ingest> Store::BeginIngest(std::int64_t trial_id, int attempt,
     throw StoreError(StoreError::Kind::kBadInput, "BeginIngest: samples_per_commit must be >= 1");
   }
   if (!std::isfinite(options.max_commit_interval_s) || options.max_commit_interval_s < 0) {
-    throw StoreError(StoreError::Kind::kBadInput, "BeginIngest: max_commit_interval_s must be finite and >= 0");
+    throw StoreError(StoreError::Kind::kBadInput,
+                     "BeginIngest: max_commit_interval_s must be finite and >= 0");
   }
   auto m = std::make_unique<Ingest::Impl>();
   m->store = impl_.get();
@@ -298,7 +317,8 @@ std::unique_ptr<Ingest> Store::BeginIngest(std::int64_t trial_id, int attempt,
     m->has_pusher = p->Int(0) != 0;
   }
   auto s = impl_->Prepare(
-      "INSERT INTO gt_streams(trial_id, attempt, cell_id, complete, samples, started_at) VALUES(?,?,?,0,0,?)");
+      "INSERT INTO gt_streams(trial_id, attempt, cell_id, complete, samples, started_at) "
+      "VALUES(?,?,?,0,0,?)");
   s->Bind(1, trial_id).Bind(2, attempt).Bind(3, row.cell_id).Bind(4, impl_->Now()).Run();
   m->stream_id = static_cast<std::int64_t>(sqlite3_last_insert_rowid(impl_->db));
   tx.Commit();
@@ -318,7 +338,8 @@ std::vector<Sample> internal::ReadStreamSamples(const Store::Impl& impl, std::in
   if (static_cast<std::int64_t>(out.size()) != expected) {
     throw StoreError(StoreError::Kind::kCorrupt,
                      std::string(function) + ": stream " + std::to_string(stream_id) + " has " +
-                         std::to_string(out.size()) + " samples, expected " + std::to_string(expected));
+                         std::to_string(out.size()) + " samples, expected " +
+                         std::to_string(expected));
   }
   return out;
 }
@@ -330,11 +351,13 @@ GroundTruth Store::ReadGroundTruth(std::int64_t trial_id) const {
       " LEFT JOIN gt_streams g ON g.id = t.gt_stream_id WHERE t.id = ?");
   t->Bind(1, trial_id);
   if (!t->Step()) {
-    throw StoreError(StoreError::Kind::kNotFound, "ReadGroundTruth: no trial " + std::to_string(trial_id));
+    throw StoreError(StoreError::Kind::kNotFound,
+                     "ReadGroundTruth: no trial " + std::to_string(trial_id));
   }
   if (t->IsNull(0)) {
-    throw StoreError(StoreError::Kind::kNotFound,
-                     "ReadGroundTruth: trial " + std::to_string(trial_id) + " has no ground truth yet");
+    throw StoreError(
+        StoreError::Kind::kNotFound,
+        "ReadGroundTruth: trial " + std::to_string(trial_id) + " has no ground truth yet");
   }
   GroundTruth gt;
   gt.trial_id = trial_id;

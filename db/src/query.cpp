@@ -18,24 +18,28 @@ namespace {
 int Authorizer(void*, int action, const char* a1, const char* a2, const char*, const char*) {
   switch (action) {
     case SQLITE_ATTACH:
-    case SQLITE_DETACH: return SQLITE_DENY;
+    case SQLITE_DETACH:
+      return SQLITE_DENY;
     case SQLITE_PRAGMA: {
-      static const char* kAllowed[] = {"table_info", "table_xinfo", "index_list", "index_info",
-                                       "index_xinfo", "table_list", "foreign_key_list",
-                                       "integrity_check", "quick_check", "foreign_key_check",
-                                       "database_list", "collation_list", "function_list"};
+      static const char* kAllowed[] = {"table_info",        "table_xinfo",     "index_list",
+                                       "index_info",        "index_xinfo",     "table_list",
+                                       "foreign_key_list",  "integrity_check", "quick_check",
+                                       "foreign_key_check", "database_list",   "collation_list",
+                                       "function_list"};
       for (const char* name : kAllowed) {
         if (a1 && std::strcmp(a1, name) == 0) return SQLITE_OK;
       }
       // Reading a setting (no argument) is fine; setting one is not.
-      if (a1 && !a2 && (std::strcmp(a1, "user_version") == 0 || std::strcmp(a1, "schema_version") == 0 ||
-                        std::strcmp(a1, "journal_mode") == 0 || std::strcmp(a1, "page_count") == 0 ||
-                        std::strcmp(a1, "page_size") == 0 || std::strcmp(a1, "freelist_count") == 0)) {
+      if (a1 && !a2 &&
+          (std::strcmp(a1, "user_version") == 0 || std::strcmp(a1, "schema_version") == 0 ||
+           std::strcmp(a1, "journal_mode") == 0 || std::strcmp(a1, "page_count") == 0 ||
+           std::strcmp(a1, "page_size") == 0 || std::strcmp(a1, "freelist_count") == 0)) {
         return SQLITE_OK;
       }
       return SQLITE_DENY;
     }
-    default: return SQLITE_OK;
+    default:
+      return SQLITE_OK;
   }
 }
 
@@ -104,9 +108,11 @@ QueryResult RunQuery(const Store& store, const std::string& sql_in, const QueryF
   std::unique_ptr<sqlite3_stmt, int (*)(sqlite3_stmt*)> stmt(raw, sqlite3_finalize);
   if (rc != SQLITE_OK) {
     const std::string msg = sqlite3_errmsg(db);
-    throw StoreError(StoreError::Kind::kBadInput,
-                     "query: " + msg + (rc == SQLITE_AUTH ? " (ATTACH, DETACH and settings pragmas are refused)" : "") +
-                         "; tables and columns: db/README.md");
+    throw StoreError(
+        StoreError::Kind::kBadInput,
+        "query: " + msg +
+            (rc == SQLITE_AUTH ? " (ATTACH, DETACH and settings pragmas are refused)" : "") +
+            "; tables and columns: db/README.md");
   }
   if (!stmt) throw StoreError(StoreError::Kind::kBadInput, "query: the SQL text is empty");
   if (tail && !Trim(tail).empty()) {
@@ -136,15 +142,23 @@ QueryResult RunQuery(const Store& store, const std::string& sql_in, const QueryF
     row.reserve(static_cast<std::size_t>(ncol));
     for (int c = 0; c < ncol; ++c) {
       switch (sqlite3_column_type(stmt.get(), c)) {
-        case SQLITE_NULL: row.emplace_back(std::monostate{}); break;
-        case SQLITE_INTEGER: row.emplace_back(static_cast<std::int64_t>(sqlite3_column_int64(stmt.get(), c))); break;
-        case SQLITE_FLOAT: row.emplace_back(sqlite3_column_double(stmt.get(), c)); break;
+        case SQLITE_NULL:
+          row.emplace_back(std::monostate{});
+          break;
+        case SQLITE_INTEGER:
+          row.emplace_back(static_cast<std::int64_t>(sqlite3_column_int64(stmt.get(), c)));
+          break;
+        case SQLITE_FLOAT:
+          row.emplace_back(sqlite3_column_double(stmt.get(), c));
+          break;
         case SQLITE_BLOB:
-          row.emplace_back("<blob " + std::to_string(sqlite3_column_bytes(stmt.get(), c)) + " bytes>");
+          row.emplace_back("<blob " + std::to_string(sqlite3_column_bytes(stmt.get(), c)) +
+                           " bytes>");
           break;
         default: {
           const auto* p = sqlite3_column_text(stmt.get(), c);
-          row.emplace_back(std::string(reinterpret_cast<const char*>(p), sqlite3_column_bytes(stmt.get(), c)));
+          row.emplace_back(
+              std::string(reinterpret_cast<const char*>(p), sqlite3_column_bytes(stmt.get(), c)));
         }
       }
     }
@@ -212,10 +226,14 @@ std::string FormatJson(const QueryResult& r) {
     nlohmann::ordered_json o = nlohmann::ordered_json::object();
     for (std::size_t c = 0; c < row.size(); ++c) {
       const auto& v = row[c];
-      if (std::holds_alternative<std::monostate>(v)) o[r.columns[c]] = nullptr;
-      else if (const auto* i = std::get_if<std::int64_t>(&v)) o[r.columns[c]] = *i;
-      else if (const auto* d = std::get_if<double>(&v)) o[r.columns[c]] = *d;
-      else o[r.columns[c]] = std::get<std::string>(v);
+      if (std::holds_alternative<std::monostate>(v))
+        o[r.columns[c]] = nullptr;
+      else if (const auto* i = std::get_if<std::int64_t>(&v))
+        o[r.columns[c]] = *i;
+      else if (const auto* d = std::get_if<double>(&v))
+        o[r.columns[c]] = *d;
+      else
+        o[r.columns[c]] = std::get<std::string>(v);
     }
     rows.push_back(std::move(o));
   }

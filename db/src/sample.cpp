@@ -45,16 +45,21 @@ struct Reader {
     p += n;
   }
   template <std::size_t N>
-  void GetArray(std::array<double, N>* a) { Get(a->data(), N * sizeof(double)); }
+  void GetArray(std::array<double, N>* a) {
+    Get(a->data(), N * sizeof(double));
+  }
 };
 
 }  // namespace
 
 const char* ToString(ContactMode mode) {
   switch (mode) {
-    case ContactMode::kStick: return "stick";
-    case ContactMode::kSlide: return "slide";
-    case ContactMode::kSeparate: return "separate";
+    case ContactMode::kStick:
+      return "stick";
+    case ContactMode::kSlide:
+      return "slide";
+    case ContactMode::kSeparate:
+      return "separate";
   }
   return "?";
 }
@@ -97,7 +102,8 @@ std::string CheckSample(const Sample& s) {
     if (!(e = CheckArray(s.contacts[c].torque, (name + "torque").c_str())).empty()) return e;
     if (static_cast<int>(s.contacts[c].mode) > 2) return name + "mode is not stick/slide/separate";
   }
-  if (s.observed_finger_wrenches.size() > 255) return "observed_finger_wrenches has more than 255 values";
+  if (s.observed_finger_wrenches.size() > 255)
+    return "observed_finger_wrenches has more than 255 values";
   for (std::size_t i = 0; i < s.observed_finger_wrenches.size(); ++i) {
     if (!std::isfinite(s.observed_finger_wrenches[i])) {
       return "observed_finger_wrenches[" + std::to_string(i) + "] is not finite";
@@ -164,7 +170,8 @@ std::vector<Sample> DecodeSamples(const void* data, std::size_t size) {
   char magic[4];
   r.Get(magic, 4);
   if (std::memcmp(magic, kMagic, 4) != 0) {
-    throw StoreError(StoreError::Kind::kCorrupt, "DecodeSamples: not a ground-truth block (bad magic)");
+    throw StoreError(StoreError::Kind::kCorrupt,
+                     "DecodeSamples: not a ground-truth block (bad magic)");
   }
   std::uint32_t n = 0;
   r.Get(&n, 4);

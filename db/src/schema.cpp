@@ -3,10 +3,10 @@
 // runs in one transaction together with the bump of user_version and its row
 // in schema_migrations, so a crash mid-migration leaves the previous version.
 #include <algorithm>
+#include <chrono>
 #include <filesystem>
 #include <string>
 #include <thread>
-#include <chrono>
 #include <vector>
 
 #include "sqlite_util.hpp"
@@ -312,9 +312,10 @@ std::unique_ptr<Store> Store::Open(const std::string& path, const StoreOptions& 
   }
   const int ps = options.new_file_page_size;
   if (ps < 512 || ps > 65536 || (ps & (ps - 1)) != 0) {
-    throw StoreError(StoreError::Kind::kBadInput,
-                     "Store::Open: new_file_page_size must be a power of two in [512, 65536] (got " +
-                         std::to_string(ps) + ")");
+    throw StoreError(
+        StoreError::Kind::kBadInput,
+        "Store::Open: new_file_page_size must be a power of two in [512, 65536] (got " +
+            std::to_string(ps) + ")");
   }
   auto impl = std::make_unique<Impl>();
   impl->path = path;
@@ -331,10 +332,10 @@ std::unique_ptr<Store> Store::Open(const std::string& path, const StoreOptions& 
   }
   const int rc = sqlite3_open_v2(path.c_str(), &impl->db, flags, nullptr);
   if (rc != SQLITE_OK) {
-    std::string msg = "Store::Open: cannot open '" + path + "': " +
-                      (impl->db ? sqlite3_errmsg(impl->db) : sqlite3_errstr(rc));
+    std::string msg = "Store::Open: cannot open '" + path +
+                      "': " + (impl->db ? sqlite3_errmsg(impl->db) : sqlite3_errstr(rc));
     throw StoreError(detail::KindOf(rc) == StoreError::Kind::kCorrupt ? StoreError::Kind::kCorrupt
-                                                                       : StoreError::Kind::kIo,
+                                                                      : StoreError::Kind::kIo,
                      msg);
   }
   sqlite3* db = impl->db;
@@ -344,8 +345,9 @@ std::unique_ptr<Store> Store::Open(const std::string& path, const StoreOptions& 
   if (!options.read_only && sqlite3_db_readonly(db, "main") == 1) {
     // SQLite silently opens a write-protected file read-only; say so now.
     throw StoreError(StoreError::Kind::kReadOnly,
-                     "Store::Open: '" + path + "' is not writable (file or directory permissions, "
-                     "or a read-only file system); fix the permissions or open it read-only");
+                     "Store::Open: '" + path +
+                         "' is not writable (file or directory permissions, "
+                         "or a read-only file system); fix the permissions or open it read-only");
   }
   try {
     Exec(db, "PRAGMA foreign_keys = ON", ctx);
@@ -372,7 +374,8 @@ std::unique_ptr<Store> Store::Open(const std::string& path, const StoreOptions& 
       // same store at once (`arena serve` and `arena submit`) saw "database
       // is locked". Retry for up to busy_timeout_ms.
       std::string mode;
-      const auto give_up = std::chrono::steady_clock::now() + std::chrono::milliseconds(options.busy_timeout_ms);
+      const auto give_up =
+          std::chrono::steady_clock::now() + std::chrono::milliseconds(options.busy_timeout_ms);
       for (;;) {
         try {
           detail::Stmt wal(db, "PRAGMA journal_mode = WAL");
@@ -380,7 +383,8 @@ std::unique_ptr<Store> Store::Open(const std::string& path, const StoreOptions& 
           mode = wal.Text(0);
           break;
         } catch (const StoreError& e) {
-          if (e.kind() != StoreError::Kind::kBusy || std::chrono::steady_clock::now() > give_up) throw;
+          if (e.kind() != StoreError::Kind::kBusy || std::chrono::steady_clock::now() > give_up)
+            throw;
           std::this_thread::sleep_for(std::chrono::milliseconds(10));
         }
       }
@@ -388,10 +392,12 @@ std::unique_ptr<Store> Store::Open(const std::string& path, const StoreOptions& 
         throw StoreError(StoreError::Kind::kIo,
                          ctx + ": cannot switch to WAL mode (got '" + mode + "')");
       }
-      Exec(db, options.synchronous_full ? "PRAGMA synchronous = FULL" : "PRAGMA synchronous = NORMAL",
+      Exec(db,
+           options.synchronous_full ? "PRAGMA synchronous = FULL" : "PRAGMA synchronous = NORMAL",
            ctx);
-      Exec(db, "PRAGMA wal_autocheckpoint = " +
-                   std::to_string(std::max<std::int64_t>(1, options.wal_autocheckpoint_bytes / page_size)),
+      Exec(db,
+           "PRAGMA wal_autocheckpoint = " + std::to_string(std::max<std::int64_t>(
+                                                1, options.wal_autocheckpoint_bytes / page_size)),
            ctx);
       Migrate(*impl);
     }

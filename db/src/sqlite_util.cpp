@@ -7,17 +7,23 @@ namespace arena::db::detail {
 StoreError::Kind KindOf(int rc) {
   switch (rc & 0xff) {
     case SQLITE_BUSY:
-    case SQLITE_LOCKED: return StoreError::Kind::kBusy;
-    case SQLITE_READONLY: return StoreError::Kind::kReadOnly;
-    case SQLITE_FULL: return StoreError::Kind::kFull;
+    case SQLITE_LOCKED:
+      return StoreError::Kind::kBusy;
+    case SQLITE_READONLY:
+      return StoreError::Kind::kReadOnly;
+    case SQLITE_FULL:
+      return StoreError::Kind::kFull;
     case SQLITE_CORRUPT:
-    case SQLITE_NOTADB: return StoreError::Kind::kCorrupt;
+    case SQLITE_NOTADB:
+      return StoreError::Kind::kCorrupt;
     case SQLITE_CONSTRAINT:
     case SQLITE_MISMATCH:
     case SQLITE_TOOBIG:
     case SQLITE_RANGE:
-    case SQLITE_ERROR: return StoreError::Kind::kBadInput;
-    default: return StoreError::Kind::kIo;
+    case SQLITE_ERROR:
+      return StoreError::Kind::kBadInput;
+    default:
+      return StoreError::Kind::kIo;
   }
 }
 
@@ -57,7 +63,8 @@ Stmt& Stmt::Bind(int i, double v) {
   return *this;
 }
 Stmt& Stmt::Bind(int i, std::string_view v) {
-  ARENA_BIND_CHECK(sqlite3_bind_text(s_, i, v.data(), static_cast<int>(v.size()), SQLITE_TRANSIENT));
+  ARENA_BIND_CHECK(
+      sqlite3_bind_text(s_, i, v.data(), static_cast<int>(v.size()), SQLITE_TRANSIENT));
   return *this;
 }
 Stmt& Stmt::Bind(int i, std::optional<double> v) { return v ? Bind(i, *v) : BindNull(i); }

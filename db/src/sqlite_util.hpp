@@ -37,7 +37,10 @@ class Stmt {
 
   // true: a row is ready; false: done. Throws StoreError on failure.
   bool Step();
-  void Run() { while (Step()) {} }
+  void Run() {
+    while (Step()) {
+    }
+  }
   void Reset();
 
   std::int64_t Int(int col) const { return sqlite3_column_int64(s_, col); }
@@ -67,7 +70,10 @@ class Binder {
     return *this;
   }
   Binder& operator<<(const std::optional<std::string>& v) {
-    if (v) s_.Bind(k_++, *v); else s_.BindNull(k_++);
+    if (v)
+      s_.Bind(k_++, *v);
+    else
+      s_.BindNull(k_++);
     return *this;
   }
   Binder& operator<<(std::nullopt_t) {

@@ -6,8 +6,8 @@
 #include <cmath>
 #include <cstring>
 #include <map>
-#include <set>
 #include <nlohmann/json.hpp>
+#include <set>
 
 #include "sqlite_util.hpp"
 #include "store_internal.hpp"
@@ -22,16 +22,26 @@ using nlohmann::json;
 
 const char* ToString(TrialState s) {
   switch (s) {
-    case TrialState::kPlanned: return "planned";
-    case TrialState::kDispatched: return "dispatched";
-    case TrialState::kExecuted: return "executed";
-    case TrialState::kResetting: return "resetting";
-    case TrialState::kResetDone: return "reset_done";
-    case TrialState::kResetFailed: return "reset_failed";
-    case TrialState::kPredicted: return "predicted";
-    case TrialState::kDone: return "done";
-    case TrialState::kFailed: return "failed";
-    case TrialState::kCancelled: return "cancelled";
+    case TrialState::kPlanned:
+      return "planned";
+    case TrialState::kDispatched:
+      return "dispatched";
+    case TrialState::kExecuted:
+      return "executed";
+    case TrialState::kResetting:
+      return "resetting";
+    case TrialState::kResetDone:
+      return "reset_done";
+    case TrialState::kResetFailed:
+      return "reset_failed";
+    case TrialState::kPredicted:
+      return "predicted";
+    case TrialState::kDone:
+      return "done";
+    case TrialState::kFailed:
+      return "failed";
+    case TrialState::kCancelled:
+      return "cancelled";
   }
   return "?";
 }
@@ -52,32 +62,47 @@ bool IsLegalTransition(TrialState from, TrialState to) {
   using S = TrialState;
   if (to == S::kFailed) return !IsTerminal(from);
   switch (from) {
-    case S::kPlanned: return to == S::kDispatched || to == S::kCancelled;
-    case S::kDispatched: return to == S::kExecuted || to == S::kPlanned;
-    case S::kExecuted: return to == S::kResetting;
-    case S::kResetting: return to == S::kResetDone || to == S::kResetFailed;
-    case S::kResetDone: return to == S::kPredicted;
-    case S::kResetFailed: return to == S::kResetting || to == S::kPredicted;
-    case S::kPredicted: return to == S::kDone;
-    default: return false;
+    case S::kPlanned:
+      return to == S::kDispatched || to == S::kCancelled;
+    case S::kDispatched:
+      return to == S::kExecuted || to == S::kPlanned;
+    case S::kExecuted:
+      return to == S::kResetting;
+    case S::kResetting:
+      return to == S::kResetDone || to == S::kResetFailed;
+    case S::kResetDone:
+      return to == S::kPredicted;
+    case S::kResetFailed:
+      return to == S::kResetting || to == S::kPredicted;
+    case S::kPredicted:
+      return to == S::kDone;
+    default:
+      return false;
   }
 }
 
 const char* ToString(CampaignState s) {
   switch (s) {
-    case CampaignState::kActive: return "active";
-    case CampaignState::kPaused: return "paused";
-    case CampaignState::kCancelled: return "cancelled";
-    case CampaignState::kDone: return "done";
+    case CampaignState::kActive:
+      return "active";
+    case CampaignState::kPaused:
+      return "paused";
+    case CampaignState::kCancelled:
+      return "cancelled";
+    case CampaignState::kDone:
+      return "done";
   }
   return "?";
 }
 
 const char* ToString(CellState s) {
   switch (s) {
-    case CellState::kHealthy: return "healthy";
-    case CellState::kQuarantined: return "quarantined";
-    case CellState::kGone: return "gone";
+    case CellState::kHealthy:
+      return "healthy";
+    case CellState::kQuarantined:
+      return "quarantined";
+    case CellState::kGone:
+      return "gone";
   }
   return "?";
 }
@@ -101,11 +126,14 @@ CellState ParseCellState(const std::string& t) {
 
 TrialState MustParseTrialState(const std::string& t) {
   auto s = ParseTrialState(t);
-  if (!s) throw StoreError(StoreError::Kind::kCorrupt, "trials.state has unknown value '" + t + "'");
+  if (!s)
+    throw StoreError(StoreError::Kind::kCorrupt, "trials.state has unknown value '" + t + "'");
   return *s;
 }
 
-[[noreturn]] void BadInput(const std::string& msg) { throw StoreError(StoreError::Kind::kBadInput, msg); }
+[[noreturn]] void BadInput(const std::string& msg) {
+  throw StoreError(StoreError::Kind::kBadInput, msg);
+}
 
 // Seeds are uint64; SQLite integers are int64: stored bit for bit.
 std::int64_t SeedToDb(std::uint64_t v) {
@@ -156,7 +184,8 @@ std::optional<double> Num(const json& j, const char* key, const std::string& whe
 std::optional<double> Norm3(const json& j, const char* key, const std::string& where) {
   if (!j.is_object() || !j.contains(key)) return std::nullopt;
   const auto& v = j.at(key);
-  if (!v.is_array() || v.size() != 3) BadInput(where + "." + key + " must be an array of 3 numbers");
+  if (!v.is_array() || v.size() != 3)
+    BadInput(where + "." + key + " must be an array of 3 numbers");
   double sum = 0;
   for (int i = 0; i < 3; ++i) {
     if (!v[i].is_number()) BadInput(where + "." + key + " must be an array of 3 numbers");
@@ -179,7 +208,8 @@ SceneColumns ReadSceneColumns(const std::string& scene_text, const std::string& 
   SceneColumns c;
   if (scene.contains("object")) {
     const auto& o = scene.at("object");
-    if (o.contains("shape") && o.at("shape").is_string()) c.object_shape = o.at("shape").get<std::string>();
+    if (o.contains("shape") && o.at("shape").is_string())
+      c.object_shape = o.at("shape").get<std::string>();
     c.object_mass = Num(o, "mass", where + ".object");
     if (o.contains("pose") && o.at("pose").is_object()) {
       const auto& pose = o.at("pose");
@@ -187,7 +217,8 @@ SceneColumns ReadSceneColumns(const std::string& scene_text, const std::string& 
       for (auto [key, dst] : {std::pair{"position", &p}, std::pair{"rpy", &rpy}}) {
         if (!pose.contains(key)) continue;
         const auto& v = pose.at(key);
-        if (!v.is_array() || v.size() != 3) BadInput(where + ".object.pose." + key + " must be 3 numbers");
+        if (!v.is_array() || v.size() != 3)
+          BadInput(where + ".object.pose." + key + " must be 3 numbers");
         for (int i = 0; i < 3; ++i) {
           if (!v[i].is_number()) BadInput(where + ".object.pose." + key + " must be 3 numbers");
           (*dst)[i] = v[i].get<double>();
@@ -198,9 +229,13 @@ SceneColumns ReadSceneColumns(const std::string& scene_text, const std::string& 
       const double cr = std::cos(rpy[0] / 2), sr = std::sin(rpy[0] / 2);
       const double cp = std::cos(rpy[1] / 2), sp = std::sin(rpy[1] / 2);
       const double cy = std::cos(rpy[2] / 2), sy = std::sin(rpy[2] / 2);
-      c.nominal = {p[0], p[1], p[2],
-                   cr * cp * cy + sr * sp * sy, sr * cp * cy - cr * sp * sy,
-                   cr * sp * cy + sr * cp * sy, cr * cp * sy - sr * sp * cy};
+      c.nominal = {p[0],
+                   p[1],
+                   p[2],
+                   cr * cp * cy + sr * sp * sy,
+                   sr * cp * cy - cr * sp * sy,
+                   cr * sp * cy + sr * cp * sy,
+                   cr * cp * sy - sr * sp * cy};
     }
   }
   c.grip_force = Num(scene, "grip_force", where);
@@ -214,10 +249,13 @@ SceneColumns ReadSceneColumns(const std::string& scene_text, const std::string& 
       const std::string fw = where + ".fingers[" + std::to_string(i) + "]";
       const auto& f = fingers[i];
       const std::string type = f.contains("type") && f.at("type").is_string()
-                                   ? f.at("type").get<std::string>() : "point";
+                                   ? f.at("type").get<std::string>()
+                                   : "point";
       c.contact_mask |= TypeBit(type, fw + ".type");
-      if (!c.finger_type) c.finger_type = type;
-      else if (*c.finger_type != type) c.finger_type = "mixed";
+      if (!c.finger_type)
+        c.finger_type = type;
+      else if (*c.finger_type != type)
+        c.finger_type = "mixed";
       if (auto mu = Num(f, "mu", fw)) {
         mu_sum += *mu;
         ++mu_n;
@@ -228,8 +266,8 @@ SceneColumns ReadSceneColumns(const std::string& scene_text, const std::string& 
   }
   if (scene.contains("pusher") && scene.at("pusher").is_object()) {
     const auto& p = scene.at("pusher");
-    const std::string type = p.contains("type") && p.at("type").is_string()
-                                 ? p.at("type").get<std::string>() : "point";
+    const std::string type =
+        p.contains("type") && p.at("type").is_string() ? p.at("type").get<std::string>() : "point";
     c.contact_mask |= TypeBit(type, where + ".pusher.type");
     c.pusher_type = type;
     c.pusher_mu = Num(p, "mu", where + ".pusher");
@@ -256,7 +294,8 @@ namespace internal {
 
 TrialRow LoadTrialRow(const Store::Impl& impl, std::int64_t trial_id, const char* function) {
   auto s = impl.Prepare(
-      "SELECT state, attempt, IFNULL(cell_id,''), campaign_id, gt_stream_id FROM trials WHERE id = ?");
+      "SELECT state, attempt, IFNULL(cell_id,''), campaign_id, gt_stream_id FROM trials WHERE id = "
+      "?");
   s->Bind(1, trial_id);
   if (!s->Step()) {
     throw StoreError(StoreError::Kind::kNotFound,
@@ -274,9 +313,9 @@ TrialRow LoadTrialRow(const Store::Impl& impl, std::int64_t trial_id, const char
 void CheckAttempt(const TrialRow& row, std::int64_t trial_id, int attempt, const char* function) {
   if (row.attempt != attempt) {
     throw StoreError(StoreError::Kind::kStaleAttempt,
-                     std::string(function) + ": trial " + std::to_string(trial_id) + " is at attempt " +
-                         std::to_string(row.attempt) + ", not " + std::to_string(attempt) +
-                         " (a late message from an earlier attempt?)");
+                     std::string(function) + ": trial " + std::to_string(trial_id) +
+                         " is at attempt " + std::to_string(row.attempt) + ", not " +
+                         std::to_string(attempt) + " (a late message from an earlier attempt?)");
   }
 }
 
@@ -297,14 +336,23 @@ void WriteTransition(const Store::Impl& impl, std::int64_t trial_id, int attempt
     auto u = impl.Prepare(
         "UPDATE trials SET state = ?, updated_at = ?,"
         " finished_at = CASE WHEN ? THEN ? ELSE finished_at END WHERE id = ?");
-    u->Bind(1, ToString(to)).Bind(2, now).Bind(3, IsTerminal(to) ? 1 : 0).Bind(4, now).Bind(5, trial_id);
+    u->Bind(1, ToString(to))
+        .Bind(2, now)
+        .Bind(3, IsTerminal(to) ? 1 : 0)
+        .Bind(4, now)
+        .Bind(5, trial_id);
     u->Run();
   }
   auto a = impl.Prepare(
       "INSERT INTO trial_transitions(trial_id, attempt, from_state, to_state, at, cell_id, reason)"
       " VALUES(?,?,?,?,?,?,?)");
-  a->Bind(1, trial_id).Bind(2, attempt).Bind(3, ToString(from)).Bind(4, ToString(to)).Bind(5, now)
-      .Bind(6, cell_id).Bind(7, reason);
+  a->Bind(1, trial_id)
+      .Bind(2, attempt)
+      .Bind(3, ToString(from))
+      .Bind(4, ToString(to))
+      .Bind(5, now)
+      .Bind(6, cell_id)
+      .Bind(7, reason);
   a->Run();
 }
 
@@ -356,7 +404,9 @@ void InsertPlannedTrials(const Store::Impl& impl, std::int64_t campaign_id, int 
     b << t.scene_json << t.params_json << t.defects_json << now << now;
     s.Run();
     s.Reset();
-    audit->Bind(1, static_cast<std::int64_t>(sqlite3_last_insert_rowid(impl.db))).Bind(2, now).Run();
+    audit->Bind(1, static_cast<std::int64_t>(sqlite3_last_insert_rowid(impl.db)))
+        .Bind(2, now)
+        .Run();
     audit->Reset();
   }
 }
@@ -382,7 +432,8 @@ constexpr const char* kCampaignCols =
 
 }  // namespace
 
-std::int64_t Store::CreateCampaign(const NewCampaign& campaign, const std::vector<PlannedTrial>& trials) {
+std::int64_t Store::CreateCampaign(const NewCampaign& campaign,
+                                   const std::vector<PlannedTrial>& trials) {
   impl_->RequireWritable("CreateCampaign");
   if (campaign.name.empty()) BadInput("CreateCampaign: name is empty");
   ParseObject(campaign.spec_json, "CreateCampaign: spec_json");
@@ -390,10 +441,16 @@ std::int64_t Store::CreateCampaign(const NewCampaign& campaign, const std::vecto
   Tx tx(impl_->db, true);
   const double now = impl_->Now();
   auto s = impl_->Prepare(
-      "INSERT INTO campaigns(name, spec_json, state, priority, seed, sampler_state_json, created_at,"
+      "INSERT INTO campaigns(name, spec_json, state, priority, seed, sampler_state_json, "
+      "created_at,"
       " updated_at) VALUES(?,?,'active',?,?,?,?,?)");
-  s->Bind(1, campaign.name).Bind(2, campaign.spec_json).Bind(3, campaign.priority)
-      .Bind(4, SeedToDb(campaign.seed)).Bind(5, campaign.sampler_state_json).Bind(6, now).Bind(7, now);
+  s->Bind(1, campaign.name)
+      .Bind(2, campaign.spec_json)
+      .Bind(3, campaign.priority)
+      .Bind(4, SeedToDb(campaign.seed))
+      .Bind(5, campaign.sampler_state_json)
+      .Bind(6, now)
+      .Bind(7, now);
   s->Run();
   const std::int64_t id = static_cast<std::int64_t>(sqlite3_last_insert_rowid(impl_->db));
   InsertPlannedTrials(*impl_, id, 0, trials, "CreateCampaign");
@@ -408,14 +465,16 @@ void Store::AppendPlannedTrials(std::int64_t campaign_id, const std::vector<Plan
   Tx tx(impl_->db, true);
   const Campaign c = GetCampaign(campaign_id);
   if (c.state == CampaignState::kCancelled || c.state == CampaignState::kDone) {
-    BadInput("AppendPlannedTrials: campaign " + std::to_string(campaign_id) + " is " + ToString(c.state));
+    BadInput("AppendPlannedTrials: campaign " + std::to_string(campaign_id) + " is " +
+             ToString(c.state));
   }
   auto n = impl_->Prepare("SELECT IFNULL(MAX(idx) + 1, 0) FROM trials WHERE campaign_id = ?");
   n->Bind(1, campaign_id);
   n->Step();
   const int first = static_cast<int>(n->Int(0));
   InsertPlannedTrials(*impl_, campaign_id, first, trials, "AppendPlannedTrials");
-  auto u = impl_->Prepare("UPDATE campaigns SET sampler_state_json = ?, updated_at = ? WHERE id = ?");
+  auto u =
+      impl_->Prepare("UPDATE campaigns SET sampler_state_json = ?, updated_at = ? WHERE id = ?");
   u->Bind(1, sampler_state_json).Bind(2, impl_->Now()).Bind(3, campaign_id).Run();
   tx.Commit();
 }
@@ -424,8 +483,9 @@ Campaign Store::GetCampaign(std::int64_t campaign_id) const {
   auto s = impl_->Prepare(std::string(kCampaignCols) + " WHERE id = ?");
   s->Bind(1, campaign_id);
   if (!s->Step()) {
-    throw StoreError(StoreError::Kind::kNotFound,
-                     "GetCampaign: no campaign " + std::to_string(campaign_id) + " (see 'arena list')");
+    throw StoreError(
+        StoreError::Kind::kNotFound,
+        "GetCampaign: no campaign " + std::to_string(campaign_id) + " (see 'arena list')");
   }
   return ReadCampaign(*s);
 }
@@ -457,10 +517,12 @@ void SetCampaignState(Store::Impl& impl, std::int64_t id, const char* function,
                      std::string(function) + ": campaign " + std::to_string(id) + " is " +
                          ToString(cur) + ", cannot become " + ToString(to));
   }
-  auto u = impl.Prepare("UPDATE campaigns SET state = ?, state_reason = ?, updated_at = ? WHERE id = ?");
+  auto u =
+      impl.Prepare("UPDATE campaigns SET state = ?, state_reason = ?, updated_at = ? WHERE id = ?");
   u->Bind(1, ToString(to)).Bind(2, reason).Bind(3, impl.Now()).Bind(4, id).Run();
   if (to == CampaignState::kCancelled) {
-    auto q = impl.Prepare("SELECT id, attempt FROM trials WHERE campaign_id = ? AND state = 'planned'");
+    auto q =
+        impl.Prepare("SELECT id, attempt FROM trials WHERE campaign_id = ? AND state = 'planned'");
     q->Bind(1, id);
     std::vector<std::pair<std::int64_t, int>> planned;
     while (q->Step()) planned.emplace_back(q->Int(0), static_cast<int>(q->Int(1)));
@@ -481,7 +543,8 @@ void Store::PauseCampaign(std::int64_t id, const std::string& reason) {
                    reason);
 }
 void Store::ResumeCampaign(std::int64_t id) {
-  SetCampaignState(*impl_, id, "ResumeCampaign", {CampaignState::kPaused}, CampaignState::kActive, "");
+  SetCampaignState(*impl_, id, "ResumeCampaign", {CampaignState::kPaused}, CampaignState::kActive,
+                   "");
 }
 void Store::CancelCampaign(std::int64_t id, const std::string& reason) {
   SetCampaignState(*impl_, id, "CancelCampaign", {CampaignState::kActive, CampaignState::kPaused},
@@ -593,7 +656,8 @@ std::optional<ClaimedTrial> Store::ClaimNextTrial(const std::string& cell_id) {
     const double dp = std::sqrt((v[0] - v[7]) * (v[0] - v[7]) + (v[1] - v[8]) * (v[1] - v[8]) +
                                 (v[2] - v[9]) * (v[2] - v[9]));
     const double da = QuatAngle(v + 3, v + 10);
-    auto e = impl_->Prepare("UPDATE trials SET start_position_error = ?, start_angle_error = ? WHERE id = ?");
+    auto e = impl_->Prepare(
+        "UPDATE trials SET start_position_error = ?, start_angle_error = ? WHERE id = ?");
     e->Bind(1, dp).Bind(2, da).Bind(3, t->trial_id).Run();
   }
   tx.Commit();
@@ -651,14 +715,16 @@ void Store::BeginReset(std::int64_t trial_id, int attempt) {
   const auto row = LoadTrialRow(*impl_, trial_id, "BeginReset");
   CheckAttempt(row, trial_id, attempt, "BeginReset");
   WriteTransition(*impl_, trial_id, attempt, row.state, TrialState::kResetting, row.cell_id,
-                  row.state == TrialState::kResetFailed ? "reset retried" : "reset sent", "BeginReset");
+                  row.state == TrialState::kResetFailed ? "reset retried" : "reset sent",
+                  "BeginReset");
   tx.Commit();
 }
 
 void Store::CompleteReset(std::int64_t trial_id, int attempt, const ResetReport& report) {
   impl_->RequireWritable("CompleteReset");
   for (int i = 0; i < 7; ++i) {
-    RequireFinite(report.observed_pose[i], "CompleteReset: observed_pose[" + std::to_string(i) + "]");
+    RequireFinite(report.observed_pose[i],
+                  "CompleteReset: observed_pose[" + std::to_string(i) + "]");
   }
   RequireFinite(report.position_error, "CompleteReset: position_error");
   RequireFinite(report.angle_error, "CompleteReset: angle_error");
@@ -671,8 +737,13 @@ void Store::CompleteReset(std::int64_t trial_id, int attempt, const ResetReport&
   auto u = impl_->Prepare(
       "UPDATE trials SET reset_ok = ?, reset_position_error = ?, reset_angle_error = ?,"
       " reset_attempts = ?, reset_reason = ? WHERE id = ?");
-  u->Bind(1, report.ok ? 1 : 0).Bind(2, report.position_error).Bind(3, report.angle_error)
-      .Bind(4, report.reset_attempts).Bind(5, report.reason).Bind(6, trial_id).Run();
+  u->Bind(1, report.ok ? 1 : 0)
+      .Bind(2, report.position_error)
+      .Bind(3, report.angle_error)
+      .Bind(4, report.reset_attempts)
+      .Bind(5, report.reason)
+      .Bind(6, trial_id)
+      .Run();
   if (!row.cell_id.empty()) {
     // The pose the cell observed is where the next trial on this cell starts,
     // ok or not; without an observation that start is unknown (NULL).
@@ -682,9 +753,15 @@ void Store::CompleteReset(std::int64_t trial_id, int attempt, const ResetReport&
     detail::Binder b(*c);
     const double now = impl_->Now();
     for (double v : report.observed_pose) {
-      if (report.pose_observed) b << v; else b << std::nullopt;
+      if (report.pose_observed)
+        b << v;
+      else
+        b << std::nullopt;
     }
-    if (report.pose_observed) b << now; else b << std::nullopt;
+    if (report.pose_observed)
+      b << now;
+    else
+      b << std::nullopt;
     b << now << row.cell_id;
     c->Run();
   }
@@ -699,10 +776,10 @@ void CheckPrediction(const Prediction& p, const std::string& prefix) {
   if (p.status.empty()) BadInput(prefix + "status is empty");
   ParseObject(p.model_json, prefix + "model_json");
   ParseObject(p.detail_json, prefix + "detail_json");
-  for (auto [v, name] : {std::pair{p.final_position_error, "final_position_error"},
-                         std::pair{p.final_angle_error, "final_angle_error"},
-                         std::pair{p.force_error, "force_error"},
-                         std::pair{p.mode_agreement, "mode_agreement"}}) {
+  for (auto [v, name] :
+       {std::pair{p.final_position_error, "final_position_error"},
+        std::pair{p.final_angle_error, "final_angle_error"},
+        std::pair{p.force_error, "force_error"}, std::pair{p.mode_agreement, "mode_agreement"}}) {
     if (v) RequireFinite(*v, prefix + name);
   }
   RequireFinite(p.wall_s, prefix + "wall_s");
@@ -725,7 +802,8 @@ void Store::RecordPrediction(std::int64_t trial_id, int attempt, const Predictio
                     "predicted (" + p.model_key + ")", "RecordPrediction");
   }
   auto s = impl_->Prepare(
-      "INSERT INTO predictions(trial_id, attempt, model_key, model_json, status, final_position_error,"
+      "INSERT INTO predictions(trial_id, attempt, model_key, model_json, status, "
+      "final_position_error,"
       " final_angle_error, force_error, mode_agreement, wall_s, detail_json, created_at)"
       " VALUES(?,?,?,?,?,?,?,?,?,?,?,?)"
       " ON CONFLICT(trial_id, attempt, model_key) DO UPDATE SET model_json = excluded.model_json,"
@@ -733,9 +811,18 @@ void Store::RecordPrediction(std::int64_t trial_id, int attempt, const Predictio
       " final_angle_error = excluded.final_angle_error, force_error = excluded.force_error,"
       " mode_agreement = excluded.mode_agreement, wall_s = excluded.wall_s,"
       " detail_json = excluded.detail_json, created_at = excluded.created_at");
-  s->Bind(1, trial_id).Bind(2, attempt).Bind(3, p.model_key).Bind(4, p.model_json).Bind(5, p.status)
-      .Bind(6, p.final_position_error).Bind(7, p.final_angle_error).Bind(8, p.force_error)
-      .Bind(9, p.mode_agreement).Bind(10, p.wall_s).Bind(11, p.detail_json).Bind(12, impl_->Now());
+  s->Bind(1, trial_id)
+      .Bind(2, attempt)
+      .Bind(3, p.model_key)
+      .Bind(4, p.model_json)
+      .Bind(5, p.status)
+      .Bind(6, p.final_position_error)
+      .Bind(7, p.final_angle_error)
+      .Bind(8, p.force_error)
+      .Bind(9, p.mode_agreement)
+      .Bind(10, p.wall_s)
+      .Bind(11, p.detail_json)
+      .Bind(12, impl_->Now());
   s->Run();
   tx.Commit();
 }
@@ -760,13 +847,15 @@ std::int64_t Store::RecordEvaluation(std::int64_t campaign_id, const std::string
   }
   const double now = impl_->Now();
   auto e = impl_->Prepare(
-      "INSERT INTO evaluations(campaign_id, created_at, settings_json, report_json) VALUES(?,?,?,?)");
+      "INSERT INTO evaluations(campaign_id, created_at, settings_json, report_json) "
+      "VALUES(?,?,?,?)");
   e->Bind(1, campaign_id).Bind(2, now).Bind(3, settings_json).Bind(4, report_json).Run();
   const std::int64_t id = sqlite3_last_insert_rowid(impl_->db);
   std::map<std::int64_t, bool> checked;
   std::set<std::pair<std::int64_t, std::string>> seen;
   auto ins = impl_->Prepare(
-      "INSERT INTO evaluation_results(evaluation_id, trial_id, attempt, model_key, model_json, status,"
+      "INSERT INTO evaluation_results(evaluation_id, trial_id, attempt, model_key, model_json, "
+      "status,"
       " final_position_error, final_angle_error, force_error, mode_agreement, wall_s, detail_json)"
       " VALUES(?,?,?,?,?,?,?,?,?,?,?,?)");
   for (const auto& r : results) {
@@ -790,9 +879,18 @@ std::int64_t Store::RecordEvaluation(std::int64_t campaign_id, const std::string
                p.model_key);
     }
     ins->Reset();
-    ins->Bind(1, id).Bind(2, r.trial_id).Bind(3, r.attempt).Bind(4, p.model_key).Bind(5, p.model_json)
-        .Bind(6, p.status).Bind(7, p.final_position_error).Bind(8, p.final_angle_error)
-        .Bind(9, p.force_error).Bind(10, p.mode_agreement).Bind(11, p.wall_s).Bind(12, p.detail_json);
+    ins->Bind(1, id)
+        .Bind(2, r.trial_id)
+        .Bind(3, r.attempt)
+        .Bind(4, p.model_key)
+        .Bind(5, p.model_json)
+        .Bind(6, p.status)
+        .Bind(7, p.final_position_error)
+        .Bind(8, p.final_angle_error)
+        .Bind(9, p.force_error)
+        .Bind(10, p.mode_agreement)
+        .Bind(11, p.wall_s)
+        .Bind(12, p.detail_json);
     ins->Run();
   }
   tx.Commit();
@@ -825,7 +923,8 @@ std::vector<Evaluation> Store::ListEvaluations(std::int64_t campaign_id) const {
 
 Evaluation Store::GetEvaluation(std::int64_t evaluation_id) const {
   auto s = impl_->Prepare(
-      "SELECT id, campaign_id, created_at, settings_json, report_json FROM evaluations WHERE id = ?");
+      "SELECT id, campaign_id, created_at, settings_json, report_json FROM evaluations WHERE id = "
+      "?");
   s->Bind(1, evaluation_id);
   if (!s->Step()) {
     throw StoreError(StoreError::Kind::kNotFound,
@@ -836,7 +935,8 @@ Evaluation Store::GetEvaluation(std::int64_t evaluation_id) const {
 
 std::vector<EvaluationResult> Store::ListEvaluationResults(std::int64_t evaluation_id) const {
   auto s = impl_->Prepare(
-      "SELECT trial_id, attempt, model_key, model_json, status, final_position_error, final_angle_error,"
+      "SELECT trial_id, attempt, model_key, model_json, status, final_position_error, "
+      "final_angle_error,"
       " force_error, mode_agreement, wall_s, detail_json FROM evaluation_results"
       " WHERE evaluation_id = ? ORDER BY trial_id, model_key");
   s->Bind(1, evaluation_id);
@@ -876,31 +976,34 @@ RecoveryReport Store::RecoverAfterRestart(const std::string& reason) {
   RecoveryReport report;
   std::vector<std::pair<std::int64_t, int>> dispatched, resetting;
   {
-    auto s = impl_->Prepare("SELECT id, attempt, state FROM trials WHERE state IN ('dispatched','resetting')");
+    auto s = impl_->Prepare(
+        "SELECT id, attempt, state FROM trials WHERE state IN ('dispatched','resetting')");
     while (s->Step()) {
-      (s->Text(2) == "dispatched" ? dispatched : resetting).emplace_back(s->Int(0), static_cast<int>(s->Int(1)));
+      (s->Text(2) == "dispatched" ? dispatched : resetting)
+          .emplace_back(s->Int(0), static_cast<int>(s->Int(1)));
     }
   }
   for (auto [id, attempt] : dispatched) {
     const auto row = LoadTrialRow(*impl_, id, "RecoverAfterRestart");
-    WriteTransition(*impl_, id, attempt, TrialState::kDispatched, TrialState::kPlanned, row.cell_id,
-                    reason + ": execute not confirmed, re-run as attempt " + std::to_string(attempt + 1),
-                    "RecoverAfterRestart");
+    WriteTransition(
+        *impl_, id, attempt, TrialState::kDispatched, TrialState::kPlanned, row.cell_id,
+        reason + ": execute not confirmed, re-run as attempt " + std::to_string(attempt + 1),
+        "RecoverAfterRestart");
     auto u = impl_->Prepare("UPDATE trials SET attempt = attempt + 1, not_before = 0 WHERE id = ?");
     u->Bind(1, id).Run();
     report.requeued.push_back(id);
   }
   for (auto [id, attempt] : resetting) {
     const auto row = LoadTrialRow(*impl_, id, "RecoverAfterRestart");
-    WriteTransition(*impl_, id, attempt, TrialState::kResetting, TrialState::kResetFailed, row.cell_id,
-                    reason + ": reset not confirmed", "RecoverAfterRestart");
-    auto u = impl_->Prepare(
-        "UPDATE trials SET reset_ok = 0, reset_reason = ? WHERE id = ?");
+    WriteTransition(*impl_, id, attempt, TrialState::kResetting, TrialState::kResetFailed,
+                    row.cell_id, reason + ": reset not confirmed", "RecoverAfterRestart");
+    auto u = impl_->Prepare("UPDATE trials SET reset_ok = 0, reset_reason = ? WHERE id = ?");
     u->Bind(1, reason + ": reset not confirmed").Bind(2, id).Run();
     // Where the interrupted reset left the object is unknown.
     auto c = impl_->Prepare(
         "UPDATE cells SET start_x = NULL, start_y = NULL, start_z = NULL, start_qw = NULL,"
-        " start_qx = NULL, start_qy = NULL, start_qz = NULL, start_observed_at = NULL WHERE id = ?");
+        " start_qx = NULL, start_qy = NULL, start_qz = NULL, start_observed_at = NULL WHERE id = "
+        "?");
     c->Bind(1, row.cell_id).Run();
     report.reset_failed.push_back(id);
   }
@@ -1026,7 +1129,8 @@ std::vector<std::string> Store::CheckInvariants() const {
        "SELECT t.id FROM trials t JOIN trial_transitions a ON a.id ="
        " (SELECT MAX(id) FROM trial_transitions WHERE trial_id = t.id)"
        " WHERE a.to_state != t.state OR a.attempt > t.attempt"},
-      {"every trial has an audit row", "SELECT t.id FROM trials t WHERE NOT EXISTS"
+      {"every trial has an audit row",
+       "SELECT t.id FROM trials t WHERE NOT EXISTS"
        " (SELECT 1 FROM trial_transitions a WHERE a.trial_id = t.id)"},
       {"a published stream's sample count equals its chunks'",
        "SELECT g.id FROM gt_streams g WHERE g.complete = 1 AND g.samples !="
@@ -1037,7 +1141,8 @@ std::vector<std::string> Store::CheckInvariants() const {
   Tx tx(impl_->db, false);
   for (const auto& [what, sql] : checks) {
     detail::Stmt s(impl_->db, sql);
-    while (s.Step()) out.push_back(std::string(what) + ": violated by id " + std::to_string(s.Int(0)));
+    while (s.Step())
+      out.push_back(std::string(what) + ": violated by id " + std::to_string(s.Int(0)));
   }
   tx.Commit();
   return out;
@@ -1061,7 +1166,12 @@ void Store::UpsertCell(const std::string& cell_id, const std::vector<std::string
       " last_seen = ?5, updated_at = ?5,"
       " state = CASE WHEN state = 'gone' THEN 'healthy' ELSE state END,"
       " quarantine_reason = CASE WHEN state = 'gone' THEN '' ELSE quarantine_reason END");
-  s->Bind(1, cell_id).Bind(2, mask).Bind(3, capabilities_json).Bind(4, defects_json).Bind(5, now).Run();
+  s->Bind(1, cell_id)
+      .Bind(2, mask)
+      .Bind(3, capabilities_json)
+      .Bind(4, defects_json)
+      .Bind(5, now)
+      .Run();
   tx.Commit();
 }
 
@@ -1146,7 +1256,8 @@ CellInfo ReadCell(const detail::Stmt& s) {
 CellInfo Store::GetCell(const std::string& cell_id) const {
   auto s = impl_->Prepare(std::string(kCellCols) + " WHERE id = ?");
   s->Bind(1, cell_id);
-  if (!s->Step()) throw StoreError(StoreError::Kind::kNotFound, "GetCell: unknown cell '" + cell_id + "'");
+  if (!s->Step())
+    throw StoreError(StoreError::Kind::kNotFound, "GetCell: unknown cell '" + cell_id + "'");
   return ReadCell(*s);
 }
 
@@ -1164,7 +1275,10 @@ std::vector<StartStateDrift> Store::Drift(std::optional<std::int64_t> campaign_i
       "SELECT campaign_id, cell_id, trials, mean_dx, mean_dy, mean_dz, mean_position_error,"
       " max_position_error, mean_angle_error, max_angle_error FROM start_state_drift"
       " WHERE ?1 IS NULL OR campaign_id = ?1 ORDER BY campaign_id, cell_id");
-  if (campaign_id) s->Bind(1, *campaign_id); else s->BindNull(1);
+  if (campaign_id)
+    s->Bind(1, *campaign_id);
+  else
+    s->BindNull(1);
   std::vector<StartStateDrift> out;
   while (s->Step()) {
     StartStateDrift d;
@@ -1185,13 +1299,14 @@ std::vector<StartStateDrift> Store::Drift(std::optional<std::int64_t> campaign_i
 
 StatusSummary Store::Status() const {
   constexpr double kRateWindowS = 900;  // recent rate: the last 15 minutes
-  Tx tx(impl_->db, false);               // one snapshot for the whole summary
+  Tx tx(impl_->db, false);              // one snapshot for the whole summary
   StatusSummary out;
   const double now = impl_->Now();
   auto s = impl_->Prepare(
       "SELECT c.id, c.name, c.state, c.priority, COUNT(t.id),"
       " SUM(t.state = 'planned'),"
-      " SUM(t.state IN ('dispatched','executed','resetting','reset_done','reset_failed','predicted')),"
+      " SUM(t.state IN "
+      "('dispatched','executed','resetting','reset_done','reset_failed','predicted')),"
       " SUM(t.state = 'done'), SUM(t.state = 'failed'), SUM(t.state = 'cancelled'),"
       " SUM(t.state IN ('done','failed') AND t.finished_at >= ?1),"
       " MIN(t.dispatched_at)"

@@ -4,15 +4,15 @@
 #include <cmath>
 #include <condition_variable>
 #include <deque>
-#include <map>
 #include <limits>
+#include <map>
 #include <mutex>
 #include <stdexcept>
 #include <thread>
 #include <tuple>
 
-#include <nlohmann/json.hpp>
 #include <spdlog/spdlog.h>
+#include <nlohmann/json.hpp>
 
 #include "arena/mechanics/scene_json.hpp"
 #include "arena/reset/reset.hpp"
@@ -50,9 +50,12 @@ bool SamePusher(const std::optional<mechanics::PusherSpec>& a,
 
 std::string ModeName(mechanics::SimulationStatus s) {
   switch (s) {
-    case mechanics::SimulationStatus::kOk: return "ok";
-    case mechanics::SimulationStatus::kSolverFailure: return "solver failure";
-    case mechanics::SimulationStatus::kInvalidScene: return "invalid scene";
+    case mechanics::SimulationStatus::kOk:
+      return "ok";
+    case mechanics::SimulationStatus::kSolverFailure:
+      return "solver failure";
+    case mechanics::SimulationStatus::kInvalidScene:
+      return "invalid scene";
   }
   return "?";
 }
@@ -60,14 +63,16 @@ std::string ModeName(mechanics::SimulationStatus s) {
 }  // namespace
 
 void ValidateCellOptions(const CellOptions& o) {
-  if (o.id.empty() || o.id.size() > 64) throw std::invalid_argument("--id: must be 1..64 characters");
+  if (o.id.empty() || o.id.size() > 64)
+    throw std::invalid_argument("--id: must be 1..64 characters");
   for (char c : o.id) {
     if (!(std::isalnum(static_cast<unsigned char>(c)) || c == '_' || c == '-' || c == '.')) {
       throw std::invalid_argument("--id: only letters, digits, '_', '-' and '.' are allowed");
     }
   }
   if (!std::isfinite(o.speed) || o.speed < 0 || o.speed > 1000) {
-    throw std::invalid_argument("--speed: must be in [0, 1000] (0 = as fast as possible, 1 = wall clock)");
+    throw std::invalid_argument(
+        "--speed: must be in [0, 1000] (0 = as fast as possible, 1 = wall clock)");
   }
   if (o.batch_samples < 1 || o.batch_samples > 256) {
     throw std::invalid_argument("--batch: must be 1..256 samples");
@@ -99,12 +104,13 @@ struct Cell::Impl {
   // instead of running it twice. Keyed by the service's session too: trial
   // ids restart at 1 in a new store, and a cell outlives stores and services.
   // Only the latest kRemembered are kept, so months of trials cost no memory.
-  using Key = std::tuple<std::uint64_t, std::uint64_t, std::uint32_t, int>;  // session, trial, attempt, phase
+  using Key = std::tuple<std::uint64_t, std::uint64_t, std::uint32_t,
+                         int>;  // session, trial, attempt, phase
   static constexpr std::size_t kRemembered = 1024;
   std::map<Key, msg::TrialStatus> done;
-  std::deque<Key> done_order;  // oldest first
-  reset::Pose true_pose;       // where the object really is now
-  reset::Pose observed_pose;   // where the sensors saw it last
+  std::deque<Key> done_order;                   // oldest first
+  reset::Pose true_pose;                        // where the object really is now
+  reset::Pose observed_pose;                    // where the sensors saw it last
   std::optional<mechanics::PusherSpec> pusher;  // the pusher mounted now
   std::thread worker;
 
@@ -165,8 +171,8 @@ struct Cell::Impl {
     s.cell_id(options.id);
     s.phase(c.phase());
     s.state(state);
-    s.observed_pose() = {observed_pose.position.x(), observed_pose.position.y(),
-                         observed_pose.position.z(), observed_pose.orientation.w(),
+    s.observed_pose() = {observed_pose.position.x(),    observed_pose.position.y(),
+                         observed_pose.position.z(),    observed_pose.orientation.w(),
                          observed_pose.orientation.x(), observed_pose.orientation.y(),
                          observed_pose.orientation.z()};
     return s;
@@ -175,7 +181,8 @@ struct Cell::Impl {
   void Send(msg::TrialStatus& s) {
     // A status is small and the history keep-all; retry through a stall.
     for (int i = 0; i < 10 && !status.Write(s); ++i) {
-      spdlog::warn("cell {}: status write for trial {} timed out, retrying", options.id, s.trial_id());
+      spdlog::warn("cell {}: status write for trial {} timed out, retrying", options.id,
+                   s.trial_id());
     }
   }
 
@@ -189,15 +196,24 @@ struct Cell::Impl {
     }
     std::lock_guard<std::mutex> lock(mutex);
     switch (s.state()) {
-      case msg::STATE_EXECUTED: ++counters.executed; break;
-      case msg::STATE_RESET_DONE: ++counters.resets; break;
-      case msg::STATE_REFUSED: ++counters.refused; break;
-      default: ++counters.failed; break;
+      case msg::STATE_EXECUTED:
+        ++counters.executed;
+        break;
+      case msg::STATE_RESET_DONE:
+        ++counters.resets;
+        break;
+      case msg::STATE_REFUSED:
+        ++counters.refused;
+        break;
+      default:
+        ++counters.failed;
+        break;
     }
   }
 
   void Refuse(const msg::TrialCommand& c, const std::string& reason) {
-    spdlog::info("cell {}: refused trial {} attempt {}: {}", options.id, c.trial_id(), c.attempt(), reason);
+    spdlog::info("cell {}: refused trial {} attempt {}: {}", options.id, c.trial_id(), c.attempt(),
+                 reason);
     auto s = BaseStatus(c, msg::STATE_REFUSED);
     s.reason(reason);
     Finish(c, s);
@@ -206,17 +222,20 @@ struct Cell::Impl {
   void Handle(const msg::TrialCommand& c) {
     const Key key{c.service_session(), c.trial_id(), c.attempt(), static_cast<int>(c.phase())};
     if (auto it = done.find(key); it != done.end()) {
-      spdlog::info("cell {}: trial {} attempt {} already finished; re-sending its status", options.id,
-                   c.trial_id(), c.attempt());
+      spdlog::info("cell {}: trial {} attempt {} already finished; re-sending its status",
+                   options.id, c.trial_id(), c.attempt());
       msg::TrialStatus s = it->second;
       Send(s);
       std::lock_guard<std::mutex> lock(mutex);
       ++counters.duplicates;
       return;
     }
-    if (c.phase() == msg::PHASE_EXECUTE) Execute(c);
-    else if (c.phase() == msg::PHASE_RESET) Reset(c);
-    else Refuse(c, "phase: unknown value");
+    if (c.phase() == msg::PHASE_EXECUTE)
+      Execute(c);
+    else if (c.phase() == msg::PHASE_RESET)
+      Reset(c);
+    else
+      Refuse(c, "phase: unknown value");
   }
 
   void Execute(const msg::TrialCommand& c) {
@@ -236,12 +255,14 @@ struct Cell::Impl {
     auto accepted = BaseStatus(c, msg::STATE_ACCEPTED);
     Send(accepted);
     if (options.defects.hang_after_accept) {  // fault injection: a hung controller
-      spdlog::warn("cell {}: fault injection: hanging after accepting trial {}", options.id, c.trial_id());
+      spdlog::warn("cell {}: fault injection: hanging after accepting trial {}", options.id,
+                   c.trial_id());
       SleepUntil(Clock::time_point::max());
       return;
     }
 
-    const TrialPerturbation perturbation = DrawPerturbation(options.defects, c.seed(), c.trial_id());
+    const TrialPerturbation perturbation =
+        DrawPerturbation(options.defects, c.seed(), c.trial_id());
     mechanics::Scene actual = ApplyPerturbation(scene, perturbation);
     actual.model.facets = std::max(actual.model.facets, options.fidelity.facets);
     actual.model.points = std::max(actual.model.points, options.fidelity.points);
@@ -336,25 +357,32 @@ struct Cell::Impl {
     s.reason(failure);
     s.samples(static_cast<std::uint32_t>(n));
     s.phase_wall_s(std::chrono::duration<double>(Clock::now() - started).count());
-    json detail = {
-        {"mu_scale", perturbation.mu_scale},
-        {"velocity_scale", perturbation.velocity_scale},
-        {"velocity_offset", {perturbation.velocity_offset.x(), perturbation.velocity_offset.y(),
-                             perturbation.velocity_offset.z()}},
-        {"dropped_observations", dropped},
-        {"batches", batch_index},
-        {"model", {{"dof", result.model.dof}, {"facets", result.model.facets},
-                   {"points", result.model.points}, {"dt", result.model.dt},
-                   {"unknowns", result.model.unknowns}}},
-        {"residuals", {{"force_balance", result.residuals.force_balance},
-                       {"complementarity", result.residuals.complementarity},
-                       {"cone", result.residuals.cone}}},
-        {"solver", {{"steps", result.solver.steps}, {"max_pivots", result.solver.max_pivots},
-                    {"failures", result.solver.failures}}},
-        {"simulate_wall_s", result.wall_s}};
+    json detail = {{"mu_scale", perturbation.mu_scale},
+                   {"velocity_scale", perturbation.velocity_scale},
+                   {"velocity_offset",
+                    {perturbation.velocity_offset.x(), perturbation.velocity_offset.y(),
+                     perturbation.velocity_offset.z()}},
+                   {"dropped_observations", dropped},
+                   {"batches", batch_index},
+                   {"model",
+                    {{"dof", result.model.dof},
+                     {"facets", result.model.facets},
+                     {"points", result.model.points},
+                     {"dt", result.model.dt},
+                     {"unknowns", result.model.unknowns}}},
+                   {"residuals",
+                    {{"force_balance", result.residuals.force_balance},
+                     {"complementarity", result.residuals.complementarity},
+                     {"cone", result.residuals.cone}}},
+                   {"solver",
+                    {{"steps", result.solver.steps},
+                     {"max_pivots", result.solver.max_pivots},
+                     {"failures", result.solver.failures}}},
+                   {"simulate_wall_s", result.wall_s}};
     s.detail_json(detail.dump());
     if (!failure.empty()) {
-      spdlog::warn("cell {}: trial {} attempt {} failed: {}", options.id, c.trial_id(), c.attempt(), failure);
+      spdlog::warn("cell {}: trial {} attempt {} failed: {}", options.id, c.trial_id(), c.attempt(),
+                   failure);
     }
     Finish(c, s);
   }
@@ -382,7 +410,8 @@ struct Cell::Impl {
     auto accepted = BaseStatus(c, msg::STATE_ACCEPTED);
     Send(accepted);
 
-    const reset::ResetOutcome out = reset::ExecuteReset(request, reset_params, c.seed(), c.trial_id());
+    const reset::ResetOutcome out =
+        reset::ExecuteReset(request, reset_params, c.seed(), c.trial_id());
     // The reset's own (simulated) duration is paced like a trial.
     if (options.speed > 0) {
       SleepUntil(started + std::chrono::duration_cast<Clock::duration>(

@@ -43,7 +43,8 @@ void ReadScalar(const json& parent, const char* key, const std::string& prefix, 
 }
 
 // A 3-vector, or one number for all three axes.
-void ReadAxes(const json& parent, const char* key, const std::string& prefix, Eigen::Vector3d* out) {
+void ReadAxes(const json& parent, const char* key, const std::string& prefix,
+              Eigen::Vector3d* out) {
   auto it = parent.find(key);
   if (it == parent.end()) return;
   const std::string path = prefix + key;
@@ -51,7 +52,8 @@ void ReadAxes(const json& parent, const char* key, const std::string& prefix, Ei
     out->setConstant(Number(*it, path));
     return;
   }
-  if (!it->is_array() || it->size() != 3) throw DefectError(path, "must be a number or an array of 3 numbers");
+  if (!it->is_array() || it->size() != 3)
+    throw DefectError(path, "must be a number or an array of 3 numbers");
   for (int k = 0; k < 3; ++k) (*out)[k] = Number((*it)[k], path + "[" + std::to_string(k) + "]");
 }
 
@@ -66,9 +68,12 @@ void NonNegative(double v, const std::string& path) {
 
 const char* TypeName(mechanics::ContactType t) {
   switch (t) {
-    case mechanics::ContactType::kPoint: return "point";
-    case mechanics::ContactType::kLine: return "line";
-    case mechanics::ContactType::kPatch: return "patch";
+    case mechanics::ContactType::kPoint:
+      return "point";
+    case mechanics::ContactType::kLine:
+      return "line";
+    case mechanics::ContactType::kPatch:
+      return "patch";
   }
   return "?";
 }
@@ -96,11 +101,13 @@ void ValidateDefectProfile(const DefectProfile& p) {
     throw DefectError("drop_probability", "must be in [0, 1)");
   }
   NonNegative(p.mu_scale_std, "friction_variability.mu_scale_std");
-  if (p.mu_scale_std > 0.5) throw DefectError("friction_variability.mu_scale_std", "must be <= 0.5");
+  if (p.mu_scale_std > 0.5)
+    throw DefectError("friction_variability.mu_scale_std", "must be <= 0.5");
   for (int k = 0; k < 3; ++k) {
     if (!std::isfinite(p.workspace_min[k]) || !std::isfinite(p.workspace_max[k]) ||
         !(p.workspace_min[k] < p.workspace_max[k])) {
-      throw DefectError("workspace.min[" + std::to_string(k) + "]", "must be finite and below workspace.max");
+      throw DefectError("workspace.min[" + std::to_string(k) + "]",
+                        "must be finite and below workspace.max");
     }
   }
   if (!(p.max_pusher_speed > 0) || !std::isfinite(p.max_pusher_speed)) {
@@ -124,9 +131,10 @@ DefectProfile ParseDefectProfile(std::string_view text) {
     throw DefectError("(document)", std::string("not valid JSON: ") + e.what());
   }
   if (!root.is_object()) throw DefectError("(document)", "must be a JSON object");
-  CheckKeys(root, "", {"pose_noise", "ft_noise", "actuation_noise", "latency_ms",
-                       "drop_probability", "friction_variability", "workspace",
-                       "max_pusher_speed", "contact_types", "reset", "comment", "fault_injection"});
+  CheckKeys(root, "",
+            {"pose_noise", "ft_noise", "actuation_noise", "latency_ms", "drop_probability",
+             "friction_variability", "workspace", "max_pusher_speed", "contact_types", "reset",
+             "comment", "fault_injection"});
   DefectProfile p;
   if (const json* o = Object(root, "pose_noise", "pose_noise")) {
     CheckKeys(*o, "pose_noise", {"position_std", "rotation_std"});
@@ -163,16 +171,21 @@ DefectProfile ParseDefectProfile(std::string_view text) {
       const json& v = (*it)[i];
       if (!v.is_string()) throw DefectError(path, "must be a string");
       const std::string s = v.get<std::string>();
-      if (s == "point") p.contact_types.push_back(mechanics::ContactType::kPoint);
-      else if (s == "line") p.contact_types.push_back(mechanics::ContactType::kLine);
-      else if (s == "patch") p.contact_types.push_back(mechanics::ContactType::kPatch);
-      else throw DefectError(path, "must be point, line or patch, got '" + s + "'");
+      if (s == "point")
+        p.contact_types.push_back(mechanics::ContactType::kPoint);
+      else if (s == "line")
+        p.contact_types.push_back(mechanics::ContactType::kLine);
+      else if (s == "patch")
+        p.contact_types.push_back(mechanics::ContactType::kPatch);
+      else
+        throw DefectError(path, "must be point, line or patch, got '" + s + "'");
     }
   }
   if (const json* o = Object(root, "reset", "reset")) {
-    CheckKeys(*o, "reset", {"failure_probability", "max_attempts", "position_tolerance",
-                            "angle_tolerance", "placement_position_std", "placement_angle_std",
-                            "translate_speed", "rotate_speed", "grasp_time", "swap_time"});
+    CheckKeys(*o, "reset",
+              {"failure_probability", "max_attempts", "position_tolerance", "angle_tolerance",
+               "placement_position_std", "placement_angle_std", "translate_speed", "rotate_speed",
+               "grasp_time", "swap_time"});
     auto& r = p.reset;
     ReadScalar(*o, "failure_probability", "reset.", &r.failure_probability);
     if (auto it = o->find("max_attempts"); it != o->end()) {
@@ -191,7 +204,8 @@ DefectProfile ParseDefectProfile(std::string_view text) {
   if (const json* o = Object(root, "fault_injection", "fault_injection")) {
     CheckKeys(*o, "fault_injection", {"hang_after_accept", "stream"});
     if (auto it = o->find("hang_after_accept"); it != o->end()) {
-      if (!it->is_boolean()) throw DefectError("fault_injection.hang_after_accept", "must be true or false");
+      if (!it->is_boolean())
+        throw DefectError("fault_injection.hang_after_accept", "must be true or false");
       p.hang_after_accept = it->get<bool>();
     }
     if (auto it = o->find("stream"); it != o->end()) {
@@ -209,30 +223,32 @@ std::string DefectProfileToJson(const DefectProfile& p) {
   json types = json::array();
   for (auto t : p.contact_types) types.push_back(TypeName(t));
   const auto& r = p.reset;
-  json j = {
-      {"pose_noise", {{"position_std", Vec(p.position_std)}, {"rotation_std", Vec(p.rotation_std)}}},
-      {"ft_noise", {{"force_std", Vec(p.force_std)}, {"torque_std", Vec(p.torque_std)}}},
-      {"actuation_noise",
-       {{"velocity_scale_std", p.velocity_scale_std}, {"velocity_offset_std", Vec(p.velocity_offset_std)}}},
-      {"latency_ms", p.latency_ms},
-      {"drop_probability", p.drop_probability},
-      {"friction_variability", {{"mu_scale_std", p.mu_scale_std}}},
-      {"workspace", {{"min", Vec(p.workspace_min)}, {"max", Vec(p.workspace_max)}}},
-      {"max_pusher_speed", p.max_pusher_speed},
-      {"contact_types", types},
-      {"reset",
-       {{"failure_probability", r.failure_probability},
-        {"max_attempts", r.max_attempts},
-        {"position_tolerance", r.position_tolerance},
-        {"angle_tolerance", r.angle_tolerance},
-        {"placement_position_std", r.placement_position_std},
-        {"placement_angle_std", r.placement_angle_std},
-        {"translate_speed", r.translate_speed},
-        {"rotate_speed", r.rotate_speed},
-        {"grasp_time", r.grasp_time},
-        {"swap_time", r.swap_time}}}};
+  json j = {{"pose_noise",
+             {{"position_std", Vec(p.position_std)}, {"rotation_std", Vec(p.rotation_std)}}},
+            {"ft_noise", {{"force_std", Vec(p.force_std)}, {"torque_std", Vec(p.torque_std)}}},
+            {"actuation_noise",
+             {{"velocity_scale_std", p.velocity_scale_std},
+              {"velocity_offset_std", Vec(p.velocity_offset_std)}}},
+            {"latency_ms", p.latency_ms},
+            {"drop_probability", p.drop_probability},
+            {"friction_variability", {{"mu_scale_std", p.mu_scale_std}}},
+            {"workspace", {{"min", Vec(p.workspace_min)}, {"max", Vec(p.workspace_max)}}},
+            {"max_pusher_speed", p.max_pusher_speed},
+            {"contact_types", types},
+            {"reset",
+             {{"failure_probability", r.failure_probability},
+              {"max_attempts", r.max_attempts},
+              {"position_tolerance", r.position_tolerance},
+              {"angle_tolerance", r.angle_tolerance},
+              {"placement_position_std", r.placement_position_std},
+              {"placement_angle_std", r.placement_angle_std},
+              {"translate_speed", r.translate_speed},
+              {"rotate_speed", r.rotate_speed},
+              {"grasp_time", r.grasp_time},
+              {"swap_time", r.swap_time}}}};
   if (p.hang_after_accept || !p.corrupt_stream.empty())
-    j["fault_injection"] = {{"hang_after_accept", p.hang_after_accept}, {"stream", p.corrupt_stream}};
+    j["fault_injection"] = {{"hang_after_accept", p.hang_after_accept},
+                            {"stream", p.corrupt_stream}};
   return j.dump();
 }
 
@@ -245,7 +261,8 @@ reset::ResetParams EffectiveResetParams(const DefectProfile& p) {
   return r;
 }
 
-TrialPerturbation DrawPerturbation(const DefectProfile& p, std::uint64_t seed, std::uint64_t trial_id) {
+TrialPerturbation DrawPerturbation(const DefectProfile& p, std::uint64_t seed,
+                                   std::uint64_t trial_id) {
   TrialPerturbation out;
   Rng friction(seed, trial_id, StreamPurpose::kFriction);
   // 1 + N(0, std) is redrawn (not clamped) in the rare case it is <= 0;
@@ -280,11 +297,11 @@ std::string CheckCapabilities(const DefectProfile& p, const mechanics::Scene& sc
     }
   }
   if (scene.pusher && !supported(scene.pusher->type)) {
-    return std::string("pusher.type: this cell has no ") + TypeName(scene.pusher->type) +
-           " pusher";
+    return std::string("pusher.type: this cell has no ") + TypeName(scene.pusher->type) + " pusher";
   }
   auto inside = [&](const Eigen::Vector3d& x) {
-    return (x.array() >= p.workspace_min.array()).all() && (x.array() <= p.workspace_max.array()).all();
+    return (x.array() >= p.workspace_min.array()).all() &&
+           (x.array() <= p.workspace_max.array()).all();
   };
   auto str = [](const Eigen::Vector3d& v) { return Vec(v).dump(); };
   const Eigen::Vector3d start = scene.object.pose.position;
@@ -301,8 +318,9 @@ std::string CheckCapabilities(const DefectProfile& p, const mechanics::Scene& sc
     // The object cannot travel further than the pusher moves it.
     const Eigen::Vector3d end = start + scene.pusher->motion.velocity * scene.duration;
     if (!inside(end)) {
-      return "pusher.motion: pushing for " + std::to_string(scene.duration) + " s moves the object to " +
-             str(end) + " m, outside the workspace " + str(p.workspace_min) + ".." + str(p.workspace_max);
+      return "pusher.motion: pushing for " + std::to_string(scene.duration) +
+             " s moves the object to " + str(end) + " m, outside the workspace " +
+             str(p.workspace_min) + ".." + str(p.workspace_max);
     }
   }
   return "";
@@ -335,8 +353,9 @@ std::vector<dds::Observation> Observe(const std::vector<mechanics::TrajectorySam
     // Noise is drawn even when the sample is not valid (fixed stream usage).
     o.position = s.position + dp;
     o.orientation = Perturb(s.orientation, dr);
-    const Eigen::Vector3d pusher_torque =
-        s.contacts.size() > scene.fingers.size() ? s.contacts.back().torque : Eigen::Vector3d::Zero();
+    const Eigen::Vector3d pusher_torque = s.contacts.size() > scene.fingers.size()
+                                              ? s.contacts.back().torque
+                                              : Eigen::Vector3d::Zero();
     const Eigen::Vector3d pf = noisy(s.pusher_force, p.force_std);
     const Eigen::Vector3d pt = noisy(pusher_torque, p.torque_std);
     o.pusher_wrench << pf, pt;
@@ -344,7 +363,8 @@ std::vector<dds::Observation> Observe(const std::vector<mechanics::TrajectorySam
     for (size_t f = 0; f < scene.fingers.size(); ++f) {
       Eigen::Vector3d force = Eigen::Vector3d::Zero(), torque = Eigen::Vector3d::Zero();
       if (f < s.contacts.size()) {
-        force = s.contacts[f].normal_force * scene.fingers[f].normal + s.contacts[f].tangential_force;
+        force =
+            s.contacts[f].normal_force * scene.fingers[f].normal + s.contacts[f].tangential_force;
         torque = s.contacts[f].torque;
       }
       const Eigen::Vector3d ff = noisy(force, p.force_std);
@@ -359,7 +379,8 @@ std::vector<dds::Observation> Observe(const std::vector<mechanics::TrajectorySam
   return out;
 }
 
-dds::PusherState PusherAt(const mechanics::Scene& scene, const mechanics::TrajectorySample& sample) {
+dds::PusherState PusherAt(const mechanics::Scene& scene,
+                          const mechanics::TrajectorySample& sample) {
   dds::PusherState p;
   p.position = sample.pusher_position;
   if (!scene.pusher) return p;

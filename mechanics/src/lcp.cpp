@@ -74,7 +74,8 @@ bool SolveBasis(const Eigen::MatrixXd& A, const Eigen::VectorXd& b, const std::v
 
 // Accepts a candidate solution when it is finite, nonnegative and
 // complementary within tolerance (nondimensional, relative to the data).
-bool Acceptable(const Eigen::VectorXd& z, const Eigen::VectorXd& w, const Eigen::VectorXd& b, double tol) {
+bool Acceptable(const Eigen::VectorXd& z, const Eigen::VectorXd& w, const Eigen::VectorXd& b,
+                double tol) {
   if (!AllFinite(z) || !AllFinite(w)) return false;
   // Relative to the data, not to z: a near-singular basis can give a huge z
   // whose relative residual looks small.
@@ -120,8 +121,8 @@ void LemkeOnce(const Eigen::MatrixXd& A, const Eigen::VectorXd& b, const Eigen::
   const Eigen::Index n = b.size();
   out.ok = false;
   out.basis.assign(static_cast<size_t>(n), 0);
-  const int max_pivots = options.max_pivots > 0 ? options.max_pivots
-                                                : static_cast<int>(50 * n + 200);
+  const int max_pivots =
+      options.max_pivots > 0 ? options.max_pivots : static_cast<int>(50 * n + 200);
   const double tol = options.pivot_tolerance;
   const Eigen::Index z0 = 2 * n;
   // Column-major: while the slack w_v is basic at position i, column v of
@@ -135,7 +136,8 @@ void LemkeOnce(const Eigen::MatrixXd& A, const Eigen::VectorXd& b, const Eigen::
   thread_local Eigen::MatrixXd Binv;
   thread_local Eigen::VectorXd x, d;  // x: values of the basic variables
   thread_local Eigen::RowVectorXd pivot_row;
-  thread_local std::vector<Eigen::Index> basis, slack_pos;  // slack_pos: position of basic w_v, or -1
+  thread_local std::vector<Eigen::Index> basis,
+      slack_pos;  // slack_pos: position of basic w_v, or -1
   Binv.setIdentity(n, n);
   x = b;
   d.resize(n);
@@ -357,7 +359,8 @@ void LemkeOnce(const Eigen::MatrixXd& A, const Eigen::VectorXd& b, const Eigen::
   // Polish: re-solve the final basis exactly and keep the better answer.
   Eigen::VectorXd zp, wp;
   if (SolveBasis(A, b, out.basis, zp, wp)) {
-    const double raw = AllFinite(w) ? NaturalResidual(z, w) : std::numeric_limits<double>::infinity();
+    const double raw =
+        AllFinite(w) ? NaturalResidual(z, w) : std::numeric_limits<double>::infinity();
     if (NaturalResidual(zp, wp) <= raw) {
       z = zp;
       w = wp;
@@ -458,7 +461,9 @@ LcpResult SolveLcp(const Eigen::MatrixXd& A, const Eigen::VectorXd& b,
     total += out.pivots;
     if (out.ok) break;
     // An inaccurate end leaves its basis in out.basis: try to repair it.
-    if (out.reason.rfind("inaccurate", 0) == 0 && RepairBasis(A, b, out.basis, options.feasibility, out)) break;
+    if (out.reason.rfind("inaccurate", 0) == 0 &&
+        RepairBasis(A, b, out.basis, options.feasibility, out))
+      break;
     if (attempt == 0) first_reason = out.reason;
   }
   out.pivots = total;

@@ -19,7 +19,8 @@ namespace arena::mechanics {
 Eigen::Vector3d FirstTangent(const Eigen::Vector3d& normal) {
   const Eigen::Vector3d n = normal.normalized();
   for (const Eigen::Vector3d& axis :
-       {Eigen::Vector3d::UnitZ().eval(), Eigen::Vector3d::UnitY().eval(), Eigen::Vector3d::UnitX().eval()}) {
+       {Eigen::Vector3d::UnitZ().eval(), Eigen::Vector3d::UnitY().eval(),
+        Eigen::Vector3d::UnitX().eval()}) {
     if (std::abs(n.dot(axis)) < 0.9) return (axis - n.dot(axis) * n).normalized();
   }
   // Unreachable for a unit normal: some axis has |n·axis| <= 1/sqrt(3).
@@ -115,7 +116,8 @@ std::string CheckPlane(const Scene& scene, const Eigen::Vector3d& p, int& passed
   const Eigen::Matrix3d I = R * ObjectInertia(scene.object) * R.transpose();
   passed = 0;
   const double gn = scene.gravity.norm();
-  if (gn > 0 && std::abs(scene.gravity.dot(p)) > kPlaneTolerance * gn) return "gravity leaves the plane";
+  if (gn > 0 && std::abs(scene.gravity.dot(p)) > kPlaneTolerance * gn)
+    return "gravity leaves the plane";
   ++passed;
   const Eigen::Vector3d Ip = I * p;
   if ((Ip - p.dot(Ip) * p).norm() > kPlaneTolerance * I.norm()) {
@@ -125,11 +127,13 @@ std::string CheckPlane(const Scene& scene, const Eigen::Vector3d& p, int& passed
   auto check_contact = [&](const ContactSpec& s, const std::string& name) -> std::string {
     const Eigen::Vector3d n = s.normal.normalized();
     if (std::abs(n.dot(p)) > kPlaneTolerance) return name + ": normal leaves the plane";
-    if (std::abs((s.position - c).dot(p)) > kPlaneTolerance * L) return name + ": position leaves the plane";
+    if (std::abs((s.position - c).dot(p)) > kPlaneTolerance * L)
+      return name + ": position leaves the plane";
     if (s.type == ContactType::kLine && std::abs(s.axis.normalized().dot(p)) > kPlaneTolerance) {
       return name + ": line axis leaves the plane";
     }
-    if (s.type == ContactType::kPatch && scene.model.points > 1) return name + ": a patch spreads out of the plane";
+    if (s.type == ContactType::kPatch && scene.model.points > 1)
+      return name + ": a patch spreads out of the plane";
     if (s.mu > 0) {
       // The full cone must have edges along ±(p × n) and be symmetric about the plane.
       const int g = scene.model.facets;
@@ -138,15 +142,16 @@ std::string CheckPlane(const Scene& scene, const Eigen::Vector3d& p, int& passed
       const double a = std::atan2(tau.dot(n.cross(t1)), tau.dot(t1));
       const double k = a * g / (2 * std::numbers::pi);
       if (g % 2 != 0 || std::abs(k - std::round(k)) > 1e-9) {
-        return name + ": friction cone has no edge along the plane (facets " + std::to_string(g) + ")";
+        return name + ": friction cone has no edge along the plane (facets " + std::to_string(g) +
+               ")";
       }
     }
     ++passed;
     return {};
   };
   for (size_t i = 0; i < scene.fingers.size(); ++i) {
-    const std::string e = check_contact(scene.fingers[i], "fingers[" + std::to_string(i) + "] '" +
-                                                              scene.fingers[i].name + "'");
+    const std::string e = check_contact(
+        scene.fingers[i], "fingers[" + std::to_string(i) + "] '" + scene.fingers[i].name + "'");
     if (!e.empty()) return e;
   }
   if (scene.pusher) {
@@ -154,7 +159,8 @@ std::string CheckPlane(const Scene& scene, const Eigen::Vector3d& p, int& passed
     const std::string e = check_contact(s, "pusher");
     if (!e.empty()) return e;
     const double v = s.motion.velocity.norm();
-    if (std::abs(s.motion.velocity.dot(p)) > kPlaneTolerance * v) return "pusher velocity leaves the plane";
+    if (std::abs(s.motion.velocity.dot(p)) > kPlaneTolerance * v)
+      return "pusher velocity leaves the plane";
     const Eigen::Vector3d& w = s.motion.angular_velocity;
     if (w.cross(p).norm() > kPlaneTolerance * w.norm()) return "pusher turns out of the plane";
     if (w.norm() > 0 && s.mu > 0) {
@@ -179,7 +185,8 @@ PlaneCheck FindPlane(const Scene& scene) {
     candidates.insert(candidates.begin(), scene.pusher->motion.angular_velocity.normalized());
   }
   const Eigen::Matrix3d R = RotationFromRpy(scene.object.pose.rpy);
-  Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig(R * ObjectInertia(scene.object) * R.transpose());
+  Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig(R * ObjectInertia(scene.object) *
+                                                     R.transpose());
   for (int i = 0; i < 3; ++i) candidates.push_back(eig.eigenvectors().col(i));
   std::vector<Eigen::Vector3d> dirs;  // directions that must lie in the plane
   for (const auto& f : scene.fingers) dirs.push_back(f.normal);
@@ -253,7 +260,7 @@ struct ContactModel::Impl {
 
   bool planar = false;
   Eigen::Vector3d plane_normal = Eigen::Vector3d::UnitY();
-  Eigen::Matrix<double, 6, Eigen::Dynamic> P;  // reduced -> full twist
+  Eigen::Matrix<double, 6, Eigen::Dynamic> P;                             // reduced -> full twist
   Eigen::Matrix<double, 3, 6> Pt3 = Eigen::Matrix<double, 3, 6>::Zero();  // planar: Pᵀ
   int nd = 6;
   int edges_per_point = 0;
@@ -261,8 +268,8 @@ struct ContactModel::Impl {
   double mass = 0, L = 1, Fs = 1, Vs = 1, dt = 0;
   Eigen::Matrix3d inertia_body = Eigen::Matrix3d::Identity();
   std::vector<Contact> contacts;
-  int nf = 0;  // force unknowns (λ, β) come first in the LCP
-  int n = 0;   // LCP size
+  int nf = 0;                        // force unknowns (λ, β) come first in the LCP
+  int n = 0;                         // LCP size
   std::vector<int> force_point;      // per force unknown: contact index
   std::vector<int> force_point_sub;  // per force unknown: point index
   std::vector<int> force_dir;        // per force unknown: -1 normal, else edge index
@@ -296,7 +303,9 @@ SimulationStatus ContactModel::status() const { return impl_->status; }
 const std::string& ContactModel::error() const { return impl_->error; }
 const ModelInfo& ContactModel::info() const { return impl_->info; }
 StepReport ContactModel::Step() { return impl_->Step(); }
-void ContactModel::SetLcpObserver(LcpObserver observer) { impl_->lcp_observer = std::move(observer); }
+void ContactModel::SetLcpObserver(LcpObserver observer) {
+  impl_->lcp_observer = std::move(observer);
+}
 double ContactModel::time() const { return impl_->t; }
 const Eigen::Vector3d& ContactModel::position() const { return impl_->c; }
 Eigen::Quaterniond ContactModel::orientation() const { return impl_->q; }
@@ -327,13 +336,17 @@ std::string BasicCheck(const Scene& s) {
     return "object/gravity: must be finite";
   }
   const Eigen::Matrix3d I = ObjectInertia(s.object);
-  if (!I.allFinite() || I.llt().info() != Eigen::Success) return "object: inertia must be positive definite";
+  if (!I.allFinite() || I.llt().info() != Eigen::Success)
+    return "object: inertia must be positive definite";
   auto contact = [&](const ContactSpec& c, const std::string& name) -> std::string {
-    if (!finite3(c.position) || !finite3(c.normal) || !finite3(c.axis)) return name + ": must be finite";
+    if (!finite3(c.position) || !finite3(c.normal) || !finite3(c.axis))
+      return name + ": must be finite";
     if (!(c.normal.norm() > 0)) return name + ".normal: must be non-zero";
-    if (c.type == ContactType::kLine && !(c.axis.norm() > 0)) return name + ".axis: must be non-zero";
+    if (c.type == ContactType::kLine && !(c.axis.norm() > 0))
+      return name + ".axis: must be non-zero";
     if (!(c.mu >= 0) || !std::isfinite(c.mu)) return name + ".mu: must be >= 0";
-    if (!(c.length >= 0) || !(c.radius >= 0) || !std::isfinite(c.length) || !std::isfinite(c.radius)) {
+    if (!(c.length >= 0) || !(c.radius >= 0) || !std::isfinite(c.length) ||
+        !std::isfinite(c.radius)) {
       return name + ": length and radius must be >= 0";
     }
     return {};
@@ -668,7 +681,8 @@ StepReport ContactModel::Impl::Step() {
       const SmallVector newton = Mr * (vr_new - vr) / dt - (Jc * f + Q);
       for (int i = 0; i < nd; ++i) {
         const bool torque = planar ? i == 2 : i >= 3;
-        res.force_balance = std::max(res.force_balance, std::abs(newton[i]) / (Fs * (torque ? L : 1.0)));
+        res.force_balance =
+            std::max(res.force_balance, std::abs(newton[i]) / (Fs * (torque ? L : 1.0)));
       }
     }
     auto comp = [&](double z_nd, double w_nd) {
@@ -680,7 +694,8 @@ StepReport ContactModel::Impl::Step() {
       double sum = 0;
       for (Point& pt : ct.points) {
         const Eigen::Vector3d urel =
-            object_velocity(pt.p) - (ct.pusher ? pt.body_velocity : Eigen::Vector3d(vf * ct.normal));
+            object_velocity(pt.p) -
+            (ct.pusher ? pt.body_velocity : Eigen::Vector3d(vf * ct.normal));
         const double lam = pt.lambda >= 0 ? zv(pt.lambda) : ct.known_normal;
         sum += lam;
         if (pt.lambda >= 0) comp(lam / Fs, (ct.normal.dot(urel) + pt.gap / dt) / Vs);
@@ -709,7 +724,8 @@ StepReport ContactModel::Impl::Step() {
     if (attempt < kAccuracyAttempts) continue;
     DumpLcp(A, b);
     char buf[128];
-    std::snprintf(buf, sizeof buf, "LCP (%d unknowns): inaccurate solution (relative residual %.3g)", n, worst);
+    std::snprintf(buf, sizeof buf,
+                  "LCP (%d unknowns): inaccurate solution (relative residual %.3g)", n, worst);
     rep.ok = false;
     rep.error = buf;
     basis.clear();
@@ -739,12 +755,14 @@ StepReport ContactModel::Impl::Step() {
         st.tangential_force += ft;
         st.torque += (pt.p - ct.position).cross(fp);
         const Eigen::Vector3d urel =
-            object_velocity(pt.p) - (ct.pusher ? pt.body_velocity : Eigen::Vector3d(vf * ct.normal));
+            object_velocity(pt.p) -
+            (ct.pusher ? pt.body_velocity : Eigen::Vector3d(vf * ct.normal));
         const Eigen::Vector3d ut = urel - ct.normal.dot(urel) * ct.normal;
         if (lam > 1e-9 * Fs && ut.norm() > 1e-9 * Vs) sliding = true;
       }
-      st.mode = st.normal_force <= 1e-9 * Fs ? ContactMode::kSeparate
-                                             : (sliding ? ContactMode::kSlide : ContactMode::kStick);
+      st.mode = st.normal_force <= 1e-9 * Fs
+                    ? ContactMode::kSeparate
+                    : (sliding ? ContactMode::kSlide : ContactMode::kStick);
     }
     if (ct.pusher) pusher_force = st.normal_force * ct.normal + st.tangential_force;
     states[ci] = st;
@@ -754,7 +772,8 @@ StepReport ContactModel::Impl::Step() {
   // pads follow the object along their normals; the pusher tracks its gaps.
   for (Contact& ct : contacts) {
     if (ct.pusher) {
-      for (Point& pt : ct.points) pt.gap += dt * ct.normal.dot(object_velocity(pt.p) - pt.body_velocity);
+      for (Point& pt : ct.points)
+        pt.gap += dt * ct.normal.dot(object_velocity(pt.p) - pt.body_velocity);
     } else if (ct.active) {
       const double vf = ct.y_plus >= 0 ? zv(ct.y_plus) - zv(ct.y_minus)
                                        : ct.normal.dot(object_velocity(ct.points[0].p));
@@ -765,7 +784,8 @@ StepReport ContactModel::Impl::Step() {
   w = w_new;
   c += dt * v_new;
   const double angle = w_new.norm() * dt;
-  if (angle > 0) q = (Eigen::Quaterniond(Eigen::AngleAxisd(angle, w_new.normalized())) * q).normalized();
+  if (angle > 0)
+    q = (Eigen::Quaterniond(Eigen::AngleAxisd(angle, w_new.normalized())) * q).normalized();
   t += dt;
   return rep;
 }

@@ -36,26 +36,34 @@ SceneError::SceneError(std::string field, const std::string& reason)
 
 const char* ToString(ContactType type) {
   switch (type) {
-    case ContactType::kPoint: return "point";
-    case ContactType::kLine: return "line";
-    case ContactType::kPatch: return "patch";
+    case ContactType::kPoint:
+      return "point";
+    case ContactType::kLine:
+      return "line";
+    case ContactType::kPatch:
+      return "patch";
   }
   return "?";
 }
 
 const char* ToString(Reduce reduce) {
   switch (reduce) {
-    case Reduce::kAuto: return "auto";
-    case Reduce::kFull: return "full";
-    case Reduce::kPlanar: return "planar";
+    case Reduce::kAuto:
+      return "auto";
+    case Reduce::kFull:
+      return "full";
+    case Reduce::kPlanar:
+      return "planar";
   }
   return "?";
 }
 
 const char* ToString(ObjectShape shape) {
   switch (shape) {
-    case ObjectShape::kBox: return "box";
-    case ObjectShape::kCylinder: return "cylinder";
+    case ObjectShape::kBox:
+      return "box";
+    case ObjectShape::kCylinder:
+      return "cylinder";
   }
   return "?";
 }
@@ -141,12 +149,15 @@ class PathTrackingBuilder {
     return true;
   }
 
-  bool parse_error(std::size_t position, const std::string&, const nlohmann::detail::exception& ex) {
+  bool parse_error(std::size_t position, const std::string&,
+                   const nlohmann::detail::exception& ex) {
     std::string what = ex.what();
     // "[json.exception.parse_error.101] parse error at line 1, column 5: ..." -> after "]".
-    if (const auto close = what.find("] "); close != std::string::npos) what = what.substr(close + 2);
-    return Fail(ChildPath(), "invalid JSON at byte offset " + std::to_string(position > 0 ? position - 1 : 0) +
-                                 ": " + Printable(what, 200));
+    if (const auto close = what.find("] "); close != std::string::npos)
+      what = what.substr(close + 2);
+    return Fail(ChildPath(), "invalid JSON at byte offset " +
+                                 std::to_string(position > 0 ? position - 1 : 0) + ": " +
+                                 Printable(what, 200));
   }
 
  private:
@@ -269,7 +280,8 @@ double Number(const json& v, const std::string& path) {
 }
 
 int Integer(const json& v, const std::string& path, int lo, int hi) {
-  const std::string range = "an integer in [" + std::to_string(lo) + ", " + std::to_string(hi) + "]";
+  const std::string range =
+      "an integer in [" + std::to_string(lo) + ", " + std::to_string(hi) + "]";
   if (!v.is_number()) throw SceneError(path, "must be " + range + ", got " + TypeName(v));
   const double x = v.get<double>();
   if (std::floor(x) != x) throw SceneError(path, "must be " + range + ", got " + Num(x));
@@ -285,7 +297,8 @@ std::string String(const json& v, const std::string& path) {
 Eigen::Vector3d Vec3(const json& v, const std::string& path) {
   if (!v.is_array()) throw SceneError(path, "must be an array of 3 numbers, got " + TypeName(v));
   if (v.size() != 3) {
-    throw SceneError(path, "must be an array of 3 numbers, got " + std::to_string(v.size()) + " elements");
+    throw SceneError(
+        path, "must be an array of 3 numbers, got " + std::to_string(v.size()) + " elements");
   }
   return {Number(v[0], Index(path, 0)), Number(v[1], Index(path, 1)), Number(v[2], Index(path, 2))};
 }
@@ -317,7 +330,8 @@ ObjectSpec ReadObject(const json& v, const std::string& path) {
   ObjectSpec object;
   const std::string shape = String(o.Require("shape"), o.At("shape"));
   const auto parsed = ObjectShapeFromString(shape);
-  if (!parsed) throw SceneError(o.At("shape"), "must be \"box\" or \"cylinder\", got " + Quote(shape));
+  if (!parsed)
+    throw SceneError(o.At("shape"), "must be \"box\" or \"cylinder\", got " + Quote(shape));
   object.shape = *parsed;
   if (object.shape == ObjectShape::kBox) {
     o.Forbid("radius", "only for shape \"cylinder\" (a box has size)");
@@ -366,9 +380,11 @@ void ReadContact(const Obj& o, ContactSpec* contact) {
     Eigen::Vector3d axis = Direction(o.Require("axis"), o.At("axis"));
     const double dot = axis.dot(contact->normal);
     if (std::abs(dot) > kParseUnitTolerance) {
-      throw SceneError(o.At("axis"), "must be perpendicular to normal (|axis.normal| <= 1e-3), got " + Num(dot));
+      throw SceneError(o.At("axis"),
+                       "must be perpendicular to normal (|axis.normal| <= 1e-3), got " + Num(dot));
     }
-    if (std::abs(dot) > 1e-12) axis = (axis - dot * contact->normal).normalized();  // into the contact plane
+    if (std::abs(dot) > 1e-12)
+      axis = (axis - dot * contact->normal).normalized();  // into the contact plane
     contact->axis = axis;
     contact->length = Number(o.Require("length"), o.At("length"));
   }
@@ -412,7 +428,8 @@ ModelOptions ReadModel(const json& v, const std::string& path) {
     const std::string text = String(*r, o.At("reduce"));
     const auto parsed = ReduceFromString(text);
     if (!parsed) {
-      throw SceneError(o.At("reduce"), "must be \"auto\", \"full\" or \"planar\", got " + Quote(text));
+      throw SceneError(o.At("reduce"),
+                       "must be \"auto\", \"full\" or \"planar\", got " + Quote(text));
     }
     model.reduce = *parsed;
   }
@@ -466,7 +483,8 @@ double DistanceToSurface(const ObjectSpec& object, const Eigen::Vector3d& p_G) {
     const Eigen::Vector3d q = p_O.cwiseAbs() - object.size / 2;
     return std::abs(box_sdf(q));
   }
-  Eigen::Vector2d q(std::hypot(p_O.x(), p_O.y()) - object.radius, std::abs(p_O.z()) - object.height / 2);
+  Eigen::Vector2d q(std::hypot(p_O.x(), p_O.y()) - object.radius,
+                    std::abs(p_O.z()) - object.height / 2);
   return std::abs(box_sdf(q));
 }
 
@@ -513,11 +531,13 @@ void ValidateContact(const ContactSpec& c, const std::string& path, const Scene&
   RequireNonNegative(c.mu, Join(path, "mu"));
   const double extent = ObjectExtent(scene.object);
   const double surface_tol = kSurfaceTolerance * extent;
-  auto on_surface = [&](const Eigen::Vector3d& p, const std::string& field, const std::string& what) {
+  auto on_surface = [&](const Eigen::Vector3d& p, const std::string& field,
+                        const std::string& what) {
     const double d = DistanceToSurface(scene.object, p);
     if (d > surface_tol) {
       throw SceneError(field, what + " must lie on the object's surface (distance " + Num(d) +
-                                  " m, tolerance " + Num(surface_tol) + " m = 1% of the object's extent)");
+                                  " m, tolerance " + Num(surface_tol) +
+                                  " m = 1% of the object's extent)");
     }
   };
   on_surface(c.position, Join(path, "position"), "the contact point");
@@ -530,14 +550,16 @@ void ValidateContact(const ContactSpec& c, const std::string& path, const Scene&
     RequireUnit(c.axis, Join(path, "axis"));
     const double dot = c.axis.dot(c.normal);
     if (std::abs(dot) > kValidateUnitTolerance) {
-      throw SceneError(Join(path, "axis"), "must be perpendicular to normal (|axis.normal| <= 1e-6), got " + Num(dot));
+      throw SceneError(Join(path, "axis"),
+                       "must be perpendicular to normal (|axis.normal| <= 1e-6), got " + Num(dot));
     }
     RequirePositive(c.length, Join(path, "length"));
     const double spacing = c.length / (scene.model.points - 1);
     if (spacing < kCoincidentTolerance * extent) {
       throw SceneError(Join(path, "length"),
-                       "too short: its " + std::to_string(scene.model.points) + " constituent points would be " +
-                           Num(spacing) + " m apart, coincident (< 1e-6 of the object's extent)");
+                       "too short: its " + std::to_string(scene.model.points) +
+                           " constituent points would be " + Num(spacing) +
+                           " m apart, coincident (< 1e-6 of the object's extent)");
     }
     for (double s : {-0.5, 0.5}) {
       on_surface(c.position + s * c.length * c.axis, Join(path, "length"), "each end of the line");
@@ -547,12 +569,13 @@ void ValidateContact(const ContactSpec& c, const std::string& path, const Scene&
     RequirePositive(c.radius, Join(path, "radius"));
     const double spacing = 2 * c.radius * std::sin(std::numbers::pi / scene.model.points);
     if (spacing < kCoincidentTolerance * extent) {
-      throw SceneError(Join(path, "radius"), "too small: its constituent points would be " + Num(spacing) +
-                                                 " m apart, coincident (< 1e-6 of the object's extent)");
+      throw SceneError(Join(path, "radius"),
+                       "too small: its constituent points would be " + Num(spacing) +
+                           " m apart, coincident (< 1e-6 of the object's extent)");
     }
     if (c.radius > extent) {
-      throw SceneError(Join(path, "radius"),
-                       "must not exceed the object's extent " + Num(extent) + " m, got " + Num(c.radius));
+      throw SceneError(Join(path, "radius"), "must not exceed the object's extent " + Num(extent) +
+                                                 " m, got " + Num(c.radius));
     }
   }
 }
@@ -564,7 +587,8 @@ void ValidateContact(const ContactSpec& c, const std::string& path, const Scene&
 void ValidateScene(const Scene& scene) {
   const ObjectSpec& object = scene.object;
   if (object.shape == ObjectShape::kBox) {
-    for (int i = 0; i < 3; ++i) RequirePositive(object.size[i], Index("object.size", static_cast<size_t>(i)));
+    for (int i = 0; i < 3; ++i)
+      RequirePositive(object.size[i], Index("object.size", static_cast<size_t>(i)));
   } else {
     RequirePositive(object.radius, "object.radius");
     RequirePositive(object.height, "object.height");
@@ -574,7 +598,8 @@ void ValidateScene(const Scene& scene) {
     const Eigen::Matrix3d& I = *object.inertia;
     for (int r = 0; r < 3; ++r) {
       for (int c = 0; c < 3; ++c) {
-        RequireFinite(I(r, c), Index(Index("object.inertia", static_cast<size_t>(r)), static_cast<size_t>(c)));
+        RequireFinite(I(r, c), Index(Index("object.inertia", static_cast<size_t>(r)),
+                                     static_cast<size_t>(c)));
       }
     }
     const double scale = I.cwiseAbs().maxCoeff();
@@ -588,8 +613,10 @@ void ValidateScene(const Scene& scene) {
     }
     // A rigid body's principal moments satisfy the triangle inequality.
     if (moments[0] + moments[1] < moments[2] * (1 - 1e-9)) {
-      throw SceneError("object.inertia", "principal moments " + Num(moments[0]) + ", " + Num(moments[1]) + ", " +
-                                             Num(moments[2]) + " violate the triangle inequality (no rigid body has them)");
+      throw SceneError("object.inertia",
+                       "principal moments " + Num(moments[0]) + ", " + Num(moments[1]) + ", " +
+                           Num(moments[2]) +
+                           " violate the triangle inequality (no rigid body has them)");
     }
   }
   RequireFinite(object.pose.position, "object.pose.position");
@@ -597,22 +624,24 @@ void ValidateScene(const Scene& scene) {
   RequireFinite(scene.gravity, "gravity");
   RequirePositive(scene.duration, "duration");
   if (scene.duration > kMaxDuration) {
-    throw SceneError("duration", "must be <= " + Num(kMaxDuration) + " s, got " + Num(scene.duration));
+    throw SceneError("duration",
+                     "must be <= " + Num(kMaxDuration) + " s, got " + Num(scene.duration));
   }
   RequireNonNegative(scene.grip_force, "grip_force");
 
   const ModelOptions& model = scene.model;
   if (model.facets < 3 || model.facets > kMaxFacets) {
-    throw SceneError("model.facets", "must be an integer in [3, " + std::to_string(kMaxFacets) + "], got " +
-                                         std::to_string(model.facets));
+    throw SceneError("model.facets", "must be an integer in [3, " + std::to_string(kMaxFacets) +
+                                         "], got " + std::to_string(model.facets));
   }
   if (model.points < 2 || model.points > kMaxPoints) {
-    throw SceneError("model.points", "must be an integer in [2, " + std::to_string(kMaxPoints) + "], got " +
-                                         std::to_string(model.points));
+    throw SceneError("model.points", "must be an integer in [2, " + std::to_string(kMaxPoints) +
+                                         "], got " + std::to_string(model.points));
   }
   RequirePositive(model.dt, "model.dt");
   if (model.dt > scene.duration) {
-    throw SceneError("model.dt", "must be <= duration (" + Num(scene.duration) + " s), got " + Num(model.dt));
+    throw SceneError("model.dt",
+                     "must be <= duration (" + Num(scene.duration) + " s), got " + Num(model.dt));
   }
   if (scene.duration / model.dt > kMaxSteps) {
     throw SceneError("model.dt", "too small: duration / dt = " + Num(scene.duration / model.dt) +
@@ -621,14 +650,14 @@ void ValidateScene(const Scene& scene) {
 
   if (scene.fingers.empty()) throw SceneError("fingers", "must list at least one finger");
   if (scene.fingers.size() > static_cast<size_t>(kMaxFingers)) {
-    throw SceneError("fingers", "must list at most " + std::to_string(kMaxFingers) + " fingers, got " +
-                                    std::to_string(scene.fingers.size()));
+    throw SceneError("fingers", "must list at most " + std::to_string(kMaxFingers) +
+                                    " fingers, got " + std::to_string(scene.fingers.size()));
   }
   // Lines and patches need enough constituent points to be a line or a patch.
   auto check_points = [&](const ContactSpec& c, const std::string& path) {
     if (c.type == ContactType::kPatch && model.points < 3) {
-      throw SceneError("model.points", "must be >= 3 when the scene has a patch contact (" + path + "), got " +
-                                           std::to_string(model.points));
+      throw SceneError("model.points", "must be >= 3 when the scene has a patch contact (" + path +
+                                           "), got " + std::to_string(model.points));
     }
   };
 
@@ -638,15 +667,19 @@ void ValidateScene(const Scene& scene) {
     const std::string path = Index("fingers", i);
     if (f.name.empty()) throw SceneError(Join(path, "name"), "must not be empty");
     if (f.name.size() > kMaxNameLength) {
-      throw SceneError(Join(path, "name"), "must be at most " + std::to_string(kMaxNameLength) + " characters");
+      throw SceneError(Join(path, "name"),
+                       "must be at most " + std::to_string(kMaxNameLength) + " characters");
     }
     if (!std::all_of(f.name.begin(), f.name.end(), ValidNameChar)) {
-      throw SceneError(Join(path, "name"), "may contain only letters, digits, '_', '-' and '.', got " + Quote(f.name));
+      throw SceneError(Join(path, "name"),
+                       "may contain only letters, digits, '_', '-' and '.', got " + Quote(f.name));
     }
-    if (f.name == "pusher") throw SceneError(Join(path, "name"), "\"pusher\" is reserved for the pusher");
+    if (f.name == "pusher")
+      throw SceneError(Join(path, "name"), "\"pusher\" is reserved for the pusher");
     for (size_t j = 0; j < i; ++j) {
       if (scene.fingers[j].name == f.name) {
-        throw SceneError(Join(path, "name"), "duplicates the name of fingers[" + std::to_string(j) + "], " + Quote(f.name));
+        throw SceneError(Join(path, "name"), "duplicates the name of fingers[" + std::to_string(j) +
+                                                 "], " + Quote(f.name));
       }
     }
     check_points(f, path);
@@ -673,8 +706,9 @@ void ValidateScene(const Scene& scene) {
       }
       if (closest < coincident) {
         throw SceneError(Join(constituents[a].first, "position"),
-                         "coincides with " + constituents[b].first + " (constituent points " + Num(closest) +
-                             " m apart, tolerance " + Num(coincident) + " m = 1e-6 of the object's extent)");
+                         "coincides with " + constituents[b].first + " (constituent points " +
+                             Num(closest) + " m apart, tolerance " + Num(coincident) +
+                             " m = 1e-6 of the object's extent)");
       }
     }
   }
@@ -686,26 +720,30 @@ void ValidateScene(const Scene& scene) {
     for (const auto& f : scene.fingers) sum += f.normal;
     const double tolerance = 1e-3 * static_cast<double>(scene.fingers.size());
     if (sum.norm() > tolerance) {
-      throw SceneError("fingers", "the grip forces do not balance: the finger normals sum to (" + Num(sum.x()) + ", " +
-                                      Num(sum.y()) + ", " + Num(sum.z()) + "), norm " + Num(sum.norm()) +
-                                      " > " + Num(tolerance) + " (opposing fingers' normals must cancel)");
+      throw SceneError("fingers", "the grip forces do not balance: the finger normals sum to (" +
+                                      Num(sum.x()) + ", " + Num(sum.y()) + ", " + Num(sum.z()) +
+                                      "), norm " + Num(sum.norm()) + " > " + Num(tolerance) +
+                                      " (opposing fingers' normals must cancel)");
     }
   }
 }
 
 namespace {
 // Pass 1 for any document: the tree, or the first problem with its path.
-json BuildDocument(std::string_view text, const JsonLimits& limits, std::optional<JsonProblem>* problem) {
+json BuildDocument(std::string_view text, const JsonLimits& limits,
+                   std::optional<JsonProblem>* problem) {
   if (text.size() > limits.max_bytes) {
-    *problem = JsonProblem{"", "is " + std::to_string(text.size()) + " bytes, larger than the limit of " +
-                                   std::to_string(limits.max_bytes) + " bytes"};
+    *problem =
+        JsonProblem{"", "is " + std::to_string(text.size()) + " bytes, larger than the limit of " +
+                            std::to_string(limits.max_bytes) + " bytes"};
     return nullptr;
   }
   PathTrackingBuilder builder(limits);
   const bool ok = json::sax_parse(text.begin(), text.end(), &builder, json::input_format_t::json,
                                   /*strict=*/true, /*ignore_comments=*/false);
   if (!ok || !builder.error_reason.empty()) {
-    *problem = JsonProblem{builder.error_path, builder.error_reason.empty() ? "invalid JSON" : builder.error_reason};
+    *problem = JsonProblem{builder.error_path,
+                           builder.error_reason.empty() ? "invalid JSON" : builder.error_reason};
     return nullptr;
   }
   return std::move(builder.root);
@@ -730,13 +768,15 @@ Scene ParseScene(std::string_view json_text) {
   scene.duration = Number(root.Require("duration"), "duration");
   scene.grip_force = Number(root.Require("grip_force"), "grip_force");
   const json& fingers = root.Require("fingers");
-  if (!fingers.is_array()) throw SceneError("fingers", "must be an array of fingers, got " + TypeName(fingers));
+  if (!fingers.is_array())
+    throw SceneError("fingers", "must be an array of fingers, got " + TypeName(fingers));
   if (fingers.empty()) throw SceneError("fingers", "must list at least one finger");
   if (fingers.size() > static_cast<size_t>(kMaxFingers)) {
-    throw SceneError("fingers", "must list at most " + std::to_string(kMaxFingers) + " fingers, got " +
-                                    std::to_string(fingers.size()));
+    throw SceneError("fingers", "must list at most " + std::to_string(kMaxFingers) +
+                                    " fingers, got " + std::to_string(fingers.size()));
   }
-  for (size_t i = 0; i < fingers.size(); ++i) scene.fingers.push_back(ReadFinger(fingers[i], Index("fingers", i)));
+  for (size_t i = 0; i < fingers.size(); ++i)
+    scene.fingers.push_back(ReadFinger(fingers[i], Index("fingers", i)));
   if (const json* p = root.Find("pusher")) scene.pusher = ReadPusher(*p, "pusher");
   if (const json* m = root.Find("model")) scene.model = ReadModel(*m, "model");
   ValidateScene(scene);
@@ -749,8 +789,9 @@ Scene LoadSceneFile(const std::string& path) {
   const std::streamoff size = in.tellg();
   if (size < 0) throw SceneError("", "cannot read '" + path + "'");
   if (static_cast<std::uintmax_t>(size) > kMaxSceneBytes) {
-    throw SceneError("", "'" + path + "' is " + std::to_string(size) + " bytes, larger than the limit of " +
-                             std::to_string(kMaxSceneBytes) + " bytes (1 MiB)");
+    throw SceneError("", "'" + path + "' is " + std::to_string(size) +
+                             " bytes, larger than the limit of " + std::to_string(kMaxSceneBytes) +
+                             " bytes (1 MiB)");
   }
   in.seekg(0);
   std::string text(static_cast<size_t>(size), '\0');
@@ -760,7 +801,9 @@ Scene LoadSceneFile(const std::string& path) {
 }
 
 namespace {
-nlohmann::ordered_json Vec(const Eigen::Vector3d& v) { return nlohmann::ordered_json::array({v.x(), v.y(), v.z()}); }
+nlohmann::ordered_json Vec(const Eigen::Vector3d& v) {
+  return nlohmann::ordered_json::array({v.x(), v.y(), v.z()});
+}
 
 nlohmann::ordered_json ContactJson(const ContactSpec& c, bool with_name) {
   nlohmann::ordered_json j;
@@ -792,9 +835,11 @@ std::string SceneToJson(const Scene& scene, int indent) {
   if (scene.object.inertia) {
     const Eigen::Matrix3d& I = *scene.object.inertia;
     object["inertia"] = ojson::array();
-    for (int r = 0; r < 3; ++r) object["inertia"].push_back(ojson::array({I(r, 0), I(r, 1), I(r, 2)}));
+    for (int r = 0; r < 3; ++r)
+      object["inertia"].push_back(ojson::array({I(r, 0), I(r, 1), I(r, 2)}));
   }
-  object["pose"] = {{"position", Vec(scene.object.pose.position)}, {"rpy", Vec(scene.object.pose.rpy)}};
+  object["pose"] = {{"position", Vec(scene.object.pose.position)},
+                    {"rpy", Vec(scene.object.pose.rpy)}};
 
   ojson j;
   j["object"] = std::move(object);

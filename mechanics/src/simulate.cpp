@@ -16,18 +16,24 @@ namespace arena::mechanics {
 
 const char* ToString(ContactMode mode) {
   switch (mode) {
-    case ContactMode::kStick: return "stick";
-    case ContactMode::kSlide: return "slide";
-    case ContactMode::kSeparate: return "separate";
+    case ContactMode::kStick:
+      return "stick";
+    case ContactMode::kSlide:
+      return "slide";
+    case ContactMode::kSeparate:
+      return "separate";
   }
   return "unknown";
 }
 
 const char* ToString(SimulationStatus status) {
   switch (status) {
-    case SimulationStatus::kOk: return "ok";
-    case SimulationStatus::kSolverFailure: return "solver_failure";
-    case SimulationStatus::kInvalidScene: return "invalid_scene";
+    case SimulationStatus::kOk:
+      return "ok";
+    case SimulationStatus::kSolverFailure:
+      return "solver_failure";
+    case SimulationStatus::kInvalidScene:
+      return "invalid_scene";
   }
   return "unknown";
 }
@@ -52,7 +58,8 @@ SimulationResult Simulate(const Scene& scene) {
   const long n_steps = std::max(1L, static_cast<long>(std::ceil(scene.duration / dt - 1e-9)));
   result.samples.reserve(static_cast<size_t>(n_samples));
   const Eigen::Vector3d pusher0 = scene.pusher ? scene.pusher->position : Eigen::Vector3d::Zero();
-  const Eigen::Vector3d pusher_v = scene.pusher ? scene.pusher->motion.velocity : Eigen::Vector3d::Zero();
+  const Eigen::Vector3d pusher_v =
+      scene.pusher ? scene.pusher->motion.velocity : Eigen::Vector3d::Zero();
 
   long next = 0;  // next sample index
   for (long step = 0; step < n_steps; ++step) {
@@ -72,7 +79,8 @@ SimulationResult Simulate(const Scene& scene) {
       result.error = when + rep.error;
       return finish();
     }
-    result.residuals.force_balance = std::max(result.residuals.force_balance, rep.residuals.force_balance);
+    result.residuals.force_balance =
+        std::max(result.residuals.force_balance, rep.residuals.force_balance);
     result.residuals.complementarity =
         std::max(result.residuals.complementarity, rep.residuals.complementarity);
     result.residuals.cone = std::max(result.residuals.cone, rep.residuals.cone);

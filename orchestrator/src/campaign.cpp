@@ -32,10 +32,14 @@ CampaignError::CampaignError(std::string field, const std::string& reason)
 
 const char* ToString(SamplerKind kind) {
   switch (kind) {
-    case SamplerKind::kGrid: return "grid";
-    case SamplerKind::kUniform: return "uniform";
-    case SamplerKind::kLatinHypercube: return "latin_hypercube";
-    case SamplerKind::kSobol: return "sobol";
+    case SamplerKind::kGrid:
+      return "grid";
+    case SamplerKind::kUniform:
+      return "uniform";
+    case SamplerKind::kLatinHypercube:
+      return "latin_hypercube";
+    case SamplerKind::kSobol:
+      return "sobol";
   }
   return "?";
 }
@@ -56,26 +60,26 @@ struct VariationInfo {
 };
 constexpr double kNoBound = -std::numeric_limits<double>::infinity();
 constexpr std::array<VariationInfo, 20> kVariationCatalog = {{
-    {"object_size_x", ValueType::kNumber, 0, true},   // box extents (m)
+    {"object_size_x", ValueType::kNumber, 0, true},  // box extents (m)
     {"object_size_y", ValueType::kNumber, 0, true},
     {"object_size_z", ValueType::kNumber, 0, true},
-    {"object_radius", ValueType::kNumber, 0, true},   // cylinder (m)
+    {"object_radius", ValueType::kNumber, 0, true},  // cylinder (m)
     {"object_height", ValueType::kNumber, 0, true},
-    {"object_mass", ValueType::kNumber, 0, true},     // kg
+    {"object_mass", ValueType::kNumber, 0, true},  // kg
     {"finger_type", ValueType::kContactType, 0, false},
-    {"finger_length", ValueType::kNumber, 0, true},   // line fingers (m)
-    {"finger_radius", ValueType::kNumber, 0, true},   // patch fingers (m)
+    {"finger_length", ValueType::kNumber, 0, true},  // line fingers (m)
+    {"finger_radius", ValueType::kNumber, 0, true},  // patch fingers (m)
     {"finger_mu", ValueType::kNumber, 0, false},
-    {"grip_force", ValueType::kNumber, 0, false},     // N
+    {"grip_force", ValueType::kNumber, 0, false},  // N
     {"pusher_type", ValueType::kContactType, 0, false},
     {"pusher_length", ValueType::kNumber, 0, true},
     {"pusher_radius", ValueType::kNumber, 0, true},
     {"pusher_mu", ValueType::kNumber, 0, false},
-    {"pivot_axis", ValueType::kVector, 0, false},     // unit, in the pusher's contact plane
+    {"pivot_axis", ValueType::kVector, 0, false},           // unit, in the pusher's contact plane
     {"pivot_offset", ValueType::kNumber, kNoBound, false},  // m along pivot_axis
-    {"push_direction", ValueType::kVector, 0, false}, // unit, gripper frame
-    {"push_speed", ValueType::kNumber, 0, false},     // m/s
-    {"push_distance", ValueType::kNumber, 0, true},   // m; sets duration = distance / speed
+    {"push_direction", ValueType::kVector, 0, false},       // unit, gripper frame
+    {"push_speed", ValueType::kNumber, 0, false},           // m/s
+    {"push_distance", ValueType::kNumber, 0, true},         // m; sets duration = distance / speed
 }};
 
 const VariationInfo* FindVariation(std::string_view name) {
@@ -106,7 +110,8 @@ std::string TypeName(const json& v) {
   return "an object";
 }
 
-void RequireObject(const json& v, const std::string& path, std::initializer_list<std::string_view> known) {
+void RequireObject(const json& v, const std::string& path,
+                   std::initializer_list<std::string_view> known) {
   if (!v.is_object()) throw CampaignError(path, "must be an object, got " + TypeName(v));
   for (const auto& item : v.items()) {
     if (std::find(known.begin(), known.end(), item.key()) == known.end()) {
@@ -125,7 +130,8 @@ double Number(const json& v, const std::string& path) {
 }
 
 int64_t Integer(const json& v, const std::string& path, int64_t lo, int64_t hi) {
-  const std::string range = "an integer in [" + std::to_string(lo) + ", " + std::to_string(hi) + "]";
+  const std::string range =
+      "an integer in [" + std::to_string(lo) + ", " + std::to_string(hi) + "]";
   if (!v.is_number()) throw CampaignError(path, "must be " + range + ", got " + TypeName(v));
   const double x = v.get<double>();
   if (std::floor(x) != x || x < static_cast<double>(lo) || x > static_cast<double>(hi)) {
@@ -146,8 +152,8 @@ VariationValue ReadValue(const json& v, const std::string& path, const Variation
       value.number = Number(v, path);
       const bool ok = info.strict ? value.number > info.lower : value.number >= info.lower;
       if (!ok) {
-        throw CampaignError(path, std::string("must be ") + (info.strict ? "> " : ">= ") + Num(info.lower) +
-                                      ", got " + Num(value.number));
+        throw CampaignError(path, std::string("must be ") + (info.strict ? "> " : ">= ") +
+                                      Num(info.lower) + ", got " + Num(value.number));
       }
       break;
     }
@@ -155,14 +161,17 @@ VariationValue ReadValue(const json& v, const std::string& path, const Variation
       const std::string text = String(v, path);
       const auto type = mechanics::ContactTypeFromString(text);
       if (!type) {
-        throw CampaignError(path, "must be \"point\", \"line\" or \"patch\", got \"" + Printable(text, 40) + "\"");
+        throw CampaignError(
+            path, "must be \"point\", \"line\" or \"patch\", got \"" + Printable(text, 40) + "\"");
       }
       value.contact_type = *type;
       break;
     }
     case ValueType::kVector: {
-      if (!v.is_array() || v.size() != 3) throw CampaignError(path, "must be an array of 3 numbers");
-      for (int i = 0; i < 3; ++i) value.vector[i] = Number(v[i], Index(path, static_cast<size_t>(i)));
+      if (!v.is_array() || v.size() != 3)
+        throw CampaignError(path, "must be an array of 3 numbers");
+      for (int i = 0; i < 3; ++i)
+        value.vector[i] = Number(v[i], Index(path, static_cast<size_t>(i)));
       const double n = value.vector.norm();
       if (!(n > 0)) throw CampaignError(path, "must be a non-zero direction");
       value.vector /= n;  // a direction: only where it points matters
@@ -172,7 +181,8 @@ VariationValue ReadValue(const json& v, const std::string& path, const Variation
   return value;
 }
 
-Variation ReadVariation(const json& v, const std::string& path, const VariationInfo& info, bool grid) {
+Variation ReadVariation(const json& v, const std::string& path, const VariationInfo& info,
+                        bool grid) {
   Variation var;
   var.name = info.name;
   var.type = info.type;
@@ -191,7 +201,8 @@ Variation ReadVariation(const json& v, const std::string& path, const VariationI
       throw CampaignError(cpath, "must have at most " + std::to_string(kMaxChoices) + " choices");
     }
     var.kind = Variation::Kind::kChoices;
-    for (size_t i = 0; i < c.size(); ++i) var.choices.push_back(ReadValue(c[i], Index(cpath, i), info));
+    for (size_t i = 0; i < c.size(); ++i)
+      var.choices.push_back(ReadValue(c[i], Index(cpath, i), info));
     return var;
   }
   if (v.contains("value")) {
@@ -202,22 +213,26 @@ Variation ReadVariation(const json& v, const std::string& path, const VariationI
   }
   RequireObject(v, path, {"min", "max", "scale", "levels"});
   if (info.type != ValueType::kNumber) {
-    throw CampaignError(path, "a range is only possible for numbers; give \"choices\" or a fixed value");
+    throw CampaignError(path,
+                        "a range is only possible for numbers; give \"choices\" or a fixed value");
   }
-  if (!v.contains("min")) throw CampaignError(Join(path, "min"), "is required (or give \"choices\" or \"value\")");
+  if (!v.contains("min"))
+    throw CampaignError(Join(path, "min"), "is required (or give \"choices\" or \"value\")");
   if (!v.contains("max")) throw CampaignError(Join(path, "max"), "is required");
   var.kind = Variation::Kind::kRange;
   var.min = ReadValue(v["min"], Join(path, "min"), info).number;
   var.max = ReadValue(v["max"], Join(path, "max"), info).number;
   if (var.max < var.min) {
-    throw CampaignError(Join(path, "max"), "must be >= min (" + Num(var.min) + "), got " + Num(var.max));
+    throw CampaignError(Join(path, "max"),
+                        "must be >= min (" + Num(var.min) + "), got " + Num(var.max));
   }
   if (v.contains("scale")) {
     const std::string scale = String(v["scale"], Join(path, "scale"));
     if (scale == "log") {
       var.log_scale = true;
     } else if (scale != "linear") {
-      throw CampaignError(Join(path, "scale"), "must be \"linear\" or \"log\", got \"" + Printable(scale, 40) + "\"");
+      throw CampaignError(Join(path, "scale"),
+                          "must be \"linear\" or \"log\", got \"" + Printable(scale, 40) + "\"");
     }
     if (var.log_scale && !(var.min > 0)) {
       throw CampaignError(Join(path, "min"), "must be > 0 for scale \"log\", got " + Num(var.min));
@@ -227,8 +242,10 @@ Variation ReadVariation(const json& v, const std::string& path, const VariationI
     var.levels = static_cast<int>(Integer(v["levels"], Join(path, "levels"), 1, kMaxGridLevels));
   }
   if (grid && var.min < var.max) {
-    if (var.levels == 0) throw CampaignError(Join(path, "levels"), "is required by the grid sampler");
-    if (var.levels < 2) throw CampaignError(Join(path, "levels"), "must be >= 2 for a range with min < max");
+    if (var.levels == 0)
+      throw CampaignError(Join(path, "levels"), "is required by the grid sampler");
+    if (var.levels < 2)
+      throw CampaignError(Join(path, "levels"), "must be >= 2 for a range with min < max");
   }
   return var;
 }
@@ -307,34 +324,39 @@ Scene BuildScene(const Scene& base, const Values& values) {
     if (s.pusher) ScaleContact(&*s.pusher, s.object.pose, k);
   }
   if (const auto* v = Get(values, "object_mass")) {
-    if (s.object.inertia) *s.object.inertia *= v->number / s.object.mass;  // same shape, scaled density
+    if (s.object.inertia)
+      *s.object.inertia *= v->number / s.object.mass;  // same shape, scaled density
     s.object.mass = v->number;
   }
 
   // Contacts: type, then the parameters of that type.
-  auto apply_contact = [&](ContactSpec* c, const std::string& path, const char* type_name, const char* length_name,
-                           const char* radius_name, const char* mu_name) {
+  auto apply_contact = [&](ContactSpec* c, const std::string& path, const char* type_name,
+                           const char* length_name, const char* radius_name, const char* mu_name) {
     if (const auto* v = Get(values, type_name)) {
       const ContactType before = c->type;
       ChangeType(c, v->contact_type);
-      if (v->contact_type == ContactType::kLine && before != ContactType::kLine && !Get(values, length_name)) {
+      if (v->contact_type == ContactType::kLine && before != ContactType::kLine &&
+          !Get(values, length_name)) {
         throw CampaignError(std::string("variations.") + type_name,
-                            std::string("\"line\" needs variations.") + length_name + " (" + path + " is a " +
-                                mechanics::ToString(before) + " in the base scene)");
+                            std::string("\"line\" needs variations.") + length_name + " (" + path +
+                                " is a " + mechanics::ToString(before) + " in the base scene)");
       }
-      if (v->contact_type == ContactType::kPatch && before != ContactType::kPatch && !Get(values, radius_name)) {
+      if (v->contact_type == ContactType::kPatch && before != ContactType::kPatch &&
+          !Get(values, radius_name)) {
         throw CampaignError(std::string("variations.") + type_name,
-                            std::string("\"patch\" needs variations.") + radius_name + " (" + path + " is a " +
-                                mechanics::ToString(before) + " in the base scene)");
+                            std::string("\"patch\" needs variations.") + radius_name + " (" + path +
+                                " is a " + mechanics::ToString(before) + " in the base scene)");
       }
     }
-    if (const auto* v = Get(values, length_name); v && c->type == ContactType::kLine) c->length = v->number;
-    if (const auto* v = Get(values, radius_name); v && c->type == ContactType::kPatch) c->radius = v->number;
+    if (const auto* v = Get(values, length_name); v && c->type == ContactType::kLine)
+      c->length = v->number;
+    if (const auto* v = Get(values, radius_name); v && c->type == ContactType::kPatch)
+      c->radius = v->number;
     if (const auto* v = Get(values, mu_name)) c->mu = v->number;
   };
   for (size_t i = 0; i < s.fingers.size(); ++i) {
-    apply_contact(&s.fingers[i], Index("scene.fingers", i), "finger_type", "finger_length", "finger_radius",
-                  "finger_mu");
+    apply_contact(&s.fingers[i], Index("scene.fingers", i), "finger_type", "finger_length",
+                  "finger_radius", "finger_mu");
   }
   if (const auto* v = Get(values, "grip_force")) s.grip_force = v->number;
 
@@ -345,9 +367,9 @@ Scene BuildScene(const Scene& base, const Values& values) {
       Eigen::Vector3d axis = FirstTangent(p.normal);
       if (const auto* a = Get(values, "pivot_axis")) axis = a->vector;
       if (std::abs(axis.dot(p.normal)) > 1e-6) {
-        throw CampaignError("variations.pivot_axis", "must be perpendicular to the pusher's normal (" +
-                                                         Num(p.normal.x()) + ", " + Num(p.normal.y()) + ", " +
-                                                         Num(p.normal.z()) + ")");
+        throw CampaignError("variations.pivot_axis",
+                            "must be perpendicular to the pusher's normal (" + Num(p.normal.x()) +
+                                ", " + Num(p.normal.y()) + ", " + Num(p.normal.z()) + ")");
       }
       p.position += offset->number * axis;
     }
@@ -357,17 +379,20 @@ Scene BuildScene(const Scene& base, const Values& values) {
     if (direction || speed) {
       const double v = speed ? speed->number : base_velocity.norm();
       if (!direction && !(base_velocity.norm() > 0)) {
-        throw CampaignError("variations.push_speed",
-                            "needs variations.push_direction (the base scene's pusher does not move)");
+        throw CampaignError(
+            "variations.push_speed",
+            "needs variations.push_direction (the base scene's pusher does not move)");
       }
-      const Eigen::Vector3d dir = direction ? direction->vector : Eigen::Vector3d(base_velocity.normalized());
+      const Eigen::Vector3d dir =
+          direction ? direction->vector : Eigen::Vector3d(base_velocity.normalized());
       p.motion.velocity = v * dir;
     }
     if (const auto* distance = Get(values, "push_distance")) {
       const double v = p.motion.velocity.norm();
       if (!(v > 0)) {
-        throw CampaignError("variations.push_distance",
-                            "needs a pusher speed > 0 (variations.push_speed or the base scene's velocity)");
+        throw CampaignError(
+            "variations.push_distance",
+            "needs a pusher speed > 0 (variations.push_speed or the base scene's velocity)");
       }
       s.duration = distance->number / v;
     }
@@ -377,17 +402,21 @@ Scene BuildScene(const Scene& base, const Values& values) {
 
 json ValueJson(const Variation& var, const VariationValue& v) {
   switch (var.type) {
-    case ValueType::kNumber: return v.number;
-    case ValueType::kContactType: return mechanics::ToString(v.contact_type);
-    case ValueType::kVector: return json::array({v.vector.x(), v.vector.y(), v.vector.z()});
+    case ValueType::kNumber:
+      return v.number;
+    case ValueType::kContactType:
+      return mechanics::ToString(v.contact_type);
+    case ValueType::kVector:
+      return json::array({v.vector.x(), v.vector.y(), v.vector.z()});
   }
   return nullptr;
 }
 
 VariationValue RangeValue(const Variation& var, double u) {
   VariationValue v;
-  v.number = var.log_scale ? std::exp(std::log(var.min) + u * (std::log(var.max) - std::log(var.min)))
-                           : var.min + u * (var.max - var.min);
+  v.number = var.log_scale
+                 ? std::exp(std::log(var.min) + u * (std::log(var.max) - std::log(var.min)))
+                 : var.min + u * (var.max - var.min);
   v.number = std::clamp(v.number, var.min, var.max);  // rounding only: u is in [0, 1]
   return v;
 }
@@ -399,15 +428,19 @@ Values ConditionValues(const Campaign& c, int64_t condition) {
     int64_t rest = condition;  // mixed radix, first sampled variation fastest
     for (const auto& var : c.variations) {
       if (!var.IsSampled()) {
-        values[var.name] = var.kind == Variation::Kind::kRange ? RangeValue(var, 0) : var.choices[0];
+        values[var.name] =
+            var.kind == Variation::Kind::kRange ? RangeValue(var, 0) : var.choices[0];
         continue;
       }
-      const int64_t radix = var.kind == Variation::Kind::kRange ? var.levels : static_cast<int64_t>(var.choices.size());
+      const int64_t radix = var.kind == Variation::Kind::kRange
+                                ? var.levels
+                                : static_cast<int64_t>(var.choices.size());
       const int64_t digit = rest % radix;
       rest /= radix;
-      values[var.name] = var.kind == Variation::Kind::kRange
-                             ? RangeValue(var, static_cast<double>(digit) / static_cast<double>(radix - 1))
-                             : var.choices[static_cast<size_t>(digit)];
+      values[var.name] =
+          var.kind == Variation::Kind::kRange
+              ? RangeValue(var, static_cast<double>(digit) / static_cast<double>(radix - 1))
+              : var.choices[static_cast<size_t>(digit)];
     }
     return values;
   }
@@ -423,7 +456,8 @@ Values ConditionValues(const Campaign& c, int64_t condition) {
       values[var.name] = RangeValue(var, u);
     } else {
       const auto n = var.choices.size();
-      values[var.name] = var.choices[std::min(n - 1, static_cast<size_t>(u * static_cast<double>(n)))];
+      values[var.name] =
+          var.choices[std::min(n - 1, static_cast<size_t>(u * static_cast<double>(n)))];
     }
   }
   return values;
@@ -442,8 +476,8 @@ std::string ReadFileLimited(const std::filesystem::path& path, const std::string
   if (size < 0) throw CampaignError(field, "cannot read '" + path.string() + "'");
   if (static_cast<std::uintmax_t>(size) > kMaxCampaignBytes) {
     throw CampaignError(field, "'" + path.string() + "' is " + std::to_string(size) +
-                                   " bytes, larger than the limit of " + std::to_string(kMaxCampaignBytes) +
-                                   " bytes (1 MiB)");
+                                   " bytes, larger than the limit of " +
+                                   std::to_string(kMaxCampaignBytes) + " bytes (1 MiB)");
   }
   in.seekg(0);
   std::string text(static_cast<size_t>(size), '\0');
@@ -458,8 +492,8 @@ std::string ReadFileLimited(const std::filesystem::path& path, const std::string
 json ParseJson(std::string_view text, const std::string& field) {
   const mechanics::JsonLimits limits{kMaxCampaignBytes, kMaxJsonDepth, kMaxJsonArray};
   if (const auto problem = mechanics::FindJsonProblem(text, limits)) {
-    const std::string path = problem->path.empty() ? field
-                             : field.empty()       ? problem->path
+    const std::string path = problem->path.empty()     ? field
+                             : field.empty()           ? problem->path
                              : problem->path[0] == '[' ? field + problem->path
                                                        : field + "." + problem->path;
     throw CampaignError(path, problem->reason);
@@ -475,8 +509,8 @@ mechanics::Scene WithModel(mechanics::Scene scene, const mechanics::ModelOptions
 bool ValidName(const std::string& name) {
   if (name.empty() || name.size() > 64) return false;
   return std::all_of(name.begin(), name.end(), [](char ch) {
-    return (ch >= 'a' && ch <= 'z') || (ch >= 'A' && ch <= 'Z') || (ch >= '0' && ch <= '9') || ch == '_' ||
-           ch == '-' || ch == '.';
+    return (ch >= 'a' && ch <= 'z') || (ch >= 'A' && ch <= 'Z') || (ch >= '0' && ch <= '9') ||
+           ch == '_' || ch == '-' || ch == '.';
   });
 }
 
@@ -484,32 +518,40 @@ bool ValidName(const std::string& name) {
 
 // ---------------------------------------------------------------------------
 
-Campaign ParseCampaign(std::string_view json_text, const std::string& base_dir, ConditionCheck check) {
+Campaign ParseCampaign(std::string_view json_text, const std::string& base_dir,
+                       ConditionCheck check) {
   json doc = ParseJson(json_text, "");
-  RequireObject(doc, "", {"name", "description", "seed", "priority", "scene", "variations", "sampler", "conditions",
-                          "trials", "replicates", "prediction", "defects"});
-  const std::filesystem::path dir = base_dir.empty() ? std::filesystem::path(".") : std::filesystem::path(base_dir);
+  RequireObject(doc, "",
+                {"name", "description", "seed", "priority", "scene", "variations", "sampler",
+                 "conditions", "trials", "replicates", "prediction", "defects"});
+  const std::filesystem::path dir =
+      base_dir.empty() ? std::filesystem::path(".") : std::filesystem::path(base_dir);
   Campaign c;
 
   if (!doc.contains("name")) throw CampaignError("name", "is required");
   c.name = String(doc["name"], "name");
   if (!ValidName(c.name)) {
-    throw CampaignError("name", "must be 1 to 64 letters, digits, '_', '-' or '.', got \"" + Printable(c.name, 40) + "\"");
+    throw CampaignError("name", "must be 1 to 64 letters, digits, '_', '-' or '.', got \"" +
+                                    Printable(c.name, 40) + "\"");
   }
   if (doc.contains("description")) c.description = String(doc["description"], "description");
-  if (!doc.contains("seed")) throw CampaignError("seed", "is required (sampling is deterministic from it)");
+  if (!doc.contains("seed"))
+    throw CampaignError("seed", "is required (sampling is deterministic from it)");
   {
     const json& seed = doc["seed"];
     if (!seed.is_number_integer() || (seed.is_number_integer() && !seed.is_number_unsigned())) {
-      throw CampaignError("seed", "must be a non-negative integer below 2^64, got " +
-                                      (seed.is_number() ? Printable(seed.dump(), 40) : TypeName(seed)));
+      throw CampaignError("seed",
+                          "must be a non-negative integer below 2^64, got " +
+                              (seed.is_number() ? Printable(seed.dump(), 40) : TypeName(seed)));
     }
     c.seed = seed.get<uint64_t>();
   }
-  if (doc.contains("priority")) c.priority = static_cast<int>(Integer(doc["priority"], "priority", -1000, 1000));
+  if (doc.contains("priority"))
+    c.priority = static_cast<int>(Integer(doc["priority"], "priority", -1000, 1000));
 
   // The base scene: inline or a file.
-  if (!doc.contains("scene")) throw CampaignError("scene", "is required (a SCENE.md scene or a path to one)");
+  if (!doc.contains("scene"))
+    throw CampaignError("scene", "is required (a SCENE.md scene or a path to one)");
   try {
     if (doc["scene"].is_string()) {
       const std::filesystem::path path = dir / doc["scene"].get<std::string>();
@@ -519,7 +561,8 @@ Campaign ParseCampaign(std::string_view json_text, const std::string& base_dir, 
     } else if (doc["scene"].is_object()) {
       c.scene = mechanics::ParseScene(doc["scene"].dump());
     } else {
-      throw CampaignError("scene", "must be a scene object or a file path, got " + TypeName(doc["scene"]));
+      throw CampaignError("scene",
+                          "must be a scene object or a file path, got " + TypeName(doc["scene"]));
     }
   } catch (const mechanics::SceneError& e) {
     throw CampaignError(e.field().empty() ? "scene" : "scene." + e.field(), e.reason());
@@ -528,13 +571,18 @@ Campaign ParseCampaign(std::string_view json_text, const std::string& base_dir, 
   // Sampler and counts.
   if (doc.contains("sampler")) {
     const std::string s = String(doc["sampler"], "sampler");
-    if (s == "grid") c.sampler = SamplerKind::kGrid;
-    else if (s == "uniform") c.sampler = SamplerKind::kUniform;
-    else if (s == "latin_hypercube") c.sampler = SamplerKind::kLatinHypercube;
-    else if (s == "sobol") c.sampler = SamplerKind::kSobol;
+    if (s == "grid")
+      c.sampler = SamplerKind::kGrid;
+    else if (s == "uniform")
+      c.sampler = SamplerKind::kUniform;
+    else if (s == "latin_hypercube")
+      c.sampler = SamplerKind::kLatinHypercube;
+    else if (s == "sobol")
+      c.sampler = SamplerKind::kSobol;
     else {
-      throw CampaignError("sampler", "must be \"grid\", \"uniform\", \"latin_hypercube\" or \"sobol\", got \"" +
-                                         Printable(s, 40) + "\"");
+      throw CampaignError(
+          "sampler", "must be \"grid\", \"uniform\", \"latin_hypercube\" or \"sobol\", got \"" +
+                         Printable(s, 40) + "\"");
     }
   }
   const bool grid = c.sampler == SamplerKind::kGrid;
@@ -542,19 +590,22 @@ Campaign ParseCampaign(std::string_view json_text, const std::string& base_dir, 
   // Variations, in canonical order.
   if (doc.contains("variations")) {
     const json& vars = doc["variations"];
-    if (!vars.is_object()) throw CampaignError("variations", "must be an object, got " + TypeName(vars));
+    if (!vars.is_object())
+      throw CampaignError("variations", "must be an object, got " + TypeName(vars));
     std::vector<std::pair<int, Variation>> read;
     for (const auto& item : vars.items()) {
       const std::string path = Join("variations", item.key());
       const VariationInfo* info = FindVariation(item.key());
       if (!info) {
         std::string list;
-        for (const auto& v : kVariationCatalog) list += (list.empty() ? "" : ", ") + std::string(v.name);
+        for (const auto& v : kVariationCatalog)
+          list += (list.empty() ? "" : ", ") + std::string(v.name);
         throw CampaignError(path, "unknown variation (expected one of: " + list + ")");
       }
       read.emplace_back(CatalogIndex(item.key()), ReadVariation(item.value(), path, *info, grid));
     }
-    std::sort(read.begin(), read.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
+    std::sort(read.begin(), read.end(),
+              [](const auto& a, const auto& b) { return a.first < b.first; });
     for (auto& [index, var] : read) c.variations.push_back(std::move(var));
   }
   // What the base scene must offer for a variation to make sense.
@@ -568,8 +619,10 @@ Campaign ParseCampaign(std::string_view json_text, const std::string& base_dir, 
       throw CampaignError(path, "only for a cylinder (the base scene's object is a box)");
     }
     if (var.name.rfind("object_", 0) == 0 && var.name != "object_mass" && c.scene.object.inertia) {
-      throw CampaignError(path, "the base scene gives object.inertia explicitly; remove it so that inertia "
-                                "follows from the varied shape");
+      throw CampaignError(
+          path,
+          "the base scene gives object.inertia explicitly; remove it so that inertia "
+          "follows from the varied shape");
     }
     const bool pusher_var = var.name.rfind("pusher_", 0) == 0 || var.name.rfind("push_", 0) == 0 ||
                             var.name.rfind("pivot_", 0) == 0;
@@ -582,17 +635,20 @@ Campaign ParseCampaign(std::string_view json_text, const std::string& base_dir, 
   for (const auto& var : c.variations) {
     if (!var.IsSampled()) continue;
     ++sampled_dims;
-    const int64_t radix = var.kind == Variation::Kind::kRange ? var.levels : static_cast<int64_t>(var.choices.size());
+    const int64_t radix =
+        var.kind == Variation::Kind::kRange ? var.levels : static_cast<int64_t>(var.choices.size());
     if (grid) {
       if (sampled_levels > kMaxConditions / radix) {
-        throw CampaignError("variations", "the grid has more than " + std::to_string(kMaxConditions) + " conditions");
+        throw CampaignError("variations", "the grid has more than " +
+                                              std::to_string(kMaxConditions) + " conditions");
       }
       sampled_levels *= radix;
     }
   }
   if (c.sampler == SamplerKind::kSobol && sampled_dims > kMaxSobolDimensions) {
-    throw CampaignError("variations", "sobol supports at most " + std::to_string(kMaxSobolDimensions) +
-                                          " varied dimensions, got " + std::to_string(sampled_dims));
+    throw CampaignError("variations",
+                        "sobol supports at most " + std::to_string(kMaxSobolDimensions) +
+                            " varied dimensions, got " + std::to_string(sampled_dims));
   }
   if (doc.contains("replicates")) {
     c.replicates = static_cast<int>(Integer(doc["replicates"], "replicates", 1, kMaxReplicates));
@@ -600,14 +656,16 @@ Campaign ParseCampaign(std::string_view json_text, const std::string& base_dir, 
   const bool has_conditions = doc.contains("conditions");
   const bool has_trials = doc.contains("trials");
   if (has_conditions && has_trials) {
-    throw CampaignError("trials", "give either conditions or trials (= conditions x replicates), not both");
+    throw CampaignError("trials",
+                        "give either conditions or trials (= conditions x replicates), not both");
   }
   int64_t conditions = 0;
   if (has_conditions) conditions = Integer(doc["conditions"], "conditions", 1, kMaxConditions);
   if (has_trials) {
     const int64_t trials = Integer(doc["trials"], "trials", 1, kMaxTrials);
     if (trials % c.replicates != 0) {
-      throw CampaignError("trials", "must be a multiple of replicates (" + std::to_string(c.replicates) + "), got " +
+      throw CampaignError("trials", "must be a multiple of replicates (" +
+                                        std::to_string(c.replicates) + "), got " +
                                         std::to_string(trials));
     }
     conditions = trials / c.replicates;
@@ -616,16 +674,18 @@ Campaign ParseCampaign(std::string_view json_text, const std::string& base_dir, 
     if (conditions != 0 && conditions != sampled_levels) {
       throw CampaignError(has_trials ? "trials" : "conditions",
                           "the grid has " + std::to_string(sampled_levels) + " conditions (x " +
-                              std::to_string(c.replicates) + " replicates); leave it out or match it");
+                              std::to_string(c.replicates) +
+                              " replicates); leave it out or match it");
     }
     conditions = sampled_levels;
   } else if (conditions == 0) {
-    throw CampaignError("conditions", "is required for sampler " + std::string(ToString(c.sampler)) +
-                                          " (or give trials)");
+    throw CampaignError("conditions", "is required for sampler " +
+                                          std::string(ToString(c.sampler)) + " (or give trials)");
   }
   c.conditions = conditions;
   if (c.conditions * c.replicates > kMaxTrials) {
-    throw CampaignError("replicates", "conditions x replicates must be <= " + std::to_string(kMaxTrials));
+    throw CampaignError("replicates",
+                        "conditions x replicates must be <= " + std::to_string(kMaxTrials));
   }
 
   // Prediction model: the base scene's model, overridden field by field.
@@ -634,18 +694,21 @@ Campaign ParseCampaign(std::string_view json_text, const std::string& base_dir, 
     const json& p = doc["prediction"];
     RequireObject(p, "prediction", {"facets", "points", "dt", "reduce"});
     if (p.contains("facets")) {
-      c.prediction.facets = static_cast<int>(Integer(p["facets"], "prediction.facets", 3, mechanics::kMaxFacets));
+      c.prediction.facets =
+          static_cast<int>(Integer(p["facets"], "prediction.facets", 3, mechanics::kMaxFacets));
     }
     if (p.contains("points")) {
-      c.prediction.points = static_cast<int>(Integer(p["points"], "prediction.points", 2, mechanics::kMaxPoints));
+      c.prediction.points =
+          static_cast<int>(Integer(p["points"], "prediction.points", 2, mechanics::kMaxPoints));
     }
     if (p.contains("dt")) c.prediction.dt = Number(p["dt"], "prediction.dt");
     if (p.contains("reduce")) {
       const std::string r = String(p["reduce"], "prediction.reduce");
       const auto reduce = mechanics::ReduceFromString(r);
       if (!reduce) {
-        throw CampaignError("prediction.reduce", "must be \"auto\", \"full\" or \"planar\", got \"" +
-                                                     Printable(r, 40) + "\"");
+        throw CampaignError(
+            "prediction.reduce",
+            "must be \"auto\", \"full\" or \"planar\", got \"" + Printable(r, 40) + "\"");
       }
       c.prediction.reduce = *reduce;
     }
@@ -657,7 +720,8 @@ Campaign ParseCampaign(std::string_view json_text, const std::string& base_dir, 
     if (d.is_string()) {
       c.defects_file = d.get<std::string>();
       d = ParseJson(ReadFileLimited(dir / c.defects_file, "defects"), "defects");
-      if (!d.is_object()) throw CampaignError("defects", "the file must hold a JSON object, got " + TypeName(d));
+      if (!d.is_object())
+        throw CampaignError("defects", "the file must hold a JSON object, got " + TypeName(d));
     } else if (!d.is_object()) {
       throw CampaignError("defects", "must be an object or a file path, got " + TypeName(d));
     }
@@ -671,8 +735,10 @@ Campaign ParseCampaign(std::string_view json_text, const std::string& base_dir, 
     mechanics::ValidateScene(WithModel(c.scene, c.prediction));
   } catch (const mechanics::SceneError& e) {
     std::string field = e.field();
-    if (field.rfind("model.", 0) == 0) field = "prediction." + field.substr(6);
-    else field = field.empty() ? "scene" : "scene." + field;
+    if (field.rfind("model.", 0) == 0)
+      field = "prediction." + field.substr(6);
+    else
+      field = field.empty() ? "scene" : "scene." + field;
     throw CampaignError(field, e.reason());
   }
   const int64_t checked = check == ConditionCheck::kAllConditions ? c.conditions : 0;
@@ -683,7 +749,8 @@ Campaign ParseCampaign(std::string_view json_text, const std::string& base_dir, 
       mechanics::ValidateScene(scene);
       mechanics::ValidateScene(WithModel(scene, c.prediction));
     } catch (const mechanics::SceneError& e) {
-      throw CampaignError("variations", "condition " + std::to_string(condition) + " " + ParametersJson(c, values) +
+      throw CampaignError("variations", "condition " + std::to_string(condition) + " " +
+                                            ParametersJson(c, values) +
                                             " gives an invalid scene: " + e.what());
     }
   }
@@ -699,8 +766,8 @@ int64_t TrialCount(const Campaign& campaign) { return campaign.conditions * camp
 
 std::vector<double> ConditionPoint(const Campaign& c, int64_t condition) {
   if (condition < 0 || condition >= c.conditions) {
-    throw std::out_of_range("ConditionPoint: condition " + std::to_string(condition) + " not in [0, " +
-                            std::to_string(c.conditions) + ")");
+    throw std::out_of_range("ConditionPoint: condition " + std::to_string(condition) +
+                            " not in [0, " + std::to_string(c.conditions) + ")");
   }
   std::vector<double> point;
   int64_t rest = condition;
@@ -710,16 +777,20 @@ std::vector<double> ConditionPoint(const Campaign& c, int64_t condition) {
     const auto i = static_cast<uint64_t>(condition);
     switch (c.sampler) {
       case SamplerKind::kGrid: {
-        const int64_t radix = var.kind == Variation::Kind::kRange ? var.levels : static_cast<int64_t>(var.choices.size());
+        const int64_t radix = var.kind == Variation::Kind::kRange
+                                  ? var.levels
+                                  : static_cast<int64_t>(var.choices.size());
         point.push_back(static_cast<double>(rest % radix) / static_cast<double>(radix));
         rest /= radix;
         break;
       }
       case SamplerKind::kUniform:
-        point.push_back(UniformFromCounter(Mix64(c.seed ^ Mix64(0xd1ULL + static_cast<uint64_t>(dim))), i));
+        point.push_back(
+            UniformFromCounter(Mix64(c.seed ^ Mix64(0xd1ULL + static_cast<uint64_t>(dim))), i));
         break;
       case SamplerKind::kLatinHypercube:
-        point.push_back(LatinHypercubeCoordinate(i, static_cast<uint64_t>(c.conditions), dim, c.seed));
+        point.push_back(
+            LatinHypercubeCoordinate(i, static_cast<uint64_t>(c.conditions), dim, c.seed));
         break;
       case SamplerKind::kSobol:
         point.push_back(ScrambledSobolCoordinate(static_cast<uint32_t>(i), dim, c.seed));

@@ -24,7 +24,8 @@ std::vector<mechanics::ModelOptions> ExpandGrid(const FidelityGrid& g) {
   auto nonempty_unique = [](const auto& list, const char* name) {
     if (list.empty()) throw std::invalid_argument(std::string(name) + ": needs at least one value");
     std::set<std::decay_t<decltype(list[0])>> seen(list.begin(), list.end());
-    if (seen.size() != list.size()) throw std::invalid_argument(std::string(name) + ": a value is repeated");
+    if (seen.size() != list.size())
+      throw std::invalid_argument(std::string(name) + ": a value is repeated");
   };
   nonempty_unique(g.facets, "facets");
   nonempty_unique(g.points, "points");
@@ -78,22 +79,30 @@ enum class Quantity { kLength, kAngle, kForce, kFraction };
 Quantity QuantityOf(ErrorMetric m) {
   switch (m) {
     case ErrorMetric::kPositionMedian:
-    case ErrorMetric::kPositionP95: return Quantity::kLength;
+    case ErrorMetric::kPositionP95:
+      return Quantity::kLength;
     case ErrorMetric::kAngleMedian:
-    case ErrorMetric::kAngleP95: return Quantity::kAngle;
+    case ErrorMetric::kAngleP95:
+      return Quantity::kAngle;
     case ErrorMetric::kForceMedian:
-    case ErrorMetric::kForceP95: return Quantity::kForce;
-    case ErrorMetric::kModeAgreementMedian: return Quantity::kFraction;
+    case ErrorMetric::kForceP95:
+      return Quantity::kForce;
+    case ErrorMetric::kModeAgreementMedian:
+      return Quantity::kFraction;
   }
   return Quantity::kLength;
 }
 
 const char* SiUnit(ErrorMetric m) {
   switch (QuantityOf(m)) {
-    case Quantity::kLength: return "m";
-    case Quantity::kAngle: return "rad";
-    case Quantity::kForce: return "N";
-    case Quantity::kFraction: return "";
+    case Quantity::kLength:
+      return "m";
+    case Quantity::kAngle:
+      return "rad";
+    case Quantity::kForce:
+      return "N";
+    case Quantity::kFraction:
+      return "";
   }
   return "";
 }
@@ -125,7 +134,8 @@ Budget ParseBudget(const std::string& text) {
     if (!found) {
       std::string names;
       for (const auto& [m, n] : kMetricNames) names += std::string(names.empty() ? "" : ", ") + n;
-      throw std::invalid_argument("budget '" + text + "': unknown metric '" + name + "' (one of " + names + ")");
+      throw std::invalid_argument("budget '" + text + "': unknown metric '" + name + "' (one of " +
+                                  names + ")");
     }
     value = text.substr(eq + 1);
   }
@@ -134,7 +144,8 @@ Budget ParseBudget(const std::string& text) {
   try {
     number = std::stod(value, &used);
   } catch (const std::exception&) {
-    throw std::invalid_argument("budget '" + text + "': '" + value + "' is not a number with a unit");
+    throw std::invalid_argument("budget '" + text + "': '" + value +
+                                "' is not a number with a unit");
   }
   const std::string unit = value.substr(used);
   struct UnitScale {
@@ -143,10 +154,10 @@ Budget ParseBudget(const std::string& text) {
     double scale;
   };
   static const UnitScale kUnits[] = {
-      {"m", Quantity::kLength, 1},       {"mm", Quantity::kLength, 1e-3},
-      {"um", Quantity::kLength, 1e-6},   {"rad", Quantity::kAngle, 1},
-      {"mrad", Quantity::kAngle, 1e-3},  {"deg", Quantity::kAngle, M_PI / 180},
-      {"N", Quantity::kForce, 1},        {"mN", Quantity::kForce, 1e-3},
+      {"m", Quantity::kLength, 1},      {"mm", Quantity::kLength, 1e-3},
+      {"um", Quantity::kLength, 1e-6},  {"rad", Quantity::kAngle, 1},
+      {"mrad", Quantity::kAngle, 1e-3}, {"deg", Quantity::kAngle, M_PI / 180},
+      {"N", Quantity::kForce, 1},       {"mN", Quantity::kForce, 1e-3},
       {"%", Quantity::kFraction, 1e-2},
   };
   double scale = 1;
@@ -174,8 +185,9 @@ Budget ParseBudget(const std::string& text) {
 
 std::string FormatBudget(const Budget& b) {
   char buf[96];
-  std::snprintf(buf, sizeof buf, "%s %s %g%s%s", ToString(b.metric), LowerIsBetter(b.metric) ? "<=" : ">=",
-                b.limit, *SiUnit(b.metric) ? " " : "", SiUnit(b.metric));
+  std::snprintf(buf, sizeof buf, "%s %s %g%s%s", ToString(b.metric),
+                LowerIsBetter(b.metric) ? "<=" : ">=", b.limit, *SiUnit(b.metric) ? " " : "",
+                SiUnit(b.metric));
   return buf;
 }
 
@@ -187,13 +199,20 @@ std::optional<double> SettingSummary::Metric(ErrorMetric metric) const {
     return median ? d->median : d->p95;
   };
   switch (metric) {
-    case ErrorMetric::kPositionMedian: return pick(position, true);
-    case ErrorMetric::kPositionP95: return pick(position, false);
-    case ErrorMetric::kAngleMedian: return pick(angle, true);
-    case ErrorMetric::kAngleP95: return pick(angle, false);
-    case ErrorMetric::kForceMedian: return pick(force, true);
-    case ErrorMetric::kForceP95: return pick(force, false);
-    case ErrorMetric::kModeAgreementMedian: return pick(mode_agreement, true);
+    case ErrorMetric::kPositionMedian:
+      return pick(position, true);
+    case ErrorMetric::kPositionP95:
+      return pick(position, false);
+    case ErrorMetric::kAngleMedian:
+      return pick(angle, true);
+    case ErrorMetric::kAngleP95:
+      return pick(angle, false);
+    case ErrorMetric::kForceMedian:
+      return pick(force, true);
+    case ErrorMetric::kForceP95:
+      return pick(force, false);
+    case ErrorMetric::kModeAgreementMedian:
+      return pick(mode_agreement, true);
   }
   return std::nullopt;
 }
@@ -248,14 +267,16 @@ EvaluationReport Summarise(const std::vector<mechanics::ModelOptions>& models,
     report.settings[i].model_key = ModelKey(models[i]);
   }
   for (const auto& r : results) {
-    if (r.setting >= models.size()) throw std::invalid_argument("Summarise: setting index out of range");
+    if (r.setting >= models.size())
+      throw std::invalid_argument("Summarise: setting index out of range");
     trials.insert(r.trial_id);
     auto& s = report.settings[r.setting];
     auto& col = c[r.setting];
     const auto& p = r.prediction;
     ++s.trials;
     col.time.push_back(p.wall_s);
-    if (p.status == "ok" && p.final_position_error && p.final_angle_error && p.force_error && p.mode_agreement) {
+    if (p.status == "ok" && p.final_position_error && p.final_angle_error && p.force_error &&
+        p.mode_agreement) {
       ++s.ok;
       col.position.push_back(*p.final_position_error);
       col.angle.push_back(*p.final_angle_error);
@@ -273,10 +294,11 @@ EvaluationReport Summarise(const std::vector<mechanics::ModelOptions>& models,
     s.force = Distribute(c[i].force);
     s.mode_agreement = Distribute(c[i].mode);
     if (!c[i].time.empty()) s.time = *Distribute(c[i].time);
-    s.within_budget = s.eligible() && std::all_of(budgets.begin(), budgets.end(), [&](const Budget& b) {
-                        const auto v = s.Metric(b.metric);
-                        return v && (LowerIsBetter(b.metric) ? *v <= b.limit : *v >= b.limit);
-                      });
+    s.within_budget =
+        s.eligible() && std::all_of(budgets.begin(), budgets.end(), [&](const Budget& b) {
+          const auto v = s.Metric(b.metric);
+          return v && (LowerIsBetter(b.metric) ? *v <= b.limit : *v >= b.limit);
+        });
   }
   MarkParetoFront(report.settings, report.primary);
 
@@ -290,17 +312,19 @@ EvaluationReport Summarise(const std::vector<mechanics::ModelOptions>& models,
     }
     const auto& best = report.settings[*report.recommended];
     if (s.time.median < best.time.median ||
-        (s.time.median == best.time.median && Cost(s, report.primary) < Cost(best, report.primary))) {
+        (s.time.median == best.time.median &&
+         Cost(s, report.primary) < Cost(best, report.primary))) {
       report.recommended = i;
     }
   }
   std::string budget_text;
-  for (const auto& b : budgets) budget_text += (budget_text.empty() ? "" : " and ") + FormatBudget(b);
+  for (const auto& b : budgets)
+    budget_text += (budget_text.empty() ? "" : " and ") + FormatBudget(b);
   if (report.recommended) {
     const auto& s = report.settings[*report.recommended];
     char buf[256];
-    std::snprintf(buf, sizeof buf, "%s: the cheapest setting (median %.3g ms per trial) %s", s.model_key.c_str(),
-                  s.time.median * 1e3,
+    std::snprintf(buf, sizeof buf, "%s: the cheapest setting (median %.3g ms per trial) %s",
+                  s.model_key.c_str(), s.time.median * 1e3,
                   budgets.empty() ? "that predicted every trial (no --budget given)"
                                   : ("within " + budget_text).c_str());
     report.recommendation = buf;
@@ -322,26 +346,28 @@ nlohmann::json ToJson(const EvaluationReport& r) {
   };
   nlohmann::json settings = nlohmann::json::array();
   for (const auto& s : r.settings) {
-    settings.push_back({{"model_key", s.model_key},
-                        {"facets", s.model.facets},
-                        {"points", s.model.points},
-                        {"dt", s.model.dt},
-                        {"reduce", mechanics::ToString(s.model.reduce)},
-                        {"trials", s.trials},
-                        {"ok", s.ok},
-                        {"failures", s.failures},
-                        {"position_error_m", dist(s.position)},
-                        {"angle_error_rad", dist(s.angle)},
-                        {"force_error_n", dist(s.force)},
-                        {"mode_agreement", dist(s.mode_agreement)},
-                        {"time_s", dist(s.time)},
-                        {"primary_error", s.Metric(r.primary) ? nlohmann::json(*s.Metric(r.primary)) : nullptr},
-                        {"pareto", s.pareto},
-                        {"within_budget", s.within_budget}});
+    settings.push_back(
+        {{"model_key", s.model_key},
+         {"facets", s.model.facets},
+         {"points", s.model.points},
+         {"dt", s.model.dt},
+         {"reduce", mechanics::ToString(s.model.reduce)},
+         {"trials", s.trials},
+         {"ok", s.ok},
+         {"failures", s.failures},
+         {"position_error_m", dist(s.position)},
+         {"angle_error_rad", dist(s.angle)},
+         {"force_error_n", dist(s.force)},
+         {"mode_agreement", dist(s.mode_agreement)},
+         {"time_s", dist(s.time)},
+         {"primary_error", s.Metric(r.primary) ? nlohmann::json(*s.Metric(r.primary)) : nullptr},
+         {"pareto", s.pareto},
+         {"within_budget", s.within_budget}});
   }
   nlohmann::json budgets = nlohmann::json::array();
   for (const auto& b : r.budgets) {
-    budgets.push_back({{"metric", ToString(b.metric)}, {"limit", b.limit}, {"text", FormatBudget(b)}});
+    budgets.push_back(
+        {{"metric", ToString(b.metric)}, {"limit", b.limit}, {"text", FormatBudget(b)}});
   }
   nlohmann::json out = {{"campaign_id", r.campaign_id},
                         {"trials", r.trials},
@@ -383,12 +409,16 @@ LoadedTrial LoadTrial(const db::Store& store, const db::Trial& t) {
 }
 
 nlohmann::json ModelJson(const mechanics::ModelOptions& m) {
-  return {{"facets", m.facets}, {"points", m.points}, {"dt", m.dt}, {"reduce", mechanics::ToString(m.reduce)}};
+  return {{"facets", m.facets},
+          {"points", m.points},
+          {"dt", m.dt},
+          {"reduce", mechanics::ToString(m.reduce)}};
 }
 
 }  // namespace
 
-EvaluationRun EvaluateCampaign(db::Store& store, std::int64_t campaign_id, const EvaluationOptions& options) {
+EvaluationRun EvaluateCampaign(db::Store& store, std::int64_t campaign_id,
+                               const EvaluationOptions& options) {
   const auto models = ExpandGrid(options.grid);
   (void)store.GetCampaign(campaign_id);  // kNotFound for an unknown campaign
   std::vector<db::Trial> trials;
@@ -403,7 +433,8 @@ EvaluationRun EvaluateCampaign(db::Store& store, std::int64_t campaign_id, const
   std::string worker_error;
   std::atomic<bool> worker_failed{false};
 
-  int threads = options.threads > 0 ? options.threads : static_cast<int>(std::thread::hardware_concurrency());
+  int threads =
+      options.threads > 0 ? options.threads : static_cast<int>(std::thread::hardware_concurrency());
   threads = std::max(1, std::min<int>(threads, static_cast<int>(std::max<std::size_t>(total, 1))));
 
   // Jobs are trial-major, so a worker usually reuses the trial it loaded last.
@@ -477,8 +508,10 @@ EvaluationRun EvaluateCampaign(db::Store& store, std::int64_t campaign_id, const
   for (const auto& b : options.budgets) grid["budgets"].push_back(FormatBudget(b));
   std::vector<db::EvaluationResult> rows;
   rows.reserve(results.size());
-  for (auto& r : results) rows.push_back(db::EvaluationResult{r.trial_id, r.attempt, std::move(r.prediction)});
-  run.evaluation_id = store.RecordEvaluation(campaign_id, grid.dump(), ToJson(run.report).dump(), rows);
+  for (auto& r : results)
+    rows.push_back(db::EvaluationResult{r.trial_id, r.attempt, std::move(r.prediction)});
+  run.evaluation_id =
+      store.RecordEvaluation(campaign_id, grid.dump(), ToJson(run.report).dump(), rows);
   return run;
 }
 

@@ -16,12 +16,13 @@ void SetUpServiceLog(const std::string& db_path, const std::string& level, bool 
   const auto lvl = spdlog::level::from_str(level);
   // from_str maps any unknown word to "off": refuse instead of going silent.
   if (lvl == spdlog::level::off && level != "off") {
-    throw std::invalid_argument("--log-level: must be trace, debug, info, warn, error, critical or off, got '" +
-                                level + "'");
+    throw std::invalid_argument(
+        "--log-level: must be trace, debug, info, warn, error, critical or off, got '" + level +
+        "'");
   }
   std::vector<spdlog::sink_ptr> sinks;
-  sinks.push_back(std::make_shared<spdlog::sinks::rotating_file_sink_mt>(
-      ServiceLogPath(db_path), kLogFileBytes, kLogFiles));
+  sinks.push_back(std::make_shared<spdlog::sinks::rotating_file_sink_mt>(ServiceLogPath(db_path),
+                                                                         kLogFileBytes, kLogFiles));
   if (to_stderr) sinks.push_back(std::make_shared<spdlog::sinks::stderr_color_sink_mt>());
   auto logger = std::make_shared<spdlog::logger>("arena", sinks.begin(), sinks.end());
   logger->set_level(lvl);

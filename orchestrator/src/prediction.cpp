@@ -17,7 +17,8 @@ mechanics::Scene ApplyModelSettings(const mechanics::Scene& scene, const nlohman
   auto number = [&](const char* key) -> const nlohmann::json* {
     if (!model.contains(key)) return nullptr;
     const auto& v = model[key];
-    if (!v.is_number()) throw mechanics::SceneError(std::string("model.") + key, "must be a number");
+    if (!v.is_number())
+      throw mechanics::SceneError(std::string("model.") + key, "must be a number");
     return &v;
   };
   if (const auto* v = number("facets")) {
@@ -32,10 +33,14 @@ mechanics::Scene ApplyModelSettings(const mechanics::Scene& scene, const nlohman
   if (model.contains("reduce")) {
     const auto& r = model["reduce"];
     const std::string s = r.is_string() ? r.get<std::string>() : "";
-    if (s == "auto") out.model.reduce = mechanics::Reduce::kAuto;
-    else if (s == "full") out.model.reduce = mechanics::Reduce::kFull;
-    else if (s == "planar") out.model.reduce = mechanics::Reduce::kPlanar;
-    else throw mechanics::SceneError("model.reduce", "must be auto, full or planar");
+    if (s == "auto")
+      out.model.reduce = mechanics::Reduce::kAuto;
+    else if (s == "full")
+      out.model.reduce = mechanics::Reduce::kFull;
+    else if (s == "planar")
+      out.model.reduce = mechanics::Reduce::kPlanar;
+    else
+      throw mechanics::SceneError("model.reduce", "must be auto, full or planar");
   }
   mechanics::ValidateScene(out);
   return out;
@@ -43,7 +48,8 @@ mechanics::Scene ApplyModelSettings(const mechanics::Scene& scene, const nlohman
 
 std::string ModelKey(const mechanics::ModelOptions& m) {
   char buf[96];
-  std::snprintf(buf, sizeof buf, "g%d_k%d_dt%g_%s", m.facets, m.points, m.dt, mechanics::ToString(m.reduce));
+  std::snprintf(buf, sizeof buf, "g%d_k%d_dt%g_%s", m.facets, m.points, m.dt,
+                mechanics::ToString(m.reduce));
   return buf;
 }
 
@@ -67,17 +73,16 @@ db::Prediction PredictTrial(const mechanics::Scene& scene,
   const auto start = std::chrono::steady_clock::now();
   const mechanics::SimulationResult result = mechanics::Simulate(scene);
   p.wall_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-  nlohmann::json detail = {
-      {"residuals",
-       {{"force_balance", result.residuals.force_balance},
-        {"complementarity", result.residuals.complementarity},
-        {"cone", result.residuals.cone}}},
-      {"solver",
-       {{"steps", result.solver.steps},
-        {"max_pivots", result.solver.max_pivots},
-        {"failures", result.solver.failures}}},
-      {"unknowns", result.model.unknowns},
-      {"dof", result.model.dof}};
+  nlohmann::json detail = {{"residuals",
+                            {{"force_balance", result.residuals.force_balance},
+                             {"complementarity", result.residuals.complementarity},
+                             {"cone", result.residuals.cone}}},
+                           {"solver",
+                            {{"steps", result.solver.steps},
+                             {"max_pivots", result.solver.max_pivots},
+                             {"failures", result.solver.failures}}},
+                           {"unknowns", result.model.unknowns},
+                           {"dof", result.model.dof}};
   switch (result.status) {
     case mechanics::SimulationStatus::kOk:
       break;

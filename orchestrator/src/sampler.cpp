@@ -22,7 +22,9 @@ double UniformFromCounter(uint64_t key, uint64_t counter) {
 }
 
 uint64_t PermuteIndex(uint64_t i, uint64_t n, uint64_t key) {
-  if (i >= n) throw std::out_of_range("PermuteIndex: index " + std::to_string(i) + " >= n " + std::to_string(n));
+  if (i >= n)
+    throw std::out_of_range("PermuteIndex: index " + std::to_string(i) + " >= n " +
+                            std::to_string(n));
   if (n <= 1) return 0;
   // A balanced Feistel network is a bijection of [0, 4^half); walking the
   // cycle until we land below n restricts it to a bijection of [0, n).
@@ -149,7 +151,8 @@ uint32_t OwenScramble(uint32_t x, uint32_t seed) {
 double SobolCoordinate(uint32_t index, int dim) { return SobolBits(index, dim) * 0x1.0p-32; }
 
 double ScrambledSobolCoordinate(uint32_t index, int dim, uint64_t seed) {
-  const uint32_t key = static_cast<uint32_t>(Mix64(seed ^ Mix64(0x50b01ULL + static_cast<uint64_t>(dim))));
+  const uint32_t key =
+      static_cast<uint32_t>(Mix64(seed ^ Mix64(0x50b01ULL + static_cast<uint64_t>(dim))));
   return OwenScramble(SobolBits(index, dim), key) * 0x1.0p-32;
 }
 

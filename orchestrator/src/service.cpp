@@ -7,16 +7,16 @@
 #include <condition_variable>
 #include <deque>
 #include <map>
-#include <random>
 #include <mutex>
 #include <optional>
+#include <random>
 #include <set>
 #include <stdexcept>
 #include <thread>
 #include <vector>
 
-#include <nlohmann/json.hpp>
 #include <spdlog/spdlog.h>
+#include <nlohmann/json.hpp>
 
 #include "arena/db/store.hpp"
 #include "arena/mechanics/scene_json.hpp"
@@ -60,8 +60,10 @@ bool StoreFailed(const std::exception& e) {
     case K::kIo:
     case K::kCorrupt:
     case K::kReadOnly:
-    case K::kTooNew: return true;
-    default: return false;
+    case K::kTooNew:
+      return true;
+    default:
+      return false;
   }
 }
 
@@ -169,12 +171,12 @@ struct Service::Impl {
     std::string id;
     bool alive = true;
     bool quarantined = false;
-    int execute_failures = 0;    // consecutive failed EXECUTE phases
-    int reset_failures = 0;      // consecutive failed RESET phases
+    int execute_failures = 0;  // consecutive failed EXECUTE phases
+    int reset_failures = 0;    // consecutive failed RESET phases
     // The last announcement, to re-register a cell whose liveliness returns.
     std::vector<std::string> contact_types;
     std::string capabilities_json = "{}", defects_json = "{}";
-    double speed = 1.0;          // the cell's announced pacing (wall s per simulated s)
+    double speed = 1.0;  // the cell's announced pacing (wall s per simulated s)
     CellPhase phase = CellPhase::kIdle;
     std::int64_t trial_id = 0, campaign_id = 0;
     int attempt = 0;
@@ -194,8 +196,8 @@ struct Service::Impl {
     std::vector<Eigen::Vector3d> normals;
     std::unique_ptr<db::Ingest> ingest;
     std::uint32_t next_sample = 0;
-    std::int64_t expected = -1;            // samples the cell says it sent; -1 before EXECUTED
-    Clock::time_point stream_deadline{};   // after EXECUTED, for missing batches
+    std::int64_t expected = -1;           // samples the cell says it sent; -1 before EXECUTED
+    Clock::time_point stream_deadline{};  // after EXECUTED, for missing batches
     std::vector<mechanics::TrajectorySample> truth;
   };
   std::map<std::int64_t, Execution> executions;
@@ -243,8 +245,13 @@ struct Service::Impl {
           case db::TrialState::kExecuted:
             store->BeginReset(t.id, t.attempt);
             store->CompleteReset(t.id, t.attempt,
-                                 db::ResetReport{false, {0, 0, 0, 1, 0, 0, 0}, 0, 0, 0,
-                                                 "service restarted before the reset", /*pose_observed=*/false});
+                                 db::ResetReport{false,
+                                                 {0, 0, 0, 1, 0, 0, 0},
+                                                 0,
+                                                 0,
+                                                 0,
+                                                 "service restarted before the reset",
+                                                 /*pose_observed=*/false});
             [[fallthrough]];
           case db::TrialState::kResetDone:
           case db::TrialState::kResetFailed:
@@ -267,14 +274,16 @@ struct Service::Impl {
       const mechanics::Scene scene = mechanics::ParseScene(t.scene_json);
       const db::GroundTruth gt = store->ReadGroundTruth(t.id);
       const auto normals = ContactNormals(scene);
-      PredictionJob job{t.id, t.attempt, t.campaign_id, ScenesForPrediction(scene, t.campaign_id), {}};
-      for (const auto& s : gt.samples) job.truth.push_back(ToTrajectorySample(s, normals, scene.pusher.has_value()));
+      PredictionJob job{
+          t.id, t.attempt, t.campaign_id, ScenesForPrediction(scene, t.campaign_id), {}};
+      for (const auto& s : gt.samples)
+        job.truth.push_back(ToTrajectorySample(s, normals, scene.pusher.has_value()));
       predictor.Submit(std::move(job));
     } catch (const std::exception& e) {
       if (StoreFailed(e)) throw;
       spdlog::error("{}: cannot predict: {}", TrialTag(t.campaign_id, t.id, t.attempt), e.what());
-      RecordPrediction(PredictionDone{t.id, t.attempt, t.campaign_id,
-                                      PredictionFailure("error", e.what())});
+      RecordPrediction(
+          PredictionDone{t.id, t.attempt, t.campaign_id, PredictionFailure("error", e.what())});
     }
   }
 
@@ -287,8 +296,8 @@ struct Service::Impl {
         if (spec.is_object() && spec.contains("prediction")) model = spec["prediction"];
       } catch (const std::exception& e) {
         if (StoreFailed(e)) throw;
-        spdlog::warn("campaign {}: spec unreadable ({}), predicting with the scene's model", campaign_id,
-                     e.what());
+        spdlog::warn("campaign {}: spec unreadable ({}), predicting with the scene's model",
+                     campaign_id, e.what());
       }
       it = campaign_models.emplace(campaign_id, model).first;
     }
@@ -319,8 +328,8 @@ struct Service::Impl {
     try {
       store->UpsertCell(id, a.contact_types(), caps.dump(), a.defects_json());
       cell.quarantined = store->GetCell(id).state == db::CellState::kQuarantined;
-      if (!was_alive || cells.size() == 1) spdlog::info("cell {} announced ({} contact types)", id,
-                                                         a.contact_types().size());
+      if (!was_alive || cells.size() == 1)
+        spdlog::info("cell {} announced ({} contact types)", id, a.contact_types().size());
     } catch (const db::StoreError& e) {
       if (StoreFailed(e)) throw;
       spdlog::error("cell {}: announcement refused: {}", id, e.what());
@@ -340,7 +349,8 @@ struct Service::Impl {
       cell.alive = true;
       cell.next_claim = Clock::now();
       try {
-        store->UpsertCell(id, cell.contact_types, cell.capabilities_json, cell.defects_json);  // gone -> healthy
+        store->UpsertCell(id, cell.contact_types, cell.capabilities_json,
+                          cell.defects_json);  // gone -> healthy
         spdlog::info("cell {}: alive again", id);
       } catch (const std::exception& ex) {
         spdlog::error("cell {}: {}", id, ex.what());
@@ -366,7 +376,8 @@ struct Service::Impl {
   // while its executes succeed is still broken.
   void CellResult(CellRun& cell, bool ok, const std::string& reason) {
     int& streak = cell.phase == CellPhase::kResetting ? cell.reset_failures : cell.execute_failures;
-    const int other = cell.phase == CellPhase::kResetting ? cell.execute_failures : cell.reset_failures;
+    const int other =
+        cell.phase == CellPhase::kResetting ? cell.execute_failures : cell.reset_failures;
     if (ok) {
       streak = 0;
       if (other == 0) store->RecordCellResult(cell.id, true);
@@ -394,7 +405,12 @@ struct Service::Impl {
     } else if (cell.phase == CellPhase::kResetting) {
       try {
         store->CompleteReset(cell.trial_id, cell.attempt,
-                             db::ResetReport{false, {0, 0, 0, 1, 0, 0, 0}, 0, 0, 0, reason,
+                             db::ResetReport{false,
+                                             {0, 0, 0, 1, 0, 0, 0},
+                                             0,
+                                             0,
+                                             0,
+                                             reason,
                                              /*pose_observed=*/false});
         Count(&ServiceCounters::resets_failed);
         AfterReset(cell.trial_id);
@@ -411,8 +427,9 @@ struct Service::Impl {
   void RetryExecution(const Execution& ex, const std::string& reason) {
     const std::string tag = TrialTag(ex.campaign_id, ex.trial_id, ex.attempt);
     try {
-      const db::TrialState next = store->RetryTrial(ex.trial_id, ex.attempt, reason, opt.max_attempts,
-                                                    opt.retry_backoff_s * std::pow(2.0, ex.attempt - 1));
+      const db::TrialState next =
+          store->RetryTrial(ex.trial_id, ex.attempt, reason, opt.max_attempts,
+                            opt.retry_backoff_s * std::pow(2.0, ex.attempt - 1));
       if (next == db::TrialState::kFailed) {
         Count(&ServiceCounters::failed);
         spdlog::error("{}: failed, no attempts left: {}", tag, reason);
@@ -431,7 +448,9 @@ struct Service::Impl {
     if (stop_requested) return;
     const auto now = Clock::now();
     for (auto& [id, cell] : cells) {
-      if (!cell.alive || cell.quarantined || cell.phase != CellPhase::kIdle || now < cell.next_claim) continue;
+      if (!cell.alive || cell.quarantined || cell.phase != CellPhase::kIdle ||
+          now < cell.next_claim)
+        continue;
       cell.next_claim = now + std::chrono::milliseconds(200);  // poll the store gently when idle
       const auto claim_started = Clock::now();
       std::optional<db::ClaimedTrial> claim;
@@ -468,7 +487,8 @@ struct Service::Impl {
       spdlog::error("{}: invalid scene: {}", tag, e.what());
       return;
     }
-    const double budget = opt.execute_timeout_s + ex.scene.duration * std::max(cell.speed, 0.0) * 1.5;
+    const double budget =
+        opt.execute_timeout_s + ex.scene.duration * std::max(cell.speed, 0.0) * 1.5;
     msg::TrialCommand cmd;
     cmd.cell_id(cell.id);
     cmd.trial_id(static_cast<std::uint64_t>(claim.trial_id));
@@ -570,7 +590,8 @@ struct Service::Impl {
     auto cit = cells.find(id);
     if (cit == cells.end()) return;
     CellRun& cell = cit->second;
-    if (cell.phase == CellPhase::kIdle || cell.trial_id != static_cast<std::int64_t>(st.trial_id()) ||
+    if (cell.phase == CellPhase::kIdle ||
+        cell.trial_id != static_cast<std::int64_t>(st.trial_id()) ||
         cell.attempt != static_cast<int>(st.attempt())) {
       return;  // late or repeated status of a phase already settled
     }
@@ -601,7 +622,8 @@ struct Service::Impl {
             // fine and a re-run is bit-identical, so the trial fails at once.
             const std::string tag = TrialTag(ex.campaign_id, ex.trial_id, ex.attempt);
             try {
-              store->FailTrial(ex.trial_id, ex.attempt, "cell " + id + ": " + st.reason(), "solver_failure");
+              store->FailTrial(ex.trial_id, ex.attempt, "cell " + id + ": " + st.reason(),
+                               "solver_failure");
               Count(&ServiceCounters::failed);
               spdlog::error("{}: failed on cell {}: {}", tag, id, st.reason());
             } catch (const db::StoreError& e) {
@@ -630,8 +652,8 @@ struct Service::Impl {
         store->CompleteReset(cell.trial_id, cell.attempt, report);
         if (!ok) {
           Count(&ServiceCounters::resets_failed);
-          spdlog::warn("trial {} attempt {}: reset on cell {} failed: {}", cell.trial_id, cell.attempt,
-                       id, st.reason());
+          spdlog::warn("trial {} attempt {}: reset on cell {} failed: {}", cell.trial_id,
+                       cell.attempt, id, st.reason());
         }
         CellResult(cell, ok, st.reason());
         if (ok) ReportTiming(cell, st.phase_wall_s());
@@ -650,7 +672,8 @@ struct Service::Impl {
   void ReportTiming(const CellRun& cell, double reset_wall_s) {
     const double busy = std::chrono::duration<double>(Clock::now() - cell.claimed_at).count();
     const double exec = cell.execute_wall_s;
-    if (!std::isfinite(exec) || exec < 0 || !std::isfinite(reset_wall_s) || reset_wall_s < 0) return;
+    if (!std::isfinite(exec) || exec < 0 || !std::isfinite(reset_wall_s) || reset_wall_s < 0)
+      return;
     TrialTiming t;
     t.trial_id = cell.trial_id;
     t.attempt = cell.attempt;
@@ -660,9 +683,11 @@ struct Service::Impl {
     t.reset_s = reset_wall_s;
     t.overhead_s = busy - exec - reset_wall_s;
     t.campaign_id = cell.campaign_id;
-    spdlog::debug("trial {} attempt {} on cell {}: busy {:.3f} ms = execute {:.3f} + reset {:.3f} + arena {:.3f}",
-                  t.trial_id, t.attempt, t.cell_id, busy * 1e3, exec * 1e3, reset_wall_s * 1e3,
-                  t.overhead_s * 1e3);
+    spdlog::debug(
+        "trial {} attempt {} on cell {}: busy {:.3f} ms = execute {:.3f} + reset {:.3f} + arena "
+        "{:.3f}",
+        t.trial_id, t.attempt, t.cell_id, busy * 1e3, exec * 1e3, reset_wall_s * 1e3,
+        t.overhead_s * 1e3);
     if (on_trial_timing) on_trial_timing(t);
   }
 
@@ -698,8 +723,8 @@ struct Service::Impl {
       store->RecordPrediction(done.trial_id, done.attempt, done.prediction);
       store->FinishTrial(done.trial_id, done.attempt);
       Count(&ServiceCounters::done);
-      spdlog::info("{}: done (prediction {}, final position error {:.3g} m)", tag, done.prediction.status,
-                   done.prediction.final_position_error.value_or(NAN));
+      spdlog::info("{}: done (prediction {}, final position error {:.3g} m)", tag,
+                   done.prediction.status, done.prediction.final_position_error.value_or(NAN));
     } catch (const db::StoreError& e) {
       if (StoreFailed(e)) throw;
       spdlog::error("{}: {}", tag, e.what());
@@ -713,7 +738,8 @@ struct Service::Impl {
       if (cell.phase == CellPhase::kIdle) continue;
       if (cell.phase == CellPhase::kExecuting) {
         auto it = executions.find(cell.trial_id);
-        if (it != executions.end() && it->second.expected >= 0 && now > it->second.stream_deadline) {
+        if (it != executions.end() && it->second.expected >= 0 &&
+            now > it->second.stream_deadline) {
           AbortPhase(cell,
                      "ground truth incomplete: " + std::to_string(it->second.next_sample) + " of " +
                          std::to_string(it->second.expected) + " samples",
@@ -740,7 +766,8 @@ struct Service::Impl {
     store->CompleteFinishedCampaigns();
     for (const auto& c : store->ListCampaigns()) {
       if (opt.only_campaign > 0 && c.id != opt.only_campaign) continue;
-      if (c.state == db::CampaignState::kActive || c.state == db::CampaignState::kPaused) return false;
+      if (c.state == db::CampaignState::kActive || c.state == db::CampaignState::kPaused)
+        return false;
     }
     return true;
   }
@@ -752,7 +779,8 @@ struct Service::Impl {
     for (;;) {
       if (stop_requested && !drain_deadline) {
         drain_deadline = After(opt.drain_timeout_s);
-        spdlog::info("stopping: no new trials; waiting up to {} s for phases in flight", opt.drain_timeout_s);
+        spdlog::info("stopping: no new trials; waiting up to {} s for phases in flight",
+                     opt.drain_timeout_s);
       }
       // Statuses are the latency-critical input: wait on them briefly.
       if (auto st = statuses.Take(std::chrono::milliseconds(1))) OnStatus(*st);
@@ -802,7 +830,8 @@ struct Service::Impl {
 Service::Service(const ServiceOptions& options) {
   if (options.db_path.empty()) throw std::invalid_argument("--db: must name the store file");
   if (options.domain_id < 0 || options.domain_id > 232)
-    throw std::invalid_argument("--domain: must be 0..232, got " + std::to_string(options.domain_id));
+    throw std::invalid_argument("--domain: must be 0..232, got " +
+                                std::to_string(options.domain_id));
   if (options.max_attempts < 1) throw std::invalid_argument("max_attempts: must be >= 1");
   if (options.quarantine_after < 1) throw std::invalid_argument("quarantine_after: must be >= 1");
   impl_ = std::make_unique<Impl>(options);

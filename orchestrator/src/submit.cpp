@@ -10,7 +10,8 @@
 namespace arena::orchestrator {
 
 namespace {
-std::vector<db::PlannedTrial> PlanChunk(const Campaign& campaign, std::int64_t begin, std::int64_t end) {
+std::vector<db::PlannedTrial> PlanChunk(const Campaign& campaign, std::int64_t begin,
+                                        std::int64_t end) {
   std::vector<db::PlannedTrial> out;
   out.reserve(static_cast<size_t>(end - begin));
   for (std::int64_t i = begin; i < end; ++i) {

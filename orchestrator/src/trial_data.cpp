@@ -11,17 +11,23 @@ namespace arena::orchestrator {
 namespace {
 db::ContactMode ToStore(mechanics::ContactMode m) {
   switch (m) {
-    case mechanics::ContactMode::kStick: return db::ContactMode::kStick;
-    case mechanics::ContactMode::kSlide: return db::ContactMode::kSlide;
-    case mechanics::ContactMode::kSeparate: return db::ContactMode::kSeparate;
+    case mechanics::ContactMode::kStick:
+      return db::ContactMode::kStick;
+    case mechanics::ContactMode::kSlide:
+      return db::ContactMode::kSlide;
+    case mechanics::ContactMode::kSeparate:
+      return db::ContactMode::kSeparate;
   }
   return db::ContactMode::kSeparate;
 }
 mechanics::ContactMode ToModel(db::ContactMode m) {
   switch (m) {
-    case db::ContactMode::kStick: return mechanics::ContactMode::kStick;
-    case db::ContactMode::kSlide: return mechanics::ContactMode::kSlide;
-    case db::ContactMode::kSeparate: return mechanics::ContactMode::kSeparate;
+    case db::ContactMode::kStick:
+      return mechanics::ContactMode::kStick;
+    case db::ContactMode::kSlide:
+      return mechanics::ContactMode::kSlide;
+    case db::ContactMode::kSeparate:
+      return mechanics::ContactMode::kSeparate;
   }
   return mechanics::ContactMode::kSeparate;
 }
@@ -40,7 +46,8 @@ std::vector<Eigen::Vector3d> ContactNormals(const mechanics::Scene& scene) {
   return normals;
 }
 
-db::Sample ToStoreSample(const msg::GroundTruthSample& in, const std::vector<Eigen::Vector3d>& normals,
+db::Sample ToStoreSample(const msg::GroundTruthSample& in,
+                         const std::vector<Eigen::Vector3d>& normals,
                          mechanics::TrajectorySample* truth_out) {
   dds::PusherState pusher;
   dds::Observation observed;
@@ -49,14 +56,22 @@ db::Sample ToStoreSample(const msg::GroundTruthSample& in, const std::vector<Eig
   db::Sample s;
   s.t = truth.t;
   const auto& q = truth.orientation;
-  s.object_pose = {truth.position.x(), truth.position.y(), truth.position.z(), q.w(), q.x(), q.y(), q.z()};
-  s.object_twist = {truth.velocity.x(),         truth.velocity.y(),         truth.velocity.z(),
-                    truth.angular_velocity.x(), truth.angular_velocity.y(), truth.angular_velocity.z()};
+  s.object_pose = {
+      truth.position.x(), truth.position.y(), truth.position.z(), q.w(), q.x(), q.y(), q.z()};
+  s.object_twist = {truth.velocity.x(),         truth.velocity.y(),
+                    truth.velocity.z(),         truth.angular_velocity.x(),
+                    truth.angular_velocity.y(), truth.angular_velocity.z()};
   const auto& pq = pusher.orientation;
-  s.pusher_pose = {pusher.position.x(), pusher.position.y(), pusher.position.z(),
-                   pq.w(), pq.x(), pq.y(), pq.z()};
-  s.pusher_twist = {pusher.velocity.x(),         pusher.velocity.y(),         pusher.velocity.z(),
-                    pusher.angular_velocity.x(), pusher.angular_velocity.y(), pusher.angular_velocity.z()};
+  s.pusher_pose = {pusher.position.x(),
+                   pusher.position.y(),
+                   pusher.position.z(),
+                   pq.w(),
+                   pq.x(),
+                   pq.y(),
+                   pq.z()};
+  s.pusher_twist = {pusher.velocity.x(),         pusher.velocity.y(),
+                    pusher.velocity.z(),         pusher.angular_velocity.x(),
+                    pusher.angular_velocity.y(), pusher.angular_velocity.z()};
   s.contacts.resize(truth.contacts.size());
   for (size_t i = 0; i < truth.contacts.size(); ++i) {
     const auto& c = truth.contacts[i];
@@ -68,8 +83,13 @@ db::Sample ToStoreSample(const msg::GroundTruthSample& in, const std::vector<Eig
   s.observed_valid = observed.valid;
   if (observed.valid) {
     const auto& oq = observed.orientation;
-    s.observed_object_pose = {observed.position.x(), observed.position.y(), observed.position.z(),
-                              oq.w(), oq.x(), oq.y(), oq.z()};
+    s.observed_object_pose = {observed.position.x(),
+                              observed.position.y(),
+                              observed.position.z(),
+                              oq.w(),
+                              oq.x(),
+                              oq.y(),
+                              oq.z()};
     for (int k = 0; k < 6; ++k) s.observed_pusher_wrench[k] = observed.pusher_wrench[k];
     for (const auto& w : observed.finger_wrenches)
       for (int k = 0; k < 6; ++k) s.observed_finger_wrenches.push_back(w[k]);
@@ -85,13 +105,15 @@ mechanics::TrajectorySample ToTrajectorySample(const db::Sample& s,
   mechanics::TrajectorySample out;
   out.t = s.t;
   out.position = {s.object_pose[0], s.object_pose[1], s.object_pose[2]};
-  out.orientation = Eigen::Quaterniond(s.object_pose[3], s.object_pose[4], s.object_pose[5], s.object_pose[6]);
+  out.orientation =
+      Eigen::Quaterniond(s.object_pose[3], s.object_pose[4], s.object_pose[5], s.object_pose[6]);
   out.velocity = {s.object_twist[0], s.object_twist[1], s.object_twist[2]};
   out.angular_velocity = {s.object_twist[3], s.object_twist[4], s.object_twist[5]};
   out.pusher_position = {s.pusher_pose[0], s.pusher_pose[1], s.pusher_pose[2]};
   out.contacts.resize(s.contacts.size());
   for (size_t i = 0; i < s.contacts.size(); ++i) {
-    const Eigen::Vector3d force(s.contacts[i].force[0], s.contacts[i].force[1], s.contacts[i].force[2]);
+    const Eigen::Vector3d force(s.contacts[i].force[0], s.contacts[i].force[1],
+                                s.contacts[i].force[2]);
     auto& c = out.contacts[i];
     c.normal_force = force.dot(normals[i]);
     c.tangential_force = force - c.normal_force * normals[i];

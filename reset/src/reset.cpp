@@ -32,11 +32,16 @@ std::string Vec(const Eigen::Vector3d& v) {
 
 const char* ToString(PrimitiveKind kind) {
   switch (kind) {
-    case PrimitiveKind::kSwapPusher: return "swap_pusher";
-    case PrimitiveKind::kRelease: return "release";
-    case PrimitiveKind::kRotate: return "rotate_in_grasp";
-    case PrimitiveKind::kTranslate: return "pick_and_place";
-    case PrimitiveKind::kRegrasp: return "regrasp";
+    case PrimitiveKind::kSwapPusher:
+      return "swap_pusher";
+    case PrimitiveKind::kRelease:
+      return "release";
+    case PrimitiveKind::kRotate:
+      return "rotate_in_grasp";
+    case PrimitiveKind::kTranslate:
+      return "pick_and_place";
+    case PrimitiveKind::kRegrasp:
+      return "regrasp";
   }
   return "?";
 }
@@ -88,8 +93,8 @@ std::vector<Primitive> PlanReset(const Pose& observed, const Pose& target, bool 
   Pose current = observed;
   if (rotate) {
     current.orientation = target.orientation;
-    plan.push_back({PrimitiveKind::kRotate, current,
-                    params.grasp_time + angle / params.rotate_speed});
+    plan.push_back(
+        {PrimitiveKind::kRotate, current, params.grasp_time + angle / params.rotate_speed});
   }
   if (translate) {
     current.position = target.position;
@@ -128,10 +133,10 @@ ResetOutcome ExecuteReset(const ResetRequest& request, const ResetParams& params
     const double slip = rng.Uniform();
     const size_t slip_at = out.plan.empty() ? 0 : static_cast<size_t>(rng.Next() % out.plan.size());
     Pose placed;
-    placed.position = request.target.position +
-                      Eigen::Vector3d(rng.Normal(params.placement_position_std),
-                                      rng.Normal(params.placement_position_std),
-                                      rng.Normal(params.placement_position_std));
+    placed.position =
+        request.target.position + Eigen::Vector3d(rng.Normal(params.placement_position_std),
+                                                  rng.Normal(params.placement_position_std),
+                                                  rng.Normal(params.placement_position_std));
     placed.orientation = Perturb(request.target.orientation, &rng, params.placement_angle_std);
     Pose seen;
     const Eigen::Vector3d sensing(rng.Normal(params.sensing_position_std),

@@ -2,19 +2,26 @@
 // schemas/include/arena/schemas/dds.hpp.
 #include "arena/schemas/dds.hpp"
 
-#include <netdb.h>
 #include <arpa/inet.h>
+#include <netdb.h>
 #include <sys/socket.h>
 
 #include <algorithm>
-#include <cstdlib>
 #include <atomic>
 #include <condition_variable>
+#include <cstdlib>
 #include <map>
 #include <mutex>
 #include <sstream>
 #include <thread>
 
+#include <fastdds/rtps/attributes/ServerAttributes.h>
+#include <fastdds/rtps/common/InstanceHandle.h>
+#include <fastdds/rtps/transport/UDPv4TransportDescriptor.h>
+#include <fastdds/rtps/transport/shared_mem/SharedMemTransportDescriptor.h>
+#include <fastrtps/utils/IPLocator.h>
+#include <fastrtps/xmlparser/XMLProfileManager.h>
+#include <spdlog/spdlog.h>
 #include <fastdds/dds/domain/DomainParticipant.hpp>
 #include <fastdds/dds/domain/DomainParticipantFactory.hpp>
 #include <fastdds/dds/domain/DomainParticipantListener.hpp>
@@ -28,13 +35,6 @@
 #include <fastdds/dds/subscriber/qos/DataReaderQos.hpp>
 #include <fastdds/dds/topic/Topic.hpp>
 #include <fastdds/dds/topic/TypeSupport.hpp>
-#include <fastdds/rtps/attributes/ServerAttributes.h>
-#include <fastdds/rtps/common/InstanceHandle.h>
-#include <fastdds/rtps/transport/UDPv4TransportDescriptor.h>
-#include <fastdds/rtps/transport/shared_mem/SharedMemTransportDescriptor.h>
-#include <fastrtps/utils/IPLocator.h>
-#include <fastrtps/xmlparser/XMLProfileManager.h>
-#include <spdlog/spdlog.h>
 
 #include "arena/schemas/arena.h"
 #include "arena/schemas/arenaPubSubTypes.h"
@@ -124,10 +124,14 @@ std::string CellParticipantName(const std::string& cell_id) { return "arena.cell
 
 const char* ToString(PeerEvent::Kind kind) {
   switch (kind) {
-    case PeerEvent::Kind::kParticipantJoined: return "participant-joined";
-    case PeerEvent::Kind::kParticipantLeft: return "participant-left";
-    case PeerEvent::Kind::kWriterLost: return "writer-lost";
-    case PeerEvent::Kind::kWriterAlive: return "writer-alive";
+    case PeerEvent::Kind::kParticipantJoined:
+      return "participant-joined";
+    case PeerEvent::Kind::kParticipantLeft:
+      return "participant-left";
+    case PeerEvent::Kind::kWriterLost:
+      return "writer-lost";
+    case PeerEvent::Kind::kWriterAlive:
+      return "writer-alive";
   }
   return "?";
 }
@@ -344,7 +348,8 @@ void ApplyNetwork(const ParticipantOptions& opt, fdds::DomainParticipantQos* qos
     }
     const HostPort hp = SplitHostPort(entry, "--discovery-server");
     frtps::RemoteServerAttributes server;
-    if (!eprosima::fastdds::rtps::get_server_client_default_guidPrefix(server_id, server.guidPrefix)) {
+    if (!eprosima::fastdds::rtps::get_server_client_default_guidPrefix(server_id,
+                                                                       server.guidPrefix)) {
       throw DdsError("--discovery-server: server id " + std::to_string(server_id) + " not usable");
     }
     server.metatrafficUnicastLocatorList.push_back(
@@ -437,9 +442,10 @@ Participant::Participant(const ParticipantOptions& options)
   core_->participant = factory->create_participant(options.domain_id, qos, core_.get(), mask);
   if (core_->participant == nullptr) {
     if (!options.network.security_dir.empty()) {
-      throw SecurityError("--security " + options.network.security_dir + ": Fast DDS refused this identity on domain " +
-                          std::to_string(options.domain_id) +
-                          " (is the domain outside the lab's or the grant's range? see the Fast DDS log above)");
+      throw SecurityError(
+          "--security " + options.network.security_dir +
+          ": Fast DDS refused this identity on domain " + std::to_string(options.domain_id) +
+          " (is the domain outside the lab's or the grant's range? see the Fast DDS log above)");
     }
     throw DdsError("dds: create_participant(domain " + std::to_string(options.domain_id) +
                    ") failed (see Fast DDS log above)");
@@ -454,16 +460,15 @@ Participant::Participant(const ParticipantOptions& options)
   if (core_->subscriber == nullptr) throw DdsError("dds: create_subscriber failed");
 
   const auto& effective = core_->participant->get_qos();
-  spdlog::debug("dds: participant {} domain {} lease {} s, transports: {}{}, peers {}, {}",
-                options.name, options.domain_id, options.lease_s,
-                options.network.shared_memory ? "shm+" : "",
-                options.network.peers.empty() && options.network.discovery_server.empty()
-                    ? "udpv4@127.0.0.1"
-                    : "udpv4",
-                effective.wire_protocol().builtin.initialPeersList.size(),
-                options.network.discovery_server.empty()
-                    ? "simple discovery"
-                    : "discovery server " + options.network.discovery_server);
+  spdlog::debug(
+      "dds: participant {} domain {} lease {} s, transports: {}{}, peers {}, {}", options.name,
+      options.domain_id, options.lease_s, options.network.shared_memory ? "shm+" : "",
+      options.network.peers.empty() && options.network.discovery_server.empty() ? "udpv4@127.0.0.1"
+                                                                                : "udpv4",
+      effective.wire_protocol().builtin.initialPeersList.size(),
+      options.network.discovery_server.empty()
+          ? "simple discovery"
+          : "discovery server " + options.network.discovery_server);
 }
 
 Participant::~Participant() = default;
@@ -517,7 +522,7 @@ struct Writer<T>::Impl {
   std::shared_ptr<detail::ParticipantCore> core;
   fdds::DataWriter* writer = nullptr;
   double max_blocking_s = 1.0;
-  int window = 0;          // GroundTruth: batches written before an acknowledgement check
+  int window = 0;  // GroundTruth: batches written before an acknowledgement check
   int unconfirmed = 0;
 
   ~Impl() {
@@ -555,9 +560,9 @@ Writer<T>::Writer(Participant& participant, const WriterOptions& options)
   impl_->writer = core.publisher->create_datawriter(t, qos, nullptr);
   if (impl_->writer == nullptr) throw DdsError("dds: create_datawriter(" + topic + ") failed");
   const auto q = impl_->writer->get_qos();
-  spdlog::debug("dds: {} writer {}: {}", core.name, topic,
-                Describe(q.reliability(), q.durability(), q.history(), q.resource_limits(),
-                         q.liveliness()));
+  spdlog::debug(
+      "dds: {} writer {}: {}", core.name, topic,
+      Describe(q.reliability(), q.durability(), q.history(), q.resource_limits(), q.liveliness()));
 }
 
 template <class T>
@@ -627,9 +632,8 @@ struct Reader<T>::Impl : public fdds::DataReaderListener {
       if (!info.valid_data) continue;  // instance disposed / no writers: not a message
       if (sample.schema_version() != msg::SCHEMA_VERSION) {
         if (rejected.fetch_add(1) == 0) {
-          spdlog::warn("dds: {} dropped a {} message of schema version {} (known: {})",
-                       core->name, Traits<T>::kTopic, sample.schema_version(),
-                       msg::SCHEMA_VERSION);
+          spdlog::warn("dds: {} dropped a {} message of schema version {} (known: {})", core->name,
+                       Traits<T>::kTopic, sample.schema_version(), msg::SCHEMA_VERSION);
         }
         continue;
       }
@@ -670,19 +674,20 @@ Reader<T>::Reader(Participant& participant, const ReaderOptions& options)
   fdds::DataReaderQos qos = core.subscriber->get_default_datareader_qos();
   ApplyTopicQos(topic, &qos.reliability(), &qos.durability(), &qos.history(),
                 &qos.resource_limits());
-  qos.endpoint().history_memory_policy = eprosima::fastrtps::rtps::DYNAMIC_REUSABLE_MEMORY_MODE;  // as writers
+  qos.endpoint().history_memory_policy =
+      eprosima::fastrtps::rtps::DYNAMIC_REUSABLE_MEMORY_MODE;  // as writers
   // Fast DDS tracks a writer's liveliness only for a finite requested lease.
   qos.liveliness().kind = fdds::AUTOMATIC_LIVELINESS_QOS;
-  qos.liveliness().lease_duration = CellWritten(topic) ? Duration_t(kCellLivelinessLease_s)
-                                                       : eprosima::fastrtps::c_TimeInfinite;
+  qos.liveliness().lease_duration =
+      CellWritten(topic) ? Duration_t(kCellLivelinessLease_s) : eprosima::fastrtps::c_TimeInfinite;
   fdds::StatusMask mask = fdds::StatusMask::data_available();
   mask << fdds::StatusMask::liveliness_changed();
   impl_->reader = core.subscriber->create_datareader(t, qos, impl_.get(), mask);
   if (impl_->reader == nullptr) throw DdsError("dds: create_datareader(" + topic + ") failed");
   const auto q = impl_->reader->get_qos();
-  spdlog::debug("dds: {} reader {}: {}", core.name, topic,
-                Describe(q.reliability(), q.durability(), q.history(), q.resource_limits(),
-                         q.liveliness()));
+  spdlog::debug(
+      "dds: {} reader {}: {}", core.name, topic,
+      Describe(q.reliability(), q.durability(), q.history(), q.resource_limits(), q.liveliness()));
 }
 
 template <class T>
@@ -725,9 +730,9 @@ std::uint64_t Reader<T>::rejected_version() const {
   return impl_->rejected.load();
 }
 
-#define ARENA_DDS_INSTANTIATE(T)             \
-  template class Writer<T>;                  \
-  template class Reader<T>;                  \
+#define ARENA_DDS_INSTANTIATE(T) \
+  template class Writer<T>;      \
+  template class Reader<T>;      \
   template const char* TopicName<T>();
 ARENA_DDS_INSTANTIATE(msg::CellAnnounce)
 ARENA_DDS_INSTANTIATE(msg::TrialCommand)

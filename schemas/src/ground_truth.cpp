@@ -19,17 +19,23 @@ void PutTwist(const Eigen::Vector3d& v, const Eigen::Vector3d& w, std::array<dou
 }
 msg::ContactMode ToMsg(mechanics::ContactMode m) {
   switch (m) {
-    case mechanics::ContactMode::kStick: return msg::MODE_STICK;
-    case mechanics::ContactMode::kSlide: return msg::MODE_SLIDE;
-    case mechanics::ContactMode::kSeparate: return msg::MODE_SEPARATE;
+    case mechanics::ContactMode::kStick:
+      return msg::MODE_STICK;
+    case mechanics::ContactMode::kSlide:
+      return msg::MODE_SLIDE;
+    case mechanics::ContactMode::kSeparate:
+      return msg::MODE_SEPARATE;
   }
   return msg::MODE_SEPARATE;
 }
 mechanics::ContactMode FromMsg(msg::ContactMode m) {
   switch (m) {
-    case msg::MODE_STICK: return mechanics::ContactMode::kStick;
-    case msg::MODE_SLIDE: return mechanics::ContactMode::kSlide;
-    case msg::MODE_SEPARATE: return mechanics::ContactMode::kSeparate;
+    case msg::MODE_STICK:
+      return mechanics::ContactMode::kStick;
+    case msg::MODE_SLIDE:
+      return mechanics::ContactMode::kSlide;
+    case msg::MODE_SEPARATE:
+      return mechanics::ContactMode::kSeparate;
   }
   return mechanics::ContactMode::kSeparate;
 }
@@ -73,7 +79,8 @@ void EncodeSample(const mechanics::TrajectorySample& truth, const PusherState& p
     for (int k = 0; k < 6; ++k) out->observed_pusher_wrench()[k] = observed.pusher_wrench[k];
     out->observed_finger_wrenches().resize(6 * observed.finger_wrenches.size());
     for (size_t f = 0; f < observed.finger_wrenches.size(); ++f) {
-      for (int k = 0; k < 6; ++k) out->observed_finger_wrenches()[6 * f + k] = observed.finger_wrenches[f][k];
+      for (int k = 0; k < 6; ++k)
+        out->observed_finger_wrenches()[6 * f + k] = observed.finger_wrenches[f][k];
     }
   } else {
     out->observed_object_pose() = {0, 0, 0, 1, 0, 0, 0};
@@ -97,7 +104,8 @@ mechanics::TrajectorySample DecodeSample(const msg::GroundTruthSample& in, Pushe
     const auto& m = in.contacts()[i];
     auto& c = s.contacts[i];
     c.normal_force = m.normal_force();
-    c.tangential_force = {m.tangential_force()[0], m.tangential_force()[1], m.tangential_force()[2]};
+    c.tangential_force = {m.tangential_force()[0], m.tangential_force()[1],
+                          m.tangential_force()[2]};
     c.torque = {m.torque()[0], m.torque()[1], m.torque()[2]};
     c.mode = FromMsg(m.mode());
   }
@@ -118,7 +126,8 @@ mechanics::TrajectorySample DecodeSample(const msg::GroundTruthSample& in, Pushe
     for (int k = 0; k < 6; ++k) observed->pusher_wrench[k] = in.observed_pusher_wrench()[k];
     observed->finger_wrenches.assign(in.observed_finger_wrenches().size() / 6, Wrench::Zero());
     for (size_t f = 0; f < observed->finger_wrenches.size(); ++f) {
-      for (int k = 0; k < 6; ++k) observed->finger_wrenches[f][k] = in.observed_finger_wrenches()[6 * f + k];
+      for (int k = 0; k < 6; ++k)
+        observed->finger_wrenches[f][k] = in.observed_finger_wrenches()[6 * f + k];
     }
   }
   return s;
@@ -126,22 +135,23 @@ mechanics::TrajectorySample DecodeSample(const msg::GroundTruthSample& in, Pushe
 
 std::string CheckSample(const msg::GroundTruthSample& s) {
   if (!std::isfinite(s.t()) || s.t() < 0) return "samples[].t: must be finite and >= 0";
-  for (const std::string& e :
-       {CheckFinite(s.object_pose(), "samples[].object_pose"),
-        CheckQuaternion(s.object_pose(), "samples[].object_pose"),
-        CheckFinite(s.object_twist(), "samples[].object_twist"),
-        CheckFinite(s.pusher_pose(), "samples[].pusher_pose"),
-        CheckQuaternion(s.pusher_pose(), "samples[].pusher_pose"),
-        CheckFinite(s.pusher_twist(), "samples[].pusher_twist"),
-        CheckFinite(s.pusher_force(), "samples[].pusher_force")}) {
+  for (const std::string& e : {CheckFinite(s.object_pose(), "samples[].object_pose"),
+                               CheckQuaternion(s.object_pose(), "samples[].object_pose"),
+                               CheckFinite(s.object_twist(), "samples[].object_twist"),
+                               CheckFinite(s.pusher_pose(), "samples[].pusher_pose"),
+                               CheckQuaternion(s.pusher_pose(), "samples[].pusher_pose"),
+                               CheckFinite(s.pusher_twist(), "samples[].pusher_twist"),
+                               CheckFinite(s.pusher_force(), "samples[].pusher_force")}) {
     if (!e.empty()) return e;
   }
   if (s.contacts().size() > kMaxContacts) return "samples[].contacts: more than 16 contacts";
   for (const auto& c : s.contacts()) {
     if (!std::isfinite(c.normal_force())) return "samples[].contacts[].normal_force: not finite";
-    if (!CheckFinite(c.tangential_force(), "").empty()) return "samples[].contacts[].tangential_force: not finite";
+    if (!CheckFinite(c.tangential_force(), "").empty())
+      return "samples[].contacts[].tangential_force: not finite";
     if (!CheckFinite(c.torque(), "").empty()) return "samples[].contacts[].torque: not finite";
-    if (c.mode() != msg::MODE_STICK && c.mode() != msg::MODE_SLIDE && c.mode() != msg::MODE_SEPARATE) {
+    if (c.mode() != msg::MODE_STICK && c.mode() != msg::MODE_SLIDE &&
+        c.mode() != msg::MODE_SEPARATE) {
       return "samples[].contacts[].mode: unknown value";
     }
   }

@@ -62,7 +62,9 @@ std::string OpenSslError() {
   return buf;
 }
 
-[[noreturn]] void Fail(const std::string& what) { throw SecurityError(what + ": " + OpenSslError()); }
+[[noreturn]] void Fail(const std::string& what) {
+  throw SecurityError(what + ": " + OpenSslError());
+}
 
 std::string BioText(BIO* bio) {
   BUF_MEM* mem = nullptr;
@@ -86,7 +88,8 @@ void AddExtension(X509* cert, X509* issuer, int nid, const char* value) {
   X509V3_set_ctx_nodb(&ctx);
   X509V3_set_ctx(&ctx, issuer, cert, nullptr, nullptr, 0);
   ExtPtr ext(X509V3_EXT_conf_nid(nullptr, &ctx, nid, value));
-  if (!ext || X509_add_ext(cert, ext.get(), -1) != 1) Fail(std::string("certificate extension ") + value);
+  if (!ext || X509_add_ext(cert, ext.get(), -1) != 1)
+    Fail(std::string("certificate extension ") + value);
 }
 
 struct Subject {
@@ -96,8 +99,8 @@ struct Subject {
 // A certificate for subject_key, signed by issuer_key (issuer == nullptr:
 // self-signed). A CA may sign certificates and documents; an identity may
 // sign (the authentication handshake) and agree keys.
-X509Ptr MakeCertificate(const Subject& subject, EVP_PKEY* subject_key, X509* issuer, EVP_PKEY* issuer_key,
-                        int valid_days, bool ca) {
+X509Ptr MakeCertificate(const Subject& subject, EVP_PKEY* subject_key, X509* issuer,
+                        EVP_PKEY* issuer_key, int valid_days, bool ca) {
   X509Ptr cert(X509_new());
   if (!cert || X509_set_version(cert.get(), 2) != 1) Fail("X509_new");
   // A random 127-bit serial: unique without keeping a counter file.
@@ -115,7 +118,8 @@ X509Ptr MakeCertificate(const Subject& subject, EVP_PKEY* subject_key, X509* iss
   auto add = [&](const char* field, const std::string& value) {
     if (value.empty()) return;
     if (X509_NAME_add_entry_by_txt(name, field, MBSTRING_UTF8,
-                                   reinterpret_cast<const unsigned char*>(value.c_str()), -1, -1, 0) != 1) {
+                                   reinterpret_cast<const unsigned char*>(value.c_str()), -1, -1,
+                                   0) != 1) {
       Fail(std::string("certificate subject ") + field);
     }
   };
@@ -131,7 +135,8 @@ X509Ptr MakeCertificate(const Subject& subject, EVP_PKEY* subject_key, X509* iss
     AddExtension(cert.get(), signer, NID_basic_constraints, "critical,CA:TRUE");
     // digitalSignature: the CA also signs the governance and permissions
     // documents (S/MIME verification checks the signer's key usage).
-    AddExtension(cert.get(), signer, NID_key_usage, "critical,digitalSignature,keyCertSign,cRLSign");
+    AddExtension(cert.get(), signer, NID_key_usage,
+                 "critical,digitalSignature,keyCertSign,cRLSign");
   } else {
     AddExtension(cert.get(), signer, NID_basic_constraints, "critical,CA:FALSE");
     AddExtension(cert.get(), signer, NID_key_usage, "critical,digitalSignature,keyAgreement");
@@ -150,7 +155,8 @@ std::string CertPem(X509* cert) {
 
 std::string KeyPem(EVP_PKEY* key) {
   BioPtr out(BIO_new(BIO_s_mem()));
-  if (!out || PEM_write_bio_PrivateKey(out.get(), key, nullptr, nullptr, 0, nullptr, nullptr) != 1) {
+  if (!out ||
+      PEM_write_bio_PrivateKey(out.get(), key, nullptr, nullptr, 0, nullptr, nullptr) != 1) {
     Fail("PEM private key");
   }
   return BioText(out.get());
@@ -176,7 +182,9 @@ std::string SignSmime(const std::string& document, X509* cert, EVP_PKEY* key) {
 // ---------------------------------------------------------------------------
 // Files
 
-std::string Join(const std::string& dir, const char* file) { return (fs::path(dir) / file).string(); }
+std::string Join(const std::string& dir, const char* file) {
+  return (fs::path(dir) / file).string();
+}
 
 // Creates path with mode; refuses to replace an existing file.
 void WriteNewFile(const std::string& path, const std::string& content, mode_t mode) {
@@ -196,16 +204,19 @@ void WriteNewFile(const std::string& path, const std::string& content, mode_t mo
     }
     done += static_cast<std::size_t>(n);
   }
-  if (fsync(fd) != 0 || close(fd) != 0) throw SecurityError(path + ": cannot write: " + std::strerror(errno));
+  if (fsync(fd) != 0 || close(fd) != 0)
+    throw SecurityError(path + ": cannot write: " + std::strerror(errno));
 }
 
 // The file's bytes; SecurityError naming it when missing or unreadable.
 std::string ReadRequired(const std::string& path, const std::string& what) {
   std::error_code ec;
   if (!fs::exists(path, ec)) throw SecurityError(path + ": missing (" + what + ")");
-  if (!fs::is_regular_file(path, ec)) throw SecurityError(path + ": not a regular file (" + what + ")");
+  if (!fs::is_regular_file(path, ec))
+    throw SecurityError(path + ": not a regular file (" + what + ")");
   std::ifstream in(path, std::ios::binary);
-  if (!in) throw SecurityError(path + ": cannot be read: " + std::strerror(errno) + " (" + what + ")");
+  if (!in)
+    throw SecurityError(path + ": cannot be read: " + std::strerror(errno) + " (" + what + ")");
   std::ostringstream text;
   text << in.rdbuf();
   if (in.bad()) throw SecurityError(path + ": cannot be read (" + what + ")");
@@ -228,8 +239,8 @@ PkeyPtr ReadPrivateKey(const std::string& path, const std::string& what) {
   BioPtr in(BIO_new_mem_buf(pem.data(), static_cast<int>(pem.size())));
   // An empty passphrase callback result: encrypted keys are refused instead
   // of prompting on a terminal (Fast DDS would need the password property).
-  PkeyPtr key(in ? PEM_read_bio_PrivateKey(in.get(), nullptr,
-                                           [](char*, int, int, void*) { return 0; }, nullptr)
+  PkeyPtr key(in ? PEM_read_bio_PrivateKey(
+                       in.get(), nullptr, [](char*, int, int, void*) { return 0; }, nullptr)
                  : nullptr);
   if (!key) {
     ERR_clear_error();
@@ -265,14 +276,16 @@ void CheckName(const std::string& value, const std::string& field, bool spaces) 
     throw std::invalid_argument(field + ": must be 1..64 characters, got '" + value + "'");
   }
   for (const char c : value) {
-    const bool ok = std::isalnum(static_cast<unsigned char>(c)) || c == '_' || c == '.' || c == '-' ||
-                    (spaces && c == ' ');
+    const bool ok = std::isalnum(static_cast<unsigned char>(c)) || c == '_' || c == '.' ||
+                    c == '-' || (spaces && c == ' ');
     if (!ok) {
-      throw std::invalid_argument(field + ": '" + value + "' may only hold letters, digits, '_', '.', '-'" +
+      throw std::invalid_argument(field + ": '" + value +
+                                  "' may only hold letters, digits, '_', '.', '-'" +
                                   (spaces ? ", ' '" : ""));
     }
   }
-  if (value == "." || value == "..") throw std::invalid_argument(field + ": '" + value + "' is not a name");
+  if (value == "." || value == "..")
+    throw std::invalid_argument(field + ": '" + value + "' is not a name");
   if (value.front() == ' ' || value.back() == ' ') {
     throw std::invalid_argument(field + ": '" + value + "' may not start or end with a space");
   }
@@ -286,8 +299,8 @@ void CheckDays(int days, const std::string& field) {
 
 void CheckDomains(int min, int max, const std::string& field) {
   if (min < 0 || max > 232 || min > max) {
-    throw std::invalid_argument(field + ": want MIN-MAX within 0..232, got " + std::to_string(min) + "-" +
-                                std::to_string(max));
+    throw std::invalid_argument(field + ": want MIN-MAX within 0..232, got " + std::to_string(min) +
+                                "-" + std::to_string(max));
   }
 }
 
@@ -310,9 +323,12 @@ std::string DomainsXml(int min, int max, const char* indent) {
 std::string GovernanceXml(const LabOptions& o) {
   std::ostringstream x;
   x << "<?xml version=\"1.0\" encoding=\"UTF-8\"?>\n"
-    << "<!-- arena lab governance (arena certs init; schemas/include/arena/schemas/security.hpp) -->\n"
+    << "<!-- arena lab governance (arena certs init; schemas/include/arena/schemas/security.hpp) "
+       "-->\n"
     << "<dds xmlns:xsi=\"http://www.w3.org/2001/XMLSchema-instance\"\n"
-    << "     xsi:noNamespaceSchemaLocation=\"http://www.omg.org/spec/DDS-SECURITY/20170901/omg_shared_ca_governance.xsd\">\n"
+    << "     "
+       "xsi:noNamespaceSchemaLocation=\"http://www.omg.org/spec/DDS-SECURITY/20170901/"
+       "omg_shared_ca_governance.xsd\">\n"
     << "  <domain_access_rules>\n"
     << "    <domain_rule>\n"
     << DomainsXml(o.domain_min, o.domain_max, "      ")
@@ -340,14 +356,16 @@ std::string GovernanceXml(const LabOptions& o) {
 
 // One <publish>/<subscribe> per topic: some Fast DDS 2.x parsers keep only
 // the last <topic> of a <topics> list.
-std::string PermissionsXml(const IdentityOptions& o, const std::string& subject, std::time_t not_before,
-                           std::time_t not_after) {
+std::string PermissionsXml(const IdentityOptions& o, const std::string& subject,
+                           std::time_t not_before, std::time_t not_after) {
   const RoleTopics topics = TopicsOf(o.role);
   std::ostringstream x;
   x << "<?xml version=\"1.0\" encoding=\"UTF-8\"?>\n"
     << "<!-- arena " << ToString(o.role) << " permissions (arena certs issue) -->\n"
     << "<dds xmlns:xsi=\"http://www.w3.org/2001/XMLSchema-instance\"\n"
-    << "     xsi:noNamespaceSchemaLocation=\"http://www.omg.org/spec/DDS-SECURITY/20170901/omg_shared_ca_permissions.xsd\">\n"
+    << "     "
+       "xsi:noNamespaceSchemaLocation=\"http://www.omg.org/spec/DDS-SECURITY/20170901/"
+       "omg_shared_ca_permissions.xsd\">\n"
     << "  <permissions>\n"
     << "    <grant name=\"" << ToString(o.role) << "." << o.name << "\">\n"
     << "      <subject_name>" << subject << "</subject_name>\n"
@@ -414,9 +432,12 @@ std::time_t ParseIsoUtc(const std::string& text) {
 
 const char* ToString(Role role) {
   switch (role) {
-    case Role::kCell: return "cell";
-    case Role::kService: return "service";
-    case Role::kWatcher: return "watcher";
+    case Role::kCell:
+      return "cell";
+    case Role::kService:
+      return "service";
+    case Role::kWatcher:
+      return "watcher";
   }
   return "?";
 }
@@ -434,9 +455,12 @@ RoleTopics TopicsOf(Role role) {
   const std::string status = TopicName<msg::TrialStatus>();
   const std::string truth = TopicName<msg::GroundTruth>();
   switch (role) {
-    case Role::kCell: return {{announce, status, truth}, {command}};
-    case Role::kService: return {{command}, {announce, status, truth}};
-    case Role::kWatcher: return {{}, {announce, status, truth}};
+    case Role::kCell:
+      return {{announce, status, truth}, {command}};
+    case Role::kService:
+      return {{command}, {announce, status, truth}};
+    case Role::kWatcher:
+      return {{}, {announce, status, truth}};
   }
   return {};
 }
@@ -452,14 +476,16 @@ void InitLab(const std::string& dir, const LabOptions& options) {
   for (const std::string& path : {key_path, cert_path}) {
     std::error_code ec;
     if (fs::exists(path, ec)) {
-      throw SecurityError(path + ": this directory holds a lab CA already; refusing to overwrite it "
+      throw SecurityError(path +
+                          ": this directory holds a lab CA already; refusing to overwrite it "
                           "(issue identities from it with `arena certs issue`)");
     }
   }
   for (const char* file : {kGovernanceXmlFile, kGovernanceFile}) {  // nothing half-made
     std::error_code ec;
     if (fs::exists(Join(dir, file), ec)) {
-      throw SecurityError(Join(dir, file) + ": exists already (a lab's remains?); refusing to overwrite it");
+      throw SecurityError(Join(dir, file) +
+                          ": exists already (a lab's remains?); refusing to overwrite it");
     }
   }
   std::error_code ec;
@@ -467,8 +493,8 @@ void InitLab(const std::string& dir, const LabOptions& options) {
   if (ec) throw SecurityError(dir + ": cannot create the directory: " + ec.message());
 
   PkeyPtr key = GenerateEcKey();
-  X509Ptr cert = MakeCertificate({options.lab_name, "", options.lab_name + " CA"}, key.get(), nullptr, key.get(),
-                                 options.valid_days, /*ca=*/true);
+  X509Ptr cert = MakeCertificate({options.lab_name, "", options.lab_name + " CA"}, key.get(),
+                                 nullptr, key.get(), options.valid_days, /*ca=*/true);
   const std::string governance = GovernanceXml(options);
   const std::string signed_governance = SignSmime(governance, cert.get(), key.get());
   // The key first, exclusively: two concurrent inits cannot both succeed.
@@ -488,15 +514,18 @@ std::string IssueIdentity(const std::string& lab_dir, const IdentityOptions& opt
   X509Ptr ca_cert = ReadCertificate(Join(lab_dir, kCaCertFile), lab_what);
   if (X509_check_private_key(ca_cert.get(), ca_key.get()) != 1) {
     ERR_clear_error();
-    throw SecurityError(Join(lab_dir, kCaKeyFile) + ": does not belong to " + Join(lab_dir, kCaCertFile));
+    throw SecurityError(Join(lab_dir, kCaKeyFile) + ": does not belong to " +
+                        Join(lab_dir, kCaCertFile));
   }
   const std::string governance = ReadRequired(Join(lab_dir, kGovernanceFile), lab_what);
-  const std::string lab_name = NameField(X509_get_subject_name(ca_cert.get()), NID_organizationName);
+  const std::string lab_name =
+      NameField(X509_get_subject_name(ca_cert.get()), NID_organizationName);
 
   const std::string dir = (fs::path(lab_dir) / options.name).string();
   std::error_code ec;
   if (fs::exists(dir, ec) && !fs::is_empty(dir, ec)) {
-    throw SecurityError(dir + ": an identity of that name exists already; refusing to overwrite it "
+    throw SecurityError(dir +
+                        ": an identity of that name exists already; refusing to overwrite it "
                         "(remove the directory to re-issue it)");
   }
   fs::create_directories(dir, ec);
@@ -504,12 +533,12 @@ std::string IssueIdentity(const std::string& lab_dir, const IdentityOptions& opt
   fs::permissions(dir, fs::perms::owner_all, ec);  // the key's directory: owner only
 
   PkeyPtr key = GenerateEcKey();
-  X509Ptr cert = MakeCertificate({lab_name, ToString(options.role), options.name}, key.get(), ca_cert.get(),
-                                 ca_key.get(), options.valid_days, /*ca=*/false);
+  X509Ptr cert = MakeCertificate({lab_name, ToString(options.role), options.name}, key.get(),
+                                 ca_cert.get(), ca_key.get(), options.valid_days, /*ca=*/false);
   const std::string subject = NameRfc2253(X509_get_subject_name(cert.get()));
   const std::time_t now = std::time(nullptr);
-  const std::string permissions =
-      PermissionsXml(options, subject, now - 300, now + static_cast<std::time_t>(options.valid_days) * 86400);
+  const std::string permissions = PermissionsXml(
+      options, subject, now - 300, now + static_cast<std::time_t>(options.valid_days) * 86400);
   const std::string signed_permissions = SignSmime(permissions, ca_cert.get(), ca_key.get());
 
   WriteNewFile(Join(dir, kIdentityKeyFile), KeyPem(key.get()), 0600);
@@ -554,14 +583,16 @@ std::string VerifySignedDocument(const std::string& p7s_path, const std::string&
 IdentityFiles CheckIdentityDir(const std::string& dir) {
   std::error_code ec;
   if (!fs::is_directory(dir, ec)) {
-    throw SecurityError(dir + ": not a directory (want an identity directory from `arena certs issue`)");
+    throw SecurityError(dir +
+                        ": not a directory (want an identity directory from `arena certs issue`)");
   }
   const std::string base = fs::absolute(dir, ec).lexically_normal().string();
-  IdentityFiles f{Join(base, kCaCertFile), Join(base, kGovernanceFile), Join(base, kIdentityCertFile),
-                  Join(base, kIdentityKeyFile), Join(base, kPermissionsFile)};
-  const std::string what = "an identity directory from `arena certs issue` holds " + std::string(kCaCertFile) +
-                           ", " + kGovernanceFile + ", " + kIdentityCertFile + ", " + kIdentityKeyFile + ", " +
-                           kPermissionsFile;
+  IdentityFiles f{Join(base, kCaCertFile), Join(base, kGovernanceFile),
+                  Join(base, kIdentityCertFile), Join(base, kIdentityKeyFile),
+                  Join(base, kPermissionsFile)};
+  const std::string what = "an identity directory from `arena certs issue` holds " +
+                           std::string(kCaCertFile) + ", " + kGovernanceFile + ", " +
+                           kIdentityCertFile + ", " + kIdentityKeyFile + ", " + kPermissionsFile;
   for (const std::string& path : {f.ca_cert, f.governance, f.cert, f.key, f.permissions}) {
     ReadRequired(path, what);
   }
@@ -578,13 +609,14 @@ IdentityFiles CheckIdentityDir(const std::string& dir) {
   if (X509_verify_cert(ctx.get()) != 1) {
     const int error = X509_STORE_CTX_get_error(ctx.get());
     ERR_clear_error();
-    throw SecurityError(f.cert + ": not valid under " + f.ca_cert + ": " + X509_verify_cert_error_string(error));
+    throw SecurityError(f.cert + ": not valid under " + f.ca_cert + ": " +
+                        X509_verify_cert_error_string(error));
   }
   if (X509_check_private_key(cert.get(), key.get()) != 1) {
     ERR_clear_error();
     throw SecurityError(f.key + ": does not belong to " + f.cert);
   }
-  struct stat st{};
+  struct stat st {};
   if (stat(f.key.c_str(), &st) == 0 && (st.st_mode & 077) != 0) {
     spdlog::warn("{}: readable by others (mode {:o}); chmod 600 it", f.key, st.st_mode & 0777);
   }
@@ -593,7 +625,8 @@ IdentityFiles CheckIdentityDir(const std::string& dir) {
   const std::string subject = NameRfc2253(X509_get_subject_name(cert.get()));
   const std::string granted = XmlElement(permissions, "subject_name");
   if (NormalizeDn(granted) != NormalizeDn(subject)) {
-    throw SecurityError(f.permissions + ": grants '" + granted + "', but " + f.cert + " is '" + subject + "'");
+    throw SecurityError(f.permissions + ": grants '" + granted + "', but " + f.cert + " is '" +
+                        subject + "'");
   }
   const std::time_t not_after = ParseIsoUtc(XmlElement(permissions, "not_after"));
   if (not_after != static_cast<std::time_t>(-1) && not_after < std::time(nullptr)) {

@@ -28,7 +28,9 @@ class CampaignCommands : public arena::test::ArenaCommandTest {
     ArenaCommandTest::SetUp();
     db_ = dir_ + "/lab.db";
   }
-  std::string Campaign() const { return std::string(ARENA_SOURCE_DIR) + "/tests/orchestrator/data/e2e60.json"; }
+  std::string Campaign() const {
+    return std::string(ARENA_SOURCE_DIR) + "/tests/orchestrator/data/e2e60.json";
+  }
   std::string db_;
 };
 
@@ -96,9 +98,9 @@ TEST_F(CampaignCommands, ConcurrentSubmitsToANewStoreBothSucceed) {
   for (int round = 0; round < 5; ++round) {
     const std::string db = dir_ + "/race" + std::to_string(round) + ".db";
     const std::string one = std::string(ARENA_BINARY) + " submit " + Campaign() + " --db " + db;
-    const int st = std::system(("(" + one + " >/dev/null 2>" + dir_ + "/e1 & " + one + " >/dev/null 2>" + dir_ +
-                                "/e2 & wait %1 && wait %2) ; r=$?; " + one + " >/dev/null 2>>" + dir_ +
-                                "/e1; exit $r")
+    const int st = std::system(("(" + one + " >/dev/null 2>" + dir_ + "/e1 & " + one +
+                                " >/dev/null 2>" + dir_ + "/e2 & wait %1 && wait %2) ; r=$?; " +
+                                one + " >/dev/null 2>>" + dir_ + "/e1; exit $r")
                                    .c_str());
     (void)st;
     const Result list = Arena("list --db " + db + " --json");
@@ -186,8 +188,10 @@ TEST_F(CampaignCommands, EveryCommandsHelpHasAnExample) {
     if (!(words >> name) || line.rfind("  ", 0) != 0) break;
     const Result help = Arena(name + " --help");
     EXPECT_EQ(help.rc, 0) << name;
-    EXPECT_NE(help.out.find("Example"), std::string::npos) << "`arena " << name << " --help` has no example";
-    EXPECT_NE(help.out.find("arena " + name), std::string::npos) << "`arena " << name << " --help`: example does not run it";
+    EXPECT_NE(help.out.find("Example"), std::string::npos)
+        << "`arena " << name << " --help` has no example";
+    EXPECT_NE(help.out.find("arena " + name), std::string::npos)
+        << "`arena " << name << " --help`: example does not run it";
     ++commands;
   }
   EXPECT_GE(commands, 10);

@@ -57,7 +57,8 @@ class PlotTest : public ::testing::Test {
       d.object_pose = {s.position.x(), s.position.y(), s.position.z(), q.w(), q.x(), q.y(), q.z()};
       d.pusher_pose[0] = s.pusher_position.x();
       for (size_t c = 0; c < s.contacts.size(); ++c) {
-        const Eigen::Vector3d f = s.contacts[c].normal_force * normals[c] + s.contacts[c].tangential_force;
+        const Eigen::Vector3d f =
+            s.contacts[c].normal_force * normals[c] + s.contacts[c].tangential_force;
         db::ContactWrench w;
         w.force = {f.x(), f.y(), f.z()};
         d.contacts.push_back(w);
@@ -85,8 +86,8 @@ class PlotTest : public ::testing::Test {
 };
 
 // data-name of every series, per panel title.
-std::map<std::string, std::vector<std::string>> SeriesByPanel(const tinyxml2::XMLDocument& doc,
-                                                              std::map<std::string, int>* points = nullptr) {
+std::map<std::string, std::vector<std::string>> SeriesByPanel(
+    const tinyxml2::XMLDocument& doc, std::map<std::string, int>* points = nullptr) {
   std::map<std::string, std::vector<std::string>> out;
   const auto* root = doc.FirstChildElement("svg");
   for (const auto* g = root->FirstChildElement("g"); g; g = g->NextSiblingElement("g")) {
@@ -100,7 +101,8 @@ std::map<std::string, std::vector<std::string>> SeriesByPanel(const tinyxml2::XM
         std::string p;
         int n = 0;
         while (in >> p) ++n;
-        for (const auto* c = s->FirstChildElement("circle"); c; c = c->NextSiblingElement("circle")) ++n;
+        for (const auto* c = s->FirstChildElement("circle"); c; c = c->NextSiblingElement("circle"))
+          ++n;
         (*points)[title + "/" + s->Attribute("data-name")] = n;
       }
     }
@@ -115,7 +117,8 @@ TEST_F(PlotTest, ChartHasPosePanelsAndOneForcePanelPerContact) {
   TrialPlotInfo info;
   const Chart chart = MakeTrialChart(*store, trial_, &info);
   EXPECT_EQ(info.prediction_status, "ok");
-  EXPECT_EQ(info.model_key, "g4_k2_dt0.008_auto");  // the campaign's "prediction", not the scene's model
+  EXPECT_EQ(info.model_key,
+            "g4_k2_dt0.008_auto");  // the campaign's "prediction", not the scene's model
   EXPECT_EQ(info.samples, samples_);
   const std::string svg = RenderSvg(chart);
   tinyxml2::XMLDocument doc;
@@ -125,8 +128,9 @@ TEST_F(PlotTest, ChartHasPosePanelsAndOneForcePanelPerContact) {
   // x, y, z, rotation + two fingers + the pusher.
   ASSERT_EQ(panels.size(), 7u) << svg.substr(0, 2000);
   const std::vector<std::string> pose = {"observed", "true", "predicted"};
-  const std::vector<std::string> force = {"normal observed", "tangential observed", "normal true",
-                                          "tangential true", "normal predicted", "tangential predicted"};
+  const std::vector<std::string> force = {"normal observed",  "tangential observed",
+                                          "normal true",      "tangential true",
+                                          "normal predicted", "tangential predicted"};
   int pose_panels = 0, force_panels = 0;
   for (const auto& [title, names] : panels) {
     if (title.rfind("object", 0) == 0) {
@@ -166,19 +170,26 @@ int RunArena(const std::string& args, std::string* err = nullptr) {
 TEST_F(PlotTest, CommandWritesTheSvgAndRefusesWhatItCannotPlot) {
   const std::string out = dir_ + "/t.svg";
   std::string err;
-  ASSERT_EQ(RunArena("plot --db " + db_ + " " + std::to_string(trial_) + " --out " + out, &err), 0) << err;
+  ASSERT_EQ(RunArena("plot --db " + db_ + " " + std::to_string(trial_) + " --out " + out, &err), 0)
+      << err;
   tinyxml2::XMLDocument doc;
   ASSERT_EQ(doc.LoadFile(out.c_str()), tinyxml2::XML_SUCCESS);
   EXPECT_EQ(SeriesByPanel(doc).size(), 7u);
   EXPECT_FALSE(std::filesystem::exists(out + ".tmp"));
 
-  EXPECT_EQ(RunArena("plot --db " + db_ + " " + std::to_string(planned_) + " --out " + dir_ + "/p.svg", &err), 2);
+  EXPECT_EQ(
+      RunArena("plot --db " + db_ + " " + std::to_string(planned_) + " --out " + dir_ + "/p.svg",
+               &err),
+      2);
   EXPECT_NE(err.find("no ground truth yet"), std::string::npos) << err;
   EXPECT_FALSE(std::filesystem::exists(dir_ + "/p.svg"));
   EXPECT_EQ(RunArena("plot --db " + db_ + " 99999 --out " + dir_ + "/n.svg", &err), 2);
   EXPECT_NE(err.find("no trial 99999"), std::string::npos) << err;
   EXPECT_EQ(RunArena("plot --db " + dir_ + "/missing.db 1 --out " + dir_ + "/m.svg", &err), 3);
-  EXPECT_EQ(RunArena("plot --db " + db_ + " " + std::to_string(trial_) + " --out " + dir_ + "/no/such/dir/x.svg", &err), 1);
+  EXPECT_EQ(RunArena("plot --db " + db_ + " " + std::to_string(trial_) + " --out " + dir_ +
+                         "/no/such/dir/x.svg",
+                     &err),
+            1);
   EXPECT_NE(err.find("directory"), std::string::npos) << err;
 }
 

@@ -49,7 +49,7 @@ TEST(SvgChart, ParsesAndHasEverySeries) {
     }
   }
   EXPECT_EQ(names, (std::vector<std::string>{"true", "observed", "predicted"}));
-  EXPECT_EQ(circles, 2);    // the NaN sample is skipped
+  EXPECT_EQ(circles, 2);  // the NaN sample is skipped
   EXPECT_EQ(polylines, 2);
 }
 

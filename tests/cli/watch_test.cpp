@@ -19,8 +19,9 @@ int ExitCode(const std::optional<int>& st) { return st && WIFEXITED(*st) ? WEXIT
 // runs trial `trial` on the cell and returns the watcher's exit code.
 int WatchOneTrial(const std::vector<std::string>& watch_args, const std::string& log, int domain,
                   std::uint64_t trial) {
-  Child cell({ARENA_BINARY, "cell", "--id", "w1", "--domain", std::to_string(domain), "--speed", "1"},
-             Tmp("cell.log"));
+  Child cell(
+      {ARENA_BINARY, "cell", "--id", "w1", "--domain", std::to_string(domain), "--speed", "1"},
+      Tmp("cell.log"));
   Driver driver(domain);
   EXPECT_TRUE(driver.WaitForCells({"w1"}, 15s));
   std::vector<std::string> argv = {ARENA_BINARY, "watch"};
@@ -40,7 +41,8 @@ int WatchOneTrial(const std::vector<std::string>& watch_args, const std::string&
 TEST(Watch, FollowsATrialToItsLastBatch) {
   const int domain = TestDomain(31);
   const std::string log = Tmp("trial.log");
-  const int rc = WatchOneTrial({"77", "--domain", std::to_string(domain), "--timeout", "20"}, log, domain, 77);
+  const int rc =
+      WatchOneTrial({"77", "--domain", std::to_string(domain), "--timeout", "20"}, log, domain, 77);
   const std::string out = ReadFile(log);
   EXPECT_EQ(rc, 0) << out;
   // Not a terminal: one line per batch, then the summary (0.4 s at 250 Hz).
@@ -54,7 +56,8 @@ TEST(Watch, FollowsATrialToItsLastBatch) {
 TEST(Watch, FollowsTheNextTrialOfACell) {
   const int domain = TestDomain(32);
   const std::string log = Tmp("cell-watch.log");
-  const int rc = WatchOneTrial({"--cell", "w1", "--domain", std::to_string(domain), "--timeout", "20"}, log, domain, 5);
+  const int rc = WatchOneTrial(
+      {"--cell", "w1", "--domain", std::to_string(domain), "--timeout", "20"}, log, domain, 5);
   EXPECT_EQ(rc, 0) << ReadFile(log);
   EXPECT_NE(ReadFile(log).find("trial 5 attempt 1: complete"), std::string::npos) << ReadFile(log);
   std::remove(log.c_str());
@@ -62,7 +65,9 @@ TEST(Watch, FollowsTheNextTrialOfACell) {
 
 TEST(Watch, GivesUpWithAClearMessageWhenNothingArrives) {
   const std::string log = Tmp("timeout.log");
-  Child watch({ARENA_BINARY, "watch", "9", "--domain", std::to_string(TestDomain(33)), "--timeout", "1"}, log);
+  Child watch(
+      {ARENA_BINARY, "watch", "9", "--domain", std::to_string(TestDomain(33)), "--timeout", "1"},
+      log);
   const auto start = std::chrono::steady_clock::now();
   EXPECT_EQ(ExitCode(watch.Wait(15s)), 4) << ReadFile(log);
   EXPECT_LT(std::chrono::steady_clock::now() - start, 10s);

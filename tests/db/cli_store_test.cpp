@@ -61,11 +61,13 @@ TEST_F(CliStoreTest, QueryFormatsAndFilters) {
   const auto table = Arena("query --db " + db_ + " --campaign 1", dir_);
   EXPECT_EQ(table.code, 0) << table.err;
   EXPECT_NE(table.out.find("(5 rows)"), std::string::npos) << table.out;
-  const auto json = Arena("query --db " + db_ + " --where 'grip_force >= 6' --outcome ok --format json", dir_);
+  const auto json =
+      Arena("query --db " + db_ + " --where 'grip_force >= 6' --outcome ok --format json", dir_);
   ASSERT_EQ(json.code, 0) << json.err;
   const auto rows = nlohmann::json::parse(json.out);
   EXPECT_EQ(rows.size(), 2u);  // grip 6 and 7 finished ok; 8 and 9 are planned
-  const auto csv = Arena("query --db " + db_ + " \"SELECT id, name FROM campaigns\" --format csv", dir_);
+  const auto csv =
+      Arena("query --db " + db_ + " \"SELECT id, name FROM campaigns\" --format csv", dir_);
   EXPECT_EQ(csv.out, "id,name\n1,first\n");
 }
 
@@ -78,8 +80,9 @@ TEST_F(CliStoreTest, QueryRefusesWritesAndExplains) {
   EXPECT_NE(missing.err.find("no store"), std::string::npos) << missing.err;
   const auto bad = Arena("query --db " + db_ + " \"SELECT nonsense FROM\"", dir_);
   EXPECT_EQ(bad.code, 2);
-  EXPECT_EQ(Arena("query --db " + db_ + " \"SELECT COUNT(*) AS n FROM trials\" --format csv", dir_).out,
-            "n\n5\n");
+  EXPECT_EQ(
+      Arena("query --db " + db_ + " \"SELECT COUNT(*) AS n FROM trials\" --format csv", dir_).out,
+      "n\n5\n");
 }
 
 TEST_F(CliStoreTest, ExportWritesAVerifiedDataset) {

@@ -84,13 +84,15 @@ TEST(StoreConcurrency, ReaderNeverSeesHalfWrittenTrial) {
         const auto gt = store->ReadGroundTruth(t.id);
         const int expected = counts[static_cast<std::size_t>(t.index)];
         if (static_cast<int>(gt.samples.size()) != expected) {
-          reader_error = "trial " + std::to_string(t.id) + ": " + std::to_string(gt.samples.size()) +
-                         " samples visible, expected " + std::to_string(expected);
+          reader_error = "trial " + std::to_string(t.id) + ": " +
+                         std::to_string(gt.samples.size()) + " samples visible, expected " +
+                         std::to_string(expected);
           return;
         }
         for (int i = 0; i < expected; i += 37) {
           if (gt.samples[static_cast<std::size_t>(i)].t != MakeSample(i).t) {
-            reader_error = "trial " + std::to_string(t.id) + " sample " + std::to_string(i) + " wrong";
+            reader_error =
+                "trial " + std::to_string(t.id) + " sample " + std::to_string(i) + " wrong";
             return;
           }
         }
@@ -134,7 +136,8 @@ TEST(StoreConcurrency, WalReaderDoesNotBlockWriter) {
   ASSERT_EQ(sqlite3_exec(reader, "BEGIN", nullptr, nullptr, nullptr), SQLITE_OK);
   auto count_planned = [&] {
     sqlite3_stmt* s = nullptr;
-    sqlite3_prepare_v2(reader, "SELECT COUNT(*) FROM trials WHERE state = 'planned'", -1, &s, nullptr);
+    sqlite3_prepare_v2(reader, "SELECT COUNT(*) FROM trials WHERE state = 'planned'", -1, &s,
+                       nullptr);
     sqlite3_step(s);
     const int n = sqlite3_column_int(s, 0);
     sqlite3_finalize(s);
@@ -148,7 +151,8 @@ TEST(StoreConcurrency, WalReaderDoesNotBlockWriter) {
     ASSERT_TRUE(t);
     RunTrialToDone(*writer, *t, 100);
   }
-  const double writer_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  const double writer_s =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   EXPECT_LT(writer_s, 5.0);
   EXPECT_EQ(count_planned(), 5);  // still the old snapshot: isolation
   sqlite3_exec(reader, "COMMIT", nullptr, nullptr, nullptr);
@@ -177,9 +181,15 @@ TEST(StoreConcurrency, RandomOperationsKeepInvariants) {
         auto t = store->ClaimNextTrial(cells[rng() % 3]);
         if (!t) break;
         switch (rng() % 5) {
-          case 0: store->RetryTrial(t->trial_id, t->attempt, "random retry", 3, 0); break;
-          case 1: store->FailTrial(t->trial_id, t->attempt, "random failure"); break;
-          default: RunTrialToDone(*store, *t, 1 + static_cast<int>(rng() % 40)); break;
+          case 0:
+            store->RetryTrial(t->trial_id, t->attempt, "random retry", 3, 0);
+            break;
+          case 1:
+            store->FailTrial(t->trial_id, t->attempt, "random failure");
+            break;
+          default:
+            RunTrialToDone(*store, *t, 1 + static_cast<int>(rng() % 40));
+            break;
         }
       }
     } catch (const std::exception& e) {

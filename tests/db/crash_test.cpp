@@ -80,8 +80,9 @@ TEST(StoreCrash, SigkillWhileWritingLosesNothingCommitted) {
     ro.read_only = true;
     auto reader = Store::Open(path, ro);
     ASSERT_EQ(reader->IntegrityCheck(), "ok") << "round " << round;
-    EXPECT_EQ(Scalar(*reader, "SELECT COUNT(*) FROM trials WHERE state IN ('executed','resetting',"
-                              "'reset_done','reset_failed','predicted','done') AND gt_stream_id IS NULL"),
+    EXPECT_EQ(Scalar(*reader,
+                     "SELECT COUNT(*) FROM trials WHERE state IN ('executed','resetting',"
+                     "'reset_done','reset_failed','predicted','done') AND gt_stream_id IS NULL"),
               0);
     for (const auto& t : reader->ListTrialsByState({TrialState::kDone})) {
       ASSERT_EQ(reader->ReadGroundTruth(t.id).samples.size(), 1500u) << "trial " << t.id;
@@ -93,11 +94,13 @@ TEST(StoreCrash, SigkillWhileWritingLosesNothingCommitted) {
     const auto v = writer->CheckInvariants();
     EXPECT_TRUE(v.empty()) << v.front();
     // No trial finished twice, no attempt published twice.
-    EXPECT_EQ(Scalar(*reader, "SELECT COUNT(*) FROM (SELECT trial_id FROM trial_transitions"
-                              " WHERE to_state = 'done' GROUP BY trial_id HAVING COUNT(*) > 1)"),
+    EXPECT_EQ(Scalar(*reader,
+                     "SELECT COUNT(*) FROM (SELECT trial_id FROM trial_transitions"
+                     " WHERE to_state = 'done' GROUP BY trial_id HAVING COUNT(*) > 1)"),
               0);
-    EXPECT_EQ(Scalar(*reader, "SELECT COUNT(*) FROM (SELECT trial_id, attempt FROM gt_streams"
-                              " WHERE complete = 1 GROUP BY trial_id, attempt HAVING COUNT(*) > 1)"),
+    EXPECT_EQ(Scalar(*reader,
+                     "SELECT COUNT(*) FROM (SELECT trial_id, attempt FROM gt_streams"
+                     " WHERE complete = 1 GROUP BY trial_id, attempt HAVING COUNT(*) > 1)"),
               0);
   }
   EXPECT_GT(kills, 6);

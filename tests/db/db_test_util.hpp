@@ -18,13 +18,19 @@ namespace arena::db::testing {
 inline std::string SceneJson(double grip_force = 10.0, const std::string& finger = "point",
                              double mu = 0.5, double x0 = 0.0) {
   return R"({"object": {"shape": "box", "size": [0.05, 0.03, 0.10], "mass": 0.2,
-              "pose": {"position": [)" + std::to_string(x0) + R"(, 0, 0], "rpy": [0, 0, 0]}},
-     "gravity": [0, 0, -9.81], "duration": 1.0, "grip_force": )" + std::to_string(grip_force) + R"(,
+              "pose": {"position": [)" +
+         std::to_string(x0) + R"(, 0, 0], "rpy": [0, 0, 0]}},
+     "gravity": [0, 0, -9.81], "duration": 1.0, "grip_force": )" +
+         std::to_string(grip_force) + R"(,
      "fingers": [
-       {"name": "left",  "type": ")" + finger + R"(", "position": [-0.025, 0, 0], "normal": [1, 0, 0],
-        "axis": [0, 0, 1], "length": 0.02, "radius": 0.01, "mu": )" + std::to_string(mu) + R"(},
-       {"name": "right", "type": ")" + finger + R"(", "position": [0.025, 0, 0], "normal": [-1, 0, 0],
-        "axis": [0, 0, 1], "length": 0.02, "radius": 0.01, "mu": )" + std::to_string(mu) + R"(}],
+       {"name": "left",  "type": ")" +
+         finger + R"(", "position": [-0.025, 0, 0], "normal": [1, 0, 0],
+        "axis": [0, 0, 1], "length": 0.02, "radius": 0.01, "mu": )" +
+         std::to_string(mu) + R"(},
+       {"name": "right", "type": ")" +
+         finger + R"(", "position": [0.025, 0, 0], "normal": [-1, 0, 0],
+        "axis": [0, 0, 1], "length": 0.02, "radius": 0.01, "mu": )" +
+         std::to_string(mu) + R"(}],
      "pusher": {"type": "point", "position": [0, 0, -0.05], "normal": [0, 0, 1], "mu": 0.3,
                 "motion": {"velocity": [0, 0, 0.01], "angular_velocity": [0, 0, 0]}}})";
 }
@@ -95,7 +101,8 @@ class TempDir {
 };
 
 // Runs one trial through the whole state machine with n samples.
-inline void RunTrialToDone(Store& store, const ClaimedTrial& t, int n, const IngestOptions& options = {}) {
+inline void RunTrialToDone(Store& store, const ClaimedTrial& t, int n,
+                           const IngestOptions& options = {}) {
   auto ingest = store.BeginIngest(t.trial_id, t.attempt, options);
   for (int i = 0; i < n; ++i) ingest->Add(MakeSample(i));
   ingest->Finish("ok");

@@ -122,7 +122,8 @@ class ExportTest : public ::testing::Test {
 
 TEST(Sha256, KnownVectors) {
   EXPECT_EQ(Sha256Hex("", 0), "e3b0c44298fc1c149afbf4c8996fb92427ae41e4649b934ca495991b7852b855");
-  EXPECT_EQ(Sha256Hex("abc", 3), "ba7816bf8f01cfea414140de5dae2223b00361a396177a9cb410ff61f20015ad");
+  EXPECT_EQ(Sha256Hex("abc", 3),
+            "ba7816bf8f01cfea414140de5dae2223b00361a396177a9cb410ff61f20015ad");
   const std::string two = "abcdbcdecdefdefgefghfghighijhijkijkljklmklmnlmnomnopnopq";
   EXPECT_EQ(Sha256Hex(two.data(), two.size()),
             "248d6a61d20638b8e5c026930c3e6039a33ce45964ff2167f6ecedd419db06c1");
@@ -140,7 +141,8 @@ TEST_F(ExportTest, Hdf5RoundTripThroughTheLibrary) {
   EXPECT_EQ(m["arena_commit"], "abc123");
   EXPECT_EQ(m["campaign"]["spec"]["name"], "export");
   EXPECT_NEAR(m["sample_rate_hz"].get<double>(), 250.0, 1e-6);
-  const hid_t file = H5Fopen((dir_.path() / "h5" / "dataset.h5").c_str(), H5F_ACC_RDONLY, H5P_DEFAULT);
+  const hid_t file =
+      H5Fopen((dir_.path() / "h5" / "dataset.h5").c_str(), H5F_ACC_RDONLY, H5P_DEFAULT);
   ASSERT_GE(file, 0);
   for (const auto& trial : store_->ListTrials(campaign_)) {
     if (!trial.gt_stream_id) continue;

@@ -28,10 +28,28 @@ void ExpectSameBits(const Sample& a, const Sample& b, std::size_t i) {
 
 const std::vector<double>& EdgeValues() {
   static const std::vector<double> v = {
-      0.0, -0.0, std::numeric_limits<double>::denorm_min(), -std::numeric_limits<double>::denorm_min(),
-      DBL_MIN, -DBL_MIN, DBL_MIN - std::numeric_limits<double>::denorm_min(),  // largest denormal
-      DBL_MAX, -DBL_MAX, 1e300, -1e300, 1e-300, 1.0, -1.0, 0.1, 1.0 / 3, 2.0, 4.0, 1e-3, -1e-3,
-      std::nextafter(1.0, 2.0), std::nextafter(0.0, -1.0)};
+      0.0,
+      -0.0,
+      std::numeric_limits<double>::denorm_min(),
+      -std::numeric_limits<double>::denorm_min(),
+      DBL_MIN,
+      -DBL_MIN,
+      DBL_MIN - std::numeric_limits<double>::denorm_min(),  // largest denormal
+      DBL_MAX,
+      -DBL_MAX,
+      1e300,
+      -1e300,
+      1e-300,
+      1.0,
+      -1.0,
+      0.1,
+      1.0 / 3,
+      2.0,
+      4.0,
+      1e-3,
+      -1e-3,
+      std::nextafter(1.0, 2.0),
+      std::nextafter(0.0, -1.0)};
   return v;
 }
 
@@ -45,14 +63,19 @@ std::vector<Sample> MixedSamples(int n, std::uint32_t seed) {
   for (int i = 0; i < n; ++i) {
     Sample s = MakeSample(i, 3);
     s.t = i / 250.0;
-    s.object_pose = {0.01 * std::sin(0.3 * i), -0.0, 0.0, std::cos(0.01 * i), 0, 0, std::sin(0.01 * i)};
+    s.object_pose = {0.01 * std::sin(0.3 * i), -0.0, 0.0, std::cos(0.01 * i), 0, 0,
+                     std::sin(0.01 * i)};
     s.object_twist = {edge[static_cast<std::size_t>(i) % edge.size()],
                       edge[static_cast<std::size_t>(i * 7 + 3) % edge.size()],
-                      std::numeric_limits<double>::denorm_min() * i, DBL_MAX, -DBL_MAX, (i % 2) ? 1e-3 : -1e-3};
+                      std::numeric_limits<double>::denorm_min() * i,
+                      DBL_MAX,
+                      -DBL_MAX,
+                      (i % 2) ? 1e-3 : -1e-3};
     for (auto& v : s.pusher_pose) v = noise(rng);
     for (auto& v : s.pusher_twist) {
       std::uint64_t b;
-      do b = rng(); while (((b >> 52) & 0x7FF) == 0x7FF);  // any finite bit pattern
+      do b = rng();
+      while (((b >> 52) & 0x7FF) == 0x7FF);  // any finite bit pattern
       std::memcpy(&v, &b, 8);
     }
     s.observed_valid = (rng() % 5) != 0;
@@ -137,7 +160,8 @@ TEST(PackedBlock, FallsBackWhenItCannotHelp) {
   std::mt19937_64 rng(3);
   auto random_double = [&rng] {
     std::uint64_t b;
-    do b = rng(); while (((b >> 52) & 0x7FF) == 0x7FF);
+    do b = rng();
+    while (((b >> 52) & 0x7FF) == 0x7FF);
     double d;
     std::memcpy(&d, &b, 8);
     return d;
@@ -145,8 +169,10 @@ TEST(PackedBlock, FallsBackWhenItCannotHelp) {
   std::vector<Sample> noise(50, MakeSample(0, 2));
   for (auto& s : noise) {
     s.t = random_double();
-    for (auto* a : {&s.object_pose, &s.pusher_pose, &s.observed_object_pose}) for (auto& v : *a) v = random_double();
-    for (auto* a : {&s.object_twist, &s.pusher_twist, &s.observed_pusher_wrench}) for (auto& v : *a) v = random_double();
+    for (auto* a : {&s.object_pose, &s.pusher_pose, &s.observed_object_pose})
+      for (auto& v : *a) v = random_double();
+    for (auto* a : {&s.object_twist, &s.pusher_twist, &s.observed_pusher_wrench})
+      for (auto& v : *a) v = random_double();
     for (auto& c : s.contacts) {
       for (auto& v : c.force) v = random_double();
       for (auto& v : c.torque) v = random_double();
@@ -255,7 +281,8 @@ std::string FirstChunkMagic(const std::string& path) {
   sqlite3* db = nullptr;
   sqlite3_open_v2(path.c_str(), &db, SQLITE_OPEN_READONLY, nullptr);
   sqlite3_stmt* s = nullptr;
-  sqlite3_prepare_v2(db, "SELECT substr(data, 1, 4) FROM gt_chunks ORDER BY id LIMIT 1", -1, &s, nullptr);
+  sqlite3_prepare_v2(db, "SELECT substr(data, 1, 4) FROM gt_chunks ORDER BY id LIMIT 1", -1, &s,
+                     nullptr);
   std::string out;
   if (sqlite3_step(s) == SQLITE_ROW) {
     out.assign(static_cast<const char*>(sqlite3_column_blob(s, 0)), 4);
@@ -316,8 +343,11 @@ TEST(PackedBlock, VersionThreeStoreMigratesAndReads) {
   {
     sqlite3* db = nullptr;
     sqlite3_open(path.c_str(), &db);
-    ASSERT_EQ(sqlite3_exec(db, "BEGIN; DELETE FROM schema_migrations WHERE version > 3;"
-                               " PRAGMA user_version = 3; COMMIT;", nullptr, nullptr, nullptr), SQLITE_OK);
+    ASSERT_EQ(sqlite3_exec(db,
+                           "BEGIN; DELETE FROM schema_migrations WHERE version > 3;"
+                           " PRAGMA user_version = 3; COMMIT;",
+                           nullptr, nullptr, nullptr),
+              SQLITE_OK);
     sqlite3_close(db);
   }
   StoreOptions ro;

@@ -36,7 +36,8 @@ class QueryTest : public ::testing::Test {
 };
 
 TEST_F(QueryTest, SelectReturnsColumnsAndTypedValues) {
-  const auto r = RunQuery(*ro_, "SELECT id, name, priority, 0.5 AS half, NULL AS none_ FROM campaigns ORDER BY id");
+  const auto r = RunQuery(
+      *ro_, "SELECT id, name, priority, 0.5 AS half, NULL AS none_ FROM campaigns ORDER BY id");
   ASSERT_EQ(r.columns, (std::vector<std::string>{"id", "name", "priority", "half", "none_"}));
   ASSERT_EQ(r.rows.size(), 2u);
   EXPECT_EQ(std::get<std::int64_t>(r.rows[0][0]), 1);
@@ -63,15 +64,17 @@ TEST_F(QueryTest, FilterShortcutsCompose) {
 }
 
 TEST_F(QueryTest, WritesAreRefused) {
-  for (const char* sql : {"DELETE FROM trials", "UPDATE campaigns SET state = 'paused'",
-                          "INSERT INTO cells(id, last_seen, created_at, updated_at) VALUES('x',0,0,0)",
-                          "DROP TABLE trials", "CREATE TABLE x(a)", "PRAGMA user_version = 7",
-                          "PRAGMA query_only = 0", "ATTACH DATABASE 'other.db' AS o", "VACUUM"}) {
+  for (const char* sql :
+       {"DELETE FROM trials", "UPDATE campaigns SET state = 'paused'",
+        "INSERT INTO cells(id, last_seen, created_at, updated_at) VALUES('x',0,0,0)",
+        "DROP TABLE trials", "CREATE TABLE x(a)", "PRAGMA user_version = 7",
+        "PRAGMA query_only = 0", "ATTACH DATABASE 'other.db' AS o", "VACUUM"}) {
     try {
       RunQuery(*ro_, sql);
       ADD_FAILURE() << "not refused: " << sql;
     } catch (const StoreError& e) {
-      EXPECT_TRUE(e.kind() == StoreError::Kind::kReadOnly || e.kind() == StoreError::Kind::kBadInput)
+      EXPECT_TRUE(e.kind() == StoreError::Kind::kReadOnly ||
+                  e.kind() == StoreError::Kind::kBadInput)
           << sql << ": " << e.what();
     }
   }
@@ -82,11 +85,13 @@ TEST_F(QueryTest, WritesAreRefused) {
   EXPECT_THROW(RunQuery(*rw, "SELECT 1"), StoreError);
   // Nothing changed.
   EXPECT_EQ(RunQuery(*ro_, "SELECT COUNT(*) FROM trials").rows[0][0], Value(std::int64_t{9}));
-  EXPECT_EQ(RunQuery(*ro_, "PRAGMA user_version").rows[0][0], Value(std::int64_t{Store::SchemaVersion()}));
+  EXPECT_EQ(RunQuery(*ro_, "PRAGMA user_version").rows[0][0],
+            Value(std::int64_t{Store::SchemaVersion()}));
 }
 
 TEST_F(QueryTest, FormatsTableCsvJson) {
-  const auto r = RunQuery(*ro_, "SELECT id, name, 0.1 + 0.2 AS x, 'a,\"b\"' AS q FROM campaigns ORDER BY id");
+  const auto r =
+      RunQuery(*ro_, "SELECT id, name, 0.1 + 0.2 AS x, 'a,\"b\"' AS q FROM campaigns ORDER BY id");
   const std::string table = FormatTable(r);
   EXPECT_NE(table.find("id  name"), std::string::npos) << table;
   EXPECT_NE(table.find("(2 rows)"), std::string::npos);

@@ -22,14 +22,14 @@ using testing::RunTrialToDone;
 using testing::SceneJson;
 using testing::TempDir;
 
-#define EXPECT_STORE_ERROR(stmt, kind_)                                   \
-  do {                                                                    \
-    try {                                                                 \
-      stmt;                                                               \
-      ADD_FAILURE() << "expected StoreError from " #stmt;                 \
-    } catch (const StoreError& e) {                                       \
+#define EXPECT_STORE_ERROR(stmt, kind_)                                           \
+  do {                                                                            \
+    try {                                                                         \
+      stmt;                                                                       \
+      ADD_FAILURE() << "expected StoreError from " #stmt;                         \
+    } catch (const StoreError& e) {                                               \
       EXPECT_EQ(static_cast<int>(e.kind()), static_cast<int>(kind_)) << e.what(); \
-    }                                                                     \
+    }                                                                             \
   } while (0)
 
 using K = StoreError::Kind;
@@ -80,13 +80,14 @@ TEST(StoreOpen, MigratesVersionOneFile) {
   {
     sqlite3* db = nullptr;
     sqlite3_open(path.c_str(), &db);
-    ASSERT_EQ(sqlite3_exec(db,
-                           "BEGIN; ALTER TABLE campaigns DROP COLUMN state_reason;"
-                           " DROP TABLE evaluation_results; DROP TABLE evaluations;"
-                           " DELETE FROM schema_migrations WHERE version > 1; PRAGMA user_version = 1;"
-                           " COMMIT;",
-                           nullptr, nullptr, nullptr),
-              SQLITE_OK)
+    ASSERT_EQ(
+        sqlite3_exec(db,
+                     "BEGIN; ALTER TABLE campaigns DROP COLUMN state_reason;"
+                     " DROP TABLE evaluation_results; DROP TABLE evaluations;"
+                     " DELETE FROM schema_migrations WHERE version > 1; PRAGMA user_version = 1;"
+                     " COMMIT;",
+                     nullptr, nullptr, nullptr),
+        SQLITE_OK)
         << sqlite3_errmsg(db);
     sqlite3_close(db);
   }
@@ -157,8 +158,9 @@ TEST(StoreCampaign, StoresTrialsWithParameterColumns) {
   EXPECT_EQ(trials[0].state, TrialState::kPlanned);
   EXPECT_EQ(trials[0].attempt, 1);
   EXPECT_EQ(RawScalar(store->path(), "SELECT grip_force FROM trials WHERE idx = 2"), "7.0");
-  EXPECT_EQ(RawScalar(store->path(), "SELECT finger_type || '/' || pusher_type FROM trials LIMIT 1"),
-            "line/point");
+  EXPECT_EQ(
+      RawScalar(store->path(), "SELECT finger_type || '/' || pusher_type FROM trials LIMIT 1"),
+      "line/point");
   EXPECT_EQ(RawScalar(store->path(), "SELECT contact_mask FROM trials LIMIT 1"), "3");
   EXPECT_EQ(RawScalar(store->path(), "SELECT round(pusher_speed, 6) FROM trials LIMIT 1"), "0.01");
   // Append more (budget sampler) continues the index and stores the sampler position.
@@ -209,8 +211,8 @@ TEST(StoreTrial, FullLifecycleWritesAuditRows) {
   EXPECT_EQ(t.state, TrialState::kDone);
   EXPECT_EQ(t.outcome, "ok");
   const auto log = store->ListTransitions(t.id);
-  const std::vector<std::string> expected = {"planned", "dispatched", "executed", "resetting",
-                                             "reset_done", "predicted", "done"};
+  const std::vector<std::string> expected = {"planned",    "dispatched", "executed", "resetting",
+                                             "reset_done", "predicted",  "done"};
   ASSERT_EQ(log.size(), expected.size());
   for (std::size_t i = 0; i < log.size(); ++i) {
     EXPECT_EQ(log[i].to_state, expected[i]);
@@ -234,11 +236,11 @@ TEST(StoreTrial, FullLifecycleWritesAuditRows) {
 TEST(StoreTrial, StateMachineMatchesTable) {
   using S = TrialState;
   const std::set<std::pair<S, S>> edges = {
-      {S::kPlanned, S::kDispatched},     {S::kPlanned, S::kCancelled},
-      {S::kDispatched, S::kExecuted},    {S::kDispatched, S::kPlanned},
-      {S::kExecuted, S::kResetting},     {S::kResetFailed, S::kResetting},
-      {S::kResetting, S::kResetDone},    {S::kResetting, S::kResetFailed},
-      {S::kResetDone, S::kPredicted},    {S::kResetFailed, S::kPredicted},
+      {S::kPlanned, S::kDispatched},  {S::kPlanned, S::kCancelled},
+      {S::kDispatched, S::kExecuted}, {S::kDispatched, S::kPlanned},
+      {S::kExecuted, S::kResetting},  {S::kResetFailed, S::kResetting},
+      {S::kResetting, S::kResetDone}, {S::kResetting, S::kResetFailed},
+      {S::kResetDone, S::kPredicted}, {S::kResetFailed, S::kPredicted},
       {S::kPredicted, S::kDone}};
   for (int a = 0; a <= static_cast<int>(S::kCancelled); ++a) {
     for (int b = 0; b <= static_cast<int>(S::kCancelled); ++b) {
@@ -659,7 +661,8 @@ TEST(StoreFaults, WriteProtectedFileIsRefusedClearly) {
   TempDir dir;
   const auto path = dir.File("ro.db");
   Store::Open(path)->CreateCampaign(MakeCampaign(), MakeTrials(1));
-  std::filesystem::permissions(path, std::filesystem::perms::owner_read | std::filesystem::perms::group_read);
+  std::filesystem::permissions(
+      path, std::filesystem::perms::owner_read | std::filesystem::perms::group_read);
   EXPECT_STORE_ERROR(Store::Open(path), K::kReadOnly);
   StoreOptions ro;
   ro.read_only = true;
@@ -733,12 +736,13 @@ TEST(StoreEvaluation, RunStoredWithResultsOnlyForDoneTrialsAndStatesUntouched) {
   auto stale = result(first->trial_id, "g4", 0);
   stale.attempt = 2;
   EXPECT_STORE_ERROR(store->RecordEvaluation(cid, "{}", "{}", {stale}), K::kStaleAttempt);
-  EXPECT_STORE_ERROR(store->RecordEvaluation(
-                         cid, "{}", "{}", {result(first->trial_id, "g4", 0), result(first->trial_id, "g4", 1)}),
-                     K::kBadInput);
-  EXPECT_STORE_ERROR(store->RecordEvaluation(cid, "{}", "{}",
-                                             {result(first->trial_id, "g4", std::nan(""))}),
-                     K::kBadInput);
+  EXPECT_STORE_ERROR(
+      store->RecordEvaluation(cid, "{}", "{}",
+                              {result(first->trial_id, "g4", 0), result(first->trial_id, "g4", 1)}),
+      K::kBadInput);
+  EXPECT_STORE_ERROR(
+      store->RecordEvaluation(cid, "{}", "{}", {result(first->trial_id, "g4", std::nan(""))}),
+      K::kBadInput);
   EXPECT_STORE_ERROR(store->RecordEvaluation(999, "{}", "{}", {}), K::kNotFound);
   EXPECT_STORE_ERROR(store->RecordEvaluation(cid, "[1]", "{}", {}), K::kBadInput);
   EXPECT_STORE_ERROR(store->GetEvaluation(999), K::kNotFound);

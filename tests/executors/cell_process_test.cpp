@@ -23,21 +23,26 @@ class ShmCleaner : public ::testing::Environment {
  public:
   // SIGKILLed cells leave fastrtps_* segments in /dev/shm; this removes only
   // segments no live process uses.
-  void TearDown() override { [[maybe_unused]] int rc = std::system("fastdds shm clean > /dev/null 2>&1"); }
+  void TearDown() override {
+    [[maybe_unused]] int rc = std::system("fastdds shm clean > /dev/null 2>&1");
+  }
 };
 [[maybe_unused]] auto* const kShmCleaner = ::testing::AddGlobalTestEnvironment(new ShmCleaner);
 
 std::unique_ptr<Child> StartCell(const std::string& id, int domain, double speed,
                                  const std::string& defects = "") {
-  std::vector<std::string> argv = {ARENA_BINARY, "cell", "--id", id, "--domain", std::to_string(domain),
-                                   "--speed", std::to_string(speed)};
+  std::vector<std::string> argv = {
+      ARENA_BINARY,         "cell", "--id", id, "--domain", std::to_string(domain), "--speed",
+      std::to_string(speed)};
   if (!defects.empty()) {
-    const std::string path = ::testing::TempDir() + "defects_" + id + "_" + std::to_string(getpid()) + ".json";
+    const std::string path =
+        ::testing::TempDir() + "defects_" + id + "_" + std::to_string(getpid()) + ".json";
     std::ofstream(path) << defects;
     argv.push_back("--defects");
     argv.push_back(path);
   }
-  const std::string log = ::testing::TempDir() + "cell_" + id + "_" + std::to_string(getpid()) + ".log";
+  const std::string log =
+      ::testing::TempDir() + "cell_" + id + "_" + std::to_string(getpid()) + ".log";
   return std::make_unique<Child>(argv, log);
 }
 
@@ -49,12 +54,14 @@ struct Stream {
   bool complete = false;
 };
 
-Stream Collect(Driver& d, std::uint64_t trial, std::uint32_t attempt, std::chrono::milliseconds timeout,
+Stream Collect(Driver& d, std::uint64_t trial, std::uint32_t attempt,
+               std::chrono::milliseconds timeout,
                std::map<std::uint64_t, std::vector<msg::GroundTruth>>* others = nullptr) {
   Stream s;
   const auto deadline = std::chrono::steady_clock::now() + timeout;
   while (!s.complete) {
-    const auto left = std::chrono::duration_cast<std::chrono::milliseconds>(deadline - std::chrono::steady_clock::now());
+    const auto left = std::chrono::duration_cast<std::chrono::milliseconds>(
+        deadline - std::chrono::steady_clock::now());
     if (left <= 0ms) break;
     auto b = d.ground_truth.Take(left);
     if (!b) break;
@@ -63,8 +70,10 @@ Stream Collect(Driver& d, std::uint64_t trial, std::uint32_t attempt, std::chron
       continue;
     }
     if (s.error.empty()) {
-      if (b->batch() != s.batches.size()) s.error = "batch " + std::to_string(b->batch()) + " out of order";
-      else s.error = dds::CheckBatch(*b, static_cast<std::uint32_t>(s.samples.size()));
+      if (b->batch() != s.batches.size())
+        s.error = "batch " + std::to_string(b->batch()) + " out of order";
+      else
+        s.error = dds::CheckBatch(*b, static_cast<std::uint32_t>(s.samples.size()));
     }
     for (const auto& x : b->samples()) s.samples.push_back(x);
     s.complete = b->last();
@@ -76,7 +85,8 @@ Stream Collect(Driver& d, std::uint64_t trial, std::uint32_t attempt, std::chron
 TEST(CellProcess, TwoCellsAndADriverExchangeCommands) {
   const int domain = test::TestDomain(1);
   auto c1 = StartCell("c1", domain, 0);
-  auto c2 = StartCell("c2", domain, 0, R"({"workspace": {"min": -0.05, "max": 0.05}, "contact_types": ["point"]})");
+  auto c2 = StartCell("c2", domain, 0,
+                      R"({"workspace": {"min": -0.05, "max": 0.05}, "contact_types": ["point"]})");
   Driver d(domain);
   ASSERT_TRUE(d.WaitForCells({"c1", "c2"}, 15s)) << "cells did not announce themselves";
   EXPECT_EQ(d.seen["c2"].contact_types().size(), 1u);
@@ -133,8 +143,9 @@ TEST(CellProcess, TwoCellsAndADriverExchangeCommands) {
   EXPECT_EQ(st_rerun->state(), msg::STATE_EXECUTED) << st_rerun->reason();
 
   // A scene outside c2's workspace is refused with the reason.
-  ASSERT_TRUE(d.Send((d.Command("c2", 202, msg::PHASE_EXECUTE,
-      R"({"object": {"shape": "box", "size": [0.05, 0.03, 0.10], "mass": 0.2,
+  ASSERT_TRUE(
+      d.Send((d.Command("c2", 202, msg::PHASE_EXECUTE,
+                        R"({"object": {"shape": "box", "size": [0.05, 0.03, 0.10], "mass": 0.2,
          "pose": {"position": [0.2, 0, 0], "rpy": [0, 0, 0]}},
          "duration": 0.1, "grip_force": 10,
          "fingers": [{"name": "l", "type": "point", "position": [0.175, 0, 0], "normal": [1, 0, 0], "mu": 0.5},
@@ -183,7 +194,8 @@ TEST(CellProcess, WallClockSpeedPacesTheStream) {
   const auto sent = std::chrono::steady_clock::now();
   ASSERT_TRUE(d.commands.Write(cmd));
   Stream s = Collect(d, 8, 1, 20s);
-  const double took = std::chrono::duration<double>(std::chrono::steady_clock::now() - sent).count();
+  const double took =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - sent).count();
   ASSERT_TRUE(s.complete);
   EXPECT_EQ(s.error, "");
   EXPECT_EQ(s.samples.size(), 251u);
@@ -207,18 +219,22 @@ TEST(CellProcess, KilledCellIsSeenGoneWithinLeasePlusOneSecond) {
   const auto deadline = killed + 10s;
   while ((writer_lost < 0 || participant_left < 0) && std::chrono::steady_clock::now() < deadline) {
     auto e = d.participant.NextPeerEvent(100ms);
-    if (e) std::printf("event %s %s %s\n", dds::ToString(e->kind), e->participant.c_str(), e->topic.c_str());
+    if (e)
+      std::printf("event %s %s %s\n", dds::ToString(e->kind), e->participant.c_str(),
+                  e->topic.c_str());
     if (!e || e->participant != "arena.cell.victim") continue;
     const double at = std::chrono::duration<double>(e->when - killed).count();
     if (e->kind == dds::PeerEvent::Kind::kWriterLost && writer_lost < 0) writer_lost = at;
-    if (e->kind == dds::PeerEvent::Kind::kParticipantLeft && participant_left < 0) participant_left = at;
+    if (e->kind == dds::PeerEvent::Kind::kParticipantLeft && participant_left < 0)
+      participant_left = at;
   }
   ASSERT_GE(writer_lost, 0) << "liveliness loss never reported";
   EXPECT_LE(writer_lost, dds::kCellLivelinessLease_s + 1.0);
   ASSERT_GE(participant_left, 0) << "participant removal never reported";
   EXPECT_LE(participant_left, 2.5 + 1.0);  // participant lease + 1 s
-  std::printf("killed cell: writer liveliness lost after %.2f s, participant dropped after %.2f s\n",
-              writer_lost, participant_left);
+  std::printf(
+      "killed cell: writer liveliness lost after %.2f s, participant dropped after %.2f s\n",
+      writer_lost, participant_left);
 }
 
 TEST(CellProcess, DefectNoiseStatisticsMatchTheProfileAndRepeatBitForBit) {
@@ -231,13 +247,15 @@ TEST(CellProcess, DefectNoiseStatisticsMatchTheProfileAndRepeatBitForBit) {
   Driver d(domain);
   ASSERT_TRUE(d.WaitForCells({"noisy"}, 15s));
   ASSERT_TRUE(d.commands.WaitForMatched(1, 10s));
-  ASSERT_TRUE(d.Send((d.Command("noisy", 9, msg::PHASE_EXECUTE, test::CanonicalScene(10.0), 1234, 1))));
+  ASSERT_TRUE(
+      d.Send((d.Command("noisy", 9, msg::PHASE_EXECUTE, test::CanonicalScene(10.0), 1234, 1))));
   Stream a = Collect(d, 9, 1, 40s);
   ASSERT_TRUE(a.complete);
   ASSERT_TRUE(d.FinalStatus(9, 20s));
   // The same trial and seed as attempt 2: the cell runs it again and must
   // see exactly what it saw the first time.
-  ASSERT_TRUE(d.Send((d.Command("noisy", 9, msg::PHASE_EXECUTE, test::CanonicalScene(10.0), 1234, 2))));
+  ASSERT_TRUE(
+      d.Send((d.Command("noisy", 9, msg::PHASE_EXECUTE, test::CanonicalScene(10.0), 1234, 2))));
   Stream b = Collect(d, 9, 2, 40s);
   ASSERT_TRUE(b.complete);
   ASSERT_EQ(a.samples.size(), b.samples.size());

@@ -19,7 +19,8 @@ dds::ParticipantOptions Named(const std::string& name, int salt) {
 }
 
 TEST(DdsParticipant, PeersAreParsedAndBadOnesNamed) {
-  EXPECT_EQ(dds::ParsePeers("10.0.0.2, hostb:7410"), (std::vector<std::string>{"10.0.0.2", "hostb:7410"}));
+  EXPECT_EQ(dds::ParsePeers("10.0.0.2, hostb:7410"),
+            (std::vector<std::string>{"10.0.0.2", "hostb:7410"}));
   EXPECT_THROW(dds::ParsePeers(""), dds::DdsError);
   try {
     dds::ParsePeers("a:99999");
@@ -102,7 +103,8 @@ TEST(DdsParticipant, ParticipantLeavingIsReported) {
   bool left = false;
   while (!left && std::chrono::steady_clock::now() < deadline) {
     auto e = b.NextPeerEvent(100ms);
-    left = e && e->kind == dds::PeerEvent::Kind::kParticipantLeft && e->participant == "arena.test.leaver";
+    left = e && e->kind == dds::PeerEvent::Kind::kParticipantLeft &&
+           e->participant == "arena.test.leaver";
   }
   EXPECT_TRUE(left);
 }

@@ -37,17 +37,20 @@ TEST(DefectProfile, ShippedExampleIsValid) {
 }
 
 TEST(DefectProfile, BadFieldsAreNamed) {
-  EXPECT_EQ(ErrorOf(R"({"pose_noise": {"position_std": [0.1, -1, 0]}})"), "pose_noise.position_std[1]");
+  EXPECT_EQ(ErrorOf(R"({"pose_noise": {"position_std": [0.1, -1, 0]}})"),
+            "pose_noise.position_std[1]");
   EXPECT_EQ(ErrorOf(R"({"latency_ms": "x"})"), "latency_ms");
   EXPECT_EQ(ErrorOf(R"({"drop_probability": 1.0})"), "drop_probability");
   EXPECT_EQ(ErrorOf(R"({"colour": 1})"), "colour");
   EXPECT_EQ(ErrorOf(R"({"ft_noise": {"force": 1}})"), "ft_noise.force");
   EXPECT_EQ(ErrorOf(R"({"contact_types": ["point", "glue"]})"), "contact_types[1]");
-  EXPECT_EQ(ErrorOf(R"({"workspace": {"min": [0, 0, 0], "max": [0.1, 0.1, -0.1]}})"), "workspace.min[2]");
+  EXPECT_EQ(ErrorOf(R"({"workspace": {"min": [0, 0, 0], "max": [0.1, 0.1, -0.1]}})"),
+            "workspace.min[2]");
   EXPECT_EQ(ErrorOf(R"({"reset": {"max_attempts": 0}})"), "reset.max_attempts");
   EXPECT_EQ(ErrorOf(R"({"reset": {"failure_probability": 2}})"), "reset.failure_probability");
   EXPECT_EQ(ErrorOf("[1, 2"), "(document)");
-  EXPECT_EQ(ErrorOf(R"({"fault_injection": {"hang_after_accept": 1}})"), "fault_injection.hang_after_accept");
+  EXPECT_EQ(ErrorOf(R"({"fault_injection": {"hang_after_accept": 1}})"),
+            "fault_injection.hang_after_accept");
   EXPECT_EQ(ErrorOf(R"({"fault_injection": {"stream": "garbage"}})"), "fault_injection.stream");
   EXPECT_EQ(ErrorOf(R"({"fault_injection": {"crash": true}})"), "fault_injection.crash");
 }
@@ -62,7 +65,8 @@ TEST(DefectProfile, FaultInjectionKnobsRoundTrip) {
   const DefectProfile q = ParseDefectProfile(DefectProfileToJson(p));
   EXPECT_TRUE(q.hang_after_accept);
   EXPECT_EQ(q.corrupt_stream, "gap");
-  EXPECT_EQ(DefectProfileToJson(ParseDefectProfile("{}")).find("fault_injection"), std::string::npos);
+  EXPECT_EQ(DefectProfileToJson(ParseDefectProfile("{}")).find("fault_injection"),
+            std::string::npos);
 }
 
 TEST(DefectProfile, RoundTripsThroughJson) {

@@ -127,7 +127,8 @@ TEST(GroundTruthCodec, FuzzCrashersAreHandled) {
   int replayed = 0;
   for (const auto& entry : std::filesystem::directory_iterator(dir)) {
     std::ifstream in(entry.path(), std::ios::binary);
-    const std::vector<char> bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    const std::vector<char> bytes((std::istreambuf_iterator<char>(in)),
+                                  std::istreambuf_iterator<char>());
     eprosima::fastrtps::rtps::SerializedPayload_t payload(static_cast<uint32_t>(bytes.size() + 4));
     payload.data[1] = 0x01;  // CDR, little endian
     std::memcpy(payload.data + 4, bytes.data(), bytes.size());
@@ -145,8 +146,10 @@ TEST(GroundTruthCodec, FuzzCrashersAreHandled) {
       PusherState pusher;
       Observation seen;
       const auto s = DecodeSample(m, &pusher, &seen);
-      EXPECT_TRUE(std::isfinite(s.t) && s.position.allFinite() && s.velocity.allFinite()) << entry.path();
-      EXPECT_TRUE(std::isfinite(seen.t) && seen.position.allFinite() && seen.pusher_wrench.allFinite())
+      EXPECT_TRUE(std::isfinite(s.t) && s.position.allFinite() && s.velocity.allFinite())
+          << entry.path();
+      EXPECT_TRUE(std::isfinite(seen.t) && seen.position.allFinite() &&
+                  seen.pusher_wrench.allFinite())
           << entry.path();
       for (const auto& w : seen.finger_wrenches) EXPECT_TRUE(w.allFinite()) << entry.path();
     }

@@ -126,11 +126,13 @@ class Lab {
 
 std::unique_ptr<test::Child> CellIn(const std::string& ns, const std::string& id, int domain,
                                     const std::vector<std::string>& network) {
-  std::vector<std::string> argv = {"/usr/sbin/ip", "netns", "exec", ns, ARENA_BINARY, "cell",
-                                   "--id", id, "--domain", std::to_string(domain), "--speed", "0", "--no-shm"};
+  std::vector<std::string> argv = {
+      "/usr/sbin/ip", "netns", "exec",    ns,         ARENA_BINARY,
+      "cell",         "--id",  id,        "--domain", std::to_string(domain),
+      "--speed",      "0",     "--no-shm"};
   argv.insert(argv.end(), network.begin(), network.end());
-  return std::make_unique<test::Child>(argv, ::testing::TempDir() + "netns_" + id + "_" +
-                                                 std::to_string(getpid()) + ".log");
+  return std::make_unique<test::Child>(
+      argv, ::testing::TempDir() + "netns_" + id + "_" + std::to_string(getpid()) + ".log");
 }
 
 // Runs the driver in namespace ns in a forked child (this process stays in
@@ -171,8 +173,10 @@ std::string DriveFrom(const std::string& ns, int domain, dds::NetworkOptions net
             next[g->trial_id()] += static_cast<std::uint32_t>(g->samples().size());
             last_seen += g->last() ? 1 : 0;
           }
-          if (!ok) result = "ground truth out of order";
-          else if (last_seen < 2) result = "ground truth incomplete";
+          if (!ok)
+            result = "ground truth out of order";
+          else if (last_seen < 2)
+            result = "ground truth incomplete";
           for (std::uint64_t trial : {1, 2}) {
             auto st = d.FinalStatus(trial, 20s);
             if (!st || st->state() != msg::STATE_EXECUTED) {
@@ -226,8 +230,8 @@ TEST(SeveralHosts, CellsJoinThroughADiscoveryServer) {
   if (!lab.ok()) GTEST_SKIP() << "network namespaces unavailable: " << lab.why();
   if (Shell("command -v fastdds") != 0) GTEST_SKIP() << "fastdds (fastdds-tools) not installed";
   const int domain = test::TestDomain(12);
-  test::Child server({"/usr/sbin/ip", "netns", "exec", lab.s(), "/usr/bin/fastdds", "discovery", "-i", "0",
-                      "-l", "10.77.0.1", "-p", "11811"},
+  test::Child server({"/usr/sbin/ip", "netns", "exec", lab.s(), "/usr/bin/fastdds", "discovery",
+                      "-i", "0", "-l", "10.77.0.1", "-p", "11811"},
                      ::testing::TempDir() + "netns_server_" + std::to_string(getpid()) + ".log");
   auto a = CellIn(lab.a(), "a", domain, {"--discovery-server", "0@10.77.0.1:11811"});
   auto b = CellIn(lab.b(), "b", domain, {"--discovery-server", "10.77.0.1:11811"});

@@ -26,7 +26,8 @@ using namespace std::chrono_literals;
 
 // 10..200, different for concurrently running test processes (ctest -j).
 inline int TestDomain(int salt = 0) {
-  return 10 + static_cast<int>((static_cast<unsigned>(getpid()) * 7u + static_cast<unsigned>(salt)) % 191u);
+  return 10 + static_cast<int>(
+                  (static_cast<unsigned>(getpid()) * 7u + static_cast<unsigned>(salt)) % 191u);
 }
 
 inline std::string ReadFile(const std::string& path) {
@@ -87,7 +88,9 @@ class Child {
   Child& operator=(const Child&) = delete;
 
   pid_t pid() const { return pid_; }
-  void Signal(int sig) { if (pid_ > 0 && !status_) kill(pid_, sig); }
+  void Signal(int sig) {
+    if (pid_ > 0 && !status_) kill(pid_, sig);
+  }
   // The exit status once the child ended, waiting up to timeout.
   std::optional<int> Wait(std::chrono::milliseconds timeout) {
     const auto deadline = std::chrono::steady_clock::now() + timeout;
@@ -135,14 +138,16 @@ struct Driver {
       if (all) return true;
       const auto left = deadline - std::chrono::steady_clock::now();
       if (left <= 0ms) return false;
-      if (auto a = announcements.Take(std::chrono::duration_cast<std::chrono::milliseconds>(left))) {
+      if (auto a =
+              announcements.Take(std::chrono::duration_cast<std::chrono::milliseconds>(left))) {
         seen[a->cell_id()] = *a;
       }
     }
   }
 
   msg::TrialCommand Command(const std::string& cell, std::uint64_t trial, msg::Phase phase,
-                            const std::string& scene, std::uint64_t seed = 7, std::uint32_t attempt = 1) {
+                            const std::string& scene, std::uint64_t seed = 7,
+                            std::uint32_t attempt = 1) {
     msg::TrialCommand c;
     c.cell_id(cell);
     c.trial_id(trial);
@@ -157,7 +162,8 @@ struct Driver {
   bool Send(msg::TrialCommand c) { return commands.Write(c); }
 
   // The next status for (trial, attempt) whose state is not ACCEPTED.
-  std::optional<msg::TrialStatus> FinalStatus(std::uint64_t trial, std::chrono::milliseconds timeout) {
+  std::optional<msg::TrialStatus> FinalStatus(std::uint64_t trial,
+                                              std::chrono::milliseconds timeout) {
     for (auto it = other_statuses.begin(); it != other_statuses.end(); ++it) {
       if (it->trial_id() == trial && it->state() != msg::STATE_ACCEPTED) {
         msg::TrialStatus s = *it;

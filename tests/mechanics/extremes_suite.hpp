@@ -53,10 +53,13 @@ inline std::vector<Extreme> Extremes() {
                    s.pusher->mu = mu;
                  }});
   }
-  for (double g : {1e-6, 1e6}) e.push_back({"grip " + std::to_string(g), [g](Scene& s) { s.grip_force = g; }});
-  for (double m : {1e-6, 1e3}) e.push_back({"mass " + std::to_string(m), [m](Scene& s) { s.object.mass = m; }});
+  for (double g : {1e-6, 1e6})
+    e.push_back({"grip " + std::to_string(g), [g](Scene& s) { s.grip_force = g; }});
+  for (double m : {1e-6, 1e3})
+    e.push_back({"mass " + std::to_string(m), [m](Scene& s) { s.object.mass = m; }});
   for (double size : {1e-4, 10.0}) {
-    e.push_back({"size " + std::to_string(size), [size](Scene& s) { ScaleLength(s, size / s.object.size.maxCoeff()); }});
+    e.push_back({"size " + std::to_string(size),
+                 [size](Scene& s) { ScaleLength(s, size / s.object.size.maxCoeff()); }});
   }
   e.push_back({"line points 1e-9 m apart", [](Scene& s) {
                  for (auto& f : s.fingers) {
@@ -65,7 +68,9 @@ inline std::vector<Extreme> Extremes() {
                  }
                }});
   for (double v : {0.0, 10.0}) {
-    e.push_back({"pusher speed " + std::to_string(v), [v](Scene& s) { s.pusher->motion.velocity = {0, 0, v}; }});
+    e.push_back({"pusher speed " + std::to_string(v), [v](Scene& s) {
+                   s.pusher->motion.velocity = {0, 0, v};
+                 }});
   }
   e.push_back({"light object, huge grip", [](Scene& s) {
                  s.object.mass = 1e-6;

@@ -38,7 +38,8 @@ bool Finite(const SimulationResult& r) {
 
 TEST(Extremes, SolveWithinToleranceOrTypedError) {
   int solved = 0, failed = 0;
-  for (const auto& base : {std::make_pair("canonical", CanonicalScene()), std::make_pair("patches", PatchScene())}) {
+  for (const auto& base :
+       {std::make_pair("canonical", CanonicalScene()), std::make_pair("patches", PatchScene())}) {
     for (const Extreme& x : Extremes()) {
       for (Reduce reduce : {Reduce::kAuto, Reduce::kFull}) {
         Scene s = base.second;
@@ -46,7 +47,8 @@ TEST(Extremes, SolveWithinToleranceOrTypedError) {
         s.model.reduce = reduce;
         x.apply(s);
         const SimulationResult r = Simulate(s);
-        const std::string what = std::string(base.first) + ", " + x.name + (reduce == Reduce::kFull ? ", full" : ", auto");
+        const std::string what = std::string(base.first) + ", " + x.name +
+                                 (reduce == Reduce::kFull ? ", full" : ", auto");
         EXPECT_TRUE(Finite(r)) << what;
         if (r.status == SimulationStatus::kOk) {
           ++solved;
@@ -91,8 +93,9 @@ TEST(ScaleInvariance, SameDimensionlessAnswer) {
   turning.pusher->position = {0.015, 0.005, -0.05};
   turning.pusher->motion.velocity = {0.002, 0.003, 0.02};
   turning.pusher->motion.angular_velocity = {0.1, 0.2, 0.3};
-  const std::vector<std::pair<const char*, Scene>> scenes = {
-      {"canonical", CanonicalScene()}, {"patches", PatchScene()}, {"off-centre turning push", turning}};
+  const std::vector<std::pair<const char*, Scene>> scenes = {{"canonical", CanonicalScene()},
+                                                             {"patches", PatchScene()},
+                                                             {"off-centre turning push", turning}};
   struct Factors {
     double a, b, c;
   };
@@ -117,11 +120,15 @@ TEST(ScaleInvariance, SameDimensionlessAnswer) {
       EXPECT_LT((m1.position() / k.a - m0.position()).norm() / L, 1e-10) << name;
       EXPECT_LT(m1.orientation().angularDistance(m0.orientation()), 1e-10) << name;
       EXPECT_LT((m1.velocity() * tau / k.a - m0.velocity()).norm() / V, 1e-10) << name;
-      EXPECT_LT((m1.angular_velocity() * tau - m0.angular_velocity()).norm() * L / V, 1e-10) << name;
+      EXPECT_LT((m1.angular_velocity() * tau - m0.angular_velocity()).norm() * L / V, 1e-10)
+          << name;
       EXPECT_LT((m1.pusher_force() / k.c - m0.pusher_force()).norm() / F, 1e-10) << name;
       for (size_t i = 0; i < m0.contacts().size(); ++i) {
-        EXPECT_NEAR(m1.contacts()[i].normal_force / k.c, m0.contacts()[i].normal_force, 1e-10 * F) << name;
-        EXPECT_LT((m1.contacts()[i].tangential_force / k.c - m0.contacts()[i].tangential_force).norm(), 1e-10 * F);
+        EXPECT_NEAR(m1.contacts()[i].normal_force / k.c, m0.contacts()[i].normal_force, 1e-10 * F)
+            << name;
+        EXPECT_LT(
+            (m1.contacts()[i].tangential_force / k.c - m0.contacts()[i].tangential_force).norm(),
+            1e-10 * F);
         EXPECT_EQ(m1.contacts()[i].mode, m0.contacts()[i].mode) << name;
       }
     }

@@ -13,7 +13,8 @@
 namespace arena::mechanics {
 namespace {
 
-void ExpectSolution(const Eigen::MatrixXd& A, const Eigen::VectorXd& b, const LcpResult& r, double tol = 1e-12) {
+void ExpectSolution(const Eigen::MatrixXd& A, const Eigen::VectorXd& b, const LcpResult& r,
+                    double tol = 1e-12) {
   ASSERT_TRUE(r.ok) << r.reason;
   const Eigen::VectorXd w = A * r.z + b;
   for (Eigen::Index i = 0; i < b.size(); ++i) {
@@ -101,7 +102,8 @@ TEST(Lemke, RandomMonotoneProblemsAndWarmStart) {
         B(i, j) = N(rng);
         S(i, j) = N(rng);
       }
-    const Eigen::MatrixXd A = B.transpose() * B + 0.01 * Eigen::MatrixXd::Identity(n, n) + (S - S.transpose());
+    const Eigen::MatrixXd A =
+        B.transpose() * B + 0.01 * Eigen::MatrixXd::Identity(n, n) + (S - S.transpose());
     Eigen::VectorXd b(n);
     for (int i = 0; i < n; ++i) b[i] = N(rng);
     const LcpResult r = SolveLcp(A, b);
@@ -128,7 +130,8 @@ TEST(Lemke, PatchContactProblemsSolveInOneRun) {
   std::vector<std::pair<Eigen::MatrixXd, Eigen::VectorXd>> problems;
   ContactModel model(s);
   ASSERT_EQ(model.status(), SimulationStatus::kOk) << model.error();
-  model.SetLcpObserver([&](const Eigen::MatrixXd& A, const Eigen::VectorXd& b) { problems.emplace_back(A, b); });
+  model.SetLcpObserver(
+      [&](const Eigen::MatrixXd& A, const Eigen::VectorXd& b) { problems.emplace_back(A, b); });
   for (int i = 0; i < 25; ++i) ASSERT_TRUE(model.Step().ok);
   ASSERT_EQ(problems.size(), 25u);
   LcpOptions one_run;

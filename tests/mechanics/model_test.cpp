@@ -60,7 +60,8 @@ TEST(Rigidity, InterpolationConstraintsAreIdentities) {
   ContactSpec line = Finger("line", ContactType::kLine, {0.02, 0.01, -0.03}, {-1, 0, 0}, 0.5);
   line.axis = Eigen::Vector3d(0, 0.3, 1).normalized();
   line.length = 0.04;
-  ContactSpec patch = Finger("patch", ContactType::kPatch, {0.02, 0, 0}, Eigen::Vector3d(-1, 0.2, 0).normalized(), 0.5);
+  ContactSpec patch = Finger("patch", ContactType::kPatch, {0.02, 0, 0},
+                             Eigen::Vector3d(-1, 0.2, 0).normalized(), 0.5);
   patch.radius = 0.01;
   const Eigen::Vector3d com(0.001, -0.002, 0.003);
   for (int trial = 0; trial < 50; ++trial) {
@@ -91,7 +92,8 @@ TEST(Rigidity, InterpolationConstraintsAreIdentities) {
         EXPECT_NEAR((pj - patch.position).dot(patch.normal), 0, 1e-15);  // in the contact plane
         EXPECT_NEAR(o.norm(), 2 * patch.radius / 3, 1e-15);
         const Eigen::Vector2d st = E.colPivHouseholderQr().solve(pj - p1);
-        const Eigen::Vector3d interp = vel(p1) + (vel(p2) - vel(p1)) * st[0] + (vel(p3) - vel(p1)) * st[1];
+        const Eigen::Vector3d interp =
+            vel(p1) + (vel(p2) - vel(p1)) * st[0] + (vel(p3) - vel(p1)) * st[1];
         EXPECT_LT((vel(pj) - interp).norm(), 1e-12);
       }
     }
@@ -195,7 +197,8 @@ void ExpectSameTrajectory(const Scene& scene, const char* what) {
     worst = std::max(worst, (a.angular_velocity - b.angular_velocity).norm() * L / V);
     worst = std::max(worst, (a.pusher_force - b.pusher_force).norm() / F);
     for (size_t i = 0; i < a.contacts.size(); ++i) {
-      worst = std::max(worst, std::abs(a.contacts[i].normal_force - b.contacts[i].normal_force) / F);
+      worst =
+          std::max(worst, std::abs(a.contacts[i].normal_force - b.contacts[i].normal_force) / F);
       EXPECT_EQ(a.contacts[i].mode, b.contacts[i].mode) << what << " t " << a.t << " contact " << i;
     }
   }
@@ -271,7 +274,8 @@ TEST(Sampling, TwoHundredFiftyHertzForAnyTimeStep) {
       EXPECT_NEAR(smp.velocity.z(), v, 1e-9) << "dt " << dt << " t " << t;
       // Position: sum of earlier steps plus the partial one.
       const long full = k == 0 ? 0 : steps_done - 1;
-      const double z = -a * dt * dt * full * (full + 1) / 2.0 - a * (full + 1) * dt * (t - full * dt) * (k > 0);
+      const double z =
+          -a * dt * dt * full * (full + 1) / 2.0 - a * (full + 1) * dt * (t - full * dt) * (k > 0);
       EXPECT_NEAR(smp.position.z(), z, 1e-12) << "dt " << dt << " t " << t;
     }
   }

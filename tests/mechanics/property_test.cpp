@@ -30,7 +30,8 @@ struct Rng {
   }
 };
 
-ContactSpec RandomContact(Rng& r, const char* name, Eigen::Vector3d position, Eigen::Vector3d normal) {
+ContactSpec RandomContact(Rng& r, const char* name, Eigen::Vector3d position,
+                          Eigen::Vector3d normal) {
   ContactSpec c;
   c.name = name;
   c.type = static_cast<ContactType>(r.I(0, 2));
@@ -82,24 +83,31 @@ Scene RandomScene(Rng& r) {
   s.object.mass = std::exp(r.U(std::log(0.01), std::log(3.0)));
   if (r.B(0.3)) s.object.pose.rpy = {r.U(-1, 1), r.U(-1, 1), r.U(-3, 3)};
   s.object.pose.position = {r.U(-0.01, 0.01), r.U(-0.01, 0.01), r.U(-0.01, 0.01)};
-  s.gravity = r.B(0.2) ? Eigen::Vector3d::Zero() : Eigen::Vector3d(9.81 * (r.B(0.6) ? Eigen::Vector3d(0, 0, -1) : r.Dir()));
+  s.gravity = r.B(0.2) ? Eigen::Vector3d::Zero()
+                       : Eigen::Vector3d(9.81 * (r.B(0.6) ? Eigen::Vector3d(0, 0, -1) : r.Dir()));
   s.duration = 0.06;
   s.grip_force = r.B(0.05) ? 0.0 : r.U(0.5, 50);
-  const double half = 0.5 * (s.object.shape == ObjectShape::kBox ? s.object.size.x() : 2 * s.object.radius);
+  const double half =
+      0.5 * (s.object.shape == ObjectShape::kBox ? s.object.size.x() : 2 * s.object.radius);
   // A grasp: two fingers facing each other on one line along x (anywhere on
   // the faces), their normals tilted a little from ±x.
   const Eigen::Vector3d offset(0, r.U(-0.01, 0.01), r.U(-0.02, 0.02));
   const double tilt = r.B(0.4) ? 0.15 : 0.0;
-  auto finger_normal = [&](double sign) { return (Eigen::Vector3d(sign, 0, 0) + tilt * r.Dir()).normalized(); };
+  auto finger_normal = [&](double sign) {
+    return (Eigen::Vector3d(sign, 0, 0) + tilt * r.Dir()).normalized();
+  };
   const Eigen::Vector3d c = s.object.pose.position;
-  s.fingers.push_back(RandomContact(r, "left", c + offset - Eigen::Vector3d(half, 0, 0), finger_normal(1)));
-  s.fingers.push_back(RandomContact(r, "right", c + offset + Eigen::Vector3d(half, 0, 0), finger_normal(-1)));
+  s.fingers.push_back(
+      RandomContact(r, "left", c + offset - Eigen::Vector3d(half, 0, 0), finger_normal(1)));
+  s.fingers.push_back(
+      RandomContact(r, "right", c + offset + Eigen::Vector3d(half, 0, 0), finger_normal(-1)));
   if (r.B(0.15)) s.fingers.pop_back();
   if (r.B(0.7)) {
     PusherSpec p;
     static_cast<ContactSpec&>(p) = RandomContact(r, "pusher", Eigen::Vector3d::Zero(), r.Dir());
     p.position = -0.05 * p.normal + 0.01 * r.Dir();
-    p.motion.velocity = r.B(0.1) ? Eigen::Vector3d::Zero() : Eigen::Vector3d(r.U(0, 0.05) * (r.B(0.5) ? p.normal : r.Dir()));
+    p.motion.velocity = r.B(0.1) ? Eigen::Vector3d::Zero()
+                                 : Eigen::Vector3d(r.U(0, 0.05) * (r.B(0.5) ? p.normal : r.Dir()));
     if (r.B(0.2)) p.motion.angular_velocity = r.U(0, 1.0) * r.Dir();
     s.pusher = p;
   }
@@ -113,16 +121,20 @@ Scene RandomScene(Rng& r) {
 
 std::string Describe(const Scene& s) {
   std::ostringstream o;
-  o << "mass " << s.object.mass << " grip " << s.grip_force << " facets " << s.model.facets << " points "
-    << s.model.points << " dt " << s.model.dt << " pusher " << (s.pusher ? "yes" : "no") << " fingers";
-  for (const auto& f : s.fingers) o << " [type " << static_cast<int>(f.type) << " mu " << f.mu << "]";
+  o << "mass " << s.object.mass << " grip " << s.grip_force << " facets " << s.model.facets
+    << " points " << s.model.points << " dt " << s.model.dt << " pusher "
+    << (s.pusher ? "yes" : "no") << " fingers";
+  for (const auto& f : s.fingers)
+    o << " [type " << static_cast<int>(f.type) << " mu " << f.mu << "]";
   return o.str();
 }
 
 bool Finite(const TrajectorySample& x) {
   bool ok = x.position.allFinite() && x.velocity.allFinite() && x.angular_velocity.allFinite() &&
             x.pusher_force.allFinite() && x.orientation.coeffs().allFinite();
-  for (const auto& c : x.contacts) ok = ok && std::isfinite(c.normal_force) && c.tangential_force.allFinite() && c.torque.allFinite();
+  for (const auto& c : x.contacts)
+    ok = ok && std::isfinite(c.normal_force) && c.tangential_force.allFinite() &&
+         c.torque.allFinite();
   return ok;
 }
 
@@ -136,7 +148,8 @@ TEST(RandomScenes, ResidualsBelowOneInTenToTheEight) {
   for (int i = 0; i < kScenes; ++i) {
     const Scene s = RandomScene(r);
     const SimulationResult res = Simulate(s);
-    ASSERT_EQ(res.status, SimulationStatus::kOk) << "scene " << i << ": " << res.error << "\n" << Describe(s);
+    ASSERT_EQ(res.status, SimulationStatus::kOk) << "scene " << i << ": " << res.error << "\n"
+                                                 << Describe(s);
     EXPECT_LT(res.residuals.force_balance, 1e-8) << "scene " << i << " " << Describe(s);
     EXPECT_LT(res.residuals.complementarity, 1e-8) << "scene " << i << " " << Describe(s);
     EXPECT_LE(res.residuals.cone, 1e-10) << "scene " << i << " " << Describe(s);
@@ -170,8 +183,10 @@ TEST(RandomScenes, ResidualsBelowOneInTenToTheEight) {
   // About one scene in eight is planar; the full-vs-planar comparison must
   // really have run (50 of the default 1,200, proportionally fewer under ASan).
   EXPECT_GT(planar_compared, kScenes / 24);
-  std::printf("%d scenes, %d steps, %d planar (each also run full); worst residuals: force balance %.3g, complementarity %.3g, cone %.3g\n",
-              kScenes, steps, planar, worst_fb, worst_comp, worst_cone);
+  std::printf(
+      "%d scenes, %d steps, %d planar (each also run full); worst residuals: force balance %.3g, "
+      "complementarity %.3g, cone %.3g\n",
+      kScenes, steps, planar, worst_fb, worst_comp, worst_cone);
 }
 
 }  // namespace

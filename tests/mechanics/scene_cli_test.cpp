@@ -27,7 +27,8 @@ struct CliRun {
 
 // Runs `arena simulate FILE`, stdout captured, stderr discarded.
 CliRun Simulate(const fs::path& file) {
-  const std::string command = std::string("'") + ARENA_BINARY + "' simulate '" + file.string() + "' 2>/dev/null";
+  const std::string command =
+      std::string("'") + ARENA_BINARY + "' simulate '" + file.string() + "' 2>/dev/null";
   CliRun run;
   FILE* pipe = ::popen(command.c_str(), "r");
   if (!pipe) return run;
@@ -77,7 +78,8 @@ TEST(SceneCli, BadInputCorpusIsRefusedNamingTheField) {
 }
 
 TEST(SceneCli, HundredMegabyteSceneIsRefusedBySize) {
-  const fs::path dir = fs::temp_directory_path() / ("arena_scene_cli_test_" + std::to_string(::getpid()));
+  const fs::path dir =
+      fs::temp_directory_path() / ("arena_scene_cli_test_" + std::to_string(::getpid()));
   fs::create_directories(dir);
   const fs::path big = dir / "big.json";
   {

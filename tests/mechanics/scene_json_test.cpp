@@ -117,13 +117,23 @@ TEST(SceneJson, RoundTripIsExact) {
 
 TEST(SceneJson, RoundTripOfCylinderWithInertiaPatchAndAwkwardNumbers) {
   json j = Canonical();
-  j["object"] = {{"shape", "cylinder"}, {"radius", 0.1 / 3}, {"height", 0.1}, {"mass", 0.3},
+  j["object"] = {{"shape", "cylinder"},
+                 {"radius", 0.1 / 3},
+                 {"height", 0.1},
+                 {"mass", 0.3},
                  {"inertia", {{1e-4, 1e-6, 0}, {1e-6, 1.1e-4, 0}, {0, 0, 1.5e-4}}},
                  {"pose", {{"position", {0.001, 0, 0}}, {"rpy", {0, 0, 0.3}}}}};
   const double r = 0.1 / 3;
-  j["fingers"] = {{{"name", "a"}, {"type", "patch"}, {"position", {0.001 - r, 0, 0}}, {"normal", {1, 0, 0}},
-                   {"radius", 0.005}, {"mu", 0.7}},
-                  {{"name", "b"}, {"type", "point"}, {"position", {0.001 + r, 0, 0}}, {"normal", {-1, 0, 0}},
+  j["fingers"] = {{{"name", "a"},
+                   {"type", "patch"},
+                   {"position", {0.001 - r, 0, 0}},
+                   {"normal", {1, 0, 0}},
+                   {"radius", 0.005},
+                   {"mu", 0.7}},
+                  {{"name", "b"},
+                   {"type", "point"},
+                   {"position", {0.001 + r, 0, 0}},
+                   {"normal", {-1, 0, 0}},
                    {"mu", 1.0 / 3}}};
   j["pusher"]["position"] = {0.001, 0, -0.05};
   j["model"] = {{"facets", 12}, {"points", 5}, {"dt", 0.001}, {"reduce", "full"}};
@@ -167,41 +177,86 @@ struct Rule {
 
 TEST(SceneJson, EachRuleNamesItsField) {
   const std::vector<Rule> rules = {
-      {"negative mu", [](json& j) { j["fingers"][1]["mu"] = -0.2; }, "fingers[1].mu", "must be >= 0, got -0.2"},
+      {"negative mu", [](json& j) { j["fingers"][1]["mu"] = -0.2; }, "fingers[1].mu",
+       "must be >= 0, got -0.2"},
       {"zero mass", [](json& j) { j["object"]["mass"] = 0; }, "object.mass", "must be > 0, got 0"},
-      {"negative size", [](json& j) { j["object"]["size"][2] = -0.1; }, "object.size[2]", "must be > 0"},
-      {"size of 2", [](json& j) { j["object"]["size"] = {0.1, 0.1}; }, "object.size", "3 numbers"},
+      {"negative size", [](json& j) { j["object"]["size"][2] = -0.1; }, "object.size[2]",
+       "must be > 0"},
+      {"size of 2",
+       [](json& j) {
+         j["object"]["size"] = {0.1, 0.1};
+       },
+       "object.size", "3 numbers"},
       {"cylinder zero height",
-       [](json& j) { j["object"] = {{"shape", "cylinder"}, {"radius", 0.025}, {"height", 0}, {"mass", 1}}; },
+       [](json& j) {
+         j["object"] = {{"shape", "cylinder"}, {"radius", 0.025}, {"height", 0}, {"mass", 1}};
+       },
        "object.height", "must be > 0"},
-      {"box with radius", [](json& j) { j["object"]["radius"] = 0.1; }, "object.radius", "only for shape"},
+      {"box with radius", [](json& j) { j["object"]["radius"] = 0.1; }, "object.radius",
+       "only for shape"},
       {"missing shape", [](json& j) { j["object"].erase("shape"); }, "object.shape", "is required"},
-      {"pose typo", [](json& j) { j["object"]["pose"]["rpy "] = {0, 0, 0}; }, "object.pose.rpy ", "unknown key"},
-      {"pose position NaN-free but string", [](json& j) { j["object"]["pose"]["position"][1] = "0"; },
-       "object.pose.position[1]", "must be a number, got a string"},
+      {"pose typo",
+       [](json& j) {
+         j["object"]["pose"]["rpy "] = {0, 0, 0};
+       },
+       "object.pose.rpy ", "unknown key"},
+      {"pose position NaN-free but string",
+       [](json& j) { j["object"]["pose"]["position"][1] = "0"; }, "object.pose.position[1]",
+       "must be a number, got a string"},
       {"gravity null", [](json& j) { j["gravity"] = nullptr; }, "gravity", "got null"},
       {"zero duration", [](json& j) { j["duration"] = 0.0; }, "duration", "must be > 0"},
-      {"hour-long duration", [](json& j) { j["duration"] = 3601.0; }, "duration", "must be <= 3600"},
-      {"negative grip force", [](json& j) { j["grip_force"] = -1; }, "grip_force", "must be >= 0, got -1"},
-      {"finger without name", [](json& j) { j["fingers"][0].erase("name"); }, "fingers[0].name", "is required"},
-      {"finger named pusher", [](json& j) { j["fingers"][0]["name"] = "pusher"; }, "fingers[0].name", "reserved"},
-      {"finger name with comma", [](json& j) { j["fingers"][0]["name"] = "a,b"; }, "fingers[0].name", "may contain"},
-      {"duplicate names", [](json& j) { j["fingers"][1]["name"] = "left"; }, "fingers[1].name", "duplicates"},
-      {"unknown type", [](json& j) { j["fingers"][0]["type"] = "edge"; }, "fingers[0].type", "\"edge\""},
-      {"line without axis", [](json& j) { j["fingers"][1].erase("axis"); }, "fingers[1].axis", "is required"},
-      {"zero axis", [](json& j) { j["fingers"][1]["axis"] = {0, 0, 0}; }, "fingers[1].axis", "zero vector"},
-      {"axis along normal", [](json& j) { j["fingers"][1]["axis"] = {1, 0, 0}; }, "fingers[1].axis", "perpendicular"},
-      {"negative length", [](json& j) { j["fingers"][1]["length"] = -0.02; }, "fingers[1].length", "must be > 0"},
-      {"line off the face", [](json& j) { j["fingers"][1]["length"] = 0.2; }, "fingers[1].length", "surface"},
-      {"point with axis", [](json& j) { j["fingers"][0]["axis"] = {0, 0, 1}; }, "fingers[0].axis", "only for type"},
-      {"patch without radius",
+      {"hour-long duration", [](json& j) { j["duration"] = 3601.0; }, "duration",
+       "must be <= 3600"},
+      {"negative grip force", [](json& j) { j["grip_force"] = -1; }, "grip_force",
+       "must be >= 0, got -1"},
+      {"finger without name", [](json& j) { j["fingers"][0].erase("name"); }, "fingers[0].name",
+       "is required"},
+      {"finger named pusher", [](json& j) { j["fingers"][0]["name"] = "pusher"; },
+       "fingers[0].name", "reserved"},
+      {"finger name with comma", [](json& j) { j["fingers"][0]["name"] = "a,b"; },
+       "fingers[0].name", "may contain"},
+      {"duplicate names", [](json& j) { j["fingers"][1]["name"] = "left"; }, "fingers[1].name",
+       "duplicates"},
+      {"unknown type", [](json& j) { j["fingers"][0]["type"] = "edge"; }, "fingers[0].type",
+       "\"edge\""},
+      {"line without axis", [](json& j) { j["fingers"][1].erase("axis"); }, "fingers[1].axis",
+       "is required"},
+      {"zero axis",
        [](json& j) {
-         j["fingers"][0]["type"] = "patch";
+         j["fingers"][1]["axis"] = {0, 0, 0};
        },
+       "fingers[1].axis", "zero vector"},
+      {"axis along normal",
+       [](json& j) {
+         j["fingers"][1]["axis"] = {1, 0, 0};
+       },
+       "fingers[1].axis", "perpendicular"},
+      {"negative length", [](json& j) { j["fingers"][1]["length"] = -0.02; }, "fingers[1].length",
+       "must be > 0"},
+      {"line off the face", [](json& j) { j["fingers"][1]["length"] = 0.2; }, "fingers[1].length",
+       "surface"},
+      {"point with axis",
+       [](json& j) {
+         j["fingers"][0]["axis"] = {0, 0, 1};
+       },
+       "fingers[0].axis", "only for type"},
+      {"patch without radius", [](json& j) { j["fingers"][0]["type"] = "patch"; },
        "fingers[0].radius", "is required"},
-      {"non-unit normal", [](json& j) { j["fingers"][0]["normal"] = {0.5, 0, 0}; }, "fingers[0].normal", "norm 0.5"},
-      {"outward normal", [](json& j) { j["fingers"][0]["normal"] = {-1, 0, 0}; }, "fingers[0].normal", "into the object"},
-      {"off surface", [](json& j) { j["fingers"][0]["position"] = {-0.03, 0, 0}; }, "fingers[0].position", "surface"},
+      {"non-unit normal",
+       [](json& j) {
+         j["fingers"][0]["normal"] = {0.5, 0, 0};
+       },
+       "fingers[0].normal", "norm 0.5"},
+      {"outward normal",
+       [](json& j) {
+         j["fingers"][0]["normal"] = {-1, 0, 0};
+       },
+       "fingers[0].normal", "into the object"},
+      {"off surface",
+       [](json& j) {
+         j["fingers"][0]["position"] = {-0.03, 0, 0};
+       },
+       "fingers[0].position", "surface"},
       {"too many fingers",
        [](json& j) {
          for (int i = 0; i < 20; ++i) j["fingers"].push_back(j["fingers"][0]);
@@ -221,11 +276,16 @@ TEST(SceneJson, EachRuleNamesItsField) {
        },
        "pusher.position", "coincides with fingers[0]"},
       {"pusher name", [](json& j) { j["pusher"]["name"] = "p"; }, "pusher.name", "unknown key"},
-      {"pusher motion typo", [](json& j) { j["pusher"]["motion"]["velocty"] = {0, 0, 1}; }, "pusher.motion.velocty",
-       "unknown key"},
-      {"pusher negative mu", [](json& j) { j["pusher"]["mu"] = -1e-9; }, "pusher.mu", "must be >= 0"},
+      {"pusher motion typo",
+       [](json& j) {
+         j["pusher"]["motion"]["velocty"] = {0, 0, 1};
+       },
+       "pusher.motion.velocty", "unknown key"},
+      {"pusher negative mu", [](json& j) { j["pusher"]["mu"] = -1e-9; }, "pusher.mu",
+       "must be >= 0"},
       {"facets 2", [](json& j) { j["model"]["facets"] = 2; }, "model.facets", "[3, 64]"},
-      {"facets string", [](json& j) { j["model"]["facets"] = "8"; }, "model.facets", "got a string"},
+      {"facets string", [](json& j) { j["model"]["facets"] = "8"; }, "model.facets",
+       "got a string"},
       {"points 1", [](json& j) { j["model"]["points"] = 1; }, "model.points", "[2, 32]"},
       {"patch with 2 points",
        [](json& j) {
@@ -237,10 +297,16 @@ TEST(SceneJson, EachRuleNamesItsField) {
       {"dt zero", [](json& j) { j["model"]["dt"] = 0; }, "model.dt", "must be > 0"},
       {"dt above duration", [](json& j) { j["model"]["dt"] = 1.5; }, "model.dt", "<= duration"},
       {"reduce", [](json& j) { j["model"]["reduce"] = "2d"; }, "model.reduce", "\"2d\""},
-      {"inertia 2x3", [](json& j) { j["object"]["inertia"] = {{1, 0, 0}, {0, 1, 0}}; }, "object.inertia", "3x3"},
+      {"inertia 2x3",
+       [](json& j) {
+         j["object"]["inertia"] = {{1, 0, 0}, {0, 1, 0}};
+       },
+       "object.inertia", "3x3"},
       {"inertia impossible",
-       [](json& j) { j["object"]["inertia"] = {{1e-4, 0, 0}, {0, 1e-4, 0}, {0, 0, 3e-4}}; }, "object.inertia",
-       "triangle inequality"},
+       [](json& j) {
+         j["object"]["inertia"] = {{1e-4, 0, 0}, {0, 1e-4, 0}, {0, 0, 3e-4}};
+       },
+       "object.inertia", "triangle inequality"},
       {"one finger", [](json& j) { j["fingers"].erase(1); }, "fingers", "do not balance"},
       {"fingers on one side",
        [](json& j) {
@@ -248,7 +314,11 @@ TEST(SceneJson, EachRuleNamesItsField) {
          j["fingers"][1]["normal"] = {1, 0, 0};
        },
        "fingers", "do not balance"},
-      {"unknown top key", [](json& j) { j["gravity_"] = {0, 0, 0}; }, "gravity_", "unknown key"},
+      {"unknown top key",
+       [](json& j) {
+         j["gravity_"] = {0, 0, 0};
+       },
+       "gravity_", "unknown key"},
   };
   for (const Rule& rule : rules) {
     SCOPED_TRACE(rule.what);
@@ -293,7 +363,8 @@ TEST(SceneJson, ValidateSceneChecksScenesBuiltInCode) {
   Scene s = ParseScene(Canonical().dump());
   EXPECT_NO_THROW(ValidateScene(s));
   Scene bad = s;
-  bad.fingers[0].normal = Eigen::Vector3d(1.001, 0, 0);  // parse would normalise; code must not rely on it
+  bad.fingers[0].normal =
+      Eigen::Vector3d(1.001, 0, 0);  // parse would normalise; code must not rely on it
   try {
     ValidateScene(bad);
     ADD_FAILURE() << "accepted a non-unit normal";
@@ -369,7 +440,8 @@ TEST(SceneJson, OversizedInputIsRefusedBeforeParsing) {
   EXPECT_NE(message.find("larger than the limit"), std::string::npos) << message;
 
   // A 100 MB file is refused by size without reading it.
-  const fs::path dir = fs::temp_directory_path() / ("arena_scene_test_" + std::to_string(::getpid()));
+  const fs::path dir =
+      fs::temp_directory_path() / ("arena_scene_test_" + std::to_string(::getpid()));
   fs::create_directories(dir);
   const fs::path big = dir / "big.json";
   {

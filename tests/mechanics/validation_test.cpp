@@ -31,7 +31,8 @@ void ExpectOk(const SimulationResult& r) {
   EXPECT_LE(r.residuals.cone, 1e-12);
 }
 
-PusherSpec Pusher(Eigen::Vector3d position, Eigen::Vector3d normal, Eigen::Vector3d velocity, double mu) {
+PusherSpec Pusher(Eigen::Vector3d position, Eigen::Vector3d normal, Eigen::Vector3d velocity,
+                  double mu) {
   PusherSpec p;
   p.name = "pusher";
   p.position = position;
@@ -126,8 +127,11 @@ TEST(LinearPush, PusherForceIsFrictionPlusGravityComponent) {
           EXPECT_LT((sample.velocity - speed * k.direction).norm(), kRel * speed) << k.what;
           EXPECT_LT(sample.angular_velocity.norm(), 1e-9);
           EXPECT_NEAR(sample.pusher_force.dot(k.direction), expected, kRel * 10) << k.what;
-          EXPECT_LT((sample.pusher_force - sample.pusher_force.dot(k.direction) * k.direction).norm(), 1e-9);
-          for (size_t i = 0; i < 2; ++i) EXPECT_EQ(sample.contacts[i].mode, ContactMode::kSlide) << k.what;
+          EXPECT_LT(
+              (sample.pusher_force - sample.pusher_force.dot(k.direction) * k.direction).norm(),
+              1e-9);
+          for (size_t i = 0; i < 2; ++i)
+            EXPECT_EQ(sample.contacts[i].mode, ContactMode::kSlide) << k.what;
           EXPECT_EQ(sample.contacts[2].mode, ContactMode::kStick);
         }
       }
@@ -214,16 +218,19 @@ TEST(PivotingPush, SmallStepsSlipAtTheImpulsiveStartOnly) {
         if (i == 0) {
           // The stick/slip boundary is predicted (away from it by 10 %).
           if (finger < 0.9 * holds) {
-            EXPECT_EQ(model.contacts()[0].mode, ContactMode::kStick) << "grip " << grip << " dt " << dt;
+            EXPECT_EQ(model.contacts()[0].mode, ContactMode::kStick)
+                << "grip " << grip << " dt " << dt;
             EXPECT_NEAR(model.angular_velocity().x(), v / d, kRel * v / d);
           } else {
-            EXPECT_EQ(model.contacts()[0].mode, ContactMode::kSlide) << "grip " << grip << " dt " << dt;
+            EXPECT_EQ(model.contacts()[0].mode, ContactMode::kSlide)
+                << "grip " << grip << " dt " << dt;
             EXPECT_LT(model.angular_velocity().x(), 0.99 * v / d);
           }
         }
       }
       // After the start the object turns at v/d exactly, with the fingers stuck.
-      EXPECT_NEAR(model.angular_velocity().x(), v / d, kRel * v / d) << "grip " << grip << " dt " << dt;
+      EXPECT_NEAR(model.angular_velocity().x(), v / d, kRel * v / d)
+          << "grip " << grip << " dt " << dt;
       EXPECT_EQ(model.contacts()[0].mode, ContactMode::kStick);
       EXPECT_EQ(model.contacts()[1].mode, ContactMode::kStick);
       const double angle = Eigen::AngleAxisd(model.orientation()).angle();
@@ -253,7 +260,8 @@ TEST(ConeApproximation, BisectorResistanceIsCosPiOverFacets) {
     const double coulomb = 2 * 0.5 * 10.0;
     for (double t : {0.02, 0.2}) {
       const auto& sample = At(r, t);
-      EXPECT_NEAR(sample.pusher_force.dot(u), coulomb * std::cos(a), kRel * coulomb) << "facets " << g;
+      EXPECT_NEAR(sample.pusher_force.dot(u), coulomb * std::cos(a), kRel * coulomb)
+          << "facets " << g;
       EXPECT_LT((sample.velocity - speed * u).norm(), kRel * speed) << "facets " << g;
       Eigen::Vector3d friction = Eigen::Vector3d::Zero();
       for (size_t i = 0; i < 2; ++i) friction += sample.contacts[i].tangential_force;

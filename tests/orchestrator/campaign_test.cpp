@@ -33,11 +33,14 @@ std::string ReadText(const fs::path& path) {
   return text.str();
 }
 
-Campaign Smoke() { return LoadCampaignFile((kSourceDir / "examples/campaigns/smoke.json").string()); }
+Campaign Smoke() {
+  return LoadCampaignFile((kSourceDir / "examples/campaigns/smoke.json").string());
+}
 
 std::string Fingerprint(const PlannedTrial& t) {
-  return std::to_string(t.index) + "/" + std::to_string(t.condition) + "/" + std::to_string(t.replicate) + "/" +
-         std::to_string(t.seed) + "/" + mechanics::SceneToJson(t.scene) + "/" + t.parameters_json;
+  return std::to_string(t.index) + "/" + std::to_string(t.condition) + "/" +
+         std::to_string(t.replicate) + "/" + std::to_string(t.seed) + "/" +
+         mechanics::SceneToJson(t.scene) + "/" + t.parameters_json;
 }
 
 TEST(Campaign, SmokeExamplePlansAbout40ValidTrialsOverAllContactTypes) {
@@ -79,7 +82,8 @@ TEST(Campaign, SmokeExampleTrialsSimulateWithTheModel) {
 }
 
 TEST(Campaign, LargerExampleResolvesFilesAndPlansValidScenes) {
-  const Campaign c = LoadCampaignFile((kSourceDir / "examples/campaigns/pivot_study.json").string());
+  const Campaign c =
+      LoadCampaignFile((kSourceDir / "examples/campaigns/pivot_study.json").string());
   EXPECT_EQ(c.sampler, SamplerKind::kSobol);
   EXPECT_EQ(TrialCount(c), 2048);
   EXPECT_EQ(c.defects_file, "lab_defects.json");
@@ -115,7 +119,8 @@ TEST(Campaign, ReadmeExampleIsValid) {
 TEST(Campaign, PlanningIsDeterministic) {
   const Campaign a = Smoke();
   const Campaign b = Smoke();
-  for (int64_t i = 0; i < TrialCount(a); ++i) EXPECT_EQ(Fingerprint(PlanTrial(a, i)), Fingerprint(PlanTrial(b, i)));
+  for (int64_t i = 0; i < TrialCount(a); ++i)
+    EXPECT_EQ(Fingerprint(PlanTrial(a, i)), Fingerprint(PlanTrial(b, i)));
 }
 
 TEST(Campaign, PlanningIsResumableFromAnIndex) {
@@ -130,7 +135,8 @@ TEST(Campaign, PlanningIsResumableFromAnIndex) {
     const std::string text = doc.dump();
     const Campaign full = ParseCampaign(text, (kSourceDir / "examples/campaigns").string());
     std::vector<std::string> sequence;
-    for (int64_t i = 0; i < TrialCount(full); ++i) sequence.push_back(Fingerprint(PlanTrial(full, i)));
+    for (int64_t i = 0; i < TrialCount(full); ++i)
+      sequence.push_back(Fingerprint(PlanTrial(full, i)));
     // A "restarted service": a fresh campaign object, starting mid-sequence.
     const Campaign resumed = ParseCampaign(text, (kSourceDir / "examples/campaigns").string());
     for (int64_t i = TrialCount(resumed) - 1; i >= TrialCount(resumed) / 2; --i) {
@@ -180,7 +186,8 @@ TEST(Campaign, GridCoversEveryCombinationOnce) {
 
 TEST(Campaign, ReloadingCanSkipTheConditionCheck) {
   json doc = json::parse(ReadText(kSourceDir / "examples/campaigns/smoke.json"));
-  doc["variations"]["pivot_offset"] = {{"choices", {0, 0.05}}};  // off the object for half the conditions
+  doc["variations"]["pivot_offset"] = {
+      {"choices", {0, 0.05}}};  // off the object for half the conditions
   EXPECT_THROW(ParseCampaign(doc.dump()), CampaignError);
   const Campaign c = ParseCampaign(doc.dump(), "", ConditionCheck::kBaseScene);
   EXPECT_EQ(TrialCount(c), 36);
@@ -201,12 +208,17 @@ TEST(Campaign, StretchingARotatedBoxCarriesTheContacts) {
   scene["fingers"][1]["position"] = {0.01 + hx * c, 0.02 + hx * s, 0};
   scene["fingers"][1]["normal"] = {-c, -s, 0};
   scene["pusher"]["position"] = {0.01, 0.02, -0.05};
-  json doc = {{"name", "rotated"}, {"seed", 3}, {"scene", scene}, {"sampler", "latin_hypercube"},
+  json doc = {{"name", "rotated"},
+              {"seed", 3},
+              {"scene", scene},
+              {"sampler", "latin_hypercube"},
               {"conditions", 50},
-              {"variations", {{"object_size_x", {{"min", 0.03}, {"max", 0.09}}},
-                              {"object_size_z", {{"min", 0.08}, {"max", 0.2}}},
-                              {"finger_type", {{"choices", {"point", "line", "patch"}}}},
-                              {"finger_length", 0.02}, {"finger_radius", 0.004}}}};
+              {"variations",
+               {{"object_size_x", {{"min", 0.03}, {"max", 0.09}}},
+                {"object_size_z", {{"min", 0.08}, {"max", 0.2}}},
+                {"finger_type", {{"choices", {"point", "line", "patch"}}}},
+                {"finger_length", 0.02},
+                {"finger_radius", 0.004}}}};
   const Campaign campaign = ParseCampaign(doc.dump());
   for (int64_t i = 0; i < TrialCount(campaign); ++i) {
     const PlannedTrial t = PlanTrial(campaign, i);
@@ -223,8 +235,13 @@ TEST(Campaign, CylinderRadiusVariationKeepsFingersOnTheSide) {
   scene["object"] = {{"shape", "cylinder"}, {"radius", 0.02}, {"height", 0.1}, {"mass", 0.3}};
   scene["fingers"][0]["position"] = {-0.02, 0, 0};
   scene["fingers"][1]["position"] = {0.02, 0, 0};
-  json doc = {{"name", "cylinder"}, {"seed", 4}, {"scene", scene}, {"sampler", "sobol"}, {"conditions", 32},
-              {"variations", {{"object_radius", {{"min", 0.01}, {"max", 0.04}}}, {"object_height", 0.12}}}};
+  json doc = {
+      {"name", "cylinder"},
+      {"seed", 4},
+      {"scene", scene},
+      {"sampler", "sobol"},
+      {"conditions", 32},
+      {"variations", {{"object_radius", {{"min", 0.01}, {"max", 0.04}}}, {"object_height", 0.12}}}};
   const Campaign campaign = ParseCampaign(doc.dump());
   for (int64_t i = 0; i < TrialCount(campaign); ++i) {
     const PlannedTrial t = PlanTrial(campaign, i);
@@ -262,7 +279,8 @@ TEST(Campaign, LogScaleRangeIsUniformInLog) {
   const Campaign c = ParseCampaign(doc.dump());
   int below_10 = 0;
   for (int64_t condition = 0; condition < c.conditions; ++condition) {
-    const double g = json::parse(PlanTrial(c, condition * c.replicates).parameters_json)["grip_force"];
+    const double g =
+        json::parse(PlanTrial(c, condition * c.replicates).parameters_json)["grip_force"];
     EXPECT_GE(g, 1.0);
     EXPECT_LE(g, 100.0);
     below_10 += g < 10;
@@ -337,7 +355,8 @@ TEST(Campaign, FuzzCrashersAreHandled) {
 }
 
 TEST(Campaign, OversizedFileIsRefusedBeforeReading) {
-  const fs::path dir = fs::temp_directory_path() / ("arena_campaign_test_" + std::to_string(::getpid()));
+  const fs::path dir =
+      fs::temp_directory_path() / ("arena_campaign_test_" + std::to_string(::getpid()));
   fs::create_directories(dir);
   const fs::path big = dir / "big.json";
   {

@@ -21,8 +21,8 @@ TEST(EvaluateEndToEnd, TwoSettingsStoredReportedAndPlotted) {
       << ReadFile(dir / "run.out") << ReadFile(db + ".log");
   ASSERT_EQ(CountStates(db, 1).at("done"), 6);
 
-  const int rc = RunArena({"evaluate", "--db", db, "--campaign", "1", "--facets", "4,8", "--points", "2",
-                           "--dt", "0.004", "--budget", "50mm", "--threads", "2", "--json"},
+  const int rc = RunArena({"evaluate", "--db", db, "--campaign", "1", "--facets", "4,8", "--points",
+                           "2", "--dt", "0.004", "--budget", "50mm", "--threads", "2", "--json"},
                           dir / "evaluate.json", std::chrono::seconds(60));
   ASSERT_EQ(rc, 0) << ReadFile(dir / "evaluate.json");
   const auto report = nlohmann::json::parse(ReadFile(dir / "evaluate.json"));
@@ -33,7 +33,8 @@ TEST(EvaluateEndToEnd, TwoSettingsStoredReportedAndPlotted) {
   for (const auto& s : report["settings"]) {
     EXPECT_EQ(s["trials"], 6);
     EXPECT_EQ(s["ok"], 6) << s.dump();
-    EXPECT_GE(s["position_error_m"]["p95"].get<double>(), s["position_error_m"]["median"].get<double>());
+    EXPECT_GE(s["position_error_m"]["p95"].get<double>(),
+              s["position_error_m"]["median"].get<double>());
     EXPECT_GT(s["time_s"]["median"].get<double>(), 0);
   }
   // The sim cell's pushes are small: a 50 mm budget holds, so one is recommended.
@@ -51,9 +52,10 @@ TEST(EvaluateEndToEnd, TwoSettingsStoredReportedAndPlotted) {
   EXPECT_TRUE(store->CheckInvariants().empty());
 
   // The table form, and the plot of the latest run.
-  ASSERT_EQ(RunArena({"evaluate", "--db", db, "--campaign", "1", "--facets", "4", "--points", "2,3"},
-                     dir / "evaluate.txt", std::chrono::seconds(60)),
-            0);
+  ASSERT_EQ(
+      RunArena({"evaluate", "--db", db, "--campaign", "1", "--facets", "4", "--points", "2,3"},
+               dir / "evaluate.txt", std::chrono::seconds(60)),
+      0);
   const std::string table = ReadFile(dir / "evaluate.txt");
   EXPECT_NE(table.find("g4_k3_dt0.004_auto"), std::string::npos) << table;
   EXPECT_NE(table.find("recommendation:"), std::string::npos) << table;
@@ -65,11 +67,14 @@ TEST(EvaluateEndToEnd, TwoSettingsStoredReportedAndPlotted) {
   EXPECT_NE(svg.find("data-name=\"pareto front\""), std::string::npos);
 
   // Bad input: exit 2 with the reason.
-  EXPECT_EQ(RunArena({"evaluate", "--db", db, "--campaign", "1", "--budget", "1kg"}, dir / "bad.out",
+  EXPECT_EQ(RunArena({"evaluate", "--db", db, "--campaign", "1", "--budget", "1kg"},
+                     dir / "bad.out", std::chrono::seconds(20)),
+            2);
+  EXPECT_NE(ReadFile(dir / "bad.out").find("unknown unit"), std::string::npos)
+      << ReadFile(dir / "bad.out");
+  EXPECT_EQ(RunArena({"evaluate", "--db", db, "--campaign", "9"}, dir / "none.out",
                      std::chrono::seconds(20)),
             2);
-  EXPECT_NE(ReadFile(dir / "bad.out").find("unknown unit"), std::string::npos) << ReadFile(dir / "bad.out");
-  EXPECT_EQ(RunArena({"evaluate", "--db", db, "--campaign", "9"}, dir / "none.out", std::chrono::seconds(20)), 2);
 }
 
 }  // namespace

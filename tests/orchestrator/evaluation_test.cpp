@@ -72,7 +72,9 @@ TEST(EvaluationBudget, ParsesShorthandMetricsAndUnits) {
   }
 }
 
-mechanics::ModelOptions Model(int facets) { return mechanics::ModelOptions{facets, 3, 0.004, mechanics::Reduce::kAuto}; }
+mechanics::ModelOptions Model(int facets) {
+  return mechanics::ModelOptions{facets, 3, 0.004, mechanics::Reduce::kAuto};
+}
 
 TrialEvaluation Result(std::int64_t trial, std::size_t setting, double position, double time,
                        const std::string& status = "ok") {
@@ -110,7 +112,8 @@ std::vector<TrialEvaluation> KnownResults() {
   return r;
 }
 
-const std::vector<mechanics::ModelOptions> kModels = {Model(4), Model(8), Model(16), Model(32), Model(6)};
+const std::vector<mechanics::ModelOptions> kModels = {Model(4), Model(8), Model(16), Model(32),
+                                                      Model(6)};
 
 TEST(EvaluationSummary, DistributionsParetoFrontAndFailures) {
   const auto report = Summarise(kModels, KnownResults(), {});
@@ -147,7 +150,8 @@ TEST(EvaluationSummary, RecommendsCheapestWithinBudget) {
   EXPECT_FALSE(report.recommended);
   EXPECT_NE(report.recommendation.find("none"), std::string::npos);
   // Two budgets must both hold; the primary metric (Pareto) is the first one's.
-  report = Summarise(kModels, KnownResults(), {ParseBudget("angle_p95=25mrad"), ParseBudget("5mm")});
+  report =
+      Summarise(kModels, KnownResults(), {ParseBudget("angle_p95=25mrad"), ParseBudget("5mm")});
   EXPECT_EQ(report.primary, ErrorMetric::kAngleP95);
   ASSERT_TRUE(report.recommended);
   EXPECT_EQ(report.settings[*report.recommended].model_key, ModelKey(Model(8)));

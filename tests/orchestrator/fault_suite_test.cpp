@@ -37,7 +37,8 @@ constexpr int kTrials = 30;
 struct SuiteTotals : ::testing::Environment {
   static inline int injected = 0, survived = 0, tests = 0;
   void TearDown() override {
-    std::printf("fault suite: %d faults injected in %d tests, %d survived\n", injected, tests, survived);
+    std::printf("fault suite: %d faults injected in %d tests, %d survived\n", injected, tests,
+                survived);
   }
 };
 const auto* const kTotals = ::testing::AddGlobalTestEnvironment(new SuiteTotals);
@@ -56,15 +57,17 @@ struct FaultTally {
   }
 };
 
-std::unique_ptr<Child> StartCell(const TempDir& dir, const std::string& domain, const std::string& id,
-                                 const std::string& speed, const std::string& defects = "") {
+std::unique_ptr<Child> StartCell(const TempDir& dir, const std::string& domain,
+                                 const std::string& id, const std::string& speed,
+                                 const std::string& defects = "") {
   std::vector<std::string> args = {"cell", "--id", id, "--domain", domain, "--speed", speed};
   if (!defects.empty()) args.insert(args.end(), {"--defects", defects});
   return StartArena(args, dir / (id + ".log"));
 }
 
 int Submit(const TempDir& dir, const std::string& db) {
-  return RunArena({"submit", TestCampaign("faults30.json"), "--db", db}, dir / "submit.out", std::chrono::seconds(30));
+  return RunArena({"submit", TestCampaign("faults30.json"), "--db", db}, dir / "submit.out",
+                  std::chrono::seconds(30));
 }
 
 bool AllFinished(const std::string& db) {
@@ -102,7 +105,8 @@ TEST(FaultSuite, ServiceKilledAtTwentySeededRandomPoints) {
   std::string kills;
   for (int k = 0; k < 20; ++k) {
     const int ms = after_ms(rng);
-    auto serve = StartArena({"serve", "--db", db, "--domain", domain}, dir / ("serve" + std::to_string(k) + ".log"));
+    auto serve = StartArena({"serve", "--db", db, "--domain", domain},
+                            dir / ("serve" + std::to_string(k) + ".log"));
     std::this_thread::sleep_for(std::chrono::milliseconds(ms));
     serve->Signal(SIGKILL);
     ASSERT_TRUE(serve->Wait(std::chrono::seconds(10)).has_value());
@@ -117,7 +121,8 @@ TEST(FaultSuite, ServiceKilledAtTwentySeededRandomPoints) {
   }
   EXPECT_EQ(tally.injected, 20) << "the campaign ended before 20 kills: " << kills;
   auto serve = StartArena({"serve", "--db", db, "--domain", domain}, dir / "serve-final.log");
-  ASSERT_TRUE(WaitUntil([&] { return all_finished(); }, kCampaignTimeout)) << ReadFile(dir / "serve-final.log");
+  ASSERT_TRUE(WaitUntil([&] { return all_finished(); }, kCampaignTimeout))
+      << ReadFile(dir / "serve-final.log");
   StopService(*serve);
   EXPECT_EQ(CountStates(db, 1)["done"], 60) << kills;
   ExpectCampaignConsistent(db, 1, 60);
@@ -149,7 +154,8 @@ TEST(FaultSuite, CellKilledMidReset) {
       << ReadFile(dir / "serve.log");
   c1->Signal(SIGKILL);
   ++tally.injected;
-  ASSERT_TRUE(WaitUntil([&] { return AllFinished(db); }, kCampaignTimeout)) << ReadFile(dir / "serve.log");
+  ASSERT_TRUE(WaitUntil([&] { return AllFinished(db); }, kCampaignTimeout))
+      << ReadFile(dir / "serve.log");
   StopService(*serve);
   ExpectCampaignConsistent(db, 1, kTrials);
   auto store = OpenReadOnly(db);
@@ -171,11 +177,13 @@ void ExpectFaultyCellQuarantined(const std::string& name, const std::string& pro
   std::ofstream(dir / "faulty.json") << profile;
   auto c1 = StartCell(dir, domain, "c1", "0.1", dir / "faulty.json");
   auto c2 = StartCell(dir, domain, "c2", "0.1");
-  std::vector<std::string> args = {"serve", "--db", db, "--domain", domain, "--quarantine-after", "2"};
+  std::vector<std::string> args = {"serve", "--db", db, "--domain", domain, "--quarantine-after",
+                                   "2"};
   args.insert(args.end(), serve_extra.begin(), serve_extra.end());
   auto serve = StartArena(args, dir / "serve.log");
   ASSERT_EQ(Submit(dir, db), 0);
-  ASSERT_TRUE(WaitUntil([&] { return AllFinished(db); }, kCampaignTimeout)) << ReadFile(dir / "serve.log");
+  ASSERT_TRUE(WaitUntil([&] { return AllFinished(db); }, kCampaignTimeout))
+      << ReadFile(dir / "serve.log");
   StopService(*serve);
   ExpectCampaignConsistent(db, 1, kTrials);
   auto store = OpenReadOnly(db);
@@ -212,11 +220,13 @@ TEST(FaultSuite, StoreRunsOutOfSpace) {
   ASSERT_EQ(Submit(dir, db), 0);
   const auto pages = std::filesystem::file_size(db) / 4096 + 24;
   auto c1 = StartCell(dir, domain, "c1", "0.1");
-  auto serve = StartArena({"serve", "--db", db, "--domain", domain, "--store-max-pages", std::to_string(pages)},
-                          dir / "serve.log");
+  auto serve = StartArena(
+      {"serve", "--db", db, "--domain", domain, "--store-max-pages", std::to_string(pages)},
+      dir / "serve.log");
   ++tally.injected;
   const auto st = serve->Wait(std::chrono::seconds(90));
-  ASSERT_TRUE(st.has_value()) << "serve did not stop on a full store: " << ReadFile(dir / "serve.log");
+  ASSERT_TRUE(st.has_value()) << "serve did not stop on a full store: "
+                              << ReadFile(dir / "serve.log");
   EXPECT_TRUE(WIFEXITED(*st) && WEXITSTATUS(*st) == 3) << ReadFile(dir / "serve.log");
   const std::string log = ReadFile(dir / "serve.log");
   EXPECT_NE(log.find("full"), std::string::npos) << log;
@@ -228,7 +238,8 @@ TEST(FaultSuite, StoreRunsOutOfSpace) {
   }
   const int done_before = CountStates(db, 1)["done"];
   auto again = StartArena({"serve", "--db", db, "--domain", domain}, dir / "serve2.log");
-  ASSERT_TRUE(WaitUntil([&] { return AllFinished(db); }, kCampaignTimeout)) << ReadFile(dir / "serve2.log");
+  ASSERT_TRUE(WaitUntil([&] { return AllFinished(db); }, kCampaignTimeout))
+      << ReadFile(dir / "serve2.log");
   StopService(*again);
   ExpectCampaignConsistent(db, 1, kTrials);
   EXPECT_EQ(CountStates(db, 1)["done"], kTrials);
@@ -245,7 +256,8 @@ TEST(FaultSuite, StoreOnAFullFileSystem) {
   const std::string mnt = dir / "small";
   std::filesystem::create_directory(mnt);
   if (std::system(("mount -t tmpfs -o size=1m tmpfs '" + mnt + "' 2>/dev/null").c_str()) != 0)
-    GTEST_SKIP() << "cannot mount a tmpfs here (not root / no CAP_SYS_ADMIN); StoreRunsOutOfSpace covers the limit";
+    GTEST_SKIP() << "cannot mount a tmpfs here (not root / no CAP_SYS_ADMIN); StoreRunsOutOfSpace "
+                    "covers the limit";
   struct Unmount {
     std::string path;
     ~Unmount() { std::system(("umount -l '" + path + "' 2>/dev/null").c_str()); }
@@ -257,9 +269,11 @@ TEST(FaultSuite, StoreOnAFullFileSystem) {
   auto serve = StartArena({"serve", "--db", db, "--domain", domain}, dir / "serve.log");
   ++tally.injected;
   const auto st = serve->Wait(std::chrono::seconds(90));
-  ASSERT_TRUE(st.has_value()) << "serve did not stop on a full file system: " << ReadFile(dir / "serve.log");
+  ASSERT_TRUE(st.has_value()) << "serve did not stop on a full file system: "
+                              << ReadFile(dir / "serve.log");
   EXPECT_TRUE(WIFEXITED(*st) && WEXITSTATUS(*st) == 3) << ReadFile(dir / "serve.log");
-  EXPECT_NE(ReadFile(dir / "serve.log").find("full"), std::string::npos) << ReadFile(dir / "serve.log");
+  EXPECT_NE(ReadFile(dir / "serve.log").find("full"), std::string::npos)
+      << ReadFile(dir / "serve.log");
   // Move the store to a roomy file system (as an operator would after
   // freeing space) and finish there.
   const std::string moved = dir / "moved.db";
@@ -274,7 +288,8 @@ TEST(FaultSuite, StoreOnAFullFileSystem) {
     EXPECT_TRUE(violations.empty()) << violations.front();
   }
   auto again = StartArena({"serve", "--db", moved, "--domain", domain}, dir / "serve2.log");
-  ASSERT_TRUE(WaitUntil([&] { return AllFinished(moved); }, kCampaignTimeout)) << ReadFile(dir / "serve2.log");
+  ASSERT_TRUE(WaitUntil([&] { return AllFinished(moved); }, kCampaignTimeout))
+      << ReadFile(dir / "serve2.log");
   StopService(*again);
   ExpectCampaignConsistent(moved, 1, kTrials);
   EXPECT_EQ(CountStates(moved, 1)["done"], kTrials);
@@ -292,18 +307,22 @@ TEST(FaultSuite, ReadOnlyStoreFile) {
   bool immutable = false;
   if (access(db.c_str(), W_OK) == 0) {  // root: mode bits do not stop writes
     immutable = std::system(("chattr +i '" + db + "' 2>/dev/null").c_str()) == 0;
-    if (!immutable) GTEST_SKIP() << "running as root and chattr +i is not permitted: cannot make the store read-only";
+    if (!immutable)
+      GTEST_SKIP()
+          << "running as root and chattr +i is not permitted: cannot make the store read-only";
   }
   ++tally.injected;
-  const int rc = RunArena({"serve", "--db", db, "--domain", std::to_string(TestDomain(27))}, dir / "serve.log",
-                          std::chrono::seconds(30));
-  const int submit_rc =
-      RunArena({"submit", TestCampaign("faults30.json"), "--db", db}, dir / "submit2.out", std::chrono::seconds(30));
-  const int pause_rc = RunArena({"pause", "1", "--db", db}, dir / "pause.out", std::chrono::seconds(30));
+  const int rc = RunArena({"serve", "--db", db, "--domain", std::to_string(TestDomain(27))},
+                          dir / "serve.log", std::chrono::seconds(30));
+  const int submit_rc = RunArena({"submit", TestCampaign("faults30.json"), "--db", db},
+                                 dir / "submit2.out", std::chrono::seconds(30));
+  const int pause_rc =
+      RunArena({"pause", "1", "--db", db}, dir / "pause.out", std::chrono::seconds(30));
   if (immutable) std::system(("chattr -i '" + db + "'").c_str());
   chmod(db.c_str(), 0644);
   EXPECT_EQ(rc, 3) << ReadFile(dir / "serve.log");
-  EXPECT_NE(ReadFile(dir / "serve.log").find("read-only"), std::string::npos) << ReadFile(dir / "serve.log");
+  EXPECT_NE(ReadFile(dir / "serve.log").find("read-only"), std::string::npos)
+      << ReadFile(dir / "serve.log");
   EXPECT_EQ(submit_rc, 3) << ReadFile(dir / "submit2.out");
   EXPECT_EQ(pause_rc, 3) << ReadFile(dir / "pause.out");
   EXPECT_EQ(ReadFile(db), before);  // not one byte changed

@@ -54,7 +54,8 @@ TEST(Sampler, LatinHypercubeDimensionsAreNotAligned) {
   const uint64_t n = 256;
   int same = 0;
   for (uint64_t i = 0; i < n; ++i) {
-    same += std::floor(LatinHypercubeCoordinate(i, n, 0, 7) * n) == std::floor(LatinHypercubeCoordinate(i, n, 1, 7) * n);
+    same += std::floor(LatinHypercubeCoordinate(i, n, 0, 7) * n) ==
+            std::floor(LatinHypercubeCoordinate(i, n, 1, 7) * n);
   }
   EXPECT_LT(same, 10);
 }

@@ -14,8 +14,8 @@ namespace {
 TEST(ServiceEndToEnd, RunsSixtyTrialsOnTwoCells) {
   TempDir dir;
   const std::string db = dir / "e2e.db";
-  const int rc = RunArena({"run", TestCampaign("e2e60.json"), "--db", db, "--cells", "2", "--domain",
-                           std::to_string(TestDomain(1)), "--quiet"},
+  const int rc = RunArena({"run", TestCampaign("e2e60.json"), "--db", db, "--cells", "2",
+                           "--domain", std::to_string(TestDomain(1)), "--quiet"},
                           dir / "run.out", std::chrono::seconds(150));
   ASSERT_EQ(rc, 0) << ReadFile(dir / "run.out") << ReadFile(db + ".log");
   const auto counts = CountStates(db, 1);
@@ -34,7 +34,9 @@ TEST(ServiceEndToEnd, RunsSixtyTrialsOnTwoCells) {
   const auto at = out.find("orchestration ");
   ASSERT_NE(at, std::string::npos) << out;
   double median_ms = -1, p95_ms = -1;
-  ASSERT_EQ(std::sscanf(out.c_str() + at, "orchestration %lf ms median, %lf ms p95", &median_ms, &p95_ms), 2)
+  ASSERT_EQ(
+      std::sscanf(out.c_str() + at, "orchestration %lf ms median, %lf ms p95", &median_ms, &p95_ms),
+      2)
       << out;
   EXPECT_GE(median_ms, 0.0) << out;
   EXPECT_GE(p95_ms, median_ms) << out;
@@ -45,14 +47,17 @@ TEST(ServiceEndToEnd, SubmitToARunningServe) {
   TempDir dir;
   const std::string db = dir / "serve.db";
   const std::string domain = std::to_string(TestDomain(2));
-  auto cell1 = StartArena({"cell", "--id", "c1", "--domain", domain, "--speed", "0"}, dir / "c1.log");
-  auto cell2 = StartArena({"cell", "--id", "c2", "--domain", domain, "--speed", "0"}, dir / "c2.log");
+  auto cell1 =
+      StartArena({"cell", "--id", "c1", "--domain", domain, "--speed", "0"}, dir / "c1.log");
+  auto cell2 =
+      StartArena({"cell", "--id", "c2", "--domain", domain, "--speed", "0"}, dir / "c2.log");
   auto serve = StartArena({"serve", "--db", db, "--domain", domain}, dir / "serve.log");
   ASSERT_EQ(RunArena({"submit", TestCampaign("e2e60.json"), "--db", db}, dir / "submit.out",
                      std::chrono::seconds(30)),
             0)
       << ReadFile(dir / "submit.out");
-  ASSERT_TRUE(WaitUntil([&] { return CountStates(db, 1)["done"] == 60; }, std::chrono::seconds(120)))
+  ASSERT_TRUE(
+      WaitUntil([&] { return CountStates(db, 1)["done"] == 60; }, std::chrono::seconds(120)))
       << ReadFile(dir / "serve.log");
   serve->Signal(SIGTERM);
   auto st = serve->Wait(std::chrono::seconds(40));
@@ -60,7 +65,8 @@ TEST(ServiceEndToEnd, SubmitToARunningServe) {
   EXPECT_TRUE(WIFEXITED(*st) && WEXITSTATUS(*st) == 0);
   ExpectCampaignConsistent(db, 1, 60);
   // status --json is what scripts read.
-  ASSERT_EQ(RunArena({"status", "--db", db, "--json"}, dir / "status.json", std::chrono::seconds(20)), 0);
+  ASSERT_EQ(
+      RunArena({"status", "--db", db, "--json"}, dir / "status.json", std::chrono::seconds(20)), 0);
   const std::string status = ReadFile(dir / "status.json");
   EXPECT_NE(status.find("\"done\":60"), std::string::npos) << status;
   EXPECT_NE(status.find("\"id\":\"c1\""), std::string::npos) << status;

@@ -20,8 +20,10 @@ struct Cells {
   Cells(const TempDir& dir, const std::string& domain, const std::string& speed,
         const std::vector<std::string>& ids, const std::string& defects_for_first = "") {
     for (size_t i = 0; i < ids.size(); ++i) {
-      std::vector<std::string> args = {"cell", "--id", ids[i], "--domain", domain, "--speed", speed};
-      if (i == 0 && !defects_for_first.empty()) args.insert(args.end(), {"--defects", defects_for_first});
+      std::vector<std::string> args = {"cell", "--id",    ids[i], "--domain",
+                                       domain, "--speed", speed};
+      if (i == 0 && !defects_for_first.empty())
+        args.insert(args.end(), {"--defects", defects_for_first});
       procs.push_back(StartArena(args, dir / (ids[i] + ".log")));
     }
   }
@@ -50,8 +52,8 @@ bool Gone(pid_t pid) {
 TEST(ServiceFaults, RunKilledTakesItsCellsWithIt) {
   TempDir dir;
   const std::string db = dir / "orphans.db";
-  auto run = StartArena({"run", TestCampaign("e2e60.json"), "--db", db, "--cells", "2", "--speed", "1",
-                         "--domain", std::to_string(TestDomain(14)), "--quiet"},
+  auto run = StartArena({"run", TestCampaign("e2e60.json"), "--db", db, "--cells", "2", "--speed",
+                         "1", "--domain", std::to_string(TestDomain(14)), "--quiet"},
                         dir / "run.out");
   std::vector<pid_t> cells;
   ASSERT_TRUE(WaitUntil(
@@ -78,7 +80,8 @@ TEST(ServiceFaults, ServiceKilledMidCampaignLosesAndDuplicatesNothing) {
   // Two kills at different points of the campaign, then a clean finish.
   for (int kill_after : {8, 25}) {
     auto serve = StartArena({"serve", "--db", db, "--domain", domain}, dir / "serve.log");
-    ASSERT_TRUE(WaitUntil([&] { return CountStates(db, 1)["done"] >= kill_after; }, kCampaignTimeout))
+    ASSERT_TRUE(
+        WaitUntil([&] { return CountStates(db, 1)["done"] >= kill_after; }, kCampaignTimeout))
         << ReadFile(dir / "serve.log");
     serve->Signal(SIGKILL);
     ASSERT_TRUE(serve->Wait(std::chrono::seconds(10)).has_value());
@@ -145,7 +148,8 @@ TEST(ServiceFaults, CellWhoseResetsKeepFailingIsQuarantined) {
   const std::string db = dir / "reset.db";
   const std::string domain = std::to_string(TestDomain(13));
   {
-    std::ofstream(dir / "bad_reset.json") << R"({"reset": {"failure_probability": 1.0, "max_attempts": 2}})";
+    std::ofstream(dir / "bad_reset.json")
+        << R"({"reset": {"failure_probability": 1.0, "max_attempts": 2}})";
   }
   Cells cells(dir, domain, "0.25", {"c1", "c2"}, dir / "bad_reset.json");
   auto serve = StartArena({"serve", "--db", db, "--domain", domain, "--quarantine-after", "3"},

@@ -53,7 +53,8 @@ inline int RunArena(const std::vector<std::string>& args, const std::string& log
   return WIFEXITED(*st) ? WEXITSTATUS(*st) : 128 + WTERMSIG(*st);
 }
 
-inline std::unique_ptr<Child> StartArena(const std::vector<std::string>& args, const std::string& log) {
+inline std::unique_ptr<Child> StartArena(const std::vector<std::string>& args,
+                                         const std::string& log) {
   std::vector<std::string> argv = {ARENA_BINARY};
   argv.insert(argv.end(), args.begin(), args.end());
   return std::make_unique<Child>(argv, log);
@@ -89,7 +90,8 @@ inline bool WaitUntil(const std::function<bool()>& done, std::chrono::millisecon
 
 // What every finished campaign must satisfy, whatever happened on the way:
 // every trial ended exactly once, the file is intact, the invariants hold.
-inline void ExpectCampaignConsistent(const std::string& db_path, std::int64_t campaign, int trials) {
+inline void ExpectCampaignConsistent(const std::string& db_path, std::int64_t campaign,
+                                     int trials) {
   auto store = OpenReadOnly(db_path);
   EXPECT_EQ(store->IntegrityCheck(), "ok");
   const auto violations = store->CheckInvariants();
@@ -100,11 +102,13 @@ inline void ExpectCampaignConsistent(const std::string& db_path, std::int64_t ca
     EXPECT_TRUE(db::IsTerminal(t.state)) << "trial " << t.id << " is " << db::ToString(t.state);
     int terminal_rows = 0;
     for (const auto& tr : store->ListTransitions(t.id)) {
-      terminal_rows += tr.to_state == "done" || tr.to_state == "failed" || tr.to_state == "cancelled";
+      terminal_rows +=
+          tr.to_state == "done" || tr.to_state == "failed" || tr.to_state == "cancelled";
     }
     EXPECT_EQ(terminal_rows, 1) << "trial " << t.id << " ended " << terminal_rows << " times";
     if (t.state == db::TrialState::kDone) {
-      EXPECT_FALSE(store->ListPredictions(t.id).empty()) << "trial " << t.id << " done without a prediction";
+      EXPECT_FALSE(store->ListPredictions(t.id).empty())
+          << "trial " << t.id << " done without a prediction";
       EXPECT_EQ(store->ReadGroundTruth(t.id).attempt, t.attempt);
     }
   }

@@ -33,7 +33,8 @@ TEST(ResetPlan, TranslationRotationAndPusherSwap) {
   EXPECT_EQ(Kinds(PlanReset(At(0, 0, 0, 0.3), At(0, 0, 0), false, params)),
             (std::vector<K>{K::kRelease, K::kRotate, K::kRegrasp}));
   const auto plan = PlanReset(At(0.02, 0, 0, 0.3), At(0, 0, 0), true, params);
-  EXPECT_EQ(Kinds(plan), (std::vector<K>{K::kSwapPusher, K::kRelease, K::kRotate, K::kTranslate, K::kRegrasp}));
+  EXPECT_EQ(Kinds(plan),
+            (std::vector<K>{K::kSwapPusher, K::kRelease, K::kRotate, K::kTranslate, K::kRegrasp}));
   // Durations follow from distances and speeds: 0.02 m at 0.05 m/s + a grasp.
   EXPECT_NEAR(plan[3].duration_s, params.grasp_time + 0.02 / params.translate_speed, 1e-12);
   EXPECT_NEAR(plan[2].duration_s, params.grasp_time + 0.3 / params.rotate_speed, 1e-9);

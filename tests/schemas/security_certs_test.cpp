@@ -45,12 +45,13 @@ class SecurityCerts : public test::ArenaCommandTest {
 TEST_F(SecurityCerts, InitMakesACaAndSignedGovernanceAndRefusesToOverwriteIt) {
   const Result init = Arena("certs init " + lab_);
   ASSERT_EQ(init.rc, 0) << init.err;
-  struct stat st{};
+  struct stat st {};
   ASSERT_EQ(stat((lab_ + "/ca.key.pem").c_str(), &st), 0);
   EXPECT_EQ(st.st_mode & 0777, 0600u);
   const std::string governance =
       dds::VerifySignedDocument(lab_ + "/governance.p7s", lab_ + "/ca.cert.pem");
-  EXPECT_NE(governance.find("<allow_unauthenticated_participants>false<"), std::string::npos) << governance;
+  EXPECT_NE(governance.find("<allow_unauthenticated_participants>false<"), std::string::npos)
+      << governance;
   EXPECT_NE(governance.find("<enable_join_access_control>true<"), std::string::npos);
   EXPECT_NE(governance.find("<data_protection_kind>ENCRYPT<"), std::string::npos);
   EXPECT_NE(governance.find("<enable_write_access_control>true<"), std::string::npos);
@@ -69,8 +70,9 @@ TEST_F(SecurityCerts, EachRoleGetsAConsistentIdentityAndItsOwnTopics) {
   dds::LabOptions lab;
   lab.lab_name = "robot lab 2";
   dds::InitLab(lab_, lab);
-  for (const auto& [role, name] : {std::pair{dds::Role::kCell, "c1"}, std::pair{dds::Role::kService, "svc"},
-                                   std::pair{dds::Role::kWatcher, "alice"}}) {
+  for (const auto& [role, name] :
+       {std::pair{dds::Role::kCell, "c1"}, std::pair{dds::Role::kService, "svc"},
+        std::pair{dds::Role::kWatcher, "alice"}}) {
     dds::IdentityOptions o;
     o.role = role;
     o.name = name;
@@ -80,14 +82,17 @@ TEST_F(SecurityCerts, EachRoleGetsAConsistentIdentityAndItsOwnTopics) {
     EXPECT_EQ(CheckError(dir), "");
     const std::string subject = dds::CertificateSubject(dir + "/identity.cert.pem");
     EXPECT_EQ(subject, std::string("CN=") + name + ",OU=" + dds::ToString(role) + ",O=robot lab 2");
-    struct stat st{};
+    struct stat st {};
     ASSERT_EQ(stat((dir + "/identity.key.pem").c_str(), &st), 0);
     EXPECT_EQ(st.st_mode & 0777, 0600u) << dir;
-    const std::string permissions = dds::VerifySignedDocument(dir + "/permissions.p7s", dir + "/ca.cert.pem");
-    EXPECT_NE(permissions.find("<subject_name>" + subject + "</subject_name>"), std::string::npos) << permissions;
+    const std::string permissions =
+        dds::VerifySignedDocument(dir + "/permissions.p7s", dir + "/ca.cert.pem");
+    EXPECT_NE(permissions.find("<subject_name>" + subject + "</subject_name>"), std::string::npos)
+        << permissions;
     EXPECT_NE(permissions.find("<default>DENY</default>"), std::string::npos);
     const auto has = [&](const char* kind, const char* topic) {
-      return permissions.find(std::string("<") + kind + "><topics><topic>" + topic + "</topic>") != std::string::npos;
+      return permissions.find(std::string("<") + kind + "><topics><topic>" + topic + "</topic>") !=
+             std::string::npos;
     };
     // Only the service publishes commands; only cells publish what the service stores.
     EXPECT_EQ(has("publish", "TrialCommand"), role == dds::Role::kService) << name;
@@ -142,7 +147,8 @@ TEST_F(SecurityCerts, BadOptionsAreNamed) {
   // Names with '--' (not allowed inside XML comments) still make valid documents.
   o.name = "c--1";
   const std::string dashes = dds::IssueIdentity(lab_, o);
-  EXPECT_NE(dds::VerifySignedDocument(dashes + "/permissions.p7s", dashes + "/ca.cert.pem").find("CN=c--1"),
+  EXPECT_NE(dds::VerifySignedDocument(dashes + "/permissions.p7s", dashes + "/ca.cert.pem")
+                .find("CN=c--1"),
             std::string::npos);
 }
 
@@ -164,8 +170,8 @@ TEST_F(SecurityCerts, EveryBrokenFileIsNamed) {
     return to;
   };
   // One file missing: named, and so are the files the directory must hold.
-  for (const std::string file : {"ca.cert.pem", "governance.p7s", "identity.cert.pem", "identity.key.pem",
-                                 "permissions.p7s"}) {
+  for (const std::string file : {"ca.cert.pem", "governance.p7s", "identity.cert.pem",
+                                 "identity.key.pem", "permissions.p7s"}) {
     const std::string d = copy("missing-" + file);
     fs::remove(d + "/" + file);
     const std::string e = CheckError(d);
@@ -175,24 +181,31 @@ TEST_F(SecurityCerts, EveryBrokenFileIsNamed) {
     const std::string d = copy("unreadable");
     chmod((d + "/identity.key.pem").c_str(), 0);
     if (geteuid() != 0) {
-      EXPECT_NE(CheckError(d).find("identity.key.pem: cannot be read"), std::string::npos) << CheckError(d);
+      EXPECT_NE(CheckError(d).find("identity.key.pem: cannot be read"), std::string::npos)
+          << CheckError(d);
     }
   }
   {  // a certificate from another lab's CA
     const std::string d = copy("foreign-cert");
-    fs::copy_file(rogue + "/identity.cert.pem", d + "/identity.cert.pem", fs::copy_options::overwrite_existing);
-    EXPECT_NE(CheckError(d).find("identity.cert.pem: not valid under"), std::string::npos) << CheckError(d);
+    fs::copy_file(rogue + "/identity.cert.pem", d + "/identity.cert.pem",
+                  fs::copy_options::overwrite_existing);
+    EXPECT_NE(CheckError(d).find("identity.cert.pem: not valid under"), std::string::npos)
+        << CheckError(d);
   }
   {  // another identity's key
     const std::string d = copy("wrong-key");
-    fs::copy_file(lab_ + "/c2/identity.key.pem", d + "/identity.key.pem", fs::copy_options::overwrite_existing);
-    EXPECT_NE(CheckError(d).find("identity.key.pem: does not belong to"), std::string::npos) << CheckError(d);
+    fs::copy_file(lab_ + "/c2/identity.key.pem", d + "/identity.key.pem",
+                  fs::copy_options::overwrite_existing);
+    EXPECT_NE(CheckError(d).find("identity.key.pem: does not belong to"), std::string::npos)
+        << CheckError(d);
   }
   {  // another identity's permissions: signed, but for another subject
     const std::string d = copy("wrong-grant");
-    fs::copy_file(lab_ + "/c2/permissions.p7s", d + "/permissions.p7s", fs::copy_options::overwrite_existing);
+    fs::copy_file(lab_ + "/c2/permissions.p7s", d + "/permissions.p7s",
+                  fs::copy_options::overwrite_existing);
     const std::string e = CheckError(d);
-    EXPECT_NE(e.find("permissions.p7s: grants 'CN=c2,OU=cell,O=arena lab'"), std::string::npos) << e;
+    EXPECT_NE(e.find("permissions.p7s: grants 'CN=c2,OU=cell,O=arena lab'"), std::string::npos)
+        << e;
   }
   {  // permissions edited after signing (a watcher granting itself TrialCommand)
     const std::string d = copy("tampered");
@@ -206,7 +219,8 @@ TEST_F(SecurityCerts, EveryBrokenFileIsNamed) {
   }
   {  // governance signed by another CA
     const std::string d = copy("foreign-governance");
-    fs::copy_file(other + "/governance.p7s", d + "/governance.p7s", fs::copy_options::overwrite_existing);
+    fs::copy_file(other + "/governance.p7s", d + "/governance.p7s",
+                  fs::copy_options::overwrite_existing);
     EXPECT_NE(CheckError(d).find("governance.p7s: signature does not verify"), std::string::npos)
         << CheckError(d);
   }
@@ -228,8 +242,10 @@ TEST_F(SecurityCerts, CommandsNameTheMissingFile) {
   fs::remove(id + "/identity.key.pem");
   const Result cell = Arena("cell --id c1 --domain 201 --security " + id);
   EXPECT_EQ(cell.rc, 2) << cell.err;
-  EXPECT_NE(cell.err.find("--security: " + id + "/identity.key.pem: missing"), std::string::npos) << cell.err;
-  const Result watch = Arena("watch --cell c1 --domain 201 --timeout 1 --security " + dir_ + "/none");
+  EXPECT_NE(cell.err.find("--security: " + id + "/identity.key.pem: missing"), std::string::npos)
+      << cell.err;
+  const Result watch =
+      Arena("watch --cell c1 --domain 201 --timeout 1 --security " + dir_ + "/none");
   EXPECT_EQ(watch.rc, 2) << watch.err;
   EXPECT_NE(watch.err.find("not a directory"), std::string::npos) << watch.err;
   const Result serve = Arena("serve --db " + dir_ + "/s.db --domain 201 --security " + id);

@@ -14,8 +14,8 @@
 #include <algorithm>
 #include <atomic>
 #include <fstream>
-#include <sstream>
 #include <set>
+#include <sstream>
 #include <thread>
 
 #include <gtest/gtest.h>
@@ -47,7 +47,8 @@ dds::NetworkOptions Secure(const std::string& identity_dir) {
   return n;
 }
 
-dds::ParticipantOptions Named(int domain, const std::string& name, dds::NetworkOptions network = {}) {
+dds::ParticipantOptions Named(int domain, const std::string& name,
+                              dds::NetworkOptions network = {}) {
   dds::ParticipantOptions o;
   o.domain_id = domain;
   o.name = name;
@@ -75,11 +76,13 @@ class SecureDomain : public ::testing::Test {
     args.insert(args.begin(), "certs");
     ASSERT_EQ(RunArena(args, dir_ / "certs.log", 20s), 0) << ReadFile(dir_ / "certs.log");
   }
-  std::unique_ptr<Child> SecureCell(const std::string& id, int domain, const std::vector<std::string>& extra = {}) {
-    std::vector<std::string> args = {"cell", "--id", id, "--domain", std::to_string(domain), "--security",
-                                     lab_ + "/" + id};
+  std::unique_ptr<Child> SecureCell(const std::string& id, int domain,
+                                    const std::vector<std::string>& extra = {}) {
+    std::vector<std::string> args = {
+        "cell", "--id", id, "--domain", std::to_string(domain), "--security", lab_ + "/" + id};
     args.insert(args.end(), extra.begin(), extra.end());
-    if (std::find(extra.begin(), extra.end(), "--speed") == extra.end()) args.insert(args.end(), {"--speed", "0"});
+    if (std::find(extra.begin(), extra.end(), "--speed") == extra.end())
+      args.insert(args.end(), {"--speed", "0"});
     return StartArena(args, dir_ / (id + ".log"));
   }
 
@@ -89,8 +92,8 @@ class SecureDomain : public ::testing::Test {
 
 // Statuses heard by the lab's service until trial `until` is EXECUTED (or
 // the timeout); the trial ids of every status heard.
-std::set<std::uint64_t> StatusesUntilExecuted(Driver& service, std::uint64_t until, std::chrono::milliseconds timeout,
-                                              bool* executed) {
+std::set<std::uint64_t> StatusesUntilExecuted(Driver& service, std::uint64_t until,
+                                              std::chrono::milliseconds timeout, bool* executed) {
   std::set<std::uint64_t> heard;
   *executed = false;
   const auto deadline = std::chrono::steady_clock::now() + timeout;
@@ -117,7 +120,7 @@ TEST_F(SecureDomain, ParticipantsWithoutALabCertificateCannotCommandACell) {
   ASSERT_TRUE(service.statuses.WaitForMatched(1, 10s));
 
   {
-    Driver open(domain);                              // no security at all
+    Driver open(domain);                                  // no security at all
     Driver foreign(domain, Secure(rogue_ + "/service"));  // a service identity from another CA
     // They cannot even see the cell's announcement, and no command reader matches.
     EXPECT_FALSE(open.WaitForCells({"c1"}, 4s));
@@ -137,7 +140,8 @@ TEST_F(SecureDomain, ParticipantsWithoutALabCertificateCannotCommandACell) {
   bool executed = false;
   const auto heard = StatusesUntilExecuted(service, 1, 30s, &executed);
   EXPECT_TRUE(executed) << ReadFile(dir_ / "c1.log");
-  EXPECT_EQ(heard.count(101), 0u) << "the cell executed a command of a participant without security";
+  EXPECT_EQ(heard.count(101), 0u)
+      << "the cell executed a command of a participant without security";
   EXPECT_EQ(heard.count(102), 0u) << "the cell executed a command of another CA's service";
   EXPECT_EQ(heard, std::set<std::uint64_t>{1});
 }
@@ -172,8 +176,8 @@ TEST_F(SecureDomain, AWatcherReadsButCannotCommand) {
   ASSERT_TRUE(statuses.WaitForMatched(1, 10s));
 
   // `arena watch` with the watcher identity follows the next trial of c1.
-  auto watch = StartArena({"watch", "--cell", "c1", "--domain", std::to_string(domain), "--timeout", "40",
-                           "--security", lab_ + "/alice"},
+  auto watch = StartArena({"watch", "--cell", "c1", "--domain", std::to_string(domain), "--timeout",
+                           "40", "--security", lab_ + "/alice"},
                           dir_ / "watch.log");
   ASSERT_TRUE(service.participant.WaitForPeer("arena.watch", 20s)) << ReadFile(dir_ / "watch.log");
 
@@ -195,7 +199,8 @@ TEST_F(SecureDomain, AWatcherReadsButCannotCommand) {
   EXPECT_TRUE(last);
   EXPECT_EQ(samples, final->samples());
   bool status_seen = false;
-  while (auto s = statuses.Take(1s)) status_seen = status_seen || (s->trial_id() == 1 && s->state() == msg::STATE_EXECUTED);
+  while (auto s = statuses.Take(1s))
+    status_seen = status_seen || (s->trial_id() == 1 && s->state() == msg::STATE_EXECUTED);
   EXPECT_TRUE(status_seen);
 
   // `arena watch` follows the first whole trial its reader sees; when it
@@ -203,13 +208,15 @@ TEST_F(SecureDomain, AWatcherReadsButCannotCommand) {
   // the next trials are for it.
   std::optional<int> st = watch->Wait(3s);
   for (std::uint64_t trial = 2; !st && trial <= 8; ++trial) {
-    ASSERT_TRUE(service.Send(service.Command("c1", trial, msg::PHASE_EXECUTE, CanonicalScene(0.4))));
+    ASSERT_TRUE(
+        service.Send(service.Command("c1", trial, msg::PHASE_EXECUTE, CanonicalScene(0.4))));
     ASSERT_TRUE(service.FinalStatus(trial, 30s).has_value()) << ReadFile(dir_ / "c1.log");
     st = watch->Wait(3s);
   }
   ASSERT_TRUE(st.has_value()) << ReadFile(dir_ / "watch.log");
   EXPECT_TRUE(WIFEXITED(*st) && WEXITSTATUS(*st) == 0) << ReadFile(dir_ / "watch.log");
-  EXPECT_NE(ReadFile(dir_ / "watch.log").find("complete"), std::string::npos) << ReadFile(dir_ / "watch.log");
+  EXPECT_NE(ReadFile(dir_ / "watch.log").find("complete"), std::string::npos)
+      << ReadFile(dir_ / "watch.log");
 }
 
 // Writes forged announcements, statuses and ground truth as fast as a cell
@@ -296,14 +303,17 @@ TEST_F(SecureDomain, ParticipantsWithoutALabCertificateCannotInjectGroundTruth) 
   const std::string db = dir_ / "lab.db";
   // Real time: the campaign takes seconds, all of them under attack.
   auto cell = SecureCell("c1", domain, {"--speed", "1"});
-  auto serve = StartArena({"serve", "--db", db, "--domain", std::to_string(domain), "--security", lab_ + "/service"},
-                          dir_ / "serve.log");
+  auto serve = StartArena(
+      {"serve", "--db", db, "--domain", std::to_string(domain), "--security", lab_ + "/service"},
+      dir_ / "serve.log");
   {
     Injector open(domain, "arena.cell.c1", {});
     Injector foreign(domain, "arena.cell.c1", Secure(rogue_ + "/c1"));
     const auto attack_start = std::chrono::steady_clock::now();
-    ASSERT_TRUE(WaitUntil([&] { return StoreKnowsCell(db, "c1"); }, 30s)) << ReadFile(dir_ / "serve.log");
-    ASSERT_EQ(RunArena({"submit", TestCampaign("eval6.json"), "--db", db}, dir_ / "submit.log", 30s), 0)
+    ASSERT_TRUE(WaitUntil([&] { return StoreKnowsCell(db, "c1"); }, 30s))
+        << ReadFile(dir_ / "serve.log");
+    ASSERT_EQ(
+        RunArena({"submit", TestCampaign("eval6.json"), "--db", db}, dir_ / "submit.log", 30s), 0)
         << ReadFile(dir_ / "submit.log");
     ASSERT_TRUE(WaitUntil([&] { return CountStates(db, 1)["done"] == 6; }, 60s))
         << ReadFile(dir_ / "serve.log") << ReadFile(dir_ / "c1.log");
@@ -318,7 +328,8 @@ TEST_F(SecureDomain, ParticipantsWithoutALabCertificateCannotInjectGroundTruth) 
   EXPECT_FALSE(StoreKnowsCell(db, "ghost"));
   auto store = OpenReadOnly(db);
   for (const auto& t : store->ListTrials(1)) {
-    EXPECT_EQ(t.attempt, 1) << "trial " << t.id << " was retried: a forged stream or status got through?";
+    EXPECT_EQ(t.attempt, 1) << "trial " << t.id
+                            << " was retried: a forged stream or status got through?";
     const auto truth = store->ReadGroundTruth(t.id);
     EXPECT_EQ(truth.cell_id, "c1");
     EXPECT_GT(truth.samples.size(), 5u);
@@ -333,9 +344,11 @@ TEST_F(SecureDomain, ParticipantsWithoutALabCertificateCannotInjectGroundTruth) 
 TEST_F(SecureDomain, WithoutSecurityTheSameInjectionReachesTheStore) {
   const int domain = TestDomain(44);
   const std::string db = dir_ / "open.db";
-  auto serve = StartArena({"serve", "--db", db, "--domain", std::to_string(domain)}, dir_ / "serve.log");
+  auto serve =
+      StartArena({"serve", "--db", db, "--domain", std::to_string(domain)}, dir_ / "serve.log");
   Injector open(domain, "arena.cell.ghost", {});
-  EXPECT_TRUE(WaitUntil([&] { return StoreKnowsCell(db, "ghost"); }, 30s)) << ReadFile(dir_ / "serve.log");
+  EXPECT_TRUE(WaitUntil([&] { return StoreKnowsCell(db, "ghost"); }, 30s))
+      << ReadFile(dir_ / "serve.log");
 }
 
 // End to end with security on: a secured service (loopback UDP) and two
@@ -346,12 +359,14 @@ TEST_F(SecureDomain, SecuredServiceAndCellsFinishACampaign) {
   // Real time, so that one cell is busy while the other is idle.
   auto c1 = SecureCell("c1", domain, {"--speed", "1"});
   auto c2 = SecureCell("c2", domain, {"--speed", "1", "--no-shm"});
-  auto serve = StartArena({"serve", "--db", db, "--domain", std::to_string(domain), "--security", lab_ + "/service"},
-                          dir_ / "serve.log");
+  auto serve = StartArena(
+      {"serve", "--db", db, "--domain", std::to_string(domain), "--security", lab_ + "/service"},
+      dir_ / "serve.log");
   // Both cells authenticate with the service before the campaign starts.
   ASSERT_TRUE(WaitUntil([&] { return StoreKnowsCell(db, "c1") && StoreKnowsCell(db, "c2"); }, 30s))
       << ReadFile(dir_ / "serve.log") << ReadFile(dir_ / "c1.log") << ReadFile(dir_ / "c2.log");
-  ASSERT_EQ(RunArena({"submit", TestCampaign("eval6.json"), "--db", db}, dir_ / "submit.log", 30s), 0)
+  ASSERT_EQ(RunArena({"submit", TestCampaign("eval6.json"), "--db", db}, dir_ / "submit.log", 30s),
+            0)
       << ReadFile(dir_ / "submit.log");
   ASSERT_TRUE(WaitUntil([&] { return CountStates(db, 1)["done"] == 6; }, 60s))
       << ReadFile(dir_ / "serve.log") << ReadFile(dir_ / "c1.log") << ReadFile(dir_ / "c2.log");
@@ -362,7 +377,8 @@ TEST_F(SecureDomain, SecuredServiceAndCellsFinishACampaign) {
   ExpectCampaignConsistent(db, 1, 6);
   std::set<std::string> cells;
   for (const auto& t : OpenReadOnly(db)->ListTrials(1)) cells.insert(t.cell_id);
-  EXPECT_EQ(cells, (std::set<std::string>{"c1", "c2"})) << "both cells (shared memory and UDP only) took part";
+  EXPECT_EQ(cells, (std::set<std::string>{"c1", "c2"}))
+      << "both cells (shared memory and UDP only) took part";
 }
 
 // `arena run --security LAB`: the service and every simulated cell use
@@ -370,15 +386,21 @@ TEST_F(SecureDomain, SecuredServiceAndCellsFinishACampaign) {
 TEST_F(SecureDomain, RunWithSecurityUsesTheLabsIdentities) {
   const std::string db = dir_ / "run.db";
   const std::string domain = std::to_string(TestDomain(46));
-  const std::vector<std::string> run = {"run", TestCampaign("eval6.json"), "--db", db, "--cells", "2",
-                                        "--domain", domain, "--quiet", "--security", lab_};
+  const std::vector<std::string> run = {"run",      TestCampaign("eval6.json"),
+                                        "--db",     db,
+                                        "--cells",  "2",
+                                        "--domain", domain,
+                                        "--quiet",  "--security",
+                                        lab_};
   EXPECT_EQ(RunArena(run, dir_ / "run-missing.out", 30s), 2);
-  EXPECT_NE(ReadFile(dir_ / "run-missing.out").find(lab_ + "/sim1: not a directory"), std::string::npos)
+  EXPECT_NE(ReadFile(dir_ / "run-missing.out").find(lab_ + "/sim1: not a directory"),
+            std::string::npos)
       << ReadFile(dir_ / "run-missing.out");
   EXPECT_FALSE(std::filesystem::exists(db));
   Certs({"issue", lab_, "--role", "cell", "--name", "sim1"});
   Certs({"issue", lab_, "--role", "cell", "--name", "sim2"});
-  ASSERT_EQ(RunArena(run, dir_ / "run.out", 60s), 0) << ReadFile(dir_ / "run.out") << ReadFile(db + ".log");
+  ASSERT_EQ(RunArena(run, dir_ / "run.out", 60s), 0)
+      << ReadFile(dir_ / "run.out") << ReadFile(db + ".log");
   ExpectCampaignConsistent(db, 1, 6);
   EXPECT_EQ(CountStates(db, 1)["done"], 6);
 }
@@ -415,7 +437,8 @@ std::string ForgerProfile(const std::vector<std::pair<std::string, std::string>>
           <properties>
 )";
   for (const auto& [name, value] : properties) {
-    x << "            <property><name>" << name << "</name><value>" << value << "</value></property>\n";
+    x << "            <property><name>" << name << "</name><value>" << value
+      << "</value></property>\n";
   }
   x << R"(          </properties>
         </propertiesPolicy>
@@ -434,7 +457,8 @@ std::string ForgerProfile(const std::vector<std::pair<std::string, std::string>>
 // `trial`, once the file `go` exists (the caller listens by then). Exit 0:
 // it wrote, never matched; 3: a cell matched its writer; 2: set-up failed
 // (the participant or the writer was refused).
-int RunForger(int domain, const std::string& profile_path, std::uint64_t trial, const std::string& go) {
+int RunForger(int domain, const std::string& profile_path, std::uint64_t trial,
+              const std::string& go) {
   for (int i = 0; i < 600 && !std::filesystem::exists(go); ++i) std::this_thread::sleep_for(100ms);
   int rc = 2;
   try {
@@ -478,9 +502,10 @@ const int kForgerHook = [] {
   return 0;
 }();
 
-std::unique_ptr<Child> StartForger(int domain, const std::string& profile, std::uint64_t trial, const std::string& go,
-                                   const std::string& log) {
-  const std::string spec = std::to_string(domain) + " " + std::to_string(trial) + " " + profile + " " + go;
+std::unique_ptr<Child> StartForger(int domain, const std::string& profile, std::uint64_t trial,
+                                   const std::string& go, const std::string& log) {
+  const std::string spec =
+      std::to_string(domain) + " " + std::to_string(trial) + " " + profile + " " + go;
   setenv("ARENA_TEST_FORGER", spec.c_str(), 1);  // inherited by the child only
   auto child = std::make_unique<Child>(std::vector<std::string>{"/proc/self/exe"}, log);
   unsetenv("ARENA_TEST_FORGER");
@@ -494,24 +519,29 @@ std::unique_ptr<Child> StartForger(int domain, const std::string& profile, std::
 // never matches it. (The remote half of access control; the watcher test
 // above covers the local half.)
 TEST_F(SecureDomain, AWatcherWithForgedPermissionsCannotCommand) {
-  if (std::system("openssl version >/dev/null 2>&1") != 0) GTEST_SKIP() << "no openssl command to sign the forgery";
+  if (std::system("openssl version >/dev/null 2>&1") != 0)
+    GTEST_SKIP() << "no openssl command to sign the forgery";
   std::string permissions = ReadFile(lab_ + "/alice/permissions.xml");
   const auto rule = permissions.find("<subscribe>");
   ASSERT_NE(rule, std::string::npos);
-  permissions.insert(rule, "<publish><topics><topic>TrialCommand</topic></topics></publish>\n        ");
+  permissions.insert(rule,
+                     "<publish><topics><topic>TrialCommand</topic></topics></publish>\n        ");
   std::ofstream(dir_ / "forged.xml") << permissions;
-  ASSERT_EQ(std::system(("openssl smime -sign -text -in " + (dir_ / "forged.xml") + " -signer " + rogue_ +
-                         "/ca.cert.pem -inkey " + rogue_ + "/ca.key.pem -out " + (dir_ / "forged.p7s"))
-                            .c_str()),
-            0);
-  const std::string auth = "dds.sec.auth.builtin.PKI-DH.", access = "dds.sec.access.builtin.Access-Permissions.";
+  ASSERT_EQ(
+      std::system(("openssl smime -sign -text -in " + (dir_ / "forged.xml") + " -signer " + rogue_ +
+                   "/ca.cert.pem -inkey " + rogue_ + "/ca.key.pem -out " + (dir_ / "forged.p7s"))
+                      .c_str()),
+      0);
+  const std::string auth = "dds.sec.auth.builtin.PKI-DH.",
+                    access = "dds.sec.access.builtin.Access-Permissions.";
   std::ofstream(dir_ / "forger.xml") << ForgerProfile({
       {"dds.sec.auth.plugin", "builtin.PKI-DH"},
       {auth + "identity_ca", "file://" + lab_ + "/ca.cert.pem"},  // a genuine lab identity...
       {auth + "identity_certificate", "file://" + lab_ + "/alice/identity.cert.pem"},
       {auth + "private_key", "file://" + lab_ + "/alice/identity.key.pem"},
       {"dds.sec.access.plugin", "builtin.Access-Permissions"},
-      {access + "permissions_ca", "file://" + rogue_ + "/ca.cert.pem"},  // ...with forged permissions
+      {access + "permissions_ca",
+       "file://" + rogue_ + "/ca.cert.pem"},  // ...with forged permissions
       {access + "governance", "file://" + rogue_ + "/governance.p7s"},
       {access + "permissions", "file://" + (dir_ / "forged.p7s")},
       {"dds.sec.crypto.plugin", "builtin.AES-GCM-GMAC"},
@@ -548,8 +578,9 @@ TEST_F(SecureDomain, AWatcherWithForgedPermissionsCannotCommand) {
   }
   const auto code = [](int st) { return WIFEXITED(st) ? WEXITSTATUS(st) : -1; };
   const int forger_rc = code(*forger_status), genuine_rc = code(*genuine_status);
-  EXPECT_EQ(genuine_rc, 3) << "control: the genuine service identity via the same profile should match\n"
-                           << ReadFile(dir_ / "genuine.log");
+  EXPECT_EQ(genuine_rc, 3)
+      << "control: the genuine service identity via the same profile should match\n"
+      << ReadFile(dir_ / "genuine.log");
   ASSERT_NE(forger_rc, 2) << "the forger could not even set up (profile or forgery broken)\n"
                           << ReadFile(dir_ / "forger.log");
   EXPECT_EQ(forger_rc, 0) << "the cell matched a command writer with forged permissions";
@@ -568,13 +599,15 @@ TEST_F(SecureDomain, SecuredServiceKilledAndRestartedFinishesTheCampaign) {
   const int domain = TestDomain(48);
   const std::string db = dir_ / "lab.db";
   auto cell = SecureCell("c1", domain, {"--speed", "1"});
-  ASSERT_EQ(RunArena({"submit", TestCampaign("eval6.json"), "--db", db}, dir_ / "submit.log", 30s), 0)
+  ASSERT_EQ(RunArena({"submit", TestCampaign("eval6.json"), "--db", db}, dir_ / "submit.log", 30s),
+            0)
       << ReadFile(dir_ / "submit.log");
-  const std::vector<std::string> serve = {"serve", "--db", db, "--domain", std::to_string(domain), "--security",
-                                          lab_ + "/service"};
+  const std::vector<std::string> serve = {
+      "serve", "--db", db, "--domain", std::to_string(domain), "--security", lab_ + "/service"};
   {
     auto first = StartArena(serve, dir_ / "serve1.log");
-    ASSERT_TRUE(WaitUntil([&] { return CountStates(db, 1)["done"] >= 1; }, 40s)) << ReadFile(dir_ / "serve1.log");
+    ASSERT_TRUE(WaitUntil([&] { return CountStates(db, 1)["done"] >= 1; }, 40s))
+        << ReadFile(dir_ / "serve1.log");
     first->Signal(SIGKILL);
     ASSERT_TRUE(first->Wait(10s).has_value());
   }

@@ -45,9 +45,9 @@ struct ExportOptions {
 };
 
 struct ExportedFile {
-  std::string path;     // relative to the dataset directory, '/' separated
+  std::string path;  // relative to the dataset directory, '/' separated
   std::uint64_t bytes = 0;
-  std::string sha256;   // lower-case hex
+  std::string sha256;  // lower-case hex
 };
 
 struct ExportReport {

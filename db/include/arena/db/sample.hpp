@@ -26,16 +26,16 @@ struct ContactWrench {
 };
 
 struct Sample {
-  double t = 0;                                       // s since the execute phase started
+  double t = 0;                                            // s since the execute phase started
   std::array<double, 7> object_pose{0, 0, 0, 1, 0, 0, 0};  // true (m, quaternion w x y z)
-  std::array<double, 6> object_twist{};               // true (m/s, rad/s)
+  std::array<double, 6> object_twist{};                    // true (m/s, rad/s)
   std::array<double, 7> pusher_pose{0, 0, 0, 1, 0, 0, 0};  // true
-  std::array<double, 6> pusher_twist{};               // true
-  std::vector<ContactWrench> contacts;                // true, scene order (fingers, then pusher)
-  bool observed_valid = true;                         // false: the sensors dropped this sample
+  std::array<double, 6> pusher_twist{};                    // true
+  std::vector<ContactWrench> contacts;  // true, scene order (fingers, then pusher)
+  bool observed_valid = true;           // false: the sensors dropped this sample
   std::array<double, 7> observed_object_pose{0, 0, 0, 1, 0, 0, 0};  // motion capture
-  std::array<double, 6> observed_pusher_wrench{};     // pusher F/T sensor (N, N m)
-  std::vector<double> observed_finger_wrenches;       // 6 per finger, scene order (N, N m)
+  std::array<double, 6> observed_pusher_wrench{};                   // pusher F/T sensor (N, N m)
+  std::vector<double> observed_finger_wrenches;  // 6 per finger, scene order (N, N m)
 };
 
 // Returns "" when every number in `s` is finite and the sizes are in range

@@ -107,8 +107,16 @@ class StoreError : public std::runtime_error {
 // ---------------------------------------------------------------- enums
 
 enum class TrialState {
-  kPlanned, kDispatched, kExecuted, kResetting, kResetDone, kResetFailed, kPredicted,
-  kDone, kFailed, kCancelled,
+  kPlanned,
+  kDispatched,
+  kExecuted,
+  kResetting,
+  kResetDone,
+  kResetFailed,
+  kPredicted,
+  kDone,
+  kFailed,
+  kCancelled,
 };
 const char* ToString(TrialState state);
 std::optional<TrialState> ParseTrialState(const std::string& text);
@@ -130,8 +138,8 @@ int ContactTypeMask(const std::vector<std::string>& types);
 // ---------------------------------------------------------------- records
 
 struct StoreOptions {
-  bool read_only = false;        // SQLITE_OPEN_READONLY: every write fails with kReadOnly
-  bool create = true;            // read-write only: create the file if missing
+  bool read_only = false;  // SQLITE_OPEN_READONLY: every write fails with kReadOnly
+  bool create = true;      // read-write only: create the file if missing
   // FULL: a commit is on disk when it returns (survives power loss).
   // NORMAL (default): a commit survives any process crash (SIGKILL); an OS
   // crash or power loss may roll back the last commits since the last WAL
@@ -157,20 +165,20 @@ struct StoreOptions {
 };
 
 struct NewCampaign {
-  std::string name;                    // non-empty
-  std::string spec_json;               // the submitted campaign, as validated (JSON object)
-  int priority = 0;                    // higher runs first
-  std::uint64_t seed = 0;              // the campaign seed
+  std::string name;                       // non-empty
+  std::string spec_json;                  // the submitted campaign, as validated (JSON object)
+  int priority = 0;                       // higher runs first
+  std::uint64_t seed = 0;                 // the campaign seed
   std::string sampler_state_json = "{}";  // where the sampler stands after the planned trials
 };
 
 struct PlannedTrial {
-  int condition = 0;                   // condition index (>= 0)
-  int replicate = 0;                   // replicate of that condition (>= 0)
-  std::uint64_t seed = 0;              // per-trial seed: re-runs the trial bit for bit
-  std::string scene_json;              // SCENE.md scene (JSON object); parameter columns come from it
-  std::string params_json = "{}";      // the sampler's own parameter values (JSON object)
-  std::string defects_json = "{}";     // the campaign's defect profile for this trial
+  int condition = 0;                // condition index (>= 0)
+  int replicate = 0;                // replicate of that condition (>= 0)
+  std::uint64_t seed = 0;           // per-trial seed: re-runs the trial bit for bit
+  std::string scene_json;           // SCENE.md scene (JSON object); parameter columns come from it
+  std::string params_json = "{}";   // the sampler's own parameter values (JSON object)
+  std::string defects_json = "{}";  // the campaign's defect profile for this trial
 };
 
 struct Campaign {
@@ -178,35 +186,35 @@ struct Campaign {
   std::string name;
   std::string spec_json;
   CampaignState state = CampaignState::kActive;
-  std::string state_reason;            // why it is paused / cancelled ("" when active)
+  std::string state_reason;  // why it is paused / cancelled ("" when active)
   int priority = 0;
   std::uint64_t seed = 0;
   std::string sampler_state_json;
-  double created_at = 0;               // s since epoch
+  double created_at = 0;  // s since epoch
   double updated_at = 0;
 };
 
 struct Trial {
   std::int64_t id = 0;
   std::int64_t campaign_id = 0;
-  int index = 0;                       // 0.. within the campaign
+  int index = 0;  // 0.. within the campaign
   int condition = 0;
   int replicate = 0;
   std::uint64_t seed = 0;
   TrialState state = TrialState::kPlanned;
-  int attempt = 1;                     // 1 for the first execution
-  std::string cell_id;                 // last cell it was dispatched to ("" if never)
+  int attempt = 1;      // 1 for the first execution
+  std::string cell_id;  // last cell it was dispatched to ("" if never)
   std::string scene_json;
   std::string params_json;
   std::string defects_json;
-  std::string outcome;                 // "" until set: ok, solver_failure, refused, failed, cancelled
+  std::string outcome;  // "" until set: ok, solver_failure, refused, failed, cancelled
   std::optional<std::int64_t> gt_stream_id;  // the published ground truth
-  double not_before = 0;               // s since epoch: a retry waits until then
+  double not_before = 0;                     // s since epoch: a retry waits until then
   double created_at = 0;
   double updated_at = 0;
   std::optional<double> dispatched_at;  // s since epoch, last dispatch (absent if never)
   std::optional<double> executed_at;
-  std::optional<double> finished_at;    // reached a terminal state
+  std::optional<double> finished_at;  // reached a terminal state
 };
 
 // What ClaimNextTrial hands the service: everything it needs to send EXECUTE.
@@ -222,9 +230,9 @@ struct ClaimedTrial {
 struct Transition {
   std::int64_t trial_id = 0;
   int attempt = 0;
-  std::string from_state;              // "" for the insert that created the trial
+  std::string from_state;  // "" for the insert that created the trial
   std::string to_state;
-  double at = 0;                       // s since epoch
+  double at = 0;  // s since epoch
   std::string cell_id;
   std::string reason;
 };
@@ -233,25 +241,25 @@ struct Transition {
 struct ResetReport {
   bool ok = false;
   std::array<double, 7> observed_pose{0, 0, 0, 1, 0, 0, 0};  // object start pose it saw (m, quat)
-  double position_error = 0;           // m, the cell's own observed-vs-target
-  double angle_error = 0;              // rad
+  double position_error = 0;                                 // m, the cell's own observed-vs-target
+  double angle_error = 0;                                    // rad
   int reset_attempts = 1;
-  std::string reason;                  // why it failed ("" if ok)
+  std::string reason;  // why it failed ("" if ok)
   // false: nothing was observed (e.g. the service restarted mid-reset), so
   // observed_pose is ignored and the next trial on the cell has no known start state.
   bool pose_observed = true;
 };
 
 struct Prediction {
-  std::string model_key;               // fidelity label, e.g. "g8_k3_dt0.004" (non-empty)
-  std::string model_json = "{}";       // the model settings used
-  std::string status = "ok";           // ok, solver_failure, invalid_scene, error
+  std::string model_key;                       // fidelity label, e.g. "g8_k3_dt0.004" (non-empty)
+  std::string model_json = "{}";               // the model settings used
+  std::string status = "ok";                   // ok, solver_failure, invalid_scene, error
   std::optional<double> final_position_error;  // m, predicted vs true final object position
   std::optional<double> final_angle_error;     // rad
   std::optional<double> force_error;           // N, RMS over samples and contacts
   std::optional<double> mode_agreement;        // [0, 1], fraction of contact-samples with same mode
-  double wall_s = 0;                   // predictor wall time (s), >= 0
-  std::string detail_json = "{}";      // residuals, solver statistics
+  double wall_s = 0;                           // predictor wall time (s), >= 0
+  std::string detail_json = "{}";              // residuals, solver statistics
 };
 
 // One trial's result in an evaluation run (`arena evaluate`): the trial
@@ -260,17 +268,17 @@ struct Prediction {
 // so that evaluating never touches a trial's own prediction or its state.
 struct EvaluationResult {
   std::int64_t trial_id = 0;
-  int attempt = 0;                     // the trial's attempt whose ground truth was used
-  Prediction prediction;               // model_key names the setting
+  int attempt = 0;        // the trial's attempt whose ground truth was used
+  Prediction prediction;  // model_key names the setting
 };
 
 // One evaluation run over a campaign's done trials.
 struct Evaluation {
   std::int64_t id = 0;
   std::int64_t campaign_id = 0;
-  double created_at = 0;               // s since epoch
-  std::string settings_json = "{}";    // the grid of settings and the budget asked for
-  std::string report_json = "{}";      // per-setting summary, Pareto front, recommendation
+  double created_at = 0;             // s since epoch
+  std::string settings_json = "{}";  // the grid of settings and the budget asked for
+  std::string report_json = "{}";    // per-setting summary, Pareto front, recommendation
 };
 
 struct CellInfo {
@@ -288,14 +296,14 @@ struct CampaignStatus {
   std::string name;
   CampaignState state = CampaignState::kActive;
   int priority = 0;
-  std::int64_t planned = 0;            // all trials of the campaign
-  std::int64_t pending = 0;            // state planned
-  std::int64_t running = 0;            // dispatched .. predicted
+  std::int64_t planned = 0;  // all trials of the campaign
+  std::int64_t pending = 0;  // state planned
+  std::int64_t running = 0;  // dispatched .. predicted
   std::int64_t done = 0;
   std::int64_t failed = 0;
   std::int64_t cancelled = 0;
-  double rate_per_hour = 0;            // finished (done+failed) trials per hour, recent window
-  std::optional<double> eta_s;         // (pending+running)/rate; absent when rate is 0
+  double rate_per_hour = 0;     // finished (done+failed) trials per hour, recent window
+  std::optional<double> eta_s;  // (pending+running)/rate; absent when rate is 0
 };
 
 // Start state observed after the reset that preceded each trial, against the
@@ -304,11 +312,11 @@ struct StartStateDrift {
   std::int64_t campaign_id = 0;
   std::string cell_id;
   std::int64_t trials = 0;
-  double mean_dx = 0, mean_dy = 0, mean_dz = 0;   // m, observed - nominal (bias)
-  double mean_position_error = 0;                 // m
-  double max_position_error = 0;                  // m
-  double mean_angle_error = 0;                    // rad
-  double max_angle_error = 0;                     // rad
+  double mean_dx = 0, mean_dy = 0, mean_dz = 0;  // m, observed - nominal (bias)
+  double mean_position_error = 0;                // m
+  double max_position_error = 0;                 // m
+  double mean_angle_error = 0;                   // rad
+  double max_angle_error = 0;                    // rad
 };
 
 struct StatusSummary {
@@ -385,8 +393,8 @@ class Store {
   Store(const Store&) = delete;
   Store& operator=(const Store&) = delete;
 
-  static int SchemaVersion();            // the schema this binary writes
-  int FileSchemaVersion() const;         // PRAGMA user_version of the open file
+  static int SchemaVersion();     // the schema this binary writes
+  int FileSchemaVersion() const;  // PRAGMA user_version of the open file
   bool read_only() const;
   const std::string& path() const;
   double Now() const;
@@ -410,9 +418,10 @@ class Store {
   // active -> paused (idempotent). `reason` tells an operator's pause from
   // an automatic suspension (e.g. "suspended: 3 reset failures in a row").
   void PauseCampaign(std::int64_t campaign_id, const std::string& reason = "paused by operator");
-  void ResumeCampaign(std::int64_t campaign_id);   // paused -> active
+  void ResumeCampaign(std::int64_t campaign_id);  // paused -> active
   // -> cancelled; its planned trials become cancelled, running ones run out.
-  void CancelCampaign(std::int64_t campaign_id, const std::string& reason = "cancelled by operator");
+  void CancelCampaign(std::int64_t campaign_id,
+                      const std::string& reason = "cancelled by operator");
   // Marks active campaigns whose trials are all terminal as done; returns their ids.
   std::vector<std::int64_t> CompleteFinishedCampaigns();
 
@@ -496,7 +505,7 @@ class Store {
   // Counts a phase result against the cell; @returns consecutive failures now.
   int RecordCellResult(const std::string& cell_id, bool ok);
   void QuarantineCell(const std::string& cell_id, const std::string& reason);
-  void ReleaseCell(const std::string& cell_id);    // quarantined|gone -> healthy, failures reset
+  void ReleaseCell(const std::string& cell_id);  // quarantined|gone -> healthy, failures reset
   void MarkCellGone(const std::string& cell_id, const std::string& reason);
   CellInfo GetCell(const std::string& cell_id) const;
   std::vector<CellInfo> ListCells() const;

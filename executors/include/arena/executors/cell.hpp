@@ -35,18 +35,18 @@ namespace arena::executors {
 // The high-fidelity model settings a cell simulates with; a scene asking for
 // more (more facets, a smaller step) keeps its own.
 struct Fidelity {
-  int facets = 16;      // edges of the friction cone
-  int points = 5;       // constituent points per line/patch
-  double dt = 0.002;    // s
+  int facets = 16;    // edges of the friction cone
+  int points = 5;     // constituent points per line/patch
+  double dt = 0.002;  // s
 };
 
 struct CellOptions {
-  std::string id;                  // [A-Za-z0-9_.-]+, unique per deployment
+  std::string id;  // [A-Za-z0-9_.-]+, unique per deployment
   int domain_id = 0;
   dds::NetworkOptions network;
   DefectProfile defects;
-  double speed = 1.0;              // wall s per simulated s: 0 = as fast as possible, 1 = real time
-  int batch_samples = 25;          // samples per GroundTruth message, 1..256 (25 = 10 Hz at 250 Hz)
+  double speed = 1.0;      // wall s per simulated s: 0 = as fast as possible, 1 = real time
+  int batch_samples = 25;  // samples per GroundTruth message, 1..256 (25 = 10 Hz at 250 Hz)
   Fidelity fidelity;
   double participant_lease_s = 2.5;
 };
@@ -67,8 +67,8 @@ struct CellCounters {
   std::uint64_t resets = 0;
   std::uint64_t refused = 0;
   std::uint64_t failed = 0;
-  std::uint64_t duplicates = 0;   // commands answered from the finished table
-  std::uint64_t samples = 0;      // ground-truth samples sent
+  std::uint64_t duplicates = 0;  // commands answered from the finished table
+  std::uint64_t samples = 0;     // ground-truth samples sent
 };
 
 class Cell {

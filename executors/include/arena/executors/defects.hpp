@@ -39,18 +39,19 @@ struct DefectProfile {
   Eigen::Vector3d force_std = Eigen::Vector3d::Zero();     // N, every F/T sensor
   Eigen::Vector3d torque_std = Eigen::Vector3d::Zero();    // N m
   // Actuation noise, drawn once per trial: v_actual = v * (1 + s) + o.
-  double velocity_scale_std = 0;                            // s ~ N(0, std), fraction
+  double velocity_scale_std = 0;                                  // s ~ N(0, std), fraction
   Eigen::Vector3d velocity_offset_std = Eigen::Vector3d::Zero();  // o ~ N(0, std), m/s
-  double latency_ms = 0;         // observed stream lags the truth by this much (>= 0)
-  double drop_probability = 0;   // per sample, [0, 1)
+  double latency_ms = 0;        // observed stream lags the truth by this much (>= 0)
+  double drop_probability = 0;  // per sample, [0, 1)
   // Trial-to-trial friction variability: every mu is scaled by 1 + N(0, std).
   double mu_scale_std = 0;
   // Capabilities and limits.
   Eigen::Vector3d workspace_min = Eigen::Vector3d::Constant(-0.25);  // m, object position
   Eigen::Vector3d workspace_max = Eigen::Vector3d::Constant(0.25);   // m
-  double max_pusher_speed = 0.5;                                      // m/s
-  std::vector<mechanics::ContactType> contact_types = {
-      mechanics::ContactType::kPoint, mechanics::ContactType::kLine, mechanics::ContactType::kPatch};
+  double max_pusher_speed = 0.5;                                     // m/s
+  std::vector<mechanics::ContactType> contact_types = {mechanics::ContactType::kPoint,
+                                                       mechanics::ContactType::kLine,
+                                                       mechanics::ContactType::kPatch};
   // Reset phase (workspace and sensing noise are filled from the above).
   reset::ResetParams reset;
   // Fault injection, for the fault tests only (JSON "fault_injection"; never
@@ -76,9 +77,9 @@ reset::ResetParams EffectiveResetParams(const DefectProfile& profile);
 
 // What the cell actually does in a trial, drawn from the profile.
 struct TrialPerturbation {
-  double mu_scale = 1;                                         // applied to every mu
-  double velocity_scale = 1;                                   // pusher velocity factor
-  Eigen::Vector3d velocity_offset = Eigen::Vector3d::Zero();   // m/s
+  double mu_scale = 1;                                        // applied to every mu
+  double velocity_scale = 1;                                  // pusher velocity factor
+  Eigen::Vector3d velocity_offset = Eigen::Vector3d::Zero();  // m/s
 };
 TrialPerturbation DrawPerturbation(const DefectProfile& profile, std::uint64_t seed,
                                    std::uint64_t trial_id);
@@ -92,9 +93,8 @@ std::string CheckCapabilities(const DefectProfile& profile, const mechanics::Sce
 // What the sensors saw for each true sample (latency, drops, noise), and the
 // pusher's true state. finger wrenches: the finger contact's force and torque.
 std::vector<dds::Observation> Observe(const std::vector<mechanics::TrajectorySample>& truth,
-                                      const mechanics::Scene& scene,
-                                      const DefectProfile& profile, std::uint64_t seed,
-                                      std::uint64_t trial_id);
+                                      const mechanics::Scene& scene, const DefectProfile& profile,
+                                      std::uint64_t seed, std::uint64_t trial_id);
 
 // The pusher's true pose and twist at a sample (constant actuated twist).
 dds::PusherState PusherAt(const mechanics::Scene& actual_scene,

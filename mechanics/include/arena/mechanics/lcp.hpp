@@ -3,8 +3,8 @@
 // test against cycling on degenerate problems), with a bounded pivot count
 // per run, an optional warm start from a previous basis, and a few runs with
 // other covering vectors when a run ends on a ray (the contact LCP is
-// copositive but not copositive-plus, so one run is not guaranteed). The model (model.hpp) hands it nondimensional problems, so the
-// tolerances here are relative by construction.
+// copositive but not copositive-plus, so one run is not guaranteed). The model (model.hpp) hands it
+// nondimensional problems, so the tolerances here are relative by construction.
 #pragma once
 
 #include <string>
@@ -15,17 +15,17 @@
 namespace arena::mechanics {
 
 struct LcpOptions {
-  int max_pivots = 0;             // 0: 50 n + 200
-  double pivot_tolerance = 1e-12; // smallest usable pivot (nondimensional)
-  double feasibility = 1e-9;      // accepted negativity of z, w (nondimensional)
-  Eigen::VectorXd covering;       // Lemke's covering vector (> 0); empty: a fixed generic one (lcp.cpp)
-  int covering_attempts = 8;      // runs with other covering vectors after a failed one
-  int first_covering = 0;         // 0: start with `covering`; k > 0: with the k-th alternative
+  int max_pivots = 0;              // 0: 50 n + 200
+  double pivot_tolerance = 1e-12;  // smallest usable pivot (nondimensional)
+  double feasibility = 1e-9;       // accepted negativity of z, w (nondimensional)
+  Eigen::VectorXd covering;   // Lemke's covering vector (> 0); empty: a fixed generic one (lcp.cpp)
+  int covering_attempts = 8;  // runs with other covering vectors after a failed one
+  int first_covering = 0;     // 0: start with `covering`; k > 0: with the k-th alternative
 };
 
 struct LcpResult {
   bool ok = false;
-  std::string reason;            // why not ok: "pivot limit", "ray termination", ...
+  std::string reason;  // why not ok: "pivot limit", "ray termination", ...
   Eigen::VectorXd z;
   Eigen::VectorXd w;             // A z + b
   std::vector<char> basis;       // basis[i] != 0: z_i is basic (a warm start for the next solve)

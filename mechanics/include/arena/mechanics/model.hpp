@@ -21,11 +21,10 @@
 // their pads follow the object along their normals; the pusher's contact
 // points move with its motion; contact points on the object are taken where
 // the contacts are, so the object slides under them. The gyroscopic torque
-// is neglected (quasi-dynamic regime; explicit integration of it is unstable). Line constituent points are spread
-// evenly over the line; patch constituent points sit on a ring of radius
-// 2R/3 (which gives a uniformly pressed disk's torsional friction 2/3 μ N R
-// when the points share the load) starting along t1, a single point at the
-// centre when points = 1.
+// is neglected (quasi-dynamic regime; explicit integration of it is unstable). Line constituent
+// points are spread evenly over the line; patch constituent points sit on a ring of radius 2R/3
+// (which gives a uniformly pressed disk's torsional friction 2/3 μ N R when the points share the
+// load) starting along t1, a single point at the centre when points = 1.
 #pragma once
 
 #include <functional>
@@ -103,17 +102,17 @@ class ContactModel {
   using LcpObserver = std::function<void(const Eigen::MatrixXd& A, const Eigen::VectorXd& b)>;
   void SetLcpObserver(LcpObserver observer);
 
-  double time() const;                          // s
-  const Eigen::Vector3d& position() const;      // object centre of mass (m)
+  double time() const;                      // s
+  const Eigen::Vector3d& position() const;  // object centre of mass (m)
   Eigen::Quaterniond orientation() const;
-  const Eigen::Vector3d& velocity() const;      // m/s (of the last step)
+  const Eigen::Vector3d& velocity() const;  // m/s (of the last step)
   const Eigen::Vector3d& angular_velocity() const;
-  Eigen::Vector3d pusher_position() const;      // pusher contact point at time()
+  Eigen::Vector3d pusher_position() const;  // pusher contact point at time()
   // Contact states of the last step: fingers in scene order, then the pusher.
   const std::vector<ContactState>& contacts() const;
-  Eigen::Vector3d pusher_force() const;         // on the object (N), last step
-  double force_scale() const;                   // N, residuals are relative to it
-  double velocity_scale() const;                // m/s
+  Eigen::Vector3d pusher_force() const;  // on the object (N), last step
+  double force_scale() const;            // N, residuals are relative to it
+  double velocity_scale() const;         // m/s
 
  private:
   struct Impl;

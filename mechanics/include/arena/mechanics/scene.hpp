@@ -27,10 +27,10 @@ struct Pose {
 struct ObjectSpec {
   ObjectShape shape = ObjectShape::kBox;
   Eigen::Vector3d size = Eigen::Vector3d::Zero();  // box: full extents (m)
-  double radius = 0;                                // cylinder (m)
-  double height = 0;                                // cylinder (m), along object z
-  double mass = 0;                                  // kg, > 0
-  std::optional<Eigen::Matrix3d> inertia;           // kg m^2 about the centre of mass
+  double radius = 0;                               // cylinder (m)
+  double height = 0;                               // cylinder (m), along object z
+  double mass = 0;                                 // kg, > 0
+  std::optional<Eigen::Matrix3d> inertia;          // kg m^2 about the centre of mass
   Pose pose;
 };
 
@@ -55,17 +55,17 @@ struct PusherSpec : ContactSpec {
 };
 
 struct ModelOptions {
-  int facets = 8;        // edges of the inscribed polyhedral friction cone, >= 3
-  int points = 3;        // constituent points per line (patch)
-  double dt = 0.004;     // time step (s)
+  int facets = 8;     // edges of the inscribed polyhedral friction cone, >= 3
+  int points = 3;     // constituent points per line (patch)
+  double dt = 0.004;  // time step (s)
   Reduce reduce = Reduce::kAuto;
 };
 
 struct Scene {
   ObjectSpec object;
   Eigen::Vector3d gravity = Eigen::Vector3d::Zero();  // m/s^2; zero = no gravity rows
-  double duration = 1.0;                               // s
-  double grip_force = 0;                               // N per finger (sum over constituents)
+  double duration = 1.0;                              // s
+  double grip_force = 0;                              // N per finger (sum over constituents)
   std::vector<ContactSpec> fingers;
   std::optional<PusherSpec> pusher;
   ModelOptions model;

@@ -76,9 +76,9 @@ struct Variation {
   std::string name;
   ValueType type = ValueType::kNumber;
   Kind kind = Kind::kFixed;
-  double min = 0, max = 0;   // kRange (SI units)
-  bool log_scale = false;    // kRange: sample log(value) uniformly (min > 0)
-  int levels = 0;            // kRange under the grid sampler: evenly spaced values incl. ends
+  double min = 0, max = 0;  // kRange (SI units)
+  bool log_scale = false;   // kRange: sample log(value) uniformly (min > 0)
+  int levels = 0;           // kRange under the grid sampler: evenly spaced values incl. ends
   std::vector<VariationValue> choices;  // kChoices; kFixed holds its one value here
 
   // A sampled axis: a range with min < max, or two or more choices.
@@ -88,15 +88,15 @@ struct Variation {
 };
 
 struct Campaign {
-  std::string name;          // [A-Za-z0-9_.-]{1,64}
-  std::string description;   // free text, optional
-  uint64_t seed = 0;         // all sampling and per-trial seeds derive from it
-  int priority = 0;          // higher runs first; [-1000, 1000]
-  mechanics::Scene scene;    // the base scene; the cells simulate with its model settings
+  std::string name;                   // [A-Za-z0-9_.-]{1,64}
+  std::string description;            // free text, optional
+  uint64_t seed = 0;                  // all sampling and per-trial seeds derive from it
+  int priority = 0;                   // higher runs first; [-1000, 1000]
+  mechanics::Scene scene;             // the base scene; the cells simulate with its model settings
   std::vector<Variation> variations;  // in canonical order (kVariationNames), only those given
   SamplerKind sampler = SamplerKind::kSobol;
-  int64_t conditions = 1;    // distinct sampled scenes
-  int replicates = 1;        // trials per condition (same scene, different seed)
+  int64_t conditions = 1;              // distinct sampled scenes
+  int replicates = 1;                  // trials per condition (same scene, different seed)
   mechanics::ModelOptions prediction;  // model settings the predictor uses
   std::string defects_json = "{}";     // defect profile (a JSON object), passed to cells as is
   std::string defects_file;            // when given as a path (relative to the campaign file)
@@ -109,9 +109,10 @@ struct PlannedTrial {
   int64_t index = 0;      // position in the campaign's sequence, [0, TrialCount)
   int64_t condition = 0;  // index / replicates
   int replicate = 0;      // index % replicates
-  uint64_t seed = 0;      // per-trial seed (defects, noise), from (campaign seed, condition, replicate)
-  mechanics::Scene scene;            // what the cell runs (valid)
-  std::string parameters_json;       // {"grip_force": 12.5, "finger_type": "line", ...}: the sampled values
+  uint64_t seed = 0;  // per-trial seed (defects, noise), from (campaign seed, condition, replicate)
+  mechanics::Scene scene;  // what the cell runs (valid)
+  std::string
+      parameters_json;  // {"grip_force": 12.5, "finger_type": "line", ...}: the sampled values
 };
 
 // How much of the plan ParseCampaign checks. kAllConditions builds and

@@ -39,7 +39,7 @@ namespace arena::orchestrator {
 struct FidelityGrid {
   std::vector<int> facets{4, 8, 16, 32};
   std::vector<int> points{2, 3, 5, 9};
-  std::vector<double> dt{0.004};             // s
+  std::vector<double> dt{0.004};  // s
   std::vector<mechanics::Reduce> reduce{mechanics::Reduce::kAuto};
 };
 
@@ -53,10 +53,13 @@ double Percentile(std::vector<double> values, double p);
 
 // The error measures a budget can bound (SI units: m, rad, N, fraction).
 enum class ErrorMetric {
-  kPositionMedian, kPositionP95,   // final object position error (m)
-  kAngleMedian, kAngleP95,         // final orientation error (rad)
-  kForceMedian, kForceP95,         // RMS contact force error (N)
-  kModeAgreementMedian,            // contact-mode agreement (fraction; a budget is a minimum)
+  kPositionMedian,
+  kPositionP95,  // final object position error (m)
+  kAngleMedian,
+  kAngleP95,  // final orientation error (rad)
+  kForceMedian,
+  kForceP95,             // RMS contact force error (N)
+  kModeAgreementMedian,  // contact-mode agreement (fraction; a budget is a minimum)
 };
 const char* ToString(ErrorMetric metric);  // "position_median", ...
 // true: smaller is better (all but mode agreement).
@@ -84,18 +87,18 @@ struct Distribution {
 
 // One setting's figures over the evaluated trials.
 struct SettingSummary {
-  std::string model_key;                   // ModelKey(model)
+  std::string model_key;  // ModelKey(model)
   mechanics::ModelOptions model;
-  int trials = 0;                          // replayed
-  int ok = 0;                              // predicted and scored
-  int failures = 0;                        // trials - ok (solver failure, invalid scene, error)
-  std::optional<Distribution> position;    // m   (absent when ok == 0)
-  std::optional<Distribution> angle;       // rad
-  std::optional<Distribution> force;       // N
+  int trials = 0;                              // replayed
+  int ok = 0;                                  // predicted and scored
+  int failures = 0;                            // trials - ok (solver failure, invalid scene, error)
+  std::optional<Distribution> position;        // m   (absent when ok == 0)
+  std::optional<Distribution> angle;           // rad
+  std::optional<Distribution> force;           // N
   std::optional<Distribution> mode_agreement;  // fraction
-  Distribution time;                       // s per trial, over all replayed trials
+  Distribution time;                           // s per trial, over all replayed trials
   bool pareto = false;
-  bool within_budget = false;              // eligible and meets every budget
+  bool within_budget = false;  // eligible and meets every budget
   // The value of `metric` (absent when the setting has no ok trial).
   std::optional<double> Metric(ErrorMetric metric) const;
   bool eligible() const { return trials > 0 && failures == 0; }
@@ -103,7 +106,7 @@ struct SettingSummary {
 
 struct EvaluationReport {
   std::int64_t campaign_id = 0;
-  int trials = 0;                          // done trials replayed
+  int trials = 0;  // done trials replayed
   ErrorMetric primary = ErrorMetric::kPositionMedian;
   std::vector<Budget> budgets;
   std::vector<SettingSummary> settings;    // grid order
@@ -115,7 +118,7 @@ struct EvaluationReport {
 struct TrialEvaluation {
   std::int64_t trial_id = 0;
   int attempt = 0;
-  std::size_t setting = 0;                 // index into the grid
+  std::size_t setting = 0;  // index into the grid
   db::Prediction prediction;
 };
 
@@ -133,7 +136,7 @@ nlohmann::json ToJson(const EvaluationReport& report);
 struct EvaluationOptions {
   FidelityGrid grid;
   std::vector<Budget> budgets;
-  int threads = 0;                         // 0: one per core
+  int threads = 0;  // 0: one per core
   // Called from the calling thread about 10 times a second and at the end:
   // (jobs done, jobs failed, jobs total); a job is one (trial, setting).
   std::function<void(long, long, long)> progress;
@@ -141,7 +144,7 @@ struct EvaluationOptions {
 };
 
 struct EvaluationRun {
-  std::int64_t evaluation_id = 0;          // 0 when cancelled (nothing stored)
+  std::int64_t evaluation_id = 0;  // 0 when cancelled (nothing stored)
   bool cancelled = false;
   EvaluationReport report;
 };

@@ -10,12 +10,12 @@
 namespace arena::orchestrator {
 
 struct PredictionError {
-  double final_position = 0;    // m, |p_pred - p_true| at the last paired sample
-  double final_angle = 0;       // rad, rotation between predicted and true orientation there
-  double force_rms = 0;         // N, RMS over samples and contacts of |f_pred - f_true|
-                                //    (normal and tangential parts, on the object)
-  double force_scale = 0;       // N, RMS of |f_true| over the same pairs (to normalise)
-  double mode_agreement = 1;    // fraction of (sample, contact) pairs with the same mode
+  double final_position = 0;  // m, |p_pred - p_true| at the last paired sample
+  double final_angle = 0;     // rad, rotation between predicted and true orientation there
+  double force_rms = 0;       // N, RMS over samples and contacts of |f_pred - f_true|
+                              //    (normal and tangential parts, on the object)
+  double force_scale = 0;     // N, RMS of |f_true| over the same pairs (to normalise)
+  double mode_agreement = 1;  // fraction of (sample, contact) pairs with the same mode
   int samples_compared = 0;
 };
 

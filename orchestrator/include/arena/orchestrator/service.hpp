@@ -44,37 +44,37 @@
 namespace arena::orchestrator {
 
 struct ServiceOptions {
-  std::string db_path;                  // the SQLite store (created if missing)
-  int domain_id = 0;                    // DDS domain, 0..232
-  dds::NetworkOptions network;          // default: this host only
-  int max_attempts = 3;                 // executions per trial before it fails
-  double retry_backoff_s = 1.0;         // first retry waits this long; doubles per attempt
-  int quarantine_after = 3;             // consecutive failed phases of a cell
-  double execute_timeout_s = 30.0;      // wall-clock budget of EXECUTE beyond the trial's
-                                        //   duration x the cell's speed
-  double reset_timeout_s = 60.0;        // wall-clock budget of RESET
-  double stream_grace_s = 5.0;          // after EXECUTED: wait this long for missing batches
-  double drain_timeout_s = 30.0;        // on Stop(): how long phases in flight may finish
-  int predictor_threads = 1;            // worker threads predicting trials
-  bool exit_when_done = false;          // `arena run`: stop when no active campaign is left
-  std::int64_t only_campaign = 0;       // > 0: exit_when_done looks at this campaign only
-  std::int64_t store_max_pages = 0;     // > 0: the store may not grow past this many 4 KiB
-                                        //   pages (db::StoreOptions::max_pages; fault tests)
+  std::string db_path;               // the SQLite store (created if missing)
+  int domain_id = 0;                 // DDS domain, 0..232
+  dds::NetworkOptions network;       // default: this host only
+  int max_attempts = 3;              // executions per trial before it fails
+  double retry_backoff_s = 1.0;      // first retry waits this long; doubles per attempt
+  int quarantine_after = 3;          // consecutive failed phases of a cell
+  double execute_timeout_s = 30.0;   // wall-clock budget of EXECUTE beyond the trial's
+                                     //   duration x the cell's speed
+  double reset_timeout_s = 60.0;     // wall-clock budget of RESET
+  double stream_grace_s = 5.0;       // after EXECUTED: wait this long for missing batches
+  double drain_timeout_s = 30.0;     // on Stop(): how long phases in flight may finish
+  int predictor_threads = 1;         // worker threads predicting trials
+  bool exit_when_done = false;       // `arena run`: stop when no active campaign is left
+  std::int64_t only_campaign = 0;    // > 0: exit_when_done looks at this campaign only
+  std::int64_t store_max_pages = 0;  // > 0: the store may not grow past this many 4 KiB
+                                     //   pages (db::StoreOptions::max_pages; fault tests)
 };
 
 // What the service has done since it started (for `arena run`'s summary and tests).
 struct ServiceCounters {
-  std::int64_t dispatched = 0;          // EXECUTE commands sent
-  std::int64_t executed = 0;            // streams published
-  std::int64_t done = 0;                // trials finished
-  std::int64_t retried = 0;             // attempts sent back to planned
-  std::int64_t failed = 0;              // trials that ran out of attempts or were refused
+  std::int64_t dispatched = 0;  // EXECUTE commands sent
+  std::int64_t executed = 0;    // streams published
+  std::int64_t done = 0;        // trials finished
+  std::int64_t retried = 0;     // attempts sent back to planned
+  std::int64_t failed = 0;      // trials that ran out of attempts or were refused
   std::int64_t resets_failed = 0;
-  std::int64_t quarantined = 0;         // cells quarantined
-  std::int64_t recovered = 0;           // trials picked up after a restart
-  std::int64_t samples = 0;             // ground-truth samples ingested
-  int cells_known = 0;                  // cells that announced themselves
-  int cells_usable = 0;                 // of those: alive and not quarantined
+  std::int64_t quarantined = 0;  // cells quarantined
+  std::int64_t recovered = 0;    // trials picked up after a restart
+  std::int64_t samples = 0;      // ground-truth samples ingested
+  int cells_known = 0;           // cells that announced themselves
+  int cells_usable = 0;          // of those: alive and not quarantined
 };
 
 // Where one clean trial's time went on its cell, for the orchestration-overhead
@@ -86,10 +86,10 @@ struct TrialTiming {
   std::int64_t trial_id = 0, campaign_id = 0;
   int attempt = 0;
   std::string cell_id;
-  double cell_busy_s = 0;   // claim -> RESET_DONE taken, service clock (s)
-  double execute_s = 0;     // the cell's own EXECUTE wall time (s)
-  double reset_s = 0;       // the cell's own RESET wall time (s)
-  double overhead_s = 0;    // cell_busy_s - execute_s - reset_s
+  double cell_busy_s = 0;  // claim -> RESET_DONE taken, service clock (s)
+  double execute_s = 0;    // the cell's own EXECUTE wall time (s)
+  double reset_s = 0;      // the cell's own RESET wall time (s)
+  double overhead_s = 0;   // cell_busy_s - execute_s - reset_s
 };
 
 class Service {

@@ -22,23 +22,23 @@
 namespace arena::reset {
 
 struct Pose {
-  Eigen::Vector3d position = Eigen::Vector3d::Zero();              // m
+  Eigen::Vector3d position = Eigen::Vector3d::Zero();  // m
   Eigen::Quaterniond orientation = Eigen::Quaterniond::Identity();
 };
 
 enum class PrimitiveKind {
-  kSwapPusher,   // exchange the pusher for the geometry the next trial needs
-  kRelease,      // open the fingers, leaving the object on the fixture
-  kRotate,       // regrasp and rotate the object in the grasp to the target orientation
-  kTranslate,    // pick and place the object at the target position
-  kRegrasp,      // grasp the object at the nominal grasp (the target pose)
+  kSwapPusher,  // exchange the pusher for the geometry the next trial needs
+  kRelease,     // open the fingers, leaving the object on the fixture
+  kRotate,      // regrasp and rotate the object in the grasp to the target orientation
+  kTranslate,   // pick and place the object at the target position
+  kRegrasp,     // grasp the object at the nominal grasp (the target pose)
 };
 const char* ToString(PrimitiveKind kind);
 
 struct Primitive {
   PrimitiveKind kind = PrimitiveKind::kRelease;
-  Pose target;              // pose of the object when the primitive ends
-  double duration_s = 0;    // planned execution time (s)
+  Pose target;            // pose of the object when the primitive ends
+  double duration_s = 0;  // planned execution time (s)
 };
 
 struct ResetParams {
@@ -52,10 +52,10 @@ struct ResetParams {
   double sensing_angle_std = 0.0;        // rad per axis
   Eigen::Vector3d workspace_min = Eigen::Vector3d::Constant(-0.25);  // m
   Eigen::Vector3d workspace_max = Eigen::Vector3d::Constant(0.25);   // m
-  double translate_speed = 0.05;         // m/s
-  double rotate_speed = 0.5;             // rad/s
-  double grasp_time = 0.5;               // s per release or regrasp
-  double swap_time = 5.0;                // s per pusher swap
+  double translate_speed = 0.05;                                     // m/s
+  double rotate_speed = 0.5;                                         // rad/s
+  double grasp_time = 0.5;                                           // s per release or regrasp
+  double swap_time = 5.0;                                            // s per pusher swap
 };
 
 // @throws std::invalid_argument naming the field ("reset.max_attempts: ...").
@@ -67,16 +67,16 @@ std::vector<Primitive> PlanReset(const Pose& observed, const Pose& target, bool 
                                  const ResetParams& params);
 
 struct ResetRequest {
-  Pose observed_end;        // what the sensors saw at the end of the last phase
-  Pose true_end;            // where the object really is
-  Pose target;              // the next trial's start pose
-  bool swap_pusher = false; // the next trial needs another pusher geometry
+  Pose observed_end;         // what the sensors saw at the end of the last phase
+  Pose true_end;             // where the object really is
+  Pose target;               // the next trial's start pose
+  bool swap_pusher = false;  // the next trial needs another pusher geometry
 };
 
 struct ResetOutcome {
   bool success = false;
-  std::string failure;          // empty on success; the reason otherwise
-  bool retryable = true;        // false: no retry can help (object left the workspace)
+  std::string failure;    // empty on success; the reason otherwise
+  bool retryable = true;  // false: no retry can help (object left the workspace)
   int attempts = 0;
   double position_error = 0;    // m, last verification (observed vs target)
   double angle_error = 0;       // rad

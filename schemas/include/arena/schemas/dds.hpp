@@ -84,7 +84,7 @@ class DdsError : public std::runtime_error {
 };
 
 inline constexpr double kCellLivelinessLease_s = 1.0;
-inline constexpr int kGroundTruthMaxBatches = 256;   // unacknowledged batches at most
+inline constexpr int kGroundTruthMaxBatches = 256;  // unacknowledged batches at most
 inline constexpr double kGroundTruthHeartbeat_s = 0.05;
 
 struct NetworkOptions {
@@ -109,24 +109,24 @@ inline constexpr int kPeerParticipantRange = 64;
 std::vector<std::string> ParsePeers(const std::string& text);
 
 struct ParticipantOptions {
-  int domain_id = 0;           // 0..232 (Fast DDS port arithmetic)
-  std::string name;            // "arena.cell.<id>", "arena.service", ...
+  int domain_id = 0;  // 0..232 (Fast DDS port arithmetic)
+  std::string name;   // "arena.cell.<id>", "arena.service", ...
   NetworkOptions network;
-  double lease_s = 2.5;        // participant lease (s); announcements every lease/5
+  double lease_s = 2.5;  // participant lease (s); announcements every lease/5
 };
 
 // Something a peer did, as seen by this participant's discovery or by one of
 // its readers' liveliness tracking.
 struct PeerEvent {
   enum class Kind {
-    kParticipantJoined,   // discovered a participant
-    kParticipantLeft,     // participant removed (clean exit) or dropped (lease expired)
-    kWriterLost,          // a writer's liveliness lease expired
-    kWriterAlive,         // a writer became alive (again)
+    kParticipantJoined,  // discovered a participant
+    kParticipantLeft,    // participant removed (clean exit) or dropped (lease expired)
+    kWriterLost,         // a writer's liveliness lease expired
+    kWriterAlive,        // a writer became alive (again)
   };
   Kind kind = Kind::kParticipantJoined;
-  std::string participant;   // the peer's participant name ("" if not yet known)
-  std::string topic;         // kWriter*: the topic of the reader that saw it
+  std::string participant;  // the peer's participant name ("" if not yet known)
+  std::string topic;        // kWriter*: the topic of the reader that saw it
   std::chrono::steady_clock::time_point when{};
 };
 const char* ToString(PeerEvent::Kind kind);

@@ -34,20 +34,20 @@ using Wrench = Eigen::Matrix<double, 6, 1>;  // force (N), torque (N m)
 
 // The pusher's true pose and twist (the mechanics sample has its position only).
 struct PusherState {
-  Eigen::Vector3d position = Eigen::Vector3d::Zero();              // m
+  Eigen::Vector3d position = Eigen::Vector3d::Zero();  // m
   Eigen::Quaterniond orientation = Eigen::Quaterniond::Identity();
-  Eigen::Vector3d velocity = Eigen::Vector3d::Zero();              // m/s
-  Eigen::Vector3d angular_velocity = Eigen::Vector3d::Zero();      // rad/s
+  Eigen::Vector3d velocity = Eigen::Vector3d::Zero();          // m/s
+  Eigen::Vector3d angular_velocity = Eigen::Vector3d::Zero();  // rad/s
 };
 
 // What the sensors reported for one sample.
 struct Observation {
-  bool valid = false;                                             // false = dropped
-  double t = 0;                                                   // s, when it was taken
-  Eigen::Vector3d position = Eigen::Vector3d::Zero();             // object (m)
+  bool valid = false;                                  // false = dropped
+  double t = 0;                                        // s, when it was taken
+  Eigen::Vector3d position = Eigen::Vector3d::Zero();  // object (m)
   Eigen::Quaterniond orientation = Eigen::Quaterniond::Identity();
-  Wrench pusher_wrench = Wrench::Zero();                          // pusher F/T sensor
-  std::vector<Wrench> finger_wrenches;                            // scene order
+  Wrench pusher_wrench = Wrench::Zero();  // pusher F/T sensor
+  std::vector<Wrench> finger_wrenches;    // scene order
 };
 
 inline constexpr int kMaxContacts = 16;

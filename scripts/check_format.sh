@@ -1,0 +1,27 @@
+#!/usr/bin/env bash
+# Checks that every tracked C++ file is formatted by .clang-format (Google
+# style, 100 columns). Exit 1 lists the files that are not; `scripts/check_format.sh
+# --fix` formats them in place.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+if ! command -v clang-format >/dev/null 2>&1; then
+  sudo=""
+  if [ "$(id -u)" -ne 0 ]; then sudo="sudo"; fi
+  export DEBIAN_FRONTEND=noninteractive
+  $sudo apt-get update -qq && $sudo apt-get install -y -qq --no-install-recommends clang-format >/dev/null
+fi
+mapfile -t files < <(git ls-files '*.cpp' '*.hpp' '*.h' '*.cc')
+if [ "${1:-}" = "--fix" ]; then
+  clang-format -i "${files[@]}"
+  exit 0
+fi
+bad=()
+for f in "${files[@]}"; do
+  if ! clang-format --dry-run --Werror "$f" >/dev/null 2>&1; then bad+=("$f"); fi
+done
+if ((${#bad[@]})); then
+  echo "check_format: ${#bad[@]} file(s) not formatted (run scripts/check_format.sh --fix):" >&2
+  printf '  %s\n' "${bad[@]}" >&2
+  exit 1
+fi
+echo "check_format: ${#files[@]} files formatted"
