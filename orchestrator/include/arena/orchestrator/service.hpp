@@ -45,7 +45,7 @@ namespace arena::orchestrator {
 
 struct ServiceOptions {
   std::string db_path;               // the SQLite store (created if missing)
-  int domain_id = 0;                 // DDS domain, 0..232
+  int domain_id = 0;                 // DDS domain, 0..dds::kMaxDomainId (231)
   dds::NetworkOptions network;       // default: this host only
   int max_attempts = 3;              // executions per trial before it fails
   double retry_backoff_s = 1.0;      // first retry waits this long; doubles per attempt
@@ -92,10 +92,15 @@ struct TrialTiming {
   double overhead_s = 0;   // cell_busy_s - execute_s - reset_s
 };
 
+// @throws std::invalid_argument naming the option ("--reset-timeout: ...")
+//   for a value that would break the service (NaN, infinite, negative, absurd).
+void ValidateServiceOptions(const ServiceOptions& options);
+
 class Service {
  public:
-  // Opens the store and joins the domain.
-  // @throws db::StoreError, dds::DdsError, std::invalid_argument (bad options).
+  // Opens the store, registers as its service (heartbeat) and joins the domain.
+  // @throws db::StoreError (kBusy naming pid and host when another service
+  //   serves the store), dds::DdsError, std::invalid_argument (bad options).
   explicit Service(const ServiceOptions& options);
   ~Service();
   Service(const Service&) = delete;
