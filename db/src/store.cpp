@@ -1,6 +1,7 @@
 // Campaigns, the trial state machine, cells and the status summary.
 // The state machine's diagram and its transition table are in store.hpp.
 #include "arena/db/store.hpp"
+#include "arena/db/prediction_status.hpp"
 
 #include <algorithm>
 #include <cmath>
@@ -105,6 +106,27 @@ const char* ToString(CellState s) {
       return "gone";
   }
   return "?";
+}
+
+const char* ToString(PredictionStatus s) {
+  switch (s) {
+    case PredictionStatus::kOk:
+      return "ok";
+    case PredictionStatus::kSolverFailure:
+      return "solver_failure";
+    case PredictionStatus::kInvalidScene:
+      return "invalid_scene";
+    case PredictionStatus::kError:
+      return "error";
+  }
+  return "?";
+}
+
+std::optional<PredictionStatus> ParsePredictionStatus(const std::string& text) {
+  for (auto s : {PredictionStatus::kOk, PredictionStatus::kSolverFailure,
+                 PredictionStatus::kInvalidScene, PredictionStatus::kError})
+    if (text == ToString(s)) return s;
+  return std::nullopt;
 }
 
 namespace {
@@ -820,6 +842,9 @@ namespace {
 void CheckPrediction(const Prediction& p, const std::string& prefix) {
   if (p.model_key.empty()) BadInput(prefix + "model_key is empty");
   if (p.status.empty()) BadInput(prefix + "status is empty");
+  if (!ParsePredictionStatus(p.status))
+    BadInput(prefix + "status '" + p.status +
+             "' is not one of ok, solver_failure, invalid_scene, error");
   ParseObject(p.model_json, prefix + "model_json");
   ParseObject(p.detail_json, prefix + "detail_json");
   for (auto [v, name] :

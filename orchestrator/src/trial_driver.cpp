@@ -822,15 +822,14 @@ struct TrialDriver::Impl {
     CheckDeadlines();
     if (t >= next_claims) {
       next_claims = t + Dur(opt.claim_period_s);
-      if (!stopping)
-        for (auto& [id, cell] : cells)
-          if (cell.alive) SendClaim(cell);
+      for (auto& [id, cell] : cells)  // also while draining: phases in flight keep their cell
+        if (cell.alive) SendClaim(cell);
     }
     if (t >= next_beat) {
       next_beat = t + Dur(opt.beat_period_s);
       std::vector<std::string> alive;
       for (const auto& [id, cell] : cells)
-        if (cell.alive && cell.ours) alive.push_back(id);
+        if (cell.alive) alive.push_back(id);  // serving us or another service: alive
       Attempt("service heartbeat", [&] { store.ServiceBeat(alive); });
     }
     if (t >= next_campaigns) {  // `arena serve` marks finished campaigns done

@@ -216,5 +216,28 @@ TEST(ServiceIsolation, ServiceRestartsDoNotFailLongTrialsOnAHealthyCell) {
   Stop(serve);
 }
 
+// Issue 15 item 7: before, `watch --cell` waited its 30 s timeout after the cell died.
+TEST(ServiceIsolation, WatchCellSaysWithinSecondsThatItsCellDisappeared) {
+  TempDir dir;
+  const std::string db = dir / "watch.db";
+  const std::string domain = std::to_string(TestDomain(57));
+  auto c1 = StartCell(dir, "c1", domain, "1");
+  ASSERT_EQ(RunArena({"submit", TestCampaign("long2.json"), "--db", db}, dir / "s.out", 30s), 0);
+  auto serve = StartArena({"serve", "--db", db, "--domain", domain}, dir / "serve.log");
+  auto watch = StartArena({"watch", "--cell", "c1", "--domain", domain}, dir / "watch.out");
+  ASSERT_TRUE(WaitUntil(
+      [&] { return ReadFile(dir / "watch.out").find("samples") != std::string::npos; }, 60s))
+      << ReadFile(dir / "watch.out");
+  c1->Signal(SIGKILL);
+  const auto killed = std::chrono::steady_clock::now();
+  const auto st = watch->Wait(10s);
+  ASSERT_TRUE(st.has_value()) << "watch did not notice its cell died";
+  EXPECT_LT(std::chrono::steady_clock::now() - killed, 5s);
+  EXPECT_TRUE(WIFEXITED(*st) && WEXITSTATUS(*st) == 4);
+  EXPECT_NE(ReadFile(dir / "watch.out").find("cell c1 disappeared"), std::string::npos)
+      << ReadFile(dir / "watch.out");
+  Stop(serve);
+}
+
 }  // namespace
 }  // namespace arena::test
