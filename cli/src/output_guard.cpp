@@ -18,7 +18,8 @@ bool IsSqliteFile(const std::string& path) {
 }
 
 bool SameFile(const std::string& a, const std::string& b) {
-  struct stat sa {}, sb {};
+  struct stat sa {
+  }, sb{};
   return ::stat(a.c_str(), &sa) == 0 && ::stat(b.c_str(), &sb) == 0 && sa.st_dev == sb.st_dev &&
          sa.st_ino == sb.st_ino;
 }
@@ -39,8 +40,8 @@ void RefuseToOverwriteStore(const std::string& path, const std::string& option,
     if (path.size() > n && path.compare(path.size() - n, n, suffix) == 0) {
       const std::string base = path.substr(0, path.size() - n);
       if (IsSqliteFile(base) || (!db_path.empty() && SameFile(base, db_path)))
-        throw CommandError(kExitBadInput, refuse + "belongs to the SQLite database '" + base +
-                                              "'" + advice);
+        throw CommandError(kExitBadInput,
+                           refuse + "belongs to the SQLite database '" + base + "'" + advice);
     }
   }
 }

@@ -66,7 +66,10 @@ void Store::ServiceBeat(const std::string& session, const std::vector<std::strin
   auto s = impl_->Prepare("UPDATE services SET last_beat = ? WHERE session = ?");
   s->Bind(1, now).Bind(2, session).Run();
   auto c = impl_->Prepare("UPDATE cells SET last_seen = ? WHERE id = ?");
-  for (const auto& id : cells_alive) c->Bind(1, now).Bind(2, id).Run();
+  for (const auto& id : cells_alive) {
+    c->Bind(1, now).Bind(2, id).Run();
+    c->Reset();
+  }
   tx.Commit();
 }
 
@@ -77,7 +80,8 @@ void Store::ServiceStopped(const std::string& session) {
 }
 
 std::optional<ServiceRecord> Store::LatestService() const {
-  auto s = impl_->Prepare(std::string(kServiceCols) + " ORDER BY started_at DESC, rowid DESC LIMIT 1");
+  auto s =
+      impl_->Prepare(std::string(kServiceCols) + " ORDER BY started_at DESC, rowid DESC LIMIT 1");
   if (!s->Step()) return std::nullopt;
   return ReadService(*s);
 }
@@ -86,14 +90,14 @@ void Store::CheckFileIdentity() const {
   struct stat st {};
   if (::stat(impl_->path.c_str(), &st) != 0) {
     const int err = errno;
-    throw StoreError(StoreError::Kind::kIo,
-                     "the store '" + impl_->path + "' was deleted or renamed while in use (" +
-                         std::strerror(err) + ")");
+    throw StoreError(StoreError::Kind::kIo, "the store '" + impl_->path +
+                                                "' was deleted or renamed while in use (" +
+                                                std::strerror(err) + ")");
   }
   if (impl_->file_ino != 0 && (static_cast<unsigned long long>(st.st_ino) != impl_->file_ino ||
                                static_cast<unsigned long long>(st.st_dev) != impl_->file_dev)) {
-    throw StoreError(StoreError::Kind::kIo, "the store '" + impl_->path +
-                                                "' was replaced by another file while in use");
+    throw StoreError(StoreError::Kind::kIo,
+                     "the store '" + impl_->path + "' was replaced by another file while in use");
   }
 }
 

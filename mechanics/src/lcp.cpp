@@ -305,7 +305,7 @@ void LemkeOnce(const Eigen::MatrixXd& A, const Eigen::VectorXd& b, const Eigen::
       if (fresh_at != pivots) {
         if (!refactor()) {
           out.status = LcpStatus::kSingularBasis;
-        out.reason = "singular basis after " + std::to_string(pivots) + " pivots";
+          out.reason = "singular basis after " + std::to_string(pivots) + " pivots";
           out.pivots = pivots;
           return;
         }

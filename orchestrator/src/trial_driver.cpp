@@ -275,9 +275,8 @@ struct TrialDriver::Impl {
       if (ours) spdlog::info("cell {}: serving us", id);
       cell.ours = ours;
       cell.serving = serving;
-      Step("cell " + id + ": serving", "", [this, id, serving] {
-        store.SetCellServing(id, opt.cell_lease_s, serving);
-      });
+      Step("cell " + id + ": serving", "",
+           [this, id, serving] { store.SetCellServing(id, opt.cell_lease_s, serving); });
     }
     if (!ours && a.serving_session() == 0) SendClaim(cell);  // free: ask at once
   }
@@ -431,8 +430,8 @@ struct TrialDriver::Impl {
                 std::string("invalid scene: ") + e.what(), "invalid_scene");
       return;
     }
-    const double budget = opt.service.execute_timeout_s +
-                          ex.scene.duration * std::max(cell.speed, 0.0) * 1.5;
+    const double budget =
+        opt.service.execute_timeout_s + ex.scene.duration * std::max(cell.speed, 0.0) * 1.5;
     cell.trial_id = claim.trial_id;
     cell.attempt = claim.attempt;
     executions.emplace(claim.trial_id, std::move(ex));
@@ -443,29 +442,30 @@ struct TrialDriver::Impl {
     const std::uint64_t seed = claim.seed;
     const std::string scene_json = claim.scene_json;
     // The sink first (a busy store: this same step again, the cell waits), then EXECUTE.
-    Step(tag + ": begin ingest", cell_id,
-         [this, tag, cell_id, trial_id, attempt, seed, scene_json, budget] {
-           auto it = executions.find(trial_id);
-           if (it == executions.end() || it->second.attempt != attempt) return;
-           it->second.sink = store.BeginIngest(trial_id, attempt);
-           CellRun& c = Cell(cell_id);
-           msg::TrialCommand cmd = Command(c, msg::PHASE_EXECUTE);
-           cmd.trial_id(static_cast<std::uint64_t>(trial_id));
-           cmd.attempt(static_cast<std::uint32_t>(attempt));
-           cmd.scene_json(scene_json);
-           cmd.seed(seed);
-           cmd.deadline_s(budget);
-           SetPhase(c, CellPhase::kExecuting, budget + 2.0);  // the clock starts when it is sent
-           Count(&ServiceCounters::dispatched);
-           if (!transport.Send(cmd)) {
-             AbortPhase(c, "EXECUTE command could not be sent", true);
-             return;
-           }
-           spdlog::info("{}: EXECUTE on cell {}", tag, cell_id);
-         },
-         [this, cell_id](const db::StoreError& e) {
-           AbortPhase(Cell(cell_id), std::string("ground truth refused: ") + e.what(), false);
-         });
+    Step(
+        tag + ": begin ingest", cell_id,
+        [this, tag, cell_id, trial_id, attempt, seed, scene_json, budget] {
+          auto it = executions.find(trial_id);
+          if (it == executions.end() || it->second.attempt != attempt) return;
+          it->second.sink = store.BeginIngest(trial_id, attempt);
+          CellRun& c = Cell(cell_id);
+          msg::TrialCommand cmd = Command(c, msg::PHASE_EXECUTE);
+          cmd.trial_id(static_cast<std::uint64_t>(trial_id));
+          cmd.attempt(static_cast<std::uint32_t>(attempt));
+          cmd.scene_json(scene_json);
+          cmd.seed(seed);
+          cmd.deadline_s(budget);
+          SetPhase(c, CellPhase::kExecuting, budget + 2.0);  // the clock starts when it is sent
+          Count(&ServiceCounters::dispatched);
+          if (!transport.Send(cmd)) {
+            AbortPhase(c, "EXECUTE command could not be sent", true);
+            return;
+          }
+          spdlog::info("{}: EXECUTE on cell {}", tag, cell_id);
+        },
+        [this, cell_id](const db::StoreError& e) {
+          AbortPhase(Cell(cell_id), std::string("ground truth refused: ") + e.what(), false);
+        });
   }
 
   // ------------------------------------------------------------ execute
@@ -532,35 +532,38 @@ struct TrialDriver::Impl {
     const std::string tag = TrialTag(ex.campaign_id, ex.trial_id, ex.attempt);
     const std::string cell_id = ex.cell_id;
     const int attempt = ex.attempt;
-    Step(tag + ": publish ground truth", cell_id, [this, tag, trial_id, attempt] {
-      auto eit = executions.find(trial_id);
-      if (eit == executions.end() || eit->second.attempt != attempt) return;
-      Execution& e = eit->second;
-      if (!e.sink) {  // a busy store broke the ingest: write the whole stream again
-        e.sink = store.BeginIngest(e.trial_id, e.attempt);
-        try {
-          e.sink->Add(e.samples);
-        } catch (...) {
-          e.sink.reset();
-          throw;
-        }
-      }
-      std::int64_t n = 0;
-      try {
-        n = e.sink->Finish();
-      } catch (const db::StoreError& err) {
-        if (Judge(err) == StoreVerdict::kRetry) e.sink.reset();
-        throw;
-      }
-      Count(&ServiceCounters::executed);
-      spdlog::info("{}: executed, {} samples stored", tag, n);
-      Executed(trial_id);
-    }, [this, tag, trial_id](const db::StoreError& e) {
-      auto eit = executions.find(trial_id);
-      if (eit == executions.end()) return;
-      spdlog::error("{}: {}", tag, e.what());
-      AbortPhase(Cell(eit->second.cell_id), e.what(), true);
-    });
+    Step(
+        tag + ": publish ground truth", cell_id,
+        [this, tag, trial_id, attempt] {
+          auto eit = executions.find(trial_id);
+          if (eit == executions.end() || eit->second.attempt != attempt) return;
+          Execution& e = eit->second;
+          if (!e.sink) {  // a busy store broke the ingest: write the whole stream again
+            e.sink = store.BeginIngest(e.trial_id, e.attempt);
+            try {
+              e.sink->Add(e.samples);
+            } catch (...) {
+              e.sink.reset();
+              throw;
+            }
+          }
+          std::int64_t n = 0;
+          try {
+            n = e.sink->Finish();
+          } catch (const db::StoreError& err) {
+            if (Judge(err) == StoreVerdict::kRetry) e.sink.reset();
+            throw;
+          }
+          Count(&ServiceCounters::executed);
+          spdlog::info("{}: executed, {} samples stored", tag, n);
+          Executed(trial_id);
+        },
+        [this, tag, trial_id](const db::StoreError& e) {
+          auto eit = executions.find(trial_id);
+          if (eit == executions.end()) return;
+          spdlog::error("{}: {}", tag, e.what());
+          AbortPhase(Cell(eit->second.cell_id), e.what(), true);
+        });
   }
 
   // The stream is published: predict, and reset the cell towards its next trial.
@@ -569,7 +572,7 @@ struct TrialDriver::Impl {
     Execution& ex = it->second;
     CellRun& cell = Cell(ex.cell_id);
     CellResult(cell, CellPhase::kExecuting, true, "");
-    PredictionRequest request{ex.trial_id,       ex.campaign_id,    ex.attempt,
+    PredictionRequest request{ex.trial_id,         ex.campaign_id,      ex.attempt,
                               std::move(ex.scene), std::move(ex.truth), ex.scene_json};
     predictions.Start(std::move(request));
     const std::string tag = TrialTag(ex.campaign_id, ex.trial_id, ex.attempt);
@@ -577,23 +580,26 @@ struct TrialDriver::Impl {
     const std::string cell_id = ex.cell_id;
     executions.erase(it);
     SetPhase(cell, CellPhase::kResetting, opt.service.reset_timeout_s + 2.0);
-    Step(tag + ": begin reset", cell_id, [this, trial_id, attempt, cell_id] {
-      CellRun& c = Cell(cell_id);
-      // Aim the reset at the start of the trial this cell will most likely run next.
-      std::optional<db::ClaimedTrial> next = store.PeekNextTrial(cell_id);
-      store.BeginReset(trial_id, attempt);
-      msg::TrialCommand cmd = Command(c, msg::PHASE_RESET);
-      cmd.trial_id(static_cast<std::uint64_t>(trial_id));
-      cmd.attempt(static_cast<std::uint32_t>(attempt));
-      cmd.scene_json(next ? next->scene_json : std::string());
-      cmd.seed(next ? next->seed : 0);
-      cmd.deadline_s(opt.service.reset_timeout_s);
-      SetPhase(c, CellPhase::kResetting, opt.service.reset_timeout_s + 2.0);
-      if (!transport.Send(cmd)) AbortPhase(c, "RESET command could not be sent", true);
-    }, [this, tag, cell_id](const db::StoreError& e) {
-      spdlog::error("{}: {}", tag, e.what());
-      SetPhase(Cell(cell_id), CellPhase::kIdle);  // the trial moved on (cancelled, failed)
-    });
+    Step(
+        tag + ": begin reset", cell_id,
+        [this, trial_id, attempt, cell_id] {
+          CellRun& c = Cell(cell_id);
+          // Aim the reset at the start of the trial this cell will most likely run next.
+          std::optional<db::ClaimedTrial> next = store.PeekNextTrial(cell_id);
+          store.BeginReset(trial_id, attempt);
+          msg::TrialCommand cmd = Command(c, msg::PHASE_RESET);
+          cmd.trial_id(static_cast<std::uint64_t>(trial_id));
+          cmd.attempt(static_cast<std::uint32_t>(attempt));
+          cmd.scene_json(next ? next->scene_json : std::string());
+          cmd.seed(next ? next->seed : 0);
+          cmd.deadline_s(opt.service.reset_timeout_s);
+          SetPhase(c, CellPhase::kResetting, opt.service.reset_timeout_s + 2.0);
+          if (!transport.Send(cmd)) AbortPhase(c, "RESET command could not be sent", true);
+        },
+        [this, tag, cell_id](const db::StoreError& e) {
+          spdlog::error("{}: {}", tag, e.what());
+          SetPhase(Cell(cell_id), CellPhase::kIdle);  // the trial moved on (cancelled, failed)
+        });
   }
 
   // ------------------------------------------------------------ statuses
@@ -761,7 +767,8 @@ struct TrialDriver::Impl {
       case db::TrialState::kExecuted:
         Step(tag + ": reset after restart", "", [this, t] {
           store.BeginReset(t.id, t.attempt);
-          store.CompleteReset(t.id, t.attempt, UnobservedReset("service restarted before the reset"));
+          store.CompleteReset(t.id, t.attempt,
+                              UnobservedReset("service restarted before the reset"));
           StartStoredPrediction(t);
         });
         return;
@@ -862,8 +869,8 @@ struct TrialDriver::Impl {
 TrialDriver::TrialDriver(DriverOptions options, ServiceIdentity me, TrialStore& store,
                          CommandTransport& transport, PredictionPort& predictions,
                          std::function<DriverClock::time_point()> now)
-    : impl_(std::make_unique<Impl>(std::move(options), std::move(me), store, transport,
-                                   predictions, std::move(now))) {}
+    : impl_(std::make_unique<Impl>(std::move(options), std::move(me), store, transport, predictions,
+                                   std::move(now))) {}
 TrialDriver::~TrialDriver() = default;
 
 void TrialDriver::Resume() { impl_->Resume(); }

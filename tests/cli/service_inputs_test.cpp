@@ -20,19 +20,25 @@ const std::string kCampaign = std::string(ARENA_SOURCE_DIR) + "/tests/orchestrat
 TEST_F(ServiceInputs, ServeRefusesOptionsThatWouldBreakItNamingTheField) {
   const std::string db = dir_ + "/s.db";
   const std::vector<std::pair<std::string, std::string>> bad = {
-      {"--reset-timeout nan", "--reset-timeout"}, {"--reset-timeout -5", "--reset-timeout"},
-      {"--execute-timeout -1", "--execute-timeout"}, {"--execute-timeout inf", "--execute-timeout"},
-      {"--execute-timeout nan", "--execute-timeout"}, {"--drain nan", "--drain"},
-      {"--drain -1", "--drain"},  {"--predictors 100000", "--predictors"},
-      {"--predictors 0", "--predictors"}, {"--domain 232", "--domain"}};
+      {"--reset-timeout nan", "--reset-timeout"},
+      {"--reset-timeout -5", "--reset-timeout"},
+      {"--execute-timeout -1", "--execute-timeout"},
+      {"--execute-timeout inf", "--execute-timeout"},
+      {"--execute-timeout nan", "--execute-timeout"},
+      {"--drain nan", "--drain"},
+      {"--drain -1", "--drain"},
+      {"--predictors 100000", "--predictors"},
+      {"--predictors 0", "--predictors"},
+      {"--domain 232", "--domain"}};
   for (const auto& [args, field] : bad) {
     const auto r = Arena("serve --db " + db + " --domain 7 " + args);
     EXPECT_EQ(r.rc, 2) << args << ": " << r.err;
     EXPECT_NE(r.err.find(field), std::string::npos) << args << ": " << r.err;
   }
   EXPECT_FALSE(std::filesystem::exists(db)) << "a refused option created the store";
-  for (const std::string& cmd : {"cell --id c1 --domain 233", "cell --id c1 --domain 232",
-                                 "run " + kCampaign + " --db " + db + " --domain 232"}) {
+  for (const std::string& cmd :
+       std::vector<std::string>{"cell --id c1 --domain 233", "cell --id c1 --domain 232",
+                                "run " + kCampaign + " --db " + db + " --domain 232"}) {
     const auto r = Arena(cmd);
     EXPECT_EQ(r.rc, 2) << cmd << ": " << r.err;
     EXPECT_NE(r.err.find("--domain"), std::string::npos) << cmd << ": " << r.err;
@@ -63,7 +69,7 @@ TEST_F(ServiceInputs, OutputsNeverOverwriteAStoreOrAnySqliteFile) {
   const std::string scene = std::string(ARENA_SOURCE_DIR) + "/examples/scenes/canonical.json";
   r = Arena("simulate " + scene + " --trajectory " + db);
   EXPECT_EQ(r.rc, 2) << r.err;
-  EXPECT_NE(r.err.find("--trajectory"), std::string::npos) << r.err;
+  EXPECT_NE((r.out + r.err).find("--trajectory"), std::string::npos) << r.out << r.err;
   r = Arena("export --db " + db + " --campaign 1 --format csv --out " + db);
   EXPECT_EQ(r.rc, 2) << r.err;
   EXPECT_EQ(Slurp(db), before) << "the store was written to";

@@ -79,9 +79,8 @@ struct FakeStore : TrialStore {
     T& t = trials.at(id);
     if (t.attempt != attempt) throw db::StoreError(K::kStaleAttempt, "stale");
     if (!db::IsLegalTransition(t.state, to))
-      throw db::StoreError(K::kIllegalTransition, std::string("illegal ") +
-                                                      db::ToString(t.state) + " -> " +
-                                                      db::ToString(to));
+      throw db::StoreError(K::kIllegalTransition, std::string("illegal ") + db::ToString(t.state) +
+                                                      " -> " + db::ToString(to));
     t.state = to;
   }
   db::RecoveryReport RecoverAfterRestart() override {
@@ -450,12 +449,11 @@ std::vector<std::string> AllSteps() {
   return all;
 }
 
-INSTANTIATE_TEST_SUITE_P(Steps, BusyAtEveryStep, ::testing::ValuesIn(kSteps),
-                         [](const auto& info) {
-                           std::string n = info.param;
-                           std::erase(n, '.');
-                           return n;
-                         });
+INSTANTIATE_TEST_SUITE_P(Steps, BusyAtEveryStep, ::testing::ValuesIn(kSteps), [](const auto& info) {
+  std::string n = info.param;
+  std::erase(n, '.');
+  return n;
+});
 
 // A store that cannot take writes: the driver stops (throws) at that step.
 class FatalAtEveryStep : public ::testing::TestWithParam<std::tuple<std::string, K>> {};
@@ -483,11 +481,11 @@ std::string FatalName(const ::testing::TestParamInfo<std::tuple<std::string, K>>
   return n + "_" + kKinds[static_cast<int>(std::get<1>(info.param))];
 }
 
-INSTANTIATE_TEST_SUITE_P(
-    Steps, FatalAtEveryStep,
-    ::testing::Combine(::testing::ValuesIn(AllSteps()),
-                       ::testing::Values(K::kFull, K::kReadOnly, K::kCorrupt, K::kIo)),
-    FatalName);
+INSTANTIATE_TEST_SUITE_P(Steps, FatalAtEveryStep,
+                         ::testing::Combine(::testing::ValuesIn(AllSteps()),
+                                            ::testing::Values(K::kFull, K::kReadOnly, K::kCorrupt,
+                                                              K::kIo)),
+                         FatalName);
 
 TEST(TrialDriver, AStoreFileThatVanishesStopsTheNextTick) {
   Harness h;
@@ -530,7 +528,7 @@ TEST(TrialDriver, AMissedDeadlineRetriesTheTrial) {
   h.answered = h.transport.sent.size();  // the cell never answers
   h.t += std::chrono::seconds(40);
   h.driver->Tick(false);
-  EXPECT_EQ(h.store.trials[1].attempt, 2);  // retried (and, the fake store not backing off,
+  EXPECT_EQ(h.store.trials[1].attempt, 2);     // retried (and, the fake store not backing off,
   EXPECT_EQ(h.driver->counters().retried, 1);  // dispatched again at once)
   EXPECT_EQ(h.Sent(msg::PHASE_EXECUTE), 2);
 }

@@ -38,7 +38,7 @@ const char* ToString(LcpStatus status);
 struct LcpResult {
   bool ok = false;
   LcpStatus status = LcpStatus::kBadProblem;  // kOk exactly when ok
-  std::string reason;  // why not ok: "pivot limit", "ray termination", ...
+  std::string reason;                         // why not ok: "pivot limit", "ray termination", ...
   Eigen::VectorXd z;
   Eigen::VectorXd w;             // A z + b
   std::vector<char> basis;       // basis[i] != 0: z_i is basic (a warm start for the next solve)
