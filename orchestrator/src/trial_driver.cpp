@@ -5,6 +5,7 @@
 #include <cmath>
 #include <cstdio>
 #include <mutex>
+#include <set>
 
 #include <spdlog/spdlog.h>
 #include <nlohmann/json.hpp>
@@ -295,8 +296,8 @@ struct TrialDriver::Impl {
     }
     if (!cell.alive) return;
     spdlog::warn("cell {}: {}", id, reason);
-    cell.alive = false;
-    cell.ours = false;  // a returning process must be claimed again
+    cell.alive = false;  // (`ours` stays: a process back from a lapse may still serve us;
+                         // a new one announces that it serves nobody)
     AbortPhase(cell, "cell lost: " + reason, /*count_against_cell=*/false);
     Step("cell " + id + ": gone", "", [this, id, reason] { store.MarkCellGone(id, reason); });
   }
@@ -386,13 +387,21 @@ struct TrialDriver::Impl {
   // resetting -> reset_done | reset_failed, then the prediction waiting for it.
   void CompleteReset(std::int64_t trial_id, int attempt, const db::ResetReport& report,
                      const std::string& cell_id) {
-    Step("trial " + std::to_string(trial_id) + ": complete reset", cell_id,
-         [this, trial_id, attempt, report] {
-           store.CompleteReset(trial_id, attempt, report);
-           if (!report.ok) Count(&ServiceCounters::resets_failed);
-           AfterReset(trial_id);
-         });
+    resets_completing.insert(trial_id);
+    Step(
+        "trial " + std::to_string(trial_id) + ": complete reset", cell_id,
+        [this, trial_id, attempt, report] {
+          store.CompleteReset(trial_id, attempt, report);
+          resets_completing.erase(trial_id);
+          if (!report.ok) Count(&ServiceCounters::resets_failed);
+          AfterReset(trial_id);
+        },
+        [this, trial_id](const db::StoreError& e) {
+          resets_completing.erase(trial_id);
+          spdlog::error("trial {}: complete reset: {}", trial_id, e.what());
+        });
   }
+  std::set<std::int64_t> resets_completing;  // CompleteReset under way (or waiting on the store)
 
   // ------------------------------------------------------------ dispatch
   void Dispatch(bool stopping) {
@@ -712,11 +721,26 @@ struct TrialDriver::Impl {
       const db::Trial t = store.GetTrial(shared->trial_id);
       if (t.attempt != shared->attempt) return;  // the trial moved on (re-run): drop it
       if (t.state == db::TrialState::kResetting || t.state == db::TrialState::kExecuted) {
-        waiting_predictions[shared->trial_id] = std::move(*shared);
-        return;
+        if (ResetInFlight(t.id, t.attempt)) {  // recorded when the reset ends (AfterReset)
+          waiting_predictions[shared->trial_id] = std::move(*shared);
+          return;
+        }
+        // Nobody resets it any more (its reset step was moot, or its status
+        // lost): close the reset as not observed, then record.
+        if (t.state == db::TrialState::kExecuted) store.BeginReset(t.id, t.attempt);
+        store.CompleteReset(t.id, t.attempt, UnobservedReset("its reset was not confirmed"));
       }
       RecordPrediction(std::move(*shared));
     });
+  }
+
+  bool ResetInFlight(std::int64_t trial_id, int attempt) const {
+    if (resets_completing.count(trial_id)) return true;
+    for (const auto& [id, cell] : cells)
+      if (cell.phase == CellPhase::kResetting && cell.trial_id == trial_id &&
+          cell.attempt == attempt)
+        return true;
+    return false;
   }
 
   void RecordPrediction(PredictionDone done) {
@@ -758,6 +782,9 @@ struct TrialDriver::Impl {
                                    db::TrialState::kResetFailed, db::TrialState::kPredicted});
       recovered = true;
       for (const auto& t : unfinished) ResumeTrial(t);
+    }, [this](const db::StoreError& e) {
+      spdlog::error("recovery after restart: {}", e.what());
+      recovered = true;  // not fatal: schedule anyway
     });
   }
 

@@ -487,6 +487,28 @@ INSTANTIATE_TEST_SUITE_P(Steps, FatalAtEveryStep,
                                                               K::kIo)),
                          FatalName);
 
+// A step the store calls moot (a stale attempt, an illegal edge: a late
+// message, someone else moved the trial) is dropped, and nothing in the driver
+// waits for it for ever: the cell goes on with the next trial.
+class MootAtEveryStep : public ::testing::TestWithParam<std::string> {};
+
+TEST_P(MootAtEveryStep, TheDriverIsNeverStuckAndTheCellGoesOn) {
+  Harness h(2);
+  h.store.faults.next[GetParam()] = {K::kStaleAttempt};
+  h.Start();
+  h.RunToEnd(300);
+  EXPECT_FALSE(h.driver->InFlight()) << GetParam() << ": the driver waits for ever";
+  EXPECT_EQ(h.driver->pending_store_steps(), 0u);
+  EXPECT_EQ(h.store.trials[2].state, db::TrialState::kDone) << GetParam();
+}
+
+INSTANTIATE_TEST_SUITE_P(Steps, MootAtEveryStep, ::testing::ValuesIn(kSteps),
+                         [](const auto& info) {
+                           std::string n = info.param;
+                           std::erase(n, '.');
+                           return n;
+                         });
+
 TEST(TrialDriver, AStoreFileThatVanishesStopsTheNextTick) {
   Harness h;
   h.Start();
