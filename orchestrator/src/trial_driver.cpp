@@ -769,23 +769,26 @@ struct TrialDriver::Impl {
   // trial is dispatched before it ran, or it would re-queue our own claims.
   bool recovered = false;
   void Resume() {
-    Step("recovery after restart", "", [this] {
-      const db::RecoveryReport report = store.RecoverAfterRestart();
-      if (!report.requeued.empty() || !report.reset_failed.empty()) {
-        spdlog::warn("recovered after restart: {} trials re-queued, {} resets marked failed",
-                     report.requeued.size(), report.reset_failed.size());
-      }
-      Count(&ServiceCounters::recovered,
-            static_cast<std::int64_t>(report.requeued.size() + report.reset_failed.size()));
-      const auto unfinished =
-          store.ListTrialsByState({db::TrialState::kExecuted, db::TrialState::kResetDone,
-                                   db::TrialState::kResetFailed, db::TrialState::kPredicted});
-      recovered = true;
-      for (const auto& t : unfinished) ResumeTrial(t);
-    }, [this](const db::StoreError& e) {
-      spdlog::error("recovery after restart: {}", e.what());
-      recovered = true;  // not fatal: schedule anyway
-    });
+    Step(
+        "recovery after restart", "",
+        [this] {
+          const db::RecoveryReport report = store.RecoverAfterRestart();
+          if (!report.requeued.empty() || !report.reset_failed.empty()) {
+            spdlog::warn("recovered after restart: {} trials re-queued, {} resets marked failed",
+                         report.requeued.size(), report.reset_failed.size());
+          }
+          Count(&ServiceCounters::recovered,
+                static_cast<std::int64_t>(report.requeued.size() + report.reset_failed.size()));
+          const auto unfinished =
+              store.ListTrialsByState({db::TrialState::kExecuted, db::TrialState::kResetDone,
+                                       db::TrialState::kResetFailed, db::TrialState::kPredicted});
+          recovered = true;
+          for (const auto& t : unfinished) ResumeTrial(t);
+        },
+        [this](const db::StoreError& e) {
+          spdlog::error("recovery after restart: {}", e.what());
+          recovered = true;  // not fatal: schedule anyway
+        });
   }
 
   void ResumeTrial(const db::Trial& t) {

@@ -502,12 +502,11 @@ TEST_P(MootAtEveryStep, TheDriverIsNeverStuckAndTheCellGoesOn) {
   EXPECT_EQ(h.store.trials[2].state, db::TrialState::kDone) << GetParam();
 }
 
-INSTANTIATE_TEST_SUITE_P(Steps, MootAtEveryStep, ::testing::ValuesIn(kSteps),
-                         [](const auto& info) {
-                           std::string n = info.param;
-                           std::erase(n, '.');
-                           return n;
-                         });
+INSTANTIATE_TEST_SUITE_P(Steps, MootAtEveryStep, ::testing::ValuesIn(kSteps), [](const auto& info) {
+  std::string n = info.param;
+  std::erase(n, '.');
+  return n;
+});
 
 TEST(TrialDriver, AStoreFileThatVanishesStopsTheNextTick) {
   Harness h;
