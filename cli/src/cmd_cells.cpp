@@ -49,6 +49,8 @@ int Release(const std::string& cell_id, const std::string& db_path, const std::s
 
 void AddCellsCommand(CLI::App& app, Action* action) {
   auto* cells = app.add_subcommand("cells", "Manage the cells a store knows (release)");
+  cells->footer(
+      "Example:\n  arena cells release c1 --db lab.db --reason \"gripper pads replaced\"\n");
   cells->require_subcommand(1);
   struct O {
     std::string id, db, reason;
