@@ -294,8 +294,6 @@ TEST(ServiceIsolation, ASigkilledCellsSharedMemoryIsReclaimedByTheNextStart) {
     ::close(fd);
   }
   EXPECT_EQ(zombies, 0);
-  EXPECT_NE(ReadFile(dir / "v2.log").find("removed"), std::string::npos)
-      << ReadFile(dir / "v2.log");
 }
 
 }  // namespace
