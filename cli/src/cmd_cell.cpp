@@ -79,6 +79,9 @@ int RunCell(CellCliOptions opt) {
     }
   }
 
+  // A predecessor SIGKILLed (a restart after a crash) left its shared memory.
+  if (const std::size_t n = dds::CleanZombieSharedMemory(); n > 0)
+    spdlog::info("cell {}: removed {} shared-memory files of dead DDS processes", opt.cell.id, n);
   std::unique_ptr<executors::Cell> cell;
   try {
     const executors::ModelFidelity fidelity{opt.cell.fidelity.facets, opt.cell.fidelity.points,
@@ -116,7 +119,7 @@ void AddCellCommand(CLI::App& app, Action* action) {
       "Stops cleanly on SIGINT/SIGTERM (exit 0).");
   cmd->add_option("--id", opt->cell.id, "Cell id, unique in the deployment ([A-Za-z0-9_.-])")
       ->required();
-  cmd->add_option("--domain", opt->cell.domain_id, "DDS domain id (0..232)")->required();
+  cmd->add_option("--domain", opt->cell.domain_id, "DDS domain id (0..231)")->required();
   cmd->add_option("--backend", opt->backend,
                   "What executes the trials: model (arena's model: self-consistency), mujoco, "
                   "exec:COMMAND (a driver, executors/README.md), replay:DATASET (an export)")
