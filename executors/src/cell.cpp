@@ -373,14 +373,15 @@ struct Cell::Impl {
       early = "backend " + layer.capabilities().name + ": no samples";
     if (!early.empty()) {
       auto s = BaseStatus(c, msg::STATE_FAILED);
-      // A model that cannot run the scene keeps its "simulation:" prefix (the
-      // service fails such a trial at once: a re-run fails the same way).
+      // Typed for the service: a model that cannot run the scene fails the
+      // same way on a re-run (FAILURE_SIMULATION: the trial fails at once);
+      // a driver that crashed, hung or sent garbage may do better next time.
+      s.failure(!got.problem.empty()                          ? msg::FAILURE_INTERNAL
+                : Stopping()                                  ? msg::FAILURE_INTERRUPTED
+                : Clock::now() > deadline                     ? msg::FAILURE_DEADLINE
+                : outcome.reason.rfind("simulation:", 0) == 0 ? msg::FAILURE_SIMULATION
+                                                              : msg::FAILURE_INTERNAL);
       s.reason(early);
-      s.failure(outcome.solver_failure && got.problem.empty() && !Stopping()
-                    ? msg::FAILURE_SIMULATION
-                : Stopping()              ? msg::FAILURE_INTERRUPTED
-                : Clock::now() > deadline ? msg::FAILURE_DEADLINE
-                                          : msg::FAILURE_INTERNAL);
       s.phase_wall_s(std::chrono::duration<double>(Clock::now() - started).count());
       s.detail_json(json({{"backend", layer.capabilities().name},
                           {"defects_applied", json::parse(layer.AppliedJson())},
@@ -571,7 +572,6 @@ struct Cell::Impl {
     }
     auto s = BaseStatus(c, out.ok ? msg::STATE_RESET_DONE : msg::STATE_FAILED);
     s.reason(out.reason);
-    if (!out.ok) s.failure(msg::FAILURE_RESET);
     s.reset_attempts(static_cast<std::uint32_t>(out.attempts));
     s.phase_wall_s(std::chrono::duration<double>(Clock::now() - started).count());
     s.detail_json(json({{"backend", layer.capabilities().name}, {"time_s", out.time_s}}).dump());

@@ -634,18 +634,18 @@ struct TrialDriver::Impl {
     }
   }
 
-  // What the trial ran on and which defects were applied (the cell's word),
-  // one store step under the usual store-error policy.
+  // What the trial ran on and which defects were applied (the cell's word).
+  // Metadata: a store error here is logged by Step's policy, never blocks the trial.
   void RecordExecution(const Execution& ex, const msg::TrialStatus& st) {
     const auto detail = nlohmann::json::parse(st.detail_json(), nullptr, false);
     if (!detail.is_object()) return;
-    const std::string applied =
-        detail.contains("defects_applied") ? detail["defects_applied"].dump() : std::string();
     const std::string backend = detail.value("backend", std::string());
     const std::string truth = detail.value("truth", std::string());
+    const std::string applied =
+        detail.contains("defects_applied") ? detail["defects_applied"].dump() : std::string();
     const std::int64_t trial_id = ex.trial_id;
     const int attempt = ex.attempt;
-    Step("trial " + std::to_string(trial_id) + ": record its backend", "",
+    Step("trial " + std::to_string(trial_id) + ": record execution", "",
          [this, trial_id, attempt, backend, truth, applied] {
            store.RecordExecution(trial_id, attempt, backend, truth, applied);
          });
