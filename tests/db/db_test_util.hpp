@@ -101,12 +101,14 @@ class TempDir {
 };
 
 // Runs one trial through the whole state machine with n samples.
-// SQL that takes a current file back to schema version 4 (undoes migration 5),
-// for tests that make an "older" store and open it again.
+// SQL that takes a current file back to schema version 4 (undoes migrations
+// 5 and 10), for tests that make an "older" store and open it again.
 inline constexpr const char* kUndoMigration5 =
     " DROP TABLE store_meta; DROP TABLE services; DROP TABLE cell_events;"
     " ALTER TABLE cells DROP COLUMN lease_s; ALTER TABLE cells DROP COLUMN serving;"
-    " ALTER TABLE trials DROP COLUMN service_restarts;";
+    " ALTER TABLE trials DROP COLUMN service_restarts;"
+    " ALTER TABLE trials DROP COLUMN backend; ALTER TABLE trials DROP COLUMN truth;"
+    " ALTER TABLE trials DROP COLUMN defects_applied;";
 
 inline void RunTrialToDone(Store& store, const ClaimedTrial& t, int n,
                            const IngestOptions& options = {}) {

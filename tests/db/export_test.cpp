@@ -213,7 +213,7 @@ TEST_F(ExportTest, CsvRoundTripThroughAParser) {
       }
     }
   }
-  EXPECT_EQ(m["counts"]["files"], 1 + 2 * 3);
+  EXPECT_EQ(m["counts"]["files"], 1 + 2 * 3 + 1);  // + scenes.jsonl
 }
 
 TEST_F(ExportTest, JsonlRoundTripThroughAParser) {

@@ -64,7 +64,8 @@ TEST(StoreOpen, MigratesEmptyFileAndReopens) {
     store->CreateCampaign(MakeCampaign(), MakeTrials(2));
   }
   EXPECT_EQ(RawScalar(path, "PRAGMA journal_mode"), "wal");
-  EXPECT_EQ(RawScalar(path, "SELECT COUNT(*) FROM schema_migrations"),
+  // Versions have gaps (each engineer has a number): the newest one is the schema's.
+  EXPECT_EQ(RawScalar(path, "SELECT MAX(version) FROM schema_migrations"),
             std::to_string(Store::SchemaVersion()));
   auto again = Store::Open(path);
   EXPECT_EQ(again->FileSchemaVersion(), Store::SchemaVersion());
