@@ -101,14 +101,18 @@ class TempDir {
 };
 
 // Runs one trial through the whole state machine with n samples.
-// SQL that takes a current file back to schema version 4 (undoes migration 5),
-// for tests that make an "older" store and open it again.
+// SQL that takes a current file back to schema version 4 (undoes migrations
+// 5 and 10), for tests that make an "older" store and open it again.
 inline constexpr const char* kUndoMigration5 =
     " DROP TABLE store_meta; DROP TABLE services; DROP TABLE cell_events;"
     " ALTER TABLE cells DROP COLUMN lease_s; ALTER TABLE cells DROP COLUMN serving;"
+<<<<<<< HEAD
     " ALTER TABLE trials DROP COLUMN service_restarts;";
 // Undoes migration 10 (trials.backend, truth, defects_applied).
 inline constexpr const char* kUndoMigration10 =
+=======
+    " ALTER TABLE trials DROP COLUMN service_restarts;"
+>>>>>>> refs/heads/service
     " ALTER TABLE trials DROP COLUMN backend; ALTER TABLE trials DROP COLUMN truth;"
     " ALTER TABLE trials DROP COLUMN defects_applied;";
 
