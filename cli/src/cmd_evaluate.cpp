@@ -11,7 +11,7 @@
 #include <nlohmann/json.hpp>
 
 #include "arena/db/store.hpp"
-#include "arena/orchestrator/evaluation.hpp"
+#include "arena/assessment/evaluation.hpp"
 #include "commands.hpp"
 #include "progress.hpp"
 #include "signals.hpp"
@@ -32,7 +32,7 @@ struct EvaluateOptions {
   bool json = false;
 };
 
-std::string Milli(const std::optional<orchestrator::Distribution>& d, double scale,
+std::string Milli(const std::optional<assessment::Distribution>& d, double scale,
                   const char* fmt) {
   if (!d) return "-";
   char buf[64];
@@ -40,7 +40,7 @@ std::string Milli(const std::optional<orchestrator::Distribution>& d, double sca
   return buf;
 }
 
-std::string FormatTable(const orchestrator::EvaluationReport& r, std::int64_t evaluation_id) {
+std::string FormatTable(const assessment::EvaluationReport& r, std::int64_t evaluation_id) {
   std::ostringstream out;
   char line[512];
   std::snprintf(line, sizeof line,
@@ -70,14 +70,14 @@ std::string FormatTable(const orchestrator::EvaluationReport& r, std::int64_t ev
                   Milli(s.force, 1, "%.3g/%.3g").c_str(), mode, time, marks.c_str());
     out << line;
   }
-  out << "Pareto front: " << orchestrator::ToString(r.primary)
+  out << "Pareto front: " << assessment::ToString(r.primary)
       << " against median time per trial.\n";
   out << "recommendation: " << r.recommendation << "\n";
   return out.str();
 }
 
 int RunEvaluate(const EvaluateOptions& o) {
-  orchestrator::EvaluationOptions eo;
+  assessment::EvaluationOptions eo;
   eo.grid.facets = o.facets;
   eo.grid.points = o.points;
   eo.grid.dt = o.dt;
@@ -95,8 +95,8 @@ int RunEvaluate(const EvaluateOptions& o) {
   if (o.threads < 0) throw CommandError(kExitBadInput, "--threads: must be >= 0 (0: one per core)");
   eo.threads = o.threads;
   try {
-    for (const auto& b : o.budgets) eo.budgets.push_back(orchestrator::ParseBudget(b));
-    (void)orchestrator::ExpandGrid(eo.grid);
+    for (const auto& b : o.budgets) eo.budgets.push_back(assessment::ParseBudget(b));
+    (void)assessment::ExpandGrid(eo.grid);
   } catch (const std::invalid_argument& e) {
     throw CommandError(kExitBadInput, std::string("evaluate: ") + e.what());
   }
@@ -106,7 +106,7 @@ int RunEvaluate(const EvaluateOptions& o) {
   SignalWatcher signals([&cancel](int) { cancel.store(true); });
   eo.cancel = &cancel;
 
-  orchestrator::EvaluationRun run;
+  assessment::EvaluationRun run;
   try {
     db::StoreOptions so;
     so.create = false;
@@ -116,7 +116,7 @@ int RunEvaluate(const EvaluateOptions& o) {
       if (!progress) progress = std::make_unique<ProgressLine>(total, "replays");
       progress->Update(done, failed);
     };
-    run = orchestrator::EvaluateCampaign(*store, o.campaign, eo);
+    run = assessment::EvaluateCampaign(*store, o.campaign, eo);
     if (progress) progress->Finish();
   } catch (const db::StoreError& e) {
     throw StoreCommandError(e);
@@ -128,7 +128,7 @@ int RunEvaluate(const EvaluateOptions& o) {
     return kExitInterrupted;
   }
   if (o.json) {
-    nlohmann::json j = orchestrator::ToJson(run.report);
+    nlohmann::json j = assessment::ToJson(run.report);
     j["evaluation_id"] = run.evaluation_id;
     std::printf("%s\n", j.dump(2).c_str());
   } else {

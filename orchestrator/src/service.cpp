@@ -22,8 +22,8 @@
 #include "arena/mechanics/scene_json.hpp"
 #include "arena/mechanics/simulate.hpp"
 #include "arena/orchestrator/logging.hpp"
-#include "arena/orchestrator/prediction.hpp"
-#include "arena/orchestrator/scoring.hpp"
+#include "arena/assessment/prediction.hpp"
+#include "arena/assessment/truth.hpp"
 #include "arena/orchestrator/trial_data.hpp"
 #include "arena/schemas/arena.h"
 #include "arena/schemas/ground_truth.hpp"
@@ -32,6 +32,12 @@ namespace arena::orchestrator {
 
 namespace {
 
+// Prediction and scoring live in assessment/ (no DDS there).
+using assessment::ApplyModelSettings;
+using assessment::ContactNormals;
+using assessment::PredictionFailure;
+using assessment::PredictTrial;
+using assessment::ToTrajectorySample;
 using Clock = std::chrono::steady_clock;
 using Seconds = std::chrono::duration<double>;
 

@@ -33,7 +33,7 @@
 #include "arena/db/store.hpp"
 #include "arena/mechanics/scene.hpp"
 
-namespace arena::orchestrator {
+namespace arena::assessment {
 
 // The settings evaluated: the cross product of the lists (facets outermost).
 struct FidelityGrid {
@@ -157,4 +157,4 @@ struct EvaluationRun {
 EvaluationRun EvaluateCampaign(db::Store& store, std::int64_t campaign_id,
                                const EvaluationOptions& options);
 
-}  // namespace arena::orchestrator
+}  // namespace arena::assessment

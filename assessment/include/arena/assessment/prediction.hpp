@@ -11,7 +11,7 @@
 #include "arena/mechanics/scene.hpp"
 #include "arena/mechanics/simulate.hpp"
 
-namespace arena::orchestrator {
+namespace arena::assessment {
 
 // Overrides the scene's `model` with the settings present in `model`
 // (facets, points, dt, reduce; any may be absent; null = none).
@@ -30,4 +30,4 @@ db::Prediction PredictTrial(const mechanics::Scene& scene,
 // A prediction that could not be made (status, reason in detail_json).
 db::Prediction PredictionFailure(const std::string& status, const std::string& reason);
 
-}  // namespace arena::orchestrator
+}  // namespace arena::assessment

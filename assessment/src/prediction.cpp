@@ -1,4 +1,4 @@
-#include "arena/orchestrator/prediction.hpp"
+#include "arena/assessment/prediction.hpp"
 
 #include <chrono>
 #include <cstdio>
@@ -6,9 +6,9 @@
 #include <nlohmann/json.hpp>
 
 #include "arena/mechanics/scene_json.hpp"
-#include "arena/orchestrator/scoring.hpp"
+#include "arena/assessment/scoring.hpp"
 
-namespace arena::orchestrator {
+namespace arena::assessment {
 
 mechanics::Scene ApplyModelSettings(const mechanics::Scene& scene, const nlohmann::json& model) {
   mechanics::Scene out = scene;
@@ -113,4 +113,4 @@ db::Prediction PredictTrial(const mechanics::Scene& scene,
   return p;
 }
 
-}  // namespace arena::orchestrator
+}  // namespace arena::assessment

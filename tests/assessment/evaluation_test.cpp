@@ -1,15 +1,15 @@
 // The evaluation logic of `arena evaluate` on known inputs: percentiles,
 // budgets, the Pareto front and the recommendation
-// (orchestrator/include/arena/orchestrator/evaluation.hpp).
+// (assessment/include/arena/assessment/evaluation.hpp).
 #include <cmath>
 
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 
-#include "arena/orchestrator/evaluation.hpp"
-#include "arena/orchestrator/prediction.hpp"
+#include "arena/assessment/evaluation.hpp"
+#include "arena/assessment/prediction.hpp"
 
-namespace arena::orchestrator {
+namespace arena::assessment {
 namespace {
 
 TEST(EvaluationPercentile, InterpolatesBetweenClosestRanks) {
@@ -183,4 +183,4 @@ TEST(EvaluationSummary, EmptyCampaignAndJson) {
 }
 
 }  // namespace
-}  // namespace arena::orchestrator
+}  // namespace arena::assessment

@@ -1,4 +1,4 @@
-#include "arena/orchestrator/evaluation.hpp"
+#include "arena/assessment/evaluation.hpp"
 
 #include <algorithm>
 #include <chrono>
@@ -13,10 +13,10 @@
 #include <nlohmann/json.hpp>
 
 #include "arena/mechanics/scene_json.hpp"
-#include "arena/orchestrator/prediction.hpp"
-#include "arena/orchestrator/trial_data.hpp"
+#include "arena/assessment/prediction.hpp"
+#include "arena/assessment/truth.hpp"
 
-namespace arena::orchestrator {
+namespace arena::assessment {
 
 // ------------------------------------------------------------ grid
 
@@ -515,4 +515,4 @@ EvaluationRun EvaluateCampaign(db::Store& store, std::int64_t campaign_id,
   return run;
 }
 
-}  // namespace arena::orchestrator
+}  // namespace arena::assessment
