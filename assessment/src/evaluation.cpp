@@ -1,3 +1,7 @@
+// Running `arena evaluate`: load the campaign's done trials, build the
+// requested predictors, replay every (trial, setting) on a pool of worker
+// threads, compute the noise floor and the convergence table, summarise and
+// store the run.
 #include "arena/assessment/evaluation.hpp"
 
 #include <algorithm>
@@ -12,375 +16,47 @@
 
 #include <nlohmann/json.hpp>
 
-#include "arena/mechanics/scene_json.hpp"
+#include "arena/assessment/convergence.hpp"
 #include "arena/assessment/prediction.hpp"
 #include "arena/assessment/truth.hpp"
+#include "arena/mechanics/scene_json.hpp"
 
 namespace arena::assessment {
 
-// ------------------------------------------------------------ grid
-
-std::vector<mechanics::ModelOptions> ExpandGrid(const FidelityGrid& g) {
-  auto nonempty_unique = [](const auto& list, const char* name) {
-    if (list.empty()) throw std::invalid_argument(std::string(name) + ": needs at least one value");
-    std::set<std::decay_t<decltype(list[0])>> seen(list.begin(), list.end());
-    if (seen.size() != list.size())
-      throw std::invalid_argument(std::string(name) + ": a value is repeated");
-  };
-  nonempty_unique(g.facets, "facets");
-  nonempty_unique(g.points, "points");
-  nonempty_unique(g.dt, "dt");
-  nonempty_unique(g.reduce, "reduce");
-  for (int f : g.facets) {
-    if (f < 3) throw std::invalid_argument("facets: must be >= 3, got " + std::to_string(f));
-  }
-  for (int k : g.points) {
-    if (k < 2) throw std::invalid_argument("points: must be >= 2, got " + std::to_string(k));
-  }
-  for (double dt : g.dt) {
-    if (!std::isfinite(dt) || dt <= 0) {
-      throw std::invalid_argument("dt: must be a finite number > 0, got " + std::to_string(dt));
-    }
-  }
-  std::vector<mechanics::ModelOptions> out;
-  for (int f : g.facets)
-    for (int k : g.points)
-      for (double dt : g.dt)
-        for (auto r : g.reduce) out.push_back(mechanics::ModelOptions{f, k, dt, r});
-  return out;
-}
-
-double Percentile(std::vector<double> v, double p) {
-  if (v.empty()) throw std::invalid_argument("Percentile: no values");
-  if (!(p >= 0 && p <= 1)) throw std::invalid_argument("Percentile: p must be in [0, 1]");
-  std::sort(v.begin(), v.end());
-  const double h = (static_cast<double>(v.size()) - 1) * p;
-  const auto lo = static_cast<std::size_t>(std::floor(h));
-  const std::size_t hi = std::min(lo + 1, v.size() - 1);
-  return v[lo] + (h - static_cast<double>(lo)) * (v[hi] - v[lo]);
-}
-
-// ------------------------------------------------------------ budgets
-
-namespace {
-
-constexpr std::pair<ErrorMetric, const char*> kMetricNames[] = {
-    {ErrorMetric::kPositionMedian, "position_median"},
-    {ErrorMetric::kPositionP95, "position_p95"},
-    {ErrorMetric::kAngleMedian, "angle_median"},
-    {ErrorMetric::kAngleP95, "angle_p95"},
-    {ErrorMetric::kForceMedian, "force_median"},
-    {ErrorMetric::kForceP95, "force_p95"},
-    {ErrorMetric::kModeAgreementMedian, "mode_agreement_median"},
-};
-
-enum class Quantity { kLength, kAngle, kForce, kFraction };
-
-Quantity QuantityOf(ErrorMetric m) {
-  switch (m) {
-    case ErrorMetric::kPositionMedian:
-    case ErrorMetric::kPositionP95:
-      return Quantity::kLength;
-    case ErrorMetric::kAngleMedian:
-    case ErrorMetric::kAngleP95:
-      return Quantity::kAngle;
-    case ErrorMetric::kForceMedian:
-    case ErrorMetric::kForceP95:
-      return Quantity::kForce;
-    case ErrorMetric::kModeAgreementMedian:
-      return Quantity::kFraction;
-  }
-  return Quantity::kLength;
-}
-
-const char* SiUnit(ErrorMetric m) {
-  switch (QuantityOf(m)) {
-    case Quantity::kLength:
-      return "m";
-    case Quantity::kAngle:
-      return "rad";
-    case Quantity::kForce:
-      return "N";
-    case Quantity::kFraction:
-      return "";
-  }
-  return "";
-}
-
-}  // namespace
-
-const char* ToString(ErrorMetric metric) {
-  for (const auto& [m, name] : kMetricNames) {
-    if (m == metric) return name;
-  }
-  return "?";
-}
-
-bool LowerIsBetter(ErrorMetric metric) { return metric != ErrorMetric::kModeAgreementMedian; }
-
-Budget ParseBudget(const std::string& text) {
-  Budget b;
-  std::string value = text;
-  const auto eq = text.find('=');
-  if (eq != std::string::npos) {
-    const std::string name = text.substr(0, eq);
-    bool found = false;
-    for (const auto& [m, n] : kMetricNames) {
-      if (name == n) {
-        b.metric = m;
-        found = true;
+TruthInfo TruthOf(const db::Store& store, const std::vector<db::Trial>& trials) {
+  std::set<std::string> cells, backends;
+  for (const auto& t : trials) cells.insert(t.cell_id);
+  std::map<std::string, std::string> backend_of;
+  for (const auto& c : store.ListCells()) {
+    std::string backend = "model";  // cells before backends existed ran the model
+    try {
+      const auto caps = nlohmann::json::parse(c.capabilities_json);
+      if (caps.is_object() && caps.contains("backend") && caps["backend"].is_string()) {
+        backend = caps["backend"].get<std::string>();
       }
+    } catch (const std::exception&) {
     }
-    if (!found) {
-      std::string names;
-      for (const auto& [m, n] : kMetricNames) names += std::string(names.empty() ? "" : ", ") + n;
-      throw std::invalid_argument("budget '" + text + "': unknown metric '" + name + "' (one of " +
-                                  names + ")");
-    }
-    value = text.substr(eq + 1);
+    backend_of[c.id] = backend;
   }
-  std::size_t used = 0;
-  double number = 0;
-  try {
-    number = std::stod(value, &used);
-  } catch (const std::exception&) {
-    throw std::invalid_argument("budget '" + text + "': '" + value +
-                                "' is not a number with a unit");
+  for (const auto& cell : cells) {
+    const auto it = backend_of.find(cell);
+    backends.insert(it == backend_of.end() ? "model" : it->second);
   }
-  const std::string unit = value.substr(used);
-  struct UnitScale {
-    const char* unit;
-    Quantity quantity;
-    double scale;
-  };
-  static const UnitScale kUnits[] = {
-      {"m", Quantity::kLength, 1},      {"mm", Quantity::kLength, 1e-3},
-      {"um", Quantity::kLength, 1e-6},  {"rad", Quantity::kAngle, 1},
-      {"mrad", Quantity::kAngle, 1e-3}, {"deg", Quantity::kAngle, M_PI / 180},
-      {"N", Quantity::kForce, 1},       {"mN", Quantity::kForce, 1e-3},
-      {"%", Quantity::kFraction, 1e-2},
-  };
-  double scale = 1;
-  if (!unit.empty()) {
-    const UnitScale* u = nullptr;
-    for (const auto& candidate : kUnits) {
-      if (unit == candidate.unit) u = &candidate;
-    }
-    if (!u) throw std::invalid_argument("budget '" + text + "': unknown unit '" + unit + "'");
-    if (u->quantity != QuantityOf(b.metric)) {
-      throw std::invalid_argument("budget '" + text + "': unit '" + unit + "' does not fit " +
-                                  ToString(b.metric));
-    }
-    scale = u->scale;
-  }
-  b.limit = number * scale;
-  if (!std::isfinite(b.limit) || b.limit < 0) {
-    throw std::invalid_argument("budget '" + text + "': must be a finite value >= 0");
-  }
-  if (QuantityOf(b.metric) == Quantity::kFraction && b.limit > 1) {
-    throw std::invalid_argument("budget '" + text + "': a fraction must be <= 1 (or <= 100%)");
-  }
-  return b;
-}
-
-std::string FormatBudget(const Budget& b) {
-  char buf[96];
-  std::snprintf(buf, sizeof buf, "%s %s %g%s%s", ToString(b.metric),
-                LowerIsBetter(b.metric) ? "<=" : ">=", b.limit, *SiUnit(b.metric) ? " " : "",
-                SiUnit(b.metric));
-  return buf;
-}
-
-// ------------------------------------------------------------ summary
-
-std::optional<double> SettingSummary::Metric(ErrorMetric metric) const {
-  auto pick = [](const std::optional<Distribution>& d, bool median) -> std::optional<double> {
-    if (!d) return std::nullopt;
-    return median ? d->median : d->p95;
-  };
-  switch (metric) {
-    case ErrorMetric::kPositionMedian:
-      return pick(position, true);
-    case ErrorMetric::kPositionP95:
-      return pick(position, false);
-    case ErrorMetric::kAngleMedian:
-      return pick(angle, true);
-    case ErrorMetric::kAngleP95:
-      return pick(angle, false);
-    case ErrorMetric::kForceMedian:
-      return pick(force, true);
-    case ErrorMetric::kForceP95:
-      return pick(force, false);
-    case ErrorMetric::kModeAgreementMedian:
-      return pick(mode_agreement, true);
-  }
-  return std::nullopt;
-}
-
-namespace {
-
-std::optional<Distribution> Distribute(const std::vector<double>& v) {
-  if (v.empty()) return std::nullopt;
-  return Distribution{Percentile(v, 0.5), Percentile(v, 0.95)};
-}
-
-// Error oriented so that smaller is better.
-double Cost(const SettingSummary& s, ErrorMetric m) {
-  const double v = *s.Metric(m);
-  return LowerIsBetter(m) ? v : -v;
-}
-
-}  // namespace
-
-void MarkParetoFront(std::vector<SettingSummary>& settings, ErrorMetric primary) {
-  for (auto& s : settings) s.pareto = false;
-  for (auto& s : settings) {
-    if (!s.eligible() || !s.Metric(primary)) continue;
-    bool dominated = false;
-    for (const auto& o : settings) {
-      if (&o == &s || !o.eligible() || !o.Metric(primary)) continue;
-      const double se = Cost(s, primary), oe = Cost(o, primary);
-      const double st = s.time.median, ot = o.time.median;
-      if (oe <= se && ot <= st && (oe < se || ot < st)) {
-        dominated = true;
-        break;
-      }
-    }
-    s.pareto = !dominated;
-  }
-}
-
-EvaluationReport Summarise(const std::vector<mechanics::ModelOptions>& models,
-                           const std::vector<TrialEvaluation>& results,
-                           const std::vector<Budget>& budgets) {
-  EvaluationReport report;
-  report.budgets = budgets;
-  if (!budgets.empty()) report.primary = budgets.front().metric;
-  struct Collect {
-    std::vector<double> position, angle, force, mode, time;
-  };
-  std::vector<Collect> c(models.size());
-  report.settings.resize(models.size());
-  std::set<std::int64_t> trials;
-  for (std::size_t i = 0; i < models.size(); ++i) {
-    report.settings[i].model = models[i];
-    report.settings[i].model_key = ModelKey(models[i]);
-  }
-  for (const auto& r : results) {
-    if (r.setting >= models.size())
-      throw std::invalid_argument("Summarise: setting index out of range");
-    trials.insert(r.trial_id);
-    auto& s = report.settings[r.setting];
-    auto& col = c[r.setting];
-    const auto& p = r.prediction;
-    ++s.trials;
-    col.time.push_back(p.wall_s);
-    if (p.status == "ok" && p.final_position_error && p.final_angle_error && p.force_error &&
-        p.mode_agreement) {
-      ++s.ok;
-      col.position.push_back(*p.final_position_error);
-      col.angle.push_back(*p.final_angle_error);
-      col.force.push_back(*p.force_error);
-      col.mode.push_back(*p.mode_agreement);
-    } else {
-      ++s.failures;
-    }
-  }
-  report.trials = static_cast<int>(trials.size());
-  for (std::size_t i = 0; i < models.size(); ++i) {
-    auto& s = report.settings[i];
-    s.position = Distribute(c[i].position);
-    s.angle = Distribute(c[i].angle);
-    s.force = Distribute(c[i].force);
-    s.mode_agreement = Distribute(c[i].mode);
-    if (!c[i].time.empty()) s.time = *Distribute(c[i].time);
-    s.within_budget =
-        s.eligible() && std::all_of(budgets.begin(), budgets.end(), [&](const Budget& b) {
-          const auto v = s.Metric(b.metric);
-          return v && (LowerIsBetter(b.metric) ? *v <= b.limit : *v >= b.limit);
-        });
-  }
-  MarkParetoFront(report.settings, report.primary);
-
-  // Cheapest (median time) setting within budget; ties go to the smaller error.
-  for (std::size_t i = 0; i < report.settings.size(); ++i) {
-    const auto& s = report.settings[i];
-    if (!s.within_budget) continue;
-    if (!report.recommended) {
-      report.recommended = i;
-      continue;
-    }
-    const auto& best = report.settings[*report.recommended];
-    if (s.time.median < best.time.median ||
-        (s.time.median == best.time.median &&
-         Cost(s, report.primary) < Cost(best, report.primary))) {
-      report.recommended = i;
-    }
-  }
-  std::string budget_text;
-  for (const auto& b : budgets)
-    budget_text += (budget_text.empty() ? "" : " and ") + FormatBudget(b);
-  if (report.recommended) {
-    const auto& s = report.settings[*report.recommended];
-    char buf[256];
-    std::snprintf(buf, sizeof buf, "%s: the cheapest setting (median %.3g ms per trial) %s",
-                  s.model_key.c_str(), s.time.median * 1e3,
-                  budgets.empty() ? "that predicted every trial (no --budget given)"
-                                  : ("within " + budget_text).c_str());
-    report.recommendation = buf;
-  } else if (report.trials == 0) {
-    report.recommendation = "none: the campaign has no done trial to evaluate";
-  } else if (std::none_of(report.settings.begin(), report.settings.end(),
-                          [](const SettingSummary& s) { return s.eligible(); })) {
-    report.recommendation = "none: every setting failed on some trial";
+  TruthInfo info;
+  info.source.clear();
+  for (const auto& b : backends) info.source += (info.source.empty() ? "" : ",") + b;
+  if (info.source.empty()) info.source = "model";
+  info.independent = !backends.empty() && !backends.count("model");
+  if (backends.count("model")) {
+    info.statement =
+        "the truth is the model at the cell's settings (self-consistency, not accuracy)";
+    if (backends.size() > 1) info.statement += "; some trials ran on " + info.source;
   } else {
-    report.recommendation = "none: no setting that predicted every trial is within " + budget_text;
+    info.statement = "the truth is the " + info.source +
+                     " backend, independent of arena's model (accuracy against that engine)";
   }
-  return report;
+  return info;
 }
-
-nlohmann::json ToJson(const EvaluationReport& r) {
-  auto dist = [](const std::optional<Distribution>& d) -> nlohmann::json {
-    if (!d) return nullptr;
-    return {{"median", d->median}, {"p95", d->p95}};
-  };
-  nlohmann::json settings = nlohmann::json::array();
-  for (const auto& s : r.settings) {
-    settings.push_back(
-        {{"model_key", s.model_key},
-         {"facets", s.model.facets},
-         {"points", s.model.points},
-         {"dt", s.model.dt},
-         {"reduce", mechanics::ToString(s.model.reduce)},
-         {"trials", s.trials},
-         {"ok", s.ok},
-         {"failures", s.failures},
-         {"position_error_m", dist(s.position)},
-         {"angle_error_rad", dist(s.angle)},
-         {"force_error_n", dist(s.force)},
-         {"mode_agreement", dist(s.mode_agreement)},
-         {"time_s", dist(s.time)},
-         {"primary_error", s.Metric(r.primary) ? nlohmann::json(*s.Metric(r.primary)) : nullptr},
-         {"pareto", s.pareto},
-         {"within_budget", s.within_budget}});
-  }
-  nlohmann::json budgets = nlohmann::json::array();
-  for (const auto& b : r.budgets) {
-    budgets.push_back(
-        {{"metric", ToString(b.metric)}, {"limit", b.limit}, {"text", FormatBudget(b)}});
-  }
-  nlohmann::json out = {{"campaign_id", r.campaign_id},
-                        {"trials", r.trials},
-                        {"primary_metric", ToString(r.primary)},
-                        {"budgets", budgets},
-                        {"settings", settings},
-                        {"recommended", nullptr},
-                        {"recommendation", r.recommendation}};
-  if (r.recommended) out["recommended"] = r.settings[*r.recommended].model_key;
-  return out;
-}
-
-// ------------------------------------------------------------ running
 
 namespace {
 
@@ -391,43 +67,90 @@ struct LoadedTrial {
   std::string error;  // non-empty: the trial could not be loaded
 };
 
-LoadedTrial LoadTrial(const db::Store& store, const db::Trial& t) {
+LoadedTrial LoadTrial(const db::Store& store, const db::Trial& t, const mechanics::Scene* scene) {
   LoadedTrial out;
   out.id = t.id;
   try {
-    out.scene = mechanics::ParseScene(t.scene_json);
-    const auto normals = ContactNormals(out.scene);
-    const db::GroundTruth gt = store.ReadGroundTruth(t.id);
-    out.truth.reserve(gt.samples.size());
-    for (const auto& s : gt.samples) {
-      out.truth.push_back(ToTrajectorySample(s, normals, out.scene.pusher.has_value()));
-    }
+    out.scene = scene ? *scene : mechanics::ParseScene(t.scene_json);
+    out.truth = ReadTruth(store, t.id, out.scene);
   } catch (const std::exception& e) {
     out.error = e.what();
   }
   return out;
 }
 
-nlohmann::json ModelJson(const mechanics::ModelOptions& m) {
-  return {{"facets", m.facets},
-          {"points", m.points},
-          {"dt", m.dt},
-          {"reduce", mechanics::ToString(m.reduce)}};
+struct Built {
+  std::vector<std::unique_ptr<Predictor>> predictors;
+  std::vector<SettingInfo> infos;
+  std::vector<std::pair<std::size_t, std::size_t>> index;  // flat -> (predictor, setting)
+  nlohmann::json grids = nlohmann::json::object();
+};
+
+Built BuildPredictors(const std::vector<PredictorRequest>& requests,
+                      const std::vector<mechanics::Scene>& scenes) {
+  if (requests.empty()) throw std::invalid_argument("predictors: name at least one");
+  Built b;
+  std::set<std::string> seen;
+  for (const auto& req : requests) {
+    if (!seen.insert(req.name).second) {
+      throw std::invalid_argument("predictors: '" + req.name + "' is named twice");
+    }
+    if (req.name == "arena") {
+      const auto models = req.arena_grid ? ExpandGrid(*req.arena_grid) : DefaultArenaGrid(scenes);
+      b.predictors.push_back(MakeArenaPredictor(models));
+      nlohmann::json keys = nlohmann::json::array();
+      for (std::size_t i = 0; i < models.size(); ++i) {
+        b.infos.push_back(SettingInfo{"arena", b.predictors.back()->settings()[i], models[i]});
+        keys.push_back(b.infos.back().setting.key);
+      }
+      b.grids["arena"] = {{"default", !req.arena_grid}, {"settings", keys}};
+    } else {
+      throw std::invalid_argument("predictors: unknown predictor '" + req.name +
+                                  "' (available: arena)");
+    }
+    for (std::size_t i = 0; i < b.predictors.back()->settings().size(); ++i) {
+      b.index.emplace_back(b.predictors.size() - 1, i);
+    }
+  }
+  return b;
+}
+
+// Up to `n` trials spread evenly over the list.
+std::vector<std::size_t> Spread(std::size_t total, int n) {
+  std::vector<std::size_t> out;
+  if (n <= 0 || total == 0) return out;
+  const std::size_t take = std::min<std::size_t>(total, static_cast<std::size_t>(n));
+  for (std::size_t i = 0; i < take; ++i) out.push_back(i * total / take);
+  return out;
 }
 
 }  // namespace
 
 EvaluationRun EvaluateCampaign(db::Store& store, std::int64_t campaign_id,
                                const EvaluationOptions& options) {
-  const auto models = ExpandGrid(options.grid);
   (void)store.GetCampaign(campaign_id);  // kNotFound for an unknown campaign
   std::vector<db::Trial> trials;
   for (auto& t : store.ListTrials(campaign_id)) {
     if (t.state == db::TrialState::kDone && t.gt_stream_id) trials.push_back(std::move(t));
   }
-  const std::size_t total = trials.size() * models.size();
+  // Scenes first: the default grids keep only settings every scene takes.
+  std::vector<std::optional<mechanics::Scene>> scenes(trials.size());
+  std::vector<mechanics::Scene> valid_scenes;
+  for (std::size_t i = 0; i < trials.size(); ++i) {
+    try {
+      scenes[i] = mechanics::ParseScene(trials[i].scene_json);
+      valid_scenes.push_back(*scenes[i]);
+    } catch (const std::exception&) {
+      // reported per job as an error
+    }
+  }
+  const Built built = BuildPredictors(options.predictors, valid_scenes);
+  const std::size_t settings = built.infos.size();
+  const std::size_t total = trials.size() * settings;
   std::vector<TrialEvaluation> results(total);
-  std::atomic<std::size_t> next{0};
+  std::vector<std::optional<FinalPose>> finals(trials.size());
+  std::vector<double> durations(trials.size(), 0);
+  std::atomic<std::size_t> next_trial{0};
   std::atomic<long> done{0}, failed{0};
   std::mutex error_mutex;
   std::string worker_error;
@@ -435,48 +158,56 @@ EvaluationRun EvaluateCampaign(db::Store& store, std::int64_t campaign_id,
 
   int threads =
       options.threads > 0 ? options.threads : static_cast<int>(std::thread::hardware_concurrency());
-  threads = std::max(1, std::min<int>(threads, static_cast<int>(std::max<std::size_t>(total, 1))));
+  threads = std::max(
+      1, std::min<int>(threads, static_cast<int>(std::max<std::size_t>(trials.size(), 1))));
 
-  // Jobs are trial-major, so a worker usually reuses the trial it loaded last.
+  // A worker takes a whole trial (every setting of every predictor), so each
+  // trial's ground truth is read and converted once.
   auto worker = [&]() {
     try {
       db::StoreOptions ro;
       ro.read_only = true;
       auto reader = db::Store::Open(store.path(), ro);
-      LoadedTrial loaded;
       for (;;) {
         if (options.cancel && options.cancel->load()) return;
-        const std::size_t job = next.fetch_add(1);
-        if (job >= total) return;
-        const auto& t = trials[job / models.size()];
-        const std::size_t setting = job % models.size();
-        if (loaded.id != t.id) loaded = LoadTrial(*reader, t);
-        TrialEvaluation& r = results[job];
-        r.trial_id = t.id;
-        r.attempt = t.attempt;
-        r.setting = setting;
-        if (!loaded.error.empty()) {
-          r.prediction = PredictionFailure("error", loaded.error);
-        } else {
-          try {
-            mechanics::Scene scene = loaded.scene;
-            scene.model = models[setting];
-            mechanics::ValidateScene(scene);
-            r.prediction = PredictTrial(scene, loaded.truth);
-          } catch (const std::exception& e) {
-            r.prediction = PredictionFailure("invalid_scene", e.what());
-          }
+        const std::size_t ti = next_trial.fetch_add(1);
+        if (ti >= trials.size()) return;
+        const auto& t = trials[ti];
+        const LoadedTrial loaded = LoadTrial(*reader, t, scenes[ti] ? &*scenes[ti] : nullptr);
+        if (loaded.error.empty() && !loaded.truth.empty()) {
+          durations[ti] = loaded.truth.back().t;
+          finals[ti] = FinalPose{t.id, t.condition, loaded.truth.back().position,
+                                 loaded.truth.back().orientation};
         }
-        r.prediction.model_key = ModelKey(models[setting]);
-        r.prediction.model_json = ModelJson(models[setting]).dump();
-        if (r.prediction.status != "ok") failed.fetch_add(1);
-        done.fetch_add(1);
+        for (std::size_t s = 0; s < settings; ++s) {
+          if (options.cancel && options.cancel->load()) return;
+          TrialEvaluation& r = results[ti * settings + s];
+          r.trial_id = t.id;
+          r.attempt = t.attempt;
+          r.setting = s;
+          r.truth_duration_s = durations[ti];
+          const auto [pi, si] = built.index[s];
+          if (!loaded.error.empty()) {
+            r.prediction = PredictionFailure("error", loaded.error);
+          } else {
+            const auto start = std::chrono::steady_clock::now();
+            const auto result = built.predictors[pi]->Run(loaded.scene, si);
+            const double wall =
+                std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+            r.prediction = ScoreSimulation(loaded.scene, result, loaded.truth);
+            r.prediction.wall_s = wall;
+          }
+          r.prediction.model_key = built.infos[s].setting.key;
+          r.prediction.model_json = built.infos[s].setting.knobs_json;
+          if (r.prediction.status != "ok") failed.fetch_add(1);
+          done.fetch_add(1);
+        }
       }
     } catch (const std::exception& e) {
       std::lock_guard<std::mutex> lock(error_mutex);
       if (worker_error.empty()) worker_error = e.what();
       worker_failed.store(true);
-      next.store(total);  // stop the others too
+      next_trial.store(trials.size());  // stop the others too
     }
   };
   std::vector<std::thread> pool;
@@ -495,16 +226,48 @@ EvaluationRun EvaluateCampaign(db::Store& store, std::int64_t campaign_id,
     run.cancelled = true;
     return run;
   }
-  run.report = Summarise(models, results, options.budgets);
+  std::vector<FinalPose> final_poses;
+  for (const auto& f : finals) {
+    if (f) final_poses.push_back(*f);
+  }
+  run.report = Summarise(built.infos, results, options.budgets, ComputeNoiseFloor(final_poses));
   run.report.campaign_id = campaign_id;
+  run.report.truth = TruthOf(store, trials);
 
-  nlohmann::json grid = {{"facets", options.grid.facets},
-                         {"points", options.grid.points},
-                         {"dt", options.grid.dt},
-                         {"reduce", nlohmann::json::array()},
+  // The convergence table: a few trials, short pieces from the true state.
+  if (options.convergence_trials > 0 && !trials.empty()) {
+    std::vector<ConvergenceTrial> sample;
+    for (std::size_t ti : Spread(trials.size(), options.convergence_trials)) {
+      if (!scenes[ti]) continue;
+      try {
+        sample.push_back(
+            ConvergenceTrial{*scenes[ti], ReadTruth(store, trials[ti].id, *scenes[ti])});
+      } catch (const std::exception&) {
+      }
+    }
+    std::size_t flat = 0;
+    for (const auto& p : built.predictors) {
+      const auto table = ConvergenceTable(*p, sample);
+      for (std::size_t i = 0; i < table.size(); ++i)
+        run.report.settings[flat + i].convergence = table[i];
+      flat += table.size();
+    }
+  }
+
+  nlohmann::json grid = {{"predictors", built.grids},
                          {"budgets", nlohmann::json::array()},
-                         {"threads", threads}};
-  for (auto r : options.grid.reduce) grid["reduce"].push_back(mechanics::ToString(r));
+                         {"threads", threads},
+                         {"convergence_trials", options.convergence_trials}};
+  for (const auto& req : options.predictors) {
+    if (req.name == "arena" && req.arena_grid) {
+      const auto& g = *req.arena_grid;
+      grid["facets"] = g.facets;
+      grid["points"] = g.points;
+      grid["dt"] = g.dt;
+      grid["reduce"] = nlohmann::json::array();
+      for (auto r : g.reduce) grid["reduce"].push_back(mechanics::ToString(r));
+    }
+  }
   for (const auto& b : options.budgets) grid["budgets"].push_back(FormatBudget(b));
   std::vector<db::EvaluationResult> rows;
   rows.reserve(results.size());

@@ -1,12 +1,14 @@
 #include "arena/assessment/prediction.hpp"
 
+#include <algorithm>
 #include <chrono>
+#include <cmath>
 #include <cstdio>
 
 #include <nlohmann/json.hpp>
 
-#include "arena/mechanics/scene_json.hpp"
 #include "arena/assessment/scoring.hpp"
+#include "arena/mechanics/scene_json.hpp"
 
 namespace arena::assessment {
 
@@ -61,18 +63,106 @@ db::Prediction PredictionFailure(const std::string& status, const std::string& r
   return p;
 }
 
-db::Prediction PredictTrial(const mechanics::Scene& scene,
-                            const std::vector<mechanics::TrajectorySample>& truth) {
+const char* ToString(PredictionOutcome outcome) {
+  switch (outcome) {
+    case PredictionOutcome::kOk:
+      return "ok";
+    case PredictionOutcome::kDiverged:
+      return "diverged";
+    case PredictionOutcome::kSolverFailure:
+      return "solver_failure";
+    case PredictionOutcome::kInvalidScene:
+      return "invalid_scene";
+    case PredictionOutcome::kError:
+      return "error";
+  }
+  return "error";
+}
+
+PredictionOutcome OutcomeOf(const std::string& status) {
+  for (auto o : {PredictionOutcome::kOk, PredictionOutcome::kDiverged,
+                 PredictionOutcome::kSolverFailure, PredictionOutcome::kInvalidScene}) {
+    if (status == ToString(o)) return o;
+  }
+  return PredictionOutcome::kError;
+}
+
+namespace {
+
+double LargestExtent(const mechanics::ObjectSpec& o) {
+  if (o.shape == mechanics::ObjectShape::kCylinder) return std::max(2 * o.radius, o.height);
+  return o.size.maxCoeff();
+}
+
+bool Finite(const mechanics::TrajectorySample& s) {
+  if (!s.position.allFinite() || !s.velocity.allFinite() || !s.angular_velocity.allFinite() ||
+      !s.orientation.coeffs().allFinite()) {
+    return false;
+  }
+  for (const auto& c : s.contacts) {
+    if (!std::isfinite(c.normal_force) || !c.tangential_force.allFinite()) return false;
+  }
+  return true;
+}
+
+// True when every finger (not the pusher) is separated.
+bool AllFingersSeparated(const mechanics::TrajectorySample& s, std::size_t fingers) {
+  if (fingers == 0 || s.contacts.size() < fingers) return false;
+  for (std::size_t i = 0; i < fingers; ++i) {
+    if (s.contacts[i].mode != mechanics::ContactMode::kSeparate) return false;
+  }
+  return true;
+}
+
+}  // namespace
+
+std::optional<std::string> DivergenceReason(
+    const mechanics::Scene& scene, const std::vector<mechanics::TrajectorySample>& predicted,
+    const std::vector<mechanics::TrajectorySample>& truth) {
+  if (predicted.empty()) return std::nullopt;
+  double travel = 0, turn = 0;
+  if (scene.pusher) {
+    travel =
+        scene.pusher->motion.velocity.norm() * scene.duration +
+        scene.pusher->motion.angular_velocity.norm() * scene.duration * LargestExtent(scene.object);
+    turn = scene.pusher->motion.angular_velocity.norm() * scene.duration;
+  }
+  const double reach = travel + LargestExtent(scene.object);
+  const auto& start = predicted.front();
+  char buf[200];
+  for (const auto& s : predicted) {
+    if (!Finite(s)) {
+      std::snprintf(buf, sizeof buf, "diverged: a non-finite state at t = %.4g s", s.t);
+      return std::string(buf);
+    }
+    const double moved = (s.position - start.position).norm();
+    if (moved > reach) {
+      std::snprintf(buf, sizeof buf,
+                    "diverged: the object moved %.4g m by t = %.4g s, more than the pusher's "
+                    "travel plus the object's extent (%.4g m)",
+                    moved, s.t, reach);
+      return std::string(buf);
+    }
+    const double turned =
+        s.orientation.normalized().angularDistance(start.orientation.normalized());
+    if (turned > M_PI / 2 + turn) {
+      std::snprintf(buf, sizeof buf, "diverged: the object turned %.1f deg by t = %.4g s",
+                    turned * 180 / M_PI, s.t);
+      return std::string(buf);
+    }
+  }
+  const std::size_t fingers = scene.fingers.size();
+  if (!truth.empty() && AllFingersSeparated(predicted.back(), fingers) &&
+      !AllFingersSeparated(truth[std::min(truth.size(), predicted.size()) - 1], fingers)) {
+    return std::string("left the grasp: every finger separated while the truth still held it");
+  }
+  return std::nullopt;
+}
+
+db::Prediction ScoreSimulation(const mechanics::Scene& scene,
+                               const mechanics::SimulationResult& result,
+                               const std::vector<mechanics::TrajectorySample>& truth) {
   db::Prediction p;
-  p.model_key = ModelKey(scene.model);
-  p.model_json = nlohmann::json({{"facets", scene.model.facets},
-                                 {"points", scene.model.points},
-                                 {"dt", scene.model.dt},
-                                 {"reduce", mechanics::ToString(scene.model.reduce)}})
-                     .dump();
-  const auto start = std::chrono::steady_clock::now();
-  const mechanics::SimulationResult result = mechanics::Simulate(scene);
-  p.wall_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   nlohmann::json detail = {{"residuals",
                             {{"force_balance", result.residuals.force_balance},
                              {"complementarity", result.residuals.complementarity},
@@ -87,15 +177,33 @@ db::Prediction PredictTrial(const mechanics::Scene& scene,
     case mechanics::SimulationStatus::kOk:
       break;
     case mechanics::SimulationStatus::kSolverFailure:
-      p.status = "solver_failure";
+      p.status = ToString(PredictionOutcome::kSolverFailure);
       detail["error"] = result.error;
       p.detail_json = detail.dump();
       return p;
     case mechanics::SimulationStatus::kInvalidScene:
-      p.status = "invalid_scene";
+      p.status = ToString(PredictionOutcome::kInvalidScene);
       detail["error"] = result.error;
       p.detail_json = detail.dump();
       return p;
+  }
+  if (const auto why = DivergenceReason(scene, result.samples, truth)) {
+    p.status = ToString(PredictionOutcome::kDiverged);
+    detail["error"] = *why;
+    if (std::none_of(result.samples.begin(), result.samples.end(),
+                     [](const auto& s) { return !Finite(s); })) {
+      // Still scored (for the listing), never averaged in: status is not ok.
+      try {
+        const PredictionError e = ScorePrediction(result.samples, truth);
+        p.final_position_error = e.final_position;
+        p.final_angle_error = e.final_angle;
+        p.force_error = e.force_rms;
+        p.mode_agreement = e.mode_agreement;
+      } catch (const std::exception&) {
+      }
+    }
+    p.detail_json = detail.dump();
+    return p;
   }
   try {
     const PredictionError e = ScorePrediction(result.samples, truth);
@@ -106,10 +214,27 @@ db::Prediction PredictTrial(const mechanics::Scene& scene,
     detail["samples_compared"] = e.samples_compared;
     detail["force_scale"] = e.force_scale;
   } catch (const std::exception& e) {
-    p.status = "error";
+    p.status = ToString(PredictionOutcome::kError);
     detail["error"] = e.what();
   }
   p.detail_json = detail.dump();
+  return p;
+}
+
+db::Prediction PredictTrial(const mechanics::Scene& scene,
+                            const std::vector<mechanics::TrajectorySample>& truth) {
+  const auto start = std::chrono::steady_clock::now();
+  const mechanics::SimulationResult result = mechanics::Simulate(scene);
+  const double wall =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  db::Prediction p = ScoreSimulation(scene, result, truth);
+  p.wall_s = wall;
+  p.model_key = ModelKey(scene.model);
+  p.model_json = nlohmann::json({{"facets", scene.model.facets},
+                                 {"points", scene.model.points},
+                                 {"dt", scene.model.dt},
+                                 {"reduce", mechanics::ToString(scene.model.reduce)}})
+                     .dump();
   return p;
 }
 

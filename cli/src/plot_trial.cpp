@@ -9,11 +9,11 @@
 #include <Eigen/Geometry>
 #include <nlohmann/json.hpp>
 
+#include "arena/assessment/prediction.hpp"
+#include "arena/assessment/truth.hpp"
 #include "arena/db/store.hpp"
 #include "arena/mechanics/scene_json.hpp"
 #include "arena/mechanics/simulate.hpp"
-#include "arena/assessment/prediction.hpp"
-#include "arena/assessment/truth.hpp"
 #include "commands.hpp"
 #include "store_errors.hpp"
 

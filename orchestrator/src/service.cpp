@@ -18,12 +18,12 @@
 #include <spdlog/spdlog.h>
 #include <nlohmann/json.hpp>
 
+#include "arena/assessment/prediction.hpp"
+#include "arena/assessment/truth.hpp"
 #include "arena/db/store.hpp"
 #include "arena/mechanics/scene_json.hpp"
 #include "arena/mechanics/simulate.hpp"
 #include "arena/orchestrator/logging.hpp"
-#include "arena/assessment/prediction.hpp"
-#include "arena/assessment/truth.hpp"
 #include "arena/orchestrator/trial_data.hpp"
 #include "arena/schemas/arena.h"
 #include "arena/schemas/ground_truth.hpp"

@@ -15,12 +15,12 @@
 #include <gtest/gtest.h>
 #include <tinyxml2.h>
 
+#include "arena/assessment/truth.hpp"
 #include "arena/db/store.hpp"
 #include "arena/mechanics/scene_json.hpp"
 #include "arena/mechanics/simulate.hpp"
 #include "arena/orchestrator/campaign.hpp"
 #include "arena/orchestrator/submit.hpp"
-#include "arena/assessment/truth.hpp"
 #include "plot_trial.hpp"
 
 namespace arena::cli {

@@ -1,0 +1,45 @@
+// A predictor: a named model of contact dynamics with its fidelity knobs.
+// `arena evaluate --predictors arena,mujoco` replays the same done trials
+// through every predictor's grid of settings; the campaign's `prediction`
+// may name one. A predictor turns a scene into a mechanics::SimulationResult
+// (the model's trajectory at 250 Hz, status, residuals) so that one scorer
+// judges them all.
+#pragma once
+
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "arena/mechanics/scene.hpp"
+#include "arena/mechanics/simulate.hpp"
+
+namespace arena::assessment {
+
+// One point of a predictor's grid.
+struct PredictorSetting {
+  std::string key;         // unique within the predictor: "g8_k3_dt0.004_auto"
+  std::string knobs_json;  // the knobs as a JSON object (stored as model_json)
+  double step = 0;         // the step size (s): the knob the curves vary
+  int refinement = 0;      // larger = finer (the finest setting is the reference)
+};
+
+class Predictor {
+ public:
+  virtual ~Predictor() = default;
+  virtual const std::string& name() const = 0;  // "arena", "mujoco"
+  virtual const std::vector<PredictorSetting>& settings() const = 0;
+  // Runs `scene` (its own `model` ignored) at settings()[setting]. Never
+  // throws: a setting the scene cannot take is kInvalidScene, a solver that
+  // gives up kSolverFailure.
+  virtual mechanics::SimulationResult Run(const mechanics::Scene& scene,
+                                          std::size_t setting) const = 0;
+};
+
+// arena's own model (mechanics) at each of `grid`'s settings.
+// @throws std::invalid_argument for an empty grid or a repeated setting.
+std::unique_ptr<Predictor> MakeArenaPredictor(std::vector<mechanics::ModelOptions> grid);
+
+// The index of the finest setting: the largest `refinement`, ties to the first.
+std::size_t FinestSetting(const Predictor& predictor);
+
+}  // namespace arena::assessment
