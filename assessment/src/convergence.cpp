@@ -41,9 +41,8 @@ Distribution Spread(std::vector<double> v) {
 
 }  // namespace
 
-std::vector<std::optional<Convergence>> ConvergenceTable(const Predictor& predictor,
-                                                         const std::vector<ConvergenceTrial>& trials,
-                                                         int pieces) {
+std::vector<std::optional<Convergence>> ConvergenceTable(
+    const Predictor& predictor, const std::vector<ConvergenceTrial>& trials, int pieces) {
   const auto& settings = predictor.settings();
   const std::size_t finest = FinestSetting(predictor);
   std::vector<std::vector<double>> position(settings.size()), angle(settings.size());
@@ -71,7 +70,8 @@ std::vector<std::optional<Convergence>> ConvergenceTable(const Predictor& predic
         const auto r = predictor.Run(*restart, i);
         if (r.status != mechanics::SimulationStatus::kOk || r.samples.empty()) continue;
         const auto& end = r.samples[std::min(r.samples.size(), reference.samples.size()) - 1];
-        const auto& ref = reference.samples[std::min(r.samples.size(), reference.samples.size()) - 1];
+        const auto& ref =
+            reference.samples[std::min(r.samples.size(), reference.samples.size()) - 1];
         (void)ref_end;
         if (!end.position.allFinite()) continue;
         position[i].push_back((end.position - ref.position).norm());
@@ -83,8 +83,8 @@ std::vector<std::optional<Convergence>> ConvergenceTable(const Predictor& predic
   std::vector<std::optional<Convergence>> out(settings.size());
   for (std::size_t i = 0; i < settings.size(); ++i) {
     if (position[i].empty()) continue;
-    out[i] = Convergence{static_cast<int>(position[i].size()), Spread(position[i]),
-                         Spread(angle[i])};
+    out[i] =
+        Convergence{static_cast<int>(position[i].size()), Spread(position[i]), Spread(angle[i])};
   }
   return out;
 }

@@ -104,9 +104,19 @@ Built BuildPredictors(const std::vector<PredictorRequest>& requests,
         keys.push_back(b.infos.back().setting.key);
       }
       b.grids["arena"] = {{"default", !req.arena_grid}, {"settings", keys}};
+    } else if (req.name == "mujoco") {
+      // MuJoCo's soft contacts take any scene the model does; its default
+      // grid varies the timestep (the knob the curves follow).
+      b.predictors.push_back(MakeMujocoPredictor(req.mujoco_grid.value_or(MujocoGrid{})));
+      nlohmann::json keys = nlohmann::json::array();
+      for (const auto& s : b.predictors.back()->settings()) {
+        b.infos.push_back(SettingInfo{"mujoco", s, std::nullopt});
+        keys.push_back(s.key);
+      }
+      b.grids["mujoco"] = {{"default", !req.mujoco_grid}, {"settings", keys}};
     } else {
       throw std::invalid_argument("predictors: unknown predictor '" + req.name +
-                                  "' (available: arena)");
+                                  "' (one of arena, mujoco)");
     }
     for (std::size_t i = 0; i < b.predictors.back()->settings().size(); ++i) {
       b.index.emplace_back(b.predictors.size() - 1, i);

@@ -151,10 +151,23 @@ std::optional<std::string> DivergenceReason(
       return std::string(buf);
     }
   }
+  // Left the grasp: every finger separated over the last quarter of the
+  // trajectory (at least 2 samples, so a contact flickering open at one
+  // sample is not a drop) while the truth still held the object there.
   const std::size_t fingers = scene.fingers.size();
-  if (!truth.empty() && AllFingersSeparated(predicted.back(), fingers) &&
-      !AllFingersSeparated(truth[std::min(truth.size(), predicted.size()) - 1], fingers)) {
-    return std::string("left the grasp: every finger separated while the truth still held it");
+  const std::size_t n = truth.empty() ? 0 : std::min(truth.size(), predicted.size());
+  const std::size_t tail = std::max<std::size_t>(2, n / 4);
+  if (n >= tail) {
+    bool dropped = true, held = false;
+    for (std::size_t i = n - tail; i < n; ++i) {
+      dropped = dropped && AllFingersSeparated(predicted[i], fingers);
+      held = held || !AllFingersSeparated(truth[i], fingers);
+    }
+    if (dropped && held) {
+      return std::string(
+          "left the grasp: every finger separated over the last quarter while the truth still "
+          "held it");
+    }
   }
   return std::nullopt;
 }

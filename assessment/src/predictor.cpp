@@ -1,6 +1,7 @@
 #include "arena/assessment/predictor.hpp"
 
 #include <algorithm>
+#include <cstdio>
 #include <numeric>
 #include <set>
 #include <stdexcept>
@@ -9,6 +10,7 @@
 
 #include "arena/assessment/prediction.hpp"
 #include "arena/mechanics/scene_json.hpp"
+#include "arena/simulators/simulator.hpp"
 
 namespace arena::assessment {
 
@@ -70,7 +72,87 @@ class ArenaPredictor final : public Predictor {
   std::vector<PredictorSetting> settings_;
 };
 
+class MujocoPredictor final : public Predictor {
+ public:
+  explicit MujocoPredictor(const MujocoGrid& grid) {
+    auto nonempty_unique = [](const auto& list, const char* name) {
+      if (list.empty()) {
+        throw std::invalid_argument(std::string("mujoco ") + name + ": needs at least one value");
+      }
+      std::set<std::decay_t<decltype(list[0])>> seen(list.begin(), list.end());
+      if (seen.size() != list.size())
+        throw std::invalid_argument(std::string("mujoco ") + name + ": a value is repeated");
+    };
+    nonempty_unique(grid.timestep, "timestep");
+    nonempty_unique(grid.cone, "cone");
+    nonempty_unique(grid.noslip, "noslip");
+    struct Point {
+      double timestep;
+      std::string cone;
+      int noslip;
+    };
+    std::vector<Point> points;
+    for (double ts : grid.timestep)
+      for (const auto& cone : grid.cone)
+        for (int ns : grid.noslip) points.push_back(Point{ts, cone, ns});
+    for (const auto& pt : points) {
+      const nlohmann::json knobs = {
+          {"timestep", pt.timestep}, {"cone", pt.cone}, {"noslip_iterations", pt.noslip}};
+      try {
+        simulators_.push_back(simulators::MakeSimulator("mujoco", knobs.dump()));
+      } catch (const std::invalid_argument& e) {
+        throw std::invalid_argument(std::string("mujoco grid: ") + e.what());
+      }
+      PredictorSetting s;
+      char key[96];
+      std::snprintf(key, sizeof key, "mujoco_ts%g_%s_ns%d", pt.timestep, pt.cone.c_str(),
+                    pt.noslip);
+      s.key = key;
+      nlohmann::json stored = knobs;
+      stored["predictor"] = "mujoco";
+      s.knobs_json = stored.dump();
+      s.step = pt.timestep;
+      settings_.push_back(std::move(s));
+    }
+    // Finer: smaller timestep, then elliptic over pyramidal, then more noslip.
+    std::vector<std::size_t> order(points.size());
+    std::iota(order.begin(), order.end(), 0);
+    std::stable_sort(order.begin(), order.end(), [&](std::size_t a, std::size_t b) {
+      const auto &x = points[a], &y = points[b];
+      if (x.timestep != y.timestep) return x.timestep > y.timestep;
+      if (x.cone != y.cone) return x.cone == "pyramidal";
+      return x.noslip < y.noslip;
+    });
+    for (std::size_t rank = 0; rank < order.size(); ++rank) {
+      settings_[order[rank]].refinement = static_cast<int>(rank);
+    }
+  }
+  const std::string& name() const override { return name_; }
+  const std::vector<PredictorSetting>& settings() const override { return settings_; }
+  mechanics::SimulationResult Run(const mechanics::Scene& scene,
+                                  std::size_t setting) const override {
+    const auto& sim = *simulators_.at(setting);
+    const std::string why = sim.CheckScene(scene);
+    if (!why.empty()) {
+      mechanics::SimulationResult r;
+      r.status = mechanics::SimulationStatus::kInvalidScene;
+      r.error = why;
+      return r;
+    }
+    return sim.Simulate(scene);
+  }
+
+ private:
+  std::string name_ = "mujoco";
+  std::vector<std::unique_ptr<simulators::Simulator>> simulators_;
+  std::vector<PredictorSetting> settings_;
+};
+
 }  // namespace
+
+std::unique_ptr<Predictor> MakeMujocoPredictor(const MujocoGrid& grid) {
+  return std::make_unique<MujocoPredictor>(grid);
+}
 
 std::unique_ptr<Predictor> MakeArenaPredictor(std::vector<mechanics::ModelOptions> grid) {
   return std::make_unique<ArenaPredictor>(std::move(grid));

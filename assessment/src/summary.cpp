@@ -142,7 +142,8 @@ void Add(SettingSummary& s, Collect& c, const TrialEvaluation& r) {
     c.position_all.push_back(*p.final_position_error);
     c.angle_all.push_back(*p.final_angle_error);
     c.by_error.emplace_back(*p.final_position_error, r.trial_id);
-    if (r.truth_duration_s > 0) c.duration_error.emplace_back(r.truth_duration_s, *p.final_position_error);
+    if (r.truth_duration_s > 0)
+      c.duration_error.emplace_back(r.truth_duration_s, *p.final_position_error);
   } else if (outcome == PredictionOutcome::kDiverged) {
     ++s.diverged;
     s.diverged_trials.push_back(TrialNote{r.trial_id, 0, reason});
@@ -182,8 +183,8 @@ std::vector<DurationPoint> DurationPoints(std::vector<std::pair<double, double>>
       d.push_back(x);
       e.push_back(y);
     }
-    out.push_back(DurationPoint{Median(d), static_cast<int>(bin.size()), Median(e),
-                                Percentile(e, 0.95)});
+    out.push_back(
+        DurationPoint{Median(d), static_cast<int>(bin.size()), Median(e), Percentile(e, 0.95)});
   }
   return out;
 }
@@ -214,21 +215,19 @@ void Recommend(EvaluationReport& report, const std::vector<Budget>& budgets) {
   if (report.recommended) {
     const auto& s = report.settings[*report.recommended];
     char buf[512];
-    std::snprintf(buf, sizeof buf,
-                  "%s %s: the %s setting within %s (median %.3g ms per trial, p95 %.3g ms; final "
-                  "position error median %s, p95 %s%s)",
-                  s.predictor.c_str(), s.model_key.c_str(),
-                  error_budget ? "cheapest" : "most accurate", budget_text.c_str(),
-                  s.time.median * 1e3, s.time.p95 * 1e3,
-                  s.position ? Millimetres(s.position->median).c_str() : "-",
-                  s.position ? Millimetres(s.position->p95).c_str() : "-",
-                  report.floor && report.floor->position_median > 0 && s.position
-                      ? (", " +
-                         std::to_string(s.position->p95 / report.floor->position_median)
-                             .substr(0, 4) +
-                         "x the noise floor")
-                            .c_str()
-                      : "");
+    std::snprintf(
+        buf, sizeof buf,
+        "%s %s: the %s setting within %s (median %.3g ms per trial, p95 %.3g ms; final "
+        "position error median %s, p95 %s%s)",
+        s.predictor.c_str(), s.model_key.c_str(), error_budget ? "cheapest" : "most accurate",
+        budget_text.c_str(), s.time.median * 1e3, s.time.p95 * 1e3,
+        s.position ? Millimetres(s.position->median).c_str() : "-",
+        s.position ? Millimetres(s.position->p95).c_str() : "-",
+        report.floor && report.floor->position_median > 0 && s.position
+            ? (", " + std::to_string(s.position->p95 / report.floor->position_median).substr(0, 4) +
+               "x the noise floor")
+                  .c_str()
+            : "");
     report.recommendation = buf;
   } else if (report.trials == 0) {
     report.recommendation = "none: the campaign has no done trial to evaluate";
@@ -250,9 +249,8 @@ std::string DescribeFront(const EvaluationReport& r) {
     if (s.pareto) front.push_back(&s);
   }
   if (front.empty()) return "no setting predicted every trial, so there is no front";
-  std::sort(front.begin(), front.end(), [](const auto* a, const auto* b) {
-    return a->time.median < b->time.median;
-  });
+  std::sort(front.begin(), front.end(),
+            [](const auto* a, const auto* b) { return a->time.median < b->time.median; });
   std::string out = std::to_string(front.size()) + " setting(s) on the front of " +
                     ToString(r.primary) + " against median time:";
   for (const auto* s : front) {
@@ -302,7 +300,8 @@ EvaluationReport Summarise(const std::vector<SettingInfo>& infos,
   std::vector<Budget> budgets = budgets_in;
   for (auto& b : budgets) {
     if (b.floor_multiple > 0) {
-      const bool angle = b.metric == ErrorMetric::kAngleMedian || b.metric == ErrorMetric::kAngleP95;
+      const bool angle =
+          b.metric == ErrorMetric::kAngleMedian || b.metric == ErrorMetric::kAngleP95;
       b.limit = floor ? b.floor_multiple * (angle ? floor->angle_median : floor->position_median)
                       : -1;  // no floor: nothing can meet it
     }
@@ -355,13 +354,12 @@ EvaluationReport Summarise(const std::vector<SettingInfo>& infos,
     for (std::size_t k = 0; k < std::min(kWorstListed, by.size()); ++k) {
       s.worst.push_back(TrialNote{by[k].second, by[k].first, ""});
     }
-    s.within_budget =
-        s.trials > 0 && !budgets.empty() &&
-        std::all_of(budgets.begin(), budgets.end(), [&](const Budget& b) {
-          if (b.limit < 0) return false;
-          const double v = s.Judged(b.metric);
-          return LowerIsBetter(b.metric) ? v <= b.limit : v >= b.limit;
-        });
+    s.within_budget = s.trials > 0 && !budgets.empty() &&
+                      std::all_of(budgets.begin(), budgets.end(), [&](const Budget& b) {
+                        if (b.limit < 0) return false;
+                        const double v = s.Judged(b.metric);
+                        return LowerIsBetter(b.metric) ? v <= b.limit : v >= b.limit;
+                      });
   }
   MarkParetoFront(report.settings, report.primary);
   Recommend(report, budgets);
@@ -377,7 +375,8 @@ EvaluationReport Summarise(const std::vector<SettingInfo>& infos,
       if (!pick || s.position_p95_all < report.settings[*pick].position_p95_all) pick = i;
     }
     if (!pick) pick = finest[name].second;
-    DurationCurve curve{name, report.settings[*pick].model_key, DurationPoints(c[*pick].duration_error)};
+    DurationCurve curve{name, report.settings[*pick].model_key,
+                        DurationPoints(c[*pick].duration_error)};
     report.duration_curves.push_back(std::move(curve));
   }
   return report;
@@ -415,32 +414,32 @@ nlohmann::json ToJson(const EvaluationReport& r) {
   const double ang_floor = r.floor ? r.floor->angle_median : 0;
   nlohmann::json settings = nlohmann::json::array();
   for (const auto& s : r.settings) {
-    nlohmann::json j = {{"predictor", s.predictor},
-                        {"model_key", s.model_key},
-                        {"knobs", nlohmann::json::parse(s.knobs_json, nullptr, false)},
-                        {"step_s", s.step},
-                        {"finest", s.finest},
-                        {"trials", s.trials},
-                        {"ok", s.ok},
-                        {"diverged", s.diverged},
-                        {"failures", s.failures},
-                        {"position_error_m", Dist(s.position)},
-                        {"angle_error_rad", Dist(s.angle)},
-                        {"force_error_n", Dist(s.force)},
-                        {"mode_agreement", Dist(s.mode_agreement)},
-                        {"position_floor_multiple", Multiple(s.position, pos_floor)},
-                        {"angle_floor_multiple", Multiple(s.angle, ang_floor)},
-                        {"time_s", Dist(std::optional<Distribution>(s.time))},
-                        {"time_per_simulated_s", Dist(s.time_per_sim_s)},
-                        {"primary_error", s.Metric(r.primary) ? nlohmann::json(*s.Metric(r.primary))
-                                                              : nullptr},
-                        {"position_p95_all_trials_m", Finite(s.position_p95_all)},
-                        {"worst_trials", Notes(s.worst, true)},
-                        {"diverged_trials", Notes(s.diverged_trials, false)},
-                        {"failed_trials", Notes(s.failed_trials, false)},
-                        {"convergence", nullptr},
-                        {"pareto", s.pareto},
-                        {"within_budget", s.within_budget}};
+    nlohmann::json j = {
+        {"predictor", s.predictor},
+        {"model_key", s.model_key},
+        {"knobs", nlohmann::json::parse(s.knobs_json, nullptr, false)},
+        {"step_s", s.step},
+        {"finest", s.finest},
+        {"trials", s.trials},
+        {"ok", s.ok},
+        {"diverged", s.diverged},
+        {"failures", s.failures},
+        {"position_error_m", Dist(s.position)},
+        {"angle_error_rad", Dist(s.angle)},
+        {"force_error_n", Dist(s.force)},
+        {"mode_agreement", Dist(s.mode_agreement)},
+        {"position_floor_multiple", Multiple(s.position, pos_floor)},
+        {"angle_floor_multiple", Multiple(s.angle, ang_floor)},
+        {"time_s", Dist(std::optional<Distribution>(s.time))},
+        {"time_per_simulated_s", Dist(s.time_per_sim_s)},
+        {"primary_error", s.Metric(r.primary) ? nlohmann::json(*s.Metric(r.primary)) : nullptr},
+        {"position_p95_all_trials_m", Finite(s.position_p95_all)},
+        {"worst_trials", Notes(s.worst, true)},
+        {"diverged_trials", Notes(s.diverged_trials, false)},
+        {"failed_trials", Notes(s.failed_trials, false)},
+        {"convergence", nullptr},
+        {"pareto", s.pareto},
+        {"within_budget", s.within_budget}};
     if (j["knobs"].is_discarded()) j["knobs"] = nlohmann::json::object();
     if (s.model) {
       j["facets"] = s.model->facets;
@@ -457,11 +456,11 @@ nlohmann::json ToJson(const EvaluationReport& r) {
   }
   nlohmann::json budgets = nlohmann::json::array();
   for (const auto& b : r.budgets) {
-    budgets.push_back({{"metric", ToString(b.metric)},
-                       {"limit", b.limit >= 0 ? nlohmann::json(b.limit) : nullptr},
-                       {"floor_multiple", b.floor_multiple > 0 ? nlohmann::json(b.floor_multiple)
-                                                               : nullptr},
-                       {"text", FormatBudget(b)}});
+    budgets.push_back(
+        {{"metric", ToString(b.metric)},
+         {"limit", b.limit >= 0 ? nlohmann::json(b.limit) : nullptr},
+         {"floor_multiple", b.floor_multiple > 0 ? nlohmann::json(b.floor_multiple) : nullptr},
+         {"text", FormatBudget(b)}});
   }
   nlohmann::json floor = nullptr;
   if (r.floor) {
@@ -474,9 +473,10 @@ nlohmann::json ToJson(const EvaluationReport& r) {
   for (const auto& c : r.duration_curves) {
     nlohmann::json points = nlohmann::json::array();
     for (const auto& p : c.points) {
-      points.push_back({{"duration_s", p.duration_s},
-                        {"trials", p.trials},
-                        {"position_error_m", {{"median", p.position_median}, {"p95", p.position_p95}}}});
+      points.push_back(
+          {{"duration_s", p.duration_s},
+           {"trials", p.trials},
+           {"position_error_m", {{"median", p.position_median}, {"p95", p.position_p95}}}});
     }
     curves.push_back({{"predictor", c.predictor}, {"model_key", c.model_key}, {"points", points}});
   }

@@ -30,6 +30,10 @@ struct EvaluateOptions {
   std::vector<double> dt{0.008, 0.004, 0.002, 0.001};
   std::vector<std::string> reduce{"auto"};
   bool grid_given = false;  // any of --facets/--points/--dt/--reduce
+  std::vector<double> mujoco_timestep{0.004, 0.002, 0.001, 0.0005};
+  std::vector<std::string> mujoco_cone{"elliptic"};
+  std::vector<int> mujoco_noslip{10};
+  bool mujoco_grid_given = false;
   std::vector<std::string> budgets;
   int threads = 0;
   int convergence_trials = 8;
@@ -169,6 +173,9 @@ int RunEvaluate(const EvaluateOptions& o) {
     assessment::PredictorRequest req;
     req.name = name;
     if (name == "arena" && o.grid_given) req.arena_grid = grid;
+    if (name == "mujoco" && o.mujoco_grid_given) {
+      req.mujoco_grid = assessment::MujocoGrid{o.mujoco_timestep, o.mujoco_cone, o.mujoco_noslip};
+    }
     eo.predictors.push_back(req);
   }
   if (o.threads < 0) throw CommandError(kExitBadInput, "--threads: must be >= 0 (0: one per core)");
@@ -232,7 +239,7 @@ void AddEvaluateCommand(CLI::App& app, Action* action) {
       ->required()
       ->check(CLI::NonNegativeNumber);
   cmd->add_option("--predictors", o->predictors,
-                  "Predictors to replay through, comma separated (arena; mujoco once built)")
+                  "Predictors to replay through, comma separated: arena, mujoco")
       ->delimiter(',')
       ->capture_default_str();
   cmd->add_option("--facets", o->facets,
@@ -249,6 +256,20 @@ void AddEvaluateCommand(CLI::App& app, Action* action) {
   cmd->add_option("--reduce", o->reduce, "arena: model reductions to try (auto, full, planar)")
       ->delimiter(',')
       ->each([o](const std::string&) { o->grid_given = true; });
+  auto mujoco_given = [o](const std::string&) { o->mujoco_grid_given = true; };
+  cmd->add_option("--mujoco-timestep", o->mujoco_timestep, "mujoco: timesteps to try (s)")
+      ->delimiter(',')
+      ->each(mujoco_given)
+      ->capture_default_str();
+  cmd->add_option("--mujoco-cone", o->mujoco_cone,
+                  "mujoco: friction cones to try (elliptic, pyramidal)")
+      ->delimiter(',')
+      ->each(mujoco_given)
+      ->capture_default_str();
+  cmd->add_option("--mujoco-noslip", o->mujoco_noslip, "mujoco: noslip iterations to try")
+      ->delimiter(',')
+      ->each(mujoco_given)
+      ->capture_default_str();
   cmd->add_option("--convergence-trials", o->convergence_trials,
                   "Trials whose pieces the convergence table restarts from the true state "
                   "(0: no table)")

@@ -34,8 +34,7 @@ struct ConvergenceTrial {
 
 // Per setting of `predictor`: the distance at the end of each piece between
 // that setting and the finest one (pieces where either failed are left out).
-std::vector<std::optional<Convergence>> ConvergenceTable(const Predictor& predictor,
-                                                         const std::vector<ConvergenceTrial>& trials,
-                                                         int pieces = 4);
+std::vector<std::optional<Convergence>> ConvergenceTable(
+    const Predictor& predictor, const std::vector<ConvergenceTrial>& trials, int pieces = 4);
 
 }  // namespace arena::assessment

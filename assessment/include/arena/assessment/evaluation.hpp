@@ -222,6 +222,7 @@ nlohmann::json ToJson(const EvaluationReport& report);
 struct PredictorRequest {
   std::string name = "arena";  // arena | mujoco
   std::optional<FidelityGrid> arena_grid;
+  std::optional<MujocoGrid> mujoco_grid;
 };
 
 struct EvaluationOptions {

@@ -37,8 +37,8 @@ struct ConditionSpread {
 };
 
 struct NoiseFloor {
-  int conditions = 0;  // with >= 2 replicates
-  int trials = 0;      // in those conditions
+  int conditions = 0;                            // with >= 2 replicates
+  int trials = 0;                                // in those conditions
   double position_median = 0, position_p95 = 0;  // m
   double angle_median = 0, angle_p95 = 0;        // rad
 };

@@ -38,8 +38,8 @@ std::string ModelKey(const mechanics::ModelOptions& model);
 // nothing. It diverged when a sample is not finite, or the object moved
 // farther from its start than the pusher travelled plus the object's
 // largest extent, or turned more than 90° beyond what the pusher's own
-// rotation explains; it left the grasp when every finger separated at the
-// end while the truth still held the object (truth may be empty: then only
+// rotation explains; it left the grasp when every finger separated over the last quarter
+// of the trajectory while the truth still held the object (truth may be empty: then only
 // the first checks apply).
 std::optional<std::string> DivergenceReason(
     const mechanics::Scene& scene, const std::vector<mechanics::TrajectorySample>& predicted,

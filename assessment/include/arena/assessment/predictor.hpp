@@ -39,6 +39,20 @@ class Predictor {
 // @throws std::invalid_argument for an empty grid or a repeated setting.
 std::unique_ptr<Predictor> MakeArenaPredictor(std::vector<mechanics::ModelOptions> grid);
 
+// MuJoCo's knobs: the cross product of the lists (timestep outermost); the
+// rest of simulators::MujocoSettings stays at its converged defaults.
+struct MujocoGrid {
+  std::vector<double> timestep{0.004, 0.002, 0.001, 0.0005};  // s, (0, 0.01]
+  std::vector<std::string> cone{"elliptic"};                  // elliptic | pyramidal
+  std::vector<int> noslip{10};                                // noslip iterations, >= 0
+};
+
+// MuJoCo 2.2 (simulators/, the same engine and scene builder as the
+// `mujoco` cell backend) at each of `grid`'s settings.
+// @throws std::invalid_argument naming the list for an empty or repeated
+//   list or a value the simulator refuses.
+std::unique_ptr<Predictor> MakeMujocoPredictor(const MujocoGrid& grid);
+
 // The index of the finest setting: the largest `refinement`, ties to the first.
 std::size_t FinestSetting(const Predictor& predictor);
 
