@@ -9,6 +9,7 @@
 #include <algorithm>
 #include <cmath>
 #include <fstream>
+#include <limits>
 #include <map>
 #include <optional>
 #include <string>
@@ -127,19 +128,29 @@ Chart TradeoffChart(const nlohmann::json& report) {
               metric + " (" + UnitOf(metric) + ")",
               true,
               {}};
+  // Per predictor: every setting as a labelled marker, and its curve: the
+  // predictor's own lower envelope (what more time buys it), by cost.
   std::size_t color = 0;
+  std::vector<Series> envelopes;
   for (const auto& name : order) {
-    Series c{name, {}, {}, kPredictorColors[color++ % 5], true};
-    c.connect = true;
+    Series c{name, {}, {}, kPredictorColors[color % 5], true};
     auto points = curves[name];
     std::stable_sort(points.begin(), points.end(),
-                     [](const auto& a, const auto& b) { return std::get<0>(a) < std::get<0>(b); });
+                     [](const auto& a, const auto& b) { return std::get<1>(a) < std::get<1>(b); });
+    Series envelope{name + " curve", {}, {}, kPredictorColors[color++ % 5]};
+    double best = std::numeric_limits<double>::infinity();
     for (const auto& [step, x, y, key] : points) {
       c.x.push_back(x);
       c.y.push_back(y);
       c.labels.push_back(key);
+      if (y < best) {
+        best = y;
+        envelope.x.push_back(x);
+        envelope.y.push_back(y);
+      }
     }
     panel.series.push_back(std::move(c));
+    envelopes.push_back(std::move(envelope));
   }
   for (const auto& [x, label] : failed_points) {
     failed.x.push_back(x);
@@ -156,6 +167,7 @@ Chart TradeoffChart(const nlohmann::json& report) {
   panel.series.push_back(failed);
   panel.series.push_back(pareto);
   panel.series.push_back(recommend);
+  for (auto& e : envelopes) panel.series.push_back(std::move(e));
   // The noise floor: the error no deterministic predictor can beat.
   const auto& floor = report.contains("noise_floor") ? report["noise_floor"] : nlohmann::json();
   if (floor.is_object() && UnitOf(metric) == "m" && !panel.series.empty()) {

@@ -51,7 +51,7 @@ std::string TickLabel(double v) {
   if (v != 0 && (std::fabs(v) < 1e-3 || std::fabs(v) >= 1e5)) {
     std::snprintf(buf, sizeof buf, "%.0e", v);
   } else {
-    std::snprintf(buf, sizeof buf, "%g", v);
+    std::snprintf(buf, sizeof buf, "%.3g", v);
   }
   return buf;
 }
@@ -97,6 +97,15 @@ std::vector<double> Ticks(const Axis& a) {
   if (!a.log) return NiceTicks(a.lo, a.hi);
   std::vector<double> t;
   for (double e = std::ceil(a.lo); e <= std::floor(a.hi); e += 1) t.push_back(std::pow(10.0, e));
+  if (t.size() >= 2) return t;
+  // Less than two decades: 1, 2 and 5 times the powers of ten inside.
+  t.clear();
+  for (double e = std::floor(a.lo); e <= std::ceil(a.hi); e += 1) {
+    for (double m : {1.0, 2.0, 5.0}) {
+      const double v = m * std::pow(10.0, e);
+      if (std::log10(v) >= a.lo - 1e-9 && std::log10(v) <= a.hi + 1e-9) t.push_back(v);
+    }
+  }
   if (t.size() < 2) return {std::pow(10.0, a.lo), std::pow(10.0, a.hi)};
   return t;
 }
@@ -120,7 +129,7 @@ std::vector<double> NiceTicks(double lo, double hi, int count) {
 }
 
 std::string RenderSvg(const Chart& chart) {
-  const int left = 80, right = 190, top = 58, gap = 50, bottom = 50;
+  const int left = 80, right = 190, top = 58, gap = 60, bottom = 50;
   const int plot_w = chart.width - left - right;
   const int n = static_cast<int>(chart.panels.size());
   const int height = top + n * chart.panel_height + (n - 1) * gap + bottom;
@@ -248,8 +257,14 @@ std::string RenderSvg(const Chart& chart) {
     svg << "</g>\n";
   }
   if (any_shared) {
-    svg << "<text x=\"" << left + plot_w / 2 << "\" y=\"" << height - 12
-        << "\" text-anchor=\"middle\">" << Escape(chart.x_label) << "</text>\n";
+    int last_shared = 0;
+    for (int pi = 0; pi < n; ++pi)
+      if (!chart.panels[pi].own_x) last_shared = pi;
+    const int y = last_shared == n - 1
+                      ? height - 12
+                      : top + last_shared * (chart.panel_height + gap) + chart.panel_height + 32;
+    svg << "<text x=\"" << left + plot_w / 2 << "\" y=\"" << y << "\" text-anchor=\"middle\">"
+        << Escape(chart.x_label) << "</text>\n";
   }
   svg << "</svg>\n";
   return svg.str();

@@ -98,8 +98,8 @@ TEST(PlotTradeoff, OldReportsStillDrawSettingsFrontAndRecommendation) {
   EXPECT_NE(chart.title.find("1 settings with zero or no error not shown"), std::string::npos)
       << chart.title;
   const auto points = SeriesPoints(RenderSvg(chart));
-  // g4 g8 g16 g6 (g64 has zero error): markers plus the line joining them.
-  EXPECT_EQ(points.at("arena"), 8);
+  EXPECT_EQ(points.at("arena"), 4);            // g4 g8 g16 g6 (g64 has zero error)
+  EXPECT_EQ(points.at("arena curve"), 3);      // its lower envelope: g4 -> g8 -> g6
   EXPECT_EQ(points.at("failed settings"), 1);  // g32
   EXPECT_EQ(points.at("recommended"), 1);
   EXPECT_EQ(points.at("pareto front"), 3);  // g4 -> g8 -> g6
@@ -141,9 +141,11 @@ TEST(PlotTradeoff, OneLabelledCurvePerPredictorFailuresApartDurationPanel) {
   EXPECT_NE(chart.title.find("truth: mujoco"), std::string::npos) << chart.title;
   const std::string svg = RenderSvg(chart);
   const auto labels = SeriesLabels(svg);
-  // arena's curve runs coarse to fine, each point labelled with its setting.
+  // arena's settings by cost, each point labelled with its setting; its curve is
+  // what more time buys it.
   EXPECT_EQ(labels.at("arena"),
             (std::vector<std::string>{"g8_dt0.008", "g8_dt0.004", "g8_dt0.002"}));
+  EXPECT_EQ(SeriesPoints(RenderSvg(chart)).at("arena curve"), 3);
   EXPECT_EQ(labels.at("mujoco"), (std::vector<std::string>{"mujoco_ts0.001"}));
   // The diverging setting is drawn apart, above every error, never at its 1e-9.
   ASSERT_EQ(labels.at("failed settings").size(), 1u);
