@@ -189,6 +189,8 @@ EvaluationRun EvaluateCampaign(db::Store& store, std::int64_t campaign_id,
           finals[ti] = FinalPose{t.id, t.condition, loaded.truth.back().position,
                                  loaded.truth.back().orientation};
         }
+        // Settings that build the same model for this scene run it once.
+        std::map<std::pair<std::size_t, std::string>, std::size_t> ran;
         for (std::size_t s = 0; s < settings; ++s) {
           if (options.cancel && options.cancel->load()) return;
           TrialEvaluation& r = results[ti * settings + s];
@@ -197,7 +199,19 @@ EvaluationRun EvaluateCampaign(db::Store& store, std::int64_t campaign_id,
           r.setting = s;
           r.truth_duration_s = durations[ti];
           const auto [pi, si] = built.index[s];
-          if (!loaded.error.empty()) {
+          std::optional<std::size_t> same;
+          if (loaded.error.empty()) {
+            const auto key =
+                std::make_pair(pi, built.predictors[pi]->EffectiveKey(loaded.scene, si));
+            const auto it = ran.find(key);
+            if (it != ran.end())
+              same = it->second;
+            else
+              ran.emplace(key, s);
+          }
+          if (same) {
+            r.prediction = results[ti * settings + *same].prediction;
+          } else if (!loaded.error.empty()) {
             r.prediction = PredictionFailure("error", loaded.error);
           } else {
             const auto start = std::chrono::steady_clock::now();

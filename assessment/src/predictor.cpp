@@ -65,6 +65,17 @@ class ArenaPredictor final : public Predictor {
     }
     return mechanics::Simulate(s);
   }
+  std::string EffectiveKey(const mechanics::Scene& scene, std::size_t setting) const override {
+    auto extended = [](const mechanics::ContactSpec& c) {
+      return c.type != mechanics::ContactType::kPoint;
+    };
+    bool points_matter = std::any_of(scene.fingers.begin(), scene.fingers.end(), extended) ||
+                         (scene.pusher && extended(*scene.pusher));
+    if (points_matter) return settings_.at(setting).key;
+    mechanics::ModelOptions m = models_.at(setting);
+    m.points = 0;  // irrelevant here: every contact is a point
+    return ModelKey(m);
+  }
 
  private:
   std::string name_ = "arena";
