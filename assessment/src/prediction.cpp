@@ -4,11 +4,13 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <memory>
 
 #include <nlohmann/json.hpp>
 
 #include "arena/assessment/scoring.hpp"
 #include "arena/mechanics/scene_json.hpp"
+#include "arena/simulators/simulator.hpp"
 
 namespace arena::assessment {
 
@@ -248,6 +250,45 @@ db::Prediction PredictTrial(const mechanics::Scene& scene,
                                  {"dt", scene.model.dt},
                                  {"reduce", mechanics::ToString(scene.model.reduce)}})
                      .dump();
+  return p;
+}
+
+db::Prediction PredictTrial(const mechanics::Scene& scene,
+                            const std::vector<mechanics::TrajectorySample>& truth,
+                            const nlohmann::json& prediction) {
+  if (!prediction.is_object() || prediction.value("predictor", "arena") != "mujoco") {
+    return PredictTrial(scene, truth);
+  }
+  nlohmann::json knobs = prediction;
+  knobs.erase("predictor");
+  std::unique_ptr<simulators::Simulator> sim;
+  try {
+    sim = simulators::MakeSimulator("mujoco", knobs.dump());
+  } catch (const std::exception& e) {
+    return PredictionFailure("error", e.what());
+  }
+  const auto start = std::chrono::steady_clock::now();
+  mechanics::SimulationResult result;
+  const std::string why = sim->CheckScene(scene);
+  if (why.empty()) {
+    result = sim->Simulate(scene);
+  } else {
+    result.status = mechanics::SimulationStatus::kInvalidScene;
+    result.error = why;
+  }
+  const double wall =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  db::Prediction p = ScoreSimulation(scene, result, truth);
+  p.wall_s = wall;
+  nlohmann::json stored = nlohmann::json::parse(sim->settings_json(), nullptr, false);
+  if (!stored.is_object()) stored = nlohmann::json::object();
+  stored["predictor"] = "mujoco";
+  p.model_json = stored.dump();
+  char key[96];
+  std::snprintf(key, sizeof key, "mujoco_ts%g_%s_ns%d", knobs.value("timestep", 0.0005),
+                knobs.value("cone", std::string("elliptic")).c_str(),
+                knobs.value("noslip_iterations", 10));
+  p.model_key = key;
   return p;
 }
 

@@ -79,6 +79,7 @@ struct PredictionJob {
   std::int64_t campaign_id = 0;
   mechanics::Scene scene;  // with the campaign's model settings applied
   std::vector<mechanics::TrajectorySample> truth;
+  nlohmann::json prediction;  // the campaign's `prediction` (names the predictor)
 };
 
 struct PredictionDone {
@@ -135,7 +136,7 @@ class PredictorPool {
         jobs_.pop_front();
       }
       PredictionDone done{job.trial_id, job.attempt, job.campaign_id,
-                          PredictTrial(job.scene, job.truth)};
+                          PredictTrial(job.scene, job.truth, job.prediction)};
       std::lock_guard lock(mu_);
       results_.push_back(std::move(done));
     }
@@ -284,6 +285,7 @@ struct Service::Impl {
           t.id, t.attempt, t.campaign_id, ScenesForPrediction(scene, t.campaign_id), {}};
       for (const auto& s : gt.samples)
         job.truth.push_back(ToTrajectorySample(s, normals, scene.pusher.has_value()));
+      job.prediction = campaign_models[t.campaign_id];
       predictor.Submit(std::move(job));
     } catch (const std::exception& e) {
       if (StoreFailed(e)) throw;
@@ -566,6 +568,7 @@ struct Service::Impl {
       CellResult(cell, true, "");
       PredictionJob job{ex.trial_id, ex.attempt, ex.campaign_id,
                         ScenesForPrediction(ex.scene, ex.campaign_id), std::move(ex.truth)};
+      job.prediction = campaign_models[ex.campaign_id];
       predictor.Submit(std::move(job));
       // Aim the reset at the start of the trial this cell will most likely run next.
       std::optional<db::ClaimedTrial> next = store->PeekNextTrial(cell.id);

@@ -59,6 +59,14 @@ db::Prediction ScoreSimulation(const mechanics::Scene& scene,
 db::Prediction PredictTrial(const mechanics::Scene& scene,
                             const std::vector<mechanics::TrajectorySample>& truth);
 
+// The same with the campaign's `prediction` object: "predictor": "mujoco"
+// runs MuJoCo (simulators/) with the object's knobs (timestep, cone,
+// noslip_iterations); anything else is arena's model on `scene` (whose
+// model the caller already set with ApplyModelSettings). Never throws.
+db::Prediction PredictTrial(const mechanics::Scene& scene,
+                            const std::vector<mechanics::TrajectorySample>& truth,
+                            const nlohmann::json& prediction);
+
 // A prediction that could not be made (status, reason in detail_json).
 db::Prediction PredictionFailure(const std::string& status, const std::string& reason);
 
