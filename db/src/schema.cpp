@@ -258,6 +258,13 @@ CREATE INDEX evaluation_results_by_model ON evaluation_results(evaluation_id, mo
       {4, "ground-truth chunks may be packed (block format AGT2)", R"sql(
 -- gt_chunks.data: "AGT1" (raw) or "AGT2" (packed) blocks; db/README.md.
 )sql"},
+      // What a trial's ground truth is and which defects were really applied
+      // (issue 13): every report can say which truth it measured against.
+      {10, "trials: the cell backend, its kind of truth and the defects applied", R"sql(
+ALTER TABLE trials ADD COLUMN backend TEXT;          -- "model", "mujoco", "exec:...", "replay:..."
+ALTER TABLE trials ADD COLUMN truth TEXT;            -- self-consistency | simulator | robot | recorded
+ALTER TABLE trials ADD COLUMN defects_applied TEXT;  -- JSON: cell, campaign, effective profile, draws
+)sql"},
   };
   return kMigrations;
 }

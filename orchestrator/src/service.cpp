@@ -329,7 +329,9 @@ struct Service::Impl {
                            {"workspace_max", a.workspace_max()},
                            {"max_pusher_speed", a.max_pusher_speed()},
                            {"speed", a.speed()},
-                           {"arena_version", a.arena_version()}};
+                           {"arena_version", a.arena_version()},
+                           {"backend", a.backend()},
+                           {"truth", a.truth()}};
     cell.contact_types = a.contact_types();
     cell.capabilities_json = caps.dump();
     cell.defects_json = a.defects_json();
@@ -505,6 +507,7 @@ struct Service::Impl {
     cmd.scene_json(claim.scene_json);
     cmd.seed(claim.seed);
     cmd.deadline_s(budget);
+    cmd.defects_json(claim.defects_json);  // applied by the cell, or the trial is REFUSED
     cmd.service_session(session);
     cell.phase = CellPhase::kExecuting;
     cell.trial_id = claim.trial_id;
@@ -520,6 +523,21 @@ struct Service::Impl {
   }
 
   // ------------------------------------------------------------ execute
+  // What the trial ran on and which defects were applied (the cell's word).
+  void RecordExecution(const Execution& ex, const msg::TrialStatus& st) {
+    const auto detail = nlohmann::json::parse(st.detail_json(), nullptr, false);
+    if (!detail.is_object()) return;
+    const std::string applied =
+        detail.contains("defects_applied") ? detail["defects_applied"].dump() : std::string();
+    try {
+      store->RecordExecution(ex.trial_id, ex.attempt, detail.value("backend", std::string()),
+                             detail.value("truth", std::string()), applied);
+    } catch (const db::StoreError& e) {
+      if (StoreFailed(e)) throw;
+      spdlog::error("trial {}: {}", ex.trial_id, e.what());
+    }
+  }
+
   void OnGroundTruth(const msg::GroundTruth& batch) {
     auto it = executions.find(static_cast<std::int64_t>(batch.trial_id()));
     if (it == executions.end() || it->second.attempt != static_cast<int>(batch.attempt())) return;
@@ -612,6 +630,7 @@ struct Service::Impl {
         case msg::STATE_ACCEPTED:
           break;
         case msg::STATE_EXECUTED:
+          RecordExecution(ex, st);
           cell.execute_wall_s = st.phase_wall_s();
           ex.expected = st.samples();
           ex.stream_deadline = After(opt.stream_grace_s);
