@@ -62,8 +62,8 @@ void EnsureStore(const std::string& path) {
   const std::string cmd = std::string(ARENA_BINARY) + " run " + campaign + " --db " + path +
                           " --cells 2 --domain 211 --quiet > " + path + ".run.out 2>&1";
   if (std::system(cmd.c_str()) != 0 || DoneTrials(path) < 1000) {
-    throw std::runtime_error("evaluation_bench: `arena run` did not finish 1,000 trials (" +
-                             path + ".run.out)");
+    throw std::runtime_error("evaluation_bench: `arena run` did not finish 1,000 trials (" + path +
+                             ".run.out)");
   }
 }
 
@@ -108,7 +108,12 @@ void Evaluate(benchmark::State& state, bool reference) {
 void BM_EvaluateReference(benchmark::State& state) { Evaluate(state, true); }
 void BM_EvaluateDefault(benchmark::State& state) { Evaluate(state, false); }
 
-BENCHMARK(BM_EvaluateReference)->Arg(2)->Arg(1)->Iterations(1)->UseRealTime()->Unit(benchmark::kSecond);
+BENCHMARK(BM_EvaluateReference)
+    ->Arg(2)
+    ->Arg(1)
+    ->Iterations(1)
+    ->UseRealTime()
+    ->Unit(benchmark::kSecond);
 BENCHMARK(BM_EvaluateDefault)->Arg(2)->Iterations(1)->UseRealTime()->Unit(benchmark::kSecond);
 
 }  // namespace

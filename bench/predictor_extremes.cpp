@@ -160,12 +160,10 @@ int main(int argc, char** argv) {
                   a::MakeArenaPredictor({m::ModelOptions{8, 3, 0.004, m::Reduce::kAuto}}), true});
   runs.push_back({"arena", "coarsest g4_k3_dt0.008",
                   a::MakeArenaPredictor({m::ModelOptions{4, 3, 0.008, m::Reduce::kAuto}}), true});
-  runs.push_back(
-      {"mujoco", "default ts0.0005", a::MakeMujocoPredictor(a::MujocoGrid{{0.0005}, {"elliptic"}, {10}}),
-       false});
-  runs.push_back(
-      {"mujoco", "coarsest ts0.004", a::MakeMujocoPredictor(a::MujocoGrid{{0.004}, {"elliptic"}, {10}}),
-       false});
+  runs.push_back({"mujoco", "default ts0.0005",
+                  a::MakeMujocoPredictor(a::MujocoGrid{{0.0005}, {"elliptic"}, {10}}), false});
+  runs.push_back({"mujoco", "coarsest ts0.004",
+                  a::MakeMujocoPredictor(a::MujocoGrid{{0.004}, {"elliptic"}, {10}}), false});
   std::printf("| predictor | setting | cases | solved | typed error | silent wrong | dropped |\n");
   std::printf("|---|---|---:|---:|---:|---:|---:|\n");
   std::vector<std::string> lines;
@@ -201,7 +199,8 @@ int main(int argc, char** argv) {
           break;
       }
       dropped += o.dropped;
-      if (per_case) lines.push_back(run.predictor + " " + run.label + " | " + c.name + " | " + verdict);
+      if (per_case)
+        lines.push_back(run.predictor + " " + run.label + " | " + c.name + " | " + verdict);
     }
     if (run.predictor == "arena") arena_silent += silent;
     std::printf("| %s | %s | %zu | %d | %d | %d | %d |\n", run.predictor.c_str(), run.label.c_str(),

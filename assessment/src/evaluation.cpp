@@ -23,37 +23,38 @@
 
 namespace arena::assessment {
 
-TruthInfo TruthOf(const db::Store& store, const std::vector<db::Trial>& trials) {
-  std::set<std::string> cells, backends;
-  for (const auto& t : trials) cells.insert(t.cell_id);
-  std::map<std::string, std::string> backend_of;
-  for (const auto& c : store.ListCells()) {
-    std::string backend = "model";  // cells before backends existed ran the model
-    try {
-      const auto caps = nlohmann::json::parse(c.capabilities_json);
-      if (caps.is_object() && caps.contains("backend") && caps["backend"].is_string()) {
-        backend = caps["backend"].get<std::string>();
-      }
-    } catch (const std::exception&) {
-    }
-    backend_of[c.id] = backend;
-  }
-  for (const auto& cell : cells) {
-    const auto it = backend_of.find(cell);
-    backends.insert(it == backend_of.end() ? "model" : it->second);
+TruthInfo TruthOf(const db::Store& store, std::int64_t campaign_id) {
+  // Per trial, from what its cell reported when it executed (migration 10);
+  // a trial executed before cells reported it ran the model.
+  std::map<std::string, std::string> backends;  // backend -> truth kind
+  for (const auto& c : store.CampaignTruths(campaign_id)) {
+    if (c.trials <= 0) continue;
+    const std::string backend = c.backend.empty() ? "model" : c.backend;
+    const std::string truth = c.truth.empty() ? "self-consistency" : c.truth;
+    backends[backend] = truth;
   }
   TruthInfo info;
   info.source.clear();
-  for (const auto& b : backends) info.source += (info.source.empty() ? "" : ",") + b;
-  if (info.source.empty()) info.source = "model";
-  info.independent = !backends.empty() && !backends.count("model");
-  if (backends.count("model")) {
+  bool self = false;
+  for (const auto& [backend, truth] : backends) {
+    info.source += (info.source.empty() ? "" : ",") + backend;
+    self = self || truth == "self-consistency";
+  }
+  if (info.source.empty()) {
+    info.source = "model";
+    self = true;
+  }
+  info.independent = !self;
+  if (self) {
     info.statement =
         "the truth is the model at the cell's settings (self-consistency, not accuracy)";
-    if (backends.size() > 1) info.statement += "; some trials ran on " + info.source;
+    if (backends.size() > 1) info.statement += "; the trials ran on " + info.source;
   } else {
-    info.statement = "the truth is the " + info.source +
-                     " backend, independent of arena's model (accuracy against that engine)";
+    std::string kinds;
+    for (const auto& [backend, truth] : backends)
+      if (kinds.find(truth) == std::string::npos) kinds += (kinds.empty() ? "" : ", ") + truth;
+    info.statement = "the truth is " + info.source + " (" + kinds +
+                     "), independent of arena's model: errors are accuracy against it";
   }
   return info;
 }
@@ -256,7 +257,7 @@ EvaluationRun EvaluateCampaign(db::Store& store, std::int64_t campaign_id,
   }
   run.report = Summarise(built.infos, results, options.budgets, ComputeNoiseFloor(final_poses));
   run.report.campaign_id = campaign_id;
-  run.report.truth = TruthOf(store, trials);
+  run.report.truth = TruthOf(store, campaign_id);
 
   // The convergence table: a few trials, short pieces from the true state.
   if (options.convergence_trials > 0 && !trials.empty()) {

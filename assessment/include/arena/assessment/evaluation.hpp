@@ -242,9 +242,10 @@ struct EvaluationRun {
   EvaluationReport report;
 };
 
-// The truth of a campaign's done trials, from the backend their cells
-// announced (capabilities "backend"; a cell that names none ran the model).
-TruthInfo TruthOf(const db::Store& store, const std::vector<db::Trial>& trials);
+// The truth of a campaign's trials, from the backend and kind of truth each
+// trial's cell reported (Store::CampaignTruths; a trial that reported none
+// ran the model). Any self-consistency truth makes the report say so.
+TruthInfo TruthOf(const db::Store& store, std::int64_t campaign_id);
 
 // Replays every done trial of the campaign through every requested
 // predictor's grid on `threads` worker threads (each with its own read-only
