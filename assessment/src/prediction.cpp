@@ -82,6 +82,9 @@ const char* ToString(PredictionOutcome outcome) {
 }
 
 PredictionOutcome OutcomeOf(const std::string& status) {
+  // mechanics' frozen-frame predictions whose fingers left the object are
+  // stored as "left_geometry": they left the grasp too.
+  if (status == "left_geometry") return PredictionOutcome::kDiverged;
   for (auto o : {PredictionOutcome::kOk, PredictionOutcome::kDiverged,
                  PredictionOutcome::kSolverFailure, PredictionOutcome::kInvalidScene}) {
     if (status == ToString(o)) return o;
