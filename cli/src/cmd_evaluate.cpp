@@ -8,6 +8,7 @@
 #include <cstdio>
 #include <sstream>
 #include <string>
+#include <vector>
 
 #include <nlohmann/json.hpp>
 
@@ -196,6 +197,7 @@ int RunEvaluate(const EvaluateOptions& o) {
   eo.cancel = &cancel;
 
   assessment::EvaluationRun run;
+  std::vector<db::Store::TruthCount> truths;  // what the errors are measured against
   try {
     db::StoreOptions so;
     so.create = false;
@@ -206,6 +208,7 @@ int RunEvaluate(const EvaluateOptions& o) {
       progress->Update(done, failed);
     };
     run = assessment::EvaluateCampaign(*store, o.campaign, eo);
+    truths = store->CampaignTruths(o.campaign);
     if (progress) progress->Finish();
   } catch (const db::StoreError& e) {
     throw StoreCommandError(e);
@@ -219,10 +222,25 @@ int RunEvaluate(const EvaluateOptions& o) {
   if (o.json) {
     nlohmann::json j = assessment::ToJson(run.report);
     j["evaluation_id"] = run.evaluation_id;
+    // "truth" is the report's object (source, independent, statement); the
+    // per-backend trial counts sit in it.
+    j["truth"]["trials"] = nlohmann::json::array();
+    for (const auto& t : truths) {
+      j["truth"]["trials"].push_back(
+          {{"truth", t.truth}, {"backend", t.backend}, {"trials", t.trials}});
+    }
     std::printf("%s\n", j.dump(2).c_str());
   } else {
     const std::string text = FormatTable(run.report, run.evaluation_id);
     std::fwrite(text.data(), 1, text.size(), stdout);
+    for (const auto& t : truths) {
+      std::printf("truth: %s (%s backend), %lld trials%s\n",
+                  t.truth.empty() ? "unreported" : t.truth.c_str(),
+                  t.backend.empty() ? "?" : t.backend.c_str(), static_cast<long long>(t.trials),
+                  t.truth == "self-consistency"
+                      ? ": these errors are arena's model against itself, not accuracy"
+                      : "");
+    }
   }
   return kExitOk;
 }

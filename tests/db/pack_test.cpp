@@ -345,6 +345,9 @@ TEST(PackedBlock, VersionThreeStoreMigratesAndReads) {
     sqlite3_open(path.c_str(), &db);
     ASSERT_EQ(sqlite3_exec(db,
                            "BEGIN; DELETE FROM schema_migrations WHERE version > 3;"
+                           " ALTER TABLE trials DROP COLUMN backend;"
+                           " ALTER TABLE trials DROP COLUMN truth;"
+                           " ALTER TABLE trials DROP COLUMN defects_applied;"
                            " PRAGMA user_version = 3; COMMIT;",
                            nullptr, nullptr, nullptr),
               SQLITE_OK);

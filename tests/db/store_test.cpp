@@ -63,7 +63,8 @@ TEST(StoreOpen, MigratesEmptyFileAndReopens) {
     store->CreateCampaign(MakeCampaign(), MakeTrials(2));
   }
   EXPECT_EQ(RawScalar(path, "PRAGMA journal_mode"), "wal");
-  EXPECT_EQ(RawScalar(path, "SELECT COUNT(*) FROM schema_migrations"),
+  // Versions may have gaps (each branch owns its numbers): the last one is the schema's.
+  EXPECT_EQ(RawScalar(path, "SELECT MAX(version) FROM schema_migrations"),
             std::to_string(Store::SchemaVersion()));
   auto again = Store::Open(path);
   EXPECT_EQ(again->FileSchemaVersion(), Store::SchemaVersion());
@@ -80,14 +81,16 @@ TEST(StoreOpen, MigratesVersionOneFile) {
   {
     sqlite3* db = nullptr;
     sqlite3_open(path.c_str(), &db);
-    ASSERT_EQ(
-        sqlite3_exec(db,
-                     "BEGIN; ALTER TABLE campaigns DROP COLUMN state_reason;"
-                     " DROP TABLE evaluation_results; DROP TABLE evaluations;"
-                     " DELETE FROM schema_migrations WHERE version > 1; PRAGMA user_version = 1;"
-                     " COMMIT;",
-                     nullptr, nullptr, nullptr),
-        SQLITE_OK)
+    ASSERT_EQ(sqlite3_exec(
+                  db,
+                  "BEGIN; ALTER TABLE campaigns DROP COLUMN state_reason;"
+                  " DROP TABLE evaluation_results; DROP TABLE evaluations;"
+                  " ALTER TABLE trials DROP COLUMN backend; ALTER TABLE trials DROP COLUMN truth;"
+                  " ALTER TABLE trials DROP COLUMN defects_applied;"
+                  " DELETE FROM schema_migrations WHERE version > 1; PRAGMA user_version = 1;"
+                  " COMMIT;",
+                  nullptr, nullptr, nullptr),
+              SQLITE_OK)
         << sqlite3_errmsg(db);
     sqlite3_close(db);
   }
