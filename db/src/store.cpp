@@ -118,13 +118,16 @@ const char* ToString(PredictionStatus s) {
       return "invalid_scene";
     case PredictionStatus::kError:
       return "error";
+    case PredictionStatus::kDiverged:
+      return "diverged";
   }
   return "?";
 }
 
 std::optional<PredictionStatus> ParsePredictionStatus(const std::string& text) {
-  for (auto s : {PredictionStatus::kOk, PredictionStatus::kSolverFailure,
-                 PredictionStatus::kInvalidScene, PredictionStatus::kError})
+  for (auto s :
+       {PredictionStatus::kOk, PredictionStatus::kSolverFailure, PredictionStatus::kInvalidScene,
+        PredictionStatus::kError, PredictionStatus::kDiverged})
     if (text == ToString(s)) return s;
   return std::nullopt;
 }

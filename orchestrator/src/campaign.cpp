@@ -17,6 +17,7 @@
 #include "arena/mechanics/json_path.hpp"
 #include "arena/mechanics/scene_json.hpp"
 #include "arena/orchestrator/sampler.hpp"
+#include "arena/simulators/simulator.hpp"
 
 namespace arena::orchestrator {
 
@@ -692,7 +693,39 @@ Campaign ParseCampaign(std::string_view json_text, const std::string& base_dir,
   c.prediction = c.scene.model;
   if (doc.contains("prediction")) {
     const json& p = doc["prediction"];
-    RequireObject(p, "prediction", {"facets", "points", "dt", "reduce"});
+    RequireObject(
+        p, "prediction",
+        {"predictor", "facets", "points", "dt", "reduce", "timestep", "cone", "noslip_iterations"});
+    // Which predictor: arena's model (knobs facets, points, dt, reduce) or
+    // MuJoCo (timestep, cone, noslip_iterations); knobs of the other are refused.
+    if (p.contains("predictor")) c.predictor = String(p["predictor"], "prediction.predictor");
+    if (c.predictor != "arena" && c.predictor != "mujoco") {
+      throw CampaignError("prediction.predictor", "must be \"arena\" or \"mujoco\", got \"" +
+                                                      Printable(c.predictor, 40) + "\"");
+    }
+    const bool mujoco = c.predictor == "mujoco";
+    for (const char* k :
+         {"facets", "points", "dt", "reduce", "timestep", "cone", "noslip_iterations"}) {
+      const bool arena_knob = std::string(k) == "facets" || std::string(k) == "points" ||
+                              std::string(k) == "dt" || std::string(k) == "reduce";
+      if (p.contains(k) && arena_knob == mujoco) {
+        throw CampaignError(std::string("prediction.") + k,
+                            std::string("is not a knob of the ") + c.predictor + " predictor");
+      }
+    }
+    if (mujoco) {
+      json knobs = p;
+      knobs.erase("predictor");
+      try {
+        (void)simulators::MakeSimulator("mujoco", knobs.dump());
+      } catch (const simulators::SimulatorError& e) {
+        const std::string field = e.field().rfind("mujoco.", 0) == 0 ? e.field().substr(7) : "";
+        const std::string what = e.what();
+        throw CampaignError("prediction" + (field.empty() ? "" : "." + field),
+                            what.substr(std::min(what.size(), e.field().size() + 2)));
+      }
+      c.predictor_settings_json = knobs.dump();
+    }
     if (p.contains("facets")) {
       c.prediction.facets =
           static_cast<int>(Integer(p["facets"], "prediction.facets", 3, mechanics::kMaxFacets));

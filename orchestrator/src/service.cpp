@@ -23,10 +23,11 @@
 #include <spdlog/spdlog.h>
 #include <nlohmann/json.hpp>
 
+#include "arena/assessment/prediction.hpp"
+#include "arena/assessment/truth.hpp"
 #include "arena/db/store.hpp"
 #include "arena/mechanics/scene_json.hpp"
 #include "arena/orchestrator/logging.hpp"
-#include "arena/orchestrator/prediction.hpp"
 #include "arena/orchestrator/trial_data.hpp"
 #include "arena/orchestrator/trial_driver.hpp"
 #include "arena/schemas/arena.h"
@@ -35,6 +36,11 @@ namespace arena::orchestrator {
 
 namespace {
 
+using assessment::ApplyModelSettings;
+using assessment::ContactNormals;
+using assessment::PredictionFailure;
+using assessment::PredictTrial;
+using assessment::ToTrajectorySample;
 using Clock = std::chrono::steady_clock;
 using Seconds = std::chrono::duration<double>;
 
@@ -169,6 +175,7 @@ struct PredictionJob {
   std::int64_t campaign_id = 0;
   mechanics::Scene scene;  // with the campaign's model settings applied
   std::vector<mechanics::TrajectorySample> truth;
+  nlohmann::json prediction;  // the campaign's `prediction` (names the predictor)
 };
 
 // Worker threads that run the predictor; jobs in, results out. Start()
@@ -201,6 +208,7 @@ class PredictorPool : public PredictionPort {
           job.truth.push_back(ToTrajectorySample(s, normals, scene.pusher.has_value()));
       }
       job.scene = ApplyModelSettings(scene, CampaignModel(r.campaign_id));
+      job.prediction = CampaignModel(r.campaign_id);
     } catch (const db::StoreError& e) {
       using K = db::StoreError::Kind;
       // A store that cannot be written stops the service; anything else
@@ -270,7 +278,7 @@ class PredictorPool : public PredictionPort {
         jobs_.pop_front();
       }
       PredictionDone done{job.trial_id, job.attempt, job.campaign_id,
-                          PredictTrial(job.scene, job.truth)};
+                          PredictTrial(job.scene, job.truth, job.prediction)};
       std::lock_guard lock(mu_);
       results_.push_back(std::move(done));
     }

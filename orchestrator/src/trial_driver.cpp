@@ -10,6 +10,7 @@
 #include <spdlog/spdlog.h>
 #include <nlohmann/json.hpp>
 
+#include "arena/assessment/truth.hpp"
 #include "arena/mechanics/scene_json.hpp"
 #include "arena/orchestrator/logging.hpp"
 #include "arena/orchestrator/trial_data.hpp"
@@ -25,6 +26,7 @@ std::string SessionHex(std::uint64_t session) {
 
 namespace {
 
+using assessment::ContactNormals;
 using Clock = DriverClock;
 using Seconds = std::chrono::duration<double>;
 
