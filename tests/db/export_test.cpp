@@ -213,11 +213,7 @@ TEST_F(ExportTest, CsvRoundTripThroughAParser) {
       }
     }
   }
-<<<<<<< HEAD
   EXPECT_EQ(m["counts"]["files"], 1 + 1 + 2 * 3);  // trials.csv, scenes.jsonl, 2 streams per trial
-=======
-  EXPECT_EQ(m["counts"]["files"], 1 + 2 * 3 + 1);  // + scenes.jsonl
->>>>>>> refs/heads/service
 }
 
 TEST_F(ExportTest, JsonlRoundTripThroughAParser) {
