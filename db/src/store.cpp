@@ -454,6 +454,7 @@ std::int64_t Store::CreateCampaign(const NewCampaign& campaign,
   s->Run();
   const std::int64_t id = static_cast<std::int64_t>(sqlite3_last_insert_rowid(impl_->db));
   InsertPlannedTrials(*impl_, id, 0, trials, "CreateCampaign");
+  internal::RegisterParameters(*impl_, id);
   tx.Commit();
   return id;
 }
@@ -473,6 +474,7 @@ void Store::AppendPlannedTrials(std::int64_t campaign_id, const std::vector<Plan
   n->Step();
   const int first = static_cast<int>(n->Int(0));
   InsertPlannedTrials(*impl_, campaign_id, first, trials, "AppendPlannedTrials");
+  internal::RegisterParameters(*impl_, campaign_id);
   auto u =
       impl_->Prepare("UPDATE campaigns SET sampler_state_json = ?, updated_at = ? WHERE id = ?");
   u->Bind(1, sampler_state_json).Bind(2, impl_->Now()).Bind(3, campaign_id).Run();

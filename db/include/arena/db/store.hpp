@@ -96,6 +96,7 @@ class StoreError : public std::runtime_error {
     kCorrupt,            // integrity check failed, malformed block, not a database
     kFull,               // disk or SQLite size limit full
     kIo,                 // cannot open / read / write the file
+    kOutput,             // an output outside the store (an export directory) cannot be written
   };
   StoreError(Kind kind, const std::string& message) : std::runtime_error(message), kind_(kind) {}
   Kind kind() const { return kind_; }
