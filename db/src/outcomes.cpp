@@ -111,8 +111,7 @@ void OutcomeAccumulator::Add(const Sample& s) {
   const V3 pusher_at{s.pusher_pose[0], s.pusher_pose[1], s.pusher_pose[2]};
   const V3 pusher_v{s.pusher_twist[0], s.pusher_twist[1], s.pusher_twist[2]};
   const Q pusher_turn =
-      samples_ == 0 ? Q{1, 0, 0, 0}
-                    : Mul(QuatOf(s.pusher_pose), Conj(QuatOf(first_.pusher_pose)));
+      samples_ == 0 ? Q{1, 0, 0, 0} : Mul(QuatOf(s.pusher_pose), Conj(QuatOf(first_.pusher_pose)));
   for (std::size_t c = 0; c < s.contacts.size(); ++c) {
     auto& pc = per_contact_[c];
     const auto& contact = s.contacts[c];
@@ -121,8 +120,8 @@ void OutcomeAccumulator::Add(const Sample& s) {
     if (!geometry) continue;
     const ContactSite& site = sites_[c];
     const V3 n = site.pusher ? Rotate(pusher_turn, site.normal) : site.normal;
-    pc.max_normal = std::max(pc.max_normal, Dot({contact.force[0], contact.force[1],
-                                                 contact.force[2]}, n));
+    pc.max_normal =
+        std::max(pc.max_normal, Dot({contact.force[0], contact.force[1], contact.force[2]}, n));
     if (contact.mode == ContactMode::kSeparate || dt <= 0) continue;
     const V3 p = site.pusher ? pusher_at : site.position;
     const V3 wr = Cross(w, Sub(p, x));
@@ -163,8 +162,7 @@ TrialOutcome OutcomeAccumulator::Result() const {
       RotationVector(Mul(QuatOf(last_.object_pose), Conj(QuatOf(first_.object_pose))));
   bool any_finger = false, kept = true;
   for (std::size_t c = 0; c < last_.contacts.size(); ++c) {
-    const bool finger = slip_known_ ? (c < sites_.size() && !sites_[c].pusher)
-                                    : false;
+    const bool finger = slip_known_ ? (c < sites_.size() && !sites_[c].pusher) : false;
     if (!finger) continue;
     any_finger = true;
     kept = kept && last_.contacts[c].mode != ContactMode::kSeparate;

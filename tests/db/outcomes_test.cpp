@@ -148,12 +148,54 @@ TEST(ResultViews, ParametersAreColumnsAndOutcomesAreStoredPerContact) {
   EXPECT_EQ(std::get<std::int64_t>(pusher.rows[0][0]), 2);
 }
 
+// A store written before schema version 6 gets the outcomes of its stored
+// streams and its parameter columns on the first read-write open.
+TEST(ResultViews, MigrationSixComputesOutcomesOfStoredStreams) {
+  TempDir dir;
+  const auto path = dir.File("v5.db");
+  {
+    auto store = Store::Open(path);
+    store->UpsertCell("c", {"point"});
+    auto trials = MakeTrials(2);
+    trials[1].params_json = R"({"pivot_offset": 0.01})";
+    store->CreateCampaign(MakeCampaign("old"), trials);
+    auto t = store->ClaimNextTrial("c");
+    auto ingest = store->BeginIngest(t->trial_id, t->attempt);
+    ingest->Add(SlidingUp(ContactMode::kSlide, false));
+    ingest->Finish("ok");
+  }
+  sqlite3* db = nullptr;
+  ASSERT_EQ(sqlite3_open(path.c_str(), &db), SQLITE_OK);
+  const char* back_to_4 =
+      "BEGIN; DROP VIEW contact_results; DROP VIEW trial_results;"
+      " DROP TABLE contact_outcomes; DROP TABLE campaign_parameters;"
+      " ALTER TABLE gt_summary DROP COLUMN net_dx; ALTER TABLE gt_summary DROP COLUMN net_dy;"
+      " ALTER TABLE gt_summary DROP COLUMN net_dz; ALTER TABLE gt_summary DROP COLUMN net_rx;"
+      " ALTER TABLE gt_summary DROP COLUMN net_ry; ALTER TABLE gt_summary DROP COLUMN net_rz;"
+      " ALTER TABLE gt_summary DROP COLUMN grasp_kept;"
+      " CREATE VIEW trial_results AS SELECT t.id AS trial_id, t.campaign_id FROM trials t;"
+      " DELETE FROM schema_migrations WHERE version > 4; PRAGMA user_version = 4; COMMIT;";
+  ASSERT_EQ(sqlite3_exec(db, back_to_4, nullptr, nullptr, nullptr), SQLITE_OK)
+      << sqlite3_errmsg(db);
+  sqlite3_close(db);
+  Store::Open(path).reset();  // migrates
+  const auto slip = Query(path,
+                          "SELECT contact_name, slip_distance_m, pivot_offset FROM"
+                          " contact_results ORDER BY contact");
+  ASSERT_EQ(slip.rows.size(), 3u);
+  EXPECT_EQ(std::get<std::string>(slip.rows[0][0]), "left");
+  EXPECT_NEAR(std::get<double>(slip.rows[0][1]), std::hypot(0.01, 0.0025), 1e-9);
+  const auto kept = Query(path, "SELECT grasp_kept, net_dz FROM trial_results WHERE samples > 0");
+  ASSERT_EQ(kept.rows.size(), 1u);
+  EXPECT_EQ(std::get<std::int64_t>(kept.rows[0][0]), 1);
+}
+
 // A store in a directory this user cannot write (a read-only bind mount in a
 // private mount namespace: root ignores permissions, so chmod proves nothing).
 // Returns the exit status of `command` run with `dir` read-only, or -1.
 int WithReadOnlyDirectory(const std::string& dir, const std::string& command) {
-  const std::string sh = "unshare -m sh -c 'mount --bind -o ro " + dir + " " + dir +
-                         " && touch " + dir + "/.w 2>/dev/null && exit 99; " + command + "'";
+  const std::string sh = "unshare -m sh -c 'mount --bind -o ro " + dir + " " + dir + " && touch " +
+                         dir + "/.w 2>/dev/null && exit 99; " + command + "'";
   const int st = std::system(sh.c_str());
   return WIFEXITED(st) ? WEXITSTATUS(st) : -1;
 }
@@ -198,12 +240,14 @@ TEST(ReadOnlyDirectory, ReadsWithAndWithoutAnUnmergedWal) {
   // Leave the WAL as a killed writer would: copy the files while it is open.
   std::filesystem::create_directories(dir.path() / "copy");
   for (const char* suffix : {"", "-wal"})
-    std::filesystem::copy_file(path + suffix, (dir.path() / "copy" / ("ro.db" + std::string(suffix))));
+    std::filesystem::copy_file(path + suffix,
+                               (dir.path() / "copy" / ("ro.db" + std::string(suffix))));
   sqlite3_close(db);
   ::setenv("ARENA_RO_STORE", (dir.path() / "copy" / "ro.db").c_str(), 1);
   ::setenv("ARENA_RO_EXPECT", "3", 1);
   ::setenv("ARENA_RO_CAMPAIGNS", "2", 1);
   EXPECT_EQ(WithReadOnlyDirectory((dir.path() / "copy").string(), reader), 0) << "with -wal";
+  for (const char* v : {"ARENA_RO_STORE", "ARENA_RO_EXPECT", "ARENA_RO_CAMPAIGNS"}) ::unsetenv(v);
 }
 
 // Run by the test above inside the read-only namespace (skipped otherwise).

@@ -19,11 +19,11 @@ namespace arena::db {
 // trial). Fingers are fixed in G; the pusher's contact point moves with the
 // pusher (its position and normal follow the sample's pusher pose).
 struct ContactSite {
-  std::string name;                    // the finger's name, "pusher", or "contact<i>"
-  bool pusher = false;                 // the pusher (last contact) rather than a finger
-  std::array<double, 3> position{};    // m, in G (for the pusher: relative to its pose)
-  std::array<double, 3> normal{};      // unit, in G (pusher: in its own frame at t = 0)
-  bool known = false;                  // false: no geometry (slip distance not computed)
+  std::string name;                  // the finger's name, "pusher", or "contact<i>"
+  bool pusher = false;               // the pusher (last contact) rather than a finger
+  std::array<double, 3> position{};  // m, in G (for the pusher: relative to its pose)
+  std::array<double, 3> normal{};    // unit, in G (pusher: in its own frame at t = 0)
+  bool known = false;                // false: no geometry (slip distance not computed)
 };
 
 // The contacts of a scene (SCENE.md): fingers in order, then the pusher.
