@@ -312,6 +312,19 @@ void H5ScalarAttr(hid_t obj, const std::string& name, const Value& v) {
   }
 }
 
+// A text too long for an HDF5 attribute (64 KiB header limit), e.g. a very
+// large scene: a scalar string dataset of the same name instead.
+void H5TextDataset(hid_t group, const std::string& name, const std::string& text) {
+  H5Handle type(H5Tcopy(H5T_C_S1), H5Tclose, "copy string type");
+  H5Check(H5Tset_size(type.id, text.size() + 1), "size string type");
+  H5Handle space(H5Screate(H5S_SCALAR), H5Sclose, "create scalar space");
+  H5Handle ds(
+      H5Dcreate2(group, name.c_str(), type.id, space.id, H5P_DEFAULT, H5P_DEFAULT, H5P_DEFAULT),
+      H5Dclose, "create dataset " + name);
+  H5Check(H5Dwrite(ds.id, type.id, H5S_ALL, H5S_ALL, H5P_DEFAULT, text.c_str()),
+          "write dataset " + name);
+}
+
 void H5Matrix(hid_t group, const char* name, const std::vector<Column>& cols,
               const std::vector<std::vector<double>>& rows) {
   const hsize_t n = rows.size(), k = cols.size();
@@ -809,8 +822,13 @@ void WriteTrial(const Store::Impl& impl, const ExportOptions& o, const Campaign&
   std::string pf;
   if (predicted) pf = writer->Stream(id, "predicted", true_cols, pred_rows, gid);
   if (group) {
-    for (std::size_t c = 0; c < columns.size() && c < irow->size(); ++c)
-      H5ScalarAttr(gid, columns[c], (*irow)[c]);
+    for (std::size_t c = 0; c < columns.size() && c < irow->size(); ++c) {
+      const auto* text = std::get_if<std::string>(&(*irow)[c]);
+      if (text && text->size() > 60000)
+        H5TextDataset(gid, columns[c], *text);
+      else
+        H5ScalarAttr(gid, columns[c], (*irow)[c]);
+    }
     if (!contact_matrix.empty()) {
       H5Matrix(gid, "contacts", ContactColumns(), contact_matrix);
       H5Handle ds(H5Dopen2(gid, "contacts", H5P_DEFAULT), H5Dclose, "open contacts");

@@ -104,14 +104,14 @@ void OutcomeAccumulator::Add(const Sample& s) {
     slip_known_ = false;
   }
   if (per_contact_.size() < s.contacts.size()) per_contact_.resize(s.contacts.size());
-  const double dt = samples_ == 0 ? 0.0 : std::max(0.0, s.t - last_.t);
+  const double dt = samples_ == 0 ? 0.0 : std::max(0.0, s.t - last_t_);
   const V3 x{s.object_pose[0], s.object_pose[1], s.object_pose[2]};
   const V3 v{s.object_twist[0], s.object_twist[1], s.object_twist[2]};
   const V3 w{s.object_twist[3], s.object_twist[4], s.object_twist[5]};
   const V3 pusher_at{s.pusher_pose[0], s.pusher_pose[1], s.pusher_pose[2]};
   const V3 pusher_v{s.pusher_twist[0], s.pusher_twist[1], s.pusher_twist[2]};
   const Q pusher_turn =
-      samples_ == 0 ? Q{1, 0, 0, 0} : Mul(QuatOf(s.pusher_pose), Conj(QuatOf(first_.pusher_pose)));
+      samples_ == 0 ? Q{1, 0, 0, 0} : Mul(QuatOf(s.pusher_pose), Conj(QuatOf(first_pusher_pose_)));
   for (std::size_t c = 0; c < s.contacts.size(); ++c) {
     auto& pc = per_contact_[c];
     const auto& contact = s.contacts[c];
@@ -131,8 +131,14 @@ void OutcomeAccumulator::Add(const Sample& s) {
     const V3 tangential{rel[0] - along * n[0], rel[1] - along * n[1], rel[2] - along * n[2]};
     pc.slip += Norm(tangential) * dt;
   }
-  if (samples_ == 0) first_ = s;
-  last_ = s;
+  if (samples_ == 0) {
+    first_pose_ = s.object_pose;
+    first_pusher_pose_ = s.pusher_pose;
+  }
+  last_pose_ = s.object_pose;
+  last_t_ = s.t;
+  last_modes_.resize(s.contacts.size());
+  for (std::size_t c = 0; c < s.contacts.size(); ++c) last_modes_[c] = s.contacts[c].mode;
   ++samples_;
 }
 
@@ -156,16 +162,15 @@ TrialOutcome OutcomeAccumulator::Result() const {
     out.contacts.push_back(std::move(o));
   }
   if (samples_ == 0) return out;
-  out.net_translation = Sub({last_.object_pose[0], last_.object_pose[1], last_.object_pose[2]},
-                            {first_.object_pose[0], first_.object_pose[1], first_.object_pose[2]});
-  out.net_rotation =
-      RotationVector(Mul(QuatOf(last_.object_pose), Conj(QuatOf(first_.object_pose))));
+  out.net_translation = Sub({last_pose_[0], last_pose_[1], last_pose_[2]},
+                            {first_pose_[0], first_pose_[1], first_pose_[2]});
+  out.net_rotation = RotationVector(Mul(QuatOf(last_pose_), Conj(QuatOf(first_pose_))));
   bool any_finger = false, kept = true;
-  for (std::size_t c = 0; c < last_.contacts.size(); ++c) {
+  for (std::size_t c = 0; c < last_modes_.size(); ++c) {
     const bool finger = slip_known_ ? (c < sites_.size() && !sites_[c].pusher) : false;
     if (!finger) continue;
     any_finger = true;
-    kept = kept && last_.contacts[c].mode != ContactMode::kSeparate;
+    kept = kept && last_modes_[c] != ContactMode::kSeparate;
   }
   if (any_finger) out.grasp_kept = kept;
   return out;

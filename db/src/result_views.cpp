@@ -154,6 +154,22 @@ void WriteOutcome(const Store::Impl& impl, std::int64_t stream_id, std::int64_t 
 }
 
 void MigrateToOutcomes(const Store::Impl& impl) {
+  std::set<std::string> have;
+  {
+    detail::Stmt cols(impl.db, "PRAGMA table_info(gt_summary)");
+    while (cols.Step()) have.insert(cols.Text(1));
+  }
+  for (const char* c : {"net_dx", "net_dy", "net_dz", "net_rx", "net_ry", "net_rz"}) {
+    if (!have.count(c))
+      detail::Exec(impl.db, std::string("ALTER TABLE gt_summary ADD COLUMN ") + c + " REAL",
+                   "migration 6");
+  }
+  if (!have.count("grasp_kept")) {
+    detail::Exec(
+        impl.db,
+        "ALTER TABLE gt_summary ADD COLUMN grasp_kept INTEGER CHECK (grasp_kept IN (0, 1))",
+        "migration 6");
+  }
   // Every published stream gets its outcome from its stored samples, once.
   detail::Stmt streams(impl.db,
                        "SELECT g.id, g.trial_id, g.attempt, g.samples, t.scene_json"

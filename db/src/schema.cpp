@@ -271,15 +271,10 @@ CREATE INDEX evaluation_results_by_model ON evaluation_results(evaluation_id, mo
       // the parameter names of every campaign, which become columns of the
       // views trial_results and contact_results (result_views.cpp).
       {6, "per-contact outcomes, object net motion, parameters as view columns", R"sql(
-ALTER TABLE gt_summary ADD COLUMN net_dx REAL;
-ALTER TABLE gt_summary ADD COLUMN net_dy REAL;
-ALTER TABLE gt_summary ADD COLUMN net_dz REAL;
-ALTER TABLE gt_summary ADD COLUMN net_rx REAL;
-ALTER TABLE gt_summary ADD COLUMN net_ry REAL;
-ALTER TABLE gt_summary ADD COLUMN net_rz REAL;
-ALTER TABLE gt_summary ADD COLUMN grasp_kept INTEGER CHECK (grasp_kept IN (0, 1));
-
-CREATE TABLE contact_outcomes(
+-- gt_summary's new columns (net_dx ... net_rz, grasp_kept) are added by
+-- MigrateToOutcomes, which skips a column that exists: the migration can be
+-- re-applied to a file whose user_version was set back.
+CREATE TABLE IF NOT EXISTS contact_outcomes(
   stream_id          INTEGER NOT NULL REFERENCES gt_streams(id) ON DELETE CASCADE,
   trial_id           INTEGER NOT NULL REFERENCES trials(id),
   attempt            INTEGER NOT NULL,
@@ -293,9 +288,9 @@ CREATE TABLE contact_outcomes(
   max_normal_force_n REAL,
   PRIMARY KEY (stream_id, contact)
 );
-CREATE INDEX contact_outcomes_by_trial ON contact_outcomes(trial_id);
+CREATE INDEX IF NOT EXISTS contact_outcomes_by_trial ON contact_outcomes(trial_id);
 
-CREATE TABLE campaign_parameters(
+CREATE TABLE IF NOT EXISTS campaign_parameters(
   campaign_id INTEGER NOT NULL REFERENCES campaigns(id),
   name        TEXT NOT NULL,
   PRIMARY KEY (campaign_id, name)

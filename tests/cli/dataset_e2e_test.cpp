@@ -33,9 +33,9 @@ class DatasetE2E : public ArenaCommandTest {
   // read_dataset.py's exit status (0 ok, 77 reader missing) and its message.
   int ReadBack(const std::string& dir, std::string* message) {
     const std::string err = dir_ + "/read.err";
-    const int st = std::system((Python() + " " + Source("tests/cli/read_dataset.py") + " " + dir +
-                                " >/dev/null 2>" + err)
-                                   .c_str());
+    const int st = std::system(
+        (Python() + " " + Source("tests/cli/read_dataset.py") + " " + dir + " >/dev/null 2>" + err)
+            .c_str());
     *message = Slurp(err);
     return WIFEXITED(st) ? WEXITSTATUS(st) : -1;
   }
@@ -45,8 +45,8 @@ class DatasetE2E : public ArenaCommandTest {
     std::string hdf5_skipped;
     for (const char* format : {"csv", "jsonl", "hdf5"}) {
       const std::string out = dir_ + "/d_" + format;
-      const auto r = Arena("export --db " + db_ + " --campaign 1 --format " + format + " --out " +
-                           out);
+      const auto r =
+          Arena("export --db " + db_ + " --campaign 1 --format " + format + " --out " + out);
       EXPECT_EQ(r.rc, 0) << format << ": " << r.err;
       EXPECT_NE(r.out.find("36 trials"), std::string::npos) << r.out;
       std::string message;
@@ -190,16 +190,15 @@ TEST_F(DatasetE2E, ReadOnlyCommandsWorkInAWriteProtectedDirectory) {
   if (std::system(probe.c_str()) != 0)
     GTEST_SKIP() << "cannot make a read-only directory (needs unshare -m and mount --bind)";
   const std::string a = ARENA_BINARY, db = ro + "/lab.db";
-  const std::string script =
-      "set -e; mount --bind -o ro " + ro + " " + ro + "; " + a + " status --db " + db + "; " + a +
-      " status --db " + db + " --json; " + a + " list --db " + db + "; " + a + " query --db " + db +
-      " --where \"pivot_offset > 0\" --format csv > " + dir_ + "/q.csv; " + a +
-      " export --db " + db + " --campaign 1 --format csv --out " + dir_ + "/exp; " + a +
-      " plot --db " + db + " 3 --out " + dir_ + "/t3.svg";
+  const std::string script = "set -e; mount --bind -o ro " + ro + " " + ro + "; " + a +
+                             " status --db " + db + "; " + a + " status --db " + db + " --json; " +
+                             a + " list --db " + db + "; " + a + " query --db " + db +
+                             " --where \"pivot_offset > 0\" --format csv > " + dir_ + "/q.csv; " +
+                             a + " export --db " + db + " --campaign 1 --format csv --out " + dir_ +
+                             "/exp; " + a + " plot --db " + db + " 3 --out " + dir_ + "/t3.svg";
   std::ofstream(dir_ + "/ro.sh") << script << "\n";
-  const auto r = std::system(("unshare -m sh " + dir_ + "/ro.sh >" + dir_ + "/ro.out 2>" + dir_ +
-                              "/ro.err")
-                                 .c_str());
+  const auto r = std::system(
+      ("unshare -m sh " + dir_ + "/ro.sh >" + dir_ + "/ro.out 2>" + dir_ + "/ro.err").c_str());
   EXPECT_EQ(WEXITSTATUS(r), 0) << Slurp(dir_ + "/ro.err");
   EXPECT_EQ(Slurp(dir_ + "/ro.err").find("read-write command"), std::string::npos);
   const auto q = Slurp(dir_ + "/q.csv");
@@ -226,10 +225,10 @@ TEST_F(DatasetE2E, ExitCodesAndMessagesFollowTheReadme) {
   }
   EXPECT_EQ(Arena("submit " + Source("examples/campaigns/smoke.json") + " --db " + dir_).rc, 3);
   // No error names an internal function ("GetCampaign:", "Store::Open:").
-  for (const std::string& cmd :
-       {"pause 99 --db " + db_, "status 99 --db " + db_, "export --db " + db_ +
-        " --campaign 99 --out " + dir_ + "/x", "plot --db " + db_ + " 9999 --out x.svg",
-        "query --db " + dir_ + "/missing.db", "cancel 42 --db " + db_}) {
+  for (const std::string& cmd : {"pause 99 --db " + db_, "status 99 --db " + db_,
+                                 "export --db " + db_ + " --campaign 99 --out " + dir_ + "/x",
+                                 "plot --db " + db_ + " 9999 --out x.svg",
+                                 "query --db " + dir_ + "/missing.db", "cancel 42 --db " + db_}) {
     const auto r = Arena(cmd);
     EXPECT_EQ(r.rc, cmd.find("missing") != std::string::npos ? 3 : 2) << cmd << ": " << r.err;
     for (const char* internal : {"GetCampaign", "Store::Open", "GetTrial", "Campaign:", "'SELECT"})

@@ -14,7 +14,9 @@
 //                            2-D float64 datasets (rows x columns), column names
 //                            and units as attributes "columns"/"units"; the trial's
 //                            index row (scene_json included) as scalar attributes of
-//                            its group (a missing value is an absent attribute)
+//                            its group (a missing value is an absent attribute; a text
+//                            over 60,000 bytes, e.g. a huge scene, is a string dataset
+//                            of that name instead: HDF5 attributes stop at 64 KiB)
 //   csv:   streams/<trial_id>_true.csv, _observed.csv, _predicted.csv
 //   jsonl: trials.jsonl, contacts.jsonl, streams/<trial_id>_true.jsonl, _observed.jsonl,
 //          _predicted.jsonl (one JSON object per line, keys = column names)

@@ -72,7 +72,10 @@ class OutcomeAccumulator {
   std::vector<ContactSite> sites_;
   std::vector<PerContact> per_contact_;
   std::size_t samples_ = 0;
-  Sample first_, last_;
+  // Only what Result() needs of the first and last samples (no per-sample allocation).
+  std::array<double, 7> first_pose_{}, last_pose_{}, first_pusher_pose_{};
+  double last_t_ = 0;
+  std::vector<ContactMode> last_modes_;
   bool slip_known_ = true;
 };
 
