@@ -162,7 +162,7 @@ void RequireFinite(double v, const std::string& what) {
   if (!std::isfinite(v)) BadInput(what + " is " + (std::isnan(v) ? "NaN" : "infinite"));
 }
 
-// The indexed parameter columns, read from the scene JSON (SCENE.md).
+// The indexed parameter columns, read from the scene JSON (docs/scene.md).
 struct SceneColumns {
   std::optional<std::string> object_shape, finger_type, pusher_type;
   std::optional<double> object_mass, grip_force, finger_mu, pusher_mu, pusher_speed,
@@ -225,7 +225,7 @@ SceneColumns ReadSceneColumns(const std::string& scene_text, const std::string& 
           RequireFinite((*dst)[i], where + ".object.pose." + key);
         }
       }
-      // R = Rz(yaw) Ry(pitch) Rx(roll) (SCENE.md: rpy about fixed x, y, z).
+      // R = Rz(yaw) Ry(pitch) Rx(roll) (docs/scene.md: rpy about fixed x, y, z).
       const double cr = std::cos(rpy[0] / 2), sr = std::sin(rpy[0] / 2);
       const double cp = std::cos(rpy[1] / 2), sp = std::sin(rpy[1] / 2);
       const double cy = std::cos(rpy[2] / 2), sy = std::sin(rpy[2] / 2);

@@ -26,7 +26,7 @@ struct ContactSite {
   bool known = false;                // false: no geometry (slip distance not computed)
 };
 
-// The contacts of a scene (SCENE.md): fingers in order, then the pusher.
+// The contacts of a scene (docs/scene.md): fingers in order, then the pusher.
 // Unreadable JSON or missing fields give sites with known = false.
 std::vector<ContactSite> ContactSitesFromScene(const std::string& scene_json);
 
