@@ -15,6 +15,7 @@
 #include "arena/orchestrator/prediction.hpp"
 #include "arena/orchestrator/trial_data.hpp"
 #include "commands.hpp"
+#include "output_guard.hpp"
 #include "progress.hpp"
 #include "store_errors.hpp"
 
@@ -103,6 +104,7 @@ db::PredictedStream Predict(const std::string& scene_json, const std::string& sp
 }
 
 int RunExport(const ExportCliOptions& o) {
+  RefuseToOverwriteStore(o.out, "--out", o.db_path);
   try {
     db::StoreOptions so;
     so.read_only = true;
