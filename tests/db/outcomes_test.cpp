@@ -258,8 +258,9 @@ TEST(ReadOnlyDirectory, ReaderChild) {
   ro.read_only = true;
   auto store = Store::Open(path, ro);
   EXPECT_EQ(store->ListTrials(1).size(), std::stoul(std::getenv("ARENA_RO_EXPECT")));
-  if (const char* c = std::getenv("ARENA_RO_CAMPAIGNS"))
+  if (const char* c = std::getenv("ARENA_RO_CAMPAIGNS")) {
     EXPECT_EQ(store->ListCampaigns().size(), std::stoul(c));
+  }
   EXPECT_EQ(RunQuery(*store, "SELECT count(*) FROM trial_results").rows.size(), 1u);
   if (::testing::Test::HasFailure()) std::_Exit(1);
 }

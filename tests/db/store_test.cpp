@@ -84,8 +84,8 @@ TEST(StoreOpen, MigratesVersionOneFile) {
     ASSERT_EQ(
         sqlite3_exec(db,
                      (std::string("BEGIN;") + testing::kUndoMigration6 +
-                       " ALTER TABLE campaigns DROP COLUMN state_reason;"
-                                  " DROP TABLE evaluation_results; DROP TABLE evaluations;") +
+                      " ALTER TABLE campaigns DROP COLUMN state_reason;"
+                      " DROP TABLE evaluation_results; DROP TABLE evaluations;" +
                       testing::kUndoMigration5 +
                       " DELETE FROM schema_migrations WHERE version > 1; PRAGMA user_version = 1;"
                       " COMMIT;")
