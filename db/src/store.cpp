@@ -509,6 +509,7 @@ std::int64_t Store::CreateCampaign(const NewCampaign& campaign,
     InsertPlannedTrials(*impl_, id, first, chunk, "CreateCampaign");
     first += static_cast<int>(chunk.size());
   }
+  internal::RegisterParameters(*impl_, id);
   tx.Commit();
   return id;
 }

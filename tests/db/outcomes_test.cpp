@@ -166,7 +166,7 @@ TEST(ResultViews, MigrationSixComputesOutcomesOfStoredStreams) {
   }
   sqlite3* db = nullptr;
   ASSERT_EQ(sqlite3_open(path.c_str(), &db), SQLITE_OK);
-  const char* back_to_4 =
+  const char* back_to_5 =
       "BEGIN; DROP VIEW contact_results; DROP VIEW trial_results;"
       " DROP TABLE contact_outcomes; DROP TABLE campaign_parameters;"
       " ALTER TABLE gt_summary DROP COLUMN net_dx; ALTER TABLE gt_summary DROP COLUMN net_dy;"
@@ -174,8 +174,8 @@ TEST(ResultViews, MigrationSixComputesOutcomesOfStoredStreams) {
       " ALTER TABLE gt_summary DROP COLUMN net_ry; ALTER TABLE gt_summary DROP COLUMN net_rz;"
       " ALTER TABLE gt_summary DROP COLUMN grasp_kept;"
       " CREATE VIEW trial_results AS SELECT t.id AS trial_id, t.campaign_id FROM trials t;"
-      " DELETE FROM schema_migrations WHERE version > 4; PRAGMA user_version = 4; COMMIT;";
-  ASSERT_EQ(sqlite3_exec(db, back_to_4, nullptr, nullptr, nullptr), SQLITE_OK)
+      " DELETE FROM schema_migrations WHERE version > 5; PRAGMA user_version = 5; COMMIT;";
+  ASSERT_EQ(sqlite3_exec(db, back_to_5, nullptr, nullptr, nullptr), SQLITE_OK)
       << sqlite3_errmsg(db);
   sqlite3_close(db);
   Store::Open(path).reset();  // migrates
