@@ -29,7 +29,18 @@ int RunQueryCommand(const QueryOptions& o) {
     so.read_only = true;
     auto store = db::Store::Open(o.db_path, so);
     db::QueryFilter filter;
-    if (o.campaign >= 0) filter.campaign_id = o.campaign;
+    if (o.campaign >= 0) {
+      // An unknown campaign is refused like every other command does, not an empty table.
+      try {
+        (void)store->GetCampaign(o.campaign);
+      } catch (const db::StoreError& e) {
+        if (e.kind() != db::StoreError::Kind::kNotFound) throw;
+        throw CommandError(kExitBadInput, "no campaign " + std::to_string(o.campaign) + " in " +
+                                              o.db_path + " (see `arena list --db " + o.db_path +
+                                              "`)");
+      }
+      filter.campaign_id = o.campaign;
+    }
     filter.where = o.where;
     filter.outcome = o.outcome;
     if (!std::isfinite(o.timeout_s) || o.timeout_s <= 0)
@@ -44,7 +55,8 @@ int RunQueryCommand(const QueryOptions& o) {
     return kExitOk;
   } catch (const db::StoreError& e) {
     // A query that would write is the user's input, not a broken store.
-    if (e.kind() == db::StoreError::Kind::kReadOnly) throw CommandError(kExitBadInput, e.what());
+    if (e.kind() == db::StoreError::Kind::kReadOnly)
+      throw CommandError(kExitBadInput, UserMessage(e.what()));
     throw StoreCommandError(e);
   }
 }
@@ -67,12 +79,17 @@ void AddQueryCommand(CLI::App& app, Action* action) {
   cmd->add_option("--timeout", o->timeout_s, "Stop a query running longer than this (s)")
       ->capture_default_str();
   cmd->add_option("--format", o->format, "Output format")
-      ->check(CLI::IsMember({"table", "csv", "json"}));
+      ->check(CLI::IsMember({"table", "csv", "json"}))
+      ->capture_default_str();
   cmd->footer(
       "Examples:\n"
       "  arena query --db lab.db --campaign 1 --where 'grip_force > 5' --format csv\n"
       "  arena query --db lab.db \"SELECT cell_id, COUNT(*) FROM trials GROUP BY cell_id\"\n"
       "  arena query --db lab.db \"SELECT * FROM start_state_drift\"\n"
+      "  arena query --db lab.db --campaign 2 --where 'pivot_offset > 0'\n"
+      "  arena query --db lab.db \"SELECT grip_force, AVG(slip_distance_m) FROM contact_results\n"
+      "                          WHERE role = 'finger' GROUP BY grip_force\"\n"
+      "Every varied parameter of a campaign is a column of trial_results and contact_results.\n"
       "The store is opened read-only: a statement that would write is refused (exit 2).\n"
       "Tables and columns: db/README.md.\n");
   cmd->callback([o, action] { *action = [o] { return RunQueryCommand(*o); }; });

@@ -3,8 +3,10 @@
 // The contract is SCENE.md: one JSON object on stdout; ok=false and a
 // non-zero exit on any error.
 #include <algorithm>
+#include <cerrno>
 #include <cmath>
 #include <cstdio>
+#include <cstring>
 #include <fstream>
 #include <iomanip>
 #include <optional>
@@ -52,7 +54,11 @@ int PrintError(const std::string& error, int exit_code) {
 void WriteTrajectory(const std::string& path, const mechanics::Scene& scene,
                      const mechanics::SimulationResult& result) {
   std::ofstream out(path);
-  if (!out) throw CommandError(kExitBadInput, "--trajectory: cannot write '" + path + "'");
+  // An output that cannot be written is a failed command (README: exit 1), not bad input.
+  if (!out)
+    throw CommandError(kExitFailure, "--trajectory: cannot write '" + path +
+                                         "': " + std::strerror(errno) +
+                                         " (does its directory exist and is it writable?)");
   out << "t,x,y,z,qw,qx,qy,qz,vx,vy,vz,wx,wy,wz,pusher_fx,pusher_fy,pusher_fz";
   std::vector<std::string> names;
   for (const auto& f : scene.fingers) names.push_back(f.name);

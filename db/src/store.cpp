@@ -187,7 +187,7 @@ void RequireFinite(double v, const std::string& what) {
   if (!std::isfinite(v)) BadInput(what + " is " + (std::isnan(v) ? "NaN" : "infinite"));
 }
 
-// The indexed parameter columns, read from the scene JSON (SCENE.md).
+// The indexed parameter columns, read from the scene JSON (docs/scene.md).
 struct SceneColumns {
   std::optional<std::string> object_shape, finger_type, pusher_type;
   std::optional<double> object_mass, grip_force, finger_mu, pusher_mu, pusher_speed,
@@ -250,7 +250,7 @@ SceneColumns ReadSceneColumns(const std::string& scene_text, const std::string& 
           RequireFinite((*dst)[i], where + ".object.pose." + key);
         }
       }
-      // R = Rz(yaw) Ry(pitch) Rx(roll) (SCENE.md: rpy about fixed x, y, z).
+      // R = Rz(yaw) Ry(pitch) Rx(roll) (docs/scene.md: rpy about fixed x, y, z).
       const double cr = std::cos(rpy[0] / 2), sr = std::sin(rpy[0] / 2);
       const double cp = std::cos(rpy[1] / 2), sp = std::sin(rpy[1] / 2);
       const double cy = std::cos(rpy[2] / 2), sy = std::sin(rpy[2] / 2);
@@ -479,6 +479,7 @@ std::int64_t Store::CreateCampaign(const NewCampaign& campaign,
   s->Run();
   const std::int64_t id = static_cast<std::int64_t>(sqlite3_last_insert_rowid(impl_->db));
   InsertPlannedTrials(*impl_, id, 0, trials, "CreateCampaign");
+  internal::RegisterParameters(*impl_, id);
   tx.Commit();
   return id;
 }
@@ -511,6 +512,7 @@ std::int64_t Store::CreateCampaign(const NewCampaign& campaign,
     InsertPlannedTrials(*impl_, id, first, chunk, "CreateCampaign");
     first += static_cast<int>(chunk.size());
   }
+  internal::RegisterParameters(*impl_, id);
   tx.Commit();
   return id;
 }
@@ -530,6 +532,7 @@ void Store::AppendPlannedTrials(std::int64_t campaign_id, const std::vector<Plan
   n->Step();
   const int first = static_cast<int>(n->Int(0));
   InsertPlannedTrials(*impl_, campaign_id, first, trials, "AppendPlannedTrials");
+  internal::RegisterParameters(*impl_, campaign_id);
   auto u =
       impl_->Prepare("UPDATE campaigns SET sampler_state_json = ?, updated_at = ? WHERE id = ?");
   u->Bind(1, sampler_state_json).Bind(2, impl_->Now()).Bind(3, campaign_id).Run();

@@ -37,6 +37,29 @@ std::vector<Sample> ReadStreamSamples(const Store::Impl& impl, std::int64_t stre
 }  // namespace arena::db::internal
 
 namespace arena::db {
+struct TrialOutcome;
+}
+
+namespace arena::db::internal {
+// Parameter columns of the result views (result_views.cpp): the names
+// campaigns varied, as registered in campaign_parameters.
+std::vector<std::string> ParameterColumns(sqlite3* db);
+// A name that may become a view column (an identifier not already a column).
+bool IsParameterColumnName(const std::string& name);
+// Recreates trial_results and contact_results with one column per parameter.
+void RebuildResultViews(sqlite3* db);
+// Records the parameter names of a campaign's trials; rebuilds the views if
+// one is new. Call inside the write transaction that inserted the trials.
+void RegisterParameters(const Store::Impl& impl, std::int64_t campaign_id);
+// Stores a stream's outcome (contact_outcomes rows, gt_summary net_* and
+// grasp_kept). Call inside a write transaction, after gt_summary's row exists.
+void WriteOutcome(const Store::Impl& impl, std::int64_t stream_id, std::int64_t trial_id,
+                  int attempt, const TrialOutcome& outcome);
+// Schema version 6: outcomes of the streams already stored, then the views.
+void MigrateToOutcomes(const Store::Impl& impl);
+}  // namespace arena::db::internal
+
+namespace arena::db {
 // Block codec pieces (sample.cpp) used by the ingest to encode as samples arrive.
 void EncodeSampleBody(const Sample& s, std::string* out);
 void EncodeBlockHeader(std::uint32_t count, std::string* out);

@@ -100,9 +100,8 @@ class TempDir {
   std::filesystem::path path_;
 };
 
-// Runs one trial through the whole state machine with n samples.
-// SQL that takes a current file back to schema version 4 (undoes migrations
-// 5 and 10), for tests that make an "older" store and open it again.
+// SQL that takes a current file back to schema version 4 (undoes migration 5),
+// for tests that make an "older" store and open it again.
 inline constexpr const char* kUndoMigration5 =
     " DROP TABLE store_meta; DROP TABLE services; DROP TABLE cell_events;"
     " ALTER TABLE cells DROP COLUMN lease_s; ALTER TABLE cells DROP COLUMN serving;"
@@ -112,6 +111,18 @@ inline constexpr const char* kUndoMigration10 =
     " ALTER TABLE trials DROP COLUMN backend; ALTER TABLE trials DROP COLUMN truth;"
     " ALTER TABLE trials DROP COLUMN defects_applied;";
 
+// SQL that takes a store back from schema version 6 to 5 (outcomes and
+// parameter views out). Migration 6 also re-applies over a file that kept
+// them, so a test that only sets user_version back still migrates.
+inline constexpr const char* kUndoMigration6 =
+    " DROP VIEW trial_results; DROP VIEW contact_results;"
+    " DROP TABLE contact_outcomes; DROP TABLE campaign_parameters;"
+    " ALTER TABLE gt_summary DROP COLUMN net_dx; ALTER TABLE gt_summary DROP COLUMN net_dy;"
+    " ALTER TABLE gt_summary DROP COLUMN net_dz; ALTER TABLE gt_summary DROP COLUMN net_rx;"
+    " ALTER TABLE gt_summary DROP COLUMN net_ry; ALTER TABLE gt_summary DROP COLUMN net_rz;"
+    " ALTER TABLE gt_summary DROP COLUMN grasp_kept;";
+
+// Runs one trial through the whole state machine with n samples.
 inline void RunTrialToDone(Store& store, const ClaimedTrial& t, int n,
                            const IngestOptions& options = {}) {
   auto ingest = store.BeginIngest(t.trial_id, t.attempt, options);

@@ -84,9 +84,10 @@ TEST(StoreOpen, MigratesVersionOneFile) {
     sqlite3_open(path.c_str(), &db);
     ASSERT_EQ(
         sqlite3_exec(db,
-                     (std::string("BEGIN; ALTER TABLE campaigns DROP COLUMN state_reason;"
-                                  " DROP TABLE evaluation_results; DROP TABLE evaluations;") +
-                      testing::kUndoMigration5 + testing::kUndoMigration10 +
+                     (std::string("BEGIN;") + testing::kUndoMigration6 +
+                      " ALTER TABLE campaigns DROP COLUMN state_reason;"
+                      " DROP TABLE evaluation_results; DROP TABLE evaluations;" +
+                      testing::kUndoMigration10 + testing::kUndoMigration5 +
                       " DELETE FROM schema_migrations WHERE version > 1; PRAGMA user_version = 1;"
                       " COMMIT;")
                          .c_str(),

@@ -96,6 +96,7 @@ class StoreError : public std::runtime_error {
     kCorrupt,            // integrity check failed, malformed block, not a database
     kFull,               // disk or SQLite size limit full
     kIo,                 // cannot open / read / write the file
+    kOutput,             // an output outside the store (an export directory) cannot be written
   };
   StoreError(Kind kind, const std::string& message) : std::runtime_error(message), kind_(kind) {}
   Kind kind() const { return kind_; }
@@ -173,10 +174,10 @@ struct NewCampaign {
 };
 
 struct PlannedTrial {
-  int condition = 0;                // condition index (>= 0)
-  int replicate = 0;                // replicate of that condition (>= 0)
-  std::uint64_t seed = 0;           // per-trial seed: re-runs the trial bit for bit
-  std::string scene_json;           // SCENE.md scene (JSON object); parameter columns come from it
+  int condition = 0;       // condition index (>= 0)
+  int replicate = 0;       // replicate of that condition (>= 0)
+  std::uint64_t seed = 0;  // per-trial seed: re-runs the trial bit for bit
+  std::string scene_json;  // scene (docs/scene.md; JSON object); parameter columns come from it
   std::string params_json = "{}";   // the sampler's own parameter values (JSON object)
   std::string defects_json = "{}";  // the campaign's defect profile for this trial
 };
