@@ -112,7 +112,10 @@ class ContactModel {
   const std::vector<ContactState>& contacts() const;
   Eigen::Vector3d pusher_force() const;  // on the object (N), last step
   double force_scale() const;            // N, residuals are relative to it
-  double velocity_scale() const;         // m/s
+  // Whether the fingers still hold the object as the grasp began (see
+  // GraspStatus); *note names the first finger that does not.
+  GraspStatus Grasp(std::string* note) const;
+  double velocity_scale() const;  // m/s
 
  private:
   struct Impl;

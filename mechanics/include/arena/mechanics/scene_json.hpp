@@ -40,6 +40,7 @@ inline constexpr std::size_t kMaxSceneBytes = 1 << 20;  // 1 MiB of JSON
 inline constexpr int kMaxSceneDepth = 16;               // nesting levels
 inline constexpr std::size_t kMaxSceneArray = 4096;     // elements per array
 inline constexpr int kMaxFingers = 16;
+inline constexpr std::size_t kMaxPolygonVertices = 256;  // prism polygons
 inline constexpr int kMaxFacets = 64;
 inline constexpr int kMaxPoints = 32;
 inline constexpr double kMaxDuration = 3600.0;  // s: one trial is not an hour
@@ -87,6 +88,13 @@ Scene LoadSceneFile(const std::string& path);
 // @throws SceneError naming the first offending field.
 void ValidateScene(const Scene& scene);
 
+// Fingers close on the object at object.pose: each finger moves along its
+// normal (its closing direction) until its pad meets the object's surface
+// (a line: its first end to meet it). For an object whose pose differs from
+// the one the contacts were planned for (a reset that left it elsewhere).
+// @throws SceneError naming fingers[i].position when a finger misses.
+void SeatFingers(Scene* scene);
+
 // The scene as SCENE.md JSON (compact when indent < 0);
 // ParseScene(SceneToJson(s)) reproduces s bit for bit.
 std::string SceneToJson(const Scene& scene, int indent = -1);
@@ -96,6 +104,8 @@ const char* ToString(ObjectShape shape);
 std::optional<ObjectShape> ObjectShapeFromString(std::string_view text);
 std::optional<ContactType> ContactTypeFromString(std::string_view text);
 std::optional<Reduce> ReduceFromString(std::string_view text);
+// "tracked" / "fixed".
+std::optional<ContactTracking> ContactTrackingFromString(std::string_view text);
 
 // The scene's length scale (m): the largest extent of the object (box: its
 // largest side; cylinder: max(diameter, height)). Tolerances scale with it.
