@@ -12,6 +12,7 @@
 
 #include "arena/db/store.hpp"
 #include "arena/orchestrator/evaluation.hpp"
+#include "arena/mechanics/scene_json.hpp"
 #include "commands.hpp"
 #include "progress.hpp"
 #include "signals.hpp"
@@ -27,6 +28,7 @@ struct EvaluateOptions {
   std::vector<int> points{2, 3, 5, 9};
   std::vector<double> dt{0.004};
   std::vector<std::string> reduce{"auto"};
+  std::vector<std::string> contacts{"tracked"};
   std::vector<std::string> budgets;
   int threads = 0;
   bool json = false;
@@ -91,6 +93,14 @@ int RunEvaluate(const EvaluateOptions& o) {
       eo.grid.reduce.push_back(mechanics::Reduce::kPlanar);
     else
       throw CommandError(kExitBadInput, "--reduce: must be auto, full or planar, got '" + r + "'");
+  }
+  eo.grid.contacts.clear();
+  for (const auto& m : o.contacts) {
+    const auto mode = mechanics::ContactTrackingFromString(m);
+    if (!mode) {
+      throw CommandError(kExitBadInput, "--contacts: must be tracked or fixed, got '" + m + "'");
+    }
+    eo.grid.contacts.push_back(*mode);
   }
   if (o.threads < 0) throw CommandError(kExitBadInput, "--threads: must be >= 0 (0: one per core)");
   eo.threads = o.threads;
@@ -157,6 +167,9 @@ void AddEvaluateCommand(CLI::App& app, Action* action) {
       ->capture_default_str();
   cmd->add_option("--dt", o->dt, "Time steps to try (s)")->delimiter(',')->capture_default_str();
   cmd->add_option("--reduce", o->reduce, "Model reductions to try (auto, full, planar)")
+      ->delimiter(',')
+      ->capture_default_str();
+  cmd->add_option("--contacts", o->contacts, "Contact geometries to try (tracked, fixed)")
       ->delimiter(',')
       ->capture_default_str();
   cmd->add_option(

@@ -1,6 +1,6 @@
 // arena simulate SCENE.json [--facets G --points K --dt S --reduce MODE]
 //                           [--contacts tracked|fixed] [--trajectory FILE.csv]
-// The contract is SCENE.md: one JSON object on stdout; ok=false and a
+// The contract is docs/scene.md: one JSON object on stdout; ok=false and a
 // non-zero exit on any error.
 #include <algorithm>
 #include <cmath>
@@ -191,9 +191,9 @@ void AddSimulateCommand(CLI::App& app, Action* action) {
   CLI::App* cmd = app.add_subcommand("simulate", "Simulate one scene with the contact model");
   cmd->footer(
       "Example:\n  arena simulate examples/scenes/canonical.json --facets 16 --trajectory out.csv\n"
-      "Prints one JSON object (SCENE.md); exit 0 on success, 2 on a bad scene, 1 on a solver "
+      "Prints one JSON object (docs/scene.md); exit 0 on success, 2 on a bad scene, 1 on a solver "
       "failure.");
-  cmd->add_option("scene", opt->scene_path, "Scene JSON file (SCENE.md)")->required();
+  cmd->add_option("scene", opt->scene_path, "Scene JSON file (docs/scene.md)")->required();
   cmd->add_option("--facets", opt->facets,
                   "Edges of the polyhedral friction cone (overrides model.facets)");
   cmd->add_option("--points", opt->points,

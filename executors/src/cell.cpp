@@ -1,5 +1,6 @@
 #include "arena/executors/cell.hpp"
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <condition_variable>
@@ -7,6 +8,7 @@
 #include <limits>
 #include <map>
 #include <mutex>
+#include <optional>
 #include <stdexcept>
 #include <thread>
 #include <tuple>
@@ -38,6 +40,22 @@ reset::Pose ToResetPose(const mechanics::Pose& p) {
                     Eigen::AngleAxisd(p.rpy.y(), Eigen::Vector3d::UnitY()) *
                     Eigen::AngleAxisd(p.rpy.x(), Eigen::Vector3d::UnitX());
   return out;
+}
+
+// Issue 12: a trial starts where the last reset left the object (its true
+// pose), so reset error reaches the trial's physics; the fingers close on the
+// object there (mechanics::SeatFingers). The observed pose still goes to the
+// store as before. Kept apart so the cell's structure can change around it.
+mechanics::Scene StartWhereResetLeft(mechanics::Scene scene,
+                                     const std::optional<reset::Pose>& reset_left) {
+  if (!reset_left) return scene;  // no reset yet: the planned pose
+  const Eigen::Matrix3d R = reset_left->orientation.normalized().toRotationMatrix();
+  scene.object.pose.position = reset_left->position;
+  scene.object.pose.rpy = {std::atan2(R(2, 1), R(2, 2)),
+                           std::asin(std::clamp(-R(2, 0), -1.0, 1.0)),
+                           std::atan2(R(1, 0), R(0, 0))};
+  mechanics::SeatFingers(&scene);  // throws SceneError when a finger misses the object
+  return scene;
 }
 
 bool SamePusher(const std::optional<mechanics::PusherSpec>& a,
@@ -111,6 +129,7 @@ struct Cell::Impl {
   std::deque<Key> done_order;                   // oldest first
   reset::Pose true_pose;                        // where the object really is now
   reset::Pose observed_pose;                    // where the sensors saw it last
+  std::optional<reset::Pose> reset_left;        // true pose the last reset left (issue 12)
   std::optional<mechanics::PusherSpec> pusher;  // the pusher mounted now
   std::thread worker;
 
@@ -263,7 +282,16 @@ struct Cell::Impl {
 
     const TrialPerturbation perturbation =
         DrawPerturbation(options.defects, c.seed(), c.trial_id());
-    mechanics::Scene actual = ApplyPerturbation(scene, perturbation);
+    mechanics::Scene start = scene;
+    try {
+      start = StartWhereResetLeft(scene, reset_left);
+    } catch (const std::exception& e) {
+      auto s = BaseStatus(c, msg::STATE_FAILED);
+      s.reason(std::string("start pose: ") + e.what());
+      return Finish(c, s);
+    }
+    reset_left.reset();  // the trial moves the object
+    mechanics::Scene actual = ApplyPerturbation(start, perturbation);
     actual.model.facets = std::max(actual.model.facets, options.fidelity.facets);
     actual.model.points = std::max(actual.model.points, options.fidelity.points);
     actual.model.dt = std::min(actual.model.dt, options.fidelity.dt);
@@ -419,6 +447,7 @@ struct Cell::Impl {
     }
     true_pose = out.final_true;
     observed_pose = out.final_observed;
+    reset_left = out.final_true;
     if (out.success) pusher = next_pusher;
     auto s = BaseStatus(c, out.success ? msg::STATE_RESET_DONE : msg::STATE_FAILED);
     s.reason(out.failure);

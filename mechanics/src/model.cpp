@@ -646,7 +646,7 @@ void ContactModel::Impl::Geometry() {
   }
 }
 
-// Friction directions of a tracked point: the SCENE.md tangent basis of its
+// Friction directions of a tracked point: the docs/scene.md tangent basis of its
 // current normal (or the in-plane tangents of the planar reduction).
 void ContactModel::Impl::SetEdges(Point& pt) {
   if (edges_per_point == 0) return;

@@ -549,7 +549,7 @@ double DistanceToSurface(const ObjectSpec& object, const Eigen::Vector3d& p_G) {
   return std::abs(box_sdf(q));
 }
 
-// SCENE.md tangent basis: t1 from the first of z, y, x with |n.axis| < 0.9.
+// docs/scene.md tangent basis: t1 from the first of z, y, x with |n.axis| < 0.9.
 Eigen::Vector3d FirstTangent(const Eigen::Vector3d& n) {
   for (const Eigen::Vector3d& a : {Eigen::Vector3d::UnitZ().eval(), Eigen::Vector3d::UnitY().eval(),
                                    Eigen::Vector3d::UnitX().eval()}) {
@@ -949,6 +949,14 @@ void SeatFingers(Scene* scene) {
                        "closing along its normal, the finger misses the object at its pose");
     }
     f.position += first * n;
+  }
+  // A pusher cannot start inside the object: it stops where it touches.
+  if (scene->pusher) {
+    PusherSpec& p = *scene->pusher;
+    const Eigen::Vector3d n = p.normal.normalized();
+    const auto e = solid.EntryOf(R_GO.transpose() * (p.position - object.pose.position),
+                                 R_GO.transpose() * n, tolerance);
+    if (e && e->s < 0) p.position += e->s * n;
   }
 }
 

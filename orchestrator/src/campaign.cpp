@@ -692,7 +692,7 @@ Campaign ParseCampaign(std::string_view json_text, const std::string& base_dir,
   c.prediction = c.scene.model;
   if (doc.contains("prediction")) {
     const json& p = doc["prediction"];
-    RequireObject(p, "prediction", {"facets", "points", "dt", "reduce"});
+    RequireObject(p, "prediction", {"facets", "points", "dt", "reduce", "contacts"});
     if (p.contains("facets")) {
       c.prediction.facets =
           static_cast<int>(Integer(p["facets"], "prediction.facets", 3, mechanics::kMaxFacets));
@@ -711,6 +711,15 @@ Campaign ParseCampaign(std::string_view json_text, const std::string& base_dir,
             "must be \"auto\", \"full\" or \"planar\", got \"" + Printable(r, 40) + "\"");
       }
       c.prediction.reduce = *reduce;
+    }
+    if (p.contains("contacts")) {
+      const std::string m = String(p["contacts"], "prediction.contacts");
+      const auto mode = mechanics::ContactTrackingFromString(m);
+      if (!mode) {
+        throw CampaignError("prediction.contacts",
+                            "must be \"tracked\" or \"fixed\", got \"" + Printable(m, 40) + "\"");
+      }
+      c.prediction.contacts = *mode;
     }
   }
 

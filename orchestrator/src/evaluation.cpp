@@ -31,6 +31,7 @@ std::vector<mechanics::ModelOptions> ExpandGrid(const FidelityGrid& g) {
   nonempty_unique(g.points, "points");
   nonempty_unique(g.dt, "dt");
   nonempty_unique(g.reduce, "reduce");
+  nonempty_unique(g.contacts, "contacts");
   for (int f : g.facets) {
     if (f < 3) throw std::invalid_argument("facets: must be >= 3, got " + std::to_string(f));
   }
@@ -46,7 +47,8 @@ std::vector<mechanics::ModelOptions> ExpandGrid(const FidelityGrid& g) {
   for (int f : g.facets)
     for (int k : g.points)
       for (double dt : g.dt)
-        for (auto r : g.reduce) out.push_back(mechanics::ModelOptions{f, k, dt, r});
+        for (auto r : g.reduce)
+          for (auto c : g.contacts) out.push_back(mechanics::ModelOptions{f, k, dt, r, c});
   return out;
 }
 
@@ -352,6 +354,7 @@ nlohmann::json ToJson(const EvaluationReport& r) {
          {"points", s.model.points},
          {"dt", s.model.dt},
          {"reduce", mechanics::ToString(s.model.reduce)},
+         {"contacts", mechanics::ToString(s.model.contacts)},
          {"trials", s.trials},
          {"ok", s.ok},
          {"failures", s.failures},
@@ -412,7 +415,8 @@ nlohmann::json ModelJson(const mechanics::ModelOptions& m) {
   return {{"facets", m.facets},
           {"points", m.points},
           {"dt", m.dt},
-          {"reduce", mechanics::ToString(m.reduce)}};
+          {"reduce", mechanics::ToString(m.reduce)},
+          {"contacts", mechanics::ToString(m.contacts)}};
 }
 
 }  // namespace
@@ -505,6 +509,7 @@ EvaluationRun EvaluateCampaign(db::Store& store, std::int64_t campaign_id,
                          {"budgets", nlohmann::json::array()},
                          {"threads", threads}};
   for (auto r : options.grid.reduce) grid["reduce"].push_back(mechanics::ToString(r));
+  for (auto c : options.grid.contacts) grid["contacts"].push_back(mechanics::ToString(c));
   for (const auto& b : options.budgets) grid["budgets"].push_back(FormatBudget(b));
   std::vector<db::EvaluationResult> rows;
   rows.reserve(results.size());

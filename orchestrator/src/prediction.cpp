@@ -50,6 +50,10 @@ std::string ModelKey(const mechanics::ModelOptions& m) {
   char buf[96];
   std::snprintf(buf, sizeof buf, "g%d_k%d_dt%g_%s", m.facets, m.points, m.dt,
                 mechanics::ToString(m.reduce));
+  // Tracked contacts are the default; the frozen frame is named by a suffix
+  // (stores written before tracking existed hold frozen-frame predictions
+  // under the bare key).
+  if (m.contacts == mechanics::ContactTracking::kFixed) return std::string(buf) + "_fixed";
   return buf;
 }
 
@@ -68,7 +72,8 @@ db::Prediction PredictTrial(const mechanics::Scene& scene,
   p.model_json = nlohmann::json({{"facets", scene.model.facets},
                                  {"points", scene.model.points},
                                  {"dt", scene.model.dt},
-                                 {"reduce", mechanics::ToString(scene.model.reduce)}})
+                                 {"reduce", mechanics::ToString(scene.model.reduce)},
+                                 {"contacts", mechanics::ToString(scene.model.contacts)}})
                      .dump();
   const auto start = std::chrono::steady_clock::now();
   const mechanics::SimulationResult result = mechanics::Simulate(scene);
@@ -82,7 +87,11 @@ db::Prediction PredictTrial(const mechanics::Scene& scene,
                              {"max_pivots", result.solver.max_pivots},
                              {"failures", result.solver.failures}}},
                            {"unknowns", result.model.unknowns},
-                           {"dof", result.model.dof}};
+                           {"dof", result.model.dof},
+                           {"grasp",
+                            {{"status", mechanics::ToString(result.grasp)},
+                             {"changed_t", result.grasp_changed_t},
+                             {"note", result.grasp_note}}}};
   switch (result.status) {
     case mechanics::SimulationStatus::kOk:
       break;
@@ -105,6 +114,10 @@ db::Prediction PredictTrial(const mechanics::Scene& scene,
     p.mode_agreement = e.mode_agreement;
     detail["samples_compared"] = e.samples_compared;
     detail["force_scale"] = e.force_scale;
+    // A frozen-frame prediction whose fingers left the object ran outside
+    // the model's validity: its errors are kept but it is not scored as a
+    // normal prediction (aggregates take status "ok" only).
+    if (result.grasp == mechanics::GraspStatus::kLeftGeometry) p.status = "left_geometry";
   } catch (const std::exception& e) {
     p.status = "error";
     detail["error"] = e.what();

@@ -440,5 +440,51 @@ TEST(TrackedEdges, ImpulseAtContactOnsetStaysBoundedAsDtShrinks) {
   }
 }
 
+// Issue 12, item 7: line fingers, 2 N grip, a pusher 10 mm off the finger
+// axis pushing 10 mm. At coarse settings (facets 8, points 3, dt 4 ms) the
+// frozen-frame model spun the object through 145° and dropped it 39 mm,
+// while the cell's 16 / 5 / 2 ms turned it 5°. Why: in both runs the pusher
+// needs nearly all of its friction (|f_y| / f_z ≈ 0.27 of μ = 0.3) to keep
+// its contact point from sliding as the object turns; the coarse run crosses
+// the cone at t = 0.36 s, the fine one never does. Once the pusher slides,
+// its frozen 10 mm arm applies about 3.5 N × 0.01 m = 0.035 N m about the
+// finger axis, more than the line fingers' torsional friction can resist
+// (2 × μ N × 0.01 m = 0.02 N m), and in a frozen frame nothing shortens that
+// arm: the object spins up, its finger friction turns from holding the
+// weight (2 μ N = 2.0 N against m g = 1.96 N) to resisting the spin, and it
+// falls. (Energy falls throughout: no numerical energy is injected.) With
+// tracked contacts the contact point slides over the tilting face and the
+// arm shrinks, so the coarse setting is merely less accurate; the frozen
+// run is flagged as having left the grasp geometry.
+TEST(CoarseSettings, TrackedStaysNearTheFineAnswerAndTheFrozenRunawayIsFlagged) {
+  Scene s = testing::CanonicalScene();
+  for (auto& f : s.fingers) {
+    f.type = ContactType::kLine;
+    f.axis = {0, 0, 1};
+    f.length = 0.02;
+  }
+  s.grip_force = 2.0;
+  s.pusher->position = {0, 0.01, -0.05};
+  auto turn = [](const SimulationResult& r) {
+    return std::abs(AngleAboutX(r.samples.back().orientation));
+  };
+  Scene fine = s;
+  fine.model = {16, 5, 0.002, Reduce::kAuto, ContactTracking::kTracked};
+  const SimulationResult rf = Simulate(fine);
+  ASSERT_EQ(rf.status, SimulationStatus::kOk) << rf.error;
+  const SimulationResult rc = Simulate(s);  // 8 / 3 / 4 ms
+  ASSERT_EQ(rc.status, SimulationStatus::kOk) << rc.error;
+  EXPECT_LT(turn(rf), 0.15);
+  EXPECT_LT(std::abs(turn(rc) - turn(rf)), 0.05) << turn(rc) << " vs " << turn(rf);
+  EXPECT_LT((rc.samples.back().position - rf.samples.back().position).norm(), 0.003);
+  EXPECT_EQ(rc.grasp, GraspStatus::kHeld) << rc.grasp_note;
+  Scene frozen = s;
+  frozen.model.contacts = ContactTracking::kFixed;
+  const SimulationResult rz = Simulate(frozen);
+  ASSERT_EQ(rz.status, SimulationStatus::kOk) << rz.error;
+  EXPECT_GT(turn(rz), 1.0);  // the runaway, reproduced
+  EXPECT_EQ(rz.grasp, GraspStatus::kLeftGeometry) << rz.grasp_note;
+}
+
 }  // namespace
 }  // namespace arena::mechanics

@@ -1,4 +1,4 @@
-// Scene: one prehensile-pushing setup (SCENE.md is the contract).
+// Scene: one prehensile-pushing setup (docs/scene.md is the contract).
 //
 // Plain structs, SI units, everything in the gripper frame at t = 0. A Scene
 // that came out of ParseScene() is valid; code that builds one by hand should

@@ -1,11 +1,11 @@
-// Reading and writing scene JSON (SCENE.md). This is the edge of the
+// Reading and writing scene JSON (docs/scene.md). This is the edge of the
 // mechanics room: the model itself never sees JSON.
 //
-// Validation rules (SCENE.md leaves these open; this list is their reference):
+// Validation rules (docs/scene.md leaves these open; this list is their reference):
 //  - Input: at most kMaxSceneBytes bytes of UTF-8 JSON, nesting at most
 //    kMaxSceneDepth levels, arrays at most kMaxSceneArray elements, no
 //    duplicate keys, no unknown keys (typo protection: every key must be one
-//    SCENE.md defines). Malformed JSON names the byte offset and the path
+//    docs/scene.md defines). Malformed JSON names the byte offset and the path
 //    where it broke ("fingers[0].mu: invalid JSON at byte 212: ...").
 //  - Required: object.shape, object.mass, the shape's dimensions, duration,
 //    grip_force, fingers (1..kMaxFingers), and for each contact type,
@@ -90,12 +90,13 @@ void ValidateScene(const Scene& scene);
 
 // Fingers close on the object at object.pose: each finger moves along its
 // normal (its closing direction) until its pad meets the object's surface
-// (a line: its first end to meet it). For an object whose pose differs from
+// (a line: its first end to meet it); a pusher that would start inside the
+// object moves back along its normal to touch it. For an object whose pose differs from
 // the one the contacts were planned for (a reset that left it elsewhere).
 // @throws SceneError naming fingers[i].position when a finger misses.
 void SeatFingers(Scene* scene);
 
-// The scene as SCENE.md JSON (compact when indent < 0);
+// The scene as docs/scene.md JSON (compact when indent < 0);
 // ParseScene(SceneToJson(s)) reproduces s bit for bit.
 std::string SceneToJson(const Scene& scene, int indent = -1);
 

@@ -1,5 +1,5 @@
 // Simulate a scene: the object's motion and every contact force over time,
-// sampled at 250 Hz. Model: DESIGN.md (Mechanics) and the seed paper.
+// sampled at 250 Hz. Model: model.hpp; scene format: docs/scene.md.
 #pragma once
 
 #include <string>

@@ -41,6 +41,7 @@ struct FidelityGrid {
   std::vector<int> points{2, 3, 5, 9};
   std::vector<double> dt{0.004};  // s
   std::vector<mechanics::Reduce> reduce{mechanics::Reduce::kAuto};
+  std::vector<mechanics::ContactTracking> contacts{mechanics::ContactTracking::kTracked};
 };
 
 // @throws std::invalid_argument naming the list for an empty list, a
