@@ -11,8 +11,8 @@
 #include <nlohmann/json.hpp>
 
 #include "arena/db/store.hpp"
-#include "arena/orchestrator/evaluation.hpp"
 #include "arena/mechanics/scene_json.hpp"
+#include "arena/orchestrator/evaluation.hpp"
 #include "commands.hpp"
 #include "progress.hpp"
 #include "signals.hpp"

@@ -51,8 +51,7 @@ mechanics::Scene StartWhereResetLeft(mechanics::Scene scene,
   if (!reset_left) return scene;  // no reset yet: the planned pose
   const Eigen::Matrix3d R = reset_left->orientation.normalized().toRotationMatrix();
   scene.object.pose.position = reset_left->position;
-  scene.object.pose.rpy = {std::atan2(R(2, 1), R(2, 2)),
-                           std::asin(std::clamp(-R(2, 0), -1.0, 1.0)),
+  scene.object.pose.rpy = {std::atan2(R(2, 1), R(2, 2)), std::asin(std::clamp(-R(2, 0), -1.0, 1.0)),
                            std::atan2(R(1, 0), R(0, 0))};
   mechanics::SeatFingers(&scene);  // throws SceneError when a finger misses the object
   return scene;

@@ -35,8 +35,7 @@ std::optional<PolygonProblem> CheckPolygon(const std::vector<Eigen::Vector2d>& p
     scale = std::max(scale, v.cwiseAbs().maxCoeff());
   }
   for (size_t i = 0; i < n; ++i) {
-    if (!polygon[i].allFinite())
-      return PolygonProblem{i, "must be finite"};
+    if (!polygon[i].allFinite()) return PolygonProblem{i, "must be finite"};
     const Eigen::Vector2d e = polygon[(i + 1) % n] - polygon[i];
     if (!(e.norm() > 1e-9 * scale)) {
       return PolygonProblem{i, "coincides with the next vertex (degenerate polygon)"};
@@ -137,7 +136,8 @@ Closest Solid::ClosestTo(const Eigen::Vector3d& p) const {
       return out;
     }
     const double rc = std::min(r, radius_);
-    out.point_O = {rc * radial.x(), rc * radial.y(), std::clamp(p.z(), -half_height_, half_height_)};
+    out.point_O = {rc * radial.x(), rc * radial.y(),
+                   std::clamp(p.z(), -half_height_, half_height_)};
     const Eigen::Vector3d diff = p - out.point_O;
     out.distance = diff.norm();
     if (out.distance > tiny) {

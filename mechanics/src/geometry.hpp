@@ -21,7 +21,7 @@
 namespace arena::mechanics::geometry {
 
 struct Closest {
-  Eigen::Vector3d point_O = Eigen::Vector3d::Zero();   // on the surface
+  Eigen::Vector3d point_O = Eigen::Vector3d::Zero();    // on the surface
   Eigen::Vector3d normal_O = Eigen::Vector3d::UnitZ();  // outward, unit
   double distance = 0;                                  // signed: < 0 inside
 };

@@ -494,7 +494,17 @@ void ContactModel::Impl::Setup() {
   }
 
   if (opt.reduce != Reduce::kFull) {
-    const PlaneCheck plane = FindPlane(scene);
+    PlaneCheck plane = FindPlane(scene);
+    if (plane.planar && opt.contacts == ContactTracking::kTracked &&
+        scene.object.shape == ObjectShape::kPrism) {
+      // Tracked normals come from the surface: a prism is symmetric about its
+      // mid-plane only, so only that plane keeps them in-plane.
+      const Eigen::Vector3d axis = RotationFromRpy(scene.object.pose.rpy).col(2);
+      if (std::abs(std::abs(axis.dot(plane.normal)) - 1) > 1e-9) {
+        plane.planar = false;
+        plane.reason = "a prism's tracked contacts stay in its mid-plane only";
+      }
+    }
     if (plane.planar) {
       planar = true;
       plane_normal = plane.normal;
@@ -651,7 +661,12 @@ void ContactModel::Impl::Geometry() {
 void ContactModel::Impl::SetEdges(Point& pt) {
   if (edges_per_point == 0) return;
   if (planar) {
-    const Eigen::Vector3d tau = plane_normal.cross(pt.n).normalized();
+    // Normals stay in the plane of a planar scene (the solid is symmetric
+    // about it, Setup()); a degenerate cross product gives no friction
+    // rather than NaN.
+    const Eigen::Vector3d cr = plane_normal.cross(pt.n);
+    const Eigen::Vector3d tau =
+        cr.norm() > 1e-12 ? Eigen::Vector3d(cr.normalized()) : Eigen::Vector3d::Zero();
     pt.edges.assign({tau, -tau});
     return;
   }

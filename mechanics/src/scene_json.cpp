@@ -601,17 +601,10 @@ void ValidateContact(const ContactSpec& c, const std::string& path, const Scene&
                                   " m = 1% of the object's extent)");
     }
   };
-  // Tracked contacts: the pusher may start away from the object (it makes
-  // contact when it gets there) but not inside it. Fingers lie on the
-  // surface in both modes (SeatFingers() closes them onto an object at
-  // another pose).
-  const bool tracked = scene.model.contacts == ContactTracking::kTracked;
-  const bool finger = path != "pusher";
+  // Contacts lie on the object's surface at its pose in both contact modes
+  // (SeatFingers() closes planned fingers onto an object at another pose).
   const Eigen::Matrix3d R_GO = RotationFromRpy(scene.object.pose.rpy);
   const geometry::Solid solid(scene.object);
-  auto to_O = [&](const Eigen::Vector3d& p_G) {
-    return Eigen::Vector3d(R_GO.transpose() * (p_G - scene.object.pose.position));
-  };
   if (c.type == ContactType::kPoint) {
     RequireNonNegative(c.radius, Join(path, "radius"));
     if (c.radius > extent) {
@@ -619,17 +612,7 @@ void ValidateContact(const ContactSpec& c, const std::string& path, const Scene&
                                                  " m, got " + Num(c.radius));
     }
   }
-  if (tracked && !finger) {
-    const double depth =
-        -solid.ClosestTo(to_O(c.position - c.radius * c.normal)).distance - c.radius;
-    if (depth > surface_tol) {
-      throw SceneError(Join(path, "position"),
-                       "starts " + Num(depth) + " m inside the object (tolerance " +
-                           Num(surface_tol) + " m = 1% of the object's extent)");
-    }
-  } else {
-    on_surface(c.position, Join(path, "position"), "the contact point");
-  }
+  on_surface(c.position, Join(path, "position"), "the contact point");
   // An inward normal of a convex body at a surface point has the centre on
   // its positive side.
   const Eigen::Vector3d centre = scene.object.pose.position + R_GO * solid.centroid_O();
@@ -652,10 +635,7 @@ void ValidateContact(const ContactSpec& c, const std::string& path, const Scene&
                            " m apart, coincident (< 1e-6 of the object's extent)");
     }
     for (double s : {-0.5, 0.5}) {
-      if (finger || !tracked) {
-        on_surface(c.position + s * c.length * c.axis, Join(path, "length"),
-                   "each end of the line");
-      }
+      on_surface(c.position + s * c.length * c.axis, Join(path, "length"), "each end of the line");
     }
   }
   if (c.type == ContactType::kPatch) {
