@@ -308,6 +308,20 @@ TEST(TrackedScene, CanonicalPushIsTheSameInBothModes) {
   }
 }
 
+// A sphere pusher (point with a radius) pushing straight up on the bottom
+// face is the canonical push: 2 μ N + m g, the object moving with it, its
+// contact point at the sphere's bottom-face touch point.
+TEST(TrackedScene, SpherePusherPushesLikeAPoint) {
+  Scene s = testing::CanonicalScene();
+  s.pusher->radius = 0.005;
+  ValidateScene(s);
+  const SimulationResult r = Simulate(s);
+  ASSERT_EQ(r.status, SimulationStatus::kOk) << r.error;
+  EXPECT_NEAR(r.samples.back().pusher_force.z(), 10.0 + 0.2 * 9.81, 1e-9);
+  EXPECT_NEAR(r.samples.back().position.z(), 0.01, 1e-12);
+  EXPECT_LT((r.samples.back().contacts[2].point - Eigen::Vector3d(0, 0, -0.05)).norm(), 1e-9);
+}
+
 // Any object pose: the fingers close on the object where it is. A box
 // shifted 3 mm along x and turned 5° about z: the fingers' pads travel along
 // their closing directions onto the turned faces, whose normals are no
@@ -410,6 +424,19 @@ TEST(TrackedEdges, GrazingOnEdgeAndQuarterTurnNeverNaN) {
       for (const auto& c : sample.contacts) ASSERT_TRUE(c.point.allFinite()) << name;
     }
     EXPECT_TRUE(std::isfinite(r.residuals.force_balance)) << name;
+    if (name == "quarter turn") {
+      // The pusher carries the corner round: the bottom face turns through
+      // 90°, the pusher loses it (make and break) and meets a side face later.
+      double most = 0;
+      bool lost = false, again = false;
+      for (const auto& sample : r.samples) {
+        most = std::max(most, std::abs(std::remainder(AngleAboutX(sample.orientation), 2 * M_PI)));
+        if (!sample.contacts[2].touching) lost = true;
+        if (lost && sample.contacts[2].touching) again = true;
+      }
+      EXPECT_GT(most, std::numbers::pi / 2) << name;
+      EXPECT_TRUE(lost && again) << name;
+    }
   }
 }
 
