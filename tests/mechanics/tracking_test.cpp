@@ -430,7 +430,8 @@ TEST(TrackedEdges, GrazingOnEdgeAndQuarterTurnNeverNaN) {
       double most = 0;
       bool lost = false, again = false;
       for (const auto& sample : r.samples) {
-        most = std::max(most, std::abs(std::remainder(AngleAboutX(sample.orientation), 2 * M_PI)));
+        most = std::max(
+            most, std::abs(std::remainder(AngleAboutX(sample.orientation), 2 * std::numbers::pi)));
         if (!sample.contacts[2].touching) lost = true;
         if (lost && sample.contacts[2].touching) again = true;
       }
