@@ -7,6 +7,10 @@
 //    duplicate keys, no unknown keys (typo protection: every key must be one
 //    docs/scene.md defines). Malformed JSON names the byte offset and the path
 //    where it broke ("fingers[0].mu: invalid JSON at byte 212: ...").
+//  - Shapes: box (size), cylinder (radius, height), prism (polygon: convex,
+//    counter-clockwise, 3..256 vertices, refused naming the vertex; height).
+//    A point contact may have a radius (a sphere). model.contacts: tracked
+//    (default) or fixed.
 //  - Required: object.shape, object.mass, the shape's dimensions, duration,
 //    grip_force, fingers (1..kMaxFingers), and for each contact type,
 //    position, normal, mu (+ axis, length for a line; radius for a patch).
