@@ -1,5 +1,7 @@
 #include "arena/orchestrator/prediction.hpp"
 
+#include "arena/db/prediction_status.hpp"
+
 #include <chrono>
 #include <cstdio>
 
@@ -96,12 +98,12 @@ db::Prediction PredictTrial(const mechanics::Scene& scene,
     case mechanics::SimulationStatus::kOk:
       break;
     case mechanics::SimulationStatus::kSolverFailure:
-      p.status = "solver_failure";
+      p.status = db::ToString(db::PredictionStatus::kSolverFailure);
       detail["error"] = result.error;
       p.detail_json = detail.dump();
       return p;
     case mechanics::SimulationStatus::kInvalidScene:
-      p.status = "invalid_scene";
+      p.status = db::ToString(db::PredictionStatus::kInvalidScene);
       detail["error"] = result.error;
       p.detail_json = detail.dump();
       return p;
@@ -119,7 +121,7 @@ db::Prediction PredictTrial(const mechanics::Scene& scene,
     // normal prediction (aggregates take status "ok" only).
     if (result.grasp == mechanics::GraspStatus::kLeftGeometry) p.status = "left_geometry";
   } catch (const std::exception& e) {
-    p.status = "error";
+    p.status = db::ToString(db::PredictionStatus::kError);
     detail["error"] = e.what();
   }
   p.detail_json = detail.dump();
