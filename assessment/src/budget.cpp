@@ -21,6 +21,7 @@ std::vector<mechanics::ModelOptions> ExpandGrid(const FidelityGrid& g) {
   nonempty_unique(g.points, "points");
   nonempty_unique(g.dt, "dt");
   nonempty_unique(g.reduce, "reduce");
+  nonempty_unique(g.contacts, "contacts");
   for (int f : g.facets) {
     if (f < 3) throw std::invalid_argument("facets: must be >= 3, got " + std::to_string(f));
   }
@@ -36,7 +37,8 @@ std::vector<mechanics::ModelOptions> ExpandGrid(const FidelityGrid& g) {
   for (int f : g.facets)
     for (int k : g.points)
       for (double dt : g.dt)
-        for (auto r : g.reduce) out.push_back(mechanics::ModelOptions{f, k, dt, r});
+        for (auto r : g.reduce)
+          for (auto c : g.contacts) out.push_back(mechanics::ModelOptions{f, k, dt, r, c});
   return out;
 }
 

@@ -54,6 +54,10 @@ std::string ModelKey(const mechanics::ModelOptions& m) {
   char buf[96];
   std::snprintf(buf, sizeof buf, "g%d_k%d_dt%g_%s", m.facets, m.points, m.dt,
                 mechanics::ToString(m.reduce));
+  // Tracked contacts are the default; the frozen frame is named by a suffix
+  // (stores written before tracking existed hold frozen-frame predictions
+  // under the bare key).
+  if (m.contacts == mechanics::ContactTracking::kFixed) return std::string(buf) + "_fixed";
   return buf;
 }
 
@@ -190,7 +194,11 @@ db::Prediction ScoreSimulation(const mechanics::Scene& scene,
                              {"max_pivots", result.solver.max_pivots},
                              {"failures", result.solver.failures}}},
                            {"unknowns", result.model.unknowns},
-                           {"dof", result.model.dof}};
+                           {"dof", result.model.dof},
+                           {"grasp",
+                            {{"status", mechanics::ToString(result.grasp)},
+                             {"changed_t", result.grasp_changed_t},
+                             {"note", result.grasp_note}}}};
   switch (result.status) {
     case mechanics::SimulationStatus::kOk:
       break;
@@ -205,7 +213,14 @@ db::Prediction ScoreSimulation(const mechanics::Scene& scene,
       p.detail_json = detail.dump();
       return p;
   }
-  if (const auto why = DivergenceReason(scene, result.samples, truth)) {
+  // A frozen-frame prediction whose fingers left the object ran outside the
+  // model's validity: kept and listed like a divergence, never averaged in.
+  std::optional<std::string> why;
+  if (result.grasp == mechanics::GraspStatus::kLeftGeometry)
+    why = "left the grasp geometry: " + result.grasp_note;
+  else
+    why = DivergenceReason(scene, result.samples, truth);
+  if (why) {
     p.status = ToString(PredictionOutcome::kDiverged);
     detail["error"] = *why;
     if (std::none_of(result.samples.begin(), result.samples.end(),
@@ -251,7 +266,8 @@ db::Prediction PredictTrial(const mechanics::Scene& scene,
   p.model_json = nlohmann::json({{"facets", scene.model.facets},
                                  {"points", scene.model.points},
                                  {"dt", scene.model.dt},
-                                 {"reduce", mechanics::ToString(scene.model.reduce)}})
+                                 {"reduce", mechanics::ToString(scene.model.reduce)},
+                                 {"contacts", mechanics::ToString(scene.model.contacts)}})
                      .dump();
   return p;
 }

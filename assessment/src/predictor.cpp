@@ -31,7 +31,8 @@ class ArenaPredictor final : public Predictor {
                                      {"facets", m.facets},
                                      {"points", m.points},
                                      {"dt", m.dt},
-                                     {"reduce", mechanics::ToString(m.reduce)}})
+                                     {"reduce", mechanics::ToString(m.reduce)},
+                                     {"contacts", mechanics::ToString(m.contacts)}})
                          .dump();
       s.step = m.dt;
       settings_.push_back(std::move(s));

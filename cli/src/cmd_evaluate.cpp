@@ -14,6 +14,7 @@
 
 #include "arena/assessment/evaluation.hpp"
 #include "arena/db/store.hpp"
+#include "arena/mechanics/scene_json.hpp"
 #include "commands.hpp"
 #include "progress.hpp"
 #include "signals.hpp"
@@ -30,6 +31,7 @@ struct EvaluateOptions {
   std::vector<int> points{3};
   std::vector<double> dt{0.008, 0.004, 0.002, 0.001};
   std::vector<std::string> reduce{"auto"};
+  std::vector<std::string> contacts{"tracked"};
   bool grid_given = false;  // any of --facets/--points/--dt/--reduce
   std::vector<double> mujoco_timestep{0.004, 0.002, 0.001, 0.0005};
   std::vector<std::string> mujoco_cone{"elliptic"};
@@ -170,6 +172,14 @@ int RunEvaluate(const EvaluateOptions& o) {
     else
       throw CommandError(kExitBadInput, "--reduce: must be auto, full or planar, got '" + r + "'");
   }
+  grid.contacts.clear();
+  for (const auto& m : o.contacts) {
+    const auto mode = mechanics::ContactTrackingFromString(m);
+    if (!mode) {
+      throw CommandError(kExitBadInput, "--contacts: must be tracked or fixed, got '" + m + "'");
+    }
+    grid.contacts.push_back(*mode);
+  }
   for (const auto& name : o.predictors) {
     assessment::PredictorRequest req;
     req.name = name;
@@ -274,6 +284,11 @@ void AddEvaluateCommand(CLI::App& app, Action* action) {
   cmd->add_option("--reduce", o->reduce, "arena: model reductions to try (auto, full, planar)")
       ->delimiter(',')
       ->each([o](const std::string&) { o->grid_given = true; });
+  cmd->add_option("--contacts", o->contacts,
+                  "arena: contact geometries to try (tracked: follow the object; fixed: frozen "
+                  "frame)")
+      ->delimiter(',')
+      ->each([o](const std::string&) { o->grid_given = true; });
   auto mujoco_given = [o](const std::string&) { o->mujoco_grid_given = true; };
   cmd->add_option("--mujoco-timestep", o->mujoco_timestep, "mujoco: timesteps to try (s)")
       ->delimiter(',')
@@ -291,6 +306,9 @@ void AddEvaluateCommand(CLI::App& app, Action* action) {
   cmd->add_option("--convergence-trials", o->convergence_trials,
                   "Trials whose pieces the convergence table restarts from the true state "
                   "(0: no table)")
+      ->capture_default_str();
+  cmd->add_option("--contacts", o->contacts, "Contact geometries to try (tracked, fixed)")
+      ->delimiter(',')
       ->capture_default_str();
   cmd->add_option(
       "--budget", o->budgets,

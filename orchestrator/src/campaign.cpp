@@ -693,10 +693,10 @@ Campaign ParseCampaign(std::string_view json_text, const std::string& base_dir,
   c.prediction = c.scene.model;
   if (doc.contains("prediction")) {
     const json& p = doc["prediction"];
-    RequireObject(
-        p, "prediction",
-        {"predictor", "facets", "points", "dt", "reduce", "timestep", "cone", "noslip_iterations"});
-    // Which predictor: arena's model (knobs facets, points, dt, reduce) or
+    RequireObject(p, "prediction",
+                  {"predictor", "facets", "points", "dt", "reduce", "contacts", "timestep", "cone",
+                   "noslip_iterations"});
+    // Which predictor: arena's model (knobs facets, points, dt, reduce, contacts) or
     // MuJoCo (timestep, cone, noslip_iterations); knobs of the other are refused.
     if (p.contains("predictor")) c.predictor = String(p["predictor"], "prediction.predictor");
     if (c.predictor != "arena" && c.predictor != "mujoco") {
@@ -704,10 +704,11 @@ Campaign ParseCampaign(std::string_view json_text, const std::string& base_dir,
                                                       Printable(c.predictor, 40) + "\"");
     }
     const bool mujoco = c.predictor == "mujoco";
-    for (const char* k :
-         {"facets", "points", "dt", "reduce", "timestep", "cone", "noslip_iterations"}) {
+    for (const char* k : {"facets", "points", "dt", "reduce", "contacts", "timestep", "cone",
+                          "noslip_iterations"}) {
       const bool arena_knob = std::string(k) == "facets" || std::string(k) == "points" ||
-                              std::string(k) == "dt" || std::string(k) == "reduce";
+                              std::string(k) == "dt" || std::string(k) == "reduce" ||
+                              std::string(k) == "contacts";
       if (p.contains(k) && arena_knob == mujoco) {
         throw CampaignError(std::string("prediction.") + k,
                             std::string("is not a knob of the ") + c.predictor + " predictor");
@@ -744,6 +745,15 @@ Campaign ParseCampaign(std::string_view json_text, const std::string& base_dir,
             "must be \"auto\", \"full\" or \"planar\", got \"" + Printable(r, 40) + "\"");
       }
       c.prediction.reduce = *reduce;
+    }
+    if (p.contains("contacts")) {
+      const std::string m = String(p["contacts"], "prediction.contacts");
+      const auto mode = mechanics::ContactTrackingFromString(m);
+      if (!mode) {
+        throw CampaignError("prediction.contacts",
+                            "must be \"tracked\" or \"fixed\", got \"" + Printable(m, 40) + "\"");
+      }
+      c.prediction.contacts = *mode;
     }
   }
 

@@ -230,7 +230,8 @@ TEST_F(ExportTest, CsvRoundTripThroughAParser) {
       }
     }
   }
-  EXPECT_EQ(m["counts"]["files"], 3 + 2 * 3);  // trials.csv, contacts.csv, scenes.jsonl, 2 streams per trial
+  EXPECT_EQ(m["counts"]["files"],
+            3 + 2 * 3);  // trials.csv, contacts.csv, scenes.jsonl, 2 streams per trial
 }
 
 TEST_F(ExportTest, JsonlRoundTripThroughAParser) {

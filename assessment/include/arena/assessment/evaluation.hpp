@@ -46,6 +46,7 @@ struct FidelityGrid {
   std::vector<int> points{3};
   std::vector<double> dt{0.008, 0.004, 0.002, 0.001};
   std::vector<mechanics::Reduce> reduce{mechanics::Reduce::kAuto};
+  std::vector<mechanics::ContactTracking> contacts{mechanics::ContactTracking::kTracked};
 };
 
 // @throws std::invalid_argument naming the list for an empty list, a
