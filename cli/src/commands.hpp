@@ -47,5 +47,6 @@ void AddEvaluateCommand(CLI::App& app, Action* action);  // cmd_evaluate.cpp
 void AddPlotCommand(CLI::App& app, Action* action);      // cmd_plot.cpp (TRIAL or --tradeoff)
 void AddWatchCommand(CLI::App& app, Action* action);     // cmd_watch.cpp
 void AddCertsCommand(CLI::App& app, Action* action);     // cmd_certs.cpp (init, issue)
+void AddSensitivityCommand(CLI::App& app, Action* action);  // cmd_sensitivity.cpp
 
 }  // namespace arena::cli

@@ -1,5 +1,6 @@
 // Dataset export (export.hpp describes the layout).
 #include "arena/db/export.hpp"
+#include "arena/db/sensitivity.hpp"
 
 #include <fcntl.h>
 #include <hdf5.h>
@@ -546,6 +547,8 @@ ExportReport ExportCampaign(const Store& store, const ExportOptions& o) {
     h5.reset();
   }
   WriteText(dir / "trials.csv", FormatCsv(index));
+  // The campaign's latest sensitivity run, if any (db/sensitivity.hpp).
+  WriteSensitivityExport(store, o.campaign_id, dir.string());
   if (o.format == ExportFormat::kJsonl) {
     std::string lines;
     const std::string arr = FormatJson(index);

@@ -4,6 +4,8 @@
 // Layout of DIR (format version 1):
 //   trials.csv               the trial index (every format): parameters, outcome,
 //                            start-state error, ground-truth summary, prediction error
+//   sensitivity.csv          only when the campaign has a sensitivity run: its latest run,
+//                            one row per condition (db/sensitivity.hpp)
 //   hdf5:  dataset.h5        /trials/<trial_id>/true, /trials/<trial_id>/observed:
 //                            2-D float64 datasets (samples x columns), column names
 //                            and units as attributes "columns"/"units"; the trial's

@@ -1,0 +1,93 @@
+// The campaign view of reliability (`arena sensitivity --db F --campaign ID`):
+// per condition (its replicates share one scene), the spread of the outcome
+// the model predicts under the campaign's defect profile -- an ensemble of N
+// model runs, each with friction and pusher velocity drawn as the cell draws
+// them (noise.hpp), seeded -- beside the spread the replicates' ground truth
+// showed, and the condition's stability (sensitivity.hpp) with the cell's
+// noise levels as tolerances.
+//
+// Outcome compared: the displacement vector (final - start position) and the
+// rotation vector (of q_end q_start^-1) of the object, both in the gripper
+// frame; a spread is the RMS distance of the members from their mean
+// (sqrt of the trace of the sample covariance, n - 1 in the denominator).
+//
+// Does the model explain the variability? For each of the two spreads, with
+// n replicates and the ensemble spread s_pred taken as the truth, the ratio
+// (s_obs / s_pred)^2 is compared with chi^2(n - 1) / (n - 1): inside its
+// central 95 % interval the verdict is "matches", above "model_underestimates"
+// (the cell varies more than the model's noise explains), below
+// "model_overestimates". Conditions with fewer than 2 replicates are
+// "too_few_replicates". A campaign-wide pooled test adds up
+// (n - 1) s_obs^2 / s_pred^2 over conditions against chi^2(sum (n - 1)).
+#pragma once
+
+#include <atomic>
+#include <cstdint>
+#include <functional>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include <nlohmann/json_fwd.hpp>
+
+#include "arena/assessment/sensitivity.hpp"
+#include "arena/db/sensitivity.hpp"
+#include "arena/db/store.hpp"
+
+namespace arena::assessment {
+
+struct CampaignSensitivityOptions {
+  int ensemble = 32;        // model runs per condition, [2, 10000]
+  std::uint64_t seed = 1;   // the ensemble's random streams derive from (seed, condition)
+  int threads = 0;          // conditions run in parallel; 0: one per core
+  bool check_stability = true;
+  // Tolerances beyond the cell's noise (relative_tolerance 0: only the noise).
+  StabilityOptions stability = [] {
+    StabilityOptions s;
+    s.relative_tolerance = 0;
+    return s;
+  }();
+  std::vector<std::string> params;  // extra parameters to probe (filters); noise ones always
+  // Floors under which a spread counts as zero: 1 um, 10 urad.
+  double position_floor = 1e-6;
+  double rotation_floor = 1e-5;
+  SimulateFn simulate;  // empty: DefaultSimulate()
+  std::string simulator_name = "arena";  // recorded in the run's settings
+  std::function<void(long, long)> progress;  // (conditions done, total), from worker threads
+  const std::atomic<bool>* cancel = nullptr;
+};
+
+struct CampaignSensitivityReport {
+  std::int64_t campaign_id = 0;
+  std::vector<db::SensitivityCondition> conditions;
+  int matches = 0, underestimates = 0, overestimates = 0, too_few = 0, no_prediction = 0;
+  int unstable = 0;
+  // Pooled over conditions with a predicted spread: sqrt(sum (n-1) r^2 / sum (n-1)).
+  std::optional<double> pooled_position_ratio, pooled_rotation_ratio;
+  std::string pooled_position_verdict, pooled_rotation_verdict;
+  long model_runs = 0;
+  double wall_s = 0;
+  int threads = 1;
+  bool cancelled = false;
+};
+
+// The verdict of an observed spread against a predicted one (see above).
+std::string SpreadVerdict(std::optional<double> observed, std::optional<double> predicted,
+                          int replicates, double floor);
+// Central 95 % interval of chi^2(dof) (table to 10, Wilson-Hilferty above).
+std::pair<double, double> ChiSquare95(int dof);
+// RMS distance from the mean (n - 1 denominator); nullopt for < 2 points.
+std::optional<double> Spread(const std::vector<Eigen::Vector3d>& points);
+
+// Reads the campaign's trials and ground truth from `store` (in the calling
+// thread), runs the analysis on worker threads. Trials without published
+// ground truth are left out of the observed spread.
+// @throws db::StoreError (unknown campaign, store failure); NoiseError for a
+//   trial's unreadable defect profile; std::invalid_argument for bad options.
+CampaignSensitivityReport AnalyseCampaign(const db::Store& store, std::int64_t campaign_id,
+                                          const CampaignSensitivityOptions& options);
+
+nlohmann::json SettingsJson(const CampaignSensitivityOptions& options);
+nlohmann::json SummaryJson(const CampaignSensitivityReport& report);
+
+}  // namespace arena::assessment
