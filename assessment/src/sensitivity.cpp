@@ -105,6 +105,14 @@ class Runner {
   std::mutex mutex_;
 };
 
+// A norm (rotation angle, displacement) at zero has a kink: its change is
+// not judged against a derivative there (its signed components are).
+bool AtKink(Quantity q, const Outcome& nominal, const std::array<double, kQuantityCount>& scales) {
+  if (q != Quantity::kRotation && q != Quantity::kDisplacement) return false;
+  const auto i = static_cast<size_t>(q);
+  return std::abs(nominal.values[i]) < kNonlinearFloor * scales[i];
+}
+
 // ---------------------------------------------------------------- derivatives
 
 struct Probes {
@@ -157,9 +165,18 @@ ParameterSensitivity Differentiate(const Scene& scene, const Parameter& p, doubl
     Derivative& d = out.derivatives[i];
     d.value = d2;
     d.normalised = n2;
+    if (probes.central) {
+      const double big = std::abs(probes.plus_h->values[i] - probes.minus_h->values[i]);
+      const double small = std::abs(probes.plus_half->values[i] - probes.minus_half->values[i]);
+      if (big > kNonlinearFloor * scales[i] && small > 0.75 * big && big > out.jump) {
+        out.jump = big;
+        out.jump_quantity = Name(Quantity(q));
+      }
+    }
     // Central differences converge as h^2, forward ones only as h.
     const double tol = probes.central ? agreement : 2 * agreement;
-    d.agrees = std::abs(n1 - n2) <= tol * std::max(std::abs(n1), std::abs(n2)) + kNormalisedFloor;
+    d.agrees = AtKink(Quantity(q), nominal, scales) ||
+               std::abs(n1 - n2) <= tol * std::max(std::abs(n1), std::abs(n2)) + kNormalisedFloor;
     if (!d.agrees) disagree += (disagree.empty() ? "" : ", ") + std::string(Name(Quantity(q)));
     out.score = std::max(out.score, std::abs(n2));
   }
@@ -246,6 +263,7 @@ Stability CheckStability(const Scene& scene, const std::vector<Parameter>& param
           // Linearised estimate against the model's own change.
           for (int q = 0; q < kQuantityCount; ++q) {
             const auto qi = static_cast<size_t>(q);
+            if (AtKink(Quantity(q), nominal, scales)) continue;
             const double actual = std::abs(out.values[qi] - nominal.values[qi]);
             const double linear = std::abs(sens[i].derivatives[qi].value * pr->delta);
             const double ratio = actual / (linear + kNonlinearFloor * scales[qi]);
@@ -306,6 +324,12 @@ Stability CheckStability(const Scene& scene, const std::vector<Parameter>& param
       AddReason(&st, params[i].name + " within +- " + tol_text + " changes the outcome (" +
                          ps.change + ") at " + Num(ps.boundary.value_or(0)) + " " +
                          params[i].unit);
+    }
+    const ParameterSensitivity& ds = sens[i];
+    if (!ds.jump_quantity.empty() && ps.tolerance > 0 && ds.parameter.step <= ps.tolerance) {
+      AddReason(&st, params[i].name + " +- " + Num(ds.parameter.step) + " " + params[i].unit +
+                         " (within the tolerance " + tol_text + ") makes " + ds.jump_quantity +
+                         " jump by " + Num(ds.jump) + ": discontinuous here");
     }
     if (ps.nonlinear) {
       AddReason(&st, params[i].name + " +- " + tol_text + " moves " + ps.nonlinear_quantity +

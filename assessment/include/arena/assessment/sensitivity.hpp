@@ -21,7 +21,10 @@
 // the grasp changes, a model run fails, or a quantity moves by more than
 // `linear_multiple` times its linearised estimate |dY/dp| delta (plus 1 % of
 // the quantity's reference scale, so that nothing near zero is flagged for
-// rounding). Where the discrete outcome changes the boundary is located by
+// rounding), or jumps (is discontinuous) within one finite-difference step
+// smaller than the tolerance. Magnitudes (rotation, displacement) at zero are
+// judged through their signed components (a norm has a kink there). Where the
+// discrete outcome changes the boundary is located by
 // bisection; the nearest boundary (in tolerances) is reported with its
 // parameter, also when it lies beyond the tolerance (then not flagged).
 //
@@ -103,6 +106,11 @@ struct ParameterSensitivity {
   std::string note;  // why not ("" when differentiable)
   std::array<Derivative, kQuantityCount> derivatives{};
   double score = 0;  // max |normalised| over quantities: the ranking key
+  // A jump: the quantity changes about as much over +-h/2 as over +-h (a
+  // smooth one changes half as much) by more than 1 % of its scale -- the
+  // outcome is discontinuous at the nominal. Empty when none.
+  std::string jump_quantity;
+  double jump = 0;  // |Y(p+h) - Y(p-h)| of that quantity, its unit
 };
 
 struct ParameterStability {
