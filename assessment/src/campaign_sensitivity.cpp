@@ -5,6 +5,7 @@
 #include <cmath>
 #include <map>
 #include <mutex>
+#include <set>
 #include <stdexcept>
 
 #include <Eigen/Geometry>
@@ -20,7 +21,10 @@ using nlohmann::json;
 struct Condition {
   int index = 0;
   std::string params_json = "{}";
-  std::string defects_json = "{}";
+  std::string defects_json = "{}";  // the campaign's profile (used when no trial ran)
+  // The profiles the replicates really ran under (the cells'), one per
+  // replicate with ground truth; ensemble member k draws from profile k mod n.
+  std::vector<std::string> profiles;
   mechanics::Scene scene;  // the prediction scene
   std::vector<Eigen::Vector3d> displacements, rotations;  // observed, one per replicate
 };
@@ -97,8 +101,16 @@ db::SensitivityCondition AnalyseCondition(const Condition& c, const CampaignSens
     row.observed_displacement = d / static_cast<double>(c.displacements.size());
     row.observed_rotation = r / static_cast<double>(c.rotations.size());
   }
-  const ActuationNoise noise = ParseActuationNoise(c.defects_json);
-  json detail = {{"noise",
+  std::vector<ActuationNoise> noises;
+  for (const auto& p : c.profiles) noises.push_back(ParseActuationNoise(p));
+  const bool from_cells = !noises.empty();
+  if (!from_cells) noises.push_back(ParseActuationNoise(c.defects_json));
+  const ActuationNoise& noise = noises.front();
+  json detail = {{"noise_source", from_cells ? "the cells' recorded profiles"
+                                             : "the campaign's profile (no trial ran)"},
+                 {"distinct_profiles",
+                  std::set<std::string>(c.profiles.begin(), c.profiles.end()).size()},
+                 {"noise",
                   {{"mu_scale_std", noise.mu_scale_std},
                    {"velocity_scale_std", noise.velocity_scale_std},
                    {"velocity_offset_std",
@@ -124,7 +136,8 @@ db::SensitivityCondition AnalyseCondition(const Condition& c, const CampaignSens
   std::vector<Eigen::Vector3d> disp, rot;
   int flips = 0;
   for (int k = 0; k < o.ensemble; ++k) {
-    const mechanics::Scene s = ApplyNoise(c.scene, DrawNoise(noise, &rng));
+    const ActuationNoise& nk = noises[static_cast<size_t>(k) % noises.size()];
+    const mechanics::Scene s = ApplyNoise(c.scene, DrawNoise(nk, &rng));
     mechanics::SimulationResult r;
     try {
       mechanics::ValidateScene(s);
@@ -257,6 +270,7 @@ CampaignSensitivityReport AnalyseCampaign(const db::Store& store, std::int64_t c
   } catch (const json::exception&) {
     // A spec that is not JSON predicts with each scene's own model settings.
   }
+  const auto cell_profiles = db::CellDefectProfiles(store, campaign_id);
   std::map<int, Condition> by_condition;
   for (const db::Trial& t : store.ListTrials(campaign_id)) {
     auto [it, fresh] = by_condition.try_emplace(t.condition);
@@ -268,6 +282,9 @@ CampaignSensitivityReport AnalyseCampaign(const db::Store& store, std::int64_t c
       c.scene = PredictionScene(t.scene_json, prediction);
     }
     if (!t.gt_stream_id) continue;
+    if (auto p = cell_profiles.find(t.id); p != cell_profiles.end()) {
+      c.profiles.push_back(p->second.empty() ? "{}" : p->second);
+    }
     const db::GroundTruth gt = store.ReadGroundTruth(t.id);
     if (gt.samples.size() < 2) continue;
     const auto& a = gt.samples.front().object_pose;

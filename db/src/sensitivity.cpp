@@ -171,6 +171,17 @@ std::vector<SensitivityCondition> ListSensitivityConditions(const Store& store,
   return out;
 }
 
+std::map<std::int64_t, std::string> CellDefectProfiles(const Store& store,
+                                                       std::int64_t campaign_id) {
+  detail::Stmt s(store.impl().db,
+                 "SELECT id, cell_defects_json FROM trials WHERE campaign_id = ? AND "
+                 "cell_defects_json IS NOT NULL");
+  s.Bind(1, campaign_id);
+  std::map<std::int64_t, std::string> out;
+  while (s.Step()) out[s.Int(0)] = s.Text(1);
+  return out;
+}
+
 std::string WriteSensitivityExport(const Store& store, std::int64_t campaign_id,
                                    const std::string& dir) {
   const auto runs = ListSensitivityRuns(store, campaign_id);

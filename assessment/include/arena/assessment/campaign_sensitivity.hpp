@@ -6,6 +6,12 @@
 // showed, and the condition's stability (sensitivity.hpp) with the cell's
 // noise levels as tolerances.
 //
+// Whose profile: the one each replicate really ran under -- the cell's
+// announced profile recorded at dispatch (a cell applies its own profile,
+// `arena cell --defects`, `arena run --cell-defects`); ensemble member k
+// draws from replicate k mod n's. Only when no trial of the condition ran is
+// the campaign's stored profile used.
+//
 // Outcome compared: the displacement vector (final - start position) and the
 // rotation vector (of q_end q_start^-1) of the object, both in the gripper
 // frame; a spread is the RMS distance of the members from their mean

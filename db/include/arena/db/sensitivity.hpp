@@ -7,6 +7,7 @@
 #pragma once
 
 #include <cstdint>
+#include <map>
 #include <optional>
 #include <string>
 #include <vector>
@@ -61,6 +62,12 @@ std::int64_t RecordSensitivityRun(Store& store, std::int64_t campaign_id,
 std::vector<SensitivityRun> ListSensitivityRuns(const Store& store, std::int64_t campaign_id);
 // By condition. @throws kNotFound for an unknown run.
 std::vector<SensitivityCondition> ListSensitivityConditions(const Store& store, std::int64_t run_id);
+
+// The defect profile each trial of the campaign really ran under: the
+// cell's announced profile recorded at dispatch (trials.cell_defects_json),
+// by trial id; trials never dispatched are absent.
+std::map<std::int64_t, std::string> CellDefectProfiles(const Store& store,
+                                                       std::int64_t campaign_id);
 
 // Writes <dir>/sensitivity.csv (one row per condition of the campaign's
 // latest run; header only when there is none) for `arena export`; @returns
