@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <map>
 #include <sstream>
 
 #include "svg_chart.hpp"
@@ -85,7 +86,7 @@ std::string MapColour(double t) {
 
 std::string RenderMapSvg(const MapData& m) {
   const int width = 820, height = 600;
-  const int left = 90, right = 170, top = 70, bottom = 70;
+  const int left = 90, right = 190, top = 90, bottom = 70;
   const int pw = width - left - right, ph = height - top - bottom;
   std::vector<double> xs, ys, vs;
   for (const auto& p : m.points) {
@@ -147,8 +148,23 @@ std::string RenderMapSvg(const MapData& m) {
   svg << "<text class=\"label\" x=\"22\" y=\"" << top + ph / 2 << "\" transform=\"rotate(-90 22 "
       << top + ph / 2 << ")\" text-anchor=\"middle\">" << Esc(m.y_label) << "</text>\n</g>\n";
 
+  // Conditions that share (x, y) (they differ in another varied parameter)
+  // sit side by side on a small ring instead of hiding each other.
+  std::map<std::pair<long, long>, std::vector<size_t>> at;
+  for (size_t i = 0; i < m.points.size(); ++i) {
+    at[{std::lround(X(m.points[i].x)), std::lround(Y(m.points[i].y))}].push_back(i);
+  }
+  std::vector<std::pair<double, double>> offset(m.points.size(), {0.0, 0.0});
+  for (const auto& [key, members] : at) {
+    if (members.size() < 2) continue;
+    for (size_t k = 0; k < members.size(); ++k) {
+      const double a = 2 * M_PI * static_cast<double>(k) / static_cast<double>(members.size());
+      offset[members[k]] = {9 * std::cos(a), -9 * std::sin(a)};
+    }
+  }
   svg << "<g class=\"series\" id=\"conditions\" data-metric=\"" << Esc(m.metric_label) << "\">\n";
-  for (const auto& p : m.points) {
+  for (size_t i = 0; i < m.points.size(); ++i) {
+    const MapPoint& p = m.points[i];
     svg << "<circle class=\"condition\" data-condition=\"" << p.condition << "\" data-x=\""
         << Num(p.x) << "\" data-y=\"" << Num(p.y) << "\"";
     if (p.value) {
@@ -157,7 +173,8 @@ std::string RenderMapSvg(const MapData& m) {
     } else {
       svg << " fill=\"none\" stroke=\"#999\"";
     }
-    svg << " cx=\"" << X(p.x) << "\" cy=\"" << Y(p.y) << "\" r=\"7\"><title>condition "
+    svg << " cx=\"" << X(p.x) + offset[i].first << "\" cy=\"" << Y(p.y) + offset[i].second
+        << "\" r=\"7\"><title>condition "
         << p.condition << ": " << (p.value ? Num(*p.value) : std::string("no value"))
         << "</title></circle>\n";
   }
@@ -173,8 +190,23 @@ std::string RenderMapSvg(const MapData& m) {
 
   // Legend or colour bar.
   const int lx = left + pw + 30;
-  svg << "<g class=\"legend\">\n<text x=\"" << lx << "\" y=\"" << top - 10 << "\">"
-      << Esc(m.metric_label) << "</text>\n";
+  // The metric's label, wrapped to the legend's width.
+  std::vector<std::string> lines(1);
+  for (size_t i = 0; i < m.metric_label.size();) {
+    size_t j = m.metric_label.find(' ', i);
+    if (j == std::string::npos) j = m.metric_label.size();
+    const std::string word = m.metric_label.substr(i, j - i);
+    if (!lines.back().empty() && lines.back().size() + word.size() > 24) lines.emplace_back();
+    lines.back() += (lines.back().empty() ? "" : " ") + word;
+    i = j + 1;
+  }
+  svg << "<g class=\"legend\">\n<text class=\"metric\" x=\"" << lx << "\" y=\""
+      << top - 12 * static_cast<int>(lines.size()) << "\">";
+  for (size_t k = 0; k < lines.size(); ++k) {
+    svg << "<tspan x=\"" << lx << "\" dy=\"" << (k == 0 ? 0 : 14) << "\">" << Esc(lines[k])
+        << "</tspan>";
+  }
+  svg << "</text>\n";
   if (m.flag) {
     int y = top + 10;
     for (auto [v, name] : {std::pair{1.0, m.flag_on}, std::pair{0.0, m.flag_off}}) {
