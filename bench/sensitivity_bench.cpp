@@ -15,7 +15,8 @@ namespace {
 using namespace arena;
 
 mechanics::Scene Canonical() {
-  return mechanics::LoadSceneFile(std::string(ARENA_SOURCE_DIR) + "/examples/scenes/canonical.json");
+  return mechanics::LoadSceneFile(std::string(ARENA_SOURCE_DIR) +
+                                  "/examples/scenes/canonical.json");
 }
 
 mechanics::Scene ShortPivot() {
@@ -37,8 +38,8 @@ void Report(benchmark::State& state, const mechanics::Scene& scene, bool stabili
   for (auto _ : state) {
     const auto start = std::chrono::steady_clock::now();
     const auto r = assessment::AnalyseScene(scene, o);
-    wall_ms += std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start)
-                   .count();
+    wall_ms +=
+        std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
     runs = r.model_runs;
     benchmark::DoNotOptimize(r.parameters.data());
   }

@@ -25,7 +25,7 @@ struct Condition {
   // The profiles the replicates really ran under (the cells'), one per
   // replicate with ground truth; ensemble member k draws from profile k mod n.
   std::vector<std::string> profiles;
-  mechanics::Scene scene;  // the prediction scene
+  mechanics::Scene scene;                                 // the prediction scene
   std::vector<Eigen::Vector3d> displacements, rotations;  // observed, one per replicate
 };
 
@@ -74,13 +74,13 @@ std::vector<std::string> StabilityFilters(const mechanics::Scene& scene,
   const auto chosen = SelectParameters(all, o.params);  // all when no filters
   for (const auto& p : all) {
     if (!(ToleranceFor(p, st).first > 0)) continue;
-    const bool noise = (p.kind == ParameterKind::kMuScale && st.noise.mu_scale_std > 0) ||
-                       (p.kind == ParameterKind::kPushSpeed && st.noise.velocity_scale_std > 0) ||
-                       (p.kind == ParameterKind::kPusherVelocity &&
-                        st.noise.velocity_offset_std[p.axis] > 0);
-    const bool by_filter =
-        (!o.params.empty() || st.relative_tolerance > 0) &&
-        std::any_of(chosen.begin(), chosen.end(), [&](const Parameter& c) { return c.name == p.name; });
+    const bool noise =
+        (p.kind == ParameterKind::kMuScale && st.noise.mu_scale_std > 0) ||
+        (p.kind == ParameterKind::kPushSpeed && st.noise.velocity_scale_std > 0) ||
+        (p.kind == ParameterKind::kPusherVelocity && st.noise.velocity_offset_std[p.axis] > 0);
+    const bool by_filter = (!o.params.empty() || st.relative_tolerance > 0) &&
+                           std::any_of(chosen.begin(), chosen.end(),
+                                       [&](const Parameter& c) { return c.name == p.name; });
     if (noise || st.tolerances.count(p.name) || by_filter) out.push_back(p.name);
   }
   return out;
@@ -106,16 +106,16 @@ db::SensitivityCondition AnalyseCondition(const Condition& c, const CampaignSens
   const bool from_cells = !noises.empty();
   if (!from_cells) noises.push_back(ParseActuationNoise(c.defects_json));
   const ActuationNoise& noise = noises.front();
-  json detail = {{"noise_source", from_cells ? "the cells' recorded profiles"
-                                             : "the campaign's profile (no trial ran)"},
-                 {"distinct_profiles",
-                  std::set<std::string>(c.profiles.begin(), c.profiles.end()).size()},
-                 {"noise",
-                  {{"mu_scale_std", noise.mu_scale_std},
-                   {"velocity_scale_std", noise.velocity_scale_std},
-                   {"velocity_offset_std",
-                    {noise.velocity_offset_std.x(), noise.velocity_offset_std.y(),
-                     noise.velocity_offset_std.z()}}}}};
+  json detail = {
+      {"noise_source",
+       from_cells ? "the cells' recorded profiles" : "the campaign's profile (no trial ran)"},
+      {"distinct_profiles", std::set<std::string>(c.profiles.begin(), c.profiles.end()).size()},
+      {"noise",
+       {{"mu_scale_std", noise.mu_scale_std},
+        {"velocity_scale_std", noise.velocity_scale_std},
+        {"velocity_offset_std",
+         {noise.velocity_offset_std.x(), noise.velocity_offset_std.y(),
+          noise.velocity_offset_std.z()}}}}};
 
   const Outcome nominal = MeasureOutcome(c.scene, simulate(c.scene));
   ++*runs;
@@ -188,8 +188,9 @@ db::SensitivityCondition AnalyseCondition(const Condition& c, const CampaignSens
       }
       detail["stability"] = ToJson(rep, c.scene)["stability"];
     } else {
-      detail["stability"] = "no parameter has a tolerance (the profile has no actuation or "
-                            "friction noise and no --tolerance was given)";
+      detail["stability"] =
+          "no parameter has a tolerance (the profile has no actuation or "
+          "friction noise and no --tolerance was given)";
     }
   }
   row.detail_json = detail.dump();
@@ -305,7 +306,8 @@ CampaignSensitivityReport AnalyseCampaign(const db::Store& store, std::int64_t c
   RunParallel(static_cast<long>(list.size()), report.threads, [&](long i) {
     if (o.cancel && o.cancel->load()) return;
     long local = 0;
-    rows[static_cast<size_t>(i)] = AnalyseCondition(*list[static_cast<size_t>(i)], o, simulate, &local);
+    rows[static_cast<size_t>(i)] =
+        AnalyseCondition(*list[static_cast<size_t>(i)], o, simulate, &local);
     runs += local;
     const long d = ++done;
     if (o.progress) {

@@ -18,10 +18,10 @@ struct QuantityInfo {
 };
 
 constexpr QuantityInfo kQuantities[kQuantityCount] = {
-    {"position_x", "m", QuantityKind::kLength},   {"position_y", "m", QuantityKind::kLength},
-    {"position_z", "m", QuantityKind::kLength},   {"roll", "rad", QuantityKind::kAngle},
-    {"pitch", "rad", QuantityKind::kAngle},       {"yaw", "rad", QuantityKind::kAngle},
-    {"rotation", "rad", QuantityKind::kAngle},    {"displacement", "m", QuantityKind::kLength},
+    {"position_x", "m", QuantityKind::kLength},  {"position_y", "m", QuantityKind::kLength},
+    {"position_z", "m", QuantityKind::kLength},  {"roll", "rad", QuantityKind::kAngle},
+    {"pitch", "rad", QuantityKind::kAngle},      {"yaw", "rad", QuantityKind::kAngle},
+    {"rotation", "rad", QuantityKind::kAngle},   {"displacement", "m", QuantityKind::kLength},
     {"pusher_force", "N", QuantityKind::kForce},
 };
 

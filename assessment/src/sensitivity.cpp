@@ -21,11 +21,11 @@ namespace {
 
 using mechanics::Scene;
 
-constexpr double kRelativeStep = 1e-2;      // of the scale, for magnitudes
-constexpr double kPositionStep = 2e-3;      // of the object's extent
-constexpr double kTiltStep = 2e-3;          // rad
-constexpr double kNormalisedFloor = 1e-3;   // normalised derivatives closer than this agree
-constexpr double kNonlinearFloor = 1e-2;    // of a quantity's scale: never "nonlinear" below
+constexpr double kRelativeStep = 1e-2;     // of the scale, for magnitudes
+constexpr double kPositionStep = 2e-3;     // of the object's extent
+constexpr double kTiltStep = 2e-3;         // rad
+constexpr double kNormalisedFloor = 1e-3;  // normalised derivatives closer than this agree
+constexpr double kNonlinearFloor = 1e-2;   // of a quantity's scale: never "nonlinear" below
 
 std::string ContactName(const Scene& s, int contact) {
   return contact < static_cast<int>(s.fingers.size()) ? s.fingers[static_cast<size_t>(contact)].name
@@ -55,8 +55,7 @@ std::array<double, kQuantityCount> QuantityScales(const Scene& scene, const Outc
   if (scene.pusher) travel = scene.pusher->motion.velocity.norm() * scene.duration;
   const double length = std::max({o.value(Quantity::kDisplacement), travel, 1e-3});
   const double angle = std::max(o.value(Quantity::kRotation), 1e-2);
-  const double force =
-      std::max({o.value(Quantity::kPusherForce), scene.grip_force * 1e-2, 1e-3});
+  const double force = std::max({o.value(Quantity::kPusherForce), scene.grip_force * 1e-2, 1e-3});
   std::array<double, kQuantityCount> s{};
   for (int q = 0; q < kQuantityCount; ++q) {
     const auto kind = KindOf(static_cast<Quantity>(q));
@@ -322,8 +321,7 @@ Stability CheckStability(const Scene& scene, const std::vector<Parameter>& param
       AddReason(&st, "the model fails within " + params[i].name + " +- " + tol_text);
     } else if (ps.flips) {
       AddReason(&st, params[i].name + " within +- " + tol_text + " changes the outcome (" +
-                         ps.change + ") at " + Num(ps.boundary.value_or(0)) + " " +
-                         params[i].unit);
+                         ps.change + ") at " + Num(ps.boundary.value_or(0)) + " " + params[i].unit);
     }
     const ParameterSensitivity& ds = sens[i];
     if (!ds.jump_quantity.empty() && ps.tolerance > 0 && ds.parameter.step <= ps.tolerance) {
@@ -332,8 +330,8 @@ Stability CheckStability(const Scene& scene, const std::vector<Parameter>& param
                          " jump by " + Num(ds.jump) + ": discontinuous here");
     }
     if (ps.nonlinear) {
-      AddReason(&st, params[i].name + " +- " + tol_text + " moves " + ps.nonlinear_quantity +
-                         " " + Num(ps.linear_ratio) + "x its linearised estimate (limit " +
+      AddReason(&st, params[i].name + " +- " + tol_text + " moves " + ps.nonlinear_quantity + " " +
+                         Num(ps.linear_ratio) + "x its linearised estimate (limit " +
                          Num(o.linear_multiple) + "x)");
     }
   }
@@ -458,10 +456,10 @@ std::vector<Parameter> SelectParameters(const std::vector<Parameter>& all,
   for (const auto& p : all) {
     bool take = false;
     for (const auto& f : filters) {
-      const bool match =
-          f == p.name || f == p.group ||
-          (f == "kinematics" && (p.group == "position" || p.group == "normal")) ||
-          (p.name.size() > f.size() && p.name.compare(0, f.size(), f) == 0 && p.name[f.size()] == '.');
+      const bool match = f == p.name || f == p.group ||
+                         (f == "kinematics" && (p.group == "position" || p.group == "normal")) ||
+                         (p.name.size() > f.size() && p.name.compare(0, f.size(), f) == 0 &&
+                          p.name[f.size()] == '.');
       if (match) {
         used.insert(f);
         take = true;
@@ -557,14 +555,13 @@ std::pair<double, std::string> ToleranceFor(const Parameter& p, const StabilityO
     return {k * o.noise.velocity_scale_std * p.nominal, "actuation_noise.velocity_scale_std" + sig};
   }
   if (p.kind == ParameterKind::kPusherVelocity && o.noise.velocity_offset_std[p.axis] > 0) {
-    return {k * o.noise.velocity_offset_std[p.axis],
-            std::string("actuation_noise.velocity_offset_std[") + std::to_string(p.axis) + "]" +
-                sig};
+    return {
+        k * o.noise.velocity_offset_std[p.axis],
+        std::string("actuation_noise.velocity_offset_std[") + std::to_string(p.axis) + "]" + sig};
   }
   if (o.relative_tolerance > 0) {
-    return {o.relative_tolerance * p.scale,
-            "--tolerance " + Num(o.relative_tolerance * 100) + "% of " + Num(p.scale) + " " +
-                p.unit};
+    return {o.relative_tolerance * p.scale, "--tolerance " + Num(o.relative_tolerance * 100) +
+                                                "% of " + Num(p.scale) + " " + p.unit};
   }
   return {0, ""};
 }
@@ -596,8 +593,10 @@ SensitivityReport AnalyseScene(const Scene& scene, const SensitivityOptions& o) 
   const auto start = std::chrono::steady_clock::now();
   const std::vector<Parameter> params = SelectParameters(SceneParameters(scene), o.params);
   for (const auto& [name, t] : o.stability.tolerances) {
-    if (std::none_of(params.begin(), params.end(), [&](const Parameter& p) { return p.name == name; })) {
-      throw std::invalid_argument("--tolerance " + name + ": no such parameter among those analysed");
+    if (std::none_of(params.begin(), params.end(),
+                     [&](const Parameter& p) { return p.name == name; })) {
+      throw std::invalid_argument("--tolerance " + name +
+                                  ": no such parameter among those analysed");
     }
   }
   Runner runner(o);
@@ -693,18 +692,18 @@ nlohmann::json ToJson(const SensitivityReport& r, const Scene& scene) {
                       {"derivative", d},
                       {"normalised", n}});
   }
-  json out = {{"nominal", nominal},
-              {"quantity_units", units},
-              {"quantity_scales", scales},
-              {"parameters", params},
-              {"model_runs", r.model_runs},
-              {"wall_s", r.wall_s},
+  json out = {{"nominal", nominal},   {"quantity_units", units},    {"quantity_scales", scales},
+              {"parameters", params}, {"model_runs", r.model_runs}, {"wall_s", r.wall_s},
               {"threads", r.threads}};
   if (r.stability.checked) {
     json ps = json::array();
     for (const auto& p : r.stability.parameters) {
-      json j = {{"parameter", p.parameter}, {"tolerance", p.tolerance}, {"source", p.source},
-                {"flips", p.flips},         {"nonlinear", p.nonlinear}, {"failed", p.failed},
+      json j = {{"parameter", p.parameter},
+                {"tolerance", p.tolerance},
+                {"source", p.source},
+                {"flips", p.flips},
+                {"nonlinear", p.nonlinear},
+                {"failed", p.failed},
                 {"linear_ratio", p.linear_ratio}};
       if (p.nonlinear) j["nonlinear_quantity"] = p.nonlinear_quantity;
       if (p.boundary) {
@@ -713,9 +712,8 @@ nlohmann::json ToJson(const SensitivityReport& r, const Scene& scene) {
       }
       ps.push_back(j);
     }
-    json s = {{"unstable", r.stability.unstable},
-              {"reasons", r.stability.reasons},
-              {"parameters", ps}};
+    json s = {
+        {"unstable", r.stability.unstable}, {"reasons", r.stability.reasons}, {"parameters", ps}};
     if (r.stability.nearest) {
       s["nearest_boundary"] = {{"parameter", r.stability.nearest->parameter},
                                {"offset", r.stability.nearest->offset},

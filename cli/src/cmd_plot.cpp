@@ -142,8 +142,8 @@ int PlotMap(const db::Store& store, const PlotOptions& o) {
     throw CommandError(kExitBadInput, "plot --map: give two varied parameters, X,Y");
   }
   if (o.metric.empty()) {
-    throw CommandError(kExitBadInput, "plot --map: needs --metric M (one of " + MapMetricNames() +
-                                          ")");
+    throw CommandError(kExitBadInput,
+                       "plot --map: needs --metric M (one of " + MapMetricNames() + ")");
   }
   MapData map;
   try {

@@ -114,8 +114,7 @@ std::string SceneText(const assessment::SensitivityReport& r, const mechanics::S
          "the parameter's scale):\n";
   char line[400];
   std::snprintf(line, sizeof line, "%4s  %-28s %11s %6s  %-13s %13s %-10s %10s  %s\n", "rank",
-                "parameter", "nominal", "unit", "most moves", "d/dp", "unit", "normalised",
-                "note");
+                "parameter", "nominal", "unit", "most moves", "d/dp", "unit", "normalised", "note");
   out << line;
   int rank = 0;
   for (const auto& p : r.parameters) {
@@ -126,8 +125,8 @@ std::string SceneText(const assessment::SensitivityReport& r, const mechanics::S
         best = q;
     }
     const auto& d = p.derivatives[size_t(best)];
-    const std::string unit =
-        std::string(assessment::Unit(Quantity(best))) + "/" + (p.parameter.unit == "1" ? "1" : p.parameter.unit);
+    const std::string unit = std::string(assessment::Unit(Quantity(best))) + "/" +
+                             (p.parameter.unit == "1" ? "1" : p.parameter.unit);
     std::snprintf(line, sizeof line, "%4d  %-28s %11.4g %6s  %-13s %13.4g %-10s %10.3g  %s\n",
                   ++rank, p.parameter.name.c_str(), p.parameter.nominal, p.parameter.unit.c_str(),
                   assessment::Name(Quantity(best)), d.value, unit.c_str(), d.normalised,
@@ -146,8 +145,9 @@ std::string SceneText(const assessment::SensitivityReport& r, const mechanics::S
       out << "  no boundary found within the searched range\n";
     }
   }
-  out << "\n" << r.model_runs << " model runs on " << r.threads << " threads, "
-      << Fmt("%.3g", r.wall_s) << " s\n";
+  out << "\n"
+      << r.model_runs << " model runs on " << r.threads << " threads, " << Fmt("%.3g", r.wall_s)
+      << " s\n";
   return out.str();
 }
 
@@ -200,8 +200,8 @@ std::string CampaignText(const assessment::CampaignSensitivityReport& r, std::in
   char line[512];
   out << "campaign " << r.campaign_id << ": " << r.conditions.size() << " conditions"
       << (run_id > 0 ? ", stored as sensitivity run " + std::to_string(run_id) : "") << "\n";
-  std::snprintf(line, sizeof line, "%5s %4s %5s %21s %21s  %-22s %-8s %s\n", "cond", "reps",
-                "ens", "pos spread mm obs/pred", "rot spread mrad o/p", "verdict", "stable",
+  std::snprintf(line, sizeof line, "%5s %4s %5s %21s %21s  %-22s %-8s %s\n", "cond", "reps", "ens",
+                "pos spread mm obs/pred", "rot spread mrad o/p", "verdict", "stable",
                 "nearest boundary");
   out << line;
   for (const auto& c : r.conditions) {
@@ -218,25 +218,26 @@ std::string CampaignText(const assessment::CampaignSensitivityReport& r, std::in
                   c.unstable ? "UNSTABLE" : "stable", boundary.c_str());
     out << line;
   }
-  out << "verdicts: " << r.matches << " match, " << r.underestimates
-      << " model underestimates, " << r.overestimates << " model overestimates, " << r.too_few
-      << " too few replicates, " << r.no_prediction << " no prediction\n";
-  out << "pooled observed/predicted spread: position "
-      << Opt(r.pooled_position_ratio, 1, "%.3g") << " (" << r.pooled_position_verdict
-      << "), rotation " << Opt(r.pooled_rotation_ratio, 1, "%.3g") << " ("
-      << r.pooled_rotation_verdict << ")\n";
+  out << "verdicts: " << r.matches << " match, " << r.underestimates << " model underestimates, "
+      << r.overestimates << " model overestimates, " << r.too_few << " too few replicates, "
+      << r.no_prediction << " no prediction\n";
+  out << "pooled observed/predicted spread: position " << Opt(r.pooled_position_ratio, 1, "%.3g")
+      << " (" << r.pooled_position_verdict << "), rotation "
+      << Opt(r.pooled_rotation_ratio, 1, "%.3g") << " (" << r.pooled_rotation_verdict << ")\n";
   out << "unstable conditions: " << r.unstable;
   std::string list;
   for (const auto& c : r.conditions) {
     if (c.unstable) list += (list.empty() ? "" : ", ") + std::to_string(c.condition);
   }
   if (!list.empty()) out << " (" << list << ")";
-  out << "\n" << r.model_runs << " model runs on " << r.threads << " threads, "
-      << Fmt("%.3g", r.wall_s) << " s\n";
+  out << "\n"
+      << r.model_runs << " model runs on " << r.threads << " threads, " << Fmt("%.3g", r.wall_s)
+      << " s\n";
   return out.str();
 }
 
-int RunCampaignSensitivity(const SensitivityCliOptions& o, const assessment::SensitivityOptions& so) {
+int RunCampaignSensitivity(const SensitivityCliOptions& o,
+                           const assessment::SensitivityOptions& so) {
   assessment::CampaignSensitivityOptions co;
   co.ensemble = o.ensemble;
   co.seed = o.seed;

@@ -71,16 +71,17 @@ struct Axis {
 
 std::string MapColour(double t) {
   // Viridis at five stops, linearly interpolated.
-  static const double kStops[5][3] = {{68, 1, 84}, {59, 82, 139}, {33, 145, 140}, {94, 201, 98},
-                                      {253, 231, 37}};
+  static const double kStops[5][3] = {
+      {68, 1, 84}, {59, 82, 139}, {33, 145, 140}, {94, 201, 98}, {253, 231, 37}};
   t = std::clamp(std::isfinite(t) ? t : 0.0, 0.0, 1.0) * 4;
   const int i = std::min(3, static_cast<int>(t));
   const double f = t - i;
   char buf[8];
-  std::snprintf(buf, sizeof buf, "#%02x%02x%02x",
-                static_cast<int>(std::lround(kStops[i][0] + f * (kStops[i + 1][0] - kStops[i][0]))),
-                static_cast<int>(std::lround(kStops[i][1] + f * (kStops[i + 1][1] - kStops[i][1]))),
-                static_cast<int>(std::lround(kStops[i][2] + f * (kStops[i + 1][2] - kStops[i][2]))));
+  std::snprintf(
+      buf, sizeof buf, "#%02x%02x%02x",
+      static_cast<int>(std::lround(kStops[i][0] + f * (kStops[i + 1][0] - kStops[i][0]))),
+      static_cast<int>(std::lround(kStops[i][1] + f * (kStops[i + 1][1] - kStops[i][1]))),
+      static_cast<int>(std::lround(kStops[i][2] + f * (kStops[i + 1][2] - kStops[i][2]))));
   return buf;
 }
 
@@ -174,9 +175,8 @@ std::string RenderMapSvg(const MapData& m) {
       svg << " fill=\"none\" stroke=\"#999\"";
     }
     svg << " cx=\"" << X(p.x) + offset[i].first << "\" cy=\"" << Y(p.y) + offset[i].second
-        << "\" r=\"7\"><title>condition "
-        << p.condition << ": " << (p.value ? Num(*p.value) : std::string("no value"))
-        << "</title></circle>\n";
+        << "\" r=\"7\"><title>condition " << p.condition << ": "
+        << (p.value ? Num(*p.value) : std::string("no value")) << "</title></circle>\n";
   }
   svg << "</g>\n";
   if (!m.boundary.empty()) {
@@ -211,8 +211,8 @@ std::string RenderMapSvg(const MapData& m) {
     int y = top + 10;
     for (auto [v, name] : {std::pair{1.0, m.flag_on}, std::pair{0.0, m.flag_off}}) {
       svg << "<circle cx=\"" << lx + 7 << "\" cy=\"" << y << "\" r=\"7\" fill=\"" << colour(v)
-          << "\" stroke=\"#222\"/><text x=\"" << lx + 20 << "\" y=\"" << y + 4 << "\">"
-          << Esc(name) << "</text>\n";
+          << "\" stroke=\"#222\"/><text x=\"" << lx + 20 << "\" y=\"" << y + 4 << "\">" << Esc(name)
+          << "</text>\n";
       y += 24;
     }
   } else {

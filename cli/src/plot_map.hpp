@@ -26,7 +26,7 @@ struct MapPoint {
 
 struct MapData {
   std::string title;
-  std::string x_label, y_label, metric_label;  // with units, e.g. "grip_force (N)"
+  std::string x_label, y_label, metric_label;           // with units, e.g. "grip_force (N)"
   std::vector<std::string> x_categories, y_categories;  // non-empty: categorical axis
   bool flag = false;  // the metric is 0/1 (e.g. unstable): two colours, no colour bar
   std::string flag_on = "yes", flag_off = "no";

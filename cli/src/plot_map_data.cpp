@@ -87,12 +87,24 @@ const std::vector<MetricInfo>& Metrics() {
 // Units of the campaign variations (orchestrator/README.md's catalogue).
 std::string UnitOf(const std::string& variation) {
   static const std::map<std::string, std::string> kUnits = {
-      {"object_size_x", "m"}, {"object_size_y", "m"}, {"object_size_z", "m"},
-      {"object_radius", "m"}, {"object_height", "m"}, {"object_mass", "kg"},
-      {"finger_length", "m"}, {"finger_radius", "m"}, {"finger_mu", "1"},
-      {"grip_force", "N"},    {"pusher_length", "m"}, {"pusher_radius", "m"},
-      {"pusher_mu", "1"},     {"pivot_offset", "m"},  {"push_speed", "m/s"},
-      {"push_distance", "m"}, {"finger_type", "type"}, {"pusher_type", "type"},
+      {"object_size_x", "m"},
+      {"object_size_y", "m"},
+      {"object_size_z", "m"},
+      {"object_radius", "m"},
+      {"object_height", "m"},
+      {"object_mass", "kg"},
+      {"finger_length", "m"},
+      {"finger_radius", "m"},
+      {"finger_mu", "1"},
+      {"grip_force", "N"},
+      {"pusher_length", "m"},
+      {"pusher_radius", "m"},
+      {"pusher_mu", "1"},
+      {"pivot_offset", "m"},
+      {"push_speed", "m/s"},
+      {"push_distance", "m"},
+      {"finger_type", "type"},
+      {"pusher_type", "type"},
       {"push_direction", "unit vector, gripper frame"},
       {"pivot_axis", "unit vector, gripper frame"}};
   auto it = kUnits.find(variation);
@@ -210,12 +222,36 @@ MapData BuildCampaignMap(const db::Store& store, std::int64_t campaign_id, const
   return map;
 }
 
-std::vector<std::pair<double, double>> AdaptiveBoundaryPoints(const db::Store&, std::int64_t,
-                                                              const std::string&,
-                                                              const std::string&) {
-  // Seam for adaptive campaigns: their samplers store the points they placed
-  // on a boundary; until that store exists there is nothing to overlay.
-  return {};
+std::vector<std::pair<double, double>> AdaptiveBoundaryPoints(const db::Store& store,
+                                                              std::int64_t campaign_id,
+                                                              const std::string& x,
+                                                              const std::string& y) {
+  // An adaptive (boundary) campaign records why it chose each trial
+  // (sampler_decisions, schema version 7); the trials its nearest-neighbour
+  // margin rule placed on the estimated boundary are the overlay. A store
+  // without that table (older, or a binary without adaptive samplers) has none.
+  const auto has =
+      db::RunQuery(store,
+                   "SELECT count(*) FROM sqlite_master WHERE type = 'table' AND name = "
+                   "'sampler_decisions'");
+  if (has.rows.empty() || AsNumber(has.rows[0][0]).value_or(0) == 0) return {};
+  const auto rows = db::RunQuery(
+      store,
+      "SELECT t.params_json FROM sampler_decisions d JOIN trials t ON t.id = d.trial_id WHERE "
+      "d.campaign_id = " +
+          std::to_string(campaign_id) +
+          " AND json_extract(d.basis_json, '$.rule') = 'nn_margin' ORDER BY t.id");
+  std::vector<std::pair<double, double>> out;
+  for (const auto& row : rows.rows) {
+    const auto* text = std::get_if<std::string>(&row[0]);
+    if (!text) continue;
+    const json p = json::parse(*text, nullptr, false);
+    if (!p.is_object() || !p.value(x, json()).is_number() || !p.value(y, json()).is_number()) {
+      continue;
+    }
+    out.emplace_back(p[x].get<double>(), p[y].get<double>());
+  }
+  return out;
 }
 
 }  // namespace arena::cli

@@ -24,8 +24,10 @@ std::string MapMetricNames();
 MapData BuildCampaignMap(const db::Store& store, std::int64_t campaign_id, const std::string& x,
                          const std::string& y, const std::string& metric);
 
-// Points an adaptive campaign placed on a boundary, in (X, Y) coordinates;
-// empty for campaigns that are not adaptive.
+// Points an adaptive campaign placed on a boundary (its sampler_decisions
+// whose rule is the nearest-neighbour margin, "nn_margin"), in (X, Y)
+// coordinates; empty for campaigns that are not adaptive and for stores
+// without adaptive samplers.
 std::vector<std::pair<double, double>> AdaptiveBoundaryPoints(const db::Store& store,
                                                               std::int64_t campaign_id,
                                                               const std::string& x,

@@ -21,7 +21,9 @@ constexpr const char* kColumns =
     "verdict, flip_fraction, unstable, boundary_parameter, boundary_offset, boundary_tolerances, "
     "reason, detail_json";
 
-[[noreturn]] void Bad(const std::string& msg) { throw StoreError(StoreError::Kind::kBadInput, msg); }
+[[noreturn]] void Bad(const std::string& msg) {
+  throw StoreError(StoreError::Kind::kBadInput, msg);
+}
 
 void CheckJson(const std::string& text, const std::string& what) {
   try {

@@ -43,9 +43,9 @@
 namespace arena::assessment {
 
 struct CampaignSensitivityOptions {
-  int ensemble = 32;        // model runs per condition, [2, 10000]
-  std::uint64_t seed = 1;   // the ensemble's random streams derive from (seed, condition)
-  int threads = 0;          // conditions run in parallel; 0: one per core
+  int ensemble = 32;       // model runs per condition, [2, 10000]
+  std::uint64_t seed = 1;  // the ensemble's random streams derive from (seed, condition)
+  int threads = 0;         // conditions run in parallel; 0: one per core
   bool check_stability = true;
   // Tolerances beyond the cell's noise (relative_tolerance 0: only the noise).
   StabilityOptions stability = [] {
@@ -57,8 +57,8 @@ struct CampaignSensitivityOptions {
   // Floors under which a spread counts as zero: 1 um, 10 urad.
   double position_floor = 1e-6;
   double rotation_floor = 1e-5;
-  SimulateFn simulate;  // empty: DefaultSimulate()
-  std::string simulator_name = "arena";  // recorded in the run's settings
+  SimulateFn simulate;                       // empty: DefaultSimulate()
+  std::string simulator_name = "arena";      // recorded in the run's settings
   std::function<void(long, long)> progress;  // (conditions done, total), from worker threads
   const std::atomic<bool>* cancel = nullptr;
 };

@@ -120,7 +120,7 @@ struct ParameterStability {
   bool flips = false;    // the discrete outcome changes within +-delta
   bool nonlinear = false;
   std::string nonlinear_quantity;  // the worst quantity when nonlinear
-  double linear_ratio = 0;  // worst |dY| / (|dY/dp| delta + 1 % scale) within +-delta
+  double linear_ratio = 0;         // worst |dY| / (|dY/dp| delta + 1 % scale) within +-delta
   std::optional<double> boundary;  // signed offset from nominal of the nearest change found
   std::string change;              // what changes there
   bool failed = false;             // a model run failed within +-delta
@@ -128,8 +128,8 @@ struct ParameterStability {
 
 struct Boundary {
   std::string parameter;
-  double offset = 0;       // signed, parameter's unit
-  double tolerances = 0;   // |offset| / delta
+  double offset = 0;      // signed, parameter's unit
+  double tolerances = 0;  // |offset| / delta
   std::string change;
 };
 
@@ -168,7 +168,7 @@ struct SensitivityOptions {
 
 struct SensitivityReport {
   Outcome nominal;
-  std::array<double, kQuantityCount> scales{};  // each quantity's reference scale
+  std::array<double, kQuantityCount> scales{};   // each quantity's reference scale
   std::vector<ParameterSensitivity> parameters;  // ranked by score, highest first
   Stability stability;
   long model_runs = 0;

@@ -37,11 +37,11 @@ struct SensitivityCondition {
                         // no_prediction
   double flip_fraction = 0;  // ensemble members whose contact modes / grasp differ from nominal
   bool unstable = false;
-  std::string boundary_parameter;      // nearest boundary found ("" none)
+  std::string boundary_parameter;             // nearest boundary found ("" none)
   std::optional<double> boundary_offset;      // signed, the parameter's unit
   std::optional<double> boundary_tolerances;  // |offset| / tolerance
-  std::string reason;                  // why unstable (first reason), or ""
-  std::string detail_json = "{}";      // the full per-condition analysis
+  std::string reason;                         // why unstable (first reason), or ""
+  std::string detail_json = "{}";             // the full per-condition analysis
 };
 
 struct SensitivityRun {
@@ -61,7 +61,8 @@ std::int64_t RecordSensitivityRun(Store& store, std::int64_t campaign_id,
 // Oldest first.
 std::vector<SensitivityRun> ListSensitivityRuns(const Store& store, std::int64_t campaign_id);
 // By condition. @throws kNotFound for an unknown run.
-std::vector<SensitivityCondition> ListSensitivityConditions(const Store& store, std::int64_t run_id);
+std::vector<SensitivityCondition> ListSensitivityConditions(const Store& store,
+                                                            std::int64_t run_id);
 
 // The defect profile each trial of the campaign really ran under: the
 // cell's announced profile recorded at dispatch (trials.cell_defects_json),
