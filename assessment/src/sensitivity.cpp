@@ -602,16 +602,6 @@ SensitivityReport AnalyseScene(const Scene& scene, const SensitivityOptions& o) 
   Runner runner(o);
   SensitivityReport report;
   report.threads = runner.threads();
-  runner.Plan(1);
-  report.nominal = *runner.Run(scene, Parameter{}, 0);
-  auto finish = [&] {
-    report.model_runs = runner.runs();
-    report.wall_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-    return report;
-  };
-  if (!report.nominal.ok) return finish();
-  report.scales = QuantityScales(scene, report.nominal);
-
   // Four probes per parameter (two for one-sided ones), all in one batch.
   std::vector<Probes> probes(params.size());
   std::vector<double> steps(params.size());
@@ -632,7 +622,16 @@ SensitivityReport AnalyseScene(const Scene& scene, const SensitivityOptions& o) 
       jobs.push_back({i, -h / 2, &probes[i].minus_half});
     }
   }
-  runner.Plan(static_cast<long>(jobs.size()));
+  runner.Plan(1 + static_cast<long>(jobs.size()));
+  report.nominal = *runner.Run(scene, Parameter{}, 0);
+  auto finish = [&] {
+    report.model_runs = runner.runs();
+    report.wall_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    return report;
+  };
+  if (!report.nominal.ok) return finish();
+  report.scales = QuantityScales(scene, report.nominal);
+
   RunParallel(static_cast<long>(jobs.size()), runner.threads(), [&](long k) {
     const Job& j = jobs[static_cast<size_t>(k)];
     *j.into = runner.Run(scene, params[j.param], j.delta);

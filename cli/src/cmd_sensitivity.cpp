@@ -166,9 +166,16 @@ int RunSceneSensitivity(const SensitivityCliOptions& o, assessment::SensitivityO
     }
   }
   so.check_stability = !o.no_stability;
+  // The plan grows once (the stability probes follow the derivatives): a new
+  // line for each phase.
   std::unique_ptr<ProgressLine> progress;
+  long progress_total = 0;
   so.progress = [&](long done, long total) {
-    if (!progress) progress = std::make_unique<ProgressLine>(total, "model runs");
+    if (!progress || total != progress_total) {
+      if (progress) progress->Finish();
+      progress = std::make_unique<ProgressLine>(total, "model runs");
+      progress_total = total;
+    }
     progress->Update(done, 0);
   };
   assessment::SensitivityReport report;
@@ -334,6 +341,11 @@ int RunSensitivity(const SensitivityCliOptions& o) {
   }
   if (campaign_mode && (o.db_path.empty() || o.campaign < 0)) {
     throw CommandError(kExitBadInput, "sensitivity: the campaign view needs --db and --campaign");
+  }
+  if (campaign_mode && !o.defects_path.empty()) {
+    throw CommandError(kExitBadInput,
+                       "--defects: only for a scene; the campaign view uses the profile each "
+                       "trial's cell recorded");
   }
   if (o.threads < 0) throw CommandError(kExitBadInput, "--threads: must be >= 0 (0: one per core)");
   if (!(o.sigmas > 0) || !std::isfinite(o.sigmas)) {
