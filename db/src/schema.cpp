@@ -259,16 +259,18 @@ CREATE INDEX evaluation_results_by_model ON evaluation_results(evaluation_id, mo
 -- gt_chunks.data: "AGT1" (raw) or "AGT2" (packed) blocks; db/README.md.
 )sql"},
       {8, "sensitivity runs: predicted vs observed spread and unstable conditions", R"sql(
-CREATE TABLE sensitivity_runs(
+-- IF NOT EXISTS: a file rolled back to an older version by hand (as the
+-- migration tests do) may still hold these tables; they are kept as they are.
+CREATE TABLE IF NOT EXISTS sensitivity_runs(
   id            INTEGER PRIMARY KEY,
   campaign_id   INTEGER NOT NULL REFERENCES campaigns(id),
   created_at    REAL NOT NULL,
   settings_json TEXT NOT NULL DEFAULT '{}',
   report_json   TEXT NOT NULL DEFAULT '{}'
 );
-CREATE INDEX sensitivity_runs_by_campaign ON sensitivity_runs(campaign_id);
+CREATE INDEX IF NOT EXISTS sensitivity_runs_by_campaign ON sensitivity_runs(campaign_id);
 
-CREATE TABLE sensitivity_conditions(
+CREATE TABLE IF NOT EXISTS sensitivity_conditions(
   run_id        INTEGER NOT NULL REFERENCES sensitivity_runs(id),
   condition     INTEGER NOT NULL CHECK (condition >= 0),
   params_json   TEXT NOT NULL DEFAULT '{}',
@@ -296,7 +298,7 @@ CREATE TABLE sensitivity_conditions(
 
 -- The latest run of each campaign, one row per condition (what `arena plot
 -- --map` and `arena export` read).
-CREATE VIEW sensitivity_latest AS
+CREATE VIEW IF NOT EXISTS sensitivity_latest AS
   SELECT r.campaign_id, c.*
   FROM sensitivity_conditions c JOIN sensitivity_runs r ON r.id = c.run_id
   WHERE r.id = (SELECT max(id) FROM sensitivity_runs WHERE campaign_id = r.campaign_id);

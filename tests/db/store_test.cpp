@@ -63,7 +63,8 @@ TEST(StoreOpen, MigratesEmptyFileAndReopens) {
     store->CreateCampaign(MakeCampaign(), MakeTrials(2));
   }
   EXPECT_EQ(RawScalar(path, "PRAGMA journal_mode"), "wal");
-  EXPECT_EQ(RawScalar(path, "SELECT COUNT(*) FROM schema_migrations"),
+  // Versions may have gaps (each engineer's migration has its own number).
+  EXPECT_EQ(RawScalar(path, "SELECT max(version) FROM schema_migrations"),
             std::to_string(Store::SchemaVersion()));
   auto again = Store::Open(path);
   EXPECT_EQ(again->FileSchemaVersion(), Store::SchemaVersion());
