@@ -280,7 +280,11 @@ CampaignSensitivityReport AnalyseCampaign(const db::Store& store, std::int64_t c
       c.index = t.condition;
       c.params_json = t.params_json.empty() ? "{}" : t.params_json;
       c.defects_json = t.defects_json.empty() ? "{}" : t.defects_json;
-      c.scene = PredictionScene(t.scene_json, prediction);
+      json model = prediction.is_object() ? prediction : json::object();
+      if (o.facets > 0) model["facets"] = o.facets;
+      if (o.points > 0) model["points"] = o.points;
+      if (o.dt > 0) model["dt"] = o.dt;
+      c.scene = PredictionScene(t.scene_json, model);
     }
     if (!t.gt_stream_id) continue;
     if (auto p = cell_profiles.find(t.id); p != cell_profiles.end()) {
@@ -342,6 +346,7 @@ json SettingsJson(const CampaignSensitivityOptions& o) {
   return {{"ensemble", o.ensemble},
           {"seed", std::to_string(o.seed)},
           {"simulator", o.simulator_name},
+          {"model_override", {{"facets", o.facets}, {"points", o.points}, {"dt", o.dt}}},
           {"check_stability", o.check_stability},
           {"noise_sigmas", o.stability.noise_sigmas},
           {"relative_tolerance", o.stability.relative_tolerance},

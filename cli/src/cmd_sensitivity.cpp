@@ -46,6 +46,8 @@ struct SensitivityCliOptions {
   bool no_store = false;
   bool json = false;
   std::string simulator = "arena";
+  int facets = 0, points = 0;  // model overrides (0: keep)
+  double dt = 0;
 };
 
 // The predictor by name. "arena" is mechanics::Simulate; other simulators
@@ -155,6 +157,10 @@ int RunSceneSensitivity(const SensitivityCliOptions& o, assessment::SensitivityO
   mechanics::Scene scene;
   try {
     scene = mechanics::LoadSceneFile(o.scene_path);
+    if (o.facets > 0) scene.model.facets = o.facets;
+    if (o.points > 0) scene.model.points = o.points;
+    if (o.dt > 0) scene.model.dt = o.dt;
+    mechanics::ValidateScene(scene);  // the overrides too
   } catch (const mechanics::SceneError& e) {
     throw CommandError(kExitBadInput, std::string("sensitivity: ") + e.what());
   }
@@ -260,6 +266,9 @@ int RunCampaignSensitivity(const SensitivityCliOptions& o,
   co.stability.linear_multiple = o.linear_multiple;
   co.simulate = so.simulate;
   co.simulator_name = o.simulator;
+  co.facets = o.facets;
+  co.points = o.points;
+  co.dt = o.dt;
 
   std::atomic<bool> cancel{false};
   SignalWatcher signals([&cancel](int) { cancel.store(true); });
@@ -407,6 +416,13 @@ void AddSensitivityCommand(CLI::App& app, Action* action) {
       ->capture_default_str();
   cmd->add_option("--simulator", o->simulator, "Predictor to analyse (arena)")
       ->capture_default_str();
+  cmd->add_option("--facets", o->facets,
+                  "Model setting for every run (0: the scene's, or the campaign's prediction)")
+      ->check(CLI::NonNegativeNumber);
+  cmd->add_option("--points", o->points, "Model setting for every run (0: keep)")
+      ->check(CLI::NonNegativeNumber);
+  cmd->add_option("--dt", o->dt, "Model time step for every run, s (0: keep)")
+      ->check(CLI::NonNegativeNumber);
   cmd->add_flag("--no-stability", o->no_stability, "Skip the stability probes");
   cmd->add_flag("--no-store", o->no_store, "Campaign view: do not store the run");
   cmd->add_flag("--json", o->json, "Print the report as JSON");

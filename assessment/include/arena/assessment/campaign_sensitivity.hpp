@@ -57,6 +57,11 @@ struct CampaignSensitivityOptions {
   // Floors under which a spread counts as zero: 1 um, 10 urad.
   double position_floor = 1e-6;
   double rotation_floor = 1e-5;
+  // Model settings for every run instead of the campaign's "prediction"
+  // ones (0: keep), e.g. a cell's own fidelity, to tell the noise's share of
+  // the spread from the model settings'.
+  int facets = 0, points = 0;
+  double dt = 0;
   SimulateFn simulate;                       // empty: DefaultSimulate()
   std::string simulator_name = "arena";      // recorded in the run's settings
   std::function<void(long, long)> progress;  // (conditions done, total), from worker threads
