@@ -199,6 +199,13 @@ struct Probe {
 
 void AddReason(Stability* s, const std::string& r) { s->reasons.push_back(r); }
 
+const char* UnitOf(const std::string& quantity) {
+  for (int q = 0; q < kQuantityCount; ++q) {
+    if (quantity == Name(Quantity(q))) return Unit(Quantity(q));
+  }
+  return "";
+}
+
 std::string Num(double v) {
   char buf[32];
   std::snprintf(buf, sizeof buf, "%.4g", v);
@@ -316,18 +323,21 @@ Stability CheckStability(const Scene& scene, const std::vector<Parameter>& param
   }
   for (size_t i = 0; i < params.size(); ++i) {
     const ParameterStability& ps = st.parameters[i];
-    const std::string tol_text = Num(ps.tolerance) + " " + params[i].unit;
+    // "0.02 N"; a dimensionless parameter (unit "1") gets no unit.
+    const std::string unit = params[i].unit == "1" ? "" : " " + params[i].unit;
+    const std::string tol_text = Num(ps.tolerance) + unit;
     if (ps.failed) {
       AddReason(&st, "the model fails within " + params[i].name + " +- " + tol_text);
     } else if (ps.flips) {
       AddReason(&st, params[i].name + " within +- " + tol_text + " changes the outcome (" +
-                         ps.change + ") at " + Num(ps.boundary.value_or(0)) + " " + params[i].unit);
+                         ps.change + ") at " + Num(ps.boundary.value_or(0)) + unit);
     }
     const ParameterSensitivity& ds = sens[i];
     if (!ds.jump_quantity.empty() && ps.tolerance > 0 && ds.parameter.step <= ps.tolerance) {
-      AddReason(&st, params[i].name + " +- " + Num(ds.parameter.step) + " " + params[i].unit +
+      AddReason(&st, params[i].name + " +- " + Num(ds.parameter.step) + unit +
                          " (within the tolerance " + tol_text + ") makes " + ds.jump_quantity +
-                         " jump by " + Num(ds.jump) + ": discontinuous here");
+                         " jump by " + Num(ds.jump) + " " + UnitOf(ds.jump_quantity) +
+                         ": discontinuous here");
     }
     if (ps.nonlinear) {
       AddReason(&st, params[i].name + " +- " + tol_text + " moves " + ps.nonlinear_quantity + " " +
