@@ -18,6 +18,7 @@
 
 #include "arena/db/store.hpp"
 #include "commands.hpp"
+#include "output_guard.hpp"
 #include "plot_charts.hpp"
 #include "plot_map_data.hpp"
 #include "plot_trial.hpp"
@@ -156,6 +157,7 @@ int PlotMap(const db::Store& store, const PlotOptions& o) {
 }
 
 int RunPlot(const PlotOptions& o) {
+  RefuseToOverwriteStore(o.out, "--out", o.db_path);
   if (!o.map.empty() && (o.tradeoff || o.trial >= 0)) {
     throw CommandError(kExitBadInput, "plot: --map is a plot of its own (no TRIAL, no --tradeoff)");
   }
