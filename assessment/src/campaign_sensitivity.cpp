@@ -108,7 +108,7 @@ db::SensitivityCondition AnalyseCondition(const Condition& c, const CampaignSens
   const ActuationNoise& noise = noises.front();
   json detail = {
       {"noise_source",
-       from_cells ? "the cells' recorded profiles" : "the campaign's profile (no trial ran)"},
+       from_cells ? "the profiles the trials ran under" : "the campaign's profile (no trial ran)"},
       {"distinct_profiles", std::set<std::string>(c.profiles.begin(), c.profiles.end()).size()},
       {"noise",
        {{"mu_scale_std", noise.mu_scale_std},
@@ -271,7 +271,7 @@ CampaignSensitivityReport AnalyseCampaign(const db::Store& store, std::int64_t c
   } catch (const json::exception&) {
     // A spec that is not JSON predicts with each scene's own model settings.
   }
-  const auto cell_profiles = db::CellDefectProfiles(store, campaign_id);
+  const auto cell_profiles = db::AppliedDefectProfiles(store, campaign_id);
   std::map<int, Condition> by_condition;
   for (const db::Trial& t : store.ListTrials(campaign_id)) {
     auto [it, fresh] = by_condition.try_emplace(t.condition);

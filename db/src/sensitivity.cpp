@@ -173,14 +173,20 @@ std::vector<SensitivityCondition> ListSensitivityConditions(const Store& store,
   return out;
 }
 
-std::map<std::int64_t, std::string> CellDefectProfiles(const Store& store,
-                                                       std::int64_t campaign_id) {
+std::map<std::int64_t, std::string> AppliedDefectProfiles(const Store& store,
+                                                          std::int64_t campaign_id) {
   detail::Stmt s(store.impl().db,
-                 "SELECT id, cell_defects_json FROM trials WHERE campaign_id = ? AND "
-                 "cell_defects_json IS NOT NULL");
+                 "SELECT id, json_extract(defects_applied, '$.effective'), cell_defects_json "
+                 "FROM trials WHERE campaign_id = ?");
   s.Bind(1, campaign_id);
   std::map<std::int64_t, std::string> out;
-  while (s.Step()) out[s.Int(0)] = s.Text(1);
+  while (s.Step()) {
+    if (!s.IsNull(1)) {
+      out[s.Int(0)] = s.Text(1);
+    } else if (!s.IsNull(2)) {
+      out[s.Int(0)] = s.Text(2);
+    }
+  }
   return out;
 }
 

@@ -23,12 +23,11 @@ std::string Campaign() {
 TEST(SensitivityEndToEnd, PivotCampaignReportStoredQueriedExportedAndMapped) {
   TempDir dir;
   const std::string db = dir / "pivot.db";
-  // The cells apply their own profile (the lab's noise; no latency: `arena
-  // export` cannot yet export a stream whose first observed samples are
-  // missing); the ensemble draws from it.
+  // The campaign's profile (the lab's actuation and friction noise) travels
+  // with each command; the cells apply it and record it; the ensemble draws
+  // from what they recorded.
   ASSERT_EQ(RunArena({"run", Campaign(), "--db", db, "--cells", "2", "--domain",
-                      std::to_string(TestDomain(18)), "--quiet", "--cell-defects",
-                      std::string(ARENA_SOURCE_DIR) + "/tests/assessment/data/cell_noise.json"},
+                      std::to_string(TestDomain(18)), "--quiet"},
                      dir / "run.out", std::chrono::seconds(240)),
             0)
       << ReadFile(dir / "run.out") << ReadFile(db + ".log");

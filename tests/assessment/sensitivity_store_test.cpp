@@ -96,11 +96,11 @@ TEST_F(SensitivityStore, BadInputIsRefusedAndNothingStored) {
 }
 
 TEST_F(SensitivityStore, CellProfilesAreThoseRecordedAtDispatch) {
-  EXPECT_TRUE(CellDefectProfiles(*store_, campaign_).empty());  // nothing dispatched
+  EXPECT_TRUE(AppliedDefectProfiles(*store_, campaign_).empty());  // nothing dispatched
   store_->UpsertCell("c1", {"point"}, "{}", R"({"friction_variability": {"mu_scale_std": 0.1}})");
   const auto claimed = store_->ClaimNextTrial("c1");
   ASSERT_TRUE(claimed.has_value());
-  const auto profiles = CellDefectProfiles(*store_, campaign_);
+  const auto profiles = AppliedDefectProfiles(*store_, campaign_);
   ASSERT_EQ(profiles.size(), 1u);
   EXPECT_NE(profiles.at(claimed->trial_id).find("mu_scale_std"), std::string::npos);
 }

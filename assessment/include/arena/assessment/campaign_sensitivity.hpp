@@ -6,25 +6,11 @@
 // showed, and the condition's stability (sensitivity.hpp) with the cell's
 // noise levels as tolerances.
 //
-// Whose profile: the one each replicate really ran under -- the cell's
-// announced profile recorded at dispatch (a cell applies its own profile,
-// `arena cell --defects`, `arena run --cell-defects`); ensemble member k
-// draws from replicate k mod n's. Only when no trial of the condition ran is
-// the campaign's stored profile used.
-//
-// Outcome compared: the displacement vector (final - start position) and the
-// rotation vector (of q_end q_start^-1) of the object, both in the gripper
-// frame; a spread is the RMS distance of the members from their mean
-// (sqrt of the trace of the sample covariance, n - 1 in the denominator).
-//
-// Does the model explain the variability? For each of the two spreads, with
-// n replicates and the ensemble spread s_pred taken as the truth, the ratio
-// (s_obs / s_pred)^2 is compared with chi^2(n - 1) / (n - 1): inside its
-// central 95 % interval the verdict is "matches", above "model_underestimates"
-// (the cell varies more than the model's noise explains), below
-// "model_overestimates". Conditions with fewer than 2 replicates are
-// "too_few_replicates". A campaign-wide pooled test adds up
-// (n - 1) s_obs^2 / s_pred^2 over conditions against chi^2(sum (n - 1)).
+// Whose profile: the one each replicate really ran under -- the effective
+// profile its cell recorded (the cell's own and the campaign's combined,
+// trials.defects_applied), or for older stores the cell's announced profile;
+// ensemble member k draws from replicate k mod n's. Only when no trial of
+// the condition ran is the campaign's stored profile used.
 #pragma once
 
 #include <atomic>

@@ -64,11 +64,14 @@ std::vector<SensitivityRun> ListSensitivityRuns(const Store& store, std::int64_t
 std::vector<SensitivityCondition> ListSensitivityConditions(const Store& store,
                                                             std::int64_t run_id);
 
-// The defect profile each trial of the campaign really ran under: the
-// cell's announced profile recorded at dispatch (trials.cell_defects_json),
-// by trial id; trials never dispatched are absent.
-std::map<std::int64_t, std::string> CellDefectProfiles(const Store& store,
-                                                       std::int64_t campaign_id);
+// The defect profile each trial of the campaign really ran under, by trial
+// id: the effective profile the cell recorded with its execution
+// (trials.defects_applied "effective": the cell's and the campaign's
+// combined, schema version 10), else the cell's announced profile recorded
+// at dispatch (trials.cell_defects_json; cells that applied only their own).
+// Trials with neither are absent.
+std::map<std::int64_t, std::string> AppliedDefectProfiles(const Store& store,
+                                                          std::int64_t campaign_id);
 
 // Writes <dir>/sensitivity.csv (one row per condition of the campaign's
 // latest run; header only when there is none) for `arena export`; @returns
