@@ -23,9 +23,9 @@ namespace {
 
 using mechanics::Scene;
 
-constexpr double kRelativeStep = 1e-2;     // of the scale, for magnitudes
-constexpr double kPositionStep = 2e-3;     // of the object's extent
-constexpr double kTiltStep = 2e-3;         // rad
+constexpr double kRelativeStep = 1e-2;  // of the scale, for magnitudes
+constexpr double kPositionStep = 2e-3;  // of the object's extent
+constexpr double kTiltStep = 2e-3;      // rad
 
 std::string ContactName(const Scene& s, int contact) {
   return contact < static_cast<int>(s.fingers.size()) ? s.fingers[static_cast<size_t>(contact)].name

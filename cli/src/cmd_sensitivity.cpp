@@ -19,6 +19,7 @@
 #include "arena/db/sensitivity.hpp"
 #include "arena/db/store.hpp"
 #include "arena/mechanics/scene_json.hpp"
+#include "arena/simulators/simulator.hpp"
 #include "commands.hpp"
 #include "progress.hpp"
 #include "signals.hpp"
@@ -46,15 +47,22 @@ struct SensitivityCliOptions {
   bool no_store = false;
   bool json = false;
   std::string simulator = "arena";
+  std::string simulator_settings;
   int facets = 0, points = 0;  // model overrides (0: keep)
   double dt = 0;
 };
 
-// The predictor by name. "arena" is mechanics::Simulate; other simulators
-// (simulators/ room) plug in here.
-assessment::SimulateFn SimulatorByName(const std::string& name) {
-  if (name == "arena") return assessment::DefaultSimulate();
-  throw CommandError(kExitBadInput, "--simulator: unknown simulator '" + name + "' (known: arena)");
+// The predictor by name (simulators room: "arena", "mujoco"), with its
+// settings as JSON ("" = defaults). Simulator::Simulate is const and
+// thread-safe, so one instance serves every worker.
+assessment::SimulateFn SimulatorByName(const std::string& name, const std::string& settings) {
+  std::shared_ptr<const simulators::Simulator> sim;
+  try {
+    sim = simulators::MakeSimulator(name, settings);
+  } catch (const simulators::SimulatorError& e) {
+    throw CommandError(kExitBadInput, std::string("--simulator: ") + e.what());
+  }
+  return [sim](const mechanics::Scene& scene) { return sim->Simulate(scene); };
 }
 
 // "5%" or "0.05" (relative, every parameter), or NAME=VALUE (absolute, in
@@ -265,7 +273,8 @@ int RunCampaignSensitivity(const SensitivityCliOptions& o,
   co.stability.noise_sigmas = o.sigmas;
   co.stability.linear_multiple = o.linear_multiple;
   co.simulate = so.simulate;
-  co.simulator_name = o.simulator;
+  co.simulator_name =
+      o.simulator + (o.simulator_settings.empty() ? "" : " " + o.simulator_settings);
   co.facets = o.facets;
   co.points = o.points;
   co.dt = o.dt;
@@ -364,7 +373,7 @@ int RunSensitivity(const SensitivityCliOptions& o) {
   so.params = o.params;
   so.step_scale = o.step_scale;
   so.threads = o.threads;
-  so.simulate = SimulatorByName(o.simulator);
+  so.simulate = SimulatorByName(o.simulator, o.simulator_settings);
   so.stability.noise_sigmas = o.sigmas;
   so.stability.linear_multiple = o.linear_multiple;
   for (const auto& t : o.tolerances) ParseTolerance(t, &so.stability);
@@ -414,8 +423,10 @@ void AddSensitivityCommand(CLI::App& app, Action* action) {
   cmd->add_option("--seed", o->seed, "Campaign view: the ensemble's seed")->capture_default_str();
   cmd->add_option("--threads", o->threads, "Worker threads (0: one per core)")
       ->capture_default_str();
-  cmd->add_option("--simulator", o->simulator, "Predictor to analyse (arena)")
+  cmd->add_option("--simulator", o->simulator, "Predictor to analyse: arena or mujoco")
       ->capture_default_str();
+  cmd->add_option("--simulator-settings", o->simulator_settings,
+                  "The simulator's settings as JSON, e.g. '{\"timestep\": 0.001}' for mujoco");
   cmd->add_option("--facets", o->facets,
                   "Model setting for every run (0: the scene's, or the campaign's prediction)")
       ->check(CLI::NonNegativeNumber);
