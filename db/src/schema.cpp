@@ -289,6 +289,7 @@ CREATE TABLE cell_events(
   reason  TEXT NOT NULL DEFAULT '',
   by_whom TEXT NOT NULL DEFAULT ''
 );
+)sql"},
       {8, "sensitivity runs: predicted vs observed spread and unstable conditions", R"sql(
 -- IF NOT EXISTS: a file rolled back to an older version by hand (as the
 -- migration tests do) may still hold these tables; they are kept as they are.
