@@ -3,6 +3,7 @@
 // next scheduling pass (within 0.2 s).
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
 #include <ctime>
 #include <memory>
 #include <optional>
@@ -71,8 +72,14 @@ std::string NoServiceWarning(const db::Store& store, const std::string& db_path)
 }
 
 int Submit(const std::string& campaign_path, const std::string& db_path) {
-  // Before any thread: Ctrl-C abandons the one transaction (nothing stored), exit 130.
-  SignalWatcher signals([](int) {});
+  // Before any thread. Ctrl-C (or SIGTERM) ends the submit at once, exit 130:
+  // the campaign is written in one transaction, and a process that ends
+  // before its commit leaves nothing of it (SQLite rolls it back, as after
+  // SIGKILL); validating a big campaign can take a while, so do not wait.
+  SignalWatcher signals([](int) {
+    std::fputs("arena: submit interrupted; nothing was stored\n", stderr);
+    std::_Exit(kExitInterrupted);
+  });
   const orchestrator::Campaign campaign = LoadValidCampaign(campaign_path);
   auto store = OpenStore(db_path, false);
   try {

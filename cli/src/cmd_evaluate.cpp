@@ -7,6 +7,7 @@
 #include <cstdio>
 #include <sstream>
 #include <string>
+#include <vector>
 
 #include <nlohmann/json.hpp>
 
@@ -107,6 +108,7 @@ int RunEvaluate(const EvaluateOptions& o) {
   eo.cancel = &cancel;
 
   orchestrator::EvaluationRun run;
+  std::vector<db::Store::TruthCount> truths;  // what the errors are measured against
   try {
     db::StoreOptions so;
     so.create = false;
@@ -117,6 +119,7 @@ int RunEvaluate(const EvaluateOptions& o) {
       progress->Update(done, failed);
     };
     run = orchestrator::EvaluateCampaign(*store, o.campaign, eo);
+    truths = store->CampaignTruths(o.campaign);
     if (progress) progress->Finish();
   } catch (const db::StoreError& e) {
     throw StoreCommandError(e);
@@ -130,10 +133,21 @@ int RunEvaluate(const EvaluateOptions& o) {
   if (o.json) {
     nlohmann::json j = orchestrator::ToJson(run.report);
     j["evaluation_id"] = run.evaluation_id;
+    j["truth"] = nlohmann::json::array();
+    for (const auto& t : truths)
+      j["truth"].push_back({{"truth", t.truth}, {"backend", t.backend}, {"trials", t.trials}});
     std::printf("%s\n", j.dump(2).c_str());
   } else {
     const std::string text = FormatTable(run.report, run.evaluation_id);
     std::fwrite(text.data(), 1, text.size(), stdout);
+    for (const auto& t : truths) {
+      std::printf("truth: %s (%s backend), %lld trials%s\n",
+                  t.truth.empty() ? "unreported" : t.truth.c_str(),
+                  t.backend.empty() ? "?" : t.backend.c_str(), static_cast<long long>(t.trials),
+                  t.truth == "self-consistency"
+                      ? ": these errors are arena's model against itself, not accuracy"
+                      : "");
+    }
   }
   return kExitOk;
 }

@@ -42,6 +42,8 @@ constexpr char kCellPrefix[] = "arena.cell.";
 // A service whose last beat is younger than this holds the store (unless its
 // pid is known dead on this host).
 constexpr double kServiceFresh_s = 15.0;
+// A service on this host is asked (its pid) if it beat within this long.
+constexpr double kServiceRemembered_s = 600.0;
 
 std::string CellOfParticipant(const std::string& participant) {
   const std::string prefix = kCellPrefix;
@@ -332,9 +334,13 @@ struct Service::Impl {
     ServiceIdentity me{session, HostName(), static_cast<std::uint32_t>(getpid()), store->StoreId()};
     // One service per store: a second one refuses to start, naming the first.
     db::ServiceRecord record{SessionHex(session), getpid(), me.host, o.domain_id, 0, 0, {}};
+    // On this host the pid says whether it lives (even if a long foreign
+    // write lock kept it from beating); elsewhere its beat must be fresh.
+    const double now = store->Now();
     const auto holder =
-        store->RegisterService(record, kServiceFresh_s, [&me](const db::ServiceRecord& other) {
-          return other.host != me.host || ProcessAlive(other.pid);
+        store->RegisterService(record, kServiceRemembered_s, [&](const db::ServiceRecord& other) {
+          return other.host == me.host ? ProcessAlive(other.pid)
+                                       : now - other.last_beat < kServiceFresh_s;
         });
     if (holder) {
       throw db::StoreError(db::StoreError::Kind::kBusy,
