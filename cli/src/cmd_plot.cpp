@@ -4,6 +4,8 @@
 // Modes (one per plot; add a mode as: an option/flag below, a chart builder
 // in plot_charts.hpp, a branch in RunPlot):
 //   --tradeoff   the speed/accuracy trade of an evaluation run (arena evaluate)
+//   --map X,Y    a metric over two varied parameters of a campaign
+//                (BuildCampaignMap, plot_map_data.hpp; RenderMapSvg)
 //   TRIAL        one trial's pose and contact forces, true vs observed vs
 //                predicted (PlotTrial, plot_trial.hpp)
 #include <algorithm>
@@ -22,6 +24,7 @@
 #include "commands.hpp"
 #include "output_guard.hpp"
 #include "plot_charts.hpp"
+#include "plot_map_data.hpp"
 #include "plot_trial.hpp"
 #include "store_errors.hpp"
 
@@ -216,6 +219,8 @@ struct PlotOptions {
   std::int64_t evaluation = -1;
   std::int64_t trial = -1;
   bool tradeoff = false;
+  std::vector<std::string> map;  // X, Y
+  std::string metric;
   std::string out;
 };
 
@@ -259,8 +264,30 @@ int PlotTradeoff(const db::Store& store, const PlotOptions& o) {
   return kExitOk;
 }
 
+int PlotMap(const db::Store& store, const PlotOptions& o) {
+  if (o.campaign < 0) throw CommandError(kExitBadInput, "plot --map: needs --campaign ID");
+  if (o.map.size() != 2 || o.map[0].empty() || o.map[1].empty()) {
+    throw CommandError(kExitBadInput, "plot --map: give two varied parameters, X,Y");
+  }
+  if (o.metric.empty()) {
+    throw CommandError(kExitBadInput,
+                       "plot --map: needs --metric M (one of " + MapMetricNames() + ")");
+  }
+  MapData map;
+  try {
+    map = BuildCampaignMap(store, o.campaign, o.map[0], o.map[1], o.metric);
+  } catch (const std::invalid_argument& e) {
+    throw CommandError(kExitBadInput, std::string("plot ") + e.what());
+  }
+  WriteFile(o.out, RenderMapSvg(map));
+  return kExitOk;
+}
+
 int RunPlot(const PlotOptions& o) {
   RefuseToOverwriteStore(o.out, "--out", o.db_path);
+  if (!o.map.empty() && (o.tradeoff || o.trial >= 0)) {
+    throw CommandError(kExitBadInput, "plot: --map is a plot of its own (no TRIAL, no --tradeoff)");
+  }
   if (o.tradeoff && o.trial >= 0) {
     throw CommandError(kExitBadInput, "plot: give either a TRIAL or --tradeoff, not both");
   }
@@ -270,8 +297,10 @@ int RunPlot(const PlotOptions& o) {
     so.read_only = true;
     auto store = db::Store::Open(o.db_path, so);
     if (o.tradeoff) return PlotTradeoff(*store, o);
+    if (!o.map.empty()) return PlotMap(*store, o);
     throw CommandError(kExitBadInput,
-                       "plot: choose a plot: a TRIAL id, or --campaign ID --tradeoff");
+                       "plot: choose a plot: a TRIAL id, --campaign ID --tradeoff, or "
+                       "--campaign ID --map X,Y --metric M");
   } catch (const db::StoreError& e) {
     throw StoreCommandError(e);
   }
@@ -294,9 +323,16 @@ void AddPlotCommand(CLI::App& app, Action* action) {
   cmd->add_option("--evaluation", o->evaluation,
                   "With --tradeoff: this evaluation run instead of the latest")
       ->check(CLI::NonNegativeNumber);
+  cmd->add_option("--map", o->map,
+                  "A map over two varied parameters of the campaign, X,Y (e.g. "
+                  "grip_force,pivot_offset)")
+      ->delimiter(',');
+  cmd->add_option("--metric", o->metric, "With --map: the colour, one of " + MapMetricNames());
   cmd->footer(
       "Examples:\n"
       "  arena plot --db lab.db 12 --out trial12.svg\n"
+      "  arena plot --db lab.db --campaign 3 --map grip_force,pivot_offset --metric unstable "
+      "--out map.svg\n"
       "  arena plot --db lab.db --campaign 3 --tradeoff --out tradeoff.svg\n"
       "A trial's prediction is re-run with the campaign's \"prediction\" settings, as `arena "
       "serve` ran it.\n"

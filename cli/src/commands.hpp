@@ -49,4 +49,7 @@ void AddPlotCommand(CLI::App& app, Action* action);      // cmd_plot.cpp (TRIAL 
 void AddWatchCommand(CLI::App& app, Action* action);     // cmd_watch.cpp
 void AddCertsCommand(CLI::App& app, Action* action);     // cmd_certs.cpp (init, issue)
 
+// cmd_sensitivity.cpp (scene and campaign views)
+void AddSensitivityCommand(CLI::App& app, Action* action);
+
 }  // namespace arena::cli

@@ -31,6 +31,7 @@ int main(int argc, char** argv) {
   AddPlotCommand(app, &action);
   AddWatchCommand(app, &action);
   AddCertsCommand(app, &action);
+  AddSensitivityCommand(app, &action);
 
   try {
     app.parse(argc, argv);

@@ -1,5 +1,6 @@
 // Dataset export (export.hpp describes the layout).
 #include "arena/db/export.hpp"
+#include "arena/db/sensitivity.hpp"
 
 #include <fcntl.h>
 #include <hdf5.h>
@@ -929,6 +930,8 @@ ExportReport WriteDataset(const Store& store, const ExportOptions& o, const fs::
   WriteText(dir / "trials.csv", FormatCsv(index.table));
   WriteText(dir / "contacts.csv", FormatCsv(contacts));
   WriteText(dir / "scenes.jsonl", ScenesJsonl(index));
+  // The campaign's latest sensitivity run, if any (db/sensitivity.hpp).
+  WriteSensitivityExport(store, o.campaign_id, dir.string());
   if (o.format == ExportFormat::kJsonl) {
     WriteJsonLines(dir / "trials.jsonl", index.table);
     WriteJsonLines(dir / "contacts.jsonl", contacts);

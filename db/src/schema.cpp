@@ -331,6 +331,51 @@ INSERT OR IGNORE INTO campaign_parameters(campaign_id, name)
   WHERE j.key IS NOT NULL ORDER BY t.id, j.id;
 )sql",
        internal::MigrateToOutcomes},
+      {8, "sensitivity runs: predicted vs observed spread and unstable conditions", R"sql(
+-- IF NOT EXISTS: a file rolled back to an older version by hand (as the
+-- migration tests do) may still hold these tables; they are kept as they are.
+CREATE TABLE IF NOT EXISTS sensitivity_runs(
+  id            INTEGER PRIMARY KEY,
+  campaign_id   INTEGER NOT NULL REFERENCES campaigns(id),
+  created_at    REAL NOT NULL,
+  settings_json TEXT NOT NULL DEFAULT '{}',
+  report_json   TEXT NOT NULL DEFAULT '{}'
+);
+CREATE INDEX IF NOT EXISTS sensitivity_runs_by_campaign ON sensitivity_runs(campaign_id);
+
+CREATE TABLE IF NOT EXISTS sensitivity_conditions(
+  run_id        INTEGER NOT NULL REFERENCES sensitivity_runs(id),
+  condition     INTEGER NOT NULL CHECK (condition >= 0),
+  params_json   TEXT NOT NULL DEFAULT '{}',
+  replicates    INTEGER NOT NULL CHECK (replicates >= 0),
+  ensemble      INTEGER NOT NULL CHECK (ensemble >= 0),
+  ensemble_failed INTEGER NOT NULL DEFAULT 0 CHECK (ensemble_failed >= 0),
+  predicted_position_spread REAL,
+  observed_position_spread  REAL,
+  predicted_rotation_spread REAL,
+  observed_rotation_spread  REAL,
+  predicted_displacement    REAL,
+  observed_displacement     REAL,
+  predicted_rotation        REAL,
+  observed_rotation         REAL,
+  verdict       TEXT NOT NULL,
+  flip_fraction REAL NOT NULL DEFAULT 0,
+  unstable      INTEGER NOT NULL CHECK (unstable IN (0, 1)),
+  boundary_parameter  TEXT NOT NULL DEFAULT '',
+  boundary_offset     REAL,
+  boundary_tolerances REAL,
+  reason        TEXT NOT NULL DEFAULT '',
+  detail_json   TEXT NOT NULL DEFAULT '{}',
+  PRIMARY KEY (run_id, condition)
+);
+
+-- The latest run of each campaign, one row per condition (what `arena plot
+-- --map` and `arena export` read).
+CREATE VIEW IF NOT EXISTS sensitivity_latest AS
+  SELECT r.campaign_id, c.*
+  FROM sensitivity_conditions c JOIN sensitivity_runs r ON r.id = c.run_id
+  WHERE r.id = (SELECT max(id) FROM sensitivity_runs WHERE campaign_id = r.campaign_id);
+)sql"},
       // What a trial's ground truth is and which defects were really applied
       // (issue 13): every report can say which truth it measured against.
       {10, "trials: the cell backend, its kind of truth and the defects applied", R"sql(

@@ -8,6 +8,8 @@
 //                            error, ground-truth summary and object outcome, stored
 //                            prediction error, the re-run prediction's predictor and
 //                            setting, and the full scene JSON (scene_json)
+//   sensitivity.csv          only when the campaign has a sensitivity run: its latest run,
+//                            one row per condition (db/sensitivity.hpp)
 //   contacts.csv             one row per (trial, contact): stick/slide/separate
 //                            fractions, slip distance, largest normal force
 //   hdf5:  dataset.h5        /trials/<trial_id>/true, /observed, /predicted, /contacts:
