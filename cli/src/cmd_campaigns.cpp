@@ -10,6 +10,7 @@
 #include <nlohmann/json.hpp>
 
 #include "arena/db/store.hpp"
+#include "arena/orchestrator/adaptive.hpp"
 #include "arena/orchestrator/campaign.hpp"
 #include "arena/orchestrator/submit.hpp"
 #include "campaign_input.hpp"
@@ -50,9 +51,18 @@ int Submit(const std::string& campaign_path, const std::string& db_path) {
   try {
     const std::int64_t id = orchestrator::SubmitCampaign(*store, campaign);
     std::printf("%lld\n", static_cast<long long>(id));
-    std::fprintf(stderr, "campaign %lld '%s': %lld trials planned in %s\n",
-                 static_cast<long long>(id), campaign.name.c_str(),
-                 static_cast<long long>(orchestrator::TrialCount(campaign)), db_path.c_str());
+    if (campaign.adaptive) {
+      std::fprintf(stderr,
+                   "campaign %lld '%s': adaptive %s sampler, %lld trials planned in round 0 in %s "
+                   "(the service plans the next rounds from their outcomes)\n",
+                   static_cast<long long>(id), campaign.name.c_str(),
+                   orchestrator::ToString(campaign.adaptive->kind),
+                   static_cast<long long>(store->ListTrials(id).size()), db_path.c_str());
+    } else {
+      std::fprintf(stderr, "campaign %lld '%s': %lld trials planned in %s\n",
+                   static_cast<long long>(id), campaign.name.c_str(),
+                   static_cast<long long>(orchestrator::TrialCount(campaign)), db_path.c_str());
+    }
   } catch (const db::StoreError& e) {
     throw StoreCommandError(e);
   }
@@ -110,6 +120,11 @@ int Status(const std::string& db_path, std::int64_t only, bool as_json) {
                           {"cancelled", c.cancelled},
                           {"rate_per_hour", c.rate_per_hour}};
       j["eta_s"] = c.eta_s ? nlohmann::json(*c.eta_s) : nlohmann::json();
+      if (const auto a = orchestrator::ReadAdaptiveProgress(store->GetCampaign(c.id))) {
+        j["adaptive"] = {{"sampler", a->sampler}, {"round", a->round},     {"open", a->open},
+                         {"refining", a->refining}, {"progress", a->progress},
+                         {"fraction", a->fraction}};
+      }
       out["campaigns"].push_back(j);
     }
     for (const auto& c : s.cells)
@@ -137,6 +152,16 @@ int Status(const std::string& db_path, std::int64_t only, bool as_json) {
                 static_cast<long long>(c.planned), static_cast<long long>(c.done),
                 static_cast<long long>(c.failed), static_cast<long long>(c.running),
                 c.rate_per_hour, c.eta_s ? FormatDuration(*c.eta_s).c_str() : "-");
+  bool header = false;
+  for (const auto& c : s.campaigns) {
+    const auto a = orchestrator::ReadAdaptiveProgress(store->GetCampaign(c.id));
+    if (!a) continue;
+    if (!header) std::printf("\nadaptive sampling:\n");
+    header = true;
+    std::printf("%-5lld %-10s round %-3d %3.0f %%  refining %s\n      %s\n",
+                static_cast<long long>(c.id), a->sampler.c_str(), a->round, a->fraction * 100,
+                a->refining.c_str(), a->progress.c_str());
+  }
   std::printf("\n%-16s %-12s %-21s %s\n", "cell", "health", "last seen", "failures in a row");
   for (const auto& c : s.cells)
     std::printf("%-16s %-12s %-21s %d%s%s\n", c.id.c_str(), db::ToString(c.state),

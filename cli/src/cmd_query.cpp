@@ -19,7 +19,13 @@ struct QueryOptions {
   std::string where;
   std::string outcome;
   std::string format = "table";
+  bool decisions = false;
 };
+
+// Why each trial of an adaptive campaign was chosen (view trial_decisions).
+constexpr const char* kDecisionsQuery =
+    "SELECT trial_id, campaign_id, idx, round, state, params_json, reason FROM trial_decisions"
+    " ORDER BY trial_id";
 
 int RunQueryCommand(const QueryOptions& o) {
   try {
@@ -30,7 +36,9 @@ int RunQueryCommand(const QueryOptions& o) {
     if (o.campaign >= 0) filter.campaign_id = o.campaign;
     filter.where = o.where;
     filter.outcome = o.outcome;
-    const auto result = db::RunQuery(*store, o.sql, filter);
+    if (o.decisions && !o.sql.empty())
+      throw CommandError(kExitBadInput, "--decisions: give either SQL or --decisions, not both");
+    const auto result = db::RunQuery(*store, o.decisions ? kDecisionsQuery : o.sql, filter);
     const std::string text = o.format == "csv"    ? db::FormatCsv(result)
                              : o.format == "json" ? db::FormatJson(result)
                                                   : db::FormatTable(result);
@@ -58,6 +66,9 @@ void AddQueryCommand(CLI::App& app, Action* action) {
                   "An SQL condition on the result's columns, e.g. 'grip_force > 5'");
   cmd->add_option("--outcome", o->outcome,
                   "Only rows whose outcome is X (ok, failed, refused, ...)");
+  cmd->add_flag("--decisions", o->decisions,
+                "Why each trial of an adaptive campaign was chosen (round, rule, evidence; "
+                "view trial_decisions)");
   cmd->add_option("--format", o->format, "Output format")
       ->check(CLI::IsMember({"table", "csv", "json"}));
   cmd->footer(
@@ -65,6 +76,7 @@ void AddQueryCommand(CLI::App& app, Action* action) {
       "  arena query --db lab.db --campaign 1 --where 'grip_force > 5' --format csv\n"
       "  arena query --db lab.db \"SELECT cell_id, COUNT(*) FROM trials GROUP BY cell_id\"\n"
       "  arena query --db lab.db \"SELECT * FROM start_state_drift\"\n"
+      "  arena query --db lab.db --campaign 2 --decisions\n"
       "The store is opened read-only: a statement that would write is refused (exit 2).\n"
       "Tables and columns: db/README.md.\n");
   cmd->callback([o, action] { *action = [o] { return RunQueryCommand(*o); }; });

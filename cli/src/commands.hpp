@@ -47,5 +47,6 @@ void AddEvaluateCommand(CLI::App& app, Action* action);  // cmd_evaluate.cpp
 void AddPlotCommand(CLI::App& app, Action* action);      // cmd_plot.cpp (TRIAL or --tradeoff)
 void AddWatchCommand(CLI::App& app, Action* action);     // cmd_watch.cpp
 void AddCertsCommand(CLI::App& app, Action* action);     // cmd_certs.cpp (init, issue)
+void AddCalibrateCommand(CLI::App& app, Action* action);  // cmd_calibrate.cpp
 
 }  // namespace arena::cli

@@ -28,6 +28,7 @@ int main(int argc, char** argv) {
   AddPlotCommand(app, &action);
   AddWatchCommand(app, &action);
   AddCertsCommand(app, &action);
+  AddCalibrateCommand(app, &action);
 
   try {
     app.parse(argc, argv);

@@ -258,6 +258,44 @@ CREATE INDEX evaluation_results_by_model ON evaluation_results(evaluation_id, mo
       {4, "ground-truth chunks may be packed (block format AGT2)", R"sql(
 -- gt_chunks.data: "AGT1" (raw) or "AGT2" (packed) blocks; db/README.md.
 )sql"},
+      // Adaptive campaigns (orchestrator/adaptive.hpp) and calibrations
+      // (assessment/calibration.hpp). sampler_open = 1: an adaptive sampler
+      // may still add trials, so the campaign is not done when its trials are.
+      {7, "adaptive sampler decisions, campaigns.sampler_open, calibrations", R"sql(
+ALTER TABLE campaigns ADD COLUMN sampler_open INTEGER NOT NULL DEFAULT 0
+  CHECK (sampler_open IN (0, 1));
+
+CREATE TABLE sampler_decisions(
+  id          INTEGER PRIMARY KEY,
+  campaign_id INTEGER NOT NULL REFERENCES campaigns(id),
+  round       INTEGER NOT NULL CHECK (round >= 0),
+  trial_id    INTEGER REFERENCES trials(id),
+  reason      TEXT NOT NULL,
+  basis_json  TEXT NOT NULL DEFAULT '{}',
+  created_at  REAL NOT NULL
+);
+CREATE INDEX sampler_decisions_by_campaign ON sampler_decisions(campaign_id, round, id);
+CREATE UNIQUE INDEX sampler_decisions_by_trial ON sampler_decisions(trial_id)
+  WHERE trial_id IS NOT NULL;
+
+CREATE VIEW trial_decisions AS
+  SELECT t.id AS trial_id, t.campaign_id, t.idx, t.state, t.params_json, t.outcome,
+         d.round, d.reason, d.basis_json
+  FROM sampler_decisions d JOIN trials t ON t.id = d.trial_id;
+
+CREATE TABLE calibrations(
+  id            INTEGER PRIMARY KEY,
+  campaign_id   INTEGER NOT NULL REFERENCES campaigns(id),
+  created_at    REAL NOT NULL,
+  params_json   TEXT NOT NULL DEFAULT '{}',
+  settings_json TEXT NOT NULL DEFAULT '{}',
+  heldout_error_before REAL NOT NULL,
+  heldout_error_after  REAL NOT NULL,
+  applied       INTEGER NOT NULL CHECK (applied IN (0, 1)),
+  report_json   TEXT NOT NULL DEFAULT '{}'
+);
+CREATE INDEX calibrations_by_campaign ON calibrations(campaign_id);
+)sql"},
   };
   return kMigrations;
 }

@@ -2,9 +2,11 @@
 
 #include <chrono>
 #include <cstdio>
+#include <map>
 
 #include <nlohmann/json.hpp>
 
+#include "arena/assessment/calibration.hpp"
 #include "arena/mechanics/scene_json.hpp"
 #include "arena/orchestrator/scoring.hpp"
 
@@ -41,6 +43,22 @@ mechanics::Scene ApplyModelSettings(const mechanics::Scene& scene, const nlohman
       out.model.reduce = mechanics::Reduce::kPlanar;
     else
       throw mechanics::SceneError("model.reduce", "must be auto, full or planar");
+  }
+  // A calibration (arena calibrate) resolved by SubmitCampaign: parameter scales.
+  if (model.contains("calibrated")) {
+    const auto& c = model["calibrated"];
+    if (!c.is_object()) throw mechanics::SceneError("model.calibrated", "must be an object");
+    std::map<std::string, double> scales;
+    for (const auto& item : c.items()) {
+      if (!item.value().is_number())
+        throw mechanics::SceneError("model.calibrated." + item.key(), "must be a number");
+      scales[item.key()] = item.value().get<double>();
+    }
+    try {
+      out = assessment::ApplyScales(out, scales);
+    } catch (const assessment::CalibrationError& e) {
+      throw mechanics::SceneError("model.calibrated", e.what());
+    }
   }
   mechanics::ValidateScene(out);
   return out;

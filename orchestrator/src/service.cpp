@@ -21,6 +21,7 @@
 #include "arena/db/store.hpp"
 #include "arena/mechanics/scene_json.hpp"
 #include "arena/mechanics/simulate.hpp"
+#include "arena/orchestrator/adaptive.hpp"
 #include "arena/orchestrator/logging.hpp"
 #include "arena/orchestrator/prediction.hpp"
 #include "arena/orchestrator/scoring.hpp"
@@ -157,6 +158,8 @@ struct Service::Impl {
   // After the participant: a bad network or security setting fails before
   // the store file is created or touched (bad input changes nothing stored).
   std::unique_ptr<db::Store> store;
+  // Adaptive campaigns' next rounds (adaptive.hpp): one call per scheduling pass.
+  AdaptivePlanner adaptive{*store};
 
   // This run's identity on the command topic (TrialCommand.service_session).
   const std::uint64_t session = std::random_device{}() * 0x100000000ull + std::random_device{}();
@@ -446,6 +449,9 @@ struct Service::Impl {
   // ------------------------------------------------------------ dispatch
   void Dispatch() {
     if (stop_requested) return;
+    adaptive.Advance(static_cast<int>(std::count_if(cells.begin(), cells.end(), [](const auto& c) {
+      return c.second.alive && !c.second.quarantined && c.second.phase == CellPhase::kIdle;
+    })));
     const auto now = Clock::now();
     for (auto& [id, cell] : cells) {
       if (!cell.alive || cell.quarantined || cell.phase != CellPhase::kIdle ||
