@@ -92,6 +92,15 @@ std::vector<BoundaryProposal> ProposeBoundaryPoints(const std::vector<LabelledPo
     double d_pos, d_neg, score;
     std::int64_t near_pos, near_neg;
   };
+  // 1-D: the labelled points in order; a candidate is uncertain when its
+  // neighbours on either side disagree (a bracket), so a batch of b splits
+  // the brackets (b = 1: bisection).
+  std::vector<std::pair<double, const LabelledPoint*>> line;
+  if (dims == 1) {
+    for (const auto& p : labelled) line.emplace_back(p.u[0], &p);
+    std::sort(line.begin(), line.end(),
+              [](const auto& a, const auto& b) { return a.first < b.first; });
+  }
   std::vector<Candidate> on_boundary;
   for (std::int64_t i = 0; i < n; ++i) {
     const std::vector<double> u = LatticePoint(i, dims, levels);
@@ -107,8 +116,19 @@ std::vector<BoundaryProposal> ProposeBoundaryPoints(const std::vector<LabelledPo
         c.near_neg = p.trial_id;
       }
     }
-    if (std::abs(c.d_pos - c.d_neg) > h) continue;  // not on the 1-NN decision boundary
-    c.score = std::min(c.d_pos, c.d_neg);
+    if (dims == 1) {
+      const auto hi = std::upper_bound(line.begin(), line.end(), u[0],
+                                       [](double x, const auto& e) { return x < e.first; });
+      if (hi == line.begin() || hi == line.end()) continue;
+      const auto lo = std::prev(hi);
+      if (lo->second->positive == hi->second->positive) continue;  // not in a bracket
+      c.near_pos = lo->second->positive ? lo->second->trial_id : hi->second->trial_id;
+      c.near_neg = lo->second->positive ? hi->second->trial_id : lo->second->trial_id;
+      c.score = std::min(u[0] - lo->first, hi->first - u[0]);
+    } else {
+      if (std::abs(c.d_pos - c.d_neg) > h) continue;  // not on the 1-NN decision boundary
+      c.score = std::min(c.d_pos, c.d_neg);
+    }
     for (const auto& e : excluded) c.score = std::min(c.score, Distance(u, e));
     on_boundary.push_back(c);
   }

@@ -73,8 +73,10 @@ int DefaultCoarseLevels(int dims);
 // boundary); its uncertainty is min(d+, d-), how far it is from any evidence.
 // Greedily picks up to `count` candidates on the boundary with the largest
 // uncertainty above `resolution`, each pick counting as evidence for the next
-// (so one batch spreads along the boundary). In 1-D this is bisection: the
-// most uncertain boundary point is the midpoint of the widest disagreeing pair.
+// (so one batch spreads along the boundary). In 1-D a candidate is on the
+// boundary when its neighbours on either side disagree: one pick is the
+// midpoint of the widest disagreeing bracket (bisection), a batch of b splits
+// the brackets into smaller parts.
 // `excluded`: points already planned or failed (never proposed again).
 // *max_uncertainty (optional): the largest uncertainty on the boundary now
 // (how far the sampler is from its resolution).
