@@ -260,6 +260,9 @@ std::int64_t AdvanceCampaign(db::Store& store, std::int64_t campaign_id, const C
   if (!out.open) state["stop_reason"] = out.stop_reason;
   out.sampler_state_json = state.dump();
   if (!store.PlanAdaptiveRound(campaign_id, stored.sampler_state_json, out)) return 0;
+  // A closed sampler whose trials are all finished: the campaign is done now
+  // (a service without exit_when_done completes campaigns nowhere else).
+  if (!out.open && out.trials.empty()) store.CompleteFinishedCampaigns();
   if (out.open) {
     spdlog::info("campaign {}: adaptive round {}: {} trials planned", campaign_id, round,
                  out.trials.size());

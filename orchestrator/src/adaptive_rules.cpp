@@ -76,7 +76,7 @@ std::vector<BoundaryProposal> ProposeBoundaryPoints(const std::vector<LabelledPo
       std::any_of(labelled.begin(), labelled.end(), [](const auto& p) { return p.positive; });
   const bool any_negative =
       std::any_of(labelled.begin(), labelled.end(), [](const auto& p) { return !p.positive; });
-  if (!any_positive || !any_negative || count <= 0) return out;
+  if (!any_positive || !any_negative) return out;
 
   // Lattice of spacing resolution / 2, at most ~300,000 candidates.
   int levels = static_cast<int>(std::ceil(2.0 / resolution)) + 1;

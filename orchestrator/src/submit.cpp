@@ -52,8 +52,8 @@ std::int64_t SubmitCampaign(db::Store& store, const Campaign& given) {
     }
     nlohmann::json spec = nlohmann::json::parse(campaign.source_json);
     nlohmann::json scales = nlohmann::json::object();
-    for (const auto& [name, p] : nlohmann::json::parse(cal.params_json).items())
-      scales[name] = p.at("scale").get<double>();
+    const nlohmann::json fitted = nlohmann::json::parse(cal.params_json);
+    for (const auto& item : fitted.items()) scales[item.key()] = item.value().at("scale").get<double>();
     spec["prediction"]["calibrated"] = scales;
     campaign.source_json = spec.dump();
     campaign.calibrated_scales = scales.get<std::map<std::string, double>>();

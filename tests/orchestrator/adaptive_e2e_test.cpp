@@ -20,7 +20,7 @@ namespace {
 using nlohmann::json;
 constexpr auto kRunTimeout = std::chrono::seconds(240);
 
-int Run(const TempDir& dir, const std::string& campaign, const std::string& db, int domain,
+int RunCampaignFile(const TempDir& dir, const std::string& campaign, const std::string& db, int domain,
         const std::vector<std::string>& extra = {}) {
   std::vector<std::string> args = {"run",      TestCampaign(campaign), "--db", db, "--cells", "2",
                                    "--domain", std::to_string(TestDomain(domain)), "--quiet"};
@@ -31,7 +31,7 @@ int Run(const TempDir& dir, const std::string& campaign, const std::string& db, 
 TEST(AdaptiveE2E, BoundarySamplerBracketsThePivotToItsResolution) {
   TempDir dir;
   const std::string db = dir / "b1.db";
-  ASSERT_EQ(Run(dir, "boundary_1d.json", db, 31), 0) << ReadFile(dir / "boundary_1d.json.run.log");
+  ASSERT_EQ(RunCampaignFile(dir, "boundary_1d.json", db, 31), 0) << ReadFile(dir / "boundary_1d.json.run.log");
   auto store = OpenReadOnly(db);
   EXPECT_EQ(store->GetCampaign(1).state, db::CampaignState::kDone);
   const auto trials = store->ListTrials(1);
@@ -92,7 +92,8 @@ TEST(AdaptiveE2E, BoundarySamplerBracketsThePivotToItsResolution) {
 TEST(AdaptiveE2E, ReplicatesGoWhereTheSpreadIsLarge) {
   TempDir dir;
   const std::string db = dir / "r.db";
-  ASSERT_EQ(Run(dir, "replicates.json", db, 32), 0) << ReadFile(dir / "replicates.json.run.log");
+  ASSERT_EQ(RunCampaignFile(dir, "replicates.json", db, 32,
+                            {"--cell-defects", TestCampaign("velocity_noise_cell.json")}), 0) << ReadFile(dir / "replicates.json.run.log");
   auto store = OpenReadOnly(db);
   EXPECT_EQ(store->GetCampaign(1).state, db::CampaignState::kDone);
   int per_condition[2] = {0, 0};
@@ -132,7 +133,7 @@ TEST(AdaptiveE2E, CalibrationRecoversTheCellsFrictionScale) {
   TempDir dir;
   const std::string db = dir / "cal.db";
   const std::string cell_defects = TestCampaign("friction_scaled_cell.json");
-  ASSERT_EQ(Run(dir, "calibration_grid.json", db, 33, {"--cell-defects", cell_defects}), 0)
+  ASSERT_EQ(RunCampaignFile(dir, "calibration_grid.json", db, 33, {"--cell-defects", cell_defects}), 0)
       << ReadFile(dir / "calibration_grid.json.run.log");
 
   const std::string out = dir / "calibrate.json";
