@@ -15,7 +15,9 @@
 // figure of merit (target: adaptive <= 25 % of the grid's trials).
 //
 //   boundary_study [CAMPAIGN.json] [--dense D] [--batch B] [--cell-defects FILE]
-//                  [--resolutions 0.1,0.05,0.025]
+//                  [--resolutions 0.125,0.0625] [--threads N]
+// Grids are compared when their points lie on the reference lattice ((D - 1)
+// divisible by (L - 1)); with D = 33 those are 3, 5, 9, 17, 33 per side.
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -25,6 +27,7 @@
 #include <map>
 #include <sstream>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include "arena/executors/defects.hpp"
@@ -126,12 +129,14 @@ int main(int argc, char** argv) {
   std::string campaign_path = std::string(ARENA_SOURCE_DIR) + "/examples/campaigns/closed_loop.json";
   std::string defects_path =
       std::string(ARENA_SOURCE_DIR) + "/examples/defects/friction_high.json";
-  int dense = 41, batch = 4;
-  std::vector<double> resolutions = {0.1, 0.05, 0.025};
+  int dense = 33, batch = 4, threads = 2;
+  std::vector<double> resolutions = {0.125, 0.0625};
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     if (a == "--dense" && i + 1 < argc) {
       dense = std::stoi(argv[++i]);
+    } else if (a == "--threads" && i + 1 < argc) {
+      threads = std::max(1, std::stoi(argv[++i]));
     } else if (a == "--batch" && i + 1 < argc) {
       batch = std::stoi(argv[++i]);
     } else if (a == "--cell-defects" && i + 1 < argc) {
@@ -153,8 +158,29 @@ int main(int argc, char** argv) {
   Cell cell{campaign, arena::executors::ParseDefectProfile(ReadFile(defects_path)), {}, 0};
   const auto start = std::chrono::steady_clock::now();
 
-  // Reference: the dense grid.
+  // Reference: the dense grid, simulated on `threads` threads (the results
+  // go into the cell's cache: every grid and adaptive point below lies on
+  // this lattice when dense - 1 is a power of two and the resolutions are
+  // 2 / (dense - 1) times powers of two).
   std::vector<std::vector<bool>> ref(dense, std::vector<bool>(dense));
+  {
+    std::vector<Point> all;
+    for (int i = 0; i < dense; ++i)
+      for (int j = 0; j < dense; ++j)
+        all.push_back({static_cast<double>(i) / (dense - 1), static_cast<double>(j) / (dense - 1)});
+    std::vector<Cell> workers(static_cast<size_t>(threads), Cell{campaign, cell.defects, {}, 0});
+    std::vector<std::thread> pool;
+    for (int t = 0; t < threads; ++t)
+      pool.emplace_back([&, t] {
+        for (size_t k = static_cast<size_t>(t); k < all.size(); k += static_cast<size_t>(threads))
+          workers[static_cast<size_t>(t)].Classify(all[k]);
+      });
+    for (auto& th : pool) th.join();
+    for (auto& w : workers) {
+      cell.cache.insert(w.cache.begin(), w.cache.end());
+      cell.simulations += w.simulations;
+    }
+  }
   for (int i = 0; i < dense; ++i)
     for (int j = 0; j < dense; ++j)
       ref[i][j] = cell.Classify({static_cast<double>(i) / (dense - 1),
@@ -172,6 +198,7 @@ int main(int argc, char** argv) {
   // Grids L x L.
   std::vector<std::pair<int, double>> grids;
   for (int l = 3; l <= dense; ++l) {
+    if ((dense - 1) % (l - 1) != 0) continue;  // only grids on the reference lattice
     std::vector<arena::orchestrator::LabelledPoint> samples;
     for (int i = 0; i < l; ++i)
       for (int j = 0; j < l; ++j) {
@@ -181,6 +208,8 @@ int main(int argc, char** argv) {
     grids.emplace_back(l, Hausdorff(ref_boundary, BoundaryOf(NearestNeighbourField(samples, dense))));
   }
 
+  std::printf("\n| grid | trials | Hausdorff |\n|---|---|---|\n");
+  for (const auto& [l, gh] : grids) std::printf("| %d x %d | %d | %.4f |\n", l, l, l * l, gh);
   std::printf("\n| resolution | adaptive trials | rounds | Hausdorff | smallest grid as accurate | grid trials | ratio |\n");
   std::printf("|---|---|---|---|---|---|---|\n");
   for (double res : resolutions) {

@@ -262,8 +262,7 @@ CREATE INDEX evaluation_results_by_model ON evaluation_results(evaluation_id, mo
       // (assessment/calibration.hpp). sampler_open = 1: an adaptive sampler
       // may still add trials, so the campaign is not done when its trials are.
       {7, "adaptive sampler decisions, campaigns.sampler_open, calibrations", R"sql(
-ALTER TABLE campaigns ADD COLUMN sampler_open INTEGER NOT NULL DEFAULT 0
-  CHECK (sampler_open IN (0, 1));
+ALTER TABLE campaigns ADD COLUMN sampler_open INTEGER NOT NULL DEFAULT 0;
 
 CREATE TABLE sampler_decisions(
   id          INTEGER PRIMARY KEY,

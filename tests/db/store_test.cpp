@@ -63,7 +63,8 @@ TEST(StoreOpen, MigratesEmptyFileAndReopens) {
     store->CreateCampaign(MakeCampaign(), MakeTrials(2));
   }
   EXPECT_EQ(RawScalar(path, "PRAGMA journal_mode"), "wal");
-  EXPECT_EQ(RawScalar(path, "SELECT COUNT(*) FROM schema_migrations"),
+  // Versions may have gaps (each engineer's migration has its own number).
+  EXPECT_EQ(RawScalar(path, "SELECT MAX(version) FROM schema_migrations"),
             std::to_string(Store::SchemaVersion()));
   auto again = Store::Open(path);
   EXPECT_EQ(again->FileSchemaVersion(), Store::SchemaVersion());
@@ -84,6 +85,9 @@ TEST(StoreOpen, MigratesVersionOneFile) {
         sqlite3_exec(db,
                      "BEGIN; ALTER TABLE campaigns DROP COLUMN state_reason;"
                      " DROP TABLE evaluation_results; DROP TABLE evaluations;"
+                     // schema 7 (adaptive samplers, calibrations)
+                     " DROP VIEW trial_decisions; DROP TABLE sampler_decisions;"
+                     " DROP TABLE calibrations; ALTER TABLE campaigns DROP COLUMN sampler_open;"
                      " DELETE FROM schema_migrations WHERE version > 1; PRAGMA user_version = 1;"
                      " COMMIT;",
                      nullptr, nullptr, nullptr),
