@@ -126,9 +126,9 @@ std::string ReadFile(const std::string& path) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  std::string campaign_path = std::string(ARENA_SOURCE_DIR) + "/examples/campaigns/closed_loop.json";
-  std::string defects_path =
-      std::string(ARENA_SOURCE_DIR) + "/examples/defects/friction_high.json";
+  std::string campaign_path =
+      std::string(ARENA_SOURCE_DIR) + "/examples/campaigns/closed_loop.json";
+  std::string defects_path = std::string(ARENA_SOURCE_DIR) + "/examples/defects/friction_high.json";
   int dense = 33, batch = 4, threads = 2;
   std::vector<double> resolutions = {0.125, 0.0625};
   for (int i = 1; i < argc; ++i) {
@@ -183,16 +183,16 @@ int main(int argc, char** argv) {
   }
   for (int i = 0; i < dense; ++i)
     for (int j = 0; j < dense; ++j)
-      ref[i][j] = cell.Classify({static_cast<double>(i) / (dense - 1),
-                                 static_cast<double>(j) / (dense - 1)});
+      ref[i][j] = cell.Classify(
+          {static_cast<double>(i) / (dense - 1), static_cast<double>(j) / (dense - 1)});
   const auto ref_boundary = BoundaryOf(ref);
   int positives = 0;
-  for (const auto& row : ref) positives += static_cast<int>(std::count(row.begin(), row.end(), true));
+  for (const auto& row : ref)
+    positives += static_cast<int>(std::count(row.begin(), row.end(), true));
   std::printf("campaign %s, cell profile %s\n", campaign_path.c_str(), defects_path.c_str());
   std::printf("reference: %d x %d grid, %d of %d points '%s', %zu boundary points (%.1f s)\n",
               dense, dense, positives, dense * dense,
-              arena::orchestrator::ClassName(campaign.adaptive->outcome, true),
-              ref_boundary.size(),
+              arena::orchestrator::ClassName(campaign.adaptive->outcome, true), ref_boundary.size(),
               std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count());
 
   // Grids L x L.
@@ -205,17 +205,21 @@ int main(int argc, char** argv) {
         const Point u = {static_cast<double>(i) / (l - 1), static_cast<double>(j) / (l - 1)};
         samples.push_back({u, cell.Classify(u), 0});
       }
-    grids.emplace_back(l, Hausdorff(ref_boundary, BoundaryOf(NearestNeighbourField(samples, dense))));
+    grids.emplace_back(l,
+                       Hausdorff(ref_boundary, BoundaryOf(NearestNeighbourField(samples, dense))));
   }
 
   std::printf("\n| grid | trials | Hausdorff |\n|---|---|---|\n");
   for (const auto& [l, gh] : grids) std::printf("| %d x %d | %d | %.4f |\n", l, l, l * l, gh);
-  std::printf("\n| resolution | adaptive trials | rounds | Hausdorff | smallest grid as accurate | grid trials | ratio |\n");
+  std::printf(
+      "\n| resolution | adaptive trials | rounds | Hausdorff | smallest grid as accurate | grid "
+      "trials | ratio |\n");
   std::printf("|---|---|---|---|---|---|---|\n");
   for (double res : resolutions) {
     std::vector<arena::orchestrator::LabelledPoint> samples;
     std::int64_t id = 0;
-    for (const auto& u : arena::orchestrator::CoarseGrid(2, arena::orchestrator::DefaultCoarseLevels(2)))
+    for (const auto& u :
+         arena::orchestrator::CoarseGrid(2, arena::orchestrator::DefaultCoarseLevels(2)))
       samples.push_back({u, cell.Classify(u), ++id});
     int rounds = 0;
     for (;;) {

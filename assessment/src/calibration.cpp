@@ -255,8 +255,8 @@ TrialError CompareTrajectories(const mechanics::Scene& scene,
   double sum = 0;
   long pairs = 0;
   for (size_t i = 0; i < n; ++i) {
-    const size_t m = std::min({predicted[i].contacts.size(), truth[i].contacts.size(),
-                               normals.size()});
+    const size_t m =
+        std::min({predicted[i].contacts.size(), truth[i].contacts.size(), normals.size()});
     for (size_t c = 0; c < m; ++c) {
       const auto& p = predicted[i].contacts[c];
       const auto& t = truth[i].contacts[c];
@@ -306,13 +306,15 @@ CalibrationResult Calibrate(const std::vector<CalibrationTrial>& trials, const S
   std::vector<int> order(trials.size());
   std::iota(order.begin(), order.end(), 0);
   std::sort(order.begin(), order.end(), [&](int a, int b) {
-    const auto ha = Mix(o.seed ^ Mix(static_cast<uint64_t>(trials[static_cast<size_t>(a)].trial_id)));
-    const auto hb = Mix(o.seed ^ Mix(static_cast<uint64_t>(trials[static_cast<size_t>(b)].trial_id)));
+    const auto ha =
+        Mix(o.seed ^ Mix(static_cast<uint64_t>(trials[static_cast<size_t>(a)].trial_id)));
+    const auto hb =
+        Mix(o.seed ^ Mix(static_cast<uint64_t>(trials[static_cast<size_t>(b)].trial_id)));
     return ha != hb ? ha < hb : a < b;
   });
-  const int n_hold = std::clamp(
-      static_cast<int>(std::lround(o.holdout * static_cast<double>(trials.size()))), 1,
-      static_cast<int>(trials.size()) - 2);
+  const int n_hold =
+      std::clamp(static_cast<int>(std::lround(o.holdout * static_cast<double>(trials.size()))), 1,
+                 static_cast<int>(trials.size()) - 2);
   std::vector<int> hold(order.begin(), order.begin() + n_hold);
   std::vector<int> train(order.begin() + n_hold, order.end());
   std::sort(hold.begin(), hold.end());
@@ -364,8 +366,8 @@ CalibrationResult Calibrate(const std::vector<CalibrationTrial>& trials, const S
     f.scale = std::exp(best[k]);
     f.ci_low = f.ci_high = f.scale;
     if (boot[k].size() >= 2) {
-      const double mean =
-          std::accumulate(boot[k].begin(), boot[k].end(), 0.0) / static_cast<double>(boot[k].size());
+      const double mean = std::accumulate(boot[k].begin(), boot[k].end(), 0.0) /
+                          static_cast<double>(boot[k].size());
       double ss = 0;
       for (double v : boot[k]) ss += (v - mean) * (v - mean);
       f.std = std::sqrt(ss / static_cast<double>(boot[k].size() - 1));
@@ -393,8 +395,8 @@ std::vector<CalibrationTrial> LoadCalibrationTrials(
       mechanics::TrajectorySample ts;
       ts.t = s.t;
       ts.position = {s.object_pose[0], s.object_pose[1], s.object_pose[2]};
-      ts.orientation =
-          Eigen::Quaterniond(s.object_pose[3], s.object_pose[4], s.object_pose[5], s.object_pose[6]);
+      ts.orientation = Eigen::Quaterniond(s.object_pose[3], s.object_pose[4], s.object_pose[5],
+                                          s.object_pose[6]);
       for (size_t i = 0; i < s.contacts.size() && i < normals.size(); ++i) {
         const Eigen::Vector3d f(s.contacts[i].force[0], s.contacts[i].force[1],
                                 s.contacts[i].force[2]);
@@ -429,8 +431,8 @@ std::string ReportJson(const CalibrationResult& r) {
       {"heldout_ids", r.heldout_ids},
       {"train_loss", {{"before", r.train_before}, {"after", r.train_after}}},
       {"heldout_loss", {{"before", r.heldout_before}, {"after", r.heldout_after}}},
-      {"heldout_position_m", {{"before", r.heldout_position_before},
-                              {"after", r.heldout_position_after}}},
+      {"heldout_position_m",
+       {{"before", r.heldout_position_before}, {"after", r.heldout_position_after}}},
       {"heldout_angle_rad", {{"before", r.heldout_angle_before}, {"after", r.heldout_angle_after}}},
       {"heldout_force_n", {{"before", r.heldout_force_before}, {"after", r.heldout_force_after}}},
       {"improved", r.improved},

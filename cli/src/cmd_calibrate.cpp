@@ -67,7 +67,9 @@ int RunCalibrate(const CalibrateOptions& o) {
   co.lower = o.lower;
   co.upper = o.upper;
   if (isatty(STDERR_FILENO))
-    co.progress = [](const std::string& line) { std::fprintf(stderr, "calibrate: %s\n", line.c_str()); };
+    co.progress = [](const std::string& line) {
+      std::fprintf(stderr, "calibrate: %s\n", line.c_str());
+    };
 
   std::unique_ptr<db::Store> store;
   std::vector<assessment::CalibrationTrial> trials;
@@ -130,10 +132,11 @@ int RunCalibrate(const CalibrateOptions& o) {
                             .dump()
                             .c_str());
   } else {
-    std::printf("calibration %lld of campaign %lld (%s, %d loss evaluations, %zu trials fitted, "
-                "%zu held out)\n\n",
-                static_cast<long long>(id), static_cast<long long>(o.campaign),
-                r.optimizer.c_str(), r.evaluations, r.train_ids.size(), r.heldout_ids.size());
+    std::printf(
+        "calibration %lld of campaign %lld (%s, %d loss evaluations, %zu trials fitted, "
+        "%zu held out)\n\n",
+        static_cast<long long>(id), static_cast<long long>(o.campaign), r.optimizer.c_str(),
+        r.evaluations, r.train_ids.size(), r.heldout_ids.size());
     std::printf("%-12s %9s %9s %21s %12s\n", "parameter", "scale", "+-std", "95% CI (bootstrap)",
                 "value");
     for (const auto& f : r.fitted) {
@@ -150,8 +153,7 @@ int RunCalibrate(const CalibrateOptions& o) {
                 r.heldout_position_after * 1e3);
     std::printf("  angle (deg)     %10.4f %10.4f\n", r.heldout_angle_before * 57.29577951,
                 r.heldout_angle_after * 57.29577951);
-    std::printf("  force RMS (N)   %10.4f %10.4f\n", r.heldout_force_before,
-                r.heldout_force_after);
+    std::printf("  force RMS (N)   %10.4f %10.4f\n", r.heldout_force_before, r.heldout_force_after);
     if (r.improved) {
       std::printf("\napplied: a campaign uses it with \"prediction\": {\"calibration\": %lld}\n",
                   static_cast<long long>(id));
@@ -185,7 +187,8 @@ void AddCalibrateCommand(CLI::App& app, Action* action) {
   cmd->add_option("--seed", o->seed, "Seed of the hold-out split and the bootstrap");
   cmd->add_option("--threads", o->threads, "Simulations in parallel")->check(CLI::Range(1, 256));
   cmd->add_option("--lower", o->lower, "Lower bound of every scale")->check(CLI::Range(0.01, 0.99));
-  cmd->add_option("--upper", o->upper, "Upper bound of every scale")->check(CLI::Range(1.01, 100.0));
+  cmd->add_option("--upper", o->upper, "Upper bound of every scale")
+      ->check(CLI::Range(1.01, 100.0));
   cmd->add_flag("--json", o->json, "JSON instead of a table");
   cmd->footer(
       "Example:\n"

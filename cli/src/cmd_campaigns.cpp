@@ -121,9 +121,9 @@ int Status(const std::string& db_path, std::int64_t only, bool as_json) {
                           {"rate_per_hour", c.rate_per_hour}};
       j["eta_s"] = c.eta_s ? nlohmann::json(*c.eta_s) : nlohmann::json();
       if (const auto a = orchestrator::ReadAdaptiveProgress(store->GetCampaign(c.id))) {
-        j["adaptive"] = {{"sampler", a->sampler}, {"round", a->round},     {"open", a->open},
-                         {"refining", a->refining}, {"progress", a->progress},
-                         {"fraction", a->fraction}};
+        j["adaptive"] = {{"sampler", a->sampler},   {"round", a->round},
+                         {"open", a->open},         {"refining", a->refining},
+                         {"progress", a->progress}, {"fraction", a->fraction}};
       }
       out["campaigns"].push_back(j);
     }

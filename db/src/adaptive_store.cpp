@@ -15,7 +15,9 @@ namespace {
 
 using detail::Tx;
 
-[[noreturn]] void Bad(const std::string& msg) { throw StoreError(StoreError::Kind::kBadInput, msg); }
+[[noreturn]] void Bad(const std::string& msg) {
+  throw StoreError(StoreError::Kind::kBadInput, msg);
+}
 
 void RequireObject(const std::string& text, const std::string& what) {
   nlohmann::json j;
@@ -61,7 +63,8 @@ bool Store::PlanAdaptiveRound(std::int64_t campaign_id, const std::string& expec
   for (std::size_t i = 0; i < round.trials.size(); ++i) {
     if (round.reasons[i].empty())
       Bad(std::string(kFn) + ": trial " + std::to_string(i) + ": reason is empty");
-    RequireObject(round.bases_json[i], std::string(kFn) + ": trial " + std::to_string(i) + ": basis");
+    RequireObject(round.bases_json[i],
+                  std::string(kFn) + ": trial " + std::to_string(i) + ": basis");
   }
   RequireObject(round.sampler_state_json, std::string(kFn) + ": sampler_state_json");
   if (!round.open && round.stop_reason.empty())

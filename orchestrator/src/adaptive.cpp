@@ -9,8 +9,8 @@
 #include <map>
 #include <set>
 
-#include <nlohmann/json.hpp>
 #include <spdlog/spdlog.h>
+#include <nlohmann/json.hpp>
 
 #include "arena/mechanics/scene_json.hpp"
 #include "arena/orchestrator/outcome.hpp"
@@ -63,7 +63,8 @@ Finished ReadFinished(db::Store& store, std::int64_t campaign_id) {
 
 TrialOutcome OutcomeOf(db::Store& store, const db::Trial& t) {
   const mechanics::Scene scene = mechanics::ParseScene(t.scene_json);
-  return ComputeOutcome(store.ReadGroundTruth(t.id).samples, static_cast<int>(scene.fingers.size()));
+  return ComputeOutcome(store.ReadGroundTruth(t.id).samples,
+                        static_cast<int>(scene.fingers.size()));
 }
 
 // ------------------------------------------------------------ boundary
@@ -126,13 +127,14 @@ void DecideBoundary(db::Store& store, const Campaign& c, const Finished& f, int 
     const std::string reason =
         "on the estimated boundary between trial " + std::to_string(p.near_positive) + " (" +
         ClassName(a.outcome, true) + ") and trial " + std::to_string(p.near_negative) + " (" +
-        ClassName(a.outcome, false) + "), " + Fixed(p.uncertainty) + " from the nearest evidence (" +
-        "resolution " + Fixed(a.resolution) + ")";
+        ClassName(a.outcome, false) + "), " + Fixed(p.uncertainty) +
+        " from the nearest evidence (" + "resolution " + Fixed(a.resolution) + ")";
     add(p.u, reason,
         json{{"rule", "nn_margin"},
              {"uncertainty", p.uncertainty},
-             {"nearest", {{ClassName(a.outcome, true), p.near_positive},
-                          {ClassName(a.outcome, false), p.near_negative}}},
+             {"nearest",
+              {{ClassName(a.outcome, true), p.near_positive},
+               {ClassName(a.outcome, false), p.near_negative}}},
              {"seen", labelled.size()},
              {"positives", positives}});
   }
@@ -140,8 +142,7 @@ void DecideBoundary(db::Store& store, const Campaign& c, const Finished& f, int 
   out->open = false;
   if (positives == 0 || positives == static_cast<int>(labelled.size())) {
     out->stop_reason = "no class change: all " + std::to_string(labelled.size()) +
-                       " finished points are '" +
-                       ClassName(a.outcome, positives > 0) + "'";
+                       " finished points are '" + ClassName(a.outcome, positives > 0) + "'";
   } else if (room <= 0) {
     out->stop_reason = "max_trials reached (" + std::to_string(a.max_trials) +
                        "); boundary uncertainty " + Fixed(uncertainty) + " > resolution " +
@@ -155,14 +156,13 @@ void DecideBoundary(db::Store& store, const Campaign& c, const Finished& f, int 
 
 // ------------------------------------------------------------ replicates
 
-void DecideReplicates(db::Store& store, const Campaign& c, const Finished& f, int round,
-                      int batch, db::AdaptiveRound* out, json* state) {
+void DecideReplicates(db::Store& store, const Campaign& c, const Finished& f, int round, int batch,
+                      db::AdaptiveRound* out, json* state) {
   const AdaptiveSpec& a = *c.adaptive;
-  (*state)["refining"] = "replicates until the " + Fixed(a.confidence * 100, 0) +
-                         " % CI of the mean final position is <= " +
-                         Fixed(a.ci_position * 1e3, 2) + " mm" +
-                         (a.ci_angle > 0 ? " and of the angle <= " + Fixed(a.ci_angle, 4) + " rad"
-                                         : std::string());
+  (*state)["refining"] =
+      "replicates until the " + Fixed(a.confidence * 100, 0) +
+      " % CI of the mean final position is <= " + Fixed(a.ci_position * 1e3, 2) + " mm" +
+      (a.ci_angle > 0 ? " and of the angle <= " + Fixed(a.ci_angle, 4) + " rad" : std::string());
   auto add = [&](std::int64_t condition, int replicate, const std::string& reason, json basis) {
     const auto index = static_cast<std::int64_t>(f.trials.size() + out->trials.size());
     out->trials.push_back(ToStoreTrial(c, PlanReplicate(c, condition, replicate, index)));
@@ -172,7 +172,8 @@ void DecideReplicates(db::Store& store, const Campaign& c, const Finished& f, in
     out->bases_json.push_back(basis.dump());
   };
   if (round == 0) {
-    const std::int64_t total = std::min<std::int64_t>(c.conditions * a.min_replicates, a.max_trials);
+    const std::int64_t total =
+        std::min<std::int64_t>(c.conditions * a.min_replicates, a.max_trials);
     for (std::int64_t i = 0; i < total; ++i) {
       add(i / a.min_replicates, static_cast<int>(i % a.min_replicates),
           "initial replicate " + std::to_string(i % a.min_replicates + 1) + " of " +
@@ -223,8 +224,7 @@ void DecideReplicates(db::Store& store, const Campaign& c, const Finished& f, in
   if (!proposals.empty()) return;
   out->open = false;
   out->stop_reason = room <= 0 ? "max_trials reached (" + std::to_string(a.max_trials) + ")"
-                               : std::to_string(on_target) + " of " +
-                                     std::to_string(c.conditions) +
+                               : std::to_string(on_target) + " of " + std::to_string(c.conditions) +
                                      " conditions on target; the rest reached max_replicates (" +
                                      std::to_string(a.max_replicates) + ")";
 }
@@ -358,8 +358,8 @@ std::optional<AdaptiveProgress> ReadAdaptiveProgress(const db::Campaign& campaig
     const double on = state.value("on_target", 0.0);
     p.progress = Fixed(on, 0) + "/" + Fixed(n, 0) + " conditions on target";
     if (state.contains("widest_ci_position"))
-      p.progress += ", widest CI +-" + Fixed(state["widest_ci_position"].get<double>() * 1e3, 3) +
-                    " mm";
+      p.progress +=
+          ", widest CI +-" + Fixed(state["widest_ci_position"].get<double>() * 1e3, 3) + " mm";
     p.fraction = on / n;
   }
   p.fraction = std::max(p.fraction, trials / max_trials);

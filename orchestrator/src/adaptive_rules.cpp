@@ -66,10 +66,9 @@ std::vector<std::vector<double>> CoarseGrid(int dims, int levels) {
   return out;
 }
 
-std::vector<BoundaryProposal> ProposeBoundaryPoints(const std::vector<LabelledPoint>& labelled,
-                                                    const std::vector<std::vector<double>>& excluded,
-                                                    int dims, double resolution, int count,
-                                                    double* max_uncertainty) {
+std::vector<BoundaryProposal> ProposeBoundaryPoints(
+    const std::vector<LabelledPoint>& labelled, const std::vector<std::vector<double>>& excluded,
+    int dims, double resolution, int count, double* max_uncertainty) {
   if (max_uncertainty) *max_uncertainty = 0;
   std::vector<BoundaryProposal> out;
   const bool any_positive =
@@ -104,8 +103,9 @@ std::vector<BoundaryProposal> ProposeBoundaryPoints(const std::vector<LabelledPo
   std::vector<Candidate> on_boundary;
   for (std::int64_t i = 0; i < n; ++i) {
     const std::vector<double> u = LatticePoint(i, dims, levels);
-    Candidate c{i, std::numeric_limits<double>::infinity(),
-                std::numeric_limits<double>::infinity(), 0, 0, 0};
+    Candidate c{
+        i, std::numeric_limits<double>::infinity(), std::numeric_limits<double>::infinity(), 0, 0,
+        0};
     for (const auto& p : labelled) {
       const double d = Distance(u, p.u);
       if (p.positive && d < c.d_pos) {

@@ -530,9 +530,9 @@ AdaptiveSpec ReadAdaptive(const json& v, SamplerKind* base) {
   };
   integer("batch", 1, 1000, &a.batch);
   if (kind == "boundary") {
-    RequireObject(v, "sampler",
-                  {"adaptive", "outcome", "threshold", "resolution", "coarse_levels", "batch",
-                   "max_trials"});
+    RequireObject(
+        v, "sampler",
+        {"adaptive", "outcome", "threshold", "resolution", "coarse_levels", "batch", "max_trials"});
     a.kind = AdaptiveKind::kBoundary;
     if (!v.contains("outcome"))
       throw CampaignError("sampler.outcome", "is required (pivoted, finger_slip or grasp_kept)");

@@ -46,14 +46,14 @@ std::int64_t SubmitCampaign(db::Store& store, const Campaign& given) {
     const db::Calibration cal = store.GetCalibration(campaign.calibration_id);  // kNotFound
     if (!cal.applied) {
       throw db::StoreError(db::StoreError::Kind::kBadInput,
-                           "prediction.calibration: calibration " +
-                               std::to_string(cal.id) +
+                           "prediction.calibration: calibration " + std::to_string(cal.id) +
                                " did not improve the held-out error and is not applied");
     }
     nlohmann::json spec = nlohmann::json::parse(campaign.source_json);
     nlohmann::json scales = nlohmann::json::object();
     const nlohmann::json fitted = nlohmann::json::parse(cal.params_json);
-    for (const auto& item : fitted.items()) scales[item.key()] = item.value().at("scale").get<double>();
+    for (const auto& item : fitted.items())
+      scales[item.key()] = item.value().at("scale").get<double>();
     spec["prediction"]["calibrated"] = scales;
     campaign.source_json = spec.dump();
     campaign.calibrated_scales = scales.get<std::map<std::string, double>>();

@@ -43,7 +43,7 @@ std::vector<CalibrationTrial> MakeTrials(double true_mu_scale, double true_pushe
     t.trial_id = 100 + i;
     t.scene = s;
     t.truth = FakeSimulate(
-        ApplyScales(s, {{"mu_fingers", true_mu_scale}, {"mu_pusher", true_pusher_scale}}))
+                  ApplyScales(s, {{"mu_fingers", true_mu_scale}, {"mu_pusher", true_pusher_scale}}))
                   .samples;
     trials.push_back(t);
   }

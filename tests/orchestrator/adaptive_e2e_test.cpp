@@ -20,10 +20,13 @@ namespace {
 using nlohmann::json;
 constexpr auto kRunTimeout = std::chrono::seconds(240);
 
-int RunCampaignFile(const TempDir& dir, const std::string& campaign, const std::string& db, int domain,
-        const std::vector<std::string>& extra = {}) {
-  std::vector<std::string> args = {"run",      TestCampaign(campaign), "--db", db, "--cells", "2",
-                                   "--domain", std::to_string(TestDomain(domain)), "--quiet"};
+int RunCampaignFile(const TempDir& dir, const std::string& campaign, const std::string& db,
+                    int domain, const std::vector<std::string>& extra = {}) {
+  std::vector<std::string> args = {"run",      TestCampaign(campaign),
+                                   "--db",     db,
+                                   "--cells",  "2",
+                                   "--domain", std::to_string(TestDomain(domain)),
+                                   "--quiet"};
   args.insert(args.end(), extra.begin(), extra.end());
   return RunArena(args, dir / (campaign + ".run.log"), kRunTimeout);
 }
@@ -31,7 +34,8 @@ int RunCampaignFile(const TempDir& dir, const std::string& campaign, const std::
 TEST(AdaptiveE2E, BoundarySamplerBracketsThePivotToItsResolution) {
   TempDir dir;
   const std::string db = dir / "b1.db";
-  ASSERT_EQ(RunCampaignFile(dir, "boundary_1d.json", db, 31), 0) << ReadFile(dir / "boundary_1d.json.run.log");
+  ASSERT_EQ(RunCampaignFile(dir, "boundary_1d.json", db, 31), 0)
+      << ReadFile(dir / "boundary_1d.json.run.log");
   auto store = OpenReadOnly(db);
   EXPECT_EQ(store->GetCampaign(1).state, db::CampaignState::kDone);
   const auto trials = store->ListTrials(1);
@@ -93,7 +97,9 @@ TEST(AdaptiveE2E, ReplicatesGoWhereTheSpreadIsLarge) {
   TempDir dir;
   const std::string db = dir / "r.db";
   ASSERT_EQ(RunCampaignFile(dir, "replicates.json", db, 32,
-                            {"--cell-defects", TestCampaign("velocity_noise_cell.json")}), 0) << ReadFile(dir / "replicates.json.run.log");
+                            {"--cell-defects", TestCampaign("velocity_noise_cell.json")}),
+            0)
+      << ReadFile(dir / "replicates.json.run.log");
   auto store = OpenReadOnly(db);
   EXPECT_EQ(store->GetCampaign(1).state, db::CampaignState::kDone);
   int per_condition[2] = {0, 0};
@@ -133,7 +139,8 @@ TEST(AdaptiveE2E, CalibrationRecoversTheCellsFrictionScale) {
   TempDir dir;
   const std::string db = dir / "cal.db";
   const std::string cell_defects = TestCampaign("friction_scaled_cell.json");
-  ASSERT_EQ(RunCampaignFile(dir, "calibration_grid.json", db, 33, {"--cell-defects", cell_defects}), 0)
+  ASSERT_EQ(RunCampaignFile(dir, "calibration_grid.json", db, 33, {"--cell-defects", cell_defects}),
+            0)
       << ReadFile(dir / "calibration_grid.json.run.log");
 
   const std::string out = dir / "calibrate.json";

@@ -47,8 +47,8 @@ TEST(BoundaryRule, OneDimensionIsBisectionToTheResolution) {
   // bisection of [0.25, 0.5] until the bracket is within the resolution.
   const double edge = 0.3141, resolution = 0.01;
   int rounds = 0;
-  const auto points =
-      RunBoundary(1, resolution, 1, [&](const auto& u) { return u[0] > edge; }, &rounds);
+  const auto points = RunBoundary(
+      1, resolution, 1, [&](const auto& u) { return u[0] > edge; }, &rounds);
   double below = 0, above = 1;
   for (const auto& p : points) {
     if (p.positive) above = std::min(above, p.u[0]);
@@ -176,7 +176,8 @@ std::string BoundaryCampaign(const std::string& sampler_extra = "") {
   return R"({"name": "b", "seed": 3, "scene": ")" + Canonical() + R"(",
     "variations": {"grip_force": {"min": 2, "max": 20}, "pivot_offset": {"min": 0, "max": 0.01}},
     "sampler": {"adaptive": "boundary", "outcome": "pivoted", "resolution": 0.1,
-                "batch": 2)" + sampler_extra + "}}";
+                "batch": 2)" +
+         sampler_extra + "}}";
 }
 
 TEST(AdaptiveCampaign, ParsesBoundaryAndReplicates) {

@@ -88,8 +88,8 @@ struct CalibrationOptions {
 
 struct FittedParam {
   std::string name;
-  double scale = 1;          // the fit
-  double std = 0;            // bootstrap standard deviation of the scale
+  double scale = 1;                // the fit
+  double std = 0;                  // bootstrap standard deviation of the scale
   double ci_low = 1, ci_high = 1;  // bootstrap 2.5 and 97.5 percentiles
   std::optional<double> nominal;   // the scenes' common value (e.g. mu 0.5), when they share one
 };

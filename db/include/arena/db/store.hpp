@@ -203,11 +203,11 @@ struct Campaign {
 struct SamplerDecision {
   std::int64_t id = 0;
   std::int64_t campaign_id = 0;
-  int round = 0;                          // 0 = the first batch
-  std::optional<std::int64_t> trial_id;   // the trial it planned; absent: it stopped
-  std::string reason;                     // e.g. "bisect between trial 4 (stick) and 7 (slide)"
-  std::string basis_json = "{}";          // what it was based on (outcomes seen, neighbours)
-  double created_at = 0;                  // s since epoch
+  int round = 0;                         // 0 = the first batch
+  std::optional<std::int64_t> trial_id;  // the trial it planned; absent: it stopped
+  std::string reason;                    // e.g. "bisect between trial 4 (stick) and 7 (slide)"
+  std::string basis_json = "{}";         // what it was based on (outcomes seen, neighbours)
+  double created_at = 0;                 // s since epoch
 };
 
 // One adaptive round, written by PlanAdaptiveRound in one transaction.
@@ -217,8 +217,8 @@ struct AdaptiveRound {
   std::vector<std::string> reasons;     // one per trial
   std::vector<std::string> bases_json;  // one per trial (JSON objects)
   std::string sampler_state_json = "{}";
-  bool open = true;          // false: the sampler has finished (stop_reason says why)
-  std::string stop_reason;   // stored as a decision without a trial when !open
+  bool open = true;         // false: the sampler has finished (stop_reason says why)
+  std::string stop_reason;  // stored as a decision without a trial when !open
 };
 
 // A fit of model parameters to a campaign's ground truth (arena calibrate).

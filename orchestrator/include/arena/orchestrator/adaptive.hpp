@@ -81,10 +81,9 @@ int DefaultCoarseLevels(int dims);
 // *max_uncertainty (optional): the largest uncertainty on the boundary now
 // (how far the sampler is from its resolution).
 // @returns fewer than `count` (none: resolved) proposals, deterministic.
-std::vector<BoundaryProposal> ProposeBoundaryPoints(const std::vector<LabelledPoint>& labelled,
-                                                    const std::vector<std::vector<double>>& excluded,
-                                                    int dims, double resolution, int count,
-                                                    double* max_uncertainty = nullptr);
+std::vector<BoundaryProposal> ProposeBoundaryPoints(
+    const std::vector<LabelledPoint>& labelled, const std::vector<std::vector<double>>& excluded,
+    int dims, double resolution, int count, double* max_uncertainty = nullptr);
 
 // ------------------------------------------------------------ replicates (pure)
 
@@ -148,8 +147,9 @@ struct AdaptiveProgress {
   int round = 0;
   bool open = false;
   std::string refining;  // e.g. "pivoted boundary in grip_force x pivot_offset"
-  std::string progress;  // e.g. "uncertainty 0.083 -> 0.025 (resolution)", "12/40 conditions on target"
-  double fraction = 0;   // [0, 1], how far towards the stop criterion
+  std::string
+      progress;  // e.g. "uncertainty 0.083 -> 0.025 (resolution)", "12/40 conditions on target"
+  double fraction = 0;  // [0, 1], how far towards the stop criterion
 };
 // @returns nullopt for a campaign that is not adaptive.
 std::optional<AdaptiveProgress> ReadAdaptiveProgress(const db::Campaign& campaign);

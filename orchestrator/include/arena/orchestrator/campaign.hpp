@@ -104,7 +104,7 @@ const char* ToString(OutcomeKind kind);  // "pivoted", "finger_slip", "grasp_kep
 
 struct AdaptiveSpec {
   AdaptiveKind kind = AdaptiveKind::kBoundary;
-  int batch = 0;       // trials per round after the first; 0: the idle cells at round 1 (then fixed)
+  int batch = 0;  // trials per round after the first; 0: the idle cells at round 1 (then fixed)
   int max_trials = 0;  // cap on the campaign's trials (> 0)
   // boundary
   OutcomeKind outcome = OutcomeKind::kPivoted;
