@@ -75,7 +75,9 @@ int RunCalibrate(const CalibrateOptions& o) {
   std::vector<assessment::CalibrationTrial> trials;
   nlohmann::json model;
   try {
-    store = db::Store::Open(o.db_path, db::StoreOptions{.create = false});
+    db::StoreOptions so;
+    so.create = false;  // calibrating needs a campaign: a missing file is an error
+    store = db::Store::Open(o.db_path, so);
     const db::Campaign campaign = store->GetCampaign(o.campaign);
     const auto spec = nlohmann::json::parse(campaign.spec_json);
     if (spec.contains("prediction")) model = spec["prediction"];
