@@ -76,6 +76,9 @@ int RunCell(CellCliOptions opt) {
     }
   }
 
+  // A predecessor SIGKILLed (a restart after a crash) left its shared memory.
+  if (const std::size_t n = dds::CleanZombieSharedMemory(); n > 0)
+    spdlog::info("cell {}: removed {} shared-memory files of dead DDS processes", opt.cell.id, n);
   std::unique_ptr<executors::Cell> cell;
   try {
     cell = std::make_unique<executors::Cell>(opt.cell, executors::DefaultMechanics());
@@ -106,7 +109,7 @@ void AddCellCommand(CLI::App& app, Action* action) {
       "Stops cleanly on SIGINT/SIGTERM (exit 0).");
   cmd->add_option("--id", opt->cell.id, "Cell id, unique in the deployment ([A-Za-z0-9_.-])")
       ->required();
-  cmd->add_option("--domain", opt->cell.domain_id, "DDS domain id (0..232)")->required();
+  cmd->add_option("--domain", opt->cell.domain_id, "DDS domain id (0..231)")->required();
   cmd->add_option("--defects", opt->defects_path, "Defect profile JSON (executors/README.md)");
   cmd->add_option("--speed", opt->cell.speed,
                   "Wall seconds per simulated second: 0 = as fast as possible, 1 = real time")

@@ -1,6 +1,7 @@
 // arena query --db FILE ["SQL"] [--campaign ID] [--where EXPR] [--outcome X]
 //              [--format table|csv|json]
 // Read-only SQL over the store; tables and columns are in db/README.md.
+#include <cmath>
 #include <cstdio>
 #include <string>
 
@@ -20,6 +21,7 @@ struct QueryOptions {
   std::string outcome;
   std::string format = "table";
   bool decisions = false;
+  double timeout_s = 60;
 };
 
 // Why each trial of an adaptive campaign was chosen (view trial_decisions).
@@ -38,7 +40,11 @@ int RunQueryCommand(const QueryOptions& o) {
     filter.outcome = o.outcome;
     if (o.decisions && !o.sql.empty())
       throw CommandError(kExitBadInput, "--decisions: give either SQL or --decisions, not both");
-    const auto result = db::RunQuery(*store, o.decisions ? kDecisionsQuery : o.sql, filter);
+    if (!std::isfinite(o.timeout_s) || o.timeout_s <= 0)
+      throw CommandError(kExitBadInput, "--timeout: must be a number of seconds > 0");
+    db::QueryLimits limits;
+    limits.max_seconds = o.timeout_s;
+    const auto result = db::RunQuery(*store, o.decisions ? kDecisionsQuery : o.sql, filter, limits);
     const std::string text = o.format == "csv"    ? db::FormatCsv(result)
                              : o.format == "json" ? db::FormatJson(result)
                                                   : db::FormatTable(result);
@@ -69,6 +75,8 @@ void AddQueryCommand(CLI::App& app, Action* action) {
   cmd->add_flag("--decisions", o->decisions,
                 "Why each trial of an adaptive campaign was chosen (round, rule, evidence; "
                 "view trial_decisions)");
+  cmd->add_option("--timeout", o->timeout_s, "Stop a query running longer than this (s)")
+      ->capture_default_str();
   cmd->add_option("--format", o->format, "Output format")
       ->check(CLI::IsMember({"table", "csv", "json"}));
   cmd->footer(

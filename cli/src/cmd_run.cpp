@@ -11,7 +11,9 @@
 #include <cstdio>
 #include <memory>
 #include <optional>
+#include <random>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include <spdlog/spdlog.h>
@@ -43,7 +45,31 @@ struct RunOptions {
   bool quiet = false;
   std::string
       security_lab;  // DDS-Security: LAB/service and LAB/sim1.. (arena certs); "": open domain
+  dds::NetworkOptions network_for_probe;  // this host only, like the run's participants
 };
+
+std::string RunTag() {
+  std::random_device rd;
+  char buf[8];
+  std::snprintf(buf, sizeof buf, "%06x", static_cast<unsigned>(rd() ^ (getpid() << 8)) & 0xffffff);
+  return buf;
+}
+
+// A domain on which no participant is heard for a moment: two `arena run`s
+// on one host (or a lab's own domain) do not share a domain by chance.
+int QuietDomain(const dds::NetworkOptions& network) {
+  std::mt19937 pick(std::random_device{}());
+  std::uniform_int_distribution<int> domain(100, dds::kMaxDomainId);
+  for (int tries = 0; tries < 8; ++tries) {
+    const int candidate = domain(pick);
+    dds::Participant probe(dds::ParticipantOptions{candidate, "arena.run-probe", network, 2.5});
+    std::this_thread::sleep_for(std::chrono::milliseconds(400));
+    if (probe.Peers().empty()) return candidate;
+    spdlog::info("domain {} is in use ({} participants); trying another", candidate,
+                 probe.Peers().size());
+  }
+  throw dds::DdsError("--domain: no quiet DDS domain found in 8 tries; pass --domain");
+}
 
 double Median(std::vector<double> v) {
   if (v.empty()) return NAN;
@@ -118,10 +144,9 @@ int Run(RunOptions opt) {
   if (opt.cells < 1 || opt.cells > 64)
     throw CommandError(kExitBadInput, "--cells: must be 1..64, got " + std::to_string(opt.cells));
   if (!(opt.speed >= 0)) throw CommandError(kExitBadInput, "--speed: must be >= 0");
-  if (opt.domain < 0) opt.domain = 100 + static_cast<int>(getpid() % 100);
-  if (opt.domain > 232)
-    throw CommandError(kExitBadInput,
-                       "--domain: must be 0..232, got " + std::to_string(opt.domain));
+  if (opt.domain > dds::kMaxDomainId || opt.domain < -1)
+    throw CommandError(kExitBadInput, "--domain: must be 0.." + std::to_string(dds::kMaxDomainId) +
+                                          ", got " + std::to_string(opt.domain));
 
   // Signals first: the log's flusher, the cells and DDS threads inherit the blocked mask.
   std::atomic<orchestrator::Service*> running{nullptr};
@@ -144,6 +169,13 @@ int Run(RunOptions opt) {
                                             " --role cell|service --name NAME`)");
     }
   }
+  if (opt.domain < 0) {
+    try {
+      opt.domain = QuietDomain(opt.network_for_probe);
+    } catch (const dds::DdsError& e) {
+      throw CommandError(kExitCommunication, e.what());
+    }
+  }
   std::int64_t campaign_id = 0;
   try {
     auto store = db::Store::Open(opt.db_path);
@@ -157,22 +189,26 @@ int Run(RunOptions opt) {
     throw CommandError(kExitBadInput, e.what());
   }
   // An adaptive campaign's count is open: its cap bounds the progress bar.
-  const std::int64_t trials = campaign.adaptive
-                                  ? std::min<std::int64_t>(campaign.adaptive->max_trials,
-                                                           orchestrator::kMaxTrials)
-                                  : orchestrator::TrialCount(campaign);
+  const std::int64_t trials =
+      campaign.adaptive
+          ? std::min<std::int64_t>(campaign.adaptive->max_trials, orchestrator::kMaxTrials)
+          : orchestrator::TrialCount(campaign);
   if (!opt.quiet)
-    std::fprintf(stderr,
-                 "campaign %lld '%s': %s%lld trials on %d simulated cells (DDS domain %d, log %s)\n",
-                 static_cast<long long>(campaign_id), campaign.name.c_str(),
-                 campaign.adaptive ? "adaptive, up to " : "", static_cast<long long>(trials),
-                 opt.cells, opt.domain, orchestrator::ServiceLogPath(opt.db_path).c_str());
+    std::fprintf(
+        stderr, "campaign %lld '%s': %s%lld trials on %d simulated cells (DDS domain %d, log %s)\n",
+        static_cast<long long>(campaign_id), campaign.name.c_str(),
+        campaign.adaptive ? "adaptive, up to " : "", static_cast<long long>(trials), opt.cells,
+        opt.domain, orchestrator::ServiceLogPath(opt.db_path).c_str());
 
+  // Cell ids unique to this run (sim1-3fa2c1, ...): two runs that end up on
+  // one domain still never address each other's cells. With --security the
+  // identities are the lab's sim1..N.
+  const std::string run_tag = opt.security_lab.empty() ? "-" + RunTag() : "";
   std::vector<ChildProcess> cells;
   const std::string self = SelfExecutable();
   for (int k = 0; k < opt.cells; ++k) {
     std::vector<std::string> argv = {self,           "cell",
-                                     "--id",         "sim" + std::to_string(k + 1),
+                                     "--id",         "sim" + std::to_string(k + 1) + run_tag,
                                      "--domain",     std::to_string(opt.domain),
                                      "--speed",      std::to_string(opt.speed),
                                      "--parent-pid", std::to_string(getpid())};
@@ -264,7 +300,8 @@ void AddRunCommand(CLI::App& app, Action* action) {
       ->required();
   cmd->add_option("--db", opt->db_path, "SQLite store (created if missing)")->capture_default_str();
   cmd->add_option("--cells", opt->cells, "Simulated cells to start")->capture_default_str();
-  cmd->add_option("--domain", opt->domain, "DDS domain id (default: 100 + pid % 100)");
+  cmd->add_option("--domain", opt->domain,
+                  "DDS domain id (default: a domain in 100..231 with no participant on it)");
   cmd->add_option("--speed", opt->speed, "Cells' pacing: 0 = as fast as possible, 1 = wall clock")
       ->capture_default_str();
   cmd->add_option("--cell-defects", opt->defects_path,

@@ -7,6 +7,8 @@
 #include <limits>
 #include <map>
 #include <mutex>
+#include <optional>
+#include <set>
 #include <stdexcept>
 #include <thread>
 #include <tuple>
@@ -70,6 +72,10 @@ void ValidateCellOptions(const CellOptions& o) {
       throw std::invalid_argument("--id: only letters, digits, '_', '-' and '.' are allowed");
     }
   }
+  if (o.domain_id < 0 || o.domain_id > dds::kMaxDomainId) {
+    throw std::invalid_argument("--domain: must be 0.." + std::to_string(dds::kMaxDomainId) +
+                                ", got " + std::to_string(o.domain_id));
+  }
   if (!std::isfinite(o.speed) || o.speed < 0 || o.speed > 1000) {
     throw std::invalid_argument(
         "--speed: must be in [0, 1000] (0 = as fast as possible, 1 = wall clock)");
@@ -114,6 +120,28 @@ struct Cell::Impl {
   std::optional<mechanics::PusherSpec> pusher;  // the pusher mounted now
   std::thread worker;
 
+  // ---- serving (PHASE_CLAIM), guarded by `mutex`. The intake thread reads
+  // commands as they come (a claim is never stuck behind a long trial) and
+  // queues the serving session's commands for the worker; every other
+  // session's command is dropped. A session once superseded is never served
+  // again, so a dead service's queued commands cannot run after its successor
+  // claimed the cell.
+  struct Serving {
+    std::uint64_t session = 0;  // 0: free
+    std::string host, store;
+    std::uint32_t pid = 0;
+    double lease_s = 0;
+    Clock::time_point until{};
+  };
+  static constexpr double kImplicitLease_s = 10.0;  // a command without a claim (a test driver)
+  static constexpr std::size_t kRetiredKept = 256;
+  Serving serving;
+  std::set<std::uint64_t> retired;
+  std::deque<std::uint64_t> retired_order;
+  std::deque<msg::TrialCommand> queue;  // the serving session's commands, for the worker
+  std::uint64_t started_unix_ns = UnixNanos();
+  std::thread intake;
+
   static dds::ParticipantOptions ParticipantFor(const CellOptions& o) {
     ValidateCellOptions(o);
     dds::ParticipantOptions p;
@@ -144,8 +172,14 @@ struct Cell::Impl {
     return !wake.wait_until(lock, until, [&] { return stop; });
   }
 
+  // Caller holds `mutex` (reads `serving`); only the constructor and the
+  // intake thread write announcements.
   void Announce() {
     msg::CellAnnounce a;
+    a.serving_session(serving.session);
+    a.serving_host(serving.host);
+    a.serving_pid(serving.pid);
+    a.serving_lease_s(serving.lease_s);
     a.cell_id(options.id);
     a.arena_version("0.1.0");
     for (auto t : options.defects.contact_types) {
@@ -160,7 +194,7 @@ struct Cell::Impl {
     a.max_pusher_speed(options.defects.max_pusher_speed);
     a.speed(options.speed);
     a.defects_json(DefectProfileToJson(options.defects));
-    a.started_unix_ns(UnixNanos());
+    a.started_unix_ns(started_unix_ns);
     if (!announce.Write(a)) throw dds::DdsError("cell: announcing the cell failed");
   }
 
@@ -171,6 +205,7 @@ struct Cell::Impl {
     s.cell_id(options.id);
     s.phase(c.phase());
     s.state(state);
+    s.service_session(c.service_session());
     s.observed_pose() = {observed_pose.position.x(),    observed_pose.position.y(),
                          observed_pose.position.z(),    observed_pose.orientation.w(),
                          observed_pose.orientation.x(), observed_pose.orientation.y(),
@@ -270,6 +305,7 @@ struct Cell::Impl {
     const mechanics::SimulationResult result = mechanics.simulate(actual);
     if (result.status != mechanics::SimulationStatus::kOk || result.samples.empty()) {
       auto s = BaseStatus(c, msg::STATE_FAILED);
+      s.failure(msg::FAILURE_SIMULATION);
       s.reason("simulation: " + ModeName(result.status) + ": " + result.error);
       s.phase_wall_s(std::chrono::duration<double>(Clock::now() - started).count());
       return Finish(c, s);
@@ -293,6 +329,7 @@ struct Cell::Impl {
       batch.trial_id(c.trial_id());
       batch.attempt(c.attempt());
       batch.cell_id(options.id);
+      batch.service_session(c.service_session());
       batch.batch(batch_index);
       batch.first_sample(static_cast<std::uint32_t>(first));
       batch.last(first + count == n);
@@ -316,6 +353,10 @@ struct Cell::Impl {
           failure = "interrupted: cell shutting down";
           break;
         }
+      }
+      if (!Serves(c.service_session())) {
+        failure = "interrupted: the cell now serves another service";
+        break;
       }
       batch.sent_unix_ns(UnixNanos());
       // Ground truth is a log: a full history throttles us, it never drops.
@@ -355,6 +396,9 @@ struct Cell::Impl {
 
     auto s = BaseStatus(c, failure.empty() ? msg::STATE_EXECUTED : msg::STATE_FAILED);
     s.reason(failure);
+    if (!failure.empty())
+      s.failure(failure.rfind("deadline", 0) == 0 ? msg::FAILURE_DEADLINE
+                                                  : msg::FAILURE_INTERRUPTED);
     s.samples(static_cast<std::uint32_t>(n));
     s.phase_wall_s(std::chrono::duration<double>(Clock::now() - started).count());
     json detail = {{"mu_scale", perturbation.mu_scale},
@@ -422,6 +466,7 @@ struct Cell::Impl {
     if (out.success) pusher = next_pusher;
     auto s = BaseStatus(c, out.success ? msg::STATE_RESET_DONE : msg::STATE_FAILED);
     s.reason(out.failure);
+    if (!out.success) s.failure(msg::FAILURE_RESET);
     s.reset_position_error(out.position_error);
     s.reset_angle_error(out.angle_error);
     s.reset_attempts(static_cast<std::uint32_t>(out.attempts));
@@ -438,10 +483,138 @@ struct Cell::Impl {
     Finish(c, s);
   }
 
-  void Run() {
+  // ---- serving
+  bool Serves(std::uint64_t session) {
+    std::lock_guard<std::mutex> lock(mutex);
+    return serving.session == session;
+  }
+
+  void Retire(std::uint64_t session) {  // caller holds mutex
+    if (session == 0 || !retired.insert(session).second) return;
+    retired_order.push_back(session);
+    while (retired_order.size() > kRetiredKept) {
+      retired.erase(retired_order.front());
+      retired_order.pop_front();
+    }
+  }
+
+  // Caller holds mutex. Serves `c`'s session from now on (a claim, or the
+  // first command of a session while the cell is free).
+  void ServeLocked(const msg::TrialCommand& c, double lease_s) {
+    const bool changed = serving.session != c.service_session();
+    if (changed) {
+      Retire(serving.session);
+      const auto dropped = std::erase_if(queue, [&](const msg::TrialCommand& q) {
+        return q.service_session() != c.service_session();
+      });
+      if (dropped > 0)
+        spdlog::info(
+            "cell {}: dropped {} queued commands of service session {:016x}, which this "
+            "cell no longer serves",
+            options.id, dropped, serving.session);
+      spdlog::info("cell {}: now serving service session {:016x} ({}, pid {})", options.id,
+                   c.service_session(), c.service_host().empty() ? "?" : c.service_host(),
+                   c.service_pid());
+    }
+    serving.session = c.service_session();
+    if (!c.service_host().empty() || changed) {
+      serving.host = c.service_host();
+      serving.pid = c.service_pid();
+      serving.store = c.service_store();
+    }
+    const bool lease_changed = serving.lease_s != lease_s;
+    serving.lease_s = lease_s;
+    serving.until = Clock::now() + std::chrono::duration_cast<Clock::duration>(
+                                       std::chrono::duration<double>(lease_s));
+    if (changed || lease_changed) Announce();
+  }
+
+  // Intake thread: one command as it arrives. Claims act at once; the serving
+  // session's commands go to the worker; others are dropped.
+  void Intake(const msg::TrialCommand& c) {
+    std::lock_guard<std::mutex> lock(mutex);
+    const std::uint64_t session = c.service_session();
+    if (retired.count(session)) {
+      spdlog::info(
+          "cell {}: dropped a {} command of trial {} from service session {:016x}, which "
+          "this cell no longer serves",
+          options.id, c.phase() == msg::PHASE_CLAIM ? "claim" : "phase", c.trial_id(), session);
+      return;
+    }
+    const bool free = serving.session == 0 || Clock::now() > serving.until;
+    const bool mine = serving.session == session;
+    // The same store's new service: the old one is dead (one service per store).
+    const bool successor =
+        !free && !mine && !serving.store.empty() && serving.store == c.service_store();
+    if (c.phase() == msg::PHASE_CLAIM) {
+      if (!std::isfinite(c.lease_s()) || c.lease_s() < 0) return;
+      if (c.lease_s() == 0) {  // release
+        if (mine) {
+          Retire(session);
+          serving = Serving{};
+          Announce();
+        }
+        return;
+      }
+      if (free || mine || successor) ServeLocked(c, std::min(c.lease_s(), 3600.0));
+      return;
+    }
+    if (!mine) {
+      if (!free) {
+        spdlog::info(
+            "cell {}: dropped trial {}'s command from service session {:016x}: serving "
+            "{:016x}",
+            options.id, c.trial_id(), session, serving.session);
+        return;
+      }
+      ServeLocked(c, kImplicitLease_s);
+    } else if (Clock::now() + std::chrono::duration_cast<Clock::duration>(
+                                  std::chrono::duration<double>(serving.lease_s)) >
+               serving.until) {
+      serving.until = Clock::now() + std::chrono::duration_cast<Clock::duration>(
+                                         std::chrono::duration<double>(serving.lease_s));
+    }
+    queue.push_back(c);
+    wake.notify_all();
+  }
+
+  void IntakeLoop() {
     while (!Stopping()) {
       auto command = commands.Take(dds::Millis(100));
+      {
+        std::lock_guard<std::mutex> lock(mutex);
+        if (serving.session != 0 && Clock::now() > serving.until) {
+          spdlog::info("cell {}: the lease of service session {:016x} ran out; free", options.id,
+                       serving.session);
+          serving.session = 0;
+          serving.host.clear();
+          serving.pid = 0;
+          serving.lease_s = 0;
+          Announce();
+        }
+      }
       if (!command || command->cell_id() != options.id) continue;
+      try {
+        Intake(*command);
+      } catch (const std::exception& e) {
+        spdlog::error("cell {}: command intake: {}", options.id, e.what());
+      }
+    }
+  }
+
+  std::optional<msg::TrialCommand> NextCommand() {
+    std::unique_lock<std::mutex> lock(mutex);
+    wake.wait_for(lock, std::chrono::milliseconds(100), [&] { return stop || !queue.empty(); });
+    if (stop || queue.empty()) return std::nullopt;
+    msg::TrialCommand c = std::move(queue.front());
+    queue.pop_front();
+    return c;
+  }
+
+  void Run() {
+    while (!Stopping()) {
+      auto command = NextCommand();
+      if (!command) continue;
       try {
         Handle(*command);
       } catch (const std::exception& e) {
@@ -449,6 +622,7 @@ struct Cell::Impl {
         // silently: report it and go on.
         spdlog::error("cell {}: trial {}: {}", options.id, command->trial_id(), e.what());
         auto s = BaseStatus(*command, msg::STATE_FAILED);
+        s.failure(msg::FAILURE_INTERNAL);
         s.reason(std::string("internal error: ") + e.what());
         Finish(*command, s);
       }
@@ -461,15 +635,20 @@ struct Cell::Impl {
 
 Cell::Cell(const CellOptions& options, MechanicsBackend mechanics)
     : impl_(std::make_unique<Impl>(options, std::move(mechanics))) {
-  impl_->Announce();
+  {
+    std::lock_guard<std::mutex> lock(impl_->mutex);
+    impl_->Announce();
+  }
   spdlog::info("cell {}: up on domain {} (speed {}, {} samples per batch)", options.id,
                options.domain_id, options.speed, options.batch_samples);
   impl_->worker = std::thread([this] { impl_->Run(); });
+  impl_->intake = std::thread([this] { impl_->IntakeLoop(); });
 }
 
 Cell::~Cell() {
   Stop();
   if (impl_->worker.joinable()) impl_->worker.join();
+  if (impl_->intake.joinable()) impl_->intake.join();
 }
 
 void Cell::Stop() {

@@ -345,11 +345,10 @@ TEST(PackedBlock, VersionThreeStoreMigratesAndReads) {
     sqlite3_open(path.c_str(), &db);
     ASSERT_EQ(
         sqlite3_exec(db,
-                     "BEGIN; DELETE FROM schema_migrations WHERE version > 3;"
-                     // schema 7 (adaptive samplers, calibrations)
-                     " DROP VIEW trial_decisions; DROP TABLE sampler_decisions;"
-                     " DROP TABLE calibrations; ALTER TABLE campaigns DROP COLUMN sampler_open;"
-                     " PRAGMA user_version = 3; COMMIT;",
+                     (std::string("BEGIN;") + testing::kUndoMigration7 + testing::kUndoMigration5 +
+                      " DELETE FROM schema_migrations WHERE version > 3;"
+                      " PRAGMA user_version = 3; COMMIT;")
+                         .c_str(),
                      nullptr, nullptr, nullptr),
         SQLITE_OK);
     sqlite3_close(db);
