@@ -165,6 +165,10 @@ int Status(const std::string& db_path, std::int64_t only, bool as_json) {
                          {"open", a->open},         {"refining", a->refining},
                          {"progress", a->progress}, {"fraction", a->fraction}};
       }
+      // What its model errors are measured against (executors/README.md, "Backends").
+      j["truth"] = nlohmann::json::array();
+      for (const auto& t : store->CampaignTruths(c.id))
+        j["truth"].push_back({{"truth", t.truth}, {"backend", t.backend}, {"trials", t.trials}});
       out["campaigns"].push_back(j);
     }
     for (const auto& c : s.cells)
@@ -204,6 +208,15 @@ int Status(const std::string& db_path, std::int64_t only, bool as_json) {
                 static_cast<long long>(c.planned), static_cast<long long>(c.done),
                 static_cast<long long>(c.failed), static_cast<long long>(c.running),
                 c.rate_per_hour, c.eta_s ? FormatDuration(*c.eta_s).c_str() : "-");
+  for (const auto& c : s.campaigns) {
+    for (const auto& t : store->CampaignTruths(c.id)) {
+      std::printf(
+          "      truth of %lld: %s (%s backend), %lld trials%s\n", static_cast<long long>(c.id),
+          t.truth.empty() ? "unreported" : t.truth.c_str(),
+          t.backend.empty() ? "?" : t.backend.c_str(), static_cast<long long>(t.trials),
+          t.truth == "self-consistency" ? ": errors are self-consistency, not accuracy" : "");
+    }
+  }
   bool header = false;
   for (const auto& c : s.campaigns) {
     const auto a = orchestrator::ReadAdaptiveProgress(store->GetCampaign(c.id));

@@ -38,9 +38,11 @@ struct RunOptions {
   std::string campaign_path;
   std::string db_path = "arena.db";
   int cells = 2;
-  int domain = -1;           // -1: derived from the process id
-  double speed = 0;          // cells' pacing: 0 = as fast as possible
-  std::string defects_path;  // the cells' own profile (workspace, reset); optional
+  int domain = -1;                // -1: derived from the process id
+  double speed = 0;               // cells' pacing: 0 = as fast as possible
+  std::string defects_path;       // the cells' own profile (workspace, reset); optional
+  std::string backend = "model";  // the cells' backend (arena cell --backend)
+  std::string backend_settings;
   std::string log_level = "info";
   bool quiet = false;
   std::string
@@ -113,6 +115,22 @@ void PrintSummary(const std::string& db_path, std::int64_t campaign_id, double w
     }
   }
   const std::int64_t total = done + failed + other;
+  std::string truth_line;
+  bool self_consistency = false;
+  for (const auto& t : store->CampaignTruths(campaign_id)) {
+    if (!truth_line.empty()) truth_line += "; ";
+    const std::string what = t.truth == "self-consistency" ? "arena's own model (" + t.backend +
+                                                                 " backend): self-consistency, "
+                                                                 "not accuracy"
+                             : t.truth == "simulator"
+                                 ? (t.backend == "mujoco" ? std::string("MuJoCo") : t.backend) +
+                                       " (an independent engine)"
+                             : t.truth == "robot"    ? "a robot (" + t.backend + ")"
+                             : t.truth == "recorded" ? "recorded data (" + t.backend + ")"
+                                                     : "an unreported backend";
+    self_consistency = self_consistency || t.truth == "self-consistency";
+    truth_line += what + ", " + std::to_string(t.trials) + " trials";
+  }
   std::printf("campaign %lld '%s': %s\n", static_cast<long long>(campaign_id),
               campaign.name.c_str(), db::ToString(campaign.state));
   std::printf("  trials      %lld: %lld done, %lld failed%s\n", static_cast<long long>(total),
@@ -125,6 +143,13 @@ void PrintSummary(const std::string& db_path, std::int64_t campaign_id, double w
       "              contact force %.3g N RMS, contact-mode agreement %.1f %%\n",
       pos_err.size(), Median(pos_err) * 1e3, Median(ang_err) * 180 / M_PI, Median(force_err),
       100 * Median(mode));
+  if (!truth_line.empty()) {
+    std::printf("  truth       model error is against %s\n", truth_line.c_str());
+    if (self_consistency)
+      std::printf(
+          "              (arena's model against itself at higher settings: run --backend mujoco "
+          "for an independent truth)\n");
+  }
   std::printf("  predictor   %.3g ms median per trial%s\n", Median(pred_time) * 1e3,
               prediction_failures
                   ? (", " + std::to_string(prediction_failures) + " predictions failed").c_str()
@@ -213,6 +238,9 @@ int Run(RunOptions opt) {
                                      "--speed",      std::to_string(opt.speed),
                                      "--parent-pid", std::to_string(getpid())};
     if (!opt.defects_path.empty()) argv.insert(argv.end(), {"--defects", opt.defects_path});
+    argv.insert(argv.end(), {"--backend", opt.backend});
+    if (!opt.backend_settings.empty())
+      argv.insert(argv.end(), {"--backend-settings", opt.backend_settings});
     if (!opt.security_lab.empty())
       argv.insert(argv.end(), {"--security", identity("sim" + std::to_string(k + 1))});
     cells.emplace_back(argv, opt.db_path + ".sim" + std::to_string(k + 1) + ".log");
@@ -304,6 +332,12 @@ void AddRunCommand(CLI::App& app, Action* action) {
                   "DDS domain id (default: a domain in 100..231 with no participant on it)");
   cmd->add_option("--speed", opt->speed, "Cells' pacing: 0 = as fast as possible, 1 = wall clock")
       ->capture_default_str();
+  cmd->add_option("--backend", opt->backend,
+                  "The cells' backend: model (arena's own model: the error is self-consistency), "
+                  "mujoco (an independent engine), exec:COMMAND, replay:DATASET")
+      ->capture_default_str();
+  cmd->add_option("--backend-settings", opt->backend_settings,
+                  "The backend's settings (JSON object), passed to every cell");
   cmd->add_option("--cell-defects", opt->defects_path,
                   "Defect profile for the cells (executors/README.md)");
   cmd->add_option("--log-level", opt->log_level,

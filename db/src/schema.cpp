@@ -326,6 +326,13 @@ CREATE TABLE calibrations(
 );
 CREATE INDEX calibrations_by_campaign ON calibrations(campaign_id);
 )sql"},
+      // What a trial's ground truth is and which defects were really applied
+      // (issue 13): every report can say which truth it measured against.
+      {10, "trials: the cell backend, its kind of truth and the defects applied", R"sql(
+ALTER TABLE trials ADD COLUMN backend TEXT;          -- "model", "mujoco", "exec:...", "replay:..."
+ALTER TABLE trials ADD COLUMN truth TEXT;            -- self-consistency | simulator | robot | recorded
+ALTER TABLE trials ADD COLUMN defects_applied TEXT;  -- JSON: cell, campaign, effective profile, draws
+)sql"},
   };
   return kMigrations;
 }

@@ -1043,6 +1043,30 @@ std::vector<EvaluationResult> Store::ListEvaluationResults(std::int64_t evaluati
   return out;
 }
 
+void Store::RecordExecution(std::int64_t trial_id, int attempt, const std::string& backend,
+                            const std::string& truth, const std::string& defects_applied_json) {
+  impl_->RequireWritable("RecordExecution");
+  Tx tx(impl_->db, true);
+  const auto row = LoadTrialRow(*impl_, trial_id, "RecordExecution");
+  CheckAttempt(row, trial_id, attempt, "RecordExecution");
+  auto u =
+      impl_->Prepare("UPDATE trials SET backend = ?, truth = ?, defects_applied = ? WHERE id = ?");
+  u->Bind(1, backend).Bind(2, truth).Bind(3, defects_applied_json).Bind(4, trial_id).Run();
+  tx.Commit();
+}
+
+std::vector<Store::TruthCount> Store::CampaignTruths(std::int64_t campaign_id) const {
+  Tx tx(impl_->db, false);
+  auto s = impl_->Prepare(
+      "SELECT IFNULL(truth, ''), IFNULL(backend, ''), COUNT(*) FROM trials"
+      " WHERE campaign_id = ? AND gt_stream_id IS NOT NULL GROUP BY 1, 2 ORDER BY 3 DESC");
+  s->Bind(1, campaign_id);
+  std::vector<TruthCount> out;
+  while (s->Step()) out.push_back({s->Text(0), s->Text(1), s->Int(2)});
+  tx.Commit();
+  return out;
+}
+
 void Store::FinishTrial(std::int64_t trial_id, int attempt) {
   impl_->RequireWritable("FinishTrial");
   Tx tx(impl_->db, true);

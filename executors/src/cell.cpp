@@ -1,5 +1,7 @@
 #include "arena/executors/cell.hpp"
 
+#include <optional>
+
 #include <chrono>
 #include <cmath>
 #include <condition_variable>
@@ -16,6 +18,7 @@
 #include <spdlog/spdlog.h>
 #include <nlohmann/json.hpp>
 
+#include "arena/executors/defect_layer.hpp"
 #include "arena/mechanics/scene_json.hpp"
 #include "arena/reset/reset.hpp"
 #include "arena/schemas/arena.h"
@@ -50,19 +53,35 @@ bool SamePusher(const std::optional<mechanics::PusherSpec>& a,
          a->axis == b->axis && a->normal == b->normal && a->position == b->position;
 }
 
-std::string ModeName(mechanics::SimulationStatus s) {
-  switch (s) {
-    case mechanics::SimulationStatus::kOk:
-      return "ok";
-    case mechanics::SimulationStatus::kSolverFailure:
-      return "solver failure";
-    case mechanics::SimulationStatus::kInvalidScene:
-      return "invalid scene";
-  }
-  return "?";
-}
-
 }  // namespace
+
+// Why a backend's true sample is unusable ("" = fine): NaN or infinite
+// values, a time that does not start at 0 or does not increase.
+std::string CheckTrueSample(const mechanics::TrajectorySample& s,
+                            const std::vector<mechanics::TrajectorySample>& before,
+                            const mechanics::Scene& scene) {
+  bool finite = std::isfinite(s.t) && s.position.allFinite() &&
+                s.orientation.coeffs().allFinite() && s.velocity.allFinite() &&
+                s.angular_velocity.allFinite() && s.pusher_position.allFinite() &&
+                s.pusher_force.allFinite();
+  for (const auto& c : s.contacts) {
+    finite = finite && std::isfinite(c.normal_force) && c.tangential_force.allFinite() &&
+             c.torque.allFinite();
+  }
+  if (!finite) return "non-finite value (NaN or infinity) in the true state";
+  if (std::abs(s.orientation.norm() - 1) > 1e-6) return "orientation is not a unit quaternion";
+  if (before.empty() && std::abs(s.t) > 1e-9) return "the first sample's t must be 0";
+  if (!before.empty() && !(s.t > before.back().t)) {
+    return "timestamps out of order: t = " + std::to_string(s.t) + " s after " +
+           std::to_string(before.back().t) + " s";
+  }
+  const size_t contacts = scene.fingers.size() + (scene.pusher ? 1 : 0);
+  if (s.contacts.size() != contacts) {
+    return "expected " + std::to_string(contacts) + " contacts (fingers, then the pusher), got " +
+           std::to_string(s.contacts.size());
+  }
+  return "";
+}
 
 void ValidateCellOptions(const CellOptions& o) {
   if (o.id.empty() || o.id.size() > 64)
@@ -91,7 +110,10 @@ void ValidateCellOptions(const CellOptions& o) {
 
 struct Cell::Impl {
   CellOptions options;
-  MechanicsBackend mechanics;
+  // Scenes are parsed here (the backend gets a valid Scene); a stand-in
+  // MechanicsBackend may bring its own parser.
+  std::function<mechanics::Scene(std::string_view)> parse;
+  DefectLayer layer;  // the backend, wrapped in defect emulation
   reset::ResetParams reset_params;
   dds::Participant participant;
   dds::Writer<msg::CellAnnounce> announce;
@@ -152,9 +174,11 @@ struct Cell::Impl {
     return p;
   }
 
-  Impl(const CellOptions& o, MechanicsBackend m)
+  Impl(const CellOptions& o, std::function<mechanics::Scene(std::string_view)> parser,
+       std::unique_ptr<Backend> backend)
       : options(o),
-        mechanics(std::move(m)),
+        parse(std::move(parser)),
+        layer(std::move(backend), o.defects),
         reset_params(EffectiveResetParams(o.defects)),
         participant(ParticipantFor(o)),
         announce(participant),
@@ -195,6 +219,13 @@ struct Cell::Impl {
     a.speed(options.speed);
     a.defects_json(DefectProfileToJson(options.defects));
     a.started_unix_ns(started_unix_ns);
+    const BackendCapabilities& caps = layer.capabilities();
+    a.backend(caps.name);
+    a.truth(ToString(caps.truth));
+    a.backend_json(json({{"engine", caps.engine},
+                         {"emulates_defects", caps.emulates_defects},
+                         {"settings", json::parse(caps.settings_json, nullptr, false)}})
+                       .dump());
     if (!announce.Write(a)) throw dds::DdsError("cell: announcing the cell failed");
   }
 
@@ -273,19 +304,34 @@ struct Cell::Impl {
       Refuse(c, "phase: unknown value");
   }
 
+  TrialContext Context(const msg::TrialCommand& c, Clock::time_point deadline) const {
+    TrialContext t;
+    t.trial_id = c.trial_id();
+    t.attempt = c.attempt();
+    t.seed = c.seed();
+    t.scene_json = c.scene_json();
+    t.deadline = deadline;
+    return t;
+  }
+
   void Execute(const msg::TrialCommand& c) {
     const auto started = Clock::now();
     mechanics::Scene scene;
     try {
-      scene = mechanics.parse(c.scene_json());
+      scene = parse(c.scene_json());
     } catch (const std::exception& e) {
       return Refuse(c, std::string("scene: ") + e.what());
     }
-    if (std::string why = CheckCapabilities(options.defects, scene); !why.empty()) {
-      return Refuse(c, why);
-    }
     if (!std::isfinite(c.deadline_s()) || c.deadline_s() < 0) {
       return Refuse(c, "deadline_s: must be finite and >= 0 (0 = none)");
+    }
+    const auto deadline = c.deadline_s() > 0
+                              ? started + std::chrono::duration_cast<Clock::duration>(
+                                              std::chrono::duration<double>(c.deadline_s()))
+                              : Clock::time_point::max();
+    const TrialContext trial = Context(c, deadline);
+    if (std::string why = layer.Prepare(scene, c.defects_json(), trial); !why.empty()) {
+      return Refuse(c, why);
     }
     auto accepted = BaseStatus(c, msg::STATE_ACCEPTED);
     Send(accepted);
@@ -296,29 +342,59 @@ struct Cell::Impl {
       return;
     }
 
-    const TrialPerturbation perturbation =
-        DrawPerturbation(options.defects, c.seed(), c.trial_id());
-    mechanics::Scene actual = ApplyPerturbation(scene, perturbation);
-    actual.model.facets = std::max(actual.model.facets, options.fidelity.facets);
-    actual.model.points = std::max(actual.model.points, options.fidelity.points);
-    actual.model.dt = std::min(actual.model.dt, options.fidelity.dt);
-    const mechanics::SimulationResult result = mechanics.simulate(actual);
-    if (result.status != mechanics::SimulationStatus::kOk || result.samples.empty()) {
+    // The backend streams the truth; the cell checks every sample (finite,
+    // time strictly increasing from 0) and stops it at the deadline.
+    struct Collected {
+      std::vector<mechanics::TrajectorySample> samples;
+      std::string problem;
+    } got;
+    const SampleSink sink = [&](const mechanics::TrajectorySample& s) {
+      if (!got.problem.empty()) return false;
+      if (std::string why = CheckTrueSample(s, got.samples, scene); !why.empty()) {
+        got.problem = why;
+        return false;
+      }
+      got.samples.push_back(s);
+      return !Stopping() && Clock::now() <= deadline;
+    };
+    const ExecuteOutcome outcome = layer.Execute(scene, trial, sink);
+    const mechanics::Scene& actual = layer.actual_scene();
+    std::string early;
+    if (!got.problem.empty())
+      early = "backend " + layer.capabilities().name + ": sample " +
+              std::to_string(got.samples.size()) + ": " + got.problem;
+    else if (Stopping())
+      early = "interrupted: cell shutting down";
+    else if (Clock::now() > deadline)
+      early = "deadline: " + std::to_string(c.deadline_s()) + " s exceeded while the backend ran";
+    else if (!outcome.ok)
+      early = outcome.reason.empty() ? "backend failed without a reason" : outcome.reason;
+    else if (got.samples.empty())
+      early = "backend " + layer.capabilities().name + ": no samples";
+    if (!early.empty()) {
       auto s = BaseStatus(c, msg::STATE_FAILED);
-      s.failure(msg::FAILURE_SIMULATION);
-      s.reason("simulation: " + ModeName(result.status) + ": " + result.error);
+      // Typed for the service: a model that cannot run the scene fails the
+      // same way on a re-run (FAILURE_SIMULATION: the trial fails at once);
+      // a driver that crashed, hung or sent garbage may do better next time.
+      s.failure(!got.problem.empty()                          ? msg::FAILURE_INTERNAL
+                : Stopping()                                  ? msg::FAILURE_INTERRUPTED
+                : Clock::now() > deadline                     ? msg::FAILURE_DEADLINE
+                : outcome.reason.rfind("simulation:", 0) == 0 ? msg::FAILURE_SIMULATION
+                                                              : msg::FAILURE_INTERNAL);
+      s.reason(early);
       s.phase_wall_s(std::chrono::duration<double>(Clock::now() - started).count());
+      s.detail_json(json({{"backend", layer.capabilities().name},
+                          {"defects_applied", json::parse(layer.AppliedJson())},
+                          {"backend_detail", json::parse(outcome.detail_json, nullptr, false)}})
+                        .dump());
       return Finish(c, s);
     }
-    const auto observed = Observe(result.samples, actual, options.defects, c.seed(), c.trial_id());
+    const std::vector<mechanics::TrajectorySample>& truth_samples = got.samples;
+    const auto observed = layer.Observe(truth_samples, trial);
 
     // Stream, paced: a batch leaves when its last sample is due.
     const auto stream_start = Clock::now();
-    const auto deadline = c.deadline_s() > 0
-                              ? started + std::chrono::duration_cast<Clock::duration>(
-                                              std::chrono::duration<double>(c.deadline_s()))
-                              : Clock::time_point::max();
-    const size_t n = result.samples.size();
+    const size_t n = truth_samples.size();
     std::uint32_t batch_index = 0;
     std::string failure;
     size_t dropped = 0;
@@ -335,7 +411,7 @@ struct Cell::Impl {
       batch.last(first + count == n);
       batch.samples().resize(count);
       for (size_t i = 0; i < count; ++i) {
-        const auto& truth = result.samples[first + i];
+        const auto& truth = truth_samples[first + i];
         dds::EncodeSample(truth, PusherAt(actual, truth), observed[first + i], &batch.samples()[i]);
       }
       // Fault injection (defects.hpp): a malformed sample, or a missing batch.
@@ -344,7 +420,7 @@ struct Cell::Impl {
       if (options.defects.corrupt_stream == "nan" && batch_index == 0)
         batch.samples()[0].object_pose()[0] = std::numeric_limits<double>::quiet_NaN();
       if (options.speed > 0) {
-        const double due_s = result.samples[first + count - 1].t * options.speed;
+        const double due_s = truth_samples[first + count - 1].t * options.speed;
         const auto due = stream_start + std::chrono::duration_cast<Clock::duration>(
                                             std::chrono::duration<double>(due_s));
         if (due > deadline) {
@@ -381,7 +457,7 @@ struct Cell::Impl {
       if (Stopping() && failure.empty() && first < n) failure = "interrupted: cell shutting down";
     }
 
-    const auto& last = result.samples.back();
+    const auto& last = truth_samples.back();
     true_pose.position = last.position;
     true_pose.orientation = last.orientation;
     // The sensors' last valid view of the end state.
@@ -401,28 +477,18 @@ struct Cell::Impl {
                                                   : msg::FAILURE_INTERRUPTED);
     s.samples(static_cast<std::uint32_t>(n));
     s.phase_wall_s(std::chrono::duration<double>(Clock::now() - started).count());
-    json detail = {{"mu_scale", perturbation.mu_scale},
-                   {"velocity_scale", perturbation.velocity_scale},
-                   {"velocity_offset",
-                    {perturbation.velocity_offset.x(), perturbation.velocity_offset.y(),
-                     perturbation.velocity_offset.z()}},
-                   {"dropped_observations", dropped},
-                   {"batches", batch_index},
-                   {"model",
-                    {{"dof", result.model.dof},
-                     {"facets", result.model.facets},
-                     {"points", result.model.points},
-                     {"dt", result.model.dt},
-                     {"unknowns", result.model.unknowns}}},
-                   {"residuals",
-                    {{"force_balance", result.residuals.force_balance},
-                     {"complementarity", result.residuals.complementarity},
-                     {"cone", result.residuals.cone}}},
-                   {"solver",
-                    {{"steps", result.solver.steps},
-                     {"max_pivots", result.solver.max_pivots},
-                     {"failures", result.solver.failures}}},
-                   {"simulate_wall_s", result.wall_s}};
+    const TrialPerturbation& perturbation = layer.perturbation();
+    json detail = json::parse(outcome.detail_json, nullptr, false);
+    if (!detail.is_object()) detail = json::object();
+    detail["mu_scale"] = perturbation.mu_scale;
+    detail["velocity_scale"] = perturbation.velocity_scale;
+    detail["velocity_offset"] = {perturbation.velocity_offset.x(), perturbation.velocity_offset.y(),
+                                 perturbation.velocity_offset.z()};
+    detail["dropped_observations"] = dropped;
+    detail["batches"] = batch_index;
+    detail["backend"] = layer.capabilities().name;
+    detail["truth"] = ToString(layer.capabilities().truth);
+    detail["defects_applied"] = json::parse(layer.AppliedJson());
     s.detail_json(detail.dump());
     if (!failure.empty()) {
       spdlog::warn("cell {}: trial {} attempt {} failed: {}", options.id, c.trial_id(), c.attempt(),
@@ -440,11 +506,11 @@ struct Cell::Impl {
     if (!c.scene_json().empty()) {
       mechanics::Scene next;
       try {
-        next = mechanics.parse(c.scene_json());
+        next = parse(c.scene_json());
       } catch (const std::exception& e) {
         return Refuse(c, std::string("scene: ") + e.what());
       }
-      if (std::string why = CheckCapabilities(options.defects, next); !why.empty()) {
+      if (std::string why = CheckCapabilities(layer.cell_profile(), next); !why.empty()) {
         return Refuse(c, why);
       }
       request.target = ToResetPose(next.object.pose);
@@ -454,6 +520,18 @@ struct Cell::Impl {
     auto accepted = BaseStatus(c, msg::STATE_ACCEPTED);
     Send(accepted);
 
+    BackendResetRequest backend_request;
+    backend_request.target = request.target;
+    backend_request.observed_end = observed_pose;
+    backend_request.swap_pusher = request.swap_pusher;
+    backend_request.next_scene_json = c.scene_json();
+    const auto deadline = c.deadline_s() > 0 && std::isfinite(c.deadline_s())
+                              ? started + std::chrono::duration_cast<Clock::duration>(
+                                              std::chrono::duration<double>(c.deadline_s()))
+                              : Clock::time_point::max();
+    if (auto own = layer.inner().Reset(backend_request, Context(c, deadline))) {
+      return FinishBackendReset(c, *own, next_pusher, started);
+    }
     const reset::ResetOutcome out =
         reset::ExecuteReset(request, reset_params, c.seed(), c.trial_id());
     // The reset's own (simulated) duration is paced like a trial.
@@ -480,6 +558,23 @@ struct Cell::Impl {
                         {"swap_pusher", request.swap_pusher},
                         {"retryable", out.retryable}})
                       .dump());
+    Finish(c, s);
+  }
+
+  // A backend that resets by itself (a robot) reports the achieved pose.
+  void FinishBackendReset(const msg::TrialCommand& c, const BackendResetOutcome& out,
+                          const std::optional<mechanics::PusherSpec>& next_pusher,
+                          Clock::time_point started) {
+    if (out.ok) {
+      true_pose = out.achieved;
+      observed_pose = out.achieved;
+      pusher = next_pusher;
+    }
+    auto s = BaseStatus(c, out.ok ? msg::STATE_RESET_DONE : msg::STATE_FAILED);
+    s.reason(out.reason);
+    s.reset_attempts(static_cast<std::uint32_t>(out.attempts));
+    s.phase_wall_s(std::chrono::duration<double>(Clock::now() - started).count());
+    s.detail_json(json({{"backend", layer.capabilities().name}, {"time_s", out.time_s}}).dump());
     Finish(c, s);
   }
 
@@ -634,7 +729,15 @@ struct Cell::Impl {
 };
 
 Cell::Cell(const CellOptions& options, MechanicsBackend mechanics)
-    : impl_(std::make_unique<Impl>(options, std::move(mechanics))) {
+    : Cell(options, MakeMechanicsStandIn(mechanics, options.fidelity), mechanics.parse) {}
+
+Cell::Cell(const CellOptions& options, std::unique_ptr<Backend> backend)
+    : Cell(options, std::move(backend),
+           [](std::string_view text) { return mechanics::ParseScene(text); }) {}
+
+Cell::Cell(const CellOptions& options, std::unique_ptr<Backend> backend,
+           std::function<mechanics::Scene(std::string_view)> parse)
+    : impl_(std::make_unique<Impl>(options, std::move(parse), std::move(backend))) {
   {
     std::lock_guard<std::mutex> lock(impl_->mutex);
     impl_->Announce();

@@ -110,6 +110,10 @@ class SqliteTrialStore : public TrialStore {
     s_.RecordPrediction(id, attempt, p);
   }
   void FinishTrial(std::int64_t id, int attempt) override { s_.FinishTrial(id, attempt); }
+  void RecordExecution(std::int64_t id, int attempt, const std::string& backend,
+                       const std::string& truth, const std::string& defects_applied) override {
+    s_.RecordExecution(id, attempt, backend, truth, defects_applied);
+  }
   void UpsertCell(const std::string& id, const std::vector<std::string>& types,
                   const std::string& caps, const std::string& defects) override {
     s_.UpsertCell(id, types, caps, defects);

@@ -248,7 +248,9 @@ struct TrialDriver::Impl {
                            {"workspace_max", a.workspace_max()},
                            {"max_pusher_speed", a.max_pusher_speed()},
                            {"speed", a.speed()},
-                           {"arena_version", a.arena_version()}};
+                           {"arena_version", a.arena_version()},
+                           {"backend", a.backend()},
+                           {"truth", a.truth()}};
     cell.contact_types = a.contact_types();
     cell.capabilities_json = caps.dump();
     cell.defects_json = a.defects_json();
@@ -450,10 +452,11 @@ struct TrialDriver::Impl {
     const int attempt = claim.attempt;
     const std::uint64_t seed = claim.seed;
     const std::string scene_json = claim.scene_json;
+    const std::string defects_json = claim.defects_json;
     // The sink first (a busy store: this same step again, the cell waits), then EXECUTE.
     Step(
         tag + ": begin ingest", cell_id,
-        [this, tag, cell_id, trial_id, attempt, seed, scene_json, budget] {
+        [this, tag, cell_id, trial_id, attempt, seed, scene_json, defects_json, budget] {
           auto it = executions.find(trial_id);
           if (it == executions.end() || it->second.attempt != attempt) return;
           it->second.sink = store.BeginIngest(trial_id, attempt);
@@ -464,6 +467,7 @@ struct TrialDriver::Impl {
           cmd.scene_json(scene_json);
           cmd.seed(seed);
           cmd.deadline_s(budget);
+          cmd.defects_json(defects_json);  // applied by the cell, or the trial is REFUSED
           SetPhase(c, CellPhase::kExecuting, budget + 2.0);  // the clock starts when it is sent
           Count(&ServiceCounters::dispatched);
           if (!transport.Send(cmd)) {
@@ -630,6 +634,23 @@ struct TrialDriver::Impl {
     }
   }
 
+  // What the trial ran on and which defects were applied (the cell's word).
+  // Metadata: a store error here is logged by Step's policy, never blocks the trial.
+  void RecordExecution(const Execution& ex, const msg::TrialStatus& st) {
+    const auto detail = nlohmann::json::parse(st.detail_json(), nullptr, false);
+    if (!detail.is_object()) return;
+    const std::string backend = detail.value("backend", std::string());
+    const std::string truth = detail.value("truth", std::string());
+    const std::string applied =
+        detail.contains("defects_applied") ? detail["defects_applied"].dump() : std::string();
+    const std::int64_t trial_id = ex.trial_id;
+    const int attempt = ex.attempt;
+    Step("trial " + std::to_string(trial_id) + ": record execution", "",
+         [this, trial_id, attempt, backend, truth, applied] {
+           store.RecordExecution(trial_id, attempt, backend, truth, applied);
+         });
+  }
+
   void OnExecuteStatus(CellRun& cell, const msg::TrialStatus& st) {
     auto it = executions.find(cell.trial_id);
     if (it == executions.end() || it->second.publishing) return;
@@ -638,6 +659,7 @@ struct TrialDriver::Impl {
       case msg::STATE_ACCEPTED:
         return;
       case msg::STATE_EXECUTED:
+        RecordExecution(ex, st);
         cell.execute_wall_s = st.phase_wall_s();
         ex.expected = st.samples();
         ex.stream_deadline = now() + Dur(opt.service.stream_grace_s);

@@ -108,6 +108,11 @@ inline constexpr const char* kUndoMigration5 =
     " ALTER TABLE cells DROP COLUMN lease_s; ALTER TABLE cells DROP COLUMN serving;"
     " ALTER TABLE trials DROP COLUMN service_restarts;";
 
+// The same for migration 10 (trials.backend, truth, defects_applied).
+inline constexpr const char* kUndoMigration10 =
+    " ALTER TABLE trials DROP COLUMN backend; ALTER TABLE trials DROP COLUMN truth;"
+    " ALTER TABLE trials DROP COLUMN defects_applied;";
+
 // The same for migration 7 (adaptive samplers' decisions, calibrations).
 inline constexpr const char* kUndoMigration7 =
     " DROP VIEW trial_decisions; DROP TABLE sampler_decisions; DROP TABLE calibrations;"

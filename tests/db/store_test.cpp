@@ -82,16 +82,16 @@ TEST(StoreOpen, MigratesVersionOneFile) {
   {
     sqlite3* db = nullptr;
     sqlite3_open(path.c_str(), &db);
-    ASSERT_EQ(
-        sqlite3_exec(db,
-                     (std::string("BEGIN; ALTER TABLE campaigns DROP COLUMN state_reason;"
-                                  " DROP TABLE evaluation_results; DROP TABLE evaluations;") +
-                      testing::kUndoMigration7 + testing::kUndoMigration5 +
-                      " DELETE FROM schema_migrations WHERE version > 1; PRAGMA user_version = 1;"
-                      " COMMIT;")
-                         .c_str(),
-                     nullptr, nullptr, nullptr),
-        SQLITE_OK)
+    ASSERT_EQ(sqlite3_exec(
+                  db,
+                  (std::string("BEGIN; ALTER TABLE campaigns DROP COLUMN state_reason;"
+                               " DROP TABLE evaluation_results; DROP TABLE evaluations;") +
+                   testing::kUndoMigration10 + testing::kUndoMigration7 + testing::kUndoMigration5 +
+                   " DELETE FROM schema_migrations WHERE version > 1; PRAGMA user_version = 1;"
+                   " COMMIT;")
+                      .c_str(),
+                  nullptr, nullptr, nullptr),
+              SQLITE_OK)
         << sqlite3_errmsg(db);
     sqlite3_close(db);
   }

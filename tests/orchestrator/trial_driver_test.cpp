@@ -178,6 +178,12 @@ struct FakeStore : TrialStore {
     faults.Hit("FinishTrial");
     Move(id, attempt, db::TrialState::kDone);
   }
+  void RecordExecution(std::int64_t, int, const std::string& backend, const std::string&,
+                       const std::string&) override {
+    faults.Hit("RecordExecution");
+    last_backend = backend;
+  }
+  std::string last_backend;
   void UpsertCell(const std::string& id, const std::vector<std::string>&, const std::string&,
                   const std::string&) override {
     faults.Hit("UpsertCell");

@@ -549,6 +549,20 @@ class Store {
   void RecordPrediction(std::int64_t trial_id, int attempt, const Prediction& prediction);
   // predicted -> done.
   void FinishTrial(std::int64_t trial_id, int attempt);
+  // What executed the trial (from the cell's EXECUTED status): the backend
+  // ("model", "mujoco", "exec:...", "replay:..."), its kind of truth
+  // ("self-consistency", "simulator", "robot", "recorded") and the defects
+  // really applied (JSON object, executors/README.md). Migration 10.
+  void RecordExecution(std::int64_t trial_id, int attempt, const std::string& backend,
+                       const std::string& truth, const std::string& defects_applied_json);
+  // Per (truth, backend): how many of the campaign's trials were executed
+  // against it (trials executed by a cell that reported none count under "").
+  struct TruthCount {
+    std::string truth;
+    std::string backend;
+    std::int64_t trials = 0;
+  };
+  std::vector<TruthCount> CampaignTruths(std::int64_t campaign_id) const;
   // After a crash: dispatched -> planned (attempt+1), resetting -> reset_failed,
   // incomplete streams of the old attempts deleted. Idempotent.
   RecoveryReport RecoverAfterRestart(const std::string& reason = "service restarted");

@@ -100,6 +100,9 @@ class TrialStore {
   // to be retried: a prediction of the same model_key replaces the previous one).
   virtual void RecordPrediction(std::int64_t trial_id, int attempt, const db::Prediction& p) = 0;
   virtual void FinishTrial(std::int64_t trial_id, int attempt) = 0;
+  // What executed the trial: backend, its kind of truth, the defects applied.
+  virtual void RecordExecution(std::int64_t trial_id, int attempt, const std::string& backend,
+                               const std::string& truth, const std::string& defects_applied) = 0;
   virtual void UpsertCell(const std::string& cell_id, const std::vector<std::string>& contact_types,
                           const std::string& capabilities_json,
                           const std::string& defects_json) = 0;
