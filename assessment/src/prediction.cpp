@@ -4,10 +4,12 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <map>
 #include <memory>
 
 #include <nlohmann/json.hpp>
 
+#include "arena/assessment/calibration.hpp"
 #include "arena/assessment/scoring.hpp"
 #include "arena/mechanics/scene_json.hpp"
 #include "arena/simulators/simulator.hpp"
@@ -45,6 +47,29 @@ mechanics::Scene ApplyModelSettings(const mechanics::Scene& scene, const nlohman
       out.model.reduce = mechanics::Reduce::kPlanar;
     else
       throw mechanics::SceneError("model.reduce", "must be auto, full or planar");
+  }
+  if (model.contains("contacts")) {
+    const auto& m = model["contacts"];
+    const auto mode =
+        m.is_string() ? mechanics::ContactTrackingFromString(m.get<std::string>()) : std::nullopt;
+    if (!mode) throw mechanics::SceneError("model.contacts", "must be tracked or fixed");
+    out.model.contacts = *mode;
+  }
+  // A calibration (arena calibrate) resolved by SubmitCampaign: parameter scales.
+  if (model.contains("calibrated")) {
+    const auto& c = model["calibrated"];
+    if (!c.is_object()) throw mechanics::SceneError("model.calibrated", "must be an object");
+    std::map<std::string, double> scales;
+    for (const auto& item : c.items()) {
+      if (!item.value().is_number())
+        throw mechanics::SceneError("model.calibrated." + item.key(), "must be a number");
+      scales[item.key()] = item.value().get<double>();
+    }
+    try {
+      out = ApplyScales(out, scales);
+    } catch (const CalibrationError& e) {
+      throw mechanics::SceneError("model.calibrated", e.what());
+    }
   }
   mechanics::ValidateScene(out);
   return out;

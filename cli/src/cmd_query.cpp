@@ -20,8 +20,14 @@ struct QueryOptions {
   std::string where;
   std::string outcome;
   std::string format = "table";
+  bool decisions = false;
   double timeout_s = 60;
 };
+
+// Why each trial of an adaptive campaign was chosen (view trial_decisions).
+constexpr const char* kDecisionsQuery =
+    "SELECT trial_id, campaign_id, idx, round, state, params_json, reason FROM trial_decisions"
+    " ORDER BY trial_id";
 
 int RunQueryCommand(const QueryOptions& o) {
   try {
@@ -43,11 +49,13 @@ int RunQueryCommand(const QueryOptions& o) {
     }
     filter.where = o.where;
     filter.outcome = o.outcome;
+    if (o.decisions && !o.sql.empty())
+      throw CommandError(kExitBadInput, "--decisions: give either SQL or --decisions, not both");
     if (!std::isfinite(o.timeout_s) || o.timeout_s <= 0)
       throw CommandError(kExitBadInput, "--timeout: must be a number of seconds > 0");
     db::QueryLimits limits;
     limits.max_seconds = o.timeout_s;
-    const auto result = db::RunQuery(*store, o.sql, filter, limits);
+    const auto result = db::RunQuery(*store, o.decisions ? kDecisionsQuery : o.sql, filter, limits);
     const std::string text = o.format == "csv"    ? db::FormatCsv(result)
                              : o.format == "json" ? db::FormatJson(result)
                                                   : db::FormatTable(result);
@@ -76,6 +84,9 @@ void AddQueryCommand(CLI::App& app, Action* action) {
                   "An SQL condition on the result's columns, e.g. 'grip_force > 5'");
   cmd->add_option("--outcome", o->outcome,
                   "Only rows whose outcome is X (ok, failed, refused, ...)");
+  cmd->add_flag("--decisions", o->decisions,
+                "Why each trial of an adaptive campaign was chosen (round, rule, evidence; "
+                "view trial_decisions)");
   cmd->add_option("--timeout", o->timeout_s, "Stop a query running longer than this (s)")
       ->capture_default_str();
   cmd->add_option("--format", o->format, "Output format")
@@ -90,6 +101,7 @@ void AddQueryCommand(CLI::App& app, Action* action) {
       "  arena query --db lab.db \"SELECT grip_force, AVG(slip_distance_m) FROM contact_results\n"
       "                          WHERE role = 'finger' GROUP BY grip_force\"\n"
       "Every varied parameter of a campaign is a column of trial_results and contact_results.\n"
+      "  arena query --db lab.db --campaign 2 --decisions\n"
       "The store is opened read-only: a statement that would write is refused (exit 2).\n"
       "Tables and columns: db/README.md.\n");
   cmd->callback([o, action] { *action = [o] { return RunQueryCommand(*o); }; });

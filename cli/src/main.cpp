@@ -32,6 +32,7 @@ int main(int argc, char** argv) {
   AddWatchCommand(app, &action);
   AddCertsCommand(app, &action);
   AddSensitivityCommand(app, &action);
+  AddCalibrateCommand(app, &action);
 
   try {
     app.parse(argc, argv);

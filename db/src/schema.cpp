@@ -331,6 +331,43 @@ INSERT OR IGNORE INTO campaign_parameters(campaign_id, name)
   WHERE j.key IS NOT NULL ORDER BY t.id, j.id;
 )sql",
        internal::MigrateToOutcomes},
+      // Adaptive campaigns (orchestrator/adaptive.hpp) and calibrations
+      // (assessment/calibration.hpp). sampler_open = 1: an adaptive sampler
+      // may still add trials, so the campaign is not done when its trials are.
+      {7, "adaptive sampler decisions, campaigns.sampler_open, calibrations", R"sql(
+ALTER TABLE campaigns ADD COLUMN sampler_open INTEGER NOT NULL DEFAULT 0;
+
+CREATE TABLE sampler_decisions(
+  id          INTEGER PRIMARY KEY,
+  campaign_id INTEGER NOT NULL REFERENCES campaigns(id),
+  round       INTEGER NOT NULL CHECK (round >= 0),
+  trial_id    INTEGER REFERENCES trials(id),
+  reason      TEXT NOT NULL,
+  basis_json  TEXT NOT NULL DEFAULT '{}',
+  created_at  REAL NOT NULL
+);
+CREATE INDEX sampler_decisions_by_campaign ON sampler_decisions(campaign_id, round, id);
+CREATE UNIQUE INDEX sampler_decisions_by_trial ON sampler_decisions(trial_id)
+  WHERE trial_id IS NOT NULL;
+
+CREATE VIEW trial_decisions AS
+  SELECT t.id AS trial_id, t.campaign_id, t.idx, t.state, t.params_json, t.outcome,
+         d.round, d.reason, d.basis_json
+  FROM sampler_decisions d JOIN trials t ON t.id = d.trial_id;
+
+CREATE TABLE calibrations(
+  id            INTEGER PRIMARY KEY,
+  campaign_id   INTEGER NOT NULL REFERENCES campaigns(id),
+  created_at    REAL NOT NULL,
+  params_json   TEXT NOT NULL DEFAULT '{}',
+  settings_json TEXT NOT NULL DEFAULT '{}',
+  heldout_error_before REAL NOT NULL,
+  heldout_error_after  REAL NOT NULL,
+  applied       INTEGER NOT NULL CHECK (applied IN (0, 1)),
+  report_json   TEXT NOT NULL DEFAULT '{}'
+);
+CREATE INDEX calibrations_by_campaign ON calibrations(campaign_id);
+)sql"},
       {8, "sensitivity runs: predicted vs observed spread and unstable conditions", R"sql(
 -- IF NOT EXISTS: a file rolled back to an older version by hand (as the
 -- migration tests do) may still hold these tables; they are kept as they are.

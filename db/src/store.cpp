@@ -395,10 +395,13 @@ int ContactTypeMask(const std::vector<std::string>& types) {
 
 // ---------------------------------------------------------------- campaigns
 
-namespace {
+namespace internal {
 
-void InsertPlannedTrials(const Store::Impl& impl, std::int64_t campaign_id, int first_index,
-                         const std::vector<PlannedTrial>& trials, const char* function) {
+std::vector<std::int64_t> InsertPlannedTrials(const Store::Impl& impl, std::int64_t campaign_id,
+                                              int first_index,
+                                              const std::vector<PlannedTrial>& trials,
+                                              const char* function) {
+  std::vector<std::int64_t> ids;
   const double now = impl.Now();
   auto ins = impl.Prepare(
       "INSERT INTO trials(campaign_id, idx, condition, replicate, seed, state, attempt,"
@@ -429,12 +432,17 @@ void InsertPlannedTrials(const Store::Impl& impl, std::int64_t campaign_id, int 
     b << t.scene_json << t.params_json << t.defects_json << now << now;
     s.Run();
     s.Reset();
-    audit->Bind(1, static_cast<std::int64_t>(sqlite3_last_insert_rowid(impl.db)))
-        .Bind(2, now)
-        .Run();
+    ids.push_back(static_cast<std::int64_t>(sqlite3_last_insert_rowid(impl.db)));
+    audit->Bind(1, ids.back()).Bind(2, now).Run();
     audit->Reset();
   }
+  return ids;
 }
+
+}  // namespace internal
+
+namespace {
+using internal::InsertPlannedTrials;
 
 Campaign ReadCampaign(const detail::Stmt& s) {
   Campaign c;
@@ -448,12 +456,13 @@ Campaign ReadCampaign(const detail::Stmt& s) {
   c.created_at = s.Real(7);
   c.updated_at = s.Real(8);
   c.state_reason = s.Text(9);
+  c.sampler_open = s.Int(10) != 0;
   return c;
 }
 
 constexpr const char* kCampaignCols =
     "SELECT id, name, spec_json, state, priority, seed, sampler_state_json, created_at, updated_at,"
-    " state_reason FROM campaigns";
+    " state_reason, sampler_open FROM campaigns";
 
 }  // namespace
 
@@ -468,14 +477,15 @@ std::int64_t Store::CreateCampaign(const NewCampaign& campaign,
   auto s = impl_->Prepare(
       "INSERT INTO campaigns(name, spec_json, state, priority, seed, sampler_state_json, "
       "created_at,"
-      " updated_at) VALUES(?,?,'active',?,?,?,?,?)");
+      " updated_at, sampler_open) VALUES(?,?,'active',?,?,?,?,?,?)");
   s->Bind(1, campaign.name)
       .Bind(2, campaign.spec_json)
       .Bind(3, campaign.priority)
       .Bind(4, SeedToDb(campaign.seed))
       .Bind(5, campaign.sampler_state_json)
       .Bind(6, now)
-      .Bind(7, now);
+      .Bind(7, now)
+      .Bind(8, campaign.sampler_open ? 1 : 0);
   s->Run();
   const std::int64_t id = static_cast<std::int64_t>(sqlite3_last_insert_rowid(impl_->db));
   InsertPlannedTrials(*impl_, id, 0, trials, "CreateCampaign");
@@ -495,14 +505,15 @@ std::int64_t Store::CreateCampaign(const NewCampaign& campaign,
   auto s = impl_->Prepare(
       "INSERT INTO campaigns(name, spec_json, state, priority, seed, sampler_state_json, "
       "created_at,"
-      " updated_at) VALUES(?,?,'active',?,?,?,?,?)");
+      " updated_at, sampler_open) VALUES(?,?,'active',?,?,?,?,?,?)");
   s->Bind(1, campaign.name)
       .Bind(2, campaign.spec_json)
       .Bind(3, campaign.priority)
       .Bind(4, SeedToDb(campaign.seed))
       .Bind(5, campaign.sampler_state_json)
       .Bind(6, now)
-      .Bind(7, now);
+      .Bind(7, now)
+      .Bind(8, campaign.sampler_open ? 1 : 0);
   s->Run();
   const std::int64_t id = static_cast<std::int64_t>(sqlite3_last_insert_rowid(impl_->db));
   int first = 0;
@@ -615,7 +626,8 @@ std::vector<std::int64_t> Store::CompleteFinishedCampaigns() {
   impl_->RequireWritable("CompleteFinishedCampaigns");
   Tx tx(impl_->db, true);
   auto s = impl_->Prepare(
-      "SELECT c.id FROM campaigns c WHERE c.state = 'active' AND NOT EXISTS ("
+      "SELECT c.id FROM campaigns c WHERE c.state = 'active' AND c.sampler_open = 0"
+      " AND NOT EXISTS ("
       " SELECT 1 FROM trials t WHERE t.campaign_id = c.id"
       " AND t.state NOT IN ('done','failed','cancelled'))");
   std::vector<std::int64_t> ids;

@@ -29,6 +29,13 @@ void WriteTransition(const Store::Impl& impl, std::int64_t trial_id, int attempt
                      TrialState to, const std::string& cell_id, const std::string& reason,
                      const char* function);
 
+// Inserts planned trials with indices first_index.. and their audit rows;
+// no transaction of its own. @returns their ids. @throws kBadInput naming `function`.
+std::vector<std::int64_t> InsertPlannedTrials(const Store::Impl& impl, std::int64_t campaign_id,
+                                              int first_index,
+                                              const std::vector<PlannedTrial>& trials,
+                                              const char* function);
+
 // The samples of one stream, in order; no transaction of its own (the caller's
 // read transaction gives the snapshot). @throws kCorrupt on a count mismatch.
 std::vector<Sample> ReadStreamSamples(const Store::Impl& impl, std::int64_t stream_id,

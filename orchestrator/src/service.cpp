@@ -27,6 +27,7 @@
 #include "arena/assessment/truth.hpp"
 #include "arena/db/store.hpp"
 #include "arena/mechanics/scene_json.hpp"
+#include "arena/orchestrator/adaptive.hpp"
 #include "arena/orchestrator/logging.hpp"
 #include "arena/orchestrator/trial_data.hpp"
 #include "arena/orchestrator/trial_driver.hpp"
@@ -318,6 +319,8 @@ struct Service::Impl {
   std::unique_ptr<db::Store> store;
   std::unique_ptr<SqliteTrialStore> trial_store;
   std::unique_ptr<TrialDriver> driver;
+  // Adaptive campaigns' next rounds (adaptive.hpp): one call per scheduling pass.
+  std::unique_ptr<AdaptivePlanner> adaptive;
   bool registered = false;
 
   std::atomic<bool> stop_requested{false};
@@ -361,6 +364,7 @@ struct Service::Impl {
     }
     registered = true;
     trial_store = std::make_unique<SqliteTrialStore>(*store, SessionHex(session));
+    adaptive = std::make_unique<AdaptivePlanner>(*store);
     DriverOptions d;
     d.service = o;
     driver = std::make_unique<TrialDriver>(d, me, *trial_store, transport, predictor);
@@ -431,6 +435,7 @@ struct Service::Impl {
       for (auto& st : statuses.TakeAll()) driver->OnStatus(st);
       while (auto e = participant.NextPeerEvent(std::chrono::milliseconds(0))) OnPeerEvent(*e);
       for (auto& p : predictor.TakeResults()) driver->OnPrediction(std::move(p));
+      if (!stop_requested) adaptive->Advance(driver->IdleCells());
       driver->Tick(stop_requested || drain_deadline.has_value());
 
       const auto now = Clock::now();

@@ -938,6 +938,12 @@ void TrialDriver::OnGroundTruth(const msg::GroundTruth& b) { impl_->OnGroundTrut
 void TrialDriver::OnPrediction(PredictionDone done) { impl_->OnPrediction(std::move(done)); }
 void TrialDriver::Tick(bool stopping) { impl_->Tick(stopping); }
 bool TrialDriver::InFlight() const { return impl_->InFlight(); }
+int TrialDriver::IdleCells() const {
+  int n = 0;
+  for (const auto& [id, cell] : impl_->cells)
+    n += cell.alive && cell.ours && !cell.quarantined && cell.phase == Impl::CellPhase::kIdle;
+  return n;
+}
 bool TrialDriver::CampaignsFinished() {
   bool finished = false;
   impl_->Attempt("completing finished campaigns", [&] {

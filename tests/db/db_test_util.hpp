@@ -122,6 +122,11 @@ inline constexpr const char* kUndoMigration6 =
     " ALTER TABLE gt_summary DROP COLUMN net_ry; ALTER TABLE gt_summary DROP COLUMN net_rz;"
     " ALTER TABLE gt_summary DROP COLUMN grasp_kept;";
 
+// The same for migration 7 (adaptive samplers' decisions, calibrations).
+inline constexpr const char* kUndoMigration7 =
+    " DROP VIEW trial_decisions; DROP TABLE sampler_decisions; DROP TABLE calibrations;"
+    " ALTER TABLE campaigns DROP COLUMN sampler_open;";
+
 // Runs one trial through the whole state machine with n samples.
 inline void RunTrialToDone(Store& store, const ClaimedTrial& t, int n,
                            const IngestOptions& options = {}) {

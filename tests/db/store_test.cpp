@@ -84,7 +84,7 @@ TEST(StoreOpen, MigratesVersionOneFile) {
     sqlite3_open(path.c_str(), &db);
     ASSERT_EQ(
         sqlite3_exec(db,
-                     (std::string("BEGIN;") + testing::kUndoMigration6 +
+                     (std::string("BEGIN;") + testing::kUndoMigration6 + testing::kUndoMigration7 +
                       " ALTER TABLE campaigns DROP COLUMN state_reason;"
                       " DROP TABLE evaluation_results; DROP TABLE evaluations;" +
                       testing::kUndoMigration10 + testing::kUndoMigration5 +

@@ -195,6 +195,8 @@ class TrialDriver {
 
   // ---- state
   bool InFlight() const;
+  // Cells alive, serving us, not quarantined and idle (an adaptive batch's size).
+  int IdleCells() const;
   // Every campaign (or options.only_campaign) is over; marks finished campaigns done.
   bool CampaignsFinished();
   ServiceCounters counters() const;
