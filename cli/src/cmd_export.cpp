@@ -7,12 +7,13 @@
 
 #include <nlohmann/json.hpp>
 
+#include "arena/assessment/prediction.hpp"
+#include "arena/assessment/truth.hpp"
 #include "arena/cli/version.hpp"
 #include "arena/db/export.hpp"
 #include "arena/db/store.hpp"
 #include "arena/mechanics/scene_json.hpp"
 #include "arena/mechanics/simulate.hpp"
-#include "arena/orchestrator/prediction.hpp"
 #include "arena/orchestrator/trial_data.hpp"
 #include "commands.hpp"
 #include "output_guard.hpp"
@@ -78,13 +79,15 @@ db::PredictedStream Predict(const std::string& scene_json, const std::string& sp
   nlohmann::json model;
   const auto spec = nlohmann::json::parse(spec_json);
   if (spec.is_object() && spec.contains("prediction")) model = spec["prediction"];
-  const mechanics::Scene model_scene = orchestrator::ApplyModelSettings(scene, model);
-  out.predictor = orchestrator::ModelKey(model_scene.model);
-  out.settings_json = nlohmann::json({{"facets", model_scene.model.facets},
-                                      {"points", model_scene.model.points},
-                                      {"dt", model_scene.model.dt},
-                                      {"reduce", mechanics::ToString(model_scene.model.reduce)}})
-                          .dump();
+  const mechanics::Scene model_scene = assessment::ApplyModelSettings(scene, model);
+  out.predictor = assessment::ModelKey(model_scene.model);
+  out.settings_json =
+      nlohmann::json({{"facets", model_scene.model.facets},
+                      {"points", model_scene.model.points},
+                      {"dt", model_scene.model.dt},
+                      {"reduce", mechanics::ToString(model_scene.model.reduce)},
+                      {"contacts", mechanics::ToString(model_scene.model.contacts)}})
+          .dump();
   const mechanics::SimulationResult r = mechanics::Simulate(model_scene);
   switch (r.status) {
     case mechanics::SimulationStatus::kOk:
@@ -98,7 +101,7 @@ db::PredictedStream Predict(const std::string& scene_json, const std::string& sp
       out.error = r.error;
       return out;
   }
-  const auto normals = orchestrator::ContactNormals(model_scene);
+  const auto normals = assessment::ContactNormals(model_scene);
   for (const auto& p : r.samples) out.samples.push_back(ToSample(p, normals, model_scene));
   return out;
 }
