@@ -197,7 +197,7 @@ class PredictorPool : public PredictionPort {
   void SetStore(db::Store* store) { store_ = store; }
 
   void Start(PredictionRequest r) override {
-    PredictionJob job{r.trial_id, r.attempt, r.campaign_id, {}, std::move(r.truth)};
+    PredictionJob job{r.trial_id, r.attempt, r.campaign_id, {}, std::move(r.truth), {}};
     try {
       mechanics::Scene scene = r.scene_json.empty() || !job.truth.empty()
                                    ? std::move(r.scene)
