@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Checks that no merge left conflict markers in a tracked file and that every
-# tracked C++ file is formatted by .clang-format (Google style, 100 columns). Exit 1 lists the files that are not; `scripts/check_format.sh
-# --fix` formats them in place.
+# tracked C++ file is formatted by .clang-format (Google style, 100 columns).
+# Exit 1 lists what is not; `scripts/check_format.sh --fix` formats in place.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 if ! command -v clang-format >/dev/null 2>&1; then
