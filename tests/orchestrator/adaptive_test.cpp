@@ -272,7 +272,7 @@ TEST_F(StoreFile, PlanAdaptiveRoundWritesOnlyFromTheStateItRead) {
   nc.name = "x";
   nc.spec_json = "{}";
   nc.sampler_open = true;
-  const std::int64_t id = store->CreateCampaign(nc, {});
+  const std::int64_t id = store->CreateCampaign(nc, std::vector<db::PlannedTrial>{});
   db::AdaptiveRound round;
   round.round = 0;
   round.open = false;
