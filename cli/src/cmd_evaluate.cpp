@@ -307,9 +307,6 @@ void AddEvaluateCommand(CLI::App& app, Action* action) {
                   "Trials whose pieces the convergence table restarts from the true state "
                   "(0: no table)")
       ->capture_default_str();
-  cmd->add_option("--contacts", o->contacts, "Contact geometries to try (tracked, fixed)")
-      ->delimiter(',')
-      ->capture_default_str();
   cmd->add_option(
       "--budget", o->budgets,
       "Budget, repeatable (all must hold), judged on p95: '1mm' = p95 final position error "
