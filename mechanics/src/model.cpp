@@ -291,23 +291,42 @@ struct Contact {
 // zeroing and multiplying it whole) while a warm-started solve reads only
 // its basic columns (a few dozen). Every other entry is one of a few per
 // column, assigned after the force block (Set), in the order assigned.
-// Small problems are formed whole at Finish() with the dense expression the
-// step always used, large ones column by column with the arithmetic of
-// Eigen's matrix product on them (a sum over the 3 or 6 reduced coordinates
-// in order from zero, times the mass): the same entries to the last bit.
+// Small problems are formed whole at Reset() with the dense expression the
+// step always used (then Set writes into it), large ones column by column
+// with the arithmetic of Eigen's matrix product on them (a sum over the 3 or
+// 6 reduced coordinates in order from zero, times the mass): the same
+// entries to the last bit.
 class StepMatrix final : public LcpColumns {
  public:
-  void Reset(int n, int nf) {
+  void Reset(int n, int nf, double mass, const Eigen::MatrixXd& Jrows, const Eigen::MatrixXd& K) {
     n_ = n;
     nf_ = nf;
-    entries_.clear();
-  }
-  void Set(int row, int col, double value) { entries_.push_back(Entry{row, col, value}); }
-  void Finish(double mass, const Eigen::MatrixXd& Jrows, const Eigen::MatrixXd& K) {
     mass_ = mass;
     K_ = &K;
+    entries_.clear();
     cache_.resize(n_, n_);
-    // Entries by column, keeping the order of assignment within a column.
+    dense_ = nf_ < kLazyForces;
+    if (dense_) {
+      // Eigen picks a coefficient-wise product for small sizes, whose sums
+      // run in another order: the dense formation keeps it.
+      cache_.setZero();
+      cache_.topLeftCorner(nf_, nf_).noalias() = mass * Jrows.transpose() * K;
+      ready_.assign(static_cast<size_t>(n_), 1);
+    } else {
+      JT_ = Jrows.transpose();
+      ready_.assign(static_cast<size_t>(n_), 0);
+    }
+  }
+  void Set(int row, int col, double value) {
+    if (dense_) {
+      cache_(row, col) = value;
+    } else {
+      entries_.push_back(Entry{row, col, value});
+    }
+  }
+  // After the last Set: the sparse entries by column, in assignment order.
+  void Finish() {
+    if (dense_) return;
     first_.assign(static_cast<size_t>(n_) + 1, 0);
     for (const Entry& e : entries_) ++first_[static_cast<size_t>(e.col) + 1];
     for (int j = 0; j < n_; ++j)
@@ -316,17 +335,6 @@ class StepMatrix final : public LcpColumns {
     fill_.assign(first_.begin(), first_.end() - 1);
     for (const Entry& e : entries_)
       sorted_[static_cast<size_t>(fill_[static_cast<size_t>(e.col)]++)] = e;
-    if (nf_ < kLazyForces) {
-      // The dense formation (Eigen picks a coefficient-wise product for
-      // small sizes, whose sums run in another order).
-      cache_.setZero();
-      cache_.topLeftCorner(nf_, nf_).noalias() = mass * Jrows.transpose() * K;
-      for (const Entry& e : entries_) cache_(e.row, e.col) = e.value;
-      ready_.assign(static_cast<size_t>(n_), 1);
-      return;
-    }
-    JT_ = Jrows.transpose();
-    ready_.assign(static_cast<size_t>(n_), 0);
   }
   Eigen::Index size() const override { return n_; }
   const double* Column(Eigen::Index j) const override {
@@ -351,13 +359,13 @@ class StepMatrix final : public LcpColumns {
     return col;
   }
   bool AllFinite() const override {
-    if (nf_ < kLazyForces) return cache_.allFinite();
+    if (dense_) return cache_.allFinite();
     if (!std::isfinite(mass_) || !JT_.allFinite() || !K_->allFinite()) return false;
     return std::all_of(entries_.begin(), entries_.end(),
                        [](const Entry& e) { return std::isfinite(e.value); });
   }
   // The whole matrix (for an observer or a dump).
-  Eigen::MatrixXd Dense() const {
+  const Eigen::MatrixXd& Dense() const {
     for (int j = 0; j < n_; ++j) Column(j);
     return cache_;
   }
@@ -371,6 +379,7 @@ class StepMatrix final : public LcpColumns {
     double value = 0;
   };
   int n_ = 0, nf_ = 0;
+  bool dense_ = true;
   double mass_ = 0;
   const Eigen::MatrixXd* K_ = nullptr;
   Eigen::MatrixXd JT_;
@@ -1014,7 +1023,7 @@ StepReport ContactModel::Impl::Step() {
   // Vs = Fs dt / m; velocity rows are divided by Vs, force rows by Fs. A
   // tracked point without rows this step keeps its unknowns at zero (a unit
   // diagonal and b = 1), so the LCP keeps its size.
-  A.Reset(n, nf);
+  A.Reset(n, nf, mass, Jrows, K);
   b.setZero(n);
   b.head(nf).noalias() = Jrows.transpose() * vfree;
   for (int k = 0; k < nf; ++k) {
@@ -1092,7 +1101,7 @@ StepReport ContactModel::Impl::Step() {
     }
     return vf * ct.normal;
   };
-  A.Finish(mass, Jrows, K);
+  A.Finish();
   if (lcp_observer) lcp_observer(A.Dense(), b);
   int next_covering = 0;
   for (int attempt = 0;; ++attempt) {
