@@ -38,23 +38,12 @@ nlohmann::json Reference() {
 // force, tangential force and mode.
 std::vector<double> Row(const SimulationResult& r, std::size_t i) {
   const TrajectorySample& m = r.samples.at(i);
-  std::vector<double> row = {static_cast<double>(i),
-                             m.position.x(),
-                             m.position.y(),
-                             m.position.z(),
-                             m.orientation.w(),
-                             m.orientation.x(),
-                             m.orientation.y(),
-                             m.orientation.z(),
-                             m.velocity.x(),
-                             m.velocity.y(),
-                             m.velocity.z(),
-                             m.angular_velocity.x(),
-                             m.angular_velocity.y(),
-                             m.angular_velocity.z(),
-                             m.pusher_force.x(),
-                             m.pusher_force.y(),
-                             m.pusher_force.z()};
+  std::vector<double> row = {static_cast<double>(i), m.position.x(),         m.position.y(),
+                             m.position.z(),         m.orientation.w(),      m.orientation.x(),
+                             m.orientation.y(),      m.orientation.z(),      m.velocity.x(),
+                             m.velocity.y(),         m.velocity.z(),         m.angular_velocity.x(),
+                             m.angular_velocity.y(), m.angular_velocity.z(), m.pusher_force.x(),
+                             m.pusher_force.y(),     m.pusher_force.z()};
   for (const ContactState& c : m.contacts) {
     row.insert(row.end(), {c.normal_force, c.tangential_force.x(), c.tangential_force.y(),
                            c.tangential_force.z(), static_cast<double>(c.mode)});
