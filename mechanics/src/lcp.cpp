@@ -128,6 +128,88 @@ bool RepairBasis(const LcpColumns& A, const Eigen::VectorXd& b, std::vector<char
   return false;
 }
 
+// Lemke's basis inverse, which knows where it may hold anything but +0: the
+// columns a pivot or a refactorisation wrote, the rows a pivot scaled, and
+// its unit entries. Clear() zeroes just those (a fresh inverse used to be
+// n² zeros, and at n = 650 zeroing it twice per 32 pivots was a third of a
+// cold solve); afterwards every entry is +0, as after setZero().
+class TrackedInverse {
+ public:
+  Eigen::MatrixXd B;
+  void Identity(Eigen::Index n) {
+    if (B.rows() != n) {
+      B.setZero(n, n);
+      dirty_col_.assign(static_cast<size_t>(n), 0);
+      scaled_row_.assign(static_cast<size_t>(n), 0);
+      cols_.clear();
+      rows_.clear();
+      units_.clear();
+    } else {
+      Clear();
+    }
+    for (Eigen::Index i = 0; i < n; ++i) Unit(i, i);
+  }
+  void Clear() {
+    for (Eigen::Index j : cols_) {
+      B.col(j).setZero();
+      dirty_col_[static_cast<size_t>(j)] = 0;
+    }
+    for (Eigen::Index r : rows_) {
+      B.row(r).setZero();
+      scaled_row_[static_cast<size_t>(r)] = 0;
+    }
+    for (const auto& [i, j] : units_) B(i, j) = 0;
+    cols_.clear();
+    rows_.clear();
+    units_.clear();
+  }
+  void Unit(Eigen::Index i, Eigen::Index j) {
+    B(i, j) = 1;
+    units_.emplace_back(i, j);
+  }
+  void ColumnWritten(Eigen::Index j) {
+    if (!dirty_col_[static_cast<size_t>(j)]) {
+      dirty_col_[static_cast<size_t>(j)] = 1;
+      cols_.push_back(j);
+    }
+  }
+  void RowScaled(Eigen::Index r) {
+    if (!scaled_row_[static_cast<size_t>(r)]) {
+      scaled_row_[static_cast<size_t>(r)] = 1;
+      rows_.push_back(r);
+    }
+  }
+  // y = B b right after a refactorisation (every column a written one or a
+  // unit column), summed as Eigen's dense product sums it (MultiplyColumns):
+  // a unit column adds b_j to one row and exact zeros elsewhere.
+  void MultiplyFresh(const Eigen::VectorXd& b, const std::vector<Eigen::Index>& unit_row,
+                     Eigen::VectorXd& y) const {
+    const Eigen::Index n = B.rows();
+    const Eigen::Index block =
+        n < 128 ? n : (n * static_cast<Eigen::Index>(sizeof(double)) < 32000 ? 16 : 4);
+    y.setZero(n);
+    thread_local Eigen::VectorXd sum;
+    for (Eigen::Index j0 = 0; j0 < n; j0 += block) {
+      const Eigen::Index j1 = std::min(j0 + block, n);
+      sum.setZero(n);
+      for (Eigen::Index j = j0; j < j1; ++j) {
+        const Eigen::Index i = unit_row[static_cast<size_t>(j)];
+        if (i >= 0) {
+          sum[i] += b[j];
+        } else {
+          sum += B.col(j) * b[j];
+        }
+      }
+      y += sum;
+    }
+  }
+
+ private:
+  std::vector<char> dirty_col_, scaled_row_;
+  std::vector<Eigen::Index> cols_, rows_;
+  std::vector<std::pair<Eigen::Index, Eigen::Index>> units_;
+};
+
 // One run of Lemke's method with covering vector `cover`; fills z, w,
 // basis, pivots and ok/reason of `out`.
 void LemkeOnce(const LcpColumns& A, const Eigen::VectorXd& b, const Eigen::VectorXd& cover,
@@ -147,12 +229,13 @@ void LemkeOnce(const LcpColumns& A, const Eigen::VectorXd& b, const Eigen::Vecto
   // per pivot instead of O(n²), with the same arithmetic on what remains.
   // Work space kept between calls (most solves are small and allocation
   // was a sixth of their cost).
-  thread_local Eigen::MatrixXd Binv;
+  thread_local TrackedInverse inverse;
+  Eigen::MatrixXd& Binv = inverse.B;
   thread_local Eigen::VectorXd x, d;  // x: values of the basic variables
   thread_local Eigen::RowVectorXd pivot_row;
   thread_local std::vector<Eigen::Index> basis,
       slack_pos;  // slack_pos: position of basic w_v, or -1
-  Binv.setIdentity(n, n);
+  inverse.Identity(n);
   x = b;
   d.resize(n);
   pivot_row.resize(n);
@@ -167,11 +250,15 @@ void LemkeOnce(const LcpColumns& A, const Eigen::VectorXd& b, const Eigen::Vecto
     const double p = d[r];
     x[r] /= p;
     Binv.row(r) /= p;
+    inverse.RowScaled(r);
     pivot_row = Binv.row(r);
     d[r] = 0;
     x.noalias() -= d * x[r];
     for (Eigen::Index j = 0; j < n; ++j) {
-      if (pivot_row[j] != 0) Binv.col(j).noalias() -= d * pivot_row[j];
+      if (pivot_row[j] != 0) {
+        Binv.col(j).noalias() -= d * pivot_row[j];
+        inverse.ColumnWritten(j);
+      }
     }
     const Eigen::Index leaving = basis[static_cast<size_t>(r)];
     basis[static_cast<size_t>(r)] = entering;
@@ -197,6 +284,7 @@ void LemkeOnce(const LcpColumns& A, const Eigen::VectorXd& b, const Eigen::Vecto
   // which costs O(k³ + (n - k) k²) instead of O(n³) for the full inverse.
   thread_local std::vector<Eigen::Index> cpos, srows;  // non-unit positions, uncovered rows
   thread_local std::vector<char> covered;
+  thread_local std::vector<Eigen::Index> unit_row;  // column v of the inverse is e_(unit_row[v])
   thread_local Eigen::MatrixXd Cs, Cu, G;
   thread_local Eigen::PartialPivLU<Eigen::MatrixXd> cs_lu;
   // Entries of the basic columns, -A(., v - n) or -cover for z0: a pointer
@@ -221,7 +309,7 @@ void LemkeOnce(const LcpColumns& A, const Eigen::VectorXd& b, const Eigen::Vecto
     }
     const auto k = static_cast<Eigen::Index>(cpos.size());
     if (static_cast<Eigen::Index>(srows.size()) != k) return false;
-    Binv.setZero();
+    inverse.Clear();
     if (k > 0) {
       Cs.resize(k, k);
       for (Eigen::Index c = 0; c < k; ++c) {
@@ -256,11 +344,16 @@ void LemkeOnce(const LcpColumns& A, const Eigen::VectorXd& b, const Eigen::Vecto
         ++u;
       }
     }
+    for (Eigen::Index r = 0; r < k; ++r) inverse.ColumnWritten(srows[static_cast<size_t>(r)]);
+    unit_row.assign(static_cast<size_t>(n), -1);
     for (Eigen::Index i = 0; i < n; ++i) {
       const Eigen::Index v = basis[static_cast<size_t>(i)];
-      if (v < n) Binv(i, v) = 1;
+      if (v < n) {
+        inverse.Unit(i, v);
+        unit_row[static_cast<size_t>(v)] = i;
+      }
     }
-    x.noalias() = Binv * b;
+    inverse.MultiplyFresh(b, unit_row, x);
     return x.allFinite();
   };
   int fresh_at = -1;  // pivot count at the last refactor
