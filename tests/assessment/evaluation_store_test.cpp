@@ -7,13 +7,13 @@
 
 #include <gtest/gtest.h>
 
+#include <nlohmann/json.hpp>
 #include "arena/assessment/evaluation.hpp"
 #include "arena/assessment/prediction.hpp"
 #include "arena/assessment/truth.hpp"
 #include "arena/mechanics/scene_json.hpp"
 #include "arena/mechanics/simulate.hpp"
 #include "db/db_test_util.hpp"
-#include <nlohmann/json.hpp>
 
 namespace arena::assessment {
 namespace {
