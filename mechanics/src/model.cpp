@@ -306,6 +306,7 @@ class StepMatrix final : public LcpColumns {
     entries_.clear();
     cache_.resize(n_, n_);
     dense_ = nf_ < kLazyForces;
+    finite_ = std::isfinite(mass) && Jrows.allFinite() && K.allFinite();
     if (dense_) {
       // Eigen picks a coefficient-wise product for small sizes, whose sums
       // run in another order: the dense formation keeps it.
@@ -318,6 +319,7 @@ class StepMatrix final : public LcpColumns {
     }
   }
   void Set(int row, int col, double value) {
+    finite_ = finite_ && std::isfinite(value);
     if (dense_) {
       cache_(row, col) = value;
     } else {
@@ -358,12 +360,10 @@ class StepMatrix final : public LcpColumns {
     ready_[static_cast<size_t>(j)] = 1;
     return col;
   }
-  bool AllFinite() const override {
-    if (dense_) return cache_.allFinite();
-    if (!std::isfinite(mass_) || !JT_.allFinite() || !K_->allFinite()) return false;
-    return std::all_of(entries_.begin(), entries_.end(),
-                       [](const Entry& e) { return std::isfinite(e.value); });
-  }
+  // From the factors (entries are sums of products of them; an overflow
+  // there would show in the solution, which the solver checks too) and the
+  // values set: no n² scan.
+  bool AllFinite() const override { return finite_; }
   // The whole matrix (for an observer or a dump).
   const Eigen::MatrixXd& Dense() const {
     for (int j = 0; j < n_; ++j) Column(j);
@@ -380,6 +380,7 @@ class StepMatrix final : public LcpColumns {
   };
   int n_ = 0, nf_ = 0;
   bool dense_ = true;
+  bool finite_ = true;
   double mass_ = 0;
   const Eigen::MatrixXd* K_ = nullptr;
   Eigen::MatrixXd JT_;
