@@ -47,6 +47,9 @@ struct Chart {
 // own x axis carries data-x-label.
 std::string RenderSvg(const Chart& chart);
 
+// Text made safe for SVG/XML attributes and content (& < > ").
+std::string SvgEscape(const std::string& s);
+
 // "Nice" axis ticks covering [lo, hi] (about `count` of them).
 std::vector<double> NiceTicks(double lo, double hi, int count = 6);
 
