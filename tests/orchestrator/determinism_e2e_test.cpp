@@ -72,7 +72,7 @@ TEST(Determinism, SameCampaignSameTruthWhicheverCellRanEachTrial) {
     std::array<double, 3> planned{0, 0, 0};
     if (scene["object"].contains("pose") && scene["object"]["pose"].contains("position"))
       planned = scene["object"]["pose"]["position"].get<std::array<double, 3>>();
-    const auto& p0 = store->ReadGroundTruth(t.id).samples.front().object_pose;
+    const auto p0 = store->ReadGroundTruth(t.id).samples.front().object_pose;
     const double d = std::hypot(p0[0] - planned[0], p0[1] - planned[1], p0[2] - planned[2]);
     EXPECT_LT(d, 3e-3) << "trial " << t.id;
     off += d > 1e-6;
