@@ -60,6 +60,13 @@ TEST(SensitivityEndToEnd, PivotCampaignReportStoredQueriedExportedAndMapped) {
   const auto rows = db::ListSensitivityConditions(*store, run_id);
   ASSERT_EQ(rows.size(), 8u);
   EXPECT_TRUE(store->CheckInvariants().empty());
+  // Each condition's ensemble drew the start pose from the reset parameters
+  // the cells recorded (the default 0.2 mm placement accuracy).
+  for (const auto& r : rows) {
+    const auto start = nlohmann::json::parse(r.detail_json)["start_pose"];
+    EXPECT_TRUE(start["drawn"].get<bool>()) << r.detail_json;
+    EXPECT_DOUBLE_EQ(start["placement_position_std"].get<double>(), 2e-4) << r.detail_json;
+  }
   ASSERT_EQ(RunArena({"sensitivity", "--db", db, "--campaign", "1", "--ensemble", "16", "--seed",
                       "5", "--threads", "1"},
                      dir / "sens2.txt", std::chrono::seconds(240)),
