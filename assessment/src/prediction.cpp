@@ -329,9 +329,10 @@ db::Prediction PredictTrial(const mechanics::Scene& scene,
   stored["predictor"] = "mujoco";
   p.model_json = stored.dump();
   char key[96];
-  std::snprintf(key, sizeof key, "mujoco_ts%g_%s_ns%d", knobs.value("timestep", 0.0005),
+  const simulators::MujocoSettings defaults;
+  std::snprintf(key, sizeof key, "mujoco_ts%g_%s_ns%d", knobs.value("timestep", defaults.timestep),
                 knobs.value("cone", std::string("elliptic")).c_str(),
-                knobs.value("noslip_iterations", 10));
+                knobs.value("noslip_iterations", defaults.noslip_iterations));
   p.model_key = key;
   return p;
 }

@@ -35,7 +35,7 @@ struct EvaluateOptions {
   bool grid_given = false;  // any of --facets/--points/--dt/--reduce
   std::vector<double> mujoco_timestep{0.004, 0.002, 0.001, 0.0005};
   std::vector<std::string> mujoco_cone{"elliptic"};
-  std::vector<int> mujoco_noslip{10};
+  std::vector<int> mujoco_noslip{0};
   bool mujoco_grid_given = false;
   std::vector<std::string> budgets;
   int threads = 0;

@@ -51,7 +51,7 @@ std::unique_ptr<Predictor> MakeArenaPredictor(std::vector<mechanics::ModelOption
 struct MujocoGrid {
   std::vector<double> timestep{0.004, 0.002, 0.001, 0.0005};  // s, (0, 0.01]
   std::vector<std::string> cone{"elliptic"};                  // elliptic | pyramidal
-  std::vector<int> noslip{10};                                // noslip iterations, >= 0
+  std::vector<int> noslip{0};  // noslip iterations, >= 0 (the simulator's default: off)
 };
 
 // MuJoCo 2.2 (simulators/, the same engine and scene builder as the

@@ -83,8 +83,12 @@ struct MujocoSettings {
   double solref_timeconst = 0.002;  // s, contact stiffness time constant (clamped to 2·timestep)
   double solref_damping = 1.0;      // damping ratio
   double solimp[5] = {0.9, 0.95, 0.001, 0.5, 2};  // impedance (dmin, dmax, width m, mid, power)
-  double impratio = 10;                           // frictional-to-normal impedance ratio, >= 1
-  int noslip_iterations = 10;                     // post-solve no-slip iterations, >= 0 (0 = off)
+  double impratio = 30;                           // frictional-to-normal impedance ratio, >= 1
+  // Post-solve no-slip iterations, >= 0 (0 = off). Off by default: with
+  // fingers sliding it made the truth depend on the timestep (0.26 mm
+  // between 0.5 and 0.125 ms); impratio 30 keeps a held object's creep
+  // to ~0.04 mm/s instead (simulators/README.md, "Default settings").
+  int noslip_iterations = 0;
   double tolerance = 1e-10;                       // Newton solver tolerance
   int iterations = 100;                           // solver iterations
   double object_damping = 0.01;  // free-joint damping (N s/m, N m s/rad): a quasi-static truth
