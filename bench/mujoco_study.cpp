@@ -10,7 +10,11 @@
 //      on the mujoco backend measures, at the cell's model settings).
 // Prints Markdown tables (bench/README.md, section "MuJoCo as ground truth").
 //
-//   build/bench/mujoco_study [PIVOT_CONDITIONS=24 [TIMESTEP]]
+//   build/bench/mujoco_study [PIVOT_CONDITIONS=24 [TIMESTEP]] [--settings JSON] [--per-scene]
+//
+// --settings: other mujoco settings than the defaults (e.g. the old
+// '{"noslip_iterations": 10, "impratio": 10}'); --per-scene: every scene's
+// change on stdout.
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -68,6 +72,7 @@ std::vector<Named> CampaignScenes(const std::string& file, int max_conditions) {
 
 double g_timestep = 0;      // argv[2]: study another default timestep
 std::string g_settings = "{}";  // --settings JSON: study other mujoco settings
+bool g_per_scene = false;       // --per-scene: one line per scene on stdout
 
 void Study(const char* title, const std::vector<Named>& scenes) {
   auto base = nlohmann::json::parse(g_settings);
@@ -108,6 +113,9 @@ void Study(const char* title, const std::vector<Named>& scenes) {
       std::fprintf(stderr, "not converged: %s: %.4f mm, %.3f mrad\n", s.label.c_str(),
                    dpos.back() * 1e3, AngleBetween(fa.orientation, fb.orientation) * 1e3);
     dang.push_back(AngleBetween(fa.orientation, fb.orientation));
+    if (g_per_scene)
+      std::printf("%s: %.4f mm %.3f mrad\n", s.label.substr(0, s.label.find(' ', s.label.find('#'))).c_str(),
+                  dpos.back() * 1e3, dang.back() * 1e3);
     gap_pos.push_back((fa.position - fm.position).norm());
     gap_ang.push_back(AngleBetween(fa.orientation, fm.orientation));
     mj_cost.push_back((c1 - c0) / s.scene.duration);
@@ -145,6 +153,8 @@ int main(int argc, char** argv) {
   for (int i = 1; i < argc; ++i) {
     if (std::string(argv[i]) == "--settings" && i + 1 < argc) {
       g_settings = argv[++i];
+    } else if (std::string(argv[i]) == "--per-scene") {
+      g_per_scene = true;
     } else {
       args.push_back(argv[i]);
     }
