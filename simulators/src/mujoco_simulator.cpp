@@ -4,8 +4,10 @@
 // Model (MJCF, built in memory, loaded through MuJoCo's VFS):
 //   world = the gripper frame; gravity as the scene's.
 //   object: a body with a free joint (damping object_damping: a frictionless
-//     pivot otherwise oscillates about its stall angle forever), a box or
-//     cylinder geom and the scene's mass and inertia about the centre of mass.
+//     pivot otherwise oscillates about its stall angle forever), a box,
+//     cylinder or prism geom (a prism: a convex mesh of its polygon's
+//     vertices at ±height/2) and the scene's mass and inertia; the body's
+//     origin is the centre of mass (a prism's polygon centroid).
 //   finger i: a body on a slide joint along its normal, driven by a motor
 //     whose force is the grip force (plus the finger's own weight along the
 //     normal); two opposed fingers are coupled (each slide axis is its
@@ -169,6 +171,47 @@ std::string Pair(const std::string& pad, const mechanics::ContactSpec& c,
   return x.str();
 }
 
+// Signed area and centroid of a polygon (counter-clockwise: area > 0).
+double PolygonArea(const std::vector<Eigen::Vector2d>& poly) {
+  double a = 0;
+  for (size_t i = 0; i < poly.size(); ++i) {
+    const auto &p = poly[i], &q = poly[(i + 1) % poly.size()];
+    a += p.x() * q.y() - q.x() * p.y();
+  }
+  return a / 2;
+}
+Eigen::Vector2d PolygonCentroid(const std::vector<Eigen::Vector2d>& poly) {
+  Eigen::Vector2d c = Eigen::Vector2d::Zero();
+  for (size_t i = 0; i < poly.size(); ++i) {
+    const auto &p = poly[i], &q = poly[(i + 1) % poly.size()];
+    c += (p + q) * (p.x() * q.y() - q.x() * p.y());
+  }
+  return c / (6 * PolygonArea(poly));
+}
+
+// The centre of mass in the object frame O: the body's origin in MuJoCo
+// (the state arena reports is the centre of mass; a prism's polygon need not
+// be centred on O's origin).
+Eigen::Vector3d CentreOfMassInO(const mechanics::ObjectSpec& o) {
+  if (o.shape != mechanics::ObjectShape::kPrism) return Eigen::Vector3d::Zero();
+  const Eigen::Vector2d c = PolygonCentroid(o.polygon);
+  return {c.x(), c.y(), 0};
+}
+
+// A prism as a mesh: its polygon at z = ±height/2, relative to the centre of
+// mass. MuJoCo collides with the mesh's convex hull, which for a convex
+// prism is the prism itself.
+std::string PrismMesh(const mechanics::ObjectSpec& o) {
+  const Eigen::Vector3d c = CentreOfMassInO(o);
+  std::string v;
+  for (const double z : {-0.5 * o.height, 0.5 * o.height}) {
+    for (const auto& p : o.polygon) {
+      v += (v.empty() ? "" : " ") + Vec(Eigen::Vector3d(p.x(), p.y(), z) - c);
+    }
+  }
+  return "  <asset>\n    <mesh name=\"object_mesh\" vertex=\"" + v + "\"/>\n  </asset>\n";
+}
+
 int StepsPerSample(const MujocoSettings& s) {
   return std::max(1, static_cast<int>(std::lround(1.0 / (mechanics::kSampleRateHz * s.timestep))));
 }
@@ -250,9 +293,10 @@ class MujocoSimulator final : public Simulator {
         .dump();
   }
   std::string CheckScene(const mechanics::Scene& scene) const override {
-    if (scene.object.shape != mechanics::ObjectShape::kBox &&
-        scene.object.shape != mechanics::ObjectShape::kCylinder)
-      return "object.shape: the mujoco simulator models box and cylinder objects only";
+    const auto& o = scene.object;
+    if (o.shape == mechanics::ObjectShape::kPrism &&
+        (o.polygon.size() < 3 || !(PolygonArea(o.polygon) > 0)))
+      return "object.polygon: the mujoco simulator needs a counter-clockwise polygon of area > 0";
     return "";
   }
   mechanics::SimulationResult Simulate(const mechanics::Scene& scene) const override;
@@ -503,12 +547,14 @@ std::string MujocoModelXml(const mechanics::Scene& scene, const MujocoSettings& 
     << (st.elliptic ? "elliptic" : "pyramidal") << "\" impratio=\"" << Num(st.impratio)
     << "\" noslip_iterations=\"" << st.noslip_iterations << "\" solver=\"Newton\" tolerance=\""
     << Num(st.tolerance) << "\" iterations=\"" << st.iterations << "\" integrator=\"Euler\"/>\n"
-    << "  <size nconmax=\"200\" njmax=\"1200\"/>\n"
-    << "  <worldbody>\n";
+    << "  <size nconmax=\"200\" njmax=\"1200\"/>\n";
+  if (o.shape == mechanics::ObjectShape::kPrism) x << PrismMesh(o);
+  x << "  <worldbody>\n";
   // Object.
   const Eigen::Quaterniond q_WO(mechanics::RotationFromRpy(o.pose.rpy));
   const Eigen::Matrix3d I = mechanics::ObjectInertia(o);
-  x << "    <body name=\"object\" pos=\"" << Vec(o.pose.position) << "\" quat=\"" << Quat(q_WO)
+  const Eigen::Vector3d com = o.pose.position + q_WO * CentreOfMassInO(o);
+  x << "    <body name=\"object\" pos=\"" << Vec(com) << "\" quat=\"" << Quat(q_WO)
     << "\">\n"
     << "      <joint name=\"object\" type=\"free\" damping=\"" << Num(st.object_damping) << "\"/>\n"
     << "      <inertial pos=\"0 0 0\" mass=\"" << Num(o.mass) << "\" fullinertia=\"" << Num(I(0, 0))
@@ -523,8 +569,12 @@ std::string MujocoModelXml(const mechanics::Scene& scene, const MujocoSettings& 
       x << "      <geom name=\"object\" type=\"cylinder\" size=\"" << Num(o.radius) << " "
         << Num(0.5 * o.height) << "\" contype=\"0\" conaffinity=\"0\" mass=\"0\"/>\n";
       break;
-    default:
-      throw SimulatorError("object.shape", "the mujoco simulator models box and cylinder only");
+    case mechanics::ObjectShape::kPrism:
+      if (o.polygon.size() < 3 || !(PolygonArea(o.polygon) > 0))
+        throw SimulatorError("object.polygon", "needs a counter-clockwise polygon of area > 0");
+      x << "      <geom name=\"object\" type=\"mesh\" mesh=\"object_mesh\" contype=\"0\" "
+           "conaffinity=\"0\" mass=\"0\"/>\n";
+      break;
   }
   x << "    </body>\n";
   // Fingers: the body origin is the contact point; the slide axis the normal.
