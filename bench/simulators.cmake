@@ -2,5 +2,3 @@
 # cost per simulated second against arena's model on the same campaign scenes.
 arena_bench(mujoco_study SOURCES ${CMAKE_CURRENT_LIST_DIR}/mujoco_study.cpp
             LIBS arena::simulators arena::orchestrator)
-arena_bench(mujoco_probe SOURCES ${CMAKE_CURRENT_LIST_DIR}/mujoco_probe.cpp
-            LIBS arena::simulators arena::orchestrator)

@@ -84,6 +84,19 @@ class ArenaPredictor final : public Predictor {
   std::vector<PredictorSetting> settings_;
 };
 
+// "0.002:1" for a key.
+template <std::size_t N>
+std::string FormatList(const std::array<double, N>& values) {
+  std::string out;
+  for (double v : values) {
+    char buf[32];
+    std::snprintf(buf, sizeof buf, "%g", v);
+    if (!out.empty()) out += ':';
+    out += buf;
+  }
+  return out;
+}
+
 class MujocoPredictor final : public Predictor {
  public:
   explicit MujocoPredictor(const MujocoGrid& grid) {
@@ -98,18 +111,39 @@ class MujocoPredictor final : public Predictor {
     nonempty_unique(grid.timestep, "timestep");
     nonempty_unique(grid.cone, "cone");
     nonempty_unique(grid.noslip, "noslip");
+    nonempty_unique(grid.solref, "solref");
+    nonempty_unique(grid.solimp, "solimp");
     struct Point {
       double timestep;
       std::string cone;
       int noslip;
+      std::array<double, 2> solref;
+      std::array<double, 5> solimp;
     };
     std::vector<Point> points;
     for (double ts : grid.timestep)
       for (const auto& cone : grid.cone)
-        for (int ns : grid.noslip) points.push_back(Point{ts, cone, ns});
+        for (int ns : grid.noslip)
+          for (const auto& sr : grid.solref)
+            for (const auto& si : grid.solimp) points.push_back(Point{ts, cone, ns, sr, si});
+    const simulators::MujocoSettings defaults;
+    const std::array<double, 2> default_solref{defaults.solref_timeconst, defaults.solref_damping};
+    std::array<double, 5> default_solimp;
+    std::copy(std::begin(defaults.solimp), std::end(defaults.solimp), default_solimp.begin());
     for (const auto& pt : points) {
-      const nlohmann::json knobs = {
+      nlohmann::json knobs = {
           {"timestep", pt.timestep}, {"cone", pt.cone}, {"noslip_iterations", pt.noslip}};
+      // Keys and knobs name solref/solimp only where they differ from the
+      // defaults, so the keys of earlier evaluations stay the same.
+      std::string soft;
+      if (pt.solref != default_solref) {
+        knobs["solref"] = pt.solref;
+        soft += "_sr" + FormatList(pt.solref);
+      }
+      if (pt.solimp != default_solimp) {
+        knobs["solimp"] = pt.solimp;
+        soft += "_si" + FormatList(pt.solimp);
+      }
       try {
         simulators_.push_back(simulators::MakeSimulator("mujoco", knobs.dump()));
       } catch (const std::invalid_argument& e) {
@@ -119,7 +153,7 @@ class MujocoPredictor final : public Predictor {
       char key[96];
       std::snprintf(key, sizeof key, "mujoco_ts%g_%s_ns%d", pt.timestep, pt.cone.c_str(),
                     pt.noslip);
-      s.key = key;
+      s.key = key + soft;
       nlohmann::json stored = knobs;
       stored["predictor"] = "mujoco";
       s.knobs_json = stored.dump();

@@ -65,7 +65,7 @@ std::unique_ptr<Simulator> MakeSimulator(std::string_view name, std::string_view
     MujocoSettings s;
     CheckKeys(j, "mujoco",
               {"timestep", "cone", "solref", "solimp", "impratio", "noslip_iterations", "tolerance",
-               "iterations", "object_damping", "finger_mass", "slip_speed"});
+               "iterations", "object_damping", "finger_mass", "slip_speed", "pads"});
     Read(j, "mujoco", "timestep", &s.timestep);
     if (auto it = j.find("cone"); it != j.end()) {
       if (*it == "elliptic")
@@ -96,6 +96,14 @@ std::unique_ptr<Simulator> MakeSimulator(std::string_view name, std::string_view
     Read(j, "mujoco", "object_damping", &s.object_damping);
     Read(j, "mujoco", "finger_mass", &s.finger_mass);
     Read(j, "mujoco", "slip_speed", &s.slip_speed);
+    if (auto it = j.find("pads"); it != j.end()) {
+      if (*it == "spheres")
+        s.pads = PadShapes::kSpheres;
+      else if (*it == "shapes")
+        s.pads = PadShapes::kShapes;
+      else
+        throw SimulatorError("mujoco.pads", "must be \"spheres\" or \"shapes\"");
+    }
     return MakeMujocoSimulator(s);
   }
   throw SimulatorError("simulator",

@@ -35,6 +35,7 @@
 #include <cmath>
 #include <cstdio>
 #include <cstring>
+#include <list>
 #include <memory>
 #include <mutex>
 #include <sstream>
@@ -91,7 +92,8 @@ std::string Num(double x) {
 constexpr int kLinePads = 5;
 constexpr int kPatchPads = 6;
 
-int PadCount(const mechanics::ContactSpec& c) {
+int PadCount(const mechanics::ContactSpec& c, PadShapes shapes) {
+  if (shapes == PadShapes::kShapes) return 1;
   switch (c.type) {
     case mechanics::ContactType::kPoint:
       return 1;
@@ -133,8 +135,28 @@ std::vector<Eigen::Vector3d> PadCentres(const mechanics::ContactSpec& c) {
   return out;
 }
 
-std::string PadGeoms(const std::string& base, const mechanics::ContactSpec& c) {
+// PadShapes::kShapes: a line is one capsule (MuJoCo gives it up to 2
+// contacts on a face, 1 against a cylinder or mesh), a patch one thin box
+// whose corners sit on the 2R/3 ring (the spheres' torsion arm).
+std::string PadGeoms(const std::string& base, const mechanics::ContactSpec& c, PadShapes shapes) {
   std::ostringstream x;
+  if (shapes == PadShapes::kShapes && c.type != mechanics::ContactType::kPoint) {
+    const Eigen::Vector3d n = c.normal.normalized();
+    const Eigen::Vector3d back = -kPadRadius * n;
+    if (c.type == mechanics::ContactType::kLine) {
+      const Eigen::Vector3d a = 0.5 * c.length * c.axis.normalized();
+      x << "      <geom name=\"" << base << "_0\" type=\"capsule\" contype=\"0\" conaffinity=\"0\" "
+        << "mass=\"0\" size=\"" << Num(kPadRadius) << "\" fromto=\"" << Vec(back - a) << " "
+        << Vec(back + a) << "\"/>\n";
+    } else {
+      const double h = 2.0 * c.radius / 3.0 / std::sqrt(2.0);
+      const Eigen::Quaterniond q = Eigen::Quaterniond::FromTwoVectors(Eigen::Vector3d::UnitZ(), n);
+      x << "      <geom name=\"" << base << "_0\" type=\"box\" contype=\"0\" conaffinity=\"0\" "
+        << "mass=\"0\" size=\"" << Num(h) << " " << Num(h) << " " << Num(kPadRadius) << "\" pos=\""
+        << Vec(back) << "\" quat=\"" << Quat(q) << "\"/>\n";
+    }
+    return x.str();
+  }
   const auto centres = PadCentres(c);
   for (size_t j = 0; j < centres.size(); ++j) {
     x << "      <geom name=\"" << base << "_" << j
@@ -154,7 +176,7 @@ std::string Pair(const std::string& pad, const mechanics::ContactSpec& c, const 
 std::string Pairs(const std::string& base, const mechanics::ContactSpec& c,
                   const MujocoSettings& st) {
   std::string all;
-  for (int j = 0; j < PadCount(c); ++j) {
+  for (int j = 0; j < PadCount(c, st.pads); ++j) {
     all += "    " + Pair(base + "_" + std::to_string(j), c, st) + "\n";
   }
   return all;
@@ -206,7 +228,8 @@ std::string PrismMesh(const mechanics::ObjectSpec& o) {
   std::string v;
   for (const double z : {-0.5 * o.height, 0.5 * o.height}) {
     for (const auto& p : o.polygon) {
-      v += (v.empty() ? "" : " ") + Vec(Eigen::Vector3d(p.x(), p.y(), z) - c);
+      if (!v.empty()) v += ' ';
+      v += Vec(Eigen::Vector3d(p.x(), p.y(), z) - c);
     }
   }
   return "  <asset>\n    <mesh name=\"object_mesh\" vertex=\"" + v + "\"/>\n  </asset>\n";
@@ -267,6 +290,91 @@ mjModel* LoadFromText(const std::string& xml, std::string* error) {
   return m;
 }
 
+// ---- compiled models, per scene -------------------------------------------------------------
+
+// The settings MuJoCo reads at run time, at their defaults: the MJCF of a
+// scene under these is the cache key, whatever the run's own values.
+MujocoSettings CompileTimeSettings(const MujocoSettings& st) {
+  MujocoSettings c;  // runtime fields at their defaults
+  c.finger_mass = st.finger_mass;
+  c.pads = st.pads;
+  c.slip_speed = st.slip_speed;  // not in the MJCF; kept for clarity
+  return c;
+}
+
+// Writes the run-time settings into a compiled model (what the MJCF of
+// MujocoModelXml(scene, st) would have compiled to).
+void ApplyRunTimeSettings(mjModel* m, const MujocoSettings& st, int object_dof) {
+  m->opt.timestep = 1.0 / (mechanics::kSampleRateHz * StepsPerSample(st));
+  m->opt.cone = st.elliptic ? mjCONE_ELLIPTIC : mjCONE_PYRAMIDAL;
+  m->opt.impratio = st.impratio;
+  m->opt.noslip_iterations = st.noslip_iterations;
+  m->opt.tolerance = st.tolerance;
+  m->opt.iterations = st.iterations;
+  for (int i = 0; i < m->npair; ++i) {
+    m->pair_solref[mjNREF * i] = st.solref_timeconst;
+    m->pair_solref[mjNREF * i + 1] = st.solref_damping;
+    for (int k = 0; k < mjNIMP; ++k) m->pair_solimp[mjNIMP * i + k] = st.solimp[k];
+  }
+  for (int k = 0; k < 6; ++k) m->dof_damping[object_dof + k] = st.object_damping;
+}
+
+struct ModelCache {
+  static constexpr size_t kModels = 32;
+  std::mutex mu;
+  std::list<std::pair<std::string, std::shared_ptr<const mjModel>>> lru;  // newest first
+  bool enabled = true;
+  MujocoModelCacheStats stats;
+};
+ModelCache& Cache() {
+  static ModelCache cache;
+  return cache;
+}
+
+// A model of the scene at the settings, owned by the caller (mj_deleteModel);
+// nullptr and *error when MuJoCo refuses the MJCF.
+mjModel* ModelFor(const mechanics::Scene& scene, const MujocoSettings& st, std::string* error) {
+  ModelCache& cache = Cache();
+  bool enabled;
+  {
+    std::lock_guard<std::mutex> lock(cache.mu);
+    enabled = cache.enabled;
+  }
+  if (!enabled) {
+    mjModel* m = LoadFromText(MujocoModelXml(scene, st), error);
+    std::lock_guard<std::mutex> lock(cache.mu);
+    ++cache.stats.compiled;
+    return m;
+  }
+  std::string key = MujocoModelXml(scene, CompileTimeSettings(st));
+  std::shared_ptr<const mjModel> compiled;
+  {
+    std::lock_guard<std::mutex> lock(cache.mu);
+    for (auto it = cache.lru.begin(); it != cache.lru.end(); ++it) {
+      if (it->first == key) {
+        cache.lru.splice(cache.lru.begin(), cache.lru, it);
+        compiled = it->second;
+        ++cache.stats.reused;
+        break;
+      }
+    }
+  }
+  if (!compiled) {
+    mjModel* m = LoadFromText(key, error);
+    if (!m) return nullptr;
+    compiled = std::shared_ptr<const mjModel>(
+        m, [](const mjModel* p) { mj_deleteModel(const_cast<mjModel*>(p)); });
+    std::lock_guard<std::mutex> lock(cache.mu);
+    ++cache.stats.compiled;
+    cache.lru.emplace_front(std::move(key), compiled);
+    if (cache.lru.size() > ModelCache::kModels) cache.lru.pop_back();
+  }
+  mjModel* m = mj_copyModel(nullptr, compiled.get());
+  const int object_joint = m->body_jntadr[mj_name2id(m, mjOBJ_BODY, "object")];
+  ApplyRunTimeSettings(m, st, m->jnt_dofadr[object_joint]);
+  return m;
+}
+
 class MujocoSimulator final : public Simulator {
  public:
   explicit MujocoSimulator(const MujocoSettings& s) : settings_(s) {
@@ -289,7 +397,8 @@ class MujocoSimulator final : public Simulator {
                 {"iterations", s.iterations},
                 {"object_damping", s.object_damping},
                 {"finger_mass", s.finger_mass},
-                {"slip_speed", s.slip_speed}})
+                {"slip_speed", s.slip_speed},
+                {"pads", s.pads == PadShapes::kSpheres ? "spheres" : "shapes"}})
         .dump();
   }
   std::string CheckScene(const mechanics::Scene& scene) const override {
@@ -456,7 +565,7 @@ mechanics::SimulationResult MujocoSimulator::Simulate(const mechanics::Scene& sc
   MjHandles h;
   try {
     std::string error;
-    h.m = LoadFromText(MujocoModelXml(scene, settings_), &error);
+    h.m = ModelFor(scene, settings_, &error);
     if (!h.m) {
       result.status = mechanics::SimulationStatus::kInvalidScene;
       result.error = error;
@@ -476,7 +585,7 @@ mechanics::SimulationResult MujocoSimulator::Simulate(const mechanics::Scene& sc
       const int j = mj_name2id(h.m, mjOBJ_JOINT, ("finger" + k).c_str());
       run.finger_qpos.push_back(h.m->jnt_qposadr[j]);
       run.finger_qvel.push_back(h.m->jnt_dofadr[j]);
-      for (int j = 0; j < PadCount(scene.fingers[i]); ++j) {
+      for (int j = 0; j < PadCount(scene.fingers[i], settings_.pads); ++j) {
         const int g = mj_name2id(h.m, mjOBJ_GEOM, ("pad" + k + "_" + std::to_string(j)).c_str());
         run.pad_of_geom[static_cast<size_t>(g)] = static_cast<int>(i);
       }
@@ -486,7 +595,7 @@ mechanics::SimulationResult MujocoSimulator::Simulate(const mechanics::Scene& sc
       const int j = h.m->body_jntadr[run.pusher_body];
       run.pusher_qpos = h.m->jnt_qposadr[j];
       run.pusher_qvel = h.m->jnt_dofadr[j];
-      for (int j = 0; j < PadCount(*scene.pusher); ++j) {
+      for (int j = 0; j < PadCount(*scene.pusher, settings_.pads); ++j) {
         const int g = mj_name2id(h.m, mjOBJ_GEOM, ("pusher_pad_" + std::to_string(j)).c_str());
         run.pad_of_geom[static_cast<size_t>(g)] = static_cast<int>(scene.fingers.size());
       }
@@ -536,6 +645,17 @@ mechanics::SimulationResult MujocoSimulator::Simulate(const mechanics::Scene& sc
 
 }  // namespace
 
+MujocoModelCacheStats GetMujocoModelCacheStats() {
+  std::lock_guard<std::mutex> lock(Cache().mu);
+  return Cache().stats;
+}
+
+void SetMujocoModelCacheEnabled(bool enabled) {
+  std::lock_guard<std::mutex> lock(Cache().mu);
+  Cache().enabled = enabled;
+  if (!enabled) Cache().lru.clear();
+}
+
 std::string MujocoModelXml(const mechanics::Scene& scene, const MujocoSettings& st) {
   const auto& o = scene.object;
   std::ostringstream x;
@@ -554,8 +674,7 @@ std::string MujocoModelXml(const mechanics::Scene& scene, const MujocoSettings& 
   const Eigen::Quaterniond q_WO(mechanics::RotationFromRpy(o.pose.rpy));
   const Eigen::Matrix3d I = mechanics::ObjectInertia(o);
   const Eigen::Vector3d com = o.pose.position + q_WO * CentreOfMassInO(o);
-  x << "    <body name=\"object\" pos=\"" << Vec(com) << "\" quat=\"" << Quat(q_WO)
-    << "\">\n"
+  x << "    <body name=\"object\" pos=\"" << Vec(com) << "\" quat=\"" << Quat(q_WO) << "\">\n"
     << "      <joint name=\"object\" type=\"free\" damping=\"" << Num(st.object_damping) << "\"/>\n"
     << "      <inertial pos=\"0 0 0\" mass=\"" << Num(o.mass) << "\" fullinertia=\"" << Num(I(0, 0))
     << " " << Num(I(1, 1)) << " " << Num(I(2, 2)) << " " << Num(I(0, 1)) << " " << Num(I(0, 2))
@@ -586,14 +705,14 @@ std::string MujocoModelXml(const mechanics::Scene& scene, const MujocoSettings& 
       << Vec(f.normal.normalized()) << "\"/>\n"
       << "      <inertial pos=\"0 0 0\" mass=\"" << Num(st.finger_mass)
       << "\" diaginertia=\"1e-6 1e-6 1e-6\"/>\n"
-      << PadGeoms("pad" + k, f) << "    </body>\n";
+      << PadGeoms("pad" + k, f, st.pads) << "    </body>\n";
   }
   if (scene.pusher) {
     const auto& p = *scene.pusher;
     x << "    <body name=\"pusher\" pos=\"" << Vec(p.position) << "\">\n"
       << "      <joint name=\"pusher\" type=\"free\" armature=\"1e6\"/>\n"
       << "      <inertial pos=\"0 0 0\" mass=\"1\" diaginertia=\"1e-3 1e-3 1e-3\"/>\n"
-      << PadGeoms("pusher_pad", p) << "    </body>\n";
+      << PadGeoms("pusher_pad", p, st.pads) << "    </body>\n";
   }
   x << "  </worldbody>\n  <contact>\n";
   for (size_t i = 0; i < scene.fingers.size(); ++i)

@@ -227,14 +227,14 @@ TEST(MujocoConvergence, TiltedPushOnSlidingLineFingersConvergesAtTheDefaults) {
   MujocoSettings noslip;
   noslip.noslip_iterations = 10;
   noslip.impratio = 10;
-  EXPECT_GT(change(noslip).first, 1e-4) << "the old settings converge here: the test proves nothing";
+  EXPECT_GT(change(noslip).first, 1e-4)
+      << "the old settings converge here: the test proves nothing";
 }
 
 // Prisms are convex meshes. A rectangular prism is the box: its pusher
-// force and trajectory are the box's under an off-centre sliding push. Its polygon need not be centred on O:
-// the same rectangle drawn 1 cm off O's origin, with O placed 1 cm the
-// other way, is the same physical scene, and the output (the centre of
-// mass) must not move.
+// force and trajectory are the box's under an off-centre sliding push. Its polygon need not be
+// centred on O: the same rectangle drawn 1 cm off O's origin, with O placed 1 cm the other way, is
+// the same physical scene, and the output (the centre of mass) must not move.
 TEST(MujocoPrism, IsAConvexMeshThatMatchesTheBoxWhereverItsPolygonSits) {
   Scene box = HeldBox(0.2, 10, 0.5);
   box.pusher = PusherBelow(0.005, 0.01, 0.3);
@@ -263,15 +263,89 @@ TEST(MujocoPrism, IsAConvexMeshThatMatchesTheBoxWhereverItsPolygonSits) {
   const auto &a = b.samples.back(), &c = p.samples.back(), &e = q.samples.back();
   EXPECT_NEAR(c.pusher_force.z(), a.pusher_force.z(), 0.01);
   EXPECT_LT((a.position - c.position).norm(), 5e-5);
-  EXPECT_LT((a.orientation * Eigen::Vector3d::UnitY() + c.orientation * Eigen::Vector3d::UnitZ())
-                .norm(),
-            1e-3);  // O's z is the box's -y
+  EXPECT_LT(
+      (a.orientation * Eigen::Vector3d::UnitY() + c.orientation * Eigen::Vector3d::UnitZ()).norm(),
+      1e-3);  // O's z is the box's -y
   EXPECT_NEAR(c.contacts[0].normal_force, 10.0, 0.1);
   EXPECT_LT((c.position - e.position).norm(), 1e-6) << "the centroid is placed where O says";
   Scene flat = prism;
   flat.object.polygon = {{0, 0}, {0.01, 0}, {0.02, 0}};
   EXPECT_NE(sim->CheckScene(flat), "");
   EXPECT_EQ(sim->Simulate(flat).status, SimulationStatus::kInvalidScene);
+}
+
+// A scene's MJCF is compiled once and copied per run with the run-time
+// settings written into the copy. That must be exactly what compiling the
+// run's own MJCF gives: the same samples bit for bit, at settings that differ
+// from the defaults in every run-time field.
+TEST(MujocoModelCache, ACopiedModelRunsExactlyLikeAFreshlyCompiledOne) {
+  Scene s = HeldBox(0.2, 10, 0.5);
+  s.fingers[1].type = ContactType::kLine;
+  s.fingers[1].axis = {0, 0, 1};
+  s.fingers[1].length = 0.02;
+  s.pusher = PusherBelow(0.006, 0.02, 0.3);
+  s.duration = 0.1;
+  MujocoSettings other;
+  other.timestep = 0.001;
+  other.elliptic = false;
+  other.solref_timeconst = 0.004;
+  other.solref_damping = 0.8;
+  other.solimp[0] = 0.8;
+  other.solimp[2] = 0.002;
+  other.impratio = 5;
+  other.noslip_iterations = 3;
+  other.tolerance = 1e-8;
+  other.iterations = 50;
+  other.object_damping = 0.05;
+  SetMujocoModelCacheEnabled(false);
+  const auto fresh = MakeMujocoSimulator(other)->Simulate(s);
+  SetMujocoModelCacheEnabled(true);
+  (void)MakeMujocoSimulator({})->Simulate(s);  // compiles the scene at the defaults
+  const auto before = GetMujocoModelCacheStats();
+  const auto copied = MakeMujocoSimulator(other)->Simulate(s);
+  const auto after = GetMujocoModelCacheStats();
+  EXPECT_EQ(after.compiled, before.compiled);
+  EXPECT_EQ(after.reused, before.reused + 1);
+  ASSERT_EQ(fresh.status, SimulationStatus::kOk) << fresh.error;
+  ASSERT_EQ(copied.status, SimulationStatus::kOk) << copied.error;
+  ASSERT_EQ(fresh.samples.size(), copied.samples.size());
+  for (size_t k = 0; k < fresh.samples.size(); ++k) {
+    ASSERT_EQ(fresh.samples[k].position, copied.samples[k].position) << k;
+    ASSERT_EQ(fresh.samples[k].orientation.coeffs(), copied.samples[k].orientation.coeffs()) << k;
+    ASSERT_EQ(fresh.samples[k].pusher_force, copied.samples[k].pusher_force) << k;
+  }
+  // Another scene is compiled, not confused with the cached one.
+  Scene wider = s;
+  wider.object.size.x() = 0.06;
+  for (int f = 0; f < 2; ++f) wider.fingers[f].position.x() = f ? 0.03 : -0.03;
+  (void)MakeMujocoSimulator(other)->Simulate(wider);
+  EXPECT_EQ(GetMujocoModelCacheStats().compiled, after.compiled + 1);
+}
+
+// pads "shapes": a line is one capsule, a patch one thin box (kept to study
+// them; spheres are the default because they converged better).
+TEST(MujocoModel, ShapePadsAreCapsulesAndBoxes) {
+  Scene s = HeldBox(0.2, 10, 0.5);
+  s.fingers[0].type = ContactType::kLine;
+  s.fingers[0].axis = {0, 0, 1};
+  s.fingers[0].length = 0.02;
+  s.fingers[1].type = ContactType::kPatch;
+  s.fingers[1].radius = 0.006;
+  s.duration = 0.2;
+  const auto sim = MakeSimulator("mujoco", R"({"pads": "shapes"})");
+  EXPECT_NE(sim->settings_json().find(R"("pads":"shapes")"), std::string::npos);
+  MujocoSettings st;
+  st.pads = PadShapes::kShapes;
+  const std::string xml = MujocoModelXml(s, st);
+  EXPECT_NE(xml.find("type=\"capsule\""), std::string::npos);
+  EXPECT_NE(xml.find("type=\"box\" contype=\"0\" conaffinity=\"0\" mass=\"0\" size=\"0.0028"),
+            std::string::npos);  // corners on the 2R/3 ring: half side 2R/3/sqrt(2)
+  EXPECT_EQ(xml.find("name=\"pad0_1\""), std::string::npos);
+  const auto r = sim->Simulate(s);
+  ASSERT_EQ(r.status, SimulationStatus::kOk) << r.error;
+  EXPECT_LT(r.samples.back().position.norm(), 5e-5);  // holds the box as the spheres do
+  EXPECT_NEAR(r.samples.back().contacts[0].normal_force, 10.0, 0.1);
+  EXPECT_THROW(MakeSimulator("mujoco", R"({"pads": "cubes"})"), SimulatorError);
 }
 
 TEST(MujocoSimulator, NeverReturnsNaNAndReportsTheEngine) {

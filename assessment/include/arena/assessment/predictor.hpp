@@ -6,6 +6,7 @@
 // judges them all.
 #pragma once
 
+#include <array>
 #include <memory>
 #include <string>
 #include <vector>
@@ -52,6 +53,12 @@ struct MujocoGrid {
   std::vector<double> timestep{0.004, 0.002, 0.001, 0.0005};  // s, (0, 0.01]
   std::vector<std::string> cone{"elliptic"};                  // elliptic | pyramidal
   std::vector<int> noslip{0};  // noslip iterations, >= 0 (the simulator's default: off)
+  // Contact softness (the simulator's defaults: [0.002, 1] and
+  // [0.9, 0.95, 0.001, 0.5, 2]). Physics, not refinement: a setting's key
+  // names them only when they differ from the defaults.
+  std::vector<std::array<double, 2>> solref{{0.002, 1.0}};  // [timeconst s, damping ratio]
+  std::vector<std::array<double, 5>> solimp{
+      {0.9, 0.95, 0.001, 0.5, 2.0}};  // [dmin, dmax, width, mid, power]
 };
 
 // MuJoCo 2.2 (simulators/, the same engine and scene builder as the

@@ -76,6 +76,13 @@ struct ArenaSettings {
 std::unique_ptr<Simulator> MakeArenaSimulator(const ArenaSettings& settings);
 
 // ---- mujoco: MuJoCo 2.2 ------------------------------------------------------------------
+
+// How line and patch pads are shaped (a point is always one sphere).
+enum class PadShapes {
+  kSpheres,  // a line: 5 spheres along it; a patch: 6 on the 2R/3 ring (default)
+  kShapes,   // a line: one capsule; a patch: one thin box (MuJoCo's own colliders)
+};
+
 // Defaults are the converged ones (simulators/README.md: convergence study).
 struct MujocoSettings {
   double timestep = 0.0005;         // s, (0, 0.01]
@@ -89,12 +96,15 @@ struct MujocoSettings {
   // between 0.5 and 0.125 ms); impratio 30 keeps a held object's creep
   // to ~0.04 mm/s instead (simulators/README.md, "Default settings").
   int noslip_iterations = 0;
-  double tolerance = 1e-10;                       // Newton solver tolerance
-  int iterations = 100;                           // solver iterations
+  double tolerance = 1e-10;      // Newton solver tolerance
+  int iterations = 100;          // solver iterations
   double object_damping = 0.01;  // free-joint damping (N s/m, N m s/rad): a quasi-static truth
   double finger_mass = 0.05;     // kg, each finger pad body
   // Slip speed (m/s) above which a touching contact counts as sliding.
   double slip_speed = 1e-4;
+  // Spheres by default: capsules and boxes converged worse or equal on the
+  // pivot study (simulators/README.md, "The MuJoCo scene").
+  PadShapes pads = PadShapes::kSpheres;
 };
 std::unique_ptr<Simulator> MakeMujocoSimulator(const MujocoSettings& settings);
 
@@ -102,6 +112,20 @@ std::unique_ptr<Simulator> MakeMujocoSimulator(const MujocoSettings& settings);
 // `arena simulate --engine mujoco --mjcf`, and tests).
 // @throws SimulatorError when the scene cannot be expressed (e.g. an unknown shape).
 std::string MujocoModelXml(const mechanics::Scene& scene, const MujocoSettings& settings);
+
+// Compiled models are kept per scene (up to a few dozen, least recently used
+// dropped): only the settings that MuJoCo reads at run time (timestep, cone,
+// solref, solimp, impratio, no-slip, tolerance, iterations, object damping)
+// differ between a predictor grid's settings, so each scene's MJCF is parsed
+// and compiled once and copied per run. Counts since the process started.
+struct MujocoModelCacheStats {
+  long compiled = 0;  // MJCF parsed and compiled
+  long reused = 0;    // a compiled model copied instead
+};
+MujocoModelCacheStats GetMujocoModelCacheStats();
+// Off: every run compiles its own model (the reference the cache is tested
+// against; also for a bench's before/after).
+void SetMujocoModelCacheEnabled(bool enabled);
 
 // ---- by name ------------------------------------------------------------------------------
 
