@@ -29,7 +29,9 @@
 // finger / pusher the sum over its MuJoCo contacts of mj_contactForce in the
 // gripper frame (force on the object), the torque about the pad's contact
 // point, and the mode: separate without a loaded contact, slide when the
-// tangential slip speed at a contact exceeds slip_speed, else stick.
+// tangential slip speed at a contact exceeds slip_speed, else stick; by
+// default averaged over the steps since the previous sample
+// (MujocoSettings::interval_forces).
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -85,10 +87,10 @@ std::string Num(double x) {
 
 // Pad geoms per contact type: a point is one sphere; a line is kLinePads
 // spheres spread evenly over it and a patch kPatchPads spheres on the 2R/3
-// ring of arena's patch model (which carry its torsion and tilt). A capsule
-// (line) or a box (patch) gives MuJoCo 1, 2 or 4 contacts depending on the
-// time step, and the final pose then moved 0.2 mm under a 4x finer step;
-// spheres keep one contact each.
+// ring of arena's patch model (which carry its torsion and tilt). With
+// PadShapes::kShapes a line is a capsule (converges like the spheres, but
+// MuJoCo gives it its two end contacts only) and a patch a box (box-box
+// contacts come and go with the step: 0.6 mm under a 4x finer one).
 constexpr int kLinePads = 5;
 constexpr int kPatchPads = 6;
 
@@ -398,7 +400,8 @@ class MujocoSimulator final : public Simulator {
                 {"object_damping", s.object_damping},
                 {"finger_mass", s.finger_mass},
                 {"slip_speed", s.slip_speed},
-                {"pads", s.pads == PadShapes::kSpheres ? "spheres" : "shapes"}})
+                {"pads", s.pads == PadShapes::kSpheres ? "spheres" : "shapes"},
+                {"forces", s.interval_forces ? "interval" : "instant"}})
         .dump();
   }
   std::string CheckScene(const mechanics::Scene& scene) const override {
@@ -476,17 +479,28 @@ struct Run {
     return q * scene.pusher->normal.normalized();
   }
 
-  mechanics::TrajectorySample Sample() const {
-    mechanics::TrajectorySample s;
-    s.t = d->time;
+  // What each pad (fingers, then the pusher) did to the object in one solve.
+  struct PadReading {
+    std::vector<Eigen::Vector3d> force, torque;  // on the object, gripper frame
+    std::vector<int> touching, sliding;          // solves in which it touched / slid
+    int solves = 0;
+    explicit PadReading(size_t n)
+        : force(n, Eigen::Vector3d::Zero()),
+          torque(n, Eigen::Vector3d::Zero()),
+          touching(n, 0),
+          sliding(n, 0) {}
+  };
+
+  // Adds the contacts of the last solve (d->contact and d->efc_force, as
+  // mj_step or mj_forward left them) to `r`.
+  void Read(PadReading* r) const {
     const mjtNum* qp = d->qpos + object_qpos;
     const mjtNum* qv = d->qvel + object_qvel;
-    s.position = Eigen::Vector3d(qp[0], qp[1], qp[2]);
-    s.orientation = Eigen::Quaterniond(qp[3], qp[4], qp[5], qp[6]).normalized();
-    s.velocity = Eigen::Vector3d(qv[0], qv[1], qv[2]);
-    s.angular_velocity = s.orientation * Eigen::Vector3d(qv[3], qv[4], qv[5]);
-    std::vector<Eigen::Vector3d> force(n_pads, Eigen::Vector3d::Zero()),
-        torque(n_pads, Eigen::Vector3d::Zero());
+    const Eigen::Vector3d position(qp[0], qp[1], qp[2]);
+    const Eigen::Quaterniond orientation =
+        Eigen::Quaterniond(qp[3], qp[4], qp[5], qp[6]).normalized();
+    const Eigen::Vector3d velocity(qv[0], qv[1], qv[2]);
+    const Eigen::Vector3d angular_velocity = orientation * Eigen::Vector3d(qv[3], qv[4], qv[5]);
     std::vector<bool> touching(n_pads, false), sliding(n_pads, false);
     for (int i = 0; i < d->ncon; ++i) {
       const mjContact& c = d->contact[i];
@@ -499,38 +513,59 @@ struct Run {
       // Contact frame rows: normal (from geom1 to geom2), tangents. The force is
       // geom1's on geom2; our pairs put the pad first, so it is the pad's on the object.
       Eigen::Vector3d f_W = Eigen::Vector3d::Zero(), tau_W = Eigen::Vector3d::Zero();
-      for (int r = 0; r < 3; ++r) {
-        const Eigen::Vector3d axis(c.frame[3 * r], c.frame[3 * r + 1], c.frame[3 * r + 2]);
-        f_W += f6[r] * axis;
-        tau_W += f6[3 + r] * axis;
+      for (int k = 0; k < 3; ++k) {
+        const Eigen::Vector3d axis(c.frame[3 * k], c.frame[3 * k + 1], c.frame[3 * k + 2]);
+        f_W += f6[k] * axis;
+        tau_W += f6[3 + k] * axis;
       }
       if (c.geom1 == object_geom) f_W = -f_W, tau_W = -tau_W;
       const Eigen::Vector3d p(c.pos[0], c.pos[1], c.pos[2]);
-      const Eigen::Vector3d ref = PadPoint(who, s.t);
-      force[who] += f_W;
-      torque[who] += tau_W + (p - ref).cross(f_W);
+      const Eigen::Vector3d ref = PadPoint(who, d->time);
+      r->force[who] += f_W;
+      r->torque[who] += tau_W + (p - ref).cross(f_W);
       if (f_W.norm() > 0) touching[who] = true;
       const Eigen::Vector3d n(c.frame[0], c.frame[1], c.frame[2]);
       Eigen::Vector3d u =
-          s.velocity + s.angular_velocity.cross(p - s.position) - PadVelocity(who, p, s.t);
+          velocity + angular_velocity.cross(p - position) - PadVelocity(who, p, d->time);
       u -= u.dot(n) * n;
       if (u.norm() > st.slip_speed) sliding[who] = true;
     }
     for (size_t k = 0; k < n_pads; ++k) {
+      r->touching[k] += touching[k] ? 1 : 0;
+      r->sliding[k] += touching[k] && sliding[k] ? 1 : 0;
+    }
+    ++r->solves;
+  }
+
+  // The sample now: pose and twist of the state; forces the mean of `r`'s
+  // solves; a pad separate when it touched in none, sliding when it slid in
+  // at least half of those in which it touched.
+  mechanics::TrajectorySample Sample(const PadReading& r) const {
+    mechanics::TrajectorySample s;
+    s.t = d->time;
+    const mjtNum* qp = d->qpos + object_qpos;
+    const mjtNum* qv = d->qvel + object_qvel;
+    s.position = Eigen::Vector3d(qp[0], qp[1], qp[2]);
+    s.orientation = Eigen::Quaterniond(qp[3], qp[4], qp[5], qp[6]).normalized();
+    s.velocity = Eigen::Vector3d(qv[0], qv[1], qv[2]);
+    s.angular_velocity = s.orientation * Eigen::Vector3d(qv[3], qv[4], qv[5]);
+    const double per_solve = 1.0 / std::max(1, r.solves);
+    for (size_t k = 0; k < n_pads; ++k) {
       mechanics::ContactState cs;
       const Eigen::Vector3d n = PadNormal(k, s.t);
-      cs.normal_force = force[k].dot(n);
-      cs.tangential_force = force[k] - cs.normal_force * n;
-      cs.torque = torque[k];
-      cs.mode = !touching[k] ? mechanics::ContactMode::kSeparate
-                : sliding[k] ? mechanics::ContactMode::kSlide
-                             : mechanics::ContactMode::kStick;
+      const Eigen::Vector3d f = r.force[k] * per_solve;
+      cs.normal_force = f.dot(n);
+      cs.tangential_force = f - cs.normal_force * n;
+      cs.torque = r.torque[k] * per_solve;
+      cs.mode = r.touching[k] == 0                  ? mechanics::ContactMode::kSeparate
+                : 2 * r.sliding[k] >= r.touching[k] ? mechanics::ContactMode::kSlide
+                                                    : mechanics::ContactMode::kStick;
       s.contacts.push_back(cs);
     }
     if (scene.pusher) {
       Eigen::Quaterniond q;
       PusherAt(s.t, &s.pusher_position, &q);
-      s.pusher_force = force.back();
+      s.pusher_force = r.force.back() * per_solve;
     }
     return s;
   }
@@ -612,18 +647,22 @@ mechanics::SimulationResult MujocoSimulator::Simulate(const mechanics::Scene& sc
     run.DrivePusher(0);
     mj_forward(h.m, h.d);
     for (long k = 0; k < n_samples; ++k) {
+      Run::PadReading interval(run.n_pads);  // the steps since the last sample
       if (k > 0) {
         for (int j = 0; j < per_sample; ++j) {
           run.DrivePusher(h.d->time);
           mj_step(h.m, h.d);
           ++result.solver.steps;
+          // After mj_step, d->contact and d->efc_force are the step's own solve.
+          if (settings_.interval_forces) run.Read(&interval);
         }
         // Pusher and time exactly on the sample instant; forces of that state.
         h.d->time = static_cast<double>(k) / mechanics::kSampleRateHz;
         run.DrivePusher(h.d->time);
         mj_forward(h.m, h.d);
       }
-      mechanics::TrajectorySample s = run.Sample();
+      if (interval.solves == 0) run.Read(&interval);  // t = 0, or instant forces
+      mechanics::TrajectorySample s = run.Sample(interval);
       s.t = static_cast<double>(k) / mechanics::kSampleRateHz;
       if (!Finite(s) || h.d->warning[mjWARN_BADQACC].number > 0) {
         result.status = mechanics::SimulationStatus::kSolverFailure;

@@ -232,6 +232,36 @@ TEST(MujocoConvergence, TiltedPushOnSlidingLineFingersConvergesAtTheDefaults) {
       << "the old settings converge here: the test proves nothing";
 }
 
+// The same scene's fingers slide, and MuJoCo's soft contact bounces them on
+// and off the face every few steps (simulators/README.md, "Default
+// settings"). At an instant a finger is then often reported separate with
+// no force; over the sample's interval (the default: the impulse of its
+// steps / 4 ms, as a filtered force sensor and arena's model report it) it
+// holds the grip force: each finger's momentum balance makes the mean
+// normal force the motor's force, 3.09 N.
+TEST(MujocoForces, OverTheSampleIntervalAFingerSlidingOnTheFaceHoldsTheGripForce) {
+  const Scene s = TiltedPushOnLineFingers();
+  MujocoSettings instant_settings;
+  instant_settings.interval_forces = false;
+  const auto interval = MakeMujocoSimulator({})->Simulate(s);
+  const auto instant = MakeMujocoSimulator(instant_settings)->Simulate(s);
+  ASSERT_EQ(interval.status, SimulationStatus::kOk) << interval.error;
+  ASSERT_EQ(instant.status, SimulationStatus::kOk) << instant.error;
+  int instant_separate = 0;
+  for (size_t k = 5; k < interval.samples.size(); ++k) {
+    for (int f = 0; f < 2; ++f) {
+      const auto& c = interval.samples[k].contacts[f];
+      EXPECT_NEAR(c.normal_force, s.grip_force, 0.2 * s.grip_force) << "sample " << k;
+      EXPECT_EQ(c.mode, ContactMode::kSlide) << "sample " << k;
+      if (instant.samples[k].contacts[f].mode == ContactMode::kSeparate) ++instant_separate;
+    }
+  }
+  EXPECT_GT(instant_separate, 10) << "no chatter at the instants: the interval proves nothing";
+  EXPECT_NE(MakeSimulator("mujoco", R"({"forces": "instant"})")->settings_json().find("instant"),
+            std::string::npos);
+  EXPECT_THROW(MakeSimulator("mujoco", R"({"forces": "mean"})"), SimulatorError);
+}
+
 // Prisms are convex meshes. A rectangular prism is the box: its pusher
 // force and trajectory are the box's under an off-centre sliding push. Its polygon need not be
 // centred on O: the same rectangle drawn 1 cm off O's origin, with O placed 1 cm the other way, is

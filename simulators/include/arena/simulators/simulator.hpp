@@ -105,6 +105,12 @@ struct MujocoSettings {
   // Spheres by default: capsules and boxes converged worse or equal on the
   // pivot study (simulators/README.md, "The MuJoCo scene").
   PadShapes pads = PadShapes::kSpheres;
+  // Contact forces, torques and modes of a 250 Hz sample: true = over the
+  // sample's interval (the impulse of its steps / 4 ms, as a force sensor
+  // filtered for 250 Hz reports them and as arena's model steps them);
+  // false = at the sample's instant. A sliding soft contact makes a finger
+  // chatter on and off the face between steps, so an instant says little.
+  bool interval_forces = true;
 };
 std::unique_ptr<Simulator> MakeMujocoSimulator(const MujocoSettings& settings);
 
