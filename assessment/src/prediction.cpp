@@ -10,6 +10,7 @@
 #include <nlohmann/json.hpp>
 
 #include "arena/assessment/calibration.hpp"
+#include "arena/assessment/predictor.hpp"
 #include "arena/assessment/scoring.hpp"
 #include "arena/mechanics/scene_json.hpp"
 #include "arena/simulators/simulator.hpp"
@@ -328,12 +329,7 @@ db::Prediction PredictTrial(const mechanics::Scene& scene,
   if (!stored.is_object()) stored = nlohmann::json::object();
   stored["predictor"] = "mujoco";
   p.model_json = stored.dump();
-  char key[96];
-  const simulators::MujocoSettings defaults;
-  std::snprintf(key, sizeof key, "mujoco_ts%g_%s_ns%d", knobs.value("timestep", defaults.timestep),
-                knobs.value("cone", std::string("elliptic")).c_str(),
-                knobs.value("noslip_iterations", defaults.noslip_iterations));
-  p.model_key = key;
+  p.model_key = MujocoSettingKey(knobs);  // knobs were checked by MakeSimulator above
   return p;
 }
 

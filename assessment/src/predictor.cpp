@@ -97,6 +97,17 @@ std::string FormatList(const std::array<double, N>& values) {
   return out;
 }
 
+std::array<double, 2> DefaultSolref() {
+  const simulators::MujocoSettings d;
+  return {d.solref_timeconst, d.solref_damping};
+}
+std::array<double, 5> DefaultSolimp() {
+  const simulators::MujocoSettings d;
+  std::array<double, 5> out;
+  std::copy(std::begin(d.solimp), std::end(d.solimp), out.begin());
+  return out;
+}
+
 class MujocoPredictor final : public Predictor {
  public:
   explicit MujocoPredictor(const MujocoGrid& grid) {
@@ -126,34 +137,20 @@ class MujocoPredictor final : public Predictor {
         for (int ns : grid.noslip)
           for (const auto& sr : grid.solref)
             for (const auto& si : grid.solimp) points.push_back(Point{ts, cone, ns, sr, si});
-    const simulators::MujocoSettings defaults;
-    const std::array<double, 2> default_solref{defaults.solref_timeconst, defaults.solref_damping};
-    std::array<double, 5> default_solimp;
-    std::copy(std::begin(defaults.solimp), std::end(defaults.solimp), default_solimp.begin());
     for (const auto& pt : points) {
       nlohmann::json knobs = {
           {"timestep", pt.timestep}, {"cone", pt.cone}, {"noslip_iterations", pt.noslip}};
-      // Keys and knobs name solref/solimp only where they differ from the
+      // Knobs (and keys) name solref/solimp only where they differ from the
       // defaults, so the keys of earlier evaluations stay the same.
-      std::string soft;
-      if (pt.solref != default_solref) {
-        knobs["solref"] = pt.solref;
-        soft += "_sr" + FormatList(pt.solref);
-      }
-      if (pt.solimp != default_solimp) {
-        knobs["solimp"] = pt.solimp;
-        soft += "_si" + FormatList(pt.solimp);
-      }
+      if (pt.solref != DefaultSolref()) knobs["solref"] = pt.solref;
+      if (pt.solimp != DefaultSolimp()) knobs["solimp"] = pt.solimp;
       try {
         simulators_.push_back(simulators::MakeSimulator("mujoco", knobs.dump()));
       } catch (const std::invalid_argument& e) {
         throw std::invalid_argument(std::string("mujoco grid: ") + e.what());
       }
       PredictorSetting s;
-      char key[96];
-      std::snprintf(key, sizeof key, "mujoco_ts%g_%s_ns%d", pt.timestep, pt.cone.c_str(),
-                    pt.noslip);
-      s.key = key + soft;
+      s.key = MujocoSettingKey(knobs);
       nlohmann::json stored = knobs;
       stored["predictor"] = "mujoco";
       s.knobs_json = stored.dump();
@@ -195,6 +192,24 @@ class MujocoPredictor final : public Predictor {
 };
 
 }  // namespace
+
+std::string MujocoSettingKey(const nlohmann::json& knobs) {
+  const simulators::MujocoSettings d;
+  char key[96];
+  std::snprintf(key, sizeof key, "mujoco_ts%g_%s_ns%d", knobs.value("timestep", d.timestep),
+                knobs.value("cone", std::string("elliptic")).c_str(),
+                knobs.value("noslip_iterations", d.noslip_iterations));
+  std::string out = key;
+  if (knobs.contains("solref")) {
+    const auto v = knobs["solref"].get<std::array<double, 2>>();
+    if (v != DefaultSolref()) out += "_sr" + FormatList(v);
+  }
+  if (knobs.contains("solimp")) {
+    const auto v = knobs["solimp"].get<std::array<double, 5>>();
+    if (v != DefaultSolimp()) out += "_si" + FormatList(v);
+  }
+  return out;
+}
 
 std::unique_ptr<Predictor> MakeMujocoPredictor(const MujocoGrid& grid) {
   return std::make_unique<MujocoPredictor>(grid);

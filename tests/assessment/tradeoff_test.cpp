@@ -271,6 +271,12 @@ TEST(MujocoGrid, SolrefAndSolimpAreGridAxesNamedOnlyWhenNotDefault) {
       EXPECT_NE(s.knobs_json.find(R"("solref":[0.01,1.0])"), std::string::npos) << s.knobs_json;
     }
   }
+  // A campaign's own MuJoCo prediction is keyed the same way.
+  EXPECT_EQ(MujocoSettingKey(nlohmann::json::object()), "mujoco_ts0.0005_elliptic_ns0");
+  EXPECT_EQ(MujocoSettingKey({{"timestep", 0.001}, {"solref", {0.002, 1.0}}}),
+            "mujoco_ts0.001_elliptic_ns0");
+  EXPECT_EQ(MujocoSettingKey({{"solimp", {0.95, 0.99, 0.001, 0.5, 2.0}}}),
+            "mujoco_ts0.0005_elliptic_ns0_si0.95:0.99:0.001:0.5:2");
   grid.solref = {{0.01, 1.0}, {0.01, 1.0}};
   EXPECT_THROW(MakeMujocoPredictor(grid), std::invalid_argument);
   grid.solref = {{-1, 1.0}};

@@ -11,6 +11,8 @@
 #include <string>
 #include <vector>
 
+#include <nlohmann/json.hpp>
+
 #include "arena/mechanics/scene.hpp"
 #include "arena/mechanics/simulate.hpp"
 
@@ -60,6 +62,13 @@ struct MujocoGrid {
   std::vector<std::array<double, 5>> solimp{
       {0.9, 0.95, 0.001, 0.5, 2.0}};  // [dmin, dmax, width, mid, power]
 };
+
+// A MuJoCo setting's model key: "mujoco_ts0.001_elliptic_ns0", with
+// "_sr0.005:1" / "_si..." appended only where solref / solimp differ from
+// the simulator's defaults (so the keys of the default settings never
+// change). `knobs` as MakeSimulator("mujoco", ...) reads them; absent knobs
+// are the defaults.
+std::string MujocoSettingKey(const nlohmann::json& knobs);
 
 // MuJoCo 2.2 (simulators/, the same engine and scene builder as the
 // `mujoco` cell backend) at each of `grid`'s settings.
