@@ -300,7 +300,6 @@ MujocoSettings CompileTimeSettings(const MujocoSettings& st) {
   MujocoSettings c;  // runtime fields at their defaults
   c.finger_mass = st.finger_mass;
   c.pads = st.pads;
-  c.slip_speed = st.slip_speed;  // not in the MJCF; kept for clarity
   return c;
 }
 
@@ -372,6 +371,10 @@ mjModel* ModelFor(const mechanics::Scene& scene, const MujocoSettings& st, std::
     if (cache.lru.size() > ModelCache::kModels) cache.lru.pop_back();
   }
   mjModel* m = mj_copyModel(nullptr, compiled.get());
+  if (!m) {
+    *error = "MuJoCo could not copy the compiled model (out of memory)";
+    return nullptr;
+  }
   const int object_joint = m->body_jntadr[mj_name2id(m, mjOBJ_BODY, "object")];
   ApplyRunTimeSettings(m, st, m->jnt_dofadr[object_joint]);
   return m;
