@@ -7,8 +7,7 @@
 //   2. cost: CPU time (this thread) per simulated second of the mujoco simulator and of
 //      the `model` backend's settings (arena g16 k5 dt 0.002, at least), and
 //      the final-pose difference between the two (the model error a campaign
-//      on the mujoco backend measures, at the cell's model settings);
-//   3. model build: CPU time per run with the compiled-model cache off and on.
+//      on the mujoco backend measures, at the cell's model settings).
 // Prints Markdown tables (bench/README.md, section "MuJoCo as ground truth").
 //
 //   build/bench/mujoco_study [PIVOT_CONDITIONS=24 [TIMESTEP]] [--settings JSON] [--per-scene]
@@ -148,45 +147,6 @@ void Study(const char* title, const std::vector<Named>& scenes) {
               Median(gap_ang) * 1e3, *std::max_element(gap_ang.begin(), gap_ang.end()) * 1e3);
 }
 
-// Cost of building the model: a scene simulated for one 250 Hz sample, and
-// the smoke campaign's scenes at a predictor's coarsest timestep (4 ms),
-// each with the compiled-model cache off (MJCF parsed and compiled per run)
-// and on (compiled once per scene, copied per run).
-void ModelBuildCost(const std::vector<Named>& scenes) {
-  std::printf("\n### Model build: compiled per run vs copied from the per-scene cache\n\n");
-  std::printf(
-      "| run | cache off (CPU ms per run) | cache on (CPU ms per run) |\n|---|---:|---:|\n");
-  const auto coarse = sim::MakeSimulator("mujoco", R"({"timestep": 0.004})");
-  const auto fine = sim::MakeSimulator("mujoco", "");
-  const auto cost = [&](const sim::Simulator& mj, bool one_sample) {
-    std::vector<double> per_run;
-    for (int rep = 0; rep < 5; ++rep) {
-      const double c0 = CpuSeconds();
-      for (const auto& s : scenes) {
-        Scene scene = s.scene;
-        if (one_sample) scene.duration = 0.004;
-        (void)mj.Simulate(scene);
-      }
-      per_run.push_back((CpuSeconds() - c0) / static_cast<double>(scenes.size()));
-    }
-    return *std::min_element(per_run.begin(), per_run.end()) * 1e3;
-  };
-  const struct {
-    const char* label;
-    const sim::Simulator* mj;
-    bool one_sample;
-  } rows[] = {{"one sample (model build + 8 steps)", fine.get(), true},
-              {"whole scene, timestep 4 ms", coarse.get(), false},
-              {"whole scene, timestep 0.5 ms (the default)", fine.get(), false}};
-  for (const auto& row : rows) {
-    sim::SetMujocoModelCacheEnabled(false);
-    const double off = cost(*row.mj, row.one_sample);
-    sim::SetMujocoModelCacheEnabled(true);
-    const double on = cost(*row.mj, row.one_sample);
-    std::printf("| %s | %.3f | %.3f |\n", row.label, off, on);
-  }
-}
-
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -206,6 +166,5 @@ int main(int argc, char** argv) {
               sim::MakeSimulator("mujoco", g_settings)->settings_json().c_str());
   Study("smoke campaign", CampaignScenes("examples/campaigns/smoke.json", 1000));
   Study("pivot study", CampaignScenes("examples/campaigns/pivot_study.json", pivot_conditions));
-  ModelBuildCost(CampaignScenes("examples/campaigns/smoke.json", 1000));
   return 0;
 }

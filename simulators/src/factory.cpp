@@ -51,6 +51,11 @@ void CheckKeys(const json& j, const std::string& sim, std::initializer_list<cons
 std::vector<std::string> SimulatorNames() { return {"arena", "mujoco"}; }
 
 std::unique_ptr<Simulator> MakeSimulator(std::string_view name, std::string_view settings_json) {
+  return MakeSimulator(name, settings_json, nullptr);
+}
+
+std::unique_ptr<Simulator> MakeSimulator(std::string_view name, std::string_view settings_json,
+                                         std::shared_ptr<MujocoModelCache> cache) {
   const json j = ParseObject(name, settings_json);
   if (name == "arena") {
     ArenaSettings s;
@@ -112,7 +117,7 @@ std::unique_ptr<Simulator> MakeSimulator(std::string_view name, std::string_view
       else
         throw SimulatorError("mujoco.forces", "must be \"interval\" or \"instant\"");
     }
-    return MakeMujocoSimulator(s);
+    return MakeMujocoSimulator(s, std::move(cache));
   }
   throw SimulatorError("simulator",
                        "unknown name '" + std::string(name) + "' (known: arena, mujoco)");
