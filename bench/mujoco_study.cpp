@@ -10,7 +10,11 @@
 //      on the mujoco backend measures, at the cell's model settings).
 // Prints Markdown tables (bench/README.md, section "MuJoCo as ground truth").
 //
-//   build/bench/mujoco_study [PIVOT_CONDITIONS=24 [TIMESTEP]]
+//   build/bench/mujoco_study [PIVOT_CONDITIONS=24 [TIMESTEP]] [--settings JSON] [--per-scene]
+//
+// --settings: other mujoco settings than the defaults (e.g. the old
+// '{"noslip_iterations": 10, "impratio": 10}'); --per-scene: every scene's
+// change on stdout.
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -19,6 +23,8 @@
 #include <ctime>
 #include <string>
 #include <vector>
+
+#include <nlohmann/json.hpp>
 
 #include "arena/orchestrator/campaign.hpp"
 #include "arena/simulators/simulator.hpp"
@@ -64,15 +70,17 @@ std::vector<Named> CampaignScenes(const std::string& file, int max_conditions) {
   return out;
 }
 
-double g_timestep = 0;  // argv[2]: study another default timestep
+double g_timestep = 0;          // argv[2]: study another default timestep
+std::string g_settings = "{}";  // --settings JSON: study other mujoco settings
+bool g_per_scene = false;       // --per-scene: one line per scene on stdout
 
 void Study(const char* title, const std::vector<Named>& scenes) {
-  sim::MujocoSettings defaults;
-  if (g_timestep > 0) defaults.timestep = g_timestep;
-  sim::MujocoSettings fine = defaults;
-  fine.timestep = defaults.timestep / 4;
-  const auto mj = sim::MakeMujocoSimulator(defaults);
-  const auto mj_fine = sim::MakeMujocoSimulator(fine);
+  auto base = nlohmann::json::parse(g_settings);
+  if (g_timestep > 0) base["timestep"] = g_timestep;
+  const auto mj = sim::MakeSimulator("mujoco", base.dump());
+  const double timestep = nlohmann::json::parse(mj->settings_json())["timestep"].get<double>();
+  base["timestep"] = timestep / 4;
+  const auto mj_fine = sim::MakeSimulator("mujoco", base.dump());
   sim::ArenaSettings cell_model;
   cell_model.facets = 16;
   cell_model.points = 5;
@@ -105,6 +113,10 @@ void Study(const char* title, const std::vector<Named>& scenes) {
       std::fprintf(stderr, "not converged: %s: %.4f mm, %.3f mrad\n", s.label.c_str(),
                    dpos.back() * 1e3, AngleBetween(fa.orientation, fb.orientation) * 1e3);
     dang.push_back(AngleBetween(fa.orientation, fb.orientation));
+    if (g_per_scene)
+      std::printf("%s: %.4f mm %.3f mrad\n",
+                  s.label.substr(0, s.label.find(' ', s.label.find('#'))).c_str(),
+                  dpos.back() * 1e3, dang.back() * 1e3);
     gap_pos.push_back((fa.position - fm.position).norm());
     gap_ang.push_back(AngleBetween(fa.orientation, fm.orientation));
     mj_cost.push_back((c1 - c0) / s.scene.duration);
@@ -117,11 +129,15 @@ void Study(const char* title, const std::vector<Named>& scenes) {
   std::printf("| quantity | median | worst |\n|---|---:|---:|\n");
   std::printf("| final position change, default vs timestep/4 (mm) | %.4f | %.4f |\n",
               Median(dpos) * 1e3, *std::max_element(dpos.begin(), dpos.end()) * 1e3);
+  std::printf("| scenes whose final position changed > 0.1 mm | %ld of %zu | |\n",
+              static_cast<long>(
+                  std::count_if(dpos.begin(), dpos.end(), [](double d) { return d > 0.1e-3; })),
+              dpos.size());
   std::printf("| final angle change, default vs timestep/4 (mrad) | %.4f | %.4f |\n",
               Median(dang) * 1e3, *std::max_element(dang.begin(), dang.end()) * 1e3);
-  std::printf("| MuJoCo CPU s per simulated s (dt %.4g s) | %.4f | %.4f |\n", defaults.timestep,
+  std::printf("| MuJoCo CPU s per simulated s (dt %.4g s) | %.4f | %.4f |\n", timestep,
               Median(mj_cost), *std::max_element(mj_cost.begin(), mj_cost.end()));
-  std::printf("| MuJoCo CPU s per simulated s (dt %.4g s) | %.4f | %.4f |\n", fine.timestep,
+  std::printf("| MuJoCo CPU s per simulated s (dt %.4g s) | %.4f | %.4f |\n", timestep / 4,
               Median(fine_cost), *std::max_element(fine_cost.begin(), fine_cost.end()));
   std::printf("| model backend CPU s per simulated s (g16 k5 dt 0.002) | %.4f | %.4f |\n",
               Median(model_cost), *std::max_element(model_cost.begin(), model_cost.end()));
@@ -134,10 +150,20 @@ void Study(const char* title, const std::vector<Named>& scenes) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  const int pivot_conditions = argc > 1 ? std::atoi(argv[1]) : 24;
-  if (argc > 2) g_timestep = std::atof(argv[2]);
-  std::printf("MuJoCo %s settings: %s\n", "default",
-              sim::MakeMujocoSimulator({})->settings_json().c_str());
+  std::vector<std::string> args;
+  for (int i = 1; i < argc; ++i) {
+    if (std::string(argv[i]) == "--settings" && i + 1 < argc) {
+      g_settings = argv[++i];
+    } else if (std::string(argv[i]) == "--per-scene") {
+      g_per_scene = true;
+    } else {
+      args.push_back(argv[i]);
+    }
+  }
+  const int pivot_conditions = !args.empty() ? std::atoi(args[0].c_str()) : 24;
+  if (args.size() > 1) g_timestep = std::atof(args[1].c_str());
+  std::printf("MuJoCo settings: %s\n",
+              sim::MakeSimulator("mujoco", g_settings)->settings_json().c_str());
   Study("smoke campaign", CampaignScenes("examples/campaigns/smoke.json", 1000));
   Study("pivot study", CampaignScenes("examples/campaigns/pivot_study.json", pivot_conditions));
   return 0;

@@ -10,6 +10,7 @@
 #include <nlohmann/json.hpp>
 
 #include "arena/assessment/calibration.hpp"
+#include "arena/assessment/predictor.hpp"
 #include "arena/assessment/scoring.hpp"
 #include "arena/mechanics/scene_json.hpp"
 #include "arena/simulators/simulator.hpp"
@@ -279,17 +280,6 @@ db::Prediction ScoreSimulation(const mechanics::Scene& scene,
   return p;
 }
 
-namespace {
-// The label a MuJoCo prediction is stored under ("mujoco_ts0.0005_elliptic_ns10").
-std::string MujocoKey(const nlohmann::json& knobs) {
-  char key[96];
-  std::snprintf(key, sizeof key, "mujoco_ts%g_%s_ns%d", knobs.value("timestep", 0.0005),
-                knobs.value("cone", std::string("elliptic")).c_str(),
-                knobs.value("noslip_iterations", 10));
-  return key;
-}
-}  // namespace
-
 db::Prediction PredictTrial(const mechanics::Scene& scene,
                             const std::vector<mechanics::TrajectorySample>& truth) {
   const auto start = std::chrono::steady_clock::now();
@@ -339,7 +329,7 @@ db::Prediction PredictTrial(const mechanics::Scene& scene,
   if (!stored.is_object()) stored = nlohmann::json::object();
   stored["predictor"] = "mujoco";
   p.model_json = stored.dump();
-  p.model_key = MujocoKey(knobs);
+  p.model_key = MujocoSettingKey(knobs);  // knobs were checked by MakeSimulator above
   return p;
 }
 
@@ -366,7 +356,7 @@ PredictedRun SimulatePrediction(const mechanics::Scene& trial_scene,
   const std::unique_ptr<simulators::Simulator> sim =
       simulators::MakeSimulator("mujoco", knobs.dump());
   run.predictor = "mujoco";
-  run.key = MujocoKey(knobs);
+  run.key = MujocoSettingKey(knobs);
   nlohmann::json stored = nlohmann::json::parse(sim->settings_json(), nullptr, false);
   if (!stored.is_object()) stored = nlohmann::json::object();
   stored["predictor"] = "mujoco";

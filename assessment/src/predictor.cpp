@@ -85,6 +85,30 @@ class ArenaPredictor final : public Predictor {
   std::vector<PredictorSetting> settings_;
 };
 
+// "0.002:1" for a key.
+template <std::size_t N>
+std::string FormatList(const std::array<double, N>& values) {
+  std::string out;
+  for (double v : values) {
+    char buf[32];
+    std::snprintf(buf, sizeof buf, "%g", v);
+    if (!out.empty()) out += ':';
+    out += buf;
+  }
+  return out;
+}
+
+std::array<double, 2> DefaultSolref() {
+  const simulators::MujocoSettings d;
+  return {d.solref_timeconst, d.solref_damping};
+}
+std::array<double, 5> DefaultSolimp() {
+  const simulators::MujocoSettings d;
+  std::array<double, 5> out;
+  std::copy(std::begin(d.solimp), std::end(d.solimp), out.begin());
+  return out;
+}
+
 class MujocoPredictor final : public Predictor {
  public:
   explicit MujocoPredictor(const MujocoGrid& grid) {
@@ -99,28 +123,35 @@ class MujocoPredictor final : public Predictor {
     nonempty_unique(grid.timestep, "timestep");
     nonempty_unique(grid.cone, "cone");
     nonempty_unique(grid.noslip, "noslip");
+    nonempty_unique(grid.solref, "solref");
+    nonempty_unique(grid.solimp, "solimp");
     struct Point {
       double timestep;
       std::string cone;
       int noslip;
+      std::array<double, 2> solref;
+      std::array<double, 5> solimp;
     };
     std::vector<Point> points;
     for (double ts : grid.timestep)
       for (const auto& cone : grid.cone)
-        for (int ns : grid.noslip) points.push_back(Point{ts, cone, ns});
+        for (int ns : grid.noslip)
+          for (const auto& sr : grid.solref)
+            for (const auto& si : grid.solimp) points.push_back(Point{ts, cone, ns, sr, si});
     for (const auto& pt : points) {
-      const nlohmann::json knobs = {
+      nlohmann::json knobs = {
           {"timestep", pt.timestep}, {"cone", pt.cone}, {"noslip_iterations", pt.noslip}};
+      // Knobs (and keys) name solref/solimp only where they differ from the
+      // defaults, so the keys of earlier evaluations stay the same.
+      if (pt.solref != DefaultSolref()) knobs["solref"] = pt.solref;
+      if (pt.solimp != DefaultSolimp()) knobs["solimp"] = pt.solimp;
       try {
         simulators_.push_back(simulators::MakeSimulator("mujoco", knobs.dump(), cache_));
       } catch (const std::invalid_argument& e) {
         throw std::invalid_argument(std::string("mujoco grid: ") + e.what());
       }
       PredictorSetting s;
-      char key[96];
-      std::snprintf(key, sizeof key, "mujoco_ts%g_%s_ns%d", pt.timestep, pt.cone.c_str(),
-                    pt.noslip);
-      s.key = key;
+      s.key = MujocoSettingKey(knobs);
       nlohmann::json stored = knobs;
       stored["predictor"] = "mujoco";
       s.knobs_json = stored.dump();
@@ -167,6 +198,24 @@ class MujocoPredictor final : public Predictor {
 };
 
 }  // namespace
+
+std::string MujocoSettingKey(const nlohmann::json& knobs) {
+  const simulators::MujocoSettings d;
+  char key[96];
+  std::snprintf(key, sizeof key, "mujoco_ts%g_%s_ns%d", knobs.value("timestep", d.timestep),
+                knobs.value("cone", std::string("elliptic")).c_str(),
+                knobs.value("noslip_iterations", d.noslip_iterations));
+  std::string out = key;
+  if (knobs.contains("solref")) {
+    const auto v = knobs["solref"].get<std::array<double, 2>>();
+    if (v != DefaultSolref()) out += "_sr" + FormatList(v);
+  }
+  if (knobs.contains("solimp")) {
+    const auto v = knobs["solimp"].get<std::array<double, 5>>();
+    if (v != DefaultSolimp()) out += "_si" + FormatList(v);
+  }
+  return out;
+}
 
 std::unique_ptr<Predictor> MakeMujocoPredictor(const MujocoGrid& grid) {
   return std::make_unique<MujocoPredictor>(grid);

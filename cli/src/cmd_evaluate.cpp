@@ -4,7 +4,9 @@
 // Replays a campaign's done trials through the model at every fidelity
 // setting of the grid, stores the run (tables evaluations and
 // evaluation_results) and prints the trade: a table or JSON.
+#include <array>
 #include <atomic>
+#include <cmath>
 #include <cstdio>
 #include <sstream>
 #include <string>
@@ -35,13 +37,43 @@ struct EvaluateOptions {
   bool grid_given = false;  // any of --facets/--points/--dt/--reduce
   std::vector<double> mujoco_timestep{0.004, 0.002, 0.001, 0.0005};
   std::vector<std::string> mujoco_cone{"elliptic"};
-  std::vector<int> mujoco_noslip{10};
+  std::vector<int> mujoco_noslip{0};
+  std::vector<std::string> mujoco_solref;  // "timeconst:dampratio" each
+  std::vector<std::string> mujoco_solimp;  // "dmin:dmax:width:mid:power" each
   bool mujoco_grid_given = false;
   std::vector<std::string> budgets;
   int threads = 0;
   int convergence_trials = 8;
   bool json = false;
 };
+
+// "0.002:1" -> {0.002, 1}; exactly N finite numbers or a bad-input error
+// naming the flag.
+template <std::size_t N>
+std::array<double, N> ParseColonList(const char* flag, const std::string& text) {
+  std::array<double, N> out{};
+  std::size_t start = 0, n = 0;
+  while (true) {
+    const std::size_t end = text.find(':', start);
+    const std::string part = text.substr(start, end == std::string::npos ? end : end - start);
+    std::size_t used = 0;
+    double v = 0;
+    try {
+      v = std::stod(part, &used);
+    } catch (const std::exception&) {
+      used = 0;
+    }
+    if (used == 0 || used != part.size() || !std::isfinite(v) || n >= N) break;
+    out[n++] = v;
+    if (end == std::string::npos) {
+      if (n == N) return out;
+      break;
+    }
+    start = end + 1;
+  }
+  throw CommandError(kExitBadInput, std::string(flag) + ": '" + text + "' must be " +
+                                        std::to_string(N) + " numbers separated by ':'");
+}
 
 std::string Tail(const std::optional<assessment::Distribution>& d, double scale) {
   if (!d) return "-";
@@ -186,6 +218,16 @@ int RunEvaluate(const EvaluateOptions& o) {
     if (name == "arena" && o.grid_given) req.arena_grid = grid;
     if (name == "mujoco" && o.mujoco_grid_given) {
       req.mujoco_grid = assessment::MujocoGrid{o.mujoco_timestep, o.mujoco_cone, o.mujoco_noslip};
+      if (!o.mujoco_solref.empty()) {
+        req.mujoco_grid->solref.clear();
+        for (const auto& v : o.mujoco_solref)
+          req.mujoco_grid->solref.push_back(ParseColonList<2>("--mujoco-solref", v));
+      }
+      if (!o.mujoco_solimp.empty()) {
+        req.mujoco_grid->solimp.clear();
+        for (const auto& v : o.mujoco_solimp)
+          req.mujoco_grid->solimp.push_back(ParseColonList<5>("--mujoco-solimp", v));
+      }
     }
     eo.predictors.push_back(req);
   }
@@ -303,6 +345,16 @@ void AddEvaluateCommand(CLI::App& app, Action* action) {
       ->delimiter(',')
       ->each(mujoco_given)
       ->capture_default_str();
+  cmd->add_option("--mujoco-solref", o->mujoco_solref,
+                  "mujoco: contact solref values to try, each TIMECONST:DAMPRATIO (default "
+                  "0.002:1)")
+      ->delimiter(',')
+      ->each(mujoco_given);
+  cmd->add_option("--mujoco-solimp", o->mujoco_solimp,
+                  "mujoco: contact solimp values to try, each DMIN:DMAX:WIDTH:MID:POWER (default "
+                  "0.9:0.95:0.001:0.5:2)")
+      ->delimiter(',')
+      ->each(mujoco_given);
   cmd->add_option("--convergence-trials", o->convergence_trials,
                   "Trials whose pieces the convergence table restarts from the true state "
                   "(0: no table)")

@@ -861,9 +861,10 @@ Campaign ParseCampaign(std::string_view json_text, const std::string& base_dir,
     const json& p = doc["prediction"];
     RequireObject(p, "prediction",
                   {"predictor", "facets", "points", "dt", "reduce", "contacts", "calibration",
-                   "calibrated", "timestep", "cone", "noslip_iterations"});
+                   "calibrated", "timestep", "cone", "noslip_iterations", "solref", "solimp"});
     // Which predictor: arena's model (knobs facets, points, dt, reduce, contacts,
-    // and a calibration's scales) or MuJoCo (timestep, cone, noslip_iterations);
+    // and a calibration's scales) or MuJoCo (timestep, cone, noslip_iterations,
+    // solref, solimp);
     // knobs of the other are refused.
     if (p.contains("predictor")) c.predictor = String(p["predictor"], "prediction.predictor");
     if (c.predictor != "arena" && c.predictor != "mujoco") {
@@ -871,10 +872,12 @@ Campaign ParseCampaign(std::string_view json_text, const std::string& base_dir,
                                                       Printable(c.predictor, 40) + "\"");
     }
     const bool mujoco = c.predictor == "mujoco";
-    for (const char* k : {"facets", "points", "dt", "reduce", "contacts", "calibration",
-                          "calibrated", "timestep", "cone", "noslip_iterations"}) {
+    for (const char* k :
+         {"facets", "points", "dt", "reduce", "contacts", "calibration", "calibrated", "timestep",
+          "cone", "noslip_iterations", "solref", "solimp"}) {
       const std::string key = k;
-      const bool arena_knob = key != "timestep" && key != "cone" && key != "noslip_iterations";
+      const bool arena_knob = key != "timestep" && key != "cone" && key != "noslip_iterations" &&
+                              key != "solref" && key != "solimp";
       if (p.contains(k) && arena_knob == mujoco) {
         throw CampaignError(std::string("prediction.") + k,
                             std::string("is not a knob of the ") + c.predictor + " predictor");

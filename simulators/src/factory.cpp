@@ -70,7 +70,7 @@ std::unique_ptr<Simulator> MakeSimulator(std::string_view name, std::string_view
     MujocoSettings s;
     CheckKeys(j, "mujoco",
               {"timestep", "cone", "solref", "solimp", "impratio", "noslip_iterations", "tolerance",
-               "iterations", "object_damping", "finger_mass", "slip_speed"});
+               "iterations", "object_damping", "finger_mass", "slip_speed", "pads", "forces"});
     Read(j, "mujoco", "timestep", &s.timestep);
     if (auto it = j.find("cone"); it != j.end()) {
       if (*it == "elliptic")
@@ -101,6 +101,22 @@ std::unique_ptr<Simulator> MakeSimulator(std::string_view name, std::string_view
     Read(j, "mujoco", "object_damping", &s.object_damping);
     Read(j, "mujoco", "finger_mass", &s.finger_mass);
     Read(j, "mujoco", "slip_speed", &s.slip_speed);
+    if (auto it = j.find("pads"); it != j.end()) {
+      if (*it == "spheres")
+        s.pads = PadShapes::kSpheres;
+      else if (*it == "shapes")
+        s.pads = PadShapes::kShapes;
+      else
+        throw SimulatorError("mujoco.pads", "must be \"spheres\" or \"shapes\"");
+    }
+    if (auto it = j.find("forces"); it != j.end()) {
+      if (*it == "interval")
+        s.interval_forces = true;
+      else if (*it == "instant")
+        s.interval_forces = false;
+      else
+        throw SimulatorError("mujoco.forces", "must be \"interval\" or \"instant\"");
+    }
     return MakeMujocoSimulator(s, std::move(cache));
   }
   throw SimulatorError("simulator",

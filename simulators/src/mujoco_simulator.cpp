@@ -4,8 +4,10 @@
 // Model (MJCF, built in memory, loaded through MuJoCo's VFS):
 //   world = the gripper frame; gravity as the scene's.
 //   object: a body with a free joint (damping object_damping: a frictionless
-//     pivot otherwise oscillates about its stall angle forever), a box or
-//     cylinder geom and the scene's mass and inertia about the centre of mass.
+//     pivot otherwise oscillates about its stall angle forever), a box,
+//     cylinder or prism geom (a prism: a convex mesh of its polygon's
+//     vertices at ±height/2) and the scene's mass and inertia; the body's
+//     origin is the centre of mass (a prism's polygon centroid).
 //   finger i: a body on a slide joint along its normal, driven by a motor
 //     whose force is the grip force (plus the finger's own weight along the
 //     normal); two opposed fingers are coupled (each slide axis is its
@@ -27,7 +29,9 @@
 // finger / pusher the sum over its MuJoCo contacts of mj_contactForce in the
 // gripper frame (force on the object), the torque about the pad's contact
 // point, and the mode: separate without a loaded contact, slide when the
-// tangential slip speed at a contact exceeds slip_speed, else stick.
+// tangential slip speed at a contact exceeds slip_speed, else stick; by
+// default averaged over the steps since the previous sample
+// (MujocoSettings::interval_forces).
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -83,14 +87,15 @@ std::string Num(double x) {
 
 // Pad geoms per contact type: a point is one sphere; a line is kLinePads
 // spheres spread evenly over it and a patch kPatchPads spheres on the 2R/3
-// ring of arena's patch model (which carry its torsion and tilt). A capsule
-// (line) or a box (patch) gives MuJoCo 1, 2 or 4 contacts depending on the
-// time step, and the final pose then moved 0.2 mm under a 4x finer step;
-// spheres keep one contact each.
+// ring of arena's patch model (which carry its torsion and tilt). With
+// PadShapes::kShapes a line is a capsule (converges like the spheres, but
+// MuJoCo gives it its two end contacts only) and a patch a box (box-box
+// contacts come and go with the step: 0.6 mm under a 4x finer one).
 constexpr int kLinePads = 5;
 constexpr int kPatchPads = 6;
 
-int PadCount(const mechanics::ContactSpec& c) {
+int PadCount(const mechanics::ContactSpec& c, PadShapes shapes) {
+  if (shapes == PadShapes::kShapes) return 1;
   switch (c.type) {
     case mechanics::ContactType::kPoint:
       return 1;
@@ -132,8 +137,28 @@ std::vector<Eigen::Vector3d> PadCentres(const mechanics::ContactSpec& c) {
   return out;
 }
 
-std::string PadGeoms(const std::string& base, const mechanics::ContactSpec& c) {
+// PadShapes::kShapes: a line is one capsule (MuJoCo gives it up to 2
+// contacts on a face, 1 against a cylinder or mesh), a patch one thin box
+// whose corners sit on the 2R/3 ring (the spheres' torsion arm).
+std::string PadGeoms(const std::string& base, const mechanics::ContactSpec& c, PadShapes shapes) {
   std::ostringstream x;
+  if (shapes == PadShapes::kShapes && c.type != mechanics::ContactType::kPoint) {
+    const Eigen::Vector3d n = c.normal.normalized();
+    const Eigen::Vector3d back = -kPadRadius * n;
+    if (c.type == mechanics::ContactType::kLine) {
+      const Eigen::Vector3d a = 0.5 * c.length * c.axis.normalized();
+      x << "      <geom name=\"" << base << "_0\" type=\"capsule\" contype=\"0\" conaffinity=\"0\" "
+        << "mass=\"0\" size=\"" << Num(kPadRadius) << "\" fromto=\"" << Vec(back - a) << " "
+        << Vec(back + a) << "\"/>\n";
+    } else {
+      const double h = 2.0 * c.radius / 3.0 / std::sqrt(2.0);
+      const Eigen::Quaterniond q = Eigen::Quaterniond::FromTwoVectors(Eigen::Vector3d::UnitZ(), n);
+      x << "      <geom name=\"" << base << "_0\" type=\"box\" contype=\"0\" conaffinity=\"0\" "
+        << "mass=\"0\" size=\"" << Num(h) << " " << Num(h) << " " << Num(kPadRadius) << "\" pos=\""
+        << Vec(back) << "\" quat=\"" << Quat(q) << "\"/>\n";
+    }
+    return x.str();
+  }
   const auto centres = PadCentres(c);
   for (size_t j = 0; j < centres.size(); ++j) {
     x << "      <geom name=\"" << base << "_" << j
@@ -153,7 +178,7 @@ std::string Pair(const std::string& pad, const mechanics::ContactSpec& c, const 
 std::string Pairs(const std::string& base, const mechanics::ContactSpec& c,
                   const MujocoSettings& st) {
   std::string all;
-  for (int j = 0; j < PadCount(c); ++j) {
+  for (int j = 0; j < PadCount(c, st.pads); ++j) {
     all += "    " + Pair(base + "_" + std::to_string(j), c, st) + "\n";
   }
   return all;
@@ -168,6 +193,48 @@ std::string Pair(const std::string& pad, const mechanics::ContactSpec& c,
   for (int k = 0; k < 5; ++k) x << Num(st.solimp[k]) << (k < 4 ? " " : "");
   x << "\" margin=\"" << Num(kContactMargin) << "\" gap=\"" << Num(kContactMargin) << "\"/>";
   return x.str();
+}
+
+// Signed area and centroid of a polygon (counter-clockwise: area > 0).
+double PolygonArea(const std::vector<Eigen::Vector2d>& poly) {
+  double a = 0;
+  for (size_t i = 0; i < poly.size(); ++i) {
+    const auto &p = poly[i], &q = poly[(i + 1) % poly.size()];
+    a += p.x() * q.y() - q.x() * p.y();
+  }
+  return a / 2;
+}
+Eigen::Vector2d PolygonCentroid(const std::vector<Eigen::Vector2d>& poly) {
+  Eigen::Vector2d c = Eigen::Vector2d::Zero();
+  for (size_t i = 0; i < poly.size(); ++i) {
+    const auto &p = poly[i], &q = poly[(i + 1) % poly.size()];
+    c += (p + q) * (p.x() * q.y() - q.x() * p.y());
+  }
+  return c / (6 * PolygonArea(poly));
+}
+
+// The centre of mass in the object frame O: the body's origin in MuJoCo
+// (the state arena reports is the centre of mass; a prism's polygon need not
+// be centred on O's origin).
+Eigen::Vector3d CentreOfMassInO(const mechanics::ObjectSpec& o) {
+  if (o.shape != mechanics::ObjectShape::kPrism) return Eigen::Vector3d::Zero();
+  const Eigen::Vector2d c = PolygonCentroid(o.polygon);
+  return {c.x(), c.y(), 0};
+}
+
+// A prism as a mesh: its polygon at z = ±height/2, relative to the centre of
+// mass. MuJoCo collides with the mesh's convex hull, which for a convex
+// prism is the prism itself.
+std::string PrismMesh(const mechanics::ObjectSpec& o) {
+  const Eigen::Vector3d c = CentreOfMassInO(o);
+  std::string v;
+  for (const double z : {-0.5 * o.height, 0.5 * o.height}) {
+    for (const auto& p : o.polygon) {
+      if (!v.empty()) v += ' ';
+      v += Vec(Eigen::Vector3d(p.x(), p.y(), z) - c);
+    }
+  }
+  return "  <asset>\n    <mesh name=\"object_mesh\" vertex=\"" + v + "\"/>\n  </asset>\n";
 }
 
 int StepsPerSample(const MujocoSettings& s) {
@@ -323,13 +390,16 @@ class MujocoSimulator final : public Simulator {
                 {"iterations", s.iterations},
                 {"object_damping", s.object_damping},
                 {"finger_mass", s.finger_mass},
-                {"slip_speed", s.slip_speed}})
+                {"slip_speed", s.slip_speed},
+                {"pads", s.pads == PadShapes::kSpheres ? "spheres" : "shapes"},
+                {"forces", s.interval_forces ? "interval" : "instant"}})
         .dump();
   }
   std::string CheckScene(const mechanics::Scene& scene) const override {
-    if (scene.object.shape != mechanics::ObjectShape::kBox &&
-        scene.object.shape != mechanics::ObjectShape::kCylinder)
-      return "object.shape: the mujoco simulator models box and cylinder objects only";
+    const auto& o = scene.object;
+    if (o.shape == mechanics::ObjectShape::kPrism &&
+        (o.polygon.size() < 3 || !(PolygonArea(o.polygon) > 0)))
+      return "object.polygon: the mujoco simulator needs a counter-clockwise polygon of area > 0";
     return "";
   }
   mechanics::SimulationResult Simulate(const mechanics::Scene& scene) const override;
@@ -401,17 +471,28 @@ struct Run {
     return q * scene.pusher->normal.normalized();
   }
 
-  mechanics::TrajectorySample Sample() const {
-    mechanics::TrajectorySample s;
-    s.t = d->time;
+  // What each pad (fingers, then the pusher) did to the object in one solve.
+  struct PadReading {
+    std::vector<Eigen::Vector3d> force, torque;  // on the object, gripper frame
+    std::vector<int> touching, sliding;          // solves in which it touched / slid
+    int solves = 0;
+    explicit PadReading(size_t n)
+        : force(n, Eigen::Vector3d::Zero()),
+          torque(n, Eigen::Vector3d::Zero()),
+          touching(n, 0),
+          sliding(n, 0) {}
+  };
+
+  // Adds the contacts of the last solve (d->contact and d->efc_force, as
+  // mj_step or mj_forward left them) to `r`.
+  void Read(PadReading* r) const {
     const mjtNum* qp = d->qpos + object_qpos;
     const mjtNum* qv = d->qvel + object_qvel;
-    s.position = Eigen::Vector3d(qp[0], qp[1], qp[2]);
-    s.orientation = Eigen::Quaterniond(qp[3], qp[4], qp[5], qp[6]).normalized();
-    s.velocity = Eigen::Vector3d(qv[0], qv[1], qv[2]);
-    s.angular_velocity = s.orientation * Eigen::Vector3d(qv[3], qv[4], qv[5]);
-    std::vector<Eigen::Vector3d> force(n_pads, Eigen::Vector3d::Zero()),
-        torque(n_pads, Eigen::Vector3d::Zero());
+    const Eigen::Vector3d position(qp[0], qp[1], qp[2]);
+    const Eigen::Quaterniond orientation =
+        Eigen::Quaterniond(qp[3], qp[4], qp[5], qp[6]).normalized();
+    const Eigen::Vector3d velocity(qv[0], qv[1], qv[2]);
+    const Eigen::Vector3d angular_velocity = orientation * Eigen::Vector3d(qv[3], qv[4], qv[5]);
     std::vector<bool> touching(n_pads, false), sliding(n_pads, false);
     for (int i = 0; i < d->ncon; ++i) {
       const mjContact& c = d->contact[i];
@@ -424,38 +505,59 @@ struct Run {
       // Contact frame rows: normal (from geom1 to geom2), tangents. The force is
       // geom1's on geom2; our pairs put the pad first, so it is the pad's on the object.
       Eigen::Vector3d f_W = Eigen::Vector3d::Zero(), tau_W = Eigen::Vector3d::Zero();
-      for (int r = 0; r < 3; ++r) {
-        const Eigen::Vector3d axis(c.frame[3 * r], c.frame[3 * r + 1], c.frame[3 * r + 2]);
-        f_W += f6[r] * axis;
-        tau_W += f6[3 + r] * axis;
+      for (int k = 0; k < 3; ++k) {
+        const Eigen::Vector3d axis(c.frame[3 * k], c.frame[3 * k + 1], c.frame[3 * k + 2]);
+        f_W += f6[k] * axis;
+        tau_W += f6[3 + k] * axis;
       }
       if (c.geom1 == object_geom) f_W = -f_W, tau_W = -tau_W;
       const Eigen::Vector3d p(c.pos[0], c.pos[1], c.pos[2]);
-      const Eigen::Vector3d ref = PadPoint(who, s.t);
-      force[who] += f_W;
-      torque[who] += tau_W + (p - ref).cross(f_W);
+      const Eigen::Vector3d ref = PadPoint(who, d->time);
+      r->force[who] += f_W;
+      r->torque[who] += tau_W + (p - ref).cross(f_W);
       if (f_W.norm() > 0) touching[who] = true;
       const Eigen::Vector3d n(c.frame[0], c.frame[1], c.frame[2]);
       Eigen::Vector3d u =
-          s.velocity + s.angular_velocity.cross(p - s.position) - PadVelocity(who, p, s.t);
+          velocity + angular_velocity.cross(p - position) - PadVelocity(who, p, d->time);
       u -= u.dot(n) * n;
       if (u.norm() > st.slip_speed) sliding[who] = true;
     }
     for (size_t k = 0; k < n_pads; ++k) {
+      r->touching[k] += touching[k] ? 1 : 0;
+      r->sliding[k] += touching[k] && sliding[k] ? 1 : 0;
+    }
+    ++r->solves;
+  }
+
+  // The sample now: pose and twist of the state; forces the mean of `r`'s
+  // solves; a pad separate when it touched in none, sliding when it slid in
+  // at least half of those in which it touched.
+  mechanics::TrajectorySample Sample(const PadReading& r) const {
+    mechanics::TrajectorySample s;
+    s.t = d->time;
+    const mjtNum* qp = d->qpos + object_qpos;
+    const mjtNum* qv = d->qvel + object_qvel;
+    s.position = Eigen::Vector3d(qp[0], qp[1], qp[2]);
+    s.orientation = Eigen::Quaterniond(qp[3], qp[4], qp[5], qp[6]).normalized();
+    s.velocity = Eigen::Vector3d(qv[0], qv[1], qv[2]);
+    s.angular_velocity = s.orientation * Eigen::Vector3d(qv[3], qv[4], qv[5]);
+    const double per_solve = 1.0 / std::max(1, r.solves);
+    for (size_t k = 0; k < n_pads; ++k) {
       mechanics::ContactState cs;
       const Eigen::Vector3d n = PadNormal(k, s.t);
-      cs.normal_force = force[k].dot(n);
-      cs.tangential_force = force[k] - cs.normal_force * n;
-      cs.torque = torque[k];
-      cs.mode = !touching[k] ? mechanics::ContactMode::kSeparate
-                : sliding[k] ? mechanics::ContactMode::kSlide
-                             : mechanics::ContactMode::kStick;
+      const Eigen::Vector3d f = r.force[k] * per_solve;
+      cs.normal_force = f.dot(n);
+      cs.tangential_force = f - cs.normal_force * n;
+      cs.torque = r.torque[k] * per_solve;
+      cs.mode = r.touching[k] == 0                  ? mechanics::ContactMode::kSeparate
+                : 2 * r.sliding[k] >= r.touching[k] ? mechanics::ContactMode::kSlide
+                                                    : mechanics::ContactMode::kStick;
       s.contacts.push_back(cs);
     }
     if (scene.pusher) {
       Eigen::Quaterniond q;
       PusherAt(s.t, &s.pusher_position, &q);
-      s.pusher_force = force.back();
+      s.pusher_force = r.force.back() * per_solve;
     }
     return s;
   }
@@ -537,7 +639,7 @@ mechanics::SimulationResult MujocoSimulator::Simulate(const mechanics::Scene& sc
       const int j = mj_name2id(h.m, mjOBJ_JOINT, ("finger" + k).c_str());
       run.finger_qpos.push_back(h.m->jnt_qposadr[j]);
       run.finger_qvel.push_back(h.m->jnt_dofadr[j]);
-      for (int j = 0; j < PadCount(scene.fingers[i]); ++j) {
+      for (int j = 0; j < PadCount(scene.fingers[i], settings_.pads); ++j) {
         const int g = mj_name2id(h.m, mjOBJ_GEOM, ("pad" + k + "_" + std::to_string(j)).c_str());
         run.pad_of_geom[static_cast<size_t>(g)] = static_cast<int>(i);
       }
@@ -547,7 +649,7 @@ mechanics::SimulationResult MujocoSimulator::Simulate(const mechanics::Scene& sc
       const int j = h.m->body_jntadr[run.pusher_body];
       run.pusher_qpos = h.m->jnt_qposadr[j];
       run.pusher_qvel = h.m->jnt_dofadr[j];
-      for (int j = 0; j < PadCount(*scene.pusher); ++j) {
+      for (int j = 0; j < PadCount(*scene.pusher, settings_.pads); ++j) {
         const int g = mj_name2id(h.m, mjOBJ_GEOM, ("pusher_pad_" + std::to_string(j)).c_str());
         run.pad_of_geom[static_cast<size_t>(g)] = static_cast<int>(scene.fingers.size());
       }
@@ -564,18 +666,22 @@ mechanics::SimulationResult MujocoSimulator::Simulate(const mechanics::Scene& sc
     run.DrivePusher(0);
     mj_forward(h.m, h.d);
     for (long k = 0; k < n_samples; ++k) {
+      Run::PadReading interval(run.n_pads);  // the steps since the last sample
       if (k > 0) {
         for (int j = 0; j < per_sample; ++j) {
           run.DrivePusher(h.d->time);
           mj_step(h.m, h.d);
           ++result.solver.steps;
+          // After mj_step, d->contact and d->efc_force are the step's own solve.
+          if (settings_.interval_forces) run.Read(&interval);
         }
         // Pusher and time exactly on the sample instant; forces of that state.
         h.d->time = static_cast<double>(k) / mechanics::kSampleRateHz;
         run.DrivePusher(h.d->time);
         mj_forward(h.m, h.d);
       }
-      mechanics::TrajectorySample s = run.Sample();
+      if (interval.solves == 0) run.Read(&interval);  // t = 0, or instant forces
+      mechanics::TrajectorySample s = run.Sample(interval);
       s.t = static_cast<double>(k) / mechanics::kSampleRateHz;
       if (!Finite(s) || h.d->warning[mjWARN_BADQACC].number > 0) {
         result.status = mechanics::SimulationStatus::kSolverFailure;
@@ -608,13 +714,14 @@ std::string MujocoModelXml(const mechanics::Scene& scene, const MujocoSettings& 
     << (st.elliptic ? "elliptic" : "pyramidal") << "\" impratio=\"" << Num(st.impratio)
     << "\" noslip_iterations=\"" << st.noslip_iterations << "\" solver=\"Newton\" tolerance=\""
     << Num(st.tolerance) << "\" iterations=\"" << st.iterations << "\" integrator=\"Euler\"/>\n"
-    << "  <size nconmax=\"200\" njmax=\"1200\"/>\n"
-    << "  <worldbody>\n";
+    << "  <size nconmax=\"200\" njmax=\"1200\"/>\n";
+  if (o.shape == mechanics::ObjectShape::kPrism) x << PrismMesh(o);
+  x << "  <worldbody>\n";
   // Object.
   const Eigen::Quaterniond q_WO(mechanics::RotationFromRpy(o.pose.rpy));
   const Eigen::Matrix3d I = mechanics::ObjectInertia(o);
-  x << "    <body name=\"object\" pos=\"" << Vec(o.pose.position) << "\" quat=\"" << Quat(q_WO)
-    << "\">\n"
+  const Eigen::Vector3d com = o.pose.position + q_WO * CentreOfMassInO(o);
+  x << "    <body name=\"object\" pos=\"" << Vec(com) << "\" quat=\"" << Quat(q_WO) << "\">\n"
     << "      <joint name=\"object\" type=\"free\" damping=\"" << Num(st.object_damping) << "\"/>\n"
     << "      <inertial pos=\"0 0 0\" mass=\"" << Num(o.mass) << "\" fullinertia=\"" << Num(I(0, 0))
     << " " << Num(I(1, 1)) << " " << Num(I(2, 2)) << " " << Num(I(0, 1)) << " " << Num(I(0, 2))
@@ -628,8 +735,12 @@ std::string MujocoModelXml(const mechanics::Scene& scene, const MujocoSettings& 
       x << "      <geom name=\"object\" type=\"cylinder\" size=\"" << Num(o.radius) << " "
         << Num(0.5 * o.height) << "\" contype=\"0\" conaffinity=\"0\" mass=\"0\"/>\n";
       break;
-    default:
-      throw SimulatorError("object.shape", "the mujoco simulator models box and cylinder only");
+    case mechanics::ObjectShape::kPrism:
+      if (o.polygon.size() < 3 || !(PolygonArea(o.polygon) > 0))
+        throw SimulatorError("object.polygon", "needs a counter-clockwise polygon of area > 0");
+      x << "      <geom name=\"object\" type=\"mesh\" mesh=\"object_mesh\" contype=\"0\" "
+           "conaffinity=\"0\" mass=\"0\"/>\n";
+      break;
   }
   x << "    </body>\n";
   // Fingers: the body origin is the contact point; the slide axis the normal.
@@ -641,14 +752,14 @@ std::string MujocoModelXml(const mechanics::Scene& scene, const MujocoSettings& 
       << Vec(f.normal.normalized()) << "\"/>\n"
       << "      <inertial pos=\"0 0 0\" mass=\"" << Num(st.finger_mass)
       << "\" diaginertia=\"1e-6 1e-6 1e-6\"/>\n"
-      << PadGeoms("pad" + k, f) << "    </body>\n";
+      << PadGeoms("pad" + k, f, st.pads) << "    </body>\n";
   }
   if (scene.pusher) {
     const auto& p = *scene.pusher;
     x << "    <body name=\"pusher\" pos=\"" << Vec(p.position) << "\">\n"
       << "      <joint name=\"pusher\" type=\"free\" armature=\"1e6\"/>\n"
       << "      <inertial pos=\"0 0 0\" mass=\"1\" diaginertia=\"1e-3 1e-3 1e-3\"/>\n"
-      << PadGeoms("pusher_pad", p) << "    </body>\n";
+      << PadGeoms("pusher_pad", p, st.pads) << "    </body>\n";
   }
   x << "  </worldbody>\n  <contact>\n";
   for (size_t i = 0; i < scene.fingers.size(); ++i)

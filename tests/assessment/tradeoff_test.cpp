@@ -4,6 +4,7 @@
 // kind (error, time, floor multiple), and the default grid for patch scenes.
 #include <cmath>
 #include <fstream>
+#include <set>
 #include <sstream>
 
 #include <gtest/gtest.h>
@@ -12,6 +13,7 @@
 #include "arena/assessment/evaluation.hpp"
 #include "arena/assessment/noise_floor.hpp"
 #include "arena/assessment/prediction.hpp"
+#include "arena/assessment/predictor.hpp"
 #include "arena/assessment/scoring.hpp"
 #include "arena/mechanics/scene_json.hpp"
 
@@ -246,6 +248,39 @@ TEST(DefaultGrid, NeverInvalidForTheScenes) {
     }
   }
   EXPECT_EQ(DefaultArenaGrid({Canonical()}).size(), 16u);
+}
+
+// MuJoCo's grid takes contact softness too (solref, solimp): a setting's key
+// names them only when they differ from the simulator's defaults, so keys
+// of the default grid stay what they were.
+TEST(MujocoGrid, SolrefAndSolimpAreGridAxesNamedOnlyWhenNotDefault) {
+  MujocoGrid grid;
+  grid.timestep = {0.001};
+  grid.solref = {{0.002, 1.0}, {0.01, 1.0}};
+  grid.solimp = {{0.9, 0.95, 0.001, 0.5, 2.0}, {0.95, 0.99, 0.001, 0.5, 2.0}};
+  const auto p = MakeMujocoPredictor(grid);
+  ASSERT_EQ(p->settings().size(), 4u);
+  std::set<std::string> keys;
+  for (const auto& s : p->settings()) keys.insert(s.key);
+  EXPECT_TRUE(keys.count("mujoco_ts0.001_elliptic_ns0")) << *keys.begin();
+  EXPECT_TRUE(keys.count("mujoco_ts0.001_elliptic_ns0_sr0.01:1"));
+  EXPECT_TRUE(keys.count("mujoco_ts0.001_elliptic_ns0_si0.95:0.99:0.001:0.5:2"));
+  EXPECT_TRUE(keys.count("mujoco_ts0.001_elliptic_ns0_sr0.01:1_si0.95:0.99:0.001:0.5:2"));
+  for (const auto& s : p->settings()) {
+    if (s.key.find("_sr") != std::string::npos) {
+      EXPECT_NE(s.knobs_json.find(R"("solref":[0.01,1.0])"), std::string::npos) << s.knobs_json;
+    }
+  }
+  // A campaign's own MuJoCo prediction is keyed the same way.
+  EXPECT_EQ(MujocoSettingKey(nlohmann::json::object()), "mujoco_ts0.0005_elliptic_ns0");
+  EXPECT_EQ(MujocoSettingKey({{"timestep", 0.001}, {"solref", {0.002, 1.0}}}),
+            "mujoco_ts0.001_elliptic_ns0");
+  EXPECT_EQ(MujocoSettingKey({{"solimp", {0.95, 0.99, 0.001, 0.5, 2.0}}}),
+            "mujoco_ts0.0005_elliptic_ns0_si0.95:0.99:0.001:0.5:2");
+  grid.solref = {{0.01, 1.0}, {0.01, 1.0}};
+  EXPECT_THROW(MakeMujocoPredictor(grid), std::invalid_argument);
+  grid.solref = {{-1, 1.0}};
+  EXPECT_THROW(MakeMujocoPredictor(grid), std::invalid_argument);  // the simulator refuses it
 }
 
 }  // namespace

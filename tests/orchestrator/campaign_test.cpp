@@ -405,6 +405,13 @@ TEST(Campaign, PredictionNamesAPredictor) {
   refused({{"timestep", 0.001}}, "prediction.timestep");  // arena has no timestep
   refused({{"predictor", "mujoco"}, {"timestep", 1.0}}, "prediction.timestep");
   refused({{"predictor", "mujoco"}, {"cone", "round"}}, "prediction.cone");
+  // Contact softness is a MuJoCo knob too (checked by the simulator).
+  doc["prediction"] = {{"predictor", "mujoco"}, {"solref", {0.005, 1}}};
+  EXPECT_EQ(json::parse(ParseCampaign(doc.dump(), dir).predictor_settings_json)["solref"][0],
+            0.005);
+  refused({{"solref", {0.005, 1}}}, "prediction.solref");  // not an arena knob
+  refused({{"predictor", "mujoco"}, {"solref", {0.005}}}, "prediction.solref");
+  refused({{"predictor", "mujoco"}, {"solimp", {0.9, 0.95, 0.001, 0.5, 0.5}}}, "prediction.solimp");
 }
 
 }  // namespace

@@ -6,9 +6,12 @@
 // judges them all.
 #pragma once
 
+#include <array>
 #include <memory>
 #include <string>
 #include <vector>
+
+#include <nlohmann/json.hpp>
 
 #include "arena/mechanics/scene.hpp"
 #include "arena/mechanics/simulate.hpp"
@@ -51,8 +54,21 @@ std::unique_ptr<Predictor> MakeArenaPredictor(std::vector<mechanics::ModelOption
 struct MujocoGrid {
   std::vector<double> timestep{0.004, 0.002, 0.001, 0.0005};  // s, (0, 0.01]
   std::vector<std::string> cone{"elliptic"};                  // elliptic | pyramidal
-  std::vector<int> noslip{10};                                // noslip iterations, >= 0
+  std::vector<int> noslip{0};  // noslip iterations, >= 0 (the simulator's default: off)
+  // Contact softness (the simulator's defaults: [0.002, 1] and
+  // [0.9, 0.95, 0.001, 0.5, 2]). Physics, not refinement: a setting's key
+  // names them only when they differ from the defaults.
+  std::vector<std::array<double, 2>> solref{{0.002, 1.0}};  // [timeconst s, damping ratio]
+  std::vector<std::array<double, 5>> solimp{
+      {0.9, 0.95, 0.001, 0.5, 2.0}};  // [dmin, dmax, width, mid, power]
 };
+
+// A MuJoCo setting's model key: "mujoco_ts0.001_elliptic_ns0", with
+// "_sr0.005:1" / "_si..." appended only where solref / solimp differ from
+// the simulator's defaults (so the keys of the default settings never
+// change). `knobs` as MakeSimulator("mujoco", ...) reads them; absent knobs
+// are the defaults.
+std::string MujocoSettingKey(const nlohmann::json& knobs);
 
 // MuJoCo 2.2 (simulators/, the same engine and scene builder as the
 // `mujoco` cell backend) at each of `grid`'s settings.

@@ -127,11 +127,12 @@ struct Campaign {
   mechanics::Scene scene;             // the base scene; the cells simulate with its model settings
   std::vector<Variation> variations;  // in canonical order (kVariationNames), only those given
   SamplerKind sampler = SamplerKind::kSobol;
-  int64_t conditions = 1;                      // distinct sampled scenes
-  int replicates = 1;                          // trials per condition (same scene, different seed)
-  mechanics::ModelOptions prediction;          // model settings the predictor uses
-  std::string predictor = "arena";             // prediction.predictor: arena | mujoco
-  std::string predictor_settings_json = "{}";  // mujoco's knobs (timestep, cone, noslip_iterations)
+  int64_t conditions = 1;              // distinct sampled scenes
+  int replicates = 1;                  // trials per condition (same scene, different seed)
+  mechanics::ModelOptions prediction;  // model settings the predictor uses
+  std::string predictor = "arena";     // prediction.predictor: arena | mujoco
+  std::string predictor_settings_json =
+      "{}";  // mujoco's knobs (timestep, cone, noslip_iterations, solref, solimp)
   std::string defects_json = "{}";  // defect profile (a JSON object), passed to cells as is
   std::string defects_file;         // when given as a path (relative to the campaign file)
   std::string source_json;  // the campaign as given, scene/defects files inlined (compact JSON)

@@ -76,6 +76,13 @@ struct ArenaSettings {
 std::unique_ptr<Simulator> MakeArenaSimulator(const ArenaSettings& settings);
 
 // ---- mujoco: MuJoCo 2.2 ------------------------------------------------------------------
+
+// How line and patch pads are shaped (a point is always one sphere).
+enum class PadShapes {
+  kSpheres,  // a line: 5 spheres along it; a patch: 6 on the 2R/3 ring (default)
+  kShapes,   // a line: one capsule; a patch: one thin box (MuJoCo's own colliders)
+};
+
 // Defaults are the converged ones (simulators/README.md: convergence study).
 struct MujocoSettings {
   double timestep = 0.0005;         // s, (0, 0.01]
@@ -83,14 +90,27 @@ struct MujocoSettings {
   double solref_timeconst = 0.002;  // s, contact stiffness time constant (clamped to 2·timestep)
   double solref_damping = 1.0;      // damping ratio
   double solimp[5] = {0.9, 0.95, 0.001, 0.5, 2};  // impedance (dmin, dmax, width m, mid, power)
-  double impratio = 10;                           // frictional-to-normal impedance ratio, >= 1
-  int noslip_iterations = 10;                     // post-solve no-slip iterations, >= 0 (0 = off)
-  double tolerance = 1e-10;                       // Newton solver tolerance
-  int iterations = 100;                           // solver iterations
+  double impratio = 30;                           // frictional-to-normal impedance ratio, >= 1
+  // Post-solve no-slip iterations, >= 0 (0 = off). Off by default: with
+  // fingers sliding it made the truth depend on the timestep (0.26 mm
+  // between 0.5 and 0.125 ms); impratio 30 keeps a held object's creep
+  // to ~0.04 mm/s instead (simulators/README.md, "Default settings").
+  int noslip_iterations = 0;
+  double tolerance = 1e-10;      // Newton solver tolerance
+  int iterations = 100;          // solver iterations
   double object_damping = 0.01;  // free-joint damping (N s/m, N m s/rad): a quasi-static truth
   double finger_mass = 0.05;     // kg, each finger pad body
   // Slip speed (m/s) above which a touching contact counts as sliding.
   double slip_speed = 1e-4;
+  // Spheres by default: capsules and boxes converged worse or equal on the
+  // pivot study (simulators/README.md, "The MuJoCo scene").
+  PadShapes pads = PadShapes::kSpheres;
+  // Contact forces, torques and modes of a 250 Hz sample: true = over the
+  // sample's interval (the impulse of its steps / 4 ms, as a force sensor
+  // filtered for 250 Hz reports them and as arena's model steps them);
+  // false = at the sample's instant. A sliding soft contact makes a finger
+  // chatter on and off the face between steps, so an instant says little.
+  bool interval_forces = true;
 };
 std::unique_ptr<Simulator> MakeMujocoSimulator(const MujocoSettings& settings);
 
