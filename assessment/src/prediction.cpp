@@ -304,7 +304,8 @@ db::Prediction PredictTrial(const mechanics::Scene& scene,
     return PredictTrial(scene, truth);
   }
   nlohmann::json knobs = prediction;
-  knobs.erase("predictor");
+  // A calibration's scales are already in `scene` (ApplyModelSettings).
+  for (const char* k : {"predictor", "calibration", "calibrated"}) knobs.erase(k);
   std::unique_ptr<simulators::Simulator> sim;
   try {
     sim = simulators::MakeSimulator("mujoco", knobs.dump());

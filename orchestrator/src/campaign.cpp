@@ -862,9 +862,10 @@ Campaign ParseCampaign(std::string_view json_text, const std::string& base_dir,
     RequireObject(p, "prediction",
                   {"predictor", "facets", "points", "dt", "reduce", "contacts", "calibration",
                    "calibrated", "timestep", "cone", "noslip_iterations"});
-    // Which predictor: arena's model (knobs facets, points, dt, reduce, contacts,
-    // and a calibration's scales) or MuJoCo (timestep, cone, noslip_iterations);
-    // knobs of the other are refused.
+    // Which predictor: arena's model (knobs facets, points, dt, reduce, contacts)
+    // or MuJoCo (timestep, cone, noslip_iterations); knobs of the other are
+    // refused. A calibration's scales apply to either (SubmitCampaign checks
+    // that the calibration was fitted for the campaign's predictor).
     if (p.contains("predictor")) c.predictor = String(p["predictor"], "prediction.predictor");
     if (c.predictor != "arena" && c.predictor != "mujoco") {
       throw CampaignError("prediction.predictor", "must be \"arena\" or \"mujoco\", got \"" +
@@ -875,14 +876,15 @@ Campaign ParseCampaign(std::string_view json_text, const std::string& base_dir,
                           "calibrated", "timestep", "cone", "noslip_iterations"}) {
       const std::string key = k;
       const bool arena_knob = key != "timestep" && key != "cone" && key != "noslip_iterations";
-      if (p.contains(k) && arena_knob == mujoco) {
+      const bool both = key == "calibration" || key == "calibrated";
+      if (p.contains(k) && !both && arena_knob == mujoco) {
         throw CampaignError(std::string("prediction.") + k,
                             std::string("is not a knob of the ") + c.predictor + " predictor");
       }
     }
     if (mujoco) {
       json knobs = p;
-      knobs.erase("predictor");
+      for (const char* k : {"predictor", "calibration", "calibrated"}) knobs.erase(k);
       try {
         (void)simulators::MakeSimulator("mujoco", knobs.dump());
       } catch (const simulators::SimulatorError& e) {

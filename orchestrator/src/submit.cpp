@@ -50,6 +50,19 @@ std::int64_t SubmitCampaign(db::Store& store, const Campaign& given,
                            "prediction.calibration: calibration " + std::to_string(cal.id) +
                                " did not improve the held-out error and is not applied");
     }
+    // Scales fitted for one predictor also absorb that predictor's own
+    // errors: they are not moved to another.
+    const nlohmann::json fit_settings = nlohmann::json::parse(cal.settings_json, nullptr, false);
+    const std::string fitted_for = fit_settings.is_object() && fit_settings.contains("predictor") &&
+                                           fit_settings["predictor"].is_string()
+                                       ? fit_settings["predictor"].get<std::string>()
+                                       : "arena";
+    if (fitted_for != campaign.predictor) {
+      throw db::StoreError(db::StoreError::Kind::kBadInput,
+                           "prediction.calibration: calibration " + std::to_string(cal.id) +
+                               " was fitted for the " + fitted_for +
+                               " predictor; this campaign predicts with " + campaign.predictor);
+    }
     nlohmann::json spec = nlohmann::json::parse(campaign.source_json);
     nlohmann::json scales = nlohmann::json::object();
     const nlohmann::json fitted = nlohmann::json::parse(cal.params_json);

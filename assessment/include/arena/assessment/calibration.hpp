@@ -22,9 +22,23 @@
 // the error before (all scales 1) and after; a fit that does not lower the
 // held-out error is reported as not improved and must not be applied.
 //
-// The simulator is passed in (SimulateFn), so the same fit runs against
-// arena's model or any other predictor. Thread safety: Calibrate calls
-// `simulate` from up to `threads` threads at once.
+// The simulator is passed in (SimulateFn, or a simulators::Simulator whose
+// PreparedScene builds each trial's model once: MuJoCo's), so the same fit
+// runs against arena's model or any other predictor. Every (trial, scales)
+// pair is simulated once (a memo), so the optimiser's start, the refits'
+// starts and repeated bootstrap draws cost nothing.
+//
+// Uncertainty, two ways (BootstrapMethod):
+//   refit  each bootstrap resample of the training trials refitted from the
+//          optimum (max(10, max_evaluations/3) evaluations each): the honest
+//          one, but it costs `bootstrap` more fits.
+//   reuse  each resample's optimum is the point, among those the main fit
+//          already evaluated, that minimises the resample's mean loss: no
+//          simulation at all (for expensive predictors). Its resolution is
+//          the spacing of the evaluated points near the optimum, so a spread
+//          narrower than the optimiser's last steps shows as zero.
+// Thread safety: Calibrate calls `simulate` from up to `threads` threads at
+// once, never twice at once for the same trial.
 #pragma once
 
 #include <cstdint>
@@ -38,6 +52,7 @@
 #include "arena/db/store.hpp"
 #include "arena/mechanics/scene.hpp"
 #include "arena/mechanics/simulate.hpp"
+#include "arena/simulators/simulator.hpp"
 
 namespace arena::assessment {
 
@@ -74,6 +89,9 @@ struct CalibrationTrial {
   std::vector<mechanics::TrajectorySample> truth;
 };
 
+enum class BootstrapMethod { kRefit, kReuse };
+const char* ToString(BootstrapMethod m);  // "refit", "reuse"
+
 struct CalibrationOptions {
   std::vector<CalibrationParam> params;  // at least one, no repeats
   double lower = 0.2, upper = 5.0;       // bounds of every scale
@@ -83,7 +101,11 @@ struct CalibrationOptions {
   int bootstrap = 20;                    // resamples for the uncertainty (0: none)
   int threads = 1;                       // simulations in parallel
   LossScales scales;
+  BootstrapMethod bootstrap_method = BootstrapMethod::kRefit;
   std::function<void(const std::string&)> progress;  // optional, one line per stage
+  // Optional, after every loss evaluation of the main fit: its number (from
+  // 1), the budget (max_evaluations), its loss and the best so far.
+  std::function<void(int evaluation, int budget, double loss, double best)> on_evaluation;
 };
 
 struct FittedParam {
@@ -103,10 +125,13 @@ struct CalibrationResult {
   double heldout_position_before = 0, heldout_position_after = 0;
   double heldout_angle_before = 0, heldout_angle_after = 0;
   double heldout_force_before = 0, heldout_force_after = 0;
-  bool improved = false;  // heldout_after < heldout_before
-  int evaluations = 0;    // loss evaluations of the main fit
-  std::string optimizer;  // "LN_BOBYQA" / "LN_COBYLA"
-  std::string stop;       // NLopt's result
+  bool improved = false;         // heldout_after < heldout_before
+  int evaluations = 0;           // loss evaluations of the main fit
+  std::string optimizer;         // "LN_BOBYQA" / "LN_COBYLA"
+  std::string stop;              // NLopt's result
+  std::string bootstrap_method;  // "refit" / "reuse"
+  long simulations = 0;          // predictor runs, all stages (the memo's misses)
+  long models_reused = 0;        // of those, runs on a prepared model (Calibrate with a Simulator)
   std::map<std::string, double> Scales() const;
 };
 
@@ -123,6 +148,11 @@ double Loss(const TrialError& e, const LossScales& s);
 
 // @throws CalibrationError for bad options or fewer than 4 trials.
 CalibrationResult Calibrate(const std::vector<CalibrationTrial>& trials, const SimulateFn& simulate,
+                            const CalibrationOptions& options);
+// The same with `simulator`, each trial's scene prepared once
+// (Simulator::Prepare) and only its friction, grip force and mass changed.
+CalibrationResult Calibrate(const std::vector<CalibrationTrial>& trials,
+                            const simulators::Simulator& simulator,
                             const CalibrationOptions& options);
 
 // The done trials of a campaign with their ground truth, each scene with
