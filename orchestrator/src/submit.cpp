@@ -81,11 +81,8 @@ std::int64_t SubmitCampaign(db::Store& store, const Campaign& given,
     c.priority = campaign.priority;
     c.seed = campaign.seed;
     c.sampler_open = true;
-    // Two transactions: a crash between them leaves an open campaign without
-    // trials, whose round 0 the service's AdaptivePlanner then plans itself.
-    const std::int64_t id = store.CreateCampaign(c, std::vector<db::PlannedTrial>{});
-    PlanFirstAdaptiveRound(store, id, campaign);
-    return id;
+    // One transaction: a crash or an interrupt leaves nothing or both.
+    return CreateAdaptiveCampaign(store, c, campaign, interrupted);
   }
   const std::int64_t total = TrialCount(campaign);
   db::NewCampaign c;
