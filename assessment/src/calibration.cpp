@@ -105,7 +105,8 @@ class Fitter {
         fresh[static_cast<size_t>(k)].ok = false;
         return;
       }
-      fresh[static_cast<size_t>(k)] = CompareTrajectories(t.scene, r.samples, t.truth);
+      fresh[static_cast<size_t>(k)] =
+          CompareTrajectories(t.scene, r.samples, t.truth, o_.scales.force_window_s);
     });
     Errors out;
     std::lock_guard lock(mu_);
@@ -135,14 +136,15 @@ class Fitter {
       int budget;
       int count;
       double best;
-    } data{this, &subset, record, max_eval, 0, INFINITY};
+      std::vector<double> best_x;
+    } data{this, &subset, record, max_eval, 0, INFINITY, start};
     opt.set_min_objective(
         [](const std::vector<double>& x, std::vector<double>&, void* p) {
           auto* d = static_cast<Data*>(p);
           ++d->count;
           const Errors e = d->self->Evaluate(*d->subset, x);
           const double loss = e.MeanLoss(d->self->o_.scales);
-          d->best = std::min(d->best, loss);
+          if (loss < d->best) d->best = loss, d->best_x = x;
           if (d->record) {
             Evaluated point{x, {}};
             for (const auto& t : e.per_trial) point.losses.push_back(Loss(t, d->self->o_.scales));
@@ -161,6 +163,10 @@ class Fitter {
       result = nlopt::ROUNDOFF_LIMITED;  // start holds the best point found
     }
     if (evaluations) *evaluations = data.count;
+    // The best point evaluated, not the optimiser's last iterate: on a loss
+    // that is rough at small scales (MuJoCo's chattering contacts) the two
+    // can differ, and the fit must never end worse than where it started.
+    if (std::isfinite(data.best)) start = data.best_x;
     if (stop) {
       switch (result) {
         case nlopt::XTOL_REACHED:
@@ -302,7 +308,8 @@ mechanics::Scene ApplyScales(const mechanics::Scene& scene,
 
 TrialError CompareTrajectories(const mechanics::Scene& scene,
                                const std::vector<mechanics::TrajectorySample>& predicted,
-                               const std::vector<mechanics::TrajectorySample>& truth) {
+                               const std::vector<mechanics::TrajectorySample>& truth,
+                               double window_s) {
   TrialError e;
   const size_t n = std::min(predicted.size(), truth.size());
   if (n == 0) {
@@ -310,16 +317,25 @@ TrialError CompareTrajectories(const mechanics::Scene& scene,
     return e;
   }
   const auto normals = Normals(scene);
+  // Samples per window (250 Hz); 1 compares sample by sample.
+  const auto w =
+      static_cast<size_t>(std::max(1L, std::lround(window_s * mechanics::kSampleRateHz)));
   double sum = 0;
   long pairs = 0;
-  for (size_t i = 0; i < n; ++i) {
-    const size_t m =
-        std::min({predicted[i].contacts.size(), truth[i].contacts.size(), normals.size()});
+  for (size_t begin = 0; begin < n; begin += w) {
+    const size_t end = std::min(n, begin + w);
+    size_t m = normals.size();
+    for (size_t i = begin; i < end; ++i)
+      m = std::min({m, predicted[i].contacts.size(), truth[i].contacts.size()});
     for (size_t c = 0; c < m; ++c) {
-      const auto& p = predicted[i].contacts[c];
-      const auto& t = truth[i].contacts[c];
-      const Eigen::Vector3d d = (p.normal_force - t.normal_force) * normals[c] +
-                                (p.tangential_force - t.tangential_force);
+      Eigen::Vector3d d = Eigen::Vector3d::Zero();  // mean over the window of f_pred - f_true
+      for (size_t i = begin; i < end; ++i) {
+        const auto& p = predicted[i].contacts[c];
+        const auto& t = truth[i].contacts[c];
+        d += (p.normal_force - t.normal_force) * normals[c] +
+             (p.tangential_force - t.tangential_force);
+      }
+      d /= static_cast<double>(end - begin);
       sum += d.squaredNorm();
       ++pairs;
     }

@@ -14,7 +14,12 @@
 //   L = (e_pos / s_pos)^2 + (e_ang / s_ang)^2 + (e_force / s_force)^2
 //
 // e_pos: final object position error (m), e_ang: final angle error (rad),
-// e_force: RMS over samples and contacts of |f_pred - f_true| (N). The fit
+// e_force: RMS over samples and contacts of |f_pred - f_true| (N); with a
+// force window, of the difference of each contact's mean force over
+// consecutive windows of that length (MuJoCo's soft contacts hand the load
+// between two coupled sliding fingers from one 4 ms sample to the next: ~2 N
+// RMS of chatter that no parameter explains, measured on the calibration
+// e2e campaign, while 40 ms means keep the friction's signal). The fit
 // minimises the mean L over the training trials with a derivative-free
 // optimiser (NLopt BOBYQA; COBYLA for one parameter) over log(scale) within
 // bounds. Uncertainty: a bootstrap over the training trials (each resample
@@ -76,9 +81,10 @@ mechanics::Scene ApplyScales(const mechanics::Scene& scene,
                              const std::map<std::string, double>& scales);
 
 struct LossScales {
-  double position_m = 1e-3;  // 1 mm of final position error weighs 1
-  double angle_rad = 0.01;   // 0.01 rad (0.57 deg) of final angle error weighs 1
-  double force_n = 0.5;      // 0.5 N RMS contact-force error weighs 1
+  double position_m = 1e-3;   // 1 mm of final position error weighs 1
+  double angle_rad = 0.01;    // 0.01 rad (0.57 deg) of final angle error weighs 1
+  double force_n = 0.5;       // 0.5 N RMS contact-force error weighs 1
+  double force_window_s = 0;  // forces compared as means over windows this long (0: per sample)
 };
 
 // One trial to fit: the scene the predictor runs (the campaign's model
@@ -141,9 +147,11 @@ struct TrialError {
   bool ok = true;  // false: the simulation failed (the loss then counts kFailedTrialLoss)
 };
 inline constexpr double kFailedTrialLoss = 1e4;
+// window_s: the force window (LossScales::force_window_s; 0: per sample).
 TrialError CompareTrajectories(const mechanics::Scene& scene,
                                const std::vector<mechanics::TrajectorySample>& predicted,
-                               const std::vector<mechanics::TrajectorySample>& truth);
+                               const std::vector<mechanics::TrajectorySample>& truth,
+                               double window_s = 0);
 double Loss(const TrialError& e, const LossScales& s);
 
 // @throws CalibrationError for bad options or fewer than 4 trials.
