@@ -363,7 +363,8 @@ PredictedRun SimulatePrediction(const mechanics::Scene& trial_scene,
     return run;
   }
   nlohmann::json knobs = prediction;
-  knobs.erase("predictor");
+  // A calibration's scales are already in run.scene (ApplyModelSettings).
+  for (const char* k : {"predictor", "calibration", "calibrated"}) knobs.erase(k);
   const std::unique_ptr<simulators::Simulator> sim =
       simulators::MakeSimulator("mujoco", knobs.dump());
   run.predictor = "mujoco";
