@@ -193,17 +193,17 @@ TEST(AdaptiveE2E, CalibrationRecoversTheCellsFrictionScale) {
 }
 
 // --predictor mujoco: cells whose physics is MuJoCo (--backend mujoco) with a
-// true friction 1.3x the scenes'; the fit runs MuJoCo as the predictor, each
-// trial's model built once, within a small budget (12 evaluations of 17
-// training trials at a 1 ms step: ~5 s). What is asserted: the budget, the
-// prepared models, a held-out error that improves, the calibration stored
-// with its predictor and usable only by a campaign predicting with MuJoCo.
-// The scale itself is printed, not asserted: on these short pushes MuJoCo's
-// coupled sliding fingers chatter and each trial starts where its cell's
-// reset left the object, and 5 of 6 such runs gave 1.34-1.38 but one stayed
-// at 1.00 (docs/closed_loop.md); recovery against a noise-free MuJoCo truth
-// is asserted in tests/assessment/calibration_test.cpp.
-TEST(AdaptiveE2E, MujocoCalibrationIsBoundedStoredAndImprovesHeldOutError) {
+// true friction 1.3x the scenes' (+-1 % per trial); the fit runs MuJoCo as the
+// predictor, each trial's model built once, within a small budget (12
+// evaluations of 17 training trials at a 1 ms step: ~5 s). Asserted: the
+// scale within 10 % (1.3642 in every run: each trial's truth is its own,
+// whichever cell ran it), the budget, the prepared models, a held-out error
+// that improves, the calibration stored with its predictor and usable only by
+// a campaign predicting with MuJoCo. The 10 % is a stated tolerance, not a
+// margin found by trying: on these short pushes MuJoCo's coupled sliding
+// fingers chatter, and other seeds of the same campaign gave 1.353-1.392
+// (docs/closed_loop.md).
+TEST(AdaptiveE2E, MujocoCalibrationRecoversTheFrictionScaleWithinItsBudget) {
   TempDir dir;
   const std::string db = dir / "mj.db";
   json grid = json::parse(ReadFile(TestCampaign("calibration_grid.json")));
@@ -232,6 +232,7 @@ TEST(AdaptiveE2E, MujocoCalibrationIsBoundedStoredAndImprovesHeldOutError) {
   std::printf("mujoco calibration: mu_fingers scale %.4f (true 1.3), held-out loss %.4g -> %.4g\n",
               scale, r["report"]["heldout_loss"]["before"].get<double>(),
               r["report"]["heldout_loss"]["after"].get<double>());
+  EXPECT_NEAR(scale, 1.3, 0.13) << text;  // within 10 %
   EXPECT_TRUE(r["applied"].get<bool>());
   EXPECT_LT(r["report"]["heldout_loss"]["after"].get<double>(),
             r["report"]["heldout_loss"]["before"].get<double>())
