@@ -8,3 +8,8 @@ add_dependencies(evaluation_bench arena)
 arena_bench(predictor_extremes SOURCES ${CMAKE_CURRENT_LIST_DIR}/predictor_extremes.cpp
             LIBS arena::assessment)
 target_include_directories(predictor_extremes PRIVATE ${PROJECT_SOURCE_DIR}/tests/mechanics)
+# MuJoCo calibration runs: compiled afresh vs prepared once (bench/README.md,
+# "Calibration against MuJoCo").
+arena_bench(calibration_bench SOURCES ${CMAKE_CURRENT_LIST_DIR}/calibration_bench.cpp
+            LIBS arena::simulators arena::mechanics)
+target_include_directories(calibration_bench PRIVATE ${PROJECT_SOURCE_DIR}/tests/mechanics)

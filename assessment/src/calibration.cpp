@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <atomic>
 #include <cmath>
+#include <mutex>
 #include <numeric>
 #include <thread>
 
@@ -63,11 +64,20 @@ struct Errors {
   }
 };
 
+using TrialSimulateFn =
+    std::function<mechanics::SimulationResult(int trial, const mechanics::Scene& scene)>;
+
+// One point the main fit evaluated: log scales and each training trial's loss.
+struct Evaluated {
+  std::vector<double> log_x;
+  std::vector<double> losses;  // in the order of the training subset
+};
+
 class Fitter {
  public:
-  Fitter(const std::vector<CalibrationTrial>& trials, const SimulateFn& simulate,
+  Fitter(const std::vector<CalibrationTrial>& trials, TrialSimulateFn simulate,
          const CalibrationOptions& o)
-      : trials_(trials), simulate_(simulate), o_(o) {}
+      : trials_(trials), simulate_(std::move(simulate)), o_(o) {}
 
   std::map<std::string, double> ScalesOf(const std::vector<double>& log_x) const {
     std::map<std::string, double> s;
@@ -75,25 +85,42 @@ class Fitter {
     return s;
   }
 
-  Errors Evaluate(const std::vector<int>& subset, const std::map<std::string, double>& scales) {
-    Errors out;
-    out.per_trial.resize(subset.size());
-    ParallelFor(static_cast<int>(subset.size()), o_.threads, [&](int i) {
-      const CalibrationTrial& t = trials_[static_cast<size_t>(subset[static_cast<size_t>(i)])];
-      const mechanics::Scene scene = ApplyScales(t.scene, scales);
-      const mechanics::SimulationResult r = simulate_(scene);
+  // Each trial of `subset` (repeats allowed) at log scales `log_x`; every
+  // (trial, log_x) is simulated once, so one trial never runs on two threads.
+  Errors Evaluate(const std::vector<int>& subset, const std::vector<double>& log_x) {
+    std::vector<int> todo;
+    {
+      std::lock_guard lock(mu_);
+      for (int i : subset)
+        if (!memo_.count({i, log_x}) && std::find(todo.begin(), todo.end(), i) == todo.end())
+          todo.push_back(i);
+    }
+    const auto scales = ScalesOf(log_x);
+    std::vector<TrialError> fresh(todo.size());
+    ParallelFor(static_cast<int>(todo.size()), o_.threads, [&](int k) {
+      const int i = todo[static_cast<size_t>(k)];
+      const CalibrationTrial& t = trials_[static_cast<size_t>(i)];
+      const mechanics::SimulationResult r = simulate_(i, ApplyScales(t.scene, scales));
       if (r.status != mechanics::SimulationStatus::kOk || r.samples.empty()) {
-        out.per_trial[static_cast<size_t>(i)].ok = false;
+        fresh[static_cast<size_t>(k)].ok = false;
         return;
       }
-      out.per_trial[static_cast<size_t>(i)] = CompareTrajectories(t.scene, r.samples, t.truth);
+      fresh[static_cast<size_t>(k)] =
+          CompareTrajectories(t.scene, r.samples, t.truth, o_.scales.force_window_s);
     });
+    Errors out;
+    std::lock_guard lock(mu_);
+    for (size_t k = 0; k < todo.size(); ++k) memo_[{todo[k], log_x}] = fresh[k];
+    simulations_ += static_cast<long>(todo.size());
+    for (int i : subset) out.per_trial.push_back(memo_.at({i, log_x}));
     return out;
   }
 
-  // Minimises the mean loss over `subset` from `start` (log scales).
+  // Minimises the mean loss over `subset` from `start` (log scales). `record`:
+  // the main fit (its points kept for the reuse bootstrap, reported per
+  // evaluation).
   std::vector<double> Fit(const std::vector<int>& subset, std::vector<double> start, int max_eval,
-                          double step, int* evaluations, std::string* stop) {
+                          double step, bool record, int* evaluations, std::string* stop) {
     const auto n = static_cast<unsigned>(o_.params.size());
     const nlopt::algorithm algorithm = n >= 2 ? nlopt::LN_BOBYQA : nlopt::LN_COBYLA;
     nlopt::opt opt(algorithm, n);
@@ -105,13 +132,27 @@ class Fitter {
     struct Data {
       Fitter* self;
       const std::vector<int>* subset;
+      bool record;
+      int budget;
       int count;
-    } data{this, &subset, 0};
+      double best;
+      std::vector<double> best_x;
+    } data{this, &subset, record, max_eval, 0, INFINITY, start};
     opt.set_min_objective(
         [](const std::vector<double>& x, std::vector<double>&, void* p) {
           auto* d = static_cast<Data*>(p);
           ++d->count;
-          return d->self->Evaluate(*d->subset, d->self->ScalesOf(x)).MeanLoss(d->self->o_.scales);
+          const Errors e = d->self->Evaluate(*d->subset, x);
+          const double loss = e.MeanLoss(d->self->o_.scales);
+          if (loss < d->best) d->best = loss, d->best_x = x;
+          if (d->record) {
+            Evaluated point{x, {}};
+            for (const auto& t : e.per_trial) point.losses.push_back(Loss(t, d->self->o_.scales));
+            d->self->evaluated_.push_back(std::move(point));
+            if (d->self->o_.on_evaluation)
+              d->self->o_.on_evaluation(d->count, d->budget, loss, d->best);
+          }
+          return loss;
         },
         &data);
     double best = 0;
@@ -122,6 +163,10 @@ class Fitter {
       result = nlopt::ROUNDOFF_LIMITED;  // start holds the best point found
     }
     if (evaluations) *evaluations = data.count;
+    // The best point evaluated, not the optimiser's last iterate: on a loss
+    // that is rough at small scales (MuJoCo's chattering contacts) the two
+    // can differ, and the fit must never end worse than where it started.
+    if (std::isfinite(data.best)) start = data.best_x;
     if (stop) {
       switch (result) {
         case nlopt::XTOL_REACHED:
@@ -143,10 +188,29 @@ class Fitter {
     return start;
   }
 
+  // Reuse bootstrap: the evaluated point minimising the weighted mean loss
+  // (weights: how often each training trial was drawn).
+  std::vector<double> BestEvaluated(const std::vector<double>& weights) const {
+    const Evaluated* best = nullptr;
+    double best_loss = INFINITY;
+    for (const auto& p : evaluated_) {
+      double sum = 0;
+      for (size_t i = 0; i < weights.size(); ++i) sum += weights[i] * p.losses[i];
+      if (sum < best_loss) best_loss = sum, best = &p;
+    }
+    return best ? best->log_x : std::vector<double>(o_.params.size(), 0.0);
+  }
+
+  long simulations() const { return simulations_; }
+
  private:
   const std::vector<CalibrationTrial>& trials_;
-  const SimulateFn& simulate_;
+  TrialSimulateFn simulate_;
   const CalibrationOptions& o_;
+  std::mutex mu_;
+  std::map<std::pair<int, std::vector<double>>, TrialError> memo_;
+  long simulations_ = 0;
+  std::vector<Evaluated> evaluated_;
 };
 
 void Mean(const Errors& e, double* pos, double* ang, double* force) {
@@ -244,7 +308,8 @@ mechanics::Scene ApplyScales(const mechanics::Scene& scene,
 
 TrialError CompareTrajectories(const mechanics::Scene& scene,
                                const std::vector<mechanics::TrajectorySample>& predicted,
-                               const std::vector<mechanics::TrajectorySample>& truth) {
+                               const std::vector<mechanics::TrajectorySample>& truth,
+                               double window_s) {
   TrialError e;
   const size_t n = std::min(predicted.size(), truth.size());
   if (n == 0) {
@@ -252,16 +317,25 @@ TrialError CompareTrajectories(const mechanics::Scene& scene,
     return e;
   }
   const auto normals = Normals(scene);
+  // Samples per window (250 Hz); 1 compares sample by sample.
+  const auto w =
+      static_cast<size_t>(std::max(1L, std::lround(window_s * mechanics::kSampleRateHz)));
   double sum = 0;
   long pairs = 0;
-  for (size_t i = 0; i < n; ++i) {
-    const size_t m =
-        std::min({predicted[i].contacts.size(), truth[i].contacts.size(), normals.size()});
+  for (size_t begin = 0; begin < n; begin += w) {
+    const size_t end = std::min(n, begin + w);
+    size_t m = normals.size();
+    for (size_t i = begin; i < end; ++i)
+      m = std::min({m, predicted[i].contacts.size(), truth[i].contacts.size()});
     for (size_t c = 0; c < m; ++c) {
-      const auto& p = predicted[i].contacts[c];
-      const auto& t = truth[i].contacts[c];
-      const Eigen::Vector3d d = (p.normal_force - t.normal_force) * normals[c] +
-                                (p.tangential_force - t.tangential_force);
+      Eigen::Vector3d d = Eigen::Vector3d::Zero();  // mean over the window of f_pred - f_true
+      for (size_t i = begin; i < end; ++i) {
+        const auto& p = predicted[i].contacts[c];
+        const auto& t = truth[i].contacts[c];
+        d += (p.normal_force - t.normal_force) * normals[c] +
+             (p.tangential_force - t.tangential_force);
+      }
+      d /= static_cast<double>(end - begin);
       sum += d.squaredNorm();
       ++pairs;
     }
@@ -285,8 +359,10 @@ std::map<std::string, double> CalibrationResult::Scales() const {
   return s;
 }
 
-CalibrationResult Calibrate(const std::vector<CalibrationTrial>& trials, const SimulateFn& simulate,
-                            const CalibrationOptions& o) {
+namespace {
+
+CalibrationResult Fitted(const std::vector<CalibrationTrial>& trials, TrialSimulateFn simulate,
+                         const CalibrationOptions& o) {
   if (o.params.empty()) throw CalibrationError("--params: name at least one parameter");
   for (size_t i = 0; i < o.params.size(); ++i)
     for (size_t j = 0; j < i; ++j)
@@ -326,40 +402,48 @@ CalibrationResult Calibrate(const std::vector<CalibrationTrial>& trials, const S
   auto say = [&](const std::string& line) {
     if (o.progress) o.progress(line);
   };
-  Fitter fitter(trials, simulate, o);
+  Fitter fitter(trials, std::move(simulate), o);
   const auto dims = o.params.size();
   const std::vector<double> zero(dims, 0.0);
   r.optimizer = dims >= 2 ? "LN_BOBYQA" : "LN_COBYLA";
+  r.bootstrap_method = ToString(o.bootstrap_method);
 
   say("fitting " + std::to_string(dims) + " parameter(s) on " + std::to_string(train.size()) +
       " trials (" + std::to_string(hold.size()) + " held out)");
-  r.train_before = fitter.Evaluate(train, fitter.ScalesOf(zero)).MeanLoss(o.scales);
+  r.train_before = fitter.Evaluate(train, zero).MeanLoss(o.scales);
   const std::vector<double> best =
-      fitter.Fit(train, zero, o.max_evaluations, 0.3, &r.evaluations, &r.stop);
-  const auto scales = fitter.ScalesOf(best);
-  r.train_after = fitter.Evaluate(train, scales).MeanLoss(o.scales);
+      fitter.Fit(train, zero, o.max_evaluations, 0.3, true, &r.evaluations, &r.stop);
+  r.train_after = fitter.Evaluate(train, best).MeanLoss(o.scales);
 
-  const Errors before = fitter.Evaluate(hold, fitter.ScalesOf(zero));
-  const Errors after = fitter.Evaluate(hold, scales);
+  say("held-out trials before and after");
+  const Errors before = fitter.Evaluate(hold, zero);
+  const Errors after = fitter.Evaluate(hold, best);
   r.heldout_before = before.MeanLoss(o.scales);
   r.heldout_after = after.MeanLoss(o.scales);
   Mean(before, &r.heldout_position_before, &r.heldout_angle_before, &r.heldout_force_before);
   Mean(after, &r.heldout_position_after, &r.heldout_angle_after, &r.heldout_force_after);
   r.improved = r.heldout_after < r.heldout_before;
 
-  // Bootstrap: resample the training trials, refit from the optimum.
+  // Bootstrap: resample the training trials; refit from the optimum, or
+  // take the best point the main fit evaluated (calibration.hpp).
   std::vector<std::vector<double>> boot(dims);
   for (int b = 0; b < o.bootstrap; ++b) {
-    say("bootstrap " + std::to_string(b + 1) + "/" + std::to_string(o.bootstrap));
+    if (o.bootstrap_method == BootstrapMethod::kRefit)
+      say("bootstrap " + std::to_string(b + 1) + "/" + std::to_string(o.bootstrap));
     std::vector<int> resample;
+    std::vector<double> weights(train.size(), 0.0);
     for (size_t i = 0; i < train.size(); ++i) {
       const uint64_t h = Mix(Mix(o.seed ^ 0xb007ULL) + static_cast<uint64_t>(b) * 7919 + i);
       resample.push_back(train[static_cast<size_t>(h % train.size())]);
+      weights[static_cast<size_t>(h % train.size())] += 1;
     }
-    const auto x =
-        fitter.Fit(resample, best, std::max(10, o.max_evaluations / 3), 0.1, nullptr, nullptr);
+    const auto x = o.bootstrap_method == BootstrapMethod::kRefit
+                       ? fitter.Fit(resample, best, std::max(10, o.max_evaluations / 3), 0.1, false,
+                                    nullptr, nullptr)
+                       : fitter.BestEvaluated(weights);
     for (size_t k = 0; k < dims; ++k) boot[k].push_back(std::exp(x[k]));
   }
+  r.simulations = fitter.simulations();
   for (size_t k = 0; k < dims; ++k) {
     FittedParam f;
     f.name = ToString(o.params[k]);
@@ -377,6 +461,35 @@ CalibrationResult Calibrate(const std::vector<CalibrationTrial>& trials, const S
     f.nominal = CommonValue(trials, o.params[k]);
     r.fitted.push_back(f);
   }
+  return r;
+}
+
+}  // namespace
+
+const char* ToString(BootstrapMethod m) { return m == BootstrapMethod::kReuse ? "reuse" : "refit"; }
+
+CalibrationResult Calibrate(const std::vector<CalibrationTrial>& trials, const SimulateFn& simulate,
+                            const CalibrationOptions& o) {
+  return Fitted(
+      trials, [&simulate](int, const mechanics::Scene& scene) { return simulate(scene); }, o);
+}
+
+CalibrationResult Calibrate(const std::vector<CalibrationTrial>& trials,
+                            const simulators::Simulator& simulator, const CalibrationOptions& o) {
+  // Each trial's model built on its first run (Fitter never runs one trial
+  // on two threads at once).
+  std::vector<std::unique_ptr<simulators::PreparedScene>> prepared(trials.size());
+  std::vector<std::once_flag> once(trials.size());
+  CalibrationResult r = Fitted(
+      trials,
+      [&](int i, const mechanics::Scene& scene) {
+        const auto k = static_cast<size_t>(i);
+        std::call_once(once[k], [&] { prepared[k] = simulator.Prepare(trials[k].scene); });
+        return prepared[k]->Simulate(scene);
+      },
+      o);
+  for (const auto& p : prepared)
+    if (p) r.models_reused += p->reused();
   return r;
 }
 
@@ -438,7 +551,10 @@ std::string ReportJson(const CalibrationResult& r) {
       {"improved", r.improved},
       {"evaluations", r.evaluations},
       {"optimizer", r.optimizer},
-      {"stop", r.stop}}
+      {"stop", r.stop},
+      {"bootstrap_method", r.bootstrap_method},
+      {"simulations", r.simulations},
+      {"models_reused", r.models_reused}}
       .dump();
 }
 

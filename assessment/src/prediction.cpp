@@ -305,7 +305,8 @@ db::Prediction PredictTrial(const mechanics::Scene& scene,
     return PredictTrial(scene, truth);
   }
   nlohmann::json knobs = prediction;
-  knobs.erase("predictor");
+  // A calibration's scales are already in `scene` (ApplyModelSettings).
+  for (const char* k : {"predictor", "calibration", "calibrated"}) knobs.erase(k);
   std::unique_ptr<simulators::Simulator> sim;
   try {
     sim = simulators::MakeSimulator("mujoco", knobs.dump());
@@ -352,7 +353,8 @@ PredictedRun SimulatePrediction(const mechanics::Scene& trial_scene,
     return run;
   }
   nlohmann::json knobs = prediction;
-  knobs.erase("predictor");
+  // A calibration's scales are already in run.scene (ApplyModelSettings).
+  for (const char* k : {"predictor", "calibration", "calibrated"}) knobs.erase(k);
   const std::unique_ptr<simulators::Simulator> sim =
       simulators::MakeSimulator("mujoco", knobs.dump());
   run.predictor = "mujoco";

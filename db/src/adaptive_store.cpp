@@ -53,42 +53,36 @@ Calibration ReadCalibration(const detail::Stmt& s) {
 
 }  // namespace
 
-bool Store::PlanAdaptiveRound(std::int64_t campaign_id, const std::string& expected_state_json,
-                              const AdaptiveRound& round) {
-  constexpr const char* kFn = "PlanAdaptiveRound";
-  impl_->RequireWritable(kFn);
-  if (round.round < 0) Bad(std::string(kFn) + ": round must be >= 0");
+namespace {
+
+// @throws kBadInput for a round whose fields do not fit together.
+void CheckRound(const AdaptiveRound& round, const char* fn) {
+  if (round.round < 0) Bad(std::string(fn) + ": round must be >= 0");
   if (round.reasons.size() != round.trials.size() || round.bases_json.size() != round.trials.size())
-    Bad(std::string(kFn) + ": one reason and one basis per trial are required");
+    Bad(std::string(fn) + ": one reason and one basis per trial are required");
   for (std::size_t i = 0; i < round.trials.size(); ++i) {
     if (round.reasons[i].empty())
-      Bad(std::string(kFn) + ": trial " + std::to_string(i) + ": reason is empty");
+      Bad(std::string(fn) + ": trial " + std::to_string(i) + ": reason is empty");
     RequireObject(round.bases_json[i],
-                  std::string(kFn) + ": trial " + std::to_string(i) + ": basis");
+                  std::string(fn) + ": trial " + std::to_string(i) + ": basis");
   }
-  RequireObject(round.sampler_state_json, std::string(kFn) + ": sampler_state_json");
+  RequireObject(round.sampler_state_json, std::string(fn) + ": sampler_state_json");
   if (!round.open && round.stop_reason.empty())
-    Bad(std::string(kFn) + ": a round that closes the sampler needs a stop_reason");
+    Bad(std::string(fn) + ": a round that closes the sampler needs a stop_reason");
+}
 
-  Tx tx(impl_->db, true);
-  const Campaign c = GetCampaign(campaign_id);
-  if (c.state != CampaignState::kActive || !c.sampler_open ||
-      c.sampler_state_json != expected_state_json)
-    return false;
-  auto busy = impl_->Prepare(
-      "SELECT 1 FROM trials WHERE campaign_id = ? AND state NOT IN ('done','failed','cancelled')"
-      " LIMIT 1");
-  busy->Bind(1, campaign_id);
-  if (busy->Step()) return false;
-
-  auto n = impl_->Prepare("SELECT IFNULL(MAX(idx) + 1, 0) FROM trials WHERE campaign_id = ?");
+// The round's trials, one decision each (and a stop row when it closes the
+// sampler), the sampler's state; inside the caller's write transaction.
+void WriteRound(const Store::Impl& impl, std::int64_t campaign_id, const AdaptiveRound& round,
+                const char* fn) {
+  auto n = impl.Prepare("SELECT IFNULL(MAX(idx) + 1, 0) FROM trials WHERE campaign_id = ?");
   n->Bind(1, campaign_id);
   n->Step();
   const int first = static_cast<int>(n->Int(0));
   const std::vector<std::int64_t> ids =
-      internal::InsertPlannedTrials(*impl_, campaign_id, first, round.trials, kFn);
-  const double now = impl_->Now();
-  auto ins = impl_->Prepare(
+      internal::InsertPlannedTrials(impl, campaign_id, first, round.trials, fn);
+  const double now = impl.Now();
+  auto ins = impl.Prepare(
       "INSERT INTO sampler_decisions(campaign_id, round, trial_id, reason, basis_json, created_at)"
       " VALUES(?,?,?,?,?,?)");
   for (std::size_t i = 0; i < ids.size(); ++i) {
@@ -111,15 +105,52 @@ bool Store::PlanAdaptiveRound(std::int64_t campaign_id, const std::string& expec
         .Run();
     ins->Reset();
   }
-  auto u = impl_->Prepare(
+  auto u = impl.Prepare(
       "UPDATE campaigns SET sampler_state_json = ?, sampler_open = ?, updated_at = ? WHERE id = ?");
   u->Bind(1, round.sampler_state_json)
       .Bind(2, round.open ? 1 : 0)
       .Bind(3, now)
       .Bind(4, campaign_id)
       .Run();
+}
+
+}  // namespace
+
+bool Store::PlanAdaptiveRound(std::int64_t campaign_id, const std::string& expected_state_json,
+                              const AdaptiveRound& round) {
+  constexpr const char* kFn = "PlanAdaptiveRound";
+  impl_->RequireWritable(kFn);
+  CheckRound(round, kFn);
+
+  Tx tx(impl_->db, true);
+  const Campaign c = GetCampaign(campaign_id);
+  if (c.state != CampaignState::kActive || !c.sampler_open ||
+      c.sampler_state_json != expected_state_json)
+    return false;
+  auto busy = impl_->Prepare(
+      "SELECT 1 FROM trials WHERE campaign_id = ? AND state NOT IN ('done','failed','cancelled')"
+      " LIMIT 1");
+  busy->Bind(1, campaign_id);
+  if (busy->Step()) return false;
+  WriteRound(*impl_, campaign_id, round, kFn);
   tx.Commit();
   return true;
+}
+
+std::int64_t Store::CreateAdaptiveCampaign(
+    const NewCampaign& campaign,
+    const std::function<AdaptiveRound(std::int64_t campaign_id)>& plan_first) {
+  constexpr const char* kFn = "CreateAdaptiveCampaign";
+  impl_->RequireWritable(kFn);
+  if (!campaign.sampler_open) Bad(std::string(kFn) + ": an adaptive campaign's sampler is open");
+  Tx tx(impl_->db, true);  // rolled back by any exception: nothing of the campaign stays
+  const std::int64_t id = internal::InsertCampaignRow(*impl_, campaign, kFn);
+  const AdaptiveRound round = plan_first(id);
+  CheckRound(round, kFn);
+  WriteRound(*impl_, id, round, kFn);
+  internal::RegisterParameters(*impl_, id);
+  tx.Commit();
+  return id;
 }
 
 std::vector<SamplerDecision> Store::ListDecisions(std::int64_t campaign_id) const {

@@ -185,3 +185,42 @@ void MigrateToOutcomes(const Store::Impl& impl) {
 }
 
 }  // namespace arena::db::internal
+
+namespace arena::db {
+
+std::map<std::int64_t, TrialOutcome> Store::ReadTrialOutcomes(std::int64_t campaign_id) const {
+  detail::Tx tx(impl_->db, false);  // one snapshot of both tables
+  std::map<std::int64_t, TrialOutcome> out;
+  auto c = impl_->Prepare(
+      "SELECT t.id, c.contact, c.name, c.role, c.stick_fraction, c.slide_fraction,"
+      " c.separate_fraction, c.slip_distance_m, c.max_normal_force_n FROM trials t"
+      " JOIN contact_outcomes c ON c.stream_id = t.gt_stream_id WHERE t.campaign_id = ?"
+      " ORDER BY t.id, c.contact");
+  c->Bind(1, campaign_id);
+  while (c->Step()) {
+    ContactOutcome o;
+    o.contact = static_cast<std::size_t>(c->Int(1));
+    o.name = c->Text(2);
+    o.pusher = c->Text(3) == "pusher";
+    o.stick_fraction = c->OptReal(4).value_or(0);
+    o.slide_fraction = c->OptReal(5).value_or(0);
+    o.separate_fraction = c->OptReal(6).value_or(0);
+    o.slip_distance = c->OptReal(7);
+    o.max_normal_force = c->OptReal(8).value_or(0);
+    out[c->Int(0)].contacts.push_back(std::move(o));
+  }
+  auto s = impl_->Prepare(
+      "SELECT t.id, s.net_dx, s.net_dy, s.net_dz, s.net_rx, s.net_ry, s.net_rz, s.grasp_kept"
+      " FROM trials t JOIN gt_summary s ON s.stream_id = t.gt_stream_id"
+      " WHERE t.campaign_id = ? AND s.net_dx IS NOT NULL");
+  s->Bind(1, campaign_id);
+  while (s->Step()) {
+    TrialOutcome& o = out[s->Int(0)];
+    o.net_translation = std::array<double, 3>{s->Real(1), s->Real(2), s->Real(3)};
+    o.net_rotation = std::array<double, 3>{s->Real(4), s->Real(5), s->Real(6)};
+    if (!s->IsNull(7)) o.grasp_kept = s->Int(7) != 0;
+  }
+  return out;
+}
+
+}  // namespace arena::db

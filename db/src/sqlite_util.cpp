@@ -104,6 +104,10 @@ std::string Stmt::Text(int col) const {
 }
 
 Tx::Tx(sqlite3* db, bool immediate) : db_(db) {
+  if (!immediate && sqlite3_get_autocommit(db) == 0) {
+    joined_ = true;  // a reader inside the connection's open transaction
+    return;
+  }
   Exec(db, immediate ? "BEGIN IMMEDIATE" : "BEGIN", "begin transaction");
   open_ = true;
 }
@@ -113,6 +117,7 @@ Tx::~Tx() {
 }
 
 void Tx::Commit() {
+  if (joined_) return;  // the owner of the transaction ends it
   // Statements still positioned on a row would make COMMIT fail; they are done with.
   for (sqlite3_stmt* p = sqlite3_next_stmt(db_, nullptr); p; p = sqlite3_next_stmt(db_, p)) {
     if (sqlite3_stmt_busy(p)) sqlite3_reset(p);

@@ -102,7 +102,10 @@ class StmtRef {
 };
 
 // BEGIN IMMEDIATE (writers) or BEGIN (readers: one snapshot); rolls back
-// unless Commit() was called.
+// unless Commit() was called. A reader inside a transaction already open on
+// the connection joins it (it reads what that transaction sees, and leaves
+// ending it to its owner): a write transaction may call the store's readers
+// (Store::CreateAdaptiveCampaign's plan). A nested writer is an error.
 class Tx {
  public:
   Tx(sqlite3* db, bool immediate);
@@ -112,6 +115,7 @@ class Tx {
  private:
   sqlite3* db_;
   bool open_ = false;
+  bool joined_ = false;
 };
 
 void Exec(sqlite3* db, const std::string& sql, const std::string& context);

@@ -397,6 +397,27 @@ int ContactTypeMask(const std::vector<std::string>& types) {
 
 namespace internal {
 
+std::int64_t InsertCampaignRow(const Store::Impl& impl, const NewCampaign& campaign,
+                               const char* function) {
+  if (campaign.name.empty()) BadInput(std::string(function) + ": name is empty");
+  ParseObject(campaign.spec_json, std::string(function) + ": spec_json");
+  ParseObject(campaign.sampler_state_json, std::string(function) + ": sampler_state_json");
+  const double now = impl.Now();
+  auto s = impl.Prepare(
+      "INSERT INTO campaigns(name, spec_json, state, priority, seed, sampler_state_json, "
+      "created_at, updated_at, sampler_open) VALUES(?,?,'active',?,?,?,?,?,?)");
+  s->Bind(1, campaign.name)
+      .Bind(2, campaign.spec_json)
+      .Bind(3, campaign.priority)
+      .Bind(4, SeedToDb(campaign.seed))
+      .Bind(5, campaign.sampler_state_json)
+      .Bind(6, now)
+      .Bind(7, now)
+      .Bind(8, campaign.sampler_open ? 1 : 0);
+  s->Run();
+  return static_cast<std::int64_t>(sqlite3_last_insert_rowid(impl.db));
+}
+
 std::vector<std::int64_t> InsertPlannedTrials(const Store::Impl& impl, std::int64_t campaign_id,
                                               int first_index,
                                               const std::vector<PlannedTrial>& trials,
@@ -473,21 +494,7 @@ std::int64_t Store::CreateCampaign(const NewCampaign& campaign,
   ParseObject(campaign.spec_json, "CreateCampaign: spec_json");
   ParseObject(campaign.sampler_state_json, "CreateCampaign: sampler_state_json");
   Tx tx(impl_->db, true);
-  const double now = impl_->Now();
-  auto s = impl_->Prepare(
-      "INSERT INTO campaigns(name, spec_json, state, priority, seed, sampler_state_json, "
-      "created_at,"
-      " updated_at, sampler_open) VALUES(?,?,'active',?,?,?,?,?,?)");
-  s->Bind(1, campaign.name)
-      .Bind(2, campaign.spec_json)
-      .Bind(3, campaign.priority)
-      .Bind(4, SeedToDb(campaign.seed))
-      .Bind(5, campaign.sampler_state_json)
-      .Bind(6, now)
-      .Bind(7, now)
-      .Bind(8, campaign.sampler_open ? 1 : 0);
-  s->Run();
-  const std::int64_t id = static_cast<std::int64_t>(sqlite3_last_insert_rowid(impl_->db));
+  const std::int64_t id = internal::InsertCampaignRow(*impl_, campaign, "CreateCampaign");
   InsertPlannedTrials(*impl_, id, 0, trials, "CreateCampaign");
   internal::RegisterParameters(*impl_, id);
   tx.Commit();
@@ -501,21 +508,7 @@ std::int64_t Store::CreateCampaign(const NewCampaign& campaign,
   ParseObject(campaign.spec_json, "CreateCampaign: spec_json");
   ParseObject(campaign.sampler_state_json, "CreateCampaign: sampler_state_json");
   Tx tx(impl_->db, true);  // rolled back by any exception: nothing of the campaign stays
-  const double now = impl_->Now();
-  auto s = impl_->Prepare(
-      "INSERT INTO campaigns(name, spec_json, state, priority, seed, sampler_state_json, "
-      "created_at,"
-      " updated_at, sampler_open) VALUES(?,?,'active',?,?,?,?,?,?)");
-  s->Bind(1, campaign.name)
-      .Bind(2, campaign.spec_json)
-      .Bind(3, campaign.priority)
-      .Bind(4, SeedToDb(campaign.seed))
-      .Bind(5, campaign.sampler_state_json)
-      .Bind(6, now)
-      .Bind(7, now)
-      .Bind(8, campaign.sampler_open ? 1 : 0);
-  s->Run();
-  const std::int64_t id = static_cast<std::int64_t>(sqlite3_last_insert_rowid(impl_->db));
+  const std::int64_t id = internal::InsertCampaignRow(*impl_, campaign, "CreateCampaign");
   int first = 0;
   for (;;) {
     const std::vector<PlannedTrial> chunk = next_chunk();

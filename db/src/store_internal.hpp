@@ -29,6 +29,11 @@ void WriteTransition(const Store::Impl& impl, std::int64_t trial_id, int attempt
                      TrialState to, const std::string& cell_id, const std::string& reason,
                      const char* function);
 
+// Inserts an active campaign's row (fields checked, kBadInput naming
+// `function`); no transaction of its own. @returns its id.
+std::int64_t InsertCampaignRow(const Store::Impl& impl, const NewCampaign& campaign,
+                               const char* function);
+
 // Inserts planned trials with indices first_index.. and their audit rows;
 // no transaction of its own. @returns their ids. @throws kBadInput naming `function`.
 std::vector<std::int64_t> InsertPlannedTrials(const Store::Impl& impl, std::int64_t campaign_id,

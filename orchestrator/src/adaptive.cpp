@@ -8,12 +8,14 @@
 #include <cstdio>
 #include <map>
 #include <set>
+#include <stdexcept>
 
 #include <spdlog/spdlog.h>
 #include <nlohmann/json.hpp>
 
 #include "arena/mechanics/scene_json.hpp"
 #include "arena/orchestrator/outcome.hpp"
+#include "arena/orchestrator/submit.hpp"
 
 namespace arena::orchestrator {
 namespace {
@@ -46,8 +48,9 @@ db::PlannedTrial ToStoreTrial(const Campaign& c, const PlannedTrial& t) {
 // Everything a decision needs from the store, in trial order.
 struct Finished {
   std::vector<db::Trial> trials;
-  std::map<std::int64_t, json> basis;  // trial id -> its decision's basis
-  bool busy = false;                   // some trial is planned or running
+  std::map<std::int64_t, json> basis;               // trial id -> its decision's basis
+  std::map<std::int64_t, db::TrialOutcome> stored;  // outcomes the ingest stored (issue 15)
+  bool busy = false;                                // some trial is planned or running
 };
 
 Finished ReadFinished(db::Store& store, std::int64_t campaign_id) {
@@ -58,6 +61,7 @@ Finished ReadFinished(db::Store& store, std::int64_t campaign_id) {
   for (const auto& d : store.ListDecisions(campaign_id)) {
     if (d.trial_id) f.basis[*d.trial_id] = json::parse(d.basis_json);
   }
+  if (!f.busy) f.stored = store.ReadTrialOutcomes(campaign_id);
   return f;
 }
 
@@ -65,6 +69,21 @@ TrialOutcome OutcomeOf(db::Store& store, const db::Trial& t) {
   const mechanics::Scene scene = mechanics::ParseScene(t.scene_json);
   return ComputeOutcome(store.ReadGroundTruth(t.id).samples,
                         static_cast<int>(scene.fingers.size()));
+}
+
+// The boundary's class for a done trial. pivoted and finger_slip come from
+// the per-contact outcomes the store computed at ingest (contact_outcomes,
+// gt_summary: the numbers `arena query` and the exports show, with each
+// contact's role taken from the scene rather than its position in the
+// sample), so the sampler and the user read the same outcome; a trial
+// without them is derived from its stream. grasp_kept keeps the stream
+// (its rule looks at the last 10 % of samples, the store's at the last one).
+bool ClassOf(db::Store& store, const Finished& f, const AdaptiveSpec& a, const db::Trial& t) {
+  if (const auto it = f.stored.find(t.id);
+      it != f.stored.end() && a.outcome != OutcomeKind::kGraspKept) {
+    if (const auto o = FromStoredOutcome(it->second)) return Classify(a.outcome, a.threshold, *o);
+  }
+  return Classify(a.outcome, a.threshold, OutcomeOf(store, t));
 }
 
 // ------------------------------------------------------------ boundary
@@ -109,7 +128,7 @@ void DecideBoundary(db::Store& store, const Campaign& c, const Finished& f, int 
       excluded.push_back(u);  // failed or cancelled: do not ask again
       continue;
     }
-    const bool positive = Classify(a.outcome, a.threshold, OutcomeOf(store, t));
+    const bool positive = ClassOf(store, f, a, t);
     positives += positive;
     labelled.push_back({u, positive, t.id});
     seen.push_back({t.id, ClassName(a.outcome, positive)});
@@ -229,21 +248,23 @@ void DecideReplicates(db::Store& store, const Campaign& c, const Finished& f, in
                                      std::to_string(a.max_replicates) + ")";
 }
 
-}  // namespace
-
-std::int64_t AdvanceCampaign(db::Store& store, std::int64_t campaign_id, const Campaign& c,
-                             int idle_cells) {
-  if (!c.adaptive) return 0;
+// The next round of an adaptive campaign, decided from the stored state
+// only; nothing written. nullopt: nothing to decide now (not adaptive, not
+// open, a round still running, no cell to size the batch by).
+std::optional<db::AdaptiveRound> DecideRound(db::Store& store, std::int64_t campaign_id,
+                                             const Campaign& c, int idle_cells,
+                                             std::string* expected_state) {
+  if (!c.adaptive) return std::nullopt;
   const db::Campaign stored = store.GetCampaign(campaign_id);
-  if (!stored.sampler_open || stored.state != db::CampaignState::kActive) return 0;
+  if (!stored.sampler_open || stored.state != db::CampaignState::kActive) return std::nullopt;
   const Finished f = ReadFinished(store, campaign_id);
-  if (f.busy) return 0;  // the round is not finished yet
+  if (f.busy) return std::nullopt;  // the round is not finished yet
   json state = json::parse(stored.sampler_state_json);
   const int round = state.contains("round") ? state["round"].get<int>() + 1 : 0;
   int batch = state.value("batch", 0);
   if (round >= 1 && batch == 0) {
     batch = c.adaptive->batch > 0 ? c.adaptive->batch : idle_cells;
-    if (batch <= 0) return 0;  // no cell to size the batch by yet
+    if (batch <= 0) return std::nullopt;  // no cell to size the batch by yet
   }
   db::AdaptiveRound out;
   out.round = round;
@@ -259,23 +280,53 @@ std::int64_t AdvanceCampaign(db::Store& store, std::int64_t campaign_id, const C
   state["open"] = out.open;
   if (!out.open) state["stop_reason"] = out.stop_reason;
   out.sampler_state_json = state.dump();
-  if (!store.PlanAdaptiveRound(campaign_id, stored.sampler_state_json, out)) return 0;
-  // A closed sampler whose trials are all finished: the campaign is done now
-  // (a service without exit_when_done completes campaigns nowhere else).
-  if (!out.open && out.trials.empty()) store.CompleteFinishedCampaigns();
-  if (out.open) {
-    spdlog::info("campaign {}: adaptive round {}: {} trials planned", campaign_id, round,
-                 out.trials.size());
-  } else {
-    spdlog::info("campaign {}: adaptive sampler finished after round {}: {}", campaign_id, round,
-                 out.stop_reason);
-  }
-  return static_cast<std::int64_t>(out.trials.size());
+  *expected_state = stored.sampler_state_json;
+  return out;
 }
 
-std::int64_t PlanFirstAdaptiveRound(db::Store& store, std::int64_t campaign_id,
-                                    const Campaign& campaign) {
-  return AdvanceCampaign(store, campaign_id, campaign, 0);
+void LogRound(std::int64_t campaign_id, const db::AdaptiveRound& out) {
+  if (out.open) {
+    spdlog::info("campaign {}: adaptive round {}: {} trials planned", campaign_id, out.round,
+                 out.trials.size());
+  } else {
+    spdlog::info("campaign {}: adaptive sampler finished after round {}: {}", campaign_id,
+                 out.round, out.stop_reason);
+  }
+}
+
+}  // namespace
+
+std::int64_t AdvanceCampaign(db::Store& store, std::int64_t campaign_id, const Campaign& c,
+                             int idle_cells) {
+  std::string expected;
+  const auto out = DecideRound(store, campaign_id, c, idle_cells, &expected);
+  if (!out || !store.PlanAdaptiveRound(campaign_id, expected, *out)) return 0;
+  // A closed sampler whose trials are all finished: the campaign is done now
+  // (a service without exit_when_done completes campaigns nowhere else).
+  if (!out->open && out->trials.empty()) store.CompleteFinishedCampaigns();
+  LogRound(campaign_id, *out);
+  return static_cast<std::int64_t>(out->trials.size());
+}
+
+std::int64_t CreateAdaptiveCampaign(db::Store& store, const db::NewCampaign& row,
+                                    const Campaign& campaign,
+                                    const std::function<bool()>& interrupted) {
+  if (!campaign.adaptive) throw std::logic_error("CreateAdaptiveCampaign: not adaptive");
+  bool closed_empty = false;
+  db::AdaptiveRound first;
+  const std::int64_t id = store.CreateAdaptiveCampaign(row, [&](std::int64_t campaign_id) {
+    std::string expected;
+    auto out = DecideRound(store, campaign_id, campaign, 0, &expected);
+    // Round 0 needs no cell and nothing finished: always decided.
+    if (!out) throw std::logic_error("CreateAdaptiveCampaign: round 0 not decided");
+    if (interrupted && interrupted()) throw SubmitInterrupted();
+    closed_empty = !out->open && out->trials.empty();
+    first = *out;
+    return *out;
+  });
+  if (closed_empty) store.CompleteFinishedCampaigns();
+  LogRound(id, first);
+  return id;
 }
 
 // ------------------------------------------------------------ planner

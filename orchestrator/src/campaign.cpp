@@ -862,10 +862,10 @@ Campaign ParseCampaign(std::string_view json_text, const std::string& base_dir,
     RequireObject(p, "prediction",
                   {"predictor", "facets", "points", "dt", "reduce", "contacts", "calibration",
                    "calibrated", "timestep", "cone", "noslip_iterations", "solref", "solimp"});
-    // Which predictor: arena's model (knobs facets, points, dt, reduce, contacts,
-    // and a calibration's scales) or MuJoCo (timestep, cone, noslip_iterations,
-    // solref, solimp);
-    // knobs of the other are refused.
+    // Which predictor: arena's model (knobs facets, points, dt, reduce, contacts)
+    // or MuJoCo (timestep, cone, noslip_iterations, solref, solimp); knobs of
+    // the other are refused. A calibration's scales apply to either
+    // (SubmitCampaign checks that it was fitted for the campaign's predictor).
     if (p.contains("predictor")) c.predictor = String(p["predictor"], "prediction.predictor");
     if (c.predictor != "arena" && c.predictor != "mujoco") {
       throw CampaignError("prediction.predictor", "must be \"arena\" or \"mujoco\", got \"" +
@@ -878,14 +878,15 @@ Campaign ParseCampaign(std::string_view json_text, const std::string& base_dir,
       const std::string key = k;
       const bool arena_knob = key != "timestep" && key != "cone" && key != "noslip_iterations" &&
                               key != "solref" && key != "solimp";
-      if (p.contains(k) && arena_knob == mujoco) {
+      const bool both = key == "calibration" || key == "calibrated";
+      if (p.contains(k) && !both && arena_knob == mujoco) {
         throw CampaignError(std::string("prediction.") + k,
                             std::string("is not a knob of the ") + c.predictor + " predictor");
       }
     }
     if (mujoco) {
       json knobs = p;
-      knobs.erase("predictor");
+      for (const char* k : {"predictor", "calibration", "calibrated"}) knobs.erase(k);
       try {
         (void)simulators::MakeSimulator("mujoco", knobs.dump());
       } catch (const simulators::SimulatorError& e) {

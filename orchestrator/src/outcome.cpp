@@ -73,6 +73,25 @@ TrialOutcome ComputeOutcome(const std::vector<mechanics::TrajectorySample>& samp
       });
 }
 
+std::optional<TrialOutcome> FromStoredOutcome(const db::TrialOutcome& stored) {
+  if (!stored.net_translation || !stored.net_rotation) return std::nullopt;
+  TrialOutcome out;
+  const auto& d = *stored.net_translation;
+  const auto& r = *stored.net_rotation;
+  out.displacement = std::sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
+  out.rotation = std::sqrt(r[0] * r[0] + r[1] * r[1] + r[2] * r[2]);
+  double sum = 0;
+  int fingers = 0;
+  for (const auto& c : stored.contacts) {
+    if (c.pusher) continue;
+    sum += c.slide_fraction;
+    ++fingers;
+  }
+  if (fingers == 0) return std::nullopt;
+  out.finger_slide_fraction = sum / fingers;
+  return out;
+}
+
 bool Classify(OutcomeKind kind, double threshold, const TrialOutcome& o) {
   switch (kind) {
     case OutcomeKind::kPivoted:

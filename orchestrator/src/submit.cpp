@@ -50,6 +50,19 @@ std::int64_t SubmitCampaign(db::Store& store, const Campaign& given,
                            "prediction.calibration: calibration " + std::to_string(cal.id) +
                                " did not improve the held-out error and is not applied");
     }
+    // Scales fitted for one predictor also absorb that predictor's own
+    // errors: they are not moved to another.
+    const nlohmann::json fit_settings = nlohmann::json::parse(cal.settings_json, nullptr, false);
+    const std::string fitted_for = fit_settings.is_object() && fit_settings.contains("predictor") &&
+                                           fit_settings["predictor"].is_string()
+                                       ? fit_settings["predictor"].get<std::string>()
+                                       : "arena";
+    if (fitted_for != campaign.predictor) {
+      throw db::StoreError(db::StoreError::Kind::kBadInput,
+                           "prediction.calibration: calibration " + std::to_string(cal.id) +
+                               " was fitted for the " + fitted_for +
+                               " predictor; this campaign predicts with " + campaign.predictor);
+    }
     nlohmann::json spec = nlohmann::json::parse(campaign.source_json);
     nlohmann::json scales = nlohmann::json::object();
     const nlohmann::json fitted = nlohmann::json::parse(cal.params_json);
@@ -68,11 +81,8 @@ std::int64_t SubmitCampaign(db::Store& store, const Campaign& given,
     c.priority = campaign.priority;
     c.seed = campaign.seed;
     c.sampler_open = true;
-    // Two transactions: a crash between them leaves an open campaign without
-    // trials, whose round 0 the service's AdaptivePlanner then plans itself.
-    const std::int64_t id = store.CreateCampaign(c, std::vector<db::PlannedTrial>{});
-    PlanFirstAdaptiveRound(store, id, campaign);
-    return id;
+    // One transaction: a crash or an interrupt leaves nothing or both.
+    return CreateAdaptiveCampaign(store, c, campaign, interrupted);
   }
   const std::int64_t total = TrialCount(campaign);
   db::NewCampaign c;

@@ -45,7 +45,27 @@ class ArenaSimulator final : public Simulator {
   ArenaSettings settings_;
 };
 
+// The default PreparedScene: nothing to keep, every variant run afresh.
+class FreshRuns final : public PreparedScene {
+ public:
+  explicit FreshRuns(const Simulator& simulator) : simulator_(simulator) {}
+  mechanics::SimulationResult Simulate(const mechanics::Scene& variant) override {
+    ++runs_;
+    return simulator_.Simulate(variant);
+  }
+  long reused() const override { return 0; }
+  long rebuilt() const override { return runs_; }
+
+ private:
+  const Simulator& simulator_;
+  long runs_ = 0;
+};
+
 }  // namespace
+
+std::unique_ptr<PreparedScene> Simulator::Prepare(const mechanics::Scene&) const {
+  return std::make_unique<FreshRuns>(*this);
+}
 
 const char* ToString(TruthKind kind) {
   switch (kind) {

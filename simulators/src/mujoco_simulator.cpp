@@ -269,9 +269,12 @@ void Validate(const MujocoSettings& s) {
 struct MjHandles {
   mjModel* m = nullptr;
   mjData* d = nullptr;
-  ~MjHandles() {
+  ~MjHandles() { Reset(); }
+  void Reset() {
     if (d) mj_deleteData(d);
     if (m) mj_deleteModel(m);
+    d = nullptr;
+    m = nullptr;
   }
 };
 
@@ -403,6 +406,7 @@ class MujocoSimulator final : public Simulator {
     return "";
   }
   mechanics::SimulationResult Simulate(const mechanics::Scene& scene) const override;
+  std::unique_ptr<PreparedScene> Prepare(const mechanics::Scene& scene) const override;
 
  private:
   MujocoSettings settings_;
@@ -573,21 +577,106 @@ bool Finite(const mechanics::TrajectorySample& s) {
   return true;
 }
 
-mechanics::SimulationResult MujocoSimulator::Simulate(const mechanics::Scene& scene) const {
-  const auto start = std::chrono::steady_clock::now();
+// Steps a loaded model through `scene`: the model built from `scene`, or
+// from a scene that differs only in friction, grip force and mass with those
+// patched in (MujocoPrepared). `d` is fresh (made or reset). Throws what
+// MuJoCo throws; fills `result` (status kSolverFailure on a divergence).
+void RunLoaded(const mechanics::Scene& scene, const MujocoSettings& st, mjModel* m, mjData* d,
+               mechanics::SimulationResult* result) {
+  const int per_sample = StepsPerSample(st);
+  Run run{scene, st, m, d, -1, -1, -1, -1, -1, -1, {}, {}, {}, 0, -1};
+  run.pad_of_geom.assign(static_cast<size_t>(m->ngeom), -1);
+  run.n_pads = scene.fingers.size() + (scene.pusher ? 1 : 0);
+  run.object_body = mj_name2id(m, mjOBJ_BODY, "object");
+  run.object_geom = mj_name2id(m, mjOBJ_GEOM, "object");
+  const int oj = m->body_jntadr[run.object_body];
+  run.object_qpos = m->jnt_qposadr[oj];
+  run.object_qvel = m->jnt_dofadr[oj];
+  for (size_t i = 0; i < scene.fingers.size(); ++i) {
+    const std::string k = std::to_string(i);
+    const int j = mj_name2id(m, mjOBJ_JOINT, ("finger" + k).c_str());
+    run.finger_qpos.push_back(m->jnt_qposadr[j]);
+    run.finger_qvel.push_back(m->jnt_dofadr[j]);
+    for (int j = 0; j < PadCount(scene.fingers[i], st.pads); ++j) {
+      const int g = mj_name2id(m, mjOBJ_GEOM, ("pad" + k + "_" + std::to_string(j)).c_str());
+      run.pad_of_geom[static_cast<size_t>(g)] = static_cast<int>(i);
+    }
+  }
+  if (scene.pusher) {
+    run.pusher_body = mj_name2id(m, mjOBJ_BODY, "pusher");
+    const int j = m->body_jntadr[run.pusher_body];
+    run.pusher_qpos = m->jnt_qposadr[j];
+    run.pusher_qvel = m->jnt_dofadr[j];
+    for (int j = 0; j < PadCount(*scene.pusher, st.pads); ++j) {
+      const int g = mj_name2id(m, mjOBJ_GEOM, ("pusher_pad_" + std::to_string(j)).c_str());
+      run.pad_of_geom[static_cast<size_t>(g)] = static_cast<int>(scene.fingers.size());
+    }
+  }
+  // Grip force along each finger's normal, plus the finger's weight along it.
+  for (size_t i = 0; i < scene.fingers.size(); ++i) {
+    const double weight = st.finger_mass * scene.gravity.dot(scene.fingers[i].normal.normalized());
+    d->ctrl[i] = scene.grip_force - weight;
+  }
+  const long n_samples =
+      static_cast<long>(std::floor(scene.duration * mechanics::kSampleRateHz + 1e-9)) + 1;
+  result->samples.reserve(static_cast<size_t>(n_samples));
+  run.DrivePusher(0);
+  mj_forward(m, d);
+  for (long k = 0; k < n_samples; ++k) {
+    Run::PadReading interval(run.n_pads);  // the steps since the last sample
+    if (k > 0) {
+      for (int j = 0; j < per_sample; ++j) {
+        run.DrivePusher(d->time);
+        mj_step(m, d);
+        ++result->solver.steps;
+        // After mj_step, d->contact and d->efc_force are the step's own solve.
+        if (st.interval_forces) run.Read(&interval);
+      }
+      // Pusher and time exactly on the sample instant; forces of that state.
+      d->time = static_cast<double>(k) / mechanics::kSampleRateHz;
+      run.DrivePusher(d->time);
+      mj_forward(m, d);
+    }
+    if (interval.solves == 0) run.Read(&interval);  // t = 0, or instant forces
+    mechanics::TrajectorySample s = run.Sample(interval);
+    s.t = static_cast<double>(k) / mechanics::kSampleRateHz;
+    if (!Finite(s) || d->warning[mjWARN_BADQACC].number > 0) {
+      result->status = mechanics::SimulationStatus::kSolverFailure;
+      result->failed_step = result->solver.steps;
+      result->solver.failures = 1;
+      result->error =
+          "MuJoCo diverged at t = " + Num(s.t) + " s (non-finite state or acceleration)";
+      return;
+    }
+    result->samples.push_back(std::move(s));
+  }
+}
+
+// A result with the run's time step and time, for Simulate and MujocoPrepared.
+class Timed {
+ public:
+  explicit Timed(const MujocoSettings& st) : start_(std::chrono::steady_clock::now()) {
+    result.model.dof = 6;
+    result.model.dt = 1.0 / (mechanics::kSampleRateHz * StepsPerSample(st));
+  }
+  mechanics::SimulationResult Finish() {
+    result.wall_s =
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - start_).count();
+    return std::move(result);
+  }
   mechanics::SimulationResult result;
-  const auto finish = [&]() -> mechanics::SimulationResult {
-    result.wall_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-    return result;
-  };
-  const int per_sample = StepsPerSample(settings_);
-  const double dt = 1.0 / (mechanics::kSampleRateHz * per_sample);
-  result.model.dof = 6;
-  result.model.dt = dt;
+
+ private:
+  std::chrono::steady_clock::time_point start_;
+};
+
+mechanics::SimulationResult MujocoSimulator::Simulate(const mechanics::Scene& scene) const {
+  Timed run(settings_);
+  auto& result = run.result;
   if (std::string why = CheckScene(scene); !why.empty()) {
     result.status = mechanics::SimulationStatus::kInvalidScene;
     result.error = why;
-    return finish();
+    return run.Finish();
   }
   MjHandles h;
   // With a cache, the model and data come from it and go back after the run
@@ -619,86 +708,126 @@ mechanics::SimulationResult MujocoSimulator::Simulate(const mechanics::Scene& sc
     if (!h.m) {
       result.status = mechanics::SimulationStatus::kInvalidScene;
       result.error = error;
-      return finish();
+      return run.Finish();
     }
     if (cache_) {
       WriteOptions(h.m, scene, settings_);
       if (h.d) mj_resetData(h.m, h.d);
     }
     if (!h.d) h.d = mj_makeData(h.m);
-    Run run{scene, settings_, h.m, h.d, -1, -1, -1, -1, -1, -1, {}, {}, {}, 0, -1};
-    run.pad_of_geom.assign(static_cast<size_t>(h.m->ngeom), -1);
-    run.n_pads = scene.fingers.size() + (scene.pusher ? 1 : 0);
-    run.object_body = mj_name2id(h.m, mjOBJ_BODY, "object");
-    run.object_geom = mj_name2id(h.m, mjOBJ_GEOM, "object");
-    const int oj = h.m->body_jntadr[run.object_body];
-    run.object_qpos = h.m->jnt_qposadr[oj];
-    run.object_qvel = h.m->jnt_dofadr[oj];
-    for (size_t i = 0; i < scene.fingers.size(); ++i) {
-      const std::string k = std::to_string(i);
-      const int j = mj_name2id(h.m, mjOBJ_JOINT, ("finger" + k).c_str());
-      run.finger_qpos.push_back(h.m->jnt_qposadr[j]);
-      run.finger_qvel.push_back(h.m->jnt_dofadr[j]);
-      for (int j = 0; j < PadCount(scene.fingers[i], settings_.pads); ++j) {
-        const int g = mj_name2id(h.m, mjOBJ_GEOM, ("pad" + k + "_" + std::to_string(j)).c_str());
-        run.pad_of_geom[static_cast<size_t>(g)] = static_cast<int>(i);
-      }
-    }
-    if (scene.pusher) {
-      run.pusher_body = mj_name2id(h.m, mjOBJ_BODY, "pusher");
-      const int j = h.m->body_jntadr[run.pusher_body];
-      run.pusher_qpos = h.m->jnt_qposadr[j];
-      run.pusher_qvel = h.m->jnt_dofadr[j];
-      for (int j = 0; j < PadCount(*scene.pusher, settings_.pads); ++j) {
-        const int g = mj_name2id(h.m, mjOBJ_GEOM, ("pusher_pad_" + std::to_string(j)).c_str());
-        run.pad_of_geom[static_cast<size_t>(g)] = static_cast<int>(scene.fingers.size());
-      }
-    }
-    // Grip force along each finger's normal, plus the finger's weight along it.
-    for (size_t i = 0; i < scene.fingers.size(); ++i) {
-      const double weight =
-          settings_.finger_mass * scene.gravity.dot(scene.fingers[i].normal.normalized());
-      h.d->ctrl[i] = scene.grip_force - weight;
-    }
-    const long n_samples =
-        static_cast<long>(std::floor(scene.duration * mechanics::kSampleRateHz + 1e-9)) + 1;
-    result.samples.reserve(static_cast<size_t>(n_samples));
-    run.DrivePusher(0);
-    mj_forward(h.m, h.d);
-    for (long k = 0; k < n_samples; ++k) {
-      Run::PadReading interval(run.n_pads);  // the steps since the last sample
-      if (k > 0) {
-        for (int j = 0; j < per_sample; ++j) {
-          run.DrivePusher(h.d->time);
-          mj_step(h.m, h.d);
-          ++result.solver.steps;
-          // After mj_step, d->contact and d->efc_force are the step's own solve.
-          if (settings_.interval_forces) run.Read(&interval);
-        }
-        // Pusher and time exactly on the sample instant; forces of that state.
-        h.d->time = static_cast<double>(k) / mechanics::kSampleRateHz;
-        run.DrivePusher(h.d->time);
-        mj_forward(h.m, h.d);
-      }
-      if (interval.solves == 0) run.Read(&interval);  // t = 0, or instant forces
-      mechanics::TrajectorySample s = run.Sample(interval);
-      s.t = static_cast<double>(k) / mechanics::kSampleRateHz;
-      if (!Finite(s) || h.d->warning[mjWARN_BADQACC].number > 0) {
-        result.status = mechanics::SimulationStatus::kSolverFailure;
-        result.failed_step = result.solver.steps;
-        result.solver.failures = 1;
-        result.error =
-            "MuJoCo diverged at t = " + Num(s.t) + " s (non-finite state or acceleration)";
-        return finish();
-      }
-      result.samples.push_back(std::move(s));
-    }
+    RunLoaded(scene, settings_, h.m, h.d, &result);
   } catch (const std::exception& e) {
     result.status = mechanics::SimulationStatus::kSolverFailure;
     result.error = e.what();
     result.samples.clear();
   }
-  return finish();
+  return run.Finish();
+}
+
+// The scene's model compiled once; a variant's friction (pair_friction of
+// every pad's pair), object mass and inertia (body_mass, body_inertia, then
+// mj_setConst for what the compiler derives from them: subtree masses,
+// inverse weights, mean inertia) are patched in. The grip force is a control
+// input set every run anyway. Whether a variant differs only in these is
+// decided by writing its MJCF with the base's values put back: the same text
+// means the same model.
+class MujocoPrepared final : public PreparedScene {
+ public:
+  MujocoPrepared(const MujocoSimulator& simulator, const MujocoSettings& settings,
+                 const mechanics::Scene& base)
+      : simulator_(simulator), settings_(settings), base_(base) {
+    if (!simulator.CheckScene(base).empty()) return;  // every run then says why
+    try {
+      xml_ = MujocoModelXml(base, settings);
+      std::string error;
+      h_.m = LoadFromText(xml_, &error);
+      if (!h_.m) return;
+      h_.d = mj_makeData(h_.m);
+      object_body_ = mj_name2id(h_.m, mjOBJ_BODY, "object");
+      for (int k = 0; k < 3; ++k) base_inertia_[k] = h_.m->body_inertia[3 * object_body_ + k];
+      // Which scene contact each pair's pad belongs to (fingers, then the
+      // pusher). The compiler may order a pair's geoms either way round.
+      const int object_geom = mj_name2id(h_.m, mjOBJ_GEOM, "object");
+      for (int p = 0; p < h_.m->npair; ++p) {
+        const int g =
+            h_.m->pair_geom1[p] == object_geom ? h_.m->pair_geom2[p] : h_.m->pair_geom1[p];
+        const char* pad = mj_id2name(h_.m, mjOBJ_GEOM, g);
+        const std::string name = pad ? pad : "";
+        int who = static_cast<int>(base.fingers.size());
+        if (name.rfind("pad", 0) == 0) who = std::stoi(name.substr(3, name.find('_') - 3));
+        pair_owner_.push_back(who);
+      }
+    } catch (const std::exception&) {
+      h_.Reset();  // every run then builds its own (and says what failed)
+    }
+  }
+
+  mechanics::SimulationResult Simulate(const mechanics::Scene& variant) override {
+    if (!h_.m || !Patchable(variant)) {
+      ++rebuilt_;
+      return simulator_.Simulate(variant);
+    }
+    ++reused_;
+    Timed run(settings_);
+    try {
+      for (int p = 0; p < h_.m->npair; ++p) {
+        const auto who = static_cast<size_t>(pair_owner_[static_cast<size_t>(p)]);
+        const double mu =
+            who < variant.fingers.size() ? variant.fingers[who].mu : variant.pusher->mu;
+        h_.m->pair_friction[5 * p] = h_.m->pair_friction[5 * p + 1] = std::max(mu, mjMINMU);
+      }
+      const double k = variant.object.mass / base_.object.mass;
+      h_.m->body_mass[object_body_] = variant.object.mass;
+      for (int a = 0; a < 3; ++a) h_.m->body_inertia[3 * object_body_ + a] = k * base_inertia_[a];
+      mj_setConst(h_.m, h_.d);
+      mj_resetData(h_.m, h_.d);
+      RunLoaded(variant, settings_, h_.m, h_.d, &run.result);
+    } catch (const std::exception& e) {
+      run.result.status = mechanics::SimulationStatus::kSolverFailure;
+      run.result.error = e.what();
+      run.result.samples.clear();
+    }
+    return run.Finish();
+  }
+  long reused() const override { return reused_; }
+  long rebuilt() const override { return rebuilt_; }
+
+ private:
+  bool Patchable(const mechanics::Scene& v) const {
+    if (v.fingers.size() != base_.fingers.size() ||
+        v.pusher.has_value() != base_.pusher.has_value())
+      return false;
+    if (!(v.object.mass > 0) || !std::isfinite(v.object.mass)) return false;
+    // Inertia scaled with the mass (ApplyScales does so); anything else is another body.
+    const Eigen::Matrix3d iv = mechanics::ObjectInertia(v.object);
+    const Eigen::Matrix3d ib = mechanics::ObjectInertia(base_.object);
+    const double k = v.object.mass / base_.object.mass;
+    if ((iv - k * ib).norm() > 1e-12 * std::max(iv.norm(), 1e-300)) return false;
+    mechanics::Scene same = v;
+    for (size_t i = 0; i < same.fingers.size(); ++i) same.fingers[i].mu = base_.fingers[i].mu;
+    if (same.pusher) same.pusher->mu = base_.pusher->mu;
+    same.object.mass = base_.object.mass;
+    same.object.inertia = base_.object.inertia;
+    try {
+      return MujocoModelXml(same, settings_) == xml_;
+    } catch (const std::exception&) {
+      return false;
+    }
+  }
+
+  const MujocoSimulator& simulator_;
+  MujocoSettings settings_;
+  mechanics::Scene base_;
+  std::string xml_;
+  MjHandles h_;
+  int object_body_ = -1;
+  double base_inertia_[3] = {0, 0, 0};
+  std::vector<int> pair_owner_;
+  long reused_ = 0, rebuilt_ = 0;
+};
+
+std::unique_ptr<PreparedScene> MujocoSimulator::Prepare(const mechanics::Scene& scene) const {
+  return std::make_unique<MujocoPrepared>(*this, settings_, scene);
 }
 
 }  // namespace

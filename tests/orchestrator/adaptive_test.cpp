@@ -2,9 +2,12 @@
 // points by the nearest-neighbour margin rule (bisection in 1-D), replicates
 // by confidence interval, campaign parsing of "sampler": {"adaptive": ...},
 // and PlanAdaptiveRound's conditional write.
+#include <sqlite3.h>
+#include <sys/wait.h>
 #include <unistd.h>
 
 #include <cmath>
+#include <csignal>
 #include <filesystem>
 #include <functional>
 #include <string>
@@ -291,6 +294,173 @@ TEST_F(StoreFile, PlanAdaptiveRoundWritesOnlyFromTheStateItRead) {
   db::AdaptiveRound bad;
   bad.trials.resize(1);
   EXPECT_THROW(store->PlanAdaptiveRound(id, "{}", bad), db::StoreError);  // no reason per trial
+}
+
+// Submit writes an adaptive campaign and its round 0 in one transaction: a
+// fault after the campaign row was written and before its round (an
+// interrupt, a round the store refuses, the process killed there) leaves
+// nothing; with two transactions the campaign would stay without trials.
+TEST_F(StoreFile, AdaptiveSubmitIsOneTransaction) {
+  const Campaign c = ParseCampaign(BoundaryCampaign());
+  auto nothing_stored = [&] {
+    auto store = db::Store::Open(path_.string());
+    EXPECT_TRUE(store->ListCampaigns().empty());
+    EXPECT_TRUE(store->ListDecisions(1).empty());
+    EXPECT_TRUE(store->ListTrials(1).empty());
+  };
+  {
+    // Interrupted after round 0 was decided (the campaign row is written).
+    auto store = db::Store::Open(path_.string());
+    int asked = 0;
+    EXPECT_THROW(SubmitCampaign(*store, c, [&] { return ++asked > 0; }), SubmitInterrupted);
+    EXPECT_EQ(asked, 1);
+  }
+  nothing_stored();
+  {
+    // The round's write fails (a trial's scene the store refuses).
+    auto store = db::Store::Open(path_.string());
+    db::NewCampaign row;
+    row.name = "b";
+    row.spec_json = "{}";
+    row.sampler_open = true;
+    EXPECT_THROW(store->CreateAdaptiveCampaign(row,
+                                               [](std::int64_t) {
+                                                 db::AdaptiveRound r;
+                                                 r.trials.resize(1);
+                                                 r.trials[0].scene_json = "not json";
+                                                 r.reasons = {"x"};
+                                                 r.bases_json = {"{}"};
+                                                 return r;
+                                               }),
+                 db::StoreError);
+  }
+  nothing_stored();
+  {
+    // Killed between the campaign row and its round: a real SIGKILL.
+    const pid_t child = fork();
+    ASSERT_GE(child, 0);
+    if (child == 0) {
+      auto store = db::Store::Open(path_.string());
+      db::NewCampaign row;
+      row.name = "b";
+      row.spec_json = "{}";
+      row.sampler_open = true;
+      store->CreateAdaptiveCampaign(row, [](std::int64_t) -> db::AdaptiveRound {
+        raise(SIGKILL);
+        _exit(3);  // not reached
+      });
+      _exit(4);  // not reached
+    }
+    int status = 0;
+    ASSERT_EQ(waitpid(child, &status, 0), child);
+    ASSERT_TRUE(WIFSIGNALED(status) && WTERMSIG(status) == SIGKILL);
+  }
+  nothing_stored();
+  // And without a fault: both, the campaign never seen without its round.
+  auto store = db::Store::Open(path_.string());
+  const std::int64_t id = SubmitCampaign(*store, c);
+  EXPECT_EQ(store->ListTrials(id).size(), 16u);
+  EXPECT_EQ(store->ListDecisions(id).size(), 16u);
+  EXPECT_TRUE(store->CheckInvariants().empty());
+}
+
+// finger_slip from the per-contact outcomes the store computed at ingest
+// (issue 15): they agree with the stream-derived outcome, and the sampler
+// reads them -- a stored slide fraction changed behind the stream's back
+// changes its decision (which the stream alone could not).
+db::Sample StickSample(int i) {
+  db::Sample s;
+  s.t = i / 250.0;
+  s.object_pose = {0, 0, 0.0001 * i, 1, 0, 0, 0};
+  s.pusher_pose = {0, 0, -0.05 + 0.0001 * i, 1, 0, 0, 0};
+  for (int c = 0; c < 3; ++c) {
+    db::ContactWrench w;
+    w.force = {c == 0 ? 5.0 : c == 1 ? -5.0 : 0.0, 0, c == 2 ? 2.0 : 1.0};
+    w.mode = db::ContactMode::kStick;
+    s.contacts.push_back(w);
+  }
+  return s;
+}
+
+void RunAllToDone(db::Store& store) {
+  while (auto t = store.ClaimNextTrial("c")) {
+    auto ingest = store.BeginIngest(t->trial_id, t->attempt);
+    for (int i = 0; i < 20; ++i) ingest->Add(StickSample(i));
+    ingest->Finish("ok");
+    store.BeginReset(t->trial_id, t->attempt);
+    db::ResetReport r;
+    r.ok = true;
+    r.observed_pose = {0, 0, 0, 1, 0, 0, 0};
+    store.CompleteReset(t->trial_id, t->attempt, r);
+    db::Prediction p;
+    p.model_key = "g8";
+    p.final_position_error = 0.001;
+    p.final_angle_error = 0.01;
+    p.force_error = 0.2;
+    p.mode_agreement = 1;
+    p.wall_s = 0.001;
+    store.RecordPrediction(t->trial_id, t->attempt, p);
+    store.FinishTrial(t->trial_id, t->attempt);
+  }
+}
+
+TEST_F(StoreFile, BoundaryReadsFingerSlipFromTheStoredContactOutcomes) {
+  const Campaign c = ParseCampaign(R"({"name": "s", "seed": 3, "scene": ")" + Canonical() + R"(",
+    "variations": {"grip_force": {"min": 2, "max": 20}},
+    "sampler": {"adaptive": "boundary", "outcome": "finger_slip", "resolution": 0.05,
+                "batch": 2}})");
+  std::int64_t id = 0;
+  std::vector<db::Trial> trials;
+  {
+    auto store = db::Store::Open(path_.string());
+    store->UpsertCell("c", {"point", "line", "patch"});
+    id = SubmitCampaign(*store, c);
+    RunAllToDone(*store);
+    trials = store->ListTrials(id);
+    ASSERT_GE(trials.size(), 3u);
+    // Stored and stream-derived agree (here: all stick, no rotation).
+    const auto stored = store->ReadTrialOutcomes(id);
+    ASSERT_EQ(stored.size(), trials.size());
+    for (const auto& t : trials) {
+      const auto from_store = FromStoredOutcome(stored.at(t.id));
+      ASSERT_TRUE(from_store);
+      const auto from_stream = ComputeOutcome(store->ReadGroundTruth(t.id).samples, 2);
+      EXPECT_DOUBLE_EQ(from_store->finger_slide_fraction, from_stream.finger_slide_fraction);
+      EXPECT_NEAR(from_store->rotation, from_stream.rotation, 1e-12);
+      EXPECT_NEAR(from_store->displacement, from_stream.displacement, 1e-12);
+    }
+  }
+  // Control: the same store untouched -- every finger stuck, the sampler stops.
+  const std::string control = path_.string() + ".control";
+  std::filesystem::copy_file(path_, control, std::filesystem::copy_options::overwrite_existing);
+  {
+    auto store = db::Store::Open(control);
+    EXPECT_EQ(AdvanceCampaign(*store, id, c, 2), 0);
+    EXPECT_FALSE(store->GetCampaign(id).sampler_open);
+    EXPECT_NE(store->ListDecisions(id).back().reason.find("no class change"), std::string::npos);
+  }
+  for (const char* suffix : {"", "-wal", "-shm"}) std::filesystem::remove(control + suffix);
+
+  // The fingers of the trials below 11 N slid, says the stored outcome (the
+  // samples still say stick).
+  sqlite3* raw = nullptr;
+  ASSERT_EQ(sqlite3_open(path_.c_str(), &raw), SQLITE_OK);
+  const std::string sql =
+      "UPDATE contact_outcomes SET slide_fraction = 1, stick_fraction = 0 WHERE role = 'finger'"
+      " AND trial_id IN (SELECT id FROM trials WHERE grip_force < 11 AND campaign_id = " +
+      std::to_string(id) + ")";
+  ASSERT_EQ(sqlite3_exec(raw, sql.c_str(), nullptr, nullptr, nullptr), SQLITE_OK);
+  EXPECT_GT(sqlite3_changes(raw), 0);
+  sqlite3_close(raw);
+
+  auto store = db::Store::Open(path_.string());
+  // (All-stick samples alone: no class change, the sampler would stop.)
+  ASSERT_GT(AdvanceCampaign(*store, id, c, 2), 0);
+  const auto state = nlohmann::json::parse(store->GetCampaign(id).sampler_state_json);
+  EXPECT_GT(state["positives"].get<int>(), 0);
+  EXPECT_LT(state["positives"].get<int>(), static_cast<int>(trials.size()));
+  const auto decisions = store->ListDecisions(id);
+  EXPECT_NE(decisions.back().reason.find("(slide)"), std::string::npos) << decisions.back().reason;
 }
 
 }  // namespace

@@ -14,7 +14,12 @@
 //   L = (e_pos / s_pos)^2 + (e_ang / s_ang)^2 + (e_force / s_force)^2
 //
 // e_pos: final object position error (m), e_ang: final angle error (rad),
-// e_force: RMS over samples and contacts of |f_pred - f_true| (N). The fit
+// e_force: RMS over samples and contacts of |f_pred - f_true| (N); with a
+// force window, of the difference of each contact's mean force over
+// consecutive windows of that length (MuJoCo's soft contacts hand the load
+// between two coupled sliding fingers from one 4 ms sample to the next: ~2 N
+// RMS of chatter that no parameter explains, measured on the calibration
+// e2e campaign, while 40 ms means keep the friction's signal). The fit
 // minimises the mean L over the training trials with a derivative-free
 // optimiser (NLopt BOBYQA; COBYLA for one parameter) over log(scale) within
 // bounds. Uncertainty: a bootstrap over the training trials (each resample
@@ -22,9 +27,23 @@
 // the error before (all scales 1) and after; a fit that does not lower the
 // held-out error is reported as not improved and must not be applied.
 //
-// The simulator is passed in (SimulateFn), so the same fit runs against
-// arena's model or any other predictor. Thread safety: Calibrate calls
-// `simulate` from up to `threads` threads at once.
+// The simulator is passed in (SimulateFn, or a simulators::Simulator whose
+// PreparedScene builds each trial's model once: MuJoCo's), so the same fit
+// runs against arena's model or any other predictor. Every (trial, scales)
+// pair is simulated once (a memo), so the optimiser's start, the refits'
+// starts and repeated bootstrap draws cost nothing.
+//
+// Uncertainty, two ways (BootstrapMethod):
+//   refit  each bootstrap resample of the training trials refitted from the
+//          optimum (max(10, max_evaluations/3) evaluations each): the honest
+//          one, but it costs `bootstrap` more fits.
+//   reuse  each resample's optimum is the point, among those the main fit
+//          already evaluated, that minimises the resample's mean loss: no
+//          simulation at all (for expensive predictors). Its resolution is
+//          the spacing of the evaluated points near the optimum, so a spread
+//          narrower than the optimiser's last steps shows as zero.
+// Thread safety: Calibrate calls `simulate` from up to `threads` threads at
+// once, never twice at once for the same trial.
 #pragma once
 
 #include <cstdint>
@@ -38,6 +57,7 @@
 #include "arena/db/store.hpp"
 #include "arena/mechanics/scene.hpp"
 #include "arena/mechanics/simulate.hpp"
+#include "arena/simulators/simulator.hpp"
 
 namespace arena::assessment {
 
@@ -61,9 +81,10 @@ mechanics::Scene ApplyScales(const mechanics::Scene& scene,
                              const std::map<std::string, double>& scales);
 
 struct LossScales {
-  double position_m = 1e-3;  // 1 mm of final position error weighs 1
-  double angle_rad = 0.01;   // 0.01 rad (0.57 deg) of final angle error weighs 1
-  double force_n = 0.5;      // 0.5 N RMS contact-force error weighs 1
+  double position_m = 1e-3;   // 1 mm of final position error weighs 1
+  double angle_rad = 0.01;    // 0.01 rad (0.57 deg) of final angle error weighs 1
+  double force_n = 0.5;       // 0.5 N RMS contact-force error weighs 1
+  double force_window_s = 0;  // forces compared as means over windows this long (0: per sample)
 };
 
 // One trial to fit: the scene the predictor runs (the campaign's model
@@ -74,6 +95,9 @@ struct CalibrationTrial {
   std::vector<mechanics::TrajectorySample> truth;
 };
 
+enum class BootstrapMethod { kRefit, kReuse };
+const char* ToString(BootstrapMethod m);  // "refit", "reuse"
+
 struct CalibrationOptions {
   std::vector<CalibrationParam> params;  // at least one, no repeats
   double lower = 0.2, upper = 5.0;       // bounds of every scale
@@ -83,7 +107,11 @@ struct CalibrationOptions {
   int bootstrap = 20;                    // resamples for the uncertainty (0: none)
   int threads = 1;                       // simulations in parallel
   LossScales scales;
+  BootstrapMethod bootstrap_method = BootstrapMethod::kRefit;
   std::function<void(const std::string&)> progress;  // optional, one line per stage
+  // Optional, after every loss evaluation of the main fit: its number (from
+  // 1), the budget (max_evaluations), its loss and the best so far.
+  std::function<void(int evaluation, int budget, double loss, double best)> on_evaluation;
 };
 
 struct FittedParam {
@@ -103,10 +131,13 @@ struct CalibrationResult {
   double heldout_position_before = 0, heldout_position_after = 0;
   double heldout_angle_before = 0, heldout_angle_after = 0;
   double heldout_force_before = 0, heldout_force_after = 0;
-  bool improved = false;  // heldout_after < heldout_before
-  int evaluations = 0;    // loss evaluations of the main fit
-  std::string optimizer;  // "LN_BOBYQA" / "LN_COBYLA"
-  std::string stop;       // NLopt's result
+  bool improved = false;         // heldout_after < heldout_before
+  int evaluations = 0;           // loss evaluations of the main fit
+  std::string optimizer;         // "LN_BOBYQA" / "LN_COBYLA"
+  std::string stop;              // NLopt's result
+  std::string bootstrap_method;  // "refit" / "reuse"
+  long simulations = 0;          // predictor runs, all stages (the memo's misses)
+  long models_reused = 0;        // of those, runs on a prepared model (Calibrate with a Simulator)
   std::map<std::string, double> Scales() const;
 };
 
@@ -116,13 +147,20 @@ struct TrialError {
   bool ok = true;  // false: the simulation failed (the loss then counts kFailedTrialLoss)
 };
 inline constexpr double kFailedTrialLoss = 1e4;
+// window_s: the force window (LossScales::force_window_s; 0: per sample).
 TrialError CompareTrajectories(const mechanics::Scene& scene,
                                const std::vector<mechanics::TrajectorySample>& predicted,
-                               const std::vector<mechanics::TrajectorySample>& truth);
+                               const std::vector<mechanics::TrajectorySample>& truth,
+                               double window_s = 0);
 double Loss(const TrialError& e, const LossScales& s);
 
 // @throws CalibrationError for bad options or fewer than 4 trials.
 CalibrationResult Calibrate(const std::vector<CalibrationTrial>& trials, const SimulateFn& simulate,
+                            const CalibrationOptions& options);
+// The same with `simulator`, each trial's scene prepared once
+// (Simulator::Prepare) and only its friction, grip force and mass changed.
+CalibrationResult Calibrate(const std::vector<CalibrationTrial>& trials,
+                            const simulators::Simulator& simulator,
                             const CalibrationOptions& options);
 
 // The done trials of a campaign with their ground truth, each scene with

@@ -71,12 +71,14 @@
 #include <array>
 #include <cstdint>
 #include <functional>
+#include <map>
 #include <memory>
 #include <optional>
 #include <stdexcept>
 #include <string>
 #include <vector>
 
+#include "arena/db/outcomes.hpp"
 #include "arena/db/sample.hpp"
 
 namespace arena::db {
@@ -508,6 +510,16 @@ class Store {
   // @throws kBadInput for bad fields (reasons/bases not one per trial, ...).
   bool PlanAdaptiveRound(std::int64_t campaign_id, const std::string& expected_state_json,
                          const AdaptiveRound& round);
+  // An adaptive campaign and its first round in ONE transaction (arena
+  // submit): the campaign row, then `plan_first(id)` -- called inside the
+  // transaction; it may read the store and sees the new campaign, but must
+  // not write -- whose round is written as PlanAdaptiveRound writes one. If
+  // plan_first or a write throws, nothing is stored; a crash leaves either
+  // nothing or the campaign with its round.
+  // @returns the campaign id. @throws kBadInput (campaign or round fields).
+  std::int64_t CreateAdaptiveCampaign(
+      const NewCampaign& campaign,
+      const std::function<AdaptiveRound(std::int64_t campaign_id)>& plan_first);
   std::vector<SamplerDecision> ListDecisions(std::int64_t campaign_id) const;
 
   // ---- calibrations (arena calibrate)
@@ -601,6 +613,12 @@ class Store {
   // The published stream of the trial, read in one snapshot.
   // @throws kNotFound when the trial has no published ground truth.
   GroundTruth ReadGroundTruth(std::int64_t trial_id) const;
+  // The outcomes stored with each published stream of the campaign's trials
+  // (contact_outcomes and gt_summary's net motion, computed at ingest from
+  // the samples: db/outcomes.hpp), by trial id, read in one snapshot. Only
+  // the stream a trial points at (its last published attempt); a trial
+  // without a stored outcome is absent.
+  std::map<std::int64_t, TrialOutcome> ReadTrialOutcomes(std::int64_t campaign_id) const;
 
   // ---- cells
   // A cell announced itself: insert or refresh it (capabilities, last_seen).

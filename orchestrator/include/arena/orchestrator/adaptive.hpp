@@ -34,6 +34,7 @@
 #include <array>
 #include <chrono>
 #include <cstdint>
+#include <functional>
 #include <map>
 #include <memory>
 #include <optional>
@@ -113,10 +114,13 @@ std::vector<ReplicateProposal> ProposeReplicates(const std::vector<ConditionOutc
 
 // ------------------------------------------------------------ the service's hook
 
-// Plans round 0 of a newly created adaptive campaign (SubmitCampaign).
-// @returns the number of trials planned.
-std::int64_t PlanFirstAdaptiveRound(db::Store& store, std::int64_t campaign_id,
-                                    const Campaign& campaign);
+// Stores a new adaptive campaign (`row`, sampler_open) and its round 0 (the
+// coarse batch, or min_replicates of every condition) in ONE transaction
+// (SubmitCampaign): a crash or an interrupt leaves nothing or both.
+// @returns the campaign id. @throws db::StoreError, SubmitInterrupted.
+std::int64_t CreateAdaptiveCampaign(db::Store& store, const db::NewCampaign& row,
+                                    const Campaign& campaign,
+                                    const std::function<bool()>& interrupted = {});
 
 // The adaptive samplers of every open campaign in one store. The service
 // calls Advance once per scheduling pass; it does its work at most every

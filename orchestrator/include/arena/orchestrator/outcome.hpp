@@ -1,12 +1,15 @@
 // A trial's outcome, computed from its ground truth by pure functions: what
-// the boundary sampler classifies and the replicates sampler measures.
-// (Until the store keeps per-contact outcomes itself, they are derived here
-// from the stored samples.)
+// the boundary sampler classifies and the replicates sampler measures. The
+// store keeps per-contact outcomes too (db/outcomes.hpp, computed at
+// ingest); FromStoredOutcome reads the boundary's inputs from them.
 #pragma once
 
 #include <array>
 #include <vector>
 
+#include <optional>
+
+#include "arena/db/outcomes.hpp"
 #include "arena/db/sample.hpp"
 #include "arena/mechanics/simulate.hpp"
 #include "arena/orchestrator/campaign.hpp"
@@ -26,6 +29,13 @@ struct TrialOutcome {
 // @param fingers: the scene's finger count (contacts after them, the pusher, are ignored).
 TrialOutcome ComputeOutcome(const std::vector<db::Sample>& samples, int fingers);
 TrialOutcome ComputeOutcome(const std::vector<mechanics::TrajectorySample>& samples, int fingers);
+
+// rotation (|net rotation|), displacement (|net translation|) and
+// finger_slide_fraction (the fingers' slide fractions averaged: each finger
+// has one mode per sample, so this is the pooled fraction) from a stored
+// outcome; nullopt without net motion or without a finger. final_position
+// and fingers_touching_at_end are not in it (left at their defaults).
+std::optional<TrialOutcome> FromStoredOutcome(const db::TrialOutcome& stored);
 
 // The class the boundary sampler looks at: pivoted: rotation > threshold;
 // finger_slip: finger_slide_fraction > threshold; grasp_kept: fingers

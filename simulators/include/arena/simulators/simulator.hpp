@@ -45,6 +45,24 @@ enum class TruthKind {
 };
 const char* ToString(TruthKind kind);
 
+// A scene built once and run again with other physical parameters: every
+// finger's and the pusher's friction coefficient, the grip force, the
+// object's mass (with its inertia scaled alike). Calibration evaluates the
+// same trial scenes many times with only these changed; an engine whose
+// model takes long to build (MuJoCo's XML compiler) patches its built model
+// instead. Any other difference in `variant` (geometry, pose, motion,
+// duration, an inertia not proportional to the mass) is run from scratch,
+// so the answer is always the variant's own. Not thread-safe: one caller at
+// a time per PreparedScene (each trial has its own).
+class PreparedScene {
+ public:
+  virtual ~PreparedScene() = default;
+  virtual mechanics::SimulationResult Simulate(const mechanics::Scene& variant) = 0;
+  // Runs that reused the built model / that had to build a new one.
+  virtual long reused() const = 0;
+  virtual long rebuilt() const = 0;
+};
+
 class Simulator {
  public:
   virtual ~Simulator() = default;
@@ -60,6 +78,9 @@ class Simulator {
   // Why this simulator cannot run the scene at all ("" = it can), e.g. a
   // shape it does not model. Cheap; a cell refuses such a scene up front.
   virtual std::string CheckScene(const mechanics::Scene& scene) const = 0;
+  // `scene` prepared for repeated runs with other friction, grip force and
+  // mass (PreparedScene). The default simulates every variant afresh.
+  virtual std::unique_ptr<PreparedScene> Prepare(const mechanics::Scene& scene) const;
 };
 
 // ---- arena: the contact model (mechanics) -------------------------------------------------
