@@ -85,7 +85,7 @@ Axis MakeAxis(Range r, bool log) {
     const double pad = log ? 0.5 : std::max(1e-9, std::fabs(a.hi) * 0.1 + 1e-9);
     a.lo -= pad;
     a.hi += pad;
-  } else if (!log) {
+  } else {  // linear or in decades: points and lines at the ends stay off the frame
     const double pad = 0.05 * (a.hi - a.lo);
     a.lo -= pad;
     a.hi += pad;
@@ -133,6 +133,12 @@ std::string RenderSvg(const Chart& chart) {
   const int plot_w = chart.width - left - right;
   const int n = static_cast<int>(chart.panels.size());
   const int height = top + n * chart.panel_height + (n - 1) * gap + bottom;
+  // The legend's longest entry widens the picture, never the plot (about 7 px
+  // per character at 12 px): a long series name is read whole, not clipped.
+  std::size_t longest = 0;
+  for (const auto& p : chart.panels)
+    for (const auto& s : p.series) longest = std::max(longest, s.name.size());
+  const int width = std::max(chart.width, left + plot_w + 48 + static_cast<int>(7 * longest));
 
   auto x_axis = [&](bool log, const Panel* only) {
     Range xr;
@@ -150,11 +156,11 @@ std::string RenderSvg(const Chart& chart) {
 
   std::ostringstream svg;
   svg << "<?xml version=\"1.0\" encoding=\"UTF-8\"?>\n"
-      << "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"" << chart.width << "\" height=\""
-      << height << "\" viewBox=\"0 0 " << chart.width << ' ' << height
+      << "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"" << width << "\" height=\"" << height
+      << "\" viewBox=\"0 0 " << width << ' ' << height
       << "\" font-family=\"sans-serif\" font-size=\"12\">\n"
       << "<rect width=\"100%\" height=\"100%\" fill=\"white\"/>\n"
-      << "<text x=\"" << chart.width / 2 << "\" y=\"22\" text-anchor=\"middle\" font-size=\"15\">"
+      << "<text x=\"" << width / 2 << "\" y=\"22\" text-anchor=\"middle\" font-size=\"15\">"
       << SvgEscape(chart.title) << "</text>\n";
 
   for (int pi = 0; pi < n; ++pi) {
