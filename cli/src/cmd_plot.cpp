@@ -175,9 +175,9 @@ Chart TradeoffChart(const nlohmann::json& report) {
   // The noise floor: the error no deterministic predictor can beat.
   const auto& floor = report.contains("noise_floor") ? report["noise_floor"] : nlohmann::json();
   if (floor.is_object() && UnitOf(metric) == "m" && !panel.series.empty()) {
-    // The floor's statistic matches the metric's (a p95 error against the p95 spread).
-    const bool p95 = metric.size() > 4 && metric.compare(metric.size() - 4, 4, "_p95") == 0;
-    const double f = floor["position_m"].value(p95 ? "p95" : "median", 0.0);
+    // The median spread, as the table's floor multiples and the 1.5floor
+    // budget use it ("within 1.5x the replicate spread on 95 % of trials").
+    const double f = floor["position_m"].value("median", 0.0);
     double lo = 0, hi = 0;
     for (const auto& se : panel.series)
       for (double x : se.x) {
@@ -185,10 +185,7 @@ Chart TradeoffChart(const nlohmann::json& report) {
         hi = std::max(hi, x);
       }
     if (f > 0 && lo > 0) {
-      Series line{std::string("noise floor (replicate spread, ") + (p95 ? "p95)" : "median)"),
-                  {lo, hi},
-                  {f, f},
-                  "#7f7f7f"};
+      Series line{"noise floor (median replicate spread)", {lo, hi}, {f, f}, "#7f7f7f"};
       line.dashed = true;
       panel.series.push_back(line);
     }

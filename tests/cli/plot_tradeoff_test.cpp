@@ -157,11 +157,11 @@ TEST(PlotTradeoff, OneLabelledCurvePerPredictorFailuresApartDurationPanel) {
   EXPECT_TRUE(chart.log_x);
   EXPECT_TRUE(chart.panels[0].log_y);
   const auto points = SeriesPoints(svg);
-  // The floor of the metric's statistic: p95 error against the p95 spread.
-  EXPECT_EQ(points.at("noise floor (replicate spread, p95)"), 2);
+  // The floor the table's multiples and the 1.5floor budget use: the median spread.
+  EXPECT_EQ(points.at("noise floor (median replicate spread)"), 2);
   for (const auto& se : chart.panels[0].series) {
     if (se.name.rfind("noise floor", 0) == 0) {
-      EXPECT_EQ(se.y, (std::vector<double>{5e-4, 5e-4}));
+      EXPECT_EQ(se.y, (std::vector<double>{2e-4, 2e-4}));
     }
   }
   EXPECT_EQ(points.at("arena g8_dt0.002 p95"), 4);  // 2 markers + 2 line points
