@@ -22,6 +22,7 @@ int main(int argc, char** argv) {
   AddServeCommand(app, &action);
   AddSimulateCommand(app, &action);
   AddCellCommand(app, &action);
+  AddControllerCommand(app, &action);
   AddQueryCommand(app, &action);
   AddExportCommand(app, &action);
   AddEvaluateCommand(app, &action);

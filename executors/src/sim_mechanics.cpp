@@ -9,6 +9,10 @@ MechanicsBackend DefaultMechanics() {
   MechanicsBackend backend;
   backend.parse = [](std::string_view text) { return mechanics::ParseScene(text); };
   backend.simulate = [](const mechanics::Scene& scene) { return mechanics::Simulate(scene); };
+  backend.simulate_closed_loop = [](const mechanics::Scene& scene,
+                                    const mechanics::PusherCommandSource& commands) {
+    return mechanics::Simulate(scene, commands);
+  };
   return backend;
 }
 

@@ -388,7 +388,8 @@ struct LoadedTrial {
   std::int64_t id = -1;
   mechanics::Scene scene;
   std::vector<mechanics::TrajectorySample> truth;
-  std::string error;  // non-empty: the trial could not be loaded
+  RecordedCommands commands;  // closed loop: replayed (issue 19); empty otherwise
+  std::string error;          // non-empty: the trial could not be loaded
 };
 
 LoadedTrial LoadTrial(const db::Store& store, const db::Trial& t) {
@@ -402,6 +403,7 @@ LoadedTrial LoadTrial(const db::Store& store, const db::Trial& t) {
     for (const auto& s : gt.samples) {
       out.truth.push_back(ToTrajectorySample(s, normals, out.scene.pusher.has_value()));
     }
+    if (auto run = store.GetClosedLoop(t.id)) out.commands = CommandsOf(*run);
   } catch (const std::exception& e) {
     out.error = e.what();
   }
@@ -462,7 +464,8 @@ EvaluationRun EvaluateCampaign(db::Store& store, std::int64_t campaign_id,
             mechanics::Scene scene = loaded.scene;
             scene.model = models[setting];
             mechanics::ValidateScene(scene);
-            r.prediction = PredictTrial(scene, loaded.truth);
+            r.prediction = PredictTrial(scene, loaded.truth,
+                                        loaded.commands.empty() ? nullptr : &loaded.commands);
           } catch (const std::exception& e) {
             r.prediction = PredictionFailure("invalid_scene", e.what());
           }

@@ -63,6 +63,26 @@ db::Prediction PredictionFailure(const std::string& status, const std::string& r
 
 db::Prediction PredictTrial(const mechanics::Scene& scene,
                             const std::vector<mechanics::TrajectorySample>& truth) {
+  return PredictTrial(scene, truth, nullptr);
+}
+
+RecordedCommands CommandsOf(const db::ClosedLoopRun& run) {
+  RecordedCommands out;
+  for (const auto& c : run.commands) {
+    if (c.sample < 0) continue;
+    if (static_cast<std::size_t>(c.sample) >= out.size()) out.resize(c.sample + 1);
+    out[c.sample].velocity = {c.commanded[0], c.commanded[1], c.commanded[2]};
+  }
+  return out;
+}
+
+db::Prediction PredictTrial(const mechanics::Scene& scene,
+                            const std::vector<mechanics::TrajectorySample>& truth,
+                            const RecordedCommands* commands) {
+  const bool closed_loop = scene.pusher && scene.pusher->controller;
+  if (closed_loop && (commands == nullptr || commands->empty())) {
+    return PredictionFailure("error", "closed-loop trial without recorded pusher commands");
+  }
   db::Prediction p;
   p.model_key = ModelKey(scene.model);
   p.model_json = nlohmann::json({{"facets", scene.model.facets},
@@ -71,7 +91,20 @@ db::Prediction PredictTrial(const mechanics::Scene& scene,
                                  {"reduce", mechanics::ToString(scene.model.reduce)}})
                      .dump();
   const auto start = std::chrono::steady_clock::now();
-  const mechanics::SimulationResult result = mechanics::Simulate(scene);
+  const mechanics::SimulationResult result =
+      closed_loop
+          ? mechanics::Simulate(scene,
+                                [commands](const std::vector<mechanics::TrajectorySample>& samples,
+                                           std::string* why) -> std::optional<mechanics::PusherMotion> {
+                                  const std::size_t k = samples.size() - 1;
+                                  if (k >= commands->size()) {
+                                    *why = "the recorded commands end at sample " +
+                                           std::to_string(commands->size());
+                                    return std::nullopt;
+                                  }
+                                  return (*commands)[k];
+                                })
+          : mechanics::Simulate(scene);
   p.wall_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   nlohmann::json detail = {{"residuals",
                             {{"force_balance", result.residuals.force_balance},
@@ -83,6 +116,7 @@ db::Prediction PredictTrial(const mechanics::Scene& scene,
                              {"failures", result.solver.failures}}},
                            {"unknowns", result.model.unknowns},
                            {"dof", result.model.dof}};
+  if (closed_loop) detail["replayed_commands"] = commands->size();
   switch (result.status) {
     case mechanics::SimulationStatus::kOk:
       break;

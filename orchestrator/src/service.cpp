@@ -21,6 +21,7 @@
 #include "arena/db/store.hpp"
 #include "arena/mechanics/scene_json.hpp"
 #include "arena/mechanics/simulate.hpp"
+#include "arena/orchestrator/closed_loop.hpp"
 #include "arena/orchestrator/logging.hpp"
 #include "arena/orchestrator/prediction.hpp"
 #include "arena/orchestrator/scoring.hpp"
@@ -73,6 +74,7 @@ struct PredictionJob {
   std::int64_t campaign_id = 0;
   mechanics::Scene scene;  // with the campaign's model settings applied
   std::vector<mechanics::TrajectorySample> truth;
+  RecordedCommands commands;  // closed loop: replayed through the model; empty otherwise
 };
 
 struct PredictionDone {
@@ -128,8 +130,9 @@ class PredictorPool {
         job = std::move(jobs_.front());
         jobs_.pop_front();
       }
-      PredictionDone done{job.trial_id, job.attempt, job.campaign_id,
-                          PredictTrial(job.scene, job.truth)};
+      PredictionDone done{
+          job.trial_id, job.attempt, job.campaign_id,
+          PredictTrial(job.scene, job.truth, job.commands.empty() ? nullptr : &job.commands)};
       std::lock_guard lock(mu_);
       results_.push_back(std::move(done));
     }
@@ -199,6 +202,7 @@ struct Service::Impl {
     std::int64_t expected = -1;           // samples the cell says it sent; -1 before EXECUTED
     Clock::time_point stream_deadline{};  // after EXECUTED, for missing batches
     std::vector<mechanics::TrajectorySample> truth;
+    RecordedCommands commands;  // closed loop: the commands the cell applied
   };
   std::map<std::int64_t, Execution> executions;
 
@@ -278,6 +282,7 @@ struct Service::Impl {
           t.id, t.attempt, t.campaign_id, ScenesForPrediction(scene, t.campaign_id), {}};
       for (const auto& s : gt.samples)
         job.truth.push_back(ToTrajectorySample(s, normals, scene.pusher.has_value()));
+      if (auto run = store->GetClosedLoop(t.id)) job.commands = CommandsOf(*run);
       predictor.Submit(std::move(job));
     } catch (const std::exception& e) {
       if (StoreFailed(e)) throw;
@@ -559,7 +564,8 @@ struct Service::Impl {
       spdlog::info("{}: executed, {} samples stored", tag, n);
       CellResult(cell, true, "");
       PredictionJob job{ex.trial_id, ex.attempt, ex.campaign_id,
-                        ScenesForPrediction(ex.scene, ex.campaign_id), std::move(ex.truth)};
+                        ScenesForPrediction(ex.scene, ex.campaign_id), std::move(ex.truth),
+                        std::move(ex.commands)};
       predictor.Submit(std::move(job));
       // Aim the reset at the start of the trial this cell will most likely run next.
       std::optional<db::ClaimedTrial> next = store->PeekNextTrial(cell.id);
@@ -584,6 +590,24 @@ struct Service::Impl {
     }
   }
 
+  // Closed loop (issue 19): the commands the cell applied and the
+  // controller's outcome, stored with the attempt; the commands also go to
+  // the prediction (replayed through the model).
+  void RecordClosedLoop(Execution& ex, const msg::TrialStatus& st) {
+    const std::string tag = TrialTag(ex.campaign_id, ex.trial_id, ex.attempt);
+    try {
+      auto run = ClosedLoopFromDetail(ex.trial_id, ex.attempt, st.reason(), st.detail_json());
+      if (!run) return;
+      store->RecordClosedLoop(*run);
+      ex.commands = CommandsOf(*run);
+    } catch (const db::StoreError& e) {
+      if (StoreFailed(e)) throw;
+      spdlog::error("{}: closed-loop record: {}", tag, e.what());
+    } catch (const std::exception& e) {
+      spdlog::error("{}: closed-loop record: {}", tag, e.what());
+    }
+  }
+
   // ------------------------------------------------------------ statuses
   void OnStatus(const msg::TrialStatus& st) {
     const std::string id = st.cell_id();
@@ -603,6 +627,7 @@ struct Service::Impl {
         case msg::STATE_ACCEPTED:
           break;
         case msg::STATE_EXECUTED:
+          RecordClosedLoop(ex, st);
           cell.execute_wall_s = st.phase_wall_s();
           ex.expected = st.samples();
           ex.stream_deadline = After(opt.stream_grace_s);
@@ -617,6 +642,7 @@ struct Service::Impl {
           break;
         }
         default:
+          RecordClosedLoop(ex, st);
           if (st.reason().rfind("simulation:", 0) == 0) {
             // A simulated cell's model could not run this scene. The cell is
             // fine and a re-run is bit-identical, so the trial fails at once.

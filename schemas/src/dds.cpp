@@ -161,6 +161,16 @@ struct Traits<msg::GroundTruth> {
   using PubSub = msg::GroundTruthPubSubType;
   static constexpr const char* kTopic = "GroundTruth";
 };
+template <>
+struct Traits<msg::LiveState> {
+  using PubSub = msg::LiveStatePubSubType;
+  static constexpr const char* kTopic = "LiveState";
+};
+template <>
+struct Traits<msg::PusherCommand> {
+  using PubSub = msg::PusherCommandPubSubType;
+  static constexpr const char* kTopic = "PusherCommand";
+};
 
 template <class T>
 const char* TopicName() {
@@ -171,6 +181,10 @@ const char* TopicName() {
 // QoS per topic
 
 namespace {
+
+bool IsRealTime(const std::string& topic) {
+  return topic == "LiveState" || topic == "PusherCommand";
+}
 
 void ApplyTopicQos(const std::string& topic, fdds::ReliabilityQosPolicy* reliability,
                    fdds::DurabilityQosPolicy* durability, fdds::HistoryQosPolicy* history,
@@ -194,10 +208,18 @@ void ApplyTopicQos(const std::string& topic, fdds::ReliabilityQosPolicy* reliabi
     history->kind = fdds::KEEP_LAST_HISTORY_QOS;
     history->depth = 1;
   }
+  if (IsRealTime(topic)) {
+    // Telemetry: the newest sample per cell is all that matters; nothing is
+    // acknowledged, so nothing ever waits (the reliable log's tail, see
+    // bench/README.md, was its acknowledgement window).
+    reliability->kind = fdds::BEST_EFFORT_RELIABILITY_QOS;
+    history->kind = fdds::KEEP_LAST_HISTORY_QOS;
+    history->depth = 1;
+  }
 }
 
-// Topics that cells write: their writers assert liveliness, their readers
-// track it.
+// Topics that cells (and controllers) write: their writers assert
+// liveliness, their readers track it.
 bool CellWritten(const std::string& topic) { return topic != "TrialCommand"; }
 
 std::string Describe(const fdds::ReliabilityQosPolicy& r, const fdds::DurabilityQosPolicy& d,
@@ -454,6 +476,8 @@ Participant::Participant(const ParticipantOptions& options)
   Register<msg::TrialCommand>(core_->participant);
   Register<msg::TrialStatus>(core_->participant);
   Register<msg::GroundTruth>(core_->participant);
+  Register<msg::LiveState>(core_->participant);
+  Register<msg::PusherCommand>(core_->participant);
   core_->publisher = core_->participant->create_publisher(fdds::PUBLISHER_QOS_DEFAULT);
   if (core_->publisher == nullptr) throw DdsError("dds: create_publisher failed");
   core_->subscriber = core_->participant->create_subscriber(fdds::SUBSCRIBER_QOS_DEFAULT);
@@ -551,6 +575,10 @@ Writer<T>::Writer(Participant& participant, const WriterOptions& options)
     qos.liveliness().kind = fdds::AUTOMATIC_LIVELINESS_QOS;
     qos.liveliness().lease_duration = Duration_t(kCellLivelinessLease_s);
     qos.liveliness().announcement_period = Duration_t(kCellLivelinessLease_s / 4.0);
+  }
+  if (IsRealTime(topic)) {
+    qos.deadline().period = Duration_t(kLiveDeadline_s);
+    qos.reliability().max_blocking_time = Duration_t(0, 0);
   }
   if (topic == "GroundTruth") {
     impl_->window = kGroundTruthMaxBatches / 4;
@@ -680,6 +708,7 @@ Reader<T>::Reader(Participant& participant, const ReaderOptions& options)
   qos.liveliness().kind = fdds::AUTOMATIC_LIVELINESS_QOS;
   qos.liveliness().lease_duration =
       CellWritten(topic) ? Duration_t(kCellLivelinessLease_s) : eprosima::fastrtps::c_TimeInfinite;
+  if (IsRealTime(topic)) qos.deadline().period = Duration_t(kLiveDeadline_s);
   fdds::StatusMask mask = fdds::StatusMask::data_available();
   mask << fdds::StatusMask::liveliness_changed();
   impl_->reader = core.subscriber->create_datareader(t, qos, impl_.get(), mask);
@@ -738,6 +767,8 @@ ARENA_DDS_INSTANTIATE(msg::CellAnnounce)
 ARENA_DDS_INSTANTIATE(msg::TrialCommand)
 ARENA_DDS_INSTANTIATE(msg::TrialStatus)
 ARENA_DDS_INSTANTIATE(msg::GroundTruth)
+ARENA_DDS_INSTANTIATE(msg::LiveState)
+ARENA_DDS_INSTANTIATE(msg::PusherCommand)
 #undef ARENA_DDS_INSTANTIATE
 
 }  // namespace arena::dds

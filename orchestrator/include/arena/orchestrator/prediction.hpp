@@ -28,6 +28,17 @@ db::Prediction PredictTrial(const mechanics::Scene& scene,
                             const std::vector<mechanics::TrajectorySample>& truth);
 
 // A prediction that could not be made (status, reason in detail_json).
+// Closed loop (issue 19): the pusher commands a closed-loop trial applied,
+// indexed by the sample they answered (ClosedLoopCommand.commanded).
+using RecordedCommands = std::vector<mechanics::PusherMotion>;
+RecordedCommands CommandsOf(const db::ClosedLoopRun& run);
+// A closed-loop scene (pusher.controller set) is predicted by replaying its
+// recorded commands open-loop through the model: command k moves the pusher
+// from the step after sample k, exactly as on the cell. Without commands a
+// closed-loop scene's prediction is status "error".
+db::Prediction PredictTrial(const mechanics::Scene& scene,
+                            const std::vector<mechanics::TrajectorySample>& truth,
+                            const RecordedCommands* commands);
 db::Prediction PredictionFailure(const std::string& status, const std::string& reason);
 
 }  // namespace arena::orchestrator

@@ -4,8 +4,9 @@
 //   participant  one Fast DDS DomainParticipant per process, named
 //                "arena.<role>.<id>" (e.g. "arena.cell.c1", "arena.service");
 //                the name is how peers recognise each other in discovery.
-//   topic        one of CellAnnounce, TrialCommand, TrialStatus, GroundTruth
-//                (schemas/arena.idl); one type per topic, same name.
+//   topic        one of CellAnnounce, TrialCommand, TrialStatus, GroundTruth,
+//                LiveState, PusherCommand (schemas/arena.idl); one type per
+//                topic, same name.
 //
 // QoS (DESIGN.md, section DDS) and why
 //   CellAnnounce  reliable, transient-local, keep-last 1 per cell: a service
@@ -21,6 +22,14 @@
 //                 It is a log, not telemetry: a full history blocks the writer
 //                 (Write returns false after max_blocking_time) instead of
 //                 dropping a sample.
+//   LiveState     best-effort, keep-last 1 per cell, volatile, deadline one
+//                 sample period (kLiveDeadline_s): what a controller or a
+//                 watcher needs now. Nothing is acknowledged, so a write never
+//                 waits; the reliable GroundTruth log beside it is unchanged.
+//   PusherCommand best-effort, keep-last 1 per cell, volatile, deadline one
+//                 period: a controller's answer to a LiveState sample; the
+//                 next answer supersedes a lost one (the cell holds the last
+//                 command a bounded time, executors/README.md).
 //   Cell topics   (CellAnnounce, TrialStatus, GroundTruth) writers assert
 //                 automatic liveliness with lease kCellLivelinessLease_s and
 //                 readers request it: a reader sees a dead cell within that
@@ -86,6 +95,8 @@ class DdsError : public std::runtime_error {
 inline constexpr double kCellLivelinessLease_s = 1.0;
 inline constexpr int kGroundTruthMaxBatches = 256;  // unacknowledged batches at most
 inline constexpr double kGroundTruthHeartbeat_s = 0.05;
+// One sample period at 250 Hz: the deadline of the real-time topics.
+inline constexpr double kLiveDeadline_s = 0.004;
 
 struct NetworkOptions {
   // "host" or "host:port" (the peer's metatraffic unicast port; without one,
@@ -167,7 +178,7 @@ struct WriterOptions {
   double max_blocking_s = 1.0;
 };
 
-// A typed DataWriter on the topic of T (one of the four arena::msg types).
+// A typed DataWriter on the topic of T (one of the six arena::msg types).
 template <class T>
 class Writer {
  public:
