@@ -113,7 +113,7 @@ arena::msg::GroundTruth MakeBatch(std::uint64_t trial, std::uint32_t index, int 
 struct Result {
   double seconds = 0;
   std::uint64_t expected = 0, received = 0, out_of_order = 0;  // the reliable log
-  std::vector<double> latency_ms;  // log batches; live rows: live samples
+  std::vector<double> latency_ms;                  // log batches; live rows: live samples
   std::uint64_t live_sent = 0, live_received = 0;  // live rows
   std::vector<double> loop_ms;  // control rows: live sample written -> its command at the cell
 };
@@ -194,7 +194,6 @@ Result StreamHere(int cells, int batches, int samples, std::chrono::microseconds
   r.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   return r;
 }
-
 
 arena::msg::LiveState MakeLive(int cell, std::uint32_t sample, bool closed_loop) {
   arena::msg::LiveState m;
@@ -283,7 +282,8 @@ Result LiveHere(int cells, double seconds, bool secure, bool control) {
   std::mutex loop_mutex;
   std::thread log_consumer([&] {
     std::vector<std::uint32_t> next(static_cast<size_t>(cells), 0);
-    const auto give_up = std::chrono::steady_clock::now() + std::chrono::duration<double>(seconds) + 15s;
+    const auto give_up =
+        std::chrono::steady_clock::now() + std::chrono::duration<double>(seconds) + 15s;
     while (r.received < r.expected && std::chrono::steady_clock::now() < give_up) {
       auto g = log_reader.Take(100ms);
       if (!g) continue;

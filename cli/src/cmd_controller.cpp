@@ -115,8 +115,7 @@ void AddControllerCommand(CLI::App& app, Action* action) {
       "A scene whose pusher motion is {\"controller\": NAME, ...} is driven by the controller\n"
       "registered under NAME (docs/closed_loop.md). Laws: pivot_to_angle, sliding_to_position.\n"
       "Stops cleanly on SIGINT/SIGTERM (exit 0).");
-  cmd->add_option("--name", opt->host.name, "Name scenes use to pick this controller")
-      ->required();
+  cmd->add_option("--name", opt->host.name, "Name scenes use to pick this controller")->required();
   cmd->add_option("--domain", opt->host.domain_id, "DDS domain id (0..232)")->required();
   cmd->add_option("--law", opt->law, "Library law to run (default: the name)");
   cmd->add_option("--peers", opt->peers, "Reach other hosts: initial peers host[:port],...");

@@ -207,8 +207,9 @@ int Run(RunOptions opt) {
   if (const auto name = CampaignController(campaign)) {
     const auto laws = executors::LibraryLaws();
     if (std::find(laws.begin(), laws.end(), *name) != laws.end()) {
-      std::vector<std::string> argv = {self,       "controller", "--name",
-                                       *name,      "--domain",   std::to_string(opt.domain),
+      std::vector<std::string> argv = {self,           "controller",
+                                       "--name",       *name,
+                                       "--domain",     std::to_string(opt.domain),
                                        "--parent-pid", std::to_string(getpid())};
       if (!opt.security_lab.empty())
         argv.insert(argv.end(), {"--security", identity("controller")});

@@ -59,8 +59,8 @@ std::string Readout(const msg::LiveState& live, std::uint64_t seen) {
     n += std::snprintf(buf + n, sizeof buf - n, " %6.2f", c.normal_force);
   }
   if (live.closed_loop() && n < static_cast<int>(sizeof buf) - 64)
-    n += std::snprintf(buf + n, sizeof buf - n, "  %s: pusher %.1f mm/s",
-                       live.controller().c_str(), pusher.velocity.norm() * 1e3);
+    n += std::snprintf(buf + n, sizeof buf - n, "  %s: pusher %.1f mm/s", live.controller().c_str(),
+                       pusher.velocity.norm() * 1e3);
   if (n < static_cast<int>(sizeof buf) - 48)
     std::snprintf(buf + n, sizeof buf - n, "  sample %u (live %llu)", live.sample(),
                   static_cast<unsigned long long>(seen));
@@ -150,8 +150,7 @@ int RunWatch(const WatchOptions& o) {
     }
     bool complete = false;
     for (auto b = log->Take(Millis0()); b; b = log->Take(Millis0())) {
-      if (!mine(b->cell_id(), b->trial_id()) || (attempt != 0 && b->attempt() != attempt))
-        continue;
+      if (!mine(b->cell_id(), b->trial_id()) || (attempt != 0 && b->attempt() != attempt)) continue;
       arrived = true;
       logged += b->samples().size();
       complete = complete || b->last();
@@ -175,11 +174,11 @@ int RunWatch(const WatchOptions& o) {
                 " within " + std::to_string(static_cast<int>(o.timeout_s)) +
                 " s: is it running (`arena status`), and is --domain the one `arena serve` uses? "
                 "(a trial that already ended is in the store: `arena plot`)");
-      throw CommandError(kExitCommunication,
-                         what + ": the trial stopped after " + std::to_string(seen) +
-                             " live samples (nothing for " +
-                             std::to_string(static_cast<int>(o.timeout_s)) +
-                             " s): did the cell die? see `arena status`");
+      throw CommandError(kExitCommunication, what + ": the trial stopped after " +
+                                                 std::to_string(seen) +
+                                                 " live samples (nothing for " +
+                                                 std::to_string(static_cast<int>(o.timeout_s)) +
+                                                 " s): did the cell die? see `arena status`");
     }
   }
   if (tty) std::fputc('\n', stdout);

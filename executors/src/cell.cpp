@@ -94,8 +94,8 @@ struct Cell::Impl {
   dds::Writer<msg::TrialStatus> status;
   dds::Writer<msg::GroundTruth> ground_truth;
   dds::Reader<msg::TrialCommand> commands;
-  dds::Writer<msg::LiveState> live;                   // one message per sample, best-effort
-  dds::Reader<msg::PusherCommand> pusher_commands;    // closed loop: the controllers' answers
+  dds::Writer<msg::LiveState> live;                 // one message per sample, best-effort
+  dds::Reader<msg::PusherCommand> pusher_commands;  // closed loop: the controllers' answers
 
   std::mutex mutex;
   std::condition_variable wake;
@@ -363,11 +363,11 @@ struct Cell::Impl {
   static constexpr double kControllerWait_s = 5.0;
 
   struct AppliedCommand {
-    std::uint32_t sample = 0;   // the sample it answered (applied from the next step)
-    double t = 0;               // s, that sample's time
+    std::uint32_t sample = 0;  // the sample it answered (applied from the next step)
+    double t = 0;              // s, that sample's time
     Eigen::Vector3d commanded = Eigen::Vector3d::Zero();  // m/s, as the controller sent it
     Eigen::Vector3d applied = Eigen::Vector3d::Zero();    // m/s, with the actuation noise
-    double loop_ms = -1;        // live sample written -> command accepted (wall), -1: held
+    double loop_ms = -1;  // live sample written -> command accepted (wall), -1: held
   };
 
   struct ClosedLoop {
@@ -392,12 +392,12 @@ struct Cell::Impl {
     std::optional<msg::PusherCommand> newest;
     for (;;) {
       const auto now = Clock::now();
-      const auto wait = until > now ? std::chrono::duration_cast<dds::Millis>(until - now)
-                                    : dds::Millis(0);
+      const auto wait =
+          until > now ? std::chrono::duration_cast<dds::Millis>(until - now) : dds::Millis(0);
       auto m = pusher_commands.Take(std::max(wait, dds::Millis(exact ? 1 : 0)));
       if (m && m->cell_id() == options.id && m->trial_id() == loop.command.trial_id() &&
-          m->attempt() == loop.command.attempt() &&
-          m->controller() == loop.context.spec.name && m->answers_sample() <= k) {
+          m->attempt() == loop.command.attempt() && m->controller() == loop.context.spec.name &&
+          m->answers_sample() <= k) {
         if (!newest || m->answers_sample() >= newest->answers_sample()) newest = std::move(*m);
         if (exact && newest->answers_sample() == k) return newest;
       }
@@ -407,8 +407,7 @@ struct Cell::Impl {
 
   // Called by the simulation after every sample: publish it, get its answer.
   std::optional<mechanics::PusherMotion> NextCommand(
-      ClosedLoop& loop, const std::vector<mechanics::TrajectorySample>& samples,
-      std::string* why) {
+      ClosedLoop& loop, const std::vector<mechanics::TrajectorySample>& samples, std::string* why) {
     const auto k = static_cast<std::uint32_t>(samples.size() - 1);
     const mechanics::TrajectorySample& truth = samples.back();
     const auto& spec = loop.context.spec;
@@ -441,8 +440,8 @@ struct Cell::Impl {
       }
     }
     PublishLive(loop.command, k, k + 1 == loop.expected_samples, encoded, spec.name, loop.params);
-    const auto hold = std::chrono::duration_cast<Clock::duration>(
-        std::chrono::duration<double>(spec.hold_s));
+    const auto hold =
+        std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(spec.hold_s));
     std::optional<msg::PusherCommand> answer;
     if (lockstep) {
       answer = AwaitCommand(loop, k, true, Clock::now() + hold);
@@ -476,10 +475,9 @@ struct Cell::Impl {
       }
       record.commanded = v;
       // Actuation noise (defects.hpp) on a moving pusher: v (1 + s) + o.
-      loop.in_force.velocity =
-          v.norm() > 0 ? Eigen::Vector3d(v * loop.perturbation.velocity_scale +
-                                         loop.perturbation.velocity_offset)
-                       : Eigen::Vector3d::Zero();
+      loop.in_force.velocity = v.norm() > 0 ? Eigen::Vector3d(v * loop.perturbation.velocity_scale +
+                                                              loop.perturbation.velocity_offset)
+                                            : Eigen::Vector3d::Zero();
       loop.in_force.angular_velocity = w;
       loop.last_command_at = now;
     } else if (now - loop.last_command_at > hold) {
@@ -487,8 +485,8 @@ struct Cell::Impl {
              " s (hold time) after sample " + std::to_string(k) + "; pusher stopped";
       return Stop(loop, record);
     } else {
-      record.commanded = loop.applied.empty() ? Eigen::Vector3d::Zero()
-                                              : loop.applied.back().commanded;
+      record.commanded =
+          loop.applied.empty() ? Eigen::Vector3d::Zero() : loop.applied.back().commanded;
     }
     record.applied = loop.in_force.velocity;
     loop.applied.push_back(record);
@@ -514,8 +512,13 @@ struct Cell::Impl {
     actual.model.facets = std::max(actual.model.facets, options.fidelity.facets);
     actual.model.points = std::max(actual.model.points, options.fidelity.points);
     actual.model.dt = std::min(actual.model.dt, options.fidelity.dt);
-    ClosedLoop loop{c, actual, perturbation, MakeControlContext(scene, options.defects.max_pusher_speed),
-                    "", Clock::now(), DeadlineOf(c, started)};
+    ClosedLoop loop{c,
+                    actual,
+                    perturbation,
+                    MakeControlContext(scene, options.defects.max_pusher_speed),
+                    "",
+                    Clock::now(),
+                    DeadlineOf(c, started)};
     loop.params = ControlContextToJson(loop.context);
     loop.expected_samples =
         static_cast<std::size_t>(std::floor(scene.duration * mechanics::kSampleRateHz + 1e-9)) + 1;
@@ -607,42 +610,41 @@ struct Cell::Impl {
     if (outcome.scored) {
       score = {{"reached", outcome.reached},
                {"final_error", outcome.final_error},
-               {"settle_time_s", outcome.settle_time_s < 0 ? json(nullptr)
-                                                           : json(outcome.settle_time_s)}};
+               {"settle_time_s",
+                outcome.settle_time_s < 0 ? json(nullptr) : json(outcome.settle_time_s)}};
     }
-    return {{"mu_scale", loop.perturbation.mu_scale},
-            {"velocity_scale", loop.perturbation.velocity_scale},
-            {"velocity_offset",
-             {loop.perturbation.velocity_offset.x(), loop.perturbation.velocity_offset.y(),
-              loop.perturbation.velocity_offset.z()}},
-            {"batches", streamed.batches},
-            {"model",
-             {{"dof", result.model.dof},
-              {"facets", result.model.facets},
-              {"points", result.model.points},
-              {"dt", result.model.dt},
-              {"unknowns", result.model.unknowns}}},
-            {"solver",
-             {{"steps", result.solver.steps},
-              {"max_pivots", result.solver.max_pivots},
-              {"failures", result.solver.failures}}},
-            {"simulate_wall_s", result.wall_s},
-            {"closed_loop",
-             {{"controller", loop.context.spec.name},
-              {"lockstep", options.speed == 0},
-              {"context", json::parse(loop.params)},
-              {"commands_columns",
-               {"sample", "t", "vx", "vy", "vz", "applied_vx", "applied_vy", "applied_vz",
-                "loop_ms"}},
-              {"commands", commands},
-              {"held", held},
-              {"loop_ms", {{"p50", pct(0.5)}, {"p99", pct(0.99)}, {"max", pct(1.0)}}},
-              {"outcome", score}}}};
+    return {
+        {"mu_scale", loop.perturbation.mu_scale},
+        {"velocity_scale", loop.perturbation.velocity_scale},
+        {"velocity_offset",
+         {loop.perturbation.velocity_offset.x(), loop.perturbation.velocity_offset.y(),
+          loop.perturbation.velocity_offset.z()}},
+        {"batches", streamed.batches},
+        {"model",
+         {{"dof", result.model.dof},
+          {"facets", result.model.facets},
+          {"points", result.model.points},
+          {"dt", result.model.dt},
+          {"unknowns", result.model.unknowns}}},
+        {"solver",
+         {{"steps", result.solver.steps},
+          {"max_pivots", result.solver.max_pivots},
+          {"failures", result.solver.failures}}},
+        {"simulate_wall_s", result.wall_s},
+        {"closed_loop",
+         {{"controller", loop.context.spec.name},
+          {"lockstep", options.speed == 0},
+          {"context", json::parse(loop.params)},
+          {"commands_columns",
+           {"sample", "t", "vx", "vy", "vz", "applied_vx", "applied_vy", "applied_vz", "loop_ms"}},
+          {"commands", commands},
+          {"held", held},
+          {"loop_ms", {{"p50", pct(0.5)}, {"p99", pct(0.99)}, {"max", pct(1.0)}}},
+          {"outcome", score}}}};
   }
 
   // ---------------------------------------------------------------------
   // Streaming: the reliable GroundTruth log, and the LiveState topic beside it.
-
 
   Clock::time_point DeadlineOf(const msg::TrialCommand& c, Clock::time_point started) const {
     return c.deadline_s() > 0 ? started + std::chrono::duration_cast<Clock::duration>(

@@ -272,8 +272,7 @@ ControllerCounters RunController(const ControllerHostOptions& o, const Controlle
     c.answers_sample(state->sample());
     c.controller(o.name);
     c.velocity() = {m.velocity.x(), m.velocity.y(), m.velocity.z()};
-    c.angular_velocity() = {m.angular_velocity.x(), m.angular_velocity.y(),
-                            m.angular_velocity.z()};
+    c.angular_velocity() = {m.angular_velocity.x(), m.angular_velocity.y(), m.angular_velocity.z()};
     c.done(run.controller->Done());
     c.state_sent_unix_ns(state->sent_unix_ns());
     c.sent_unix_ns(UnixNanos());

@@ -124,9 +124,9 @@ SimulationResult Simulate(const Scene& scene, const PusherCommandSource& command
         sample.velocity = model.velocity();
         sample.angular_velocity = model.angular_velocity();
       }
-      sample.pusher_position = closed_loop ? Eigen::Vector3d(model.pusher_position() -
-                                                             command_v * (t1 - ts))
-                                           : Eigen::Vector3d(pusher0 + pusher_v * ts);
+      sample.pusher_position =
+          closed_loop ? Eigen::Vector3d(model.pusher_position() - command_v * (t1 - ts))
+                      : Eigen::Vector3d(pusher0 + pusher_v * ts);
       sample.pusher_force = model.pusher_force();
       sample.contacts = model.contacts();
       result.samples.push_back(std::move(sample));

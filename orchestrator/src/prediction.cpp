@@ -92,19 +92,19 @@ db::Prediction PredictTrial(const mechanics::Scene& scene,
                      .dump();
   const auto start = std::chrono::steady_clock::now();
   const mechanics::SimulationResult result =
-      closed_loop
-          ? mechanics::Simulate(scene,
-                                [commands](const std::vector<mechanics::TrajectorySample>& samples,
-                                           std::string* why) -> std::optional<mechanics::PusherMotion> {
-                                  const std::size_t k = samples.size() - 1;
-                                  if (k >= commands->size()) {
-                                    *why = "the recorded commands end at sample " +
-                                           std::to_string(commands->size());
-                                    return std::nullopt;
-                                  }
-                                  return (*commands)[k];
-                                })
-          : mechanics::Simulate(scene);
+      closed_loop ? mechanics::Simulate(
+                        scene,
+                        [commands](const std::vector<mechanics::TrajectorySample>& samples,
+                                   std::string* why) -> std::optional<mechanics::PusherMotion> {
+                          const std::size_t k = samples.size() - 1;
+                          if (k >= commands->size()) {
+                            *why = "the recorded commands end at sample " +
+                                   std::to_string(commands->size());
+                            return std::nullopt;
+                          }
+                          return (*commands)[k];
+                        })
+                  : mechanics::Simulate(scene);
   p.wall_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   nlohmann::json detail = {{"residuals",
                             {{"force_balance", result.residuals.force_balance},

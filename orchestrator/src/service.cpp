@@ -563,9 +563,9 @@ struct Service::Impl {
       Count(&ServiceCounters::executed);
       spdlog::info("{}: executed, {} samples stored", tag, n);
       CellResult(cell, true, "");
-      PredictionJob job{ex.trial_id, ex.attempt, ex.campaign_id,
-                        ScenesForPrediction(ex.scene, ex.campaign_id), std::move(ex.truth),
-                        std::move(ex.commands)};
+      PredictionJob job{ex.trial_id,         ex.attempt,
+                        ex.campaign_id,      ScenesForPrediction(ex.scene, ex.campaign_id),
+                        std::move(ex.truth), std::move(ex.commands)};
       predictor.Submit(std::move(job));
       // Aim the reset at the start of the trial this cell will most likely run next.
       std::optional<db::ClaimedTrial> next = store->PeekNextTrial(cell.id);

@@ -14,7 +14,8 @@
 
 namespace arena::test {
 
-// A box held by two point fingers on the x axis (it pivots freely about it);
+// A box held by two patch fingers on the x axis (it pivots about it against
+// their torsional friction, so it stops when the pusher stops);
 // the pusher on the -y face, 4 cm below the axis, pushes along +y and turns
 // the box about +x. pivot_to_angle drives that angle to `target` (rad).
 inline std::string PivotScene(double duration_s, double target, double gain, double hold_s) {
@@ -23,12 +24,11 @@ inline std::string PivotScene(double duration_s, double target, double gain, dou
   "gravity": [0, 0, -9.81], "duration": )"
     << duration_s << R"(, "grip_force": 10.0,
   "fingers": [
-    {"name": "left",  "type": "point", "position": [-0.025, 0, 0], "normal": [1, 0, 0], "mu": 0.5},
-    {"name": "right", "type": "point", "position": [0.025, 0, 0], "normal": [-1, 0, 0], "mu": 0.5}],
+    {"name": "left",  "type": "patch", "radius": 0.005, "position": [-0.025, 0, 0], "normal": [1, 0, 0], "mu": 0.5},
+    {"name": "right", "type": "patch", "radius": 0.005, "position": [0.025, 0, 0], "normal": [-1, 0, 0], "mu": 0.5}],
   "pusher": {"type": "point", "position": [0, -0.015, -0.04], "normal": [0, 1, 0], "mu": 0.3,
              "motion": {"controller": "pivot_to_angle", "target": )"
-    << target << R"(, "gain": )" << gain << R"(, "tolerance": 0.02, "hold_s": )" << hold_s
-    << R"(}},
+    << target << R"(, "gain": )" << gain << R"(, "tolerance": 0.02, "hold_s": )" << hold_s << R"(}},
   "model": {"facets": 8, "points": 3, "dt": 0.004, "reduce": "auto"}})";
   return s.str();
 }
@@ -49,8 +49,8 @@ inline std::unique_ptr<Child> StartController(int domain, const std::string& nam
 
 inline std::unique_ptr<Child> StartCell(int domain, const std::string& id, double speed,
                                         const std::string& defects = "") {
-  std::vector<std::string> args = {"cell",    "--id",   id, "--domain", std::to_string(domain),
-                                   "--speed", std::to_string(speed)};
+  std::vector<std::string> args = {
+      "cell", "--id", id, "--domain", std::to_string(domain), "--speed", std::to_string(speed)};
   if (!defects.empty()) {
     const std::string path =
         ::testing::TempDir() + "closed_loop_defects_" + std::to_string(getpid()) + ".json";

@@ -20,7 +20,7 @@ struct TrialRun {
 };
 
 TrialRun Execute(test::Driver& d, dds::Reader<msg::LiveState>& live, std::uint64_t trial,
-            std::uint32_t attempt, const std::string& scene) {
+                 std::uint32_t attempt, const std::string& scene) {
   TrialRun r;
   auto c = d.Command("c1", trial, msg::PHASE_EXECUTE, scene, 11, attempt);
   EXPECT_TRUE(d.Send(c));

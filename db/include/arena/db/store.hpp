@@ -265,11 +265,11 @@ struct Prediction {
 // A closed-loop trial attempt (issue 19): its controller, the controller's
 // own outcome, and every pusher command the cell applied.
 struct ClosedLoopCommand {
-  int sample = 0;                         // the sample it answered (applied from the next step)
-  double t = 0;                           // s
-  std::array<double, 3> commanded{};      // m/s, as the controller sent it
-  std::array<double, 3> applied{};        // m/s, with the cell's actuation noise
-  std::optional<double> loop_ms;          // live sample -> command accepted; absent: held
+  int sample = 0;                     // the sample it answered (applied from the next step)
+  double t = 0;                       // s
+  std::array<double, 3> commanded{};  // m/s, as the controller sent it
+  std::array<double, 3> applied{};    // m/s, with the cell's actuation noise
+  std::optional<double> loop_ms;      // live sample -> command accepted; absent: held
 };
 struct ClosedLoopRun {
   std::int64_t trial_id = 0;
@@ -277,12 +277,12 @@ struct ClosedLoopRun {
   std::string controller;
   bool lockstep = false;
   double target = 0, gain = 0, tolerance = 0, hold_s = 0;
-  std::optional<bool> reached;           // absent: not scored (not a library law)
+  std::optional<bool> reached;  // absent: not scored (not a library law)
   std::optional<double> final_error;
-  std::optional<double> settle_time_s;   // absent: never settled
+  std::optional<double> settle_time_s;  // absent: never settled
   int held = 0;
   std::optional<double> loop_p50_ms, loop_p99_ms;
-  std::string failure;                   // "" when the phase ran through
+  std::string failure;  // "" when the phase ran through
   std::vector<ClosedLoopCommand> commands;
 };
 

@@ -69,10 +69,10 @@ struct ControlInput {
   std::uint64_t trial_id = 0;
   std::uint32_t attempt = 0;
   std::uint32_t sample = 0;
-  double t = 0;                   // s since the phase started
+  double t = 0;                       // s since the phase started
   mechanics::TrajectorySample truth;  // the true state (ground truth)
-  bool observed_valid = false;    // false: the sensors dropped this sample
-  double observed_t = 0;          // when the reading was taken (t - latency)
+  bool observed_valid = false;        // false: the sensors dropped this sample
+  double observed_t = 0;              // when the reading was taken (t - latency)
   Eigen::Vector3d observed_position = Eigen::Vector3d::Zero();
   Eigen::Quaterniond observed_orientation = Eigen::Quaterniond::Identity();
   const ControlContext* context = nullptr;  // never null in Command()
@@ -125,8 +125,8 @@ struct ControllerHostOptions {
 };
 
 struct ControllerCounters {
-  std::uint64_t samples = 0;   // closed-loop samples answered
-  std::uint64_t trials = 0;    // trial attempts seen
+  std::uint64_t samples = 0;  // closed-loop samples answered
+  std::uint64_t trials = 0;   // trial attempts seen
 };
 
 using ControllerFactory = std::function<std::unique_ptr<Controller>(const ControlContext&)>;

@@ -55,11 +55,11 @@ struct PusherMotion {
 // (docs/closed_loop.md). target, gain and tolerance mean what the controller
 // makes of them (pivot_to_angle: angle in rad, speed per rad, rad).
 struct PusherController {
-  std::string name;        // [A-Za-z0-9_.-]{1,64}
-  double target = 0;       // the controller's goal
-  double gain = 1;         // its gain
-  double tolerance = 0.02; // reached when |error| <= tolerance (controller's units), > 0
-  double hold_s = 0.05;    // the cell holds the last command at most this long (s), > 0
+  std::string name;         // [A-Za-z0-9_.-]{1,64}
+  double target = 0;        // the controller's goal
+  double gain = 1;          // its gain
+  double tolerance = 0.02;  // reached when |error| <= tolerance (controller's units), > 0
+  double hold_s = 0.05;     // the cell holds the last command at most this long (s), > 0
 };
 
 struct PusherSpec : ContactSpec {
