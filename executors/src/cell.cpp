@@ -138,7 +138,7 @@ struct Cell::Impl {
         ground_truth(participant),
         commands(participant, dds::ReaderOptions{false}),
         live(participant),
-        pusher_commands(participant, dds::ReaderOptions{false}) {}
+        pusher_commands(participant, dds::ReaderOptions{false, o.id}) {}
 
   bool Stopping() {
     std::lock_guard<std::mutex> lock(mutex);

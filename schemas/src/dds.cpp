@@ -14,6 +14,7 @@
 #include <mutex>
 #include <sstream>
 #include <thread>
+#include <type_traits>
 
 #include <fastdds/rtps/attributes/ServerAttributes.h>
 #include <fastdds/rtps/common/InstanceHandle.h>
@@ -645,6 +646,8 @@ struct Reader<T>::Impl : public fdds::DataReaderListener {
   std::deque<T> queue;
   std::atomic<std::uint64_t> rejected{0};
 
+  std::string only_cell;  // real-time topics: this cell's messages only
+
   ~Impl() override {
     if (reader != nullptr) {
       reader->set_listener(nullptr);
@@ -671,9 +674,24 @@ struct Reader<T>::Impl : public fdds::DataReaderListener {
     if (taken.empty()) return;
     {
       std::lock_guard<std::mutex> lock(mutex);
-      for (auto& s : taken) queue.push_back(std::move(s));
+      for (auto& s : taken) Enqueue(std::move(s));
     }
     arrived.notify_all();
+  }
+
+  // Real-time topics: keep-last 1 per cell in our queue too (a reader that
+  // fell behind gets each cell's newest message, not a backlog).
+  void Enqueue(T&& s) {
+    if constexpr (std::is_same_v<T, msg::LiveState> || std::is_same_v<T, msg::PusherCommand>) {
+      if (!only_cell.empty() && s.cell_id() != only_cell) return;
+      for (auto& q : queue) {
+        if (q.cell_id() == s.cell_id()) {
+          q = std::move(s);
+          return;
+        }
+      }
+    }
+    queue.push_back(std::move(s));
   }
 
   void on_liveliness_changed(fdds::DataReader*,
@@ -711,6 +729,11 @@ Reader<T>::Reader(Participant& participant, const ReaderOptions& options)
   if (IsRealTime(topic)) qos.deadline().period = Duration_t(kLiveDeadline_s);
   fdds::StatusMask mask = fdds::StatusMask::data_available();
   mask << fdds::StatusMask::liveliness_changed();
+  // only_cell is applied in our listener: a DDS content filter needs type
+  // objects that arena's generated types do not carry (Fast DDS 2.9 refuses
+  // create_contentfilteredtopic without them), so other cells' messages still
+  // cross the transport (bench/README.md).
+  impl_->only_cell = IsRealTime(topic) ? options.only_cell : std::string();
   impl_->reader = core.subscriber->create_datareader(t, qos, impl_.get(), mask);
   if (impl_->reader == nullptr) throw DdsError("dds: create_datareader(" + topic + ") failed");
   const auto q = impl_->reader->get_qos();

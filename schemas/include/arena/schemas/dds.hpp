@@ -211,6 +211,9 @@ struct ReaderOptions {
   // Track writers' liveliness and report kWriterLost / kWriterAlive as
   // participant PeerEvents.
   bool report_liveliness = true;
+  // LiveState / PusherCommand only: queue this cell's messages only (others
+  // are dropped by the listener; they still cross the transport). Empty: all.
+  std::string only_cell;
 };
 
 // A typed DataReader on the topic of T; samples are queued by the listener
@@ -224,7 +227,9 @@ class Reader {
   Reader(const Reader&) = delete;
   Reader& operator=(const Reader&) = delete;
 
-  // Next sample in arrival order, waiting up to timeout.
+  // Next sample in arrival order, waiting up to timeout. LiveState and
+  // PusherCommand queue keep-last 1 per cell as their QoS does: a newer
+  // message of a cell replaces one not yet taken.
   std::optional<T> Take(Millis timeout);
   // Every queued sample, without waiting.
   std::vector<T> TakeAll();
