@@ -374,10 +374,12 @@ Result LiveHere(int cells, double seconds, bool secure, bool control) {
   live_consumer.join();
   r.live_sent = live_sent;
   if (control)
-    std::fprintf(stderr, "control: %llu live sent, %llu taken by the controller, %llu commands taken by cells\n",
-                 static_cast<unsigned long long>(live_sent.load()),
-                 static_cast<unsigned long long>(r.live_received),
-                 static_cast<unsigned long long>(commands_seen.load()));
+    std::fprintf(
+        stderr,
+        "control: %llu live sent, %llu taken by the controller, %llu commands taken by cells\n",
+        static_cast<unsigned long long>(live_sent.load()),
+        static_cast<unsigned long long>(r.live_received),
+        static_cast<unsigned long long>(commands_seen.load()));
   r.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   return r;
 }
@@ -475,19 +477,18 @@ void BM_GroundTruthPaced(benchmark::State& state) {
   const bool secure = state.range(2) != 0;
   const int batches = 3 * 250 / batch;  // 3 s
   for (auto _ : state) {
-    const Result r =
-        Stream(cells, batches, batch, std::chrono::microseconds(4000 * batch), secure);
+    const Result r = Stream(cells, batches, batch, std::chrono::microseconds(4000 * batch), secure);
     Report(state, r, secure);
     // Where the tail comes from: the writer blocked inside Write() (the
     // acknowledgement window of the reliable log) -- its p99 and how many
     // writes blocked more than 1 ms.
     state.counters["write_p99_ms"] = Percentile(r.loop_ms, 0.99);
     state.counters["writes_over_1ms_pct"] =
-        r.loop_ms.empty() ? 0
-                          : 100.0 *
-                                std::count_if(r.loop_ms.begin(), r.loop_ms.end(),
-                                              [](double ms) { return ms > 1.0; }) /
-                                r.loop_ms.size();
+        r.loop_ms.empty()
+            ? 0
+            : 100.0 * std::count_if(r.loop_ms.begin(), r.loop_ms.end(), [](double ms) {
+                return ms > 1.0;
+              }) / r.loop_ms.size();
   }
 }
 BENCHMARK(BM_GroundTruthPaced)

@@ -260,8 +260,10 @@ CREATE INDEX evaluation_results_by_model ON evaluation_results(evaluation_id, mo
 )sql"},
       // Closed-loop trials (issue 19): the controller, its own outcome, and
       // every command the cell applied (ground truth like the samples).
+      // IF NOT EXISTS: tests fake an older file by lowering user_version
+      // without dropping later tables.
       {9, "closed-loop runs and their applied pusher commands", R"sql(
-CREATE TABLE closed_loop_runs(
+CREATE TABLE IF NOT EXISTS closed_loop_runs(
   trial_id      INTEGER NOT NULL REFERENCES trials(id),
   attempt       INTEGER NOT NULL,
   controller    TEXT NOT NULL,
@@ -280,7 +282,7 @@ CREATE TABLE closed_loop_runs(
   created_at    REAL NOT NULL,
   PRIMARY KEY (trial_id, attempt)
 );
-CREATE TABLE closed_loop_commands(
+CREATE TABLE IF NOT EXISTS closed_loop_commands(
   trial_id   INTEGER NOT NULL,
   attempt    INTEGER NOT NULL,
   sample     INTEGER NOT NULL,   -- the sample it answered; applied from the next step on

@@ -63,7 +63,7 @@ TEST(StoreOpen, MigratesEmptyFileAndReopens) {
     store->CreateCampaign(MakeCampaign(), MakeTrials(2));
   }
   EXPECT_EQ(RawScalar(path, "PRAGMA journal_mode"), "wal");
-  EXPECT_EQ(RawScalar(path, "SELECT COUNT(*) FROM schema_migrations"),
+  EXPECT_EQ(RawScalar(path, "SELECT MAX(version) FROM schema_migrations"),
             std::to_string(Store::SchemaVersion()));
   auto again = Store::Open(path);
   EXPECT_EQ(again->FileSchemaVersion(), Store::SchemaVersion());
