@@ -382,7 +382,6 @@ struct Cell::Impl {
     std::vector<AppliedCommand> applied;
     mechanics::PusherMotion in_force;
     Clock::time_point last_command_at;
-    std::uint64_t last_live_ns = 0;
   };
 
   // The newest command of this trial answering a sample <= k (lockstep: == k),
@@ -518,7 +517,11 @@ struct Cell::Impl {
                     MakeControlContext(scene, options.defects.max_pusher_speed),
                     "",
                     Clock::now(),
-                    DeadlineOf(c, started)};
+                    DeadlineOf(c, started),
+                    0,
+                    {},
+                    {},
+                    {}};
     loop.params = ControlContextToJson(loop.context);
     loop.expected_samples =
         static_cast<std::size_t>(std::floor(scene.duration * mechanics::kSampleRateHz + 1e-9)) + 1;

@@ -278,8 +278,8 @@ struct Service::Impl {
       const mechanics::Scene scene = mechanics::ParseScene(t.scene_json);
       const db::GroundTruth gt = store->ReadGroundTruth(t.id);
       const auto normals = ContactNormals(scene);
-      PredictionJob job{
-          t.id, t.attempt, t.campaign_id, ScenesForPrediction(scene, t.campaign_id), {}};
+      PredictionJob job{t.id, t.attempt, t.campaign_id, ScenesForPrediction(scene, t.campaign_id),
+                        {},   {}};
       for (const auto& s : gt.samples)
         job.truth.push_back(ToTrajectorySample(s, normals, scene.pusher.has_value()));
       if (auto run = store->GetClosedLoop(t.id)) job.commands = CommandsOf(*run);

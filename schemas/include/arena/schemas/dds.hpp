@@ -79,6 +79,7 @@
 #include <optional>
 #include <stdexcept>
 #include <string>
+#include <utility>
 #include <vector>
 
 namespace arena::dds {
@@ -208,6 +209,11 @@ class Writer {
 };
 
 struct ReaderOptions {
+  ReaderOptions() = default;
+  // ReaderOptions{false}, ReaderOptions{false, "c1"}.
+  ReaderOptions(bool liveliness, std::string cell = "")
+      : report_liveliness(liveliness), only_cell(std::move(cell)) {}
+
   // Track writers' liveliness and report kWriterLost / kWriterAlive as
   // participant PeerEvents.
   bool report_liveliness = true;
