@@ -5,6 +5,7 @@
 #include <cstdio>
 #include <ctime>
 #include <memory>
+#include <optional>
 #include <string>
 
 #include <nlohmann/json.hpp>
@@ -15,6 +16,7 @@
 #include "campaign_input.hpp"
 #include "commands.hpp"
 #include "progress.hpp"
+#include "signals.hpp"
 #include "store_errors.hpp"
 
 namespace arena::cli {
@@ -44,15 +46,48 @@ std::string IsoTime(double unix_s) {
   return buf;
 }
 
+// A service beat within this long counts as running (it beats every second).
+constexpr double kServiceRecent_s = 10.0;
+
+// "" when a service beat recently; otherwise a warning saying so.
+std::string NoServiceWarning(const db::Store& store, const std::string& db_path) {
+  std::optional<db::ServiceRecord> latest;
+  try {
+    latest = store.LatestService();
+  } catch (const db::StoreError&) {
+    return "";  // an older store without the services table: say nothing
+  }
+  const double now = store.Now();
+  if (latest && !latest->stopped_at && now - latest->last_beat <= kServiceRecent_s) return "";
+  std::string last = "no service has ever run on it";
+  if (latest) {
+    last = "the last one (pid " + std::to_string(latest->pid) + " on " + latest->host + ") " +
+           (latest->stopped_at ? "stopped " : "last beat ") +
+           FormatDuration(now - latest->last_beat) + " ago";
+  }
+  return "no `arena serve` has a heartbeat on " + db_path + " in the last " +
+         std::to_string(static_cast<int>(kServiceRecent_s)) + " s (" + last +
+         "); trials wait until one runs";
+}
+
 int Submit(const std::string& campaign_path, const std::string& db_path) {
+  // Before any thread: Ctrl-C abandons the one transaction (nothing stored), exit 130.
+  SignalWatcher signals([](int) {});
   const orchestrator::Campaign campaign = LoadValidCampaign(campaign_path);
   auto store = OpenStore(db_path, false);
   try {
-    const std::int64_t id = orchestrator::SubmitCampaign(*store, campaign);
+    const std::int64_t id =
+        orchestrator::SubmitCampaign(*store, campaign, [&] { return signals.received() != 0; });
+    if (signals.received()) throw orchestrator::SubmitInterrupted();
     std::printf("%lld\n", static_cast<long long>(id));
     std::fprintf(stderr, "campaign %lld '%s': %lld trials planned in %s\n",
                  static_cast<long long>(id), campaign.name.c_str(),
                  static_cast<long long>(orchestrator::TrialCount(campaign)), db_path.c_str());
+    if (const std::string w = NoServiceWarning(*store, db_path); !w.empty())
+      std::fprintf(stderr, "warning: %s\n", w.c_str());
+  } catch (const orchestrator::SubmitInterrupted& e) {
+    std::fprintf(stderr, "arena: %s\n", e.what());
+    return kExitInterrupted;
   } catch (const db::StoreError& e) {
     throw StoreCommandError(e);
   }
@@ -83,11 +118,16 @@ int List(const std::string& db_path, bool as_json) {
 int Status(const std::string& db_path, std::int64_t only, bool as_json) {
   auto store = OpenStore(db_path, true);
   db::StatusSummary s;
+  std::optional<db::ServiceRecord> service;
+  std::string no_service;
   try {
     s = store->Status();
+    service = store->LatestService();
+    no_service = NoServiceWarning(*store, db_path);
   } catch (const db::StoreError& e) {
     throw StoreCommandError(e);
   }
+  if (!no_service.empty()) std::fprintf(stderr, "warning: %s\n", no_service.c_str());
   if (only > 0) {
     std::erase_if(s.campaigns, [&](const db::CampaignStatus& c) { return c.id != only; });
     if (s.campaigns.empty())
@@ -110,6 +150,10 @@ int Status(const std::string& db_path, std::int64_t only, bool as_json) {
                           {"cancelled", c.cancelled},
                           {"rate_per_hour", c.rate_per_hour}};
       j["eta_s"] = c.eta_s ? nlohmann::json(*c.eta_s) : nlohmann::json();
+      // What its model errors are measured against (executors/README.md, "Backends").
+      j["truth"] = nlohmann::json::array();
+      for (const auto& t : store->CampaignTruths(c.id))
+        j["truth"].push_back({{"truth", t.truth}, {"backend", t.backend}, {"trials", t.trials}});
       out["campaigns"].push_back(j);
     }
     for (const auto& c : s.cells)
@@ -117,7 +161,19 @@ int Status(const std::string& db_path, std::int64_t only, bool as_json) {
                               {"state", db::ToString(c.state)},
                               {"last_seen", IsoTime(c.last_seen)},
                               {"consecutive_failures", c.consecutive_failures},
-                              {"quarantine_reason", c.quarantine_reason}});
+                              {"quarantine_reason", c.quarantine_reason},
+                              {"serving", c.serving}});
+    out["service"] = nullptr;
+    if (service) {
+      out["service"] = {{"session", service->session},
+                        {"pid", service->pid},
+                        {"host", service->host},
+                        {"domain", service->domain},
+                        {"started", IsoTime(service->started_at)},
+                        {"last_beat", IsoTime(service->last_beat)},
+                        {"stopped", service->stopped_at ? IsoTime(*service->stopped_at) : ""},
+                        {"running", no_service.empty()}};
+    }
     for (const auto& d : s.drift)
       out["drift"].push_back({{"campaign", d.campaign_id},
                               {"cell", d.cell_id},
@@ -137,11 +193,33 @@ int Status(const std::string& db_path, std::int64_t only, bool as_json) {
                 static_cast<long long>(c.planned), static_cast<long long>(c.done),
                 static_cast<long long>(c.failed), static_cast<long long>(c.running),
                 c.rate_per_hour, c.eta_s ? FormatDuration(*c.eta_s).c_str() : "-");
+  for (const auto& c : s.campaigns) {
+    for (const auto& t : store->CampaignTruths(c.id)) {
+      std::printf(
+          "      truth of %lld: %s (%s backend), %lld trials%s\n", static_cast<long long>(c.id),
+          t.truth.empty() ? "unreported" : t.truth.c_str(),
+          t.backend.empty() ? "?" : t.backend.c_str(), static_cast<long long>(t.trials),
+          t.truth == "self-consistency" ? ": errors are self-consistency, not accuracy" : "");
+    }
+  }
+  if (service) {
+    std::printf("\nservice: pid %lld on %s, DDS domain %d, session %s, started %s, %s\n",
+                static_cast<long long>(service->pid), service->host.c_str(), service->domain,
+                service->session.c_str(), IsoTime(service->started_at).c_str(),
+                service->stopped_at ? ("stopped " + IsoTime(*service->stopped_at)).c_str()
+                                    : ("last beat " + IsoTime(service->last_beat) +
+                                       (no_service.empty() ? " (running)" : " (not running)"))
+                                          .c_str());
+  } else {
+    std::printf("\nservice: none has run on this store\n");
+  }
   std::printf("\n%-16s %-12s %-21s %s\n", "cell", "health", "last seen", "failures in a row");
   for (const auto& c : s.cells)
     std::printf("%-16s %-12s %-21s %d%s%s\n", c.id.c_str(), db::ToString(c.state),
                 IsoTime(c.last_seen).c_str(), c.consecutive_failures,
                 c.quarantine_reason.empty() ? "" : "  ", c.quarantine_reason.c_str());
+  for (const auto& c : s.cells)
+    if (!c.serving.empty()) std::printf("cell %s is %s\n", c.id.c_str(), c.serving.c_str());
   if (!s.drift.empty()) {
     std::printf(
         "\nstart-state drift (observed after reset - nominal):\n%-5s %-16s %6s %28s %10s %10s\n",
@@ -213,10 +291,18 @@ void AddCampaignCommands(CLI::App& app, Action* action) {
     cmd->footer(
         "Example:\n  arena status --db lab.db 3\n  arena status --db lab.db --json\n"
         "Works from any process or host that can open the store file (README: remote hosts).\n");
-    cmd->add_option("id", o->id, "Only this campaign");
+    auto* id = cmd->add_option("id", o->id, "Only this campaign");
     cmd->add_option("--db", o->db, "SQLite store")->required();
     cmd->add_flag("--json", o->json, "JSON for scripts");
-    cmd->callback([o, action] { *action = [o] { return Status(o->db, o->id, o->json); }; });
+    cmd->callback([o, id, action] {
+      const bool given = id->count() > 0;
+      *action = [o, given] {
+        if (given && o->id < 1)
+          throw CommandError(kExitBadInput, "id: must be a campaign id (>= 1), got " +
+                                                std::to_string(o->id) + " (see `arena list`)");
+        return Status(o->db, o->id, o->json);
+      };
+    });
   }
   for (const char* verb : {"pause", "resume", "cancel"}) {
     struct O {

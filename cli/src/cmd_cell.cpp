@@ -1,4 +1,5 @@
-// arena cell --id ID --domain D [--defects FILE] [--speed X] [--batch N]
+// arena cell --id ID --domain D [--backend NAME] [--backend-settings JSON]
+//            [--defects FILE] [--speed X] [--batch N]
 //            [--peers H[:P],...] [--discovery-server [ID@]H:P] [--profile-xml F]
 //            [--security DIR]
 // Runs one simulated cell until SIGINT or SIGTERM (executors/README.md).
@@ -25,6 +26,8 @@ namespace {
 struct CellCliOptions {
   executors::CellOptions cell;
   std::string defects_path;
+  std::string backend = "model";  // model | mujoco | exec:COMMAND | replay:DATASET
+  std::string backend_settings;   // JSON object of the backend's settings (mujoco)
   std::string peers;
   bool verbose = false;
   int parent_pid = 0;  // > 0: stop when that process (arena run) is gone
@@ -76,9 +79,17 @@ int RunCell(CellCliOptions opt) {
     }
   }
 
+  // A predecessor SIGKILLed (a restart after a crash) left its shared memory.
+  if (const std::size_t n = dds::CleanZombieSharedMemory(); n > 0)
+    spdlog::info("cell {}: removed {} shared-memory files of dead DDS processes", opt.cell.id, n);
   std::unique_ptr<executors::Cell> cell;
   try {
-    cell = std::make_unique<executors::Cell>(opt.cell, executors::DefaultMechanics());
+    const executors::ModelFidelity fidelity{opt.cell.fidelity.facets, opt.cell.fidelity.points,
+                                            opt.cell.fidelity.dt};
+    auto backend = executors::MakeBackend(opt.backend, fidelity, opt.backend_settings);
+    cell = std::make_unique<executors::Cell>(opt.cell, std::move(backend));
+  } catch (const std::invalid_argument& e) {
+    throw CommandError(kExitBadInput, e.what());
   } catch (const dds::SecurityError& e) {
     throw CommandError(kExitBadInput, e.what());
   } catch (const dds::DdsError& e) {
@@ -101,12 +112,21 @@ void AddCellCommand(CLI::App& app, Action* action) {
       app.add_subcommand("cell", "Run a simulated robot cell that serves trials over DDS");
   cmd->footer(
       "Example:\n  arena cell --id c1 --domain 42 --defects examples/defects/noisy.json --speed 0\n"
+      "  arena cell --id c1 --domain 42 --backend mujoco\n"
+      "  arena cell --id lab1 --domain 42 --backend 'exec:examples/drivers/replay.py DATASET'\n"
       "  arena cell --id c1 --domain 42 --security lab-pki/c1   (see `arena certs --help`)\n"
       "Without --peers or --discovery-server the cell is reachable from this host only.\n"
       "Stops cleanly on SIGINT/SIGTERM (exit 0).");
   cmd->add_option("--id", opt->cell.id, "Cell id, unique in the deployment ([A-Za-z0-9_.-])")
       ->required();
-  cmd->add_option("--domain", opt->cell.domain_id, "DDS domain id (0..232)")->required();
+  cmd->add_option("--domain", opt->cell.domain_id, "DDS domain id (0..231)")->required();
+  cmd->add_option("--backend", opt->backend,
+                  "What executes the trials: model (arena's model: self-consistency), mujoco, "
+                  "exec:COMMAND (a driver, executors/README.md), replay:DATASET (an export)")
+      ->capture_default_str();
+  cmd->add_option("--backend-settings", opt->backend_settings,
+                  "The backend's settings as a JSON object, e.g. '{\"timestep\": 0.001}' for "
+                  "mujoco (simulators/README.md)");
   cmd->add_option("--defects", opt->defects_path, "Defect profile JSON (executors/README.md)");
   cmd->add_option("--speed", opt->cell.speed,
                   "Wall seconds per simulated second: 0 = as fast as possible, 1 = real time")

@@ -8,6 +8,7 @@
 #include "arena/db/export.hpp"
 #include "arena/db/store.hpp"
 #include "commands.hpp"
+#include "output_guard.hpp"
 #include "store_errors.hpp"
 
 namespace arena::cli {
@@ -21,6 +22,7 @@ struct ExportCliOptions {
 };
 
 int RunExport(const ExportCliOptions& o) {
+  RefuseToOverwriteStore(o.out, "--out", o.db_path);
   try {
     db::StoreOptions so;
     so.read_only = true;

@@ -16,6 +16,7 @@
 
 #include "arena/db/store.hpp"
 #include "commands.hpp"
+#include "output_guard.hpp"
 #include "plot_charts.hpp"
 #include "plot_trial.hpp"
 #include "store_errors.hpp"
@@ -132,6 +133,7 @@ int PlotTradeoff(const db::Store& store, const PlotOptions& o) {
 }
 
 int RunPlot(const PlotOptions& o) {
+  RefuseToOverwriteStore(o.out, "--out", o.db_path);
   if (o.tradeoff && o.trial >= 0) {
     throw CommandError(kExitBadInput, "plot: give either a TRIAL or --tradeoff, not both");
   }

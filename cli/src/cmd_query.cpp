@@ -1,6 +1,7 @@
 // arena query --db FILE ["SQL"] [--campaign ID] [--where EXPR] [--outcome X]
 //              [--format table|csv|json]
 // Read-only SQL over the store; tables and columns are in db/README.md.
+#include <cmath>
 #include <cstdio>
 #include <string>
 
@@ -19,6 +20,7 @@ struct QueryOptions {
   std::string where;
   std::string outcome;
   std::string format = "table";
+  double timeout_s = 60;
 };
 
 int RunQueryCommand(const QueryOptions& o) {
@@ -30,7 +32,11 @@ int RunQueryCommand(const QueryOptions& o) {
     if (o.campaign >= 0) filter.campaign_id = o.campaign;
     filter.where = o.where;
     filter.outcome = o.outcome;
-    const auto result = db::RunQuery(*store, o.sql, filter);
+    if (!std::isfinite(o.timeout_s) || o.timeout_s <= 0)
+      throw CommandError(kExitBadInput, "--timeout: must be a number of seconds > 0");
+    db::QueryLimits limits;
+    limits.max_seconds = o.timeout_s;
+    const auto result = db::RunQuery(*store, o.sql, filter, limits);
     const std::string text = o.format == "csv"    ? db::FormatCsv(result)
                              : o.format == "json" ? db::FormatJson(result)
                                                   : db::FormatTable(result);
@@ -58,6 +64,8 @@ void AddQueryCommand(CLI::App& app, Action* action) {
                   "An SQL condition on the result's columns, e.g. 'grip_force > 5'");
   cmd->add_option("--outcome", o->outcome,
                   "Only rows whose outcome is X (ok, failed, refused, ...)");
+  cmd->add_option("--timeout", o->timeout_s, "Stop a query running longer than this (s)")
+      ->capture_default_str();
   cmd->add_option("--format", o->format, "Output format")
       ->check(CLI::IsMember({"table", "csv", "json"}));
   cmd->footer(

@@ -11,7 +11,9 @@
 #include <cstdio>
 #include <memory>
 #include <optional>
+#include <random>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include <spdlog/spdlog.h>
@@ -37,14 +39,40 @@ struct RunOptions {
   std::string campaign_path;
   std::string db_path = "arena.db";
   int cells = 2;
-  int domain = -1;           // -1: derived from the process id
-  double speed = 0;          // cells' pacing: 0 = as fast as possible
-  std::string defects_path;  // the cells' own profile (workspace, reset); optional
+  int domain = -1;                // -1: derived from the process id
+  double speed = 0;               // cells' pacing: 0 = as fast as possible
+  std::string defects_path;       // the cells' own profile (workspace, reset); optional
+  std::string backend = "model";  // the cells' backend (arena cell --backend)
+  std::string backend_settings;
   std::string log_level = "info";
   bool quiet = false;
   std::string
       security_lab;  // DDS-Security: LAB/service and LAB/sim1.. (arena certs); "": open domain
+  dds::NetworkOptions network_for_probe;  // this host only, like the run's participants
 };
+
+std::string RunTag() {
+  std::random_device rd;
+  char buf[8];
+  std::snprintf(buf, sizeof buf, "%06x", static_cast<unsigned>(rd() ^ (getpid() << 8)) & 0xffffff);
+  return buf;
+}
+
+// A domain on which no participant is heard for a moment: two `arena run`s
+// on one host (or a lab's own domain) do not share a domain by chance.
+int QuietDomain(const dds::NetworkOptions& network) {
+  std::mt19937 pick(std::random_device{}());
+  std::uniform_int_distribution<int> domain(100, dds::kMaxDomainId);
+  for (int tries = 0; tries < 8; ++tries) {
+    const int candidate = domain(pick);
+    dds::Participant probe(dds::ParticipantOptions{candidate, "arena.run-probe", network, 2.5});
+    std::this_thread::sleep_for(std::chrono::milliseconds(400));
+    if (probe.Peers().empty()) return candidate;
+    spdlog::info("domain {} is in use ({} participants); trying another", candidate,
+                 probe.Peers().size());
+  }
+  throw dds::DdsError("--domain: no quiet DDS domain found in 8 tries; pass --domain");
+}
 
 double Median(std::vector<double> v) {
   if (v.empty()) return NAN;
@@ -88,6 +116,22 @@ void PrintSummary(const std::string& db_path, std::int64_t campaign_id, double w
     }
   }
   const std::int64_t total = done + failed + other;
+  std::string truth_line;
+  bool self_consistency = false;
+  for (const auto& t : store->CampaignTruths(campaign_id)) {
+    if (!truth_line.empty()) truth_line += "; ";
+    const std::string what = t.truth == "self-consistency" ? "arena's own model (" + t.backend +
+                                                                 " backend): self-consistency, "
+                                                                 "not accuracy"
+                             : t.truth == "simulator"
+                                 ? (t.backend == "mujoco" ? std::string("MuJoCo") : t.backend) +
+                                       " (an independent engine)"
+                             : t.truth == "robot"    ? "a robot (" + t.backend + ")"
+                             : t.truth == "recorded" ? "recorded data (" + t.backend + ")"
+                                                     : "an unreported backend";
+    self_consistency = self_consistency || t.truth == "self-consistency";
+    truth_line += what + ", " + std::to_string(t.trials) + " trials";
+  }
   std::printf("campaign %lld '%s': %s\n", static_cast<long long>(campaign_id),
               campaign.name.c_str(), db::ToString(campaign.state));
   std::printf("  trials      %lld: %lld done, %lld failed%s\n", static_cast<long long>(total),
@@ -100,6 +144,13 @@ void PrintSummary(const std::string& db_path, std::int64_t campaign_id, double w
       "              contact force %.3g N RMS, contact-mode agreement %.1f %%\n",
       pos_err.size(), Median(pos_err) * 1e3, Median(ang_err) * 180 / M_PI, Median(force_err),
       100 * Median(mode));
+  if (!truth_line.empty()) {
+    std::printf("  truth       model error is against %s\n", truth_line.c_str());
+    if (self_consistency)
+      std::printf(
+          "              (arena's model against itself at higher settings: run --backend mujoco "
+          "for an independent truth)\n");
+  }
   std::printf("  predictor   %.3g ms median per trial%s\n", Median(pred_time) * 1e3,
               prediction_failures
                   ? (", " + std::to_string(prediction_failures) + " predictions failed").c_str()
@@ -127,10 +178,9 @@ int Run(RunOptions opt) {
   if (opt.cells < 1 || opt.cells > 64)
     throw CommandError(kExitBadInput, "--cells: must be 1..64, got " + std::to_string(opt.cells));
   if (!(opt.speed >= 0)) throw CommandError(kExitBadInput, "--speed: must be >= 0");
-  if (opt.domain < 0) opt.domain = 100 + static_cast<int>(getpid() % 100);
-  if (opt.domain > 232)
-    throw CommandError(kExitBadInput,
-                       "--domain: must be 0..232, got " + std::to_string(opt.domain));
+  if (opt.domain > dds::kMaxDomainId || opt.domain < -1)
+    throw CommandError(kExitBadInput, "--domain: must be 0.." + std::to_string(dds::kMaxDomainId) +
+                                          ", got " + std::to_string(opt.domain));
 
   // Signals first: the log's flusher, the cells and DDS threads inherit the blocked mask.
   std::atomic<orchestrator::Service*> running{nullptr};
@@ -154,6 +204,13 @@ int Run(RunOptions opt) {
                                             " --role cell|service --name NAME`)");
     }
   }
+  if (opt.domain < 0) {
+    try {
+      opt.domain = QuietDomain(opt.network_for_probe);
+    } catch (const dds::DdsError& e) {
+      throw CommandError(kExitCommunication, e.what());
+    }
+  }
   std::int64_t campaign_id = 0;
   try {
     auto store = db::Store::Open(opt.db_path);
@@ -173,16 +230,23 @@ int Run(RunOptions opt) {
         static_cast<long long>(campaign_id), campaign.name.c_str(), static_cast<long long>(trials),
         opt.cells, opt.domain, orchestrator::ServiceLogPath(opt.db_path).c_str());
 
+  // Cell ids unique to this run (sim1-3fa2c1, ...): two runs that end up on
+  // one domain still never address each other's cells. With --security the
+  // identities are the lab's sim1..N.
+  const std::string run_tag = opt.security_lab.empty() ? "-" + RunTag() : "";
   std::vector<ChildProcess> cells;
   std::vector<ChildProcess> controllers;
   const std::string self = SelfExecutable();
   for (int k = 0; k < opt.cells; ++k) {
     std::vector<std::string> argv = {self,           "cell",
-                                     "--id",         "sim" + std::to_string(k + 1),
+                                     "--id",         "sim" + std::to_string(k + 1) + run_tag,
                                      "--domain",     std::to_string(opt.domain),
                                      "--speed",      std::to_string(opt.speed),
                                      "--parent-pid", std::to_string(getpid())};
     if (!opt.defects_path.empty()) argv.insert(argv.end(), {"--defects", opt.defects_path});
+    argv.insert(argv.end(), {"--backend", opt.backend});
+    if (!opt.backend_settings.empty())
+      argv.insert(argv.end(), {"--backend-settings", opt.backend_settings});
     if (!opt.security_lab.empty())
       argv.insert(argv.end(), {"--security", identity("sim" + std::to_string(k + 1))});
     cells.emplace_back(argv, opt.db_path + ".sim" + std::to_string(k + 1) + ".log");
@@ -290,9 +354,16 @@ void AddRunCommand(CLI::App& app, Action* action) {
       ->required();
   cmd->add_option("--db", opt->db_path, "SQLite store (created if missing)")->capture_default_str();
   cmd->add_option("--cells", opt->cells, "Simulated cells to start")->capture_default_str();
-  cmd->add_option("--domain", opt->domain, "DDS domain id (default: 100 + pid % 100)");
+  cmd->add_option("--domain", opt->domain,
+                  "DDS domain id (default: a domain in 100..231 with no participant on it)");
   cmd->add_option("--speed", opt->speed, "Cells' pacing: 0 = as fast as possible, 1 = wall clock")
       ->capture_default_str();
+  cmd->add_option("--backend", opt->backend,
+                  "The cells' backend: model (arena's own model: the error is self-consistency), "
+                  "mujoco (an independent engine), exec:COMMAND, replay:DATASET")
+      ->capture_default_str();
+  cmd->add_option("--backend-settings", opt->backend_settings,
+                  "The backend's settings (JSON object), passed to every cell");
   cmd->add_option("--cell-defects", opt->defects_path,
                   "Defect profile for the cells (executors/README.md)");
   cmd->add_option("--log-level", opt->log_level,

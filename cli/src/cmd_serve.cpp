@@ -35,6 +35,7 @@ int RunServe(ServeCliOptions opt) {
   });
   try {
     if (!opt.peers.empty()) opt.service.network.peers = dds::ParsePeers(opt.peers);
+    orchestrator::ValidateServiceOptions(opt.service);  // before anything is created
     orchestrator::SetUpServiceLog(opt.service.db_path, opt.log_level);
   } catch (const dds::DdsError& e) {
     throw CommandError(kExitBadInput, e.what());
@@ -44,6 +45,7 @@ int RunServe(ServeCliOptions opt) {
     throw CommandError(kExitStore,
                        std::string("cannot write the log next to the store: ") + e.what());
   }
+  dds::CleanZombieSharedMemory();  // what SIGKILLed predecessors and cells left in /dev/shm
   std::unique_ptr<orchestrator::Service> service;
   try {
     service = std::make_unique<orchestrator::Service>(opt.service);
@@ -85,7 +87,7 @@ void AddServeCommand(CLI::App& app, Action* action) {
       "Logs go to FILE.log next to the store (rotated, 16 MiB x 6 at most) and to stderr.\n"
       "SIGTERM stops dispatching and lets phases in flight finish (up to --drain s).");
   cmd->add_option("--db", opt->service.db_path, "SQLite store (created if missing)")->required();
-  cmd->add_option("--domain", opt->service.domain_id, "DDS domain id (0..232)")->required();
+  cmd->add_option("--domain", opt->service.domain_id, "DDS domain id (0..231)")->required();
   cmd->add_option("--peers", opt->peers, "Reach other hosts: initial peers host[:port],...");
   cmd->add_option("--discovery-server", opt->service.network.discovery_server,
                   "Client of a Fast DDS discovery server [id@]host:port");

@@ -16,6 +16,7 @@
 #include "arena/mechanics/scene_json.hpp"
 #include "arena/mechanics/simulate.hpp"
 #include "commands.hpp"
+#include "output_guard.hpp"
 
 namespace arena::cli {
 namespace {
@@ -99,6 +100,13 @@ int RunSimulate(const SimulateOptions& opt) {
     return PrintError(e.what(), e.exit_code());
   }
 
+  if (!opt.trajectory_path.empty()) {
+    try {
+      RefuseToOverwriteStore(opt.trajectory_path, "--trajectory");
+    } catch (const CommandError& e) {
+      return PrintError(e.what(), e.exit_code());
+    }
+  }
   const mechanics::SimulationResult result = mechanics::Simulate(scene);
   if (result.status != mechanics::SimulationStatus::kOk) {
     return PrintError(result.error, result.status == mechanics::SimulationStatus::kInvalidScene

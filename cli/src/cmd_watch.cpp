@@ -90,10 +90,16 @@ int RunWatch(const WatchOptions& o) {
   std::unique_ptr<dds::Participant> participant;
   std::unique_ptr<dds::Reader<msg::LiveState>> live;
   std::unique_ptr<dds::Reader<msg::GroundTruth>> log;
+  // With --cell: the cell's statuses (a FAILED phase) and its liveliness (a
+  // dead cell) end the watch within about a second, saying what happened.
+  std::unique_ptr<dds::Reader<msg::TrialStatus>> statuses;
   try {
     participant = std::make_unique<dds::Participant>(po);
     live = std::make_unique<dds::Reader<msg::LiveState>>(*participant, dds::ReaderOptions{false});
     log = std::make_unique<dds::Reader<msg::GroundTruth>>(*participant, dds::ReaderOptions{false});
+    if (!o.cell.empty())
+      statuses =
+          std::make_unique<dds::Reader<msg::TrialStatus>>(*participant, dds::ReaderOptions{true});
   } catch (const dds::SecurityError& e) {
     throw CommandError(kExitBadInput, e.what());
   } catch (const dds::DdsError& e) {
@@ -129,7 +135,41 @@ int RunWatch(const WatchOptions& o) {
     std::fflush(stdout);
     last_print = Clock::now();
   };
+  const std::string cell_participant = o.cell.empty() ? "" : dds::CellParticipantName(o.cell);
   while (!stop) {
+    if (statuses) {
+      for (const auto& st : statuses->TakeAll()) {
+        if (st.cell_id() != o.cell) continue;
+        if (st.state() != msg::STATE_FAILED && st.state() != msg::STATE_REFUSED) continue;
+        if (trial >= 0 && st.trial_id() != static_cast<std::uint64_t>(trial)) continue;
+        if (tty && seen > 0) std::fputc('\n', stdout);
+        std::fflush(stdout);
+        throw CommandError(kExitFailure,
+                           "cell " + o.cell + ": trial " + std::to_string(st.trial_id()) +
+                               " attempt " + std::to_string(st.attempt()) + " " +
+                               (st.phase() == msg::PHASE_RESET ? "RESET" : "EXECUTE") + " " +
+                               (st.state() == msg::STATE_REFUSED ? "refused" : "failed") + ": " +
+                               st.reason());
+      }
+      while (auto e = participant->NextPeerEvent(std::chrono::milliseconds(0))) {
+        using Kind = dds::PeerEvent::Kind;
+        if (e->participant != cell_participant ||
+            (e->kind != Kind::kParticipantLeft && e->kind != Kind::kWriterLost))
+          continue;
+        int still = 0;  // a restarted cell's new process keeps the id alive
+        for (const auto& p : participant->Peers()) still += p == cell_participant;
+        if (e->kind == Kind::kWriterLost) --still;
+        if (still > 0) continue;
+        if (tty && seen > 0) std::fputc('\n', stdout);
+        std::fflush(stdout);
+        throw CommandError(kExitCommunication,
+                           "cell " + o.cell + " disappeared (" + dds::ToString(e->kind) + ")" +
+                               (trial >= 0 ? " during trial " + std::to_string(trial) + " after " +
+                                                 std::to_string(seen) + " live samples"
+                                           : std::string()) +
+                               "; see `arena status`");
+      }
+    }
     bool arrived = false;
     for (auto m = live->Take(std::chrono::milliseconds(20)); m; m = live->Take(Millis0())) {
       if (!mine(m->cell_id(), m->trial_id())) continue;
@@ -195,9 +235,9 @@ void AddWatchCommand(CLI::App& app, Action* action) {
   cmd->add_option("trial", o->trial, "Trial id (see `arena status` / `arena query`)")
       ->check(CLI::NonNegativeNumber);
   cmd->add_option("--cell", o->cell, "Instead of a trial: the next trial streamed by this cell");
-  cmd->add_option("--domain", o->domain, "DDS domain id of the service and cells (0..232)")
+  cmd->add_option("--domain", o->domain, "DDS domain id of the service and cells (0..231)")
       ->required()
-      ->check(CLI::Range(0, 232));
+      ->check(CLI::Range(0, dds::kMaxDomainId));
   cmd->add_option("--peers", o->peers, "Reach cells on other hosts: initial peers host[:port],...");
   cmd->add_option("--discovery-server", o->discovery_server,
                   "Client of a Fast DDS discovery server [id@]host:port");

@@ -41,6 +41,7 @@ void AddServeCommand(CLI::App& app, Action* action);
 void AddRunCommand(CLI::App& app, Action* action);
 void AddCampaignCommands(CLI::App& app, Action* action);  // submit list status pause resume cancel
 void AddCellCommand(CLI::App& app, Action* action);
+void AddCellsCommand(CLI::App& app, Action* action);       // cmd_cells.cpp (release)
 void AddControllerCommand(CLI::App& app, Action* action);  // cmd_controller.cpp (issue 19)
 void AddQueryCommand(CLI::App& app, Action* action);       // cmd_query.cpp (store room)
 void AddExportCommand(CLI::App& app, Action* action);      // cmd_export.cpp (store room)

@@ -23,6 +23,7 @@ int main(int argc, char** argv) {
   AddSimulateCommand(app, &action);
   AddCellCommand(app, &action);
   AddControllerCommand(app, &action);
+  AddCellsCommand(app, &action);
   AddQueryCommand(app, &action);
   AddExportCommand(app, &action);
   AddEvaluateCommand(app, &action);

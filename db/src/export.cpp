@@ -546,6 +546,25 @@ ExportReport ExportCampaign(const Store& store, const ExportOptions& o) {
     h5.reset();
   }
   WriteText(dir / "trials.csv", FormatCsv(index));
+  // Every format: each trial's full scene as commanded, so the dataset can be
+  // served as a cell (replay:DIR, examples/drivers/replay.py) matched by scene.
+  {
+    std::string lines;
+    for (std::size_t i = 0; i < scenes.size(); ++i) {
+      ojson scene;
+      try {
+        scene = ojson::parse(scenes[i]);
+      } catch (const nlohmann::json::exception&) {
+        scene = nullptr;
+      }
+      lines += ojson({{"trial_id", std::get<std::int64_t>(index.rows[i][0])},
+                      {"seed", std::get<std::string>(index.rows[i][4])},
+                      {"scene", scene}})
+                   .dump() +
+               "\n";
+    }
+    WriteText(dir / "scenes.jsonl", lines);
+  }
   if (o.format == ExportFormat::kJsonl) {
     std::string lines;
     const std::string arr = FormatJson(index);

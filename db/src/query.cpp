@@ -3,6 +3,7 @@
 
 #include <algorithm>
 #include <cctype>
+#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <cstring>
@@ -93,7 +94,22 @@ std::string ComposeQuery(const std::string& sql, const QueryFilter& filter) {
   return out;
 }
 
-QueryResult RunQuery(const Store& store, const std::string& sql_in, const QueryFilter& filter) {
+namespace {
+struct Budget {
+  std::chrono::steady_clock::time_point deadline;
+  bool expired = false;
+};
+int OverBudget(void* p) {
+  auto* b = static_cast<Budget*>(p);
+  if (std::chrono::steady_clock::now() > b->deadline) b->expired = true;
+  return b->expired ? 1 : 0;  // non-zero interrupts the statement (SQLITE_INTERRUPT)
+}
+}  // namespace
+
+QueryResult RunQuery(const Store& store, const std::string& sql_in, const QueryFilter& filter,
+                     const QueryLimits& limits) {
+  if (!(limits.max_seconds > 0) || limits.max_rows < 1)
+    throw StoreError(StoreError::Kind::kBadInput, "query: limits must be > 0");
   if (!store.read_only()) {
     throw StoreError(StoreError::Kind::kReadOnly,
                      "RunQuery: the store must be opened read-only for a query");
@@ -132,11 +148,30 @@ QueryResult RunQuery(const Store& store, const std::string& sql_in, const QueryF
   QueryResult out;
   const int ncol = sqlite3_column_count(stmt.get());
   for (int c = 0; c < ncol; ++c) out.columns.emplace_back(sqlite3_column_name(stmt.get(), c));
+  Budget budget{std::chrono::steady_clock::now() +
+                std::chrono::duration_cast<std::chrono::steady_clock::duration>(
+                    std::chrono::duration<double>(std::min(limits.max_seconds, 1e7)))};
+  sqlite3_progress_handler(db, 10000, OverBudget, &budget);
+  struct Unset {
+    sqlite3* db;
+    ~Unset() { sqlite3_progress_handler(db, 0, nullptr, nullptr); }
+  } unset{db};
   while (true) {
     const int step = sqlite3_step(stmt.get());
     if (step == SQLITE_DONE) break;
+    if (step == SQLITE_INTERRUPT || budget.expired) {
+      throw StoreError(StoreError::Kind::kBadInput,
+                       "query: stopped after " + std::to_string(limits.max_seconds) +
+                           " s (--timeout); a recursive CTE without a LIMIT, or a join that "
+                           "needs one?");
+    }
     if (step != SQLITE_ROW) {
       throw StoreError(detail::KindOf(step), std::string("query: ") + sqlite3_errmsg(db));
+    }
+    if (static_cast<std::int64_t>(out.rows.size()) >= limits.max_rows) {
+      throw StoreError(StoreError::Kind::kBadInput, "query: more than " +
+                                                        std::to_string(limits.max_rows) +
+                                                        " rows; add a LIMIT or a --where");
     }
     std::vector<Value> row;
     row.reserve(static_cast<std::size_t>(ncol));

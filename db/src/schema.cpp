@@ -2,6 +2,8 @@
 // each table). PRAGMA user_version is the schema version; each migration
 // runs in one transaction together with the bump of user_version and its row
 // in schema_migrations, so a crash mid-migration leaves the previous version.
+#include <sys/stat.h>
+
 #include <algorithm>
 #include <chrono>
 #include <filesystem>
@@ -258,6 +260,36 @@ CREATE INDEX evaluation_results_by_model ON evaluation_results(evaluation_id, mo
       {4, "ground-truth chunks may be packed (block format AGT2)", R"sql(
 -- gt_chunks.data: "AGT1" (raw) or "AGT2" (packed) blocks; db/README.md.
 )sql"},
+      {5, "service heartbeats, the store's id, cell leases and the cell audit log", R"sql(
+CREATE TABLE store_meta(
+  key   TEXT PRIMARY KEY,
+  value TEXT NOT NULL
+);
+INSERT INTO store_meta(key, value) VALUES('store_id', lower(hex(randomblob(8))));
+CREATE TABLE services(
+  session    TEXT PRIMARY KEY,
+  pid        INTEGER NOT NULL,
+  host       TEXT NOT NULL,
+  domain     INTEGER NOT NULL,
+  started_at REAL NOT NULL,
+  last_beat  REAL NOT NULL,
+  stopped_at REAL
+);
+CREATE INDEX services_by_beat ON services(last_beat);
+ALTER TABLE cells ADD COLUMN lease_s REAL NOT NULL DEFAULT 0;
+ALTER TABLE cells ADD COLUMN serving TEXT NOT NULL DEFAULT '';
+-- Attempts cut short by a service restart (RecoverAfterRestart) are nobody's
+-- fault: they do not count against max_attempts.
+ALTER TABLE trials ADD COLUMN service_restarts INTEGER NOT NULL DEFAULT 0;
+CREATE TABLE cell_events(
+  id      INTEGER PRIMARY KEY,
+  cell_id TEXT NOT NULL,
+  at      REAL NOT NULL,
+  event   TEXT NOT NULL CHECK (event IN ('quarantined','released')),
+  reason  TEXT NOT NULL DEFAULT '',
+  by_whom TEXT NOT NULL DEFAULT ''
+);
+)sql"},
       // Closed-loop trials (issue 19): the controller, its own outcome, and
       // every command the cell applied (ground truth like the samples).
       // IF NOT EXISTS: tests fake an older file by lowering user_version
@@ -293,6 +325,13 @@ CREATE TABLE IF NOT EXISTS closed_loop_commands(
   PRIMARY KEY (trial_id, attempt, sample),
   FOREIGN KEY (trial_id, attempt) REFERENCES closed_loop_runs(trial_id, attempt)
 ) WITHOUT ROWID;
+)sql"},
+      // What a trial's ground truth is and which defects were really applied
+      // (issue 13): every report can say which truth it measured against.
+      {10, "trials: the cell backend, its kind of truth and the defects applied", R"sql(
+ALTER TABLE trials ADD COLUMN backend TEXT;          -- "model", "mujoco", "exec:...", "replay:..."
+ALTER TABLE trials ADD COLUMN truth TEXT;            -- self-consistency | simulator | robot | recorded
+ALTER TABLE trials ADD COLUMN defects_applied TEXT;  -- JSON: cell, campaign, effective profile, draws
 )sql"},
   };
   return kMigrations;
@@ -456,6 +495,11 @@ std::unique_ptr<Store> Store::Open(const std::string& path, const StoreOptions& 
       throw StoreError(StoreError::Kind::kCorrupt, e.what());
     }
     throw;
+  }
+  struct stat st {};
+  if (::stat(path.c_str(), &st) == 0) {
+    impl->file_dev = static_cast<unsigned long long>(st.st_dev);
+    impl->file_ino = static_cast<unsigned long long>(st.st_ino);
   }
   return std::unique_ptr<Store>(new Store(std::move(impl)));
 }

@@ -125,6 +125,9 @@ struct Store::Impl {
   std::string path;
   StoreOptions options;
   mutable std::map<std::string, std::unique_ptr<detail::Stmt>, std::less<>> cache;
+  // The file opened (stat at open): CheckFileIdentity() notices it deleted,
+  // renamed or replaced under us.
+  unsigned long long file_dev = 0, file_ino = 0;
 
   ~Impl();
   detail::StmtRef Prepare(std::string_view sql) const;

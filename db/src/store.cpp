@@ -1,6 +1,7 @@
 // Campaigns, the trial state machine, cells and the status summary.
 // The state machine's diagram and its transition table are in store.hpp.
 #include "arena/db/store.hpp"
+#include "arena/db/prediction_status.hpp"
 
 #include <algorithm>
 #include <cmath>
@@ -105,6 +106,27 @@ const char* ToString(CellState s) {
       return "gone";
   }
   return "?";
+}
+
+const char* ToString(PredictionStatus s) {
+  switch (s) {
+    case PredictionStatus::kOk:
+      return "ok";
+    case PredictionStatus::kSolverFailure:
+      return "solver_failure";
+    case PredictionStatus::kInvalidScene:
+      return "invalid_scene";
+    case PredictionStatus::kError:
+      return "error";
+  }
+  return "?";
+}
+
+std::optional<PredictionStatus> ParsePredictionStatus(const std::string& text) {
+  for (auto s : {PredictionStatus::kOk, PredictionStatus::kSolverFailure,
+                 PredictionStatus::kInvalidScene, PredictionStatus::kError})
+    if (text == ToString(s)) return s;
+  return std::nullopt;
 }
 
 namespace {
@@ -458,6 +480,38 @@ std::int64_t Store::CreateCampaign(const NewCampaign& campaign,
   return id;
 }
 
+std::int64_t Store::CreateCampaign(const NewCampaign& campaign,
+                                   const std::function<std::vector<PlannedTrial>()>& next_chunk) {
+  impl_->RequireWritable("CreateCampaign");
+  if (campaign.name.empty()) BadInput("CreateCampaign: name is empty");
+  ParseObject(campaign.spec_json, "CreateCampaign: spec_json");
+  ParseObject(campaign.sampler_state_json, "CreateCampaign: sampler_state_json");
+  Tx tx(impl_->db, true);  // rolled back by any exception: nothing of the campaign stays
+  const double now = impl_->Now();
+  auto s = impl_->Prepare(
+      "INSERT INTO campaigns(name, spec_json, state, priority, seed, sampler_state_json, "
+      "created_at,"
+      " updated_at) VALUES(?,?,'active',?,?,?,?,?)");
+  s->Bind(1, campaign.name)
+      .Bind(2, campaign.spec_json)
+      .Bind(3, campaign.priority)
+      .Bind(4, SeedToDb(campaign.seed))
+      .Bind(5, campaign.sampler_state_json)
+      .Bind(6, now)
+      .Bind(7, now);
+  s->Run();
+  const std::int64_t id = static_cast<std::int64_t>(sqlite3_last_insert_rowid(impl_->db));
+  int first = 0;
+  for (;;) {
+    const std::vector<PlannedTrial> chunk = next_chunk();
+    if (chunk.empty()) break;
+    InsertPlannedTrials(*impl_, id, first, chunk, "CreateCampaign");
+    first += static_cast<int>(chunk.size());
+  }
+  tx.Commit();
+  return id;
+}
+
 void Store::AppendPlannedTrials(std::int64_t campaign_id, const std::vector<PlannedTrial>& trials,
                                 const std::string& sampler_state_json) {
   impl_->RequireWritable("AppendPlannedTrials");
@@ -659,6 +713,11 @@ std::optional<ClaimedTrial> Store::ClaimNextTrial(const std::string& cell_id) {
     auto e = impl_->Prepare(
         "UPDATE trials SET start_position_error = ?, start_angle_error = ? WHERE id = ?");
     e->Bind(1, dp).Bind(2, da).Bind(3, t->trial_id).Run();
+  } else {
+    // No observed start for this attempt: an earlier attempt's errors must not stay.
+    auto e = impl_->Prepare(
+        "UPDATE trials SET start_position_error = NULL, start_angle_error = NULL WHERE id = ?");
+    e->Bind(1, t->trial_id).Run();
   }
   tx.Commit();
   return t;
@@ -677,11 +736,20 @@ TrialState Store::RetryTrial(std::int64_t trial_id, int attempt, const std::stri
     internal::CheckEdge(row.state, TrialState::kPlanned, trial_id, "RetryTrial");
   }
   TrialState to;
-  if (attempt >= max_attempts) {
+  // Attempts a service restart cut short do not count (the cell was not at fault).
+  auto r = impl_->Prepare("SELECT service_restarts FROM trials WHERE id = ?");
+  r->Bind(1, trial_id);
+  r->Step();
+  const int counted = attempt - static_cast<int>(r->Int(0));
+  if (counted >= max_attempts) {
     to = TrialState::kFailed;
     WriteTransition(*impl_, trial_id, attempt, row.state, to, row.cell_id,
-                    reason + " (attempt " + std::to_string(attempt) + " of " +
-                        std::to_string(max_attempts) + ": giving up)",
+                    reason + " (attempt " + std::to_string(counted) + " of " +
+                        std::to_string(max_attempts) +
+                        (counted != attempt ? " not counting " + std::to_string(attempt - counted) +
+                                                  " cut short by service restarts"
+                                            : std::string()) +
+                        ": giving up)",
                     "RetryTrial");
     auto o = impl_->Prepare("UPDATE trials SET outcome = 'failed' WHERE id = ?");
     o->Bind(1, trial_id).Run();
@@ -774,6 +842,9 @@ namespace {
 void CheckPrediction(const Prediction& p, const std::string& prefix) {
   if (p.model_key.empty()) BadInput(prefix + "model_key is empty");
   if (p.status.empty()) BadInput(prefix + "status is empty");
+  if (!ParsePredictionStatus(p.status))
+    BadInput(prefix + "status '" + p.status +
+             "' is not one of ok, solver_failure, invalid_scene, error");
   ParseObject(p.model_json, prefix + "model_json");
   ParseObject(p.detail_json, prefix + "detail_json");
   for (auto [v, name] :
@@ -960,6 +1031,30 @@ std::vector<EvaluationResult> Store::ListEvaluationResults(std::int64_t evaluati
   return out;
 }
 
+void Store::RecordExecution(std::int64_t trial_id, int attempt, const std::string& backend,
+                            const std::string& truth, const std::string& defects_applied_json) {
+  impl_->RequireWritable("RecordExecution");
+  Tx tx(impl_->db, true);
+  const auto row = LoadTrialRow(*impl_, trial_id, "RecordExecution");
+  CheckAttempt(row, trial_id, attempt, "RecordExecution");
+  auto u =
+      impl_->Prepare("UPDATE trials SET backend = ?, truth = ?, defects_applied = ? WHERE id = ?");
+  u->Bind(1, backend).Bind(2, truth).Bind(3, defects_applied_json).Bind(4, trial_id).Run();
+  tx.Commit();
+}
+
+std::vector<Store::TruthCount> Store::CampaignTruths(std::int64_t campaign_id) const {
+  Tx tx(impl_->db, false);
+  auto s = impl_->Prepare(
+      "SELECT IFNULL(truth, ''), IFNULL(backend, ''), COUNT(*) FROM trials"
+      " WHERE campaign_id = ? AND gt_stream_id IS NOT NULL GROUP BY 1, 2 ORDER BY 3 DESC");
+  s->Bind(1, campaign_id);
+  std::vector<TruthCount> out;
+  while (s->Step()) out.push_back({s->Text(0), s->Text(1), s->Int(2)});
+  tx.Commit();
+  return out;
+}
+
 void Store::FinishTrial(std::int64_t trial_id, int attempt) {
   impl_->RequireWritable("FinishTrial");
   Tx tx(impl_->db, true);
@@ -989,7 +1084,9 @@ RecoveryReport Store::RecoverAfterRestart(const std::string& reason) {
         *impl_, id, attempt, TrialState::kDispatched, TrialState::kPlanned, row.cell_id,
         reason + ": execute not confirmed, re-run as attempt " + std::to_string(attempt + 1),
         "RecoverAfterRestart");
-    auto u = impl_->Prepare("UPDATE trials SET attempt = attempt + 1, not_before = 0 WHERE id = ?");
+    auto u = impl_->Prepare(
+        "UPDATE trials SET attempt = attempt + 1, not_before = 0,"
+        " service_restarts = service_restarts + 1 WHERE id = ?");
     u->Bind(1, id).Run();
     report.requeued.push_back(id);
   }
@@ -1209,21 +1306,54 @@ int Store::RecordCellResult(const std::string& cell_id, bool ok) {
   return n;
 }
 
+namespace {
+void AddCellEvent(const Store::Impl& impl, const std::string& cell_id, const char* event,
+                  const std::string& reason, const std::string& by_whom) {
+  auto e = impl.Prepare(
+      "INSERT INTO cell_events(cell_id, at, event, reason, by_whom) VALUES(?,?,?,?,?)");
+  e->Bind(1, cell_id).Bind(2, impl.Now()).Bind(3, event).Bind(4, reason).Bind(5, by_whom).Run();
+}
+}  // namespace
+
 void Store::QuarantineCell(const std::string& cell_id, const std::string& reason) {
   impl_->RequireWritable("QuarantineCell");
+  Tx tx(impl_->db, true);
   auto s = impl_->Prepare(
       "UPDATE cells SET state = 'quarantined', quarantine_reason = ?, updated_at = ? WHERE id = ?");
   s->Bind(1, reason).Bind(2, impl_->Now()).Bind(3, cell_id).Run();
   RequireCellChanged(impl_->db, "QuarantineCell", cell_id);
+  AddCellEvent(*impl_, cell_id, "quarantined", reason, "service");
+  tx.Commit();
 }
 
-void Store::ReleaseCell(const std::string& cell_id) {
+void Store::ReleaseCell(const std::string& cell_id, const std::string& reason,
+                        const std::string& by_whom) {
   impl_->RequireWritable("ReleaseCell");
+  Tx tx(impl_->db, true);
   auto s = impl_->Prepare(
       "UPDATE cells SET state = 'healthy', quarantine_reason = '', consecutive_failures = 0,"
       " updated_at = ? WHERE id = ?");
   s->Bind(1, impl_->Now()).Bind(2, cell_id).Run();
   RequireCellChanged(impl_->db, "ReleaseCell", cell_id);
+  AddCellEvent(*impl_, cell_id, "released", reason, by_whom);
+  tx.Commit();
+}
+
+std::vector<CellEvent> Store::ListCellEvents(const std::string& cell_id) const {
+  auto s = impl_->Prepare(
+      "SELECT cell_id, at, event, reason, by_whom FROM cell_events WHERE cell_id = ? ORDER BY id");
+  s->Bind(1, cell_id);
+  std::vector<CellEvent> out;
+  while (s->Step()) out.push_back({s->Text(0), s->Real(1), s->Text(2), s->Text(3), s->Text(4)});
+  return out;
+}
+
+void Store::SetCellServing(const std::string& cell_id, double lease_s, const std::string& serving) {
+  impl_->RequireWritable("SetCellServing");
+  if (!std::isfinite(lease_s) || lease_s < 0) BadInput("SetCellServing: lease_s must be >= 0");
+  auto s = impl_->Prepare("UPDATE cells SET lease_s = ?, serving = ? WHERE id = ?");
+  s->Bind(1, lease_s).Bind(2, serving).Bind(3, cell_id).Run();
+  RequireCellChanged(impl_->db, "SetCellServing", cell_id);
 }
 
 void Store::MarkCellGone(const std::string& cell_id, const std::string& reason) {
@@ -1239,7 +1369,7 @@ void Store::MarkCellGone(const std::string& cell_id, const std::string& reason) 
 namespace {
 constexpr const char* kCellCols =
     "SELECT id, state, last_seen, consecutive_failures, total_failures, capabilities_json,"
-    " quarantine_reason FROM cells";
+    " quarantine_reason, lease_s, serving FROM cells";
 CellInfo ReadCell(const detail::Stmt& s) {
   CellInfo c;
   c.id = s.Text(0);
@@ -1249,6 +1379,8 @@ CellInfo ReadCell(const detail::Stmt& s) {
   c.total_failures = static_cast<int>(s.Int(4));
   c.capabilities_json = s.Text(5);
   c.quarantine_reason = s.Text(6);
+  c.lease_s = s.Real(7);
+  c.serving = s.Text(8);
   return c;
 }
 }  // namespace
@@ -1335,6 +1467,14 @@ StatusSummary Store::Status() const {
     out.campaigns.push_back(c);
   }
   out.cells = ListCells();
+  // A cell whose last sign is older than its lease is gone, whatever the last
+  // service wrote (it may have died without saying so).
+  for (auto& c : out.cells) {
+    if (c.state == CellState::kHealthy && c.lease_s > 0 && now - c.last_seen > c.lease_s) {
+      c.state = CellState::kGone;
+      if (c.quarantine_reason.empty()) c.quarantine_reason = "no sign within its lease";
+    }
+  }
   out.drift = Drift();
   tx.Commit();
   return out;

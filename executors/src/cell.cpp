@@ -8,6 +8,8 @@
 #include <limits>
 #include <map>
 #include <mutex>
+#include <optional>
+#include <set>
 #include <stdexcept>
 #include <thread>
 #include <tuple>
@@ -16,6 +18,7 @@
 #include <nlohmann/json.hpp>
 
 #include "arena/executors/controller.hpp"
+#include "arena/executors/defect_layer.hpp"
 #include "arena/mechanics/scene_json.hpp"
 #include "arena/reset/reset.hpp"
 #include "arena/schemas/arena.h"
@@ -42,14 +45,6 @@ reset::Pose ToResetPose(const mechanics::Pose& p) {
   return out;
 }
 
-bool SamePusher(const std::optional<mechanics::PusherSpec>& a,
-                const std::optional<mechanics::PusherSpec>& b) {
-  if (a.has_value() != b.has_value()) return false;
-  if (!a) return true;
-  return a->type == b->type && a->length == b->length && a->radius == b->radius &&
-         a->axis == b->axis && a->normal == b->normal && a->position == b->position;
-}
-
 std::string ModeName(mechanics::SimulationStatus s) {
   switch (s) {
     case mechanics::SimulationStatus::kOk:
@@ -62,7 +57,43 @@ std::string ModeName(mechanics::SimulationStatus s) {
   return "?";
 }
 
+bool SamePusher(const std::optional<mechanics::PusherSpec>& a,
+                const std::optional<mechanics::PusherSpec>& b) {
+  if (a.has_value() != b.has_value()) return false;
+  if (!a) return true;
+  return a->type == b->type && a->length == b->length && a->radius == b->radius &&
+         a->axis == b->axis && a->normal == b->normal && a->position == b->position;
+}
+
 }  // namespace
+
+// Why a backend's true sample is unusable ("" = fine): NaN or infinite
+// values, a time that does not start at 0 or does not increase.
+std::string CheckTrueSample(const mechanics::TrajectorySample& s,
+                            const std::vector<mechanics::TrajectorySample>& before,
+                            const mechanics::Scene& scene) {
+  bool finite = std::isfinite(s.t) && s.position.allFinite() &&
+                s.orientation.coeffs().allFinite() && s.velocity.allFinite() &&
+                s.angular_velocity.allFinite() && s.pusher_position.allFinite() &&
+                s.pusher_force.allFinite();
+  for (const auto& c : s.contacts) {
+    finite = finite && std::isfinite(c.normal_force) && c.tangential_force.allFinite() &&
+             c.torque.allFinite();
+  }
+  if (!finite) return "non-finite value (NaN or infinity) in the true state";
+  if (std::abs(s.orientation.norm() - 1) > 1e-6) return "orientation is not a unit quaternion";
+  if (before.empty() && std::abs(s.t) > 1e-9) return "the first sample's t must be 0";
+  if (!before.empty() && !(s.t > before.back().t)) {
+    return "timestamps out of order: t = " + std::to_string(s.t) + " s after " +
+           std::to_string(before.back().t) + " s";
+  }
+  const size_t contacts = scene.fingers.size() + (scene.pusher ? 1 : 0);
+  if (s.contacts.size() != contacts) {
+    return "expected " + std::to_string(contacts) + " contacts (fingers, then the pusher), got " +
+           std::to_string(s.contacts.size());
+  }
+  return "";
+}
 
 void ValidateCellOptions(const CellOptions& o) {
   if (o.id.empty() || o.id.size() > 64)
@@ -71,6 +102,10 @@ void ValidateCellOptions(const CellOptions& o) {
     if (!(std::isalnum(static_cast<unsigned char>(c)) || c == '_' || c == '-' || c == '.')) {
       throw std::invalid_argument("--id: only letters, digits, '_', '-' and '.' are allowed");
     }
+  }
+  if (o.domain_id < 0 || o.domain_id > dds::kMaxDomainId) {
+    throw std::invalid_argument("--domain: must be 0.." + std::to_string(dds::kMaxDomainId) +
+                                ", got " + std::to_string(o.domain_id));
   }
   if (!std::isfinite(o.speed) || o.speed < 0 || o.speed > 1000) {
     throw std::invalid_argument(
@@ -87,7 +122,10 @@ void ValidateCellOptions(const CellOptions& o) {
 
 struct Cell::Impl {
   CellOptions options;
-  MechanicsBackend mechanics;
+  // Scenes are parsed here (the backend gets a valid Scene); a stand-in
+  // MechanicsBackend may bring its own parser.
+  std::function<mechanics::Scene(std::string_view)> parse;
+  DefectLayer layer;  // the backend, wrapped in defect emulation
   reset::ResetParams reset_params;
   dds::Participant participant;
   dds::Writer<msg::CellAnnounce> announce;
@@ -118,6 +156,28 @@ struct Cell::Impl {
   std::optional<mechanics::PusherSpec> pusher;  // the pusher mounted now
   std::thread worker;
 
+  // ---- serving (PHASE_CLAIM), guarded by `mutex`. The intake thread reads
+  // commands as they come (a claim is never stuck behind a long trial) and
+  // queues the serving session's commands for the worker; every other
+  // session's command is dropped. A session once superseded is never served
+  // again, so a dead service's queued commands cannot run after its successor
+  // claimed the cell.
+  struct Serving {
+    std::uint64_t session = 0;  // 0: free
+    std::string host, store;
+    std::uint32_t pid = 0;
+    double lease_s = 0;
+    Clock::time_point until{};
+  };
+  static constexpr double kImplicitLease_s = 10.0;  // a command without a claim (a test driver)
+  static constexpr std::size_t kRetiredKept = 256;
+  Serving serving;
+  std::set<std::uint64_t> retired;
+  std::deque<std::uint64_t> retired_order;
+  std::deque<msg::TrialCommand> queue;  // the serving session's commands, for the worker
+  std::uint64_t started_unix_ns = UnixNanos();
+  std::thread intake;
+
   static dds::ParticipantOptions ParticipantFor(const CellOptions& o) {
     ValidateCellOptions(o);
     dds::ParticipantOptions p;
@@ -128,9 +188,11 @@ struct Cell::Impl {
     return p;
   }
 
-  Impl(const CellOptions& o, MechanicsBackend m)
+  Impl(const CellOptions& o, std::function<mechanics::Scene(std::string_view)> parser,
+       std::unique_ptr<Backend> backend)
       : options(o),
-        mechanics(std::move(m)),
+        parse(std::move(parser)),
+        layer(std::move(backend), o.defects),
         reset_params(EffectiveResetParams(o.defects)),
         participant(ParticipantFor(o)),
         announce(participant),
@@ -150,8 +212,14 @@ struct Cell::Impl {
     return !wake.wait_until(lock, until, [&] { return stop; });
   }
 
+  // Caller holds `mutex` (reads `serving`); only the constructor and the
+  // intake thread write announcements.
   void Announce() {
     msg::CellAnnounce a;
+    a.serving_session(serving.session);
+    a.serving_host(serving.host);
+    a.serving_pid(serving.pid);
+    a.serving_lease_s(serving.lease_s);
     a.cell_id(options.id);
     a.arena_version("0.1.0");
     for (auto t : options.defects.contact_types) {
@@ -166,7 +234,14 @@ struct Cell::Impl {
     a.max_pusher_speed(options.defects.max_pusher_speed);
     a.speed(options.speed);
     a.defects_json(DefectProfileToJson(options.defects));
-    a.started_unix_ns(UnixNanos());
+    a.started_unix_ns(started_unix_ns);
+    const BackendCapabilities& caps = layer.capabilities();
+    a.backend(caps.name);
+    a.truth(ToString(caps.truth));
+    a.backend_json(json({{"engine", caps.engine},
+                         {"emulates_defects", caps.emulates_defects},
+                         {"settings", json::parse(caps.settings_json, nullptr, false)}})
+                       .dump());
     if (!announce.Write(a)) throw dds::DdsError("cell: announcing the cell failed");
   }
 
@@ -177,6 +252,7 @@ struct Cell::Impl {
     s.cell_id(options.id);
     s.phase(c.phase());
     s.state(state);
+    s.service_session(c.service_session());
     s.observed_pose() = {observed_pose.position.x(),    observed_pose.position.y(),
                          observed_pose.position.z(),    observed_pose.orientation.w(),
                          observed_pose.orientation.x(), observed_pose.orientation.y(),
@@ -244,19 +320,40 @@ struct Cell::Impl {
       Refuse(c, "phase: unknown value");
   }
 
+  TrialContext Context(const msg::TrialCommand& c, Clock::time_point deadline) const {
+    TrialContext t;
+    t.trial_id = c.trial_id();
+    t.attempt = c.attempt();
+    t.seed = c.seed();
+    t.scene_json = c.scene_json();
+    t.deadline = deadline;
+    return t;
+  }
+
   void Execute(const msg::TrialCommand& c) {
     const auto started = Clock::now();
     mechanics::Scene scene;
     try {
-      scene = mechanics.parse(c.scene_json());
+      scene = parse(c.scene_json());
     } catch (const std::exception& e) {
       return Refuse(c, std::string("scene: ") + e.what());
     }
-    if (std::string why = CheckCapabilities(options.defects, scene); !why.empty()) {
-      return Refuse(c, why);
-    }
     if (!std::isfinite(c.deadline_s()) || c.deadline_s() < 0) {
       return Refuse(c, "deadline_s: must be finite and >= 0 (0 = none)");
+    }
+    const auto deadline = c.deadline_s() > 0
+                              ? started + std::chrono::duration_cast<Clock::duration>(
+                                              std::chrono::duration<double>(c.deadline_s()))
+                              : Clock::time_point::max();
+    const TrialContext trial = Context(c, deadline);
+    const bool closed_loop = scene.pusher && scene.pusher->controller;
+    if (closed_loop && !layer.capabilities().closed_loop) {
+      return Refuse(c, "pusher.motion.controller: the " + layer.capabilities().name +
+                           " backend cannot run closed-loop trials (it cannot step with "
+                           "commanded pusher velocities); run them on a `model` cell");
+    }
+    if (std::string why = layer.Prepare(scene, c.defects_json(), trial); !why.empty()) {
+      return Refuse(c, why);
     }
     auto accepted = BaseStatus(c, msg::STATE_ACCEPTED);
     Send(accepted);
@@ -266,35 +363,69 @@ struct Cell::Impl {
       SleepUntil(Clock::time_point::max());
       return;
     }
-    if (scene.pusher && scene.pusher->controller) return ExecuteClosedLoop(c, scene, started);
+    if (closed_loop) return ExecuteClosedLoop(c, scene, trial, started);
 
-    const TrialPerturbation perturbation =
-        DrawPerturbation(options.defects, c.seed(), c.trial_id());
-    mechanics::Scene actual = ApplyPerturbation(scene, perturbation);
-    actual.model.facets = std::max(actual.model.facets, options.fidelity.facets);
-    actual.model.points = std::max(actual.model.points, options.fidelity.points);
-    actual.model.dt = std::min(actual.model.dt, options.fidelity.dt);
-    const mechanics::SimulationResult result = mechanics.simulate(actual);
-    if (result.status != mechanics::SimulationStatus::kOk || result.samples.empty()) {
+    // The backend streams the truth; the cell checks every sample (finite,
+    // time strictly increasing from 0) and stops it at the deadline.
+    struct Collected {
+      std::vector<mechanics::TrajectorySample> samples;
+      std::string problem;
+    } got;
+    const SampleSink sink = [&](const mechanics::TrajectorySample& s) {
+      if (!got.problem.empty()) return false;
+      if (std::string why = CheckTrueSample(s, got.samples, scene); !why.empty()) {
+        got.problem = why;
+        return false;
+      }
+      got.samples.push_back(s);
+      return !Stopping() && Clock::now() <= deadline;
+    };
+    const ExecuteOutcome outcome = layer.Execute(scene, trial, sink);
+    const mechanics::Scene& actual = layer.actual_scene();
+    std::string early;
+    if (!got.problem.empty())
+      early = "backend " + layer.capabilities().name + ": sample " +
+              std::to_string(got.samples.size()) + ": " + got.problem;
+    else if (Stopping())
+      early = "interrupted: cell shutting down";
+    else if (Clock::now() > deadline)
+      early = "deadline: " + std::to_string(c.deadline_s()) + " s exceeded while the backend ran";
+    else if (!outcome.ok)
+      early = outcome.reason.empty() ? "backend failed without a reason" : outcome.reason;
+    else if (got.samples.empty())
+      early = "backend " + layer.capabilities().name + ": no samples";
+    if (!early.empty()) {
       auto s = BaseStatus(c, msg::STATE_FAILED);
-      s.reason("simulation: " + ModeName(result.status) + ": " + result.error);
+      // Typed for the service: a model that cannot run the scene fails the
+      // same way on a re-run (FAILURE_SIMULATION: the trial fails at once);
+      // a driver that crashed, hung or sent garbage may do better next time.
+      s.failure(!got.problem.empty()                          ? msg::FAILURE_INTERNAL
+                : Stopping()                                  ? msg::FAILURE_INTERRUPTED
+                : Clock::now() > deadline                     ? msg::FAILURE_DEADLINE
+                : outcome.reason.rfind("simulation:", 0) == 0 ? msg::FAILURE_SIMULATION
+                                                              : msg::FAILURE_INTERNAL);
+      s.reason(early);
       s.phase_wall_s(std::chrono::duration<double>(Clock::now() - started).count());
+      s.detail_json(json({{"backend", layer.capabilities().name},
+                          {"defects_applied", json::parse(layer.AppliedJson())},
+                          {"backend_detail", json::parse(outcome.detail_json, nullptr, false)}})
+                        .dump());
       return Finish(c, s);
     }
-    const auto observed = Observe(result.samples, actual, options.defects, c.seed(), c.trial_id());
+    const std::vector<mechanics::TrajectorySample>& truth_samples = got.samples;
+    const auto observed = layer.Observe(truth_samples, trial);
 
     // Stream, paced: a batch leaves when its last sample is due; the live
     // topic gets every sample when it is due.
-    const auto deadline = DeadlineOf(c, started);
     size_t dropped = 0;
     for (const auto& o : observed) dropped += o.valid ? 0 : 1;
     const StreamOutcome streamed =
-        StreamLog(c, result, actual, observed, Clock::now(), deadline, Pacing::kLive);
+        StreamLog(c, truth_samples, actual, observed, Clock::now(), deadline, Pacing::kLive);
     const std::string& failure = streamed.failure;
-    const size_t n = result.samples.size();
+    const size_t n = truth_samples.size();
     const std::uint32_t batch_index = streamed.batches;
 
-    const auto& last = result.samples.back();
+    const auto& last = truth_samples.back();
     true_pose.position = last.position;
     true_pose.orientation = last.orientation;
     // The sensors' last valid view of the end state.
@@ -309,30 +440,23 @@ struct Cell::Impl {
 
     auto s = BaseStatus(c, failure.empty() ? msg::STATE_EXECUTED : msg::STATE_FAILED);
     s.reason(failure);
+    if (!failure.empty())
+      s.failure(failure.rfind("deadline", 0) == 0 ? msg::FAILURE_DEADLINE
+                                                  : msg::FAILURE_INTERRUPTED);
     s.samples(static_cast<std::uint32_t>(n));
     s.phase_wall_s(std::chrono::duration<double>(Clock::now() - started).count());
-    json detail = {{"mu_scale", perturbation.mu_scale},
-                   {"velocity_scale", perturbation.velocity_scale},
-                   {"velocity_offset",
-                    {perturbation.velocity_offset.x(), perturbation.velocity_offset.y(),
-                     perturbation.velocity_offset.z()}},
-                   {"dropped_observations", dropped},
-                   {"batches", batch_index},
-                   {"model",
-                    {{"dof", result.model.dof},
-                     {"facets", result.model.facets},
-                     {"points", result.model.points},
-                     {"dt", result.model.dt},
-                     {"unknowns", result.model.unknowns}}},
-                   {"residuals",
-                    {{"force_balance", result.residuals.force_balance},
-                     {"complementarity", result.residuals.complementarity},
-                     {"cone", result.residuals.cone}}},
-                   {"solver",
-                    {{"steps", result.solver.steps},
-                     {"max_pivots", result.solver.max_pivots},
-                     {"failures", result.solver.failures}}},
-                   {"simulate_wall_s", result.wall_s}};
+    const TrialPerturbation& perturbation = layer.perturbation();
+    json detail = json::parse(outcome.detail_json, nullptr, false);
+    if (!detail.is_object()) detail = json::object();
+    detail["mu_scale"] = perturbation.mu_scale;
+    detail["velocity_scale"] = perturbation.velocity_scale;
+    detail["velocity_offset"] = {perturbation.velocity_offset.x(), perturbation.velocity_offset.y(),
+                                 perturbation.velocity_offset.z()};
+    detail["dropped_observations"] = dropped;
+    detail["batches"] = batch_index;
+    detail["backend"] = layer.capabilities().name;
+    detail["truth"] = ToString(layer.capabilities().truth);
+    detail["defects_applied"] = json::parse(layer.AppliedJson());
     s.detail_json(detail.dump());
     if (!failure.empty()) {
       spdlog::warn("cell {}: trial {} attempt {} failed: {}", options.id, c.trial_id(), c.attempt(),
@@ -372,7 +496,7 @@ struct Cell::Impl {
 
   struct ClosedLoop {
     const msg::TrialCommand& command;
-    const mechanics::Scene& actual;
+    const TrialContext& trial;
     const TrialPerturbation& perturbation;
     executors::ControlContext context;
     std::string params;
@@ -421,8 +545,7 @@ struct Cell::Impl {
     }
     // What the sensors saw of this sample (latency, drops, noise: the same
     // streams as the log's, so live and log agree).
-    const auto observed = Observe(samples, loop.actual, options.defects, loop.command.seed(),
-                                  loop.command.trial_id());
+    const auto observed = layer.Observe(samples, loop.trial);
     dds::PusherState pusher;
     pusher.position = truth.pusher_position;
     pusher.velocity = loop.in_force.velocity;
@@ -466,10 +589,10 @@ struct Cell::Impl {
                " is not finite; pusher stopped";
         return Stop(loop, record);
       }
-      if (v.norm() > options.defects.max_pusher_speed * (1 + 1e-9)) {
+      if (v.norm() > layer.cell_profile().max_pusher_speed * (1 + 1e-9)) {
         *why = "controller " + spec.name + ": commanded " + std::to_string(v.norm()) +
                " m/s at sample " + std::to_string(k) + ", above this cell's " +
-               std::to_string(options.defects.max_pusher_speed) + " m/s; pusher stopped";
+               std::to_string(layer.cell_profile().max_pusher_speed) + " m/s; pusher stopped";
         return Stop(loop, record);
       }
       record.commanded = v;
@@ -499,25 +622,17 @@ struct Cell::Impl {
     return std::nullopt;
   }
 
+  // The backend can run it (Execute checked closed_loop before ACCEPTED); the
+  // defect layer perturbs the scene as for any trial.
   void ExecuteClosedLoop(const msg::TrialCommand& c, const mechanics::Scene& scene,
-                         Clock::time_point started) {
-    if (!mechanics.simulate_closed_loop) {
-      return Refuse(c, "pusher.motion.controller: this cell's backend cannot run closed loops");
-    }
-    const TrialPerturbation perturbation =
-        DrawPerturbation(options.defects, c.seed(), c.trial_id());
-    mechanics::Scene actual = ApplyPerturbation(scene, perturbation);
-    actual.pusher->motion = mechanics::PusherMotion{};  // at rest until the first answer
-    actual.model.facets = std::max(actual.model.facets, options.fidelity.facets);
-    actual.model.points = std::max(actual.model.points, options.fidelity.points);
-    actual.model.dt = std::min(actual.model.dt, options.fidelity.dt);
+                         const TrialContext& trial, Clock::time_point started) {
     ClosedLoop loop{c,
-                    actual,
-                    perturbation,
-                    MakeControlContext(scene, options.defects.max_pusher_speed),
+                    trial,
+                    layer.perturbation(),
+                    MakeControlContext(scene, layer.cell_profile().max_pusher_speed),
                     "",
                     Clock::now(),
-                    DeadlineOf(c, started),
+                    trial.deadline,
                     0,
                     {},
                     {},
@@ -534,6 +649,7 @@ struct Cell::Impl {
     if (!participant.WaitForPeer(peer, wait) || !live.WaitForMatched(1, dds::Millis(2000)) ||
         !pusher_commands.WaitForMatched(1, dds::Millis(2000))) {
       auto s = BaseStatus(c, msg::STATE_FAILED);
+      s.failure(msg::FAILURE_NONE);  // the controller's, not the cell's: a retry may find it
       s.reason("controller " + loop.context.spec.name + ": not on domain " +
                std::to_string(options.domain_id) + " (start `arena controller --name " +
                loop.context.spec.name + "`)");
@@ -543,10 +659,11 @@ struct Cell::Impl {
     loop.start = Clock::now();
     loop.last_command_at = loop.start;
     pusher_commands.TakeAll();  // answers to earlier trials
-    mechanics::SimulationResult result = mechanics.simulate_closed_loop(
-        actual, [&](const std::vector<mechanics::TrajectorySample>& samples, std::string* why) {
-          return NextCommand(loop, samples, why);
-        });
+    mechanics::SimulationResult result =
+        layer.ExecuteClosedLoop(scene, trial,
+                                [&](const std::vector<mechanics::TrajectorySample>& samples,
+                                    std::string* why) { return NextCommand(loop, samples, why); });
+    const mechanics::Scene& actual = layer.actual_scene();
     std::string failure = result.stopped;
     if (result.status != mechanics::SimulationStatus::kOk) {
       failure = "simulation: " + ModeName(result.status) + ": " + result.error;
@@ -554,16 +671,17 @@ struct Cell::Impl {
     if (result.samples.empty()) {
       auto s = BaseStatus(c, msg::STATE_FAILED);
       s.reason(failure.empty() ? "simulation: no samples" : failure);
+      s.failure(ClosedLoopFailure(s.reason()));
       s.phase_wall_s(std::chrono::duration<double>(Clock::now() - started).count());
       return Finish(c, s);
     }
     // The log: every sample, as the closed loop saw it, unpaced (the loop
     // itself was paced).
-    const auto observed = Observe(result.samples, actual, options.defects, c.seed(), c.trial_id());
+    const auto observed = layer.Observe(result.samples, trial);
     mechanics::Scene as_run = actual;  // PusherAt's velocity: the last command
     as_run.pusher->motion = loop.in_force;
-    const StreamOutcome streamed = StreamLog(c, result, as_run, observed, Clock::now(),
-                                             DeadlineOf(c, started), Pacing::kFlatOut);
+    const StreamOutcome streamed = StreamLog(c, result.samples, as_run, observed, Clock::now(),
+                                             trial.deadline, Pacing::kFlatOut);
     if (failure.empty()) failure = streamed.failure;
     const auto& last = result.samples.back();
     true_pose.position = last.position;
@@ -579,6 +697,7 @@ struct Cell::Impl {
 
     auto s = BaseStatus(c, failure.empty() ? msg::STATE_EXECUTED : msg::STATE_FAILED);
     s.reason(failure);
+    if (!failure.empty()) s.failure(ClosedLoopFailure(failure));
     s.samples(static_cast<std::uint32_t>(result.samples.size()));
     s.phase_wall_s(std::chrono::duration<double>(Clock::now() - started).count());
     s.detail_json(ClosedLoopDetail(loop, result, streamed).dump());
@@ -587,6 +706,16 @@ struct Cell::Impl {
                    failure);
     }
     Finish(c, s);
+  }
+
+  // Typed for the service like an open-loop failure; a controller's fault
+  // (gone, silent past its hold time, a bad command) is FAILURE_NONE: no
+  // fault of the cell's model, and a retry may well run through.
+  static msg::FailureKind ClosedLoopFailure(const std::string& reason) {
+    if (reason.rfind("simulation:", 0) == 0) return msg::FAILURE_SIMULATION;
+    if (reason.rfind("deadline", 0) == 0) return msg::FAILURE_DEADLINE;
+    if (reason.rfind("interrupted", 0) == 0) return msg::FAILURE_INTERRUPTED;
+    return msg::FAILURE_NONE;
   }
 
   json ClosedLoopDetail(const ClosedLoop& loop, const mechanics::SimulationResult& result,
@@ -623,6 +752,9 @@ struct Cell::Impl {
          {loop.perturbation.velocity_offset.x(), loop.perturbation.velocity_offset.y(),
           loop.perturbation.velocity_offset.z()}},
         {"batches", streamed.batches},
+        {"backend", layer.capabilities().name},
+        {"truth", ToString(layer.capabilities().truth)},
+        {"defects_applied", json::parse(layer.AppliedJson())},
         {"model",
          {{"dof", result.model.dof},
           {"facets", result.model.facets},
@@ -649,12 +781,6 @@ struct Cell::Impl {
   // ---------------------------------------------------------------------
   // Streaming: the reliable GroundTruth log, and the LiveState topic beside it.
 
-  Clock::time_point DeadlineOf(const msg::TrialCommand& c, Clock::time_point started) const {
-    return c.deadline_s() > 0 ? started + std::chrono::duration_cast<Clock::duration>(
-                                              std::chrono::duration<double>(c.deadline_s()))
-                              : Clock::time_point::max();
-  }
-
   // One sample on the live topic: best-effort, keep-last 1, never waits.
   void PublishLive(const msg::TrialCommand& c, std::uint32_t index, bool last,
                    const msg::GroundTruthSample& sample, const std::string& controller = "",
@@ -673,18 +799,19 @@ struct Cell::Impl {
     live.Write(s);
   }
 
-  StreamOutcome StreamLog(const msg::TrialCommand& c, const mechanics::SimulationResult& result,
+  StreamOutcome StreamLog(const msg::TrialCommand& c,
+                          const std::vector<mechanics::TrajectorySample>& truth_samples,
                           const mechanics::Scene& actual,
                           const std::vector<dds::Observation>& observed,
                           Clock::time_point stream_start, Clock::time_point deadline,
                           Pacing pacing) {
     StreamOutcome out;
-    const size_t n = result.samples.size();
+    const size_t n = truth_samples.size();
     // Nobody watching: do not even serialise the live samples.
     const bool live_on = pacing == Pacing::kLive && live.Matched() > 0;
     auto due_of = [&](size_t i) {
       return stream_start + std::chrono::duration_cast<Clock::duration>(
-                                std::chrono::duration<double>(result.samples[i].t * options.speed));
+                                std::chrono::duration<double>(truth_samples[i].t * options.speed));
     };
     std::string& failure = out.failure;
     for (size_t first = 0; first < n && failure.empty();) {
@@ -693,12 +820,13 @@ struct Cell::Impl {
       batch.trial_id(c.trial_id());
       batch.attempt(c.attempt());
       batch.cell_id(options.id);
+      batch.service_session(c.service_session());
       batch.batch(out.batches);
       batch.first_sample(static_cast<std::uint32_t>(first));
       batch.last(first + count == n);
       batch.samples().resize(count);
       for (size_t i = 0; i < count; ++i) {
-        const auto& truth = result.samples[first + i];
+        const auto& truth = truth_samples[first + i];
         dds::EncodeSample(truth, PusherAt(actual, truth), observed[first + i], &batch.samples()[i]);
       }
       const bool paced = pacing == Pacing::kLive && options.speed > 0;
@@ -729,6 +857,10 @@ struct Cell::Impl {
           failure = "interrupted: cell shutting down";
           break;
         }
+      }
+      if (!Serves(c.service_session())) {
+        failure = "interrupted: the cell now serves another service";
+        break;
       }
       batch.sent_unix_ns(UnixNanos());
       // Ground truth is a log: a full history throttles us, it never drops.
@@ -764,11 +896,11 @@ struct Cell::Impl {
     if (!c.scene_json().empty()) {
       mechanics::Scene next;
       try {
-        next = mechanics.parse(c.scene_json());
+        next = parse(c.scene_json());
       } catch (const std::exception& e) {
         return Refuse(c, std::string("scene: ") + e.what());
       }
-      if (std::string why = CheckCapabilities(options.defects, next); !why.empty()) {
+      if (std::string why = CheckCapabilities(layer.cell_profile(), next); !why.empty()) {
         return Refuse(c, why);
       }
       request.target = ToResetPose(next.object.pose);
@@ -778,6 +910,18 @@ struct Cell::Impl {
     auto accepted = BaseStatus(c, msg::STATE_ACCEPTED);
     Send(accepted);
 
+    BackendResetRequest backend_request;
+    backend_request.target = request.target;
+    backend_request.observed_end = observed_pose;
+    backend_request.swap_pusher = request.swap_pusher;
+    backend_request.next_scene_json = c.scene_json();
+    const auto deadline = c.deadline_s() > 0 && std::isfinite(c.deadline_s())
+                              ? started + std::chrono::duration_cast<Clock::duration>(
+                                              std::chrono::duration<double>(c.deadline_s()))
+                              : Clock::time_point::max();
+    if (auto own = layer.inner().Reset(backend_request, Context(c, deadline))) {
+      return FinishBackendReset(c, *own, next_pusher, started);
+    }
     const reset::ResetOutcome out =
         reset::ExecuteReset(request, reset_params, c.seed(), c.trial_id());
     // The reset's own (simulated) duration is paced like a trial.
@@ -790,6 +934,7 @@ struct Cell::Impl {
     if (out.success) pusher = next_pusher;
     auto s = BaseStatus(c, out.success ? msg::STATE_RESET_DONE : msg::STATE_FAILED);
     s.reason(out.failure);
+    if (!out.success) s.failure(msg::FAILURE_RESET);
     s.reset_position_error(out.position_error);
     s.reset_angle_error(out.angle_error);
     s.reset_attempts(static_cast<std::uint32_t>(out.attempts));
@@ -806,10 +951,155 @@ struct Cell::Impl {
     Finish(c, s);
   }
 
-  void Run() {
+  // A backend that resets by itself (a robot) reports the achieved pose.
+  void FinishBackendReset(const msg::TrialCommand& c, const BackendResetOutcome& out,
+                          const std::optional<mechanics::PusherSpec>& next_pusher,
+                          Clock::time_point started) {
+    if (out.ok) {
+      true_pose = out.achieved;
+      observed_pose = out.achieved;
+      pusher = next_pusher;
+    }
+    auto s = BaseStatus(c, out.ok ? msg::STATE_RESET_DONE : msg::STATE_FAILED);
+    s.reason(out.reason);
+    s.reset_attempts(static_cast<std::uint32_t>(out.attempts));
+    s.phase_wall_s(std::chrono::duration<double>(Clock::now() - started).count());
+    s.detail_json(json({{"backend", layer.capabilities().name}, {"time_s", out.time_s}}).dump());
+    Finish(c, s);
+  }
+
+  // ---- serving
+  bool Serves(std::uint64_t session) {
+    std::lock_guard<std::mutex> lock(mutex);
+    return serving.session == session;
+  }
+
+  void Retire(std::uint64_t session) {  // caller holds mutex
+    if (session == 0 || !retired.insert(session).second) return;
+    retired_order.push_back(session);
+    while (retired_order.size() > kRetiredKept) {
+      retired.erase(retired_order.front());
+      retired_order.pop_front();
+    }
+  }
+
+  // Caller holds mutex. Serves `c`'s session from now on (a claim, or the
+  // first command of a session while the cell is free).
+  void ServeLocked(const msg::TrialCommand& c, double lease_s) {
+    const bool changed = serving.session != c.service_session();
+    if (changed) {
+      Retire(serving.session);
+      const auto dropped = std::erase_if(queue, [&](const msg::TrialCommand& q) {
+        return q.service_session() != c.service_session();
+      });
+      if (dropped > 0)
+        spdlog::info(
+            "cell {}: dropped {} queued commands of service session {:016x}, which this "
+            "cell no longer serves",
+            options.id, dropped, serving.session);
+      spdlog::info("cell {}: now serving service session {:016x} ({}, pid {})", options.id,
+                   c.service_session(), c.service_host().empty() ? "?" : c.service_host(),
+                   c.service_pid());
+    }
+    serving.session = c.service_session();
+    if (!c.service_host().empty() || changed) {
+      serving.host = c.service_host();
+      serving.pid = c.service_pid();
+      serving.store = c.service_store();
+    }
+    const bool lease_changed = serving.lease_s != lease_s;
+    serving.lease_s = lease_s;
+    serving.until = Clock::now() + std::chrono::duration_cast<Clock::duration>(
+                                       std::chrono::duration<double>(lease_s));
+    if (changed || lease_changed) Announce();
+  }
+
+  // Intake thread: one command as it arrives. Claims act at once; the serving
+  // session's commands go to the worker; others are dropped.
+  void Intake(const msg::TrialCommand& c) {
+    std::lock_guard<std::mutex> lock(mutex);
+    const std::uint64_t session = c.service_session();
+    if (retired.count(session)) {
+      spdlog::info(
+          "cell {}: dropped a {} command of trial {} from service session {:016x}, which "
+          "this cell no longer serves",
+          options.id, c.phase() == msg::PHASE_CLAIM ? "claim" : "phase", c.trial_id(), session);
+      return;
+    }
+    const bool free = serving.session == 0 || Clock::now() > serving.until;
+    const bool mine = serving.session == session;
+    // The same store's new service: the old one is dead (one service per store).
+    const bool successor =
+        !free && !mine && !serving.store.empty() && serving.store == c.service_store();
+    if (c.phase() == msg::PHASE_CLAIM) {
+      if (!std::isfinite(c.lease_s()) || c.lease_s() < 0) return;
+      if (c.lease_s() == 0) {  // release
+        if (mine) {
+          Retire(session);
+          serving = Serving{};
+          Announce();
+        }
+        return;
+      }
+      if (free || mine || successor) ServeLocked(c, std::min(c.lease_s(), 3600.0));
+      return;
+    }
+    if (!mine) {
+      if (!free) {
+        spdlog::info(
+            "cell {}: dropped trial {}'s command from service session {:016x}: serving "
+            "{:016x}",
+            options.id, c.trial_id(), session, serving.session);
+        return;
+      }
+      ServeLocked(c, kImplicitLease_s);
+    } else if (Clock::now() + std::chrono::duration_cast<Clock::duration>(
+                                  std::chrono::duration<double>(serving.lease_s)) >
+               serving.until) {
+      serving.until = Clock::now() + std::chrono::duration_cast<Clock::duration>(
+                                         std::chrono::duration<double>(serving.lease_s));
+    }
+    queue.push_back(c);
+    wake.notify_all();
+  }
+
+  void IntakeLoop() {
     while (!Stopping()) {
       auto command = commands.Take(dds::Millis(100));
+      {
+        std::lock_guard<std::mutex> lock(mutex);
+        if (serving.session != 0 && Clock::now() > serving.until) {
+          spdlog::info("cell {}: the lease of service session {:016x} ran out; free", options.id,
+                       serving.session);
+          serving.session = 0;
+          serving.host.clear();
+          serving.pid = 0;
+          serving.lease_s = 0;
+          Announce();
+        }
+      }
       if (!command || command->cell_id() != options.id) continue;
+      try {
+        Intake(*command);
+      } catch (const std::exception& e) {
+        spdlog::error("cell {}: command intake: {}", options.id, e.what());
+      }
+    }
+  }
+
+  std::optional<msg::TrialCommand> NextCommand() {
+    std::unique_lock<std::mutex> lock(mutex);
+    wake.wait_for(lock, std::chrono::milliseconds(100), [&] { return stop || !queue.empty(); });
+    if (stop || queue.empty()) return std::nullopt;
+    msg::TrialCommand c = std::move(queue.front());
+    queue.pop_front();
+    return c;
+  }
+
+  void Run() {
+    while (!Stopping()) {
+      auto command = NextCommand();
+      if (!command) continue;
       try {
         Handle(*command);
       } catch (const std::exception& e) {
@@ -817,6 +1107,7 @@ struct Cell::Impl {
         // silently: report it and go on.
         spdlog::error("cell {}: trial {}: {}", options.id, command->trial_id(), e.what());
         auto s = BaseStatus(*command, msg::STATE_FAILED);
+        s.failure(msg::FAILURE_INTERNAL);
         s.reason(std::string("internal error: ") + e.what());
         Finish(*command, s);
       }
@@ -828,16 +1119,29 @@ struct Cell::Impl {
 };
 
 Cell::Cell(const CellOptions& options, MechanicsBackend mechanics)
-    : impl_(std::make_unique<Impl>(options, std::move(mechanics))) {
-  impl_->Announce();
+    : Cell(options, MakeMechanicsStandIn(mechanics, options.fidelity), mechanics.parse) {}
+
+Cell::Cell(const CellOptions& options, std::unique_ptr<Backend> backend)
+    : Cell(options, std::move(backend),
+           [](std::string_view text) { return mechanics::ParseScene(text); }) {}
+
+Cell::Cell(const CellOptions& options, std::unique_ptr<Backend> backend,
+           std::function<mechanics::Scene(std::string_view)> parse)
+    : impl_(std::make_unique<Impl>(options, std::move(parse), std::move(backend))) {
+  {
+    std::lock_guard<std::mutex> lock(impl_->mutex);
+    impl_->Announce();
+  }
   spdlog::info("cell {}: up on domain {} (speed {}, {} samples per batch)", options.id,
                options.domain_id, options.speed, options.batch_samples);
   impl_->worker = std::thread([this] { impl_->Run(); });
+  impl_->intake = std::thread([this] { impl_->IntakeLoop(); });
 }
 
 Cell::~Cell() {
   Stop();
   if (impl_->worker.joinable()) impl_->worker.join();
+  if (impl_->intake.joinable()) impl_->intake.join();
 }
 
 void Cell::Stop() {

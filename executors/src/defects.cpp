@@ -373,7 +373,11 @@ std::vector<dds::Observation> Observe(const std::vector<mechanics::TrajectorySam
     }
     o.t = s.t;
     if (!o.valid) {
+      // Not a measurement: zeros, but as many finger wrenches as the scene
+      // has fingers, so every sample of a trial has the same shape (the
+      // store and the export rely on it; latency makes the first ones invalid).
       o = dds::Observation{};
+      o.finger_wrenches.assign(scene.fingers.size(), dds::Wrench::Zero());
     }
   }
   return out;

@@ -97,6 +97,7 @@ bool RepairBasis(const Eigen::MatrixXd& A, const Eigen::VectorXd& b, std::vector
     if (!SolveBasis(A, b, basis, z, w)) return false;
     if (Acceptable(z, w, b, tol)) {
       out.ok = true;
+      out.status = LcpStatus::kOk;
       out.reason.clear();
       out.z = z;
       out.w = w;
@@ -251,6 +252,7 @@ void LemkeOnce(const Eigen::MatrixXd& A, const Eigen::VectorXd& b, const Eigen::
   for (;;) {
     if (pivots % kRefactorInterval == 0 && pivots != fresh_at) {
       if (!refactor()) {
+        out.status = LcpStatus::kSingularBasis;
         out.reason = "singular basis after " + std::to_string(pivots) + " pivots";
         out.pivots = pivots;
         return;
@@ -258,6 +260,7 @@ void LemkeOnce(const Eigen::MatrixXd& A, const Eigen::VectorXd& b, const Eigen::
       fresh_at = pivots;
     }
     if (pivots >= max_pivots) {
+      out.status = LcpStatus::kPivotLimit;
       out.reason = "pivot limit (" + std::to_string(max_pivots) + ") reached";
       out.pivots = pivots;
       return;
@@ -301,6 +304,7 @@ void LemkeOnce(const Eigen::MatrixXd& A, const Eigen::VectorXd& b, const Eigen::
       // drift: look again with a fresh one (cheap, see refactor) first.
       if (fresh_at != pivots) {
         if (!refactor()) {
+          out.status = LcpStatus::kSingularBasis;
           out.reason = "singular basis after " + std::to_string(pivots) + " pivots";
           out.pivots = pivots;
           return;
@@ -308,6 +312,7 @@ void LemkeOnce(const Eigen::MatrixXd& A, const Eigen::VectorXd& b, const Eigen::
         fresh_at = pivots;
         continue;
       }
+      out.status = LcpStatus::kRayTermination;
       out.reason = "ray termination after " + std::to_string(pivots) + " pivots";
       out.pivots = pivots;
       return;
@@ -367,6 +372,7 @@ void LemkeOnce(const Eigen::MatrixXd& A, const Eigen::VectorXd& b, const Eigen::
     }
   }
   if (!AllFinite(z) || !AllFinite(w)) {
+    out.status = LcpStatus::kNonFiniteSolution;
     out.reason = "non-finite solution after " + std::to_string(pivots) + " pivots";
     return;
   }
@@ -375,10 +381,12 @@ void LemkeOnce(const Eigen::MatrixXd& A, const Eigen::VectorXd& b, const Eigen::
     char buf[96];
     std::snprintf(buf, sizeof buf, "inaccurate solution (natural residual %.3g) after %d pivots",
                   out.natural_residual, pivots);
+    out.status = LcpStatus::kInaccurate;
     out.reason = buf;
     return;
   }
   out.ok = true;
+  out.status = LcpStatus::kOk;
   out.reason.clear();
   out.z = z;
   out.w = w;
@@ -386,21 +394,44 @@ void LemkeOnce(const Eigen::MatrixXd& A, const Eigen::VectorXd& b, const Eigen::
 
 }  // namespace
 
+const char* ToString(LcpStatus status) {
+  switch (status) {
+    case LcpStatus::kOk:
+      return "ok";
+    case LcpStatus::kSingularBasis:
+      return "singular basis";
+    case LcpStatus::kPivotLimit:
+      return "pivot limit";
+    case LcpStatus::kRayTermination:
+      return "ray termination";
+    case LcpStatus::kNonFiniteSolution:
+      return "non-finite solution";
+    case LcpStatus::kInaccurate:
+      return "inaccurate solution";
+    case LcpStatus::kBadProblem:
+      return "bad problem";
+  }
+  return "?";
+}
+
 LcpResult SolveLcp(const Eigen::MatrixXd& A, const Eigen::VectorXd& b,
                    const std::vector<char>* warm_basis, const LcpOptions& options) {
   LcpResult out;
   const Eigen::Index n = b.size();
   out.basis.assign(static_cast<size_t>(n), 0);
   if (A.rows() != n || A.cols() != n) {
+    out.status = LcpStatus::kBadProblem;
     out.reason = "matrix and vector sizes differ";
     return out;
   }
   if (!A.allFinite() || !b.allFinite()) {
+    out.status = LcpStatus::kBadProblem;
     out.reason = "non-finite problem data";
     return out;
   }
   if (n == 0 || b.minCoeff() >= 0) {
     out.ok = true;
+    out.status = LcpStatus::kOk;
     out.z = Eigen::VectorXd::Zero(n);
     out.w = b;
     return out;
@@ -411,6 +442,7 @@ LcpResult SolveLcp(const Eigen::MatrixXd& A, const Eigen::VectorXd& b,
     Eigen::VectorXd z, w;
     if (SolveBasis(A, b, *warm_basis, z, w) && Acceptable(z, w, b, options.feasibility)) {
       out.ok = true;
+      out.status = LcpStatus::kOk;
       out.z = z;
       out.w = w;
       out.basis = *warm_basis;
@@ -461,7 +493,7 @@ LcpResult SolveLcp(const Eigen::MatrixXd& A, const Eigen::VectorXd& b,
     total += out.pivots;
     if (out.ok) break;
     // An inaccurate end leaves its basis in out.basis: try to repair it.
-    if (out.reason.rfind("inaccurate", 0) == 0 &&
+    if (out.status == LcpStatus::kInaccurate &&
         RepairBasis(A, b, out.basis, options.feasibility, out))
       break;
     if (attempt == 0) first_reason = out.reason;

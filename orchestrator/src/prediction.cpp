@@ -1,5 +1,7 @@
 #include "arena/orchestrator/prediction.hpp"
 
+#include "arena/db/prediction_status.hpp"
+
 #include <chrono>
 #include <cstdio>
 
@@ -121,12 +123,12 @@ db::Prediction PredictTrial(const mechanics::Scene& scene,
     case mechanics::SimulationStatus::kOk:
       break;
     case mechanics::SimulationStatus::kSolverFailure:
-      p.status = "solver_failure";
+      p.status = db::ToString(db::PredictionStatus::kSolverFailure);
       detail["error"] = result.error;
       p.detail_json = detail.dump();
       return p;
     case mechanics::SimulationStatus::kInvalidScene:
-      p.status = "invalid_scene";
+      p.status = db::ToString(db::PredictionStatus::kInvalidScene);
       detail["error"] = result.error;
       p.detail_json = detail.dump();
       return p;
@@ -140,7 +142,7 @@ db::Prediction PredictTrial(const mechanics::Scene& scene,
     detail["samples_compared"] = e.samples_compared;
     detail["force_scale"] = e.force_scale;
   } catch (const std::exception& e) {
-    p.status = "error";
+    p.status = db::ToString(db::PredictionStatus::kError);
     detail["error"] = e.what();
   }
   p.detail_json = detail.dump();

@@ -36,22 +36,25 @@ std::string SamplerState(const Campaign& campaign, std::int64_t next_index) {
 }
 }  // namespace
 
-std::int64_t SubmitCampaign(db::Store& store, const Campaign& campaign) {
+std::int64_t SubmitCampaign(db::Store& store, const Campaign& campaign,
+                            const std::function<bool()>& interrupted) {
   const std::int64_t total = TrialCount(campaign);
-  std::int64_t next = std::min(total, kPlanChunk);
   db::NewCampaign c;
   c.name = campaign.name;
   c.spec_json = campaign.source_json;
   c.priority = campaign.priority;
   c.seed = campaign.seed;
-  c.sampler_state_json = SamplerState(campaign, next);
-  const std::int64_t id = store.CreateCampaign(c, PlanChunk(campaign, 0, next));
-  while (next < total) {
+  c.sampler_state_json = SamplerState(campaign, total);
+  // One transaction: a crash, a full disk or an interrupt leaves nothing.
+  std::int64_t next = 0;
+  return store.CreateCampaign(c, [&]() -> std::vector<db::PlannedTrial> {
+    if (interrupted && interrupted()) throw SubmitInterrupted();
+    if (next >= total) return {};
     const std::int64_t end = std::min(total, next + kPlanChunk);
-    store.AppendPlannedTrials(id, PlanChunk(campaign, next, end), SamplerState(campaign, end));
+    auto chunk = PlanChunk(campaign, next, end);
     next = end;
-  }
-  return id;
+    return chunk;
+  });
 }
 
 }  // namespace arena::orchestrator

@@ -93,6 +93,10 @@ db::Sample ToStoreSample(const msg::GroundTruthSample& in,
     for (int k = 0; k < 6; ++k) s.observed_pusher_wrench[k] = observed.pusher_wrench[k];
     for (const auto& w : observed.finger_wrenches)
       for (int k = 0; k < 6; ++k) s.observed_finger_wrenches.push_back(w[k]);
+  } else {
+    // A dropped sample keeps the trial's shape (zeros for every finger value
+    // the cell sent), so the export's columns stay the same for all samples.
+    s.observed_finger_wrenches.assign(in.observed_finger_wrenches().size() / 6 * 6, 0.0);
   }
   if (truth_out) *truth_out = std::move(truth);
   return s;

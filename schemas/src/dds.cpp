@@ -423,8 +423,9 @@ void Register(fdds::DomainParticipant* participant) {
 
 Participant::Participant(const ParticipantOptions& options)
     : core_(std::make_shared<detail::ParticipantCore>()) {
-  if (options.domain_id < 0 || options.domain_id > 232) {
-    throw DdsError("--domain: must be 0..232, got " + std::to_string(options.domain_id));
+  if (options.domain_id < 0 || options.domain_id > kMaxDomainId) {
+    throw DdsError("--domain: must be 0.." + std::to_string(kMaxDomainId) + ", got " +
+                   std::to_string(options.domain_id));
   }
   if (!(options.lease_s > 0.2) || options.lease_s > 3600) {
     throw DdsError("dds: participant lease must be in (0.2, 3600] s");

@@ -85,7 +85,8 @@ void EncodeSample(const mechanics::TrajectorySample& truth, const PusherState& p
   } else {
     out->observed_object_pose() = {0, 0, 0, 1, 0, 0, 0};
     out->observed_pusher_wrench() = {0, 0, 0, 0, 0, 0};
-    out->observed_finger_wrenches().clear();
+    // Zeros, keeping the shape: a dropped sample has as many finger values as the others.
+    out->observed_finger_wrenches().assign(6 * observed.finger_wrenches.size(), 0.0);
   }
 }
 

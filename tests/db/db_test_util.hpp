@@ -101,6 +101,13 @@ class TempDir {
 };
 
 // Runs one trial through the whole state machine with n samples.
+// SQL that takes a current file back to schema version 4 (undoes migration 5),
+// for tests that make an "older" store and open it again.
+inline constexpr const char* kUndoMigration5 =
+    " DROP TABLE store_meta; DROP TABLE services; DROP TABLE cell_events;"
+    " ALTER TABLE cells DROP COLUMN lease_s; ALTER TABLE cells DROP COLUMN serving;"
+    " ALTER TABLE trials DROP COLUMN service_restarts;";
+
 inline void RunTrialToDone(Store& store, const ClaimedTrial& t, int n,
                            const IngestOptions& options = {}) {
   auto ingest = store.BeginIngest(t.trial_id, t.attempt, options);

@@ -133,6 +133,8 @@ TEST(CellProcess, TwoCellsAndADriverExchangeCommands) {
 
   // ... but a new service session (a new store restarts trial ids at 1) is not a
   // repeat: the same trial id and attempt run again and stream again.
+  // (The first session releases the cell; a cell serves one session at a time.)
+  ASSERT_TRUE(d.Send(d.Claim("c1", 0)));
   auto e1_new_session = e1;
   e1_new_session.service_session(e1.service_session() + 1);
   ASSERT_TRUE(d.commands.Write(e1_new_session));

@@ -156,6 +156,19 @@ struct Driver {
     c.scene_json(scene);
     c.seed(seed);
     c.deadline_s(60);
+    c.service_session(session);
+    return c;
+  }
+
+  // PHASE_CLAIM for `lease_s` (0 releases the cell).
+  msg::TrialCommand Claim(const std::string& cell, double lease_s) {
+    msg::TrialCommand c;
+    c.cell_id(cell);
+    c.phase(msg::PHASE_CLAIM);
+    c.service_session(session);
+    c.lease_s(lease_s);
+    c.service_host("test-host");
+    c.service_pid(1);
     return c;
   }
 
@@ -188,6 +201,7 @@ struct Driver {
   dds::Reader<msg::TrialStatus> statuses;
   dds::Reader<msg::GroundTruth> ground_truth;
   std::map<std::string, msg::CellAnnounce> seen;
+  std::uint64_t session = 0x7e57d21e;  // this driver's service session
   std::vector<msg::TrialStatus> other_statuses;
 };
 

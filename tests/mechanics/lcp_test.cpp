@@ -31,6 +31,7 @@ TEST(Lemke, SolvesKnownTwoByTwo) {
   b << -5, -6;
   const LcpResult r = SolveLcp(A, b);
   ExpectSolution(A, b, r);
+  EXPECT_EQ(r.status, LcpStatus::kOk);
   EXPECT_NEAR(r.z[0], 4.0 / 3.0, 1e-14);
   EXPECT_NEAR(r.z[1], 7.0 / 3.0, 1e-14);
 }
@@ -41,6 +42,7 @@ TEST(Lemke, NonnegativeDataNeedsNoPivot) {
   const LcpResult r = SolveLcp(A, b);
   ExpectSolution(A, b, r);
   EXPECT_EQ(r.pivots, 0);
+  EXPECT_EQ(r.status, LcpStatus::kOk);
   EXPECT_EQ(r.z.norm(), 0.0);
 }
 
@@ -61,6 +63,7 @@ TEST(Lemke, InfeasibleProblemEndsOnARay) {
   const LcpResult r = SolveLcp(A, b);
   EXPECT_FALSE(r.ok);
   EXPECT_NE(r.reason.find("ray termination"), std::string::npos) << r.reason;
+  EXPECT_EQ(r.status, LcpStatus::kRayTermination);  // typed: nobody parses the reason
 }
 
 TEST(Lemke, NonFiniteDataIsRefused) {

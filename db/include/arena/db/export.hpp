@@ -12,6 +12,8 @@
 //   csv:   streams/<trial_id>_true.csv, streams/<trial_id>_observed.csv
 //   jsonl: trials.jsonl, streams/<trial_id>_true.jsonl, streams/<trial_id>_observed.jsonl
 //                            (one JSON object per line, keys = column names)
+//   scenes.jsonl             (every format) one line per trial: {"trial_id", "seed",
+//                            "scene"}: the scene as commanded (replay:DIR serves it)
 //   manifest.json            written last, atomically (temp file + rename): format
 //                            version, campaign spec, arena version and commit, units
 //                            and frames of every column, sample rate, counts, and the

@@ -41,12 +41,20 @@ inline constexpr const char* kDefaultQuery = "SELECT * FROM trial_results ORDER 
 // Values are bound, never spliced into the text. @returns the SQL.
 std::string ComposeQuery(const std::string& sql, const QueryFilter& filter);
 
+// Bounds on one query: a runaway statement (an infinite recursive CTE, a
+// cross join of the sample tables) stops instead of running for ever.
+struct QueryLimits {
+  double max_seconds = 60;             // wall time (sqlite3_progress_handler)
+  std::int64_t max_rows = 10'000'000;  // rows kept in memory
+};
+
 // Runs one read-only statement. Parameters ?1 and ?2 are bound to the
 // filter's campaign id and outcome (see ComposeQuery).
 // @throws StoreError(kReadOnly) if the store is not read-only or the statement
 //   would write; kBadInput for SQL errors (message from SQLite), several
-//   statements, or a refused ATTACH/pragma.
-QueryResult RunQuery(const Store& store, const std::string& sql, const QueryFilter& filter = {});
+//   statements, a refused ATTACH/pragma, or a query past `limits`.
+QueryResult RunQuery(const Store& store, const std::string& sql, const QueryFilter& filter = {},
+                     const QueryLimits& limits = {});
 
 // Output formats. Numbers: table with up to 6 significant digits; CSV and
 // JSON with enough digits to round-trip a double exactly.

@@ -313,6 +313,32 @@ struct CellInfo {
   int total_failures = 0;
   std::string capabilities_json;
   std::string quarantine_reason;
+  // The service's liveliness lease for this cell (s; 0 unknown): `status`
+  // shows a healthy cell whose last_seen is older than this as gone.
+  double lease_s = 0;
+  // "" while this store's service serves the cell; otherwise who holds it,
+  // e.g. "service 1a2b... on host lab2 (pid 4242)".
+  std::string serving;
+};
+
+// One start of `arena serve` (or `arena run`) on this store: its heartbeat.
+struct ServiceRecord {
+  std::string session;  // hex of the service session (TrialCommand.service_session)
+  std::int64_t pid = 0;
+  std::string host;
+  int domain = 0;
+  double started_at = 0;  // s since epoch
+  double last_beat = 0;
+  std::optional<double> stopped_at;  // a clean stop
+};
+
+// An operator's or the service's act on a cell (cell_events).
+struct CellEvent {
+  std::string cell_id;
+  double at = 0;
+  std::string event;  // quarantined, released
+  std::string reason;
+  std::string by_whom;
 };
 
 struct CampaignStatus {
@@ -434,6 +460,11 @@ class Store {
   // Inserts the campaign and its planned trials in one transaction.
   // @returns the campaign id. @throws kBadInput naming the trial and field.
   std::int64_t CreateCampaign(const NewCampaign& campaign, const std::vector<PlannedTrial>& trials);
+  // The same for a campaign too big for memory: asks next_chunk for planned
+  // trials until it returns none, all in ONE transaction. If next_chunk (or a
+  // write) throws -- an interrupt, a full disk -- nothing is stored.
+  std::int64_t CreateCampaign(const NewCampaign& campaign,
+                              const std::function<std::vector<PlannedTrial>()>& next_chunk);
   // Adds more planned trials (a budget-driven sampler) and stores the sampler's new position.
   void AppendPlannedTrials(std::int64_t campaign_id, const std::vector<PlannedTrial>& trials,
                            const std::string& sampler_state_json);
@@ -462,7 +493,8 @@ class Store {
   // What ClaimNextTrial would return now, without writing (to aim a reset).
   std::optional<ClaimedTrial> PeekNextTrial(const std::string& cell_id) const;
   // dispatched -> planned with attempt+1 and not_before = now + backoff_s; or
-  // -> failed (outcome "failed") when attempt >= max_attempts.
+  // -> failed (outcome "failed") when attempt >= max_attempts, not counting
+  // attempts that a service restart cut short (RecoverAfterRestart).
   // @returns the new state.
   TrialState RetryTrial(std::int64_t trial_id, int attempt, const std::string& reason,
                         int max_attempts, double backoff_s);
@@ -485,6 +517,20 @@ class Store {
   std::optional<ClosedLoopRun> GetClosedLoop(std::int64_t trial_id) const;
   // predicted -> done.
   void FinishTrial(std::int64_t trial_id, int attempt);
+  // What executed the trial (from the cell's EXECUTED status): the backend
+  // ("model", "mujoco", "exec:...", "replay:..."), its kind of truth
+  // ("self-consistency", "simulator", "robot", "recorded") and the defects
+  // really applied (JSON object, executors/README.md). Migration 10.
+  void RecordExecution(std::int64_t trial_id, int attempt, const std::string& backend,
+                       const std::string& truth, const std::string& defects_applied_json);
+  // Per (truth, backend): how many of the campaign's trials were executed
+  // against it (trials executed by a cell that reported none count under "").
+  struct TruthCount {
+    std::string truth;
+    std::string backend;
+    std::int64_t trials = 0;
+  };
+  std::vector<TruthCount> CampaignTruths(std::int64_t campaign_id) const;
   // After a crash: dispatched -> planned (attempt+1), resetting -> reset_failed,
   // incomplete streams of the old attempts deleted. Idempotent.
   RecoveryReport RecoverAfterRestart(const std::string& reason = "service restarted");
@@ -533,10 +579,37 @@ class Store {
   // Counts a phase result against the cell; @returns consecutive failures now.
   int RecordCellResult(const std::string& cell_id, bool ok);
   void QuarantineCell(const std::string& cell_id, const std::string& reason);
-  void ReleaseCell(const std::string& cell_id);  // quarantined|gone -> healthy, failures reset
+  // quarantined|gone -> healthy, failures reset; writes a `released` row to
+  // cell_events (who and why) in the same transaction.
+  void ReleaseCell(const std::string& cell_id, const std::string& reason = "",
+                   const std::string& by_whom = "");
+  std::vector<CellEvent> ListCellEvents(const std::string& cell_id) const;
+  // The service's view of a cell: the lease it judges it by, and who else
+  // serves it ("" = us / nobody).
+  void SetCellServing(const std::string& cell_id, double lease_s, const std::string& serving);
   void MarkCellGone(const std::string& cell_id, const std::string& reason);
   CellInfo GetCell(const std::string& cell_id) const;
   std::vector<CellInfo> ListCells() const;
+
+  // ---- services (heartbeat; one service per store)
+  // This store's random id (made by migration 5): a restarted service of the
+  // same store may take its cells over at once.
+  std::string StoreId() const;
+  // Registers `me` as the store's service unless another one still holds it:
+  // the latest unstopped service whose last beat is younger than fresh_s and
+  // for which holder_alive() is true (it may check the pid on this host).
+  // @returns that holder (nothing written) or nullopt (me registered).
+  std::optional<ServiceRecord> RegisterService(
+      const ServiceRecord& me, double fresh_s,
+      const std::function<bool(const ServiceRecord&)>& holder_alive);
+  // The service's heartbeat; also refreshes last_seen of the cells it hears.
+  void ServiceBeat(const std::string& session, const std::vector<std::string>& cells_alive);
+  void ServiceStopped(const std::string& session);
+  // The most recently started service, if any ever ran.
+  std::optional<ServiceRecord> LatestService() const;
+  // @throws StoreError(kIo) naming the path when the file opened is no
+  //   longer at its path (deleted, renamed or replaced by another file).
+  void CheckFileIdentity() const;
 
   // ---- read side
   StatusSummary Status() const;

@@ -1,15 +1,18 @@
-// The simulated arena cell: a DDS server that announces itself, executes
-// TrialCommands with the mechanics library and streams ground truth.
+// The arena cell: a DDS server that announces itself, executes TrialCommands
+// on its backend (backend.hpp: model, mujoco, exec:COMMAND, replay:DATASET),
+// wrapped in the defect layer (defect_layer.hpp), and streams ground truth.
 //
 //   commands (TrialCommand, cell_id == ours)
 //        |
 //   listener queue --> worker thread: one command at a time
-//        EXECUTE: parse scene -> check capabilities (REFUSED + reason)
-//                 -> ACCEPTED -> perturb (friction, actuation) -> Simulate
-//                 -> observe (noise, latency, drops) -> GroundTruth batches
+//        EXECUTE: parse scene -> defect layer + backend Prepare (REFUSED + reason)
+//                 -> ACCEPTED -> perturb (friction, actuation) -> backend Execute
+//                    (true samples, each checked) -> observe (noise, latency,
+//                    drops) -> GroundTruth batches
 //                    paced by speed -> EXECUTED (or FAILED + reason)
-//        RESET:   plan from the observed end pose to the next scene's start
-//                 -> simulated execution with retries -> RESET_DONE / FAILED
+//        RESET:   the backend's own reset (a robot), or else: plan from the
+//                 observed end pose to the next scene's start -> simulated
+//                 execution with retries -> RESET_DONE / FAILED
 //   A command whose (trial, attempt, phase) already finished is answered by
 //   re-sending the final status; it never runs twice (idempotency).
 //
@@ -25,6 +28,7 @@
 #include <string>
 #include <string_view>
 
+#include "arena/executors/backend.hpp"
 #include "arena/executors/defects.hpp"
 #include "arena/mechanics/scene.hpp"
 #include "arena/mechanics/simulate.hpp"
@@ -65,6 +69,9 @@ struct MechanicsBackend {
       simulate_closed_loop;
 };
 MechanicsBackend DefaultMechanics();
+// A MechanicsBackend as a cell Backend (`model`, at least the given fidelity).
+std::unique_ptr<Backend> MakeMechanicsStandIn(const MechanicsBackend& mechanics,
+                                              const Fidelity& fidelity);
 
 struct CellCounters {
   std::uint64_t executed = 0;
@@ -79,7 +86,14 @@ class Cell {
  public:
   // Joins the domain, announces the cell and starts the worker.
   // @throws std::invalid_argument for bad options, dds::DdsError when DDS refuses.
+  // The `model` backend on these mechanics (tests bring closed-form stand-ins).
   Cell(const CellOptions& options, MechanicsBackend mechanics);
+  // Any backend (backend.hpp), wrapped in the defect layer with options.defects.
+  // @throws std::invalid_argument also when the backend cannot emulate the
+  // profile's defects.
+  Cell(const CellOptions& options, std::unique_ptr<Backend> backend);
+  Cell(const CellOptions& options, std::unique_ptr<Backend> backend,
+       std::function<mechanics::Scene(std::string_view)> parse);
   ~Cell();
   Cell(const Cell&) = delete;
   Cell& operator=(const Cell&) = delete;

@@ -23,9 +23,22 @@ struct LcpOptions {
   int first_covering = 0;     // 0: start with `covering`; k > 0: with the k-th alternative
 };
 
+// Why a solve ended, for code (reason has the words and the numbers).
+enum class LcpStatus {
+  kOk,
+  kSingularBasis,      // the basis could not be factorised
+  kPivotLimit,         // max_pivots reached
+  kRayTermination,     // Lemke's method ended on a secondary ray
+  kNonFiniteSolution,  // z or w not finite
+  kInaccurate,         // complementarity residual above feasibility
+  kBadProblem,         // sizes differ or non-finite data
+};
+const char* ToString(LcpStatus status);
+
 struct LcpResult {
   bool ok = false;
-  std::string reason;  // why not ok: "pivot limit", "ray termination", ...
+  LcpStatus status = LcpStatus::kBadProblem;  // kOk exactly when ok
+  std::string reason;                         // why not ok: "pivot limit", "ray termination", ...
   Eigen::VectorXd z;
   Eigen::VectorXd w;             // A z + b
   std::vector<char> basis;       // basis[i] != 0: z_i is basic (a warm start for the next solve)

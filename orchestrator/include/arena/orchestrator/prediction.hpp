@@ -27,7 +27,6 @@ std::string ModelKey(const mechanics::ModelOptions& model);
 db::Prediction PredictTrial(const mechanics::Scene& scene,
                             const std::vector<mechanics::TrajectorySample>& truth);
 
-// A prediction that could not be made (status, reason in detail_json).
 // Closed loop (issue 19): the pusher commands a closed-loop trial applied,
 // indexed by the sample they answered (ClosedLoopCommand.commanded).
 using RecordedCommands = std::vector<mechanics::PusherMotion>;
@@ -39,6 +38,7 @@ RecordedCommands CommandsOf(const db::ClosedLoopRun& run);
 db::Prediction PredictTrial(const mechanics::Scene& scene,
                             const std::vector<mechanics::TrajectorySample>& truth,
                             const RecordedCommands* commands);
+// A prediction that could not be made (status, reason in detail_json).
 db::Prediction PredictionFailure(const std::string& status, const std::string& reason);
 
 }  // namespace arena::orchestrator

@@ -14,6 +14,12 @@
 //   prediction (worker thread) --RecordPrediction--> [predicted]
 //   --FinishTrial--> [done]
 //
+// The decisions live in TrialDriver (trial_driver.hpp: the cell state machine,
+// the store-error policy, sessions and claims); this class is the shell
+// around it: DDS endpoints, the SQLite store, predictor threads, heartbeat.
+// One service per store: a second one on the same store refuses to start
+// (db::StoreError kBusy naming the first one's pid and host).
+//
 // Failures: a REFUSED/FAILED execute, a malformed or out-of-order stream, a
 // missed deadline or a cell that died (liveliness lost, participant gone)
 // send the trial back to planned with attempt + 1 after a backoff
@@ -23,7 +29,8 @@
 // is ignored (the store refuses stale attempts). A store that can no longer
 // be written (full, read-only, corrupt, I/O error) is nobody's trial or cell
 // fault: Run() throws that db::StoreError and the service stops (`arena
-// serve` exits 3); what was committed stays intact and a restart resumes.
+// serve` exits 3); what was committed stays intact and a restart resumes. A
+// busy store (another process's write lock) is retried, step by step.
 //
 // Crash safety: at start the service calls RecoverAfterRestart (dispatched ->
 // planned with attempt + 1, resetting -> reset_failed) and then finishes every
@@ -45,7 +52,7 @@ namespace arena::orchestrator {
 
 struct ServiceOptions {
   std::string db_path;               // the SQLite store (created if missing)
-  int domain_id = 0;                 // DDS domain, 0..232
+  int domain_id = 0;                 // DDS domain, 0..dds::kMaxDomainId (231)
   dds::NetworkOptions network;       // default: this host only
   int max_attempts = 3;              // executions per trial before it fails
   double retry_backoff_s = 1.0;      // first retry waits this long; doubles per attempt
@@ -92,10 +99,15 @@ struct TrialTiming {
   double overhead_s = 0;   // cell_busy_s - execute_s - reset_s
 };
 
+// @throws std::invalid_argument naming the option ("--reset-timeout: ...")
+//   for a value that would break the service (NaN, infinite, negative, absurd).
+void ValidateServiceOptions(const ServiceOptions& options);
+
 class Service {
  public:
-  // Opens the store and joins the domain.
-  // @throws db::StoreError, dds::DdsError, std::invalid_argument (bad options).
+  // Opens the store, registers as its service (heartbeat) and joins the domain.
+  // @throws db::StoreError (kBusy naming pid and host when another service
+  //   serves the store), dds::DdsError, std::invalid_argument (bad options).
   explicit Service(const ServiceOptions& options);
   ~Service();
   Service(const Service&) = delete;

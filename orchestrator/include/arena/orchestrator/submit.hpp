@@ -3,19 +3,27 @@
 #pragma once
 
 #include <cstdint>
+#include <functional>
+#include <stdexcept>
 
 #include "arena/db/store.hpp"
 #include "arena/orchestrator/campaign.hpp"
 
 namespace arena::orchestrator {
 
-inline constexpr std::int64_t kPlanChunk = 5000;  // trials planned and written per transaction
+inline constexpr std::int64_t kPlanChunk = 5000;  // trials planned (in memory) at a time
 
-// Stores the campaign and plans all of its trials. The first chunk is written
-// with the campaign in one transaction, the rest in further transactions, each
-// storing the sampler's position ({"next_index": N}) with its trials so a
-// partial plan can be seen and continued.
-// @returns the campaign id. @throws db::StoreError.
-std::int64_t SubmitCampaign(db::Store& store, const Campaign& campaign);
+// `interrupted` returned true: the submit was abandoned and nothing stored.
+class SubmitInterrupted : public std::runtime_error {
+ public:
+  SubmitInterrupted() : std::runtime_error("submit interrupted; nothing was stored") {}
+};
+
+// Stores the campaign and plans all of its trials in ONE transaction (planned
+// kPlanChunk at a time): a crash, a full disk or an interrupt mid-way leaves
+// nothing of the campaign. `interrupted` is asked between chunks.
+// @returns the campaign id. @throws db::StoreError, SubmitInterrupted.
+std::int64_t SubmitCampaign(db::Store& store, const Campaign& campaign,
+                            const std::function<bool()>& interrupted = {});
 
 }  // namespace arena::orchestrator

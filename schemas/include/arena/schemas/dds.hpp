@@ -94,6 +94,9 @@ class DdsError : public std::runtime_error {
 };
 
 inline constexpr double kCellLivelinessLease_s = 1.0;
+// The largest domain id whose ports Fast DDS can form (7400 + 250 x domain +
+// offsets for participant ids up to 65535): 232 fails on the first user port.
+inline constexpr int kMaxDomainId = 231;
 inline constexpr int kGroundTruthMaxBatches = 256;  // unacknowledged batches at most
 inline constexpr double kGroundTruthHeartbeat_s = 0.05;
 // One sample period at 250 Hz: the deadline of the real-time topics.
@@ -121,7 +124,7 @@ inline constexpr int kPeerParticipantRange = 64;
 std::vector<std::string> ParsePeers(const std::string& text);
 
 struct ParticipantOptions {
-  int domain_id = 0;  // 0..232 (Fast DDS port arithmetic)
+  int domain_id = 0;  // 0..kMaxDomainId (Fast DDS port arithmetic)
   std::string name;   // "arena.cell.<id>", "arena.service", ...
   NetworkOptions network;
   double lease_s = 2.5;  // participant lease (s); announcements every lease/5
@@ -252,6 +255,12 @@ class Reader {
 // Topic name of each message type ("CellAnnounce", ...).
 template <class T>
 const char* TopicName();
+
+// Removes the /dev/shm files of Fast DDS participants whose process died
+// without closing them (a SIGKILLed cell leaves ~0.5 MB): a segment or port
+// whose lock file nobody holds. Live processes' files are never touched.
+// @returns the number of files removed.
+std::size_t CleanZombieSharedMemory();
 
 // Participant names by role; cells are "arena.cell.<cell id>".
 std::string CellParticipantName(const std::string& cell_id);

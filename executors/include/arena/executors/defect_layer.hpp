@@ -1,0 +1,83 @@
+// The defect layer: defect emulation wrapped around any backend.
+//
+// For a trial it combines the cell's own profile with the campaign's (sent
+// in TrialCommand.defects_json; CombineProfiles says how), checks the
+// combined limits (workspace, contact types, pusher speed), perturbs the
+// scene the backend runs (friction, pusher velocity) and, once the backend
+// has streamed the truth, emulates what the sensors saw (noise, latency,
+// drops). Sensing defects are computed from the truth, so they apply on every
+// backend. On a backend whose physics cannot be perturbed (a robot, recorded
+// data: BackendCapabilities::emulates_defects false) a profile with friction
+// variability or actuation noise is refused with the reason: a defect is
+// applied or refused, never silently dropped.
+#pragma once
+
+#include <memory>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "arena/executors/backend.hpp"
+#include "arena/executors/defects.hpp"
+#include "arena/schemas/ground_truth.hpp"
+
+namespace arena::executors {
+
+// The profile a trial runs with: the cell's own (its hardware: limits,
+// reset, and whatever defects the lab wants the cell to emulate) and the
+// campaign's. Independent sources combine as such:
+//   noise standard deviations (pose, rotation, force, torque, actuation,
+//     friction variability): root sum of squares;
+//   latency: the sum; drop probability: 1 - (1 - a)(1 - b);
+//   limits (workspace, pusher speed, contact types): the cell's (a campaign
+//     cannot widen hardware; its own limits are ignored);
+//   reset parameters and fault injection: the cell's.
+DefectProfile CombineProfiles(const DefectProfile& cell, const DefectProfile& campaign);
+
+// True when the profile perturbs the physics (friction variability,
+// actuation noise): only a simulated backend can apply that.
+bool PerturbsPhysics(const DefectProfile& profile);
+
+class DefectLayer {
+ public:
+  DefectLayer(std::unique_ptr<Backend> inner, DefectProfile cell_profile);
+  const Backend& inner() const { return *inner_; }
+  Backend& inner() { return *inner_; }
+  const BackendCapabilities& capabilities() const { return caps_; }
+  const DefectProfile& cell_profile() const { return cell_; }
+
+  // Sets the trial's campaign profile ("" or "{}" = none) and checks the
+  // scene against the combined limits and the backend. "" = can run it.
+  std::string Prepare(const mechanics::Scene& scene, std::string_view campaign_defects_json,
+                      const TrialContext& trial);
+  // Runs the perturbed scene on the backend.
+  ExecuteOutcome Execute(const mechanics::Scene& scene, const TrialContext& trial,
+                         const SampleSink& sink);
+  // Closed loop (issue 19): perturbs the scene as Execute does (friction; the
+  // actuation noise the cell applies to every command is perturbation()), puts
+  // its pusher at rest until the first command and runs it on the backend's
+  // SimulateClosedLoop. Only for a backend whose capabilities say closed_loop.
+  mechanics::SimulationResult ExecuteClosedLoop(const mechanics::Scene& scene,
+                                                const TrialContext& trial,
+                                                const mechanics::PusherCommandSource& commands);
+  // What the sensors saw of the truth the backend streamed.
+  std::vector<dds::Observation> Observe(const std::vector<mechanics::TrajectorySample>& truth,
+                                        const TrialContext& trial) const;
+  // The scene as really run (after Execute) and what was applied, as JSON:
+  // {"emulated": bool, "cell": {...}, "campaign": {...}|null, "effective": {...},
+  //  "perturbation": {"mu_scale", "velocity_scale", "velocity_offset"}}
+  const mechanics::Scene& actual_scene() const { return actual_; }
+  const TrialPerturbation& perturbation() const { return perturbation_; }
+  std::string AppliedJson() const;
+
+ private:
+  std::unique_ptr<Backend> inner_;
+  BackendCapabilities caps_;
+  DefectProfile cell_;
+  std::optional<DefectProfile> campaign_;
+  DefectProfile effective_;
+  TrialPerturbation perturbation_;
+  mechanics::Scene actual_;
+};
+
+}  // namespace arena::executors

@@ -1,0 +1,221 @@
+// The service's decisions, without DDS, SQLite or a real clock: events in
+// (a cell announced / lost / a status / a ground-truth batch / a prediction /
+// a tick), actions out through three ports (the store's trial steps, the
+// command transport, the predictor). Service (service.hpp) is the thin shell
+// that owns the DDS endpoints, the SQLite store and the predictor threads and
+// feeds this driver; tests drive it with a fake clock, transport and store.
+//
+// ## One cell, as the driver sees it (one function, SetPhase, changes it)
+//
+//   announced ──claim sent──▶ (serving us? per the cell's announce)
+//        │                          │ yes
+//        │                          ▼            ClaimNextTrial
+//        │  ┌──────────────────▶  idle ──────────────────────────▶ executing
+//        │  │                       ▲                                 │
+//        │  │   status RESET_DONE/  │ CompleteReset                   │ all samples +
+//        │  │   FAILED, deadline ───┘                                 │ EXECUTED:
+//        │  │                    resetting ◀──── BeginReset ──────────┘ Ingest::Finish
+//        │  │                                                         │
+//        │  └── REFUSED / FAILED / malformed stream / deadline ───────┘ RetryTrial|FailTrial
+//        ▼
+//   lost (liveliness, participant gone): phase aborted, cell `gone`; back on
+//   its next announce, its liveliness, or when another process with its id is
+//   still there (a restart within the lease).
+//
+// A cell serves one service session at a time (TrialCommand PHASE_CLAIM,
+// renewed every claim_period_s while we live): the driver dispatches only to
+// cells whose announce names our session; a cell serving another service is
+// written to the store as "serving service S on host H" for `arena status`.
+// Statuses and ground truth of another session are dropped.
+//
+// ## One policy for store errors (StorePolicy)
+//
+//   kBusy (the write lock is held elsewhere)  -> the SAME step is retried
+//       after a backoff (50 ms doubling to 2 s); the trial and the cell stay
+//       where they are (deadlines of a trial waiting on the store are held)
+//   kFull, kIo, kCorrupt, kReadOnly, kTooNew  -> Stop: Tick() throws that
+//       db::StoreError; `arena serve` exits 3. Nothing half-done is left
+//       behind: every step is one transaction and a restart resumes.
+//   other kinds (stale attempt, illegal edge, not found, bad input)
+//       -> that step is moot (a late message, an operator's cancel); logged.
+//
+// ## Resume (a restarted service)
+//
+//   RecoverAfterRestart (dispatched -> planned+1, resetting -> reset_failed),
+//   then ListTrialsByState(executed, reset_done, reset_failed, predicted)
+//   and each goes through the same steps as the live path.
+#pragma once
+
+#include <chrono>
+#include <cstdint>
+#include <deque>
+#include <functional>
+#include <map>
+#include <memory>
+#include <optional>
+#include <set>
+#include <string>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "arena/db/store.hpp"
+#include "arena/mechanics/scene.hpp"
+#include "arena/mechanics/simulate.hpp"
+#include "arena/orchestrator/prediction.hpp"
+#include "arena/orchestrator/service.hpp"
+#include "arena/schemas/arena.h"
+
+namespace arena::orchestrator {
+
+using DriverClock = std::chrono::steady_clock;
+
+// The ground truth of one (trial, attempt) being written (db::Ingest in production).
+class GroundTruthSink {
+ public:
+  virtual ~GroundTruthSink() = default;
+  virtual void Add(const std::vector<db::Sample>& samples) = 0;
+  virtual void Poll() = 0;
+  // Publishes the stream and moves the trial to executed; @returns samples stored.
+  virtual std::int64_t Finish() = 0;
+};
+
+// The store steps the driver takes (db::Store in production). Every call is
+// one transaction; a db::StoreError says what went wrong.
+class TrialStore {
+ public:
+  virtual ~TrialStore() = default;
+  virtual db::RecoveryReport RecoverAfterRestart() = 0;
+  virtual std::vector<db::Trial> ListTrialsByState(const std::vector<db::TrialState>& states) = 0;
+  virtual db::Trial GetTrial(std::int64_t trial_id) = 0;
+  virtual std::optional<db::ClaimedTrial> ClaimNextTrial(const std::string& cell_id) = 0;
+  virtual std::optional<db::ClaimedTrial> PeekNextTrial(const std::string& cell_id) = 0;
+  virtual std::unique_ptr<GroundTruthSink> BeginIngest(std::int64_t trial_id, int attempt) = 0;
+  virtual db::TrialState RetryTrial(std::int64_t trial_id, int attempt, const std::string& reason,
+                                    int max_attempts, double backoff_s) = 0;
+  virtual void FailTrial(std::int64_t trial_id, int attempt, const std::string& reason,
+                         const std::string& outcome) = 0;
+  virtual void BeginReset(std::int64_t trial_id, int attempt) = 0;
+  virtual void CompleteReset(std::int64_t trial_id, int attempt, const db::ResetReport& report) = 0;
+  // RecordPrediction then FinishTrial (each its own transaction; both idempotent enough
+  // to be retried: a prediction of the same model_key replaces the previous one).
+  virtual void RecordPrediction(std::int64_t trial_id, int attempt, const db::Prediction& p) = 0;
+  virtual void FinishTrial(std::int64_t trial_id, int attempt) = 0;
+  // What executed the trial: backend, its kind of truth, the defects applied.
+  virtual void RecordExecution(std::int64_t trial_id, int attempt, const std::string& backend,
+                               const std::string& truth, const std::string& defects_applied) = 0;
+  // Closed loop (issue 19): the commands a cell applied and the controller's
+  // outcome, for one attempt (replaces that attempt's earlier record).
+  virtual void RecordClosedLoop(const db::ClosedLoopRun& run) = 0;
+  virtual void UpsertCell(const std::string& cell_id, const std::vector<std::string>& contact_types,
+                          const std::string& capabilities_json,
+                          const std::string& defects_json) = 0;
+  virtual bool CellQuarantined(const std::string& cell_id) = 0;
+  virtual int RecordCellResult(const std::string& cell_id, bool ok) = 0;
+  virtual void QuarantineCell(const std::string& cell_id, const std::string& reason) = 0;
+  virtual void MarkCellGone(const std::string& cell_id, const std::string& reason) = 0;
+  virtual void SetCellServing(const std::string& cell_id, double lease_s,
+                              const std::string& serving) = 0;
+  // Marks finished campaigns done; @returns whether every campaign (or `only`) is over.
+  virtual bool CompleteFinishedCampaigns(std::int64_t only) = 0;
+  virtual void ServiceBeat(const std::vector<std::string>& cells_alive) = 0;
+  // @throws StoreError(kIo) when the file was deleted, renamed or replaced.
+  virtual void CheckFileIdentity() = 0;
+};
+
+// Sends commands to cells (the DDS TrialCommand writer in production).
+class CommandTransport {
+ public:
+  virtual ~CommandTransport() = default;
+  // @returns false when the command could not be sent.
+  virtual bool Send(msg::TrialCommand& command) = 0;
+};
+
+// What the driver asks of the predictor (worker threads in production).
+struct PredictionRequest {
+  std::int64_t trial_id = 0, campaign_id = 0;
+  int attempt = 0;
+  mechanics::Scene scene;  // the trial's scene (the shell applies the campaign's model)
+  // The true trajectory; empty: read it from the store (a resumed trial).
+  std::vector<mechanics::TrajectorySample> truth;
+  std::string scene_json;
+  // Closed loop (issue 19): the commands the cell applied, replayed through
+  // the model; empty: an open-loop trial, or (a resumed trial) read them
+  // from the store.
+  RecordedCommands commands;
+};
+
+struct PredictionDone {
+  std::int64_t trial_id = 0;
+  int attempt = 0;
+  std::int64_t campaign_id = 0;
+  db::Prediction prediction;
+};
+
+class PredictionPort {
+ public:
+  virtual ~PredictionPort() = default;
+  virtual void Start(PredictionRequest request) = 0;
+  virtual int outstanding() const = 0;
+};
+
+// Who this service is, as cells and other services see it.
+struct ServiceIdentity {
+  std::uint64_t session = 0;
+  std::string host;
+  std::uint32_t pid = 0;
+  std::string store_id;
+};
+
+struct DriverOptions {
+  ServiceOptions service;
+  double claim_lease_s = 10.0;   // a cell serves us this long without renewal
+  double claim_period_s = 1.0;   // we renew (and claim free cells) this often
+  double beat_period_s = 1.0;    // the store heartbeat
+  double cell_lease_s = 10.0;    // `status` shows a cell gone after this long without a sign
+  double dispatch_poll_s = 0.2;  // an idle cell asks the store for work this often
+};
+
+class TrialDriver {
+ public:
+  TrialDriver(DriverOptions options, ServiceIdentity me, TrialStore& store,
+              CommandTransport& transport, PredictionPort& predictions,
+              std::function<DriverClock::time_point()> now = DriverClock::now);
+  ~TrialDriver();
+  TrialDriver(const TrialDriver&) = delete;
+  TrialDriver& operator=(const TrialDriver&) = delete;
+
+  // Start-up: recovery and the trials a previous service left unfinished.
+  void Resume();
+
+  // ---- events
+  void OnAnnounce(const msg::CellAnnounce& announce);
+  // A cell's participant or writer went away. `another_process` is true when
+  // another participant with the cell's id is still there (it was restarted).
+  void OnCellLost(const std::string& cell_id, const std::string& reason, bool another_process);
+  void OnCellAlive(const std::string& cell_id);
+  void OnStatus(const msg::TrialStatus& status);
+  void OnGroundTruth(const msg::GroundTruth& batch);
+  void OnPrediction(PredictionDone done);
+  // Deadlines, store steps waiting after a busy store, claims, heartbeat,
+  // dispatch. `stopping`: no new trials. @throws db::StoreError (fatal kinds).
+  void Tick(bool stopping);
+
+  // ---- state
+  bool InFlight() const;
+  // Every campaign (or options.only_campaign) is over; marks finished campaigns done.
+  bool CampaignsFinished();
+  ServiceCounters counters() const;
+  void OnTrialTiming(std::function<void(const TrialTiming&)> callback);
+  // Store steps waiting for a busy store to free up.
+  std::size_t pending_store_steps() const;
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
+// "1a2b3c4d5e6f7a8b": a session as the store and status show it.
+std::string SessionHex(std::uint64_t session);
+
+}  // namespace arena::orchestrator

@@ -1,0 +1,975 @@
+// The service's decisions; the contract and the state machine are in trial_driver.hpp.
+#include "arena/orchestrator/trial_driver.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <mutex>
+#include <set>
+
+#include <spdlog/spdlog.h>
+#include <nlohmann/json.hpp>
+
+#include "arena/mechanics/scene_json.hpp"
+#include "arena/orchestrator/closed_loop.hpp"
+#include "arena/orchestrator/logging.hpp"
+#include "arena/orchestrator/trial_data.hpp"
+#include "arena/schemas/ground_truth.hpp"
+
+namespace arena::orchestrator {
+
+std::string SessionHex(std::uint64_t session) {
+  char buf[17];
+  std::snprintf(buf, sizeof buf, "%016llx", static_cast<unsigned long long>(session));
+  return buf;
+}
+
+namespace {
+
+using Clock = DriverClock;
+using Seconds = std::chrono::duration<double>;
+
+Clock::duration Dur(double seconds) {
+  return std::chrono::duration_cast<Clock::duration>(Seconds(seconds));
+}
+
+// What a store error means for the step that met it (trial_driver.hpp).
+enum class StoreVerdict { kRetry, kStop, kMoot };
+
+StoreVerdict Judge(const db::StoreError& e) {
+  using K = db::StoreError::Kind;
+  switch (e.kind()) {
+    case K::kBusy:
+      return StoreVerdict::kRetry;
+    case K::kFull:
+    case K::kIo:
+    case K::kCorrupt:
+    case K::kReadOnly:
+    case K::kTooNew:
+      return StoreVerdict::kStop;
+    default:
+      return StoreVerdict::kMoot;
+  }
+}
+
+db::ResetReport UnobservedReset(const std::string& reason) {
+  db::ResetReport r;
+  r.ok = false;
+  r.reason = reason;
+  r.pose_observed = false;
+  return r;
+}
+
+constexpr double kFirstBackoff_s = 0.05;
+constexpr double kMaxBackoff_s = 2.0;
+
+}  // namespace
+
+struct TrialDriver::Impl {
+  DriverOptions opt;
+  ServiceIdentity me;
+  TrialStore& store;
+  CommandTransport& transport;
+  PredictionPort& predictions;
+  std::function<Clock::time_point()> now;
+
+  mutable std::mutex counters_mu;
+  ServiceCounters counters;
+  std::function<void(const TrialTiming&)> on_trial_timing;
+
+  enum class CellPhase { kIdle, kExecuting, kResetting };
+  struct CellRun {
+    std::string id;
+    bool alive = true;
+    bool quarantined = false;
+    bool ours = false;              // its announce names our session
+    std::uint64_t incarnation = 0;  // the announcing process's start (started_unix_ns)
+    std::string serving;            // who else it serves ("" = us / nobody), as stored
+    int execute_failures = 0;
+    int reset_failures = 0;
+    std::vector<std::string> contact_types;
+    std::string capabilities_json = "{}", defects_json = "{}";
+    double speed = 1.0;
+    CellPhase phase = CellPhase::kIdle;
+    std::int64_t trial_id = 0, campaign_id = 0;
+    int attempt = 0;
+    Clock::time_point deadline{};
+    Clock::time_point next_claim{};
+    Clock::time_point claimed_at{};
+    double execute_wall_s = -1;
+    int store_waits = 0;  // store steps of this cell waiting after kBusy: deadlines held
+  };
+  std::map<std::string, CellRun> cells;
+
+  struct Execution {
+    std::int64_t trial_id = 0, campaign_id = 0;
+    int attempt = 0;
+    std::string cell_id;
+    mechanics::Scene scene;
+    std::string scene_json;
+    std::vector<Eigen::Vector3d> normals;
+    std::unique_ptr<GroundTruthSink> sink;  // null after a busy store broke it: re-ingest
+    std::vector<db::Sample> samples;        // everything received, for a re-ingest
+    std::uint32_t next_sample = 0;
+    std::int64_t expected = -1;
+    Clock::time_point stream_deadline{};
+    std::vector<mechanics::TrajectorySample> truth;
+    RecordedCommands commands;  // closed loop: the commands the cell applied
+    bool publishing = false;    // the publish step is under way (or waiting on the store)
+  };
+  std::map<std::int64_t, Execution> executions;
+  std::map<std::int64_t, PredictionDone> waiting_predictions;
+
+  // A store step that met kBusy, waiting to be taken again.
+  struct PendingStep {
+    std::string what;
+    std::string cell_id;  // "" when no cell waits on it
+    std::function<void()> run;
+    std::function<void(const db::StoreError&)> on_moot;
+    Clock::time_point due;
+    double backoff_s;
+  };
+  std::deque<PendingStep> pending;
+
+  Clock::time_point next_claims{}, next_beat{}, next_file_check{}, next_campaigns{};
+
+  Impl(DriverOptions o, ServiceIdentity m, TrialStore& s, CommandTransport& t, PredictionPort& p,
+       std::function<Clock::time_point()> n)
+      : opt(std::move(o)),
+        me(std::move(m)),
+        store(s),
+        transport(t),
+        predictions(p),
+        now(std::move(n)) {}
+
+  void Count(std::int64_t ServiceCounters::*field, std::int64_t n = 1) {
+    std::lock_guard lock(counters_mu);
+    counters.*field += n;
+  }
+
+  // ------------------------------------------------------------ store policy
+  // Runs one store step under the policy of the header. kBusy: the same step
+  // is queued again (the cell, if any, waits with its deadlines held);
+  // fatal kinds: rethrown; others: on_moot (or a log line).
+  // @returns true when the step ran to its end now.
+  bool Step(const std::string& what, const std::string& cell_id, const std::function<void()>& run,
+            const std::function<void(const db::StoreError&)>& on_moot = {},
+            double backoff_s = kFirstBackoff_s) {
+    try {
+      run();
+      return true;
+    } catch (const db::StoreError& e) {
+      switch (Judge(e)) {
+        case StoreVerdict::kStop:
+          throw;
+        case StoreVerdict::kRetry: {
+          spdlog::warn("{}: store busy ({}); retrying in {:.2f} s", what, e.what(), backoff_s);
+          if (!cell_id.empty()) ++Cell(cell_id).store_waits;
+          pending.push_back({what, cell_id, run, on_moot, now() + Dur(backoff_s), backoff_s});
+          return false;
+        }
+        case StoreVerdict::kMoot:
+          if (on_moot)
+            on_moot(e);
+          else
+            spdlog::error("{}: {}", what, e.what());
+          return false;
+      }
+    }
+    return false;
+  }
+
+  // A step whose busy retry is pointless (the next pass does it anyway).
+  void Attempt(const std::string& what, const std::function<void()>& run) {
+    try {
+      run();
+    } catch (const db::StoreError& e) {
+      if (Judge(e) == StoreVerdict::kStop) throw;
+      spdlog::warn("{}: {}", what, e.what());
+    }
+  }
+
+  void RunPendingSteps() {
+    const auto t = now();
+    for (std::size_t n = pending.size(); n > 0 && !pending.empty(); --n) {
+      if (pending.front().due > t) {  // FIFO per due time is enough: keep order, rotate
+        pending.push_back(std::move(pending.front()));
+        pending.pop_front();
+        continue;
+      }
+      PendingStep p = std::move(pending.front());
+      pending.pop_front();
+      if (!p.cell_id.empty()) --Cell(p.cell_id).store_waits;
+      Step(p.what, p.cell_id, p.run, p.on_moot, std::min(p.backoff_s * 2, kMaxBackoff_s));
+    }
+  }
+
+  // ------------------------------------------------------------ cells
+  CellRun& Cell(const std::string& id) {
+    auto [it, inserted] = cells.try_emplace(id);
+    if (inserted) it->second.id = id;
+    return it->second;
+  }
+
+  // The one place a cell's phase changes.
+  void SetPhase(CellRun& cell, CellPhase phase, double deadline_s = 0) {
+    cell.phase = phase;
+    if (phase == CellPhase::kIdle) {
+      cell.next_claim = now();
+    } else {
+      cell.deadline = now() + Dur(deadline_s);
+    }
+  }
+
+  msg::TrialCommand Command(const CellRun& cell, msg::Phase phase) {
+    msg::TrialCommand cmd;
+    cmd.cell_id(cell.id);
+    cmd.phase(phase);
+    cmd.service_session(me.session);
+    return cmd;
+  }
+
+  void SendClaim(const CellRun& cell) {
+    msg::TrialCommand cmd = Command(cell, msg::PHASE_CLAIM);
+    cmd.lease_s(opt.claim_lease_s);
+    cmd.service_host(me.host);
+    cmd.service_pid(me.pid);
+    cmd.service_store(me.store_id);
+    transport.Send(cmd);
+  }
+
+  void OnAnnounce(const msg::CellAnnounce& a) {
+    const std::string id = a.cell_id();
+    CellRun& cell = Cell(id);
+    const bool was_alive = cell.alive;
+    const bool restarted = cell.incarnation != 0 && cell.incarnation != a.started_unix_ns();
+    cell.incarnation = a.started_unix_ns();
+    cell.alive = true;
+    cell.speed = a.speed();
+    nlohmann::json caps = {{"workspace_min", a.workspace_min()},
+                           {"workspace_max", a.workspace_max()},
+                           {"max_pusher_speed", a.max_pusher_speed()},
+                           {"speed", a.speed()},
+                           {"arena_version", a.arena_version()},
+                           {"backend", a.backend()},
+                           {"truth", a.truth()}};
+    cell.contact_types = a.contact_types();
+    cell.capabilities_json = caps.dump();
+    cell.defects_json = a.defects_json();
+    if (restarted && cell.phase != CellPhase::kIdle)
+      AbortPhase(cell, "cell " + id + " restarted", /*count_against_cell=*/false);
+    Step("cell " + id + ": announcement", "", [this, id, was_alive] {
+      CellRun& c = Cell(id);
+      store.UpsertCell(id, c.contact_types, c.capabilities_json, c.defects_json);
+      c.quarantined = store.CellQuarantined(id);
+      if (!was_alive || cells.size() == 1)
+        spdlog::info("cell {} announced ({} contact types)", id, c.contact_types.size());
+    });
+    const bool ours = a.serving_session() == me.session;
+    std::string serving;
+    if (!ours && a.serving_session() != 0) {
+      serving = "serving service " + SessionHex(a.serving_session()) + " on host " +
+                (a.serving_host().empty() ? "?" : a.serving_host()) + " (pid " +
+                std::to_string(a.serving_pid()) + ")";
+    }
+    if (cell.ours && !ours && cell.phase != CellPhase::kIdle)
+      AbortPhase(cell, "cell " + id + " now " + (serving.empty() ? "serves nobody" : serving),
+                 false);
+    if (ours != cell.ours || serving != cell.serving) {
+      if (!serving.empty()) spdlog::warn("cell {} is {}", id, serving);
+      if (ours) spdlog::info("cell {}: serving us", id);
+      cell.ours = ours;
+      cell.serving = serving;
+      Step("cell " + id + ": serving", "",
+           [this, id, serving] { store.SetCellServing(id, opt.cell_lease_s, serving); });
+    }
+    if (!ours && a.serving_session() == 0) SendClaim(cell);  // free: ask at once
+  }
+
+  void OnCellLost(const std::string& id, const std::string& reason, bool another_process) {
+    auto it = cells.find(id);
+    if (it == cells.end()) return;
+    CellRun& cell = it->second;
+    if (another_process) {
+      // A restart within the lease: the old process's loss arrives after the
+      // new one announced. The id stays alive (a phase of the old one is
+      // aborted by the new incarnation's announce).
+      spdlog::info("cell {}: an older process with this id is gone ({}); the new one stays", id,
+                   reason);
+      return;
+    }
+    if (!cell.alive) return;
+    spdlog::warn("cell {}: {}", id, reason);
+    cell.alive = false;  // (`ours` stays: a process back from a lapse may still serve us;
+                         // a new one announces that it serves nobody)
+    AbortPhase(cell, "cell lost: " + reason, /*count_against_cell=*/false);
+    Step("cell " + id + ": gone", "", [this, id, reason] { store.MarkCellGone(id, reason); });
+  }
+
+  void OnCellAlive(const std::string& id) {
+    auto it = cells.find(id);
+    if (it == cells.end() || it->second.alive) return;
+    CellRun& cell = it->second;
+    cell.alive = true;
+    cell.next_claim = now();
+    SendClaim(cell);
+    Step("cell " + id + ": alive again", "", [this, id] {
+      CellRun& c = Cell(id);
+      store.UpsertCell(id, c.contact_types, c.capabilities_json, c.defects_json);
+      spdlog::info("cell {}: alive again", id);
+    });
+  }
+
+  // Counts a phase result (quarantine after quarantine_after failures with no
+  // fully clean trial between them).
+  void CellResult(CellRun& cell, CellPhase phase, bool ok, const std::string& reason) {
+    int& streak = phase == CellPhase::kResetting ? cell.reset_failures : cell.execute_failures;
+    const int other = phase == CellPhase::kResetting ? cell.execute_failures : cell.reset_failures;
+    if (ok) {
+      streak = 0;
+      if (other != 0) return;
+    } else {
+      ++streak;
+    }
+    const std::string id = cell.id;
+    Step("cell " + id + ": result", id, [this, id, ok, reason] {
+      const int failures = store.RecordCellResult(id, ok);
+      if (ok || failures < opt.service.quarantine_after) return;
+      const std::string why = std::to_string(failures) + " failures in a row, last: " + reason;
+      store.QuarantineCell(id, why);
+      Cell(id).quarantined = true;
+      Count(&ServiceCounters::quarantined);
+      spdlog::error("cell {} quarantined: {}", id, why);
+    });
+  }
+
+  // Ends whatever phase the cell is in as a failure.
+  void AbortPhase(CellRun& cell, const std::string& reason, bool count_against_cell) {
+    const CellPhase phase = cell.phase;
+    if (phase == CellPhase::kExecuting) {
+      auto it = executions.find(cell.trial_id);
+      if (it != executions.end()) {
+        RetryExecution(it->second.trial_id, it->second.campaign_id, it->second.attempt, reason);
+        executions.erase(it);
+      }
+    } else if (phase == CellPhase::kResetting) {
+      CompleteReset(cell.trial_id, cell.attempt, UnobservedReset(reason), cell.id);
+    }
+    if (phase != CellPhase::kIdle) {
+      if (count_against_cell) CellResult(cell, phase, false, reason);
+      SetPhase(cell, CellPhase::kIdle);
+    }
+  }
+
+  void RetryExecution(std::int64_t trial_id, std::int64_t campaign_id, int attempt,
+                      const std::string& reason) {
+    const std::string tag = TrialTag(campaign_id, trial_id, attempt);
+    Step(tag + ": retry", "", [this, tag, trial_id, attempt, reason] {
+      const db::TrialState next =
+          store.RetryTrial(trial_id, attempt, reason, opt.service.max_attempts,
+                           opt.service.retry_backoff_s * std::pow(2.0, attempt - 1));
+      if (next == db::TrialState::kFailed) {
+        Count(&ServiceCounters::failed);
+        spdlog::error("{}: failed, no attempts left: {}", tag, reason);
+      } else {
+        Count(&ServiceCounters::retried);
+        spdlog::warn("{}: will be retried: {}", tag, reason);
+      }
+    });
+  }
+
+  void FailTrial(std::int64_t trial_id, std::int64_t campaign_id, int attempt,
+                 const std::string& reason, const std::string& outcome) {
+    const std::string tag = TrialTag(campaign_id, trial_id, attempt);
+    Step(tag + ": fail", "", [this, tag, trial_id, attempt, reason, outcome] {
+      store.FailTrial(trial_id, attempt, reason, outcome);
+      Count(&ServiceCounters::failed);
+      spdlog::error("{}: failed: {}", tag, reason);
+    });
+  }
+
+  // resetting -> reset_done | reset_failed, then the prediction waiting for it.
+  void CompleteReset(std::int64_t trial_id, int attempt, const db::ResetReport& report,
+                     const std::string& cell_id) {
+    resets_completing.insert(trial_id);
+    Step(
+        "trial " + std::to_string(trial_id) + ": complete reset", cell_id,
+        [this, trial_id, attempt, report] {
+          store.CompleteReset(trial_id, attempt, report);
+          resets_completing.erase(trial_id);
+          if (!report.ok) Count(&ServiceCounters::resets_failed);
+          AfterReset(trial_id);
+        },
+        [this, trial_id](const db::StoreError& e) {
+          resets_completing.erase(trial_id);
+          spdlog::error("trial {}: complete reset: {}", trial_id, e.what());
+        });
+  }
+  std::set<std::int64_t> resets_completing;  // CompleteReset under way (or waiting on the store)
+
+  // ------------------------------------------------------------ dispatch
+  void Dispatch(bool stopping) {
+    if (stopping || !recovered) return;
+    const auto t = now();
+    for (auto& [id, cell] : cells) {
+      if (!cell.alive || !cell.ours || cell.quarantined || cell.phase != CellPhase::kIdle ||
+          cell.store_waits > 0 || t < cell.next_claim)
+        continue;
+      cell.next_claim = t + Dur(opt.dispatch_poll_s);  // poll the store gently when idle
+      std::optional<db::ClaimedTrial> claim;
+      const std::string cell_id = id;
+      Attempt("cell " + id + ": claim", [&] { claim = store.ClaimNextTrial(cell_id); });
+      if (!claim) continue;
+      cell.claimed_at = t;
+      cell.campaign_id = claim->campaign_id;
+      cell.execute_wall_s = -1;
+      StartExecution(cell, *claim);
+    }
+  }
+
+  void StartExecution(CellRun& cell, const db::ClaimedTrial& claim) {
+    const std::string tag = TrialTag(claim.campaign_id, claim.trial_id, claim.attempt);
+    Execution ex;
+    ex.trial_id = claim.trial_id;
+    ex.campaign_id = claim.campaign_id;
+    ex.attempt = claim.attempt;
+    ex.cell_id = cell.id;
+    ex.scene_json = claim.scene_json;
+    try {
+      ex.scene = mechanics::ParseScene(claim.scene_json);
+      ex.normals = ContactNormals(ex.scene);
+    } catch (const mechanics::SceneError& e) {
+      FailTrial(claim.trial_id, claim.campaign_id, claim.attempt,
+                std::string("invalid scene: ") + e.what(), "invalid_scene");
+      return;
+    }
+    const double budget =
+        opt.service.execute_timeout_s + ex.scene.duration * std::max(cell.speed, 0.0) * 1.5;
+    cell.trial_id = claim.trial_id;
+    cell.attempt = claim.attempt;
+    executions.emplace(claim.trial_id, std::move(ex));
+    SetPhase(cell, CellPhase::kExecuting, budget + 2.0);
+    const std::string cell_id = cell.id;
+    const std::int64_t trial_id = claim.trial_id;
+    const int attempt = claim.attempt;
+    const std::uint64_t seed = claim.seed;
+    const std::string scene_json = claim.scene_json;
+    const std::string defects_json = claim.defects_json;
+    // The sink first (a busy store: this same step again, the cell waits), then EXECUTE.
+    Step(
+        tag + ": begin ingest", cell_id,
+        [this, tag, cell_id, trial_id, attempt, seed, scene_json, defects_json, budget] {
+          auto it = executions.find(trial_id);
+          if (it == executions.end() || it->second.attempt != attempt) return;
+          it->second.sink = store.BeginIngest(trial_id, attempt);
+          CellRun& c = Cell(cell_id);
+          msg::TrialCommand cmd = Command(c, msg::PHASE_EXECUTE);
+          cmd.trial_id(static_cast<std::uint64_t>(trial_id));
+          cmd.attempt(static_cast<std::uint32_t>(attempt));
+          cmd.scene_json(scene_json);
+          cmd.seed(seed);
+          cmd.deadline_s(budget);
+          cmd.defects_json(defects_json);  // applied by the cell, or the trial is REFUSED
+          SetPhase(c, CellPhase::kExecuting, budget + 2.0);  // the clock starts when it is sent
+          Count(&ServiceCounters::dispatched);
+          if (!transport.Send(cmd)) {
+            AbortPhase(c, "EXECUTE command could not be sent", true);
+            return;
+          }
+          spdlog::info("{}: EXECUTE on cell {}", tag, cell_id);
+        },
+        [this, cell_id](const db::StoreError& e) {
+          AbortPhase(Cell(cell_id), std::string("ground truth refused: ") + e.what(), false);
+        });
+  }
+
+  // ------------------------------------------------------------ execute
+  void OnGroundTruth(const msg::GroundTruth& batch) {
+    if (batch.service_session() != me.session) return;  // another service's trial
+    auto it = executions.find(static_cast<std::int64_t>(batch.trial_id()));
+    if (it == executions.end() || it->second.attempt != static_cast<int>(batch.attempt()) ||
+        it->second.cell_id != batch.cell_id() || it->second.publishing)
+      return;
+    Execution& ex = it->second;
+    const std::string problem = dds::CheckBatch(batch, ex.next_sample);
+    if (!problem.empty()) {
+      FailStream(ex, "malformed ground truth from cell " + batch.cell_id() + ": " + problem);
+      return;
+    }
+    std::vector<db::Sample> samples;
+    try {
+      samples.reserve(batch.samples().size());
+      for (const auto& s : batch.samples()) {
+        mechanics::TrajectorySample truth;
+        samples.push_back(ToStoreSample(s, ex.normals, &truth));
+        ex.truth.push_back(std::move(truth));
+      }
+    } catch (const std::exception& e) {
+      FailStream(ex, std::string("ground truth refused: ") + e.what());
+      return;
+    }
+    if (ex.sink) {
+      try {
+        ex.sink->Add(samples);
+      } catch (const db::StoreError& e) {
+        switch (Judge(e)) {
+          case StoreVerdict::kStop:
+            throw;
+          case StoreVerdict::kRetry:  // kept in memory; published by a fresh ingest at the end
+            spdlog::warn("{}: store busy while ingesting ({}); the stream is re-written at its end",
+                         TrialTag(ex.campaign_id, ex.trial_id, ex.attempt), e.what());
+            ex.sink.reset();
+            break;
+          case StoreVerdict::kMoot:
+            FailStream(ex, std::string("ground truth refused: ") + e.what());
+            return;
+        }
+      }
+    }
+    ex.next_sample += static_cast<std::uint32_t>(samples.size());
+    Count(&ServiceCounters::samples, static_cast<std::int64_t>(samples.size()));
+    ex.samples.insert(ex.samples.end(), std::make_move_iterator(samples.begin()),
+                      std::make_move_iterator(samples.end()));
+    MaybeFinishExecution(ex.trial_id);
+  }
+
+  void FailStream(Execution& ex, const std::string& reason) {
+    spdlog::error("{}: {}", TrialTag(ex.campaign_id, ex.trial_id, ex.attempt), reason);
+    AbortPhase(Cell(ex.cell_id), reason, true);
+  }
+
+  void MaybeFinishExecution(std::int64_t trial_id) {
+    auto it = executions.find(trial_id);
+    if (it == executions.end()) return;
+    Execution& ex = it->second;
+    if (ex.publishing || ex.expected < 0 || ex.next_sample < ex.expected) return;
+    ex.publishing = true;
+    const std::string tag = TrialTag(ex.campaign_id, ex.trial_id, ex.attempt);
+    const std::string cell_id = ex.cell_id;
+    const int attempt = ex.attempt;
+    Step(
+        tag + ": publish ground truth", cell_id,
+        [this, tag, trial_id, attempt] {
+          auto eit = executions.find(trial_id);
+          if (eit == executions.end() || eit->second.attempt != attempt) return;
+          Execution& e = eit->second;
+          if (!e.sink) {  // a busy store broke the ingest: write the whole stream again
+            e.sink = store.BeginIngest(e.trial_id, e.attempt);
+            try {
+              e.sink->Add(e.samples);
+            } catch (...) {
+              e.sink.reset();
+              throw;
+            }
+          }
+          std::int64_t n = 0;
+          try {
+            n = e.sink->Finish();
+          } catch (const db::StoreError& err) {
+            if (Judge(err) == StoreVerdict::kRetry) e.sink.reset();
+            throw;
+          }
+          Count(&ServiceCounters::executed);
+          spdlog::info("{}: executed, {} samples stored", tag, n);
+          Executed(trial_id);
+        },
+        [this, tag, trial_id](const db::StoreError& e) {
+          auto eit = executions.find(trial_id);
+          if (eit == executions.end()) return;
+          spdlog::error("{}: {}", tag, e.what());
+          AbortPhase(Cell(eit->second.cell_id), e.what(), true);
+        });
+  }
+
+  // The stream is published: predict, and reset the cell towards its next trial.
+  void Executed(std::int64_t trial_id) {
+    auto it = executions.find(trial_id);
+    Execution& ex = it->second;
+    CellRun& cell = Cell(ex.cell_id);
+    CellResult(cell, CellPhase::kExecuting, true, "");
+    PredictionRequest request{ex.trial_id,           ex.campaign_id,      ex.attempt,
+                              std::move(ex.scene),   std::move(ex.truth), ex.scene_json,
+                              std::move(ex.commands)};
+    predictions.Start(std::move(request));
+    const std::string tag = TrialTag(ex.campaign_id, ex.trial_id, ex.attempt);
+    const int attempt = ex.attempt;
+    const std::string cell_id = ex.cell_id;
+    executions.erase(it);
+    SetPhase(cell, CellPhase::kResetting, opt.service.reset_timeout_s + 2.0);
+    Step(
+        tag + ": begin reset", cell_id,
+        [this, trial_id, attempt, cell_id] {
+          CellRun& c = Cell(cell_id);
+          // Aim the reset at the start of the trial this cell will most likely run next.
+          std::optional<db::ClaimedTrial> next = store.PeekNextTrial(cell_id);
+          store.BeginReset(trial_id, attempt);
+          msg::TrialCommand cmd = Command(c, msg::PHASE_RESET);
+          cmd.trial_id(static_cast<std::uint64_t>(trial_id));
+          cmd.attempt(static_cast<std::uint32_t>(attempt));
+          cmd.scene_json(next ? next->scene_json : std::string());
+          cmd.seed(next ? next->seed : 0);
+          cmd.deadline_s(opt.service.reset_timeout_s);
+          SetPhase(c, CellPhase::kResetting, opt.service.reset_timeout_s + 2.0);
+          if (!transport.Send(cmd)) AbortPhase(c, "RESET command could not be sent", true);
+        },
+        [this, tag, cell_id](const db::StoreError& e) {
+          spdlog::error("{}: {}", tag, e.what());
+          SetPhase(Cell(cell_id), CellPhase::kIdle);  // the trial moved on (cancelled, failed)
+        });
+  }
+
+  // ------------------------------------------------------------ statuses
+  void OnStatus(const msg::TrialStatus& st) {
+    if (st.service_session() != me.session) return;  // another service's (or a dead one's)
+    const std::string id = st.cell_id();
+    auto cit = cells.find(id);
+    if (cit == cells.end()) return;
+    CellRun& cell = cit->second;
+    if (cell.phase == CellPhase::kIdle ||
+        cell.trial_id != static_cast<std::int64_t>(st.trial_id()) ||
+        cell.attempt != static_cast<int>(st.attempt())) {
+      return;  // late or repeated status of a phase already settled
+    }
+    if (st.phase() == msg::PHASE_EXECUTE && cell.phase == CellPhase::kExecuting) {
+      OnExecuteStatus(cell, st);
+    } else if (st.phase() == msg::PHASE_RESET && cell.phase == CellPhase::kResetting) {
+      OnResetStatus(cell, st);
+    }
+  }
+
+  // What the trial ran on and which defects were applied (the cell's word).
+  // Metadata: a store error here is logged by Step's policy, never blocks the trial.
+  void RecordExecution(const Execution& ex, const msg::TrialStatus& st) {
+    const auto detail = nlohmann::json::parse(st.detail_json(), nullptr, false);
+    if (!detail.is_object()) return;
+    const std::string backend = detail.value("backend", std::string());
+    const std::string truth = detail.value("truth", std::string());
+    const std::string applied =
+        detail.contains("defects_applied") ? detail["defects_applied"].dump() : std::string();
+    const std::int64_t trial_id = ex.trial_id;
+    const int attempt = ex.attempt;
+    Step("trial " + std::to_string(trial_id) + ": record execution", "",
+         [this, trial_id, attempt, backend, truth, applied] {
+           store.RecordExecution(trial_id, attempt, backend, truth, applied);
+         });
+  }
+
+  // Closed loop (issue 19): the commands the cell applied and the
+  // controller's outcome (detail_json "closed_loop"), stored with the attempt
+  // like RecordExecution; the commands also go to the prediction (replayed).
+  void RecordClosedLoop(Execution& ex, const msg::TrialStatus& st) {
+    const std::string tag = TrialTag(ex.campaign_id, ex.trial_id, ex.attempt);
+    std::optional<db::ClosedLoopRun> run;
+    try {
+      run = ClosedLoopFromDetail(ex.trial_id, ex.attempt, st.reason(), st.detail_json());
+    } catch (const std::exception& e) {
+      spdlog::error("{}: closed-loop record: {}", tag, e.what());
+      return;
+    }
+    if (!run) return;
+    ex.commands = CommandsOf(*run);
+    auto shared = std::make_shared<db::ClosedLoopRun>(std::move(*run));
+    Step(tag + ": record closed loop", "", [this, shared] { store.RecordClosedLoop(*shared); });
+  }
+
+  void OnExecuteStatus(CellRun& cell, const msg::TrialStatus& st) {
+    auto it = executions.find(cell.trial_id);
+    if (it == executions.end() || it->second.publishing) return;
+    Execution& ex = it->second;
+    switch (st.state()) {
+      case msg::STATE_ACCEPTED:
+        return;
+      case msg::STATE_EXECUTED:
+        RecordExecution(ex, st);
+        RecordClosedLoop(ex, st);
+        cell.execute_wall_s = st.phase_wall_s();
+        ex.expected = st.samples();
+        ex.stream_deadline = now() + Dur(opt.service.stream_grace_s);
+        MaybeFinishExecution(ex.trial_id);
+        return;
+      case msg::STATE_REFUSED: {
+        RetryExecution(ex.trial_id, ex.campaign_id, ex.attempt,
+                       "refused by cell " + cell.id + ": " + st.reason());
+        executions.erase(it);
+        SetPhase(cell, CellPhase::kIdle);
+        cell.next_claim = now() + Dur(0.5);  // another cell may take it
+        return;
+      }
+      default:
+        RecordClosedLoop(ex, st);  // a failed closed loop: why, and the commands up to then
+        if (st.failure() == msg::FAILURE_SIMULATION) {
+          // The cell's simulator could not run this scene. The cell is fine
+          // and a re-run is bit-identical, so the trial fails at once.
+          FailTrial(ex.trial_id, ex.campaign_id, ex.attempt, "cell " + cell.id + ": " + st.reason(),
+                    "solver_failure");
+          executions.erase(it);
+          SetPhase(cell, CellPhase::kIdle);
+          return;
+        }
+        AbortPhase(cell, "cell " + cell.id + " failed: " + st.reason(), true);
+        return;
+    }
+  }
+
+  void OnResetStatus(CellRun& cell, const msg::TrialStatus& st) {
+    if (st.state() != msg::STATE_RESET_DONE && st.state() != msg::STATE_FAILED) return;
+    const bool ok = st.state() == msg::STATE_RESET_DONE;
+    db::ResetReport report;
+    report.ok = ok;
+    std::copy(st.observed_pose().begin(), st.observed_pose().end(), report.observed_pose.begin());
+    report.position_error = st.reset_position_error();
+    report.angle_error = st.reset_angle_error();
+    report.reset_attempts = static_cast<int>(st.reset_attempts());
+    report.reason = st.reason();
+    if (!ok) {
+      spdlog::warn("trial {} attempt {}: reset on cell {} failed: {}", cell.trial_id, cell.attempt,
+                   cell.id, st.reason());
+    }
+    CompleteReset(cell.trial_id, cell.attempt, report, cell.id);
+    CellResult(cell, CellPhase::kResetting, ok, st.reason());
+    if (ok) ReportTiming(cell, st.phase_wall_s());
+    SetPhase(cell, CellPhase::kIdle);
+  }
+
+  // The split of a clean trial's time on its cell (TrialTiming). A cell's
+  // reported phase times are its word: non-finite or negative ones give no figure.
+  void ReportTiming(const CellRun& cell, double reset_wall_s) {
+    const double busy = Seconds(now() - cell.claimed_at).count();
+    const double exec = cell.execute_wall_s;
+    if (!std::isfinite(exec) || exec < 0 || !std::isfinite(reset_wall_s) || reset_wall_s < 0)
+      return;
+    TrialTiming t;
+    t.trial_id = cell.trial_id;
+    t.attempt = cell.attempt;
+    t.cell_id = cell.id;
+    t.cell_busy_s = busy;
+    t.execute_s = exec;
+    t.reset_s = reset_wall_s;
+    t.overhead_s = busy - exec - reset_wall_s;
+    t.campaign_id = cell.campaign_id;
+    if (on_trial_timing) on_trial_timing(t);
+  }
+
+  // ------------------------------------------------------------ predictions
+  void AfterReset(std::int64_t trial_id) {
+    auto it = waiting_predictions.find(trial_id);
+    if (it == waiting_predictions.end()) return;
+    PredictionDone done = std::move(it->second);
+    waiting_predictions.erase(it);
+    RecordPrediction(std::move(done));
+  }
+
+  void OnPrediction(PredictionDone done) {
+    const std::int64_t trial_id = done.trial_id;
+    auto shared = std::make_shared<PredictionDone>(std::move(done));
+    Step("trial " + std::to_string(trial_id) + ": prediction", "", [this, shared] {
+      const db::Trial t = store.GetTrial(shared->trial_id);
+      if (t.attempt != shared->attempt) return;  // the trial moved on (re-run): drop it
+      if (t.state == db::TrialState::kResetting || t.state == db::TrialState::kExecuted) {
+        if (ResetInFlight(t.id, t.attempt)) {  // recorded when the reset ends (AfterReset)
+          waiting_predictions[shared->trial_id] = std::move(*shared);
+          return;
+        }
+        // Nobody resets it any more (its reset step was moot, or its status
+        // lost): close the reset as not observed, then record.
+        if (t.state == db::TrialState::kExecuted) store.BeginReset(t.id, t.attempt);
+        store.CompleteReset(t.id, t.attempt, UnobservedReset("its reset was not confirmed"));
+      }
+      RecordPrediction(std::move(*shared));
+    });
+  }
+
+  bool ResetInFlight(std::int64_t trial_id, int attempt) const {
+    if (resets_completing.count(trial_id)) return true;
+    for (const auto& [id, cell] : cells)
+      if (cell.phase == CellPhase::kResetting && cell.trial_id == trial_id &&
+          cell.attempt == attempt)
+        return true;
+    return false;
+  }
+
+  void RecordPrediction(PredictionDone done) {
+    const std::string tag = TrialTag(done.campaign_id, done.trial_id, done.attempt);
+    auto shared = std::make_shared<PredictionDone>(std::move(done));
+    Step(tag + ": record prediction", "", [this, tag, shared] {
+      store.RecordPrediction(shared->trial_id, shared->attempt, shared->prediction);
+      spdlog::info("{}: predicted ({}, final position error {:.3g} m)", tag,
+                   shared->prediction.status,
+                   shared->prediction.final_position_error.value_or(NAN));
+      Finish(shared->trial_id, shared->campaign_id, shared->attempt);
+    });
+  }
+
+  void Finish(std::int64_t trial_id, std::int64_t campaign_id, int attempt) {
+    const std::string tag = TrialTag(campaign_id, trial_id, attempt);
+    Step(tag + ": finish", "", [this, tag, trial_id, attempt] {
+      store.FinishTrial(trial_id, attempt);
+      Count(&ServiceCounters::done);
+      spdlog::info("{}: done", tag);
+    });
+  }
+
+  // ------------------------------------------------------------ resume
+  // Recovery first (a busy store: the same step again at the next tick); no
+  // trial is dispatched before it ran, or it would re-queue our own claims.
+  bool recovered = false;
+  void Resume() {
+    Step(
+        "recovery after restart", "",
+        [this] {
+          const db::RecoveryReport report = store.RecoverAfterRestart();
+          if (!report.requeued.empty() || !report.reset_failed.empty()) {
+            spdlog::warn("recovered after restart: {} trials re-queued, {} resets marked failed",
+                         report.requeued.size(), report.reset_failed.size());
+          }
+          Count(&ServiceCounters::recovered,
+                static_cast<std::int64_t>(report.requeued.size() + report.reset_failed.size()));
+          const auto unfinished =
+              store.ListTrialsByState({db::TrialState::kExecuted, db::TrialState::kResetDone,
+                                       db::TrialState::kResetFailed, db::TrialState::kPredicted});
+          recovered = true;
+          for (const auto& t : unfinished) ResumeTrial(t);
+        },
+        [this](const db::StoreError& e) {
+          spdlog::error("recovery after restart: {}", e.what());
+          recovered = true;  // not fatal: schedule anyway
+        });
+  }
+
+  void ResumeTrial(const db::Trial& t) {
+    const std::string tag = TrialTag(t.campaign_id, t.id, t.attempt);
+    switch (t.state) {
+      case db::TrialState::kExecuted:
+        Step(tag + ": reset after restart", "", [this, t] {
+          store.BeginReset(t.id, t.attempt);
+          store.CompleteReset(t.id, t.attempt,
+                              UnobservedReset("service restarted before the reset"));
+          StartStoredPrediction(t);
+        });
+        return;
+      case db::TrialState::kResetDone:
+      case db::TrialState::kResetFailed:
+        StartStoredPrediction(t);
+        return;
+      case db::TrialState::kPredicted:
+        Finish(t.id, t.campaign_id, t.attempt);
+        return;
+      default:
+        return;
+    }
+  }
+
+  void StartStoredPrediction(const db::Trial& t) {
+    spdlog::info("{}: predicting after restart", TrialTag(t.campaign_id, t.id, t.attempt));
+    PredictionRequest request;
+    request.trial_id = t.id;
+    request.campaign_id = t.campaign_id;
+    request.attempt = t.attempt;
+    request.scene_json = t.scene_json;
+    predictions.Start(std::move(request));
+  }
+
+  // ------------------------------------------------------------ tick
+  void CheckDeadlines() {
+    const auto t = now();
+    for (auto& [id, cell] : cells) {
+      if (cell.phase == CellPhase::kIdle || cell.store_waits > 0) continue;
+      if (cell.phase == CellPhase::kExecuting) {
+        auto it = executions.find(cell.trial_id);
+        if (it != executions.end() && it->second.publishing) continue;
+        if (it != executions.end() && it->second.expected >= 0 && t > it->second.stream_deadline) {
+          AbortPhase(cell,
+                     "ground truth incomplete: " + std::to_string(it->second.next_sample) + " of " +
+                         std::to_string(it->second.expected) + " samples",
+                     true);
+          continue;
+        }
+      }
+      if (t > cell.deadline) {
+        AbortPhase(cell,
+                   std::string(cell.phase == CellPhase::kExecuting ? "EXECUTE" : "RESET") +
+                       " missed its deadline on cell " + id,
+                   true);
+      }
+    }
+  }
+
+  void Tick(bool stopping) {
+    const auto t = now();
+    if (t >= next_file_check) {
+      next_file_check = t + Dur(0.1);
+      store.CheckFileIdentity();  // throws kIo: the service stops naming the file
+    }
+    RunPendingSteps();
+    CheckDeadlines();
+    if (t >= next_claims) {
+      next_claims = t + Dur(opt.claim_period_s);
+      for (auto& [id, cell] : cells)  // also while draining: phases in flight keep their cell
+        if (cell.alive) SendClaim(cell);
+    }
+    if (t >= next_beat) {
+      next_beat = t + Dur(opt.beat_period_s);
+      std::vector<std::string> alive;
+      for (const auto& [id, cell] : cells)
+        if (cell.alive) alive.push_back(id);  // serving us or another service: alive
+      Attempt("service heartbeat", [&] { store.ServiceBeat(alive); });
+    }
+    if (t >= next_campaigns) {  // `arena serve` marks finished campaigns done
+      next_campaigns = t + Dur(1.0);
+      Attempt("completing finished campaigns", [&] { store.CompleteFinishedCampaigns(0); });
+    }
+    Dispatch(stopping);
+  }
+
+  bool InFlight() const {
+    for (const auto& [id, cell] : cells)
+      if (cell.phase != CellPhase::kIdle) return true;
+    return predictions.outstanding() > 0 || !waiting_predictions.empty() || !pending.empty();
+  }
+
+  ServiceCounters Snapshot() const {
+    int known = 0, usable = 0;
+    for (const auto& [id, cell] : cells) {
+      ++known;
+      usable += cell.alive && !cell.quarantined;
+    }
+    std::lock_guard lock(counters_mu);
+    ServiceCounters c = counters;
+    c.cells_known = known;
+    c.cells_usable = usable;
+    return c;
+  }
+};
+
+TrialDriver::TrialDriver(DriverOptions options, ServiceIdentity me, TrialStore& store,
+                         CommandTransport& transport, PredictionPort& predictions,
+                         std::function<DriverClock::time_point()> now)
+    : impl_(std::make_unique<Impl>(std::move(options), std::move(me), store, transport, predictions,
+                                   std::move(now))) {}
+TrialDriver::~TrialDriver() = default;
+
+void TrialDriver::Resume() { impl_->Resume(); }
+void TrialDriver::OnAnnounce(const msg::CellAnnounce& a) { impl_->OnAnnounce(a); }
+void TrialDriver::OnCellLost(const std::string& id, const std::string& reason, bool another) {
+  impl_->OnCellLost(id, reason, another);
+}
+void TrialDriver::OnCellAlive(const std::string& id) { impl_->OnCellAlive(id); }
+void TrialDriver::OnStatus(const msg::TrialStatus& st) { impl_->OnStatus(st); }
+void TrialDriver::OnGroundTruth(const msg::GroundTruth& b) { impl_->OnGroundTruth(b); }
+void TrialDriver::OnPrediction(PredictionDone done) { impl_->OnPrediction(std::move(done)); }
+void TrialDriver::Tick(bool stopping) { impl_->Tick(stopping); }
+bool TrialDriver::InFlight() const { return impl_->InFlight(); }
+bool TrialDriver::CampaignsFinished() {
+  bool finished = false;
+  impl_->Attempt("completing finished campaigns", [&] {
+    finished = impl_->store.CompleteFinishedCampaigns(impl_->opt.service.only_campaign);
+  });
+  return finished;
+}
+ServiceCounters TrialDriver::counters() const { return impl_->Snapshot(); }
+void TrialDriver::OnTrialTiming(std::function<void(const TrialTiming&)> callback) {
+  impl_->on_trial_timing = std::move(callback);
+}
+std::size_t TrialDriver::pending_store_steps() const { return impl_->pending.size(); }
+
+}  // namespace arena::orchestrator

@@ -1,0 +1,128 @@
+// Simulators: one interface for anything that turns a scene into a
+// trajectory. Cell backends use a simulator as their physics (the truth of a
+// simulated cell); predictors use one to predict a trial. Both get the same
+// output type, mechanics::SimulationResult (250 Hz TrajectorySamples), so a
+// prediction and a ground truth compare sample by sample.
+//
+//   name      what it is                                   truth it gives
+//   arena     arena's own contact model (mechanics::Simulate)
+//             at the settings below                        self-consistency only
+//   mujoco    MuJoCo 2.2 (soft contact, elliptic cones)    independent engine
+//
+// Settings are plain structs with a default for every field; MakeSimulator()
+// also reads them from JSON ({"timestep": 0.0005, ...}) so a command-line
+// flag or a campaign can carry them. Simulate() is const and thread-safe:
+// every call builds its own model and data.
+#pragma once
+
+#include <memory>
+#include <stdexcept>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include "arena/mechanics/scene.hpp"
+#include "arena/mechanics/simulate.hpp"
+
+namespace arena::simulators {
+
+// A name or setting a simulator does not know, or a value out of range.
+// what() is "<field>: <reason>", e.g. "mujoco.timestep: must be in (0, 0.01]".
+class SimulatorError : public std::invalid_argument {
+ public:
+  SimulatorError(std::string field, const std::string& reason)
+      : std::invalid_argument(field + ": " + reason), field_(std::move(field)) {}
+  const std::string& field() const { return field_; }
+
+ private:
+  std::string field_;
+};
+
+// What kind of truth a simulator's trajectory is when a cell serves it.
+enum class TruthKind {
+  kSelfConsistency,  // arena's own model: an "error" against it is self-consistency
+  kIndependent,      // another engine: an error against it says how usable the model is
+};
+const char* ToString(TruthKind kind);
+
+class Simulator {
+ public:
+  virtual ~Simulator() = default;
+  // "arena", "mujoco", ...
+  virtual std::string name() const = 0;
+  virtual TruthKind truth() const = 0;
+  // The settings in force, as canonical JSON (stored with every trial).
+  virtual std::string settings_json() const = 0;
+  // Never throws for a scene that passed mechanics::ValidateScene(); a scene
+  // the simulator cannot build or step ends with status kInvalidScene or
+  // kSolverFailure and a reason. Never returns NaN samples.
+  virtual mechanics::SimulationResult Simulate(const mechanics::Scene& scene) const = 0;
+  // Why this simulator cannot run the scene at all ("" = it can), e.g. a
+  // shape it does not model. Cheap; a cell refuses such a scene up front.
+  virtual std::string CheckScene(const mechanics::Scene& scene) const = 0;
+  // Closed loop (issue 19): the scene with its pusher motion commanded after
+  // every sample (mechanics::Simulate(scene, commands)). Only a simulator
+  // that steps with commanded pusher velocities can (closed_loop() true:
+  // `arena`); the others end at once with kInvalidScene and say so.
+  virtual bool closed_loop() const { return false; }
+  virtual mechanics::SimulationResult SimulateClosedLoop(
+      const mechanics::Scene& scene, const mechanics::PusherCommandSource& commands) const {
+    (void)scene;
+    (void)commands;
+    mechanics::SimulationResult r;
+    r.status = mechanics::SimulationStatus::kInvalidScene;
+    r.error = "the " + name() + " simulator cannot run closed-loop scenes";
+    return r;
+  }
+};
+
+// ---- arena: the contact model (mechanics) -------------------------------------------------
+
+struct ArenaSettings {
+  int facets = 0;  // friction-cone edges (>= 3); 0 = the scene's own model.facets
+  int points = 0;  // constituent points per line/patch (>= 1); 0 = the scene's own
+  double dt = 0;   // time step (s, > 0); 0 = the scene's own
+  // true: a scene asking for finer settings keeps its own (a cell's truth is
+  // never coarser than the scene asked for); false: these settings exactly
+  // (a predictor's).
+  bool at_least = false;
+};
+std::unique_ptr<Simulator> MakeArenaSimulator(const ArenaSettings& settings);
+
+// ---- mujoco: MuJoCo 2.2 ------------------------------------------------------------------
+// Defaults are the converged ones (simulators/README.md: convergence study).
+struct MujocoSettings {
+  double timestep = 0.0005;         // s, (0, 0.01]
+  bool elliptic = true;             // elliptic friction cones (pyramidal: false)
+  double solref_timeconst = 0.002;  // s, contact stiffness time constant (clamped to 2·timestep)
+  double solref_damping = 1.0;      // damping ratio
+  double solimp[5] = {0.9, 0.95, 0.001, 0.5, 2};  // impedance (dmin, dmax, width m, mid, power)
+  double impratio = 10;                           // frictional-to-normal impedance ratio, >= 1
+  int noslip_iterations = 10;                     // post-solve no-slip iterations, >= 0 (0 = off)
+  double tolerance = 1e-10;                       // Newton solver tolerance
+  int iterations = 100;                           // solver iterations
+  double object_damping = 0.01;  // free-joint damping (N s/m, N m s/rad): a quasi-static truth
+  double finger_mass = 0.05;     // kg, each finger pad body
+  // Slip speed (m/s) above which a touching contact counts as sliding.
+  double slip_speed = 1e-4;
+};
+std::unique_ptr<Simulator> MakeMujocoSimulator(const MujocoSettings& settings);
+
+// The MJCF text the mujoco simulator builds for a scene (for inspection,
+// `arena simulate --engine mujoco --mjcf`, and tests).
+// @throws SimulatorError when the scene cannot be expressed (e.g. an unknown shape).
+std::string MujocoModelXml(const mechanics::Scene& scene, const MujocoSettings& settings);
+
+// ---- by name ------------------------------------------------------------------------------
+
+// "arena" and "mujoco".
+std::vector<std::string> SimulatorNames();
+
+// settings_json: an object of the simulator's settings ("" or "{}" = defaults),
+// e.g. {"timestep": 0.001, "noslip_iterations": 0} for mujoco,
+// {"facets": 16, "points": 5, "dt": 0.002, "at_least": true} for arena.
+// @throws SimulatorError naming the unknown simulator or the bad setting.
+std::unique_ptr<Simulator> MakeSimulator(std::string_view name,
+                                         std::string_view settings_json = "");
+
+}  // namespace arena::simulators

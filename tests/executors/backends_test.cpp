@@ -1,0 +1,287 @@
+// Cell backends without DDS: model and mujoco behind one interface, the
+// defect layer's combination and refusals, replay:DATASET's matching, and
+// exec:COMMAND against real driver processes (examples/drivers/replay.py)
+// failing in every way the protocol names: malformed output, a crash, a
+// hang, NaN, out-of-order timestamps. After each failure the backend starts
+// the driver afresh and the next trial runs whole.
+#include <unistd.h>
+
+#include <filesystem>
+#include <fstream>
+
+#include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
+
+#include "arena/executors/backend.hpp"
+#include "arena/executors/defect_layer.hpp"
+#include "arena/executors/exec_protocol.hpp"
+#include "arena/mechanics/scene_json.hpp"
+
+namespace arena::executors {
+namespace {
+
+namespace fs = std::filesystem;
+using nlohmann::json;
+
+std::string ShortScene(double grip = 10.0) {
+  json s =
+      json::parse(std::ifstream(std::string(ARENA_SOURCE_DIR) + "/examples/scenes/canonical.json"));
+  s["duration"] = 0.1;
+  s["grip_force"] = grip;
+  return s.dump();
+}
+
+// An export-format dataset (jsonl) of the given scenes, the truth from arena's model.
+class Dataset : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    char tmpl[] = "/tmp/arena-backends-test-XXXXXX";
+    dir_ = mkdtemp(tmpl);
+    fs::create_directories(dir_ + "/streams");
+    std::ofstream(dir_ + "/manifest.json") << json({{"export_format", "jsonl"}}).dump();
+    std::ofstream scenes(dir_ + "/scenes.jsonl");
+    int id = 1;
+    for (double grip : {10.0, 12.0}) {
+      const std::string text = ShortScene(grip);
+      scenes << json({{"trial_id", id}, {"seed", "7"}, {"scene", json::parse(text)}}).dump()
+             << "\n";
+      WriteStream(id, mechanics::ParseScene(text));
+      ++id;
+    }
+  }
+  void TearDown() override {
+    if (!HasFailure()) fs::remove_all(dir_);
+  }
+  void WriteStream(int id, const mechanics::Scene& scene) {
+    const auto r = mechanics::Simulate(scene);
+    ASSERT_EQ(r.status, mechanics::SimulationStatus::kOk);
+    samples_ = r.samples.size();
+    std::ofstream out(dir_ + "/streams/" + std::to_string(id) + "_true.jsonl");
+    std::vector<std::string> names = {"left", "right", "pusher"};
+    std::vector<Eigen::Vector3d> normals = {{1, 0, 0}, {-1, 0, 0}, {0, 0, 1}};
+    for (const auto& s : r.samples) {
+      json row = {{"t", s.t},
+                  {"x", s.position.x()},
+                  {"y", s.position.y()},
+                  {"z", s.position.z()},
+                  {"qw", s.orientation.w()},
+                  {"qx", s.orientation.x()},
+                  {"qy", s.orientation.y()},
+                  {"qz", s.orientation.z()},
+                  {"vx", s.velocity.x()},
+                  {"vy", s.velocity.y()},
+                  {"vz", s.velocity.z()},
+                  {"wx", s.angular_velocity.x()},
+                  {"wy", s.angular_velocity.y()},
+                  {"wz", s.angular_velocity.z()},
+                  {"pusher_x", s.pusher_position.x()},
+                  {"pusher_y", s.pusher_position.y()},
+                  {"pusher_z", s.pusher_position.z()}};
+      for (size_t c = 0; c < 3; ++c) {
+        const auto& cs = s.contacts[c];
+        const Eigen::Vector3d f = cs.normal_force * normals[c] + cs.tangential_force;
+        row[names[c] + "_fx"] = f.x();
+        row[names[c] + "_fy"] = f.y();
+        row[names[c] + "_fz"] = f.z();
+        row[names[c] + "_tx"] = cs.torque.x();
+        row[names[c] + "_ty"] = cs.torque.y();
+        row[names[c] + "_tz"] = cs.torque.z();
+        row[names[c] + "_mode"] = static_cast<int>(cs.mode);
+      }
+      out << row.dump() << "\n";
+    }
+  }
+
+  // Runs one trial as the cell does (CheckTrueSample on every sample).
+  struct Run {
+    std::string refused;
+    ExecuteOutcome outcome;
+    std::vector<mechanics::TrajectorySample> samples;
+    std::string rejected;  // the cell's reason for stopping the stream
+  };
+  Run RunTrial(Backend& backend, const std::string& text, std::uint64_t seed = 7) {
+    Run run;
+    const auto scene = mechanics::ParseScene(text);
+    TrialContext trial;
+    trial.trial_id = ++trial_id_;
+    trial.seed = seed;
+    trial.scene_json = text;
+    trial.deadline = std::chrono::steady_clock::now() + std::chrono::seconds(20);
+    run.refused = backend.Prepare(scene, trial);
+    if (!run.refused.empty()) return run;
+    run.outcome = backend.Execute(scene, trial, [&](const mechanics::TrajectorySample& s) {
+      run.rejected = CheckTrueSample(s, run.samples, scene);
+      if (!run.rejected.empty()) return false;
+      run.samples.push_back(s);
+      return true;
+    });
+    return run;
+  }
+
+  std::unique_ptr<Backend> Driver(const std::string& mode) {
+    ExecBackendOptions o;
+    o.command =
+        "python3 " + std::string(ARENA_SOURCE_DIR) + "/examples/drivers/replay.py " + dir_ +
+        (mode.empty() ? "" : " --fail-mode " + mode + " --fail-once " + dir_ + "/failed-" + mode);
+    o.reply_timeout_s = 2;
+    return MakeExecBackend(o);
+  }
+
+  // The failure kind fails one trial with `reason`; the restarted driver serves the next whole.
+  void ExpectFailsThenRecovers(const std::string& mode, const std::string& reason) {
+    auto backend = Driver(mode);
+    const Run bad = RunTrial(*backend, ShortScene(10));
+    ASSERT_EQ(bad.refused, "");
+    EXPECT_FALSE(bad.outcome.ok);
+    EXPECT_NE((bad.outcome.reason + " | " + bad.rejected).find(reason), std::string::npos)
+        << bad.outcome.reason << " | " << bad.rejected;
+    const Run good = RunTrial(*backend, ShortScene(10));
+    ASSERT_EQ(good.refused, "");
+    EXPECT_TRUE(good.outcome.ok) << good.outcome.reason;
+    EXPECT_EQ(good.samples.size(), samples_);
+  }
+
+  std::string dir_;
+  size_t samples_ = 0;
+  std::uint64_t trial_id_ = 0;
+};
+
+TEST(SimulatorBackends, ModelAndMujocoRunTheSameScene) {
+  const std::string text = ShortScene();
+  const auto scene = mechanics::ParseScene(text);
+  for (const char* name : {"model", "mujoco"}) {
+    auto backend = MakeBackend(name, ModelFidelity{});
+    const auto caps = backend->Capabilities();
+    EXPECT_EQ(caps.name, name);
+    EXPECT_EQ(caps.truth, std::string(name) == "model" ? TruthSource::kSelfConsistency
+                                                       : TruthSource::kSimulator);
+    TrialContext trial;
+    trial.scene_json = text;
+    ASSERT_EQ(backend->Prepare(scene, trial), "");
+    std::vector<mechanics::TrajectorySample> got;
+    const auto out = backend->Execute(scene, trial, [&](const mechanics::TrajectorySample& s) {
+      EXPECT_EQ(CheckTrueSample(s, got, scene), "");
+      got.push_back(s);
+      return true;
+    });
+    ASSERT_TRUE(out.ok) << out.reason;
+    EXPECT_EQ(got.size(), 26u);
+    EXPECT_NEAR(got.back().position.z(), 0.001, 1e-4) << name;  // 1 cm/s for 0.1 s, sliding
+  }
+  EXPECT_THROW(MakeBackend("bullet", ModelFidelity{}), std::invalid_argument);
+  EXPECT_THROW(MakeBackend("mujoco", ModelFidelity{}, R"({"timestep": 1})"), std::invalid_argument);
+}
+
+TEST(DefectLayerTest, CombinesProfilesAndRefusesWhatItCannotApply) {
+  DefectProfile cell, campaign;
+  cell.position_std.setConstant(3e-4);
+  campaign.position_std.setConstant(4e-4);
+  cell.latency_ms = 2;
+  campaign.latency_ms = 4;
+  cell.drop_probability = 0.1;
+  campaign.drop_probability = 0.2;
+  campaign.workspace_max.setConstant(1.0);  // a campaign cannot widen the cell's workspace
+  const DefectProfile p = CombineProfiles(cell, campaign);
+  EXPECT_NEAR(p.position_std.x(), 5e-4, 1e-12);
+  EXPECT_DOUBLE_EQ(p.latency_ms, 6);
+  EXPECT_NEAR(p.drop_probability, 0.28, 1e-12);
+  EXPECT_EQ(p.workspace_max, cell.workspace_max);
+
+  const std::string text = ShortScene();
+  const auto scene = mechanics::ParseScene(text);
+  TrialContext trial;
+  trial.scene_json = text;
+  DefectLayer sim(MakeBackend("model", ModelFidelity{}), DefectProfile{});
+  EXPECT_EQ(sim.Prepare(scene, R"({"friction_variability": {"mu_scale_std": 0.1}})", trial), "");
+  EXPECT_NE(sim.Prepare(scene, R"({"latency": 3})", trial).find("defects_json: "),
+            std::string::npos);  // a bad campaign profile names its field
+}
+
+TEST_F(Dataset, ReplayServesMatchingScenesAndRefusesOthers) {
+  auto replay = MakeReplayBackend(dir_);
+  EXPECT_EQ(replay->Capabilities().truth, TruthSource::kRecorded);
+  EXPECT_FALSE(replay->Capabilities().emulates_defects);
+  Run run = RunTrial(*replay, ShortScene(12));
+  ASSERT_EQ(run.refused, "");
+  ASSERT_TRUE(run.outcome.ok) << run.outcome.reason;
+  EXPECT_EQ(run.samples.size(), samples_);
+  EXPECT_NE(run.outcome.detail_json.find("\"recorded_trial\":2"), std::string::npos);
+  // The predictor's settings (model) do not matter; the physics does.
+  json other_model = json::parse(ShortScene(12));
+  other_model["model"]["facets"] = 4;
+  EXPECT_EQ(RunTrial(*replay, other_model.dump()).refused, "");
+  const Run missing = RunTrial(*replay, ShortScene(11));
+  EXPECT_NE(missing.refused.find("holds no trial with this scene"), std::string::npos)
+      << missing.refused;
+  // Recorded physics cannot be perturbed: such a campaign is refused, not run without it.
+  DefectLayer layer(MakeReplayBackend(dir_), DefectProfile{});
+  const std::string text = ShortScene(12);
+  TrialContext trial;
+  trial.scene_json = text;
+  EXPECT_NE(layer
+                .Prepare(mechanics::ParseScene(text),
+                         R"({"friction_variability": {"mu_scale_std": 0.05}})", trial)
+                .find("cannot"),
+            std::string::npos);
+  EXPECT_EQ(layer.Prepare(mechanics::ParseScene(text), R"({"latency_ms": 4})", trial), "");
+  EXPECT_THROW(MakeReplayBackend(dir_ + "/nowhere"), std::invalid_argument);
+}
+
+TEST_F(Dataset, ExecDriverServesTrialsAndRefusesUnknownScenes) {
+  auto backend = Driver("");
+  const auto caps = backend->Capabilities();
+  EXPECT_EQ(caps.truth, TruthSource::kRecorded);
+  EXPECT_NE(caps.engine.find("recorded dataset"), std::string::npos);
+  for (int k = 0; k < 2; ++k) {
+    const Run run = RunTrial(*backend, ShortScene(10));
+    ASSERT_EQ(run.refused, "");
+    ASSERT_TRUE(run.outcome.ok) << run.outcome.reason;
+    ASSERT_EQ(run.samples.size(), samples_);
+    EXPECT_NEAR(run.samples.back().position.z(), 0.001, 1e-4);
+  }
+  EXPECT_NE(RunTrial(*backend, ShortScene(11)).refused.find("driver refused"), std::string::npos);
+}
+
+TEST_F(Dataset, ExecMalformedOutputFailsThePhase) {
+  ExpectFailsThenRecovers("malformed", "malformed output");
+}
+TEST_F(Dataset, ExecCrashFailsThePhase) {
+  ExpectFailsThenRecovers("crash", "exited with status 3");
+}
+TEST_F(Dataset, ExecHangFailsThePhase) { ExpectFailsThenRecovers("hang", "driver hung"); }
+TEST_F(Dataset, ExecNaNFailsThePhase) { ExpectFailsThenRecovers("nan", "NaN"); }
+TEST_F(Dataset, ExecOutOfOrderTimestampsFailThePhase) {
+  ExpectFailsThenRecovers("disorder", "out of order");
+}
+
+TEST_F(Dataset, ExecDriverThatNeverSaysHelloIsRefusedAtStart) {
+  ExecBackendOptions o;
+  o.command = "sleep 30";
+  o.hello_timeout_s = 0.5;
+  EXPECT_THROW(MakeExecBackend(o), std::invalid_argument);
+  o.command = "echo '{\"type\":\"hello\",\"protocol\":99}'";
+  try {
+    MakeExecBackend(o);
+    FAIL();
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("protocol 99"), std::string::npos) << e.what();
+  }
+}
+
+TEST(ExecProtocol, SamplesRoundTrip) {
+  mechanics::TrajectorySample s;
+  s.t = 0.004;
+  s.position = {1, 2, 3};
+  s.contacts.resize(2);
+  s.contacts[1].mode = mechanics::ContactMode::kSlide;
+  mechanics::TrajectorySample back;
+  ASSERT_EQ(exec::ParseSample(exec::SampleToJson(s), &back), "");
+  EXPECT_EQ(back.position, s.position);
+  EXPECT_EQ(back.contacts[1].mode, mechanics::ContactMode::kSlide);
+  json bad = exec::SampleToJson(s);
+  bad.erase("orientation");
+  EXPECT_NE(exec::ParseSample(bad, &back).find("orientation"), std::string::npos);
+}
+
+}  // namespace
+}  // namespace arena::executors

@@ -1,0 +1,244 @@
+// Services that cannot mix their data, and no trial left stuck (issue 16),
+// with real processes: two services on one domain, a second `serve` on one
+// store, a foreign write lock, a store deleted under the service, a cell
+// restarted within its lease, service restarts during long trials.
+#include <filesystem>
+#include <fstream>
+#include <map>
+#include <string>
+#include <vector>
+
+#include <gtest/gtest.h>
+
+#include "service_support.hpp"
+
+namespace arena::test {
+namespace {
+
+using namespace std::chrono_literals;
+constexpr auto kTimeout = std::chrono::seconds(150);
+
+std::unique_ptr<Child> StartCell(const TempDir& dir, const std::string& id,
+                                 const std::string& domain, const std::string& speed,
+                                 const std::string& log_suffix = "") {
+  return StartArena({"cell", "--id", id, "--domain", domain, "--speed", speed},
+                    dir / (id + log_suffix + ".log"));
+}
+
+bool AllFinished(const std::string& db, std::int64_t campaign, int trials) {
+  auto c = CountStates(db, campaign);
+  return c["done"] + c["failed"] == trials;
+}
+
+// Samples stored per trial of the campaign (its scene's duration decides them).
+std::map<std::int64_t, std::size_t> StoredSamples(const std::string& db, std::int64_t campaign) {
+  std::map<std::int64_t, std::size_t> out;
+  auto store = OpenReadOnly(db);
+  for (const auto& t : store->ListTrials(campaign))
+    if (t.gt_stream_id) out[t.id] = store->ReadGroundTruth(t.id).samples.size();
+  return out;
+}
+
+void Stop(std::unique_ptr<Child>& serve) {
+  serve->Signal(SIGTERM);
+  ASSERT_TRUE(serve->Wait(40s).has_value());
+}
+
+// Item 1: before, B stored A's ground truth (trial ids both start at 1).
+TEST(ServiceIsolation, TwoServicesOnOneDomainNeverStoreEachOthersGroundTruth) {
+  TempDir dir;
+  const std::string a = dir / "a.db", b = dir / "b.db";
+  const std::string domain = std::to_string(TestDomain(51));
+  auto c1 = StartCell(dir, "c1", domain, "0.5");
+  auto c2 = StartCell(dir, "c2", domain, "0.5");
+  ASSERT_EQ(RunArena({"submit", TestCampaign("iso_a.json"), "--db", a}, dir / "sa.out", 30s), 0);
+  ASSERT_EQ(RunArena({"submit", TestCampaign("iso_b.json"), "--db", b}, dir / "sb.out", 30s), 0);
+  auto serve_a = StartArena({"serve", "--db", a, "--domain", domain}, dir / "serve_a.log");
+  ASSERT_TRUE(WaitUntil([&] { return CountStates(a, 1)["done"] >= 1; }, kTimeout))
+      << ReadFile(dir / "serve_a.log");
+  auto serve_b = StartArena({"serve", "--db", b, "--domain", domain}, dir / "serve_b.log");
+  // B sees the cells taken by A, and says so in its store.
+  ASSERT_TRUE(WaitUntil(
+      [&] {
+        RunArena({"status", "--db", b}, dir / "status_b.out", 30s);
+        const std::string status = ReadFile(dir / "status_b.out");
+        return status.find("cell c1 is serving service") != std::string::npos &&
+               status.find("cell c2 is serving service") != std::string::npos;
+      },
+      30s))
+      << ReadFile(dir / "status_b.out") << ReadFile(dir / "serve_b.log");
+  EXPECT_NE(ReadFile(dir / "status_b.out").find("on host "), std::string::npos);
+  ASSERT_TRUE(WaitUntil([&] { return AllFinished(a, 1, 8); }, kTimeout))
+      << ReadFile(dir / "serve_a.log");
+  Stop(serve_a);  // releases its cells: B takes them
+  ASSERT_TRUE(WaitUntil([&] { return AllFinished(b, 1, 8); }, kTimeout))
+      << ReadFile(dir / "serve_b.log");
+  Stop(serve_b);
+  EXPECT_EQ(CountStates(a, 1)["done"], 8);
+  EXPECT_EQ(CountStates(b, 1)["done"], 8);
+  ExpectCampaignConsistent(a, 1, 8);
+  ExpectCampaignConsistent(b, 1, 8);
+  // A's trials last 0.2 s, B's 0.4 s: a foreign stream would have the other length.
+  const auto sa = StoredSamples(a, 1), sb = StoredSamples(b, 1);
+  ASSERT_EQ(sa.size(), 8u);
+  ASSERT_EQ(sb.size(), 8u);
+  for (const auto& [id, n] : sa) EXPECT_EQ(n, sa.begin()->second) << "store a, trial " << id;
+  for (const auto& [id, n] : sb) EXPECT_EQ(n, sb.begin()->second) << "store b, trial " << id;
+  EXPECT_GT(sb.begin()->second, sa.begin()->second + 40);
+}
+
+// Item 5: before, the second serve re-queued the first one's trial in flight.
+TEST(ServiceIsolation, ASecondServeOnTheSameStoreRefusesNamingTheFirst) {
+  TempDir dir;
+  const std::string db = dir / "one.db";
+  const std::string domain = std::to_string(TestDomain(52));
+  auto serve = StartArena({"serve", "--db", db, "--domain", domain}, dir / "serve.log");
+  ASSERT_TRUE(WaitUntil(
+      [&] { return ReadFile(dir / "serve.log").find("service session") != std::string::npos; },
+      30s));
+  const int rc = RunArena({"serve", "--db", db, "--domain", domain}, dir / "second.log",
+                          std::chrono::seconds(30));
+  EXPECT_EQ(rc, 3) << ReadFile(dir / "second.log");
+  const std::string second = ReadFile(dir / "second.log");
+  EXPECT_NE(second.find("pid " + std::to_string(serve->pid())), std::string::npos) << second;
+  EXPECT_NE(second.find("host"), std::string::npos) << second;
+  // The first one is unharmed; once it stopped, a new one may start.
+  Stop(serve);
+  auto again = StartArena({"serve", "--db", db, "--domain", domain}, dir / "again.log");
+  EXPECT_TRUE(WaitUntil(
+      [&] { return ReadFile(dir / "again.log").find("service session") != std::string::npos; },
+      30s))
+      << ReadFile(dir / "again.log");
+  // `status` names the running service; with none running it warns.
+  RunArena({"status", "--db", db}, dir / "status.out", 30s);
+  EXPECT_NE(ReadFile(dir / "status.out").find("(running)"), std::string::npos)
+      << ReadFile(dir / "status.out");
+  Stop(again);
+  RunArena({"status", "--db", db}, dir / "status2.out", 30s);
+  EXPECT_NE(ReadFile(dir / "status2.out").find("no `arena serve` has a heartbeat"),
+            std::string::npos)
+      << ReadFile(dir / "status2.out");
+}
+
+// Item 2: before, trials stayed in `resetting` for ever after a long foreign lock.
+TEST(ServiceIsolation, AForeignWriteLockLongerThanTheBusyTimeoutStrandsNoTrial) {
+  TempDir dir;
+  const std::string db = dir / "locked.db";
+  const std::string domain = std::to_string(TestDomain(53));
+  auto c1 = StartCell(dir, "c1", domain, "0.5");
+  ASSERT_EQ(RunArena({"submit", TestCampaign("iso_a.json"), "--db", db}, dir / "s.out", 30s), 0);
+  auto serve = StartArena({"serve", "--db", db, "--domain", domain}, dir / "serve.log");
+  ASSERT_TRUE(WaitUntil([&] { return CountStates(db, 1)["done"] >= 1; }, kTimeout))
+      << ReadFile(dir / "serve.log");
+  // An analyst's sqlite3 (or a backup) holds the write lock for 8 s (> the 5 s busy timeout).
+  {
+    std::ofstream(dir / "lock.py") << "import sqlite3, sys, time\n"
+                                      "c = sqlite3.connect(sys.argv[1], isolation_level=None)\n"
+                                      "c.execute('BEGIN IMMEDIATE')\n"
+                                      "time.sleep(8)\n"
+                                      "c.execute('ROLLBACK')\n";
+  }
+  Child lock({"/usr/bin/python3", dir / "lock.py", db}, dir / "lock.out");
+  ASSERT_TRUE(lock.Wait(30s).has_value());
+  ASSERT_TRUE(WaitUntil([&] { return AllFinished(db, 1, 8); }, kTimeout))
+      << ReadFile(dir / "serve.log");
+  EXPECT_EQ(CountStates(db, 1)["done"], 8);
+  ExpectCampaignConsistent(db, 1, 8);
+  EXPECT_NE(ReadFile(dir / "serve.log").find("store busy"), std::string::npos)
+      << "the lock was never met; the test proves nothing";
+  // `arena serve` marks the finished campaign done (issue 15, item 5).
+  EXPECT_TRUE(WaitUntil(
+      [&] { return OpenReadOnly(db)->GetCampaign(1).state == db::CampaignState::kDone; }, 10s));
+  Stop(serve);
+}
+
+// Item 9: before, 3000 trials were "finished" into the deleted file, exit 0.
+TEST(ServiceIsolation, AStoreDeletedUnderTheServiceStopsItWithExitThree) {
+  TempDir dir;
+  const std::string db = dir / "doomed.db";
+  const std::string domain = std::to_string(TestDomain(54));
+  auto c1 = StartCell(dir, "c1", domain, "0.5");
+  ASSERT_EQ(RunArena({"submit", TestCampaign("iso_b.json"), "--db", db}, dir / "s.out", 30s), 0);
+  auto serve = StartArena({"serve", "--db", db, "--domain", domain}, dir / "serve.log");
+  ASSERT_TRUE(WaitUntil([&] { return CountStates(db, 1)["done"] >= 1; }, kTimeout));
+  std::filesystem::rename(db, dir / "moved.db");
+  const auto st = serve->Wait(10s);
+  ASSERT_TRUE(st.has_value()) << "the service did not notice its store was renamed";
+  EXPECT_TRUE(WIFEXITED(*st) && WEXITSTATUS(*st) == 3);
+  EXPECT_NE(ReadFile(dir / "serve.log").find("deleted or renamed"), std::string::npos)
+      << ReadFile(dir / "serve.log");
+}
+
+// Item 3: before, the id stayed `gone` for ever (the old loss came after the new announce).
+TEST(ServiceIsolation, ACellRestartedWithinItsLeaseIsRevived) {
+  TempDir dir;
+  const std::string db = dir / "revive.db";
+  const std::string domain = std::to_string(TestDomain(55));
+  auto c1 = StartCell(dir, "c1", domain, "0.5");
+  ASSERT_EQ(RunArena({"submit", TestCampaign("iso_b.json"), "--db", db}, dir / "s.out", 30s), 0);
+  auto serve = StartArena({"serve", "--db", db, "--domain", domain}, dir / "serve.log");
+  ASSERT_TRUE(WaitUntil([&] { return CountStates(db, 1)["done"] >= 2; }, kTimeout));
+  c1->Signal(SIGKILL);
+  c1->Wait(5s);
+  c1 = StartCell(dir, "c1", domain, "0.5", "-2");  // at once: well within the lease
+  // c1 is the only cell: the campaign finishes only if it was revived.
+  ASSERT_TRUE(WaitUntil([&] { return AllFinished(db, 1, 8); }, kTimeout))
+      << ReadFile(dir / "serve.log");
+  EXPECT_EQ(CountStates(db, 1)["done"], 8);
+  ExpectCampaignConsistent(db, 1, 8);
+  EXPECT_EQ(OpenReadOnly(db)->GetCell("c1").state, db::CellState::kHealthy);
+  Stop(serve);
+}
+
+// Item 4: before, the third restart failed a healthy trial ("attempt 4 of 3").
+TEST(ServiceIsolation, ServiceRestartsDoNotFailLongTrialsOnAHealthyCell) {
+  TempDir dir;
+  const std::string db = dir / "restarts.db";
+  const std::string domain = std::to_string(TestDomain(56));
+  auto c1 = StartCell(dir, "c1", domain, "1");
+  ASSERT_EQ(RunArena({"submit", TestCampaign("long2.json"), "--db", db}, dir / "s.out", 30s), 0);
+  for (int k = 0; k < 3; ++k) {
+    auto serve = StartArena(
+        {"serve", "--db", db, "--domain", domain, "--max-attempts", "3", "--execute-timeout", "2"},
+        dir / ("serve" + std::to_string(k) + ".log"));
+    ASSERT_TRUE(WaitUntil([&] { return CountStates(db, 1)["dispatched"] >= 1; }, 60s));
+    std::this_thread::sleep_for(1s);  // mid-trial
+    serve->Signal(SIGKILL);
+    serve->Wait(10s);
+  }
+  // A tight budget: a trial queued behind dead sessions' commands would miss it.
+  auto serve = StartArena(
+      {"serve", "--db", db, "--domain", domain, "--max-attempts", "3", "--execute-timeout", "2"},
+      dir / "serve-final.log");
+  ASSERT_TRUE(WaitUntil([&] { return AllFinished(db, 1, 2); }, kTimeout))
+      << ReadFile(dir / "serve-final.log");
+  EXPECT_EQ(CountStates(db, 1)["done"], 2) << ReadFile(dir / "serve-final.log");
+  ExpectCampaignConsistent(db, 1, 2);
+  Stop(serve);
+}
+
+// Issue 15 item 7: before, `watch --cell` waited its 30 s timeout after the cell died.
+TEST(ServiceIsolation, WatchCellSaysWithinSecondsThatItsCellDisappeared) {
+  TempDir dir;
+  const std::string db = dir / "watch.db";
+  const std::string domain = std::to_string(TestDomain(57));
+  auto c1 = StartCell(dir, "c1", domain, "1");
+  ASSERT_EQ(RunArena({"submit", TestCampaign("long2.json"), "--db", db}, dir / "s.out", 30s), 0);
+  auto serve = StartArena({"serve", "--db", db, "--domain", domain}, dir / "serve.log");
+  auto watch = StartArena({"watch", "--cell", "c1", "--domain", domain}, dir / "watch.out");
+  ASSERT_TRUE(WaitUntil(
+      [&] { return ReadFile(dir / "watch.out").find(" sample ") != std::string::npos; }, 60s))
+      << ReadFile(dir / "watch.out");
+  c1->Signal(SIGKILL);
+  const auto killed = std::chrono::steady_clock::now();
+  const auto st = watch->Wait(10s);
+  ASSERT_TRUE(st.has_value()) << "watch did not notice its cell died";
+  EXPECT_LT(std::chrono::steady_clock::now() - killed, 5s);
+  EXPECT_TRUE(WIFEXITED(*st) && WEXITSTATUS(*st) == 4);
+  EXPECT_NE(ReadFile(dir / "watch.out").find("cell c1 disappeared"), std::string::npos)
+      << ReadFile(dir / "watch.out");
+  Stop(serve);
+}
+
+}  // namespace
+}  // namespace arena::test

@@ -1,0 +1,656 @@
+// The TrialDriver alone: a fake clock, a fake command transport with a fake
+// cell answering it, a fake store that keeps the trial state machine (and
+// refuses illegal edges like the real one) and can fail any step with any
+// store error. No DDS, no SQLite, no threads, no sleeping.
+#include "arena/orchestrator/trial_driver.hpp"
+
+#include <deque>
+#include <map>
+#include <set>
+#include <sstream>
+
+#include <gtest/gtest.h>
+#include <spdlog/spdlog.h>
+
+#include "arena/schemas/ground_truth.hpp"
+
+namespace arena::orchestrator {
+namespace {
+
+using K = db::StoreError::Kind;
+using Clock = DriverClock;
+
+std::string Scene() {
+  return R"({"object": {"shape": "box", "size": [0.05, 0.03, 0.10], "mass": 0.2,
+              "pose": {"position": [0, 0, 0], "rpy": [0, 0, 0]}},
+  "gravity": [0, 0, -9.81], "duration": 0.1, "grip_force": 10.0,
+  "fingers": [
+    {"name": "left",  "type": "point", "position": [-0.025, 0, 0], "normal": [1, 0, 0], "mu": 0.5},
+    {"name": "right", "type": "point", "position": [0.025, 0, 0], "normal": [-1, 0, 0], "mu": 0.5}],
+  "model": {"facets": 8, "points": 3, "dt": 0.004, "reduce": "auto"}})";
+}
+
+// Injected failures: step name -> kinds thrown by its next calls, in order.
+struct Faults {
+  std::map<std::string, std::deque<K>> next;
+  std::map<std::string, int> calls;
+  void Hit(const std::string& step) {
+    ++calls[step];
+    auto it = next.find(step);
+    if (it == next.end() || it->second.empty()) return;
+    const K kind = it->second.front();
+    it->second.pop_front();
+    throw db::StoreError(kind, step + ": injected");
+  }
+};
+
+struct FakeSink : GroundTruthSink {
+  Faults& faults;
+  std::function<void(std::int64_t)> finish;
+  std::int64_t n = 0;
+  FakeSink(Faults& f, std::function<void(std::int64_t)> fin) : faults(f), finish(std::move(fin)) {}
+  void Add(const std::vector<db::Sample>& s) override {
+    faults.Hit("Ingest.Add");
+    n += static_cast<std::int64_t>(s.size());
+  }
+  void Poll() override {}
+  std::int64_t Finish() override {
+    faults.Hit("Ingest.Finish");
+    finish(n);
+    return n;
+  }
+};
+
+struct FakeStore : TrialStore {
+  struct T {
+    db::TrialState state = db::TrialState::kPlanned;
+    int attempt = 1;
+    std::int64_t samples = -1;
+    std::string outcome;
+  };
+  Faults faults;
+  std::map<std::int64_t, T> trials;
+  std::map<std::string, std::string> serving;
+  std::set<std::string> gone, quarantined;
+  int beats = 0;
+  bool file_gone = false;
+
+  void Move(std::int64_t id, int attempt, db::TrialState to) {
+    T& t = trials.at(id);
+    if (t.attempt != attempt) throw db::StoreError(K::kStaleAttempt, "stale");
+    if (!db::IsLegalTransition(t.state, to))
+      throw db::StoreError(K::kIllegalTransition, std::string("illegal ") + db::ToString(t.state) +
+                                                      " -> " + db::ToString(to));
+    t.state = to;
+  }
+  db::RecoveryReport RecoverAfterRestart() override {
+    faults.Hit("RecoverAfterRestart");
+    db::RecoveryReport r;
+    for (auto& [id, t] : trials) {
+      if (t.state == db::TrialState::kDispatched) {
+        t.state = db::TrialState::kPlanned;
+        ++t.attempt;
+        r.requeued.push_back(id);
+      } else if (t.state == db::TrialState::kResetting) {
+        t.state = db::TrialState::kResetFailed;
+        r.reset_failed.push_back(id);
+      }
+    }
+    return r;
+  }
+  std::vector<db::Trial> ListTrialsByState(const std::vector<db::TrialState>& states) override {
+    faults.Hit("ListTrialsByState");
+    std::vector<db::Trial> out;
+    for (auto& [id, t] : trials)
+      if (std::find(states.begin(), states.end(), t.state) != states.end()) out.push_back(Get(id));
+    return out;
+  }
+  db::Trial Get(std::int64_t id) {
+    db::Trial r;
+    r.id = id;
+    r.campaign_id = 1;
+    r.state = trials.at(id).state;
+    r.attempt = trials.at(id).attempt;
+    r.scene_json = Scene();
+    return r;
+  }
+  db::Trial GetTrial(std::int64_t id) override {
+    faults.Hit("GetTrial");
+    return Get(id);
+  }
+  std::optional<db::ClaimedTrial> Next() {
+    for (auto& [id, t] : trials)
+      if (t.state == db::TrialState::kPlanned)
+        return db::ClaimedTrial{id, 1, t.attempt, 7, Scene(), "{}"};
+    return std::nullopt;
+  }
+  std::optional<db::ClaimedTrial> ClaimNextTrial(const std::string&) override {
+    faults.Hit("ClaimNextTrial");
+    auto c = Next();
+    if (c) Move(c->trial_id, c->attempt, db::TrialState::kDispatched);
+    return c;
+  }
+  std::optional<db::ClaimedTrial> PeekNextTrial(const std::string&) override {
+    faults.Hit("PeekNextTrial");
+    return Next();
+  }
+  std::unique_ptr<GroundTruthSink> BeginIngest(std::int64_t id, int attempt) override {
+    faults.Hit("BeginIngest");
+    if (trials.at(id).attempt != attempt) throw db::StoreError(K::kStaleAttempt, "stale");
+    return std::make_unique<FakeSink>(faults, [this, id, attempt](std::int64_t n) {
+      Move(id, attempt, db::TrialState::kExecuted);
+      trials.at(id).samples = n;
+    });
+  }
+  db::TrialState RetryTrial(std::int64_t id, int attempt, const std::string&, int max_attempts,
+                            double) override {
+    faults.Hit("RetryTrial");
+    T& t = trials.at(id);
+    if (t.attempt != attempt) throw db::StoreError(K::kStaleAttempt, "stale");
+    if (attempt >= max_attempts) {
+      Move(id, attempt, db::TrialState::kFailed);
+      return t.state;
+    }
+    Move(id, attempt, db::TrialState::kPlanned);
+    ++t.attempt;
+    return t.state;
+  }
+  void FailTrial(std::int64_t id, int attempt, const std::string&,
+                 const std::string& outcome) override {
+    faults.Hit("FailTrial");
+    Move(id, attempt, db::TrialState::kFailed);
+    trials.at(id).outcome = outcome;
+  }
+  void BeginReset(std::int64_t id, int attempt) override {
+    faults.Hit("BeginReset");
+    Move(id, attempt, db::TrialState::kResetting);
+  }
+  void CompleteReset(std::int64_t id, int attempt, const db::ResetReport& r) override {
+    faults.Hit("CompleteReset");
+    Move(id, attempt, r.ok ? db::TrialState::kResetDone : db::TrialState::kResetFailed);
+  }
+  void RecordPrediction(std::int64_t id, int attempt, const db::Prediction&) override {
+    faults.Hit("RecordPrediction");
+    if (trials.at(id).state != db::TrialState::kPredicted)
+      Move(id, attempt, db::TrialState::kPredicted);
+  }
+  void FinishTrial(std::int64_t id, int attempt) override {
+    faults.Hit("FinishTrial");
+    Move(id, attempt, db::TrialState::kDone);
+  }
+  void RecordExecution(std::int64_t, int, const std::string& backend, const std::string&,
+                       const std::string&) override {
+    faults.Hit("RecordExecution");
+    last_backend = backend;
+  }
+  std::string last_backend;
+  void RecordClosedLoop(const db::ClosedLoopRun& run) override {
+    faults.Hit("RecordClosedLoop");
+    closed_loops.push_back(run);
+  }
+  std::vector<db::ClosedLoopRun> closed_loops;
+  void UpsertCell(const std::string& id, const std::vector<std::string>&, const std::string&,
+                  const std::string&) override {
+    faults.Hit("UpsertCell");
+    gone.erase(id);
+  }
+  bool CellQuarantined(const std::string& id) override {
+    faults.Hit("CellQuarantined");
+    return quarantined.count(id) > 0;
+  }
+  int failures = 0;
+  int RecordCellResult(const std::string&, bool ok) override {
+    faults.Hit("RecordCellResult");
+    failures = ok ? 0 : failures + 1;
+    return failures;
+  }
+  void QuarantineCell(const std::string& id, const std::string&) override {
+    faults.Hit("QuarantineCell");
+    quarantined.insert(id);
+  }
+  void MarkCellGone(const std::string& id, const std::string&) override {
+    faults.Hit("MarkCellGone");
+    gone.insert(id);
+  }
+  void SetCellServing(const std::string& id, double, const std::string& s) override {
+    faults.Hit("SetCellServing");
+    serving[id] = s;
+  }
+  bool CompleteFinishedCampaigns(std::int64_t) override {
+    faults.Hit("CompleteFinishedCampaigns");
+    for (auto& [id, t] : trials)
+      if (!db::IsTerminal(t.state)) return false;
+    return true;
+  }
+  void ServiceBeat(const std::vector<std::string>&) override {
+    faults.Hit("ServiceBeat");
+    ++beats;
+  }
+  void CheckFileIdentity() override {
+    if (file_gone) throw db::StoreError(K::kIo, "the store 'x.db' was deleted or renamed");
+  }
+};
+
+struct FakeTransport : CommandTransport {
+  std::vector<msg::TrialCommand> sent;
+  bool Send(msg::TrialCommand& c) override {
+    sent.push_back(c);
+    return true;
+  }
+};
+
+struct FakePredictions : PredictionPort {
+  std::deque<PredictionRequest> requests;
+  std::size_t last_commands = 0;  // closed loop: commands the last request replays
+  void Start(PredictionRequest r) override {
+    last_commands = r.commands.size();
+    requests.push_back(std::move(r));
+  }
+  int outstanding() const override { return static_cast<int>(requests.size()); }
+};
+
+// The driver logs every step; the tests read the fakes instead.
+[[maybe_unused]] const bool kQuiet = [] {
+  spdlog::set_level(spdlog::level::off);
+  return true;
+}();
+
+constexpr std::uint64_t kSession = 0xabcdef;
+constexpr std::uint64_t kOther = 0x123456;
+
+// The driver with fakes around it, and a fake cell that answers commands.
+struct Harness {
+  FakeStore store;
+  FakeTransport transport;
+  FakePredictions predictions;
+  Clock::time_point t = Clock::time_point{} + std::chrono::hours(1);
+  std::unique_ptr<TrialDriver> driver;
+  std::size_t answered = 0;  // commands the fake cell has handled
+  int samples = 10;
+  msg::TrialState execute_answer = msg::STATE_EXECUTED;
+  msg::FailureKind execute_failure = msg::FAILURE_NONE;
+  std::string execute_detail = "{}";  // the EXECUTE status's detail_json
+
+  explicit Harness(int trials = 1) {
+    for (int i = 1; i <= trials; ++i) store.trials[i] = {};
+    DriverOptions o;
+    o.service.max_attempts = 3;
+    driver = std::make_unique<TrialDriver>(o, ServiceIdentity{kSession, "lab1", 42, "store-a"},
+                                           store, transport, predictions, [this] { return t; });
+  }
+
+  msg::CellAnnounce Announce(const std::string& id, std::uint64_t serving,
+                             std::uint64_t incarnation = 1) {
+    msg::CellAnnounce a;
+    a.cell_id(id);
+    a.contact_types({"point"});
+    a.speed(0);
+    a.defects_json("{}");
+    a.started_unix_ns(incarnation);
+    a.serving_session(serving);
+    a.serving_host(serving == kSession ? "lab1" : "lab2");
+    a.serving_pid(serving == kSession ? 42 : 77);
+    return a;
+  }
+
+  msg::TrialStatus Status(const msg::TrialCommand& c, msg::TrialState state,
+                          std::uint64_t session = kSession) {
+    msg::TrialStatus s;
+    s.trial_id(c.trial_id());
+    s.attempt(c.attempt());
+    s.cell_id(c.cell_id());
+    s.phase(c.phase());
+    s.state(state);
+    s.service_session(session);
+    s.samples(static_cast<std::uint32_t>(samples));
+    s.phase_wall_s(0.01);
+    s.observed_pose({0, 0, 0, 1, 0, 0, 0});
+    return s;
+  }
+
+  msg::GroundTruth Batch(const msg::TrialCommand& c, std::uint64_t session = kSession) {
+    msg::GroundTruth b;
+    b.trial_id(c.trial_id());
+    b.attempt(c.attempt());
+    b.cell_id(c.cell_id());
+    b.service_session(session);
+    b.batch(0);
+    b.first_sample(0);
+    b.last(true);
+    for (int i = 0; i < samples; ++i) {
+      mechanics::TrajectorySample truth;
+      truth.t = i * 0.004;
+      truth.contacts.resize(2);
+      dds::Observation obs;
+      obs.valid = true;
+      obs.t = truth.t;
+      obs.finger_wrenches.resize(2, dds::Wrench::Zero());
+      msg::GroundTruthSample s;
+      dds::EncodeSample(truth, dds::PusherState{}, obs, &s);
+      b.samples().push_back(s);
+    }
+    return b;
+  }
+
+  // The fake cell answers every command it has not answered yet; the
+  // predictor answers every request.
+  void Answer() {
+    for (; answered < transport.sent.size(); ++answered) {
+      const msg::TrialCommand c = transport.sent[answered];
+      if (c.phase() == msg::PHASE_EXECUTE) {
+        driver->OnStatus(Status(c, msg::STATE_ACCEPTED));
+        if (execute_answer == msg::STATE_EXECUTED) driver->OnGroundTruth(Batch(c));
+        auto st = Status(c, execute_answer);
+        st.failure(execute_failure);
+        st.detail_json(execute_detail);
+        driver->OnStatus(st);
+      } else if (c.phase() == msg::PHASE_RESET) {
+        driver->OnStatus(Status(c, msg::STATE_RESET_DONE));
+      }
+    }
+    while (!predictions.requests.empty()) {
+      const PredictionRequest r = predictions.requests.front();
+      predictions.requests.pop_front();
+      db::Prediction p;
+      p.model_key = "g8";
+      driver->OnPrediction(PredictionDone{r.trial_id, r.attempt, r.campaign_id, p});
+    }
+  }
+
+  // Ticks (100 ms apart) until every trial is terminal, or `limit` ticks.
+  bool RunToEnd(int limit = 400) {
+    for (int i = 0; i < limit; ++i) {
+      t += std::chrono::milliseconds(100);
+      driver->Tick(false);
+      Answer();
+      bool all = true;
+      for (auto& [id, tr] : store.trials) all = all && db::IsTerminal(tr.state);
+      if (all && !driver->InFlight()) return true;
+    }
+    return false;
+  }
+
+  void Start(std::uint64_t serving = kSession) {
+    driver->Resume();
+    driver->OnAnnounce(Announce("c1", serving));
+  }
+
+  int Sent(msg::Phase phase) const {
+    int n = 0;
+    for (const auto& c : transport.sent) n += c.phase() == phase;
+    return n;
+  }
+};
+
+TEST(TrialDriver, OneTrialGoesThroughEveryStepToDone) {
+  Harness h;
+  h.Start();
+  ASSERT_TRUE(h.RunToEnd());
+  EXPECT_EQ(h.store.trials[1].state, db::TrialState::kDone);
+  EXPECT_EQ(h.store.trials[1].attempt, 1);
+  EXPECT_EQ(h.store.trials[1].samples, 10);
+  EXPECT_EQ(h.Sent(msg::PHASE_EXECUTE), 1);
+  EXPECT_EQ(h.Sent(msg::PHASE_RESET), 1);
+  EXPECT_GE(h.Sent(msg::PHASE_CLAIM), 1);
+  for (const auto& c : h.transport.sent) EXPECT_EQ(c.service_session(), kSession);
+  EXPECT_EQ(h.driver->counters().done, 1);
+  EXPECT_GE(h.store.beats, 1);
+  EXPECT_GE(h.store.faults.calls["CompleteFinishedCampaigns"], 1);
+}
+
+// Closed loop (issue 19): the cell's record of the commands it applied is
+// stored with the attempt (the same step again after a busy store) and its
+// commands go to the prediction, which replays them.
+TEST(TrialDriver, AClosedLoopTrialStoresItsCommandsAndPredictsByReplayingThem) {
+  Harness h;
+  h.execute_detail = R"({"closed_loop": {"controller": "pivot_to_angle", "lockstep": true,
+      "context": {"target": 0.2, "gain": 1.0, "tolerance": 0.01, "hold_s": 0.5},
+      "commands": [[0, 0.0, 0.01, 0, 0, 0.01, 0, 0, 0.4], [1, 0.004, 0.02, 0, 0, 0.02, 0, 0, 0.5]],
+      "held": 0, "loop_ms": {"p50": 0.4, "p99": 0.5},
+      "outcome": {"reached": false, "final_error": 0.1, "settle_time_s": null}}})";
+  h.store.faults.next["RecordClosedLoop"] = {K::kBusy};
+  h.Start();
+  ASSERT_TRUE(h.RunToEnd());
+  EXPECT_EQ(h.predictions.last_commands, 2u);
+  EXPECT_EQ(h.store.trials[1].state, db::TrialState::kDone);
+  EXPECT_EQ(h.store.faults.calls["RecordClosedLoop"], 2);
+  ASSERT_EQ(h.store.closed_loops.size(), 1u);
+  EXPECT_EQ(h.store.closed_loops[0].controller, "pivot_to_angle");
+  EXPECT_EQ(h.store.closed_loops[0].commands.size(), 2u);
+  EXPECT_EQ(h.store.closed_loops[0].trial_id, 1);
+}
+
+TEST(TrialDriver, ACellServingAnotherServiceGetsNoTrialAndIsNamedInTheStore) {
+  Harness h;
+  h.Start(kOther);
+  EXPECT_FALSE(h.RunToEnd(30));
+  EXPECT_EQ(h.Sent(msg::PHASE_EXECUTE), 0);
+  EXPECT_EQ(h.store.trials[1].state, db::TrialState::kPlanned);
+  EXPECT_EQ(h.store.serving["c1"], "serving service 0000000000123456 on host lab2 (pid 77)");
+  EXPECT_GE(h.Sent(msg::PHASE_CLAIM), 1);  // it keeps asking: the other lease may run out
+  // The cell frees up and serves us: the trial runs.
+  h.driver->OnAnnounce(h.Announce("c1", kSession));
+  EXPECT_EQ(h.store.serving["c1"], "");
+  ASSERT_TRUE(h.RunToEnd());
+  EXPECT_EQ(h.store.trials[1].state, db::TrialState::kDone);
+}
+
+TEST(TrialDriver, StatusesAndGroundTruthOfAnotherSessionAreDropped) {
+  Harness h;
+  h.Start();
+  h.t += std::chrono::milliseconds(100);
+  h.driver->Tick(false);
+  ASSERT_EQ(h.Sent(msg::PHASE_EXECUTE), 1);
+  msg::TrialCommand execute;
+  for (const auto& c : h.transport.sent)
+    if (c.phase() == msg::PHASE_EXECUTE) execute = c;
+  // Another service's cell answers a trial with the same id and attempt.
+  h.driver->OnGroundTruth(h.Batch(execute, kOther));
+  h.driver->OnStatus(h.Status(execute, msg::STATE_EXECUTED, kOther));
+  h.driver->OnStatus(h.Status(execute, msg::STATE_FAILED, kOther));
+  EXPECT_EQ(h.store.trials[1].state, db::TrialState::kDispatched);
+  EXPECT_EQ(h.store.trials[1].attempt, 1);
+  EXPECT_EQ(h.store.trials[1].samples, -1);
+  h.answered = 0;  // now our own answers
+  ASSERT_TRUE(h.RunToEnd());
+  EXPECT_EQ(h.store.trials[1].state, db::TrialState::kDone);
+  EXPECT_EQ(h.store.trials[1].attempt, 1);
+}
+
+// Busy at any step: the same step is taken again; the trial is never
+// abandoned, never retried as if the cell had failed, and ends done.
+class BusyAtEveryStep : public ::testing::TestWithParam<std::string> {};
+
+TEST_P(BusyAtEveryStep, TheSameStepIsRetriedAndTheTrialEndsDone) {
+  Harness h;
+  h.store.faults.next[GetParam()] = {K::kBusy, K::kBusy, K::kBusy};
+  h.Start();
+  ASSERT_TRUE(h.RunToEnd()) << "trial stuck in " << db::ToString(h.store.trials[1].state);
+  EXPECT_GT(h.store.faults.calls[GetParam()], 3) << GetParam() << " was not retried";
+  EXPECT_EQ(h.store.trials[1].state, db::TrialState::kDone);
+  EXPECT_EQ(h.store.trials[1].attempt, 1) << "a busy store cost the trial an attempt";
+  EXPECT_EQ(h.store.trials[1].samples, 10);
+  EXPECT_EQ(h.driver->pending_store_steps(), 0u);
+  EXPECT_EQ(h.driver->counters().retried, 0);
+}
+
+// Every store step a trial (or its cell) goes through.
+const std::vector<std::string> kSteps = {
+    "RecoverAfterRestart", "ListTrialsByState", "UpsertCell",       "CellQuarantined",
+    "SetCellServing",      "ClaimNextTrial",    "BeginIngest",      "Ingest.Add",
+    "Ingest.Finish",       "RecordCellResult",  "PeekNextTrial",    "BeginReset",
+    "CompleteReset",       "GetTrial",          "RecordPrediction", "FinishTrial"};
+// ... and the periodic ones (a busy one is simply taken at its next period).
+std::vector<std::string> AllSteps() {
+  auto all = kSteps;
+  all.push_back("ServiceBeat");
+  all.push_back("CompleteFinishedCampaigns");
+  return all;
+}
+
+INSTANTIATE_TEST_SUITE_P(Steps, BusyAtEveryStep, ::testing::ValuesIn(kSteps), [](const auto& info) {
+  std::string n = info.param;
+  std::erase(n, '.');
+  return n;
+});
+
+// A store that cannot take writes: the driver stops (throws) at that step.
+class FatalAtEveryStep : public ::testing::TestWithParam<std::tuple<std::string, K>> {};
+
+TEST_P(FatalAtEveryStep, TheDriverStopsWithTheStoreError) {
+  const auto& [step, kind] = GetParam();
+  Harness h;
+  h.store.faults.next[step] = {kind};
+  bool thrown = false;
+  try {
+    h.Start();
+    h.RunToEnd();
+  } catch (const db::StoreError& e) {
+    thrown = true;
+    EXPECT_EQ(e.kind(), kind);
+  }
+  EXPECT_TRUE(thrown) << step << ": a fatal store error did not stop the driver";
+}
+
+std::string FatalName(const ::testing::TestParamInfo<std::tuple<std::string, K>>& info) {
+  std::string n = std::get<0>(info.param);
+  std::erase(n, '.');
+  static const char* const kKinds[] = {"BadInput", "NotFound", "Illegal", "Stale", "ReadOnly",
+                                       "Busy",     "TooNew",   "Corrupt", "Full",  "Io"};
+  return n + "_" + kKinds[static_cast<int>(std::get<1>(info.param))];
+}
+
+INSTANTIATE_TEST_SUITE_P(Steps, FatalAtEveryStep,
+                         ::testing::Combine(::testing::ValuesIn(AllSteps()),
+                                            ::testing::Values(K::kFull, K::kReadOnly, K::kCorrupt,
+                                                              K::kIo)),
+                         FatalName);
+
+// A step the store calls moot (a stale attempt, an illegal edge: a late
+// message, someone else moved the trial) is dropped, and nothing in the driver
+// waits for it for ever: the cell goes on with the next trial.
+class MootAtEveryStep : public ::testing::TestWithParam<std::string> {};
+
+TEST_P(MootAtEveryStep, TheDriverIsNeverStuckAndTheCellGoesOn) {
+  Harness h(2);
+  h.store.faults.next[GetParam()] = {K::kStaleAttempt};
+  h.Start();
+  h.RunToEnd(300);
+  EXPECT_FALSE(h.driver->InFlight()) << GetParam() << ": the driver waits for ever";
+  EXPECT_EQ(h.driver->pending_store_steps(), 0u);
+  EXPECT_EQ(h.store.trials[2].state, db::TrialState::kDone) << GetParam();
+}
+
+INSTANTIATE_TEST_SUITE_P(Steps, MootAtEveryStep, ::testing::ValuesIn(kSteps), [](const auto& info) {
+  std::string n = info.param;
+  std::erase(n, '.');
+  return n;
+});
+
+TEST(TrialDriver, AStoreFileThatVanishesStopsTheNextTick) {
+  Harness h;
+  h.Start();
+  h.t += std::chrono::milliseconds(100);
+  h.driver->Tick(false);
+  h.store.file_gone = true;
+  h.t += std::chrono::milliseconds(200);
+  EXPECT_THROW(h.driver->Tick(false), db::StoreError);
+}
+
+TEST(TrialDriver, ASimulationFailureFailsTheTrialAtOnceWithoutBlamingTheCell) {
+  Harness h;
+  h.execute_answer = msg::STATE_FAILED;
+  h.execute_failure = msg::FAILURE_SIMULATION;
+  h.Start();
+  ASSERT_TRUE(h.RunToEnd());
+  EXPECT_EQ(h.store.trials[1].state, db::TrialState::kFailed);
+  EXPECT_EQ(h.store.trials[1].outcome, "solver_failure");
+  EXPECT_EQ(h.store.trials[1].attempt, 1);
+  EXPECT_EQ(h.store.faults.calls["RecordCellResult"], 0);
+}
+
+TEST(TrialDriver, AFailedExecuteIsRetriedUpToMaxAttemptsThenTheCellIsQuarantined) {
+  Harness h;
+  h.execute_answer = msg::STATE_FAILED;
+  h.Start();
+  ASSERT_TRUE(h.RunToEnd(2000));
+  EXPECT_EQ(h.store.trials[1].state, db::TrialState::kFailed);
+  EXPECT_EQ(h.store.trials[1].attempt, 3);
+  EXPECT_TRUE(h.store.quarantined.count("c1"));
+}
+
+TEST(TrialDriver, AMissedDeadlineRetriesTheTrial) {
+  Harness h;
+  h.Start();
+  h.t += std::chrono::milliseconds(100);
+  h.driver->Tick(false);
+  ASSERT_EQ(h.Sent(msg::PHASE_EXECUTE), 1);
+  h.answered = h.transport.sent.size();  // the cell never answers
+  h.t += std::chrono::seconds(40);
+  h.driver->Tick(false);
+  EXPECT_EQ(h.store.trials[1].attempt, 2);     // retried (and, the fake store not backing off,
+  EXPECT_EQ(h.driver->counters().retried, 1);  // dispatched again at once)
+  EXPECT_EQ(h.Sent(msg::PHASE_EXECUTE), 2);
+}
+
+TEST(TrialDriver, ACellRestartedWithinItsLeaseStaysAliveAndItsOldPhaseIsAborted) {
+  Harness h;
+  h.Start();
+  h.t += std::chrono::milliseconds(100);
+  h.driver->Tick(false);
+  ASSERT_EQ(h.Sent(msg::PHASE_EXECUTE), 1);
+  h.answered = h.transport.sent.size();  // the old process died mid-trial
+  // The new process announces first (not yet serving anyone) ...
+  h.driver->OnAnnounce(h.Announce("c1", 0, /*incarnation=*/2));
+  EXPECT_EQ(h.store.trials[1].state, db::TrialState::kPlanned) << "old phase not aborted";
+  // ... then the old one's loss arrives while the new one is there.
+  h.driver->OnCellLost("c1", "liveliness lost", /*another_process=*/true);
+  EXPECT_FALSE(h.store.gone.count("c1"));
+  EXPECT_EQ(h.driver->counters().cells_usable, 1);
+  h.driver->OnAnnounce(h.Announce("c1", kSession, 2));
+  ASSERT_TRUE(h.RunToEnd());
+  EXPECT_EQ(h.store.trials[1].state, db::TrialState::kDone);
+  EXPECT_EQ(h.store.trials[1].attempt, 2);
+}
+
+TEST(TrialDriver, ALostCellIsGoneAndItsTrialRequeued) {
+  Harness h;
+  h.Start();
+  h.t += std::chrono::milliseconds(100);
+  h.driver->Tick(false);
+  h.answered = h.transport.sent.size();
+  h.driver->OnCellLost("c1", "participant left", false);
+  EXPECT_TRUE(h.store.gone.count("c1"));
+  EXPECT_EQ(h.store.trials[1].state, db::TrialState::kPlanned);
+  EXPECT_EQ(h.driver->counters().cells_usable, 0);
+}
+
+TEST(TrialDriver, ResumeFinishesWhatARestartLeftThroughTheSameSteps) {
+  Harness h(5);
+  h.store.trials[1].state = db::TrialState::kExecuted;
+  h.store.trials[2].state = db::TrialState::kResetDone;
+  h.store.trials[3].state = db::TrialState::kPredicted;
+  h.store.trials[4].state = db::TrialState::kDispatched;  // -> planned, attempt 2
+  h.store.trials[5].state = db::TrialState::kResetting;   // -> reset_failed
+  h.store.faults.next["BeginReset"] = {K::kBusy};
+  h.store.faults.next["RecordPrediction"] = {K::kBusy};
+  h.Start();
+  ASSERT_TRUE(h.RunToEnd());
+  for (int i = 1; i <= 5; ++i)
+    EXPECT_EQ(h.store.trials[i].state, db::TrialState::kDone) << "trial " << i;
+  EXPECT_EQ(h.store.trials[4].attempt, 2);
+  EXPECT_EQ(h.driver->counters().recovered, 2);
+}
+
+TEST(TrialDriver, NoTrialIsDispatchedBeforeRecoveryRan) {
+  Harness h;
+  h.store.faults.next["RecoverAfterRestart"] = {K::kBusy, K::kBusy};
+  h.driver->Resume();
+  h.driver->OnAnnounce(h.Announce("c1", kSession));
+  h.driver->Tick(false);  // the backoff has not passed: recovery waits, so does dispatch
+  EXPECT_EQ(h.Sent(msg::PHASE_EXECUTE), 0);
+  ASSERT_TRUE(h.RunToEnd());
+}
+
+}  // namespace
+}  // namespace arena::orchestrator
