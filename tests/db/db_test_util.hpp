@@ -107,6 +107,10 @@ inline constexpr const char* kUndoMigration5 =
     " DROP TABLE store_meta; DROP TABLE services; DROP TABLE cell_events;"
     " ALTER TABLE cells DROP COLUMN lease_s; ALTER TABLE cells DROP COLUMN serving;"
     " ALTER TABLE trials DROP COLUMN service_restarts;";
+// Undoes migration 10 (trials.backend, truth, defects_applied).
+inline constexpr const char* kUndoMigration10 =
+    " ALTER TABLE trials DROP COLUMN backend; ALTER TABLE trials DROP COLUMN truth;"
+    " ALTER TABLE trials DROP COLUMN defects_applied;";
 
 inline void RunTrialToDone(Store& store, const ClaimedTrial& t, int n,
                            const IngestOptions& options = {}) {

@@ -213,7 +213,7 @@ TEST_F(ExportTest, CsvRoundTripThroughAParser) {
       }
     }
   }
-  EXPECT_EQ(m["counts"]["files"], 1 + 2 * 3);
+  EXPECT_EQ(m["counts"]["files"], 1 + 1 + 2 * 3);  // trials.csv, scenes.jsonl, 2 streams per trial
 }
 
 TEST_F(ExportTest, JsonlRoundTripThroughAParser) {

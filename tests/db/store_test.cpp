@@ -85,7 +85,7 @@ TEST(StoreOpen, MigratesVersionOneFile) {
         sqlite3_exec(db,
                      (std::string("BEGIN; ALTER TABLE campaigns DROP COLUMN state_reason;"
                                   " DROP TABLE evaluation_results; DROP TABLE evaluations;") +
-                      testing::kUndoMigration5 +
+                      testing::kUndoMigration5 + testing::kUndoMigration10 +
                       " DELETE FROM schema_migrations WHERE version > 1; PRAGMA user_version = 1;"
                       " COMMIT;")
                          .c_str(),
