@@ -97,6 +97,38 @@ void Step(benchmark::State& state, Variant v, bool pusher, Reduce reduce) {
   state.counters["unknowns"] = unknowns;
 }
 
+// Tracked vs fixed contact geometry (issue 12): the canonical scene's steps
+// with model.contacts set, same counters as Step_*.
+void StepContacts(benchmark::State& state, ContactTracking mode, Reduce reduce) {
+  Scene s = Make(kCanonical, true, reduce);
+  s.model.contacts = mode;
+  std::vector<double> us;
+  for (auto _ : state) {
+    ContactModel m(s);
+    for (int k = 0; k < 500; ++k) {
+      const auto t0 = std::chrono::steady_clock::now();
+      const StepReport rep = m.Step();
+      const auto t1 = std::chrono::steady_clock::now();
+      if (!rep.ok) {
+        state.SkipWithError(rep.error.c_str());
+        return;
+      }
+      us.push_back(std::chrono::duration<double, std::micro>(t1 - t0).count());
+    }
+  }
+  std::sort(us.begin(), us.end());
+  state.counters["step_median_us"] = us[us.size() / 2];
+  state.counters["step_p90_us"] = us[us.size() * 9 / 10];
+}
+BENCHMARK_CAPTURE(StepContacts, canonical_full_tracked, ContactTracking::kTracked, Reduce::kFull)
+    ->Unit(benchmark::kMillisecond);
+BENCHMARK_CAPTURE(StepContacts, canonical_full_fixed, ContactTracking::kFixed, Reduce::kFull)
+    ->Unit(benchmark::kMillisecond);
+BENCHMARK_CAPTURE(StepContacts, canonical_planar_tracked, ContactTracking::kTracked, Reduce::kAuto)
+    ->Unit(benchmark::kMillisecond);
+BENCHMARK_CAPTURE(StepContacts, canonical_planar_fixed, ContactTracking::kFixed, Reduce::kAuto)
+    ->Unit(benchmark::kMillisecond);
+
 #define ARENA_MECH_BENCH(name, v, pusher, reduce)                                   \
   BENCHMARK_CAPTURE(Trial, name, v, pusher, reduce)->Unit(benchmark::kMillisecond); \
   BENCHMARK_CAPTURE(Step, name, v, pusher, reduce)->Unit(benchmark::kMillisecond)

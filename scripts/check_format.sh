@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
-# Checks that every tracked C++ file is formatted by .clang-format (Google
-# style, 100 columns). Exit 1 lists the files that are not; `scripts/check_format.sh
-# --fix` formats them in place.
+# Checks that no merge left conflict markers in a tracked file and that every
+# tracked C++ file is formatted by .clang-format (Google style, 100 columns).
+# Exit 1 lists what is not; `scripts/check_format.sh --fix` formats in place.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 if ! command -v clang-format >/dev/null 2>&1; then
@@ -9,6 +9,13 @@ if ! command -v clang-format >/dev/null 2>&1; then
   if [ "$(id -u)" -ne 0 ]; then sudo="sudo"; fi
   export DEBIAN_FRONTEND=noninteractive
   $sudo apt-get update -qq && $sudo apt-get install -y -qq --no-install-recommends clang-format >/dev/null
+fi
+# A merge's leftover conflict markers (they compile in comments and README
+# tables, so no build catches them).
+if markers=$(git grep -nE '^(<<<<<<<|>>>>>>>) ' -- . ':!*.patch'); then
+  echo "check_format: conflict markers left by a merge:" >&2
+  echo "$markers" >&2
+  exit 1
 fi
 mapfile -t files < <(git ls-files '*.cpp' '*.hpp' '*.h' '*.cc')
 if [ "${1:-}" = "--fix" ]; then

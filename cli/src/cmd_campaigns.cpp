@@ -3,6 +3,7 @@
 // next scheduling pass (within 0.2 s).
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
 #include <ctime>
 #include <memory>
 #include <optional>
@@ -11,6 +12,7 @@
 #include <nlohmann/json.hpp>
 
 #include "arena/db/store.hpp"
+#include "arena/orchestrator/adaptive.hpp"
 #include "arena/orchestrator/campaign.hpp"
 #include "arena/orchestrator/submit.hpp"
 #include "campaign_input.hpp"
@@ -71,8 +73,14 @@ std::string NoServiceWarning(const db::Store& store, const std::string& db_path)
 }
 
 int Submit(const std::string& campaign_path, const std::string& db_path) {
-  // Before any thread: Ctrl-C abandons the one transaction (nothing stored), exit 130.
-  SignalWatcher signals([](int) {});
+  // Before any thread. Ctrl-C (or SIGTERM) ends the submit at once, exit 130:
+  // the campaign is written in one transaction, and a process that ends
+  // before its commit leaves nothing of it (SQLite rolls it back, as after
+  // SIGKILL); validating a big campaign can take a while, so do not wait.
+  SignalWatcher signals([](int) {
+    std::fputs("arena: submit interrupted; nothing was stored\n", stderr);
+    std::_Exit(kExitInterrupted);
+  });
   const orchestrator::Campaign campaign = LoadValidCampaign(campaign_path);
   auto store = OpenStore(db_path, false);
   try {
@@ -80,9 +88,18 @@ int Submit(const std::string& campaign_path, const std::string& db_path) {
         orchestrator::SubmitCampaign(*store, campaign, [&] { return signals.received() != 0; });
     if (signals.received()) throw orchestrator::SubmitInterrupted();
     std::printf("%lld\n", static_cast<long long>(id));
-    std::fprintf(stderr, "campaign %lld '%s': %lld trials planned in %s\n",
-                 static_cast<long long>(id), campaign.name.c_str(),
-                 static_cast<long long>(orchestrator::TrialCount(campaign)), db_path.c_str());
+    if (campaign.adaptive) {
+      std::fprintf(stderr,
+                   "campaign %lld '%s': adaptive %s sampler, %lld trials planned in round 0 in %s "
+                   "(the service plans the next rounds from their outcomes)\n",
+                   static_cast<long long>(id), campaign.name.c_str(),
+                   orchestrator::ToString(campaign.adaptive->kind),
+                   static_cast<long long>(store->ListTrials(id).size()), db_path.c_str());
+    } else {
+      std::fprintf(stderr, "campaign %lld '%s': %lld trials planned in %s\n",
+                   static_cast<long long>(id), campaign.name.c_str(),
+                   static_cast<long long>(orchestrator::TrialCount(campaign)), db_path.c_str());
+    }
     if (const std::string w = NoServiceWarning(*store, db_path); !w.empty())
       std::fprintf(stderr, "warning: %s\n", w.c_str());
   } catch (const orchestrator::SubmitInterrupted& e) {
@@ -150,6 +167,11 @@ int Status(const std::string& db_path, std::int64_t only, bool as_json) {
                           {"cancelled", c.cancelled},
                           {"rate_per_hour", c.rate_per_hour}};
       j["eta_s"] = c.eta_s ? nlohmann::json(*c.eta_s) : nlohmann::json();
+      if (const auto a = orchestrator::ReadAdaptiveProgress(store->GetCampaign(c.id))) {
+        j["adaptive"] = {{"sampler", a->sampler},   {"round", a->round},
+                         {"open", a->open},         {"refining", a->refining},
+                         {"progress", a->progress}, {"fraction", a->fraction}};
+      }
       // What its model errors are measured against (executors/README.md, "Backends").
       j["truth"] = nlohmann::json::array();
       for (const auto& t : store->CampaignTruths(c.id))
@@ -201,6 +223,16 @@ int Status(const std::string& db_path, std::int64_t only, bool as_json) {
           t.backend.empty() ? "?" : t.backend.c_str(), static_cast<long long>(t.trials),
           t.truth == "self-consistency" ? ": errors are self-consistency, not accuracy" : "");
     }
+  }
+  bool header = false;
+  for (const auto& c : s.campaigns) {
+    const auto a = orchestrator::ReadAdaptiveProgress(store->GetCampaign(c.id));
+    if (!a) continue;
+    if (!header) std::printf("\nadaptive sampling:\n");
+    header = true;
+    std::printf("%-5lld %-10s round %-3d %3.0f %%  refining %s\n      %s\n",
+                static_cast<long long>(c.id), a->sampler.c_str(), a->round, a->fraction * 100,
+                a->refining.c_str(), a->progress.c_str());
   }
   if (service) {
     std::printf("\nservice: pid %lld on %s, DDS domain %d, session %s, started %s, %s\n",

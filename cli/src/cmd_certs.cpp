@@ -16,7 +16,7 @@ struct CertsOptions {
   dds::LabOptions lab;
   std::string role;
   dds::IdentityOptions identity;
-  std::string domains = "0-232";
+  std::string domains = "0-231";
 };
 
 // "A-B" or "A" -> [A, B].
@@ -35,7 +35,7 @@ void ParseDomains(const std::string& text, int* min, int* max) {
     }
   } catch (const std::exception&) {
     throw CommandError(kExitBadInput,
-                       "--domains: want MIN-MAX (e.g. 0-232) or one id, got '" + text + "'");
+                       "--domains: want MIN-MAX (e.g. 0-231) or one id, got '" + text + "'");
   }
 }
 

@@ -113,7 +113,7 @@ void AddControllerCommand(CLI::App& app, Action* action) {
       "  arena controller --name lab_pivot --law pivot_to_angle --domain 42 --security "
       "lab-pki/ctl\n"
       "A scene whose pusher motion is {\"controller\": NAME, ...} is driven by the controller\n"
-      "registered under NAME (docs/closed_loop.md). Laws: pivot_to_angle, sliding_to_position.\n"
+      "registered under NAME (docs/live_control.md). Laws: pivot_to_angle, sliding_to_position.\n"
       "Stops cleanly on SIGINT/SIGTERM (exit 0).");
   cmd->add_option("--name", opt->host.name, "Name scenes use to pick this controller")->required();
   cmd->add_option("--domain", opt->host.domain_id, "DDS domain id (0..232)")->required();

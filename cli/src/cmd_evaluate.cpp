@@ -1,5 +1,6 @@
-// arena evaluate --db FILE --campaign ID [--facets 4,8,16,32] [--points 2,3,5,9]
-//                [--dt 0.004] [--reduce auto] [--budget 1mm ...] [--threads N] [--json]
+// arena evaluate --db FILE --campaign ID [--predictors arena] [--facets 4,8,16,32] [--points 3]
+//                [--dt 0.008,0.004,0.002,0.001] [--reduce auto] [--budget 1mm|2ms|1.5floor ...]
+//                [--convergence-trials 8] [--threads N] [--json]
 // Replays a campaign's done trials through the model at every fidelity
 // setting of the grid, stores the run (tables evaluations and
 // evaluation_results) and prints the trade: a table or JSON.
@@ -7,11 +8,13 @@
 #include <cstdio>
 #include <sstream>
 #include <string>
+#include <vector>
 
 #include <nlohmann/json.hpp>
 
+#include "arena/assessment/evaluation.hpp"
 #include "arena/db/store.hpp"
-#include "arena/orchestrator/evaluation.hpp"
+#include "arena/mechanics/scene_json.hpp"
 #include "commands.hpp"
 #include "progress.hpp"
 #include "signals.hpp"
@@ -23,80 +26,177 @@ namespace {
 struct EvaluateOptions {
   std::string db_path;
   std::int64_t campaign = -1;
+  std::vector<std::string> predictors{"arena"};
   std::vector<int> facets{4, 8, 16, 32};
-  std::vector<int> points{2, 3, 5, 9};
-  std::vector<double> dt{0.004};
+  std::vector<int> points{3};
+  std::vector<double> dt{0.008, 0.004, 0.002, 0.001};
   std::vector<std::string> reduce{"auto"};
+  std::vector<std::string> contacts{"tracked"};
+  bool grid_given = false;  // any of --facets/--points/--dt/--reduce
+  std::vector<double> mujoco_timestep{0.004, 0.002, 0.001, 0.0005};
+  std::vector<std::string> mujoco_cone{"elliptic"};
+  std::vector<int> mujoco_noslip{10};
+  bool mujoco_grid_given = false;
   std::vector<std::string> budgets;
   int threads = 0;
+  int convergence_trials = 8;
   bool json = false;
 };
 
-std::string Milli(const std::optional<orchestrator::Distribution>& d, double scale,
-                  const char* fmt) {
+std::string Tail(const std::optional<assessment::Distribution>& d, double scale) {
   if (!d) return "-";
   char buf[64];
-  std::snprintf(buf, sizeof buf, fmt, d->median * scale, d->p95 * scale);
+  std::snprintf(buf, sizeof buf, "%.3g/%.3g/%.3g", d->median * scale, d->p95 * scale,
+                d->max * scale);
   return buf;
 }
 
-std::string FormatTable(const orchestrator::EvaluationReport& r, std::int64_t evaluation_id) {
+std::string TrialIds(const std::vector<assessment::TrialNote>& notes, std::size_t limit) {
+  std::string out;
+  for (std::size_t i = 0; i < notes.size() && i < limit; ++i) {
+    out += (out.empty() ? "" : " ") + std::to_string(notes[i].trial_id);
+  }
+  if (notes.size() > limit) out += " ...";
+  return out;
+}
+
+std::string FormatTable(const assessment::EvaluationReport& r, std::int64_t evaluation_id) {
   std::ostringstream out;
-  char line[512];
+  char line[640];
   std::snprintf(line, sizeof line,
-                "campaign %lld: %d done trials replayed at %zu settings (evaluation %lld)\n",
+                "campaign %lld: %d done trials replayed at %zu settings of %zu predictor(s) "
+                "(evaluation %lld)\n",
                 static_cast<long long>(r.campaign_id), r.trials, r.settings.size(),
-                static_cast<long long>(evaluation_id));
+                r.predictors.size(), static_cast<long long>(evaluation_id));
   out << line;
-  std::snprintf(line, sizeof line, "%-24s %6s %17s %17s %17s %9s %15s %s\n", "setting", "ok",
-                "pos mm med/p95", "angle deg med/p95", "force N med/p95", "mode med",
-                "ms/trial med/p95", "");
+  out << "truth: " << r.truth.source << " -- " << r.truth.statement << "\n";
+  const double floor_m = r.floor ? r.floor->position_median : 0;
+  if (r.floor) {
+    std::snprintf(line, sizeof line,
+                  "noise floor (replicate spread of the true final pose, %d conditions with >= 2 "
+                  "replicates): position median %.3g mm, p95 %.3g mm; angle median %.3g deg, p95 "
+                  "%.3g deg\n",
+                  r.floor->conditions, r.floor->position_median * 1e3, r.floor->position_p95 * 1e3,
+                  r.floor->angle_median * 180 / M_PI, r.floor->angle_p95 * 180 / M_PI);
+  } else {
+    std::snprintf(line, sizeof line,
+                  "noise floor: none (no condition has 2 replicates; errors cannot be judged "
+                  "against replicate spread)\n");
+  }
+  out << line;
+  std::snprintf(line, sizeof line, "%-8s %-24s %9s %20s %9s %20s %17s %15s %15s %s\n", "predictor",
+                "setting", "ok/div/fail", "pos mm med/p95/max", "p95/floor",
+                "angle deg med/p95/max", "mode med/p5/min", "ms/trial med/p95", "ms per sim s", "");
   out << line;
   for (std::size_t i = 0; i < r.settings.size(); ++i) {
     const auto& s = r.settings[i];
     std::string marks;
-    if (s.pareto) marks += " pareto";
-    if (s.within_budget && !r.budgets.empty()) marks += " in-budget";
+    if (s.pareto) marks += " front";
+    if (s.within_budget) marks += " in-budget";
     if (r.recommended && *r.recommended == i) marks += " <== recommended";
-    char ok[32];
-    std::snprintf(ok, sizeof ok, "%d/%d", s.ok, s.trials);
-    char mode[32] = "-";
-    if (s.mode_agreement) std::snprintf(mode, sizeof mode, "%.3f", s.mode_agreement->median);
+    char counts[48];
+    std::snprintf(counts, sizeof counts, "%d/%d/%d", s.ok, s.diverged, s.failures);
+    char multiple[32] = "-";
+    if (s.position && floor_m > 0)
+      std::snprintf(multiple, sizeof multiple, "%.2fx", s.position->p95 / floor_m);
+    char mode[48] = "-";
+    if (s.mode_agreement) {
+      std::snprintf(mode, sizeof mode, "%.3f/%.3f/%.3f", s.mode_agreement->median,
+                    s.mode_agreement->p95, s.mode_agreement->max);
+    }
     char time[48];
     std::snprintf(time, sizeof time, "%.3g/%.3g", s.time.median * 1e3, s.time.p95 * 1e3);
-    std::snprintf(line, sizeof line, "%-24s %6s %17s %17s %17s %9s %15s%s\n", s.model_key.c_str(),
-                  ok, Milli(s.position, 1e3, "%.3g/%.3g").c_str(),
-                  Milli(s.angle, 180 / M_PI, "%.3g/%.3g").c_str(),
-                  Milli(s.force, 1, "%.3g/%.3g").c_str(), mode, time, marks.c_str());
+    char per_sim[32] = "-";
+    if (s.time_per_sim_s)
+      std::snprintf(per_sim, sizeof per_sim, "%.3g", s.time_per_sim_s->median * 1e3);
+    std::snprintf(line, sizeof line, "%-8s %-24s %11s %20s %9s %20s %17s %15s %15s%s\n",
+                  s.predictor.c_str(), s.model_key.c_str(), counts, Tail(s.position, 1e3).c_str(),
+                  multiple, Tail(s.angle, 180 / M_PI).c_str(), mode, time, per_sim, marks.c_str());
     out << line;
   }
-  out << "Pareto front: " << orchestrator::ToString(r.primary)
-      << " against median time per trial.\n";
+  out << "\nworst trials (largest final position error; `arena plot --db FILE TRIAL`), "
+         "divergences and failures:\n";
+  for (const auto& s : r.settings) {
+    if (s.worst.empty() && s.diverged_trials.empty() && s.failed_trials.empty()) continue;
+    out << "  " << s.predictor << " " << s.model_key << ":";
+    if (!s.worst.empty()) {
+      out << " worst";
+      for (const auto& w : s.worst) {
+        std::snprintf(line, sizeof line, " %lld (%.3g mm)", static_cast<long long>(w.trial_id),
+                      w.value * 1e3);
+        out << line;
+      }
+    }
+    if (!s.diverged_trials.empty())
+      out << "; diverged/left grasp " << s.diverged_trials.size() << ": "
+          << TrialIds(s.diverged_trials, 10) << " (" << s.diverged_trials.front().reason << ")";
+    if (!s.failed_trials.empty())
+      out << "; failed " << s.failed_trials.size() << ": " << TrialIds(s.failed_trials, 10) << " ("
+          << s.failed_trials.front().reason << ")";
+    out << "\n";
+  }
+  out << "\nconvergence against each predictor's finest setting (pieces restarted from the true "
+         "state) beside the error against the truth, final position mm med/p95:\n";
+  for (const auto& s : r.settings) {
+    std::snprintf(
+        line, sizeof line, "  %-8s %-24s discretisation %-17s vs truth %s%s\n", s.predictor.c_str(),
+        s.model_key.c_str(),
+        s.convergence
+            ? (Tail(std::optional<assessment::Distribution>(s.convergence->position), 1e3) + " (" +
+               std::to_string(s.convergence->pieces) + " pieces)")
+                  .c_str()
+            : "-",
+        Tail(s.position, 1e3).c_str(), s.finest ? "  (finest)" : "");
+    out << line;
+  }
+  out << "\nfront: " << r.front << "\n";
   out << "recommendation: " << r.recommendation << "\n";
   return out.str();
 }
 
 int RunEvaluate(const EvaluateOptions& o) {
-  orchestrator::EvaluationOptions eo;
-  eo.grid.facets = o.facets;
-  eo.grid.points = o.points;
-  eo.grid.dt = o.dt;
-  eo.grid.reduce.clear();
+  assessment::EvaluationOptions eo;
+  eo.predictors.clear();
+  assessment::FidelityGrid grid;
+  grid.facets = o.facets;
+  grid.points = o.points;
+  grid.dt = o.dt;
+  grid.reduce.clear();
   for (const auto& r : o.reduce) {
     if (r == "auto")
-      eo.grid.reduce.push_back(mechanics::Reduce::kAuto);
+      grid.reduce.push_back(mechanics::Reduce::kAuto);
     else if (r == "full")
-      eo.grid.reduce.push_back(mechanics::Reduce::kFull);
+      grid.reduce.push_back(mechanics::Reduce::kFull);
     else if (r == "planar")
-      eo.grid.reduce.push_back(mechanics::Reduce::kPlanar);
+      grid.reduce.push_back(mechanics::Reduce::kPlanar);
     else
       throw CommandError(kExitBadInput, "--reduce: must be auto, full or planar, got '" + r + "'");
   }
+  grid.contacts.clear();
+  for (const auto& m : o.contacts) {
+    const auto mode = mechanics::ContactTrackingFromString(m);
+    if (!mode) {
+      throw CommandError(kExitBadInput, "--contacts: must be tracked or fixed, got '" + m + "'");
+    }
+    grid.contacts.push_back(*mode);
+  }
+  for (const auto& name : o.predictors) {
+    assessment::PredictorRequest req;
+    req.name = name;
+    if (name == "arena" && o.grid_given) req.arena_grid = grid;
+    if (name == "mujoco" && o.mujoco_grid_given) {
+      req.mujoco_grid = assessment::MujocoGrid{o.mujoco_timestep, o.mujoco_cone, o.mujoco_noslip};
+    }
+    eo.predictors.push_back(req);
+  }
   if (o.threads < 0) throw CommandError(kExitBadInput, "--threads: must be >= 0 (0: one per core)");
+  if (o.convergence_trials < 0)
+    throw CommandError(kExitBadInput, "--convergence-trials: must be >= 0 (0: no table)");
   eo.threads = o.threads;
+  eo.convergence_trials = o.convergence_trials;
   try {
-    for (const auto& b : o.budgets) eo.budgets.push_back(orchestrator::ParseBudget(b));
-    (void)orchestrator::ExpandGrid(eo.grid);
+    for (const auto& b : o.budgets) eo.budgets.push_back(assessment::ParseBudget(b));
+    if (o.grid_given) (void)assessment::ExpandGrid(grid);
   } catch (const std::invalid_argument& e) {
     throw CommandError(kExitBadInput, std::string("evaluate: ") + e.what());
   }
@@ -106,7 +206,8 @@ int RunEvaluate(const EvaluateOptions& o) {
   SignalWatcher signals([&cancel](int) { cancel.store(true); });
   eo.cancel = &cancel;
 
-  orchestrator::EvaluationRun run;
+  assessment::EvaluationRun run;
+  std::vector<db::Store::TruthCount> truths;  // what the errors are measured against
   try {
     db::StoreOptions so;
     so.create = false;
@@ -116,7 +217,8 @@ int RunEvaluate(const EvaluateOptions& o) {
       if (!progress) progress = std::make_unique<ProgressLine>(total, "replays");
       progress->Update(done, failed);
     };
-    run = orchestrator::EvaluateCampaign(*store, o.campaign, eo);
+    run = assessment::EvaluateCampaign(*store, o.campaign, eo);
+    truths = store->CampaignTruths(o.campaign);
     if (progress) progress->Finish();
   } catch (const db::StoreError& e) {
     throw StoreCommandError(e);
@@ -128,12 +230,27 @@ int RunEvaluate(const EvaluateOptions& o) {
     return kExitInterrupted;
   }
   if (o.json) {
-    nlohmann::json j = orchestrator::ToJson(run.report);
+    nlohmann::json j = assessment::ToJson(run.report);
     j["evaluation_id"] = run.evaluation_id;
+    // "truth" is the report's object (source, independent, statement); the
+    // per-backend trial counts sit in it.
+    j["truth"]["trials"] = nlohmann::json::array();
+    for (const auto& t : truths) {
+      j["truth"]["trials"].push_back(
+          {{"truth", t.truth}, {"backend", t.backend}, {"trials", t.trials}});
+    }
     std::printf("%s\n", j.dump(2).c_str());
   } else {
     const std::string text = FormatTable(run.report, run.evaluation_id);
     std::fwrite(text.data(), 1, text.size(), stdout);
+    for (const auto& t : truths) {
+      std::printf("truth: %s (%s backend), %lld trials%s\n",
+                  t.truth.empty() ? "unreported" : t.truth.c_str(),
+                  t.backend.empty() ? "?" : t.backend.c_str(), static_cast<long long>(t.trials),
+                  t.truth == "self-consistency"
+                      ? ": these errors are arena's model against itself, not accuracy"
+                      : "");
+    }
   }
   return kExitOk;
 }
@@ -149,33 +266,70 @@ void AddEvaluateCommand(CLI::App& app, Action* action) {
   cmd->add_option("--campaign", o->campaign, "Campaign id")
       ->required()
       ->check(CLI::NonNegativeNumber);
-  cmd->add_option("--facets", o->facets, "Friction cone facets to try (comma separated)")
+  cmd->add_option("--predictors", o->predictors,
+                  "Predictors to replay through, comma separated: arena, mujoco")
       ->delimiter(',')
       ->capture_default_str();
-  cmd->add_option("--points", o->points, "Constituent points per line/patch to try")
+  cmd->add_option("--facets", o->facets,
+                  "arena: friction cone facets to try (comma separated; default grid: 4,8,16,32 "
+                  "x dt 8,4,2,1 ms, keeping only settings every trial's scene takes)")
       ->delimiter(',')
+      ->each([o](const std::string&) { o->grid_given = true; });
+  cmd->add_option("--points", o->points, "arena: constituent points per line/patch to try")
+      ->delimiter(',')
+      ->each([o](const std::string&) { o->grid_given = true; });
+  cmd->add_option("--dt", o->dt, "arena: time steps to try (s)")
+      ->delimiter(',')
+      ->each([o](const std::string&) { o->grid_given = true; });
+  cmd->add_option("--reduce", o->reduce, "arena: model reductions to try (auto, full, planar)")
+      ->delimiter(',')
+      ->each([o](const std::string&) { o->grid_given = true; });
+  cmd->add_option("--contacts", o->contacts,
+                  "arena: contact geometries to try (tracked: follow the object; fixed: frozen "
+                  "frame)")
+      ->delimiter(',')
+      ->each([o](const std::string&) { o->grid_given = true; });
+  auto mujoco_given = [o](const std::string&) { o->mujoco_grid_given = true; };
+  cmd->add_option("--mujoco-timestep", o->mujoco_timestep, "mujoco: timesteps to try (s)")
+      ->delimiter(',')
+      ->each(mujoco_given)
       ->capture_default_str();
-  cmd->add_option("--dt", o->dt, "Time steps to try (s)")->delimiter(',')->capture_default_str();
-  cmd->add_option("--reduce", o->reduce, "Model reductions to try (auto, full, planar)")
+  cmd->add_option("--mujoco-cone", o->mujoco_cone,
+                  "mujoco: friction cones to try (elliptic, pyramidal)")
       ->delimiter(',')
+      ->each(mujoco_given)
+      ->capture_default_str();
+  cmd->add_option("--mujoco-noslip", o->mujoco_noslip, "mujoco: noslip iterations to try")
+      ->delimiter(',')
+      ->each(mujoco_given)
+      ->capture_default_str();
+  cmd->add_option("--convergence-trials", o->convergence_trials,
+                  "Trials whose pieces the convergence table restarts from the true state "
+                  "(0: no table)")
       ->capture_default_str();
   cmd->add_option(
       "--budget", o->budgets,
-      "Error budget, repeatable (all must hold): '1mm' = median final position error <= 1 mm, "
-      "or METRIC=VALUE[UNIT] with METRIC position_median|position_p95|angle_median|angle_p95|"
-      "force_median|force_p95|mode_agreement_median (a minimum)");
+      "Budget, repeatable (all must hold), judged on p95: '1mm' = p95 final position error "
+      "<= 1 mm, '2ms' = p95 predictor time per trial <= 2 ms, '1.5floor' = p95 final position "
+      "error <= 1.5 x the noise floor; or METRIC=VALUE[UNIT] with METRIC position_median|"
+      "position_p95|angle_median|angle_p95|force_median|force_p95|mode_agreement_median "
+      "(a minimum)|time_p95");
   cmd->add_option("--threads", o->threads, "Worker threads (0: one per core)")
       ->capture_default_str();
   cmd->add_flag("--json", o->json, "Print the report as JSON");
   cmd->footer(
       "Example:\n"
-      "  arena evaluate --db lab.db --campaign 3 --facets 4,8,16 --points 2,3,5 --budget 1mm\n"
-      "Every done trial is replayed from its stored scene at each setting of the cross product\n"
-      "facets x points x dt x reduce, scored against its stored ground truth, and the run is\n"
-      "stored (tables evaluations, evaluation_results). Errors are medians and 95th percentiles\n"
-      "over trials; model time is the predictor's wall time per trial. The Pareto front is the\n"
-      "first budget's metric (default: median final position error) against median time; the\n"
-      "recommendation is the cheapest setting that predicted every trial within every budget.\n"
+      "  arena evaluate --db lab.db --campaign 3 --predictors arena --budget 1.5floor\n"
+      "  arena evaluate --db lab.db --campaign 3 --facets 4,8,16 --points 3,5 --budget 1mm\n"
+      "Every done trial is replayed from its stored scene through each predictor at each setting\n"
+      "of its grid (arena: facets x points x dt x reduce), scored against its stored ground\n"
+      "truth, and the run is stored (tables evaluations, evaluation_results). Every error is\n"
+      "median/p95/max over the trials predicted; divergences (left the grasp, blew up) and\n"
+      "failures are counted and listed apart, never averaged in. The noise floor is the spread\n"
+      "of the true final pose between replicates. The Pareto front is the first error budget's\n"
+      "metric (default: p95 final position error) against median time; with a budget the\n"
+      "cheapest setting meeting it on p95 is recommended (with only a time budget, the most\n"
+      "accurate), without one the front is described. The report names its truth.\n"
       "Plot the trade with: arena plot --db FILE --campaign ID --tradeoff --out FILE.svg\n");
   cmd->callback([o, action] { *action = [o] { return RunEvaluate(*o); }; });
 }

@@ -4,12 +4,18 @@
 // Modes (one per plot; add a mode as: an option/flag below, a chart builder
 // in plot_charts.hpp, a branch in RunPlot):
 //   --tradeoff   the speed/accuracy trade of an evaluation run (arena evaluate)
+//   --map X,Y    a metric over two varied parameters of a campaign
+//                (BuildCampaignMap, plot_map_data.hpp; RenderMapSvg)
 //   TRIAL        one trial's pose and contact forces, true vs observed vs
 //                predicted (PlotTrial, plot_trial.hpp)
 #include <algorithm>
 #include <cmath>
 #include <fstream>
+#include <limits>
+#include <map>
+#include <optional>
 #include <string>
+#include <tuple>
 #include <vector>
 
 #include <nlohmann/json.hpp>
@@ -18,10 +24,59 @@
 #include "commands.hpp"
 #include "output_guard.hpp"
 #include "plot_charts.hpp"
+#include "plot_map_data.hpp"
 #include "plot_trial.hpp"
 #include "store_errors.hpp"
 
 namespace arena::cli {
+
+namespace {
+
+const char* const kPredictorColors[] = {"#1f77b4", "#9467bd", "#8c564b", "#17becf", "#bcbd22"};
+
+std::string UnitOf(const std::string& metric) {
+  if (metric.rfind("angle", 0) == 0) return "rad";
+  if (metric.rfind("force", 0) == 0) return "N";
+  if (metric.rfind("mode", 0) == 0) return "fraction";
+  return "m";
+}
+
+// The cost axis: wall time per simulated second; reports written before it
+// existed give the median time per trial instead.
+std::optional<double> Cost(const nlohmann::json& s, bool per_sim_s) {
+  const char* key = per_sim_s ? "time_per_simulated_s" : "time_s";
+  if (!s.contains(key) || !s[key].is_object() || !s[key]["median"].is_number()) return {};
+  return s[key]["median"].get<double>();
+}
+
+// The error-against-duration panel (reports since duration_curves exist).
+Panel DurationPanel(const nlohmann::json& report) {
+  Panel panel{"final position error against ground-truth duration (how fast the error grows)",
+              "final position error p95 (m)",
+              true,
+              {}};
+  panel.own_x = true;
+  panel.log_x = true;
+  panel.x_label = "ground-truth duration of the trial (s)";
+  std::size_t color = 0;
+  for (const auto& c : report["duration_curves"]) {
+    Series s{c.value("predictor", "?") + " " + c.value("model_key", "") + " p95",
+             {},
+             {},
+             kPredictorColors[color++ % 5],
+             true};
+    s.connect = true;
+    for (const auto& p : c["points"]) {
+      s.x.push_back(p.value("duration_s", 0.0));
+      s.y.push_back(p["position_error_m"].value("p95", 0.0));
+      s.labels.push_back(std::to_string(p.value("trials", 0)) + " trials");
+    }
+    panel.series.push_back(std::move(s));
+  }
+  return panel;
+}
+
+}  // namespace
 
 Chart TradeoffChart(const nlohmann::json& report) {
   if (!report.is_object() || !report.contains("settings") || !report["settings"].is_array()) {
@@ -29,55 +84,130 @@ Chart TradeoffChart(const nlohmann::json& report) {
   }
   const std::string metric = report.value("primary_metric", "position_median");
   const std::string recommended =
-      report["recommended"].is_string() ? report["recommended"].get<std::string>() : "";
-  Series all{"settings", {}, {}, "#1f77b4", true};
+      report.contains("recommended") && report["recommended"].is_string()
+          ? report["recommended"].get<std::string>()
+          : "";
+  const bool per_sim_s = std::any_of(report["settings"].begin(), report["settings"].end(),
+                                     [](const nlohmann::json& s) { return Cost(s, true); });
+  // One curve per predictor through its settings, coarse to fine.
+  std::map<std::string, std::vector<std::tuple<double, double, double, std::string>>> curves;
+  std::vector<std::string> order;
   Series failed{"failed settings", {}, {}, "#d62728", true};
   Series recommend{"recommended", {}, {}, "#2ca02c", true};
   std::vector<std::pair<double, double>> front;
+  std::vector<std::pair<double, std::string>> failed_points;
+  double max_error = 0;
   int hidden = 0;
   for (const auto& s : report["settings"]) {
-    if (!s.contains("time_s") || !s["time_s"].is_object() || !s["primary_error"].is_number()) {
+    const auto cost = Cost(s, per_sim_s);
+    const std::string predictor = s.value("predictor", "arena");
+    const std::string key = s.value("model_key", "");
+    if (std::find(order.begin(), order.end(), predictor) == order.end()) order.push_back(predictor);
+    const int bad = s.value("failures", 0) + s.value("diverged", 0);
+    if (bad > 0 && cost && *cost > 0) {
+      // Drawn apart, above every error: its error leaves out what it failed on.
+      failed_points.emplace_back(*cost, key + ": " + std::to_string(s.value("diverged", 0)) +
+                                            " diverged, " + std::to_string(s.value("failures", 0)) +
+                                            " failed");
+      continue;
+    }
+    if (!cost || !s.contains("primary_error") || !s["primary_error"].is_number()) {
       ++hidden;
       continue;
     }
-    const double t_ms = s["time_s"]["median"].get<double>() * 1e3;
     const double err = s["primary_error"].get<double>();
-    if (!(err > 0) || !(t_ms > 0)) {
+    if (!(err > 0) || !(*cost > 0)) {
       ++hidden;
       continue;
     }
-    const bool ok = s.value("failures", 0) == 0;
-    Series& into = ok ? all : failed;
-    into.x.push_back(t_ms);
-    into.y.push_back(err);
-    if (ok && s.value("pareto", false)) front.emplace_back(t_ms, err);
-    if (s.value("model_key", "") == recommended) {
-      recommend.x.push_back(t_ms);
+    max_error = std::max(max_error, err);
+    curves[predictor].emplace_back(-s.value("step_s", 0.0), *cost, err, key);
+    if (s.value("pareto", false)) front.emplace_back(*cost, err);
+    if (key == recommended) {
+      recommend.x.push_back(*cost);
       recommend.y.push_back(err);
     }
   }
+  Panel panel{"prediction error against predictor cost, one curve per predictor",
+              metric + " (" + UnitOf(metric) + ")",
+              true,
+              {}};
+  // Per predictor: every setting as a labelled marker, and its curve: the
+  // predictor's own lower envelope (what more time buys it), by cost.
+  std::size_t color = 0;
+  std::vector<Series> envelopes;
+  for (const auto& name : order) {
+    Series c{name, {}, {}, kPredictorColors[color % 5], true};
+    auto points = curves[name];
+    std::stable_sort(points.begin(), points.end(),
+                     [](const auto& a, const auto& b) { return std::get<1>(a) < std::get<1>(b); });
+    Series envelope{name + " curve", {}, {}, kPredictorColors[color++ % 5]};
+    double best = std::numeric_limits<double>::infinity();
+    for (const auto& [step, x, y, key] : points) {
+      c.x.push_back(x);
+      c.y.push_back(y);
+      c.labels.push_back(key);
+      if (y < best) {
+        best = y;
+        envelope.x.push_back(x);
+        envelope.y.push_back(y);
+      }
+    }
+    panel.series.push_back(std::move(c));
+    envelopes.push_back(std::move(envelope));
+  }
+  for (const auto& [x, label] : failed_points) {
+    failed.x.push_back(x);
+    failed.y.push_back(max_error > 0 ? 3 * max_error : 1);
+    failed.labels.push_back(label);
+  }
   std::sort(front.begin(), front.end());
   Series pareto{"pareto front", {}, {}, "#ff7f0e"};
+  pareto.dashed = true;
   for (const auto& [x, y] : front) {
     pareto.x.push_back(x);
     pareto.y.push_back(y);
   }
+  panel.series.push_back(failed);
+  panel.series.push_back(pareto);
+  panel.series.push_back(recommend);
+  for (auto& e : envelopes) panel.series.push_back(std::move(e));
+  // The noise floor: the error no deterministic predictor can beat.
+  const auto& floor = report.contains("noise_floor") ? report["noise_floor"] : nlohmann::json();
+  if (floor.is_object() && UnitOf(metric) == "m" && !panel.series.empty()) {
+    const double f = floor["position_m"].value("median", 0.0);
+    double lo = 0, hi = 0;
+    for (const auto& se : panel.series)
+      for (double x : se.x) {
+        lo = lo > 0 ? std::min(lo, x) : x;
+        hi = std::max(hi, x);
+      }
+    if (f > 0 && lo > 0) {
+      Series line{"noise floor (replicate spread)", {lo, hi}, {f, f}, "#7f7f7f"};
+      line.dashed = true;
+      panel.series.push_back(line);
+    }
+  }
   Chart chart;
+  const std::string truth = report.contains("truth") && report["truth"].is_object()
+                                ? report["truth"].value("source", "")
+                                : "";
   chart.title =
-      "campaign " + std::to_string(report.value("campaign_id", 0)) + ": " + metric +
-      " vs model time (" + std::to_string(report.value("trials", 0)) + " trials" +
+      "campaign " + std::to_string(report.value("campaign_id", 0)) + ": " + metric + " vs cost (" +
+      std::to_string(report.value("trials", 0)) + " trials" +
+      (truth.empty() ? "" : ", truth: " + truth) +
       (hidden ? ", " + std::to_string(hidden) + " settings with zero or no error not shown" : "") +
       ")";
-  chart.x_label = "median model time per trial (ms)";
+  chart.x_label = per_sim_s ? "predictor wall time per simulated second (s/s)"
+                            : "median model time per trial (s)";
   chart.log_x = true;
-  const bool angle = metric.rfind("angle", 0) == 0, force = metric.rfind("force", 0) == 0;
-  const std::string unit = angle                          ? "rad"
-                           : force                        ? "N"
-                           : metric.rfind("mode", 0) == 0 ? "fraction"
-                                                          : "m";
-  Panel panel{"prediction error against predictor time", metric + " (" + unit + ")", true, {}};
-  panel.series = {all, failed, pareto, recommend};
   chart.panels = {panel};
+  if (report.contains("duration_curves") && report["duration_curves"].is_array() &&
+      !report["duration_curves"].empty()) {
+    chart.panels.push_back(DurationPanel(report));
+  }
+  chart.width = 1000;
+  chart.panel_height = 320;
   return chart;
 }
 
@@ -89,6 +219,8 @@ struct PlotOptions {
   std::int64_t evaluation = -1;
   std::int64_t trial = -1;
   bool tradeoff = false;
+  std::vector<std::string> map;  // X, Y
+  std::string metric;
   std::string out;
 };
 
@@ -132,8 +264,30 @@ int PlotTradeoff(const db::Store& store, const PlotOptions& o) {
   return kExitOk;
 }
 
+int PlotMap(const db::Store& store, const PlotOptions& o) {
+  if (o.campaign < 0) throw CommandError(kExitBadInput, "plot --map: needs --campaign ID");
+  if (o.map.size() != 2 || o.map[0].empty() || o.map[1].empty()) {
+    throw CommandError(kExitBadInput, "plot --map: give two varied parameters, X,Y");
+  }
+  if (o.metric.empty()) {
+    throw CommandError(kExitBadInput,
+                       "plot --map: needs --metric M (one of " + MapMetricNames() + ")");
+  }
+  MapData map;
+  try {
+    map = BuildCampaignMap(store, o.campaign, o.map[0], o.map[1], o.metric);
+  } catch (const std::invalid_argument& e) {
+    throw CommandError(kExitBadInput, std::string("plot ") + e.what());
+  }
+  WriteFile(o.out, RenderMapSvg(map));
+  return kExitOk;
+}
+
 int RunPlot(const PlotOptions& o) {
   RefuseToOverwriteStore(o.out, "--out", o.db_path);
+  if (!o.map.empty() && (o.tradeoff || o.trial >= 0)) {
+    throw CommandError(kExitBadInput, "plot: --map is a plot of its own (no TRIAL, no --tradeoff)");
+  }
   if (o.tradeoff && o.trial >= 0) {
     throw CommandError(kExitBadInput, "plot: give either a TRIAL or --tradeoff, not both");
   }
@@ -143,8 +297,10 @@ int RunPlot(const PlotOptions& o) {
     so.read_only = true;
     auto store = db::Store::Open(o.db_path, so);
     if (o.tradeoff) return PlotTradeoff(*store, o);
+    if (!o.map.empty()) return PlotMap(*store, o);
     throw CommandError(kExitBadInput,
-                       "plot: choose a plot: a TRIAL id, or --campaign ID --tradeoff");
+                       "plot: choose a plot: a TRIAL id, --campaign ID --tradeoff, or "
+                       "--campaign ID --map X,Y --metric M");
   } catch (const db::StoreError& e) {
     throw StoreCommandError(e);
   }
@@ -167,9 +323,16 @@ void AddPlotCommand(CLI::App& app, Action* action) {
   cmd->add_option("--evaluation", o->evaluation,
                   "With --tradeoff: this evaluation run instead of the latest")
       ->check(CLI::NonNegativeNumber);
+  cmd->add_option("--map", o->map,
+                  "A map over two varied parameters of the campaign, X,Y (e.g. "
+                  "grip_force,pivot_offset)")
+      ->delimiter(',');
+  cmd->add_option("--metric", o->metric, "With --map: the colour, one of " + MapMetricNames());
   cmd->footer(
       "Examples:\n"
       "  arena plot --db lab.db 12 --out trial12.svg\n"
+      "  arena plot --db lab.db --campaign 3 --map grip_force,pivot_offset --metric unstable "
+      "--out map.svg\n"
       "  arena plot --db lab.db --campaign 3 --tradeoff --out tradeoff.svg\n"
       "A trial's prediction is re-run with the campaign's \"prediction\" settings, as `arena "
       "serve` ran it.\n"

@@ -223,12 +223,17 @@ int Run(RunOptions opt) {
   } catch (const std::invalid_argument& e) {
     throw CommandError(kExitBadInput, e.what());
   }
-  const std::int64_t trials = orchestrator::TrialCount(campaign);
+  // An adaptive campaign's count is open: its cap bounds the progress bar.
+  const std::int64_t trials =
+      campaign.adaptive
+          ? std::min<std::int64_t>(campaign.adaptive->max_trials, orchestrator::kMaxTrials)
+          : orchestrator::TrialCount(campaign);
   if (!opt.quiet)
     std::fprintf(
-        stderr, "campaign %lld '%s': %lld trials on %d simulated cells (DDS domain %d, log %s)\n",
-        static_cast<long long>(campaign_id), campaign.name.c_str(), static_cast<long long>(trials),
-        opt.cells, opt.domain, orchestrator::ServiceLogPath(opt.db_path).c_str());
+        stderr, "campaign %lld '%s': %s%lld trials on %d simulated cells (DDS domain %d, log %s)\n",
+        static_cast<long long>(campaign_id), campaign.name.c_str(),
+        campaign.adaptive ? "adaptive, up to " : "", static_cast<long long>(trials), opt.cells,
+        opt.domain, orchestrator::ServiceLogPath(opt.db_path).c_str());
 
   // Cell ids unique to this run (sim1-3fa2c1, ...): two runs that end up on
   // one domain still never address each other's cells. With --security the

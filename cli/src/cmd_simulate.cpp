@@ -1,10 +1,12 @@
 // arena simulate SCENE.json [--facets G --points K --dt S --reduce MODE]
-//                           [--trajectory FILE.csv]
-// The contract is SCENE.md: one JSON object on stdout; ok=false and a
+//                           [--contacts tracked|fixed] [--trajectory FILE.csv]
+// The contract is docs/scene.md: one JSON object on stdout; ok=false and a
 // non-zero exit on any error.
 #include <algorithm>
+#include <cerrno>
 #include <cmath>
 #include <cstdio>
+#include <cstring>
 #include <fstream>
 #include <iomanip>
 #include <optional>
@@ -30,6 +32,7 @@ struct SimulateOptions {
   std::optional<int> points;
   std::optional<double> dt;
   std::optional<std::string> reduce;
+  std::optional<std::string> contacts;
   std::string trajectory_path;
 };
 
@@ -52,12 +55,21 @@ int PrintError(const std::string& error, int exit_code) {
 void WriteTrajectory(const std::string& path, const mechanics::Scene& scene,
                      const mechanics::SimulationResult& result) {
   std::ofstream out(path);
-  if (!out) throw CommandError(kExitBadInput, "--trajectory: cannot write '" + path + "'");
+  // An output that cannot be written is a failed command (README: exit 1), not bad input.
+  if (!out)
+    throw CommandError(kExitFailure, "--trajectory: cannot write '" + path +
+                                         "': " + std::strerror(errno) +
+                                         " (does its directory exist and is it writable?)");
   out << "t,x,y,z,qw,qx,qy,qz,vx,vy,vz,wx,wy,wz,pusher_fx,pusher_fy,pusher_fz";
   std::vector<std::string> names;
   for (const auto& f : scene.fingers) names.push_back(f.name);
   if (scene.pusher) names.push_back("pusher");
   for (const auto& n : names) out << ',' << n << "_fn," << n << "_ft," << n << "_mode";
+  // Appended (docs/scene.md): per contact whether it touches and where, in
+  // the object frame.
+  for (const auto& n : names) {
+    out << ',' << n << "_touching," << n << "_px," << n << "_py," << n << "_pz";
+  }
   out << '\n' << std::setprecision(10);
   for (const auto& s : result.samples) {
     const auto& q = s.orientation;
@@ -69,6 +81,10 @@ void WriteTrajectory(const std::string& path, const mechanics::Scene& scene,
     for (const auto& c : s.contacts) {
       out << ',' << c.normal_force << ',' << c.tangential_force.norm() << ','
           << mechanics::ToString(c.mode);
+    }
+    for (const auto& c : s.contacts) {
+      out << ',' << (c.touching ? 1 : 0) << ',' << c.point.x() << ',' << c.point.y() << ','
+          << c.point.z();
     }
     out << '\n';
   }
@@ -92,6 +108,14 @@ int RunSimulate(const SimulateOptions& opt) {
       else
         throw mechanics::SceneError("--reduce",
                                     "must be auto, full or planar, got '" + *opt.reduce + "'");
+    }
+    if (opt.contacts) {
+      const auto parsed = mechanics::ContactTrackingFromString(*opt.contacts);
+      if (!parsed) {
+        throw mechanics::SceneError("--contacts",
+                                    "must be tracked or fixed, got '" + *opt.contacts + "'");
+      }
+      scene.model.contacts = *parsed;
     }
     mechanics::ValidateScene(scene);  // the overrides too
   } catch (const mechanics::SceneError& e) {
@@ -129,7 +153,9 @@ int RunSimulate(const SimulateOptions& opt) {
     contacts.push_back({{"name", name},
                         {"mode", mechanics::ToString(c.mode)},
                         {"normal_force", c.normal_force},
-                        {"tangential_force", Vec(c.tangential_force)}});
+                        {"tangential_force", Vec(c.tangential_force)},
+                        {"touching", c.touching},
+                        {"point", Vec(c.point)}});
   }
   Eigen::Vector3d mean_pusher = Eigen::Vector3d::Zero();
   double max_pusher = 0;
@@ -145,7 +171,8 @@ int RunSimulate(const SimulateOptions& opt) {
                 {"facets", result.model.facets},
                 {"points", result.model.points},
                 {"dt", result.model.dt},
-                {"unknowns", result.model.unknowns}}},
+                {"unknowns", result.model.unknowns},
+                {"contacts", mechanics::ToString(scene.model.contacts)}}},
               {"final",
                {{"position", Vec(last.position)},
                 {"rpy", Vec(Rpy(last.orientation))},
@@ -162,6 +189,10 @@ int RunSimulate(const SimulateOptions& opt) {
                {{"steps", result.solver.steps},
                 {"max_pivots", result.solver.max_pivots},
                 {"failures", result.solver.failures}}},
+              {"grasp",
+               {{"status", mechanics::ToString(result.grasp)},
+                {"changed_t", result.grasp_changed_t},
+                {"note", result.grasp_note}}},
               {"wall_s", result.wall_s}};
   std::printf("%s\n", out.dump().c_str());
   return kExitOk;
@@ -174,15 +205,18 @@ void AddSimulateCommand(CLI::App& app, Action* action) {
   CLI::App* cmd = app.add_subcommand("simulate", "Simulate one scene with the contact model");
   cmd->footer(
       "Example:\n  arena simulate examples/scenes/canonical.json --facets 16 --trajectory out.csv\n"
-      "Prints one JSON object (SCENE.md); exit 0 on success, 2 on a bad scene, 1 on a solver "
+      "Prints one JSON object (docs/scene.md); exit 0 on success, 2 on a bad scene, 1 on a solver "
       "failure.");
-  cmd->add_option("scene", opt->scene_path, "Scene JSON file (SCENE.md)")->required();
+  cmd->add_option("scene", opt->scene_path, "Scene JSON file (docs/scene.md)")->required();
   cmd->add_option("--facets", opt->facets,
                   "Edges of the polyhedral friction cone (overrides model.facets)");
   cmd->add_option("--points", opt->points,
                   "Constituent points per line/patch (overrides model.points)");
   cmd->add_option("--dt", opt->dt, "Time step in s (overrides model.dt)");
   cmd->add_option("--reduce", opt->reduce, "auto, full or planar (overrides model.reduce)");
+  cmd->add_option("--contacts", opt->contacts,
+                  "tracked or fixed: contact geometry follows the object, or stays frozen "
+                  "(overrides model.contacts)");
   cmd->add_option("--trajectory", opt->trajectory_path, "Write the 250 Hz trajectory as CSV");
   cmd->callback([opt, action] { *action = [opt] { return RunSimulate(*opt); }; });
 }

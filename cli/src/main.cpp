@@ -6,7 +6,9 @@
 #include <CLI/CLI.hpp>
 
 #include "arena/cli/version.hpp"
+#include "arena/db/store.hpp"
 #include "commands.hpp"
+#include "store_errors.hpp"
 
 int main(int argc, char** argv) {
   using namespace arena::cli;
@@ -30,6 +32,8 @@ int main(int argc, char** argv) {
   AddPlotCommand(app, &action);
   AddWatchCommand(app, &action);
   AddCertsCommand(app, &action);
+  AddSensitivityCommand(app, &action);
+  AddCalibrateCommand(app, &action);
 
   try {
     app.parse(argc, argv);
@@ -39,14 +43,19 @@ int main(int argc, char** argv) {
     return rc == 0 ? kExitOk : kExitBadInput;
   }
   if (!action) {
-    std::fputs(app.help().c_str(), stdout);
-    return kExitOk;
+    // No command is a usage error (README: exit codes): the usage goes to stderr.
+    std::fputs(app.help().c_str(), stderr);
+    std::fputs("arena: no command given\n", stderr);
+    return kExitBadInput;
   }
   try {
     return action();
   } catch (const CommandError& e) {
-    std::fprintf(stderr, "arena: %s\n", e.what());
+    std::fprintf(stderr, "arena: %s\n", UserMessage(e.what()).c_str());
     return e.exit_code();
+  } catch (const arena::db::StoreError& e) {  // a store error a command did not translate
+    std::fprintf(stderr, "arena: %s\n", UserMessage(e.what()).c_str());
+    return ExitCodeFor(e);
   } catch (const std::exception& e) {
     std::fprintf(stderr, "arena: internal error: %s\n", e.what());
     return kExitFailure;

@@ -9,12 +9,16 @@
 namespace arena::cli {
 
 // --tradeoff: an evaluation run's report (the JSON Store::RecordEvaluation
-// keeps, orchestrator::ToJson) as primary error against median model time
-// per trial, both log axes. Series: "settings" (markers, every setting that
-// predicted all trials), "pareto front" (line through the front, by time),
-// "recommended" (marker), "failed settings" (markers at their error over the
-// trials they did predict). A setting with zero error cannot sit on a log
-// axis; the title says how many were left out.
+// keeps, assessment::ToJson). Panel 1: primary error against the predictor's
+// wall time per simulated second (reports older than that field: median time
+// per trial), both log axes; one series per predictor (named after it:
+// markers joined coarse to fine, each labelled with its setting), "failed
+// settings" (drawn apart, above every error, labelled with their divergence
+// and failure counts), "pareto front", "recommended", and "noise floor
+// (replicate spread)" when the report has one. Panel 2 (own x axis, when the
+// report has duration_curves): p95 final position error against
+// ground-truth duration per predictor. A setting with zero error cannot sit
+// on a log axis; the title says how many were left out.
 // @throws std::invalid_argument when the report lacks its fields.
 Chart TradeoffChart(const nlohmann::json& report);
 

@@ -9,11 +9,11 @@
 #include <Eigen/Geometry>
 #include <nlohmann/json.hpp>
 
+#include "arena/assessment/prediction.hpp"
+#include "arena/assessment/truth.hpp"
 #include "arena/db/store.hpp"
 #include "arena/mechanics/scene_json.hpp"
 #include "arena/mechanics/simulate.hpp"
-#include "arena/orchestrator/prediction.hpp"
-#include "arena/orchestrator/trial_data.hpp"
 #include "commands.hpp"
 #include "store_errors.hpp"
 
@@ -151,7 +151,7 @@ Chart MakeTrialChart(const db::Store& store, std::int64_t trial_id, TrialPlotInf
     throw CommandError(
         kExitStore, "trial " + std::to_string(trial_id) + ": stored scene unreadable: " + e.what());
   }
-  const auto normals = orchestrator::ContactNormals(scene);
+  const auto normals = assessment::ContactNormals(scene);
 
   // The prediction, exactly as the service makes it: the campaign's
   // "prediction" settings applied to the trial's scene.
@@ -164,8 +164,8 @@ Chart MakeTrialChart(const db::Store& store, std::int64_t trial_id, TrialPlotInf
     nlohmann::json model;
     const auto spec = nlohmann::json::parse(campaign.spec_json);
     if (spec.is_object() && spec.contains("prediction")) model = spec["prediction"];
-    const mechanics::Scene model_scene = orchestrator::ApplyModelSettings(scene, model);
-    inf.model_key = orchestrator::ModelKey(model_scene.model);
+    const mechanics::Scene model_scene = assessment::ApplyModelSettings(scene, model);
+    inf.model_key = assessment::ModelKey(model_scene.model);
     predicted = mechanics::Simulate(model_scene);
     switch (predicted.status) {
       case mechanics::SimulationStatus::kOk:

@@ -51,7 +51,7 @@ std::string TickLabel(double v) {
   if (v != 0 && (std::fabs(v) < 1e-3 || std::fabs(v) >= 1e5)) {
     std::snprintf(buf, sizeof buf, "%.0e", v);
   } else {
-    std::snprintf(buf, sizeof buf, "%g", v);
+    std::snprintf(buf, sizeof buf, "%.3g", v);
   }
   return buf;
 }
@@ -97,6 +97,15 @@ std::vector<double> Ticks(const Axis& a) {
   if (!a.log) return NiceTicks(a.lo, a.hi);
   std::vector<double> t;
   for (double e = std::ceil(a.lo); e <= std::floor(a.hi); e += 1) t.push_back(std::pow(10.0, e));
+  if (t.size() >= 2) return t;
+  // Less than two decades: 1, 2 and 5 times the powers of ten inside.
+  t.clear();
+  for (double e = std::floor(a.lo); e <= std::ceil(a.hi); e += 1) {
+    for (double m : {1.0, 2.0, 5.0}) {
+      const double v = m * std::pow(10.0, e);
+      if (std::log10(v) >= a.lo - 1e-9 && std::log10(v) <= a.hi + 1e-9) t.push_back(v);
+    }
+  }
   if (t.size() < 2) return {std::pow(10.0, a.lo), std::pow(10.0, a.hi)};
   return t;
 }
@@ -120,17 +129,24 @@ std::vector<double> NiceTicks(double lo, double hi, int count) {
 }
 
 std::string RenderSvg(const Chart& chart) {
-  const int left = 80, right = 190, top = 58, gap = 50, bottom = 50;
+  const int left = 80, right = 190, top = 58, gap = 60, bottom = 50;
   const int plot_w = chart.width - left - right;
   const int n = static_cast<int>(chart.panels.size());
   const int height = top + n * chart.panel_height + (n - 1) * gap + bottom;
 
-  Range xr;
-  for (const auto& p : chart.panels)
-    for (const auto& s : p.series)
-      for (double x : s.x)
-        if (std::isfinite(x) && (!chart.log_x || x > 0)) xr.Add(x);
-  const Axis xa = MakeAxis(xr, chart.log_x);
+  auto x_axis = [&](bool log, const Panel* only) {
+    Range xr;
+    for (const auto& p : chart.panels) {
+      if (only ? &p != only : p.own_x) continue;
+      for (const auto& s : p.series)
+        for (double x : s.x)
+          if (std::isfinite(x) && (!log || x > 0)) xr.Add(x);
+    }
+    return MakeAxis(xr, log);
+  };
+  const Axis shared_xa = x_axis(chart.log_x, nullptr);
+  const bool any_shared = std::any_of(chart.panels.begin(), chart.panels.end(),
+                                      [](const Panel& p) { return !p.own_x; });
 
   std::ostringstream svg;
   svg << "<?xml version=\"1.0\" encoding=\"UTF-8\"?>\n"
@@ -155,10 +171,13 @@ std::string RenderSvg(const Chart& chart) {
       yr.hi = mid + 0.5 * panel.min_y_span;
     }
     const Axis ya = MakeAxis(yr, panel.log_y);
+    const Axis xa = panel.own_x ? x_axis(panel.log_x, &panel) : shared_xa;
     auto px = [&](double x) { return left + xa.Frac(x) * plot_w; };
     auto py = [&](double y) { return y0 + h - ya.Frac(y) * h; };
 
-    svg << "<g class=\"panel\" data-title=\"" << Escape(panel.title) << "\">\n"
+    svg << "<g class=\"panel\" data-title=\"" << Escape(panel.title) << "\"";
+    if (panel.own_x) svg << " data-x-label=\"" << Escape(panel.x_label) << "\"";
+    svg << ">\n"
         << "<text x=\"" << left << "\" y=\"" << y0 - 8 << "\" font-size=\"13\">"
         << Escape(panel.title) << "</text>\n"
         << "<rect x=\"" << left << "\" y=\"" << y0 << "\" width=\"" << plot_w << "\" height=\"" << h
@@ -181,6 +200,10 @@ std::string RenderSvg(const Chart& chart) {
           << "<text x=\"" << Num(x) << "\" y=\"" << y0 + h + 16 << "\" text-anchor=\"middle\">"
           << TickLabel(t) << "</text>\n";
     }
+    if (panel.own_x) {
+      svg << "<text x=\"" << left + plot_w / 2 << "\" y=\"" << y0 + h + 32
+          << "\" text-anchor=\"middle\">" << Escape(panel.x_label) << "</text>\n";
+    }
     svg << "<text transform=\"translate(" << left - 55 << ',' << y0 + h / 2
         << ") rotate(-90)\" text-anchor=\"middle\">" << Escape(panel.y_label) << "</text>\n";
 
@@ -189,10 +212,25 @@ std::string RenderSvg(const Chart& chart) {
       svg << "<g class=\"series\" id=\"p" << pi << '_' << Id(s.name) << "\" data-name=\""
           << Escape(s.name) << "\">\n";
       if (s.markers) {
+        if (s.connect) {
+          svg << "<polyline fill=\"none\" stroke=\"" << s.color << "\" stroke-width=\"1.2\""
+              << (s.dashed ? " stroke-dasharray=\"6 3\"" : "") << " points=\"";
+          for (size_t i = 0; i < s.x.size() && i < s.y.size(); ++i) {
+            if (!xa.Usable(s.x[i]) || !ya.Usable(s.y[i])) continue;
+            svg << Num(px(s.x[i])) << ',' << Num(py(s.y[i])) << ' ';
+          }
+          svg << "\"/>\n";
+        }
+        const char* r = s.labels.empty() ? "1.8" : "3.5";
         for (size_t i = 0; i < s.x.size() && i < s.y.size(); ++i) {
           if (!xa.Usable(s.x[i]) || !ya.Usable(s.y[i])) continue;
-          svg << "<circle cx=\"" << Num(px(s.x[i])) << "\" cy=\"" << Num(py(s.y[i]))
-              << "\" r=\"1.8\" fill=\"" << s.color << "\"/>\n";
+          svg << "<circle cx=\"" << Num(px(s.x[i])) << "\" cy=\"" << Num(py(s.y[i])) << "\" r=\""
+              << r << "\" fill=\"" << s.color << "\"/>\n";
+          if (i < s.labels.size() && !s.labels[i].empty()) {
+            svg << "<text class=\"point-label\" x=\"" << Num(px(s.x[i]) + 5) << "\" y=\""
+                << Num(py(s.y[i]) - 5) << "\" font-size=\"9\" fill=\"" << s.color << "\">"
+                << Escape(s.labels[i]) << "</text>\n";
+          }
         }
       } else {
         svg << "<polyline fill=\"none\" stroke=\"" << s.color << "\" stroke-width=\"1.5\""
@@ -218,8 +256,17 @@ std::string RenderSvg(const Chart& chart) {
     }
     svg << "</g>\n";
   }
-  svg << "<text x=\"" << left + plot_w / 2 << "\" y=\"" << height - 12
-      << "\" text-anchor=\"middle\">" << Escape(chart.x_label) << "</text>\n</svg>\n";
+  if (any_shared) {
+    int last_shared = 0;
+    for (int pi = 0; pi < n; ++pi)
+      if (!chart.panels[pi].own_x) last_shared = pi;
+    const int y = last_shared == n - 1
+                      ? height - 12
+                      : top + last_shared * (chart.panel_height + gap) + chart.panel_height + 32;
+    svg << "<text x=\"" << left + plot_w / 2 << "\" y=\"" << y << "\" text-anchor=\"middle\">"
+        << Escape(chart.x_label) << "</text>\n";
+  }
+  svg << "</svg>\n";
   return svg.str();
 }
 

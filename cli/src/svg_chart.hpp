@@ -14,6 +14,8 @@ struct Series {
   std::string color = "#1f77b4";
   bool markers = false;  // markers instead of a polyline
   bool dashed = false;
+  bool connect = false;             // with markers: also a polyline through them
+  std::vector<std::string> labels;  // with markers: a text label per point (optional)
 };
 
 struct Panel {
@@ -24,6 +26,10 @@ struct Panel {
   // Linear axes: the y axis spans at least this much (y units), centred on
   // the data, so a flat or nearly flat signal is not blown up to noise.
   double min_y_span = 0;
+  // Its own x axis (label under the panel) instead of the chart's shared one.
+  bool own_x = false;
+  std::string x_label;
+  bool log_x = false;
 };
 
 struct Chart {
@@ -36,7 +42,9 @@ struct Chart {
 };
 
 // The SVG document. Every series is a <g class="series" id="..."> with a
-// data-name attribute, so tests and scripts can find it.
+// data-name attribute, so tests and scripts can find it; a point's label is a
+// <text class="point-label"> inside its series' group, and a panel with its
+// own x axis carries data-x-label.
 std::string RenderSvg(const Chart& chart);
 
 // "Nice" axis ticks covering [lo, hi] (about `count` of them).

@@ -1,18 +1,25 @@
 // Dataset export (export.hpp describes the layout).
 #include "arena/db/export.hpp"
+#include "arena/db/sensitivity.hpp"
 
 #include <fcntl.h>
 #include <hdf5.h>
+#include <sys/stat.h>
 #include <unistd.h>
 
+#include <cerrno>
 #include <charconv>
 #include <cmath>
 #include <cstdio>
+#include <cstring>
 #include <ctime>
 #include <filesystem>
 #include <fstream>
+#include <limits>
 #include <map>
+#include <memory>
 #include <nlohmann/json.hpp>
+#include <optional>
 #include <set>
 #include <sstream>
 
@@ -39,7 +46,10 @@ const char* ToString(ExportFormat f) {
 
 namespace {
 
-[[noreturn]] void IoError(const std::string& msg) { throw StoreError(StoreError::Kind::kIo, msg); }
+// Writing the dataset failed: the command failed, the store is fine.
+[[noreturn]] void IoError(const std::string& msg) {
+  throw StoreError(StoreError::Kind::kOutput, msg);
+}
 [[noreturn]] void Corrupt(const std::string& msg) {
   throw StoreError(StoreError::Kind::kCorrupt, msg);
 }
@@ -57,8 +67,10 @@ struct StreamShape {
   std::vector<std::string> finger_names;   // for the observed finger wrenches
 };
 
-StreamShape ShapeFromScene(const std::string& scene_json, const Sample* first) {
-  StreamShape shape;
+// Column names from the scene; the widths from the samples (the largest
+// count any sample has: a sample with fewer values is padded with NaN, a
+// dropped observation has none). Positional names when the scene disagrees.
+StreamShape ShapeFromScene(const std::string& scene_json, const std::vector<Sample>& samples) {
   std::vector<std::string> fingers;
   bool pusher = false;
   try {
@@ -74,8 +86,16 @@ StreamShape ShapeFromScene(const std::string& scene_json, const Sample* first) {
     pusher = scene.contains("pusher") && scene["pusher"].is_object();
   } catch (const nlohmann::json::exception&) {
   }
-  const std::size_t nc = first ? first->contacts.size() : 0;
-  const std::size_t nf = first ? first->observed_finger_wrenches.size() / 6 : 0;
+  std::size_t nc = 0, nfv = 0;
+  bool any_valid = false;
+  for (const auto& s : samples) {
+    nc = std::max(nc, s.contacts.size());
+    if (s.observed_valid) nfv = std::max(nfv, s.observed_finger_wrenches.size());
+    any_valid = any_valid || s.observed_valid;
+  }
+  if (samples.empty()) nc = fingers.size() + (pusher ? 1 : 0);  // nothing measured: the scene
+  // No observation delivered: the scene's fingers (their columns all missing).
+  const std::size_t nf = any_valid ? (nfv + 5) / 6 : fingers.size();
   std::vector<std::string> contacts = fingers;
   if (pusher) contacts.push_back("pusher");
   if (contacts.size() != nc) {  // the cell reported another set: name them by position
@@ -86,6 +106,7 @@ StreamShape ShapeFromScene(const std::string& scene_json, const Sample* first) {
     fingers.clear();
     for (std::size_t i = 0; i < nf; ++i) fingers.push_back("finger" + std::to_string(i));
   }
+  StreamShape shape;
   shape.contact_names = contacts;
   shape.finger_names = fingers;
   return shape;
@@ -136,6 +157,8 @@ std::vector<Column> ObservedColumns(const StreamShape& s) {
   return c;
 }
 
+constexpr double kMissing = std::numeric_limits<double>::quiet_NaN();
+
 void FlattenTrue(const Sample& s, std::size_t contacts, std::vector<double>* row) {
   row->clear();
   row->push_back(s.t);
@@ -143,28 +166,39 @@ void FlattenTrue(const Sample& s, std::size_t contacts, std::vector<double>* row
   row->insert(row->end(), s.object_twist.begin(), s.object_twist.end());
   row->insert(row->end(), s.pusher_pose.begin(), s.pusher_pose.end());
   row->insert(row->end(), s.pusher_twist.begin(), s.pusher_twist.end());
-  if (s.contacts.size() != contacts)
-    Corrupt("export: a sample's contact count changes within the trial");
-  for (const auto& c : s.contacts) {
+  for (std::size_t i = 0; i < contacts; ++i) {
+    if (i >= s.contacts.size()) {  // a contact this sample lacks
+      row->insert(row->end(), 7, kMissing);
+      continue;
+    }
+    const auto& c = s.contacts[i];
     row->insert(row->end(), c.force.begin(), c.force.end());
     row->insert(row->end(), c.torque.begin(), c.torque.end());
     row->push_back(static_cast<double>(c.mode));
   }
 }
 
+// A dropped observation (valid = 0) carries no measurement: its values are
+// missing, never zeros that look like one.
 void FlattenObserved(const Sample& s, std::size_t finger_values, std::vector<double>* row) {
   row->clear();
   row->push_back(s.t);
   row->push_back(s.observed_valid ? 1 : 0);
+  const std::size_t width = 7 + 6 + finger_values;
+  if (!s.observed_valid) {
+    row->insert(row->end(), width, kMissing);
+    return;
+  }
   row->insert(row->end(), s.observed_object_pose.begin(), s.observed_object_pose.end());
   row->insert(row->end(), s.observed_pusher_wrench.begin(), s.observed_pusher_wrench.end());
-  if (s.observed_finger_wrenches.size() != finger_values) {
-    Corrupt("export: a sample's finger wrench count changes within the trial");
-  }
-  row->insert(row->end(), s.observed_finger_wrenches.begin(), s.observed_finger_wrenches.end());
+  for (std::size_t i = 0; i < finger_values; ++i)
+    row->push_back(i < s.observed_finger_wrenches.size() ? s.observed_finger_wrenches[i]
+                                                         : kMissing);
 }
 
+// Shortest text that reads back exactly; "" for a missing value (NaN).
 std::string Num(double v) {
+  if (!std::isfinite(v)) return "";
   char buf[32];
   const auto r = std::to_chars(buf, buf + sizeof buf, v);  // shortest text that reads back exactly
   return std::string(buf, r.ptr);
@@ -216,7 +250,8 @@ std::string StreamJsonl(const std::vector<Column>& cols,
       out.push_back('"');
       out.append(cols[i].name);
       out.append("\":");
-      out.append(Num(r[i]));
+      const std::string n = Num(r[i]);
+      out.append(n.empty() ? "null" : n);
     }
     out.append("}\n");
   }
@@ -276,6 +311,19 @@ void H5ScalarAttr(hid_t obj, const std::string& name, const Value& v) {
                "create attribute " + name);
     H5Check(H5Awrite(a.id, type.id, s.c_str()), "write attribute " + name);
   }
+}
+
+// A text too long for an HDF5 attribute (64 KiB header limit), e.g. a very
+// large scene: a scalar string dataset of the same name instead.
+void H5TextDataset(hid_t group, const std::string& name, const std::string& text) {
+  H5Handle type(H5Tcopy(H5T_C_S1), H5Tclose, "copy string type");
+  H5Check(H5Tset_size(type.id, text.size() + 1), "size string type");
+  H5Handle space(H5Screate(H5S_SCALAR), H5Sclose, "create scalar space");
+  H5Handle ds(
+      H5Dcreate2(group, name.c_str(), type.id, space.id, H5P_DEFAULT, H5P_DEFAULT, H5P_DEFAULT),
+      H5Dclose, "create dataset " + name);
+  H5Check(H5Dwrite(ds.id, type.id, H5S_ALL, H5S_ALL, H5P_DEFAULT, text.c_str()),
+          "write dataset " + name);
 }
 
 void H5Matrix(hid_t group, const char* name, const std::vector<Column>& cols,
@@ -354,25 +402,49 @@ const std::map<std::string, std::pair<std::string, std::string>>& IndexColumnDoc
       {"predictor_wall_s", {"s", "predictor wall time"}},
       {"true_file", {"", "file of the true stream (csv/jsonl)"}},
       {"observed_file", {"", "file of the observed stream (csv/jsonl)"}},
+      {"predicted_file", {"", "file of the predicted stream (csv/jsonl)"}},
+      {"max_pusher_force_n", {"N", "largest pusher contact force magnitude"}},
+      {"net_dx", {"m", "object translation, last minus first sample, x in G"}},
+      {"net_dy", {"m", "object translation, last minus first sample, y in G"}},
+      {"net_dz", {"m", "object translation, last minus first sample, z in G"}},
+      {"net_rx", {"rad", "object rotation first -> last sample as rotation vector, x in G"}},
+      {"net_ry", {"rad", "object rotation first -> last sample as rotation vector, y in G"}},
+      {"net_rz", {"rad", "object rotation first -> last sample as rotation vector, z in G"}},
+      {"grasp_kept", {"1", "1 if every finger still touched the object at the last sample"}},
+      {"predicted_by", {"", "model setting key of the exported predicted stream"}},
+      {"predicted_settings", {"", "model settings (JSON) of the exported predicted stream"}},
+      {"predicted_status", {"", "ok, solver_failure, invalid_scene, error"}},
+      {"predicted_error", {"", "why there is no predicted stream (empty when ok)"}},
+      {"predicted_samples", {"1", "samples in the predicted stream"}},
+      {"scene_json", {"", "the trial's full scene (JSON; docs/scene.md)"}},
   };
   return kDocs;
 }
 
+// The trial index; the last three columns are for the export's own use.
 constexpr const char* kIndexSql =
-    "SELECT t.id AS trial_id, t.idx, t.condition, t.replicate, t.seed, t.state, t.attempt, "
-    "t.cell_id,"
-    " t.outcome, t.object_shape, t.object_mass, t.grip_force, t.finger_type, t.finger_count, "
-    "t.finger_mu,"
-    " t.pusher_type, t.pusher_mu, t.pusher_speed, t.pusher_angular_speed, t.duration,"
-    " t.start_position_error, t.start_angle_error, t.reset_ok, s.samples, s.observed_samples,"
-    " s.duration_s, s.displacement_m, s.rotation_rad, s.max_contact_force_n, s.stick_fraction,"
-    " s.slide_fraction, s.separate_fraction, p.model_key, p.status AS prediction_status,"
+    "SELECT t.id AS trial_id, t.idx, t.condition, t.replicate, t.seed, t.state, t.attempt,"
+    " t.cell_id, t.outcome, t.object_shape, t.object_mass, t.grip_force, t.finger_type,"
+    " t.finger_count, t.finger_mu, t.pusher_type, t.pusher_mu, t.pusher_speed,"
+    " t.pusher_angular_speed, t.duration, t.start_position_error, t.start_angle_error,"
+    " t.reset_ok, s.samples, s.observed_samples, s.duration_s, s.displacement_m,"
+    " s.rotation_rad, s.max_contact_force_n, s.stick_fraction, s.slide_fraction,"
+    " s.separate_fraction, p.model_key, p.status AS prediction_status,"
     " p.final_position_error, p.final_angle_error, p.force_error, p.mode_agreement,"
-    " p.wall_s AS predictor_wall_s, t.gt_stream_id, t.scene_json"
+    " p.wall_s AS predictor_wall_s, s.max_pusher_force_n, s.net_dx, s.net_dy, s.net_dz,"
+    " s.net_rx, s.net_ry, s.net_rz, s.grasp_kept,"
+    " t.gt_stream_id, t.scene_json, t.params_json"
     " FROM trials t JOIN gt_summary s ON s.stream_id = t.gt_stream_id"
     " LEFT JOIN predictions p ON p.id ="
     "  (SELECT MIN(id) FROM predictions WHERE trial_id = t.id AND attempt = t.attempt)"
     " WHERE t.campaign_id = ? ORDER BY t.idx";
+constexpr std::size_t kSeedCol = 4, kSamplesCol = 23;
+
+constexpr const char* kContactSql =
+    "SELECT c.trial_id, c.contact, c.name AS contact_name, c.role, c.stick_fraction,"
+    " c.slide_fraction, c.separate_fraction, c.slip_distance_m, c.max_normal_force_n"
+    " FROM contact_outcomes c JOIN trials t ON t.gt_stream_id = c.stream_id"
+    " WHERE t.campaign_id = ? ORDER BY t.idx, c.contact";
 
 Value ColumnValue(const detail::Stmt& s, int c) {
   switch (sqlite3_column_type(s.get(), c)) {
@@ -414,165 +486,241 @@ std::uint64_t CountLines(const fs::path& p) {
   return n;
 }
 
-}  // namespace
+// A parameter's JSON value as an index value (arrays and objects as JSON text).
+Value ParamValue(const ojson& v) {
+  if (v.is_number_integer()) return static_cast<std::int64_t>(v.get<std::int64_t>());
+  if (v.is_number()) return v.get<double>();
+  if (v.is_boolean()) return static_cast<std::int64_t>(v.get<bool>() ? 1 : 0);
+  if (v.is_string()) return v.get<std::string>();
+  if (v.is_null()) return std::monostate{};
+  return v.dump();
+}
 
-ExportReport ExportCampaign(const Store& store, const ExportOptions& o) {
-  const fs::path dir(o.out_dir);
-  if (o.out_dir.empty()) throw StoreError(StoreError::Kind::kBadInput, "export: --out is empty");
-  store.GetCampaign(o.campaign_id);  // kNotFound before anything is created
-  std::error_code ec;
-  if (fs::exists(dir) && !fs::is_empty(dir, ec)) {
-    throw StoreError(StoreError::Kind::kBadInput,
-                     "export: '" + o.out_dir + "' is not empty; choose a new directory");
+// The scene on one line (it is a CSV field and an HDF5 attribute).
+std::string CompactScene(const std::string& text) {
+  try {
+    return ojson::parse(text).dump();
+  } catch (const nlohmann::json::exception&) {
+    std::string out = text;
+    for (char& c : out)
+      if (c == '\n' || c == '\r') c = ' ';
+    return out;
   }
-  fs::create_directories(dir / "streams", ec);
-  if (ec) IoError("export: cannot create '" + o.out_dir + "': " + ec.message());
-  if (o.format == ExportFormat::kHdf5) fs::remove(dir / "streams", ec);
+}
 
-  const auto& impl = store.impl();
-  detail::Tx snapshot(impl.db, false);  // everything below reads one consistent state
-  const Campaign campaign = store.GetCampaign(o.campaign_id);
-
-  QueryResult index;
+// The trial index of a campaign: the columns of kIndexSql, one column per
+// parameter the campaign varied (names as in trial_results), the scene.
+struct TrialIndex {
+  QueryResult table;
   std::vector<std::int64_t> stream_ids;
-  std::vector<std::string> scenes;
-  {
-    detail::Stmt s(impl.db, kIndexSql);
-    s.Bind(1, o.campaign_id);
-    const int ncol = sqlite3_column_count(s.get()) - 2;  // gt_stream_id, scene_json are internal
-    for (int c = 0; c < ncol; ++c) index.columns.emplace_back(sqlite3_column_name(s.get(), c));
-    while (s.Step()) {
-      std::vector<Value> row;
-      for (int c = 0; c < ncol; ++c) row.push_back(ColumnValue(s, c));
-      // Seeds are uint64 stored bit for bit in int64: export the unsigned value.
-      const auto seed = static_cast<std::uint64_t>(std::get<std::int64_t>(row[4]));
-      row[4] = std::to_string(seed);
-      index.rows.push_back(std::move(row));
-      stream_ids.push_back(s.Int(ncol));
-      scenes.push_back(s.Text(ncol + 1));
-    }
-  }
-  const bool files_per_trial = o.format != ExportFormat::kHdf5;
-  if (files_per_trial) {
-    index.columns.push_back("true_file");
-    index.columns.push_back("observed_file");
-  }
-  const std::size_t samples_col = 23;  // index of "samples" in kIndexSql
-  ExportReport report;
-  report.dir = dir.string();
-  ojson trials_manifest = ojson::array();
-  std::vector<Column> true_cols_first, obs_cols_first;
-  double sample_rate = 0;
+  std::vector<std::string> scenes;  // as stored (for the stream shapes)
+};
 
-  std::unique_ptr<H5Handle> h5;
-  if (o.format == ExportFormat::kHdf5) {
-    H5Eset_auto2(H5E_DEFAULT, nullptr, nullptr);  // errors become exceptions, not stderr noise
-    h5 = std::make_unique<H5Handle>(
-        H5Fcreate((dir / "dataset.h5").c_str(), H5F_ACC_EXCL, H5P_DEFAULT, H5P_DEFAULT), H5Fclose,
-        "create " + (dir / "dataset.h5").string());
-    H5Handle g(H5Gcreate2(h5->id, "trials", H5P_DEFAULT, H5P_DEFAULT, H5P_DEFAULT), H5Gclose,
-               "create /trials");
+TrialIndex ReadIndex(const Store::Impl& impl, std::int64_t campaign_id) {
+  TrialIndex out;
+  std::vector<ojson> params;
+  detail::Stmt s(impl.db, kIndexSql);
+  s.Bind(1, campaign_id);
+  const int ncol = sqlite3_column_count(s.get()) - 3;  // gt_stream_id, scene, params: internal
+  for (int c = 0; c < ncol; ++c) out.table.columns.emplace_back(sqlite3_column_name(s.get(), c));
+  while (s.Step()) {
+    std::vector<Value> row;
+    for (int c = 0; c < ncol; ++c) row.push_back(ColumnValue(s, c));
+    // Seeds are uint64 stored bit for bit in int64: export the unsigned value.
+    row[kSeedCol] =
+        std::to_string(static_cast<std::uint64_t>(std::get<std::int64_t>(row[kSeedCol])));
+    out.table.rows.push_back(std::move(row));
+    out.stream_ids.push_back(s.Int(ncol));
+    out.scenes.push_back(s.Text(ncol + 1));
+    try {
+      params.push_back(ojson::parse(s.Text(ncol + 2)));
+    } catch (const nlohmann::json::exception&) {
+      params.push_back(ojson::object());
+    }
+  }
+  // Parameter columns, in the order the campaign lists them; a name that is
+  // already a column (grip_force, ...) is that column (read from the scene).
+  std::vector<std::string> names;
+  std::set<std::string> have(out.table.columns.begin(), out.table.columns.end());
+  for (const auto& p : params) {
+    if (!p.is_object()) continue;
+    for (const auto& item : p.items()) {
+      if (have.insert(item.key()).second) names.push_back(item.key());
+    }
+  }
+  for (const auto& n : names) out.table.columns.push_back(n);
+  out.table.columns.push_back("scene_json");
+  for (std::size_t i = 0; i < out.table.rows.size(); ++i) {
+    for (const auto& n : names) {
+      out.table.rows[i].push_back(params[i].is_object() && params[i].contains(n)
+                                      ? ParamValue(params[i][n])
+                                      : Value(std::monostate{}));
+    }
+    out.table.rows[i].emplace_back(CompactScene(out.scenes[i]));
+  }
+  return out;
+}
+
+// Every format: each trial's full scene as commanded, one JSON line per
+// trial, so the dataset can be served as a cell (replay:DIR,
+// examples/drivers/replay.py) matched by scene.
+std::string ScenesJsonl(const TrialIndex& index) {
+  std::string lines;
+  for (std::size_t i = 0; i < index.scenes.size(); ++i) {
+    ojson scene;
+    try {
+      scene = ojson::parse(index.scenes[i]);
+    } catch (const nlohmann::json::exception&) {
+      scene = nullptr;
+    }
+    lines += ojson({{"trial_id", std::get<std::int64_t>(index.table.rows[i][0])},
+                    {"seed", std::get<std::string>(index.table.rows[i][kSeedCol])},
+                    {"scene", scene}})
+                 .dump() +
+             "\n";
+  }
+  return lines;
+}
+
+// Per-contact outcomes of the campaign's exported trials, by trial id.
+QueryResult ReadContacts(const Store::Impl& impl, std::int64_t campaign_id,
+                         std::map<std::int64_t, std::vector<std::size_t>>* by_trial) {
+  QueryResult out;
+  detail::Stmt s(impl.db, kContactSql);
+  s.Bind(1, campaign_id);
+  for (int c = 0; c < sqlite3_column_count(s.get()); ++c)
+    out.columns.emplace_back(sqlite3_column_name(s.get(), c));
+  while (s.Step()) {
+    std::vector<Value> row;
+    for (int c = 0; c < sqlite3_column_count(s.get()); ++c) row.push_back(ColumnValue(s, c));
+    (*by_trial)[s.Int(0)].push_back(out.rows.size());
+    out.rows.push_back(std::move(row));
+  }
+  return out;
+}
+
+const std::vector<Column>& ContactColumns() {
+  static const std::vector<Column> kCols = {
+      {"contact", "1", "contact index in scene order (fingers, then the pusher)"},
+      {"stick_fraction", "1", "share of the contact's samples sticking"},
+      {"slide_fraction", "1", "share of the contact's samples sliding"},
+      {"separate_fraction", "1", "share of the contact's samples separated"},
+      {"slip_distance_m", "m", "tangential path of the object at the contact relative to it"},
+      {"max_normal_force_n", "N", "largest force along the contact normal"}};
+  return kCols;
+}
+
+double AsDouble(const Value& v) {
+  if (const auto* i = std::get_if<std::int64_t>(&v)) return static_cast<double>(*i);
+  if (const auto* d = std::get_if<double>(&v)) return *d;
+  return kMissing;
+}
+
+// A new directory next to the target, on the same file system, that becomes
+// the target by one rename(2) at the end; removed with everything in it if
+// the export fails before.
+class StagingDir {
+ public:
+  explicit StagingDir(const fs::path& target) {
+    const fs::path parent = target.parent_path().empty() ? fs::path(".") : target.parent_path();
+    std::error_code ec;
+    fs::create_directories(parent, ec);
+    std::string tmpl = (parent / ("." + target.filename().string() + ".partial-XXXXXX")).string();
+    if (::mkdtemp(tmpl.data()) == nullptr) {
+      IoError("export: cannot create a directory in '" + parent.string() +
+              "': " + std::strerror(errno) + " (is it writable?)");
+    }
+    path_ = tmpl;
+    // mkdtemp makes it private (0700); the dataset gets what mkdir would give it.
+    const mode_t mask = ::umask(0);
+    ::umask(mask);
+    ::chmod(path_.c_str(), 0777 & ~mask);
+  }
+  ~StagingDir() {
+    if (path_.empty()) return;
+    std::error_code ec;
+    fs::remove_all(path_, ec);
+  }
+  StagingDir(const StagingDir&) = delete;
+  StagingDir& operator=(const StagingDir&) = delete;
+  const fs::path& path() const { return path_; }
+
+  void MoveTo(const fs::path& target) {
+    // rename(2) replaces an empty directory atomically; a non-empty one was refused up front.
+    if (::rename(path_.c_str(), target.c_str()) != 0) {
+      IoError("export: cannot move the finished dataset to '" + target.string() +
+              "': " + std::strerror(errno));
+    }
+    path_.clear();
+    const fs::path parent = target.parent_path().empty() ? fs::path(".") : target.parent_path();
+    const int fd = ::open(parent.c_str(), O_RDONLY | O_DIRECTORY);
+    if (fd >= 0) {
+      ::fsync(fd);
+      ::close(fd);
+    }
   }
 
-  std::vector<double> row;
-  for (std::size_t i = 0; i < index.rows.size(); ++i) {
-    auto& irow = index.rows[i];
-    const auto trial_id = std::get<std::int64_t>(irow[0]);
-    const auto expected = std::get<std::int64_t>(irow[samples_col]);
-    const auto samples = internal::ReadStreamSamples(impl, stream_ids[i], expected, "export");
-    const StreamShape shape = ShapeFromScene(scenes[i], samples.empty() ? nullptr : &samples[0]);
-    const auto true_cols = TrueColumns(shape);
-    const auto obs_cols = ObservedColumns(shape);
-    if (i == 0) {
-      true_cols_first = true_cols;
-      obs_cols_first = obs_cols;
-    }
-    if (sample_rate == 0 && samples.size() >= 2 && samples.back().t > samples.front().t) {
-      sample_rate =
-          static_cast<double>(samples.size() - 1) / (samples.back().t - samples.front().t);
-    }
-    std::vector<std::vector<double>> true_rows, obs_rows;
-    true_rows.reserve(samples.size());
-    obs_rows.reserve(samples.size());
-    const std::size_t nfv = samples.empty() ? 0 : samples[0].observed_finger_wrenches.size();
-    for (const auto& s : samples) {
-      FlattenTrue(s, shape.contact_names.size(), &row);
-      true_rows.push_back(row);
-      FlattenObserved(s, nfv, &row);
-      obs_rows.push_back(row);
-    }
-    ojson tm = {{"trial_id", trial_id},
-                {"samples", samples.size()},
-                {"true_columns", true_cols.size()},
-                {"observed_columns", obs_cols.size()}};
-    const std::string id = std::to_string(trial_id);
-    if (o.format == ExportFormat::kHdf5) {
-      const std::string gname = "trials/" + id;
-      H5Handle g(H5Gcreate2(h5->id, gname.c_str(), H5P_DEFAULT, H5P_DEFAULT, H5P_DEFAULT), H5Gclose,
-                 "create group /" + gname);
-      for (std::size_t c = 0; c < index.columns.size(); ++c)
-        H5ScalarAttr(g.id, index.columns[c], irow[c]);
-      H5Matrix(g.id, "true", true_cols, true_rows);
-      H5Matrix(g.id, "observed", obs_cols, obs_rows);
-      tm["group"] = "/" + gname;
+ private:
+  fs::path path_;
+};
+
+// The files of one export (one format) in the staging directory.
+class DatasetWriter {
+ public:
+  DatasetWriter(fs::path dir, ExportFormat format) : dir_(std::move(dir)), format_(format) {
+    if (format_ == ExportFormat::kHdf5) {
+      H5Eset_auto2(H5E_DEFAULT, nullptr, nullptr);  // errors become exceptions, not stderr noise
+      h5_ = std::make_unique<H5Handle>(
+          H5Fcreate((dir_ / "dataset.h5").c_str(), H5F_ACC_EXCL, H5P_DEFAULT, H5P_DEFAULT),
+          H5Fclose, "create dataset.h5");
+      H5Handle g(H5Gcreate2(h5_->id, "trials", H5P_DEFAULT, H5P_DEFAULT, H5P_DEFAULT), H5Gclose,
+                 "create /trials");
     } else {
-      const std::string ext = o.format == ExportFormat::kCsv ? ".csv" : ".jsonl";
-      const std::string tf = "streams/" + id + "_true" + ext,
-                        of = "streams/" + id + "_observed" + ext;
-      if (o.format == ExportFormat::kCsv) {
-        WriteText(dir / tf, StreamCsv(true_cols, true_rows));
-        WriteText(dir / of, StreamCsv(obs_cols, obs_rows));
-      } else {
-        WriteText(dir / tf, StreamJsonl(true_cols, true_rows));
-        WriteText(dir / of, StreamJsonl(obs_cols, obs_rows));
-      }
-      irow.emplace_back(tf);
-      irow.emplace_back(of);
-      tm["true_file"] = tf;
-      tm["observed_file"] = of;
+      std::error_code ec;
+      fs::create_directories(dir_ / "streams", ec);
+      if (ec) IoError("export: cannot create streams/: " + ec.message());
     }
-    tm["true_columns_list"] = ColumnsJson(true_cols);
-    tm["observed_columns_list"] = ColumnsJson(obs_cols);
-    trials_manifest.push_back(std::move(tm));
-    report.samples += static_cast<std::int64_t>(samples.size());
   }
-  report.trials = static_cast<std::int64_t>(index.rows.size());
-  snapshot.Commit();
+  bool files_per_trial() const { return format_ != ExportFormat::kHdf5; }
 
-  if (h5) {
-    H5ScalarAttr(h5->id, "format_version", Value(std::int64_t{kDatasetFormatVersion}));
-    H5ScalarAttr(h5->id, "campaign_id", Value(o.campaign_id));
-    H5Check(H5Fflush(h5->id, H5F_SCOPE_GLOBAL), "flush dataset.h5");
-    h5.reset();
-  }
-  WriteText(dir / "trials.csv", FormatCsv(index));
-  // Every format: each trial's full scene as commanded, so the dataset can be
-  // served as a cell (replay:DIR, examples/drivers/replay.py) matched by scene.
-  {
-    std::string lines;
-    for (std::size_t i = 0; i < scenes.size(); ++i) {
-      ojson scene;
-      try {
-        scene = ojson::parse(scenes[i]);
-      } catch (const nlohmann::json::exception&) {
-        scene = nullptr;
-      }
-      lines += ojson({{"trial_id", std::get<std::int64_t>(index.rows[i][0])},
-                      {"seed", std::get<std::string>(index.rows[i][4])},
-                      {"scene", scene}})
-                   .dump() +
-               "\n";
+  // One stream of a trial ("true", "observed", "predicted"): an HDF5 dataset
+  // of group `group`, or a file whose name it returns.
+  std::string Stream(const std::string& id, const char* which, const std::vector<Column>& cols,
+                     const std::vector<std::vector<double>>& rows, hid_t group) {
+    if (format_ == ExportFormat::kHdf5) {
+      H5Matrix(group, which, cols, rows);
+      return "";
     }
-    WriteText(dir / "scenes.jsonl", lines);
-  }
-  if (o.format == ExportFormat::kJsonl) {
-    std::string lines;
-    const std::string arr = FormatJson(index);
-    for (const auto& obj : ojson::parse(arr)) lines += obj.dump() + "\n";
-    WriteText(dir / "trials.jsonl", lines);
+    const bool csv = format_ == ExportFormat::kCsv;
+    const std::string file = "streams/" + id + "_" + which + (csv ? ".csv" : ".jsonl");
+    WriteText(dir_ / file, csv ? StreamCsv(cols, rows) : StreamJsonl(cols, rows));
+    return file;
   }
 
-  // Checksums of every file, in a stable order.
+  hid_t file() const { return h5_ ? h5_->id : -1; }
+
+  void Close(std::int64_t campaign_id) {
+    if (!h5_) return;
+    H5ScalarAttr(h5_->id, "format_version", Value(std::int64_t{kDatasetFormatVersion}));
+    H5ScalarAttr(h5_->id, "campaign_id", Value(campaign_id));
+    H5Check(H5Fflush(h5_->id, H5F_SCOPE_GLOBAL), "flush dataset.h5");
+    h5_.reset();
+  }
+
+ private:
+  fs::path dir_;
+  ExportFormat format_;
+  std::unique_ptr<H5Handle> h5_;
+};
+
+void WriteJsonLines(const fs::path& p, const QueryResult& table) {
+  std::string lines;
+  for (const auto& obj : ojson::parse(FormatJson(table))) lines += obj.dump() + "\n";
+  WriteText(p, lines);
+}
+
+// Checksums of every file in `dir`, in a stable order.
+ojson ChecksumFiles(const fs::path& dir, ExportReport* report) {
   std::vector<fs::path> paths;
   for (const auto& e : fs::recursive_directory_iterator(dir)) {
     if (e.is_regular_file()) paths.push_back(e.path());
@@ -586,8 +734,209 @@ ExportReport ExportCampaign(const Store& store, const ExportOptions& o) {
     f.bytes = fs::file_size(p);
     f.sha256 = Sha256File(p.string());
     files.push_back({{"path", f.path}, {"bytes", f.bytes}, {"sha256", f.sha256}});
-    report.files.push_back(std::move(f));
+    report->files.push_back(std::move(f));
   }
+  return files;
+}
+
+ojson IndexColumnsJson(const std::vector<std::string>& columns,
+                       const std::set<std::string>& parameters) {
+  ojson out = ojson::array();
+  for (const auto& c : columns) {
+    const auto it = IndexColumnDocs().find(c);
+    if (it != IndexColumnDocs().end()) {
+      out.push_back({{"name", c}, {"unit", it->second.first}, {"meaning", it->second.second}});
+    } else {
+      out.push_back({{"name", c},
+                     {"unit", ""},
+                     {"meaning", parameters.count(c) ? "varied parameter of the campaign "
+                                                       "(as in its \"variations\"; SI units)"
+                                                     : ""}});
+    }
+  }
+  return out;
+}
+
+// Everything the per-trial loop collects for the manifest.
+struct TrialsWritten {
+  ojson manifest = ojson::array();
+  std::vector<Column> true_cols, obs_cols, predicted_cols;
+  double sample_rate = 0;
+};
+
+// Writes one trial's streams (and HDF5 group); appends its index values.
+void WriteTrial(const Store::Impl& impl, const ExportOptions& o, const Campaign& campaign,
+                const TrialIndex& index, std::size_t i, std::vector<Value>* irow,
+                const std::vector<std::string>& columns, const QueryResult& contacts,
+                const std::vector<std::size_t>& contact_rows, DatasetWriter* writer,
+                TrialsWritten* out, ExportReport* report) {
+  const auto trial_id = std::get<std::int64_t>((*irow)[0]);
+  const auto expected = std::get<std::int64_t>((*irow)[kSamplesCol]);
+  const auto samples = internal::ReadStreamSamples(impl, index.stream_ids[i], expected, "export");
+  const StreamShape shape = ShapeFromScene(index.scenes[i], samples);
+  const auto true_cols = TrueColumns(shape);
+  const auto obs_cols = ObservedColumns(shape);
+  if (out->true_cols.empty()) {
+    out->true_cols = true_cols;
+    out->obs_cols = obs_cols;
+  }
+  if (out->sample_rate == 0 && samples.size() >= 2 && samples.back().t > samples.front().t) {
+    out->sample_rate =
+        static_cast<double>(samples.size() - 1) / (samples.back().t - samples.front().t);
+  }
+  std::vector<std::vector<double>> true_rows, obs_rows, pred_rows;
+  std::vector<double> row;
+  const std::size_t nfv = 6 * shape.finger_names.size();
+  for (const auto& s : samples) {
+    FlattenTrue(s, shape.contact_names.size(), &row);
+    true_rows.push_back(row);
+    FlattenObserved(s, nfv, &row);
+    obs_rows.push_back(row);
+  }
+  std::optional<PredictedStream> predicted;
+  if (o.predict) {
+    try {
+      predicted = o.predict(index.scenes[i], campaign.spec_json);
+    } catch (const std::exception& e) {
+      predicted = PredictedStream{};
+      predicted->status = "error";
+      predicted->error = e.what();
+    }
+    for (const auto& s : predicted->samples) {
+      FlattenTrue(s, shape.contact_names.size(), &row);
+      pred_rows.push_back(row);
+    }
+    irow->emplace_back(predicted->predictor);
+    irow->emplace_back(predicted->settings_json);
+    irow->emplace_back(predicted->status);
+    irow->emplace_back(predicted->error);
+    irow->emplace_back(static_cast<std::int64_t>(predicted->samples.size()));
+    if (out->predicted_cols.empty()) out->predicted_cols = true_cols;
+  }
+  // Per-contact outcomes as a matrix (contacts x ContactColumns()).
+  std::vector<std::vector<double>> contact_matrix;
+  std::vector<std::string> contact_names, contact_roles;
+  for (std::size_t r : contact_rows) {
+    const auto& c = contacts.rows[r];
+    contact_matrix.push_back({AsDouble(c[1]), AsDouble(c[4]), AsDouble(c[5]), AsDouble(c[6]),
+                              AsDouble(c[7]), AsDouble(c[8])});
+    contact_names.push_back(std::get<std::string>(c[2]));
+    contact_roles.push_back(std::get<std::string>(c[3]));
+  }
+
+  const std::string id = std::to_string(trial_id);
+  ojson tm = {{"trial_id", trial_id},
+              {"samples", samples.size()},
+              {"true_columns", true_cols.size()},
+              {"observed_columns", obs_cols.size()}};
+  if (predicted) tm["predicted_samples"] = predicted->samples.size();
+  std::unique_ptr<H5Handle> group;
+  if (!writer->files_per_trial()) {
+    const std::string gname = "trials/" + id;
+    group = std::make_unique<H5Handle>(
+        H5Gcreate2(writer->file(), gname.c_str(), H5P_DEFAULT, H5P_DEFAULT, H5P_DEFAULT), H5Gclose,
+        "create group /" + gname);
+    tm["group"] = "/" + gname;
+  }
+  const hid_t gid = group ? group->id : -1;
+  const std::string tf = writer->Stream(id, "true", true_cols, true_rows, gid);
+  const std::string of = writer->Stream(id, "observed", obs_cols, obs_rows, gid);
+  std::string pf;
+  if (predicted) pf = writer->Stream(id, "predicted", true_cols, pred_rows, gid);
+  if (group) {
+    for (std::size_t c = 0; c < columns.size() && c < irow->size(); ++c) {
+      const auto* text = std::get_if<std::string>(&(*irow)[c]);
+      if (text && text->size() > 60000)
+        H5TextDataset(gid, columns[c], *text);
+      else
+        H5ScalarAttr(gid, columns[c], (*irow)[c]);
+    }
+    if (!contact_matrix.empty()) {
+      H5Matrix(gid, "contacts", ContactColumns(), contact_matrix);
+      H5Handle ds(H5Dopen2(gid, "contacts", H5P_DEFAULT), H5Dclose, "open contacts");
+      H5StringArrayAttr(ds.id, "contact_names", contact_names);
+      H5StringArrayAttr(ds.id, "roles", contact_roles);
+    }
+  } else {
+    irow->emplace_back(tf);
+    irow->emplace_back(of);
+    tm["true_file"] = tf;
+    tm["observed_file"] = of;
+    if (predicted) {
+      irow->emplace_back(pf);
+      tm["predicted_file"] = pf;
+    }
+  }
+  tm["true_columns_list"] = ColumnsJson(true_cols);
+  tm["observed_columns_list"] = ColumnsJson(obs_cols);
+  out->manifest.push_back(std::move(tm));
+  report->samples += static_cast<std::int64_t>(samples.size());
+}
+
+// Writes every file of the dataset into `dir` (the staging directory).
+ExportReport WriteDataset(const Store& store, const ExportOptions& o, const fs::path& dir) {
+  const auto& impl = store.impl();
+  detail::Tx snapshot(impl.db, false);  // everything below reads one consistent state
+  const Campaign campaign = store.GetCampaign(o.campaign_id);
+  TrialIndex index = ReadIndex(impl, o.campaign_id);
+  std::map<std::int64_t, std::vector<std::size_t>> contacts_by_trial;
+  const QueryResult contacts = ReadContacts(impl, o.campaign_id, &contacts_by_trial);
+  std::set<std::string> parameters;
+  {
+    const std::size_t base =
+        static_cast<std::size_t>(sqlite3_column_count(detail::Stmt(impl.db, kIndexSql).get())) - 3;
+    for (std::size_t c = base; c + 1 < index.table.columns.size(); ++c)
+      parameters.insert(index.table.columns[c]);
+  }
+  // The columns each row gets after the stored ones (same order as WriteTrial).
+  std::vector<std::string> columns = index.table.columns;
+  if (o.predict) {
+    for (const char* c : {"predicted_by", "predicted_settings", "predicted_status",
+                          "predicted_error", "predicted_samples"})
+      columns.emplace_back(c);
+  }
+  DatasetWriter writer(dir, o.format);
+  if (writer.files_per_trial()) {
+    columns.emplace_back("true_file");
+    columns.emplace_back("observed_file");
+    if (o.predict) columns.emplace_back("predicted_file");
+  }
+
+  ExportReport report;
+  TrialsWritten written;
+  static const std::vector<std::size_t> kNone;
+  const auto total = static_cast<std::int64_t>(index.table.rows.size());
+  for (std::size_t i = 0; i < index.table.rows.size(); ++i) {
+    auto& irow = index.table.rows[i];
+    const auto trial_id = std::get<std::int64_t>(irow[0]);
+    const auto it = contacts_by_trial.find(trial_id);
+    try {
+      WriteTrial(impl, o, campaign, index, i, &irow, columns, contacts,
+                 it == contacts_by_trial.end() ? kNone : it->second, &writer, &written, &report);
+    } catch (const StoreError& e) {
+      std::string what = e.what();
+      if (what.rfind("export: ", 0) == 0) what = what.substr(8);
+      throw StoreError(e.kind(), "export: trial " + std::to_string(trial_id) + " (index " +
+                                     std::to_string(std::get<std::int64_t>(irow[1])) +
+                                     "): " + what);
+    }
+    if (o.progress) o.progress(static_cast<std::int64_t>(i) + 1, total);
+  }
+  report.trials = total;
+  snapshot.Commit();
+  writer.Close(o.campaign_id);
+
+  index.table.columns = columns;
+  WriteText(dir / "trials.csv", FormatCsv(index.table));
+  WriteText(dir / "contacts.csv", FormatCsv(contacts));
+  WriteText(dir / "scenes.jsonl", ScenesJsonl(index));
+  // The campaign's latest sensitivity run, if any (db/sensitivity.hpp).
+  WriteSensitivityExport(store, o.campaign_id, dir.string());
+  if (o.format == ExportFormat::kJsonl) {
+    WriteJsonLines(dir / "trials.jsonl", index.table);
+    WriteJsonLines(dir / "contacts.jsonl", contacts);
+  }
+  const ojson files = ChecksumFiles(dir, &report);
 
   ojson spec;
   try {
@@ -595,13 +944,13 @@ ExportReport ExportCampaign(const Store& store, const ExportOptions& o) {
   } catch (const nlohmann::json::exception&) {
     spec = campaign.spec_json;
   }
-  ojson index_cols = ojson::array();
-  for (const auto& c : index.columns) {
-    const auto it = IndexColumnDocs().find(c);
-    index_cols.push_back({{"name", c},
-                          {"unit", it == IndexColumnDocs().end() ? "" : it->second.first},
-                          {"meaning", it == IndexColumnDocs().end() ? "" : it->second.second}});
-  }
+  ojson contact_cols = ojson::array();
+  contact_cols.push_back({{"name", "trial_id"}, {"unit", "1"}, {"meaning", "trial id"}});
+  contact_cols.push_back(
+      {{"name", "contact_name"}, {"unit", ""}, {"meaning", "finger name, or pusher"}});
+  contact_cols.push_back({{"name", "role"}, {"unit", ""}, {"meaning", "finger or pusher"}});
+  for (const auto& c : ContactColumns())
+    contact_cols.push_back({{"name", c.name}, {"unit", c.unit}, {"meaning", c.meaning}});
   ojson manifest = {
       {"format", "arena-dataset"},
       {"format_version", kDatasetFormatVersion},
@@ -620,33 +969,76 @@ ExportReport ExportCampaign(const Store& store, const ExportOptions& o) {
        {{"G",
          "gripper frame at the start of the trial; every pose, twist and wrench is "
          "expressed in it; quaternions are (w, x, y, z)"}}},
-      {"sample_rate_hz", std::round(sample_rate * 1000) / 1000},
+      {"sample_rate_hz", std::round(written.sample_rate * 1000) / 1000},
       {"counts", {{"trials", report.trials}, {"samples", report.samples}, {"files", files.size()}}},
       {"columns",
-       {{"trials", index_cols},
-        {"true", ColumnsJson(true_cols_first)},
-        {"observed", ColumnsJson(obs_cols_first)}}},
-      {"missing_values", "CSV: empty field; JSON: null; HDF5: attribute absent"},
-      {"trials", trials_manifest},
+       {{"trials", IndexColumnsJson(columns, parameters)},
+        {"contacts", contact_cols},
+        {"true", ColumnsJson(written.true_cols)},
+        {"observed", ColumnsJson(written.obs_cols)}}},
+      {"parameters", ojson(std::vector<std::string>(parameters.begin(), parameters.end()))},
+      {"predictions",
+       o.predict ? "re-run per trial with the campaign's \"prediction\" settings, as the service "
+                   "ran it; columns as \"true\" (predicted_by / predicted_settings say which)"
+                 : "not exported"},
+      {"missing_values",
+       "CSV: empty field; JSON: null; HDF5: NaN in datasets, absent attribute in groups. A "
+       "dropped observation (valid = 0) has every observed value missing."},
+      {"trials", written.manifest},
       {"files", files},
   };
+  if (o.predict) manifest["columns"]["predicted"] = ColumnsJson(written.predicted_cols);
   // Last and atomically: a complete manifest marks a complete dataset.
   const fs::path tmp = dir / "manifest.json.tmp";
   WriteText(tmp, manifest.dump(2) + "\n");
   SyncFile(tmp);
+  std::error_code ec;
   fs::rename(tmp, dir / "manifest.json", ec);
   if (ec) IoError("export: cannot rename the manifest into place: " + ec.message());
-  {
-    const int fd = ::open(dir.c_str(), O_RDONLY | O_DIRECTORY);
-    if (fd >= 0) {
-      ::fsync(fd);
-      ::close(fd);
+  return report;
+}
+
+// Records of a CSV file: line ends outside quoted fields (a scene or a
+// reason may hold a quoted newline).
+std::uint64_t CountCsvRecords(const fs::path& p) {
+  std::ifstream in(p, std::ios::binary);
+  std::uint64_t n = 0;
+  bool quoted = false;
+  char buf[1 << 16];
+  while (in) {
+    in.read(buf, sizeof buf);
+    for (std::streamsize i = 0; i < in.gcount(); ++i) {
+      if (buf[i] == '"') quoted = !quoted;  // a doubled quote toggles twice
+      n += buf[i] == '\n' && !quoted;
     }
   }
-  const ExportReport verified = VerifyExport(dir.string());
+  return n;
+}
+
+}  // namespace
+
+ExportReport ExportCampaign(const Store& store, const ExportOptions& o) {
+  if (o.out_dir.empty()) throw StoreError(StoreError::Kind::kBadInput, "export: --out is empty");
+  fs::path dir = fs::path(o.out_dir).lexically_normal();
+  if (!dir.has_filename()) dir = dir.parent_path();  // "out/" names "out"
+  store.GetCampaign(o.campaign_id);                  // kNotFound before anything is created
+  std::error_code ec;
+  if (fs::exists(dir, ec) && !fs::is_directory(dir, ec)) {
+    throw StoreError(StoreError::Kind::kBadInput,
+                     "export: '" + o.out_dir + "' is a file; --out names a new directory");
+  }
+  if (fs::exists(dir, ec) && !fs::is_empty(dir, ec)) {
+    throw StoreError(StoreError::Kind::kBadInput,
+                     "export: '" + o.out_dir + "' is not empty; choose a new directory");
+  }
+  StagingDir staging(dir);
+  ExportReport report = WriteDataset(store, o, staging.path());
+  const ExportReport verified = VerifyExport(staging.path().string());
   if (verified.trials != report.trials || verified.samples != report.samples) {
     Corrupt("export: verification counted other trials/samples than were written");
   }
+  staging.MoveTo(dir);
+  report.dir = o.out_dir;
   return report;
 }
 
@@ -695,14 +1087,16 @@ ExportReport VerifyExport(const std::string& dir_text) {
     H5Handle file(H5Fopen((dir / "dataset.h5").c_str(), H5F_ACC_RDONLY, H5P_DEFAULT), H5Fclose,
                   "open dataset.h5");
     for (const auto& t : m.at("trials")) {
-      for (const char* which : {"true", "observed"}) {
+      for (const char* which : {"true", "observed", "predicted"}) {
+        const bool predicted = std::string(which) == "predicted";
+        if (predicted && !t.contains("predicted_samples")) continue;
         const std::string name = t.at("group").get<std::string>() + "/" + which;
         H5Handle ds(H5Dopen2(file.id, name.c_str(), H5P_DEFAULT), H5Dclose, "open " + name);
         H5Handle space(H5Dget_space(ds.id), H5Sclose, "get space of " + name);
         hsize_t dims[2] = {0, 0};
         if (H5Sget_simple_extent_ndims(space.id) != 2) Corrupt("verify: " + name + " is not 2-D");
         H5Sget_simple_extent_dims(space.id, dims, nullptr);
-        if (dims[0] != t.at("samples").get<std::uint64_t>())
+        if (dims[0] != t.at(predicted ? "predicted_samples" : "samples").get<std::uint64_t>())
           Corrupt("verify: " + name + " sample count");
       }
       samples += t.at("samples").get<std::int64_t>();
@@ -711,9 +1105,12 @@ ExportReport VerifyExport(const std::string& dir_text) {
     const bool csv = format == "csv";
     for (const auto& t : m.at("trials")) {
       const auto n = t.at("samples").get<std::uint64_t>();
-      for (const char* key : {"true_file", "observed_file"}) {
+      for (const char* key : {"true_file", "observed_file", "predicted_file"}) {
+        const bool predicted = std::string(key) == "predicted_file";
+        if (predicted && !t.contains(key)) continue;
         const auto path = t.at(key).get<std::string>();
-        if (CountLines(dir / path) != n + (csv ? 1 : 0))
+        const auto rows = predicted ? t.at("predicted_samples").get<std::uint64_t>() : n;
+        if (CountLines(dir / path) != rows + (csv ? 1 : 0))
           Corrupt("verify: '" + path + "' sample count");
       }
       samples += static_cast<std::int64_t>(n);
@@ -725,7 +1122,7 @@ ExportReport VerifyExport(const std::string& dir_text) {
       m.at("counts").at("trials").get<std::int64_t>() != r.trials) {
     Corrupt("verify: counts in the manifest do not match the streams");
   }
-  if (CountLines(dir / "trials.csv") != static_cast<std::uint64_t>(r.trials) + 1) {
+  if (CountCsvRecords(dir / "trials.csv") != static_cast<std::uint64_t>(r.trials) + 1) {
     Corrupt("verify: trials.csv row count");
   }
   return r;

@@ -3,9 +3,11 @@
 // move to `executed` (store.hpp, invariants 3 and 4).
 #include <chrono>
 #include <cmath>
+#include <memory>
 #include <string>
 #include <vector>
 
+#include "arena/db/outcomes.hpp"
 #include "arena/db/store.hpp"
 #include "sqlite_util.hpp"
 #include "store_internal.hpp"
@@ -92,6 +94,8 @@ struct Ingest::Impl {
   double max_contact_force = 0, max_pusher_force = 0;
   std::int64_t modes[3] = {0, 0, 0};
   double obs_sq_sum = 0, obs_max = 0;
+  // Per-contact and object outcomes (outcomes.hpp), from the scene's contact sites.
+  std::unique_ptr<OutcomeAccumulator> outcome;
 
   // Shape of the open chunk's samples: only a uniform chunk can be packed.
   int chunk_contacts = -1, chunk_finger_values = -1;
@@ -162,6 +166,7 @@ void Ingest::Add(const Sample& s) {
                          " s (out of order); sample refused");
   }
   if (m.total == 0) m.first_pose = s.object_pose;
+  m.outcome->Add(s);
   m.last_pose = s.object_pose;
   m.last_t = s.t;
   for (std::size_t c = 0; c < s.contacts.size(); ++c) {
@@ -276,6 +281,7 @@ std::int64_t Ingest::Finish(const std::string& outcome) {
     }
     s->Run();
   }
+  internal::WriteOutcome(*m.store, m.stream_id, m.trial_id, m.attempt, m.outcome->Result());
   if (row.state == TrialState::kDispatched) {
     internal::WriteTransition(
         *m.store, m.trial_id, m.attempt, row.state, TrialState::kExecuted, row.cell_id,
@@ -311,10 +317,11 @@ std::unique_ptr<Ingest> Store::BeginIngest(std::int64_t trial_id, int attempt,
   Tx tx(impl_->db, true);
   const auto row = CheckIngestable(*impl_, trial_id, attempt, "BeginIngest");
   {
-    auto p = impl_->Prepare("SELECT pusher_type IS NOT NULL FROM trials WHERE id = ?");
+    auto p = impl_->Prepare("SELECT pusher_type IS NOT NULL, scene_json FROM trials WHERE id = ?");
     p->Bind(1, trial_id);
     p->Step();
     m->has_pusher = p->Int(0) != 0;
+    m->outcome = std::make_unique<OutcomeAccumulator>(ContactSitesFromScene(p->Text(1)));
   }
   auto s = impl_->Prepare(
       "INSERT INTO gt_streams(trial_id, attempt, cell_id, complete, samples, started_at) "

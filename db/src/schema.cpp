@@ -3,15 +3,19 @@
 // runs in one transaction together with the bump of user_version and its row
 // in schema_migrations, so a crash mid-migration leaves the previous version.
 #include <sys/stat.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <chrono>
+#include <cstdio>
+#include <cstdlib>
 #include <filesystem>
 #include <string>
 #include <thread>
 #include <vector>
 
 #include "sqlite_util.hpp"
+#include "store_internal.hpp"
 
 namespace arena::db {
 namespace {
@@ -22,6 +26,9 @@ struct Migration {
   int version;
   const char* what;
   const char* sql;
+  // Work SQL alone cannot do (decoding stored samples), run after `sql` in
+  // the same transaction; nullptr for none.
+  void (*after)(const Store::Impl&) = nullptr;
 };
 
 // Append only: a released migration is never edited.
@@ -290,6 +297,122 @@ CREATE TABLE cell_events(
   by_whom TEXT NOT NULL DEFAULT ''
 );
 )sql"},
+      // Per-contact outcomes and the object's net motion per stream, computed
+      // from the samples (outcomes.hpp) for the streams already stored too;
+      // the parameter names of every campaign, which become columns of the
+      // views trial_results and contact_results (result_views.cpp).
+      {6, "per-contact outcomes, object net motion, parameters as view columns", R"sql(
+-- gt_summary's new columns (net_dx ... net_rz, grasp_kept) are added by
+-- MigrateToOutcomes, which skips a column that exists: the migration can be
+-- re-applied to a file whose user_version was set back.
+CREATE TABLE IF NOT EXISTS contact_outcomes(
+  stream_id          INTEGER NOT NULL REFERENCES gt_streams(id) ON DELETE CASCADE,
+  trial_id           INTEGER NOT NULL REFERENCES trials(id),
+  attempt            INTEGER NOT NULL,
+  contact            INTEGER NOT NULL CHECK (contact >= 0),
+  name               TEXT NOT NULL,
+  role               TEXT NOT NULL CHECK (role IN ('finger', 'pusher')),
+  stick_fraction     REAL,
+  slide_fraction     REAL,
+  separate_fraction  REAL,
+  slip_distance_m    REAL,
+  max_normal_force_n REAL,
+  PRIMARY KEY (stream_id, contact)
+);
+CREATE INDEX IF NOT EXISTS contact_outcomes_by_trial ON contact_outcomes(trial_id);
+
+CREATE TABLE IF NOT EXISTS campaign_parameters(
+  campaign_id INTEGER NOT NULL REFERENCES campaigns(id),
+  name        TEXT NOT NULL,
+  PRIMARY KEY (campaign_id, name)
+);
+INSERT OR IGNORE INTO campaign_parameters(campaign_id, name)
+  SELECT t.campaign_id, j.key FROM trials t, json_each(t.params_json) j
+  WHERE j.key IS NOT NULL ORDER BY t.id, j.id;
+)sql",
+       internal::MigrateToOutcomes},
+      // Adaptive campaigns (orchestrator/adaptive.hpp) and calibrations
+      // (assessment/calibration.hpp). sampler_open = 1: an adaptive sampler
+      // may still add trials, so the campaign is not done when its trials are.
+      {7, "adaptive sampler decisions, campaigns.sampler_open, calibrations", R"sql(
+ALTER TABLE campaigns ADD COLUMN sampler_open INTEGER NOT NULL DEFAULT 0;
+
+CREATE TABLE sampler_decisions(
+  id          INTEGER PRIMARY KEY,
+  campaign_id INTEGER NOT NULL REFERENCES campaigns(id),
+  round       INTEGER NOT NULL CHECK (round >= 0),
+  trial_id    INTEGER REFERENCES trials(id),
+  reason      TEXT NOT NULL,
+  basis_json  TEXT NOT NULL DEFAULT '{}',
+  created_at  REAL NOT NULL
+);
+CREATE INDEX sampler_decisions_by_campaign ON sampler_decisions(campaign_id, round, id);
+CREATE UNIQUE INDEX sampler_decisions_by_trial ON sampler_decisions(trial_id)
+  WHERE trial_id IS NOT NULL;
+
+CREATE VIEW trial_decisions AS
+  SELECT t.id AS trial_id, t.campaign_id, t.idx, t.state, t.params_json, t.outcome,
+         d.round, d.reason, d.basis_json
+  FROM sampler_decisions d JOIN trials t ON t.id = d.trial_id;
+
+CREATE TABLE calibrations(
+  id            INTEGER PRIMARY KEY,
+  campaign_id   INTEGER NOT NULL REFERENCES campaigns(id),
+  created_at    REAL NOT NULL,
+  params_json   TEXT NOT NULL DEFAULT '{}',
+  settings_json TEXT NOT NULL DEFAULT '{}',
+  heldout_error_before REAL NOT NULL,
+  heldout_error_after  REAL NOT NULL,
+  applied       INTEGER NOT NULL CHECK (applied IN (0, 1)),
+  report_json   TEXT NOT NULL DEFAULT '{}'
+);
+CREATE INDEX calibrations_by_campaign ON calibrations(campaign_id);
+)sql"},
+      {8, "sensitivity runs: predicted vs observed spread and unstable conditions", R"sql(
+-- IF NOT EXISTS: a file rolled back to an older version by hand (as the
+-- migration tests do) may still hold these tables; they are kept as they are.
+CREATE TABLE IF NOT EXISTS sensitivity_runs(
+  id            INTEGER PRIMARY KEY,
+  campaign_id   INTEGER NOT NULL REFERENCES campaigns(id),
+  created_at    REAL NOT NULL,
+  settings_json TEXT NOT NULL DEFAULT '{}',
+  report_json   TEXT NOT NULL DEFAULT '{}'
+);
+CREATE INDEX IF NOT EXISTS sensitivity_runs_by_campaign ON sensitivity_runs(campaign_id);
+
+CREATE TABLE IF NOT EXISTS sensitivity_conditions(
+  run_id        INTEGER NOT NULL REFERENCES sensitivity_runs(id),
+  condition     INTEGER NOT NULL CHECK (condition >= 0),
+  params_json   TEXT NOT NULL DEFAULT '{}',
+  replicates    INTEGER NOT NULL CHECK (replicates >= 0),
+  ensemble      INTEGER NOT NULL CHECK (ensemble >= 0),
+  ensemble_failed INTEGER NOT NULL DEFAULT 0 CHECK (ensemble_failed >= 0),
+  predicted_position_spread REAL,
+  observed_position_spread  REAL,
+  predicted_rotation_spread REAL,
+  observed_rotation_spread  REAL,
+  predicted_displacement    REAL,
+  observed_displacement     REAL,
+  predicted_rotation        REAL,
+  observed_rotation         REAL,
+  verdict       TEXT NOT NULL,
+  flip_fraction REAL NOT NULL DEFAULT 0,
+  unstable      INTEGER NOT NULL CHECK (unstable IN (0, 1)),
+  boundary_parameter  TEXT NOT NULL DEFAULT '',
+  boundary_offset     REAL,
+  boundary_tolerances REAL,
+  reason        TEXT NOT NULL DEFAULT '',
+  detail_json   TEXT NOT NULL DEFAULT '{}',
+  PRIMARY KEY (run_id, condition)
+);
+
+-- The latest run of each campaign, one row per condition (what `arena plot
+-- --map` and `arena export` read).
+CREATE VIEW IF NOT EXISTS sensitivity_latest AS
+  SELECT r.campaign_id, c.*
+  FROM sensitivity_conditions c JOIN sensitivity_runs r ON r.id = c.run_id
+  WHERE r.id = (SELECT max(id) FROM sensitivity_runs WHERE campaign_id = r.campaign_id);
+)sql"},
       // Closed-loop trials (issue 19): the controller, its own outcome, and
       // every command the cell applied (ground truth like the samples).
       // IF NOT EXISTS: tests fake an older file by lowering user_version
@@ -349,6 +472,86 @@ int UserVersion(sqlite3* db) {
   return static_cast<int>(s.Int(0));
 }
 
+// Whether the connection can read the schema (the first access that needs
+// the WAL's shared memory).
+bool CanRead(sqlite3* db) {
+  sqlite3_stmt* st = nullptr;
+  int rc = sqlite3_prepare_v2(db, "SELECT count(*) FROM sqlite_master", -1, &st, nullptr);
+  if (rc == SQLITE_OK) rc = sqlite3_step(st);
+  sqlite3_finalize(st);
+  return rc == SQLITE_ROW;
+}
+
+// Whether the connection failed for want of the WAL's shared memory (cannot
+// create or write the -shm / -wal files), rather than e.g. a corrupt file.
+bool NeedsSharedMemory(sqlite3* db) {
+  if (CanRead(db)) return false;
+  const int rc = sqlite3_extended_errcode(db) & 0xff;
+  return rc == SQLITE_CANTOPEN || rc == SQLITE_READONLY;
+}
+
+std::int64_t FileSize(const std::string& path) {
+  std::error_code ec;
+  const auto n = std::filesystem::file_size(path, ec);
+  return ec ? -1 : static_cast<std::int64_t>(n);
+}
+
+// Read-only access to a store whose directory is not writable. Without a
+// -wal file (or with an empty one) every committed transaction is in the main
+// file, and SQLite's immutable=1 reads it with no lock and no -shm. With a
+// non-empty -wal (a writer stopped without a checkpoint), immutable=1 would
+// silently miss those transactions: the file and its WAL are copied into a
+// private temporary directory and the copy is read (removed on close).
+void OpenWithoutSharedMemory(Store::Impl& impl) {
+  sqlite3_close_v2(impl.db);
+  impl.db = nullptr;
+  const std::string& path = impl.path;
+  std::string target = path;
+  if (FileSize(path + "-wal") > 0) {
+    const char* tmp = std::getenv("TMPDIR");
+    std::string tmpl = std::string(tmp && *tmp ? tmp : "/tmp") + "/arena-readonly-XXXXXX";
+    if (::mkdtemp(tmpl.data()) == nullptr) {
+      throw StoreError(StoreError::Kind::kIo,
+                       "Store::Open: '" + path +
+                           "' is in a directory this user cannot write and has an unmerged "
+                           "WAL; reading it needs a private copy, but no temporary directory "
+                           "could be made (set TMPDIR to a writable directory)");
+    }
+    impl.private_copy_dir = tmpl;
+    const std::filesystem::path dir(tmpl);
+    std::error_code ec;
+    std::filesystem::copy_file(path, dir / "store.db", ec);
+    if (!ec) std::filesystem::copy_file(path + "-wal", dir / "store.db-wal", ec);
+    if (ec) {
+      throw StoreError(StoreError::Kind::kIo,
+                       "Store::Open: cannot copy '" + path + "' for reading: " + ec.message());
+    }
+    target = (dir / "store.db").string();
+    const int rc = sqlite3_open_v2(target.c_str(), &impl.db,
+                                   SQLITE_OPEN_NOMUTEX | SQLITE_OPEN_READONLY, nullptr);
+    if (rc == SQLITE_OK && CanRead(impl.db)) return;
+  } else {
+    // URI form: the path's own '?' and '#' must not be taken as URI syntax.
+    std::string uri = "file:";
+    for (char c : std::filesystem::absolute(path).string()) {
+      if (c == '?' || c == '#' || c == '%') {
+        char buf[4];
+        std::snprintf(buf, sizeof buf, "%%%02X", static_cast<unsigned char>(c));
+        uri += buf;
+      } else {
+        uri += c;
+      }
+    }
+    uri += "?mode=ro&immutable=1";
+    const int rc =
+        sqlite3_open_v2(uri.c_str(), &impl.db,
+                        SQLITE_OPEN_NOMUTEX | SQLITE_OPEN_READONLY | SQLITE_OPEN_URI, nullptr);
+    if (rc == SQLITE_OK && CanRead(impl.db)) return;
+  }
+  const std::string why = impl.db ? sqlite3_errmsg(impl.db) : "out of memory";
+  throw StoreError(StoreError::Kind::kIo, "Store::Open: cannot read '" + path + "': " + why);
+}
+
 void Migrate(Store::Impl& impl) {
   sqlite3* db = impl.db;
   const int target = Store::SchemaVersion();
@@ -365,6 +568,7 @@ void Migrate(Store::Impl& impl) {
   for (const auto& m : Migrations()) {
     if (m.version <= current) continue;
     Exec(db, m.sql, "Store::Open: migration " + std::to_string(m.version));
+    if (m.after) m.after(impl);
     detail::Stmt ins(db, "INSERT INTO schema_migrations(version, what, applied_at) VALUES(?,?,?)");
     ins.Bind(1, m.version).Bind(2, m.what).Bind(3, impl.Now()).Run();
     Exec(db, "PRAGMA user_version = " + std::to_string(m.version), "Store::Open: user_version");
@@ -399,13 +603,27 @@ std::unique_ptr<Store> Store::Open(const std::string& path, const StoreOptions& 
     throw StoreError(StoreError::Kind::kIo,
                      "Store::Open: no store at '" + path + "' (create one with 'arena submit')");
   }
+  {
+    std::error_code ec;
+    if (std::filesystem::is_directory(path, ec)) {
+      throw StoreError(StoreError::Kind::kIo,
+                       "Store::Open: '" + path +
+                           "' is a directory; --db names the store file (e.g. '" +
+                           (std::filesystem::path(path) / "lab.db").string() + "')");
+    }
+  }
   int flags = SQLITE_OPEN_NOMUTEX;  // one connection per thread (documented)
   if (options.read_only) {
     flags |= SQLITE_OPEN_READONLY;
   } else {
     flags |= SQLITE_OPEN_READWRITE | (options.create ? SQLITE_OPEN_CREATE : 0);
   }
-  const int rc = sqlite3_open_v2(path.c_str(), &impl->db, flags, nullptr);
+  int rc = sqlite3_open_v2(path.c_str(), &impl->db, flags, nullptr);
+  if (rc == SQLITE_OK && options.read_only && NeedsSharedMemory(impl->db)) {
+    // A WAL store in a directory we cannot write (a copy made for reading,
+    // a read-only mount): SQLite cannot create the -shm file next to it.
+    OpenWithoutSharedMemory(*impl);
+  }
   if (rc != SQLITE_OK) {
     std::string msg = "Store::Open: cannot open '" + path +
                       "': " + (impl->db ? sqlite3_errmsg(impl->db) : sqlite3_errstr(rc));

@@ -1,8 +1,16 @@
 #include "sqlite_util.hpp"
 
 #include <chrono>
+#include <filesystem>
 
 namespace arena::db::detail {
+
+// Said when a write meets a read-only store: what may be wrong, not which
+// command to run (a read-only command never writes; the error means the
+// store or its directory is write-protected for a command that must write).
+constexpr const char* kReadOnlyHint =
+    " (the store is read-only here: commands that change it, such as submit, pause or serve, "
+    "need write access to the store file and its directory)";
 
 StoreError::Kind KindOf(int rc) {
   switch (rc & 0xff) {
@@ -31,7 +39,7 @@ void Throw(sqlite3* db, int rc, const std::string& context) {
   std::string msg = context + ": " + (db ? sqlite3_errmsg(db) : sqlite3_errstr(rc));
   const auto kind = KindOf(rc);
   if (kind == StoreError::Kind::kReadOnly) {
-    msg += " (the store is open read-only: use a read-write command such as 'arena serve')";
+    msg += kReadOnlyHint;
   } else if (kind == StoreError::Kind::kFull) {
     msg += " (free disk space, then restart; nothing of this write was stored)";
   } else if (kind == StoreError::Kind::kBusy) {
@@ -122,7 +130,7 @@ void Exec(sqlite3* db, const std::string& sql, const std::string& context) {
     StoreError::Kind kind = KindOf(rc);
     std::string full = context + ": " + msg;
     if (kind == StoreError::Kind::kReadOnly) {
-      full += " (the store is open read-only: use a read-write command such as 'arena serve')";
+      full += kReadOnlyHint;
     }
     throw StoreError(kind, full);
   }
@@ -135,6 +143,10 @@ namespace arena::db {
 Store::Impl::~Impl() {
   cache.clear();  // finalize every statement before closing
   if (db) sqlite3_close_v2(db);
+  if (!private_copy_dir.empty()) {
+    std::error_code ec;
+    std::filesystem::remove_all(private_copy_dir, ec);
+  }
 }
 
 detail::StmtRef Store::Impl::Prepare(std::string_view sql) const {

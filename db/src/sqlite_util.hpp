@@ -124,6 +124,9 @@ struct Store::Impl {
   sqlite3* db = nullptr;
   std::string path;
   StoreOptions options;
+  // A private copy read instead of `path` (a read-only store whose
+  // directory cannot be written, with an unmerged WAL); removed on close.
+  std::string private_copy_dir;
   mutable std::map<std::string, std::unique_ptr<detail::Stmt>, std::less<>> cache;
   // The file opened (stat at open): CheckFileIdentity() notices it deleted,
   // renamed or replaced under us.

@@ -118,13 +118,16 @@ const char* ToString(PredictionStatus s) {
       return "invalid_scene";
     case PredictionStatus::kError:
       return "error";
+    case PredictionStatus::kDiverged:
+      return "diverged";
   }
   return "?";
 }
 
 std::optional<PredictionStatus> ParsePredictionStatus(const std::string& text) {
-  for (auto s : {PredictionStatus::kOk, PredictionStatus::kSolverFailure,
-                 PredictionStatus::kInvalidScene, PredictionStatus::kError})
+  for (auto s :
+       {PredictionStatus::kOk, PredictionStatus::kSolverFailure, PredictionStatus::kInvalidScene,
+        PredictionStatus::kError, PredictionStatus::kDiverged})
     if (text == ToString(s)) return s;
   return std::nullopt;
 }
@@ -184,7 +187,7 @@ void RequireFinite(double v, const std::string& what) {
   if (!std::isfinite(v)) BadInput(what + " is " + (std::isnan(v) ? "NaN" : "infinite"));
 }
 
-// The indexed parameter columns, read from the scene JSON (SCENE.md).
+// The indexed parameter columns, read from the scene JSON (docs/scene.md).
 struct SceneColumns {
   std::optional<std::string> object_shape, finger_type, pusher_type;
   std::optional<double> object_mass, grip_force, finger_mu, pusher_mu, pusher_speed,
@@ -247,7 +250,7 @@ SceneColumns ReadSceneColumns(const std::string& scene_text, const std::string& 
           RequireFinite((*dst)[i], where + ".object.pose." + key);
         }
       }
-      // R = Rz(yaw) Ry(pitch) Rx(roll) (SCENE.md: rpy about fixed x, y, z).
+      // R = Rz(yaw) Ry(pitch) Rx(roll) (docs/scene.md: rpy about fixed x, y, z).
       const double cr = std::cos(rpy[0] / 2), sr = std::sin(rpy[0] / 2);
       const double cp = std::cos(rpy[1] / 2), sp = std::sin(rpy[1] / 2);
       const double cy = std::cos(rpy[2] / 2), sy = std::sin(rpy[2] / 2);
@@ -392,10 +395,13 @@ int ContactTypeMask(const std::vector<std::string>& types) {
 
 // ---------------------------------------------------------------- campaigns
 
-namespace {
+namespace internal {
 
-void InsertPlannedTrials(const Store::Impl& impl, std::int64_t campaign_id, int first_index,
-                         const std::vector<PlannedTrial>& trials, const char* function) {
+std::vector<std::int64_t> InsertPlannedTrials(const Store::Impl& impl, std::int64_t campaign_id,
+                                              int first_index,
+                                              const std::vector<PlannedTrial>& trials,
+                                              const char* function) {
+  std::vector<std::int64_t> ids;
   const double now = impl.Now();
   auto ins = impl.Prepare(
       "INSERT INTO trials(campaign_id, idx, condition, replicate, seed, state, attempt,"
@@ -426,12 +432,17 @@ void InsertPlannedTrials(const Store::Impl& impl, std::int64_t campaign_id, int 
     b << t.scene_json << t.params_json << t.defects_json << now << now;
     s.Run();
     s.Reset();
-    audit->Bind(1, static_cast<std::int64_t>(sqlite3_last_insert_rowid(impl.db)))
-        .Bind(2, now)
-        .Run();
+    ids.push_back(static_cast<std::int64_t>(sqlite3_last_insert_rowid(impl.db)));
+    audit->Bind(1, ids.back()).Bind(2, now).Run();
     audit->Reset();
   }
+  return ids;
 }
+
+}  // namespace internal
+
+namespace {
+using internal::InsertPlannedTrials;
 
 Campaign ReadCampaign(const detail::Stmt& s) {
   Campaign c;
@@ -445,12 +456,13 @@ Campaign ReadCampaign(const detail::Stmt& s) {
   c.created_at = s.Real(7);
   c.updated_at = s.Real(8);
   c.state_reason = s.Text(9);
+  c.sampler_open = s.Int(10) != 0;
   return c;
 }
 
 constexpr const char* kCampaignCols =
     "SELECT id, name, spec_json, state, priority, seed, sampler_state_json, created_at, updated_at,"
-    " state_reason FROM campaigns";
+    " state_reason, sampler_open FROM campaigns";
 
 }  // namespace
 
@@ -465,17 +477,19 @@ std::int64_t Store::CreateCampaign(const NewCampaign& campaign,
   auto s = impl_->Prepare(
       "INSERT INTO campaigns(name, spec_json, state, priority, seed, sampler_state_json, "
       "created_at,"
-      " updated_at) VALUES(?,?,'active',?,?,?,?,?)");
+      " updated_at, sampler_open) VALUES(?,?,'active',?,?,?,?,?,?)");
   s->Bind(1, campaign.name)
       .Bind(2, campaign.spec_json)
       .Bind(3, campaign.priority)
       .Bind(4, SeedToDb(campaign.seed))
       .Bind(5, campaign.sampler_state_json)
       .Bind(6, now)
-      .Bind(7, now);
+      .Bind(7, now)
+      .Bind(8, campaign.sampler_open ? 1 : 0);
   s->Run();
   const std::int64_t id = static_cast<std::int64_t>(sqlite3_last_insert_rowid(impl_->db));
   InsertPlannedTrials(*impl_, id, 0, trials, "CreateCampaign");
+  internal::RegisterParameters(*impl_, id);
   tx.Commit();
   return id;
 }
@@ -491,14 +505,15 @@ std::int64_t Store::CreateCampaign(const NewCampaign& campaign,
   auto s = impl_->Prepare(
       "INSERT INTO campaigns(name, spec_json, state, priority, seed, sampler_state_json, "
       "created_at,"
-      " updated_at) VALUES(?,?,'active',?,?,?,?,?)");
+      " updated_at, sampler_open) VALUES(?,?,'active',?,?,?,?,?,?)");
   s->Bind(1, campaign.name)
       .Bind(2, campaign.spec_json)
       .Bind(3, campaign.priority)
       .Bind(4, SeedToDb(campaign.seed))
       .Bind(5, campaign.sampler_state_json)
       .Bind(6, now)
-      .Bind(7, now);
+      .Bind(7, now)
+      .Bind(8, campaign.sampler_open ? 1 : 0);
   s->Run();
   const std::int64_t id = static_cast<std::int64_t>(sqlite3_last_insert_rowid(impl_->db));
   int first = 0;
@@ -508,6 +523,7 @@ std::int64_t Store::CreateCampaign(const NewCampaign& campaign,
     InsertPlannedTrials(*impl_, id, first, chunk, "CreateCampaign");
     first += static_cast<int>(chunk.size());
   }
+  internal::RegisterParameters(*impl_, id);
   tx.Commit();
   return id;
 }
@@ -527,6 +543,7 @@ void Store::AppendPlannedTrials(std::int64_t campaign_id, const std::vector<Plan
   n->Step();
   const int first = static_cast<int>(n->Int(0));
   InsertPlannedTrials(*impl_, campaign_id, first, trials, "AppendPlannedTrials");
+  internal::RegisterParameters(*impl_, campaign_id);
   auto u =
       impl_->Prepare("UPDATE campaigns SET sampler_state_json = ?, updated_at = ? WHERE id = ?");
   u->Bind(1, sampler_state_json).Bind(2, impl_->Now()).Bind(3, campaign_id).Run();
@@ -609,7 +626,8 @@ std::vector<std::int64_t> Store::CompleteFinishedCampaigns() {
   impl_->RequireWritable("CompleteFinishedCampaigns");
   Tx tx(impl_->db, true);
   auto s = impl_->Prepare(
-      "SELECT c.id FROM campaigns c WHERE c.state = 'active' AND NOT EXISTS ("
+      "SELECT c.id FROM campaigns c WHERE c.state = 'active' AND c.sampler_open = 0"
+      " AND NOT EXISTS ("
       " SELECT 1 FROM trials t WHERE t.campaign_id = c.id"
       " AND t.state NOT IN ('done','failed','cancelled'))");
   std::vector<std::int64_t> ids;

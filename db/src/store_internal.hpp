@@ -29,11 +29,41 @@ void WriteTransition(const Store::Impl& impl, std::int64_t trial_id, int attempt
                      TrialState to, const std::string& cell_id, const std::string& reason,
                      const char* function);
 
+// Inserts planned trials with indices first_index.. and their audit rows;
+// no transaction of its own. @returns their ids. @throws kBadInput naming `function`.
+std::vector<std::int64_t> InsertPlannedTrials(const Store::Impl& impl, std::int64_t campaign_id,
+                                              int first_index,
+                                              const std::vector<PlannedTrial>& trials,
+                                              const char* function);
+
 // The samples of one stream, in order; no transaction of its own (the caller's
 // read transaction gives the snapshot). @throws kCorrupt on a count mismatch.
 std::vector<Sample> ReadStreamSamples(const Store::Impl& impl, std::int64_t stream_id,
                                       std::int64_t expected, const char* function);
 
+}  // namespace arena::db::internal
+
+namespace arena::db {
+struct TrialOutcome;
+}
+
+namespace arena::db::internal {
+// Parameter columns of the result views (result_views.cpp): the names
+// campaigns varied, as registered in campaign_parameters.
+std::vector<std::string> ParameterColumns(sqlite3* db);
+// A name that may become a view column (an identifier not already a column).
+bool IsParameterColumnName(const std::string& name);
+// Recreates trial_results and contact_results with one column per parameter.
+void RebuildResultViews(sqlite3* db);
+// Records the parameter names of a campaign's trials; rebuilds the views if
+// one is new. Call inside the write transaction that inserted the trials.
+void RegisterParameters(const Store::Impl& impl, std::int64_t campaign_id);
+// Stores a stream's outcome (contact_outcomes rows, gt_summary net_* and
+// grasp_kept). Call inside a write transaction, after gt_summary's row exists.
+void WriteOutcome(const Store::Impl& impl, std::int64_t stream_id, std::int64_t trial_id,
+                  int attempt, const TrialOutcome& outcome);
+// Schema version 6: outcomes of the streams already stored, then the views.
+void MigrateToOutcomes(const Store::Impl& impl);
 }  // namespace arena::db::internal
 
 namespace arena::db {

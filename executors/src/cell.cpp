@@ -57,6 +57,21 @@ std::string ModeName(mechanics::SimulationStatus s) {
   return "?";
 }
 
+// Issue 12: a trial starts where the last reset left the object (its true
+// pose), so reset error reaches the trial's physics; the fingers close on the
+// object there (mechanics::SeatFingers). The observed pose still goes to the
+// store as before. Kept apart so the cell's structure can change around it.
+mechanics::Scene StartWhereResetLeft(mechanics::Scene scene,
+                                     const std::optional<reset::Pose>& reset_left) {
+  if (!reset_left) return scene;  // no reset yet: the planned pose
+  const Eigen::Matrix3d R = reset_left->orientation.normalized().toRotationMatrix();
+  scene.object.pose.position = reset_left->position;
+  scene.object.pose.rpy = {std::atan2(R(2, 1), R(2, 2)), std::asin(std::clamp(-R(2, 0), -1.0, 1.0)),
+                           std::atan2(R(1, 0), R(0, 0))};
+  mechanics::SeatFingers(&scene);  // throws SceneError when a finger misses the object
+  return scene;
+}
+
 bool SamePusher(const std::optional<mechanics::PusherSpec>& a,
                 const std::optional<mechanics::PusherSpec>& b) {
   if (a.has_value() != b.has_value()) return false;
@@ -153,6 +168,7 @@ struct Cell::Impl {
   std::deque<Key> done_order;                   // oldest first
   reset::Pose true_pose;                        // where the object really is now
   reset::Pose observed_pose;                    // where the sensors saw it last
+  std::optional<reset::Pose> reset_left;        // true pose the last reset left (issue 12)
   std::optional<mechanics::PusherSpec> pusher;  // the pusher mounted now
   std::thread worker;
 
@@ -345,6 +361,12 @@ struct Cell::Impl {
                               ? started + std::chrono::duration_cast<Clock::duration>(
                                               std::chrono::duration<double>(c.deadline_s()))
                               : Clock::time_point::max();
+    // Issue 12: the trial starts where the last reset left the object.
+    try {
+      scene = StartWhereResetLeft(scene, reset_left);
+    } catch (const std::exception& e) {
+      return Refuse(c, std::string("start pose: ") + e.what());
+    }
     const TrialContext trial = Context(c, deadline);
     const bool closed_loop = scene.pusher && scene.pusher->controller;
     if (closed_loop && !layer.capabilities().closed_loop) {
@@ -357,6 +379,7 @@ struct Cell::Impl {
     }
     auto accepted = BaseStatus(c, msg::STATE_ACCEPTED);
     Send(accepted);
+    reset_left.reset();                       // the trial moves the object
     if (options.defects.hang_after_accept) {  // fault injection: a hung controller
       spdlog::warn("cell {}: fault injection: hanging after accepting trial {}", options.id,
                    c.trial_id());
@@ -931,6 +954,7 @@ struct Cell::Impl {
     }
     true_pose = out.final_true;
     observed_pose = out.final_observed;
+    reset_left = out.final_true;
     if (out.success) pusher = next_pusher;
     auto s = BaseStatus(c, out.success ? msg::STATE_RESET_DONE : msg::STATE_FAILED);
     s.reason(out.failure);

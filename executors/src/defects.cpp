@@ -100,6 +100,8 @@ void ValidateDefectProfile(const DefectProfile& p) {
   if (!(p.drop_probability >= 0 && p.drop_probability < 1)) {
     throw DefectError("drop_probability", "must be in [0, 1)");
   }
+  if (!std::isfinite(p.mu_scale) || !(p.mu_scale > 0) || p.mu_scale > 10)
+    throw DefectError("friction_variability.mu_scale", "must be in (0, 10]");
   NonNegative(p.mu_scale_std, "friction_variability.mu_scale_std");
   if (p.mu_scale_std > 0.5)
     throw DefectError("friction_variability.mu_scale_std", "must be <= 0.5");
@@ -154,7 +156,8 @@ DefectProfile ParseDefectProfile(std::string_view text) {
   ReadScalar(root, "latency_ms", "", &p.latency_ms);
   ReadScalar(root, "drop_probability", "", &p.drop_probability);
   if (const json* o = Object(root, "friction_variability", "friction_variability")) {
-    CheckKeys(*o, "friction_variability", {"mu_scale_std"});
+    CheckKeys(*o, "friction_variability", {"mu_scale", "mu_scale_std"});
+    ReadScalar(*o, "mu_scale", "friction_variability.", &p.mu_scale);
     ReadScalar(*o, "mu_scale_std", "friction_variability.", &p.mu_scale_std);
   }
   if (const json* o = Object(root, "workspace", "workspace")) {
@@ -231,7 +234,7 @@ std::string DefectProfileToJson(const DefectProfile& p) {
               {"velocity_offset_std", Vec(p.velocity_offset_std)}}},
             {"latency_ms", p.latency_ms},
             {"drop_probability", p.drop_probability},
-            {"friction_variability", {{"mu_scale_std", p.mu_scale_std}}},
+            {"friction_variability", {{"mu_scale", p.mu_scale}, {"mu_scale_std", p.mu_scale_std}}},
             {"workspace", {{"min", Vec(p.workspace_min)}, {"max", Vec(p.workspace_max)}}},
             {"max_pusher_speed", p.max_pusher_speed},
             {"contact_types", types},
@@ -270,6 +273,7 @@ TrialPerturbation DrawPerturbation(const DefectProfile& p, std::uint64_t seed,
   do {
     out.mu_scale = 1.0 + friction.Normal(p.mu_scale_std);
   } while (out.mu_scale <= 0.0);
+  out.mu_scale *= p.mu_scale;
   Rng actuation(seed, trial_id, StreamPurpose::kActuation);
   out.velocity_scale = 1.0 + actuation.Normal(p.velocity_scale_std);
   for (int k = 0; k < 3; ++k) out.velocity_offset[k] = actuation.Normal(p.velocity_offset_std[k]);

@@ -13,6 +13,7 @@
 #include <Eigen/Eigenvalues>
 
 #include "arena/mechanics/lcp.hpp"
+#include "geometry.hpp"
 
 namespace arena::mechanics {
 
@@ -81,6 +82,16 @@ Eigen::Matrix3d ObjectInertia(const ObjectSpec& object) {
     const Eigen::Vector3d s2 = object.size.cwiseProduct(object.size);
     I.diagonal() << m * (s2.y() + s2.z()) / 12.0, m * (s2.x() + s2.z()) / 12.0,
         m * (s2.x() + s2.y()) / 12.0;
+  } else if (object.shape == ObjectShape::kPrism) {
+    // Uniform density over the polygon's area times the height; moments
+    // about the centroid (geometry::MomentsOf).
+    const geometry::PolygonMoments pm = geometry::MomentsOf(object.polygon);
+    const double h2 = object.height * object.height;
+    const double k = pm.area > 0 ? m / pm.area : 0.0;
+    I(0, 0) = k * pm.yy + m * h2 / 12.0;
+    I(1, 1) = k * pm.xx + m * h2 / 12.0;
+    I(2, 2) = k * (pm.xx + pm.yy);
+    I(0, 1) = I(1, 0) = -k * pm.xy;
   } else {
     const double r2 = object.radius * object.radius;
     const double h2 = object.height * object.height;
@@ -92,6 +103,14 @@ Eigen::Matrix3d ObjectInertia(const ObjectSpec& object) {
 namespace {
 
 constexpr double kPlaneTolerance = 1e-9;
+// Tracked contacts: a primitive within this fraction of the object's extent
+// of the surface touches it (and a pad's support feature counts points this
+// close to the first one as one face or edge).
+constexpr double kGapTolerance = 1e-4;
+// Fixed contacts: a frozen finger point farther than this fraction of the
+// object's extent from its surface has left the grasp geometry (the 1 % that
+// scene validation allows at the start).
+constexpr double kGraspTolerance = 1e-2;
 // Reduced-coordinate quantities (3 or 6 rows) without heap allocation.
 using SmallMatrix = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, 0, 6, 6>;
 using SmallVector = Eigen::Matrix<double, Eigen::Dynamic, 1, 0, 6, 1>;
@@ -102,16 +121,25 @@ constexpr double kAcceptedResidual = 1e-8;
 constexpr int kAccuracyAttempts = 4;
 
 double LengthScale(const ObjectSpec& object) {
-  double L = object.shape == ObjectShape::kBox ? object.size.maxCoeff()
-                                               : std::max(2 * object.radius, object.height);
+  double L = object.shape == ObjectShape::kBox        ? object.size.maxCoeff()
+             : object.shape == ObjectShape::kCylinder ? std::max(2 * object.radius, object.height)
+                                                      : geometry::Solid(object).extent();
   return L > 0 && std::isfinite(L) ? L : 1.0;
+}
+
+// The centre of mass in the gripper frame at t = 0 (a prism's polygon need
+// not be centred on the object frame's origin).
+Eigen::Vector3d CentreOfMass(const ObjectSpec& object) {
+  if (object.shape != ObjectShape::kPrism) return object.pose.position;
+  return object.pose.position +
+         RotationFromRpy(object.pose.rpy) * geometry::Solid(object).centroid_O();
 }
 
 // Checks one candidate plane normal; returns the first failed condition
 // (empty when the scene is planar about p) and counts passed conditions.
 std::string CheckPlane(const Scene& scene, const Eigen::Vector3d& p, int& passed) {
   const double L = LengthScale(scene.object);
-  const Eigen::Vector3d c = scene.object.pose.position;
+  const Eigen::Vector3d c = CentreOfMass(scene.object);
   const Eigen::Matrix3d R = RotationFromRpy(scene.object.pose.rpy);
   const Eigen::Matrix3d I = R * ObjectInertia(scene.object) * R.transpose();
   passed = 0;
@@ -230,10 +258,16 @@ struct Point {
   int lambda = -1;  // LCP index of λ_n; -1 for a point finger (λ_n = grip force)
   int beta0 = -1;   // first friction index (edges of them); -1 without friction
   int xi = -1;      // LCP index of ξ
-  double gap = 0;   // pusher only (m)
+  double gap = 0;   // fixed: pusher only, integrated; tracked: from the geometry (m)
   // This step's geometry.
   Eigen::Vector3d p = Eigen::Vector3d::Zero();
   Eigen::Vector3d body_velocity = Eigen::Vector3d::Zero();  // of the contacting body (pusher)
+  // Tracked geometry only: whether the point has rows this step (a finger
+  // point whose closing line misses the object has none), its normal into
+  // the object and friction directions.
+  bool active = true;
+  Eigen::Vector3d n = Eigen::Vector3d::UnitX();
+  std::vector<Eigen::Vector3d> edges;
 };
 
 struct Contact {
@@ -244,9 +278,11 @@ struct Contact {
   int y_plus = -1, y_minus = -1;
   double pad = 0;  // finger: how far its pad has followed the object along n (m)
   std::vector<Point> points;
-  Eigen::Vector3d normal = Eigen::Vector3d::UnitX();
+  Eigen::Vector3d normal = Eigen::Vector3d::UnitX();  // fixed: the normal; tracked: closing
   Eigen::Vector3d position = Eigen::Vector3d::Zero();
-  std::vector<Eigen::Vector3d> edges;  // friction directions this step
+  std::vector<Eigen::Vector3d> edges;  // friction directions this step (fixed geometry)
+  bool touching = true;                // tracked: some point within the gap tolerance
+  bool any_active = true;              // tracked: some point has rows
 };
 
 }  // namespace
@@ -284,12 +320,27 @@ struct ContactModel::Impl {
   Eigen::Vector3d pusher_force = Eigen::Vector3d::Zero();
   std::vector<char> basis;
 
+  // Tracked geometry.
+  bool tracked = false;
+  std::unique_ptr<geometry::Solid> solid;
+  Eigen::Vector3d com_O = Eigen::Vector3d::Zero();  // centre of mass in the object frame
+  double gap_tolerance = 0;                         // m: within it a primitive touches
+  std::vector<double> cone_cos, cone_sin;           // facets' angles from t1
+
   // Work space.
-  Eigen::MatrixXd Jc, K, A;
+  Eigen::MatrixXd Jc, Jv, K, A;
   Eigen::VectorXd b;
 
   void Setup();
   void Geometry();
+  void TrackedGeometry();
+  void PlaceOnSolid(Contact& ct, Point& pt, const Eigen::Vector3d& q, const Eigen::Vector3d& base,
+                    const Eigen::Vector3d& closing, const Eigen::Vector3d& vp,
+                    const Eigen::Vector3d& wp);
+  bool PlacePatch(Contact& ct, const Eigen::Vector3d& base, const Eigen::Vector3d& closing,
+                  const Eigen::Vector3d& vp, const Eigen::Vector3d& wp);
+  void SetEdges(Point& pt);
+  Eigen::Vector3d ObjectOrigin() const { return c - q.toRotationMatrix() * com_O; }
   StepReport Step();
 };
 
@@ -314,6 +365,39 @@ const Eigen::Vector3d& ContactModel::angular_velocity() const { return impl_->w;
 const std::vector<ContactState>& ContactModel::contacts() const { return impl_->states; }
 Eigen::Vector3d ContactModel::pusher_force() const { return impl_->pusher_force; }
 double ContactModel::force_scale() const { return impl_->Fs; }
+
+GraspStatus ContactModel::Grasp(std::string* note) const {
+  const Impl& m = *impl_;
+  if (m.status != SimulationStatus::kOk) return GraspStatus::kHeld;
+  const Eigen::Matrix3d R = m.q.toRotationMatrix();
+  const Eigen::Vector3d origin = m.ObjectOrigin();
+  const double tolerance = kGraspTolerance * m.L;
+  for (size_t i = 0; i < m.contacts.size(); ++i) {
+    const Contact& ct = m.contacts[i];
+    if (ct.pusher || !ct.active) continue;
+    const std::string who = "fingers[" + std::to_string(i) + "] '" + ct.spec.name + "'";
+    if (m.tracked) {
+      if (!ct.touching && !ct.any_active) {
+        if (note) *note = who + " lost contact: its pad passed the object's edge";
+        return GraspStatus::kLost;
+      }
+      continue;
+    }
+    for (const Point& pt : ct.points) {
+      const double off = std::abs(m.solid->ClosestTo(R.transpose() * (pt.p - origin)).distance);
+      if (off > tolerance) {
+        if (note) {
+          char buf[160];
+          std::snprintf(buf, sizeof buf,
+                        " left the object: a frozen contact point is %.3g m off its surface", off);
+          *note = who + buf;
+        }
+        return GraspStatus::kLeftGeometry;
+      }
+    }
+  }
+  return GraspStatus::kHeld;
+}
 double ContactModel::velocity_scale() const { return impl_->Vs; }
 Eigen::Vector3d ContactModel::pusher_position() const {
   if (!impl_->scene.pusher) return Eigen::Vector3d::Zero();
@@ -407,11 +491,32 @@ void ContactModel::Impl::Setup() {
   mass = scene.object.mass;
   L = LengthScale(scene.object);
   inertia_body = ObjectInertia(scene.object);
-  c = scene.object.pose.position;
+  c = CentreOfMass(scene.object);
   q = Eigen::Quaterniond(RotationFromRpy(scene.object.pose.rpy));
+  tracked = opt.contacts == ContactTracking::kTracked;
+  solid = std::make_unique<geometry::Solid>(scene.object);
+  com_O = solid->centroid_O();
+  if (tracked) {
+    gap_tolerance = kGapTolerance * L;
+    for (int j = 0; j < opt.facets; ++j) {
+      const double a = 2.0 * std::numbers::pi * j / opt.facets;
+      cone_cos.push_back(std::cos(a));
+      cone_sin.push_back(std::sin(a));
+    }
+  }
 
   if (opt.reduce != Reduce::kFull) {
-    const PlaneCheck plane = FindPlane(scene);
+    PlaneCheck plane = FindPlane(scene);
+    if (plane.planar && opt.contacts == ContactTracking::kTracked &&
+        scene.object.shape == ObjectShape::kPrism) {
+      // Tracked normals come from the surface: a prism is symmetric about its
+      // mid-plane only, so only that plane keeps them in-plane.
+      const Eigen::Vector3d axis = RotationFromRpy(scene.object.pose.rpy).col(2);
+      if (std::abs(std::abs(axis.dot(plane.normal)) - 1) > 1e-9) {
+        plane.planar = false;
+        plane.reason = "a prism's tracked contacts stay in its mid-plane only";
+      }
+    }
     if (plane.planar) {
       planar = true;
       plane_normal = plane.normal;
@@ -508,7 +613,25 @@ void ContactModel::Impl::Setup() {
   info.unknowns = n;
   states.assign(contacts.size(), ContactState{});
   basis.clear();
-  Geometry();
+  if (tracked) {
+    // Fingers close on the object where it is: each pad moves along its
+    // closing direction until its first constituent point meets the surface.
+    const Eigen::Matrix3d R = q.toRotationMatrix();
+    const Eigen::Vector3d origin = ObjectOrigin();
+    for (Contact& ct : contacts) {
+      if (ct.pusher || ct.known_normal >= 0) continue;  // point pads re-seat every step
+      double first = std::numeric_limits<double>::infinity();
+      for (const Point& pt : ct.points) {
+        const auto e = solid->EntryOf(R.transpose() * (ct.spec.position + pt.offset0 - origin),
+                                      R.transpose() * ct.spec.normal, gap_tolerance);
+        if (e) first = std::min(first, e->s);
+      }
+      if (std::isfinite(first)) ct.pad = first;
+    }
+    TrackedGeometry();
+  } else {
+    Geometry();
+  }
 }
 
 // Contact geometry at time t: fingers are fixed in the gripper frame but for
@@ -545,6 +668,170 @@ void ContactModel::Impl::Geometry() {
   }
 }
 
+// Friction directions of a tracked point: the docs/scene.md tangent basis of its
+// current normal (or the in-plane tangents of the planar reduction).
+void ContactModel::Impl::SetEdges(Point& pt) {
+  if (edges_per_point == 0) return;
+  if (planar) {
+    // Normals stay in the plane of a planar scene (the solid is symmetric
+    // about it, Setup()); a degenerate cross product gives no friction
+    // rather than NaN.
+    const Eigen::Vector3d cr = plane_normal.cross(pt.n);
+    const Eigen::Vector3d tau =
+        cr.norm() > 1e-12 ? Eigen::Vector3d(cr.normalized()) : Eigen::Vector3d::Zero();
+    pt.edges.assign({tau, -tau});
+    return;
+  }
+  const Eigen::Vector3d t1 = FirstTangent(pt.n);
+  const Eigen::Vector3d t2 = pt.n.cross(t1);
+  pt.edges.resize(cone_cos.size());
+  for (size_t j = 0; j < cone_cos.size(); ++j) pt.edges[j] = cone_cos[j] * t1 + cone_sin[j] * t2;
+}
+
+// One constituent point of a primitive at q (gripper frame) against the
+// object. A finger's point touches only where its closing line meets the
+// object (past an edge it has nothing to press on); the pusher's point meets
+// the closest surface point, so it may push an edge or a corner. A point
+// contact with a radius is a sphere: its centre is q moved back along the
+// closing direction by the radius.
+void ContactModel::Impl::PlaceOnSolid(Contact& ct, Point& pt, const Eigen::Vector3d& q_in,
+                                      const Eigen::Vector3d& base, const Eigen::Vector3d& closing,
+                                      const Eigen::Vector3d& vp, const Eigen::Vector3d& wp) {
+  const Eigen::Matrix3d R = q.toRotationMatrix();
+  const Eigen::Vector3d origin = ObjectOrigin();
+  const double r = ct.spec.type == ContactType::kPoint ? ct.spec.radius : 0.0;
+  const Eigen::Vector3d centre = q_in - r * closing;
+  const Eigen::Vector3d centre_O = R.transpose() * (centre - origin);
+  pt.active = true;
+  if (!ct.pusher) {
+    const auto e = solid->EntryOf(centre_O, R.transpose() * closing, gap_tolerance + r);
+    if (!e) {
+      pt.active = false;
+      pt.gap = std::numeric_limits<double>::infinity();
+      pt.p = q_in;
+      return;
+    }
+    if (r == 0) {
+      pt.p = origin + R * e->point_O;
+      pt.n = -(R * e->normal_O);
+      pt.gap = e->s * closing.dot(pt.n);
+      SetEdges(pt);
+      return;
+    }
+  }
+  const geometry::Closest cl = solid->ClosestTo(centre_O);
+  pt.p = origin + R * cl.point_O;
+  pt.n = -(R * cl.normal_O);
+  pt.gap = cl.distance - r;
+  const Eigen::Vector3d body_point = centre + r * pt.n;
+  pt.body_velocity = vp + wp.cross(body_point - base);
+  SetEdges(pt);
+}
+
+// A flat pad (patch) whose first feature towards it is an edge or a vertex
+// of the object lying over the disk touches along that edge's chord (a
+// line) or at that vertex (a point): its constituent points move there, with
+// the disk's normal. Returns false when the pad rests on a face (or its rim
+// meets the object): then the ring of constituent points stays.
+bool ContactModel::Impl::PlacePatch(Contact& ct, const Eigen::Vector3d& base,
+                                    const Eigen::Vector3d& closing, const Eigen::Vector3d& vp,
+                                    const Eigen::Vector3d& wp) {
+  const Eigen::Matrix3d R = q.toRotationMatrix();
+  const Eigen::Vector3d origin = ObjectOrigin();
+  const geometry::Feature f = solid->Support(R.transpose() * closing, gap_tolerance);
+  if (f.kind == geometry::Feature::Kind::kFace) return false;
+  const double radius = ct.spec.radius;
+  auto in_plane = [&](const Eigen::Vector3d& x) {
+    const Eigen::Vector3d d = x - base;
+    return Eigen::Vector3d(d - closing.dot(d) * closing);
+  };
+  std::vector<Eigen::Vector3d> at;  // contact points on the object (gripper frame)
+  if (f.kind == geometry::Feature::Kind::kEdge) {
+    const Eigen::Vector3d a = origin + R * f.points_O[0];
+    const Eigen::Vector3d ab = R * (f.points_O[1] - f.points_O[0]);
+    const Eigen::Vector3d pa = in_plane(a), pab = ab - closing.dot(ab) * closing;
+    const double A2 = pab.squaredNorm(), B2 = 2 * pa.dot(pab),
+                 C2 = pa.squaredNorm() - radius * radius;
+    const double disc = B2 * B2 - 4 * A2 * C2;
+    if (!(A2 > 1e-24 * L * L) || disc <= 0) return false;
+    const double root = std::sqrt(disc);
+    const double u0 = std::max(0.0, (-B2 - root) / (2 * A2));
+    const double u1 = std::min(1.0, (-B2 + root) / (2 * A2));
+    if (!((u1 - u0) * ab.norm() > 1e-6 * radius)) return false;
+    const size_t k = ct.points.size();
+    for (size_t j = 0; j < k; ++j) {
+      const double u = k == 1 ? (u0 + u1) / 2 : u0 + (u1 - u0) * static_cast<double>(j) / (k - 1);
+      at.push_back(a + u * ab);
+    }
+  } else {
+    const Eigen::Vector3d v = origin + R * f.points_O[0];
+    if (in_plane(v).norm() > radius) return false;
+    at.push_back(v);
+  }
+  for (size_t j = 0; j < ct.points.size(); ++j) {
+    Point& pt = ct.points[j];
+    if (j >= at.size()) {
+      pt.active = false;
+      pt.gap = std::numeric_limits<double>::infinity();
+      pt.p = base;
+      continue;
+    }
+    pt.active = true;
+    pt.p = at[j];
+    pt.n = closing;
+    pt.gap = closing.dot(at[j] - base);
+    pt.body_velocity = vp + wp.cross(at[j] - pt.gap * closing - base);
+    SetEdges(pt);
+  }
+  return true;
+}
+
+// Contact geometry at time t from the object's pose: each primitive sits
+// where the hand (fingers: at their pads' travel along the closing
+// direction) or the pusher's motion puts it; its constituent points meet the
+// object's surface (PlaceOnSolid, PlacePatch). Point fingers are
+// force-controlled pads that stay on the surface: they are re-seated along
+// their closing direction every step.
+void ContactModel::Impl::TrackedGeometry() {
+  for (Contact& ct : contacts) {
+    Eigen::Matrix3d Rp = Eigen::Matrix3d::Identity();
+    Eigen::Vector3d vp = Eigen::Vector3d::Zero(), wp = Eigen::Vector3d::Zero();
+    Eigen::Vector3d base = ct.spec.position + ct.pad * ct.spec.normal;
+    if (ct.pusher) {
+      vp = scene.pusher->motion.velocity;
+      wp = scene.pusher->motion.angular_velocity;
+      base = ct.spec.position + vp * t;
+      const double a = wp.norm() * t;
+      if (a > 0) Rp = Eigen::AngleAxisd(a, wp.normalized()).toRotationMatrix();
+    }
+    const Eigen::Vector3d closing = Rp * ct.spec.normal;
+    ct.normal = closing;
+    ct.position = base;
+    const bool patch = ct.spec.type == ContactType::kPatch && ct.points.size() > 1;
+    if (!(patch && PlacePatch(ct, base, closing, vp, wp))) {
+      for (Point& pt : ct.points)
+        PlaceOnSolid(ct, pt, base + Rp * pt.offset0, base, closing, vp, wp);
+    }
+    if (!ct.pusher && ct.known_normal >= 0 && ct.points[0].active) {
+      // A point pad keeps pressing: it travels along its closing direction
+      // onto the surface (first order in the gap; the gap is then zero).
+      Point& pt = ct.points[0];
+      const double along = closing.dot(pt.n);
+      if (along > 1e-6) {
+        ct.pad += pt.gap / along;
+        ct.position = ct.spec.position + ct.pad * ct.spec.normal;
+        pt.gap = 0;
+      }
+    }
+    ct.any_active = false;
+    ct.touching = false;
+    for (const Point& pt : ct.points) {
+      ct.any_active = ct.any_active || pt.active;
+      ct.touching = ct.touching || (pt.active && pt.gap <= gap_tolerance);
+    }
+  }
+}
+
 StepReport ContactModel::Impl::Step() {
   StepReport rep;
   if (status != SimulationStatus::kOk) {
@@ -552,7 +839,20 @@ StepReport ContactModel::Impl::Step() {
     rep.error = error;
     return rep;
   }
-  Geometry();
+  if (tracked) {
+    TrackedGeometry();
+  } else {
+    Geometry();
+  }
+  // Per point: its normal and friction directions (tracked: its own; fixed:
+  // the contact's), and whether it has rows this step.
+  auto normal_of = [&](const Contact& ct, const Point& pt) -> const Eigen::Vector3d& {
+    return tracked ? pt.n : ct.normal;
+  };
+  auto edge_of = [&](const Contact& ct, const Point& pt, int e) -> const Eigen::Vector3d& {
+    return tracked ? pt.edges[static_cast<size_t>(e)] : ct.edges[static_cast<size_t>(e)];
+  };
+  auto live = [&](const Point& pt) { return !tracked || pt.active; };
   const Eigen::Matrix3d R = q.toRotationMatrix();
   const Eigen::Matrix3d Iw = R * inertia_body * R.transpose();
 
@@ -574,8 +874,8 @@ StepReport ContactModel::Impl::Step() {
   Eigen::Matrix<double, 6, 1> known = Eigen::Matrix<double, 6, 1>::Zero();
   known.head<3>() = mass * scene.gravity;
   for (const Contact& ct : contacts) {
-    if (ct.known_normal > 0) {
-      const Eigen::Vector3d f = ct.known_normal * ct.normal;
+    if (ct.known_normal > 0 && live(ct.points[0])) {
+      const Eigen::Vector3d f = ct.known_normal * normal_of(ct, ct.points[0]);
       known.head<3>() += f;
       known.tail<3>() += (ct.points[0].p - c).cross(f);
     }
@@ -584,12 +884,22 @@ StepReport ContactModel::Impl::Step() {
   const SmallVector vfree = vr + dt * Minv * Q;
 
   // Columns of the grasp map for every force unknown, in reduced coordinates.
+  // Velocity rows use Jv: the same directions, except that a tracked point
+  // finger's pad follows the object along its closing direction c, so its
+  // friction rows see d' = d - (d·c)/(n·c) n (the pad's normal following
+  // removed from the relative velocity).
   Jc.resize(nd, nf);
+  if (tracked) Jv.resize(nd, nf);
   for (int k = 0; k < nf; ++k) {
     const Contact& ct = contacts[static_cast<size_t>(force_point[static_cast<size_t>(k)])];
     const Point& pt = ct.points[static_cast<size_t>(force_point_sub[static_cast<size_t>(k)])];
     const int e = force_dir[static_cast<size_t>(k)];
-    const Eigen::Vector3d d = e < 0 ? ct.normal : ct.edges[static_cast<size_t>(e)];
+    if (!live(pt)) {
+      Jc.col(k).setZero();
+      Jv.col(k).setZero();
+      continue;
+    }
+    const Eigen::Vector3d d = e < 0 ? normal_of(ct, pt) : edge_of(ct, pt, e);
     Eigen::Matrix<double, 6, 1> col;
     col << d, (pt.p - c).cross(d);
     if (planar) {
@@ -597,42 +907,78 @@ StepReport ContactModel::Impl::Step() {
     } else {
       Jc.col(k) = col;
     }
+    if (tracked) {
+      Jv.col(k) = Jc.col(k);
+      if (e >= 0 && ct.known_normal >= 0 && !ct.pusher) {
+        const double along = pt.n.dot(ct.normal);
+        if (along > 1e-6) {
+          const Eigen::Vector3d dv = d - (d.dot(ct.normal) / along) * pt.n;
+          col << dv, (pt.p - c).cross(dv);
+          if (planar) {
+            Jv.col(k) = Pt3 * col;
+          } else {
+            Jv.col(k) = col;
+          }
+        }
+      }
+    }
   }
+  const Eigen::MatrixXd& Jrows = tracked ? Jv : Jc;
   K.noalias() = Minv * Jc;
 
   // Nondimensional LCP: force unknowns scale with Fs, velocity unknowns with
-  // Vs = Fs dt / m; velocity rows are divided by Vs, force rows by Fs.
+  // Vs = Fs dt / m; velocity rows are divided by Vs, force rows by Fs. A
+  // tracked point without rows this step keeps its unknowns at zero (a unit
+  // diagonal and b = 1), so the LCP keeps its size.
   A.setZero(n, n);
   b.setZero(n);
-  A.topLeftCorner(nf, nf).noalias() = mass * Jc.transpose() * K;
-  b.head(nf).noalias() = Jc.transpose() * vfree;
+  A.topLeftCorner(nf, nf).noalias() = mass * Jrows.transpose() * K;
+  b.head(nf).noalias() = Jrows.transpose() * vfree;
   for (int k = 0; k < nf; ++k) {
     const Contact& ct = contacts[static_cast<size_t>(force_point[static_cast<size_t>(k)])];
     const Point& pt = ct.points[static_cast<size_t>(force_point_sub[static_cast<size_t>(k)])];
     const int e = force_dir[static_cast<size_t>(k)];
-    const Eigen::Vector3d d = e < 0 ? ct.normal : ct.edges[static_cast<size_t>(e)];
-    double bk = b[k] - d.dot(pt.body_velocity);
-    if (e < 0) {
-      bk += pt.gap / dt;
-      if (ct.y_plus >= 0) {
-        A(k, ct.y_plus) = -1;
-        A(k, ct.y_minus) = 1;
-      }
-    } else {
-      A(k, pt.xi) = 1;
+    if (!live(pt)) {
+      A(k, k) = 1;
+      b[k] = 1;
+      continue;
     }
+    const Eigen::Vector3d d = e < 0 ? normal_of(ct, pt) : edge_of(ct, pt, e);
+    // The pad's own velocity along its closing direction (fixed: d·n = 1 or 0).
+    const double pad_along = tracked ? d.dot(ct.normal) : (e < 0 ? 1.0 : 0.0);
+    double bk = b[k] - d.dot(pt.body_velocity);
+    if (e < 0) bk += pt.gap / dt;
+    if (ct.y_plus >= 0 && pad_along != 0) {
+      A(k, ct.y_plus) = -pad_along;
+      A(k, ct.y_minus) = pad_along;
+    }
+    if (e >= 0) A(k, pt.xi) = 1;
     b[k] = bk / Vs;
   }
   for (const Contact& ct : contacts) {
     if (!ct.active) continue;
     for (const Point& pt : ct.points) {
       if (pt.xi < 0) continue;
+      if (!live(pt)) {
+        A(pt.xi, pt.xi) = 1;
+        b[pt.xi] = 1;
+        continue;
+      }
       if (pt.lambda >= 0) A(pt.xi, pt.lambda) = ct.spec.mu;
       for (int e = 0; e < edges_per_point; ++e) A(pt.xi, pt.beta0 + e) = -1;
       b[pt.xi] = ct.known_normal > 0 ? ct.spec.mu * ct.known_normal / Fs : 0.0;
     }
     if (ct.y_plus >= 0) {
+      if (tracked && !ct.any_active) {
+        // The pad has passed the object's edge: it presses on nothing.
+        A(ct.y_plus, ct.y_plus) = 1;
+        A(ct.y_minus, ct.y_minus) = 1;
+        b[ct.y_plus] = 1;
+        b[ct.y_minus] = 1;
+        continue;
+      }
       for (const Point& pt : ct.points) {
+        if (!live(pt)) continue;
         A(ct.y_plus, pt.lambda) = 1;
         A(ct.y_minus, pt.lambda) = -1;
       }
@@ -652,6 +998,17 @@ StepReport ContactModel::Impl::Step() {
     return v_new + w_new.cross(p - c);
   };
   auto zv = [&](int i) { return i >= 0 ? sol.z[i] * (i < nf ? Fs : Vs) : 0.0; };
+  // Velocity of the body a point presses on: the pusher's, or the pad's
+  // along its closing direction (a tracked point pad follows the object).
+  auto body_velocity = [&](const Contact& ct, const Point& pt) -> Eigen::Vector3d {
+    if (ct.pusher) return pt.body_velocity;
+    double vf = zv(ct.y_plus) - zv(ct.y_minus);
+    if (tracked && ct.known_normal >= 0) {
+      const double along = pt.n.dot(ct.normal);
+      vf = along > 1e-6 ? pt.n.dot(object_velocity(pt.p)) / along : 0.0;
+    }
+    return vf * ct.normal;
+  };
   if (lcp_observer) lcp_observer(A, b);
   int next_covering = 0;
   for (int attempt = 0;; ++attempt) {
@@ -702,29 +1059,27 @@ StepReport ContactModel::Impl::Step() {
     };
     for (Contact& ct : contacts) {
       if (!ct.active) continue;
-      const double vf = zv(ct.y_plus) - zv(ct.y_minus);
       double sum = 0;
       for (Point& pt : ct.points) {
-        const Eigen::Vector3d urel =
-            object_velocity(pt.p) -
-            (ct.pusher ? pt.body_velocity : Eigen::Vector3d(vf * ct.normal));
+        if (!live(pt)) continue;
+        const Eigen::Vector3d urel = object_velocity(pt.p) - body_velocity(ct, pt);
         const double lam = pt.lambda >= 0 ? zv(pt.lambda) : ct.known_normal;
         sum += lam;
-        if (pt.lambda >= 0) comp(lam / Fs, (ct.normal.dot(urel) + pt.gap / dt) / Vs);
+        if (pt.lambda >= 0) comp(lam / Fs, (normal_of(ct, pt).dot(urel) + pt.gap / dt) / Vs);
         if (pt.beta0 >= 0) {
           const double xi = zv(pt.xi);
           double bsum = 0;
           for (int e = 0; e < edges_per_point; ++e) {
             const double be = zv(pt.beta0 + e);
             bsum += be;
-            comp(be / Fs, (xi + ct.edges[static_cast<size_t>(e)].dot(urel)) / Vs);
+            comp(be / Fs, (xi + edge_of(ct, pt, e).dot(urel)) / Vs);
           }
           const double slack = ct.spec.mu * lam - bsum;
           comp(xi / Vs, slack / Fs);
           res.cone = std::max(res.cone, -slack / Fs);
         }
       }
-      if (ct.y_plus >= 0) {
+      if (ct.y_plus >= 0 && (!tracked || ct.any_active)) {
         const double err = (sum - scene.grip_force) / Fs;
         res.force_balance = std::max(res.force_balance, std::abs(err));
         comp(zv(ct.y_plus) / Vs, err);
@@ -748,44 +1103,68 @@ StepReport ContactModel::Impl::Step() {
 
   // Contact states (on the object, gripper frame) and modes.
   pusher_force.setZero();
+  const Eigen::Vector3d origin = ObjectOrigin();
   for (size_t ci = 0; ci < contacts.size(); ++ci) {
     Contact& ct = contacts[ci];
     ContactState st;
+    Eigen::Vector3d force = Eigen::Vector3d::Zero();
+    Eigen::Vector3d weighted = Eigen::Vector3d::Zero(), plain = Eigen::Vector3d::Zero();
+    int n_plain = 0;
     if (ct.active) {
-      const double vf = zv(ct.y_plus) - zv(ct.y_minus);
       bool sliding = false;
       for (Point& pt : ct.points) {
+        if (!live(pt)) continue;
         const double lam = pt.lambda >= 0 ? zv(pt.lambda) : ct.known_normal;
+        const Eigen::Vector3d& nrm = normal_of(ct, pt);
         Eigen::Vector3d ft = Eigen::Vector3d::Zero();
         if (pt.beta0 >= 0) {
-          for (int e = 0; e < edges_per_point; ++e) {
-            ft += zv(pt.beta0 + e) * ct.edges[static_cast<size_t>(e)];
-          }
+          for (int e = 0; e < edges_per_point; ++e) ft += zv(pt.beta0 + e) * edge_of(ct, pt, e);
         }
-        const Eigen::Vector3d fp = lam * ct.normal + ft;
+        const Eigen::Vector3d fp = lam * nrm + ft;
+        force += fp;
         st.normal_force += lam;
         st.tangential_force += ft;
         st.torque += (pt.p - ct.position).cross(fp);
-        const Eigen::Vector3d urel =
-            object_velocity(pt.p) -
-            (ct.pusher ? pt.body_velocity : Eigen::Vector3d(vf * ct.normal));
-        const Eigen::Vector3d ut = urel - ct.normal.dot(urel) * ct.normal;
+        const Eigen::Vector3d urel = object_velocity(pt.p) - body_velocity(ct, pt);
+        const Eigen::Vector3d ut = urel - nrm.dot(urel) * nrm;
         if (lam > 1e-9 * Fs && ut.norm() > 1e-9 * Vs) sliding = true;
+        const bool close = pt.gap <= (tracked ? gap_tolerance : 0.0) || lam > 1e-9 * Fs;
+        if (close) {
+          ++st.touching_points;
+          weighted += lam * pt.p;
+          plain += pt.p;
+          ++n_plain;
+        }
       }
       st.mode = st.normal_force <= 1e-9 * Fs
                     ? ContactMode::kSeparate
                     : (sliding ? ContactMode::kSlide : ContactMode::kStick);
     }
-    if (ct.pusher) pusher_force = st.normal_force * ct.normal + st.tangential_force;
+    st.touching = st.touching_points > 0;
+    // Where it touches, in the object frame: the force-weighted centre of its
+    // touching points (their plain centre without force; where it is, if none).
+    Eigen::Vector3d at_G = ct.position;
+    if (st.normal_force > 1e-9 * Fs) {
+      at_G = weighted / st.normal_force;
+    } else if (n_plain > 0) {
+      at_G = plain / n_plain;
+    }
+    st.point = R.transpose() * (at_G - origin);
+    if (ct.pusher) pusher_force = force;
     states[ci] = st;
   }
 
   // Integrate (semi-implicit Euler on the new twist). Pressing fingers'
-  // pads follow the object along their normals; the pusher tracks its gaps.
+  // pads follow the object along their normals; the pusher tracks its gaps
+  // (fixed geometry; tracked geometry measures them every step).
   for (Contact& ct : contacts) {
     if (ct.pusher) {
-      for (Point& pt : ct.points)
-        pt.gap += dt * ct.normal.dot(object_velocity(pt.p) - pt.body_velocity);
+      if (!tracked) {
+        for (Point& pt : ct.points)
+          pt.gap += dt * ct.normal.dot(object_velocity(pt.p) - pt.body_velocity);
+      }
+    } else if (tracked && ct.known_normal >= 0) {
+      // A point pad is re-seated on the surface by TrackedGeometry().
     } else if (ct.active) {
       const double vf = ct.y_plus >= 0 ? zv(ct.y_plus) - zv(ct.y_minus)
                                        : ct.normal.dot(object_velocity(ct.points[0].p));

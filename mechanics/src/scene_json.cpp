@@ -11,6 +11,7 @@
 #include "arena/mechanics/scene_json.hpp"
 
 #include "arena/mechanics/json_path.hpp"
+#include "geometry.hpp"
 
 #include <algorithm>
 #include <array>
@@ -65,13 +66,32 @@ const char* ToString(ObjectShape shape) {
       return "box";
     case ObjectShape::kCylinder:
       return "cylinder";
+    case ObjectShape::kPrism:
+      return "prism";
   }
   return "?";
+}
+
+const char* ToString(ContactTracking tracking) {
+  switch (tracking) {
+    case ContactTracking::kTracked:
+      return "tracked";
+    case ContactTracking::kFixed:
+      return "fixed";
+  }
+  return "?";
+}
+
+std::optional<ContactTracking> ContactTrackingFromString(std::string_view text) {
+  if (text == "tracked") return ContactTracking::kTracked;
+  if (text == "fixed") return ContactTracking::kFixed;
+  return std::nullopt;
 }
 
 std::optional<ObjectShape> ObjectShapeFromString(std::string_view text) {
   if (text == "box") return ObjectShape::kBox;
   if (text == "cylinder") return ObjectShape::kCylinder;
+  if (text == "prism") return ObjectShape::kPrism;
   return std::nullopt;
 }
 
@@ -91,6 +111,13 @@ std::optional<Reduce> ReduceFromString(std::string_view text) {
 
 double ObjectExtent(const ObjectSpec& object) {
   if (object.shape == ObjectShape::kBox) return object.size.maxCoeff();
+  if (object.shape == ObjectShape::kPrism) {
+    double diameter = 0;
+    for (const auto& a : object.polygon) {
+      for (const auto& b : object.polygon) diameter = std::max(diameter, (a - b).norm());
+    }
+    return std::max(diameter, object.height);
+  }
   return std::max(2 * object.radius, object.height);
 }
 
@@ -327,20 +354,39 @@ Pose ReadPose(const json& v, const std::string& path) {
 }
 
 ObjectSpec ReadObject(const json& v, const std::string& path) {
-  Obj o(v, path, {"shape", "size", "radius", "height", "mass", "inertia", "pose"});
+  Obj o(v, path, {"shape", "size", "radius", "height", "polygon", "mass", "inertia", "pose"});
   ObjectSpec object;
   const std::string shape = String(o.Require("shape"), o.At("shape"));
   const auto parsed = ObjectShapeFromString(shape);
-  if (!parsed)
-    throw SceneError(o.At("shape"), "must be \"box\" or \"cylinder\", got " + Quote(shape));
+  if (!parsed) {
+    throw SceneError(o.At("shape"),
+                     "must be \"box\", \"cylinder\" or \"prism\", got " + Quote(shape));
+  }
   object.shape = *parsed;
+  if (object.shape != ObjectShape::kPrism) o.Forbid("polygon", "only for shape \"prism\"");
   if (object.shape == ObjectShape::kBox) {
     o.Forbid("radius", "only for shape \"cylinder\" (a box has size)");
-    o.Forbid("height", "only for shape \"cylinder\" (a box has size)");
+    o.Forbid("height", "only for shapes \"cylinder\" and \"prism\" (a box has size)");
     object.size = Vec3(o.Require("size"), o.At("size"));
-  } else {
+  } else if (object.shape == ObjectShape::kCylinder) {
     o.Forbid("size", "only for shape \"box\" (a cylinder has radius and height)");
     object.radius = Number(o.Require("radius"), o.At("radius"));
+    object.height = Number(o.Require("height"), o.At("height"));
+  } else {
+    o.Forbid("size", "only for shape \"box\" (a prism has polygon and height)");
+    o.Forbid("radius", "only for shape \"cylinder\" (a prism has polygon and height)");
+    const json& poly = o.Require("polygon");
+    const std::string ppath = o.At("polygon");
+    if (!poly.is_array()) {
+      throw SceneError(ppath, "must be an array of [x, y] vertices, got " + TypeName(poly));
+    }
+    for (size_t i = 0; i < poly.size(); ++i) {
+      const std::string vpath = Index(ppath, i);
+      if (!poly[i].is_array() || poly[i].size() != 2)
+        throw SceneError(vpath, "must be an array of 2 numbers [x, y]");
+      object.polygon.emplace_back(Number(poly[i][0], Index(vpath, 0)),
+                                  Number(poly[i][1], Index(vpath, 1)));
+    }
     object.height = Number(o.Require("height"), o.At("height"));
   }
   object.mass = Number(o.Require("mass"), o.At("mass"));
@@ -373,7 +419,8 @@ void ReadContact(const Obj& o, ContactSpec* contact) {
     o.Forbid("axis", "only for type \"line\"");
     o.Forbid("length", "only for type \"line\"");
   }
-  if (contact->type != ContactType::kPatch) o.Forbid("radius", "only for type \"patch\"");
+  if (contact->type == ContactType::kLine)
+    o.Forbid("radius", "only for type \"patch\" (and \"point\": a sphere)");
   contact->position = Vec3(o.Require("position"), o.At("position"));
   contact->normal = Direction(o.Require("normal"), o.At("normal"));
   contact->mu = Number(o.Require("mu"), o.At("mu"));
@@ -391,6 +438,9 @@ void ReadContact(const Obj& o, ContactSpec* contact) {
   }
   if (contact->type == ContactType::kPatch) {
     contact->radius = Number(o.Require("radius"), o.At("radius"));
+  }
+  if (contact->type == ContactType::kPoint) {
+    if (const json* r = o.Find("radius")) contact->radius = Number(*r, o.At("radius"));
   }
 }
 
@@ -447,7 +497,7 @@ PusherSpec ReadPusher(const json& v, const std::string& path) {
 }
 
 ModelOptions ReadModel(const json& v, const std::string& path) {
-  Obj o(v, path, {"facets", "points", "dt", "reduce"});
+  Obj o(v, path, {"facets", "points", "dt", "reduce", "contacts"});
   ModelOptions model;
   if (const json* f = o.Find("facets")) model.facets = Integer(*f, o.At("facets"), 3, kMaxFacets);
   if (const json* p = o.Find("points")) model.points = Integer(*p, o.At("points"), 2, kMaxPoints);
@@ -460,6 +510,14 @@ ModelOptions ReadModel(const json& v, const std::string& path) {
                        "must be \"auto\", \"full\" or \"planar\", got " + Quote(text));
     }
     model.reduce = *parsed;
+  }
+  if (const json* c = o.Find("contacts")) {
+    const std::string text = String(*c, o.At("contacts"));
+    const auto parsed = ContactTrackingFromString(text);
+    if (!parsed) {
+      throw SceneError(o.At("contacts"), "must be \"tracked\" or \"fixed\", got " + Quote(text));
+    }
+    model.contacts = *parsed;
   }
   return model;
 }
@@ -511,12 +569,15 @@ double DistanceToSurface(const ObjectSpec& object, const Eigen::Vector3d& p_G) {
     const Eigen::Vector3d q = p_O.cwiseAbs() - object.size / 2;
     return std::abs(box_sdf(q));
   }
+  if (object.shape == ObjectShape::kPrism) {
+    return std::abs(geometry::Solid(object).ClosestTo(p_O).distance);
+  }
   Eigen::Vector2d q(std::hypot(p_O.x(), p_O.y()) - object.radius,
                     std::abs(p_O.z()) - object.height / 2);
   return std::abs(box_sdf(q));
 }
 
-// SCENE.md tangent basis: t1 from the first of z, y, x with |n.axis| < 0.9.
+// docs/scene.md tangent basis: t1 from the first of z, y, x with |n.axis| < 0.9.
 Eigen::Vector3d FirstTangent(const Eigen::Vector3d& n) {
   for (const Eigen::Vector3d& a : {Eigen::Vector3d::UnitZ().eval(), Eigen::Vector3d::UnitY().eval(),
                                    Eigen::Vector3d::UnitX().eval()}) {
@@ -568,10 +629,22 @@ void ValidateContact(const ContactSpec& c, const std::string& path, const Scene&
                                   " m = 1% of the object's extent)");
     }
   };
+  // Contacts lie on the object's surface at its pose in both contact modes
+  // (SeatFingers() closes planned fingers onto an object at another pose).
+  const Eigen::Matrix3d R_GO = RotationFromRpy(scene.object.pose.rpy);
+  const geometry::Solid solid(scene.object);
+  if (c.type == ContactType::kPoint) {
+    RequireNonNegative(c.radius, Join(path, "radius"));
+    if (c.radius > extent) {
+      throw SceneError(Join(path, "radius"), "must not exceed the object's extent " + Num(extent) +
+                                                 " m, got " + Num(c.radius));
+    }
+  }
   on_surface(c.position, Join(path, "position"), "the contact point");
   // An inward normal of a convex body at a surface point has the centre on
   // its positive side.
-  if (c.normal.dot(scene.object.pose.position - c.position) <= 0) {
+  const Eigen::Vector3d centre = scene.object.pose.position + R_GO * solid.centroid_O();
+  if (c.normal.dot(centre - c.position) <= 0) {
     throw SceneError(Join(path, "normal"), "must point into the object (towards its centre)");
   }
   if (c.type == ContactType::kLine) {
@@ -617,6 +690,15 @@ void ValidateScene(const Scene& scene) {
   if (object.shape == ObjectShape::kBox) {
     for (int i = 0; i < 3; ++i)
       RequirePositive(object.size[i], Index("object.size", static_cast<size_t>(i)));
+  } else if (object.shape == ObjectShape::kPrism) {
+    if (object.polygon.size() > kMaxPolygonVertices) {
+      throw SceneError("object.polygon",
+                       "must have at most " + std::to_string(kMaxPolygonVertices) + " vertices");
+    }
+    if (const auto problem = geometry::CheckPolygon(object.polygon)) {
+      throw SceneError(Index("object.polygon", problem->vertex), problem->reason);
+    }
+    RequirePositive(object.height, "object.height");
   } else {
     RequirePositive(object.radius, "object.radius");
     RequirePositive(object.height, "object.height");
@@ -853,11 +935,48 @@ nlohmann::ordered_json ContactJson(const ContactSpec& c, bool with_name) {
     j["axis"] = Vec(c.axis);
     j["length"] = c.length;
   }
-  if (c.type == ContactType::kPatch) j["radius"] = c.radius;
+  if (c.type == ContactType::kPatch || (c.type == ContactType::kPoint && c.radius != 0))
+    j["radius"] = c.radius;
   j["mu"] = c.mu;
   return j;
 }
 }  // namespace
+
+void SeatFingers(Scene* scene) {
+  const ObjectSpec& object = scene->object;
+  const Eigen::Matrix3d R_GO = RotationFromRpy(object.pose.rpy);
+  const geometry::Solid solid(object);
+  const double tolerance = 1e-9 * ObjectExtent(object);
+  for (size_t i = 0; i < scene->fingers.size(); ++i) {
+    ContactSpec& f = scene->fingers[i];
+    const Eigen::Vector3d n = f.normal.normalized();
+    // The pad's constituent points; the one that meets the object first
+    // sets how far the pad closes.
+    std::vector<Eigen::Vector3d> at = {f.position};
+    if (f.type == ContactType::kLine) {
+      at = {f.position - f.length / 2 * f.axis, f.position + f.length / 2 * f.axis};
+    }
+    double first = std::numeric_limits<double>::infinity();
+    for (const auto& p : at) {
+      const auto e = solid.EntryOf(R_GO.transpose() * (p - object.pose.position),
+                                   R_GO.transpose() * n, tolerance);
+      if (e) first = std::min(first, e->s);
+    }
+    if (!std::isfinite(first)) {
+      throw SceneError(Join(Index("fingers", i), "position"),
+                       "closing along its normal, the finger misses the object at its pose");
+    }
+    f.position += first * n;
+  }
+  // A pusher cannot start inside the object: it stops where it touches.
+  if (scene->pusher) {
+    PusherSpec& p = *scene->pusher;
+    const Eigen::Vector3d n = p.normal.normalized();
+    const auto e = solid.EntryOf(R_GO.transpose() * (p.position - object.pose.position),
+                                 R_GO.transpose() * n, tolerance);
+    if (e && e->s < 0) p.position += e->s * n;
+  }
+}
 
 std::string SceneToJson(const Scene& scene, int indent) {
   using ojson = nlohmann::ordered_json;
@@ -865,8 +984,12 @@ std::string SceneToJson(const Scene& scene, int indent) {
   object["shape"] = ToString(scene.object.shape);
   if (scene.object.shape == ObjectShape::kBox) {
     object["size"] = Vec(scene.object.size);
-  } else {
+  } else if (scene.object.shape == ObjectShape::kCylinder) {
     object["radius"] = scene.object.radius;
+    object["height"] = scene.object.height;
+  } else {
+    object["polygon"] = ojson::array();
+    for (const auto& v : scene.object.polygon) object["polygon"].push_back({v.x(), v.y()});
     object["height"] = scene.object.height;
   }
   object["mass"] = scene.object.mass;
@@ -903,7 +1026,8 @@ std::string SceneToJson(const Scene& scene, int indent) {
   j["model"] = {{"facets", scene.model.facets},
                 {"points", scene.model.points},
                 {"dt", scene.model.dt},
-                {"reduce", ToString(scene.model.reduce)}};
+                {"reduce", ToString(scene.model.reduce)},
+                {"contacts", ToString(scene.model.contacts)}};
   return j.dump(indent);
 }
 

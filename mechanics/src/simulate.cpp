@@ -38,6 +38,18 @@ const char* ToString(SimulationStatus status) {
   return "unknown";
 }
 
+const char* ToString(GraspStatus status) {
+  switch (status) {
+    case GraspStatus::kHeld:
+      return "held";
+    case GraspStatus::kLost:
+      return "lost";
+    case GraspStatus::kLeftGeometry:
+      return "left_geometry";
+  }
+  return "unknown";
+}
+
 SimulationResult Simulate(const Scene& scene) { return Simulate(scene, nullptr); }
 
 namespace {
@@ -111,6 +123,10 @@ SimulationResult Simulate(const Scene& scene, const PusherCommandSource& command
     result.residuals.complementarity =
         std::max(result.residuals.complementarity, rep.residuals.complementarity);
     result.residuals.cone = std::max(result.residuals.cone, rep.residuals.cone);
+    if (result.grasp == GraspStatus::kHeld) {
+      result.grasp = model.Grasp(&result.grasp_note);
+      if (result.grasp != GraspStatus::kHeld) result.grasp_changed_t = model.time();
+    }
     const double t1 = model.time();
     while (next < n_samples) {
       const double ts = static_cast<double>(next) * period;

@@ -17,6 +17,7 @@
 #include "arena/mechanics/json_path.hpp"
 #include "arena/mechanics/scene_json.hpp"
 #include "arena/orchestrator/sampler.hpp"
+#include "arena/simulators/simulator.hpp"
 
 namespace arena::orchestrator {
 
@@ -40,6 +41,28 @@ const char* ToString(SamplerKind kind) {
       return "latin_hypercube";
     case SamplerKind::kSobol:
       return "sobol";
+  }
+  return "?";
+}
+
+const char* ToString(AdaptiveKind kind) {
+  switch (kind) {
+    case AdaptiveKind::kBoundary:
+      return "boundary";
+    case AdaptiveKind::kReplicates:
+      return "replicates";
+  }
+  return "?";
+}
+
+const char* ToString(OutcomeKind kind) {
+  switch (kind) {
+    case OutcomeKind::kPivoted:
+      return "pivoted";
+    case OutcomeKind::kFingerSlip:
+      return "finger_slip";
+    case OutcomeKind::kGraspKept:
+      return "grasp_kept";
   }
   return "?";
 }
@@ -474,6 +497,130 @@ Values ConditionValues(const Campaign& c, int64_t condition) {
   return values;
 }
 
+// Values of every variation at a point u of the unit box (sampled ranges only).
+Values PointValues(const Campaign& c, const std::vector<double>& u) {
+  Values values;
+  size_t d = 0;
+  for (const auto& var : c.variations) {
+    if (!var.IsSampled()) {
+      values[var.name] = var.kind == Variation::Kind::kRange ? RangeValue(var, 0) : var.choices[0];
+      continue;
+    }
+    values[var.name] = RangeValue(var, u.at(d++));
+  }
+  return values;
+}
+
+OutcomeKind ReadOutcome(const json& v, const std::string& path) {
+  const std::string name = String(v, path);
+  if (name == "pivoted") return OutcomeKind::kPivoted;
+  if (name == "finger_slip") return OutcomeKind::kFingerSlip;
+  if (name == "grasp_kept") return OutcomeKind::kGraspKept;
+  throw CampaignError(path, "must be \"pivoted\", \"finger_slip\" or \"grasp_kept\", got \"" +
+                                Printable(name, 40) + "\"");
+}
+
+// "sampler": {"adaptive": ...} (orchestrator/README.md, "Adaptive samplers").
+AdaptiveSpec ReadAdaptive(const json& v, SamplerKind* base) {
+  if (!v.contains("adaptive"))
+    throw CampaignError("sampler.adaptive", "is required in a sampler object");
+  const std::string kind = String(v["adaptive"], "sampler.adaptive");
+  AdaptiveSpec a;
+  auto number = [&](const char* key, double lo, double hi, bool lo_open, double* out) {
+    if (!v.contains(key)) return;
+    const std::string path = std::string("sampler.") + key;
+    const double x = Number(v[key], path);
+    if ((lo_open ? !(x > lo) : !(x >= lo)) || !(x <= hi)) {
+      throw CampaignError(path, "must be in " + std::string(lo_open ? "(" : "[") + Num(lo) + ", " +
+                                    Num(hi) + "], got " + Num(x));
+    }
+    *out = x;
+  };
+  auto integer = [&](const char* key, int64_t lo, int64_t hi, int* out) {
+    if (v.contains(key))
+      *out = static_cast<int>(Integer(v[key], std::string("sampler.") + key, lo, hi));
+  };
+  integer("batch", 1, 1000, &a.batch);
+  if (kind == "boundary") {
+    RequireObject(
+        v, "sampler",
+        {"adaptive", "outcome", "threshold", "resolution", "coarse_levels", "batch", "max_trials"});
+    a.kind = AdaptiveKind::kBoundary;
+    if (!v.contains("outcome"))
+      throw CampaignError("sampler.outcome", "is required (pivoted, finger_slip or grasp_kept)");
+    a.outcome = ReadOutcome(v["outcome"], "sampler.outcome");
+    a.threshold = a.outcome == OutcomeKind::kPivoted      ? 0.05
+                  : a.outcome == OutcomeKind::kFingerSlip ? 0.5
+                                                          : 0.01;
+    number("threshold", 0, 1e3, true, &a.threshold);
+    number("resolution", 0, 0.5, true, &a.resolution);
+    if (a.resolution < 0.002)
+      throw CampaignError("sampler.resolution", "must be >= 0.002, got " + Num(a.resolution));
+    integer("coarse_levels", 2, 33, &a.coarse_levels);
+    a.max_trials = 200;
+    integer("max_trials", 2, 100000, &a.max_trials);
+    return a;
+  }
+  if (kind == "replicates") {
+    RequireObject(v, "sampler",
+                  {"adaptive", "base", "min_replicates", "max_replicates", "ci_position",
+                   "ci_angle", "confidence", "batch", "max_trials"});
+    a.kind = AdaptiveKind::kReplicates;
+    *base = SamplerKind::kSobol;
+    if (v.contains("base")) {
+      const std::string b = String(v["base"], "sampler.base");
+      if (b == "grid")
+        *base = SamplerKind::kGrid;
+      else if (b == "uniform")
+        *base = SamplerKind::kUniform;
+      else if (b == "latin_hypercube")
+        *base = SamplerKind::kLatinHypercube;
+      else if (b != "sobol")
+        throw CampaignError("sampler.base",
+                            "must be \"grid\", \"uniform\", \"latin_hypercube\" or \"sobol\", "
+                            "got \"" +
+                                Printable(b, 40) + "\"");
+    }
+    integer("min_replicates", 2, kMaxReplicates, &a.min_replicates);
+    integer("max_replicates", 2, kMaxReplicates, &a.max_replicates);
+    if (a.max_replicates < a.min_replicates) {
+      throw CampaignError("sampler.max_replicates",
+                          "must be >= min_replicates (" + std::to_string(a.min_replicates) + ")");
+    }
+    number("ci_position", 0, 1, true, &a.ci_position);
+    number("ci_angle", 0, 3.2, false, &a.ci_angle);
+    number("confidence", 0.5, 0.999, false, &a.confidence);
+    a.max_trials = static_cast<int>(kMaxTrials);
+    integer("max_trials", 2, kMaxTrials, &a.max_trials);
+    return a;
+  }
+  throw CampaignError("sampler.adaptive", "must be \"boundary\" or \"replicates\", got \"" +
+                                              Printable(kind, 40) + "\"");
+}
+
+// The boundary sampler works in a box of 1 to 3 numeric ranges.
+void CheckBoundaryVariations(const json& doc, const Campaign& c) {
+  for (const char* key : {"conditions", "trials"}) {
+    if (doc.contains(key))
+      throw CampaignError(key,
+                          "the boundary sampler chooses its points; bound it with "
+                          "sampler.max_trials instead");
+  }
+  int dims = 0;
+  for (const auto& var : c.variations) {
+    if (!var.IsSampled()) continue;
+    if (var.kind != Variation::Kind::kRange) {
+      throw CampaignError("variations." + var.name,
+                          "the boundary sampler needs numeric ranges (min < max), not choices");
+    }
+    ++dims;
+  }
+  if (dims < 1 || dims > 3) {
+    throw CampaignError("variations", "the boundary sampler needs 1 to 3 ranges (min < max), got " +
+                                          std::to_string(dims));
+  }
+}
+
 std::string ParametersJson(const Campaign& c, const Values& values) {
   json out = json::object();
   for (const auto& var : c.variations) out[var.name] = ValueJson(var, values.at(var.name));
@@ -580,7 +727,9 @@ Campaign ParseCampaign(std::string_view json_text, const std::string& base_dir,
   }
 
   // Sampler and counts.
-  if (doc.contains("sampler")) {
+  if (doc.contains("sampler") && doc["sampler"].is_object()) {
+    c.adaptive = ReadAdaptive(doc["sampler"], &c.sampler);
+  } else if (doc.contains("sampler")) {
     const std::string s = String(doc["sampler"], "sampler");
     if (s == "grid")
       c.sampler = SamplerKind::kGrid;
@@ -592,11 +741,14 @@ Campaign ParseCampaign(std::string_view json_text, const std::string& base_dir,
       c.sampler = SamplerKind::kSobol;
     else {
       throw CampaignError(
-          "sampler", "must be \"grid\", \"uniform\", \"latin_hypercube\" or \"sobol\", got \"" +
-                         Printable(s, 40) + "\"");
+          "sampler",
+          "must be \"grid\", \"uniform\", \"latin_hypercube\", \"sobol\" or an object "
+          "{\"adaptive\": \"boundary\"|\"replicates\", ...}, got \"" +
+              Printable(s, 40) + "\"");
     }
   }
-  const bool grid = c.sampler == SamplerKind::kGrid;
+  const bool boundary = c.adaptive && c.adaptive->kind == AdaptiveKind::kBoundary;
+  const bool grid = c.sampler == SamplerKind::kGrid && !boundary;
 
   // Variations, in canonical order.
   if (doc.contains("variations")) {
@@ -661,9 +813,17 @@ Campaign ParseCampaign(std::string_view json_text, const std::string& base_dir,
                         "sobol supports at most " + std::to_string(kMaxSobolDimensions) +
                             " varied dimensions, got " + std::to_string(sampled_dims));
   }
+  if (c.adaptive && doc.contains("replicates")) {
+    throw CampaignError("replicates",
+                        "an adaptive sampler chooses replicates itself; give "
+                        "sampler.min_replicates / sampler.max_replicates instead");
+  }
   if (doc.contains("replicates")) {
     c.replicates = static_cast<int>(Integer(doc["replicates"], "replicates", 1, kMaxReplicates));
   }
+  if (c.adaptive && c.adaptive->kind == AdaptiveKind::kReplicates)
+    c.replicates = c.adaptive->min_replicates;
+  if (boundary) CheckBoundaryVariations(doc, c);
   const bool has_conditions = doc.contains("conditions");
   const bool has_trials = doc.contains("trials");
   if (has_conditions && has_trials) {
@@ -681,7 +841,9 @@ Campaign ParseCampaign(std::string_view json_text, const std::string& base_dir,
     }
     conditions = trials / c.replicates;
   }
-  if (grid) {
+  if (boundary) {
+    conditions = 0;  // points are chosen as results come in
+  } else if (grid) {
     if (conditions != 0 && conditions != sampled_levels) {
       throw CampaignError(has_trials ? "trials" : "conditions",
                           "the grid has " + std::to_string(sampled_levels) + " conditions (x " +
@@ -694,6 +856,11 @@ Campaign ParseCampaign(std::string_view json_text, const std::string& base_dir,
                                           std::string(ToString(c.sampler)) + " (or give trials)");
   }
   c.conditions = conditions;
+  if (c.adaptive && c.adaptive->kind == AdaptiveKind::kReplicates &&
+      c.conditions * c.adaptive->max_replicates > kMaxTrials) {
+    throw CampaignError("sampler.max_replicates",
+                        "conditions x max_replicates must be <= " + std::to_string(kMaxTrials));
+  }
   if (c.conditions * c.replicates > kMaxTrials) {
     throw CampaignError("replicates",
                         "conditions x replicates must be <= " + std::to_string(kMaxTrials));
@@ -703,7 +870,55 @@ Campaign ParseCampaign(std::string_view json_text, const std::string& base_dir,
   c.prediction = c.scene.model;
   if (doc.contains("prediction")) {
     const json& p = doc["prediction"];
-    RequireObject(p, "prediction", {"facets", "points", "dt", "reduce"});
+    RequireObject(p, "prediction",
+                  {"predictor", "facets", "points", "dt", "reduce", "contacts", "calibration",
+                   "calibrated", "timestep", "cone", "noslip_iterations"});
+    // Which predictor: arena's model (knobs facets, points, dt, reduce, contacts,
+    // and a calibration's scales) or MuJoCo (timestep, cone, noslip_iterations);
+    // knobs of the other are refused.
+    if (p.contains("predictor")) c.predictor = String(p["predictor"], "prediction.predictor");
+    if (c.predictor != "arena" && c.predictor != "mujoco") {
+      throw CampaignError("prediction.predictor", "must be \"arena\" or \"mujoco\", got \"" +
+                                                      Printable(c.predictor, 40) + "\"");
+    }
+    const bool mujoco = c.predictor == "mujoco";
+    for (const char* k : {"facets", "points", "dt", "reduce", "contacts", "calibration",
+                          "calibrated", "timestep", "cone", "noslip_iterations"}) {
+      const std::string key = k;
+      const bool arena_knob = key != "timestep" && key != "cone" && key != "noslip_iterations";
+      if (p.contains(k) && arena_knob == mujoco) {
+        throw CampaignError(std::string("prediction.") + k,
+                            std::string("is not a knob of the ") + c.predictor + " predictor");
+      }
+    }
+    if (mujoco) {
+      json knobs = p;
+      knobs.erase("predictor");
+      try {
+        (void)simulators::MakeSimulator("mujoco", knobs.dump());
+      } catch (const simulators::SimulatorError& e) {
+        const std::string field = e.field().rfind("mujoco.", 0) == 0 ? e.field().substr(7) : "";
+        const std::string what = e.what();
+        throw CampaignError("prediction" + (field.empty() ? "" : "." + field),
+                            what.substr(std::min(what.size(), e.field().size() + 2)));
+      }
+      c.predictor_settings_json = knobs.dump();
+    }
+    if (p.contains("calibrated")) {
+      // Written by SubmitCampaign from "calibration" (or given by hand): scales.
+      RequireObject(p["calibrated"], "prediction.calibrated",
+                    {"mu_fingers", "mu_pusher", "grip_force", "object_mass"});
+      for (const auto& item : p["calibrated"].items()) {
+        const std::string path = "prediction.calibrated." + item.key();
+        const double k = Number(item.value(), path);
+        if (!(k > 0)) throw CampaignError(path, "must be > 0, got " + Num(k));
+        c.calibrated_scales[item.key()] = k;
+      }
+    }
+    if (p.contains("calibration")) {
+      c.calibration_id = Integer(p["calibration"], "prediction.calibration", 1,
+                                 std::numeric_limits<int32_t>::max());
+    }
     if (p.contains("facets")) {
       c.prediction.facets =
           static_cast<int>(Integer(p["facets"], "prediction.facets", 3, mechanics::kMaxFacets));
@@ -722,6 +937,15 @@ Campaign ParseCampaign(std::string_view json_text, const std::string& base_dir,
             "must be \"auto\", \"full\" or \"planar\", got \"" + Printable(r, 40) + "\"");
       }
       c.prediction.reduce = *reduce;
+    }
+    if (p.contains("contacts")) {
+      const std::string m = String(p["contacts"], "prediction.contacts");
+      const auto mode = mechanics::ContactTrackingFromString(m);
+      if (!mode) {
+        throw CampaignError("prediction.contacts",
+                            "must be \"tracked\" or \"fixed\", got \"" + Printable(m, 40) + "\"");
+      }
+      c.prediction.contacts = *mode;
     }
   }
 
@@ -751,6 +975,23 @@ Campaign ParseCampaign(std::string_view json_text, const std::string& base_dir,
     else
       field = field.empty() ? "scene" : "scene." + field;
     throw CampaignError(field, e.reason());
+  }
+  if (boundary && check == ConditionCheck::kAllConditions) {
+    // The space is a box: its corners are the extremes every chosen point lies between.
+    const int dims = static_cast<int>(SampledVariations(c).size());
+    for (int corner = 0; corner < (1 << dims); ++corner) {
+      std::vector<double> u(static_cast<size_t>(dims));
+      for (int d = 0; d < dims; ++d) u[static_cast<size_t>(d)] = (corner >> d) & 1;
+      const Values values = PointValues(c, u);
+      try {
+        const Scene scene = BuildScene(c.scene, values);
+        mechanics::ValidateScene(scene);
+        mechanics::ValidateScene(WithModel(scene, c.prediction));
+      } catch (const mechanics::SceneError& e) {
+        throw CampaignError("variations", "the corner " + ParametersJson(c, values) +
+                                              " gives an invalid scene: " + e.what());
+      }
+    }
   }
   const int64_t checked = check == ConditionCheck::kAllConditions ? c.conditions : 0;
   for (int64_t condition = 0; condition < checked; ++condition) {
@@ -824,6 +1065,63 @@ PlannedTrial PlanTrial(const Campaign& c, int64_t index) {
   t.seed = Mix64(Mix64(Mix64(c.seed ^ 0x7419a1ULL) + static_cast<uint64_t>(t.condition)) +
                  static_cast<uint64_t>(t.replicate));
   const Values values = ConditionValues(c, t.condition);
+  t.scene = BuildScene(c.scene, values);
+  t.parameters_json = ParametersJson(c, values);
+  return t;
+}
+
+std::vector<std::string> SampledVariations(const Campaign& c) {
+  std::vector<std::string> names;
+  for (const auto& var : c.variations)
+    if (var.IsSampled()) names.push_back(var.name);
+  return names;
+}
+
+namespace {
+uint64_t TrialSeed(const Campaign& c, int64_t condition, int replicate) {
+  return Mix64(Mix64(Mix64(c.seed ^ 0x7419a1ULL) + static_cast<uint64_t>(condition)) +
+               static_cast<uint64_t>(replicate));
+}
+}  // namespace
+
+PlannedTrial PlanTrialAt(const Campaign& c, const std::vector<double>& u, int64_t index,
+                         int64_t condition, int replicate) {
+  const auto names = SampledVariations(c);
+  if (u.size() != names.size()) {
+    throw std::invalid_argument("PlanTrialAt: point has " + std::to_string(u.size()) +
+                                " coordinates, the campaign samples " +
+                                std::to_string(names.size()));
+  }
+  for (const auto& var : c.variations) {
+    if (var.IsSampled() && var.kind != Variation::Kind::kRange)
+      throw std::invalid_argument("PlanTrialAt: " + var.name + " is not a range");
+  }
+  for (double x : u) {
+    if (!(x >= 0 && x <= 1))
+      throw std::invalid_argument("PlanTrialAt: coordinate " + Num(x) + " not in [0, 1]");
+  }
+  PlannedTrial t;
+  t.index = index;
+  t.condition = condition;
+  t.replicate = replicate;
+  t.seed = TrialSeed(c, condition, replicate);
+  const Values values = PointValues(c, u);
+  t.scene = BuildScene(c.scene, values);
+  t.parameters_json = ParametersJson(c, values);
+  return t;
+}
+
+PlannedTrial PlanReplicate(const Campaign& c, int64_t condition, int replicate, int64_t index) {
+  if (condition < 0 || condition >= c.conditions) {
+    throw std::out_of_range("PlanReplicate: condition " + std::to_string(condition) +
+                            " not in [0, " + std::to_string(c.conditions) + ")");
+  }
+  PlannedTrial t;
+  t.index = index;
+  t.condition = condition;
+  t.replicate = replicate;
+  t.seed = TrialSeed(c, condition, replicate);
+  const Values values = ConditionValues(c, condition);
   t.scene = BuildScene(c.scene, values);
   t.parameters_json = ParametersJson(c, values);
   return t;

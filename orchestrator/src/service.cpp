@@ -23,10 +23,12 @@
 #include <spdlog/spdlog.h>
 #include <nlohmann/json.hpp>
 
+#include "arena/assessment/prediction.hpp"
+#include "arena/assessment/truth.hpp"
 #include "arena/db/store.hpp"
 #include "arena/mechanics/scene_json.hpp"
+#include "arena/orchestrator/adaptive.hpp"
 #include "arena/orchestrator/logging.hpp"
-#include "arena/orchestrator/prediction.hpp"
 #include "arena/orchestrator/trial_data.hpp"
 #include "arena/orchestrator/trial_driver.hpp"
 #include "arena/schemas/arena.h"
@@ -35,6 +37,11 @@ namespace arena::orchestrator {
 
 namespace {
 
+using assessment::ApplyModelSettings;
+using assessment::ContactNormals;
+using assessment::PredictionFailure;
+using assessment::PredictTrial;
+using assessment::ToTrajectorySample;
 using Clock = std::chrono::steady_clock;
 using Seconds = std::chrono::duration<double>;
 
@@ -42,6 +49,8 @@ constexpr char kCellPrefix[] = "arena.cell.";
 // A service whose last beat is younger than this holds the store (unless its
 // pid is known dead on this host).
 constexpr double kServiceFresh_s = 15.0;
+// A service on this host is asked (its pid) if it beat within this long.
+constexpr double kServiceRemembered_s = 600.0;
 
 std::string CellOfParticipant(const std::string& participant) {
   const std::string prefix = kCellPrefix;
@@ -168,7 +177,8 @@ struct PredictionJob {
   std::int64_t campaign_id = 0;
   mechanics::Scene scene;  // with the campaign's model settings applied
   std::vector<mechanics::TrajectorySample> truth;
-  RecordedCommands commands;  // closed loop: replayed through the model; empty otherwise
+  nlohmann::json prediction;  // the campaign's `prediction` (names the predictor)
+  assessment::RecordedCommands commands;  // closed loop: replayed through the model; empty otherwise
 };
 
 // Worker threads that run the predictor; jobs in, results out. Start()
@@ -189,8 +199,8 @@ class PredictorPool : public PredictionPort {
   void SetStore(db::Store* store) { store_ = store; }
 
   void Start(PredictionRequest r) override {
-    PredictionJob job{r.trial_id, r.attempt,          r.campaign_id,
-                      {},         std::move(r.truth), std::move(r.commands)};
+    PredictionJob job{r.trial_id,         r.attempt, r.campaign_id, {},
+                      std::move(r.truth), {},        std::move(r.commands)};
     try {
       mechanics::Scene scene = r.scene_json.empty() || !job.truth.empty()
                                    ? std::move(r.scene)
@@ -202,10 +212,11 @@ class PredictorPool : public PredictionPort {
           job.truth.push_back(ToTrajectorySample(s, normals, scene.pusher.has_value()));
         // Closed loop: the commands it applied, replayed (issue 19).
         if (job.commands.empty() && scene.pusher && scene.pusher->controller) {
-          if (auto run = store_->GetClosedLoop(r.trial_id)) job.commands = CommandsOf(*run);
+          if (auto run = store_->GetClosedLoop(r.trial_id)) job.commands = assessment::CommandsOf(*run);
         }
       }
       job.scene = ApplyModelSettings(scene, CampaignModel(r.campaign_id));
+      job.prediction = CampaignModel(r.campaign_id);
     } catch (const db::StoreError& e) {
       using K = db::StoreError::Kind;
       // A store that cannot be written stops the service; anything else
@@ -274,9 +285,9 @@ class PredictorPool : public PredictionPort {
         job = std::move(jobs_.front());
         jobs_.pop_front();
       }
-      PredictionDone done{
-          job.trial_id, job.attempt, job.campaign_id,
-          PredictTrial(job.scene, job.truth, job.commands.empty() ? nullptr : &job.commands)};
+      PredictionDone done{job.trial_id, job.attempt, job.campaign_id,
+                          assessment::PredictTrial(job.scene, job.truth, job.prediction,
+                                                   job.commands.empty() ? nullptr : &job.commands)};
       std::lock_guard lock(mu_);
       results_.push_back(std::move(done));
     }
@@ -316,6 +327,8 @@ struct Service::Impl {
   std::unique_ptr<db::Store> store;
   std::unique_ptr<SqliteTrialStore> trial_store;
   std::unique_ptr<TrialDriver> driver;
+  // Adaptive campaigns' next rounds (adaptive.hpp): one call per scheduling pass.
+  std::unique_ptr<AdaptivePlanner> adaptive;
   bool registered = false;
 
   std::atomic<bool> stop_requested{false};
@@ -340,9 +353,13 @@ struct Service::Impl {
     ServiceIdentity me{session, HostName(), static_cast<std::uint32_t>(getpid()), store->StoreId()};
     // One service per store: a second one refuses to start, naming the first.
     db::ServiceRecord record{SessionHex(session), getpid(), me.host, o.domain_id, 0, 0, {}};
+    // On this host the pid says whether it lives (even if a long foreign
+    // write lock kept it from beating); elsewhere its beat must be fresh.
+    const double now = store->Now();
     const auto holder =
-        store->RegisterService(record, kServiceFresh_s, [&me](const db::ServiceRecord& other) {
-          return other.host != me.host || ProcessAlive(other.pid);
+        store->RegisterService(record, kServiceRemembered_s, [&](const db::ServiceRecord& other) {
+          return other.host == me.host ? ProcessAlive(other.pid)
+                                       : now - other.last_beat < kServiceFresh_s;
         });
     if (holder) {
       throw db::StoreError(db::StoreError::Kind::kBusy,
@@ -355,6 +372,7 @@ struct Service::Impl {
     }
     registered = true;
     trial_store = std::make_unique<SqliteTrialStore>(*store, SessionHex(session));
+    adaptive = std::make_unique<AdaptivePlanner>(*store);
     DriverOptions d;
     d.service = o;
     driver = std::make_unique<TrialDriver>(d, me, *trial_store, transport, predictor);
@@ -425,6 +443,7 @@ struct Service::Impl {
       for (auto& st : statuses.TakeAll()) driver->OnStatus(st);
       while (auto e = participant.NextPeerEvent(std::chrono::milliseconds(0))) OnPeerEvent(*e);
       for (auto& p : predictor.TakeResults()) driver->OnPrediction(std::move(p));
+      if (!stop_requested) adaptive->Advance(driver->IdleCells());
       driver->Tick(stop_requested || drain_deadline.has_value());
 
       const auto now = Clock::now();

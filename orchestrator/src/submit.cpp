@@ -1,11 +1,13 @@
 #include "arena/orchestrator/submit.hpp"
 
 #include <algorithm>
+#include <map>
 #include <vector>
 
 #include <nlohmann/json.hpp>
 
 #include "arena/mechanics/scene_json.hpp"
+#include "arena/orchestrator/adaptive.hpp"
 
 namespace arena::orchestrator {
 
@@ -36,8 +38,42 @@ std::string SamplerState(const Campaign& campaign, std::int64_t next_index) {
 }
 }  // namespace
 
-std::int64_t SubmitCampaign(db::Store& store, const Campaign& campaign,
+std::int64_t SubmitCampaign(db::Store& store, const Campaign& given,
                             const std::function<bool()>& interrupted) {
+  Campaign campaign = given;
+  if (campaign.calibration_id > 0) {
+    // prediction.calibration: ID -> the fitted scales, recorded in the stored
+    // spec (prediction.calibrated) so the predictor needs no second lookup.
+    const db::Calibration cal = store.GetCalibration(campaign.calibration_id);  // kNotFound
+    if (!cal.applied) {
+      throw db::StoreError(db::StoreError::Kind::kBadInput,
+                           "prediction.calibration: calibration " + std::to_string(cal.id) +
+                               " did not improve the held-out error and is not applied");
+    }
+    nlohmann::json spec = nlohmann::json::parse(campaign.source_json);
+    nlohmann::json scales = nlohmann::json::object();
+    const nlohmann::json fitted = nlohmann::json::parse(cal.params_json);
+    for (const auto& item : fitted.items())
+      scales[item.key()] = item.value().at("scale").get<double>();
+    spec["prediction"]["calibrated"] = scales;
+    campaign.source_json = spec.dump();
+    campaign.calibrated_scales = scales.get<std::map<std::string, double>>();
+  }
+  if (campaign.adaptive) {
+    // Round 0 (the coarse batch, or min_replicates of every condition) is
+    // planned now; later rounds by the service's AdaptivePlanner.
+    db::NewCampaign c;
+    c.name = campaign.name;
+    c.spec_json = campaign.source_json;
+    c.priority = campaign.priority;
+    c.seed = campaign.seed;
+    c.sampler_open = true;
+    // Two transactions: a crash between them leaves an open campaign without
+    // trials, whose round 0 the service's AdaptivePlanner then plans itself.
+    const std::int64_t id = store.CreateCampaign(c, std::vector<db::PlannedTrial>{});
+    PlanFirstAdaptiveRound(store, id, campaign);
+    return id;
+  }
   const std::int64_t total = TrialCount(campaign);
   db::NewCampaign c;
   c.name = campaign.name;

@@ -10,6 +10,7 @@
 #include <spdlog/spdlog.h>
 #include <nlohmann/json.hpp>
 
+#include "arena/assessment/truth.hpp"
 #include "arena/mechanics/scene_json.hpp"
 #include "arena/orchestrator/closed_loop.hpp"
 #include "arena/orchestrator/logging.hpp"
@@ -26,6 +27,7 @@ std::string SessionHex(std::uint64_t session) {
 
 namespace {
 
+using assessment::ContactNormals;
 using Clock = DriverClock;
 using Seconds = std::chrono::duration<double>;
 
@@ -114,7 +116,7 @@ struct TrialDriver::Impl {
     std::int64_t expected = -1;
     Clock::time_point stream_deadline{};
     std::vector<mechanics::TrajectorySample> truth;
-    RecordedCommands commands;  // closed loop: the commands the cell applied
+    assessment::RecordedCommands commands;  // closed loop: the commands the cell applied
     bool publishing = false;    // the publish step is under way (or waiting on the store)
   };
   std::map<std::int64_t, Execution> executions;
@@ -667,7 +669,7 @@ struct TrialDriver::Impl {
       return;
     }
     if (!run) return;
-    ex.commands = CommandsOf(*run);
+    ex.commands = assessment::CommandsOf(*run);
     auto shared = std::make_shared<db::ClosedLoopRun>(std::move(*run));
     Step(tag + ": record closed loop", "", [this, shared] { store.RecordClosedLoop(*shared); });
   }
@@ -959,6 +961,12 @@ void TrialDriver::OnGroundTruth(const msg::GroundTruth& b) { impl_->OnGroundTrut
 void TrialDriver::OnPrediction(PredictionDone done) { impl_->OnPrediction(std::move(done)); }
 void TrialDriver::Tick(bool stopping) { impl_->Tick(stopping); }
 bool TrialDriver::InFlight() const { return impl_->InFlight(); }
+int TrialDriver::IdleCells() const {
+  int n = 0;
+  for (const auto& [id, cell] : impl_->cells)
+    n += cell.alive && cell.ours && !cell.quarantined && cell.phase == Impl::CellPhase::kIdle;
+  return n;
+}
 bool TrialDriver::CampaignsFinished() {
   bool finished = false;
   impl_->Attempt("completing finished campaigns", [&] {

@@ -298,9 +298,9 @@ void CheckDays(int days, const std::string& field) {
 }
 
 void CheckDomains(int min, int max, const std::string& field) {
-  if (min < 0 || max > 232 || min > max) {
-    throw std::invalid_argument(field + ": want MIN-MAX within 0..232, got " + std::to_string(min) +
-                                "-" + std::to_string(max));
+  if (min < 0 || max > kMaxDomainId || min > max) {
+    throw std::invalid_argument(field + ": want MIN-MAX within 0.." + std::to_string(kMaxDomainId) +
+                                ", got " + std::to_string(min) + "-" + std::to_string(max));
   }
 }
 

@@ -15,10 +15,10 @@
 //   pusher: a body on a free joint with a huge armature whose qpos and qvel
 //     are written before every step (a mocap body would have zero velocity
 //     to the solver, and contact damping then lags it by ~2·timeconst·v).
-//   pads (fingers and pusher): point = sphere, line = capsule along the
-//     axis, patch = thin square box whose 4 corners lie on the 2R/3 ring of
-//     arena's patch model (the corners carry the torsional friction); every
-//     pad's surface touches the object at the contact position at t = 0.
+//   pads (fingers and pusher): spheres (r 1 mm): one for a point, 5 spread
+//     over a line, 6 on the 2R/3 ring of arena's patch model for a patch
+//     (they carry its torsion and tilt); every pad's surface touches the
+//     object at t = 0.
 //   contacts: explicit <pair>s only (pad with object), per-pair friction
 //     (μ, torsion 0, rolling 0), condim 3, solref/solimp of the settings;
 //     margin = gap = 1 mm so contacts are found before they touch.
@@ -48,8 +48,7 @@
 namespace arena::simulators {
 namespace {
 
-constexpr double kPadRadius = 0.001;      // m: sphere/capsule pad radius
-constexpr double kPadThickness = 0.001;   // m: half thickness of a patch's box pad
+constexpr double kPadRadius = 0.001;      // m: pad sphere radius
 constexpr double kContactMargin = 0.001;  // m: contacts found this early (inactive: gap)
 
 // MuJoCo's default error handler calls exit(); ours throws to the caller.
@@ -81,52 +80,82 @@ std::string Num(double x) {
   return buf;
 }
 
-// Orientation whose z axis is `z` and whose x axis is as close to `x_hint` as possible.
-Eigen::Quaterniond FrameZ(const Eigen::Vector3d& z, const Eigen::Vector3d& x_hint) {
-  Eigen::Vector3d zz = z.normalized();
-  Eigen::Vector3d xx = x_hint - x_hint.dot(zz) * zz;
-  if (xx.norm() < 1e-9) xx = mechanics::FirstTangent(zz);
-  xx.normalize();
-  Eigen::Matrix3d r;
-  r.col(0) = xx;
-  r.col(1) = zz.cross(xx);
-  r.col(2) = zz;
-  return Eigen::Quaterniond(r);
-}
+// Pad geoms per contact type: a point is one sphere; a line is kLinePads
+// spheres spread evenly over it and a patch kPatchPads spheres on the 2R/3
+// ring of arena's patch model (which carry its torsion and tilt). A capsule
+// (line) or a box (patch) gives MuJoCo 1, 2 or 4 contacts depending on the
+// time step, and the final pose then moved 0.2 mm under a 4x finer step;
+// spheres keep one contact each.
+constexpr int kLinePads = 5;
+constexpr int kPatchPads = 6;
 
-// A pad geom (in its body frame, whose origin is the contact point) for a contact.
-std::string PadGeom(const std::string& name, const mechanics::ContactSpec& c) {
-  std::ostringstream x;
-  const Eigen::Vector3d n = c.normal.normalized();
-  x << "<geom name=\"" << name << "\" contype=\"0\" conaffinity=\"0\" mass=\"0\" ";
+int PadCount(const mechanics::ContactSpec& c) {
   switch (c.type) {
     case mechanics::ContactType::kPoint:
-      x << "type=\"sphere\" size=\"" << Num(kPadRadius) << "\" pos=\"" << Vec(-kPadRadius * n)
-        << "\"";
+      return 1;
+    case mechanics::ContactType::kLine:
+      return kLinePads;
+    case mechanics::ContactType::kPatch:
+      return kPatchPads;
+  }
+  return 1;
+}
+
+// Sphere centres (in the pad body's frame, whose origin is the contact point).
+std::vector<Eigen::Vector3d> PadCentres(const mechanics::ContactSpec& c) {
+  const Eigen::Vector3d n = c.normal.normalized();
+  const Eigen::Vector3d back = -kPadRadius * n;
+  std::vector<Eigen::Vector3d> out;
+  switch (c.type) {
+    case mechanics::ContactType::kPoint:
+      out.push_back(back);
       break;
     case mechanics::ContactType::kLine: {
       const Eigen::Vector3d a = c.axis.normalized();
-      x << "type=\"capsule\" size=\"" << Num(kPadRadius) << "\" fromto=\""
-        << Vec(-kPadRadius * n - 0.5 * c.length * a) << " "
-        << Vec(-kPadRadius * n + 0.5 * c.length * a) << "\"";
+      for (int j = 0; j < kLinePads; ++j) {
+        const double s = c.length * (static_cast<double>(j) / (kLinePads - 1) - 0.5);
+        out.push_back(back + s * a);
+      }
       break;
     }
     case mechanics::ContactType::kPatch: {
-      // Square pad: corners at 2R/3 from the centre (half side R·√2/3).
-      const double half = c.radius * std::sqrt(2.0) / 3.0;
-      x << "type=\"box\" size=\"" << Num(half) << " " << Num(half) << " " << Num(kPadThickness)
-        << "\" pos=\"" << Vec(-kPadThickness * n) << "\" quat=\""
-        << Quat(FrameZ(n, mechanics::FirstTangent(n))) << "\"";
+      const Eigen::Vector3d t1 = mechanics::FirstTangent(n), t2 = n.cross(t1);
+      const double r = 2.0 * c.radius / 3.0;
+      for (int j = 0; j < kPatchPads; ++j) {
+        const double phi = 2 * M_PI * j / kPatchPads;
+        out.push_back(back + r * (std::cos(phi) * t1 + std::sin(phi) * t2));
+      }
       break;
     }
   }
-  x << "/>";
+  return out;
+}
+
+std::string PadGeoms(const std::string& base, const mechanics::ContactSpec& c) {
+  std::ostringstream x;
+  const auto centres = PadCentres(c);
+  for (size_t j = 0; j < centres.size(); ++j) {
+    x << "      <geom name=\"" << base << "_" << j
+      << "\" type=\"sphere\" contype=\"0\" conaffinity=\"0\" mass=\"0\" size=\"" << Num(kPadRadius)
+      << "\" pos=\"" << Vec(centres[j]) << "\"/>\n";
+  }
   return x.str();
 }
 
 bool Opposed(const mechanics::Scene& s) {
   return s.fingers.size() == 2 &&
          (s.fingers[0].normal.normalized() + s.fingers[1].normal.normalized()).norm() < 1e-9;
+}
+
+std::string Pair(const std::string& pad, const mechanics::ContactSpec& c, const MujocoSettings& st);
+
+std::string Pairs(const std::string& base, const mechanics::ContactSpec& c,
+                  const MujocoSettings& st) {
+  std::string all;
+  for (int j = 0; j < PadCount(c); ++j) {
+    all += "    " + Pair(base + "_" + std::to_string(j), c, st) + "\n";
+  }
+  return all;
 }
 
 std::string Pair(const std::string& pad, const mechanics::ContactSpec& c,
@@ -240,7 +269,9 @@ struct Run {
   mjData* d;
   int object_body = -1, object_qpos = -1, object_qvel = -1;
   int pusher_body = -1, pusher_qpos = -1, pusher_qvel = -1;
-  std::vector<int> finger_qpos, finger_qvel, pad_geom;  // fingers, then pusher pad
+  std::vector<int> finger_qpos, finger_qvel;
+  std::vector<int> pad_of_geom;  // geom id -> finger index (then the pusher), -1: none
+  size_t n_pads = 0;
   int object_geom = -1;
 
   // Pusher contact point and orientation at time t (constant twist about the contact point).
@@ -301,20 +332,15 @@ struct Run {
     s.orientation = Eigen::Quaterniond(qp[3], qp[4], qp[5], qp[6]).normalized();
     s.velocity = Eigen::Vector3d(qv[0], qv[1], qv[2]);
     s.angular_velocity = s.orientation * Eigen::Vector3d(qv[3], qv[4], qv[5]);
-    const size_t n_pads = pad_geom.size();
     std::vector<Eigen::Vector3d> force(n_pads, Eigen::Vector3d::Zero()),
         torque(n_pads, Eigen::Vector3d::Zero());
     std::vector<bool> touching(n_pads, false), sliding(n_pads, false);
     for (int i = 0; i < d->ncon; ++i) {
       const mjContact& c = d->contact[i];
       if (c.exclude != 0 || c.efc_address < 0) continue;  // found in the margin, not active
-      size_t who = n_pads;
-      for (size_t k = 0; k < n_pads; ++k) {
-        if ((c.geom1 == pad_geom[k] && c.geom2 == object_geom) ||
-            (c.geom2 == pad_geom[k] && c.geom1 == object_geom))
-          who = k;
-      }
-      if (who == n_pads) continue;
+      const int other = c.geom1 == object_geom ? c.geom2 : c.geom2 == object_geom ? c.geom1 : -1;
+      if (other < 0 || pad_of_geom[static_cast<size_t>(other)] < 0) continue;
+      const size_t who = static_cast<size_t>(pad_of_geom[static_cast<size_t>(other)]);
       mjtNum f6[6];
       mj_contactForce(m, d, i, f6);
       // Contact frame rows: normal (from geom1 to geom2), tangents. The force is
@@ -393,7 +419,9 @@ mechanics::SimulationResult MujocoSimulator::Simulate(const mechanics::Scene& sc
       return finish();
     }
     h.d = mj_makeData(h.m);
-    Run run{scene, settings_, h.m, h.d, -1, -1, -1, -1, -1, -1, {}, {}, {}, -1};
+    Run run{scene, settings_, h.m, h.d, -1, -1, -1, -1, -1, -1, {}, {}, {}, 0, -1};
+    run.pad_of_geom.assign(static_cast<size_t>(h.m->ngeom), -1);
+    run.n_pads = scene.fingers.size() + (scene.pusher ? 1 : 0);
     run.object_body = mj_name2id(h.m, mjOBJ_BODY, "object");
     run.object_geom = mj_name2id(h.m, mjOBJ_GEOM, "object");
     const int oj = h.m->body_jntadr[run.object_body];
@@ -404,14 +432,20 @@ mechanics::SimulationResult MujocoSimulator::Simulate(const mechanics::Scene& sc
       const int j = mj_name2id(h.m, mjOBJ_JOINT, ("finger" + k).c_str());
       run.finger_qpos.push_back(h.m->jnt_qposadr[j]);
       run.finger_qvel.push_back(h.m->jnt_dofadr[j]);
-      run.pad_geom.push_back(mj_name2id(h.m, mjOBJ_GEOM, ("pad" + k).c_str()));
+      for (int j = 0; j < PadCount(scene.fingers[i]); ++j) {
+        const int g = mj_name2id(h.m, mjOBJ_GEOM, ("pad" + k + "_" + std::to_string(j)).c_str());
+        run.pad_of_geom[static_cast<size_t>(g)] = static_cast<int>(i);
+      }
     }
     if (scene.pusher) {
       run.pusher_body = mj_name2id(h.m, mjOBJ_BODY, "pusher");
       const int j = h.m->body_jntadr[run.pusher_body];
       run.pusher_qpos = h.m->jnt_qposadr[j];
       run.pusher_qvel = h.m->jnt_dofadr[j];
-      run.pad_geom.push_back(mj_name2id(h.m, mjOBJ_GEOM, "pusher_pad"));
+      for (int j = 0; j < PadCount(*scene.pusher); ++j) {
+        const int g = mj_name2id(h.m, mjOBJ_GEOM, ("pusher_pad_" + std::to_string(j)).c_str());
+        run.pad_of_geom[static_cast<size_t>(g)] = static_cast<int>(scene.fingers.size());
+      }
     }
     // Grip force along each finger's normal, plus the finger's weight along it.
     for (size_t i = 0; i < scene.fingers.size(); ++i) {
@@ -502,21 +536,19 @@ std::string MujocoModelXml(const mechanics::Scene& scene, const MujocoSettings& 
       << Vec(f.normal.normalized()) << "\"/>\n"
       << "      <inertial pos=\"0 0 0\" mass=\"" << Num(st.finger_mass)
       << "\" diaginertia=\"1e-6 1e-6 1e-6\"/>\n"
-      << "      " << PadGeom("pad" + k, f) << "\n"
-      << "    </body>\n";
+      << PadGeoms("pad" + k, f) << "    </body>\n";
   }
   if (scene.pusher) {
     const auto& p = *scene.pusher;
     x << "    <body name=\"pusher\" pos=\"" << Vec(p.position) << "\">\n"
       << "      <joint name=\"pusher\" type=\"free\" armature=\"1e6\"/>\n"
       << "      <inertial pos=\"0 0 0\" mass=\"1\" diaginertia=\"1e-3 1e-3 1e-3\"/>\n"
-      << "      " << PadGeom("pusher_pad", p) << "\n"
-      << "    </body>\n";
+      << PadGeoms("pusher_pad", p) << "    </body>\n";
   }
   x << "  </worldbody>\n  <contact>\n";
   for (size_t i = 0; i < scene.fingers.size(); ++i)
-    x << "    " << Pair("pad" + std::to_string(i), scene.fingers[i], st) << "\n";
-  if (scene.pusher) x << "    " << Pair("pusher_pad", *scene.pusher, st) << "\n";
+    x << Pairs("pad" + std::to_string(i), scene.fingers[i], st);
+  if (scene.pusher) x << Pairs("pusher_pad", *scene.pusher, st);
   x << "  </contact>\n";
   if (Opposed(scene)) {
     x << "  <equality>\n    <joint joint1=\"finger0\" joint2=\"finger1\" polycoef=\"0 1 0 0 0\"/>\n"

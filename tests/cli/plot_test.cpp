@@ -15,12 +15,12 @@
 #include <gtest/gtest.h>
 #include <tinyxml2.h>
 
+#include "arena/assessment/truth.hpp"
 #include "arena/db/store.hpp"
 #include "arena/mechanics/scene_json.hpp"
 #include "arena/mechanics/simulate.hpp"
 #include "arena/orchestrator/campaign.hpp"
 #include "arena/orchestrator/submit.hpp"
-#include "arena/orchestrator/trial_data.hpp"
 #include "plot_trial.hpp"
 
 namespace arena::cli {
@@ -47,7 +47,7 @@ class PlotTest : public ::testing::Test {
     const auto truth = mechanics::Simulate(scene);
     ASSERT_EQ(truth.status, mechanics::SimulationStatus::kOk) << truth.error;
     samples_ = truth.samples.size();
-    const auto normals = orchestrator::ContactNormals(scene);
+    const auto normals = assessment::ContactNormals(scene);
     auto ingest = store->BeginIngest(trial_, claimed->attempt);
     for (size_t i = 0; i < truth.samples.size(); ++i) {
       const auto& s = truth.samples[i];

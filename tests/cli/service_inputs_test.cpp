@@ -128,10 +128,12 @@ TEST_F(ServiceInputs, SubmitInterruptedExits130AndStoresNothing) {
   }
   std::this_thread::sleep_for(std::chrono::milliseconds(1500));
   kill(pid, SIGINT);
+  const auto interrupted = std::chrono::steady_clock::now();
   int st = 0;
   ASSERT_EQ(waitpid(pid, &st, 0), pid);
   ASSERT_TRUE(WIFEXITED(st));
   EXPECT_EQ(WEXITSTATUS(st), 130);
+  EXPECT_LT(std::chrono::steady_clock::now() - interrupted, std::chrono::seconds(3));
   db::StoreOptions ro;
   ro.read_only = true;
   if (std::filesystem::exists(db)) {

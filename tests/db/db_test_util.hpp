@@ -100,7 +100,6 @@ class TempDir {
   std::filesystem::path path_;
 };
 
-// Runs one trial through the whole state machine with n samples.
 // SQL that takes a current file back to schema version 4 (undoes migration 5),
 // for tests that make an "older" store and open it again.
 inline constexpr const char* kUndoMigration5 =
@@ -112,6 +111,23 @@ inline constexpr const char* kUndoMigration10 =
     " ALTER TABLE trials DROP COLUMN backend; ALTER TABLE trials DROP COLUMN truth;"
     " ALTER TABLE trials DROP COLUMN defects_applied;";
 
+// SQL that takes a store back from schema version 6 to 5 (outcomes and
+// parameter views out). Migration 6 also re-applies over a file that kept
+// them, so a test that only sets user_version back still migrates.
+inline constexpr const char* kUndoMigration6 =
+    " DROP VIEW trial_results; DROP VIEW contact_results;"
+    " DROP TABLE contact_outcomes; DROP TABLE campaign_parameters;"
+    " ALTER TABLE gt_summary DROP COLUMN net_dx; ALTER TABLE gt_summary DROP COLUMN net_dy;"
+    " ALTER TABLE gt_summary DROP COLUMN net_dz; ALTER TABLE gt_summary DROP COLUMN net_rx;"
+    " ALTER TABLE gt_summary DROP COLUMN net_ry; ALTER TABLE gt_summary DROP COLUMN net_rz;"
+    " ALTER TABLE gt_summary DROP COLUMN grasp_kept;";
+
+// The same for migration 7 (adaptive samplers' decisions, calibrations).
+inline constexpr const char* kUndoMigration7 =
+    " DROP VIEW trial_decisions; DROP TABLE sampler_decisions; DROP TABLE calibrations;"
+    " ALTER TABLE campaigns DROP COLUMN sampler_open;";
+
+// Runs one trial through the whole state machine with n samples.
 inline void RunTrialToDone(Store& store, const ClaimedTrial& t, int n,
                            const IngestOptions& options = {}) {
   auto ingest = store.BeginIngest(t.trial_id, t.attempt, options);

@@ -1,8 +1,11 @@
 // Export round trips: HDF5 read back through the HDF5 library, CSV and JSONL
 // through parsers, each compared value for value with the store.
 #include <hdf5.h>
+#include <sqlite3.h>
 
+#include <cmath>
 #include <fstream>
+#include <limits>
 #include <nlohmann/json.hpp>
 #include <sstream>
 
@@ -33,12 +36,25 @@ std::vector<double> TrueRow(const Sample& s) {
   return r;
 }
 
+// A dropped observation (valid = 0) has every value missing (NaN).
 std::vector<double> ObservedRow(const Sample& s) {
   std::vector<double> r{s.t, s.observed_valid ? 1.0 : 0.0};
+  if (!s.observed_valid) {
+    r.insert(r.end(), 7 + 6 + s.observed_finger_wrenches.size(),
+             std::numeric_limits<double>::quiet_NaN());
+    return r;
+  }
   for (double v : s.observed_object_pose) r.push_back(v);
   for (double v : s.observed_pusher_wrench) r.push_back(v);
   for (double v : s.observed_finger_wrenches) r.push_back(v);
   return r;
+}
+
+// Equal, or both missing.
+bool Same(double a, double b) { return (std::isnan(a) && std::isnan(b)) || a == b; }
+// A CSV field as a number: empty is missing.
+double CsvNumber(const std::string& f) {
+  return f.empty() ? std::numeric_limits<double>::quiet_NaN() : std::strtod(f.c_str(), nullptr);
 }
 
 std::string ReadAll(const fs::path& p) {
@@ -162,7 +178,8 @@ TEST_F(ExportTest, Hdf5RoundTripThroughTheLibrary) {
         const auto expected = observed ? ObservedRow(gt.samples[i]) : TrueRow(gt.samples[i]);
         ASSERT_EQ(expected.size(), dims[1]);
         for (std::size_t k = 0; k < expected.size(); ++k) {
-          ASSERT_EQ(data[i * dims[1] + k], expected[k]) << name << " row " << i << " col " << k;
+          ASSERT_TRUE(Same(data[i * dims[1] + k], expected[k]))
+              << name << " row " << i << " col " << k;
         }
       }
       H5Sclose(space);
@@ -208,12 +225,13 @@ TEST_F(ExportTest, CsvRoundTripThroughAParser) {
         const auto expected = observed ? ObservedRow(gt.samples[i]) : TrueRow(gt.samples[i]);
         ASSERT_EQ(rows[i + 1].size(), expected.size());
         for (std::size_t k = 0; k < expected.size(); ++k) {
-          ASSERT_EQ(std::strtod(rows[i + 1][k].c_str(), nullptr), expected[k]) << file << " " << i;
+          ASSERT_TRUE(Same(CsvNumber(rows[i + 1][k]), expected[k])) << file << " " << i;
         }
       }
     }
   }
-  EXPECT_EQ(m["counts"]["files"], 1 + 1 + 2 * 3);  // trials.csv, scenes.jsonl, 2 streams per trial
+  EXPECT_EQ(m["counts"]["files"],
+            3 + 2 * 3);  // trials.csv, contacts.csv, scenes.jsonl, 2 streams per trial
 }
 
 TEST_F(ExportTest, JsonlRoundTripThroughAParser) {
@@ -279,6 +297,178 @@ TEST_F(ExportTest, RefusesNonEmptyDirectoryAndUnknownCampaign) {
   o.out_dir = dir_.File("none");
   EXPECT_THROW(ExportCampaign(*store_, o), StoreError);
   EXPECT_FALSE(fs::exists(dir_.path() / "none"));
+}
+
+// What a cell with drops really sends: a dropped observation carries no
+// finger wrenches at all (0 values where a valid one has 12), and one sample
+// lacks a contact. Every format exports it; dropped rows are flagged and missing.
+TEST(ExportRealData, DroppedObservationsAndShortSamplesExportInEveryFormat) {
+  TempDir dir;
+  const auto path = dir.File("drops.db");
+  {
+    auto store = Store::Open(path);
+    store->UpsertCell("c", {"point"});
+    store->CreateCampaign(MakeCampaign("drops"), MakeTrials(1));
+    auto t = store->ClaimNextTrial("c");
+    auto ingest = store->BeginIngest(t->trial_id, t->attempt);
+    for (int i = 0; i < 60; ++i) {
+      Sample s = testing::MakeSample(i);
+      if (s.observed_valid == false) s.observed_finger_wrenches.clear();  // as the DDS decoder
+      if (i == 30) s.contacts.pop_back();                                 // a short sample
+      ingest->Add(s);
+    }
+    ingest->Finish("ok");
+  }
+  StoreOptions ro;
+  ro.read_only = true;
+  auto store = Store::Open(path, ro);
+  for (const auto f : {ExportFormat::kHdf5, ExportFormat::kCsv, ExportFormat::kJsonl}) {
+    ExportOptions o;
+    o.campaign_id = 1;
+    o.format = f;
+    o.out_dir = dir.File(std::string("out_") + ToString(f));
+    const auto r = ExportCampaign(*store, o);
+    EXPECT_EQ(r.samples, 60) << ToString(f);
+  }
+  const auto rows = ParseCsv(ReadAll(dir.path() / "out_csv" / "streams" / "1_observed.csv"));
+  ASSERT_EQ(rows.size(), 61u);
+  EXPECT_EQ(rows[0].size(), 2u + 7 + 6 + 12);  // the valid samples' width
+  EXPECT_EQ(rows[4][1], "0");                  // sample 3 was dropped
+  EXPECT_EQ(rows[4][2], "");                   // and has no values
+  EXPECT_EQ(rows[1][1], "1");
+  const auto truth = ParseCsv(ReadAll(dir.path() / "out_csv" / "streams" / "1_true.csv"));
+  EXPECT_EQ(truth[31].back(), "");  // sample 30's missing pusher contact
+  std::ifstream jl(dir.path() / "out_jsonl" / "streams" / "1_observed.jsonl");
+  std::string line;
+  for (int i = 0; i <= 3; ++i) std::getline(jl, line);
+  const auto dropped = nlohmann::json::parse(line);
+  EXPECT_EQ(dropped["valid"], 0);
+  EXPECT_TRUE(dropped["x"].is_null());
+}
+
+// A failed export leaves nothing behind, names the trial, and a retry works.
+TEST_F(ExportTest, FailedExportLeavesNothingNamesTheTrialAndCanBeRetried) {
+  // Damage the second trial's ground truth (a chunk that is not a block).
+  std::int64_t victim = 0;
+  std::string saved;
+  {
+    auto rw = Store::Open(path_);
+    victim = rw->ListTrials(campaign_)[1].id;
+    sqlite3* db = nullptr;
+    ASSERT_EQ(sqlite3_open(path_.c_str(), &db), SQLITE_OK);
+    const std::string sql =
+        "UPDATE gt_chunks SET data = x'00010203' WHERE stream_id = (SELECT gt_stream_id FROM "
+        "trials WHERE id = " +
+        std::to_string(victim) + ")";
+    ASSERT_EQ(sqlite3_exec(db, sql.c_str(), nullptr, nullptr, nullptr), SQLITE_OK);
+    sqlite3_close(db);
+  }
+  for (const auto f : {ExportFormat::kHdf5, ExportFormat::kCsv}) {
+    try {
+      Export(f, "retry");
+      ADD_FAILURE() << "export of a damaged stream succeeded";
+    } catch (const StoreError& e) {
+      EXPECT_EQ(e.kind(), StoreError::Kind::kCorrupt);
+      EXPECT_NE(std::string(e.what()).find("trial " + std::to_string(victim)), std::string::npos)
+          << e.what();
+    }
+    EXPECT_FALSE(fs::exists(dir_.path() / "retry"));
+    for (const auto& e : fs::directory_iterator(dir_.path()))
+      EXPECT_EQ(e.path().filename().string().find(".partial"), std::string::npos) << e.path();
+  }
+  // An empty directory the user made stays usable too.
+  fs::create_directories(dir_.path() / "made");
+  EXPECT_THROW(Export(ExportFormat::kJsonl, "made"), StoreError);
+  EXPECT_TRUE(fs::is_empty(dir_.path() / "made"));
+  // Repair the store (re-ingest the trial), then the same command works.
+  {
+    auto rw = Store::Open(path_);
+    const auto t = rw->GetTrial(victim);
+    auto ingest = rw->BeginIngest(victim, t.attempt);
+    for (int i = 0; i < 17; ++i) ingest->Add(testing::MakeSample(i));
+    ingest->Finish("ok");
+  }
+  EXPECT_EQ(Export(ExportFormat::kHdf5, "retry").trials, 3);
+  EXPECT_EQ(Export(ExportFormat::kCsv, "made").trials, 3);
+  EXPECT_EQ(VerifyExport(dir_.File("made")).trials, 3);
+}
+
+// An output that cannot be written is kOutput (the command failed; exit 1), not a store error.
+TEST_F(ExportTest, UnwritableOutputIsAnOutputError) {
+  std::ofstream(dir_.path() / "plainfile") << "x";
+  try {
+    Export(ExportFormat::kCsv, "plainfile/sub");
+    ADD_FAILURE();
+  } catch (const StoreError& e) {
+    EXPECT_EQ(e.kind(), StoreError::Kind::kOutput) << e.what();
+  }
+}
+
+// Parameters, the scene, contact outcomes and a predicted stream travel with each trial.
+TEST(ExportContents, ParametersSceneContactsAndPredictions) {
+  TempDir dir;
+  const auto path = dir.File("p.db");
+  {
+    auto store = Store::Open(path);
+    store->UpsertCell("c", {"point"});
+    auto trials = MakeTrials(2);
+    trials[0].params_json =
+        R"({"pivot_offset": 0, "push_distance": 0.004, "finger_type": "point"})";
+    trials[1].params_json =
+        R"({"pivot_offset": 0.01, "push_distance": 0.004, "finger_type": "point"})";
+    store->CreateCampaign(MakeCampaign("p"), trials);
+    for (int i = 0; i < 2; ++i) RunTrialToDone(*store, *store->ClaimNextTrial("c"), 20);
+  }
+  StoreOptions ro;
+  ro.read_only = true;
+  auto store = Store::Open(path, ro);
+  ExportOptions o;
+  o.campaign_id = 1;
+  o.format = ExportFormat::kCsv;
+  o.out_dir = dir.File("d");
+  int calls = 0;
+  o.predict = [&](const std::string& scene, const std::string& spec) {
+    EXPECT_NE(scene.find("fingers"), std::string::npos);
+    EXPECT_NE(spec.find("\"p\""), std::string::npos);
+    PredictedStream p;
+    p.predictor = "g4_k3_dt0.008_auto";
+    p.settings_json = R"({"facets":4})";
+    if (++calls == 2) {
+      p.status = "solver_failure";
+      p.error = "no pivot";
+      return p;
+    }
+    for (int i = 0; i < 5; ++i) p.samples.push_back(testing::MakeSample(i));
+    return p;
+  };
+  ExportCampaign(*store, o);
+  const auto index = ParseCsv(ReadAll(dir.path() / "d" / "trials.csv"));
+  ASSERT_EQ(index.size(), 3u);
+  const auto& h = index[0];
+  auto col = [&](const std::string& n) {
+    const auto it = std::find(h.begin(), h.end(), n);
+    EXPECT_NE(it, h.end()) << n;
+    return static_cast<std::size_t>(it - h.begin());
+  };
+  EXPECT_EQ(index[1][col("pivot_offset")], "0");
+  EXPECT_EQ(index[2][col("pivot_offset")], "0.01");
+  EXPECT_EQ(index[1][col("push_distance")], "0.004");
+  EXPECT_EQ(std::count(h.begin(), h.end(), "finger_type"), 1);  // already a column
+  EXPECT_EQ(nlohmann::json::parse(index[1][col("scene_json")])["fingers"].size(), 2u);
+  EXPECT_EQ(index[1][col("predicted_by")], "g4_k3_dt0.008_auto");
+  EXPECT_EQ(index[1][col("predicted_samples")], "5");
+  EXPECT_EQ(index[2][col("predicted_status")], "solver_failure");
+  EXPECT_EQ(index[2][col("predicted_error")], "no pivot");
+  EXPECT_EQ(ParseCsv(ReadAll(dir.path() / "d" / index[1][col("predicted_file")])).size(), 6u);
+  EXPECT_EQ(ParseCsv(ReadAll(dir.path() / "d" / index[2][col("predicted_file")])).size(), 1u);
+  EXPECT_NE(index[1][col("grasp_kept")], "");
+  const auto contacts = ParseCsv(ReadAll(dir.path() / "d" / "contacts.csv"));
+  ASSERT_EQ(contacts.size(), 1u + 2 * 3);
+  EXPECT_EQ(contacts[1][2], "left");
+  EXPECT_EQ(contacts[3][2], "pusher");
+  const auto m = nlohmann::json::parse(ReadAll(dir.path() / "d" / "manifest.json"));
+  EXPECT_EQ(m["parameters"].size(), 2u);  // pivot_offset, push_distance
+  EXPECT_EQ(m["columns"]["predicted"].size(), m["columns"]["true"].size());
 }
 
 }  // namespace

@@ -242,6 +242,22 @@ TEST_F(Dataset, ExecDriverServesTrialsAndRefusesUnknownScenes) {
   EXPECT_NE(RunTrial(*backend, ShortScene(11)).refused.find("driver refused"), std::string::npos);
 }
 
+TEST_F(Dataset, ExecDriverResetsWhenItSaysItCan) {
+  // Without "resets": the cell's own (simulated) reset runs: nullopt.
+  BackendResetRequest request;
+  request.target.position = {0.001, 0, 0.002};
+  EXPECT_FALSE(Driver("")->Reset(request, TrialContext{}).has_value());
+  ExecBackendOptions o;
+  o.command = "python3 " + std::string(ARENA_SOURCE_DIR) + "/examples/drivers/replay.py " + dir_ +
+              " --resets";
+  auto backend = MakeExecBackend(o);
+  const auto out = backend->Reset(request, TrialContext{});
+  ASSERT_TRUE(out.has_value());
+  EXPECT_TRUE(out->ok) << out->reason;
+  EXPECT_EQ(out->attempts, 1);
+  EXPECT_TRUE(out->achieved.position.isApprox(request.target.position));
+}
+
 TEST_F(Dataset, ExecMalformedOutputFailsThePhase) {
   ExpectFailsThenRecovers("malformed", "malformed output");
 }

@@ -41,14 +41,20 @@ TEST(Extremes, SolveWithinToleranceOrTypedError) {
   for (const auto& base :
        {std::make_pair("canonical", CanonicalScene()), std::make_pair("patches", PatchScene())}) {
     for (const Extreme& x : Extremes()) {
-      for (Reduce reduce : {Reduce::kAuto, Reduce::kFull}) {
+      for (int setting = 0; setting < 4; ++setting) {
+        // Both reductions, both contact geometries (issue 12).
+        const Reduce reduce = setting % 2 == 0 ? Reduce::kAuto : Reduce::kFull;
+        const ContactTracking mode =
+            setting < 2 ? ContactTracking::kTracked : ContactTracking::kFixed;
         Scene s = base.second;
         s.duration = 0.2;
         s.model.reduce = reduce;
+        s.model.contacts = mode;
         x.apply(s);
         const SimulationResult r = Simulate(s);
         const std::string what = std::string(base.first) + ", " + x.name +
-                                 (reduce == Reduce::kFull ? ", full" : ", auto");
+                                 (reduce == Reduce::kFull ? ", full" : ", auto") +
+                                 (mode == ContactTracking::kFixed ? ", fixed" : ", tracked");
         EXPECT_TRUE(Finite(r)) << what;
         if (r.status == SimulationStatus::kOk) {
           ++solved;

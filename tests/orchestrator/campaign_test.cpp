@@ -376,3 +376,36 @@ TEST(Campaign, OversizedFileIsRefusedBeforeReading) {
 
 }  // namespace
 }  // namespace arena::orchestrator
+
+namespace arena::orchestrator {
+namespace {
+
+// The campaign's `prediction` may name its predictor (issue 14): arena's
+// model or MuJoCo, each with its own knobs only.
+TEST(Campaign, PredictionNamesAPredictor) {
+  json doc = json::parse(ReadText(kSourceDir / "examples/campaigns/smoke.json"));
+  const std::string dir = (kSourceDir / "examples/campaigns").string();
+  EXPECT_EQ(ParseCampaign(doc.dump(), dir).predictor, "arena");
+  doc["prediction"] = {{"predictor", "mujoco"}, {"timestep", 0.001}, {"cone", "elliptic"}};
+  const Campaign m = ParseCampaign(doc.dump(), dir);
+  EXPECT_EQ(m.predictor, "mujoco");
+  EXPECT_EQ(json::parse(m.predictor_settings_json)["timestep"], 0.001);
+  auto refused = [&](const json& prediction, const std::string& field) {
+    json bad = doc;
+    bad["prediction"] = prediction;
+    try {
+      ParseCampaign(bad.dump(), dir);
+      ADD_FAILURE() << prediction.dump() << " was accepted";
+    } catch (const CampaignError& e) {
+      EXPECT_EQ(e.field(), field) << e.what();
+    }
+  };
+  refused({{"predictor", "bullet"}}, "prediction.predictor");
+  refused({{"predictor", "mujoco"}, {"facets", 8}}, "prediction.facets");
+  refused({{"timestep", 0.001}}, "prediction.timestep");  // arena has no timestep
+  refused({{"predictor", "mujoco"}, {"timestep", 1.0}}, "prediction.timestep");
+  refused({{"predictor", "mujoco"}, {"cone", "round"}}, "prediction.cone");
+}
+
+}  // namespace
+}  // namespace arena::orchestrator

@@ -37,6 +37,13 @@ TEST(EvaluateEndToEnd, TwoSettingsStoredReportedAndPlotted) {
               s["position_error_m"]["median"].get<double>());
     EXPECT_GT(s["time_s"]["median"].get<double>(), 0);
   }
+  // The cells ran the model: the report says its truth is self-consistency.
+  EXPECT_EQ(report["truth"]["source"], "model");
+  EXPECT_EQ(report["truth"]["independent"], false);
+  EXPECT_NE(report["truth"]["statement"].get<std::string>().find(
+                "the truth is the model at the cell's settings (self-consistency, not accuracy)"),
+            std::string::npos)
+      << report["truth"].dump();
   // The sim cell's pushes are small: a 50 mm budget holds, so one is recommended.
   ASSERT_TRUE(report["recommended"].is_string()) << report.dump(2);
 
@@ -59,6 +66,8 @@ TEST(EvaluateEndToEnd, TwoSettingsStoredReportedAndPlotted) {
   const std::string table = ReadFile(dir / "evaluate.txt");
   EXPECT_NE(table.find("g4_k3_dt0.004_auto"), std::string::npos) << table;
   EXPECT_NE(table.find("recommendation:"), std::string::npos) << table;
+  EXPECT_NE(table.find("self-consistency, not accuracy"), std::string::npos) << table;
+  EXPECT_NE(table.find("noise floor"), std::string::npos) << table;
   ASSERT_EQ(RunArena({"plot", "--db", db, "--campaign", "1", "--tradeoff", "--out", dir / "t.svg"},
                      dir / "plot.out", std::chrono::seconds(20)),
             0)

@@ -97,13 +97,13 @@ TEST(MujocoModel, HasExplicitPairsCoupledFingersAndPads) {
   s.pusher->length = 0.02;
   const std::string xml = MujocoModelXml(s, MujocoSettings{});
   EXPECT_NE(xml.find("cone=\"elliptic\""), std::string::npos);
-  EXPECT_NE(xml.find("<pair geom1=\"pad0\" geom2=\"object\""), std::string::npos);
-  EXPECT_NE(xml.find("<pair geom1=\"pusher_pad\""), std::string::npos);
+  EXPECT_NE(xml.find("<pair geom1=\"pad0_0\" geom2=\"object\""), std::string::npos);
+  EXPECT_EQ(xml.find("name=\"pad0_1\""), std::string::npos);               // point: one sphere
+  EXPECT_NE(xml.find("<pair geom1=\"pad1_5\""), std::string::npos);        // patch: 6 on the ring
+  EXPECT_NE(xml.find("<pair geom1=\"pusher_pad_4\""), std::string::npos);  // line: 5
   EXPECT_NE(xml.find("polycoef=\"0 1 0 0 0\""), std::string::npos);
-  EXPECT_NE(xml.find("type=\"sphere\""), std::string::npos);             // point finger
-  EXPECT_NE(xml.find("type=\"box\" size=\"0.0028"), std::string::npos);  // patch: R·√2/3
-  EXPECT_NE(xml.find("type=\"capsule\""), std::string::npos);            // line pusher
-  EXPECT_EQ(xml.find("contype=\"1\""), std::string::npos);               // no implicit contacts
+  EXPECT_EQ(xml.find("type=\"capsule\""), std::string::npos);  // spheres only
+  EXPECT_EQ(xml.find("contype=\"1\""), std::string::npos);     // no implicit contacts
 }
 
 // Held box: two point fingers, 10 N, μ 0.5, 0.2 kg (m g = 1.96 N < 2 μ N = 10 N).

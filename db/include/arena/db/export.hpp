@@ -1,24 +1,39 @@
 // Dataset export (`arena export`): one directory per campaign that a user
 // can take away and read without arena.
 //
-// Layout of DIR (format version 1):
-//   trials.csv               the trial index (every format): parameters, outcome,
-//                            start-state error, ground-truth summary, prediction error
-//   hdf5:  dataset.h5        /trials/<trial_id>/true, /trials/<trial_id>/observed:
-//                            2-D float64 datasets (samples x columns), column names
+// Layout of DIR (format version 2; version 1 had no parameters, scene,
+// predictions or contact outcomes; its files and columns are all still there):
+//   trials.csv               the trial index (every format): parameters (one column
+//                            per varied parameter of the campaign), outcome, start-state
+//                            error, ground-truth summary and object outcome, stored
+//                            prediction error, the re-run prediction's predictor and
+//                            setting, and the full scene JSON (scene_json)
+//   sensitivity.csv          only when the campaign has a sensitivity run: its latest run,
+//                            one row per condition (db/sensitivity.hpp)
+//   contacts.csv             one row per (trial, contact): stick/slide/separate
+//                            fractions, slip distance, largest normal force
+//   hdf5:  dataset.h5        /trials/<trial_id>/true, /observed, /predicted, /contacts:
+//                            2-D float64 datasets (rows x columns), column names
 //                            and units as attributes "columns"/"units"; the trial's
-//                            index row as scalar attributes of its group (a missing
-//                            value is an absent attribute)
-//   csv:   streams/<trial_id>_true.csv, streams/<trial_id>_observed.csv
-//   jsonl: trials.jsonl, streams/<trial_id>_true.jsonl, streams/<trial_id>_observed.jsonl
-//                            (one JSON object per line, keys = column names)
+//                            index row (scene_json included) as scalar attributes of
+//                            its group (a missing value is an absent attribute; a text
+//                            over 60,000 bytes, e.g. a huge scene, is a string dataset
+//                            of that name instead: HDF5 attributes stop at 64 KiB)
+//   csv:   streams/<trial_id>_true.csv, _observed.csv, _predicted.csv
+//   jsonl: trials.jsonl, contacts.jsonl, streams/<trial_id>_true.jsonl, _observed.jsonl,
+//          _predicted.jsonl (one JSON object per line, keys = column names)
 //   scenes.jsonl             (every format) one line per trial: {"trial_id", "seed",
 //                            "scene"}: the scene as commanded (replay:DIR serves it)
-//   manifest.json            written last, atomically (temp file + rename): format
-//                            version, campaign spec, arena version and commit, units
+//   manifest.json            format version, campaign spec, arena version and commit, units
 //                            and frames of every column, sample rate, counts, and the
 //                            size and SHA-256 of every other file
-// A directory without manifest.json is an interrupted export.
+// A value that is not there (a dropped observation: valid = 0; a contact a
+// sample lacks) is NaN in HDF5, an empty field in CSV and null in JSON.
+//
+// The dataset is written into a temporary directory next to DIR (same file
+// system), verified there, and renamed to DIR at the end: DIR appears whole
+// or not at all, and a failed export leaves nothing behind (so it can be
+// retried as it was). An error names the trial at fault.
 //
 // The export reads the store in one snapshot (one read transaction), so it is
 // consistent while a service keeps writing; it includes every trial whose
@@ -26,6 +41,7 @@
 #pragma once
 
 #include <cstdint>
+#include <functional>
 #include <string>
 #include <vector>
 
@@ -36,7 +52,20 @@ namespace arena::db {
 enum class ExportFormat { kHdf5, kCsv, kJsonl };
 const char* ToString(ExportFormat format);
 
-inline constexpr int kDatasetFormatVersion = 1;
+inline constexpr int kDatasetFormatVersion = 2;
+
+// A trial's predicted trajectory and contact forces, beside the truth. db
+// does not run the model (it knows nothing of mechanics): the caller passes
+// a predictor (ExportOptions::predict).
+struct PredictedStream {
+  std::string status = "ok";         // ok, solver_failure, invalid_scene, error
+  std::string predictor;             // the model setting's key, e.g. g4_k3_dt0.008_auto
+  std::string settings_json = "{}";  // the settings that made it
+  std::string error;                 // why there is no prediction ("" when ok)
+  // Same layout as the truth: t, object pose and twist, pusher pose and
+  // twist, contacts (force on the object in G, torque, mode); observed_* unused.
+  std::vector<Sample> samples;
+};
 
 struct ExportOptions {
   std::int64_t campaign_id = 0;
@@ -44,6 +73,12 @@ struct ExportOptions {
   std::string out_dir;        // created; must not exist or be empty
   std::string arena_version;  // arena::Version() (lives in cli; passed in)
   std::string arena_commit;   // arena::GitCommit()
+  // The prediction of one trial from its scene and the campaign's spec
+  // (both JSON); empty: no predicted streams.
+  std::function<PredictedStream(const std::string& scene_json, const std::string& spec_json)>
+      predict;
+  // Called after each trial with (trials written, trials to write).
+  std::function<void(std::int64_t, std::int64_t)> progress;
 };
 
 struct ExportedFile {
@@ -60,8 +95,10 @@ struct ExportReport {
 };
 
 // Writes the dataset, then verifies it (VerifyExport).
-// @throws StoreError: kNotFound (no campaign), kBadInput (directory not empty),
-//   kIo (cannot write), kCorrupt (verification failed).
+// @throws StoreError: kNotFound (no campaign), kBadInput (directory not empty
+//   or a file), kOutput (cannot write the dataset), kCorrupt (unreadable
+//   ground truth in the store, or verification failed); nothing is left in
+//   or beside out_dir then.
 ExportReport ExportCampaign(const Store& store, const ExportOptions& options);
 
 // Re-reads manifest.json and checks every listed file's size and SHA-256, that
@@ -69,7 +106,7 @@ ExportReport ExportCampaign(const Store& store, const ExportOptions& options);
 // @throws StoreError(kCorrupt) naming the first mismatch.
 ExportReport VerifyExport(const std::string& dir);
 
-// SHA-256 (FIPS 180-4; our own small implementation, no OpenSSL), lower-case hex.
+// SHA-256 through OpenSSL's EVP digest, lower-case hex.
 std::string Sha256Hex(const void* data, std::size_t size);
 std::string Sha256File(const std::string& path);
 

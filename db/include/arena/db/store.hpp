@@ -96,6 +96,7 @@ class StoreError : public std::runtime_error {
     kCorrupt,            // integrity check failed, malformed block, not a database
     kFull,               // disk or SQLite size limit full
     kIo,                 // cannot open / read / write the file
+    kOutput,             // an output outside the store (an export directory) cannot be written
   };
   StoreError(Kind kind, const std::string& message) : std::runtime_error(message), kind_(kind) {}
   Kind kind() const { return kind_; }
@@ -170,13 +171,16 @@ struct NewCampaign {
   int priority = 0;                       // higher runs first
   std::uint64_t seed = 0;                 // the campaign seed
   std::string sampler_state_json = "{}";  // where the sampler stands after the planned trials
+  // An adaptive sampler that will add trials as results come in
+  // (PlanAdaptiveRound): the campaign is not done while this is true.
+  bool sampler_open = false;
 };
 
 struct PlannedTrial {
-  int condition = 0;                // condition index (>= 0)
-  int replicate = 0;                // replicate of that condition (>= 0)
-  std::uint64_t seed = 0;           // per-trial seed: re-runs the trial bit for bit
-  std::string scene_json;           // SCENE.md scene (JSON object); parameter columns come from it
+  int condition = 0;       // condition index (>= 0)
+  int replicate = 0;       // replicate of that condition (>= 0)
+  std::uint64_t seed = 0;  // per-trial seed: re-runs the trial bit for bit
+  std::string scene_json;  // scene (docs/scene.md; JSON object); parameter columns come from it
   std::string params_json = "{}";   // the sampler's own parameter values (JSON object)
   std::string defects_json = "{}";  // the campaign's defect profile for this trial
 };
@@ -192,6 +196,43 @@ struct Campaign {
   std::string sampler_state_json;
   double created_at = 0;  // s since epoch
   double updated_at = 0;
+  bool sampler_open = false;  // an adaptive sampler may still add trials
+};
+
+// One decision of an adaptive sampler (orchestrator/adaptive.hpp): a trial it
+// planned and why, or (trial_id absent) why it stopped.
+struct SamplerDecision {
+  std::int64_t id = 0;
+  std::int64_t campaign_id = 0;
+  int round = 0;                         // 0 = the first batch
+  std::optional<std::int64_t> trial_id;  // the trial it planned; absent: it stopped
+  std::string reason;                    // e.g. "bisect between trial 4 (stick) and 7 (slide)"
+  std::string basis_json = "{}";         // what it was based on (outcomes seen, neighbours)
+  double created_at = 0;                 // s since epoch
+};
+
+// One adaptive round, written by PlanAdaptiveRound in one transaction.
+struct AdaptiveRound {
+  int round = 0;
+  std::vector<PlannedTrial> trials;
+  std::vector<std::string> reasons;     // one per trial
+  std::vector<std::string> bases_json;  // one per trial (JSON objects)
+  std::string sampler_state_json = "{}";
+  bool open = true;         // false: the sampler has finished (stop_reason says why)
+  std::string stop_reason;  // stored as a decision without a trial when !open
+};
+
+// A fit of model parameters to a campaign's ground truth (arena calibrate).
+struct Calibration {
+  std::int64_t id = 0;
+  std::int64_t campaign_id = 0;
+  double created_at = 0;
+  std::string params_json = "{}";    // fitted values with uncertainty, by parameter name
+  std::string settings_json = "{}";  // parameters, bounds, weights, hold-out, predictor
+  double heldout_error_before = 0;   // weighted loss on held-out trials, uncalibrated (>= 0)
+  double heldout_error_after = 0;    // the same with the fitted values (>= 0)
+  bool applied = false;              // true only when it improved the held-out error
+  std::string report_json = "{}";
 };
 
 struct Trial {
@@ -477,8 +518,28 @@ class Store {
   // -> cancelled; its planned trials become cancelled, running ones run out.
   void CancelCampaign(std::int64_t campaign_id,
                       const std::string& reason = "cancelled by operator");
-  // Marks active campaigns whose trials are all terminal as done; returns their ids.
+  // Marks active campaigns whose trials are all terminal and whose sampler is
+  // not open (AdaptiveRound::open) as done; returns their ids.
   std::vector<std::int64_t> CompleteFinishedCampaigns();
+
+  // ---- adaptive samplers
+  // Appends the round's planned trials, one decision row each (and a stop
+  // row when !round.open), the sampler's new state and sampler_open, in one
+  // transaction -- only if the campaign is active, its sampler is open, its
+  // sampler state is still `expected_state_json` and none of its trials is
+  // planned or running (so two services cannot both advance it).
+  // @returns false (nothing written) when one of those does not hold.
+  // @throws kBadInput for bad fields (reasons/bases not one per trial, ...).
+  bool PlanAdaptiveRound(std::int64_t campaign_id, const std::string& expected_state_json,
+                         const AdaptiveRound& round);
+  std::vector<SamplerDecision> ListDecisions(std::int64_t campaign_id) const;
+
+  // ---- calibrations (arena calibrate)
+  // @returns the calibration id. @throws kNotFound (campaign), kBadInput (NaN, bad JSON).
+  std::int64_t RecordCalibration(const Calibration& calibration);
+  // @throws kNotFound.
+  Calibration GetCalibration(std::int64_t calibration_id) const;
+  std::vector<Calibration> ListCalibrations(std::int64_t campaign_id) const;
 
   // ---- trial state machine (see the table above)
   // Atomically picks the next planned trial, by campaign priority (then

@@ -3,7 +3,7 @@
 // answers each sample of a closed-loop trial with a pusher command on the
 // PusherCommand topic. A cell running a scene whose pusher motion is
 // {"controller": NAME, ...} applies the answers of the controller registered
-// under NAME (docs/closed_loop.md).
+// under NAME (docs/live_control.md).
 //
 // Writing your own controller: derive from Controller, then host it with
 // RunController() (or `arena controller --name NAME --law LAW` for the laws

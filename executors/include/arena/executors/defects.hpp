@@ -43,7 +43,10 @@ struct DefectProfile {
   Eigen::Vector3d velocity_offset_std = Eigen::Vector3d::Zero();  // o ~ N(0, std), m/s
   double latency_ms = 0;        // observed stream lags the truth by this much (>= 0)
   double drop_probability = 0;  // per sample, [0, 1)
-  // Trial-to-trial friction variability: every mu is scaled by 1 + N(0, std).
+  // The cell's true friction against the scene's: every mu is scaled by
+  // mu_scale (a systematic error of the scene's coefficients, (0, 10]) ...
+  double mu_scale = 1;
+  // ... and trial to trial by 1 + N(0, std) on top.
   double mu_scale_std = 0;
   // Capabilities and limits.
   Eigen::Vector3d workspace_min = Eigen::Vector3d::Constant(-0.25);  // m, object position

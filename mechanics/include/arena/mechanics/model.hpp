@@ -1,7 +1,7 @@
 // The contact model of one scene, stepped in time (Simulate() drives it;
 // benchmarks and tests may step it directly).
 //
-// Formulation (velocity-level time stepping with inertia, DESIGN.md Mechanics):
+// Formulation (velocity-level time stepping with inertia):
 //   M (v+ - v) / dt = G f + w_known          (Newton-Euler; v the object twist
 //                                              in the gripper frame, which is
 //                                              the inertial reference)
@@ -17,10 +17,18 @@
 // velocities (v_f = y⁺ - y⁻); it is nondimensionalised by the scene's
 // force, mass and time-step scales and solved with SolveLcp (lcp.hpp).
 //
-// Geometry: fingers stay where they are in the gripper frame except that
-// their pads follow the object along their normals; the pusher's contact
-// points move with its motion; contact points on the object are taken where
-// the contacts are, so the object slides under them. The gyroscopic torque
+// Geometry, model.contacts = tracked (the default): every step the contact
+// points, normals and gaps come from the object's current pose (closest
+// features against the box, cylinder or prism; docs/scene.md, "Tracked
+// contacts"); a finger point whose closing line misses the object, or a
+// patch point off its edge chord, has no rows that step (unit diagonal, z =
+// 0), so the LCP keeps its size; a point finger's pad is re-seated along its
+// closing direction, and its friction rows see the pad's following removed.
+// model.contacts = fixed (the frozen frame): fingers stay where they are in
+// the gripper frame except that their pads follow the object along their
+// normals; the pusher's contact points move with its motion; contact points
+// on the object are taken where the contacts are, so the object slides
+// under them. The gyroscopic torque
 // is neglected (quasi-dynamic regime; explicit integration of it is unstable). Line constituent
 // points are spread evenly over the line; patch constituent points sit on a ring of radius 2R/3
 // (which gives a uniformly pressed disk's torsional friction 2/3 μ N R when the points share the
@@ -41,7 +49,7 @@
 
 namespace arena::mechanics {
 
-// SCENE.md tangent basis: t1 is the normalised projection onto the contact
+// docs/scene.md tangent basis: t1 is the normalised projection onto the contact
 // plane of the first of the gripper's z, y, x axes with |n·axis| < 0.9.
 Eigen::Vector3d FirstTangent(const Eigen::Vector3d& normal);
 
@@ -117,7 +125,10 @@ class ContactModel {
   const std::vector<ContactState>& contacts() const;
   Eigen::Vector3d pusher_force() const;  // on the object (N), last step
   double force_scale() const;            // N, residuals are relative to it
-  double velocity_scale() const;         // m/s
+  // Whether the fingers still hold the object as the grasp began (see
+  // GraspStatus); *note names the first finger that does not.
+  GraspStatus Grasp(std::string* note) const;
+  double velocity_scale() const;  // m/s
 
  private:
   struct Impl;

@@ -1,4 +1,4 @@
-// Scene: one prehensile-pushing setup (SCENE.md is the contract).
+// Scene: one prehensile-pushing setup (docs/scene.md is the contract).
 //
 // Plain structs, SI units, everything in the gripper frame at t = 0. A Scene
 // that came out of ParseScene() is valid; code that builds one by hand should
@@ -13,11 +13,16 @@
 
 namespace arena::mechanics {
 
-enum class ObjectShape { kBox, kCylinder };
+// kPrism: a convex polygon in the object's xy-plane extruded along its z.
+enum class ObjectShape { kBox, kCylinder, kPrism };
 enum class ContactType { kPoint, kLine, kPatch };
 // kAuto: model only what the scene requires; kFull: always 6 DOF;
 // kPlanar: 3 DOF, refuse a scene that is not planar.
 enum class Reduce { kAuto, kFull, kPlanar };
+// kTracked: contact points and normals follow the object's surface every step
+// and contacts are made and lost; kFixed: contact frames frozen in the
+// gripper frame (right for small motion only, cheaper).
+enum class ContactTracking { kTracked, kFixed };
 
 struct Pose {
   Eigen::Vector3d position = Eigen::Vector3d::Zero();  // m
@@ -28,7 +33,8 @@ struct ObjectSpec {
   ObjectShape shape = ObjectShape::kBox;
   Eigen::Vector3d size = Eigen::Vector3d::Zero();  // box: full extents (m)
   double radius = 0;                               // cylinder (m)
-  double height = 0;                               // cylinder (m), along object z
+  double height = 0;                               // cylinder, prism (m), along object z
+  std::vector<Eigen::Vector2d> polygon;            // prism: convex, counter-clockwise (m)
   double mass = 0;                                 // kg, > 0
   std::optional<Eigen::Matrix3d> inertia;          // kg m^2 about the centre of mass
   Pose pose;
@@ -41,7 +47,7 @@ struct ContactSpec {
   Eigen::Vector3d normal = Eigen::Vector3d::UnitX();   // unit, into the object
   Eigen::Vector3d axis = Eigen::Vector3d::UnitZ();     // line: unit direction
   double length = 0;                                   // line (m)
-  double radius = 0;                                   // patch (m)
+  double radius = 0;                                   // patch (m); point: a sphere's (m)
   double mu = 0;                                       // friction coefficient, >= 0
 };
 
@@ -52,7 +58,7 @@ struct PusherMotion {
 
 // A closed-loop pusher (JSON: "motion": {"controller": NAME, ...}): a
 // controller registered under `name` commands the motion each sample
-// (docs/closed_loop.md). target, gain and tolerance mean what the controller
+// (docs/live_control.md). target, gain and tolerance mean what the controller
 // makes of them (pivot_to_angle: angle in rad, speed per rad, rad).
 struct PusherController {
   std::string name;         // [A-Za-z0-9_.-]{1,64}
@@ -74,6 +80,7 @@ struct ModelOptions {
   int points = 3;     // constituent points per line (patch)
   double dt = 0.004;  // time step (s)
   Reduce reduce = Reduce::kAuto;
+  ContactTracking contacts = ContactTracking::kTracked;
 };
 
 struct Scene {
@@ -88,5 +95,6 @@ struct Scene {
 
 const char* ToString(ContactType type);
 const char* ToString(Reduce reduce);
+const char* ToString(ContactTracking tracking);
 
 }  // namespace arena::mechanics

@@ -1,12 +1,16 @@
-// Reading and writing scene JSON (SCENE.md). This is the edge of the
+// Reading and writing scene JSON (docs/scene.md). This is the edge of the
 // mechanics room: the model itself never sees JSON.
 //
-// Validation rules (SCENE.md leaves these open; this list is their reference):
+// Validation rules (docs/scene.md leaves these open; this list is their reference):
 //  - Input: at most kMaxSceneBytes bytes of UTF-8 JSON, nesting at most
 //    kMaxSceneDepth levels, arrays at most kMaxSceneArray elements, no
 //    duplicate keys, no unknown keys (typo protection: every key must be one
-//    SCENE.md defines). Malformed JSON names the byte offset and the path
+//    docs/scene.md defines). Malformed JSON names the byte offset and the path
 //    where it broke ("fingers[0].mu: invalid JSON at byte 212: ...").
+//  - Shapes: box (size), cylinder (radius, height), prism (polygon: convex,
+//    counter-clockwise, 3..256 vertices, refused naming the vertex; height).
+//    A point contact may have a radius (a sphere). model.contacts: tracked
+//    (default) or fixed.
 //  - Required: object.shape, object.mass, the shape's dimensions, duration,
 //    grip_force, fingers (1..kMaxFingers), and for each contact type,
 //    position, normal, mu (+ axis, length for a line; radius for a patch).
@@ -40,6 +44,7 @@ inline constexpr std::size_t kMaxSceneBytes = 1 << 20;  // 1 MiB of JSON
 inline constexpr int kMaxSceneDepth = 16;               // nesting levels
 inline constexpr std::size_t kMaxSceneArray = 4096;     // elements per array
 inline constexpr int kMaxFingers = 16;
+inline constexpr std::size_t kMaxPolygonVertices = 256;  // prism polygons
 inline constexpr int kMaxFacets = 64;
 inline constexpr int kMaxPoints = 32;
 inline constexpr double kMaxDuration = 3600.0;  // s: one trial is not an hour
@@ -87,7 +92,15 @@ Scene LoadSceneFile(const std::string& path);
 // @throws SceneError naming the first offending field.
 void ValidateScene(const Scene& scene);
 
-// The scene as SCENE.md JSON (compact when indent < 0);
+// Fingers close on the object at object.pose: each finger moves along its
+// normal (its closing direction) until its pad meets the object's surface
+// (a line: its first end to meet it); a pusher that would start inside the
+// object moves back along its normal to touch it. For an object whose pose differs from
+// the one the contacts were planned for (a reset that left it elsewhere).
+// @throws SceneError naming fingers[i].position when a finger misses.
+void SeatFingers(Scene* scene);
+
+// The scene as docs/scene.md JSON (compact when indent < 0);
 // ParseScene(SceneToJson(s)) reproduces s bit for bit.
 std::string SceneToJson(const Scene& scene, int indent = -1);
 
@@ -96,6 +109,8 @@ const char* ToString(ObjectShape shape);
 std::optional<ObjectShape> ObjectShapeFromString(std::string_view text);
 std::optional<ContactType> ContactTypeFromString(std::string_view text);
 std::optional<Reduce> ReduceFromString(std::string_view text);
+// "tracked" / "fixed".
+std::optional<ContactTracking> ContactTrackingFromString(std::string_view text);
 
 // The scene's length scale (m): the largest extent of the object (box: its
 // largest side; cylinder: max(diameter, height)). Tolerances scale with it.

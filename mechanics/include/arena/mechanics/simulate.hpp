@@ -1,5 +1,5 @@
 // Simulate a scene: the object's motion and every contact force over time,
-// sampled at 250 Hz. Model: DESIGN.md (Mechanics) and the seed paper.
+// sampled at 250 Hz. Model: model.hpp; scene format: docs/scene.md.
 #pragma once
 
 #include <functional>
@@ -25,6 +25,13 @@ struct ContactState {
   Eigen::Vector3d tangential_force = Eigen::Vector3d::Zero();  // N, on the object, gripper frame
   Eigen::Vector3d torque = Eigen::Vector3d::Zero();            // N m about the contact position
   ContactMode mode = ContactMode::kSeparate;
+  // Whether it touches the object (a constituent point within the gap
+  // tolerance of the surface, or pressing), how many of its constituent
+  // points do, and where: the force-weighted centre of those points in the
+  // object frame (m; where the primitive is when it touches nothing).
+  bool touching = false;
+  int touching_points = 0;
+  Eigen::Vector3d point = Eigen::Vector3d::Zero();
 };
 
 struct TrajectorySample {
@@ -67,6 +74,15 @@ enum class SimulationStatus {
 };
 const char* ToString(SimulationStatus status);
 
+// Whether the predicted motion stayed within the grasp it started from.
+// kHeld: every finger touches the object throughout. kLost (tracked
+// contacts): a finger lost contact, e.g. its pad passed the object's edge,
+// a physical prediction of a drop. kLeftGeometry (fixed contacts): a
+// finger's frozen contact point is no longer on the object's surface, so
+// the model ran outside its validity; not a normal prediction.
+enum class GraspStatus { kHeld, kLost, kLeftGeometry };
+const char* ToString(GraspStatus status);
+
 struct SimulationResult {
   SimulationStatus status = SimulationStatus::kOk;
   std::string error;  // empty when ok; names the step and reason otherwise
@@ -79,6 +95,9 @@ struct SimulationResult {
   // Closed loop: why the command source stopped the run early (status stays
   // kOk, samples end there); empty when it ran to the scene's duration.
   std::string stopped;
+  GraspStatus grasp = GraspStatus::kHeld;
+  double grasp_changed_t = -1;  // s: when it first stopped being kHeld (-1: never)
+  std::string grasp_note;       // which finger, and why
 };
 
 // Never throws for a scene that passed ValidateScene(); a step the solver

@@ -19,6 +19,8 @@
 
 #include <cstdint>
 #include <limits>
+#include <map>
+#include <optional>
 #include <stdexcept>
 #include <string>
 #include <string_view>
@@ -87,6 +89,36 @@ struct Variation {
   }
 };
 
+// An adaptive sampler (campaign "sampler": {"adaptive": ...}; adaptive.hpp
+// decides its trials round by round from the outcomes in the store).
+enum class AdaptiveKind { kBoundary, kReplicates };
+const char* ToString(AdaptiveKind kind);  // "boundary", "replicates"
+
+// What a trial's outcome is, for the boundary sampler (outcome.hpp computes it).
+enum class OutcomeKind {
+  kPivoted,     // |net rotation| > threshold (rad)
+  kFingerSlip,  // fraction of finger contact-samples sliding > threshold
+  kGraspKept,   // every finger still touching at the end and displacement <= threshold (m)
+};
+const char* ToString(OutcomeKind kind);  // "pivoted", "finger_slip", "grasp_kept"
+
+struct AdaptiveSpec {
+  AdaptiveKind kind = AdaptiveKind::kBoundary;
+  int batch = 0;  // trials per round after the first; 0: the idle cells at round 1 (then fixed)
+  int max_trials = 0;  // cap on the campaign's trials (> 0)
+  // boundary
+  OutcomeKind outcome = OutcomeKind::kPivoted;
+  double threshold = std::numeric_limits<double>::quiet_NaN();  // the outcome's threshold
+  double resolution = 0.05;  // wanted boundary accuracy, as a fraction of each range (0, 0.5]
+  int coarse_levels = 0;     // first batch: a grid of this many levels per dimension
+  // replicates
+  int min_replicates = 3;
+  int max_replicates = 20;
+  double ci_position = 0.001;  // m: target half-width of the mean final position's CI
+  double ci_angle = 0;         // rad: same for the final angle (0: not a target)
+  double confidence = 0.95;    // of the CI, in (0, 1)
+};
+
 struct Campaign {
   std::string name;                   // [A-Za-z0-9_.-]{1,64}
   std::string description;            // free text, optional
@@ -95,12 +127,22 @@ struct Campaign {
   mechanics::Scene scene;             // the base scene; the cells simulate with its model settings
   std::vector<Variation> variations;  // in canonical order (kVariationNames), only those given
   SamplerKind sampler = SamplerKind::kSobol;
-  int64_t conditions = 1;              // distinct sampled scenes
-  int replicates = 1;                  // trials per condition (same scene, different seed)
-  mechanics::ModelOptions prediction;  // model settings the predictor uses
-  std::string defects_json = "{}";     // defect profile (a JSON object), passed to cells as is
-  std::string defects_file;            // when given as a path (relative to the campaign file)
+  int64_t conditions = 1;                      // distinct sampled scenes
+  int replicates = 1;                          // trials per condition (same scene, different seed)
+  mechanics::ModelOptions prediction;          // model settings the predictor uses
+  std::string predictor = "arena";             // prediction.predictor: arena | mujoco
+  std::string predictor_settings_json = "{}";  // mujoco's knobs (timestep, cone, noslip_iterations)
+  std::string defects_json = "{}";  // defect profile (a JSON object), passed to cells as is
+  std::string defects_file;         // when given as a path (relative to the campaign file)
   std::string source_json;  // the campaign as given, scene/defects files inlined (compact JSON)
+  // Set for an adaptive campaign. Boundary: conditions = 0 (points are chosen
+  // as results come in; PlanTrialAt builds them). Replicates: conditions and
+  // `sampler` are the base plan, replicates = min_replicates.
+  std::optional<AdaptiveSpec> adaptive;
+  // prediction.calibration: a stored calibration whose fitted parameters the
+  // predictor applies (SubmitCampaign resolves it into calibrated_scales).
+  std::int64_t calibration_id = 0;
+  std::map<std::string, double> calibrated_scales;  // e.g. {"mu_fingers": 1.42}
 };
 
 // One trial of a campaign's plan. Replicates of a condition have the same
@@ -139,6 +181,22 @@ int64_t TrialCount(const Campaign& campaign);  // conditions * replicates
 // campaign continues the same sequence from a stored index.
 // @pre 0 <= index < TrialCount(campaign), else std::out_of_range.
 PlannedTrial PlanTrial(const Campaign& campaign, int64_t index);
+
+// The sampled variations' names, in campaign.variations order (the unit
+// point's dimensions).
+std::vector<std::string> SampledVariations(const Campaign& campaign);
+
+// A trial at an arbitrary point u of the unit hypercube (one coordinate in
+// [0, 1] per sampled variation, ranges only), for adaptive samplers. Its seed
+// follows (campaign seed, condition, replicate) as PlanTrial's does.
+// @throws std::invalid_argument for a wrong dimension or a coordinate outside [0, 1].
+PlannedTrial PlanTrialAt(const Campaign& campaign, const std::vector<double>& u, int64_t index,
+                         int64_t condition, int replicate);
+
+// Replicate `replicate` of condition `condition` of the base plan (any
+// replicate count), for the replicates sampler. @pre 0 <= condition < conditions.
+PlannedTrial PlanReplicate(const Campaign& campaign, int64_t condition, int replicate,
+                           int64_t index);
 
 // The condition's point in the unit hypercube, one coordinate in [0, 1) per
 // sampled variation (in campaign.variations order). Grid: level / levels.

@@ -62,7 +62,7 @@
 #include "arena/db/store.hpp"
 #include "arena/mechanics/scene.hpp"
 #include "arena/mechanics/simulate.hpp"
-#include "arena/orchestrator/prediction.hpp"
+#include "arena/assessment/prediction.hpp"
 #include "arena/orchestrator/service.hpp"
 #include "arena/schemas/arena.h"
 
@@ -142,7 +142,7 @@ struct PredictionRequest {
   // Closed loop (issue 19): the commands the cell applied, replayed through
   // the model; empty: an open-loop trial, or (a resumed trial) read them
   // from the store.
-  RecordedCommands commands;
+  assessment::RecordedCommands commands;
 };
 
 struct PredictionDone {
@@ -203,6 +203,8 @@ class TrialDriver {
 
   // ---- state
   bool InFlight() const;
+  // Cells alive, serving us, not quarantined and idle (an adaptive batch's size).
+  int IdleCells() const;
   // Every campaign (or options.only_campaign) is over; marks finished campaigns done.
   bool CampaignsFinished();
   ServiceCounters counters() const;

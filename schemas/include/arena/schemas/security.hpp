@@ -78,16 +78,16 @@ RoleTopics TopicsOf(Role role);
 struct LabOptions {
   std::string lab_name = "arena lab";  // O= of every subject ([A-Za-z0-9 _.-], 1..64)
   int valid_days = 3650;               // CA certificate lifetime (days, 1..36500)
-  int domain_min = 0;                  // governance applies to domains [min, max] (0..232)
-  int domain_max = 232;
+  int domain_min = 0;  // governance applies to domains [min, max] (0..231, dds::kMaxDomainId)
+  int domain_max = 231;
 };
 
 struct IdentityOptions {
   Role role = Role::kCell;
   std::string name;      // [A-Za-z0-9_.-], 1..64; also the directory name
   int valid_days = 730;  // certificate and grant lifetime (days, 1..36500)
-  int domain_min = 0;    // the grant covers domains [min, max] (0..232)
-  int domain_max = 232;
+  int domain_min = 0;    // the grant covers domains [min, max] (0..231, dds::kMaxDomainId)
+  int domain_max = 231;
 };
 
 // File names inside a lab and an identity directory.

@@ -1,11 +1,11 @@
-#include "arena/orchestrator/scoring.hpp"
+#include "arena/assessment/scoring.hpp"
 
 #include <algorithm>
 #include <cmath>
 #include <stdexcept>
 #include <string>
 
-namespace arena::orchestrator {
+namespace arena::assessment {
 
 namespace {
 // A contact's normal direction is the same in prediction and truth, so the
@@ -55,4 +55,4 @@ PredictionError ScorePrediction(const std::vector<mechanics::TrajectorySample>& 
   return error;
 }
 
-}  // namespace arena::orchestrator
+}  // namespace arena::assessment

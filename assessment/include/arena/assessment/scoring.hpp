@@ -7,7 +7,7 @@
 
 #include "arena/mechanics/simulate.hpp"
 
-namespace arena::orchestrator {
+namespace arena::assessment {
 
 struct PredictionError {
   double final_position = 0;  // m, |p_pred - p_true| at the last paired sample
@@ -24,4 +24,4 @@ struct PredictionError {
 PredictionError ScorePrediction(const std::vector<mechanics::TrajectorySample>& predicted,
                                 const std::vector<mechanics::TrajectorySample>& truth);
 
-}  // namespace arena::orchestrator
+}  // namespace arena::assessment

@@ -3,9 +3,9 @@
 
 #include <gtest/gtest.h>
 
-#include "arena/orchestrator/scoring.hpp"
+#include "arena/assessment/scoring.hpp"
 
-namespace arena::orchestrator {
+namespace arena::assessment {
 namespace {
 
 using mechanics::ContactMode;
@@ -57,4 +57,4 @@ TEST(ScorePrediction, ContactCountMismatchIsAnError) {
 }
 
 }  // namespace
-}  // namespace arena::orchestrator
+}  // namespace arena::assessment

@@ -1,15 +1,15 @@
 // The evaluation logic of `arena evaluate` on known inputs: percentiles,
 // budgets, the Pareto front and the recommendation
-// (orchestrator/include/arena/orchestrator/evaluation.hpp).
+// (assessment/include/arena/assessment/evaluation.hpp).
 #include <cmath>
 
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 
-#include "arena/orchestrator/evaluation.hpp"
-#include "arena/orchestrator/prediction.hpp"
+#include "arena/assessment/evaluation.hpp"
+#include "arena/assessment/prediction.hpp"
 
-namespace arena::orchestrator {
+namespace arena::assessment {
 namespace {
 
 TEST(EvaluationPercentile, InterpolatesBetweenClosestRanks) {
@@ -54,7 +54,7 @@ TEST(EvaluationGrid, CrossProductInOrderAndBadListsRefused) {
 
 TEST(EvaluationBudget, ParsesShorthandMetricsAndUnits) {
   auto b = ParseBudget("1mm");
-  EXPECT_EQ(b.metric, ErrorMetric::kPositionMedian);
+  EXPECT_EQ(b.metric, ErrorMetric::kPositionP95);  // budgets are met on p95
   EXPECT_DOUBLE_EQ(b.limit, 1e-3);
   b = ParseBudget("position_p95=0.005");
   EXPECT_EQ(b.metric, ErrorMetric::kPositionP95);
@@ -65,9 +65,20 @@ TEST(EvaluationBudget, ParsesShorthandMetricsAndUnits) {
   EXPECT_DOUBLE_EQ(b.limit, 0.02);
   b = ParseBudget("mode_agreement_median=95%");
   EXPECT_DOUBLE_EQ(b.limit, 0.95);
-  EXPECT_EQ(FormatBudget(ParseBudget("2mm")), "position_median <= 0.002 m");
-  for (const char* bad : {"", "mm", "1 mm", "1kg", "angle_median=1mm", "speed=1", "-1mm",
-                          "mode_agreement_median=1.5", "nan", "position_median=inf"}) {
+  EXPECT_EQ(FormatBudget(ParseBudget("2mm")), "position_p95 <= 0.002 m");
+  EXPECT_EQ(FormatBudget(ParseBudget("position_median=2mm")), "position_median <= 0.002 m");
+  b = ParseBudget("2ms");
+  EXPECT_EQ(b.metric, ErrorMetric::kTimeP95);
+  EXPECT_DOUBLE_EQ(b.limit, 2e-3);
+  b = ParseBudget("1.5floor");
+  EXPECT_EQ(b.metric, ErrorMetric::kPositionP95);
+  EXPECT_DOUBLE_EQ(b.floor_multiple, 1.5);
+  b = ParseBudget("angle_p95=2floor");
+  EXPECT_EQ(b.metric, ErrorMetric::kAngleP95);
+  EXPECT_DOUBLE_EQ(b.floor_multiple, 2);
+  for (const char* bad :
+       {"", "mm", "1 mm", "1kg", "angle_median=1mm", "speed=1", "-1mm", "mode_agreement_median=1.5",
+        "nan", "position_median=inf", "force_p95=2floor", "0floor", "time_p95=1mm", "2 ms"}) {
     EXPECT_THROW(ParseBudget(bad), std::invalid_argument) << bad;
   }
 }
@@ -112,8 +123,8 @@ std::vector<TrialEvaluation> KnownResults() {
   return r;
 }
 
-const std::vector<mechanics::ModelOptions> kModels = {Model(4), Model(8), Model(16), Model(32),
-                                                      Model(6)};
+const std::vector<SettingInfo> kModels =
+    ArenaSettings({Model(4), Model(8), Model(16), Model(32), Model(6)});
 
 TEST(EvaluationSummary, DistributionsParetoFrontAndFailures) {
   const auto report = Summarise(kModels, KnownResults(), {});
@@ -131,20 +142,32 @@ TEST(EvaluationSummary, DistributionsParetoFrontAndFailures) {
   EXPECT_EQ(g32.ok, 2);
   EXPECT_EQ(g32.failures, 1);
   EXPECT_FALSE(g32.eligible());
+  EXPECT_EQ(g32.failed_trials.size(), 1u);
+  EXPECT_EQ(g32.failed_trials[0].trial_id, 3);
   std::vector<bool> front;
   for (const auto& s : report.settings) front.push_back(s.pareto);
   EXPECT_EQ(front, (std::vector<bool>{true, true, false, false, true}));
-  // No budget: the cheapest setting that predicted every trial.
-  ASSERT_TRUE(report.recommended);
-  EXPECT_EQ(*report.recommended, 0u);
+  // No budget: nothing picked; the front is described instead.
+  EXPECT_FALSE(report.recommended);
+  EXPECT_NE(report.front.find("3 setting(s) on the front"), std::string::npos) << report.front;
+  EXPECT_NE(report.front.find("g4_k3_dt0.004_auto"), std::string::npos) << report.front;
+  // Tails: max and the worst trials by id.
+  EXPECT_NEAR(g4.position->max, 4.1e-3, 1e-15);
+  ASSERT_EQ(g4.worst.size(), 3u);
+  EXPECT_EQ(g4.worst[0].trial_id, 3);
+  EXPECT_EQ(g4.worst[2].trial_id, 1);
 }
 
 TEST(EvaluationSummary, RecommendsCheapestWithinBudget) {
-  auto report = Summarise(kModels, KnownResults(), {ParseBudget("2.5mm")});
+  auto report = Summarise(kModels, KnownResults(), {ParseBudget("position_median=2.5mm")});
   ASSERT_TRUE(report.recommended);
   EXPECT_EQ(report.settings[*report.recommended].model_key, ModelKey(Model(8)));
   EXPECT_NE(report.recommendation.find("within position_median <= 0.0025 m"), std::string::npos)
       << report.recommendation;
+  // On p95: g8's p95 is 2.09 mm, so 2.05 mm rules it out and g6 (1.09 mm) is the cheapest.
+  report = Summarise(kModels, KnownResults(), {ParseBudget("2.05mm")});
+  ASSERT_TRUE(report.recommended);
+  EXPECT_EQ(report.settings[*report.recommended].model_key, ModelKey(Model(6)));
   // g32 would meet 0.6 mm but failed on a trial: nothing is within budget.
   report = Summarise(kModels, KnownResults(), {ParseBudget("0.6mm")});
   EXPECT_FALSE(report.recommended);
@@ -162,7 +185,7 @@ TEST(EvaluationSummary, RecommendsCheapestWithinBudget) {
 }
 
 TEST(EvaluationSummary, EmptyCampaignAndJson) {
-  const auto empty = Summarise(kModels, {}, {ParseBudget("1mm")});
+  const auto empty = Summarise(kModels, {}, {ParseBudget("position_median=1mm")});
   EXPECT_EQ(empty.trials, 0);
   EXPECT_FALSE(empty.recommended);
   EXPECT_FALSE(empty.settings[0].position);
@@ -171,16 +194,20 @@ TEST(EvaluationSummary, EmptyCampaignAndJson) {
   EXPECT_TRUE(j["settings"][0]["position_error_m"].is_null());
   EXPECT_TRUE(j["recommended"].is_null());
 
-  const auto full = ToJson(Summarise(kModels, KnownResults(), {ParseBudget("2.5mm")}));
+  const auto full =
+      ToJson(Summarise(kModels, KnownResults(), {ParseBudget("position_median=2.5mm")}));
   EXPECT_EQ(full["recommended"], ModelKey(Model(8)));
   EXPECT_EQ(full["settings"].size(), 5u);
   EXPECT_EQ(full["settings"][1]["pareto"], true);
   EXPECT_EQ(full["settings"][1]["within_budget"], true);
   EXPECT_NEAR(full["settings"][1]["position_error_m"]["median"].get<double>(), 2e-3, 1e-15);
   EXPECT_EQ(full["primary_metric"], "position_median");
+  EXPECT_EQ(full["settings"][1]["predictor"], "arena");
+  EXPECT_NEAR(full["settings"][1]["position_error_m"]["max"].get<double>(), 2.1e-3, 1e-15);
+  EXPECT_EQ(full["settings"][3]["failed_trials"][0]["trial_id"], 3);
   // Parses back (no NaN written).
   EXPECT_EQ(nlohmann::json::parse(full.dump()), full);
 }
 
 }  // namespace
-}  // namespace arena::orchestrator
+}  // namespace arena::assessment

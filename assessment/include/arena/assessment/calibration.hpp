@@ -1,0 +1,139 @@
+// Calibration: fit model parameters to a campaign's ground truth
+// (`arena calibrate`; docs/closed_loop.md).
+//
+// Parameters are multiplicative scales on the scene's values, so one fit
+// serves a campaign whose scenes vary them:
+//
+//   mu_fingers   every finger's friction coefficient
+//   mu_pusher    the pusher's friction coefficient
+//   grip_force   the grip force the cell really applies
+//   object_mass  the object's mass (and inertia)
+//
+// Loss of one trial (weights: LossScales, documented in the README):
+//
+//   L = (e_pos / s_pos)^2 + (e_ang / s_ang)^2 + (e_force / s_force)^2
+//
+// e_pos: final object position error (m), e_ang: final angle error (rad),
+// e_force: RMS over samples and contacts of |f_pred - f_true| (N). The fit
+// minimises the mean L over the training trials with a derivative-free
+// optimiser (NLopt BOBYQA; COBYLA for one parameter) over log(scale) within
+// bounds. Uncertainty: a bootstrap over the training trials (each resample
+// refitted from the optimum). The held-out trials (a seeded split) measure
+// the error before (all scales 1) and after; a fit that does not lower the
+// held-out error is reported as not improved and must not be applied.
+//
+// The simulator is passed in (SimulateFn), so the same fit runs against
+// arena's model or any other predictor. Thread safety: Calibrate calls
+// `simulate` from up to `threads` threads at once.
+#pragma once
+
+#include <cstdint>
+#include <functional>
+#include <map>
+#include <optional>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include "arena/db/store.hpp"
+#include "arena/mechanics/scene.hpp"
+#include "arena/mechanics/simulate.hpp"
+
+namespace arena::assessment {
+
+using SimulateFn = std::function<mechanics::SimulationResult(const mechanics::Scene&)>;
+
+// Bad calibration input (unknown parameter, too few trials, ...): the
+// message names the option ("--params: ...").
+class CalibrationError : public std::runtime_error {
+ public:
+  using std::runtime_error::runtime_error;
+};
+
+enum class CalibrationParam { kMuFingers, kMuPusher, kGripForce, kObjectMass };
+const char* ToString(CalibrationParam p);  // "mu_fingers", ...
+// @throws CalibrationError naming the unknown name.
+CalibrationParam ParseCalibrationParam(const std::string& name);
+
+// The scene with the given scales applied (name -> factor, names as ToString).
+// @throws CalibrationError for an unknown name or a factor that is not > 0.
+mechanics::Scene ApplyScales(const mechanics::Scene& scene,
+                             const std::map<std::string, double>& scales);
+
+struct LossScales {
+  double position_m = 1e-3;  // 1 mm of final position error weighs 1
+  double angle_rad = 0.01;   // 0.01 rad (0.57 deg) of final angle error weighs 1
+  double force_n = 0.5;      // 0.5 N RMS contact-force error weighs 1
+};
+
+// One trial to fit: the scene the predictor runs (the campaign's model
+// settings applied) and its true trajectory.
+struct CalibrationTrial {
+  std::int64_t trial_id = 0;
+  mechanics::Scene scene;
+  std::vector<mechanics::TrajectorySample> truth;
+};
+
+struct CalibrationOptions {
+  std::vector<CalibrationParam> params;  // at least one, no repeats
+  double lower = 0.2, upper = 5.0;       // bounds of every scale
+  double holdout = 0.3;                  // fraction of trials held out, (0, 0.9]
+  std::uint64_t seed = 1;                // the hold-out split and the bootstrap
+  int max_evaluations = 150;             // of the loss, for the main fit
+  int bootstrap = 20;                    // resamples for the uncertainty (0: none)
+  int threads = 1;                       // simulations in parallel
+  LossScales scales;
+  std::function<void(const std::string&)> progress;  // optional, one line per stage
+};
+
+struct FittedParam {
+  std::string name;
+  double scale = 1;                // the fit
+  double std = 0;                  // bootstrap standard deviation of the scale
+  double ci_low = 1, ci_high = 1;  // bootstrap 2.5 and 97.5 percentiles
+  std::optional<double> nominal;   // the scenes' common value (e.g. mu 0.5), when they share one
+};
+
+struct CalibrationResult {
+  std::vector<FittedParam> fitted;
+  std::vector<std::int64_t> train_ids, heldout_ids;
+  double train_before = 0, train_after = 0;      // mean loss, training trials
+  double heldout_before = 0, heldout_after = 0;  // mean loss, held-out trials
+  // Held-out mean errors before/after, for the report (m, rad, N).
+  double heldout_position_before = 0, heldout_position_after = 0;
+  double heldout_angle_before = 0, heldout_angle_after = 0;
+  double heldout_force_before = 0, heldout_force_after = 0;
+  bool improved = false;  // heldout_after < heldout_before
+  int evaluations = 0;    // loss evaluations of the main fit
+  std::string optimizer;  // "LN_BOBYQA" / "LN_COBYLA"
+  std::string stop;       // NLopt's result
+  std::map<std::string, double> Scales() const;
+};
+
+// Per-trial error of a prediction against truth (samples paired by index).
+struct TrialError {
+  double position = 0, angle = 0, force = 0;
+  bool ok = true;  // false: the simulation failed (the loss then counts kFailedTrialLoss)
+};
+inline constexpr double kFailedTrialLoss = 1e4;
+TrialError CompareTrajectories(const mechanics::Scene& scene,
+                               const std::vector<mechanics::TrajectorySample>& predicted,
+                               const std::vector<mechanics::TrajectorySample>& truth);
+double Loss(const TrialError& e, const LossScales& s);
+
+// @throws CalibrationError for bad options or fewer than 4 trials.
+CalibrationResult Calibrate(const std::vector<CalibrationTrial>& trials, const SimulateFn& simulate,
+                            const CalibrationOptions& options);
+
+// The done trials of a campaign with their ground truth, each scene with
+// `model_json`'s settings applied by `prepare` (the campaign's prediction).
+// @throws db::StoreError.
+std::vector<CalibrationTrial> LoadCalibrationTrials(
+    const db::Store& store, std::int64_t campaign_id,
+    const std::function<mechanics::Scene(const mechanics::Scene&)>& prepare);
+
+// The result as stored (db::Calibration's params_json / report_json).
+std::string ParamsJson(const CalibrationResult& r);
+std::string ReportJson(const CalibrationResult& r);
+
+}  // namespace arena::assessment

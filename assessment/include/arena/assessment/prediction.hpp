@@ -1,0 +1,98 @@
+// Predicting a trial: the campaign's model settings applied to the trial's
+// scene, the model run, and the result scored against the ground truth.
+#pragma once
+
+#include <optional>
+#include <string>
+#include <vector>
+
+#include <nlohmann/json_fwd.hpp>
+
+#include "arena/db/store.hpp"
+#include "arena/mechanics/scene.hpp"
+#include "arena/mechanics/simulate.hpp"
+
+namespace arena::assessment {
+
+// What became of one prediction (stored as db::Prediction::status).
+enum class PredictionOutcome {
+  kOk,
+  kDiverged,       // ran, but left the grasp or blew up: counted apart, never averaged in
+  kSolverFailure,  // the solver gave up (experiment data, not an error)
+  kInvalidScene,   // the setting does not fit the scene
+  kError,          // the trial could not be loaded or scored
+};
+const char* ToString(PredictionOutcome outcome);  // "ok", "diverged", "solver_failure", ...
+// The outcome a stored status names (unknown text: kError).
+PredictionOutcome OutcomeOf(const std::string& status);
+
+// Overrides the scene's `model` with the settings present in `model`
+// (facets, points, dt, reduce; any may be absent; null = none).
+// @throws mechanics::SceneError naming "model.<field>" for a bad setting.
+mechanics::Scene ApplyModelSettings(const mechanics::Scene& scene, const nlohmann::json& model);
+
+// "g8_k3_dt0.004_auto": the fidelity label predictions are stored under.
+std::string ModelKey(const mechanics::ModelOptions& model);
+
+// Why a predicted trajectory cannot be a prediction of a held object, or
+// nothing. It diverged when a sample is not finite, or the object moved
+// farther from its start than the pusher travelled plus the object's
+// largest extent, or turned more than 90° beyond what the pusher's own
+// rotation explains; it left the grasp when every finger separated over the last quarter
+// of the trajectory while the truth still held the object (truth may be empty: then only
+// the first checks apply).
+std::optional<std::string> DivergenceReason(
+    const mechanics::Scene& scene, const std::vector<mechanics::TrajectorySample>& predicted,
+    const std::vector<mechanics::TrajectorySample>& truth);
+
+// Scores a simulation of `scene` against `truth` into a stored prediction
+// (status, errors, residuals and solver statistics in detail_json); never
+// throws. model_key, model_json and wall_s are the caller's to set.
+db::Prediction ScoreSimulation(const mechanics::Scene& scene,
+                               const mechanics::SimulationResult& result,
+                               const std::vector<mechanics::TrajectorySample>& truth);
+
+// Runs the model on `scene` and scores it against `truth`; never throws.
+// A solver failure is a prediction with status "solver_failure" (experiment
+// data, not an error), an invalid scene one with "invalid_scene", a run
+// that left the grasp or diverged one with "diverged" (errors still filled).
+db::Prediction PredictTrial(const mechanics::Scene& scene,
+                            const std::vector<mechanics::TrajectorySample>& truth);
+
+// The same with the campaign's `prediction` object: "predictor": "mujoco"
+// runs MuJoCo (simulators/) with the object's knobs (timestep, cone,
+// noslip_iterations); anything else is arena's model on `scene` (whose
+// model the caller already set with ApplyModelSettings). Never throws.
+db::Prediction PredictTrial(const mechanics::Scene& scene,
+                            const std::vector<mechanics::TrajectorySample>& truth,
+                            const nlohmann::json& prediction);
+
+// Closed loop (issue 19): the pusher commands a closed-loop trial applied,
+// indexed by the sample they answered (db::ClosedLoopCommand.commanded).
+using RecordedCommands = std::vector<mechanics::PusherMotion>;
+RecordedCommands CommandsOf(const db::ClosedLoopRun& run);
+// A command source that replays `commands` open-loop: command k moves the
+// pusher from the step after sample k, exactly as on the cell; the run stops
+// where the recording ends. `commands` must outlive the source.
+mechanics::PusherCommandSource ReplayCommands(const RecordedCommands& commands);
+
+// The scene a replay is scored against: a closed loop's pusher starts at
+// rest (its scene motion is zero), so the divergence check bounds its
+// travel by the fastest recorded command instead.
+mechanics::Scene ReplayScoringScene(const mechanics::Scene& scene,
+                                    const RecordedCommands& commands);
+
+// The same, for any trial: a closed-loop scene (pusher.controller set) is
+// predicted by replaying `commands` through the predictor (open-loop replay
+// of the same inputs) and scored as any trial; without commands its
+// prediction is status "error", on a predictor that cannot replay commands
+// "invalid_scene" with the reason. `commands` is ignored for an open-loop
+// scene and may be null. Never throws.
+db::Prediction PredictTrial(const mechanics::Scene& scene,
+                            const std::vector<mechanics::TrajectorySample>& truth,
+                            const nlohmann::json& prediction, const RecordedCommands* commands);
+
+// A prediction that could not be made (status, reason in detail_json).
+db::Prediction PredictionFailure(const std::string& status, const std::string& reason);
+
+}  // namespace arena::assessment

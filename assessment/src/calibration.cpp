@@ -1,0 +1,445 @@
+// Calibration by derivative-free least squares (design: calibration.hpp).
+#include "arena/assessment/calibration.hpp"
+
+#include <algorithm>
+#include <atomic>
+#include <cmath>
+#include <numeric>
+#include <thread>
+
+#include <nlohmann/json.hpp>
+#include <nlopt.hpp>
+
+#include "arena/mechanics/scene_json.hpp"
+
+namespace arena::assessment {
+namespace {
+
+uint64_t Mix(uint64_t x) {
+  x += 0x9e3779b97f4a7c15ULL;
+  x = (x ^ (x >> 30)) * 0xbf58476d1ce4e5b9ULL;
+  x = (x ^ (x >> 27)) * 0x94d049bb133111ebULL;
+  return x ^ (x >> 31);
+}
+
+std::vector<Eigen::Vector3d> Normals(const mechanics::Scene& scene) {
+  std::vector<Eigen::Vector3d> n;
+  for (const auto& f : scene.fingers) n.push_back(f.normal.normalized());
+  if (scene.pusher) n.push_back(scene.pusher->normal.normalized());
+  return n;
+}
+
+// Runs fn(i) for i in [0, n) on up to `threads` threads.
+void ParallelFor(int n, int threads, const std::function<void(int)>& fn) {
+  threads = std::clamp(threads, 1, std::max(1, n));
+  if (threads == 1) {
+    for (int i = 0; i < n; ++i) fn(i);
+    return;
+  }
+  std::atomic<int> next{0};
+  std::vector<std::thread> pool;
+  for (int t = 0; t < threads; ++t)
+    pool.emplace_back([&] {
+      for (int i = next++; i < n; i = next++) fn(i);
+    });
+  for (auto& th : pool) th.join();
+}
+
+double Percentile(std::vector<double> v, double q) {
+  if (v.empty()) return NAN;
+  std::sort(v.begin(), v.end());
+  const double pos = q * static_cast<double>(v.size() - 1);
+  const auto lo = static_cast<size_t>(std::floor(pos));
+  const size_t hi = std::min(lo + 1, v.size() - 1);
+  return v[lo] + (pos - static_cast<double>(lo)) * (v[hi] - v[lo]);
+}
+
+struct Errors {
+  std::vector<TrialError> per_trial;
+  double MeanLoss(const LossScales& s) const {
+    double sum = 0;
+    for (const auto& e : per_trial) sum += Loss(e, s);
+    return per_trial.empty() ? 0 : sum / static_cast<double>(per_trial.size());
+  }
+};
+
+class Fitter {
+ public:
+  Fitter(const std::vector<CalibrationTrial>& trials, const SimulateFn& simulate,
+         const CalibrationOptions& o)
+      : trials_(trials), simulate_(simulate), o_(o) {}
+
+  std::map<std::string, double> ScalesOf(const std::vector<double>& log_x) const {
+    std::map<std::string, double> s;
+    for (size_t k = 0; k < o_.params.size(); ++k) s[ToString(o_.params[k])] = std::exp(log_x[k]);
+    return s;
+  }
+
+  Errors Evaluate(const std::vector<int>& subset, const std::map<std::string, double>& scales) {
+    Errors out;
+    out.per_trial.resize(subset.size());
+    ParallelFor(static_cast<int>(subset.size()), o_.threads, [&](int i) {
+      const CalibrationTrial& t = trials_[static_cast<size_t>(subset[static_cast<size_t>(i)])];
+      const mechanics::Scene scene = ApplyScales(t.scene, scales);
+      const mechanics::SimulationResult r = simulate_(scene);
+      if (r.status != mechanics::SimulationStatus::kOk || r.samples.empty()) {
+        out.per_trial[static_cast<size_t>(i)].ok = false;
+        return;
+      }
+      out.per_trial[static_cast<size_t>(i)] = CompareTrajectories(t.scene, r.samples, t.truth);
+    });
+    return out;
+  }
+
+  // Minimises the mean loss over `subset` from `start` (log scales).
+  std::vector<double> Fit(const std::vector<int>& subset, std::vector<double> start, int max_eval,
+                          double step, int* evaluations, std::string* stop) {
+    const auto n = static_cast<unsigned>(o_.params.size());
+    const nlopt::algorithm algorithm = n >= 2 ? nlopt::LN_BOBYQA : nlopt::LN_COBYLA;
+    nlopt::opt opt(algorithm, n);
+    opt.set_lower_bounds(std::vector<double>(n, std::log(o_.lower)));
+    opt.set_upper_bounds(std::vector<double>(n, std::log(o_.upper)));
+    opt.set_initial_step(step);
+    opt.set_xtol_abs(1e-4);  // 0.01 % of a scale
+    opt.set_maxeval(max_eval);
+    struct Data {
+      Fitter* self;
+      const std::vector<int>* subset;
+      int count;
+    } data{this, &subset, 0};
+    opt.set_min_objective(
+        [](const std::vector<double>& x, std::vector<double>&, void* p) {
+          auto* d = static_cast<Data*>(p);
+          ++d->count;
+          return d->self->Evaluate(*d->subset, d->self->ScalesOf(x)).MeanLoss(d->self->o_.scales);
+        },
+        &data);
+    double best = 0;
+    nlopt::result result = nlopt::FAILURE;
+    try {
+      result = opt.optimize(start, best);
+    } catch (const nlopt::roundoff_limited&) {
+      result = nlopt::ROUNDOFF_LIMITED;  // start holds the best point found
+    }
+    if (evaluations) *evaluations = data.count;
+    if (stop) {
+      switch (result) {
+        case nlopt::XTOL_REACHED:
+          *stop = "xtol_reached";
+          break;
+        case nlopt::FTOL_REACHED:
+          *stop = "ftol_reached";
+          break;
+        case nlopt::MAXEVAL_REACHED:
+          *stop = "maxeval_reached";
+          break;
+        case nlopt::ROUNDOFF_LIMITED:
+          *stop = "roundoff_limited";
+          break;
+        default:
+          *stop = "result " + std::to_string(static_cast<int>(result));
+      }
+    }
+    return start;
+  }
+
+ private:
+  const std::vector<CalibrationTrial>& trials_;
+  const SimulateFn& simulate_;
+  const CalibrationOptions& o_;
+};
+
+void Mean(const Errors& e, double* pos, double* ang, double* force) {
+  *pos = *ang = *force = 0;
+  int n = 0;
+  for (const auto& t : e.per_trial) {
+    if (!t.ok) continue;
+    *pos += t.position;
+    *ang += t.angle;
+    *force += t.force;
+    ++n;
+  }
+  if (n > 0) {
+    *pos /= n;
+    *ang /= n;
+    *force /= n;
+  }
+}
+
+std::optional<double> CommonValue(const std::vector<CalibrationTrial>& trials, CalibrationParam p) {
+  std::optional<double> value;
+  for (const auto& t : trials) {
+    std::vector<double> vs;
+    switch (p) {
+      case CalibrationParam::kMuFingers:
+        for (const auto& f : t.scene.fingers) vs.push_back(f.mu);
+        break;
+      case CalibrationParam::kMuPusher:
+        if (t.scene.pusher) vs.push_back(t.scene.pusher->mu);
+        break;
+      case CalibrationParam::kGripForce:
+        vs.push_back(t.scene.grip_force);
+        break;
+      case CalibrationParam::kObjectMass:
+        vs.push_back(t.scene.object.mass);
+        break;
+    }
+    for (double v : vs) {
+      if (!value) value = v;
+      if (std::abs(*value - v) > 1e-12 * std::max(1.0, std::abs(v))) return std::nullopt;
+    }
+  }
+  return value;
+}
+
+}  // namespace
+
+const char* ToString(CalibrationParam p) {
+  switch (p) {
+    case CalibrationParam::kMuFingers:
+      return "mu_fingers";
+    case CalibrationParam::kMuPusher:
+      return "mu_pusher";
+    case CalibrationParam::kGripForce:
+      return "grip_force";
+    case CalibrationParam::kObjectMass:
+      return "object_mass";
+  }
+  return "?";
+}
+
+CalibrationParam ParseCalibrationParam(const std::string& name) {
+  for (auto p : {CalibrationParam::kMuFingers, CalibrationParam::kMuPusher,
+                 CalibrationParam::kGripForce, CalibrationParam::kObjectMass}) {
+    if (name == ToString(p)) return p;
+  }
+  throw CalibrationError("--params: unknown parameter '" + name +
+                         "' (expected mu_fingers, mu_pusher, grip_force or object_mass)");
+}
+
+mechanics::Scene ApplyScales(const mechanics::Scene& scene,
+                             const std::map<std::string, double>& scales) {
+  mechanics::Scene s = scene;
+  for (const auto& [name, k] : scales) {
+    if (!(k > 0) || !std::isfinite(k))
+      throw CalibrationError("calibration: scale of " + name + " must be finite and > 0");
+    switch (ParseCalibrationParam(name)) {
+      case CalibrationParam::kMuFingers:
+        for (auto& f : s.fingers) f.mu *= k;
+        break;
+      case CalibrationParam::kMuPusher:
+        if (s.pusher) s.pusher->mu *= k;
+        break;
+      case CalibrationParam::kGripForce:
+        s.grip_force *= k;
+        break;
+      case CalibrationParam::kObjectMass:
+        s.object.mass *= k;
+        if (s.object.inertia) *s.object.inertia *= k;
+        break;
+    }
+  }
+  return s;
+}
+
+TrialError CompareTrajectories(const mechanics::Scene& scene,
+                               const std::vector<mechanics::TrajectorySample>& predicted,
+                               const std::vector<mechanics::TrajectorySample>& truth) {
+  TrialError e;
+  const size_t n = std::min(predicted.size(), truth.size());
+  if (n == 0) {
+    e.ok = false;
+    return e;
+  }
+  const auto normals = Normals(scene);
+  double sum = 0;
+  long pairs = 0;
+  for (size_t i = 0; i < n; ++i) {
+    const size_t m =
+        std::min({predicted[i].contacts.size(), truth[i].contacts.size(), normals.size()});
+    for (size_t c = 0; c < m; ++c) {
+      const auto& p = predicted[i].contacts[c];
+      const auto& t = truth[i].contacts[c];
+      const Eigen::Vector3d d = (p.normal_force - t.normal_force) * normals[c] +
+                                (p.tangential_force - t.tangential_force);
+      sum += d.squaredNorm();
+      ++pairs;
+    }
+  }
+  e.position = (predicted[n - 1].position - truth[n - 1].position).norm();
+  e.angle = predicted[n - 1].orientation.normalized().angularDistance(
+      truth[n - 1].orientation.normalized());
+  e.force = pairs ? std::sqrt(sum / static_cast<double>(pairs)) : 0;
+  return e;
+}
+
+double Loss(const TrialError& e, const LossScales& s) {
+  if (!e.ok) return kFailedTrialLoss;
+  const double a = e.position / s.position_m, b = e.angle / s.angle_rad, c = e.force / s.force_n;
+  return a * a + b * b + c * c;
+}
+
+std::map<std::string, double> CalibrationResult::Scales() const {
+  std::map<std::string, double> s;
+  for (const auto& f : fitted) s[f.name] = f.scale;
+  return s;
+}
+
+CalibrationResult Calibrate(const std::vector<CalibrationTrial>& trials, const SimulateFn& simulate,
+                            const CalibrationOptions& o) {
+  if (o.params.empty()) throw CalibrationError("--params: name at least one parameter");
+  for (size_t i = 0; i < o.params.size(); ++i)
+    for (size_t j = 0; j < i; ++j)
+      if (o.params[i] == o.params[j])
+        throw CalibrationError(std::string("--params: ") + ToString(o.params[i]) + " is repeated");
+  if (!(o.holdout > 0 && o.holdout <= 0.9))
+    throw CalibrationError("--holdout: must be in (0, 0.9]");
+  if (!(o.lower > 0 && o.lower < 1 && o.upper > 1 && std::isfinite(o.upper)))
+    throw CalibrationError("bounds: need 0 < lower < 1 < upper");
+  if (trials.size() < 4)
+    throw CalibrationError("--campaign: " + std::to_string(trials.size()) +
+                           " done trials with ground truth; calibration needs at least 4");
+  if (o.max_evaluations < 5) throw CalibrationError("--max-evaluations: must be >= 5");
+  if (o.bootstrap < 0) throw CalibrationError("--bootstrap: must be >= 0");
+
+  // Seeded split: order trials by a hash of (seed, id), hold out the first part.
+  std::vector<int> order(trials.size());
+  std::iota(order.begin(), order.end(), 0);
+  std::sort(order.begin(), order.end(), [&](int a, int b) {
+    const auto ha =
+        Mix(o.seed ^ Mix(static_cast<uint64_t>(trials[static_cast<size_t>(a)].trial_id)));
+    const auto hb =
+        Mix(o.seed ^ Mix(static_cast<uint64_t>(trials[static_cast<size_t>(b)].trial_id)));
+    return ha != hb ? ha < hb : a < b;
+  });
+  const int n_hold =
+      std::clamp(static_cast<int>(std::lround(o.holdout * static_cast<double>(trials.size()))), 1,
+                 static_cast<int>(trials.size()) - 2);
+  std::vector<int> hold(order.begin(), order.begin() + n_hold);
+  std::vector<int> train(order.begin() + n_hold, order.end());
+  std::sort(hold.begin(), hold.end());
+  std::sort(train.begin(), train.end());
+
+  CalibrationResult r;
+  for (int i : train) r.train_ids.push_back(trials[static_cast<size_t>(i)].trial_id);
+  for (int i : hold) r.heldout_ids.push_back(trials[static_cast<size_t>(i)].trial_id);
+  auto say = [&](const std::string& line) {
+    if (o.progress) o.progress(line);
+  };
+  Fitter fitter(trials, simulate, o);
+  const auto dims = o.params.size();
+  const std::vector<double> zero(dims, 0.0);
+  r.optimizer = dims >= 2 ? "LN_BOBYQA" : "LN_COBYLA";
+
+  say("fitting " + std::to_string(dims) + " parameter(s) on " + std::to_string(train.size()) +
+      " trials (" + std::to_string(hold.size()) + " held out)");
+  r.train_before = fitter.Evaluate(train, fitter.ScalesOf(zero)).MeanLoss(o.scales);
+  const std::vector<double> best =
+      fitter.Fit(train, zero, o.max_evaluations, 0.3, &r.evaluations, &r.stop);
+  const auto scales = fitter.ScalesOf(best);
+  r.train_after = fitter.Evaluate(train, scales).MeanLoss(o.scales);
+
+  const Errors before = fitter.Evaluate(hold, fitter.ScalesOf(zero));
+  const Errors after = fitter.Evaluate(hold, scales);
+  r.heldout_before = before.MeanLoss(o.scales);
+  r.heldout_after = after.MeanLoss(o.scales);
+  Mean(before, &r.heldout_position_before, &r.heldout_angle_before, &r.heldout_force_before);
+  Mean(after, &r.heldout_position_after, &r.heldout_angle_after, &r.heldout_force_after);
+  r.improved = r.heldout_after < r.heldout_before;
+
+  // Bootstrap: resample the training trials, refit from the optimum.
+  std::vector<std::vector<double>> boot(dims);
+  for (int b = 0; b < o.bootstrap; ++b) {
+    say("bootstrap " + std::to_string(b + 1) + "/" + std::to_string(o.bootstrap));
+    std::vector<int> resample;
+    for (size_t i = 0; i < train.size(); ++i) {
+      const uint64_t h = Mix(Mix(o.seed ^ 0xb007ULL) + static_cast<uint64_t>(b) * 7919 + i);
+      resample.push_back(train[static_cast<size_t>(h % train.size())]);
+    }
+    const auto x =
+        fitter.Fit(resample, best, std::max(10, o.max_evaluations / 3), 0.1, nullptr, nullptr);
+    for (size_t k = 0; k < dims; ++k) boot[k].push_back(std::exp(x[k]));
+  }
+  for (size_t k = 0; k < dims; ++k) {
+    FittedParam f;
+    f.name = ToString(o.params[k]);
+    f.scale = std::exp(best[k]);
+    f.ci_low = f.ci_high = f.scale;
+    if (boot[k].size() >= 2) {
+      const double mean = std::accumulate(boot[k].begin(), boot[k].end(), 0.0) /
+                          static_cast<double>(boot[k].size());
+      double ss = 0;
+      for (double v : boot[k]) ss += (v - mean) * (v - mean);
+      f.std = std::sqrt(ss / static_cast<double>(boot[k].size() - 1));
+      f.ci_low = Percentile(boot[k], 0.025);
+      f.ci_high = Percentile(boot[k], 0.975);
+    }
+    f.nominal = CommonValue(trials, o.params[k]);
+    r.fitted.push_back(f);
+  }
+  return r;
+}
+
+std::vector<CalibrationTrial> LoadCalibrationTrials(
+    const db::Store& store, std::int64_t campaign_id,
+    const std::function<mechanics::Scene(const mechanics::Scene&)>& prepare) {
+  std::vector<CalibrationTrial> out;
+  for (const auto& t : store.ListTrials(campaign_id)) {
+    if (t.state != db::TrialState::kDone || !t.gt_stream_id) continue;
+    CalibrationTrial c;
+    c.trial_id = t.id;
+    const mechanics::Scene scene = mechanics::ParseScene(t.scene_json);
+    c.scene = prepare(scene);
+    const auto normals = Normals(scene);
+    for (const auto& s : store.ReadGroundTruth(t.id).samples) {
+      mechanics::TrajectorySample ts;
+      ts.t = s.t;
+      ts.position = {s.object_pose[0], s.object_pose[1], s.object_pose[2]};
+      ts.orientation = Eigen::Quaterniond(s.object_pose[3], s.object_pose[4], s.object_pose[5],
+                                          s.object_pose[6]);
+      for (size_t i = 0; i < s.contacts.size() && i < normals.size(); ++i) {
+        const Eigen::Vector3d f(s.contacts[i].force[0], s.contacts[i].force[1],
+                                s.contacts[i].force[2]);
+        mechanics::ContactState cs;
+        cs.normal_force = f.dot(normals[i]);
+        cs.tangential_force = f - cs.normal_force * normals[i];
+        ts.contacts.push_back(cs);
+      }
+      c.truth.push_back(std::move(ts));
+    }
+    out.push_back(std::move(c));
+  }
+  return out;
+}
+
+std::string ParamsJson(const CalibrationResult& r) {
+  nlohmann::json j = nlohmann::json::object();
+  for (const auto& f : r.fitted) {
+    nlohmann::json p = {{"scale", f.scale}, {"std", f.std}, {"ci95", {f.ci_low, f.ci_high}}};
+    if (f.nominal) {
+      p["nominal"] = *f.nominal;
+      p["value"] = *f.nominal * f.scale;
+    }
+    j[f.name] = p;
+  }
+  return j.dump();
+}
+
+std::string ReportJson(const CalibrationResult& r) {
+  return nlohmann::json{
+      {"train_ids", r.train_ids},
+      {"heldout_ids", r.heldout_ids},
+      {"train_loss", {{"before", r.train_before}, {"after", r.train_after}}},
+      {"heldout_loss", {{"before", r.heldout_before}, {"after", r.heldout_after}}},
+      {"heldout_position_m",
+       {{"before", r.heldout_position_before}, {"after", r.heldout_position_after}}},
+      {"heldout_angle_rad", {{"before", r.heldout_angle_before}, {"after", r.heldout_angle_after}}},
+      {"heldout_force_n", {{"before", r.heldout_force_before}, {"after", r.heldout_force_after}}},
+      {"improved", r.improved},
+      {"evaluations", r.evaluations},
+      {"optimizer", r.optimizer},
+      {"stop", r.stop}}
+      .dump();
+}
+
+}  // namespace arena::assessment

@@ -1,0 +1,320 @@
+// Running `arena evaluate`: load the campaign's done trials, build the
+// requested predictors, replay every (trial, setting) on a pool of worker
+// threads, compute the noise floor and the convergence table, summarise and
+// store the run.
+#include "arena/assessment/evaluation.hpp"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <map>
+#include <mutex>
+#include <set>
+#include <stdexcept>
+#include <thread>
+
+#include <nlohmann/json.hpp>
+
+#include "arena/assessment/convergence.hpp"
+#include "arena/assessment/prediction.hpp"
+#include "arena/assessment/truth.hpp"
+#include "arena/mechanics/scene_json.hpp"
+
+namespace arena::assessment {
+
+TruthInfo TruthOf(const db::Store& store, std::int64_t campaign_id) {
+  // Per trial, from what its cell reported when it executed (migration 10);
+  // a trial executed before cells reported it ran the model.
+  std::map<std::string, std::string> backends;  // backend -> truth kind
+  for (const auto& c : store.CampaignTruths(campaign_id)) {
+    if (c.trials <= 0) continue;
+    const std::string backend = c.backend.empty() ? "model" : c.backend;
+    const std::string truth = c.truth.empty() ? "self-consistency" : c.truth;
+    backends[backend] = truth;
+  }
+  TruthInfo info;
+  info.source.clear();
+  bool self = false;
+  for (const auto& [backend, truth] : backends) {
+    info.source += (info.source.empty() ? "" : ",") + backend;
+    self = self || truth == "self-consistency";
+  }
+  if (info.source.empty()) {
+    info.source = "model";
+    self = true;
+  }
+  info.independent = !self;
+  if (self) {
+    info.statement =
+        "the truth is the model at the cell's settings (self-consistency, not accuracy)";
+    if (backends.size() > 1) info.statement += "; the trials ran on " + info.source;
+  } else {
+    std::string kinds;
+    for (const auto& [backend, truth] : backends)
+      if (kinds.find(truth) == std::string::npos) kinds += (kinds.empty() ? "" : ", ") + truth;
+    info.statement = "the truth is " + info.source + " (" + kinds +
+                     "), independent of arena's model: errors are accuracy against it";
+  }
+  return info;
+}
+
+namespace {
+
+struct LoadedTrial {
+  std::int64_t id = -1;
+  mechanics::Scene scene;
+  std::vector<mechanics::TrajectorySample> truth;
+  RecordedCommands commands;  // closed loop: replayed (issue 19); empty otherwise
+  std::string error;          // non-empty: the trial could not be loaded
+};
+
+LoadedTrial LoadTrial(const db::Store& store, const db::Trial& t, const mechanics::Scene* scene) {
+  LoadedTrial out;
+  out.id = t.id;
+  try {
+    out.scene = scene ? *scene : mechanics::ParseScene(t.scene_json);
+    out.truth = ReadTruth(store, t.id, out.scene);
+    if (out.scene.pusher && out.scene.pusher->controller) {
+      if (auto run = store.GetClosedLoop(t.id)) out.commands = CommandsOf(*run);
+      if (out.commands.empty()) out.error = "closed-loop trial without recorded pusher commands";
+    }
+  } catch (const std::exception& e) {
+    out.error = e.what();
+  }
+  return out;
+}
+
+struct Built {
+  std::vector<std::unique_ptr<Predictor>> predictors;
+  std::vector<SettingInfo> infos;
+  std::vector<std::pair<std::size_t, std::size_t>> index;  // flat -> (predictor, setting)
+  nlohmann::json grids = nlohmann::json::object();
+};
+
+Built BuildPredictors(const std::vector<PredictorRequest>& requests,
+                      const std::vector<mechanics::Scene>& scenes) {
+  if (requests.empty()) throw std::invalid_argument("predictors: name at least one");
+  Built b;
+  std::set<std::string> seen;
+  for (const auto& req : requests) {
+    if (!seen.insert(req.name).second) {
+      throw std::invalid_argument("predictors: '" + req.name + "' is named twice");
+    }
+    if (req.name == "arena") {
+      const auto models = req.arena_grid ? ExpandGrid(*req.arena_grid) : DefaultArenaGrid(scenes);
+      b.predictors.push_back(MakeArenaPredictor(models));
+      nlohmann::json keys = nlohmann::json::array();
+      for (std::size_t i = 0; i < models.size(); ++i) {
+        b.infos.push_back(SettingInfo{"arena", b.predictors.back()->settings()[i], models[i]});
+        keys.push_back(b.infos.back().setting.key);
+      }
+      b.grids["arena"] = {{"default", !req.arena_grid}, {"settings", keys}};
+    } else if (req.name == "mujoco") {
+      // MuJoCo's soft contacts take any scene the model does; its default
+      // grid varies the timestep (the knob the curves follow).
+      b.predictors.push_back(MakeMujocoPredictor(req.mujoco_grid.value_or(MujocoGrid{})));
+      nlohmann::json keys = nlohmann::json::array();
+      for (const auto& s : b.predictors.back()->settings()) {
+        b.infos.push_back(SettingInfo{"mujoco", s, std::nullopt});
+        keys.push_back(s.key);
+      }
+      b.grids["mujoco"] = {{"default", !req.mujoco_grid}, {"settings", keys}};
+    } else {
+      throw std::invalid_argument("predictors: unknown predictor '" + req.name +
+                                  "' (one of arena, mujoco)");
+    }
+    for (std::size_t i = 0; i < b.predictors.back()->settings().size(); ++i) {
+      b.index.emplace_back(b.predictors.size() - 1, i);
+    }
+  }
+  return b;
+}
+
+// Up to `n` trials spread evenly over the list.
+std::vector<std::size_t> Spread(std::size_t total, int n) {
+  std::vector<std::size_t> out;
+  if (n <= 0 || total == 0) return out;
+  const std::size_t take = std::min<std::size_t>(total, static_cast<std::size_t>(n));
+  for (std::size_t i = 0; i < take; ++i) out.push_back(i * total / take);
+  return out;
+}
+
+}  // namespace
+
+EvaluationRun EvaluateCampaign(db::Store& store, std::int64_t campaign_id,
+                               const EvaluationOptions& options) {
+  (void)store.GetCampaign(campaign_id);  // kNotFound for an unknown campaign
+  std::vector<db::Trial> trials;
+  for (auto& t : store.ListTrials(campaign_id)) {
+    if (t.state == db::TrialState::kDone && t.gt_stream_id) trials.push_back(std::move(t));
+  }
+  // Scenes first: the default grids keep only settings every scene takes.
+  std::vector<std::optional<mechanics::Scene>> scenes(trials.size());
+  std::vector<mechanics::Scene> valid_scenes;
+  for (std::size_t i = 0; i < trials.size(); ++i) {
+    try {
+      scenes[i] = mechanics::ParseScene(trials[i].scene_json);
+      valid_scenes.push_back(*scenes[i]);
+    } catch (const std::exception&) {
+      // reported per job as an error
+    }
+  }
+  const Built built = BuildPredictors(options.predictors, valid_scenes);
+  const std::size_t settings = built.infos.size();
+  const std::size_t total = trials.size() * settings;
+  std::vector<TrialEvaluation> results(total);
+  std::vector<std::optional<FinalPose>> finals(trials.size());
+  std::vector<double> durations(trials.size(), 0);
+  std::atomic<std::size_t> next_trial{0};
+  std::atomic<long> done{0}, failed{0};
+  std::mutex error_mutex;
+  std::string worker_error;
+  std::atomic<bool> worker_failed{false};
+
+  int threads =
+      options.threads > 0 ? options.threads : static_cast<int>(std::thread::hardware_concurrency());
+  threads = std::max(
+      1, std::min<int>(threads, static_cast<int>(std::max<std::size_t>(trials.size(), 1))));
+
+  // A worker takes a whole trial (every setting of every predictor), so each
+  // trial's ground truth is read and converted once.
+  auto worker = [&]() {
+    try {
+      db::StoreOptions ro;
+      ro.read_only = true;
+      auto reader = db::Store::Open(store.path(), ro);
+      for (;;) {
+        if (options.cancel && options.cancel->load()) return;
+        const std::size_t ti = next_trial.fetch_add(1);
+        if (ti >= trials.size()) return;
+        const auto& t = trials[ti];
+        const LoadedTrial loaded = LoadTrial(*reader, t, scenes[ti] ? &*scenes[ti] : nullptr);
+        if (loaded.error.empty() && !loaded.truth.empty()) {
+          durations[ti] = loaded.truth.back().t;
+          finals[ti] = FinalPose{t.id, t.condition, loaded.truth.back().position,
+                                 loaded.truth.back().orientation};
+        }
+        // Settings that build the same model for this scene run it once.
+        std::map<std::pair<std::size_t, std::string>, std::size_t> ran;
+        for (std::size_t s = 0; s < settings; ++s) {
+          if (options.cancel && options.cancel->load()) return;
+          TrialEvaluation& r = results[ti * settings + s];
+          r.trial_id = t.id;
+          r.attempt = t.attempt;
+          r.setting = s;
+          r.truth_duration_s = durations[ti];
+          const auto [pi, si] = built.index[s];
+          std::optional<std::size_t> same;
+          if (loaded.error.empty()) {
+            const auto key =
+                std::make_pair(pi, built.predictors[pi]->EffectiveKey(loaded.scene, si));
+            const auto it = ran.find(key);
+            if (it != ran.end())
+              same = it->second;
+            else
+              ran.emplace(key, s);
+          }
+          if (same) {
+            r.prediction = results[ti * settings + *same].prediction;
+          } else if (!loaded.error.empty()) {
+            r.prediction = PredictionFailure("error", loaded.error);
+          } else {
+            const auto start = std::chrono::steady_clock::now();
+            const auto& predictor = *built.predictors[pi];
+            const auto result =
+                loaded.commands.empty()
+                    ? predictor.Run(loaded.scene, si)
+                    : predictor.RunClosedLoop(loaded.scene, si, ReplayCommands(loaded.commands));
+            const double wall =
+                std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+            r.prediction = ScoreSimulation(loaded.commands.empty()
+                                               ? loaded.scene
+                                               : ReplayScoringScene(loaded.scene, loaded.commands),
+                                           result, loaded.truth);
+            r.prediction.wall_s = wall;
+          }
+          r.prediction.model_key = built.infos[s].setting.key;
+          r.prediction.model_json = built.infos[s].setting.knobs_json;
+          if (r.prediction.status != "ok") failed.fetch_add(1);
+          done.fetch_add(1);
+        }
+      }
+    } catch (const std::exception& e) {
+      std::lock_guard<std::mutex> lock(error_mutex);
+      if (worker_error.empty()) worker_error = e.what();
+      worker_failed.store(true);
+      next_trial.store(trials.size());  // stop the others too
+    }
+  };
+  std::vector<std::thread> pool;
+  for (int i = 0; i < threads; ++i) pool.emplace_back(worker);
+  while (done.load() < static_cast<long>(total) && !worker_failed.load() &&
+         !(options.cancel && options.cancel->load())) {
+    if (options.progress) options.progress(done.load(), failed.load(), static_cast<long>(total));
+    std::this_thread::sleep_for(std::chrono::milliseconds(100));
+  }
+  for (auto& th : pool) th.join();
+  if (options.progress) options.progress(done.load(), failed.load(), static_cast<long>(total));
+  if (!worker_error.empty()) throw std::runtime_error("evaluate: a worker failed: " + worker_error);
+
+  EvaluationRun run;
+  if (options.cancel && options.cancel->load()) {
+    run.cancelled = true;
+    return run;
+  }
+  std::vector<FinalPose> final_poses;
+  for (const auto& f : finals) {
+    if (f) final_poses.push_back(*f);
+  }
+  run.report = Summarise(built.infos, results, options.budgets, ComputeNoiseFloor(final_poses));
+  run.report.campaign_id = campaign_id;
+  run.report.truth = TruthOf(store, campaign_id);
+
+  // The convergence table: a few trials, short pieces from the true state.
+  if (options.convergence_trials > 0 && !trials.empty()) {
+    std::vector<ConvergenceTrial> sample;
+    for (std::size_t ti : Spread(trials.size(), options.convergence_trials)) {
+      // A closed-loop trial's pieces would need its commands replayed from
+      // the restart on; the table is built from open-loop trials only.
+      if (!scenes[ti] || (scenes[ti]->pusher && scenes[ti]->pusher->controller)) continue;
+      try {
+        sample.push_back(
+            ConvergenceTrial{*scenes[ti], ReadTruth(store, trials[ti].id, *scenes[ti])});
+      } catch (const std::exception&) {
+      }
+    }
+    std::size_t flat = 0;
+    for (const auto& p : built.predictors) {
+      const auto table = ConvergenceTable(*p, sample);
+      for (std::size_t i = 0; i < table.size(); ++i)
+        run.report.settings[flat + i].convergence = table[i];
+      flat += table.size();
+    }
+  }
+
+  nlohmann::json grid = {{"predictors", built.grids},
+                         {"budgets", nlohmann::json::array()},
+                         {"threads", threads},
+                         {"convergence_trials", options.convergence_trials}};
+  for (const auto& req : options.predictors) {
+    if (req.name == "arena" && req.arena_grid) {
+      const auto& g = *req.arena_grid;
+      grid["facets"] = g.facets;
+      grid["points"] = g.points;
+      grid["dt"] = g.dt;
+      grid["reduce"] = nlohmann::json::array();
+      for (auto r : g.reduce) grid["reduce"].push_back(mechanics::ToString(r));
+    }
+  }
+  for (const auto& b : options.budgets) grid["budgets"].push_back(FormatBudget(b));
+  std::vector<db::EvaluationResult> rows;
+  rows.reserve(results.size());
+  for (auto& r : results)
+    rows.push_back(db::EvaluationResult{r.trial_id, r.attempt, std::move(r.prediction)});
+  run.evaluation_id =
+      store.RecordEvaluation(campaign_id, grid.dump(), ToJson(run.report).dump(), rows);
+  return run;
+}
+
+}  // namespace arena::assessment

@@ -1,0 +1,406 @@
+#include "arena/assessment/prediction.hpp"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <map>
+#include <memory>
+
+#include <nlohmann/json.hpp>
+
+#include "arena/assessment/calibration.hpp"
+#include "arena/assessment/scoring.hpp"
+#include "arena/mechanics/scene_json.hpp"
+#include "arena/simulators/simulator.hpp"
+
+namespace arena::assessment {
+
+mechanics::Scene ApplyModelSettings(const mechanics::Scene& scene, const nlohmann::json& model) {
+  mechanics::Scene out = scene;
+  if (model.is_null()) return out;
+  if (!model.is_object()) throw mechanics::SceneError("model", "must be an object");
+  auto number = [&](const char* key) -> const nlohmann::json* {
+    if (!model.contains(key)) return nullptr;
+    const auto& v = model[key];
+    if (!v.is_number())
+      throw mechanics::SceneError(std::string("model.") + key, "must be a number");
+    return &v;
+  };
+  if (const auto* v = number("facets")) {
+    if (!v->is_number_integer()) throw mechanics::SceneError("model.facets", "must be an integer");
+    out.model.facets = v->get<int>();
+  }
+  if (const auto* v = number("points")) {
+    if (!v->is_number_integer()) throw mechanics::SceneError("model.points", "must be an integer");
+    out.model.points = v->get<int>();
+  }
+  if (const auto* v = number("dt")) out.model.dt = v->get<double>();
+  if (model.contains("reduce")) {
+    const auto& r = model["reduce"];
+    const std::string s = r.is_string() ? r.get<std::string>() : "";
+    if (s == "auto")
+      out.model.reduce = mechanics::Reduce::kAuto;
+    else if (s == "full")
+      out.model.reduce = mechanics::Reduce::kFull;
+    else if (s == "planar")
+      out.model.reduce = mechanics::Reduce::kPlanar;
+    else
+      throw mechanics::SceneError("model.reduce", "must be auto, full or planar");
+  }
+  if (model.contains("contacts")) {
+    const auto& m = model["contacts"];
+    const auto mode =
+        m.is_string() ? mechanics::ContactTrackingFromString(m.get<std::string>()) : std::nullopt;
+    if (!mode) throw mechanics::SceneError("model.contacts", "must be tracked or fixed");
+    out.model.contacts = *mode;
+  }
+  // A calibration (arena calibrate) resolved by SubmitCampaign: parameter scales.
+  if (model.contains("calibrated")) {
+    const auto& c = model["calibrated"];
+    if (!c.is_object()) throw mechanics::SceneError("model.calibrated", "must be an object");
+    std::map<std::string, double> scales;
+    for (const auto& item : c.items()) {
+      if (!item.value().is_number())
+        throw mechanics::SceneError("model.calibrated." + item.key(), "must be a number");
+      scales[item.key()] = item.value().get<double>();
+    }
+    try {
+      out = ApplyScales(out, scales);
+    } catch (const CalibrationError& e) {
+      throw mechanics::SceneError("model.calibrated", e.what());
+    }
+  }
+  mechanics::ValidateScene(out);
+  return out;
+}
+
+std::string ModelKey(const mechanics::ModelOptions& m) {
+  char buf[96];
+  std::snprintf(buf, sizeof buf, "g%d_k%d_dt%g_%s", m.facets, m.points, m.dt,
+                mechanics::ToString(m.reduce));
+  // Tracked contacts are the default; the frozen frame is named by a suffix
+  // (stores written before tracking existed hold frozen-frame predictions
+  // under the bare key).
+  if (m.contacts == mechanics::ContactTracking::kFixed) return std::string(buf) + "_fixed";
+  return buf;
+}
+
+db::Prediction PredictionFailure(const std::string& status, const std::string& reason) {
+  db::Prediction p;
+  p.model_key = "unknown";
+  p.status = status;
+  p.detail_json = nlohmann::json({{"error", reason}}).dump();
+  return p;
+}
+
+const char* ToString(PredictionOutcome outcome) {
+  switch (outcome) {
+    case PredictionOutcome::kOk:
+      return "ok";
+    case PredictionOutcome::kDiverged:
+      return "diverged";
+    case PredictionOutcome::kSolverFailure:
+      return "solver_failure";
+    case PredictionOutcome::kInvalidScene:
+      return "invalid_scene";
+    case PredictionOutcome::kError:
+      return "error";
+  }
+  return "error";
+}
+
+PredictionOutcome OutcomeOf(const std::string& status) {
+  // mechanics' frozen-frame predictions whose fingers left the object are
+  // stored as "left_geometry": they left the grasp too.
+  if (status == "left_geometry") return PredictionOutcome::kDiverged;
+  for (auto o : {PredictionOutcome::kOk, PredictionOutcome::kDiverged,
+                 PredictionOutcome::kSolverFailure, PredictionOutcome::kInvalidScene}) {
+    if (status == ToString(o)) return o;
+  }
+  return PredictionOutcome::kError;
+}
+
+namespace {
+
+double LargestExtent(const mechanics::ObjectSpec& o) {
+  if (o.shape == mechanics::ObjectShape::kCylinder) return std::max(2 * o.radius, o.height);
+  return o.size.maxCoeff();
+}
+
+bool Finite(const mechanics::TrajectorySample& s) {
+  if (!s.position.allFinite() || !s.velocity.allFinite() || !s.angular_velocity.allFinite() ||
+      !s.orientation.coeffs().allFinite()) {
+    return false;
+  }
+  for (const auto& c : s.contacts) {
+    if (!std::isfinite(c.normal_force) || !c.tangential_force.allFinite()) return false;
+  }
+  return true;
+}
+
+// True when every finger (not the pusher) is separated.
+bool AllFingersSeparated(const mechanics::TrajectorySample& s, std::size_t fingers) {
+  if (fingers == 0 || s.contacts.size() < fingers) return false;
+  for (std::size_t i = 0; i < fingers; ++i) {
+    if (s.contacts[i].mode != mechanics::ContactMode::kSeparate) return false;
+  }
+  return true;
+}
+
+}  // namespace
+
+std::optional<std::string> DivergenceReason(
+    const mechanics::Scene& scene, const std::vector<mechanics::TrajectorySample>& predicted,
+    const std::vector<mechanics::TrajectorySample>& truth) {
+  if (predicted.empty()) return std::nullopt;
+  double travel = 0, turn = 0;
+  if (scene.pusher) {
+    travel =
+        scene.pusher->motion.velocity.norm() * scene.duration +
+        scene.pusher->motion.angular_velocity.norm() * scene.duration * LargestExtent(scene.object);
+    turn = scene.pusher->motion.angular_velocity.norm() * scene.duration;
+  }
+  const double reach = travel + LargestExtent(scene.object);
+  const auto& start = predicted.front();
+  char buf[200];
+  for (const auto& s : predicted) {
+    if (!Finite(s)) {
+      std::snprintf(buf, sizeof buf, "diverged: a non-finite state at t = %.4g s", s.t);
+      return std::string(buf);
+    }
+    const double moved = (s.position - start.position).norm();
+    if (moved > reach) {
+      std::snprintf(buf, sizeof buf,
+                    "diverged: the object moved %.4g m by t = %.4g s, more than the pusher's "
+                    "travel plus the object's extent (%.4g m)",
+                    moved, s.t, reach);
+      return std::string(buf);
+    }
+    const double turned =
+        s.orientation.normalized().angularDistance(start.orientation.normalized());
+    if (turned > M_PI / 2 + turn) {
+      std::snprintf(buf, sizeof buf, "diverged: the object turned %.1f deg by t = %.4g s",
+                    turned * 180 / M_PI, s.t);
+      return std::string(buf);
+    }
+  }
+  // Left the grasp: every finger separated over the last quarter of the
+  // trajectory (at least 2 samples, so a contact flickering open at one
+  // sample is not a drop) while the truth still held the object there.
+  const std::size_t fingers = scene.fingers.size();
+  const std::size_t n = truth.empty() ? 0 : std::min(truth.size(), predicted.size());
+  const std::size_t tail = std::max<std::size_t>(2, n / 4);
+  if (n >= tail) {
+    bool dropped = true, held = false;
+    for (std::size_t i = n - tail; i < n; ++i) {
+      dropped = dropped && AllFingersSeparated(predicted[i], fingers);
+      held = held || !AllFingersSeparated(truth[i], fingers);
+    }
+    if (dropped && held) {
+      return std::string(
+          "left the grasp: every finger separated over the last quarter while the truth still "
+          "held it");
+    }
+  }
+  return std::nullopt;
+}
+
+db::Prediction ScoreSimulation(const mechanics::Scene& scene,
+                               const mechanics::SimulationResult& result,
+                               const std::vector<mechanics::TrajectorySample>& truth) {
+  db::Prediction p;
+  nlohmann::json detail = {{"residuals",
+                            {{"force_balance", result.residuals.force_balance},
+                             {"complementarity", result.residuals.complementarity},
+                             {"cone", result.residuals.cone}}},
+                           {"solver",
+                            {{"steps", result.solver.steps},
+                             {"max_pivots", result.solver.max_pivots},
+                             {"failures", result.solver.failures}}},
+                           {"unknowns", result.model.unknowns},
+                           {"dof", result.model.dof},
+                           {"grasp",
+                            {{"status", mechanics::ToString(result.grasp)},
+                             {"changed_t", result.grasp_changed_t},
+                             {"note", result.grasp_note}}}};
+  switch (result.status) {
+    case mechanics::SimulationStatus::kOk:
+      break;
+    case mechanics::SimulationStatus::kSolverFailure:
+      p.status = ToString(PredictionOutcome::kSolverFailure);
+      detail["error"] = result.error;
+      p.detail_json = detail.dump();
+      return p;
+    case mechanics::SimulationStatus::kInvalidScene:
+      p.status = ToString(PredictionOutcome::kInvalidScene);
+      detail["error"] = result.error;
+      p.detail_json = detail.dump();
+      return p;
+  }
+  // A frozen-frame prediction whose fingers left the object ran outside the
+  // model's validity: kept and listed like a divergence, never averaged in.
+  std::optional<std::string> why;
+  if (result.grasp == mechanics::GraspStatus::kLeftGeometry)
+    why = "left the grasp geometry: " + result.grasp_note;
+  else
+    why = DivergenceReason(scene, result.samples, truth);
+  if (why) {
+    p.status = ToString(PredictionOutcome::kDiverged);
+    detail["error"] = *why;
+    if (std::none_of(result.samples.begin(), result.samples.end(),
+                     [](const auto& s) { return !Finite(s); })) {
+      // Still scored (for the listing), never averaged in: status is not ok.
+      try {
+        const PredictionError e = ScorePrediction(result.samples, truth);
+        p.final_position_error = e.final_position;
+        p.final_angle_error = e.final_angle;
+        p.force_error = e.force_rms;
+        p.mode_agreement = e.mode_agreement;
+      } catch (const std::exception&) {
+      }
+    }
+    p.detail_json = detail.dump();
+    return p;
+  }
+  try {
+    const PredictionError e = ScorePrediction(result.samples, truth);
+    p.final_position_error = e.final_position;
+    p.final_angle_error = e.final_angle;
+    p.force_error = e.force_rms;
+    p.mode_agreement = e.mode_agreement;
+    detail["samples_compared"] = e.samples_compared;
+    detail["force_scale"] = e.force_scale;
+  } catch (const std::exception& e) {
+    p.status = ToString(PredictionOutcome::kError);
+    detail["error"] = e.what();
+  }
+  p.detail_json = detail.dump();
+  return p;
+}
+
+db::Prediction PredictTrial(const mechanics::Scene& scene,
+                            const std::vector<mechanics::TrajectorySample>& truth) {
+  const auto start = std::chrono::steady_clock::now();
+  const mechanics::SimulationResult result = mechanics::Simulate(scene);
+  const double wall =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  db::Prediction p = ScoreSimulation(scene, result, truth);
+  p.wall_s = wall;
+  p.model_key = ModelKey(scene.model);
+  p.model_json = nlohmann::json({{"facets", scene.model.facets},
+                                 {"points", scene.model.points},
+                                 {"dt", scene.model.dt},
+                                 {"reduce", mechanics::ToString(scene.model.reduce)},
+                                 {"contacts", mechanics::ToString(scene.model.contacts)}})
+                     .dump();
+  return p;
+}
+
+db::Prediction PredictTrial(const mechanics::Scene& scene,
+                            const std::vector<mechanics::TrajectorySample>& truth,
+                            const nlohmann::json& prediction) {
+  return PredictTrial(scene, truth, prediction, nullptr);
+}
+
+RecordedCommands CommandsOf(const db::ClosedLoopRun& run) {
+  RecordedCommands out;
+  for (const auto& c : run.commands) {
+    if (c.sample < 0) continue;
+    if (static_cast<std::size_t>(c.sample) >= out.size()) out.resize(c.sample + 1);
+    out[c.sample].velocity = {c.commanded[0], c.commanded[1], c.commanded[2]};
+  }
+  return out;
+}
+
+mechanics::PusherCommandSource ReplayCommands(const RecordedCommands& commands) {
+  return [&commands](const std::vector<mechanics::TrajectorySample>& samples,
+                     std::string* why) -> std::optional<mechanics::PusherMotion> {
+    const std::size_t k = samples.size() - 1;
+    if (k >= commands.size()) {
+      *why = "the recorded commands end at sample " + std::to_string(commands.size());
+      return std::nullopt;
+    }
+    return commands[k];
+  };
+}
+
+mechanics::Scene ReplayScoringScene(const mechanics::Scene& scene,
+                                    const RecordedCommands& commands) {
+  mechanics::Scene out = scene;
+  if (!out.pusher) return out;
+  for (const auto& c : commands) {
+    if (c.velocity.norm() > out.pusher->motion.velocity.norm())
+      out.pusher->motion.velocity = c.velocity;
+  }
+  return out;
+}
+
+db::Prediction PredictTrial(const mechanics::Scene& scene,
+                            const std::vector<mechanics::TrajectorySample>& truth,
+                            const nlohmann::json& prediction, const RecordedCommands* commands) {
+  const bool mujoco =
+      prediction.is_object() && prediction.value("predictor", "arena") == "mujoco";
+  const bool closed_loop = scene.pusher && scene.pusher->controller;
+  if (closed_loop && (commands == nullptr || commands->empty())) {
+    return PredictionFailure("error", "closed-loop trial without recorded pusher commands");
+  }
+  if (closed_loop && !mujoco) {
+    const auto start = std::chrono::steady_clock::now();
+    const mechanics::SimulationResult result = mechanics::Simulate(scene, ReplayCommands(*commands));
+    const double wall =
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    db::Prediction p = ScoreSimulation(ReplayScoringScene(scene, *commands), result, truth);
+    p.wall_s = wall;
+    p.model_key = ModelKey(scene.model);
+    p.model_json = nlohmann::json({{"facets", scene.model.facets},
+                                   {"points", scene.model.points},
+                                   {"dt", scene.model.dt},
+                                   {"reduce", mechanics::ToString(scene.model.reduce)},
+                                   {"contacts", mechanics::ToString(scene.model.contacts)}})
+                       .dump();
+    auto detail = nlohmann::json::parse(p.detail_json, nullptr, false);
+    if (detail.is_object()) {
+      detail["replayed_commands"] = commands->size();
+      if (!result.stopped.empty()) detail["replay_stopped"] = result.stopped;
+      p.detail_json = detail.dump();
+    }
+    return p;
+  }
+  if (!mujoco) return PredictTrial(scene, truth);
+  nlohmann::json knobs = prediction;
+  knobs.erase("predictor");
+  std::unique_ptr<simulators::Simulator> sim;
+  try {
+    sim = simulators::MakeSimulator("mujoco", knobs.dump());
+  } catch (const std::exception& e) {
+    return PredictionFailure("error", e.what());
+  }
+  const auto start = std::chrono::steady_clock::now();
+  mechanics::SimulationResult result;
+  const std::string why = sim->CheckScene(scene);
+  if (why.empty()) {
+    result = closed_loop ? sim->SimulateClosedLoop(scene, ReplayCommands(*commands))
+                         : sim->Simulate(scene);
+  } else {
+    result.status = mechanics::SimulationStatus::kInvalidScene;
+    result.error = why;
+  }
+  const double wall =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  db::Prediction p =
+      ScoreSimulation(closed_loop ? ReplayScoringScene(scene, *commands) : scene, result, truth);
+  p.wall_s = wall;
+  nlohmann::json stored = nlohmann::json::parse(sim->settings_json(), nullptr, false);
+  if (!stored.is_object()) stored = nlohmann::json::object();
+  stored["predictor"] = "mujoco";
+  p.model_json = stored.dump();
+  char key[96];
+  std::snprintf(key, sizeof key, "mujoco_ts%g_%s_ns%d", knobs.value("timestep", 0.0005),
+                knobs.value("cone", std::string("elliptic")).c_str(),
+                knobs.value("noslip_iterations", 10));
+  p.model_key = key;
+  return p;
+}
+
+}  // namespace arena::assessment

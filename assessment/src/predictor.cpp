@@ -1,0 +1,210 @@
+#include "arena/assessment/predictor.hpp"
+
+#include <algorithm>
+#include <cstdio>
+#include <numeric>
+#include <set>
+#include <stdexcept>
+
+#include <nlohmann/json.hpp>
+
+#include "arena/assessment/prediction.hpp"
+#include "arena/mechanics/scene_json.hpp"
+#include "arena/simulators/simulator.hpp"
+
+namespace arena::assessment {
+
+namespace {
+
+class ArenaPredictor final : public Predictor {
+ public:
+  explicit ArenaPredictor(std::vector<mechanics::ModelOptions> grid) : models_(std::move(grid)) {
+    if (models_.empty()) throw std::invalid_argument("arena predictor: the grid is empty");
+    std::set<std::string> keys;
+    for (const auto& m : models_) {
+      PredictorSetting s;
+      s.key = ModelKey(m);
+      if (!keys.insert(s.key).second) {
+        throw std::invalid_argument("arena predictor: setting " + s.key + " is repeated");
+      }
+      s.knobs_json = nlohmann::json({{"predictor", "arena"},
+                                     {"facets", m.facets},
+                                     {"points", m.points},
+                                     {"dt", m.dt},
+                                     {"reduce", mechanics::ToString(m.reduce)},
+                                     {"contacts", mechanics::ToString(m.contacts)}})
+                         .dump();
+      s.step = m.dt;
+      settings_.push_back(std::move(s));
+    }
+    // Finer: smaller step first, then more facets, then more points.
+    std::vector<std::size_t> order(models_.size());
+    std::iota(order.begin(), order.end(), 0);
+    std::stable_sort(order.begin(), order.end(), [&](std::size_t a, std::size_t b) {
+      const auto &x = models_[a], &y = models_[b];
+      if (x.dt != y.dt) return x.dt > y.dt;
+      if (x.facets != y.facets) return x.facets < y.facets;
+      return x.points < y.points;
+    });
+    for (std::size_t rank = 0; rank < order.size(); ++rank) {
+      settings_[order[rank]].refinement = static_cast<int>(rank);
+    }
+  }
+  const std::string& name() const override { return name_; }
+  const std::vector<PredictorSetting>& settings() const override { return settings_; }
+  mechanics::SimulationResult Run(const mechanics::Scene& scene,
+                                  std::size_t setting) const override {
+    mechanics::Scene s = scene;
+    s.model = models_.at(setting);
+    try {
+      mechanics::ValidateScene(s);
+    } catch (const std::exception& e) {
+      mechanics::SimulationResult r;
+      r.status = mechanics::SimulationStatus::kInvalidScene;
+      r.error = e.what();
+      return r;
+    }
+    return mechanics::Simulate(s);
+  }
+  mechanics::SimulationResult RunClosedLoop(
+      const mechanics::Scene& scene, std::size_t setting,
+      const mechanics::PusherCommandSource& commands) const override {
+    mechanics::Scene s = scene;
+    s.model = models_.at(setting);
+    try {
+      mechanics::ValidateScene(s);
+    } catch (const std::exception& e) {
+      mechanics::SimulationResult r;
+      r.status = mechanics::SimulationStatus::kInvalidScene;
+      r.error = e.what();
+      return r;
+    }
+    return mechanics::Simulate(s, commands);
+  }
+  std::string EffectiveKey(const mechanics::Scene& scene, std::size_t setting) const override {
+    auto extended = [](const mechanics::ContactSpec& c) {
+      return c.type != mechanics::ContactType::kPoint;
+    };
+    bool points_matter = std::any_of(scene.fingers.begin(), scene.fingers.end(), extended) ||
+                         (scene.pusher && extended(*scene.pusher));
+    if (points_matter) return settings_.at(setting).key;
+    mechanics::ModelOptions m = models_.at(setting);
+    m.points = 0;  // irrelevant here: every contact is a point
+    return ModelKey(m);
+  }
+
+ private:
+  std::string name_ = "arena";
+  std::vector<mechanics::ModelOptions> models_;
+  std::vector<PredictorSetting> settings_;
+};
+
+class MujocoPredictor final : public Predictor {
+ public:
+  explicit MujocoPredictor(const MujocoGrid& grid) {
+    auto nonempty_unique = [](const auto& list, const char* name) {
+      if (list.empty()) {
+        throw std::invalid_argument(std::string("mujoco ") + name + ": needs at least one value");
+      }
+      std::set<std::decay_t<decltype(list[0])>> seen(list.begin(), list.end());
+      if (seen.size() != list.size())
+        throw std::invalid_argument(std::string("mujoco ") + name + ": a value is repeated");
+    };
+    nonempty_unique(grid.timestep, "timestep");
+    nonempty_unique(grid.cone, "cone");
+    nonempty_unique(grid.noslip, "noslip");
+    struct Point {
+      double timestep;
+      std::string cone;
+      int noslip;
+    };
+    std::vector<Point> points;
+    for (double ts : grid.timestep)
+      for (const auto& cone : grid.cone)
+        for (int ns : grid.noslip) points.push_back(Point{ts, cone, ns});
+    for (const auto& pt : points) {
+      const nlohmann::json knobs = {
+          {"timestep", pt.timestep}, {"cone", pt.cone}, {"noslip_iterations", pt.noslip}};
+      try {
+        simulators_.push_back(simulators::MakeSimulator("mujoco", knobs.dump()));
+      } catch (const std::invalid_argument& e) {
+        throw std::invalid_argument(std::string("mujoco grid: ") + e.what());
+      }
+      PredictorSetting s;
+      char key[96];
+      std::snprintf(key, sizeof key, "mujoco_ts%g_%s_ns%d", pt.timestep, pt.cone.c_str(),
+                    pt.noslip);
+      s.key = key;
+      nlohmann::json stored = knobs;
+      stored["predictor"] = "mujoco";
+      s.knobs_json = stored.dump();
+      s.step = pt.timestep;
+      settings_.push_back(std::move(s));
+    }
+    // Finer: smaller timestep, then elliptic over pyramidal, then more noslip.
+    std::vector<std::size_t> order(points.size());
+    std::iota(order.begin(), order.end(), 0);
+    std::stable_sort(order.begin(), order.end(), [&](std::size_t a, std::size_t b) {
+      const auto &x = points[a], &y = points[b];
+      if (x.timestep != y.timestep) return x.timestep > y.timestep;
+      if (x.cone != y.cone) return x.cone == "pyramidal";
+      return x.noslip < y.noslip;
+    });
+    for (std::size_t rank = 0; rank < order.size(); ++rank) {
+      settings_[order[rank]].refinement = static_cast<int>(rank);
+    }
+  }
+  const std::string& name() const override { return name_; }
+  const std::vector<PredictorSetting>& settings() const override { return settings_; }
+  mechanics::SimulationResult Run(const mechanics::Scene& scene,
+                                  std::size_t setting) const override {
+    const auto& sim = *simulators_.at(setting);
+    const std::string why = sim.CheckScene(scene);
+    if (!why.empty()) {
+      mechanics::SimulationResult r;
+      r.status = mechanics::SimulationStatus::kInvalidScene;
+      r.error = why;
+      return r;
+    }
+    return sim.Simulate(scene);
+  }
+  mechanics::SimulationResult RunClosedLoop(
+      const mechanics::Scene& scene, std::size_t setting,
+      const mechanics::PusherCommandSource& commands) const override {
+    const auto& sim = *simulators_.at(setting);
+    const std::string why = sim.CheckScene(scene);
+    if (!why.empty()) {
+      mechanics::SimulationResult r;
+      r.status = mechanics::SimulationStatus::kInvalidScene;
+      r.error = why;
+      return r;
+    }
+    return sim.SimulateClosedLoop(scene, commands);
+  }
+
+ private:
+  std::string name_ = "mujoco";
+  std::vector<std::unique_ptr<simulators::Simulator>> simulators_;
+  std::vector<PredictorSetting> settings_;
+};
+
+}  // namespace
+
+std::unique_ptr<Predictor> MakeMujocoPredictor(const MujocoGrid& grid) {
+  return std::make_unique<MujocoPredictor>(grid);
+}
+
+std::unique_ptr<Predictor> MakeArenaPredictor(std::vector<mechanics::ModelOptions> grid) {
+  return std::make_unique<ArenaPredictor>(std::move(grid));
+}
+
+std::size_t FinestSetting(const Predictor& predictor) {
+  const auto& s = predictor.settings();
+  std::size_t best = 0;
+  for (std::size_t i = 1; i < s.size(); ++i) {
+    if (s[i].refinement > s[best].refinement) best = i;
+  }
+  return best;
+}
+
+}  // namespace arena::assessment

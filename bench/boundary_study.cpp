@@ -1,0 +1,253 @@
+// Boundary sampler vs the grid, on the same simulated cells (bench/README.md,
+// "Adaptive boundary sampling").
+//
+// The "cell" is what `arena cell` runs: the trial's scene with the cell's
+// defect profile (friction scale, per-trial variability, actuation noise drawn
+// from the trial's seed) at the cell's fidelity (>= 16 facets, 5 points,
+// dt <= 2 ms). The reference boundary is the class change on a dense grid
+// (D x D points); an estimate's boundary is that of the 1-nearest-neighbour
+// classifier of its samples on the same dense grid. Accuracy: the Hausdorff
+// distance between the two boundary point sets, in the unit square.
+//
+// For each resolution the adaptive campaign is run to its stop (rounds of
+// `batch`), its Hausdorff distance measured, and the smallest L x L grid
+// whose Hausdorff distance is no larger is found: the trial ratio is the
+// figure of merit (target: adaptive <= 25 % of the grid's trials).
+//
+//   boundary_study [CAMPAIGN.json] [--dense D] [--batch B] [--cell-defects FILE]
+//                  [--resolutions 0.125,0.0625] [--threads N]
+// Grids are compared when their points lie on the reference lattice ((D - 1)
+// divisible by (L - 1)); with D = 33 those are 3, 5, 9, 17, 33 per side.
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <fstream>
+#include <map>
+#include <sstream>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "arena/executors/defects.hpp"
+#include "arena/mechanics/simulate.hpp"
+#include "arena/orchestrator/adaptive.hpp"
+#include "arena/orchestrator/campaign.hpp"
+#include "arena/orchestrator/outcome.hpp"
+
+namespace {
+
+using arena::orchestrator::Campaign;
+using Point = std::vector<double>;
+
+struct Cell {
+  const Campaign& campaign;
+  arena::executors::DefectProfile defects;
+  std::map<Point, bool> cache;
+  int simulations = 0;
+
+  bool Classify(const Point& u) {
+    if (auto it = cache.find(u); it != cache.end()) return it->second;
+    // Condition index from the point, so a grid point and an adaptive point
+    // at the same place are the same trial (same seed, same perturbation).
+    std::int64_t key = 0;
+    for (double x : u) key = key * 100003 + std::llround(x * 100000);
+    const auto trial = arena::orchestrator::PlanTrialAt(campaign, u, 0, key, 0);
+    const auto p = arena::executors::DrawPerturbation(defects, trial.seed, 1);
+    arena::mechanics::Scene s = arena::executors::ApplyPerturbation(trial.scene, p);
+    s.model.facets = std::max(s.model.facets, 16);
+    s.model.points = std::max(s.model.points, 5);
+    s.model.dt = std::min(s.model.dt, 0.002);
+    const auto r = arena::mechanics::Simulate(s);
+    ++simulations;
+    const auto o =
+        arena::orchestrator::ComputeOutcome(r.samples, static_cast<int>(s.fingers.size()));
+    const bool cls =
+        arena::orchestrator::Classify(campaign.adaptive->outcome, campaign.adaptive->threshold, o);
+    cache[u] = cls;
+    return cls;
+  }
+};
+
+// Boundary points of a class field on a D x D grid: midpoints of 4-neighbours
+// that differ.
+std::vector<Point> BoundaryOf(const std::vector<std::vector<bool>>& cls) {
+  const int d = static_cast<int>(cls.size());
+  std::vector<Point> out;
+  const double h = 1.0 / (d - 1);
+  for (int i = 0; i < d; ++i)
+    for (int j = 0; j < d; ++j) {
+      if (i + 1 < d && cls[i][j] != cls[i + 1][j]) out.push_back({(i + 0.5) * h, j * h});
+      if (j + 1 < d && cls[i][j] != cls[i][j + 1]) out.push_back({i * h, (j + 0.5) * h});
+    }
+  return out;
+}
+
+double Hausdorff(const std::vector<Point>& a, const std::vector<Point>& b) {
+  if (a.empty() || b.empty()) return a.empty() && b.empty() ? 0 : INFINITY;
+  auto directed = [](const std::vector<Point>& x, const std::vector<Point>& y) {
+    double worst = 0;
+    for (const auto& p : x) {
+      double best = INFINITY;
+      for (const auto& q : y) best = std::min(best, std::hypot(p[0] - q[0], p[1] - q[1]));
+      worst = std::max(worst, best);
+    }
+    return worst;
+  };
+  return std::max(directed(a, b), directed(b, a));
+}
+
+std::vector<std::vector<bool>> NearestNeighbourField(
+    const std::vector<arena::orchestrator::LabelledPoint>& samples, int d) {
+  std::vector<std::vector<bool>> cls(d, std::vector<bool>(d));
+  for (int i = 0; i < d; ++i)
+    for (int j = 0; j < d; ++j) {
+      const double x = static_cast<double>(i) / (d - 1), y = static_cast<double>(j) / (d - 1);
+      double best = INFINITY;
+      for (const auto& s : samples) {
+        const double dist = std::hypot(s.u[0] - x, s.u[1] - y);
+        if (dist < best) {
+          best = dist;
+          cls[i][j] = s.positive;
+        }
+      }
+    }
+  return cls;
+}
+
+std::string ReadFile(const std::string& path) {
+  std::ifstream in(path);
+  std::stringstream s;
+  s << in.rdbuf();
+  return s.str();
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  std::string campaign_path =
+      std::string(ARENA_SOURCE_DIR) + "/examples/campaigns/closed_loop.json";
+  std::string defects_path = std::string(ARENA_SOURCE_DIR) + "/examples/defects/friction_high.json";
+  int dense = 33, batch = 4, threads = 2;
+  std::vector<double> resolutions = {0.125, 0.0625};
+  for (int i = 1; i < argc; ++i) {
+    const std::string a = argv[i];
+    if (a == "--dense" && i + 1 < argc) {
+      dense = std::stoi(argv[++i]);
+    } else if (a == "--threads" && i + 1 < argc) {
+      threads = std::max(1, std::stoi(argv[++i]));
+    } else if (a == "--batch" && i + 1 < argc) {
+      batch = std::stoi(argv[++i]);
+    } else if (a == "--cell-defects" && i + 1 < argc) {
+      defects_path = argv[++i];
+    } else if (a == "--resolutions" && i + 1 < argc) {
+      resolutions.clear();
+      std::stringstream in(argv[++i]);
+      std::string r;
+      while (std::getline(in, r, ',')) resolutions.push_back(std::stod(r));
+    } else {
+      campaign_path = a;
+    }
+  }
+  const Campaign campaign = arena::orchestrator::LoadCampaignFile(campaign_path);
+  if (!campaign.adaptive || arena::orchestrator::SampledVariations(campaign).size() != 2) {
+    std::fprintf(stderr, "boundary_study: needs a 2-D boundary campaign\n");
+    return 2;
+  }
+  Cell cell{campaign, arena::executors::ParseDefectProfile(ReadFile(defects_path)), {}, 0};
+  const auto start = std::chrono::steady_clock::now();
+
+  // Reference: the dense grid, simulated on `threads` threads (the results
+  // go into the cell's cache: every grid and adaptive point below lies on
+  // this lattice when dense - 1 is a power of two and the resolutions are
+  // 2 / (dense - 1) times powers of two).
+  std::vector<std::vector<bool>> ref(dense, std::vector<bool>(dense));
+  {
+    std::vector<Point> all;
+    for (int i = 0; i < dense; ++i)
+      for (int j = 0; j < dense; ++j)
+        all.push_back({static_cast<double>(i) / (dense - 1), static_cast<double>(j) / (dense - 1)});
+    std::vector<Cell> workers(static_cast<size_t>(threads), Cell{campaign, cell.defects, {}, 0});
+    std::vector<std::thread> pool;
+    for (int t = 0; t < threads; ++t)
+      pool.emplace_back([&, t] {
+        for (size_t k = static_cast<size_t>(t); k < all.size(); k += static_cast<size_t>(threads))
+          workers[static_cast<size_t>(t)].Classify(all[k]);
+      });
+    for (auto& th : pool) th.join();
+    for (auto& w : workers) {
+      cell.cache.insert(w.cache.begin(), w.cache.end());
+      cell.simulations += w.simulations;
+    }
+  }
+  for (int i = 0; i < dense; ++i)
+    for (int j = 0; j < dense; ++j)
+      ref[i][j] = cell.Classify(
+          {static_cast<double>(i) / (dense - 1), static_cast<double>(j) / (dense - 1)});
+  const auto ref_boundary = BoundaryOf(ref);
+  int positives = 0;
+  for (const auto& row : ref)
+    positives += static_cast<int>(std::count(row.begin(), row.end(), true));
+  std::printf("campaign %s, cell profile %s\n", campaign_path.c_str(), defects_path.c_str());
+  std::printf("reference: %d x %d grid, %d of %d points '%s', %zu boundary points (%.1f s)\n",
+              dense, dense, positives, dense * dense,
+              arena::orchestrator::ClassName(campaign.adaptive->outcome, true), ref_boundary.size(),
+              std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count());
+
+  // Grids L x L.
+  std::vector<std::pair<int, double>> grids;
+  for (int l = 3; l <= dense; ++l) {
+    if ((dense - 1) % (l - 1) != 0) continue;  // only grids on the reference lattice
+    std::vector<arena::orchestrator::LabelledPoint> samples;
+    for (int i = 0; i < l; ++i)
+      for (int j = 0; j < l; ++j) {
+        const Point u = {static_cast<double>(i) / (l - 1), static_cast<double>(j) / (l - 1)};
+        samples.push_back({u, cell.Classify(u), 0});
+      }
+    grids.emplace_back(l,
+                       Hausdorff(ref_boundary, BoundaryOf(NearestNeighbourField(samples, dense))));
+  }
+
+  std::printf("\n| grid | trials | Hausdorff |\n|---|---|---|\n");
+  for (const auto& [l, gh] : grids) std::printf("| %d x %d | %d | %.4f |\n", l, l, l * l, gh);
+  std::printf(
+      "\n| resolution | adaptive trials | rounds | Hausdorff | smallest grid as accurate | grid "
+      "trials | ratio |\n");
+  std::printf("|---|---|---|---|---|---|---|\n");
+  for (double res : resolutions) {
+    std::vector<arena::orchestrator::LabelledPoint> samples;
+    std::int64_t id = 0;
+    for (const auto& u :
+         arena::orchestrator::CoarseGrid(2, arena::orchestrator::DefaultCoarseLevels(2)))
+      samples.push_back({u, cell.Classify(u), ++id});
+    int rounds = 0;
+    for (;;) {
+      const auto p = arena::orchestrator::ProposeBoundaryPoints(samples, {}, 2, res, batch);
+      if (p.empty()) break;
+      ++rounds;
+      for (const auto& q : p) samples.push_back({q.u, cell.Classify(q.u), ++id});
+    }
+    const double h = Hausdorff(ref_boundary, BoundaryOf(NearestNeighbourField(samples, dense)));
+    int grid_l = -1;
+    double grid_h = 0;
+    for (const auto& [l, gh] : grids) {
+      if (gh <= h + 1e-12) {
+        grid_l = l;
+        grid_h = gh;
+        break;
+      }
+    }
+    if (grid_l < 0) {
+      std::printf("| %.3f | %zu | %d | %.4f | none up to %d x %d | - | - |\n", res, samples.size(),
+                  rounds, h, dense, dense);
+    } else {
+      std::printf("| %.3f | %zu | %d | %.4f | %d x %d (Hausdorff %.4f) | %d | %.0f %% |\n", res,
+                  samples.size(), rounds, h, grid_l, grid_l, grid_h, grid_l * grid_l,
+                  100.0 * static_cast<double>(samples.size()) / (grid_l * grid_l));
+    }
+  }
+  std::printf("\n%d distinct cell simulations, %.1f s\n", cell.simulations,
+              std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count());
+  return 0;
+}

@@ -1,0 +1,191 @@
+// Adaptive samplers' rounds and decisions, and calibrations (migration 7;
+// db/README.md, "sampler_decisions", "calibrations").
+#include <cmath>
+#include <string>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include "arena/db/store.hpp"
+#include "sqlite_util.hpp"
+#include "store_internal.hpp"
+
+namespace arena::db {
+namespace {
+
+using detail::Tx;
+
+[[noreturn]] void Bad(const std::string& msg) {
+  throw StoreError(StoreError::Kind::kBadInput, msg);
+}
+
+void RequireObject(const std::string& text, const std::string& what) {
+  nlohmann::json j;
+  try {
+    j = nlohmann::json::parse(text);
+  } catch (const std::exception& e) {
+    Bad(what + " is not valid JSON: " + e.what());
+  }
+  if (!j.is_object()) Bad(what + " must be a JSON object");
+}
+
+void RequireFiniteNonNegative(double v, const std::string& what) {
+  if (!std::isfinite(v) || v < 0) Bad(what + " must be finite and >= 0, got " + std::to_string(v));
+}
+
+constexpr const char* kCalibrationCols =
+    "SELECT id, campaign_id, created_at, params_json, settings_json, heldout_error_before,"
+    " heldout_error_after, applied, report_json FROM calibrations";
+
+Calibration ReadCalibration(const detail::Stmt& s) {
+  Calibration c;
+  c.id = s.Int(0);
+  c.campaign_id = s.Int(1);
+  c.created_at = s.Real(2);
+  c.params_json = s.Text(3);
+  c.settings_json = s.Text(4);
+  c.heldout_error_before = s.Real(5);
+  c.heldout_error_after = s.Real(6);
+  c.applied = s.Int(7) != 0;
+  c.report_json = s.Text(8);
+  return c;
+}
+
+}  // namespace
+
+bool Store::PlanAdaptiveRound(std::int64_t campaign_id, const std::string& expected_state_json,
+                              const AdaptiveRound& round) {
+  constexpr const char* kFn = "PlanAdaptiveRound";
+  impl_->RequireWritable(kFn);
+  if (round.round < 0) Bad(std::string(kFn) + ": round must be >= 0");
+  if (round.reasons.size() != round.trials.size() || round.bases_json.size() != round.trials.size())
+    Bad(std::string(kFn) + ": one reason and one basis per trial are required");
+  for (std::size_t i = 0; i < round.trials.size(); ++i) {
+    if (round.reasons[i].empty())
+      Bad(std::string(kFn) + ": trial " + std::to_string(i) + ": reason is empty");
+    RequireObject(round.bases_json[i],
+                  std::string(kFn) + ": trial " + std::to_string(i) + ": basis");
+  }
+  RequireObject(round.sampler_state_json, std::string(kFn) + ": sampler_state_json");
+  if (!round.open && round.stop_reason.empty())
+    Bad(std::string(kFn) + ": a round that closes the sampler needs a stop_reason");
+
+  Tx tx(impl_->db, true);
+  const Campaign c = GetCampaign(campaign_id);
+  if (c.state != CampaignState::kActive || !c.sampler_open ||
+      c.sampler_state_json != expected_state_json)
+    return false;
+  auto busy = impl_->Prepare(
+      "SELECT 1 FROM trials WHERE campaign_id = ? AND state NOT IN ('done','failed','cancelled')"
+      " LIMIT 1");
+  busy->Bind(1, campaign_id);
+  if (busy->Step()) return false;
+
+  auto n = impl_->Prepare("SELECT IFNULL(MAX(idx) + 1, 0) FROM trials WHERE campaign_id = ?");
+  n->Bind(1, campaign_id);
+  n->Step();
+  const int first = static_cast<int>(n->Int(0));
+  const std::vector<std::int64_t> ids =
+      internal::InsertPlannedTrials(*impl_, campaign_id, first, round.trials, kFn);
+  const double now = impl_->Now();
+  auto ins = impl_->Prepare(
+      "INSERT INTO sampler_decisions(campaign_id, round, trial_id, reason, basis_json, created_at)"
+      " VALUES(?,?,?,?,?,?)");
+  for (std::size_t i = 0; i < ids.size(); ++i) {
+    ins->Bind(1, campaign_id)
+        .Bind(2, round.round)
+        .Bind(3, ids[i])
+        .Bind(4, round.reasons[i])
+        .Bind(5, round.bases_json[i])
+        .Bind(6, now)
+        .Run();
+    ins->Reset();
+  }
+  if (!round.open) {
+    ins->Bind(1, campaign_id)
+        .Bind(2, round.round)
+        .BindNull(3)
+        .Bind(4, round.stop_reason)
+        .Bind(5, std::string("{}"))
+        .Bind(6, now)
+        .Run();
+    ins->Reset();
+  }
+  auto u = impl_->Prepare(
+      "UPDATE campaigns SET sampler_state_json = ?, sampler_open = ?, updated_at = ? WHERE id = ?");
+  u->Bind(1, round.sampler_state_json)
+      .Bind(2, round.open ? 1 : 0)
+      .Bind(3, now)
+      .Bind(4, campaign_id)
+      .Run();
+  tx.Commit();
+  return true;
+}
+
+std::vector<SamplerDecision> Store::ListDecisions(std::int64_t campaign_id) const {
+  auto s = impl_->Prepare(
+      "SELECT id, campaign_id, round, trial_id, reason, basis_json, created_at"
+      " FROM sampler_decisions WHERE campaign_id = ? ORDER BY id");
+  s->Bind(1, campaign_id);
+  std::vector<SamplerDecision> out;
+  while (s->Step()) {
+    SamplerDecision d;
+    d.id = s->Int(0);
+    d.campaign_id = s->Int(1);
+    d.round = static_cast<int>(s->Int(2));
+    if (!s->IsNull(3)) d.trial_id = s->Int(3);
+    d.reason = s->Text(4);
+    d.basis_json = s->Text(5);
+    d.created_at = s->Real(6);
+    out.push_back(std::move(d));
+  }
+  return out;
+}
+
+std::int64_t Store::RecordCalibration(const Calibration& c) {
+  constexpr const char* kFn = "RecordCalibration";
+  impl_->RequireWritable(kFn);
+  RequireObject(c.params_json, std::string(kFn) + ": params_json");
+  RequireObject(c.settings_json, std::string(kFn) + ": settings_json");
+  RequireObject(c.report_json, std::string(kFn) + ": report_json");
+  RequireFiniteNonNegative(c.heldout_error_before, std::string(kFn) + ": heldout_error_before");
+  RequireFiniteNonNegative(c.heldout_error_after, std::string(kFn) + ": heldout_error_after");
+  Tx tx(impl_->db, true);
+  GetCampaign(c.campaign_id);  // kNotFound
+  auto s = impl_->Prepare(
+      "INSERT INTO calibrations(campaign_id, created_at, params_json, settings_json,"
+      " heldout_error_before, heldout_error_after, applied, report_json) VALUES(?,?,?,?,?,?,?,?)");
+  s->Bind(1, c.campaign_id)
+      .Bind(2, impl_->Now())
+      .Bind(3, c.params_json)
+      .Bind(4, c.settings_json)
+      .Bind(5, c.heldout_error_before)
+      .Bind(6, c.heldout_error_after)
+      .Bind(7, c.applied ? 1 : 0)
+      .Bind(8, c.report_json)
+      .Run();
+  const auto id = static_cast<std::int64_t>(sqlite3_last_insert_rowid(impl_->db));
+  tx.Commit();
+  return id;
+}
+
+Calibration Store::GetCalibration(std::int64_t calibration_id) const {
+  auto s = impl_->Prepare(std::string(kCalibrationCols) + " WHERE id = ?");
+  s->Bind(1, calibration_id);
+  if (!s->Step()) {
+    throw StoreError(StoreError::Kind::kNotFound,
+                     "GetCalibration: no calibration " + std::to_string(calibration_id) +
+                         " (see 'arena query \"SELECT * FROM calibrations\"')");
+  }
+  return ReadCalibration(*s);
+}
+
+std::vector<Calibration> Store::ListCalibrations(std::int64_t campaign_id) const {
+  auto s = impl_->Prepare(std::string(kCalibrationCols) + " WHERE campaign_id = ? ORDER BY id");
+  s->Bind(1, campaign_id);
+  std::vector<Calibration> out;
+  while (s->Step()) out.push_back(ReadCalibration(*s));
+  return out;
+}
+
+}  // namespace arena::db

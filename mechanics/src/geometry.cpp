@@ -1,0 +1,299 @@
+// The object as a solid (geometry.hpp): prisms (boxes included) by their
+// side planes and caps, cylinders by their radius and caps.
+#include "geometry.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <numbers>
+
+namespace arena::mechanics::geometry {
+
+namespace {
+
+double Cross2(const Eigen::Vector2d& a, const Eigen::Vector2d& b) {
+  return a.x() * b.y() - a.y() * b.x();
+}
+
+// Closest point of the segment [a, b] to p (2-D).
+Eigen::Vector2d ClosestOnSegment(const Eigen::Vector2d& a, const Eigen::Vector2d& b,
+                                 const Eigen::Vector2d& p) {
+  const Eigen::Vector2d ab = b - a;
+  const double len2 = ab.squaredNorm();
+  const double u = len2 > 0 ? std::clamp((p - a).dot(ab) / len2, 0.0, 1.0) : 0.0;
+  return a + u * ab;
+}
+
+}  // namespace
+
+std::optional<PolygonProblem> CheckPolygon(const std::vector<Eigen::Vector2d>& polygon) {
+  const size_t n = polygon.size();
+  if (n < 3) return PolygonProblem{n == 0 ? 0 : n - 1, "a polygon needs at least 3 vertices"};
+  double scale = 0;
+  for (const auto& v : polygon) {
+    if (!v.allFinite()) return PolygonProblem{0, "vertices must be finite"};
+    scale = std::max(scale, v.cwiseAbs().maxCoeff());
+  }
+  for (size_t i = 0; i < n; ++i) {
+    if (!polygon[i].allFinite()) return PolygonProblem{i, "must be finite"};
+    const Eigen::Vector2d e = polygon[(i + 1) % n] - polygon[i];
+    if (!(e.norm() > 1e-9 * scale)) {
+      return PolygonProblem{i, "coincides with the next vertex (degenerate polygon)"};
+    }
+  }
+  double turning = 0;
+  for (size_t i = 0; i < n; ++i) {
+    const Eigen::Vector2d e0 = polygon[i] - polygon[(i + n - 1) % n];
+    const Eigen::Vector2d e1 = polygon[(i + 1) % n] - polygon[i];
+    const double c = Cross2(e0, e1);
+    if (!(c > 1e-9 * e0.norm() * e1.norm())) {
+      return PolygonProblem{i, c < 0 ? "turns clockwise here: the polygon must be convex and "
+                                       "counter-clockwise"
+                                     : "lies on the line of its neighbours (degenerate polygon)"};
+    }
+    turning += std::atan2(c, e0.dot(e1));
+  }
+  if (std::abs(turning - 2 * std::numbers::pi) > 1e-6) {
+    return PolygonProblem{n - 1, "the polygon winds around more than once (not simple)"};
+  }
+  return std::nullopt;
+}
+
+PolygonMoments MomentsOf(const std::vector<Eigen::Vector2d>& polygon) {
+  PolygonMoments m;
+  double cx = 0, cy = 0, xx = 0, yy = 0, xy = 0;
+  const size_t n = polygon.size();
+  for (size_t i = 0; i < n; ++i) {
+    const Eigen::Vector2d& a = polygon[i];
+    const Eigen::Vector2d& b = polygon[(i + 1) % n];
+    const double c = Cross2(a, b);
+    m.area += c / 2;
+    cx += (a.x() + b.x()) * c;
+    cy += (a.y() + b.y()) * c;
+    xx += (a.x() * a.x() + a.x() * b.x() + b.x() * b.x()) * c;
+    yy += (a.y() * a.y() + a.y() * b.y() + b.y() * b.y()) * c;
+    xy += (a.x() * b.y() + 2 * a.x() * a.y() + 2 * b.x() * b.y() + b.x() * a.y()) * c;
+  }
+  if (!(m.area > 0)) return m;
+  m.centroid = {cx / (6 * m.area), cy / (6 * m.area)};
+  m.xx = xx / 12 - m.area * m.centroid.x() * m.centroid.x();
+  m.yy = yy / 12 - m.area * m.centroid.y() * m.centroid.y();
+  m.xy = xy / 24 - m.area * m.centroid.x() * m.centroid.y();
+  return m;
+}
+
+Solid::Solid(const ObjectSpec& object) : shape_(object.shape) {
+  if (shape_ == ObjectShape::kCylinder) {
+    radius_ = object.radius;
+    half_height_ = object.height / 2;
+    extent_ = std::max(2 * radius_, object.height);
+  } else {
+    if (shape_ == ObjectShape::kBox) {
+      const double hx = object.size.x() / 2, hy = object.size.y() / 2;
+      polygon_ = {{-hx, -hy}, {hx, -hy}, {hx, hy}, {-hx, hy}};
+      half_height_ = object.size.z() / 2;
+    } else {
+      polygon_ = object.polygon;
+      half_height_ = object.height / 2;
+      const PolygonMoments m = MomentsOf(polygon_);
+      centroid_O_ = {m.centroid.x(), m.centroid.y(), 0};
+    }
+    double diameter = 0;
+    for (size_t i = 0; i < polygon_.size(); ++i) {
+      const Eigen::Vector2d& a = polygon_[i];
+      const Eigen::Vector2d& b = polygon_[(i + 1) % polygon_.size()];
+      const Eigen::Vector2d e = b - a;
+      const Eigen::Vector2d nrm = Eigen::Vector2d(e.y(), -e.x()).normalized();
+      edge_normals_.push_back(nrm);
+      edge_offsets_.push_back(nrm.dot(a));
+      for (const auto& v : polygon_) diameter = std::max(diameter, (v - a).norm());
+    }
+    extent_ = std::max(diameter, 2 * half_height_);
+  }
+  if (!(extent_ > 0) || !std::isfinite(extent_)) extent_ = 1;
+}
+
+Closest Solid::ClosestTo(const Eigen::Vector3d& p) const {
+  Closest out;
+  const double tiny = 1e-15 * extent_;
+  if (shape_ == ObjectShape::kCylinder) {
+    const double r = std::hypot(p.x(), p.y());
+    const Eigen::Vector2d radial =
+        r > tiny ? Eigen::Vector2d(p.x() / r, p.y() / r) : Eigen::Vector2d(1, 0);
+    const double d_side = r - radius_;
+    const double d_cap = std::abs(p.z()) - half_height_;
+    const double zsign = p.z() >= 0 ? 1.0 : -1.0;
+    if (d_side <= 0 && d_cap <= 0) {
+      if (d_side > d_cap) {
+        out.normal_O = {radial.x(), radial.y(), 0};
+        out.point_O = {radius_ * radial.x(), radius_ * radial.y(), p.z()};
+        out.distance = d_side;
+      } else {
+        out.normal_O = {0, 0, zsign};
+        out.point_O = {p.x(), p.y(), zsign * half_height_};
+        out.distance = d_cap;
+      }
+      return out;
+    }
+    const double rc = std::min(r, radius_);
+    out.point_O = {rc * radial.x(), rc * radial.y(),
+                   std::clamp(p.z(), -half_height_, half_height_)};
+    const Eigen::Vector3d diff = p - out.point_O;
+    out.distance = diff.norm();
+    if (out.distance > tiny) {
+      out.normal_O = diff / out.distance;
+    } else {
+      out.normal_O = d_side > d_cap ? Eigen::Vector3d(radial.x(), radial.y(), 0)
+                                    : Eigen::Vector3d(0, 0, zsign);
+    }
+    return out;
+  }
+  // Prism: the face of least depth inside; outside, the closest point is the
+  // polygon's closest point in x-y with z clamped (the prism is a product).
+  const Eigen::Vector2d xy(p.x(), p.y());
+  double best = -std::numeric_limits<double>::infinity();
+  Eigen::Vector3d best_normal = Eigen::Vector3d::UnitZ();
+  bool inside_xy = true;
+  for (size_t i = 0; i < edge_normals_.size(); ++i) {
+    const double d = edge_normals_[i].dot(xy) - edge_offsets_[i];
+    if (d > 0) inside_xy = false;
+    if (d > best) {
+      best = d;
+      best_normal = {edge_normals_[i].x(), edge_normals_[i].y(), 0};
+    }
+  }
+  const double d_top = p.z() - half_height_, d_bottom = -p.z() - half_height_;
+  if (d_top > best) {
+    best = d_top;
+    best_normal = Eigen::Vector3d::UnitZ();
+  }
+  if (d_bottom > best) {
+    best = d_bottom;
+    best_normal = -Eigen::Vector3d::UnitZ();
+  }
+  if (best <= 0) {
+    out.distance = best;
+    out.normal_O = best_normal;
+    out.point_O = p - best * best_normal;
+    return out;
+  }
+  Eigen::Vector2d c = xy;
+  if (!inside_xy) {
+    double best2 = std::numeric_limits<double>::infinity();
+    for (size_t i = 0; i < polygon_.size(); ++i) {
+      const Eigen::Vector2d q =
+          ClosestOnSegment(polygon_[i], polygon_[(i + 1) % polygon_.size()], xy);
+      const double d2 = (q - xy).squaredNorm();
+      if (d2 < best2) {
+        best2 = d2;
+        c = q;
+      }
+    }
+  }
+  out.point_O = {c.x(), c.y(), std::clamp(p.z(), -half_height_, half_height_)};
+  const Eigen::Vector3d diff = p - out.point_O;
+  out.distance = diff.norm();
+  out.normal_O = out.distance > tiny ? Eigen::Vector3d(diff / out.distance) : best_normal;
+  return out;
+}
+
+std::optional<Entry> Solid::EntryOf(const Eigen::Vector3d& p, const Eigen::Vector3d& d,
+                                    double tolerance) const {
+  double s_in = -std::numeric_limits<double>::infinity();
+  double s_out = std::numeric_limits<double>::infinity();
+  Eigen::Vector3d normal = Eigen::Vector3d::UnitZ();
+  // One half-space n·x <= offset: narrows [s_in, s_out]; false on a miss.
+  auto clip = [&](const Eigen::Vector3d& n, double offset) {
+    const double nd = n.dot(d);
+    const double np = n.dot(p) - offset;
+    if (std::abs(nd) < 1e-12) return np <= tolerance;
+    const double s = -np / nd;
+    if (nd < 0) {
+      if (s > s_in) {
+        s_in = s;
+        normal = n;
+      }
+    } else {
+      s_out = std::min(s_out, s);
+    }
+    return true;
+  };
+  if (!clip(Eigen::Vector3d::UnitZ(), half_height_) ||
+      !clip(-Eigen::Vector3d::UnitZ(), half_height_)) {
+    return std::nullopt;
+  }
+  if (shape_ == ObjectShape::kCylinder) {
+    const Eigen::Vector2d q(p.x(), p.y()), e(d.x(), d.y());
+    const double a = e.squaredNorm();
+    const double rt = radius_ + tolerance;
+    if (a < 1e-12) {
+      if (q.norm() > rt) return std::nullopt;
+    } else {
+      const double b = 2 * q.dot(e);
+      const double c_tol = q.squaredNorm() - rt * rt;
+      if (b * b - 4 * a * c_tol < 0) return std::nullopt;
+      const double c = q.squaredNorm() - radius_ * radius_;
+      const double root = std::sqrt(std::max(b * b - 4 * a * c, 0.0));
+      const double s1 = (-b - root) / (2 * a), s2 = (-b + root) / (2 * a);
+      if (s1 > s_in) {
+        s_in = s1;
+        const Eigen::Vector2d r = q + s1 * e;
+        const double rn = r.norm();
+        normal = rn > 0 ? Eigen::Vector3d(r.x() / rn, r.y() / rn, 0) : Eigen::Vector3d::UnitX();
+      }
+      s_out = std::min(s_out, s2);
+    }
+  } else {
+    for (size_t i = 0; i < edge_normals_.size(); ++i) {
+      if (!clip({edge_normals_[i].x(), edge_normals_[i].y(), 0}, edge_offsets_[i]))
+        return std::nullopt;
+    }
+  }
+  if (!std::isfinite(s_in) || s_in > s_out + tolerance) return std::nullopt;
+  Entry out;
+  out.s = s_in;
+  out.point_O = p + s_in * d;
+  out.normal_O = normal;
+  return out;
+}
+
+Feature Solid::Support(const Eigen::Vector3d& dir, double tolerance) const {
+  Feature f;
+  if (shape_ == ObjectShape::kCylinder) {
+    const Eigen::Vector2d e(dir.x(), dir.y());
+    const double en = e.norm();
+    const double zs = dir.z() > 0 ? -half_height_ : half_height_;  // the cap that comes first
+    const Eigen::Vector2d rim = en > 0 ? Eigen::Vector2d(-e / en) : Eigen::Vector2d(1, 0);
+    if (2 * radius_ * en <= tolerance) {
+      f.kind = Feature::Kind::kFace;
+      for (int j = 0; j < 4; ++j) {
+        const double a = j * std::numbers::pi / 2;
+        f.points_O.emplace_back(radius_ * std::cos(a), radius_ * std::sin(a), zs);
+      }
+    } else if (2 * half_height_ * std::abs(dir.z()) <= tolerance) {
+      f.kind = Feature::Kind::kEdge;
+      f.points_O.emplace_back(radius_ * rim.x(), radius_ * rim.y(), -half_height_);
+      f.points_O.emplace_back(radius_ * rim.x(), radius_ * rim.y(), half_height_);
+    } else {
+      f.kind = Feature::Kind::kVertex;
+      f.points_O.emplace_back(radius_ * rim.x(), radius_ * rim.y(), zs);
+    }
+    return f;
+  }
+  double lo = std::numeric_limits<double>::infinity();
+  for (double z : {-half_height_, half_height_}) {
+    for (const auto& v : polygon_) lo = std::min(lo, dir.dot(Eigen::Vector3d(v.x(), v.y(), z)));
+  }
+  for (double z : {-half_height_, half_height_}) {
+    for (const auto& v : polygon_) {
+      const Eigen::Vector3d x(v.x(), v.y(), z);
+      if (dir.dot(x) <= lo + tolerance) f.points_O.push_back(x);
+    }
+  }
+  f.kind = f.points_O.size() == 1   ? Feature::Kind::kVertex
+           : f.points_O.size() == 2 ? Feature::Kind::kEdge
+                                    : Feature::Kind::kFace;
+  return f;
+}
+
+}  // namespace arena::mechanics::geometry

@@ -1,0 +1,374 @@
+// Adaptive campaigns against the store: read the finished round's outcomes,
+// decide the next round with the pure rules (adaptive_rules.cpp), write it
+// in one transaction. Design and guarantees: adaptive.hpp.
+#include "arena/orchestrator/adaptive.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <map>
+#include <set>
+
+#include <spdlog/spdlog.h>
+#include <nlohmann/json.hpp>
+
+#include "arena/mechanics/scene_json.hpp"
+#include "arena/orchestrator/outcome.hpp"
+
+namespace arena::orchestrator {
+namespace {
+
+using nlohmann::json;
+
+std::string Fixed(double v, int digits = 3) {
+  char buf[64];
+  std::snprintf(buf, sizeof buf, "%.*f", digits, v);
+  return buf;
+}
+
+std::string JoinNames(const std::vector<std::string>& names) {
+  std::string out;
+  for (const auto& n : names) out += (out.empty() ? "" : " x ") + n;
+  return out;
+}
+
+db::PlannedTrial ToStoreTrial(const Campaign& c, const PlannedTrial& t) {
+  db::PlannedTrial p;
+  p.condition = static_cast<int>(t.condition);
+  p.replicate = t.replicate;
+  p.seed = t.seed;
+  p.scene_json = mechanics::SceneToJson(t.scene);
+  p.params_json = t.parameters_json;
+  p.defects_json = c.defects_json;
+  return p;
+}
+
+// Everything a decision needs from the store, in trial order.
+struct Finished {
+  std::vector<db::Trial> trials;
+  std::map<std::int64_t, json> basis;  // trial id -> its decision's basis
+  bool busy = false;                   // some trial is planned or running
+};
+
+Finished ReadFinished(db::Store& store, std::int64_t campaign_id) {
+  Finished f;
+  f.trials = store.ListTrials(campaign_id);
+  for (const auto& t : f.trials)
+    if (!db::IsTerminal(t.state)) f.busy = true;
+  for (const auto& d : store.ListDecisions(campaign_id)) {
+    if (d.trial_id) f.basis[*d.trial_id] = json::parse(d.basis_json);
+  }
+  return f;
+}
+
+TrialOutcome OutcomeOf(db::Store& store, const db::Trial& t) {
+  const mechanics::Scene scene = mechanics::ParseScene(t.scene_json);
+  return ComputeOutcome(store.ReadGroundTruth(t.id).samples,
+                        static_cast<int>(scene.fingers.size()));
+}
+
+// ------------------------------------------------------------ boundary
+
+void DecideBoundary(db::Store& store, const Campaign& c, const Finished& f, int round, int batch,
+                    db::AdaptiveRound* out, json* state) {
+  const AdaptiveSpec& a = *c.adaptive;
+  const auto names = SampledVariations(c);
+  const int dims = static_cast<int>(names.size());
+  const int levels = a.coarse_levels > 0 ? a.coarse_levels : DefaultCoarseLevels(dims);
+  (*state)["refining"] = std::string(ToString(a.outcome)) + " boundary in " + JoinNames(names);
+  (*state)["resolution"] = a.resolution;
+  auto add = [&](const std::vector<double>& u, const std::string& reason, json basis) {
+    const auto index = static_cast<std::int64_t>(f.trials.size() + out->trials.size());
+    out->trials.push_back(ToStoreTrial(c, PlanTrialAt(c, u, index, index, 0)));
+    basis["u"] = u;
+    out->reasons.push_back(reason);
+    out->bases_json.push_back(basis.dump());
+  };
+
+  if (round == 0) {
+    const auto grid = CoarseGrid(dims, levels);
+    for (size_t i = 0; i < grid.size() && static_cast<int>(i) < a.max_trials; ++i) {
+      add(grid[i],
+          "coarse grid point " + std::to_string(i + 1) + " of " + std::to_string(grid.size()) +
+              " (" + std::to_string(levels) + " levels per dimension)",
+          json{{"rule", "coarse_grid"}, {"levels", levels}});
+    }
+    (*state)["uncertainty"] = nullptr;
+    return;
+  }
+
+  std::vector<LabelledPoint> labelled;
+  std::vector<std::vector<double>> excluded;
+  json seen = json::array();
+  int positives = 0;
+  for (const auto& t : f.trials) {
+    const auto it = f.basis.find(t.id);
+    if (it == f.basis.end() || !it->second.contains("u")) continue;
+    const auto u = it->second["u"].get<std::vector<double>>();
+    if (t.state != db::TrialState::kDone) {
+      excluded.push_back(u);  // failed or cancelled: do not ask again
+      continue;
+    }
+    const bool positive = Classify(a.outcome, a.threshold, OutcomeOf(store, t));
+    positives += positive;
+    labelled.push_back({u, positive, t.id});
+    seen.push_back({t.id, ClassName(a.outcome, positive)});
+  }
+  (*state)["labelled"] = labelled.size();
+  (*state)["positives"] = positives;
+  const int room = a.max_trials - static_cast<int>(f.trials.size());
+  double uncertainty = 0;
+  const auto proposals = ProposeBoundaryPoints(labelled, excluded, dims, a.resolution,
+                                               std::min(batch, std::max(room, 0)), &uncertainty);
+  (*state)["uncertainty"] = uncertainty;
+  std::map<std::int64_t, bool> class_of;
+  for (const auto& p : labelled) class_of[p.trial_id] = p.positive;
+  for (const auto& p : proposals) {
+    const std::string reason =
+        "on the estimated boundary between trial " + std::to_string(p.near_positive) + " (" +
+        ClassName(a.outcome, true) + ") and trial " + std::to_string(p.near_negative) + " (" +
+        ClassName(a.outcome, false) + "), " + Fixed(p.uncertainty) +
+        " from the nearest evidence (" + "resolution " + Fixed(a.resolution) + ")";
+    add(p.u, reason,
+        json{{"rule", "nn_margin"},
+             {"uncertainty", p.uncertainty},
+             {"nearest",
+              {{ClassName(a.outcome, true), p.near_positive},
+               {ClassName(a.outcome, false), p.near_negative}}},
+             {"seen", labelled.size()},
+             {"positives", positives}});
+  }
+  if (!proposals.empty()) return;
+  out->open = false;
+  if (positives == 0 || positives == static_cast<int>(labelled.size())) {
+    out->stop_reason = "no class change: all " + std::to_string(labelled.size()) +
+                       " finished points are '" + ClassName(a.outcome, positives > 0) + "'";
+  } else if (room <= 0) {
+    out->stop_reason = "max_trials reached (" + std::to_string(a.max_trials) +
+                       "); boundary uncertainty " + Fixed(uncertainty) + " > resolution " +
+                       Fixed(a.resolution);
+  } else {
+    out->stop_reason = "resolved: every point of the estimated boundary is within " +
+                       Fixed(uncertainty) + " (<= resolution " + Fixed(a.resolution) +
+                       ") of a sample of each class";
+  }
+}
+
+// ------------------------------------------------------------ replicates
+
+void DecideReplicates(db::Store& store, const Campaign& c, const Finished& f, int round, int batch,
+                      db::AdaptiveRound* out, json* state) {
+  const AdaptiveSpec& a = *c.adaptive;
+  (*state)["refining"] =
+      "replicates until the " + Fixed(a.confidence * 100, 0) +
+      " % CI of the mean final position is <= " + Fixed(a.ci_position * 1e3, 2) + " mm" +
+      (a.ci_angle > 0 ? " and of the angle <= " + Fixed(a.ci_angle, 4) + " rad" : std::string());
+  auto add = [&](std::int64_t condition, int replicate, const std::string& reason, json basis) {
+    const auto index = static_cast<std::int64_t>(f.trials.size() + out->trials.size());
+    out->trials.push_back(ToStoreTrial(c, PlanReplicate(c, condition, replicate, index)));
+    basis["condition"] = condition;
+    basis["replicate"] = replicate;
+    out->reasons.push_back(reason);
+    out->bases_json.push_back(basis.dump());
+  };
+  if (round == 0) {
+    const std::int64_t total =
+        std::min<std::int64_t>(c.conditions * a.min_replicates, a.max_trials);
+    for (std::int64_t i = 0; i < total; ++i) {
+      add(i / a.min_replicates, static_cast<int>(i % a.min_replicates),
+          "initial replicate " + std::to_string(i % a.min_replicates + 1) + " of " +
+              std::to_string(a.min_replicates) + " (min_replicates)",
+          json{{"rule", "initial"}});
+    }
+    (*state)["conditions"] = c.conditions;
+    (*state)["on_target"] = 0;
+    return;
+  }
+  std::vector<ConditionOutcomes> conditions(static_cast<size_t>(c.conditions));
+  for (std::int64_t i = 0; i < c.conditions; ++i) conditions[static_cast<size_t>(i)].condition = i;
+  for (const auto& t : f.trials) {
+    auto& co = conditions.at(static_cast<size_t>(t.condition));
+    ++co.planned;
+    if (t.state != db::TrialState::kDone) continue;
+    const TrialOutcome o = OutcomeOf(store, t);
+    co.final_position.push_back(o.final_position);
+    co.final_angle.push_back(o.rotation);
+  }
+  const int room = a.max_trials - static_cast<int>(f.trials.size());
+  const auto proposals = ProposeReplicates(conditions, a, std::min(batch, std::max(room, 0)));
+  int on_target = 0;
+  double widest = 0;
+  for (const auto& co : conditions) {
+    const double w = PositionHalfWidth(co, a.confidence);
+    const bool angle_ok =
+        a.ci_angle <= 0 || ConfidenceHalfWidth(co.final_angle, a.confidence) <= a.ci_angle;
+    on_target += w <= a.ci_position && angle_ok;
+    if (std::isfinite(w)) widest = std::max(widest, w);
+  }
+  (*state)["conditions"] = c.conditions;
+  (*state)["on_target"] = on_target;
+  (*state)["widest_ci_position"] = widest;
+  for (const auto& p : proposals) {
+    const auto& co = conditions[static_cast<size_t>(p.condition)];
+    const std::string reason =
+        "condition " + std::to_string(p.condition) + ": " + Fixed(a.confidence * 100, 0) +
+        " % CI of the mean final position +-" + Fixed(p.ci_position * 1e3, 3) + " mm (target " +
+        Fixed(a.ci_position * 1e3, 3) + " mm) after " + std::to_string(co.final_position.size()) +
+        " replicates";
+    add(p.condition, co.planned, reason,
+        json{{"rule", "ci_above_target"},
+             {"ci_position_m", std::isfinite(p.ci_position) ? json(p.ci_position) : json()},
+             {"ci_angle_rad", std::isfinite(p.ci_angle) ? json(p.ci_angle) : json()},
+             {"replicates_done", co.final_position.size()}});
+  }
+  if (!proposals.empty()) return;
+  out->open = false;
+  out->stop_reason = room <= 0 ? "max_trials reached (" + std::to_string(a.max_trials) + ")"
+                               : std::to_string(on_target) + " of " + std::to_string(c.conditions) +
+                                     " conditions on target; the rest reached max_replicates (" +
+                                     std::to_string(a.max_replicates) + ")";
+}
+
+}  // namespace
+
+std::int64_t AdvanceCampaign(db::Store& store, std::int64_t campaign_id, const Campaign& c,
+                             int idle_cells) {
+  if (!c.adaptive) return 0;
+  const db::Campaign stored = store.GetCampaign(campaign_id);
+  if (!stored.sampler_open || stored.state != db::CampaignState::kActive) return 0;
+  const Finished f = ReadFinished(store, campaign_id);
+  if (f.busy) return 0;  // the round is not finished yet
+  json state = json::parse(stored.sampler_state_json);
+  const int round = state.contains("round") ? state["round"].get<int>() + 1 : 0;
+  int batch = state.value("batch", 0);
+  if (round >= 1 && batch == 0) {
+    batch = c.adaptive->batch > 0 ? c.adaptive->batch : idle_cells;
+    if (batch <= 0) return 0;  // no cell to size the batch by yet
+  }
+  db::AdaptiveRound out;
+  out.round = round;
+  state["sampler"] = ToString(c.adaptive->kind);
+  state["round"] = round;
+  state["batch"] = batch;
+  if (c.adaptive->kind == AdaptiveKind::kBoundary)
+    DecideBoundary(store, c, f, round, batch, &out, &state);
+  else
+    DecideReplicates(store, c, f, round, batch, &out, &state);
+  state["trials"] = f.trials.size() + out.trials.size();
+  state["max_trials"] = c.adaptive->max_trials;
+  state["open"] = out.open;
+  if (!out.open) state["stop_reason"] = out.stop_reason;
+  out.sampler_state_json = state.dump();
+  if (!store.PlanAdaptiveRound(campaign_id, stored.sampler_state_json, out)) return 0;
+  // A closed sampler whose trials are all finished: the campaign is done now
+  // (a service without exit_when_done completes campaigns nowhere else).
+  if (!out.open && out.trials.empty()) store.CompleteFinishedCampaigns();
+  if (out.open) {
+    spdlog::info("campaign {}: adaptive round {}: {} trials planned", campaign_id, round,
+                 out.trials.size());
+  } else {
+    spdlog::info("campaign {}: adaptive sampler finished after round {}: {}", campaign_id, round,
+                 out.stop_reason);
+  }
+  return static_cast<std::int64_t>(out.trials.size());
+}
+
+std::int64_t PlanFirstAdaptiveRound(db::Store& store, std::int64_t campaign_id,
+                                    const Campaign& campaign) {
+  return AdvanceCampaign(store, campaign_id, campaign, 0);
+}
+
+// ------------------------------------------------------------ planner
+
+struct AdaptivePlanner::Impl {
+  db::Store& store;
+  std::chrono::milliseconds period;
+  std::chrono::steady_clock::time_point next{};
+  std::map<std::int64_t, std::optional<Campaign>> campaigns;  // nullopt: not adaptive
+};
+
+AdaptivePlanner::AdaptivePlanner(db::Store& store, std::chrono::milliseconds period)
+    : impl_(std::make_unique<Impl>(Impl{store, period, {}, {}})) {}
+AdaptivePlanner::~AdaptivePlanner() = default;
+
+std::int64_t AdaptivePlanner::Advance(int idle_cells) {
+  const auto now = std::chrono::steady_clock::now();
+  if (now < impl_->next) return 0;
+  impl_->next = now + impl_->period;
+  std::int64_t planned = 0;
+  for (const auto& stored : impl_->store.ListCampaigns()) {
+    if (!stored.sampler_open || stored.state != db::CampaignState::kActive) continue;
+    auto it = impl_->campaigns.find(stored.id);
+    if (it == impl_->campaigns.end()) {
+      std::optional<Campaign> parsed;
+      try {
+        parsed = ParseCampaign(stored.spec_json, "", ConditionCheck::kBaseScene);
+        if (!parsed->adaptive) parsed.reset();
+      } catch (const CampaignError& e) {
+        spdlog::error("campaign {}: spec unreadable, adaptive sampler stopped: {}", stored.id,
+                      e.what());
+      }
+      it = impl_->campaigns.emplace(stored.id, std::move(parsed)).first;
+    }
+    if (!it->second) continue;
+    try {
+      planned += AdvanceCampaign(impl_->store, stored.id, *it->second, idle_cells);
+    } catch (const db::StoreError& e) {
+      using K = db::StoreError::Kind;
+      if (e.kind() != K::kBusy && e.kind() != K::kBadInput && e.kind() != K::kNotFound) throw;
+      spdlog::warn("campaign {}: adaptive round not planned now: {}", stored.id, e.what());
+    } catch (const std::exception& e) {
+      spdlog::error("campaign {}: adaptive round failed: {}", stored.id, e.what());
+    }
+  }
+  return planned;
+}
+
+// ------------------------------------------------------------ status
+
+std::optional<AdaptiveProgress> ReadAdaptiveProgress(const db::Campaign& campaign) {
+  json state;
+  try {
+    state = json::parse(campaign.sampler_state_json);
+  } catch (const std::exception&) {
+    return std::nullopt;
+  }
+  if (!state.is_object() || !state.contains("round") || !state.contains("sampler"))
+    return std::nullopt;
+  AdaptiveProgress p;
+  p.sampler = state.value("sampler", "");
+  p.round = state.value("round", 0);
+  p.open = campaign.sampler_open;
+  p.refining = state.value("refining", "");
+  const double trials = state.value("trials", 0.0);
+  const double max_trials = std::max(1.0, state.value("max_trials", 1.0));
+  if (p.sampler == "boundary") {
+    const double res = state.value("resolution", 0.0);
+    if (state.contains("uncertainty") && state["uncertainty"].is_number()) {
+      const double u = state["uncertainty"].get<double>();
+      p.progress = "boundary uncertainty " + Fixed(u) + " (target " + Fixed(res) + "), " +
+                   std::to_string(state.value("labelled", 0)) + " points classified";
+      p.fraction = u > 0 ? std::min(1.0, res / u) : 1.0;
+    } else {
+      p.progress = "coarse batch of " + Fixed(trials, 0) + " points";
+      p.fraction = 0;
+    }
+  } else {
+    const double n = std::max(1.0, state.value("conditions", 1.0));
+    const double on = state.value("on_target", 0.0);
+    p.progress = Fixed(on, 0) + "/" + Fixed(n, 0) + " conditions on target";
+    if (state.contains("widest_ci_position"))
+      p.progress +=
+          ", widest CI +-" + Fixed(state["widest_ci_position"].get<double>() * 1e3, 3) + " mm";
+    p.fraction = on / n;
+  }
+  p.fraction = std::max(p.fraction, trials / max_trials);
+  if (!p.open) {
+    p.fraction = 1;
+    p.progress = "finished: " + state.value("stop_reason", std::string());
+  }
+  p.progress += " (" + Fixed(trials, 0) + "/" + Fixed(max_trials, 0) + " trials max)";
+  return p;
+}
+
+}  // namespace arena::orchestrator
