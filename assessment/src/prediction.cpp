@@ -339,15 +339,15 @@ mechanics::Scene ReplayScoringScene(const mechanics::Scene& scene,
 db::Prediction PredictTrial(const mechanics::Scene& scene,
                             const std::vector<mechanics::TrajectorySample>& truth,
                             const nlohmann::json& prediction, const RecordedCommands* commands) {
-  const bool mujoco =
-      prediction.is_object() && prediction.value("predictor", "arena") == "mujoco";
+  const bool mujoco = prediction.is_object() && prediction.value("predictor", "arena") == "mujoco";
   const bool closed_loop = scene.pusher && scene.pusher->controller;
   if (closed_loop && (commands == nullptr || commands->empty())) {
     return PredictionFailure("error", "closed-loop trial without recorded pusher commands");
   }
   if (closed_loop && !mujoco) {
     const auto start = std::chrono::steady_clock::now();
-    const mechanics::SimulationResult result = mechanics::Simulate(scene, ReplayCommands(*commands));
+    const mechanics::SimulationResult result =
+        mechanics::Simulate(scene, ReplayCommands(*commands));
     const double wall =
         std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
     db::Prediction p = ScoreSimulation(ReplayScoringScene(scene, *commands), result, truth);

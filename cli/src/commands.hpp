@@ -42,7 +42,6 @@ void AddRunCommand(CLI::App& app, Action* action);
 void AddCampaignCommands(CLI::App& app, Action* action);  // submit list status pause resume cancel
 void AddCellCommand(CLI::App& app, Action* action);
 void AddCellsCommand(CLI::App& app, Action* action);      // cmd_cells.cpp (release)
-void AddControllerCommand(CLI::App& app, Action* action);  // cmd_controller.cpp (issue 19)
 void AddQueryCommand(CLI::App& app, Action* action);      // cmd_query.cpp (store room)
 void AddExportCommand(CLI::App& app, Action* action);     // cmd_export.cpp (store room)
 void AddEvaluateCommand(CLI::App& app, Action* action);   // cmd_evaluate.cpp
@@ -53,5 +52,7 @@ void AddCalibrateCommand(CLI::App& app, Action* action);  // cmd_calibrate.cpp
 
 // cmd_sensitivity.cpp (scene and campaign views)
 void AddSensitivityCommand(CLI::App& app, Action* action);
+// cmd_controller.cpp (closed-loop controllers, issue 19)
+void AddControllerCommand(CLI::App& app, Action* action);
 
 }  // namespace arena::cli

@@ -178,7 +178,8 @@ struct PredictionJob {
   mechanics::Scene scene;  // with the campaign's model settings applied
   std::vector<mechanics::TrajectorySample> truth;
   nlohmann::json prediction;  // the campaign's `prediction` (names the predictor)
-  assessment::RecordedCommands commands;  // closed loop: replayed through the model; empty otherwise
+  // Closed loop: the applied commands, replayed through the model; empty otherwise.
+  assessment::RecordedCommands commands;
 };
 
 // Worker threads that run the predictor; jobs in, results out. Start()
@@ -199,7 +200,7 @@ class PredictorPool : public PredictionPort {
   void SetStore(db::Store* store) { store_ = store; }
 
   void Start(PredictionRequest r) override {
-    PredictionJob job{r.trial_id,         r.attempt, r.campaign_id, {},
+    PredictionJob job{r.trial_id,         r.attempt, r.campaign_id,        {},
                       std::move(r.truth), {},        std::move(r.commands)};
     try {
       mechanics::Scene scene = r.scene_json.empty() || !job.truth.empty()
@@ -212,7 +213,8 @@ class PredictorPool : public PredictionPort {
           job.truth.push_back(ToTrajectorySample(s, normals, scene.pusher.has_value()));
         // Closed loop: the commands it applied, replayed (issue 19).
         if (job.commands.empty() && scene.pusher && scene.pusher->controller) {
-          if (auto run = store_->GetClosedLoop(r.trial_id)) job.commands = assessment::CommandsOf(*run);
+          if (auto run = store_->GetClosedLoop(r.trial_id))
+            job.commands = assessment::CommandsOf(*run);
         }
       }
       job.scene = ApplyModelSettings(scene, CampaignModel(r.campaign_id));

@@ -117,7 +117,7 @@ struct TrialDriver::Impl {
     Clock::time_point stream_deadline{};
     std::vector<mechanics::TrajectorySample> truth;
     assessment::RecordedCommands commands;  // closed loop: the commands the cell applied
-    bool publishing = false;    // the publish step is under way (or waiting on the store)
+    bool publishing = false;  // the publish step is under way (or waiting on the store)
   };
   std::map<std::int64_t, Execution> executions;
   std::map<std::int64_t, PredictionDone> waiting_predictions;

@@ -59,10 +59,10 @@
 
 #include <Eigen/Core>
 
+#include "arena/assessment/prediction.hpp"
 #include "arena/db/store.hpp"
 #include "arena/mechanics/scene.hpp"
 #include "arena/mechanics/simulate.hpp"
-#include "arena/assessment/prediction.hpp"
 #include "arena/orchestrator/service.hpp"
 #include "arena/schemas/arena.h"
 
