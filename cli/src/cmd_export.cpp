@@ -72,8 +72,11 @@ db::Sample ToSample(const mechanics::TrajectorySample& p,
   return s;
 }
 
-// The campaign's "prediction" settings applied to the trial's scene, as the service does.
-db::PredictedStream Predict(const std::string& scene_json, const std::string& spec_json) {
+// The campaign's "prediction" settings applied to the trial's scene, as the
+// service does; a closed-loop trial's prediction replays `commands` (the
+// commands its cell applied; issue 19).
+db::PredictedStream PredictWith(const std::string& scene_json, const std::string& spec_json,
+                                const std::vector<db::ClosedLoopCommand>* commands) {
   db::PredictedStream out;
   const mechanics::Scene scene = mechanics::ParseScene(scene_json);
   nlohmann::json model;
@@ -88,7 +91,21 @@ db::PredictedStream Predict(const std::string& scene_json, const std::string& sp
                       {"reduce", mechanics::ToString(model_scene.model.reduce)},
                       {"contacts", mechanics::ToString(model_scene.model.contacts)}})
           .dump();
-  const mechanics::SimulationResult r = mechanics::Simulate(model_scene);
+  const bool closed_loop = model_scene.pusher && model_scene.pusher->controller;
+  assessment::RecordedCommands recorded;
+  if (closed_loop) {
+    db::ClosedLoopRun run;
+    if (commands) run.commands = *commands;
+    recorded = assessment::CommandsOf(run);
+    if (recorded.empty()) {
+      out.status = "error";
+      out.error = "closed-loop trial without recorded pusher commands";
+      return out;
+    }
+  }
+  const mechanics::SimulationResult r =
+      closed_loop ? mechanics::Simulate(model_scene, assessment::ReplayCommands(recorded))
+                  : mechanics::Simulate(model_scene);
   switch (r.status) {
     case mechanics::SimulationStatus::kOk:
       break;
@@ -106,6 +123,15 @@ db::PredictedStream Predict(const std::string& scene_json, const std::string& sp
   return out;
 }
 
+db::PredictedStream Predict(const std::string& scene_json, const std::string& spec_json) {
+  return PredictWith(scene_json, spec_json, nullptr);
+}
+
+db::PredictedStream PredictClosedLoop(const std::string& scene_json, const std::string& spec_json,
+                                      const std::vector<db::ClosedLoopCommand>& commands) {
+  return PredictWith(scene_json, spec_json, &commands);
+}
+
 int RunExport(const ExportCliOptions& o) {
   RefuseToOverwriteStore(o.out, "--out", o.db_path);
   try {
@@ -120,7 +146,10 @@ int RunExport(const ExportCliOptions& o) {
     eo.out_dir = o.out;
     eo.arena_version = arena::Version();
     eo.arena_commit = arena::GitCommit();
-    if (!o.no_predictions) eo.predict = Predict;
+    if (!o.no_predictions) {
+      eo.predict = Predict;
+      eo.predict_closed_loop = PredictClosedLoop;
+    }
     std::unique_ptr<ProgressLine> progress;
     eo.progress = [&](std::int64_t done, std::int64_t total) {
       if (!progress) progress = std::make_unique<ProgressLine>(static_cast<long>(total), "trials");
@@ -160,7 +189,9 @@ void AddExportCommand(CLI::App& app, Action* action) {
       "  arena export --db lab.db --campaign 1 --format hdf5 --out datasets/c1\n"
       "Writes trials.csv (index: parameters, outcomes, prediction errors, scene), contacts.csv\n"
       "(per-contact outcomes), the true, observed and predicted streams of every trial with\n"
-      "ground truth, and manifest.json (units, frames, counts, SHA-256 of every file); verifies\n"
+      "ground truth, closed-loop trials' controller outcomes and applied pusher commands\n"
+      "(closed_loop.csv, closed_loop_commands.csv; their predictions replay the commands),\n"
+      "and manifest.json (units, frames, counts, SHA-256 of every file); verifies\n"
       "it, then moves it into place: DIR appears complete or not at all.\n"
       "Reads one snapshot of the store: safe while 'arena serve' runs.\n");
   cmd->callback([o, action] { *action = [o] { return RunExport(*o); }; });
