@@ -279,6 +279,17 @@ db::Prediction ScoreSimulation(const mechanics::Scene& scene,
   return p;
 }
 
+namespace {
+// The label a MuJoCo prediction is stored under ("mujoco_ts0.0005_elliptic_ns10").
+std::string MujocoKey(const nlohmann::json& knobs) {
+  char key[96];
+  std::snprintf(key, sizeof key, "mujoco_ts%g_%s_ns%d", knobs.value("timestep", 0.0005),
+                knobs.value("cone", std::string("elliptic")).c_str(),
+                knobs.value("noslip_iterations", 10));
+  return key;
+}
+}  // namespace
+
 db::Prediction PredictTrial(const mechanics::Scene& scene,
                             const std::vector<mechanics::TrajectorySample>& truth) {
   const auto start = std::chrono::steady_clock::now();
@@ -395,12 +406,60 @@ db::Prediction PredictTrial(const mechanics::Scene& scene,
   if (!stored.is_object()) stored = nlohmann::json::object();
   stored["predictor"] = "mujoco";
   p.model_json = stored.dump();
-  char key[96];
-  std::snprintf(key, sizeof key, "mujoco_ts%g_%s_ns%d", knobs.value("timestep", 0.0005),
-                knobs.value("cone", std::string("elliptic")).c_str(),
-                knobs.value("noslip_iterations", 10));
-  p.model_key = key;
+  p.model_key = MujocoKey(knobs);
   return p;
+}
+
+PredictedRun SimulatePrediction(const mechanics::Scene& trial_scene,
+                                const nlohmann::json& prediction,
+                                const RecordedCommands* commands) {
+  PredictedRun run;
+  run.scene = ApplyModelSettings(trial_scene, prediction);
+  const bool mujoco = prediction.is_object() && prediction.value("predictor", "arena") == "mujoco";
+  const bool closed_loop = run.scene.pusher && run.scene.pusher->controller;
+  const bool replay = closed_loop && commands != nullptr && !commands->empty();
+  const auto no_commands = [&run] {
+    run.result.status = mechanics::SimulationStatus::kInvalidScene;
+    run.result.error = "closed-loop trial without recorded pusher commands";
+  };
+  if (!mujoco) {
+    run.predictor = "arena";
+    run.key = ModelKey(run.scene.model);
+    run.settings_json =
+        nlohmann::json({{"facets", run.scene.model.facets},
+                        {"points", run.scene.model.points},
+                        {"dt", run.scene.model.dt},
+                        {"reduce", mechanics::ToString(run.scene.model.reduce)},
+                        {"contacts", mechanics::ToString(run.scene.model.contacts)}})
+            .dump();
+    if (closed_loop && !replay)
+      no_commands();
+    else
+      run.result = replay ? mechanics::Simulate(run.scene, ReplayCommands(*commands))
+                          : mechanics::Simulate(run.scene);
+    return run;
+  }
+  nlohmann::json knobs = prediction;
+  knobs.erase("predictor");
+  const std::unique_ptr<simulators::Simulator> sim =
+      simulators::MakeSimulator("mujoco", knobs.dump());
+  run.predictor = "mujoco";
+  run.key = MujocoKey(knobs);
+  nlohmann::json stored = nlohmann::json::parse(sim->settings_json(), nullptr, false);
+  if (!stored.is_object()) stored = nlohmann::json::object();
+  stored["predictor"] = "mujoco";
+  run.settings_json = stored.dump();
+  if (const std::string why = sim->CheckScene(run.scene); !why.empty()) {
+    run.result.status = mechanics::SimulationStatus::kInvalidScene;
+    run.result.error = why;
+    return run;
+  }
+  if (closed_loop && !replay)
+    no_commands();
+  else
+    run.result = replay ? sim->SimulateClosedLoop(run.scene, ReplayCommands(*commands))
+                        : sim->Simulate(run.scene);
+  return run;
 }
 
 }  // namespace arena::assessment

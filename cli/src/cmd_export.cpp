@@ -72,9 +72,10 @@ db::Sample ToSample(const mechanics::TrajectorySample& p,
   return s;
 }
 
-// The campaign's "prediction" settings applied to the trial's scene, as the
-// service does; a closed-loop trial's prediction replays `commands` (the
-// commands its cell applied; issue 19).
+// The campaign's "prediction" settings applied to the trial's scene and run
+// on the predictor they name (arena's model or MuJoCo), as the service does;
+// a closed-loop trial's prediction replays `commands` (the commands its cell
+// applied; issue 19).
 db::PredictedStream PredictWith(const std::string& scene_json, const std::string& spec_json,
                                 const std::vector<db::ClosedLoopCommand>* commands) {
   db::PredictedStream out;
@@ -82,44 +83,29 @@ db::PredictedStream PredictWith(const std::string& scene_json, const std::string
   nlohmann::json model;
   const auto spec = nlohmann::json::parse(spec_json);
   if (spec.is_object() && spec.contains("prediction")) model = spec["prediction"];
-  const mechanics::Scene model_scene = assessment::ApplyModelSettings(scene, model);
-  out.predictor = assessment::ModelKey(model_scene.model);
-  out.settings_json =
-      nlohmann::json({{"facets", model_scene.model.facets},
-                      {"points", model_scene.model.points},
-                      {"dt", model_scene.model.dt},
-                      {"reduce", mechanics::ToString(model_scene.model.reduce)},
-                      {"contacts", mechanics::ToString(model_scene.model.contacts)}})
-          .dump();
-  const bool closed_loop = model_scene.pusher && model_scene.pusher->controller;
   assessment::RecordedCommands recorded;
-  if (closed_loop) {
-    db::ClosedLoopRun run;
-    if (commands) run.commands = *commands;
-    recorded = assessment::CommandsOf(run);
-    if (recorded.empty()) {
-      out.status = "error";
-      out.error = "closed-loop trial without recorded pusher commands";
-      return out;
-    }
+  if (commands) {
+    db::ClosedLoopRun applied;
+    applied.commands = *commands;
+    recorded = assessment::CommandsOf(applied);
   }
-  const mechanics::SimulationResult r =
-      closed_loop ? mechanics::Simulate(model_scene, assessment::ReplayCommands(recorded))
-                  : mechanics::Simulate(model_scene);
-  switch (r.status) {
+  const assessment::PredictedRun run = assessment::SimulatePrediction(scene, model, &recorded);
+  out.predictor = run.key;
+  out.settings_json = run.settings_json;
+  switch (run.result.status) {
     case mechanics::SimulationStatus::kOk:
       break;
     case mechanics::SimulationStatus::kSolverFailure:
       out.status = "solver_failure";
-      out.error = r.error;
+      out.error = run.result.error;
       return out;
     case mechanics::SimulationStatus::kInvalidScene:
       out.status = "invalid_scene";
-      out.error = r.error;
+      out.error = run.result.error;
       return out;
   }
-  const auto normals = assessment::ContactNormals(model_scene);
-  for (const auto& p : r.samples) out.samples.push_back(ToSample(p, normals, model_scene));
+  const auto normals = assessment::ContactNormals(run.scene);
+  for (const auto& p : run.result.samples) out.samples.push_back(ToSample(p, normals, run.scene));
   return out;
 }
 

@@ -11,29 +11,6 @@
 namespace arena::cli {
 namespace {
 
-std::string Esc(const std::string& s) {
-  std::string out;
-  for (char c : s) {
-    switch (c) {
-      case '&':
-        out += "&amp;";
-        break;
-      case '<':
-        out += "&lt;";
-        break;
-      case '>':
-        out += "&gt;";
-        break;
-      case '"':
-        out += "&quot;";
-        break;
-      default:
-        out += c;
-    }
-  }
-  return out;
-}
-
 std::string Num(double v) {
   char buf[32];
   std::snprintf(buf, sizeof buf, "%.6g", v);
@@ -123,10 +100,10 @@ std::string RenderMapSvg(const MapData& m) {
       << "\" font-family=\"sans-serif\" font-size=\"12\">\n"
       << "<rect width=\"100%\" height=\"100%\" fill=\"white\"/>\n"
       << "<text class=\"title\" x=\"" << width / 2 << "\" y=\"24\" text-anchor=\"middle\" "
-      << "font-size=\"15\">" << Esc(m.title) << "</text>\n";
+      << "font-size=\"15\">" << SvgEscape(m.title) << "</text>\n";
   if (!m.note.empty()) {
     svg << "<text class=\"note\" x=\"" << width / 2 << "\" y=\"44\" text-anchor=\"middle\" "
-        << "fill=\"#555\">" << Esc(m.note) << "</text>\n";
+        << "fill=\"#555\">" << SvgEscape(m.note) << "</text>\n";
   }
   svg << "<rect x=\"" << left << "\" y=\"" << top << "\" width=\"" << pw << "\" height=\"" << ph
       << "\" fill=\"none\" stroke=\"#333\"/>\n";
@@ -135,19 +112,19 @@ std::string RenderMapSvg(const MapData& m) {
     if (t < ax.lo || t > ax.hi) continue;
     svg << "<line x1=\"" << X(t) << "\" y1=\"" << top + ph << "\" x2=\"" << X(t) << "\" y2=\""
         << top + ph + 5 << "\" stroke=\"#333\"/><text x=\"" << X(t) << "\" y=\"" << top + ph + 18
-        << "\" text-anchor=\"middle\">" << Esc(ax.Label(t)) << "</text>\n";
+        << "\" text-anchor=\"middle\">" << SvgEscape(ax.Label(t)) << "</text>\n";
   }
   svg << "<text class=\"label\" x=\"" << left + pw / 2 << "\" y=\"" << height - 20
-      << "\" text-anchor=\"middle\">" << Esc(m.x_label) << "</text>\n</g>\n";
+      << "\" text-anchor=\"middle\">" << SvgEscape(m.x_label) << "</text>\n</g>\n";
   svg << "<g class=\"axis\" id=\"y-axis\">\n";
   for (double t : ay.ticks) {
     if (t < ay.lo || t > ay.hi) continue;
     svg << "<line x1=\"" << left - 5 << "\" y1=\"" << Y(t) << "\" x2=\"" << left << "\" y2=\""
         << Y(t) << "\" stroke=\"#333\"/><text x=\"" << left - 8 << "\" y=\"" << Y(t) + 4
-        << "\" text-anchor=\"end\">" << Esc(ay.Label(t)) << "</text>\n";
+        << "\" text-anchor=\"end\">" << SvgEscape(ay.Label(t)) << "</text>\n";
   }
   svg << "<text class=\"label\" x=\"22\" y=\"" << top + ph / 2 << "\" transform=\"rotate(-90 22 "
-      << top + ph / 2 << ")\" text-anchor=\"middle\">" << Esc(m.y_label) << "</text>\n</g>\n";
+      << top + ph / 2 << ")\" text-anchor=\"middle\">" << SvgEscape(m.y_label) << "</text>\n</g>\n";
 
   // Conditions that share (x, y) (they differ in another varied parameter)
   // sit side by side on a small ring instead of hiding each other.
@@ -163,7 +140,8 @@ std::string RenderMapSvg(const MapData& m) {
       offset[members[k]] = {9 * std::cos(a), -9 * std::sin(a)};
     }
   }
-  svg << "<g class=\"series\" id=\"conditions\" data-metric=\"" << Esc(m.metric_label) << "\">\n";
+  svg << "<g class=\"series\" id=\"conditions\" data-metric=\"" << SvgEscape(m.metric_label)
+      << "\">\n";
   for (size_t i = 0; i < m.points.size(); ++i) {
     const MapPoint& p = m.points[i];
     svg << "<circle class=\"condition\" data-condition=\"" << p.condition << "\" data-x=\""
@@ -203,7 +181,7 @@ std::string RenderMapSvg(const MapData& m) {
   svg << "<g class=\"legend\">\n<text class=\"metric\" x=\"" << lx << "\" y=\""
       << top - 12 * static_cast<int>(lines.size()) << "\">";
   for (size_t k = 0; k < lines.size(); ++k) {
-    svg << "<tspan x=\"" << lx << "\" dy=\"" << (k == 0 ? 0 : 14) << "\">" << Esc(lines[k])
+    svg << "<tspan x=\"" << lx << "\" dy=\"" << (k == 0 ? 0 : 14) << "\">" << SvgEscape(lines[k])
         << "</tspan>";
   }
   svg << "</text>\n";
@@ -211,8 +189,8 @@ std::string RenderMapSvg(const MapData& m) {
     int y = top + 10;
     for (auto [v, name] : {std::pair{1.0, m.flag_on}, std::pair{0.0, m.flag_off}}) {
       svg << "<circle cx=\"" << lx + 7 << "\" cy=\"" << y << "\" r=\"7\" fill=\"" << colour(v)
-          << "\" stroke=\"#222\"/><text x=\"" << lx + 20 << "\" y=\"" << y + 4 << "\">" << Esc(name)
-          << "</text>\n";
+          << "\" stroke=\"#222\"/><text x=\"" << lx + 20 << "\" y=\"" << y + 4 << "\">"
+          << SvgEscape(name) << "</text>\n";
       y += 24;
     }
   } else {

@@ -154,7 +154,7 @@ Chart MakeTrialChart(const db::Store& store, std::int64_t trial_id, TrialPlotInf
   const auto normals = assessment::ContactNormals(scene);
 
   // The prediction, exactly as the service makes it: the campaign's
-  // "prediction" settings applied to the trial's scene.
+  // "prediction" settings applied to the trial's scene, on its predictor.
   TrialPlotInfo local;
   TrialPlotInfo& inf = info ? *info : local;
   inf.samples = gt.samples.size();
@@ -164,9 +164,14 @@ Chart MakeTrialChart(const db::Store& store, std::int64_t trial_id, TrialPlotInf
     nlohmann::json model;
     const auto spec = nlohmann::json::parse(campaign.spec_json);
     if (spec.is_object() && spec.contains("prediction")) model = spec["prediction"];
-    const mechanics::Scene model_scene = assessment::ApplyModelSettings(scene, model);
-    inf.model_key = assessment::ModelKey(model_scene.model);
-    predicted = mechanics::Simulate(model_scene);
+    // A closed-loop trial (issue 19) is predicted by replaying its applied commands.
+    assessment::RecordedCommands commands;
+    if (scene.pusher && scene.pusher->controller) {
+      if (auto applied = store.GetClosedLoop(trial_id)) commands = assessment::CommandsOf(*applied);
+    }
+    assessment::PredictedRun run = assessment::SimulatePrediction(scene, model, &commands);
+    inf.model_key = run.key;
+    predicted = std::move(run.result);
     switch (predicted.status) {
       case mechanics::SimulationStatus::kOk:
         inf.prediction_status = "ok";

@@ -9,9 +9,7 @@
 
 namespace arena::cli {
 
-namespace {
-
-std::string Escape(const std::string& s) {
+std::string SvgEscape(const std::string& s) {
   std::string out;
   for (char c : s) {
     switch (c) {
@@ -33,6 +31,8 @@ std::string Escape(const std::string& s) {
   }
   return out;
 }
+
+namespace {
 
 std::string Id(const std::string& s) {
   std::string out;
@@ -155,7 +155,7 @@ std::string RenderSvg(const Chart& chart) {
       << "\" font-family=\"sans-serif\" font-size=\"12\">\n"
       << "<rect width=\"100%\" height=\"100%\" fill=\"white\"/>\n"
       << "<text x=\"" << chart.width / 2 << "\" y=\"22\" text-anchor=\"middle\" font-size=\"15\">"
-      << Escape(chart.title) << "</text>\n";
+      << SvgEscape(chart.title) << "</text>\n";
 
   for (int pi = 0; pi < n; ++pi) {
     const Panel& panel = chart.panels[pi];
@@ -175,11 +175,11 @@ std::string RenderSvg(const Chart& chart) {
     auto px = [&](double x) { return left + xa.Frac(x) * plot_w; };
     auto py = [&](double y) { return y0 + h - ya.Frac(y) * h; };
 
-    svg << "<g class=\"panel\" data-title=\"" << Escape(panel.title) << "\"";
-    if (panel.own_x) svg << " data-x-label=\"" << Escape(panel.x_label) << "\"";
+    svg << "<g class=\"panel\" data-title=\"" << SvgEscape(panel.title) << "\"";
+    if (panel.own_x) svg << " data-x-label=\"" << SvgEscape(panel.x_label) << "\"";
     svg << ">\n"
         << "<text x=\"" << left << "\" y=\"" << y0 - 8 << "\" font-size=\"13\">"
-        << Escape(panel.title) << "</text>\n"
+        << SvgEscape(panel.title) << "</text>\n"
         << "<rect x=\"" << left << "\" y=\"" << y0 << "\" width=\"" << plot_w << "\" height=\"" << h
         << "\" fill=\"none\" stroke=\"#444\"/>\n";
     for (double t : Ticks(ya)) {
@@ -202,15 +202,15 @@ std::string RenderSvg(const Chart& chart) {
     }
     if (panel.own_x) {
       svg << "<text x=\"" << left + plot_w / 2 << "\" y=\"" << y0 + h + 32
-          << "\" text-anchor=\"middle\">" << Escape(panel.x_label) << "</text>\n";
+          << "\" text-anchor=\"middle\">" << SvgEscape(panel.x_label) << "</text>\n";
     }
     svg << "<text transform=\"translate(" << left - 55 << ',' << y0 + h / 2
-        << ") rotate(-90)\" text-anchor=\"middle\">" << Escape(panel.y_label) << "</text>\n";
+        << ") rotate(-90)\" text-anchor=\"middle\">" << SvgEscape(panel.y_label) << "</text>\n";
 
     int legend_y = y0 + 12;
     for (const auto& s : panel.series) {
       svg << "<g class=\"series\" id=\"p" << pi << '_' << Id(s.name) << "\" data-name=\""
-          << Escape(s.name) << "\">\n";
+          << SvgEscape(s.name) << "\">\n";
       if (s.markers) {
         if (s.connect) {
           svg << "<polyline fill=\"none\" stroke=\"" << s.color << "\" stroke-width=\"1.2\""
@@ -229,7 +229,7 @@ std::string RenderSvg(const Chart& chart) {
           if (i < s.labels.size() && !s.labels[i].empty()) {
             svg << "<text class=\"point-label\" x=\"" << Num(px(s.x[i]) + 5) << "\" y=\""
                 << Num(py(s.y[i]) - 5) << "\" font-size=\"9\" fill=\"" << s.color << "\">"
-                << Escape(s.labels[i]) << "</text>\n";
+                << SvgEscape(s.labels[i]) << "</text>\n";
           }
         }
       } else {
@@ -250,8 +250,8 @@ std::string RenderSvg(const Chart& chart) {
             << legend_y - 4 << "\" y2=\"" << legend_y - 4 << "\" stroke=\"" << s.color
             << "\" stroke-width=\"3\"" << (s.dashed ? " stroke-dasharray=\"6 3\"" : "") << "/>";
       }
-      svg << "<text x=\"" << left + plot_w + 38 << "\" y=\"" << legend_y << "\">" << Escape(s.name)
-          << "</text>\n";
+      svg << "<text x=\"" << left + plot_w + 38 << "\" y=\"" << legend_y << "\">"
+          << SvgEscape(s.name) << "</text>\n";
       legend_y += 16;
     }
     svg << "</g>\n";
@@ -264,7 +264,7 @@ std::string RenderSvg(const Chart& chart) {
                       ? height - 12
                       : top + last_shared * (chart.panel_height + gap) + chart.panel_height + 32;
     svg << "<text x=\"" << left + plot_w / 2 << "\" y=\"" << y << "\" text-anchor=\"middle\">"
-        << Escape(chart.x_label) << "</text>\n";
+        << SvgEscape(chart.x_label) << "</text>\n";
   }
   svg << "</svg>\n";
   return svg.str();

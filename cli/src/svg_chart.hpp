@@ -14,8 +14,8 @@ struct Series {
   std::string color = "#1f77b4";
   bool markers = false;  // markers instead of a polyline
   bool dashed = false;
-  bool connect = false;             // with markers: also a polyline through them
-  std::vector<std::string> labels;  // with markers: a text label per point (optional)
+  bool connect = false;               // with markers: also a polyline through them
+  std::vector<std::string> labels{};  // with markers: a text label per point (optional)
 };
 
 struct Panel {
@@ -28,13 +28,13 @@ struct Panel {
   double min_y_span = 0;
   // Its own x axis (label under the panel) instead of the chart's shared one.
   bool own_x = false;
-  std::string x_label;
+  std::string x_label{};
   bool log_x = false;
 };
 
 struct Chart {
   std::string title;
-  std::string x_label;
+  std::string x_label{};
   bool log_x = false;
   std::vector<Panel> panels;
   int width = 900;
@@ -46,6 +46,9 @@ struct Chart {
 // <text class="point-label"> inside its series' group, and a panel with its
 // own x axis carries data-x-label.
 std::string RenderSvg(const Chart& chart);
+
+// Text made safe for SVG/XML attributes and content (& < > ").
+std::string SvgEscape(const std::string& s);
 
 // "Nice" axis ticks covering [lo, hi] (about `count` of them).
 std::vector<double> NiceTicks(double lo, double hi, int count = 6);

@@ -5,6 +5,8 @@
 
 #include <cerrno>
 #include <cstring>
+#include <stdexcept>
+#include <string>
 
 #include "arena/db/store.hpp"
 #include "sqlite_util.hpp"
@@ -84,6 +86,13 @@ std::optional<ServiceRecord> Store::LatestService() const {
       impl_->Prepare(std::string(kServiceCols) + " ORDER BY started_at DESC, rowid DESC LIMIT 1");
   if (!s->Step()) return std::nullopt;
   return ReadService(*s);
+}
+
+void Store::SetBusyTimeout(int ms) {
+  if (ms < 0)
+    throw std::invalid_argument("busy timeout: must be >= 0 ms, got " + std::to_string(ms));
+  sqlite3_busy_timeout(impl_->db, ms);
+  impl_->options.busy_timeout_ms = ms;
 }
 
 void Store::CheckFileIdentity() const {

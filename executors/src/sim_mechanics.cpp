@@ -6,6 +6,7 @@
 
 #include "arena/executors/cell.hpp"
 #include "arena/mechanics/scene_json.hpp"
+#include "simulation_stream.hpp"
 
 namespace arena::executors {
 
@@ -44,37 +45,7 @@ class MechanicsStandIn final : public Backend {
   }
   ExecuteOutcome Execute(const mechanics::Scene& scene, const TrialContext&,
                          const SampleSink& sink) override {
-    const mechanics::SimulationResult r = m_.simulate(AtFidelity(scene));
-    ExecuteOutcome out;
-    out.simulate_wall_s = r.wall_s;
-    out.detail_json = nlohmann::json({{"model",
-                                       {{"dof", r.model.dof},
-                                        {"facets", r.model.facets},
-                                        {"points", r.model.points},
-                                        {"dt", r.model.dt},
-                                        {"unknowns", r.model.unknowns}}},
-                                      {"residuals",
-                                       {{"force_balance", r.residuals.force_balance},
-                                        {"complementarity", r.residuals.complementarity},
-                                        {"cone", r.residuals.cone}}},
-                                      {"solver",
-                                       {{"steps", r.solver.steps},
-                                        {"max_pivots", r.solver.max_pivots},
-                                        {"failures", r.solver.failures}}},
-                                      {"simulate_wall_s", r.wall_s}})
-                          .dump();
-    if (r.status != mechanics::SimulationStatus::kOk || r.samples.empty()) {
-      const char* what = r.status == mechanics::SimulationStatus::kSolverFailure  ? "solver failure"
-                         : r.status == mechanics::SimulationStatus::kInvalidScene ? "invalid scene"
-                                                                                  : "ok";
-      out.reason = std::string("simulation: ") + what + ": " + r.error;
-      out.solver_failure = true;
-      return out;
-    }
-    for (const auto& s : r.samples)
-      if (!sink(s)) return out;
-    out.ok = true;
-    return out;
+    return StreamSimulation(m_.simulate(AtFidelity(scene)), sink);
   }
 
  private:

@@ -7,21 +7,10 @@
 
 #include "arena/executors/backend.hpp"
 #include "arena/simulators/simulator.hpp"
+#include "simulation_stream.hpp"
 
 namespace arena::executors {
 namespace {
-
-std::string SimulationFailure(const mechanics::SimulationResult& r) {
-  switch (r.status) {
-    case mechanics::SimulationStatus::kOk:
-      return "simulation: ok: " + r.error;
-    case mechanics::SimulationStatus::kSolverFailure:
-      return "simulation: solver failure: " + r.error;
-    case mechanics::SimulationStatus::kInvalidScene:
-      return "simulation: invalid scene: " + r.error;
-  }
-  return "simulation: " + r.error;
-}
 
 class SimulatorBackend final : public Backend {
  public:
@@ -42,38 +31,7 @@ class SimulatorBackend final : public Backend {
   }
   ExecuteOutcome Execute(const mechanics::Scene& scene, const TrialContext&,
                          const SampleSink& sink) override {
-    const mechanics::SimulationResult r = sim_->Simulate(scene);
-    ExecuteOutcome out;
-    out.simulate_wall_s = r.wall_s;
-    nlohmann::json detail = {{"model",
-                              {{"dof", r.model.dof},
-                               {"facets", r.model.facets},
-                               {"points", r.model.points},
-                               {"dt", r.model.dt},
-                               {"unknowns", r.model.unknowns}}},
-                             {"residuals",
-                              {{"force_balance", r.residuals.force_balance},
-                               {"complementarity", r.residuals.complementarity},
-                               {"cone", r.residuals.cone}}},
-                             {"solver",
-                              {{"steps", r.solver.steps},
-                               {"max_pivots", r.solver.max_pivots},
-                               {"failures", r.solver.failures}}},
-                             {"simulate_wall_s", r.wall_s}};
-    out.detail_json = detail.dump();
-    if (r.status != mechanics::SimulationStatus::kOk || r.samples.empty()) {
-      out.reason = SimulationFailure(r);
-      out.solver_failure = true;
-      return out;
-    }
-    for (const auto& s : r.samples) {
-      if (!sink(s)) {
-        out.reason = "interrupted";
-        return out;
-      }
-    }
-    out.ok = true;
-    return out;
+    return StreamSimulation(sim_->Simulate(scene), sink);
   }
   mechanics::SimulationResult SimulateClosedLoop(
       const mechanics::Scene& scene, const mechanics::PusherCommandSource& commands) override {

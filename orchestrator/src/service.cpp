@@ -373,6 +373,7 @@ struct Service::Impl {
                                " s ago); stop it first, or use another store");
     }
     registered = true;
+    store->SetBusyTimeout(o.store_busy_timeout_ms);
     trial_store = std::make_unique<SqliteTrialStore>(*store, SessionHex(session));
     adaptive = std::make_unique<AdaptivePlanner>(*store);
     DriverOptions d;

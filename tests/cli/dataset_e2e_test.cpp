@@ -151,6 +151,35 @@ TEST_F(DatasetE2E, PredictionsAreExportedBesideTheTruth) {
   EXPECT_EQ(Slurp(out + "2/trials.csv").find("predicted_by"), std::string::npos);
 }
 
+// A campaign predicted by MuJoCo exports MuJoCo's trajectory under the key
+// the service stored (before, the export re-ran arena's model for it).
+TEST_F(DatasetE2E, AMujocoPredictedCampaignExportsMujocosPrediction) {
+  std::ifstream in(Source("examples/campaigns/smoke.json"));
+  nlohmann::json spec = nlohmann::json::parse(in);
+  spec["prediction"] = {{"predictor", "mujoco"}, {"timestep", 0.001}};
+  const std::string file = dir_ + "/smoke_mujoco.json";
+  std::ofstream(file) << spec.dump(2);
+  db_ = dir_ + "/lab.db";
+  ASSERT_EQ(Arena("run " + file + " --db " + db_ + " --cells 2").rc, 0);
+  const auto out = dir_ + "/d";
+  ASSERT_EQ(Arena("export --db " + db_ + " --campaign 1 --format jsonl --out " + out).rc, 0);
+  std::ifstream index(out + "/trials.jsonl");
+  std::string line;
+  int trials = 0;
+  while (std::getline(index, line)) {
+    const auto t = nlohmann::json::parse(line);
+    ++trials;
+    EXPECT_EQ(t["predicted_by"], t["model_key"]);
+    EXPECT_EQ(t["predicted_by"].get<std::string>().rfind("mujoco_ts0.001", 0), 0u) << t;
+    EXPECT_EQ(nlohmann::json::parse(t["predicted_settings"].get<std::string>())["predictor"],
+              "mujoco");
+    if (t["predicted_status"] == "ok") {
+      EXPECT_GT(t["predicted_samples"].get<int>(), 10);
+    }
+  }
+  EXPECT_EQ(trials, 36);
+}
+
 TEST_F(DatasetE2E, PerContactOutcomesAreQueryableAndExported) {
   RunSmoke(Source("examples/defects/noisy.json"));
   const auto q = Arena("query --db " + db_ +

@@ -14,6 +14,7 @@
 
 #include <gtest/gtest.h>
 #include <tinyxml2.h>
+#include <nlohmann/json.hpp>
 
 #include "arena/assessment/truth.hpp"
 #include "arena/db/store.hpp"
@@ -32,9 +33,12 @@ class PlotTest : public ::testing::Test {
     char tmpl[] = "/tmp/arena-plot-test-XXXXXX";
     dir_ = mkdtemp(tmpl);
     db_ = dir_ + "/plot.db";
+    Populate(std::string(ARENA_SOURCE_DIR) + "/tests/orchestrator/data/e2e60.json");
+  }
+  // Submits the campaign file and stores ground truth for its first trial.
+  void Populate(const std::string& campaign_file) {
     auto store = db::Store::Open(db_);
-    const auto campaign = orchestrator::LoadCampaignFile(std::string(ARENA_SOURCE_DIR) +
-                                                         "/tests/orchestrator/data/e2e60.json");
+    const auto campaign = orchestrator::LoadCampaignFile(campaign_file);
     campaign_ = orchestrator::SubmitCampaign(*store, campaign);
     store->UpsertCell("c1", {"point", "line"});
     const auto claimed = store->ClaimNextTrial("c1");
@@ -152,6 +156,39 @@ TEST_F(PlotTest, ChartHasPosePanelsAndOneForcePanelPerContact) {
             static_cast<int>(samples_ - (samples_ + 4) / 10));
   EXPECT_GT(points["object position z (gripper frame)/predicted"], static_cast<int>(samples_) / 2);
   EXPECT_GT(points["pusher contact force on the object/normal predicted"], 0);
+}
+
+// A campaign predicted by MuJoCo is drawn with MuJoCo's trajectory (the
+// plot re-runs the campaign's predictor, not arena's model).
+class MujocoPlotTest : public PlotTest {
+ protected:
+  void SetUp() override {
+    char tmpl[] = "/tmp/arena-plot-test-XXXXXX";
+    dir_ = mkdtemp(tmpl);
+    db_ = dir_ + "/mujoco.db";
+    std::ifstream in(std::string(ARENA_SOURCE_DIR) + "/tests/orchestrator/data/e2e60.json");
+    nlohmann::json spec = nlohmann::json::parse(in);
+    spec["prediction"] = {{"predictor", "mujoco"}, {"timestep", 0.001}};
+    const std::string file = dir_ + "/mujoco_predicted.json";
+    std::ofstream(file) << spec.dump(2);
+    Populate(file);
+  }
+};
+
+TEST_F(MujocoPlotTest, AMujocoPredictedCampaignIsDrawnWithMujocosTrajectory) {
+  db::StoreOptions ro;
+  ro.read_only = true;
+  auto store = db::Store::Open(db_, ro);
+  TrialPlotInfo info;
+  const Chart chart = MakeTrialChart(*store, trial_, &info);
+  EXPECT_EQ(info.prediction_status, "ok");
+  EXPECT_EQ(info.model_key.rfind("mujoco_ts0.001", 0), 0u) << info.model_key;
+  tinyxml2::XMLDocument doc;
+  const std::string svg = RenderSvg(chart);
+  ASSERT_EQ(doc.Parse(svg.c_str()), tinyxml2::XML_SUCCESS) << doc.ErrorStr();
+  std::map<std::string, int> points;
+  SeriesByPanel(doc, &points);
+  EXPECT_GT(points["object position z (gripper frame)/predicted"], 10);
 }
 
 int RunArena(const std::string& args, std::string* err = nullptr) {

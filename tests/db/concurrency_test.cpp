@@ -161,6 +161,37 @@ TEST(StoreConcurrency, WalReaderDoesNotBlockWriter) {
   EXPECT_EQ(writer->IntegrityCheck(), "ok");
 }
 
+// SetBusyTimeout applies from now on: with another connection holding the
+// write lock, a store opened patient (5 s) and then made impatient gives up
+// with kBusy instead of waiting (the service relies on it to keep its loop
+// responsive); a negative timeout is refused with the field named.
+TEST(StoreConcurrency, SetBusyTimeoutMakesAWriterGiveUpOnAForeignLock) {
+  TempDir dir;
+  const auto path = dir.File("busy.db");
+  auto store = Store::Open(path);
+  store->UpsertCell("c", {"point"});
+  sqlite3* other = nullptr;
+  ASSERT_EQ(sqlite3_open_v2(path.c_str(), &other, SQLITE_OPEN_READWRITE, nullptr), SQLITE_OK);
+  ASSERT_EQ(sqlite3_exec(other, "BEGIN IMMEDIATE", nullptr, nullptr, nullptr), SQLITE_OK);
+  store->SetBusyTimeout(10);
+  try {
+    store->UpsertCell("d", {"point"});
+    ADD_FAILURE() << "a write under a foreign lock succeeded";
+  } catch (const StoreError& e) {
+    EXPECT_EQ(e.kind(), StoreError::Kind::kBusy) << e.what();
+  }
+  sqlite3_exec(other, "ROLLBACK", nullptr, nullptr, nullptr);
+  sqlite3_close(other);
+  store->UpsertCell("d", {"point"});  // the lock is gone: the same write goes through
+  EXPECT_EQ(store->ListCells().size(), 2u);
+  try {
+    store->SetBusyTimeout(-1);
+    ADD_FAILURE() << "a negative busy timeout was accepted";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("busy timeout"), std::string::npos) << e.what();
+  }
+}
+
 // Random interleavings of two services' worth of operations on two
 // connections (seeded): the invariants hold after every round.
 TEST(StoreConcurrency, RandomOperationsKeepInvariants) {

@@ -205,7 +205,10 @@ TEST(CellProcess, WallClockSpeedPacesTheStream) {
   EXPECT_LT(took, 5.0);
 }
 
-TEST(CellProcess, KilledCellIsSeenGoneWithinLeasePlusOneSecond) {
+// The leases, not DDS's defaults (tens of seconds), decide how soon a killed
+// cell is seen gone. The slack (3 s past each lease) is for a loaded CI
+// machine whose event thread runs late; the defaults would miss it by far.
+TEST(CellProcess, KilledCellIsSeenGoneSoonAfterItsLeases) {
   const int domain = test::TestDomain(4);
   auto c1 = StartCell("victim", domain, 0);
   Driver d(domain);
@@ -218,7 +221,7 @@ TEST(CellProcess, KilledCellIsSeenGoneWithinLeasePlusOneSecond) {
   const auto killed = std::chrono::steady_clock::now();
   ASSERT_TRUE(c1->Wait(5s));
   double writer_lost = -1, participant_left = -1;
-  const auto deadline = killed + 10s;
+  const auto deadline = killed + 15s;
   while ((writer_lost < 0 || participant_left < 0) && std::chrono::steady_clock::now() < deadline) {
     auto e = d.participant.NextPeerEvent(100ms);
     if (e)
@@ -231,9 +234,9 @@ TEST(CellProcess, KilledCellIsSeenGoneWithinLeasePlusOneSecond) {
       participant_left = at;
   }
   ASSERT_GE(writer_lost, 0) << "liveliness loss never reported";
-  EXPECT_LE(writer_lost, dds::kCellLivelinessLease_s + 1.0);
+  EXPECT_LE(writer_lost, dds::kCellLivelinessLease_s + 3.0);
   ASSERT_GE(participant_left, 0) << "participant removal never reported";
-  EXPECT_LE(participant_left, 2.5 + 1.0);  // participant lease + 1 s
+  EXPECT_LE(participant_left, 2.5 + 3.0);  // participant lease + slack
   std::printf(
       "killed cell: writer liveliness lost after %.2f s, participant dropped after %.2f s\n",
       writer_lost, participant_left);

@@ -135,22 +135,33 @@ TEST(ServiceIsolation, AForeignWriteLockLongerThanTheBusyTimeoutStrandsNoTrial) 
   auto serve = StartArena({"serve", "--db", db, "--domain", domain}, dir / "serve.log");
   ASSERT_TRUE(WaitUntil([&] { return CountStates(db, 1)["done"] >= 1; }, kTimeout))
       << ReadFile(dir / "serve.log");
-  // An analyst's sqlite3 (or a backup) holds the write lock for 8 s (> the 5 s busy timeout).
+  // An analyst's sqlite3 (or a backup) holds the write lock for 12 s: more
+  // than twice the 5 s busy timeout, so a trial step that starts after the
+  // first blocked write (which may be a heartbeat) still runs into it.
   {
-    std::ofstream(dir / "lock.py") << "import sqlite3, sys, time\n"
-                                      "c = sqlite3.connect(sys.argv[1], isolation_level=None)\n"
-                                      "c.execute('BEGIN IMMEDIATE')\n"
-                                      "time.sleep(8)\n"
-                                      "c.execute('ROLLBACK')\n";
+    std::ofstream(dir / "lock.py")
+        << "import sqlite3, sys, time\n"
+           "c = sqlite3.connect(sys.argv[1], isolation_level=None, timeout=30)\n"
+           "c.execute('BEGIN IMMEDIATE')\n"
+           "print('locked', flush=True)\n"
+           "time.sleep(12)\n"
+           "c.execute('ROLLBACK')\n";
   }
   Child lock({"/usr/bin/python3", dir / "lock.py", db}, dir / "lock.out");
-  ASSERT_TRUE(lock.Wait(30s).has_value());
+  ASSERT_TRUE(lock.Wait(60s).has_value());
+  ASSERT_NE(ReadFile(dir / "lock.out").find("locked"), std::string::npos)
+      << "the lock was never taken: " << ReadFile(dir / "lock.out");
   ASSERT_TRUE(WaitUntil([&] { return AllFinished(db, 1, 8); }, kTimeout))
       << ReadFile(dir / "serve.log");
   EXPECT_EQ(CountStates(db, 1)["done"], 8);
   ExpectCampaignConsistent(db, 1, 8);
   EXPECT_NE(ReadFile(dir / "serve.log").find("store busy"), std::string::npos)
-      << "the lock was never met; the test proves nothing";
+      << "no trial step met the lock; the test proves nothing\n"
+      << ReadFile(dir / "serve.log");
+  // The loop kept renewing its cell's claim while the lock lasted: no trial
+  // was taken from a cell whose lease lapsed (it was, with a 5 s wait per write).
+  EXPECT_EQ(ReadFile(dir / "serve.log").find("now serves nobody"), std::string::npos)
+      << ReadFile(dir / "serve.log");
   // `arena serve` marks the finished campaign done (issue 15, item 5).
   EXPECT_TRUE(WaitUntil(
       [&] { return OpenReadOnly(db)->GetCampaign(1).state == db::CampaignState::kDone; }, 10s));

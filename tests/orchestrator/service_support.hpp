@@ -88,6 +88,32 @@ inline bool WaitUntil(const std::function<bool()>& done, std::chrono::millisecon
   return false;
 }
 
+// Waits for `done` while `progress` keeps moving: false when it stood still
+// for `stall` or `cap` passed. For whole campaigns, whose length depends on
+// how loaded the machine is; a stuck service still fails within `stall`.
+inline bool WaitWhileProgressing(const std::function<bool()>& done,
+                                 const std::function<int()>& progress,
+                                 std::chrono::milliseconds stall, std::chrono::milliseconds cap) {
+  const auto start = std::chrono::steady_clock::now();
+  auto moved = start;
+  int last = -1;
+  while (std::chrono::steady_clock::now() - start < cap) {
+    try {
+      if (done()) return true;
+      const int now = progress();
+      if (now != last) {
+        last = now;
+        moved = std::chrono::steady_clock::now();
+      }
+    } catch (const db::StoreError&) {
+      // the store may be busy or mid-migration: try again
+    }
+    if (std::chrono::steady_clock::now() - moved > stall) return false;
+    std::this_thread::sleep_for(std::chrono::milliseconds(50));
+  }
+  return false;
+}
+
 // What every finished campaign must satisfy, whatever happened on the way:
 // every trial ended exactly once, the file is intact, the invariants hold.
 inline void ExpectCampaignConsistent(const std::string& db_path, std::int64_t campaign,

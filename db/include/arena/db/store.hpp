@@ -671,6 +671,12 @@ class Store {
   // @throws StoreError(kIo) naming the path when the file opened is no
   //   longer at its path (deleted, renamed or replaced by another file).
   void CheckFileIdentity() const;
+  // How long a write waits for another process's lock before kBusy, from
+  // now on (StoreOptions::busy_timeout_ms applies while opening). A service
+  // lowers it so that a foreign lock never stalls its loop for long: it
+  // retries the step instead and keeps renewing its cells' claims.
+  // @throws std::invalid_argument when ms is negative.
+  void SetBusyTimeout(int ms);
 
   // ---- read side
   StatusSummary Status() const;

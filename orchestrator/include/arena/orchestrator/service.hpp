@@ -67,6 +67,11 @@ struct ServiceOptions {
   std::int64_t only_campaign = 0;    // > 0: exit_when_done looks at this campaign only
   std::int64_t store_max_pages = 0;  // > 0: the store may not grow past this many 4 KiB
                                      //   pages (db::StoreOptions::max_pages; fault tests)
+  // Once serving, a write waits this long for another process's lock before
+  // the step is retried later (the retry policy of trial_driver.hpp). Short,
+  // so that a long foreign lock never stalls the loop that renews the cells'
+  // claims (their lease is claim_lease_s) and reads their statuses.
+  int store_busy_timeout_ms = 250;
 };
 
 // What the service has done since it started (for `arena run`'s summary and tests).

@@ -1,0 +1,58 @@
+#include "simulation_stream.hpp"
+
+#include <string>
+
+#include <nlohmann/json.hpp>
+
+namespace arena::executors {
+namespace {
+
+std::string SimulationFailure(const mechanics::SimulationResult& r) {
+  switch (r.status) {
+    case mechanics::SimulationStatus::kOk:
+      return "simulation: ok: " + r.error;  // ok but no samples
+    case mechanics::SimulationStatus::kSolverFailure:
+      return "simulation: solver failure: " + r.error;
+    case mechanics::SimulationStatus::kInvalidScene:
+      return "simulation: invalid scene: " + r.error;
+  }
+  return "simulation: " + r.error;
+}
+
+}  // namespace
+
+ExecuteOutcome StreamSimulation(const mechanics::SimulationResult& r, const SampleSink& sink) {
+  ExecuteOutcome out;
+  out.simulate_wall_s = r.wall_s;
+  out.detail_json = nlohmann::json({{"model",
+                                     {{"dof", r.model.dof},
+                                      {"facets", r.model.facets},
+                                      {"points", r.model.points},
+                                      {"dt", r.model.dt},
+                                      {"unknowns", r.model.unknowns}}},
+                                    {"residuals",
+                                     {{"force_balance", r.residuals.force_balance},
+                                      {"complementarity", r.residuals.complementarity},
+                                      {"cone", r.residuals.cone}}},
+                                    {"solver",
+                                     {{"steps", r.solver.steps},
+                                      {"max_pivots", r.solver.max_pivots},
+                                      {"failures", r.solver.failures}}},
+                                    {"simulate_wall_s", r.wall_s}})
+                        .dump();
+  if (r.status != mechanics::SimulationStatus::kOk || r.samples.empty()) {
+    out.reason = SimulationFailure(r);
+    out.solver_failure = true;
+    return out;
+  }
+  for (const auto& s : r.samples) {
+    if (!sink(s)) {
+      out.reason = "interrupted";
+      return out;
+    }
+  }
+  out.ok = true;
+  return out;
+}
+
+}  // namespace arena::executors
