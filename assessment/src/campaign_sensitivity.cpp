@@ -102,10 +102,21 @@ db::SensitivityCondition AnalyseCondition(const Condition& c, const CampaignSens
     row.observed_rotation = r / static_cast<double>(c.rotations.size());
   }
   std::vector<ActuationNoise> noises;
-  for (const auto& p : c.profiles) noises.push_back(ParseActuationNoise(p));
+  std::vector<StartPoseNoise> starts;
+  for (const auto& p : c.profiles) {
+    noises.push_back(ParseActuationNoise(p));
+    starts.push_back(ParseStartPoseNoise(p));
+  }
   const bool from_cells = !noises.empty();
-  if (!from_cells) noises.push_back(ParseActuationNoise(c.defects_json));
+  if (!from_cells) {
+    noises.push_back(ParseActuationNoise(c.defects_json));
+    starts.push_back(ParseStartPoseNoise(c.defects_json));
+  }
+  if (!o.draw_start_pose) {
+    for (auto& st : starts) st.emulated = false;
+  }
   const ActuationNoise& noise = noises.front();
+  const StartPoseNoise& start = starts.front();
   json detail = {
       {"noise_source",
        from_cells ? "the profiles the trials ran under" : "the campaign's profile (no trial ran)"},
@@ -115,7 +126,16 @@ db::SensitivityCondition AnalyseCondition(const Condition& c, const CampaignSens
         {"velocity_scale_std", noise.velocity_scale_std},
         {"velocity_offset_std",
          {noise.velocity_offset_std.x(), noise.velocity_offset_std.y(),
-          noise.velocity_offset_std.z()}}}}};
+          noise.velocity_offset_std.z()}}}},
+      {"start_pose",
+       {{"drawn", start.any()},
+        {"placement_position_std", start.position_std},
+        {"placement_angle_std", start.angle_std},
+        {"sensing_position_std", start.sensing_position_std},
+        {"sensing_angle_std", start.sensing_angle_std},
+        {"position_tolerance", start.position_tolerance},
+        {"angle_tolerance", start.angle_tolerance},
+        {"max_attempts", start.max_attempts}}}};
 
   const Outcome nominal = MeasureOutcome(c.scene, simulate(c.scene));
   ++*runs;
@@ -136,10 +156,14 @@ db::SensitivityCondition AnalyseCondition(const Condition& c, const CampaignSens
   std::vector<Eigen::Vector3d> disp, rot;
   int flips = 0;
   for (int k = 0; k < o.ensemble; ++k) {
-    const ActuationNoise& nk = noises[static_cast<size_t>(k) % noises.size()];
-    const mechanics::Scene s = ApplyNoise(c.scene, DrawNoise(nk, &rng));
+    const size_t from = static_cast<size_t>(k) % noises.size();
+    // The start pose the reset leaves, then the trial's own draws (as the cell).
+    const StartPoseDraw start_draw = DrawStartPose(starts[from], &rng);
+    const NoiseDraw noise_draw = DrawNoise(noises[from], &rng);
+    mechanics::Scene s = c.scene;
     mechanics::SimulationResult r;
     try {
+      s = ApplyNoise(ApplyStartPose(c.scene, start_draw), noise_draw);
       mechanics::ValidateScene(s);
       r = simulate(s);
     } catch (const mechanics::SceneError& e) {
@@ -348,6 +372,7 @@ json SettingsJson(const CampaignSensitivityOptions& o) {
           {"simulator", o.simulator_name},
           {"model_override", {{"facets", o.facets}, {"points", o.points}, {"dt", o.dt}}},
           {"check_stability", o.check_stability},
+          {"draw_start_pose", o.draw_start_pose},
           {"noise_sigmas", o.stability.noise_sigmas},
           {"relative_tolerance", o.stability.relative_tolerance},
           {"tolerances", tol},

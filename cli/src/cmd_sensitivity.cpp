@@ -44,6 +44,7 @@ struct SensitivityCliOptions {
   std::uint64_t seed = 1;
   int threads = 0;
   bool no_stability = false;
+  bool no_start_pose = false;
   bool no_store = false;
   bool json = false;
   std::string simulator = "arena";
@@ -264,6 +265,7 @@ int RunCampaignSensitivity(const SensitivityCliOptions& o,
   co.seed = o.seed;
   co.threads = o.threads;
   co.check_stability = !o.no_stability;
+  co.draw_start_pose = !o.no_start_pose;
   co.params = o.params;
   co.stability.tolerances = so.stability.tolerances;
   // The campaign view probes the cell's noise; a relative --tolerance adds every parameter.
@@ -435,6 +437,9 @@ void AddSensitivityCommand(CLI::App& app, Action* action) {
   cmd->add_option("--dt", o->dt, "Model time step for every run, s (0: keep)")
       ->check(CLI::NonNegativeNumber);
   cmd->add_flag("--no-stability", o->no_stability, "Skip the stability probes");
+  cmd->add_flag("--no-start-pose", o->no_start_pose,
+                "Campaign view: start every ensemble run at the nominal pose (leave out the "
+                "reset's placement error, to tell its share of the spread)");
   cmd->add_flag("--no-store", o->no_store, "Campaign view: do not store the run");
   cmd->add_flag("--json", o->json, "Print the report as JSON");
   cmd->footer(

@@ -176,8 +176,9 @@ std::vector<SensitivityCondition> ListSensitivityConditions(const Store& store,
 std::map<std::int64_t, std::string> AppliedDefectProfiles(const Store& store,
                                                           std::int64_t campaign_id) {
   detail::Stmt s(store.impl().db,
-                 "SELECT id, json_extract(defects_applied, '$.effective'), cell_defects_json "
-                 "FROM trials WHERE campaign_id = ?");
+                 "SELECT id, json_set(json_extract(defects_applied, '$.effective'), '$.emulated', "
+                 "json(CASE json_type(defects_applied, '$.emulated') WHEN 'false' THEN 'false' "
+                 "ELSE 'true' END)), cell_defects_json FROM trials WHERE campaign_id = ?");
   s.Bind(1, campaign_id);
   std::map<std::int64_t, std::string> out;
   while (s.Step()) {

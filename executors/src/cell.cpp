@@ -72,6 +72,33 @@ mechanics::Scene StartWhereResetLeft(mechanics::Scene scene,
   return scene;
 }
 
+// Where the cell's last simulated reset left the object, and for which trial.
+struct ResetLeft {
+  std::uint64_t seed = 0;  // the prepared trial's seed
+  reset::Pose target;      // its planned start pose
+  reset::Pose pose;        // where the object really ended
+};
+
+// Where a trial starts on a simulated cell (nullopt: as planned). The
+// placement error belongs to the trial the placement prepares
+// (reset::PlacementForTrial): the cell's own reset if it was aimed at this
+// very trial, otherwise the same pure draw for this trial -- as if the cell's
+// reset had been aimed at it. That is the simulation's bookkeeping (the
+// driver aims a reset at the trial it expects next; another cell may take
+// it, and a fresh cell has reset nothing), so a trial's truth never depends
+// on which cell ran it or what ran before. A backend that does not emulate
+// defects (a robot, recorded data) has its own start and is left alone.
+std::optional<reset::Pose> TrialStartPose(const std::optional<ResetLeft>& left, std::uint64_t seed,
+                                          const reset::Pose& target,
+                                          const reset::ResetParams& params, bool emulated) {
+  if (!emulated) return std::nullopt;
+  if (left && left->seed == seed && left->target.position == target.position &&
+      left->target.orientation.coeffs() == target.orientation.coeffs()) {
+    return left->pose;
+  }
+  return reset::PlacementForTrial(target, params, seed).true_pose;
+}
+
 bool SamePusher(const std::optional<mechanics::PusherSpec>& a,
                 const std::optional<mechanics::PusherSpec>& b) {
   if (a.has_value() != b.has_value()) return false;
@@ -168,7 +195,7 @@ struct Cell::Impl {
   std::deque<Key> done_order;                   // oldest first
   reset::Pose true_pose;                        // where the object really is now
   reset::Pose observed_pose;                    // where the sensors saw it last
-  std::optional<reset::Pose> reset_left;        // true pose the last reset left (issue 12)
+  std::optional<ResetLeft> reset_left;          // the last successful simulated reset
   std::optional<mechanics::PusherSpec> pusher;  // the pusher mounted now
   std::thread worker;
 
@@ -361,9 +388,11 @@ struct Cell::Impl {
                               ? started + std::chrono::duration_cast<Clock::duration>(
                                               std::chrono::duration<double>(c.deadline_s()))
                               : Clock::time_point::max();
-    // Issue 12: the trial starts where the last reset left the object.
+    // Issue 12: the trial starts where the reset that prepared it left the object.
     try {
-      scene = StartWhereResetLeft(scene, reset_left);
+      scene = StartWhereResetLeft(
+          scene, TrialStartPose(reset_left, c.seed(), ToResetPose(scene.object.pose), reset_params,
+                                layer.capabilities().emulates_defects));
     } catch (const std::exception& e) {
       return Refuse(c, std::string("start pose: ") + e.what());
     }
@@ -954,7 +983,7 @@ struct Cell::Impl {
     }
     true_pose = out.final_true;
     observed_pose = out.final_observed;
-    reset_left = out.final_true;
+    if (out.success) reset_left = ResetLeft{c.seed(), request.target, out.final_true};
     if (out.success) pusher = next_pusher;
     auto s = BaseStatus(c, out.success ? msg::STATE_RESET_DONE : msg::STATE_FAILED);
     s.reason(out.failure);

@@ -28,7 +28,53 @@ std::string Vec(const Eigen::Vector3d& v) {
   return out.str();
 }
 
+// The stream of placements a reset aimed at one trial draws (reset.hpp):
+// twelve normal draws per placement in a fixed order, keyed by the prepared
+// trial's seed alone.
+class PlacementDraws {
+ public:
+  PlacementDraws(const Pose& target, const ResetParams& params, std::uint64_t trial_seed)
+      : target_(target), params_(params), rng_(trial_seed, 0, StreamPurpose::kPlacement) {}
+
+  Placement Next() {
+    Placement p;
+    p.true_pose.position =
+        target_.position + Eigen::Vector3d(rng_.Normal(params_.placement_position_std),
+                                           rng_.Normal(params_.placement_position_std),
+                                           rng_.Normal(params_.placement_position_std));
+    p.true_pose.orientation = Perturb(target_.orientation, &rng_, params_.placement_angle_std);
+    p.observed.position =
+        p.true_pose.position + Eigen::Vector3d(rng_.Normal(params_.sensing_position_std),
+                                               rng_.Normal(params_.sensing_position_std),
+                                               rng_.Normal(params_.sensing_position_std));
+    p.observed.orientation = Perturb(p.true_pose.orientation, &rng_, params_.sensing_angle_std);
+    p.position_error = (p.observed.position - target_.position).norm();
+    p.angle_error = AngleBetween(p.observed.orientation, target_.orientation);
+    p.verified =
+        p.position_error <= params_.position_tolerance && p.angle_error <= params_.angle_tolerance;
+    p.placements = ++drawn_;
+    return p;
+  }
+
+ private:
+  Pose target_;
+  ResetParams params_;
+  Rng rng_;
+  int drawn_ = 0;
+};
+
 }  // namespace
+
+Placement PlacementForTrial(const Pose& target, const ResetParams& params,
+                            std::uint64_t trial_seed) {
+  PlacementDraws draws(target, params, trial_seed);
+  Placement p;
+  for (int k = 0; k < params.max_attempts; ++k) {
+    p = draws.Next();
+    if (p.verified) break;
+  }
+  return p;
+}
 
 const char* ToString(PrimitiveKind kind) {
   switch (kind) {
@@ -107,7 +153,8 @@ std::vector<Primitive> PlanReset(const Pose& observed, const Pose& target, bool 
 
 ResetOutcome ExecuteReset(const ResetRequest& request, const ResetParams& params,
                           std::uint64_t seed, std::uint64_t trial_id) {
-  Rng rng(seed, trial_id, StreamPurpose::kReset);
+  Rng slips(seed, trial_id, StreamPurpose::kReset);
+  PlacementDraws placements(request.target, params, seed);
   ResetOutcome out;
   out.final_true = request.true_end;
   out.final_observed = request.observed_end;
@@ -123,29 +170,18 @@ ResetOutcome ExecuteReset(const ResetRequest& request, const ResetParams& params
     return out;
   }
   Pose observed = request.observed_end;
-  Pose actual = request.true_end;
   bool swap = request.swap_pusher;
   for (int attempt = 1; attempt <= params.max_attempts; ++attempt) {
     out.attempts = attempt;
     out.plan = PlanReset(observed, request.target, swap, params);
-    // Draw every random number of the attempt in a fixed order so that one
-    // outcome does not shift the streams of the others.
-    const double slip = rng.Uniform();
-    const size_t slip_at = out.plan.empty() ? 0 : static_cast<size_t>(rng.Next() % out.plan.size());
-    Pose placed;
-    placed.position =
-        request.target.position + Eigen::Vector3d(rng.Normal(params.placement_position_std),
-                                                  rng.Normal(params.placement_position_std),
-                                                  rng.Normal(params.placement_position_std));
-    placed.orientation = Perturb(request.target.orientation, &rng, params.placement_angle_std);
-    Pose seen;
-    const Eigen::Vector3d sensing(rng.Normal(params.sensing_position_std),
-                                  rng.Normal(params.sensing_position_std),
-                                  rng.Normal(params.sensing_position_std));
-
+    // Two draws per attempt whatever the plan, so that one outcome does not
+    // shift the stream of the others.
+    const double slip = slips.Uniform();
+    const std::uint64_t slip_draw = slips.Next();
     if (slip < params.failure_probability && !out.plan.empty()) {
       // The object slipped during one primitive: time up to and including it
       // is spent, the object stays where it was (observed again as before).
+      const size_t slip_at = static_cast<size_t>(slip_draw % out.plan.size());
       for (size_t i = 0; i <= slip_at; ++i) out.time_s += out.plan[i].duration_s;
       if (swap && slip_at > 0) swap = false;  // the swap (always first) was completed
       out.failure = std::string("object slipped during ") + ToString(out.plan[slip_at].kind) +
@@ -154,16 +190,14 @@ ResetOutcome ExecuteReset(const ResetRequest& request, const ResetParams& params
     }
     for (const auto& p : out.plan) out.time_s += p.duration_s;
     swap = false;
-    if (!out.plan.empty()) actual = placed;
-    seen.position = actual.position + sensing;
-    seen.orientation = Perturb(actual.orientation, &rng, params.sensing_angle_std);
-    observed = seen;
-    out.final_true = actual;
-    out.final_observed = seen;
-    out.position_error = (seen.position - request.target.position).norm();
-    out.angle_error = AngleBetween(seen.orientation, request.target.orientation);
-    if (out.position_error <= params.position_tolerance &&
-        out.angle_error <= params.angle_tolerance) {
+    // The prepared trial's next placement (also with an empty plan: reset.hpp).
+    const Placement placed = placements.Next();
+    observed = placed.observed;
+    out.final_true = placed.true_pose;
+    out.final_observed = placed.observed;
+    out.position_error = placed.position_error;
+    out.angle_error = placed.angle_error;
+    if (placed.verified) {
       out.success = true;
       out.failure.clear();
       return out;

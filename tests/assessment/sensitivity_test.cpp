@@ -26,6 +26,7 @@
 #include "arena/assessment/noise.hpp"
 #include "arena/assessment/sensitivity.hpp"
 #include "arena/mechanics/scene_json.hpp"
+#include "arena/reset/reset.hpp"
 
 namespace arena::assessment {
 namespace {
@@ -282,6 +283,66 @@ TEST(CampaignSpread, EnsembleDrawsFollowTheProfile) {
   const Scene s = ApplyNoise(SlidingPush(), {1.1, 0.5, {0, 0, 0.001}});
   EXPECT_NEAR(s.fingers[0].mu, 0.55, 1e-12);
   EXPECT_NEAR(s.pusher->motion.velocity.z(), 0.006, 1e-12);
+}
+
+// The ensemble's start pose comes from the distribution the simulated cell
+// draws it from (reset::PlacementForTrial): same spread, the same
+// truncation by verification (a placement seen out of tolerance is placed
+// again), read from the profile the cell records.
+TEST(CampaignSpread, EnsembleStartPoseIsTheResetsPlacement) {
+  const StartPoseNoise n = ParseStartPoseNoise(R"({
+      "emulated": true,
+      "pose_noise": {"position_std": [0.0005, 0.0002, 0.0001], "rotation_std": 0.004},
+      "reset": {"placement_position_std": 0.0012, "placement_angle_std": 0.01,
+                "position_tolerance": 0.002, "angle_tolerance": 0.02, "max_attempts": 3}})");
+  EXPECT_DOUBLE_EQ(n.sensing_position_std, 0.0005);
+  EXPECT_DOUBLE_EQ(n.sensing_angle_std, 0.004);
+  ASSERT_TRUE(n.any());
+  reset::ResetParams p;
+  p.placement_position_std = 0.0012;
+  p.placement_angle_std = 0.01;
+  p.sensing_position_std = 0.0005;
+  p.sensing_angle_std = 0.004;
+  const int k = 6000;
+  std::mt19937_64 rng(11);
+  double ours = 0, cells = 0, ours_angle = 0, cells_angle = 0;
+  reset::Pose target;
+  for (int i = 0; i < k; ++i) {
+    const StartPoseDraw d = DrawStartPose(n, &rng);
+    ours += d.offset.squaredNorm();
+    ours_angle += d.rotation.squaredNorm();
+    const reset::Placement c = reset::PlacementForTrial(target, p, 5000 + i);
+    cells += c.true_pose.position.squaredNorm();
+    const double a = reset::AngleBetween(c.true_pose.orientation, target.orientation);
+    cells_angle += a * a;
+  }
+  // |offset| of 1.2 mm per axis is often beyond the 2 mm tolerance: the
+  // truncation is visible (RMS below the untruncated sqrt(3) 1.2 mm).
+  EXPECT_LT(std::sqrt(cells / k), 0.95 * std::sqrt(3.0) * 0.0012);
+  EXPECT_NEAR(std::sqrt(ours / k), std::sqrt(cells / k), 0.03 * std::sqrt(cells / k));
+  EXPECT_NEAR(std::sqrt(ours_angle / k), std::sqrt(cells_angle / k),
+              0.03 * std::sqrt(cells_angle / k));
+
+  // The scene starts there with the fingers closed onto the object.
+  StartPoseDraw d;
+  d.offset = {0.0, 0.0005, 0.0003};
+  d.rotation = {0.0, 0.0, 0.01};
+  const Scene moved = ApplyStartPose(SlidingPush(), d);
+  EXPECT_TRUE(moved.object.pose.position.isApprox(Eigen::Vector3d(0, 0.0005, 0.0003)));
+  EXPECT_NEAR(moved.object.pose.rpy.z(), 0.01, 1e-12);
+
+  // A robot or recording (not emulated) keeps its own start; no reset
+  // object: a cell at the reset defaults; bad fields named.
+  EXPECT_FALSE(ParseStartPoseNoise(R"({"emulated": false})").any());
+  EXPECT_DOUBLE_EQ(ParseStartPoseNoise("{}").position_std,
+                   reset::ResetParams{}.placement_position_std);
+  EXPECT_DOUBLE_EQ(ParseStartPoseNoise("{}").angle_std, reset::ResetParams{}.placement_angle_std);
+  try {
+    ParseStartPoseNoise(R"({"reset": {"placement_angle_std": -1}})");
+    FAIL();
+  } catch (const NoiseError& e) {
+    EXPECT_EQ(e.field(), "reset.placement_angle_std");
+  }
 }
 
 }  // namespace

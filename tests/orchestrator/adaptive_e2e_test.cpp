@@ -70,10 +70,9 @@ TEST(AdaptiveE2E, BoundarySamplerBracketsThePivotToItsResolution) {
       above = points[i].first;
     }
   }
-  // Once, or (rarely) three times right at the boundary: each trial starts
-  // where its cell's last reset left the object (issue 12), so two trials a
-  // bisection step apart may fall on either side of it.
-  EXPECT_TRUE(changes == 1 || changes == 3) << changes;
+  // Exactly once: each trial's start pose is its own (reset::PlacementForTrial),
+  // so which cell ran a trial next to the boundary cannot flip its class.
+  EXPECT_EQ(changes, 1);
   EXPECT_FALSE(points.front().second);  // little offset: no pivot
   EXPECT_TRUE(points.back().second);    // at the edge: pivots
   EXPECT_LE(above - below, 2 * 0.03 * 0.007 + 1e-9);
@@ -175,10 +174,13 @@ TEST(AdaptiveE2E, CalibrationRecoversTheCellsFrictionScale) {
       << ReadFile(dir / "calibrated.log");
   auto store = OpenReadOnly(db);
   const double before = MeanForceError(*store, 1), after = MeanForceError(*store, 2);
-  // Measurably closer. Not by a fixed factor: each cell starts a trial where
-  // its last reset left the object (issue 12), so the second campaign's truth
-  // depends on which cell ran which trial (seen: 0.59-0.75 of before).
-  EXPECT_LT(after, 0.9 * before) << "force error before " << before << " N, after " << after;
+  // Closer by nearly half. The figure is reproducible to the last bit (1.0670
+  // N before, 0.5697 N after, in every run): each trial starts at its own
+  // placement (reset::PlacementForTrial), whichever cell ran it. Not below
+  // 0.5 as before trials started off their planned pose (issue 12): the
+  // prediction starts at the planned pose, and calibrating friction cannot
+  // remove the start-pose error's share.
+  EXPECT_LT(after, 0.6 * before) << "force error before " << before << " N, after " << after;
   EXPECT_NE(store->GetCampaign(2).spec_json.find("\"calibrated\""), std::string::npos);
 
   // A calibration that does not exist is refused at submit, nothing stored.

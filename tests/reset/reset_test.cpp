@@ -101,7 +101,8 @@ TEST(ResetExecute, NoisySensingNeedsRetriesAtTheRateTheToleranceImplies) {
     ResetRequest r;
     r.true_end = At(0.01, 0, 0);
     r.observed_end = r.true_end;
-    failed += ExecuteReset(r, params, 9, static_cast<std::uint64_t>(trial)).success ? 0 : 1;
+    // The verification draws belong to the prepared trial: one seed each.
+    failed += ExecuteReset(r, params, static_cast<std::uint64_t>(trial), 9).success ? 0 : 1;
   }
   EXPECT_NEAR(failed / static_cast<double>(n), 0.2615, 0.03);
 }
@@ -118,6 +119,88 @@ TEST(ResetExecute, DeterministicFromSeedAndTrial) {
   EXPECT_EQ(a.attempts, b.attempts);
   EXPECT_EQ(a.final_true.position, b.final_true.position);
   EXPECT_EQ(a.time_s, b.time_s);
+}
+
+// The class of bug this guards against: a trial's start pose depended on
+// which cell prepared it and what that cell ran before (its previous end
+// pose, the id of the trial just executed, a pusher swap, slips). The start
+// pose must be a pure function of the prepared trial's seed, its target and
+// the reset parameters.
+TEST(ResetExecute, WhereTheObjectEndsBelongsToThePreparedTrialAlone) {
+  ResetParams params;
+  params.failure_probability = 0.3;
+  params.sensing_position_std = 8e-4;  // some verifications fail: retries happen
+  params.placement_position_std = 5e-4;
+  params.placement_angle_std = 5e-3;
+  const Pose target = At(0.001, -0.002, 0.0, 0.05);
+  int successes = 0, retried = 0;
+  for (std::uint64_t seed = 1; seed <= 300; ++seed) {
+    const Placement pure = PlacementForTrial(target, params, seed);
+    EXPECT_EQ(pure.true_pose.position, PlacementForTrial(target, params, seed).true_pose.position);
+    // Two different histories: another previous end, trial just run, swap.
+    ResetRequest a, b;
+    a.true_end = a.observed_end = At(0.03, 0.01, 0, 0.4);
+    b.true_end = b.observed_end = At(-0.02, 0.0, 0.0, -1.0);
+    a.target = b.target = target;
+    b.swap_pusher = true;
+    const ResetOutcome ra = ExecuteReset(a, params, seed, 11);
+    const ResetOutcome rb = ExecuteReset(b, params, seed, 4242);
+    for (const ResetOutcome* r : {&ra, &rb}) {
+      if (!r->success) continue;
+      ++successes;
+      retried += r->attempts > 1;
+      EXPECT_EQ(r->final_true.position, pure.true_pose.position) << "seed " << seed;
+      EXPECT_EQ(r->final_true.orientation.coeffs(), pure.true_pose.orientation.coeffs());
+      EXPECT_EQ(r->final_observed.position, pure.observed.position);
+      EXPECT_TRUE(pure.verified);
+    }
+  }
+  EXPECT_GT(successes, 450);
+  EXPECT_GT(retried, 50);  // slips and failed verifications were exercised
+}
+
+TEST(ResetExecute, NothingToMoveStillEndsAtTheTrialsPlacementInNoTime) {
+  ResetParams params;
+  ResetRequest r;
+  r.target = At(0, 0, 0);
+  r.true_end = r.observed_end = At(0.0005, 0, 0);  // within tolerance: empty plan
+  const ResetOutcome out = ExecuteReset(r, params, 77, 3);
+  ASSERT_TRUE(out.success) << out.failure;
+  EXPECT_TRUE(out.plan.empty());
+  EXPECT_EQ(out.time_s, 0.0);
+  EXPECT_EQ(out.final_true.position, PlacementForTrial(r.target, params, 77).true_pose.position);
+  EXPECT_NE(out.final_true.position, r.true_end.position);
+}
+
+TEST(ResetPlacement, SpreadIsThePlacementAccuracy) {
+  // Without sensing noise and with tolerances 6-7 sigma wide nearly every
+  // placement verifies at the first draw: the start pose is target +
+  // N(0, placement_position_std) per axis.
+  ResetParams params;
+  params.placement_position_std = 3e-4;
+  params.placement_angle_std = 4e-3;
+  const Pose target = At(0.01, 0.0, 0.0, 0.2);
+  const int n = 4000;
+  Eigen::Vector3d sum = Eigen::Vector3d::Zero(), sum2 = Eigen::Vector3d::Zero();
+  double angle2 = 0;
+  int placed_again = 0;
+  for (int k = 0; k < n; ++k) {
+    const Placement p = PlacementForTrial(target, params, static_cast<std::uint64_t>(k) + 1000);
+    ASSERT_TRUE(p.verified);
+    placed_again += p.placements > 1;
+    const Eigen::Vector3d d = p.true_pose.position - target.position;
+    sum += d;
+    sum2 += d.cwiseProduct(d);
+    const double a = AngleBetween(p.true_pose.orientation, target.orientation);
+    angle2 += a * a;
+  }
+  for (int i = 0; i < 3; ++i) {
+    EXPECT_NEAR(sum[i] / n, 0, 3e-4 * 0.06);
+    EXPECT_NEAR(std::sqrt(sum2[i] / n), 3e-4, 3e-4 * 0.05);
+  }
+  EXPECT_LE(placed_again, 3);  // a 5-sigma rotation now and then
+  // |rotation vector|^2 is sigma^2 chi^2(3): mean 3 sigma^2.
+  EXPECT_NEAR(std::sqrt(angle2 / n / 3), 4e-3, 4e-3 * 0.05);
 }
 
 TEST(ResetParams, BadFieldsAreNamed) {

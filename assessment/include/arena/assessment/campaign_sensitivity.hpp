@@ -1,8 +1,9 @@
 // The campaign view of reliability (`arena sensitivity --db F --campaign ID`):
 // per condition (its replicates share one scene), the spread of the outcome
 // the model predicts under the campaign's defect profile -- an ensemble of N
-// model runs, each with friction and pusher velocity drawn as the cell draws
-// them (noise.hpp), seeded -- beside the spread the replicates' ground truth
+// model runs, each with friction, pusher velocity and the start pose the
+// cell's reset leaves drawn as the cell draws them (noise.hpp), seeded --
+// beside the spread the replicates' ground truth
 // showed, and the condition's stability (sensitivity.hpp) with the cell's
 // noise levels as tolerances.
 //
@@ -33,6 +34,10 @@ struct CampaignSensitivityOptions {
   std::uint64_t seed = 1;  // the ensemble's random streams derive from (seed, condition)
   int threads = 0;         // conditions run in parallel; 0: one per core
   bool check_stability = true;
+  // Draw the start pose each replicate began from (the reset's placement
+  // accuracy in the profiles the trials ran under); false leaves it nominal,
+  // to tell its share of the spread.
+  bool draw_start_pose = true;
   // Tolerances beyond the cell's noise (relative_tolerance 0: only the noise).
   StabilityOptions stability = [] {
     StabilityOptions s;

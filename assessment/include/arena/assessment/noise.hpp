@@ -4,8 +4,13 @@
 // because assessment does not link executors. The cell draws per trial:
 //   every mu      *= 1 + N(0, mu_scale_std)   (redrawn while <= 0)
 //   pusher v       = v * (1 + N(0, velocity_scale_std)) + N(0, velocity_offset_std) per axis
-// Sensing noise, latency and drops change only what the sensors saw, never
-// the ground truth, so they play no part in the predicted spread.
+// and a simulated cell starts each trial where the reset that prepared it
+// placed the object (reset/include/arena/reset/reset.hpp, PlacementForTrial):
+//   start pose     = nominal (+) N(0, reset.placement_*_std) per axis, the
+//                    first of at most reset.max_attempts placements that the
+//                    verification (pose_noise as sensing) sees within tolerance.
+// Sensing noise, latency and drops otherwise change only what the sensors
+// saw, never the ground truth, so they play no other part in the spread.
 #pragma once
 
 #include <cstdint>
@@ -57,5 +62,41 @@ NoiseDraw DrawNoise(const ActuationNoise& noise, std::mt19937_64* rng);
 
 // The scene with the draw applied (friction scaled, pusher velocity changed).
 mechanics::Scene ApplyNoise(const mechanics::Scene& scene, const NoiseDraw& draw);
+
+// The start-pose error a simulated cell's reset leaves, from the profile's
+// "reset" object (the cell's reset parameters; a profile without one is a
+// cell at the reset defaults, as reset::ResetParams has them) and
+// "pose_noise" (verification sensing: the largest axis, as the cell uses
+// it). Read here because assessment links neither reset nor executors; a test
+// holds it to reset::PlacementForTrial's distribution.
+struct StartPoseNoise {
+  double position_std = 2e-4;         // m per axis (reset.placement_position_std)
+  double angle_std = 2e-3;            // rad per axis (reset.placement_angle_std)
+  double position_tolerance = 0.002;  // m: verification
+  double angle_tolerance = 0.02;      // rad
+  double sensing_position_std = 0;    // m per axis
+  double sensing_angle_std = 0;       // rad per axis
+  int max_attempts = 3;
+  // False when the cell's backend does not emulate defects (a robot, a
+  // recording: "emulated": false in the applied profile): it has its own start.
+  bool emulated = true;
+  bool any() const { return emulated && (position_std > 0 || angle_std > 0); }
+};
+
+// @throws NoiseError naming the field ("reset.placement_position_std").
+StartPoseNoise ParseStartPoseNoise(std::string_view profile_json);
+
+struct StartPoseDraw {
+  Eigen::Vector3d offset = Eigen::Vector3d::Zero();    // m, in the gripper frame
+  Eigen::Vector3d rotation = Eigen::Vector3d::Zero();  // rad, rotation vector in the object frame
+};
+
+// One draw (own random stream, as DrawNoise). Zero when !noise.any().
+StartPoseDraw DrawStartPose(const StartPoseNoise& noise, std::mt19937_64* rng);
+
+// The scene starting at the drawn pose, the fingers closed onto the object
+// there (mechanics::SeatFingers), as the cell starts it.
+// @throws mechanics::SceneError when a finger misses the object there.
+mechanics::Scene ApplyStartPose(const mechanics::Scene& scene, const StartPoseDraw& draw);
 
 }  // namespace arena::assessment

@@ -69,7 +69,8 @@ std::vector<SensitivityCondition> ListSensitivityConditions(const Store& store,
 // (trials.defects_applied "effective": the cell's and the campaign's
 // combined, schema version 10), else the cell's announced profile recorded
 // at dispatch (trials.cell_defects_json; cells that applied only their own).
-// Trials with neither are absent.
+// The recorded profile carries "emulated" (false: the backend did not emulate
+// defects, a robot or recorded data). Trials with neither are absent.
 std::map<std::int64_t, std::string> AppliedDefectProfiles(const Store& store,
                                                           std::int64_t campaign_id);
 

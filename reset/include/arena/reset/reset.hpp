@@ -6,7 +6,15 @@
 // and an object that left the workspace, which no retry fixes), verifies the
 // result against a tolerance from the observed pose, and retries up to
 // max_attempts times. A reset that still fails is reported with its reason so
-// the scheduler can quarantine the cell. Deterministic from (seed, trial id).
+// the scheduler can quarantine the cell.
+//
+// Whose randomness: where a placement really ends and what verification sees
+// belong to the trial the reset prepares, so they are drawn from a stream
+// keyed by that trial's seed alone (PlacementForTrial()); a trial's start pose
+// is then a pure function of (its seed, its target pose, the reset
+// parameters), whichever cell prepared it and whatever ran there before. Only
+// the slips (failures and where they happen, hence time and retries) are the
+// cell's history, drawn from (seed, id of the trial just executed).
 //
 // Frames: all poses in the gripper's nominal frame at the start of a trial
 // (SCENE.md), m and rad.
@@ -86,10 +94,36 @@ struct ResetOutcome {
   Pose final_observed;          // what verification saw
 };
 
-// Simulated execution with verification and retries.
+// Simulated execution with verification and retries. `seed` is the seed of
+// the trial the reset prepares (the target's), `trial_id` the trial that just
+// ran (slips only). Every attempt that does not slip ends at the next of the
+// prepared trial's placements (PlacementForTrial), also when no primitive
+// was needed: the next trial's grasp seats the object anew, so a simulated
+// object keeps no memory of earlier trials (no time is spent then).
+// On success, final_true == PlacementForTrial(target, params, seed).true_pose.
 // @pre ValidateResetParams(params) passes.
 ResetOutcome ExecuteReset(const ResetRequest& request, const ResetParams& params,
                           std::uint64_t seed, std::uint64_t trial_id);
+
+// The placements a simulated reset aimed at one trial draws, in order:
+// placement k ends at target (+) N(0, placement std) per axis and is seen at
+// that (+) N(0, sensing std) per axis; the first within tolerance of the
+// target is kept (at most max_attempts are drawn).
+struct Placement {
+  Pose true_pose;             // where the object ends
+  Pose observed;              // what verification saw
+  int placements = 0;         // placements drawn, 1..max_attempts
+  bool verified = false;      // false: none verified; the last one is returned
+  double position_error = 0;  // m, observed vs target
+  double angle_error = 0;     // rad
+};
+// Pure: the same (target, params, trial_seed) give the same placement bit for
+// bit. A simulated cell starts a trial here when its own last reset was not
+// aimed at that trial (another cell took it, or no reset ran yet): a
+// simulation's bookkeeping, as if its reset had been (executors/README.md).
+// @pre ValidateResetParams(params) passes.
+Placement PlacementForTrial(const Pose& target, const ResetParams& params,
+                            std::uint64_t trial_seed);
 
 // Angle (rad) of the rotation between two orientations.
 double AngleBetween(const Eigen::Quaterniond& a, const Eigen::Quaterniond& b);

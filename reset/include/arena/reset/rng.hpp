@@ -16,7 +16,9 @@ enum class StreamPurpose : std::uint64_t {
   kDrops = 3,
   kActuation = 4,
   kFriction = 5,
-  kReset = 6,
+  kReset = 6,      // a reset's slips (which attempt fails, during which primitive)
+  kPlacement = 7,  // where a reset's placements end and what verification sees (keyed
+                   // by the prepared trial's seed alone, trial id 0: reset.hpp)
 };
 
 class Rng {
