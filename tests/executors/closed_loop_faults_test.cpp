@@ -33,7 +33,11 @@ void DeadControllerFailsThePhase(double speed) {
   while (seen < 50 && Clock::now() < give_up) {
     if (auto m = live.Take(100ms); m && m->trial_id() == 1 && m->closed_loop()) ++seen;
   }
-  ASSERT_GE(seen, 50u) << "the closed loop never ran";
+  if (seen < 50) {  // say why: the phase's own status (seen once under load 20+)
+    const auto early = d.FinalStatus(1, 5s);
+    FAIL() << "the closed loop never ran (" << seen << " live samples); the phase: "
+           << (early ? std::to_string(early->state()) + " " + early->reason() : "no status");
+  }
   controller->Signal(SIGKILL);
   const auto killed = Clock::now();
   auto st = d.FinalStatus(1, 30s);
