@@ -166,7 +166,31 @@ EvaluationRun EvaluateCampaign(db::Store& store, std::int64_t campaign_id,
   std::vector<TrialEvaluation> results(total);
   std::vector<std::optional<FinalPose>> finals(trials.size());
   std::vector<double> durations(trials.size(), 0);
-  std::atomic<std::size_t> next_trial{0};
+  // Trials with the same scene (the replicates of a condition: their truths
+  // differ, the scene a predictor is given does not) share each prediction:
+  // a predictor is deterministic, so it runs once per scene and setting and
+  // is scored against each trial's truth. A group holds at most
+  // kGroupTrials (their truths are in memory together, and one scene's many
+  // replicates still spread over the threads).
+  constexpr std::size_t kGroupTrials = 8;
+  std::vector<std::vector<std::size_t>> groups;
+  {
+    std::map<std::string, std::size_t> open;  // scene -> its group still taking trials
+    for (std::size_t i = 0; i < trials.size(); ++i) {
+      // A closed-loop trial's prediction replays its own commands: never shared.
+      if (scenes[i] && scenes[i]->pusher && scenes[i]->pusher->controller) {
+        groups.push_back({i});
+        continue;
+      }
+      auto it = open.find(trials[i].scene_json);
+      if (it == open.end() || groups[it->second].size() >= kGroupTrials) {
+        groups.emplace_back();
+        it = open.insert_or_assign(trials[i].scene_json, groups.size() - 1).first;
+      }
+      groups[it->second].push_back(i);
+    }
+  }
+  std::atomic<std::size_t> next_group{0};
   std::atomic<long> done{0}, failed{0};
   std::mutex error_mutex;
   std::string worker_error;
@@ -175,10 +199,11 @@ EvaluationRun EvaluateCampaign(db::Store& store, std::int64_t campaign_id,
   int threads =
       options.threads > 0 ? options.threads : static_cast<int>(std::thread::hardware_concurrency());
   threads = std::max(
-      1, std::min<int>(threads, static_cast<int>(std::max<std::size_t>(trials.size(), 1))));
+      1, std::min<int>(threads, static_cast<int>(std::max<std::size_t>(groups.size(), 1))));
 
-  // A worker takes a whole trial (every setting of every predictor), so each
-  // trial's ground truth is read and converted once.
+  // A worker takes a whole group of trials with one scene (every setting of
+  // every predictor), so each trial's ground truth is read and converted
+  // once, and each setting's prediction is made once for the group.
   auto worker = [&]() {
     try {
       db::StoreOptions ro;
@@ -186,65 +211,86 @@ EvaluationRun EvaluateCampaign(db::Store& store, std::int64_t campaign_id,
       auto reader = db::Store::Open(store.path(), ro);
       for (;;) {
         if (options.cancel && options.cancel->load()) return;
-        const std::size_t ti = next_trial.fetch_add(1);
-        if (ti >= trials.size()) return;
-        const auto& t = trials[ti];
-        const LoadedTrial loaded = LoadTrial(*reader, t, scenes[ti] ? &*scenes[ti] : nullptr);
-        if (loaded.error.empty() && !loaded.truth.empty()) {
-          durations[ti] = loaded.truth.back().t;
-          finals[ti] = FinalPose{t.id, t.condition, loaded.truth.back().position,
-                                 loaded.truth.back().orientation};
+        const std::size_t gi = next_group.fetch_add(1);
+        if (gi >= groups.size()) return;
+        const std::vector<std::size_t>& members = groups[gi];
+        std::vector<LoadedTrial> loaded;
+        loaded.reserve(members.size());
+        for (std::size_t ti : members) {
+          const auto& t = trials[ti];
+          loaded.push_back(LoadTrial(*reader, t, scenes[ti] ? &*scenes[ti] : nullptr));
+          const LoadedTrial& l = loaded.back();
+          if (l.error.empty() && !l.truth.empty()) {
+            durations[ti] = l.truth.back().t;
+            finals[ti] =
+                FinalPose{t.id, t.condition, l.truth.back().position, l.truth.back().orientation};
+          }
+        }
+        // The scene every member was given (the first that loaded).
+        const LoadedTrial* with_scene = nullptr;
+        for (const LoadedTrial& l : loaded) {
+          if (l.error.empty()) {
+            with_scene = &l;
+            break;
+          }
         }
         // Settings that build the same model for this scene run it once.
         std::map<std::pair<std::size_t, std::string>, std::size_t> ran;
         for (std::size_t s = 0; s < settings; ++s) {
           if (options.cancel && options.cancel->load()) return;
-          TrialEvaluation& r = results[ti * settings + s];
-          r.trial_id = t.id;
-          r.attempt = t.attempt;
-          r.setting = s;
-          r.truth_duration_s = durations[ti];
           const auto [pi, si] = built.index[s];
           std::optional<std::size_t> same;
-          if (loaded.error.empty()) {
+          if (with_scene) {
             const auto key =
-                std::make_pair(pi, built.predictors[pi]->EffectiveKey(loaded.scene, si));
+                std::make_pair(pi, built.predictors[pi]->EffectiveKey(with_scene->scene, si));
             const auto it = ran.find(key);
             if (it != ran.end())
               same = it->second;
             else
               ran.emplace(key, s);
           }
-          if (same) {
-            r.prediction = results[ti * settings + *same].prediction;
-          } else if (!loaded.error.empty()) {
-            r.prediction = PredictionFailure("error", loaded.error);
-          } else {
-            const auto start = std::chrono::steady_clock::now();
-            const auto& predictor = *built.predictors[pi];
-            const auto result =
-                loaded.commands.empty()
-                    ? predictor.Run(loaded.scene, si)
-                    : predictor.RunClosedLoop(loaded.scene, si, ReplayCommands(loaded.commands));
-            const double wall =
-                std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-            r.prediction = ScoreSimulation(loaded.commands.empty()
-                                               ? loaded.scene
-                                               : ReplayScoringScene(loaded.scene, loaded.commands),
-                                           result, loaded.truth);
-            r.prediction.wall_s = wall;
+          std::optional<mechanics::SimulationResult> result;
+          double wall = 0;
+          for (std::size_t m = 0; m < members.size(); ++m) {
+            const std::size_t ti = members[m];
+            const auto& t = trials[ti];
+            const LoadedTrial& l = loaded[m];
+            TrialEvaluation& r = results[ti * settings + s];
+            r.trial_id = t.id;
+            r.attempt = t.attempt;
+            r.setting = s;
+            r.truth_duration_s = durations[ti];
+            if (same) {
+              r.prediction = results[ti * settings + *same].prediction;
+            } else if (!l.error.empty()) {
+              r.prediction = PredictionFailure("error", l.error);
+            } else {
+              if (!result) {
+                const auto start = std::chrono::steady_clock::now();
+                const auto& predictor = *built.predictors[pi];
+                result = l.commands.empty()
+                             ? predictor.Run(l.scene, si)
+                             : predictor.RunClosedLoop(l.scene, si, ReplayCommands(l.commands));
+                wall =
+                    std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+              }
+              r.prediction = ScoreSimulation(
+                  l.commands.empty() ? l.scene : ReplayScoringScene(l.scene, l.commands), *result,
+                  l.truth);
+              r.prediction.wall_s = wall;
+            }
+            r.prediction.model_key = built.infos[s].setting.key;
+            r.prediction.model_json = built.infos[s].setting.knobs_json;
+            if (r.prediction.status != "ok") failed.fetch_add(1);
+            done.fetch_add(1);
           }
-          r.prediction.model_key = built.infos[s].setting.key;
-          r.prediction.model_json = built.infos[s].setting.knobs_json;
-          if (r.prediction.status != "ok") failed.fetch_add(1);
-          done.fetch_add(1);
         }
       }
     } catch (const std::exception& e) {
       std::lock_guard<std::mutex> lock(error_mutex);
       if (worker_error.empty()) worker_error = e.what();
       worker_failed.store(true);
-      next_trial.store(trials.size());  // stop the others too
+      next_group.store(groups.size());  // stop the others too
     }
   };
   std::vector<std::thread> pool;

@@ -5,6 +5,7 @@
 #include <numeric>
 #include <set>
 #include <stdexcept>
+#include <thread>
 
 #include <nlohmann/json.hpp>
 
@@ -126,7 +127,7 @@ class MujocoPredictor final : public Predictor {
       const nlohmann::json knobs = {
           {"timestep", pt.timestep}, {"cone", pt.cone}, {"noslip_iterations", pt.noslip}};
       try {
-        simulators_.push_back(simulators::MakeSimulator("mujoco", knobs.dump()));
+        simulators_.push_back(simulators::MakeSimulator("mujoco", knobs.dump(), cache_));
       } catch (const std::invalid_argument& e) {
         throw std::invalid_argument(std::string("mujoco grid: ") + e.what());
       }
@@ -184,6 +185,11 @@ class MujocoPredictor final : public Predictor {
 
  private:
   std::string name_ = "mujoco";
+  // Shared by the settings: an evaluation runs all of them on one scene in a
+  // row, and they differ only in MuJoCo's <option> knobs (simulator.hpp). One
+  // idle model per worker thread is what that needs.
+  std::shared_ptr<simulators::MujocoModelCache> cache_ = simulators::MakeMujocoModelCache(
+      std::clamp<std::size_t>(std::thread::hardware_concurrency(), 2, 8));
   std::vector<std::unique_ptr<simulators::Simulator>> simulators_;
   std::vector<PredictorSetting> settings_;
 };

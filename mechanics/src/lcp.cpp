@@ -31,9 +31,21 @@ double NaturalResidual(const Eigen::VectorXd& z, const Eigen::VectorXd& w) {
 
 bool AllFinite(const Eigen::VectorXd& v) { return v.allFinite(); }
 
+// A dense matrix as columns (its storage is column-major).
+class DenseColumns final : public LcpColumns {
+ public:
+  explicit DenseColumns(const Eigen::MatrixXd& A) : A_(A) {}
+  Eigen::Index size() const override { return A_.rows(); }
+  const double* Column(Eigen::Index j) const override { return A_.data() + j * A_.rows(); }
+  bool AllFinite() const override { return A_.allFinite(); }
+
+ private:
+  const Eigen::MatrixXd& A_;
+};
+
 // Solves the complementary basis "z_i basic where basis[i]" exactly:
 // A_bb z_b = -b_b, all other z zero. False when that basis is singular.
-bool SolveBasis(const Eigen::MatrixXd& A, const Eigen::VectorXd& b, const std::vector<char>& basis,
+bool SolveBasis(const LcpColumns& A, const Eigen::VectorXd& b, const std::vector<char>& basis,
                 Eigen::VectorXd& z, Eigen::VectorXd& w) {
   // Called on every warm-started step: keep the work space between calls.
   thread_local std::vector<Eigen::Index> idx;
@@ -53,7 +65,8 @@ bool SolveBasis(const Eigen::MatrixXd& A, const Eigen::VectorXd& b, const std::v
     for (Eigen::Index c = 0; c < m; ++c) {
       const Eigen::Index col = idx[static_cast<size_t>(c)];
       bb[c] = -b[col];
-      for (Eigen::Index r = 0; r < m; ++r) Abb(r, c) = A(idx[static_cast<size_t>(r)], col);
+      const double* a = A.Column(col);
+      for (Eigen::Index r = 0; r < m; ++r) Abb(r, c) = a[idx[static_cast<size_t>(r)]];
     }
     lu.compute(Abb);
     zb = lu.solve(bb);
@@ -67,7 +80,7 @@ bool SolveBasis(const Eigen::MatrixXd& A, const Eigen::VectorXd& b, const std::v
     if ((Abb * zb - bb).lpNorm<Eigen::Infinity>() > 1e-9 * scale) return false;
     for (Eigen::Index r = 0; r < m; ++r) z[idx[static_cast<size_t>(r)]] = zb[r];
   }
-  w.noalias() = A * z;
+  MultiplyColumns(A, z, w);
   w += b;
   return AllFinite(w);
 }
@@ -88,8 +101,8 @@ bool Acceptable(const Eigen::VectorXd& z, const Eigen::VectorXd& w, const Eigen:
 // negative z or w. Flipping the least violated index and re-solving fixes
 // that in a few steps (finite for P-matrices; here a bounded repair that
 // either reaches an acceptable solution or gives up).
-bool RepairBasis(const Eigen::MatrixXd& A, const Eigen::VectorXd& b, std::vector<char> basis,
-                 double tol, LcpResult& out) {
+bool RepairBasis(const LcpColumns& A, const Eigen::VectorXd& b, std::vector<char> basis, double tol,
+                 LcpResult& out) {
   const Eigen::Index n = b.size();
   const double thr = tol * std::max(1.0, b.lpNorm<Eigen::Infinity>());
   Eigen::VectorXd z, w;
@@ -115,9 +128,91 @@ bool RepairBasis(const Eigen::MatrixXd& A, const Eigen::VectorXd& b, std::vector
   return false;
 }
 
+// Lemke's basis inverse, which knows where it may hold anything but +0: the
+// columns a pivot or a refactorisation wrote, the rows a pivot scaled, and
+// its unit entries. Clear() zeroes just those (a fresh inverse used to be
+// n² zeros, and at n = 650 zeroing it twice per 32 pivots was a third of a
+// cold solve); afterwards every entry is +0, as after setZero().
+class TrackedInverse {
+ public:
+  Eigen::MatrixXd B;
+  void Identity(Eigen::Index n) {
+    if (B.rows() != n) {
+      B.setZero(n, n);
+      dirty_col_.assign(static_cast<size_t>(n), 0);
+      scaled_row_.assign(static_cast<size_t>(n), 0);
+      cols_.clear();
+      rows_.clear();
+      units_.clear();
+    } else {
+      Clear();
+    }
+    for (Eigen::Index i = 0; i < n; ++i) Unit(i, i);
+  }
+  void Clear() {
+    for (Eigen::Index j : cols_) {
+      B.col(j).setZero();
+      dirty_col_[static_cast<size_t>(j)] = 0;
+    }
+    for (Eigen::Index r : rows_) {
+      B.row(r).setZero();
+      scaled_row_[static_cast<size_t>(r)] = 0;
+    }
+    for (const auto& [i, j] : units_) B(i, j) = 0;
+    cols_.clear();
+    rows_.clear();
+    units_.clear();
+  }
+  void Unit(Eigen::Index i, Eigen::Index j) {
+    B(i, j) = 1;
+    units_.emplace_back(i, j);
+  }
+  void ColumnWritten(Eigen::Index j) {
+    if (!dirty_col_[static_cast<size_t>(j)]) {
+      dirty_col_[static_cast<size_t>(j)] = 1;
+      cols_.push_back(j);
+    }
+  }
+  void RowScaled(Eigen::Index r) {
+    if (!scaled_row_[static_cast<size_t>(r)]) {
+      scaled_row_[static_cast<size_t>(r)] = 1;
+      rows_.push_back(r);
+    }
+  }
+  // y = B b right after a refactorisation (every column a written one or a
+  // unit column), summed as Eigen's dense product sums it (MultiplyColumns):
+  // a unit column adds b_j to one row and exact zeros elsewhere.
+  void MultiplyFresh(const Eigen::VectorXd& b, const std::vector<Eigen::Index>& unit_row,
+                     Eigen::VectorXd& y) const {
+    const Eigen::Index n = B.rows();
+    const Eigen::Index block =
+        n < 128 ? n : (n * static_cast<Eigen::Index>(sizeof(double)) < 32000 ? 16 : 4);
+    y.setZero(n);
+    thread_local Eigen::VectorXd sum;
+    for (Eigen::Index j0 = 0; j0 < n; j0 += block) {
+      const Eigen::Index j1 = std::min(j0 + block, n);
+      sum.setZero(n);
+      for (Eigen::Index j = j0; j < j1; ++j) {
+        const Eigen::Index i = unit_row[static_cast<size_t>(j)];
+        if (i >= 0) {
+          sum[i] += b[j];
+        } else {
+          sum += B.col(j) * b[j];
+        }
+      }
+      y += sum;
+    }
+  }
+
+ private:
+  std::vector<char> dirty_col_, scaled_row_;
+  std::vector<Eigen::Index> cols_, rows_;
+  std::vector<std::pair<Eigen::Index, Eigen::Index>> units_;
+};
+
 // One run of Lemke's method with covering vector `cover`; fills z, w,
 // basis, pivots and ok/reason of `out`.
-void LemkeOnce(const Eigen::MatrixXd& A, const Eigen::VectorXd& b, const Eigen::VectorXd& cover,
+void LemkeOnce(const LcpColumns& A, const Eigen::VectorXd& b, const Eigen::VectorXd& cover,
                const LcpOptions& options, LcpResult& out) {
   const Eigen::Index n = b.size();
   out.ok = false;
@@ -134,12 +229,13 @@ void LemkeOnce(const Eigen::MatrixXd& A, const Eigen::VectorXd& b, const Eigen::
   // per pivot instead of O(n²), with the same arithmetic on what remains.
   // Work space kept between calls (most solves are small and allocation
   // was a sixth of their cost).
-  thread_local Eigen::MatrixXd Binv;
+  thread_local TrackedInverse inverse;
+  Eigen::MatrixXd& Binv = inverse.B;
   thread_local Eigen::VectorXd x, d;  // x: values of the basic variables
   thread_local Eigen::RowVectorXd pivot_row;
   thread_local std::vector<Eigen::Index> basis,
       slack_pos;  // slack_pos: position of basic w_v, or -1
-  Binv.setIdentity(n, n);
+  inverse.Identity(n);
   x = b;
   d.resize(n);
   pivot_row.resize(n);
@@ -154,11 +250,15 @@ void LemkeOnce(const Eigen::MatrixXd& A, const Eigen::VectorXd& b, const Eigen::
     const double p = d[r];
     x[r] /= p;
     Binv.row(r) /= p;
+    inverse.RowScaled(r);
     pivot_row = Binv.row(r);
     d[r] = 0;
     x.noalias() -= d * x[r];
     for (Eigen::Index j = 0; j < n; ++j) {
-      if (pivot_row[j] != 0) Binv.col(j).noalias() -= d * pivot_row[j];
+      if (pivot_row[j] != 0) {
+        Binv.col(j).noalias() -= d * pivot_row[j];
+        inverse.ColumnWritten(j);
+      }
     }
     const Eigen::Index leaving = basis[static_cast<size_t>(r)];
     basis[static_cast<size_t>(r)] = entering;
@@ -184,10 +284,13 @@ void LemkeOnce(const Eigen::MatrixXd& A, const Eigen::VectorXd& b, const Eigen::
   // which costs O(k³ + (n - k) k²) instead of O(n³) for the full inverse.
   thread_local std::vector<Eigen::Index> cpos, srows;  // non-unit positions, uncovered rows
   thread_local std::vector<char> covered;
+  thread_local std::vector<Eigen::Index> unit_row;  // column v of the inverse is e_(unit_row[v])
   thread_local Eigen::MatrixXd Cs, Cu, G;
   thread_local Eigen::PartialPivLU<Eigen::MatrixXd> cs_lu;
-  auto column = [&](Eigen::Index v, Eigen::Index row) {
-    return v < 2 * n ? -A(row, v - n) : -cover[row];
+  // Entries of the basic columns, -A(., v - n) or -cover for z0: a pointer
+  // per column, then one entry per row.
+  auto column_of = [&](Eigen::Index v) -> const double* {
+    return v < 2 * n ? A.Column(v - n) : cover.data();
   };
   auto refactor = [&]() -> bool {
     cpos.clear();
@@ -206,12 +309,12 @@ void LemkeOnce(const Eigen::MatrixXd& A, const Eigen::VectorXd& b, const Eigen::
     }
     const auto k = static_cast<Eigen::Index>(cpos.size());
     if (static_cast<Eigen::Index>(srows.size()) != k) return false;
-    Binv.setZero();
+    inverse.Clear();
     if (k > 0) {
       Cs.resize(k, k);
       for (Eigen::Index c = 0; c < k; ++c) {
-        const Eigen::Index v = basis[static_cast<size_t>(cpos[static_cast<size_t>(c)])];
-        for (Eigen::Index r = 0; r < k; ++r) Cs(r, c) = column(v, srows[static_cast<size_t>(r)]);
+        const double* a = column_of(basis[static_cast<size_t>(cpos[static_cast<size_t>(c)])]);
+        for (Eigen::Index r = 0; r < k; ++r) Cs(r, c) = -a[srows[static_cast<size_t>(r)]];
       }
       cs_lu.compute(Cs);
       const Eigen::MatrixXd cs_inv = cs_lu.inverse();
@@ -223,17 +326,17 @@ void LemkeOnce(const Eigen::MatrixXd& A, const Eigen::VectorXd& b, const Eigen::
       }
       // Slack rows: -C_r C_S⁻¹ on the uncovered rows.
       Cu.resize(n - k, k);
-      Eigen::Index u = 0;
-      for (Eigen::Index i = 0; i < n; ++i) {
-        const Eigen::Index v = basis[static_cast<size_t>(i)];
-        if (v >= n) continue;
-        for (Eigen::Index c = 0; c < k; ++c) {
-          Cu(u, c) = column(basis[static_cast<size_t>(cpos[static_cast<size_t>(c)])], v);
+      for (Eigen::Index c = 0; c < k; ++c) {
+        const double* a = column_of(basis[static_cast<size_t>(cpos[static_cast<size_t>(c)])]);
+        Eigen::Index u = 0;
+        for (Eigen::Index i = 0; i < n; ++i) {
+          const Eigen::Index v = basis[static_cast<size_t>(i)];
+          if (v >= n) continue;
+          Cu(u++, c) = -a[v];
         }
-        ++u;
       }
       G.noalias() = Cu * cs_inv;
-      u = 0;
+      Eigen::Index u = 0;
       for (Eigen::Index i = 0; i < n; ++i) {
         const Eigen::Index v = basis[static_cast<size_t>(i)];
         if (v >= n) continue;
@@ -241,11 +344,16 @@ void LemkeOnce(const Eigen::MatrixXd& A, const Eigen::VectorXd& b, const Eigen::
         ++u;
       }
     }
+    for (Eigen::Index r = 0; r < k; ++r) inverse.ColumnWritten(srows[static_cast<size_t>(r)]);
+    unit_row.assign(static_cast<size_t>(n), -1);
     for (Eigen::Index i = 0; i < n; ++i) {
       const Eigen::Index v = basis[static_cast<size_t>(i)];
-      if (v < n) Binv(i, v) = 1;
+      if (v < n) {
+        inverse.Unit(i, v);
+        unit_row[static_cast<size_t>(v)] = i;
+      }
     }
-    x.noalias() = Binv * b;
+    inverse.MultiplyFresh(b, unit_row, x);
     return x.allFinite();
   };
   int fresh_at = -1;  // pivot count at the last refactor
@@ -270,7 +378,7 @@ void LemkeOnce(const Eigen::MatrixXd& A, const Eigen::VectorXd& b, const Eigen::
       d = Binv.col(entering);
     } else {
       // d = -Binv a: covered rows contribute a_v e_(slack position).
-      const auto a = A.col(entering - n);
+      const double* a = A.Column(entering - n);
       d.setZero();
       for (Eigen::Index j = 0; j < n; ++j) {
         const double aj = a[j];
@@ -360,7 +468,9 @@ void LemkeOnce(const Eigen::MatrixXd& A, const Eigen::VectorXd& b, const Eigen::
       out.basis[static_cast<size_t>(v - n)] = 1;
     }
   }
-  Eigen::VectorXd w = A * z + b;
+  Eigen::VectorXd w;
+  MultiplyColumns(A, z, w);
+  w += b;
   // Polish: re-solve the final basis exactly and keep the better answer.
   Eigen::VectorXd zp, wp;
   if (SolveBasis(A, b, out.basis, zp, wp)) {
@@ -414,17 +524,53 @@ const char* ToString(LcpStatus status) {
   return "?";
 }
 
+void MultiplyColumns(const LcpColumns& A, const Eigen::VectorXd& z, Eigen::VectorXd& w) {
+  // Eigen 3.4's general_matrix_vector_product (column-major): columns in
+  // blocks of all of them (n < 128), 16 (n < 4000) or 4; per block and row a
+  // sum from zero over the block's columns in order, then added to w.
+  const Eigen::Index n = A.size();
+  const Eigen::Index block =
+      n < 128 ? n : (n * static_cast<Eigen::Index>(sizeof(double)) < 32000 ? 16 : 4);
+  w.setZero(n);
+  thread_local Eigen::VectorXd sum;
+  for (Eigen::Index j0 = 0; j0 < n; j0 += block) {
+    const Eigen::Index j1 = std::min(j0 + block, n);
+    bool any = false;
+    for (Eigen::Index j = j0; j < j1; ++j) {
+      const double zj = z[j];
+      if (zj == 0) continue;
+      if (!any) sum.setZero(n);
+      any = true;
+      const double* a = A.Column(j);
+      for (Eigen::Index i = 0; i < n; ++i) sum[i] += a[i] * zj;
+    }
+    if (any) w += sum;
+  }
+}
+
 LcpResult SolveLcp(const Eigen::MatrixXd& A, const Eigen::VectorXd& b,
                    const std::vector<char>* warm_basis, const LcpOptions& options) {
-  LcpResult out;
-  const Eigen::Index n = b.size();
-  out.basis.assign(static_cast<size_t>(n), 0);
-  if (A.rows() != n || A.cols() != n) {
+  if (A.rows() != b.size() || A.cols() != b.size()) {
+    LcpResult out;
+    out.basis.assign(static_cast<size_t>(b.size()), 0);
     out.status = LcpStatus::kBadProblem;
     out.reason = "matrix and vector sizes differ";
     return out;
   }
-  if (!A.allFinite() || !b.allFinite()) {
+  return SolveLcp(DenseColumns(A), b, warm_basis, options);
+}
+
+LcpResult SolveLcp(const LcpColumns& A, const Eigen::VectorXd& b,
+                   const std::vector<char>* warm_basis, const LcpOptions& options) {
+  LcpResult out;
+  const Eigen::Index n = b.size();
+  out.basis.assign(static_cast<size_t>(n), 0);
+  if (A.size() != n) {
+    out.status = LcpStatus::kBadProblem;
+    out.reason = "matrix and vector sizes differ";
+    return out;
+  }
+  if (!A.AllFinite() || !b.allFinite()) {
     out.status = LcpStatus::kBadProblem;
     out.reason = "non-finite problem data";
     return out;

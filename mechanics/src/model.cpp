@@ -285,6 +285,111 @@ struct Contact {
   bool any_active = true;              // tracked: some point has rows
 };
 
+// One step's LCP matrix, formed by columns when the solver asks for them.
+// The force block is mass · Jrowsᵀ K (rank ≤ 6, but n² entries: at 32 facets
+// and 9-point lines n ≈ 650, and the step used to spend most of its time
+// zeroing and multiplying it whole) while a warm-started solve reads only
+// its basic columns (a few dozen). Every other entry is one of a few per
+// column, assigned after the force block (Set), in the order assigned.
+// Small problems are formed whole at Reset() with the dense expression the
+// step always used (then Set writes into it), large ones column by column
+// with the arithmetic of Eigen's matrix product on them (a sum over the 3 or
+// 6 reduced coordinates in order from zero, times the mass): the same
+// entries to the last bit.
+class StepMatrix final : public LcpColumns {
+ public:
+  void Reset(int n, int nf, double mass, const Eigen::MatrixXd& Jrows, const Eigen::MatrixXd& K) {
+    n_ = n;
+    nf_ = nf;
+    mass_ = mass;
+    K_ = &K;
+    entries_.clear();
+    cache_.resize(n_, n_);
+    dense_ = nf_ < kLazyForces;
+    finite_ = std::isfinite(mass) && Jrows.allFinite() && K.allFinite();
+    if (dense_) {
+      // Eigen picks a coefficient-wise product for small sizes, whose sums
+      // run in another order: the dense formation keeps it.
+      cache_.setZero();
+      cache_.topLeftCorner(nf_, nf_).noalias() = mass * Jrows.transpose() * K;
+      ready_.assign(static_cast<size_t>(n_), 1);
+    } else {
+      JT_ = Jrows.transpose();
+      ready_.assign(static_cast<size_t>(n_), 0);
+    }
+  }
+  void Set(int row, int col, double value) {
+    finite_ = finite_ && std::isfinite(value);
+    if (dense_) {
+      cache_(row, col) = value;
+    } else {
+      entries_.push_back(Entry{row, col, value});
+    }
+  }
+  // After the last Set: the sparse entries by column, in assignment order.
+  void Finish() {
+    if (dense_) return;
+    first_.assign(static_cast<size_t>(n_) + 1, 0);
+    for (const Entry& e : entries_) ++first_[static_cast<size_t>(e.col) + 1];
+    for (int j = 0; j < n_; ++j)
+      first_[static_cast<size_t>(j) + 1] += first_[static_cast<size_t>(j)];
+    sorted_.resize(entries_.size());
+    fill_.assign(first_.begin(), first_.end() - 1);
+    for (const Entry& e : entries_)
+      sorted_[static_cast<size_t>(fill_[static_cast<size_t>(e.col)]++)] = e;
+  }
+  Eigen::Index size() const override { return n_; }
+  const double* Column(Eigen::Index j) const override {
+    double* col = cache_.data() + j * n_;
+    if (ready_[static_cast<size_t>(j)]) return col;
+    Eigen::Map<Eigen::VectorXd> c(col, n_);
+    if (j < nf_) {
+      // gebp: per entry, acc = 0; acc += a_k b_k over k in order; then
+      // 0 + acc · mass (the destination was zeroed, alpha = mass).
+      auto top = c.head(nf_);
+      top.setZero();
+      for (Eigen::Index k = 0; k < JT_.cols(); ++k) top += JT_.col(k) * (*K_)(k, j);
+      for (Eigen::Index i = 0; i < nf_; ++i) col[i] = 0.0 + col[i] * mass_;
+      c.tail(n_ - nf_).setZero();
+    } else {
+      c.setZero();
+    }
+    for (int e = first_[static_cast<size_t>(j)]; e < first_[static_cast<size_t>(j) + 1]; ++e) {
+      col[sorted_[static_cast<size_t>(e)].row] = sorted_[static_cast<size_t>(e)].value;
+    }
+    ready_[static_cast<size_t>(j)] = 1;
+    return col;
+  }
+  // From the factors (entries are sums of products of them; an overflow
+  // there would show in the solution, which the solver checks too) and the
+  // values set: no n² scan.
+  bool AllFinite() const override { return finite_; }
+  // The whole matrix (for an observer or a dump).
+  const Eigen::MatrixXd& Dense() const {
+    for (int j = 0; j < n_; ++j) Column(j);
+    return cache_;
+  }
+
+ private:
+  // From this many force unknowns on, columns are formed on demand (Eigen's
+  // product uses its blocked kernel there, whose sums Column() repeats).
+  static constexpr int kLazyForces = 16;
+  struct Entry {
+    int row = 0, col = 0;
+    double value = 0;
+  };
+  int n_ = 0, nf_ = 0;
+  bool dense_ = true;
+  bool finite_ = true;
+  double mass_ = 0;
+  const Eigen::MatrixXd* K_ = nullptr;
+  Eigen::MatrixXd JT_;
+  std::vector<Entry> entries_, sorted_;
+  std::vector<int> first_, fill_;
+  mutable Eigen::MatrixXd cache_;
+  mutable std::vector<char> ready_;
+};
+
 }  // namespace
 
 struct ContactModel::Impl {
@@ -328,7 +433,8 @@ struct ContactModel::Impl {
   std::vector<double> cone_cos, cone_sin;           // facets' angles from t1
 
   // Work space.
-  Eigen::MatrixXd Jc, Jv, K, A;
+  Eigen::MatrixXd Jc, Jv, K;
+  StepMatrix A;
   Eigen::VectorXd b;
 
   void Setup();
@@ -930,16 +1036,15 @@ StepReport ContactModel::Impl::Step() {
   // Vs = Fs dt / m; velocity rows are divided by Vs, force rows by Fs. A
   // tracked point without rows this step keeps its unknowns at zero (a unit
   // diagonal and b = 1), so the LCP keeps its size.
-  A.setZero(n, n);
+  A.Reset(n, nf, mass, Jrows, K);
   b.setZero(n);
-  A.topLeftCorner(nf, nf).noalias() = mass * Jrows.transpose() * K;
   b.head(nf).noalias() = Jrows.transpose() * vfree;
   for (int k = 0; k < nf; ++k) {
     const Contact& ct = contacts[static_cast<size_t>(force_point[static_cast<size_t>(k)])];
     const Point& pt = ct.points[static_cast<size_t>(force_point_sub[static_cast<size_t>(k)])];
     const int e = force_dir[static_cast<size_t>(k)];
     if (!live(pt)) {
-      A(k, k) = 1;
+      A.Set(k, k, 1);
       b[k] = 1;
       continue;
     }
@@ -949,10 +1054,10 @@ StepReport ContactModel::Impl::Step() {
     double bk = b[k] - d.dot(pt.body_velocity);
     if (e < 0) bk += pt.gap / dt;
     if (ct.y_plus >= 0 && pad_along != 0) {
-      A(k, ct.y_plus) = -pad_along;
-      A(k, ct.y_minus) = pad_along;
+      A.Set(k, ct.y_plus, -pad_along);
+      A.Set(k, ct.y_minus, pad_along);
     }
-    if (e >= 0) A(k, pt.xi) = 1;
+    if (e >= 0) A.Set(k, pt.xi, 1);
     b[k] = bk / Vs;
   }
   for (const Contact& ct : contacts) {
@@ -960,27 +1065,27 @@ StepReport ContactModel::Impl::Step() {
     for (const Point& pt : ct.points) {
       if (pt.xi < 0) continue;
       if (!live(pt)) {
-        A(pt.xi, pt.xi) = 1;
+        A.Set(pt.xi, pt.xi, 1);
         b[pt.xi] = 1;
         continue;
       }
-      if (pt.lambda >= 0) A(pt.xi, pt.lambda) = ct.spec.mu;
-      for (int e = 0; e < edges_per_point; ++e) A(pt.xi, pt.beta0 + e) = -1;
+      if (pt.lambda >= 0) A.Set(pt.xi, pt.lambda, ct.spec.mu);
+      for (int e = 0; e < edges_per_point; ++e) A.Set(pt.xi, pt.beta0 + e, -1);
       b[pt.xi] = ct.known_normal > 0 ? ct.spec.mu * ct.known_normal / Fs : 0.0;
     }
     if (ct.y_plus >= 0) {
       if (tracked && !ct.any_active) {
         // The pad has passed the object's edge: it presses on nothing.
-        A(ct.y_plus, ct.y_plus) = 1;
-        A(ct.y_minus, ct.y_minus) = 1;
+        A.Set(ct.y_plus, ct.y_plus, 1);
+        A.Set(ct.y_minus, ct.y_minus, 1);
         b[ct.y_plus] = 1;
         b[ct.y_minus] = 1;
         continue;
       }
       for (const Point& pt : ct.points) {
         if (!live(pt)) continue;
-        A(ct.y_plus, pt.lambda) = 1;
-        A(ct.y_minus, pt.lambda) = -1;
+        A.Set(ct.y_plus, pt.lambda, 1);
+        A.Set(ct.y_minus, pt.lambda, -1);
       }
       b[ct.y_plus] = -scene.grip_force / Fs;
       b[ct.y_minus] = scene.grip_force / Fs;
@@ -1009,7 +1114,8 @@ StepReport ContactModel::Impl::Step() {
     }
     return vf * ct.normal;
   };
-  if (lcp_observer) lcp_observer(A, b);
+  A.Finish();
+  if (lcp_observer) lcp_observer(A.Dense(), b);
   int next_covering = 0;
   for (int attempt = 0;; ++attempt) {
     // Attempt 0 may start warm; later attempts start cold, each from another
@@ -1023,7 +1129,7 @@ StepReport ContactModel::Impl::Step() {
     rep.pivots += sol.pivots;
     rep.warm_start_used = sol.warm_start_used;
     if (!sol.ok) {
-      DumpLcp(A, b);
+      DumpLcp(A.Dense(), b);
       rep.ok = false;
       rep.error = "LCP (" + std::to_string(n) + " unknowns): " + sol.reason;
       basis.clear();
@@ -1089,7 +1195,7 @@ StepReport ContactModel::Impl::Step() {
     const double worst = std::max({res.force_balance, res.complementarity, res.cone});
     if (std::isfinite(worst) && worst <= kAcceptedResidual) break;
     if (attempt < kAccuracyAttempts) continue;
-    DumpLcp(A, b);
+    DumpLcp(A.Dense(), b);
     char buf[128];
     std::snprintf(buf, sizeof buf,
                   "LCP (%d unknowns): inaccurate solution (relative residual %.3g)", n, worst);

@@ -51,6 +51,11 @@ void CheckKeys(const json& j, const std::string& sim, std::initializer_list<cons
 std::vector<std::string> SimulatorNames() { return {"arena", "mujoco"}; }
 
 std::unique_ptr<Simulator> MakeSimulator(std::string_view name, std::string_view settings_json) {
+  return MakeSimulator(name, settings_json, nullptr);
+}
+
+std::unique_ptr<Simulator> MakeSimulator(std::string_view name, std::string_view settings_json,
+                                         std::shared_ptr<MujocoModelCache> cache) {
   const json j = ParseObject(name, settings_json);
   if (name == "arena") {
     ArenaSettings s;
@@ -96,7 +101,7 @@ std::unique_ptr<Simulator> MakeSimulator(std::string_view name, std::string_view
     Read(j, "mujoco", "object_damping", &s.object_damping);
     Read(j, "mujoco", "finger_mass", &s.finger_mass);
     Read(j, "mujoco", "slip_speed", &s.slip_speed);
-    return MakeMujocoSimulator(s);
+    return MakeMujocoSimulator(s, std::move(cache));
   }
   throw SimulatorError("simulator",
                        "unknown name '" + std::string(name) + "' (known: arena, mujoco)");

@@ -37,6 +37,7 @@
 #include <mutex>
 #include <sstream>
 #include <stdexcept>
+#include <vector>
 
 #include <mujoco/mujoco.h>
 #include <Eigen/Geometry>
@@ -224,9 +225,85 @@ mjModel* LoadFromText(const std::string& xml, std::string* error) {
   return m;
 }
 
+}  // namespace
+
+// Idle compiled models by key (the MJCF without its <option> line, plus the
+// gravity that line carries), least recently used first.
+class MujocoModelCache {
+ public:
+  explicit MujocoModelCache(std::size_t models) : keep_(models) {}
+  ~MujocoModelCache() {
+    for (auto& e : idle_) Free(e);
+  }
+  struct Entry {
+    std::string key;
+    mjModel* m = nullptr;
+    mjData* d = nullptr;
+  };
+  // An idle entry for `key`, or an empty one (the caller builds it).
+  Entry Take(const std::string& key) {
+    std::lock_guard<std::mutex> lock(mutex_);
+    for (auto it = idle_.begin(); it != idle_.end(); ++it) {
+      if (it->key == key) {
+        Entry e = std::move(*it);
+        idle_.erase(it);
+        return e;
+      }
+    }
+    return Entry{key, nullptr, nullptr};
+  }
+  void Give(Entry e) {
+    if (!e.m || !e.d || keep_ == 0) {
+      Free(e);
+      return;
+    }
+    std::lock_guard<std::mutex> lock(mutex_);
+    idle_.push_back(std::move(e));
+    while (idle_.size() > keep_) {
+      Free(idle_.front());
+      idle_.erase(idle_.begin());
+    }
+  }
+
+ private:
+  static void Free(Entry& e) {
+    if (e.d) mj_deleteData(e.d);
+    if (e.m) mj_deleteModel(e.m);
+    e.d = nullptr;
+    e.m = nullptr;
+  }
+  std::size_t keep_;
+  std::mutex mutex_;
+  std::vector<Entry> idle_;
+};
+
+namespace {
+
+// The cache key of a model: its MJCF without the <option> line (whose knobs
+// are written into the model before each run), plus the gravity that line
+// also carries.
+std::string CacheKey(const std::string& xml, const mechanics::Scene& scene) {
+  const auto start = xml.find("  <option ");
+  const auto end = start == std::string::npos ? start : xml.find('\n', start);
+  if (end == std::string::npos) return xml;
+  return xml.substr(0, start) + xml.substr(end + 1) + "gravity " + Vec(scene.gravity);
+}
+
+// The <option> knobs of the settings, as the MJCF's option line sets them.
+void WriteOptions(mjModel* m, const mechanics::Scene& scene, const MujocoSettings& st) {
+  m->opt.timestep = 1.0 / (mechanics::kSampleRateHz * StepsPerSample(st));
+  for (int k = 0; k < 3; ++k) m->opt.gravity[k] = scene.gravity[k];
+  m->opt.cone = st.elliptic ? mjCONE_ELLIPTIC : mjCONE_PYRAMIDAL;
+  m->opt.impratio = st.impratio;
+  m->opt.noslip_iterations = st.noslip_iterations;
+  m->opt.tolerance = st.tolerance;
+  m->opt.iterations = st.iterations;
+}
+
 class MujocoSimulator final : public Simulator {
  public:
-  explicit MujocoSimulator(const MujocoSettings& s) : settings_(s) {
+  MujocoSimulator(const MujocoSettings& s, std::shared_ptr<MujocoModelCache> cache)
+      : settings_(s), cache_(std::move(cache)) {
     Validate(s);
     InstallMujocoHandlers();
   }
@@ -259,6 +336,7 @@ class MujocoSimulator final : public Simulator {
 
  private:
   MujocoSettings settings_;
+  std::shared_ptr<MujocoModelCache> cache_;
 };
 
 // Per-run state: ids into the model and the scene's kinematics.
@@ -410,15 +488,42 @@ mechanics::SimulationResult MujocoSimulator::Simulate(const mechanics::Scene& sc
     return finish();
   }
   MjHandles h;
+  // With a cache, the model and data come from it and go back after the run
+  // (on every path: the data is reset before its next use).
+  struct Lease {
+    MujocoModelCache* cache = nullptr;
+    MujocoModelCache::Entry entry;
+    MjHandles* h = nullptr;
+    ~Lease() {
+      if (!cache) return;
+      entry.m = h->m;
+      entry.d = h->d;
+      h->m = nullptr;
+      h->d = nullptr;
+      cache->Give(std::move(entry));
+    }
+  } lease;
   try {
     std::string error;
-    h.m = LoadFromText(MujocoModelXml(scene, settings_), &error);
+    const std::string xml = MujocoModelXml(scene, settings_);
+    if (cache_) {
+      lease.entry = cache_->Take(CacheKey(xml, scene));
+      lease.cache = cache_.get();
+      lease.h = &h;
+      h.m = lease.entry.m;
+      h.d = lease.entry.d;
+    }
+    if (!h.m) h.m = LoadFromText(xml, &error);
     if (!h.m) {
       result.status = mechanics::SimulationStatus::kInvalidScene;
       result.error = error;
       return finish();
     }
-    h.d = mj_makeData(h.m);
+    if (cache_) {
+      WriteOptions(h.m, scene, settings_);
+      if (h.d) mj_resetData(h.m, h.d);
+    }
+    if (!h.d) h.d = mj_makeData(h.m);
     Run run{scene, settings_, h.m, h.d, -1, -1, -1, -1, -1, -1, {}, {}, {}, 0, -1};
     run.pad_of_geom.assign(static_cast<size_t>(h.m->ngeom), -1);
     run.n_pads = scene.fingers.size() + (scene.pusher ? 1 : 0);
@@ -562,7 +667,16 @@ std::string MujocoModelXml(const mechanics::Scene& scene, const MujocoSettings& 
 }
 
 std::unique_ptr<Simulator> MakeMujocoSimulator(const MujocoSettings& settings) {
-  return std::make_unique<MujocoSimulator>(settings);
+  return std::make_unique<MujocoSimulator>(settings, nullptr);
+}
+
+std::unique_ptr<Simulator> MakeMujocoSimulator(const MujocoSettings& settings,
+                                               std::shared_ptr<MujocoModelCache> cache) {
+  return std::make_unique<MujocoSimulator>(settings, std::move(cache));
+}
+
+std::shared_ptr<MujocoModelCache> MakeMujocoModelCache(std::size_t models) {
+  return std::make_shared<MujocoModelCache>(models);
 }
 
 }  // namespace arena::simulators

@@ -47,10 +47,33 @@ struct LcpResult {
   double natural_residual = 0;   // max_i |min(z_i, w_i)|
 };
 
+// The matrix of an LCP, read column by column. A solve touches only the
+// columns of the variables it makes basic (a warm-started solve: those of its
+// basis), so a caller whose matrix is costly to form whole (the contact
+// model's: hundreds of unknowns, a few dozen basic) forms columns on demand.
+class LcpColumns {
+ public:
+  virtual ~LcpColumns() = default;
+  virtual Eigen::Index size() const = 0;
+  // Column j (size() entries), valid until the solve returns.
+  virtual const double* Column(Eigen::Index j) const = 0;
+  // Whether every entry is finite (asked once, before solving).
+  virtual bool AllFinite() const = 0;
+};
+
 // Never throws; never returns non-finite z or w when ok.
 // warm_basis: the basis of a previous solve of a problem of the same size
 // (may be null or empty).
 LcpResult SolveLcp(const Eigen::MatrixXd& A, const Eigen::VectorXd& b,
                    const std::vector<char>* warm_basis = nullptr, const LcpOptions& options = {});
+// The same on a matrix given by columns: the same arithmetic, so the same
+// answer to the last bit as the dense call on the same entries.
+LcpResult SolveLcp(const LcpColumns& A, const Eigen::VectorXd& b,
+                   const std::vector<char>* warm_basis = nullptr, const LcpOptions& options = {});
+
+// w = A z, summed as Eigen's dense column-major product sums it (columns in
+// blocks, each block's terms in column order from zero), skipping columns
+// where z is zero (they add exact zeros): bit for bit the dense A * z.
+void MultiplyColumns(const LcpColumns& A, const Eigen::VectorXd& z, Eigen::VectorXd& w);
 
 }  // namespace arena::mechanics
