@@ -618,7 +618,17 @@ struct Cell::Impl {
         std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(spec.hold_s));
     std::optional<msg::PusherCommand> answer;
     if (lockstep) {
-      answer = AwaitCommand(loop, k, true, Clock::now() + hold);
+      // Best-effort loses messages (a controller that matched a moment late
+      // misses sample 0): without an answer the sample is published again
+      // every 20 ms until the hold time runs out.
+      const auto give_up = Clock::now() + hold;
+      for (;;) {
+        answer = AwaitCommand(loop, k, true,
+                              std::min(give_up, Clock::now() + std::chrono::milliseconds(20)));
+        if (answer || Clock::now() >= give_up || Stopping()) break;
+        PublishLive(loop.command, k, k + 1 == loop.expected_samples, encoded, spec.name,
+                    loop.params);
+      }
     } else {
       // Collect until the next sample is due; the newest answer wins.
       const auto next_due =

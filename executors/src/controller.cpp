@@ -6,6 +6,7 @@
 #include <chrono>
 #include <cmath>
 #include <map>
+#include <optional>
 #include <stdexcept>
 #include <thread>
 
@@ -206,6 +207,11 @@ struct Running {
   ControlContext context;
   std::unique_ptr<Controller> controller;
   bool failed = false;  // the factory refused this trial: ignore it
+  // The last sample answered and the answer: a lockstep cell re-publishes a
+  // sample it has no answer to (best-effort may lose either message), and the
+  // same answer goes out again without asking the law twice.
+  std::optional<std::uint32_t> answered;
+  msg::PusherCommand last;
 };
 
 }  // namespace
@@ -233,9 +239,16 @@ ControllerCounters RunController(const ControllerHostOptions& o, const Controlle
   while (stop == nullptr || !stop->load()) {
     auto state = live.Take(dds::Millis(100));
     if (!state || !state->closed_loop() || state->controller() != o.name) continue;
+    // A new trial attempt on this cell gets a fresh Running (built in place).
+    auto found = cells.find(state->cell_id());
+    if (found != cells.end() &&
+        (found->second.trial != state->trial_id() || found->second.attempt != state->attempt())) {
+      cells.erase(found);
+      found = cells.end();
+    }
+    const bool fresh = found == cells.end();
     Running& run = cells[state->cell_id()];
-    if (run.trial != state->trial_id() || run.attempt != state->attempt()) {
-      run = Running{};
+    if (fresh) {
       run.trial = state->trial_id();
       run.attempt = state->attempt();
       try {
@@ -249,6 +262,11 @@ ControllerCounters RunController(const ControllerHostOptions& o, const Controlle
       if (!run.failed) ++counters.trials;
     }
     if (run.failed) continue;
+    if (run.answered && *run.answered == state->sample()) {
+      run.last.sent_unix_ns(UnixNanos());
+      commands.Write(run.last);
+      continue;
+    }
     mechanics::TrajectorySample truth;
     dds::Observation observed;
     if (!dds::CheckSample(state->state()).empty()) continue;  // malformed: no answer
@@ -277,6 +295,8 @@ ControllerCounters RunController(const ControllerHostOptions& o, const Controlle
     c.state_sent_unix_ns(state->sent_unix_ns());
     c.sent_unix_ns(UnixNanos());
     commands.Write(c);
+    run.answered = state->sample();
+    run.last = c;
     ++counters.samples;
   }
   return counters;
