@@ -65,7 +65,8 @@ struct LoadedTrial {
   std::int64_t id = -1;
   mechanics::Scene scene;
   std::vector<mechanics::TrajectorySample> truth;
-  std::string error;  // non-empty: the trial could not be loaded
+  RecordedCommands commands;  // closed loop: replayed (issue 19); empty otherwise
+  std::string error;          // non-empty: the trial could not be loaded
 };
 
 LoadedTrial LoadTrial(const db::Store& store, const db::Trial& t, const mechanics::Scene* scene) {
@@ -74,6 +75,10 @@ LoadedTrial LoadTrial(const db::Store& store, const db::Trial& t, const mechanic
   try {
     out.scene = scene ? *scene : mechanics::ParseScene(t.scene_json);
     out.truth = ReadTruth(store, t.id, out.scene);
+    if (out.scene.pusher && out.scene.pusher->controller) {
+      if (auto run = store.GetClosedLoop(t.id)) out.commands = CommandsOf(*run);
+      if (out.commands.empty()) out.error = "closed-loop trial without recorded pusher commands";
+    }
   } catch (const std::exception& e) {
     out.error = e.what();
   }
@@ -172,6 +177,11 @@ EvaluationRun EvaluateCampaign(db::Store& store, std::int64_t campaign_id,
   {
     std::map<std::string, std::size_t> open;  // scene -> its group still taking trials
     for (std::size_t i = 0; i < trials.size(); ++i) {
+      // A closed-loop trial's prediction replays its own commands: never shared.
+      if (scenes[i] && scenes[i]->pusher && scenes[i]->pusher->controller) {
+        groups.push_back({i});
+        continue;
+      }
       auto it = open.find(trials[i].scene_json);
       if (it == open.end() || groups[it->second].size() >= kGroupTrials) {
         groups.emplace_back();
@@ -257,11 +267,16 @@ EvaluationRun EvaluateCampaign(db::Store& store, std::int64_t campaign_id,
             } else {
               if (!result) {
                 const auto start = std::chrono::steady_clock::now();
-                result = built.predictors[pi]->Run(l.scene, si);
+                const auto& predictor = *built.predictors[pi];
+                result = l.commands.empty()
+                             ? predictor.Run(l.scene, si)
+                             : predictor.RunClosedLoop(l.scene, si, ReplayCommands(l.commands));
                 wall =
                     std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
               }
-              r.prediction = ScoreSimulation(l.scene, *result, l.truth);
+              r.prediction = ScoreSimulation(
+                  l.commands.empty() ? l.scene : ReplayScoringScene(l.scene, l.commands), *result,
+                  l.truth);
               r.prediction.wall_s = wall;
             }
             r.prediction.model_key = built.infos[s].setting.key;
@@ -306,7 +321,9 @@ EvaluationRun EvaluateCampaign(db::Store& store, std::int64_t campaign_id,
   if (options.convergence_trials > 0 && !trials.empty()) {
     std::vector<ConvergenceTrial> sample;
     for (std::size_t ti : Spread(trials.size(), options.convergence_trials)) {
-      if (!scenes[ti]) continue;
+      // A closed-loop trial's pieces would need its commands replayed from
+      // the restart on; the table is built from open-loop trials only.
+      if (!scenes[ti] || (scenes[ti]->pusher && scenes[ti]->pusher->controller)) continue;
       try {
         sample.push_back(
             ConvergenceTrial{*scenes[ti], ReadTruth(store, trials[ti].id, *scenes[ti])});

@@ -301,9 +301,74 @@ db::Prediction PredictTrial(const mechanics::Scene& scene,
 db::Prediction PredictTrial(const mechanics::Scene& scene,
                             const std::vector<mechanics::TrajectorySample>& truth,
                             const nlohmann::json& prediction) {
-  if (!prediction.is_object() || prediction.value("predictor", "arena") != "mujoco") {
-    return PredictTrial(scene, truth);
+  return PredictTrial(scene, truth, prediction, nullptr);
+}
+
+RecordedCommands CommandsOf(const db::ClosedLoopRun& run) {
+  RecordedCommands out;
+  for (const auto& c : run.commands) {
+    if (c.sample < 0) continue;
+    if (static_cast<std::size_t>(c.sample) >= out.size()) out.resize(c.sample + 1);
+    out[c.sample].velocity = {c.commanded[0], c.commanded[1], c.commanded[2]};
   }
+  return out;
+}
+
+mechanics::PusherCommandSource ReplayCommands(const RecordedCommands& commands) {
+  return [&commands](const std::vector<mechanics::TrajectorySample>& samples,
+                     std::string* why) -> std::optional<mechanics::PusherMotion> {
+    const std::size_t k = samples.size() - 1;
+    if (k >= commands.size()) {
+      *why = "the recorded commands end at sample " + std::to_string(commands.size());
+      return std::nullopt;
+    }
+    return commands[k];
+  };
+}
+
+mechanics::Scene ReplayScoringScene(const mechanics::Scene& scene,
+                                    const RecordedCommands& commands) {
+  mechanics::Scene out = scene;
+  if (!out.pusher) return out;
+  for (const auto& c : commands) {
+    if (c.velocity.norm() > out.pusher->motion.velocity.norm())
+      out.pusher->motion.velocity = c.velocity;
+  }
+  return out;
+}
+
+db::Prediction PredictTrial(const mechanics::Scene& scene,
+                            const std::vector<mechanics::TrajectorySample>& truth,
+                            const nlohmann::json& prediction, const RecordedCommands* commands) {
+  const bool mujoco = prediction.is_object() && prediction.value("predictor", "arena") == "mujoco";
+  const bool closed_loop = scene.pusher && scene.pusher->controller;
+  if (closed_loop && (commands == nullptr || commands->empty())) {
+    return PredictionFailure("error", "closed-loop trial without recorded pusher commands");
+  }
+  if (closed_loop && !mujoco) {
+    const auto start = std::chrono::steady_clock::now();
+    const mechanics::SimulationResult result =
+        mechanics::Simulate(scene, ReplayCommands(*commands));
+    const double wall =
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    db::Prediction p = ScoreSimulation(ReplayScoringScene(scene, *commands), result, truth);
+    p.wall_s = wall;
+    p.model_key = ModelKey(scene.model);
+    p.model_json = nlohmann::json({{"facets", scene.model.facets},
+                                   {"points", scene.model.points},
+                                   {"dt", scene.model.dt},
+                                   {"reduce", mechanics::ToString(scene.model.reduce)},
+                                   {"contacts", mechanics::ToString(scene.model.contacts)}})
+                       .dump();
+    auto detail = nlohmann::json::parse(p.detail_json, nullptr, false);
+    if (detail.is_object()) {
+      detail["replayed_commands"] = commands->size();
+      if (!result.stopped.empty()) detail["replay_stopped"] = result.stopped;
+      p.detail_json = detail.dump();
+    }
+    return p;
+  }
+  if (!mujoco) return PredictTrial(scene, truth);
   nlohmann::json knobs = prediction;
   // A calibration's scales are already in `scene` (ApplyModelSettings).
   for (const char* k : {"predictor", "calibration", "calibrated"}) knobs.erase(k);
@@ -317,14 +382,16 @@ db::Prediction PredictTrial(const mechanics::Scene& scene,
   mechanics::SimulationResult result;
   const std::string why = sim->CheckScene(scene);
   if (why.empty()) {
-    result = sim->Simulate(scene);
+    result = closed_loop ? sim->SimulateClosedLoop(scene, ReplayCommands(*commands))
+                         : sim->Simulate(scene);
   } else {
     result.status = mechanics::SimulationStatus::kInvalidScene;
     result.error = why;
   }
   const double wall =
       std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-  db::Prediction p = ScoreSimulation(scene, result, truth);
+  db::Prediction p =
+      ScoreSimulation(closed_loop ? ReplayScoringScene(scene, *commands) : scene, result, truth);
   p.wall_s = wall;
   nlohmann::json stored = nlohmann::json::parse(sim->settings_json(), nullptr, false);
   if (!stored.is_object()) stored = nlohmann::json::object();
@@ -335,10 +402,17 @@ db::Prediction PredictTrial(const mechanics::Scene& scene,
 }
 
 PredictedRun SimulatePrediction(const mechanics::Scene& trial_scene,
-                                const nlohmann::json& prediction) {
+                                const nlohmann::json& prediction,
+                                const RecordedCommands* commands) {
   PredictedRun run;
   run.scene = ApplyModelSettings(trial_scene, prediction);
   const bool mujoco = prediction.is_object() && prediction.value("predictor", "arena") == "mujoco";
+  const bool closed_loop = run.scene.pusher && run.scene.pusher->controller;
+  const bool replay = closed_loop && commands != nullptr && !commands->empty();
+  const auto no_commands = [&run] {
+    run.result.status = mechanics::SimulationStatus::kInvalidScene;
+    run.result.error = "closed-loop trial without recorded pusher commands";
+  };
   if (!mujoco) {
     run.predictor = "arena";
     run.key = ModelKey(run.scene.model);
@@ -349,7 +423,11 @@ PredictedRun SimulatePrediction(const mechanics::Scene& trial_scene,
                         {"reduce", mechanics::ToString(run.scene.model.reduce)},
                         {"contacts", mechanics::ToString(run.scene.model.contacts)}})
             .dump();
-    run.result = mechanics::Simulate(run.scene);
+    if (closed_loop && !replay)
+      no_commands();
+    else
+      run.result = replay ? mechanics::Simulate(run.scene, ReplayCommands(*commands))
+                          : mechanics::Simulate(run.scene);
     return run;
   }
   nlohmann::json knobs = prediction;
@@ -368,7 +446,11 @@ PredictedRun SimulatePrediction(const mechanics::Scene& trial_scene,
     run.result.error = why;
     return run;
   }
-  run.result = sim->Simulate(run.scene);
+  if (closed_loop && !replay)
+    no_commands();
+  else
+    run.result = replay ? sim->SimulateClosedLoop(run.scene, ReplayCommands(*commands))
+                        : sim->Simulate(run.scene);
   return run;
 }
 

@@ -67,6 +67,21 @@ class ArenaPredictor final : public Predictor {
     }
     return mechanics::Simulate(s);
   }
+  mechanics::SimulationResult RunClosedLoop(
+      const mechanics::Scene& scene, std::size_t setting,
+      const mechanics::PusherCommandSource& commands) const override {
+    mechanics::Scene s = scene;
+    s.model = models_.at(setting);
+    try {
+      mechanics::ValidateScene(s);
+    } catch (const std::exception& e) {
+      mechanics::SimulationResult r;
+      r.status = mechanics::SimulationStatus::kInvalidScene;
+      r.error = e.what();
+      return r;
+    }
+    return mechanics::Simulate(s, commands);
+  }
   std::string EffectiveKey(const mechanics::Scene& scene, std::size_t setting) const override {
     auto extended = [](const mechanics::ContactSpec& c) {
       return c.type != mechanics::ContactType::kPoint;
@@ -184,6 +199,19 @@ class MujocoPredictor final : public Predictor {
       return r;
     }
     return sim.Simulate(scene);
+  }
+  mechanics::SimulationResult RunClosedLoop(
+      const mechanics::Scene& scene, std::size_t setting,
+      const mechanics::PusherCommandSource& commands) const override {
+    const auto& sim = *simulators_.at(setting);
+    const std::string why = sim.CheckScene(scene);
+    if (!why.empty()) {
+      mechanics::SimulationResult r;
+      r.status = mechanics::SimulationStatus::kInvalidScene;
+      r.error = why;
+      return r;
+    }
+    return sim.SimulateClosedLoop(scene, commands);
   }
 
  private:

@@ -124,13 +124,14 @@ void AddCertsCommand(CLI::App& app, Action* action) {
       cmd->add_subcommand("issue", "Issue an identity and its role's permissions into DIR/NAME");
   issue->footer(
       "Example:\n  arena certs issue lab-pki --role watcher --name alice --days 365\n"
-      "Roles: cell (publishes CellAnnounce, TrialStatus, GroundTruth; reads TrialCommand),\n"
-      "service (publishes TrialCommand; reads the rest), watcher (reads CellAnnounce, "
-      "TrialStatus,\n"
-      "GroundTruth; publishes nothing). Prints DIR/NAME, the directory for --security.\n"
+      "Roles: cell (publishes CellAnnounce, TrialStatus, GroundTruth, LiveState; reads\n"
+      "TrialCommand, PusherCommand), service (publishes TrialCommand; reads the cells' topics),\n"
+      "watcher (reads CellAnnounce, TrialStatus, GroundTruth, LiveState; publishes nothing),\n"
+      "controller (publishes PusherCommand; reads CellAnnounce, LiveState).\n"
+      "Prints DIR/NAME, the directory for --security.\n"
       "Refuses to overwrite an identity: remove DIR/NAME to re-issue it.");
   issue->add_option("dir", o->dir, "Lab directory made by `arena certs init`")->required();
-  issue->add_option("--role", o->role, "cell, service or watcher")->required();
+  issue->add_option("--role", o->role, "cell, service, watcher or controller")->required();
   issue
       ->add_option("--name", o->identity.name,
                    "Identity name ([A-Za-z0-9_.-]; a cell's id is a good choice)")

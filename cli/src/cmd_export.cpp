@@ -73,14 +73,23 @@ db::Sample ToSample(const mechanics::TrajectorySample& p,
 }
 
 // The campaign's "prediction" settings applied to the trial's scene and run
-// on the predictor they name (arena's model or MuJoCo), as the service does.
-db::PredictedStream Predict(const std::string& scene_json, const std::string& spec_json) {
+// on the predictor they name (arena's model or MuJoCo), as the service does;
+// a closed-loop trial's prediction replays `commands` (the commands its cell
+// applied; issue 19).
+db::PredictedStream PredictWith(const std::string& scene_json, const std::string& spec_json,
+                                const std::vector<db::ClosedLoopCommand>* commands) {
   db::PredictedStream out;
   const mechanics::Scene scene = mechanics::ParseScene(scene_json);
   nlohmann::json model;
   const auto spec = nlohmann::json::parse(spec_json);
   if (spec.is_object() && spec.contains("prediction")) model = spec["prediction"];
-  const assessment::PredictedRun run = assessment::SimulatePrediction(scene, model);
+  assessment::RecordedCommands recorded;
+  if (commands) {
+    db::ClosedLoopRun applied;
+    applied.commands = *commands;
+    recorded = assessment::CommandsOf(applied);
+  }
+  const assessment::PredictedRun run = assessment::SimulatePrediction(scene, model, &recorded);
   out.predictor = run.key;
   out.settings_json = run.settings_json;
   switch (run.result.status) {
@@ -100,6 +109,15 @@ db::PredictedStream Predict(const std::string& scene_json, const std::string& sp
   return out;
 }
 
+db::PredictedStream Predict(const std::string& scene_json, const std::string& spec_json) {
+  return PredictWith(scene_json, spec_json, nullptr);
+}
+
+db::PredictedStream PredictClosedLoop(const std::string& scene_json, const std::string& spec_json,
+                                      const std::vector<db::ClosedLoopCommand>& commands) {
+  return PredictWith(scene_json, spec_json, &commands);
+}
+
 int RunExport(const ExportCliOptions& o) {
   RefuseToOverwriteStore(o.out, "--out", o.db_path);
   try {
@@ -114,7 +132,10 @@ int RunExport(const ExportCliOptions& o) {
     eo.out_dir = o.out;
     eo.arena_version = arena::Version();
     eo.arena_commit = arena::GitCommit();
-    if (!o.no_predictions) eo.predict = Predict;
+    if (!o.no_predictions) {
+      eo.predict = Predict;
+      eo.predict_closed_loop = PredictClosedLoop;
+    }
     std::unique_ptr<ProgressLine> progress;
     eo.progress = [&](std::int64_t done, std::int64_t total) {
       if (!progress) progress = std::make_unique<ProgressLine>(static_cast<long>(total), "trials");
@@ -154,7 +175,9 @@ void AddExportCommand(CLI::App& app, Action* action) {
       "  arena export --db lab.db --campaign 1 --format hdf5 --out datasets/c1\n"
       "Writes trials.csv (index: parameters, outcomes, prediction errors, scene), contacts.csv\n"
       "(per-contact outcomes), the true, observed and predicted streams of every trial with\n"
-      "ground truth, and manifest.json (units, frames, counts, SHA-256 of every file); verifies\n"
+      "ground truth, closed-loop trials' controller outcomes and applied pusher commands\n"
+      "(closed_loop.csv, closed_loop_commands.csv; their predictions replay the commands),\n"
+      "and manifest.json (units, frames, counts, SHA-256 of every file); verifies\n"
       "it, then moves it into place: DIR appears complete or not at all.\n"
       "Reads one snapshot of the store: safe while 'arena serve' runs.\n");
   cmd->callback([o, action] { *action = [o] { return RunExport(*o); }; });

@@ -19,6 +19,7 @@
 #include <spdlog/spdlog.h>
 
 #include "arena/db/store.hpp"
+#include "arena/executors/controller.hpp"
 #include "arena/orchestrator/campaign.hpp"
 #include "arena/orchestrator/logging.hpp"
 #include "arena/orchestrator/service.hpp"
@@ -165,6 +166,14 @@ void PrintSummary(const std::string& db_path, std::int64_t campaign_id, double w
               db_path.c_str(), db_path.c_str(), db_path.c_str());
 }
 
+// The controller a closed-loop campaign's scenes name (variations never
+// change the name); nullopt for an open-loop campaign.
+std::optional<std::string> CampaignController(const orchestrator::Campaign& campaign) {
+  const auto& pusher = campaign.scene.pusher;
+  if (!pusher || !pusher->controller) return std::nullopt;
+  return pusher->controller->name;
+}
+
 int Run(RunOptions opt) {
   if (opt.cells < 1 || opt.cells > 64)
     throw CommandError(kExitBadInput, "--cells: must be 1..64, got " + std::to_string(opt.cells));
@@ -187,6 +196,7 @@ int Run(RunOptions opt) {
       dds::CheckIdentityDir(identity("service"));
       for (int k = 0; k < opt.cells; ++k)
         dds::CheckIdentityDir(identity("sim" + std::to_string(k + 1)));
+      if (CampaignController(campaign)) dds::CheckIdentityDir(identity("controller"));
     } catch (const dds::SecurityError& e) {
       throw CommandError(kExitBadInput, std::string("--security: ") + e.what() +
                                             " (issue it with `arena certs issue " +
@@ -230,6 +240,7 @@ int Run(RunOptions opt) {
   // identities are the lab's sim1..N.
   const std::string run_tag = opt.security_lab.empty() ? "-" + RunTag() : "";
   std::vector<ChildProcess> cells;
+  std::vector<ChildProcess> controllers;
   const std::string self = SelfExecutable();
   for (int k = 0; k < opt.cells; ++k) {
     std::vector<std::string> argv = {self,           "cell",
@@ -259,6 +270,25 @@ int Run(RunOptions opt) {
     throw StoreCommandError(e);
   } catch (const dds::DdsError& e) {
     throw CommandError(kExitCommunication, e.what());
+  }
+  // A closed-loop campaign's controller (issue 19), started like the cells
+  // when arena's library has it; a lab's own one the lab starts.
+  if (const auto name = CampaignController(campaign)) {
+    const auto laws = executors::LibraryLaws();
+    if (std::find(laws.begin(), laws.end(), *name) != laws.end()) {
+      std::vector<std::string> argv = {self,           "controller",
+                                       "--name",       *name,
+                                       "--domain",     std::to_string(opt.domain),
+                                       "--parent-pid", std::to_string(getpid())};
+      if (!opt.security_lab.empty())
+        argv.insert(argv.end(), {"--security", identity("controller")});
+      controllers.emplace_back(argv, opt.db_path + ".controller.log");
+    } else if (!opt.quiet) {
+      std::fprintf(stderr,
+                   "closed loop: start controller '%s' on domain %d yourself (it is not one of "
+                   "arena's own)\n",
+                   name->c_str(), opt.domain);
+    }
   }
   running = service.get();
   if (signals.received()) service->Stop();
@@ -303,6 +333,7 @@ int Run(RunOptions opt) {
   service.reset();
   running = nullptr;
   for (auto& cell : cells) cell.Stop();
+  for (auto& controller : controllers) controller.Stop();
   spdlog::default_logger()->flush();
 
   PrintSummary(opt.db_path, campaign_id, wall, overhead_s);

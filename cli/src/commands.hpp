@@ -52,5 +52,7 @@ void AddCalibrateCommand(CLI::App& app, Action* action);  // cmd_calibrate.cpp
 
 // cmd_sensitivity.cpp (scene and campaign views)
 void AddSensitivityCommand(CLI::App& app, Action* action);
+// cmd_controller.cpp (closed-loop controllers, issue 19)
+void AddControllerCommand(CLI::App& app, Action* action);
 
 }  // namespace arena::cli

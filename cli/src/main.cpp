@@ -24,6 +24,7 @@ int main(int argc, char** argv) {
   AddServeCommand(app, &action);
   AddSimulateCommand(app, &action);
   AddCellCommand(app, &action);
+  AddControllerCommand(app, &action);
   AddCellsCommand(app, &action);
   AddQueryCommand(app, &action);
   AddExportCommand(app, &action);

@@ -164,7 +164,12 @@ Chart MakeTrialChart(const db::Store& store, std::int64_t trial_id, TrialPlotInf
     nlohmann::json model;
     const auto spec = nlohmann::json::parse(campaign.spec_json);
     if (spec.is_object() && spec.contains("prediction")) model = spec["prediction"];
-    assessment::PredictedRun run = assessment::SimulatePrediction(scene, model);
+    // A closed-loop trial (issue 19) is predicted by replaying its applied commands.
+    assessment::RecordedCommands commands;
+    if (scene.pusher && scene.pusher->controller) {
+      if (auto applied = store.GetClosedLoop(trial_id)) commands = assessment::CommandsOf(*applied);
+    }
+    assessment::PredictedRun run = assessment::SimulatePrediction(scene, model, &commands);
     inf.model_key = run.key;
     predicted = std::move(run.result);
     switch (predicted.status) {

@@ -583,10 +583,37 @@ std::string ScenesJsonl(const TrialIndex& index) {
 }
 
 // Per-contact outcomes of the campaign's exported trials, by trial id.
+// Closed loop (issue 19): the runs and applied commands of the attempts whose
+// ground truth is exported.
+constexpr const char* kClosedLoopRunSql =
+    "SELECT r.trial_id, r.attempt, r.controller, r.lockstep, r.target, r.gain, r.tolerance,"
+    " r.hold_s, r.reached, r.final_error, r.settle_time_s, r.held, r.loop_p50_ms,"
+    " r.loop_p99_ms, r.failure"
+    " FROM closed_loop_runs r JOIN trials t ON t.id = r.trial_id AND t.attempt = r.attempt"
+    " JOIN gt_summary s ON s.stream_id = t.gt_stream_id"
+    " WHERE t.campaign_id = ? ORDER BY t.idx";
+constexpr const char* kClosedLoopCommandSql =
+    "SELECT c.trial_id, c.attempt, c.sample, c.t, c.vx, c.vy, c.vz, c.applied_vx, c.applied_vy,"
+    " c.applied_vz, c.loop_ms"
+    " FROM closed_loop_commands c JOIN trials t ON t.id = c.trial_id AND t.attempt = c.attempt"
+    " JOIN gt_summary s ON s.stream_id = t.gt_stream_id"
+    " WHERE t.campaign_id = ? ORDER BY t.idx, c.sample";
+constexpr std::size_t kCommandFirstCol = 2;  // sample: trial_id and attempt come first
+
+// Rows of `sql` (bound to the campaign; column 0 the trial id), and which
+// rows belong to which trial.
+QueryResult ReadByTrial(const Store::Impl& impl, const char* sql, std::int64_t campaign_id,
+                        std::map<std::int64_t, std::vector<std::size_t>>* by_trial);
+
 QueryResult ReadContacts(const Store::Impl& impl, std::int64_t campaign_id,
                          std::map<std::int64_t, std::vector<std::size_t>>* by_trial) {
+  return ReadByTrial(impl, kContactSql, campaign_id, by_trial);
+}
+
+QueryResult ReadByTrial(const Store::Impl& impl, const char* sql, std::int64_t campaign_id,
+                        std::map<std::int64_t, std::vector<std::size_t>>* by_trial) {
   QueryResult out;
-  detail::Stmt s(impl.db, kContactSql);
+  detail::Stmt s(impl.db, sql);
   s.Bind(1, campaign_id);
   for (int c = 0; c < sqlite3_column_count(s.get()); ++c)
     out.columns.emplace_back(sqlite3_column_name(s.get(), c));
@@ -607,6 +634,22 @@ const std::vector<Column>& ContactColumns() {
       {"separate_fraction", "1", "share of the contact's samples separated"},
       {"slip_distance_m", "m", "tangential path of the object at the contact relative to it"},
       {"max_normal_force_n", "N", "largest force along the contact normal"}};
+  return kCols;
+}
+
+const std::vector<Column>& CommandColumns() {
+  static const std::vector<Column> kCols = {
+      {"sample", "1", "the live sample the command answered; applied from the next model step"},
+      {"t", "s", "time of that sample since the trial started"},
+      {"vx", "m/s", "commanded pusher velocity, x (gripper frame)"},
+      {"vy", "m/s", "commanded pusher velocity, y"},
+      {"vz", "m/s", "commanded pusher velocity, z"},
+      {"applied_vx", "m/s", "actuated pusher velocity (with the cell's actuation noise), x"},
+      {"applied_vy", "m/s", "actuated pusher velocity, y"},
+      {"applied_vz", "m/s", "actuated pusher velocity, z"},
+      {"loop_ms", "ms",
+       "live sample written -> command accepted by the cell; missing: no fresh command, the "
+       "last one held"}};
   return kCols;
 }
 
@@ -765,11 +808,16 @@ struct TrialsWritten {
 };
 
 // Writes one trial's streams (and HDF5 group); appends its index values.
+// Rows of a by-trial table that belong to one trial.
+struct TrialRows {
+  const QueryResult& table;
+  const std::vector<std::size_t>& rows;
+};
+
 void WriteTrial(const Store::Impl& impl, const ExportOptions& o, const Campaign& campaign,
                 const TrialIndex& index, std::size_t i, std::vector<Value>* irow,
-                const std::vector<std::string>& columns, const QueryResult& contacts,
-                const std::vector<std::size_t>& contact_rows, DatasetWriter* writer,
-                TrialsWritten* out, ExportReport* report) {
+                const std::vector<std::string>& columns, TrialRows contacts, TrialRows commands,
+                DatasetWriter* writer, TrialsWritten* out, ExportReport* report) {
   const auto trial_id = std::get<std::int64_t>((*irow)[0]);
   const auto expected = std::get<std::int64_t>((*irow)[kSamplesCol]);
   const auto samples = internal::ReadStreamSamples(impl, index.stream_ids[i], expected, "export");
@@ -793,10 +841,30 @@ void WriteTrial(const Store::Impl& impl, const ExportOptions& o, const Campaign&
     FlattenObserved(s, nfv, &row);
     obs_rows.push_back(row);
   }
+  // Closed loop: the applied commands (CommandColumns() per row).
+  std::vector<std::vector<double>> command_matrix;
+  std::vector<ClosedLoopCommand> applied;
+  for (std::size_t r : commands.rows) {
+    const auto& c = commands.table.rows[r];
+    std::vector<double> m;
+    for (std::size_t k = kCommandFirstCol; k < c.size(); ++k) m.push_back(AsDouble(c[k]));
+    ClosedLoopCommand cmd;
+    cmd.sample = static_cast<int>(std::get<std::int64_t>(c[kCommandFirstCol]));
+    cmd.t = m[1];
+    for (int k = 0; k < 3; ++k) {
+      cmd.commanded[k] = m[2 + k];
+      cmd.applied[k] = m[5 + k];
+    }
+    if (!std::isnan(m[8])) cmd.loop_ms = m[8];
+    applied.push_back(cmd);
+    command_matrix.push_back(std::move(m));
+  }
   std::optional<PredictedStream> predicted;
   if (o.predict) {
     try {
-      predicted = o.predict(index.scenes[i], campaign.spec_json);
+      predicted = !applied.empty() && o.predict_closed_loop
+                      ? o.predict_closed_loop(index.scenes[i], campaign.spec_json, applied)
+                      : o.predict(index.scenes[i], campaign.spec_json);
     } catch (const std::exception& e) {
       predicted = PredictedStream{};
       predicted->status = "error";
@@ -816,8 +884,8 @@ void WriteTrial(const Store::Impl& impl, const ExportOptions& o, const Campaign&
   // Per-contact outcomes as a matrix (contacts x ContactColumns()).
   std::vector<std::vector<double>> contact_matrix;
   std::vector<std::string> contact_names, contact_roles;
-  for (std::size_t r : contact_rows) {
-    const auto& c = contacts.rows[r];
+  for (std::size_t r : contacts.rows) {
+    const auto& c = contacts.table.rows[r];
     contact_matrix.push_back({AsDouble(c[1]), AsDouble(c[4]), AsDouble(c[5]), AsDouble(c[6]),
                               AsDouble(c[7]), AsDouble(c[8])});
     contact_names.push_back(std::get<std::string>(c[2]));
@@ -830,6 +898,7 @@ void WriteTrial(const Store::Impl& impl, const ExportOptions& o, const Campaign&
               {"true_columns", true_cols.size()},
               {"observed_columns", obs_cols.size()}};
   if (predicted) tm["predicted_samples"] = predicted->samples.size();
+  if (!commands.rows.empty()) tm["commands"] = commands.rows.size();
   std::unique_ptr<H5Handle> group;
   if (!writer->files_per_trial()) {
     const std::string gname = "trials/" + id;
@@ -857,6 +926,7 @@ void WriteTrial(const Store::Impl& impl, const ExportOptions& o, const Campaign&
       H5StringArrayAttr(ds.id, "contact_names", contact_names);
       H5StringArrayAttr(ds.id, "roles", contact_roles);
     }
+    if (!command_matrix.empty()) H5Matrix(gid, "commands", CommandColumns(), command_matrix);
   } else {
     irow->emplace_back(tf);
     irow->emplace_back(of);
@@ -881,6 +951,10 @@ ExportReport WriteDataset(const Store& store, const ExportOptions& o, const fs::
   TrialIndex index = ReadIndex(impl, o.campaign_id);
   std::map<std::int64_t, std::vector<std::size_t>> contacts_by_trial;
   const QueryResult contacts = ReadContacts(impl, o.campaign_id, &contacts_by_trial);
+  std::map<std::int64_t, std::vector<std::size_t>> runs_by_trial, commands_by_trial;
+  const QueryResult runs = ReadByTrial(impl, kClosedLoopRunSql, o.campaign_id, &runs_by_trial);
+  const QueryResult commands =
+      ReadByTrial(impl, kClosedLoopCommandSql, o.campaign_id, &commands_by_trial);
   std::set<std::string> parameters;
   {
     const std::size_t base =
@@ -910,9 +984,12 @@ ExportReport WriteDataset(const Store& store, const ExportOptions& o, const fs::
     auto& irow = index.table.rows[i];
     const auto trial_id = std::get<std::int64_t>(irow[0]);
     const auto it = contacts_by_trial.find(trial_id);
+    const auto ct = commands_by_trial.find(trial_id);
     try {
-      WriteTrial(impl, o, campaign, index, i, &irow, columns, contacts,
-                 it == contacts_by_trial.end() ? kNone : it->second, &writer, &written, &report);
+      WriteTrial(impl, o, campaign, index, i, &irow, columns,
+                 {contacts, it == contacts_by_trial.end() ? kNone : it->second},
+                 {commands, ct == commands_by_trial.end() ? kNone : ct->second}, &writer, &written,
+                 &report);
     } catch (const StoreError& e) {
       std::string what = e.what();
       if (what.rfind("export: ", 0) == 0) what = what.substr(8);
@@ -932,9 +1009,17 @@ ExportReport WriteDataset(const Store& store, const ExportOptions& o, const fs::
   WriteText(dir / "scenes.jsonl", ScenesJsonl(index));
   // The campaign's latest sensitivity run, if any (db/sensitivity.hpp).
   WriteSensitivityExport(store, o.campaign_id, dir.string());
+  if (!runs.rows.empty()) {
+    WriteText(dir / "closed_loop.csv", FormatCsv(runs));
+    WriteText(dir / "closed_loop_commands.csv", FormatCsv(commands));
+  }
   if (o.format == ExportFormat::kJsonl) {
     WriteJsonLines(dir / "trials.jsonl", index.table);
     WriteJsonLines(dir / "contacts.jsonl", contacts);
+    if (!runs.rows.empty()) {
+      WriteJsonLines(dir / "closed_loop.jsonl", runs);
+      WriteJsonLines(dir / "closed_loop_commands.jsonl", commands);
+    }
   }
   const ojson files = ChecksumFiles(dir, &report);
 
@@ -988,6 +1073,20 @@ ExportReport WriteDataset(const Store& store, const ExportOptions& o, const fs::
       {"files", files},
   };
   if (o.predict) manifest["columns"]["predicted"] = ColumnsJson(written.predicted_cols);
+  if (!runs.rows.empty()) {
+    ojson cmd_cols = ojson::array();
+    cmd_cols.push_back({{"name", "trial_id"}, {"unit", "1"}, {"meaning", "trial id"}});
+    cmd_cols.push_back({{"name", "attempt"}, {"unit", "1"}, {"meaning", "the exported attempt"}});
+    for (const auto& c : CommandColumns())
+      cmd_cols.push_back({{"name", c.name}, {"unit", c.unit}, {"meaning", c.meaning}});
+    manifest["columns"]["closed_loop_commands"] = cmd_cols;
+    manifest["closed_loop"] =
+        "closed_loop.csv: one row per closed-loop trial (controller, its settings and own "
+        "outcome; target, final_error and tolerance in the controller's units: rad for "
+        "pivot_to_angle, m for sliding_to_position); closed_loop_commands.csv: every pusher "
+        "command the cell applied. Predictions of these trials replay the commanded velocities "
+        "through the model.";
+  }
   // Last and atomically: a complete manifest marks a complete dataset.
   const fs::path tmp = dir / "manifest.json.tmp";
   WriteText(tmp, manifest.dump(2) + "\n");
@@ -1099,6 +1198,15 @@ ExportReport VerifyExport(const std::string& dir_text) {
         if (dims[0] != t.at(predicted ? "predicted_samples" : "samples").get<std::uint64_t>())
           Corrupt("verify: " + name + " sample count");
       }
+      if (t.contains("commands")) {
+        const std::string name = t.at("group").get<std::string>() + "/commands";
+        H5Handle ds(H5Dopen2(file.id, name.c_str(), H5P_DEFAULT), H5Dclose, "open " + name);
+        H5Handle space(H5Dget_space(ds.id), H5Sclose, "get space of " + name);
+        hsize_t dims[2] = {0, 0};
+        H5Sget_simple_extent_dims(space.id, dims, nullptr);
+        if (dims[0] != t.at("commands").get<std::uint64_t>())
+          Corrupt("verify: " + name + " command count");
+      }
       samples += t.at("samples").get<std::int64_t>();
     }
   } else {
@@ -1125,6 +1233,11 @@ ExportReport VerifyExport(const std::string& dir_text) {
   if (CountCsvRecords(dir / "trials.csv") != static_cast<std::uint64_t>(r.trials) + 1) {
     Corrupt("verify: trials.csv row count");
   }
+  // Closed loop: every applied command of the manifest's trials is there.
+  std::uint64_t commands = 0;
+  for (const auto& t : m.at("trials")) commands += t.value("commands", std::uint64_t{0});
+  if (commands > 0 && CountCsvRecords(dir / "closed_loop_commands.csv") != commands + 1)
+    Corrupt("verify: closed_loop_commands.csv row count");
   return r;
 }
 

@@ -413,6 +413,42 @@ CREATE VIEW IF NOT EXISTS sensitivity_latest AS
   FROM sensitivity_conditions c JOIN sensitivity_runs r ON r.id = c.run_id
   WHERE r.id = (SELECT max(id) FROM sensitivity_runs WHERE campaign_id = r.campaign_id);
 )sql"},
+      // Closed-loop trials (issue 19): the controller, its own outcome, and
+      // every command the cell applied (ground truth like the samples).
+      // IF NOT EXISTS: tests fake an older file by lowering user_version
+      // without dropping later tables.
+      {9, "closed-loop runs and their applied pusher commands", R"sql(
+CREATE TABLE IF NOT EXISTS closed_loop_runs(
+  trial_id      INTEGER NOT NULL REFERENCES trials(id),
+  attempt       INTEGER NOT NULL,
+  controller    TEXT NOT NULL,
+  lockstep      INTEGER NOT NULL CHECK (lockstep IN (0, 1)),
+  target        REAL NOT NULL,
+  gain          REAL NOT NULL,
+  tolerance     REAL NOT NULL,
+  hold_s        REAL NOT NULL,
+  reached       INTEGER CHECK (reached IN (0, 1)),  -- NULL: not a library law (not scored)
+  final_error   REAL,
+  settle_time_s REAL,                               -- NULL: never settled
+  held          INTEGER NOT NULL,                   -- samples without a fresh answer
+  loop_p50_ms   REAL,
+  loop_p99_ms   REAL,
+  failure       TEXT NOT NULL DEFAULT '',           -- why the phase failed ('' if it ran through)
+  created_at    REAL NOT NULL,
+  PRIMARY KEY (trial_id, attempt)
+);
+CREATE TABLE IF NOT EXISTS closed_loop_commands(
+  trial_id   INTEGER NOT NULL,
+  attempt    INTEGER NOT NULL,
+  sample     INTEGER NOT NULL,   -- the sample it answered; applied from the next step on
+  t          REAL NOT NULL,
+  vx REAL NOT NULL, vy REAL NOT NULL, vz REAL NOT NULL,                 -- commanded (m/s)
+  applied_vx REAL NOT NULL, applied_vy REAL NOT NULL, applied_vz REAL NOT NULL,  -- actuated
+  loop_ms    REAL,               -- live sample -> command accepted; NULL: held
+  PRIMARY KEY (trial_id, attempt, sample),
+  FOREIGN KEY (trial_id, attempt) REFERENCES closed_loop_runs(trial_id, attempt)
+) WITHOUT ROWID;
+)sql"},
       // What a trial's ground truth is and which defects were really applied
       // (issue 13): every report can say which truth it measured against.
       {10, "trials: the cell backend, its kind of truth and the defects applied", R"sql(

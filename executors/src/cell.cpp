@@ -17,6 +17,7 @@
 #include <spdlog/spdlog.h>
 #include <nlohmann/json.hpp>
 
+#include "arena/executors/controller.hpp"
 #include "arena/executors/defect_layer.hpp"
 #include "arena/mechanics/scene_json.hpp"
 #include "arena/reset/reset.hpp"
@@ -42,6 +43,18 @@ reset::Pose ToResetPose(const mechanics::Pose& p) {
                     Eigen::AngleAxisd(p.rpy.y(), Eigen::Vector3d::UnitY()) *
                     Eigen::AngleAxisd(p.rpy.x(), Eigen::Vector3d::UnitX());
   return out;
+}
+
+std::string ModeName(mechanics::SimulationStatus s) {
+  switch (s) {
+    case mechanics::SimulationStatus::kOk:
+      return "ok";
+    case mechanics::SimulationStatus::kSolverFailure:
+      return "solver failure";
+    case mechanics::SimulationStatus::kInvalidScene:
+      return "invalid scene";
+  }
+  return "?";
 }
 
 // Issue 12: a trial starts where the last reset left the object (its true
@@ -161,6 +174,8 @@ struct Cell::Impl {
   dds::Writer<msg::TrialStatus> status;
   dds::Writer<msg::GroundTruth> ground_truth;
   dds::Reader<msg::TrialCommand> commands;
+  dds::Writer<msg::LiveState> live;                 // one message per sample, best-effort
+  dds::Reader<msg::PusherCommand> pusher_commands;  // closed loop: the controllers' answers
 
   std::mutex mutex;
   std::condition_variable wake;
@@ -226,7 +241,9 @@ struct Cell::Impl {
         announce(participant),
         status(participant),
         ground_truth(participant),
-        commands(participant, dds::ReaderOptions{false}) {}
+        commands(participant, dds::ReaderOptions{false}),
+        live(participant),
+        pusher_commands(participant, dds::ReaderOptions{false, o.id}) {}
 
   bool Stopping() {
     std::lock_guard<std::mutex> lock(mutex);
@@ -380,6 +397,12 @@ struct Cell::Impl {
       return Refuse(c, std::string("start pose: ") + e.what());
     }
     const TrialContext trial = Context(c, deadline);
+    const bool closed_loop = scene.pusher && scene.pusher->controller;
+    if (closed_loop && !layer.capabilities().closed_loop) {
+      return Refuse(c, "pusher.motion.controller: the " + layer.capabilities().name +
+                           " backend cannot run closed-loop trials (it cannot step with "
+                           "commanded pusher velocities); run them on a `model` cell");
+    }
     if (std::string why = layer.Prepare(scene, c.defects_json(), trial); !why.empty()) {
       return Refuse(c, why);
     }
@@ -392,6 +415,7 @@ struct Cell::Impl {
       SleepUntil(Clock::time_point::max());
       return;
     }
+    if (closed_loop) return ExecuteClosedLoop(c, scene, trial, started);
 
     // The backend streams the truth; the cell checks every sample (finite,
     // time strictly increasing from 0) and stops it at the deadline.
@@ -443,70 +467,15 @@ struct Cell::Impl {
     const std::vector<mechanics::TrajectorySample>& truth_samples = got.samples;
     const auto observed = layer.Observe(truth_samples, trial);
 
-    // Stream, paced: a batch leaves when its last sample is due.
-    const auto stream_start = Clock::now();
-    const size_t n = truth_samples.size();
-    std::uint32_t batch_index = 0;
-    std::string failure;
+    // Stream, paced: a batch leaves when its last sample is due; the live
+    // topic gets every sample when it is due.
     size_t dropped = 0;
     for (const auto& o : observed) dropped += o.valid ? 0 : 1;
-    for (size_t first = 0; first < n && failure.empty();) {
-      const size_t count = std::min<size_t>(options.batch_samples, n - first);
-      msg::GroundTruth batch;
-      batch.trial_id(c.trial_id());
-      batch.attempt(c.attempt());
-      batch.cell_id(options.id);
-      batch.service_session(c.service_session());
-      batch.batch(batch_index);
-      batch.first_sample(static_cast<std::uint32_t>(first));
-      batch.last(first + count == n);
-      batch.samples().resize(count);
-      for (size_t i = 0; i < count; ++i) {
-        const auto& truth = truth_samples[first + i];
-        dds::EncodeSample(truth, PusherAt(actual, truth), observed[first + i], &batch.samples()[i]);
-      }
-      // Fault injection (defects.hpp): a malformed sample, or a missing batch.
-      if (options.defects.corrupt_stream == "gap" && batch_index == 0)
-        batch.first_sample(static_cast<std::uint32_t>(first + 1));
-      if (options.defects.corrupt_stream == "nan" && batch_index == 0)
-        batch.samples()[0].object_pose()[0] = std::numeric_limits<double>::quiet_NaN();
-      if (options.speed > 0) {
-        const double due_s = truth_samples[first + count - 1].t * options.speed;
-        const auto due = stream_start + std::chrono::duration_cast<Clock::duration>(
-                                            std::chrono::duration<double>(due_s));
-        if (due > deadline) {
-          SleepUntil(deadline);
-        } else if (!SleepUntil(due)) {
-          failure = "interrupted: cell shutting down";
-          break;
-        }
-      }
-      if (!Serves(c.service_session())) {
-        failure = "interrupted: the cell now serves another service";
-        break;
-      }
-      batch.sent_unix_ns(UnixNanos());
-      // Ground truth is a log: a full history throttles us, it never drops.
-      while (!ground_truth.Write(batch)) {
-        if (Stopping()) {
-          failure = "interrupted: cell shutting down";
-          break;
-        }
-        if (Clock::now() > deadline) break;
-        spdlog::warn("cell {}: ground-truth history full (a slow reader?), retrying", options.id);
-      }
-      if (Clock::now() > deadline) {
-        failure = "deadline: " + std::to_string(c.deadline_s()) + " s exceeded after " +
-                  std::to_string(first + count) + " of " + std::to_string(n) + " samples";
-      }
-      if (failure.empty()) {
-        std::lock_guard<std::mutex> lock(mutex);
-        counters.samples += count;
-      }
-      first += count;
-      ++batch_index;
-      if (Stopping() && failure.empty() && first < n) failure = "interrupted: cell shutting down";
-    }
+    const StreamOutcome streamed =
+        StreamLog(c, truth_samples, actual, observed, Clock::now(), deadline, Pacing::kLive);
+    const std::string& failure = streamed.failure;
+    const size_t n = truth_samples.size();
+    const std::uint32_t batch_index = streamed.batches;
 
     const auto& last = truth_samples.back();
     true_pose.position = last.position;
@@ -546,6 +515,438 @@ struct Cell::Impl {
                    failure);
     }
     Finish(c, s);
+  }
+
+  // How StreamLog (below) sends a trial.
+  enum class Pacing {
+    kLive,     // samples leave when due (speed > 0), each on the live topic too
+    kFlatOut,  // as fast as the log takes them, log only (closed loop: already live)
+  };
+  struct StreamOutcome {
+    std::string failure;  // "" when the whole trial was sent
+    std::uint32_t batches = 0;
+  };
+
+  // ---------------------------------------------------------------------
+  // Closed loop (issue 19): the pusher follows a controller's commands.
+  // Each sample goes out on the live topic; the command answering it moves
+  // the pusher from the next step on. speed 0: lockstep (the simulation waits
+  // for the answer to sample k, at most hold_s, before step k+1); speed > 0:
+  // wall clock (the newest command in force when a step is due). Without a
+  // new command for hold_s the pusher stops and the phase fails.
+
+  // How long a closed-loop trial waits for its controller to appear.
+  static constexpr double kControllerWait_s = 5.0;
+
+  struct AppliedCommand {
+    std::uint32_t sample = 0;  // the sample it answered (applied from the next step)
+    double t = 0;              // s, that sample's time
+    Eigen::Vector3d commanded = Eigen::Vector3d::Zero();  // m/s, as the controller sent it
+    Eigen::Vector3d applied = Eigen::Vector3d::Zero();    // m/s, with the actuation noise
+    double loop_ms = -1;  // live sample written -> command accepted (wall), -1: held
+  };
+
+  struct ClosedLoop {
+    const msg::TrialCommand& command;
+    const TrialContext& trial;
+    const TrialPerturbation& perturbation;
+    executors::ControlContext context;
+    std::string params;
+    Clock::time_point start;
+    Clock::time_point deadline;
+    std::size_t expected_samples = 0;
+    std::vector<AppliedCommand> applied;
+    mechanics::PusherMotion in_force;
+    Clock::time_point last_command_at;
+  };
+
+  // The newest command of this trial answering a sample <= k (lockstep: == k),
+  // waiting until `until` at most.
+  std::optional<msg::PusherCommand> AwaitCommand(const ClosedLoop& loop, std::uint32_t k,
+                                                 bool exact, Clock::time_point until) {
+    std::optional<msg::PusherCommand> newest;
+    for (;;) {
+      const auto now = Clock::now();
+      const auto wait =
+          until > now ? std::chrono::duration_cast<dds::Millis>(until - now) : dds::Millis(0);
+      auto m = pusher_commands.Take(std::max(wait, dds::Millis(exact ? 1 : 0)));
+      if (m && m->cell_id() == options.id && m->trial_id() == loop.command.trial_id() &&
+          m->attempt() == loop.command.attempt() && m->controller() == loop.context.spec.name &&
+          m->answers_sample() <= k) {
+        if (!newest || m->answers_sample() >= newest->answers_sample()) newest = std::move(*m);
+        if (exact && newest->answers_sample() == k) return newest;
+      }
+      if (Clock::now() >= until || Stopping()) return exact ? std::nullopt : newest;
+    }
+  }
+
+  // Called by the simulation after every sample: publish it, get its answer.
+  std::optional<mechanics::PusherMotion> NextCommand(
+      ClosedLoop& loop, const std::vector<mechanics::TrajectorySample>& samples, std::string* why) {
+    const auto k = static_cast<std::uint32_t>(samples.size() - 1);
+    const mechanics::TrajectorySample& truth = samples.back();
+    const auto& spec = loop.context.spec;
+    if (Stopping()) {
+      *why = "interrupted: cell shutting down";
+      return std::nullopt;
+    }
+    if (Clock::now() > loop.deadline) {
+      *why = "deadline: " + std::to_string(loop.command.deadline_s()) + " s exceeded after " +
+             std::to_string(k + 1) + " samples";
+      return std::nullopt;
+    }
+    // What the sensors saw of this sample (latency, drops, noise: the same
+    // streams as the log's, so live and log agree).
+    const auto observed = layer.Observe(samples, loop.trial);
+    dds::PusherState pusher;
+    pusher.position = truth.pusher_position;
+    pusher.velocity = loop.in_force.velocity;
+    pusher.angular_velocity = loop.in_force.angular_velocity;
+    msg::GroundTruthSample encoded;
+    dds::EncodeSample(truth, pusher, observed.back(), &encoded);
+    const bool lockstep = options.speed == 0;
+    if (!lockstep) {
+      const auto due = loop.start + std::chrono::duration_cast<Clock::duration>(
+                                        std::chrono::duration<double>(truth.t * options.speed));
+      if (!SleepUntil(due)) {
+        *why = "interrupted: cell shutting down";
+        return std::nullopt;
+      }
+    }
+    PublishLive(loop.command, k, k + 1 == loop.expected_samples, encoded, spec.name, loop.params);
+    const auto hold =
+        std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(spec.hold_s));
+    std::optional<msg::PusherCommand> answer;
+    if (lockstep) {
+      // Best-effort loses messages (a controller that matched a moment late
+      // misses sample 0): without an answer the sample is published again
+      // every 20 ms until the hold time runs out.
+      const auto give_up = Clock::now() + hold;
+      for (;;) {
+        answer = AwaitCommand(loop, k, true,
+                              std::min(give_up, Clock::now() + std::chrono::milliseconds(20)));
+        if (answer || Clock::now() >= give_up || Stopping()) break;
+        PublishLive(loop.command, k, k + 1 == loop.expected_samples, encoded, spec.name,
+                    loop.params);
+      }
+    } else {
+      // Collect until the next sample is due; the newest answer wins.
+      const auto next_due =
+          loop.start + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(
+                           (truth.t + 1.0 / mechanics::kSampleRateHz) * options.speed));
+      answer = AwaitCommand(loop, k, false, next_due);
+    }
+    AppliedCommand record;
+    record.sample = k;
+    record.t = truth.t;
+    const auto now = Clock::now();
+    if (answer) {
+      record.loop_ms = (UnixNanos() - answer->state_sent_unix_ns()) * 1e-6;
+      if (answer->answers_sample() != k) record.loop_ms = -1;  // an older sample's answer
+      const Eigen::Vector3d v(answer->velocity()[0], answer->velocity()[1], answer->velocity()[2]);
+      const Eigen::Vector3d w(answer->angular_velocity()[0], answer->angular_velocity()[1],
+                              answer->angular_velocity()[2]);
+      if (!v.allFinite() || !w.allFinite()) {
+        *why = "controller " + spec.name + ": command answering sample " + std::to_string(k) +
+               " is not finite; pusher stopped";
+        return Stop(loop, record);
+      }
+      if (v.norm() > layer.cell_profile().max_pusher_speed * (1 + 1e-9)) {
+        *why = "controller " + spec.name + ": commanded " + std::to_string(v.norm()) +
+               " m/s at sample " + std::to_string(k) + ", above this cell's " +
+               std::to_string(layer.cell_profile().max_pusher_speed) + " m/s; pusher stopped";
+        return Stop(loop, record);
+      }
+      record.commanded = v;
+      // Actuation noise (defects.hpp) on a moving pusher: v (1 + s) + o.
+      loop.in_force.velocity = v.norm() > 0 ? Eigen::Vector3d(v * loop.perturbation.velocity_scale +
+                                                              loop.perturbation.velocity_offset)
+                                            : Eigen::Vector3d::Zero();
+      loop.in_force.angular_velocity = w;
+      loop.last_command_at = now;
+    } else if (now - loop.last_command_at > hold) {
+      *why = "controller " + spec.name + ": no command for " + std::to_string(spec.hold_s) +
+             " s (hold time) after sample " + std::to_string(k) + "; pusher stopped";
+      return Stop(loop, record);
+    } else {
+      record.commanded =
+          loop.applied.empty() ? Eigen::Vector3d::Zero() : loop.applied.back().commanded;
+    }
+    record.applied = loop.in_force.velocity;
+    loop.applied.push_back(record);
+    return loop.in_force;
+  }
+
+  std::optional<mechanics::PusherMotion> Stop(ClosedLoop& loop, AppliedCommand record) {
+    loop.in_force.velocity.setZero();
+    record.applied.setZero();
+    loop.applied.push_back(record);
+    return std::nullopt;
+  }
+
+  // The backend can run it (Execute checked closed_loop before ACCEPTED); the
+  // defect layer perturbs the scene as for any trial.
+  void ExecuteClosedLoop(const msg::TrialCommand& c, const mechanics::Scene& scene,
+                         const TrialContext& trial, Clock::time_point started) {
+    ClosedLoop loop{c,
+                    trial,
+                    layer.perturbation(),
+                    MakeControlContext(scene, layer.cell_profile().max_pusher_speed),
+                    "",
+                    Clock::now(),
+                    trial.deadline,
+                    0,
+                    {},
+                    {},
+                    {}};
+    loop.params = ControlContextToJson(loop.context);
+    loop.expected_samples =
+        static_cast<std::size_t>(std::floor(scene.duration * mechanics::kSampleRateHz + 1e-9)) + 1;
+    // The controller must be on the domain, its endpoints matched, before
+    // the first sample: a lockstep cell waits for it only hold_s.
+    const std::string peer = "arena.controller." + loop.context.spec.name;
+    const auto wait = std::chrono::duration_cast<dds::Millis>(
+        std::min(std::chrono::duration<double>(kControllerWait_s),
+                 std::chrono::duration<double>(loop.deadline - Clock::now())));
+    if (!participant.WaitForPeer(peer, wait) || !live.WaitForMatched(1, dds::Millis(2000)) ||
+        !pusher_commands.WaitForMatched(1, dds::Millis(2000))) {
+      auto s = BaseStatus(c, msg::STATE_FAILED);
+      s.failure(msg::FAILURE_NONE);  // the controller's, not the cell's: a retry may find it
+      s.reason("controller " + loop.context.spec.name + ": not on domain " +
+               std::to_string(options.domain_id) + " (start `arena controller --name " +
+               loop.context.spec.name + "`)");
+      s.phase_wall_s(std::chrono::duration<double>(Clock::now() - started).count());
+      return Finish(c, s);
+    }
+    loop.start = Clock::now();
+    loop.last_command_at = loop.start;
+    pusher_commands.TakeAll();  // answers to earlier trials
+    mechanics::SimulationResult result =
+        layer.ExecuteClosedLoop(scene, trial,
+                                [&](const std::vector<mechanics::TrajectorySample>& samples,
+                                    std::string* why) { return NextCommand(loop, samples, why); });
+    const mechanics::Scene& actual = layer.actual_scene();
+    std::string failure = result.stopped;
+    if (result.status != mechanics::SimulationStatus::kOk) {
+      failure = "simulation: " + ModeName(result.status) + ": " + result.error;
+    }
+    if (result.samples.empty()) {
+      auto s = BaseStatus(c, msg::STATE_FAILED);
+      s.reason(failure.empty() ? "simulation: no samples" : failure);
+      s.failure(ClosedLoopFailure(s.reason()));
+      s.phase_wall_s(std::chrono::duration<double>(Clock::now() - started).count());
+      return Finish(c, s);
+    }
+    // The log: every sample, as the closed loop saw it, unpaced (the loop
+    // itself was paced).
+    const auto observed = layer.Observe(result.samples, trial);
+    mechanics::Scene as_run = actual;  // PusherAt's velocity: the last command
+    as_run.pusher->motion = loop.in_force;
+    const StreamOutcome streamed = StreamLog(c, result.samples, as_run, observed, Clock::now(),
+                                             trial.deadline, Pacing::kFlatOut);
+    if (failure.empty()) failure = streamed.failure;
+    const auto& last = result.samples.back();
+    true_pose.position = last.position;
+    true_pose.orientation = last.orientation;
+    for (auto it = observed.rbegin(); it != observed.rend(); ++it) {
+      if (it->valid) {
+        observed_pose.position = it->position;
+        observed_pose.orientation = it->orientation;
+        break;
+      }
+    }
+    pusher = scene.pusher;
+
+    auto s = BaseStatus(c, failure.empty() ? msg::STATE_EXECUTED : msg::STATE_FAILED);
+    s.reason(failure);
+    if (!failure.empty()) s.failure(ClosedLoopFailure(failure));
+    s.samples(static_cast<std::uint32_t>(result.samples.size()));
+    s.phase_wall_s(std::chrono::duration<double>(Clock::now() - started).count());
+    s.detail_json(ClosedLoopDetail(loop, result, streamed).dump());
+    if (!failure.empty()) {
+      spdlog::warn("cell {}: trial {} attempt {} failed: {}", options.id, c.trial_id(), c.attempt(),
+                   failure);
+    }
+    Finish(c, s);
+  }
+
+  // Typed for the service like an open-loop failure; a controller's fault
+  // (gone, silent past its hold time, a bad command) is FAILURE_NONE: no
+  // fault of the cell's model, and a retry may well run through.
+  static msg::FailureKind ClosedLoopFailure(const std::string& reason) {
+    if (reason.rfind("simulation:", 0) == 0) return msg::FAILURE_SIMULATION;
+    if (reason.rfind("deadline", 0) == 0) return msg::FAILURE_DEADLINE;
+    if (reason.rfind("interrupted", 0) == 0) return msg::FAILURE_INTERRUPTED;
+    return msg::FAILURE_NONE;
+  }
+
+  json ClosedLoopDetail(const ClosedLoop& loop, const mechanics::SimulationResult& result,
+                        const StreamOutcome& streamed) {
+    json commands = json::array();
+    std::vector<double> loop_ms;
+    std::size_t held = 0;
+    for (const auto& a : loop.applied) {
+      commands.push_back({a.sample, a.t, a.commanded.x(), a.commanded.y(), a.commanded.z(),
+                          a.applied.x(), a.applied.y(), a.applied.z(), a.loop_ms});
+      if (a.loop_ms >= 0)
+        loop_ms.push_back(a.loop_ms);
+      else
+        ++held;
+    }
+    std::sort(loop_ms.begin(), loop_ms.end());
+    auto pct = [&](double q) {
+      return loop_ms.empty() ? json(nullptr)
+                             : json(loop_ms[static_cast<size_t>(q * (loop_ms.size() - 1))]);
+    };
+    const ControlOutcome outcome =
+        ScoreControl(loop.context.spec.name, loop.context, result.samples);
+    json score = nullptr;
+    if (outcome.scored) {
+      score = {{"reached", outcome.reached},
+               {"final_error", outcome.final_error},
+               {"settle_time_s",
+                outcome.settle_time_s < 0 ? json(nullptr) : json(outcome.settle_time_s)}};
+    }
+    return {
+        {"mu_scale", loop.perturbation.mu_scale},
+        {"velocity_scale", loop.perturbation.velocity_scale},
+        {"velocity_offset",
+         {loop.perturbation.velocity_offset.x(), loop.perturbation.velocity_offset.y(),
+          loop.perturbation.velocity_offset.z()}},
+        {"batches", streamed.batches},
+        {"backend", layer.capabilities().name},
+        {"truth", ToString(layer.capabilities().truth)},
+        {"defects_applied", json::parse(layer.AppliedJson())},
+        {"model",
+         {{"dof", result.model.dof},
+          {"facets", result.model.facets},
+          {"points", result.model.points},
+          {"dt", result.model.dt},
+          {"unknowns", result.model.unknowns}}},
+        {"solver",
+         {{"steps", result.solver.steps},
+          {"max_pivots", result.solver.max_pivots},
+          {"failures", result.solver.failures}}},
+        {"simulate_wall_s", result.wall_s},
+        {"closed_loop",
+         {{"controller", loop.context.spec.name},
+          {"lockstep", options.speed == 0},
+          {"context", json::parse(loop.params)},
+          {"commands_columns",
+           {"sample", "t", "vx", "vy", "vz", "applied_vx", "applied_vy", "applied_vz", "loop_ms"}},
+          {"commands", commands},
+          {"held", held},
+          {"loop_ms", {{"p50", pct(0.5)}, {"p99", pct(0.99)}, {"max", pct(1.0)}}},
+          {"outcome", score}}}};
+  }
+
+  // ---------------------------------------------------------------------
+  // Streaming: the reliable GroundTruth log, and the LiveState topic beside it.
+
+  // One sample on the live topic: best-effort, keep-last 1, never waits.
+  void PublishLive(const msg::TrialCommand& c, std::uint32_t index, bool last,
+                   const msg::GroundTruthSample& sample, const std::string& controller = "",
+                   const std::string& params = "") {
+    msg::LiveState s;
+    s.cell_id(options.id);
+    s.trial_id(c.trial_id());
+    s.attempt(c.attempt());
+    s.sample(index);
+    s.last(last);
+    s.closed_loop(!controller.empty());
+    s.controller(controller);
+    s.controller_params(params);
+    s.state(sample);
+    s.sent_unix_ns(UnixNanos());
+    live.Write(s);
+  }
+
+  StreamOutcome StreamLog(const msg::TrialCommand& c,
+                          const std::vector<mechanics::TrajectorySample>& truth_samples,
+                          const mechanics::Scene& actual,
+                          const std::vector<dds::Observation>& observed,
+                          Clock::time_point stream_start, Clock::time_point deadline,
+                          Pacing pacing) {
+    StreamOutcome out;
+    const size_t n = truth_samples.size();
+    // Nobody watching: do not even serialise the live samples.
+    const bool live_on = pacing == Pacing::kLive && live.Matched() > 0;
+    auto due_of = [&](size_t i) {
+      return stream_start + std::chrono::duration_cast<Clock::duration>(
+                                std::chrono::duration<double>(truth_samples[i].t * options.speed));
+    };
+    std::string& failure = out.failure;
+    for (size_t first = 0; first < n && failure.empty();) {
+      const size_t count = std::min<size_t>(options.batch_samples, n - first);
+      msg::GroundTruth batch;
+      batch.trial_id(c.trial_id());
+      batch.attempt(c.attempt());
+      batch.cell_id(options.id);
+      batch.service_session(c.service_session());
+      batch.batch(out.batches);
+      batch.first_sample(static_cast<std::uint32_t>(first));
+      batch.last(first + count == n);
+      batch.samples().resize(count);
+      for (size_t i = 0; i < count; ++i) {
+        const auto& truth = truth_samples[first + i];
+        dds::EncodeSample(truth, PusherAt(actual, truth), observed[first + i], &batch.samples()[i]);
+      }
+      const bool paced = pacing == Pacing::kLive && options.speed > 0;
+      for (size_t i = 0; i < count && (paced || live_on); ++i) {
+        if (paced) {
+          const auto due = due_of(first + i);
+          if (due > deadline) break;  // the deadline check below ends the trial
+          if (!SleepUntil(due)) {
+            failure = "interrupted: cell shutting down";
+            break;
+          }
+        }
+        if (paced ? live.Matched() > 0 : live_on)
+          PublishLive(c, static_cast<std::uint32_t>(first + i), first + i + 1 == n,
+                      batch.samples()[i]);
+      }
+      if (!failure.empty()) break;
+      // Fault injection (defects.hpp): a malformed sample, or a missing batch.
+      if (options.defects.corrupt_stream == "gap" && out.batches == 0)
+        batch.first_sample(static_cast<std::uint32_t>(first + 1));
+      if (options.defects.corrupt_stream == "nan" && out.batches == 0)
+        batch.samples()[0].object_pose()[0] = std::numeric_limits<double>::quiet_NaN();
+      if (paced) {
+        const auto due = due_of(first + count - 1);
+        if (due > deadline) {
+          SleepUntil(deadline);
+        } else if (!SleepUntil(due)) {
+          failure = "interrupted: cell shutting down";
+          break;
+        }
+      }
+      if (!Serves(c.service_session())) {
+        failure = "interrupted: the cell now serves another service";
+        break;
+      }
+      batch.sent_unix_ns(UnixNanos());
+      // Ground truth is a log: a full history throttles us, it never drops.
+      while (!ground_truth.Write(batch)) {
+        if (Stopping()) {
+          failure = "interrupted: cell shutting down";
+          break;
+        }
+        if (Clock::now() > deadline) break;
+        spdlog::warn("cell {}: ground-truth history full (a slow reader?), retrying", options.id);
+      }
+      if (Clock::now() > deadline) {
+        failure = "deadline: " + std::to_string(c.deadline_s()) + " s exceeded after " +
+                  std::to_string(first + count) + " of " + std::to_string(n) + " samples";
+      }
+      if (failure.empty()) {
+        std::lock_guard<std::mutex> lock(mutex);
+        counters.samples += count;
+      }
+      first += count;
+      ++out.batches;
+      if (Stopping() && failure.empty() && first < n) failure = "interrupted: cell shutting down";
+    }
+    return out;
   }
 
   void Reset(const msg::TrialCommand& c) {

@@ -87,6 +87,16 @@ ExecuteOutcome DefectLayer::Execute(const mechanics::Scene& scene, const TrialCo
   return inner_->Execute(actual_, trial, sink);
 }
 
+mechanics::SimulationResult DefectLayer::ExecuteClosedLoop(
+    const mechanics::Scene& scene, const TrialContext& trial,
+    const mechanics::PusherCommandSource& commands) {
+  perturbation_ = caps_.emulates_defects ? DrawPerturbation(effective_, trial.seed, trial.trial_id)
+                                         : TrialPerturbation{};
+  actual_ = caps_.emulates_defects ? ApplyPerturbation(scene, perturbation_) : scene;
+  if (actual_.pusher) actual_.pusher->motion = mechanics::PusherMotion{};  // until the first answer
+  return inner_->SimulateClosedLoop(actual_, commands);
+}
+
 std::vector<dds::Observation> DefectLayer::Observe(
     const std::vector<mechanics::TrajectorySample>& truth, const TrialContext& trial) const {
   // Sensing defects (noise, latency, drops) are computed from the truth, so

@@ -14,6 +14,10 @@ MechanicsBackend DefaultMechanics() {
   MechanicsBackend backend;
   backend.parse = [](std::string_view text) { return mechanics::ParseScene(text); };
   backend.simulate = [](const mechanics::Scene& scene) { return mechanics::Simulate(scene); };
+  backend.simulate_closed_loop = [](const mechanics::Scene& scene,
+                                    const mechanics::PusherCommandSource& commands) {
+    return mechanics::Simulate(scene, commands);
+  };
   return backend;
 }
 
@@ -31,19 +35,28 @@ class MechanicsStandIn final : public Backend {
     c.engine = "arena contact model";
     c.settings_json =
         nlohmann::json({{"facets", f_.facets}, {"points", f_.points}, {"dt", f_.dt}}).dump();
+    c.closed_loop = static_cast<bool>(m_.simulate_closed_loop);
     return c;
   }
   std::string Prepare(const mechanics::Scene&, const TrialContext&) override { return ""; }
+  mechanics::SimulationResult SimulateClosedLoop(
+      const mechanics::Scene& scene, const mechanics::PusherCommandSource& commands) override {
+    return m_.simulate_closed_loop(AtFidelity(scene), commands);
+  }
   ExecuteOutcome Execute(const mechanics::Scene& scene, const TrialContext&,
                          const SampleSink& sink) override {
+    return StreamSimulation(m_.simulate(AtFidelity(scene)), sink);
+  }
+
+ private:
+  mechanics::Scene AtFidelity(const mechanics::Scene& scene) const {
     mechanics::Scene actual = scene;
     actual.model.facets = std::max(actual.model.facets, f_.facets);
     actual.model.points = std::max(actual.model.points, f_.points);
     actual.model.dt = std::min(actual.model.dt, f_.dt);
-    return StreamSimulation(m_.simulate(actual), sink);
+    return actual;
   }
 
- private:
   MechanicsBackend m_;
   Fidelity f_;
 };

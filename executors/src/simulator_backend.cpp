@@ -22,6 +22,7 @@ class SimulatorBackend final : public Backend {
     caps_.engine = std::move(engine);
     caps_.emulates_defects = true;
     caps_.settings_json = sim_->settings_json();
+    caps_.closed_loop = sim_->closed_loop();
   }
   BackendCapabilities Capabilities() const override { return caps_; }
   std::string Prepare(const mechanics::Scene& scene, const TrialContext&) override {
@@ -31,6 +32,10 @@ class SimulatorBackend final : public Backend {
   ExecuteOutcome Execute(const mechanics::Scene& scene, const TrialContext&,
                          const SampleSink& sink) override {
     return StreamSimulation(sim_->Simulate(scene), sink);
+  }
+  mechanics::SimulationResult SimulateClosedLoop(
+      const mechanics::Scene& scene, const mechanics::PusherCommandSource& commands) override {
+    return sim_->SimulateClosedLoop(scene, commands);
   }
 
  private:

@@ -509,6 +509,18 @@ Eigen::Vector3d ContactModel::pusher_position() const {
   if (!impl_->scene.pusher) return Eigen::Vector3d::Zero();
   return impl_->scene.pusher->position + impl_->scene.pusher->motion.velocity * impl_->t;
 }
+// Geometry() places the pusher at position + velocity t: rebasing the
+// position keeps it where it is when the velocity changes.
+bool ContactModel::SetPusherMotion(const PusherMotion& motion) {
+  auto& pusher = impl_->scene.pusher;
+  if (!pusher || motion.angular_velocity != pusher->motion.angular_velocity) return false;
+  pusher->position = pusher_position() - motion.velocity * impl_->t;
+  pusher->motion = motion;
+  for (Contact& ct : impl_->contacts) {
+    if (ct.pusher) ct.spec.position = pusher->position;
+  }
+  return true;
+}
 
 namespace {
 

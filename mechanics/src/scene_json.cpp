@@ -15,6 +15,7 @@
 
 #include <algorithm>
 #include <array>
+#include <cctype>
 #include <charconv>
 #include <cmath>
 #include <fstream>
@@ -451,12 +452,39 @@ ContactSpec ReadFinger(const json& v, const std::string& path) {
   return finger;
 }
 
+// "motion": {"controller": NAME, "target": x, "gain": k, "tolerance": e,
+// "hold_s": h} (closed loop; everything but the name optional).
+PusherController ReadController(const json& v, const std::string& path) {
+  Obj o(v, path, {"controller", "target", "gain", "tolerance", "hold_s"});
+  PusherController c;
+  c.name = String(o.Require("controller"), o.At("controller"));
+  if (c.name.empty() || c.name.size() > kMaxNameLength) {
+    throw SceneError(o.At("controller"), "must be 1..64 characters");
+  }
+  for (char ch : c.name) {
+    if (!(std::isalnum(static_cast<unsigned char>(ch)) || ch == '_' || ch == '-' || ch == '.')) {
+      throw SceneError(o.At("controller"), "only letters, digits, '_', '-' and '.' are allowed");
+    }
+  }
+  if (const json* x = o.Find("target")) c.target = Number(*x, o.At("target"));
+  if (const json* x = o.Find("gain")) c.gain = Number(*x, o.At("gain"));
+  if (const json* x = o.Find("tolerance")) c.tolerance = Number(*x, o.At("tolerance"));
+  if (const json* x = o.Find("hold_s")) c.hold_s = Number(*x, o.At("hold_s"));
+  if (!(c.tolerance > 0)) throw SceneError(o.At("tolerance"), "must be > 0");
+  if (!(c.hold_s > 0) || c.hold_s > 60) throw SceneError(o.At("hold_s"), "must be in (0, 60] s");
+  return c;
+}
+
 PusherSpec ReadPusher(const json& v, const std::string& path) {
   Obj o(v, path, {"type", "position", "normal", "axis", "length", "radius", "mu", "motion"});
   PusherSpec pusher;
   pusher.name = "pusher";
   ReadContact(o, &pusher);
   if (const json* m = o.Find("motion")) {
+    if (m->is_object() && m->contains("controller")) {
+      pusher.controller = ReadController(*m, o.At("motion"));
+      return pusher;
+    }
     Obj motion(*m, o.At("motion"), {"velocity", "angular_velocity"});
     if (const json* vel = motion.Find("velocity")) {
       pusher.motion.velocity = Vec3(*vel, motion.At("velocity"));
@@ -774,6 +802,16 @@ void ValidateScene(const Scene& scene) {
     ValidateContact(p, "pusher", scene);
     RequireFinite(p.motion.velocity, "pusher.motion.velocity");
     RequireFinite(p.motion.angular_velocity, "pusher.motion.angular_velocity");
+    if (p.controller) {
+      if (p.controller->name.empty() || p.controller->name.size() > kMaxNameLength)
+        throw SceneError("pusher.motion.controller", "must be 1..64 characters");
+      if (!std::isfinite(p.controller->target) || !std::isfinite(p.controller->gain))
+        throw SceneError("pusher.motion", "target and gain must be finite");
+      if (!(p.controller->tolerance > 0) || !std::isfinite(p.controller->tolerance))
+        throw SceneError("pusher.motion.tolerance", "must be > 0");
+      if (!(p.controller->hold_s > 0) || p.controller->hold_s > 60)
+        throw SceneError("pusher.motion.hold_s", "must be in (0, 60] s");
+    }
     constituents.emplace_back("pusher", ConstituentPoints(p, model.points));
   }
 
@@ -973,8 +1011,16 @@ std::string SceneToJson(const Scene& scene, int indent) {
   for (const auto& f : scene.fingers) j["fingers"].push_back(ContactJson(f, true));
   if (scene.pusher) {
     ojson p = ContactJson(*scene.pusher, false);
-    p["motion"] = {{"velocity", Vec(scene.pusher->motion.velocity)},
-                   {"angular_velocity", Vec(scene.pusher->motion.angular_velocity)}};
+    if (const auto& c = scene.pusher->controller) {
+      p["motion"] = {{"controller", c->name},
+                     {"target", c->target},
+                     {"gain", c->gain},
+                     {"tolerance", c->tolerance},
+                     {"hold_s", c->hold_s}};
+    } else {
+      p["motion"] = {{"velocity", Vec(scene.pusher->motion.velocity)},
+                     {"angular_velocity", Vec(scene.pusher->motion.angular_velocity)}};
+    }
     j["pusher"] = std::move(p);
   }
   j["model"] = {{"facets", scene.model.facets},

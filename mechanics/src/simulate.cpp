@@ -50,7 +50,32 @@ const char* ToString(GraspStatus status) {
   return "unknown";
 }
 
-SimulationResult Simulate(const Scene& scene) {
+SimulationResult Simulate(const Scene& scene) { return Simulate(scene, nullptr); }
+
+namespace {
+
+// The command a closed loop may apply: translation within the model's plane
+// (when the model is planar), the scene's own turning.
+std::string CheckCommand(const Scene& scene, const ModelInfo& info, const PusherMotion& command) {
+  if (!command.velocity.allFinite() || !command.angular_velocity.allFinite())
+    return "pusher command: not finite";
+  if (command.angular_velocity != scene.pusher->motion.angular_velocity)
+    return "pusher command: angular velocity differs from the scene's (the model turns the pusher "
+           "at a constant rate only)";
+  if (info.dof == 3) {
+    Scene with = scene;
+    with.pusher->motion = command;
+    const PlaneCheck plane = FindPlane(with);
+    const PlaneCheck base = FindPlane(scene);
+    if (!plane.planar || plane.normal.cross(base.normal).norm() > 1e-6)
+      return "pusher command: leaves the plane of the planar model";
+  }
+  return "";
+}
+
+}  // namespace
+
+SimulationResult Simulate(const Scene& scene, const PusherCommandSource& commands) {
   const auto start = std::chrono::steady_clock::now();
   SimulationResult result;
   ContactModel model(scene);
@@ -72,6 +97,8 @@ SimulationResult Simulate(const Scene& scene) {
   const Eigen::Vector3d pusher0 = scene.pusher ? scene.pusher->position : Eigen::Vector3d::Zero();
   const Eigen::Vector3d pusher_v =
       scene.pusher ? scene.pusher->motion.velocity : Eigen::Vector3d::Zero();
+  const bool closed_loop = commands && scene.pusher;
+  Eigen::Vector3d command_v = pusher_v;  // closed loop: the motion in force
 
   long next = 0;  // next sample index
   for (long step = 0; step < n_steps; ++step) {
@@ -113,11 +140,27 @@ SimulationResult Simulate(const Scene& scene) {
         sample.velocity = model.velocity();
         sample.angular_velocity = model.angular_velocity();
       }
-      sample.pusher_position = pusher0 + pusher_v * ts;
+      sample.pusher_position =
+          closed_loop ? Eigen::Vector3d(model.pusher_position() - command_v * (t1 - ts))
+                      : Eigen::Vector3d(pusher0 + pusher_v * ts);
       sample.pusher_force = model.pusher_force();
       sample.contacts = model.contacts();
       result.samples.push_back(std::move(sample));
       ++next;
+      if (!closed_loop) continue;
+      std::string why;
+      const std::optional<PusherMotion> command = commands(result.samples, &why);
+      if (!command) {
+        result.stopped = why.empty() ? "stopped by the command source" : why;
+        return finish();
+      }
+      if (std::string bad = CheckCommand(scene, result.model, *command); !bad.empty()) {
+        result.status = SimulationStatus::kInvalidScene;
+        result.error = bad;
+        return finish();
+      }
+      model.SetPusherMotion(*command);
+      command_v = command->velocity;
     }
   }
   return finish();

@@ -82,7 +82,7 @@ struct VariationInfo {
   bool strict;
 };
 constexpr double kNoBound = -std::numeric_limits<double>::infinity();
-constexpr std::array<VariationInfo, 20> kVariationCatalog = {{
+constexpr std::array<VariationInfo, 22> kVariationCatalog = {{
     {"object_size_x", ValueType::kNumber, 0, true},  // box extents (m)
     {"object_size_y", ValueType::kNumber, 0, true},
     {"object_size_z", ValueType::kNumber, 0, true},
@@ -103,6 +103,9 @@ constexpr std::array<VariationInfo, 20> kVariationCatalog = {{
     {"push_direction", ValueType::kVector, 0, false},       // unit, gripper frame
     {"push_speed", ValueType::kNumber, 0, false},           // m/s
     {"push_distance", ValueType::kNumber, 0, true},         // m; sets duration = distance / speed
+    // Closed loop (issue 19): the scene's pusher.motion controller settings.
+    {"controller_target", ValueType::kNumber, kNoBound, false},  // controller's units
+    {"controller_gain", ValueType::kNumber, kNoBound, false},
 }};
 
 const VariationInfo* FindVariation(std::string_view name) {
@@ -419,6 +422,14 @@ Scene BuildScene(const Scene& base, const Values& values) {
       }
       s.duration = distance->number / v;
     }
+    const auto* target = Get(values, "controller_target");
+    const auto* gain = Get(values, "controller_gain");
+    if ((target || gain) && !p.controller) {
+      throw CampaignError(target ? "variations.controller_target" : "variations.controller_gain",
+                          "needs a closed-loop scene (pusher.motion {\"controller\": NAME})");
+    }
+    if (target) p.controller->target = target->number;
+    if (gain) p.controller->gain = gain->number;
   }
   return s;
 }

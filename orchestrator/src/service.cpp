@@ -122,6 +122,7 @@ class SqliteTrialStore : public TrialStore {
                        const std::string& truth, const std::string& defects_applied) override {
     s_.RecordExecution(id, attempt, backend, truth, defects_applied);
   }
+  void RecordClosedLoop(const db::ClosedLoopRun& run) override { s_.RecordClosedLoop(run); }
   void UpsertCell(const std::string& id, const std::vector<std::string>& types,
                   const std::string& caps, const std::string& defects) override {
     s_.UpsertCell(id, types, caps, defects);
@@ -177,6 +178,8 @@ struct PredictionJob {
   mechanics::Scene scene;  // with the campaign's model settings applied
   std::vector<mechanics::TrajectorySample> truth;
   nlohmann::json prediction;  // the campaign's `prediction` (names the predictor)
+  // Closed loop: the applied commands, replayed through the model; empty otherwise.
+  assessment::RecordedCommands commands;
 };
 
 // Worker threads that run the predictor; jobs in, results out. Start()
@@ -197,7 +200,8 @@ class PredictorPool : public PredictionPort {
   void SetStore(db::Store* store) { store_ = store; }
 
   void Start(PredictionRequest r) override {
-    PredictionJob job{r.trial_id, r.attempt, r.campaign_id, {}, std::move(r.truth), {}};
+    PredictionJob job{r.trial_id,         r.attempt, r.campaign_id,        {},
+                      std::move(r.truth), {},        std::move(r.commands)};
     try {
       mechanics::Scene scene = r.scene_json.empty() || !job.truth.empty()
                                    ? std::move(r.scene)
@@ -207,6 +211,11 @@ class PredictorPool : public PredictionPort {
         const auto normals = ContactNormals(scene);
         for (const auto& s : gt.samples)
           job.truth.push_back(ToTrajectorySample(s, normals, scene.pusher.has_value()));
+        // Closed loop: the commands it applied, replayed (issue 19).
+        if (job.commands.empty() && scene.pusher && scene.pusher->controller) {
+          if (auto run = store_->GetClosedLoop(r.trial_id))
+            job.commands = assessment::CommandsOf(*run);
+        }
       }
       job.scene = ApplyModelSettings(scene, CampaignModel(r.campaign_id));
       job.prediction = CampaignModel(r.campaign_id);
@@ -279,7 +288,8 @@ class PredictorPool : public PredictionPort {
         jobs_.pop_front();
       }
       PredictionDone done{job.trial_id, job.attempt, job.campaign_id,
-                          PredictTrial(job.scene, job.truth, job.prediction)};
+                          assessment::PredictTrial(job.scene, job.truth, job.prediction,
+                                                   job.commands.empty() ? nullptr : &job.commands)};
       std::lock_guard lock(mu_);
       results_.push_back(std::move(done));
     }

@@ -12,6 +12,7 @@
 
 #include "arena/assessment/truth.hpp"
 #include "arena/mechanics/scene_json.hpp"
+#include "arena/orchestrator/closed_loop.hpp"
 #include "arena/orchestrator/logging.hpp"
 #include "arena/orchestrator/trial_data.hpp"
 #include "arena/schemas/ground_truth.hpp"
@@ -115,6 +116,7 @@ struct TrialDriver::Impl {
     std::int64_t expected = -1;
     Clock::time_point stream_deadline{};
     std::vector<mechanics::TrajectorySample> truth;
+    assessment::RecordedCommands commands;  // closed loop: the commands the cell applied
     bool publishing = false;  // the publish step is under way (or waiting on the store)
   };
   std::map<std::int64_t, Execution> executions;
@@ -587,8 +589,9 @@ struct TrialDriver::Impl {
     Execution& ex = it->second;
     CellRun& cell = Cell(ex.cell_id);
     CellResult(cell, CellPhase::kExecuting, true, "");
-    PredictionRequest request{ex.trial_id,         ex.campaign_id,      ex.attempt,
-                              std::move(ex.scene), std::move(ex.truth), ex.scene_json};
+    PredictionRequest request{ex.trial_id,           ex.campaign_id,      ex.attempt,
+                              std::move(ex.scene),   std::move(ex.truth), ex.scene_json,
+                              std::move(ex.commands)};
     predictions.Start(std::move(request));
     const std::string tag = TrialTag(ex.campaign_id, ex.trial_id, ex.attempt);
     const int attempt = ex.attempt;
@@ -653,6 +656,24 @@ struct TrialDriver::Impl {
          });
   }
 
+  // Closed loop (issue 19): the commands the cell applied and the
+  // controller's outcome (detail_json "closed_loop"), stored with the attempt
+  // like RecordExecution; the commands also go to the prediction (replayed).
+  void RecordClosedLoop(Execution& ex, const msg::TrialStatus& st) {
+    const std::string tag = TrialTag(ex.campaign_id, ex.trial_id, ex.attempt);
+    std::optional<db::ClosedLoopRun> run;
+    try {
+      run = ClosedLoopFromDetail(ex.trial_id, ex.attempt, st.reason(), st.detail_json());
+    } catch (const std::exception& e) {
+      spdlog::error("{}: closed-loop record: {}", tag, e.what());
+      return;
+    }
+    if (!run) return;
+    ex.commands = assessment::CommandsOf(*run);
+    auto shared = std::make_shared<db::ClosedLoopRun>(std::move(*run));
+    Step(tag + ": record closed loop", "", [this, shared] { store.RecordClosedLoop(*shared); });
+  }
+
   void OnExecuteStatus(CellRun& cell, const msg::TrialStatus& st) {
     auto it = executions.find(cell.trial_id);
     if (it == executions.end() || it->second.publishing) return;
@@ -662,6 +683,7 @@ struct TrialDriver::Impl {
         return;
       case msg::STATE_EXECUTED:
         RecordExecution(ex, st);
+        RecordClosedLoop(ex, st);
         cell.execute_wall_s = st.phase_wall_s();
         ex.expected = st.samples();
         ex.stream_deadline = now() + Dur(opt.service.stream_grace_s);
@@ -676,6 +698,7 @@ struct TrialDriver::Impl {
         return;
       }
       default:
+        RecordClosedLoop(ex, st);  // a failed closed loop: why, and the commands up to then
         if (st.failure() == msg::FAILURE_SIMULATION) {
           // The cell's simulator could not run this scene. The cell is fine
           // and a re-run is bit-identical, so the trial fails at once.

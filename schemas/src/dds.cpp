@@ -14,6 +14,7 @@
 #include <mutex>
 #include <sstream>
 #include <thread>
+#include <type_traits>
 
 #include <fastdds/rtps/attributes/ServerAttributes.h>
 #include <fastdds/rtps/common/InstanceHandle.h>
@@ -161,6 +162,16 @@ struct Traits<msg::GroundTruth> {
   using PubSub = msg::GroundTruthPubSubType;
   static constexpr const char* kTopic = "GroundTruth";
 };
+template <>
+struct Traits<msg::LiveState> {
+  using PubSub = msg::LiveStatePubSubType;
+  static constexpr const char* kTopic = "LiveState";
+};
+template <>
+struct Traits<msg::PusherCommand> {
+  using PubSub = msg::PusherCommandPubSubType;
+  static constexpr const char* kTopic = "PusherCommand";
+};
 
 template <class T>
 const char* TopicName() {
@@ -171,6 +182,10 @@ const char* TopicName() {
 // QoS per topic
 
 namespace {
+
+bool IsRealTime(const std::string& topic) {
+  return topic == "LiveState" || topic == "PusherCommand";
+}
 
 void ApplyTopicQos(const std::string& topic, fdds::ReliabilityQosPolicy* reliability,
                    fdds::DurabilityQosPolicy* durability, fdds::HistoryQosPolicy* history,
@@ -194,10 +209,18 @@ void ApplyTopicQos(const std::string& topic, fdds::ReliabilityQosPolicy* reliabi
     history->kind = fdds::KEEP_LAST_HISTORY_QOS;
     history->depth = 1;
   }
+  if (IsRealTime(topic)) {
+    // Telemetry: the newest sample per cell is all that matters; nothing is
+    // acknowledged, so nothing ever waits (the reliable log's tail, see
+    // bench/README.md, was its acknowledgement window).
+    reliability->kind = fdds::BEST_EFFORT_RELIABILITY_QOS;
+    history->kind = fdds::KEEP_LAST_HISTORY_QOS;
+    history->depth = 1;
+  }
 }
 
-// Topics that cells write: their writers assert liveliness, their readers
-// track it.
+// Topics that cells (and controllers) write: their writers assert
+// liveliness, their readers track it.
 bool CellWritten(const std::string& topic) { return topic != "TrialCommand"; }
 
 std::string Describe(const fdds::ReliabilityQosPolicy& r, const fdds::DurabilityQosPolicy& d,
@@ -455,6 +478,8 @@ Participant::Participant(const ParticipantOptions& options)
   Register<msg::TrialCommand>(core_->participant);
   Register<msg::TrialStatus>(core_->participant);
   Register<msg::GroundTruth>(core_->participant);
+  Register<msg::LiveState>(core_->participant);
+  Register<msg::PusherCommand>(core_->participant);
   core_->publisher = core_->participant->create_publisher(fdds::PUBLISHER_QOS_DEFAULT);
   if (core_->publisher == nullptr) throw DdsError("dds: create_publisher failed");
   core_->subscriber = core_->participant->create_subscriber(fdds::SUBSCRIBER_QOS_DEFAULT);
@@ -553,6 +578,10 @@ Writer<T>::Writer(Participant& participant, const WriterOptions& options)
     qos.liveliness().lease_duration = Duration_t(kCellLivelinessLease_s);
     qos.liveliness().announcement_period = Duration_t(kCellLivelinessLease_s / 4.0);
   }
+  if (IsRealTime(topic)) {
+    qos.deadline().period = Duration_t(kLiveDeadline_s);
+    qos.reliability().max_blocking_time = Duration_t(0, 0);
+  }
   if (topic == "GroundTruth") {
     impl_->window = kGroundTruthMaxBatches / 4;
     auto& times = qos.reliable_writer_qos().times;
@@ -618,6 +647,8 @@ struct Reader<T>::Impl : public fdds::DataReaderListener {
   std::deque<T> queue;
   std::atomic<std::uint64_t> rejected{0};
 
+  std::string only_cell;  // real-time topics: this cell's messages only
+
   ~Impl() override {
     if (reader != nullptr) {
       reader->set_listener(nullptr);
@@ -644,9 +675,24 @@ struct Reader<T>::Impl : public fdds::DataReaderListener {
     if (taken.empty()) return;
     {
       std::lock_guard<std::mutex> lock(mutex);
-      for (auto& s : taken) queue.push_back(std::move(s));
+      for (auto& s : taken) Enqueue(std::move(s));
     }
     arrived.notify_all();
+  }
+
+  // Real-time topics: keep-last 1 per cell in our queue too (a reader that
+  // fell behind gets each cell's newest message, not a backlog).
+  void Enqueue(T&& s) {
+    if constexpr (std::is_same_v<T, msg::LiveState> || std::is_same_v<T, msg::PusherCommand>) {
+      if (!only_cell.empty() && s.cell_id() != only_cell) return;
+      for (auto& q : queue) {
+        if (q.cell_id() == s.cell_id()) {
+          q = std::move(s);
+          return;
+        }
+      }
+    }
+    queue.push_back(std::move(s));
   }
 
   void on_liveliness_changed(fdds::DataReader*,
@@ -681,8 +727,14 @@ Reader<T>::Reader(Participant& participant, const ReaderOptions& options)
   qos.liveliness().kind = fdds::AUTOMATIC_LIVELINESS_QOS;
   qos.liveliness().lease_duration =
       CellWritten(topic) ? Duration_t(kCellLivelinessLease_s) : eprosima::fastrtps::c_TimeInfinite;
+  if (IsRealTime(topic)) qos.deadline().period = Duration_t(kLiveDeadline_s);
   fdds::StatusMask mask = fdds::StatusMask::data_available();
   mask << fdds::StatusMask::liveliness_changed();
+  // only_cell is applied in our listener: a DDS content filter needs type
+  // objects that arena's generated types do not carry (Fast DDS 2.9 refuses
+  // create_contentfilteredtopic without them), so other cells' messages still
+  // cross the transport (bench/README.md).
+  impl_->only_cell = IsRealTime(topic) ? options.only_cell : std::string();
   impl_->reader = core.subscriber->create_datareader(t, qos, impl_.get(), mask);
   if (impl_->reader == nullptr) throw DdsError("dds: create_datareader(" + topic + ") failed");
   const auto q = impl_->reader->get_qos();
@@ -739,6 +791,8 @@ ARENA_DDS_INSTANTIATE(msg::CellAnnounce)
 ARENA_DDS_INSTANTIATE(msg::TrialCommand)
 ARENA_DDS_INSTANTIATE(msg::TrialStatus)
 ARENA_DDS_INSTANTIATE(msg::GroundTruth)
+ARENA_DDS_INSTANTIATE(msg::LiveState)
+ARENA_DDS_INSTANTIATE(msg::PusherCommand)
 #undef ARENA_DDS_INSTANTIATE
 
 }  // namespace arena::dds

@@ -438,6 +438,8 @@ const char* ToString(Role role) {
       return "service";
     case Role::kWatcher:
       return "watcher";
+    case Role::kController:
+      return "controller";
   }
   return "?";
 }
@@ -446,7 +448,8 @@ Role ParseRole(const std::string& text) {
   if (text == "cell") return Role::kCell;
   if (text == "service") return Role::kService;
   if (text == "watcher") return Role::kWatcher;
-  throw SecurityError("--role: '" + text + "' is not one of cell, service, watcher");
+  if (text == "controller") return Role::kController;
+  throw SecurityError("--role: '" + text + "' is not one of cell, service, watcher, controller");
 }
 
 RoleTopics TopicsOf(Role role) {
@@ -454,13 +457,17 @@ RoleTopics TopicsOf(Role role) {
   const std::string command = TopicName<msg::TrialCommand>();
   const std::string status = TopicName<msg::TrialStatus>();
   const std::string truth = TopicName<msg::GroundTruth>();
+  const std::string live = TopicName<msg::LiveState>();
+  const std::string pusher = TopicName<msg::PusherCommand>();
   switch (role) {
     case Role::kCell:
-      return {{announce, status, truth}, {command}};
+      return {{announce, status, truth, live}, {command, pusher}};
     case Role::kService:
-      return {{command}, {announce, status, truth}};
+      return {{command}, {announce, status, truth, live}};
     case Role::kWatcher:
-      return {{}, {announce, status, truth}};
+      return {{}, {announce, status, truth, live}};
+    case Role::kController:  // reads what the cells see, answers with pusher commands
+      return {{pusher}, {announce, live}};
   }
   return {};
 }

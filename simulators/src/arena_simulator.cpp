@@ -27,6 +27,17 @@ class ArenaSimulator final : public Simulator {
   std::string CheckScene(const mechanics::Scene&) const override { return ""; }
 
   mechanics::SimulationResult Simulate(const mechanics::Scene& scene) const override {
+    return mechanics::Simulate(AtSettings(scene));
+  }
+  bool closed_loop() const override { return true; }
+  mechanics::SimulationResult SimulateClosedLoop(
+      const mechanics::Scene& scene,
+      const mechanics::PusherCommandSource& commands) const override {
+    return mechanics::Simulate(AtSettings(scene), commands);
+  }
+
+ private:
+  mechanics::Scene AtSettings(const mechanics::Scene& scene) const {
     mechanics::Scene s = scene;
     auto& m = s.model;
     if (settings_.at_least) {
@@ -38,10 +49,9 @@ class ArenaSimulator final : public Simulator {
       if (settings_.points) m.points = settings_.points;
       if (settings_.dt > 0) m.dt = settings_.dt;
     }
-    return mechanics::Simulate(s);
+    return s;
   }
 
- private:
   ArenaSettings settings_;
 };
 

@@ -471,5 +471,123 @@ TEST(ExportContents, ParametersSceneContactsAndPredictions) {
   EXPECT_EQ(m["columns"]["predicted"].size(), m["columns"]["true"].size());
 }
 
+// Closed loop (issue 19): the controller's run and every applied command
+// travel with the dataset in each format, and the prediction of a
+// closed-loop trial is given the commands to replay.
+TEST(ExportContents, ClosedLoopRunsAndAppliedCommandsInEveryFormat) {
+  TempDir dir;
+  const auto path = dir.File("cl.db");
+  std::int64_t closed_trial = 0;
+  {
+    auto store = Store::Open(path);
+    store->UpsertCell("c", {"point"});
+    store->CreateCampaign(MakeCampaign("cl"), MakeTrials(2));
+    for (int i = 0; i < 2; ++i) {
+      const auto t = store->ClaimNextTrial("c");
+      RunTrialToDone(*store, *t, 20);
+      if (i != 0) continue;
+      closed_trial = t->trial_id;
+      ClosedLoopRun run;
+      run.trial_id = t->trial_id;
+      run.attempt = t->attempt;
+      run.controller = "pivot";
+      run.lockstep = true;
+      run.target = 0.2;
+      run.gain = 0.05;
+      run.tolerance = 0.02;
+      run.hold_s = 0.05;
+      run.reached = true;
+      run.final_error = 0.01;
+      run.settle_time_s = 0.3;
+      run.held = 1;
+      run.loop_p50_ms = 0.4;
+      run.loop_p99_ms = 1.5;
+      for (int k = 0; k < 3; ++k) {
+        ClosedLoopCommand c;
+        c.sample = k;
+        c.t = 0.004 * k;
+        c.commanded = {0.01 * (k + 1), 0, 0};
+        c.applied = {0.01 * (k + 1) + 1e-4, 0, 0};
+        if (k != 1) c.loop_ms = 0.5 + k;  // sample 1: no fresh answer, held
+        run.commands.push_back(c);
+      }
+      store->RecordClosedLoop(run);
+    }
+  }
+  StoreOptions ro;
+  ro.read_only = true;
+  auto store = Store::Open(path, ro);
+  auto export_as = [&](ExportFormat f, const std::string& name, int* replays) {
+    ExportOptions o;
+    o.campaign_id = 1;
+    o.format = f;
+    o.out_dir = dir.File(name);
+    o.predict = [](const std::string&, const std::string&) { return PredictedStream{}; };
+    o.predict_closed_loop = [replays](const std::string&, const std::string&,
+                                      const std::vector<ClosedLoopCommand>& commands) {
+      ++*replays;
+      EXPECT_EQ(commands.size(), 3u);
+      if (commands.size() == 3) {
+        EXPECT_EQ(commands[2].sample, 2);
+        EXPECT_DOUBLE_EQ(commands[2].commanded[0], 0.03);
+        EXPECT_FALSE(commands[1].loop_ms.has_value());
+      }
+      return PredictedStream{};
+    };
+    ExportCampaign(*store, o);
+    return dir.path() / name;
+  };
+  int replays = 0;
+  const auto csv = export_as(ExportFormat::kCsv, "csv", &replays);
+  EXPECT_EQ(replays, 1);  // the open-loop trial went to `predict`
+  const auto runs = ParseCsv(ReadAll(csv / "closed_loop.csv"));
+  ASSERT_EQ(runs.size(), 2u);
+  EXPECT_EQ(runs[1][0], std::to_string(closed_trial));
+  EXPECT_EQ(runs[1][2], "pivot");
+  const auto commands = ParseCsv(ReadAll(csv / "closed_loop_commands.csv"));
+  ASSERT_EQ(commands.size(), 4u);
+  EXPECT_EQ(commands[0][2], "sample");
+  EXPECT_DOUBLE_EQ(CsvNumber(commands[3][4]), 0.03);
+  EXPECT_DOUBLE_EQ(CsvNumber(commands[3][7]), 0.0301);
+  EXPECT_EQ(commands[2][10], "");  // held: no loop latency
+  const auto m = nlohmann::json::parse(ReadAll(csv / "manifest.json"));
+  EXPECT_EQ(m["columns"]["closed_loop_commands"].size(), 11u);
+  int listed = 0;
+  for (const auto& t : m["trials"]) listed += t.value("commands", 0);
+  EXPECT_EQ(listed, 3);
+
+  const auto jsonl = export_as(ExportFormat::kJsonl, "jsonl", &replays);
+  std::istringstream lines(ReadAll(jsonl / "closed_loop_commands.jsonl"));
+  std::string line;
+  int n = 0;
+  while (std::getline(lines, line)) {
+    const auto j = nlohmann::json::parse(line);
+    EXPECT_EQ(j["sample"], n);
+    EXPECT_EQ(j["loop_ms"].is_null(), n == 1);
+    ++n;
+  }
+  EXPECT_EQ(n, 3);
+
+  const auto h5 = export_as(ExportFormat::kHdf5, "h5", &replays);
+  const hid_t file = H5Fopen((h5 / "dataset.h5").c_str(), H5F_ACC_RDONLY, H5P_DEFAULT);
+  ASSERT_GE(file, 0);
+  const std::string name = "/trials/" + std::to_string(closed_trial) + "/commands";
+  const hid_t ds = H5Dopen2(file, name.c_str(), H5P_DEFAULT);
+  ASSERT_GE(ds, 0);
+  const hid_t space = H5Dget_space(ds);
+  hsize_t dims[2];
+  H5Sget_simple_extent_dims(space, dims, nullptr);
+  ASSERT_EQ(dims[0], 3u);
+  ASSERT_EQ(dims[1], 9u);
+  std::vector<double> data(dims[0] * dims[1]);
+  ASSERT_GE(H5Dread(ds, H5T_NATIVE_DOUBLE, H5S_ALL, H5S_ALL, H5P_DEFAULT, data.data()), 0);
+  EXPECT_DOUBLE_EQ(data[2 * 9 + 2], 0.03);   // sample 2, vx
+  EXPECT_TRUE(std::isnan(data[1 * 9 + 8]));  // sample 1 held
+  EXPECT_DOUBLE_EQ(data[2 * 9 + 8], 2.5);
+  H5Sclose(space);
+  H5Dclose(ds);
+  H5Fclose(file);
+}
+
 }  // namespace
 }  // namespace arena::db

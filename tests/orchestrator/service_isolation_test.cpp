@@ -243,7 +243,7 @@ TEST(ServiceIsolation, WatchCellSaysWithinSecondsThatItsCellDisappeared) {
   auto serve = StartArena({"serve", "--db", db, "--domain", domain}, dir / "serve.log");
   auto watch = StartArena({"watch", "--cell", "c1", "--domain", domain}, dir / "watch.out");
   ASSERT_TRUE(WaitUntil(
-      [&] { return ReadFile(dir / "watch.out").find("samples") != std::string::npos; }, 60s))
+      [&] { return ReadFile(dir / "watch.out").find(" sample ") != std::string::npos; }, 60s))
       << ReadFile(dir / "watch.out");
   c1->Signal(SIGKILL);
   const auto killed = std::chrono::steady_clock::now();

@@ -184,6 +184,11 @@ struct FakeStore : TrialStore {
     last_backend = backend;
   }
   std::string last_backend;
+  void RecordClosedLoop(const db::ClosedLoopRun& run) override {
+    faults.Hit("RecordClosedLoop");
+    closed_loops.push_back(run);
+  }
+  std::vector<db::ClosedLoopRun> closed_loops;
   void UpsertCell(const std::string& id, const std::vector<std::string>&, const std::string&,
                   const std::string&) override {
     faults.Hit("UpsertCell");
@@ -236,7 +241,11 @@ struct FakeTransport : CommandTransport {
 
 struct FakePredictions : PredictionPort {
   std::deque<PredictionRequest> requests;
-  void Start(PredictionRequest r) override { requests.push_back(std::move(r)); }
+  std::size_t last_commands = 0;  // closed loop: commands the last request replays
+  void Start(PredictionRequest r) override {
+    last_commands = r.commands.size();
+    requests.push_back(std::move(r));
+  }
   int outstanding() const override { return static_cast<int>(requests.size()); }
 };
 
@@ -260,6 +269,7 @@ struct Harness {
   int samples = 10;
   msg::TrialState execute_answer = msg::STATE_EXECUTED;
   msg::FailureKind execute_failure = msg::FAILURE_NONE;
+  std::string execute_detail = "{}";  // the EXECUTE status's detail_json
 
   explicit Harness(int trials = 1) {
     for (int i = 1; i <= trials; ++i) store.trials[i] = {};
@@ -332,6 +342,7 @@ struct Harness {
         if (execute_answer == msg::STATE_EXECUTED) driver->OnGroundTruth(Batch(c));
         auto st = Status(c, execute_answer);
         st.failure(execute_failure);
+        st.detail_json(execute_detail);
         driver->OnStatus(st);
       } else if (c.phase() == msg::PHASE_RESET) {
         driver->OnStatus(Status(c, msg::STATE_RESET_DONE));
@@ -385,6 +396,28 @@ TEST(TrialDriver, OneTrialGoesThroughEveryStepToDone) {
   EXPECT_EQ(h.driver->counters().done, 1);
   EXPECT_GE(h.store.beats, 1);
   EXPECT_GE(h.store.faults.calls["CompleteFinishedCampaigns"], 1);
+}
+
+// Closed loop (issue 19): the cell's record of the commands it applied is
+// stored with the attempt (the same step again after a busy store) and its
+// commands go to the prediction, which replays them.
+TEST(TrialDriver, AClosedLoopTrialStoresItsCommandsAndPredictsByReplayingThem) {
+  Harness h;
+  h.execute_detail = R"({"closed_loop": {"controller": "pivot_to_angle", "lockstep": true,
+      "context": {"target": 0.2, "gain": 1.0, "tolerance": 0.01, "hold_s": 0.5},
+      "commands": [[0, 0.0, 0.01, 0, 0, 0.01, 0, 0, 0.4], [1, 0.004, 0.02, 0, 0, 0.02, 0, 0, 0.5]],
+      "held": 0, "loop_ms": {"p50": 0.4, "p99": 0.5},
+      "outcome": {"reached": false, "final_error": 0.1, "settle_time_s": null}}})";
+  h.store.faults.next["RecordClosedLoop"] = {K::kBusy};
+  h.Start();
+  ASSERT_TRUE(h.RunToEnd());
+  EXPECT_EQ(h.predictions.last_commands, 2u);
+  EXPECT_EQ(h.store.trials[1].state, db::TrialState::kDone);
+  EXPECT_EQ(h.store.faults.calls["RecordClosedLoop"], 2);
+  ASSERT_EQ(h.store.closed_loops.size(), 1u);
+  EXPECT_EQ(h.store.closed_loops[0].controller, "pivot_to_angle");
+  EXPECT_EQ(h.store.closed_loops[0].commands.size(), 2u);
+  EXPECT_EQ(h.store.closed_loops[0].trial_id, 1);
 }
 
 TEST(TrialDriver, ACellServingAnotherServiceGetsNoTrialAndIsNamedInTheStore) {

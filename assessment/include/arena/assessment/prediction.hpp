@@ -67,6 +67,31 @@ db::Prediction PredictTrial(const mechanics::Scene& scene,
                             const std::vector<mechanics::TrajectorySample>& truth,
                             const nlohmann::json& prediction);
 
+// Closed loop (issue 19): the pusher commands a closed-loop trial applied,
+// indexed by the sample they answered (db::ClosedLoopCommand.commanded).
+using RecordedCommands = std::vector<mechanics::PusherMotion>;
+RecordedCommands CommandsOf(const db::ClosedLoopRun& run);
+// A command source that replays `commands` open-loop: command k moves the
+// pusher from the step after sample k, exactly as on the cell; the run stops
+// where the recording ends. `commands` must outlive the source.
+mechanics::PusherCommandSource ReplayCommands(const RecordedCommands& commands);
+
+// The scene a replay is scored against: a closed loop's pusher starts at
+// rest (its scene motion is zero), so the divergence check bounds its
+// travel by the fastest recorded command instead.
+mechanics::Scene ReplayScoringScene(const mechanics::Scene& scene,
+                                    const RecordedCommands& commands);
+
+// The same, for any trial: a closed-loop scene (pusher.controller set) is
+// predicted by replaying `commands` through the predictor (open-loop replay
+// of the same inputs) and scored as any trial; without commands its
+// prediction is status "error", on a predictor that cannot replay commands
+// "invalid_scene" with the reason. `commands` is ignored for an open-loop
+// scene and may be null. Never throws.
+db::Prediction PredictTrial(const mechanics::Scene& scene,
+                            const std::vector<mechanics::TrajectorySample>& truth,
+                            const nlohmann::json& prediction, const RecordedCommands* commands);
+
 // A trial's predicted trajectory, made as the service makes it: `prediction`
 // (the campaign's object, or null) applied to the trial's scene and run on
 // the predictor it names. Plots and exports re-run it this way (the store
@@ -79,11 +104,15 @@ struct PredictedRun {
   std::string key;            // the label the service stores the prediction under
   std::string settings_json;  // the settings it ran with (stored as model_json)
 };
+// A closed-loop scene (issue 19) replays `commands` (RecordedCommands, above);
+// without them, or on a predictor that cannot replay commands, result.status
+// is kInvalidScene with the reason.
 // @throws mechanics::SceneError for bad model settings; std::exception when
 //   the predictor cannot be made. A solver failure or a scene the predictor
 //   refuses is in result.status, not thrown.
 PredictedRun SimulatePrediction(const mechanics::Scene& trial_scene,
-                                const nlohmann::json& prediction);
+                                const nlohmann::json& prediction,
+                                const RecordedCommands* commands = nullptr);
 
 // A prediction that could not be made (status, reason in detail_json).
 db::Prediction PredictionFailure(const std::string& status, const std::string& reason);

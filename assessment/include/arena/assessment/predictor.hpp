@@ -36,6 +36,13 @@ class Predictor {
   // gives up kSolverFailure.
   virtual mechanics::SimulationResult Run(const mechanics::Scene& scene,
                                           std::size_t setting) const = 0;
+  // Closed loop (issue 19): the same with the pusher's motion taken from
+  // `commands` after every sample (the replay of a closed-loop trial's
+  // recorded commands). A predictor that cannot step with commanded pusher
+  // velocities returns kInvalidScene with the reason.
+  virtual mechanics::SimulationResult RunClosedLoop(
+      const mechanics::Scene& scene, std::size_t setting,
+      const mechanics::PusherCommandSource& commands) const = 0;
   // Settings that build the same model for `scene` share this key (arena:
   // constituent points do not matter to a scene of point contacts), so an
   // evaluation runs the model once and gives both the result and its time.

@@ -22,6 +22,15 @@
 //   csv:   streams/<trial_id>_true.csv, _observed.csv, _predicted.csv
 //   jsonl: trials.jsonl, contacts.jsonl, streams/<trial_id>_true.jsonl, _observed.jsonl,
 //          _predicted.jsonl (one JSON object per line, keys = column names)
+//   closed_loop.csv          only when the campaign has closed-loop trials (issue 19): one row
+//                            per exported attempt: controller, lockstep, target, gain, tolerance,
+//                            hold time, the controller's outcome (reached, final error, settle
+//                            time), held samples, loop latency p50/p99, failure
+//   closed_loop_commands.csv one row per pusher command the cell applied: the sample it answered
+//                            (applied from the next step), t, commanded and actuated velocity
+//                            (m/s, gripper frame), loop latency (empty: held); jsonl also
+//                            closed_loop.jsonl, closed_loop_commands.jsonl; hdf5 also
+//                            /trials/<trial_id>/commands (same columns but trial and attempt)
 //   scenes.jsonl             (every format) one line per trial: {"trial_id", "seed",
 //                            "scene"}: the scene as commanded (replay:DIR serves it)
 //   manifest.json            format version, campaign spec, arena version and commit, units
@@ -77,6 +86,12 @@ struct ExportOptions {
   // (both JSON); empty: no predicted streams.
   std::function<PredictedStream(const std::string& scene_json, const std::string& spec_json)>
       predict;
+  // Closed loop (issue 19): the prediction of a closed-loop trial, which
+  // replays the pusher commands its cell applied (in sample order); empty:
+  // `predict` is called for those trials too.
+  std::function<PredictedStream(const std::string& scene_json, const std::string& spec_json,
+                                const std::vector<ClosedLoopCommand>& commands)>
+      predict_closed_loop;
   // Called after each trial with (trials written, trials to write).
   std::function<void(std::int64_t, std::int64_t)> progress;
 };

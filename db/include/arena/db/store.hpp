@@ -305,6 +305,30 @@ struct Prediction {
   std::string detail_json = "{}";              // residuals, solver statistics
 };
 
+// A closed-loop trial attempt (issue 19): its controller, the controller's
+// own outcome, and every pusher command the cell applied.
+struct ClosedLoopCommand {
+  int sample = 0;                     // the sample it answered (applied from the next step)
+  double t = 0;                       // s
+  std::array<double, 3> commanded{};  // m/s, as the controller sent it
+  std::array<double, 3> applied{};    // m/s, with the cell's actuation noise
+  std::optional<double> loop_ms;      // live sample -> command accepted; absent: held
+};
+struct ClosedLoopRun {
+  std::int64_t trial_id = 0;
+  int attempt = 0;
+  std::string controller;
+  bool lockstep = false;
+  double target = 0, gain = 0, tolerance = 0, hold_s = 0;
+  std::optional<bool> reached;  // absent: not scored (not a library law)
+  std::optional<double> final_error;
+  std::optional<double> settle_time_s;  // absent: never settled
+  int held = 0;
+  std::optional<double> loop_p50_ms, loop_p99_ms;
+  std::string failure;  // "" when the phase ran through
+  std::vector<ClosedLoopCommand> commands;
+};
+
 // One trial's result in an evaluation run (`arena evaluate`): the trial
 // replayed through the model at one fidelity setting, scored against its
 // ground truth. Same fields as a prediction; stored apart from `predictions`
@@ -560,6 +584,10 @@ class Store {
   // attempt); reset_done | reset_failed -> predicted on the first one.
   // Allowed in reset_done, reset_failed, predicted.
   void RecordPrediction(std::int64_t trial_id, int attempt, const Prediction& prediction);
+  // Closed loop (issue 19): replaces what was stored for (trial, attempt).
+  void RecordClosedLoop(const ClosedLoopRun& run);
+  // The newest attempt's closed-loop run of a trial; nullopt: not closed-loop.
+  std::optional<ClosedLoopRun> GetClosedLoop(std::int64_t trial_id) const;
   // predicted -> done.
   void FinishTrial(std::int64_t trial_id, int attempt);
   // What executed the trial (from the cell's EXECUTED status): the backend

@@ -62,6 +62,11 @@ struct BackendCapabilities {
   // a campaign asking for emulated defects is then refused, never dropped.
   bool emulates_defects = true;
   std::string settings_json = "{}";  // the backend's own settings, stored with its trials
+  // It can run closed-loop scenes (pusher.motion {"controller": NAME}, issue
+  // 19): SimulateClosedLoop steps its model with the commanded pusher
+  // velocities. Only arena's own model can (`model`); the cell refuses a
+  // closed-loop scene on any other backend, with the reason.
+  bool closed_loop = false;
 };
 
 struct TrialContext {
@@ -121,6 +126,18 @@ class Backend {
     (void)request;
     (void)trial;
     return std::nullopt;
+  }
+  // Closed loop (issue 19; only called when Capabilities().closed_loop): the
+  // scene with its pusher motion taken from `commands` after every sample.
+  // The default cannot (kInvalidScene with the reason).
+  virtual mechanics::SimulationResult SimulateClosedLoop(
+      const mechanics::Scene& scene, const mechanics::PusherCommandSource& commands) {
+    (void)scene;
+    (void)commands;
+    mechanics::SimulationResult r;
+    r.status = mechanics::SimulationStatus::kInvalidScene;
+    r.error = "this backend cannot run closed-loop scenes";
+    return r;
   }
 };
 

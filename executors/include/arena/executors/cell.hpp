@@ -63,6 +63,10 @@ void ValidateCellOptions(const CellOptions& options);
 struct MechanicsBackend {
   std::function<mechanics::Scene(std::string_view)> parse;  // throws mechanics::SceneError
   std::function<mechanics::SimulationResult(const mechanics::Scene&)> simulate;
+  // Closed-loop trials (pusher.controller set); empty: the cell refuses them.
+  std::function<mechanics::SimulationResult(const mechanics::Scene&,
+                                            const mechanics::PusherCommandSource&)>
+      simulate_closed_loop;
 };
 MechanicsBackend DefaultMechanics();
 // A MechanicsBackend as a cell Backend (`model`, at least the given fidelity).

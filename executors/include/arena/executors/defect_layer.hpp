@@ -53,6 +53,13 @@ class DefectLayer {
   // Runs the perturbed scene on the backend.
   ExecuteOutcome Execute(const mechanics::Scene& scene, const TrialContext& trial,
                          const SampleSink& sink);
+  // Closed loop (issue 19): perturbs the scene as Execute does (friction; the
+  // actuation noise the cell applies to every command is perturbation()), puts
+  // its pusher at rest until the first command and runs it on the backend's
+  // SimulateClosedLoop. Only for a backend whose capabilities say closed_loop.
+  mechanics::SimulationResult ExecuteClosedLoop(const mechanics::Scene& scene,
+                                                const TrialContext& trial,
+                                                const mechanics::PusherCommandSource& commands);
   // What the sensors saw of the truth the backend streamed.
   std::vector<dds::Observation> Observe(const std::vector<mechanics::TrajectorySample>& truth,
                                         const TrialContext& trial) const;

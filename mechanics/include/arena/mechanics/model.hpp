@@ -110,6 +110,11 @@ class ContactModel {
   using LcpObserver = std::function<void(const Eigen::MatrixXd& A, const Eigen::VectorXd& b)>;
   void SetLcpObserver(LcpObserver observer);
 
+  // Closed loop: the pusher moves with `motion` from the next Step() on,
+  // continuing from where it is now. Translation only: an angular velocity
+  // different from the scene's is refused (returns false, nothing changed).
+  bool SetPusherMotion(const PusherMotion& motion);
+
   double time() const;                      // s
   const Eigen::Vector3d& position() const;  // object centre of mass (m)
   Eigen::Quaterniond orientation() const;

@@ -56,8 +56,23 @@ struct PusherMotion {
   Eigen::Vector3d angular_velocity = Eigen::Vector3d::Zero();  // rad/s, about the contact point
 };
 
+// A closed-loop pusher (JSON: "motion": {"controller": NAME, ...}): a
+// controller registered under `name` commands the motion each sample
+// (docs/live_control.md). target, gain and tolerance mean what the controller
+// makes of them (pivot_to_angle: angle in rad, speed per rad, rad).
+struct PusherController {
+  std::string name;         // [A-Za-z0-9_.-]{1,64}
+  double target = 0;        // the controller's goal
+  double gain = 1;          // its gain
+  double tolerance = 0.02;  // reached when |error| <= tolerance (controller's units), > 0
+  double hold_s = 0.05;     // the cell holds the last command at most this long (s), > 0
+};
+
 struct PusherSpec : ContactSpec {
   PusherMotion motion;
+  // Set: closed loop; `motion` is then the command before the first answer
+  // (zero) and the controller's commands replace it step by step.
+  std::optional<PusherController> controller;
 };
 
 struct ModelOptions {

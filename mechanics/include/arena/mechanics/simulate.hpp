@@ -2,6 +2,8 @@
 // sampled at 250 Hz. Model: model.hpp; scene format: docs/scene.md.
 #pragma once
 
+#include <functional>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -90,6 +92,9 @@ struct SimulationResult {
   Residuals residuals;
   SolverStatistics solver;
   double wall_s = 0;
+  // Closed loop: why the command source stopped the run early (status stays
+  // kOk, samples end there); empty when it ran to the scene's duration.
+  std::string stopped;
   GraspStatus grasp = GraspStatus::kHeld;
   double grasp_changed_t = -1;  // s: when it first stopped being kHeld (-1: never)
   std::string grasp_note;       // which finger, and why
@@ -97,6 +102,21 @@ struct SimulationResult {
 
 // Never throws for a scene that passed ValidateScene(); a step the solver
 // cannot solve ends the run with status kSolverFailure. Never returns NaN.
+// A closed-loop scene (pusher.controller set) runs with its pusher at rest:
+// use the overload below to give it commands.
 SimulationResult Simulate(const Scene& scene);
+
+// Closed loop: the pusher's motion commanded sample by sample. Called once
+// per sample, in order, with every sample so far (the newest last); the
+// motion it returns moves the pusher from the next step on. It returns
+// nullopt to stop the run (why in *stop_reason, copied to
+// SimulationResult::stopped). A command that leaves the plane of a planar
+// model, or turns the pusher differently from the scene, ends the run with
+// kInvalidScene. The same commands in the same order give the same result,
+// bit for bit: the replay of a closed-loop trial is this with the recorded
+// commands.
+using PusherCommandSource = std::function<std::optional<PusherMotion>(
+    const std::vector<TrajectorySample>& samples, std::string* stop_reason)>;
+SimulationResult Simulate(const Scene& scene, const PusherCommandSource& commands);
 
 }  // namespace arena::mechanics

@@ -59,6 +59,7 @@
 
 #include <Eigen/Core>
 
+#include "arena/assessment/prediction.hpp"
 #include "arena/db/store.hpp"
 #include "arena/mechanics/scene.hpp"
 #include "arena/mechanics/simulate.hpp"
@@ -103,6 +104,9 @@ class TrialStore {
   // What executed the trial: backend, its kind of truth, the defects applied.
   virtual void RecordExecution(std::int64_t trial_id, int attempt, const std::string& backend,
                                const std::string& truth, const std::string& defects_applied) = 0;
+  // Closed loop (issue 19): the commands a cell applied and the controller's
+  // outcome, for one attempt (replaces that attempt's earlier record).
+  virtual void RecordClosedLoop(const db::ClosedLoopRun& run) = 0;
   virtual void UpsertCell(const std::string& cell_id, const std::vector<std::string>& contact_types,
                           const std::string& capabilities_json,
                           const std::string& defects_json) = 0;
@@ -135,6 +139,10 @@ struct PredictionRequest {
   // The true trajectory; empty: read it from the store (a resumed trial).
   std::vector<mechanics::TrajectorySample> truth;
   std::string scene_json;
+  // Closed loop (issue 19): the commands the cell applied, replayed through
+  // the model; empty: an open-loop trial, or (a resumed trial) read them
+  // from the store.
+  assessment::RecordedCommands commands;
 };
 
 struct PredictionDone {

@@ -4,8 +4,9 @@
 //   participant  one Fast DDS DomainParticipant per process, named
 //                "arena.<role>.<id>" (e.g. "arena.cell.c1", "arena.service");
 //                the name is how peers recognise each other in discovery.
-//   topic        one of CellAnnounce, TrialCommand, TrialStatus, GroundTruth
-//                (schemas/arena.idl); one type per topic, same name.
+//   topic        one of CellAnnounce, TrialCommand, TrialStatus, GroundTruth,
+//                LiveState, PusherCommand (schemas/arena.idl); one type per
+//                topic, same name.
 //
 // QoS (DESIGN.md, section DDS) and why
 //   CellAnnounce  reliable, transient-local, keep-last 1 per cell: a service
@@ -21,6 +22,14 @@
 //                 It is a log, not telemetry: a full history blocks the writer
 //                 (Write returns false after max_blocking_time) instead of
 //                 dropping a sample.
+//   LiveState     best-effort, keep-last 1 per cell, volatile, deadline one
+//                 sample period (kLiveDeadline_s): what a controller or a
+//                 watcher needs now. Nothing is acknowledged, so a write never
+//                 waits; the reliable GroundTruth log beside it is unchanged.
+//   PusherCommand best-effort, keep-last 1 per cell, volatile, deadline one
+//                 period: a controller's answer to a LiveState sample; the
+//                 next answer supersedes a lost one (the cell holds the last
+//                 command a bounded time, executors/README.md).
 //   Cell topics   (CellAnnounce, TrialStatus, GroundTruth) writers assert
 //                 automatic liveliness with lease kCellLivelinessLease_s and
 //                 readers request it: a reader sees a dead cell within that
@@ -70,6 +79,7 @@
 #include <optional>
 #include <stdexcept>
 #include <string>
+#include <utility>
 #include <vector>
 
 namespace arena::dds {
@@ -89,6 +99,8 @@ inline constexpr double kCellLivelinessLease_s = 1.0;
 inline constexpr int kMaxDomainId = 231;
 inline constexpr int kGroundTruthMaxBatches = 256;  // unacknowledged batches at most
 inline constexpr double kGroundTruthHeartbeat_s = 0.05;
+// One sample period at 250 Hz: the deadline of the real-time topics.
+inline constexpr double kLiveDeadline_s = 0.004;
 
 struct NetworkOptions {
   // "host" or "host:port" (the peer's metatraffic unicast port; without one,
@@ -170,7 +182,7 @@ struct WriterOptions {
   double max_blocking_s = 1.0;
 };
 
-// A typed DataWriter on the topic of T (one of the four arena::msg types).
+// A typed DataWriter on the topic of T (one of the six arena::msg types).
 template <class T>
 class Writer {
  public:
@@ -200,9 +212,17 @@ class Writer {
 };
 
 struct ReaderOptions {
+  ReaderOptions() = default;
+  // ReaderOptions{false}, ReaderOptions{false, "c1"}.
+  ReaderOptions(bool liveliness, std::string cell = "")
+      : report_liveliness(liveliness), only_cell(std::move(cell)) {}
+
   // Track writers' liveliness and report kWriterLost / kWriterAlive as
   // participant PeerEvents.
   bool report_liveliness = true;
+  // LiveState / PusherCommand only: queue this cell's messages only (others
+  // are dropped by the listener; they still cross the transport). Empty: all.
+  std::string only_cell;
 };
 
 // A typed DataReader on the topic of T; samples are queued by the listener
@@ -216,7 +236,9 @@ class Reader {
   Reader(const Reader&) = delete;
   Reader& operator=(const Reader&) = delete;
 
-  // Next sample in arrival order, waiting up to timeout.
+  // Next sample in arrival order, waiting up to timeout. LiveState and
+  // PusherCommand queue keep-last 1 per cell as their QoS does: a newer
+  // message of a cell replaces one not yet taken.
   std::optional<T> Take(Millis timeout);
   // Every queued sample, without waiting.
   std::vector<T> TakeAll();

@@ -63,9 +63,9 @@ class SecurityError : public DdsError {
   using DdsError::DdsError;
 };
 
-enum class Role { kCell, kService, kWatcher };
+enum class Role { kCell, kService, kWatcher, kController };
 const char* ToString(Role role);
-// "cell", "service", "watcher". @throws SecurityError naming the choices.
+// "cell", "service", "watcher", "controller". @throws SecurityError naming the choices.
 Role ParseRole(const std::string& text);
 
 // The topics a role may publish and subscribe (access control grant).

@@ -81,6 +81,20 @@ class Simulator {
   // `scene` prepared for repeated runs with other friction, grip force and
   // mass (PreparedScene). The default simulates every variant afresh.
   virtual std::unique_ptr<PreparedScene> Prepare(const mechanics::Scene& scene) const;
+  // Closed loop (issue 19): the scene with its pusher motion commanded after
+  // every sample (mechanics::Simulate(scene, commands)). Only a simulator
+  // that steps with commanded pusher velocities can (closed_loop() true:
+  // `arena`); the others end at once with kInvalidScene and say so.
+  virtual bool closed_loop() const { return false; }
+  virtual mechanics::SimulationResult SimulateClosedLoop(
+      const mechanics::Scene& scene, const mechanics::PusherCommandSource& commands) const {
+    (void)scene;
+    (void)commands;
+    mechanics::SimulationResult r;
+    r.status = mechanics::SimulationStatus::kInvalidScene;
+    r.error = "the " + name() + " simulator cannot run closed-loop scenes";
+    return r;
+  }
 };
 
 // ---- arena: the contact model (mechanics) -------------------------------------------------

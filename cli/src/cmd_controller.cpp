@@ -1,0 +1,132 @@
+// arena controller --name NAME --domain D [--law LAW] [--security DIR] ...
+// Hosts a closed-loop controller of arena's own library (executors/
+// controller.hpp): answers every LiveState sample of a closed-loop trial whose
+// scene names NAME with a PusherCommand, until SIGINT or SIGTERM.
+#include <signal.h>
+#include <sys/prctl.h>
+#include <unistd.h>
+
+#include <pthread.h>
+
+#include <algorithm>
+#include <atomic>
+#include <memory>
+#include <string>
+#include <thread>
+
+#include <spdlog/sinks/stdout_color_sinks.h>
+#include <spdlog/spdlog.h>
+
+#include "arena/executors/controller.hpp"
+#include "arena/schemas/security.hpp"
+#include "commands.hpp"
+
+namespace arena::cli {
+namespace {
+
+struct ControllerCliOptions {
+  executors::ControllerHostOptions host;
+  std::string law;  // empty: the name is the law
+  std::string peers;
+  bool verbose = false;
+  int parent_pid = 0;
+};
+
+std::string LawList() {
+  std::string list;
+  for (const auto& l : executors::LibraryLaws()) list += (list.empty() ? "" : ", ") + l;
+  return list;
+}
+
+int RunController(ControllerCliOptions opt) {
+  auto logger = spdlog::stderr_color_mt("controller");
+  spdlog::set_default_logger(logger);
+  spdlog::set_level(opt.verbose ? spdlog::level::debug : spdlog::level::info);
+  const std::string law = opt.law.empty() ? opt.host.name : opt.law;
+  const auto laws = executors::LibraryLaws();
+  if (std::find(laws.begin(), laws.end(), law) == laws.end()) {
+    throw CommandError(kExitBadInput, (opt.law.empty() ? "--name: " : "--law: ") +
+                                          std::string("no controller law '") + law +
+                                          "' in arena's library (one of: " + LawList() +
+                                          "; give --law when the name is your own)");
+  }
+  try {
+    if (!opt.peers.empty()) opt.host.network.peers = dds::ParsePeers(opt.peers);
+  } catch (const dds::DdsError& e) {
+    throw CommandError(kExitBadInput, e.what());
+  }
+  // Signals: blocked before DDS starts its threads, awaited on a thread of
+  // our own that flips `stop` (as `arena cell`).
+  sigset_t signals;
+  sigemptyset(&signals);
+  sigaddset(&signals, SIGINT);
+  sigaddset(&signals, SIGTERM);
+  pthread_sigmask(SIG_BLOCK, &signals, nullptr);
+  if (opt.parent_pid > 0) {
+    prctl(PR_SET_PDEATHSIG, SIGTERM);
+    if (getppid() != opt.parent_pid) return kExitOk;
+  }
+  std::atomic<bool> stop{false};
+  std::thread waiter([&] {
+    int sig = 0;
+    sigwait(&signals, &sig);
+    spdlog::info("controller {}: {} received, shutting down", opt.host.name,
+                 sig == SIGINT ? "SIGINT" : "SIGTERM");
+    stop = true;
+  });
+  executors::ControllerCounters counters;
+  int code = kExitOk;
+  std::string error;
+  try {
+    counters = executors::RunController(
+        opt.host,
+        [law](const executors::ControlContext& context) {
+          return executors::MakeLibraryController(law, context);
+        },
+        &stop);
+  } catch (const dds::SecurityError& e) {
+    code = kExitBadInput;
+    error = e.what();
+  } catch (const dds::DdsError& e) {
+    code = kExitCommunication;
+    error = e.what();
+  } catch (const std::invalid_argument& e) {
+    code = kExitBadInput;
+    error = e.what();
+  }
+  if (!stop) pthread_kill(waiter.native_handle(), SIGTERM);
+  waiter.join();
+  if (code != kExitOk) throw CommandError(code, error);
+  spdlog::info("controller {}: answered {} samples of {} trials", opt.host.name, counters.samples,
+               counters.trials);
+  return kExitOk;
+}
+
+}  // namespace
+
+void AddControllerCommand(CLI::App& app, Action* action) {
+  auto opt = std::make_shared<ControllerCliOptions>();
+  CLI::App* cmd = app.add_subcommand(
+      "controller", "Host a closed-loop controller that commands the pusher of running trials");
+  cmd->footer(
+      "Example:\n  arena controller --name pivot_to_angle --domain 42\n"
+      "  arena controller --name lab_pivot --law pivot_to_angle --domain 42 --security "
+      "lab-pki/ctl\n"
+      "A scene whose pusher motion is {\"controller\": NAME, ...} is driven by the controller\n"
+      "registered under NAME (docs/live_control.md). Laws: pivot_to_angle, sliding_to_position.\n"
+      "Stops cleanly on SIGINT/SIGTERM (exit 0).");
+  cmd->add_option("--name", opt->host.name, "Name scenes use to pick this controller")->required();
+  cmd->add_option("--domain", opt->host.domain_id, "DDS domain id (0..232)")->required();
+  cmd->add_option("--law", opt->law, "Library law to run (default: the name)");
+  cmd->add_option("--peers", opt->peers, "Reach other hosts: initial peers host[:port],...");
+  cmd->add_option("--discovery-server", opt->host.network.discovery_server,
+                  "Reach other hosts through a Fast DDS discovery server [id@]host:port");
+  cmd->add_option("--security", opt->host.network.security_dir,
+                  "DDS-Security: a 'controller' identity directory from `arena certs issue`");
+  cmd->add_option("--parent-pid", opt->parent_pid,
+                  "Stop when this process exits (arena run passes its own pid)");
+  cmd->add_flag("-v,--verbose", opt->verbose, "Debug log");
+  cmd->callback([opt, action] { *action = [opt] { return RunController(*opt); }; });
+}
+
+}  // namespace arena::cli
