@@ -87,6 +87,15 @@ std::string ModelKey(const mechanics::ModelOptions& m) {
   return buf;
 }
 
+std::string ModelSettingsJson(const mechanics::ModelOptions& model) {
+  return nlohmann::json({{"facets", model.facets},
+                         {"points", model.points},
+                         {"dt", model.dt},
+                         {"reduce", mechanics::ToString(model.reduce)},
+                         {"contacts", mechanics::ToString(model.contacts)}})
+      .dump();
+}
+
 db::Prediction PredictionFailure(const std::string& status, const std::string& reason) {
   db::Prediction p;
   p.model_key = "unknown";
@@ -289,12 +298,7 @@ db::Prediction PredictTrial(const mechanics::Scene& scene,
   db::Prediction p = ScoreSimulation(scene, result, truth);
   p.wall_s = wall;
   p.model_key = ModelKey(scene.model);
-  p.model_json = nlohmann::json({{"facets", scene.model.facets},
-                                 {"points", scene.model.points},
-                                 {"dt", scene.model.dt},
-                                 {"reduce", mechanics::ToString(scene.model.reduce)},
-                                 {"contacts", mechanics::ToString(scene.model.contacts)}})
-                     .dump();
+  p.model_json = ModelSettingsJson(scene.model);
   return p;
 }
 
@@ -354,12 +358,7 @@ db::Prediction PredictTrial(const mechanics::Scene& scene,
     db::Prediction p = ScoreSimulation(ReplayScoringScene(scene, *commands), result, truth);
     p.wall_s = wall;
     p.model_key = ModelKey(scene.model);
-    p.model_json = nlohmann::json({{"facets", scene.model.facets},
-                                   {"points", scene.model.points},
-                                   {"dt", scene.model.dt},
-                                   {"reduce", mechanics::ToString(scene.model.reduce)},
-                                   {"contacts", mechanics::ToString(scene.model.contacts)}})
-                       .dump();
+    p.model_json = ModelSettingsJson(scene.model);
     auto detail = nlohmann::json::parse(p.detail_json, nullptr, false);
     if (detail.is_object()) {
       detail["replayed_commands"] = commands->size();
@@ -416,13 +415,7 @@ PredictedRun SimulatePrediction(const mechanics::Scene& trial_scene,
   if (!mujoco) {
     run.predictor = "arena";
     run.key = ModelKey(run.scene.model);
-    run.settings_json =
-        nlohmann::json({{"facets", run.scene.model.facets},
-                        {"points", run.scene.model.points},
-                        {"dt", run.scene.model.dt},
-                        {"reduce", mechanics::ToString(run.scene.model.reduce)},
-                        {"contacts", mechanics::ToString(run.scene.model.contacts)}})
-            .dump();
+    run.settings_json = ModelSettingsJson(run.scene.model);
     if (closed_loop && !replay)
       no_commands();
     else

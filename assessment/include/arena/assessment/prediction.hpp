@@ -33,6 +33,9 @@ mechanics::Scene ApplyModelSettings(const mechanics::Scene& scene, const nlohman
 
 // "g8_k3_dt0.004_auto": the fidelity label predictions are stored under.
 std::string ModelKey(const mechanics::ModelOptions& model);
+// {"facets", "points", "dt", "reduce", "contacts"} as JSON text: what an
+// arena prediction is stored with (db::Prediction::model_json).
+std::string ModelSettingsJson(const mechanics::ModelOptions& model);
 
 // Why a predicted trajectory cannot be a prediction of a held object, or
 // nothing. It diverged when a sample is not finite, or the object moved
