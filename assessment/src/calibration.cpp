@@ -88,17 +88,18 @@ class Fitter {
   // Each trial of `subset` (repeats allowed) at log scales `log_x`; every
   // (trial, log_x) is simulated once, so one trial never runs on two threads.
   Errors Evaluate(const std::vector<int>& subset, const std::vector<double>& log_x) {
-    std::vector<int> todo;
+    std::vector<int> unsimulated;
     {
       std::lock_guard lock(mu_);
       for (int i : subset)
-        if (!memo_.count({i, log_x}) && std::find(todo.begin(), todo.end(), i) == todo.end())
-          todo.push_back(i);
+        if (!memo_.count({i, log_x}) &&
+            std::find(unsimulated.begin(), unsimulated.end(), i) == unsimulated.end())
+          unsimulated.push_back(i);
     }
     const auto scales = ScalesOf(log_x);
-    std::vector<TrialError> fresh(todo.size());
-    ParallelFor(static_cast<int>(todo.size()), o_.threads, [&](int k) {
-      const int i = todo[static_cast<size_t>(k)];
+    std::vector<TrialError> fresh(unsimulated.size());
+    ParallelFor(static_cast<int>(unsimulated.size()), o_.threads, [&](int k) {
+      const int i = unsimulated[static_cast<size_t>(k)];
       const CalibrationTrial& t = trials_[static_cast<size_t>(i)];
       const mechanics::SimulationResult r = simulate_(i, ApplyScales(t.scene, scales));
       if (r.status != mechanics::SimulationStatus::kOk || r.samples.empty()) {
@@ -110,8 +111,8 @@ class Fitter {
     });
     Errors out;
     std::lock_guard lock(mu_);
-    for (size_t k = 0; k < todo.size(); ++k) memo_[{todo[k], log_x}] = fresh[k];
-    simulations_ += static_cast<long>(todo.size());
+    for (size_t k = 0; k < unsimulated.size(); ++k) memo_[{unsimulated[k], log_x}] = fresh[k];
+    simulations_ += static_cast<long>(unsimulated.size());
     for (int i : subset) out.per_trial.push_back(memo_.at({i, log_x}));
     return out;
   }

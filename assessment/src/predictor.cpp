@@ -17,6 +17,19 @@ namespace arena::assessment {
 
 namespace {
 
+// Each setting's refinement rank (0 = coarsest): `knobs[i]` describes
+// settings[i]; `coarser(x, y)` is true when x is the coarser of the two.
+template <typename Knobs, typename Coarser>
+void RankByRefinement(const std::vector<Knobs>& knobs, std::vector<PredictorSetting>* settings,
+                      Coarser coarser) {
+  std::vector<std::size_t> order(knobs.size());
+  std::iota(order.begin(), order.end(), 0);
+  std::stable_sort(order.begin(), order.end(),
+                   [&](std::size_t a, std::size_t b) { return coarser(knobs[a], knobs[b]); });
+  for (std::size_t rank = 0; rank < order.size(); ++rank)
+    (*settings)[order[rank]].refinement = static_cast<int>(rank);
+}
+
 class ArenaPredictor final : public Predictor {
  public:
   explicit ArenaPredictor(std::vector<mechanics::ModelOptions> grid) : models_(std::move(grid)) {
@@ -39,17 +52,11 @@ class ArenaPredictor final : public Predictor {
       settings_.push_back(std::move(s));
     }
     // Finer: smaller step first, then more facets, then more points.
-    std::vector<std::size_t> order(models_.size());
-    std::iota(order.begin(), order.end(), 0);
-    std::stable_sort(order.begin(), order.end(), [&](std::size_t a, std::size_t b) {
-      const auto &x = models_[a], &y = models_[b];
+    RankByRefinement(models_, &settings_, [](const auto& x, const auto& y) {
       if (x.dt != y.dt) return x.dt > y.dt;
       if (x.facets != y.facets) return x.facets < y.facets;
       return x.points < y.points;
     });
-    for (std::size_t rank = 0; rank < order.size(); ++rank) {
-      settings_[order[rank]].refinement = static_cast<int>(rank);
-    }
   }
   const std::string& name() const override { return name_; }
   const std::vector<PredictorSetting>& settings() const override { return settings_; }
@@ -174,17 +181,11 @@ class MujocoPredictor final : public Predictor {
       settings_.push_back(std::move(s));
     }
     // Finer: smaller timestep, then elliptic over pyramidal, then more noslip.
-    std::vector<std::size_t> order(points.size());
-    std::iota(order.begin(), order.end(), 0);
-    std::stable_sort(order.begin(), order.end(), [&](std::size_t a, std::size_t b) {
-      const auto &x = points[a], &y = points[b];
+    RankByRefinement(points, &settings_, [](const auto& x, const auto& y) {
       if (x.timestep != y.timestep) return x.timestep > y.timestep;
       if (x.cone != y.cone) return x.cone == "pyramidal";
       return x.noslip < y.noslip;
     });
-    for (std::size_t rank = 0; rank < order.size(); ++rank) {
-      settings_[order[rank]].refinement = static_cast<int>(rank);
-    }
   }
   const std::string& name() const override { return name_; }
   const std::vector<PredictorSetting>& settings() const override { return settings_; }
