@@ -19,20 +19,25 @@
 #include <algorithm>
 #include <atomic>
 #include <chrono>
+#include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
 #include <filesystem>
 #include <functional>
+#include <limits>
+#include <map>
 #include <mutex>
 #include <string>
 #include <thread>
 #include <vector>
 
 #include <benchmark/benchmark.h>
+#include <sys/resource.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include "arena/executors/controller.hpp"
 #include "arena/schemas/arena.h"
 #include "arena/schemas/dds.hpp"
 #include "arena/schemas/security.hpp"
@@ -116,8 +121,15 @@ struct Result {
   std::vector<double> latency_ms;                  // log batches; live rows: live samples
   std::uint64_t live_sent = 0, live_received = 0;  // live rows
   std::vector<double> loop_ms;  // control rows: live sample written -> its command at the cell
+  std::map<std::string, double> extra;  // further counters, reported as they are
 };
 constexpr int kHead = 7;  // doubles before the vectors in the child's pipe
+
+double Percentile(std::vector<double> v, double q) {
+  if (v.empty()) return -1;
+  std::sort(v.begin(), v.end());
+  return v[static_cast<size_t>(q * (v.size() - 1))];
+}
 
 // `cells` writer participants (fresh for every configuration) each send
 // `batches` batches of `samples` samples, one every `period` (0 = flat out).
@@ -214,7 +226,7 @@ arena::msg::LiveState MakeLive(int cell, std::uint32_t sample, bool closed_loop)
   m.controller(closed_loop ? "bench" : "");
   auto& s = m.state();
   s.t(sample / 250.0);
-  s.object_pose() = {0.001, 0, 0.01, 1, 0, 0, 0};
+  s.object_pose() = {0.001 * cell, 0, 0.01, 1, 0, 0, 0};  // x: the cell (ControlHere's trace)
   s.pusher_pose() = {0, 0, -0.05, 1, 0, 0, 0};
   s.contacts().resize(3);
   s.observed_valid(true);
@@ -223,14 +235,35 @@ arena::msg::LiveState MakeLive(int cell, std::uint32_t sample, bool closed_loop)
   return m;
 }
 
+// The service's side of the log: takes every batch, counts samples and
+// batches out of order.
+void ConsumeLog(arena::dds::Reader<arena::msg::GroundTruth>& reader, int cells, double seconds,
+                Result* r) {
+  std::vector<std::uint32_t> next(static_cast<size_t>(cells), 0);
+  const auto give_up =
+      std::chrono::steady_clock::now() + std::chrono::duration<double>(seconds) + 15s;
+  while (r->received < r->expected && std::chrono::steady_clock::now() < give_up) {
+    auto g = reader.Take(100ms);
+    if (!g) continue;
+    auto& n = next[static_cast<size_t>(g->trial_id())];
+    if (g->first_sample() != n) ++r->out_of_order;
+    n = g->first_sample() + static_cast<std::uint32_t>(g->samples().size());
+    r->received += g->samples().size();
+  }
+}
+
+void WriteBatch(arena::dds::Writer<arena::msg::GroundTruth>& log, int cell, int index) {
+  auto g = MakeBatch(static_cast<std::uint64_t>(cell), static_cast<std::uint32_t>(index), 25);
+  g.sent_unix_ns(NowNs());
+  while (!log.Write(g)) {
+  }
+}
+
 // The live topic beside the reliable log (issue 19): `cells` cells sample at
 // 250 Hz for `seconds`; every sample goes out on LiveState, every 25th
-// sample a batch of 25 on GroundTruth. control = false: the service reads
-// both (live latency, log loss). control = true: a controller participant
-// answers every live sample with a PusherCommand and each cell waits for the
-// answer to its sample (up to one period), as a closed-loop cell does; the
-// loop time is live write -> the answer taken by the cell's thread.
-Result LiveHere(int cells, double seconds, bool secure, bool control) {
+// sample a batch of 25 on GroundTruth; the service reads both (live latency,
+// log loss).
+Result LiveHere(int cells, double seconds, bool secure) {
   using namespace arena;
   dds::ParticipantOptions ro;
   ro.domain_id = Domain();
@@ -239,20 +272,137 @@ Result LiveHere(int cells, double seconds, bool secure, bool control) {
   if (secure) ro.network.security_dir = BenchLab::Get().Service();
   dds::Participant service(ro);
   dds::Reader<msg::GroundTruth> log_reader(service);
-  std::unique_ptr<dds::Reader<msg::LiveState>> live_reader;
-  if (!control) live_reader = std::make_unique<dds::Reader<msg::LiveState>>(service);
-
-  std::unique_ptr<dds::Participant> ctl;
-  std::unique_ptr<dds::Reader<msg::LiveState>> ctl_in;
-  std::unique_ptr<dds::Writer<msg::PusherCommand>> ctl_out;
-  if (control) {
+  dds::Reader<msg::LiveState> live_reader(service);
+  struct CellSide {
+    std::unique_ptr<dds::Participant> participant;
+    std::unique_ptr<dds::Writer<msg::GroundTruth>> log;
+    std::unique_ptr<dds::Writer<msg::LiveState>> live;
+  };
+  std::vector<CellSide> side(static_cast<size_t>(cells));
+  for (int c = 0; c < cells; ++c) {
     dds::ParticipantOptions o = ro;
-    o.name = "arena.controller.bench";
-    if (secure) o.network.security_dir = BenchLab::Get().Controller();
-    ctl = std::make_unique<dds::Participant>(o);
-    ctl_in = std::make_unique<dds::Reader<msg::LiveState>>(*ctl, dds::ReaderOptions{false});
-    ctl_out = std::make_unique<dds::Writer<msg::PusherCommand>>(*ctl);
+    o.name = "arena.cell.bench" + std::to_string(c);
+    if (secure) o.network.security_dir = BenchLab::Get().Cell(c);
+    auto& cs = side[static_cast<size_t>(c)];
+    cs.participant = std::make_unique<dds::Participant>(o);
+    cs.log = std::make_unique<dds::Writer<msg::GroundTruth>>(*cs.participant);
+    cs.live = std::make_unique<dds::Writer<msg::LiveState>>(*cs.participant);
   }
+  for (auto& cs : side) {
+    cs.log->WaitForMatched(1, 30s);
+    cs.live->WaitForMatched(1, 30s);
+  }
+  log_reader.WaitForMatched(cells, 30s);
+  live_reader.WaitForMatched(cells, 30s);
+  const int samples = static_cast<int>(seconds * 250);
+  const int batches = samples / 25;
+  Result r;
+  r.expected = static_cast<std::uint64_t>(cells) * batches * 25;
+  std::atomic<bool> done{false};
+  std::thread log_consumer([&] { ConsumeLog(log_reader, cells, seconds, &r); });
+  std::thread live_consumer([&] {
+    while (!done) {
+      auto m = live_reader.Take(50ms);
+      if (!m) continue;
+      r.latency_ms.push_back((NowNs() - m->sent_unix_ns()) * 1e-6);
+      ++r.live_received;
+    }
+  });
+  std::atomic<std::uint64_t> live_sent{0};
+  const auto start = std::chrono::steady_clock::now();
+  std::vector<std::thread> producers;
+  for (int c = 0; c < cells; ++c) {
+    producers.emplace_back([&, c] {
+      auto& cs = side[static_cast<size_t>(c)];
+      auto next_due = std::chrono::steady_clock::now();
+      for (int b = 0; b < batches; ++b) {
+        for (int k = 0; k < 25; ++k) {
+          next_due += 4ms;
+          std::this_thread::sleep_until(next_due);
+          auto m = MakeLive(c, static_cast<std::uint32_t>(b * 25 + k), false);
+          m.sent_unix_ns(NowNs());
+          cs.live->Write(m);
+          ++live_sent;
+        }
+        WriteBatch(*cs.log, c, b);
+      }
+    });
+  }
+  for (auto& p : producers) p.join();
+  log_consumer.join();
+  std::this_thread::sleep_for(100ms);
+  done = true;
+  live_consumer.join();
+  r.live_sent = live_sent;
+  const auto counters = live_reader.counters();
+  r.extra["live_superseded"] = static_cast<double>(counters.superseded);
+  r.extra["live_lost"] = static_cast<double>(counters.lost);
+  r.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  return r;
+}
+
+// The control loop (issue 19), with arena's own controller host
+// (executors::RunController, as `arena controller` runs it) answering every
+// live sample of `cells` cells at 250 Hz; each cell waits for the answer to
+// its sample until its next sample is due (one period), as a wall-clock
+// closed-loop cell does, and writes the log beside it. Every sample is
+// traced through the stages: cell writes the live sample -> the controller's
+// law sees it -> the cell takes the command answering it. cell_filter: the
+// cells read PusherCommand through the DDS content filter on their cell id
+// (writer-side: a command crosses to its cell only); false: the listener
+// alone drops other cells' commands (every command crosses to every cell, as
+// before the filter).
+Result ControlHere(int cells, double seconds, bool secure, bool cell_filter) {
+  using namespace arena;
+  const int samples = static_cast<int>(seconds * 250);
+  const int batches = samples / 25;
+  const auto n = static_cast<size_t>(samples);
+  // ns timestamps per [cell][sample], 0 = never; each written by one thread.
+  std::vector<std::vector<std::uint64_t>> sent(cells, std::vector<std::uint64_t>(n, 0));
+  std::vector<std::vector<std::uint64_t>> law(cells, std::vector<std::uint64_t>(n, 0));
+  std::vector<std::vector<std::uint64_t>> taken(cells, std::vector<std::uint64_t>(n, 0));
+  std::vector<std::vector<char>> in_time(cells, std::vector<char>(n, 0));
+
+  // The law records when it saw a sample (the cell is encoded in the
+  // object's x, MakeLive) and commands a constant push.
+  class TracedLaw : public executors::Controller {
+   public:
+    explicit TracedLaw(std::vector<std::vector<std::uint64_t>>* law) : law_(law) {}
+    mechanics::PusherMotion Command(const executors::ControlInput& in) override {
+      const auto cell = static_cast<size_t>(std::lround(in.truth.position.x() * 1000));
+      if (cell < law_->size() && in.sample < (*law_)[cell].size())
+        (*law_)[cell][in.sample] = NowNs();
+      mechanics::PusherMotion m;
+      m.velocity = {0.01, 0, 0};
+      return m;
+    }
+
+   private:
+    std::vector<std::vector<std::uint64_t>>* law_;
+  };
+  executors::ControllerHostOptions host;
+  host.name = "bench";
+  host.domain_id = Domain();
+  host.network.shared_memory = std::getenv("ARENA_BENCH_NO_SHM") == nullptr;
+  if (secure) host.network.security_dir = BenchLab::Get().Controller();
+  std::atomic<bool> stop_controller{false};
+  executors::ControllerCounters controller_counters;
+  std::thread controller([&] {
+    controller_counters = executors::RunController(
+        host, [&](const executors::ControlContext&) { return std::make_unique<TracedLaw>(&law); },
+        &stop_controller);
+  });
+  executors::ControlContext context;
+  context.spec.name = host.name;
+  const std::string params = executors::ControlContextToJson(context);
+
+  dds::ParticipantOptions ro;
+  ro.domain_id = Domain();
+  ro.name = "arena.bench.service";
+  ro.network = host.network;
+  if (secure) ro.network.security_dir = BenchLab::Get().Service();
+  dds::Participant service(ro);
+  dds::Reader<msg::GroundTruth> log_reader(service);
   struct CellSide {
     std::unique_ptr<dds::Participant> participant;
     std::unique_ptr<dds::Writer<msg::GroundTruth>> log;
@@ -268,119 +418,132 @@ Result LiveHere(int cells, double seconds, bool secure, bool control) {
     cs.participant = std::make_unique<dds::Participant>(o);
     cs.log = std::make_unique<dds::Writer<msg::GroundTruth>>(*cs.participant);
     cs.live = std::make_unique<dds::Writer<msg::LiveState>>(*cs.participant);
-    if (control)
-      cs.commands = std::make_unique<dds::Reader<msg::PusherCommand>>(
-          *cs.participant, dds::ReaderOptions{false, "bench" + std::to_string(c)});
+    dds::ReaderOptions ro_cmd{false, "bench" + std::to_string(c)};
+    ro_cmd.cell_filter_in_dds = cell_filter;
+    cs.commands = std::make_unique<dds::Reader<msg::PusherCommand>>(*cs.participant, ro_cmd);
   }
   for (auto& cs : side) {
     cs.log->WaitForMatched(1, 30s);
     cs.live->WaitForMatched(1, 30s);
-    if (control) cs.commands->WaitForMatched(1, 30s);
+    cs.commands->WaitForMatched(1, 30s);
   }
   log_reader.WaitForMatched(cells, 30s);
-  if (live_reader) live_reader->WaitForMatched(cells, 30s);
-  if (control) {
-    ctl_in->WaitForMatched(cells, 30s);
-    ctl_out->WaitForMatched(cells, 30s);
-  }
-  const int samples = static_cast<int>(seconds * 250);
-  const int batches = samples / 25;
+  std::this_thread::sleep_for(200ms);  // the controller's side of the matching settles
+
   Result r;
   r.expected = static_cast<std::uint64_t>(cells) * batches * 25;
-  std::atomic<bool> done{false};
-  std::mutex loop_mutex;
-  std::thread log_consumer([&] {
-    std::vector<std::uint32_t> next(static_cast<size_t>(cells), 0);
-    const auto give_up =
-        std::chrono::steady_clock::now() + std::chrono::duration<double>(seconds) + 15s;
-    while (r.received < r.expected && std::chrono::steady_clock::now() < give_up) {
-      auto g = log_reader.Take(100ms);
-      if (!g) continue;
-      auto& n = next[static_cast<size_t>(g->trial_id())];
-      if (g->first_sample() != n) ++r.out_of_order;
-      n = g->first_sample() + static_cast<std::uint32_t>(g->samples().size());
-      r.received += g->samples().size();
-    }
-  });
-  std::thread live_consumer([&] {
-    while (!done) {
-      if (live_reader) {
-        auto m = live_reader->Take(50ms);
-        if (!m) continue;
-        r.latency_ms.push_back((NowNs() - m->sent_unix_ns()) * 1e-6);
-        ++r.live_received;
-      } else {
-        auto m = ctl_in->Take(50ms);
-        if (!m) continue;
-        ++r.live_received;
-        msg::PusherCommand c;
-        c.cell_id(m->cell_id());
-        c.trial_id(m->trial_id());
-        c.attempt(m->attempt());
-        c.answers_sample(m->sample());
-        c.controller("bench");
-        c.velocity() = {0.01, 0, 0};
-        c.state_sent_unix_ns(m->sent_unix_ns());
-        c.sent_unix_ns(NowNs());
-        ctl_out->Write(c);
-      }
-    }
-  });
-  std::atomic<std::uint64_t> live_sent{0};
-  std::atomic<std::uint64_t> commands_seen{0};
+  std::thread log_consumer([&] { ConsumeLog(log_reader, cells, seconds, &r); });
+  rusage before{};
+  getrusage(RUSAGE_SELF, &before);
   const auto start = std::chrono::steady_clock::now();
   std::vector<std::thread> producers;
   for (int c = 0; c < cells; ++c) {
     producers.emplace_back([&, c] {
       auto& cs = side[static_cast<size_t>(c)];
       const std::string id = "bench" + std::to_string(c);
-      std::vector<double> loops;
       auto next_due = std::chrono::steady_clock::now();
       for (int b = 0; b < batches; ++b) {
         for (int k = 0; k < 25; ++k) {
           const auto sample = static_cast<std::uint32_t>(b * 25 + k);
           next_due += 4ms;
           std::this_thread::sleep_until(next_due);
-          auto m = MakeLive(c, sample, control);
+          auto m = MakeLive(c, sample, true);
+          m.controller_params(params);
           m.sent_unix_ns(NowNs());
+          sent[c][sample] = m.sent_unix_ns();
           cs.live->Write(m);
-          ++live_sent;
-          if (!control) continue;
-          // Wait for the answer to this sample, one period at most.
+          // The answer to this sample, until the next sample is due; an
+          // older sample's late answer is recorded as late.
           const auto until = next_due + 4ms;
-          while (std::chrono::steady_clock::now() < until) {
-            auto left = std::chrono::duration_cast<std::chrono::milliseconds>(
-                until - std::chrono::steady_clock::now());
-            auto cmd = cs.commands->Take(std::max(left, 1ms));
-            if (cmd) ++commands_seen;
-            if (!cmd || cmd->cell_id() != id || cmd->answers_sample() != sample) continue;
-            loops.push_back((NowNs() - cmd->state_sent_unix_ns()) * 1e-6);
-            break;
+          for (auto now = std::chrono::steady_clock::now(); now < until;
+               now = std::chrono::steady_clock::now()) {
+            auto cmd = cs.commands->Take(until - now);
+            if (!cmd || cmd->cell_id() != id || cmd->answers_sample() > sample) continue;
+            auto& t = taken[c][cmd->answers_sample()];
+            if (t == 0) t = NowNs();
+            if (cmd->answers_sample() == sample) {
+              in_time[c][sample] = 1;
+              break;
+            }
           }
         }
-        auto g = MakeBatch(static_cast<std::uint64_t>(c), static_cast<std::uint32_t>(b), 25);
-        g.sent_unix_ns(NowNs());
-        while (!cs.log->Write(g)) {
-        }
+        WriteBatch(*cs.log, c, b);
       }
-      std::lock_guard<std::mutex> lock(loop_mutex);
-      r.loop_ms.insert(r.loop_ms.end(), loops.begin(), loops.end());
     });
   }
   for (auto& p : producers) p.join();
+  const double wall =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  rusage after{};
+  getrusage(RUSAGE_SELF, &after);
   log_consumer.join();
-  std::this_thread::sleep_for(100ms);
-  done = true;
-  live_consumer.join();
-  r.live_sent = live_sent;
-  if (control)
-    std::fprintf(
-        stderr,
-        "control: %llu live sent, %llu taken by the controller, %llu commands taken by cells\n",
-        static_cast<unsigned long long>(live_sent.load()),
-        static_cast<unsigned long long>(r.live_received),
-        static_cast<unsigned long long>(commands_seen.load()));
-  r.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  stop_controller = true;
+  controller.join();
+  r.seconds = wall;
+
+  // The loop, its stages and what was lost where.
+  std::uint64_t answered = 0, late = 0, at_law = 0;
+  std::vector<double> all_ms;  // every sample: its loop time, +inf when never answered in time
+  std::vector<double> in_ms, out_ms;
+  for (int c = 0; c < cells; ++c) {
+    for (size_t k = 0; k < n; ++k) {
+      if (sent[c][k] == 0) continue;
+      ++r.live_sent;
+      if (law[c][k] != 0) ++at_law;
+      if (in_time[c][k]) {
+        ++answered;
+        const double ms = (taken[c][k] - sent[c][k]) * 1e-6;
+        r.loop_ms.push_back(ms);
+        all_ms.push_back(ms);
+        if (law[c][k] != 0) {
+          in_ms.push_back((law[c][k] - sent[c][k]) * 1e-6);
+          out_ms.push_back((taken[c][k] - law[c][k]) * 1e-6);
+        }
+      } else {
+        all_ms.push_back(std::numeric_limits<double>::infinity());
+        if (taken[c][k] != 0) ++late;
+      }
+    }
+  }
+  r.live_received = at_law;
+  r.extra["answered"] = static_cast<double>(answered);
+  r.extra["late"] = static_cast<double>(late);
+  r.extra["p99_all_ms"] = Percentile(all_ms, 0.99);
+  r.extra["stage_in_p50_ms"] = Percentile(in_ms, 0.50);
+  r.extra["stage_in_p99_ms"] = Percentile(in_ms, 0.99);
+  r.extra["stage_out_p50_ms"] = Percentile(out_ms, 0.50);
+  r.extra["stage_out_p99_ms"] = Percentile(out_ms, 0.99);
+  r.extra["ctl_superseded"] = static_cast<double>(controller_counters.live.superseded);
+  r.extra["ctl_lost"] = static_cast<double>(controller_counters.live.lost);
+  std::uint64_t other = 0, superseded = 0, lost = 0;
+  for (auto& cs : side) {
+    const auto k = cs.commands->counters();
+    other += k.other_cell;
+    superseded += k.superseded;
+    lost += k.lost;
+  }
+  r.extra["cmd_other_cell"] = static_cast<double>(other);
+  r.extra["cmd_superseded"] = static_cast<double>(superseded);
+  const auto cpu = [](const rusage& u) {
+    return u.ru_utime.tv_sec + u.ru_stime.tv_sec + (u.ru_utime.tv_usec + u.ru_stime.tv_usec) * 1e-6;
+  };
+  r.extra["cpu_cores"] = (cpu(after) - cpu(before)) / wall;
+  r.extra["ctx_switches_per_sample"] =
+      static_cast<double>(after.ru_nvcsw + after.ru_nivcsw - before.ru_nvcsw - before.ru_nivcsw) /
+      std::max<std::uint64_t>(1, r.live_sent);
+  std::fprintf(stderr,
+               "control (%s, %s): %llu live sent, %llu seen by the law, %llu answered within "
+               "the period, %llu late; controller's reader: %llu superseded, %llu lost; cells' "
+               "readers: %llu commands for other cells, %llu superseded, %llu sequence gaps (other "
+               "cells' commands the writer filtered out count here)\n",
+               secure ? "secure" : "open", cell_filter ? "DDS cell filter" : "listener filter",
+               static_cast<unsigned long long>(r.live_sent),
+               static_cast<unsigned long long>(at_law), static_cast<unsigned long long>(answered),
+               static_cast<unsigned long long>(late),
+               static_cast<unsigned long long>(controller_counters.live.superseded),
+               static_cast<unsigned long long>(controller_counters.live.lost),
+               static_cast<unsigned long long>(other), static_cast<unsigned long long>(superseded),
+               static_cast<unsigned long long>(lost));
   return r;
 }
 
@@ -412,6 +575,13 @@ Result RunInChild(const std::function<Result()>& run, bool secure) {
                  r.loop_ms.size() * sizeof(double));
     bytes.append(reinterpret_cast<const char*>(r.latency_ms.data()),
                  r.latency_ms.size() * sizeof(double));
+    // Then the extra counters, "name=value\n" each, after a NUL.
+    bytes.push_back('\0');
+    for (const auto& [name, value] : r.extra) {
+      char number[64];
+      std::snprintf(number, sizeof number, "%.9g", value);
+      bytes += name + "=" + number + "\n";
+    }
     for (std::size_t done = 0; done < bytes.size();) {
       const ssize_t n = write(fds[1], bytes.data() + done, bytes.size() - done);
       if (n <= 0) break;
@@ -444,7 +614,17 @@ Result RunInChild(const std::function<Result()>& run, bool secure) {
   const auto loops = static_cast<std::size_t>(head[6]);
   r.loop_ms.resize(loops);
   std::memcpy(r.loop_ms.data(), bytes.data() + sizeof head, loops * sizeof(double));
-  const std::size_t rest = bytes.size() - sizeof head - loops * sizeof(double);
+  const std::size_t text = bytes.rfind('\0');  // the extra counters follow it
+  for (std::size_t at = text + 1; at < bytes.size();) {
+    const std::size_t eol = bytes.find('\n', at);
+    const std::string line = bytes.substr(at, eol - at);
+    const std::size_t eq = line.find('=');
+    if (eq != std::string::npos)
+      r.extra[line.substr(0, eq)] = std::strtod(line.c_str() + eq + 1, nullptr);
+    if (eol == std::string::npos) break;
+    at = eol + 1;
+  }
+  const std::size_t rest = text - sizeof head - loops * sizeof(double);
   r.latency_ms.resize(rest / sizeof(double));
   std::memcpy(r.latency_ms.data(), bytes.data() + sizeof head + loops * sizeof(double),
               r.latency_ms.size() * sizeof(double));
@@ -453,12 +633,6 @@ Result RunInChild(const std::function<Result()>& run, bool secure) {
 
 Result Stream(int cells, int batches, int samples, std::chrono::microseconds period, bool secure) {
   return RunInChild([=] { return StreamHere(cells, batches, samples, period, secure); }, secure);
-}
-
-double Percentile(std::vector<double> v, double q) {
-  if (v.empty()) return -1;
-  std::sort(v.begin(), v.end());
-  return v[static_cast<size_t>(q * (v.size() - 1))];
 }
 
 void Report(benchmark::State& state, const Result& r, bool secure) {
@@ -525,10 +699,11 @@ void BM_LiveState(benchmark::State& state) {
   const int cells = static_cast<int>(state.range(0));
   const bool secure = state.range(1) != 0;
   for (auto _ : state) {
-    const Result r = RunInChild([=] { return LiveHere(cells, 3.0, secure, false); }, secure);
+    const Result r = RunInChild([=] { return LiveHere(cells, 3.0, secure); }, secure);
     Report(state, r, secure);
     state.counters["live_received_pct"] =
         r.live_sent > 0 ? 100.0 * static_cast<double>(r.live_received) / r.live_sent : 0;
+    for (const auto& [name, value] : r.extra) state.counters[name] = value;
   }
 }
 BENCHMARK(BM_LiveState)
@@ -539,25 +714,38 @@ BENCHMARK(BM_LiveState)
     ->Unit(benchmark::kSecond)
     ->UseRealTime();
 
+// p50/p99/max: the loop (live sample written -> the command answering it
+// taken by the cell) over the samples answered within their period;
+// answered_pct: those samples' share of all samples sent (the rest were never
+// answered or answered late: `late`); p99_all_ms: the p99 over all samples
+// with an unanswered one counted as infinitely late (inf: more than 1 % were
+// not answered in time). stage_in: live sample written -> the controller's
+// law saw it (delivery + the controller's queue); stage_out: law -> the cell
+// took the command (encode, send, delivery, the cell's wake-up). lost = the
+// reliable log's loss beside the loop.
 void BM_ControlLoop(benchmark::State& state) {
   const int cells = static_cast<int>(state.range(0));
   const bool secure = state.range(1) != 0;
+  const bool cell_filter = state.range(2) != 0;
   for (auto _ : state) {
-    Result r = RunInChild([=] { return LiveHere(cells, 3.0, secure, true); }, secure);
-    const std::size_t answered = r.loop_ms.size();
+    Result r = RunInChild([=] { return ControlHere(cells, 3.0, secure, cell_filter); }, secure);
     Report(state, r, secure);
-    // p50/p99 of the loop (live sample -> command at the cell), not of the log.
     state.counters["p50_ms"] = Percentile(r.loop_ms, 0.50);
     state.counters["p99_ms"] = Percentile(r.loop_ms, 0.99);
     state.counters["max_ms"] = Percentile(r.loop_ms, 1.0);
     state.counters["answered_pct"] =
-        r.live_sent > 0 ? 100.0 * static_cast<double>(answered) / r.live_sent : 0;
+        r.live_sent > 0 ? 100.0 * static_cast<double>(r.loop_ms.size()) / r.live_sent : 0;
+    state.counters["law_saw_pct"] =
+        r.live_sent > 0 ? 100.0 * static_cast<double>(r.live_received) / r.live_sent : 0;
+    for (const auto& [name, value] : r.extra) state.counters[name] = value;
   }
 }
 BENCHMARK(BM_ControlLoop)
-    ->ArgNames({"cells", "secure"})
-    ->Args({16, 0})
-    ->Args({16, 1})
+    ->ArgNames({"cells", "secure", "cell_filter"})
+    ->Args({16, 0, 0})
+    ->Args({16, 0, 1})
+    ->Args({16, 1, 0})
+    ->Args({16, 1, 1})
     ->Iterations(1)
     ->Unit(benchmark::kSecond)
     ->UseRealTime();

@@ -97,8 +97,11 @@ int RunController(ControllerCliOptions opt) {
   if (!stop) pthread_kill(waiter.native_handle(), SIGTERM);
   waiter.join();
   if (code != kExitOk) throw CommandError(code, error);
-  spdlog::info("controller {}: answered {} samples of {} trials", opt.host.name, counters.samples,
-               counters.trials);
+  spdlog::info(
+      "controller {}: answered {} samples of {} trials ({} live samples superseded before it "
+      "took them, {} reported lost)",
+      opt.host.name, counters.samples, counters.trials, counters.live.superseded,
+      counters.live.lost);
   return kExitOk;
 }
 

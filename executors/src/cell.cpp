@@ -567,9 +567,10 @@ struct Cell::Impl {
     std::optional<msg::PusherCommand> newest;
     for (;;) {
       const auto now = Clock::now();
-      const auto wait =
-          until > now ? std::chrono::duration_cast<dds::Millis>(until - now) : dds::Millis(0);
-      auto m = pusher_commands.Take(std::max(wait, dds::Millis(exact ? 1 : 0)));
+      const auto wait = until > now
+                            ? std::chrono::duration_cast<std::chrono::nanoseconds>(until - now)
+                            : std::chrono::nanoseconds(0);
+      auto m = pusher_commands.Take(wait);
       if (m && m->cell_id() == options.id && m->trial_id() == loop.command.trial_id() &&
           m->attempt() == loop.command.attempt() && m->controller() == loop.context.spec.name &&
           m->answers_sample() <= k) {

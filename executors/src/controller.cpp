@@ -299,6 +299,7 @@ ControllerCounters RunController(const ControllerHostOptions& o, const Controlle
     run.last = c;
     ++counters.samples;
   }
+  counters.live = live.counters();
   return counters;
 }
 

@@ -10,6 +10,7 @@
 #include <atomic>
 #include <condition_variable>
 #include <cstdlib>
+#include <cstring>
 #include <map>
 #include <mutex>
 #include <sstream>
@@ -34,6 +35,9 @@
 #include <fastdds/dds/subscriber/SampleInfo.hpp>
 #include <fastdds/dds/subscriber/Subscriber.hpp>
 #include <fastdds/dds/subscriber/qos/DataReaderQos.hpp>
+#include <fastdds/dds/topic/ContentFilteredTopic.hpp>
+#include <fastdds/dds/topic/IContentFilter.hpp>
+#include <fastdds/dds/topic/IContentFilterFactory.hpp>
 #include <fastdds/dds/topic/Topic.hpp>
 #include <fastdds/dds/topic/TypeSupport.hpp>
 
@@ -219,9 +223,69 @@ void ApplyTopicQos(const std::string& topic, fdds::ReliabilityQosPolicy* reliabi
   }
 }
 
-// Topics that cells (and controllers) write: their writers assert
-// liveliness, their readers track it.
-bool CellWritten(const std::string& topic) { return topic != "TrialCommand"; }
+// Topics that cells write: their writers assert liveliness, their readers
+// track it. Not PusherCommand: a writer filters for its readers (one send per
+// command, to its cell) only with infinite liveliness (Fast DDS 2.9), and a
+// cell finds a silent controller by its hold time anyway.
+bool CellWritten(const std::string& topic) {
+  return topic != "TrialCommand" && topic != "PusherCommand";
+}
+
+// ReaderOptions::only_cell as a DDS content filter (kCellFilterClass): the
+// sample's first member, the key cell_id, equals parameter 0. Registered in
+// every participant, so a writer evaluates its readers' filters and sends a
+// message to the readers that want it only; a reader filters on arrival
+// what a writer did not. Reads the CDR string in place: no type objects
+// (Fast DDS's SQL filter needs them and arena's generated types carry none).
+class CellFilter final : public fdds::IContentFilter {
+ public:
+  explicit CellFilter(std::string cell) : cell_(std::move(cell)) {}
+  void set_cell(std::string cell) { cell_ = std::move(cell); }
+  bool evaluate(const SerializedPayload& payload, const FilterSampleInfo&,
+                const GUID_t&) const override {
+    // Encapsulation (2 bytes kind, 2 options), then uint32 length with the
+    // terminating NUL, then the characters.
+    if (payload.data == nullptr || payload.length < 9) return false;
+    const bool little = (payload.data[1] & 1) != 0;
+    const unsigned char* p = payload.data + 4;
+    const std::uint32_t n = little ? (p[0] | p[1] << 8 | p[2] << 16 | std::uint32_t{p[3]} << 24)
+                                   : (std::uint32_t{p[0]} << 24 | p[1] << 16 | p[2] << 8 | p[3]);
+    if (n == 0 || n - 1 != cell_.size() || 8 + n > payload.length) return false;
+    return std::memcmp(payload.data + 8, cell_.data(), cell_.size()) == 0;
+  }
+
+ private:
+  std::string cell_;
+};
+
+constexpr const char* kCellFilterExpression = "cell_id = %0";
+
+class CellFilterFactory : public fdds::IContentFilterFactory {
+ public:
+  ReturnCode_t create_content_filter(const char*, const char*, const fdds::TopicDataType*,
+                                     const char* expression, const ParameterSeq& parameters,
+                                     fdds::IContentFilter*& filter) override {
+    if (expression != nullptr && std::string(expression) != kCellFilterExpression)
+      return ReturnCode_t::RETCODE_BAD_PARAMETER;
+    if (parameters.length() != 1 || parameters[0] == nullptr)
+      return ReturnCode_t::RETCODE_BAD_PARAMETER;
+    if (filter != nullptr) {  // new parameters for a filter made before
+      static_cast<CellFilter*>(filter)->set_cell(parameters[0]);
+    } else {
+      filter = new CellFilter(parameters[0]);
+    }
+    return ReturnCode_t::RETCODE_OK;
+  }
+  ReturnCode_t delete_content_filter(const char*, fdds::IContentFilter* filter) override {
+    delete static_cast<CellFilter*>(filter);
+    return ReturnCode_t::RETCODE_OK;
+  }
+};
+
+CellFilterFactory& TheCellFilterFactory() {
+  static CellFilterFactory factory;
+  return factory;
+}
 
 std::string Describe(const fdds::ReliabilityQosPolicy& r, const fdds::DurabilityQosPolicy& d,
                      const fdds::HistoryQosPolicy& h, const fdds::ResourceLimitsQosPolicy& l,
@@ -310,6 +374,25 @@ struct ParticipantCore : public fdds::DomainParticipantListener {
 
   fdds::Topic* TopicFor(const std::string& topic, const std::string& type) {
     std::lock_guard<std::mutex> lock(mutex);
+    return TopicLocked(topic, type);
+  }
+
+  // `topic` restricted to one cell's messages (ReaderOptions::only_cell).
+  fdds::TopicDescription* CellTopicFor(const std::string& topic, const std::string& type,
+                                       const std::string& cell) {
+    std::lock_guard<std::mutex> lock(mutex);
+    const std::string name = topic + ".cell." + cell;
+    auto it = filtered.find(name);
+    if (it != filtered.end()) return it->second;
+    fdds::ContentFilteredTopic* t = participant->create_contentfilteredtopic(
+        name, TopicLocked(topic, type), kCellFilterExpression, {cell}, kCellFilterClass);
+    if (t == nullptr) throw DdsError("dds: create_contentfilteredtopic(" + name + ") failed");
+    filtered[name] = t;
+    return t;
+  }
+
+ private:
+  fdds::Topic* TopicLocked(const std::string& topic, const std::string& type) {
     auto it = topics.find(topic);
     if (it != topics.end()) return it->second;
     fdds::Topic* t = participant->create_topic(topic, type, fdds::TOPIC_QOS_DEFAULT);
@@ -317,6 +400,7 @@ struct ParticipantCore : public fdds::DomainParticipantListener {
     topics[topic] = t;
     return t;
   }
+  std::map<std::string, fdds::ContentFilteredTopic*> filtered;
 };
 
 }  // namespace detail
@@ -480,6 +564,11 @@ Participant::Participant(const ParticipantOptions& options)
   Register<msg::GroundTruth>(core_->participant);
   Register<msg::LiveState>(core_->participant);
   Register<msg::PusherCommand>(core_->participant);
+  if (core_->participant->register_content_filter_factory(
+          kCellFilterClass, &TheCellFilterFactory()) != ReturnCode_t::RETCODE_OK) {
+    throw DdsError(std::string("dds: register_content_filter_factory(") + kCellFilterClass +
+                   ") failed");
+  }
   core_->publisher = core_->participant->create_publisher(fdds::PUBLISHER_QOS_DEFAULT);
   if (core_->publisher == nullptr) throw DdsError("dds: create_publisher failed");
   core_->subscriber = core_->participant->create_subscriber(fdds::SUBSCRIBER_QOS_DEFAULT);
@@ -581,6 +670,10 @@ Writer<T>::Writer(Participant& participant, const WriterOptions& options)
   if (IsRealTime(topic)) {
     qos.deadline().period = Duration_t(kLiveDeadline_s);
     qos.reliability().max_blocking_time = Duration_t(0, 0);
+    // Evaluate the readers' cell filters here, for up to this many readers
+    // (more are filtered on arrival).
+    qos.writer_resource_limits().reader_filters_allocation =
+        eprosima::fastrtps::ResourceLimitedContainerConfig(0, 1024, 1);
   }
   if (topic == "GroundTruth") {
     impl_->window = kGroundTruthMaxBatches / 4;
@@ -646,6 +739,7 @@ struct Reader<T>::Impl : public fdds::DataReaderListener {
   std::condition_variable arrived;
   std::deque<T> queue;
   std::atomic<std::uint64_t> rejected{0};
+  ReaderCounters counters;  // under mutex
 
   std::string only_cell;  // real-time topics: this cell's messages only
 
@@ -680,14 +774,23 @@ struct Reader<T>::Impl : public fdds::DataReaderListener {
     arrived.notify_all();
   }
 
+  void on_sample_lost(fdds::DataReader*, const fdds::SampleLostStatus& status) override {
+    std::lock_guard<std::mutex> lock(mutex);
+    counters.lost += static_cast<std::uint64_t>(std::max(0, status.total_count_change));
+  }
+
   // Real-time topics: keep-last 1 per cell in our queue too (a reader that
   // fell behind gets each cell's newest message, not a backlog).
   void Enqueue(T&& s) {
     if constexpr (std::is_same_v<T, msg::LiveState> || std::is_same_v<T, msg::PusherCommand>) {
-      if (!only_cell.empty() && s.cell_id() != only_cell) return;
+      if (!only_cell.empty() && s.cell_id() != only_cell) {
+        ++counters.other_cell;
+        return;
+      }
       for (auto& q : queue) {
         if (q.cell_id() == s.cell_id()) {
           q = std::move(s);
+          ++counters.superseded;
           return;
         }
       }
@@ -730,12 +833,17 @@ Reader<T>::Reader(Participant& participant, const ReaderOptions& options)
   if (IsRealTime(topic)) qos.deadline().period = Duration_t(kLiveDeadline_s);
   fdds::StatusMask mask = fdds::StatusMask::data_available();
   mask << fdds::StatusMask::liveliness_changed();
-  // only_cell is applied in our listener: a DDS content filter needs type
-  // objects that arena's generated types do not carry (Fast DDS 2.9 refuses
-  // create_contentfilteredtopic without them), so other cells' messages still
-  // cross the transport (bench/README.md).
+  mask << fdds::StatusMask::sample_lost();
+  // only_cell: a content-filtered topic (kCellFilterClass, evaluated by the
+  // writer where it can); the listener checks again (belt and braces, and
+  // counts what crossed for nothing).
   impl_->only_cell = IsRealTime(topic) ? options.only_cell : std::string();
-  impl_->reader = core.subscriber->create_datareader(t, qos, impl_.get(), mask);
+  fdds::TopicDescription* description = t;
+  if (!impl_->only_cell.empty() && options.cell_filter_in_dds) {
+    description =
+        core.CellTopicFor(topic, typename Traits<T>::PubSub().getName(), impl_->only_cell);
+  }
+  impl_->reader = core.subscriber->create_datareader(description, qos, impl_.get(), mask);
   if (impl_->reader == nullptr) throw DdsError("dds: create_datareader(" + topic + ") failed");
   const auto q = impl_->reader->get_qos();
   spdlog::debug(
@@ -747,13 +855,14 @@ template <class T>
 Reader<T>::~Reader() = default;
 
 template <class T>
-std::optional<T> Reader<T>::Take(Millis timeout) {
+std::optional<T> Reader<T>::Take(std::chrono::nanoseconds timeout) {
   std::unique_lock<std::mutex> lock(impl_->mutex);
   if (!impl_->arrived.wait_for(lock, timeout, [&] { return !impl_->queue.empty(); })) {
     return std::nullopt;
   }
   T sample = std::move(impl_->queue.front());
   impl_->queue.pop_front();
+  ++impl_->counters.taken;
   return sample;
 }
 
@@ -763,7 +872,14 @@ std::vector<T> Reader<T>::TakeAll() {
   std::vector<T> all(std::make_move_iterator(impl_->queue.begin()),
                      std::make_move_iterator(impl_->queue.end()));
   impl_->queue.clear();
+  impl_->counters.taken += all.size();
   return all;
+}
+
+template <class T>
+ReaderCounters Reader<T>::counters() const {
+  std::lock_guard<std::mutex> lock(impl_->mutex);
+  return impl_->counters;
 }
 
 template <class T>

@@ -127,6 +127,7 @@ struct ControllerHostOptions {
 struct ControllerCounters {
   std::uint64_t samples = 0;  // closed-loop samples answered
   std::uint64_t trials = 0;   // trial attempts seen
+  dds::ReaderCounters live;   // the LiveState reader's (superseded: samples it fell behind on)
 };
 
 using ControllerFactory = std::function<std::unique_ptr<Controller>(const ControlContext&)>;

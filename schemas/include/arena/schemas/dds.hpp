@@ -29,8 +29,14 @@
 //   PusherCommand best-effort, keep-last 1 per cell, volatile, deadline one
 //                 period: a controller's answer to a LiveState sample; the
 //                 next answer supersedes a lost one (the cell holds the last
-//                 command a bounded time, executors/README.md).
-//   Cell topics   (CellAnnounce, TrialStatus, GroundTruth) writers assert
+//                 command a bounded time, executors/README.md). A cell reads
+//                 it through a content filter on its own cell id, evaluated by
+//                 the writer: a command crosses to its cell only (one send,
+//                 not one per cell: bench/README.md). Writer-side filtering
+//                 needs a writer of infinite liveliness, so this topic's
+//                 writers assert none (a silent controller is found by the
+//                 cell's hold time instead).
+//   Cell topics   (CellAnnounce, TrialStatus, GroundTruth, LiveState) writers assert
 //                 automatic liveliness with lease kCellLivelinessLease_s and
 //                 readers request it: a reader sees a dead cell within that
 //                 lease. (A writer offering a longer lease does not match.)
@@ -220,10 +226,32 @@ struct ReaderOptions {
   // Track writers' liveliness and report kWriterLost / kWriterAlive as
   // participant PeerEvents.
   bool report_liveliness = true;
-  // LiveState / PusherCommand only: queue this cell's messages only (others
-  // are dropped by the listener; they still cross the transport). Empty: all.
+  // LiveState / PusherCommand only: this cell's messages only. The reader
+  // reads a content-filtered topic (filter class kCellFilterClass), so a
+  // writer that filters for its readers (every PusherCommand writer: see
+  // QoS above) sends a cell only its own messages; other writers' messages
+  // are filtered on arrival. Empty: all cells.
   std::string only_cell;
+  // false: only_cell is checked in the listener alone, every message of the
+  // topic crosses to this reader (how it was before the content filter;
+  // bench_dds measures both).
+  bool cell_filter_in_dds = true;
 };
+
+// What a reader saw and did not hand over (Reader::counters()).
+struct ReaderCounters {
+  std::uint64_t taken = 0;       // handed to Take()/TakeAll()
+  std::uint64_t superseded = 0;  // real-time topics: replaced in the queue by a newer
+                                 // message of the same cell before anyone took it
+  std::uint64_t lost = 0;        // best-effort: reported lost by DDS (sequence gaps; for an
+                                 // only_cell reader these include the other cells' messages
+                                 // its writer filtered out)
+  std::uint64_t other_cell = 0;  // only_cell: arrived for another cell (crossed for nothing)
+};
+
+// Content filter class of ReaderOptions::only_cell: expression "cell_id = %0",
+// parameter 0 the cell id (the topic's key, the first member of the type).
+inline constexpr const char* kCellFilterClass = "arena.cell_id";
 
 // A typed DataReader on the topic of T; samples are queued by the listener
 // and taken by the caller's thread.
@@ -239,13 +267,15 @@ class Reader {
   // Next sample in arrival order, waiting up to timeout. LiveState and
   // PusherCommand queue keep-last 1 per cell as their QoS does: a newer
   // message of a cell replaces one not yet taken.
-  std::optional<T> Take(Millis timeout);
+  // (Any duration: a real-time reader waits to the microsecond.)
+  std::optional<T> Take(std::chrono::nanoseconds timeout);
   // Every queued sample, without waiting.
   std::vector<T> TakeAll();
   int Matched() const;
   bool WaitForMatched(int writers, Millis timeout) const;
   // Samples dropped because their schema_version is unknown.
   std::uint64_t rejected_version() const;
+  ReaderCounters counters() const;
 
  private:
   struct Impl;
