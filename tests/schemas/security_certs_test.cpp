@@ -56,6 +56,20 @@ TEST_F(SecurityCerts, InitMakesACaAndSignedGovernanceAndRefusesToOverwriteIt) {
   EXPECT_NE(governance.find("<data_protection_kind>ENCRYPT<"), std::string::npos);
   EXPECT_NE(governance.find("<enable_write_access_control>true<"), std::string::npos);
   EXPECT_NE(governance.find("<enable_read_access_control>true<"), std::string::npos);
+  // The real-time topics' own rules (no submessage MAC, payload encrypted)
+  // come before "*": the first matching rule applies.
+  const auto any = governance.find("<topic_expression>*<");
+  for (const char* topic : {"LiveState", "PusherCommand"}) {
+    const auto rule = governance.find(std::string("<topic_expression>") + topic + "<");
+    ASSERT_NE(rule, std::string::npos) << topic;
+    EXPECT_LT(rule, any) << topic;
+    const auto end = governance.find("</topic_rule>", rule);
+    const std::string body = governance.substr(rule, end - rule);
+    EXPECT_NE(body.find("<metadata_protection_kind>NONE<"), std::string::npos) << body;
+    EXPECT_NE(body.find("<data_protection_kind>ENCRYPT<"), std::string::npos) << body;
+    EXPECT_NE(body.find("<enable_write_access_control>true<"), std::string::npos) << body;
+  }
+  EXPECT_NE(governance.find("<metadata_protection_kind>SIGN<", any), std::string::npos);
   EXPECT_EQ(dds::CertificateSubject(lab_ + "/ca.cert.pem"), "CN=arena lab CA,O=arena lab");
 
   const std::string key_before = Slurp(lab_ + "/ca.key.pem");
