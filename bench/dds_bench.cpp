@@ -352,7 +352,10 @@ Result LiveHere(int cells, double seconds, bool secure) {
 // (writer-side: a command crosses to its cell only); false: the listener
 // alone drops other cells' commands (every command crosses to every cell, as
 // before the filter).
-Result ControlHere(int cells, double seconds, bool secure, bool cell_filter) {
+// spread: cell c samples at c/cells of a period after cell 0, as cells
+// started independently do (on average); otherwise all cells sample on the
+// same tick, the worst case for the one controller answering them.
+Result ControlHere(int cells, double seconds, bool secure, bool cell_filter, bool spread) {
   using namespace arena;
   const int samples = static_cast<int>(seconds * 250);
   const int batches = samples / 25;
@@ -436,12 +439,13 @@ Result ControlHere(int cells, double seconds, bool secure, bool cell_filter) {
   rusage before{};
   getrusage(RUSAGE_SELF, &before);
   const auto start = std::chrono::steady_clock::now();
+  const auto first_tick = start + 20ms;  // every cell's clock starts from it
   std::vector<std::thread> producers;
   for (int c = 0; c < cells; ++c) {
     producers.emplace_back([&, c] {
       auto& cs = side[static_cast<size_t>(c)];
       const std::string id = "bench" + std::to_string(c);
-      auto next_due = std::chrono::steady_clock::now();
+      auto next_due = first_tick + (spread ? 4000us * c / cells : 0us);
       for (int b = 0; b < batches; ++b) {
         for (int k = 0; k < 25; ++k) {
           const auto sample = static_cast<std::uint32_t>(b * 25 + k);
@@ -722,13 +726,16 @@ BENCHMARK(BM_LiveState)
 // not answered in time). stage_in: live sample written -> the controller's
 // law saw it (delivery + the controller's queue); stage_out: law -> the cell
 // took the command (encode, send, delivery, the cell's wake-up). lost = the
-// reliable log's loss beside the loop.
+// reliable log's loss beside the loop. phase_spread: the cells' 250 Hz clocks
+// offset by 1/16 period each (0: all on the same tick, the worst case).
 void BM_ControlLoop(benchmark::State& state) {
   const int cells = static_cast<int>(state.range(0));
   const bool secure = state.range(1) != 0;
   const bool cell_filter = state.range(2) != 0;
+  const bool spread = state.range(3) != 0;
   for (auto _ : state) {
-    Result r = RunInChild([=] { return ControlHere(cells, 3.0, secure, cell_filter); }, secure);
+    Result r =
+        RunInChild([=] { return ControlHere(cells, 3.0, secure, cell_filter, spread); }, secure);
     Report(state, r, secure);
     state.counters["p50_ms"] = Percentile(r.loop_ms, 0.50);
     state.counters["p99_ms"] = Percentile(r.loop_ms, 0.99);
@@ -741,11 +748,13 @@ void BM_ControlLoop(benchmark::State& state) {
   }
 }
 BENCHMARK(BM_ControlLoop)
-    ->ArgNames({"cells", "secure", "cell_filter"})
-    ->Args({16, 0, 0})
-    ->Args({16, 0, 1})
-    ->Args({16, 1, 0})
-    ->Args({16, 1, 1})
+    ->ArgNames({"cells", "secure", "cell_filter", "phase_spread"})
+    ->Args({16, 0, 0, 0})
+    ->Args({16, 0, 1, 0})
+    ->Args({16, 0, 1, 1})
+    ->Args({16, 1, 0, 0})
+    ->Args({16, 1, 1, 0})
+    ->Args({16, 1, 1, 1})
     ->Iterations(1)
     ->Unit(benchmark::kSecond)
     ->UseRealTime();
