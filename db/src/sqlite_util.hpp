@@ -76,6 +76,13 @@ class Binder {
       s_.BindNull(k_++);
     return *this;
   }
+  Binder& operator<<(const std::optional<std::int64_t>& v) {
+    if (v)
+      s_.Bind(k_++, *v);
+    else
+      s_.BindNull(k_++);
+    return *this;
+  }
   Binder& operator<<(std::nullopt_t) {
     s_.BindNull(k_++);
     return *this;
