@@ -69,14 +69,8 @@ class Binder {
     s_.Bind(k_++, v);
     return *this;
   }
-  Binder& operator<<(const std::optional<std::string>& v) {
-    if (v)
-      s_.Bind(k_++, *v);
-    else
-      s_.BindNull(k_++);
-    return *this;
-  }
-  Binder& operator<<(const std::optional<std::int64_t>& v) {
+  template <class T>
+  Binder& operator<<(const std::optional<T>& v) {  // NULL when empty
     if (v)
       s_.Bind(k_++, *v);
     else
