@@ -492,12 +492,13 @@ struct Run {
     PusherAt(t, &c, &q);
     return c;
   }
-  Eigen::Vector3d PadNormal(size_t who, double t) const {
+  // The axis a pad's force is split along: the normal the scene gives it, as
+  // every reader of a sample puts it back together (assessment::
+  // ContactNormals). A turning pusher's own normal was used before, so the
+  // store rebuilt a force that was not the one measured.
+  Eigen::Vector3d PadNormal(size_t who) const {
     if (who < scene.fingers.size()) return scene.fingers[who].normal.normalized();
-    Eigen::Vector3d c;
-    Eigen::Quaterniond q;
-    PusherAt(t, &c, &q);
-    return q * scene.pusher->normal.normalized();
+    return scene.pusher->normal.normalized();
   }
 
   // What each pad (fingers, then the pusher) did to the object in one solve.
@@ -573,7 +574,7 @@ struct Run {
     const double per_solve = 1.0 / std::max(1, r.solves);
     for (size_t k = 0; k < n_pads; ++k) {
       mechanics::ContactState cs;
-      const Eigen::Vector3d n = PadNormal(k, s.t);
+      const Eigen::Vector3d n = PadNormal(k);
       const Eigen::Vector3d f = r.force[k] * per_solve;
       cs.normal_force = f.dot(n);
       cs.tangential_force = f - cs.normal_force * n;
