@@ -5,6 +5,7 @@
 #include <arpa/inet.h>
 #include <netdb.h>
 #include <sys/socket.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <atomic>
@@ -320,6 +321,9 @@ struct ParticipantCore : public fdds::DomainParticipantListener {
   fdds::Publisher* publisher = nullptr;
   fdds::Subscriber* subscriber = nullptr;
   std::map<std::string, fdds::Topic*> topics;
+  // Local-only with shared memory: the real-time readers listen on a UDP
+  // loopback port of their own only (see Reader).
+  bool real_time_on_udp = false;
 
   mutable std::mutex mutex;
   std::condition_variable changed;
@@ -542,6 +546,9 @@ Participant::Participant(const ParticipantOptions& options)
   discovery.leaseDuration = Duration_t(options.lease_s);
   discovery.leaseDuration_announcementperiod = Duration_t(options.lease_s / 5.0);
   if (options.network.profile_xml.empty()) ApplyNetwork(options, &qos);
+  core_->real_time_on_udp = options.network.profile_xml.empty() && options.network.peers.empty() &&
+                            options.network.discovery_server.empty() &&
+                            options.network.shared_memory;
   ApplySecurity(options.network, &qos);
 
   core_->name = options.name;
@@ -626,6 +633,39 @@ bool PollUntil(Millis timeout, const std::function<bool()>& done) {
     std::this_thread::sleep_for(Millis(5));
   }
   return true;
+}
+}  // namespace
+
+namespace {
+// A UDP port on 127.0.0.1 that nobody holds now (the kernel's choice); 0 if
+// none could be had.
+int FreeLoopbackUdpPort() {
+  const int fd = socket(AF_INET, SOCK_DGRAM, 0);
+  if (fd < 0) return 0;
+  sockaddr_in a{};
+  a.sin_family = AF_INET;
+  a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+  socklen_t len = sizeof a;
+  int port = 0;
+  if (bind(fd, reinterpret_cast<sockaddr*>(&a), sizeof a) == 0 &&
+      getsockname(fd, reinterpret_cast<sockaddr*>(&a), &len) == 0) {
+    port = ntohs(a.sin_port);
+  }
+  close(fd);
+  return port;
+}
+
+// True when someone (the reader's receiver, we trust) holds the port.
+bool LoopbackUdpPortHeld(int port) {
+  const int fd = socket(AF_INET, SOCK_DGRAM, 0);
+  if (fd < 0) return false;
+  sockaddr_in a{};
+  a.sin_family = AF_INET;
+  a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+  a.sin_port = htons(static_cast<std::uint16_t>(port));
+  const bool held = bind(fd, reinterpret_cast<sockaddr*>(&a), sizeof a) != 0;
+  close(fd);
+  return held;
 }
 }  // namespace
 
@@ -843,7 +883,34 @@ Reader<T>::Reader(Participant& participant, const ReaderOptions& options)
     description =
         core.CellTopicFor(topic, typename Traits<T>::PubSub().getName(), impl_->only_cell);
   }
-  impl_->reader = core.subscriber->create_datareader(description, qos, impl_.get(), mask);
+  // A best-effort writer sends to every transport's locators of a reader
+  // (Fast DDS 2.9: each transport selects its own), so a reader announcing
+  // shared memory and UDP got every live sample twice and decoded (secured:
+  // authenticated) it twice; the reliable log goes by shared memory alone.
+  // A real-time reader therefore listens on a loopback UDP port of its own
+  // only, which every local participant reaches, shared memory or not
+  // (bench/README.md). The port is one the kernel just called free, checked
+  // to be held after the reader made its receiver (another process may have
+  // taken it in between: then another port; after 8 tries the defaults).
+  if (IsRealTime(topic) && core.real_time_on_udp) {
+    for (int attempt = 0; attempt < 8 && impl_->reader == nullptr; ++attempt) {
+      const int port = FreeLoopbackUdpPort();
+      if (port == 0) break;
+      fdds::DataReaderQos own = qos;
+      own.endpoint().unicast_locator_list.clear();
+      own.endpoint().unicast_locator_list.push_back(UdpLocator("127.0.0.1", port));
+      fdds::DataReader* r = core.subscriber->create_datareader(description, own, impl_.get(), mask);
+      if (r == nullptr) break;
+      if (LoopbackUdpPortHeld(port)) {
+        impl_->reader = r;
+      } else {
+        r->set_listener(nullptr);
+        core.subscriber->delete_datareader(r);
+      }
+    }
+  }
+  if (impl_->reader == nullptr)
+    impl_->reader = core.subscriber->create_datareader(description, qos, impl_.get(), mask);
   if (impl_->reader == nullptr) throw DdsError("dds: create_datareader(" + topic + ") failed");
   const auto q = impl_->reader->get_qos();
   spdlog::debug(

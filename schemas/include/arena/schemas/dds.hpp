@@ -36,6 +36,13 @@
 //                 needs a writer of infinite liveliness, so this topic's
 //                 writers assert none (a silent controller is found by the
 //                 cell's hold time instead).
+//   Real-time readers  (LiveState, PusherCommand) of a local-only participant
+//                 with shared memory listen on a loopback UDP port of their
+//                 own only: Fast DDS 2.9 sends a best-effort message to every
+//                 locator a reader announces, so with shared memory and UDP
+//                 each message arrived twice (and was decoded, secured:
+//                 authenticated, twice). Every local participant reaches UDP
+//                 loopback, shared memory or not.
 //   Cell topics   (CellAnnounce, TrialStatus, GroundTruth, LiveState) writers assert
 //                 automatic liveliness with lease kCellLivelinessLease_s and
 //                 readers request it: a reader sees a dead cell within that
