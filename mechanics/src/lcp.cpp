@@ -7,6 +7,7 @@
 #include "arena/mechanics/lcp.hpp"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstdint>
 #include <cstdio>
@@ -43,6 +44,117 @@ class DenseColumns final : public LcpColumns {
   const Eigen::MatrixXd& A_;
 };
 
+// LU factorisation with partial pivoting of a basis block. Up to 16 rows it
+// runs Eigen's unblocked algorithm and its triangular solves written out on
+// work space kept between calls (no dispatch, no heap), in Eigen's order of
+// operations, so the answer is Eigen's to the last bit; larger blocks go to
+// Eigen's blocked PartialPivLU.
+class BasisLu {
+ public:
+  void Compute(const Eigen::MatrixXd& block) {
+    m_ = block.rows();
+    if (m_ > kUnblocked) {
+      large_.compute(block);
+      return;
+    }
+    lu_ = block;
+    double* a = lu_.data();
+    for (Eigen::Index k = 0; k < m_; ++k) {
+      Eigen::Index best = k;
+      double biggest = std::abs(a[k + k * m_]);
+      for (Eigen::Index i = k + 1; i < m_; ++i) {
+        const double s = std::abs(a[i + k * m_]);
+        if (s > biggest) {
+          biggest = s;
+          best = i;
+        }
+      }
+      swap_[static_cast<size_t>(k)] = best;
+      if (biggest != 0) {
+        if (best != k) {
+          for (Eigen::Index j = 0; j < m_; ++j) std::swap(a[k + j * m_], a[best + j * m_]);
+        }
+        const double pivot = a[k + k * m_];
+        for (Eigen::Index i = k + 1; i < m_; ++i) a[i + k * m_] /= pivot;
+      }
+      for (Eigen::Index j = k + 1; j < m_; ++j) {
+        const double u = a[k + j * m_];
+        for (Eigen::Index i = k + 1; i < m_; ++i) a[i + j * m_] -= a[i + k * m_] * u;
+      }
+    }
+  }
+  // x = block⁻¹ rhs.
+  void Solve(const Eigen::VectorXd& rhs, Eigen::VectorXd& x) const {
+    if (m_ > kUnblocked) {
+      x = large_.solve(rhs);
+      return;
+    }
+    x = rhs;
+    for (Eigen::Index k = 0; k < m_; ++k) std::swap(x[k], x[swap_[static_cast<size_t>(k)]]);
+    ForwardUnitLower(x);
+    BackwardUpper(x);
+  }
+
+ private:
+  // Eigen's triangular_solve_vector (column-major): panels of kPanel
+  // columns solved column by column, the rows past a panel updated by one
+  // matrix-vector product (each row's sum from zero in column order).
+  void ForwardUnitLower(Eigen::VectorXd& x) const {
+    const double* a = lu_.data();
+    for (Eigen::Index p0 = 0; p0 < m_; p0 += kPanel) {
+      const Eigen::Index p1 = std::min(p0 + kPanel, m_);
+      for (Eigen::Index i = p0; i < p1; ++i) {
+        const double xi = x[i];
+        if (xi == 0) continue;
+        for (Eigen::Index r = i + 1; r < p1; ++r) x[r] -= xi * a[r + i * m_];
+      }
+      for (Eigen::Index r = p1; r < m_; ++r) {
+        double sum = 0;
+        for (Eigen::Index j = p0; j < p1; ++j) sum += a[r + j * m_] * x[j];
+        x[r] += -1.0 * sum;
+      }
+    }
+  }
+  void BackwardUpper(Eigen::VectorXd& x) const {
+    const double* a = lu_.data();
+    for (Eigen::Index p1 = m_; p1 > 0; p1 -= kPanel) {
+      const Eigen::Index p0 = std::max<Eigen::Index>(p1 - kPanel, 0);
+      for (Eigen::Index i = p1 - 1; i >= p0; --i) {
+        if (x[i] == 0) continue;
+        x[i] /= a[i + i * m_];
+        const double xi = x[i];
+        for (Eigen::Index r = p0; r < i; ++r) x[r] -= xi * a[r + i * m_];
+      }
+      for (Eigen::Index r = 0; r < p0; ++r) {
+        double sum = 0;
+        for (Eigen::Index j = p0; j < p1; ++j) sum += a[r + j * m_] * x[j];
+        x[r] += -1.0 * sum;
+      }
+    }
+  }
+
+  static constexpr Eigen::Index kUnblocked = 16;  // Eigen's UnBlockedBound
+  static constexpr Eigen::Index kPanel = 8;       // EIGEN_TUNE_TRIANGULAR_PANEL_WIDTH
+  Eigen::Index m_ = 0;
+  Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, 0, kUnblocked, kUnblocked> lu_;
+  std::array<Eigen::Index, kUnblocked> swap_{};
+  Eigen::PartialPivLU<Eigen::MatrixXd> large_;
+};
+
+// r = rhs - block x (the product summed from zero in column order, as
+// Eigen's column-major matrix-vector product sums it).
+void BasisResidual(const Eigen::MatrixXd& block, const Eigen::VectorXd& x,
+                   const Eigen::VectorXd& rhs, Eigen::VectorXd& r) {
+  const Eigen::Index m = block.rows();
+  r.setZero(m);
+  for (Eigen::Index j = 0; j < m; ++j) {
+    const double xj = x[j];
+    const double* a = block.data() + j * m;
+    for (Eigen::Index i = 0; i < m; ++i) r[i] += a[i] * xj;
+  }
+  for (Eigen::Index i = 0; i < m; ++i) r[i] = rhs[i] - r[i];
+}
+
 // Solves the complementary basis "z_i basic where basis[i]" exactly:
 // A_bb z_b = -b_b, all other z zero. False when that basis is singular.
 bool SolveBasis(const LcpColumns& A, const Eigen::VectorXd& b, const std::vector<char>& basis,
@@ -50,8 +162,8 @@ bool SolveBasis(const LcpColumns& A, const Eigen::VectorXd& b, const std::vector
   // Called on every warm-started step: keep the work space between calls.
   thread_local std::vector<Eigen::Index> idx;
   thread_local Eigen::MatrixXd Abb;
-  thread_local Eigen::VectorXd bb, zb;
-  thread_local Eigen::PartialPivLU<Eigen::MatrixXd> lu;
+  thread_local Eigen::VectorXd bb, zb, rb, db;
+  thread_local BasisLu lu;
   const Eigen::Index n = b.size();
   idx.clear();
   for (Eigen::Index i = 0; i < n; ++i) {
@@ -68,16 +180,19 @@ bool SolveBasis(const LcpColumns& A, const Eigen::VectorXd& b, const std::vector
       const double* a = A.Column(col);
       for (Eigen::Index r = 0; r < m; ++r) Abb(r, c) = a[idx[static_cast<size_t>(r)]];
     }
-    lu.compute(Abb);
-    zb = lu.solve(bb);
+    lu.Compute(Abb);
+    lu.Solve(bb, zb);
     if (!AllFinite(zb)) return false;
     // One step of iterative refinement: the contact blocks can be
     // ill-conditioned (a 0.1 mm object: entries from 1 to 1e7).
-    zb += lu.solve(bb - Abb * zb);
+    BasisResidual(Abb, zb, bb, rb);
+    lu.Solve(rb, db);
+    zb += db;
     if (!AllFinite(zb)) return false;
     // A singular basis shows as a large solve residual.
     const double scale = 1.0 + bb.lpNorm<Eigen::Infinity>();
-    if ((Abb * zb - bb).lpNorm<Eigen::Infinity>() > 1e-9 * scale) return false;
+    BasisResidual(Abb, zb, bb, rb);
+    if (rb.lpNorm<Eigen::Infinity>() > 1e-9 * scale) return false;
     for (Eigen::Index r = 0; r < m; ++r) z[idx[static_cast<size_t>(r)]] = zb[r];
   }
   MultiplyColumns(A, z, w);
