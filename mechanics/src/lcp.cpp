@@ -57,13 +57,14 @@ class BasisLu {
       large_.compute(block);
       return;
     }
-    lu_ = block;
+    const Eigen::Index m = m_;
     double* a = lu_.data();
-    for (Eigen::Index k = 0; k < m_; ++k) {
+    std::copy(block.data(), block.data() + m * m, a);
+    for (Eigen::Index k = 0; k < m; ++k) {
       Eigen::Index best = k;
-      double biggest = std::abs(a[k + k * m_]);
-      for (Eigen::Index i = k + 1; i < m_; ++i) {
-        const double s = std::abs(a[i + k * m_]);
+      double biggest = std::abs(a[k + k * m]);
+      for (Eigen::Index i = k + 1; i < m; ++i) {
+        const double s = std::abs(a[i + k * m]);
         if (s > biggest) {
           biggest = s;
           best = i;
@@ -72,14 +73,16 @@ class BasisLu {
       swap_[static_cast<size_t>(k)] = best;
       if (biggest != 0) {
         if (best != k) {
-          for (Eigen::Index j = 0; j < m_; ++j) std::swap(a[k + j * m_], a[best + j * m_]);
+          for (Eigen::Index j = 0; j < m; ++j) std::swap(a[k + j * m], a[best + j * m]);
         }
-        const double pivot = a[k + k * m_];
-        for (Eigen::Index i = k + 1; i < m_; ++i) a[i + k * m_] /= pivot;
+        const double pivot = a[k + k * m];
+        for (Eigen::Index i = k + 1; i < m; ++i) a[i + k * m] /= pivot;
       }
-      for (Eigen::Index j = k + 1; j < m_; ++j) {
-        const double u = a[k + j * m_];
-        for (Eigen::Index i = k + 1; i < m_; ++i) a[i + j * m_] -= a[i + k * m_] * u;
+      const double* l = a + k * m;
+      for (Eigen::Index j = k + 1; j < m; ++j) {
+        double* col = a + j * m;
+        const double u = col[k];
+        for (Eigen::Index i = k + 1; i < m; ++i) col[i] -= l[i] * u;
       }
     }
   }
@@ -89,45 +92,49 @@ class BasisLu {
       x = large_.solve(rhs);
       return;
     }
-    x = rhs;
-    for (Eigen::Index k = 0; k < m_; ++k) std::swap(x[k], x[swap_[static_cast<size_t>(k)]]);
-    ForwardUnitLower(x);
-    BackwardUpper(x);
+    std::array<double, kUnblocked> y;
+    std::copy(rhs.data(), rhs.data() + m_, y.data());
+    for (Eigen::Index k = 0; k < m_; ++k) std::swap(y[k], y[swap_[static_cast<size_t>(k)]]);
+    ForwardUnitLower(y.data());
+    BackwardUpper(y.data());
+    x = Eigen::Map<const Eigen::VectorXd>(y.data(), m_);
   }
 
  private:
   // Eigen's triangular_solve_vector (column-major): panels of kPanel
   // columns solved column by column, the rows past a panel updated by one
   // matrix-vector product (each row's sum from zero in column order).
-  void ForwardUnitLower(Eigen::VectorXd& x) const {
+  void ForwardUnitLower(double* x) const {
+    const Eigen::Index m = m_;
     const double* a = lu_.data();
-    for (Eigen::Index p0 = 0; p0 < m_; p0 += kPanel) {
-      const Eigen::Index p1 = std::min(p0 + kPanel, m_);
+    for (Eigen::Index p0 = 0; p0 < m; p0 += kPanel) {
+      const Eigen::Index p1 = std::min(p0 + kPanel, m);
       for (Eigen::Index i = p0; i < p1; ++i) {
         const double xi = x[i];
         if (xi == 0) continue;
-        for (Eigen::Index r = i + 1; r < p1; ++r) x[r] -= xi * a[r + i * m_];
+        for (Eigen::Index r = i + 1; r < p1; ++r) x[r] -= xi * a[r + i * m];
       }
-      for (Eigen::Index r = p1; r < m_; ++r) {
+      for (Eigen::Index r = p1; r < m; ++r) {
         double sum = 0;
-        for (Eigen::Index j = p0; j < p1; ++j) sum += a[r + j * m_] * x[j];
+        for (Eigen::Index j = p0; j < p1; ++j) sum += a[r + j * m] * x[j];
         x[r] += -1.0 * sum;
       }
     }
   }
-  void BackwardUpper(Eigen::VectorXd& x) const {
+  void BackwardUpper(double* x) const {
+    const Eigen::Index m = m_;
     const double* a = lu_.data();
-    for (Eigen::Index p1 = m_; p1 > 0; p1 -= kPanel) {
+    for (Eigen::Index p1 = m; p1 > 0; p1 -= kPanel) {
       const Eigen::Index p0 = std::max<Eigen::Index>(p1 - kPanel, 0);
       for (Eigen::Index i = p1 - 1; i >= p0; --i) {
         if (x[i] == 0) continue;
-        x[i] /= a[i + i * m_];
+        x[i] /= a[i + i * m];
         const double xi = x[i];
-        for (Eigen::Index r = p0; r < i; ++r) x[r] -= xi * a[r + i * m_];
+        for (Eigen::Index r = p0; r < i; ++r) x[r] -= xi * a[r + i * m];
       }
       for (Eigen::Index r = 0; r < p0; ++r) {
         double sum = 0;
-        for (Eigen::Index j = p0; j < p1; ++j) sum += a[r + j * m_] * x[j];
+        for (Eigen::Index j = p0; j < p1; ++j) sum += a[r + j * m] * x[j];
         x[r] += -1.0 * sum;
       }
     }
@@ -136,7 +143,7 @@ class BasisLu {
   static constexpr Eigen::Index kUnblocked = 16;  // Eigen's UnBlockedBound
   static constexpr Eigen::Index kPanel = 8;       // EIGEN_TUNE_TRIANGULAR_PANEL_WIDTH
   Eigen::Index m_ = 0;
-  Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, 0, kUnblocked, kUnblocked> lu_;
+  std::array<double, kUnblocked * kUnblocked> lu_{};
   std::array<Eigen::Index, kUnblocked> swap_{};
   Eigen::PartialPivLU<Eigen::MatrixXd> large_;
 };
@@ -704,11 +711,11 @@ LcpResult SolveLcp(const LcpColumns& A, const Eigen::VectorXd& b,
     if (SolveBasis(A, b, *warm_basis, z, w) && Acceptable(z, w, b, options.feasibility)) {
       out.ok = true;
       out.status = LcpStatus::kOk;
-      out.z = z;
-      out.w = w;
+      out.natural_residual = NaturalResidual(z, w);
+      out.z.swap(z);
+      out.w.swap(w);
       out.basis = *warm_basis;
       out.warm_start_used = true;
-      out.natural_residual = NaturalResidual(z, w);
       return out;
     }
   }
