@@ -311,7 +311,11 @@ class StepMatrix final : public LcpColumns {
       // Eigen picks a coefficient-wise product for small sizes, whose sums
       // run in another order: the dense formation keeps it.
       cache_.setZero();
-      cache_.topLeftCorner(nf_, nf_).noalias() = mass * Jrows.transpose() * K;
+      if (Jrows.rows() == 3) {
+        PlanarForceBlock(mass, Jrows, K);
+      } else {
+        cache_.topLeftCorner(nf_, nf_).noalias() = mass * Jrows.transpose() * K;
+      }
       ready_.assign(static_cast<size_t>(n_), 1);
     } else {
       JT_ = Jrows.transpose();
@@ -359,6 +363,32 @@ class StepMatrix final : public LcpColumns {
     }
     ready_[static_cast<size_t>(j)] = 1;
     return col;
+  }
+  // The force block of a planar step (3 reduced coordinates) written out:
+  // Eigen's product sums each entry over the 3 coordinates in order, from
+  // zero and then times the mass in its blocked kernel (2 nf + 3 >= 20),
+  // the mass times the plain sum in its coefficient-wise one: the same
+  // entries to the last bit, without the kernel's packing.
+  void PlanarForceBlock(double mass, const Eigen::MatrixXd& Jrows, const Eigen::MatrixXd& K) {
+    const bool blocked = 2 * nf_ + 3 >= 20;
+    const double* J = Jrows.data();
+    const double* Kd = K.data();
+    for (int j = 0; j < nf_; ++j) {
+      const double k0 = Kd[3 * j], k1 = Kd[3 * j + 1], k2 = Kd[3 * j + 2];
+      double* col = cache_.data() + static_cast<Eigen::Index>(j) * n_;
+      for (int i = 0; i < nf_; ++i) {
+        const double* a = J + 3 * i;
+        if (blocked) {
+          double acc = 0.0;
+          acc += a[0] * k0;
+          acc += a[1] * k1;
+          acc += a[2] * k2;
+          col[i] = 0.0 + mass * acc;
+        } else {
+          col[i] = mass * (a[0] * k0 + a[1] * k1 + a[2] * k2);
+        }
+      }
+    }
   }
   // From the factors (entries are sums of products of them; an overflow
   // there would show in the solution, which the solver checks too) and the
@@ -966,12 +996,21 @@ StepReport ContactModel::Impl::Step() {
   Eigen::Matrix<double, 6, 6> M6 = Eigen::Matrix<double, 6, 6>::Zero();
   M6.topLeftCorner<3, 3>() = mass * Eigen::Matrix3d::Identity();
   M6.bottomRightCorner<3, 3>() = Iw;
-  const SmallMatrix Mr = P.transpose() * M6 * P;
-  const SmallMatrix Minv = Mr.llt().solve(SmallMatrix::Identity(nd, nd));
-
+  SmallMatrix Mr, Minv;
   Eigen::Matrix<double, 6, 1> tw;
   tw << v, w;
-  const SmallVector vr = P.transpose() * tw;
+  SmallVector vr;
+  if (planar) {
+    // Fixed 3x3 sizes: the same arithmetic without dynamic-size dispatch.
+    const Eigen::Matrix3d Mr3 = Pt3 * M6 * Pt3.transpose();
+    Mr = Mr3;
+    Minv = Mr3.llt().solve(Eigen::Matrix3d::Identity());
+    vr = Pt3 * tw;
+  } else {
+    Mr = P.transpose() * M6 * P;
+    Minv = Mr.llt().solve(SmallMatrix::Identity(nd, nd));
+    vr = P.transpose() * tw;
+  }
 
   // Known wrench: gravity and point fingers' normal forces. The gyroscopic
   // torque -ω × Iω is left out: it is second order in the slow turning rates
@@ -986,7 +1025,7 @@ StepReport ContactModel::Impl::Step() {
       known.tail<3>() += (ct.points[0].p - c).cross(f);
     }
   }
-  const SmallVector Q = P.transpose() * known;
+  const SmallVector Q = planar ? SmallVector(Pt3 * known) : SmallVector(P.transpose() * known);
   const SmallVector vfree = vr + dt * Minv * Q;
 
   // Columns of the grasp map for every force unknown, in reduced coordinates.
@@ -1030,7 +1069,20 @@ StepReport ContactModel::Impl::Step() {
     }
   }
   const Eigen::MatrixXd& Jrows = tracked ? Jv : Jc;
-  K.noalias() = Minv * Jc;
+  if (planar) {
+    // Written out (Eigen's product sums over the 3 coordinates from zero in
+    // order: the same bits, without its kernel's packing).
+    K.resize(3, nf);
+    for (int j = 0; j < nf; ++j) {
+      for (int i = 0; i < 3; ++i) {
+        double acc = 0.0;
+        for (int k = 0; k < 3; ++k) acc += Minv(i, k) * Jc(k, j);
+        K(i, j) = acc;
+      }
+    }
+  } else {
+    K.noalias() = Minv * Jc;
+  }
 
   // Nondimensional LCP: force unknowns scale with Fs, velocity unknowns with
   // Vs = Fs dt / m; velocity rows are divided by Vs, force rows by Fs. A
