@@ -44,11 +44,14 @@ class DenseColumns final : public LcpColumns {
   const Eigen::MatrixXd& A_;
 };
 
-// LU factorisation with partial pivoting of a basis block. Up to 16 rows it
-// runs Eigen's unblocked algorithm and its triangular solves written out on
-// work space kept between calls (no dispatch, no heap), in Eigen's order of
-// operations, so the answer is Eigen's to the last bit; larger blocks go to
-// Eigen's blocked PartialPivLU.
+// LU factorisation with partial pivoting of a basis block, on work space
+// kept between calls (no dispatch, no heap). Up to 16 rows it runs Eigen's
+// unblocked algorithm, so the answer is Eigen's to the last bit; from 17 to
+// 32 rows (line fingers' bases) the same unblocked algorithm, where Eigen
+// would block in panels of 8 and sum the trailing updates in another order
+// (answers differ in the last bits: 1e-12 relative at worst on the
+// reference trajectories); beyond that Eigen's blocked PartialPivLU. The
+// triangular solves follow Eigen's (panels of 8) at every size.
 class BasisLu {
  public:
   void Compute(const Eigen::MatrixXd& block) {
@@ -140,7 +143,7 @@ class BasisLu {
     }
   }
 
-  static constexpr Eigen::Index kUnblocked = 16;  // Eigen's UnBlockedBound
+  static constexpr Eigen::Index kUnblocked = 32;  // rows factorised here
   static constexpr Eigen::Index kPanel = 8;       // EIGEN_TUNE_TRIANGULAR_PANEL_WIDTH
   Eigen::Index m_ = 0;
   std::array<double, kUnblocked * kUnblocked> lu_{};
