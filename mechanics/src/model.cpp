@@ -433,6 +433,7 @@ struct ContactModel::Impl {
   Eigen::Vector3d plane_normal = Eigen::Vector3d::UnitY();
   Eigen::Matrix<double, 6, Eigen::Dynamic> P;                             // reduced -> full twist
   Eigen::Matrix<double, 3, 6> Pt3 = Eigen::Matrix<double, 3, 6>::Zero();  // planar: Pᵀ
+  Eigen::Vector3d plane_e1 = Eigen::Vector3d::UnitX(), plane_e2 = Eigen::Vector3d::UnitZ();
   int nd = 6;
   int edges_per_point = 0;
 
@@ -476,6 +477,26 @@ struct ContactModel::Impl {
   bool PlacePatch(Contact& ct, const Eigen::Vector3d& base, const Eigen::Vector3d& closing,
                   const Eigen::Vector3d& vp, const Eigen::Vector3d& wp);
   void SetEdges(Point& pt);
+  // Column k of a grasp map: the wrench of a unit force along d at arm
+  // (from the centre of mass), in reduced coordinates.
+  void SetGraspColumn(Eigen::MatrixXd& J, int k, const Eigen::Vector3d& d,
+                      const Eigen::Vector3d& arm) const {
+    const Eigen::Vector3d moment = arm.cross(d);
+    double* out = J.data() + static_cast<Eigen::Index>(k) * nd;
+    if (planar) {
+      // Pᵀ (d, moment) written out, summed as Eigen's fixed 3x6 product sums
+      // it (the same bits without forming the 6-vector).
+      const Eigen::Vector3d& p = plane_normal;
+      out[0] = plane_e1.dot(d);
+      out[1] = plane_e2.dot(d);
+      out[2] = p.x() * moment.x() + (p.y() * moment.y() + p.z() * moment.z());
+    } else {
+      for (int i = 0; i < 3; ++i) {
+        out[i] = d[i];
+        out[3 + i] = moment[i];
+      }
+    }
+  }
   Eigen::Vector3d ObjectOrigin() const { return c - q.toRotationMatrix() * com_O; }
   StepReport Step();
 };
@@ -672,6 +693,8 @@ void ContactModel::Impl::Setup() {
     P.block<3, 1>(0, 1) = e2;
     P.block<3, 1>(3, 2) = p;
     Pt3 = P.transpose();
+    plane_e1 = e1;
+    plane_e2 = e2;
     edges_per_point = 2;
   } else {
     nd = 6;
@@ -1045,25 +1068,14 @@ StepReport ContactModel::Impl::Step() {
       continue;
     }
     const Eigen::Vector3d d = e < 0 ? normal_of(ct, pt) : edge_of(ct, pt, e);
-    Eigen::Matrix<double, 6, 1> col;
-    col << d, (pt.p - c).cross(d);
-    if (planar) {
-      Jc.col(k) = Pt3 * col;  // fixed-size 3x6 projection
-    } else {
-      Jc.col(k) = col;
-    }
+    SetGraspColumn(Jc, k, d, pt.p - c);
     if (tracked) {
       Jv.col(k) = Jc.col(k);
       if (e >= 0 && ct.known_normal >= 0 && !ct.pusher) {
         const double along = pt.n.dot(ct.normal);
         if (along > 1e-6) {
           const Eigen::Vector3d dv = d - (d.dot(ct.normal) / along) * pt.n;
-          col << dv, (pt.p - c).cross(dv);
-          if (planar) {
-            Jv.col(k) = Pt3 * col;
-          } else {
-            Jv.col(k) = col;
-          }
+          SetGraspColumn(Jv, k, dv, pt.p - c);
         }
       }
     }
