@@ -306,16 +306,21 @@ class StepMatrix final : public LcpColumns {
     entries_.clear();
     cache_.resize(n_, n_);
     dense_ = nf_ < kLazyForces;
+    if (dense_ && Jrows.rows() == 3) {
+      // Every entry of the force block is written; a non-finite factor
+      // shows in its row or column of entries (inf·0 is NaN).
+      cache_.rightCols(n_ - nf_).setZero();
+      cache_.bottomLeftCorner(n_ - nf_, nf_).setZero();
+      finite_ = std::isfinite(mass) && PlanarForceBlock(mass, Jrows, K);
+      ready_.assign(static_cast<size_t>(n_), 1);
+      return;
+    }
     finite_ = std::isfinite(mass) && Jrows.allFinite() && K.allFinite();
     if (dense_) {
       // Eigen picks a coefficient-wise product for small sizes, whose sums
       // run in another order: the dense formation keeps it.
       cache_.setZero();
-      if (Jrows.rows() == 3) {
-        PlanarForceBlock(mass, Jrows, K);
-      } else {
-        cache_.topLeftCorner(nf_, nf_).noalias() = mass * Jrows.transpose() * K;
-      }
+      cache_.topLeftCorner(nf_, nf_).noalias() = mass * Jrows.transpose() * K;
       ready_.assign(static_cast<size_t>(n_), 1);
     } else {
       JT_ = Jrows.transpose();
@@ -369,8 +374,10 @@ class StepMatrix final : public LcpColumns {
   // zero and then times the mass in its blocked kernel (2 nf + 3 >= 20),
   // the mass times the plain sum in its coefficient-wise one: the same
   // entries to the last bit, without the kernel's packing.
-  void PlanarForceBlock(double mass, const Eigen::MatrixXd& Jrows, const Eigen::MatrixXd& K) {
+  // Returns whether every entry is finite.
+  bool PlanarForceBlock(double mass, const Eigen::MatrixXd& Jrows, const Eigen::MatrixXd& K) {
     const bool blocked = 2 * nf_ + 3 >= 20;
+    double probe = 0;  // NaN when some entry is not finite
     const double* J = Jrows.data();
     const double* Kd = K.data();
     for (int j = 0; j < nf_; ++j) {
@@ -387,8 +394,10 @@ class StepMatrix final : public LcpColumns {
         } else {
           col[i] = mass * (a[0] * k0 + a[1] * k1 + a[2] * k2);
         }
+        probe += col[i] - col[i];
       }
     }
+    return probe == 0;
   }
   // From the factors (entries are sums of products of them; an overflow
   // there would show in the solution, which the solver checks too) and the
@@ -838,7 +847,9 @@ void ContactModel::Impl::SetEdges(Point& pt) {
     const Eigen::Vector3d cr = plane_normal.cross(pt.n);
     const Eigen::Vector3d tau =
         cr.norm() > 1e-12 ? Eigen::Vector3d(cr.normalized()) : Eigen::Vector3d::Zero();
-    pt.edges.assign({tau, -tau});
+    pt.edges.resize(2);
+    pt.edges[0] = tau;
+    pt.edges[1] = -tau;
     return;
   }
   const Eigen::Vector3d t1 = FirstTangent(pt.n);
