@@ -688,40 +688,52 @@ LcpResult SolveLcp(const Eigen::MatrixXd& A, const Eigen::VectorXd& b,
 LcpResult SolveLcp(const LcpColumns& A, const Eigen::VectorXd& b,
                    const std::vector<char>* warm_basis, const LcpOptions& options) {
   LcpResult out;
+  SolveLcp(A, b, warm_basis, options, out);
+  return out;
+}
+
+void SolveLcp(const LcpColumns& A, const Eigen::VectorXd& b, const std::vector<char>* warm_basis,
+              const LcpOptions& options, LcpResult& out) {
+  // Every field is set again; the vectors keep their storage.
+  out.ok = false;
+  out.status = LcpStatus::kBadProblem;
+  out.reason.clear();
+  out.pivots = 0;
+  out.warm_start_used = false;
+  out.natural_residual = 0;
   const Eigen::Index n = b.size();
-  out.basis.assign(static_cast<size_t>(n), 0);
   if (A.size() != n) {
-    out.status = LcpStatus::kBadProblem;
+    out.basis.assign(static_cast<size_t>(n), 0);
     out.reason = "matrix and vector sizes differ";
-    return out;
+    return;
   }
   if (!A.AllFinite() || !b.allFinite()) {
-    out.status = LcpStatus::kBadProblem;
+    out.basis.assign(static_cast<size_t>(n), 0);
     out.reason = "non-finite problem data";
-    return out;
+    return;
   }
   if (n == 0 || b.minCoeff() >= 0) {
+    out.basis.assign(static_cast<size_t>(n), 0);
     out.ok = true;
     out.status = LcpStatus::kOk;
-    out.z = Eigen::VectorXd::Zero(n);
+    out.z.setZero(n);
     out.w = b;
-    return out;
+    return;
   }
 
   // Warm start: the previous step's basis usually still holds.
   if (warm_basis != nullptr && static_cast<Eigen::Index>(warm_basis->size()) == n) {
-    Eigen::VectorXd z, w;
-    if (SolveBasis(A, b, *warm_basis, z, w) && Acceptable(z, w, b, options.feasibility)) {
+    if (SolveBasis(A, b, *warm_basis, out.z, out.w) &&
+        Acceptable(out.z, out.w, b, options.feasibility)) {
       out.ok = true;
       out.status = LcpStatus::kOk;
-      out.natural_residual = NaturalResidual(z, w);
-      out.z.swap(z);
-      out.w.swap(w);
+      out.natural_residual = NaturalResidual(out.z, out.w);
       out.basis = *warm_basis;
       out.warm_start_used = true;
-      return out;
+      return;
     }
   }
+  out.basis.assign(static_cast<size_t>(n), 0);
 
   // Lemke's method is only guaranteed for copositive-plus matrices; the
   // friction rows make ours merely copositive, and a ray can end a run on a
@@ -773,8 +785,9 @@ LcpResult SolveLcp(const LcpColumns& A, const Eigen::VectorXd& b,
   if (!out.ok) {
     out.reason = first_reason + "; " + std::to_string(attempts - 1) +
                  " other covering vectors failed too (last: " + out.reason + ")";
+    out.z.resize(0);
+    out.w.resize(0);
   }
-  return out;
 }
 
 }  // namespace arena::mechanics

@@ -476,6 +476,8 @@ struct ContactModel::Impl {
   Eigen::MatrixXd Jc, Jv, K;
   StepMatrix A;
   Eigen::VectorXd b;
+  LcpResult solution;      // the last solve (its vectors reused)
+  Eigen::VectorXd forces;  // N, per force unknown
 
   void Setup();
   void Geometry();
@@ -1169,8 +1171,8 @@ StepReport ContactModel::Impl::Step() {
 
   // Solve (warm from the last basis), then check the physical residuals; a
   // warm-started answer that fails them is solved again cold.
-  LcpResult sol;
-  Eigen::VectorXd f;
+  LcpResult& sol = solution;
+  Eigen::VectorXd& f = forces;
   SmallVector vr_new;
   Eigen::Vector3d v_new, w_new;
   Residuals res;
@@ -1199,7 +1201,7 @@ StepReport ContactModel::Impl::Step() {
     LcpOptions lcp_options;
     const bool warm = attempt == 0 && !basis.empty();
     lcp_options.first_covering = next_covering;
-    sol = SolveLcp(A, b, warm ? &basis : nullptr, lcp_options);
+    SolveLcp(A, b, warm ? &basis : nullptr, lcp_options, sol);
     if (!sol.warm_start_used) ++next_covering;
     rep.pivots += sol.pivots;
     rep.warm_start_used = sol.warm_start_used;
