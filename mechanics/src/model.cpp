@@ -468,9 +468,11 @@ struct ContactModel::Impl {
   // Tracked geometry.
   bool tracked = false;
   std::unique_ptr<geometry::Solid> solid;
-  Eigen::Vector3d com_O = Eigen::Vector3d::Zero();  // centre of mass in the object frame
-  double gap_tolerance = 0;                         // m: within it a primitive touches
-  std::vector<double> cone_cos, cone_sin;           // facets' angles from t1
+  Eigen::Vector3d com_O = Eigen::Vector3d::Zero();        // centre of mass in the object frame
+  double gap_tolerance = 0;                               // m: within it a primitive touches
+  Eigen::Matrix3d pose_R = Eigen::Matrix3d::Identity();   // this step's object rotation
+  Eigen::Vector3d pose_origin = Eigen::Vector3d::Zero();  // and object-frame origin
+  std::vector<double> cone_cos, cone_sin;                 // facets' angles from t1
 
   // Work space.
   Eigen::MatrixXd Jc, Jv, K;
@@ -869,8 +871,8 @@ void ContactModel::Impl::SetEdges(Point& pt) {
 void ContactModel::Impl::PlaceOnSolid(Contact& ct, Point& pt, const Eigen::Vector3d& q_in,
                                       const Eigen::Vector3d& base, const Eigen::Vector3d& closing,
                                       const Eigen::Vector3d& vp, const Eigen::Vector3d& wp) {
-  const Eigen::Matrix3d R = q.toRotationMatrix();
-  const Eigen::Vector3d origin = ObjectOrigin();
+  const Eigen::Matrix3d& R = pose_R;
+  const Eigen::Vector3d& origin = pose_origin;
   const double r = ct.spec.type == ContactType::kPoint ? ct.spec.radius : 0.0;
   const Eigen::Vector3d centre = q_in - r * closing;
   const Eigen::Vector3d centre_O = R.transpose() * (centre - origin);
@@ -908,8 +910,8 @@ void ContactModel::Impl::PlaceOnSolid(Contact& ct, Point& pt, const Eigen::Vecto
 bool ContactModel::Impl::PlacePatch(Contact& ct, const Eigen::Vector3d& base,
                                     const Eigen::Vector3d& closing, const Eigen::Vector3d& vp,
                                     const Eigen::Vector3d& wp) {
-  const Eigen::Matrix3d R = q.toRotationMatrix();
-  const Eigen::Vector3d origin = ObjectOrigin();
+  const Eigen::Matrix3d& R = pose_R;
+  const Eigen::Vector3d& origin = pose_origin;
   const geometry::Feature f = solid->Support(R.transpose() * closing, gap_tolerance);
   if (f.kind == geometry::Feature::Kind::kFace) return false;
   const double radius = ct.spec.radius;
@@ -965,6 +967,9 @@ bool ContactModel::Impl::PlacePatch(Contact& ct, const Eigen::Vector3d& base,
 // force-controlled pads that stay on the surface: they are re-seated along
 // their closing direction every step.
 void ContactModel::Impl::TrackedGeometry() {
+  // The object's pose, once per step for every primitive placed on it.
+  pose_R = q.toRotationMatrix();
+  pose_origin = ObjectOrigin();
   for (Contact& ct : contacts) {
     Eigen::Matrix3d Rp = Eigen::Matrix3d::Identity();
     Eigen::Vector3d vp = Eigen::Vector3d::Zero(), wp = Eigen::Vector3d::Zero();
