@@ -46,12 +46,13 @@ class DenseColumns final : public LcpColumns {
 
 // LU factorisation with partial pivoting of a basis block, on work space
 // kept between calls (no dispatch, no heap). Up to 16 rows it runs Eigen's
-// unblocked algorithm, so the answer is Eigen's to the last bit; from 17 to
-// 32 rows (line fingers' bases) the same unblocked algorithm, where Eigen
-// would block in panels of 8 and sum the trailing updates in another order
-// (answers differ in the last bits: 1e-12 relative at worst on the
-// reference trajectories); beyond that Eigen's blocked PartialPivLU. The
-// triangular solves follow Eigen's (panels of 8) at every size.
+// unblocked algorithm and its panel-of-8 triangular solves written out in
+// the same order, so the answer is Eigen's to the last bit; larger blocks go
+// to Eigen's blocked PartialPivLU. (The unblocked LU up to 32 rows, where
+// Eigen blocks in panels of 8 and so rounds differently, was tried: a
+// closed-loop pivot, executors_closed_loop_test, then ended 0.48 rad from
+// its target instead of within 0.02 -- a step's last bits can choose
+// another of a friction LCP's solutions -- so the bits stay Eigen's.)
 class BasisLu {
  public:
   void Compute(const Eigen::MatrixXd& block) {
@@ -143,7 +144,7 @@ class BasisLu {
     }
   }
 
-  static constexpr Eigen::Index kUnblocked = 32;  // rows factorised here
+  static constexpr Eigen::Index kUnblocked = 16;  // Eigen's UnBlockedBound
   static constexpr Eigen::Index kPanel = 8;       // EIGEN_TUNE_TRIANGULAR_PANEL_WIDTH
   Eigen::Index m_ = 0;
   std::array<double, kUnblocked * kUnblocked> lu_{};
