@@ -28,6 +28,7 @@ import json
 import math
 import os
 import sys
+import time
 
 PROTOCOL = 1
 
@@ -198,11 +199,13 @@ def main(argv):
                     sys.stdout.flush()
                     break
                 if k == 2 and fail_mode == "crash":
+                    # Half a trial is out (the cell streams what it has while
+                    # we are quiet): the cell must fail it, not keep it.
                     log("crashing on purpose")
+                    time.sleep(0.3)
                     os._exit(3)
                 if k == 2 and fail_mode == "hang":
                     log("hanging on purpose")
-                    import time
                     time.sleep(3600)
                 if k == 2 and fail_mode == "nan":
                     text = json.dumps(sample).replace(json.dumps(sample["position"][0]), "NaN", 1)

@@ -202,8 +202,7 @@ RecordedStream Hdf5Recording::Read(std::int64_t trial_id, bool samples) const {
   H5Object type(H5Dget_type(ds.id), H5Tclose);
   if (type.id < 0) throw std::invalid_argument(where + "unreadable type: " + H5Reason());
   if (H5Tget_class(type.id) != H5T_FLOAT || H5Tget_size(type.id) != 8)
-    throw std::invalid_argument(where + "holds " + TypeName(type.id) +
-                                ", expected 64-bit floats");
+    throw std::invalid_argument(where + "holds " + TypeName(type.id) + ", expected 64-bit floats");
   H5Object space(H5Dget_space(ds.id), H5Sclose);
   if (space.id < 0 || H5Sget_simple_extent_ndims(space.id) != 2)
     throw std::invalid_argument(where + "must be 2-D (samples x columns)");

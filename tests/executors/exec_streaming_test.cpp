@@ -79,7 +79,8 @@ class ExecStreaming : public ::testing::Test {
   void Drain(test::Driver& d, dds::Reader<msg::LiveState>& live, std::uint64_t trial, Seen* seen) {
     for (auto b = d.ground_truth.Take(20ms); b; b = d.ground_truth.Take(0ms)) {
       if (b->trial_id() != trial) continue;
-      for (std::uint32_t i = 0; i < b->samples().size(); ++i) seen->logged.insert(b->first_sample() + i);
+      for (std::uint32_t i = 0; i < b->samples().size(); ++i)
+        seen->logged.insert(b->first_sample() + i);
       seen->last_batch = seen->last_batch || b->last();
     }
     for (auto m = live.Take(0ms); m; m = live.Take(0ms))
