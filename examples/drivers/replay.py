@@ -81,7 +81,8 @@ class Dataset:
         self.format = manifest.get("export_format")
         if self.format not in ("csv", "jsonl"):
             raise SystemExit(f"replay.py: {path}: export format {self.format!r} cannot be read "
-                             "with the standard library; export with --format csv or jsonl")
+                             "with the standard library; export with --format csv or jsonl, or serve "
+                             "it without a driver: --backend replay:DIR")
         self.trials = []  # (trial_id, seed, scene)
         with open(os.path.join(path, "scenes.jsonl")) as f:
             for line in f:

@@ -1,6 +1,9 @@
 // exec:COMMAND: a driver process speaking the JSON-lines protocol
-// (exec_protocol.hpp). Every failure of the driver fails the phase with a
-// reason, kills the driver and leaves the next Prepare to start it afresh.
+// (exec_protocol.hpp). Each sample line goes to the cell's sink as it is
+// read (the cell streams it on at once); while the driver is quiet the cell
+// is told (TrialContext::idle) so it can flush what it holds. Every failure
+// of the driver fails the phase with a reason, kills the driver and leaves
+// the next Prepare to start it afresh.
 #include <fcntl.h>
 #include <poll.h>
 #include <signal.h>
