@@ -990,7 +990,7 @@ struct Cell::Impl {
   // The backend finished: the rest of the log, flagged last; the live
   // topic's final sample again, flagged last.
   void EndStream(Outgoing& out) {
-    if (!SendBatch(out, true)) return;
+    if (!SendBatch(out, true) || out.pushed == 0) return;
     if (Paced(out) ? live.Matched() > 0 : out.live_on)
       PublishLive(out.c, static_cast<std::uint32_t>(out.pushed - 1), true, out.newest);
   }

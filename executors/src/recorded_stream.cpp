@@ -20,14 +20,6 @@ namespace {
 
 constexpr double kMissing = std::numeric_limits<double>::quiet_NaN();
 
-std::string Slurp(const std::string& path) {
-  std::ifstream in(path, std::ios::binary);
-  if (!in) throw std::invalid_argument(path + ": cannot read it");
-  std::ostringstream s;
-  s << in.rdbuf();
-  return s.str();
-}
-
 std::vector<std::string> SplitCsv(const std::string& line) {
   std::vector<std::string> out;
   std::string cur;
@@ -97,6 +89,14 @@ std::string TypeName(hid_t type) {
 
 }  // namespace
 
+std::string ReadText(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) throw std::invalid_argument(path + ": cannot read it");
+  std::ostringstream s;
+  s << in.rdbuf();
+  return s.str();
+}
+
 int RecordedStream::Column(const std::string& name) const {
   for (size_t i = 0; i < columns.size(); ++i)
     if (columns[i] == name) return static_cast<int>(i);
@@ -104,7 +104,7 @@ int RecordedStream::Column(const std::string& name) const {
 }
 
 RecordedStream ReadCsvStream(const std::string& path) {
-  std::istringstream in(Slurp(path));
+  std::istringstream in(ReadText(path));
   RecordedStream out;
   std::string line;
   if (!std::getline(in, line)) throw std::invalid_argument(path + ": empty (no header line)");
@@ -131,7 +131,7 @@ RecordedStream ReadCsvStream(const std::string& path) {
 }
 
 RecordedStream ReadJsonlStream(const std::string& path) {
-  std::istringstream in(Slurp(path));
+  std::istringstream in(ReadText(path));
   RecordedStream out;
   std::map<std::string, size_t> index;
   std::string line;

@@ -18,6 +18,9 @@ struct RecordedStream {
   int Column(const std::string& name) const;
 };
 
+// A whole file. @throws std::invalid_argument "PATH: cannot read it".
+std::string ReadText(const std::string& path);
+
 // The export's file formats ("csv", "jsonl", "hdf5"; manifest.json's export_format).
 // @throws std::invalid_argument naming the file and what is wrong with it.
 RecordedStream ReadCsvStream(const std::string& path);

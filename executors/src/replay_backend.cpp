@@ -6,7 +6,6 @@
 // reason.
 #include <cmath>
 #include <filesystem>
-#include <fstream>
 #include <map>
 #include <sstream>
 #include <stdexcept>
@@ -47,14 +46,6 @@ bool Same(const json& a, const json& b) {
 json Physical(json scene) {
   if (scene.is_object()) scene.erase("model");
   return scene;
-}
-
-std::string Slurp(const fs::path& p) {
-  std::ifstream in(p, std::ios::binary);
-  if (!in) throw std::invalid_argument("cannot read " + p.string());
-  std::ostringstream s;
-  s << in.rdbuf();
-  return s.str();
 }
 
 // The recorded rows as the true samples of `scene`: contacts in scene order
@@ -136,7 +127,7 @@ class ReplayBackend final : public Backend {
     const fs::path root(dir);
     json manifest;
     try {
-      manifest = json::parse(Slurp(root / "manifest.json"));
+      manifest = json::parse(ReadText((root / "manifest.json").string()));
     } catch (const json::exception& e) {
       throw std::invalid_argument(dir + "/manifest.json: not JSON: " + e.what());
     }
@@ -146,7 +137,7 @@ class ReplayBackend final : public Backend {
                                   "' is none of the formats arena writes (hdf5, csv, jsonl)");
     if (!fs::exists(root / "scenes.jsonl"))
       throw std::invalid_argument(dir + ": no scenes.jsonl (exported by an older arena?)");
-    std::istringstream lines(Slurp(root / "scenes.jsonl"));
+    std::istringstream lines(ReadText((root / "scenes.jsonl").string()));
     std::string line;
     for (int number = 1; std::getline(lines, line); ++number) {
       if (line.empty()) continue;
