@@ -162,11 +162,11 @@ RecordedStream ReadJsonlStream(const std::string& path) {
 
 Hdf5Recording::Hdf5Recording(std::string path) : path_(std::move(path)) {
   QuietHdf5();
-  if (H5Fis_hdf5(path_.c_str()) <= 0) {
-    const std::string why = H5Reason();
+  if (const htri_t is = H5Fis_hdf5(path_.c_str()); is <= 0) {
+    const std::string why = is < 0 ? H5Reason() : "no HDF5 signature";
     std::ifstream probe(path_);
     throw std::invalid_argument(path_ + ": " +
-                                (probe ? "not a readable HDF5 file (" + why + ")"
+                                (probe ? "not an HDF5 file (" + why + ")"
                                        : std::string("missing (the export's dataset.h5)")));
   }
   file_ = H5Fopen(path_.c_str(), H5F_ACC_RDONLY, H5P_DEFAULT);
@@ -217,21 +217,31 @@ RecordedStream Hdf5Recording::Read(std::int64_t trial_id, bool samples) const {
   H5Object attr(H5Aopen(ds.id, "columns", H5P_DEFAULT), H5Aclose);
   H5Object atype(attr.id < 0 ? -1 : H5Aget_type(attr.id), H5Tclose);
   H5Object aspace(attr.id < 0 ? -1 : H5Aget_space(attr.id), H5Sclose);
-  if (atype.id < 0 || aspace.id < 0 || H5Tget_class(atype.id) != H5T_STRING ||
-      H5Tis_variable_str(atype.id) > 0)
-    throw std::invalid_argument(where + "attribute \"columns\" must hold fixed-length strings");
+  if (atype.id < 0 || aspace.id < 0 || H5Tget_class(atype.id) != H5T_STRING)
+    throw std::invalid_argument(where + "attribute \"columns\" must hold strings");
   const hssize_t names = H5Sget_simple_extent_npoints(aspace.id);
   if (names < 0 || static_cast<hsize_t>(names) != dims[1])
     throw std::invalid_argument(where + "attribute \"columns\" names " + std::to_string(names) +
                                 " columns, the dataset has " + std::to_string(dims[1]));
-  const size_t width = H5Tget_size(atype.id);
-  std::string buffer(width * static_cast<size_t>(names), '\0');
-  if (H5Aread(attr.id, atype.id, buffer.data()) < 0)
-    throw std::invalid_argument(where + "cannot read attribute \"columns\": " + H5Reason());
   RecordedStream out;
-  for (hssize_t k = 0; k < names; ++k) {
-    const char* p = buffer.data() + static_cast<size_t>(k) * width;
-    out.columns.emplace_back(p, strnlen(p, width));
+  if (H5Tis_variable_str(atype.id) > 0) {  // arena writes fixed-length; h5py variable-length
+    H5Object text(H5Tcopy(H5T_C_S1), H5Tclose);
+    H5Tset_size(text.id, H5T_VARIABLE);
+    H5Tset_cset(text.id, H5Tget_cset(atype.id));
+    std::vector<char*> p(static_cast<size_t>(names), nullptr);
+    if (H5Aread(attr.id, text.id, p.data()) < 0)
+      throw std::invalid_argument(where + "cannot read attribute \"columns\": " + H5Reason());
+    for (char* name : p) out.columns.emplace_back(name ? name : "");
+    H5Dvlen_reclaim(text.id, aspace.id, H5P_DEFAULT, p.data());
+  } else {
+    const size_t width = H5Tget_size(atype.id);
+    std::string buffer(width * static_cast<size_t>(names), '\0');
+    if (H5Aread(attr.id, atype.id, buffer.data()) < 0)
+      throw std::invalid_argument(where + "cannot read attribute \"columns\": " + H5Reason());
+    for (hssize_t k = 0; k < names; ++k) {
+      const char* p = buffer.data() + static_cast<size_t>(k) * width;
+      out.columns.emplace_back(p, strnlen(p, width));
+    }
   }
   if (!samples || dims[0] == 0) return out;
 
