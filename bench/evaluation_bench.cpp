@@ -35,14 +35,22 @@ std::string StorePath() {
   return env ? env : "/tmp/arena_evaluation_bench.db";
 }
 
+// 0 when there is no usable store: a file a read-only open refuses (made by an
+// older build at an older schema, which read-only cannot migrate) is rebuilt
+// rather than aborting the benchmark.
 int DoneTrials(const std::string& path) {
   if (!fs::exists(path)) return 0;
   arena::db::StoreOptions ro;
   ro.read_only = true;
-  auto store = arena::db::Store::Open(path, ro);
-  int done = 0;
-  for (const auto& t : store->ListTrials(1)) done += t.state == arena::db::TrialState::kDone;
-  return done;
+  try {
+    auto store = arena::db::Store::Open(path, ro);
+    int done = 0;
+    for (const auto& t : store->ListTrials(1)) done += t.state == arena::db::TrialState::kDone;
+    return done;
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "evaluation_bench: rebuilding %s (%s)\n", path.c_str(), e.what());
+    return 0;
+  }
 }
 
 // A 1,000-trial campaign run once with `arena run` (2 cells).

@@ -143,13 +143,7 @@ mechanics::Scene ApplyStartPose(const mechanics::Scene& scene, const StartPoseDr
 }
 
 ActuationNoise ParseActuationNoise(std::string_view text) {
-  json root;
-  try {
-    root = json::parse(text);
-  } catch (const json::parse_error& e) {
-    throw NoiseError("defects", std::string("not valid JSON: ") + e.what());
-  }
-  if (!root.is_object()) throw NoiseError("defects", "must be a JSON object");
+  const json root = ParseObject(text);
   ActuationNoise n;
   if (const json* f = Member(root, "friction_variability")) {
     if (!f->is_object()) throw NoiseError("friction_variability", "must be an object");

@@ -62,32 +62,15 @@ class ArenaPredictor final : public Predictor {
   const std::vector<PredictorSetting>& settings() const override { return settings_; }
   mechanics::SimulationResult Run(const mechanics::Scene& scene,
                                   std::size_t setting) const override {
-    mechanics::Scene s = scene;
-    s.model = models_.at(setting);
-    try {
-      mechanics::ValidateScene(s);
-    } catch (const std::exception& e) {
-      mechanics::SimulationResult r;
-      r.status = mechanics::SimulationStatus::kInvalidScene;
-      r.error = e.what();
-      return r;
-    }
-    return mechanics::Simulate(s);
+    return SimulateAt(scene, setting,
+                      [](const mechanics::Scene& s) { return mechanics::Simulate(s); });
   }
   mechanics::SimulationResult RunClosedLoop(
       const mechanics::Scene& scene, std::size_t setting,
       const mechanics::PusherCommandSource& commands) const override {
-    mechanics::Scene s = scene;
-    s.model = models_.at(setting);
-    try {
-      mechanics::ValidateScene(s);
-    } catch (const std::exception& e) {
-      mechanics::SimulationResult r;
-      r.status = mechanics::SimulationStatus::kInvalidScene;
-      r.error = e.what();
-      return r;
-    }
-    return mechanics::Simulate(s, commands);
+    return SimulateAt(scene, setting, [&commands](const mechanics::Scene& s) {
+      return mechanics::Simulate(s, commands);
+    });
   }
   std::string EffectiveKey(const mechanics::Scene& scene, std::size_t setting) const override {
     auto extended = [](const mechanics::ContactSpec& c) {
@@ -102,6 +85,24 @@ class ArenaPredictor final : public Predictor {
   }
 
  private:
+  // The scene at one of this predictor's settings; a setting the scene
+  // cannot take is an invalid-scene result, not an exception.
+  template <class Simulation>
+  mechanics::SimulationResult SimulateAt(const mechanics::Scene& scene, std::size_t setting,
+                                         const Simulation& run) const {
+    mechanics::Scene s = scene;
+    s.model = models_.at(setting);
+    try {
+      mechanics::ValidateScene(s);
+    } catch (const std::exception& e) {
+      mechanics::SimulationResult r;
+      r.status = mechanics::SimulationStatus::kInvalidScene;
+      r.error = e.what();
+      return r;
+    }
+    return run(s);
+  }
+
   std::string name_ = "arena";
   std::vector<mechanics::ModelOptions> models_;
   std::vector<PredictorSetting> settings_;

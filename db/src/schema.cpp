@@ -456,6 +456,14 @@ ALTER TABLE trials ADD COLUMN backend TEXT;          -- "model", "mujoco", "exec
 ALTER TABLE trials ADD COLUMN truth TEXT;            -- self-consistency | simulator | robot | recorded
 ALTER TABLE trials ADD COLUMN defects_applied TEXT;  -- JSON: cell, campaign, effective profile, draws
 )sql"},
+      // Versions 11-13 are left to work on other branches; versions apply in order.
+      // A reset is aimed at the trial the service expects next on the cell;
+      // another cell may take that trial. Without knowing which trial a
+      // cell's observed start was prepared for, a trial run from another
+      // trial's reset was charged that reset's placement error.
+      {14, "cells.start_for_trial: the trial a cell's observed start was aimed at", R"sql(
+ALTER TABLE cells ADD COLUMN start_for_trial INTEGER;  -- 0: aimed at no trial; NULL: not known
+)sql"},
   };
   return kMigrations;
 }

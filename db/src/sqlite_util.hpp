@@ -69,7 +69,8 @@ class Binder {
     s_.Bind(k_++, v);
     return *this;
   }
-  Binder& operator<<(const std::optional<std::string>& v) {
+  template <class T>
+  Binder& operator<<(const std::optional<T>& v) {  // NULL when empty
     if (v)
       s_.Bind(k_++, *v);
     else

@@ -696,18 +696,21 @@ std::optional<ClaimedTrial> Store::ClaimNextTrial(const std::string& cell_id) {
   const double now = impl_->Now();
   WriteTransition(*impl_, t->trial_id, t->attempt, TrialState::kPlanned, TrialState::kDispatched,
                   cell_id, "claimed", "ClaimNextTrial");
-  // The start state this trial begins from: the cell's last observed reset result.
+  // The start state this trial begins from: the cell's last observed reset
+  // result, if that reset was aimed at this trial (or its aim is not known).
   auto u = impl_->Prepare(
       "UPDATE trials SET cell_id = ?1, dispatched_at = ?2,"
       " cell_defects_json = (SELECT defects_json FROM cells WHERE id = ?1),"
       " start_x = c.start_x, start_y = c.start_y, start_z = c.start_z, start_qw = c.start_qw,"
       " start_qx = c.start_qx, start_qy = c.start_qy, start_qz = c.start_qz"
-      " FROM (SELECT * FROM cells WHERE id = ?1) AS c WHERE trials.id = ?3");
+      " FROM (SELECT 1) LEFT JOIN cells AS c ON c.id = ?1"
+      "  AND (c.start_for_trial IS NULL OR c.start_for_trial = ?3) WHERE trials.id = ?3");
   u->Bind(1, cell_id).Bind(2, now).Bind(3, t->trial_id).Run();
   // The trial will move the object: the cell's start state is consumed.
   auto clear = impl_->Prepare(
       "UPDATE cells SET start_x = NULL, start_y = NULL, start_z = NULL, start_qw = NULL,"
-      " start_qx = NULL, start_qy = NULL, start_qz = NULL, start_observed_at = NULL WHERE id = ?");
+      " start_qx = NULL, start_qy = NULL, start_qz = NULL, start_observed_at = NULL,"
+      " start_for_trial = NULL WHERE id = ?");
   clear->Bind(1, cell_id).Run();
   auto r = impl_->Prepare(
       "SELECT start_x, start_y, start_z, start_qw, start_qx, start_qy, start_qz,"
@@ -828,7 +831,8 @@ void Store::CompleteReset(std::int64_t trial_id, int attempt, const ResetReport&
     // ok or not; without an observation that start is unknown (NULL).
     auto c = impl_->Prepare(
         "UPDATE cells SET start_x = ?, start_y = ?, start_z = ?, start_qw = ?, start_qx = ?,"
-        " start_qy = ?, start_qz = ?, start_observed_at = ?, updated_at = ? WHERE id = ?");
+        " start_qy = ?, start_qz = ?, start_observed_at = ?, start_for_trial = ?, updated_at = ?"
+        " WHERE id = ?");
     detail::Binder b(*c);
     const double now = impl_->Now();
     for (double v : report.observed_pose) {
@@ -841,7 +845,7 @@ void Store::CompleteReset(std::int64_t trial_id, int attempt, const ResetReport&
       b << now;
     else
       b << std::nullopt;
-    b << now << row.cell_id;
+    b << report.aimed_at_trial << now << row.cell_id;
     c->Run();
   }
   tx.Commit();
@@ -1110,8 +1114,8 @@ RecoveryReport Store::RecoverAfterRestart(const std::string& reason) {
     // Where the interrupted reset left the object is unknown.
     auto c = impl_->Prepare(
         "UPDATE cells SET start_x = NULL, start_y = NULL, start_z = NULL, start_qw = NULL,"
-        " start_qx = NULL, start_qy = NULL, start_qz = NULL, start_observed_at = NULL WHERE id = "
-        "?");
+        " start_qx = NULL, start_qy = NULL, start_qz = NULL, start_observed_at = NULL,"
+        " start_for_trial = NULL WHERE id = ?");
     c->Bind(1, row.cell_id).Run();
     report.reset_failed.push_back(id);
   }

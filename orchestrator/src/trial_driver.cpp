@@ -100,6 +100,7 @@ struct TrialDriver::Impl {
     Clock::time_point claimed_at{};
     double execute_wall_s = -1;
     int store_waits = 0;  // store steps of this cell waiting after kBusy: deadlines held
+    std::int64_t reset_aimed_at = 0;  // the trial the running reset prepares (0: none)
   };
   std::map<std::string, CellRun> cells;
 
@@ -610,6 +611,7 @@ struct TrialDriver::Impl {
           cmd.attempt(static_cast<std::uint32_t>(attempt));
           cmd.scene_json(next ? next->scene_json : std::string());
           cmd.seed(next ? next->seed : 0);
+          c.reset_aimed_at = next ? next->trial_id : 0;
           cmd.deadline_s(opt.service.reset_timeout_s);
           SetPhase(c, CellPhase::kResetting, opt.service.reset_timeout_s + 2.0);
           if (!transport.Send(cmd)) AbortPhase(c, "RESET command could not be sent", true);
@@ -723,6 +725,7 @@ struct TrialDriver::Impl {
     report.angle_error = st.reset_angle_error();
     report.reset_attempts = static_cast<int>(st.reset_attempts());
     report.reason = st.reason();
+    report.aimed_at_trial = cell.reset_aimed_at;
     if (!ok) {
       spdlog::warn("trial {} attempt {}: reset on cell {} failed: {}", cell.trial_id, cell.attempt,
                    cell.id, st.reason());

@@ -195,6 +195,31 @@ std::string Pair(const std::string& pad, const mechanics::ContactSpec& c,
   return x.str();
 }
 
+// The most contacts MuJoCo 2.2's collision functions return for one pad
+// against the object: a sphere 1, a capsule 2 (on a face), a box 8 (box on a
+// box); meshes and cylinders go through the convex collider (1).
+int MaxPadContacts(const mechanics::ContactSpec& c, PadShapes shapes) {
+  if (shapes == PadShapes::kSpheres || c.type == mechanics::ContactType::kPoint) return 1;
+  return c.type == mechanics::ContactType::kLine ? 2 : 8;
+}
+
+// <size> for this scene. The solver's stack grows with njmax squared: a fixed
+// njmax of 1200 made mj_makeData zero a 58 MB stack (10.7 ms) for every model,
+// where a scene of three point pads needs some 40 constraint rows. A run whose
+// contacts still overflow these bounds fails loudly (RunSamples).
+std::string SizeElement(const mechanics::Scene& scene, PadShapes shapes) {
+  int contacts = 0;
+  for (const auto& f : scene.fingers) contacts += PadCount(f, shapes) * MaxPadContacts(f, shapes);
+  if (scene.pusher)
+    contacts += PadCount(*scene.pusher, shapes) * MaxPadContacts(*scene.pusher, shapes);
+  // Rows: up to 4 per condim-3 contact (a pyramidal cone; elliptic uses 3),
+  // plus joint limits of the finger slides and the object, with room to spare.
+  const int rows = 4 * contacts + 2 * static_cast<int>(scene.fingers.size()) + 16;
+  std::ostringstream x;
+  x << "  <size nconmax=\"" << contacts + 8 << "\" njmax=\"" << rows << "\"/>\n";
+  return x.str();
+}
+
 // Signed area and centroid of a polygon (counter-clockwise: area > 0).
 double PolygonArea(const std::vector<Eigen::Vector2d>& poly) {
   double a = 0;
@@ -467,12 +492,13 @@ struct Run {
     PusherAt(t, &c, &q);
     return c;
   }
-  Eigen::Vector3d PadNormal(size_t who, double t) const {
+  // The axis a pad's force is split along: the normal the scene gives it, as
+  // every reader of a sample puts it back together (assessment::
+  // ContactNormals). A turning pusher's own normal was used before, so the
+  // store rebuilt a force that was not the one measured.
+  Eigen::Vector3d PadNormal(size_t who) const {
     if (who < scene.fingers.size()) return scene.fingers[who].normal.normalized();
-    Eigen::Vector3d c;
-    Eigen::Quaterniond q;
-    PusherAt(t, &c, &q);
-    return q * scene.pusher->normal.normalized();
+    return scene.pusher->normal.normalized();
   }
 
   // What each pad (fingers, then the pusher) did to the object in one solve.
@@ -548,7 +574,7 @@ struct Run {
     const double per_solve = 1.0 / std::max(1, r.solves);
     for (size_t k = 0; k < n_pads; ++k) {
       mechanics::ContactState cs;
-      const Eigen::Vector3d n = PadNormal(k, s.t);
+      const Eigen::Vector3d n = PadNormal(k);
       const Eigen::Vector3d f = r.force[k] * per_solve;
       cs.normal_force = f.dot(n);
       cs.tangential_force = f - cs.normal_force * n;
@@ -640,12 +666,22 @@ void RunLoaded(const mechanics::Scene& scene, const MujocoSettings& st, mjModel*
     if (interval.solves == 0) run.Read(&interval);  // t = 0, or instant forces
     mechanics::TrajectorySample s = run.Sample(interval);
     s.t = static_cast<double>(k) / mechanics::kSampleRateHz;
+    // MuJoCo drops contacts that do not fit its buffers and goes on: a truth
+    // with contacts missing must not pass for a good one.
+    std::string failure;
     if (!Finite(s) || d->warning[mjWARN_BADQACC].number > 0) {
+      failure = "MuJoCo diverged at t = " + Num(s.t) + " s (non-finite state or acceleration)";
+    } else if (d->warning[mjWARN_CONTACTFULL].number > 0 ||
+               d->warning[mjWARN_CNSTRFULL].number > 0) {
+      failure = "MuJoCo's contact buffers overflowed by t = " + Num(s.t) + " s (nconmax " +
+                std::to_string(m->nconmax) + ", njmax " + std::to_string(m->njmax) +
+                "): contacts were dropped";
+    }
+    if (!failure.empty()) {
       result->status = mechanics::SimulationStatus::kSolverFailure;
       result->failed_step = result->solver.steps;
       result->solver.failures = 1;
-      result->error =
-          "MuJoCo diverged at t = " + Num(s.t) + " s (non-finite state or acceleration)";
+      result->error = failure;
       return;
     }
     result->samples.push_back(std::move(s));
@@ -843,7 +879,7 @@ std::string MujocoModelXml(const mechanics::Scene& scene, const MujocoSettings& 
     << (st.elliptic ? "elliptic" : "pyramidal") << "\" impratio=\"" << Num(st.impratio)
     << "\" noslip_iterations=\"" << st.noslip_iterations << "\" solver=\"Newton\" tolerance=\""
     << Num(st.tolerance) << "\" iterations=\"" << st.iterations << "\" integrator=\"Euler\"/>\n"
-    << "  <size nconmax=\"200\" njmax=\"1200\"/>\n";
+    << SizeElement(scene, st.pads);
   if (o.shape == mechanics::ObjectShape::kPrism) x << PrismMesh(o);
   x << "  <worldbody>\n";
   // Object.

@@ -343,13 +343,14 @@ TEST(PackedBlock, VersionThreeStoreMigratesAndReads) {
   {
     sqlite3* db = nullptr;
     sqlite3_open(path.c_str(), &db);
-    ASSERT_EQ(sqlite3_exec(db,
-                           (std::string("BEGIN;") + testing::kUndoMigration10 +
-                            testing::kUndoMigration7 + testing::kUndoMigration5 +
-                            " DELETE FROM schema_migrations WHERE version > 3;"
-                            " PRAGMA user_version = 3; COMMIT;")
-                               .c_str(),
-                           nullptr, nullptr, nullptr),
+    ASSERT_EQ(sqlite3_exec(
+                  db,
+                  (std::string("BEGIN;") + testing::kUndoMigration10 + testing::kUndoMigration14 +
+                   testing::kUndoMigration7 + testing::kUndoMigration5 +
+                   " DELETE FROM schema_migrations WHERE version > 3;"
+                   " PRAGMA user_version = 3; COMMIT;")
+                      .c_str(),
+                  nullptr, nullptr, nullptr),
               SQLITE_OK);
     sqlite3_close(db);
   }

@@ -83,15 +83,16 @@ TEST(StoreOpen, MigratesVersionOneFile) {
     sqlite3* db = nullptr;
     sqlite3_open(path.c_str(), &db);
     ASSERT_EQ(
-        sqlite3_exec(db,
-                     (std::string("BEGIN;") + testing::kUndoMigration6 + testing::kUndoMigration7 +
-                      " ALTER TABLE campaigns DROP COLUMN state_reason;"
-                      " DROP TABLE evaluation_results; DROP TABLE evaluations;" +
-                      testing::kUndoMigration10 + testing::kUndoMigration5 +
-                      " DELETE FROM schema_migrations WHERE version > 1; PRAGMA user_version = 1;"
-                      " COMMIT;")
-                         .c_str(),
-                     nullptr, nullptr, nullptr),
+        sqlite3_exec(
+            db,
+            (std::string("BEGIN;") + testing::kUndoMigration6 + testing::kUndoMigration7 +
+             " ALTER TABLE campaigns DROP COLUMN state_reason;"
+             " DROP TABLE evaluation_results; DROP TABLE evaluations;" +
+             testing::kUndoMigration10 + testing::kUndoMigration14 + testing::kUndoMigration5 +
+             " DELETE FROM schema_migrations WHERE version > 1; PRAGMA user_version = 1;"
+             " COMMIT;")
+                .c_str(),
+            nullptr, nullptr, nullptr),
         SQLITE_OK)
         << sqlite3_errmsg(db);
     sqlite3_close(db);
@@ -821,6 +822,53 @@ TEST(StoreTrial, RetriedAttemptDropsThePreviousStartError) {
   store->RetryTrial(t->trial_id, t->attempt, "deadline", 3, 0);
   ASSERT_TRUE(store->ClaimNextTrial("c"));  // no reset since: nothing observed
   EXPECT_EQ(RawScalar(dir.File("s.db"), q), "");
+}
+
+// Two cells that expect the same next trial: one takes it, and the other's
+// observed start (prepared for that trial) is not charged to the trial it
+// claims instead; a reset aimed at the trial claimed is.
+TEST(StoreTrial, AnObservedStartGoesOnlyToTheTrialItsResetWasAimedAt) {
+  TempDir dir;
+  auto store = Store::Open(dir.File("s.db"));
+  store->UpsertCell("a", {"point"});
+  store->UpsertCell("b", {"point"});
+  store->CreateCampaign(MakeCampaign(), MakeTrials(4));
+  const auto reset_aimed_at = [&](const ClaimedTrial& t, std::int64_t aim) {
+    auto ingest = store->BeginIngest(t.trial_id, t.attempt, {});
+    for (int i = 0; i < 10; ++i) ingest->Add(MakeSample(i));
+    ingest->Finish("ok");
+    store->BeginReset(t.trial_id, t.attempt);
+    ResetReport r;
+    r.ok = true;
+    r.observed_pose = {0.002, -0.001, 0, 1, 0, 0, 0};
+    r.aimed_at_trial = aim;
+    store->CompleteReset(t.trial_id, t.attempt, r);
+  };
+  const auto start_x = [&](std::int64_t id) {
+    return RawScalar(dir.File("s.db"),
+                     "SELECT start_x FROM trials WHERE id = " + std::to_string(id)) +
+           "|" +
+           RawScalar(dir.File("s.db"),
+                     "SELECT start_position_error FROM trials WHERE id = " + std::to_string(id));
+  };
+  const auto first = store->ClaimNextTrial("a");
+  ASSERT_TRUE(first);
+  const auto expected_next = store->PeekNextTrial("a");
+  ASSERT_TRUE(expected_next);
+  reset_aimed_at(*first, expected_next->trial_id);
+  const auto taken_by_b = store->ClaimNextTrial("b");  // b takes the trial a's reset prepared
+  ASSERT_TRUE(taken_by_b);
+  EXPECT_EQ(taken_by_b->trial_id, expected_next->trial_id);
+  const auto other = store->ClaimNextTrial("a");
+  ASSERT_TRUE(other);
+  EXPECT_EQ(start_x(other->trial_id), "|");  // a's start was prepared for another trial
+  // Aimed at the trial it then claims: charged, error against that trial's nominal pose.
+  reset_aimed_at(*other, other->trial_id + 1);
+  const auto aimed = store->ClaimNextTrial("a");
+  ASSERT_TRUE(aimed);
+  ASSERT_EQ(aimed->trial_id, other->trial_id + 1);
+  EXPECT_NE(start_x(aimed->trial_id), "|");
+  EXPECT_EQ(RawScalar(dir.File("s.db"), "SELECT start_for_trial FROM cells WHERE id = 'a'"), "");
 }
 
 TEST(StoreServices, OneServicePerStoreHeartbeatAndStop) {

@@ -10,8 +10,12 @@
 // how many values are); the test allows 1e-9 relative (plus 1e-9 absolute)
 // so that other builds (Debug, sanitizers) whose own rounding may differ in
 // the last bits still check the trajectories rather than the compiler.
+// Contact forces were re-recorded once since, when a tracked contact's force
+// came to be split along the scene's normal rather than summed over its
+// points' own (docs/scene.md): every other value stayed bit-identical.
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
 #include <cstring>
 #include <fstream>
 #include <string>
@@ -52,11 +56,16 @@ std::vector<double> Row(const SimulationResult& r, std::size_t i) {
 }
 
 TEST(ReferenceTrajectories, EveryCaseMatchesTheRecordedModel) {
-  const nlohmann::json cases = Reference();
+  nlohmann::json cases = Reference();
   ASSERT_GE(cases.size(), 18u);
+  // ARENA_REFERENCE_RECORD=FILE writes the same samples as the model gives
+  // them now, for a deliberate change of what the model reports (review the
+  // difference before committing it).
+  const char* record_to = std::getenv("ARENA_REFERENCE_RECORD");
+  const bool recording = record_to != nullptr;
   long values = 0, identical = 0;
   double worst = 0;
-  for (const auto& c : cases) {
+  for (auto& c : cases) {
     const std::string name = c.at("name");
     SCOPED_TRACE(name);
     const SimulationResult r = Simulate(ParseScene(c.at("scene").dump()));
@@ -65,9 +74,13 @@ TEST(ReferenceTrajectories, EveryCaseMatchesTheRecordedModel) {
     EXPECT_EQ(r.model.unknowns, c.at("unknowns").get<int>());
     EXPECT_EQ(r.model.dof, c.at("dof").get<int>());
     ASSERT_EQ(r.samples.size(), c.at("n_samples").get<std::size_t>());
-    for (const auto& rec : c.at("samples")) {
+    for (auto& rec : c.at("samples")) {
       const auto i = rec.at(0).get<std::size_t>();
       const std::vector<double> got = Row(r, i);
+      if (recording) {
+        rec = got;
+        continue;
+      }
       ASSERT_EQ(got.size(), rec.size()) << "sample " << i;
       for (std::size_t k = 0; k < got.size(); ++k) {
         const double want = rec.at(k).get<double>();
@@ -78,6 +91,10 @@ TEST(ReferenceTrajectories, EveryCaseMatchesTheRecordedModel) {
         EXPECT_LE(diff, kTolerance * (1 + std::abs(want))) << "sample " << i << " value " << k;
       }
     }
+  }
+  if (recording) {
+    std::ofstream(record_to) << cases.dump(1) << "\n";
+    return;
   }
   std::printf("%ld of %ld recorded values bit-identical; worst relative difference %.3g\n",
               identical, values, worst);

@@ -128,6 +128,37 @@ TEST(TrackedPivot, AngleFollowsExactGeometryThroughTheStall) {
   }
 }
 
+// The frictionless pusher on the turned bottom face pushes along the face's
+// inward normal (0, -sin θ, cos θ), not along its own +z. A sample splits
+// that force along the scene's normal for the pusher (+z): normal_force is
+// its z component and tangential_force the rest, so that normal_force · n +
+// tangential_force, the vector the store and every export rebuild, is the
+// force applied (it used to be the magnitude along the face normal with no
+// tangential part: a vertical force of the right size).
+TEST(TrackedPivot, AContactsForceRebuiltAlongTheScenesNormalIsTheForceApplied) {
+  const double w = 0.03, h = 0.05, d = 0.01, v = 0.01, dt = 0.0005;
+  Scene s = PivotScene(w, h, d, v, dt);
+  s.duration = 0.1;
+  const SimulationResult r = Simulate(s);
+  ASSERT_EQ(r.status, SimulationStatus::kOk) << r.error;
+  const TrajectorySample& last = r.samples.back();
+  const double theta = AngleAboutX(last.orientation);
+  ASSERT_GT(theta, 0.08);  // turned some 5°: the face normal is well off +z
+  const ContactState& pusher = last.contacts[2];
+  const Eigen::Vector3d rebuilt =
+      pusher.normal_force * Eigen::Vector3d::UnitZ() + pusher.tangential_force;
+  const double scale = last.pusher_force.norm();
+  ASSERT_GT(scale, 1e-3);
+  EXPECT_LT((rebuilt - last.pusher_force).norm(), 1e-9 * scale);
+  EXPECT_LT(std::abs(pusher.tangential_force.z()), 1e-9 * scale);
+  // The sample's force is the last step's, solved at the pose one step
+  // before the one it reports: the face has turned ω dt ≈ 3e-3 rad since
+  // (ω = v cos²θ / (d - h sin θ) ≈ 6.5 rad/s as the stall nears), against
+  // the sin θ > 0.08 a vertical force would be off.
+  const Eigen::Vector3d face_inward(0, -std::sin(theta), std::cos(theta));
+  EXPECT_LT((last.pusher_force / scale - face_inward).norm(), 1e-2);
+}
+
 // dt convergence on a 30° pivot (w = 8 cm, d = 3 cm: θ* = 36.9°). The error
 // of the angle against θ(s) at the travel where it is 30° falls at least in
 // proportion to dt (first order: semi-implicit Euler with the gap

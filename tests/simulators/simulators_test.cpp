@@ -104,6 +104,9 @@ TEST(MujocoModel, HasExplicitPairsCoupledFingersAndPads) {
   EXPECT_NE(xml.find("polycoef=\"0 1 0 0 0\""), std::string::npos);
   EXPECT_EQ(xml.find("type=\"capsule\""), std::string::npos);  // spheres only
   EXPECT_EQ(xml.find("contype=\"1\""), std::string::npos);     // no implicit contacts
+  // Buffers sized to the pads: 12 spheres, one contact each, 4 rows a
+  // contact + 2 per finger + 16 (njmax 1200 made a 58 MB solver stack).
+  EXPECT_NE(xml.find("<size nconmax=\"20\" njmax=\"68\"/>"), std::string::npos);
 }
 
 // Held box: two point fingers, 10 N, μ 0.5, 0.2 kg (m g = 1.96 N < 2 μ N = 10 N).
@@ -324,7 +327,9 @@ TEST(MujocoModel, ShapePadsAreCapsulesAndBoxes) {
   EXPECT_NE(xml.find("type=\"box\" contype=\"0\" conaffinity=\"0\" mass=\"0\" size=\"0.0028"),
             std::string::npos);  // corners on the 2R/3 ring: half side 2R/3/sqrt(2)
   EXPECT_EQ(xml.find("name=\"pad0_1\""), std::string::npos);
-  const auto r = sim->Simulate(s);
+  // A capsule makes up to 2 contacts, a box up to 8: room for 10 (+8).
+  EXPECT_NE(xml.find("<size nconmax=\"18\" njmax=\"60\"/>"), std::string::npos);
+  const auto r = sim->Simulate(s);  // no overflow of those buffers either
   ASSERT_EQ(r.status, SimulationStatus::kOk) << r.error;
   EXPECT_LT(r.samples.back().position.norm(), 5e-5);  // holds the box as the spheres do
   EXPECT_NEAR(r.samples.back().contacts[0].normal_force, 10.0, 0.1);

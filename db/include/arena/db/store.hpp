@@ -291,6 +291,12 @@ struct ResetReport {
   // false: nothing was observed (e.g. the service restarted mid-reset), so
   // observed_pose is ignored and the next trial on the cell has no known start state.
   bool pose_observed = true;
+  // The trial this reset prepared the start of: the one the service expected
+  // next on the cell (0: none). The observed start is charged only to that
+  // trial; a trial the cell claims after a reset aimed at another one (two
+  // cells expected the same trial) has no observed start. nullopt: not known,
+  // and the start goes to whichever trial the cell claims next.
+  std::optional<std::int64_t> aimed_at_trial;
 };
 
 struct Prediction {

@@ -149,9 +149,8 @@ struct MujocoSettings {
 };
 std::unique_ptr<Simulator> MakeMujocoSimulator(const MujocoSettings& settings);
 
-// Compiled MuJoCo models kept for reuse. Building one is ~65 ms (parsing,
-// compiling and, above all, zeroing the 59 MB solver stack that njmax 1200
-// asks for), more than a coarse 0.2-s run itself; an evaluation runs every
+// Compiled MuJoCo models kept for reuse. Building one (parsing, compiling,
+// mj_makeData) costs a few ms; an evaluation runs every
 // setting of the mujoco predictor on one scene in a row, and settings that
 // differ only in <option> (timestep, cone, impratio, noslip_iterations,
 // tolerance, iterations) share one compiled model and its data: the options
