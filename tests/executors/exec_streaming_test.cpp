@@ -125,7 +125,7 @@ TEST_F(ExecStreaming, SamplesReachTheLogAndLiveTopicBeforeTheDriverFinishes) {
   EXPECT_EQ(one.logged.size(), 30u);  // 0..29: all that were written, in the log already
   EXPECT_EQ(*one.logged.rbegin(), 29u);
   EXPECT_FALSE(one.last_batch);
-  EXPECT_FALSE(d.FinalStatus(1, 0ms).has_value()) << "the driver cannot have finished yet";
+  EXPECT_FALSE(d.FinalStatus(1, 300ms).has_value()) << "the driver cannot have finished yet";
   Go(1);
   const auto done = d.FinalStatus(1, 20s);
   ASSERT_TRUE(done.has_value());
