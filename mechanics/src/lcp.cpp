@@ -7,6 +7,7 @@
 #include "arena/mechanics/lcp.hpp"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstdint>
 #include <cstdio>
@@ -43,6 +44,128 @@ class DenseColumns final : public LcpColumns {
   const Eigen::MatrixXd& A_;
 };
 
+// LU factorisation with partial pivoting of a basis block, on work space
+// kept between calls (no dispatch, no heap). Up to 16 rows it runs Eigen's
+// unblocked algorithm and its panel-of-8 triangular solves written out in
+// the same order, so the answer is Eigen's to the last bit; larger blocks go
+// to Eigen's blocked PartialPivLU. (The unblocked LU up to 32 rows, where
+// Eigen blocks in panels of 8 and so rounds differently, was tried: a
+// closed-loop pivot, executors_closed_loop_test, then ended 0.48 rad from
+// its target instead of within 0.02 -- a step's last bits can choose
+// another of a friction LCP's solutions -- so the bits stay Eigen's.)
+class BasisLu {
+ public:
+  void Compute(const Eigen::MatrixXd& block) {
+    m_ = block.rows();
+    if (m_ > kUnblocked) {
+      large_.compute(block);
+      return;
+    }
+    const Eigen::Index m = m_;
+    double* a = lu_.data();
+    std::copy(block.data(), block.data() + m * m, a);
+    for (Eigen::Index k = 0; k < m; ++k) {
+      Eigen::Index best = k;
+      double biggest = std::abs(a[k + k * m]);
+      for (Eigen::Index i = k + 1; i < m; ++i) {
+        const double s = std::abs(a[i + k * m]);
+        if (s > biggest) {
+          biggest = s;
+          best = i;
+        }
+      }
+      swap_[static_cast<size_t>(k)] = best;
+      if (biggest != 0) {
+        if (best != k) {
+          for (Eigen::Index j = 0; j < m; ++j) std::swap(a[k + j * m], a[best + j * m]);
+        }
+        const double pivot = a[k + k * m];
+        for (Eigen::Index i = k + 1; i < m; ++i) a[i + k * m] /= pivot;
+      }
+      const double* l = a + k * m;
+      for (Eigen::Index j = k + 1; j < m; ++j) {
+        double* col = a + j * m;
+        const double u = col[k];
+        for (Eigen::Index i = k + 1; i < m; ++i) col[i] -= l[i] * u;
+      }
+    }
+  }
+  // x = block⁻¹ rhs.
+  void Solve(const Eigen::VectorXd& rhs, Eigen::VectorXd& x) const {
+    if (m_ > kUnblocked) {
+      x = large_.solve(rhs);
+      return;
+    }
+    std::array<double, kUnblocked> y;
+    std::copy(rhs.data(), rhs.data() + m_, y.data());
+    for (Eigen::Index k = 0; k < m_; ++k) std::swap(y[k], y[swap_[static_cast<size_t>(k)]]);
+    ForwardUnitLower(y.data());
+    BackwardUpper(y.data());
+    x = Eigen::Map<const Eigen::VectorXd>(y.data(), m_);
+  }
+
+ private:
+  // Eigen's triangular_solve_vector (column-major): panels of kPanel
+  // columns solved column by column, the rows past a panel updated by one
+  // matrix-vector product (each row's sum from zero in column order).
+  void ForwardUnitLower(double* x) const {
+    const Eigen::Index m = m_;
+    const double* a = lu_.data();
+    for (Eigen::Index p0 = 0; p0 < m; p0 += kPanel) {
+      const Eigen::Index p1 = std::min(p0 + kPanel, m);
+      for (Eigen::Index i = p0; i < p1; ++i) {
+        const double xi = x[i];
+        if (xi == 0) continue;
+        for (Eigen::Index r = i + 1; r < p1; ++r) x[r] -= xi * a[r + i * m];
+      }
+      for (Eigen::Index r = p1; r < m; ++r) {
+        double sum = 0;
+        for (Eigen::Index j = p0; j < p1; ++j) sum += a[r + j * m] * x[j];
+        x[r] += -1.0 * sum;
+      }
+    }
+  }
+  void BackwardUpper(double* x) const {
+    const Eigen::Index m = m_;
+    const double* a = lu_.data();
+    for (Eigen::Index p1 = m; p1 > 0; p1 -= kPanel) {
+      const Eigen::Index p0 = std::max<Eigen::Index>(p1 - kPanel, 0);
+      for (Eigen::Index i = p1 - 1; i >= p0; --i) {
+        if (x[i] == 0) continue;
+        x[i] /= a[i + i * m];
+        const double xi = x[i];
+        for (Eigen::Index r = p0; r < i; ++r) x[r] -= xi * a[r + i * m];
+      }
+      for (Eigen::Index r = 0; r < p0; ++r) {
+        double sum = 0;
+        for (Eigen::Index j = p0; j < p1; ++j) sum += a[r + j * m] * x[j];
+        x[r] += -1.0 * sum;
+      }
+    }
+  }
+
+  static constexpr Eigen::Index kUnblocked = 16;  // Eigen's UnBlockedBound
+  static constexpr Eigen::Index kPanel = 8;       // EIGEN_TUNE_TRIANGULAR_PANEL_WIDTH
+  Eigen::Index m_ = 0;
+  std::array<double, kUnblocked * kUnblocked> lu_{};
+  std::array<Eigen::Index, kUnblocked> swap_{};
+  Eigen::PartialPivLU<Eigen::MatrixXd> large_;
+};
+
+// r = rhs - block x (the product summed from zero in column order, as
+// Eigen's column-major matrix-vector product sums it).
+void BasisResidual(const Eigen::MatrixXd& block, const Eigen::VectorXd& x,
+                   const Eigen::VectorXd& rhs, Eigen::VectorXd& r) {
+  const Eigen::Index m = block.rows();
+  r.setZero(m);
+  for (Eigen::Index j = 0; j < m; ++j) {
+    const double xj = x[j];
+    const double* a = block.data() + j * m;
+    for (Eigen::Index i = 0; i < m; ++i) r[i] += a[i] * xj;
+  }
+  for (Eigen::Index i = 0; i < m; ++i) r[i] = rhs[i] - r[i];
+}
+
 // Solves the complementary basis "z_i basic where basis[i]" exactly:
 // A_bb z_b = -b_b, all other z zero. False when that basis is singular.
 bool SolveBasis(const LcpColumns& A, const Eigen::VectorXd& b, const std::vector<char>& basis,
@@ -50,8 +173,8 @@ bool SolveBasis(const LcpColumns& A, const Eigen::VectorXd& b, const std::vector
   // Called on every warm-started step: keep the work space between calls.
   thread_local std::vector<Eigen::Index> idx;
   thread_local Eigen::MatrixXd Abb;
-  thread_local Eigen::VectorXd bb, zb;
-  thread_local Eigen::PartialPivLU<Eigen::MatrixXd> lu;
+  thread_local Eigen::VectorXd bb, zb, rb, db;
+  thread_local BasisLu lu;
   const Eigen::Index n = b.size();
   idx.clear();
   for (Eigen::Index i = 0; i < n; ++i) {
@@ -68,16 +191,19 @@ bool SolveBasis(const LcpColumns& A, const Eigen::VectorXd& b, const std::vector
       const double* a = A.Column(col);
       for (Eigen::Index r = 0; r < m; ++r) Abb(r, c) = a[idx[static_cast<size_t>(r)]];
     }
-    lu.compute(Abb);
-    zb = lu.solve(bb);
+    lu.Compute(Abb);
+    lu.Solve(bb, zb);
     if (!AllFinite(zb)) return false;
     // One step of iterative refinement: the contact blocks can be
     // ill-conditioned (a 0.1 mm object: entries from 1 to 1e7).
-    zb += lu.solve(bb - Abb * zb);
+    BasisResidual(Abb, zb, bb, rb);
+    lu.Solve(rb, db);
+    zb += db;
     if (!AllFinite(zb)) return false;
     // A singular basis shows as a large solve residual.
     const double scale = 1.0 + bb.lpNorm<Eigen::Infinity>();
-    if ((Abb * zb - bb).lpNorm<Eigen::Infinity>() > 1e-9 * scale) return false;
+    BasisResidual(Abb, zb, bb, rb);
+    if (rb.lpNorm<Eigen::Infinity>() > 1e-9 * scale) return false;
     for (Eigen::Index r = 0; r < m; ++r) z[idx[static_cast<size_t>(r)]] = zb[r];
   }
   MultiplyColumns(A, z, w);
@@ -210,261 +336,194 @@ class TrackedInverse {
   std::vector<std::pair<Eigen::Index, Eigen::Index>> units_;
 };
 
-// One run of Lemke's method with covering vector `cover`; fills z, w,
-// basis, pivots and ok/reason of `out`.
-void LemkeOnce(const LcpColumns& A, const Eigen::VectorXd& b, const Eigen::VectorXd& cover,
-               const LcpOptions& options, LcpResult& out) {
-  const Eigen::Index n = b.size();
-  out.ok = false;
-  out.basis.assign(static_cast<size_t>(n), 0);
-  const int max_pivots =
-      options.max_pivots > 0 ? options.max_pivots : static_cast<int>(50 * n + 200);
-  const double tol = options.pivot_tolerance;
-  const Eigen::Index z0 = 2 * n;
+// Lemke's work space, kept per thread between calls (most solves are small
+// and allocation was a sixth of their cost).
+struct LemkeWork {
   // Column-major: while the slack w_v is basic at position i, column v of
   // the inverse is exactly e_i, and a pivot row is zero on all those columns
-  // but the leaving slack's. The rank-one update below therefore touches
+  // but the leaving slack's. The rank-one update (Pivot) therefore touches
   // only the columns of the rows no slack covers (k + 1 of n), and the
   // entering column is formed from them plus the slack positions: O(n k)
   // per pivot instead of O(n²), with the same arithmetic on what remains.
-  // Work space kept between calls (most solves are small and allocation
-  // was a sixth of their cost).
-  thread_local TrackedInverse inverse;
-  Eigen::MatrixXd& Binv = inverse.B;
-  thread_local Eigen::VectorXd x, d;  // x: values of the basic variables
-  thread_local Eigen::RowVectorXd pivot_row;
-  thread_local std::vector<Eigen::Index> basis,
-      slack_pos;  // slack_pos: position of basic w_v, or -1
-  inverse.Identity(n);
-  x = b;
-  d.resize(n);
-  pivot_row.resize(n);
-  basis.resize(static_cast<size_t>(n));
-  slack_pos.resize(static_cast<size_t>(n));
-  for (Eigen::Index i = 0; i < n; ++i) {
-    basis[static_cast<size_t>(i)] = i;
-    slack_pos[static_cast<size_t>(i)] = i;
-  }
+  TrackedInverse inverse;
+  Eigen::VectorXd x, d;  // x: values of the basic variables; d: the entering column
+  Eigen::RowVectorXd pivot_row;
+  std::vector<Eigen::Index> basis;
+  std::vector<Eigen::Index> slack_pos;  // position of basic w_v, or -1
+  std::vector<Eigen::Index> ties;
+  // RefactorInverse: non-unit positions, uncovered rows, and where column v
+  // of the inverse is e_(unit_row[v]).
+  std::vector<Eigen::Index> cpos, srows, unit_row;
+  std::vector<char> covered;
+  Eigen::MatrixXd Cs, Cu, G;
+  Eigen::PartialPivLU<Eigen::MatrixXd> cs_lu;
+};
 
-  auto pivot = [&](Eigen::Index r, Eigen::Index entering) {
-    const double p = d[r];
-    x[r] /= p;
-    Binv.row(r) /= p;
-    inverse.RowScaled(r);
-    pivot_row = Binv.row(r);
-    d[r] = 0;
-    x.noalias() -= d * x[r];
-    for (Eigen::Index j = 0; j < n; ++j) {
-      if (pivot_row[j] != 0) {
-        Binv.col(j).noalias() -= d * pivot_row[j];
-        inverse.ColumnWritten(j);
-      }
+// Pivots the entering variable (column w.d) in at row r; returns the one
+// that left.
+Eigen::Index Pivot(LemkeWork& w, Eigen::Index n, Eigen::Index r, Eigen::Index entering) {
+  Eigen::MatrixXd& Binv = w.inverse.B;
+  const double p = w.d[r];
+  w.x[r] /= p;
+  Binv.row(r) /= p;
+  w.inverse.RowScaled(r);
+  w.pivot_row = Binv.row(r);
+  w.d[r] = 0;
+  w.x.noalias() -= w.d * w.x[r];
+  for (Eigen::Index j = 0; j < n; ++j) {
+    if (w.pivot_row[j] != 0) {
+      Binv.col(j).noalias() -= w.d * w.pivot_row[j];
+      w.inverse.ColumnWritten(j);
     }
-    const Eigen::Index leaving = basis[static_cast<size_t>(r)];
-    basis[static_cast<size_t>(r)] = entering;
-    if (leaving < n) slack_pos[static_cast<size_t>(leaving)] = -1;
-    if (entering < n) slack_pos[static_cast<size_t>(entering)] = r;
-    return leaving;
-  };
-
-  // z0 enters with column -cover at the row that needs the largest z0.
-  Eigen::Index r = 0;
-  for (Eigen::Index i = 1; i < n; ++i) {
-    if (x[i] / cover[i] <= x[r] / cover[r]) r = i;
   }
-  d = -cover;
-  Eigen::Index leaving = pivot(r, z0);
-  int pivots = 1;
-  thread_local std::vector<Eigen::Index> ties;
-  // Rebuilds the basis inverse from scratch, so rank-one drift does not pile
-  // up. Most basic variables are slacks w_v (unit columns e_v), so only the
-  // k x k block of the other columns on the rows no slack covers needs a
-  // factorisation: with C the k non-unit columns and S those rows,
-  //   x_C = C_S⁻¹ y_S,   x_(slack of row r) = y_r - C_r x_C,
-  // which costs O(k³ + (n - k) k²) instead of O(n³) for the full inverse.
-  thread_local std::vector<Eigen::Index> cpos, srows;  // non-unit positions, uncovered rows
-  thread_local std::vector<char> covered;
-  thread_local std::vector<Eigen::Index> unit_row;  // column v of the inverse is e_(unit_row[v])
-  thread_local Eigen::MatrixXd Cs, Cu, G;
-  thread_local Eigen::PartialPivLU<Eigen::MatrixXd> cs_lu;
+  const Eigen::Index leaving = w.basis[static_cast<size_t>(r)];
+  w.basis[static_cast<size_t>(r)] = entering;
+  if (leaving < n) w.slack_pos[static_cast<size_t>(leaving)] = -1;
+  if (entering < n) w.slack_pos[static_cast<size_t>(entering)] = r;
+  return leaving;
+}
+
+// Rebuilds the basis inverse from scratch, so rank-one drift does not pile
+// up. Most basic variables are slacks w_v (unit columns e_v), so only the
+// k x k block of the other columns on the rows no slack covers needs a
+// factorisation: with C the k non-unit columns and S those rows,
+//   x_C = C_S⁻¹ y_S,   x_(slack of row r) = y_r - C_r x_C,
+// which costs O(k³ + (n - k) k²) instead of O(n³) for the full inverse.
+bool RefactorInverse(const LcpColumns& A, const Eigen::VectorXd& b, const Eigen::VectorXd& cover,
+                     LemkeWork& w) {
+  const Eigen::Index n = b.size();
+  Eigen::MatrixXd& Binv = w.inverse.B;
   // Entries of the basic columns, -A(., v - n) or -cover for z0: a pointer
   // per column, then one entry per row.
   auto column_of = [&](Eigen::Index v) -> const double* {
     return v < 2 * n ? A.Column(v - n) : cover.data();
   };
-  auto refactor = [&]() -> bool {
-    cpos.clear();
-    srows.clear();
-    covered.assign(static_cast<size_t>(n), 0);
-    for (Eigen::Index i = 0; i < n; ++i) {
-      const Eigen::Index v = basis[static_cast<size_t>(i)];
-      if (v < n) {
-        covered[static_cast<size_t>(v)] = 1;
-      } else {
-        cpos.push_back(i);
+  w.cpos.clear();
+  w.srows.clear();
+  w.covered.assign(static_cast<size_t>(n), 0);
+  for (Eigen::Index i = 0; i < n; ++i) {
+    const Eigen::Index v = w.basis[static_cast<size_t>(i)];
+    if (v < n) {
+      w.covered[static_cast<size_t>(v)] = 1;
+    } else {
+      w.cpos.push_back(i);
+    }
+  }
+  for (Eigen::Index r = 0; r < n; ++r) {
+    if (!w.covered[static_cast<size_t>(r)]) w.srows.push_back(r);
+  }
+  const auto k = static_cast<Eigen::Index>(w.cpos.size());
+  if (static_cast<Eigen::Index>(w.srows.size()) != k) return false;
+  w.inverse.Clear();
+  if (k > 0) {
+    w.Cs.resize(k, k);
+    for (Eigen::Index c = 0; c < k; ++c) {
+      const double* a = column_of(w.basis[static_cast<size_t>(w.cpos[static_cast<size_t>(c)])]);
+      for (Eigen::Index r = 0; r < k; ++r) w.Cs(r, c) = -a[w.srows[static_cast<size_t>(r)]];
+    }
+    w.cs_lu.compute(w.Cs);
+    const Eigen::MatrixXd cs_inv = w.cs_lu.inverse();
+    if (!cs_inv.allFinite()) return false;
+    for (Eigen::Index c = 0; c < k; ++c) {
+      for (Eigen::Index r = 0; r < k; ++r) {
+        Binv(w.cpos[static_cast<size_t>(c)], w.srows[static_cast<size_t>(r)]) = cs_inv(c, r);
       }
     }
-    for (Eigen::Index r = 0; r < n; ++r) {
-      if (!covered[static_cast<size_t>(r)]) srows.push_back(r);
-    }
-    const auto k = static_cast<Eigen::Index>(cpos.size());
-    if (static_cast<Eigen::Index>(srows.size()) != k) return false;
-    inverse.Clear();
-    if (k > 0) {
-      Cs.resize(k, k);
-      for (Eigen::Index c = 0; c < k; ++c) {
-        const double* a = column_of(basis[static_cast<size_t>(cpos[static_cast<size_t>(c)])]);
-        for (Eigen::Index r = 0; r < k; ++r) Cs(r, c) = -a[srows[static_cast<size_t>(r)]];
-      }
-      cs_lu.compute(Cs);
-      const Eigen::MatrixXd cs_inv = cs_lu.inverse();
-      if (!cs_inv.allFinite()) return false;
-      for (Eigen::Index c = 0; c < k; ++c) {
-        for (Eigen::Index r = 0; r < k; ++r) {
-          Binv(cpos[static_cast<size_t>(c)], srows[static_cast<size_t>(r)]) = cs_inv(c, r);
-        }
-      }
-      // Slack rows: -C_r C_S⁻¹ on the uncovered rows.
-      Cu.resize(n - k, k);
-      for (Eigen::Index c = 0; c < k; ++c) {
-        const double* a = column_of(basis[static_cast<size_t>(cpos[static_cast<size_t>(c)])]);
-        Eigen::Index u = 0;
-        for (Eigen::Index i = 0; i < n; ++i) {
-          const Eigen::Index v = basis[static_cast<size_t>(i)];
-          if (v >= n) continue;
-          Cu(u++, c) = -a[v];
-        }
-      }
-      G.noalias() = Cu * cs_inv;
+    // Slack rows: -C_r C_S⁻¹ on the uncovered rows.
+    w.Cu.resize(n - k, k);
+    for (Eigen::Index c = 0; c < k; ++c) {
+      const double* a = column_of(w.basis[static_cast<size_t>(w.cpos[static_cast<size_t>(c)])]);
       Eigen::Index u = 0;
       for (Eigen::Index i = 0; i < n; ++i) {
-        const Eigen::Index v = basis[static_cast<size_t>(i)];
+        const Eigen::Index v = w.basis[static_cast<size_t>(i)];
         if (v >= n) continue;
-        for (Eigen::Index r = 0; r < k; ++r) Binv(i, srows[static_cast<size_t>(r)]) = -G(u, r);
-        ++u;
+        w.Cu(u++, c) = -a[v];
       }
     }
-    for (Eigen::Index r = 0; r < k; ++r) inverse.ColumnWritten(srows[static_cast<size_t>(r)]);
-    unit_row.assign(static_cast<size_t>(n), -1);
+    w.G.noalias() = w.Cu * cs_inv;
+    Eigen::Index u = 0;
     for (Eigen::Index i = 0; i < n; ++i) {
-      const Eigen::Index v = basis[static_cast<size_t>(i)];
-      if (v < n) {
-        inverse.Unit(i, v);
-        unit_row[static_cast<size_t>(v)] = i;
-      }
+      const Eigen::Index v = w.basis[static_cast<size_t>(i)];
+      if (v >= n) continue;
+      for (Eigen::Index r = 0; r < k; ++r) Binv(i, w.srows[static_cast<size_t>(r)]) = -w.G(u, r);
+      ++u;
     }
-    inverse.MultiplyFresh(b, unit_row, x);
-    return x.allFinite();
-  };
-  int fresh_at = -1;  // pivot count at the last refactor
-  for (;;) {
-    if (pivots % kRefactorInterval == 0 && pivots != fresh_at) {
-      if (!refactor()) {
-        out.status = LcpStatus::kSingularBasis;
-        out.reason = "singular basis after " + std::to_string(pivots) + " pivots";
-        out.pivots = pivots;
-        return;
-      }
-      fresh_at = pivots;
-    }
-    if (pivots >= max_pivots) {
-      out.status = LcpStatus::kPivotLimit;
-      out.reason = "pivot limit (" + std::to_string(max_pivots) + ") reached";
-      out.pivots = pivots;
-      return;
-    }
-    const Eigen::Index entering = leaving < n ? leaving + n : leaving - n;
-    if (entering < n) {
-      d = Binv.col(entering);
-    } else {
-      // d = -Binv a: covered rows contribute a_v e_(slack position).
-      const double* a = A.Column(entering - n);
-      d.setZero();
-      for (Eigen::Index j = 0; j < n; ++j) {
-        const double aj = a[j];
-        if (aj == 0) continue;
-        const Eigen::Index sp = slack_pos[static_cast<size_t>(j)];
-        if (sp >= 0) {
-          d[sp] -= aj;
-        } else {
-          d.noalias() -= Binv.col(j) * aj;
-        }
-      }
-    }
-    // Minimum ratio over rows where the entering variable decreases a basic one.
-    // Pivots are judged relative to the column (the problem is scaled, but
-    // far-away contacts still make columns of very different sizes).
-    const double dtol = tol * std::max(1.0, d.lpNorm<Eigen::Infinity>());
-    double best = std::numeric_limits<double>::infinity();
-    for (Eigen::Index i = 0; i < n; ++i) {
-      if (d[i] > dtol) best = std::min(best, x[i] / d[i]);
-    }
-    if (!std::isfinite(best)) {
-      // On degenerate problems z0 can reach zero without being chosen to
-      // leave; the point reached is then already a solution. Otherwise this
-      // is a genuine secondary ray.
-      double z0_value = std::numeric_limits<double>::infinity();
-      for (Eigen::Index i = 0; i < n; ++i) {
-        if (basis[static_cast<size_t>(i)] == z0) z0_value = x[i];
-      }
-      if (std::abs(z0_value) <= 1e-9 * std::max(1.0, x.lpNorm<Eigen::Infinity>())) break;
-      // A ray seen through a drifted inverse may be an artefact of the
-      // drift: look again with a fresh one (cheap, see refactor) first.
-      if (fresh_at != pivots) {
-        if (!refactor()) {
-          out.status = LcpStatus::kSingularBasis;
-          out.reason = "singular basis after " + std::to_string(pivots) + " pivots";
-          out.pivots = pivots;
-          return;
-        }
-        fresh_at = pivots;
-        continue;
-      }
-      out.status = LcpStatus::kRayTermination;
-      out.reason = "ray termination after " + std::to_string(pivots) + " pivots";
-      out.pivots = pivots;
-      return;
-    }
-    ties.clear();
-    const double slack = 1e-12 * std::max(1.0, std::abs(best));
-    for (Eigen::Index i = 0; i < n; ++i) {
-      if (d[i] > dtol && x[i] / d[i] <= best + slack) ties.push_back(i);
-    }
-    // Leaving z0 ends the method; otherwise break ties lexicographically
-    // on the rows of the basis inverse scaled by the pivot column.
-    r = ties.front();
-    bool z0_leaves = false;
-    for (Eigen::Index i : ties) {
-      if (basis[static_cast<size_t>(i)] == z0) {
-        r = i;
-        z0_leaves = true;
-      }
-    }
-    if (!z0_leaves && ties.size() > 1) {
-      for (size_t t = 1; t < ties.size(); ++t) {
-        const Eigen::Index c = ties[t];
-        for (Eigen::Index j = 0; j < n; ++j) {
-          const double a = Binv(c, j) / d[c];
-          const double bb = Binv(r, j) / d[r];
-          if (a < bb - 1e-14) {
-            r = c;
-            break;
-          }
-          if (a > bb + 1e-14) break;
-        }
-      }
-    }
-    leaving = pivot(r, entering);
-    ++pivots;
-    if (leaving == z0) break;
   }
-  out.pivots = pivots;
+  for (Eigen::Index r = 0; r < k; ++r) w.inverse.ColumnWritten(w.srows[static_cast<size_t>(r)]);
+  w.unit_row.assign(static_cast<size_t>(n), -1);
+  for (Eigen::Index i = 0; i < n; ++i) {
+    const Eigen::Index v = w.basis[static_cast<size_t>(i)];
+    if (v < n) {
+      w.inverse.Unit(i, v);
+      w.unit_row[static_cast<size_t>(v)] = i;
+    }
+  }
+  w.inverse.MultiplyFresh(b, w.unit_row, w.x);
+  return w.x.allFinite();
+}
 
+// w.d = the entering variable's column through the basis inverse.
+void EnteringColumn(const LcpColumns& A, Eigen::Index n, Eigen::Index entering, LemkeWork& w) {
+  const Eigen::MatrixXd& Binv = w.inverse.B;
+  if (entering < n) {
+    w.d = Binv.col(entering);
+    return;
+  }
+  // d = -Binv a: covered rows contribute a_v e_(slack position).
+  const double* a = A.Column(entering - n);
+  w.d.setZero();
+  for (Eigen::Index j = 0; j < n; ++j) {
+    const double aj = a[j];
+    if (aj == 0) continue;
+    const Eigen::Index sp = w.slack_pos[static_cast<size_t>(j)];
+    if (sp >= 0) {
+      w.d[sp] -= aj;
+    } else {
+      w.d.noalias() -= Binv.col(j) * aj;
+    }
+  }
+}
+
+// The row that leaves, among those reaching the minimum ratio `best`:
+// z0's if it is one of them (that ends the method), otherwise the
+// lexicographic minimum of the basis inverse's rows scaled by the column.
+Eigen::Index LeavingRow(LemkeWork& w, Eigen::Index n, Eigen::Index z0, double best, double dtol) {
+  const Eigen::MatrixXd& Binv = w.inverse.B;
+  w.ties.clear();
+  const double slack = 1e-12 * std::max(1.0, std::abs(best));
+  for (Eigen::Index i = 0; i < n; ++i) {
+    if (w.d[i] > dtol && w.x[i] / w.d[i] <= best + slack) w.ties.push_back(i);
+  }
+  Eigen::Index r = w.ties.front();
+  for (Eigen::Index i : w.ties) {
+    if (w.basis[static_cast<size_t>(i)] == z0) return i;
+  }
+  for (size_t t = 1; t < w.ties.size(); ++t) {
+    const Eigen::Index c = w.ties[t];
+    for (Eigen::Index j = 0; j < n; ++j) {
+      const double a = Binv(c, j) / w.d[c];
+      const double bb = Binv(r, j) / w.d[r];
+      if (a < bb - 1e-14) {
+        r = c;
+        break;
+      }
+      if (a > bb + 1e-14) break;
+    }
+  }
+  return r;
+}
+
+// z and w from the final basis (re-solved exactly when that is better), and
+// whether they pass as a solution.
+void FinishLemke(const LcpColumns& A, const Eigen::VectorXd& b, const LemkeWork& work, int pivots,
+                 const LcpOptions& options, LcpResult& out) {
+  const Eigen::Index n = b.size();
+  out.pivots = pivots;
   Eigen::VectorXd z = Eigen::VectorXd::Zero(n);
   for (Eigen::Index i = 0; i < n; ++i) {
-    const Eigen::Index v = basis[static_cast<size_t>(i)];
+    const Eigen::Index v = work.basis[static_cast<size_t>(i)];
     if (v >= n && v < 2 * n) {
-      z[v - n] = x[i];
+      z[v - n] = work.x[i];
       out.basis[static_cast<size_t>(v - n)] = 1;
     }
   }
@@ -500,6 +559,94 @@ void LemkeOnce(const LcpColumns& A, const Eigen::VectorXd& b, const Eigen::Vecto
   out.reason.clear();
   out.z = z;
   out.w = w;
+}
+
+void Stopped(LcpResult& out, LcpStatus status, const std::string& why, int pivots) {
+  out.status = status;
+  out.reason = why + " after " + std::to_string(pivots) + " pivots";
+  out.pivots = pivots;
+}
+
+// One run of Lemke's method with covering vector `cover`; fills z, w,
+// basis, pivots and ok/reason of `out`.
+void LemkeOnce(const LcpColumns& A, const Eigen::VectorXd& b, const Eigen::VectorXd& cover,
+               const LcpOptions& options, LcpResult& out) {
+  const Eigen::Index n = b.size();
+  out.ok = false;
+  out.basis.assign(static_cast<size_t>(n), 0);
+  const int max_pivots =
+      options.max_pivots > 0 ? options.max_pivots : static_cast<int>(50 * n + 200);
+  const double tol = options.pivot_tolerance;
+  const Eigen::Index z0 = 2 * n;
+  thread_local LemkeWork w;
+  w.inverse.Identity(n);
+  w.x = b;
+  w.d.resize(n);
+  w.pivot_row.resize(n);
+  w.basis.resize(static_cast<size_t>(n));
+  w.slack_pos.resize(static_cast<size_t>(n));
+  for (Eigen::Index i = 0; i < n; ++i) {
+    w.basis[static_cast<size_t>(i)] = i;
+    w.slack_pos[static_cast<size_t>(i)] = i;
+  }
+
+  // z0 enters with column -cover at the row that needs the largest z0.
+  Eigen::Index r = 0;
+  for (Eigen::Index i = 1; i < n; ++i) {
+    if (w.x[i] / cover[i] <= w.x[r] / cover[r]) r = i;
+  }
+  w.d = -cover;
+  Eigen::Index leaving = Pivot(w, n, r, z0);
+  int pivots = 1;
+  int fresh_at = -1;  // pivot count at the last refactor
+  for (;;) {
+    if (pivots % kRefactorInterval == 0 && pivots != fresh_at) {
+      if (!RefactorInverse(A, b, cover, w)) {
+        return Stopped(out, LcpStatus::kSingularBasis, "singular basis", pivots);
+      }
+      fresh_at = pivots;
+    }
+    if (pivots >= max_pivots) {
+      out.status = LcpStatus::kPivotLimit;
+      out.reason = "pivot limit (" + std::to_string(max_pivots) + ") reached";
+      out.pivots = pivots;
+      return;
+    }
+    const Eigen::Index entering = leaving < n ? leaving + n : leaving - n;
+    EnteringColumn(A, n, entering, w);
+    // Minimum ratio over rows where the entering variable decreases a basic one.
+    // Pivots are judged relative to the column (the problem is scaled, but
+    // far-away contacts still make columns of very different sizes).
+    const double dtol = tol * std::max(1.0, w.d.lpNorm<Eigen::Infinity>());
+    double best = std::numeric_limits<double>::infinity();
+    for (Eigen::Index i = 0; i < n; ++i) {
+      if (w.d[i] > dtol) best = std::min(best, w.x[i] / w.d[i]);
+    }
+    if (!std::isfinite(best)) {
+      // On degenerate problems z0 can reach zero without being chosen to
+      // leave; the point reached is then already a solution. Otherwise this
+      // is a genuine secondary ray.
+      double z0_value = std::numeric_limits<double>::infinity();
+      for (Eigen::Index i = 0; i < n; ++i) {
+        if (w.basis[static_cast<size_t>(i)] == z0) z0_value = w.x[i];
+      }
+      if (std::abs(z0_value) <= 1e-9 * std::max(1.0, w.x.lpNorm<Eigen::Infinity>())) break;
+      // A ray seen through a drifted inverse may be an artefact of the
+      // drift: look again with a fresh one (cheap, see RefactorInverse) first.
+      if (fresh_at != pivots) {
+        if (!RefactorInverse(A, b, cover, w)) {
+          return Stopped(out, LcpStatus::kSingularBasis, "singular basis", pivots);
+        }
+        fresh_at = pivots;
+        continue;
+      }
+      return Stopped(out, LcpStatus::kRayTermination, "ray termination", pivots);
+    }
+    leaving = Pivot(w, n, LeavingRow(w, n, z0, best, dtol), entering);
+    ++pivots;
+    if (leaving == z0) break;
+  }
+  FinishLemke(A, b, w, pivots, options, out);
 }
 
 }  // namespace
@@ -563,40 +710,52 @@ LcpResult SolveLcp(const Eigen::MatrixXd& A, const Eigen::VectorXd& b,
 LcpResult SolveLcp(const LcpColumns& A, const Eigen::VectorXd& b,
                    const std::vector<char>* warm_basis, const LcpOptions& options) {
   LcpResult out;
+  SolveLcp(A, b, warm_basis, options, out);
+  return out;
+}
+
+void SolveLcp(const LcpColumns& A, const Eigen::VectorXd& b, const std::vector<char>* warm_basis,
+              const LcpOptions& options, LcpResult& out) {
+  // Every field is set again; the vectors keep their storage.
+  out.ok = false;
+  out.status = LcpStatus::kBadProblem;
+  out.reason.clear();
+  out.pivots = 0;
+  out.warm_start_used = false;
+  out.natural_residual = 0;
   const Eigen::Index n = b.size();
-  out.basis.assign(static_cast<size_t>(n), 0);
   if (A.size() != n) {
-    out.status = LcpStatus::kBadProblem;
+    out.basis.assign(static_cast<size_t>(n), 0);
     out.reason = "matrix and vector sizes differ";
-    return out;
+    return;
   }
   if (!A.AllFinite() || !b.allFinite()) {
-    out.status = LcpStatus::kBadProblem;
+    out.basis.assign(static_cast<size_t>(n), 0);
     out.reason = "non-finite problem data";
-    return out;
+    return;
   }
   if (n == 0 || b.minCoeff() >= 0) {
+    out.basis.assign(static_cast<size_t>(n), 0);
     out.ok = true;
     out.status = LcpStatus::kOk;
-    out.z = Eigen::VectorXd::Zero(n);
+    out.z.setZero(n);
     out.w = b;
-    return out;
+    return;
   }
 
   // Warm start: the previous step's basis usually still holds.
   if (warm_basis != nullptr && static_cast<Eigen::Index>(warm_basis->size()) == n) {
-    Eigen::VectorXd z, w;
-    if (SolveBasis(A, b, *warm_basis, z, w) && Acceptable(z, w, b, options.feasibility)) {
+    if (SolveBasis(A, b, *warm_basis, out.z, out.w) &&
+        Acceptable(out.z, out.w, b, options.feasibility)) {
       out.ok = true;
       out.status = LcpStatus::kOk;
-      out.z = z;
-      out.w = w;
+      out.natural_residual = NaturalResidual(out.z, out.w);
       out.basis = *warm_basis;
       out.warm_start_used = true;
-      out.natural_residual = NaturalResidual(z, w);
-      return out;
+      return;
     }
   }
+  out.basis.assign(static_cast<size_t>(n), 0);
 
   // Lemke's method is only guaranteed for copositive-plus matrices; the
   // friction rows make ours merely copositive, and a ray can end a run on a
@@ -648,8 +807,9 @@ LcpResult SolveLcp(const LcpColumns& A, const Eigen::VectorXd& b,
   if (!out.ok) {
     out.reason = first_reason + "; " + std::to_string(attempts - 1) +
                  " other covering vectors failed too (last: " + out.reason + ")";
+    out.z.resize(0);
+    out.w.resize(0);
   }
-  return out;
 }
 
 }  // namespace arena::mechanics

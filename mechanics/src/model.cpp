@@ -328,6 +328,15 @@ class StepMatrix final : public LcpColumns {
     entries_.clear();
     cache_.resize(n_, n_);
     dense_ = nf_ < kLazyForces;
+    if (dense_ && Jrows.rows() == 3) {
+      // Every entry of the force block is written; a non-finite factor
+      // shows in its row or column of entries (inf·0 is NaN).
+      cache_.rightCols(n_ - nf_).setZero();
+      cache_.bottomLeftCorner(n_ - nf_, nf_).setZero();
+      finite_ = std::isfinite(mass) && PlanarForceBlock(mass, Jrows, K);
+      ready_.assign(static_cast<size_t>(n_), 1);
+      return;
+    }
     finite_ = std::isfinite(mass) && Jrows.allFinite() && K.allFinite();
     if (dense_) {
       // Eigen picks a coefficient-wise product for small sizes, whose sums
@@ -382,6 +391,36 @@ class StepMatrix final : public LcpColumns {
     ready_[static_cast<size_t>(j)] = 1;
     return col;
   }
+  // The force block of a planar step (3 reduced coordinates) written out:
+  // Eigen's product sums each entry over the 3 coordinates in order, from
+  // zero and then times the mass in its blocked kernel (2 nf + 3 >= 20),
+  // the mass times the plain sum in its coefficient-wise one: the same
+  // entries to the last bit, without the kernel's packing.
+  // Returns whether every entry is finite.
+  bool PlanarForceBlock(double mass, const Eigen::MatrixXd& Jrows, const Eigen::MatrixXd& K) {
+    const bool blocked = 2 * nf_ + 3 >= 20;
+    double probe = 0;  // NaN when some entry is not finite
+    const double* J = Jrows.data();
+    const double* Kd = K.data();
+    for (int j = 0; j < nf_; ++j) {
+      const double k0 = Kd[3 * j], k1 = Kd[3 * j + 1], k2 = Kd[3 * j + 2];
+      double* col = cache_.data() + static_cast<Eigen::Index>(j) * n_;
+      for (int i = 0; i < nf_; ++i) {
+        const double* a = J + 3 * i;
+        if (blocked) {
+          double acc = 0.0;
+          acc += a[0] * k0;
+          acc += a[1] * k1;
+          acc += a[2] * k2;
+          col[i] = 0.0 + mass * acc;
+        } else {
+          col[i] = mass * (a[0] * k0 + a[1] * k1 + a[2] * k2);
+        }
+        probe += col[i] - col[i];
+      }
+    }
+    return probe == 0;
+  }
   // From the factors (entries are sums of products of them; an overflow
   // there would show in the solution, which the solver checks too) and the
   // values set: no n² scan.
@@ -425,6 +464,7 @@ struct ContactModel::Impl {
   Eigen::Vector3d plane_normal = Eigen::Vector3d::UnitY();
   Eigen::Matrix<double, 6, Eigen::Dynamic> P;                             // reduced -> full twist
   Eigen::Matrix<double, 3, 6> Pt3 = Eigen::Matrix<double, 3, 6>::Zero();  // planar: Pᵀ
+  Eigen::Vector3d plane_e1 = Eigen::Vector3d::UnitX(), plane_e2 = Eigen::Vector3d::UnitZ();
   int nd = 6;
   int edges_per_point = 0;
 
@@ -450,14 +490,18 @@ struct ContactModel::Impl {
   // Tracked geometry.
   bool tracked = false;
   std::unique_ptr<geometry::Solid> solid;
-  Eigen::Vector3d com_O = Eigen::Vector3d::Zero();  // centre of mass in the object frame
-  double gap_tolerance = 0;                         // m: within it a primitive touches
-  std::vector<double> cone_cos, cone_sin;           // facets' angles from t1
+  Eigen::Vector3d com_O = Eigen::Vector3d::Zero();        // centre of mass in the object frame
+  double gap_tolerance = 0;                               // m: within it a primitive touches
+  Eigen::Matrix3d pose_R = Eigen::Matrix3d::Identity();   // this step's object rotation
+  Eigen::Vector3d pose_origin = Eigen::Vector3d::Zero();  // and object-frame origin
+  std::vector<double> cone_cos, cone_sin;                 // facets' angles from t1
 
   // Work space.
   Eigen::MatrixXd Jc, Jv, K;
   StepMatrix A;
   Eigen::VectorXd b;
+  LcpResult solution;      // the last solve (its vectors reused)
+  Eigen::VectorXd forces;  // N, per force unknown
 
   void Setup();
   void Geometry();
@@ -468,6 +512,26 @@ struct ContactModel::Impl {
   bool PlacePatch(Contact& ct, const Eigen::Vector3d& base, const Eigen::Vector3d& closing,
                   const Eigen::Vector3d& vp, const Eigen::Vector3d& wp);
   void SetEdges(Point& pt);
+  // Column k of a grasp map: the wrench of a unit force along d at arm
+  // (from the centre of mass), in reduced coordinates.
+  void SetGraspColumn(Eigen::MatrixXd& J, int k, const Eigen::Vector3d& d,
+                      const Eigen::Vector3d& arm) const {
+    const Eigen::Vector3d moment = arm.cross(d);
+    double* out = J.data() + static_cast<Eigen::Index>(k) * nd;
+    if (planar) {
+      // Pᵀ (d, moment) written out, summed as Eigen's fixed 3x6 product sums
+      // it (the same bits without forming the 6-vector).
+      const Eigen::Vector3d& p = plane_normal;
+      out[0] = plane_e1.dot(d);
+      out[1] = plane_e2.dot(d);
+      out[2] = p.x() * moment.x() + (p.y() * moment.y() + p.z() * moment.z());
+    } else {
+      for (int i = 0; i < 3; ++i) {
+        out[i] = d[i];
+        out[3 + i] = moment[i];
+      }
+    }
+  }
   Eigen::Vector3d ObjectOrigin() const { return c - q.toRotationMatrix() * com_O; }
   StepReport Step();
 };
@@ -664,6 +728,8 @@ void ContactModel::Impl::Setup() {
     P.block<3, 1>(0, 1) = e2;
     P.block<3, 1>(3, 2) = p;
     Pt3 = P.transpose();
+    plane_e1 = e1;
+    plane_e2 = e2;
     edges_per_point = 2;
   } else {
     nd = 6;
@@ -807,7 +873,9 @@ void ContactModel::Impl::SetEdges(Point& pt) {
     const Eigen::Vector3d cr = plane_normal.cross(pt.n);
     const Eigen::Vector3d tau =
         cr.norm() > 1e-12 ? Eigen::Vector3d(cr.normalized()) : Eigen::Vector3d::Zero();
-    pt.edges.assign({tau, -tau});
+    pt.edges.resize(2);
+    pt.edges[0] = tau;
+    pt.edges[1] = -tau;
     return;
   }
   const Eigen::Vector3d t1 = FirstTangent(pt.n);
@@ -825,8 +893,8 @@ void ContactModel::Impl::SetEdges(Point& pt) {
 void ContactModel::Impl::PlaceOnSolid(Contact& ct, Point& pt, const Eigen::Vector3d& q_in,
                                       const Eigen::Vector3d& base, const Eigen::Vector3d& closing,
                                       const Eigen::Vector3d& vp, const Eigen::Vector3d& wp) {
-  const Eigen::Matrix3d R = q.toRotationMatrix();
-  const Eigen::Vector3d origin = ObjectOrigin();
+  const Eigen::Matrix3d& R = pose_R;
+  const Eigen::Vector3d& origin = pose_origin;
   const double r = ct.spec.type == ContactType::kPoint ? ct.spec.radius : 0.0;
   const Eigen::Vector3d centre = q_in - r * closing;
   const Eigen::Vector3d centre_O = R.transpose() * (centre - origin);
@@ -864,8 +932,8 @@ void ContactModel::Impl::PlaceOnSolid(Contact& ct, Point& pt, const Eigen::Vecto
 bool ContactModel::Impl::PlacePatch(Contact& ct, const Eigen::Vector3d& base,
                                     const Eigen::Vector3d& closing, const Eigen::Vector3d& vp,
                                     const Eigen::Vector3d& wp) {
-  const Eigen::Matrix3d R = q.toRotationMatrix();
-  const Eigen::Vector3d origin = ObjectOrigin();
+  const Eigen::Matrix3d& R = pose_R;
+  const Eigen::Vector3d& origin = pose_origin;
   const geometry::Feature f = solid->Support(R.transpose() * closing, gap_tolerance);
   if (f.kind == geometry::Feature::Kind::kFace) return false;
   const double radius = ct.spec.radius;
@@ -921,6 +989,9 @@ bool ContactModel::Impl::PlacePatch(Contact& ct, const Eigen::Vector3d& base,
 // force-controlled pads that stay on the surface: they are re-seated along
 // their closing direction every step.
 void ContactModel::Impl::TrackedGeometry() {
+  // The object's pose, once per step for every primitive placed on it.
+  pose_R = q.toRotationMatrix();
+  pose_origin = ObjectOrigin();
   for (Contact& ct : contacts) {
     Eigen::Matrix3d Rp = Eigen::Matrix3d::Identity();
     Eigen::Vector3d vp = Eigen::Vector3d::Zero(), wp = Eigen::Vector3d::Zero();
@@ -988,12 +1059,21 @@ StepReport ContactModel::Impl::Step() {
   Eigen::Matrix<double, 6, 6> M6 = Eigen::Matrix<double, 6, 6>::Zero();
   M6.topLeftCorner<3, 3>() = mass * Eigen::Matrix3d::Identity();
   M6.bottomRightCorner<3, 3>() = Iw;
-  const SmallMatrix Mr = P.transpose() * M6 * P;
-  const SmallMatrix Minv = Mr.llt().solve(SmallMatrix::Identity(nd, nd));
-
+  SmallMatrix Mr, Minv;
   Eigen::Matrix<double, 6, 1> tw;
   tw << v, w;
-  const SmallVector vr = P.transpose() * tw;
+  SmallVector vr;
+  if (planar) {
+    // Fixed 3x3 sizes: the same arithmetic without dynamic-size dispatch.
+    const Eigen::Matrix3d Mr3 = Pt3 * M6 * Pt3.transpose();
+    Mr = Mr3;
+    Minv = Mr3.llt().solve(Eigen::Matrix3d::Identity());
+    vr = Pt3 * tw;
+  } else {
+    Mr = P.transpose() * M6 * P;
+    Minv = Mr.llt().solve(SmallMatrix::Identity(nd, nd));
+    vr = P.transpose() * tw;
+  }
 
   // Known wrench: gravity and point fingers' normal forces. The gyroscopic
   // torque -ω × Iω is left out: it is second order in the slow turning rates
@@ -1008,7 +1088,7 @@ StepReport ContactModel::Impl::Step() {
       known.tail<3>() += (ct.points[0].p - c).cross(f);
     }
   }
-  const SmallVector Q = P.transpose() * known;
+  const SmallVector Q = planar ? SmallVector(Pt3 * known) : SmallVector(P.transpose() * known);
   const SmallVector vfree = vr + dt * Minv * Q;
 
   // Columns of the grasp map for every force unknown, in reduced coordinates.
@@ -1028,31 +1108,33 @@ StepReport ContactModel::Impl::Step() {
       continue;
     }
     const Eigen::Vector3d d = e < 0 ? normal_of(ct, pt) : edge_of(ct, pt, e);
-    Eigen::Matrix<double, 6, 1> col;
-    col << d, (pt.p - c).cross(d);
-    if (planar) {
-      Jc.col(k) = Pt3 * col;  // fixed-size 3x6 projection
-    } else {
-      Jc.col(k) = col;
-    }
+    SetGraspColumn(Jc, k, d, pt.p - c);
     if (tracked) {
       Jv.col(k) = Jc.col(k);
       if (e >= 0 && ct.known_normal >= 0 && !ct.pusher) {
         const double along = pt.n.dot(ct.normal);
         if (along > 1e-6) {
           const Eigen::Vector3d dv = d - (d.dot(ct.normal) / along) * pt.n;
-          col << dv, (pt.p - c).cross(dv);
-          if (planar) {
-            Jv.col(k) = Pt3 * col;
-          } else {
-            Jv.col(k) = col;
-          }
+          SetGraspColumn(Jv, k, dv, pt.p - c);
         }
       }
     }
   }
   const Eigen::MatrixXd& Jrows = tracked ? Jv : Jc;
-  K.noalias() = Minv * Jc;
+  if (planar) {
+    // Written out (Eigen's product sums over the 3 coordinates from zero in
+    // order: the same bits, without its kernel's packing).
+    K.resize(3, nf);
+    for (int j = 0; j < nf; ++j) {
+      for (int i = 0; i < 3; ++i) {
+        double acc = 0.0;
+        for (int k = 0; k < 3; ++k) acc += Minv(i, k) * Jc(k, j);
+        K(i, j) = acc;
+      }
+    }
+  } else {
+    K.noalias() = Minv * Jc;
+  }
 
   // Nondimensional LCP: force unknowns scale with Fs, velocity unknowns with
   // Vs = Fs dt / m; velocity rows are divided by Vs, force rows by Fs. A
@@ -1116,8 +1198,8 @@ StepReport ContactModel::Impl::Step() {
 
   // Solve (warm from the last basis), then check the physical residuals; a
   // warm-started answer that fails them is solved again cold.
-  LcpResult sol;
-  Eigen::VectorXd f;
+  LcpResult& sol = solution;
+  Eigen::VectorXd& f = forces;
   SmallVector vr_new;
   Eigen::Vector3d v_new, w_new;
   Residuals res;
@@ -1146,7 +1228,7 @@ StepReport ContactModel::Impl::Step() {
     LcpOptions lcp_options;
     const bool warm = attempt == 0 && !basis.empty();
     lcp_options.first_covering = next_covering;
-    sol = SolveLcp(A, b, warm ? &basis : nullptr, lcp_options);
+    SolveLcp(A, b, warm ? &basis : nullptr, lcp_options, sol);
     if (!sol.warm_start_used) ++next_covering;
     rep.pivots += sol.pivots;
     rep.warm_start_used = sol.warm_start_used;

@@ -1,11 +1,15 @@
 // The Lemke solver on problems with known answers, degenerate ties, and
 // the failures it must report instead of hanging or returning NaN.
+#include <algorithm>
 #include <cmath>
 #include <cstring>
 #include <limits>
+#include <numeric>
 #include <random>
+#include <vector>
 
 #include <gtest/gtest.h>
+#include <Eigen/LU>
 
 #include "arena/mechanics/lcp.hpp"
 #include "arena/mechanics/model.hpp"
@@ -184,6 +188,66 @@ TEST(Lemke, ColumnsGiveTheDenseAnswerBitForBit) {
     for (char x : c.basis) basic += x;
     EXPECT_EQ(warm.read(), basic) << "n = " << n;
   }
+}
+
+// A warm-started solve factorises its basis with lcp.cpp's own small LU
+// (BasisLu): Eigen's unblocked algorithm and triangular solves written out,
+// so up to 16 basic unknowns the answer must be Eigen's PartialPivLU answer
+// (with the one refinement step SolveBasis takes) to the last bit; beyond
+// that it is Eigen's own (checked to the bit as well). Problems are made with a chosen basis: z > 0
+// on it, w > 0 off it; the matrices have the contact LCP's exact ties (entries ±1, 0.3, 0) so the
+// pivot choice between equal magnitudes is exercised.
+TEST(Lemke, WarmBasisSolveMatchesEigensLu) {
+  std::mt19937 rng(23);
+  std::normal_distribution<double> N;
+  std::uniform_int_distribution<int> kind(0, 5);
+  int small = 0;
+  for (int trial = 0; trial < 400; ++trial) {
+    const int m = 1 + trial % 40;
+    const int n = m + 1 + trial % 7;
+    Eigen::MatrixXd A(n, n);
+    for (int i = 0; i < n; ++i)
+      for (int j = 0; j < n; ++j) {
+        const int k = kind(rng);
+        A(i, j) = k == 0 ? 0.0 : k == 1 ? 1.0 : k == 2 ? -1.0 : k == 3 ? 0.3 : N(rng);
+      }
+    A.diagonal().array() += 4.0;  // keep the bases well away from singular
+    std::vector<char> basis(static_cast<size_t>(n), 0);
+    std::vector<int> order(static_cast<size_t>(n));
+    std::iota(order.begin(), order.end(), 0);
+    std::shuffle(order.begin(), order.end(), rng);
+    for (int i = 0; i < m; ++i) basis[static_cast<size_t>(order[static_cast<size_t>(i)])] = 1;
+    Eigen::VectorXd z = Eigen::VectorXd::Zero(n), w = Eigen::VectorXd::Zero(n);
+    for (int i = 0; i < n; ++i)
+      (basis[static_cast<size_t>(i)] ? z[i] : w[i]) = 0.5 + N(rng) * N(rng);
+    z = z.cwiseAbs();
+    w = w.cwiseAbs();
+    const Eigen::VectorXd b = w - A * z;
+    if (b.minCoeff() >= 0) continue;  // trivial: solved without the basis
+    const LcpResult r = SolveLcp(A, b, &basis);
+    ASSERT_TRUE(r.ok && r.warm_start_used) << "m = " << m << ": " << r.reason;
+
+    std::vector<Eigen::Index> idx;
+    for (int i = 0; i < n; ++i)
+      if (basis[static_cast<size_t>(i)]) idx.push_back(i);
+    Eigen::MatrixXd Abb(m, m);
+    Eigen::VectorXd bb(m);
+    for (int c = 0; c < m; ++c) {
+      bb[c] = -b[idx[static_cast<size_t>(c)]];
+      for (int q = 0; q < m; ++q)
+        Abb(q, c) = A(idx[static_cast<size_t>(q)], idx[static_cast<size_t>(c)]);
+    }
+    const Eigen::PartialPivLU<Eigen::MatrixXd> lu(Abb);
+    Eigen::VectorXd zb = lu.solve(bb);
+    zb += lu.solve(bb - Abb * zb);
+    for (int c = 0; c < m; ++c) {
+      const double got = r.z[idx[static_cast<size_t>(c)]];
+      EXPECT_EQ(std::memcmp(&got, &zb[c], sizeof got), 0)
+          << "m = " << m << ": " << got << " vs " << zb[c];
+    }
+    if (m <= 16) ++small;
+  }
+  EXPECT_GT(small, 100);  // the bit-for-bit range really ran
 }
 
 // The contact LCPs of a 3x3-patch scene (n = 194; bench/README.md "LCP

@@ -71,6 +71,12 @@ LcpResult SolveLcp(const Eigen::MatrixXd& A, const Eigen::VectorXd& b,
 LcpResult SolveLcp(const LcpColumns& A, const Eigen::VectorXd& b,
                    const std::vector<char>* warm_basis = nullptr, const LcpOptions& options = {});
 
+// The same into `out`, whose vectors keep their storage from one solve to
+// the next (a caller solving every time step allocates nothing on a
+// warm-started step).
+void SolveLcp(const LcpColumns& A, const Eigen::VectorXd& b, const std::vector<char>* warm_basis,
+              const LcpOptions& options, LcpResult& out);
+
 // w = A z, summed as Eigen's dense column-major product sums it (columns in
 // blocks, each block's terms in column order from zero), skipping columns
 // where z is zero (they add exact zeros): bit for bit the dense A * z.
