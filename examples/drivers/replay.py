@@ -12,8 +12,9 @@ recorded elsewhere. Standard library only.
 
 Options (after DATASET), to exercise the cell's failure handling (tests):
     --fail-mode MODE   malformed | crash | hang | nan | disorder | refuse-all
-                       misbehave while executing (once per driver process when
-                       --fail-once FILE names a marker file that does not exist yet)
+                       misbehave while executing (only once, in whichever driver
+                       process gets there first, when --fail-once FILE names a
+                       marker file: the first to misbehave creates it)
     --resets           answer reset requests itself (reports the target as achieved)
 
 Protocol (executors/README.md has the full table):
@@ -28,6 +29,7 @@ import json
 import math
 import os
 import sys
+import time
 
 PROTOCOL = 1
 
@@ -80,7 +82,8 @@ class Dataset:
         self.format = manifest.get("export_format")
         if self.format not in ("csv", "jsonl"):
             raise SystemExit(f"replay.py: {path}: export format {self.format!r} cannot be read "
-                             "with the standard library; export with --format csv or jsonl")
+                             "with the standard library; export with --format csv or jsonl, or serve "
+                             "it without a driver: --backend replay:DIR")
         self.trials = []  # (trial_id, seed, scene)
         with open(os.path.join(path, "scenes.jsonl")) as f:
             for line in f:
@@ -158,11 +161,16 @@ def main(argv):
             resets, i = True, i + 1
         else:
             raise SystemExit(f"replay.py: unknown option {argv[i]}")
-    if fail_mode and fail_once:
-        if os.path.exists(fail_once):
-            fail_mode = None  # misbehaved once already: the restarted driver is well
-        else:
-            open(fail_once, "w").close()
+
+    def misbehaving():
+        """Whether to misbehave now (once over all driver processes with --fail-once)."""
+        if not fail_mode or not fail_once:
+            return bool(fail_mode)
+        try:  # O_EXCL: of several drivers (one per cell) exactly one wins
+            os.close(os.open(fail_once, os.O_CREAT | os.O_EXCL | os.O_WRONLY))
+            return True
+        except FileExistsError:
+            return False  # misbehaved once already: this driver is well
 
     send({"type": "hello", "protocol": PROTOCOL, "name": "replay.py",
           "truth": "recorded", "engine": f"recorded dataset {os.path.abspath(dataset.path)}",
@@ -178,7 +186,7 @@ def main(argv):
         if kind == "prepare":
             scene = msg.get("scene")
             hit = dataset.match(scene, msg.get("seed")) if isinstance(scene, dict) else None
-            if fail_mode == "refuse-all" or hit is None:
+            if hit is None or (fail_mode == "refuse-all" and misbehaving()):
                 prepared = None
                 send({"type": "refused",
                       "reason": f"dataset {dataset.path} holds no trial with this scene"})
@@ -191,25 +199,29 @@ def main(argv):
                 continue
             trial_id, scene = prepared
             rows = read_stream(dataset.path, dataset.format, trial_id)
+            misbehave = fail_mode != "refuse-all" and len(rows) > 2 and misbehaving()
+            mode = fail_mode if misbehave else None
             for k, row in enumerate(rows):
                 sample = to_sample(row, scene)
-                if k == 2 and fail_mode == "malformed":
+                if k == 2 and mode == "malformed":
                     sys.stdout.write("this is not json\n")
                     sys.stdout.flush()
                     break
-                if k == 2 and fail_mode == "crash":
+                if k == 2 and mode == "crash":
+                    # Half a trial is out (the cell streams what it has while
+                    # we are quiet): the cell must fail it, not keep it.
                     log("crashing on purpose")
+                    time.sleep(0.3)
                     os._exit(3)
-                if k == 2 and fail_mode == "hang":
+                if k == 2 and mode == "hang":
                     log("hanging on purpose")
-                    import time
                     time.sleep(3600)
-                if k == 2 and fail_mode == "nan":
+                if k == 2 and mode == "nan":
                     text = json.dumps(sample).replace(json.dumps(sample["position"][0]), "NaN", 1)
                     sys.stdout.write(text + "\n")
                     sys.stdout.flush()
                     break
-                if k == 2 and fail_mode == "disorder":
+                if k == 2 and mode == "disorder":
                     sample["t"] = 0.0  # time going back
                 send(sample)
             else:

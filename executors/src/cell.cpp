@@ -396,7 +396,7 @@ struct Cell::Impl {
     } catch (const std::exception& e) {
       return Refuse(c, std::string("start pose: ") + e.what());
     }
-    const TrialContext trial = Context(c, deadline);
+    TrialContext trial = Context(c, deadline);
     const bool closed_loop = scene.pusher && scene.pusher->controller;
     if (closed_loop && !layer.capabilities().closed_loop) {
       return Refuse(c, "pusher.motion.controller: the " + layer.capabilities().name +
@@ -418,26 +418,42 @@ struct Cell::Impl {
     if (closed_loop) return ExecuteClosedLoop(c, scene, trial, started);
 
     // The backend streams the truth; the cell checks every sample (finite,
-    // time strictly increasing from 0) and stops it at the deadline.
+    // time strictly increasing from 0), observes it and sends it on as it
+    // arrives: on the live topic when due, into the log batch by batch (a
+    // driver or a robot streams live; a simulator's samples come all at
+    // once). A failure after some samples went out ends the phase FAILED
+    // like a deadline does; the service then drops the partial stream.
     struct Collected {
       std::vector<mechanics::TrajectorySample> samples;
+      std::vector<dds::Observation> observed;
+      std::optional<Observer> observer;  // from the first sample: the layer's scene is set
       std::string problem;
     } got;
+    Outgoing out(c, deadline, Pacing::kLive, live.Matched() > 0);
     const SampleSink sink = [&](const mechanics::TrajectorySample& s) {
-      if (!got.problem.empty()) return false;
+      if (!got.problem.empty() || !out.failure.empty()) return false;
       if (std::string why = CheckTrueSample(s, got.samples, scene); !why.empty()) {
         got.problem = why;
         return false;
       }
       got.samples.push_back(s);
+      if (!got.observer) got.observer.emplace(layer.MakeObserver(trial));
+      got.observed.push_back(got.observer->Next(got.samples));
+      if (!Push(out, layer.actual_scene(), got.samples.back(), got.observed.back())) return false;
       return !Stopping() && Clock::now() <= deadline;
     };
+    // A backend waiting on its hardware: what the log holds leaves now.
+    trial.idle = [&] {
+      if (out.failure.empty()) SendBatch(out, false);
+    };
     const ExecuteOutcome outcome = layer.Execute(scene, trial, sink);
-    const mechanics::Scene& actual = layer.actual_scene();
+    trial.idle = nullptr;
     std::string early;
     if (!got.problem.empty())
       early = "backend " + layer.capabilities().name + ": sample " +
               std::to_string(got.samples.size()) + ": " + got.problem;
+    else if (!out.failure.empty())
+      early = out.failure;
     else if (Stopping())
       early = "interrupted: cell shutting down";
     else if (Clock::now() > deadline)
@@ -452,30 +468,33 @@ struct Cell::Impl {
       // same way on a re-run (FAILURE_SIMULATION: the trial fails at once);
       // a driver that crashed, hung or sent garbage may do better next time.
       s.failure(!got.problem.empty()                          ? msg::FAILURE_INTERNAL
+                : early.rfind("deadline", 0) == 0             ? msg::FAILURE_DEADLINE
+                : early.rfind("interrupted", 0) == 0          ? msg::FAILURE_INTERRUPTED
                 : Stopping()                                  ? msg::FAILURE_INTERRUPTED
                 : Clock::now() > deadline                     ? msg::FAILURE_DEADLINE
                 : outcome.reason.rfind("simulation:", 0) == 0 ? msg::FAILURE_SIMULATION
                                                               : msg::FAILURE_INTERNAL);
       s.reason(early);
+      s.samples(static_cast<std::uint32_t>(out.sent));  // already in the log (not a trial)
       s.phase_wall_s(std::chrono::duration<double>(Clock::now() - started).count());
       s.detail_json(json({{"backend", layer.capabilities().name},
                           {"defects_applied", json::parse(layer.AppliedJson())},
+                          {"streamed_samples", out.sent},
                           {"backend_detail", json::parse(outcome.detail_json, nullptr, false)}})
                         .dump());
+      if (out.sent > 0)
+        spdlog::warn("cell {}: trial {} attempt {} failed after {} samples were streamed: {}",
+                     options.id, c.trial_id(), c.attempt(), out.sent, early);
       return Finish(c, s);
     }
     const std::vector<mechanics::TrajectorySample>& truth_samples = got.samples;
-    const auto observed = layer.Observe(truth_samples, trial);
-
-    // Stream, paced: a batch leaves when its last sample is due; the live
-    // topic gets every sample when it is due.
+    const std::vector<dds::Observation>& observed = got.observed;
+    EndStream(out);
+    const std::string& failure = out.failure;
+    const size_t n = truth_samples.size();
     size_t dropped = 0;
     for (const auto& o : observed) dropped += o.valid ? 0 : 1;
-    const StreamOutcome streamed =
-        StreamLog(c, truth_samples, actual, observed, Clock::now(), deadline, Pacing::kLive);
-    const std::string& failure = streamed.failure;
-    const size_t n = truth_samples.size();
-    const std::uint32_t batch_index = streamed.batches;
+    const std::uint32_t batch_index = out.batches;
 
     const auto& last = truth_samples.back();
     true_pose.position = last.position;
@@ -517,7 +536,7 @@ struct Cell::Impl {
     Finish(c, s);
   }
 
-  // How StreamLog (below) sends a trial.
+  // How a trial's samples go out (Outgoing, below).
   enum class Pacing {
     kLive,     // samples leave when due (speed > 0), each on the live topic too
     kFlatOut,  // as fast as the log takes them, log only (closed loop: already live)
@@ -743,8 +762,8 @@ struct Cell::Impl {
     const auto observed = layer.Observe(result.samples, trial);
     mechanics::Scene as_run = actual;  // PusherAt's velocity: the last command
     as_run.pusher->motion = loop.in_force;
-    const StreamOutcome streamed = StreamLog(c, result.samples, as_run, observed, Clock::now(),
-                                             trial.deadline, Pacing::kFlatOut);
+    const StreamOutcome streamed =
+        StreamLog(c, result.samples, as_run, observed, trial.deadline, Pacing::kFlatOut);
     if (failure.empty()) failure = streamed.failure;
     const auto& last = result.samples.back();
     true_pose.position = last.position;
@@ -862,92 +881,137 @@ struct Cell::Impl {
     live.Write(s);
   }
 
+  // One trial's stream on its way out, fed sample by sample as the backend
+  // produces them (Push), ended by EndStream. The log (GroundTruth, reliable)
+  // takes samples in batches of --batch: a full batch leaves when the next
+  // sample arrives, a partial one when the backend goes quiet (SendBatch from
+  // TrialContext::idle) or at the end, flagged last. The live topic gets every
+  // sample when it is due; its `last` sample is sent again at the end, when
+  // the backend said the trial is over.
+  struct Outgoing {
+    Outgoing(const msg::TrialCommand& command, Clock::time_point until, Pacing how, bool live)
+        : c(command), deadline(until), pacing(how), live_on(live) {}
+    const msg::TrialCommand& c;
+    Clock::time_point deadline;
+    Pacing pacing;
+    bool live_on;                   // a reader was matched at the start (speed 0)
+    Clock::time_point start{};      // when sample 0 arrived: the pacing's origin
+    msg::GroundTruth batch;         // the samples not yet in the log
+    std::size_t sent = 0;           // samples in the log
+    std::size_t pushed = 0;         // samples taken
+    std::uint32_t batches = 0;      // batches in the log
+    msg::GroundTruthSample newest;  // the latest sample, for the live topic's last
+    std::string failure;            // why the stream stopped ("" = going)
+  };
+
+  bool Paced(const Outgoing& out) const { return out.pacing == Pacing::kLive && options.speed > 0; }
+
+  // Takes one sample: paces it, publishes it live, queues it for the log.
+  // @returns false when the stream stopped (out.failure says why).
+  bool Push(Outgoing& out, const mechanics::Scene& actual, const mechanics::TrajectorySample& truth,
+            const dds::Observation& observed) {
+    if (!out.failure.empty()) return false;
+    if (out.pushed == 0) out.start = Clock::now();
+    if (out.batch.samples().size() >= static_cast<std::size_t>(options.batch_samples) &&
+        !SendBatch(out, false))
+      return false;
+    const bool paced = Paced(out);
+    if (paced) {
+      const auto due = out.start + std::chrono::duration_cast<Clock::duration>(
+                                       std::chrono::duration<double>(truth.t * options.speed));
+      if (due > out.deadline) {
+        SleepUntil(out.deadline);
+        out.failure = "deadline: " + std::to_string(out.c.deadline_s()) + " s exceeded after " +
+                      std::to_string(out.sent) + " samples";
+        return false;
+      }
+      if (!SleepUntil(due)) {
+        out.failure = "interrupted: cell shutting down";
+        return false;
+      }
+    }
+    msg::GroundTruthSample encoded;
+    dds::EncodeSample(truth, PusherAt(actual, truth), observed, &encoded);
+    if (paced ? live.Matched() > 0 : out.live_on)
+      PublishLive(out.c, static_cast<std::uint32_t>(out.pushed), false, encoded);
+    out.newest = encoded;
+    out.batch.samples().push_back(std::move(encoded));
+    ++out.pushed;
+    return true;
+  }
+
+  // The queued samples into the log as one batch (nothing queued: nothing
+  // sent, unless it is the last one). @returns false when the stream stopped.
+  bool SendBatch(Outgoing& out, bool last) {
+    if (!out.failure.empty()) return false;
+    msg::GroundTruth& batch = out.batch;
+    if (batch.samples().empty() && !last) return true;
+    const std::size_t count = batch.samples().size();
+    batch.trial_id(out.c.trial_id());
+    batch.attempt(out.c.attempt());
+    batch.cell_id(options.id);
+    batch.service_session(out.c.service_session());
+    batch.batch(out.batches);
+    batch.first_sample(static_cast<std::uint32_t>(out.sent));
+    batch.last(last);
+    // Fault injection (defects.hpp): a malformed sample, or a missing batch.
+    if (options.defects.corrupt_stream == "gap" && out.batches == 0)
+      batch.first_sample(static_cast<std::uint32_t>(out.sent + 1));
+    if (options.defects.corrupt_stream == "nan" && out.batches == 0 && count > 0)
+      batch.samples()[0].object_pose()[0] = std::numeric_limits<double>::quiet_NaN();
+    if (!Serves(out.c.service_session())) {
+      out.failure = "interrupted: the cell now serves another service";
+      return false;
+    }
+    batch.sent_unix_ns(UnixNanos());
+    // Ground truth is a log: a full history throttles us, it never drops.
+    while (!ground_truth.Write(batch)) {
+      if (Stopping()) {
+        out.failure = "interrupted: cell shutting down";
+        return false;
+      }
+      if (Clock::now() > out.deadline) break;
+      spdlog::warn("cell {}: ground-truth history full (a slow reader?), retrying", options.id);
+    }
+    if (Clock::now() > out.deadline) {
+      out.failure = "deadline: " + std::to_string(out.c.deadline_s()) + " s exceeded after " +
+                    std::to_string(out.sent + count) + " samples";
+      return false;
+    }
+    out.sent += count;
+    ++out.batches;
+    batch.samples().clear();
+    {
+      std::lock_guard<std::mutex> lock(mutex);
+      counters.samples += count;
+    }
+    return true;
+  }
+
+  // The backend finished: the rest of the log, flagged last; the live
+  // topic's final sample again, flagged last.
+  void EndStream(Outgoing& out) {
+    if (!SendBatch(out, true) || out.pushed == 0) return;
+    if (Paced(out) ? live.Matched() > 0 : out.live_on)
+      PublishLive(out.c, static_cast<std::uint32_t>(out.pushed - 1), true, out.newest);
+  }
+
+  // A whole trial's samples, known in advance (closed loop: the loop ran live).
   StreamOutcome StreamLog(const msg::TrialCommand& c,
                           const std::vector<mechanics::TrajectorySample>& truth_samples,
                           const mechanics::Scene& actual,
-                          const std::vector<dds::Observation>& observed,
-                          Clock::time_point stream_start, Clock::time_point deadline,
+                          const std::vector<dds::Observation>& observed, Clock::time_point deadline,
                           Pacing pacing) {
-    StreamOutcome out;
-    const size_t n = truth_samples.size();
-    // Nobody watching: do not even serialise the live samples.
-    const bool live_on = pacing == Pacing::kLive && live.Matched() > 0;
-    auto due_of = [&](size_t i) {
-      return stream_start + std::chrono::duration_cast<Clock::duration>(
-                                std::chrono::duration<double>(truth_samples[i].t * options.speed));
-    };
-    std::string& failure = out.failure;
-    for (size_t first = 0; first < n && failure.empty();) {
-      const size_t count = std::min<size_t>(options.batch_samples, n - first);
-      msg::GroundTruth batch;
-      batch.trial_id(c.trial_id());
-      batch.attempt(c.attempt());
-      batch.cell_id(options.id);
-      batch.service_session(c.service_session());
-      batch.batch(out.batches);
-      batch.first_sample(static_cast<std::uint32_t>(first));
-      batch.last(first + count == n);
-      batch.samples().resize(count);
-      for (size_t i = 0; i < count; ++i) {
-        const auto& truth = truth_samples[first + i];
-        dds::EncodeSample(truth, PusherAt(actual, truth), observed[first + i], &batch.samples()[i]);
-      }
-      const bool paced = pacing == Pacing::kLive && options.speed > 0;
-      for (size_t i = 0; i < count && (paced || live_on); ++i) {
-        if (paced) {
-          const auto due = due_of(first + i);
-          if (due > deadline) break;  // the deadline check below ends the trial
-          if (!SleepUntil(due)) {
-            failure = "interrupted: cell shutting down";
-            break;
-          }
-        }
-        if (paced ? live.Matched() > 0 : live_on)
-          PublishLive(c, static_cast<std::uint32_t>(first + i), first + i + 1 == n,
-                      batch.samples()[i]);
-      }
-      if (!failure.empty()) break;
-      // Fault injection (defects.hpp): a malformed sample, or a missing batch.
-      if (options.defects.corrupt_stream == "gap" && out.batches == 0)
-        batch.first_sample(static_cast<std::uint32_t>(first + 1));
-      if (options.defects.corrupt_stream == "nan" && out.batches == 0)
-        batch.samples()[0].object_pose()[0] = std::numeric_limits<double>::quiet_NaN();
-      if (paced) {
-        const auto due = due_of(first + count - 1);
-        if (due > deadline) {
-          SleepUntil(deadline);
-        } else if (!SleepUntil(due)) {
-          failure = "interrupted: cell shutting down";
-          break;
-        }
-      }
-      if (!Serves(c.service_session())) {
-        failure = "interrupted: the cell now serves another service";
+    Outgoing out(c, deadline, pacing, pacing == Pacing::kLive && live.Matched() > 0);
+    for (std::size_t i = 0; i < truth_samples.size(); ++i) {
+      if (!Push(out, actual, truth_samples[i], observed[i])) break;
+      if (Stopping() && i + 1 < truth_samples.size()) {
+        out.failure = "interrupted: cell shutting down";
         break;
       }
-      batch.sent_unix_ns(UnixNanos());
-      // Ground truth is a log: a full history throttles us, it never drops.
-      while (!ground_truth.Write(batch)) {
-        if (Stopping()) {
-          failure = "interrupted: cell shutting down";
-          break;
-        }
-        if (Clock::now() > deadline) break;
-        spdlog::warn("cell {}: ground-truth history full (a slow reader?), retrying", options.id);
-      }
-      if (Clock::now() > deadline) {
-        failure = "deadline: " + std::to_string(c.deadline_s()) + " s exceeded after " +
-                  std::to_string(first + count) + " of " + std::to_string(n) + " samples";
-      }
-      if (failure.empty()) {
-        std::lock_guard<std::mutex> lock(mutex);
-        counters.samples += count;
-      }
-      first += count;
-      ++out.batches;
-      if (Stopping() && failure.empty() && first < n) failure = "interrupted: cell shutting down";
     }
-    return out;
+    if (out.failure.empty()) EndStream(out);
+    return {out.failure, out.batches};
   }
 
   void Reset(const msg::TrialCommand& c) {

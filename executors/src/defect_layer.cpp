@@ -104,6 +104,10 @@ std::vector<dds::Observation> DefectLayer::Observe(
   return executors::Observe(truth, actual_, effective_, trial.seed, trial.trial_id);
 }
 
+Observer DefectLayer::MakeObserver(const TrialContext& trial) const {
+  return Observer(actual_, effective_, trial.seed, trial.trial_id);
+}
+
 std::string DefectLayer::AppliedJson() const {
   using nlohmann::json;
   const auto profile = [](const DefectProfile& p) { return json::parse(DefectProfileToJson(p)); };

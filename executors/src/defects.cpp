@@ -330,59 +330,89 @@ std::string CheckCapabilities(const DefectProfile& p, const mechanics::Scene& sc
   return "";
 }
 
+struct Observer::State {
+  State(const mechanics::Scene& s, const DefectProfile& p, std::uint64_t seed,
+        std::uint64_t trial_id)
+      : scene(s),
+        profile(p),
+        pose(seed, trial_id, StreamPurpose::kPoseNoise),
+        ft(seed, trial_id, StreamPurpose::kForceTorqueNoise),
+        drops(seed, trial_id, StreamPurpose::kDrops),
+        lag(std::lround(p.latency_ms * 1e-3 * mechanics::kSampleRateHz)) {}
+  mechanics::Scene scene;
+  DefectProfile profile;
+  Rng pose, ft, drops;
+  long lag;
+};
+
+Observer::Observer(const mechanics::Scene& scene, const DefectProfile& profile, std::uint64_t seed,
+                   std::uint64_t trial_id)
+    : state_(std::make_unique<State>(scene, profile, seed, trial_id)) {}
+Observer::~Observer() = default;
+Observer::Observer(Observer&&) noexcept = default;
+Observer& Observer::operator=(Observer&&) noexcept = default;
+
+dds::Observation Observer::Next(const std::vector<mechanics::TrajectorySample>& truth) {
+  State& st = *state_;
+  const DefectProfile& p = st.profile;
+  const mechanics::Scene& scene = st.scene;
+  auto noisy = [&](const Eigen::Vector3d& v, const Eigen::Vector3d& std_dev) {
+    return Eigen::Vector3d(v.x() + st.ft.Normal(std_dev.x()), v.y() + st.ft.Normal(std_dev.y()),
+                           v.z() + st.ft.Normal(std_dev.z()));
+  };
+  const size_t i = truth.size() - 1;
+  // Every draw happens for every sample, in a fixed order, so that a drop
+  // or the latency never shifts the noise of later samples.
+  const bool dropped = st.drops.Uniform() < p.drop_probability;
+  const Eigen::Vector3d dp(st.pose.Normal(p.position_std.x()), st.pose.Normal(p.position_std.y()),
+                           st.pose.Normal(p.position_std.z()));
+  const Eigen::Vector3d dr(st.pose.Normal(p.rotation_std.x()), st.pose.Normal(p.rotation_std.y()),
+                           st.pose.Normal(p.rotation_std.z()));
+  dds::Observation o;
+  const long source = static_cast<long>(i) - st.lag;
+  const mechanics::TrajectorySample& s = truth[source < 0 ? 0 : static_cast<size_t>(source)];
+  o.valid = !dropped && source >= 0;
+  // Noise is drawn even when the sample is not valid (fixed stream usage).
+  o.position = s.position + dp;
+  o.orientation = Perturb(s.orientation, dr);
+  const Eigen::Vector3d pusher_torque =
+      s.contacts.size() > scene.fingers.size() ? s.contacts.back().torque : Eigen::Vector3d::Zero();
+  const Eigen::Vector3d pf = noisy(s.pusher_force, p.force_std);
+  const Eigen::Vector3d pt = noisy(pusher_torque, p.torque_std);
+  o.pusher_wrench << pf, pt;
+  o.finger_wrenches.resize(scene.fingers.size());
+  for (size_t f = 0; f < scene.fingers.size(); ++f) {
+    Eigen::Vector3d force = Eigen::Vector3d::Zero(), torque = Eigen::Vector3d::Zero();
+    if (f < s.contacts.size()) {
+      force = s.contacts[f].normal_force * scene.fingers[f].normal + s.contacts[f].tangential_force;
+      torque = s.contacts[f].torque;
+    }
+    const Eigen::Vector3d ff = noisy(force, p.force_std);
+    const Eigen::Vector3d ftq = noisy(torque, p.torque_std);
+    o.finger_wrenches[f] << ff, ftq;
+  }
+  o.t = s.t;
+  if (!o.valid) {
+    // Not a measurement: zeros, but as many finger wrenches as the scene
+    // has fingers, so every sample of a trial has the same shape (the
+    // store and the export rely on it; latency makes the first ones invalid).
+    o = dds::Observation{};
+    o.finger_wrenches.assign(scene.fingers.size(), dds::Wrench::Zero());
+  }
+  return o;
+}
+
 std::vector<dds::Observation> Observe(const std::vector<mechanics::TrajectorySample>& truth,
                                       const mechanics::Scene& scene, const DefectProfile& p,
                                       std::uint64_t seed, std::uint64_t trial_id) {
-  Rng pose(seed, trial_id, StreamPurpose::kPoseNoise);
-  Rng ft(seed, trial_id, StreamPurpose::kForceTorqueNoise);
-  Rng drops(seed, trial_id, StreamPurpose::kDrops);
-  const long lag = std::lround(p.latency_ms * 1e-3 * mechanics::kSampleRateHz);
-  auto noisy = [&](const Eigen::Vector3d& v, const Eigen::Vector3d& std_dev) {
-    return Eigen::Vector3d(v.x() + ft.Normal(std_dev.x()), v.y() + ft.Normal(std_dev.y()),
-                           v.z() + ft.Normal(std_dev.z()));
-  };
-  std::vector<dds::Observation> out(truth.size());
-  for (size_t i = 0; i < truth.size(); ++i) {
-    // Every draw happens for every sample, in a fixed order, so that a drop
-    // or the latency never shifts the noise of later samples.
-    const bool dropped = drops.Uniform() < p.drop_probability;
-    const Eigen::Vector3d dp(pose.Normal(p.position_std.x()), pose.Normal(p.position_std.y()),
-                             pose.Normal(p.position_std.z()));
-    const Eigen::Vector3d dr(pose.Normal(p.rotation_std.x()), pose.Normal(p.rotation_std.y()),
-                             pose.Normal(p.rotation_std.z()));
-    dds::Observation& o = out[i];
-    const long source = static_cast<long>(i) - lag;
-    const mechanics::TrajectorySample& s = truth[source < 0 ? 0 : static_cast<size_t>(source)];
-    o.valid = !dropped && source >= 0;
-    // Noise is drawn even when the sample is not valid (fixed stream usage).
-    o.position = s.position + dp;
-    o.orientation = Perturb(s.orientation, dr);
-    const Eigen::Vector3d pusher_torque = s.contacts.size() > scene.fingers.size()
-                                              ? s.contacts.back().torque
-                                              : Eigen::Vector3d::Zero();
-    const Eigen::Vector3d pf = noisy(s.pusher_force, p.force_std);
-    const Eigen::Vector3d pt = noisy(pusher_torque, p.torque_std);
-    o.pusher_wrench << pf, pt;
-    o.finger_wrenches.resize(scene.fingers.size());
-    for (size_t f = 0; f < scene.fingers.size(); ++f) {
-      Eigen::Vector3d force = Eigen::Vector3d::Zero(), torque = Eigen::Vector3d::Zero();
-      if (f < s.contacts.size()) {
-        force =
-            s.contacts[f].normal_force * scene.fingers[f].normal + s.contacts[f].tangential_force;
-        torque = s.contacts[f].torque;
-      }
-      const Eigen::Vector3d ff = noisy(force, p.force_std);
-      const Eigen::Vector3d ftq = noisy(torque, p.torque_std);
-      o.finger_wrenches[f] << ff, ftq;
-    }
-    o.t = s.t;
-    if (!o.valid) {
-      // Not a measurement: zeros, but as many finger wrenches as the scene
-      // has fingers, so every sample of a trial has the same shape (the
-      // store and the export rely on it; latency makes the first ones invalid).
-      o = dds::Observation{};
-      o.finger_wrenches.assign(scene.fingers.size(), dds::Wrench::Zero());
-    }
+  Observer observer(scene, p, seed, trial_id);
+  std::vector<mechanics::TrajectorySample> so_far;
+  so_far.reserve(truth.size());
+  std::vector<dds::Observation> out;
+  out.reserve(truth.size());
+  for (const auto& s : truth) {
+    so_far.push_back(s);
+    out.push_back(observer.Next(so_far));
   }
   return out;
 }

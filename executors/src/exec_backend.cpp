@@ -1,6 +1,9 @@
 // exec:COMMAND: a driver process speaking the JSON-lines protocol
-// (exec_protocol.hpp). Every failure of the driver fails the phase with a
-// reason, kills the driver and leaves the next Prepare to start it afresh.
+// (exec_protocol.hpp). Each sample line goes to the cell's sink as it is
+// read (the cell streams it on at once); while the driver is quiet the cell
+// is told (TrialContext::idle) so it can flush what it holds. Every failure
+// of the driver fails the phase with a reason, kills the driver and leaves
+// the next Prepare to start it afresh.
 #include <fcntl.h>
 #include <poll.h>
 #include <signal.h>
@@ -12,6 +15,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstring>
+#include <functional>
 #include <stdexcept>
 #include <thread>
 
@@ -95,7 +99,9 @@ class DriverProcess {
     return true;
   }
 
-  Read ReadLine(Clock::time_point until, std::string* line) {
+  // `idle` (may be empty) is called after each 50 ms without a line.
+  Read ReadLine(Clock::time_point until, std::string* line,
+                const std::function<void()>& idle = nullptr) {
     for (;;) {
       if (auto nl = buffer_.find('\n'); nl != std::string::npos) {
         *line = buffer_.substr(0, nl);
@@ -107,8 +113,10 @@ class DriverProcess {
       const auto left = std::chrono::duration_cast<std::chrono::milliseconds>(until - Clock::now());
       if (left.count() <= 0) return Read::kTimeout;
       pollfd p{out_, POLLIN, 0};
-      const int r = poll(&p, 1, static_cast<int>(std::min<long long>(left.count(), 200)));
+      const int r =
+          poll(&p, 1, static_cast<int>(std::min<long long>(left.count(), idle ? 50 : 200)));
       if (r < 0 && errno != EINTR) return Read::kEof;
+      if (r == 0 && idle) idle();  // the driver is quiet: the cell sends what it holds
       if (r <= 0) continue;
       char chunk[65536];
       const ssize_t n = read(out_, chunk, sizeof chunk);
@@ -251,7 +259,7 @@ class ExecBackend final : public Backend {
     std::size_t count = 0;
     for (;;) {
       json msg;
-      if (std::string why = Await("execute", Deadline(trial), &msg); !why.empty()) {
+      if (std::string why = Await("execute", Deadline(trial), &msg, trial.idle); !why.empty()) {
         out.reason = why;
         return out;
       }
@@ -384,10 +392,11 @@ class ExecBackend final : public Backend {
   }
 
   // One message; "" or the reason the phase fails.
-  std::string Await(const char* phase, Clock::time_point until, json* msg) {
+  std::string Await(const char* phase, Clock::time_point until, json* msg,
+                    const std::function<void()>& idle = nullptr) {
     for (;;) {
       std::string line;
-      switch (driver_->ReadLine(until, &line)) {
+      switch (driver_->ReadLine(until, &line, idle)) {
         case DriverProcess::Read::kTimeout: {
           const double waited = options_.reply_timeout_s;
           return Fail(phase, Clock::now() >= until && until < After(waited - 0.5)

@@ -1,12 +1,11 @@
-// replay:DATASET: recorded trials (an `arena export` directory, csv or jsonl)
-// served as a cell. A commanded scene is matched to the recorded trials by
-// its physical parameters (everything but `model`, numbers to 1e-9
-// relative); a recorded trial with the command's seed is preferred (the same
-// campaign re-run), otherwise matching trials are served in turn. A scene
-// the dataset does not hold is REFUSED, with the reason.
+// replay:DATASET: recorded trials (an `arena export` directory in any format
+// the export writes: csv, jsonl, hdf5) served as a cell. A commanded scene is matched to the
+// recorded trials by its physical parameters (everything but `model`, numbers to 1e-9 relative); a
+// recorded trial with the command's seed is preferred (the same campaign re-run), otherwise
+// matching trials are served in turn. A scene the dataset does not hold is REFUSED, with the
+// reason.
 #include <cmath>
 #include <filesystem>
-#include <fstream>
 #include <map>
 #include <sstream>
 #include <stdexcept>
@@ -14,6 +13,7 @@
 #include <nlohmann/json.hpp>
 
 #include "arena/executors/backend.hpp"
+#include "recorded_stream.hpp"
 
 namespace arena::executors {
 namespace {
@@ -48,29 +48,70 @@ json Physical(json scene) {
   return scene;
 }
 
-std::string Slurp(const fs::path& p) {
-  std::ifstream in(p, std::ios::binary);
-  if (!in) throw std::invalid_argument("cannot read " + p.string());
-  std::ostringstream s;
-  s << in.rdbuf();
-  return s.str();
-}
-
-std::vector<std::string> SplitCsv(const std::string& line) {
-  std::vector<std::string> out;
-  std::string cur;
-  bool quoted = false;
-  for (char ch : line) {
-    if (ch == '"') {
-      quoted = !quoted;
-    } else if (ch == ',' && !quoted) {
-      out.push_back(cur);
-      cur.clear();
-    } else if (ch != '\r') {
-      cur += ch;
-    }
+// The recorded rows as the true samples of `scene`: contacts in scene order
+// (fingers, then the pusher), named as the export names them (a finger's
+// name, "pusher"; "contactK" by position when the recording had another set).
+std::vector<mechanics::TrajectorySample> ToSamples(const RecordedStream& stream,
+                                                   const mechanics::Scene& scene) {
+  std::vector<std::string> names;
+  std::vector<Eigen::Vector3d> normals;
+  for (size_t i = 0; i < scene.fingers.size(); ++i) {
+    names.push_back(scene.fingers[i].name.empty() ? "finger" + std::to_string(i)
+                                                  : scene.fingers[i].name);
+    normals.push_back(scene.fingers[i].normal.normalized());
   }
-  out.push_back(cur);
+  if (scene.pusher) {
+    names.push_back("pusher");
+    normals.push_back(scene.pusher->normal.normalized());
+  }
+  const auto col = [&](const std::string& name) {
+    const int k = stream.Column(name);
+    if (k < 0) throw std::invalid_argument("column '" + name + "' missing");
+    return static_cast<size_t>(k);
+  };
+  const auto cols = [&](const std::string& prefix, std::initializer_list<const char*> axes) {
+    std::vector<size_t> out;
+    for (const char* a : axes) out.push_back(col(prefix + a));
+    return out;
+  };
+  const auto pose = cols("", {"x", "y", "z", "qw", "qx", "qy", "qz"});
+  const auto twist = cols("", {"vx", "vy", "vz", "wx", "wy", "wz"});
+  const auto pusher = cols("pusher_", {"x", "y", "z"});
+  std::vector<std::vector<size_t>> contact;  // fx fy fz tx ty tz mode
+  for (size_t c = 0; c < names.size(); ++c) {
+    const std::string prefix =
+        (stream.Column(names[c] + "_fx") >= 0 ? names[c] : "contact" + std::to_string(c)) + "_";
+    contact.push_back(cols(prefix, {"fx", "fy", "fz", "tx", "ty", "tz", "mode"}));
+  }
+  const size_t t = col("t");
+  std::vector<mechanics::TrajectorySample> out;
+  out.reserve(stream.rows.size());
+  for (const auto& row : stream.rows) {
+    mechanics::TrajectorySample s;
+    const auto v3 = [&](const std::vector<size_t>& k, size_t at) {
+      return Eigen::Vector3d(row[k[at]], row[k[at + 1]], row[k[at + 2]]);
+    };
+    s.t = row[t];
+    s.position = v3(pose, 0);
+    s.orientation = Eigen::Quaterniond(row[pose[3]], row[pose[4]], row[pose[5]], row[pose[6]]);
+    s.velocity = v3(twist, 0);
+    s.angular_velocity = v3(twist, 3);
+    s.pusher_position = v3(pusher, 0);
+    for (size_t c = 0; c < names.size(); ++c) {
+      const Eigen::Vector3d f = v3(contact[c], 0);
+      mechanics::ContactState st;
+      st.normal_force = f.dot(normals[c]);
+      st.tangential_force = f - st.normal_force * normals[c];
+      st.torque = v3(contact[c], 3);
+      const double mode = row[contact[c][6]];
+      st.mode = mode == 0   ? mechanics::ContactMode::kStick
+                : mode == 1 ? mechanics::ContactMode::kSlide
+                            : mechanics::ContactMode::kSeparate;
+      s.contacts.push_back(st);
+      if (scene.pusher && c + 1 == names.size()) s.pusher_force = f;
+    }
+    out.push_back(std::move(s));
+  }
   return out;
 }
 
@@ -86,23 +127,26 @@ class ReplayBackend final : public Backend {
     const fs::path root(dir);
     json manifest;
     try {
-      manifest = json::parse(Slurp(root / "manifest.json"));
+      manifest = json::parse(ReadText((root / "manifest.json").string()));
     } catch (const json::exception& e) {
       throw std::invalid_argument(dir + "/manifest.json: not JSON: " + e.what());
     }
     format_ = manifest.value("export_format", "");
-    if (format_ != "csv" && format_ != "jsonl")
-      throw std::invalid_argument(dir + ": export format '" + format_ +
-                                  "' is not served yet (export with --format csv or jsonl)");
+    if (format_ != "csv" && format_ != "jsonl" && format_ != "hdf5")
+      throw std::invalid_argument(dir + "/manifest.json: export_format '" + format_ +
+                                  "' is none of the formats arena writes (hdf5, csv, jsonl)");
     if (!fs::exists(root / "scenes.jsonl"))
       throw std::invalid_argument(dir + ": no scenes.jsonl (exported by an older arena?)");
-    std::istringstream lines(Slurp(root / "scenes.jsonl"));
+    std::istringstream lines(ReadText((root / "scenes.jsonl").string()));
     std::string line;
-    while (std::getline(lines, line)) {
+    for (int number = 1; std::getline(lines, line); ++number) {
       if (line.empty()) continue;
       const json j = json::parse(line, nullptr, false);
-      if (j.is_discarded() || !j.is_object() || !j.contains("scene") || j["scene"].is_null())
-        continue;
+      if (j.is_discarded() || !j.is_object() || !j.contains("trial_id") ||
+          !j["trial_id"].is_number_integer())
+        throw std::invalid_argument(dir + "/scenes.jsonl: line " + std::to_string(number) +
+                                    ": not an object with a trial_id");
+      if (!j.contains("scene") || !j["scene"].is_object()) continue;  // a trial without a scene
       Recorded r;
       r.trial_id = j.value("trial_id", std::int64_t{0});
       r.seed = j.contains("seed")
@@ -112,6 +156,18 @@ class ReplayBackend final : public Backend {
       trials_.push_back(std::move(r));
     }
     if (trials_.empty()) throw std::invalid_argument(dir + ": holds no trials");
+    // Every served trial's stream is there and well formed before the cell
+    // comes up: a broken dataset stops `arena cell` with the file and the
+    // reason, not a trial in the middle of a campaign.
+    if (format_ == "hdf5") {
+      h5_ = std::make_unique<Hdf5Recording>((root / "dataset.h5").string());
+      for (const auto& r : trials_) h5_->Check(r.trial_id);
+    } else {
+      for (const auto& r : trials_)
+        if (const fs::path p = StreamFile(r.trial_id); !fs::is_regular_file(p))
+          throw std::invalid_argument(p.string() + ": missing (trial " +
+                                      std::to_string(r.trial_id) + "'s true stream)");
+    }
     caps_.name = "replay:" + dir;
     caps_.truth = TruthSource::kRecorded;
     caps_.engine = "recorded dataset " + fs::absolute(root).string() + " (" +
@@ -148,56 +204,21 @@ class ReplayBackend final : public Backend {
       out.reason = "replay: execute without a prepared trial";
       return out;
     }
-    std::vector<std::map<std::string, double>> rows;
+    RecordedStream stream;
     try {
-      rows = ReadStream(prepared_->trial_id);
+      stream = ReadStream(prepared_->trial_id);
     } catch (const std::exception& e) {
       out.reason = std::string("replay: ") + e.what();
       return out;
     }
-    std::vector<std::string> names;
-    std::vector<Eigen::Vector3d> normals;
-    for (size_t i = 0; i < scene.fingers.size(); ++i) {
-      names.push_back(scene.fingers[i].name.empty() ? "finger" + std::to_string(i)
-                                                    : scene.fingers[i].name);
-      normals.push_back(scene.fingers[i].normal.normalized());
+    std::vector<mechanics::TrajectorySample> samples;
+    try {
+      samples = ToSamples(stream, scene);
+    } catch (const std::exception& e) {
+      out.reason = "replay: trial " + std::to_string(prepared_->trial_id) + ": " + e.what();
+      return out;
     }
-    if (scene.pusher) {
-      names.push_back("pusher");
-      normals.push_back(scene.pusher->normal.normalized());
-    }
-    for (const auto& row : rows) {
-      mechanics::TrajectorySample s;
-      try {
-        const auto at = [&](const std::string& k) {
-          auto it = row.find(k);
-          if (it == row.end()) throw std::invalid_argument("column '" + k + "' missing");
-          return it->second;
-        };
-        s.t = at("t");
-        s.position = {at("x"), at("y"), at("z")};
-        s.orientation = Eigen::Quaterniond(at("qw"), at("qx"), at("qy"), at("qz"));
-        s.velocity = {at("vx"), at("vy"), at("vz")};
-        s.angular_velocity = {at("wx"), at("wy"), at("wz")};
-        s.pusher_position = {at("pusher_x"), at("pusher_y"), at("pusher_z")};
-        for (size_t c = 0; c < names.size(); ++c) {
-          const std::string& n = names[c];
-          const Eigen::Vector3d f(at(n + "_fx"), at(n + "_fy"), at(n + "_fz"));
-          mechanics::ContactState st;
-          st.normal_force = f.dot(normals[c]);
-          st.tangential_force = f - st.normal_force * normals[c];
-          st.torque = {at(n + "_tx"), at(n + "_ty"), at(n + "_tz")};
-          const int mode = static_cast<int>(at(n + "_mode"));
-          st.mode = mode == 0   ? mechanics::ContactMode::kStick
-                    : mode == 1 ? mechanics::ContactMode::kSlide
-                                : mechanics::ContactMode::kSeparate;
-          s.contacts.push_back(st);
-          if (scene.pusher && c + 1 == names.size()) s.pusher_force = f;
-        }
-      } catch (const std::exception& e) {
-        out.reason = "replay: trial " + std::to_string(prepared_->trial_id) + ": " + e.what();
-        return out;
-      }
+    for (const auto& s : samples) {
       if (!sink(s)) {
         out.reason = "replay: stream stopped by the cell";
         return out;
@@ -209,40 +230,20 @@ class ReplayBackend final : public Backend {
   }
 
  private:
-  std::vector<std::map<std::string, double>> ReadStream(std::int64_t id) const {
-    const fs::path root(dir_);
-    std::vector<std::map<std::string, double>> rows;
-    if (format_ == "csv") {
-      std::istringstream in(Slurp(root / "streams" / (std::to_string(id) + "_true.csv")));
-      std::string line;
-      if (!std::getline(in, line)) throw std::invalid_argument("empty stream");
-      const auto header = SplitCsv(line);
-      while (std::getline(in, line)) {
-        if (line.empty()) continue;
-        const auto cells = SplitCsv(line);
-        std::map<std::string, double> row;
-        for (size_t k = 0; k < header.size() && k < cells.size(); ++k)
-          row[header[k]] = cells[k].empty() ? NAN : std::stod(cells[k]);
-        rows.push_back(std::move(row));
-      }
-    } else {
-      std::istringstream in(Slurp(root / "streams" / (std::to_string(id) + "_true.jsonl")));
-      std::string line;
-      while (std::getline(in, line)) {
-        if (line.empty()) continue;
-        const json j = json::parse(line);
-        std::map<std::string, double> row;
-        for (auto it = j.begin(); it != j.end(); ++it)
-          row[it.key()] = it->is_number() ? it->get<double>() : NAN;
-        rows.push_back(std::move(row));
-      }
-    }
-    return rows;
+  fs::path StreamFile(std::int64_t id) const {
+    return fs::path(dir_) / "streams" / (std::to_string(id) + "_true." + format_);
+  }
+
+  RecordedStream ReadStream(std::int64_t id) const {
+    if (format_ == "hdf5") return h5_->Read(id);
+    return format_ == "csv" ? ReadCsvStream(StreamFile(id).string())
+                            : ReadJsonlStream(StreamFile(id).string());
   }
 
   std::string dir_;
   std::string format_;
   std::vector<Recorded> trials_;
+  std::unique_ptr<Hdf5Recording> h5_;  // format hdf5: dataset.h5, open while the cell runs
   std::map<std::string, int> served_;
   const Recorded* prepared_ = nullptr;
   BackendCapabilities caps_;

@@ -4,6 +4,7 @@
 // failing in every way the protocol names: malformed output, a crash, a
 // hang, NaN, out-of-order timestamps. After each failure the backend starts
 // the driver afresh and the next trial runs whole.
+#include <hdf5.h>
 #include <unistd.h>
 
 #include <filesystem>
@@ -29,6 +30,66 @@ std::string ShortScene(double grip = 10.0) {
   s["duration"] = 0.1;
   s["grip_force"] = grip;
   return s.dump();
+}
+
+// The fixture's dataset as `arena export --format hdf5` lays it out
+// (db/export.hpp): manifest, scenes.jsonl, dataset.h5 with /trials/ID/true
+// (float64, samples x columns, attribute "columns"). `damage`: "" (whole),
+// "missing" (trial 2's stream gone), "integers" (trial 2's stream of ints),
+// "truncated" (the file cut in half).
+std::string WriteHdf5Dataset(const std::string& from, const std::string& damage) {
+  const std::string dir = from + "/h5-" + (damage.empty() ? "whole" : damage);
+  fs::create_directories(dir);
+  std::ofstream(dir + "/manifest.json") << json({{"export_format", "hdf5"}}).dump();
+  fs::copy_file(from + "/scenes.jsonl", dir + "/scenes.jsonl");
+  const std::string path = dir + "/dataset.h5";
+  const hid_t file = H5Fcreate(path.c_str(), H5F_ACC_TRUNC, H5P_DEFAULT, H5P_DEFAULT);
+  H5Gclose(H5Gcreate2(file, "trials", H5P_DEFAULT, H5P_DEFAULT, H5P_DEFAULT));
+  for (int id : {1, 2}) {
+    std::vector<std::string> columns;
+    std::vector<double> flat;
+    hsize_t rows = 0;
+    std::ifstream in(from + "/streams/" + std::to_string(id) + "_true.jsonl");
+    for (std::string line; std::getline(in, line); ++rows) {
+      const json row = json::parse(line);
+      if (columns.empty())
+        for (auto it = row.begin(); it != row.end(); ++it) columns.push_back(it.key());
+      for (const auto& c : columns) flat.push_back(row[c].get<double>());
+    }
+    const std::string group = "trials/" + std::to_string(id);
+    H5Gclose(H5Gcreate2(file, group.c_str(), H5P_DEFAULT, H5P_DEFAULT, H5P_DEFAULT));
+    if (id == 2 && damage == "missing") continue;
+    const hsize_t dims[2] = {rows, columns.size()};
+    const hid_t space = H5Screate_simple(2, dims, nullptr);
+    const bool ints = id == 2 && damage == "integers";
+    const hid_t ds =
+        H5Dcreate2(file, (group + "/true").c_str(), ints ? H5T_STD_I32LE : H5T_IEEE_F64LE, space,
+                   H5P_DEFAULT, H5P_DEFAULT, H5P_DEFAULT);
+    std::vector<int> as_ints(flat.begin(), flat.end());
+    if (ints)
+      H5Dwrite(ds, H5T_NATIVE_INT, H5S_ALL, H5S_ALL, H5P_DEFAULT, as_ints.data());
+    else
+      H5Dwrite(ds, H5T_NATIVE_DOUBLE, H5S_ALL, H5S_ALL, H5P_DEFAULT, flat.data());
+    size_t width = 1;
+    for (const auto& c : columns) width = std::max(width, c.size() + 1);
+    std::string names(width * columns.size(), '\0');
+    for (size_t k = 0; k < columns.size(); ++k)
+      names.replace(k * width, columns[k].size(), columns[k]);
+    const hid_t type = H5Tcopy(H5T_C_S1);
+    H5Tset_size(type, width);
+    const hsize_t n[1] = {columns.size()};
+    const hid_t aspace = H5Screate_simple(1, n, nullptr);
+    const hid_t attr = H5Acreate2(ds, "columns", type, aspace, H5P_DEFAULT, H5P_DEFAULT);
+    H5Awrite(attr, type, names.data());
+    H5Aclose(attr);
+    H5Sclose(aspace);
+    H5Tclose(type);
+    H5Dclose(ds);
+    H5Sclose(space);
+  }
+  H5Fclose(file);
+  if (damage == "truncated") fs::resize_file(path, fs::file_size(path) / 2);
+  return dir;
 }
 
 // An export-format dataset (jsonl) of the given scenes, the truth from arena's model.
@@ -225,6 +286,44 @@ TEST_F(Dataset, ReplayServesMatchingScenesAndRefusesOthers) {
             std::string::npos);
   EXPECT_EQ(layer.Prepare(mechanics::ParseScene(text), R"({"latency_ms": 4})", trial), "");
   EXPECT_THROW(MakeReplayBackend(dir_ + "/nowhere"), std::invalid_argument);
+}
+
+TEST_F(Dataset, ReplayServesHdf5ExportsAndNamesWhatIsWrongWithThem) {
+  // The same trials through the HDF5 reader: matched as in csv and jsonl,
+  // the same samples, the same refusal.
+  auto jsonl = MakeReplayBackend(dir_);
+  auto hdf5 = MakeReplayBackend(WriteHdf5Dataset(dir_, ""));
+  EXPECT_NE(hdf5->Capabilities().engine.find("hdf5"), std::string::npos);
+  const Run a = RunTrial(*jsonl, ShortScene(12)), b = RunTrial(*hdf5, ShortScene(12));
+  ASSERT_TRUE(b.outcome.ok) << b.outcome.reason << b.rejected;
+  ASSERT_EQ(b.samples.size(), samples_);
+  ASSERT_EQ(a.samples.size(), b.samples.size());
+  for (size_t i = 0; i < a.samples.size(); ++i) {
+    EXPECT_EQ(a.samples[i].t, b.samples[i].t);
+    EXPECT_EQ(a.samples[i].position, b.samples[i].position);
+    EXPECT_EQ(a.samples[i].contacts[2].normal_force, b.samples[i].contacts[2].normal_force);
+  }
+  EXPECT_NE(b.outcome.detail_json.find("\"recorded_trial\":2"), std::string::npos);
+  EXPECT_NE(RunTrial(*hdf5, ShortScene(11)).refused.find("holds no trial with this scene"),
+            std::string::npos);
+
+  // A broken file stops the backend at start, naming the file, the object and the reason.
+  const auto error = [&](const std::string& damage) {
+    try {
+      MakeReplayBackend(WriteHdf5Dataset(dir_, damage));
+    } catch (const std::invalid_argument& e) {
+      return std::string(e.what());
+    }
+    return std::string("(no error)");
+  };
+  const std::string missing = error("missing"), ints = error("integers"), cut = error("truncated");
+  EXPECT_NE(missing.find("h5-missing/dataset.h5: /trials/2/true: missing"), std::string::npos)
+      << missing;
+  EXPECT_NE(ints.find("dataset.h5: /trials/2/true: holds 32-bit integers, expected 64-bit floats"),
+            std::string::npos)
+      << ints;
+  EXPECT_NE(cut.find("h5-truncated/dataset.h5: "), std::string::npos) << cut;
+  EXPECT_NE(cut.find("truncated"), std::string::npos) << cut;
 }
 
 TEST_F(Dataset, ExecDriverServesTrialsAndRefusesUnknownScenes) {

@@ -19,7 +19,10 @@
 //                           streams true samples (own timestamps, strictly
 //                           increasing, starting at 0) into sink; returns ok or
 //                           a failure reason. sink returns false when the cell
-//                           wants it to stop (deadline, shutdown).
+//                           wants it to stop (deadline, shutdown). The cell
+//                           sends each sample on as it arrives (live topic,
+//                           log): a backend that has samples should give
+//                           them at once, not at the end.
 //   Reset(request, trial)   bring the object to the requested start pose; a
 //                           backend without a reset of its own returns nullopt
 //                           and the cell's simulated reset planner does it.
@@ -76,6 +79,11 @@ struct TrialContext {
   std::string_view scene_json;  // the scene as commanded (a driver may want the text)
   // Wall-clock time by which the phase must end (time_point::max() = none).
   std::chrono::steady_clock::time_point deadline = std::chrono::steady_clock::time_point::max();
+  // Set by the cell during Execute (may be empty): a backend whose samples
+  // come over time (a driver, hardware) calls it while it waits for more
+  // (exec: after 50 ms without a line), and the cell sends the samples it
+  // still holds into the log. From the worker thread, like every call.
+  std::function<void()> idle;
 };
 
 // Why a backend's true sample is unusable ("" = fine): NaN or infinite

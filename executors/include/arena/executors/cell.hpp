@@ -6,10 +6,10 @@
 //        |
 //   listener queue --> worker thread: one command at a time
 //        EXECUTE: parse scene -> defect layer + backend Prepare (REFUSED + reason)
-//                 -> ACCEPTED -> perturb (friction, actuation) -> backend Execute
-//                    (true samples, each checked) -> observe (noise, latency,
-//                    drops) -> GroundTruth batches
-//                    paced by speed -> EXECUTED (or FAILED + reason)
+//                 -> ACCEPTED -> perturb (friction, actuation) -> backend Execute:
+//                    each true sample as it arrives -> checked -> observed
+//                    (noise, latency, drops) -> LiveState and GroundTruth
+//                    batches, paced by speed -> EXECUTED (or FAILED + reason)
 //        RESET:   the backend's own reset (a robot), or else: plan from the
 //                 observed end pose to the next scene's start -> simulated
 //                 execution with retries -> RESET_DONE / FAILED

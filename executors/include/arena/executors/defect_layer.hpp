@@ -60,6 +60,9 @@ class DefectLayer {
   mechanics::SimulationResult ExecuteClosedLoop(const mechanics::Scene& scene,
                                                 const TrialContext& trial,
                                                 const mechanics::PusherCommandSource& commands);
+  // The sensors of this trial (after Execute perturbed the scene), sample by
+  // sample as the backend streams them: the same observations as Observe.
+  Observer MakeObserver(const TrialContext& trial) const;
   // What the sensors saw of the truth the backend streamed.
   std::vector<dds::Observation> Observe(const std::vector<mechanics::TrajectorySample>& truth,
                                         const TrialContext& trial) const;

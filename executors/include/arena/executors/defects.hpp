@@ -6,6 +6,7 @@
 #pragma once
 
 #include <cstdint>
+#include <memory>
 #include <stdexcept>
 #include <string>
 #include <string_view>
@@ -98,6 +99,24 @@ std::string CheckCapabilities(const DefectProfile& profile, const mechanics::Sce
 std::vector<dds::Observation> Observe(const std::vector<mechanics::TrajectorySample>& truth,
                                       const mechanics::Scene& scene, const DefectProfile& profile,
                                       std::uint64_t seed, std::uint64_t trial_id);
+
+// The same observations one sample at a time, as a backend streams them
+// (the sensors only ever look back: latency shows an older sample): Next(truth)
+// is the observation of truth.back(), and calling it after each sample gives
+// exactly Observe(truth) (Observe is built on it).
+class Observer {
+ public:
+  Observer(const mechanics::Scene& scene, const DefectProfile& profile, std::uint64_t seed,
+           std::uint64_t trial_id);
+  ~Observer();
+  Observer(Observer&&) noexcept;
+  Observer& operator=(Observer&&) noexcept;
+  dds::Observation Next(const std::vector<mechanics::TrajectorySample>& truth_so_far);
+
+ private:
+  struct State;
+  std::unique_ptr<State> state_;
+};
 
 // The pusher's true pose and twist at a sample (constant actuated twist).
 dds::PusherState PusherAt(const mechanics::Scene& actual_scene,

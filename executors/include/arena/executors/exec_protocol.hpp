@@ -23,6 +23,8 @@
 //                                            (or {"type":"samples","samples":[...]})
 //                                            then {"type":"done","detail":{...}}
 //                                            or {"type":"failed","reason"}
+//     Samples stream live: the cell forwards each line as it arrives (live
+//     topic, log); a failure after some of them still fails the phase.
 //     {"type":"reset","trial_id","attempt","target":{"position","orientation"},
 //      "scene":{SCENE}|null}               (only when hello said "resets": true)
 //                                            {"type":"reset_done","achieved":{"position",
