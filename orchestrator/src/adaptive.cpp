@@ -148,7 +148,8 @@ void DecideBoundary(db::Store& store, const Campaign& c, const Finished& f, int 
   const AdaptiveSpec& a = *c.adaptive;
   const auto names = SampledVariations(c);
   const int dims = static_cast<int>(names.size());
-  const int levels = a.coarse_levels > 0 ? a.coarse_levels : DefaultCoarseLevels(dims);
+  const int levels =
+      a.coarse_levels > 0 ? a.coarse_levels : DefaultCoarseLevels(dims, a.resolution);
   (*state)["refining"] = std::string(ToString(a.outcome)) + " boundary in " + JoinNames(names);
   (*state)["resolution"] = a.resolution;
   auto add = [&](const std::vector<double>& u, const std::string& reason, json basis) {
@@ -530,6 +531,13 @@ std::optional<AdaptiveProgress> ReadAdaptiveProgress(const db::Campaign& campaig
     p.fraction = on / n;
   }
   p.fraction = std::max(p.fraction, trials / max_trials);
+  if (state.contains("known_through_round") && p.round >= 1) {
+    const int known = state["known_through_round"].get<int>();
+    p.progress += "; round " + std::to_string(p.round) + " decided from round" +
+                  (known == 0 ? " 0" : "s 0-" + std::to_string(known));
+    if (state.contains("pending_round") && state["pending_round"].is_number())
+      p.progress += " while round " + std::to_string(state["pending_round"].get<int>()) + " ran";
+  }
   if (!p.open) {
     p.fraction = 1;
     p.progress = "finished: " + state.value("stop_reason", std::string());

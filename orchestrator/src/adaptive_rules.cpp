@@ -57,6 +57,11 @@ double StudentQuantile(double p, int dof) {
 
 int DefaultCoarseLevels(int dims) { return dims <= 1 ? 5 : dims == 2 ? 4 : 3; }
 
+int DefaultCoarseLevels(int dims, double resolution) {
+  const int by_resolution = static_cast<int>(std::ceil(1.0 / (8.0 * resolution) - 1e-9)) + 1;
+  return std::clamp(by_resolution, 3, std::max(3, DefaultCoarseLevels(dims)));
+}
+
 std::vector<std::vector<double>> CoarseGrid(int dims, int levels) {
   if (dims < 1 || levels < 2) throw std::invalid_argument("CoarseGrid: dims >= 1, levels >= 2");
   std::int64_t n = 1;

@@ -79,6 +79,12 @@ struct BoundaryProposal {
 std::vector<std::vector<double>> CoarseGrid(int dims, int levels);
 // Default coarse levels: 5 (1-D), 4 (2-D), 3 (3-D).
 int DefaultCoarseLevels(int dims);
+// The same, but no finer than a spacing of 8 x resolution (at least 3
+// levels): the coarse batch costs levels^dims trials whatever the resolution,
+// and at a coarse resolution it was most of the campaign (16 of 27 trials at
+// 0.125 in 2-D; bench/README.md, "Adaptive boundary sampling").
+// 2-D: 3 levels from resolution 0.0625 up, 4 below.
+int DefaultCoarseLevels(int dims, double resolution);
 
 // The nearest-neighbour margin rule. Candidates: a lattice of spacing
 // resolution / 2. A candidate lies on the current estimate of the boundary
