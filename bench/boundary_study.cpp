@@ -15,9 +15,14 @@
 // figure of merit (target: adaptive <= 25 % of the grid's trials).
 //
 //   boundary_study [CAMPAIGN.json] [--dense D] [--batch B] [--cell-defects FILE]
-//                  [--resolutions 0.125,0.0625] [--threads N]
-// Grids are compared when their points lie on the reference lattice ((D - 1)
-// divisible by (L - 1)); with D = 33 those are 3, 5, 9, 17, 33 per side.
+//                  [--resolutions 0.125,0.0625] [--threads N] [--coarse L] [--max-grid M]
+// Each resolution is run with synchronous rounds and with pipelined ones
+// (round k+1 decided from rounds <= k-1, round k pending: adaptive.hpp).
+// Grids: every L x L from 3 up to M (default 33; points off the reference
+// lattice are simulated too), and beyond M those on the lattice ((D - 1)
+// divisible by (L - 1)). The comparison takes the smallest grid at least
+// as accurate (the grids' distance is not monotone in L: the harshest
+// comparison for the adaptive sampler).
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -116,6 +121,44 @@ std::vector<std::vector<bool>> NearestNeighbourField(
   return cls;
 }
 
+// One adaptive campaign to its stop, with the orchestrator's round policy
+// (adaptive.cpp, DecideRound): round 1 from round 0; pipelined, round r >= 2
+// first from rounds <= r-2 with round r-1 pending (its points asked, not yet
+// evidence), and from rounds <= r-1 only when that adds nothing; the sampler
+// stops when a decision from every round adds nothing.
+struct Adaptive {
+  std::vector<arena::orchestrator::LabelledPoint> samples;
+  int rounds = 0;
+};
+
+Adaptive RunAdaptive(Cell& cell, double res, int batch, int coarse_levels, bool pipelined) {
+  using arena::orchestrator::LabelledPoint;
+  std::vector<std::vector<LabelledPoint>> rounds;  // rounds[r]: its points, labelled
+  std::int64_t id = 0;
+  rounds.emplace_back();
+  for (const auto& u : arena::orchestrator::CoarseGrid(2, coarse_levels))
+    rounds[0].push_back({u, cell.Classify(u), ++id});
+  auto known = [&](int through) {
+    std::vector<LabelledPoint> k;
+    for (int r = 0; r <= through; ++r) k.insert(k.end(), rounds[r].begin(), rounds[r].end());
+    return k;
+  };
+  for (;;) {
+    const int r = static_cast<int>(rounds.size());
+    std::vector<arena::orchestrator::BoundaryProposal> p;
+    if (pipelined && r >= 2) {
+      std::vector<Point> pending;
+      for (const auto& q : rounds[r - 1]) pending.push_back(q.u);
+      p = arena::orchestrator::ProposeBoundaryPoints(known(r - 2), pending, 2, res, batch);
+    }
+    if (p.empty()) p = arena::orchestrator::ProposeBoundaryPoints(known(r - 1), {}, 2, res, batch);
+    if (p.empty()) break;
+    rounds.emplace_back();
+    for (const auto& q : p) rounds.back().push_back({q.u, cell.Classify(q.u), ++id});
+  }
+  return {known(static_cast<int>(rounds.size()) - 1), static_cast<int>(rounds.size()) - 1};
+}
+
 std::string ReadFile(const std::string& path) {
   std::ifstream in(path);
   std::stringstream s;
@@ -129,7 +172,8 @@ int main(int argc, char** argv) {
   std::string campaign_path =
       std::string(ARENA_SOURCE_DIR) + "/examples/campaigns/closed_loop.json";
   std::string defects_path = std::string(ARENA_SOURCE_DIR) + "/examples/defects/friction_high.json";
-  int dense = 33, batch = 4, threads = 2;
+  int dense = 33, batch = 4, threads = 2, coarse_levels = 0, max_grid = 33;
+  bool map = false;
   std::vector<double> resolutions = {0.125, 0.0625};
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
@@ -137,6 +181,12 @@ int main(int argc, char** argv) {
       dense = std::stoi(argv[++i]);
     } else if (a == "--threads" && i + 1 < argc) {
       threads = std::max(1, std::stoi(argv[++i]));
+    } else if (a == "--map") {
+      map = true;
+    } else if (a == "--max-grid" && i + 1 < argc) {
+      max_grid = std::stoi(argv[++i]);
+    } else if (a == "--coarse" && i + 1 < argc) {
+      coarse_levels = std::stoi(argv[++i]);
     } else if (a == "--batch" && i + 1 < argc) {
       batch = std::stoi(argv[++i]);
     } else if (a == "--cell-defects" && i + 1 < argc) {
@@ -155,6 +205,8 @@ int main(int argc, char** argv) {
     std::fprintf(stderr, "boundary_study: needs a 2-D boundary campaign\n");
     return 2;
   }
+  // 0: per resolution, as the orchestrator chooses (DefaultCoarseLevels).
+  if (coarse_levels < 2) coarse_levels = campaign.adaptive->coarse_levels;
   Cell cell{campaign, arena::executors::ParseDefectProfile(ReadFile(defects_path)), {}, 0};
   const auto start = std::chrono::steady_clock::now();
 
@@ -162,24 +214,32 @@ int main(int argc, char** argv) {
   // go into the cell's cache: every grid and adaptive point below lies on
   // this lattice when dense - 1 is a power of two and the resolutions are
   // 2 / (dense - 1) times powers of two).
-  std::vector<std::vector<bool>> ref(dense, std::vector<bool>(dense));
-  {
-    std::vector<Point> all;
-    for (int i = 0; i < dense; ++i)
-      for (int j = 0; j < dense; ++j)
-        all.push_back({static_cast<double>(i) / (dense - 1), static_cast<double>(j) / (dense - 1)});
+  // Simulates the points not yet known on `threads` threads (results into
+  // the cell's cache).
+  auto prefetch = [&](const std::vector<Point>& points) {
+    std::vector<Point> todo;
+    for (const auto& u : points)
+      if (!cell.cache.count(u)) todo.push_back(u);
     std::vector<Cell> workers(static_cast<size_t>(threads), Cell{campaign, cell.defects, {}, 0});
     std::vector<std::thread> pool;
     for (int t = 0; t < threads; ++t)
       pool.emplace_back([&, t] {
-        for (size_t k = static_cast<size_t>(t); k < all.size(); k += static_cast<size_t>(threads))
-          workers[static_cast<size_t>(t)].Classify(all[k]);
+        for (size_t k = static_cast<size_t>(t); k < todo.size(); k += static_cast<size_t>(threads))
+          workers[static_cast<size_t>(t)].Classify(todo[k]);
       });
     for (auto& th : pool) th.join();
     for (auto& w : workers) {
       cell.cache.insert(w.cache.begin(), w.cache.end());
       cell.simulations += w.simulations;
     }
+  };
+  std::vector<std::vector<bool>> ref(dense, std::vector<bool>(dense));
+  {
+    std::vector<Point> all;
+    for (int i = 0; i < dense; ++i)
+      for (int j = 0; j < dense; ++j)
+        all.push_back({static_cast<double>(i) / (dense - 1), static_cast<double>(j) / (dense - 1)});
+    prefetch(all);
   }
   for (int i = 0; i < dense; ++i)
     for (int j = 0; j < dense; ++j)
@@ -195,10 +255,32 @@ int main(int argc, char** argv) {
               arena::orchestrator::ClassName(campaign.adaptive->outcome, true), ref_boundary.size(),
               std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count());
 
-  // Grids L x L.
+  if (map) {  // the reference field, first dimension across, '#' = positive
+    for (int j = dense - 1; j >= 0; --j) {
+      for (int i = 0; i < dense; ++i) std::putchar(ref[i][j] ? '#' : '.');
+      std::putchar('\n');
+    }
+  }
+  // Grids L x L: every L up to max_grid (points off the reference lattice
+  // are simulated too), and the lattice's own divisors beyond.
+  auto grid_points = [](int l) {
+    std::vector<Point> g;
+    for (int i = 0; i < l; ++i)
+      for (int j = 0; j < l; ++j)
+        g.push_back({static_cast<double>(i) / (l - 1), static_cast<double>(j) / (l - 1)});
+    return g;
+  };
+  std::vector<int> sides;
+  for (int l = 3; l <= dense; ++l)
+    if (l <= max_grid || (dense - 1) % (l - 1) == 0) sides.push_back(l);
+  {
+    std::vector<Point> all;
+    for (int l : sides)
+      for (const auto& u : grid_points(l)) all.push_back(u);
+    prefetch(all);
+  }
   std::vector<std::pair<int, double>> grids;
-  for (int l = 3; l <= dense; ++l) {
-    if ((dense - 1) % (l - 1) != 0) continue;  // only grids on the reference lattice
+  for (int l : sides) {
     std::vector<arena::orchestrator::LabelledPoint> samples;
     for (int i = 0; i < l; ++i)
       for (int j = 0; j < l; ++j) {
@@ -211,40 +293,41 @@ int main(int argc, char** argv) {
 
   std::printf("\n| grid | trials | Hausdorff |\n|---|---|---|\n");
   for (const auto& [l, gh] : grids) std::printf("| %d x %d | %d | %.4f |\n", l, l, l * l, gh);
+  // The grids' Hausdorff distance is not monotone in L (a boundary point
+  // can fall between samples of a finer grid); "as accurate" below is the
+  // smallest grid at least as accurate.
   std::printf(
-      "\n| resolution | adaptive trials | rounds | Hausdorff | smallest grid as accurate | grid "
-      "trials | ratio |\n");
-  std::printf("|---|---|---|---|---|---|---|\n");
+      "\n| resolution | rounds policy | adaptive trials | rounds | Hausdorff | smallest grid as "
+      "accurate "
+      "| grid trials | ratio |\n");
+  std::printf("|---|---|---|---|---|---|---|---|\n");
   for (double res : resolutions) {
-    std::vector<arena::orchestrator::LabelledPoint> samples;
-    std::int64_t id = 0;
-    for (const auto& u :
-         arena::orchestrator::CoarseGrid(2, arena::orchestrator::DefaultCoarseLevels(2)))
-      samples.push_back({u, cell.Classify(u), ++id});
-    int rounds = 0;
-    for (;;) {
-      const auto p = arena::orchestrator::ProposeBoundaryPoints(samples, {}, 2, res, batch);
-      if (p.empty()) break;
-      ++rounds;
-      for (const auto& q : p) samples.push_back({q.u, cell.Classify(q.u), ++id});
-    }
-    const double h = Hausdorff(ref_boundary, BoundaryOf(NearestNeighbourField(samples, dense)));
-    int grid_l = -1;
-    double grid_h = 0;
-    for (const auto& [l, gh] : grids) {
-      if (gh <= h + 1e-12) {
-        grid_l = l;
-        grid_h = gh;
-        break;
+    for (const bool pipelined : {false, true}) {
+      const int levels =
+          coarse_levels >= 2 ? coarse_levels : arena::orchestrator::DefaultCoarseLevels(2, res);
+      const Adaptive run = RunAdaptive(cell, res, batch, levels, pipelined);
+      const auto& samples = run.samples;
+      const double h = Hausdorff(ref_boundary, BoundaryOf(NearestNeighbourField(samples, dense)));
+      int grid_l = -1;
+      double grid_h = 0;
+      for (const auto& [l, gh] : grids) {
+        if (gh <= h + 1e-12) {
+          grid_l = l;
+          grid_h = gh;
+          break;
+        }
       }
-    }
-    if (grid_l < 0) {
-      std::printf("| %.3f | %zu | %d | %.4f | none up to %d x %d | - | - |\n", res, samples.size(),
-                  rounds, h, dense, dense);
-    } else {
-      std::printf("| %.3f | %zu | %d | %.4f | %d x %d (Hausdorff %.4f) | %d | %.0f %% |\n", res,
-                  samples.size(), rounds, h, grid_l, grid_l, grid_h, grid_l * grid_l,
-                  100.0 * static_cast<double>(samples.size()) / (grid_l * grid_l));
+      const std::string mode =
+          std::string(pipelined ? "pipelined" : "sync") + ", coarse " + std::to_string(levels);
+      if (grid_l < 0) {
+        std::printf("| %.3f | %s | %zu | %d | %.4f | none up to %d x %d | - | - |\n", res,
+                    mode.c_str(), samples.size(), run.rounds, h, dense, dense);
+      } else {
+        std::printf("| %.3f | %s | %zu | %d | %.4f | %d x %d (Hausdorff %.4f) | %d | %.0f %% |\n",
+                    res, mode.c_str(), samples.size(), run.rounds, h, grid_l, grid_l, grid_h,
+                    grid_l * grid_l,
+                    100.0 * static_cast<double>(samples.size()) / (grid_l * grid_l));
+      }
     }
   }
   std::printf("\n%d distinct cell simulations, %.1f s\n", cell.simulations,

@@ -1,6 +1,7 @@
 // Adaptive samplers' rounds and decisions, and calibrations (migration 7;
 // db/README.md, "sampler_decisions", "calibrations").
 #include <cmath>
+#include <limits>
 #include <string>
 #include <vector>
 
@@ -127,12 +128,18 @@ bool Store::PlanAdaptiveRound(std::int64_t campaign_id, const std::string& expec
   if (c.state != CampaignState::kActive || !c.sampler_open ||
       c.sampler_state_json != expected_state_json)
     return false;
+  // The trials of the rounds the decision was based on (a trial without a
+  // decision counts as round 0).
   auto busy = impl_->Prepare(
-      "SELECT 1 FROM trials WHERE campaign_id = ? AND state NOT IN ('done','failed','cancelled')"
-      " LIMIT 1");
-  busy->Bind(1, campaign_id);
+      "SELECT 1 FROM trials t LEFT JOIN sampler_decisions d ON d.trial_id = t.id"
+      " WHERE t.campaign_id = ? AND t.state NOT IN ('done','failed','cancelled')"
+      " AND IFNULL(d.round, 0) <= ? LIMIT 1");
+  busy->Bind(1, campaign_id)
+      .Bind(2, static_cast<std::int64_t>(
+                   round.known_through_round.value_or(std::numeric_limits<int>::max())));
   if (busy->Step()) return false;
   WriteRound(*impl_, campaign_id, round, kFn);
+  internal::RegisterParameters(*impl_, campaign_id);  // a later round may bring a new name
   tx.Commit();
   return true;
 }

@@ -45,24 +45,79 @@ db::PlannedTrial ToStoreTrial(const Campaign& c, const PlannedTrial& t) {
   return p;
 }
 
-// Everything a decision needs from the store, in trial order.
-struct Finished {
-  std::vector<db::Trial> trials;
-  std::map<std::int64_t, json> basis;               // trial id -> its decision's basis
-  std::map<std::int64_t, db::TrialOutcome> stored;  // outcomes the ingest stored (issue 15)
-  bool busy = false;                                // some trial is planned or running
+// What a decision is based on: the outcomes of rounds 0 .. known_through
+// (every trial of them finished) and, pipelined, the points of round
+// `pending` (planned, outcome unknown: used as if asked, never as evidence).
+struct Basis {
+  int known_through = -1;
+  int pending = -1;  // -1: none
 };
 
-Finished ReadFinished(db::Store& store, std::int64_t campaign_id) {
+// Everything a decision needs from the store, in trial order.
+struct Finished {
+  std::vector<db::Trial> trials;                    // all of the campaign's
+  std::map<std::int64_t, json> basis;               // trial id -> its decision's basis
+  std::map<std::int64_t, int> round_of;             // trial id -> the round that planned it
+  std::map<std::int64_t, db::TrialOutcome> stored;  // outcomes the ingest stored (issue 15)
+  Basis on;
+
+  int RoundOf(const db::Trial& t) const {
+    const auto it = round_of.find(t.id);
+    return it == round_of.end() ? 0 : it->second;
+  }
+  bool Known(const db::Trial& t) const { return RoundOf(t) <= on.known_through; }
+  bool Pending(const db::Trial& t) const { return on.pending >= 0 && RoundOf(t) == on.pending; }
+  // Every trial of rounds <= known_through is finished.
+  bool KnownFinished(int known_through) const {
+    for (const auto& t : trials)
+      if (RoundOf(t) <= known_through && !db::IsTerminal(t.state)) return false;
+    return true;
+  }
+  std::vector<std::int64_t> PendingIds() const {
+    std::vector<std::int64_t> ids;
+    for (const auto& t : trials)
+      if (Pending(t)) ids.push_back(t.id);
+    return ids;
+  }
+};
+
+// The campaign's trials and decisions; outcomes are read once a basis is
+// known to be finished (DecideRound).
+Finished ReadTrials(db::Store& store, std::int64_t campaign_id) {
   Finished f;
   f.trials = store.ListTrials(campaign_id);
-  for (const auto& t : f.trials)
-    if (!db::IsTerminal(t.state)) f.busy = true;
   for (const auto& d : store.ListDecisions(campaign_id)) {
-    if (d.trial_id) f.basis[*d.trial_id] = json::parse(d.basis_json);
+    if (!d.trial_id) continue;
+    f.basis[*d.trial_id] = json::parse(d.basis_json);
+    f.round_of[*d.trial_id] = d.round;
   }
-  if (!f.busy) f.stored = store.ReadTrialOutcomes(campaign_id);
   return f;
+}
+
+// The basis in words, appended to every reason ("from rounds 0-3; round 4's
+// 2 trials pending").
+std::string BasisText(const Finished& f) {
+  std::string text = f.on.known_through <= 0
+                         ? "from round 0"
+                         : "from rounds 0-" + std::to_string(f.on.known_through);
+  if (f.on.pending >= 0) {
+    const std::size_t n = f.PendingIds().size();
+    text += "; round " + std::to_string(f.on.pending) + "'s " + std::to_string(n) +
+            (n == 1 ? " trial" : " trials") + " pending";
+  }
+  return text;
+}
+
+// The basis as JSON, stored with every decision and in the sampler state.
+json BasisJson(const Finished& f) {
+  json b{{"known_through_round", f.on.known_through}};
+  if (f.on.pending >= 0) {
+    b["pending_round"] = f.on.pending;
+    b["pending_trials"] = f.PendingIds();
+  } else {
+    b["pending_round"] = nullptr;
+  }
+  return b;
 }
 
 TrialOutcome OutcomeOf(db::Store& store, const db::Trial& t) {
@@ -93,7 +148,8 @@ void DecideBoundary(db::Store& store, const Campaign& c, const Finished& f, int 
   const AdaptiveSpec& a = *c.adaptive;
   const auto names = SampledVariations(c);
   const int dims = static_cast<int>(names.size());
-  const int levels = a.coarse_levels > 0 ? a.coarse_levels : DefaultCoarseLevels(dims);
+  const int levels =
+      a.coarse_levels > 0 ? a.coarse_levels : DefaultCoarseLevels(dims, a.resolution);
   (*state)["refining"] = std::string(ToString(a.outcome)) + " boundary in " + JoinNames(names);
   (*state)["resolution"] = a.resolution;
   auto add = [&](const std::vector<double>& u, const std::string& reason, json basis) {
@@ -120,10 +176,17 @@ void DecideBoundary(db::Store& store, const Campaign& c, const Finished& f, int 
   std::vector<std::vector<double>> excluded;
   json seen = json::array();
   int positives = 0;
+  int pending = 0;
   for (const auto& t : f.trials) {
     const auto it = f.basis.find(t.id);
     if (it == f.basis.end() || !it->second.contains("u")) continue;
     const auto u = it->second["u"].get<std::vector<double>>();
+    if (f.Pending(t)) {
+      excluded.push_back(u);  // asked already: neither asked again nor evidence yet
+      ++pending;
+      continue;
+    }
+    if (!f.Known(t)) continue;
     if (t.state != db::TrialState::kDone) {
       excluded.push_back(u);  // failed or cancelled: do not ask again
       continue;
@@ -135,6 +198,7 @@ void DecideBoundary(db::Store& store, const Campaign& c, const Finished& f, int 
   }
   (*state)["labelled"] = labelled.size();
   (*state)["positives"] = positives;
+  (*state)["pending"] = pending;
   const int room = a.max_trials - static_cast<int>(f.trials.size());
   double uncertainty = 0;
   const auto proposals = ProposeBoundaryPoints(labelled, excluded, dims, a.resolution,
@@ -143,19 +207,21 @@ void DecideBoundary(db::Store& store, const Campaign& c, const Finished& f, int 
   std::map<std::int64_t, bool> class_of;
   for (const auto& p : labelled) class_of[p.trial_id] = p.positive;
   for (const auto& p : proposals) {
-    const std::string reason =
-        "on the estimated boundary between trial " + std::to_string(p.near_positive) + " (" +
-        ClassName(a.outcome, true) + ") and trial " + std::to_string(p.near_negative) + " (" +
-        ClassName(a.outcome, false) + "), " + Fixed(p.uncertainty) +
-        " from the nearest evidence (" + "resolution " + Fixed(a.resolution) + ")";
-    add(p.u, reason,
-        json{{"rule", "nn_margin"},
-             {"uncertainty", p.uncertainty},
-             {"nearest",
-              {{ClassName(a.outcome, true), p.near_positive},
-               {ClassName(a.outcome, false), p.near_negative}}},
-             {"seen", labelled.size()},
-             {"positives", positives}});
+    const std::string reason = "on the estimated boundary between trial " +
+                               std::to_string(p.near_positive) + " (" + ClassName(a.outcome, true) +
+                               ") and trial " + std::to_string(p.near_negative) + " (" +
+                               ClassName(a.outcome, false) + "), " + Fixed(p.uncertainty) +
+                               " from the nearest evidence (" + "resolution " +
+                               Fixed(a.resolution) + "; " + BasisText(f) + ")";
+    json basis{{"rule", "nn_margin"},
+               {"uncertainty", p.uncertainty},
+               {"nearest",
+                {{ClassName(a.outcome, true), p.near_positive},
+                 {ClassName(a.outcome, false), p.near_negative}}},
+               {"seen", labelled.size()},
+               {"positives", positives}};
+    basis.update(BasisJson(f));
+    add(p.u, reason, basis);
   }
   if (!proposals.empty()) return;
   out->open = false;
@@ -208,7 +274,8 @@ void DecideReplicates(db::Store& store, const Campaign& c, const Finished& f, in
   for (const auto& t : f.trials) {
     auto& co = conditions.at(static_cast<size_t>(t.condition));
     ++co.planned;
-    if (t.state != db::TrialState::kDone) continue;
+    if (f.Pending(t)) ++co.pending;
+    if (!f.Known(t) || t.state != db::TrialState::kDone) continue;
     const TrialOutcome o = OutcomeOf(store, t);
     co.final_position.push_back(o.final_position);
     co.final_angle.push_back(o.rotation);
@@ -233,12 +300,20 @@ void DecideReplicates(db::Store& store, const Campaign& c, const Finished& f, in
         "condition " + std::to_string(p.condition) + ": " + Fixed(a.confidence * 100, 0) +
         " % CI of the mean final position +-" + Fixed(p.ci_position * 1e3, 3) + " mm (target " +
         Fixed(a.ci_position * 1e3, 3) + " mm) after " + std::to_string(co.final_position.size()) +
-        " replicates";
-    add(p.condition, co.planned, reason,
-        json{{"rule", "ci_above_target"},
-             {"ci_position_m", std::isfinite(p.ci_position) ? json(p.ci_position) : json()},
-             {"ci_angle_rad", std::isfinite(p.ci_angle) ? json(p.ci_angle) : json()},
-             {"replicates_done", co.final_position.size()}});
+        " replicates" +
+        (co.pending > 0 ? ", +-" + Fixed(p.ci_position_expected * 1e3, 3) + " mm expected with " +
+                              std::to_string(co.pending) + " pending"
+                        : std::string()) +
+        " (" + BasisText(f) + ")";
+    auto finite = [](double v) { return std::isfinite(v) ? json(v) : json(); };
+    json basis{{"rule", "ci_above_target"},
+               {"ci_position_m", finite(p.ci_position)},
+               {"ci_angle_rad", finite(p.ci_angle)},
+               {"ci_position_expected_m", finite(p.ci_position_expected)},
+               {"replicates_done", co.final_position.size()},
+               {"replicates_pending", co.pending}};
+    basis.update(BasisJson(f));
+    add(p.condition, co.planned, reason, basis);
   }
   if (!proposals.empty()) return;
   out->open = false;
@@ -250,38 +325,71 @@ void DecideReplicates(db::Store& store, const Campaign& c, const Finished& f, in
 
 // The next round of an adaptive campaign, decided from the stored state
 // only; nothing written. nullopt: nothing to decide now (not adaptive, not
-// open, a round still running, no cell to size the batch by).
+// open, the rounds it must be based on still running, no cell to size the
+// batch by).
+//
+// Round r >= 2 of a pipelined campaign is first decided from rounds <= r-2
+// with round r-1 pending, as soon as rounds <= r-2 are finished (so it is
+// queued while round r-1 runs); only when that finds nothing to add is it
+// decided from rounds <= r-1, once those are finished (and only then may the
+// sampler stop). Round 1, and every round of a campaign with
+// "pipeline": false, is decided from all the rounds before it. Each attempt
+// is a pure function of stored state that does not depend on timing: the
+// outcomes of finished rounds and the points of the pending one.
 std::optional<db::AdaptiveRound> DecideRound(db::Store& store, std::int64_t campaign_id,
                                              const Campaign& c, int idle_cells,
                                              std::string* expected_state) {
   if (!c.adaptive) return std::nullopt;
   const db::Campaign stored = store.GetCampaign(campaign_id);
   if (!stored.sampler_open || stored.state != db::CampaignState::kActive) return std::nullopt;
-  const Finished f = ReadFinished(store, campaign_id);
-  if (f.busy) return std::nullopt;  // the round is not finished yet
-  json state = json::parse(stored.sampler_state_json);
-  const int round = state.contains("round") ? state["round"].get<int>() + 1 : 0;
-  int batch = state.value("batch", 0);
-  if (round >= 1 && batch == 0) {
-    batch = c.adaptive->batch > 0 ? c.adaptive->batch : idle_cells;
-    if (batch <= 0) return std::nullopt;  // no cell to size the batch by yet
+  Finished f = ReadTrials(store, campaign_id);
+  const json before = json::parse(stored.sampler_state_json);
+  const int round = before.contains("round") ? before["round"].get<int>() + 1 : 0;
+  int batch = before.value("batch", 0);
+  std::vector<Basis> bases;
+  if (round == 0) {
+    bases.push_back({-1, -1});
+  } else {
+    if (c.adaptive->pipeline && round >= 2) bases.push_back({round - 2, round - 1});
+    bases.push_back({round - 1, -1});
   }
-  db::AdaptiveRound out;
-  out.round = round;
-  state["sampler"] = ToString(c.adaptive->kind);
-  state["round"] = round;
-  state["batch"] = batch;
-  if (c.adaptive->kind == AdaptiveKind::kBoundary)
-    DecideBoundary(store, c, f, round, batch, &out, &state);
-  else
-    DecideReplicates(store, c, f, round, batch, &out, &state);
-  state["trials"] = f.trials.size() + out.trials.size();
-  state["max_trials"] = c.adaptive->max_trials;
-  state["open"] = out.open;
-  if (!out.open) state["stop_reason"] = out.stop_reason;
-  out.sampler_state_json = state.dump();
-  *expected_state = stored.sampler_state_json;
-  return out;
+  bool outcomes_read = false;
+  for (size_t i = 0; i < bases.size(); ++i) {
+    if (!f.KnownFinished(bases[i].known_through)) return std::nullopt;  // wait for them
+    if (round >= 1 && batch == 0) {
+      batch = c.adaptive->batch > 0 ? c.adaptive->batch : idle_cells;
+      if (batch <= 0) return std::nullopt;  // no cell to size the batch by yet
+    }
+    if (round >= 1 && !outcomes_read) {
+      f.stored = store.ReadTrialOutcomes(campaign_id);
+      outcomes_read = true;
+    }
+    f.on = bases[i];
+    db::AdaptiveRound out;
+    out.round = round;
+    out.known_through_round = f.on.known_through;
+    json state = before;
+    state["sampler"] = ToString(c.adaptive->kind);
+    state["round"] = round;
+    state["batch"] = batch;
+    state["pipeline"] = c.adaptive->pipeline;
+    state.update(BasisJson(f));
+    if (c.adaptive->kind == AdaptiveKind::kBoundary)
+      DecideBoundary(store, c, f, round, batch, &out, &state);
+    else
+      DecideReplicates(store, c, f, round, batch, &out, &state);
+    // A pipelined attempt that adds nothing does not stop the sampler: the
+    // pending round's outcomes may still show more to do.
+    if (out.trials.empty() && i + 1 < bases.size()) continue;
+    state["trials"] = f.trials.size() + out.trials.size();
+    state["max_trials"] = c.adaptive->max_trials;
+    state["open"] = out.open;
+    if (!out.open) state["stop_reason"] = out.stop_reason;
+    out.sampler_state_json = state.dump();
+    *expected_state = stored.sampler_state_json;
+    return out;
+  }
+  return std::nullopt;
 }
 
 void LogRound(std::int64_t campaign_id, const db::AdaptiveRound& out) {
@@ -298,14 +406,21 @@ void LogRound(std::int64_t campaign_id, const db::AdaptiveRound& out) {
 
 std::int64_t AdvanceCampaign(db::Store& store, std::int64_t campaign_id, const Campaign& c,
                              int idle_cells) {
-  std::string expected;
-  const auto out = DecideRound(store, campaign_id, c, idle_cells, &expected);
-  if (!out || !store.PlanAdaptiveRound(campaign_id, expected, *out)) return 0;
-  // A closed sampler whose trials are all finished: the campaign is done now
-  // (a service without exit_when_done completes campaigns nowhere else).
-  if (!out->open && out->trials.empty()) store.CompleteFinishedCampaigns();
-  LogRound(campaign_id, *out);
-  return static_cast<std::int64_t>(out->trials.size());
+  std::int64_t planned = 0;
+  // Up to two rounds at once: when round 0 finishes, round 1 (from it) and,
+  // pipelined, round 2 (from it, round 1 pending) are both decided.
+  for (int i = 0; i < 2; ++i) {
+    std::string expected;
+    const auto out = DecideRound(store, campaign_id, c, idle_cells, &expected);
+    if (!out || !store.PlanAdaptiveRound(campaign_id, expected, *out)) break;
+    // A closed sampler whose trials are all finished: the campaign is done now
+    // (a service without exit_when_done completes campaigns nowhere else).
+    if (!out->open && out->trials.empty()) store.CompleteFinishedCampaigns();
+    LogRound(campaign_id, *out);
+    planned += static_cast<std::int64_t>(out->trials.size());
+    if (!out->open) break;
+  }
+  return planned;
 }
 
 std::int64_t CreateAdaptiveCampaign(db::Store& store, const db::NewCampaign& row,
@@ -335,16 +450,18 @@ struct AdaptivePlanner::Impl {
   db::Store& store;
   std::chrono::milliseconds period;
   std::chrono::steady_clock::time_point next{};
+  std::int64_t finished = -1;                                 // at the last pass
   std::map<std::int64_t, std::optional<Campaign>> campaigns;  // nullopt: not adaptive
 };
 
 AdaptivePlanner::AdaptivePlanner(db::Store& store, std::chrono::milliseconds period)
-    : impl_(std::make_unique<Impl>(Impl{store, period, {}, {}})) {}
+    : impl_(std::make_unique<Impl>(Impl{store, period, {}, -1, {}})) {}
 AdaptivePlanner::~AdaptivePlanner() = default;
 
-std::int64_t AdaptivePlanner::Advance(int idle_cells) {
+std::int64_t AdaptivePlanner::Advance(int idle_cells, std::int64_t finished) {
   const auto now = std::chrono::steady_clock::now();
-  if (now < impl_->next) return 0;
+  if (now < impl_->next && finished == impl_->finished) return 0;
+  impl_->finished = finished;
   impl_->next = now + impl_->period;
   std::int64_t planned = 0;
   for (const auto& stored : impl_->store.ListCampaigns()) {
@@ -414,6 +531,13 @@ std::optional<AdaptiveProgress> ReadAdaptiveProgress(const db::Campaign& campaig
     p.fraction = on / n;
   }
   p.fraction = std::max(p.fraction, trials / max_trials);
+  if (state.contains("known_through_round") && p.round >= 1) {
+    const int known = state["known_through_round"].get<int>();
+    p.progress += "; round " + std::to_string(p.round) + " decided from round" +
+                  (known == 0 ? " 0" : "s 0-" + std::to_string(known));
+    if (state.contains("pending_round") && state["pending_round"].is_number())
+      p.progress += " while round " + std::to_string(state["pending_round"].get<int>()) + " ran";
+  }
   if (!p.open) {
     p.fraction = 1;
     p.progress = "finished: " + state.value("stop_reason", std::string());

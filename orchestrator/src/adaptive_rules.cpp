@@ -57,6 +57,11 @@ double StudentQuantile(double p, int dof) {
 
 int DefaultCoarseLevels(int dims) { return dims <= 1 ? 5 : dims == 2 ? 4 : 3; }
 
+int DefaultCoarseLevels(int dims, double resolution) {
+  const int by_resolution = static_cast<int>(std::ceil(1.0 / (8.0 * resolution) - 1e-9)) + 1;
+  return std::clamp(by_resolution, 3, std::max(3, DefaultCoarseLevels(dims)));
+}
+
 std::vector<std::vector<double>> CoarseGrid(int dims, int levels) {
   if (dims < 1 || levels < 2) throw std::invalid_argument("CoarseGrid: dims >= 1, levels >= 2");
   std::int64_t n = 1;
@@ -154,23 +159,28 @@ std::vector<BoundaryProposal> ProposeBoundaryPoints(
   return out;
 }
 
-double ConfidenceHalfWidth(const std::vector<double>& values, double confidence) {
+double ExpectedHalfWidth(const std::vector<double>& values, double confidence, int extra) {
   const size_t n = values.size();
   if (n < 2) return std::numeric_limits<double>::infinity();
   const double mean = std::accumulate(values.begin(), values.end(), 0.0) / static_cast<double>(n);
   double ss = 0;
   for (double v : values) ss += (v - mean) * (v - mean);
   const double sd = std::sqrt(ss / static_cast<double>(n - 1));
-  const double t = StudentQuantile(0.5 + confidence / 2, static_cast<int>(n - 1));
-  return t * sd / std::sqrt(static_cast<double>(n));
+  const size_t m = n + static_cast<size_t>(std::max(extra, 0));
+  const double t = StudentQuantile(0.5 + confidence / 2, static_cast<int>(m - 1));
+  return t * sd / std::sqrt(static_cast<double>(m));
 }
 
-double PositionHalfWidth(const ConditionOutcomes& c, double confidence) {
+double ConfidenceHalfWidth(const std::vector<double>& values, double confidence) {
+  return ExpectedHalfWidth(values, confidence, 0);
+}
+
+double PositionHalfWidth(const ConditionOutcomes& c, double confidence, int extra) {
   double worst = 0;
   for (size_t k = 0; k < 3; ++k) {
     std::vector<double> v;
     for (const auto& p : c.final_position) v.push_back(p[k]);
-    worst = std::max(worst, ConfidenceHalfWidth(v, confidence));
+    worst = std::max(worst, ExpectedHalfWidth(v, confidence, extra));
   }
   return worst;
 }
@@ -186,10 +196,16 @@ std::vector<ReplicateProposal> ProposeReplicates(const std::vector<ConditionOutc
     if (c.planned >= spec.max_replicates) continue;
     const double pos = PositionHalfWidth(c, spec.confidence);
     const double ang = ConfidenceHalfWidth(c.final_angle, spec.confidence);
-    double ratio = pos / spec.ci_position;
-    if (spec.ci_angle > 0) ratio = std::max(ratio, ang / spec.ci_angle);
+    // Judged by what the pending replicates are expected to leave (the same
+    // spread, more of them): a pipelined round does not pile replicates on
+    // a condition that its running ones will probably bring on target.
+    const double pos_expected = PositionHalfWidth(c, spec.confidence, c.pending);
+    double ratio = pos_expected / spec.ci_position;
+    if (spec.ci_angle > 0)
+      ratio = std::max(
+          ratio, ExpectedHalfWidth(c.final_angle, spec.confidence, c.pending) / spec.ci_angle);
     if (!(ratio > 1)) continue;  // on target (NaN cannot happen: outcomes are finite)
-    needs.push_back({{c.condition, pos, ang}, ratio});
+    needs.push_back({{c.condition, pos, ang, pos_expected}, ratio});
   }
   // Widest first; ties by condition index (deterministic).
   std::stable_sort(needs.begin(), needs.end(),

@@ -541,10 +541,15 @@ AdaptiveSpec ReadAdaptive(const json& v, SamplerKind* base) {
       *out = static_cast<int>(Integer(v[key], std::string("sampler.") + key, lo, hi));
   };
   integer("batch", 1, 1000, &a.batch);
+  if (v.contains("pipeline")) {
+    if (!v["pipeline"].is_boolean())
+      throw CampaignError("sampler.pipeline", "must be true or false");
+    a.pipeline = v["pipeline"].get<bool>();
+  }
   if (kind == "boundary") {
-    RequireObject(
-        v, "sampler",
-        {"adaptive", "outcome", "threshold", "resolution", "coarse_levels", "batch", "max_trials"});
+    RequireObject(v, "sampler",
+                  {"adaptive", "outcome", "threshold", "resolution", "coarse_levels", "batch",
+                   "max_trials", "pipeline"});
     a.kind = AdaptiveKind::kBoundary;
     if (!v.contains("outcome"))
       throw CampaignError("sampler.outcome", "is required (pivoted, finger_slip or grasp_kept)");
@@ -564,7 +569,7 @@ AdaptiveSpec ReadAdaptive(const json& v, SamplerKind* base) {
   if (kind == "replicates") {
     RequireObject(v, "sampler",
                   {"adaptive", "base", "min_replicates", "max_replicates", "ci_position",
-                   "ci_angle", "confidence", "batch", "max_trials"});
+                   "ci_angle", "confidence", "batch", "max_trials", "pipeline"});
     a.kind = AdaptiveKind::kReplicates;
     *base = SamplerKind::kSobol;
     if (v.contains("base")) {

@@ -446,7 +446,10 @@ struct Service::Impl {
       for (auto& st : statuses.TakeAll()) driver->OnStatus(st);
       while (auto e = participant.NextPeerEvent(std::chrono::milliseconds(0))) OnPeerEvent(*e);
       for (auto& p : predictor.TakeResults()) driver->OnPrediction(std::move(p));
-      if (!stop_requested) adaptive->Advance(driver->IdleCells());
+      if (!stop_requested) {
+        const ServiceCounters c = driver->counters();
+        adaptive->Advance(driver->IdleCells(), c.done + c.failed);
+      }
       driver->Tick(stop_requested || drain_deadline.has_value());
 
       const auto now = Clock::now();

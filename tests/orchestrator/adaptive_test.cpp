@@ -16,6 +16,7 @@
 #include <nlohmann/json.hpp>
 
 #include "arena/db/store.hpp"
+#include "arena/mechanics/scene_json.hpp"
 #include "arena/orchestrator/adaptive.hpp"
 #include "arena/orchestrator/campaign.hpp"
 #include "arena/orchestrator/outcome.hpp"
@@ -43,6 +44,19 @@ std::vector<LabelledPoint> RunBoundary(int dims, double resolution, int batch,
     if (*rounds > 500) break;
   }
   return labelled;
+}
+
+// The coarse batch is no finer than 8 x resolution (>= 3 levels) and no
+// finer than the per-dimension default.
+TEST(BoundaryRule, CoarseLevelsFollowTheResolution) {
+  EXPECT_EQ(DefaultCoarseLevels(2, 0.25), 3);
+  EXPECT_EQ(DefaultCoarseLevels(2, 0.125), 3);
+  EXPECT_EQ(DefaultCoarseLevels(2, 0.0625), 3);
+  EXPECT_EQ(DefaultCoarseLevels(2, 0.05), 4);
+  EXPECT_EQ(DefaultCoarseLevels(2, 0.01), 4);
+  EXPECT_EQ(DefaultCoarseLevels(1, 0.03), 5);
+  EXPECT_EQ(DefaultCoarseLevels(1, 0.05), 4);
+  EXPECT_EQ(DefaultCoarseLevels(3, 0.01), 3);
 }
 
 TEST(BoundaryRule, OneDimensionIsBisectionToTheResolution) {
@@ -252,11 +266,11 @@ TEST_F(StoreFile, SubmitPlansTheCoarseRoundWithADecisionEach) {
   const Campaign c = ParseCampaign(BoundaryCampaign());
   const std::int64_t id = SubmitCampaign(*store, c);
   const auto trials = store->ListTrials(id);
-  ASSERT_EQ(trials.size(), 16u);  // 4 x 4 coarse grid
+  ASSERT_EQ(trials.size(), 9u);  // 3 x 3 coarse grid (resolution 0.1: DefaultCoarseLevels)
   const auto decisions = store->ListDecisions(id);
-  ASSERT_EQ(decisions.size(), 16u);
+  ASSERT_EQ(decisions.size(), 9u);
   EXPECT_EQ(*decisions[0].trial_id, trials[0].id);
-  EXPECT_NE(decisions[0].reason.find("coarse grid point 1 of 16"), std::string::npos);
+  EXPECT_NE(decisions[0].reason.find("coarse grid point 1 of 9"), std::string::npos);
   const auto campaign = store->GetCampaign(id);
   EXPECT_TRUE(campaign.sampler_open);
   // Not done although... its trials are not finished; and while they run
@@ -294,6 +308,61 @@ TEST_F(StoreFile, PlanAdaptiveRoundWritesOnlyFromTheStateItRead) {
   db::AdaptiveRound bad;
   bad.trials.resize(1);
   EXPECT_THROW(store->PlanAdaptiveRound(id, "{}", bad), db::StoreError);  // no reason per trial
+}
+
+// A pipelined round is written while the round before it runs, but only
+// when the rounds it was based on are finished; and a later round's trials
+// get their parameter columns in the result views like round 0's, also for a
+// name round 0 did not have.
+TEST_F(StoreFile, LaterRoundsArePipelinedAndRegisterTheirParameters) {
+  auto store = db::Store::Open(path_.string());
+  const Campaign c = ParseCampaign(BoundaryCampaign());
+  const std::int64_t id = SubmitCampaign(*store, c);
+  const std::string state = store->GetCampaign(id).sampler_state_json;
+  db::AdaptiveRound round;
+  round.round = 1;
+  round.sampler_state_json = R"({"round": 1})";
+  PlannedTrial t = PlanTrialAt(c, {0.25, 0.75}, 9, 9, 0);
+  nlohmann::json params = nlohmann::json::parse(t.parameters_json);
+  params["extra_knob"] = 0.125;
+  db::PlannedTrial p;
+  p.seed = t.seed;
+  p.scene_json = mechanics::SceneToJson(t.scene);
+  p.params_json = params.dump();
+  round.trials = {p};
+  round.reasons = {"test"};
+  round.bases_json = {"{}"};
+  round.known_through_round = 0;  // round 0 is still planned: not final
+  EXPECT_FALSE(store->PlanAdaptiveRound(id, state, round));
+  round.known_through_round.reset();  // every trial: not finished either
+  EXPECT_FALSE(store->PlanAdaptiveRound(id, state, round));
+  round.known_through_round = -1;  // based on nothing finished (round 0 pending)
+  ASSERT_TRUE(store->PlanAdaptiveRound(id, state, round));
+  ASSERT_EQ(store->ListTrials(id).size(), 10u);
+  EXPECT_EQ(store->ListDecisions(id).back().round, 1);
+
+  sqlite3* raw = nullptr;
+  ASSERT_EQ(sqlite3_open(path_.c_str(), &raw), SQLITE_OK);
+  auto column = [&](const std::string& sql) {
+    sqlite3_stmt* s = nullptr;
+    EXPECT_EQ(sqlite3_prepare_v2(raw, sql.c_str(), -1, &s, nullptr), SQLITE_OK) << sql;
+    std::vector<std::string> out;
+    while (s && sqlite3_step(s) == SQLITE_ROW)
+      out.push_back(sqlite3_column_type(s, 0) == SQLITE_NULL
+                        ? "NULL"
+                        : reinterpret_cast<const char*>(sqlite3_column_text(s, 0)));
+    sqlite3_finalize(s);
+    return out;
+  };
+  const auto knob = column("SELECT extra_knob FROM trial_results ORDER BY trial_id");
+  ASSERT_EQ(knob.size(), 10u);
+  EXPECT_EQ(knob[0], "NULL");  // round 0 did not vary it
+  EXPECT_EQ(knob[9], "0.125");
+  const auto offset = column("SELECT pivot_offset FROM trial_results ORDER BY trial_id");
+  ASSERT_EQ(offset.size(), 10u);
+  EXPECT_NE(offset[9], "NULL");
+  EXPECT_NEAR(std::stod(offset[9]), params["pivot_offset"].get<double>(), 1e-12);
+  sqlite3_close(raw);
 }
 
 // Submit writes an adaptive campaign and its round 0 in one transaction: a
@@ -359,8 +428,8 @@ TEST_F(StoreFile, AdaptiveSubmitIsOneTransaction) {
   // And without a fault: both, the campaign never seen without its round.
   auto store = db::Store::Open(path_.string());
   const std::int64_t id = SubmitCampaign(*store, c);
-  EXPECT_EQ(store->ListTrials(id).size(), 16u);
-  EXPECT_EQ(store->ListDecisions(id).size(), 16u);
+  EXPECT_EQ(store->ListTrials(id).size(), 9u);
+  EXPECT_EQ(store->ListDecisions(id).size(), 9u);
   EXPECT_TRUE(store->CheckInvariants().empty());
 }
 

@@ -222,6 +222,10 @@ struct AdaptiveRound {
   std::string sampler_state_json = "{}";
   bool open = true;         // false: the sampler has finished (stop_reason says why)
   std::string stop_reason;  // stored as a decision without a trial when !open
+  // The rounds whose outcomes the decision used: 0 .. known_through_round
+  // (their trials must all be finished; later rounds may still run: a
+  // pipelined round). nullopt: every trial of the campaign so far.
+  std::optional<int> known_through_round;
 };
 
 // A fit of model parameters to a campaign's ground truth (arena calibrate).
@@ -534,8 +538,11 @@ class Store {
   // Appends the round's planned trials, one decision row each (and a stop
   // row when !round.open), the sampler's new state and sampler_open, in one
   // transaction -- only if the campaign is active, its sampler is open, its
-  // sampler state is still `expected_state_json` and none of its trials is
-  // planned or running (so two services cannot both advance it).
+  // sampler state is still `expected_state_json` and none of the trials the
+  // decision was based on (round.known_through_round; all when unset) is
+  // planned or running (so two services cannot both advance it, and no
+  // decision is written from outcomes that are not final). Registers new
+  // parameter names in the result views, as CreateCampaign does.
   // @returns false (nothing written) when one of those does not hold.
   // @throws kBadInput for bad fields (reasons/bases not one per trial, ...).
   bool PlanAdaptiveRound(std::int64_t campaign_id, const std::string& expected_state_json,

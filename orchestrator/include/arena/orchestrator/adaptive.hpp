@@ -2,15 +2,28 @@
 // outcomes of the finished ones (campaign "sampler": {"adaptive": ...};
 // orchestrator/README.md, "Adaptive samplers"; docs/closed_loop.md).
 //
-// Ask/tell in rounds. A round is decided only when every trial of the
-// campaign so far is terminal (done, failed, cancelled), from the outcomes of
-// all of them, by a pure function of (campaign, outcomes in trial order,
-// round, batch size). Its trials, one decision row per trial (why, and the
-// outcomes it was based on) and the sampler's new state are written in one
-// transaction (db::Store::PlanAdaptiveRound). So:
+// Ask/tell in rounds, pipelined. Every decision is a pure function of
+// (campaign, the outcomes of a set of finished rounds in trial order, the
+// points of at most one pending round, round, batch size):
+//   round 1      from round 0 (when all of it is finished);
+//   round r >= 2 from rounds <= r-2 with round r-1 PENDING -- its points
+//                count as asked (never proposed again, and a candidate near
+//                one is as certain as if it were a sample) but not as
+//                evidence -- decided as soon as rounds <= r-2 are finished,
+//                so round r is queued while round r-1 runs and the cells do
+//                not idle at a round boundary; only if that adds nothing is
+//                round r decided from rounds <= r-1 once those are finished
+//                (and only such a decision may stop the sampler).
+// With "pipeline": false every round is decided from all the rounds before
+// it (cells idle while a round's last trials finish). The decision's trials,
+// one decision row per trial (why, and the basis: known_through_round,
+// pending_round, pending_trials) and the sampler's new state are written in
+// one transaction (db::Store::PlanAdaptiveRound), refused unless every trial
+// of the known rounds is finished. So:
 //   * a restarted service (SIGKILL at any moment) recomputes the same next
 //     round from the same stored outcomes: the sequence does not depend on
-//     the kill, nor on which cell ran which trial, nor on timing;
+//     the kill, nor on which cell ran which trial or finished first, nor on
+//     timing (which rounds a decision may use is fixed by its round number);
 //   * two services on one store cannot both advance a campaign (the write is
 //     conditional on the state it read).
 // The batch size is the campaign's sampler.batch, or else the number of idle
@@ -66,6 +79,12 @@ struct BoundaryProposal {
 std::vector<std::vector<double>> CoarseGrid(int dims, int levels);
 // Default coarse levels: 5 (1-D), 4 (2-D), 3 (3-D).
 int DefaultCoarseLevels(int dims);
+// The same, but no finer than a spacing of 8 x resolution (at least 3
+// levels): the coarse batch costs levels^dims trials whatever the resolution,
+// and at a coarse resolution it was most of the campaign (16 of 27 trials at
+// 0.125 in 2-D; bench/README.md, "Adaptive boundary sampling").
+// 2-D: 3 levels from resolution 0.0625 up, 4 below.
+int DefaultCoarseLevels(int dims, double resolution);
 
 // The nearest-neighbour margin rule. Candidates: a lattice of spacing
 // resolution / 2. A candidate lies on the current estimate of the boundary
@@ -93,22 +112,29 @@ struct ConditionOutcomes {
   std::int64_t condition = 0;
   std::vector<std::array<double, 3>> final_position;  // m
   std::vector<double> final_angle;                    // rad, net rotation
-  int planned = 0;                                    // replicates planned so far (incl. failed)
+  int planned = 0;  // replicates planned so far (incl. failed and pending)
+  int pending = 0;  // of them, in a pipelined round still running: outcome unknown
 };
 
 // Half-width of the two-sided `confidence` interval of the mean of `values`
 // (Student t); +infinity with fewer than 2 values.
 double ConfidenceHalfWidth(const std::vector<double>& values, double confidence);
-// The widest of the position coordinates' half-widths (m).
-double PositionHalfWidth(const ConditionOutcomes& c, double confidence);
+// The half-width expected once `extra` more values with the same spread are
+// in: t(n+extra-1) * sd / sqrt(n+extra); +infinity with fewer than 2 values.
+double ExpectedHalfWidth(const std::vector<double>& values, double confidence, int extra);
+// The widest of the position coordinates' half-widths (m), expected with
+// `extra` more replicates.
+double PositionHalfWidth(const ConditionOutcomes& c, double confidence, int extra = 0);
 
 struct ReplicateProposal {
   std::int64_t condition = 0;
-  double ci_position = 0;  // m, current half-width
-  double ci_angle = 0;     // rad
+  double ci_position = 0;           // m, current half-width
+  double ci_angle = 0;              // rad
+  double ci_position_expected = 0;  // m, expected once its pending replicates are in
 };
-// Conditions whose CI is above target and that have fewer than
-// max_replicates: the `count` widest (relative to target) get one more.
+// Conditions whose CI -- expected once their pending replicates are in -- is
+// above target and that have fewer than max_replicates (planned): the
+// `count` widest (relative to target) get one more.
 std::vector<ReplicateProposal> ProposeReplicates(const std::vector<ConditionOutcomes>& conditions,
                                                  const AdaptiveSpec& spec, int count);
 
@@ -123,8 +149,10 @@ std::int64_t CreateAdaptiveCampaign(db::Store& store, const db::NewCampaign& row
                                     const std::function<bool()>& interrupted = {});
 
 // The adaptive samplers of every open campaign in one store. The service
-// calls Advance once per scheduling pass; it does its work at most every
-// `period` and only for campaigns whose round is finished.
+// calls Advance once per scheduling pass; it does its work every `period`,
+// and at once when `finished` (trials the service has finished so far)
+// changed since the last call -- a round's last trial should not leave the
+// cells waiting for the timer -- and only for campaigns with a round to decide.
 class AdaptivePlanner {
  public:
   explicit AdaptivePlanner(db::Store& store,
@@ -132,7 +160,7 @@ class AdaptivePlanner {
   ~AdaptivePlanner();
   // @returns trials planned in this call. @throws db::StoreError only for a
   //   failing store (a campaign whose spec cannot be read is closed with the reason).
-  std::int64_t Advance(int idle_cells);
+  std::int64_t Advance(int idle_cells, std::int64_t finished = -1);
 
  private:
   struct Impl;

@@ -106,6 +106,10 @@ struct AdaptiveSpec {
   AdaptiveKind kind = AdaptiveKind::kBoundary;
   int batch = 0;  // trials per round after the first; 0: the idle cells at round 1 (then fixed)
   int max_trials = 0;  // cap on the campaign's trials (> 0)
+  // Pipelined rounds (adaptive.hpp): round k+1 is decided from rounds <= k-1
+  // with round k pending, so it is queued while round k runs. false: a round
+  // is decided only when every earlier trial is finished (cells idle between).
+  bool pipeline = true;
   // boundary
   OutcomeKind outcome = OutcomeKind::kPivoted;
   double threshold = std::numeric_limits<double>::quiet_NaN();  // the outcome's threshold
