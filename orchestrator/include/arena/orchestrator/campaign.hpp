@@ -109,7 +109,10 @@ struct AdaptiveSpec {
   // Pipelined rounds (adaptive.hpp): round k+1 is decided from rounds <= k-1
   // with round k pending, so it is queued while round k runs. false: a round
   // is decided only when every earlier trial is finished (cells idle between).
-  bool pipeline = true;
+  // Off by default: on simulated cells at wall-clock pace a pipelined
+  // campaign took 1.8x as long (bench/README.md): its cells always have a
+  // next trial to reset for, and the reset pays a pusher move each time.
+  bool pipeline = false;
   // boundary
   OutcomeKind outcome = OutcomeKind::kPivoted;
   double threshold = std::numeric_limits<double>::quiet_NaN();  // the outcome's threshold
