@@ -217,15 +217,16 @@ int main(int argc, char** argv) {
   // Simulates the points not yet known on `threads` threads (results into
   // the cell's cache).
   auto prefetch = [&](const std::vector<Point>& points) {
-    std::vector<Point> todo;
+    std::vector<Point> unclassified;
     for (const auto& u : points)
-      if (!cell.cache.count(u)) todo.push_back(u);
+      if (!cell.cache.count(u)) unclassified.push_back(u);
     std::vector<Cell> workers(static_cast<size_t>(threads), Cell{campaign, cell.defects, {}, 0});
     std::vector<std::thread> pool;
     for (int t = 0; t < threads; ++t)
       pool.emplace_back([&, t] {
-        for (size_t k = static_cast<size_t>(t); k < todo.size(); k += static_cast<size_t>(threads))
-          workers[static_cast<size_t>(t)].Classify(todo[k]);
+        for (size_t k = static_cast<size_t>(t); k < unclassified.size();
+             k += static_cast<size_t>(threads))
+          workers[static_cast<size_t>(t)].Classify(unclassified[k]);
       });
     for (auto& th : pool) th.join();
     for (auto& w : workers) {

@@ -17,6 +17,14 @@ namespace arena::assessment {
 
 namespace {
 
+// A scene a predictor's setting cannot take: a result saying so, not an exception.
+mechanics::SimulationResult InvalidScene(const std::string& why) {
+  mechanics::SimulationResult r;
+  r.status = mechanics::SimulationStatus::kInvalidScene;
+  r.error = why;
+  return r;
+}
+
 // Each setting's refinement rank (0 = coarsest): `knobs[i]` describes
 // settings[i]; `coarser(x, y)` is true when x is the coarser of the two.
 template <typename Knobs, typename Coarser>
@@ -95,10 +103,7 @@ class ArenaPredictor final : public Predictor {
     try {
       mechanics::ValidateScene(s);
     } catch (const std::exception& e) {
-      mechanics::SimulationResult r;
-      r.status = mechanics::SimulationStatus::kInvalidScene;
-      r.error = e.what();
-      return r;
+      return InvalidScene(e.what());
     }
     return run(s);
   }
@@ -193,26 +198,14 @@ class MujocoPredictor final : public Predictor {
   mechanics::SimulationResult Run(const mechanics::Scene& scene,
                                   std::size_t setting) const override {
     const auto& sim = *simulators_.at(setting);
-    const std::string why = sim.CheckScene(scene);
-    if (!why.empty()) {
-      mechanics::SimulationResult r;
-      r.status = mechanics::SimulationStatus::kInvalidScene;
-      r.error = why;
-      return r;
-    }
+    if (std::string why = sim.CheckScene(scene); !why.empty()) return InvalidScene(why);
     return sim.Simulate(scene);
   }
   mechanics::SimulationResult RunClosedLoop(
       const mechanics::Scene& scene, std::size_t setting,
       const mechanics::PusherCommandSource& commands) const override {
     const auto& sim = *simulators_.at(setting);
-    const std::string why = sim.CheckScene(scene);
-    if (!why.empty()) {
-      mechanics::SimulationResult r;
-      r.status = mechanics::SimulationStatus::kInvalidScene;
-      r.error = why;
-      return r;
-    }
+    if (std::string why = sim.CheckScene(scene); !why.empty()) return InvalidScene(why);
     return sim.SimulateClosedLoop(scene, commands);
   }
 
