@@ -23,11 +23,14 @@
 #include "arena/reset/reset.hpp"
 #include "arena/schemas/arena.h"
 #include "arena/schemas/ground_truth.hpp"
+#include "closed_loop_trial.hpp"
+#include "command_intake.hpp"
+#include "trial_stream.hpp"
 
 namespace arena::executors {
 namespace {
 
-using Clock = std::chrono::steady_clock;
+using Clock = StreamClock;
 using nlohmann::json;
 
 std::uint64_t UnixNanos() {
@@ -176,12 +179,15 @@ struct Cell::Impl {
   dds::Reader<msg::TrialCommand> commands;
   dds::Writer<msg::LiveState> live;                 // one message per sample, best-effort
   dds::Reader<msg::PusherCommand> pusher_commands;  // closed loop: the controllers' answers
+  StreamPort stream_port;                           // how trials' samples leave (trial_stream.hpp)
 
+  // Guarded by `mutex`: shared by the worker, the intake thread and Stop().
   std::mutex mutex;
   std::condition_variable wake;
   bool stop = false;
   bool finished = false;
   CellCounters counters;
+  CommandIntake intake_state;  // which service is served; its queued commands
 
   // Worker-only state.
   // Phases already finished, to answer a repeated command with its status
@@ -197,28 +203,8 @@ struct Cell::Impl {
   reset::Pose observed_pose;                    // where the sensors saw it last
   std::optional<ResetLeft> reset_left;          // the last successful simulated reset
   std::optional<mechanics::PusherSpec> pusher;  // the pusher mounted now
-  std::thread worker;
-
-  // ---- serving (PHASE_CLAIM), guarded by `mutex`. The intake thread reads
-  // commands as they come (a claim is never stuck behind a long trial) and
-  // queues the serving session's commands for the worker; every other
-  // session's command is dropped. A session once superseded is never served
-  // again, so a dead service's queued commands cannot run after its successor
-  // claimed the cell.
-  struct Serving {
-    std::uint64_t session = 0;  // 0: free
-    std::string host, store;
-    std::uint32_t pid = 0;
-    double lease_s = 0;
-    Clock::time_point until{};
-  };
-  static constexpr double kImplicitLease_s = 10.0;  // a command without a claim (a test driver)
-  static constexpr std::size_t kRetiredKept = 256;
-  Serving serving;
-  std::set<std::uint64_t> retired;
-  std::deque<std::uint64_t> retired_order;
-  std::deque<msg::TrialCommand> queue;  // the serving session's commands, for the worker
   std::uint64_t started_unix_ns = UnixNanos();
+  std::thread worker;
   std::thread intake;
 
   static dds::ParticipantOptions ParticipantFor(const CellOptions& o) {
@@ -243,7 +229,24 @@ struct Cell::Impl {
         ground_truth(participant),
         commands(participant, dds::ReaderOptions{false}),
         live(participant),
-        pusher_commands(participant, dds::ReaderOptions{false, o.id}) {}
+        pusher_commands(participant, dds::ReaderOptions{false, o.id}) {
+    stream_port.cell_id = o.id;
+    stream_port.batch_samples = o.batch_samples;
+    stream_port.speed = o.speed;
+    stream_port.corrupt_stream = o.defects.corrupt_stream;
+    stream_port.log = &ground_truth;
+    stream_port.live = &live;
+    stream_port.stopping = [this] { return Stopping(); };
+    stream_port.sleep_until = [this](Clock::time_point until) { return SleepUntil(until); };
+    stream_port.serves = [this](std::uint64_t session) {
+      std::lock_guard<std::mutex> lock(mutex);
+      return intake_state.Serves(session);
+    };
+    stream_port.count_samples = [this](std::size_t n) {
+      std::lock_guard<std::mutex> lock(mutex);
+      counters.samples += n;
+    };
+  }
 
   bool Stopping() {
     std::lock_guard<std::mutex> lock(mutex);
@@ -255,9 +258,10 @@ struct Cell::Impl {
     return !wake.wait_until(lock, until, [&] { return stop; });
   }
 
-  // Caller holds `mutex` (reads `serving`); only the constructor and the
-  // intake thread write announcements.
+  // Caller holds `mutex` (reads the serving session); only the constructor
+  // and the intake thread write announcements.
   void Announce() {
+    const CommandIntake::Serving& serving = intake_state.serving();
     msg::CellAnnounce a;
     a.serving_session(serving.session);
     a.serving_host(serving.host);
@@ -287,6 +291,8 @@ struct Cell::Impl {
                        .dump());
     if (!announce.Write(a)) throw dds::DdsError("cell: announcing the cell failed");
   }
+
+  // ---- statuses
 
   msg::TrialStatus BaseStatus(const msg::TrialCommand& c, msg::TrialState state) {
     msg::TrialStatus s;
@@ -373,6 +379,23 @@ struct Cell::Impl {
     return t;
   }
 
+  // Where the trial left the object: its last sample (true) and the sensors'
+  // last valid view of it (observed).
+  void EndedAt(const mechanics::TrajectorySample& last,
+               const std::vector<dds::Observation>& observed) {
+    true_pose.position = last.position;
+    true_pose.orientation = last.orientation;
+    for (auto it = observed.rbegin(); it != observed.rend(); ++it) {
+      if (it->valid) {
+        observed_pose.position = it->position;
+        observed_pose.orientation = it->orientation;
+        break;
+      }
+    }
+  }
+
+  // ---- EXECUTE
+
   void Execute(const msg::TrialCommand& c) {
     const auto started = Clock::now();
     mechanics::Scene scene;
@@ -416,22 +439,29 @@ struct Cell::Impl {
       return;
     }
     if (closed_loop) return ExecuteClosedLoop(c, scene, trial, started);
+    ExecuteOpenLoop(c, scene, trial, started);
+  }
 
-    // The backend streams the truth; the cell checks every sample (finite,
-    // time strictly increasing from 0), observes it and sends it on as it
-    // arrives: on the live topic when due, into the log batch by batch (a
-    // driver or a robot streams live; a simulator's samples come all at
-    // once). A failure after some samples went out ends the phase FAILED
-    // like a deadline does; the service then drops the partial stream.
-    struct Collected {
-      std::vector<mechanics::TrajectorySample> samples;
-      std::vector<dds::Observation> observed;
-      std::optional<Observer> observer;  // from the first sample: the layer's scene is set
-      std::string problem;
-    } got;
-    Outgoing out(c, deadline, Pacing::kLive, live.Matched() > 0);
+  // What an open-loop run collected from the backend, sample by sample.
+  struct Collected {
+    std::vector<mechanics::TrajectorySample> samples;
+    std::vector<dds::Observation> observed;
+    std::optional<Observer> observer;  // from the first sample: the layer's scene is set
+    std::string problem;               // why a sample was unusable ("" = none)
+  };
+
+  // The backend streams the truth; the cell checks every sample (finite,
+  // time strictly increasing from 0), observes it and sends it on as it
+  // arrives: on the live topic when due, into the log batch by batch (a
+  // driver or a robot streams live; a simulator's samples come all at
+  // once). A failure after some samples went out ends the phase FAILED
+  // like a deadline does; the service then drops the partial stream.
+  void ExecuteOpenLoop(const msg::TrialCommand& c, const mechanics::Scene& scene,
+                       TrialContext& trial, Clock::time_point started) {
+    Collected got;
+    TrialStream out(stream_port, c, trial.deadline, Pacing::kLive);
     const SampleSink sink = [&](const mechanics::TrajectorySample& s) {
-      if (!got.problem.empty() || !out.failure.empty()) return false;
+      if (!got.problem.empty() || !out.failure().empty()) return false;
       if (std::string why = CheckTrueSample(s, got.samples, scene); !why.empty()) {
         got.problem = why;
         return false;
@@ -439,74 +469,18 @@ struct Cell::Impl {
       got.samples.push_back(s);
       if (!got.observer) got.observer.emplace(layer.MakeObserver(trial));
       got.observed.push_back(got.observer->Next(got.samples));
-      if (!Push(out, layer.actual_scene(), got.samples.back(), got.observed.back())) return false;
-      return !Stopping() && Clock::now() <= deadline;
+      if (!out.Push(layer.actual_scene(), got.samples.back(), got.observed.back())) return false;
+      return !Stopping() && Clock::now() <= trial.deadline;
     };
     // A backend waiting on its hardware: what the log holds leaves now.
-    trial.idle = [&] {
-      if (out.failure.empty()) SendBatch(out, false);
-    };
+    trial.idle = [&] { out.Flush(); };
     const ExecuteOutcome outcome = layer.Execute(scene, trial, sink);
     trial.idle = nullptr;
-    std::string early;
-    if (!got.problem.empty())
-      early = "backend " + layer.capabilities().name + ": sample " +
-              std::to_string(got.samples.size()) + ": " + got.problem;
-    else if (!out.failure.empty())
-      early = out.failure;
-    else if (Stopping())
-      early = "interrupted: cell shutting down";
-    else if (Clock::now() > deadline)
-      early = "deadline: " + std::to_string(c.deadline_s()) + " s exceeded while the backend ran";
-    else if (!outcome.ok)
-      early = outcome.reason.empty() ? "backend failed without a reason" : outcome.reason;
-    else if (got.samples.empty())
-      early = "backend " + layer.capabilities().name + ": no samples";
-    if (!early.empty()) {
-      auto s = BaseStatus(c, msg::STATE_FAILED);
-      // Typed for the service: a model that cannot run the scene fails the
-      // same way on a re-run (FAILURE_SIMULATION: the trial fails at once);
-      // a driver that crashed, hung or sent garbage may do better next time.
-      s.failure(!got.problem.empty()                          ? msg::FAILURE_INTERNAL
-                : early.rfind("deadline", 0) == 0             ? msg::FAILURE_DEADLINE
-                : early.rfind("interrupted", 0) == 0          ? msg::FAILURE_INTERRUPTED
-                : Stopping()                                  ? msg::FAILURE_INTERRUPTED
-                : Clock::now() > deadline                     ? msg::FAILURE_DEADLINE
-                : outcome.reason.rfind("simulation:", 0) == 0 ? msg::FAILURE_SIMULATION
-                                                              : msg::FAILURE_INTERNAL);
-      s.reason(early);
-      s.samples(static_cast<std::uint32_t>(out.sent));  // already in the log (not a trial)
-      s.phase_wall_s(std::chrono::duration<double>(Clock::now() - started).count());
-      s.detail_json(json({{"backend", layer.capabilities().name},
-                          {"defects_applied", json::parse(layer.AppliedJson())},
-                          {"streamed_samples", out.sent},
-                          {"backend_detail", json::parse(outcome.detail_json, nullptr, false)}})
-                        .dump());
-      if (out.sent > 0)
-        spdlog::warn("cell {}: trial {} attempt {} failed after {} samples were streamed: {}",
-                     options.id, c.trial_id(), c.attempt(), out.sent, early);
-      return Finish(c, s);
-    }
-    const std::vector<mechanics::TrajectorySample>& truth_samples = got.samples;
-    const std::vector<dds::Observation>& observed = got.observed;
-    EndStream(out);
-    const std::string& failure = out.failure;
-    const size_t n = truth_samples.size();
-    size_t dropped = 0;
-    for (const auto& o : observed) dropped += o.valid ? 0 : 1;
-    const std::uint32_t batch_index = out.batches;
-
-    const auto& last = truth_samples.back();
-    true_pose.position = last.position;
-    true_pose.orientation = last.orientation;
-    // The sensors' last valid view of the end state.
-    for (auto it = observed.rbegin(); it != observed.rend(); ++it) {
-      if (it->valid) {
-        observed_pose.position = it->position;
-        observed_pose.orientation = it->orientation;
-        break;
-      }
-    }
+    if (std::string early = WhyStoppedEarly(c, trial.deadline, got, out, outcome); !early.empty())
+      return FinishEarlyFailure(c, early, got, out, outcome, trial.deadline, started);
+    out.End();
+    const std::string& failure = out.failure();
+    EndedAt(got.samples.back(), got.observed);
     pusher = scene.pusher;
 
     auto s = BaseStatus(c, failure.empty() ? msg::STATE_EXECUTED : msg::STATE_FAILED);
@@ -514,8 +488,10 @@ struct Cell::Impl {
     if (!failure.empty())
       s.failure(failure.rfind("deadline", 0) == 0 ? msg::FAILURE_DEADLINE
                                                   : msg::FAILURE_INTERRUPTED);
-    s.samples(static_cast<std::uint32_t>(n));
+    s.samples(static_cast<std::uint32_t>(got.samples.size()));
     s.phase_wall_s(std::chrono::duration<double>(Clock::now() - started).count());
+    std::size_t dropped = 0;
+    for (const auto& o : got.observed) dropped += o.valid ? 0 : 1;
     const TrialPerturbation& perturbation = layer.perturbation();
     json detail = json::parse(outcome.detail_json, nullptr, false);
     if (!detail.is_object()) detail = json::object();
@@ -524,7 +500,7 @@ struct Cell::Impl {
     detail["velocity_offset"] = {perturbation.velocity_offset.x(), perturbation.velocity_offset.y(),
                                  perturbation.velocity_offset.z()};
     detail["dropped_observations"] = dropped;
-    detail["batches"] = batch_index;
+    detail["batches"] = out.batches();
     detail["backend"] = layer.capabilities().name;
     detail["truth"] = ToString(layer.capabilities().truth);
     detail["defects_applied"] = json::parse(layer.AppliedJson());
@@ -536,216 +512,79 @@ struct Cell::Impl {
     Finish(c, s);
   }
 
-  // How a trial's samples go out (Outgoing, below).
-  enum class Pacing {
-    kLive,     // samples leave when due (speed > 0), each on the live topic too
-    kFlatOut,  // as fast as the log takes them, log only (closed loop: already live)
-  };
-  struct StreamOutcome {
-    std::string failure;  // "" when the whole trial was sent
-    std::uint32_t batches = 0;
-  };
-
-  // ---------------------------------------------------------------------
-  // Closed loop (issue 19): the pusher follows a controller's commands.
-  // Each sample goes out on the live topic; the command answering it moves
-  // the pusher from the next step on. speed 0: lockstep (the simulation waits
-  // for the answer to sample k, at most hold_s, before step k+1); speed > 0:
-  // wall clock (the newest command in force when a step is due). Without a
-  // new command for hold_s the pusher stops and the phase fails.
-
-  // How long a closed-loop trial waits for its controller to appear.
-  static constexpr double kControllerWait_s = 5.0;
-
-  struct AppliedCommand {
-    std::uint32_t sample = 0;  // the sample it answered (applied from the next step)
-    double t = 0;              // s, that sample's time
-    Eigen::Vector3d commanded = Eigen::Vector3d::Zero();  // m/s, as the controller sent it
-    Eigen::Vector3d applied = Eigen::Vector3d::Zero();    // m/s, with the actuation noise
-    double loop_ms = -1;  // live sample written -> command accepted (wall), -1: held
-  };
-
-  struct ClosedLoop {
-    const msg::TrialCommand& command;
-    const TrialContext& trial;
-    const TrialPerturbation& perturbation;
-    executors::ControlContext context;
-    std::string params;
-    Clock::time_point start;
-    Clock::time_point deadline;
-    std::size_t expected_samples = 0;
-    std::vector<AppliedCommand> applied;
-    mechanics::PusherMotion in_force;
-    Clock::time_point last_command_at;
-  };
-
-  // The newest command of this trial answering a sample <= k (lockstep: == k),
-  // waiting until `until` at most.
-  std::optional<msg::PusherCommand> AwaitCommand(const ClosedLoop& loop, std::uint32_t k,
-                                                 bool exact, Clock::time_point until) {
-    std::optional<msg::PusherCommand> newest;
-    for (;;) {
-      const auto now = Clock::now();
-      const auto wait = until > now
-                            ? std::chrono::duration_cast<std::chrono::nanoseconds>(until - now)
-                            : std::chrono::nanoseconds(0);
-      auto m = pusher_commands.Take(wait);
-      if (m && m->cell_id() == options.id && m->trial_id() == loop.command.trial_id() &&
-          m->attempt() == loop.command.attempt() && m->controller() == loop.context.spec.name &&
-          m->answers_sample() <= k) {
-        if (!newest || m->answers_sample() >= newest->answers_sample()) newest = std::move(*m);
-        if (exact && newest->answers_sample() == k) return newest;
-      }
-      if (Clock::now() >= until || Stopping()) return exact ? std::nullopt : newest;
-    }
+  // Why the backend's run cannot be a whole trial ("" = it can).
+  std::string WhyStoppedEarly(const msg::TrialCommand& c, Clock::time_point deadline,
+                              const Collected& got, const TrialStream& out,
+                              const ExecuteOutcome& outcome) {
+    if (!got.problem.empty())
+      return "backend " + layer.capabilities().name + ": sample " +
+             std::to_string(got.samples.size()) + ": " + got.problem;
+    if (!out.failure().empty()) return out.failure();
+    if (Stopping()) return "interrupted: cell shutting down";
+    if (Clock::now() > deadline)
+      return "deadline: " + std::to_string(c.deadline_s()) + " s exceeded while the backend ran";
+    if (!outcome.ok)
+      return outcome.reason.empty() ? "backend failed without a reason" : outcome.reason;
+    if (got.samples.empty()) return "backend " + layer.capabilities().name + ": no samples";
+    return "";
   }
 
-  // Called by the simulation after every sample: publish it, get its answer.
-  std::optional<mechanics::PusherMotion> NextCommand(
-      ClosedLoop& loop, const std::vector<mechanics::TrajectorySample>& samples, std::string* why) {
-    const auto k = static_cast<std::uint32_t>(samples.size() - 1);
-    const mechanics::TrajectorySample& truth = samples.back();
-    const auto& spec = loop.context.spec;
-    if (Stopping()) {
-      *why = "interrupted: cell shutting down";
-      return std::nullopt;
-    }
-    if (Clock::now() > loop.deadline) {
-      *why = "deadline: " + std::to_string(loop.command.deadline_s()) + " s exceeded after " +
-             std::to_string(k + 1) + " samples";
-      return std::nullopt;
-    }
-    // What the sensors saw of this sample (latency, drops, noise: the same
-    // streams as the log's, so live and log agree).
-    const auto observed = layer.Observe(samples, loop.trial);
-    dds::PusherState pusher;
-    pusher.position = truth.pusher_position;
-    pusher.velocity = loop.in_force.velocity;
-    pusher.angular_velocity = loop.in_force.angular_velocity;
-    msg::GroundTruthSample encoded;
-    dds::EncodeSample(truth, pusher, observed.back(), &encoded);
-    const bool lockstep = options.speed == 0;
-    if (!lockstep) {
-      const auto due = loop.start + std::chrono::duration_cast<Clock::duration>(
-                                        std::chrono::duration<double>(truth.t * options.speed));
-      if (!SleepUntil(due)) {
-        *why = "interrupted: cell shutting down";
-        return std::nullopt;
-      }
-    }
-    PublishLive(loop.command, k, k + 1 == loop.expected_samples, encoded, spec.name, loop.params);
-    const auto hold =
-        std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(spec.hold_s));
-    std::optional<msg::PusherCommand> answer;
-    if (lockstep) {
-      // Best-effort loses messages (a controller that matched a moment late
-      // misses sample 0): without an answer the sample is published again
-      // every 20 ms until the hold time runs out.
-      const auto give_up = Clock::now() + hold;
-      for (;;) {
-        answer = AwaitCommand(loop, k, true,
-                              std::min(give_up, Clock::now() + std::chrono::milliseconds(20)));
-        if (answer || Clock::now() >= give_up || Stopping()) break;
-        PublishLive(loop.command, k, k + 1 == loop.expected_samples, encoded, spec.name,
-                    loop.params);
-      }
-    } else {
-      // Collect until the next sample is due; the newest answer wins.
-      const auto next_due =
-          loop.start + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(
-                           (truth.t + 1.0 / mechanics::kSampleRateHz) * options.speed));
-      answer = AwaitCommand(loop, k, false, next_due);
-    }
-    AppliedCommand record;
-    record.sample = k;
-    record.t = truth.t;
-    const auto now = Clock::now();
-    if (answer) {
-      record.loop_ms = (UnixNanos() - answer->state_sent_unix_ns()) * 1e-6;
-      if (answer->answers_sample() != k) record.loop_ms = -1;  // an older sample's answer
-      const Eigen::Vector3d v(answer->velocity()[0], answer->velocity()[1], answer->velocity()[2]);
-      const Eigen::Vector3d w(answer->angular_velocity()[0], answer->angular_velocity()[1],
-                              answer->angular_velocity()[2]);
-      if (!v.allFinite() || !w.allFinite()) {
-        *why = "controller " + spec.name + ": command answering sample " + std::to_string(k) +
-               " is not finite; pusher stopped";
-        return Stop(loop, record);
-      }
-      if (v.norm() > layer.cell_profile().max_pusher_speed * (1 + 1e-9)) {
-        *why = "controller " + spec.name + ": commanded " + std::to_string(v.norm()) +
-               " m/s at sample " + std::to_string(k) + ", above this cell's " +
-               std::to_string(layer.cell_profile().max_pusher_speed) + " m/s; pusher stopped";
-        return Stop(loop, record);
-      }
-      record.commanded = v;
-      // Actuation noise (defects.hpp) on a moving pusher: v (1 + s) + o.
-      loop.in_force.velocity = v.norm() > 0 ? Eigen::Vector3d(v * loop.perturbation.velocity_scale +
-                                                              loop.perturbation.velocity_offset)
-                                            : Eigen::Vector3d::Zero();
-      loop.in_force.angular_velocity = w;
-      loop.last_command_at = now;
-    } else if (now - loop.last_command_at > hold) {
-      *why = "controller " + spec.name + ": no command for " + std::to_string(spec.hold_s) +
-             " s (hold time) after sample " + std::to_string(k) + "; pusher stopped";
-      return Stop(loop, record);
-    } else {
-      record.commanded =
-          loop.applied.empty() ? Eigen::Vector3d::Zero() : loop.applied.back().commanded;
-    }
-    record.applied = loop.in_force.velocity;
-    loop.applied.push_back(record);
-    return loop.in_force;
-  }
-
-  std::optional<mechanics::PusherMotion> Stop(ClosedLoop& loop, AppliedCommand record) {
-    loop.in_force.velocity.setZero();
-    record.applied.setZero();
-    loop.applied.push_back(record);
-    return std::nullopt;
+  void FinishEarlyFailure(const msg::TrialCommand& c, const std::string& early,
+                          const Collected& got, const TrialStream& out,
+                          const ExecuteOutcome& outcome, Clock::time_point deadline,
+                          Clock::time_point started) {
+    auto s = BaseStatus(c, msg::STATE_FAILED);
+    // Typed for the service: a model that cannot run the scene fails the
+    // same way on a re-run (FAILURE_SIMULATION: the trial fails at once);
+    // a driver that crashed, hung or sent garbage may do better next time.
+    s.failure(!got.problem.empty()                          ? msg::FAILURE_INTERNAL
+              : early.rfind("deadline", 0) == 0             ? msg::FAILURE_DEADLINE
+              : early.rfind("interrupted", 0) == 0          ? msg::FAILURE_INTERRUPTED
+              : Stopping()                                  ? msg::FAILURE_INTERRUPTED
+              : Clock::now() > deadline                     ? msg::FAILURE_DEADLINE
+              : outcome.reason.rfind("simulation:", 0) == 0 ? msg::FAILURE_SIMULATION
+                                                            : msg::FAILURE_INTERNAL);
+    s.reason(early);
+    s.samples(static_cast<std::uint32_t>(out.sent()));  // already in the log (not a trial)
+    s.phase_wall_s(std::chrono::duration<double>(Clock::now() - started).count());
+    s.detail_json(json({{"backend", layer.capabilities().name},
+                        {"defects_applied", json::parse(layer.AppliedJson())},
+                        {"streamed_samples", out.sent()},
+                        {"backend_detail", json::parse(outcome.detail_json, nullptr, false)}})
+                      .dump());
+    if (out.sent() > 0)
+      spdlog::warn("cell {}: trial {} attempt {} failed after {} samples were streamed: {}",
+                   options.id, c.trial_id(), c.attempt(), out.sent(), early);
+    Finish(c, s);
   }
 
   // The backend can run it (Execute checked closed_loop before ACCEPTED); the
-  // defect layer perturbs the scene as for any trial.
+  // defect layer perturbs the scene as for any trial. closed_loop_trial.hpp
+  // runs the loop.
   void ExecuteClosedLoop(const msg::TrialCommand& c, const mechanics::Scene& scene,
                          const TrialContext& trial, Clock::time_point started) {
-    ClosedLoop loop{c,
-                    trial,
-                    layer.perturbation(),
-                    MakeControlContext(scene, layer.cell_profile().max_pusher_speed),
-                    "",
-                    Clock::now(),
-                    trial.deadline,
-                    0,
-                    {},
-                    {},
-                    {}};
-    loop.params = ControlContextToJson(loop.context);
-    loop.expected_samples =
-        static_cast<std::size_t>(std::floor(scene.duration * mechanics::kSampleRateHz + 1e-9)) + 1;
+    ClosedLoopTrial loop(stream_port, pusher_commands, layer, c, trial, scene);
     // The controller must be on the domain, its endpoints matched, before
     // the first sample: a lockstep cell waits for it only hold_s.
-    const std::string peer = "arena.controller." + loop.context.spec.name;
+    const std::string& name = loop.context().spec.name;
     const auto wait = std::chrono::duration_cast<dds::Millis>(
-        std::min(std::chrono::duration<double>(kControllerWait_s),
-                 std::chrono::duration<double>(loop.deadline - Clock::now())));
-    if (!participant.WaitForPeer(peer, wait) || !live.WaitForMatched(1, dds::Millis(2000)) ||
+        std::min(std::chrono::duration<double>(ClosedLoopTrial::kControllerWait_s),
+                 std::chrono::duration<double>(trial.deadline - Clock::now())));
+    if (!participant.WaitForPeer("arena.controller." + name, wait) ||
+        !live.WaitForMatched(1, dds::Millis(2000)) ||
         !pusher_commands.WaitForMatched(1, dds::Millis(2000))) {
       auto s = BaseStatus(c, msg::STATE_FAILED);
       s.failure(msg::FAILURE_NONE);  // the controller's, not the cell's: a retry may find it
-      s.reason("controller " + loop.context.spec.name + ": not on domain " +
-               std::to_string(options.domain_id) + " (start `arena controller --name " +
-               loop.context.spec.name + "`)");
+      s.reason("controller " + name + ": not on domain " + std::to_string(options.domain_id) +
+               " (start `arena controller --name " + name + "`)");
       s.phase_wall_s(std::chrono::duration<double>(Clock::now() - started).count());
       return Finish(c, s);
     }
-    loop.start = Clock::now();
-    loop.last_command_at = loop.start;
-    pusher_commands.TakeAll();  // answers to earlier trials
+    loop.Start();
     mechanics::SimulationResult result =
         layer.ExecuteClosedLoop(scene, trial,
                                 [&](const std::vector<mechanics::TrajectorySample>& samples,
-                                    std::string* why) { return NextCommand(loop, samples, why); });
-    const mechanics::Scene& actual = layer.actual_scene();
+                                    std::string* why) { return loop.Next(samples, why); });
     std::string failure = result.stopped;
     if (result.status != mechanics::SimulationStatus::kOk) {
       failure = "simulation: " + ModeName(result.status) + ": " + result.error;
@@ -753,36 +592,30 @@ struct Cell::Impl {
     if (result.samples.empty()) {
       auto s = BaseStatus(c, msg::STATE_FAILED);
       s.reason(failure.empty() ? "simulation: no samples" : failure);
-      s.failure(ClosedLoopFailure(s.reason()));
+      s.failure(ClosedLoopTrial::FailureOf(s.reason()));
       s.phase_wall_s(std::chrono::duration<double>(Clock::now() - started).count());
       return Finish(c, s);
     }
     // The log: every sample, as the closed loop saw it, unpaced (the loop
-    // itself was paced).
-    const auto observed = layer.Observe(result.samples, trial);
-    mechanics::Scene as_run = actual;  // PusherAt's velocity: the last command
-    as_run.pusher->motion = loop.in_force;
-    const StreamOutcome streamed =
-        StreamLog(c, result.samples, as_run, observed, trial.deadline, Pacing::kFlatOut);
+    // itself was paced). The loop observed each sample as it went; a run
+    // that ended past its last published sample is observed whole.
+    const std::vector<dds::Observation> observed = loop.observed().size() == result.samples.size()
+                                                       ? loop.observed()
+                                                       : layer.Observe(result.samples, trial);
+    mechanics::Scene as_run = layer.actual_scene();  // PusherAt's velocity: the last command
+    as_run.pusher->motion = loop.in_force();
+    const StreamOutcome streamed = StreamLog(stream_port, c, result.samples, as_run, observed,
+                                             trial.deadline, Pacing::kFlatOut);
     if (failure.empty()) failure = streamed.failure;
-    const auto& last = result.samples.back();
-    true_pose.position = last.position;
-    true_pose.orientation = last.orientation;
-    for (auto it = observed.rbegin(); it != observed.rend(); ++it) {
-      if (it->valid) {
-        observed_pose.position = it->position;
-        observed_pose.orientation = it->orientation;
-        break;
-      }
-    }
+    EndedAt(result.samples.back(), observed);
     pusher = scene.pusher;
 
     auto s = BaseStatus(c, failure.empty() ? msg::STATE_EXECUTED : msg::STATE_FAILED);
     s.reason(failure);
-    if (!failure.empty()) s.failure(ClosedLoopFailure(failure));
+    if (!failure.empty()) s.failure(ClosedLoopTrial::FailureOf(failure));
     s.samples(static_cast<std::uint32_t>(result.samples.size()));
     s.phase_wall_s(std::chrono::duration<double>(Clock::now() - started).count());
-    s.detail_json(ClosedLoopDetail(loop, result, streamed).dump());
+    s.detail_json(loop.Detail(result, streamed.batches).dump());
     if (!failure.empty()) {
       spdlog::warn("cell {}: trial {} attempt {} failed: {}", options.id, c.trial_id(), c.attempt(),
                    failure);
@@ -790,229 +623,7 @@ struct Cell::Impl {
     Finish(c, s);
   }
 
-  // Typed for the service like an open-loop failure; a controller's fault
-  // (gone, silent past its hold time, a bad command) is FAILURE_NONE: no
-  // fault of the cell's model, and a retry may well run through.
-  static msg::FailureKind ClosedLoopFailure(const std::string& reason) {
-    if (reason.rfind("simulation:", 0) == 0) return msg::FAILURE_SIMULATION;
-    if (reason.rfind("deadline", 0) == 0) return msg::FAILURE_DEADLINE;
-    if (reason.rfind("interrupted", 0) == 0) return msg::FAILURE_INTERRUPTED;
-    return msg::FAILURE_NONE;
-  }
-
-  json ClosedLoopDetail(const ClosedLoop& loop, const mechanics::SimulationResult& result,
-                        const StreamOutcome& streamed) {
-    json commands = json::array();
-    std::vector<double> loop_ms;
-    std::size_t held = 0;
-    for (const auto& a : loop.applied) {
-      commands.push_back({a.sample, a.t, a.commanded.x(), a.commanded.y(), a.commanded.z(),
-                          a.applied.x(), a.applied.y(), a.applied.z(), a.loop_ms});
-      if (a.loop_ms >= 0)
-        loop_ms.push_back(a.loop_ms);
-      else
-        ++held;
-    }
-    std::sort(loop_ms.begin(), loop_ms.end());
-    auto pct = [&](double q) {
-      return loop_ms.empty() ? json(nullptr)
-                             : json(loop_ms[static_cast<size_t>(q * (loop_ms.size() - 1))]);
-    };
-    const ControlOutcome outcome =
-        ScoreControl(loop.context.spec.name, loop.context, result.samples);
-    json score = nullptr;
-    if (outcome.scored) {
-      score = {{"reached", outcome.reached},
-               {"final_error", outcome.final_error},
-               {"settle_time_s",
-                outcome.settle_time_s < 0 ? json(nullptr) : json(outcome.settle_time_s)}};
-    }
-    return {
-        {"mu_scale", loop.perturbation.mu_scale},
-        {"velocity_scale", loop.perturbation.velocity_scale},
-        {"velocity_offset",
-         {loop.perturbation.velocity_offset.x(), loop.perturbation.velocity_offset.y(),
-          loop.perturbation.velocity_offset.z()}},
-        {"batches", streamed.batches},
-        {"backend", layer.capabilities().name},
-        {"truth", ToString(layer.capabilities().truth)},
-        {"defects_applied", json::parse(layer.AppliedJson())},
-        {"model",
-         {{"dof", result.model.dof},
-          {"facets", result.model.facets},
-          {"points", result.model.points},
-          {"dt", result.model.dt},
-          {"unknowns", result.model.unknowns}}},
-        {"solver",
-         {{"steps", result.solver.steps},
-          {"max_pivots", result.solver.max_pivots},
-          {"failures", result.solver.failures}}},
-        {"simulate_wall_s", result.wall_s},
-        {"closed_loop",
-         {{"controller", loop.context.spec.name},
-          {"lockstep", options.speed == 0},
-          {"context", json::parse(loop.params)},
-          {"commands_columns",
-           {"sample", "t", "vx", "vy", "vz", "applied_vx", "applied_vy", "applied_vz", "loop_ms"}},
-          {"commands", commands},
-          {"held", held},
-          {"loop_ms", {{"p50", pct(0.5)}, {"p99", pct(0.99)}, {"max", pct(1.0)}}},
-          {"outcome", score}}}};
-  }
-
-  // ---------------------------------------------------------------------
-  // Streaming: the reliable GroundTruth log, and the LiveState topic beside it.
-
-  // One sample on the live topic: best-effort, keep-last 1, never waits.
-  void PublishLive(const msg::TrialCommand& c, std::uint32_t index, bool last,
-                   const msg::GroundTruthSample& sample, const std::string& controller = "",
-                   const std::string& params = "") {
-    msg::LiveState s;
-    s.cell_id(options.id);
-    s.trial_id(c.trial_id());
-    s.attempt(c.attempt());
-    s.sample(index);
-    s.last(last);
-    s.closed_loop(!controller.empty());
-    s.controller(controller);
-    s.controller_params(params);
-    s.state(sample);
-    s.sent_unix_ns(UnixNanos());
-    live.Write(s);
-  }
-
-  // One trial's stream on its way out, fed sample by sample as the backend
-  // produces them (Push), ended by EndStream. The log (GroundTruth, reliable)
-  // takes samples in batches of --batch: a full batch leaves when the next
-  // sample arrives, a partial one when the backend goes quiet (SendBatch from
-  // TrialContext::idle) or at the end, flagged last. The live topic gets every
-  // sample when it is due; its `last` sample is sent again at the end, when
-  // the backend said the trial is over.
-  struct Outgoing {
-    Outgoing(const msg::TrialCommand& command, Clock::time_point until, Pacing how, bool live)
-        : c(command), deadline(until), pacing(how), live_on(live) {}
-    const msg::TrialCommand& c;
-    Clock::time_point deadline;
-    Pacing pacing;
-    bool live_on;                   // a reader was matched at the start (speed 0)
-    Clock::time_point start{};      // when sample 0 arrived: the pacing's origin
-    msg::GroundTruth batch;         // the samples not yet in the log
-    std::size_t sent = 0;           // samples in the log
-    std::size_t pushed = 0;         // samples taken
-    std::uint32_t batches = 0;      // batches in the log
-    msg::GroundTruthSample newest;  // the latest sample, for the live topic's last
-    std::string failure;            // why the stream stopped ("" = going)
-  };
-
-  bool Paced(const Outgoing& out) const { return out.pacing == Pacing::kLive && options.speed > 0; }
-
-  // Takes one sample: paces it, publishes it live, queues it for the log.
-  // @returns false when the stream stopped (out.failure says why).
-  bool Push(Outgoing& out, const mechanics::Scene& actual, const mechanics::TrajectorySample& truth,
-            const dds::Observation& observed) {
-    if (!out.failure.empty()) return false;
-    if (out.pushed == 0) out.start = Clock::now();
-    if (out.batch.samples().size() >= static_cast<std::size_t>(options.batch_samples) &&
-        !SendBatch(out, false))
-      return false;
-    const bool paced = Paced(out);
-    if (paced) {
-      const auto due = out.start + std::chrono::duration_cast<Clock::duration>(
-                                       std::chrono::duration<double>(truth.t * options.speed));
-      if (due > out.deadline) {
-        SleepUntil(out.deadline);
-        out.failure = "deadline: " + std::to_string(out.c.deadline_s()) + " s exceeded after " +
-                      std::to_string(out.sent) + " samples";
-        return false;
-      }
-      if (!SleepUntil(due)) {
-        out.failure = "interrupted: cell shutting down";
-        return false;
-      }
-    }
-    msg::GroundTruthSample encoded;
-    dds::EncodeSample(truth, PusherAt(actual, truth), observed, &encoded);
-    if (paced ? live.Matched() > 0 : out.live_on)
-      PublishLive(out.c, static_cast<std::uint32_t>(out.pushed), false, encoded);
-    out.newest = encoded;
-    out.batch.samples().push_back(std::move(encoded));
-    ++out.pushed;
-    return true;
-  }
-
-  // The queued samples into the log as one batch (nothing queued: nothing
-  // sent, unless it is the last one). @returns false when the stream stopped.
-  bool SendBatch(Outgoing& out, bool last) {
-    if (!out.failure.empty()) return false;
-    msg::GroundTruth& batch = out.batch;
-    if (batch.samples().empty() && !last) return true;
-    const std::size_t count = batch.samples().size();
-    batch.trial_id(out.c.trial_id());
-    batch.attempt(out.c.attempt());
-    batch.cell_id(options.id);
-    batch.service_session(out.c.service_session());
-    batch.batch(out.batches);
-    batch.first_sample(static_cast<std::uint32_t>(out.sent));
-    batch.last(last);
-    // Fault injection (defects.hpp): a malformed sample, or a missing batch.
-    if (options.defects.corrupt_stream == "gap" && out.batches == 0)
-      batch.first_sample(static_cast<std::uint32_t>(out.sent + 1));
-    if (options.defects.corrupt_stream == "nan" && out.batches == 0 && count > 0)
-      batch.samples()[0].object_pose()[0] = std::numeric_limits<double>::quiet_NaN();
-    if (!Serves(out.c.service_session())) {
-      out.failure = "interrupted: the cell now serves another service";
-      return false;
-    }
-    batch.sent_unix_ns(UnixNanos());
-    // Ground truth is a log: a full history throttles us, it never drops.
-    while (!ground_truth.Write(batch)) {
-      if (Stopping()) {
-        out.failure = "interrupted: cell shutting down";
-        return false;
-      }
-      if (Clock::now() > out.deadline) break;
-      spdlog::warn("cell {}: ground-truth history full (a slow reader?), retrying", options.id);
-    }
-    if (Clock::now() > out.deadline) {
-      out.failure = "deadline: " + std::to_string(out.c.deadline_s()) + " s exceeded after " +
-                    std::to_string(out.sent + count) + " samples";
-      return false;
-    }
-    out.sent += count;
-    ++out.batches;
-    batch.samples().clear();
-    {
-      std::lock_guard<std::mutex> lock(mutex);
-      counters.samples += count;
-    }
-    return true;
-  }
-
-  // The backend finished: the rest of the log, flagged last; the live
-  // topic's final sample again, flagged last.
-  void EndStream(Outgoing& out) {
-    if (!SendBatch(out, true) || out.pushed == 0) return;
-    if (Paced(out) ? live.Matched() > 0 : out.live_on)
-      PublishLive(out.c, static_cast<std::uint32_t>(out.pushed - 1), true, out.newest);
-  }
-
-  // A whole trial's samples, known in advance (closed loop: the loop ran live).
-  StreamOutcome StreamLog(const msg::TrialCommand& c,
-                          const std::vector<mechanics::TrajectorySample>& truth_samples,
-                          const mechanics::Scene& actual,
-                          const std::vector<dds::Observation>& observed, Clock::time_point deadline,
-                          Pacing pacing) {
-    Outgoing out(c, deadline, pacing, pacing == Pacing::kLive && live.Matched() > 0);
-    for (std::size_t i = 0; i < truth_samples.size(); ++i) {
-      if (!Push(out, actual, truth_samples[i], observed[i])) break;
-      if (Stopping() && i + 1 < truth_samples.size()) {
-        out.failure = "interrupted: cell shutting down";
-        break;
-      }
-    }
-    if (out.failure.empty()) EndStream(out);
-    return {out.failure, out.batches};
-  }
+  // ---- RESET
 
   void Reset(const msg::TrialCommand& c) {
     const auto started = Clock::now();
@@ -1096,119 +707,20 @@ struct Cell::Impl {
     Finish(c, s);
   }
 
-  // ---- serving
-  bool Serves(std::uint64_t session) {
-    std::lock_guard<std::mutex> lock(mutex);
-    return serving.session == session;
-  }
-
-  void Retire(std::uint64_t session) {  // caller holds mutex
-    if (session == 0 || !retired.insert(session).second) return;
-    retired_order.push_back(session);
-    while (retired_order.size() > kRetiredKept) {
-      retired.erase(retired_order.front());
-      retired_order.pop_front();
-    }
-  }
-
-  // Caller holds mutex. Serves `c`'s session from now on (a claim, or the
-  // first command of a session while the cell is free).
-  void ServeLocked(const msg::TrialCommand& c, double lease_s) {
-    const bool changed = serving.session != c.service_session();
-    if (changed) {
-      Retire(serving.session);
-      const auto dropped = std::erase_if(queue, [&](const msg::TrialCommand& q) {
-        return q.service_session() != c.service_session();
-      });
-      if (dropped > 0)
-        spdlog::info(
-            "cell {}: dropped {} queued commands of service session {:016x}, which this "
-            "cell no longer serves",
-            options.id, dropped, serving.session);
-      spdlog::info("cell {}: now serving service session {:016x} ({}, pid {})", options.id,
-                   c.service_session(), c.service_host().empty() ? "?" : c.service_host(),
-                   c.service_pid());
-    }
-    serving.session = c.service_session();
-    if (!c.service_host().empty() || changed) {
-      serving.host = c.service_host();
-      serving.pid = c.service_pid();
-      serving.store = c.service_store();
-    }
-    const bool lease_changed = serving.lease_s != lease_s;
-    serving.lease_s = lease_s;
-    serving.until = Clock::now() + std::chrono::duration_cast<Clock::duration>(
-                                       std::chrono::duration<double>(lease_s));
-    if (changed || lease_changed) Announce();
-  }
-
-  // Intake thread: one command as it arrives. Claims act at once; the serving
-  // session's commands go to the worker; others are dropped.
-  void Intake(const msg::TrialCommand& c) {
-    std::lock_guard<std::mutex> lock(mutex);
-    const std::uint64_t session = c.service_session();
-    if (retired.count(session)) {
-      spdlog::info(
-          "cell {}: dropped a {} command of trial {} from service session {:016x}, which "
-          "this cell no longer serves",
-          options.id, c.phase() == msg::PHASE_CLAIM ? "claim" : "phase", c.trial_id(), session);
-      return;
-    }
-    const bool free = serving.session == 0 || Clock::now() > serving.until;
-    const bool mine = serving.session == session;
-    // The same store's new service: the old one is dead (one service per store).
-    const bool successor =
-        !free && !mine && !serving.store.empty() && serving.store == c.service_store();
-    if (c.phase() == msg::PHASE_CLAIM) {
-      if (!std::isfinite(c.lease_s()) || c.lease_s() < 0) return;
-      if (c.lease_s() == 0) {  // release
-        if (mine) {
-          Retire(session);
-          serving = Serving{};
-          Announce();
-        }
-        return;
-      }
-      if (free || mine || successor) ServeLocked(c, std::min(c.lease_s(), 3600.0));
-      return;
-    }
-    if (!mine) {
-      if (!free) {
-        spdlog::info(
-            "cell {}: dropped trial {}'s command from service session {:016x}: serving "
-            "{:016x}",
-            options.id, c.trial_id(), session, serving.session);
-        return;
-      }
-      ServeLocked(c, kImplicitLease_s);
-    } else if (Clock::now() + std::chrono::duration_cast<Clock::duration>(
-                                  std::chrono::duration<double>(serving.lease_s)) >
-               serving.until) {
-      serving.until = Clock::now() + std::chrono::duration_cast<Clock::duration>(
-                                         std::chrono::duration<double>(serving.lease_s));
-    }
-    queue.push_back(c);
-    wake.notify_all();
-  }
+  // ---- serving: the intake thread reads commands as they come (a claim is
+  // never stuck behind a long trial) and queues the served session's for the
+  // worker (command_intake.hpp).
 
   void IntakeLoop() {
     while (!Stopping()) {
       auto command = commands.Take(dds::Millis(100));
-      {
-        std::lock_guard<std::mutex> lock(mutex);
-        if (serving.session != 0 && Clock::now() > serving.until) {
-          spdlog::info("cell {}: the lease of service session {:016x} ran out; free", options.id,
-                       serving.session);
-          serving.session = 0;
-          serving.host.clear();
-          serving.pid = 0;
-          serving.lease_s = 0;
-          Announce();
-        }
-      }
-      if (!command || command->cell_id() != options.id) continue;
       try {
-        Intake(*command);
+        std::lock_guard<std::mutex> lock(mutex);
+        if (intake_state.Expire(Clock::now(), options.id)) Announce();
+        if (!command || command->cell_id() != options.id) continue;
+        const CommandIntake::Taken taken = intake_state.Take(*command, Clock::now(), options.id);
+        if (taken.announce) Announce();
+        if (taken.queued) wake.notify_all();
       } catch (const std::exception& e) {
         spdlog::error("cell {}: command intake: {}", options.id, e.what());
       }
@@ -1217,11 +729,10 @@ struct Cell::Impl {
 
   std::optional<msg::TrialCommand> NextCommand() {
     std::unique_lock<std::mutex> lock(mutex);
-    wake.wait_for(lock, std::chrono::milliseconds(100), [&] { return stop || !queue.empty(); });
-    if (stop || queue.empty()) return std::nullopt;
-    msg::TrialCommand c = std::move(queue.front());
-    queue.pop_front();
-    return c;
+    wake.wait_for(lock, std::chrono::milliseconds(100),
+                  [&] { return stop || !intake_state.empty(); });
+    if (stop) return std::nullopt;
+    return intake_state.Pop();
   }
 
   void Run() {

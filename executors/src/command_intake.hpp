@@ -1,0 +1,79 @@
+// Which service a cell serves, and the commands waiting for its worker.
+//
+// A cell serves one service session at a time (DESIGN.md, PHASE_CLAIM):
+//
+//   free --claim / first phase command--> serving S --lease runs out--> free
+//     serving S --release (lease 0)--> free          (S retired)
+//     serving S --claim by S' of the same store--> serving S'  (S retired:
+//                                       one service per store, so S is dead)
+//
+// A retired session is never served again, so a dead service's late commands
+// cannot run after its successor claimed the cell. Commands of the served
+// session queue for the worker; every other session's are dropped.
+//
+// No DDS and no locking here: the cell calls it under its own mutex from the
+// intake thread (Take, Expire) and the worker (Pop, Serves), which keeps the
+// rules testable without processes (tests/executors/command_intake_test.cpp).
+#pragma once
+
+#include <chrono>
+#include <cstdint>
+#include <deque>
+#include <optional>
+#include <set>
+#include <string>
+
+#include "arena/schemas/arena.h"
+
+namespace arena::executors {
+
+class CommandIntake {
+ public:
+  using Clock = std::chrono::steady_clock;
+
+  struct Serving {
+    std::uint64_t session = 0;  // 0: free
+    std::string host, store;
+    std::uint32_t pid = 0;
+    double lease_s = 0;
+    Clock::time_point until{};
+  };
+
+  // A command without a claim (a test driver) holds the cell this long.
+  static constexpr double kImplicitLease_s = 10.0;
+  static constexpr double kMaxLease_s = 3600.0;
+  static constexpr std::size_t kRetiredKept = 256;
+
+  // What taking one command did.
+  struct Taken {
+    bool queued = false;    // it waits for the worker (Pop)
+    bool announce = false;  // `serving` changed: the cell announces it
+  };
+
+  // One command as it arrives (claims act at once). `cell_id` is the cell's.
+  Taken Take(const msg::TrialCommand& c, Clock::time_point now, const std::string& cell_id);
+
+  // Frees the cell when the served session's lease ran out.
+  // @returns true when it did (the cell announces it).
+  bool Expire(Clock::time_point now, const std::string& cell_id);
+
+  // The oldest queued command of the served session.
+  std::optional<msg::TrialCommand> Pop();
+  bool empty() const { return queue_.empty(); }
+
+  bool Serves(std::uint64_t session) const { return serving_.session == session; }
+  const Serving& serving() const { return serving_; }
+
+ private:
+  void Retire(std::uint64_t session);
+  // Serves `c`'s session from now on. @returns true when the announcement changes.
+  bool Serve(const msg::TrialCommand& c, double lease_s, Clock::time_point now,
+             const std::string& cell_id);
+
+  Serving serving_;
+  std::set<std::uint64_t> retired_;
+  std::deque<std::uint64_t> retired_order_;  // oldest first: only kRetiredKept are kept
+  std::deque<msg::TrialCommand> queue_;
+};
+
+}  // namespace arena::executors
