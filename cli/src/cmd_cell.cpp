@@ -4,12 +4,12 @@
 //            [--security DIR]
 // Runs one simulated cell until SIGINT or SIGTERM (executors/README.md).
 #include <signal.h>
-#include <sys/prctl.h>
-#include <unistd.h>
 
+#include <condition_variable>
 #include <cstdio>
 #include <fstream>
 #include <memory>
+#include <mutex>
 #include <sstream>
 #include <string>
 
@@ -19,6 +19,7 @@
 #include "arena/executors/cell.hpp"
 #include "arena/schemas/security.hpp"
 #include "commands.hpp"
+#include "signals.hpp"
 
 namespace arena::cli {
 namespace {
@@ -59,24 +60,20 @@ int RunCell(CellCliOptions opt) {
     throw CommandError(kExitBadInput, e.what());
   }
 
-  // SIGINT/SIGTERM are blocked before any thread starts (DDS threads inherit
-  // the mask); this thread then waits for them with sigwait, so no signal
-  // handler runs at all and shutdown happens on an ordinary thread.
-  sigset_t signals;
-  sigemptyset(&signals);
-  sigaddset(&signals, SIGINT);
-  sigaddset(&signals, SIGTERM);
-  pthread_sigmask(SIG_BLOCK, &signals, nullptr);
-  // A cell started by `arena run` must not outlive it, even when it is
-  // SIGKILLed: the kernel sends SIGTERM when the parent dies. A parent that
-  // died before this line is caught by comparing the parent pid.
-  if (opt.parent_pid > 0) {
-    prctl(PR_SET_PDEATHSIG, SIGTERM);
-    if (getppid() != opt.parent_pid) {
-      spdlog::warn("cell {}: the process that started it ({}) is gone; not starting", opt.cell.id,
-                   opt.parent_pid);
-      return kExitOk;
-    }
+  // Signals are blocked before any thread starts (DDS threads inherit the
+  // mask) and handled on the watcher's thread: no code runs in a handler.
+  std::mutex mu;
+  std::condition_variable stopped;
+  int stop_signal = 0;
+  SignalWatcher signals([&](int sig) {
+    std::lock_guard<std::mutex> lock(mu);
+    stop_signal = sig;
+    stopped.notify_all();
+  });
+  if (!FollowParent(opt.parent_pid)) {
+    spdlog::warn("cell {}: the process that started it ({}) is gone; not starting", opt.cell.id,
+                 opt.parent_pid);
+    return kExitOk;
   }
 
   // A predecessor SIGKILLed (a restart after a crash) left its shared memory.
@@ -95,10 +92,12 @@ int RunCell(CellCliOptions opt) {
   } catch (const dds::DdsError& e) {
     throw CommandError(kExitCommunication, e.what());
   }
-  int sig = 0;
-  sigwait(&signals, &sig);
+  {
+    std::unique_lock<std::mutex> lock(mu);
+    stopped.wait(lock, [&] { return stop_signal != 0; });
+  }
   spdlog::info("cell {}: {} received, shutting down", opt.cell.id,
-               sig == SIGINT ? "SIGINT" : "SIGTERM");
+               stop_signal == SIGINT ? "SIGINT" : "SIGTERM");
   cell->Stop();
   cell.reset();
   return kExitOk;

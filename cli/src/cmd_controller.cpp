@@ -3,16 +3,11 @@
 // controller.hpp): answers every LiveState sample of a closed-loop trial whose
 // scene names NAME with a PusherCommand, until SIGINT or SIGTERM.
 #include <signal.h>
-#include <sys/prctl.h>
-#include <unistd.h>
-
-#include <pthread.h>
 
 #include <algorithm>
 #include <atomic>
 #include <memory>
 #include <string>
-#include <thread>
 
 #include <spdlog/sinks/stdout_color_sinks.h>
 #include <spdlog/spdlog.h>
@@ -20,6 +15,7 @@
 #include "arena/executors/controller.hpp"
 #include "arena/schemas/security.hpp"
 #include "commands.hpp"
+#include "signals.hpp"
 
 namespace arena::cli {
 namespace {
@@ -55,25 +51,15 @@ int RunController(ControllerCliOptions opt) {
   } catch (const dds::DdsError& e) {
     throw CommandError(kExitBadInput, e.what());
   }
-  // Signals: blocked before DDS starts its threads, awaited on a thread of
-  // our own that flips `stop` (as `arena cell`).
-  sigset_t signals;
-  sigemptyset(&signals);
-  sigaddset(&signals, SIGINT);
-  sigaddset(&signals, SIGTERM);
-  pthread_sigmask(SIG_BLOCK, &signals, nullptr);
-  if (opt.parent_pid > 0) {
-    prctl(PR_SET_PDEATHSIG, SIGTERM);
-    if (getppid() != opt.parent_pid) return kExitOk;
-  }
+  // Signals: blocked before DDS starts its threads, handled on the
+  // watcher's thread, which flips `stop` (as `arena cell`).
   std::atomic<bool> stop{false};
-  std::thread waiter([&] {
-    int sig = 0;
-    sigwait(&signals, &sig);
+  SignalWatcher signals([&](int sig) {
     spdlog::info("controller {}: {} received, shutting down", opt.host.name,
                  sig == SIGINT ? "SIGINT" : "SIGTERM");
     stop = true;
   });
+  if (!FollowParent(opt.parent_pid)) return kExitOk;
   executors::ControllerCounters counters;
   int code = kExitOk;
   std::string error;
@@ -94,8 +80,6 @@ int RunController(ControllerCliOptions opt) {
     code = kExitBadInput;
     error = e.what();
   }
-  if (!stop) pthread_kill(waiter.native_handle(), SIGTERM);
-  waiter.join();
   if (code != kExitOk) throw CommandError(code, error);
   spdlog::info(
       "controller {}: answered {} samples of {} trials ({} live samples superseded before it "

@@ -1,6 +1,8 @@
 #include "signals.hpp"
 
 #include <signal.h>
+#include <sys/prctl.h>
+#include <unistd.h>
 
 #include <ctime>
 
@@ -27,6 +29,13 @@ SignalWatcher::SignalWatcher(std::function<void(int)> on_signal) {
 SignalWatcher::~SignalWatcher() {
   done_ = true;
   thread_.join();
+}
+
+bool FollowParent(int parent_pid) {
+  if (parent_pid <= 0) return true;
+  prctl(PR_SET_PDEATHSIG, SIGTERM);
+  // A parent that died before the line above is caught by its pid.
+  return getppid() == parent_pid;
 }
 
 }  // namespace arena::cli

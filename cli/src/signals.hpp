@@ -24,4 +24,10 @@ class SignalWatcher {
   std::thread thread_;
 };
 
+// A process started by `arena run` (a cell, a controller) must not outlive
+// it, even when it is SIGKILLed: the kernel sends SIGTERM when the parent
+// dies. @returns false when the parent (parent_pid > 0) is already gone, so
+// the caller exits at once; true when there is none to follow.
+bool FollowParent(int parent_pid);
+
 }  // namespace arena::cli
