@@ -16,6 +16,7 @@
 #include "arena/orchestrator/logging.hpp"
 #include "arena/orchestrator/trial_data.hpp"
 #include "arena/schemas/ground_truth.hpp"
+#include "store_steps.hpp"
 
 namespace arena::orchestrator {
 
@@ -35,25 +36,6 @@ Clock::duration Dur(double seconds) {
   return std::chrono::duration_cast<Clock::duration>(Seconds(seconds));
 }
 
-// What a store error means for the step that met it (trial_driver.hpp).
-enum class StoreVerdict { kRetry, kStop, kMoot };
-
-StoreVerdict Judge(const db::StoreError& e) {
-  using K = db::StoreError::Kind;
-  switch (e.kind()) {
-    case K::kBusy:
-      return StoreVerdict::kRetry;
-    case K::kFull:
-    case K::kIo:
-    case K::kCorrupt:
-    case K::kReadOnly:
-    case K::kTooNew:
-      return StoreVerdict::kStop;
-    default:
-      return StoreVerdict::kMoot;
-  }
-}
-
 db::ResetReport UnobservedReset(const std::string& reason) {
   db::ResetReport r;
   r.ok = false;
@@ -61,9 +43,6 @@ db::ResetReport UnobservedReset(const std::string& reason) {
   r.pose_observed = false;
   return r;
 }
-
-constexpr double kFirstBackoff_s = 0.05;
-constexpr double kMaxBackoff_s = 2.0;
 
 }  // namespace
 
@@ -123,16 +102,8 @@ struct TrialDriver::Impl {
   std::map<std::int64_t, Execution> executions;
   std::map<std::int64_t, PredictionDone> waiting_predictions;
 
-  // A store step that met kBusy, waiting to be taken again.
-  struct PendingStep {
-    std::string what;
-    std::string cell_id;  // "" when no cell waits on it
-    std::function<void()> run;
-    std::function<void(const db::StoreError&)> on_moot;
-    Clock::time_point due;
-    double backoff_s;
-  };
-  std::deque<PendingStep> pending;
+  // Store steps, and those waiting after a busy store (store_steps.hpp).
+  StoreSteps steps;
 
   Clock::time_point next_claims{}, next_beat{}, next_file_check{}, next_campaigns{};
 
@@ -143,7 +114,10 @@ struct TrialDriver::Impl {
         store(s),
         transport(t),
         predictions(p),
-        now(std::move(n)) {}
+        now(std::move(n)),
+        steps(now, [this](const std::string& cell_id, int delta) {
+          Cell(cell_id).store_waits += delta;
+        }) {}
 
   void Count(std::int64_t ServiceCounters::*field, std::int64_t n = 1) {
     std::lock_guard lock(counters_mu);
@@ -151,61 +125,14 @@ struct TrialDriver::Impl {
   }
 
   // ------------------------------------------------------------ store policy
-  // Runs one store step under the policy of the header. kBusy: the same step
-  // is queued again (the cell, if any, waits with its deadlines held);
-  // fatal kinds: rethrown; others: on_moot (or a log line).
-  // @returns true when the step ran to its end now.
-  bool Step(const std::string& what, const std::string& cell_id, const std::function<void()>& run,
-            const std::function<void(const db::StoreError&)>& on_moot = {},
-            double backoff_s = kFirstBackoff_s) {
-    try {
-      run();
-      return true;
-    } catch (const db::StoreError& e) {
-      switch (Judge(e)) {
-        case StoreVerdict::kStop:
-          throw;
-        case StoreVerdict::kRetry: {
-          spdlog::warn("{}: store busy ({}); retrying in {:.2f} s", what, e.what(), backoff_s);
-          if (!cell_id.empty()) ++Cell(cell_id).store_waits;
-          pending.push_back({what, cell_id, run, on_moot, now() + Dur(backoff_s), backoff_s});
-          return false;
-        }
-        case StoreVerdict::kMoot:
-          if (on_moot)
-            on_moot(e);
-          else
-            spdlog::error("{}: {}", what, e.what());
-          return false;
-      }
-    }
-    return false;
+  // store_steps.hpp: kBusy queues the step again (the cell, if any, waits
+  // with its deadlines held); fatal kinds are rethrown; others go to on_moot
+  // (or a log line). @returns true when the step ran to its end now.
+  bool Step(const std::string& what, const std::string& cell_id, const StoreSteps::Run& run,
+            const StoreSteps::OnMoot& on_moot = {}) {
+    return steps.Step(what, cell_id, run, on_moot);
   }
-
-  // A step whose busy retry is pointless (the next pass does it anyway).
-  void Attempt(const std::string& what, const std::function<void()>& run) {
-    try {
-      run();
-    } catch (const db::StoreError& e) {
-      if (Judge(e) == StoreVerdict::kStop) throw;
-      spdlog::warn("{}: {}", what, e.what());
-    }
-  }
-
-  void RunPendingSteps() {
-    const auto t = now();
-    for (std::size_t n = pending.size(); n > 0 && !pending.empty(); --n) {
-      if (pending.front().due > t) {  // FIFO per due time is enough: keep order, rotate
-        pending.push_back(std::move(pending.front()));
-        pending.pop_front();
-        continue;
-      }
-      PendingStep p = std::move(pending.front());
-      pending.pop_front();
-      if (!p.cell_id.empty()) --Cell(p.cell_id).store_waits;
-      Step(p.what, p.cell_id, p.run, p.on_moot, std::min(p.backoff_s * 2, kMaxBackoff_s));
-    }
-  }
+  void Attempt(const std::string& what, const StoreSteps::Run& run) { steps.Attempt(what, run); }
 
   // ------------------------------------------------------------ cells
   CellRun& Cell(const std::string& id) {
@@ -905,7 +832,7 @@ struct TrialDriver::Impl {
       next_file_check = t + Dur(0.1);
       store.CheckFileIdentity();  // throws kIo: the service stops naming the file
     }
-    RunPendingSteps();
+    steps.RunDue();
     CheckDeadlines();
     if (t >= next_claims) {
       next_claims = t + Dur(opt.claim_period_s);
@@ -929,7 +856,7 @@ struct TrialDriver::Impl {
   bool InFlight() const {
     for (const auto& [id, cell] : cells)
       if (cell.phase != CellPhase::kIdle) return true;
-    return predictions.outstanding() > 0 || !waiting_predictions.empty() || !pending.empty();
+    return predictions.outstanding() > 0 || !waiting_predictions.empty() || steps.pending() > 0;
   }
 
   ServiceCounters Snapshot() const {
@@ -981,6 +908,6 @@ ServiceCounters TrialDriver::counters() const { return impl_->Snapshot(); }
 void TrialDriver::OnTrialTiming(std::function<void(const TrialTiming&)> callback) {
   impl_->on_trial_timing = std::move(callback);
 }
-std::size_t TrialDriver::pending_store_steps() const { return impl_->pending.size(); }
+std::size_t TrialDriver::pending_store_steps() const { return impl_->steps.pending(); }
 
 }  // namespace arena::orchestrator
