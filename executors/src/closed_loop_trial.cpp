@@ -150,9 +150,8 @@ std::optional<mechanics::PusherMotion> ClosedLoopTrial::Apply(const msg::PusherC
   // Actuation noise (defects.hpp) on a moving pusher: v (1 + s) + o.
   const TrialPerturbation& perturbation = layer_.perturbation();
   in_force_.velocity =
-      v.norm() > 0
-          ? Eigen::Vector3d(v * perturbation.velocity_scale + perturbation.velocity_offset)
-          : Eigen::Vector3d::Zero();
+      v.norm() > 0 ? Eigen::Vector3d(v * perturbation.velocity_scale + perturbation.velocity_offset)
+                   : Eigen::Vector3d::Zero();
   in_force_.angular_velocity = w;
   last_command_at_ = StreamClock::now();
   record.applied = in_force_.velocity;
@@ -195,10 +194,10 @@ json ClosedLoopTrial::Detail(const mechanics::SimulationResult& result,
   const ControlOutcome outcome = ScoreControl(context_.spec.name, context_, result.samples);
   json score = nullptr;
   if (outcome.scored) {
-    score = {{"reached", outcome.reached},
-             {"final_error", outcome.final_error},
-             {"settle_time_s",
-              outcome.settle_time_s < 0 ? json(nullptr) : json(outcome.settle_time_s)}};
+    score = {
+        {"reached", outcome.reached},
+        {"final_error", outcome.final_error},
+        {"settle_time_s", outcome.settle_time_s < 0 ? json(nullptr) : json(outcome.settle_time_s)}};
   }
   const TrialPerturbation& perturbation = layer_.perturbation();
   return {

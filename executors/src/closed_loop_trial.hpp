@@ -39,15 +39,14 @@ class ClosedLoopTrial {
   void Start();
   // Called by the simulation after every sample: publishes it, gets its
   // answer. nullopt (with *why) stops the run.
-  std::optional<mechanics::PusherMotion> Next(const std::vector<mechanics::TrajectorySample>& samples,
-                                              std::string* why);
+  std::optional<mechanics::PusherMotion> Next(
+      const std::vector<mechanics::TrajectorySample>& samples, std::string* why);
   // The pusher motion in force at the end (the last applied command).
   const mechanics::PusherMotion& in_force() const { return in_force_; }
   // What the sensors saw of each sample published so far.
   const std::vector<dds::Observation>& observed() const { return observed_; }
   // The EXECUTE status's detail: the model's figures and `closed_loop`.
-  nlohmann::json Detail(const mechanics::SimulationResult& result,
-                        std::uint32_t log_batches) const;
+  nlohmann::json Detail(const mechanics::SimulationResult& result, std::uint32_t log_batches) const;
 
   // Typed for the service like an open-loop failure; a controller's fault
   // (gone, silent past its hold time, a bad command) is FAILURE_NONE: no

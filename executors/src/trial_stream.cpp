@@ -17,8 +17,8 @@ std::uint64_t UnixNanos() {
 
 }  // namespace
 
-void PublishLive(const StreamPort& port, const msg::TrialCommand& c, std::uint32_t index,
-                 bool last, const msg::GroundTruthSample& sample, const std::string& controller,
+void PublishLive(const StreamPort& port, const msg::TrialCommand& c, std::uint32_t index, bool last,
+                 const msg::GroundTruthSample& sample, const std::string& controller,
                  const std::string& params) {
   msg::LiveState s;
   s.cell_id(port.cell_id);
@@ -51,8 +51,7 @@ bool TrialStream::Push(const mechanics::Scene& actual, const mechanics::Trajecto
                        const dds::Observation& observed) {
   if (!failure_.empty()) return false;
   if (pushed_ == 0) start_ = StreamClock::now();
-  if (batch_.samples().size() >= static_cast<std::size_t>(port_.batch_samples) &&
-      !SendBatch(false))
+  if (batch_.samples().size() >= static_cast<std::size_t>(port_.batch_samples) && !SendBatch(false))
     return false;
   if (Paced()) {
     const auto due = start_ + std::chrono::duration_cast<StreamClock::duration>(

@@ -50,9 +50,9 @@ enum class Pacing {
 
 // One sample on the live topic: best-effort, keep-last 1, never waits.
 // `controller` and its `params` are set for a closed-loop trial's samples.
-void PublishLive(const StreamPort& port, const msg::TrialCommand& c, std::uint32_t index,
-                 bool last, const msg::GroundTruthSample& sample,
-                 const std::string& controller = "", const std::string& params = "");
+void PublishLive(const StreamPort& port, const msg::TrialCommand& c, std::uint32_t index, bool last,
+                 const msg::GroundTruthSample& sample, const std::string& controller = "",
+                 const std::string& params = "");
 
 class TrialStream {
  public:

@@ -57,7 +57,8 @@ TEST(CommandIntake, AnotherSessionsCommandsAreDroppedWhileTheLeaseHolds) {
   EXPECT_TRUE(intake.Take(Claim(7, 5.0), t0, kCell).announce);
   // A second service on another store cannot take the cell nor queue work.
   EXPECT_FALSE(intake.Take(Claim(8, 5.0, "/lab/b.db"), After(t0, 1), kCell).announce);
-  const auto other = intake.Take(Command(8, msg::PHASE_EXECUTE, 1, "/lab/b.db"), After(t0, 1), kCell);
+  const auto other =
+      intake.Take(Command(8, msg::PHASE_EXECUTE, 1, "/lab/b.db"), After(t0, 1), kCell);
   EXPECT_FALSE(other.queued);
   EXPECT_TRUE(intake.Serves(7));
   EXPECT_TRUE(intake.empty());
@@ -112,8 +113,8 @@ TEST(CommandIntake, OnlyTheServedSessionCanReleaseTheCell) {
 TEST(CommandIntake, AClaimWithABadLeaseIsIgnoredAndALongOneIsCapped) {
   CommandIntake intake;
   const auto t0 = Clock::now();
-  for (double bad : {-1.0, std::numeric_limits<double>::quiet_NaN(),
-                     std::numeric_limits<double>::infinity()}) {
+  for (double bad :
+       {-1.0, std::numeric_limits<double>::quiet_NaN(), std::numeric_limits<double>::infinity()}) {
     EXPECT_FALSE(intake.Take(Claim(7, bad), t0, kCell).announce) << bad;
     EXPECT_TRUE(intake.Serves(0)) << bad;
   }
