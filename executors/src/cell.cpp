@@ -596,15 +596,21 @@ struct Cell::Impl {
       s.phase_wall_s(std::chrono::duration<double>(Clock::now() - started).count());
       return Finish(c, s);
     }
-    // The log: every sample, as the closed loop saw it, unpaced (the loop
-    // itself was paced). The loop observed each sample as it went; a run
-    // that ended past its last published sample is observed whole.
-    const std::vector<dds::Observation> observed = loop.observed().size() == result.samples.size()
-                                                       ? loop.observed()
-                                                       : layer.Observe(result.samples, trial);
-    mechanics::Scene as_run = layer.actual_scene();  // PusherAt's velocity: the last command
-    as_run.pusher->motion = loop.in_force();
-    const StreamOutcome streamed = StreamLog(stream_port, c, result.samples, as_run, observed,
+    // The log: every sample, as the closed loop saw it (what the sensors saw,
+    // the pusher's state under the command in force), unpaced (the loop
+    // itself was paced). A run that ended past its last published sample is
+    // taken whole: observed again, its pusher at the last command.
+    std::vector<dds::Observation> observed = loop.observed();
+    std::vector<dds::PusherState> pushers = loop.pushers();
+    if (observed.size() != result.samples.size()) {
+      observed = layer.Observe(result.samples, trial);
+      mechanics::Scene as_run = layer.actual_scene();
+      as_run.pusher->motion = loop.in_force();
+      pushers.resize(std::min(pushers.size(), result.samples.size()));
+      for (std::size_t i = pushers.size(); i < result.samples.size(); ++i)
+        pushers.push_back(PusherAt(as_run, result.samples[i]));
+    }
+    const StreamOutcome streamed = StreamLog(stream_port, c, result.samples, pushers, observed,
                                              trial.deadline, Pacing::kFlatOut);
     if (failure.empty()) failure = streamed.failure;
     EndedAt(result.samples.back(), observed);

@@ -3,6 +3,8 @@
 #include <algorithm>
 #include <cmath>
 
+#include "arena/executors/defects.hpp"
+
 namespace arena::executors {
 namespace {
 
@@ -97,10 +99,10 @@ std::optional<mechanics::PusherMotion> ClosedLoopTrial::Next(
   // streams as the log's, so live and log agree), one sample at a time.
   if (!observer_) observer_.emplace(layer_.MakeObserver(trial_));
   observed_.push_back(observer_->Next(samples));
-  dds::PusherState pusher;
-  pusher.position = truth.pusher_position;
-  pusher.velocity = in_force_.velocity;
+  dds::PusherState pusher = PusherAt(layer_.actual_scene(), truth);  // its pose
+  pusher.velocity = in_force_.velocity;  // the command that moved it to this sample
   pusher.angular_velocity = in_force_.angular_velocity;
+  pushers_.push_back(pusher);
   msg::GroundTruthSample encoded;
   dds::EncodeSample(truth, pusher, observed_.back(), &encoded);
   if (port_.speed > 0 && !port_.sleep_until(start_ + Seconds(truth.t * port_.speed))) {

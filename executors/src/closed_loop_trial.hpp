@@ -43,8 +43,10 @@ class ClosedLoopTrial {
       const std::vector<mechanics::TrajectorySample>& samples, std::string* why);
   // The pusher motion in force at the end (the last applied command).
   const mechanics::PusherMotion& in_force() const { return in_force_; }
-  // What the sensors saw of each sample published so far.
+  // What the sensors saw of each sample published so far, and the pusher's
+  // state at each (its velocity: the command in force while it was made).
   const std::vector<dds::Observation>& observed() const { return observed_; }
+  const std::vector<dds::PusherState>& pushers() const { return pushers_; }
   // The EXECUTE status's detail: the model's figures and `closed_loop`.
   nlohmann::json Detail(const mechanics::SimulationResult& result, std::uint32_t log_batches) const;
 
@@ -89,6 +91,7 @@ class ClosedLoopTrial {
   std::vector<AppliedCommand> applied_;
   std::optional<Observer> observer_;  // from the first sample: the layer's scene is set
   std::vector<dds::Observation> observed_;
+  std::vector<dds::PusherState> pushers_;
 };
 
 }  // namespace arena::executors

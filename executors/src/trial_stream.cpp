@@ -49,6 +49,11 @@ bool TrialStream::LiveDue() const { return Paced() ? port_.live->Matched() > 0 :
 
 bool TrialStream::Push(const mechanics::Scene& actual, const mechanics::TrajectorySample& truth,
                        const dds::Observation& observed) {
+  return Push(truth, PusherAt(actual, truth), observed);
+}
+
+bool TrialStream::Push(const mechanics::TrajectorySample& truth, const dds::PusherState& pusher,
+                       const dds::Observation& observed) {
   if (!failure_.empty()) return false;
   if (pushed_ == 0) start_ = StreamClock::now();
   if (batch_.samples().size() >= static_cast<std::size_t>(port_.batch_samples) && !SendBatch(false))
@@ -68,7 +73,7 @@ bool TrialStream::Push(const mechanics::Scene& actual, const mechanics::Trajecto
     }
   }
   msg::GroundTruthSample encoded;
-  dds::EncodeSample(truth, PusherAt(actual, truth), observed, &encoded);
+  dds::EncodeSample(truth, pusher, observed, &encoded);
   if (LiveDue()) PublishLive(port_, c_, static_cast<std::uint32_t>(pushed_), false, encoded);
   newest_ = encoded;
   batch_.samples().push_back(std::move(encoded));
@@ -129,13 +134,13 @@ bool TrialStream::SendBatch(bool last) {
 
 StreamOutcome StreamLog(const StreamPort& port, const msg::TrialCommand& c,
                         const std::vector<mechanics::TrajectorySample>& truth,
-                        const mechanics::Scene& actual,
+                        const std::vector<dds::PusherState>& pushers,
                         const std::vector<dds::Observation>& observed,
                         StreamClock::time_point deadline, Pacing pacing) {
   TrialStream out(port, c, deadline, pacing);
   std::string stopped;
   for (std::size_t i = 0; i < truth.size(); ++i) {
-    if (!out.Push(actual, truth[i], observed[i])) break;
+    if (!out.Push(truth[i], pushers[i], observed[i])) break;
     if (port.stopping() && i + 1 < truth.size()) {
       stopped = "interrupted: cell shutting down";
       break;

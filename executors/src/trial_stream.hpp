@@ -63,6 +63,10 @@ class TrialStream {
   // @returns false when the stream stopped (failure() says why).
   bool Push(const mechanics::Scene& actual, const mechanics::TrajectorySample& truth,
             const dds::Observation& observed);
+  // The same with the pusher's state given (a closed loop's changes with
+  // every command; `actual`'s constant motion would give the last one).
+  bool Push(const mechanics::TrajectorySample& truth, const dds::PusherState& pusher,
+            const dds::Observation& observed);
   // What the log queue holds leaves now (a backend waiting on its hardware).
   void Flush();
   // The backend finished: the rest of the log, flagged last; the live
@@ -99,10 +103,11 @@ struct StreamOutcome {
   std::uint32_t batches = 0;
 };
 
-// A whole trial's samples, known in advance (closed loop: the loop ran live).
+// A whole trial's samples, known in advance (closed loop: the loop ran live,
+// and `pushers` holds the pusher's state at each sample).
 StreamOutcome StreamLog(const StreamPort& port, const msg::TrialCommand& c,
                         const std::vector<mechanics::TrajectorySample>& truth,
-                        const mechanics::Scene& actual,
+                        const std::vector<dds::PusherState>& pushers,
                         const std::vector<dds::Observation>& observed,
                         StreamClock::time_point deadline, Pacing pacing);
 

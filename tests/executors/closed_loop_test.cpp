@@ -87,6 +87,16 @@ TEST(ClosedLoop, LockstepPivotReachesItsTargetAndReplaysIdentically) {
   EXPECT_LT(std::abs(outcome["final_error"].get<double>()), 0.02);
   EXPECT_GT(outcome["settle_time_s"].get<double>(), 0.0);
   EXPECT_GT(a.live, 0u) << "no LiveState seen";
+  // The log's pusher twist is, at every sample, the command that moved the
+  // pusher to it: the one applied after the previous sample (at rest before
+  // the first). It used to carry the trial's last command throughout.
+  for (std::size_t k = 0; k < a.samples.size(); ++k) {
+    for (int axis = 0; axis < 3; ++axis) {
+      const double want = k == 0 ? 0.0 : commands[k - 1][5 + axis].get<double>();
+      ASSERT_EQ(a.samples[k].pusher_twist()[static_cast<std::size_t>(axis)], want)
+          << "sample " << k << " axis " << axis;
+    }
+  }
 
   // The same attempt again: the same perturbation, noise and drops, so the
   // same commands and the same end state, bit for bit.
