@@ -102,12 +102,22 @@ std::optional<reset::Pose> TrialStartPose(const std::optional<ResetLeft>& left, 
   return reset::PlacementForTrial(target, params, seed).true_pose;
 }
 
-bool SamePusher(const std::optional<mechanics::PusherSpec>& a,
-                const std::optional<mechanics::PusherSpec>& b) {
-  if (a.has_value() != b.has_value()) return false;
-  if (!a) return true;
-  return a->type == b->type && a->length == b->length && a->radius == b->radius &&
-         a->axis == b->axis && a->normal == b->normal && a->position == b->position;
+// What the next trial's pusher asks of the cell: nothing, a move of the
+// same pusher (only its contact point differs: the arm places it), or a swap
+// (another geometry or direction: a tool change).
+struct PusherChange {
+  bool swap = false;
+  double move_m = 0;
+};
+PusherChange ChangeOfPusher(const std::optional<mechanics::PusherSpec>& now,
+                            const std::optional<mechanics::PusherSpec>& next) {
+  if (now.has_value() != next.has_value()) return {true, 0};
+  if (!now) return {};
+  const bool same_tool = now->type == next->type && now->length == next->length &&
+                         now->radius == next->radius && now->axis == next->axis &&
+                         now->normal == next->normal;
+  if (!same_tool) return {true, 0};
+  return {false, (next->position - now->position).norm()};
 }
 
 }  // namespace
@@ -650,7 +660,9 @@ struct Cell::Impl {
       request.target = ToResetPose(next.object.pose);
       next_pusher = next.pusher;
     }
-    request.swap_pusher = !SamePusher(pusher, next_pusher);
+    const PusherChange change = ChangeOfPusher(pusher, next_pusher);
+    request.swap_pusher = change.swap;
+    request.pusher_move_m = change.move_m;
     auto accepted = BaseStatus(c, msg::STATE_ACCEPTED);
     Send(accepted);
 
@@ -658,6 +670,7 @@ struct Cell::Impl {
     backend_request.target = request.target;
     backend_request.observed_end = observed_pose;
     backend_request.swap_pusher = request.swap_pusher;
+    backend_request.pusher_move_m = request.pusher_move_m;
     backend_request.next_scene_json = c.scene_json();
     const auto deadline = c.deadline_s() > 0 && std::isfinite(c.deadline_s())
                               ? started + std::chrono::duration_cast<Clock::duration>(
@@ -691,6 +704,7 @@ struct Cell::Impl {
     s.detail_json(json({{"plan", plan},
                         {"time_s", out.time_s},
                         {"swap_pusher", request.swap_pusher},
+                        {"pusher_move_m", request.pusher_move_m},
                         {"retryable", out.retryable}})
                       .dump());
     Finish(c, s);

@@ -80,6 +80,8 @@ const char* ToString(PrimitiveKind kind) {
   switch (kind) {
     case PrimitiveKind::kSwapPusher:
       return "swap_pusher";
+    case PrimitiveKind::kMovePusher:
+      return "move_pusher";
     case PrimitiveKind::kRelease:
       return "release";
     case PrimitiveKind::kRotate:
@@ -127,9 +129,13 @@ void ValidateResetParams(const ResetParams& p) {
 }
 
 std::vector<Primitive> PlanReset(const Pose& observed, const Pose& target, bool swap_pusher,
-                                 const ResetParams& params) {
+                                 const ResetParams& params, double pusher_move_m) {
   std::vector<Primitive> plan;
-  if (swap_pusher) plan.push_back({PrimitiveKind::kSwapPusher, observed, params.swap_time});
+  if (swap_pusher) {
+    plan.push_back({PrimitiveKind::kSwapPusher, observed, params.swap_time});
+  } else if (pusher_move_m > 0) {
+    plan.push_back({PrimitiveKind::kMovePusher, observed, pusher_move_m / params.translate_speed});
+  }
   const double angle = AngleBetween(observed.orientation, target.orientation);
   const double distance = (target.position - observed.position).norm();
   const bool rotate = angle > params.angle_tolerance;
@@ -171,9 +177,10 @@ ResetOutcome ExecuteReset(const ResetRequest& request, const ResetParams& params
   }
   Pose observed = request.observed_end;
   bool swap = request.swap_pusher;
+  double move = swap ? 0.0 : request.pusher_move_m;
   for (int attempt = 1; attempt <= params.max_attempts; ++attempt) {
     out.attempts = attempt;
-    out.plan = PlanReset(observed, request.target, swap, params);
+    out.plan = PlanReset(observed, request.target, swap, params, move);
     // Two draws per attempt whatever the plan, so that one outcome does not
     // shift the stream of the others.
     const double slip = slips.Uniform();
@@ -183,13 +190,17 @@ ResetOutcome ExecuteReset(const ResetRequest& request, const ResetParams& params
       // is spent, the object stays where it was (observed again as before).
       const size_t slip_at = static_cast<size_t>(slip_draw % out.plan.size());
       for (size_t i = 0; i <= slip_at; ++i) out.time_s += out.plan[i].duration_s;
-      if (swap && slip_at > 0) swap = false;  // the swap (always first) was completed
+      if (slip_at > 0) {  // the pusher's swap or move (always first) was completed
+        swap = false;
+        move = 0;
+      }
       out.failure = std::string("object slipped during ") + ToString(out.plan[slip_at].kind) +
                     " (attempt " + std::to_string(attempt) + ")";
       continue;
     }
     for (const auto& p : out.plan) out.time_s += p.duration_s;
     swap = false;
+    move = 0;
     // The prepared trial's next placement (also with an empty plan: reset.hpp).
     const Placement placed = placements.Next();
     observed = placed.observed;

@@ -86,10 +86,11 @@ TEST(FaultSuite, ServiceKilledAtTwentySeededRandomPoints) {
   const std::string db = dir / "kill20.db";
   const std::string domain = std::to_string(TestDomain(21));
   // Wall-clock pacing so the campaign outlasts 20 kills (about 40 s of service
-  // time): at half speed a trial with its reset (a pusher swap is 5 s) takes
-  // 1-3 s, so 60 trials on two cells need well over a minute.
-  auto c1 = StartCell(dir, domain, "c1", "0.5");
-  auto c2 = StartCell(dir, domain, "c2", "0.5");
+  // time): a trial with its reset (release, pick and place, regrasp, and a
+  // 0.2 s pusher move where the pivot offset changes) takes about 2 s, so 60
+  // trials on two cells need about a minute.
+  auto c1 = StartCell(dir, domain, "c1", "1");
+  auto c2 = StartCell(dir, domain, "c2", "1");
   // 60 trials: with the service finding its cells at once after a restart,
   // the 30-trial campaign ends before the 20th kill.
   ASSERT_EQ(RunArena({"submit", TestCampaign("e2e60.json"), "--db", db}, dir / "submit.out",
@@ -123,8 +124,8 @@ TEST(FaultSuite, ServiceKilledAtTwentySeededRandomPoints) {
   }
   EXPECT_EQ(tally.injected, 20) << "the campaign ended before 20 kills: " << kills;
   auto serve = StartArena({"serve", "--db", db, "--domain", domain}, dir / "serve-final.log");
-  // What is left may take minutes on a loaded machine (pusher swaps are paced
-  // too); a service that stops making progress still fails within a minute.
+  // What is left may take minutes on a loaded machine (resets are paced too);
+  // a service that stops making progress still fails within a minute.
   ASSERT_TRUE(WaitWhileProgressing(
       all_finished, [&db] { return CountStates(db, 1)["done"]; }, std::chrono::seconds(60),
       std::chrono::seconds(480)))

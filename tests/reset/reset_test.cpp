@@ -41,6 +41,30 @@ TEST(ResetPlan, TranslationRotationAndPusherSwap) {
   EXPECT_TRUE(plan.back().target.position.isApprox(Eigen::Vector3d::Zero()));
 }
 
+// The same pusher placed elsewhere is moved by the arm (distance over the
+// translate speed), not swapped; a swap already places the new pusher.
+TEST(ResetPlan, APusherMovedRatherThanSwappedCostsItsTravel) {
+  ResetParams params;
+  using K = PrimitiveKind;
+  const auto moved = PlanReset(At(0, 0, 0), At(0, 0, 0), false, params, 0.005);
+  ASSERT_EQ(Kinds(moved), (std::vector<K>{K::kMovePusher}));
+  EXPECT_NEAR(moved[0].duration_s, 0.005 / params.translate_speed, 1e-12);
+  EXPECT_LT(moved[0].duration_s, params.swap_time);
+  EXPECT_EQ(Kinds(PlanReset(At(0.01, 0, 0), At(0, 0, 0), true, params, 0.005)),
+            (std::vector<K>{K::kSwapPusher, K::kRelease, K::kTranslate, K::kRegrasp}));
+  ResetRequest r;
+  r.target = At(0, 0, 0);
+  r.observed_end = r.true_end = At(0.01, 0, 0);
+  const ResetOutcome plain = ExecuteReset(r, params, 7, 1);
+  r.pusher_move_m = 0.005;
+  const ResetOutcome with_move = ExecuteReset(r, params, 7, 1);
+  ASSERT_TRUE(plain.success && with_move.success);
+  EXPECT_NEAR(with_move.time_s - plain.time_s, 0.005 / params.translate_speed, 1e-12);
+  EXPECT_EQ(with_move.final_true.position,
+            plain.final_true.position)  // the placement is the trial's
+      << "a pusher move must not change where the object is placed";
+}
+
 TEST(ResetExecute, SucceedsWithinToleranceAndReportsTime) {
   ResetParams params;
   ResetRequest r;

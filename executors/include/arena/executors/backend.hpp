@@ -109,6 +109,7 @@ struct BackendResetRequest {
   reset::Pose target;           // the next trial's start pose (gripper frame)
   reset::Pose observed_end;     // where the cell last saw the object
   bool swap_pusher = false;     // the next trial needs another pusher
+  double pusher_move_m = 0;     // or the same pusher, moved this far (m)
   std::string next_scene_json;  // "" = nominal
 };
 struct BackendResetOutcome {

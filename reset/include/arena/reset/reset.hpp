@@ -36,6 +36,7 @@ struct Pose {
 
 enum class PrimitiveKind {
   kSwapPusher,  // exchange the pusher for the geometry the next trial needs
+  kMovePusher,  // the same pusher, moved to where the next trial needs it
   kRelease,     // open the fingers, leaving the object on the fixture
   kRotate,      // regrasp and rotate the object in the grasp to the target orientation
   kTranslate,   // pick and place the object at the target position
@@ -70,15 +71,20 @@ struct ResetParams {
 void ValidateResetParams(const ResetParams& params);
 
 // Plans from the observed pose to the target. Primitives that are not needed
-// (already within tolerance) are left out; swap_pusher adds a swap first.
+// (already within tolerance) are left out; swap_pusher adds a swap first, and
+// pusher_move_m > 0 (the same pusher, placed elsewhere; no swap) a move of the
+// pusher at translate_speed.
 std::vector<Primitive> PlanReset(const Pose& observed, const Pose& target, bool swap_pusher,
-                                 const ResetParams& params);
+                                 const ResetParams& params, double pusher_move_m = 0);
 
 struct ResetRequest {
   Pose observed_end;         // what the sensors saw at the end of the last phase
   Pose true_end;             // where the object really is
   Pose target;               // the next trial's start pose
   bool swap_pusher = false;  // the next trial needs another pusher geometry
+  // The next trial needs the same pusher elsewhere (its contact point moved
+  // by this much, m): a move of the arm, not a tool change. 0 with a swap.
+  double pusher_move_m = 0;
 };
 
 struct ResetOutcome {
