@@ -430,10 +430,22 @@ class MujocoSimulator final : public Simulator {
       return "object.polygon: the mujoco simulator needs a counter-clockwise polygon of area > 0";
     return "";
   }
-  mechanics::SimulationResult Simulate(const mechanics::Scene& scene) const override;
+  mechanics::SimulationResult Simulate(const mechanics::Scene& scene) const override {
+    return SimulateWith(scene, nullptr);
+  }
+  // Closed loop (issue 19): the pusher is driven kinematically anyway, so a
+  // command only changes its velocity from the sample it answers on.
+  bool closed_loop() const override { return true; }
+  mechanics::SimulationResult SimulateClosedLoop(
+      const mechanics::Scene& scene,
+      const mechanics::PusherCommandSource& commands) const override {
+    return SimulateWith(scene, &commands);
+  }
   std::unique_ptr<PreparedScene> Prepare(const mechanics::Scene& scene) const override;
 
  private:
+  mechanics::SimulationResult SimulateWith(const mechanics::Scene& scene,
+                                           const mechanics::PusherCommandSource* commands) const;
   MujocoSettings settings_;
   std::shared_ptr<MujocoModelCache> cache_;
 };
@@ -450,11 +462,31 @@ struct Run {
   std::vector<int> pad_of_geom;  // geom id -> finger index (then the pusher), -1: none
   size_t n_pads = 0;
   int object_geom = -1;
+  // Closed loop: the pusher's velocity in force since pusher_t0, when it was
+  // at pusher_base (commanded is false: the scene's constant motion).
+  bool commanded = false;
+  Eigen::Vector3d pusher_base = Eigen::Vector3d::Zero(), pusher_v = Eigen::Vector3d::Zero();
+  double pusher_t0 = 0;
+
+  const Eigen::Vector3d& PusherVelocity() const {
+    return commanded ? pusher_v : scene.pusher->motion.velocity;
+  }
+  // A command from time t on (the pusher stays where it is then). The
+  // velocity in force again changes nothing, to the last bit.
+  void CommandPusher(double t, const Eigen::Vector3d& velocity) {
+    if (velocity == PusherVelocity()) return;
+    Eigen::Quaterniond q;
+    PusherAt(t, &pusher_base, &q);
+    pusher_t0 = t;
+    pusher_v = velocity;
+    commanded = true;
+  }
 
   // Pusher contact point and orientation at time t (constant twist about the contact point).
   void PusherAt(double t, Eigen::Vector3d* p, Eigen::Quaterniond* q) const {
     const auto& ps = *scene.pusher;
-    *p = ps.position + ps.motion.velocity * t;
+    *p = commanded ? Eigen::Vector3d(pusher_base + pusher_v * (t - pusher_t0))
+                   : Eigen::Vector3d(ps.position + ps.motion.velocity * t);
     const Eigen::Vector3d w = ps.motion.angular_velocity;
     *q = w.norm() > 0 ? Eigen::Quaterniond(Eigen::AngleAxisd(w.norm() * t, w.normalized()))
                       : Eigen::Quaterniond::Identity();
@@ -469,7 +501,7 @@ struct Run {
     qp[3] = q.w(), qp[4] = q.x(), qp[5] = q.y(), qp[6] = q.z();
     const Eigen::Vector3d w_local = q.conjugate() * scene.pusher->motion.angular_velocity;
     mjtNum* qv = d->qvel + pusher_qvel;
-    for (int k = 0; k < 3; ++k) qv[k] = scene.pusher->motion.velocity[k], qv[3 + k] = w_local[k];
+    for (int k = 0; k < 3; ++k) qv[k] = PusherVelocity()[k], qv[3 + k] = w_local[k];
   }
 
   // Velocity of the pad carrying contact index `who` at world point p.
@@ -479,7 +511,7 @@ struct Run {
     Eigen::Vector3d c;
     Eigen::Quaterniond q;
     PusherAt(t, &c, &q);
-    return scene.pusher->motion.velocity + scene.pusher->motion.angular_velocity.cross(p - c);
+    return PusherVelocity() + scene.pusher->motion.angular_velocity.cross(p - c);
   }
   // The pad's contact point now (where its surface met the object at t = 0).
   Eigen::Vector3d PadPoint(size_t who, double t) const {
@@ -607,8 +639,20 @@ bool Finite(const mechanics::TrajectorySample& s) {
 // from a scene that differs only in friction, grip force and mass with those
 // patched in (MujocoPrepared). `d` is fresh (made or reset). Throws what
 // MuJoCo throws; fills `result` (status kSolverFailure on a divergence).
+// Closed loop: `commands` answers every sample with the pusher's velocity
+// from then on (mechanics::Simulate(scene, commands) has the same contract).
+std::string CheckCommand(const mechanics::Scene& scene, const mechanics::PusherMotion& command) {
+  if (!command.velocity.allFinite() || !command.angular_velocity.allFinite())
+    return "pusher command: not finite";
+  if (command.angular_velocity != scene.pusher->motion.angular_velocity)
+    return "pusher command: angular velocity differs from the scene's (the pusher turns at a "
+           "constant rate only)";
+  return "";
+}
+
 void RunLoaded(const mechanics::Scene& scene, const MujocoSettings& st, mjModel* m, mjData* d,
-               mechanics::SimulationResult* result) {
+               mechanics::SimulationResult* result,
+               const mechanics::PusherCommandSource* commands = nullptr) {
   const int per_sample = StepsPerSample(st);
   Run run{scene, st, m, d, -1, -1, -1, -1, -1, -1, {}, {}, {}, 0, -1};
   run.pad_of_geom.assign(static_cast<size_t>(m->ngeom), -1);
@@ -685,6 +729,19 @@ void RunLoaded(const mechanics::Scene& scene, const MujocoSettings& st, mjModel*
       return;
     }
     result->samples.push_back(std::move(s));
+    if (!commands || !scene.pusher) continue;
+    std::string why;
+    const std::optional<mechanics::PusherMotion> command = (*commands)(result->samples, &why);
+    if (!command) {
+      result->stopped = why.empty() ? "stopped by the command source" : why;
+      return;
+    }
+    if (std::string bad = CheckCommand(scene, *command); !bad.empty()) {
+      result->status = mechanics::SimulationStatus::kInvalidScene;
+      result->error = bad;
+      return;
+    }
+    run.CommandPusher(d->time, command->velocity);
   }
 }
 
@@ -706,7 +763,8 @@ class Timed {
   std::chrono::steady_clock::time_point start_;
 };
 
-mechanics::SimulationResult MujocoSimulator::Simulate(const mechanics::Scene& scene) const {
+mechanics::SimulationResult MujocoSimulator::SimulateWith(
+    const mechanics::Scene& scene, const mechanics::PusherCommandSource* commands) const {
   Timed run(settings_);
   auto& result = run.result;
   if (std::string why = CheckScene(scene); !why.empty()) {
@@ -751,7 +809,7 @@ mechanics::SimulationResult MujocoSimulator::Simulate(const mechanics::Scene& sc
       if (h.d) mj_resetData(h.m, h.d);
     }
     if (!h.d) h.d = mj_makeData(h.m);
-    RunLoaded(scene, settings_, h.m, h.d, &result);
+    RunLoaded(scene, settings_, h.m, h.d, &result, commands);
   } catch (const std::exception& e) {
     result.status = mechanics::SimulationStatus::kSolverFailure;
     result.error = e.what();

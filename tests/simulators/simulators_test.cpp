@@ -148,6 +148,56 @@ TEST(MujocoClosedForm, SlidingPushForce) {
   EXPECT_EQ(last.contacts[2].mode, ContactMode::kStick);
 }
 
+// Closed loop (issue 19): a command source answering every sample with the
+// scene's own motion gives the open-loop run exactly (the pusher is driven
+// kinematically either way); a source that stops the pusher half-way leaves
+// it where it was then, and the sliding push it drove stops with it (the
+// object rests held: its velocity is back to about zero within 0.1 s).
+TEST(MujocoClosedLoop, ReplaysCommandsLikeTheOpenLoopRunAndStopsThePusherOnCommand) {
+  Scene s = HeldBox(0.2, 10, 0.5);
+  s.pusher = PusherBelow(0, 0.01, 0.3);
+  s.duration = 0.4;
+  const auto sim = MakeMujocoSimulator({});
+  ASSERT_TRUE(sim->closed_loop());
+  const auto open = sim->Simulate(s);
+  ASSERT_EQ(open.status, SimulationStatus::kOk) << open.error;
+  const auto same = sim->SimulateClosedLoop(
+      s, [&](const std::vector<mechanics::TrajectorySample>&, std::string*) {
+        return std::optional<mechanics::PusherMotion>(s.pusher->motion);
+      });
+  ASSERT_EQ(same.status, SimulationStatus::kOk) << same.error;
+  ASSERT_EQ(same.samples.size(), open.samples.size());
+  for (std::size_t i = 0; i < open.samples.size(); ++i) {
+    EXPECT_EQ(same.samples[i].position, open.samples[i].position) << i;
+    EXPECT_EQ(same.samples[i].pusher_position, open.samples[i].pusher_position) << i;
+  }
+  const std::size_t half = open.samples.size() / 2;
+  const auto stopped = sim->SimulateClosedLoop(
+      s, [&](const std::vector<mechanics::TrajectorySample>& so_far, std::string*) {
+        mechanics::PusherMotion m = s.pusher->motion;
+        if (so_far.size() > half) m.velocity.setZero();
+        return std::optional<mechanics::PusherMotion>(m);
+      });
+  ASSERT_EQ(stopped.status, SimulationStatus::kOk) << stopped.error;
+  ASSERT_EQ(stopped.samples.size(), open.samples.size());
+  const Eigen::Vector3d at_stop = stopped.samples[half].pusher_position;
+  EXPECT_NEAR(at_stop.z(), -0.05 + 0.01 * stopped.samples[half].t, 1e-12);
+  for (std::size_t i = half; i < stopped.samples.size(); ++i)
+    EXPECT_EQ(stopped.samples[i].pusher_position, at_stop) << i;
+  EXPECT_LT(stopped.samples.back().velocity.norm(), 1e-3);
+  EXPECT_LT(stopped.samples.back().position.z(), open.samples.back().position.z() - 1e-3);
+  // A source that ends the run: the reason is kept, the samples so far too.
+  const auto ended = sim->SimulateClosedLoop(
+      s, [](const std::vector<mechanics::TrajectorySample>& so_far, std::string* why) {
+        if (so_far.size() < 10)
+          return std::optional<mechanics::PusherMotion>(mechanics::PusherMotion{});
+        *why = "controller gone";
+        return std::optional<mechanics::PusherMotion>();
+      });
+  EXPECT_EQ(ended.stopped, "controller gone");
+  EXPECT_EQ(ended.samples.size(), 10u);
+}
+
 // Pivoting push (no gravity): point fingers on the x axis with μ = 2 (sliding
 // would need 40 N), a frictionless pusher d = 1 cm off the axis pushing +z.
 // The box can only pivot about the fingers' axis while the pusher slides
