@@ -48,9 +48,11 @@ inline std::unique_ptr<Child> StartController(int domain, const std::string& nam
 }
 
 inline std::unique_ptr<Child> StartCell(int domain, const std::string& id, double speed,
-                                        const std::string& defects = "") {
+                                        const std::string& defects = "",
+                                        const std::string& backend = "model") {
   std::vector<std::string> args = {
-      "cell", "--id", id, "--domain", std::to_string(domain), "--speed", std::to_string(speed)};
+      "cell",      "--id", id, "--domain", std::to_string(domain), "--speed", std::to_string(speed),
+      "--backend", backend};
   if (!defects.empty()) {
     const std::string path =
         ::testing::TempDir() + "closed_loop_defects_" + std::to_string(getpid()) + ".json";

@@ -114,5 +114,31 @@ TEST(ClosedLoop, LockstepPivotReachesItsTargetAndReplaysIdentically) {
     EXPECT_EQ(b.samples.back().object_pose()[i], a.samples.back().object_pose()[i]);
 }
 
+// The same lockstep loop on a MuJoCo cell (an independent engine whose
+// pusher takes each command from the sample it answers): the pivot reaches
+// its target, every sample is answered, and the log's pusher twist is the
+// applied command, as on the model cell.
+TEST(ClosedLoop, LockstepPivotOnAMujocoCellReachesItsTarget) {
+  const int domain = test::TestDomain(23);
+  auto cell = test::StartCell(domain, "c1", 0, "", "mujoco");
+  auto controller = test::StartController(domain, "pivot_to_angle");
+  test::Driver d(domain);
+  dds::Reader<msg::LiveState> live(d.participant, dds::ReaderOptions{false});
+  ASSERT_TRUE(d.WaitForCells({"c1"}, 15s));
+  ASSERT_TRUE(d.commands.WaitForMatched(1, 10s));
+  ASSERT_TRUE(d.participant.WaitForPeer("arena.controller.pivot_to_angle", 15s));
+  TrialRun a = Execute(d, live, 1, 1, test::PivotScene(1.2, 0.15, 0.5, 2.0));
+  ASSERT_EQ(a.status.state(), msg::STATE_EXECUTED) << a.status.reason();
+  ASSERT_TRUE(a.detail.is_object()) << a.status.detail_json();
+  EXPECT_EQ(a.detail["held"].get<int>(), 0);
+  const auto& outcome = a.detail["outcome"];
+  ASSERT_TRUE(outcome.is_object());
+  EXPECT_TRUE(outcome["reached"].get<bool>()) << outcome.dump();
+  const auto& commands = a.detail["commands"];
+  ASSERT_EQ(a.samples.size(), commands.size());
+  for (std::size_t k = 1; k < a.samples.size(); ++k)
+    ASSERT_EQ(a.samples[k].pusher_twist()[1], commands[k - 1][6].get<double>()) << k;
+}
+
 }  // namespace
 }  // namespace arena
