@@ -13,14 +13,11 @@ using namespace std::chrono_literals;
 using Clock = std::chrono::steady_clock;
 
 void DeadControllerFailsThePhase(double speed) {
-  const int domain = test::TestDomain(speed > 0 ? 191 : 190);
-  auto cell = test::StartCell(domain, "c1", speed);
-  auto controller = test::StartController(domain, "pivot_to_angle");
-  test::Driver d(domain);
-  dds::Reader<msg::LiveState> live(d.participant, dds::ReaderOptions{false});
-  ASSERT_TRUE(d.WaitForCells({"c1"}, 15s));
-  ASSERT_TRUE(d.commands.WaitForMatched(1, 10s));
-  ASSERT_TRUE(d.participant.WaitForPeer("arena.controller.pivot_to_angle", 15s));
+  test::LoopRig rig(test::TestDomain(speed > 0 ? 191 : 190), speed);
+  ASSERT_TRUE(rig.Ready());
+  auto& d = rig.driver;
+  auto& live = rig.live;
+  auto& controller = rig.controller;
 
   const double hold_s = 0.3;
   // Long enough that the controller dies in the middle (lockstep: the
@@ -60,7 +57,7 @@ void DeadControllerFailsThePhase(double speed) {
   auto next = d.FinalStatus(2, 30s);
   ASSERT_TRUE(next);
   EXPECT_EQ(next->state(), msg::STATE_EXECUTED) << next->reason();
-  EXPECT_FALSE(cell->Wait(0ms).has_value()) << "the cell process ended";
+  EXPECT_FALSE(rig.cell->Wait(0ms).has_value()) << "the cell process ended";
 }
 
 TEST(ClosedLoopFaults, DeadControllerFailsThePhaseWithinItsHoldTimeInLockstep) {

@@ -63,6 +63,26 @@ inline std::unique_ptr<Child> StartCell(int domain, const std::string& id, doubl
   return StartProcess("cell_" + id, args);
 }
 
+// One cell ("c1") and the pivot_to_angle controller as real processes on a
+// test domain, with a driver playing the service and a reader of the live
+// topic. Ready() waits (bounded) until all of them have found each other.
+struct LoopRig {
+  LoopRig(int domain, double speed, const std::string& defects = "",
+          const std::string& backend = "model")
+      : cell(StartCell(domain, "c1", speed, defects, backend)),
+        controller(StartController(domain, "pivot_to_angle")),
+        driver(domain),
+        live(driver.participant, dds::ReaderOptions{false}) {}
+  bool Ready() {
+    using namespace std::chrono_literals;
+    return driver.WaitForCells({"c1"}, 15s) && driver.commands.WaitForMatched(1, 10s) &&
+           driver.participant.WaitForPeer("arena.controller.pivot_to_angle", 15s);
+  }
+  std::unique_ptr<Child> cell, controller;
+  Driver driver;
+  dds::Reader<msg::LiveState> live;
+};
+
 // The closed_loop section of an EXECUTE status's detail.
 inline nlohmann::json ClosedLoopDetail(const msg::TrialStatus& s) {
   const auto j = nlohmann::json::parse(s.detail_json(), nullptr, false);

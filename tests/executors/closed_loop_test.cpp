@@ -45,26 +45,21 @@ TrialRun Execute(test::Driver& d, dds::Reader<msg::LiveState>& live, std::uint64
 }
 
 TEST(ClosedLoop, LockstepPivotReachesItsTargetAndReplaysIdentically) {
-  const int domain = test::TestDomain(19);
   // An imperfect cell: sensing noise, latency, drops, actuation noise. Its
   // reset places exactly: since trials start at their own placement
   // (reset::PlacementForTrial) even on a fresh cell, the default placement
   // error made this pivot overshoot to 0.35 rad (the law never pulls, so
   // nothing brings the object back once past the target) -- a property of
   // the law on that start pose, not of the lockstep loop tested here.
-  auto cell = test::StartCell(domain, "c1", 0,
-                              R"({"pose_noise": {"position_std": 0.0002, "rotation_std": 0.002},
-                                  "latency_ms": 8, "drop_probability": 0.05,
-                                  "actuation_noise": {"velocity_scale_std": 0.05,
-                                                      "velocity_offset_std": 0.0001},
-                                  "reset": {"placement_position_std": 0,
-                                            "placement_angle_std": 0}})");
-  auto controller = test::StartController(domain, "pivot_to_angle");
-  test::Driver d(domain);
-  dds::Reader<msg::LiveState> live(d.participant, dds::ReaderOptions{false});
-  ASSERT_TRUE(d.WaitForCells({"c1"}, 15s));
-  ASSERT_TRUE(d.commands.WaitForMatched(1, 10s));
-  ASSERT_TRUE(d.participant.WaitForPeer("arena.controller.pivot_to_angle", 15s));
+  test::LoopRig rig(test::TestDomain(19), 0,
+                    R"({"pose_noise": {"position_std": 0.0002, "rotation_std": 0.002},
+                        "latency_ms": 8, "drop_probability": 0.05,
+                        "actuation_noise": {"velocity_scale_std": 0.05,
+                                            "velocity_offset_std": 0.0001},
+                        "reset": {"placement_position_std": 0, "placement_angle_std": 0}})");
+  ASSERT_TRUE(rig.Ready());
+  auto& d = rig.driver;
+  auto& live = rig.live;
 
   const double target = 0.15;
   const std::string scene = test::PivotScene(1.2, target, 0.5, 2.0);
@@ -119,15 +114,9 @@ TEST(ClosedLoop, LockstepPivotReachesItsTargetAndReplaysIdentically) {
 // its target, every sample is answered, and the log's pusher twist is the
 // applied command, as on the model cell.
 TEST(ClosedLoop, LockstepPivotOnAMujocoCellReachesItsTarget) {
-  const int domain = test::TestDomain(23);
-  auto cell = test::StartCell(domain, "c1", 0, "", "mujoco");
-  auto controller = test::StartController(domain, "pivot_to_angle");
-  test::Driver d(domain);
-  dds::Reader<msg::LiveState> live(d.participant, dds::ReaderOptions{false});
-  ASSERT_TRUE(d.WaitForCells({"c1"}, 15s));
-  ASSERT_TRUE(d.commands.WaitForMatched(1, 10s));
-  ASSERT_TRUE(d.participant.WaitForPeer("arena.controller.pivot_to_angle", 15s));
-  TrialRun a = Execute(d, live, 1, 1, test::PivotScene(1.2, 0.15, 0.5, 2.0));
+  test::LoopRig rig(test::TestDomain(23), 0, "", "mujoco");
+  ASSERT_TRUE(rig.Ready());
+  TrialRun a = Execute(rig.driver, rig.live, 1, 1, test::PivotScene(1.2, 0.15, 0.5, 2.0));
   ASSERT_EQ(a.status.state(), msg::STATE_EXECUTED) << a.status.reason();
   ASSERT_TRUE(a.detail.is_object()) << a.status.detail_json();
   EXPECT_EQ(a.detail["held"].get<int>(), 0);
