@@ -545,6 +545,7 @@ AdaptiveSpec ReadAdaptive(const json& v, SamplerKind* base) {
     if (!v["pipeline"].is_boolean())
       throw CampaignError("sampler.pipeline", "must be true or false");
     a.pipeline = v["pipeline"].get<bool>();
+    a.pipeline_given = true;
   }
   if (kind == "boundary") {
     RequireObject(v, "sampler",

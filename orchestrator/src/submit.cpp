@@ -72,6 +72,15 @@ std::int64_t SubmitCampaign(db::Store& store, const Campaign& given,
     campaign.source_json = spec.dump();
     campaign.calibrated_scales = scales.get<std::map<std::string, double>>();
   }
+  if (campaign.adaptive && !campaign.adaptive->pipeline_given) {
+    // The default is stored with the campaign: the service reads it from
+    // there on every restart, whatever a later binary's default is.
+    nlohmann::json spec = nlohmann::json::parse(campaign.source_json);
+    spec["sampler"]["pipeline"] = kPipelineDefault;
+    campaign.source_json = spec.dump();
+    campaign.adaptive->pipeline = kPipelineDefault;
+    campaign.adaptive->pipeline_given = true;
+  }
   if (campaign.adaptive) {
     // Round 0 (the coarse batch, or min_replicates of every condition) is
     // planned now; later rounds by the service's AdaptivePlanner.

@@ -369,6 +369,26 @@ TEST_F(StoreFile, LaterRoundsArePipelinedAndRegisterTheirParameters) {
 // fault after the campaign row was written and before its round (an
 // interrupt, a round the store refuses, the process killed there) leaves
 // nothing; with two transactions the campaign would stay without trials.
+// Pipelined rounds are the default for new campaigns, and the value is stored
+// with the campaign at submit: a campaign stored without the key (submitted
+// before the default changed) stays synchronous, so a service upgrade never
+// changes a running campaign's sequence.
+TEST_F(StoreFile, SubmitStoresThePipelineChoiceWithTheCampaign) {
+  auto store = db::Store::Open(path_.string());
+  const std::int64_t by_default = SubmitCampaign(*store, ParseCampaign(BoundaryCampaign()));
+  const std::int64_t off =
+      SubmitCampaign(*store, ParseCampaign(BoundaryCampaign(R"(, "pipeline": false)")));
+  auto stored = [&](std::int64_t id) {
+    return nlohmann::json::parse(store->GetCampaign(id).spec_json)["sampler"];
+  };
+  EXPECT_EQ(stored(by_default)["pipeline"], true);
+  EXPECT_EQ(stored(off)["pipeline"], false);
+  EXPECT_TRUE(ParseCampaign(store->GetCampaign(by_default).spec_json).adaptive->pipeline);
+  EXPECT_FALSE(ParseCampaign(store->GetCampaign(off).spec_json).adaptive->pipeline);
+  EXPECT_FALSE(ParseCampaign(BoundaryCampaign()).adaptive->pipeline)
+      << "a stored campaign without the key was submitted synchronous";
+}
+
 TEST_F(StoreFile, AdaptiveSubmitIsOneTransaction) {
   const Campaign c = ParseCampaign(BoundaryCampaign());
   auto nothing_stored = [&] {

@@ -102,6 +102,11 @@ enum class OutcomeKind {
 };
 const char* ToString(OutcomeKind kind);  // "pivoted", "finger_slip", "grasp_kept"
 
+// What `arena submit` stores for an adaptive campaign that does not say
+// (bench/README.md: pipelined rounds keep the cells busy; 128 s against 138 s
+// on closed_loop.json with two simulated cells at wall-clock pace).
+inline constexpr bool kPipelineDefault = true;
+
 struct AdaptiveSpec {
   AdaptiveKind kind = AdaptiveKind::kBoundary;
   int batch = 0;  // trials per round after the first; 0: the idle cells at round 1 (then fixed)
@@ -109,10 +114,13 @@ struct AdaptiveSpec {
   // Pipelined rounds (adaptive.hpp): round k+1 is decided from rounds <= k-1
   // with round k pending, so it is queued while round k runs. false: a round
   // is decided only when every earlier trial is finished (cells idle between).
-  // Off by default: on simulated cells at wall-clock pace a pipelined
-  // campaign took 1.8x as long (bench/README.md): its cells always have a
-  // next trial to reset for, and the reset pays a pusher move each time.
+  // A stored campaign without the key is synchronous (how it was submitted
+  // before pipelining became the default); `arena submit` writes the key into
+  // every adaptive campaign it stores, true unless the campaign says false
+  // (kPipelineDefault), so a service upgrade never changes a running
+  // campaign's sequence.
   bool pipeline = false;
+  bool pipeline_given = false;  // the campaign JSON has the key
   // boundary
   OutcomeKind outcome = OutcomeKind::kPivoted;
   double threshold = std::numeric_limits<double>::quiet_NaN();  // the outcome's threshold
