@@ -434,7 +434,7 @@ struct Cell::Impl {
     if (closed_loop && !layer.capabilities().closed_loop) {
       return Refuse(c, "pusher.motion.controller: the " + layer.capabilities().name +
                            " backend cannot run closed-loop trials (it cannot step with "
-                           "commanded pusher velocities); run them on a `model` cell");
+                           "commanded pusher velocities); run them on a `model` or `mujoco` cell");
     }
     if (std::string why = layer.Prepare(scene, c.defects_json(), trial); !why.empty()) {
       return Refuse(c, why);
