@@ -23,16 +23,20 @@
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
+#include <ctime>
 #include <filesystem>
 #include <functional>
 #include <limits>
 #include <map>
+#include <memory>
 #include <mutex>
+#include <new>
 #include <string>
 #include <thread>
 #include <vector>
 
 #include <benchmark/benchmark.h>
+#include <sys/mman.h>
 #include <sys/resource.h>
 #include <sys/wait.h>
 #include <unistd.h>
@@ -131,6 +135,55 @@ double Percentile(std::vector<double> v, double q) {
   return v[static_cast<size_t>(q * (v.size() - 1))];
 }
 
+// The warm-up of every secured row: waits (at most 60 s) until each of
+// `parts` has authenticated `expected` peers, so that no PKI-DH handshake
+// (ECDSA, ECDH, signed permissions: 2 * 136 at 16 cells) still runs beside
+// the measurement. The service's matches alone do not say that: the cells
+// authenticate each other too, and did so into the first second of the
+// live row (bench/README.md, 2026-11-24). @returns the seconds waited.
+double WaitForHandshakes(const std::vector<arena::dds::Participant*>& parts, int expected) {
+  const auto start = std::chrono::steady_clock::now();
+  const auto deadline = start + 60s;
+  for (auto* p : parts) {
+    const auto left = deadline - std::chrono::steady_clock::now();
+    if (!p->WaitForAuthenticated(expected,
+                                 std::chrono::duration_cast<arena::dds::Millis>(
+                                     std::max<std::chrono::steady_clock::duration>(left, 0s)))) {
+      std::fprintf(stderr, "bench_dds: %s authenticated %d of %d peers after 60 s\n",
+                   p->name().c_str(), p->AuthenticatedPeers(), expected);
+    }
+  }
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+}
+
+// Where in the run the tail lies: p99 of the samples sent in each 0.5 s
+// window (stderr), from (sent ns, latency ms) pairs.
+void PrintTailOverTime(const char* what, std::vector<std::pair<std::uint64_t, double>> trace) {
+  if (trace.empty()) return;
+  // For `perf record -k CLOCK_MONOTONIC` + `perf report --time`: the
+  // measurement's end on that clock (its start: the end minus the run).
+  timespec now{};
+  clock_gettime(CLOCK_MONOTONIC, &now);
+  std::fprintf(stderr, "%s ends at monotonic %ld.%06ld (system %llu ns)\n", what,
+               static_cast<long>(now.tv_sec), now.tv_nsec / 1000,
+               static_cast<unsigned long long>(NowNs()));
+  std::sort(trace.begin(), trace.end());
+  const std::uint64_t t0 = trace.front().first;
+  std::fprintf(stderr, "%s p99 per 0.5 s:", what);
+  std::vector<double> window;
+  std::uint64_t end = t0 + 500'000'000;
+  for (std::size_t i = 0; i <= trace.size(); ++i) {
+    if (i == trace.size() || trace[i].first >= end) {
+      std::fprintf(stderr, " %.2f(n=%zu)", Percentile(window, 0.99), window.size());
+      window.clear();
+      end += 500'000'000;
+      if (i == trace.size()) break;
+    }
+    window.push_back(trace[i].second);
+  }
+  std::fprintf(stderr, "\n");
+}
+
 // `cells` writer participants (fresh for every configuration) each send
 // `batches` batches of `samples` samples, one every `period` (0 = flat out).
 // secure: every participant with its lab identity (BenchLab).
@@ -155,6 +208,9 @@ Result StreamHere(int cells, int batches, int samples, std::chrono::microseconds
   // Secure: every pair of participants authenticates first (PKI-DH).
   for (auto& w : writers) w->WaitForMatched(1, 30s);
   reader.WaitForMatched(cells, 30s);
+  std::vector<arena::dds::Participant*> all{&service};
+  for (auto& p : parts) all.push_back(p.get());
+  WaitForHandshakes(all, secure ? cells : 0);
   Result r;
   r.expected = static_cast<std::uint64_t>(cells) * batches * samples;
   std::atomic<bool> done{false};
@@ -259,85 +315,278 @@ void WriteBatch(arena::dds::Writer<arena::msg::GroundTruth>& log, int cell, int 
   }
 }
 
+// Memory shared with the cells when they run as processes of their own
+// (mapped before fork; zeroed). Freed at the end of the configuration's
+// child process.
+template <class T>
+T* SharedArray(std::size_t n) {
+  void* p = mmap(nullptr, sizeof(T) * n, PROT_READ | PROT_WRITE, MAP_SHARED | MAP_ANONYMOUS, -1, 0);
+  if (p == MAP_FAILED) {
+    std::perror("mmap");
+    std::exit(1);
+  }
+  return new (p) T[n]();
+}
+
+// What the live and loop rows' cells and their service side share: the
+// start signal, each cell's handshakes, and per sample the loop's trace.
+struct CellSync {
+  std::atomic<int> matched[kMaxCells];
+  std::atomic<int> authenticated[kMaxCells];
+  std::atomic<std::int64_t> start_ns;  // steady_clock; 0 = not yet
+  std::atomic<int> finished;
+  std::atomic<bool> quit;
+  std::atomic<std::uint64_t> live_sent;
+  // Loop rows: the cells' command readers and, as processes, their CPU.
+  std::atomic<std::uint64_t> cmd_other_cell, cmd_superseded, cmd_lost;
+  std::atomic<std::uint64_t> cpu_us, ctx_switches;
+};
+
+// One cell of the live and loop rows (a thread of the configuration's
+// process, or a process of its own: cell_processes).
+struct CellPlan {
+  int cells = 16;
+  int domain = 0;
+  bool secure = false;
+  bool closed_loop = false;  // the loop rows: waits for each command
+  bool cell_filter = true;   // loop: PusherCommand through the DDS cell filter
+  bool spread = false;       // loop: cell c's clock c/cells of a period late
+  int batches = 30;          // of 25 samples
+  std::string controller_params;
+  // Loop trace, [cell * samples + sample], ns (0 = never).
+  std::uint64_t* sent = nullptr;
+  std::uint64_t* taken = nullptr;
+  char* in_time = nullptr;
+};
+
+std::chrono::steady_clock::time_point SteadyFromNs(std::int64_t ns) {
+  return std::chrono::steady_clock::time_point(std::chrono::nanoseconds(ns));
+}
+
+double CpuSeconds(const rusage& u) {
+  return u.ru_utime.tv_sec + u.ru_stime.tv_sec + (u.ru_utime.tv_usec + u.ru_stime.tv_usec) * 1e-6;
+}
+
+void RunCell(int c, const CellPlan& plan, CellSync* sync, bool own_process) {
+  using namespace arena;
+  dds::ParticipantOptions o;
+  o.domain_id = plan.domain;
+  o.name = "arena.cell.bench" + std::to_string(c);
+  o.network.shared_memory = std::getenv("ARENA_BENCH_NO_SHM") == nullptr;
+  if (plan.secure) o.network.security_dir = BenchLab::Get().Cell(c);
+  dds::Participant participant(o);
+  dds::Writer<msg::GroundTruth> log(participant);
+  dds::Writer<msg::LiveState> live(participant);
+  std::unique_ptr<dds::Reader<msg::PusherCommand>> commands;
+  const std::string id = "bench" + std::to_string(c);
+  if (plan.closed_loop) {
+    dds::ReaderOptions ro_cmd{false, id};
+    ro_cmd.cell_filter_in_dds = plan.cell_filter;
+    commands = std::make_unique<dds::Reader<msg::PusherCommand>>(participant, ro_cmd);
+  }
+  log.WaitForMatched(1, 30s);
+  live.WaitForMatched(1, 30s);
+  if (commands) commands->WaitForMatched(1, 30s);
+  sync->matched[c] = 1;
+  const auto give_up = std::chrono::steady_clock::now() + 120s;
+  while (sync->start_ns == 0 && !sync->quit && std::chrono::steady_clock::now() < give_up) {
+    sync->authenticated[c] = participant.AuthenticatedPeers();
+    std::this_thread::sleep_for(2ms);
+  }
+  rusage before{};
+  getrusage(RUSAGE_SELF, &before);
+  const auto samples = static_cast<std::size_t>(plan.batches) * 25;
+  auto next_due = SteadyFromNs(sync->start_ns) +
+                  (plan.spread ? std::chrono::microseconds(4000 * c / plan.cells) : 0us);
+  for (int b = 0; b < plan.batches && sync->start_ns != 0; ++b) {
+    for (int k = 0; k < 25; ++k) {
+      const auto sample = static_cast<std::uint32_t>(b * 25 + k);
+      next_due += 4ms;
+      std::this_thread::sleep_until(next_due);
+      auto m = MakeLive(c, sample, plan.closed_loop);
+      if (plan.closed_loop) m.controller_params(plan.controller_params);
+      m.sent_unix_ns(NowNs());
+      live.Write(m);
+      ++sync->live_sent;
+      if (!plan.closed_loop) continue;
+      const std::size_t at = static_cast<std::size_t>(c) * samples;
+      plan.sent[at + sample] = m.sent_unix_ns();
+      // The answer to this sample, until the next sample is due; an older
+      // sample's late answer is recorded as late.
+      const auto until = next_due + 4ms;
+      for (auto now = std::chrono::steady_clock::now(); now < until;
+           now = std::chrono::steady_clock::now()) {
+        auto cmd = commands->Take(until - now);
+        if (!cmd || cmd->cell_id() != id || cmd->answers_sample() > sample) continue;
+        auto& t = plan.taken[at + cmd->answers_sample()];
+        if (t == 0) t = NowNs();
+        if (cmd->answers_sample() == sample) {
+          plan.in_time[at + sample] = 1;
+          break;
+        }
+      }
+    }
+    WriteBatch(log, c, b);
+  }
+  sync->authenticated[c] = participant.AuthenticatedPeers();
+  if (own_process) {  // the configuration's process counts its own threads
+    rusage after{};
+    getrusage(RUSAGE_SELF, &after);
+    sync->cpu_us += static_cast<std::uint64_t>((CpuSeconds(after) - CpuSeconds(before)) * 1e6);
+    sync->ctx_switches += static_cast<std::uint64_t>(after.ru_nvcsw + after.ru_nivcsw -
+                                                     before.ru_nvcsw - before.ru_nivcsw);
+  }
+  if (commands) {
+    const auto k = commands->counters();
+    sync->cmd_other_cell += k.other_cell;
+    sync->cmd_superseded += k.superseded;
+    sync->cmd_lost += k.lost;
+  }
+  ++sync->finished;
+  // Stay on the domain until every cell is done: a participant that leaves
+  // sets off discovery work in all the others.
+  while (!sync->quit && std::chrono::steady_clock::now() < give_up + 60s)
+    std::this_thread::sleep_for(5ms);
+}
+
+// The cells of a live or loop row: threads of this process, or (as `arena
+// cell`s are) one process each, forked before this process touches DDS.
+// Fast DDS and OpenSSL keep process-wide state (OpenSSL 3.0 takes global
+// write locks on every EVP_PKEY and RAND_bytes call), so 16 cells in one
+// process contend where 16 processes do not (bench/README.md, 2026-11-24).
+class Cells {
+ public:
+  Cells(const CellPlan& plan, CellSync* sync, bool processes) : plan_(plan), sync_(sync) {
+    for (int c = 0; c < plan.cells; ++c) {
+      if (!processes) {
+        threads_.emplace_back([this, c] { RunCell(c, plan_, sync_, false); });
+        continue;
+      }
+      const pid_t pid = fork();
+      if (pid == 0) {
+        RunCell(c, plan_, sync_, true);
+        _exit(0);
+      }
+      if (pid < 0) {
+        std::perror("fork");
+        std::exit(1);
+      }
+      pids_.push_back(pid);
+    }
+  }
+  // Waits (bounded) until every cell matched its readers and authenticated
+  // `peers` participants, and the service side's own participants did too;
+  // then starts every cell's clock 50 ms later. @returns seconds waited.
+  double WaitAndStart(const std::vector<arena::dds::Participant*>& here, int peers) {
+    const auto start = std::chrono::steady_clock::now();
+    const auto deadline = start + 60s;
+    auto ready = [&] {
+      for (int c = 0; c < plan_.cells; ++c)
+        if (sync_->matched[c] == 0 || sync_->authenticated[c] < peers) return false;
+      for (auto* p : here)
+        if (p->AuthenticatedPeers() < peers) return false;
+      return true;
+    };
+    while (!ready() && std::chrono::steady_clock::now() < deadline)
+      std::this_thread::sleep_for(5ms);
+    if (!ready()) std::fprintf(stderr, "bench_dds: cells not ready after 60 s, starting anyway\n");
+    const double waited =
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    start_ = std::chrono::steady_clock::now() + 50ms;
+    sync_->start_ns =
+        std::chrono::duration_cast<std::chrono::nanoseconds>(start_.time_since_epoch()).count();
+    return waited;
+  }
+  std::chrono::steady_clock::time_point start() const { return start_; }
+  // Handshakes still missing, counted on every participant's side.
+  int MissingHandshakes(const std::vector<arena::dds::Participant*>& here, int peers) const {
+    int missing = 0;
+    for (int c = 0; c < plan_.cells; ++c) missing += std::max(0, peers - sync_->authenticated[c]);
+    for (auto* p : here) missing += std::max(0, peers - p->AuthenticatedPeers());
+    return missing;
+  }
+  void WaitFinished(std::chrono::seconds timeout) {
+    const auto deadline = std::chrono::steady_clock::now() + timeout;
+    while (sync_->finished < plan_.cells && std::chrono::steady_clock::now() < deadline)
+      std::this_thread::sleep_for(2ms);
+  }
+  ~Cells() {
+    sync_->quit = true;
+    for (auto& t : threads_) t.join();
+    for (pid_t pid : pids_) {
+      int status = 0;
+      waitpid(pid, &status, 0);
+    }
+  }
+
+ private:
+  const CellPlan plan_;
+  CellSync* sync_;
+  std::vector<std::thread> threads_;
+  std::vector<pid_t> pids_;
+  std::chrono::steady_clock::time_point start_{};
+};
+
 // The live topic beside the reliable log (issue 19): `cells` cells sample at
 // 250 Hz for `seconds`; every sample goes out on LiveState, every 25th
 // sample a batch of 25 on GroundTruth; the service reads both (live latency,
-// log loss).
-Result LiveHere(int cells, double seconds, bool secure) {
+// log loss). Measured after every handshake of the domain is done (warm-up).
+Result LiveHere(int cells, double seconds, bool secure, bool cell_processes) {
   using namespace arena;
+  CellPlan plan;
+  plan.cells = cells;
+  plan.domain = Domain();
+  plan.secure = secure;
+  plan.batches = static_cast<int>(seconds * 250) / 25;
+  if (secure) BenchLab::Get();
+  auto* sync = SharedArray<CellSync>(1);
+  Cells cell_side(plan, sync, cell_processes);  // forks first: no DDS here yet
+
   dds::ParticipantOptions ro;
-  ro.domain_id = Domain();
+  ro.domain_id = plan.domain;
   ro.name = "arena.bench.service";
   ro.network.shared_memory = std::getenv("ARENA_BENCH_NO_SHM") == nullptr;
   if (secure) ro.network.security_dir = BenchLab::Get().Service();
   dds::Participant service(ro);
   dds::Reader<msg::GroundTruth> log_reader(service);
   dds::Reader<msg::LiveState> live_reader(service);
-  struct CellSide {
-    std::unique_ptr<dds::Participant> participant;
-    std::unique_ptr<dds::Writer<msg::GroundTruth>> log;
-    std::unique_ptr<dds::Writer<msg::LiveState>> live;
-  };
-  std::vector<CellSide> side(static_cast<size_t>(cells));
-  for (int c = 0; c < cells; ++c) {
-    dds::ParticipantOptions o = ro;
-    o.name = "arena.cell.bench" + std::to_string(c);
-    if (secure) o.network.security_dir = BenchLab::Get().Cell(c);
-    auto& cs = side[static_cast<size_t>(c)];
-    cs.participant = std::make_unique<dds::Participant>(o);
-    cs.log = std::make_unique<dds::Writer<msg::GroundTruth>>(*cs.participant);
-    cs.live = std::make_unique<dds::Writer<msg::LiveState>>(*cs.participant);
-  }
-  for (auto& cs : side) {
-    cs.log->WaitForMatched(1, 30s);
-    cs.live->WaitForMatched(1, 30s);
-  }
   log_reader.WaitForMatched(cells, 30s);
   live_reader.WaitForMatched(cells, 30s);
-  const int samples = static_cast<int>(seconds * 250);
-  const int batches = samples / 25;
+  const int peers = secure ? cells : 0;
   Result r;
-  r.expected = static_cast<std::uint64_t>(cells) * batches * 25;
+  r.expected = static_cast<std::uint64_t>(cells) * plan.batches * 25;
   std::atomic<bool> done{false};
-  std::thread log_consumer([&] { ConsumeLog(log_reader, cells, seconds, &r); });
+  std::vector<std::pair<std::uint64_t, double>> trace;
+  const bool print_trace = std::getenv("ARENA_BENCH_TRACE") != nullptr;
+  r.extra["warmup_s"] = cell_side.WaitAndStart({&service}, peers);
+  r.extra["handshakes_missing_at_start"] = cell_side.MissingHandshakes({&service}, peers);
+  std::thread log_consumer([&] { ConsumeLog(log_reader, cells, seconds + 0.1, &r); });
   std::thread live_consumer([&] {
     while (!done) {
       auto m = live_reader.Take(50ms);
       if (!m) continue;
-      r.latency_ms.push_back((NowNs() - m->sent_unix_ns()) * 1e-6);
+      const double ms = (NowNs() - m->sent_unix_ns()) * 1e-6;
+      r.latency_ms.push_back(ms);
+      trace.emplace_back(m->sent_unix_ns(), ms);
+      if (print_trace)
+        std::fprintf(stderr, "T %s %u %llu %.3f\n", m->cell_id().c_str(), m->sample(),
+                     static_cast<unsigned long long>(m->sent_unix_ns()), ms);
       ++r.live_received;
     }
   });
-  std::atomic<std::uint64_t> live_sent{0};
-  const auto start = std::chrono::steady_clock::now();
-  std::vector<std::thread> producers;
-  for (int c = 0; c < cells; ++c) {
-    producers.emplace_back([&, c] {
-      auto& cs = side[static_cast<size_t>(c)];
-      auto next_due = std::chrono::steady_clock::now();
-      for (int b = 0; b < batches; ++b) {
-        for (int k = 0; k < 25; ++k) {
-          next_due += 4ms;
-          std::this_thread::sleep_until(next_due);
-          auto m = MakeLive(c, static_cast<std::uint32_t>(b * 25 + k), false);
-          m.sent_unix_ns(NowNs());
-          cs.live->Write(m);
-          ++live_sent;
-        }
-        WriteBatch(*cs.log, c, b);
-      }
-    });
-  }
-  for (auto& p : producers) p.join();
+  cell_side.WaitFinished(std::chrono::seconds(static_cast<int>(seconds) + 30));
+  r.extra["handshakes_missing_at_end"] = cell_side.MissingHandshakes({&service}, peers);
   log_consumer.join();
   std::this_thread::sleep_for(100ms);
   done = true;
   live_consumer.join();
-  r.live_sent = live_sent;
+  r.live_sent = sync->live_sent;
   const auto counters = live_reader.counters();
   r.extra["live_superseded"] = static_cast<double>(counters.superseded);
   r.extra["live_lost"] = static_cast<double>(counters.lost);
-  r.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  PrintTailOverTime(secure ? "live (secure)" : "live (open)", std::move(trace));
+  r.seconds =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - cell_side.start()).count();
   return r;
 }
 
@@ -355,16 +604,32 @@ Result LiveHere(int cells, double seconds, bool secure) {
 // spread: cell c samples at c/cells of a period after cell 0, as cells
 // started independently do (on average); otherwise all cells sample on the
 // same tick, the worst case for the one controller answering them.
-Result ControlHere(int cells, double seconds, bool secure, bool cell_filter, bool spread) {
+// cell_processes: every cell a process of its own (as `arena cell`s are);
+// the controller and the service's log reader share this one.
+Result ControlHere(int cells, double seconds, bool secure, bool cell_filter, bool spread,
+                   bool cell_processes) {
   using namespace arena;
-  const int samples = static_cast<int>(seconds * 250);
-  const int batches = samples / 25;
-  const auto n = static_cast<size_t>(samples);
-  // ns timestamps per [cell][sample], 0 = never; each written by one thread.
-  std::vector<std::vector<std::uint64_t>> sent(cells, std::vector<std::uint64_t>(n, 0));
+  CellPlan plan;
+  plan.cells = cells;
+  plan.domain = Domain();
+  plan.secure = secure;
+  plan.closed_loop = true;
+  plan.cell_filter = cell_filter;
+  plan.spread = spread;
+  plan.batches = static_cast<int>(seconds * 250) / 25;
+  const auto n = static_cast<std::size_t>(plan.batches) * 25;
+  const std::size_t all_samples = static_cast<std::size_t>(cells) * n;
+  plan.sent = SharedArray<std::uint64_t>(all_samples);
+  plan.taken = SharedArray<std::uint64_t>(all_samples);
+  plan.in_time = SharedArray<char>(all_samples);
+  // When the law saw each sample (this process), [cell][sample] ns.
   std::vector<std::vector<std::uint64_t>> law(cells, std::vector<std::uint64_t>(n, 0));
-  std::vector<std::vector<std::uint64_t>> taken(cells, std::vector<std::uint64_t>(n, 0));
-  std::vector<std::vector<char>> in_time(cells, std::vector<char>(n, 0));
+  executors::ControlContext context;
+  context.spec.name = "bench";
+  plan.controller_params = executors::ControlContextToJson(context);
+  if (secure) BenchLab::Get();
+  auto* sync = SharedArray<CellSync>(1);
+  Cells cell_side(plan, sync, cell_processes);  // forks first: no DDS here yet
 
   // The law records when it saw a sample (the cell is encoded in the
   // object's x, MakeLive) and commands a constant push.
@@ -385,7 +650,7 @@ Result ControlHere(int cells, double seconds, bool secure, bool cell_filter, boo
   };
   executors::ControllerHostOptions host;
   host.name = "bench";
-  host.domain_id = Domain();
+  host.domain_id = plan.domain;
   host.network.shared_memory = std::getenv("ARENA_BENCH_NO_SHM") == nullptr;
   if (secure) host.network.security_dir = BenchLab::Get().Controller();
   std::atomic<bool> stop_controller{false};
@@ -395,91 +660,30 @@ Result ControlHere(int cells, double seconds, bool secure, bool cell_filter, boo
         host, [&](const executors::ControlContext&) { return std::make_unique<TracedLaw>(&law); },
         &stop_controller);
   });
-  executors::ControlContext context;
-  context.spec.name = host.name;
-  const std::string params = executors::ControlContextToJson(context);
 
   dds::ParticipantOptions ro;
-  ro.domain_id = Domain();
+  ro.domain_id = plan.domain;
   ro.name = "arena.bench.service";
   ro.network = host.network;
   if (secure) ro.network.security_dir = BenchLab::Get().Service();
   dds::Participant service(ro);
   dds::Reader<msg::GroundTruth> log_reader(service);
-  struct CellSide {
-    std::unique_ptr<dds::Participant> participant;
-    std::unique_ptr<dds::Writer<msg::GroundTruth>> log;
-    std::unique_ptr<dds::Writer<msg::LiveState>> live;
-    std::unique_ptr<dds::Reader<msg::PusherCommand>> commands;
-  };
-  std::vector<CellSide> side(static_cast<size_t>(cells));
-  for (int c = 0; c < cells; ++c) {
-    dds::ParticipantOptions o = ro;
-    o.name = "arena.cell.bench" + std::to_string(c);
-    if (secure) o.network.security_dir = BenchLab::Get().Cell(c);
-    auto& cs = side[static_cast<size_t>(c)];
-    cs.participant = std::make_unique<dds::Participant>(o);
-    cs.log = std::make_unique<dds::Writer<msg::GroundTruth>>(*cs.participant);
-    cs.live = std::make_unique<dds::Writer<msg::LiveState>>(*cs.participant);
-    dds::ReaderOptions ro_cmd{false, "bench" + std::to_string(c)};
-    ro_cmd.cell_filter_in_dds = cell_filter;
-    cs.commands = std::make_unique<dds::Reader<msg::PusherCommand>>(*cs.participant, ro_cmd);
-  }
-  for (auto& cs : side) {
-    cs.log->WaitForMatched(1, 30s);
-    cs.live->WaitForMatched(1, 30s);
-    cs.commands->WaitForMatched(1, 30s);
-  }
   log_reader.WaitForMatched(cells, 30s);
-  std::this_thread::sleep_for(200ms);  // the controller's side of the matching settles
+  const int peers = secure ? cells + 1 : 0;  // the others and the controller
 
   Result r;
-  r.expected = static_cast<std::uint64_t>(cells) * batches * 25;
-  std::thread log_consumer([&] { ConsumeLog(log_reader, cells, seconds, &r); });
+  r.expected = static_cast<std::uint64_t>(cells) * plan.batches * 25;
+  r.extra["warmup_s"] = cell_side.WaitAndStart({&service}, peers);
+  r.extra["handshakes_missing_at_start"] = cell_side.MissingHandshakes({&service}, peers);
+  std::thread log_consumer([&] { ConsumeLog(log_reader, cells, seconds + 0.1, &r); });
   rusage before{};
   getrusage(RUSAGE_SELF, &before);
-  const auto start = std::chrono::steady_clock::now();
-  const auto first_tick = start + 20ms;  // every cell's clock starts from it
-  std::vector<std::thread> producers;
-  for (int c = 0; c < cells; ++c) {
-    producers.emplace_back([&, c] {
-      auto& cs = side[static_cast<size_t>(c)];
-      const std::string id = "bench" + std::to_string(c);
-      auto next_due = first_tick + (spread ? 4000us * c / cells : 0us);
-      for (int b = 0; b < batches; ++b) {
-        for (int k = 0; k < 25; ++k) {
-          const auto sample = static_cast<std::uint32_t>(b * 25 + k);
-          next_due += 4ms;
-          std::this_thread::sleep_until(next_due);
-          auto m = MakeLive(c, sample, true);
-          m.controller_params(params);
-          m.sent_unix_ns(NowNs());
-          sent[c][sample] = m.sent_unix_ns();
-          cs.live->Write(m);
-          // The answer to this sample, until the next sample is due; an
-          // older sample's late answer is recorded as late.
-          const auto until = next_due + 4ms;
-          for (auto now = std::chrono::steady_clock::now(); now < until;
-               now = std::chrono::steady_clock::now()) {
-            auto cmd = cs.commands->Take(until - now);
-            if (!cmd || cmd->cell_id() != id || cmd->answers_sample() > sample) continue;
-            auto& t = taken[c][cmd->answers_sample()];
-            if (t == 0) t = NowNs();
-            if (cmd->answers_sample() == sample) {
-              in_time[c][sample] = 1;
-              break;
-            }
-          }
-        }
-        WriteBatch(*cs.log, c, b);
-      }
-    });
-  }
-  for (auto& p : producers) p.join();
+  cell_side.WaitFinished(std::chrono::seconds(static_cast<int>(seconds) + 30));
   const double wall =
-      std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - cell_side.start()).count();
   rusage after{};
   getrusage(RUSAGE_SELF, &after);
+  r.extra["handshakes_missing_at_end"] = cell_side.MissingHandshakes({&service}, peers);
   log_consumer.join();
   stop_controller = true;
   controller.join();
@@ -489,26 +693,32 @@ Result ControlHere(int cells, double seconds, bool secure, bool cell_filter, boo
   std::uint64_t answered = 0, late = 0, at_law = 0;
   std::vector<double> all_ms;  // every sample: its loop time, +inf when never answered in time
   std::vector<double> in_ms, out_ms;
+  std::vector<std::pair<std::uint64_t, double>> trace;
   for (int c = 0; c < cells; ++c) {
     for (size_t k = 0; k < n; ++k) {
-      if (sent[c][k] == 0) continue;
+      const std::size_t at = static_cast<std::size_t>(c) * n + k;
+      const std::uint64_t sent = plan.sent[at], taken = plan.taken[at];
+      if (sent == 0) continue;
       ++r.live_sent;
       if (law[c][k] != 0) ++at_law;
-      if (in_time[c][k]) {
+      if (plan.in_time[at]) {
         ++answered;
-        const double ms = (taken[c][k] - sent[c][k]) * 1e-6;
+        const double ms = (taken - sent) * 1e-6;
         r.loop_ms.push_back(ms);
         all_ms.push_back(ms);
+        trace.emplace_back(sent, ms);
         if (law[c][k] != 0) {
-          in_ms.push_back((law[c][k] - sent[c][k]) * 1e-6);
-          out_ms.push_back((taken[c][k] - law[c][k]) * 1e-6);
+          in_ms.push_back((law[c][k] - sent) * 1e-6);
+          out_ms.push_back((taken - law[c][k]) * 1e-6);
         }
       } else {
         all_ms.push_back(std::numeric_limits<double>::infinity());
-        if (taken[c][k] != 0) ++late;
+        trace.emplace_back(sent, std::numeric_limits<double>::infinity());
+        if (taken != 0) ++late;
       }
     }
   }
+  PrintTailOverTime(secure ? "loop (secure)" : "loop (open)", std::move(trace));
   r.live_received = at_law;
   r.extra["answered"] = static_cast<double>(answered);
   r.extra["late"] = static_cast<double>(late);
@@ -519,35 +729,31 @@ Result ControlHere(int cells, double seconds, bool secure, bool cell_filter, boo
   r.extra["stage_out_p99_ms"] = Percentile(out_ms, 0.99);
   r.extra["ctl_superseded"] = static_cast<double>(controller_counters.live.superseded);
   r.extra["ctl_lost"] = static_cast<double>(controller_counters.live.lost);
-  std::uint64_t other = 0, superseded = 0, lost = 0;
-  for (auto& cs : side) {
-    const auto k = cs.commands->counters();
-    other += k.other_cell;
-    superseded += k.superseded;
-    lost += k.lost;
-  }
-  r.extra["cmd_other_cell"] = static_cast<double>(other);
-  r.extra["cmd_superseded"] = static_cast<double>(superseded);
-  const auto cpu = [](const rusage& u) {
-    return u.ru_utime.tv_sec + u.ru_stime.tv_sec + (u.ru_utime.tv_usec + u.ru_stime.tv_usec) * 1e-6;
-  };
-  r.extra["cpu_cores"] = (cpu(after) - cpu(before)) / wall;
+  r.extra["cmd_other_cell"] = static_cast<double>(sync->cmd_other_cell);
+  r.extra["cmd_superseded"] = static_cast<double>(sync->cmd_superseded);
+  // CPU of this process over the run, plus the cells' own when they are
+  // processes (their threads are this process's otherwise).
+  r.extra["cpu_cores"] =
+      (CpuSeconds(after) - CpuSeconds(before) + sync->cpu_us * 1e-6) / std::max(wall, 1e-9);
   r.extra["ctx_switches_per_sample"] =
-      static_cast<double>(after.ru_nvcsw + after.ru_nivcsw - before.ru_nvcsw - before.ru_nivcsw) /
+      static_cast<double>(after.ru_nvcsw + after.ru_nivcsw - before.ru_nvcsw - before.ru_nivcsw +
+                          sync->ctx_switches) /
       std::max<std::uint64_t>(1, r.live_sent);
   std::fprintf(stderr,
-               "control (%s, %s): %llu live sent, %llu seen by the law, %llu answered within "
-               "the period, %llu late; controller's reader: %llu superseded, %llu lost; cells' "
-               "readers: %llu commands for other cells, %llu superseded, %llu sequence gaps (other "
-               "cells' commands the writer filtered out count here)\n",
+               "control (%s, %s, cells as %s): %llu live sent, %llu seen by the law, %llu "
+               "answered within the period, %llu late; controller's reader: %llu superseded, %llu "
+               "lost; cells' readers: %llu commands for other cells, %llu superseded, %llu "
+               "sequence gaps (other cells' commands the writer filtered out count here)\n",
                secure ? "secure" : "open", cell_filter ? "DDS cell filter" : "listener filter",
+               cell_processes ? "processes" : "threads",
                static_cast<unsigned long long>(r.live_sent),
                static_cast<unsigned long long>(at_law), static_cast<unsigned long long>(answered),
                static_cast<unsigned long long>(late),
                static_cast<unsigned long long>(controller_counters.live.superseded),
                static_cast<unsigned long long>(controller_counters.live.lost),
-               static_cast<unsigned long long>(other), static_cast<unsigned long long>(superseded),
-               static_cast<unsigned long long>(lost));
+               static_cast<unsigned long long>(sync->cmd_other_cell.load()),
+               static_cast<unsigned long long>(sync->cmd_superseded.load()),
+               static_cast<unsigned long long>(sync->cmd_lost.load()));
   return r;
 }
 
@@ -703,7 +909,8 @@ void BM_LiveState(benchmark::State& state) {
   const int cells = static_cast<int>(state.range(0));
   const bool secure = state.range(1) != 0;
   for (auto _ : state) {
-    const Result r = RunInChild([=] { return LiveHere(cells, 3.0, secure); }, secure);
+    const bool processes = state.range(2) != 0;
+    const Result r = RunInChild([=] { return LiveHere(cells, 3.0, secure, processes); }, secure);
     Report(state, r, secure);
     state.counters["live_received_pct"] =
         r.live_sent > 0 ? 100.0 * static_cast<double>(r.live_received) / r.live_sent : 0;
@@ -711,9 +918,11 @@ void BM_LiveState(benchmark::State& state) {
   }
 }
 BENCHMARK(BM_LiveState)
-    ->ArgNames({"cells", "secure"})
-    ->Args({16, 0})
-    ->Args({16, 1})
+    ->ArgNames({"cells", "secure", "cell_processes"})
+    ->Args({16, 0, 1})
+    ->Args({16, 1, 1})
+    ->Args({16, 0, 0})
+    ->Args({16, 1, 0})
     ->Iterations(1)
     ->Unit(benchmark::kSecond)
     ->UseRealTime();
@@ -733,9 +942,10 @@ void BM_ControlLoop(benchmark::State& state) {
   const bool secure = state.range(1) != 0;
   const bool cell_filter = state.range(2) != 0;
   const bool spread = state.range(3) != 0;
+  const bool processes = state.range(4) != 0;
   for (auto _ : state) {
-    Result r =
-        RunInChild([=] { return ControlHere(cells, 3.0, secure, cell_filter, spread); }, secure);
+    Result r = RunInChild(
+        [=] { return ControlHere(cells, 3.0, secure, cell_filter, spread, processes); }, secure);
     Report(state, r, secure);
     state.counters["p50_ms"] = Percentile(r.loop_ms, 0.50);
     state.counters["p99_ms"] = Percentile(r.loop_ms, 0.99);
@@ -748,13 +958,16 @@ void BM_ControlLoop(benchmark::State& state) {
   }
 }
 BENCHMARK(BM_ControlLoop)
-    ->ArgNames({"cells", "secure", "cell_filter", "phase_spread"})
-    ->Args({16, 0, 0, 0})
-    ->Args({16, 0, 1, 0})
-    ->Args({16, 0, 1, 1})
-    ->Args({16, 1, 0, 0})
-    ->Args({16, 1, 1, 0})
-    ->Args({16, 1, 1, 1})
+    ->ArgNames({"cells", "secure", "cell_filter", "phase_spread", "cell_processes"})
+    ->Args({16, 0, 0, 0, 1})
+    ->Args({16, 0, 1, 0, 1})
+    ->Args({16, 0, 1, 1, 1})
+    ->Args({16, 1, 0, 0, 1})
+    ->Args({16, 1, 1, 0, 1})
+    ->Args({16, 1, 1, 1, 1})
+    ->Args({16, 0, 1, 0, 0})
+    ->Args({16, 1, 1, 0, 0})
+    ->Args({16, 1, 1, 1, 0})
     ->Iterations(1)
     ->Unit(benchmark::kSecond)
     ->UseRealTime();

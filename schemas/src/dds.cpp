@@ -14,6 +14,7 @@
 #include <cstring>
 #include <map>
 #include <mutex>
+#include <set>
 #include <sstream>
 #include <thread>
 #include <type_traits>
@@ -329,6 +330,7 @@ struct ParticipantCore : public fdds::DomainParticipantListener {
   std::condition_variable changed;
   std::deque<PeerEvent> events;
   std::map<frtps::GuidPrefix_t, std::string> peers;  // discovered participants
+  std::set<frtps::GuidPrefix_t> authenticated;       // DDS-Security: handshake done
 
   ~ParticipantCore() override {
     if (participant != nullptr) {
@@ -369,11 +371,32 @@ struct ParticipantCore : public fdds::DomainParticipantListener {
       {
         std::lock_guard<std::mutex> lock(mutex);
         peers.erase(prefix);
+        authenticated.erase(prefix);
       }
       spdlog::debug("dds: {} lost participant {} ({})", name, peer,
                     info.status == S::DROPPED_PARTICIPANT ? "lease expired" : "removed");
       Push({PeerEvent::Kind::kParticipantLeft, peer, "", {}});
     }
+  }
+
+  // DDS-Security: a remote participant passed (or failed) authentication.
+  // Discovery reports a peer before its handshake; its endpoints match only
+  // after it, and until every handshake of a domain is done they cost CPU.
+  void onParticipantAuthentication(fdds::DomainParticipant*,
+                                   frtps::ParticipantAuthenticationInfo&& info) override {
+    using S = frtps::ParticipantAuthenticationInfo::AUTHENTICATION_STATUS;
+    {
+      std::lock_guard<std::mutex> lock(mutex);
+      if (info.status == S::AUTHORIZED_PARTICIPANT) {
+        authenticated.insert(info.guid.guidPrefix);
+      } else {
+        authenticated.erase(info.guid.guidPrefix);
+      }
+    }
+    spdlog::debug("dds: {} {} participant {}", name,
+                  info.status == S::AUTHORIZED_PARTICIPANT ? "authenticated" : "refused",
+                  PeerName(info.guid.guidPrefix));
+    changed.notify_all();
   }
 
   fdds::Topic* TopicFor(const std::string& topic, const std::string& type) {
@@ -623,6 +646,17 @@ bool Participant::WaitForPeer(const std::string& name, Millis timeout) {
     }
     return false;
   });
+}
+
+int Participant::AuthenticatedPeers() const {
+  std::lock_guard<std::mutex> lock(core_->mutex);
+  return static_cast<int>(core_->authenticated.size());
+}
+
+bool Participant::WaitForAuthenticated(int peers, Millis timeout) {
+  std::unique_lock<std::mutex> lock(core_->mutex);
+  return core_->changed.wait_for(
+      lock, timeout, [&] { return static_cast<int>(core_->authenticated.size()) >= peers; });
 }
 
 namespace {

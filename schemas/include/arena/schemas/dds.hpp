@@ -183,6 +183,13 @@ class Participant {
   std::vector<std::string> Peers() const;
   // Waits until a participant with this name is known. @returns false on timeout.
   bool WaitForPeer(const std::string& name, Millis timeout);
+  // DDS-Security: remote participants whose authentication handshake this
+  // participant completed (0 without security). Discovery reports a peer
+  // before that; its endpoints match after it.
+  int AuthenticatedPeers() const;
+  // Waits until at least `peers` remote participants are authenticated.
+  // @returns false on timeout.
+  bool WaitForAuthenticated(int peers, Millis timeout);
 
   std::shared_ptr<detail::ParticipantCore> core() const { return core_; }
 
