@@ -15,6 +15,12 @@
 //                                 PKI-DH, access control, RTPS messages signed,
 //                                 payloads AES-GCM encrypted); secure:0 is
 //                                 the open domain, measured in the same run.
+//   BM_LiveState, BM_ControlLoop  the live topic and the closed loop
+//                                 (issue 19); cell_processes:1 runs every
+//                                 cell as a process of its own (as `arena
+//                                 cell`s are), 0 as threads of one process.
+//                                 Secured rows start once every participant
+//                                 authenticated every other (warm-up).
 // Target (issue 4): 16 cells x 250 Hz, zero loss, p99 < 5 ms.
 #include <algorithm>
 #include <atomic>

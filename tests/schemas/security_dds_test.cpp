@@ -118,6 +118,8 @@ TEST_F(SecureDomain, ParticipantsWithoutALabCertificateCannotCommandACell) {
   ASSERT_TRUE(service.WaitForCells({"c1"}, 30s)) << ReadFile(dir_ / "c1.log");
   ASSERT_TRUE(service.commands.WaitForMatched(1, 10s));
   ASSERT_TRUE(service.statuses.WaitForMatched(1, 10s));
+  // The handshake with the cell is done (its endpoints matched after it).
+  EXPECT_TRUE(service.participant.WaitForAuthenticated(1, 10s));
 
   {
     Driver open(domain);                                  // no security at all
@@ -132,6 +134,11 @@ TEST_F(SecureDomain, ParticipantsWithoutALabCertificateCannotCommandACell) {
       foreign.Send(foreign.Command("c1", 102, msg::PHASE_EXECUTE, CanonicalScene(0.1)));
       std::this_thread::sleep_for(100ms);
     }
+    // Neither passed authentication with anyone, and the lab's service still
+    // counts the cell alone.
+    EXPECT_EQ(open.participant.AuthenticatedPeers(), 0);
+    EXPECT_EQ(foreign.participant.AuthenticatedPeers(), 0);
+    EXPECT_EQ(service.participant.AuthenticatedPeers(), 1);
   }
   // The lab's service, listening all along, then commands the same cell: it
   // hears that trial, and nothing of 101 or 102 (the cell reports every
