@@ -362,6 +362,62 @@ std::map<std::string, double> CalibrationResult::Scales() const {
 
 namespace {
 
+// The scales profiled for parameter k (log): `points` spread over the
+// bounds, six near the fit, and the fit itself; ascending, no repeats.
+std::vector<double> ProfileGrid(double fit, const CalibrationOptions& o) {
+  const double lo = std::log(o.lower), hi = std::log(o.upper);
+  std::vector<double> xs = {fit};
+  for (int i = 0; i < o.profile_points; ++i)
+    xs.push_back(lo + (hi - lo) * i / std::max(1, o.profile_points - 1));
+  for (double d : {0.05, 0.1, 0.2}) {
+    if (fit - d >= lo) xs.push_back(fit - d);
+    if (fit + d <= hi) xs.push_back(fit + d);
+  }
+  std::sort(xs.begin(), xs.end());
+  xs.erase(std::unique(xs.begin(), xs.end(), [](double a, double b) { return b - a < 1e-9; }),
+           xs.end());
+  return xs;
+}
+
+// Identifiability profile of parameter k (calibration.hpp): the training
+// loss along it alone, and the run of scales around the fit whose mean
+// per-trial increase is within kProfileStandardErrors of its standard error.
+void Profile(Fitter& fitter, const std::vector<int>& train, const std::vector<double>& best,
+             size_t k, const CalibrationOptions& o, FittedParam* f) {
+  std::vector<double> at_fit;
+  for (const auto& e : fitter.Evaluate(train, best).per_trial) at_fit.push_back(Loss(e, o.scales));
+  const std::vector<double> xs = ProfileGrid(best[k], o);
+  std::vector<bool> as_good(xs.size());
+  size_t fit_index = 0;
+  for (size_t j = 0; j < xs.size(); ++j) {
+    if (xs[j] == best[k]) fit_index = j;
+    std::vector<double> x = best;
+    x[k] = xs[j];
+    const Errors e = fitter.Evaluate(train, x);
+    const auto n = static_cast<double>(at_fit.size());
+    double sum = 0, sum2 = 0;
+    for (size_t i = 0; i < at_fit.size(); ++i) {
+      const double d = Loss(e.per_trial[i], o.scales) - at_fit[i];
+      sum += d;
+      sum2 += d * d;
+    }
+    const double mean = sum / n;
+    const double se = n > 1 ? std::sqrt(std::max(0.0, sum2 / n - mean * mean) / (n - 1)) : 0;
+    as_good[j] = mean <= kProfileStandardErrors * se;
+    f->profile.emplace_back(std::exp(xs[j]), e.MeanLoss(o.scales));
+  }
+  size_t low = fit_index, high = fit_index;
+  while (low > 0 && as_good[low - 1]) --low;
+  while (high + 1 < xs.size() && as_good[high + 1]) ++high;
+  // The range reported is bracketed by the nearest scales that fit worse:
+  // the data rule out what lies beyond them, not what lies between.
+  f->profiled = true;
+  f->bounded_low = low > 0;
+  f->bounded_high = high + 1 < xs.size();
+  f->profile_low = std::exp(f->bounded_low ? xs[low - 1] : xs[low]);
+  f->profile_high = std::exp(f->bounded_high ? xs[high + 1] : xs[high]);
+}
+
 CalibrationResult Fitted(const std::vector<CalibrationTrial>& trials, TrialSimulateFn simulate,
                          const CalibrationOptions& o) {
   if (o.params.empty()) throw CalibrationError("--params: name at least one parameter");
@@ -378,6 +434,8 @@ CalibrationResult Fitted(const std::vector<CalibrationTrial>& trials, TrialSimul
                            " done trials with ground truth; calibration needs at least 4");
   if (o.max_evaluations < 5) throw CalibrationError("--max-evaluations: must be >= 5");
   if (o.bootstrap < 0) throw CalibrationError("--bootstrap: must be >= 0");
+  if (o.profile_points != 0 && o.profile_points < 3)
+    throw CalibrationError("--profile-points: must be 0 (no profile) or >= 3");
 
   // Seeded split: order trials by a hash of (seed, id), hold out the first part.
   std::vector<int> order(trials.size());
@@ -444,9 +502,16 @@ CalibrationResult Fitted(const std::vector<CalibrationTrial>& trials, TrialSimul
                        : fitter.BestEvaluated(weights);
     for (size_t k = 0; k < dims; ++k) boot[k].push_back(std::exp(x[k]));
   }
+  std::vector<FittedParam> profiles(dims);
+  if (o.profile_points > 0) {
+    for (size_t k = 0; k < dims; ++k) {
+      say(std::string("profile of ") + ToString(o.params[k]));
+      Profile(fitter, train, best, k, o, &profiles[k]);
+    }
+  }
   r.simulations = fitter.simulations();
   for (size_t k = 0; k < dims; ++k) {
-    FittedParam f;
+    FittedParam f = profiles[k];
     f.name = ToString(o.params[k]);
     f.scale = std::exp(best[k]);
     f.ci_low = f.ci_high = f.scale;
@@ -530,6 +595,14 @@ std::string ParamsJson(const CalibrationResult& r) {
   nlohmann::json j = nlohmann::json::object();
   for (const auto& f : r.fitted) {
     nlohmann::json p = {{"scale", f.scale}, {"std", f.std}, {"ci95", {f.ci_low, f.ci_high}}};
+    if (f.profiled) {
+      nlohmann::json loss = nlohmann::json::array();
+      for (const auto& [scale, l] : f.profile) loss.push_back({scale, l});
+      p["profile"] = {{"range", {f.profile_low, f.profile_high}},
+                      {"bounded", {f.bounded_low, f.bounded_high}},
+                      {"identified", f.identified()},
+                      {"loss", loss}};
+    }
     if (f.nominal) {
       p["nominal"] = *f.nominal;
       p["value"] = *f.nominal * f.scale;

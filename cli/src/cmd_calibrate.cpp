@@ -37,6 +37,7 @@ struct CalibrateOptions {
   std::uint64_t seed = 1;
   int threads = 1;
   double lower = 0.2, upper = 5.0;
+  int profile_points = -1;  // < 0 = the predictor's default
   bool json = false;
 };
 
@@ -54,6 +55,8 @@ std::vector<assessment::CalibrationParam> ParseParams(const std::string& list) {
 // MuJoCo costs ~0.1 s per trial: fewer evaluations and a bootstrap that
 // reuses them unless asked otherwise (docs/closed_loop.md).
 constexpr int kArenaEvaluations = 150, kMujocoEvaluations = 40;
+// The identifiability profile's scales over the bounds (six more near the fit).
+constexpr int kArenaProfilePoints = 12, kMujocoProfilePoints = 6;
 // MuJoCo's coupled sliding fingers hand the load back and forth from one
 // sample to the next (calibration.hpp): its forces are compared as 40 ms means.
 constexpr double kMujocoForceWindow = 0.04;
@@ -66,6 +69,44 @@ std::string MujocoKnobs(const CalibrateOptions& o, const nlohmann::json& predict
   nlohmann::json knobs = prediction;
   for (const char* k : {"predictor", "calibration", "calibrated"}) knobs.erase(k);
   return knobs.dump();
+}
+
+// The fit, its bootstrap interval, its profile range (the scales that fit
+// as well), and a sentence for each parameter the data do not bound.
+void PrintFittedTable(const assessment::CalibrationResult& r) {
+  std::printf("%-12s %9s %9s %21s   %-26s %s\n", "parameter", "scale", "+-std",
+              "95% CI (bootstrap)", "fits as well (profile)", "value");
+  auto side = [](double v, bool bounded) {
+    char buf[32];
+    if (bounded)
+      std::snprintf(buf, sizeof buf, "%8.4f", v);
+    else
+      std::snprintf(buf, sizeof buf, "%.4g bound", v);
+    return std::string(buf);
+  };
+  for (const auto& f : r.fitted) {
+    std::printf("%-12s %9.4f %9.4f   [%8.4f, %8.4f] ", f.name.c_str(), f.scale, f.std, f.ci_low,
+                f.ci_high);
+    std::string range = "-";
+    if (f.profiled)
+      range = "[" + side(f.profile_low, f.bounded_low) + ", " +
+              side(f.profile_high, f.bounded_high) + "]";
+    std::printf("  %-26s ", range.c_str());
+    if (f.nominal)
+      std::printf("%.4g -> %.4g\n", *f.nominal, *f.nominal * f.scale);
+    else
+      std::printf("(varies)\n");
+  }
+  for (const auto& f : r.fitted) {
+    if (f.identified()) continue;
+    std::printf(
+        "\n%s: NOT IDENTIFIED by these trials: every scale from %.4g%s to %.4g%s fits them as "
+        "well as %.4g (the mean loss per trial within %.0f standard errors), so the fitted value "
+        "is one of many and its bootstrap interval understates that. Trials in which it changes "
+        "the outcome would bound it.\n",
+        f.name.c_str(), f.profile_low, f.bounded_low ? "" : " (the lower bound)", f.profile_high,
+        f.bounded_high ? "" : " (the upper bound)", f.scale, assessment::kProfileStandardErrors);
+  }
 }
 
 int RunCalibrate(const CalibrateOptions& o) {
@@ -98,6 +139,8 @@ int RunCalibrate(const CalibrateOptions& o) {
       o.force_window >= 0 ? o.force_window : (mujoco ? kMujocoForceWindow : 0.0);
   co.max_evaluations =
       o.max_evaluations > 0 ? o.max_evaluations : (mujoco ? kMujocoEvaluations : kArenaEvaluations);
+  co.profile_points = o.profile_points >= 0 ? o.profile_points
+                                            : (mujoco ? kMujocoProfilePoints : kArenaProfilePoints);
   co.seed = o.seed;
   co.threads = o.threads;
   co.lower = o.lower;
@@ -174,6 +217,7 @@ int RunCalibrate(const CalibrateOptions& o) {
                                      {"max_evaluations", co.max_evaluations},
                                      {"seed", o.seed},
                                      {"bounds", {o.lower, o.upper}},
+                                     {"profile_points", co.profile_points},
                                      {"loss_scales",
                                       {{"position_m", co.scales.position_m},
                                        {"angle_rad", co.scales.angle_rad},
@@ -210,16 +254,7 @@ int RunCalibrate(const CalibrateOptions& o) {
     if (mujoco) std::printf(" (%ld on a model built once per trial)", r.models_reused);
     std::printf("; uncertainty: %d bootstrap resamples (%s)\n\n", o.bootstrap,
                 r.bootstrap_method.c_str());
-    std::printf("%-12s %9s %9s %21s %12s\n", "parameter", "scale", "+-std", "95% CI (bootstrap)",
-                "value");
-    for (const auto& f : r.fitted) {
-      std::printf("%-12s %9.4f %9.4f   [%8.4f, %8.4f] ", f.name.c_str(), f.scale, f.std, f.ci_low,
-                  f.ci_high);
-      if (f.nominal)
-        std::printf("%6.4g -> %.4g\n", *f.nominal, *f.nominal * f.scale);
-      else
-        std::printf("%12s\n", "(varies)");
-    }
+    PrintFittedTable(r);
     std::printf("\nheld-out error       before      after\n");
     std::printf("  loss (weighted) %10.4g %10.4g\n", r.heldout_before, r.heldout_after);
     std::printf("  position (mm)   %10.4f %10.4f\n", r.heldout_position_before * 1e3,
@@ -257,6 +292,10 @@ void AddCalibrateCommand(CLI::App& app, Action* action) {
   cmd->add_option("--bootstrap-method", o->bootstrap_method,
                   "refit (each resample refitted) or reuse (the main fit's evaluated points, no "
                   "simulation); default refit for arena, reuse for mujoco");
+  cmd->add_option("--profile-points", o->profile_points,
+                  "Scales over the bounds at which each parameter's loss is profiled to check "
+                  "that the data identify it (0: no profile; default 12 for arena, 6 for mujoco)")
+      ->check(CLI::NonNegativeNumber);
   cmd->add_option("--holdout", o->holdout, "Fraction of trials held out to judge the fit")
       ->check(CLI::Range(0.05, 0.9));
   cmd->add_option("--bootstrap", o->bootstrap, "Resamples for the uncertainty (0: none)")

@@ -1,9 +1,11 @@
 // Calibration against a stand-in simulator whose answer is known: the fit
 // must recover the true scale, bracket it by its bootstrap interval, improve
 // the held-out error, and say so when a parameter cannot improve anything.
+#include <algorithm>
 #include <cmath>
 
 #include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
 
 #include "arena/assessment/calibration.hpp"
 #include "arena/simulators/simulator.hpp"
@@ -83,6 +85,63 @@ TEST(Calibrate, AParameterWithoutEffectDoesNotImprove) {
   EXPECT_EQ(r.optimizer, "LN_COBYLA");
 }
 
+// A pusher that sticks once its friction reaches 0.3: above that its
+// friction changes nothing (the stand-in moves the object by min(mu, 0.3)).
+mechanics::SimulationResult StickingPusherSimulate(const mechanics::Scene& s) {
+  mechanics::Scene capped = s;
+  capped.pusher->mu = std::min(s.pusher->mu, 0.3);
+  return FakeSimulate(capped);
+}
+
+TEST(Calibrate, AProfileBoundsAnIdentifiedParameterAndFlagsAFlatOne) {
+  // Truth: fingers 1.3x, pusher 1.3x (0.39: past where it sticks). The
+  // fingers' profile brackets 1.3 on both sides; the pusher's runs from
+  // about 1 (where the truth's effect saturates) up to the upper bound, and
+  // it is reported as not identified, whatever its bootstrap says.
+  std::vector<CalibrationTrial> trials = MakeTrials(1.0, 1.0);
+  for (auto& t : trials)
+    t.truth =
+        StickingPusherSimulate(ApplyScales(t.scene, {{"mu_fingers", 1.3}, {"mu_pusher", 1.3}}))
+            .samples;
+  CalibrationOptions o;
+  o.params = {CalibrationParam::kMuFingers, CalibrationParam::kMuPusher};
+  o.bootstrap = 4;
+  const auto r = Calibrate(trials, StickingPusherSimulate, o);
+  ASSERT_EQ(r.fitted.size(), 2u);
+  const FittedParam& fingers = r.fitted[0];
+  const FittedParam& pusher = r.fitted[1];
+  EXPECT_NEAR(fingers.scale, 1.3, 0.01);
+  ASSERT_TRUE(fingers.profiled);
+  EXPECT_TRUE(fingers.identified());
+  EXPECT_LT(fingers.profile_low, 1.3);
+  EXPECT_GT(fingers.profile_high, 1.3);
+  EXPECT_GT(fingers.profile_low, 1.3 * 0.8);  // the neighbours near the fit (x 0.82 .. 1.22)
+  EXPECT_LT(fingers.profile_high, 1.3 * 1.25);
+  ASSERT_TRUE(pusher.profiled);
+  EXPECT_FALSE(pusher.identified());
+  EXPECT_TRUE(pusher.bounded_low);
+  EXPECT_FALSE(pusher.bounded_high);
+  EXPECT_DOUBLE_EQ(pusher.profile_high, o.upper);
+  EXPECT_LT(pusher.profile_low, 1.0);
+  EXPECT_GT(pusher.profile_low, 0.5);
+  ASSERT_GE(pusher.profile.size(), 12u);
+  for (size_t i = 1; i < pusher.profile.size(); ++i)
+    EXPECT_LT(pusher.profile[i - 1].first, pusher.profile[i].first);
+  // Stored with the fit.
+  const auto stored = nlohmann::json::parse(ParamsJson(r));
+  EXPECT_EQ(stored["mu_pusher"]["profile"]["identified"], false);
+  EXPECT_EQ(stored["mu_fingers"]["profile"]["identified"], true);
+  EXPECT_EQ(stored["mu_pusher"]["profile"]["bounded"][1], false);
+
+  o.profile_points = 0;  // no profile: nothing claimed either way
+  const auto plain = Calibrate(trials, StickingPusherSimulate, o);
+  EXPECT_FALSE(plain.fitted[1].profiled);
+  EXPECT_TRUE(plain.fitted[1].identified());
+  EXPECT_FALSE(nlohmann::json::parse(ParamsJson(plain))["mu_pusher"].contains("profile"));
+  o.profile_points = 2;
+  EXPECT_THROW(Calibrate(trials, StickingPusherSimulate, o), CalibrationError);
+}
+
 TEST(Calibrate, RefusesBadOptions) {
   CalibrationOptions o;
   EXPECT_THROW(Calibrate(MakeTrials(1, 1), FakeSimulate, o), CalibrationError);  // no params
@@ -144,10 +203,13 @@ TEST(Calibrate, RecoversTheFingersFrictionAgainstMujocoOnPreparedModels) {
   EXPECT_LE(r.train_after, r.train_before);
   EXPECT_EQ(seen, r.evaluations);
   EXPECT_LE(r.evaluations, 20);
-  // Memoised: at most one run per trial and evaluated point (+ held-out twice);
-  // the reuse bootstrap simulated nothing; every run on its trial's prepared model.
+  // Memoised: at most one run per trial and evaluated point (+ held-out twice,
+  // + the profile's scales: profile_points and 7 more at most); the reuse
+  // bootstrap simulated nothing; every run on its trial's prepared model.
   EXPECT_LE(r.simulations,
-            static_cast<long>(r.evaluations * r.train_ids.size() + 2 * r.heldout_ids.size()));
+            static_cast<long>((r.evaluations + o.profile_points + 7) * r.train_ids.size() +
+                              2 * r.heldout_ids.size()));
+  EXPECT_TRUE(r.fitted[0].profiled);
   EXPECT_EQ(r.models_reused, r.simulations);
   EXPECT_EQ(r.bootstrap_method, "reuse");
 }

@@ -216,6 +216,11 @@ TEST(AdaptiveE2E, CalibrationRecoversTheCellsFrictionScale) {
   const double scale = r["params"]["mu_fingers"]["scale"].get<double>();
   EXPECT_NEAR(scale, 1.3, 0.13) << text;  // within 10 %
   EXPECT_NEAR(r["params"]["mu_fingers"]["value"].get<double>(), 0.65, 0.065);
+  // The fingers slide in these trials: the data bound their friction.
+  const json& profile = r["params"]["mu_fingers"]["profile"];
+  EXPECT_TRUE(profile["identified"].get<bool>()) << text;
+  EXPECT_LT(profile["range"][0].get<double>(), scale) << text;
+  EXPECT_GT(profile["range"][1].get<double>(), scale) << text;
   EXPECT_TRUE(r["applied"].get<bool>());
   EXPECT_LT(r["report"]["heldout_loss"]["after"].get<double>(),
             r["report"]["heldout_loss"]["before"].get<double>());

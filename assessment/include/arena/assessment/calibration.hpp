@@ -42,6 +42,21 @@
 //          simulation at all (for expensive predictors). Its resolution is
 //          the spacing of the evaluated points near the optimum, so a spread
 //          narrower than the optimiser's last steps shows as zero.
+// Identifiability (profile): a bootstrap refitted from the optimum cannot
+// see a direction in which the loss is flat (a pusher that sticks in every
+// trial fits any friction above the one it needs, and the refits stay where
+// they start), so each parameter is also profiled: the training loss along
+// that parameter alone, the others at the fit, on `profile_points` scales
+// spread over the bounds plus six near the fit (x 0.82 ... 1.22). A scale
+// is "as good as the fit" when the mean per-trial increase of the loss over
+// the fit's is within kProfileStandardErrors standard errors of that mean
+// (paired over the training trials). The profile range is bracketed by the
+// nearest profiled scales on either side of the fit that fit worse (what
+// the data rule out lies beyond them); a side with none up to its bound is
+// not bounded by the data, and the parameter is reported as not identified:
+// its fitted value is then one of many that fit as well. The test is a
+// mean's, so one trial the model gets badly wrong widens the range: it errs
+// towards "not ruled out".
 // Thread safety: Calibrate calls `simulate` from up to `threads` threads at
 // once, never twice at once for the same trial.
 #pragma once
@@ -107,6 +122,7 @@ struct CalibrationOptions {
   int bootstrap = 20;                    // resamples for the uncertainty (0: none)
   int threads = 1;                       // simulations in parallel
   LossScales scales;
+  int profile_points = 12;  // identifiability profile: scales over the bounds (0: no profile)
   BootstrapMethod bootstrap_method = BootstrapMethod::kRefit;
   std::function<void(const std::string&)> progress;  // optional, one line per stage
   // Optional, after every loss evaluation of the main fit: its number (from
@@ -120,7 +136,17 @@ struct FittedParam {
   double std = 0;                  // bootstrap standard deviation of the scale
   double ci_low = 1, ci_high = 1;  // bootstrap 2.5 and 97.5 percentiles
   std::optional<double> nominal;   // the scenes' common value (e.g. mu 0.5), when they share one
+  // Identifiability profile (above); absent when profile_points is 0.
+  bool profiled = false;
+  double profile_low = 1, profile_high = 1;        // the scales that fit worse, or the bounds
+  bool bounded_low = true, bounded_high = true;    // false: the range reaches that bound
+  std::vector<std::pair<double, double>> profile;  // (scale, mean training loss), ascending
+  bool identified() const { return !profiled || (bounded_low && bounded_high); }
 };
+
+// A profile scale is as good as the fit when its mean per-trial loss
+// increase is at most this many standard errors of that mean.
+inline constexpr double kProfileStandardErrors = 2.0;
 
 struct CalibrationResult {
   std::vector<FittedParam> fitted;
