@@ -362,6 +362,40 @@ std::map<std::string, double> CalibrationResult::Scales() const {
 
 namespace {
 
+// Whether the per-trial loss increases over the fit's (paired) show a
+// scale fitting worse: their mean is above kProfileMinIncrease of the fit's
+// mean loss (`loss_at_fit`) and a one-sided Wilcoxon
+// signed-rank test (normal approximation, zeros dropped) puts them above
+// zero by more than kProfileStandardErrors standard deviations. Ranks, not
+// a mean's standard error: one trial the model gets badly wrong would
+// otherwise swamp the evidence of all the others.
+bool FitsWorse(const std::vector<double>& increase, double loss_at_fit) {
+  double mean = 0;
+  std::vector<double> nonzero;
+  for (double d : increase) {
+    mean += d / static_cast<double>(increase.size());
+    if (d != 0) nonzero.push_back(d);
+  }
+  if (!(mean > kProfileMinIncrease * loss_at_fit) || nonzero.empty()) return false;
+  std::vector<size_t> order(nonzero.size());
+  std::iota(order.begin(), order.end(), size_t{0});
+  std::sort(order.begin(), order.end(),
+            [&](size_t a, size_t b) { return std::abs(nonzero[a]) < std::abs(nonzero[b]); });
+  double w_plus = 0;  // sum of the ranks (ties: mean rank) of the positive increases
+  for (size_t i = 0; i < order.size();) {
+    size_t k = i;
+    while (k + 1 < order.size() && std::abs(nonzero[order[k + 1]]) == std::abs(nonzero[order[i]]))
+      ++k;
+    const double rank = 0.5 * static_cast<double>(i + k) + 1;
+    for (size_t m = i; m <= k; ++m)
+      if (nonzero[order[m]] > 0) w_plus += rank;
+    i = k + 1;
+  }
+  const auto n = static_cast<double>(nonzero.size());
+  const double sd = std::sqrt(n * (n + 1) * (2 * n + 1) / 24);
+  return (w_plus - n * (n + 1) / 4) > kProfileStandardErrors * sd;
+}
+
 // The scales profiled for parameter k (log): `points` spread over the
 // bounds, six near the fit, and the fit itself; ascending, no repeats.
 std::vector<double> ProfileGrid(double fit, const CalibrationOptions& o) {
@@ -380,12 +414,14 @@ std::vector<double> ProfileGrid(double fit, const CalibrationOptions& o) {
 }
 
 // Identifiability profile of parameter k (calibration.hpp): the training
-// loss along it alone, and the run of scales around the fit whose mean
-// per-trial increase is within kProfileStandardErrors of its standard error.
+// loss along it alone, and the run of scales around the fit that do not fit
+// worse (FitsWorse).
 void Profile(Fitter& fitter, const std::vector<int>& train, const std::vector<double>& best,
              size_t k, const CalibrationOptions& o, FittedParam* f) {
   std::vector<double> at_fit;
   for (const auto& e : fitter.Evaluate(train, best).per_trial) at_fit.push_back(Loss(e, o.scales));
+  const double mean_at_fit =
+      std::accumulate(at_fit.begin(), at_fit.end(), 0.0) / static_cast<double>(at_fit.size());
   const std::vector<double> xs = ProfileGrid(best[k], o);
   std::vector<bool> as_good(xs.size());
   size_t fit_index = 0;
@@ -394,16 +430,10 @@ void Profile(Fitter& fitter, const std::vector<int>& train, const std::vector<do
     std::vector<double> x = best;
     x[k] = xs[j];
     const Errors e = fitter.Evaluate(train, x);
-    const auto n = static_cast<double>(at_fit.size());
-    double sum = 0, sum2 = 0;
-    for (size_t i = 0; i < at_fit.size(); ++i) {
-      const double d = Loss(e.per_trial[i], o.scales) - at_fit[i];
-      sum += d;
-      sum2 += d * d;
-    }
-    const double mean = sum / n;
-    const double se = n > 1 ? std::sqrt(std::max(0.0, sum2 / n - mean * mean) / (n - 1)) : 0;
-    as_good[j] = mean <= kProfileStandardErrors * se;
+    std::vector<double> increase;
+    for (size_t i = 0; i < at_fit.size(); ++i)
+      increase.push_back(Loss(e.per_trial[i], o.scales) - at_fit[i]);
+    as_good[j] = !FitsWorse(increase, mean_at_fit);
     f->profile.emplace_back(std::exp(xs[j]), e.MeanLoss(o.scales));
   }
   size_t low = fit_index, high = fit_index;

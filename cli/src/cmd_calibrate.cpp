@@ -100,12 +100,14 @@ void PrintFittedTable(const assessment::CalibrationResult& r) {
   for (const auto& f : r.fitted) {
     if (f.identified()) continue;
     std::printf(
-        "\n%s: NOT IDENTIFIED by these trials: every scale from %.4g%s to %.4g%s fits them as "
-        "well as %.4g (the mean loss per trial within %.0f standard errors), so the fitted value "
-        "is one of many and its bootstrap interval understates that. Trials in which it changes "
-        "the outcome would bound it.\n",
+        "\n%s: NOT IDENTIFIED by these trials: no scale from %.4g%s to %.4g%s fits them "
+        "measurably worse than %.4g (by more than %.0f %% of its loss and a paired signed-rank "
+        "test at %.0f standard deviations), so the "
+        "fitted value is one of many and its bootstrap interval understates that. Trials in "
+        "which it changes the outcome would bound it.\n",
         f.name.c_str(), f.profile_low, f.bounded_low ? "" : " (the lower bound)", f.profile_high,
-        f.bounded_high ? "" : " (the upper bound)", f.scale, assessment::kProfileStandardErrors);
+        f.bounded_high ? "" : " (the upper bound)", f.scale, 100 * assessment::kProfileMinIncrease,
+        assessment::kProfileStandardErrors);
   }
 }
 

@@ -48,15 +48,18 @@
 // they start), so each parameter is also profiled: the training loss along
 // that parameter alone, the others at the fit, on `profile_points` scales
 // spread over the bounds plus six near the fit (x 0.82 ... 1.22). A scale
-// is "as good as the fit" when the mean per-trial increase of the loss over
-// the fit's is within kProfileStandardErrors standard errors of that mean
-// (paired over the training trials). The profile range is bracketed by the
+// "fits worse" than the fit when the per-trial loss increases (paired over
+// the training trials) have a mean above kProfileMinIncrease of the fit's
+// mean loss (a plateau 0.1 % above the fit is no evidence) and a one-sided Wilcoxon
+// signed-rank statistic more than kProfileStandardErrors standard
+// deviations above zero: ranks, so that one trial the model gets badly
+// wrong does not swamp the evidence of all the others (a mean's standard
+// error would), and trials that a parameter does not affect at all (zero
+// increase) count for nothing. The profile range is bracketed by the
 // nearest profiled scales on either side of the fit that fit worse (what
 // the data rule out lies beyond them); a side with none up to its bound is
-// not bounded by the data, and the parameter is reported as not identified:
-// its fitted value is then one of many that fit as well. The test is a
-// mean's, so one trial the model gets badly wrong widens the range: it errs
-// towards "not ruled out".
+// not bounded by the data, and the parameter is reported as not
+// identified: its fitted value is then one of many that fit as well.
 // Thread safety: Calibrate calls `simulate` from up to `threads` threads at
 // once, never twice at once for the same trial.
 #pragma once
@@ -144,9 +147,11 @@ struct FittedParam {
   bool identified() const { return !profiled || (bounded_low && bounded_high); }
 };
 
-// A profile scale is as good as the fit when its mean per-trial loss
-// increase is at most this many standard errors of that mean.
+// A profile scale fits worse than the fit when the signed-rank statistic of
+// its per-trial loss increases is this many standard deviations above zero.
 inline constexpr double kProfileStandardErrors = 2.0;
+// ... and the mean increase is above this fraction of the fit's mean loss.
+inline constexpr double kProfileMinIncrease = 0.01;
 
 struct CalibrationResult {
   std::vector<FittedParam> fitted;
