@@ -14,6 +14,7 @@
 #include "arena/assessment/calibration.hpp"
 #include "arena/assessment/prediction.hpp"
 #include "arena/db/store.hpp"
+#include "arena/mechanics/scene_json.hpp"
 #include "arena/mechanics/simulate.hpp"
 #include "arena/simulators/simulator.hpp"
 #include "commands.hpp"
@@ -111,14 +112,36 @@ void PrintFittedTable(const assessment::CalibrationResult& r) {
   }
 }
 
+// The arena model a calibration fits: the campaign's prediction settings,
+// overridden by --predictor-settings (facets, points, dt, reduce, contacts),
+// e.g. to fit at the cell's fidelity rather than the campaign's coarser one.
+nlohmann::json ArenaModelSettings(const std::string& text, nlohmann::json model) {
+  if (text.empty()) return model;
+  nlohmann::json given;
+  try {
+    given = nlohmann::json::parse(text);
+  } catch (const nlohmann::json::exception& e) {
+    throw CommandError(kExitBadInput, std::string("--predictor-settings: not JSON: ") + e.what());
+  }
+  if (!given.is_object())
+    throw CommandError(kExitBadInput, "--predictor-settings: must be a JSON object");
+  if (!model.is_object()) model = nlohmann::json::object();
+  for (const auto& [key, value] : given.items()) {
+    if (key != "facets" && key != "points" && key != "dt" && key != "reduce" && key != "contacts")
+      throw CommandError(kExitBadInput, "--predictor-settings: '" + key +
+                                            "' is not an arena model setting (facets, points, "
+                                            "dt, reduce, contacts)");
+    model[key] = value;
+  }
+  return model;
+}
+
 int RunCalibrate(const CalibrateOptions& o) {
   if (o.predictor != "arena" && o.predictor != "mujoco") {
     throw CommandError(kExitBadInput,
                        "--predictor: '" + o.predictor + "' is not a predictor (arena or mujoco)");
   }
   const bool mujoco = o.predictor == "mujoco";
-  if (!mujoco && !o.predictor_settings.empty())
-    throw CommandError(kExitBadInput, "--predictor-settings: only for --predictor mujoco");
   assessment::CalibrationOptions co;
   if (o.bootstrap_method.empty()) {
     co.bootstrap_method =
@@ -161,11 +184,16 @@ int RunCalibrate(const CalibrateOptions& o) {
     if (spec.contains("prediction")) model = spec["prediction"];
     // Fit against the uncalibrated model: a previous calibration is not stacked.
     if (model.is_object()) model.erase("calibrated");
+    if (!mujoco) model = ArenaModelSettings(o.predictor_settings, model);
     trials = assessment::LoadCalibrationTrials(*store, o.campaign, [&](const mechanics::Scene& s) {
-      return assessment::ApplyModelSettings(s, model);
+      mechanics::Scene fitted = assessment::ApplyModelSettings(s, model);
+      mechanics::ValidateScene(fitted);
+      return fitted;
     });
   } catch (const db::StoreError& e) {
     throw StoreCommandError(e);
+  } catch (const mechanics::SceneError& e) {
+    throw CommandError(kExitBadInput, std::string("--predictor-settings: ") + e.what());
   }
   if (mujoco) {
     try {
@@ -289,8 +317,9 @@ void AddCalibrateCommand(CLI::App& app, Action* action) {
       ->required();
   cmd->add_option("--predictor", o->predictor, "The model fitted: arena or mujoco");
   cmd->add_option("--predictor-settings", o->predictor_settings,
-                  "mujoco's knobs as JSON ({\"timestep\": 0.001}); default: the campaign's "
-                  "mujoco prediction knobs, else the simulator's defaults");
+                  "The fitted model's settings as JSON: mujoco's knobs ({\"timestep\": 0.001}), or "
+                  "arena's (facets, points, dt, reduce, contacts: over the campaign's prediction "
+                  "settings); default: the campaign's prediction settings");
   cmd->add_option("--bootstrap-method", o->bootstrap_method,
                   "refit (each resample refitted) or reuse (the main fit's evaluated points, no "
                   "simulation); default refit for arena, reuse for mujoco");
