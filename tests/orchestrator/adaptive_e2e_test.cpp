@@ -225,6 +225,19 @@ TEST(AdaptiveE2E, CalibrationRecoversTheCellsFrictionScale) {
   EXPECT_LT(r["report"]["heldout_loss"]["after"].get<double>(),
             r["report"]["heldout_loss"]["before"].get<double>());
 
+  // Fitting arena's model at other settings than the campaign's: a setting
+  // that is not arena's, or a bad value, is refused naming it; nothing stored.
+  for (const char* bad : {R"({"timestep": 0.001})", R"({"dt": -1})", "[1]", "{"}) {
+    const std::string log = dir / "bad_settings.log";
+    EXPECT_EQ(RunArena({"calibrate", "--db", db, "--campaign", "1", "--params", "mu_fingers",
+                        "--predictor-settings", bad},
+                       log, std::chrono::seconds(60)),
+              2)
+        << bad;
+    EXPECT_NE(ReadFile(log).find("--predictor-settings"), std::string::npos) << ReadFile(log);
+  }
+  EXPECT_EQ(OpenReadOnly(db)->ListCalibrations(1).size(), 1u);
+
   // The same campaign predicted with the calibration: closer to the truth.
   json spec = json::parse(ReadFile(TestCampaign("calibration_grid.json")));
   spec["name"] = "calibrated";
