@@ -316,12 +316,15 @@ TEST(AdaptiveE2E, MujocoCalibrationRecoversTheFrictionScaleWithinItsBudget) {
       << text;
   EXPECT_LE(r["report"]["train_loss"]["after"].get<double>(),
             r["report"]["train_loss"]["before"].get<double>());
-  // The budget held: at most 12 evaluations of the training trials plus the
-  // held-out trials twice; the reuse bootstrap simulated nothing more.
+  // The budget held: at most 12 evaluations of the training trials, the
+  // profile's scales (mujoco's default 6 over the bounds, 6 near the fit and
+  // the fit), the held-out trials twice; the reuse bootstrap simulated
+  // nothing more.
   const auto train = r["report"]["train_ids"].size(), held = r["report"]["heldout_ids"].size();
   EXPECT_EQ(train + held, 24u);
   EXPECT_LE(r["report"]["evaluations"].get<int>(), 12);
-  EXPECT_LE(r["report"]["simulations"].get<std::size_t>(), 12 * train + 2 * held);
+  EXPECT_LE(r["report"]["simulations"].get<std::size_t>(), (12 + 13) * train + 2 * held);
+  EXPECT_TRUE(r["params"]["mu_fingers"].contains("profile")) << text;
   EXPECT_EQ(r["report"]["bootstrap_method"], "reuse");
   // Every run on the model its trial's scene built once (none rebuilt).
   EXPECT_EQ(r["report"]["models_reused"].get<std::size_t>(),
