@@ -268,6 +268,11 @@ struct Point {
   bool active = true;
   Eigen::Vector3d n = Eigen::Vector3d::UnitX();
   std::vector<Eigen::Vector3d> edges;
+  // Planar reduction: a line's point strictly between its two end points
+  // (`interior`) is given no rows while both ends have rows on one flat
+  // face (`redundant`, MarkRedundantPoints).
+  bool interior = false;
+  bool redundant = false;
 };
 
 struct Contact {
@@ -506,6 +511,7 @@ struct ContactModel::Impl {
   void Setup();
   void Geometry();
   void TrackedGeometry();
+  void MarkRedundantPoints();
   void PlaceOnSolid(Contact& ct, Point& pt, const Eigen::Vector3d& q, const Eigen::Vector3d& base,
                     const Eigen::Vector3d& closing, const Eigen::Vector3d& vp,
                     const Eigen::Vector3d& wp);
@@ -764,6 +770,14 @@ void ContactModel::Impl::Setup() {
       ct.points.push_back(pt);
     }
     if (!ct.pusher && ct.points.size() == 1) ct.known_normal = scene.grip_force;
+    if (ct.spec.type == ContactType::kLine && ct.points.size() > 2) {
+      const auto along = [&](const Point& pt) { return pt.offset0.dot(ct.spec.axis); };
+      const auto [lo, hi] =
+          std::minmax_element(ct.points.begin(), ct.points.end(),
+                              [&](const Point& a, const Point& b) { return along(a) < along(b); });
+      const double s_lo = along(*lo), s_hi = along(*hi);
+      for (Point& pt : ct.points) pt.interior = along(pt) > s_lo && along(pt) < s_hi;
+    }
     contacts.push_back(std::move(ct));
   }
   const bool friction_rows = edges_per_point > 0;
@@ -1031,6 +1045,28 @@ void ContactModel::Impl::TrackedGeometry() {
   }
 }
 
+// In a planar scene every point of a line that lies in the plane moves with
+// the same tangential velocity, and its velocity along a shared normal is
+// linear along the line; so is the gap to a flat face. A force at an interior
+// point is then a positive combination of forces at the two ends with the
+// same wrench, and pressing there (zero normal velocity) means both ends
+// press too: the interior points add nothing to the motion but unknowns to
+// the warm-started basis (19 of them for two 3-point lines and a pusher).
+// They keep no rows while both ends have rows with one normal; otherwise (an
+// end past the object's edge, the line across an edge) all points do.
+void ContactModel::Impl::MarkRedundantPoints() {
+  for (Contact& ct : contacts) {
+    if (ct.spec.type != ContactType::kLine || ct.points.size() <= 2) continue;
+    bool ends_press = true;
+    for (const Point& pt : ct.points) {
+      if (!tracked) break;
+      const bool same_face = (pt.n - ct.points[0].n).norm() <= 1e-12;
+      if (pt.interior ? !same_face : !(pt.active && same_face)) ends_press = false;
+    }
+    for (Point& pt : ct.points) pt.redundant = pt.interior && ends_press;
+  }
+}
+
 StepReport ContactModel::Impl::Step() {
   StepReport rep;
   if (status != SimulationStatus::kOk) {
@@ -1052,6 +1088,10 @@ StepReport ContactModel::Impl::Step() {
     return tracked ? pt.edges[static_cast<size_t>(e)] : ct.edges[static_cast<size_t>(e)];
   };
   auto live = [&](const Point& pt) { return !tracked || pt.active; };
+  if (planar) MarkRedundantPoints();
+  // Whether a point has LCP rows this step (a redundant one has a unit
+  // diagonal, like a tracked point without rows; it still counts as touching).
+  auto rows = [&](const Point& pt) { return live(pt) && !pt.redundant; };
   const Eigen::Matrix3d R = q.toRotationMatrix();
   const Eigen::Matrix3d Iw = R * inertia_body * R.transpose();
 
@@ -1102,7 +1142,7 @@ StepReport ContactModel::Impl::Step() {
     const Contact& ct = contacts[static_cast<size_t>(force_point[static_cast<size_t>(k)])];
     const Point& pt = ct.points[static_cast<size_t>(force_point_sub[static_cast<size_t>(k)])];
     const int e = force_dir[static_cast<size_t>(k)];
-    if (!live(pt)) {
+    if (!rows(pt)) {
       Jc.col(k).setZero();
       Jv.col(k).setZero();
       continue;
@@ -1147,7 +1187,7 @@ StepReport ContactModel::Impl::Step() {
     const Contact& ct = contacts[static_cast<size_t>(force_point[static_cast<size_t>(k)])];
     const Point& pt = ct.points[static_cast<size_t>(force_point_sub[static_cast<size_t>(k)])];
     const int e = force_dir[static_cast<size_t>(k)];
-    if (!live(pt)) {
+    if (!rows(pt)) {
       A.Set(k, k, 1);
       b[k] = 1;
       continue;
@@ -1168,7 +1208,7 @@ StepReport ContactModel::Impl::Step() {
     if (!ct.active) continue;
     for (const Point& pt : ct.points) {
       if (pt.xi < 0) continue;
-      if (!live(pt)) {
+      if (!rows(pt)) {
         A.Set(pt.xi, pt.xi, 1);
         b[pt.xi] = 1;
         continue;
@@ -1187,7 +1227,7 @@ StepReport ContactModel::Impl::Step() {
         continue;
       }
       for (const Point& pt : ct.points) {
-        if (!live(pt)) continue;
+        if (!rows(pt)) continue;
         A.Set(ct.y_plus, pt.lambda, 1);
         A.Set(ct.y_minus, pt.lambda, -1);
       }
@@ -1271,7 +1311,7 @@ StepReport ContactModel::Impl::Step() {
       if (!ct.active) continue;
       double sum = 0;
       for (Point& pt : ct.points) {
-        if (!live(pt)) continue;
+        if (!rows(pt)) continue;  // a redundant point's unknowns are zero by construction
         const Eigen::Vector3d urel = object_velocity(pt.p) - body_velocity(ct, pt);
         const double lam = pt.lambda >= 0 ? zv(pt.lambda) : ct.known_normal;
         sum += lam;
