@@ -183,14 +183,9 @@ bool SolveBasis(const LcpColumns& A, const Eigen::VectorXd& b, const std::vector
   z.setZero(n);
   if (!idx.empty()) {
     const auto m = static_cast<Eigen::Index>(idx.size());
-    Abb.resize(m, m);
     bb.resize(m);
-    for (Eigen::Index c = 0; c < m; ++c) {
-      const Eigen::Index col = idx[static_cast<size_t>(c)];
-      bb[c] = -b[col];
-      const double* a = A.Column(col);
-      for (Eigen::Index r = 0; r < m; ++r) Abb(r, c) = a[idx[static_cast<size_t>(r)]];
-    }
+    for (Eigen::Index c = 0; c < m; ++c) bb[c] = -b[idx[static_cast<size_t>(c)]];
+    A.GatherBasis(idx, Abb);
     lu.Compute(Abb);
     lu.Solve(bb, zb);
     if (!AllFinite(zb)) return false;
@@ -206,7 +201,7 @@ bool SolveBasis(const LcpColumns& A, const Eigen::VectorXd& b, const std::vector
     if (rb.lpNorm<Eigen::Infinity>() > 1e-9 * scale) return false;
     for (Eigen::Index r = 0; r < m; ++r) z[idx[static_cast<size_t>(r)]] = zb[r];
   }
-  MultiplyColumns(A, z, w);
+  A.Multiply(z, w);
   w += b;
   return AllFinite(w);
 }
@@ -669,6 +664,19 @@ const char* ToString(LcpStatus status) {
       return "bad problem";
   }
   return "?";
+}
+
+void LcpColumns::GatherBasis(const std::vector<Eigen::Index>& idx, Eigen::MatrixXd& block) const {
+  const auto m = static_cast<Eigen::Index>(idx.size());
+  block.resize(m, m);
+  for (Eigen::Index c = 0; c < m; ++c) {
+    const double* a = Column(idx[static_cast<size_t>(c)]);
+    for (Eigen::Index r = 0; r < m; ++r) block(r, c) = a[idx[static_cast<size_t>(r)]];
+  }
+}
+
+void LcpColumns::Multiply(const Eigen::VectorXd& z, Eigen::VectorXd& w) const {
+  MultiplyColumns(*this, z, w);
 }
 
 void MultiplyColumns(const LcpColumns& A, const Eigen::VectorXd& z, Eigen::VectorXd& w) {

@@ -332,16 +332,12 @@ class StepMatrix final : public LcpColumns {
     K_ = &K;
     entries_.clear();
     cache_.resize(n_, n_);
-    dense_ = nf_ < kLazyForces;
-    if (dense_ && Jrows.rows() == 3) {
-      // Every entry of the force block is written; a non-finite factor
-      // shows in its row or column of entries (inf·0 is NaN).
-      cache_.rightCols(n_ - nf_).setZero();
-      cache_.bottomLeftCorner(n_ - nf_, nf_).setZero();
-      finite_ = std::isfinite(mass) && PlanarForceBlock(mass, Jrows, K);
-      ready_.assign(static_cast<size_t>(n_), 1);
-      return;
-    }
+    // Planar (3 reduced coordinates): never formed whole. A warm-started
+    // step reads only its basis block and w = A z, both cheap from the
+    // factors (GatherBasis, Multiply); Lemke's columns are formed on demand.
+    low_rank_ = Jrows.rows() == 3;
+    J_ = &Jrows;
+    dense_ = nf_ < kLazyForces && !low_rank_;
     finite_ = std::isfinite(mass) && Jrows.allFinite() && K.allFinite();
     if (dense_) {
       // Eigen picks a coefficient-wise product for small sizes, whose sums
@@ -396,40 +392,73 @@ class StepMatrix final : public LcpColumns {
     ready_[static_cast<size_t>(j)] = 1;
     return col;
   }
-  // The force block of a planar step (3 reduced coordinates) written out:
-  // Eigen's product sums each entry over the 3 coordinates in order, from
-  // zero and then times the mass in its blocked kernel (2 nf + 3 >= 20),
-  // the mass times the plain sum in its coefficient-wise one: the same
-  // entries to the last bit, without the kernel's packing.
-  // Returns whether every entry is finite.
-  bool PlanarForceBlock(double mass, const Eigen::MatrixXd& Jrows, const Eigen::MatrixXd& K) {
-    const bool blocked = 2 * nf_ + 3 >= 20;
-    double probe = 0;  // NaN when some entry is not finite
-    const double* J = Jrows.data();
-    const double* Kd = K.data();
-    for (int j = 0; j < nf_; ++j) {
-      const double k0 = Kd[3 * j], k1 = Kd[3 * j + 1], k2 = Kd[3 * j + 2];
-      double* col = cache_.data() + static_cast<Eigen::Index>(j) * n_;
-      for (int i = 0; i < nf_; ++i) {
-        const double* a = J + 3 * i;
-        if (blocked) {
-          double acc = 0.0;
-          acc += a[0] * k0;
-          acc += a[1] * k1;
-          acc += a[2] * k2;
-          col[i] = 0.0 + mass * acc;
-        } else {
-          col[i] = mass * (a[0] * k0 + a[1] * k1 + a[2] * k2);
-        }
-        probe += col[i] - col[i];
-      }
-    }
-    return probe == 0;
-  }
   // From the factors (entries are sums of products of them; an overflow
   // there would show in the solution, which the solver checks too) and the
   // values set: no n² scan.
   bool AllFinite() const override { return finite_; }
+  // The planar basis block: force entries mass · J_i · K_j over the 3
+  // reduced coordinates, then the entries set (as Column() writes them).
+  void GatherBasis(const std::vector<Eigen::Index>& idx, Eigen::MatrixXd& block) const override {
+    if (!low_rank_) {
+      LcpColumns::GatherBasis(idx, block);
+      return;
+    }
+    const auto m = static_cast<Eigen::Index>(idx.size());
+    block.resize(m, m);
+    position_.resize(static_cast<size_t>(n_), -1);
+    for (Eigen::Index r = 0; r < m; ++r)
+      position_[static_cast<size_t>(idx[static_cast<size_t>(r)])] = static_cast<int>(r);
+    const double* J = J_->data();
+    const double* Kd = K_->data();
+    for (Eigen::Index c = 0; c < m; ++c) {
+      const Eigen::Index j = idx[static_cast<size_t>(c)];
+      double* out = block.data() + c * m;
+      if (j < nf_) {
+        const double k0 = Kd[3 * j], k1 = Kd[3 * j + 1], k2 = Kd[3 * j + 2];
+        for (Eigen::Index r = 0; r < m; ++r) {
+          const Eigen::Index i = idx[static_cast<size_t>(r)];
+          out[r] = i < nf_ ? mass_ * (J[3 * i] * k0 + J[3 * i + 1] * k1 + J[3 * i + 2] * k2) : 0.0;
+        }
+      } else {
+        std::fill(out, out + m, 0.0);
+      }
+      for (int e = first_[static_cast<size_t>(j)]; e < first_[static_cast<size_t>(j) + 1]; ++e) {
+        const Entry& entry = sorted_[static_cast<size_t>(e)];
+        const int r = position_[static_cast<size_t>(entry.row)];
+        if (r >= 0) out[r] = entry.value;
+      }
+    }
+    for (Eigen::Index r = 0; r < m; ++r)
+      position_[static_cast<size_t>(idx[static_cast<size_t>(r)])] = -1;
+  }
+  // Planar w = A z: mass · J (K z) over the force rows, plus the entries set
+  // (they sit where the force block is zero: rows and columns of unknowns
+  // without rows, whose grasp-map columns are zero).
+  void Multiply(const Eigen::VectorXd& z, Eigen::VectorXd& w) const override {
+    if (!low_rank_) {
+      LcpColumns::Multiply(z, w);
+      return;
+    }
+    w.setZero(n_);
+    const double* J = J_->data();
+    const double* Kd = K_->data();
+    double y0 = 0, y1 = 0, y2 = 0;
+    for (int j = 0; j < nf_; ++j) {
+      const double zj = z[j];
+      if (zj == 0) continue;
+      y0 += Kd[3 * j] * zj;
+      y1 += Kd[3 * j + 1] * zj;
+      y2 += Kd[3 * j + 2] * zj;
+    }
+    y0 *= mass_;
+    y1 *= mass_;
+    y2 *= mass_;
+    for (int i = 0; i < nf_; ++i) w[i] = J[3 * i] * y0 + J[3 * i + 1] * y1 + J[3 * i + 2] * y2;
+    for (const Entry& e : sorted_) {
+      const double zc = z[e.col];
+      if (zc != 0) w[e.row] += e.value * zc;
+    }
+  }
   // The whole matrix (for an observer or a dump).
   const Eigen::MatrixXd& Dense() const {
     for (int j = 0; j < n_; ++j) Column(j);
@@ -446,6 +475,9 @@ class StepMatrix final : public LcpColumns {
   };
   int n_ = 0, nf_ = 0;
   bool dense_ = true;
+  bool low_rank_ = false;  // planar: GatherBasis and Multiply from the factors
+  const Eigen::MatrixXd* J_ = nullptr;
+  mutable std::vector<int> position_;  // GatherBasis: a row's place in the basis, else -1
   bool finite_ = true;
   double mass_ = 0;
   const Eigen::MatrixXd* K_ = nullptr;

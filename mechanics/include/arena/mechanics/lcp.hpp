@@ -59,6 +59,13 @@ class LcpColumns {
   virtual const double* Column(Eigen::Index j) const = 0;
   // Whether every entry is finite (asked once, before solving).
   virtual bool AllFinite() const = 0;
+  // A(idx, idx) into `block` (idx.size() square): the basis of a warm-started
+  // solve. The default reads Column(); a matrix with structure (the planar
+  // contact model's rank-3 force block) can form just these entries.
+  virtual void GatherBasis(const std::vector<Eigen::Index>& idx, Eigen::MatrixXd& block) const;
+  // w = A z. The default is MultiplyColumns (below); a structured matrix may
+  // sum in another order (then not bit for bit the dense product).
+  virtual void Multiply(const Eigen::VectorXd& z, Eigen::VectorXd& w) const;
 };
 
 // Never throws; never returns non-finite z or w when ok.
