@@ -322,10 +322,11 @@ std::string DomainsXml(int min, int max, const char* indent) {
 
 // The real-time topics (LiveState, PusherCommand: 4 000 messages/s each at
 // 16 cells x 250 Hz) carry no submessage MAC of their own: every RTPS message
-// is already signed with receiver-specific MACs by its sending participant
-// (rtps_protection_kind SIGN), which authenticates the writer too (its GUID
-// prefix is the sender's), and the payload stays AES-GCM encrypted
-// (authenticated). The third crypto operation per message and receiver
+// is already signed with its sending participant's key (rtps_protection_kind
+// SIGN; a key every authenticated lab participant holds, so it authenticates
+// the lab, not the sender: SECURITY.md), and the payload stays AES-GCM
+// encrypted and authenticated with the writer's key, which only its matched
+// readers hold. The third crypto operation per message and receiver
 // halved the secured control loop's answered samples (bench/README.md);
 // access control is the same as on every topic. The first matching rule
 // applies, so these come before "*".
