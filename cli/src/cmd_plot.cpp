@@ -8,6 +8,8 @@
 //                (BuildCampaignMap, plot_map_data.hpp; RenderMapSvg)
 //   TRIAL        one trial's pose and contact forces, true vs observed vs
 //                predicted (PlotTrial, plot_trial.hpp)
+//   --calibration ID  a calibration's loss profiles (CalibrationProfileChart,
+//                plot_profile.cpp)
 #include <algorithm>
 #include <cmath>
 #include <fstream>
@@ -221,6 +223,7 @@ struct PlotOptions {
   std::int64_t evaluation = -1;
   std::int64_t trial = -1;
   bool tradeoff = false;
+  std::int64_t calibration = -1;
   std::vector<std::string> map;  // X, Y
   std::string metric;
   std::string out;
@@ -266,6 +269,27 @@ int PlotTradeoff(const db::Store& store, const PlotOptions& o) {
   return kExitOk;
 }
 
+int PlotCalibration(const db::Store& store, const PlotOptions& o) {
+  const db::Calibration cal = store.GetCalibration(o.calibration);
+  std::string predictor = "arena";
+  try {
+    predictor = nlohmann::json::parse(cal.settings_json).value("predictor", predictor);
+  } catch (const nlohmann::json::exception&) {
+  }
+  Chart chart;
+  try {
+    chart = CalibrationProfileChart(nlohmann::json::parse(cal.params_json),
+                                    "calibration " + std::to_string(cal.id) + " of campaign " +
+                                        std::to_string(cal.campaign_id) + " (predictor " +
+                                        predictor + "): the training loss along each parameter");
+  } catch (const std::exception& e) {
+    throw CommandError(kExitBadInput, "plot --calibration: calibration " + std::to_string(cal.id) +
+                                          ": " + e.what());
+  }
+  WriteFile(o.out, RenderSvg(chart));
+  return kExitOk;
+}
+
 int PlotMap(const db::Store& store, const PlotOptions& o) {
   if (o.campaign < 0) throw CommandError(kExitBadInput, "plot --map: needs --campaign ID");
   if (o.map.size() != 2 || o.map[0].empty() || o.map[1].empty()) {
@@ -293,16 +317,21 @@ int RunPlot(const PlotOptions& o) {
   if (o.tradeoff && o.trial >= 0) {
     throw CommandError(kExitBadInput, "plot: give either a TRIAL or --tradeoff, not both");
   }
+  if (o.calibration >= 0 && (o.tradeoff || o.trial >= 0 || !o.map.empty())) {
+    throw CommandError(kExitBadInput,
+                       "plot: --calibration is a plot of its own (no TRIAL, --tradeoff or --map)");
+  }
   if (o.trial >= 0) return PlotTrial(o.db_path, o.trial, o.out);
   try {
     db::StoreOptions so;
     so.read_only = true;
     auto store = db::Store::Open(o.db_path, so);
+    if (o.calibration >= 0) return PlotCalibration(*store, o);
     if (o.tradeoff) return PlotTradeoff(*store, o);
     if (!o.map.empty()) return PlotMap(*store, o);
     throw CommandError(kExitBadInput,
-                       "plot: choose a plot: a TRIAL id, --campaign ID --tradeoff, or "
-                       "--campaign ID --map X,Y --metric M");
+                       "plot: choose a plot: a TRIAL id, --campaign ID --tradeoff, "
+                       "--campaign ID --map X,Y --metric M, or --calibration ID");
   } catch (const db::StoreError& e) {
     throw StoreCommandError(e);
   }
@@ -313,7 +342,9 @@ int RunPlot(const PlotOptions& o) {
 void AddPlotCommand(CLI::App& app, Action* action) {
   auto o = std::make_shared<PlotOptions>();
   auto* cmd = app.add_subcommand(
-      "plot", "Draw charts from the store as SVG: a trial, or the speed/accuracy trade");
+      "plot",
+      "Draw charts from the store as SVG: a trial, the speed/accuracy trade, a map, or a "
+      "calibration's loss profile");
   cmd->add_option("trial", o->trial, "Trial id (see `arena query`)")->check(CLI::NonNegativeNumber);
   cmd->add_option("--db", o->db_path, "Store file (opened read-only)")->required();
   cmd->add_option("--out", o->out, "SVG file to write")->required();
@@ -330,12 +361,17 @@ void AddPlotCommand(CLI::App& app, Action* action) {
                   "grip_force,pivot_offset)")
       ->delimiter(',');
   cmd->add_option("--metric", o->metric, "With --map: the colour, one of " + MapMetricNames());
+  cmd->add_option("--calibration", o->calibration,
+                  "A calibration's loss profile (arena calibrate): the training loss along each "
+                  "fitted parameter, the fit, and what the data rule out")
+      ->check(CLI::PositiveNumber);
   cmd->footer(
       "Examples:\n"
       "  arena plot --db lab.db 12 --out trial12.svg\n"
       "  arena plot --db lab.db --campaign 3 --map grip_force,pivot_offset --metric unstable "
       "--out map.svg\n"
       "  arena plot --db lab.db --campaign 3 --tradeoff --out tradeoff.svg\n"
+      "  arena plot --db lab.db --calibration 1 --out profile.svg\n"
       "A trial's prediction is re-run with the campaign's \"prediction\" settings, as `arena "
       "serve` ran it.\n"
       "View the SVG in a browser, or convert it: rsvg-convert trial12.svg -o trial12.png\n");

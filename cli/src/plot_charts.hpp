@@ -22,4 +22,14 @@ namespace arena::cli {
 // @throws std::invalid_argument when the report lacks its fields.
 Chart TradeoffChart(const nlohmann::json& report);
 
+// --calibration: a calibration's stored parameters (db::Calibration's
+// params_json, assessment::ParamsJson). One panel per parameter with a
+// profile: the mean training loss against its scale (both log axes; series
+// "loss NAME", markers joined), the fit ("fit NAME") and the dashed ends
+// of what fits as well ("fits as well from NAME" / "fits as well up to NAME":
+// the nearest scales that fit worse, or a bound);
+// the title says when the data do not identify it.
+// @throws std::invalid_argument when no parameter has a profile.
+Chart CalibrationProfileChart(const nlohmann::json& params, const std::string& title);
+
 }  // namespace arena::cli

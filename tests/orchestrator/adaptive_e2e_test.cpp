@@ -237,6 +237,16 @@ TEST(AdaptiveE2E, CalibrationRecoversTheCellsFrictionScale) {
     EXPECT_NE(ReadFile(log).find("--predictor-settings"), std::string::npos) << ReadFile(log);
   }
   EXPECT_EQ(OpenReadOnly(db)->ListCalibrations(1).size(), 1u);
+  // The profile drawn: one panel per parameter; a calibration that does not
+  // exist is refused.
+  EXPECT_EQ(RunArena({"plot", "--db", db, "--calibration", "1", "--out", dir / "profile.svg"},
+                     dir / "plot.log", std::chrono::seconds(30)),
+            0)
+      << ReadFile(dir / "plot.log");
+  EXPECT_NE(ReadFile(dir / "profile.svg").find("data-name=\"loss mu_fingers\""), std::string::npos);
+  EXPECT_EQ(RunArena({"plot", "--db", db, "--calibration", "9", "--out", dir / "none.svg"},
+                     dir / "plot9.log", std::chrono::seconds(30)),
+            2);
 
   // The same campaign predicted with the calibration: closer to the truth.
   json spec = json::parse(ReadFile(TestCampaign("calibration_grid.json")));
