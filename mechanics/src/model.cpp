@@ -331,6 +331,7 @@ class StepMatrix final : public LcpColumns {
     mass_ = mass;
     K_ = &K;
     entries_.clear();
+    diagonal_.assign(static_cast<size_t>(nf), 0.0);
     cache_.resize(n_, n_);
     // Planar (3 reduced coordinates): never formed whole. A warm-started
     // step reads only its basis block and w = A z, both cheap from the
@@ -348,6 +349,16 @@ class StepMatrix final : public LcpColumns {
     } else {
       JT_ = Jrows.transpose();
       ready_.assign(static_cast<size_t>(n_), 0);
+    }
+  }
+  // Adds to a diagonal entry of the force block (after Reset, before
+  // Finish): an elastic pad's compliance on its points' normal rows.
+  void AddToForceDiagonal(int k, double value) {
+    finite_ = finite_ && std::isfinite(value);
+    if (dense_) {
+      cache_(k, k) += value;
+    } else {
+      diagonal_[static_cast<size_t>(k)] += value;
     }
   }
   void Set(int row, int col, double value) {
@@ -382,6 +393,7 @@ class StepMatrix final : public LcpColumns {
       top.setZero();
       for (Eigen::Index k = 0; k < JT_.cols(); ++k) top += JT_.col(k) * (*K_)(k, j);
       for (Eigen::Index i = 0; i < nf_; ++i) col[i] = 0.0 + col[i] * mass_;
+      col[j] += diagonal_[static_cast<size_t>(j)];
       c.tail(n_ - nf_).setZero();
     } else {
       c.setZero();
@@ -419,6 +431,7 @@ class StepMatrix final : public LcpColumns {
           const Eigen::Index i = idx[static_cast<size_t>(r)];
           out[r] = i < nf_ ? mass_ * (J[3 * i] * k0 + J[3 * i + 1] * k1 + J[3 * i + 2] * k2) : 0.0;
         }
+        out[c] += diagonal_[static_cast<size_t>(j)];
       } else {
         std::fill(out, out + m, 0.0);
       }
@@ -453,7 +466,9 @@ class StepMatrix final : public LcpColumns {
     y0 *= mass_;
     y1 *= mass_;
     y2 *= mass_;
-    for (int i = 0; i < nf_; ++i) w[i] = J[3 * i] * y0 + J[3 * i + 1] * y1 + J[3 * i + 2] * y2;
+    for (int i = 0; i < nf_; ++i)
+      w[i] = J[3 * i] * y0 + J[3 * i + 1] * y1 + J[3 * i + 2] * y2 +
+             diagonal_[static_cast<size_t>(i)] * z[i];
     for (const Entry& e : sorted_) {
       const double zc = z[e.col];
       if (zc != 0) w[e.row] += e.value * zc;
@@ -483,6 +498,7 @@ class StepMatrix final : public LcpColumns {
   const Eigen::MatrixXd* K_ = nullptr;
   Eigen::MatrixXd JT_;
   std::vector<Entry> entries_, sorted_;
+  std::vector<double> diagonal_;  // lazy and planar: added to the force block's diagonal
   std::vector<int> first_, fill_;
   mutable Eigen::MatrixXd cache_;
   mutable std::vector<char> ready_;
@@ -544,6 +560,12 @@ struct ContactModel::Impl {
   void Geometry();
   void TrackedGeometry();
   void MarkRedundantPoints();
+  // An elastic pad's compliance per constituent point over dt², 1/(k_point
+  // dt²) (1/(kg)): times the mass, the point's normal-row diagonal.
+  double PadCompliance(const Contact& ct) const {
+    const double k_point = ct.spec.stiffness / static_cast<double>(ct.points.size());
+    return 1.0 / (k_point * dt * dt);
+  }
   void PlaceOnSolid(Contact& ct, Point& pt, const Eigen::Vector3d& q, const Eigen::Vector3d& base,
                     const Eigen::Vector3d& closing, const Eigen::Vector3d& vp,
                     const Eigen::Vector3d& wp);
@@ -1088,7 +1110,9 @@ void ContactModel::Impl::TrackedGeometry() {
 // end past the object's edge, the line across an edge) all points do.
 void ContactModel::Impl::MarkRedundantPoints() {
   for (Contact& ct : contacts) {
-    if (ct.spec.type != ContactType::kLine || ct.points.size() <= 2) continue;
+    // An elastic pad's interior points carry load by penetration: kept.
+    if (ct.spec.type != ContactType::kLine || ct.points.size() <= 2 || ct.spec.stiffness > 0)
+      continue;
     bool ends_press = true;
     for (const Point& pt : ct.points) {
       if (!tracked) break;
@@ -1234,6 +1258,9 @@ StepReport ContactModel::Impl::Step() {
       A.Set(k, ct.y_minus, pad_along);
     }
     if (e >= 0) A.Set(k, pt.xi, 1);
+    // An elastic pad: the point sinks in by its force over its stiffness,
+    // w = v_n + gap/dt + λ/(k dt), nondimensional m/(k dt²) on the diagonal.
+    if (e < 0 && ct.spec.stiffness > 0) A.AddToForceDiagonal(k, mass * PadCompliance(ct));
     b[k] = bk / Vs;
   }
   for (const Contact& ct : contacts) {
@@ -1347,7 +1374,10 @@ StepReport ContactModel::Impl::Step() {
         const Eigen::Vector3d urel = object_velocity(pt.p) - body_velocity(ct, pt);
         const double lam = pt.lambda >= 0 ? zv(pt.lambda) : ct.known_normal;
         sum += lam;
-        if (pt.lambda >= 0) comp(lam / Fs, (normal_of(ct, pt).dot(urel) + pt.gap / dt) / Vs);
+        if (pt.lambda >= 0) {
+          const double sink = ct.spec.stiffness > 0 ? lam * PadCompliance(ct) * dt : 0.0;
+          comp(lam / Fs, (normal_of(ct, pt).dot(urel) + pt.gap / dt + sink) / Vs);
+        }
         if (pt.beta0 >= 0) {
           const double xi = zv(pt.xi);
           double bsum = 0;

@@ -445,10 +445,19 @@ void ReadContact(const Obj& o, ContactSpec* contact) {
 }
 
 ContactSpec ReadFinger(const json& v, const std::string& path) {
-  Obj o(v, path, {"name", "type", "position", "normal", "axis", "length", "radius", "mu"});
+  Obj o(v, path,
+        {"name", "type", "position", "normal", "axis", "length", "radius", "mu", "stiffness"});
   ContactSpec finger;
   finger.name = String(o.Require("name"), o.At("name"));
   ReadContact(o, &finger);
+  if (const json* k = o.Find("stiffness")) {
+    if (finger.type == ContactType::kPoint)
+      o.Forbid("stiffness", "only for a line or patch finger (a pad of several points)");
+    finger.stiffness = Number(*k, o.At("stiffness"));
+    if (!(finger.stiffness > 0))
+      throw SceneError(o.At("stiffness"), "must be > 0 N/m (leave it out for a rigid pad), got " +
+                                              Num(finger.stiffness));
+  }
   return finger;
 }
 
@@ -618,6 +627,10 @@ void ValidateContact(const ContactSpec& c, const std::string& path, const Scene&
   RequireFinite(c.position, Join(path, "position"));
   RequireUnit(c.normal, Join(path, "normal"));
   RequireNonNegative(c.mu, Join(path, "mu"));
+  RequireNonNegative(c.stiffness, Join(path, "stiffness"));
+  if (c.stiffness > 0 && c.type == ContactType::kPoint)
+    throw SceneError(Join(path, "stiffness"),
+                     "only for a line or patch finger (a pad of several points)");
   const double extent = ObjectExtent(scene.object);
   const double surface_tol = kSurfaceTolerance * extent;
   auto on_surface = [&](const Eigen::Vector3d& p, const std::string& field,
@@ -800,6 +813,8 @@ void ValidateScene(const Scene& scene) {
     const PusherSpec& p = *scene.pusher;
     check_points(p, "pusher");
     ValidateContact(p, "pusher", scene);
+    if (p.stiffness != 0)
+      throw SceneError("pusher.stiffness", "only for finger pads (the pusher is rigid)");
     RequireFinite(p.motion.velocity, "pusher.motion.velocity");
     RequireFinite(p.motion.angular_velocity, "pusher.motion.angular_velocity");
     if (p.controller) {
@@ -938,6 +953,7 @@ nlohmann::ordered_json ContactJson(const ContactSpec& c, bool with_name) {
   if (c.type == ContactType::kPatch || (c.type == ContactType::kPoint && c.radius != 0))
     j["radius"] = c.radius;
   j["mu"] = c.mu;
+  if (c.stiffness > 0) j["stiffness"] = c.stiffness;
   return j;
 }
 }  // namespace

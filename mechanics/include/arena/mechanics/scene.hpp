@@ -49,6 +49,10 @@ struct ContactSpec {
   double length = 0;                                   // line (m)
   double radius = 0;                                   // patch (m); point: a sphere's (m)
   double mu = 0;                                       // friction coefficient, >= 0
+  // Finger pads of a line or patch: their normal stiffness (N/m, the whole
+  // pad, shared by its constituent points); 0 = rigid. An elastic pad shares
+  // its load by penetration where a rigid one's sharing is undetermined.
+  double stiffness = 0;
 };
 
 struct PusherMotion {
