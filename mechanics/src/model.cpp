@@ -627,10 +627,11 @@ GraspStatus ContactModel::Grasp(std::string* note) const {
   for (size_t i = 0; i < m.contacts.size(); ++i) {
     const Contact& ct = m.contacts[i];
     if (ct.pusher || !ct.active) continue;
-    const std::string who = "fingers[" + std::to_string(i) + "] '" + ct.spec.name + "'";
+    // Named only when it is news (called after every step of every trial).
+    auto who = [&] { return "fingers[" + std::to_string(i) + "] '" + ct.spec.name + "'"; };
     if (m.tracked) {
       if (!ct.touching && !ct.any_active) {
-        if (note) *note = who + " lost contact: its pad passed the object's edge";
+        if (note) *note = who() + " lost contact: its pad passed the object's edge";
         return GraspStatus::kLost;
       }
       continue;
@@ -642,7 +643,7 @@ GraspStatus ContactModel::Grasp(std::string* note) const {
           char buf[160];
           std::snprintf(buf, sizeof buf,
                         " left the object: a frozen contact point is %.3g m off its surface", off);
-          *note = who + buf;
+          *note = who() + buf;
         }
         return GraspStatus::kLeftGeometry;
       }
