@@ -185,6 +185,12 @@ bool SolveBasis(const LcpColumns& A, const Eigen::VectorXd& b, const std::vector
     const auto m = static_cast<Eigen::Index>(idx.size());
     bb.resize(m);
     for (Eigen::Index c = 0; c < m; ++c) bb[c] = -b[idx[static_cast<size_t>(c)]];
+    if (A.SolveBasisBlock(idx, bb, zb)) {
+      for (Eigen::Index r = 0; r < m; ++r) z[idx[static_cast<size_t>(r)]] = zb[r];
+      A.Multiply(z, w);
+      w += b;
+      return AllFinite(w);
+    }
     A.GatherBasis(idx, Abb);
     lu.Compute(Abb);
     lu.Solve(bb, zb);
@@ -677,6 +683,11 @@ void LcpColumns::GatherBasis(const std::vector<Eigen::Index>& idx, Eigen::Matrix
 
 void LcpColumns::Multiply(const Eigen::VectorXd& z, Eigen::VectorXd& w) const {
   MultiplyColumns(*this, z, w);
+}
+
+bool LcpColumns::SolveBasisBlock(const std::vector<Eigen::Index>&, const Eigen::VectorXd&,
+                                 Eigen::VectorXd&) const {
+  return false;
 }
 
 void MultiplyColumns(const LcpColumns& A, const Eigen::VectorXd& z, Eigen::VectorXd& w) {

@@ -3,6 +3,7 @@
 #include "arena/mechanics/model.hpp"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
@@ -14,6 +15,7 @@
 
 #include "arena/mechanics/lcp.hpp"
 #include "geometry.hpp"
+#include "sparse_lu.hpp"
 
 namespace arena::mechanics {
 
@@ -339,6 +341,7 @@ class StepMatrix final : public LcpColumns {
     low_rank_ = Jrows.rows() == 3;
     J_ = &Jrows;
     dense_ = nf_ < kLazyForces && !low_rank_;
+    sorted_ready_ = dense_;
     finite_ = std::isfinite(mass) && Jrows.allFinite() && K.allFinite();
     if (dense_) {
       // Eigen picks a coefficient-wise product for small sizes, whose sums
@@ -347,7 +350,7 @@ class StepMatrix final : public LcpColumns {
       cache_.topLeftCorner(nf_, nf_).noalias() = mass * Jrows.transpose() * K;
       ready_.assign(static_cast<size_t>(n_), 1);
     } else {
-      JT_ = Jrows.transpose();
+      jt_ready_ = false;  // Column() transposes when Lemke first asks
       ready_.assign(static_cast<size_t>(n_), 0);
     }
   }
@@ -369,9 +372,13 @@ class StepMatrix final : public LcpColumns {
       entries_.push_back(Entry{row, col, value});
     }
   }
-  // After the last Set: the sparse entries by column, in assignment order.
-  void Finish() {
-    if (dense_) return;
+  // After the last Set. The entries are sorted by column when a column or
+  // the gathered basis block is first read (a warm step solved bordered
+  // never reads them by column).
+  void Finish() { sorted_ready_ = dense_; }
+  void SortEntries() const {
+    if (sorted_ready_) return;
+    sorted_ready_ = true;
     first_.assign(static_cast<size_t>(n_) + 1, 0);
     for (const Entry& e : entries_) ++first_[static_cast<size_t>(e.col) + 1];
     for (int j = 0; j < n_; ++j)
@@ -385,6 +392,11 @@ class StepMatrix final : public LcpColumns {
   const double* Column(Eigen::Index j) const override {
     double* col = cache_.data() + j * n_;
     if (ready_[static_cast<size_t>(j)]) return col;
+    SortEntries();
+    if (!jt_ready_ && j < nf_) {
+      JT_ = J_->transpose();
+      jt_ready_ = true;
+    }
     Eigen::Map<Eigen::VectorXd> c(col, n_);
     if (j < nf_) {
       // gebp: per entry, acc = 0; acc += a_k b_k over k in order; then
@@ -415,6 +427,7 @@ class StepMatrix final : public LcpColumns {
       LcpColumns::GatherBasis(idx, block);
       return;
     }
+    SortEntries();
     const auto m = static_cast<Eigen::Index>(idx.size());
     block.resize(m, m);
     position_.resize(static_cast<size_t>(n_), -1);
@@ -469,10 +482,94 @@ class StepMatrix final : public LcpColumns {
     for (int i = 0; i < nf_; ++i)
       w[i] = J[3 * i] * y0 + J[3 * i + 1] * y1 + J[3 * i + 2] * y2 +
              diagonal_[static_cast<size_t>(i)] * z[i];
-    for (const Entry& e : sorted_) {
+    for (const Entry& e : entries_) {
       const double zc = z[e.col];
       if (zc != 0) w[e.row] += e.value * zc;
     }
+  }
+  // The planar basis solved bordered. With y = mass · K_B z_B, the change of
+  // the 3 reduced coordinates' velocity that the basic forces make,
+  // A(idx, idx) z = rhs reads
+  //   J_i · y + d_i z_i + (entries set in row i) = rhs_i   (each basic row i)
+  //   mass · K_B z_B - y = 0                               (3 border rows)
+  // a sparse system (3 grasp-map entries per force row, the few constants
+  // per row of the friction cone and the pads, 3 dense border rows), where
+  // the dense LU factorises all m² entries of the rank-3 force block. Its
+  // elimination order is cached per pattern (SmallSparseLu). The answer is
+  // checked against A(idx, idx) itself: one refinement when its residual is
+  // above 1e-14 of the data, refused (the dense LU answers) above 1e-11.
+  bool SolveBasisBlock(const std::vector<Eigen::Index>& idx, const Eigen::VectorXd& rhs,
+                       Eigen::VectorXd& x) const override {
+    if (!low_rank_) return false;
+    const auto m = static_cast<int>(idx.size());
+    const int size = m + 3;
+    if (size > SmallSparseLu::kMaxSize) return false;
+    position_.resize(static_cast<size_t>(n_), -1);
+    for (int r = 0; r < m; ++r) position_[static_cast<size_t>(idx[static_cast<size_t>(r)])] = r;
+    const double* J = J_->data();
+    const double* Kd = K_->data();
+    lu_.Clear(size);
+    for (int r = 0; r < m; ++r) {
+      const Eigen::Index i = idx[static_cast<size_t>(r)];
+      if (i >= nf_) continue;
+      for (int k = 0; k < 3; ++k) lu_.Add(r, m + k, J[3 * i + k]);
+      for (int k = 0; k < 3; ++k) lu_.Add(m + k, r, mass_ * Kd[3 * i + k]);
+      const double d = diagonal_[static_cast<size_t>(i)];
+      if (d != 0) lu_.Add(r, r, d);
+    }
+    for (int k = 0; k < 3; ++k) lu_.Add(m + k, m + k, -1.0);
+    for (const Entry& e : entries_) {
+      const int r = position_[static_cast<size_t>(e.row)];
+      const int c = position_[static_cast<size_t>(e.col)];
+      if (r >= 0 && c >= 0) lu_.Add(r, c, e.value);
+    }
+    // A(idx, idx) z - rhs from z alone (y recomputed, as the block has it).
+    auto worst_residual = [&](const double* z) {
+      double y[3] = {0, 0, 0};
+      for (int c = 0; c < m; ++c) {
+        const Eigen::Index j = idx[static_cast<size_t>(c)];
+        if (j >= nf_) continue;
+        for (int k = 0; k < 3; ++k) y[k] += Kd[3 * j + k] * z[c];
+      }
+      for (double& yk : y) yk *= mass_;
+      std::array<double, SmallSparseLu::kMaxSize> r{};
+      for (int row = 0; row < m; ++row) {
+        const Eigen::Index i = idx[static_cast<size_t>(row)];
+        double v = -rhs[row];
+        if (i < nf_) {
+          v += J[3 * i] * y[0] + J[3 * i + 1] * y[1] + J[3 * i + 2] * y[2] +
+               diagonal_[static_cast<size_t>(i)] * z[row];
+        }
+        r[static_cast<size_t>(row)] = v;
+      }
+      for (const Entry& e : entries_) {
+        const int row = position_[static_cast<size_t>(e.row)];
+        const int c = position_[static_cast<size_t>(e.col)];
+        if (row >= 0 && c >= 0) r[static_cast<size_t>(row)] += e.value * z[c];
+      }
+      double worst = 0;
+      for (int row = 0; row < m; ++row)
+        worst = std::max(worst, std::abs(r[static_cast<size_t>(row)]));
+      return worst;
+    };
+    bool ok = lu_.Factor();
+    if (ok) {
+      std::array<double, SmallSparseLu::kMaxSize> b{}, u{}, res{}, du{};
+      std::copy(rhs.data(), rhs.data() + m, b.begin());
+      lu_.Solve(b.data(), u.data());
+      const double scale = 1.0 + rhs.lpNorm<Eigen::Infinity>();
+      double worst = worst_residual(u.data());
+      if (!(worst <= 1e-14 * scale)) {
+        lu_.Residual(b.data(), u.data(), res.data());
+        lu_.Solve(res.data(), du.data());
+        for (int c = 0; c < size; ++c) u[static_cast<size_t>(c)] += du[static_cast<size_t>(c)];
+        worst = worst_residual(u.data());
+      }
+      ok = worst <= 1e-11 * scale;
+      if (ok) x = Eigen::Map<const Eigen::VectorXd>(u.data(), m);
+    }
+    for (int r = 0; r < m; ++r) position_[static_cast<size_t>(idx[static_cast<size_t>(r)])] = -1;
+    return ok;
   }
   // The whole matrix (for an observer or a dump).
   const Eigen::MatrixXd& Dense() const {
@@ -496,12 +593,16 @@ class StepMatrix final : public LcpColumns {
   bool finite_ = true;
   double mass_ = 0;
   const Eigen::MatrixXd* K_ = nullptr;
-  Eigen::MatrixXd JT_;
-  std::vector<Entry> entries_, sorted_;
+  mutable Eigen::MatrixXd JT_;
+  mutable bool jt_ready_ = false;
+  std::vector<Entry> entries_;
+  mutable std::vector<Entry> sorted_;
+  mutable bool sorted_ready_ = true;
   std::vector<double> diagonal_;  // lazy and planar: added to the force block's diagonal
-  std::vector<int> first_, fill_;
+  mutable std::vector<int> first_, fill_;
   mutable Eigen::MatrixXd cache_;
   mutable std::vector<char> ready_;
+  mutable SmallSparseLu lu_;  // planar: the bordered basis (SolveBasisBlock)
 };
 
 }  // namespace

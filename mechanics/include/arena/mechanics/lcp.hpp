@@ -66,6 +66,12 @@ class LcpColumns {
   // w = A z. The default is MultiplyColumns (below); a structured matrix may
   // sum in another order (then not bit for bit the dense product).
   virtual void Multiply(const Eigen::VectorXd& z, Eigen::VectorXd& w) const;
+  // Solves A(idx, idx) x = rhs with the matrix's own structure (the planar
+  // contact model: its rank-3 force block bordered by the 3 reduced
+  // coordinates, a sparse system). False when it has none or its answer is
+  // not accurate enough; the solver then factorises the gathered block.
+  virtual bool SolveBasisBlock(const std::vector<Eigen::Index>& idx, const Eigen::VectorXd& rhs,
+                               Eigen::VectorXd& x) const;
 };
 
 // Never throws; never returns non-finite z or w when ok.
