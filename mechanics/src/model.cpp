@@ -12,6 +12,7 @@
 
 #include <Eigen/Cholesky>
 #include <Eigen/Eigenvalues>
+#include <Eigen/LU>
 
 #include "arena/mechanics/lcp.hpp"
 #include "geometry.hpp"
@@ -1041,8 +1042,9 @@ void ContactModel::Impl::SetEdges(Point& pt) {
     // about it, Setup()); a degenerate cross product gives no friction
     // rather than NaN.
     const Eigen::Vector3d cr = plane_normal.cross(pt.n);
+    const double length = cr.norm();
     const Eigen::Vector3d tau =
-        cr.norm() > 1e-12 ? Eigen::Vector3d(cr.normalized()) : Eigen::Vector3d::Zero();
+        length > 1e-12 ? Eigen::Vector3d(cr / length) : Eigen::Vector3d::Zero();
     pt.edges.resize(2);
     pt.edges[0] = tau;
     pt.edges[1] = -tau;
@@ -1251,23 +1253,28 @@ StepReport ContactModel::Impl::Step() {
   // diagonal, like a tracked point without rows; it still counts as touching).
   auto rows = [&](const Point& pt) { return live(pt) && !pt.redundant; };
   const Eigen::Matrix3d R = q.toRotationMatrix();
-  const Eigen::Matrix3d Iw = R * inertia_body * R.transpose();
 
   // Reduced mass matrix and its inverse.
-  Eigen::Matrix<double, 6, 6> M6 = Eigen::Matrix<double, 6, 6>::Zero();
-  M6.topLeftCorner<3, 3>() = mass * Eigen::Matrix3d::Identity();
-  M6.bottomRightCorner<3, 3>() = Iw;
   SmallMatrix Mr, Minv;
   Eigen::Matrix<double, 6, 1> tw;
   tw << v, w;
   SmallVector vr;
   if (planar) {
-    // Fixed 3x3 sizes: the same arithmetic without dynamic-size dispatch.
-    const Eigen::Matrix3d Mr3 = Pt3 * M6 * Pt3.transpose();
+    // Pᵀ diag(m I, R I Rᵀ) P on the plane's coordinates (e1, e2 in the
+    // plane, turning about its normal p), written out on fixed 3x3 sizes.
+    const Eigen::Vector3d p_body = R.transpose() * plane_normal;
+    Eigen::Matrix3d Mr3 = Eigen::Matrix3d::Zero();
+    Mr3(0, 0) = mass * plane_e1.dot(plane_e1);
+    Mr3(0, 1) = Mr3(1, 0) = mass * plane_e1.dot(plane_e2);
+    Mr3(1, 1) = mass * plane_e2.dot(plane_e2);
+    Mr3(2, 2) = p_body.dot(inertia_body * p_body);
     Mr = Mr3;
-    Minv = Mr3.llt().solve(Eigen::Matrix3d::Identity());
+    Minv = Mr3.inverse();  // closed form for 3x3 (Mr3 is the planar mass: SPD)
     vr = Pt3 * tw;
   } else {
+    Eigen::Matrix<double, 6, 6> M6 = Eigen::Matrix<double, 6, 6>::Zero();
+    M6.topLeftCorner<3, 3>() = mass * Eigen::Matrix3d::Identity();
+    M6.bottomRightCorner<3, 3>() = R * inertia_body * R.transpose();
     Mr = P.transpose() * M6 * P;
     Minv = Mr.llt().solve(SmallMatrix::Identity(nd, nd));
     vr = P.transpose() * tw;
@@ -1340,7 +1347,13 @@ StepReport ContactModel::Impl::Step() {
   // diagonal and b = 1), so the LCP keeps its size.
   A.Reset(n, nf, mass, Jrows, K);
   b.setZero(n);
-  b.head(nf).noalias() = Jrows.transpose() * vfree;
+  if (planar) {
+    const double* J = Jrows.data();
+    for (int k = 0; k < nf; ++k)
+      b[k] = J[3 * k] * vfree[0] + J[3 * k + 1] * vfree[1] + J[3 * k + 2] * vfree[2];
+  } else {
+    b.head(nf).noalias() = Jrows.transpose() * vfree;
+  }
   for (int k = 0; k < nf; ++k) {
     const Contact& ct = contacts[static_cast<size_t>(force_point[static_cast<size_t>(k)])];
     const Point& pt = ct.points[static_cast<size_t>(force_point_sub[static_cast<size_t>(k)])];
@@ -1450,7 +1463,25 @@ StepReport ContactModel::Impl::Step() {
 
     // Forces (N) and the new twist.
     f = Fs * sol.z.head(nf);
-    vr_new = vfree + dt * (K * f);
+    SmallVector Kf, Jf;  // at most 6: on the stack (a product in an expression is a heap temporary)
+    if (planar) {
+      // Written out: Eigen's general product on a 3 x nf block dispatches
+      // to its blocked kernel.
+      Kf.setZero(3);
+      Jf.setZero(3);
+      for (int j = 0; j < nf; ++j) {
+        const double fj = f[j];
+        if (fj == 0) continue;
+        for (int i = 0; i < 3; ++i) {
+          Kf[i] += K(i, j) * fj;
+          Jf[i] += Jc(i, j) * fj;
+        }
+      }
+    } else {
+      Kf.noalias() = K * f;
+      Jf.noalias() = Jc * f;
+    }
+    vr_new = vfree + dt * Kf;
     const Eigen::Matrix<double, 6, 1> tw_new = P * vr_new;
     v_new = tw_new.head<3>();
     w_new = tw_new.tail<3>();
@@ -1458,7 +1489,7 @@ StepReport ContactModel::Impl::Step() {
     // Residuals, recomputed from the physical quantities (not the solver's w).
     res = Residuals{};
     {
-      const SmallVector newton = Mr * (vr_new - vr) / dt - (Jc * f + Q);
+      const SmallVector newton = Mr * (vr_new - vr) / dt - (Jf + Q);
       for (int i = 0; i < nd; ++i) {
         const bool torque = planar ? i == 2 : i >= 3;
         res.force_balance =
