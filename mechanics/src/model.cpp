@@ -304,11 +304,11 @@ struct Contact {
 void ReportAlongSceneNormal(const Contact& ct, bool tracked, const Eigen::Vector3d& force,
                             ContactState* st) {
   const Eigen::Vector3d n = ct.spec.normal.normalized();
-  constexpr double kSame = 1e-12;  // rounding of the same direction
-  bool along_n = (ct.normal - n).norm() <= kSame;
+  constexpr double kSame2 = 1e-24;  // rounding of the same direction, squared
+  bool along_n = (ct.normal - n).squaredNorm() <= kSame2;
   if (tracked) {
     along_n = true;
-    for (const Point& pt : ct.points) along_n = along_n && (pt.n - n).norm() <= kSame;
+    for (const Point& pt : ct.points) along_n = along_n && (pt.n - n).squaredNorm() <= kSame2;
   }
   if (along_n) return;
   st->normal_force = force.dot(n);
@@ -524,49 +524,35 @@ class StepMatrix final : public LcpColumns {
       const int c = position_[static_cast<size_t>(e.col)];
       if (r >= 0 && c >= 0) lu_.Add(r, c, e.value);
     }
-    // A(idx, idx) z - rhs from z alone (y recomputed, as the block has it).
-    auto worst_residual = [&](const double* z) {
-      double y[3] = {0, 0, 0};
-      for (int c = 0; c < m; ++c) {
-        const Eigen::Index j = idx[static_cast<size_t>(c)];
-        if (j >= nf_) continue;
-        for (int k = 0; k < 3; ++k) y[k] += Kd[3 * j + k] * z[c];
-      }
-      for (double& yk : y) yk *= mass_;
-      std::array<double, SmallSparseLu::kMaxSize> r{};
+    // The bordered residual res = rhs - M u gives A(idx, idx)'s own: with
+    // mass · K z = y - res_border, row i's is res_i + J_i · res_border.
+    std::array<double, SmallSparseLu::kMaxSize> b, u, res, du;
+    auto worst_residual = [&] {
+      lu_.Residual(b.data(), u.data(), res.data());
+      const double r0 = res[static_cast<size_t>(m)], r1 = res[static_cast<size_t>(m) + 1],
+                   r2 = res[static_cast<size_t>(m) + 2];
+      double worst = 0;
       for (int row = 0; row < m; ++row) {
         const Eigen::Index i = idx[static_cast<size_t>(row)];
-        double v = -rhs[row];
-        if (i < nf_) {
-          v += J[3 * i] * y[0] + J[3 * i + 1] * y[1] + J[3 * i + 2] * y[2] +
-               diagonal_[static_cast<size_t>(i)] * z[row];
-        }
-        r[static_cast<size_t>(row)] = v;
+        double v = res[static_cast<size_t>(row)];
+        if (i < nf_) v += J[3 * i] * r0 + J[3 * i + 1] * r1 + J[3 * i + 2] * r2;
+        worst = std::max(worst, std::abs(v));
       }
-      for (const Entry& e : entries_) {
-        const int row = position_[static_cast<size_t>(e.row)];
-        const int c = position_[static_cast<size_t>(e.col)];
-        if (row >= 0 && c >= 0) r[static_cast<size_t>(row)] += e.value * z[c];
-      }
-      double worst = 0;
-      for (int row = 0; row < m; ++row)
-        worst = std::max(worst, std::abs(r[static_cast<size_t>(row)]));
       return worst;
     };
     bool ok = lu_.Factor();
     if (ok) {
-      std::array<double, SmallSparseLu::kMaxSize> b{}, u{}, res{}, du{};
       std::copy(rhs.data(), rhs.data() + m, b.begin());
+      std::fill(b.begin() + m, b.begin() + size, 0.0);
       lu_.Solve(b.data(), u.data());
       const double scale = 1.0 + rhs.lpNorm<Eigen::Infinity>();
-      double worst = worst_residual(u.data());
+      double worst = worst_residual();
       if (!(worst <= 1e-14 * scale)) {
-        lu_.Residual(b.data(), u.data(), res.data());
         lu_.Solve(res.data(), du.data());
         for (int c = 0; c < size; ++c) u[static_cast<size_t>(c)] += du[static_cast<size_t>(c)];
-        worst = worst_residual(u.data());
+        worst = worst_residual();
       }
-      ok = worst <= 1e-11 * scale;
+      ok = std::isfinite(worst) && worst <= 1e-11 * scale;
       if (ok) x = Eigen::Map<const Eigen::VectorXd>(u.data(), m);
     }
     for (int r = 0; r < m; ++r) position_[static_cast<size_t>(idx[static_cast<size_t>(r)])] = -1;
@@ -1354,6 +1340,7 @@ StepReport ContactModel::Impl::Step() {
   } else {
     b.head(nf).noalias() = Jrows.transpose() * vfree;
   }
+  const double inv_dt = 1.0 / dt, inv_Vs = 1.0 / Vs;
   for (int k = 0; k < nf; ++k) {
     const Contact& ct = contacts[static_cast<size_t>(force_point[static_cast<size_t>(k)])];
     const Point& pt = ct.points[static_cast<size_t>(force_point_sub[static_cast<size_t>(k)])];
@@ -1367,7 +1354,7 @@ StepReport ContactModel::Impl::Step() {
     // The pad's own velocity along its closing direction (fixed: d·n = 1 or 0).
     const double pad_along = tracked ? d.dot(ct.normal) : (e < 0 ? 1.0 : 0.0);
     double bk = b[k] - d.dot(pt.body_velocity);
-    if (e < 0) bk += pt.gap / dt;
+    if (e < 0) bk += pt.gap * inv_dt;
     if (ct.y_plus >= 0 && pad_along != 0) {
       A.Set(k, ct.y_plus, -pad_along);
       A.Set(k, ct.y_minus, pad_along);
@@ -1376,7 +1363,7 @@ StepReport ContactModel::Impl::Step() {
     // An elastic pad: the point sinks in by its force over its stiffness,
     // w = v_n + gap/dt + λ/(k dt), nondimensional m/(k dt²) on the diagonal.
     if (e < 0 && ct.spec.stiffness > 0) A.AddToForceDiagonal(k, mass * PadCompliance(ct));
-    b[k] = bk / Vs;
+    b[k] = bk * inv_Vs;
   }
   for (const Contact& ct : contacts) {
     if (!ct.active) continue;
@@ -1572,7 +1559,7 @@ StepReport ContactModel::Impl::Step() {
         st.torque += (pt.p - ct.position).cross(fp);
         const Eigen::Vector3d urel = object_velocity(pt.p) - body_velocity(ct, pt);
         const Eigen::Vector3d ut = urel - nrm.dot(urel) * nrm;
-        if (lam > 1e-9 * Fs && ut.norm() > 1e-9 * Vs) sliding = true;
+        if (lam > 1e-9 * Fs && ut.squaredNorm() > 1e-18 * Vs * Vs) sliding = true;
         const bool close = pt.gap <= (tracked ? gap_tolerance : 0.0) || lam > 1e-9 * Fs;
         if (close) {
           ++st.touching_points;

@@ -22,8 +22,9 @@ constexpr std::uint64_t Low(int n) {
 }  // namespace
 
 void SmallSparseLu::Clear(int n) {
+  // Rows past the larger of the two sizes are zero already.
+  std::fill(bits_.begin(), bits_.begin() + std::clamp(std::max(n_, n), 0, kMaxSize), 0);
   n_ = n;
-  bits_.fill(0);
   entries_.clear();
   active_ = nullptr;
 }
