@@ -661,19 +661,18 @@ struct ContactModel::Impl {
                   const Eigen::Vector3d& vp, const Eigen::Vector3d& wp);
   void SetEdges(Point& pt);
   // Column k of a grasp map: the wrench of a unit force along d at arm
-  // (from the centre of mass), in reduced coordinates.
+  // (from the centre of mass), in reduced coordinates. Planar: (e1 · d,
+  // e2 · d, p · (arm × d)), the last as d · (p × arm) with p × arm given
+  // (the same for every direction at one point).
   void SetGraspColumn(Eigen::MatrixXd& J, int k, const Eigen::Vector3d& d,
-                      const Eigen::Vector3d& arm) const {
-    const Eigen::Vector3d moment = arm.cross(d);
+                      const Eigen::Vector3d& arm, const Eigen::Vector3d& p_cross_arm) const {
     double* out = J.data() + static_cast<Eigen::Index>(k) * nd;
     if (planar) {
-      // Pᵀ (d, moment) written out, summed as Eigen's fixed 3x6 product sums
-      // it (the same bits without forming the 6-vector).
-      const Eigen::Vector3d& p = plane_normal;
       out[0] = plane_e1.dot(d);
       out[1] = plane_e2.dot(d);
-      out[2] = p.x() * moment.x() + (p.y() * moment.y() + p.z() * moment.z());
+      out[2] = p_cross_arm.dot(d);
     } else {
+      const Eigen::Vector3d moment = arm.cross(d);
       for (int i = 0; i < 3; ++i) {
         out[i] = d[i];
         out[3 + i] = moment[i];
@@ -1289,6 +1288,8 @@ StepReport ContactModel::Impl::Step() {
   // removed from the relative velocity).
   Jc.resize(nd, nf);
   if (tracked) Jv.resize(nd, nf);
+  const Point* arm_of = nullptr;  // the point whose arm is below (its unknowns are consecutive)
+  Eigen::Vector3d arm = Eigen::Vector3d::Zero(), p_cross_arm = Eigen::Vector3d::Zero();
   for (int k = 0; k < nf; ++k) {
     const Contact& ct = contacts[static_cast<size_t>(force_point[static_cast<size_t>(k)])];
     const Point& pt = ct.points[static_cast<size_t>(force_point_sub[static_cast<size_t>(k)])];
@@ -1299,14 +1300,19 @@ StepReport ContactModel::Impl::Step() {
       continue;
     }
     const Eigen::Vector3d d = e < 0 ? normal_of(ct, pt) : edge_of(ct, pt, e);
-    SetGraspColumn(Jc, k, d, pt.p - c);
+    if (&pt != arm_of) {
+      arm_of = &pt;
+      arm = pt.p - c;
+      if (planar) p_cross_arm = plane_normal.cross(arm);
+    }
+    SetGraspColumn(Jc, k, d, arm, p_cross_arm);
     if (tracked) {
       Jv.col(k) = Jc.col(k);
       if (e >= 0 && ct.known_normal >= 0 && !ct.pusher) {
         const double along = pt.n.dot(ct.normal);
         if (along > 1e-6) {
           const Eigen::Vector3d dv = d - (d.dot(ct.normal) / along) * pt.n;
-          SetGraspColumn(Jv, k, dv, pt.p - c);
+          SetGraspColumn(Jv, k, dv, arm, p_cross_arm);
         }
       }
     }
@@ -1340,7 +1346,7 @@ StepReport ContactModel::Impl::Step() {
   } else {
     b.head(nf).noalias() = Jrows.transpose() * vfree;
   }
-  const double inv_dt = 1.0 / dt, inv_Vs = 1.0 / Vs;
+  const double inv_dt = 1.0 / dt, inv_Vs = 1.0 / Vs, inv_Fs = 1.0 / Fs;
   for (int k = 0; k < nf; ++k) {
     const Contact& ct = contacts[static_cast<size_t>(force_point[static_cast<size_t>(k)])];
     const Point& pt = ct.points[static_cast<size_t>(force_point_sub[static_cast<size_t>(k)])];
@@ -1496,7 +1502,7 @@ StepReport ContactModel::Impl::Step() {
         sum += lam;
         if (pt.lambda >= 0) {
           const double sink = ct.spec.stiffness > 0 ? lam * PadCompliance(ct) * dt : 0.0;
-          comp(lam / Fs, (normal_of(ct, pt).dot(urel) + pt.gap / dt + sink) / Vs);
+          comp(lam * inv_Fs, (normal_of(ct, pt).dot(urel) + pt.gap * inv_dt + sink) * inv_Vs);
         }
         if (pt.beta0 >= 0) {
           const double xi = zv(pt.xi);
@@ -1504,18 +1510,18 @@ StepReport ContactModel::Impl::Step() {
           for (int e = 0; e < edges_per_point; ++e) {
             const double be = zv(pt.beta0 + e);
             bsum += be;
-            comp(be / Fs, (xi + edge_of(ct, pt, e).dot(urel)) / Vs);
+            comp(be * inv_Fs, (xi + edge_of(ct, pt, e).dot(urel)) * inv_Vs);
           }
           const double slack = ct.spec.mu * lam - bsum;
-          comp(xi / Vs, slack / Fs);
-          res.cone = std::max(res.cone, -slack / Fs);
+          comp(xi * inv_Vs, slack * inv_Fs);
+          res.cone = std::max(res.cone, -slack * inv_Fs);
         }
       }
       if (ct.y_plus >= 0 && (!tracked || ct.any_active)) {
-        const double err = (sum - scene.grip_force) / Fs;
+        const double err = (sum - scene.grip_force) * inv_Fs;
         res.force_balance = std::max(res.force_balance, std::abs(err));
-        comp(zv(ct.y_plus) / Vs, err);
-        comp(zv(ct.y_minus) / Vs, -err);
+        comp(zv(ct.y_plus) * inv_Vs, err);
+        comp(zv(ct.y_minus) * inv_Vs, -err);
       }
     }
     const double worst = std::max({res.force_balance, res.complementarity, res.cone});
