@@ -315,6 +315,15 @@ void ReportAlongSceneNormal(const Contact& ct, bool tracked, const Eigen::Vector
   st->tangential_force = force - st->normal_force * n;
 }
 
+// Whether every entry is finite: x · 0 is 0 for finite x and NaN otherwise,
+// a sum without branches (Eigen's allFinite() compares x - x element-wise).
+bool AllFiniteEntries(const Eigen::MatrixXd& m) {
+  double zero = 0;
+  const double* a = m.data();
+  for (Eigen::Index i = 0; i < m.size(); ++i) zero += a[i] * 0.0;
+  return zero == 0;
+}
+
 // One step's LCP matrix, formed by columns when the solver asks for them.
 // The force block is mass · Jrowsᵀ K (rank ≤ 6, but n² entries: at 32 facets
 // and 9-point lines n ≈ 650, and the step used to spend most of its time
@@ -343,7 +352,7 @@ class StepMatrix final : public LcpColumns {
     J_ = &Jrows;
     dense_ = nf_ < kLazyForces && !low_rank_;
     sorted_ready_ = dense_;
-    finite_ = std::isfinite(mass) && Jrows.allFinite() && K.allFinite();
+    finite_ = std::isfinite(mass) && AllFiniteEntries(Jrows) && AllFiniteEntries(K);
     if (dense_) {
       // Eigen picks a coefficient-wise product for small sizes, whose sums
       // run in another order: the dense formation keeps it.
@@ -1026,10 +1035,17 @@ void ContactModel::Impl::SetEdges(Point& pt) {
     // Normals stay in the plane of a planar scene (the solid is symmetric
     // about it, Setup()); a degenerate cross product gives no friction
     // rather than NaN.
+    // p and n are unit and n lies in the plane, so p × n is unit but for
+    // rounding: normalised only when it is not (a square root and a
+    // division per point and step otherwise).
     const Eigen::Vector3d cr = plane_normal.cross(pt.n);
-    const double length = cr.norm();
-    const Eigen::Vector3d tau =
-        length > 1e-12 ? Eigen::Vector3d(cr / length) : Eigen::Vector3d::Zero();
+    const double length2 = cr.squaredNorm();
+    Eigen::Vector3d tau = Eigen::Vector3d::Zero();
+    if (std::abs(length2 - 1.0) <= 1e-15) {
+      tau = cr;
+    } else if (length2 > 1e-24) {
+      tau = cr / std::sqrt(length2);
+    }
     pt.edges.resize(2);
     pt.edges[0] = tau;
     pt.edges[1] = -tau;
