@@ -37,10 +37,7 @@ bool SmallSparseLu::BuildPlan(Plan& plan) const {
   std::uint64_t rows_left = Low(n), cols_left = Low(n);
   plan.n = 0;
   plan.pattern = bits_;
-  plan.pivot_row.clear();
-  plan.pivot_col.clear();
-  plan.rows_first.assign(1, 0);
-  plan.cols_first.assign(1, 0);
+  plan.steps.clear();
   plan.rows.clear();
   plan.cols.clear();
   plan.filled.clear();
@@ -76,30 +73,33 @@ bool SmallSparseLu::BuildPlan(Plan& plan) const {
       }
     }
     if (best_r < 0) return false;  // no usable pivot: singular
-    const int pr = best_r, pc = best_c;
-    rows_left &= ~Bit(pr);
-    cols_left &= ~Bit(pc);
-    plan.pivot_row.push_back(pr);
-    plan.pivot_col.push_back(pc);
+    Elimination el;
+    el.row = best_r;
+    el.col = best_c;
+    rows_left &= ~Bit(el.row);
+    cols_left &= ~Bit(el.col);
+    el.r0 = static_cast<int>(plan.rows.size());
     for (std::uint64_t rs = rows_left; rs != 0; rs &= rs - 1) {
       const int r = std::countr_zero(rs);
-      if (S[static_cast<size_t>(r)] & Bit(pc)) plan.rows.push_back(r);
+      if (S[static_cast<size_t>(r)] & Bit(el.col)) plan.rows.push_back(r);
     }
-    const std::uint64_t pivot_cols = S[static_cast<size_t>(pr)] & cols_left;
+    el.r1 = static_cast<int>(plan.rows.size());
+    const std::uint64_t pivot_cols = S[static_cast<size_t>(el.row)] & cols_left;
+    el.c0 = static_cast<int>(plan.cols.size());
     for (std::uint64_t cs = pivot_cols; cs != 0; cs &= cs - 1)
       plan.cols.push_back(std::countr_zero(cs));
-    const double p = at(pr, pc);
-    for (size_t k = static_cast<size_t>(plan.rows_first.back()); k < plan.rows.size(); ++k) {
-      const int r = plan.rows[k];
-      const double f = at(r, pc) / p;
+    el.c1 = static_cast<int>(plan.cols.size());
+    const double p = at(el.row, el.col);
+    for (int k = el.r0; k < el.r1; ++k) {
+      const int r = plan.rows[static_cast<size_t>(k)];
+      const double f = at(r, el.col) / p;
       S[static_cast<size_t>(r)] |= pivot_cols;  // fill
       for (std::uint64_t cs = pivot_cols; cs != 0; cs &= cs - 1) {
         const int c = std::countr_zero(cs);
-        at(r, c) -= f * at(pr, c);
+        at(r, c) -= f * at(el.row, c);
       }
     }
-    plan.rows_first.push_back(static_cast<int>(plan.rows.size()));
-    plan.cols_first.push_back(static_cast<int>(plan.cols.size()));
+    plan.steps.push_back(el);
   }
   for (int r = 0; r < n; ++r) {
     for (std::uint64_t cs = S[static_cast<size_t>(r)]; cs != 0; cs &= cs - 1)
@@ -113,29 +113,22 @@ bool SmallSparseLu::Replay(const Plan& plan) {
   double* a = a_.data();
   for (const int pos : plan.filled) a[pos] = 0.0;
   for (const Entry& e : entries_) a[e.row * kMaxSize + e.col] += e.value;
-  for (int step = 0; step < plan.n; ++step) {
-    const int pr = plan.pivot_row[static_cast<size_t>(step)];
-    const int pc = plan.pivot_col[static_cast<size_t>(step)];
-    const double p = a[pr * kMaxSize + pc];
-    const int r0 = plan.rows_first[static_cast<size_t>(step)];
-    const int r1 = plan.rows_first[static_cast<size_t>(step) + 1];
+  const int* rows = plan.rows.data();
+  const int* cols = plan.cols.data();
+  for (const Elimination& el : plan.steps) {
+    const double* prow = a + el.row * kMaxSize;
+    const double p = prow[el.col];
     double colmax = 0;
-    for (int k = r0; k < r1; ++k)
-      colmax = std::max(colmax, std::abs(a[plan.rows[static_cast<size_t>(k)] * kMaxSize + pc]));
+    for (int k = el.r0; k < el.r1; ++k)
+      colmax = std::max(colmax, std::abs(a[rows[k] * kMaxSize + el.col]));
     if (!std::isfinite(p) || !(std::abs(p) > 0) || std::abs(p) < kReplayThreshold * colmax)
       return false;
-    const int c0 = plan.cols_first[static_cast<size_t>(step)];
-    const int c1 = plan.cols_first[static_cast<size_t>(step) + 1];
-    const double* prow = a + pr * kMaxSize;
-    for (int k = r0; k < r1; ++k) {
-      double* row = a + plan.rows[static_cast<size_t>(k)] * kMaxSize;
-      const double f = row[pc] / p;
-      row[pc] = f;  // L, kept where the eliminated entry was
+    for (int k = el.r0; k < el.r1; ++k) {
+      double* row = a + rows[k] * kMaxSize;
+      const double f = row[el.col] / p;
+      row[el.col] = f;  // L, kept where the eliminated entry was
       if (f == 0) continue;
-      for (int j = c0; j < c1; ++j) {
-        const int c = plan.cols[static_cast<size_t>(j)];
-        row[c] -= f * prow[c];
-      }
+      for (int j = el.c0; j < el.c1; ++j) row[cols[j]] -= f * prow[cols[j]];
     }
   }
   return true;
@@ -149,13 +142,18 @@ bool SmallSparseLu::Factor() {
     return p.n == n_ && std::equal(p.pattern.begin(), p.pattern.begin() + n_, bits_.begin());
   };
   Plan* plan = nullptr;
-  for (Plan& p : plans_) {
-    if (same(p)) plan = &p;
+  if (last_ < plans_.size() && same(plans_[last_])) {
+    plan = &plans_[last_];  // a warm step's basis usually keeps its pattern
+  } else {
+    for (Plan& p : plans_) {
+      if (same(p)) plan = &p;
+    }
   }
   if (plan != nullptr) {
     plan->last_used = clock_;
     if (Replay(*plan)) {
       active_ = plan;
+      last_ = static_cast<size_t>(plan - plans_.data());
       return true;
     }
     // This step's values need other pivots: plan again on them.
@@ -173,35 +171,29 @@ bool SmallSparseLu::Factor() {
     return false;
   }
   active_ = plan;
+  last_ = static_cast<size_t>(plan - plans_.data());
   return true;
 }
 
 void SmallSparseLu::Solve(const double* rhs, double* x) const {
   const Plan& plan = *active_;
   const double* a = a_.data();
+  const int* rows = plan.rows.data();
+  const int* cols = plan.cols.data();
   std::array<double, kMaxSize> y;
   std::copy(rhs, rhs + n_, y.begin());
-  for (int step = 0; step < plan.n; ++step) {
-    const int pr = plan.pivot_row[static_cast<size_t>(step)];
-    const int pc = plan.pivot_col[static_cast<size_t>(step)];
-    const double yp = y[static_cast<size_t>(pr)];
+  for (const Elimination& el : plan.steps) {
+    const double yp = y[static_cast<size_t>(el.row)];
     if (yp == 0) continue;
-    for (int k = plan.rows_first[static_cast<size_t>(step)];
-         k < plan.rows_first[static_cast<size_t>(step) + 1]; ++k) {
-      const int r = plan.rows[static_cast<size_t>(k)];
-      y[static_cast<size_t>(r)] -= a[r * kMaxSize + pc] * yp;
-    }
+    for (int k = el.r0; k < el.r1; ++k)
+      y[static_cast<size_t>(rows[k])] -= a[rows[k] * kMaxSize + el.col] * yp;
   }
-  for (int step = plan.n - 1; step >= 0; --step) {
-    const int pr = plan.pivot_row[static_cast<size_t>(step)];
-    const int pc = plan.pivot_col[static_cast<size_t>(step)];
-    double sum = y[static_cast<size_t>(pr)];
-    for (int k = plan.cols_first[static_cast<size_t>(step)];
-         k < plan.cols_first[static_cast<size_t>(step) + 1]; ++k) {
-      const int c = plan.cols[static_cast<size_t>(k)];
-      sum -= a[pr * kMaxSize + c] * x[c];
-    }
-    x[pc] = sum / a[pr * kMaxSize + pc];
+  for (auto it = plan.steps.rbegin(); it != plan.steps.rend(); ++it) {
+    const Elimination& el = *it;
+    const double* prow = a + el.row * kMaxSize;
+    double sum = y[static_cast<size_t>(el.row)];
+    for (int k = el.c0; k < el.c1; ++k) sum -= prow[cols[k]] * x[cols[k]];
+    x[el.col] = sum / prow[el.col];
   }
 }
 

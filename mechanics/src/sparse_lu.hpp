@@ -46,13 +46,17 @@ class SmallSparseLu {
     double value = 0;
   };
   using Pattern = std::array<std::uint64_t, kMaxSize>;
+  // One elimination step: pivot (row, col), the rows below it with an entry
+  // in its column (rows[r0, r1)) and its row's columns not yet eliminated
+  // (cols[c0, c1)).
+  struct Elimination {
+    int row = 0, col = 0, r0 = 0, r1 = 0, c0 = 0, c1 = 0;
+  };
   struct Plan {
     int n = 0;
     Pattern pattern{};
-    std::vector<int> pivot_row, pivot_col;  // per elimination step
-    // Per step: the rows below the pivot with an entry in its column, and
-    // the pivot row's columns not yet eliminated (offsets into the lists).
-    std::vector<int> rows_first, rows, cols_first, cols;
+    std::vector<Elimination> steps;
+    std::vector<int> rows, cols;
     std::vector<int> filled;  // every position of the factors, r * kMaxSize + c
     std::uint64_t last_used = 0;
   };
@@ -65,6 +69,7 @@ class SmallSparseLu {
   std::vector<Entry> entries_;
   std::vector<Plan> plans_;
   const Plan* active_ = nullptr;
+  std::size_t last_ = 0;  // the plan used last
   std::uint64_t clock_ = 0;
   std::array<double, kMaxSize * kMaxSize> a_{};  // factors, row-major, stride kMaxSize
 };
