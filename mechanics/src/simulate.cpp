@@ -80,9 +80,12 @@ SimulationResult Simulate(const Scene& scene, const PusherCommandSource& command
   SimulationResult result;
   ContactModel model(scene);
   result.model = model.info();
+  // Every return goes through finish(): it moves the result out (returned
+  // by value from a lambda that captures it, it was copied, every sample
+  // and its contact states, once per trial).
   auto finish = [&] {
     result.wall_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-    return result;
+    return std::move(result);
   };
   if (model.status() != SimulationStatus::kOk) {
     result.status = model.status();
