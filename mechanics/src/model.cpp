@@ -1166,6 +1166,9 @@ void ContactModel::Impl::TrackedGeometry() {
   pose_R = q.toRotationMatrix();
   pose_origin = ObjectOrigin();
   for (Contact& ct : contacts) {
+    // Only a turning pusher has a rotation (fingers and most pushers keep
+    // their directions: no product per point and step).
+    bool turned = false;
     Eigen::Matrix3d Rp = Eigen::Matrix3d::Identity();
     Eigen::Vector3d vp = Eigen::Vector3d::Zero(), wp = Eigen::Vector3d::Zero();
     Eigen::Vector3d base = ct.spec.position + ct.pad * ct.spec.normal;
@@ -1174,15 +1177,19 @@ void ContactModel::Impl::TrackedGeometry() {
       wp = scene.pusher->motion.angular_velocity;
       base = ct.spec.position + vp * t;
       const double a = wp.norm() * t;
-      if (a > 0) Rp = Eigen::AngleAxisd(a, wp.normalized()).toRotationMatrix();
+      turned = a > 0;
+      if (turned) Rp = Eigen::AngleAxisd(a, wp.normalized()).toRotationMatrix();
     }
-    const Eigen::Vector3d closing = Rp * ct.spec.normal;
+    const Eigen::Vector3d closing = turned ? Eigen::Vector3d(Rp * ct.spec.normal) : ct.spec.normal;
     ct.normal = closing;
     ct.position = base;
     const bool patch = ct.spec.type == ContactType::kPatch && ct.points.size() > 1;
     if (!(patch && PlacePatch(ct, base, closing, vp, wp))) {
-      for (Point& pt : ct.points)
-        PlaceOnSolid(ct, pt, base + Rp * pt.offset0, base, closing, vp, wp);
+      for (Point& pt : ct.points) {
+        const Eigen::Vector3d at =
+            turned ? Eigen::Vector3d(base + Rp * pt.offset0) : Eigen::Vector3d(base + pt.offset0);
+        PlaceOnSolid(ct, pt, at, base, closing, vp, wp);
+      }
     }
     if (!ct.pusher && ct.known_normal >= 0 && ct.points[0].active) {
       // A point pad keeps pressing: it travels along its closing direction
