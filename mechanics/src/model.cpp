@@ -288,6 +288,7 @@ struct Contact {
   std::vector<Point> points;
   Eigen::Vector3d normal = Eigen::Vector3d::UnitX();  // fixed: the normal; tracked: closing
   Eigen::Vector3d position = Eigen::Vector3d::Zero();
+  Eigen::Vector3d scene_normal = Eigen::Vector3d::UnitX();  // the reported normal (Setup)
   std::vector<Eigen::Vector3d> edges;  // friction directions this step (fixed geometry)
   bool touching = true;                // tracked: some point within the gap tolerance
   bool any_active = true;              // tracked: some point has rows
@@ -303,7 +304,7 @@ struct Contact {
 // summed, to the last bit.
 void ReportAlongSceneNormal(const Contact& ct, bool tracked, const Eigen::Vector3d& force,
                             ContactState* st) {
-  const Eigen::Vector3d n = ct.spec.normal.normalized();
+  const Eigen::Vector3d& n = ct.scene_normal;
   constexpr double kSame2 = 1e-24;  // rounding of the same direction, squared
   bool along_n = (ct.normal - n).squaredNorm() <= kSame2;
   if (tracked) {
@@ -912,6 +913,7 @@ void ContactModel::Impl::Setup() {
     Contact ct;
     ct.spec = specs[i];
     ct.spec.normal.normalize();
+    ct.scene_normal = ct.spec.normal.normalized();
     if (ct.spec.type == ContactType::kLine) ct.spec.axis.normalize();
     ct.pusher = scene.pusher && i + 1 == specs.size();
     ct.active = ct.pusher || scene.grip_force > 0;
@@ -1564,7 +1566,7 @@ StepReport ContactModel::Impl::Step() {
 
   // Contact states (on the object, gripper frame) and modes.
   pusher_force.setZero();
-  const Eigen::Vector3d origin = ObjectOrigin();
+  const Eigen::Vector3d origin = c - R * com_O;  // ObjectOrigin(), q unchanged since R
   for (size_t ci = 0; ci < contacts.size(); ++ci) {
     Contact& ct = contacts[ci];
     ContactState st;
