@@ -1166,7 +1166,7 @@ bool ContactModel::Impl::PlacePatch(Contact& ct, const Eigen::Vector3d& base,
 void ContactModel::Impl::TrackedGeometry() {
   // The object's pose, once per step for every primitive placed on it.
   pose_R = q.toRotationMatrix();
-  pose_origin = ObjectOrigin();
+  pose_origin = c - pose_R * com_O;  // ObjectOrigin() without converting q again
   for (Contact& ct : contacts) {
     // Only a turning pusher has a rotation (fingers and most pushers keep
     // their directions: no product per point and step).
@@ -1262,7 +1262,8 @@ StepReport ContactModel::Impl::Step() {
   // Whether a point has LCP rows this step (a redundant one has a unit
   // diagonal, like a tracked point without rows; it still counts as touching).
   auto rows = [&](const Point& pt) { return live(pt) && !pt.redundant; };
-  const Eigen::Matrix3d R = q.toRotationMatrix();
+  // The object's rotation (tracked geometry has just formed it from q).
+  const Eigen::Matrix3d R = tracked ? pose_R : q.toRotationMatrix();
 
   // Reduced mass matrix and its inverse.
   SmallMatrix Mr, Minv;
