@@ -11,11 +11,7 @@
 namespace arena::cli {
 namespace {
 
-std::string Num(double v) {
-  char buf[32];
-  std::snprintf(buf, sizeof buf, "%.6g", v);
-  return buf;
-}
+std::string Num(double v) { return FormatNumber(v, 6); }
 
 struct Axis {
   double lo = 0, hi = 1;

@@ -13,11 +13,7 @@
 namespace arena::cli {
 namespace {
 
-std::string Format(double v) {
-  char buf[32];
-  std::snprintf(buf, sizeof buf, "%.4g", v);
-  return buf;
-}
+std::string Format(double v) { return FormatNumber(v, 4); }
 
 // A vertical line at x over [lo, hi] (log y: both ends must be > 0).
 Series Vertical(const std::string& name, double x, double lo, double hi, const char* color) {

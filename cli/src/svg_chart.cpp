@@ -276,4 +276,10 @@ std::string RenderSvg(const Chart& chart) {
   return svg.str();
 }
 
+std::string FormatNumber(double v, int significant) {
+  char buf[40];
+  std::snprintf(buf, sizeof buf, "%.*g", significant, v);
+  return buf;
+}
+
 }  // namespace arena::cli

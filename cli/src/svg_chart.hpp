@@ -50,6 +50,10 @@ std::string RenderSvg(const Chart& chart);
 // Text made safe for SVG/XML attributes and content (& < > ").
 std::string SvgEscape(const std::string& s);
 
+// v with `significant` significant digits, as printf's %g gives it (axis
+// labels, table cells and captions of the plots).
+std::string FormatNumber(double v, int significant);
+
 // "Nice" axis ticks covering [lo, hi] (about `count` of them).
 std::vector<double> NiceTicks(double lo, double hi, int count = 6);
 
