@@ -276,6 +276,11 @@ struct Point {
   // face (`redundant`, MarkRedundantPoints).
   bool interior = false;
   bool redundant = false;
+  // The relative velocity at the point after this step's solve, kept by the
+  // residual checks for the contact states (valid when urel_step is the
+  // step's number).
+  Eigen::Vector3d urel = Eigen::Vector3d::Zero();
+  long urel_step = -1;
 };
 
 struct Contact {
@@ -630,6 +635,7 @@ struct ContactModel::Impl {
 
   // State.
   double t = 0;
+  long steps_taken = 0;
   Eigen::Vector3d c = Eigen::Vector3d::Zero();
   Eigen::Quaterniond q = Eigen::Quaterniond::Identity();
   Eigen::Vector3d v = Eigen::Vector3d::Zero();
@@ -1244,6 +1250,7 @@ StepReport ContactModel::Impl::Step() {
     rep.error = error;
     return rep;
   }
+  ++steps_taken;
   if (tracked) {
     TrackedGeometry();
   } else {
@@ -1524,6 +1531,8 @@ StepReport ContactModel::Impl::Step() {
       for (Point& pt : ct.points) {
         if (!rows(pt)) continue;  // a redundant point's unknowns are zero by construction
         const Eigen::Vector3d urel = object_velocity(pt.p) - body_velocity(ct, pt);
+        pt.urel = urel;
+        pt.urel_step = steps_taken;
         const double lam = pt.lambda >= 0 ? zv(pt.lambda) : ct.known_normal;
         sum += lam;
         if (pt.lambda >= 0) {
@@ -1589,7 +1598,10 @@ StepReport ContactModel::Impl::Step() {
         st.normal_force += lam;
         st.tangential_force += ft;
         st.torque += (pt.p - ct.position).cross(fp);
-        const Eigen::Vector3d urel = object_velocity(pt.p) - body_velocity(ct, pt);
+        const Eigen::Vector3d urel =
+            pt.urel_step == steps_taken
+                ? pt.urel
+                : Eigen::Vector3d(object_velocity(pt.p) - body_velocity(ct, pt));
         const Eigen::Vector3d ut = urel - nrm.dot(urel) * nrm;
         if (lam > 1e-9 * Fs && ut.squaredNorm() > 1e-18 * Vs * Vs) sliding = true;
         const bool close = pt.gap <= (tracked ? gap_tolerance : 0.0) || lam > 1e-9 * Fs;
