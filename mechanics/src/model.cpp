@@ -293,7 +293,6 @@ struct Contact {
   std::vector<Point> points;
   Eigen::Vector3d normal = Eigen::Vector3d::UnitX();  // fixed: the normal; tracked: closing
   Eigen::Vector3d position = Eigen::Vector3d::Zero();
-  Eigen::Vector3d scene_normal = Eigen::Vector3d::UnitX();  // the reported normal (Setup)
   std::vector<Eigen::Vector3d> edges;  // friction directions this step (fixed geometry)
   bool touching = true;                // tracked: some point within the gap tolerance
   bool any_active = true;              // tracked: some point has rows
@@ -309,8 +308,8 @@ struct Contact {
 // summed, to the last bit.
 void ReportAlongSceneNormal(const Contact& ct, bool tracked, const Eigen::Vector3d& force,
                             ContactState* st) {
-  const Eigen::Vector3d& n = ct.scene_normal;
-  constexpr double kSame2 = 1e-24;  // rounding of the same direction, squared
+  const Eigen::Vector3d& n = ct.spec.normal;  // unit since Setup()
+  constexpr double kSame2 = 1e-24;            // rounding of the same direction, squared
   bool along_n = (ct.normal - n).squaredNorm() <= kSame2;
   if (tracked) {
     along_n = true;
@@ -446,9 +445,7 @@ class StepMatrix final : public LcpColumns {
     SortEntries();
     const auto m = static_cast<Eigen::Index>(idx.size());
     block.resize(m, m);
-    position_.resize(static_cast<size_t>(n_), -1);
-    for (Eigen::Index r = 0; r < m; ++r)
-      position_[static_cast<size_t>(idx[static_cast<size_t>(r)])] = static_cast<int>(r);
+    PlaceBasis(idx);
     const double* J = J_->data();
     const double* Kd = K_->data();
     for (Eigen::Index c = 0; c < m; ++c) {
@@ -470,8 +467,7 @@ class StepMatrix final : public LcpColumns {
         if (r >= 0) out[r] = entry.value;
       }
     }
-    for (Eigen::Index r = 0; r < m; ++r)
-      position_[static_cast<size_t>(idx[static_cast<size_t>(r)])] = -1;
+    PlaceBasis(idx, false);
   }
   // Planar w = A z: mass · J (K z) over the force rows, plus the entries set
   // (they sit where the force block is zero: rows and columns of unknowns
@@ -520,8 +516,7 @@ class StepMatrix final : public LcpColumns {
     const auto m = static_cast<int>(idx.size());
     const int size = m + 3;
     if (size > SmallSparseLu::kMaxSize) return false;
-    position_.resize(static_cast<size_t>(n_), -1);
-    for (int r = 0; r < m; ++r) position_[static_cast<size_t>(idx[static_cast<size_t>(r)])] = r;
+    PlaceBasis(idx);
     const double* J = J_->data();
     const double* Kd = K_->data();
     lu_.Clear(size);
@@ -570,7 +565,7 @@ class StepMatrix final : public LcpColumns {
       ok = std::isfinite(worst) && worst <= 1e-11 * scale;
       if (ok) x = Eigen::Map<const Eigen::VectorXd>(u.data(), m);
     }
-    for (int r = 0; r < m; ++r) position_[static_cast<size_t>(idx[static_cast<size_t>(r)])] = -1;
+    PlaceBasis(idx, false);
     return ok;
   }
   // The whole matrix (for an observer or a dump).
@@ -591,7 +586,14 @@ class StepMatrix final : public LcpColumns {
   bool dense_ = true;
   bool low_rank_ = false;  // planar: GatherBasis and Multiply from the factors
   const Eigen::MatrixXd* J_ = nullptr;
-  mutable std::vector<int> position_;  // GatherBasis: a row's place in the basis, else -1
+  // A row's place in the basis being read, else -1: set by PlaceBasis(idx),
+  // cleared by PlaceBasis(idx, false).
+  mutable std::vector<int> position_;
+  void PlaceBasis(const std::vector<Eigen::Index>& idx, bool place = true) const {
+    position_.resize(static_cast<size_t>(n_), -1);
+    for (size_t r = 0; r < idx.size(); ++r)
+      position_[static_cast<size_t>(idx[r])] = place ? static_cast<int>(r) : -1;
+  }
   bool finite_ = true;
   double mass_ = 0;
   const Eigen::MatrixXd* K_ = nullptr;
@@ -919,7 +921,6 @@ void ContactModel::Impl::Setup() {
     Contact ct;
     ct.spec = specs[i];
     ct.spec.normal.normalize();
-    ct.scene_normal = ct.spec.normal.normalized();
     if (ct.spec.type == ContactType::kLine) ct.spec.axis.normalize();
     ct.pusher = scene.pusher && i + 1 == specs.size();
     ct.active = ct.pusher || scene.grip_force > 0;
@@ -1041,11 +1042,9 @@ void ContactModel::Impl::SetEdges(Point& pt) {
   if (edges_per_point == 0) return;
   if (planar) {
     // Normals stay in the plane of a planar scene (the solid is symmetric
-    // about it, Setup()); a degenerate cross product gives no friction
-    // rather than NaN.
-    // p and n are unit and n lies in the plane, so p × n is unit but for
-    // rounding: normalised only when it is not (a square root and a
-    // division per point and step otherwise).
+    // about it, Setup()), so p × n is unit but for rounding and is
+    // normalised only when it is not; a degenerate cross product gives no
+    // friction rather than NaN.
     const Eigen::Vector3d cr = plane_normal.cross(pt.n);
     const double length2 = cr.squaredNorm();
     Eigen::Vector3d tau = Eigen::Vector3d::Zero();

@@ -24,7 +24,8 @@ class SmallSparseLu {
 
   // Starts a matrix of n x n (n <= kMaxSize) with no entries.
   void Clear(int n);
-  // Adds value at (row, col); the position is structural even when the
+  // Adds value at (row, col), both below the n of Clear() (and so below
+  // kMaxSize: Factor() refuses a larger n); the position is structural even when the
   // value is zero (a grasp-map entry that vanishes at one pose), so the
   // pattern, and the plan, stay the same from step to step.
   void Add(int row, int col, double value) {
