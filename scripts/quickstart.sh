@@ -10,7 +10,8 @@ cd "$here"
 what="${1:-run}"
 case "$what" in
   run)
-    scripts/setup.sh "$here/build"
+    # The campaign needs the arena binary alone (its cells are `arena cell`).
+    scripts/setup.sh --target arena "$here/build"
     mkdir -p out
     exec build/bin/arena run examples/campaigns/smoke.json --db out/smoke.db --cells 2
     ;;

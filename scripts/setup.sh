@@ -3,8 +3,11 @@
 # every package is there and nothing changed, it only asks ninja, which
 # answers "no work to do".
 #
-#   scripts/setup.sh [--bench-peers] [BUILD_DIR] [extra cmake args...]
+#   scripts/setup.sh [--bench-peers] [--target T] [BUILD_DIR] [extra cmake args...]
 #
+# --target T builds only T (and what it needs) instead of every target: the
+# quick start's `run` needs the arena binary alone, not the ~260 test and
+# benchmark targets. May be given more than once.
 # --bench-peers also installs the peer LCP solvers that only
 # bench/lcp_solvers_bench compares against (Siconos numerics, Bullet, DART;
 # benchmark-only, never runtime dependencies; bench/README.md "LCP solvers").
@@ -12,10 +15,14 @@
 # Environment: ARENA_JOBS (default 2).
 set -euo pipefail
 bench_peers=0
-if [ "${1:-}" = "--bench-peers" ]; then
-  bench_peers=1
-  shift
-fi
+targets=()
+while (($#)); do
+  case "$1" in
+    --bench-peers) bench_peers=1; shift ;;
+    --target) targets+=(--target "$2"); shift 2 ;;
+    *) break ;;
+  esac
+done
 here="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 build="${1:-$here/build}"
 shift || true
@@ -63,4 +70,4 @@ if [ ! -f "$build/build.ninja" ]; then
 elif (($#)); then
   cmake "$build" "$@" >/dev/null
 fi
-cmake --build "$build" -j "$jobs"
+cmake --build "$build" -j "$jobs" "${targets[@]}"
