@@ -56,13 +56,12 @@ TrialChecks CheckTrial(const Recording& r, const Resampled& s, const CheckOption
   const auto note = [&](std::string check, std::string detail) {
     c.findings.push_back({std::move(check), std::move(detail), false});
   };
-  for (const auto& [count, stream] :
-       {std::pair{s.object_out_of_order, r.object_pose.name},
-        std::pair{s.pusher_out_of_order, r.pusher_pose.name},
-        std::pair{s.force_out_of_order, r.force.name}}) {
+  for (const auto& [count, stream] : {std::pair{s.object_out_of_order, r.object_pose.name},
+                                      std::pair{s.pusher_out_of_order, r.pusher_pose.name},
+                                      std::pair{s.force_out_of_order, r.force.name}}) {
     if (count > 0)
-      note("out_of_order_stamps",
-           stream + ": " + std::to_string(count) + " stamp(s) earlier than the one before (sorted)");
+      note("out_of_order_stamps", stream + ": " + std::to_string(count) +
+                                      " stamp(s) earlier than the one before (sorted)");
   }
   c.object_travel =
       std::hypot(s.object[n - 1][0] - s.object[0][0], s.object[n - 1][1] - s.object[0][1]);
@@ -72,9 +71,9 @@ TrialChecks CheckTrial(const Recording& r, const Resampled& s, const CheckOption
   // shows as a start inside it) and touch it when the object starts to move.
   c.start_gap = Gap(r, s, 0);
   if (c.start_gap < -o.inside_fail)
-    fail_pose("pusher_inside_at_start",
-              "the pusher disk starts " + Mm(-c.start_gap) + " inside the outline (more than " +
-                  Mm(o.inside_fail) + ": the poses or the outline are off)");
+    fail_pose("pusher_inside_at_start", "the pusher disk starts " + Mm(-c.start_gap) +
+                                            " inside the outline (more than " + Mm(o.inside_fail) +
+                                            ": the poses or the outline are off)");
   else if (c.start_gap < -o.inside_warn)
     note("pusher_inside_at_start", "the pusher disk starts " + Mm(-c.start_gap) +
                                        " inside the outline (calibration; within " +
@@ -93,8 +92,8 @@ TrialChecks CheckTrial(const Recording& r, const Resampled& s, const CheckOption
   } else if (std::abs(c.onset_gap) > o.onset_gap_tol) {
     fail_pose("contact_gap_at_onset", "the object starts to move at " + S(c.onset_t) +
                                           " with the pusher disk " + Mm(c.onset_gap) +
-                                          " from the outline (tolerance " +
-                                          Mm(o.onset_gap_tol) + "): frame or calibration off");
+                                          " from the outline (tolerance " + Mm(o.onset_gap_tol) +
+                                          "): frame or calibration off");
   }
 
   // Force stream: frozen (a sensor that stopped updating repeats its last
@@ -151,10 +150,10 @@ TrialChecks CheckTrial(const Recording& r, const Resampled& s, const CheckOption
     }
     if (clear >= 5) c.force_drift = std::hypot(ex / clear - fx, ey / clear - fy);
     if (c.force_usable && c.force_offset > o.offset_fail)
-      fail_force("force_offset_drift",
-                 "the force reads " + N(c.force_offset) + " before the pusher moves (over " +
-                     S(s.t[moves]) + "; more than " + N(o.offset_fail) +
-                     "): the sensor's zero has drifted");
+      fail_force("force_offset_drift", "the force reads " + N(c.force_offset) +
+                                           " before the pusher moves (over " + S(s.t[moves]) +
+                                           "; more than " + N(o.offset_fail) +
+                                           "): the sensor's zero has drifted");
     else if (c.force_usable && !std::isnan(c.force_drift) && c.force_drift > o.drift_fail)
       fail_force("force_offset_drift", "the force's zero moved by " + N(c.force_drift) +
                                            " between the start and the end (more than " +

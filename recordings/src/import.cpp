@@ -227,8 +227,8 @@ std::string ReportText(const std::vector<ImportedTrial>& trials, const std::stri
   }
   t += "imported " + std::to_string(trials.size()) + " trials -> " + dir + " (truth: measured)\n";
   t += "  poses scored: " + std::to_string(trials.size() - pose_failed) + ", refused " +
-       std::to_string(pose_failed) + "; forces scored: " +
-       std::to_string(trials.size() - force_failed) + ", not scored " +
+       std::to_string(pose_failed) +
+       "; forces scored: " + std::to_string(trials.size() - force_failed) + ", not scored " +
        std::to_string(force_failed) + "; no finding: " + std::to_string(clean) + "\n";
   for (const auto& [check, n] : by_check)
     t += "  " + check + ": " + std::to_string(n) + " trial(s)\n";
@@ -237,8 +237,9 @@ std::string ReportText(const std::vector<ImportedTrial>& trials, const std::stri
   for (const auto& tr : trials) {
     char line[512];
     std::snprintf(line, sizeof line, "%-60s %8lld %13s %7s %12s %9s  %-5s %s\n", tr.name.c_str(),
-                  static_cast<long long>(tr.samples), Num(tr.checks.start_gap * 1e3, "%.2f").c_str(),
-                  Num(tr.checks.onset_t).c_str(), Num(tr.checks.onset_gap * 1e3, "%.2f").c_str(),
+                  static_cast<long long>(tr.samples),
+                  Num(tr.checks.start_gap * 1e3, "%.2f").c_str(), Num(tr.checks.onset_t).c_str(),
+                  Num(tr.checks.onset_gap * 1e3, "%.2f").c_str(),
                   Num(tr.checks.force_offset, "%.2f").c_str(),
                   tr.checks.pose_usable ? "ok" : "FAIL", tr.checks.force_usable ? "ok" : "FAIL");
     t += line;
@@ -341,8 +342,7 @@ std::string SceneJson(const Recording& r, const Resampled& s, const ImportOption
         {"polygon", polygon},
         {"height", r.shape.thickness},
         {"mass", r.shape.mass},
-        {"inertia",
-         {{inertia[0], 0.0, 0.0}, {0.0, inertia[1], 0.0}, {0.0, 0.0, inertia[2]}}},
+        {"inertia", {{inertia[0], 0.0, 0.0}, {0.0, inertia[1], 0.0}, {0.0, 0.0, inertia[2]}}},
         {"pose",
          {{"position", {Round(s.object[0][0], 1e-7), Round(s.object[0][1], 1e-7), z}},
           {"rpy", {0.0, 0.0, Round(s.object[0][2], 1e-7)}}}}}},
@@ -427,8 +427,8 @@ ImportReport ImportRecordings(const std::vector<Recording>& recordings, const Im
       auto ingest = store->BeginIngest(claimed->trial_id, claimed->attempt);
       ingest->Add(p.samples);
       ingest->Finish("ok");
-      store->RecordExecution(claimed->trial_id, claimed->attempt, "import:" + o.adaptor,
-                             "measured", "{}");
+      store->RecordExecution(claimed->trial_id, claimed->attempt, "import:" + o.adaptor, "measured",
+                             "{}");
     }
     ojson per_trial = ojson::array();
     for (const auto& t : store->ListTrials(campaign_id)) {

@@ -192,8 +192,8 @@ Recording ReadPushFile(const std::string& path, const ShapesTable& shapes) {
   }
   H5Eset_auto2(H5E_DEFAULT, nullptr, nullptr);  // errors come back as exceptions, not stderr
   if (const htri_t is = H5Fis_hdf5(path.c_str()); is <= 0)
-    throw ImportError(path, is < 0 ? "cannot read it as HDF5: " + H5Reason()
-                                   : std::string("not an HDF5 file"));
+    throw ImportError(
+        path, is < 0 ? "cannot read it as HDF5: " + H5Reason() : std::string("not an HDF5 file"));
   H5Object file(H5Fopen(path.c_str(), H5F_ACC_RDONLY, H5P_DEFAULT), H5Fclose);
   if (file.id < 0) throw ImportError(path, "cannot open it: " + H5Reason());
   Recording r;
@@ -207,9 +207,10 @@ Recording ReadPushFile(const std::string& path, const ShapesTable& shapes) {
   // The sensor reads the reaction on the pusher; the object feels the opposite.
   for (auto& v : r.force.values)
     for (double& x : v) x = -x;
-  json params = {{"surface", p.surface},        {"shape", p.shape}, {"acceleration", p.a},
-                 {"speed_mm_s", p.v},           {"contact_i", p.i}, {"contact_s", p.s},
-                 {"push_angle_rad", p.t},       {"file", fs::path(path).filename().string()}};
+  json params = {{"surface", p.surface},  {"shape", p.shape},
+                 {"acceleration", p.a},   {"speed_mm_s", p.v},
+                 {"contact_i", p.i},      {"contact_s", p.s},
+                 {"push_angle_rad", p.t}, {"file", fs::path(path).filename().string()}};
   r.parameters_json = params.dump();
   return r;
 }

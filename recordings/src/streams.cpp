@@ -48,8 +48,8 @@ Sorted Sort(const Stream& s, const std::string& file, bool angle) {
       }
       char buf[64];
       std::snprintf(buf, sizeof buf, "%.6f", out.t[k]);
-      throw ImportError(file, s.name + ": two different rows at time " + buf +
-                                  " (time does not advance)");
+      throw ImportError(
+          file, s.name + ": two different rows at time " + buf + " (time does not advance)");
     }
   }
   if (angle) {  // theta continuous: no jump of 2 pi between neighbours
@@ -119,7 +119,8 @@ double SignedDistance(const std::vector<std::array<double, 2>>& poly, double x, 
     const auto& b = poly[i];
     const double ex = b[0] - a[0], ey = b[1] - a[1];
     const double len2 = ex * ex + ey * ey;
-    const double u = len2 > 0 ? std::clamp(((x - a[0]) * ex + (y - a[1]) * ey) / len2, 0.0, 1.0) : 0;
+    const double u =
+        len2 > 0 ? std::clamp(((x - a[0]) * ex + (y - a[1]) * ey) / len2, 0.0, 1.0) : 0;
     best = std::min(best, std::hypot(x - a[0] - u * ex, y - a[1] - u * ey));
     // even-odd rule: a horizontal ray to +x crosses edge (a, b)
     if ((a[1] > y) != (b[1] > y) && x < a[0] + (y - a[1]) / (b[1] - a[1]) * ex) inside = !inside;

@@ -14,8 +14,8 @@
 #include <filesystem>
 #include <fstream>
 #include <functional>
-#include <set>
 #include <nlohmann/json.hpp>
+#include <set>
 
 #include <gtest/gtest.h>
 
@@ -82,18 +82,16 @@ class ImportTest : public ::testing::Test {
     data_ = root_ / "abs";
     fs::create_directories(data_);
     shapes_path_ = root_ / "shapes.json";
-    std::ofstream(shapes_path_) << json({{"thickness", 0.013},
-                                         {"pusher_radius", kR},
-                                         {"shapes",
-                                          {{"rect1",
-                                            {{"mass", 0.8374},
-                                             {"moment_of_inertia", 0.001131},
-                                             {"outline",
-                                              {{-kHalf, -kHalf},
-                                               {kHalf, -kHalf},
-                                               {kHalf, kHalf},
-                                               {-kHalf, kHalf}}}}}}}})
-                                       .dump();
+    std::ofstream(shapes_path_)
+        << json({{"thickness", 0.013},
+                 {"pusher_radius", kR},
+                 {"shapes",
+                  {{"rect1",
+                    {{"mass", 0.8374},
+                     {"moment_of_inertia", 0.001131},
+                     {"outline",
+                      {{-kHalf, -kHalf}, {kHalf, -kHalf}, {kHalf, kHalf}, {-kHalf, kHalf}}}}}}}})
+               .dump();
   }
   void TearDown() override {
     if (!HasFailure()) fs::remove_all(root_);
@@ -313,7 +311,8 @@ TEST_F(ImportTest, BadInputNamesTheFileAndTheReasonAndWritesNothing) {
     fs::create_directories(data_);
     WriteH5(data_ / "motion_surface=abs_shape=rect1_a=0_v=50_i=0.000_s=0.400_t=0.000.h5",
             Push());  // a good file beside the bad one: still nothing is written
-    if (std::string(bad.what) == "no .h5 file") fs::remove_all(data_), fs::create_directories(data_);
+    if (std::string(bad.what) == "no .h5 file")
+      fs::remove_all(data_), fs::create_directories(data_);
     bad.write(data_);
     try {
       Import();
@@ -347,7 +346,8 @@ TEST(PushFileName, ParsesEveryParameter) {
 
 TEST(SignedDistance, OfANonConvexOutline) {
   // An L: the notch's corner (0.5, 0.5) is inside the hull but outside the L.
-  const std::vector<std::array<double, 2>> l = {{0, 0}, {1, 0}, {1, 0.5}, {0.5, 0.5}, {0.5, 1}, {0, 1}};
+  const std::vector<std::array<double, 2>> l = {{0, 0},     {1, 0},   {1, 0.5},
+                                                {0.5, 0.5}, {0.5, 1}, {0, 1}};
   EXPECT_NEAR(SignedDistance(l, 0.75, 0.75), std::hypot(0.25, 0.25), 1e-12);
   EXPECT_NEAR(SignedDistance(l, 0.25, 0.25), -0.25, 1e-12);
   EXPECT_NEAR(SignedDistance(l, -0.1, 0.5), 0.1, 1e-12);

@@ -58,8 +58,8 @@ TEST_F(PushDatasetE2e, ImportsAllFiftyTrialsAndReportsTheirDefects) {
     if (!t["onset_gap_m"].is_null())
       worst_onset_gap = std::max(worst_onset_gap, std::abs(t["onset_gap_m"].get<double>()));
   }
-  EXPECT_EQ(shapes, (std::map<std::string, int>{{"ellip1", 13}, {"ellip3", 10}, {"hex", 14},
-                                                {"rect1", 13}}));
+  EXPECT_EQ(shapes, (std::map<std::string, int>{
+                        {"ellip1", 13}, {"ellip3", 10}, {"hex", 14}, {"rect1", 13}}));
   // Every rect1 force stream is frozen, and no other.
   EXPECT_EQ(frozen["rect1"], 13);
   EXPECT_EQ(frozen["ellip1"] + frozen["ellip3"] + frozen["hex"], 0);

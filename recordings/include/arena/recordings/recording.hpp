@@ -107,14 +107,14 @@ struct TrialChecks {
 
 // Tolerances of the checks (docs/real_data.md says why these).
 struct CheckOptions {
-  double onset_motion = 0.0005;   // m: a point of the outline moved this far: the object moves
-  double onset_gap_tol = 0.002;   // m: |gap at onset| above this fails the poses
-  double inside_warn = 0.0;       // m: a start deeper than this inside the outline is reported
-  double inside_fail = 0.001;     // m: ... and deeper than this fails the poses
-  double clear_gap = 0.003;       // m: pusher this far from the outline: no contact force
-  double frozen_range = 1e-9;     // N: every force channel within this: frozen
-  double offset_fail = 0.5;       // N: |force| while clear above this: an offset
-  double drift_fail = 0.5;        // N: the offset changing by more than this: a drift
+  double onset_motion = 0.0005;  // m: a point of the outline moved this far: the object moves
+  double onset_gap_tol = 0.002;  // m: |gap at onset| above this fails the poses
+  double inside_warn = 0.0;      // m: a start deeper than this inside the outline is reported
+  double inside_fail = 0.001;    // m: ... and deeper than this fails the poses
+  double clear_gap = 0.003;      // m: pusher this far from the outline: no contact force
+  double frozen_range = 1e-9;    // N: every force channel within this: frozen
+  double offset_fail = 0.5;      // N: |force| while clear above this: an offset
+  double drift_fail = 0.5;       // N: the offset changing by more than this: a drift
 };
 
 TrialChecks CheckTrial(const Recording& recording, const Resampled& streams,
