@@ -38,9 +38,10 @@ int RunPushImport(const ImportCliOptions& o) {
     io.arena_commit = arena::GitCommit();
     const auto report = recordings::ImportRecordings(recorded, io);
     std::fputs(report.text.c_str(), stdout);
-    std::printf("wrote %s: dataset.h5, scenes.jsonl, campaign.json, import_report.{txt,json}, "
-                "manifest.json (verified)\n",
-                o.out.c_str());
+    std::printf(
+        "wrote %s: dataset.h5, scenes.jsonl, campaign.json, import_report.{txt,json}, "
+        "manifest.json (verified)\n",
+        o.out.c_str());
     return kExitOk;
   } catch (const recordings::ImportError& e) {
     throw CommandError(kExitBadInput, std::string("import: ") + e.what() + " (nothing written)");
