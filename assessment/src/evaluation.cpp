@@ -55,6 +55,9 @@ TruthInfo TruthOf(const db::Store& store, std::int64_t campaign_id) {
       if (kinds.find(truth) == std::string::npos) kinds += (kinds.empty() ? "" : ", ") + truth;
     info.statement = "the truth is " + info.source + " (" + kinds +
                      "), independent of arena's model: errors are accuracy against it";
+    if (kinds.find("measured") != std::string::npos)
+      info.statement +=
+          " (measured: the observed streams are the truth, there is no separate true stream)";
   }
   return info;
 }

@@ -123,8 +123,9 @@ void Add(SettingSummary& s, Collect& c, const TrialEvaluation& r) {
   c.time.push_back(p.wall_s);
   if (r.truth_duration_s > 0) c.per_sim_s.push_back(p.wall_s / r.truth_duration_s);
   const PredictionOutcome outcome = OutcomeOf(p.status);
-  const bool scored =
-      p.final_position_error && p.final_angle_error && p.force_error && p.mode_agreement;
+  // A measured truth whose force stream failed its import check has no
+  // contact forces: the poses are scored, the forces and modes are not.
+  const bool scored = p.final_position_error && p.final_angle_error;
   std::string reason;
   if (outcome != PredictionOutcome::kOk || !scored) {
     try {
@@ -137,8 +138,8 @@ void Add(SettingSummary& s, Collect& c, const TrialEvaluation& r) {
     ++s.ok;
     c.position.push_back(*p.final_position_error);
     c.angle.push_back(*p.final_angle_error);
-    c.force.push_back(*p.force_error);
-    c.mode.push_back(*p.mode_agreement);
+    if (p.force_error) c.force.push_back(*p.force_error);
+    if (p.mode_agreement) c.mode.push_back(*p.mode_agreement);
     c.position_all.push_back(*p.final_position_error);
     c.angle_all.push_back(*p.final_angle_error);
     c.by_error.emplace_back(*p.final_position_error, r.trial_id);

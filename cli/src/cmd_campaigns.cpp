@@ -217,11 +217,13 @@ int Status(const std::string& db_path, std::int64_t only, bool as_json) {
                 c.rate_per_hour, c.eta_s ? FormatDuration(*c.eta_s).c_str() : "-");
   for (const auto& c : s.campaigns) {
     for (const auto& t : store->CampaignTruths(c.id)) {
-      std::printf(
-          "      truth of %lld: %s (%s backend), %lld trials%s\n", static_cast<long long>(c.id),
-          t.truth.empty() ? "unreported" : t.truth.c_str(),
-          t.backend.empty() ? "?" : t.backend.c_str(), static_cast<long long>(t.trials),
-          t.truth == "self-consistency" ? ": errors are self-consistency, not accuracy" : "");
+      std::printf("      truth of %lld: %s (%s backend), %lld trials%s\n",
+                  static_cast<long long>(c.id), t.truth.empty() ? "unreported" : t.truth.c_str(),
+                  t.backend.empty() ? "?" : t.backend.c_str(), static_cast<long long>(t.trials),
+                  t.truth == "self-consistency" ? ": errors are self-consistency, not accuracy"
+                  : t.truth == "measured"
+                      ? ": the observed streams are the truth (no separate true stream)"
+                      : "");
     }
   }
   bool header = false;

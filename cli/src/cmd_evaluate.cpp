@@ -291,6 +291,10 @@ int RunEvaluate(const EvaluateOptions& o) {
                   t.backend.empty() ? "?" : t.backend.c_str(), static_cast<long long>(t.trials),
                   t.truth == "self-consistency"
                       ? ": these errors are arena's model against itself, not accuracy"
+                  : t.truth == "measured"
+                      ? ": measured, the observed streams are the truth (no separate true "
+                        "stream); trials whose streams failed the import check are not scored "
+                        "on them"
                       : "");
     }
   }

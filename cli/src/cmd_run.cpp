@@ -120,15 +120,18 @@ void PrintSummary(const std::string& db_path, std::int64_t campaign_id, double w
   bool self_consistency = false;
   for (const auto& t : store->CampaignTruths(campaign_id)) {
     if (!truth_line.empty()) truth_line += "; ";
-    const std::string what = t.truth == "self-consistency" ? "arena's own model (" + t.backend +
-                                                                 " backend): self-consistency, "
-                                                                 "not accuracy"
-                             : t.truth == "simulator"
-                                 ? (t.backend == "mujoco" ? std::string("MuJoCo") : t.backend) +
+    const std::string what =
+        t.truth == "self-consistency" ? "arena's own model (" + t.backend +
+                                            " backend): self-consistency, "
+                                            "not accuracy"
+        : t.truth == "simulator" ? (t.backend == "mujoco" ? std::string("MuJoCo") : t.backend) +
                                        " (an independent engine)"
-                             : t.truth == "robot"    ? "a robot (" + t.backend + ")"
-                             : t.truth == "recorded" ? "recorded data (" + t.backend + ")"
-                                                     : "an unreported backend";
+        : t.truth == "robot"    ? "a robot (" + t.backend + ")"
+        : t.truth == "recorded" ? "recorded data (" + t.backend + ")"
+        : t.truth == "measured" ? "measured data (" + t.backend +
+                                      "): the observed streams are the truth, no separate "
+                                      "true stream"
+                                : "an unreported backend";
     self_consistency = self_consistency || t.truth == "self-consistency";
     truth_line += what + ", " + std::to_string(t.trials) + " trials";
   }

@@ -49,6 +49,7 @@ void AddPlotCommand(CLI::App& app, Action* action);       // cmd_plot.cpp (TRIAL
 void AddWatchCommand(CLI::App& app, Action* action);      // cmd_watch.cpp
 void AddCertsCommand(CLI::App& app, Action* action);      // cmd_certs.cpp (init, issue)
 void AddCalibrateCommand(CLI::App& app, Action* action);  // cmd_calibrate.cpp
+void AddImportCommand(CLI::App& app, Action* action);     // cmd_import.cpp (recordings room)
 
 // cmd_sensitivity.cpp (scene and campaign views)
 void AddSensitivityCommand(CLI::App& app, Action* action);

@@ -34,6 +34,7 @@ int main(int argc, char** argv) {
   AddCertsCommand(app, &action);
   AddSensitivityCommand(app, &action);
   AddCalibrateCommand(app, &action);
+  AddImportCommand(app, &action);
 
   try {
     app.parse(argc, argv);

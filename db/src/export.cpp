@@ -1021,6 +1021,20 @@ ExportReport WriteDataset(const Store& store, const ExportOptions& o, const fs::
       WriteJsonLines(dir / "closed_loop_commands.jsonl", commands);
     }
   }
+  for (const auto& [rel, text] : o.extra_files) {
+    const fs::path r(rel);
+    if (rel.empty() || r.is_absolute() || rel.find("..") != std::string::npos ||
+        rel == "manifest.json")
+      throw StoreError(
+          StoreError::Kind::kBadInput,
+          "export: extra file '" + rel + "' must be a relative path inside the dataset");
+    std::error_code ec;
+    if (fs::exists(dir / r, ec))
+      throw StoreError(StoreError::Kind::kBadInput,
+                       "export: extra file '" + rel + "' is one the export writes itself");
+    if (r.has_parent_path()) fs::create_directories(dir / r.parent_path(), ec);
+    WriteText(dir / r, text);
+  }
   const ojson files = ChecksumFiles(dir, &report);
 
   ojson spec;
@@ -1073,6 +1087,19 @@ ExportReport WriteDataset(const Store& store, const ExportOptions& o, const fs::
       {"files", files},
   };
   if (o.predict) manifest["columns"]["predicted"] = ColumnsJson(written.predicted_cols);
+  if (!o.manifest_extra_json.empty()) {
+    ojson extra;
+    try {
+      extra = ojson::parse(o.manifest_extra_json);
+    } catch (const nlohmann::json::exception& e) {
+      throw StoreError(StoreError::Kind::kBadInput,
+                       std::string("export: manifest_extra_json is not JSON: ") + e.what());
+    }
+    if (!extra.is_object())
+      throw StoreError(StoreError::Kind::kBadInput,
+                       "export: manifest_extra_json must be a JSON object");
+    for (auto it = extra.begin(); it != extra.end(); ++it) manifest[it.key()] = it.value();
+  }
   if (!runs.rows.empty()) {
     ojson cmd_cols = ojson::array();
     cmd_cols.push_back({{"name", "trial_id"}, {"unit", "1"}, {"meaning", "trial id"}});

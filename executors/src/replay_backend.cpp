@@ -13,6 +13,7 @@
 #include <nlohmann/json.hpp>
 
 #include "arena/executors/backend.hpp"
+#include "arena/mechanics/scene_json.hpp"
 #include "recorded_stream.hpp"
 
 namespace arena::executors {
@@ -48,11 +49,27 @@ json Physical(json scene) {
   return scene;
 }
 
+// A recorded scene as the service writes a commanded one (SceneToJson of the
+// parsed scene), so that a scene written by another program (arena import)
+// matches whatever defaults and spelling it used. A scene this arena cannot
+// parse stays as it is (and matches only the same text).
+json Canonical(const json& scene) {
+  try {
+    return json::parse(mechanics::SceneToJson(mechanics::ParseScene(scene.dump())));
+  } catch (const std::exception&) {
+    return scene;
+  }
+}
+
 // The recorded rows as the true samples of `scene`: contacts in scene order
 // (fingers, then the pusher), named as the export names them (a finger's
 // name, "pusher"; "contactK" by position when the recording had another set).
+// A measured recording whose force stream failed its import check has no
+// contact columns at all: its samples then carry no contacts (forces unknown,
+// never scored), when `forces_optional`.
 std::vector<mechanics::TrajectorySample> ToSamples(const RecordedStream& stream,
-                                                   const mechanics::Scene& scene) {
+                                                   const mechanics::Scene& scene,
+                                                   bool forces_optional) {
   std::vector<std::string> names;
   std::vector<Eigen::Vector3d> normals;
   for (size_t i = 0; i < scene.fingers.size(); ++i) {
@@ -78,6 +95,10 @@ std::vector<mechanics::TrajectorySample> ToSamples(const RecordedStream& stream,
   const auto twist = cols("", {"vx", "vy", "vz", "wx", "wy", "wz"});
   const auto pusher = cols("pusher_", {"x", "y", "z"});
   std::vector<std::vector<size_t>> contact;  // fx fy fz tx ty tz mode
+  const bool no_forces = forces_optional && stream.Column("pusher_fx") < 0 &&
+                         stream.Column("contact0_fx") < 0 &&
+                         (scene.fingers.empty() || stream.Column(names[0] + "_fx") < 0);
+  if (no_forces) names.clear();
   for (size_t c = 0; c < names.size(); ++c) {
     const std::string prefix =
         (stream.Column(names[c] + "_fx") >= 0 ? names[c] : "contact" + std::to_string(c)) + "_";
@@ -119,6 +140,7 @@ struct Recorded {
   std::int64_t trial_id = 0;
   std::string seed;
   json scene;
+  std::string refused;  // an imported trial whose poses failed their check: why
 };
 
 class ReplayBackend final : public Backend {
@@ -152,10 +174,25 @@ class ReplayBackend final : public Backend {
       r.seed = j.contains("seed")
                    ? (j["seed"].is_string() ? j["seed"].get<std::string>() : j["seed"].dump())
                    : "";
-      r.scene = Physical(j["scene"]);
+      r.scene = Physical(Canonical(j["scene"]));
       trials_.push_back(std::move(r));
     }
     if (trials_.empty()) throw std::invalid_argument(dir + ": holds no trials");
+    // An imported recording (arena import): measured truth, and the trials
+    // whose poses failed the import's checks are never served (never scored).
+    measured_ = manifest.value("truth", "") == "measured";
+    if (manifest.contains("import") && manifest["import"].is_object() &&
+        manifest["import"].contains("trials") && manifest["import"]["trials"].is_array()) {
+      for (const auto& t : manifest["import"]["trials"]) {
+        if (!t.is_object() || t.value("pose_usable", true)) continue;
+        for (auto& r : trials_)
+          if (r.trial_id == t.value("trial_id", std::int64_t{-1}))
+            r.refused = "replay: recorded trial " + std::to_string(r.trial_id) + " (" +
+                        t.value("trial", std::string("?")) +
+                        ") failed its import check of the poses (" + dir +
+                        "/import_report.txt): not served, so never scored";
+      }
+    }
     // Every served trial's stream is there and well formed before the cell
     // comes up: a broken dataset stops `arena cell` with the file and the
     // reason, not a trial in the middle of a campaign.
@@ -169,9 +206,10 @@ class ReplayBackend final : public Backend {
                                       std::to_string(r.trial_id) + "'s true stream)");
     }
     caps_.name = "replay:" + dir;
-    caps_.truth = TruthSource::kRecorded;
-    caps_.engine = "recorded dataset " + fs::absolute(root).string() + " (" +
-                   std::to_string(trials_.size()) + " trials, " + format_ + ")";
+    caps_.truth = measured_ ? TruthSource::kMeasured : TruthSource::kRecorded;
+    caps_.engine = std::string(measured_ ? "measured" : "recorded") + " dataset " +
+                   fs::absolute(root).string() + " (" + std::to_string(trials_.size()) +
+                   " trials, " + format_ + ")";
     caps_.emulates_defects = false;
     caps_.settings_json =
         json({{"dataset", fs::absolute(root).string()}, {"trials", trials_.size()}}).dump();
@@ -194,6 +232,11 @@ class ReplayBackend final : public Backend {
       int& n = served_[want.dump()];
       prepared_ = hits[static_cast<size_t>(n++) % hits.size()];
     }
+    if (!prepared_->refused.empty()) {
+      const std::string why = prepared_->refused;
+      prepared_ = nullptr;
+      return why;
+    }
     return "";
   }
 
@@ -213,7 +256,7 @@ class ReplayBackend final : public Backend {
     }
     std::vector<mechanics::TrajectorySample> samples;
     try {
-      samples = ToSamples(stream, scene);
+      samples = ToSamples(stream, scene, measured_);
     } catch (const std::exception& e) {
       out.reason = "replay: trial " + std::to_string(prepared_->trial_id) + ": " + e.what();
       return out;
@@ -244,6 +287,7 @@ class ReplayBackend final : public Backend {
   std::string format_;
   std::vector<Recorded> trials_;
   std::unique_ptr<Hdf5Recording> h5_;  // format hdf5: dataset.h5, open while the cell runs
+  bool measured_ = false;              // manifest "truth": "measured" (arena import)
   std::map<std::string, int> served_;
   const Recorded* prepared_ = nullptr;
   BackendCapabilities caps_;

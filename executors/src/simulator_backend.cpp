@@ -55,17 +55,19 @@ const char* ToString(TruthSource s) {
       return "robot";
     case TruthSource::kRecorded:
       return "recorded";
+    case TruthSource::kMeasured:
+      return "measured";
   }
   return "?";
 }
 
 TruthSource ParseTruthSource(std::string_view name) {
   for (auto s : {TruthSource::kSelfConsistency, TruthSource::kSimulator, TruthSource::kRobot,
-                 TruthSource::kRecorded}) {
+                 TruthSource::kRecorded, TruthSource::kMeasured}) {
     if (name == ToString(s)) return s;
   }
   throw std::invalid_argument("truth: unknown value '" + std::string(name) +
-                              "' (self-consistency, simulator, robot, recorded)");
+                              "' (self-consistency, simulator, robot, recorded, measured)");
 }
 
 std::unique_ptr<Backend> MakeModelBackend(const ModelFidelity& f) {

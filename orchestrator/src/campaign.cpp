@@ -686,8 +686,8 @@ Campaign ParseCampaign(std::string_view json_text, const std::string& base_dir,
                        ConditionCheck check) {
   json doc = ParseJson(json_text, "");
   RequireObject(doc, "",
-                {"name", "description", "seed", "priority", "scene", "variations", "sampler",
-                 "conditions", "trials", "replicates", "prediction", "defects"});
+                {"name", "description", "seed", "priority", "scene", "scenes", "variations",
+                 "sampler", "conditions", "trials", "replicates", "prediction", "defects"});
   const std::filesystem::path dir =
       base_dir.empty() ? std::filesystem::path(".") : std::filesystem::path(base_dir);
   Campaign c;
@@ -713,24 +713,99 @@ Campaign ParseCampaign(std::string_view json_text, const std::string& base_dir,
   if (doc.contains("priority"))
     c.priority = static_cast<int>(Integer(doc["priority"], "priority", -1000, 1000));
 
-  // The base scene: inline or a file.
-  if (!doc.contains("scene"))
-    throw CampaignError("scene", "is required (a SCENE.md scene or a path to one)");
-  try {
-    if (doc["scene"].is_string()) {
-      const std::filesystem::path path = dir / doc["scene"].get<std::string>();
-      const std::string text = ReadFileLimited(path, "scene");
-      c.scene = mechanics::ParseScene(text);
-      doc["scene"] = ParseJson(text, "scene");
-    } else if (doc["scene"].is_object()) {
-      c.scene = mechanics::ParseScene(doc["scene"].dump());
-    } else {
-      throw CampaignError("scene",
-                          "must be a scene object or a file path, got " + TypeName(doc["scene"]));
+  // Listed scenes: each one condition; the first is the base scene.
+  if (doc.contains("scenes")) {
+    for (const char* k : {"scene", "variations", "sampler", "conditions", "trials"}) {
+      if (doc.contains(k))
+        throw CampaignError(k, "a campaign of listed \"scenes\" has no \"" + std::string(k) +
+                                   "\" (each listed scene is one condition)");
     }
-  } catch (const mechanics::SceneError& e) {
-    throw CampaignError(e.field().empty() ? "scene" : "scene." + e.field(), e.reason());
+    json list = json::array();
+    if (doc["scenes"].is_string()) {
+      // JSON lines: {"scene": {...}, "seed": "..."} (an arena dataset's scenes.jsonl) or scenes.
+      const std::filesystem::path path = dir / doc["scenes"].get<std::string>();
+      std::ifstream in(path, std::ios::binary);
+      if (!in) throw CampaignError("scenes", "cannot open '" + path.string() + "'");
+      std::string line;
+      std::size_t bytes = 0;
+      for (int number = 1; std::getline(in, line); ++number) {
+        bytes += line.size() + 1;
+        if (bytes > kMaxScenesFileBytes)
+          throw CampaignError("scenes", "'" + path.string() + "' is larger than " +
+                                            std::to_string(kMaxScenesFileBytes) + " bytes");
+        if (line.empty()) continue;
+        list.push_back(ParseJson(line, "scenes (line " + std::to_string(number) + ")"));
+      }
+    } else if (doc["scenes"].is_array()) {
+      list = doc["scenes"];
+    } else {
+      throw CampaignError("scenes",
+                          "must be an array of scenes or a path to a JSON-lines file, "
+                          "got " +
+                              TypeName(doc["scenes"]));
+    }
+    if (list.empty()) throw CampaignError("scenes", "lists no scene");
+    if (static_cast<int64_t>(list.size()) > kMaxConditions)
+      throw CampaignError("scenes", "lists more than " + std::to_string(kMaxConditions));
+    for (std::size_t i = 0; i < list.size(); ++i) {
+      const std::string field = "scenes[" + std::to_string(i) + "]";
+      json& item = list[i];
+      if (!item.is_object()) throw CampaignError(field, "must be an object");
+      std::optional<uint64_t> seed;
+      if (item.contains("scene")) {  // {"scene": ..., "seed": ...} (other keys: the dataset's)
+        if (item.contains("seed")) {
+          const json& sj = item["seed"];
+          if (sj.is_number_unsigned()) {
+            seed = sj.get<uint64_t>();
+          } else if (sj.is_string()) {
+            const std::string text = sj.get<std::string>();
+            uint64_t v = 0;
+            const auto r = std::from_chars(text.data(), text.data() + text.size(), v);
+            if (r.ec != std::errc() || r.ptr != text.data() + text.size())
+              throw CampaignError(field + ".seed", "must be an integer in [0, 2^64)");
+            seed = v;
+          } else {
+            throw CampaignError(field + ".seed", "must be an integer in [0, 2^64)");
+          }
+        }
+        json scene = item["scene"];
+        item = json{{"scene", scene}};
+        if (seed) item["seed"] = std::to_string(*seed);
+      } else {
+        item = json{{"scene", item}};
+      }
+      try {
+        c.scenes.push_back(mechanics::ParseScene(item["scene"].dump()));
+      } catch (const mechanics::SceneError& e) {
+        throw CampaignError(e.field().empty() ? field : field + "." + e.field(), e.reason());
+      }
+      c.scene_seeds.push_back(seed);
+    }
+    doc["scenes"] = list;  // inline: the stored campaign is whole without the file
+    c.scene = c.scenes.front();
+    c.sampler = SamplerKind::kGrid;
   }
+
+  // The base scene: inline or a file.
+  if (!c.scenes.empty()) {
+    // listed above
+  } else if (!doc.contains("scene"))
+    throw CampaignError("scene", "is required (a SCENE.md scene or a path to one)");
+  if (c.scenes.empty()) try {
+      if (doc["scene"].is_string()) {
+        const std::filesystem::path path = dir / doc["scene"].get<std::string>();
+        const std::string text = ReadFileLimited(path, "scene");
+        c.scene = mechanics::ParseScene(text);
+        doc["scene"] = ParseJson(text, "scene");
+      } else if (doc["scene"].is_object()) {
+        c.scene = mechanics::ParseScene(doc["scene"].dump());
+      } else {
+        throw CampaignError("scene",
+                            "must be a scene object or a file path, got " + TypeName(doc["scene"]));
+      }
+    } catch (const mechanics::SceneError& e) {
+      throw CampaignError(e.field().empty() ? "scene" : "scene." + e.field(), e.reason());
+    }
 
   // Sampler and counts.
   if (doc.contains("sampler") && doc["sampler"].is_object()) {
@@ -849,6 +924,8 @@ Campaign ParseCampaign(std::string_view json_text, const std::string& base_dir,
   }
   if (boundary) {
     conditions = 0;  // points are chosen as results come in
+  } else if (!c.scenes.empty()) {
+    conditions = static_cast<int64_t>(c.scenes.size());
   } else if (grid) {
     if (conditions != 0 && conditions != sampled_levels) {
       throw CampaignError(has_trials ? "trials" : "conditions",
@@ -976,15 +1053,19 @@ Campaign ParseCampaign(std::string_view json_text, const std::string& base_dir,
 
   // Every condition must give a valid scene, for the cells and for the
   // predictor: refuse the campaign now rather than fail trial 9,000.
-  try {
-    mechanics::ValidateScene(WithModel(c.scene, c.prediction));
-  } catch (const mechanics::SceneError& e) {
-    std::string field = e.field();
-    if (field.rfind("model.", 0) == 0)
-      field = "prediction." + field.substr(6);
-    else
-      field = field.empty() ? "scene" : "scene." + field;
-    throw CampaignError(field, e.reason());
+  for (std::size_t i = 0; i < std::max<std::size_t>(1, c.scenes.size()); ++i) {
+    if (i > 0 && check != ConditionCheck::kAllConditions) break;
+    const std::string where = c.scenes.empty() ? "scene" : "scenes[" + std::to_string(i) + "]";
+    try {
+      mechanics::ValidateScene(WithModel(c.scenes.empty() ? c.scene : c.scenes[i], c.prediction));
+    } catch (const mechanics::SceneError& e) {
+      std::string field = e.field();
+      if (field.rfind("model.", 0) == 0)
+        field = "prediction." + field.substr(6);
+      else
+        field = field.empty() ? where : where + "." + field;
+      throw CampaignError(field, e.reason());
+    }
   }
   if (boundary && check == ConditionCheck::kAllConditions) {
     // The space is a box: its corners are the extremes every chosen point lies between.
@@ -1074,6 +1155,13 @@ PlannedTrial PlanTrial(const Campaign& c, int64_t index) {
   t.replicate = static_cast<int>(index % c.replicates);
   t.seed = Mix64(Mix64(Mix64(c.seed ^ 0x7419a1ULL) + static_cast<uint64_t>(t.condition)) +
                  static_cast<uint64_t>(t.replicate));
+  if (!c.scenes.empty()) {  // a listed scene, with its own seed if it has one
+    const auto k = static_cast<std::size_t>(t.condition);
+    if (t.replicate == 0 && c.scene_seeds[k]) t.seed = *c.scene_seeds[k];
+    t.scene = c.scenes[k];
+    t.parameters_json = json{{"scene_index", t.condition}}.dump();
+    return t;
+  }
   const Values values = ConditionValues(c, t.condition);
   t.scene = BuildScene(c.scene, values);
   t.parameters_json = ParametersJson(c, values);

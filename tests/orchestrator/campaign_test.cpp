@@ -196,6 +196,49 @@ TEST(Campaign, ReloadingCanSkipTheConditionCheck) {
   EXPECT_EQ(Fingerprint(PlanTrial(reloaded, 35)), Fingerprint(PlanTrial(smoke, 35)));
 }
 
+// Listed scenes (an imported dataset's scenes.jsonl): one condition each, the
+// listed seed for the first replicate, the scenes inline in the stored campaign.
+TEST(Campaign, ListedScenesAreOneConditionEachWithTheirSeeds) {
+  const json base = json::parse(ReadText(kSourceDir / "examples/campaigns/smoke.json"))["scene"];
+  json second = base;
+  second["grip_force"] = 12.5;
+  char tmpl[] = "/tmp/arena-scenes-test-XXXXXX";
+  const fs::path dir = mkdtemp(tmpl);
+  std::ofstream(dir / "scenes.jsonl")
+      << json({{"trial_id", 7}, {"seed", "123"}, {"scene", base}}).dump() << "\n"
+      << json({{"trial_id", 8}, {"scene", second}}).dump() << "\n";
+  const json doc = {{"name", "listed"}, {"seed", 5}, {"scenes", "scenes.jsonl"}, {"replicates", 2}};
+  std::ofstream(dir / "campaign.json") << doc.dump();
+  const Campaign c = LoadCampaignFile((dir / "campaign.json").string());
+  ASSERT_EQ(TrialCount(c), 4);
+  EXPECT_EQ(PlanTrial(c, 0).seed, 123u);
+  EXPECT_NE(PlanTrial(c, 1).seed, 123u);  // the second replicate: its own seed
+  EXPECT_EQ(PlanTrial(c, 2).scene.grip_force, 12.5);
+  EXPECT_EQ(PlanTrial(c, 3).parameters_json, R"({"scene_index":1})");
+  // Stored and reloaded without the file.
+  fs::remove_all(dir);
+  const Campaign reloaded = ParseCampaign(c.source_json, "", ConditionCheck::kBaseScene);
+  EXPECT_EQ(Fingerprint(PlanTrial(reloaded, 2)), Fingerprint(PlanTrial(c, 2)));
+  EXPECT_EQ(PlanTrial(reloaded, 0).seed, 123u);
+  // Refused: with variations, an empty list, a bad scene named by its index.
+  json bad = doc;
+  bad["scenes"] = json::array({base});
+  bad["variations"] = {{"grip_force", 3}};
+  EXPECT_THROW(ParseCampaign(bad.dump()), CampaignError);
+  bad.erase("variations");
+  bad["scenes"] = json::array();
+  EXPECT_THROW(ParseCampaign(bad.dump()), CampaignError);
+  json broken = base;
+  broken["object"]["mass"] = -1;
+  bad["scenes"] = json::array({base, broken});
+  try {
+    ParseCampaign(bad.dump());
+    ADD_FAILURE() << "accepted";
+  } catch (const CampaignError& e) {
+    EXPECT_EQ(e.field().rfind("scenes[1]", 0), 0u) << e.what();
+  }
+}
+
 // A rotated box: contacts placed on its rotated faces stay on them when the
 // box is stretched (every condition is validated, surface check included).
 TEST(Campaign, StretchingARotatedBoxCarriesTheContacts) {

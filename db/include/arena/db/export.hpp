@@ -52,6 +52,7 @@
 #include <cstdint>
 #include <functional>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "arena/db/store.hpp"
@@ -94,6 +95,13 @@ struct ExportOptions {
       predict_closed_loop;
   // Called after each trial with (trials written, trials to write).
   std::function<void(std::int64_t, std::int64_t)> progress;
+  // Files a producer adds to the dataset (path relative to it, '/' separated, no
+  // "..": e.g. an importer's campaign.json and import report): written before
+  // the checksums, so the manifest lists them like every other file.
+  std::vector<std::pair<std::string, std::string>> extra_files;
+  // A JSON object whose keys are set in manifest.json after export's own (an
+  // importer's "truth": "measured", its "frames"); "" adds nothing.
+  std::string manifest_extra_json;
 };
 
 struct ExportedFile {

@@ -49,6 +49,8 @@ enum class TruthSource {
   kSimulator,        // an independent engine (mujoco)
   kRobot,            // hardware, through a driver
   kRecorded,         // a dataset recorded elsewhere
+  kMeasured,         // real measurements (an imported lab recording): the observed
+                     // stream is the truth; there is no separate true stream
 };
 const char* ToString(TruthSource source);
 // @throws std::invalid_argument for an unknown name.

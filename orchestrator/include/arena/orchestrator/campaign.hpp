@@ -159,7 +159,16 @@ struct Campaign {
   // predictor applies (SubmitCampaign resolves it into calibrated_scales).
   std::int64_t calibration_id = 0;
   std::map<std::string, double> calibrated_scales;  // e.g. {"mu_fingers": 1.42}
+  // A campaign of listed scenes ("scenes" instead of "scene" and
+  // "variations", e.g. an imported dataset's scenes.jsonl): condition i runs
+  // scenes[i] (`scene` is scenes[0]); a listed seed is its first replicate's.
+  std::vector<mechanics::Scene> scenes;
+  std::vector<std::optional<uint64_t>> scene_seeds;
 };
+
+// The largest file of listed scenes a campaign may name (recorded pushes
+// carry their pusher paths: tens of kB per scene).
+inline constexpr std::size_t kMaxScenesFileBytes = std::size_t{64} << 20;
 
 // One trial of a campaign's plan. Replicates of a condition have the same
 // scene and parameters, bit for bit.
