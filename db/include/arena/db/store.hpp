@@ -745,4 +745,13 @@ class Store {
   friend class Ingest;
 };
 
+// Runs `write` (one store write) until it does not fail with kBusy: a long
+// computation (an evaluation, a calibration) that ends while another process
+// holds the write lock waits for it instead of discarding its result.
+// Between tries (0.1 s, doubling to 2 s) on_wait(seconds waited so far,
+// SQLite's message) is called; it returns false to give up, and then the
+// last kBusy is rethrown. Any other error is thrown at once.
+void RetryWhileBusy(const std::function<void()>& write,
+                    const std::function<bool(double, const std::string&)>& on_wait);
+
 }  // namespace arena::db
