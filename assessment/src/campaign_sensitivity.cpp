@@ -323,6 +323,19 @@ CampaignSensitivityReport AnalyseCampaign(const db::Store& store, std::int64_t c
   }
   std::vector<const Condition*> list;
   for (const auto& [k, c] : by_condition) list.push_back(&c);
+  // A tolerance for a parameter no condition has would be stored as if it
+  // had been applied (the scene view refuses it the same way).
+  for (const auto& [name, t] : o.stability.tolerances) {
+    const bool known = std::any_of(list.begin(), list.end(), [&](const Condition* c) {
+      const auto all = SceneParameters(c->scene);
+      return std::any_of(all.begin(), all.end(),
+                         [&](const Parameter& p) { return p.name == name; });
+    });
+    if (!known)
+      throw std::invalid_argument("--tolerance " + name +
+                                  ": no such parameter in this campaign's scenes (see `arena "
+                                  "sensitivity SCENE.json` for the names)");
+  }
 
   CampaignSensitivityReport report;
   report.campaign_id = campaign_id;

@@ -152,6 +152,12 @@ EvaluationRun EvaluateCampaign(db::Store& store, std::int64_t campaign_id,
   for (auto& t : store.ListTrials(campaign_id)) {
     if (t.state == db::TrialState::kDone && t.gt_stream_id) trials.push_back(std::move(t));
   }
+  if (trials.empty()) {
+    // An evaluation of nothing would be stored as if it said something.
+    throw std::invalid_argument("campaign " + std::to_string(campaign_id) +
+                                " has no done trials to evaluate yet (arena status shows "
+                                "its progress)");
+  }
   // Scenes first: the default grids keep only settings every scene takes.
   std::vector<std::optional<mechanics::Scene>> scenes(trials.size());
   std::vector<mechanics::Scene> valid_scenes;
@@ -361,8 +367,22 @@ EvaluationRun EvaluateCampaign(db::Store& store, std::int64_t campaign_id,
   rows.reserve(results.size());
   for (auto& r : results)
     rows.push_back(db::EvaluationResult{r.trial_id, r.attempt, std::move(r.prediction)});
-  run.evaluation_id =
-      store.RecordEvaluation(campaign_id, grid.dump(), ToJson(run.report).dump(), rows);
+  run.settings_json = grid.dump();
+  const std::string report_json = ToJson(run.report).dump();
+  try {
+    db::RetryWhileBusy(
+        [&] {
+          run.evaluation_id =
+              store.RecordEvaluation(campaign_id, run.settings_json, report_json, rows);
+        },
+        [&](double waited, const std::string& why) {
+          if (options.cancel && options.cancel->load()) return false;
+          return !options.on_store_busy || options.on_store_busy(waited, why);
+        });
+  } catch (const db::StoreError& e) {
+    run.not_stored = e.what();  // the finished work is the caller's to keep
+    run.not_stored_kind = e.kind();
+  }
   return run;
 }
 

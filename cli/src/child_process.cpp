@@ -1,12 +1,15 @@
 #include "child_process.hpp"
 
 #include <fcntl.h>
+#include <poll.h>
 #include <signal.h>
 #include <spawn.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <atomic>
 #include <cerrno>
+#include <cstdio>
 #include <cstring>
 #include <stdexcept>
 #include <thread>
@@ -23,14 +26,72 @@ int DecodeStatus(int status) {
 }
 }  // namespace
 
-ChildProcess::ChildProcess(const std::vector<std::string>& argv, const std::string& log_path) {
+// Reads a child's output from a pipe into its log file, rotating the file
+// to PATH.1 past `max` bytes. Ends when the pipe closes, or (after the child
+// was stopped) once the pipe is drained: a grandchild holding the pipe open
+// cannot keep it waiting.
+class LogPump {
+ public:
+  LogPump(int fd, std::string path, std::uintmax_t max)
+      : fd_(fd), path_(std::move(path)), max_(max), thread_([this] { Run(); }) {}
+  ~LogPump() {
+    stop_ = true;
+    thread_.join();
+    ::close(fd_);
+  }
+  LogPump(const LogPump&) = delete;
+  LogPump& operator=(const LogPump&) = delete;
+
+ private:
+  void Run() {
+    std::FILE* out = std::fopen(path_.c_str(), "ab");
+    if (out) std::fseek(out, 0, SEEK_END);
+    std::uintmax_t size = out ? static_cast<std::uintmax_t>(std::ftell(out)) : 0;
+    char buf[65536];
+    for (;;) {
+      pollfd p{fd_, POLLIN, 0};
+      const int r = ::poll(&p, 1, 100);
+      if (r < 0 && errno == EINTR) continue;
+      if (r == 0) {
+        if (stop_) break;  // stopped and drained
+        continue;
+      }
+      const ssize_t n = ::read(fd_, buf, sizeof buf);
+      if (n < 0 && errno == EINTR) continue;
+      if (n <= 0) break;  // every writer closed it
+      if (!out) continue;
+      if (size + static_cast<std::uintmax_t>(n) > max_ && size > 0) {
+        std::fclose(out);
+        std::rename(path_.c_str(), (path_ + ".1").c_str());
+        out = std::fopen(path_.c_str(), "ab");
+        size = 0;
+        if (!out) continue;
+      }
+      size += std::fwrite(buf, 1, static_cast<std::size_t>(n), out);
+      std::fflush(out);
+    }
+    if (out) std::fclose(out);
+  }
+
+  int fd_;
+  std::string path_;
+  std::uintmax_t max_;
+  std::atomic<bool> stop_{false};
+  std::thread thread_;
+};
+
+ChildProcess::ChildProcess(const std::vector<std::string>& argv, const std::string& log_path,
+                           std::uintmax_t max_log_bytes) {
   if (argv.empty()) throw std::runtime_error("ChildProcess: empty argv");
+  int out[2] = {-1, -1};
+  if (!log_path.empty() && ::pipe2(out, O_CLOEXEC) != 0)
+    throw std::runtime_error(std::string("cannot start ") + argv[0] +
+                             ": pipe: " + std::strerror(errno));
   posix_spawn_file_actions_t actions;
   posix_spawn_file_actions_init(&actions);
   if (!log_path.empty()) {
-    posix_spawn_file_actions_addopen(&actions, STDOUT_FILENO, log_path.c_str(),
-                                     O_WRONLY | O_CREAT | O_APPEND, 0644);
-    posix_spawn_file_actions_adddup2(&actions, STDOUT_FILENO, STDERR_FILENO);
+    posix_spawn_file_actions_adddup2(&actions, out[1], STDOUT_FILENO);
+    posix_spawn_file_actions_adddup2(&actions, out[1], STDERR_FILENO);
   }
   posix_spawn_file_actions_addopen(&actions, STDIN_FILENO, "/dev/null", O_RDONLY, 0);
   std::vector<char*> args;
@@ -38,19 +99,23 @@ ChildProcess::ChildProcess(const std::vector<std::string>& argv, const std::stri
   args.push_back(nullptr);
   const int rc = posix_spawn(&pid_, args[0], &actions, nullptr, args.data(), environ);
   posix_spawn_file_actions_destroy(&actions);
+  if (out[1] >= 0) ::close(out[1]);
   if (rc != 0) {
+    if (out[0] >= 0) ::close(out[0]);
     pid_ = -1;
     throw std::runtime_error("cannot start " + argv[0] + ": " + std::strerror(rc));
   }
+  if (out[0] >= 0) pump_ = std::make_shared<LogPump>(out[0], log_path, max_log_bytes);
 }
 
 ChildProcess::ChildProcess(ChildProcess&& other) noexcept
-    : pid_(other.pid_), status_(other.status_) {
+    : pid_(other.pid_), status_(other.status_), pump_(std::move(other.pump_)) {
   other.pid_ = -1;
 }
 
 ChildProcess::~ChildProcess() {
   if (pid_ > 0 && !status_) Stop();
+  pump_.reset();  // drains what the child wrote last
 }
 
 std::optional<int> ChildProcess::Poll() {

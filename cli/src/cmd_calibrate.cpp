@@ -4,6 +4,7 @@
 // prints the fit with its uncertainty and the held-out error before/after,
 // and stores it; a campaign's "prediction": {"calibration": ID} then uses it.
 
+#include <atomic>
 #include <cstdio>
 #include <memory>
 #include <sstream>
@@ -18,7 +19,10 @@
 #include "arena/mechanics/simulate.hpp"
 #include "arena/simulators/simulator.hpp"
 #include "commands.hpp"
+#include "output_guard.hpp"
 #include "progress.hpp"
+#include "result_file.hpp"
+#include "signals.hpp"
 #include "store_errors.hpp"
 
 namespace arena::cli {
@@ -40,6 +44,7 @@ struct CalibrateOptions {
   double lower = 0.2, upper = 5.0;
   int profile_points = -1;  // < 0 = the predictor's default
   bool json = false;
+  std::string out_path;  // --out: the result as JSON, besides the store
 };
 
 std::vector<assessment::CalibrationParam> ParseParams(const std::string& list) {
@@ -120,6 +125,11 @@ nlohmann::json ArenaModelSettings(const std::string& text, nlohmann::json model)
   nlohmann::json given;
   try {
     given = nlohmann::json::parse(text);
+  } catch (const nlohmann::json::out_of_range& e) {  // 1e999: valid JSON, no double holds it
+    throw CommandError(kExitBadInput,
+                       std::string("--predictor-settings: a number out of range (beyond a "
+                                   "double): ") +
+                           e.what());
   } catch (const nlohmann::json::exception& e) {
     throw CommandError(kExitBadInput, std::string("--predictor-settings: not JSON: ") + e.what());
   }
@@ -171,6 +181,7 @@ int RunCalibrate(const CalibrateOptions& o) {
   co.lower = o.lower;
   co.upper = o.upper;
 
+  RefuseToOverwriteStore(o.out_path, "--out", o.db_path);
   std::unique_ptr<db::Store> store;
   std::vector<assessment::CalibrationTrial> trials;
   nlohmann::json model;
@@ -259,21 +270,39 @@ int RunCalibrate(const CalibrateOptions& o) {
   cal.applied = r.improved;
   cal.report_json = assessment::ReportJson(r);
   std::int64_t id = 0;
-  try {
-    id = store->RecordCalibration(cal);
-  } catch (const db::StoreError& e) {
-    throw StoreCommandError(e);
+  nlohmann::json result{{"id", nullptr},
+                        {"campaign", o.campaign},
+                        {"applied", r.improved},
+                        {"predictor", o.predictor},
+                        {"params", nlohmann::json::parse(cal.params_json)},
+                        {"report", nlohmann::json::parse(cal.report_json)}};
+  {
+    // The fit is done: a store locked by another process is waited for (Ctrl-C
+    // or any other store failure keeps the result in a file), never a reason
+    // to throw it away.
+    const std::string rescue =
+        o.out_path.empty() ? RescuePath("calibration", o.campaign) : o.out_path;
+    std::atomic<bool> cancel{false};
+    SignalWatcher signals([&cancel](int) { cancel.store(true); });
+    try {
+      db::RetryWhileBusy([&] { id = store->RecordCalibration(cal); },
+                         BusyStoreNotice("calibrate", rescue, [&cancel] { return cancel.load(); }));
+    } catch (const db::StoreError& e) {
+      result["settings"] = nlohmann::json::parse(cal.settings_json);
+      result["heldout_error"] = {{"before", cal.heldout_error_before},
+                                 {"after", cal.heldout_error_after}};
+      result["not_stored"] = e.what();
+      WriteResultFile(rescue, result.dump(2) + "\n");
+      throw CommandError(ExitCodeFor(e),
+                         "calibrate: finished, but the store did not take the result (" +
+                             UserMessage(e.what()) + "); the result is saved in " + rescue);
+    }
   }
+  result["id"] = id;
+  if (!o.out_path.empty()) WriteResultFile(o.out_path, result.dump(2) + "\n");
 
   if (o.json) {
-    std::printf("%s\n", nlohmann::json{{"id", id},
-                                       {"campaign", o.campaign},
-                                       {"applied", r.improved},
-                                       {"predictor", o.predictor},
-                                       {"params", nlohmann::json::parse(cal.params_json)},
-                                       {"report", nlohmann::json::parse(cal.report_json)}}
-                            .dump()
-                            .c_str());
+    std::printf("%s\n", result.dump().c_str());
   } else {
     std::printf(
         "calibration %lld of campaign %lld (predictor %s, %s, %d loss evaluations, %zu trials "
@@ -344,6 +373,9 @@ void AddCalibrateCommand(CLI::App& app, Action* action) {
   cmd->add_option("--upper", o->upper, "Upper bound of every scale")
       ->check(CLI::Range(1.01, 100.0));
   cmd->add_flag("--json", o->json, "JSON instead of a table");
+  cmd->add_option("--out", o->out_path,
+                  "Also write the result (JSON) to this file; a fit the store cannot take "
+                  "(locked until Ctrl-C, full) is saved there too");
   cmd->footer(
       "Example:\n"
       "  arena calibrate --db lab.db --campaign 1 --params mu_fingers,mu_pusher --holdout 0.3\n"

@@ -16,6 +16,7 @@
 #include <spdlog/sinks/stdout_color_sinks.h>
 #include <spdlog/spdlog.h>
 
+#include "arena/db/export.hpp"
 #include "arena/executors/cell.hpp"
 #include "arena/schemas/security.hpp"
 #include "commands.hpp"
@@ -84,6 +85,22 @@ int RunCell(CellCliOptions opt) {
     const executors::ModelFidelity fidelity{opt.cell.fidelity.facets, opt.cell.fidelity.points,
                                             opt.cell.fidelity.dt};
     auto backend = executors::MakeBackend(opt.backend, fidelity, opt.backend_settings);
+    if (opt.backend.rfind("replay:", 0) == 0) {
+      // Every file against the manifest (checksums, sizes, counts, nothing
+      // unlisted) before the cell serves a trial from it (after the
+      // backend's own reading of it, whose reasons are more specific).
+      const std::string dataset = opt.backend.substr(7);
+      try {
+        (void)db::VerifyExport(dataset);
+      } catch (const db::StoreError& e) {
+        throw CommandError(kExitBadInput,
+                           "--backend replay:" + dataset +
+                               ": the dataset does not match its manifest: " + e.what());
+      } catch (const std::exception& e) {
+        throw CommandError(kExitBadInput,
+                           "--backend replay:" + dataset + ": unreadable manifest: " + e.what());
+      }
+    }
     cell = std::make_unique<executors::Cell>(opt.cell, std::move(backend));
   } catch (const std::invalid_argument& e) {
     throw CommandError(kExitBadInput, e.what());

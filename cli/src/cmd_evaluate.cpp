@@ -18,7 +18,9 @@
 #include "arena/db/store.hpp"
 #include "arena/mechanics/scene_json.hpp"
 #include "commands.hpp"
+#include "output_guard.hpp"
 #include "progress.hpp"
+#include "result_file.hpp"
 #include "signals.hpp"
 #include "store_errors.hpp"
 
@@ -45,6 +47,7 @@ struct EvaluateOptions {
   int threads = 0;
   int convergence_trials = 8;
   bool json = false;
+  std::string out_path;  // --out: the report as JSON, besides the store
 };
 
 // "0.002:1" -> {0.002, 1}; exactly N finite numbers or a bad-input error
@@ -243,10 +246,14 @@ int RunEvaluate(const EvaluateOptions& o) {
     throw CommandError(kExitBadInput, std::string("evaluate: ") + e.what());
   }
 
+  RefuseToOverwriteStore(o.out_path, "--out", o.db_path);
+  const std::string rescue = o.out_path.empty() ? RescuePath("evaluation", o.campaign) : o.out_path;
+
   // Signals first, so the worker threads inherit the blocked mask.
   std::atomic<bool> cancel{false};
   SignalWatcher signals([&cancel](int) { cancel.store(true); });
   eo.cancel = &cancel;
+  eo.on_store_busy = BusyStoreNotice("evaluate", rescue, [&cancel] { return cancel.load(); });
 
   assessment::EvaluationRun run;
   std::vector<db::Store::TruthCount> truths;  // what the errors are measured against
@@ -271,16 +278,29 @@ int RunEvaluate(const EvaluateOptions& o) {
     std::fprintf(stderr, "evaluate: interrupted; nothing stored\n");
     return kExitInterrupted;
   }
+  nlohmann::json j = assessment::ToJson(run.report);
+  j["evaluation_id"] = run.evaluation_id;
+  // "truth" is the report's object (source, independent, statement); the
+  // per-backend trial counts sit in it.
+  j["truth"]["trials"] = nlohmann::json::array();
+  for (const auto& t : truths) {
+    j["truth"]["trials"].push_back(
+        {{"truth", t.truth}, {"backend", t.backend}, {"trials", t.trials}});
+  }
+  if (!run.not_stored.empty()) {
+    // Finished, but the store would not take it: the work is kept in a file.
+    j["evaluation_id"] = nullptr;
+    j["campaign"] = o.campaign;
+    j["settings"] = nlohmann::json::parse(run.settings_json);
+    j["not_stored"] = run.not_stored;
+    WriteResultFile(rescue, j.dump(2) + "\n");
+    throw CommandError(
+        run.not_stored_kind == db::StoreError::Kind::kBadInput ? kExitBadInput : kExitStore,
+        "evaluate: finished, but the store did not take the result (" +
+            UserMessage(run.not_stored) + "); the report is saved in " + rescue);
+  }
+  if (!o.out_path.empty()) WriteResultFile(o.out_path, j.dump(2) + "\n");
   if (o.json) {
-    nlohmann::json j = assessment::ToJson(run.report);
-    j["evaluation_id"] = run.evaluation_id;
-    // "truth" is the report's object (source, independent, statement); the
-    // per-backend trial counts sit in it.
-    j["truth"]["trials"] = nlohmann::json::array();
-    for (const auto& t : truths) {
-      j["truth"]["trials"].push_back(
-          {{"truth", t.truth}, {"backend", t.backend}, {"trials", t.trials}});
-    }
     std::printf("%s\n", j.dump(2).c_str());
   } else {
     const std::string text = FormatTable(run.report, run.evaluation_id);
@@ -373,6 +393,9 @@ void AddEvaluateCommand(CLI::App& app, Action* action) {
   cmd->add_option("--threads", o->threads, "Worker threads (0: one per core)")
       ->capture_default_str();
   cmd->add_flag("--json", o->json, "Print the report as JSON");
+  cmd->add_option("--out", o->out_path,
+                  "Also write the report (JSON) to this file; a run the store cannot take "
+                  "(locked until Ctrl-C, full) is saved there too");
   cmd->footer(
       "Example:\n"
       "  arena evaluate --db lab.db --campaign 3 --predictors arena --budget 1.5floor\n"

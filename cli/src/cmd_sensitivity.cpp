@@ -22,6 +22,7 @@
 #include "arena/simulators/simulator.hpp"
 #include "commands.hpp"
 #include "progress.hpp"
+#include "result_file.hpp"
 #include "signals.hpp"
 #include "store_errors.hpp"
 
@@ -303,8 +304,15 @@ int RunCampaignSensitivity(const SensitivityCliOptions& o,
       return kExitInterrupted;
     }
     if (!o.no_store) {
-      run_id = db::RecordSensitivityRun(*store, o.campaign, assessment::SettingsJson(co).dump(),
-                                        assessment::SummaryJson(report).dump(), report.conditions);
+      // Finished: a store locked by another process is waited for, not a
+      // reason to throw the run away (Ctrl-C gives up).
+      db::RetryWhileBusy(
+          [&] {
+            run_id =
+                db::RecordSensitivityRun(*store, o.campaign, assessment::SettingsJson(co).dump(),
+                                         assessment::SummaryJson(report).dump(), report.conditions);
+          },
+          BusyStoreNotice("sensitivity", "", [&cancel] { return cancel.load(); }));
     }
   } catch (const db::StoreError& e) {
     throw StoreCommandError(e);

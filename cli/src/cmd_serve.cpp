@@ -121,6 +121,9 @@ void AddServeCommand(CLI::App& app, Action* action) {
       ->capture_default_str();
   cmd->add_option("--predictors", opt->service.predictor_threads, "Predictor threads")
       ->capture_default_str();
+  cmd->add_option("--integrity-check-period", opt->service.integrity_check_period_s,
+                  "Seconds between the store's quick checks while serving (damage found: exit 3)")
+      ->capture_default_str();
   // Hidden: bounds the store's size to emulate a full disk (fault tests).
   cmd->add_option("--store-max-pages", opt->service.store_max_pages)->group("");
   cmd->callback([opt, action] { *action = [opt] { return RunServe(*opt); }; });

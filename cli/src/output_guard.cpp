@@ -3,6 +3,7 @@
 #include <sys/stat.h>
 
 #include <cstring>
+#include <filesystem>
 #include <fstream>
 
 #include "commands.hpp"
@@ -24,6 +25,31 @@ bool SameFile(const std::string& a, const std::string& b) {
          sa.st_ino == sb.st_ino;
 }
 
+std::string Parent(const std::string& path) {
+  const std::string p = std::filesystem::path(path).parent_path().string();
+  return p.empty() ? "." : p;
+}
+
+// The files arena keeps beside a store STORE, named after it: STORE-wal,
+// STORE-shm, STORE-journal (SQLite's), STORE.log and its rotations
+// STORE.N.log, the logs of `arena run`'s children (STORE.sim1.log,
+// STORE.controller.log). `name` is the output's file name, `store` the store's.
+bool OwnedName(const std::string& name, const std::string& store) {
+  if (name.size() <= store.size() || name.compare(0, store.size(), store) != 0) return false;
+  const std::string rest = name.substr(store.size());
+  if (rest == "-wal" || rest == "-shm" || rest == "-journal") return true;
+  return rest.size() >= 4 && rest[0] == '.' && rest.compare(rest.size() - 4, 4, ".log") == 0;
+}
+
+// An export's staging directory (".NAME.partial-..."), anywhere on the path.
+bool InStagingDir(const std::string& path) {
+  for (const auto& part : std::filesystem::path(path)) {
+    const std::string s = part.string();
+    if (s.size() > 1 && s[0] == '.' && s.find(".partial-") != std::string::npos) return true;
+  }
+  return false;
+}
+
 }  // namespace
 
 void RefuseToOverwriteStore(const std::string& path, const std::string& option,
@@ -35,6 +61,16 @@ void RefuseToOverwriteStore(const std::string& path, const std::string& option,
     throw CommandError(kExitBadInput, refuse + "is the store (--db)" + advice);
   if (IsSqliteFile(path))
     throw CommandError(kExitBadInput, refuse + "is an SQLite database" + advice);
+  if (!db_path.empty()) {
+    const std::string name = std::filesystem::path(path).filename().string();
+    const std::string store = std::filesystem::path(db_path).filename().string();
+    if (!store.empty() && OwnedName(name, store) && SameFile(Parent(path), Parent(db_path)))
+      throw CommandError(kExitBadInput, refuse + "is kept by the store '" + db_path +
+                                            "' (its log or SQLite's files)" + advice);
+  }
+  if (InStagingDir(path))
+    throw CommandError(kExitBadInput,
+                       refuse + "is inside an export's unfinished (.partial-) directory" + advice);
   for (const char* suffix : {"-wal", "-shm", "-journal"}) {
     const std::size_t n = std::strlen(suffix);
     if (path.size() > n && path.compare(path.size() - n, n, suffix) == 0) {

@@ -126,6 +126,22 @@ Chart MakeTrialChart(const db::Store& store, std::int64_t trial_id, TrialPlotInf
                                             store.path() + " --campaign ID`)");
     throw StoreCommandError(e);
   }
+  if (!trial.gt_stream_id && db::IsTerminal(trial.state)) {
+    // Failed or cancelled before any ground truth was kept: there is
+    // nothing to plot now or later, and nothing to watch.
+    std::string why;
+    try {
+      const auto history = store.ListTransitions(trial_id);
+      if (!history.empty()) why = history.back().reason;
+    } catch (const db::StoreError&) {
+    }
+    throw CommandError(kExitBadInput,
+                       "trial " + std::to_string(trial_id) + " " + db::ToString(trial.state) +
+                           " without ground truth" + (why.empty() ? "" : " (" + why + ")") +
+                           "; there is nothing to plot (`arena query --db " + store.path() +
+                           " \"select * from trial_transitions where trial_id = " +
+                           std::to_string(trial_id) + "\"` shows its history)");
+  }
   if (!trial.gt_stream_id) {
     throw CommandError(
         kExitBadInput,

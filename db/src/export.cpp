@@ -4,13 +4,16 @@
 
 #include <fcntl.h>
 #include <hdf5.h>
+#include <signal.h>
 #include <sys/stat.h>
 #include <unistd.h>
 
 #include <cerrno>
 #include <charconv>
+#include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
 #include <cstring>
 #include <ctime>
 #include <filesystem>
@@ -659,6 +662,32 @@ double AsDouble(const Value& v) {
   return kMissing;
 }
 
+// What a killed export (SIGKILL, power loss) left in `parent`: staging
+// directories ".NAME.partial-PID-XXXXXX" of a process that no longer runs,
+// and ones of the older ".NAME.partial-XXXXXX" form not touched for an hour.
+// Removed before the next export there starts; a live export's is kept.
+void RemoveDeadStagingDirs(const fs::path& parent) {
+  std::error_code ec;
+  for (fs::directory_iterator it(parent, ec), end; !ec && it != end; it.increment(ec)) {
+    const std::string name = it->path().filename().string();
+    const std::size_t at = name.rfind(".partial-");
+    if (name.empty() || name[0] != '.' || at == std::string::npos) continue;
+    std::error_code kind;
+    if (!it->is_directory(kind) || it->is_symlink(kind)) continue;
+    const std::string tail = name.substr(at + 9);  // "PID-XXXXXX" or "XXXXXX"
+    const std::size_t dash = tail.find('-');
+    bool dead = false;
+    if (dash != std::string::npos && dash > 0 && tail.find_first_not_of("0123456789") == dash) {
+      const long pid = std::strtol(tail.substr(0, dash).c_str(), nullptr, 10);
+      dead = pid > 0 && ::kill(static_cast<pid_t>(pid), 0) != 0 && errno == ESRCH;
+    } else if (dash == std::string::npos) {
+      const auto age = fs::file_time_type::clock::now() - fs::last_write_time(it->path(), kind);
+      dead = !kind && age > std::chrono::hours(1);
+    }
+    if (dead) fs::remove_all(it->path(), kind);
+  }
+}
+
 // A new directory next to the target, on the same file system, that becomes
 // the target by one rename(2) at the end; removed with everything in it if
 // the export fails before.
@@ -668,7 +697,12 @@ class StagingDir {
     const fs::path parent = target.parent_path().empty() ? fs::path(".") : target.parent_path();
     std::error_code ec;
     fs::create_directories(parent, ec);
-    std::string tmpl = (parent / ("." + target.filename().string() + ".partial-XXXXXX")).string();
+    RemoveDeadStagingDirs(parent);
+    // The pid in the name lets the next export tell a live one's directory
+    // from one a killed export left.
+    std::string tmpl = (parent / ("." + target.filename().string() + ".partial-" +
+                                  std::to_string(::getpid()) + "-XXXXXX"))
+                           .string();
     if (::mkdtemp(tmpl.data()) == nullptr) {
       IoError("export: cannot create a directory in '" + parent.string() +
               "': " + std::strerror(errno) + " (is it writable?)");
@@ -1190,6 +1224,11 @@ ExportReport VerifyExport(const std::string& dir_text) {
   for (const auto& f : m.at("files")) {
     ExportedFile ef;
     ef.path = f.at("path").get<std::string>();
+    // A listed path stays inside the dataset (no absolute path, no "..").
+    const fs::path rel(ef.path);
+    bool outside = ef.path.empty() || rel.is_absolute();
+    for (const auto& part : rel.lexically_normal()) outside = outside || part == "..";
+    if (outside) Corrupt("verify: '" + ef.path + "' is not a path inside the dataset");
     ef.bytes = f.at("bytes").get<std::uint64_t>();
     ef.sha256 = f.at("sha256").get<std::string>();
     const fs::path p = dir / ef.path;
@@ -1201,6 +1240,10 @@ ExportReport VerifyExport(const std::string& dir_text) {
     r.files.push_back(ef);
   }
   for (const auto& e : fs::recursive_directory_iterator(dir)) {
+    // A symlink would let a checksum vouch for a file outside the dataset.
+    if (e.is_symlink())
+      Corrupt("verify: '" + fs::relative(e.path(), dir).generic_string() +
+              "' is a symbolic link (a dataset holds its own files)");
     if (!e.is_regular_file()) continue;
     const auto rel = fs::relative(e.path(), dir).generic_string();
     if (rel != "manifest.json" && !listed.count(rel))
@@ -1208,6 +1251,12 @@ ExportReport VerifyExport(const std::string& dir_text) {
   }
   const std::string format = m.value("export_format", "");
   std::int64_t samples = 0;
+  {
+    std::set<std::int64_t> ids;
+    for (const auto& t : m.at("trials"))
+      if (!ids.insert(t.at("trial_id").get<std::int64_t>()).second)
+        Corrupt("verify: trial " + t.at("trial_id").dump() + " is listed twice");
+  }
   if (format == "hdf5") {
     H5Eset_auto2(H5E_DEFAULT, nullptr, nullptr);
     H5Handle file(H5Fopen((dir / "dataset.h5").c_str(), H5F_ACC_RDONLY, H5P_DEFAULT), H5Fclose,

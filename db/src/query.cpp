@@ -14,13 +14,36 @@
 namespace arena::db {
 namespace {
 
-// Only reads pass: no ATTACH/DETACH (they would open other files), and
-// pragmas only from a list of pure queries.
+// Functions a query may not call, though SQLite offers them: fts3_tokenizer()
+// returns a live code address and (two arguments) installs a pointer, a known
+// attack primitive; fts5() hands out an API pointer; load_extension() runs a
+// shared library; readfile/writefile/edit are the shell's file access. Every
+// other function name SQLite ships only computes on its arguments. The
+// prefixes catch what a newer SQLite adds to the same families.
+bool DeniedFunction(const char* name) {
+  if (!name) return true;
+  std::string n(name);
+  for (auto& c : n) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+  static const char* kDenied[] = {"fts3_tokenizer", "fts5", "load_extension", "readfile",
+                                  "writefile",      "edit", "lsmode",         "fts3_exprtest"};
+  for (const char* d : kDenied)
+    if (n == d) return true;
+  // Internal and test hooks (sqlite_rename_*, fts3_*, fts5_* helpers); the
+  // version functions are plain text.
+  if (n.rfind("fts3", 0) == 0 || n.rfind("fts4", 0) == 0 || n.rfind("fts5", 0) == 0) return true;
+  if (n.rfind("sqlite_", 0) == 0 && n != "sqlite_version" && n != "sqlite_source_id") return true;
+  return false;
+}
+
+// Only reads pass: no ATTACH/DETACH (they would open other files), pragmas
+// only from a list of pure queries, and no function of DeniedFunction().
 int Authorizer(void*, int action, const char* a1, const char* a2, const char*, const char*) {
   switch (action) {
     case SQLITE_ATTACH:
     case SQLITE_DETACH:
       return SQLITE_DENY;
+    case SQLITE_FUNCTION:  // a1: unused, a2: the function's name
+      return DeniedFunction(a2) ? SQLITE_DENY : SQLITE_OK;
     case SQLITE_PRAGMA: {
       static const char* kAllowed[] = {"table_info",        "table_xinfo",     "index_list",
                                        "index_info",        "index_xinfo",     "table_list",
@@ -127,7 +150,9 @@ QueryResult RunQuery(const Store& store, const std::string& sql_in, const QueryF
     throw StoreError(
         StoreError::Kind::kBadInput,
         "query: " + msg +
-            (rc == SQLITE_AUTH ? " (ATTACH, DETACH and settings pragmas are refused)" : "") +
+            (rc == SQLITE_AUTH ? " (ATTACH, DETACH, settings pragmas and functions that "
+                                 "touch memory or files are refused)"
+                               : "") +
             "; tables and columns: db/README.md");
   }
   if (!stmt) throw StoreError(StoreError::Kind::kBadInput, "query: the SQL text is empty");

@@ -560,6 +560,67 @@ void OpenWithoutSharedMemory(Store::Impl& impl) {
   throw StoreError(StoreError::Kind::kIo, "Store::Open: cannot read '" + path + "': " + why);
 }
 
+struct Progress {
+  std::chrono::steady_clock::time_point deadline;
+  bool bounded = false;
+};
+
+int PastDeadline(void* p) {
+  const auto* g = static_cast<const Progress*>(p);
+  return g->bounded && std::chrono::steady_clock::now() > g->deadline ? 1 : 0;
+}
+
+Store::QuickCheckResult RunQuickCheck(sqlite3* db, double budget_s) {
+  const auto start = std::chrono::steady_clock::now();
+  Progress p{start + std::chrono::duration_cast<std::chrono::steady_clock::duration>(
+                         std::chrono::duration<double>(budget_s > 0 ? budget_s : 0)),
+             budget_s > 0};
+  Store::QuickCheckResult r;
+  sqlite3_progress_handler(db, 4096, PastDeadline, &p);
+  sqlite3_stmt* s = nullptr;
+  int rc = sqlite3_prepare_v2(db, "PRAGMA quick_check(20)", -1, &s, nullptr);
+  std::string problems;
+  while (rc == SQLITE_OK && (rc = sqlite3_step(s)) == SQLITE_ROW) {
+    const auto* text = reinterpret_cast<const char*>(sqlite3_column_text(s, 0));
+    const std::string line = text ? text : "";
+    if (line == "ok") continue;
+    if (!problems.empty()) problems += "; ";
+    problems += line;
+  }
+  const std::string error = sqlite3_errmsg(db);
+  sqlite3_finalize(s);
+  sqlite3_progress_handler(db, 0, nullptr, nullptr);
+  r.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  if ((rc & 0xff) == SQLITE_INTERRUPT) return r;  // out of time: complete = false
+  r.complete = true;
+  if (rc != SQLITE_DONE) {
+    // A page too broken to walk (or not a database at all) fails the pragma itself.
+    if (detail::KindOf(rc) == StoreError::Kind::kBusy) detail::Throw(db, rc, "PRAGMA quick_check");
+    problems = error;
+  }
+  r.problems = problems;
+  return r;
+}
+
+Store::QuickCheckResult CheckSound(sqlite3* db, const std::string& path, double budget_s) {
+  std::error_code ec;
+  if (std::filesystem::file_size(path, ec) == 0) {  // a new store: nothing to check
+    Store::QuickCheckResult r;
+    r.complete = true;
+    return r;
+  }
+  auto r = RunQuickCheck(db, budget_s);
+  if (!r.problems.empty()) {
+    throw StoreError(StoreError::Kind::kCorrupt,
+                     "Store::Open: '" + path +
+                         "' is corrupt (PRAGMA quick_check: " + r.problems.substr(0, 400) +
+                         "); nothing was written to it. Restore a backup, or salvage what "
+                         "is readable with `sqlite3 " +
+                         path + " .recover | sqlite3 NEW.db`");
+  }
+  return r;
+}
+
 void Migrate(Store::Impl& impl) {
   sqlite3* db = impl.db;
   const int target = Store::SchemaVersion();
@@ -651,6 +712,12 @@ std::unique_ptr<Store> Store::Open(const std::string& path, const StoreOptions& 
                          "or a read-only file system); fix the permissions or open it read-only");
   }
   try {
+    if (!options.read_only && options.open_check_budget_s > 0) {
+      // Before anything writes: a page of `trials` garbled left SQLite able
+      // to append to the file without a word (the damage shows only when a
+      // reader reaches it), so a writing command refuses it up front.
+      impl->open_check = CheckSound(db, path, options.open_check_budget_s);
+    }
     Exec(db, "PRAGMA foreign_keys = ON", ctx);
     if (!options.read_only) {
       // A new file gets 8 KiB pages (no effect on an existing one, whose
@@ -734,6 +801,14 @@ int Store::FileSchemaVersion() const { return UserVersion(impl_->db); }
 bool Store::read_only() const { return impl_->options.read_only; }
 const std::string& Store::path() const { return impl_->path; }
 double Store::Now() const { return impl_->Now(); }
+
+Store::QuickCheckResult Store::QuickCheck(double budget_s) const {
+  return RunQuickCheck(impl_->db, budget_s);
+}
+
+const Store::QuickCheckResult& Store::open_check() const { return impl_->open_check; }
+
+void Store::Interrupt() const { sqlite3_interrupt(impl_->db); }
 
 std::string Store::IntegrityCheck() const {
   detail::Stmt s(impl_->db, "PRAGMA integrity_check");

@@ -28,6 +28,8 @@ constexpr const char* kColumns =
 void CheckJson(const std::string& text, const std::string& what) {
   try {
     if (!nlohmann::json::parse(text).is_object()) Bad(what + " must be a JSON object");
+  } catch (const nlohmann::json::out_of_range& e) {  // 1e999: valid JSON, no double holds it
+    Bad(what + " holds a number out of range (beyond a double): " + e.what());
   } catch (const nlohmann::json::exception& e) {
     Bad(what + " is not valid JSON: " + e.what());
   }

@@ -3,10 +3,13 @@
 // db/README.md (services, store_meta).
 #include <sys/stat.h>
 
+#include <algorithm>
 #include <cerrno>
+#include <chrono>
 #include <cstring>
 #include <stdexcept>
 #include <string>
+#include <thread>
 
 #include "arena/db/store.hpp"
 #include "sqlite_util.hpp"
@@ -107,6 +110,25 @@ void Store::CheckFileIdentity() const {
                                static_cast<unsigned long long>(st.st_dev) != impl_->file_dev)) {
     throw StoreError(StoreError::Kind::kIo,
                      "the store '" + impl_->path + "' was replaced by another file while in use");
+  }
+}
+
+void RetryWhileBusy(const std::function<void()>& write,
+                    const std::function<bool(double, const std::string&)>& on_wait) {
+  const auto start = std::chrono::steady_clock::now();
+  double pause_s = 0.1;
+  for (;;) {
+    try {
+      write();
+      return;
+    } catch (const StoreError& e) {
+      if (e.kind() != StoreError::Kind::kBusy) throw;
+      const double waited =
+          std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+      if (on_wait && !on_wait(waited, e.what())) throw;
+    }
+    std::this_thread::sleep_for(std::chrono::duration<double>(pause_s));
+    pause_s = std::min(2.0, pause_s * 2);
   }
 }
 

@@ -136,6 +136,7 @@ struct Store::Impl {
   // The file opened (stat at open): CheckFileIdentity() notices it deleted,
   // renamed or replaced under us.
   unsigned long long file_dev = 0, file_ino = 0;
+  Store::QuickCheckResult open_check;  // the read-write open's quick check
 
   ~Impl();
   detail::StmtRef Prepare(std::string_view sql) const;

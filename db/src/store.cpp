@@ -176,7 +176,9 @@ json ParseObject(const std::string& text, const std::string& what) {
   json j;
   try {
     j = json::parse(text);
-  } catch (const json::exception& e) {  // parse errors and number overflow (1e999)
+  } catch (const json::out_of_range& e) {  // 1e999: valid JSON, no double holds it
+    BadInput(what + " holds a number out of range (beyond a double): " + e.what());
+  } catch (const json::exception& e) {
     BadInput(what + " is not valid JSON: " + e.what());
   }
   if (!j.is_object()) BadInput(what + " must be a JSON object");

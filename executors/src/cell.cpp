@@ -122,6 +122,31 @@ PusherChange ChangeOfPusher(const std::optional<mechanics::PusherSpec>& now,
 
 }  // namespace
 
+namespace {
+// How far a stream's last sample may sit from the scene's duration: two of
+// its sample intervals (a backend samples at its own rate, the last sample
+// falls within one interval of the end), and at least 1 ms or 1 %.
+double StreamLengthTolerance(const mechanics::Scene& scene,
+                             const std::vector<mechanics::TrajectorySample>& samples) {
+  double interval = 0;
+  if (samples.size() >= 2) interval = samples.back().t - samples[samples.size() - 2].t;
+  return std::max({1e-3, 0.01 * scene.duration, 2 * interval});
+}
+
+// "" when the stream covers the scene's duration, else why not.
+std::string CheckStreamLength(const mechanics::Scene& scene,
+                              const std::vector<mechanics::TrajectorySample>& samples) {
+  if (samples.empty()) return "";
+  const double end = samples.back().t;
+  if (end < scene.duration - StreamLengthTolerance(scene, samples)) {
+    return "the stream ends at t = " + std::to_string(end) + " s (" +
+           std::to_string(samples.size()) + " samples), the scene lasts " +
+           std::to_string(scene.duration) + " s";
+  }
+  return "";
+}
+}  // namespace
+
 // Why a backend's true sample is unusable ("" = fine): NaN or infinite
 // values, a time that does not start at 0 or does not increase.
 std::string CheckTrueSample(const mechanics::TrajectorySample& s,
@@ -141,6 +166,12 @@ std::string CheckTrueSample(const mechanics::TrajectorySample& s,
   if (!before.empty() && !(s.t > before.back().t)) {
     return "timestamps out of order: t = " + std::to_string(s.t) + " s after " +
            std::to_string(before.back().t) + " s";
+  }
+  // A stream is the scene's push, no longer: a driver that reports a 0.2 s
+  // push as a 200 s stream describes another experiment.
+  if (s.t > scene.duration + StreamLengthTolerance(scene, before)) {
+    return "t = " + std::to_string(s.t) + " s is past the scene's duration of " +
+           std::to_string(scene.duration) + " s";
   }
   const size_t contacts = scene.fingers.size() + (scene.pusher ? 1 : 0);
   if (s.contacts.size() != contacts) {
@@ -536,6 +567,8 @@ struct Cell::Impl {
     if (!outcome.ok)
       return outcome.reason.empty() ? "backend failed without a reason" : outcome.reason;
     if (got.samples.empty()) return "backend " + layer.capabilities().name + ": no samples";
+    if (std::string why = CheckStreamLength(layer.actual_scene(), got.samples); !why.empty())
+      return "backend " + layer.capabilities().name + ": " + why;
     return "";
   }
 

@@ -129,6 +129,9 @@ DefectProfile ParseDefectProfile(std::string_view text) {
   json root;
   try {
     root = json::parse(text);
+  } catch (const json::out_of_range& e) {  // 1e999: valid JSON, no double holds it
+    throw DefectError("(document)",
+                      std::string("a number out of range (beyond a double): ") + e.what());
   } catch (const json::parse_error& e) {
     throw DefectError("(document)", std::string("not valid JSON: ") + e.what());
   }

@@ -15,6 +15,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstring>
+#include <filesystem>
 #include <functional>
 #include <stdexcept>
 #include <thread>
@@ -31,6 +32,12 @@ using Clock = std::chrono::steady_clock;
 using nlohmann::json;
 
 constexpr std::size_t kMaxLine = 4 << 20;  // a longer line is malformed output
+// A driver's stderr reaches the log through the cell, at most this much per
+// phase (a driver printing in a loop grew a cell's log by 200 MiB in two
+// trials); the rest is counted and said once.
+constexpr std::size_t kStderrPerPhase = 64 << 10;
+// A driver log file (ExecBackendOptions::log_path) is rotated to PATH.1 past this size.
+constexpr std::uintmax_t kDriverLogRotate = 16u << 20;
 
 Clock::time_point After(double s) {
   return Clock::now() +
@@ -52,9 +59,10 @@ class DriverProcess {
  public:
   enum class Read { kLine, kTimeout, kEof, kTooLong };
 
-  DriverProcess(const std::string& command, const std::string& log_path) {
-    int to_child[2], from_child[2];
-    if (pipe2(to_child, O_CLOEXEC) != 0 || pipe2(from_child, O_CLOEXEC) != 0)
+  DriverProcess(const std::string& command, const std::string& log_path) : log_path_(log_path) {
+    int to_child[2], from_child[2], err[2];
+    if (pipe2(to_child, O_CLOEXEC) != 0 || pipe2(from_child, O_CLOEXEC) != 0 ||
+        pipe2(err, O_CLOEXEC) != 0)
       throw std::runtime_error(std::string("pipe: ") + std::strerror(errno));
     const pid_t parent = getpid();
     pid_ = fork();
@@ -66,10 +74,7 @@ class DriverProcess {
       if (getppid() != parent) _exit(127);
       dup2(to_child[0], STDIN_FILENO);
       dup2(from_child[1], STDOUT_FILENO);
-      if (!log_path.empty()) {
-        const int fd = open(log_path.c_str(), O_WRONLY | O_CREAT | O_APPEND, 0644);
-        if (fd >= 0) dup2(fd, STDERR_FILENO);
-      }
+      dup2(err[1], STDERR_FILENO);  // read by the cell, capped per phase
       sigset_t none;
       sigemptyset(&none);
       sigprocmask(SIG_SETMASK, &none, nullptr);  // the cell blocks SIGTERM; the driver must not
@@ -79,8 +84,12 @@ class DriverProcess {
     setpgid(pid_, pid_);
     close(to_child[0]);
     close(from_child[1]);
+    close(err[1]);
     in_ = to_child[1];
     out_ = from_child[0];
+    err_ = err[0];
+    fcntl(err_, F_SETFL, fcntl(err_, F_GETFL) | O_NONBLOCK);
+    StartWatchdog();
   }
   ~DriverProcess() { Kill(); }
   DriverProcess(const DriverProcess&) = delete;
@@ -112,12 +121,13 @@ class DriverProcess {
       if (eof_) return Read::kEof;
       const auto left = std::chrono::duration_cast<std::chrono::milliseconds>(until - Clock::now());
       if (left.count() <= 0) return Read::kTimeout;
-      pollfd p{out_, POLLIN, 0};
-      const int r =
-          poll(&p, 1, static_cast<int>(std::min<long long>(left.count(), idle ? 50 : 200)));
+      pollfd p[2] = {{out_, POLLIN, 0}, {err_, POLLIN, 0}};
+      const int r = poll(p, err_ >= 0 ? 2 : 1,
+                         static_cast<int>(std::min<long long>(left.count(), idle ? 50 : 200)));
       if (r < 0 && errno != EINTR) return Read::kEof;
       if (r == 0 && idle) idle();  // the driver is quiet: the cell sends what it holds
-      if (r <= 0) continue;
+      if (r > 0 && err_ >= 0 && (p[1].revents & (POLLIN | POLLHUP))) DrainStderr();
+      if (r <= 0 || !(p[0].revents & (POLLIN | POLLHUP | POLLERR))) continue;
       char chunk[65536];
       const ssize_t n = read(out_, chunk, sizeof chunk);
       if (n < 0 && errno == EINTR) continue;
@@ -127,6 +137,16 @@ class DriverProcess {
       }
       buffer_.append(chunk, static_cast<std::size_t>(n));
     }
+  }
+
+  // A new phase: a new stderr allowance (and a word on what the last one dropped).
+  void NewPhase() {
+    if (stderr_dropped_ > 0)
+      WriteLog("[arena] driver stderr: " + std::to_string(stderr_dropped_) +
+               " bytes dropped in the last phase (over " + std::to_string(kStderrPerPhase >> 10) +
+               " KiB)");
+    stderr_dropped_ = 0;
+    stderr_left_ = kStderrPerPhase;
   }
 
   // How the driver ended (waits up to `grace` for it); "" if still running.
@@ -165,16 +185,122 @@ class DriverProcess {
       }
     }
     kill(-pid_, SIGKILL);  // anything the driver left in its group
+    if (watchdog_ > 0) {   // its work is done: it must not kill a reused group id later
+      kill(watchdog_, SIGKILL);
+      waitpid(watchdog_, nullptr, 0);
+      watchdog_ = -1;
+    }
     Close();
     pid_ = -1;
   }
 
  private:
   void Close() {
+    if (err_ >= 0) DrainStderr();
     if (in_ >= 0) close(in_);
     if (out_ >= 0) close(out_);
-    in_ = out_ = -1;
+    if (err_ >= 0) close(err_);
+    if (watch_fd_ >= 0) close(watch_fd_);  // EOF: the watchdog ends (killing what is left)
+    if (watchdog_ > 0) waitpid(watchdog_, nullptr, 0);
+    in_ = out_ = err_ = watch_fd_ = -1;
+    watchdog_ = -1;
   }
+
+  // PR_SET_PDEATHSIG reaches the driver's shell only, not what it started:
+  // a SIGKILLed cell left the driver's own children running. A watchdog
+  // process (a shell, exec'd: it holds none of the cell's descriptors) waits
+  // for EOF on a pipe only the cell writes to; the cell's death, however it
+  // dies, closes that pipe, and the watchdog kills the driver's whole group.
+  void StartWatchdog() {
+    int w[2];
+    if (pipe2(w, O_CLOEXEC) != 0) return;
+    const std::string script =
+        "read -r _; kill -9 -" + std::to_string(pid_) + " 2>/dev/null; exit 0";
+    const pid_t wd = fork();
+    if (wd == 0) {
+      setpgid(0, 0);  // not in the cell's group (a group kill of the cell must not take it)
+      dup2(w[0], STDIN_FILENO);
+      const int null = open("/dev/null", O_WRONLY);
+      if (null >= 0) {
+        dup2(null, STDOUT_FILENO);
+        dup2(null, STDERR_FILENO);
+      }
+      sigset_t none;
+      sigemptyset(&none);
+      sigprocmask(SIG_SETMASK, &none, nullptr);
+      signal(SIGTERM, SIG_IGN);  // only the pipe's EOF (or the cell's SIGKILL) ends it
+      signal(SIGINT, SIG_IGN);
+      signal(SIGHUP, SIG_IGN);
+      execl("/bin/sh", "sh", "-c", script.c_str(), static_cast<char*>(nullptr));
+      _exit(127);
+    }
+    close(w[0]);
+    if (wd < 0) {
+      close(w[1]);
+      return;
+    }
+    watchdog_ = wd;
+    watch_fd_ = w[1];
+  }
+
+  void WriteLog(const std::string& line) {
+    if (log_path_.empty()) {
+      spdlog::info("driver: {}", line);
+      return;
+    }
+    std::error_code ec;
+    if (std::filesystem::file_size(log_path_, ec) > kDriverLogRotate && !ec)
+      std::filesystem::rename(log_path_, log_path_ + ".1", ec);
+    const int fd = open(log_path_.c_str(), O_WRONLY | O_CREAT | O_APPEND | O_CLOEXEC, 0644);
+    if (fd < 0) return;
+    const std::string text = line + "\n";
+    [[maybe_unused]] const ssize_t n = write(fd, text.data(), text.size());
+    close(fd);
+  }
+
+  // What the driver wrote on stderr, line by line into the log, up to the
+  // phase's allowance.
+  void DrainStderr() {
+    char chunk[65536];
+    for (int reads = 0; reads < 64 && err_ >= 0; ++reads) {  // a fast writer cannot hold us here
+      const ssize_t n = read(err_, chunk, sizeof chunk);
+      if (n < 0 && errno == EINTR) continue;
+      if (n == 0) {  // the driver closed its stderr: stop polling it
+        close(err_);
+        err_ = -1;
+        break;
+      }
+      if (n < 0) break;
+      err_buffer_.append(chunk, static_cast<std::size_t>(n));
+      std::size_t start = 0;
+      for (;;) {
+        std::size_t nl = err_buffer_.find('\n', start);
+        if (nl == std::string::npos && err_buffer_.size() - start > 4096)
+          nl = start + 4096;  // a long line without an end: logged in pieces
+        if (nl == std::string::npos) break;
+        const std::string line = err_buffer_.substr(start, nl - start);
+        start = std::min(err_buffer_.size(), nl + (err_buffer_[nl] == '\n' ? 1 : 0));
+        if (line.size() + 1 <= stderr_left_) {
+          stderr_left_ -= line.size() + 1;
+          WriteLog(line);
+        } else {
+          if (stderr_dropped_ == 0)
+            WriteLog("[arena] driver stderr: over " + std::to_string(kStderrPerPhase >> 10) +
+                     " KiB in this phase; the rest of it is dropped");
+          stderr_dropped_ += line.size() + 1;
+        }
+      }
+      err_buffer_.erase(0, start);
+    }
+  }
+
+  std::string log_path_;
+  int err_ = -1;
+  int watch_fd_ = -1;
+  pid_t watchdog_ = -1;
+  std::string err_buffer_;
+  std::size_t stderr_left_ = kStderrPerPhase;
+  std::uint64_t stderr_dropped_ = 0;
   pid_t pid_ = -1;
   int in_ = -1, out_ = -1;
   std::string buffer_;
@@ -219,6 +345,7 @@ class ExecBackend final : public Backend {
     }
     json scene = json::parse(trial.scene_json, nullptr, false);
     if (scene.is_discarded()) scene = nullptr;
+    StartPhase();
     if (!driver_->Send({{"type", "prepare"},
                         {"trial_id", trial.trial_id},
                         {"attempt", trial.attempt},
@@ -249,6 +376,7 @@ class ExecBackend final : public Backend {
     const double left = trial.deadline == Clock::time_point::max()
                             ? 0.0
                             : std::chrono::duration<double>(trial.deadline - Clock::now()).count();
+    StartPhase();
     if (!driver_->Send({{"type", "execute"},
                         {"trial_id", trial.trial_id},
                         {"attempt", trial.attempt},
@@ -326,6 +454,7 @@ class ExecBackend final : public Backend {
     }
     json scene = json::parse(request.next_scene_json, nullptr, false);
     if (scene.is_discarded() || request.next_scene_json.empty()) scene = nullptr;
+    StartPhase();
     if (!driver_->Send({{"type", "reset"},
                         {"trial_id", trial.trial_id},
                         {"attempt", trial.attempt},
@@ -374,6 +503,11 @@ class ExecBackend final : public Backend {
     return std::min(trial.deadline, After(options_.reply_timeout_s));
   }
 
+  void StartPhase() {
+    phase_lines_ = 0;
+    if (driver_) driver_->NewPhase();
+  }
+
   std::string Gone() {
     const std::string how = driver_ ? driver_->Ended(1.0) : "";
     return "crashed: " + (how.empty() ? std::string("stopped reading its input") : how);
@@ -399,7 +533,14 @@ class ExecBackend final : public Backend {
       switch (driver_->ReadLine(until, &line, idle)) {
         case DriverProcess::Read::kTimeout: {
           const double waited = options_.reply_timeout_s;
-          return Fail(phase, Clock::now() >= until && until < After(waited - 0.5)
+          const bool deadline = Clock::now() >= until && until < After(waited - 0.5);
+          if (phase_lines_ > 0 && deadline) {
+            // It talks, it just never finishes: not a hang.
+            return Fail(phase, "driver overran the phase's deadline: still sending (" +
+                                   std::to_string(phase_lines_) + " lines in this " + phase +
+                                   ", no done)");
+          }
+          return Fail(phase, deadline
                                  ? std::string("driver hung: no reply before the phase's deadline")
                                  : "driver hung: no reply within " + std::to_string(waited) + " s");
         }
@@ -411,8 +552,14 @@ class ExecBackend final : public Backend {
           break;
       }
       if (line.empty()) continue;
-      *msg = json::parse(line, nullptr, false);
-      if (msg->is_discarded()) {
+      ++phase_lines_;
+      try {
+        *msg = json::parse(line);
+      } catch (const json::out_of_range&) {
+        // Valid JSON syntax, a number no double holds (1e999).
+        return Fail(phase, "driver: a number out of range (beyond a double) in its output: " +
+                               line.substr(0, 120));
+      } catch (const json::exception&) {
         if (MentionsNonFinite(line))
           return Fail(phase, "driver: non-finite number (NaN or Infinity) in its output");
         return Fail(phase, "driver: malformed output (not JSON): " + line.substr(0, 120));
@@ -468,6 +615,7 @@ class ExecBackend final : public Backend {
   BackendCapabilities caps_;
   bool resets_ = false;
   int restarts_ = 0;
+  std::size_t phase_lines_ = 0;  // lines the driver sent since the phase began
 };
 
 std::string Vec3(const nlohmann::json& j, const char* key, Eigen::Vector3d* out, bool required) {

@@ -4,6 +4,7 @@
 
 #include <hdf5.h>
 
+#include <algorithm>
 #include <charconv>
 #include <cmath>
 #include <cstring>
@@ -103,60 +104,101 @@ int RecordedStream::Column(const std::string& name) const {
   return -1;
 }
 
-RecordedStream ReadCsvStream(const std::string& path) {
-  std::istringstream in(ReadText(path));
-  RecordedStream out;
+namespace {
+std::vector<double> ParseCsvRow(const std::string& path, int number, const std::string& line,
+                                const std::vector<std::string>& columns) {
+  const auto cells = SplitCsv(line);
+  if (cells.size() != columns.size())
+    throw std::invalid_argument(path + ": line " + std::to_string(number) + ": " +
+                                std::to_string(cells.size()) + " fields, the header has " +
+                                std::to_string(columns.size()));
+  std::vector<double> row(cells.size(), kMissing);
+  for (size_t k = 0; k < cells.size(); ++k) {
+    if (cells[k].empty()) continue;  // a missing value
+    const char* end = cells[k].data() + cells[k].size();
+    const auto r = std::from_chars(cells[k].data(), end, row[k]);
+    if (r.ec != std::errc() || r.ptr != end)
+      throw std::invalid_argument(path + ": line " + std::to_string(number) + ", column '" +
+                                  columns[k] + "': not a number: '" + cells[k] + "'");
+  }
+  return row;
+}
+}  // namespace
+
+std::size_t StreamCsv(const std::string& path, const ColumnsFn& on_columns, const RowFn& on_row) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) throw std::invalid_argument(path + ": cannot read it");
   std::string line;
   if (!std::getline(in, line)) throw std::invalid_argument(path + ": empty (no header line)");
-  out.columns = SplitCsv(line);
+  const std::vector<std::string> columns = SplitCsv(line);
+  on_columns(columns);
+  std::size_t rows = 0;
   for (int number = 2; std::getline(in, line); ++number) {
     if (line.empty() || line == "\r") continue;
-    const auto cells = SplitCsv(line);
-    if (cells.size() != out.columns.size())
-      throw std::invalid_argument(path + ": line " + std::to_string(number) + ": " +
-                                  std::to_string(cells.size()) + " fields, the header has " +
-                                  std::to_string(out.columns.size()));
-    std::vector<double> row(cells.size(), kMissing);
-    for (size_t k = 0; k < cells.size(); ++k) {
-      if (cells[k].empty()) continue;  // a missing value
-      const char* end = cells[k].data() + cells[k].size();
-      const auto r = std::from_chars(cells[k].data(), end, row[k]);
-      if (r.ec != std::errc() || r.ptr != end)
-        throw std::invalid_argument(path + ": line " + std::to_string(number) + ", column '" +
-                                    out.columns[k] + "': not a number: '" + cells[k] + "'");
-    }
-    out.rows.push_back(std::move(row));
+    ++rows;
+    if (!on_row(ParseCsvRow(path, number, line, columns))) break;
   }
-  return out;
+  return rows;
 }
 
-RecordedStream ReadJsonlStream(const std::string& path) {
-  std::istringstream in(ReadText(path));
-  RecordedStream out;
+std::size_t StreamJsonl(const std::string& path, const ColumnsFn& on_columns, const RowFn& on_row) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) throw std::invalid_argument(path + ": cannot read it");
+  std::vector<std::string> columns;
   std::map<std::string, size_t> index;
   std::string line;
+  std::size_t rows = 0;
   for (int number = 1; std::getline(in, line); ++number) {
     if (line.empty()) continue;
     const auto j = nlohmann::json::parse(line, nullptr, false);
     if (j.is_discarded() || !j.is_object())
       throw std::invalid_argument(path + ": line " + std::to_string(number) +
                                   ": not a JSON object");
-    std::vector<double> row(out.columns.size(), kMissing);
-    for (auto it = j.begin(); it != j.end(); ++it) {
-      auto [at, added] = index.emplace(it.key(), out.columns.size());
-      if (added) {
-        out.columns.push_back(it.key());
-        for (auto& earlier : out.rows) earlier.push_back(kMissing);
-        row.push_back(kMissing);
+    if (rows == 0) {
+      for (auto it = j.begin(); it != j.end(); ++it) {
+        index.emplace(it.key(), columns.size());
+        columns.push_back(it.key());
       }
+      on_columns(columns);
+    }
+    std::vector<double> row(columns.size(), kMissing);
+    for (auto it = j.begin(); it != j.end(); ++it) {
+      const auto at = index.find(it.key());
+      if (at == index.end())
+        throw std::invalid_argument(path + ": line " + std::to_string(number) + ": key '" +
+                                    it.key() + "' is not among the first line's");
       if (it->is_number())
         row[at->second] = it->get<double>();
       else if (!it->is_null())
         throw std::invalid_argument(path + ": line " + std::to_string(number) + ", '" + it.key() +
                                     "': not a number");
     }
-    out.rows.push_back(std::move(row));
+    ++rows;
+    if (!on_row(row)) break;
   }
+  if (rows == 0) on_columns(columns);
+  return rows;
+}
+
+RecordedStream ReadCsvStream(const std::string& path) {
+  RecordedStream out;
+  StreamCsv(
+      path, [&](const std::vector<std::string>& c) { out.columns = c; },
+      [&](const std::vector<double>& r) {
+        out.rows.push_back(r);
+        return true;
+      });
+  return out;
+}
+
+RecordedStream ReadJsonlStream(const std::string& path) {
+  RecordedStream out;
+  StreamJsonl(
+      path, [&](const std::vector<std::string>& c) { out.columns = c; },
+      [&](const std::vector<double>& r) {
+        out.rows.push_back(r);
+        return true;
+      });
   return out;
 }
 
@@ -244,15 +286,47 @@ RecordedStream Hdf5Recording::Read(std::int64_t trial_id, bool samples) const {
     }
   }
   if (!samples || dims[0] == 0) return out;
-
-  std::vector<double> flat(static_cast<size_t>(dims[0] * dims[1]));
-  if (H5Dread(ds.id, H5T_NATIVE_DOUBLE, H5S_ALL, H5S_ALL, H5P_DEFAULT, flat.data()) < 0)
-    throw std::invalid_argument(where + "cannot read its samples: " + H5Reason());
-  out.rows.resize(static_cast<size_t>(dims[0]));
-  for (size_t i = 0; i < out.rows.size(); ++i)
-    out.rows[i].assign(flat.begin() + static_cast<std::ptrdiff_t>(i * dims[1]),
-                       flat.begin() + static_cast<std::ptrdiff_t>((i + 1) * dims[1]));
+  Stream(trial_id, nullptr, [&](const std::vector<double>& r) {
+    out.rows.push_back(r);
+    return true;
+  });
   return out;
+}
+
+std::size_t Hdf5Recording::Stream(std::int64_t trial_id, const ColumnsFn& on_columns,
+                                  const RowFn& on_row) const {
+  const RecordedStream head = Read(trial_id, false);
+  if (on_columns) on_columns(head.columns);
+  QuietHdf5();
+  const std::string name = "trials/" + std::to_string(trial_id) + "/true";
+  const std::string where = path_ + ": /" + name + ": ";
+  H5Object ds(H5Dopen2(file_, name.c_str(), H5P_DEFAULT), H5Dclose);
+  H5Object space(ds.id < 0 ? -1 : H5Dget_space(ds.id), H5Sclose);
+  if (space.id < 0) throw std::invalid_argument(where + "cannot open it: " + H5Reason());
+  hsize_t dims[2] = {0, 0};
+  H5Sget_simple_extent_dims(space.id, dims, nullptr);
+  const hsize_t slab = std::max<hsize_t>(
+      1, std::min<hsize_t>(dims[0], (1u << 20) / 8 / std::max<hsize_t>(1, dims[1])));
+  std::vector<double> flat(static_cast<size_t>(slab * dims[1]));
+  std::vector<double> row(static_cast<size_t>(dims[1]));
+  std::size_t rows = 0;
+  for (hsize_t first = 0; first < dims[0]; first += slab) {
+    const hsize_t count[2] = {std::min(slab, dims[0] - first), dims[1]};
+    const hsize_t start[2] = {first, 0};
+    H5Object file_space(H5Scopy(space.id), H5Sclose);
+    H5Object mem(H5Screate_simple(2, count, nullptr), H5Sclose);
+    if (file_space.id < 0 || mem.id < 0 ||
+        H5Sselect_hyperslab(file_space.id, H5S_SELECT_SET, start, nullptr, count, nullptr) < 0 ||
+        H5Dread(ds.id, H5T_NATIVE_DOUBLE, mem.id, file_space.id, H5P_DEFAULT, flat.data()) < 0)
+      throw std::invalid_argument(where + "cannot read its samples: " + H5Reason());
+    for (hsize_t i = 0; i < count[0]; ++i) {
+      std::copy(flat.begin() + static_cast<std::ptrdiff_t>(i * dims[1]),
+                flat.begin() + static_cast<std::ptrdiff_t>((i + 1) * dims[1]), row.begin());
+      ++rows;
+      if (!on_row(row)) return rows;
+    }
+  }
+  return rows;
 }
 
 }  // namespace arena::executors

@@ -6,6 +6,7 @@
 #pragma once
 
 #include <cstdint>
+#include <functional>
 #include <string>
 #include <vector>
 
@@ -21,10 +22,20 @@ struct RecordedStream {
 // A whole file. @throws std::invalid_argument "PATH: cannot read it".
 std::string ReadText(const std::string& path);
 
+// Row by row, in bounded memory (a 2 GiB stream is never held whole):
+// on_columns once with the column names, then on_row for each row until it
+// returns false. @returns the rows passed to on_row.
+using ColumnsFn = std::function<void(const std::vector<std::string>&)>;
+using RowFn = std::function<bool(const std::vector<double>&)>;
+
 // The export's file formats ("csv", "jsonl", "hdf5"; manifest.json's export_format).
 // @throws std::invalid_argument naming the file and what is wrong with it.
 RecordedStream ReadCsvStream(const std::string& path);
 RecordedStream ReadJsonlStream(const std::string& path);
+std::size_t StreamCsv(const std::string& path, const ColumnsFn& on_columns, const RowFn& on_row);
+// A JSON-lines stream's columns are the keys of its first line (the export
+// writes every key on every line); a later line's other key is refused.
+std::size_t StreamJsonl(const std::string& path, const ColumnsFn& on_columns, const RowFn& on_row);
 
 // dataset.h5 of `arena export --format hdf5`: /trials/<trial_id>/true, a 2-D
 // float64 dataset (samples x columns) whose attribute "columns" names them.
@@ -44,6 +55,8 @@ class Hdf5Recording {
   void Check(std::int64_t trial_id) const;
   // @throws std::invalid_argument as Check, or when the samples cannot be read.
   RecordedStream Read(std::int64_t trial_id) const;
+  // The samples in slabs of a few thousand rows (bounded memory).
+  std::size_t Stream(std::int64_t trial_id, const ColumnsFn& on_columns, const RowFn& on_row) const;
 
  private:
   RecordedStream Read(std::int64_t trial_id, bool samples) const;

@@ -4,9 +4,13 @@
 // recorded trial with the command's seed is preferred (the same campaign re-run), otherwise
 // matching trials are served in turn. A scene the dataset does not hold is REFUSED, with the
 // reason.
+#include <sys/stat.h>
+
 #include <cmath>
 #include <filesystem>
 #include <map>
+#include <optional>
+#include <set>
 #include <sstream>
 #include <stdexcept>
 
@@ -64,83 +68,134 @@ json Canonical(const json& scene) {
 // The recorded rows as the true samples of `scene`: contacts in scene order
 // (fingers, then the pusher), named as the export names them (a finger's
 // name, "pusher"; "contactK" by position when the recording had another set).
+// One row at a time: a stream is never held whole.
 // A measured recording whose force stream failed its import check has no
 // contact columns at all: its samples then carry no contacts (forces unknown,
 // never scored), when `forces_optional`.
-std::vector<mechanics::TrajectorySample> ToSamples(const RecordedStream& stream,
-                                                   const mechanics::Scene& scene,
-                                                   bool forces_optional) {
-  std::vector<std::string> names;
-  std::vector<Eigen::Vector3d> normals;
-  for (size_t i = 0; i < scene.fingers.size(); ++i) {
-    names.push_back(scene.fingers[i].name.empty() ? "finger" + std::to_string(i)
-                                                  : scene.fingers[i].name);
-    normals.push_back(scene.fingers[i].normal.normalized());
+class RowToSample {
+ public:
+  RowToSample(const std::vector<std::string>& columns, const mechanics::Scene& scene,
+              bool forces_optional)
+      : columns_(columns) {
+    for (size_t i = 0; i < scene.fingers.size(); ++i) {
+      names_.push_back(scene.fingers[i].name.empty() ? "finger" + std::to_string(i)
+                                                     : scene.fingers[i].name);
+      normals_.push_back(scene.fingers[i].normal.normalized());
+    }
+    if (scene.pusher) {
+      names_.push_back("pusher");
+      normals_.push_back(scene.pusher->normal.normalized());
+    }
+    pusher_ = scene.pusher.has_value();
+    pose_ = Cols("", {"x", "y", "z", "qw", "qx", "qy", "qz"});
+    twist_ = Cols("", {"vx", "vy", "vz", "wx", "wy", "wz"});
+    pusher_pos_ = Cols("pusher_", {"x", "y", "z"});
+    const bool no_forces = forces_optional && Find("pusher_fx") < 0 && Find("contact0_fx") < 0 &&
+                           (scene.fingers.empty() || Find(names_[0] + "_fx") < 0);
+    if (no_forces) names_.clear();
+    for (size_t c = 0; c < names_.size(); ++c) {
+      const std::string prefix =
+          (Find(names_[c] + "_fx") >= 0 ? names_[c] : "contact" + std::to_string(c)) + "_";
+      contact_.push_back(Cols(prefix, {"fx", "fy", "fz", "tx", "ty", "tz", "mode"}));
+    }
+    t_ = Col("t");
   }
-  if (scene.pusher) {
-    names.push_back("pusher");
-    normals.push_back(scene.pusher->normal.normalized());
-  }
-  const auto col = [&](const std::string& name) {
-    const int k = stream.Column(name);
-    if (k < 0) throw std::invalid_argument("column '" + name + "' missing");
-    return static_cast<size_t>(k);
-  };
-  const auto cols = [&](const std::string& prefix, std::initializer_list<const char*> axes) {
-    std::vector<size_t> out;
-    for (const char* a : axes) out.push_back(col(prefix + a));
-    return out;
-  };
-  const auto pose = cols("", {"x", "y", "z", "qw", "qx", "qy", "qz"});
-  const auto twist = cols("", {"vx", "vy", "vz", "wx", "wy", "wz"});
-  const auto pusher = cols("pusher_", {"x", "y", "z"});
-  std::vector<std::vector<size_t>> contact;  // fx fy fz tx ty tz mode
-  const bool no_forces = forces_optional && stream.Column("pusher_fx") < 0 &&
-                         stream.Column("contact0_fx") < 0 &&
-                         (scene.fingers.empty() || stream.Column(names[0] + "_fx") < 0);
-  if (no_forces) names.clear();
-  for (size_t c = 0; c < names.size(); ++c) {
-    const std::string prefix =
-        (stream.Column(names[c] + "_fx") >= 0 ? names[c] : "contact" + std::to_string(c)) + "_";
-    contact.push_back(cols(prefix, {"fx", "fy", "fz", "tx", "ty", "tz", "mode"}));
-  }
-  const size_t t = col("t");
-  std::vector<mechanics::TrajectorySample> out;
-  out.reserve(stream.rows.size());
-  for (const auto& row : stream.rows) {
+
+  // @throws std::invalid_argument for a value no sample can hold (a contact
+  //   mode other than 0 stick, 1 slide, 2 separate).
+  mechanics::TrajectorySample Convert(const std::vector<double>& row, std::size_t number) const {
     mechanics::TrajectorySample s;
     const auto v3 = [&](const std::vector<size_t>& k, size_t at) {
       return Eigen::Vector3d(row[k[at]], row[k[at + 1]], row[k[at + 2]]);
     };
-    s.t = row[t];
-    s.position = v3(pose, 0);
-    s.orientation = Eigen::Quaterniond(row[pose[3]], row[pose[4]], row[pose[5]], row[pose[6]]);
-    s.velocity = v3(twist, 0);
-    s.angular_velocity = v3(twist, 3);
-    s.pusher_position = v3(pusher, 0);
-    for (size_t c = 0; c < names.size(); ++c) {
-      const Eigen::Vector3d f = v3(contact[c], 0);
+    s.t = row[t_];
+    s.position = v3(pose_, 0);
+    s.orientation = Eigen::Quaterniond(row[pose_[3]], row[pose_[4]], row[pose_[5]], row[pose_[6]]);
+    s.velocity = v3(twist_, 0);
+    s.angular_velocity = v3(twist_, 3);
+    s.pusher_position = v3(pusher_pos_, 0);
+    for (size_t c = 0; c < names_.size(); ++c) {
+      const Eigen::Vector3d f = v3(contact_[c], 0);
       mechanics::ContactState st;
-      st.normal_force = f.dot(normals[c]);
-      st.tangential_force = f - st.normal_force * normals[c];
-      st.torque = v3(contact[c], 3);
-      const double mode = row[contact[c][6]];
+      st.normal_force = f.dot(normals_[c]);
+      st.tangential_force = f - st.normal_force * normals_[c];
+      st.torque = v3(contact_[c], 3);
+      const double mode = row[contact_[c][6]];
+      if (mode != 0 && mode != 1 && mode != 2)
+        throw std::invalid_argument("row " + std::to_string(number) + ": " +
+                                    columns_[contact_[c][6]] + " = " + std::to_string(mode) +
+                                    " is no contact mode (0 stick, 1 slide, 2 separate)");
       st.mode = mode == 0   ? mechanics::ContactMode::kStick
                 : mode == 1 ? mechanics::ContactMode::kSlide
                             : mechanics::ContactMode::kSeparate;
       s.contacts.push_back(st);
-      if (scene.pusher && c + 1 == names.size()) s.pusher_force = f;
+      if (pusher_ && c + 1 == names_.size()) s.pusher_force = f;
     }
-    out.push_back(std::move(s));
+    return s;
   }
-  return out;
+
+ private:
+  int Find(const std::string& name) const {
+    for (size_t i = 0; i < columns_.size(); ++i)
+      if (columns_[i] == name) return static_cast<int>(i);
+    return -1;
+  }
+  size_t Col(const std::string& name) const {
+    const int k = Find(name);
+    if (k < 0) throw std::invalid_argument("column '" + name + "' missing");
+    return static_cast<size_t>(k);
+  }
+  std::vector<size_t> Cols(const std::string& prefix, std::initializer_list<const char*> axes) {
+    std::vector<size_t> out;
+    for (const char* a : axes) out.push_back(Col(prefix + a));
+    return out;
+  }
+
+  std::vector<std::string> columns_;
+  std::vector<std::string> names_;
+  std::vector<Eigen::Vector3d> normals_;
+  bool pusher_ = false;
+  std::vector<size_t> pose_, twist_, pusher_pos_;
+  std::vector<std::vector<size_t>> contact_;
+  size_t t_ = 0;
+};
+
+// A file's size and modification time when the cell verified the dataset:
+// an edit after that (a stream moved 5 cm, cut short) is refused at serve time.
+struct FileStamp {
+  std::uintmax_t bytes = 0;
+  std::int64_t mtime_ns = 0;
+  bool operator==(const FileStamp& o) const { return bytes == o.bytes && mtime_ns == o.mtime_ns; }
+};
+
+FileStamp Stamp(const fs::path& p) {
+  struct stat st {};
+  if (::stat(p.c_str(), &st) != 0) return {};
+  return {static_cast<std::uintmax_t>(st.st_size),
+          static_cast<std::int64_t>(st.st_mtim.tv_sec) * 1000000000 + st.st_mtim.tv_nsec};
+}
+
+// A path the manifest names, relative and inside the dataset.
+fs::path Inside(const fs::path& root, const std::string& rel, const std::string& what) {
+  const fs::path p(rel);
+  if (rel.empty() || p.is_absolute())
+    throw std::invalid_argument(root.string() + "/manifest.json: " + what + " '" + rel +
+                                "' is not a path inside the dataset");
+  for (const auto& part : p.lexically_normal())
+    if (part == "..")
+      throw std::invalid_argument(root.string() + "/manifest.json: " + what + " '" + rel +
+                                  "' leads outside the dataset");
+  return root / p.lexically_normal();
 }
 
 struct Recorded {
   std::int64_t trial_id = 0;
   std::string seed;
   json scene;
-  std::string refused;  // an imported trial whose poses failed their check: why
+  std::string refused;        // an imported trial whose poses failed their check: why
+  std::uint64_t samples = 0;  // the manifest's count
+  fs::path stream;            // csv/jsonl: its true stream file
+  FileStamp stamp;            // of that file (hdf5: of dataset.h5) when verified
 };
 
 class ReplayBackend final : public Backend {
@@ -159,8 +214,34 @@ class ReplayBackend final : public Backend {
                                   "' is none of the formats arena writes (hdf5, csv, jsonl)");
     if (!fs::exists(root / "scenes.jsonl"))
       throw std::invalid_argument(dir + ": no scenes.jsonl (exported by an older arena?)");
+    // Nothing in the dataset may point elsewhere: a symlink would serve a
+    // file the manifest's checks never saw.
+    {
+      std::error_code ec;
+      for (auto it = fs::recursive_directory_iterator(root, ec);
+           !ec && it != fs::recursive_directory_iterator(); it.increment(ec)) {
+        if (it->is_symlink())
+          throw std::invalid_argument(it->path().string() +
+                                      ": a symbolic link in the dataset (refused: replay serves "
+                                      "only the dataset's own files)");
+      }
+    }
+    // The manifest's trials: ids unique, each with its sample count (and, for
+    // csv/jsonl, its true stream file inside the dataset).
+    std::map<std::int64_t, const json*> listed;
+    if (!manifest.contains("trials") || !manifest["trials"].is_array())
+      throw std::invalid_argument(dir + "/manifest.json: no trials list");
+    for (const auto& t : manifest["trials"]) {
+      if (!t.is_object() || !t.contains("trial_id") || !t["trial_id"].is_number_integer() ||
+          !t.contains("samples") || !t["samples"].is_number_unsigned())
+        throw std::invalid_argument(dir + "/manifest.json: a trial without trial_id and samples");
+      if (!listed.emplace(t["trial_id"].get<std::int64_t>(), &t).second)
+        throw std::invalid_argument(dir + "/manifest.json: trial " + t["trial_id"].dump() +
+                                    " is listed twice");
+    }
     std::istringstream lines(ReadText((root / "scenes.jsonl").string()));
     std::string line;
+    std::set<std::int64_t> seen;
     for (int number = 1; std::getline(lines, line); ++number) {
       if (line.empty()) continue;
       const json j = json::parse(line, nullptr, false);
@@ -168,13 +249,28 @@ class ReplayBackend final : public Backend {
           !j["trial_id"].is_number_integer())
         throw std::invalid_argument(dir + "/scenes.jsonl: line " + std::to_string(number) +
                                     ": not an object with a trial_id");
+      const auto id = j["trial_id"].get<std::int64_t>();
+      if (!seen.insert(id).second)
+        throw std::invalid_argument(dir + "/scenes.jsonl: line " + std::to_string(number) +
+                                    ": trial " + std::to_string(id) +
+                                    " again (each recorded trial once)");
       if (!j.contains("scene") || !j["scene"].is_object()) continue;  // a trial without a scene
+      const auto m = listed.find(id);
+      if (m == listed.end())
+        throw std::invalid_argument(dir + "/scenes.jsonl: line " + std::to_string(number) +
+                                    ": trial " + std::to_string(id) + " is not in the manifest");
       Recorded r;
-      r.trial_id = j.value("trial_id", std::int64_t{0});
+      r.trial_id = id;
       r.seed = j.contains("seed")
                    ? (j["seed"].is_string() ? j["seed"].get<std::string>() : j["seed"].dump())
                    : "";
       r.scene = Physical(Canonical(j["scene"]));
+      r.samples = (*m->second)["samples"].get<std::uint64_t>();
+      if (format_ != "hdf5") {
+        const json& file = (*m->second).contains("true_file") ? (*m->second)["true_file"] : json();
+        r.stream =
+            file.is_string() ? Inside(root, file.get<std::string>(), "true_file") : StreamFile(id);
+      }
       trials_.push_back(std::move(r));
     }
     if (trials_.empty()) throw std::invalid_argument(dir + ": holds no trials");
@@ -198,12 +294,17 @@ class ReplayBackend final : public Backend {
     // reason, not a trial in the middle of a campaign.
     if (format_ == "hdf5") {
       h5_ = std::make_unique<Hdf5Recording>((root / "dataset.h5").string());
-      for (const auto& r : trials_) h5_->Check(r.trial_id);
+      for (auto& r : trials_) {
+        h5_->Check(r.trial_id);
+        r.stamp = Stamp(root / "dataset.h5");
+      }
     } else {
-      for (const auto& r : trials_)
-        if (const fs::path p = StreamFile(r.trial_id); !fs::is_regular_file(p))
-          throw std::invalid_argument(p.string() + ": missing (trial " +
+      for (auto& r : trials_) {
+        if (!fs::is_regular_file(r.stream))
+          throw std::invalid_argument(r.stream.string() + ": missing (trial " +
                                       std::to_string(r.trial_id) + "'s true stream)");
+        r.stamp = Stamp(r.stream);
+      }
     }
     caps_.name = "replay:" + dir;
     caps_.truth = measured_ ? TruthSource::kMeasured : TruthSource::kRecorded;
@@ -247,25 +348,52 @@ class ReplayBackend final : public Backend {
       out.reason = "replay: execute without a prepared trial";
       return out;
     }
-    RecordedStream stream;
-    try {
-      stream = ReadStream(prepared_->trial_id);
-    } catch (const std::exception& e) {
-      out.reason = std::string("replay: ") + e.what();
+    const Recorded& r = *prepared_;
+    const std::string trial = "replay: trial " + std::to_string(r.trial_id) + ": ";
+    const fs::path file = format_ == "hdf5" ? fs::path(dir_) / "dataset.h5" : r.stream;
+    if (!(Stamp(file) == r.stamp)) {
+      out.reason = trial + file.string() +
+                   " changed since the cell verified the dataset (restart the cell to verify it "
+                   "again)";
       return out;
     }
-    std::vector<mechanics::TrajectorySample> samples;
+    // Row by row into the sink: memory stays bounded whatever the file's size.
+    std::optional<RowToSample> convert;
+    bool stopped = false;
+    std::size_t rows = 0;
     try {
-      samples = ToSamples(stream, scene, measured_);
+      const ColumnsFn on_columns = [&](const std::vector<std::string>& c) {
+        convert.emplace(c, scene, measured_);
+      };
+      const RowFn on_row = [&](const std::vector<double>& row) {
+        if (++rows > r.samples) return false;  // longer than recorded: refused below
+        if (!sink(convert->Convert(row, rows))) {
+          stopped = true;
+          return false;
+        }
+        return true;
+      };
+      if (format_ == "hdf5")
+        h5_->Stream(r.trial_id, on_columns, on_row);
+      else if (format_ == "csv")
+        StreamCsv(r.stream.string(), on_columns, on_row);
+      else
+        StreamJsonl(r.stream.string(), on_columns, on_row);
     } catch (const std::exception& e) {
-      out.reason = "replay: trial " + std::to_string(prepared_->trial_id) + ": " + e.what();
+      out.reason = trial + e.what();
       return out;
     }
-    for (const auto& s : samples) {
-      if (!sink(s)) {
-        out.reason = "replay: stream stopped by the cell";
-        return out;
-      }
+    if (stopped) {
+      out.reason = "replay: stream stopped by the cell";
+      return out;
+    }
+    if (rows != r.samples) {
+      out.reason =
+          trial +
+          (rows > r.samples ? std::string("the stream has more rows than the ")
+                            : "the stream has " + std::to_string(rows) + " rows, not the ") +
+          std::to_string(r.samples) + " the manifest recorded";
+      return out;
     }
     out.ok = true;
     out.detail_json = json({{"recorded_trial", prepared_->trial_id}, {"dataset", dir_}}).dump();
@@ -275,12 +403,6 @@ class ReplayBackend final : public Backend {
  private:
   fs::path StreamFile(std::int64_t id) const {
     return fs::path(dir_) / "streams" / (std::to_string(id) + "_true." + format_);
-  }
-
-  RecordedStream ReadStream(std::int64_t id) const {
-    if (format_ == "hdf5") return h5_->Read(id);
-    return format_ == "csv" ? ReadCsvStream(StreamFile(id).string())
-                            : ReadJsonlStream(StreamFile(id).string());
   }
 
   std::string dir_;

@@ -183,6 +183,10 @@ class PathTrackingBuilder {
     // "[json.exception.parse_error.101] parse error at line 1, column 5: ..." -> after "]".
     if (const auto close = what.find("] "); close != std::string::npos)
       what = what.substr(close + 2);
+    if (ex.id == 406)  // out_of_range.406: valid JSON, a number no double holds (1e999)
+      return Fail(ChildPath(), "a number out of range (beyond a double) at byte offset " +
+                                   std::to_string(position > 0 ? position - 1 : 0) + ": " +
+                                   Printable(what, 200));
     return Fail(ChildPath(), "invalid JSON at byte offset " +
                                  std::to_string(position > 0 ? position - 1 : 0) + ": " +
                                  Printable(what, 200));

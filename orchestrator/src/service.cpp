@@ -84,6 +84,82 @@ class SqliteSink : public GroundTruthSink {
   std::unique_ptr<db::Ingest> ingest_;
 };
 
+// The store's quick check at a cadence, on its own read-only connection in
+// its own thread (a check of a large store takes seconds; the service loop
+// must not wait for it). WAL lets it read beside the service's writes.
+class IntegrityMonitor {
+ public:
+  IntegrityMonitor(const std::string& path, double period_s, bool open_check_complete)
+      : path_(path), period_(period_s) {
+    thread_ = std::thread([this, open_check_complete] { Run(!open_check_complete); });
+  }
+  ~IntegrityMonitor() {
+    {
+      std::lock_guard lock(mu_);
+      stop_ = true;
+      if (reader_) reader_->Interrupt();
+    }
+    cv_.notify_all();
+    thread_.join();
+  }
+  void ThrowIfDamaged() const {
+    std::lock_guard lock(mu_);
+    if (!damage_.empty()) throw db::StoreError(db::StoreError::Kind::kCorrupt, damage_);
+  }
+
+ private:
+  void Run(bool check_now) {
+    std::unique_lock lock(mu_);
+    for (;;) {
+      if (!check_now)
+        cv_.wait_for(lock, std::chrono::duration<double>(period_), [&] { return stop_; });
+      check_now = false;
+      if (stop_) return;
+      lock.unlock();
+      std::string damage;
+      double seconds = 0;
+      try {
+        db::StoreOptions ro;
+        ro.read_only = true;
+        auto reader = db::Store::Open(path_, ro);
+        {
+          std::lock_guard l(mu_);
+          if (stop_) return;
+          reader_ = reader.get();
+        }
+        const auto r = reader->QuickCheck(0);
+        {
+          std::lock_guard l(mu_);
+          reader_ = nullptr;
+        }
+        seconds = r.seconds;
+        if (r.complete && !r.problems.empty()) damage = r.problems.substr(0, 400);
+      } catch (const db::StoreError& e) {
+        if (e.kind() == db::StoreError::Kind::kCorrupt)
+          damage = e.what();
+        else
+          spdlog::warn("store quick check could not run: {}", e.what());
+      }
+      lock.lock();
+      if (!damage.empty()) {
+        damage_ = "the store '" + path_ + "' is corrupt (PRAGMA quick_check: " + damage +
+                  "); stopped before writing more into it";
+        return;
+      }
+      if (!stop_) spdlog::debug("store quick check: ok ({:.1f} s)", seconds);
+    }
+  }
+
+  std::string path_;
+  double period_;
+  mutable std::mutex mu_;
+  std::condition_variable cv_;
+  bool stop_ = false;
+  const db::Store* reader_ = nullptr;
+  std::string damage_;
+  std::thread thread_;
+};
+
 class SqliteTrialStore : public TrialStore {
  public:
   SqliteTrialStore(db::Store& store, std::string session)
@@ -154,11 +230,18 @@ class SqliteTrialStore : public TrialStore {
   void ServiceBeat(const std::vector<std::string>& cells) override {
     s_.ServiceBeat(session_, cells);
   }
-  void CheckFileIdentity() override { s_.CheckFileIdentity(); }
+  // The tick's look at the file: still the one opened, and no damage found
+  // by the background quick check (both throw: the service stops, exit 3).
+  void CheckFileIdentity() override {
+    s_.CheckFileIdentity();
+    if (integrity_) integrity_->ThrowIfDamaged();
+  }
+  void WatchIntegrity(const class IntegrityMonitor* m) { integrity_ = m; }
 
  private:
   db::Store& s_;
   std::string session_;
+  const IntegrityMonitor* integrity_ = nullptr;
 };
 
 class DdsTransport : public CommandTransport {
@@ -328,6 +411,7 @@ struct Service::Impl {
   // the store file is created or touched (bad input changes nothing stored).
   std::unique_ptr<db::Store> store;
   std::unique_ptr<SqliteTrialStore> trial_store;
+  std::unique_ptr<IntegrityMonitor> integrity;  // trial_store points at it: ends before it
   std::unique_ptr<TrialDriver> driver;
   // Adaptive campaigns' next rounds (adaptive.hpp): one call per scheduling pass.
   std::unique_ptr<AdaptivePlanner> adaptive;
@@ -375,6 +459,15 @@ struct Service::Impl {
     registered = true;
     store->SetBusyTimeout(o.store_busy_timeout_ms);
     trial_store = std::make_unique<SqliteTrialStore>(*store, SessionHex(session));
+    const auto& checked = store->open_check();
+    if (!checked.complete)
+      spdlog::warn(
+          "store quick check incomplete after {:.1f} s (a large store); finishing it in "
+          "the background",
+          checked.seconds);
+    integrity =
+        std::make_unique<IntegrityMonitor>(o.db_path, o.integrity_check_period_s, checked.complete);
+    trial_store->WatchIntegrity(integrity.get());
     adaptive = std::make_unique<AdaptivePlanner>(*store);
     DriverOptions d;
     d.service = o;
@@ -519,6 +612,7 @@ void ValidateServiceOptions(const ServiceOptions& o) {
   RequireSeconds(o.drain_timeout_s, "--drain", 0, 86400);
   RequireSeconds(o.retry_backoff_s, "retry_backoff_s", 0, 86400);
   RequireSeconds(o.stream_grace_s, "stream_grace_s", 0, 3600);
+  RequireSeconds(o.integrity_check_period_s, "--integrity-check-period", 0.1, 7 * 86400);
   const int cores = static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
   const int max_predictors = std::max(64, 4 * cores);
   if (o.predictor_threads < 1 || o.predictor_threads > max_predictors)

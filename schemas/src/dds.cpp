@@ -318,6 +318,7 @@ namespace detail {
 struct ParticipantCore : public fdds::DomainParticipantListener {
   std::string name;
   int domain_id = 0;
+  std::string security_dir;  // --security: the identity (for a denied endpoint's message)
   fdds::DomainParticipant* participant = nullptr;
   fdds::Publisher* publisher = nullptr;
   fdds::Subscriber* subscriber = nullptr;
@@ -576,6 +577,7 @@ Participant::Participant(const ParticipantOptions& options)
 
   core_->name = options.name;
   core_->domain_id = options.domain_id;
+  core_->security_dir = options.network.security_dir;
   const fdds::StatusMask mask = fdds::StatusMask::none();  // participant discovery only
   core_->participant = factory->create_participant(options.domain_id, qos, core_.get(), mask);
   if (core_->participant == nullptr) {
@@ -755,7 +757,12 @@ Writer<T>::Writer(Participant& participant, const WriterOptions& options)
     times.heartbeatPeriod = Duration_t(kGroundTruthHeartbeat_s);
   }
   impl_->writer = core.publisher->create_datawriter(t, qos, nullptr);
-  if (impl_->writer == nullptr) throw DdsError("dds: create_datawriter(" + topic + ") failed");
+  if (impl_->writer == nullptr) {
+    // Under DDS-Security the usual cause is an identity of another role.
+    if (!core.security_dir.empty())
+      throw SecurityError(DeniedEndpoint(core.security_dir, topic, /*publish=*/true));
+    throw DdsError("dds: create_datawriter(" + topic + ") failed");
+  }
   const auto q = impl_->writer->get_qos();
   spdlog::debug(
       "dds: {} writer {}: {}", core.name, topic,
@@ -945,7 +952,11 @@ Reader<T>::Reader(Participant& participant, const ReaderOptions& options)
   }
   if (impl_->reader == nullptr)
     impl_->reader = core.subscriber->create_datareader(description, qos, impl_.get(), mask);
-  if (impl_->reader == nullptr) throw DdsError("dds: create_datareader(" + topic + ") failed");
+  if (impl_->reader == nullptr) {
+    if (!core.security_dir.empty())
+      throw SecurityError(DeniedEndpoint(core.security_dir, topic, /*publish=*/false));
+    throw DdsError("dds: create_datareader(" + topic + ") failed");
+  }
   const auto q = impl_->reader->get_qos();
   spdlog::debug(
       "dds: {} reader {}: {}", core.name, topic,

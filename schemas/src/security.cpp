@@ -6,6 +6,7 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cctype>
 #include <cerrno>
 #include <cstring>
@@ -611,6 +612,37 @@ std::string VerifySignedDocument(const std::string& p7s_path, const std::string&
                         OpenSslError());
   }
   return BioText(out.get());
+}
+
+std::string DeniedEndpoint(const std::string& identity_dir, const std::string& topic,
+                           bool publish) {
+  std::string role = "?";
+  {
+    std::ifstream in(Join(identity_dir, kPermissionsXmlFile));
+    std::ostringstream text;
+    text << in.rdbuf();
+    const std::string xml = text.str();
+    const auto at = xml.find("<grant name=\"");
+    if (at != std::string::npos) {
+      const auto begin = at + 13;
+      const auto dot = xml.find_first_of(".\"", begin);
+      if (dot != std::string::npos) role = xml.substr(begin, dot - begin);
+    }
+  }
+  std::string may;
+  for (Role r : {Role::kCell, Role::kService, Role::kWatcher, Role::kController}) {
+    const RoleTopics t = TopicsOf(r);
+    const auto& list = publish ? t.publish : t.subscribe;
+    if (std::find(list.begin(), list.end(), topic) == list.end()) continue;
+    if (!may.empty()) may += " or ";
+    may += std::string("'") + ToString(r) + "'";
+  }
+  const std::string verb = publish ? "publish" : "subscribe to";
+  return "--security " + identity_dir + ": this identity's role '" + role + "' may not " + verb +
+         " " + topic +
+         (may.empty() ? std::string()
+                      : "; a " + may + " identity may (arena certs issue LAB --role " +
+                            may.substr(1, may.find('\'', 1) - 1) + " --name N)");
 }
 
 IdentityFiles CheckIdentityDir(const std::string& dir) {

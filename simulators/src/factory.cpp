@@ -13,6 +13,10 @@ json ParseObject(std::string_view name, std::string_view text) {
   json j;
   try {
     j = json::parse(text);
+  } catch (const json::out_of_range& e) {  // 1e999: valid JSON, no double holds it
+    throw SimulatorError(
+        std::string(name),
+        std::string("settings hold a number out of range (beyond a double): ") + e.what());
   } catch (const json::exception& e) {
     throw SimulatorError(std::string(name), std::string("settings are not JSON: ") + e.what());
   }

@@ -230,5 +230,44 @@ TEST_F(PlotTest, CommandWritesTheSvgAndRefusesWhatItCannotPlot) {
   EXPECT_NE(err.find("directory"), std::string::npos) << err;
 }
 
+// Issue 28: a failed trial is not "not executed yet" (nothing will come to
+// plot or watch), and the store's own log is not an output file.
+TEST_F(PlotTest, AFailedTrialSaysWhyAndTheStoresLogIsNoOutput) {
+  {
+    auto store = db::Store::Open(db_);
+    auto t = store->ClaimNextTrial("c1");
+    ASSERT_TRUE(t.has_value());
+    ASSERT_EQ(t->trial_id, planned_);
+    store->FailTrial(t->trial_id, t->attempt, "refused by cell: no such finger", "refused");
+  }
+  std::string err;
+  EXPECT_EQ(
+      RunArena("plot --db " + db_ + " " + std::to_string(planned_) + " --out " + dir_ + "/f.svg",
+               &err),
+      2);
+  EXPECT_NE(err.find("failed without ground truth (refused by cell: no such finger)"),
+            std::string::npos)
+      << err;
+  EXPECT_EQ(err.find("watch it live"), std::string::npos) << err;
+
+  std::ofstream(db_ + ".log") << "the service's log\n";
+  for (const std::string& out :
+       {db_ + ".log", db_ + ".1.log", db_ + ".sim1.log", dir_ + "/.x.partial-1-abc/p.svg"}) {
+    EXPECT_EQ(RunArena("plot --db " + db_ + " " + std::to_string(trial_) + " --out " + out, &err),
+              2)
+        << out;
+    EXPECT_NE(err.find("refusing to overwrite"), std::string::npos) << out << ": " << err;
+  }
+  EXPECT_EQ(RunArena("export --db " + db_ + " --campaign " + std::to_string(campaign_) + " --out " +
+                         db_ + ".log",
+                     &err),
+            2);
+  EXPECT_NE(err.find("kept by the store"), std::string::npos) << err;
+  std::ifstream log(db_ + ".log");
+  std::string first;
+  std::getline(log, first);
+  EXPECT_EQ(first, "the service's log");  // untouched, still a file
+}
+
 }  // namespace
 }  // namespace arena::cli

@@ -187,6 +187,12 @@ TEST(StoreCampaign, BadInputRefusedAndNothingStored) {
   auto trials = MakeTrials(3);
   trials[2].scene_json = R"({"grip_force": 1e999, "fingers": [{"type": "point"}]})";
   EXPECT_STORE_ERROR(store->CreateCampaign(MakeCampaign(), trials), K::kBadInput);
+  try {  // 1e999 is JSON; what is wrong is the number's size (issue 28)
+    store->CreateCampaign(MakeCampaign(), trials);
+  } catch (const StoreError& e) {
+    EXPECT_NE(std::string(e.what()).find("out of range"), std::string::npos) << e.what();
+    EXPECT_EQ(std::string(e.what()).find("not valid JSON"), std::string::npos) << e.what();
+  }
   trials[2].scene_json = R"({"fingers": [{"type": "blob"}]})";
   try {
     store->CreateCampaign(MakeCampaign(), trials);

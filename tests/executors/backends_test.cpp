@@ -9,6 +9,8 @@
 
 #include <filesystem>
 #include <fstream>
+#include <functional>
+#include <thread>
 
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
@@ -40,7 +42,9 @@ std::string ShortScene(double grip = 10.0) {
 std::string WriteHdf5Dataset(const std::string& from, const std::string& damage) {
   const std::string dir = from + "/h5-" + (damage.empty() ? "whole" : damage);
   fs::create_directories(dir);
-  std::ofstream(dir + "/manifest.json") << json({{"export_format", "hdf5"}}).dump();
+  json manifest = json::parse(std::ifstream(from + "/manifest.json"));
+  manifest["export_format"] = "hdf5";
+  std::ofstream(dir + "/manifest.json") << manifest.dump();
   fs::copy_file(from + "/scenes.jsonl", dir + "/scenes.jsonl");
   const std::string path = dir + "/dataset.h5";
   const hid_t file = H5Fcreate(path.c_str(), H5F_ACC_TRUNC, H5P_DEFAULT, H5P_DEFAULT);
@@ -99,16 +103,20 @@ class Dataset : public ::testing::Test {
     char tmpl[] = "/tmp/arena-backends-test-XXXXXX";
     dir_ = mkdtemp(tmpl);
     fs::create_directories(dir_ + "/streams");
-    std::ofstream(dir_ + "/manifest.json") << json({{"export_format", "jsonl"}}).dump();
     std::ofstream scenes(dir_ + "/scenes.jsonl");
+    json trials = json::array();
     int id = 1;
     for (double grip : {10.0, 12.0}) {
       const std::string text = ShortScene(grip);
       scenes << json({{"trial_id", id}, {"seed", "7"}, {"scene", json::parse(text)}}).dump()
              << "\n";
       WriteStream(id, mechanics::ParseScene(text));
+      trials.push_back({{"trial_id", id}, {"samples", samples_}});
       ++id;
     }
+    // The manifest's part replay reads (an export's also lists files and checksums).
+    std::ofstream(dir_ + "/manifest.json")
+        << json({{"export_format", "jsonl"}, {"trials", trials}}).dump();
   }
   void TearDown() override {
     if (!HasFailure()) fs::remove_all(dir_);
@@ -381,6 +389,198 @@ TEST_F(Dataset, ExecDriverThatNeverSaysHelloIsRefusedAtStart) {
   } catch (const std::invalid_argument& e) {
     EXPECT_NE(std::string(e.what()).find("protocol 99"), std::string::npos) << e.what();
   }
+}
+
+// Issue 28: what replay serves is what was recorded. Each tampering is
+// refused, at start (the dataset's shape) or when the trial is served (its
+// stream), with the reason.
+TEST_F(Dataset, ReplayRefusesTamperedDatasets) {
+  int refused = 0;
+  const auto expect_start_refused = [&](const std::string& why, const std::string& dir) {
+    try {
+      MakeReplayBackend(dir);
+      ADD_FAILURE() << "accepted: " << why;
+    } catch (const std::invalid_argument& e) {
+      EXPECT_NE(std::string(e.what()).find(why), std::string::npos) << e.what();
+      ++refused;
+    }
+  };
+  const auto copy = [&](const std::string& name) {
+    const std::string to = dir_ + "/" + name;
+    fs::create_directories(to);
+    fs::copy(dir_ + "/streams", to + "/streams", fs::copy_options::recursive);
+    fs::copy_file(dir_ + "/scenes.jsonl", to + "/scenes.jsonl");
+    fs::copy_file(dir_ + "/manifest.json", to + "/manifest.json");
+    return to;
+  };
+  {  // trial 2's line says trial 1: trial 2's scene would be served trial 1's data
+    const std::string d = copy("dup");
+    std::ifstream in(d + "/scenes.jsonl");
+    std::string a, b;
+    std::getline(in, a);
+    std::getline(in, b);
+    in.close();
+    json jb = json::parse(b);
+    jb["trial_id"] = 1;
+    std::ofstream(d + "/scenes.jsonl") << a << "\n" << jb.dump() << "\n";
+    expect_start_refused("trial 1 again", d);
+  }
+  {  // a stream that is a link to a file elsewhere
+    const std::string d = copy("link");
+    fs::copy_file(d + "/streams/2_true.jsonl", dir_ + "/elsewhere.jsonl");
+    fs::remove(d + "/streams/2_true.jsonl");
+    fs::create_symlink(dir_ + "/elsewhere.jsonl", d + "/streams/2_true.jsonl");
+    expect_start_refused("symbolic link", d);
+  }
+  {  // the manifest points a stream outside the dataset
+    const std::string d = copy("outside");
+    json m = json::parse(std::ifstream(d + "/manifest.json"));
+    m["trials"][1]["true_file"] = "../elsewhere.jsonl";
+    std::ofstream(d + "/manifest.json") << m.dump();
+    expect_start_refused("leads outside the dataset", d);
+  }
+  {  // a trial listed twice in the manifest
+    const std::string d = copy("twice");
+    json m = json::parse(std::ifstream(d + "/manifest.json"));
+    m["trials"][1]["trial_id"] = 1;
+    std::ofstream(d + "/manifest.json") << m.dump();
+    expect_start_refused("listed twice", d);
+  }
+  const auto expect_serve_refused = [&](const std::string& why, const std::string& dir,
+                                        const std::function<void()>& after_start = nullptr) {
+    auto replay = MakeReplayBackend(dir);
+    if (after_start) after_start();
+    const Run run = RunTrial(*replay, ShortScene(12));
+    ASSERT_EQ(run.refused, "");
+    EXPECT_FALSE(run.outcome.ok) << why;
+    EXPECT_NE(run.outcome.reason.find(why), std::string::npos) << run.outcome.reason;
+    refused += !run.outcome.ok;
+  };
+  const auto rewrite = [](const std::string& path, const std::function<void(json&, int)>& edit,
+                          int keep_rows) {
+    std::ifstream in(path);
+    std::vector<json> rows;
+    for (std::string line; std::getline(in, line);) rows.push_back(json::parse(line));
+    in.close();
+    std::ofstream out(path);
+    for (int i = 0; i < static_cast<int>(rows.size()) && i < keep_rows; ++i) {
+      edit(rows[static_cast<size_t>(i)], i);
+      out << rows[static_cast<size_t>(i)].dump() << "\n";
+    }
+  };
+  {  // a contact mode of 7.5
+    const std::string d = copy("mode");
+    rewrite(
+        d + "/streams/2_true.jsonl",
+        [](json& r, int i) {
+          if (i == 3) r["left_mode"] = 7.5;
+        },
+        1 << 20);
+    expect_serve_refused("is no contact mode", d);
+  }
+  {  // the stream cut short (the manifest recorded more rows)
+    const std::string d = copy("cut");
+    rewrite(
+        d + "/streams/2_true.jsonl", [](json&, int) {}, 10);
+    expect_serve_refused("rows, not the " + std::to_string(samples_), d);
+  }
+  {  // the object moved 5 cm after the cell verified the dataset
+    const std::string d = copy("moved");
+    expect_serve_refused("changed since the cell verified", d, [&] {
+      std::this_thread::sleep_for(std::chrono::milliseconds(20));  // a new mtime
+      rewrite(
+          d + "/streams/2_true.jsonl", [](json& r, int) { r["x"] = r["x"].get<double>() + 0.05; },
+          1 << 20);
+    });
+  }
+  std::printf("replay: %d of 7 tampered datasets refused\n", refused);
+  // The untouched dataset still serves.
+  auto replay = MakeReplayBackend(dir_);
+  EXPECT_TRUE(RunTrial(*replay, ShortScene(12)).outcome.ok);
+}
+
+// A stream longer than its scene (a 0.1 s push reported as 100 s) is not a
+// recording of that push: the cell's check stops it at the first sample past
+// the scene's end; one that ends early is refused when it ends.
+TEST(StreamLength, StreamsThatDoNotMatchTheSceneAreRefused) {
+  const auto scene = mechanics::ParseScene(ShortScene());
+  auto sample = [](double t) {
+    mechanics::TrajectorySample s;
+    s.t = t;
+    s.contacts.resize(3);
+    return s;
+  };
+  std::vector<mechanics::TrajectorySample> before;
+  for (int k = 0; k <= 25; ++k) {
+    ASSERT_EQ(CheckTrueSample(sample(0.004 * k), before, scene), "") << k;
+    before.push_back(sample(0.004 * k));
+  }
+  EXPECT_NE(CheckTrueSample(sample(0.2), before, scene).find("past the scene's duration"),
+            std::string::npos);
+  EXPECT_NE(CheckTrueSample(sample(100.0), before, scene).find("past the scene's duration"),
+            std::string::npos);
+}
+
+// Exec drivers: 1e999 is named for what it is; a driver that keeps streaming
+// past the deadline is not "hung"; its stderr reaches the log capped.
+TEST_F(Dataset, ExecDriverOutputsAreNamedAndItsStderrIsCapped) {
+  const std::string script = dir_ + "/driver.py";
+  std::ofstream(script) << R"PY(
+import json, os, sys
+def send(m):
+    sys.stdout.write(json.dumps(m) + "\n"); sys.stdout.flush()
+send({"type": "hello", "protocol": 1, "name": "t", "truth": "robot",
+      "contact_types": ["point", "line", "patch"]})
+marker = sys.argv[1]
+for line in sys.stdin:
+    m = json.loads(line)
+    if m["type"] == "prepare":
+        send({"type": "ready"})
+    elif m["type"] == "execute":
+        sys.stderr.write(("x" * 999 + "\n") * 4000)   # 4 MB of stderr
+        sys.stderr.flush()
+        if not os.path.exists(marker):   # the first trial (the driver restarts after it)
+            open(marker, "w").close()
+            sys.stdout.write('{"type": "sample", "t": 1e999}\n'); sys.stdout.flush()
+        else:
+            k = 0
+            while True:   # streams, never says done
+                send({"type": "log", "text": "sample %d" % k}); k += 1
+    elif m["type"] == "shutdown":
+        break
+)PY";
+  ExecBackendOptions o;
+  o.command = "python3 " + script + " " + dir_ + "/first-done";
+  o.log_path = dir_ + "/driver.log";
+  o.reply_timeout_s = 30;
+  auto backend = MakeExecBackend(o);
+  const auto scene = mechanics::ParseScene(ShortScene());
+  TrialContext trial;
+  trial.scene_json = ShortScene();
+  trial.deadline = std::chrono::steady_clock::now() + std::chrono::seconds(20);
+  ASSERT_EQ(backend->Prepare(scene, trial), "");
+  auto out =
+      backend->Execute(scene, trial, [](const mechanics::TrajectorySample&) { return true; });
+  EXPECT_FALSE(out.ok);
+  EXPECT_NE(out.reason.find("out of range"), std::string::npos) << out.reason;
+  EXPECT_EQ(out.reason.find("not JSON"), std::string::npos) << out.reason;
+
+  trial.deadline = std::chrono::steady_clock::now() + std::chrono::seconds(3);
+  ASSERT_EQ(backend->Prepare(scene, trial), "");
+  trial.deadline = std::chrono::steady_clock::now() + std::chrono::milliseconds(1500);
+  out = backend->Execute(scene, trial, [](const mechanics::TrajectorySample&) { return true; });
+  EXPECT_FALSE(out.ok);
+  EXPECT_NE(out.reason.find("overran the phase's deadline: still sending"), std::string::npos)
+      << out.reason;
+  EXPECT_EQ(out.reason.find("hung"), std::string::npos) << out.reason;
+  backend.reset();
+  // 8 MB written on stderr over two trials; the log holds at most 64 KiB a phase.
+  const auto bytes = fs::file_size(dir_ + "/driver.log");
+  EXPECT_LT(bytes, 3u * (64u << 10)) << bytes;
+  EXPECT_GT(bytes, 32u << 10) << bytes;
+  std::ifstream log(dir_ + "/driver.log");
+  const std::string text((std::istreambuf_iterator<char>(log)), std::istreambuf_iterator<char>());
+  EXPECT_NE(text.find("the rest of it is dropped"), std::string::npos);
 }
 
 TEST(ExecProtocol, SamplesRoundTrip) {

@@ -172,6 +172,16 @@ TEST_F(SecureDomain, AWatcherReadsButCannotCommand) {
     dds::Participant cell_identity(Named(domain, "arena.test-cell", Secure(lab_ + "/c2")));
     EXPECT_THROW(dds::Writer<msg::TrialCommand> w(cell_identity), dds::DdsError);
   }
+  // Issue 28: the refusal names the identity's role and the one that may,
+  // not Fast DDS's bare "create_datawriter(TrialCommand) failed".
+  try {
+    dds::Writer<msg::TrialCommand> w(watcher);
+    ADD_FAILURE() << "a watcher identity wrote commands";
+  } catch (const dds::SecurityError& e) {
+    const std::string what = e.what();
+    EXPECT_NE(what.find("role 'watcher' may not publish TrialCommand"), std::string::npos) << what;
+    EXPECT_NE(what.find("'service' identity may"), std::string::npos) << what;
+  }
   dds::Reader<msg::CellAnnounce> announcements(watcher);
   dds::Reader<msg::TrialStatus> statuses(watcher);
   dds::Reader<msg::GroundTruth> truth(watcher);

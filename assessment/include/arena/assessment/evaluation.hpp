@@ -235,12 +235,22 @@ struct EvaluationOptions {
   // (jobs done, jobs failed, jobs total); a job is one (trial, setting).
   std::function<void(long, long, long)> progress;
   const std::atomic<bool>* cancel = nullptr;  // set: stop early, store nothing
+  // The finished run's write found the store locked by another process: it
+  // waits and retries (db::RetryWhileBusy) until the lock is free, `cancel`
+  // is set, or this returns false; (seconds waited, SQLite's message).
+  std::function<bool(double, const std::string&)> on_store_busy;
 };
 
 struct EvaluationRun {
   std::int64_t evaluation_id = 0;  // 0 when cancelled (nothing stored)
   bool cancelled = false;
   EvaluationReport report;
+  // Set when the run finished but the store refused its write (locked past
+  // the caller's patience, full, read-only, ...): the report is still here
+  // for the caller to keep (`arena evaluate` writes it to a file).
+  std::string not_stored;
+  db::StoreError::Kind not_stored_kind = db::StoreError::Kind::kIo;
+  std::string settings_json;  // the grid as it would be stored
 };
 
 // The truth of a campaign's trials, from the backend and kind of truth each
@@ -252,7 +262,8 @@ TruthInfo TruthOf(const db::Store& store, std::int64_t campaign_id);
 // predictor's grid on `threads` worker threads (each with its own read-only
 // connection to store.path()), stores the run (Store::RecordEvaluation) and
 // returns it.
-// @throws std::invalid_argument for a bad grid or an unknown predictor;
+// @throws std::invalid_argument for a bad grid, an unknown predictor or a
+//   campaign without done trials (nothing to evaluate: nothing is stored);
 //   db::StoreError for an unknown campaign or a store failure.
 EvaluationRun EvaluateCampaign(db::Store& store, std::int64_t campaign_id,
                                const EvaluationOptions& options);

@@ -163,6 +163,13 @@ struct StoreOptions {
   // Page size of a new file (512..65536, a power of two); an existing file
   // keeps its own. 8192: see db/README.md, "Pragmas".
   int new_file_page_size = 8192;
+  // A read-write open first runs SQLite's quick check (PRAGMA quick_check:
+  // every page and record, not the index contents) for up to this many
+  // seconds and refuses a corrupt file with kCorrupt before writing anything.
+  // A larger store than it can check in time opens with the check incomplete
+  // (Store::open_check()); `arena serve` finishes it in the background
+  // (db/README.md, "Integrity"). <= 0: no check (benchmarks only).
+  double open_check_budget_s = 10.0;
   // Seconds since the Unix epoch; tests inject a clock. Default: system clock.
   std::function<double()> clock;
 };
@@ -503,6 +510,20 @@ class Store {
   double Now() const;
   // "ok" or SQLite's list of problems (PRAGMA integrity_check).
   std::string IntegrityCheck() const;
+  // PRAGMA quick_check for up to budget_s seconds (<= 0: no limit; another
+  // thread's Interrupt() also stops it).
+  struct QuickCheckResult {
+    bool complete = false;  // false: the budget ran out (or interrupted) first
+    std::string problems;   // "" when complete and the file is sound
+    double seconds = 0;
+  };
+  QuickCheckResult QuickCheck(double budget_s) const;
+  // What the read-write open's check found (complete = false when it ran out
+  // of StoreOptions::open_check_budget_s, or was skipped).
+  const QuickCheckResult& open_check() const;
+  // Stops this connection's running statement (SQLITE_INTERRUPT); the one
+  // call that may come from another thread.
+  void Interrupt() const;
   // The state machine's invariants over the whole file (e.g. a trial at or
   // past executed has a complete stream of its attempt; done has a
   // prediction; the last audit row of each trial matches its state).
@@ -723,5 +744,14 @@ class Store {
   std::unique_ptr<Impl> impl_;
   friend class Ingest;
 };
+
+// Runs `write` (one store write) until it does not fail with kBusy: a long
+// computation (an evaluation, a calibration) that ends while another process
+// holds the write lock waits for it instead of discarding its result.
+// Between tries (0.1 s, doubling to 2 s) on_wait(seconds waited so far,
+// SQLite's message) is called; it returns false to give up, and then the
+// last kBusy is rethrown. Any other error is thrown at once.
+void RetryWhileBusy(const std::function<void()>& write,
+                    const std::function<bool(double, const std::string&)>& on_wait);
 
 }  // namespace arena::db

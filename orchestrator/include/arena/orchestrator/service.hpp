@@ -72,6 +72,11 @@ struct ServiceOptions {
   // so that a long foreign lock never stalls the loop that renews the cells'
   // claims (their lease is claim_lease_s) and reads their statuses.
   int store_busy_timeout_ms = 250;
+  // While serving, a second connection runs the store's quick check
+  // (PRAGMA quick_check) this often; damage found stops the service with
+  // kCorrupt (exit 3) naming it. The open's own check is bounded in time
+  // (db::StoreOptions::open_check_budget_s); this one finishes the file.
+  double integrity_check_period_s = 300.0;
 };
 
 // What the service has done since it started (for `arena run`'s summary and tests).

@@ -115,6 +115,12 @@ struct IdentityFiles {
   std::string ca_cert, governance, cert, key, permissions;
 };
 
+// Why an identity may not have a DataWriter (publish) or DataReader of
+// `topic`: the role its grant names, and the roles that may ("--security
+// lab/w: this identity's role 'watcher' may not publish TrialCommand; a
+// 'service' identity may (arena certs issue LAB --role service --name N)").
+std::string DeniedEndpoint(const std::string& identity_dir, const std::string& topic, bool publish);
+
 // Checks an identity directory (invariant 4). @throws SecurityError naming
 // the file at fault.
 IdentityFiles CheckIdentityDir(const std::string& dir);
