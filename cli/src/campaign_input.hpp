@@ -19,10 +19,27 @@ inline orchestrator::Campaign LoadValidCampaign(const std::string& path) {
   } catch (const orchestrator::CampaignError& e) {
     throw CommandError(kExitBadInput, path + ": " + e.what());
   }
+  executors::DefectProfile profile;
   try {
-    executors::ParseDefectProfile(campaign.defects_json);
+    profile = executors::ParseDefectProfile(campaign.defects_json);
   } catch (const executors::DefectError& e) {
     throw CommandError(kExitBadInput, path + ": defects." + e.what());
+  }
+  // A campaign no cell can run (a push out of the workspace or above the
+  // pusher's speed limit that its own defect profile sets) is refused now,
+  // not run to 100 % failure (issue 26). Adaptive campaigns choose their
+  // points later; their corners are checked as scenes by ParseCampaign.
+  if (!campaign.adaptive) {
+    for (std::int64_t condition = 0; condition < campaign.conditions; ++condition) {
+      const auto trial = orchestrator::PlanTrial(campaign, condition * campaign.replicates);
+      if (const std::string why = executors::CheckCapabilities(profile, trial.scene);
+          !why.empty()) {
+        throw CommandError(kExitBadInput,
+                           path + ": condition " + std::to_string(condition) + " " +
+                               trial.parameters_json +
+                               " cannot run within the campaign's defect profile: " + why);
+      }
+    }
   }
   return campaign;
 }

@@ -17,8 +17,11 @@
 #include "arena/orchestrator/submit.hpp"
 #include "campaign_input.hpp"
 #include "commands.hpp"
+#include "deadline_report.hpp"
+#include "failure_reasons.hpp"
 #include "progress.hpp"
 #include "signals.hpp"
+#include "status_cells.hpp"
 #include "store_errors.hpp"
 
 namespace arena::cli {
@@ -132,19 +135,26 @@ int List(const std::string& db_path, bool as_json) {
   return kExitOk;
 }
 
-int Status(const std::string& db_path, std::int64_t only, bool as_json) {
+int Status(const std::string& db_path, std::int64_t only, bool as_json, bool all_cells) {
   auto store = OpenStore(db_path, true);
   db::StatusSummary s;
   std::optional<db::ServiceRecord> service;
   std::string no_service;
+  std::vector<CellActivity> activity;
   try {
     s = store->Status();
     service = store->LatestService();
     no_service = NoServiceWarning(*store, db_path);
+    activity = ReadCellActivity(*store, s.cells);
   } catch (const db::StoreError& e) {
     throw StoreCommandError(e);
   }
-  if (!no_service.empty()) std::fprintf(stderr, "warning: %s\n", no_service.c_str());
+  // The warning says trials wait: only when some do (an active campaign with
+  // trials not yet finished), not on a store whose campaigns are all done.
+  std::int64_t waiting = 0;
+  for (const auto& c : s.campaigns)
+    if (c.state == db::CampaignState::kActive) waiting += c.pending + c.running;
+  if (!no_service.empty() && waiting > 0) std::fprintf(stderr, "warning: %s\n", no_service.c_str());
   if (only > 0) {
     std::erase_if(s.campaigns, [&](const db::CampaignStatus& c) { return c.id != only; });
     if (s.campaigns.empty())
@@ -176,15 +186,27 @@ int Status(const std::string& db_path, std::int64_t only, bool as_json) {
       j["truth"] = nlohmann::json::array();
       for (const auto& t : store->CampaignTruths(c.id))
         j["truth"].push_back({{"truth", t.truth}, {"backend", t.backend}, {"trials", t.trials}});
+      j["failures"] = FailuresJson(CampaignFailures(*store, c.id));
+      if (const auto d = CampaignDeadlines(*store, c.id); d.runs > 0)
+        j["closed_loop"] = DeadlinesJson(d);
       out["campaigns"].push_back(j);
     }
-    for (const auto& c : s.cells)
-      out["cells"].push_back({{"id", c.id},
-                              {"state", db::ToString(c.state)},
-                              {"last_seen", IsoTime(c.last_seen)},
-                              {"consecutive_failures", c.consecutive_failures},
-                              {"quarantine_reason", c.quarantine_reason},
-                              {"serving", c.serving}});
+    // JSON lists every cell (scripts filter); the text view folds old gone ones.
+    for (size_t k = 0; k < s.cells.size(); ++k) {
+      const auto& c = s.cells[k];
+      const auto& a = activity[k];
+      out["cells"].push_back(
+          {{"id", c.id},
+           {"state", db::ToString(c.state)},
+           {"last_seen", IsoTime(c.last_seen)},
+           {"consecutive_failures", c.consecutive_failures},
+           {"quarantine_reason", c.quarantine_reason},
+           {"serving", c.serving},
+           {"backend", a.backend},
+           {"phase", a.phase},
+           {"trial", a.trial_id ? nlohmann::json(a.trial_id) : nlohmann::json()},
+           {"in_phase_s", a.trial_id ? nlohmann::json(a.in_phase_s) : nlohmann::json()}});
+    }
     out["service"] = nullptr;
     if (service) {
       out["service"] = {{"session", service->session},
@@ -225,6 +247,10 @@ int Status(const std::string& db_path, std::int64_t only, bool as_json) {
                       ? ": the observed streams are the truth (no separate true stream)"
                       : "");
     }
+    const std::string failures = FormatFailures(CampaignFailures(*store, c.id), "      ") +
+                                 FormatDeadlines(CampaignDeadlines(*store, c.id), "      ");
+    if (!failures.empty())
+      std::printf("      campaign %lld:\n%s", static_cast<long long>(c.id), failures.c_str());
   }
   bool header = false;
   for (const auto& c : s.campaigns) {
@@ -247,11 +273,7 @@ int Status(const std::string& db_path, std::int64_t only, bool as_json) {
   } else {
     std::printf("\nservice: none has run on this store\n");
   }
-  std::printf("\n%-16s %-12s %-21s %s\n", "cell", "health", "last seen", "failures in a row");
-  for (const auto& c : s.cells)
-    std::printf("%-16s %-12s %-21s %d%s%s\n", c.id.c_str(), db::ToString(c.state),
-                IsoTime(c.last_seen).c_str(), c.consecutive_failures,
-                c.quarantine_reason.empty() ? "" : "  ", c.quarantine_reason.c_str());
+  std::fputs(FormatCellTable(s.cells, activity, store->Now(), all_cells).c_str(), stdout);
   for (const auto& c : s.cells)
     if (!c.serving.empty()) std::printf("cell %s is %s\n", c.id.c_str(), c.serving.c_str());
   if (!s.drift.empty()) {
@@ -318,6 +340,7 @@ void AddCampaignCommands(CLI::App& app, Action* action) {
       std::string db;
       std::int64_t id = 0;
       bool json = false;
+      bool all = false;
     };
     auto o = std::make_shared<O>();
     auto* cmd =
@@ -328,13 +351,15 @@ void AddCampaignCommands(CLI::App& app, Action* action) {
     auto* id = cmd->add_option("id", o->id, "Only this campaign");
     cmd->add_option("--db", o->db, "SQLite store")->required();
     cmd->add_flag("--json", o->json, "JSON for scripts");
+    cmd->add_flag("--all", o->all,
+                  "List every cell, also those gone for more than a day (otherwise counted)");
     cmd->callback([o, id, action] {
       const bool given = id->count() > 0;
       *action = [o, given] {
         if (given && o->id < 1)
           throw CommandError(kExitBadInput, "id: must be a campaign id (>= 1), got " +
                                                 std::to_string(o->id) + " (see `arena list`)");
-        return Status(o->db, o->id, o->json);
+        return Status(o->db, o->id, o->json, o->all);
       };
     });
   }

@@ -23,6 +23,7 @@
 #include "result_file.hpp"
 #include "signals.hpp"
 #include "store_errors.hpp"
+#include "truth_relation.hpp"
 
 namespace arena::cli {
 namespace {
@@ -278,7 +279,12 @@ int RunEvaluate(const EvaluateOptions& o) {
     std::fprintf(stderr, "evaluate: interrupted; nothing stored\n");
     return kExitInterrupted;
   }
+  // Predictors whose engine made the truth: self-consistency, not accuracy.
+  std::vector<std::string> self_consistent;
+  for (const auto& p : run.report.predictors)
+    if (SelfConsistent(p, run.report.truth.source)) self_consistent.push_back(p);
   nlohmann::json j = assessment::ToJson(run.report);
+  j["truth"]["self_consistency_predictors"] = self_consistent;
   j["evaluation_id"] = run.evaluation_id;
   // "truth" is the report's object (source, independent, statement); the
   // per-backend trial counts sit in it.
@@ -317,6 +323,11 @@ int RunEvaluate(const EvaluateOptions& o) {
                         "on them"
                       : "");
     }
+    for (const auto& p : self_consistent)
+      std::printf(
+          "predictor %s: the truth's own engine (%s backend): its errors are self-consistency, "
+          "not accuracy\n",
+          p.c_str(), EngineBackend(p).c_str());
   }
   return kExitOk;
 }

@@ -10,6 +10,8 @@
 //                predicted (PlotTrial, plot_trial.hpp)
 //   --calibration ID  a calibration's loss profiles (CalibrationProfileChart,
 //                plot_profile.cpp)
+//   --scene FILE (or TRIAL --scene) the set-up a scene describes, in two
+//                views with a scale bar (SceneSvg, plot_scene.hpp)
 #include <algorithm>
 #include <cmath>
 #include <fstream>
@@ -23,18 +25,30 @@
 #include <nlohmann/json.hpp>
 
 #include "arena/db/store.hpp"
+#include "arena/mechanics/scene_json.hpp"
 #include "commands.hpp"
 #include "output_guard.hpp"
 #include "plot_charts.hpp"
 #include "plot_map_data.hpp"
+#include "plot_scene.hpp"
 #include "plot_trial.hpp"
 #include "store_errors.hpp"
+#include "truth_relation.hpp"
 
 namespace arena::cli {
 
 namespace {
 
 const char* const kPredictorColors[] = {"#1f77b4", "#9467bd", "#8c564b", "#17becf", "#bcbd22"};
+
+// The unit a person reads a metric in, and the factor from its SI value:
+// one unit per quantity in human output (mm, degrees, N).
+std::pair<std::string, double> HumanUnit(const std::string& metric) {
+  if (metric.rfind("angle", 0) == 0) return {"deg", 180 / M_PI};
+  if (metric.rfind("force", 0) == 0) return {"N", 1};
+  if (metric.rfind("mode", 0) == 0) return {"fraction", 1};
+  return {"mm", 1e3};
+}
 
 std::string UnitOf(const std::string& metric) {
   if (metric.rfind("angle", 0) == 0) return "rad";
@@ -51,10 +65,17 @@ std::optional<double> Cost(const nlohmann::json& s, bool per_sim_s) {
   return s[key]["median"].get<double>();
 }
 
+// The time per trial's p95 (the time budget's metric).
+std::optional<double> Cost95(const nlohmann::json& s) {
+  if (!s.contains("time_s") || !s["time_s"].is_object() || !s["time_s"]["p95"].is_number())
+    return {};
+  return s["time_s"]["p95"].get<double>();
+}
+
 // The error-against-duration panel (reports since duration_curves exist).
 Panel DurationPanel(const nlohmann::json& report) {
   Panel panel{"final position error against ground-truth duration (how fast the error grows)",
-              "final position error p95 (m)",
+              "final position error p95 (mm)",
               true,
               {}};
   panel.own_x = true;
@@ -70,7 +91,7 @@ Panel DurationPanel(const nlohmann::json& report) {
     s.connect = true;
     for (const auto& p : c["points"]) {
       s.x.push_back(p.value("duration_s", 0.0));
-      s.y.push_back(p["position_error_m"].value("p95", 0.0));
+      s.y.push_back(p["position_error_m"].value("p95", 0.0) * 1e3);
       s.labels.push_back(std::to_string(p.value("trials", 0)) + " trials");
     }
     panel.series.push_back(std::move(s));
@@ -89,19 +110,41 @@ Chart TradeoffChart(const nlohmann::json& report) {
       report.contains("recommended") && report["recommended"].is_string()
           ? report["recommended"].get<std::string>()
           : "";
-  const bool per_sim_s = std::any_of(report["settings"].begin(), report["settings"].end(),
-                                     [](const nlohmann::json& s) { return Cost(s, true); });
+  const auto unit = HumanUnit(metric);
+  // A time budget is on the time per trial (p95): then that is the x axis,
+  // so the budget line, the front and the recommendation share it.
+  std::optional<double> time_budget, error_budget;
+  std::string time_budget_text, error_budget_text;
+  if (report.contains("budgets") && report["budgets"].is_array()) {
+    for (const auto& b : report["budgets"]) {
+      if (!b.is_object() || !b.contains("limit") || !b["limit"].is_number()) continue;
+      const std::string m = b.value("metric", "");
+      if (m == "time_p95") {
+        time_budget = b["limit"].get<double>();
+        time_budget_text = b.value("text", "");
+      } else if (m == metric) {
+        error_budget = b["limit"].get<double>() * HumanUnit(metric).second;
+        error_budget_text = b.value("text", "");
+      }
+    }
+  }
+  const bool per_sim_s =
+      !time_budget && std::any_of(report["settings"].begin(), report["settings"].end(),
+                                  [](const nlohmann::json& s) { return Cost(s, true); });
+  const std::string truth_source = report.contains("truth") && report["truth"].is_object()
+                                       ? report["truth"].value("source", "")
+                                       : "";
   // One curve per predictor through its settings, coarse to fine.
   std::map<std::string, std::vector<std::tuple<double, double, double, std::string>>> curves;
   std::vector<std::string> order;
   Series failed{"failed settings", {}, {}, "#d62728", true};
   Series recommend{"recommended", {}, {}, "#2ca02c", true};
-  std::vector<std::pair<double, double>> front;
   std::vector<std::pair<double, std::string>> failed_points;
+  std::vector<std::tuple<double, double, std::string>> plotted;  // cost, error, key
   double max_error = 0;
   int hidden = 0;
   for (const auto& s : report["settings"]) {
-    const auto cost = Cost(s, per_sim_s);
+    const auto cost = time_budget ? Cost95(s) : Cost(s, per_sim_s);
     const std::string predictor = s.value("predictor", "arena");
     const std::string key = s.value("model_key", "");
     if (std::find(order.begin(), order.end(), predictor) == order.end()) order.push_back(predictor);
@@ -117,21 +160,22 @@ Chart TradeoffChart(const nlohmann::json& report) {
       ++hidden;
       continue;
     }
-    const double err = s["primary_error"].get<double>();
+    const double err = s["primary_error"].get<double>() * unit.second;
     if (!(err > 0) || !(*cost > 0)) {
       ++hidden;
       continue;
     }
     max_error = std::max(max_error, err);
     curves[predictor].emplace_back(-s.value("step_s", 0.0), *cost, err, key);
-    if (s.value("pareto", false)) front.emplace_back(*cost, err);
+    plotted.emplace_back(*cost, err, key);
     if (key == recommended) {
       recommend.x.push_back(*cost);
       recommend.y.push_back(err);
+      recommend.labels.push_back("recommended: " + key);
     }
   }
   Panel panel{"prediction error against predictor cost, one curve per predictor",
-              metric + " (" + UnitOf(metric) + ")",
+              metric + " (" + unit.first + ")",
               true,
               {}};
   // Per predictor: every setting as a labelled marker, and its curve: the
@@ -139,7 +183,14 @@ Chart TradeoffChart(const nlohmann::json& report) {
   std::size_t color = 0;
   std::vector<Series> envelopes;
   for (const auto& name : order) {
-    Series c{name, {}, {}, kPredictorColors[color % 5], true};
+    // The truth's own engine predicting it measures self-consistency.
+    Series c{SelfConsistent(name, truth_source)
+                 ? name + " (self-consistency: the truth's own engine)"
+                 : name,
+             {},
+             {},
+             kPredictorColors[color % 5],
+             true};
     auto points = curves[name];
     std::stable_sort(points.begin(), points.end(),
                      [](const auto& a, const auto& b) { return std::get<1>(a) < std::get<1>(b); });
@@ -163,23 +214,27 @@ Chart TradeoffChart(const nlohmann::json& report) {
     failed.y.push_back(max_error > 0 ? 3 * max_error : 1);
     failed.labels.push_back(label);
   }
-  std::sort(front.begin(), front.end());
+  // The front on the axis drawn: the settings no other beats on both cost and error.
+  std::sort(plotted.begin(), plotted.end());
   Series pareto{"pareto front", {}, {}, "#ff7f0e"};
   pareto.dashed = true;
-  for (const auto& [x, y] : front) {
-    pareto.x.push_back(x);
-    pareto.y.push_back(y);
+  double best = std::numeric_limits<double>::infinity();
+  for (const auto& [x, y, key] : plotted) {
+    if (y < best) {
+      best = y;
+      pareto.x.push_back(x);
+      pareto.y.push_back(y);
+    }
   }
   panel.series.push_back(failed);
   panel.series.push_back(pareto);
-  panel.series.push_back(recommend);
   for (auto& e : envelopes) panel.series.push_back(std::move(e));
   // The noise floor: the error no deterministic predictor can beat.
   const auto& floor = report.contains("noise_floor") ? report["noise_floor"] : nlohmann::json();
   if (floor.is_object() && UnitOf(metric) == "m" && !panel.series.empty()) {
     // The median spread, as the table's floor multiples and the 1.5floor
     // budget use it ("within 1.5x the replicate spread on 95 % of trials").
-    const double f = floor["position_m"].value("median", 0.0);
+    const double f = floor["position_m"].value("median", 0.0) * unit.second;
     double lo = 0, hi = 0;
     for (const auto& se : panel.series)
       for (double x : se.x) {
@@ -192,18 +247,45 @@ Chart TradeoffChart(const nlohmann::json& report) {
       panel.series.push_back(line);
     }
   }
+  // The budget, as a line on the axis it limits.
+  double lo = 0, hi = 0, ylo = 0, yhi = 0;
+  for (const auto& se : panel.series)
+    for (size_t i = 0; i < se.x.size() && i < se.y.size(); ++i) {
+      lo = lo > 0 ? std::min(lo, se.x[i]) : se.x[i];
+      hi = std::max(hi, se.x[i]);
+      ylo = ylo > 0 ? std::min(ylo, se.y[i]) : se.y[i];
+      yhi = std::max(yhi, se.y[i]);
+    }
+  if (error_budget && *error_budget > 0 && lo > 0) {
+    Series line{"budget " + error_budget_text, {lo, hi}, {*error_budget, *error_budget}, "#2ca02c"};
+    line.dashed = true;
+    panel.series.push_back(line);
+  }
+  if (time_budget && *time_budget > 0 && ylo > 0) {
+    Series line{"budget " + time_budget_text, {*time_budget, *time_budget}, {ylo, yhi}, "#2ca02c"};
+    line.dashed = true;
+    panel.series.push_back(line);
+  }
+  // The recommendation last: drawn over every other point, a ring with its label.
+  recommend.marker_radius = 8;
+  recommend.hollow = true;
+  panel.series.push_back(recommend);
   Chart chart;
-  const std::string truth = report.contains("truth") && report["truth"].is_object()
-                                ? report["truth"].value("source", "")
-                                : "";
+  // Reports before the truth statement say nothing about it: claim nothing.
+  const bool independent = !report.contains("truth") || !report["truth"].is_object() ||
+                           report["truth"].value("independent", true);
+  const std::string truth =
+      truth_source.empty() ? ""
+                           : truth_source + (independent ? "" : ": self-consistency, not accuracy");
   chart.title =
       "campaign " + std::to_string(report.value("campaign_id", 0)) + ": " + metric + " vs cost (" +
       std::to_string(report.value("trials", 0)) + " trials" +
       (truth.empty() ? "" : ", truth: " + truth) +
       (hidden ? ", " + std::to_string(hidden) + " settings with zero or no error not shown" : "") +
       ")";
-  chart.x_label = per_sim_s ? "predictor wall time per simulated second (s/s)"
-                            : "median model time per trial (s)";
+  chart.x_label = time_budget ? "p95 predictor time per trial (s)"
+                  : per_sim_s ? "predictor wall time per simulated second (s/s)"
+                              : "median model time per trial (s)";
   chart.log_x = true;
   chart.panels = {panel};
   if (report.contains("duration_curves") && report["duration_curves"].is_array() &&
@@ -227,6 +309,8 @@ struct PlotOptions {
   std::vector<std::string> map;  // X, Y
   std::string metric;
   std::string out;
+  bool scene = false;      // --scene given: a picture of the set-up
+  std::string scene_file;  // its file; "" = the TRIAL's stored scene
 };
 
 void WriteFile(const std::string& path, const std::string& text) {
@@ -309,8 +393,50 @@ int PlotMap(const db::Store& store, const PlotOptions& o) {
   return kExitOk;
 }
 
+int PlotScene(const PlotOptions& o) {
+  if (o.tradeoff || o.calibration >= 0 || !o.map.empty())
+    throw CommandError(kExitBadInput,
+                       "plot: --scene is a plot of its own (no --tradeoff, --map, --calibration)");
+  mechanics::Scene scene;
+  std::string title;
+  if (!o.scene_file.empty()) {
+    if (o.trial >= 0)
+      throw CommandError(kExitBadInput,
+                         "plot --scene FILE: give a scene file or a TRIAL, not both");
+    try {
+      scene = mechanics::LoadSceneFile(o.scene_file);
+    } catch (const mechanics::SceneError& e) {
+      throw CommandError(kExitBadInput, o.scene_file + ": " + e.what());
+    }
+    title = o.scene_file;
+  } else {
+    if (o.trial < 0 || o.db_path.empty())
+      throw CommandError(kExitBadInput,
+                         "plot --scene: give a scene file (--scene FILE) or --db F TRIAL --scene");
+    try {
+      db::StoreOptions so;
+      so.read_only = true;
+      auto store = db::Store::Open(o.db_path, so);
+      const db::Trial t = store->GetTrial(o.trial);
+      scene = mechanics::ParseScene(t.scene_json);
+      title = "trial " + std::to_string(t.id) + " of campaign " + std::to_string(t.campaign_id) +
+              " (" + o.db_path + ")";
+    } catch (const db::StoreError& e) {
+      throw StoreCommandError(e);
+    } catch (const mechanics::SceneError& e) {
+      throw CommandError(kExitStore, "plot --scene: trial " + std::to_string(o.trial) +
+                                         " has an unreadable scene: " + e.what());
+    }
+  }
+  WriteFile(o.out, SceneSvg(scene, title));
+  return kExitOk;
+}
+
 int RunPlot(const PlotOptions& o) {
   RefuseToOverwriteStore(o.out, "--out", o.db_path);
+  if (o.scene) return PlotScene(o);
+  if (o.db_path.empty())
+    throw CommandError(kExitBadInput, "plot: --db is required (or --scene FILE)");
   if (!o.map.empty() && (o.tradeoff || o.trial >= 0)) {
     throw CommandError(kExitBadInput, "plot: --map is a plot of its own (no TRIAL, no --tradeoff)");
   }
@@ -346,7 +472,7 @@ void AddPlotCommand(CLI::App& app, Action* action) {
       "Draw charts from the store as SVG: a trial, the speed/accuracy trade, a map, or a "
       "calibration's loss profile");
   cmd->add_option("trial", o->trial, "Trial id (see `arena query`)")->check(CLI::NonNegativeNumber);
-  cmd->add_option("--db", o->db_path, "Store file (opened read-only)")->required();
+  cmd->add_option("--db", o->db_path, "Store file (opened read-only); not needed for --scene FILE");
   cmd->add_option("--out", o->out, "SVG file to write")->required();
   cmd->add_option("--campaign", o->campaign, "Campaign id")->check(CLI::NonNegativeNumber);
   cmd->add_flag(
@@ -365,6 +491,11 @@ void AddPlotCommand(CLI::App& app, Action* action) {
                   "A calibration's loss profile (arena calibrate): the training loss along each "
                   "fitted parameter, the fit, and what the data rule out")
       ->check(CLI::PositiveNumber);
+  auto* scene = cmd->add_option("--scene", o->scene_file,
+                                "A picture of the set-up: a scene file's (or, with no FILE, "
+                                "the TRIAL's) object, fingers, pusher and its push, in two views "
+                                "with a scale bar")
+                    ->expected(0, 1);
   cmd->footer(
       "Examples:\n"
       "  arena plot --db lab.db 12 --out trial12.svg\n"
@@ -372,10 +503,15 @@ void AddPlotCommand(CLI::App& app, Action* action) {
       "--out map.svg\n"
       "  arena plot --db lab.db --campaign 3 --tradeoff --out tradeoff.svg\n"
       "  arena plot --db lab.db --calibration 1 --out profile.svg\n"
+      "  arena plot --scene examples/scenes/canonical.json --out scene.svg\n"
+      "  arena plot --db lab.db 12 --scene --out scene12.svg\n"
       "A trial's prediction is re-run with the campaign's \"prediction\" settings, as `arena "
       "serve` ran it.\n"
       "View the SVG in a browser, or convert it: rsvg-convert trial12.svg -o trial12.png\n");
-  cmd->callback([o, action] { *action = [o] { return RunPlot(*o); }; });
+  cmd->callback([o, scene, action] {
+    o->scene = scene->count() > 0;
+    *action = [o] { return RunPlot(*o); };
+  });
 }
 
 }  // namespace arena::cli

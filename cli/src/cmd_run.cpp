@@ -28,6 +28,8 @@
 #include "campaign_input.hpp"
 #include "child_process.hpp"
 #include "commands.hpp"
+#include "deadline_report.hpp"
+#include "failure_reasons.hpp"
 #include "progress.hpp"
 #include "signals.hpp"
 #include "store_errors.hpp"
@@ -88,8 +90,9 @@ double Percentile(std::vector<double> v, double q) {
 }
 
 // overhead_s: arena's own time per clean trial on its cell (TrialTiming).
-void PrintSummary(const std::string& db_path, std::int64_t campaign_id, double wall_s,
-                  const std::vector<double>& overhead_s) {
+// @returns the number of failed trials (the exit code says whether there were any).
+std::int64_t PrintSummary(const std::string& db_path, std::int64_t campaign_id, double wall_s,
+                          const std::vector<double>& overhead_s) {
   db::StoreOptions ro;
   ro.read_only = true;
   auto store = db::Store::Open(db_path, ro);
@@ -142,11 +145,17 @@ void PrintSummary(const std::string& db_path, std::int64_t campaign_id, double w
               other ? (", " + std::to_string(other) + " unfinished").c_str() : "");
   std::printf("  time        %s wall, %.1f trials/min\n", FormatDuration(wall_s).c_str(),
               wall_s > 0 ? 60.0 * (done + failed) / wall_s : 0.0);
-  std::printf(
-      "  model error (median over %zu predictions): final position %.3g mm, final angle %.3g deg,\n"
-      "              contact force %.3g N RMS, contact-mode agreement %.1f %%\n",
-      pos_err.size(), Median(pos_err) * 1e3, Median(ang_err) * 180 / M_PI, Median(force_err),
-      100 * Median(mode));
+  if (pos_err.empty()) {
+    // No number rather than "nan mm": nothing was predicted and scored.
+    std::printf("  model error none: no trial was predicted and scored\n");
+  } else {
+    std::printf(
+        "  model error (median over %zu predictions): final position %.3g mm, final angle %.3g "
+        "deg,\n"
+        "              contact force %.3g N RMS, contact-mode agreement %.1f %%\n",
+        pos_err.size(), Median(pos_err) * 1e3, Median(ang_err) * 180 / M_PI, Median(force_err),
+        100 * Median(mode));
+  }
   if (!truth_line.empty()) {
     std::printf("  truth       model error is against %s\n", truth_line.c_str());
     if (self_consistency)
@@ -154,10 +163,11 @@ void PrintSummary(const std::string& db_path, std::int64_t campaign_id, double w
           "              (arena's model against itself at higher settings: run --backend mujoco "
           "for an independent truth)\n");
   }
-  std::printf("  predictor   %.3g ms median per trial%s\n", Median(pred_time) * 1e3,
-              prediction_failures
-                  ? (", " + std::to_string(prediction_failures) + " predictions failed").c_str()
-                  : "");
+  if (!pred_time.empty())
+    std::printf("  predictor   %.3g ms median per trial%s\n", Median(pred_time) * 1e3,
+                prediction_failures
+                    ? (", " + std::to_string(prediction_failures) + " predictions failed").c_str()
+                    : "");
   if (!overhead_s.empty()) {
     std::printf(
         "  orchestration %.2f ms median, %.2f ms p95 per trial (cell busy time minus its own "
@@ -165,8 +175,12 @@ void PrintSummary(const std::string& db_path, std::int64_t campaign_id, double w
         "              and reset time, %zu clean trials)\n",
         Median(overhead_s) * 1e3, Percentile(overhead_s, 0.95) * 1e3, overhead_s.size());
   }
+  // Every failure with its reason (the cell's, the driver's, the predictor's).
+  std::fputs(FormatFailures(CampaignFailures(*store, campaign_id), "  ").c_str(), stdout);
+  std::fputs(FormatDeadlines(CampaignDeadlines(*store, campaign_id), "  ").c_str(), stdout);
   std::printf("  store       %s  (arena status --db %s; arena query --db %s \"select ...\")\n",
               db_path.c_str(), db_path.c_str(), db_path.c_str());
+  return failed;
 }
 
 // The controller a closed-loop campaign's scenes name (variations never
@@ -339,9 +353,13 @@ int Run(RunOptions opt) {
   for (auto& controller : controllers) controller.Stop();
   spdlog::default_logger()->flush();
 
-  PrintSummary(opt.db_path, campaign_id, wall, overhead_s);
+  const std::int64_t failed = PrintSummary(opt.db_path, campaign_id, wall, overhead_s);
   if (!cells_failed.empty()) throw CommandError(kExitCommunication, cells_failed);
   if (signals.received()) return kExitInterrupted;
+  // README's exit codes: a campaign with failed trials is a failed command.
+  if (failed > 0)
+    throw CommandError(kExitFailure,
+                       std::to_string(failed) + " trials failed (their reasons are listed above)");
   return kExitOk;
 }
 

@@ -15,6 +15,7 @@
 #include "arena/mechanics/scene_json.hpp"
 #include "arena/mechanics/simulate.hpp"
 #include "commands.hpp"
+#include "deadline_report.hpp"
 #include "store_errors.hpp"
 
 namespace arena::cli {
@@ -289,6 +290,10 @@ Chart MakeTrialChart(const db::Store& store, std::int64_t trial_id, TrialPlotInf
       (gt.cell_id.empty() ? "" : ", cell " + gt.cell_id) + ")  prediction " +
       (inf.model_key.empty() ? "-" : inf.model_key) +
       (inf.prediction_status == "ok" ? "" : " " + inf.prediction_status + prediction_note);
+  // A closed-loop trial says how many control deadlines it missed.
+  if (scene.pusher && scene.pusher->controller) {
+    if (const auto run = store.GetClosedLoop(trial_id)) chart.title += "; " + DeadlineCaption(*run);
+  }
   chart.x_label = "time since execute started (s)";
   chart.panel_height = 150;
   const char* names[3] = {"x", "y", "z"};

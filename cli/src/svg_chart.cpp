@@ -6,6 +6,7 @@
 #include <cstdio>
 #include <limits>
 #include <sstream>
+#include <utility>
 
 namespace arena::cli {
 
@@ -128,6 +129,51 @@ std::vector<double> NiceTicks(double lo, double hi, int count) {
   return ticks;
 }
 
+namespace {
+
+// Point labels that do not overlap: each label goes to the first spot around
+// its point (right, left, above, below, then further out) whose box is free.
+class LabelPlacer {
+ public:
+  // @returns the text's baseline start (x, y) for a 9 px label of `chars`.
+  std::pair<double, double> Place(double x, double y, double r, size_t chars) {
+    const double w = 5.0 * static_cast<double>(chars) + 2, h = 10;
+    const double gap = r + 2;
+    // Candidate boxes (left, top) around the point.
+    std::vector<std::pair<double, double>> spots = {
+        {x + gap, y - gap - h}, {x + gap, y + gap},       {x - gap - w, y - gap - h},
+        {x - gap - w, y + gap}, {x - w / 2, y - gap - h}, {x - w / 2, y + gap}};
+    for (int k = 1; k <= 12; ++k) {
+      spots.emplace_back(x + gap, y - gap - h - k * (h + 1));
+      spots.emplace_back(x + gap, y + gap + k * (h + 1));
+      spots.emplace_back(x - gap - w, y - gap - h - k * (h + 1));
+      spots.emplace_back(x - gap - w, y + gap + k * (h + 1));
+    }
+    std::pair<double, double> chosen = spots.front();
+    for (const auto& s : spots) {
+      if (Free(s.first, s.second, w, h)) {
+        chosen = s;
+        break;
+      }
+    }
+    boxes_.push_back({chosen.first, chosen.second, w, h});
+    return {chosen.first, chosen.second + h - 2};
+  }
+
+ private:
+  struct Box {
+    double x, y, w, h;
+  };
+  bool Free(double x, double y, double w, double h) const {
+    for (const auto& b : boxes_)
+      if (x < b.x + b.w && b.x < x + w && y < b.y + b.h && b.y < y + h) return false;
+    return true;
+  }
+  std::vector<Box> boxes_;
+};
+
+}  // namespace
+
 std::string RenderSvg(const Chart& chart) {
   const int left = 80, right = 190, top = 58, gap = 60, bottom = 50;
   const int plot_w = chart.width - left - right;
@@ -214,6 +260,7 @@ std::string RenderSvg(const Chart& chart) {
         << ") rotate(-90)\" text-anchor=\"middle\">" << SvgEscape(panel.y_label) << "</text>\n";
 
     int legend_y = y0 + 12;
+    LabelPlacer placed;
     for (const auto& s : panel.series) {
       svg << "<g class=\"series\" id=\"p" << pi << '_' << Id(s.name) << "\" data-name=\""
           << SvgEscape(s.name) << "\">\n";
@@ -227,14 +274,17 @@ std::string RenderSvg(const Chart& chart) {
           }
           svg << "\"/>\n";
         }
-        const char* r = s.labels.empty() ? "1.8" : "3.5";
+        const double r = s.marker_radius > 0 ? s.marker_radius : (s.labels.empty() ? 1.8 : 3.5);
         for (size_t i = 0; i < s.x.size() && i < s.y.size(); ++i) {
           if (!xa.Usable(s.x[i]) || !ya.Usable(s.y[i])) continue;
           svg << "<circle cx=\"" << Num(px(s.x[i])) << "\" cy=\"" << Num(py(s.y[i])) << "\" r=\""
-              << r << "\" fill=\"" << s.color << "\"/>\n";
+              << Num(r) << "\" "
+              << (s.hollow ? "fill=\"none\" stroke-width=\"2.5\" stroke=\"" : "fill=\"") << s.color
+              << "\"/>\n";
           if (i < s.labels.size() && !s.labels[i].empty()) {
-            svg << "<text class=\"point-label\" x=\"" << Num(px(s.x[i]) + 5) << "\" y=\""
-                << Num(py(s.y[i]) - 5) << "\" font-size=\"9\" fill=\"" << s.color << "\">"
+            const auto at = placed.Place(px(s.x[i]), py(s.y[i]), r, s.labels[i].size());
+            svg << "<text class=\"point-label\" x=\"" << Num(at.first) << "\" y=\""
+                << Num(at.second) << "\" font-size=\"9\" fill=\"" << s.color << "\">"
                 << SvgEscape(s.labels[i]) << "</text>\n";
           }
         }

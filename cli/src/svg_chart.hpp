@@ -16,6 +16,8 @@ struct Series {
   bool dashed = false;
   bool connect = false;               // with markers: also a polyline through them
   std::vector<std::string> labels{};  // with markers: a text label per point (optional)
+  double marker_radius = 0;           // with markers: 0 = 3.5 labelled, 1.8 otherwise
+  bool hollow = false;                // with markers: a ring (drawn over what it marks)
 };
 
 struct Panel {
@@ -44,7 +46,8 @@ struct Chart {
 // The SVG document. Every series is a <g class="series" id="..."> with a
 // data-name attribute, so tests and scripts can find it; a point's label is a
 // <text class="point-label"> inside its series' group, and a panel with its
-// own x axis carries data-x-label.
+// own x axis carries data-x-label. Point labels of a panel never overlap one
+// another: each is placed at the first free spot around its point.
 std::string RenderSvg(const Chart& chart);
 
 // Text made safe for SVG/XML attributes and content (& < > ").

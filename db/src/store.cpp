@@ -1458,7 +1458,7 @@ StatusSummary Store::Status() const {
       "('dispatched','executed','resetting','reset_done','reset_failed','predicted')),"
       " SUM(t.state = 'done'), SUM(t.state = 'failed'), SUM(t.state = 'cancelled'),"
       " SUM(t.state IN ('done','failed') AND t.finished_at >= ?1),"
-      " MIN(t.dispatched_at)"
+      " MIN(t.dispatched_at), MAX(t.finished_at), SUM(t.state IN ('done','failed'))"
       " FROM campaigns c LEFT JOIN trials t ON t.campaign_id = c.id GROUP BY c.id ORDER BY c.id");
   s->Bind(1, now - kRateWindowS);
   while (s->Step()) {
@@ -1474,7 +1474,16 @@ StatusSummary Store::Status() const {
     c.failed = s->Int(8);
     c.cancelled = s->Int(9);
     const std::int64_t recent = s->Int(10);
-    if (!s->IsNull(11) && recent > 0) {
+    const bool finished = c.pending == 0 && c.running == 0 && c.state != CampaignState::kActive;
+    if (finished) {
+      // Frozen: the rate it ran at, from its first dispatch to its last
+      // finish, not one that decays as the clock moves on (issue 26).
+      const std::int64_t finished_trials = s->Int(13);
+      if (!s->IsNull(11) && !s->IsNull(12) && finished_trials > 0) {
+        const double span = s->Real(12) - s->Real(11);
+        if (span > 0) c.rate_per_hour = finished_trials * 3600.0 / span;
+      }
+    } else if (!s->IsNull(11) && recent > 0) {
       const double span = std::min(kRateWindowS, now - s->Real(11));
       if (span > 0) c.rate_per_hour = recent * 3600.0 / span;
     }

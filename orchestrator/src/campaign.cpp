@@ -279,7 +279,7 @@ Variation ReadVariation(const json& v, const std::string& path, const VariationI
 // ---------------------------------------------------------------------------
 // Applying a condition's values to the base scene.
 
-// SCENE.md tangent basis: t1 from the first of z, y, x with |n.axis| < 0.9.
+// docs/scene.md tangent basis: t1 from the first of z, y, x with |n.axis| < 0.9.
 Eigen::Vector3d FirstTangent(const Eigen::Vector3d& n) {
   for (const Eigen::Vector3d& a : {Eigen::Vector3d::UnitZ().eval(), Eigen::Vector3d::UnitY().eval(),
                                    Eigen::Vector3d::UnitX().eval()}) {
@@ -313,7 +313,7 @@ void ScaleContact(ContactSpec* c, const mechanics::Pose& pose, const Eigen::Vect
 }
 
 // Turns a contact into `type`; a new line lies along the contact's first
-// tangent (SCENE.md basis).
+// tangent (docs/scene.md basis).
 void ChangeType(ContactSpec* c, ContactType type) {
   if (c->type == type) return;
   c->type = type;
@@ -790,7 +790,7 @@ Campaign ParseCampaign(std::string_view json_text, const std::string& base_dir,
   if (!c.scenes.empty()) {
     // listed above
   } else if (!doc.contains("scene"))
-    throw CampaignError("scene", "is required (a SCENE.md scene or a path to one)");
+    throw CampaignError("scene", "is required (a scene, docs/scene.md, or a path to one)");
   if (c.scenes.empty()) try {
       if (doc["scene"].is_string()) {
         const std::filesystem::path path = dir / doc["scene"].get<std::string>();
@@ -1050,6 +1050,9 @@ Campaign ParseCampaign(std::string_view json_text, const std::string& base_dir,
     c.defects_json = d.dump();
   }
   c.source_json = doc.dump();
+
+  // A unit slip is blamed on the field written, before its consequences are.
+  CheckPlausibility(c);
 
   // Every condition must give a valid scene, for the cells and for the
   // predictor: refuse the campaign now rather than fail trial 9,000.

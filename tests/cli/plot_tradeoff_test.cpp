@@ -1,5 +1,7 @@
 // `arena plot --tradeoff`: the chart of an evaluation report parses as SVG
 // and carries the settings, the Pareto front and the recommendation.
+#include <cmath>
+#include <functional>
 #include <map>
 #include <string>
 #include <vector>
@@ -146,13 +148,16 @@ TEST(PlotTradeoff, OneLabelledCurvePerPredictorFailuresApartDurationPanel) {
   EXPECT_EQ(labels.at("arena"),
             (std::vector<std::string>{"g8_dt0.008", "g8_dt0.004", "g8_dt0.002"}));
   EXPECT_EQ(SeriesPoints(RenderSvg(chart)).at("arena curve"), 3);
-  EXPECT_EQ(labels.at("mujoco"), (std::vector<std::string>{"mujoco_ts0.001"}));
+  // MuJoCo predicting MuJoCo's trials is self-consistency (issue 26), and says so.
+  EXPECT_EQ(labels.at("mujoco (self-consistency: the truth's own engine)"),
+            (std::vector<std::string>{"mujoco_ts0.001"}));
+  EXPECT_EQ(labels.count("mujoco"), 0u);
   // The diverging setting is drawn apart, above every error, never at its 1e-9.
   ASSERT_EQ(labels.at("failed settings").size(), 1u);
   EXPECT_NE(labels.at("failed settings")[0].find("mujoco_ts0.004: 3 diverged"), std::string::npos);
   const auto& failed = chart.panels[0].series[2];
   ASSERT_EQ(failed.name, "failed settings");
-  EXPECT_GT(failed.y[0], 2e-3);
+  EXPECT_GT(failed.y[0], 2);  // mm
   // Log-log: x and y both on log axes; the floor is drawn.
   EXPECT_TRUE(chart.log_x);
   EXPECT_TRUE(chart.panels[0].log_y);
@@ -161,7 +166,7 @@ TEST(PlotTradeoff, OneLabelledCurvePerPredictorFailuresApartDurationPanel) {
   EXPECT_EQ(points.at("noise floor (median replicate spread)"), 2);
   for (const auto& se : chart.panels[0].series) {
     if (se.name.rfind("noise floor", 0) == 0) {
-      EXPECT_EQ(se.y, (std::vector<double>{2e-4, 2e-4}));
+      EXPECT_EQ(se.y, (std::vector<double>{0.2, 0.2}));  // mm, as the axis
     }
   }
   EXPECT_EQ(points.at("arena g8_dt0.002 p95"), 4);  // 2 markers + 2 line points
@@ -178,6 +183,89 @@ TEST(PlotTradeoff, OneLabelledCurvePerPredictorFailuresApartDurationPanel) {
     }
   }
   EXPECT_EQ(own_x, 1);
+}
+
+// Pins (issue 26): the recommendation's marker (r = 1.8) was drawn under an
+// ordinary point (r = 3.5) and the curves, unlabelled; the budget was never
+// drawn; labels overlapped; errors were in metres where the text says mm.
+TEST(PlotTradeoff, RecommendationOnTopLabelledBudgetDrawnInMm) {
+  const nlohmann::json report = {
+      {"campaign_id", 5},
+      {"trials", 12},
+      {"primary_metric", "position_p95"},
+      {"recommended", "g8_dt0.004"},
+      {"truth", {{"source", "model"}, {"independent", false}}},
+      {"budgets",
+       {{{"metric", "position_p95"}, {"limit", 1.5e-3}, {"text", "position_p95<=1.5mm"}}}},
+      {"settings",
+       {Predicted("arena", "g8_dt0.008", 0.008, 2e-3, 1e-3, true),
+        Predicted("arena", "g8_dt0.004", 0.004, 1e-3, 1.05e-3, true),
+        Predicted("arena", "g8_dt0.002", 0.002, 0.99e-3, 1.1e-3, true)}}};
+  const Chart chart = TradeoffChart(report);
+  const auto& series = chart.panels[0].series;
+  // Drawn last (on top), bigger than any point, labelled.
+  ASSERT_EQ(series.back().name, "recommended");
+  EXPECT_GT(series.back().marker_radius, 3.5);
+  EXPECT_EQ(series.back().labels, (std::vector<std::string>{"recommended: g8_dt0.004"}));
+  EXPECT_NEAR(series.back().y.at(0), 1.0, 1e-12);  // mm
+  EXPECT_NE(chart.panels[0].y_label.find("(mm)"), std::string::npos);
+  bool budget = false;
+  for (const auto& se : series)
+    if (se.name.rfind("budget", 0) == 0) {
+      budget = true;
+      EXPECT_EQ(se.y, (std::vector<double>{1.5, 1.5}));
+    }
+  EXPECT_TRUE(budget) << "no budget line";
+  EXPECT_NE(chart.title.find("self-consistency, not accuracy"), std::string::npos) << chart.title;
+  // Labels of points close together never overlap (9 px text, ~5 px a character).
+  tinyxml2::XMLDocument doc;
+  const std::string svg = RenderSvg(chart);
+  ASSERT_EQ(doc.Parse(svg.c_str()), tinyxml2::XML_SUCCESS);
+  struct Box {
+    double x, y, w;
+  };
+  std::vector<Box> boxes;
+  std::function<void(const tinyxml2::XMLElement*)> walk = [&](const tinyxml2::XMLElement* e) {
+    for (const auto* c = e->FirstChildElement(); c; c = c->NextSiblingElement()) {
+      if (c->Attribute("class", "point-label"))
+        boxes.push_back({c->DoubleAttribute("x"), c->DoubleAttribute("y"),
+                         5.0 * std::string(c->GetText()).size()});
+      walk(c);
+    }
+  };
+  walk(doc.RootElement());
+  ASSERT_GE(boxes.size(), 4u);
+  for (size_t i = 0; i < boxes.size(); ++i)
+    for (size_t j = i + 1; j < boxes.size(); ++j) {
+      const bool overlap = boxes[i].x < boxes[j].x + boxes[j].w &&
+                           boxes[j].x < boxes[i].x + boxes[i].w &&
+                           std::abs(boxes[i].y - boxes[j].y) < 10;
+      EXPECT_FALSE(overlap) << "labels " << i << " and " << j << " overlap";
+    }
+}
+
+// Pins (issue 26): the front came from the report's flags, computed on time
+// per trial, but was drawn on time per simulated second, so it doubled back.
+TEST(PlotTradeoff, FrontComputedOnTheAxisDrawn) {
+  // Per trial (time_s = per_sim_s / 5 here) and per simulated second agree on
+  // order unless the durations differ: flags that disagree with the x drawn.
+  const nlohmann::json report = {{"campaign_id", 6},
+                                 {"trials", 12},
+                                 {"primary_metric", "position_p95"},
+                                 {"settings",
+                                  {Predicted("arena", "a", 0.008, 2e-3, 3e-3, true),
+                                   Predicted("arena", "b", 0.004, 1e-3, 1e-3, false),
+                                   Predicted("arena", "c", 0.002, 5e-4, 2e-3, true)}}};
+  const Chart chart = TradeoffChart(report);
+  for (const auto& se : chart.panels[0].series) {
+    if (se.name != "pareto front") continue;
+    // b dominates a on the drawn axis; the front rises in x and falls in y.
+    EXPECT_EQ(se.x, (std::vector<double>{1e-3, 2e-3}));
+    for (size_t i = 1; i < se.x.size(); ++i) {
+      EXPECT_GT(se.x[i], se.x[i - 1]);
+      EXPECT_LT(se.y[i], se.y[i - 1]);
+    }
+  }
 }
 
 TEST(PlotTradeoff, MalformedReportRefused) {

@@ -1,6 +1,6 @@
 // Campaigns: what to vary, how to sample it, how often to repeat it.
 //
-// A campaign is a base scene (SCENE.md) plus a variation space. Each
+// A campaign is a base scene (docs/scene.md) plus a variation space. Each
 // *condition* is one point of that space, i.e. one concrete scene; each
 // condition is run `replicates` times with identical initial conditions (only
 // the per-trial seed, which drives a cell's defects, differs). The format is
@@ -199,6 +199,14 @@ Campaign ParseCampaign(std::string_view json_text, const std::string& base_dir =
 // Reads a campaign file (at most kMaxCampaignBytes); file paths inside it are
 // relative to the campaign file. @throws CampaignError.
 Campaign LoadCampaignFile(const std::string& path);
+
+// Values legal but implausible for the scene's scale, in the units a person
+// types: a push longer than 10 object sizes, a pusher speed above the cells'
+// limit (defects.max_pusher_speed, default 0.5 m/s), a push shorter than one
+// model step, a grip above 250 times the object's weight. ParseCampaign calls
+// it before validating scenes. @throws CampaignError naming the field written
+// and the likely unit slip (plausibility.cpp).
+void CheckPlausibility(const Campaign& campaign);
 
 int64_t TrialCount(const Campaign& campaign);  // conditions * replicates
 

@@ -1,0 +1,346 @@
+#include "plot_scene.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <limits>
+#include <string>
+#include <vector>
+
+#include <Eigen/Geometry>
+
+#include "arena/mechanics/scene_json.hpp"
+#include "svg_chart.hpp"
+
+namespace arena::cli {
+namespace {
+
+using Eigen::Vector2d;
+using Eigen::Vector3d;
+
+constexpr double kPi = 3.14159265358979323846;
+
+struct View {
+  std::string id, title;
+  int h_axis, v_axis;  // scene axes drawn right and up
+};
+
+Eigen::Matrix3d Rotation(const mechanics::Pose& p) {
+  return (Eigen::AngleAxisd(p.rpy.z(), Vector3d::UnitZ()) *
+          Eigen::AngleAxisd(p.rpy.y(), Vector3d::UnitY()) *
+          Eigen::AngleAxisd(p.rpy.x(), Vector3d::UnitX()))
+      .toRotationMatrix();
+}
+
+// The object's surface sampled (corners, rims) in the scene frame.
+std::vector<Vector3d> ObjectPoints(const mechanics::ObjectSpec& o) {
+  std::vector<Vector3d> local;
+  switch (o.shape) {
+    case mechanics::ObjectShape::kBox:
+      for (int k = 0; k < 8; ++k)
+        local.push_back(0.5 * Vector3d((k & 1 ? 1 : -1) * o.size.x(), (k & 2 ? 1 : -1) * o.size.y(),
+                                       (k & 4 ? 1 : -1) * o.size.z()));
+      break;
+    case mechanics::ObjectShape::kCylinder:
+      for (int k = 0; k < 48; ++k) {
+        const double a = 2 * kPi * k / 48;
+        for (double z : {-0.5 * o.height, 0.5 * o.height})
+          local.emplace_back(o.radius * std::cos(a), o.radius * std::sin(a), z);
+      }
+      break;
+    default:
+      for (const auto& v : o.polygon)
+        for (double z : {-0.5 * o.height, 0.5 * o.height}) local.emplace_back(v.x(), v.y(), z);
+      break;
+  }
+  const Eigen::Matrix3d r = Rotation(o.pose);
+  std::vector<Vector3d> out;
+  for (const auto& p : local) out.push_back(o.pose.position + r * p);
+  return out;
+}
+
+std::vector<Vector2d> Hull(std::vector<Vector2d> p) {
+  std::sort(p.begin(), p.end(), [](const Vector2d& a, const Vector2d& b) {
+    return a.x() < b.x() || (a.x() == b.x() && a.y() < b.y());
+  });
+  if (p.size() < 3) return p;
+  std::vector<Vector2d> h(2 * p.size());
+  size_t k = 0;
+  auto cross = [](const Vector2d& o, const Vector2d& a, const Vector2d& b) {
+    return (a - o).x() * (b - o).y() - (a - o).y() * (b - o).x();
+  };
+  for (size_t i = 0; i < p.size(); ++i) {
+    while (k >= 2 && cross(h[k - 2], h[k - 1], p[i]) <= 0) --k;
+    h[k++] = p[i];
+  }
+  for (size_t i = p.size() - 1, t = k + 1; i-- > 0;) {
+    while (k >= t && cross(h[k - 2], h[k - 1], p[i]) <= 0) --k;
+    h[k++] = p[i];
+  }
+  h.resize(k - 1);
+  return h;
+}
+
+std::string F(double v) {
+  char b[32];
+  std::snprintf(b, sizeof b, "%.1f", v);
+  return b;
+}
+
+// A length in the unit a person reads: mm below 1 m.
+std::string Length(double m) {
+  return std::abs(m) < 1 ? FormatNumber(m * 1e3, 3) + " mm" : FormatNumber(m, 3) + " m";
+}
+
+// Any unit vector perpendicular to n.
+Vector3d Perpendicular(const Vector3d& n) {
+  const Vector3d a = std::abs(n.x()) < 0.9 ? Vector3d::UnitX() : Vector3d::UnitY();
+  return n.cross(a).normalized();
+}
+
+// A contact's drawn shape in the scene frame: a point, a segment, a disc rim.
+std::vector<Vector3d> ContactShape(const mechanics::ContactSpec& c) {
+  std::vector<Vector3d> pts;
+  switch (c.type) {
+    case mechanics::ContactType::kPoint:
+      pts.push_back(c.position);
+      break;
+    case mechanics::ContactType::kLine:
+      pts.push_back(c.position - 0.5 * c.length * c.axis.normalized());
+      pts.push_back(c.position + 0.5 * c.length * c.axis.normalized());
+      break;
+    case mechanics::ContactType::kPatch: {
+      const Vector3d u = Perpendicular(c.normal.normalized());
+      const Vector3d v = c.normal.normalized().cross(u);
+      for (int k = 0; k <= 32; ++k) {
+        const double a = 2 * kPi * k / 32;
+        pts.push_back(c.position + c.radius * (std::cos(a) * u + std::sin(a) * v));
+      }
+      break;
+    }
+  }
+  return pts;
+}
+
+class Canvas {
+ public:
+  Canvas(const View& view, double x0, double y0, double w, double h, double scale, Vector2d centre)
+      : view_(view), x0_(x0), y0_(y0), w_(w), h_(h), scale_(scale), centre_(std::move(centre)) {}
+  Vector2d Project(const Vector3d& p) const { return {p[view_.h_axis], p[view_.v_axis]}; }
+  Vector2d Px(const Vector3d& p) const { return Px2(Project(p)); }
+  Vector2d Px2(const Vector2d& q) const {
+    return {x0_ + w_ / 2 + (q.x() - centre_.x()) * scale_,
+            y0_ + h_ / 2 - (q.y() - centre_.y()) * scale_};
+  }
+  double x0() const { return x0_; }
+  double y0() const { return y0_; }
+  double w() const { return w_; }
+  double h() const { return h_; }
+  double scale() const { return scale_; }
+
+ private:
+  View view_;
+  double x0_, y0_, w_, h_, scale_;
+  Vector2d centre_;
+};
+
+std::string Arrow(const Vector2d& from, const Vector2d& to, const std::string& color, bool dashed,
+                  double width = 2) {
+  std::string s = "<line x1=\"" + F(from.x()) + "\" y1=\"" + F(from.y()) + "\" x2=\"" + F(to.x()) +
+                  "\" y2=\"" + F(to.y()) + "\" stroke=\"" + color + "\" stroke-width=\"" +
+                  F(width) + "\"" + (dashed ? " stroke-dasharray=\"6,4\"" : "") + "/>";
+  const Vector2d d = to - from;
+  if (d.norm() > 1e-9) {
+    const Vector2d u = d.normalized(), n(-u.y(), u.x());
+    const Vector2d a = to - 9 * u + 4.5 * n, b = to - 9 * u - 4.5 * n;
+    s += "<polygon points=\"" + F(to.x()) + "," + F(to.y()) + " " + F(a.x()) + "," + F(a.y()) +
+         " " + F(b.x()) + "," + F(b.y()) + "\" fill=\"" + color + "\"/>";
+  }
+  return s;
+}
+
+std::string Text(const Vector2d& at, const std::string& text, const std::string& color,
+                 const char* anchor = "middle", int size = 12) {
+  return "<text x=\"" + F(at.x()) + "\" y=\"" + F(at.y()) + "\" font-size=\"" +
+         std::to_string(size) + "\" text-anchor=\"" + anchor + "\" fill=\"" + color + "\">" +
+         SvgEscape(text) + "</text>";
+}
+
+// The label of a contact: outside the object, beyond its normal's arrow,
+// anchored so the text runs away from the object.
+std::string Label(const Canvas& c, const Vector3d& position, const Vector3d& normal,
+                  const std::string& text, const std::string& color) {
+  const Vector2d p = c.Px(position);
+  Vector2d dir = c.Px(position - normal) - p;  // away from the object, in px
+  if (dir.norm() < 1e-9) return Text(p + Vector2d(0, -14), text, color);
+  dir.normalize();
+  if (std::abs(dir.x()) > 0.5)
+    return Text(p + 32 * dir + Vector2d(0, 4), text, color, dir.x() < 0 ? "end" : "start");
+  return Text(p + 32 * dir + Vector2d(0, dir.y() > 0 ? 12 : -4), text, color);
+}
+
+std::string DrawContact(const Canvas& c, const mechanics::ContactSpec& s, const std::string& id,
+                        const std::string& label, const std::string& color) {
+  std::string g = "<g id=\"" + SvgEscape(id) + "\" class=\"contact\" data-type=\"" +
+                  mechanics::ToString(s.type) + "\">";
+  const auto pts = ContactShape(s);
+  if (pts.size() == 1) {
+    g += "<circle cx=\"" + F(c.Px(pts[0]).x()) + "\" cy=\"" + F(c.Px(pts[0]).y()) +
+         "\" r=\"4\" fill=\"" + color + "\"/>";
+  } else {
+    std::string d;
+    for (const auto& p : pts) d += F(c.Px(p).x()) + "," + F(c.Px(p).y()) + " ";
+    g += "<polyline points=\"" + d + "\" fill=\"none\" stroke=\"" + color +
+         "\" stroke-width=\"4\" stroke-linecap=\"round\"/>";
+  }
+  // The normal: from outside into the object (a finger's closing direction).
+  const Vector2d tip = c.Px(s.position);
+  Vector2d out = c.Px(s.position - s.normal.normalized()) - tip;
+  if (out.norm() > 1e-9)
+    g += Arrow(tip + 26 * out.normalized(), tip + 6 * out.normalized(), color, false, 1.5);
+  g += Label(c, s.position, s.normal.normalized(), label, color);
+  g += "</g>";
+  return g;
+}
+
+// A round length of about a quarter of the view.
+double ScaleBarLength(double view_m) {
+  const double target = view_m / 4;
+  const double p = std::pow(10.0, std::floor(std::log10(target)));
+  for (double m : {5.0, 2.0, 1.0})
+    if (m * p <= target) return m * p;
+  return p;
+}
+
+}  // namespace
+
+std::string SceneSvg(const mechanics::Scene& scene, const std::string& title) {
+  const View views[2] = {{"view-front", "front: x right, z up (looking along +y)", 0, 2},
+                         {"view-top", "top: x right, y up (looking down along -z)", 0, 1}};
+  // Everything drawn, to fit both views at one scale.
+  std::vector<Vector3d> all = ObjectPoints(scene.object);
+  for (const auto& f : scene.fingers)
+    for (const auto& p : ContactShape(f)) all.push_back(p);
+  Vector3d push_end = Vector3d::Zero();
+  const bool moves = scene.pusher && !scene.pusher->controller &&
+                     scene.pusher->motion.velocity.norm() * scene.duration > 0;
+  if (scene.pusher) {
+    for (const auto& p : ContactShape(*scene.pusher)) all.push_back(p);
+    push_end = scene.pusher->position + scene.pusher->motion.velocity * scene.duration;
+    if (moves) all.push_back(push_end);
+  }
+  const double panel_w = 470, panel_h = 430, top = 70, margin = 20;
+  double scale = std::numeric_limits<double>::infinity();
+  Vector2d centres[2];
+  for (int k = 0; k < 2; ++k) {
+    Vector2d lo = Vector2d::Constant(std::numeric_limits<double>::infinity()), hi = -lo;
+    for (const auto& p : all) {
+      const Vector2d q(p[views[k].h_axis], p[views[k].v_axis]);
+      lo = lo.cwiseMin(q);
+      hi = hi.cwiseMax(q);
+    }
+    centres[k] = 0.5 * (lo + hi);
+    const Vector2d extent = (hi - lo).cwiseMax(1e-3);
+    // Room for labels around the drawing: 60 % of the panel for the set-up.
+    scale = std::min({scale, 0.6 * panel_w / extent.x(), 0.6 * (panel_h - 60) / extent.y()});
+  }
+  const double width = 2 * panel_w + 3 * margin, height = top + panel_h + 90;
+  std::string svg = "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"" + F(width) +
+                    "\" height=\"" + F(height) + "\" viewBox=\"0 0 " + F(width) + " " + F(height) +
+                    "\" font-family=\"sans-serif\">";
+  svg += "<rect width=\"100%\" height=\"100%\" fill=\"white\"/>";
+  svg += Text({width / 2, 26}, title, "#000", "middle", 16);
+  const auto& o = scene.object;
+  std::string object_text = std::string(mechanics::ToString(o.shape)) + " ";
+  if (o.shape == mechanics::ObjectShape::kBox)
+    object_text += FormatNumber(o.size.x() * 1e3, 3) + " x " + FormatNumber(o.size.y() * 1e3, 3) +
+                   " x " + FormatNumber(o.size.z() * 1e3, 3) + " mm";
+  else if (o.shape == mechanics::ObjectShape::kCylinder)
+    object_text += "radius " + Length(o.radius) + ", height " + Length(o.height);
+  else
+    object_text += std::to_string(o.polygon.size()) + "-gon, height " + Length(o.height);
+  object_text += ", " + FormatNumber(o.mass * 1e3, 3) + " g; grip " +
+                 FormatNumber(scene.grip_force, 3) + " N per finger; " +
+                 (scene.duration >= 1 ? FormatNumber(scene.duration, 3) + " s"
+                                      : FormatNumber(scene.duration * 1e3, 3) + " ms");
+  if (scene.pusher) {
+    if (scene.pusher->controller)
+      object_text += "; pusher closed-loop (" + scene.pusher->controller->name + ")";
+    else
+      object_text += "; push " + Length((push_end - scene.pusher->position).norm()) + " at " +
+                     FormatNumber(scene.pusher->motion.velocity.norm() * 1e3, 3) + " mm/s";
+  }
+  svg += Text({width / 2, 48}, object_text, "#333", "middle", 13);
+  for (int k = 0; k < 2; ++k) {
+    const View& v = views[k];
+    const Canvas c(v, margin + k * (panel_w + margin), top, panel_w, panel_h, scale, centres[k]);
+    svg += "<g id=\"" + v.id + "\">";
+    svg += "<rect x=\"" + F(c.x0()) + "\" y=\"" + F(c.y0()) + "\" width=\"" + F(c.w()) +
+           "\" height=\"" + F(c.h()) + "\" fill=\"none\" stroke=\"#bbb\"/>";
+    svg += Text({c.x0() + 8, c.y0() + 18}, v.title, "#333", "start", 12);
+    // The object.
+    std::vector<Vector2d> proj;
+    for (const auto& p : ObjectPoints(scene.object)) proj.push_back(c.Project(p));
+    std::string d;
+    for (const auto& q : Hull(proj)) d += F(c.Px2(q).x()) + "," + F(c.Px2(q).y()) + " ";
+    svg += "<g id=\"object\"><polygon points=\"" + d +
+           "\" fill=\"#e6e6e6\" stroke=\"#555\" stroke-width=\"1.5\"/>";
+    svg += "<circle cx=\"" + F(c.Px(o.pose.position).x()) + "\" cy=\"" +
+           F(c.Px(o.pose.position).y()) + "\" r=\"2.5\" fill=\"#555\"/></g>";
+    // The fingers and the pusher.
+    for (size_t i = 0; i < scene.fingers.size(); ++i) {
+      const auto& f = scene.fingers[i];
+      const std::string name = f.name.empty() ? "finger " + std::to_string(i) : f.name;
+      svg += DrawContact(c, f, "finger-" + name, name + " (" + mechanics::ToString(f.type) + ")",
+                         "#1f5fbf");
+    }
+    if (scene.pusher) {
+      svg += DrawContact(c, *scene.pusher, "pusher",
+                         std::string("pusher (") + mechanics::ToString(scene.pusher->type) + ")",
+                         "#c0392b");
+      if (moves) {
+        const Vector2d a = c.Px(scene.pusher->position), b = c.Px(push_end);
+        svg += "<g id=\"push-motion\">";
+        if ((b - a).norm() > 3) {
+          // Beside the pusher (not over its normal's arrow), with its end drawn hollow.
+          const Vector2d u = (b - a).normalized(), side(-u.y() * 14, u.x() * 14);
+          svg += Arrow(a + side, b + side, "#c0392b", true);
+          svg += "<circle cx=\"" + F(b.x()) + "\" cy=\"" + F(b.y()) +
+                 "\" r=\"4\" fill=\"none\" stroke=\"#c0392b\"/>";
+          svg += Text(0.5 * (a + b) + 2.2 * side + Vector2d(0, 4),
+                      "push " + Length((push_end - scene.pusher->position).norm()), "#c0392b",
+                      side.x() >= 0 ? "start" : "end", 11);
+        } else {
+          // Along the view direction: a dot-in-circle marks motion out of the page.
+          svg += "<circle cx=\"" + F(a.x()) + "\" cy=\"" + F(a.y()) +
+                 "\" r=\"9\" fill=\"none\" stroke=\"#c0392b\" stroke-dasharray=\"3,2\"/>";
+        }
+        svg += "</g>";
+      }
+    }
+    // Gravity, in the corner it points from.
+    const Vector2d g(scene.gravity[v.h_axis], scene.gravity[v.v_axis]);
+    if (g.norm() > 1e-9) {
+      const Vector2d u(g.x() / g.norm(), -g.y() / g.norm());
+      const Vector2d at(c.x0() + c.w() - 40, c.y0() + 60);
+      svg += "<g id=\"gravity\">" + Arrow(at - 18 * u, at + 18 * u, "#2e7d32", false, 1.5) +
+             Text(at + Vector2d(16, 4), "g", "#2e7d32", "start") + "</g>";
+    }
+    // The scale bar.
+    const double bar = ScaleBarLength(c.w() / scale);
+    const Vector2d b0(c.x0() + 20, c.y0() + c.h() - 20), b1 = b0 + Vector2d(bar * scale, 0);
+    svg += "<g id=\"scale-bar\" data-metres=\"" + FormatNumber(bar, 6) + "\"><line x1=\"" +
+           F(b0.x()) + "\" y1=\"" + F(b0.y()) + "\" x2=\"" + F(b1.x()) + "\" y2=\"" + F(b1.y()) +
+           "\" stroke=\"#000\" stroke-width=\"3\"/>" +
+           Text(0.5 * (b0 + b1) + Vector2d(0, -7), Length(bar), "#000") + "</g>";
+    svg += "</g>";
+  }
+  svg += Text({width / 2, height - 40},
+              "blue: fingers, red: pusher (arrows point into the object; dashed: the pusher's "
+              "path over the push), grey: the object at its start pose",
+              "#555", "middle", 12);
+  svg += "</svg>\n";
+  return svg;
+}
+
+}  // namespace arena::cli

@@ -1,0 +1,109 @@
+// Issue 26 end to end, through the arena binary: a campaign whose every trial
+// fails exits non-zero with its reasons; `arena status` gives the same
+// reasons and warns only when trials wait; a campaign no cell can run is
+// refused at submit; `arena plot --scene` draws the set-up. Each test names
+// the behaviour it pins.
+#include <fstream>
+#include <string>
+
+#include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
+
+#include "arena_command_test.hpp"
+
+namespace arena::test {
+namespace {
+
+nlohmann::json Smoke() {
+  std::ifstream in(std::string(ARENA_SOURCE_DIR) + "/examples/campaigns/smoke.json");
+  return nlohmann::json::parse(in);
+}
+
+class Honest : public ArenaCommandTest {
+ protected:
+  std::string Write(const std::string& name, const std::string& text) {
+    const std::string path = dir_ + "/" + name;
+    std::ofstream(path) << text;
+    return path;
+  }
+};
+
+// Pins: a campaign whose every trial failed ended "0 done, N failed ... nan
+// mm" with exit 0 and no reason anywhere but the log.
+TEST_F(Honest, RunWithEveryTrialFailedExitsOneAndSaysWhy) {
+  auto c = Smoke();
+  c["variations"]["finger_type"] = "point";
+  c["variations"]["grip_force"] = 10;
+  c["variations"]["pivot_offset"] = {{"choices", {0, 0.01}}};
+  c["replicates"] = 1;
+  const std::string campaign = Write("c.json", c.dump());
+  // The cells' own profile allows 10 mm/s; the campaign pushes at 20 mm/s.
+  const std::string slow = Write("slow.json", R"({"max_pusher_speed": 0.01})");
+  const std::string db = dir_ + "/f.db";
+  const auto r =
+      Arena("run " + campaign + " --db " + db + " --cells 1 --quiet --cell-defects " + slow);
+  EXPECT_EQ(r.rc, 1) << r.out << r.err;
+  EXPECT_NE(r.out.find("2 failed"), std::string::npos) << r.out;
+  EXPECT_EQ(r.out.find("nan"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("failed trials by reason (2):"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("2 x cell: refused by cell"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("exceeds this cell's"), std::string::npos) << r.out;
+  EXPECT_NE(r.err.find("2 trials failed"), std::string::npos) << r.err;
+
+  // The same reasons in status, and no "trials wait" warning: nothing waits.
+  const auto s = Arena("status --db " + db);
+  EXPECT_EQ(s.rc, 0) << s.err;
+  EXPECT_NE(s.out.find("failed trials by reason (2):"), std::string::npos) << s.out;
+  EXPECT_EQ(s.err.find("trials wait until one runs"), std::string::npos) << s.err;
+  EXPECT_NE(s.out.find("backend"), std::string::npos) << s.out;
+  const auto j = Arena("status --db " + db + " --json");
+  ASSERT_EQ(j.rc, 0) << j.err;
+  const auto doc = nlohmann::json::parse(j.out);
+  const auto& failures = doc["campaigns"][0]["failures"];
+  ASSERT_EQ(failures["failed"].size(), 1u) << failures.dump();
+  EXPECT_EQ(failures["failed"][0]["count"], 2);
+  EXPECT_EQ(failures["failed"][0]["source"], "cell");
+  EXPECT_EQ(doc["cells"][0]["backend"], "model");
+}
+
+// Pins: a push the workspace cannot hold was accepted and failed on every
+// trial at the cell.
+TEST_F(Honest, CampaignOutsideItsWorkspaceRefusedAtSubmit) {
+  auto c = Smoke();
+  c["defects"]["workspace"] = {{"min", {-0.01, -0.01, -0.01}}, {"max", {0.01, 0.01, 0.01}}};
+  c["variations"]["push_distance"] = 0.02;
+  const auto r = Arena("submit " + Write("ws.json", c.dump()) + " --db " + dir_ + "/w.db");
+  EXPECT_EQ(r.rc, 2) << r.out << r.err;
+  EXPECT_NE(r.err.find("outside the workspace"), std::string::npos) << r.err;
+}
+
+// Pins: `push_speed: 10` (meant mm/s) was blamed on model.dt.
+TEST_F(Honest, UnitSlipBlamesTheFieldWritten) {
+  auto c = Smoke();
+  c["variations"]["push_speed"] = 10;
+  const auto r = Arena("submit " + Write("s.json", c.dump()) + " --db " + dir_ + "/s.db");
+  EXPECT_EQ(r.rc, 2);
+  EXPECT_NE(r.err.find("variations.push_speed"), std::string::npos) << r.err;
+  EXPECT_EQ(r.err.find("model.dt"), std::string::npos) << r.err;
+}
+
+// Pins: there was no picture of a scene file's set-up.
+TEST_F(Honest, PlotSceneDrawsTwoViewsWithAScaleBar) {
+  const std::string svg = dir_ + "/scene.svg";
+  const auto r = Arena("plot --scene " + std::string(ARENA_SOURCE_DIR) +
+                       "/examples/scenes/canonical.json --out " + svg);
+  ASSERT_EQ(r.rc, 0) << r.err;
+  const std::string text = Slurp(svg);
+  for (const char* id :
+       {"id=\"view-front\"", "id=\"view-top\"", "id=\"scale-bar\"", "id=\"finger-left\"",
+        "id=\"finger-right\"", "id=\"pusher\"", "id=\"push-motion\"", "50 x 30 x 100 mm"})
+    EXPECT_NE(text.find(id), std::string::npos) << id;
+  // A bad scene is bad input naming its field; no file needs --db.
+  const auto bad = Arena("plot --scene " + Write("bad.json", R"({"object": 1})") + " --out " +
+                         dir_ + "/bad.svg");
+  EXPECT_EQ(bad.rc, 2) << bad.err;
+  EXPECT_NE(bad.err.find("object"), std::string::npos) << bad.err;
+}
+
+}  // namespace
+}  // namespace arena::test

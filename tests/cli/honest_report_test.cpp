@@ -1,0 +1,204 @@
+// Issue 26, "what a lab reads must be right": every failure has a reason a
+// person can read (grouped, counted, blamed on the cell, the driver or the
+// predictor), a finished campaign's rate stays what it was, unit slips are
+// blamed on the field written. Each test names the behaviour it pins.
+#include <fstream>
+#include <string>
+
+#include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
+
+#include "arena/db/store.hpp"
+#include "arena/orchestrator/campaign.hpp"
+#include "db/db_test_util.hpp"
+#include "failure_reasons.hpp"
+#include "status_cells.hpp"
+
+namespace arena::cli {
+namespace {
+
+using db::testing::MakeCampaign;
+using db::testing::MakeTrials;
+using db::testing::RunTrialToDone;
+using db::testing::TempDir;
+
+// Pins: before issue 26 a retry and a failed trial were counted (or not even
+// that) without their reason; the reason was only in the service log.
+TEST(FailureReasons, GroupedByReasonAndSourceWithCounts) {
+  TempDir dir;
+  const std::string path = dir.File("f.db");
+  std::int64_t id = 0;
+  {
+    auto store = db::Store::Open(path);
+    store->UpsertCell("sim1-3fa2c1", {"point"});
+    store->UpsertCell("sim2-3fa2c1", {"point"});
+    id = store->CreateCampaign(MakeCampaign(), MakeTrials(4));
+    // Trial 1: a start-up race, retried, then done.
+    auto t = store->ClaimNextTrial("sim1-3fa2c1");
+    store->RetryTrial(t->trial_id, t->attempt,
+                      "cell sim1-3fa2c1 failed: no command for 0.25 s after sample 0", 3, 0);
+    t = store->ClaimNextTrial("sim1-3fa2c1");
+    ASSERT_EQ(t->attempt, 2);
+    RunTrialToDone(*store, *t, 5);
+    // Trials 2 and 3: refused by two different cells for the same reason.
+    t = store->ClaimNextTrial("sim1-3fa2c1");
+    store->FailTrial(t->trial_id, t->attempt,
+                     "refused by cell sim1-3fa2c1: pusher.motion: pushing for 500 s moves the "
+                     "object outside the workspace",
+                     "refused");
+    t = store->ClaimNextTrial("sim2-3fa2c1");
+    store->FailTrial(t->trial_id, t->attempt,
+                     "refused by cell sim2-3fa2c1: pusher.motion: pushing for 480.5 s moves the "
+                     "object outside the workspace",
+                     "refused");
+    // Trial 4: the robot driver gave up.
+    t = store->ClaimNextTrial("sim2-3fa2c1");
+    store->FailTrial(t->trial_id, t->attempt,
+                     "cell sim2-3fa2c1: driver exited with status 3 before its first sample",
+                     "failed");
+  }
+  db::StoreOptions ro;
+  ro.read_only = true;
+  auto store = db::Store::Open(path, ro);
+  const FailureReport r = CampaignFailures(*store, id);
+  EXPECT_EQ(r.failed_trials, 3);
+  ASSERT_EQ(r.failures.size(), 2u);
+  EXPECT_EQ(r.failures[0].count, 2);  // two cells, two durations: one reason
+  EXPECT_EQ(r.failures[0].source, "cell");
+  EXPECT_NE(r.failures[0].example.find("pushing for"), std::string::npos);
+  EXPECT_EQ(r.failures[1].count, 1);
+  EXPECT_EQ(r.failures[1].source, "driver");
+  EXPECT_EQ(r.retried_attempts, 1);
+  ASSERT_EQ(r.retries.size(), 1u);
+  EXPECT_NE(r.retries[0].example.find("no command for 0.25 s"), std::string::npos);
+  const std::string text = FormatFailures(r, "  ");
+  EXPECT_NE(text.find("failed trials by reason (3)"), std::string::npos) << text;
+  EXPECT_NE(text.find("2 x cell: refused by cell"), std::string::npos) << text;
+  EXPECT_NE(text.find("1 x driver: "), std::string::npos) << text;
+  EXPECT_NE(text.find("retried attempts by reason (1)"), std::string::npos) << text;
+  const auto j = FailuresJson(r);
+  EXPECT_EQ(j["failed"][0]["count"], 2);
+  EXPECT_EQ(j["retried"][0]["source"], "cell");
+}
+
+TEST(FailureReasons, KeyIgnoresCellIdsAndNumbersOnly) {
+  EXPECT_EQ(ReasonKey("cell a1: 500 s at 1e-3 m/s", "a1"),
+            ReasonKey("cell b7: 2.5 s at 4 m/s", "b7"));
+  EXPECT_NE(ReasonKey("cell a1: timeout", "a1"), ReasonKey("cell a1: refused", "a1"));
+  EXPECT_EQ(ReasonSource("exec driver: exited"), "driver");
+  EXPECT_EQ(ReasonSource("refused by cell c1: x"), "cell");
+  EXPECT_EQ(ReasonSource("service restarted"), "service");
+}
+
+// Pins: a finished campaign's rate decayed as the clock moved on (12,791/h,
+// later 200/h); now it is the rate it ran at, whenever status is asked.
+TEST(StatusRate, FrozenOnceTheCampaignIsFinished) {
+  TempDir dir;
+  double now = 10000;
+  db::StoreOptions o;
+  o.clock = [&] { return now; };
+  auto store = db::Store::Open(dir.File("r.db"), o);
+  store->UpsertCell("c", {"point"});
+  store->CreateCampaign(MakeCampaign(), MakeTrials(4));
+  for (int i = 0; i < 4; ++i) {
+    auto t = store->ClaimNextTrial("c");
+    now += 10;
+    RunTrialToDone(*store, *t, 5);
+  }
+  store->CompleteFinishedCampaigns();
+  const double rate = store->Status().campaigns.at(0).rate_per_hour;
+  EXPECT_NEAR(rate, 4 * 3600.0 / 40, 1e-6);  // 4 trials from the first dispatch to the last finish
+  now += 3600;
+  EXPECT_NEAR(store->Status().campaigns.at(0).rate_per_hour, rate, 1e-9);
+  EXPECT_FALSE(store->Status().campaigns.at(0).eta_s);
+}
+
+// Pins: cells of earlier runs piled up as `gone` for ever in the cell table.
+TEST(StatusCells, GoneForADayFoldedIntoACount) {
+  std::vector<db::CellInfo> cells(3);
+  cells[0].id = "live";
+  cells[0].last_seen = 1e6;
+  cells[1].id = "old1";
+  cells[1].state = db::CellState::kGone;
+  cells[1].last_seen = 1e6 - 2 * 86400;
+  cells[2].id = "recent-gone";
+  cells[2].state = db::CellState::kGone;
+  cells[2].last_seen = 1e6 - 60;
+  std::vector<CellActivity> activity(3);
+  activity[0].backend = "mujoco";
+  activity[0].phase = "execute";
+  activity[0].trial_id = 42;
+  activity[0].in_phase_s = 3;
+  const std::string folded = FormatCellTable(cells, activity, 1e6, false);
+  EXPECT_EQ(folded.find("old1"), std::string::npos) << folded;
+  EXPECT_NE(folded.find("recent-gone"), std::string::npos) << folded;
+  EXPECT_NE(folded.find("1 cell gone for more than a day (arena status --all lists them)"),
+            std::string::npos)
+      << folded;
+  EXPECT_NE(folded.find("mujoco"), std::string::npos) << folded;
+  EXPECT_NE(folded.find("execute"), std::string::npos) << folded;
+  EXPECT_NE(folded.find("42"), std::string::npos) << folded;
+  const std::string all = FormatCellTable(cells, activity, 1e6, true);
+  EXPECT_NE(all.find("old1"), std::string::npos) << all;
+  EXPECT_EQ(all.find("more than a day"), std::string::npos) << all;
+}
+
+std::string Smoke(const std::string& variation, const std::string& value) {
+  std::ifstream in(std::string(ARENA_SOURCE_DIR) + "/examples/campaigns/smoke.json");
+  auto doc = nlohmann::json::parse(in);
+  doc["variations"][variation] = nlohmann::json::parse(value);
+  return doc.dump();
+}
+
+std::string FieldOf(const std::string& text) {
+  try {
+    orchestrator::ParseCampaign(text);
+  } catch (const orchestrator::CampaignError& e) {
+    return e.field() + ": " + e.reason();
+  }
+  return "accepted";
+}
+
+// Pins: `push_speed: 10` (meant mm/s) was blamed on model.dt.
+TEST(Plausibility, PushSpeedSlipBlamesPushSpeed) {
+  const std::string why = FieldOf(Smoke("push_speed", "10"));
+  EXPECT_EQ(why.rfind("variations.push_speed:", 0), 0u) << why;
+  EXPECT_NE(why.find("10 mm/s is 0.01"), std::string::npos) << why;
+}
+
+// Pins: `push_distance: 5` (meant mm) was accepted as a 250 s push that
+// every trial then failed.
+TEST(Plausibility, PushDistanceSlipRefused) {
+  const std::string why = FieldOf(Smoke("push_distance", "5"));
+  EXPECT_EQ(why.rfind("variations.push_distance:", 0), 0u) << why;
+  EXPECT_NE(why.find("5 mm is 0.005"), std::string::npos) << why;
+  EXPECT_EQ(FieldOf(Smoke("push_distance", "1.5")).rfind("variations.push_distance:", 0), 0u);
+  EXPECT_EQ(FieldOf(Smoke("push_distance", "0.02")), "accepted");
+}
+
+// Pins: a grip in kilonewtons on a 0.2 kg object was accepted.
+TEST(Plausibility, GripInKilonewtonsRefused) {
+  const std::string why = FieldOf(Smoke("grip_force", R"({"min": 8, "max": 2000, "levels": 2})"));
+  EXPECT_EQ(why.rfind("variations.grip_force:", 0), 0u) << why;
+  EXPECT_NE(why.find("times the weight"), std::string::npos) << why;
+  EXPECT_EQ(FieldOf(Smoke("grip_force", "40")), "accepted");
+}
+
+// Pins: a push shorter than one predictor step was blamed on prediction.dt
+// ("model.dt: must be <= duration"), not on the push written.
+TEST(Plausibility, PushShorterThanAStepBlamesThePush) {
+  const std::string why = FieldOf(Smoke("push_distance", "0.0001"));
+  EXPECT_EQ(why.rfind("variations.push_distance:", 0), 0u) << why;
+  EXPECT_NE(why.find("shorter than one model step (8 ms)"), std::string::npos) << why;
+}
+
+TEST(Plausibility, SpeedLimitIsTheCampaignProfiles) {
+  auto doc = nlohmann::json::parse(Smoke("push_speed", "0.8"));
+  doc["variations"]["push_distance"] = 0.02;
+  EXPECT_EQ(FieldOf(doc.dump()).rfind("variations.push_speed:", 0), 0u);
+  doc["defects"]["max_pusher_speed"] = 1.0;
+  EXPECT_EQ(FieldOf(doc.dump()), "accepted");
+}
+
+}  // namespace
+}  // namespace arena::cli
