@@ -265,8 +265,10 @@ db::Prediction ScoreSimulation(const mechanics::Scene& scene,
         const PredictionError e = ScorePrediction(result.samples, truth);
         p.final_position_error = e.final_position;
         p.final_angle_error = e.final_angle;
-        p.force_error = e.force_rms;
-        p.mode_agreement = e.mode_agreement;
+        if (e.contact_pairs > 0) {  // else the truth measured no force: not scored
+          p.force_error = e.force_rms;
+          p.mode_agreement = e.mode_agreement;
+        }
       } catch (const std::exception&) {
       }
     }
@@ -277,8 +279,12 @@ db::Prediction ScoreSimulation(const mechanics::Scene& scene,
     const PredictionError e = ScorePrediction(result.samples, truth);
     p.final_position_error = e.final_position;
     p.final_angle_error = e.final_angle;
-    p.force_error = e.force_rms;
-    p.mode_agreement = e.mode_agreement;
+    if (e.contact_pairs > 0) {  // else the truth measured no force: not scored
+      p.force_error = e.force_rms;
+      p.mode_agreement = e.mode_agreement;
+    } else {
+      detail["force_not_scored"] = "the truth has no measured contact forces";
+    }
     detail["samples_compared"] = e.samples_compared;
     detail["force_scale"] = e.force_scale;
   } catch (const std::exception& e) {

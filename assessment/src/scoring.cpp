@@ -56,6 +56,7 @@ PredictionError ScorePrediction(const std::vector<mechanics::TrajectorySample>& 
     error.mode_agreement = double(agreeing) / pairs;
   }
   error.samples_compared = static_cast<int>(n);
+  error.contact_pairs = pairs;
   return error;
 }
 

@@ -19,6 +19,7 @@
 
 #include <gtest/gtest.h>
 
+#include "arena/assessment/scoring.hpp"
 #include "arena/db/export.hpp"
 #include "arena/executors/backend.hpp"
 #include "arena/recordings/import.hpp"
@@ -50,7 +51,9 @@ Rows Push(double force_on_object = 2.0) {
     r.tip.push_back({t0 + t, px, 0.0, 0.0});
     r.object.push_back({t0 + t + 0.0005, ox, 0.0, 0.0});
     // The sensor reads the reaction on the pusher: minus the force on the object.
-    r.force.push_back({t0 + t + 0.001, pushing ? -force_on_object : 0.0, 0.0, 0.0});
+    // A live sensor's noise (a few mN): no two rows alike.
+    const double noise = 0.004 * std::sin(1.7 * k) + 0.003 * std::cos(0.9 * k * k);
+    r.force.push_back({t0 + t + 0.001, (pushing ? -force_on_object : 0.0) + noise, -noise, 0.0});
   }
   return r;
 }
@@ -117,6 +120,31 @@ class ImportTest : public ::testing::Test {
   fs::path root_, data_, shapes_path_;
 };
 
+// Serves the dataset's first trial through replay:DATASET as a cell would
+// (matched by its scene and seed) with a pusher facing +x; the samples it streams.
+std::vector<mechanics::TrajectorySample> Replay(const fs::path& ds) {
+  std::ifstream lines(ds / "scenes.jsonl");
+  std::string line;
+  std::getline(lines, line);
+  const json entry = json::parse(line);
+  const std::string scene_text = entry["scene"].dump();
+  executors::TrialContext trial;
+  trial.scene_json = scene_text;
+  trial.seed = std::stoull(entry["seed"].get<std::string>());
+  mechanics::Scene scene;  // what the cell parsed; replay needs its contacts' names and normals
+  scene.pusher.emplace();
+  scene.pusher->normal = Eigen::Vector3d::UnitX();
+  const auto replay = executors::MakeReplayBackend(ds.string());
+  EXPECT_EQ(replay->Prepare(scene, trial), "");
+  std::vector<mechanics::TrajectorySample> out;
+  const auto outcome = replay->Execute(scene, trial, [&](const mechanics::TrajectorySample& s) {
+    out.push_back(s);
+    return true;
+  });
+  EXPECT_TRUE(outcome.ok) << outcome.reason;
+  return out;
+}
+
 TEST_F(ImportTest, AGoodPushBecomesAVerifiedMeasuredDatasetWithItsCampaign) {
   Rows rows = Push();
   std::swap(rows.object[100], rows.object[101]);  // one out-of-order stamp
@@ -182,9 +210,22 @@ TEST_F(ImportTest, AGoodPushBecomesAVerifiedMeasuredDatasetWithItsCampaign) {
   EXPECT_NEAR(path["position"].back()[0].get<double>(), -kHalf + 0.049, 2e-6);
   EXPECT_NEAR(scene["duration"].get<double>(), path["t"].back().get<double>(), 1e-9);
 
-  // replay:DATASET serves it as measured truth.
+  // replay:DATASET serves it as measured truth: the pusher's measured force
+  // on the object, 2 N along +x while it pushes.
   const auto replay = executors::MakeReplayBackend(ds.string());
   EXPECT_EQ(replay->Capabilities().truth, executors::TruthSource::kMeasured);
+  const auto truth = Replay(ds);
+  ASSERT_EQ(truth.size(), static_cast<std::size_t>(t.samples));
+  ASSERT_EQ(truth[150].contacts.size(), 1u);
+  EXPECT_NEAR(truth[150].contacts[0].normal_force, 2.0, 0.01);  // within the sensor's noise
+  EXPECT_EQ(truth[150].contacts[0].mode, mechanics::ContactMode::kStick);
+  EXPECT_EQ(truth[10].contacts[0].mode, mechanics::ContactMode::kSeparate);  // 1 mm apart
+  // Scored against a prediction: forces compared.
+  auto predicted = truth;
+  for (auto& p : predicted) p.contacts[0].normal_force += 0.5;
+  const auto e = assessment::ScorePrediction(predicted, truth);
+  EXPECT_GT(e.contact_pairs, 0);
+  EXPECT_NEAR(e.force_rms, 0.5, 1e-9);
 }
 
 TEST_F(ImportTest, AFrozenForceStreamIsReportedAndLeftOutOfTheTruth) {
@@ -205,23 +246,38 @@ TEST_F(ImportTest, AFrozenForceStreamIsReportedAndLeftOutOfTheTruth) {
   EXPECT_EQ(m["import"]["trials"][0]["force_usable"], false);
   const json rep = json::parse(std::ifstream(root_ / "ds" / "import_report.json"));
   EXPECT_EQ(rep[0]["force_usable"], false);
+  // Replayed, the truth has no contacts: a prediction's poses are scored, its
+  // forces never (no pair compared, so no force error is reported).
+  const auto truth = Replay(root_ / "ds");
+  ASSERT_FALSE(truth.empty());
+  for (const auto& s : truth) ASSERT_TRUE(s.contacts.empty());
+  auto predicted = truth;
+  for (auto& p : predicted) {
+    p.contacts.emplace_back();
+    p.contacts.back().normal_force = 3.0;
+    p.position.x() += 0.001;
+  }
+  const auto e = assessment::ScorePrediction(predicted, truth);
+  EXPECT_EQ(e.contact_pairs, 0);
+  EXPECT_NEAR(e.final_position, 0.001, 1e-12);
 }
 
 TEST_F(ImportTest, AForceThatReadsWhileNothingPushesIsAnOffset) {
   Rows rows = Push();
   for (auto& f : rows.force) f[1] -= 1.2;  // 1.2 N in y throughout
   WriteH5(data_ / kGoodName, rows);
-  const auto& c = Import().trials[0].checks;
+  const ImportReport report = Import();
+  const auto& c = report.trials[0].checks;
   EXPECT_FALSE(c.force_usable);
-  EXPECT_NEAR(c.force_offset, 1.2, 1e-6);
+  EXPECT_NEAR(c.force_offset, 1.2, 0.01);
   ASSERT_FALSE(c.findings.empty());
   EXPECT_EQ(c.findings.back().check, "force_offset_drift");
 }
 
 TEST_F(ImportTest, APusherStartingDeepInsideTheOutlineFailsThePosesAndReplayRefusesIt) {
   Rows rows = Push();
-  for (auto& p : rows.tip) p[1] += 0.003;  // the pusher 3 mm off the push line: still fine
-  for (auto& p : rows.tip) p[0] += 0.003;  // and 3 mm further in: it starts 2 mm inside
+  for (auto& p : rows.tip) p[2] += 0.003;  // the pusher 3 mm off the push line: still fine
+  for (auto& p : rows.tip) p[1] += 0.003;  // and 3 mm further in: it starts 2 mm inside
   WriteH5(data_ / kGoodName, rows);
   const ImportReport report = Import();
   const auto& c = report.trials[0].checks;
@@ -248,9 +304,10 @@ TEST_F(ImportTest, APusherStartingDeepInsideTheOutlineFailsThePosesAndReplayRefu
 
 TEST_F(ImportTest, ASlightlyInsideStartIsReportedAndKept) {
   Rows rows = Push();
-  for (auto& p : rows.tip) p[0] += 0.0012;  // starts 0.2 mm inside: a calibration error
+  for (auto& p : rows.tip) p[1] += 0.0012;  // starts 0.2 mm inside: a calibration error
   WriteH5(data_ / kGoodName, rows);
-  const auto& c = Import().trials[0].checks;
+  const ImportReport report = Import();
+  const auto& c = report.trials[0].checks;
   EXPECT_TRUE(c.pose_usable);
   ASSERT_FALSE(c.findings.empty());
   EXPECT_EQ(c.findings[0].check, "pusher_inside_at_start");
@@ -272,7 +329,7 @@ TEST_F(ImportTest, BadInputNamesTheFileAndTheReasonAndWritesNothing) {
          WriteH5(d / kGoodName, Push());
          fs::resize_file(d / kGoodName, fs::file_size(d / kGoodName) / 2);
        },
-       kGoodName, "HDF5"},
+       kGoodName, "truncated file"},
       {"missing dataset", [](const fs::path& d) { WriteH5(d / kGoodName, Push(), false); },
        kGoodName, "no dataset 'ft_wrench'"},
       {"NaN",
@@ -348,7 +405,8 @@ TEST(SignedDistance, OfANonConvexOutline) {
   // An L: the notch's corner (0.5, 0.5) is inside the hull but outside the L.
   const std::vector<std::array<double, 2>> l = {{0, 0},     {1, 0},   {1, 0.5},
                                                 {0.5, 0.5}, {0.5, 1}, {0, 1}};
-  EXPECT_NEAR(SignedDistance(l, 0.75, 0.75), std::hypot(0.25, 0.25), 1e-12);
+  EXPECT_NEAR(SignedDistance(l, 0.75, 0.75), 0.25, 1e-12);  // to the notch's two edges
+  EXPECT_NEAR(SignedDistance(l, 1.2, 1.2), std::hypot(0.2, 0.7), 1e-12);  // to the corner (1, 0.5)
   EXPECT_NEAR(SignedDistance(l, 0.25, 0.25), -0.25, 1e-12);
   EXPECT_NEAR(SignedDistance(l, -0.1, 0.5), 0.1, 1e-12);
 }

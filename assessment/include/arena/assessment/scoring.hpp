@@ -17,6 +17,9 @@ struct PredictionError {
   double force_scale = 0;     // N, RMS of |f_true| over the same pairs (to normalise)
   double mode_agreement = 1;  // fraction of (sample, contact) pairs with the same mode
   int samples_compared = 0;
+  // (sample, contact) pairs whose forces were compared; 0: the truth measured
+  // no force (force_rms and mode_agreement then mean nothing: not scored).
+  long contact_pairs = 0;
 };
 
 // @pre every sample of both has the same number of contacts.
