@@ -59,7 +59,7 @@ std::vector<assessment::CalibrationParam> ParseParams(const std::string& list) {
 }
 
 // MuJoCo costs ~0.1 s per trial: fewer evaluations and a bootstrap that
-// reuses them unless asked otherwise (docs/closed_loop.md).
+// reuses them unless asked otherwise (docs/adaptive.md).
 constexpr int kArenaEvaluations = 150, kMujocoEvaluations = 40;
 // The identifiability profile's scales over the bounds (six more near the fit).
 constexpr int kArenaProfilePoints = 12, kMujocoProfilePoints = 6;
@@ -382,7 +382,7 @@ void AddCalibrateCommand(CLI::App& app, Action* action) {
       "  arena calibrate --db lab.db --campaign 1 --params mu_fingers --predictor mujoco "
       "--threads 2\n"
       "Exit 0: stored and applied; 1: stored, but it did not lower the held-out error (not "
-      "applied).\nLoss weights and method: docs/closed_loop.md.\n");
+      "applied).\nLoss weights and method: docs/adaptive.md.\n");
   cmd->callback([o, action] { *action = [o] { return RunCalibrate(*o); }; });
 }
 

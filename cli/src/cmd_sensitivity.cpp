@@ -247,14 +247,16 @@ std::string CampaignText(const assessment::CampaignSensitivityReport& r, std::in
   out << "pooled observed/predicted spread: position " << Opt(r.pooled_position_ratio, 1, "%.3g")
       << " (" << r.pooled_position_verdict << "), rotation "
       << Opt(r.pooled_rotation_ratio, 1, "%.3g") << " (" << r.pooled_rotation_verdict << ")\n";
-  out << "unstable conditions: " << r.unstable;
-  std::string list;
+  // Each unstable condition by its parameters (not only its index) and why.
+  out << "unstable conditions: " << r.unstable << "\n";
   for (const auto& c : r.conditions) {
-    if (c.unstable) list += (list.empty() ? "" : ", ") + std::to_string(c.condition);
+    if (!c.unstable) continue;
+    out << "  condition " << c.condition << " " << c.params_json << ": "
+        << (c.reason.empty() ? "no reason recorded" : c.reason) << " ("
+        << Fmt("%.0f", c.flip_fraction * 100) << " % of the ensemble changed contact modes or "
+        << "grasp)\n";
   }
-  if (!list.empty()) out << " (" << list << ")";
-  out << "\n"
-      << r.model_runs << " model runs on " << r.threads << " threads, " << Fmt("%.3g", r.wall_s)
+  out << r.model_runs << " model runs on " << r.threads << " threads, " << Fmt("%.3g", r.wall_s)
       << " s\n";
   return out.str();
 }
@@ -404,7 +406,7 @@ void AddSensitivityCommand(CLI::App& app, Action* action) {
       "sensitivity",
       "How sensitive a push's predicted outcome is to its inputs, and whether it is unstable; "
       "for a campaign, predicted vs observed spread per condition");
-  cmd->add_option("scene", o->scene_path, "Scene JSON file (SCENE.md)");
+  cmd->add_option("scene", o->scene_path, "Scene JSON file (docs/scene.md)");
   cmd->add_option("--db", o->db_path, "Store file (campaign view)");
   cmd->add_option("--campaign", o->campaign, "Campaign id (campaign view)")
       ->check(CLI::NonNegativeNumber);

@@ -1,4 +1,4 @@
-// arena: one binary, many subcommands (DESIGN.md, cli room).
+// arena: one binary, many subcommands (docs/architecture.md, the cli room).
 #include <cstdio>
 #include <exception>
 #include <string>

@@ -8,6 +8,7 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cerrno>
 #include <charconv>
 #include <chrono>
@@ -995,6 +996,16 @@ ExportReport WriteDataset(const Store& store, const ExportOptions& o, const fs::
         static_cast<std::size_t>(sqlite3_column_count(detail::Stmt(impl.db, kIndexSql).get())) - 3;
     for (std::size_t c = base; c + 1 < index.table.columns.size(); ++c)
       parameters.insert(index.table.columns[c]);
+    // Variations written into the scene (grip_force, finger_type, ...) have
+    // their own scene-derived column; they are parameters all the same.
+    const auto spec = nlohmann::json::parse(campaign.spec_json, nullptr, false);
+    if (spec.is_object() && spec.contains("variations") && spec["variations"].is_object()) {
+      for (const auto& [name, value] : spec["variations"].items()) {
+        if (std::find(index.table.columns.begin(), index.table.columns.end(), name) !=
+            index.table.columns.end())
+          parameters.insert(name);
+      }
+    }
   }
   // The columns each row gets after the stored ones (same order as WriteTrial).
   std::vector<std::string> columns = index.table.columns;

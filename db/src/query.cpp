@@ -74,8 +74,18 @@ std::string Trim(const std::string& s) {
   return s.substr(b, e - b);
 }
 
+// 6 significant digits, but never an exponent for a value a person reads
+// whole: a timestamp (1795810000.125 s, not 1.79581e+09) keeps its
+// integer part and milliseconds.
 std::string ShortNumber(double v) {
-  char buf[32];
+  char buf[48];
+  if (std::isfinite(v) && std::abs(v) >= 1e6 && std::abs(v) < 1e15) {
+    std::snprintf(buf, sizeof buf, "%.3f", v);
+    std::string s = buf;
+    while (s.back() == '0') s.pop_back();
+    if (s.back() == '.') s.pop_back();
+    return s;
+  }
   std::snprintf(buf, sizeof buf, "%.6g", v);
   return buf;
 }

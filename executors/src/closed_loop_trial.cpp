@@ -42,6 +42,10 @@ void ClosedLoopTrial::Start() {
   commands_.TakeAll();  // answers to earlier trials
 }
 
+double ClosedLoopTrial::HoldLimit() const {
+  return answered_ ? context_.spec.hold_s : std::max(context_.spec.hold_s, kFirstAnswerWait_s);
+}
+
 std::optional<msg::PusherCommand> ClosedLoopTrial::Await(std::uint32_t k, bool exact,
                                                          StreamClock::time_point until) {
   std::optional<msg::PusherCommand> newest;
@@ -69,7 +73,7 @@ std::optional<msg::PusherCommand> ClosedLoopTrial::Answer(std::uint32_t k, doubl
     // Best-effort loses messages (a controller that matched a moment late
     // misses sample 0): without an answer the sample is published again
     // every 20 ms until the hold time runs out.
-    const auto give_up = StreamClock::now() + Seconds(context_.spec.hold_s);
+    const auto give_up = StreamClock::now() + Seconds(HoldLimit());
     for (;;) {
       auto answer =
           Await(k, true, std::min(give_up, StreamClock::now() + std::chrono::milliseconds(20)));
@@ -115,9 +119,13 @@ std::optional<mechanics::PusherMotion> ClosedLoopTrial::Next(
   record.sample = k;
   record.t = truth.t;
   if (answer) return Apply(*answer, record, why);
-  if (StreamClock::now() - last_command_at_ > Seconds(spec.hold_s)) {
-    *why = "controller " + spec.name + ": no command for " + std::to_string(spec.hold_s) +
-           " s (hold time) after sample " + std::to_string(k) + "; pusher stopped";
+  if (StreamClock::now() - last_command_at_ > Seconds(HoldLimit())) {
+    *why = answered_
+               ? "controller " + spec.name + ": no command for " + std::to_string(spec.hold_s) +
+                     " s (hold time) after sample " + std::to_string(k) + "; pusher stopped"
+               : "controller " + spec.name + ": no answer to the first sample within " +
+                     std::to_string(HoldLimit()) + " s of the trial's start (sample " +
+                     std::to_string(k) + "); pusher stopped";
     return Stop(record);
   }
   record.commanded = applied_.empty() ? Eigen::Vector3d::Zero() : applied_.back().commanded;
@@ -156,6 +164,7 @@ std::optional<mechanics::PusherMotion> ClosedLoopTrial::Apply(const msg::PusherC
                    : Eigen::Vector3d::Zero();
   in_force_.angular_velocity = w;
   last_command_at_ = StreamClock::now();
+  answered_ = true;
   record.applied = in_force_.velocity;
   applied_.push_back(record);
   return in_force_;

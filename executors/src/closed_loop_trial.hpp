@@ -27,6 +27,11 @@ class ClosedLoopTrial {
  public:
   // How long a closed-loop trial waits for its controller to appear.
   static constexpr double kControllerWait_s = 5.0;
+  // Before its first answer a controller is starting up: its endpoints are
+  // matched, but discovery may not have completed on its side (best-effort
+  // samples are lost until it has) and its first sample costs it the most.
+  // Until then the hold time does not run; this bound does.
+  static constexpr double kFirstAnswerWait_s = 2.0;
 
   // `port` publishes the live samples; `commands` reads the controllers'
   // answers (filtered to this cell). The defect layer has prepared the trial.
@@ -68,6 +73,9 @@ class ClosedLoopTrial {
   // waiting until `until` at most.
   std::optional<msg::PusherCommand> Await(std::uint32_t k, bool exact,
                                           StreamClock::time_point until);
+  // How long without a command stops the pusher: the hold time once the
+  // controller has answered, kFirstAnswerWait_s (at least) before.
+  double HoldLimit() const;
   // The answer to sample k: lockstep waits for it (republishing the sample),
   // wall clock takes the newest until the next sample is due.
   std::optional<msg::PusherCommand> Answer(std::uint32_t k, double t,
@@ -87,6 +95,7 @@ class ClosedLoopTrial {
   std::size_t expected_samples_ = 0;
   StreamClock::time_point start_{};
   StreamClock::time_point last_command_at_{};
+  bool answered_ = false;  // a command of this trial taken into force
   mechanics::PusherMotion in_force_;
   std::vector<AppliedCommand> applied_;
   std::optional<Observer> observer_;  // from the first sample: the layer's scene is set

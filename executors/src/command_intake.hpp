@@ -1,6 +1,7 @@
 // Which service a cell serves, and the commands waiting for its worker.
 //
-// A cell serves one service session at a time (DESIGN.md, PHASE_CLAIM):
+// A cell serves one service session at a time (README.md, "One service per store, one service per
+// cell"):
 //
 //   free --claim / first phase command--> serving S --lease runs out--> free
 //     serving S --release (lease 0)--> free          (S retired)

@@ -2,12 +2,16 @@
 // person can read (grouped, counted, blamed on the cell, the driver or the
 // predictor), a finished campaign's rate stays what it was, unit slips are
 // blamed on the field written. Each test names the behaviour it pins.
+#include <algorithm>
 #include <fstream>
 #include <string>
+#include <vector>
 
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 
+#include "arena/db/export.hpp"
+#include "arena/db/query.hpp"
 #include "arena/db/store.hpp"
 #include "arena/orchestrator/campaign.hpp"
 #include "db/db_test_util.hpp"
@@ -141,6 +145,56 @@ TEST(StatusCells, GoneForADayFoldedIntoACount) {
   const std::string all = FormatCellTable(cells, activity, 1e6, true);
   EXPECT_NE(all.find("old1"), std::string::npos) << all;
   EXPECT_EQ(all.find("more than a day"), std::string::npos) << all;
+}
+
+// Pins: `arena query` printed timestamps as 1.79581e+09.
+TEST(QueryTable, TimestampsKeepTheirDigits) {
+  TempDir dir;
+  db::StoreOptions o;
+  o.clock = [] { return 1795810000.125; };
+  const std::string path = dir.File("q.db");
+  db::Store::Open(path, o)->CreateCampaign(MakeCampaign(), MakeTrials(1));
+  db::StoreOptions ro;
+  ro.read_only = true;
+  auto store = db::Store::Open(path, ro);
+  const std::string table =
+      db::FormatTable(db::RunQuery(*store, "SELECT created_at, 0.000123456789 AS s FROM trials"));
+  EXPECT_NE(table.find("1795810000.125"), std::string::npos) << table;
+  EXPECT_EQ(table.find("e+09"), std::string::npos) << table;
+  EXPECT_NE(table.find("0.000123457"), std::string::npos) << table;  // small ones as before
+}
+
+// Pins: the export manifest's `parameters` left out grip_force and
+// finger_type, the variations written into the scene's own columns.
+TEST(ExportManifest, ParametersNameEveryVariation) {
+  TempDir dir;
+  const std::string path = dir.File("e.db");
+  {
+    auto store = db::Store::Open(path);
+    store->UpsertCell("c", {"point"});
+    db::NewCampaign c = MakeCampaign();
+    c.spec_json =
+        R"({"name": "c", "variations": {"grip_force": {"choices": [5, 6]},
+            "finger_type": "point", "pivot_offset": 0.0}})";
+    auto trials = MakeTrials(2);
+    for (auto& t : trials) t.params_json = R"({"pivot_offset": 0.0})";
+    store->CreateCampaign(c, trials);
+    for (int i = 0; i < 2; ++i) RunTrialToDone(*store, *store->ClaimNextTrial("c"), 5);
+  }
+  db::StoreOptions ro;
+  ro.read_only = true;
+  auto store = db::Store::Open(path, ro);
+  db::ExportOptions eo;
+  eo.campaign_id = 1;
+  eo.format = db::ExportFormat::kCsv;
+  eo.out_dir = dir.File("out");
+  db::ExportCampaign(*store, eo);
+  std::ifstream in(eo.out_dir + "/manifest.json");
+  const auto manifest = nlohmann::json::parse(in);
+  std::vector<std::string> parameters = manifest["parameters"];
+  for (const char* name : {"grip_force", "finger_type", "pivot_offset"})
+    EXPECT_NE(std::find(parameters.begin(), parameters.end(), name), parameters.end())
+        << name << " missing from " << manifest["parameters"].dump();
 }
 
 std::string Smoke(const std::string& variation, const std::string& value) {

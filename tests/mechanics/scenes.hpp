@@ -1,4 +1,4 @@
-// Scenes built in code for the mechanics tests (SCENE.md's canonical scene
+// Scenes built in code for the mechanics tests (docs/scene.md's example scene
 // and the textbook set-ups of the validation tests).
 #pragma once
 
@@ -17,7 +17,7 @@ inline ContactSpec Finger(const char* name, ContactType type, Eigen::Vector3d po
   return f;
 }
 
-// SCENE.md's example: a point finger and a line finger, pusher from below.
+// docs/scene.md's example: a point finger and a line finger, pusher from below.
 inline Scene CanonicalScene() {
   Scene s;
   s.object.shape = ObjectShape::kBox;

@@ -161,7 +161,7 @@ TEST(LinearPush, PusherForceIsFrictionPlusGravityComponent) {
   }
 }
 
-// The canonical scene of SCENE.md is case (b): 2 μ N + m g = 11.962 N.
+// The example scene of docs/scene.md is case (b): 2 μ N + m g = 11.962 N.
 TEST(LinearPush, CanonicalSceneOfTheContract) {
   for (auto [reduce, mode] : kSettings) {
     Scene s = CanonicalScene();

@@ -289,7 +289,7 @@ TEST(AdaptiveE2E, CalibrationRecoversTheCellsFrictionScale) {
 // a campaign predicting with MuJoCo. The 10 % is a stated tolerance, not a
 // margin found by trying: on these short pushes MuJoCo's coupled sliding
 // fingers chatter, and other seeds of the same campaign gave 1.353-1.392
-// (docs/closed_loop.md).
+// (docs/adaptive.md).
 TEST(AdaptiveE2E, MujocoCalibrationRecoversTheFrictionScaleWithinItsBudget) {
   TempDir dir;
   const std::string db = dir / "mj.db";

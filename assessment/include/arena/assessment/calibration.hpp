@@ -1,5 +1,5 @@
 // Calibration: fit model parameters to a campaign's ground truth
-// (`arena calibrate`; docs/closed_loop.md).
+// (`arena calibrate`; docs/adaptive.md).
 //
 // Parameters are multiplicative scales on the scene's values, so one fit
 // serves a campaign whose scenes vary them:

@@ -1,6 +1,6 @@
 // Adaptive samplers: campaigns that choose their next trials from the
 // outcomes of the finished ones (campaign "sampler": {"adaptive": ...};
-// orchestrator/README.md, "Adaptive samplers"; docs/closed_loop.md).
+// orchestrator/README.md, "Adaptive samplers"; docs/adaptive.md).
 //
 // Ask/tell in rounds, pipelined. Every decision is a pure function of
 // (campaign, the outcomes of a set of finished rounds in trial order, the

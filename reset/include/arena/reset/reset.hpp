@@ -17,7 +17,7 @@
 // cell's history, drawn from (seed, id of the trial just executed).
 //
 // Frames: all poses in the gripper's nominal frame at the start of a trial
-// (SCENE.md), m and rad.
+// (docs/scene.md), m and rad.
 #pragma once
 
 #include <cstdint>

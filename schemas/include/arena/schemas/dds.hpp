@@ -8,7 +8,7 @@
 //                LiveState, PusherCommand (schemas/arena.idl); one type per
 //                topic, same name.
 //
-// QoS (DESIGN.md, section DDS) and why
+// QoS (docs/architecture.md, DDS topics) and why
 //   CellAnnounce  reliable, transient-local, keep-last 1 per cell: a service
 //                 that starts after the cell still learns of it.
 //   TrialCommand  reliable, keep-all, volatile: a restarted cell gets no stale

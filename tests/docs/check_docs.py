@@ -1,0 +1,266 @@
+#!/usr/bin/env python3
+"""Docs that cannot drift (issue 26): checks docs/, README.md and every room's
+README.md against the repository and the built `arena` binary.
+
+  check_docs.py --source DIR --arena BIN            the static checks
+  check_docs.py --source DIR --arena BIN --examples the worked example of
+      docs/campaigns.md, run again: every `$ arena query` block's output must
+      be what the doc prints (--update rewrites the blocks instead)
+
+Static checks: no file of the repository names a file it lacks (the shared
+design notes are not in it); README.md links every page of docs/; every
+repository path a doc names exists; every `arena COMMAND` a doc shows is a
+command of the binary; docs/architecture.md's topic count and table match
+the topics schemas/src/dds.cpp registers. Exit 1 with one line per problem.
+"""
+import argparse
+import os
+import re
+import shlex
+import subprocess
+import sys
+import tempfile
+
+NUMBER_WORDS = {2: "Two", 3: "Three", 4: "Four", 5: "Five", 6: "Six", 7: "Seven", 8: "Eight"}
+# Written split so that this file does not name them itself.
+MISSING_NOTES = ["DESIGN" + ".md", "SCENE" + ".md"]
+
+
+def tracked_files(src):
+    try:
+        out = subprocess.run(["git", "-C", src, "ls-files"], capture_output=True, text=True,
+                             check=True).stdout.split("\n")
+        return [f for f in out if f]
+    except (OSError, subprocess.CalledProcessError):
+        files = []
+        for root, dirs, names in os.walk(src):
+            dirs[:] = [d for d in dirs if not d.startswith((".", "build"))]
+            files += [os.path.relpath(os.path.join(root, n), src) for n in names]
+        return files
+
+
+def doc_files(src, files):
+    return sorted(f for f in files
+                  if f.endswith(".md") and (f.startswith("docs/") or "/" not in f or
+                                            f.count("/") == 1 and f.endswith("README.md")))
+
+
+def check_missing_notes(src, files, problems):
+    for f in files:
+        path = os.path.join(src, f)
+        try:
+            text = open(path, encoding="utf-8", errors="replace").read()
+        except OSError:
+            continue
+        for name in MISSING_NOTES:
+            for n, line in enumerate(text.split("\n"), 1):
+                if name in line:
+                    problems.append(f"{f}:{n}: names {name}, which the repository lacks")
+
+
+def check_docs_mentions(src, files, problems):
+    """Every docs page any file of the repository names exists."""
+    for f in files:
+        try:
+            text = open(os.path.join(src, f), encoding="utf-8", errors="replace").read()
+        except OSError:
+            continue
+        for m in set(re.findall(r"\bdocs/([A-Za-z0-9_-]+\.md)\b", text)):
+            if not os.path.exists(os.path.join(src, "docs", m)):
+                problems.append(f"{f}: names docs/{m}, which does not exist")
+
+
+def check_readme_lists_docs(src, files, problems):
+    readme = open(os.path.join(src, "README.md"), encoding="utf-8").read()
+    for f in files:
+        if f.startswith("docs/") and f.endswith(".md") and f"({f})" not in readme:
+            problems.append(f"README.md: does not link {f}")
+
+
+TOP_DIRS = None
+
+
+def check_paths(src, docs, problems):
+    tops = {p for p in os.listdir(src) if os.path.isdir(os.path.join(src, p))
+            and not p.startswith(".") and not p.startswith("build")}
+    for f in docs:
+        text = open(os.path.join(src, f), encoding="utf-8").read()
+        base = os.path.dirname(f)
+        # Markdown links to files of the repository.
+        for m in re.finditer(r"\]\(([^)#\s]+)(#[^)]*)?\)", text):
+            target = m.group(1)
+            if re.match(r"^[a-z]+:", target):
+                continue
+            if not os.path.exists(os.path.normpath(os.path.join(src, base, target))):
+                problems.append(f"{f}: links {target}, which does not exist")
+        # `dir/file.ext` in code spans, for the repository's own folders.
+        for m in re.finditer(r"`([A-Za-z0-9_./-]+)`", text):
+            token = m.group(1)
+            first = token.split("/")[0]
+            if "/" not in token or first not in tops or not re.search(r"\.[a-z]+$", token):
+                continue
+            if not os.path.exists(os.path.join(src, token)):
+                problems.append(f"{f}: names {token}, which does not exist")
+
+
+def arena_commands(arena):
+    out = subprocess.run([arena, "--help"], capture_output=True, text=True).stdout
+    commands = set()
+    in_list = False
+    for line in out.split("\n"):
+        if line.strip().upper().startswith("SUBCOMMANDS"):
+            in_list = True
+            continue
+        if in_list:
+            m = re.match(r"^\s+([a-z][a-z-]*)\b", line)
+            if m:
+                commands.add(m.group(1))
+    return commands
+
+
+def check_commands(src, docs, arena, problems):
+    known = arena_commands(arena)
+    if not known:
+        problems.append(f"{arena} --help lists no commands")
+        return
+    for f in docs:
+        text = open(os.path.join(src, f), encoding="utf-8").read()
+        for m in re.finditer(r"(?:^\$ |`)arena ([a-z][a-z-]*)", text, re.M):
+            if m.group(1) not in known:
+                problems.append(f"{f}: shows `arena {m.group(1)}`, not a command of arena "
+                                f"({', '.join(sorted(known))})")
+
+
+def check_topics(src, problems):
+    dds = open(os.path.join(src, "schemas/src/dds.cpp"), encoding="utf-8").read()
+    topics = re.findall(r'kTopic = "([A-Za-z]+)"', dds)
+    arch = open(os.path.join(src, "docs/architecture.md"), encoding="utf-8").read()
+    word = NUMBER_WORDS.get(len(topics), str(len(topics)))
+    if not re.search(rf"\b{word} topics\b", arch, re.I):
+        problems.append(f"docs/architecture.md: does not say '{word} topics' "
+                        f"(schemas/src/dds.cpp registers {len(topics)}: {', '.join(topics)})")
+    for t in topics:
+        if f"| `{t}` |" not in arch:
+            problems.append(f"docs/architecture.md: the topic table has no row for {t}")
+
+
+# ---------------------------------------------------------------- examples
+
+def doc_blocks(text):
+    """(start, end, command, output) of every ``` block starting with `$ arena`:
+    the command runs on while a line ends with a backslash or a quote is open."""
+    blocks = []
+    for m in re.finditer(r"```\n(\$ arena .*?)```\n", text, re.S):
+        lines = m.group(1).split("\n")
+        parts = [lines[0][2:]]
+        k = 1
+        while k < len(lines) and (parts[-1].endswith("\\") or
+                                  " ".join(parts).count('"') % 2 == 1):
+            parts.append(lines[k].strip())
+            k += 1
+        cmd = " ".join(p[:-1].strip() if p.endswith("\\") else p for p in parts)
+        output = "\n".join(lines[k:])
+        blocks.append((m.start(1), m.end(1), cmd, output))
+    return blocks
+
+
+# Lines of `arena run`'s output that depend on the host (time, rates, the
+# DDS domain picked, orchestration times) are not compared; every other
+# line the doc shows must be printed as shown.
+VARIABLE_RUN_LINES = ("  time ", "  predictor ", "  orchestration ", "              and reset",
+                      "campaign 1 'grip-slip': 24 trials on")
+
+
+def run_examples(src, arena, update, problems):
+    doc_path = os.path.join(src, "docs/campaigns.md")
+    text = open(doc_path, encoding="utf-8").read()
+    rel = lambda argv: [os.path.join(src, a) if a.startswith("examples/") else a for a in argv]
+    with tempfile.TemporaryDirectory(prefix="arena-docs-") as tmp:
+        new_text = text
+        ran = None
+        blocks = doc_blocks(text)
+        # In the doc's order: submit (own store), run, queries, export.
+        outputs = {}
+        for start, end, cmd, expected in blocks:
+            argv = shlex.split(cmd)
+            verb = argv[1]
+            if verb == "submit":
+                sub = os.path.join(tmp, "submit")
+                os.makedirs(sub)
+                got = subprocess.run([arena] + rel(argv[1:]), capture_output=True, text=True,
+                                     cwd=sub, timeout=120)
+                printed = got.stdout + got.stderr
+                for line in expected.strip().split("\n"):
+                    if line and line not in printed:
+                        problems.append(f"docs/campaigns.md: `{cmd}` no longer prints {line!r}")
+            elif verb == "run":
+                got = subprocess.run([arena] + rel(argv[1:]) + ["--quiet"], capture_output=True,
+                                     text=True, cwd=tmp, timeout=300)
+                if got.returncode != 0:
+                    problems.append(f"docs/campaigns.md: the worked example's run exited "
+                                    f"{got.returncode}: {got.stderr.strip()[-400:]}")
+                    return
+                ran = got.stdout
+                shown = expected.split("\n$ ")[0]  # the run's own output, not the next command's
+                for line in shown.strip().split("\n"):
+                    if not line or line.startswith(VARIABLE_RUN_LINES):
+                        continue
+                    if line not in ran.split("\n"):
+                        problems.append(f"docs/campaigns.md: `arena run` no longer prints\n"
+                                        f"{line}\nit prints\n{ran}")
+            elif verb in ("query", "export"):
+                if ran is None:
+                    problems.append("docs/campaigns.md: a query before the run")
+                    return
+                got = subprocess.run([arena] + argv[1:], capture_output=True, text=True, cwd=tmp,
+                                     timeout=120)
+                output = got.stdout + (got.stderr if verb == "export" else "")
+                if output.strip() != expected.strip():
+                    if update:
+                        outputs[(start, end)] = (expected, output)
+                    else:
+                        problems.append(f"docs/campaigns.md: `{cmd[:60]}...` now prints\n"
+                                        f"{output}where the doc says\n{expected}")
+        # The Python read-back: run as shown, its output compared with the block after it.
+        m = re.search(r"```python\n(.*?)```\n.*?```\n(.*?)```", text, re.S)
+        if m:
+            got = subprocess.run([sys.executable, "-c", m.group(1)], capture_output=True,
+                                 text=True, cwd=tmp, timeout=120)
+            if got.stdout.strip() != m.group(2).strip():
+                problems.append(f"docs/campaigns.md: the Python read-back now prints\n"
+                                f"{got.stdout}{got.stderr}where the doc says\n{m.group(2)}")
+        for (start, end), (expected, output) in sorted(outputs.items(), reverse=True):
+            body = new_text[start:end]
+            new_text = new_text[:start] + body[:len(body) - len(expected)] + output + \
+                new_text[end:]
+        if update and new_text != text:
+            open(doc_path, "w", encoding="utf-8").write(new_text)
+            print("docs/campaigns.md: outputs updated")
+
+
+def main():
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--source", required=True)
+    ap.add_argument("--arena", required=True)
+    ap.add_argument("--examples", action="store_true")
+    ap.add_argument("--update", action="store_true")
+    a = ap.parse_args()
+    problems = []
+    if a.examples:
+        run_examples(a.source, a.arena, a.update, problems)
+    else:
+        files = tracked_files(a.source)
+        docs = doc_files(a.source, files)
+        check_missing_notes(a.source, files, problems)
+        check_docs_mentions(a.source, files, problems)
+        check_readme_lists_docs(a.source, files, problems)
+        check_paths(a.source, docs, problems)
+        check_commands(a.source, docs, a.arena, problems)
+        check_topics(a.source, problems)
+    for p in problems:
+        print(p)
+    return 1 if problems else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
