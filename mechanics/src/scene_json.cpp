@@ -82,6 +82,16 @@ const char* ToString(ContactTracking tracking) {
   return "?";
 }
 
+const char* ToString(GripperCoupling coupling) {
+  switch (coupling) {
+    case GripperCoupling::kIndependent:
+      return "independent";
+    case GripperCoupling::kParallelJaw:
+      return "parallel_jaw";
+  }
+  return "?";
+}
+
 std::optional<ContactTracking> ContactTrackingFromString(std::string_view text) {
   if (text == "tracked") return ContactTracking::kTracked;
   if (text == "fixed") return ContactTracking::kFixed;
@@ -535,6 +545,23 @@ ModelOptions ReadModel(const json& v, const std::string& path) {
   return model;
 }
 
+GripperSpec ReadGripper(const json& v, const std::string& path) {
+  Obj o(v, path, {"coupling"});
+  GripperSpec gripper;
+  if (const json* c = o.Find("coupling")) {
+    const std::string text = String(*c, o.At("coupling"));
+    if (text == "independent") {
+      gripper.coupling = GripperCoupling::kIndependent;
+    } else if (text == "parallel_jaw") {
+      gripper.coupling = GripperCoupling::kParallelJaw;
+    } else {
+      throw SceneError(o.At("coupling"),
+                       "must be \"independent\" or \"parallel_jaw\", got " + Quote(text));
+    }
+  }
+  return gripper;
+}
+
 // ---------------------------------------------------------------------------
 // Validation helpers.
 
@@ -851,6 +878,18 @@ void ValidateScene(const Scene& scene) {
       }
     }
   }
+  // A parallel-jaw mechanism moves two opposed fingers.
+  if (scene.gripper.coupling == GripperCoupling::kParallelJaw) {
+    const bool opposed =
+        scene.fingers.size() == 2 &&
+        (scene.fingers[0].normal.normalized() + scene.fingers[1].normal.normalized()).norm() < 1e-3;
+    if (!opposed) {
+      throw SceneError("gripper.coupling",
+                       "parallel_jaw needs exactly two fingers with opposed normals, got " +
+                           std::to_string(scene.fingers.size()) + " finger(s)" +
+                           (scene.fingers.size() == 2 ? " whose normals do not oppose" : ""));
+    }
+  }
   // Grip forces are prescribed (each finger pushes grip_force along its
   // normal), so unless they cancel the grasp itself accelerates the object
   // without bound: one finger, or fingers that do not oppose, is no grasp.
@@ -900,7 +939,9 @@ Scene ParseScene(std::string_view json_text) {
   const json doc = BuildDocument(json_text, JsonLimits{}, &problem);
   if (problem) throw SceneError(problem->path, problem->reason);
 
-  Obj root(doc, "", {"object", "gravity", "duration", "grip_force", "fingers", "pusher", "model"});
+  Obj root(
+      doc, "",
+      {"object", "gravity", "duration", "grip_force", "fingers", "pusher", "model", "gripper"});
   Scene scene;
   scene.object = ReadObject(root.Require("object"), "object");
   if (const json* g = root.Find("gravity")) scene.gravity = Vec3(*g, "gravity");
@@ -918,6 +959,7 @@ Scene ParseScene(std::string_view json_text) {
     scene.fingers.push_back(ReadFinger(fingers[i], Index("fingers", i)));
   if (const json* p = root.Find("pusher")) scene.pusher = ReadPusher(*p, "pusher");
   if (const json* m = root.Find("model")) scene.model = ReadModel(*m, "model");
+  if (const json* g = root.Find("gripper")) scene.gripper = ReadGripper(*g, "gripper");
   ValidateScene(scene);
   return scene;
 }
@@ -1048,6 +1090,9 @@ std::string SceneToJson(const Scene& scene, int indent) {
                 {"dt", scene.model.dt},
                 {"reduce", ToString(scene.model.reduce)},
                 {"contacts", ToString(scene.model.contacts)}};
+  // Written only when it says something: a scene without it means independent pads.
+  if (scene.gripper.coupling != GripperCoupling::kIndependent)
+    j["gripper"] = {{"coupling", ToString(scene.gripper.coupling)}};
   return j.dump(indent);
 }
 

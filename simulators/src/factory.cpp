@@ -74,7 +74,8 @@ std::unique_ptr<Simulator> MakeSimulator(std::string_view name, std::string_view
     MujocoSettings s;
     CheckKeys(j, "mujoco",
               {"timestep", "cone", "solref", "solimp", "impratio", "noslip_iterations", "tolerance",
-               "iterations", "object_damping", "finger_mass", "slip_speed", "pads", "forces"});
+               "iterations", "object_damping", "finger_mass", "slip_speed", "pads", "forces",
+               "scale_to_scene"});
     Read(j, "mujoco", "timestep", &s.timestep);
     if (auto it = j.find("cone"); it != j.end()) {
       if (*it == "elliptic")
@@ -105,6 +106,7 @@ std::unique_ptr<Simulator> MakeSimulator(std::string_view name, std::string_view
     Read(j, "mujoco", "object_damping", &s.object_damping);
     Read(j, "mujoco", "finger_mass", &s.finger_mass);
     Read(j, "mujoco", "slip_speed", &s.slip_speed);
+    Read(j, "mujoco", "scale_to_scene", &s.scale_to_scene);
     if (auto it = j.find("pads"); it != j.end()) {
       if (*it == "spheres")
         s.pads = PadShapes::kSpheres;

@@ -10,10 +10,10 @@
 //     origin is the centre of mass (a prism's polygon centroid).
 //   finger i: a body on a slide joint along its normal, driven by a motor
 //     whose force is the grip force (plus the finger's own weight along the
-//     normal); two opposed fingers are coupled (each slide axis is its
-//     normal, so joint1 = joint2 closes them symmetrically about a fixed
-//     centre, as a parallel gripper's mechanism does: uncoupled, object and
-//     fingers drift together in x). The gap stays free: the grip force holds.
+//     normal); with the scene's gripper.coupling "parallel_jaw" the two
+//     slides are coupled (each slide axis is its normal, so joint1 = joint2
+//     closes them symmetrically about a fixed centre), else independent
+//     pads. The gap stays free: the grip force holds.
 //   pusher: a body on a free joint with a huge armature whose qpos and qvel
 //     are written before every step (a mocap body would have zero velocity
 //     to the solver, and contact damping then lags it by ~2·timeconst·v).
@@ -23,7 +23,10 @@
 //     object at t = 0.
 //   contacts: explicit <pair>s only (pad with object), per-pair friction
 //     (μ, torsion 0, rolling 0), condim 3, solref/solimp of the settings;
-//     margin = gap = 1 mm so contacts are found before they touch.
+//     margin 1 mm so contacts are found before they touch, acting from
+//     1 µm before touch. Pads, margin and impedance are scaled to the scene
+//     (ForScene); per-step checks end a run that left MuJoCo's validity
+//     with a typed error (TruthLimits).
 //
 // Truth per 250 Hz sample: the object's pose and twist from qpos/qvel; per
 // finger / pusher the sum over its MuJoCo contacts of mj_contactForce in the
@@ -52,9 +55,6 @@
 
 namespace arena::simulators {
 namespace {
-
-constexpr double kPadRadius = 0.001;      // m: pad sphere radius
-constexpr double kContactMargin = 0.001;  // m: contacts found this early (inactive: gap)
 
 // MuJoCo's default error handler calls exit(); ours throws to the caller.
 [[noreturn]] void ThrowMujocoError(const char* message) {
@@ -108,9 +108,9 @@ int PadCount(const mechanics::ContactSpec& c, PadShapes shapes) {
 }
 
 // Sphere centres (in the pad body's frame, whose origin is the contact point).
-std::vector<Eigen::Vector3d> PadCentres(const mechanics::ContactSpec& c) {
+std::vector<Eigen::Vector3d> PadCentres(const mechanics::ContactSpec& c, double pad_radius) {
   const Eigen::Vector3d n = c.normal.normalized();
-  const Eigen::Vector3d back = -kPadRadius * n;
+  const Eigen::Vector3d back = -pad_radius * n;
   std::vector<Eigen::Vector3d> out;
   switch (c.type) {
     case mechanics::ContactType::kPoint:
@@ -140,40 +140,44 @@ std::vector<Eigen::Vector3d> PadCentres(const mechanics::ContactSpec& c) {
 // PadShapes::kShapes: a line is one capsule (MuJoCo gives it up to 2
 // contacts on a face, 1 against a cylinder or mesh), a patch one thin box
 // whose corners sit on the 2R/3 ring (the spheres' torsion arm).
-std::string PadGeoms(const std::string& base, const mechanics::ContactSpec& c, PadShapes shapes) {
+std::string PadGeoms(const std::string& base, const mechanics::ContactSpec& c,
+                     const MujocoSettings& st) {
   std::ostringstream x;
-  if (shapes == PadShapes::kShapes && c.type != mechanics::ContactType::kPoint) {
+  const double pad_radius = st.pad_radius;
+  if (st.pads == PadShapes::kShapes && c.type != mechanics::ContactType::kPoint) {
     const Eigen::Vector3d n = c.normal.normalized();
-    const Eigen::Vector3d back = -kPadRadius * n;
+    const Eigen::Vector3d back = -pad_radius * n;
     if (c.type == mechanics::ContactType::kLine) {
       const Eigen::Vector3d a = 0.5 * c.length * c.axis.normalized();
       x << "      <geom name=\"" << base << "_0\" type=\"capsule\" contype=\"0\" conaffinity=\"0\" "
-        << "mass=\"0\" size=\"" << Num(kPadRadius) << "\" fromto=\"" << Vec(back - a) << " "
+        << "mass=\"0\" size=\"" << Num(pad_radius) << "\" fromto=\"" << Vec(back - a) << " "
         << Vec(back + a) << "\"/>\n";
     } else {
       const double h = 2.0 * c.radius / 3.0 / std::sqrt(2.0);
       const Eigen::Quaterniond q = Eigen::Quaterniond::FromTwoVectors(Eigen::Vector3d::UnitZ(), n);
       x << "      <geom name=\"" << base << "_0\" type=\"box\" contype=\"0\" conaffinity=\"0\" "
-        << "mass=\"0\" size=\"" << Num(h) << " " << Num(h) << " " << Num(kPadRadius) << "\" pos=\""
+        << "mass=\"0\" size=\"" << Num(h) << " " << Num(h) << " " << Num(pad_radius) << "\" pos=\""
         << Vec(back) << "\" quat=\"" << Quat(q) << "\"/>\n";
     }
     return x.str();
   }
-  const auto centres = PadCentres(c);
+  const auto centres = PadCentres(c, st.pad_radius);
   for (size_t j = 0; j < centres.size(); ++j) {
     x << "      <geom name=\"" << base << "_" << j
-      << "\" type=\"sphere\" contype=\"0\" conaffinity=\"0\" mass=\"0\" size=\"" << Num(kPadRadius)
+      << "\" type=\"sphere\" contype=\"0\" conaffinity=\"0\" mass=\"0\" size=\"" << Num(pad_radius)
       << "\" pos=\"" << Vec(centres[j]) << "\"/>\n";
   }
   return x.str();
 }
 
-bool Opposed(const mechanics::Scene& s) {
-  return s.fingers.size() == 2 &&
-         (s.fingers[0].normal.normalized() + s.fingers[1].normal.normalized()).norm() < 1e-9;
-}
-
 std::string Pair(const std::string& pad, const mechanics::ContactSpec& c, const MujocoSettings& st);
+
+// A contact acts once its distance is below margin - gap. With gap = margin
+// a pad that touches at t = 0 (distance 0) acts only once it has sunk in: the
+// first step then accelerates the fingers and the pusher freely into the
+// object (0.5 mm at 100 N or 1 m/s). Acting from a thousandth of the margin
+// before touch (1 µm at the defaults) starts every contact loaded.
+constexpr double kActiveAtTouch = 1e-3;
 
 std::string Pairs(const std::string& base, const mechanics::ContactSpec& c,
                   const MujocoSettings& st) {
@@ -191,7 +195,8 @@ std::string Pair(const std::string& pad, const mechanics::ContactSpec& c,
     << Num(c.mu) << " 0 0 0\" solref=\"" << Num(st.solref_timeconst) << " "
     << Num(st.solref_damping) << "\" solimp=\"";
   for (int k = 0; k < 5; ++k) x << Num(st.solimp[k]) << (k < 4 ? " " : "");
-  x << "\" margin=\"" << Num(kContactMargin) << "\" gap=\"" << Num(kContactMargin) << "\"/>";
+  x << "\" margin=\"" << Num(st.contact_margin) << "\" gap=\""
+    << Num(st.contact_margin * (1 - kActiveAtTouch)) << "\"/>";
   return x.str();
 }
 
@@ -289,6 +294,209 @@ void Validate(const MujocoSettings& s) {
   if (!(s.slip_speed > 0) || !std::isfinite(s.slip_speed))
     throw SimulatorError("mujoco.slip_speed", "must be > 0");
 }
+
+// ---- Scaled to the scene --------------------------------------------------
+// MuJoCo's contacts are soft: a pad sinks into the object by an amount set by
+// solref/solimp and the load, finds contacts within a margin, and a light
+// finger body bounces on a light object. The defaults were tuned on the
+// canonical scene (0.2 kg, 3 x 5 x 10 cm, 10 N); ForScene keeps them there and
+// scales them where the scene is smaller or more loaded, so that the soft
+// contact stays small against the scene (simulators/README.md, "Scaled to the
+// scene").
+constexpr double kReferenceLength = 0.03;      // m: the canonical box's smallest side
+constexpr double kReferenceLoad = 250;         // m/s²: its grip, 10 N x (1/0.05 + 1/0.2) /kg
+constexpr double kSlowestUnscaledPush = 1e-3;  // m/s: slower pushes creep at the defaults
+constexpr double kMostImpedance = 0.9999;      // MuJoCo clamps solimp's d to it (mjMAXIMP)
+
+// The object's smallest dimension (m): a box's shortest side, a cylinder's
+// diameter or height, a prism's height or its polygon's equal-area diameter.
+double SmallestDimension(const mechanics::ObjectSpec& o) {
+  switch (o.shape) {
+    case mechanics::ObjectShape::kBox:
+      return o.size.minCoeff();
+    case mechanics::ObjectShape::kCylinder:
+      return std::min(2 * o.radius, o.height);
+    case mechanics::ObjectShape::kPrism: {
+      double a = 0;
+      for (size_t i = 0; i < o.polygon.size(); ++i) {
+        const auto &p = o.polygon[i], &q = o.polygon[(i + 1) % o.polygon.size()];
+        a += 0.5 * (p.x() * q.y() - q.x() * p.y());
+      }
+      return std::min(o.height, 2 * std::sqrt(std::abs(a) / M_PI));
+    }
+  }
+  return o.size.minCoeff();
+}
+
+MujocoSettings ForScene(const mechanics::Scene& scene, const MujocoSettings& in) {
+  MujocoSettings st = in;
+  if (!in.scale_to_scene) return st;
+  // Lengths: pads, margin and the impedance's width shrink with a small
+  // object (a 1 mm pad on a 1 mm object is no point contact).
+  const double k_len = std::min(1.0, SmallestDimension(scene.object) / kReferenceLength);
+  st.pad_radius *= k_len;
+  st.contact_margin *= k_len;
+  st.solimp[2] *= k_len;
+  // Masses: a finger far heavier than the object it holds bounces it off
+  // (the pads are massless in the scene), so it is never heavier than the
+  // object; the damping keeps its time constants (translation m/c, rotation
+  // I/c with I ~ m L^2). Lighter fingers chatter more on a sliding face, so
+  // an object heavier than the finger keeps the finger as set.
+  const double k_mass = std::min(1.0, scene.object.mass / in.finger_mass);
+  st.finger_mass *= k_mass;
+  st.object_damping *= k_mass * k_len * k_len;
+  // Load and speed: a soft contact sinks by about (1 - d)/d · a · timeconst²
+  // (a: the acceleration its force gives the bodies it separates) and its
+  // friction creeps at a speed proportional to (1 - d)/d. The canonical scene
+  // (a = 10 N x (1/0.05 + 1/0.2) /kg = 250 m/s², pusher 1 cm/s) sinks about
+  // 90 µm and creeps about 0.1 mm/s; a scene that loads its contacts harder
+  // (relative to its size) or pushes slower than 1 mm/s gets (1 - d)/d
+  // divided by the ratio, then the time constant down to 2 timesteps.
+  const double m_o = scene.object.mass, m_f = st.finger_mass;
+  const double weight = m_o * scene.gravity.norm();
+  double a = scene.grip_force * (1 / m_f + 1 / m_o);
+  if (scene.pusher) {
+    double mu_n = 0;
+    for (const auto& f : scene.fingers) mu_n += f.mu * scene.grip_force;
+    a = std::max(a, (mu_n + weight) / m_o);
+  }
+  double ratio = std::max(1.0, a / kReferenceLoad / k_len);
+  if (scene.pusher) {
+    const double v = scene.pusher->motion.velocity.norm();
+    if (v > 0) ratio = std::max(ratio, kSlowestUnscaledPush / v);
+  }
+  if (ratio > 1) {
+    const double timestep = 1.0 / (mechanics::kSampleRateHz * StepsPerSample(st));
+    double achieved = ratio;  // the smaller reduction of (1 - d)/d of dmin and dmax
+    for (const int k : {0, 1}) {
+      const double odds = (1 - in.solimp[k]) / in.solimp[k];
+      const double d = std::max(in.solimp[k], std::min(kMostImpedance, 1 / (1 + odds / ratio)));
+      achieved = std::min(achieved, odds / ((1 - d) / d));
+      st.solimp[k] = d;
+    }
+    // What the impedance could not give, the time constant does (down to
+    // MuJoCo's own floor of two timesteps); penetration goes with its square.
+    if (achieved < ratio) {
+      st.solref_timeconst =
+          std::max(2 * timestep, in.solref_timeconst / std::sqrt(ratio / achieved));
+    }
+  }
+  return st;
+}
+
+// Whether two scenes' derived settings build the same model.
+bool SameTuning(const MujocoSettings& a, const MujocoSettings& b) {
+  return a.finger_mass == b.finger_mass && a.object_damping == b.object_damping &&
+         a.pad_radius == b.pad_radius && a.contact_margin == b.contact_margin &&
+         std::equal(a.solimp, a.solimp + 5, b.solimp) && a.solref_timeconst == b.solref_timeconst &&
+         a.solref_damping == b.solref_damping && a.timestep == b.timestep;
+}
+
+// A parallel jaw: the two finger slides travel alike (each along its own
+// normal, so the fingers close symmetrically about a centre fixed in the
+// hand). As stiff as the contacts: at MuJoCo's default equality solref
+// (0.02 s) the fingers drifted 0.1 mm apart within 0.05 s of a 10 N push.
+std::string JawEquality(const MujocoSettings& st) {
+  std::ostringstream x;
+  x << "  <equality>\n    <joint joint1=\"finger0\" joint2=\"finger1\" polycoef=\"0 1 0 0 0\" "
+    << "solref=\"" << Num(st.solref_timeconst) << " " << Num(st.solref_damping) << "\" solimp=\"";
+  for (int k = 0; k < 5; ++k) x << Num(st.solimp[k]) << (k < 4 ? " " : "");
+  x << "\"/>\n  </equality>\n";
+  return x.str();
+}
+
+// ---- The truth's limits -----------------------------------------------------
+// Checked after every step: where MuJoCo's answer stops being the scene's
+// physics, the run ends with a typed error saying which limit and by how much
+// instead of returning a wrong trajectory as a truth.
+class TruthLimits {
+ public:
+  TruthLimits(const mechanics::Scene& scene, const MujocoSettings& st) : scene_(scene), st_(st) {
+    extent_ = scene.object.shape == mechanics::ObjectShape::kBox
+                  ? scene.object.size.maxCoeff()
+                  : std::max(2 * scene.object.radius, scene.object.height);
+    if (scene.object.shape == mechanics::ObjectShape::kPrism) {
+      for (const auto& p : scene.object.polygon) extent_ = std::max(extent_, 2 * p.norm());
+    }
+  }
+  // The largest penetration (m) an active pad contact may have: beyond it the
+  // pose is off by more than the truth's accuracy and a sphere pad's contact
+  // normal turns with its depth.
+  double PenetrationLimit() const { return 0.25 * st_.pad_radius; }
+
+  // "" while within the limits; otherwise which limit, when, by how much.
+  // `object_geom`, `pad_of_geom`: the run's ids; `start`: the object's
+  // centre at t = 0; `pusher_speed`: the pusher's speed now.
+  std::string Check(const mjModel* m, const mjData* d, int object_qpos, int object_qvel,
+                    int object_geom, const std::vector<int>& pad_of_geom,
+                    const std::vector<int>& finger_qpos, const Eigen::Vector3d& start,
+                    double pusher_speed) {
+    (void)m;
+    const double t = d->time;
+    const double g = scene_.gravity.norm();
+    // Penetration of an active pad contact.
+    for (int i = 0; i < d->ncon; ++i) {
+      const mjContact& c = d->contact[i];
+      if (c.exclude != 0 || c.efc_address < 0) continue;
+      const int other = c.geom1 == object_geom ? c.geom2 : c.geom2 == object_geom ? c.geom1 : -1;
+      if (other < 0 || pad_of_geom[static_cast<size_t>(other)] < 0) continue;
+      if (-c.dist > PenetrationLimit()) {
+        return Fail("penetration", t,
+                    "a pad sinks " + Num(-c.dist) + " m into the object (limit " +
+                        Num(PenetrationLimit()) +
+                        " m, a quarter of the pad radius): the soft contact cannot carry this load "
+                        "(grip, weight or pusher speed) at this timestep");
+      }
+    }
+    // Ejection: farther than the pusher and a free fall could have carried it.
+    const mjtNum* qp = d->qpos + object_qpos;
+    const Eigen::Vector3d p(qp[0], qp[1], qp[2]);
+    travel_ += pusher_speed * m->opt.timestep;
+    const double reach = travel_ + 0.5 * g * t * t + extent_;
+    if (!((p - start).norm() <= reach)) {
+      return Fail("ejection from the grasp", t,
+                  "the object moved " + Num((p - start).norm()) +
+                      " m, farther than the pusher's travel, a free fall and its own extent (" +
+                      Num(reach) + " m) allow");
+    }
+    // Energy growth: its centre faster than the pusher (twice its speed: an
+    // elastic rebound), a free fall and a small start kick could make it.
+    // (Not its spin: a pusher close to the axis a pivot turns about turns it
+    // fast, rightly.)
+    const mjtNum* qv = d->qvel + object_qvel;
+    const double speed = Eigen::Vector3d(qv[0], qv[1], qv[2]).norm();
+    const double bound = 2 * pusher_speed + g * t + 0.01 * extent_ / 0.1;
+    if (!(speed <= bound)) {
+      return Fail("energy growth", t,
+                  "the object's centre moves at " + Num(speed) +
+                      " m/s, more than the pusher, "
+                      "gravity and the start can give it (" +
+                      Num(bound) + " m/s)");
+    }
+    // The jaw's coupling: both fingers travel alike.
+    if (scene_.gripper.coupling == mechanics::GripperCoupling::kParallelJaw &&
+        finger_qpos.size() == 2) {
+      const double gap = std::abs(d->qpos[finger_qpos[0]] - d->qpos[finger_qpos[1]]);
+      if (gap > 0.1 * st_.pad_radius) {
+        return Fail("constraint violation", t,
+                    "the parallel jaw's fingers travel " + Num(gap) +
+                        " m apart (limit a tenth of the pad radius, " + Num(0.1 * st_.pad_radius) +
+                        " m)");
+      }
+    }
+    return "";
+  }
+
+ private:
+  static std::string Fail(const char* limit, double t, const std::string& what) {
+    return std::string("MuJoCo outside its limits at t = ") + Num(t) + " s (" + limit +
+           "): " + what;
+  }
+  const mechanics::Scene& scene_;
+  const MujocoSettings& st_;
+  double extent_ = 0;
+  double travel_ = 0;
+};
 
 // Owns a model and its data; frees them on every path.
 struct MjHandles {
@@ -420,7 +628,8 @@ class MujocoSimulator final : public Simulator {
                 {"finger_mass", s.finger_mass},
                 {"slip_speed", s.slip_speed},
                 {"pads", s.pads == PadShapes::kSpheres ? "spheres" : "shapes"},
-                {"forces", s.interval_forces ? "interval" : "instant"}})
+                {"forces", s.interval_forces ? "interval" : "instant"},
+                {"scale_to_scene", s.scale_to_scene}})
         .dump();
   }
   std::string CheckScene(const mechanics::Scene& scene) const override {
@@ -470,6 +679,11 @@ struct Run {
 
   const Eigen::Vector3d& PusherVelocity() const {
     return commanded ? pusher_v : scene.pusher->motion.velocity;
+  }
+  // The fastest a point of the pusher's pad near the object moves (m/s).
+  double PusherSpeed() const {
+    return PusherVelocity().norm() + scene.pusher->motion.angular_velocity.norm() *
+                                         std::max(scene.pusher->length, 2 * scene.pusher->radius);
   }
   // A command from time t on (the pusher stays where it is then). The
   // velocity in force again changes nothing, to the last bit.
@@ -650,9 +864,10 @@ std::string CheckCommand(const mechanics::Scene& scene, const mechanics::PusherM
   return "";
 }
 
-void RunLoaded(const mechanics::Scene& scene, const MujocoSettings& st, mjModel* m, mjData* d,
+void RunLoaded(const mechanics::Scene& scene, const MujocoSettings& settings, mjModel* m, mjData* d,
                mechanics::SimulationResult* result,
                const mechanics::PusherCommandSource* commands = nullptr) {
+  const MujocoSettings st = ForScene(scene, settings);
   const int per_sample = StepsPerSample(st);
   Run run{scene, st, m, d, -1, -1, -1, -1, -1, -1, {}, {}, {}, 0, -1};
   run.pad_of_geom.assign(static_cast<size_t>(m->ngeom), -1);
@@ -692,15 +907,22 @@ void RunLoaded(const mechanics::Scene& scene, const MujocoSettings& st, mjModel*
   result->samples.reserve(static_cast<size_t>(n_samples));
   run.DrivePusher(0);
   mj_forward(m, d);
+  TruthLimits limits(scene, st);
+  const Eigen::Vector3d start(d->qpos[run.object_qpos], d->qpos[run.object_qpos + 1],
+                              d->qpos[run.object_qpos + 2]);
+  std::string beyond;  // a limit the run went past
   for (long k = 0; k < n_samples; ++k) {
     Run::PadReading interval(run.n_pads);  // the steps since the last sample
     if (k > 0) {
-      for (int j = 0; j < per_sample; ++j) {
+      for (int j = 0; j < per_sample && beyond.empty(); ++j) {
         run.DrivePusher(d->time);
         mj_step(m, d);
         ++result->solver.steps;
         // After mj_step, d->contact and d->efc_force are the step's own solve.
         if (st.interval_forces) run.Read(&interval);
+        beyond =
+            limits.Check(m, d, run.object_qpos, run.object_qvel, run.object_geom, run.pad_of_geom,
+                         run.finger_qpos, start, run.pusher_body < 0 ? 0.0 : run.PusherSpeed());
       }
       // Pusher and time exactly on the sample instant; forces of that state.
       d->time = static_cast<double>(k) / mechanics::kSampleRateHz;
@@ -712,8 +934,10 @@ void RunLoaded(const mechanics::Scene& scene, const MujocoSettings& st, mjModel*
     s.t = static_cast<double>(k) / mechanics::kSampleRateHz;
     // MuJoCo drops contacts that do not fit its buffers and goes on: a truth
     // with contacts missing must not pass for a good one.
-    std::string failure;
-    if (!Finite(s) || d->warning[mjWARN_BADQACC].number > 0) {
+    std::string failure = beyond;  // a limit crossed comes first: it says why
+    if (!failure.empty()) {
+      // (the samples end before this one)
+    } else if (!Finite(s) || d->warning[mjWARN_BADQACC].number > 0) {
       failure = "MuJoCo diverged at t = " + Num(s.t) + " s (non-finite state or acceleration)";
     } else if (d->warning[mjWARN_CONTACTFULL].number > 0 ||
                d->warning[mjWARN_CNSTRFULL].number > 0) {
@@ -897,6 +1121,8 @@ class MujocoPrepared final : public PreparedScene {
     const Eigen::Matrix3d ib = mechanics::ObjectInertia(base_.object);
     const double k = v.object.mass / base_.object.mass;
     if ((iv - k * ib).norm() > 1e-12 * std::max(iv.norm(), 1e-300)) return false;
+    // What ForScene derives from the mass, grip and friction must be the base's too.
+    if (!SameTuning(ForScene(v, settings_), ForScene(base_, settings_))) return false;
     mechanics::Scene same = v;
     for (size_t i = 0; i < same.fingers.size(); ++i) same.fingers[i].mu = base_.fingers[i].mu;
     if (same.pusher) same.pusher->mu = base_.pusher->mu;
@@ -926,7 +1152,8 @@ std::unique_ptr<PreparedScene> MujocoSimulator::Prepare(const mechanics::Scene& 
 
 }  // namespace
 
-std::string MujocoModelXml(const mechanics::Scene& scene, const MujocoSettings& st) {
+std::string MujocoModelXml(const mechanics::Scene& scene, const MujocoSettings& settings) {
+  const MujocoSettings st = ForScene(scene, settings);
   const auto& o = scene.object;
   std::ostringstream x;
   const int per_sample = StepsPerSample(st);
@@ -975,23 +1202,22 @@ std::string MujocoModelXml(const mechanics::Scene& scene, const MujocoSettings& 
       << Vec(f.normal.normalized()) << "\"/>\n"
       << "      <inertial pos=\"0 0 0\" mass=\"" << Num(st.finger_mass)
       << "\" diaginertia=\"1e-6 1e-6 1e-6\"/>\n"
-      << PadGeoms("pad" + k, f, st.pads) << "    </body>\n";
+      << PadGeoms("pad" + k, f, st) << "    </body>\n";
   }
   if (scene.pusher) {
     const auto& p = *scene.pusher;
     x << "    <body name=\"pusher\" pos=\"" << Vec(p.position) << "\">\n"
       << "      <joint name=\"pusher\" type=\"free\" armature=\"1e6\"/>\n"
       << "      <inertial pos=\"0 0 0\" mass=\"1\" diaginertia=\"1e-3 1e-3 1e-3\"/>\n"
-      << PadGeoms("pusher_pad", p, st.pads) << "    </body>\n";
+      << PadGeoms("pusher_pad", p, st) << "    </body>\n";
   }
   x << "  </worldbody>\n  <contact>\n";
   for (size_t i = 0; i < scene.fingers.size(); ++i)
     x << Pairs("pad" + std::to_string(i), scene.fingers[i], st);
   if (scene.pusher) x << Pairs("pusher_pad", *scene.pusher, st);
   x << "  </contact>\n";
-  if (Opposed(scene)) {
-    x << "  <equality>\n    <joint joint1=\"finger0\" joint2=\"finger1\" polycoef=\"0 1 0 0 0\"/>\n"
-      << "  </equality>\n";
+  if (scene.gripper.coupling == mechanics::GripperCoupling::kParallelJaw) {
+    x << JawEquality(st);
   }
   x << "  <actuator>\n";
   for (size_t i = 0; i < scene.fingers.size(); ++i)

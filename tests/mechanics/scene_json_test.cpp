@@ -478,5 +478,46 @@ TEST(SceneJson, MissingFileIsRefused) {
   EXPECT_THROW(LoadSceneFile("/nonexistent/scene.json"), SceneError);
 }
 
+// Issue 31: "gripper": {"coupling": ...} says whether the two fingers are one
+// parallel-jaw mechanism. Absent keeps the meaning every scene had (independent
+// pads), and is written back only when it says otherwise, so existing scene
+// files round-trip to the same text.
+TEST(SceneJson, GripperCouplingIsAnAdditionThatDefaultsToIndependentPads) {
+  json j = Canonical();
+  const Scene plain = ParseScene(j.dump());
+  EXPECT_EQ(plain.gripper.coupling, GripperCoupling::kIndependent);
+  EXPECT_EQ(json::parse(SceneToJson(plain)).count("gripper"), 0u);
+
+  j["gripper"] = {{"coupling", "parallel_jaw"}};
+  const Scene jaw = ParseScene(j.dump());
+  EXPECT_EQ(jaw.gripper.coupling, GripperCoupling::kParallelJaw);
+  EXPECT_EQ(json::parse(SceneToJson(jaw))["gripper"]["coupling"], "parallel_jaw");
+  EXPECT_EQ(ParseScene(SceneToJson(jaw)).gripper.coupling, GripperCoupling::kParallelJaw);
+
+  j["gripper"] = {{"coupling", "independent"}};
+  EXPECT_EQ(ParseScene(j.dump()).gripper.coupling, GripperCoupling::kIndependent);
+
+  std::string message;
+  j["gripper"] = {{"coupling", "vacuum"}};
+  EXPECT_EQ(RefusedAt(j.dump(), &message), "gripper.coupling");
+  EXPECT_NE(message.find("parallel_jaw"), std::string::npos) << message;
+  j["gripper"] = {{"coupling", "independent"}, {"stroke", 0.1}};
+  EXPECT_EQ(RefusedAt(j.dump()), "gripper.stroke");
+  j["gripper"] = "parallel_jaw";
+  EXPECT_EQ(RefusedAt(j.dump()), "gripper");
+
+  // The example of a lab's parallel-jaw gripper reads as one.
+  EXPECT_EQ(
+      LoadSceneFile((kSourceDir / "examples/scenes/parallel_jaw.json").string()).gripper.coupling,
+      GripperCoupling::kParallelJaw);
+
+  // A jaw moves two opposed fingers: three fingers, or two that do not oppose, are refused.
+  j["gripper"] = {{"coupling", "parallel_jaw"}};
+  json one = j;
+  one["fingers"] = json::array({j["fingers"][0]});
+  one["grip_force"] = 0.0;
+  EXPECT_EQ(RefusedAt(one.dump(), &message), "gripper.coupling") << message;
+}
+
 }  // namespace
 }  // namespace arena::mechanics

@@ -87,6 +87,21 @@ struct ModelOptions {
   ContactTracking contacts = ContactTracking::kTracked;
 };
 
+// How the fingers move along their closing directions (JSON "gripper":
+// {"coupling": ...}; absent = independent, the meaning every scene had
+// before the field existed). kIndependent: each finger a force-controlled
+// pad that follows the object along its normal on its own, so the grasp
+// moves with the object along the grip axis. kParallelJaw: two opposed
+// fingers on one mechanism (a parallel-jaw gripper): they close and open
+// symmetrically about a centre fixed in the hand, so the grasp holds the
+// object's position along the grip axis (the jaw takes any net force there)
+// while the grip force squeezes.
+enum class GripperCoupling { kIndependent, kParallelJaw };
+
+struct GripperSpec {
+  GripperCoupling coupling = GripperCoupling::kIndependent;
+};
+
 struct Scene {
   ObjectSpec object;
   Eigen::Vector3d gravity = Eigen::Vector3d::Zero();  // m/s^2; zero = no gravity rows
@@ -95,10 +110,12 @@ struct Scene {
   std::vector<ContactSpec> fingers;
   std::optional<PusherSpec> pusher;
   ModelOptions model;
+  GripperSpec gripper;
 };
 
 const char* ToString(ContactType type);
 const char* ToString(Reduce reduce);
 const char* ToString(ContactTracking tracking);
+const char* ToString(GripperCoupling coupling);
 
 }  // namespace arena::mechanics

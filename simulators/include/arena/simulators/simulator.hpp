@@ -146,6 +146,17 @@ struct MujocoSettings {
   // false = at the sample's instant. A sliding soft contact makes a finger
   // chatter on and off the face between steps, so an instant says little.
   bool interval_forces = true;
+  // Pad sphere radius and contact margin (m): contacts are found within the
+  // margin and act from touch (gap = margin). Scaled to the scene with
+  // scale_to_scene.
+  double pad_radius = 0.001;
+  double contact_margin = 0.001;
+  // true: the pads, margin and solimp width shrink with a small object, the
+  // finger mass with a light one, and the contact impedance rises with the
+  // load (simulators/README.md, "Scaled to the scene"), so the soft contact
+  // stays small against the scene; a scene like the canonical one (0.2 kg,
+  // 3 cm and more, 10 N) keeps these settings exactly. false: as set.
+  bool scale_to_scene = true;
 };
 std::unique_ptr<Simulator> MakeMujocoSimulator(const MujocoSettings& settings);
 

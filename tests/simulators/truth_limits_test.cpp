@@ -1,0 +1,172 @@
+// Issue 31: the MuJoCo truth knows its limits (per-step checks turn a run
+// that left MuJoCo's validity into a typed error), its soft contacts are
+// scaled to the scene (so more of the extremes are right), and the scene's
+// gripper coupling is honoured (independent pads or a parallel jaw), while
+// arena's model refuses the jaw it does not model.
+#include <cmath>
+
+#include <gtest/gtest.h>
+
+#include "arena/mechanics/scene_json.hpp"
+#include "arena/mechanics/simulate.hpp"
+#include "arena/simulators/simulator.hpp"
+#include "mechanics/scenes.hpp"
+
+namespace arena::simulators {
+namespace {
+
+using mechanics::GripperCoupling;
+using mechanics::Scene;
+using mechanics::SimulationStatus;
+
+// The canonical scene (a point and a line finger, 10 N, mu 0.5, 0.2 kg, the
+// pusher under the bottom face at 1 cm/s), 0.2 s.
+Scene Canonical() {
+  Scene s = mechanics::testing::CanonicalScene();
+  s.duration = 0.2;
+  return s;
+}
+
+// Its closed form: the box slides up with the pusher through both fingers,
+// pusher force 2 mu N + m g. The mean over the second half of the run.
+double MeanPusherForce(const mechanics::SimulationResult& r) {
+  double sum = 0;
+  int n = 0;
+  for (const auto& s : r.samples)
+    if (s.t >= r.samples.back().t / 2) sum += s.pusher_force.z(), ++n;
+  return n ? sum / n : 0;
+}
+double ExpectedForce(const Scene& s) {
+  return 2 * s.fingers[0].mu * s.grip_force + s.object.mass * s.gravity.norm();
+}
+
+bool IsLimitError(const mechanics::SimulationResult& r, const std::string& limit) {
+  return r.status == SimulationStatus::kSolverFailure &&
+         r.error.find("MuJoCo outside its limits") != std::string::npos &&
+         r.error.find(limit) != std::string::npos;
+}
+
+// A 1 kN grip on the 0.2 kg box, a 0.1 g box and a 10 m/s pusher: MuJoCo's
+// soft contact cannot carry these at its timestep (before these checks the
+// first was returned `ok` with the object ejected 7.6 m). Each is now a typed
+// error naming the limit it crossed, with nothing after it.
+TEST(MujocoLimits, RunsBeyondTheSoftContactAreTypedErrors) {
+  const auto sim = MakeMujocoSimulator({});
+  Scene grip = Canonical();
+  grip.grip_force = 1e4;
+  const auto a = sim->Simulate(grip);
+  EXPECT_TRUE(IsLimitError(a, "energy growth")) << a.error;
+  Scene light = Canonical();
+  light.object.mass = 1e-4;
+  const auto b = sim->Simulate(light);
+  EXPECT_TRUE(IsLimitError(b, "")) << b.error;
+  Scene fast = Canonical();
+  fast.pusher->motion.velocity = {0, 0, 10};
+  const auto c = sim->Simulate(fast);
+  EXPECT_TRUE(IsLimitError(c, "penetration")) << c.error;
+  EXPECT_NE(c.error.find("a pad sinks"), std::string::npos) << c.error;
+  for (const auto* r : {&a, &b, &c}) {
+    for (const auto& s : r->samples) EXPECT_TRUE(s.position.allFinite());
+  }
+}
+
+// A slow push (0.1 mm/s): at the unscaled defaults soft friction creeps at
+// about that speed, so the fingers' friction never builds up and the pusher
+// force came out half the closed form's 11.962 N, `ok`. Scaled to the scene
+// (impedance raised by 1 mm/s / v) it is within 2 %.
+TEST(MujocoScaled, ASlowPushBuildsTheFullFrictionForce) {
+  Scene s = Canonical();
+  s.pusher->motion.velocity = {0, 0, 1e-4};
+  const auto scaled = MakeMujocoSimulator({})->Simulate(s);
+  ASSERT_EQ(scaled.status, SimulationStatus::kOk) << scaled.error;
+  EXPECT_NEAR(MeanPusherForce(scaled), ExpectedForce(s), 0.02 * ExpectedForce(s));
+  MujocoSettings raw;
+  raw.scale_to_scene = false;
+  const auto unscaled = MakeMujocoSimulator(raw)->Simulate(s);
+  ASSERT_EQ(unscaled.status, SimulationStatus::kOk) << unscaled.error;
+  EXPECT_LT(MeanPusherForce(unscaled), 0.9 * ExpectedForce(s))
+      << "the unscaled contact is right here: the test proves nothing";
+}
+
+// A 100 N grip in a parallel jaw: scaled (impedance raised with the load),
+// the box slides up with the pusher and the force is 2 mu N + m g = 101.96 N;
+// unscaled, the pads sink more than a quarter of their radius and the run is
+// refused (before the checks: returned as a truth).
+TEST(MujocoScaled, AHundredNewtonGripIsRightScaledAndRefusedUnscaled) {
+  Scene s = Canonical();
+  s.grip_force = 100;
+  s.gripper.coupling = GripperCoupling::kParallelJaw;
+  const auto scaled = MakeMujocoSimulator({})->Simulate(s);
+  ASSERT_EQ(scaled.status, SimulationStatus::kOk) << scaled.error;
+  EXPECT_NEAR(MeanPusherForce(scaled), ExpectedForce(s), 0.02 * ExpectedForce(s));
+  EXPECT_NEAR(scaled.samples.back().position.z(), 0.002, 1e-4);
+  MujocoSettings raw;
+  raw.scale_to_scene = false;
+  const auto unscaled = MakeMujocoSimulator(raw)->Simulate(s);
+  EXPECT_NE(unscaled.status, SimulationStatus::kOk);
+}
+
+// The scene's canonical settings are the unscaled ones: the canonical scene's
+// MJCF is the same text with scaling on and off (its mass, size and load are
+// the references), so every figure measured on it before still holds.
+TEST(MujocoScaled, TheCanonicalSceneKeepsTheDefaults) {
+  MujocoSettings raw;
+  raw.scale_to_scene = false;
+  EXPECT_EQ(MujocoModelXml(Canonical(), {}), MujocoModelXml(Canonical(), raw));
+  Scene light = Canonical();
+  light.object.mass = 0.01;
+  EXPECT_NE(MujocoModelXml(light, {}), MujocoModelXml(light, raw));
+}
+
+// Issue 31's push along the grip axis (tilted 30° from z towards +x, pusher
+// mu 0.3, no gravity, point fingers). Independent pads follow the box along
+// x, so the pusher's contact sticks and the box goes where the pusher goes:
+// x(T) = 1.000 mm, z(T) = 1.732 mm at T = 0.2 s (MuJoCo: 0.924 mm, its soft
+// pusher contact creeps while it drags the grasp along: 0.1 mm allowed). A
+// parallel jaw holds the box's x: the pusher slides under it, x(T) = 0,
+// z(T) = 1.732 mm.
+Scene PushAlongTheGripAxis() {
+  Scene s = mechanics::testing::HeldBox(0.2, 10, 0.5);
+  s.gravity = Eigen::Vector3d::Zero();
+  mechanics::PusherSpec p;
+  p.name = "pusher";
+  p.position = {0, 0, -0.05};
+  p.normal = {0, 0, 1};
+  p.mu = 0.3;
+  p.motion.velocity = {0.01 * std::sin(M_PI / 6), 0, 0.01 * std::cos(M_PI / 6)};
+  s.pusher = p;
+  s.duration = 0.2;
+  return s;
+}
+
+TEST(MujocoGripper, HonoursIndependentPadsAndTheParallelJaw) {
+  Scene s = PushAlongTheGripAxis();
+  EXPECT_EQ(MujocoModelXml(s, {}).find("<equality>"), std::string::npos);
+  const auto free_pads = MakeMujocoSimulator({})->Simulate(s);
+  ASSERT_EQ(free_pads.status, SimulationStatus::kOk) << free_pads.error;
+  EXPECT_NEAR(free_pads.samples.back().position.x(), 1.0e-3, 1e-4);
+  EXPECT_NEAR(free_pads.samples.back().position.z(), 1.732e-3, 1e-4);
+
+  s.gripper.coupling = GripperCoupling::kParallelJaw;
+  EXPECT_NE(MujocoModelXml(s, {}).find("polycoef=\"0 1 0 0 0\""), std::string::npos);
+  const auto jaw = MakeMujocoSimulator({})->Simulate(s);
+  ASSERT_EQ(jaw.status, SimulationStatus::kOk) << jaw.error;
+  EXPECT_NEAR(jaw.samples.back().position.x(), 0, 5e-5);
+  EXPECT_NEAR(jaw.samples.back().position.z(), 1.732e-3, 1e-4);
+}
+
+// arena's model has independent pads only: a parallel-jaw scene is refused
+// with a typed error naming the field, never run as independent pads.
+TEST(ArenaGripper, RefusesTheParallelJawNamingTheField) {
+  Scene s = PushAlongTheGripAxis();
+  s.gripper.coupling = GripperCoupling::kParallelJaw;
+  const auto r = MakeArenaSimulator({})->Simulate(s);
+  EXPECT_EQ(r.status, SimulationStatus::kInvalidScene);
+  EXPECT_EQ(r.error.rfind("gripper.coupling: ", 0), 0u) << r.error;
+  EXPECT_TRUE(r.samples.empty());
+  s.gripper.coupling = GripperCoupling::kIndependent;
+  EXPECT_EQ(MakeArenaSimulator({})->Simulate(s).status, SimulationStatus::kOk);
+}
+
+}  // namespace
+}  // namespace arena::simulators
