@@ -15,6 +15,7 @@
 #include <Eigen/LU>
 
 #include "arena/mechanics/lcp.hpp"
+#include "arena/mechanics/pusher_motion.hpp"
 #include "geometry.hpp"
 #include "sparse_lu.hpp"
 
@@ -147,8 +148,15 @@ std::string CheckPlane(const Scene& scene, const Eigen::Vector3d& p, int& passed
   const Eigen::Matrix3d I = R * ObjectInertia(scene.object) * R.transpose();
   passed = 0;
   const double gn = scene.gravity.norm();
-  if (gn > 0 && std::abs(scene.gravity.dot(p)) > kPlaneTolerance * gn)
+  if (scene.support) {
+    // The support carries the weight: gravity and the support's normal
+    // load are both along the plane normal (free pushing: the table's) and
+    // leave the planar equations; the support's friction lies in the plane.
+    if (scene.gravity.cross(p).norm() > kPlaneTolerance * gn)
+      return "support: gravity is not normal to the plane";
+  } else if (gn > 0 && std::abs(scene.gravity.dot(p)) > kPlaneTolerance * gn) {
     return "gravity leaves the plane";
+  }
   ++passed;
   const Eigen::Vector3d Ip = I * p;
   if ((Ip - p.dot(Ip) * p).norm() > kPlaneTolerance * I.norm()) {
@@ -192,8 +200,21 @@ std::string CheckPlane(const Scene& scene, const Eigen::Vector3d& p, int& passed
     const double v = s.motion.velocity.norm();
     if (std::abs(s.motion.velocity.dot(p)) > kPlaneTolerance * v)
       return "pusher velocity leaves the plane";
-    const Eigen::Vector3d& w = s.motion.angular_velocity;
+    Eigen::Vector3d w = s.motion.angular_velocity;
     if (w.cross(p).norm() > kPlaneTolerance * w.norm()) return "pusher turns out of the plane";
+    if (s.path) {
+      for (size_t k = 0; k < s.path->position.size(); ++k) {
+        if (std::abs((s.path->position[k] - s.position).dot(p)) > kPlaneTolerance * L)
+          return "pusher path leaves the plane (position[" + std::to_string(k) + "])";
+        if (s.path->rpy.empty()) continue;
+        const Eigen::AngleAxisd turn(RotationFromRpy(s.path->rpy[k]) *
+                                     RotationFromRpy(s.path->rpy[0]).transpose());
+        const Eigen::Vector3d axis = turn.angle() * turn.axis();
+        if (axis.cross(p).norm() > kPlaneTolerance * std::max(axis.norm(), 1.0))
+          return "pusher path turns out of the plane (rpy[" + std::to_string(k) + "])";
+        if (axis.norm() > w.norm()) w = axis;
+      }
+    }
     if (w.norm() > 0 && s.mu > 0) {
       // A turning normal changes its tangent basis; only planes normal to a
       // gripper axis with facets a multiple of 4 keep in-plane edges throughout.
@@ -214,6 +235,9 @@ PlaneCheck FindPlane(const Scene& scene) {
                                              Eigen::Vector3d::UnitX()};
   if (scene.pusher && scene.pusher->motion.angular_velocity.norm() > 0) {
     candidates.insert(candidates.begin(), scene.pusher->motion.angular_velocity.normalized());
+  }
+  if (scene.support && scene.gravity.norm() > 0) {
+    candidates.insert(candidates.begin(), scene.gravity.normalized());
   }
   const Eigen::Matrix3d R = RotationFromRpy(scene.object.pose.rpy);
   Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig(R * ObjectInertia(scene.object) *
@@ -759,13 +783,14 @@ GraspStatus ContactModel::Grasp(std::string* note) const {
 double ContactModel::velocity_scale() const { return impl_->Vs; }
 Eigen::Vector3d ContactModel::pusher_position() const {
   if (!impl_->scene.pusher) return Eigen::Vector3d::Zero();
-  return impl_->scene.pusher->position + impl_->scene.pusher->motion.velocity * impl_->t;
+  return PusherPoseAt(*impl_->scene.pusher, impl_->t).position;
 }
 // Geometry() places the pusher at position + velocity t: rebasing the
 // position keeps it where it is when the velocity changes.
 bool ContactModel::SetPusherMotion(const PusherMotion& motion) {
   auto& pusher = impl_->scene.pusher;
-  if (!pusher || motion.angular_velocity != pusher->motion.angular_velocity) return false;
+  if (!pusher || pusher->path || motion.angular_velocity != pusher->motion.angular_velocity)
+    return false;
   pusher->position = pusher_position() - motion.velocity * impl_->t;
   pusher->motion = motion;
   for (Contact& ct : impl_->contacts) {
@@ -815,6 +840,17 @@ std::string BasicCheck(const Scene& s) {
     if (!finite3(s.pusher->motion.velocity) || !finite3(s.pusher->motion.angular_velocity)) {
       return "pusher.motion: must be finite";
     }
+    if (const auto& path = s.pusher->path) {
+      // PusherPoseAt() interpolates: it needs times from 0 that increase.
+      if (path->t.empty() || path->t[0] != 0 || path->position.size() != path->t.size() ||
+          (!path->rpy.empty() && path->rpy.size() != path->t.size()))
+        return "pusher.motion.path: t from 0 with one position (and rpy) row per time";
+      for (size_t k = 0; k < path->t.size(); ++k) {
+        if (!std::isfinite(path->t[k]) || (k > 0 && !(path->t[k] > path->t[k - 1])) ||
+            !finite3(path->position[k]) || (!path->rpy.empty() && !finite3(path->rpy[k])))
+          return "pusher.motion.path: times must increase, every entry finite";
+      }
+    }
   }
   return {};
 }
@@ -842,6 +878,12 @@ void ContactModel::Impl::Setup() {
   if (std::string e = BasicCheck(scene); !e.empty()) {
     status = SimulationStatus::kInvalidScene;
     error = e;
+    return;
+  }
+  if (scene.support) {
+    // Refused, never ignored: without its friction the object would float.
+    status = SimulationStatus::kInvalidScene;
+    error = "support: arena's model does not model a support yet (MuJoCo does)";
     return;
   }
   const ModelOptions& opt = scene.model;
@@ -908,8 +950,9 @@ void ContactModel::Impl::Setup() {
   const double g = scene.gravity.norm();
   Fs = std::max(scene.grip_force, mass * g);
   if (scene.pusher) {
-    Fs = std::max({Fs, mass * scene.pusher->motion.velocity.norm() / dt,
-                   mass * scene.pusher->motion.angular_velocity.norm() * L / dt});
+    const PusherTwist peak = PusherPeakRates(*scene.pusher);
+    Fs = std::max(
+        {Fs, mass * peak.velocity.norm() / dt, mass * peak.angular_velocity.norm() * L / dt});
   }
   if (!(Fs > 0)) Fs = mass * L / (dt * dt);
   Vs = Fs * dt / mass;
@@ -1010,15 +1053,25 @@ void ContactModel::Impl::Geometry() {
     Eigen::Matrix3d Rp = Eigen::Matrix3d::Identity();
     Eigen::Vector3d vp = Eigen::Vector3d::Zero(), wp = Eigen::Vector3d::Zero();
     ct.position = ct.spec.position + ct.pad * ct.spec.normal;
-    if (ct.pusher) {
+    bool turned = false;
+    if (ct.pusher && scene.pusher->path) {
+      const PusherPose pose = PusherPoseAt(*scene.pusher, t);
+      const PusherTwist twist = PusherTwistOver(*scene.pusher, t, dt);
+      vp = twist.velocity;
+      wp = twist.angular_velocity;
+      ct.position = pose.position;
+      Rp = pose.rotation;
+      turned = pose.turned;
+    } else if (ct.pusher) {
       vp = scene.pusher->motion.velocity;
       wp = scene.pusher->motion.angular_velocity;
       ct.position = ct.spec.position + vp * t;
       const double a = wp.norm() * t;
       if (a > 0) Rp = Eigen::AngleAxisd(a, wp.normalized()).toRotationMatrix();
+      turned = wp.norm() > 0;
     }
     const Eigen::Vector3d n = Rp * ct.spec.normal;
-    const bool recompute = ct.edges.empty() || (ct.pusher && wp.norm() > 0);
+    const bool recompute = ct.edges.empty() || (ct.pusher && turned);
     ct.normal = n;
     if (recompute) {
       if (planar) {
@@ -1179,7 +1232,16 @@ void ContactModel::Impl::TrackedGeometry() {
     Eigen::Matrix3d Rp = Eigen::Matrix3d::Identity();
     Eigen::Vector3d vp = Eigen::Vector3d::Zero(), wp = Eigen::Vector3d::Zero();
     Eigen::Vector3d base = ct.spec.position + ct.pad * ct.spec.normal;
-    if (ct.pusher) {
+    if (ct.pusher && scene.pusher->path) {
+      // A recorded path: where it is now, and its mean motion over the step.
+      const PusherPose pose = PusherPoseAt(*scene.pusher, t);
+      const PusherTwist twist = PusherTwistOver(*scene.pusher, t, dt);
+      vp = twist.velocity;
+      wp = twist.angular_velocity;
+      base = pose.position;
+      turned = pose.turned;
+      Rp = pose.rotation;
+    } else if (ct.pusher) {
       vp = scene.pusher->motion.velocity;
       wp = scene.pusher->motion.angular_velocity;
       base = ct.spec.position + vp * t;
