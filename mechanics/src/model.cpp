@@ -17,6 +17,7 @@
 #include "arena/mechanics/lcp.hpp"
 #include "arena/mechanics/pusher_motion.hpp"
 #include "geometry.hpp"
+#include "model_tester.hpp"
 #include "sparse_lu.hpp"
 
 namespace arena::mechanics {
@@ -346,7 +347,8 @@ void ReportAlongSceneNormal(const Contact& ct, bool tracked, const Eigen::Vector
 
 // Whether every entry is finite: x · 0 is 0 for finite x and NaN otherwise,
 // a sum without branches (Eigen's allFinite() compares x - x element-wise).
-bool AllFiniteEntries(const Eigen::MatrixXd& m) {
+template <typename Dense>
+bool AllFiniteEntries(const Dense& m) {
   double zero = 0;
   const double* a = m.data();
   for (Eigen::Index i = 0; i < m.size(); ++i) zero += a[i] * 0.0;
@@ -633,6 +635,26 @@ class StepMatrix final : public LcpColumns {
   mutable SmallSparseLu lu_;  // planar: the bordered basis (SolveBasisBlock)
 };
 
+// One step's quantities, passed from phase to phase (the phases are below,
+// after Step()). Kept between steps only so that its buffers are reused;
+// nothing in it is read before the phase that writes it in the same step.
+struct StepScratch {
+  Eigen::Matrix3d R = Eigen::Matrix3d::Identity();  // the object's rotation (kPlaceContacts)
+  SmallMatrix Mr, Minv;                             // reduced mass matrix (kMassMatrix)
+  SmallVector vr;                                   // twist at the step's start, reduced
+  SmallVector Q;                                    // known wrench, reduced (kFreeMotion)
+  SmallVector vfree;                                // twist under the known wrench alone
+  Eigen::MatrixXd Jc, Jv, K;  // grasp maps (forces, velocity rows) and M⁻¹ Jc (kGraspMap)
+  StepMatrix A;               // the LCP w = A z + b (kContactRows, kConeRows, kPadRows)
+  Eigen::VectorXd b;
+  LcpResult solution;      // the last solve (its vectors reused) (kSolve)
+  Eigen::VectorXd forces;  // N, per force unknown
+  SmallVector Jf;          // contact wrench, reduced
+  SmallVector vr_new;      // the new twist, reduced
+  Eigen::Vector3d v_new = Eigen::Vector3d::Zero(), w_new = Eigen::Vector3d::Zero();
+  Residuals res;
+};
+
 }  // namespace
 
 struct ContactModel::Impl {
@@ -680,13 +702,14 @@ struct ContactModel::Impl {
   std::vector<double> cone_cos, cone_sin;                 // facets' angles from t1
 
   // Work space.
-  Eigen::MatrixXd Jc, Jv, K;
-  StepMatrix A;
-  Eigen::VectorXd b;
-  LcpResult solution;      // the last solve (its vectors reused)
-  Eigen::VectorXd forces;  // N, per force unknown
+  StepScratch scratch;
 
   void Setup();
+  bool SetupReduction();
+  void SetupScales();
+  void SetupContacts();
+  void SetupUnknowns();
+  void SeatContacts();
   void Geometry();
   void TrackedGeometry();
   void MarkRedundantPoints();
@@ -722,7 +745,43 @@ struct ContactModel::Impl {
     }
   }
   Eigen::Vector3d ObjectOrigin() const { return c - q.toRotationMatrix() * com_O; }
+
+  // Per point: its normal and friction directions (tracked: its own; fixed:
+  // the contact's), whether it is live (tracked: touches this step), and
+  // whether it has LCP rows this step (a redundant one has a unit diagonal,
+  // like a tracked point without rows; it still counts as touching).
+  const Eigen::Vector3d& NormalOf(const Contact& ct, const Point& pt) const {
+    return tracked ? pt.n : ct.normal;
+  }
+  const Eigen::Vector3d& EdgeOf(const Contact& ct, const Point& pt, int e) const {
+    return tracked ? pt.edges[static_cast<size_t>(e)] : ct.edges[static_cast<size_t>(e)];
+  }
+  bool Live(const Point& pt) const { return !tracked || pt.active; }
+  bool HasRows(const Point& pt) const { return Live(pt) && !pt.redundant; }
+
+  // The step, phase by phase (model_tester.hpp lists them).
   StepReport Step();
+  bool BeginStep(StepReport& rep);
+  bool RunPhase(StepPhase phase, StepReport& rep);
+  void PlaceContacts(StepScratch& s);
+  void FormMassMatrix(StepScratch& s);
+  bool FormFreeMotion(StepScratch& s, StepReport& rep);
+  void FormGraspMap(StepScratch& s);
+  void AssembleContactRows(StepScratch& s);
+  void AssembleConeRows(StepScratch& s);
+  void AssemblePadRows(StepScratch& s);
+  bool Solve(StepScratch& s, StepReport& rep);
+  void RecoverMotion(StepScratch& s);
+  double CheckResiduals(StepScratch& s);
+  bool CheckValues(StepScratch& s, StepReport& rep);
+  bool Refuse(StepReport& rep, const std::string& why);  // kNonFinite
+  void ReportContacts(StepScratch& s);
+  void Integrate(StepScratch& s);
+  // After kSolve: an unknown in physical units, the object's velocity at p,
+  // the velocity of the body a point presses on.
+  double Unknown(const StepScratch& s, int i) const;
+  Eigen::Vector3d ObjectVelocity(const StepScratch& s, const Eigen::Vector3d& p) const;
+  Eigen::Vector3d BodyVelocity(const StepScratch& s, const Contact& ct, const Point& pt) const;
 };
 
 ContactModel::ContactModel(const Scene& scene) : impl_(std::make_unique<Impl>()) {
@@ -905,6 +964,24 @@ void ContactModel::Impl::Setup() {
     }
   }
 
+  if (!SetupReduction()) return;
+  SetupScales();
+  SetupContacts();
+  SetupUnknowns();
+  info.dof = nd;
+  info.facets = opt.facets;
+  info.points = opt.points;
+  info.dt = dt;
+  info.unknowns = n;
+  states.assign(contacts.size(), ContactState{});
+  basis.clear();
+  SeatContacts();
+}
+
+// Planar reduction when the scene allows it (and asks): the plane and its
+// coordinates; false (status set) when planar was required and is not there.
+bool ContactModel::Impl::SetupReduction() {
+  const ModelOptions& opt = scene.model;
   if (opt.reduce != Reduce::kFull) {
     PlaneCheck plane = FindPlane(scene);
     if (plane.planar && opt.contacts == ContactTracking::kTracked &&
@@ -923,7 +1000,7 @@ void ContactModel::Impl::Setup() {
     } else if (opt.reduce == Reduce::kPlanar) {
       status = SimulationStatus::kInvalidScene;
       error = "model.reduce: planar, but the scene is not planar (" + plane.reason + ")";
-      return;
+      return false;
     }
   }
   if (planar) {
@@ -944,7 +1021,10 @@ void ContactModel::Impl::Setup() {
     P = Eigen::Matrix<double, 6, Eigen::Dynamic>::Identity(6, 6);
     edges_per_point = opt.facets;
   }
+  return true;
+}
 
+void ContactModel::Impl::SetupScales() {
   // Force scale: the largest of the forces the scene names (grip, weight,
   // the impulse that brings the object to the pusher's speed in one step).
   const double g = scene.gravity.norm();
@@ -956,8 +1036,12 @@ void ContactModel::Impl::Setup() {
   }
   if (!(Fs > 0)) Fs = mass * L / (dt * dt);
   Vs = Fs * dt / mass;
+}
 
-  // Unknowns: forces first (λ, β per point), then velocities (ξ, pad y±).
+// The contacts and their constituent points: fingers in scene order, then
+// the pusher.
+void ContactModel::Impl::SetupContacts() {
+  const ModelOptions& opt = scene.model;
   std::vector<ContactSpec> specs(scene.fingers.begin(), scene.fingers.end());
   if (scene.pusher) specs.push_back(*scene.pusher);
   for (size_t i = 0; i < specs.size(); ++i) {
@@ -983,6 +1067,10 @@ void ContactModel::Impl::Setup() {
     }
     contacts.push_back(std::move(ct));
   }
+}
+
+// Unknowns: forces first (λ, β per point), then velocities (ξ, pad y±).
+void ContactModel::Impl::SetupUnknowns() {
   const bool friction_rows = edges_per_point > 0;
   for (size_t ci = 0; ci < contacts.size(); ++ci) {
     Contact& ct = contacts[ci];
@@ -1017,13 +1105,10 @@ void ContactModel::Impl::Setup() {
       ct.y_minus = n++;
     }
   }
-  info.dof = nd;
-  info.facets = opt.facets;
-  info.points = opt.points;
-  info.dt = dt;
-  info.unknowns = n;
-  states.assign(contacts.size(), ContactState{});
-  basis.clear();
+}
+
+// The geometry at t = 0.
+void ContactModel::Impl::SeatContacts() {
   if (tracked) {
     // Fingers close on the object where it is: each pad moves along its
     // closing direction until its first constituent point meets the surface.
@@ -1304,82 +1389,146 @@ void ContactModel::Impl::MarkRedundantPoints() {
   }
 }
 
-StepReport ContactModel::Impl::Step() {
-  StepReport rep;
+// ---------------------------------------------------------------------------
+// One step in named phases (StepPhase, model_tester.hpp). Each phase reads
+// the model's state and the step's scratch (StepScratch) and writes only the
+// scratch, except where it says so: PlaceContacts moves the tracked geometry
+// (points, normals, gaps, pads re-seated), ReportContacts writes the contact
+// states and Integrate the state. The phases' order is the physics':
+//   geometry -> inertia -> free motion -> grasp map -> LCP rows (one phase per
+//   kind of row) -> solve -> bad values -> contact states -> integration.
+// A new kind of contact adds its unknowns in Setup() (force unknowns first,
+// velocity unknowns after), its known wrench in FormFreeMotion, its rows in a
+// phase of its own after AssemblePadRows (StepMatrix::Set on its unknowns'
+// rows and columns; b set alongside), and its report in ReportContacts.
+
+bool ContactModel::Impl::RunPhase(StepPhase phase, StepReport& rep) {
+  StepScratch& s = scratch;
+  switch (phase) {
+    case StepPhase::kPlaceContacts:
+      PlaceContacts(s);
+      return true;
+    case StepPhase::kMassMatrix:
+      FormMassMatrix(s);
+      return true;
+    case StepPhase::kFreeMotion:
+      return FormFreeMotion(s, rep);
+    case StepPhase::kGraspMap:
+      FormGraspMap(s);
+      return true;
+    case StepPhase::kContactRows:
+      AssembleContactRows(s);
+      return true;
+    case StepPhase::kConeRows:
+      AssembleConeRows(s);
+      return true;
+    case StepPhase::kPadRows:
+      AssemblePadRows(s);
+      return true;
+    case StepPhase::kSolve:
+      return Solve(s, rep);
+    case StepPhase::kCheckValues:
+      return CheckValues(s, rep);
+    case StepPhase::kContactStates:
+      ReportContacts(s);
+      return true;
+    case StepPhase::kIntegrate:
+      Integrate(s);
+      return true;
+  }
+  return false;
+}
+
+bool ContactModel::Impl::BeginStep(StepReport& rep) {
   if (status != SimulationStatus::kOk) {
     rep.ok = false;
     rep.error = error;
-    return rep;
+    rep.failure = StepFailure::kModel;
+    return false;
   }
   ++steps_taken;
+  return true;
+}
+
+StepReport ContactModel::Impl::Step() {
+  StepReport rep;
+  if (!BeginStep(rep)) return rep;
+  for (int i = 0; i < kStepPhases; ++i) {
+    if (!RunPhase(static_cast<StepPhase>(i), rep)) return rep;
+  }
+  return rep;
+}
+
+// Phase 1. This step's geometry: points, normals, friction directions, gaps,
+// and whether each point has rows.
+void ContactModel::Impl::PlaceContacts(StepScratch& s) {
   if (tracked) {
     TrackedGeometry();
   } else {
     Geometry();
   }
-  // Per point: its normal and friction directions (tracked: its own; fixed:
-  // the contact's), and whether it has rows this step.
-  auto normal_of = [&](const Contact& ct, const Point& pt) -> const Eigen::Vector3d& {
-    return tracked ? pt.n : ct.normal;
-  };
-  auto edge_of = [&](const Contact& ct, const Point& pt, int e) -> const Eigen::Vector3d& {
-    return tracked ? pt.edges[static_cast<size_t>(e)] : ct.edges[static_cast<size_t>(e)];
-  };
-  auto live = [&](const Point& pt) { return !tracked || pt.active; };
   if (planar) MarkRedundantPoints();
-  // Whether a point has LCP rows this step (a redundant one has a unit
-  // diagonal, like a tracked point without rows; it still counts as touching).
-  auto rows = [&](const Point& pt) { return live(pt) && !pt.redundant; };
   // The object's rotation (tracked geometry has just formed it from q).
-  const Eigen::Matrix3d R = tracked ? pose_R : q.toRotationMatrix();
+  s.R = tracked ? pose_R : q.toRotationMatrix();
+}
 
-  // Reduced mass matrix and its inverse.
-  SmallMatrix Mr, Minv;
+// Phase 2. Reduced mass matrix, its inverse, and the twist in reduced
+// coordinates.
+void ContactModel::Impl::FormMassMatrix(StepScratch& s) {
   Eigen::Matrix<double, 6, 1> tw;
   tw << v, w;
-  SmallVector vr;
   if (planar) {
     // Pᵀ diag(m I, R I Rᵀ) P on the plane's coordinates (e1, e2 in the
     // plane, turning about its normal p), written out on fixed 3x3 sizes.
-    const Eigen::Vector3d p_body = R.transpose() * plane_normal;
+    const Eigen::Vector3d p_body = s.R.transpose() * plane_normal;
     Eigen::Matrix3d Mr3 = Eigen::Matrix3d::Zero();
     Mr3(0, 0) = mass * plane_e1.dot(plane_e1);
     Mr3(0, 1) = Mr3(1, 0) = mass * plane_e1.dot(plane_e2);
     Mr3(1, 1) = mass * plane_e2.dot(plane_e2);
     Mr3(2, 2) = p_body.dot(inertia_body * p_body);
-    Mr = Mr3;
-    Minv = Mr3.inverse();  // closed form for 3x3 (Mr3 is the planar mass: SPD)
-    vr = Pt3 * tw;
+    s.Mr = Mr3;
+    s.Minv = Mr3.inverse();  // closed form for 3x3 (Mr3 is the planar mass: SPD)
+    s.vr = Pt3 * tw;
   } else {
     Eigen::Matrix<double, 6, 6> M6 = Eigen::Matrix<double, 6, 6>::Zero();
     M6.topLeftCorner<3, 3>() = mass * Eigen::Matrix3d::Identity();
-    M6.bottomRightCorner<3, 3>() = R * inertia_body * R.transpose();
-    Mr = P.transpose() * M6 * P;
-    Minv = Mr.llt().solve(SmallMatrix::Identity(nd, nd));
-    vr = P.transpose() * tw;
+    M6.bottomRightCorner<3, 3>() = s.R * inertia_body * s.R.transpose();
+    s.Mr = P.transpose() * M6 * P;
+    s.Minv = s.Mr.llt().solve(SmallMatrix::Identity(nd, nd));
+    s.vr = P.transpose() * tw;
   }
+}
 
-  // Known wrench: gravity and point fingers' normal forces. The gyroscopic
-  // torque -ω × Iω is left out: it is second order in the slow turning rates
-  // of pushing (the quasi-dynamic regime of the model), and its explicit
-  // integration pumps energy into a spinning body.
+// Phase 3. Known wrench: gravity and point fingers' normal forces; the
+// twist they give without contact forces. The gyroscopic torque -ω × Iω is
+// left out: it is second order in the slow turning rates of pushing (the
+// quasi-dynamic regime of the model), and its explicit integration pumps
+// energy into a spinning body. A non-finite free twist (a state or a known
+// wrench gone bad) is refused here, before the solver sees it.
+bool ContactModel::Impl::FormFreeMotion(StepScratch& s, StepReport& rep) {
   Eigen::Matrix<double, 6, 1> known = Eigen::Matrix<double, 6, 1>::Zero();
   known.head<3>() = mass * scene.gravity;
   for (const Contact& ct : contacts) {
-    if (ct.known_normal > 0 && live(ct.points[0])) {
-      const Eigen::Vector3d f = ct.known_normal * normal_of(ct, ct.points[0]);
+    if (ct.known_normal > 0 && Live(ct.points[0])) {
+      const Eigen::Vector3d f = ct.known_normal * NormalOf(ct, ct.points[0]);
       known.head<3>() += f;
       known.tail<3>() += (ct.points[0].p - c).cross(f);
     }
   }
-  const SmallVector Q = planar ? SmallVector(Pt3 * known) : SmallVector(P.transpose() * known);
-  const SmallVector vfree = vr + dt * Minv * Q;
+  s.Q = planar ? SmallVector(Pt3 * known) : SmallVector(P.transpose() * known);
+  s.vfree = s.vr + dt * s.Minv * s.Q;
+  if (AllFiniteEntries(s.vfree) && AllFiniteEntries(s.Minv)) return true;
+  return Refuse(rep, "non-finite free twist (the object's twist, mass matrix or known wrench)");
+}
 
-  // Columns of the grasp map for every force unknown, in reduced coordinates.
-  // Velocity rows use Jv: the same directions, except that a tracked point
-  // finger's pad follows the object along its closing direction c, so its
-  // friction rows see d' = d - (d·c)/(n·c) n (the pad's normal following
-  // removed from the relative velocity).
+// Phase 4. Columns of the grasp map for every force unknown, in reduced
+// coordinates, and K = M⁻¹ J. Velocity rows use Jv: the same directions,
+// except that a tracked point finger's pad follows the object along its
+// closing direction c, so its friction rows see d' = d - (d·c)/(n·c) n (the
+// pad's normal following removed from the relative velocity).
+void ContactModel::Impl::FormGraspMap(StepScratch& s) {
+  Eigen::MatrixXd& Jc = s.Jc;
+  Eigen::MatrixXd& Jv = s.Jv;
   Jc.resize(nd, nf);
   if (tracked) Jv.resize(nd, nf);
   const Point* arm_of = nullptr;  // the point whose arm is below (its unknowns are consecutive)
@@ -1388,12 +1537,12 @@ StepReport ContactModel::Impl::Step() {
     const Contact& ct = contacts[static_cast<size_t>(force_point[static_cast<size_t>(k)])];
     const Point& pt = ct.points[static_cast<size_t>(force_point_sub[static_cast<size_t>(k)])];
     const int e = force_dir[static_cast<size_t>(k)];
-    if (!rows(pt)) {
+    if (!HasRows(pt)) {
       Jc.col(k).setZero();
-      Jv.col(k).setZero();
+      if (tracked) Jv.col(k).setZero();
       continue;
     }
-    const Eigen::Vector3d d = e < 0 ? normal_of(ct, pt) : edge_of(ct, pt, e);
+    const Eigen::Vector3d d = e < 0 ? NormalOf(ct, pt) : EdgeOf(ct, pt, e);
     if (&pt != arm_of) {
       arm_of = &pt;
       arm = pt.p - c;
@@ -1411,28 +1560,34 @@ StepReport ContactModel::Impl::Step() {
       }
     }
   }
-  const Eigen::MatrixXd& Jrows = tracked ? Jv : Jc;
   if (planar) {
     // Written out (Eigen's product sums over the 3 coordinates from zero in
     // order: the same bits, without its kernel's packing).
-    K.resize(3, nf);
+    s.K.resize(3, nf);
     for (int j = 0; j < nf; ++j) {
       for (int i = 0; i < 3; ++i) {
         double acc = 0.0;
-        for (int k = 0; k < 3; ++k) acc += Minv(i, k) * Jc(k, j);
-        K(i, j) = acc;
+        for (int k = 0; k < 3; ++k) acc += s.Minv(i, k) * Jc(k, j);
+        s.K(i, j) = acc;
       }
     }
   } else {
-    K.noalias() = Minv * Jc;
+    s.K.noalias() = s.Minv * Jc;
   }
+}
 
-  // Nondimensional LCP: force unknowns scale with Fs, velocity unknowns with
-  // Vs = Fs dt / m; velocity rows are divided by Vs, force rows by Fs. A
-  // tracked point without rows this step keeps its unknowns at zero (a unit
-  // diagonal and b = 1), so the LCP keeps its size.
-  A.Reset(n, nf, mass, Jrows, K);
+// Phase 5. The force block and the rows of the force unknowns (normals and
+// friction edges). Nondimensional LCP: force unknowns scale with Fs,
+// velocity unknowns with Vs = Fs dt / m; velocity rows are divided by Vs,
+// force rows by Fs. A tracked point without rows this step keeps its
+// unknowns at zero (a unit diagonal and b = 1), so the LCP keeps its size.
+void ContactModel::Impl::AssembleContactRows(StepScratch& s) {
+  const Eigen::MatrixXd& Jrows = tracked ? s.Jv : s.Jc;
+  StepMatrix& A = s.A;
+  Eigen::VectorXd& b = s.b;
+  A.Reset(n, nf, mass, Jrows, s.K);
   b.setZero(n);
+  const SmallVector& vfree = s.vfree;
   if (planar) {
     const double* J = Jrows.data();
     for (int k = 0; k < nf; ++k)
@@ -1440,17 +1595,17 @@ StepReport ContactModel::Impl::Step() {
   } else {
     b.head(nf).noalias() = Jrows.transpose() * vfree;
   }
-  const double inv_dt = 1.0 / dt, inv_Vs = 1.0 / Vs, inv_Fs = 1.0 / Fs;
+  const double inv_dt = 1.0 / dt, inv_Vs = 1.0 / Vs;
   for (int k = 0; k < nf; ++k) {
     const Contact& ct = contacts[static_cast<size_t>(force_point[static_cast<size_t>(k)])];
     const Point& pt = ct.points[static_cast<size_t>(force_point_sub[static_cast<size_t>(k)])];
     const int e = force_dir[static_cast<size_t>(k)];
-    if (!rows(pt)) {
+    if (!HasRows(pt)) {
       A.Set(k, k, 1);
       b[k] = 1;
       continue;
     }
-    const Eigen::Vector3d d = e < 0 ? normal_of(ct, pt) : edge_of(ct, pt, e);
+    const Eigen::Vector3d d = e < 0 ? NormalOf(ct, pt) : EdgeOf(ct, pt, e);
     // The pad's own velocity along its closing direction (fixed: d·n = 1 or 0).
     const double pad_along = tracked ? d.dot(ct.normal) : (e < 0 ? 1.0 : 0.0);
     double bk = b[k] - d.dot(pt.body_velocity);
@@ -1465,62 +1620,81 @@ StepReport ContactModel::Impl::Step() {
     if (e < 0 && ct.spec.stiffness > 0) A.AddToForceDiagonal(k, mass * PadCompliance(ct));
     b[k] = bk * inv_Vs;
   }
+}
+
+// Phase 6. The friction cone's rows (ξ): μ λ - Σβ ≥ 0 ⊥ ξ ≥ 0; a point
+// finger's λ is its known normal force (in b).
+void ContactModel::Impl::AssembleConeRows(StepScratch& s) {
   for (const Contact& ct : contacts) {
     if (!ct.active) continue;
     for (const Point& pt : ct.points) {
       if (pt.xi < 0) continue;
-      if (!rows(pt)) {
-        A.Set(pt.xi, pt.xi, 1);
-        b[pt.xi] = 1;
+      if (!HasRows(pt)) {
+        s.A.Set(pt.xi, pt.xi, 1);
+        s.b[pt.xi] = 1;
         continue;
       }
-      if (pt.lambda >= 0) A.Set(pt.xi, pt.lambda, ct.spec.mu);
-      for (int e = 0; e < edges_per_point; ++e) A.Set(pt.xi, pt.beta0 + e, -1);
-      b[pt.xi] = ct.known_normal > 0 ? ct.spec.mu * ct.known_normal / Fs : 0.0;
-    }
-    if (ct.y_plus >= 0) {
-      if (tracked && !ct.any_active) {
-        // The pad has passed the object's edge: it presses on nothing.
-        A.Set(ct.y_plus, ct.y_plus, 1);
-        A.Set(ct.y_minus, ct.y_minus, 1);
-        b[ct.y_plus] = 1;
-        b[ct.y_minus] = 1;
-        continue;
-      }
-      for (const Point& pt : ct.points) {
-        if (!rows(pt)) continue;
-        A.Set(ct.y_plus, pt.lambda, 1);
-        A.Set(ct.y_minus, pt.lambda, -1);
-      }
-      b[ct.y_plus] = -scene.grip_force / Fs;
-      b[ct.y_minus] = scene.grip_force / Fs;
+      if (pt.lambda >= 0) s.A.Set(pt.xi, pt.lambda, ct.spec.mu);
+      for (int e = 0; e < edges_per_point; ++e) s.A.Set(pt.xi, pt.beta0 + e, -1);
+      s.b[pt.xi] = ct.known_normal > 0 ? ct.spec.mu * ct.known_normal / Fs : 0.0;
     }
   }
+}
 
-  // Solve (warm from the last basis), then check the physical residuals; a
-  // warm-started answer that fails them is solved again cold.
-  LcpResult& sol = solution;
-  Eigen::VectorXd& f = forces;
-  SmallVector vr_new;
-  Eigen::Vector3d v_new, w_new;
-  Residuals res;
-  auto object_velocity = [&](const Eigen::Vector3d& p) -> Eigen::Vector3d {
-    return v_new + w_new.cross(p - c);
-  };
-  auto zv = [&](int i) { return i >= 0 ? sol.z[i] * (i < nf ? Fs : Vs) : 0.0; };
-  // Velocity of the body a point presses on: the pusher's, or the pad's
-  // along its closing direction (a tracked point pad follows the object).
-  auto body_velocity = [&](const Contact& ct, const Point& pt) -> Eigen::Vector3d {
-    if (ct.pusher) return pt.body_velocity;
-    double vf = zv(ct.y_plus) - zv(ct.y_minus);
-    if (tracked && ct.known_normal >= 0) {
-      const double along = pt.n.dot(ct.normal);
-      vf = along > 1e-6 ? pt.n.dot(object_velocity(pt.p)) / along : 0.0;
+// Phase 7. The force-controlled pads' rows (y±): the pad's points' normal
+// forces sum to the grip force, paired with its free velocity.
+void ContactModel::Impl::AssemblePadRows(StepScratch& s) {
+  for (const Contact& ct : contacts) {
+    if (!ct.active || ct.y_plus < 0) continue;
+    if (tracked && !ct.any_active) {
+      // The pad has passed the object's edge: it presses on nothing.
+      s.A.Set(ct.y_plus, ct.y_plus, 1);
+      s.A.Set(ct.y_minus, ct.y_minus, 1);
+      s.b[ct.y_plus] = 1;
+      s.b[ct.y_minus] = 1;
+      continue;
     }
-    return vf * ct.normal;
-  };
-  A.Finish();
-  if (lcp_observer) lcp_observer(A.Dense(), b);
+    for (const Point& pt : ct.points) {
+      if (!HasRows(pt)) continue;
+      s.A.Set(ct.y_plus, pt.lambda, 1);
+      s.A.Set(ct.y_minus, pt.lambda, -1);
+    }
+    s.b[ct.y_plus] = -scene.grip_force / Fs;
+    s.b[ct.y_minus] = scene.grip_force / Fs;
+  }
+}
+
+// An unknown in physical units (force unknowns N, velocity unknowns m/s);
+// 0 for an index of none.
+double ContactModel::Impl::Unknown(const StepScratch& s, int i) const {
+  return i >= 0 ? s.solution.z[i] * (i < nf ? Fs : Vs) : 0.0;
+}
+
+Eigen::Vector3d ContactModel::Impl::ObjectVelocity(const StepScratch& s,
+                                                   const Eigen::Vector3d& p) const {
+  return s.v_new + s.w_new.cross(p - c);
+}
+
+// Velocity of the body a point presses on: the pusher's, or the pad's
+// along its closing direction (a tracked point pad follows the object).
+Eigen::Vector3d ContactModel::Impl::BodyVelocity(const StepScratch& s, const Contact& ct,
+                                                 const Point& pt) const {
+  if (ct.pusher) return pt.body_velocity;
+  double vf = Unknown(s, ct.y_plus) - Unknown(s, ct.y_minus);
+  if (tracked && ct.known_normal >= 0) {
+    const double along = pt.n.dot(ct.normal);
+    vf = along > 1e-6 ? pt.n.dot(ObjectVelocity(s, pt.p)) / along : 0.0;
+  }
+  return vf * ct.normal;
+}
+
+// Phase 8. Solve (warm from the last basis), recover the forces and the new
+// twist, then check the physical residuals; a warm-started answer that fails
+// them is solved again cold. On failure the basis is dropped.
+bool ContactModel::Impl::Solve(StepScratch& s, StepReport& rep) {
+  LcpResult& sol = s.solution;
+  s.A.Finish();
+  if (lcp_observer) lcp_observer(s.A.Dense(), s.b);
   int next_covering = 0;
   for (int attempt = 0;; ++attempt) {
     // Attempt 0 may start warm; later attempts start cold, each from another
@@ -1529,115 +1703,158 @@ StepReport ContactModel::Impl::Step() {
     LcpOptions lcp_options;
     const bool warm = attempt == 0 && !basis.empty();
     lcp_options.first_covering = next_covering;
-    SolveLcp(A, b, warm ? &basis : nullptr, lcp_options, sol);
+    SolveLcp(s.A, s.b, warm ? &basis : nullptr, lcp_options, sol);
     if (!sol.warm_start_used) ++next_covering;
     rep.pivots += sol.pivots;
     rep.warm_start_used = sol.warm_start_used;
     if (!sol.ok) {
-      DumpLcp(A.Dense(), b);
+      DumpLcp(s.A.Dense(), s.b);
       rep.ok = false;
       rep.error = "LCP (" + std::to_string(n) + " unknowns): " + sol.reason;
+      rep.failure = StepFailure::kSolver;
       basis.clear();
-      return rep;
+      return false;
     }
-    // A pad's velocity is y+ - y-; their common part is a free direction.
-    for (const Contact& ct : contacts) {
-      if (ct.y_plus < 0) continue;
-      const double common = std::min(sol.z[ct.y_plus], sol.z[ct.y_minus]);
-      sol.z[ct.y_plus] -= common;
-      sol.z[ct.y_minus] -= common;
-    }
-
-    // Forces (N) and the new twist.
-    f = Fs * sol.z.head(nf);
-    SmallVector Kf, Jf;  // at most 6: on the stack (a product in an expression is a heap temporary)
-    if (planar) {
-      // Written out: Eigen's general product on a 3 x nf block dispatches
-      // to its blocked kernel.
-      Kf.setZero(3);
-      Jf.setZero(3);
-      for (int j = 0; j < nf; ++j) {
-        const double fj = f[j];
-        if (fj == 0) continue;
-        for (int i = 0; i < 3; ++i) {
-          Kf[i] += K(i, j) * fj;
-          Jf[i] += Jc(i, j) * fj;
-        }
-      }
-    } else {
-      Kf.noalias() = K * f;
-      Jf.noalias() = Jc * f;
-    }
-    vr_new = vfree + dt * Kf;
-    const Eigen::Matrix<double, 6, 1> tw_new = P * vr_new;
-    v_new = tw_new.head<3>();
-    w_new = tw_new.tail<3>();
-
-    // Residuals, recomputed from the physical quantities (not the solver's w).
-    res = Residuals{};
-    {
-      const SmallVector newton = Mr * (vr_new - vr) / dt - (Jf + Q);
-      for (int i = 0; i < nd; ++i) {
-        const bool torque = planar ? i == 2 : i >= 3;
-        res.force_balance =
-            std::max(res.force_balance, std::abs(newton[i]) / (Fs * (torque ? L : 1.0)));
-      }
-    }
-    auto comp = [&](double z_nd, double w_nd) {
-      res.complementarity = std::max(res.complementarity, std::abs(std::min(z_nd, w_nd)));
-    };
-    for (Contact& ct : contacts) {
-      if (!ct.active) continue;
-      double sum = 0;
-      for (Point& pt : ct.points) {
-        if (!rows(pt)) continue;  // a redundant point's unknowns are zero by construction
-        const Eigen::Vector3d urel = object_velocity(pt.p) - body_velocity(ct, pt);
-        pt.urel = urel;
-        pt.urel_step = steps_taken;
-        const double lam = pt.lambda >= 0 ? zv(pt.lambda) : ct.known_normal;
-        sum += lam;
-        if (pt.lambda >= 0) {
-          const double sink = ct.spec.stiffness > 0 ? lam * PadCompliance(ct) * dt : 0.0;
-          comp(lam * inv_Fs, (normal_of(ct, pt).dot(urel) + pt.gap * inv_dt + sink) * inv_Vs);
-        }
-        if (pt.beta0 >= 0) {
-          const double xi = zv(pt.xi);
-          double bsum = 0;
-          for (int e = 0; e < edges_per_point; ++e) {
-            const double be = zv(pt.beta0 + e);
-            bsum += be;
-            comp(be * inv_Fs, (xi + edge_of(ct, pt, e).dot(urel)) * inv_Vs);
-          }
-          const double slack = ct.spec.mu * lam - bsum;
-          comp(xi * inv_Vs, slack * inv_Fs);
-          res.cone = std::max(res.cone, -slack * inv_Fs);
-        }
-      }
-      if (ct.y_plus >= 0 && (!tracked || ct.any_active)) {
-        const double err = (sum - scene.grip_force) * inv_Fs;
-        res.force_balance = std::max(res.force_balance, std::abs(err));
-        comp(zv(ct.y_plus) * inv_Vs, err);
-        comp(zv(ct.y_minus) * inv_Vs, -err);
-      }
-    }
-    const double worst = std::max({res.force_balance, res.complementarity, res.cone});
+    RecoverMotion(s);
+    const double worst = CheckResiduals(s);
     if (std::isfinite(worst) && worst <= kAcceptedResidual) break;
     if (attempt < kAccuracyAttempts) continue;
-    DumpLcp(A.Dense(), b);
+    DumpLcp(s.A.Dense(), s.b);
     char buf[128];
     std::snprintf(buf, sizeof buf,
                   "LCP (%d unknowns): inaccurate solution (relative residual %.3g)", n, worst);
     rep.ok = false;
     rep.error = buf;
+    rep.failure = StepFailure::kInaccurate;
     basis.clear();
-    return rep;
+    return false;
   }
   basis = sol.basis;
-  rep.residuals = res;
+  rep.residuals = s.res;
+  return true;
+}
 
-  // Contact states (on the object, gripper frame) and modes.
+// Forces (N) and the new twist from the solver's answer.
+void ContactModel::Impl::RecoverMotion(StepScratch& s) {
+  LcpResult& sol = s.solution;
+  // A pad's velocity is y+ - y-; their common part is a free direction.
+  for (const Contact& ct : contacts) {
+    if (ct.y_plus < 0) continue;
+    const double common = std::min(sol.z[ct.y_plus], sol.z[ct.y_minus]);
+    sol.z[ct.y_plus] -= common;
+    sol.z[ct.y_minus] -= common;
+  }
+  Eigen::VectorXd& f = s.forces;
+  f = Fs * sol.z.head(nf);
+  SmallVector Kf;  // at most 6: on the stack (a product in an expression is a heap temporary)
+  SmallVector& Jf = s.Jf;
+  if (planar) {
+    // Written out: Eigen's general product on a 3 x nf block dispatches
+    // to its blocked kernel.
+    Kf.setZero(3);
+    Jf.setZero(3);
+    for (int j = 0; j < nf; ++j) {
+      const double fj = f[j];
+      if (fj == 0) continue;
+      for (int i = 0; i < 3; ++i) {
+        Kf[i] += s.K(i, j) * fj;
+        Jf[i] += s.Jc(i, j) * fj;
+      }
+    }
+  } else {
+    Kf.noalias() = s.K * f;
+    Jf.noalias() = s.Jc * f;
+  }
+  s.vr_new = s.vfree + dt * Kf;
+  const Eigen::Matrix<double, 6, 1> tw_new = P * s.vr_new;
+  s.v_new = tw_new.head<3>();
+  s.w_new = tw_new.tail<3>();
+}
+
+// Residuals, recomputed from the physical quantities (not the solver's w);
+// returns the worst. Keeps each point's relative velocity for the states.
+double ContactModel::Impl::CheckResiduals(StepScratch& s) {
+  Residuals& res = s.res;
+  res = Residuals{};
+  {
+    const SmallVector newton = s.Mr * (s.vr_new - s.vr) / dt - (s.Jf + s.Q);
+    for (int i = 0; i < nd; ++i) {
+      const bool torque = planar ? i == 2 : i >= 3;
+      res.force_balance =
+          std::max(res.force_balance, std::abs(newton[i]) / (Fs * (torque ? L : 1.0)));
+    }
+  }
+  const double inv_dt = 1.0 / dt, inv_Vs = 1.0 / Vs, inv_Fs = 1.0 / Fs;
+  auto comp = [&](double z_nd, double w_nd) {
+    res.complementarity = std::max(res.complementarity, std::abs(std::min(z_nd, w_nd)));
+  };
+  for (Contact& ct : contacts) {
+    if (!ct.active) continue;
+    double sum = 0;
+    for (Point& pt : ct.points) {
+      if (!HasRows(pt)) continue;  // a redundant point's unknowns are zero by construction
+      const Eigen::Vector3d urel = ObjectVelocity(s, pt.p) - BodyVelocity(s, ct, pt);
+      pt.urel = urel;
+      pt.urel_step = steps_taken;
+      const double lam = pt.lambda >= 0 ? Unknown(s, pt.lambda) : ct.known_normal;
+      sum += lam;
+      if (pt.lambda >= 0) {
+        const double sink = ct.spec.stiffness > 0 ? lam * PadCompliance(ct) * dt : 0.0;
+        comp(lam * inv_Fs, (NormalOf(ct, pt).dot(urel) + pt.gap * inv_dt + sink) * inv_Vs);
+      }
+      if (pt.beta0 >= 0) {
+        const double xi = Unknown(s, pt.xi);
+        double bsum = 0;
+        for (int e = 0; e < edges_per_point; ++e) {
+          const double be = Unknown(s, pt.beta0 + e);
+          bsum += be;
+          comp(be * inv_Fs, (xi + EdgeOf(ct, pt, e).dot(urel)) * inv_Vs);
+        }
+        const double slack = ct.spec.mu * lam - bsum;
+        comp(xi * inv_Vs, slack * inv_Fs);
+        res.cone = std::max(res.cone, -slack * inv_Fs);
+      }
+    }
+    if (ct.y_plus >= 0 && (!tracked || ct.any_active)) {
+      const double err = (sum - scene.grip_force) * inv_Fs;
+      res.force_balance = std::max(res.force_balance, std::abs(err));
+      comp(Unknown(s, ct.y_plus) * inv_Vs, err);
+      comp(Unknown(s, ct.y_minus) * inv_Vs, -err);
+    }
+  }
+  return std::max({res.force_balance, res.complementarity, res.cone});
+}
+
+// Phase 9. Bad values: a step whose forces, twist or next pose is not
+// finite is refused (typed kNonFinite, naming the quantity) before anything
+// of the state changes. The residual checks refuse a NaN residual; this
+// catches what they do not read (forces of points without rows, the pose).
+bool ContactModel::Impl::CheckValues(StepScratch& s, StepReport& rep) {
+  const char* bad = nullptr;
+  if (!AllFiniteEntries(s.forces)) {
+    bad = "contact forces";
+  } else if (!s.v_new.allFinite() || !s.w_new.allFinite()) {
+    bad = "object twist";
+  } else if (!(c + dt * s.v_new).allFinite()) {
+    bad = "object position";
+  }
+  if (bad == nullptr) return true;
+  return Refuse(rep, std::string("non-finite ") + bad + " after the solve");
+}
+
+bool ContactModel::Impl::Refuse(StepReport& rep, const std::string& why) {
+  rep.ok = false;
+  rep.failure = StepFailure::kNonFinite;
+  rep.error = why;
+  basis.clear();
+  return false;
+}
+
+// Phase 10. Contact states (on the object, gripper frame) and modes; the
+// pusher's force.
+void ContactModel::Impl::ReportContacts(StepScratch& s) {
   pusher_force.setZero();
-  const Eigen::Vector3d origin = c - R * com_O;  // ObjectOrigin(), q unchanged since R
+  const Eigen::Vector3d origin = c - s.R * com_O;  // ObjectOrigin(), q unchanged since R
   for (size_t ci = 0; ci < contacts.size(); ++ci) {
     Contact& ct = contacts[ci];
     ContactState st;
@@ -1647,12 +1864,13 @@ StepReport ContactModel::Impl::Step() {
     if (ct.active) {
       bool sliding = false;
       for (Point& pt : ct.points) {
-        if (!live(pt)) continue;
-        const double lam = pt.lambda >= 0 ? zv(pt.lambda) : ct.known_normal;
-        const Eigen::Vector3d& nrm = normal_of(ct, pt);
+        if (!Live(pt)) continue;
+        const double lam = pt.lambda >= 0 ? Unknown(s, pt.lambda) : ct.known_normal;
+        const Eigen::Vector3d& nrm = NormalOf(ct, pt);
         Eigen::Vector3d ft = Eigen::Vector3d::Zero();
         if (pt.beta0 >= 0) {
-          for (int e = 0; e < edges_per_point; ++e) ft += zv(pt.beta0 + e) * edge_of(ct, pt, e);
+          for (int e = 0; e < edges_per_point; ++e)
+            ft += Unknown(s, pt.beta0 + e) * EdgeOf(ct, pt, e);
         }
         const Eigen::Vector3d fp = lam * nrm + ft;
         force += fp;
@@ -1662,7 +1880,7 @@ StepReport ContactModel::Impl::Step() {
         const Eigen::Vector3d urel =
             pt.urel_step == steps_taken
                 ? pt.urel
-                : Eigen::Vector3d(object_velocity(pt.p) - body_velocity(ct, pt));
+                : Eigen::Vector3d(ObjectVelocity(s, pt.p) - BodyVelocity(s, ct, pt));
         const Eigen::Vector3d ut = urel - nrm.dot(urel) * nrm;
         if (lam > 1e-9 * Fs && ut.squaredNorm() > 1e-18 * Vs * Vs) sliding = true;
         const bool close = pt.gap <= (tracked ? gap_tolerance : 0.0) || lam > 1e-9 * Fs;
@@ -1686,37 +1904,66 @@ StepReport ContactModel::Impl::Step() {
     } else if (n_plain > 0) {
       at_G = plain / n_plain;
     }
-    st.point = R.transpose() * (at_G - origin);
+    st.point = s.R.transpose() * (at_G - origin);
     ReportAlongSceneNormal(ct, tracked, force, &st);
     if (ct.pusher) pusher_force = force;
     states[ci] = st;
   }
+}
 
-  // Integrate (semi-implicit Euler on the new twist). Pressing fingers'
-  // pads follow the object along their normals; the pusher tracks its gaps
-  // (fixed geometry; tracked geometry measures them every step).
+// Phase 11. Integrate (semi-implicit Euler on the new twist). Pressing
+// fingers' pads follow the object along their normals; the pusher tracks its
+// gaps (fixed geometry; tracked geometry measures them every step).
+void ContactModel::Impl::Integrate(StepScratch& s) {
   for (Contact& ct : contacts) {
     if (ct.pusher) {
       if (!tracked) {
         for (Point& pt : ct.points)
-          pt.gap += dt * ct.normal.dot(object_velocity(pt.p) - pt.body_velocity);
+          pt.gap += dt * ct.normal.dot(ObjectVelocity(s, pt.p) - pt.body_velocity);
       }
     } else if (tracked && ct.known_normal >= 0) {
       // A point pad is re-seated on the surface by TrackedGeometry().
     } else if (ct.active) {
-      const double vf = ct.y_plus >= 0 ? zv(ct.y_plus) - zv(ct.y_minus)
-                                       : ct.normal.dot(object_velocity(ct.points[0].p));
+      const double vf = ct.y_plus >= 0 ? Unknown(s, ct.y_plus) - Unknown(s, ct.y_minus)
+                                       : ct.normal.dot(ObjectVelocity(s, ct.points[0].p));
       ct.pad += dt * vf;
     }
   }
-  v = v_new;
-  w = w_new;
-  c += dt * v_new;
-  const double angle = w_new.norm() * dt;
+  v = s.v_new;
+  w = s.w_new;
+  c += dt * s.v_new;
+  const double angle = s.w_new.norm() * dt;
   if (angle > 0)
-    q = (Eigen::Quaterniond(Eigen::AngleAxisd(angle, w_new.normalized())) * q).normalized();
+    q = (Eigen::Quaterniond(Eigen::AngleAxisd(angle, s.w_new.normalized())) * q).normalized();
   t += dt;
-  return rep;
+}
+
+}  // namespace arena::mechanics
+
+namespace arena::mechanics {
+
+bool ContactModelTester::BeginStep(StepReport& rep) { return model_.impl_->BeginStep(rep); }
+bool ContactModelTester::Run(StepPhase phase, StepReport& rep) {
+  return model_.impl_->RunPhase(phase, rep);
+}
+int ContactModelTester::reduced_coordinates() const { return model_.impl_->nd; }
+int ContactModelTester::force_unknowns() const { return model_.impl_->nf; }
+int ContactModelTester::lcp_size() const { return model_.impl_->n; }
+Eigen::MatrixXd ContactModelTester::mass_matrix() const { return model_.impl_->scratch.Mr; }
+Eigen::VectorXd ContactModelTester::known_wrench() const { return model_.impl_->scratch.Q; }
+Eigen::VectorXd ContactModelTester::free_twist() const { return model_.impl_->scratch.vfree; }
+Eigen::MatrixXd ContactModelTester::grasp_map() const { return model_.impl_->scratch.Jc; }
+Eigen::MatrixXd ContactModelTester::lcp_matrix() const { return model_.impl_->scratch.A.Dense(); }
+Eigen::VectorXd ContactModelTester::lcp_vector() const { return model_.impl_->scratch.b; }
+Eigen::VectorXd ContactModelTester::forces() const { return model_.impl_->scratch.forces; }
+Eigen::Matrix<double, 6, 1> ContactModelTester::new_twist() const {
+  Eigen::Matrix<double, 6, 1> tw;
+  tw << model_.impl_->scratch.v_new, model_.impl_->scratch.w_new;
+  return tw;
+}
+void ContactModelTester::SetTwist(const Eigen::Vector3d& v, const Eigen::Vector3d& w) {
+  model_.impl_->v = v;
+  model_.impl_->w = w;
 }
 
 }  // namespace arena::mechanics

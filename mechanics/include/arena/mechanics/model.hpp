@@ -80,10 +80,20 @@ struct PlaneCheck {
 };
 PlaneCheck FindPlane(const Scene& scene);
 
+// Why a step was refused (StepReport::failure).
+enum class StepFailure {
+  kNone,        // the step was taken
+  kModel,       // the scene cannot be modelled (ContactModel::error())
+  kSolver,      // Lemke found no solution
+  kInaccurate,  // every solve's physical residuals exceeded the accepted ones
+  kNonFinite,   // a force, the twist or the pose came out non-finite
+};
+
 // One step's diagnostics (nondimensional residuals, see Residuals).
 struct StepReport {
   bool ok = true;
   std::string error;
+  StepFailure failure = StepFailure::kNone;
   int pivots = 0;
   bool warm_start_used = false;
   Residuals residuals;
@@ -131,6 +141,7 @@ class ContactModel {
   double velocity_scale() const;  // m/s
 
  private:
+  friend class ContactModelTester;  // runs and reads the step's phases (tests)
   struct Impl;
   std::unique_ptr<Impl> impl_;
 };
