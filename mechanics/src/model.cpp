@@ -19,6 +19,7 @@
 #include "geometry.hpp"
 #include "model_tester.hpp"
 #include "sparse_lu.hpp"
+#include "support_stage.hpp"
 
 namespace arena::mechanics {
 
@@ -692,6 +693,15 @@ struct ContactModel::Impl {
   Eigen::Vector3d pusher_force = Eigen::Vector3d::Zero();
   std::vector<char> basis;
 
+  // The support (support_stage.hpp): its friction directions are the last
+  // force unknowns [support_beta0, nf), its ξ the last unknown.
+  SupportStage support;
+  int support_beta0 = -1, support_xi = -1;
+  Eigen::Matrix<double, 3, Eigen::Dynamic> support_D;
+  Eigen::Vector3d support_twist = Eigen::Vector3d::Zero();  // last step's reduced twist
+  // Force unknowns of the contacts (the support's come after them).
+  int ContactForceUnknowns() const { return support_beta0 >= 0 ? support_beta0 : nf; }
+
   // Tracked geometry.
   bool tracked = false;
   std::unique_ptr<geometry::Solid> solid;
@@ -770,6 +780,9 @@ struct ContactModel::Impl {
   void AssembleContactRows(StepScratch& s);
   void AssembleConeRows(StepScratch& s);
   void AssemblePadRows(StepScratch& s);
+  void AssembleSupportRows(StepScratch& s);
+  void SetupSupport();
+  void SupportResiduals(StepScratch& s);
   bool Solve(StepScratch& s, StepReport& rep);
   void RecoverMotion(StepScratch& s);
   double CheckResiduals(StepScratch& s);
@@ -939,12 +952,6 @@ void ContactModel::Impl::Setup() {
     error = e;
     return;
   }
-  if (scene.support) {
-    // Refused, never ignored: without its friction the object would float.
-    status = SimulationStatus::kInvalidScene;
-    error = "support: arena's model does not model a support yet (MuJoCo does)";
-    return;
-  }
   const ModelOptions& opt = scene.model;
   dt = opt.dt;
   mass = scene.object.mass;
@@ -968,6 +975,7 @@ void ContactModel::Impl::Setup() {
   SetupScales();
   SetupContacts();
   SetupUnknowns();
+  if (status != SimulationStatus::kOk) return;
   info.dof = nd;
   info.facets = opt.facets;
   info.points = opt.points;
@@ -997,11 +1005,27 @@ bool ContactModel::Impl::SetupReduction() {
     if (plane.planar) {
       planar = true;
       plane_normal = plane.normal;
+    } else if (scene.support) {
+      status = SimulationStatus::kInvalidScene;
+      error =
+          "support: needs a scene planar about the support (the support's load is fixed by "
+          "its pressure, so the object moves on it), but " +
+          plane.reason;
+      return false;
     } else if (opt.reduce == Reduce::kPlanar) {
       status = SimulationStatus::kInvalidScene;
       error = "model.reduce: planar, but the scene is not planar (" + plane.reason + ")";
       return false;
     }
+  }
+  if (scene.support && !planar) {
+    // reduce "full": 6 DOF would let the object tip or sink under the load
+    // its pressure distribution fixes.
+    status = SimulationStatus::kInvalidScene;
+    error =
+        "support: needs the planar model (model.reduce \"auto\" or \"planar\"); with \"full\" "
+        "the support's fixed pressure cannot hold the object";
+    return false;
   }
   if (planar) {
     nd = 3;
@@ -1094,6 +1118,7 @@ void ContactModel::Impl::SetupUnknowns() {
       }
     }
   }
+  SetupSupport();
   n = nf;
   for (Contact& ct : contacts) {
     if (!ct.active) continue;
@@ -1104,6 +1129,26 @@ void ContactModel::Impl::SetupUnknowns() {
       ct.y_plus = n++;
       ct.y_minus = n++;
     }
+  }
+  if (support_beta0 >= 0) support_xi = n++;
+}
+
+// The support's force unknowns (SupportStage: its friction directions),
+// after the contacts'; ξ is added with the velocity unknowns.
+void ContactModel::Impl::SetupSupport() {
+  if (!scene.support) return;
+  if (std::string e = support.Setup(scene, plane_normal, plane_e1, plane_e2); !e.empty()) {
+    status = SimulationStatus::kInvalidScene;
+    error = e;
+    return;
+  }
+  if (!support.active()) return;  // μ = 0: no friction, nothing to solve for
+  support_beta0 = nf;
+  for (int k = 0; k < support.directions(); ++k) {
+    ++nf;
+    force_point.push_back(-1);
+    force_point_sub.push_back(-1);
+    force_dir.push_back(k);
   }
 }
 
@@ -1425,6 +1470,9 @@ bool ContactModel::Impl::RunPhase(StepPhase phase, StepReport& rep) {
     case StepPhase::kPadRows:
       AssemblePadRows(s);
       return true;
+    case StepPhase::kSupportRows:
+      AssembleSupportRows(s);
+      return true;
     case StepPhase::kSolve:
       return Solve(s, rep);
     case StepPhase::kCheckValues:
@@ -1533,7 +1581,16 @@ void ContactModel::Impl::FormGraspMap(StepScratch& s) {
   if (tracked) Jv.resize(nd, nf);
   const Point* arm_of = nullptr;  // the point whose arm is below (its unknowns are consecutive)
   Eigen::Vector3d arm = Eigen::Vector3d::Zero(), p_cross_arm = Eigen::Vector3d::Zero();
-  for (int k = 0; k < nf; ++k) {
+  const int nf_contacts = ContactForceUnknowns();
+  if (support_beta0 >= 0) {
+    // The support's limit-surface directions at this pose (planar only).
+    support.Columns(s.R, c - s.R * com_O, c, support_twist, &support_D);
+    for (int k = nf_contacts; k < nf; ++k) {
+      Jc.col(k) = support_D.col(k - nf_contacts);
+      if (tracked) Jv.col(k) = Jc.col(k);
+    }
+  }
+  for (int k = 0; k < nf_contacts; ++k) {
     const Contact& ct = contacts[static_cast<size_t>(force_point[static_cast<size_t>(k)])];
     const Point& pt = ct.points[static_cast<size_t>(force_point_sub[static_cast<size_t>(k)])];
     const int e = force_dir[static_cast<size_t>(k)];
@@ -1596,7 +1653,7 @@ void ContactModel::Impl::AssembleContactRows(StepScratch& s) {
     b.head(nf).noalias() = Jrows.transpose() * vfree;
   }
   const double inv_dt = 1.0 / dt, inv_Vs = 1.0 / Vs;
-  for (int k = 0; k < nf; ++k) {
+  for (int k = 0; k < ContactForceUnknowns(); ++k) {
     const Contact& ct = contacts[static_cast<size_t>(force_point[static_cast<size_t>(k)])];
     const Point& pt = ct.points[static_cast<size_t>(force_point_sub[static_cast<size_t>(k)])];
     const int e = force_dir[static_cast<size_t>(k)];
@@ -1664,6 +1721,41 @@ void ContactModel::Impl::AssemblePadRows(StepScratch& s) {
   }
 }
 
+// Phase 8. The support's rows (SupportStage): per friction direction k,
+// ξ + D_kᵀ ν⁺ >= 0 ⊥ β_k >= 0 (b[k] holds D_kᵀ ν_free from the force block's
+// phase); μN - Σ_k β_k >= 0 ⊥ ξ >= 0.
+void ContactModel::Impl::AssembleSupportRows(StepScratch& s) {
+  if (support_xi < 0) return;
+  const double inv_Vs = 1.0 / Vs;
+  for (int k = support_beta0; k < nf; ++k) {
+    s.A.Set(k, support_xi, 1);
+    s.b[k] *= inv_Vs;
+  }
+  for (int k = support_beta0; k < nf; ++k) s.A.Set(support_xi, k, -1);
+  s.b[support_xi] = support.limit() / Fs;
+}
+
+// The support's complementarity and cone residuals (CheckResiduals).
+void ContactModel::Impl::SupportResiduals(StepScratch& s) {
+  if (support_xi < 0) return;
+  Residuals& res = s.res;
+  const double inv_Vs = 1.0 / Vs, inv_Fs = 1.0 / Fs;
+  const double xi = Unknown(s, support_xi);
+  double bsum = 0;
+  for (int k = support_beta0; k < nf; ++k) {
+    const double be = Unknown(s, k);
+    bsum += be;
+    double along = 0;  // D_kᵀ ν⁺
+    for (int i = 0; i < 3; ++i) along += s.Jc(i, k) * s.vr_new[i];
+    res.complementarity =
+        std::max(res.complementarity, std::abs(std::min(be * inv_Fs, (xi + along) * inv_Vs)));
+  }
+  const double slack = support.limit() - bsum;
+  res.complementarity =
+      std::max(res.complementarity, std::abs(std::min(xi * inv_Vs, slack * inv_Fs)));
+  res.cone = std::max(res.cone, -slack * inv_Fs);
+}
+
 // An unknown in physical units (force unknowns N, velocity unknowns m/s);
 // 0 for an index of none.
 double ContactModel::Impl::Unknown(const StepScratch& s, int i) const {
@@ -1688,7 +1780,7 @@ Eigen::Vector3d ContactModel::Impl::BodyVelocity(const StepScratch& s, const Con
   return vf * ct.normal;
 }
 
-// Phase 8. Solve (warm from the last basis), recover the forces and the new
+// Phase 9. Solve (warm from the last basis), recover the forces and the new
 // twist, then check the physical residuals; a warm-started answer that fails
 // them is solved again cold. On failure the basis is dropped.
 bool ContactModel::Impl::Solve(StepScratch& s, StepReport& rep) {
@@ -1822,10 +1914,11 @@ double ContactModel::Impl::CheckResiduals(StepScratch& s) {
       comp(Unknown(s, ct.y_minus) * inv_Vs, -err);
     }
   }
+  SupportResiduals(s);
   return std::max({res.force_balance, res.complementarity, res.cone});
 }
 
-// Phase 9. Bad values: a step whose forces, twist or next pose is not
+// Phase 10. Bad values: a step whose forces, twist or next pose is not
 // finite is refused (typed kNonFinite, naming the quantity) before anything
 // of the state changes. The residual checks refuse a NaN residual; this
 // catches what they do not read (forces of points without rows, the pose).
@@ -1850,7 +1943,7 @@ bool ContactModel::Impl::Refuse(StepReport& rep, const std::string& why) {
   return false;
 }
 
-// Phase 10. Contact states (on the object, gripper frame) and modes; the
+// Phase 11. Contact states (on the object, gripper frame) and modes; the
 // pusher's force.
 void ContactModel::Impl::ReportContacts(StepScratch& s) {
   pusher_force.setZero();
@@ -1911,7 +2004,7 @@ void ContactModel::Impl::ReportContacts(StepScratch& s) {
   }
 }
 
-// Phase 11. Integrate (semi-implicit Euler on the new twist). Pressing
+// Phase 12. Integrate (semi-implicit Euler on the new twist). Pressing
 // fingers' pads follow the object along their normals; the pusher tracks its
 // gaps (fixed geometry; tracked geometry measures them every step).
 void ContactModel::Impl::Integrate(StepScratch& s) {
@@ -1929,6 +2022,7 @@ void ContactModel::Impl::Integrate(StepScratch& s) {
       ct.pad += dt * vf;
     }
   }
+  if (support_xi >= 0) support_twist = Eigen::Vector3d(s.vr_new[0], s.vr_new[1], s.vr_new[2]);
   v = s.v_new;
   w = s.w_new;
   c += dt * s.v_new;

@@ -19,6 +19,7 @@ enum class StepPhase {
   kContactRows,    // LCP rows of the force unknowns (normals, friction edges), force block
   kConeRows,       // LCP rows of the friction cones (ξ)
   kPadRows,        // LCP rows of the force-controlled pads (y±)
+  kSupportRows,    // LCP rows of the support's limit-surface directions and its ξ
   kSolve,          // Lemke (warm, then cold retries), forces and new twist, residuals
   kCheckValues,    // refuses non-finite forces, twist or pose (StepFailure::kNonFinite)
   kContactStates,  // contact states and modes, the pusher's force
@@ -40,13 +41,13 @@ class ContactModelTester {
   int reduced_coordinates() const;
   int force_unknowns() const;
   int lcp_size() const;
-  Eigen::MatrixXd mass_matrix() const;     // kMassMatrix
-  Eigen::VectorXd known_wrench() const;    // kFreeMotion (reduced)
-  Eigen::VectorXd free_twist() const;      // kFreeMotion (reduced)
-  Eigen::MatrixXd grasp_map() const;       // kGraspMap (reduced x force unknowns)
-  Eigen::MatrixXd lcp_matrix() const;      // kSolve (formed by then; nondimensional)
-  Eigen::VectorXd lcp_vector() const;      // the row phases
-  Eigen::VectorXd forces() const;          // kSolve (N)
+  Eigen::MatrixXd mass_matrix() const;            // kMassMatrix
+  Eigen::VectorXd known_wrench() const;           // kFreeMotion (reduced)
+  Eigen::VectorXd free_twist() const;             // kFreeMotion (reduced)
+  Eigen::MatrixXd grasp_map() const;              // kGraspMap (reduced x force unknowns)
+  Eigen::MatrixXd lcp_matrix() const;             // kSolve (formed by then; nondimensional)
+  Eigen::VectorXd lcp_vector() const;             // the row phases
+  Eigen::VectorXd forces() const;                 // kSolve (N)
   Eigen::Matrix<double, 6, 1> new_twist() const;  // kSolve: (v, ω) of the step's end
 
   // Faults: sets the object's twist as if a step had ended with it (for
