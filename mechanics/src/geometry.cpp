@@ -2,6 +2,8 @@
 // side planes and caps, cylinders by their radius and caps.
 #include "geometry.hpp"
 
+#include "arena/mechanics/polygon.hpp"
+
 #include <algorithm>
 #include <cmath>
 #include <limits>
@@ -27,35 +29,7 @@ Eigen::Vector2d ClosestOnSegment(const Eigen::Vector2d& a, const Eigen::Vector2d
 }  // namespace
 
 std::optional<PolygonProblem> CheckPolygon(const std::vector<Eigen::Vector2d>& polygon) {
-  const size_t n = polygon.size();
-  if (n < 3) return PolygonProblem{n == 0 ? 0 : n - 1, "a polygon needs at least 3 vertices"};
-  double scale = 0;
-  for (const auto& v : polygon) {
-    if (!v.allFinite()) return PolygonProblem{0, "vertices must be finite"};
-    scale = std::max(scale, v.cwiseAbs().maxCoeff());
-  }
-  for (size_t i = 0; i < n; ++i) {
-    if (!polygon[i].allFinite()) return PolygonProblem{i, "must be finite"};
-    const Eigen::Vector2d e = polygon[(i + 1) % n] - polygon[i];
-    if (!(e.norm() > 1e-9 * scale)) {
-      return PolygonProblem{i, "coincides with the next vertex (degenerate polygon)"};
-    }
-  }
-  double turning = 0;
-  for (size_t i = 0; i < n; ++i) {
-    const Eigen::Vector2d e0 = polygon[i] - polygon[(i + n - 1) % n];
-    const Eigen::Vector2d e1 = polygon[(i + 1) % n] - polygon[i];
-    const double c = Cross2(e0, e1);
-    if (!(c > 1e-9 * e0.norm() * e1.norm())) {
-      return PolygonProblem{i, c < 0 ? "turns clockwise here: the polygon must be convex and "
-                                       "counter-clockwise"
-                                     : "lies on the line of its neighbours (degenerate polygon)"};
-    }
-    turning += std::atan2(c, e0.dot(e1));
-  }
-  if (std::abs(turning - 2 * std::numbers::pi) > 1e-6) {
-    return PolygonProblem{n - 1, "the polygon winds around more than once (not simple)"};
-  }
+  if (const auto p = polygon::CheckSimple(polygon)) return PolygonProblem{p->vertex, p->reason};
   return std::nullopt;
 }
 
@@ -95,6 +69,7 @@ Solid::Solid(const ObjectSpec& object) : shape_(object.shape) {
     } else {
       polygon_ = object.polygon;
       half_height_ = object.height / 2;
+      convex_ = polygon::IsConvex(polygon_);
       const PolygonMoments m = MomentsOf(polygon_);
       centroid_O_ = {m.centroid.x(), m.centroid.y(), 0};
     }
@@ -148,6 +123,7 @@ Closest Solid::ClosestTo(const Eigen::Vector3d& p) const {
     }
     return out;
   }
+  if (!convex_) return ClosestToNonConvex(p);
   // Prism: the face of least depth inside; outside, the closest point is the
   // polygon's closest point in x-y with z clamped (the prism is a product).
   const Eigen::Vector2d xy(p.x(), p.y());
@@ -243,6 +219,8 @@ std::optional<Entry> Solid::EntryOf(const Eigen::Vector3d& p, const Eigen::Vecto
       }
       s_out = std::min(s_out, s2);
     }
+  } else if (!convex_) {
+    return EntryOfNonConvex(p, d, tolerance, s_in, s_out, normal);
   } else {
     for (size_t i = 0; i < edge_normals_.size(); ++i) {
       if (!clip({edge_normals_[i].x(), edge_normals_[i].y(), 0}, edge_offsets_[i]))
@@ -255,6 +233,101 @@ std::optional<Entry> Solid::EntryOf(const Eigen::Vector3d& p, const Eigen::Vecto
   out.point_O = p + s_in * d;
   out.normal_O = normal;
   return out;
+}
+
+// A non-convex prism: inside, the nearer of the side (the outline's closest
+// edge point) and the caps; outside, the outline's closest point in x-y with
+// z clamped, as for a convex one.
+Closest Solid::ClosestToNonConvex(const Eigen::Vector3d& p) const {
+  Closest out;
+  const Eigen::Vector2d xy(p.x(), p.y());
+  const polygon::BoundaryPoint b = polygon::ClosestOnBoundary(polygon_, xy);
+  const bool inside_xy = polygon::Contains(polygon_, xy);
+  const Eigen::Vector2d edge_n = edge_normals_[b.edge];
+  const double d_top = p.z() - half_height_, d_bottom = -p.z() - half_height_;
+  const double tiny = 1e-15 * extent_;
+  if (inside_xy && d_top <= 0 && d_bottom <= 0) {
+    const double d_side = -b.distance;
+    if (d_side >= d_top && d_side >= d_bottom) {
+      // Outward: from p to the boundary point (a reflex corner has no edge
+      // normal of its own), the edge's when p is on it.
+      const Eigen::Vector2d to = b.point - xy;
+      const Eigen::Vector2d nrm = to.norm() > tiny ? Eigen::Vector2d(to / to.norm()) : edge_n;
+      out.normal_O = {nrm.x(), nrm.y(), 0};
+      out.point_O = {b.point.x(), b.point.y(), p.z()};
+      out.distance = d_side;
+    } else {
+      const double zs = d_top >= d_bottom ? 1.0 : -1.0;
+      out.normal_O = {0, 0, zs};
+      out.point_O = {p.x(), p.y(), zs * half_height_};
+      out.distance = std::max(d_top, d_bottom);
+    }
+    return out;
+  }
+  const Eigen::Vector2d c = inside_xy ? xy : b.point;
+  out.point_O = {c.x(), c.y(), std::clamp(p.z(), -half_height_, half_height_)};
+  const Eigen::Vector3d diff = p - out.point_O;
+  out.distance = diff.norm();
+  out.normal_O = out.distance > tiny ? Eigen::Vector3d(diff / out.distance)
+                                     : Eigen::Vector3d(edge_n.x(), edge_n.y(), 0);
+  return out;
+}
+
+// A non-convex prism: the line's x-y trace crosses the outline at sorted
+// parameters; between crossings it is alternately outside and inside (the
+// midpoint decides). The first inside stretch that overlaps the caps' slab
+// [s_in, s_out] (within `tolerance`) is where the line enters.
+std::optional<Entry> Solid::EntryOfNonConvex(const Eigen::Vector3d& p, const Eigen::Vector3d& d,
+                                             double tolerance, double s_in, double s_out,
+                                             Eigen::Vector3d cap_normal) const {
+  const Eigen::Vector2d q(p.x(), p.y()), e(d.x(), d.y());
+  const size_t n = polygon_.size();
+  struct Crossing {
+    double s;
+    size_t edge;
+  };
+  std::vector<Crossing> xs;
+  const double e2 = e.squaredNorm();
+  if (e2 < 1e-24) {
+    // Along z: inside the outline (or within tolerance of it) or a miss.
+    const polygon::BoundaryPoint b = polygon::ClosestOnBoundary(polygon_, q);
+    if (!polygon::Contains(polygon_, q) && b.distance > tolerance) return std::nullopt;
+    if (!std::isfinite(s_in) || s_in > s_out + tolerance) return std::nullopt;
+    Entry out;
+    out.s = s_in;
+    out.point_O = p + s_in * d;
+    out.normal_O = cap_normal;
+    return out;
+  }
+  for (size_t i = 0; i < n; ++i) {
+    const Eigen::Vector2d& a = polygon_[i];
+    const Eigen::Vector2d ab = polygon_[(i + 1) % n] - a;
+    const double den = e.x() * ab.y() - e.y() * ab.x();
+    if (std::abs(den) < 1e-15 * std::sqrt(e2) * ab.norm()) continue;  // parallel
+    const Eigen::Vector2d aq = a - q;
+    const double s = (aq.x() * ab.y() - aq.y() * ab.x()) / den;
+    const double u = (aq.x() * e.y() - aq.y() * e.x()) / den;
+    if (u >= 0 && u <= 1) xs.push_back({s, i});
+  }
+  std::sort(xs.begin(), xs.end(), [](const Crossing& a, const Crossing& b) { return a.s < b.s; });
+  for (size_t k = 0; k + 1 < xs.size(); ++k) {
+    const double lo = xs[k].s, hi = xs[k + 1].s;
+    if (!(hi > lo)) continue;
+    if (!polygon::Contains(polygon_, q + 0.5 * (lo + hi) * e)) continue;
+    const double enter = std::max(lo, s_in), leave = std::min(hi, s_out);
+    if (enter > leave + tolerance) continue;
+    Entry out;
+    out.s = enter;
+    out.point_O = p + enter * d;
+    if (lo >= s_in) {
+      const Eigen::Vector2d& nrm = edge_normals_[xs[k].edge];
+      out.normal_O = {nrm.x(), nrm.y(), 0};
+    } else {
+      out.normal_O = cap_normal;
+    }
+    return out;
+  }
+  return std::nullopt;
 }
 
 Feature Solid::Support(const Eigen::Vector3d& dir, double tolerance) const {

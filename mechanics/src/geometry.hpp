@@ -4,8 +4,9 @@
 // frame O (the frame object.pose places: a box's and cylinder's centre, a
 // prism's polygon origin at mid-height); the model converts.
 //
-// Shapes: a box is the prism of its x-y rectangle; a prism is a convex
-// polygon (counter-clockwise) extruded along z over [-h/2, h/2]; a cylinder
+// Shapes: a box is the prism of its x-y rectangle; a prism is a simple
+// polygon (counter-clockwise, convex or not) extruded along z over
+// [-h/2, h/2]; a cylinder
 // has its axis along z. Outward normals throughout; signed distances are
 // negative inside.
 #pragma once
@@ -58,7 +59,13 @@ class Solid {
   double extent() const { return extent_; }
 
  private:
+  Closest ClosestToNonConvex(const Eigen::Vector3d& p_O) const;
+  std::optional<Entry> EntryOfNonConvex(const Eigen::Vector3d& p_O, const Eigen::Vector3d& d_O,
+                                        double tolerance, double s_in, double s_out,
+                                        Eigen::Vector3d cap_normal_O) const;
+
   ObjectShape shape_;
+  bool convex_ = true;  // prisms: a non-convex outline takes the general paths
   double radius_ = 0, half_height_ = 0;
   std::vector<Eigen::Vector2d> polygon_;  // box: its rectangle
   std::vector<Eigen::Vector2d> edge_normals_;
@@ -67,7 +74,7 @@ class Solid {
   double extent_ = 1;
 };
 
-// Prism polygons: nullopt when convex, counter-clockwise and non-degenerate;
+// Prism polygons: nullopt when simple, counter-clockwise and non-degenerate;
 // otherwise the index of the offending vertex and why.
 struct PolygonProblem {
   size_t vertex = 0;

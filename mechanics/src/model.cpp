@@ -15,9 +15,11 @@
 #include <Eigen/LU>
 
 #include "arena/mechanics/lcp.hpp"
+#include "arena/mechanics/pusher_motion.hpp"
 #include "geometry.hpp"
 #include "model_tester.hpp"
 #include "sparse_lu.hpp"
+#include "support_stage.hpp"
 
 namespace arena::mechanics {
 
@@ -148,8 +150,15 @@ std::string CheckPlane(const Scene& scene, const Eigen::Vector3d& p, int& passed
   const Eigen::Matrix3d I = R * ObjectInertia(scene.object) * R.transpose();
   passed = 0;
   const double gn = scene.gravity.norm();
-  if (gn > 0 && std::abs(scene.gravity.dot(p)) > kPlaneTolerance * gn)
+  if (scene.support) {
+    // The support carries the weight: gravity and the support's normal
+    // load are both along the plane normal (free pushing: the table's) and
+    // leave the planar equations; the support's friction lies in the plane.
+    if (scene.gravity.cross(p).norm() > kPlaneTolerance * gn)
+      return "support: gravity is not normal to the plane";
+  } else if (gn > 0 && std::abs(scene.gravity.dot(p)) > kPlaneTolerance * gn) {
     return "gravity leaves the plane";
+  }
   ++passed;
   const Eigen::Vector3d Ip = I * p;
   if ((Ip - p.dot(Ip) * p).norm() > kPlaneTolerance * I.norm()) {
@@ -193,8 +202,21 @@ std::string CheckPlane(const Scene& scene, const Eigen::Vector3d& p, int& passed
     const double v = s.motion.velocity.norm();
     if (std::abs(s.motion.velocity.dot(p)) > kPlaneTolerance * v)
       return "pusher velocity leaves the plane";
-    const Eigen::Vector3d& w = s.motion.angular_velocity;
+    Eigen::Vector3d w = s.motion.angular_velocity;
     if (w.cross(p).norm() > kPlaneTolerance * w.norm()) return "pusher turns out of the plane";
+    if (s.path) {
+      for (size_t k = 0; k < s.path->position.size(); ++k) {
+        if (std::abs((s.path->position[k] - s.position).dot(p)) > kPlaneTolerance * L)
+          return "pusher path leaves the plane (position[" + std::to_string(k) + "])";
+        if (s.path->rpy.empty()) continue;
+        const Eigen::AngleAxisd turn(RotationFromRpy(s.path->rpy[k]) *
+                                     RotationFromRpy(s.path->rpy[0]).transpose());
+        const Eigen::Vector3d axis = turn.angle() * turn.axis();
+        if (axis.cross(p).norm() > kPlaneTolerance * std::max(axis.norm(), 1.0))
+          return "pusher path turns out of the plane (rpy[" + std::to_string(k) + "])";
+        if (axis.norm() > w.norm()) w = axis;
+      }
+    }
     if (w.norm() > 0 && s.mu > 0) {
       // A turning normal changes its tangent basis; only planes normal to a
       // gripper axis with facets a multiple of 4 keep in-plane edges throughout.
@@ -215,6 +237,9 @@ PlaneCheck FindPlane(const Scene& scene) {
                                              Eigen::Vector3d::UnitX()};
   if (scene.pusher && scene.pusher->motion.angular_velocity.norm() > 0) {
     candidates.insert(candidates.begin(), scene.pusher->motion.angular_velocity.normalized());
+  }
+  if (scene.support && scene.gravity.norm() > 0) {
+    candidates.insert(candidates.begin(), scene.gravity.normalized());
   }
   const Eigen::Matrix3d R = RotationFromRpy(scene.object.pose.rpy);
   Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig(R * ObjectInertia(scene.object) *
@@ -668,6 +693,15 @@ struct ContactModel::Impl {
   Eigen::Vector3d pusher_force = Eigen::Vector3d::Zero();
   std::vector<char> basis;
 
+  // The support (support_stage.hpp): its friction directions are the last
+  // force unknowns [support_beta0, nf), its ξ the last unknown.
+  SupportStage support;
+  int support_beta0 = -1, support_xi = -1;
+  Eigen::Matrix<double, 3, Eigen::Dynamic> support_D;
+  Eigen::Vector3d support_twist = Eigen::Vector3d::Zero();  // last step's reduced twist
+  // Force unknowns of the contacts (the support's come after them).
+  int ContactForceUnknowns() const { return support_beta0 >= 0 ? support_beta0 : nf; }
+
   // Tracked geometry.
   bool tracked = false;
   std::unique_ptr<geometry::Solid> solid;
@@ -746,6 +780,9 @@ struct ContactModel::Impl {
   void AssembleContactRows(StepScratch& s);
   void AssembleConeRows(StepScratch& s);
   void AssemblePadRows(StepScratch& s);
+  void AssembleSupportRows(StepScratch& s);
+  void SetupSupport();
+  void SupportResiduals(StepScratch& s);
   bool Solve(StepScratch& s, StepReport& rep);
   void RecoverMotion(StepScratch& s);
   double CheckResiduals(StepScratch& s);
@@ -818,13 +855,14 @@ GraspStatus ContactModel::Grasp(std::string* note) const {
 double ContactModel::velocity_scale() const { return impl_->Vs; }
 Eigen::Vector3d ContactModel::pusher_position() const {
   if (!impl_->scene.pusher) return Eigen::Vector3d::Zero();
-  return impl_->scene.pusher->position + impl_->scene.pusher->motion.velocity * impl_->t;
+  return PusherPoseAt(*impl_->scene.pusher, impl_->t).position;
 }
 // Geometry() places the pusher at position + velocity t: rebasing the
 // position keeps it where it is when the velocity changes.
 bool ContactModel::SetPusherMotion(const PusherMotion& motion) {
   auto& pusher = impl_->scene.pusher;
-  if (!pusher || motion.angular_velocity != pusher->motion.angular_velocity) return false;
+  if (!pusher || pusher->path || motion.angular_velocity != pusher->motion.angular_velocity)
+    return false;
   pusher->position = pusher_position() - motion.velocity * impl_->t;
   pusher->motion = motion;
   for (Contact& ct : impl_->contacts) {
@@ -873,6 +911,17 @@ std::string BasicCheck(const Scene& s) {
     if (!e.empty()) return e;
     if (!finite3(s.pusher->motion.velocity) || !finite3(s.pusher->motion.angular_velocity)) {
       return "pusher.motion: must be finite";
+    }
+    if (const auto& path = s.pusher->path) {
+      // PusherPoseAt() interpolates: it needs times from 0 that increase.
+      if (path->t.empty() || path->t[0] != 0 || path->position.size() != path->t.size() ||
+          (!path->rpy.empty() && path->rpy.size() != path->t.size()))
+        return "pusher.motion.path: t from 0 with one position (and rpy) row per time";
+      for (size_t k = 0; k < path->t.size(); ++k) {
+        if (!std::isfinite(path->t[k]) || (k > 0 && !(path->t[k] > path->t[k - 1])) ||
+            !finite3(path->position[k]) || (!path->rpy.empty() && !finite3(path->rpy[k])))
+          return "pusher.motion.path: times must increase, every entry finite";
+      }
     }
   }
   return {};
@@ -926,6 +975,7 @@ void ContactModel::Impl::Setup() {
   SetupScales();
   SetupContacts();
   SetupUnknowns();
+  if (status != SimulationStatus::kOk) return;
   info.dof = nd;
   info.facets = opt.facets;
   info.points = opt.points;
@@ -955,11 +1005,27 @@ bool ContactModel::Impl::SetupReduction() {
     if (plane.planar) {
       planar = true;
       plane_normal = plane.normal;
+    } else if (scene.support) {
+      status = SimulationStatus::kInvalidScene;
+      error =
+          "support: needs a scene planar about the support (the support's load is fixed by "
+          "its pressure, so the object moves on it), but " +
+          plane.reason;
+      return false;
     } else if (opt.reduce == Reduce::kPlanar) {
       status = SimulationStatus::kInvalidScene;
       error = "model.reduce: planar, but the scene is not planar (" + plane.reason + ")";
       return false;
     }
+  }
+  if (scene.support && !planar) {
+    // reduce "full": 6 DOF would let the object tip or sink under the load
+    // its pressure distribution fixes.
+    status = SimulationStatus::kInvalidScene;
+    error =
+        "support: needs the planar model (model.reduce \"auto\" or \"planar\"); with \"full\" "
+        "the support's fixed pressure cannot hold the object";
+    return false;
   }
   if (planar) {
     nd = 3;
@@ -988,8 +1054,9 @@ void ContactModel::Impl::SetupScales() {
   const double g = scene.gravity.norm();
   Fs = std::max(scene.grip_force, mass * g);
   if (scene.pusher) {
-    Fs = std::max({Fs, mass * scene.pusher->motion.velocity.norm() / dt,
-                   mass * scene.pusher->motion.angular_velocity.norm() * L / dt});
+    const PusherTwist peak = PusherPeakRates(*scene.pusher);
+    Fs = std::max(
+        {Fs, mass * peak.velocity.norm() / dt, mass * peak.angular_velocity.norm() * L / dt});
   }
   if (!(Fs > 0)) Fs = mass * L / (dt * dt);
   Vs = Fs * dt / mass;
@@ -1051,6 +1118,7 @@ void ContactModel::Impl::SetupUnknowns() {
       }
     }
   }
+  SetupSupport();
   n = nf;
   for (Contact& ct : contacts) {
     if (!ct.active) continue;
@@ -1061,6 +1129,26 @@ void ContactModel::Impl::SetupUnknowns() {
       ct.y_plus = n++;
       ct.y_minus = n++;
     }
+  }
+  if (support_beta0 >= 0) support_xi = n++;
+}
+
+// The support's force unknowns (SupportStage: its friction directions),
+// after the contacts'; ξ is added with the velocity unknowns.
+void ContactModel::Impl::SetupSupport() {
+  if (!scene.support) return;
+  if (std::string e = support.Setup(scene, plane_normal, plane_e1, plane_e2); !e.empty()) {
+    status = SimulationStatus::kInvalidScene;
+    error = e;
+    return;
+  }
+  if (!support.active()) return;  // μ = 0: no friction, nothing to solve for
+  support_beta0 = nf;
+  for (int k = 0; k < support.directions(); ++k) {
+    ++nf;
+    force_point.push_back(-1);
+    force_point_sub.push_back(-1);
+    force_dir.push_back(k);
   }
 }
 
@@ -1095,15 +1183,25 @@ void ContactModel::Impl::Geometry() {
     Eigen::Matrix3d Rp = Eigen::Matrix3d::Identity();
     Eigen::Vector3d vp = Eigen::Vector3d::Zero(), wp = Eigen::Vector3d::Zero();
     ct.position = ct.spec.position + ct.pad * ct.spec.normal;
-    if (ct.pusher) {
+    bool turned = false;
+    if (ct.pusher && scene.pusher->path) {
+      const PusherPose pose = PusherPoseAt(*scene.pusher, t);
+      const PusherTwist twist = PusherTwistOver(*scene.pusher, t, dt);
+      vp = twist.velocity;
+      wp = twist.angular_velocity;
+      ct.position = pose.position;
+      Rp = pose.rotation;
+      turned = pose.turned;
+    } else if (ct.pusher) {
       vp = scene.pusher->motion.velocity;
       wp = scene.pusher->motion.angular_velocity;
       ct.position = ct.spec.position + vp * t;
       const double a = wp.norm() * t;
       if (a > 0) Rp = Eigen::AngleAxisd(a, wp.normalized()).toRotationMatrix();
+      turned = wp.norm() > 0;
     }
     const Eigen::Vector3d n = Rp * ct.spec.normal;
-    const bool recompute = ct.edges.empty() || (ct.pusher && wp.norm() > 0);
+    const bool recompute = ct.edges.empty() || (ct.pusher && turned);
     ct.normal = n;
     if (recompute) {
       if (planar) {
@@ -1264,7 +1362,16 @@ void ContactModel::Impl::TrackedGeometry() {
     Eigen::Matrix3d Rp = Eigen::Matrix3d::Identity();
     Eigen::Vector3d vp = Eigen::Vector3d::Zero(), wp = Eigen::Vector3d::Zero();
     Eigen::Vector3d base = ct.spec.position + ct.pad * ct.spec.normal;
-    if (ct.pusher) {
+    if (ct.pusher && scene.pusher->path) {
+      // A recorded path: where it is now, and its mean motion over the step.
+      const PusherPose pose = PusherPoseAt(*scene.pusher, t);
+      const PusherTwist twist = PusherTwistOver(*scene.pusher, t, dt);
+      vp = twist.velocity;
+      wp = twist.angular_velocity;
+      base = pose.position;
+      turned = pose.turned;
+      Rp = pose.rotation;
+    } else if (ct.pusher) {
       vp = scene.pusher->motion.velocity;
       wp = scene.pusher->motion.angular_velocity;
       base = ct.spec.position + vp * t;
@@ -1362,6 +1469,9 @@ bool ContactModel::Impl::RunPhase(StepPhase phase, StepReport& rep) {
       return true;
     case StepPhase::kPadRows:
       AssemblePadRows(s);
+      return true;
+    case StepPhase::kSupportRows:
+      AssembleSupportRows(s);
       return true;
     case StepPhase::kSolve:
       return Solve(s, rep);
@@ -1471,7 +1581,16 @@ void ContactModel::Impl::FormGraspMap(StepScratch& s) {
   if (tracked) Jv.resize(nd, nf);
   const Point* arm_of = nullptr;  // the point whose arm is below (its unknowns are consecutive)
   Eigen::Vector3d arm = Eigen::Vector3d::Zero(), p_cross_arm = Eigen::Vector3d::Zero();
-  for (int k = 0; k < nf; ++k) {
+  const int nf_contacts = ContactForceUnknowns();
+  if (support_beta0 >= 0) {
+    // The support's limit-surface directions at this pose (planar only).
+    support.Columns(s.R, c - s.R * com_O, c, support_twist, &support_D);
+    for (int k = nf_contacts; k < nf; ++k) {
+      Jc.col(k) = support_D.col(k - nf_contacts);
+      if (tracked) Jv.col(k) = Jc.col(k);
+    }
+  }
+  for (int k = 0; k < nf_contacts; ++k) {
     const Contact& ct = contacts[static_cast<size_t>(force_point[static_cast<size_t>(k)])];
     const Point& pt = ct.points[static_cast<size_t>(force_point_sub[static_cast<size_t>(k)])];
     const int e = force_dir[static_cast<size_t>(k)];
@@ -1534,7 +1653,7 @@ void ContactModel::Impl::AssembleContactRows(StepScratch& s) {
     b.head(nf).noalias() = Jrows.transpose() * vfree;
   }
   const double inv_dt = 1.0 / dt, inv_Vs = 1.0 / Vs;
-  for (int k = 0; k < nf; ++k) {
+  for (int k = 0; k < ContactForceUnknowns(); ++k) {
     const Contact& ct = contacts[static_cast<size_t>(force_point[static_cast<size_t>(k)])];
     const Point& pt = ct.points[static_cast<size_t>(force_point_sub[static_cast<size_t>(k)])];
     const int e = force_dir[static_cast<size_t>(k)];
@@ -1602,6 +1721,41 @@ void ContactModel::Impl::AssemblePadRows(StepScratch& s) {
   }
 }
 
+// Phase 8. The support's rows (SupportStage): per friction direction k,
+// ξ + D_kᵀ ν⁺ >= 0 ⊥ β_k >= 0 (b[k] holds D_kᵀ ν_free from the force block's
+// phase); μN - Σ_k β_k >= 0 ⊥ ξ >= 0.
+void ContactModel::Impl::AssembleSupportRows(StepScratch& s) {
+  if (support_xi < 0) return;
+  const double inv_Vs = 1.0 / Vs;
+  for (int k = support_beta0; k < nf; ++k) {
+    s.A.Set(k, support_xi, 1);
+    s.b[k] *= inv_Vs;
+  }
+  for (int k = support_beta0; k < nf; ++k) s.A.Set(support_xi, k, -1);
+  s.b[support_xi] = support.limit() / Fs;
+}
+
+// The support's complementarity and cone residuals (CheckResiduals).
+void ContactModel::Impl::SupportResiduals(StepScratch& s) {
+  if (support_xi < 0) return;
+  Residuals& res = s.res;
+  const double inv_Vs = 1.0 / Vs, inv_Fs = 1.0 / Fs;
+  const double xi = Unknown(s, support_xi);
+  double bsum = 0;
+  for (int k = support_beta0; k < nf; ++k) {
+    const double be = Unknown(s, k);
+    bsum += be;
+    double along = 0;  // D_kᵀ ν⁺
+    for (int i = 0; i < 3; ++i) along += s.Jc(i, k) * s.vr_new[i];
+    res.complementarity =
+        std::max(res.complementarity, std::abs(std::min(be * inv_Fs, (xi + along) * inv_Vs)));
+  }
+  const double slack = support.limit() - bsum;
+  res.complementarity =
+      std::max(res.complementarity, std::abs(std::min(xi * inv_Vs, slack * inv_Fs)));
+  res.cone = std::max(res.cone, -slack * inv_Fs);
+}
+
 // An unknown in physical units (force unknowns N, velocity unknowns m/s);
 // 0 for an index of none.
 double ContactModel::Impl::Unknown(const StepScratch& s, int i) const {
@@ -1626,7 +1780,7 @@ Eigen::Vector3d ContactModel::Impl::BodyVelocity(const StepScratch& s, const Con
   return vf * ct.normal;
 }
 
-// Phase 8. Solve (warm from the last basis), recover the forces and the new
+// Phase 9. Solve (warm from the last basis), recover the forces and the new
 // twist, then check the physical residuals; a warm-started answer that fails
 // them is solved again cold. On failure the basis is dropped.
 bool ContactModel::Impl::Solve(StepScratch& s, StepReport& rep) {
@@ -1760,10 +1914,11 @@ double ContactModel::Impl::CheckResiduals(StepScratch& s) {
       comp(Unknown(s, ct.y_minus) * inv_Vs, -err);
     }
   }
+  SupportResiduals(s);
   return std::max({res.force_balance, res.complementarity, res.cone});
 }
 
-// Phase 9. Bad values: a step whose forces, twist or next pose is not
+// Phase 10. Bad values: a step whose forces, twist or next pose is not
 // finite is refused (typed kNonFinite, naming the quantity) before anything
 // of the state changes. The residual checks refuse a NaN residual; this
 // catches what they do not read (forces of points without rows, the pose).
@@ -1788,7 +1943,7 @@ bool ContactModel::Impl::Refuse(StepReport& rep, const std::string& why) {
   return false;
 }
 
-// Phase 10. Contact states (on the object, gripper frame) and modes; the
+// Phase 11. Contact states (on the object, gripper frame) and modes; the
 // pusher's force.
 void ContactModel::Impl::ReportContacts(StepScratch& s) {
   pusher_force.setZero();
@@ -1849,7 +2004,7 @@ void ContactModel::Impl::ReportContacts(StepScratch& s) {
   }
 }
 
-// Phase 11. Integrate (semi-implicit Euler on the new twist). Pressing
+// Phase 12. Integrate (semi-implicit Euler on the new twist). Pressing
 // fingers' pads follow the object along their normals; the pusher tracks its
 // gaps (fixed geometry; tracked geometry measures them every step).
 void ContactModel::Impl::Integrate(StepScratch& s) {
@@ -1867,6 +2022,7 @@ void ContactModel::Impl::Integrate(StepScratch& s) {
       ct.pad += dt * vf;
     }
   }
+  if (support_xi >= 0) support_twist = Eigen::Vector3d(s.vr_new[0], s.vr_new[1], s.vr_new[2]);
   v = s.v_new;
   w = s.w_new;
   c += dt * s.v_new;

@@ -19,6 +19,7 @@ enum class StepPhase {
   kContactRows,    // LCP rows of the force unknowns (normals, friction edges), force block
   kConeRows,       // LCP rows of the friction cones (ξ)
   kPadRows,        // LCP rows of the force-controlled pads (y±)
+  kSupportRows,    // LCP rows of the support's limit-surface directions and its ξ
   kSolve,          // Lemke (warm, then cold retries), forces and new twist, residuals
   kCheckValues,    // refuses non-finite forces, twist or pose (StepFailure::kNonFinite)
   kContactStates,  // contact states and modes, the pusher's force

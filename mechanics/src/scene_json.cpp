@@ -11,6 +11,7 @@
 #include "arena/mechanics/scene_json.hpp"
 
 #include "arena/mechanics/json_path.hpp"
+#include "arena/mechanics/polygon.hpp"
 #include "geometry.hpp"
 
 #include <algorithm>
@@ -498,6 +499,56 @@ PusherController ReadController(const json& v, const std::string& path) {
   return c;
 }
 
+// An array of [a, b, c] rows (a path's positions or angles).
+std::vector<Eigen::Vector3d> Rows3(const json& v, const std::string& path) {
+  if (!v.is_array())
+    throw SceneError(path, "must be an array of [x, y, z] rows, got " + TypeName(v));
+  std::vector<Eigen::Vector3d> rows;
+  rows.reserve(v.size());
+  for (size_t i = 0; i < v.size(); ++i) rows.push_back(Vec3(v[i], Index(path, i)));
+  return rows;
+}
+
+// "path": {"t": [...], "position": [[x, y, z], ...], "rpy": [[r, p, y], ...]}.
+PusherPath ReadPath(const json& v, const std::string& path) {
+  Obj o(v, path, {"t", "position", "rpy"});
+  PusherPath out;
+  const json& t = o.Require("t");
+  if (!t.is_array())
+    throw SceneError(o.At("t"), "must be an array of times (s), got " + TypeName(t));
+  for (size_t i = 0; i < t.size(); ++i) out.t.push_back(Number(t[i], Index(o.At("t"), i)));
+  out.position = Rows3(o.Require("position"), o.At("position"));
+  if (const json* r = o.Find("rpy")) out.rpy = Rows3(*r, o.At("rpy"));
+  return out;
+}
+
+// "support": {"mu": m, "pressure": "uniform" | {"points": [[x, y, w], ...]}}.
+SupportSpec ReadSupport(const json& v, const std::string& path) {
+  Obj o(v, path, {"mu", "pressure"});
+  SupportSpec support;
+  support.mu = Number(o.Require("mu"), o.At("mu"));
+  if (const json* p = o.Find("pressure")) {
+    const std::string ppath = o.At("pressure");
+    if (p->is_string()) {
+      const std::string text = p->get<std::string>();
+      if (text != "uniform") {
+        throw SceneError(
+            ppath, "must be \"uniform\" or {\"points\": [[x, y, w], ...]}, got " + Quote(text));
+      }
+    } else {
+      Obj pressure(*p, ppath, {"points"});
+      const json& points = pressure.Require("points");
+      const std::string list = pressure.At("points");
+      if (!points.is_array() || points.empty()) {
+        throw SceneError(list, "must be a non-empty array of [x, y, w] points");
+      }
+      for (size_t i = 0; i < points.size(); ++i)
+        support.pressure_points.push_back(Vec3(points[i], Index(list, i)));
+    }
+  }
+  return support;
+}
+
 PusherSpec ReadPusher(const json& v, const std::string& path) {
   Obj o(v, path, {"type", "position", "normal", "axis", "length", "radius", "mu", "motion"});
   PusherSpec pusher;
@@ -508,7 +559,13 @@ PusherSpec ReadPusher(const json& v, const std::string& path) {
       pusher.controller = ReadController(*m, o.At("motion"));
       return pusher;
     }
-    Obj motion(*m, o.At("motion"), {"velocity", "angular_velocity"});
+    Obj motion(*m, o.At("motion"), {"velocity", "angular_velocity", "path"});
+    if (const json* path = motion.Find("path")) {
+      motion.Forbid("velocity", "a recorded path replaces velocity and angular_velocity");
+      motion.Forbid("angular_velocity", "a recorded path replaces velocity and angular_velocity");
+      pusher.path = ReadPath(*path, motion.At("path"));
+      return pusher;
+    }
     if (const json* vel = motion.Find("velocity")) {
       pusher.motion.velocity = Vec3(*vel, motion.At("velocity"));
     }
@@ -654,6 +711,114 @@ bool ValidNameChar(char c) {
          c == '-' || c == '.';
 }
 
+// A pusher path: times from 0, strictly increasing; rows of one length;
+// the first position is the pusher's.
+void ValidatePath(const PusherPath& path, const Eigen::Vector3d& start, double extent) {
+  const std::string base = "pusher.motion.path";
+  if (path.t.empty()) throw SceneError(Join(base, "t"), "must hold at least one time");
+  if (path.t.size() > kMaxSceneArray) {
+    throw SceneError(Join(base, "t"),
+                     "must hold at most " + std::to_string(kMaxSceneArray) + " samples");
+  }
+  for (size_t i = 0; i < path.t.size(); ++i) RequireFinite(path.t[i], Index(Join(base, "t"), i));
+  if (path.t[0] != 0) {
+    throw SceneError(Index(Join(base, "t"), 0),
+                     "must be 0 (the path starts with the scene), got " + Num(path.t[0]));
+  }
+  for (size_t i = 1; i < path.t.size(); ++i) {
+    if (!(path.t[i] > path.t[i - 1])) {
+      throw SceneError(Index(Join(base, "t"), i), "must be later than t[" + std::to_string(i - 1) +
+                                                      "] = " + Num(path.t[i - 1]) +
+                                                      " (times strictly increase), got " +
+                                                      Num(path.t[i]));
+    }
+  }
+  if (path.position.size() != path.t.size()) {
+    throw SceneError(Join(base, "position"), "must have one row per time (" +
+                                                 std::to_string(path.t.size()) + "), got " +
+                                                 std::to_string(path.position.size()));
+  }
+  for (size_t i = 0; i < path.position.size(); ++i)
+    RequireFinite(path.position[i], Index(Join(base, "position"), i));
+  if (!path.rpy.empty() && path.rpy.size() != path.t.size()) {
+    throw SceneError(Join(base, "rpy"), "must have one row per time (" +
+                                            std::to_string(path.t.size()) + "), got " +
+                                            std::to_string(path.rpy.size()));
+  }
+  for (size_t i = 0; i < path.rpy.size(); ++i)
+    RequireFinite(path.rpy[i], Index(Join(base, "rpy"), i));
+  const double off = (path.position[0] - start).norm();
+  if (off > 1e-9 * extent) {
+    throw SceneError(Index(Join(base, "position"), 0),
+                     "must equal pusher.position (the path starts where the pusher is), " +
+                         Num(off) + " m away");
+  }
+}
+
+// The support: gravity to press the object on it, the object resting on a
+// z cap, pressure points on that face with their centre under the centre
+// of mass.
+void ValidateSupport(const Scene& scene) {
+  const SupportSpec& s = *scene.support;
+  RequireNonNegative(s.mu, "support.mu");
+  const double g = scene.gravity.norm();
+  if (!(g > 0)) {
+    throw SceneError("support", "needs gravity (the object's weight is the support's load)");
+  }
+  const Eigen::Matrix3d R_GO = RotationFromRpy(scene.object.pose.rpy);
+  const double along = R_GO.col(2).dot(scene.gravity / g);
+  if (std::abs(along) < 1 - 1e-9) {
+    throw SceneError("support",
+                     "the object rests on no face the model supports: its z axis must be along "
+                     "gravity (a z cap on the support), |z . g| = " +
+                         Num(std::abs(along)));
+  }
+  if (s.pressure_points.size() > kMaxSupportPoints) {
+    throw SceneError("support.pressure.points",
+                     "must hold at most " + std::to_string(kMaxSupportPoints) + " points");
+  }
+  if (s.pressure_points.empty()) return;
+  const ObjectSpec& object = scene.object;
+  const double extent = ObjectExtent(object);
+  const std::string list = "support.pressure.points";
+  double total = 0;
+  Eigen::Vector2d centre = Eigen::Vector2d::Zero();
+  for (size_t i = 0; i < s.pressure_points.size(); ++i) {
+    const Eigen::Vector3d& p = s.pressure_points[i];
+    const std::string at = Index(list, i);
+    RequireFinite(p, at);
+    if (!(p.z() >= 0)) throw SceneError(Index(at, 2), "weight must be >= 0, got " + Num(p.z()));
+    const Eigen::Vector2d xy = p.head<2>();
+    bool inside = false;
+    if (object.shape == ObjectShape::kBox) {
+      inside = std::abs(xy.x()) <= object.size.x() / 2 * (1 + 1e-9) &&
+               std::abs(xy.y()) <= object.size.y() / 2 * (1 + 1e-9);
+    } else if (object.shape == ObjectShape::kCylinder) {
+      inside = xy.norm() <= object.radius * (1 + 1e-9);
+    } else {
+      inside = polygon::Contains(object.polygon, xy) ||
+               polygon::ClosestOnBoundary(object.polygon, xy).distance <= 1e-9 * extent;
+    }
+    if (!inside) {
+      throw SceneError(at, "lies off the object's face on the support (object frame x, y " +
+                               Num(xy.x()) + ", " + Num(xy.y()) + ")");
+    }
+    total += p.z();
+    centre += p.z() * xy;
+  }
+  if (!(total > 0)) throw SceneError(list, "weights must not all be zero");
+  centre /= total;
+  const Eigen::Vector3d com_O = geometry::Solid(object).centroid_O();
+  const double off = (centre - com_O.head<2>()).norm();
+  if (off > kSurfaceTolerance * extent) {
+    throw SceneError(list,
+                     "the centre of pressure must lie under the centre of mass (a rigid "
+                     "body at rest on a plane), it is " +
+                         Num(off) + " m off (tolerance " + Num(kSurfaceTolerance * extent) +
+                         " m = 1% of the object's extent)");
+  }
+}
+
 void ValidateContact(const ContactSpec& c, const std::string& path, const Scene& scene) {
   RequireFinite(c.position, Join(path, "position"));
   RequireUnit(c.normal, Join(path, "normal"));
@@ -684,11 +849,33 @@ void ValidateContact(const ContactSpec& c, const std::string& path, const Scene&
                                                  " m, got " + Num(c.radius));
     }
   }
-  on_surface(c.position, Join(path, "position"), "the contact point");
-  // An inward normal of a convex body at a surface point has the centre on
-  // its positive side.
+  // A point pusher with tracked contacts may start apart from the object
+  // (the contact is made when it arrives), never inside it.
+  const bool may_start_apart = path == "pusher" && c.type == ContactType::kPoint &&
+                               scene.model.contacts == ContactTracking::kTracked;
+  const Eigen::Vector3d p_O = R_GO.transpose() * (c.position - scene.object.pose.position);
+  if (may_start_apart) {
+    const double depth = -solid.ClosestTo(p_O).distance;
+    if (depth > surface_tol) {
+      throw SceneError(Join(path, "position"), "lies inside the object (" + Num(depth) +
+                                                   " m deep, tolerance " + Num(surface_tol) +
+                                                   " m = 1% of the object's extent)");
+    }
+  } else {
+    on_surface(c.position, Join(path, "position"), "the contact point");
+  }
   const Eigen::Vector3d centre = scene.object.pose.position + R_GO * solid.centroid_O();
-  if (c.normal.dot(centre - c.position) <= 0) {
+  if (scene.object.shape == ObjectShape::kPrism && !polygon::IsConvex(scene.object.polygon)) {
+    // A non-convex outline: into the object is against the outward normal
+    // of the closest surface point (its centre may lie anywhere).
+    const Eigen::Vector3d outward = R_GO * solid.ClosestTo(p_O).normal_O;
+    if (c.normal.dot(outward) >= 0) {
+      throw SceneError(Join(path, "normal"),
+                       "must point into the object (against the surface's outward normal)");
+    }
+  } else if (c.normal.dot(centre - c.position) <= 0) {
+    // An inward normal of a convex body at a surface point has the centre
+    // on its positive side.
     throw SceneError(Join(path, "normal"), "must point into the object (towards its centre)");
   }
   if (c.type == ContactType::kLine) {
@@ -802,7 +989,10 @@ void ValidateScene(const Scene& scene) {
                                      " steps, more than " + Num(kMaxSteps));
   }
 
-  if (scene.fingers.empty()) throw SceneError("fingers", "must list at least one finger");
+  if (scene.fingers.empty() && !scene.support) {
+    throw SceneError("fingers", "must list at least one finger (or the scene needs a support)");
+  }
+  if (scene.support) ValidateSupport(scene);
   if (scene.fingers.size() > static_cast<size_t>(kMaxFingers)) {
     throw SceneError("fingers", "must list at most " + std::to_string(kMaxFingers) +
                                     " fingers, got " + std::to_string(scene.fingers.size()));
@@ -848,6 +1038,16 @@ void ValidateScene(const Scene& scene) {
       throw SceneError("pusher.stiffness", "only for finger pads (the pusher is rigid)");
     RequireFinite(p.motion.velocity, "pusher.motion.velocity");
     RequireFinite(p.motion.angular_velocity, "pusher.motion.angular_velocity");
+    if (p.path) {
+      if (p.controller)
+        throw SceneError("pusher.motion.path",
+                         "a recorded path and a controller exclude each other");
+      if (p.motion.velocity != Eigen::Vector3d::Zero() ||
+          p.motion.angular_velocity != Eigen::Vector3d::Zero())
+        throw SceneError("pusher.motion.path",
+                         "replaces velocity and angular_velocity (set them zero)");
+      ValidatePath(*p.path, p.position, ObjectExtent(object));
+    }
     if (p.controller) {
       if (p.controller->name.empty() || p.controller->name.size() > kMaxNameLength)
         throw SceneError("pusher.motion.controller", "must be 1..64 characters");
@@ -941,7 +1141,8 @@ Scene ParseScene(std::string_view json_text) {
 
   Obj root(
       doc, "",
-      {"object", "gravity", "duration", "grip_force", "fingers", "pusher", "model", "gripper"});
+      {"object", "gravity", "duration", "grip_force", "fingers", "pusher", "support", "model",
+       "gripper"});
   Scene scene;
   scene.object = ReadObject(root.Require("object"), "object");
   if (const json* g = root.Find("gravity")) scene.gravity = Vec3(*g, "gravity");
@@ -950,7 +1151,10 @@ Scene ParseScene(std::string_view json_text) {
   const json& fingers = root.Require("fingers");
   if (!fingers.is_array())
     throw SceneError("fingers", "must be an array of fingers, got " + TypeName(fingers));
-  if (fingers.empty()) throw SceneError("fingers", "must list at least one finger");
+  if (const json* sup = root.Find("support")) scene.support = ReadSupport(*sup, "support");
+  if (fingers.empty() && !scene.support) {
+    throw SceneError("fingers", "must list at least one finger (or the scene needs a support)");
+  }
   if (fingers.size() > static_cast<size_t>(kMaxFingers)) {
     throw SceneError("fingers", "must list at most " + std::to_string(kMaxFingers) +
                                     " fingers, got " + std::to_string(fingers.size()));
@@ -1079,11 +1283,32 @@ std::string SceneToJson(const Scene& scene, int indent) {
                      {"gain", c->gain},
                      {"tolerance", c->tolerance},
                      {"hold_s", c->hold_s}};
+    } else if (const auto& path = scene.pusher->path) {
+      ojson rows = ojson::array();
+      for (const auto& x : path->position) rows.push_back(Vec(x));
+      ojson jp = {{"t", path->t}, {"position", std::move(rows)}};
+      if (!path->rpy.empty()) {
+        ojson angles = ojson::array();
+        for (const auto& a : path->rpy) angles.push_back(Vec(a));
+        jp["rpy"] = std::move(angles);
+      }
+      p["motion"] = {{"path", std::move(jp)}};
     } else {
       p["motion"] = {{"velocity", Vec(scene.pusher->motion.velocity)},
                      {"angular_velocity", Vec(scene.pusher->motion.angular_velocity)}};
     }
     j["pusher"] = std::move(p);
+  }
+  if (const auto& support = scene.support) {
+    ojson js = {{"mu", support->mu}};
+    if (support->pressure_points.empty()) {
+      js["pressure"] = "uniform";
+    } else {
+      ojson points = ojson::array();
+      for (const auto& p : support->pressure_points) points.push_back(Vec(p));
+      js["pressure"] = {{"points", std::move(points)}};
+    }
+    j["support"] = std::move(js);
   }
   j["model"] = {{"facets", scene.model.facets},
                 {"points", scene.model.points},

@@ -11,6 +11,7 @@
 #include <cstdio>
 
 #include "arena/mechanics/model.hpp"
+#include "arena/mechanics/pusher_motion.hpp"
 
 namespace arena::mechanics {
 
@@ -154,8 +155,10 @@ SimulationResult Simulate(const Scene& scene, const PusherCommandSource& command
         sample.angular_velocity = model.angular_velocity();
       }
       sample.pusher_position =
-          closed_loop ? Eigen::Vector3d(model.pusher_position() - command_v * (t1 - ts))
-                      : Eigen::Vector3d(pusher0 + pusher_v * ts);
+          closed_loop
+              ? Eigen::Vector3d(model.pusher_position() - command_v * (t1 - ts))
+              : (scene.pusher && scene.pusher->path ? PusherPoseAt(*scene.pusher, ts).position
+                                                    : Eigen::Vector3d(pusher0 + pusher_v * ts));
       sample.pusher_force = model.pusher_force();
       sample.contacts = model.contacts();
       result.samples.push_back(std::move(sample));

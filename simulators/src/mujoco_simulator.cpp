@@ -51,6 +51,9 @@
 #include <nlohmann/json.hpp>
 
 #include "arena/mechanics/model.hpp"
+#include "arena/mechanics/polygon.hpp"
+#include "arena/mechanics/pusher_motion.hpp"
+#include "arena/mechanics/support.hpp"
 #include "arena/simulators/simulator.hpp"
 
 namespace arena::simulators {
@@ -107,10 +110,17 @@ int PadCount(const mechanics::ContactSpec& c, PadShapes shapes) {
   return 1;
 }
 
+// A pad sphere's radius: a point contact with a radius is a sphere of that
+// radius (the push dataset's 4.75 mm pusher); other pads use the settings'
+// pad radius (scaled to the scene).
+double PadRadius(const mechanics::ContactSpec& c, double pad_radius) {
+  return c.type == mechanics::ContactType::kPoint && c.radius > 0 ? c.radius : pad_radius;
+}
+
 // Sphere centres (in the pad body's frame, whose origin is the contact point).
 std::vector<Eigen::Vector3d> PadCentres(const mechanics::ContactSpec& c, double pad_radius) {
   const Eigen::Vector3d n = c.normal.normalized();
-  const Eigen::Vector3d back = -pad_radius * n;
+  const Eigen::Vector3d back = -PadRadius(c, pad_radius) * n;
   std::vector<Eigen::Vector3d> out;
   switch (c.type) {
     case mechanics::ContactType::kPoint:
@@ -164,13 +174,18 @@ std::string PadGeoms(const std::string& base, const mechanics::ContactSpec& c,
   const auto centres = PadCentres(c, st.pad_radius);
   for (size_t j = 0; j < centres.size(); ++j) {
     x << "      <geom name=\"" << base << "_" << j
-      << "\" type=\"sphere\" contype=\"0\" conaffinity=\"0\" mass=\"0\" size=\"" << Num(pad_radius)
-      << "\" pos=\"" << Vec(centres[j]) << "\"/>\n";
+      << "\" type=\"sphere\" contype=\"0\" conaffinity=\"0\" mass=\"0\" size=\""
+      << Num(PadRadius(c, pad_radius)) << "\" pos=\"" << Vec(centres[j]) << "\"/>\n";
   }
   return x.str();
 }
 
-std::string Pair(const std::string& pad, const mechanics::ContactSpec& c, const MujocoSettings& st);
+std::string Pair(const std::string& pad, const mechanics::ContactSpec& c, const MujocoSettings& st,
+                 const std::string& object = "object");
+
+// The object's collision geoms: "object", and for a non-convex prism one
+// more per convex piece ("object_piece1", ...; ObjectPieces).
+std::vector<std::string> ObjectGeomNames(const mechanics::ObjectSpec& o);
 
 // A contact acts once its distance is below margin - gap. With gap = margin
 // a pad that touches at t = 0 (distance 0) acts only once it has sunk in: the
@@ -180,19 +195,21 @@ std::string Pair(const std::string& pad, const mechanics::ContactSpec& c, const 
 constexpr double kActiveAtTouch = 1e-3;
 
 std::string Pairs(const std::string& base, const mechanics::ContactSpec& c,
-                  const MujocoSettings& st) {
+                  const MujocoSettings& st, const mechanics::ObjectSpec& o) {
   std::string all;
-  for (int j = 0; j < PadCount(c, st.pads); ++j) {
-    all += "    " + Pair(base + "_" + std::to_string(j), c, st) + "\n";
+  for (const std::string& object : ObjectGeomNames(o)) {
+    for (int j = 0; j < PadCount(c, st.pads); ++j) {
+      all += "    " + Pair(base + "_" + std::to_string(j), c, st, object) + "\n";
+    }
   }
   return all;
 }
 
-std::string Pair(const std::string& pad, const mechanics::ContactSpec& c,
-                 const MujocoSettings& st) {
+std::string Pair(const std::string& pad, const mechanics::ContactSpec& c, const MujocoSettings& st,
+                 const std::string& object) {
   std::ostringstream x;
-  x << "<pair geom1=\"" << pad << "\" geom2=\"object\" condim=\"3\" friction=\"" << Num(c.mu) << " "
-    << Num(c.mu) << " 0 0 0\" solref=\"" << Num(st.solref_timeconst) << " "
+  x << "<pair geom1=\"" << pad << "\" geom2=\"" << object << "\" condim=\"3\" friction=\""
+    << Num(c.mu) << " " << Num(c.mu) << " 0 0 0\" solref=\"" << Num(st.solref_timeconst) << " "
     << Num(st.solref_damping) << "\" solimp=\"";
   for (int k = 0; k < 5; ++k) x << Num(st.solimp[k]) << (k < 4 ? " " : "");
   x << "\" margin=\"" << Num(st.contact_margin) << "\" gap=\""
@@ -208,6 +225,8 @@ int MaxPadContacts(const mechanics::ContactSpec& c, PadShapes shapes) {
   return c.type == mechanics::ContactType::kLine ? 2 : 8;
 }
 
+std::vector<Eigen::Vector3d> SupportFeet(const mechanics::Scene& scene);
+
 // <size> for this scene. The solver's stack grows with njmax squared: a fixed
 // njmax of 1200 made mj_makeData zero a 58 MB stack (10.7 ms) for every model,
 // where a scene of three point pads needs some 40 constraint rows. A run whose
@@ -217,6 +236,10 @@ std::string SizeElement(const mechanics::Scene& scene, PadShapes shapes) {
   for (const auto& f : scene.fingers) contacts += PadCount(f, shapes) * MaxPadContacts(f, shapes);
   if (scene.pusher)
     contacts += PadCount(*scene.pusher, shapes) * MaxPadContacts(*scene.pusher, shapes);
+  // A non-convex prism's pads meet each convex piece; the support one
+  // contact per foot.
+  contacts *= static_cast<int>(ObjectGeomNames(scene.object).size());
+  contacts += static_cast<int>(SupportFeet(scene).size());
   // Rows: up to 4 per condim-3 contact (a pyramidal cone; elliptic uses 3),
   // plus joint limits of the finger slides and the object, with room to spare.
   const int rows = 4 * contacts + 2 * static_cast<int>(scene.fingers.size()) + 16;
@@ -252,19 +275,139 @@ Eigen::Vector3d CentreOfMassInO(const mechanics::ObjectSpec& o) {
   return {c.x(), c.y(), 0};
 }
 
-// A prism as a mesh: its polygon at z = ±height/2, relative to the centre of
-// mass. MuJoCo collides with the mesh's convex hull, which for a convex
-// prism is the prism itself.
+// A prism's convex pieces: the polygon itself when convex; otherwise the
+// triangles of its ear clipping (MuJoCo collides with a mesh's convex hull,
+// so a non-convex outline must be cut into convex parts).
+std::vector<std::vector<Eigen::Vector2d>> ObjectPieces(const mechanics::ObjectSpec& o) {
+  if (o.shape != mechanics::ObjectShape::kPrism) return {};
+  if (o.polygon.size() < 3 || mechanics::polygon::IsConvex(o.polygon)) return {o.polygon};
+  std::vector<std::vector<Eigen::Vector2d>> pieces;
+  for (const auto& t : mechanics::polygon::Triangulate(o.polygon)) {
+    pieces.push_back({o.polygon[static_cast<size_t>(t[0])], o.polygon[static_cast<size_t>(t[1])],
+                      o.polygon[static_cast<size_t>(t[2])]});
+  }
+  return pieces;
+}
+
+std::vector<std::string> ObjectGeomNames(const mechanics::ObjectSpec& o) {
+  std::vector<std::string> names = {"object"};
+  const size_t pieces = ObjectPieces(o).size();
+  for (size_t i = 1; i < pieces; ++i) names.push_back("object_piece" + std::to_string(i));
+  return names;
+}
+
+// A prism as meshes: each convex piece at z = ±height/2, relative to the
+// centre of mass.
 std::string PrismMesh(const mechanics::ObjectSpec& o) {
   const Eigen::Vector3d c = CentreOfMassInO(o);
-  std::string v;
-  for (const double z : {-0.5 * o.height, 0.5 * o.height}) {
-    for (const auto& p : o.polygon) {
-      if (!v.empty()) v += ' ';
-      v += Vec(Eigen::Vector3d(p.x(), p.y(), z) - c);
+  const auto pieces = ObjectPieces(o);
+  std::string out = "  <asset>\n";
+  for (size_t i = 0; i < pieces.size(); ++i) {
+    std::string v;
+    for (const double z : {-0.5 * o.height, 0.5 * o.height}) {
+      for (const auto& p : pieces[i]) {
+        if (!v.empty()) v += ' ';
+        v += Vec(Eigen::Vector3d(p.x(), p.y(), z) - c);
+      }
+    }
+    out += "    <mesh name=\"object_mesh" + (i == 0 ? std::string() : std::to_string(i)) +
+           "\" vertex=\"" + v + "\"/>\n";
+  }
+  return out + "  </asset>\n";
+}
+
+// The support (a scene's `support`): a plane through the object's resting
+// face, normal against gravity, and small sphere feet on that face in the
+// object body that press on it. MuJoCo's own plane-box or plane-mesh
+// contact puts the load on a few corners (up to 4 contacts), a pressure far
+// from uniform; feet on an equal-area grid of the face (the cells of side h
+// whose centres lie inside the outline) spread it about evenly, each foot's
+// share set by MuJoCo's soft contact (equal while the object stays level;
+// a push at mid-height shifts it, as on a real table).
+constexpr double kFootRadius = 0.0005;  // m
+constexpr int kFeetAcross = 10;         // grid cells along the face's longer side
+
+std::vector<Eigen::Vector3d> SupportFeet(const mechanics::Scene& scene) {
+  std::vector<Eigen::Vector3d> feet;
+  if (!scene.support) return feet;
+  const auto& o = scene.object;
+  double cap = 0;
+  try {
+    cap = mechanics::SupportPressureOf(scene, 1).cap_z_O;
+  } catch (const std::exception&) {
+    return feet;  // CheckScene says why
+  }
+  std::vector<Eigen::Vector2d> outline;
+  if (o.shape == mechanics::ObjectShape::kBox) {
+    const double hx = o.size.x() / 2, hy = o.size.y() / 2;
+    outline = {{-hx, -hy}, {hx, -hy}, {hx, hy}, {-hx, hy}};
+  } else if (o.shape == mechanics::ObjectShape::kPrism) {
+    outline = o.polygon;
+  }
+  Eigen::Vector2d lo, hi;
+  if (outline.empty()) {
+    lo = Eigen::Vector2d::Constant(-o.radius);
+    hi = Eigen::Vector2d::Constant(o.radius);
+  } else {
+    lo = hi = outline[0];
+    for (const auto& v : outline) lo = lo.cwiseMin(v), hi = hi.cwiseMax(v);
+  }
+  const double h = (hi - lo).maxCoeff() / kFeetAcross;
+  const Eigen::Vector3d com = CentreOfMassInO(o);
+  // The foot's lowest point on the face: its centre kFootRadius inside.
+  const double z = cap - (cap > 0 ? 1 : -1) * kFootRadius;
+  for (double x = lo.x() + h / 2; x < hi.x(); x += h) {
+    for (double y = lo.y() + h / 2; y < hi.y(); y += h) {
+      const Eigen::Vector2d p(x, y);
+      const bool inside =
+          outline.empty() ? p.norm() <= o.radius : mechanics::polygon::Contains(outline, p);
+      if (inside) feet.push_back(Eigen::Vector3d(x, y, z) - com);
     }
   }
-  return "  <asset>\n    <mesh name=\"object_mesh\" vertex=\"" + v + "\"/>\n  </asset>\n";
+  return feet;
+}
+
+// The feet as geoms of the object body (positions relative to its centre of mass).
+std::string SupportFeetGeoms(const mechanics::Scene& scene) {
+  std::ostringstream x;
+  const auto feet = SupportFeet(scene);
+  for (size_t i = 0; i < feet.size(); ++i) {
+    x << "      <geom name=\"foot" << i << "\" type=\"sphere\" size=\"" << Num(kFootRadius)
+      << "\" pos=\"" << Vec(feet[i]) << "\" contype=\"0\" conaffinity=\"0\" mass=\"0\"/>\n";
+  }
+  return x.str();
+}
+
+// The support plane in the world: through the resting face at t = 0.
+std::string SupportPlaneGeom(const mechanics::Scene& scene) {
+  if (!scene.support || !(scene.gravity.norm() > 0)) return "";
+  const auto& o = scene.object;
+  double cap = 0;
+  try {
+    cap = mechanics::SupportPressureOf(scene, 1).cap_z_O;
+  } catch (const std::exception&) {
+    return "";
+  }
+  const Eigen::Matrix3d R = mechanics::RotationFromRpy(o.pose.rpy);
+  const Eigen::Vector3d at = o.pose.position + R * Eigen::Vector3d(0, 0, cap);
+  const Eigen::Quaterniond q =
+      Eigen::Quaterniond::FromTwoVectors(Eigen::Vector3d::UnitZ(), -scene.gravity.normalized());
+  return "    <geom name=\"support\" type=\"plane\" size=\"0 0 1\" pos=\"" + Vec(at) +
+         "\" quat=\"" + Quat(q) + "\" contype=\"0\" conaffinity=\"0\"/>\n";
+}
+
+// One pair per foot with the support's friction.
+std::string SupportPairs(const mechanics::Scene& scene, const MujocoSettings& st) {
+  std::ostringstream x;
+  const size_t feet = SupportFeet(scene).size();
+  for (size_t i = 0; i < feet; ++i) {
+    x << "    <pair geom1=\"foot" << i << "\" geom2=\"support\" condim=\"3\" friction=\""
+      << Num(scene.support->mu) << " " << Num(scene.support->mu) << " 0 0 0\" solref=\""
+      << Num(st.solref_timeconst) << " " << Num(st.solref_damping) << "\" solimp=\"";
+    for (int k = 0; k < 5; ++k) x << Num(st.solimp[k]) << (k < 4 ? " " : "");
+    x << "\" margin=\"" << Num(kContactMargin) << "\" gap=\"" << Num(kContactMargin) << "\"/>\n";
+  }
+  return x.str();
 }
 
 int StepsPerSample(const MujocoSettings& s) {
@@ -637,6 +780,14 @@ class MujocoSimulator final : public Simulator {
     if (o.shape == mechanics::ObjectShape::kPrism &&
         (o.polygon.size() < 3 || !(PolygonArea(o.polygon) > 0)))
       return "object.polygon: the mujoco simulator needs a counter-clockwise polygon of area > 0";
+    if (scene.support) {
+      if (!scene.support->pressure_points.empty())
+        return "support.pressure.points: the mujoco simulator spreads the support's load by its "
+               "own soft contacts on feet over the face (uniform pressure); weighted points are "
+               "arena's model only";
+      if (SupportFeet(scene).empty())
+        return "support: the object rests on no z cap (its z axis must be along gravity)";
+    }
     return "";
   }
   mechanics::SimulationResult Simulate(const mechanics::Scene& scene) const override {
@@ -671,6 +822,7 @@ struct Run {
   std::vector<int> pad_of_geom;  // geom id -> finger index (then the pusher), -1: none
   size_t n_pads = 0;
   int object_geom = -1;
+  std::vector<char> is_object;  // geom id -> one of the object's collision geoms
   // Closed loop: the pusher's velocity in force since pusher_t0, when it was
   // at pusher_base (commanded is false: the scene's constant motion).
   bool commanded = false;
@@ -696,9 +848,16 @@ struct Run {
     commanded = true;
   }
 
-  // Pusher contact point and orientation at time t (constant twist about the contact point).
+  // Pusher contact point and orientation at time t (constant twist about the
+  // contact point, or its recorded path).
   void PusherAt(double t, Eigen::Vector3d* p, Eigen::Quaterniond* q) const {
     const auto& ps = *scene.pusher;
+    if (ps.path) {
+      const mechanics::PusherPose pose = mechanics::PusherPoseAt(ps, t);
+      *p = pose.position;
+      *q = Eigen::Quaterniond(pose.rotation);
+      return;
+    }
     *p = commanded ? Eigen::Vector3d(pusher_base + pusher_v * (t - pusher_t0))
                    : Eigen::Vector3d(ps.position + ps.motion.velocity * t);
     const Eigen::Vector3d w = ps.motion.angular_velocity;
@@ -713,11 +872,18 @@ struct Run {
     mjtNum* qp = d->qpos + pusher_qpos;
     for (int k = 0; k < 3; ++k) qp[k] = p[k];
     qp[3] = q.w(), qp[4] = q.x(), qp[5] = q.y(), qp[6] = q.z();
-    const Eigen::Vector3d w_local = q.conjugate() * scene.pusher->motion.angular_velocity;
+    const mechanics::PusherTwist twist = PathTwist(t);
+    const Eigen::Vector3d w_local = q.conjugate() * twist.angular_velocity;
     mjtNum* qv = d->qvel + pusher_qvel;
-    for (int k = 0; k < 3; ++k) qv[k] = PusherVelocity()[k], qv[3 + k] = w_local[k];
+    for (int k = 0; k < 3; ++k) qv[k] = twist.velocity[k], qv[3 + k] = w_local[k];
   }
 
+  // The pusher's twist over the step from t: its constant motion (or the
+  // command in force), or its recorded path's mean motion over the step.
+  mechanics::PusherTwist PathTwist(double t) const {
+    if (scene.pusher->path) return mechanics::PusherTwistOver(*scene.pusher, t, m->opt.timestep);
+    return {PusherVelocity(), scene.pusher->motion.angular_velocity};
+  }
   // Velocity of the pad carrying contact index `who` at world point p.
   Eigen::Vector3d PadVelocity(size_t who, const Eigen::Vector3d& p, double t) const {
     if (who < scene.fingers.size())
@@ -725,7 +891,8 @@ struct Run {
     Eigen::Vector3d c;
     Eigen::Quaterniond q;
     PusherAt(t, &c, &q);
-    return PusherVelocity() + scene.pusher->motion.angular_velocity.cross(p - c);
+    const mechanics::PusherTwist twist = PathTwist(t);
+    return twist.velocity + twist.angular_velocity.cross(p - c);
   }
   // The pad's contact point now (where its surface met the object at t = 0).
   Eigen::Vector3d PadPoint(size_t who, double t) const {
@@ -773,7 +940,9 @@ struct Run {
     for (int i = 0; i < d->ncon; ++i) {
       const mjContact& c = d->contact[i];
       if (c.exclude != 0 || c.efc_address < 0) continue;  // found in the margin, not active
-      const int other = c.geom1 == object_geom ? c.geom2 : c.geom2 == object_geom ? c.geom1 : -1;
+      const bool object1 = is_object[static_cast<size_t>(c.geom1)] != 0;
+      const bool object2 = is_object[static_cast<size_t>(c.geom2)] != 0;
+      const int other = object1 ? c.geom2 : object2 ? c.geom1 : -1;
       if (other < 0 || pad_of_geom[static_cast<size_t>(other)] < 0) continue;
       const size_t who = static_cast<size_t>(pad_of_geom[static_cast<size_t>(other)]);
       mjtNum f6[6];
@@ -786,7 +955,7 @@ struct Run {
         f_W += f6[k] * axis;
         tau_W += f6[3 + k] * axis;
       }
-      if (c.geom1 == object_geom) f_W = -f_W, tau_W = -tau_W;
+      if (object1) f_W = -f_W, tau_W = -tau_W;
       const Eigen::Vector3d p(c.pos[0], c.pos[1], c.pos[2]);
       const Eigen::Vector3d ref = PadPoint(who, d->time);
       r->force[who] += f_W;
@@ -869,11 +1038,14 @@ void RunLoaded(const mechanics::Scene& scene, const MujocoSettings& settings, mj
                const mechanics::PusherCommandSource* commands = nullptr) {
   const MujocoSettings st = ForScene(scene, settings);
   const int per_sample = StepsPerSample(st);
-  Run run{scene, st, m, d, -1, -1, -1, -1, -1, -1, {}, {}, {}, 0, -1};
+  Run run{scene, st, m, d, -1, -1, -1, -1, -1, -1, {}, {}, {}, 0, -1, {}};
   run.pad_of_geom.assign(static_cast<size_t>(m->ngeom), -1);
   run.n_pads = scene.fingers.size() + (scene.pusher ? 1 : 0);
   run.object_body = mj_name2id(m, mjOBJ_BODY, "object");
   run.object_geom = mj_name2id(m, mjOBJ_GEOM, "object");
+  run.is_object.assign(static_cast<size_t>(m->ngeom), 0);
+  for (const std::string& name : ObjectGeomNames(scene.object))
+    run.is_object[static_cast<size_t>(mj_name2id(m, mjOBJ_GEOM, name.c_str()))] = 1;
   const int oj = m->body_jntadr[run.object_body];
   run.object_qpos = m->jnt_qposadr[oj];
   run.object_qvel = m->jnt_dofadr[oj];
@@ -1071,8 +1243,13 @@ class MujocoPrepared final : public PreparedScene {
             h_.m->pair_geom1[p] == object_geom ? h_.m->pair_geom2[p] : h_.m->pair_geom1[p];
         const char* pad = mj_id2name(h_.m, mjOBJ_GEOM, g);
         const std::string name = pad ? pad : "";
+        // The pair's pad: a finger's "padK_j", the pusher's, or a support foot.
+        const char* other = mj_id2name(
+            h_.m, mjOBJ_GEOM, g == h_.m->pair_geom1[p] ? h_.m->pair_geom2[p] : h_.m->pair_geom1[p]);
+        const std::string first = name.rfind("object", 0) == 0 && other ? other : name;
         int who = static_cast<int>(base.fingers.size());
-        if (name.rfind("pad", 0) == 0) who = std::stoi(name.substr(3, name.find('_') - 3));
+        if (first.rfind("pad", 0) == 0) who = std::stoi(first.substr(3, first.find('_') - 3));
+        if (first.rfind("foot", 0) == 0 || first == "support") who = kSupportOwner;
         pair_owner_.push_back(who);
       }
     } catch (const std::exception&) {
@@ -1089,9 +1266,11 @@ class MujocoPrepared final : public PreparedScene {
     Timed run(settings_);
     try {
       for (int p = 0; p < h_.m->npair; ++p) {
-        const auto who = static_cast<size_t>(pair_owner_[static_cast<size_t>(p)]);
-        const double mu =
-            who < variant.fingers.size() ? variant.fingers[who].mu : variant.pusher->mu;
+        const int owner = pair_owner_[static_cast<size_t>(p)];
+        const auto who = static_cast<size_t>(owner);
+        const double mu = owner == kSupportOwner         ? variant.support->mu
+                          : who < variant.fingers.size() ? variant.fingers[who].mu
+                                                         : variant.pusher->mu;
         h_.m->pair_friction[5 * p] = h_.m->pair_friction[5 * p + 1] = std::max(mu, mjMINMU);
       }
       const double k = variant.object.mass / base_.object.mass;
@@ -1126,6 +1305,8 @@ class MujocoPrepared final : public PreparedScene {
     mechanics::Scene same = v;
     for (size_t i = 0; i < same.fingers.size(); ++i) same.fingers[i].mu = base_.fingers[i].mu;
     if (same.pusher) same.pusher->mu = base_.pusher->mu;
+    if (same.support.has_value() != base_.support.has_value()) return false;
+    if (same.support) same.support->mu = base_.support->mu;
     same.object.mass = base_.object.mass;
     same.object.inertia = base_.object.inertia;
     try {
@@ -1142,6 +1323,7 @@ class MujocoPrepared final : public PreparedScene {
   MjHandles h_;
   int object_body_ = -1;
   double base_inertia_[3] = {0, 0, 0};
+  static constexpr int kSupportOwner = -1;  // a pair of a support foot
   std::vector<int> pair_owner_;
   long reused_ = 0, rebuilt_ = 0;
 };
@@ -1185,14 +1367,19 @@ std::string MujocoModelXml(const mechanics::Scene& scene, const MujocoSettings& 
       x << "      <geom name=\"object\" type=\"cylinder\" size=\"" << Num(o.radius) << " "
         << Num(0.5 * o.height) << "\" contype=\"0\" conaffinity=\"0\" mass=\"0\"/>\n";
       break;
-    case mechanics::ObjectShape::kPrism:
+    case mechanics::ObjectShape::kPrism: {
       if (o.polygon.size() < 3 || !(PolygonArea(o.polygon) > 0))
         throw SimulatorError("object.polygon", "needs a counter-clockwise polygon of area > 0");
-      x << "      <geom name=\"object\" type=\"mesh\" mesh=\"object_mesh\" contype=\"0\" "
-           "conaffinity=\"0\" mass=\"0\"/>\n";
+      const auto names = ObjectGeomNames(o);
+      for (size_t i = 0; i < names.size(); ++i) {
+        x << "      <geom name=\"" << names[i] << "\" type=\"mesh\" mesh=\"object_mesh"
+          << (i == 0 ? std::string() : std::to_string(i))
+          << "\" contype=\"0\" conaffinity=\"0\" mass=\"0\"/>\n";
+      }
       break;
+    }
   }
-  x << "    </body>\n";
+  x << SupportFeetGeoms(scene) << "    </body>\n" << SupportPlaneGeom(scene);
   // Fingers: the body origin is the contact point; the slide axis the normal.
   for (size_t i = 0; i < scene.fingers.size(); ++i) {
     const auto& f = scene.fingers[i];
@@ -1213,8 +1400,9 @@ std::string MujocoModelXml(const mechanics::Scene& scene, const MujocoSettings& 
   }
   x << "  </worldbody>\n  <contact>\n";
   for (size_t i = 0; i < scene.fingers.size(); ++i)
-    x << Pairs("pad" + std::to_string(i), scene.fingers[i], st);
-  if (scene.pusher) x << Pairs("pusher_pad", *scene.pusher, st);
+    x << Pairs("pad" + std::to_string(i), scene.fingers[i], st, o);
+  if (scene.pusher) x << Pairs("pusher_pad", *scene.pusher, st, o);
+  if (scene.support) x << SupportPairs(scene, st);
   x << "  </contact>\n";
   if (scene.gripper.coupling == mechanics::GripperCoupling::kParallelJaw) {
     x << JawEquality(st);

@@ -13,6 +13,9 @@
 //     a point finger therefore has λ_n = grip_force and no normal row.
 //   the pusher is velocity-controlled (virtual 6-DOF actuator, J_ext1 = I6):
 //     u_body(p) = v_p + ω_p × (p - pusher contact point).
+//   a support (scene.support, planar only): its limit surface as K sampled
+//     friction wrenches D_k with the known load μ m g (support_stage.hpp):
+//     ξ_s + D_kᵀ ν⁺ >= 0 ⊥ β_k >= 0,  μ m g - Σ β_k >= 0 ⊥ ξ_s >= 0.
 // Substituting v+ leaves a mixed LCP in forces (λ, β), slacks ξ and pad
 // velocities (v_f = y⁺ - y⁻); it is nondimensionalised by the scene's
 // force, mass and time-step scales and solved with SolveLcp (lcp.hpp).

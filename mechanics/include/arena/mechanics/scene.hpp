@@ -13,7 +13,8 @@
 
 namespace arena::mechanics {
 
-// kPrism: a convex polygon in the object's xy-plane extruded along its z.
+// kPrism: a simple (convex or not) counter-clockwise polygon in the
+// object's xy-plane extruded along its z.
 enum class ObjectShape { kBox, kCylinder, kPrism };
 enum class ContactType { kPoint, kLine, kPatch };
 // kAuto: model only what the scene requires; kFull: always 6 DOF;
@@ -34,7 +35,7 @@ struct ObjectSpec {
   Eigen::Vector3d size = Eigen::Vector3d::Zero();  // box: full extents (m)
   double radius = 0;                               // cylinder (m)
   double height = 0;                               // cylinder, prism (m), along object z
-  std::vector<Eigen::Vector2d> polygon;            // prism: convex, counter-clockwise (m)
+  std::vector<Eigen::Vector2d> polygon;            // prism: simple, counter-clockwise (m)
   double mass = 0;                                 // kg, > 0
   std::optional<Eigen::Matrix3d> inertia;          // kg m^2 about the centre of mass
   Pose pose;
@@ -72,11 +73,43 @@ struct PusherController {
   double hold_s = 0.05;     // the cell holds the last command at most this long (s), > 0
 };
 
+// A recorded pusher path (JSON: "motion": {"path": {"t": [...], "position":
+// [...], "rpy": [...]}}): the pusher's reference point (its `position` at
+// t = 0) at times t, in the scene frame, linear between samples and at rest
+// after the last one. t[0] = 0 and t strictly increases; position[0] is the
+// pusher's position. rpy, when given (same length), is the pusher's
+// orientation in the scene frame: the pusher turns about its reference point
+// by R(rpy(t)) R(rpy[0])ᵀ (its normal and axis turn with it), interpolated
+// along the shortest rotation between samples.
+struct PusherPath {
+  std::vector<double> t;                  // s
+  std::vector<Eigen::Vector3d> position;  // m, scene frame
+  std::vector<Eigen::Vector3d> rpy;       // rad; empty: the pusher does not turn
+};
+
 struct PusherSpec : ContactSpec {
   PusherMotion motion;
+  // Set: the pusher follows this path; `motion` is then unused (zero).
+  std::optional<PusherPath> path;
   // Set: closed loop; `motion` is then the command before the first answer
   // (zero) and the controller's commands replace it step by step.
   std::optional<PusherController> controller;
+};
+
+// A support (JSON "support"): a flat surface perpendicular to gravity that
+// the object rests on, touching the object's face that faces along gravity
+// at the start pose. Its normal load is the object's weight m|g|, spread
+// over that face by the pressure distribution, and its friction (mu) is
+// Coulomb friction integrated over it: the limit surface. Gravity must be
+// non-zero and the face one of the object's z caps (a box's, cylinder's or
+// prism's top or bottom).
+struct SupportSpec {
+  double mu = 0;  // support friction coefficient, >= 0
+  // Empty: uniform pressure over the face. Otherwise weighted points
+  // (x, y, w): x, y in the object frame (m) on the face, w >= 0 (the
+  // model normalises them; their weighted centre lies under the centre of
+  // mass).
+  std::vector<Eigen::Vector3d> pressure_points;
 };
 
 struct ModelOptions {
@@ -107,8 +140,9 @@ struct Scene {
   Eigen::Vector3d gravity = Eigen::Vector3d::Zero();  // m/s^2; zero = no gravity rows
   double duration = 1.0;                              // s
   double grip_force = 0;                              // N per finger (sum over constituents)
-  std::vector<ContactSpec> fingers;
+  std::vector<ContactSpec> fingers;  // may be empty when a support holds the object
   std::optional<PusherSpec> pusher;
+  std::optional<SupportSpec> support;
   ModelOptions model;
   GripperSpec gripper;
 };

@@ -7,8 +7,9 @@
 //    duplicate keys, no unknown keys (typo protection: every key must be one
 //    docs/scene.md defines). Malformed JSON names the byte offset and the path
 //    where it broke ("fingers[0].mu: invalid JSON at byte 212: ...").
-//  - Shapes: box (size), cylinder (radius, height), prism (polygon: convex,
-//    counter-clockwise, 3..256 vertices, refused naming the vertex; height).
+//  - Shapes: box (size), cylinder (radius, height), prism (polygon: simple,
+//    convex or not, counter-clockwise, 3..256 vertices, refused naming the
+//    vertex; height).
 //    A point contact may have a radius (a sphere). model.contacts: tracked
 //    (default) or fixed.
 //  - Required: object.shape, object.mass, the shape's dimensions, duration,
@@ -26,6 +27,15 @@
 //    object's surface within 1% of the object's size; normals point into the
 //    object; constituent points of different contacts (and of one line or
 //    patch) must be at least 1e-6 of the object's size apart (coincident).
+//  - Support (optional): mu >= 0, gravity non-zero, the object's z axis
+//    along gravity; pressure points on the resting face, weights >= 0 not
+//    all zero, their centre under the centre of mass (1% of the extent).
+//    fingers may then be empty. A point pusher with tracked contacts may
+//    start apart from the object (not inside it).
+//  - Pusher path: t from 0, strictly increasing, at most kMaxSceneArray
+//    samples; position (and rpy, if given) one row per time; position[0]
+//    equals pusher.position (1e-9 of the extent); excludes velocity,
+//    angular_velocity and a controller.
 //  - Grasp: with grip_force > 0 the finger normals must cancel (|sum| <=
 //    1e-3 per finger): grip forces are prescribed, so an unbalanced grasp
 //    (one finger, or fingers that do not oppose) would fling the object.
@@ -50,6 +60,7 @@ inline constexpr int kMaxPoints = 32;
 inline constexpr double kMaxDuration = 3600.0;  // s: one trial is not an hour
 inline constexpr double kMaxSteps = 1e7;        // duration / dt: bounds run time
 inline constexpr std::size_t kMaxNameLength = 64;
+inline constexpr std::size_t kMaxSupportPoints = 1024;  // support.pressure.points
 
 // A scene that is missing a field, has a field of the wrong type, a
 // non-finite number or a value out of range. field() is the JSON path
