@@ -56,7 +56,9 @@ struct ServiceOptions {
   dds::NetworkOptions network;       // default: this host only
   int max_attempts = 3;              // executions per trial before it fails
   double retry_backoff_s = 1.0;      // first retry waits this long; doubles per attempt
-  int quarantine_after = 3;          // consecutive failed phases of a cell
+  int quarantine_after = 3;          // consecutive failed phases of a cell (its own fault)
+  double cell_backoff_s = 0.5;       // after a failed phase the cell waits this long before
+  double cell_backoff_max_s = 8.0;   //   its next trial, doubling per failure in a row, to this
   double execute_timeout_s = 30.0;   // wall-clock budget of EXECUTE beyond the trial's
                                      //   duration x the cell's speed
   double reset_timeout_s = 60.0;     // wall-clock budget of RESET
