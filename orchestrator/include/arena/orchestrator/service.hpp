@@ -24,8 +24,12 @@
 // missed deadline or a cell that died (liveliness lost, participant gone)
 // send the trial back to planned with attempt + 1 after a backoff
 // (RetryTrial; lineage kept), or to failed when attempts run out. A cell that
-// fails `quarantine_after` phases in a row, or whose reset keeps failing, is
-// quarantined and gets no more trials. A late message from an older attempt
+// fails `quarantine_after` phases in a row by its own fault, or whose reset
+// keeps failing, is quarantined and gets no more trials; a failure caused by
+// the controller, the service itself or the store never counts against the
+// cell, and after any failure the cell backs off (cell_backoff_s, doubling)
+// before its next trial (trial_policy.hpp decides all of it, by named rules
+// written to each trial's audit rows). A late message from an older attempt
 // is ignored (the store refuses stale attempts). A store that can no longer
 // be written (full, read-only, corrupt, I/O error) is nobody's trial or cell
 // fault: Run() throws that db::StoreError and the service stops (`arena
