@@ -51,6 +51,11 @@ int RunController(ControllerCliOptions opt) {
   } catch (const dds::DdsError& e) {
     throw CommandError(kExitBadInput, e.what());
   }
+  // A bad --domain is bad input (2), as from `arena cell`, not a DDS failure (4).
+  if (opt.host.domain_id < 0 || opt.host.domain_id > dds::kMaxDomainId) {
+    throw CommandError(kExitBadInput, "--domain: must be 0.." + std::to_string(dds::kMaxDomainId) +
+                                          ", got " + std::to_string(opt.host.domain_id));
+  }
   // Signals: blocked before DDS starts its threads, handled on the
   // watcher's thread, which flips `stop` (as `arena cell`).
   std::atomic<bool> stop{false};
@@ -103,7 +108,7 @@ void AddControllerCommand(CLI::App& app, Action* action) {
       "registered under NAME (docs/live_control.md). Laws: pivot_to_angle, sliding_to_position.\n"
       "Stops cleanly on SIGINT/SIGTERM (exit 0).");
   cmd->add_option("--name", opt->host.name, "Name scenes use to pick this controller")->required();
-  cmd->add_option("--domain", opt->host.domain_id, "DDS domain id (0..232)")->required();
+  cmd->add_option("--domain", opt->host.domain_id, "DDS domain id (0..231)")->required();
   cmd->add_option("--law", opt->law, "Library law to run (default: the name)");
   cmd->add_option("--peers", opt->peers, "Reach other hosts: initial peers host[:port],...");
   cmd->add_option("--discovery-server", opt->host.network.discovery_server,

@@ -283,9 +283,10 @@ std::int64_t Ingest::Finish(const std::string& outcome) {
   }
   internal::WriteOutcome(*m.store, m.stream_id, m.trial_id, m.attempt, m.outcome->Result());
   if (row.state == TrialState::kDispatched) {
-    internal::WriteTransition(
-        *m.store, m.trial_id, m.attempt, row.state, TrialState::kExecuted, row.cell_id,
-        "ground truth complete (" + std::to_string(m.total) + " samples)", "Ingest::Finish");
+    internal::WriteTransition(*m.store, m.trial_id, m.attempt, row.state, TrialState::kExecuted,
+                              row.cell_id,
+                              "ground truth complete (" + std::to_string(m.total) + " samples)",
+                              "execute.ground_truth_complete", "Ingest::Finish");
     auto u = m.store->Prepare("UPDATE trials SET outcome = ?, executed_at = ? WHERE id = ?");
     u->Bind(1, outcome).Bind(2, now).Bind(3, m.trial_id).Run();
   }

@@ -464,6 +464,12 @@ ALTER TABLE trials ADD COLUMN defects_applied TEXT;  -- JSON: cell, campaign, ef
       {14, "cells.start_for_trial: the trial a cell's observed start was aimed at", R"sql(
 ALTER TABLE cells ADD COLUMN start_for_trial INTEGER;  -- 0: aimed at no trial; NULL: not known
 )sql"},
+      // "Why did trial 17 go to resetting?": every audit row names the rule
+      // that decided it (orchestrator/trial_policy.hpp, retry_rule.hpp, or
+      // the store's own edge). Older rows keep ''.
+      {15, "trial_transitions.rule: the rule that decided each transition", R"sql(
+ALTER TABLE trial_transitions ADD COLUMN rule TEXT NOT NULL DEFAULT '';
+)sql"},
   };
   return kMigrations;
 }

@@ -1,7 +1,9 @@
 // Campaigns, the trial state machine, cells and the status summary.
 // The state machine's diagram and its transition table are in store.hpp.
 #include "arena/db/store.hpp"
+
 #include "arena/db/prediction_status.hpp"
+#include "arena/db/retry_rule.hpp"
 
 #include <algorithm>
 #include <cmath>
@@ -356,7 +358,7 @@ void CheckEdge(TrialState from, TrialState to, std::int64_t trial_id, const char
 
 void WriteTransition(const Store::Impl& impl, std::int64_t trial_id, int attempt, TrialState from,
                      TrialState to, const std::string& cell_id, const std::string& reason,
-                     const char* function) {
+                     std::string_view rule, const char* function) {
   CheckEdge(from, to, trial_id, function);
   const double now = impl.Now();
   {
@@ -371,15 +373,16 @@ void WriteTransition(const Store::Impl& impl, std::int64_t trial_id, int attempt
     u->Run();
   }
   auto a = impl.Prepare(
-      "INSERT INTO trial_transitions(trial_id, attempt, from_state, to_state, at, cell_id, reason)"
-      " VALUES(?,?,?,?,?,?,?)");
+      "INSERT INTO trial_transitions(trial_id, attempt, from_state, to_state, at, cell_id, reason,"
+      " rule) VALUES(?,?,?,?,?,?,?,?)");
   a->Bind(1, trial_id)
       .Bind(2, attempt)
       .Bind(3, ToString(from))
       .Bind(4, ToString(to))
       .Bind(5, now)
       .Bind(6, cell_id)
-      .Bind(7, reason);
+      .Bind(7, reason)
+      .Bind(8, std::string(rule));
   a->Run();
 }
 
@@ -434,8 +437,8 @@ std::vector<std::int64_t> InsertPlannedTrials(const Store::Impl& impl, std::int6
       " scene_json, params_json, defects_json, created_at, updated_at)"
       " VALUES(?,?,?,?,?,'planned',1,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?)");
   auto audit = impl.Prepare(
-      "INSERT INTO trial_transitions(trial_id, attempt, from_state, to_state, at, reason)"
-      " VALUES(?,1,'','planned',?,'sampled')");
+      "INSERT INTO trial_transitions(trial_id, attempt, from_state, to_state, at, reason, rule)"
+      " VALUES(?,1,'','planned',?,'sampled','sampler.planned')");
   for (std::size_t i = 0; i < trials.size(); ++i) {
     const auto& t = trials[i];
     const std::string where = std::string(function) + ": trial " + std::to_string(i);
@@ -594,7 +597,7 @@ void SetCampaignState(Store::Impl& impl, std::int64_t id, const char* function,
     while (q->Step()) planned.emplace_back(q->Int(0), static_cast<int>(q->Int(1)));
     for (auto [tid, attempt] : planned) {
       WriteTransition(impl, tid, attempt, TrialState::kPlanned, TrialState::kCancelled, "",
-                      "campaign cancelled: " + reason, function);
+                      "campaign cancelled: " + reason, "operator.cancel_campaign", function);
       auto o = impl.Prepare("UPDATE trials SET outcome = 'cancelled' WHERE id = ?");
       o->Bind(1, tid).Run();
     }
@@ -697,7 +700,7 @@ std::optional<ClaimedTrial> Store::ClaimNextTrial(const std::string& cell_id) {
   if (!t) return std::nullopt;
   const double now = impl_->Now();
   WriteTransition(*impl_, t->trial_id, t->attempt, TrialState::kPlanned, TrialState::kDispatched,
-                  cell_id, "claimed", "ClaimNextTrial");
+                  cell_id, "claimed", "dispatch.claimed", "ClaimNextTrial");
   // The start state this trial begins from: the cell's last observed reset
   // result, if that reset was aimed at this trial (or its aim is not known).
   auto u = impl_->Prepare(
@@ -740,7 +743,7 @@ std::optional<ClaimedTrial> Store::ClaimNextTrial(const std::string& cell_id) {
 }
 
 TrialState Store::RetryTrial(std::int64_t trial_id, int attempt, const std::string& reason,
-                             int max_attempts, double backoff_s) {
+                             int max_attempts, double backoff_s, std::string_view rule) {
   impl_->RequireWritable("RetryTrial");
   RequireFinite(backoff_s, "RetryTrial: backoff_s");
   if (backoff_s < 0) BadInput("RetryTrial: backoff_s must be >= 0");
@@ -751,27 +754,32 @@ TrialState Store::RetryTrial(std::int64_t trial_id, int attempt, const std::stri
   if (row.state != TrialState::kDispatched) {
     internal::CheckEdge(row.state, TrialState::kPlanned, trial_id, "RetryTrial");
   }
-  TrialState to;
-  // Attempts a service restart cut short do not count (the cell was not at fault).
   auto r = impl_->Prepare("SELECT service_restarts FROM trials WHERE id = ?");
   r->Bind(1, trial_id);
   r->Step();
-  const int counted = attempt - static_cast<int>(r->Int(0));
-  if (counted >= max_attempts) {
+  const int restarts = static_cast<int>(r->Int(0));
+  // The one retry rule (retry_rule.hpp); the audit row names the caller's
+  // rule (why the attempt ended) and the retry rule's verdict.
+  const RetryVerdict verdict = DecideRetry(attempt, restarts, max_attempts);
+  const std::string rules =
+      rule.empty() ? std::string(verdict.rule) : std::string(rule) + " " + verdict.rule;
+  TrialState to;
+  if (verdict.give_up) {
     to = TrialState::kFailed;
     WriteTransition(*impl_, trial_id, attempt, row.state, to, row.cell_id,
-                    reason + " (attempt " + std::to_string(counted) + " of " +
+                    reason + " (attempt " + std::to_string(verdict.counted) + " of " +
                         std::to_string(max_attempts) +
-                        (counted != attempt ? " not counting " + std::to_string(attempt - counted) +
-                                                  " cut short by service restarts"
-                                            : std::string()) +
+                        (restarts != 0 ? " not counting " + std::to_string(restarts) +
+                                             " cut short by service restarts"
+                                       : std::string()) +
                         ": giving up)",
-                    "RetryTrial");
+                    rules, "RetryTrial");
     auto o = impl_->Prepare("UPDATE trials SET outcome = 'failed' WHERE id = ?");
     o->Bind(1, trial_id).Run();
   } else {
     to = TrialState::kPlanned;
-    WriteTransition(*impl_, trial_id, attempt, row.state, to, row.cell_id, reason, "RetryTrial");
+    WriteTransition(*impl_, trial_id, attempt, row.state, to, row.cell_id, reason, rules,
+                    "RetryTrial");
     auto u = impl_->Prepare("UPDATE trials SET attempt = attempt + 1, not_before = ? WHERE id = ?");
     u->Bind(1, impl_->Now() + backoff_s).Bind(2, trial_id).Run();
   }
@@ -780,31 +788,32 @@ TrialState Store::RetryTrial(std::int64_t trial_id, int attempt, const std::stri
 }
 
 void Store::FailTrial(std::int64_t trial_id, int attempt, const std::string& reason,
-                      const std::string& outcome) {
+                      const std::string& outcome, std::string_view rule) {
   impl_->RequireWritable("FailTrial");
   if (outcome.empty()) BadInput("FailTrial: outcome is empty");
   Tx tx(impl_->db, true);
   const auto row = LoadTrialRow(*impl_, trial_id, "FailTrial");
   CheckAttempt(row, trial_id, attempt, "FailTrial");
   WriteTransition(*impl_, trial_id, attempt, row.state, TrialState::kFailed, row.cell_id, reason,
-                  "FailTrial");
+                  rule.empty() ? std::string_view("fail.unnamed") : rule, "FailTrial");
   auto o = impl_->Prepare("UPDATE trials SET outcome = ? WHERE id = ?");
   o->Bind(1, outcome).Bind(2, trial_id).Run();
   tx.Commit();
 }
 
-void Store::BeginReset(std::int64_t trial_id, int attempt) {
+void Store::BeginReset(std::int64_t trial_id, int attempt, std::string_view rule) {
   impl_->RequireWritable("BeginReset");
   Tx tx(impl_->db, true);
   const auto row = LoadTrialRow(*impl_, trial_id, "BeginReset");
   CheckAttempt(row, trial_id, attempt, "BeginReset");
   WriteTransition(*impl_, trial_id, attempt, row.state, TrialState::kResetting, row.cell_id,
                   row.state == TrialState::kResetFailed ? "reset retried" : "reset sent",
-                  "BeginReset");
+                  rule.empty() ? std::string_view("reset.unnamed") : rule, "BeginReset");
   tx.Commit();
 }
 
-void Store::CompleteReset(std::int64_t trial_id, int attempt, const ResetReport& report) {
+void Store::CompleteReset(std::int64_t trial_id, int attempt, const ResetReport& report,
+                          std::string_view rule) {
   impl_->RequireWritable("CompleteReset");
   for (int i = 0; i < 7; ++i) {
     RequireFinite(report.observed_pose[i],
@@ -817,7 +826,11 @@ void Store::CompleteReset(std::int64_t trial_id, int attempt, const ResetReport&
   CheckAttempt(row, trial_id, attempt, "CompleteReset");
   const TrialState to = report.ok ? TrialState::kResetDone : TrialState::kResetFailed;
   WriteTransition(*impl_, trial_id, attempt, row.state, to, row.cell_id,
-                  report.ok ? "reset verified" : report.reason, "CompleteReset");
+                  report.ok ? "reset verified" : report.reason,
+                  !rule.empty() ? rule
+                  : report.ok   ? std::string_view("reset.verified")
+                                : std::string_view("reset.failed"),
+                  "CompleteReset");
   auto u = impl_->Prepare(
       "UPDATE trials SET reset_ok = ?, reset_position_error = ?, reset_angle_error = ?,"
       " reset_attempts = ?, reset_reason = ? WHERE id = ?");
@@ -887,7 +900,7 @@ void Store::RecordPrediction(std::int64_t trial_id, int attempt, const Predictio
   CheckAttempt(row, trial_id, attempt, "RecordPrediction");
   if (row.state != TrialState::kPredicted) {
     WriteTransition(*impl_, trial_id, attempt, row.state, TrialState::kPredicted, row.cell_id,
-                    "predicted (" + p.model_key + ")", "RecordPrediction");
+                    "predicted (" + p.model_key + ")", "predict.recorded", "RecordPrediction");
   }
   auto s = impl_->Prepare(
       "INSERT INTO predictions(trial_id, attempt, model_key, model_json, status, "
@@ -1078,7 +1091,7 @@ void Store::FinishTrial(std::int64_t trial_id, int attempt) {
   const auto row = LoadTrialRow(*impl_, trial_id, "FinishTrial");
   CheckAttempt(row, trial_id, attempt, "FinishTrial");
   WriteTransition(*impl_, trial_id, attempt, row.state, TrialState::kDone, row.cell_id, "done",
-                  "FinishTrial");
+                  "finish.predicted", "FinishTrial");
   tx.Commit();
 }
 
@@ -1100,7 +1113,7 @@ RecoveryReport Store::RecoverAfterRestart(const std::string& reason) {
     WriteTransition(
         *impl_, id, attempt, TrialState::kDispatched, TrialState::kPlanned, row.cell_id,
         reason + ": execute not confirmed, re-run as attempt " + std::to_string(attempt + 1),
-        "RecoverAfterRestart");
+        "recover.execute_unconfirmed", "RecoverAfterRestart");
     auto u = impl_->Prepare(
         "UPDATE trials SET attempt = attempt + 1, not_before = 0,"
         " service_restarts = service_restarts + 1 WHERE id = ?");
@@ -1110,7 +1123,8 @@ RecoveryReport Store::RecoverAfterRestart(const std::string& reason) {
   for (auto [id, attempt] : resetting) {
     const auto row = LoadTrialRow(*impl_, id, "RecoverAfterRestart");
     WriteTransition(*impl_, id, attempt, TrialState::kResetting, TrialState::kResetFailed,
-                    row.cell_id, reason + ": reset not confirmed", "RecoverAfterRestart");
+                    row.cell_id, reason + ": reset not confirmed", "recover.reset_unconfirmed",
+                    "RecoverAfterRestart");
     auto u = impl_->Prepare("UPDATE trials SET reset_ok = 0, reset_reason = ? WHERE id = ?");
     u->Bind(1, reason + ": reset not confirmed").Bind(2, id).Run();
     // Where the interrupted reset left the object is unknown.
@@ -1196,13 +1210,13 @@ std::vector<Trial> Store::ListTrialsByState(const std::vector<TrialState>& state
 
 std::vector<Transition> Store::ListTransitions(std::int64_t trial_id) const {
   auto s = impl_->Prepare(
-      "SELECT trial_id, attempt, from_state, to_state, at, cell_id, reason FROM trial_transitions"
-      " WHERE trial_id = ? ORDER BY id");
+      "SELECT trial_id, attempt, from_state, to_state, at, cell_id, reason, rule"
+      " FROM trial_transitions WHERE trial_id = ? ORDER BY id");
   s->Bind(1, trial_id);
   std::vector<Transition> out;
   while (s->Step()) {
     out.push_back({s->Int(0), static_cast<int>(s->Int(1)), s->Text(2), s->Text(3), s->Real(4),
-                   s->Text(5), s->Text(6)});
+                   s->Text(5), s->Text(6), s->Text(7)});
   }
   return out;
 }

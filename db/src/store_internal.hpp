@@ -4,6 +4,7 @@
 #include <cstdint>
 #include <optional>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include "sqlite_util.hpp"
@@ -24,10 +25,11 @@ TrialRow LoadTrialRow(const Store::Impl& impl, std::int64_t trial_id, const char
 void CheckAttempt(const TrialRow& row, std::int64_t trial_id, int attempt, const char* function);
 // @throws kIllegalTransition unless IsLegalTransition(from, to).
 void CheckEdge(TrialState from, TrialState to, std::int64_t trial_id, const char* function);
-// Checks the edge, updates trials.state and appends the audit row. Call inside a write transaction.
+// Checks the edge, updates trials.state and appends the audit row with the
+// name of the rule that decided it. Call inside a write transaction.
 void WriteTransition(const Store::Impl& impl, std::int64_t trial_id, int attempt, TrialState from,
                      TrialState to, const std::string& cell_id, const std::string& reason,
-                     const char* function);
+                     std::string_view rule, const char* function);
 
 // Inserts an active campaign's row (fields checked, kBadInput naming
 // `function`); no transaction of its own. @returns its id.

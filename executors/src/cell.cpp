@@ -25,6 +25,7 @@
 #include "arena/schemas/ground_truth.hpp"
 #include "closed_loop_trial.hpp"
 #include "command_intake.hpp"
+#include "trial_start.hpp"
 #include "trial_stream.hpp"
 
 namespace arena::executors {
@@ -58,66 +59,6 @@ std::string ModeName(mechanics::SimulationStatus s) {
       return "invalid scene";
   }
   return "?";
-}
-
-// Issue 12: a trial starts where the last reset left the object (its true
-// pose), so reset error reaches the trial's physics; the fingers close on the
-// object there (mechanics::SeatFingers). The observed pose still goes to the
-// store as before. Kept apart so the cell's structure can change around it.
-mechanics::Scene StartWhereResetLeft(mechanics::Scene scene,
-                                     const std::optional<reset::Pose>& reset_left) {
-  if (!reset_left) return scene;  // no reset yet: the planned pose
-  const Eigen::Matrix3d R = reset_left->orientation.normalized().toRotationMatrix();
-  scene.object.pose.position = reset_left->position;
-  scene.object.pose.rpy = {std::atan2(R(2, 1), R(2, 2)), std::asin(std::clamp(-R(2, 0), -1.0, 1.0)),
-                           std::atan2(R(1, 0), R(0, 0))};
-  mechanics::SeatFingers(&scene);  // throws SceneError when a finger misses the object
-  return scene;
-}
-
-// Where the cell's last simulated reset left the object, and for which trial.
-struct ResetLeft {
-  std::uint64_t seed = 0;  // the prepared trial's seed
-  reset::Pose target;      // its planned start pose
-  reset::Pose pose;        // where the object really ended
-};
-
-// Where a trial starts on a simulated cell (nullopt: as planned). The
-// placement error belongs to the trial the placement prepares
-// (reset::PlacementForTrial): the cell's own reset if it was aimed at this
-// very trial, otherwise the same pure draw for this trial -- as if the cell's
-// reset had been aimed at it. That is the simulation's bookkeeping (the
-// driver aims a reset at the trial it expects next; another cell may take
-// it, and a fresh cell has reset nothing), so a trial's truth never depends
-// on which cell ran it or what ran before. A backend that does not emulate
-// defects (a robot, recorded data) has its own start and is left alone.
-std::optional<reset::Pose> TrialStartPose(const std::optional<ResetLeft>& left, std::uint64_t seed,
-                                          const reset::Pose& target,
-                                          const reset::ResetParams& params, bool emulated) {
-  if (!emulated) return std::nullopt;
-  if (left && left->seed == seed && left->target.position == target.position &&
-      left->target.orientation.coeffs() == target.orientation.coeffs()) {
-    return left->pose;
-  }
-  return reset::PlacementForTrial(target, params, seed).true_pose;
-}
-
-// What the next trial's pusher asks of the cell: nothing, a move of the
-// same pusher (only its contact point differs: the arm places it), or a swap
-// (another geometry or direction: a tool change).
-struct PusherChange {
-  bool swap = false;
-  double move_m = 0;
-};
-PusherChange ChangeOfPusher(const std::optional<mechanics::PusherSpec>& now,
-                            const std::optional<mechanics::PusherSpec>& next) {
-  if (now.has_value() != next.has_value()) return {true, 0};
-  if (!now) return {};
-  const bool same_tool = now->type == next->type && now->length == next->length &&
-                         now->radius == next->radius && now->axis == next->axis &&
-                         now->normal == next->normal;
-  if (!same_tool) return {true, 0};
-  return {false, (next->position - now->position).norm()};
 }
 
 }  // namespace
@@ -242,7 +183,7 @@ struct Cell::Impl {
   std::deque<Key> done_order;                   // oldest first
   reset::Pose true_pose;                        // where the object really is now
   reset::Pose observed_pose;                    // where the sensors saw it last
-  std::optional<ResetLeft> reset_left;          // the last successful simulated reset
+  TrialStart trial_start;                       // where trials start (the last reset)
   std::optional<mechanics::PusherSpec> pusher;  // the pusher mounted now
   std::uint64_t started_unix_ns = UnixNanos();
   std::thread worker;
@@ -454,9 +395,9 @@ struct Cell::Impl {
                               : Clock::time_point::max();
     // Issue 12: the trial starts where the reset that prepared it left the object.
     try {
-      scene = StartWhereResetLeft(
-          scene, TrialStartPose(reset_left, c.seed(), ToResetPose(scene.object.pose), reset_params,
-                                layer.capabilities().emulates_defects));
+      scene = TrialStart::PlacedAt(
+          scene, trial_start.StartPose(c.seed(), ToResetPose(scene.object.pose), reset_params,
+                                       layer.capabilities().emulates_defects));
     } catch (const std::exception& e) {
       return Refuse(c, std::string("start pose: ") + e.what());
     }
@@ -472,7 +413,7 @@ struct Cell::Impl {
     }
     auto accepted = BaseStatus(c, msg::STATE_ACCEPTED);
     Send(accepted);
-    reset_left.reset();                       // the trial moves the object
+    trial_start.TrialRan();                   // the trial moves the object
     if (options.defects.hang_after_accept) {  // fault injection: a hung controller
       spdlog::warn("cell {}: fault injection: hanging after accepting trial {}", options.id,
                    c.trial_id());
@@ -517,8 +458,9 @@ struct Cell::Impl {
     trial.idle = [&] { out.Flush(); };
     const ExecuteOutcome outcome = layer.Execute(scene, trial, sink);
     trial.idle = nullptr;
-    if (std::string early = WhyStoppedEarly(c, trial.deadline, got, out, outcome); !early.empty())
-      return FinishEarlyFailure(c, early, got, out, outcome, trial.deadline, started);
+    if (const Stopped early = WhyStoppedEarly(c, trial.deadline, got, out, outcome);
+        !early.reason.empty())
+      return FinishEarlyFailure(c, early, out, outcome, started);
     out.End();
     const std::string& failure = out.failure();
     EndedAt(got.samples.back(), got.observed);
@@ -526,9 +468,7 @@ struct Cell::Impl {
 
     auto s = BaseStatus(c, failure.empty() ? msg::STATE_EXECUTED : msg::STATE_FAILED);
     s.reason(failure);
-    if (!failure.empty())
-      s.failure(failure.rfind("deadline", 0) == 0 ? msg::FAILURE_DEADLINE
-                                                  : msg::FAILURE_INTERRUPTED);
+    if (!failure.empty()) s.failure(out.failure_kind());
     s.samples(static_cast<std::uint32_t>(got.samples.size()));
     s.phase_wall_s(std::chrono::duration<double>(Clock::now() - started).count());
     std::size_t dropped = 0;
@@ -553,41 +493,42 @@ struct Cell::Impl {
     Finish(c, s);
   }
 
-  // Why the backend's run cannot be a whole trial ("" = it can).
-  std::string WhyStoppedEarly(const msg::TrialCommand& c, Clock::time_point deadline,
-                              const Collected& got, const TrialStream& out,
-                              const ExecuteOutcome& outcome) {
+  // Why the backend's run cannot be a whole trial (reason "" = it can), typed
+  // for the service: a model that cannot run the scene fails the same way on
+  // a re-run (FAILURE_SIMULATION: the trial fails at once); a driver that
+  // crashed, hung or sent garbage may do better next time.
+  struct Stopped {
+    std::string reason;
+    msg::FailureKind kind = msg::FAILURE_NONE;
+  };
+  Stopped WhyStoppedEarly(const msg::TrialCommand& c, Clock::time_point deadline,
+                          const Collected& got, const TrialStream& out,
+                          const ExecuteOutcome& outcome) {
     if (!got.problem.empty())
-      return "backend " + layer.capabilities().name + ": sample " +
-             std::to_string(got.samples.size()) + ": " + got.problem;
-    if (!out.failure().empty()) return out.failure();
-    if (Stopping()) return "interrupted: cell shutting down";
+      return {"backend " + layer.capabilities().name + ": sample " +
+                  std::to_string(got.samples.size()) + ": " + got.problem,
+              msg::FAILURE_INTERNAL};
+    if (!out.failure().empty()) return {out.failure(), out.failure_kind()};
+    if (Stopping()) return {"interrupted: cell shutting down", msg::FAILURE_INTERRUPTED};
     if (Clock::now() > deadline)
-      return "deadline: " + std::to_string(c.deadline_s()) + " s exceeded while the backend ran";
+      return {"deadline: " + std::to_string(c.deadline_s()) + " s exceeded while the backend ran",
+              msg::FAILURE_DEADLINE};
     if (!outcome.ok)
-      return outcome.reason.empty() ? "backend failed without a reason" : outcome.reason;
-    if (got.samples.empty()) return "backend " + layer.capabilities().name + ": no samples";
+      return {outcome.reason.empty() ? "backend failed without a reason" : outcome.reason,
+              outcome.failure == ExecuteFailure::kSimulation ? msg::FAILURE_SIMULATION
+                                                             : msg::FAILURE_INTERNAL};
+    if (got.samples.empty())
+      return {"backend " + layer.capabilities().name + ": no samples", msg::FAILURE_INTERNAL};
     if (std::string why = CheckStreamLength(layer.actual_scene(), got.samples); !why.empty())
-      return "backend " + layer.capabilities().name + ": " + why;
-    return "";
+      return {"backend " + layer.capabilities().name + ": " + why, msg::FAILURE_INTERNAL};
+    return {};
   }
 
-  void FinishEarlyFailure(const msg::TrialCommand& c, const std::string& early,
-                          const Collected& got, const TrialStream& out,
-                          const ExecuteOutcome& outcome, Clock::time_point deadline,
-                          Clock::time_point started) {
+  void FinishEarlyFailure(const msg::TrialCommand& c, const Stopped& early, const TrialStream& out,
+                          const ExecuteOutcome& outcome, Clock::time_point started) {
     auto s = BaseStatus(c, msg::STATE_FAILED);
-    // Typed for the service: a model that cannot run the scene fails the
-    // same way on a re-run (FAILURE_SIMULATION: the trial fails at once);
-    // a driver that crashed, hung or sent garbage may do better next time.
-    s.failure(!got.problem.empty()                          ? msg::FAILURE_INTERNAL
-              : early.rfind("deadline", 0) == 0             ? msg::FAILURE_DEADLINE
-              : early.rfind("interrupted", 0) == 0          ? msg::FAILURE_INTERRUPTED
-              : Stopping()                                  ? msg::FAILURE_INTERRUPTED
-              : Clock::now() > deadline                     ? msg::FAILURE_DEADLINE
-              : outcome.reason.rfind("simulation:", 0) == 0 ? msg::FAILURE_SIMULATION
-                                                            : msg::FAILURE_INTERNAL);
-    s.reason(early);
+    s.failure(early.kind);
+    s.reason(early.reason);
     s.samples(static_cast<std::uint32_t>(out.sent()));  // already in the log (not a trial)
     s.phase_wall_s(std::chrono::duration<double>(Clock::now() - started).count());
     s.detail_json(json({{"backend", layer.capabilities().name},
@@ -597,7 +538,7 @@ struct Cell::Impl {
                       .dump());
     if (out.sent() > 0)
       spdlog::warn("cell {}: trial {} attempt {} failed after {} samples were streamed: {}",
-                   options.id, c.trial_id(), c.attempt(), out.sent(), early);
+                   options.id, c.trial_id(), c.attempt(), out.sent(), early.reason);
     Finish(c, s);
   }
 
@@ -617,7 +558,7 @@ struct Cell::Impl {
         !live.WaitForMatched(1, dds::Millis(2000)) ||
         !pusher_commands.WaitForMatched(1, dds::Millis(2000))) {
       auto s = BaseStatus(c, msg::STATE_FAILED);
-      s.failure(msg::FAILURE_NONE);  // the controller's, not the cell's: a retry may find it
+      s.failure(msg::FAILURE_CONTROLLER);  // not the cell's fault: a retry may find it
       s.reason("controller " + name + ": not on domain " + std::to_string(options.domain_id) +
                " (start `arena controller --name " + name + "`)");
       s.phase_wall_s(std::chrono::duration<double>(Clock::now() - started).count());
@@ -629,13 +570,15 @@ struct Cell::Impl {
                                 [&](const std::vector<mechanics::TrajectorySample>& samples,
                                     std::string* why) { return loop.Next(samples, why); });
     std::string failure = result.stopped;
+    msg::FailureKind kind = failure.empty() ? msg::FAILURE_NONE : loop.stop_kind();
     if (result.status != mechanics::SimulationStatus::kOk) {
       failure = "simulation: " + ModeName(result.status) + ": " + result.error;
+      kind = msg::FAILURE_SIMULATION;
     }
     if (result.samples.empty()) {
       auto s = BaseStatus(c, msg::STATE_FAILED);
       s.reason(failure.empty() ? "simulation: no samples" : failure);
-      s.failure(ClosedLoopTrial::FailureOf(s.reason()));
+      s.failure(failure.empty() ? msg::FAILURE_SIMULATION : kind);
       s.phase_wall_s(std::chrono::duration<double>(Clock::now() - started).count());
       return Finish(c, s);
     }
@@ -655,13 +598,16 @@ struct Cell::Impl {
     }
     const StreamOutcome streamed = StreamLog(stream_port, c, result.samples, pushers, observed,
                                              trial.deadline, Pacing::kFlatOut);
-    if (failure.empty()) failure = streamed.failure;
+    if (failure.empty()) {
+      failure = streamed.failure;
+      kind = streamed.kind;
+    }
     EndedAt(result.samples.back(), observed);
     pusher = scene.pusher;
 
     auto s = BaseStatus(c, failure.empty() ? msg::STATE_EXECUTED : msg::STATE_FAILED);
     s.reason(failure);
-    if (!failure.empty()) s.failure(ClosedLoopTrial::FailureOf(failure));
+    if (!failure.empty()) s.failure(kind);
     s.samples(static_cast<std::uint32_t>(result.samples.size()));
     s.phase_wall_s(std::chrono::duration<double>(Clock::now() - started).count());
     s.detail_json(loop.Detail(result, streamed.batches).dump());
@@ -721,7 +667,7 @@ struct Cell::Impl {
     }
     true_pose = out.final_true;
     observed_pose = out.final_observed;
-    if (out.success) reset_left = ResetLeft{c.seed(), request.target, out.final_true};
+    if (out.success) trial_start.ResetEnded(c.seed(), request.target, out.final_true);
     if (out.success) pusher = next_pusher;
     auto s = BaseStatus(c, out.success ? msg::STATE_RESET_DONE : msg::STATE_FAILED);
     s.reason(out.failure);

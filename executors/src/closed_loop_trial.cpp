@@ -92,12 +92,12 @@ std::optional<mechanics::PusherMotion> ClosedLoopTrial::Next(
   const auto& spec = context_.spec;
   if (port_.stopping()) {
     *why = "interrupted: cell shutting down";
-    return std::nullopt;
+    return Stopped(msg::FAILURE_INTERRUPTED);
   }
   if (StreamClock::now() > trial_.deadline) {
     *why = "deadline: " + std::to_string(command_.deadline_s()) + " s exceeded after " +
            std::to_string(k + 1) + " samples";
-    return std::nullopt;
+    return Stopped(msg::FAILURE_DEADLINE);
   }
   // What the sensors saw of this sample (latency, drops, noise: the same
   // streams as the log's, so live and log agree), one sample at a time.
@@ -111,7 +111,7 @@ std::optional<mechanics::PusherMotion> ClosedLoopTrial::Next(
   dds::EncodeSample(truth, pusher, observed_.back(), &encoded);
   if (port_.speed > 0 && !port_.sleep_until(start_ + Seconds(truth.t * port_.speed))) {
     *why = "interrupted: cell shutting down";
-    return std::nullopt;
+    return Stopped(msg::FAILURE_INTERRUPTED);
   }
   const std::optional<msg::PusherCommand> answer =
       Answer(k, truth.t, encoded, k + 1 == expected_samples_);
@@ -170,18 +170,17 @@ std::optional<mechanics::PusherMotion> ClosedLoopTrial::Apply(const msg::PusherC
   return in_force_;
 }
 
+// Every Stop is the controller's doing: gone, silent past its hold time, a bad command.
 std::optional<mechanics::PusherMotion> ClosedLoopTrial::Stop(AppliedCommand record) {
   in_force_.velocity.setZero();
   record.applied.setZero();
   applied_.push_back(record);
-  return std::nullopt;
+  return Stopped(msg::FAILURE_CONTROLLER);
 }
 
-msg::FailureKind ClosedLoopTrial::FailureOf(const std::string& reason) {
-  if (reason.rfind("simulation:", 0) == 0) return msg::FAILURE_SIMULATION;
-  if (reason.rfind("deadline", 0) == 0) return msg::FAILURE_DEADLINE;
-  if (reason.rfind("interrupted", 0) == 0) return msg::FAILURE_INTERRUPTED;
-  return msg::FAILURE_NONE;
+std::optional<mechanics::PusherMotion> ClosedLoopTrial::Stopped(msg::FailureKind kind) {
+  stop_kind_ = kind;
+  return std::nullopt;
 }
 
 json ClosedLoopTrial::Detail(const mechanics::SimulationResult& result,

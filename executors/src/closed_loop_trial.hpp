@@ -55,10 +55,12 @@ class ClosedLoopTrial {
   // The EXECUTE status's detail: the model's figures and `closed_loop`.
   nlohmann::json Detail(const mechanics::SimulationResult& result, std::uint32_t log_batches) const;
 
-  // Typed for the service like an open-loop failure; a controller's fault
-  // (gone, silent past its hold time, a bad command) is FAILURE_NONE: no
-  // fault of the cell's model, and a retry may well run through.
-  static msg::FailureKind FailureOf(const std::string& reason);
+  // Why Next stopped the run, typed for the service like an open-loop
+  // failure (FAILURE_NONE while it runs): the cell shutting down, its
+  // deadline, or the controller (gone, silent past its hold time, a bad
+  // command: FAILURE_CONTROLLER, no fault of the cell, and a retry may well
+  // run through).
+  msg::FailureKind stop_kind() const { return stop_kind_; }
 
  private:
   struct AppliedCommand {
@@ -84,6 +86,8 @@ class ClosedLoopTrial {
   std::optional<mechanics::PusherMotion> Apply(const msg::PusherCommand& answer,
                                                AppliedCommand record, std::string* why);
   std::optional<mechanics::PusherMotion> Stop(AppliedCommand record);
+  // Records why the run stops; @returns nullopt.
+  std::optional<mechanics::PusherMotion> Stopped(msg::FailureKind kind);
 
   const StreamPort& port_;
   dds::Reader<msg::PusherCommand>& commands_;
@@ -101,6 +105,7 @@ class ClosedLoopTrial {
   std::optional<Observer> observer_;  // from the first sample: the layer's scene is set
   std::vector<dds::Observation> observed_;
   std::vector<dds::PusherState> pushers_;
+  msg::FailureKind stop_kind_ = msg::FAILURE_NONE;
 };
 
 }  // namespace arena::executors

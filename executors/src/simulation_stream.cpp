@@ -42,12 +42,13 @@ ExecuteOutcome StreamSimulation(const mechanics::SimulationResult& r, const Samp
                         .dump();
   if (r.status != mechanics::SimulationStatus::kOk || r.samples.empty()) {
     out.reason = SimulationFailure(r);
-    out.solver_failure = true;
+    out.failure = ExecuteFailure::kSimulation;
     return out;
   }
   for (const auto& s : r.samples) {
     if (!sink(s)) {
       out.reason = "interrupted";
+      out.failure = ExecuteFailure::kBackend;  // the cell stopped it: its own reason goes first
       return out;
     }
   }

@@ -63,12 +63,12 @@ bool TrialStream::Push(const mechanics::TrajectorySample& truth, const dds::Push
                                   std::chrono::duration<double>(truth.t * port_.speed));
     if (due > deadline_) {
       port_.sleep_until(deadline_);
-      failure_ = "deadline: " + std::to_string(c_.deadline_s()) + " s exceeded after " +
-                 std::to_string(sent_) + " samples";
+      Fail(msg::FAILURE_DEADLINE, "deadline: " + std::to_string(c_.deadline_s()) +
+                                      " s exceeded after " + std::to_string(sent_) + " samples");
       return false;
     }
     if (!port_.sleep_until(due)) {
-      failure_ = "interrupted: cell shutting down";
+      Fail(msg::FAILURE_INTERRUPTED, "interrupted: cell shutting down");
       return false;
     }
   }
@@ -79,6 +79,11 @@ bool TrialStream::Push(const mechanics::TrajectorySample& truth, const dds::Push
   batch_.samples().push_back(std::move(encoded));
   ++pushed_;
   return true;
+}
+
+void TrialStream::Fail(msg::FailureKind kind, std::string reason) {
+  failure_ = std::move(reason);
+  failure_kind_ = kind;
 }
 
 void TrialStream::Flush() {
@@ -107,22 +112,23 @@ bool TrialStream::SendBatch(bool last) {
   if (port_.corrupt_stream == "nan" && batches_ == 0 && count > 0)
     batch_.samples()[0].object_pose()[0] = std::numeric_limits<double>::quiet_NaN();
   if (!port_.serves(c_.service_session())) {
-    failure_ = "interrupted: the cell now serves another service";
+    Fail(msg::FAILURE_INTERRUPTED, "interrupted: the cell now serves another service");
     return false;
   }
   batch_.sent_unix_ns(UnixNanos());
   // Ground truth is a log: a full history throttles us, it never drops.
   while (!port_.log->Write(batch_)) {
     if (port_.stopping()) {
-      failure_ = "interrupted: cell shutting down";
+      Fail(msg::FAILURE_INTERRUPTED, "interrupted: cell shutting down");
       return false;
     }
     if (StreamClock::now() > deadline_) break;
     spdlog::warn("cell {}: ground-truth history full (a slow reader?), retrying", port_.cell_id);
   }
   if (StreamClock::now() > deadline_) {
-    failure_ = "deadline: " + std::to_string(c_.deadline_s()) + " s exceeded after " +
-               std::to_string(sent_ + count) + " samples";
+    Fail(msg::FAILURE_DEADLINE, "deadline: " + std::to_string(c_.deadline_s()) +
+                                    " s exceeded after " + std::to_string(sent_ + count) +
+                                    " samples");
     return false;
   }
   sent_ += count;
@@ -147,7 +153,8 @@ StreamOutcome StreamLog(const StreamPort& port, const msg::TrialCommand& c,
     }
   }
   if (out.failure().empty() && stopped.empty()) out.End();
-  return {out.failure().empty() ? stopped : out.failure(), out.batches()};
+  if (!out.failure().empty()) return {out.failure(), out.failure_kind(), out.batches()};
+  return {stopped, stopped.empty() ? msg::FAILURE_NONE : msg::FAILURE_INTERRUPTED, out.batches()};
 }
 
 }  // namespace arena::executors

@@ -73,9 +73,10 @@ class TrialStream {
   // topic's final sample again, flagged last.
   void End();
 
-  const std::string& failure() const { return failure_; }  // "" while going
-  std::size_t sent() const { return sent_; }               // samples in the log
-  std::uint32_t batches() const { return batches_; }       // batches in the log
+  const std::string& failure() const { return failure_; }          // "" while going
+  msg::FailureKind failure_kind() const { return failure_kind_; }  // typed: deadline, interrupted
+  std::size_t sent() const { return sent_; }                       // samples in the log
+  std::uint32_t batches() const { return batches_; }               // batches in the log
 
  private:
   bool Paced() const { return pacing_ == Pacing::kLive && port_.speed > 0; }
@@ -83,6 +84,7 @@ class TrialStream {
   // The queued samples into the log as one batch (nothing queued: nothing
   // sent, unless it is the last one). @returns false when the stream stopped.
   bool SendBatch(bool last);
+  void Fail(msg::FailureKind kind, std::string reason);
 
   const StreamPort& port_;
   const msg::TrialCommand& c_;
@@ -96,10 +98,12 @@ class TrialStream {
   std::uint32_t batches_ = 0;
   msg::GroundTruthSample newest_;  // the latest sample, for the live topic's last
   std::string failure_;
+  msg::FailureKind failure_kind_ = msg::FAILURE_NONE;
 };
 
 struct StreamOutcome {
   std::string failure;  // "" when the whole trial was sent
+  msg::FailureKind kind = msg::FAILURE_NONE;
   std::uint32_t batches = 0;
 };
 

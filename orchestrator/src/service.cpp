@@ -179,16 +179,19 @@ class SqliteTrialStore : public TrialStore {
     return std::make_unique<SqliteSink>(s_.BeginIngest(trial_id, attempt));
   }
   db::TrialState RetryTrial(std::int64_t id, int attempt, const std::string& reason,
-                            int max_attempts, double backoff_s) override {
-    return s_.RetryTrial(id, attempt, reason, max_attempts, backoff_s);
+                            int max_attempts, double backoff_s, const std::string& rule) override {
+    return s_.RetryTrial(id, attempt, reason, max_attempts, backoff_s, rule);
   }
   void FailTrial(std::int64_t id, int attempt, const std::string& reason,
-                 const std::string& outcome) override {
-    s_.FailTrial(id, attempt, reason, outcome);
+                 const std::string& outcome, const std::string& rule) override {
+    s_.FailTrial(id, attempt, reason, outcome, rule);
   }
-  void BeginReset(std::int64_t id, int attempt) override { s_.BeginReset(id, attempt); }
-  void CompleteReset(std::int64_t id, int attempt, const db::ResetReport& r) override {
-    s_.CompleteReset(id, attempt, r);
+  void BeginReset(std::int64_t id, int attempt, const std::string& rule) override {
+    s_.BeginReset(id, attempt, rule);
+  }
+  void CompleteReset(std::int64_t id, int attempt, const db::ResetReport& r,
+                     const std::string& rule) override {
+    s_.CompleteReset(id, attempt, r, rule);
   }
   void RecordPrediction(std::int64_t id, int attempt, const db::Prediction& p) override {
     s_.RecordPrediction(id, attempt, p);

@@ -36,6 +36,45 @@ Clock::duration Dur(double seconds) {
   return std::chrono::duration_cast<Clock::duration>(Seconds(seconds));
 }
 
+// The wire's words (msg::) as the trial policy's types.
+StatusPhase ToPolicy(msg::Phase p) {
+  return p == msg::PHASE_RESET ? StatusPhase::kReset : StatusPhase::kExecute;
+}
+StatusState ToPolicy(msg::TrialState s) {
+  switch (s) {
+    case msg::STATE_ACCEPTED:
+      return StatusState::kAccepted;
+    case msg::STATE_EXECUTED:
+      return StatusState::kExecuted;
+    case msg::STATE_RESET_DONE:
+      return StatusState::kResetDone;
+    case msg::STATE_REFUSED:
+      return StatusState::kRefused;
+    case msg::STATE_FAILED:
+      break;
+  }
+  return StatusState::kFailed;
+}
+FailureKind ToPolicy(msg::FailureKind k) {
+  switch (k) {
+    case msg::FAILURE_SIMULATION:
+      return FailureKind::kSimulation;
+    case msg::FAILURE_DEADLINE:
+      return FailureKind::kDeadline;
+    case msg::FAILURE_INTERRUPTED:
+      return FailureKind::kInterrupted;
+    case msg::FAILURE_RESET:
+      return FailureKind::kReset;
+    case msg::FAILURE_INTERNAL:
+      return FailureKind::kInternal;
+    case msg::FAILURE_CONTROLLER:
+      return FailureKind::kController;
+    case msg::FAILURE_NONE:
+      break;
+  }
+  return FailureKind::kNone;
+}
+
 db::ResetReport UnobservedReset(const std::string& reason) {
   db::ResetReport r;
   r.ok = false;
@@ -58,7 +97,6 @@ struct TrialDriver::Impl {
   ServiceCounters counters;
   std::function<void(const TrialTiming&)> on_trial_timing;
 
-  enum class CellPhase { kIdle, kExecuting, kResetting };
   struct CellRun {
     std::string id;
     bool alive = true;
@@ -66,8 +104,9 @@ struct TrialDriver::Impl {
     bool ours = false;              // its announce names our session
     std::uint64_t incarnation = 0;  // the announcing process's start (started_unix_ns)
     std::string serving;            // who else it serves ("" = us / nobody), as stored
-    int execute_failures = 0;
+    int execute_failures = 0;       // phases in a row that failed by the cell's fault
     int reset_failures = 0;
+    int failures_in_a_row = 0;  // failed phases in a row, whoever caused them (the backoff)
     std::vector<std::string> contact_types;
     std::string capabilities_json = "{}", defects_json = "{}";
     double speed = 1.0;
@@ -187,7 +226,8 @@ struct TrialDriver::Impl {
     cell.capabilities_json = caps.dump();
     cell.defects_json = a.defects_json();
     if (restarted && cell.phase != CellPhase::kIdle)
-      AbortPhase(cell, "cell " + id + " restarted", /*count_against_cell=*/false);
+      EndPhase(cell, DecideServiceEvent(cell.phase, ServiceEvent::kCellRestarted),
+               "cell " + id + " restarted");
     Step("cell " + id + ": announcement", "", [this, id, was_alive] {
       CellRun& c = Cell(id);
       store.UpsertCell(id, c.contact_types, c.capabilities_json, c.defects_json);
@@ -203,8 +243,8 @@ struct TrialDriver::Impl {
                 std::to_string(a.serving_pid()) + ")";
     }
     if (cell.ours && !ours && cell.phase != CellPhase::kIdle)
-      AbortPhase(cell, "cell " + id + " now " + (serving.empty() ? "serves nobody" : serving),
-                 false);
+      EndPhase(cell, DecideServiceEvent(cell.phase, ServiceEvent::kCellServesAnother),
+               "cell " + id + " now " + (serving.empty() ? "serves nobody" : serving));
     if (ours != cell.ours || serving != cell.serving) {
       if (!serving.empty()) spdlog::warn("cell {} is {}", id, serving);
       if (ours) spdlog::info("cell {}: serving us", id);
@@ -232,7 +272,7 @@ struct TrialDriver::Impl {
     spdlog::warn("cell {}: {}", id, reason);
     cell.alive = false;  // (`ours` stays: a process back from a lapse may still serve us;
                          // a new one announces that it serves nobody)
-    AbortPhase(cell, "cell lost: " + reason, /*count_against_cell=*/false);
+    EndPhase(cell, DecideServiceEvent(cell.phase, ServiceEvent::kCellLost), "cell lost: " + reason);
     Step("cell " + id + ": gone", "", [this, id, reason] { store.MarkCellGone(id, reason); });
   }
 
@@ -273,59 +313,80 @@ struct TrialDriver::Impl {
     });
   }
 
-  // Ends whatever phase the cell is in as a failure.
-  void AbortPhase(CellRun& cell, const std::string& reason, bool count_against_cell) {
+  // Executes a policy decision that ends the cell's phase (trial_policy.hpp):
+  // the trial retried or failed, or its reset closed as not observed; the
+  // failure counted against the cell only when it was the cell's; the backoff.
+  void EndPhase(CellRun& cell, const Decision& d, const std::string& reason) {
     const CellPhase phase = cell.phase;
+    if (phase == CellPhase::kIdle || !d.ends_phase()) return;
     if (phase == CellPhase::kExecuting) {
       auto it = executions.find(cell.trial_id);
       if (it != executions.end()) {
-        RetryExecution(it->second.trial_id, it->second.campaign_id, it->second.attempt, reason);
+        const Execution& ex = it->second;
+        if (d.trial == TrialStep::kFail)
+          FailTrial(ex.trial_id, ex.campaign_id, ex.attempt, reason, d.outcome, d.rule);
+        else
+          RetryExecution(ex.trial_id, ex.campaign_id, ex.attempt, reason, d.rule);
         executions.erase(it);
       }
     } else if (phase == CellPhase::kResetting) {
-      CompleteReset(cell.trial_id, cell.attempt, UnobservedReset(reason), cell.id);
+      CompleteReset(cell.trial_id, cell.attempt, UnobservedReset(reason), cell.id, d.rule);
     }
-    if (phase != CellPhase::kIdle) {
-      if (count_against_cell) CellResult(cell, phase, false, reason);
-      SetPhase(cell, CellPhase::kIdle);
+    if (d.counts_against_cell()) CellResult(cell, phase, false, reason);
+    SetPhase(cell, CellPhase::kIdle);
+    BackOff(cell, d, reason);
+  }
+
+  // After a failed phase the cell waits before its next trial (a paused
+  // controller, a store under load: not trial after trial within a second).
+  void BackOff(CellRun& cell, const Decision& d, const std::string& reason) {
+    if (d.back_off) {
+      ++cell.failures_in_a_row;
+      const double wait = CellBackoff_s(cell.failures_in_a_row, opt.service.cell_backoff_s,
+                                        opt.service.cell_backoff_max_s);
+      cell.next_claim = now() + Dur(wait);
+      spdlog::warn("cell {}: {} ({}; blame: {}); next trial in {:.2g} s", cell.id, reason, d.rule,
+                   ToString(d.blame), wait);
+    } else if (d.pause_s > 0) {
+      cell.next_claim = now() + Dur(d.pause_s);
     }
   }
 
   void RetryExecution(std::int64_t trial_id, std::int64_t campaign_id, int attempt,
-                      const std::string& reason) {
+                      const std::string& reason, const std::string& rule) {
     const std::string tag = TrialTag(campaign_id, trial_id, attempt);
-    Step(tag + ": retry", "", [this, tag, trial_id, attempt, reason] {
+    Step(tag + ": retry", "", [this, tag, trial_id, attempt, reason, rule] {
       const db::TrialState next =
           store.RetryTrial(trial_id, attempt, reason, opt.service.max_attempts,
-                           opt.service.retry_backoff_s * std::pow(2.0, attempt - 1));
+                           opt.service.retry_backoff_s * std::pow(2.0, attempt - 1), rule);
       if (next == db::TrialState::kFailed) {
         Count(&ServiceCounters::failed);
-        spdlog::error("{}: failed, no attempts left: {}", tag, reason);
+        spdlog::error("{}: failed, no attempts left: {} ({})", tag, reason, rule);
       } else {
         Count(&ServiceCounters::retried);
-        spdlog::warn("{}: will be retried: {}", tag, reason);
+        spdlog::warn("{}: will be retried: {} ({})", tag, reason, rule);
       }
     });
   }
 
   void FailTrial(std::int64_t trial_id, std::int64_t campaign_id, int attempt,
-                 const std::string& reason, const std::string& outcome) {
+                 const std::string& reason, const std::string& outcome, const std::string& rule) {
     const std::string tag = TrialTag(campaign_id, trial_id, attempt);
-    Step(tag + ": fail", "", [this, tag, trial_id, attempt, reason, outcome] {
-      store.FailTrial(trial_id, attempt, reason, outcome);
+    Step(tag + ": fail", "", [this, tag, trial_id, attempt, reason, outcome, rule] {
+      store.FailTrial(trial_id, attempt, reason, outcome, rule);
       Count(&ServiceCounters::failed);
-      spdlog::error("{}: failed: {}", tag, reason);
+      spdlog::error("{}: failed: {} ({})", tag, reason, rule);
     });
   }
 
   // resetting -> reset_done | reset_failed, then the prediction waiting for it.
   void CompleteReset(std::int64_t trial_id, int attempt, const db::ResetReport& report,
-                     const std::string& cell_id) {
+                     const std::string& cell_id, const std::string& rule) {
     resets_completing.insert(trial_id);
     Step(
         "trial " + std::to_string(trial_id) + ": complete reset", cell_id,
-        [this, trial_id, attempt, report] {
-          store.CompleteReset(trial_id, attempt, report);
+        [this, trial_id, attempt, report, rule] {
+          store.CompleteReset(trial_id, attempt, report, rule);
           resets_completing.erase(trial_id);
           if (!report.ok) Count(&ServiceCounters::resets_failed);
           AfterReset(trial_id);
@@ -369,8 +430,9 @@ struct TrialDriver::Impl {
       ex.scene = mechanics::ParseScene(claim.scene_json);
       ex.normals = ContactNormals(ex.scene);
     } catch (const mechanics::SceneError& e) {
+      const Decision d = DecideServiceEvent(CellPhase::kIdle, ServiceEvent::kInvalidScene);
       FailTrial(claim.trial_id, claim.campaign_id, claim.attempt,
-                std::string("invalid scene: ") + e.what(), "invalid_scene");
+                std::string("invalid scene: ") + e.what(), d.outcome, d.rule);
       return;
     }
     const double budget =
@@ -403,13 +465,16 @@ struct TrialDriver::Impl {
           SetPhase(c, CellPhase::kExecuting, budget + 2.0);  // the clock starts when it is sent
           Count(&ServiceCounters::dispatched);
           if (!transport.Send(cmd)) {
-            AbortPhase(c, "EXECUTE command could not be sent", true);
+            EndPhase(c, DecideServiceEvent(c.phase, ServiceEvent::kCommandNotSent),
+                     "EXECUTE command could not be sent");
             return;
           }
           spdlog::info("{}: EXECUTE on cell {}", tag, cell_id);
         },
         [this, cell_id](const db::StoreError& e) {
-          AbortPhase(Cell(cell_id), std::string("ground truth refused: ") + e.what(), false);
+          CellRun& c = Cell(cell_id);
+          EndPhase(c, DecideServiceEvent(c.phase, ServiceEvent::kStoreRefusedTruth),
+                   std::string("ground truth refused: ") + e.what());
         });
   }
 
@@ -423,7 +488,8 @@ struct TrialDriver::Impl {
     Execution& ex = it->second;
     const std::string problem = dds::CheckBatch(batch, ex.next_sample);
     if (!problem.empty()) {
-      FailStream(ex, "malformed ground truth from cell " + batch.cell_id() + ": " + problem);
+      FailStream(ex, "malformed ground truth from cell " + batch.cell_id() + ": " + problem,
+                 ServiceEvent::kStreamMalformed);
       return;
     }
     std::vector<db::Sample> samples;
@@ -434,8 +500,9 @@ struct TrialDriver::Impl {
         samples.push_back(ToStoreSample(s, ex.normals, &truth));
         ex.truth.push_back(std::move(truth));
       }
-    } catch (const std::exception& e) {
-      FailStream(ex, std::string("ground truth refused: ") + e.what());
+    } catch (const std::exception& e) {  // a value the store would refuse: the cell's
+      FailStream(ex, std::string("ground truth refused: ") + e.what(),
+                 ServiceEvent::kStreamMalformed);
       return;
     }
     if (ex.sink) {
@@ -451,7 +518,8 @@ struct TrialDriver::Impl {
             ex.sink.reset();
             break;
           case StoreVerdict::kMoot:
-            FailStream(ex, std::string("ground truth refused: ") + e.what());
+            FailStream(ex, std::string("ground truth refused: ") + e.what(),
+                       ServiceEvent::kStoreRefusedTruth);
             return;
         }
       }
@@ -463,9 +531,10 @@ struct TrialDriver::Impl {
     MaybeFinishExecution(ex.trial_id);
   }
 
-  void FailStream(Execution& ex, const std::string& reason) {
+  void FailStream(Execution& ex, const std::string& reason, ServiceEvent event) {
     spdlog::error("{}: {}", TrialTag(ex.campaign_id, ex.trial_id, ex.attempt), reason);
-    AbortPhase(Cell(ex.cell_id), reason, true);
+    CellRun& cell = Cell(ex.cell_id);
+    EndPhase(cell, DecideServiceEvent(cell.phase, event), reason);
   }
 
   void MaybeFinishExecution(std::int64_t trial_id) {
@@ -507,7 +576,8 @@ struct TrialDriver::Impl {
           auto eit = executions.find(trial_id);
           if (eit == executions.end()) return;
           spdlog::error("{}: {}", tag, e.what());
-          AbortPhase(Cell(eit->second.cell_id), e.what(), true);
+          CellRun& c = Cell(eit->second.cell_id);
+          EndPhase(c, DecideServiceEvent(c.phase, ServiceEvent::kStoreRefusedTruth), e.what());
         });
   }
 
@@ -532,7 +602,7 @@ struct TrialDriver::Impl {
           CellRun& c = Cell(cell_id);
           // Aim the reset at the start of the trial this cell will most likely run next.
           std::optional<db::ClaimedTrial> next = store.PeekNextTrial(cell_id);
-          store.BeginReset(trial_id, attempt);
+          store.BeginReset(trial_id, attempt, kResetAfterExecute);
           msg::TrialCommand cmd = Command(c, msg::PHASE_RESET);
           cmd.trial_id(static_cast<std::uint64_t>(trial_id));
           cmd.attempt(static_cast<std::uint32_t>(attempt));
@@ -541,7 +611,9 @@ struct TrialDriver::Impl {
           c.reset_aimed_at = next ? next->trial_id : 0;
           cmd.deadline_s(opt.service.reset_timeout_s);
           SetPhase(c, CellPhase::kResetting, opt.service.reset_timeout_s + 2.0);
-          if (!transport.Send(cmd)) AbortPhase(c, "RESET command could not be sent", true);
+          if (!transport.Send(cmd))
+            EndPhase(c, DecideServiceEvent(c.phase, ServiceEvent::kCommandNotSent),
+                     "RESET command could not be sent");
         },
         [this, tag, cell_id](const db::StoreError& e) {
           spdlog::error("{}: {}", tag, e.what());
@@ -552,19 +624,18 @@ struct TrialDriver::Impl {
   // ------------------------------------------------------------ statuses
   void OnStatus(const msg::TrialStatus& st) {
     if (st.service_session() != me.session) return;  // another service's (or a dead one's)
-    const std::string id = st.cell_id();
-    auto cit = cells.find(id);
+    auto cit = cells.find(st.cell_id());
     if (cit == cells.end()) return;
     CellRun& cell = cit->second;
-    if (cell.phase == CellPhase::kIdle ||
-        cell.trial_id != static_cast<std::int64_t>(st.trial_id()) ||
-        cell.attempt != static_cast<int>(st.attempt())) {
-      return;  // late or repeated status of a phase already settled
-    }
-    if (st.phase() == msg::PHASE_EXECUTE && cell.phase == CellPhase::kExecuting) {
-      OnExecuteStatus(cell, st);
-    } else if (st.phase() == msg::PHASE_RESET && cell.phase == CellPhase::kResetting) {
-      OnResetStatus(cell, st);
+    const bool same = cell.trial_id == static_cast<std::int64_t>(st.trial_id()) &&
+                      cell.attempt == static_cast<int>(st.attempt());
+    if (LateMessageRule(true, cell.phase, same)) return;  // a phase already settled
+    const Decision d = DecideStatus(cell.phase, ToPolicy(st.phase()), ToPolicy(st.state()),
+                                    ToPolicy(st.failure()));
+    if (cell.phase == CellPhase::kExecuting && st.phase() == msg::PHASE_EXECUTE) {
+      OnExecuteStatus(cell, st, d);
+    } else if (cell.phase == CellPhase::kResetting && st.phase() == msg::PHASE_RESET) {
+      OnResetStatus(cell, st, d);
     }
   }
 
@@ -603,14 +674,15 @@ struct TrialDriver::Impl {
     Step(tag + ": record closed loop", "", [this, shared] { store.RecordClosedLoop(*shared); });
   }
 
-  void OnExecuteStatus(CellRun& cell, const msg::TrialStatus& st) {
+  void OnExecuteStatus(CellRun& cell, const msg::TrialStatus& st, const Decision& d) {
     auto it = executions.find(cell.trial_id);
     if (it == executions.end() || it->second.publishing) return;
     Execution& ex = it->second;
-    switch (st.state()) {
-      case msg::STATE_ACCEPTED:
+    switch (d.trial) {
+      case TrialStep::kIgnore:
+      case TrialStep::kAwait:
         return;
-      case msg::STATE_EXECUTED:
+      case TrialStep::kCollectStream:
         RecordExecution(ex, st);
         RecordClosedLoop(ex, st);
         cell.execute_wall_s = st.phase_wall_s();
@@ -618,33 +690,22 @@ struct TrialDriver::Impl {
         ex.stream_deadline = now() + Dur(opt.service.stream_grace_s);
         MaybeFinishExecution(ex.trial_id);
         return;
-      case msg::STATE_REFUSED: {
-        RetryExecution(ex.trial_id, ex.campaign_id, ex.attempt,
-                       "refused by cell " + cell.id + ": " + st.reason());
-        executions.erase(it);
-        SetPhase(cell, CellPhase::kIdle);
-        cell.next_claim = now() + Dur(0.5);  // another cell may take it
-        return;
-      }
       default:
-        RecordClosedLoop(ex, st);  // a failed closed loop: why, and the commands up to then
-        if (st.failure() == msg::FAILURE_SIMULATION) {
-          // The cell's simulator could not run this scene. The cell is fine
-          // and a re-run is bit-identical, so the trial fails at once.
-          FailTrial(ex.trial_id, ex.campaign_id, ex.attempt, "cell " + cell.id + ": " + st.reason(),
-                    "solver_failure");
-          executions.erase(it);
-          SetPhase(cell, CellPhase::kIdle);
-          return;
-        }
-        AbortPhase(cell, "cell " + cell.id + " failed: " + st.reason(), true);
-        return;
+        break;
     }
+    if (st.state() == msg::STATE_REFUSED) {
+      EndPhase(cell, d, "refused by cell " + cell.id + ": " + st.reason());
+      return;
+    }
+    RecordClosedLoop(ex, st);  // a failed closed loop: why, and the commands up to then
+    EndPhase(cell, d,
+             d.trial == TrialStep::kFail ? "cell " + cell.id + ": " + st.reason()
+                                         : "cell " + cell.id + " failed: " + st.reason());
   }
 
-  void OnResetStatus(CellRun& cell, const msg::TrialStatus& st) {
-    if (st.state() != msg::STATE_RESET_DONE && st.state() != msg::STATE_FAILED) return;
-    const bool ok = st.state() == msg::STATE_RESET_DONE;
+  void OnResetStatus(CellRun& cell, const msg::TrialStatus& st, const Decision& d) {
+    if (d.trial != TrialStep::kResetDone && d.trial != TrialStep::kResetFailed) return;
+    const bool ok = d.trial == TrialStep::kResetDone;
     db::ResetReport report;
     report.ok = ok;
     std::copy(st.observed_pose().begin(), st.observed_pose().end(), report.observed_pose.begin());
@@ -657,10 +718,12 @@ struct TrialDriver::Impl {
       spdlog::warn("trial {} attempt {}: reset on cell {} failed: {}", cell.trial_id, cell.attempt,
                    cell.id, st.reason());
     }
-    CompleteReset(cell.trial_id, cell.attempt, report, cell.id);
-    CellResult(cell, CellPhase::kResetting, ok, st.reason());
+    CompleteReset(cell.trial_id, cell.attempt, report, cell.id, d.rule);
+    if (ok || d.counts_against_cell()) CellResult(cell, CellPhase::kResetting, ok, st.reason());
     if (ok) ReportTiming(cell, st.phase_wall_s());
     SetPhase(cell, CellPhase::kIdle);
+    if (ok) cell.failures_in_a_row = 0;  // a whole clean trial: the backoff starts over
+    BackOff(cell, d, "reset failed: " + st.reason());
   }
 
   // The split of a clean trial's time on its cell (TrialTiming). A cell's
@@ -696,16 +759,26 @@ struct TrialDriver::Impl {
     auto shared = std::make_shared<PredictionDone>(std::move(done));
     Step("trial " + std::to_string(trial_id) + ": prediction", "", [this, shared] {
       const db::Trial t = store.GetTrial(shared->trial_id);
-      if (t.attempt != shared->attempt) return;  // the trial moved on (re-run): drop it
-      if (t.state == db::TrialState::kResetting || t.state == db::TrialState::kExecuted) {
-        if (ResetInFlight(t.id, t.attempt)) {  // recorded when the reset ends (AfterReset)
+      const bool awaiting_reset =
+          t.state == db::TrialState::kResetting || t.state == db::TrialState::kExecuted;
+      const PredictionDecision d = DecidePrediction(
+          t.attempt == shared->attempt, awaiting_reset,
+          awaiting_reset && t.attempt == shared->attempt && ResetInFlight(t.id, t.attempt));
+      switch (d.step) {
+        case PredictionStep::kDrop:  // the trial moved on (re-run)
+          return;
+        case PredictionStep::kWaitForReset:  // recorded when the reset ends (AfterReset)
           waiting_predictions[shared->trial_id] = std::move(*shared);
           return;
-        }
-        // Nobody resets it any more (its reset step was moot, or its status
-        // lost): close the reset as not observed, then record.
-        if (t.state == db::TrialState::kExecuted) store.BeginReset(t.id, t.attempt);
-        store.CompleteReset(t.id, t.attempt, UnobservedReset("its reset was not confirmed"));
+        case PredictionStep::kCloseResetThenRecord:
+          // Nobody resets it any more (its reset step was moot, or its status
+          // lost): close the reset as not observed, then record.
+          if (t.state == db::TrialState::kExecuted) store.BeginReset(t.id, t.attempt, d.rule);
+          store.CompleteReset(t.id, t.attempt, UnobservedReset("its reset was not confirmed"),
+                              d.rule);
+          break;
+        case PredictionStep::kRecord:
+          break;
       }
       RecordPrediction(std::move(*shared));
     });
@@ -773,9 +846,10 @@ struct TrialDriver::Impl {
     switch (t.state) {
       case db::TrialState::kExecuted:
         Step(tag + ": reset after restart", "", [this, t] {
-          store.BeginReset(t.id, t.attempt);
+          store.BeginReset(t.id, t.attempt, kResetAfterRestart);
           store.CompleteReset(t.id, t.attempt,
-                              UnobservedReset("service restarted before the reset"));
+                              UnobservedReset("service restarted before the reset"),
+                              kResetAfterRestart);
           StartStoredPrediction(t);
         });
         return;
@@ -810,18 +884,16 @@ struct TrialDriver::Impl {
         auto it = executions.find(cell.trial_id);
         if (it != executions.end() && it->second.publishing) continue;
         if (it != executions.end() && it->second.expected >= 0 && t > it->second.stream_deadline) {
-          AbortPhase(cell,
-                     "ground truth incomplete: " + std::to_string(it->second.next_sample) + " of " +
-                         std::to_string(it->second.expected) + " samples",
-                     true);
+          EndPhase(cell, DecideServiceEvent(cell.phase, ServiceEvent::kStreamIncomplete),
+                   "ground truth incomplete: " + std::to_string(it->second.next_sample) + " of " +
+                       std::to_string(it->second.expected) + " samples");
           continue;
         }
       }
       if (t > cell.deadline) {
-        AbortPhase(cell,
-                   std::string(cell.phase == CellPhase::kExecuting ? "EXECUTE" : "RESET") +
-                       " missed its deadline on cell " + id,
-                   true);
+        EndPhase(cell, DecideServiceEvent(cell.phase, ServiceEvent::kDeadlineMissed),
+                 std::string(cell.phase == CellPhase::kExecuting ? "EXECUTE" : "RESET") +
+                     " missed its deadline on cell " + id);
       }
     }
   }
@@ -894,7 +966,7 @@ bool TrialDriver::InFlight() const { return impl_->InFlight(); }
 int TrialDriver::IdleCells() const {
   int n = 0;
   for (const auto& [id, cell] : impl_->cells)
-    n += cell.alive && cell.ours && !cell.quarantined && cell.phase == Impl::CellPhase::kIdle;
+    n += cell.alive && cell.ours && !cell.quarantined && cell.phase == CellPhase::kIdle;
   return n;
 }
 bool TrialDriver::CampaignsFinished() {

@@ -38,6 +38,8 @@ TEST_F(ServiceInputs, ServeRefusesOptionsThatWouldBreakItNamingTheField) {
   EXPECT_FALSE(std::filesystem::exists(db)) << "a refused option created the store";
   for (const std::string& cmd :
        std::vector<std::string>{"cell --id c1 --domain 233", "cell --id c1 --domain 232",
+                                // the same bad --domain exits 2 from every command (issue 27)
+                                "controller --name pivot_to_angle --domain 232",
                                 "run " + kCampaign + " --db " + db + " --domain 232"}) {
     const auto r = Arena(cmd);
     EXPECT_EQ(r.rc, 2) << cmd << ": " << r.err;

@@ -112,6 +112,8 @@ inline constexpr const char* kUndoMigration10 =
     " ALTER TABLE trials DROP COLUMN defects_applied;";
 // Undoes migration 14 (cells.start_for_trial).
 inline constexpr const char* kUndoMigration14 = " ALTER TABLE cells DROP COLUMN start_for_trial;";
+// Undoes migration 15 (trial_transitions.rule).
+inline constexpr const char* kUndoMigration15 = " ALTER TABLE trial_transitions DROP COLUMN rule;";
 
 // SQL that takes a store back from schema version 6 to 5 (outcomes and
 // parameter views out). Migration 6 also re-applies over a file that kept

@@ -170,7 +170,7 @@ TEST(ResultViews, MigrationSixComputesOutcomesOfStoredStreams) {
   // re-added: undo them too, so the store really is at version 5.
   const std::string back_to_5 =
       std::string("BEGIN;") + testing::kUndoMigration7 + testing::kUndoMigration10 +
-      testing::kUndoMigration14 +
+      testing::kUndoMigration14 + testing::kUndoMigration15 +
       " DROP VIEW contact_results; DROP VIEW trial_results;"
       " DROP TABLE contact_outcomes; DROP TABLE campaign_parameters;"
       " ALTER TABLE gt_summary DROP COLUMN net_dx; ALTER TABLE gt_summary DROP COLUMN net_dy;"

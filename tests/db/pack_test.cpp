@@ -346,7 +346,7 @@ TEST(PackedBlock, VersionThreeStoreMigratesAndReads) {
     ASSERT_EQ(sqlite3_exec(
                   db,
                   (std::string("BEGIN;") + testing::kUndoMigration10 + testing::kUndoMigration14 +
-                   testing::kUndoMigration7 + testing::kUndoMigration5 +
+                   testing::kUndoMigration15 + testing::kUndoMigration7 + testing::kUndoMigration5 +
                    " DELETE FROM schema_migrations WHERE version > 3;"
                    " PRAGMA user_version = 3; COMMIT;")
                       .c_str(),

@@ -459,19 +459,30 @@ TEST(SceneJson, OversizedInputIsRefusedBeforeParsing) {
   fs::remove_all(dir);
 }
 
-// Inputs the fuzzer (scripts/fuzz.sh) once crashed on: each must now be
-// parsed or refused with a SceneError.
-TEST(SceneJson, FuzzCrashersAreHandled) {
-  const fs::path dir = kSourceDir / "tests/fuzz/crashers/scene_fuzz";
-  if (!fs::exists(dir)) GTEST_SKIP() << "no crashers recorded";
-  for (const auto& entry : fs::directory_iterator(dir)) {
-    SCOPED_TRACE(entry.path().string());
-    try {
-      const Scene s = ParseScene(ReadText(entry.path()));
-      EXPECT_EQ(SceneToJson(ParseScene(SceneToJson(s))), SceneToJson(s));
-    } catch (const SceneError&) {
+// The fuzzer's corpus (scripts/fuzz.sh seeds it with the example and bad
+// scenes) and the inputs it once crashed on (tests/fuzz/crashers/scene_fuzz,
+// when there are any): each must be parsed, and then survive a round trip,
+// or be refused with a SceneError; anything else thrown fails the test.
+TEST(SceneJson, FuzzCorpusAndCrashersAreHandled) {
+  int replayed = 0, accepted = 0;
+  for (const char* sub :
+       {"examples/scenes", "tests/bad_inputs/scenes", "tests/fuzz/crashers/scene_fuzz"}) {
+    const fs::path dir = kSourceDir / sub;
+    if (!fs::exists(dir)) continue;  // crashers: none recorded yet
+    for (const auto& entry : fs::directory_iterator(dir)) {
+      SCOPED_TRACE(entry.path().string());
+      ++replayed;
+      try {
+        const Scene s = ParseScene(ReadText(entry.path()));
+        ++accepted;
+        EXPECT_EQ(SceneToJson(ParseScene(SceneToJson(s))), SceneToJson(s));
+      } catch (const SceneError&) {
+      }
     }
   }
+  EXPECT_GE(replayed, 50);
+  EXPECT_GE(accepted, 1);         // the example scene
+  EXPECT_LT(accepted, replayed);  // the bad ones are refused
 }
 
 TEST(SceneJson, MissingFileIsRefused) {

@@ -1,9 +1,12 @@
 // Faults with real processes: the service SIGKILLed mid-campaign and
-// restarted, a cell SIGKILLed mid-trial, a cell whose resets keep failing.
+// restarted, a cell SIGKILLed mid-trial, a cell whose resets keep failing, a
+// closed-loop controller paused (SIGSTOP) for 2 s.
 // After each, every trial ends exactly once and the store is consistent.
+#include <algorithm>
 #include <filesystem>
 #include <fstream>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include <gtest/gtest.h>
@@ -171,6 +174,72 @@ TEST(ServiceFaults, CellWhoseResetsKeepFailingIsQuarantined) {
   int on_c1 = 0;
   for (const auto& t : store->ListTrials(1)) on_c1 += t.cell_id == "c1";
   EXPECT_LE(on_c1, 3);  // quarantined after its third failed reset
+  serve->Signal(SIGTERM);
+  serve->Wait(std::chrono::seconds(40));
+}
+
+// Issue 28: a controller paused for 2 s (a GC pause, a restart) fails the
+// closed-loop trials running meanwhile on their 0.25 s hold time. The trial
+// policy blames the controller, not the cell: the cell is never quarantined,
+// it backs off after each failure (the next trial is not dispatched at
+// once), and every trial is done once the controller is back.
+TEST(ServiceFaults, APausedControllerNeverQuarantinesTheCellAndTheCellBacksOff) {
+  TempDir dir;
+  const std::string db = dir / "paused.db";
+  const std::string domain = std::to_string(TestDomain(15));
+  auto controller =
+      StartArena({"controller", "--name", "pivot_to_angle", "--domain", domain}, dir / "ctl.log");
+  Cells cells(dir, domain, "1", {"c1"});
+  auto serve = StartArena({"serve", "--db", db, "--domain", domain, "--quarantine-after", "3"},
+                          dir / "serve.log");
+  ASSERT_EQ(RunArena({"submit", TestCampaign("closed_loop6.json"), "--db", db}, dir / "submit.out",
+                     std::chrono::seconds(30)),
+            0);
+  // Pause the controller while a trial runs its loop (after one trial is done).
+  ASSERT_TRUE(WaitUntil(
+      [&] {
+        if (CountStates(db, 1)["done"] < 1) return false;
+        for (const auto& t : OpenReadOnly(db)->ListTrials(1))
+          if (t.state == db::TrialState::kDispatched) return true;
+        return false;
+      },
+      kCampaignTimeout))
+      << ReadFile(dir / "serve.log");
+  std::this_thread::sleep_for(std::chrono::milliseconds(300));
+  controller->Signal(SIGSTOP);
+  std::this_thread::sleep_for(std::chrono::seconds(2));
+  controller->Signal(SIGCONT);
+  ASSERT_TRUE(WaitUntil(
+      [&] {
+        auto c = CountStates(db, 1);
+        return c["done"] + c["failed"] == 6;
+      },
+      kCampaignTimeout))
+      << ReadFile(dir / "serve.log");
+  ExpectCampaignConsistent(db, 1, 6);
+  auto store = OpenReadOnly(db);
+  EXPECT_EQ(store->GetCell("c1").state, db::CellState::kHealthy) << ReadFile(dir / "serve.log");
+  EXPECT_EQ(CountStates(db, 1)["done"], 6) << ReadFile(dir / "serve.log");
+  // The failures are named as the controller's, and after each the cell
+  // waited at least its first backoff (0.5 s) before its next claim.
+  std::vector<db::Transition> rows;
+  for (const auto& t : store->ListTrials(1)) {
+    const auto tr = store->ListTransitions(t.id);
+    rows.insert(rows.end(), tr.begin(), tr.end());
+  }
+  std::sort(rows.begin(), rows.end(), [](const auto& a, const auto& b) { return a.at < b.at; });
+  int controller_faults = 0;
+  for (std::size_t i = 0; i < rows.size(); ++i) {
+    if (rows[i].rule.rfind("execute.controller_fault", 0) != 0) continue;
+    ++controller_faults;
+    for (std::size_t j = i + 1; j < rows.size(); ++j) {
+      if (rows[j].rule != "dispatch.claimed") continue;
+      EXPECT_GE(rows[j].at - rows[i].at, 0.45)
+          << "trial " << rows[j].trial_id << " dispatched at once after a failure";
+      break;
+    }
+  }
+  EXPECT_GE(controller_faults, 1) << "the pause failed no trial: the test proved nothing";
   serve->Signal(SIGTERM);
   serve->Wait(std::chrono::seconds(40));
 }

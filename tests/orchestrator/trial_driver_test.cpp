@@ -12,6 +12,7 @@
 #include <gtest/gtest.h>
 #include <spdlog/spdlog.h>
 
+#include "arena/db/retry_rule.hpp"
 #include "arena/schemas/ground_truth.hpp"
 
 namespace arena::orchestrator {
@@ -67,6 +68,8 @@ struct FakeStore : TrialStore {
     int attempt = 1;
     std::int64_t samples = -1;
     std::string outcome;
+    int service_restarts = 0;
+    std::vector<std::string> rules;  // the audit rows' rules, in order
   };
   Faults faults;
   std::map<std::int64_t, T> trials;
@@ -90,6 +93,7 @@ struct FakeStore : TrialStore {
       if (t.state == db::TrialState::kDispatched) {
         t.state = db::TrialState::kPlanned;
         ++t.attempt;
+        ++t.service_restarts;
         r.requeued.push_back(id);
       } else if (t.state == db::TrialState::kResetting) {
         t.state = db::TrialState::kResetFailed;
@@ -142,32 +146,40 @@ struct FakeStore : TrialStore {
       trials.at(id).samples = n;
     });
   }
+  // The same retry rule as the real store (db::DecideRetry), not a copy of it.
   db::TrialState RetryTrial(std::int64_t id, int attempt, const std::string&, int max_attempts,
-                            double) override {
+                            double, const std::string& rule) override {
     faults.Hit("RetryTrial");
     T& t = trials.at(id);
     if (t.attempt != attempt) throw db::StoreError(K::kStaleAttempt, "stale");
-    if (attempt >= max_attempts) {
+    const db::RetryVerdict verdict = db::DecideRetry(attempt, t.service_restarts, max_attempts);
+    if (verdict.give_up) {
       Move(id, attempt, db::TrialState::kFailed);
-      return t.state;
+      t.outcome = "failed";
+    } else {
+      Move(id, attempt, db::TrialState::kPlanned);
+      ++t.attempt;
     }
-    Move(id, attempt, db::TrialState::kPlanned);
-    ++t.attempt;
+    t.rules.push_back(rule + " " + verdict.rule);
     return t.state;
   }
-  void FailTrial(std::int64_t id, int attempt, const std::string&,
-                 const std::string& outcome) override {
+  void FailTrial(std::int64_t id, int attempt, const std::string&, const std::string& outcome,
+                 const std::string& rule) override {
     faults.Hit("FailTrial");
     Move(id, attempt, db::TrialState::kFailed);
     trials.at(id).outcome = outcome;
+    trials.at(id).rules.push_back(rule);
   }
-  void BeginReset(std::int64_t id, int attempt) override {
+  void BeginReset(std::int64_t id, int attempt, const std::string& rule) override {
     faults.Hit("BeginReset");
     Move(id, attempt, db::TrialState::kResetting);
+    trials.at(id).rules.push_back(rule);
   }
-  void CompleteReset(std::int64_t id, int attempt, const db::ResetReport& r) override {
+  void CompleteReset(std::int64_t id, int attempt, const db::ResetReport& r,
+                     const std::string& rule) override {
     faults.Hit("CompleteReset");
     Move(id, attempt, r.ok ? db::TrialState::kResetDone : db::TrialState::kResetFailed);
+    trials.at(id).rules.push_back(rule);
   }
   void RecordPrediction(std::int64_t id, int attempt, const db::Prediction&) override {
     faults.Hit("RecordPrediction");
@@ -588,8 +600,17 @@ TEST(TrialDriver, AMissedDeadlineRetriesTheTrial) {
   h.answered = h.transport.sent.size();  // the cell never answers
   h.t += std::chrono::seconds(40);
   h.driver->Tick(false);
-  EXPECT_EQ(h.store.trials[1].attempt, 2);     // retried (and, the fake store not backing off,
-  EXPECT_EQ(h.driver->counters().retried, 1);  // dispatched again at once)
+  EXPECT_EQ(h.store.trials[1].attempt, 2);  // retried
+  EXPECT_EQ(h.driver->counters().retried, 1);
+  EXPECT_EQ(h.store.trials[1].rules.back(), "execute.deadline_missed retry.attempts_left");
+  // The cell backs off (issue 28): not dispatched again at once ...
+  EXPECT_EQ(h.Sent(msg::PHASE_EXECUTE), 1);
+  h.t += std::chrono::milliseconds(300);
+  h.driver->Tick(false);
+  EXPECT_EQ(h.Sent(msg::PHASE_EXECUTE), 1);
+  // ... but after its backoff (0.5 s for a first failure).
+  h.t += std::chrono::milliseconds(300);
+  h.driver->Tick(false);
   EXPECT_EQ(h.Sent(msg::PHASE_EXECUTE), 2);
 }
 
@@ -640,6 +661,43 @@ TEST(TrialDriver, ResumeFinishesWhatARestartLeftThroughTheSameSteps) {
     EXPECT_EQ(h.store.trials[i].state, db::TrialState::kDone) << "trial " << i;
   EXPECT_EQ(h.store.trials[4].attempt, 2);
   EXPECT_EQ(h.driver->counters().recovered, 2);
+}
+
+// Issue 28: a controller paused past its hold time fails trial after trial;
+// none counts against the cell, which is never quarantined, backs off
+// between them, and runs the trials once the controller is back.
+TEST(TrialDriver, ControllerFaultsNeverQuarantineTheCellAndTheCellBacksOff) {
+  Harness h(4);
+  h.execute_answer = msg::STATE_FAILED;
+  h.execute_failure = msg::FAILURE_CONTROLLER;
+  h.Start();
+  for (int i = 0; i < 60; ++i) {  // 6 s of a controller that answers nothing
+    h.t += std::chrono::milliseconds(100);
+    h.driver->Tick(false);
+    h.Answer();
+  }
+  EXPECT_EQ(h.store.faults.calls["RecordCellResult"], 0) << "a controller fault blamed the cell";
+  EXPECT_FALSE(h.store.quarantined.count("c1"));
+  // Backed off: 0.5 + 1 + 2 + 4 s between the failures, so at most 4 or 5 in 6 s.
+  EXPECT_LE(h.Sent(msg::PHASE_EXECUTE), 5);
+  EXPECT_GE(h.Sent(msg::PHASE_EXECUTE), 3);
+  bool named = false;
+  for (const auto& [id, t] : h.store.trials)
+    for (const auto& r : t.rules) named = named || r.rfind("execute.controller_fault", 0) == 0;
+  EXPECT_TRUE(named);
+  h.execute_answer = msg::STATE_EXECUTED;  // the controller is back
+  ASSERT_TRUE(h.RunToEnd(2000));
+  EXPECT_FALSE(h.store.quarantined.count("c1"));
+}
+
+TEST(TrialDriver, EveryResetItBeginsNamesItsRule) {
+  Harness h;
+  h.Start();
+  ASSERT_TRUE(h.RunToEnd());
+  const auto& rules = h.store.trials[1].rules;
+  ASSERT_EQ(rules.size(), 2u);
+  EXPECT_EQ(rules[0], kResetAfterExecute);
+  EXPECT_EQ(rules[1], "reset.verified");
 }
 
 TEST(TrialDriver, NoTrialIsDispatchedBeforeRecoveryRan) {

@@ -76,6 +76,7 @@
 #include <optional>
 #include <stdexcept>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include "arena/db/outcomes.hpp"
@@ -289,6 +290,10 @@ struct Transition {
   double at = 0;  // s since epoch
   std::string cell_id;
   std::string reason;
+  // The name of the rule that decided it (the service's trial policy,
+  // orchestrator/trial_policy.hpp, or the store's own edge, e.g.
+  // "dispatch.claimed"); "" in rows written before migration 15.
+  std::string rule;
 };
 
 // A cell's reset report (TrialStatus of a RESET phase).
@@ -599,21 +604,26 @@ class Store {
   std::optional<ClaimedTrial> ClaimNextTrial(const std::string& cell_id);
   // What ClaimNextTrial would return now, without writing (to aim a reset).
   std::optional<ClaimedTrial> PeekNextTrial(const std::string& cell_id) const;
+  // `rule` (these four): the name of the caller's rule that decided the
+  // step, written to the audit row (trial_transitions.rule).
+  //
   // dispatched -> planned with attempt+1 and not_before = now + backoff_s; or
-  // -> failed (outcome "failed") when attempt >= max_attempts, not counting
-  // attempts that a service restart cut short (RecoverAfterRestart).
+  // -> failed (outcome "failed") when the retry rule (retry_rule.hpp:
+  // DecideRetry, which does not count attempts a service restart cut short)
+  // gives up. The audit row names `rule` and the retry rule's verdict.
   // @returns the new state.
   TrialState RetryTrial(std::int64_t trial_id, int attempt, const std::string& reason,
-                        int max_attempts, double backoff_s);
+                        int max_attempts, double backoff_s, std::string_view rule = {});
   // any non-terminal -> failed, outcome `outcome` (e.g. "refused").
   void FailTrial(std::int64_t trial_id, int attempt, const std::string& reason,
-                 const std::string& outcome = "failed");
+                 const std::string& outcome = "failed", std::string_view rule = {});
   // executed | reset_failed -> resetting.
-  void BeginReset(std::int64_t trial_id, int attempt);
+  void BeginReset(std::int64_t trial_id, int attempt, std::string_view rule = {});
   // resetting -> reset_done | reset_failed; stores the observed start state on
   // the cell (the next trial claimed there inherits it; a claim consumes it)
   // and the report on the trial.
-  void CompleteReset(std::int64_t trial_id, int attempt, const ResetReport& report);
+  void CompleteReset(std::int64_t trial_id, int attempt, const ResetReport& report,
+                     std::string_view rule = {});
   // Stores a prediction (replacing one with the same model_key for this
   // attempt); reset_done | reset_failed -> predicted on the first one.
   // Allowed in reset_done, reset_failed, predicted.

@@ -99,10 +99,19 @@ std::string CheckTrueSample(const mechanics::TrajectorySample& sample,
 // Returns false when the backend must stop streaming.
 using SampleSink = std::function<bool(const mechanics::TrajectorySample&)>;
 
+// Why a backend's Execute failed, typed for the service (the cell sends it as
+// TrialStatus.failure; nobody parses the reason's words).
+enum class ExecuteFailure {
+  kNone,
+  kSimulation,  // a deterministic model failure: a re-run fails the same way (the trial fails)
+  kBackend,     // the backend (a driver, hardware, a dataset) failed: a re-run may do better
+};
+
 struct ExecuteOutcome {
   bool ok = false;
-  std::string reason;              // why not ok ("simulation: ...", "driver: ...")
-  bool solver_failure = false;     // a deterministic model failure (a re-run fails the same way)
+  std::string reason;  // why not ok ("simulation: ...", "driver: ...")
+  // Set by a simulator's failure; a !ok outcome left at kNone is the backend's (kBackend).
+  ExecuteFailure failure = ExecuteFailure::kNone;
   std::string detail_json = "{}";  // backend statistics stored with the trial
   double simulate_wall_s = 0;
 };

@@ -24,8 +24,12 @@
 // missed deadline or a cell that died (liveliness lost, participant gone)
 // send the trial back to planned with attempt + 1 after a backoff
 // (RetryTrial; lineage kept), or to failed when attempts run out. A cell that
-// fails `quarantine_after` phases in a row, or whose reset keeps failing, is
-// quarantined and gets no more trials. A late message from an older attempt
+// fails `quarantine_after` phases in a row by its own fault, or whose reset
+// keeps failing, is quarantined and gets no more trials; a failure caused by
+// the controller, the service itself or the store never counts against the
+// cell, and after any failure the cell backs off (cell_backoff_s, doubling)
+// before its next trial (trial_policy.hpp decides all of it, by named rules
+// written to each trial's audit rows). A late message from an older attempt
 // is ignored (the store refuses stale attempts). A store that can no longer
 // be written (full, read-only, corrupt, I/O error) is nobody's trial or cell
 // fault: Run() throws that db::StoreError and the service stops (`arena
@@ -56,7 +60,9 @@ struct ServiceOptions {
   dds::NetworkOptions network;       // default: this host only
   int max_attempts = 3;              // executions per trial before it fails
   double retry_backoff_s = 1.0;      // first retry waits this long; doubles per attempt
-  int quarantine_after = 3;          // consecutive failed phases of a cell
+  int quarantine_after = 3;          // consecutive failed phases of a cell (its own fault)
+  double cell_backoff_s = 0.5;       // after a failed phase the cell waits this long before
+  double cell_backoff_max_s = 8.0;   //   its next trial, doubling per failure in a row, to this
   double execute_timeout_s = 30.0;   // wall-clock budget of EXECUTE beyond the trial's
                                      //   duration x the cell's speed
   double reset_timeout_s = 60.0;     // wall-clock budget of RESET

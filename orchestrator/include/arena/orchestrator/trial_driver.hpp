@@ -1,9 +1,12 @@
-// The service's decisions, without DDS, SQLite or a real clock: events in
+// The service's trial lifecycle, without DDS, SQLite or a real clock: events in
 // (a cell announced / lost / a status / a ground-truth batch / a prediction /
 // a tick), actions out through three ports (the store's trial steps, the
 // command transport, the predictor). Service (service.hpp) is the thin shell
 // that owns the DDS endpoints, the SQLite store and the predictor threads and
 // feeds this driver; tests drive it with a fake clock, transport and store.
+// Every decision about a trial (retry, fail, blame the cell, back off, begin
+// or close a reset, drop a late message) is a rule of trial_policy.hpp; the
+// driver executes it and writes the rule's name to the trial's audit row.
 //
 // ## One cell, as the driver sees it (one function, SetPhase, changes it)
 //
@@ -17,6 +20,7 @@
 //        │  │                    resetting ◀──── BeginReset ──────────┘ Ingest::Finish
 //        │  │                                                         │
 //        │  └── REFUSED / FAILED / malformed stream / deadline ───────┘ RetryTrial|FailTrial
+//        │      (trial_policy.hpp decides which, whom to blame, the backoff)
 //        ▼
 //   lost (liveliness, participant gone): phase aborted, cell `gone`; back on
 //   its next announce, its liveliness, or when another process with its id is
@@ -64,6 +68,7 @@
 #include "arena/mechanics/scene.hpp"
 #include "arena/mechanics/simulate.hpp"
 #include "arena/orchestrator/service.hpp"
+#include "arena/orchestrator/trial_policy.hpp"
 #include "arena/schemas/arena.h"
 
 namespace arena::orchestrator {
@@ -91,12 +96,17 @@ class TrialStore {
   virtual std::optional<db::ClaimedTrial> ClaimNextTrial(const std::string& cell_id) = 0;
   virtual std::optional<db::ClaimedTrial> PeekNextTrial(const std::string& cell_id) = 0;
   virtual std::unique_ptr<GroundTruthSink> BeginIngest(std::int64_t trial_id, int attempt) = 0;
+  // `rule` (these four): the trial policy's rule that decided the step
+  // (trial_policy.hpp), for the audit row. RetryTrial applies db::DecideRetry
+  // (db/retry_rule.hpp), as every implementation must.
   virtual db::TrialState RetryTrial(std::int64_t trial_id, int attempt, const std::string& reason,
-                                    int max_attempts, double backoff_s) = 0;
+                                    int max_attempts, double backoff_s,
+                                    const std::string& rule) = 0;
   virtual void FailTrial(std::int64_t trial_id, int attempt, const std::string& reason,
-                         const std::string& outcome) = 0;
-  virtual void BeginReset(std::int64_t trial_id, int attempt) = 0;
-  virtual void CompleteReset(std::int64_t trial_id, int attempt, const db::ResetReport& report) = 0;
+                         const std::string& outcome, const std::string& rule) = 0;
+  virtual void BeginReset(std::int64_t trial_id, int attempt, const std::string& rule) = 0;
+  virtual void CompleteReset(std::int64_t trial_id, int attempt, const db::ResetReport& report,
+                             const std::string& rule) = 0;
   // RecordPrediction then FinishTrial (each its own transaction; both idempotent enough
   // to be retried: a prediction of the same model_key replaces the previous one).
   virtual void RecordPrediction(std::int64_t trial_id, int attempt, const db::Prediction& p) = 0;

@@ -1,0 +1,49 @@
+// A cell's start-pose and pusher rules; the contract is in trial_start.hpp.
+#include "trial_start.hpp"
+
+#include <algorithm>
+#include <cmath>
+
+#include "arena/mechanics/scene_json.hpp"
+
+namespace arena::executors {
+
+PusherChange ChangeOfPusher(const std::optional<mechanics::PusherSpec>& now,
+                            const std::optional<mechanics::PusherSpec>& next) {
+  if (now.has_value() != next.has_value()) return {true, 0};
+  if (!now) return {};
+  const bool same_tool = now->type == next->type && now->length == next->length &&
+                         now->radius == next->radius && now->axis == next->axis &&
+                         now->normal == next->normal;
+  if (!same_tool) return {true, 0};
+  return {false, (next->position - now->position).norm()};
+}
+
+void TrialStart::ResetEnded(std::uint64_t seed, const reset::Pose& target,
+                            const reset::Pose& pose) {
+  left_ = Left{seed, target, pose};
+}
+
+std::optional<reset::Pose> TrialStart::StartPose(std::uint64_t seed, const reset::Pose& target,
+                                                 const reset::ResetParams& params,
+                                                 bool emulated) const {
+  if (!emulated) return std::nullopt;
+  if (left_ && left_->seed == seed && left_->target.position == target.position &&
+      left_->target.orientation.coeffs() == target.orientation.coeffs()) {
+    return left_->pose;
+  }
+  return reset::PlacementForTrial(target, params, seed).true_pose;
+}
+
+mechanics::Scene TrialStart::PlacedAt(mechanics::Scene scene,
+                                      const std::optional<reset::Pose>& start) {
+  if (!start) return scene;  // the planned pose
+  const Eigen::Matrix3d R = start->orientation.normalized().toRotationMatrix();
+  scene.object.pose.position = start->position;
+  scene.object.pose.rpy = {std::atan2(R(2, 1), R(2, 2)), std::asin(std::clamp(-R(2, 0), -1.0, 1.0)),
+                           std::atan2(R(1, 0), R(0, 0))};
+  mechanics::SeatFingers(&scene);  // throws SceneError when a finger misses the object
+  return scene;
+}
+
+}  // namespace arena::executors

@@ -1,0 +1,144 @@
+// Every decision the service takes about a trial, as pure functions of typed
+// inputs: what happens to the trial (wait, collect its stream, retry, fail,
+// close its reset), whom the failure is counted against, whether the cell
+// backs off, and the NAME of the rule that decided. The trial driver
+// (trial_driver.hpp) only executes decisions; each rule's name goes to the
+// trial's audit row (trial_transitions.rule), so "why did trial 17 go to
+// resetting?" is answered by one row and one row of the policy's table test
+// (tests/orchestrator/trial_policy_test.cpp).
+//
+// ## Who is to blame (issue 28)
+//
+//   a failure caused by ...            counts against the cell   backs the cell off
+//   the cell (deadline, stream, crash)         yes                      yes
+//   the controller (closed loop)               no                       yes
+//   the service itself (a command unsent)      no                       yes
+//   the store (refused the ground truth)       no                       yes
+//   the scene (the simulator cannot run it)    no (the trial fails)     no
+//   nobody (the cell lost, restarted, claimed) no                       no
+//   (the predictor's failures never reach the cell: a prediction is stored
+//    with its status, the trial is done either way.)
+//
+// A cell that fails `quarantine_after` phases in a row that were ITS fault is
+// quarantined; after any failure the cell waits CellBackoff_s before its next
+// trial, so a paused controller or a store under load does not burn trial
+// after trial in a second.
+//
+// ## The retry rule
+//
+// Whether a retried trial runs again or fails for good is db::DecideRetry
+// (db/retry_rule.hpp), applied by the store inside RetryTrial's transaction.
+#pragma once
+
+#include <string_view>
+
+#include "arena/db/retry_rule.hpp"
+
+namespace arena::orchestrator {
+
+// What a cell is doing, as the driver sees it.
+enum class CellPhase { kIdle, kExecuting, kResetting };
+
+// The phase a cell's status is about (msg::Phase).
+enum class StatusPhase { kExecute, kReset };
+
+// A cell's status (msg::TrialState).
+enum class StatusState { kAccepted, kExecuted, kResetDone, kRefused, kFailed };
+
+// Why a phase FAILED, as the cell typed it (msg::FailureKind).
+enum class FailureKind {
+  kNone,         // untyped (an older cell)
+  kSimulation,   // the cell's simulator cannot run the scene; a re-run is identical
+  kDeadline,     // the cell saw the phase's deadline pass
+  kInterrupted,  // the cell is shutting down or now serves another service
+  kReset,        // the reset did not reach its target
+  kInternal,     // a bug, a DDS failure or a failed backend (driver, hardware) in the cell
+  kController,   // the closed loop's controller: gone, silent past its hold time, a bad command
+};
+
+// What the service itself observed about a cell's phase.
+enum class ServiceEvent {
+  kDeadlineMissed,     // no final status by the phase's deadline (+ 2 s)
+  kStreamIncomplete,   // EXECUTED, but the ground truth did not all arrive in time
+  kStreamMalformed,    // a batch out of order, a bad value in a sample
+  kCommandNotSent,     // the service could not send the phase's command
+  kStoreRefusedTruth,  // the store refused the ground truth (not a busy store: that waits)
+  kCellLost,           // its participant or writer went away
+  kCellRestarted,      // a new process with its id announced itself
+  kCellServesAnother,  // it now serves another service (or nobody)
+  kInvalidScene,       // the claimed trial's scene does not parse (found before dispatch)
+};
+
+// Whom a failure is counted against.
+enum class Party { kNobody, kCell, kController, kService, kStore, kScene };
+
+// What happens to the trial of the phase.
+enum class TrialStep {
+  kIgnore,         // a late or repeated message of a phase already settled: nothing
+  kAwait,          // the phase goes on (ACCEPTED)
+  kCollectStream,  // EXECUTED: wait for the rest of the ground truth, then publish it
+  kRetry,          // the attempt ended: RetryTrial (the retry rule decides run again / fail)
+  kFail,           // the trial fails now, with `outcome`
+  kResetDone,      // CompleteReset ok
+  kResetFailed,    // CompleteReset not ok (not observed)
+};
+
+struct Decision {
+  TrialStep trial = TrialStep::kIgnore;
+  Party blame = Party::kNobody;  // kCell: counts towards quarantine
+  bool back_off = false;         // the cell waits CellBackoff_s before its next trial
+  double pause_s = 0;            // or (a refusal) this fixed pause
+  const char* outcome = "";      // kFail: the trial's outcome
+  const char* rule = "";         // the rule's name ("execute.controller_fault")
+
+  bool counts_against_cell() const { return blame == Party::kCell; }
+  bool ends_phase() const { return trial != TrialStep::kIgnore && trial != TrialStep::kAwait; }
+};
+
+// A status of the cell's current (trial, attempt), while the cell is in `phase`.
+Decision DecideStatus(CellPhase phase, StatusPhase status_phase, StatusState state,
+                      FailureKind failure);
+
+// Something the service observed while the cell is in `phase`.
+Decision DecideServiceEvent(CellPhase phase, ServiceEvent event);
+
+// A message (status, ground truth) that names another service session, or
+// another trial or attempt than the cell's current one, or arrives while the
+// cell is idle: a late or repeated message of a phase already settled.
+// nullptr: it is current; otherwise the rule that drops it.
+const char* LateMessageRule(bool our_session, CellPhase phase, bool same_trial_and_attempt);
+
+// A prediction came back for (trial, attempt).
+enum class PredictionStep {
+  kDrop,                  // the trial moved on (another attempt): the prediction is stale
+  kWaitForReset,          // its reset is still running: recorded when the reset ends
+  kCloseResetThenRecord,  // nobody resets it any more: close the reset as not observed, record
+  kRecord,                // record it, then finish the trial
+};
+struct PredictionDecision {
+  PredictionStep step = PredictionStep::kRecord;
+  const char* rule = "";
+};
+// `awaiting_reset`: the trial is in executed or resetting.
+PredictionDecision DecidePrediction(bool same_attempt, bool awaiting_reset, bool reset_in_flight);
+
+// Why a reset begins (the rule on its audit row).
+inline constexpr const char* kResetAfterExecute = "reset.after_execute";
+inline constexpr const char* kResetAfterRestart = "reset.after_restart";
+inline constexpr const char* kResetUnconfirmedAtPrediction = "reset.unconfirmed_at_prediction";
+
+// How long a cell waits before its next trial after `failures_in_a_row`
+// (>= 1) failed phases, whoever caused them: base_s doubling per failure,
+// at most max_s. A refused trial waits kRefusedPause_s (another cell may take it).
+double CellBackoff_s(int failures_in_a_row, double base_s, double max_s);
+inline constexpr double kRefusedPause_s = 0.5;
+
+const char* ToString(CellPhase phase);
+const char* ToString(StatusPhase phase);
+const char* ToString(StatusState state);
+const char* ToString(FailureKind kind);
+const char* ToString(ServiceEvent event);
+const char* ToString(Party party);
+const char* ToString(TrialStep step);
+
+}  // namespace arena::orchestrator
