@@ -96,6 +96,34 @@ TrialChecks CheckTrial(const Recording& r, const Resampled& s, const CheckOption
                                           "): frame or calibration off");
   }
 
+  // The push angle: from the inward normal at the start contact to the
+  // pusher's travel, in the object's start frame; against the lab's own.
+  {
+    constexpr double kDeg = 180 / 3.14159265358979323846;
+    const double c0 = std::cos(s.object[0][2]), s0 = std::sin(s.object[0][2]);
+    const auto local = [&](double dx, double dy) {
+      return std::array<double, 2>{c0 * dx + s0 * dy, -s0 * dx + c0 * dy};
+    };
+    const auto p0 = local(s.pusher[0][0] - s.object[0][0], s.pusher[0][1] - s.object[0][1]);
+    const auto q = NearestPoint(r.shape.outline, p0[0], p0[1]);
+    const double side = SignedDistance(r.shape.outline, p0[0], p0[1]) < 0 ? -1.0 : 1.0;
+    const double nx = side * (q[0] - p0[0]), ny = side * (q[1] - p0[1]);
+    const auto d = local(s.pusher[n - 1][0] - s.pusher[0][0], s.pusher[n - 1][1] - s.pusher[0][1]);
+    c.push_angle = std::atan2(nx * d[1] - ny * d[0], nx * d[0] + ny * d[1]);
+    if (!std::isnan(r.stated_push_angle)) {
+      const double diff =
+          std::remainder(c.push_angle - r.stated_push_angle, 2 * 3.14159265358979323846);
+      if (std::abs(diff) > o.angle_fail) {
+        char b[200];
+        std::snprintf(b, sizeof b,
+                      "the pusher travels at %.1f deg from the inward normal, the recording "
+                      "states %.1f deg (tolerance %.1f): frame, outline or parameters off",
+                      c.push_angle * kDeg, r.stated_push_angle * kDeg, o.angle_fail * kDeg);
+        fail_pose("push_angle_mismatch", b);
+      }
+    }
+  }
+
   // Force stream: frozen (a sensor that stopped updating repeats its last
   // row), and its zero (the force read while nothing pushes).
   c.force_offset = NAN;

@@ -27,28 +27,6 @@ constexpr double kGravity = 9.81;
 
 double Round(double v, double unit) { return std::round(v / unit) * unit; }
 
-// The closest point of the polygon's boundary to (x, y).
-std::array<double, 2> NearestPoint(const std::vector<std::array<double, 2>>& poly, double x,
-                                   double y) {
-  double best = INFINITY;
-  std::array<double, 2> out{poly[0][0], poly[0][1]};
-  for (std::size_t i = 0, j = poly.size() - 1; i < poly.size(); j = i++) {
-    const auto& a = poly[j];
-    const auto& b = poly[i];
-    const double ex = b[0] - a[0], ey = b[1] - a[1];
-    const double len2 = ex * ex + ey * ey;
-    const double u =
-        len2 > 0 ? std::clamp(((x - a[0]) * ex + (y - a[1]) * ey) / len2, 0.0, 1.0) : 0.0;
-    const double px = a[0] + u * ex, py = a[1] + u * ey;
-    const double d = std::hypot(x - px, y - py);
-    if (d < best) {
-      best = d;
-      out = {px, py};
-    }
-  }
-  return out;
-}
-
 // Where the pusher meets the object at sample k, in T: the unit normal into
 // the object (from the pusher's centre towards the outline's closest point),
 // and the gap of the disk (m).
@@ -271,6 +249,7 @@ ojson ReportJson(const std::vector<ImportedTrial>& trials) {
                  {"force_drift_n", num(tr.checks.force_drift)},
                  {"object_travel_m", tr.checks.object_travel},
                  {"object_rotation_rad", tr.checks.object_rotation},
+                 {"push_angle_rad", tr.checks.push_angle},
                  {"findings", findings}});
   }
   return a;

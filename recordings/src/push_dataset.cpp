@@ -212,6 +212,7 @@ Recording ReadPushFile(const std::string& path, const ShapesTable& shapes) {
                  {"contact_i", p.i},      {"contact_s", p.s},
                  {"push_angle_rad", p.t}, {"file", fs::path(path).filename().string()}};
   r.parameters_json = params.dump();
+  r.stated_push_angle = p.t;  // t: from the inward normal to the push (checked on the poses)
   return r;
 }
 

@@ -128,4 +128,25 @@ double SignedDistance(const std::vector<std::array<double, 2>>& poly, double x, 
   return inside ? -best : best;
 }
 
+std::array<double, 2> NearestPoint(const std::vector<std::array<double, 2>>& poly, double x,
+                                   double y) {
+  double best = INFINITY;
+  std::array<double, 2> out{poly[0][0], poly[0][1]};
+  for (std::size_t i = 0, j = poly.size() - 1; i < poly.size(); j = i++) {
+    const auto& a = poly[j];
+    const auto& b = poly[i];
+    const double ex = b[0] - a[0], ey = b[1] - a[1];
+    const double len2 = ex * ex + ey * ey;
+    const double u =
+        len2 > 0 ? std::clamp(((x - a[0]) * ex + (y - a[1]) * ey) / len2, 0.0, 1.0) : 0.0;
+    const double px = a[0] + u * ex, py = a[1] + u * ey;
+    const double d = std::hypot(x - px, y - py);
+    if (d < best) {
+      best = d;
+      out = {px, py};
+    }
+  }
+  return out;
+}
+
 }  // namespace arena::recordings

@@ -314,6 +314,19 @@ TEST_F(ImportTest, ASlightlyInsideStartIsReportedAndKept) {
   EXPECT_FALSE(c.findings[0].fails);
 }
 
+TEST_F(ImportTest, APushAngleOffTheStatedOneFailsThePoses) {
+  // The name says t = 0.349 rad (20 deg from the inward normal); the poses push straight in.
+  WriteH5(data_ / "motion_surface=abs_shape=rect1_a=0_v=50_i=0.000_s=0.500_t=0.349.h5", Push());
+  const ImportReport report = Import();
+  const auto& c = report.trials[0].checks;
+  EXPECT_NEAR(c.push_angle, 0.0, 1e-3);
+  EXPECT_FALSE(c.pose_usable) << report.text;
+  ASSERT_FALSE(c.findings.empty());
+  EXPECT_EQ(c.findings[0].check, "push_angle_mismatch");
+  EXPECT_NE(c.findings[0].detail.find("states 20.0 deg"), std::string::npos)
+      << c.findings[0].detail;
+}
+
 // Bad input: an ImportError naming the file and the reason, nothing written.
 struct BadCase {
   const char* what;

@@ -77,6 +77,16 @@ TEST_F(PushDatasetE2e, ImportsAllFiftyTrialsAndReportsTheirDefects) {
   for (const auto& [shape, n] : out_of_order) oo += n;
   EXPECT_GT(oo, 0);  // the README: a few object_pose stamps are out of order
 
+  // The push angle the file names (t) agrees with the poses within 2.5 deg
+  // (the README: 0.2 to 1.9 deg with its onset rule).
+  for (const auto& t : report) {
+    const std::string source = t["source"];
+    const auto at = source.find("_t=");
+    ASSERT_NE(at, std::string::npos) << source;
+    const double stated = std::stod(source.substr(at + 3));
+    EXPECT_LT(std::abs(t["push_angle_rad"].get<double>() - stated), 2.5 * M_PI / 180) << source;
+  }
+
   int usable_force = 0;
   for (const auto& t : report) usable_force += t["force_usable"].get<bool>();
   EXPECT_EQ(usable_force, 50 - 13 - 22);

@@ -14,6 +14,7 @@
 
 #include <array>
 #include <cstdint>
+#include <limits>
 #include <stdexcept>
 #include <string>
 #include <vector>
@@ -63,6 +64,10 @@ struct Recording {
   // in T (an adaptor converts its sensor's convention); empty: not measured.
   Stream force;
   std::string parameters_json = "{}";  // the push as the lab describes it (JSON object)
+  // The push angle the lab states (rad): from the inward normal of the outline
+  // at the pusher's start to the pusher's travel, counter-clockwise; NaN:
+  // not stated. Checked against the poses.
+  double stated_push_angle = std::numeric_limits<double>::quiet_NaN();
 };
 
 // The streams of one recording on one clock: t_k = k / rate from the latest
@@ -103,6 +108,7 @@ struct TrialChecks {
   double force_drift = 0;      // N: change of that offset between the start and the end
   double object_travel = 0;    // m: |final - start| object position
   double object_rotation = 0;  // rad: final - start angle
+  double push_angle = 0;       // rad: the measured push angle (as Recording::stated_push_angle)
 };
 
 // Tolerances of the checks (docs/real_data.md says why these).
@@ -115,6 +121,7 @@ struct CheckOptions {
   double frozen_range = 1e-9;    // N: every force channel within this: frozen
   double offset_fail = 0.5;      // N: |force| while clear above this: an offset
   double drift_fail = 0.5;       // N: the offset changing by more than this: a drift
+  double angle_fail = 0.0873;    // rad (5 deg): measured push angle off the stated one
 };
 
 TrialChecks CheckTrial(const Recording& recording, const Resampled& streams,
@@ -123,5 +130,8 @@ TrialChecks CheckTrial(const Recording& recording, const Resampled& streams,
 // Signed distance (m) from a point to a simple polygon's boundary: negative
 // inside. The polygon in the point's frame.
 double SignedDistance(const std::vector<std::array<double, 2>>& polygon, double x, double y);
+// The closest point of the polygon's boundary to (x, y).
+std::array<double, 2> NearestPoint(const std::vector<std::array<double, 2>>& polygon, double x,
+                                   double y);
 
 }  // namespace arena::recordings
