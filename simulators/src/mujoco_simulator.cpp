@@ -422,7 +422,7 @@ class TruthLimits {
   // The largest penetration (m) an active pad contact may have: beyond it the
   // pose is off by more than the truth's accuracy and a sphere pad's contact
   // normal turns with its depth.
-  double PenetrationLimit() const { return 0.25 * st_.pad_radius; }
+  double PenetrationLimit() const { return 0.5 * st_.pad_radius; }
 
   // "" while within the limits; otherwise which limit, when, by how much.
   // `object_geom`, `pad_of_geom`: the run's ids; `start`: the object's
@@ -444,7 +444,7 @@ class TruthLimits {
         return Fail("penetration", t,
                     "a pad sinks " + Num(-c.dist) + " m into the object (limit " +
                         Num(PenetrationLimit()) +
-                        " m, a quarter of the pad radius): the soft contact cannot carry this load "
+                        " m, half the pad radius): the soft contact cannot carry this load "
                         "(grip, weight or pusher speed) at this timestep");
       }
     }
