@@ -348,8 +348,8 @@ MujocoSettings ForScene(const mechanics::Scene& scene, const MujocoSettings& in)
   // Load and speed: a soft contact sinks by about (1 - d)/d · a · timeconst²
   // (a: the acceleration its force gives the bodies it separates) and its
   // friction creeps at a speed proportional to (1 - d)/d. The canonical scene
-  // (a = 10 N x (1/0.05 + 1/0.2) /kg = 250 m/s², pusher 1 cm/s) sinks about
-  // 90 µm and creeps about 0.1 mm/s; a scene that loads its contacts harder
+  // (a = 10 N x (1/0.05 + 1/0.2) /kg = 250 m/s², pusher 1 cm/s) keeps the
+  // settings; a scene that loads its contacts harder
   // (relative to its size) or pushes slower than 1 mm/s gets (1 - d)/d
   // divided by the ratio, then the time constant down to 2 timesteps.
   const double m_o = scene.object.mass, m_f = st.finger_mass;
