@@ -116,9 +116,10 @@ Judged Judge(const m::Scene& scene, const m::SimulationResult& r) {
   const Eigen::Vector3d error = last.position - expected;
   const double off = error.norm();
   if (!(off <= tol)) {
-    std::snprintf(buf, sizeof buf,
-                  "position at t = %.3g s off (0, 0, vt) by (%.2g, %.2g, %.2g) m (tolerance %.2g m)",
-                  last.t, error.x(), error.y(), error.z(), tol);
+    std::snprintf(
+        buf, sizeof buf,
+        "position at t = %.3g s off (0, 0, vt) by (%.2g, %.2g, %.2g) m (tolerance %.2g m)", last.t,
+        error.x(), error.y(), error.z(), tol);
     return {Verdict::kSilent, buf};
   }
   const Eigen::AngleAxisd turn(last.orientation);
@@ -135,8 +136,9 @@ Judged Judge(const m::Scene& scene, const m::SimulationResult& r) {
   if (n > 0) {
     const double mean = sum / n;
     if (!(std::abs(mean - force) <= 0.02 * force)) {
-      std::snprintf(buf, sizeof buf, "pusher force %.4g N, expected 2 mu N + m g = %.4g N (%+.1f %%)",
-                    mean, force, 100 * (mean / force - 1));
+      std::snprintf(buf, sizeof buf,
+                    "pusher force %.4g N, expected 2 mu N + m g = %.4g N (%+.1f %%)", mean, force,
+                    100 * (mean / force - 1));
       return {Verdict::kSilent, buf};
     }
   }

@@ -491,8 +491,8 @@ MujocoSettings ForScene(const mechanics::Scene& scene, const MujocoSettings& in)
   // Load and speed: a soft contact sinks by about (1 - d)/d · a · timeconst²
   // (a: the acceleration its force gives the bodies it separates) and its
   // friction creeps at a speed proportional to (1 - d)/d. The canonical scene
-  // (a = 10 N x (1/0.05 + 1/0.2) /kg = 250 m/s², pusher 1 cm/s) sinks about
-  // 90 µm and creeps about 0.1 mm/s; a scene that loads its contacts harder
+  // (a = 10 N x (1/0.05 + 1/0.2) /kg = 250 m/s², pusher 1 cm/s) keeps the
+  // settings; a scene that loads its contacts harder
   // (relative to its size) or pushes slower than 1 mm/s gets (1 - d)/d
   // divided by the ratio, then the time constant down to 2 timesteps.
   const double m_o = scene.object.mass, m_f = st.finger_mass;
@@ -565,7 +565,7 @@ class TruthLimits {
   // The largest penetration (m) an active pad contact may have: beyond it the
   // pose is off by more than the truth's accuracy and a sphere pad's contact
   // normal turns with its depth.
-  double PenetrationLimit() const { return 0.25 * st_.pad_radius; }
+  double PenetrationLimit() const { return 0.5 * st_.pad_radius; }
 
   // "" while within the limits; otherwise which limit, when, by how much.
   // `object_geom`, `pad_of_geom`: the run's ids; `start`: the object's
@@ -587,7 +587,7 @@ class TruthLimits {
         return Fail("penetration", t,
                     "a pad sinks " + Num(-c.dist) + " m into the object (limit " +
                         Num(PenetrationLimit()) +
-                        " m, a quarter of the pad radius): the soft contact cannot carry this load "
+                        " m, half the pad radius): the soft contact cannot carry this load "
                         "(grip, weight or pusher speed) at this timestep");
       }
     }

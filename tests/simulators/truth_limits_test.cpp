@@ -70,6 +70,21 @@ TEST(MujocoLimits, RunsBeyondTheSoftContactAreTypedErrors) {
   }
 }
 
+// A parallel jaw whose two slides part: a 1 m/s push through a jaw (its
+// equality is as soft as the contacts) lets the fingers travel more than a
+// tenth of the pad radius apart by t = 0.06 s, and the run stops there.
+TEST(MujocoLimits, AJawWhoseFingersPartIsAConstraintViolation) {
+  Scene s = Canonical();
+  s.gripper.coupling = GripperCoupling::kParallelJaw;
+  s.pusher->motion.velocity = {0, 0, 1};
+  const auto r = MakeMujocoSimulator({})->Simulate(s);
+  EXPECT_TRUE(IsLimitError(r, "constraint violation")) << r.error;
+  EXPECT_NE(r.error.find("fingers travel"), std::string::npos) << r.error;
+  EXPECT_LT(r.samples.size(), 51u);
+  s.gripper.coupling = GripperCoupling::kIndependent;  // nothing to violate
+  EXPECT_EQ(MakeMujocoSimulator({})->Simulate(s).status, SimulationStatus::kOk);
+}
+
 // A slow push (0.1 mm/s): at the unscaled defaults soft friction creeps at
 // about that speed, so the fingers' friction never builds up and the pusher
 // force came out half the closed form's 11.962 N, `ok`. Scaled to the scene
