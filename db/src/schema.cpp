@@ -586,7 +586,9 @@ Store::QuickCheckResult RunQuickCheck(sqlite3* db, double budget_s) {
   sqlite3_stmt* s = nullptr;
   int rc = sqlite3_prepare_v2(db, "PRAGMA quick_check(20)", -1, &s, nullptr);
   std::string problems;
-  while (rc == SQLITE_OK && (rc = sqlite3_step(s)) == SQLITE_ROW) {
+  while (rc == SQLITE_OK || rc == SQLITE_ROW) {
+    rc = sqlite3_step(s);
+    if (rc != SQLITE_ROW) break;
     const auto* text = reinterpret_cast<const char*>(sqlite3_column_text(s, 0));
     const std::string line = text ? text : "";
     if (line == "ok") continue;

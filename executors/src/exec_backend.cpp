@@ -534,7 +534,8 @@ class ExecBackend final : public Backend {
         case DriverProcess::Read::kTimeout: {
           const double waited = options_.reply_timeout_s;
           const bool deadline = Clock::now() >= until && until < After(waited - 0.5);
-          if (phase_lines_ > 0 && deadline) {
+          if (phase_lines_ > 0 && deadline &&
+              Clock::now() - last_line_at_ < std::chrono::seconds(1)) {
             // It talks, it just never finishes: not a hang.
             return Fail(phase, "driver overran the phase's deadline: still sending (" +
                                    std::to_string(phase_lines_) + " lines in this " + phase +
@@ -553,6 +554,7 @@ class ExecBackend final : public Backend {
       }
       if (line.empty()) continue;
       ++phase_lines_;
+      last_line_at_ = Clock::now();
       try {
         *msg = json::parse(line);
       } catch (const json::out_of_range&) {
@@ -616,6 +618,7 @@ class ExecBackend final : public Backend {
   bool resets_ = false;
   int restarts_ = 0;
   std::size_t phase_lines_ = 0;  // lines the driver sent since the phase began
+  Clock::time_point last_line_at_{};
 };
 
 std::string Vec3(const nlohmann::json& j, const char* key, Eigen::Vector3d* out, bool required) {

@@ -115,7 +115,9 @@ TEST_F(ExecStreaming, SamplesReachTheLogAndLiveTopicBeforeTheDriverFinishes) {
   ASSERT_TRUE(d.WaitForCells({"stream1"}, 15s));
   ASSERT_TRUE(d.commands.WaitForMatched(1, 10s));
   ASSERT_TRUE(live.WaitForMatched(1, 10s));
-  const std::string scene = test::CanonicalScene(0.3);
+  // 60 samples, 4 ms apart: the driver streams the whole scene (a stream
+  // shorter than its scene is refused).
+  const std::string scene = test::CanonicalScene(0.236);
 
   // 1: streamed while the driver waits; the rest after it continues.
   ASSERT_TRUE(d.Send(d.Command("stream1", 1, msg::PHASE_EXECUTE, scene, 7)));
