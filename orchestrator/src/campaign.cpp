@@ -974,8 +974,9 @@ Campaign ParseCampaign(std::string_view json_text, const std::string& base_dir,
   }
   c.source_json = doc.dump();
 
-  // A unit slip is blamed on the field written, before its consequences are.
-  CheckPlausibility(c);
+  // A unit slip is blamed on the field written, before its consequences are
+  // (at submit: a stored campaign reloads as it was accepted).
+  if (check == ConditionCheck::kAllConditions) CheckPlausibility(c);
   // Every condition must give a valid scene, for the cells and for the
   // predictor: refuse the campaign now rather than fail trial 9,000.
   try {
