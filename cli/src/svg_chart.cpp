@@ -137,7 +137,7 @@ class LabelPlacer {
  public:
   // @returns the text's baseline start (x, y) for a 9 px label of `chars`.
   std::pair<double, double> Place(double x, double y, double r, size_t chars) {
-    const double w = 5.0 * static_cast<double>(chars) + 2, h = 10;
+    const double w = 5.6 * static_cast<double>(chars) + 2, h = 10;  // 9 px sans-serif
     const double gap = r + 2;
     // Candidate boxes (left, top) around the point.
     std::vector<std::pair<double, double>> spots = {
