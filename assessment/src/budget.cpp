@@ -116,22 +116,6 @@ Quantity QuantityOf(ErrorMetric m) {
   return Quantity::kLength;
 }
 
-const char* SiUnit(ErrorMetric m) {
-  switch (QuantityOf(m)) {
-    case Quantity::kLength:
-      return "m";
-    case Quantity::kAngle:
-      return "rad";
-    case Quantity::kForce:
-      return "N";
-    case Quantity::kFraction:
-      return "";
-    case Quantity::kTime:
-      return "s";
-  }
-  return "";
-}
-
 }  // namespace
 
 const char* ToString(ErrorMetric metric) {
@@ -228,20 +212,39 @@ Budget ParseBudget(const std::string& text) {
   return b;
 }
 
-std::string FormatBudget(const Budget& b) {
-  char buf[128];
-  if (b.floor_multiple > 0) {
-    std::snprintf(buf, sizeof buf, "%s <= %g x noise floor", ToString(b.metric), b.floor_multiple);
-    if (b.limit > 0) {
-      const std::string head = buf;
-      std::snprintf(buf, sizeof buf, "%s (%g %s)", head.c_str(), b.limit, SiUnit(b.metric));
-    }
-    return buf;
+// A limit in the unit a person reads it in (one unit per quantity in human
+// output: mm, degrees, N, ms); JSON keeps the SI value beside this text.
+std::string HumanLimit(ErrorMetric m, double v) {
+  char buf[64];
+  switch (QuantityOf(m)) {
+    case Quantity::kLength:
+      std::snprintf(buf, sizeof buf, "%g mm", v * 1e3);
+      break;
+    case Quantity::kAngle:
+      std::snprintf(buf, sizeof buf, "%.4g deg", v * 180 / 3.14159265358979323846);
+      break;
+    case Quantity::kTime:
+      std::snprintf(buf, sizeof buf, "%g ms", v * 1e3);
+      break;
+    case Quantity::kForce:
+      std::snprintf(buf, sizeof buf, "%g N", v);
+      break;
+    case Quantity::kFraction:
+      std::snprintf(buf, sizeof buf, "%g", v);
+      break;
   }
-  std::snprintf(buf, sizeof buf, "%s %s %g%s%s", ToString(b.metric),
-                LowerIsBetter(b.metric) ? "<=" : ">=", b.limit, *SiUnit(b.metric) ? " " : "",
-                SiUnit(b.metric));
   return buf;
+}
+
+std::string FormatBudget(const Budget& b) {
+  const std::string name = ToString(b.metric);
+  if (b.floor_multiple > 0) {
+    char buf[64];
+    std::snprintf(buf, sizeof buf, "%g", b.floor_multiple);
+    return name + " <= " + buf + " x noise floor" +
+           (b.limit > 0 ? " (" + HumanLimit(b.metric, b.limit) + ")" : "");
+  }
+  return name + (LowerIsBetter(b.metric) ? " <= " : " >= ") + HumanLimit(b.metric, b.limit);
 }
 
 }  // namespace arena::assessment

@@ -257,12 +257,21 @@ std::string DescribeFront(const EvaluationReport& r) {
   for (const auto* s : front) {
     char buf[256];
     const double e = s->Judged(r.primary);
+    // The table's units: mm and degrees, never metres beside millimetres.
+    const bool angle =
+        r.primary == ErrorMetric::kAngleMedian || r.primary == ErrorMetric::kAngleP95;
+    const bool fraction = r.primary == ErrorMetric::kModeAgreementMedian;
+    const bool force =
+        r.primary == ErrorMetric::kForceMedian || r.primary == ErrorMetric::kForceP95;
     std::snprintf(buf, sizeof buf, " %s %s %.3g ms -> %.4g%s", s->predictor.c_str(),
-                  s->model_key.c_str(), s->time.median * 1e3, e,
-                  r.primary == ErrorMetric::kModeAgreementMedian ? ""
-                  : r.primary == ErrorMetric::kAngleMedian || r.primary == ErrorMetric::kAngleP95
-                      ? " rad"
-                      : " m");
+                  s->model_key.c_str(), s->time.median * 1e3,
+                  fraction || force ? e
+                  : angle           ? e * 180 / M_PI
+                                    : e * 1e3,
+                  fraction ? ""
+                  : force  ? " N"
+                  : angle  ? " deg"
+                           : " mm");
     out += buf;
     if (r.floor && r.floor->position_median > 0 &&
         (r.primary == ErrorMetric::kPositionMedian || r.primary == ErrorMetric::kPositionP95)) {

@@ -15,6 +15,7 @@
 #include "arena/orchestrator/adaptive.hpp"
 #include "arena/orchestrator/campaign.hpp"
 #include "arena/orchestrator/submit.hpp"
+#include "boundary_report.hpp"
 #include "campaign_input.hpp"
 #include "commands.hpp"
 #include "deadline_report.hpp"
@@ -181,6 +182,14 @@ int Status(const std::string& db_path, std::int64_t only, bool as_json, bool all
         j["adaptive"] = {{"sampler", a->sampler},   {"round", a->round},
                          {"open", a->open},         {"refining", a->refining},
                          {"progress", a->progress}, {"fraction", a->fraction}};
+        if (const auto b = FindBoundary(*store, c.id)) {
+          nlohmann::json crossings = nlohmann::json::array();
+          for (const auto& x : b->crossings) crossings.push_back({{"at", x.at}, {"half", x.half}});
+          j["adaptive"]["boundary"] = {{"parameters", b->parameters},
+                                       {"classes", {b->positive, b->negative}},
+                                       {"classified", b->classified},
+                                       {"crossings", crossings}};
+        }
       }
       // What its model errors are measured against (executors/README.md, "Backends").
       j["truth"] = nlohmann::json::array();
@@ -261,6 +270,8 @@ int Status(const std::string& db_path, std::int64_t only, bool as_json, bool all
     std::printf("%-5lld %-10s round %-3d %3.0f %%  refining %s\n      %s\n",
                 static_cast<long long>(c.id), a->sampler.c_str(), a->round, a->fraction * 100,
                 a->refining.c_str(), a->progress.c_str());
+    if (const auto b = FindBoundary(*store, c.id))
+      std::fputs(FormatBoundary(*b, "      ").c_str(), stdout);
   }
   if (service) {
     std::printf("\nservice: pid %lld on %s, DDS domain %d, session %s, started %s, %s\n",

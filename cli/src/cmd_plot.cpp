@@ -227,8 +227,8 @@ Chart TradeoffChart(const nlohmann::json& report) {
     }
   }
   panel.series.push_back(failed);
-  panel.series.push_back(pareto);
   for (auto& e : envelopes) panel.series.push_back(std::move(e));
+  panel.series.push_back(pareto);  // over the curves it may coincide with
   // The noise floor: the error no deterministic predictor can beat.
   const auto& floor = report.contains("noise_floor") ? report["noise_floor"] : nlohmann::json();
   if (floor.is_object() && UnitOf(metric) == "m" && !panel.series.empty()) {
@@ -267,6 +267,7 @@ Chart TradeoffChart(const nlohmann::json& report) {
     panel.series.push_back(line);
   }
   // The recommendation last: drawn over every other point, a ring with its label.
+  if (recommend.x.empty()) recommend.name = "recommended: none within the budget";
   recommend.marker_radius = 8;
   recommend.hollow = true;
   panel.series.push_back(recommend);

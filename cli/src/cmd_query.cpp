@@ -7,6 +7,7 @@
 
 #include "arena/db/query.hpp"
 #include "arena/db/store.hpp"
+#include "boundary_report.hpp"
 #include "commands.hpp"
 #include "store_errors.hpp"
 
@@ -60,6 +61,14 @@ int RunQueryCommand(const QueryOptions& o) {
                              : o.format == "json" ? db::FormatJson(result)
                                                   : db::FormatTable(result);
     std::fwrite(text.data(), 1, text.size(), stdout);
+    // The decisions' conclusion: the boundary found so far, in the
+    // parameters' units (after the table; on stderr for csv/json output).
+    if (o.decisions && o.campaign > 0) {
+      if (const auto b = FindBoundary(*store, o.campaign)) {
+        const std::string statement = FormatBoundary(*b, "");
+        std::fputs(statement.c_str(), o.format == "table" ? stdout : stderr);
+      }
+    }
     return kExitOk;
   } catch (const db::StoreError& e) {
     // A query that would write is the user's input, not a broken store.

@@ -135,9 +135,11 @@ namespace {
 // its point (right, left, above, below, then further out) whose box is free.
 class LabelPlacer {
  public:
+  // Labels stay inside the panel's frame (x0, y0)-(x1, y1) when a spot there is free.
+  LabelPlacer(double x0, double y0, double x1, double y1) : x0_(x0), y0_(y0), x1_(x1), y1_(y1) {}
   // @returns the text's baseline start (x, y) for a 9 px label of `chars`.
   std::pair<double, double> Place(double x, double y, double r, size_t chars) {
-    const double w = 5.0 * static_cast<double>(chars) + 2, h = 10;
+    const double w = 5.6 * static_cast<double>(chars) + 2, h = 10;  // 9 px sans-serif
     const double gap = r + 2;
     // Candidate boxes (left, top) around the point.
     std::vector<std::pair<double, double>> spots = {
@@ -151,7 +153,9 @@ class LabelPlacer {
     }
     std::pair<double, double> chosen = spots.front();
     for (const auto& s : spots) {
-      if (Free(s.first, s.second, w, h)) {
+      const bool inside =
+          s.first >= x0_ && s.first + w <= x1_ && s.second >= y0_ && s.second + h <= y1_;
+      if (inside && Free(s.first, s.second, w, h)) {
         chosen = s;
         break;
       }
@@ -169,6 +173,7 @@ class LabelPlacer {
       if (x < b.x + b.w && b.x < x + w && y < b.y + b.h && b.y < y + h) return false;
     return true;
   }
+  double x0_, y0_, x1_, y1_;
   std::vector<Box> boxes_;
 };
 
@@ -260,7 +265,7 @@ std::string RenderSvg(const Chart& chart) {
         << ") rotate(-90)\" text-anchor=\"middle\">" << SvgEscape(panel.y_label) << "</text>\n";
 
     int legend_y = y0 + 12;
-    LabelPlacer placed;
+    LabelPlacer placed(left, y0, left + plot_w, y0 + h);
     for (const auto& s : panel.series) {
       svg << "<g class=\"series\" id=\"p" << pi << '_' << Id(s.name) << "\" data-name=\""
           << SvgEscape(s.name) << "\">\n";

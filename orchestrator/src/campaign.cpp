@@ -1051,9 +1051,9 @@ Campaign ParseCampaign(std::string_view json_text, const std::string& base_dir,
   }
   c.source_json = doc.dump();
 
-  // A unit slip is blamed on the field written, before its consequences are.
-  CheckPlausibility(c);
-
+  // A unit slip is blamed on the field written, before its consequences are
+  // (at submit: a stored campaign reloads as it was accepted).
+  if (check == ConditionCheck::kAllConditions) CheckPlausibility(c);
   // Every condition must give a valid scene, for the cells and for the
   // predictor: refuse the campaign now rather than fail trial 9,000.
   for (std::size_t i = 0; i < std::max<std::size_t>(1, c.scenes.size()); ++i) {

@@ -65,8 +65,10 @@ TEST(EvaluationBudget, ParsesShorthandMetricsAndUnits) {
   EXPECT_DOUBLE_EQ(b.limit, 0.02);
   b = ParseBudget("mode_agreement_median=95%");
   EXPECT_DOUBLE_EQ(b.limit, 0.95);
-  EXPECT_EQ(FormatBudget(ParseBudget("2mm")), "position_p95 <= 0.002 m");
-  EXPECT_EQ(FormatBudget(ParseBudget("position_median=2mm")), "position_median <= 0.002 m");
+  // Issue 26: one unit per quantity in human output (it was "<= 0.002 m"
+  // beside a table in mm).
+  EXPECT_EQ(FormatBudget(ParseBudget("2mm")), "position_p95 <= 2 mm");
+  EXPECT_EQ(FormatBudget(ParseBudget("position_median=2mm")), "position_median <= 2 mm");
   b = ParseBudget("2ms");
   EXPECT_EQ(b.metric, ErrorMetric::kTimeP95);
   EXPECT_DOUBLE_EQ(b.limit, 2e-3);
@@ -162,7 +164,7 @@ TEST(EvaluationSummary, RecommendsCheapestWithinBudget) {
   auto report = Summarise(kModels, KnownResults(), {ParseBudget("position_median=2.5mm")});
   ASSERT_TRUE(report.recommended);
   EXPECT_EQ(report.settings[*report.recommended].model_key, ModelKey(Model(8)));
-  EXPECT_NE(report.recommendation.find("within position_median <= 0.0025 m"), std::string::npos)
+  EXPECT_NE(report.recommendation.find("within position_median <= 2.5 mm"), std::string::npos)
       << report.recommendation;
   // On p95: g8's p95 is 2.09 mm, so 2.05 mm rules it out and g6 (1.09 mm) is the cheapest.
   report = Summarise(kModels, KnownResults(), {ParseBudget("2.05mm")});

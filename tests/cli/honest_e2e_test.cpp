@@ -105,5 +105,33 @@ TEST_F(Honest, PlotSceneDrawsTwoViewsWithAScaleBar) {
   EXPECT_NE(bad.err.find("object"), std::string::npos) << bad.err;
 }
 
+// Pins: an adaptive boundary campaign never stated the boundary it found,
+// in the parameter's units, with its interval.
+TEST_F(Honest, BoundaryStatedInStatusAndDecisions) {
+  const std::string db = dir_ + "/b.db";
+  const auto r =
+      Arena("run " + std::string(ARENA_SOURCE_DIR) +
+            "/tests/orchestrator/data/boundary_1d.json --db " + db + " --cells 2 --quiet");
+  ASSERT_EQ(r.rc, 0) << r.out << r.err;
+  const auto s = Arena("status --db " + db);
+  EXPECT_NE(s.out.find("boundary between pivoted and not pivoted"), std::string::npos) << s.out;
+  EXPECT_NE(s.out.find("pivot_offset "), std::string::npos) << s.out;
+  EXPECT_NE(s.out.find(" mm +- "), std::string::npos) << s.out;
+  const auto d = Arena("query --db " + db + " --campaign 1 --decisions");
+  EXPECT_EQ(d.rc, 0) << d.err;
+  EXPECT_NE(d.out.find("boundary between pivoted and not pivoted"), std::string::npos) << d.out;
+  const auto j = Arena("status --db " + db + " --json");
+  const auto doc = nlohmann::json::parse(j.out);
+  const auto& b = doc["campaigns"][0]["adaptive"]["boundary"];
+  ASSERT_TRUE(b.is_object()) << j.out;
+  ASSERT_GE(b["crossings"].size(), 1u) << b.dump();
+  for (const auto& x : b["crossings"]) {
+    const double at = x["at"][0], half = x["half"][0];
+    EXPECT_GE(at - half, 0.008);  // inside the searched range, in metres (SI in JSON)
+    EXPECT_LE(at + half, 0.015);
+    EXPECT_LT(half, 0.0015) << "a bracket, not the whole range";
+  }
+}
+
 }  // namespace
 }  // namespace arena::test

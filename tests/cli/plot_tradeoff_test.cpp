@@ -1,5 +1,6 @@
 // `arena plot --tradeoff`: the chart of an evaluation report parses as SVG
 // and carries the settings, the Pareto front and the recommendation.
+#include <algorithm>
 #include <cmath>
 #include <functional>
 #include <map>
@@ -106,7 +107,9 @@ TEST(PlotTradeoff, OldReportsStillDrawSettingsFrontAndRecommendation) {
   EXPECT_EQ(points.at("recommended"), 1);
   EXPECT_EQ(points.at("pareto front"), 3);  // g4 -> g8 -> g6
   // The front runs by increasing time.
-  const auto& front = chart.panels[0].series[2];
+  const auto& series = chart.panels[0].series;
+  const auto& front = *std::find_if(series.begin(), series.end(),
+                                    [](const Series& se) { return se.name == "pareto front"; });
   EXPECT_EQ(front.name, "pareto front");
   EXPECT_EQ(front.x, (std::vector<double>{1e-3, 2e-3, 4e-3}));
 }
@@ -229,7 +232,7 @@ TEST(PlotTradeoff, RecommendationOnTopLabelledBudgetDrawnInMm) {
     for (const auto* c = e->FirstChildElement(); c; c = c->NextSiblingElement()) {
       if (c->Attribute("class", "point-label"))
         boxes.push_back({c->DoubleAttribute("x"), c->DoubleAttribute("y"),
-                         5.0 * std::string(c->GetText()).size()});
+                         5.6 * std::string(c->GetText()).size()});
       walk(c);
     }
   };
