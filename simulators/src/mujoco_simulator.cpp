@@ -21,6 +21,10 @@
 //     over a line, 6 on the 2R/3 ring of arena's patch model for a patch
 //     (they carry its torsion and tilt); every pad's surface touches the
 //     object at t = 0.
+//   support (a scene's `support`): a plane through the resting face and
+//     small sphere feet on an equal-area grid of that face (SupportFeet);
+//     a non-convex prism is cut into convex pieces (ObjectPieces); a
+//     recorded pusher path drives the pusher (mechanics::PusherPoseAt).
 //   contacts: explicit <pair>s only (pad with object), per-pair friction
 //     (μ, torsion 0, rolling 0), condim 3, solref/solimp of the settings;
 //     margin 1 mm so contacts are found before they touch, acting from

@@ -7,6 +7,7 @@
 #include <gtest/gtest.h>
 
 #include "arena/mechanics/model.hpp"
+#include "arena/mechanics/scene_json.hpp"
 #include "arena/mechanics/simulate.hpp"
 #include "arena/simulators/simulator.hpp"
 #include "mechanics/scenes.hpp"
@@ -60,10 +61,10 @@ void RecordPath(Scene* s) {
 
 // A face-centred push: the object translates along x and the pusher's force
 // is the support's sliding friction μ m g. Soft contact: MuJoCo's elliptic
-// friction with impratio 30 reaches μ N within a few per cent, and the feet
-// share the load only as evenly as the object stays level, so the force is
-// checked within 3 % and the heading within 1 mrad. Both as a constant
-// velocity and as the same motion recorded as a path.
+// friction with impratio 30 reaches μ N only approximately (measured:
+// +0.25 %), so the force is checked within 1 % and the heading within
+// 1 mrad. Both as a constant velocity and as the same motion recorded as a
+// path.
 TEST(MujocoSupport, FaceCentredPushNeedsMuMgAndTranslatesStraight) {
   const auto sim = MakeMujocoSimulator({});
   for (const bool recorded : {false, true}) {
@@ -88,7 +89,7 @@ TEST(MujocoSupport, FaceCentredPushNeedsMuMgAndTranslatesStraight) {
       ++n;
       EXPECT_NEAR(sample.velocity.x(), 0.02, 0.02 * 0.05) << recorded << " t " << sample.t;
     }
-    EXPECT_NEAR(fx / n, kMu * kMass * kG, 0.03 * kMu * kMass * kG) << "recorded " << recorded;
+    EXPECT_NEAR(fx / n, kMu * kMass * kG, 0.01 * kMu * kMass * kG) << "recorded " << recorded;
     const auto& last = r.samples.back();
     const Eigen::Vector3d heading = last.orientation * Eigen::Vector3d::UnitX();
     EXPECT_LT(std::abs(heading.y()), 1e-3);
@@ -144,7 +145,7 @@ TEST(MujocoSupport, NonConvexPrismIsCutIntoConvexPieces) {
   const auto r = sim->Simulate(s);
   ASSERT_EQ(r.status, SimulationStatus::kOk) << r.error;
   // The push passes through the centroid's y (0): it translates and the
-  // pusher's force is μ m g (3 % as above).
+  // pusher's force is μ m g (1 % as above; measured +0.28 %).
   double fx = 0;
   int n = 0;
   for (const auto& sample : r.samples) {
@@ -152,7 +153,7 @@ TEST(MujocoSupport, NonConvexPrismIsCutIntoConvexPieces) {
     fx += sample.pusher_force.x();
     ++n;
   }
-  EXPECT_NEAR(fx / n, kMu * kMass * kG, 0.03 * kMu * kMass * kG);
+  EXPECT_NEAR(fx / n, kMu * kMass * kG, 0.01 * kMu * kMass * kG);
   EXPECT_GT(r.samples.back().position.x(), 0.005);
 }
 
