@@ -303,14 +303,14 @@ void Validate(const MujocoSettings& s) {
 // scales them where the scene is smaller or more loaded, so that the soft
 // contact stays small against the scene (simulators/README.md, "Scaled to the
 // scene").
-constexpr double kReferenceLength = 0.03;      // m: the canonical box's smallest side
-constexpr double kReferenceLoad = 250;         // m/s²: its grip, 10 N x (1/0.05 + 1/0.2) /kg
+constexpr double kReferenceLength = 0.03;  // m: the canonical box's smallest side
+constexpr double kReferenceLoad = 250;     // m/s²: its grip, 10 N x (1/0.05 + 1/0.2) /kg
 // Loads up to this many times the canonical one keep the defaults: their
 // pads sink well within the penetration limit, and a stiffer contact made
 // one pivot-study scene (patch pads, 68 g, 18 N: 2.5x) change 0.24 mm under
 // a 4x finer timestep, against 0.0007 mm at the defaults.
 constexpr double kLoadHeadroom = 4;
-constexpr double kReferencePushLoad = 60;  // m/s²: its push, (2 x 0.5 x 10 + 1.96) N / 0.2 kg
+constexpr double kReferencePushLoad = 60;      // m/s²: its push, (2 x 0.5 x 10 + 1.96) N / 0.2 kg
 constexpr double kSlowestUnscaledPush = 1e-3;  // m/s: slower pushes creep at the defaults
 constexpr double kMostImpedance = 0.9999;      // MuJoCo clamps solimp's d to it (mjMAXIMP)
 
@@ -357,10 +357,11 @@ MujocoSettings ForScene(const mechanics::Scene& scene, const MujocoSettings& in,
   // Load and speed: a soft contact sinks by about (1 - d)/d · a · timeconst²
   // (a: the acceleration its force gives the bodies it separates) and its
   // friction creeps at a speed proportional to (1 - d)/d. The canonical scene
-  // (a = 10 N x (1/0.05 + 1/0.2) /kg = 250 m/s², pusher 1 cm/s) keeps the
-  // settings; a scene that loads its contacts more than kLoadHeadroom times
-  // harder (relative to its size) or pushes slower than 1 mm/s gets (1 - d)/d
-  // divided by the ratio, then the time constant down to 2 timesteps.
+  // (grip a = 10 N x (1/0.05 + 1/0.2) /kg = 250 m/s², push a = 60 m/s²,
+  // pusher 1 cm/s) keeps the settings; pairs loaded harder (the fingers'
+  // more than kLoadHeadroom times; relative to the size) or pushed slower
+  // than 1 mm/s get (1 - d)/d divided by the ratio, then the time constant
+  // down to 2 timesteps.
   const double m_o = scene.object.mass, m_f = st.finger_mass;
   const double weight = m_o * scene.gravity.norm();
   double ratio = scene.grip_force * (1 / m_f + 1 / m_o) / (kLoadHeadroom * kReferenceLoad);
