@@ -409,7 +409,8 @@ std::string SupportPairs(const mechanics::Scene& scene, const MujocoSettings& st
       << Num(scene.support->mu) << " " << Num(scene.support->mu) << " 0 0 0\" solref=\""
       << Num(st.solref_timeconst) << " " << Num(st.solref_damping) << "\" solimp=\"";
     for (int k = 0; k < 5; ++k) x << Num(st.solimp[k]) << (k < 4 ? " " : "");
-    x << "\" margin=\"" << Num(kContactMargin) << "\" gap=\"" << Num(kContactMargin) << "\"/>\n";
+    x << "\" margin=\"" << Num(st.contact_margin) << "\" gap=\"" << Num(st.contact_margin)
+      << "\"/>\n";
   }
   return x.str();
 }
