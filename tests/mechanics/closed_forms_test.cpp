@@ -107,8 +107,8 @@ TEST(ClosedForms, TiltedPushTurnsWithThePusherSeenFromTheAxis) {
 // The two model options are read, written back when not the default, and a
 // wrong value is refused naming the field.
 TEST(ClosedForms, PadAndConeOptionsRoundTrip) {
-  const std::string base = std::string(kBox) + R"(,"duration":0.1,"grip_force":10.0,)" +
-                           kPointFingers + R"(,"model":{)";
+  const std::string base =
+      std::string(kBox) + R"(,"duration":0.1,"grip_force":10.0,)" + kPointFingers + R"(,"model":{)";
   const Scene plain = Parse(base + "}");
   EXPECT_EQ(plain.model.pads, PadModel::kRigid);
   EXPECT_EQ(plain.model.cone, ConeModel::kPolyhedral);
