@@ -1158,10 +1158,9 @@ Scene ParseScene(std::string_view json_text) {
   const json doc = BuildDocument(json_text, JsonLimits{}, &problem);
   if (problem) throw SceneError(problem->path, problem->reason);
 
-  Obj root(
-      doc, "",
-      {"object", "gravity", "duration", "grip_force", "fingers", "pusher", "support", "model",
-       "gripper"});
+  Obj root(doc, "",
+           {"object", "gravity", "duration", "grip_force", "fingers", "pusher", "support", "model",
+            "gripper"});
   Scene scene;
   scene.object = ReadObject(root.Require("object"), "object");
   if (const json* g = root.Find("gravity")) scene.gravity = Vec3(*g, "gravity");
