@@ -409,7 +409,10 @@ std::string SupportPairs(const mechanics::Scene& scene, const MujocoSettings& st
       << Num(scene.support->mu) << " " << Num(scene.support->mu) << " 0 0 0\" solref=\""
       << Num(st.solref_timeconst) << " " << Num(st.solref_damping) << "\" solimp=\"";
     for (int k = 0; k < 5; ++k) x << Num(st.solimp[k]) << (k < 4 ? " " : "");
-    x << "\" margin=\"" << Num(kContactMargin) << "\" gap=\"" << Num(kContactMargin) << "\"/>\n";
+    // The contact rule of every pair (Pair): margin scaled to the scene,
+    // acting from touch.
+    x << "\" margin=\"" << Num(st.contact_margin) << "\" gap=\""
+      << Num(st.contact_margin * (1 - kActiveAtTouch)) << "\"/>\n";
   }
   return x.str();
 }
