@@ -236,9 +236,10 @@ ControllerCounters RunController(const ControllerHostOptions& o, const Controlle
   // publish there (a SecurityError naming the binding otherwise).
   dds::WriterOptions wo;
   wo.controller = o.name;
-  dds::Writer<msg::PusherCommand> commands(participant, wo);
+  { dds::Writer<msg::PusherCommand> allowed(participant, wo); }  // refused at once if not
   // One controller per name: a second one would answer the same samples
-  // with another law. The name is claimed before answering anything.
+  // with another law. The name is claimed before the writer cells wait for
+  // exists, so no trial starts on a controller that is still claiming it.
   if (const auto holder = participant.WaitForNamesake(
           std::chrono::duration_cast<dds::Millis>(std::chrono::duration<double>(o.claim_wait_s)))) {
     throw ControllerNameConflict(
@@ -246,6 +247,7 @@ ControllerCounters RunController(const ControllerHostOptions& o, const Controlle
         std::to_string(o.domain_id) + " by another controller (" + po.name + ", " + *holder +
         "); stop that one or choose another name");
   }
+  dds::Writer<msg::PusherCommand> commands(participant, wo);
   spdlog::info("controller {}: up on domain {}", o.name, o.domain_id);
 
   ControllerCounters counters;
