@@ -868,10 +868,15 @@ void ValidateContact(const ContactSpec& c, const std::string& path, const Scene&
                                                  " m, got " + Num(c.radius));
     }
   }
-  // A point pusher with tracked contacts may start apart from the object
-  // (the contact is made when it arrives), never inside it.
-  const bool may_start_apart = path == "pusher" && c.type == ContactType::kPoint &&
-                               scene.model.contacts == ContactTracking::kTracked;
+  // A point pusher with tracked contacts may start apart from an object a
+  // support holds, or along a recorded path (the contact is made when it
+  // arrives), never inside it. In a grasp, a constant-velocity pusher must
+  // touch at t = 0: one placed off the object (a varied offset past its edge)
+  // is a campaign's mistake, not a push.
+  const bool may_start_apart =
+      path == "pusher" && c.type == ContactType::kPoint &&
+      scene.model.contacts == ContactTracking::kTracked &&
+      (scene.support.has_value() || (scene.pusher && scene.pusher->path.has_value()));
   const Eigen::Vector3d p_O = R_GO.transpose() * (c.position - scene.object.pose.position);
   if (may_start_apart) {
     const double depth = -solid.ClosestTo(p_O).distance;
