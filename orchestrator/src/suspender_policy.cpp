@@ -55,16 +55,23 @@ const char* Unit(Condition c) {
       return " m";
     case Condition::kCellSilence:
       return " s";
-    case Condition::kStoreFreeSpace:
-      return " bytes";
     default:
       return "";
   }
 }
 
+// Bytes as a person reads them: MiB from 1 MiB on.
+std::string Bytes(double b) {
+  if (b < 1024.0 * 1024) return Num(b) + " bytes";
+  char buf[64];
+  std::snprintf(buf, sizeof buf, "%.1f MiB", b / (1024.0 * 1024));
+  return buf;
+}
+
 std::string Evidence(Condition c, const SuspenderLimits& l, const Reading& r) {
-  std::string e = Num(r.value) + Unit(c) + (c == Condition::kStoreFreeSpace ? " < " : " > ") +
-                  Num(l.threshold) + Unit(c);
+  std::string e = c == Condition::kStoreFreeSpace
+                      ? Bytes(r.value) + " < " + Bytes(l.threshold)
+                      : Num(r.value) + Unit(c) + " > " + Num(l.threshold) + Unit(c);
   switch (c) {
     case Condition::kResetFailureRate:
       return e + " failed over the last " + std::to_string(r.evidence) + " resets";

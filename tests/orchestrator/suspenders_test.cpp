@@ -253,6 +253,26 @@ TEST(Suspenders, StoreFreeSpaceHoldsEveryCell) {
   EXPECT_EQ(f.Active().size(), 1u) << "still short of space";
 }
 
+TEST(Suspenders, AFailureRateAboveItsThresholdIsToldOnce) {
+  Fixture f(Quick());
+  const auto a =
+      f.store->CreateCampaign(db::testing::MakeCampaign("a"), db::testing::MakeTrials(12));
+  f.store->SetAsideTrials(a, "set aside: a test", "test.set_aside");
+  for (int i = 0; i < 12; ++i) {
+    f.watch->Poll();
+    f.now += 1;
+  }
+  const auto kinds = f.EventKinds();
+  EXPECT_EQ(std::count(kinds.begin(), kinds.end(), "failure_rate_high"), 1);
+  const auto events = f.store->ListEvents();
+  const auto it = std::find_if(events.begin(), events.end(), [](const db::EventRecord& e) {
+    return e.kind == "failure_rate_high";
+  });
+  ASSERT_NE(it, events.end());
+  EXPECT_EQ(it->campaign_id, a);
+  EXPECT_EQ(it->message, "campaign 1: 12 of 12 finished trials failed");
+}
+
 TEST(Suspenders, ARestartedServiceAdoptsTheStoresSuspensions) {
   Fixture f(Quick());
   for (int i = 0; i < 4; ++i) f.suspenders->OnReset("c1", 1, false, false, 0);
