@@ -161,6 +161,9 @@ void AddServeCommand(CLI::App& app, Action* action) {
   cmd->add_option("--notify-failure-rate", opt->service.notify_failure_rate,
                   "Failed share of a campaign's finished trials that is an event")
       ->capture_default_str();
+  // Hidden: the longest wait of a cell after failed phases (the soak test
+  // compresses a week; a lab keeps the default).
+  cmd->add_option("--cell-backoff-max", opt->service.cell_backoff_max_s)->group("");
   // Hidden: bounds the store's size to emulate a full disk (fault tests).
   cmd->add_option("--store-max-pages", opt->service.store_max_pages)->group("");
   cmd->callback([opt, action] { *action = [opt] { return RunServe(*opt); }; });

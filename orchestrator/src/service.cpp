@@ -646,6 +646,8 @@ void ValidateServiceOptions(const ServiceOptions& o) {
     throw std::invalid_argument("--predictors: must be 1.." + std::to_string(max_predictors) +
                                 " threads, got " + std::to_string(o.predictor_threads));
   if (o.store_max_pages < 0) throw std::invalid_argument("--store-max-pages: must be >= 0");
+  RequireSeconds(o.cell_backoff_s, "cell_backoff_s", 0, 3600);
+  RequireSeconds(o.cell_backoff_max_s, "--cell-backoff-max", 0, 3600);
   RequireSeconds(o.notify_timeout_s, "--notify-timeout", 0.01, 3600);
   RequireSeconds(o.watch_period_s, "watch_period_s", 0.01, 3600);
   if (o.notify_queue < 1 || o.notify_queue > 100000)
