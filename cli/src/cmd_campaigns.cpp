@@ -23,6 +23,7 @@
 #include "progress.hpp"
 #include "signals.hpp"
 #include "status_cells.hpp"
+#include "status_suspensions.hpp"
 #include "store_errors.hpp"
 
 namespace arena::cli {
@@ -40,6 +41,11 @@ std::unique_ptr<db::Store> OpenStore(const std::string& path, bool read_only) {
         std::string(e.what()) +
             (read_only ? " (is --db the store `arena serve` or `arena run` uses?)" : ""));
   }
+}
+
+// The store's suspensions, newest first (issue 29).
+std::vector<db::Suspension> Suspensions(const db::Store& store) {
+  return store.ListSuspensions(false, 200);
 }
 
 // A service beat within this long counts as running (it beats every second).
@@ -225,6 +231,7 @@ int Status(const std::string& db_path, std::int64_t only, bool as_json, bool all
                               {"mean_position_error_m", d.mean_position_error},
                               {"max_position_error_m", d.max_position_error},
                               {"mean_angle_error_rad", d.mean_angle_error}});
+    out["suspensions"] = SuspensionsJson(Suspensions(*store));
     std::printf("%s\n", out.dump().c_str());
     return kExitOk;
   }
@@ -287,17 +294,27 @@ int Status(const std::string& db_path, std::int64_t only, bool as_json, bool all
                   static_cast<long long>(d.trials), d.mean_dx * 1e3, d.mean_dy * 1e3,
                   d.mean_dz * 1e3, d.mean_position_error * 1e3, d.mean_angle_error * 180 / M_PI);
   }
+  std::fputs(FormatSuspensions(Suspensions(*store), store->Now()).c_str(), stdout);
   return kExitOk;
 }
 
-int Control(const std::string& verb, std::int64_t id, const std::string& db_path) {
+int Control(const std::string& verb, std::int64_t id, const std::string& db_path,
+            const std::optional<std::string>& cell) {
   auto store = OpenStore(db_path, false);
   try {
-    if (verb == "pause")
+    if (verb == "pause") {
       store->PauseCampaign(id);
-    else if (verb == "resume")
-      store->ResumeCampaign(id);
-    else
+    } else if (verb == "resume") {
+      // Also lifts its suspensions (and the service's, and --cell's) and
+      // resets their hold: the service sees it on its next pass (1 s).
+      for (const auto& s : store->ResumeSuspended(id, cell))
+        std::fprintf(stderr, "lifted: %s suspension of %s (%s)\n", s.condition.c_str(),
+                     s.scope == "cell"       ? ("cell " + s.cell_id).c_str()
+                     : s.scope == "campaign" ? ("campaign " + std::to_string(s.campaign_id)).c_str()
+                                             : "every campaign",
+                     s.evidence.c_str());
+    } else
+
       store->CancelCampaign(id);
     std::fprintf(stderr, "campaign %lld: %s\n", static_cast<long long>(id),
                  db::ToString(store->GetCampaign(id).state));
@@ -369,6 +386,7 @@ void AddCampaignCommands(CLI::App& app, Action* action) {
       std::string db;
       std::int64_t id = 0;
       std::string verb;
+      std::string cell;
     };
     auto o = std::make_shared<O>();
     o->verb = verb;
@@ -377,10 +395,24 @@ void AddCampaignCommands(CLI::App& app, Action* action) {
         : verb == std::string("resume") ? "Resume a paused campaign"
                                         : "Cancel a campaign (planned trials are dropped)");
     auto* cmd = app.add_subcommand(verb, help);
-    cmd->footer(std::string("Example:\n  arena ") + verb + " 3 --db lab.db\n");
+    cmd->footer(std::string("Example:\n  arena ") + verb + " 3 --db lab.db\n" +
+                (verb == std::string("resume")
+                     ? "  arena resume 3 --cell c2 --db lab.db\n"
+                       "Lifts the campaign's suspensions (and the service's; with --cell, that "
+                       "cell's) and resets their hold (docs/operations.md).\n"
+                     : ""));
     cmd->add_option("id", o->id, "Campaign id (see `arena list`)")->required();
     cmd->add_option("--db", o->db, "SQLite store")->required();
-    cmd->callback([o, action] { *action = [o] { return Control(o->verb, o->id, o->db); }; });
+    CLI::Option* cell = nullptr;
+    if (verb == std::string("resume"))
+      cell = cmd->add_option("--cell", o->cell, "Also lift this cell's suspensions");
+    cmd->callback([o, action, cell] {
+      const bool with_cell = cell && cell->count() > 0;
+      *action = [o, with_cell] {
+        return Control(o->verb, o->id, o->db,
+                       with_cell ? std::optional<std::string>(o->cell) : std::nullopt);
+      };
+    });
   }
 }
 

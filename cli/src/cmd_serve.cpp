@@ -3,10 +3,13 @@
 
 #include <atomic>
 #include <cstdio>
+#include <fstream>
 #include <memory>
+#include <sstream>
 #include <string>
 
 #include <spdlog/spdlog.h>
+#include <nlohmann/json.hpp>
 
 #include "arena/db/store.hpp"
 #include "arena/orchestrator/logging.hpp"
@@ -23,7 +26,25 @@ struct ServeCliOptions {
   orchestrator::ServiceOptions service;
   std::string peers;
   std::string log_level = "info";
+  std::string suspenders_path;  // --suspenders FILE
 };
+
+// The suspenders' limits: the defaults (docs/operations.md), with FILE's
+// fields over them. @throws std::invalid_argument naming the file and field.
+orchestrator::SuspenderConfig LoadSuspenders(const std::string& path) {
+  if (path.empty()) return {};
+  std::ifstream in(path);
+  if (!in) throw std::invalid_argument("--suspenders " + path + ": cannot read the file");
+  std::stringstream text;
+  text << in.rdbuf();
+  const auto j = nlohmann::json::parse(text.str(), nullptr, false);
+  if (j.is_discarded()) throw std::invalid_argument("--suspenders " + path + ": not valid JSON");
+  try {
+    return orchestrator::ParseSuspenders(j);
+  } catch (const std::invalid_argument& e) {
+    throw std::invalid_argument("--suspenders " + path + ": " + e.what());
+  }
+}
 
 int RunServe(ServeCliOptions opt) {
   // Before any thread exists (the log's flusher, DDS): threads inherit the
@@ -35,6 +56,7 @@ int RunServe(ServeCliOptions opt) {
   });
   try {
     if (!opt.peers.empty()) opt.service.network.peers = dds::ParsePeers(opt.peers);
+    opt.service.suspenders = LoadSuspenders(opt.suspenders_path);
     orchestrator::ValidateServiceOptions(opt.service);  // before anything is created
     orchestrator::SetUpServiceLog(opt.service.db_path, opt.log_level);
   } catch (const dds::DdsError& e) {
@@ -124,6 +146,24 @@ void AddServeCommand(CLI::App& app, Action* action) {
   cmd->add_option("--integrity-check-period", opt->service.integrity_check_period_s,
                   "Seconds between the store's quick checks while serving (damage found: exit 3)")
       ->capture_default_str();
+  cmd->add_option("--suspenders", opt->suspenders_path,
+                  "JSON file of suspender limits over the defaults (docs/operations.md)");
+  cmd->add_option("--notify", opt->service.notify_command,
+                  "Run this shell command with one JSON event on stdin per event "
+                  "(campaign done, cell gone, suspension, ...; docs/operations.md)");
+  cmd->add_option("--notify-timeout", opt->service.notify_timeout_s,
+                  "Seconds a --notify command may run before its process group is killed")
+      ->capture_default_str();
+  cmd->add_option("--notify-queue", opt->service.notify_queue,
+                  "Events waiting for a slow --notify command before new ones are dropped "
+                  "(counted and logged; all stay in the store)")
+      ->capture_default_str();
+  cmd->add_option("--notify-failure-rate", opt->service.notify_failure_rate,
+                  "Failed share of a campaign's finished trials that is an event")
+      ->capture_default_str();
+  // Hidden: the longest wait of a cell after failed phases (the soak test
+  // compresses a week; a lab keeps the default).
+  cmd->add_option("--cell-backoff-max", opt->service.cell_backoff_max_s)->group("");
   // Hidden: bounds the store's size to emulate a full disk (fault tests).
   cmd->add_option("--store-max-pages", opt->service.store_max_pages)->group("");
   cmd->callback([opt, action] { *action = [opt] { return RunServe(*opt); }; });

@@ -470,6 +470,36 @@ ALTER TABLE cells ADD COLUMN start_for_trial INTEGER;  -- 0: aimed at no trial; 
       {15, "trial_transitions.rule: the rule that decided each transition", R"sql(
 ALTER TABLE trial_transitions ADD COLUMN rule TEXT NOT NULL DEFAULT '';
 )sql"},
+      // Issue 29: suspensions (a condition paused dispatch for a cell, a
+      // campaign or the whole service, and when it was lifted, by which rule
+      // or by `arena resume`) and the service's events (what `arena serve
+      // --notify` is told, also kept here). IF NOT EXISTS: tests fake an
+      // older file by lowering user_version without dropping later tables.
+      {16, "suspensions and service events", R"sql(
+CREATE TABLE IF NOT EXISTS suspensions(
+  id          INTEGER PRIMARY KEY,
+  condition   TEXT NOT NULL,        -- reset_failure_rate, start_pose_drift, ... (suspender_policy.hpp)
+  scope       TEXT NOT NULL CHECK (scope IN ('cell', 'campaign', 'service')),
+  campaign_id INTEGER REFERENCES campaigns(id),  -- campaign scope (NULL otherwise)
+  cell_id     TEXT,                              -- cell scope (NULL otherwise)
+  rule        TEXT NOT NULL,        -- the rule that fired it ("reset_failure_rate.fired")
+  evidence    TEXT NOT NULL,        -- the reading against its limit
+  fired_at    REAL NOT NULL,
+  lifted_at   REAL,                 -- NULL: still holds dispatch back
+  lifted_by   TEXT,                 -- the rule that lifted it, or 'arena resume'
+  lift_reason TEXT
+);
+CREATE INDEX IF NOT EXISTS suspensions_active ON suspensions(lifted_at, scope);
+CREATE TABLE IF NOT EXISTS service_events(
+  id          INTEGER PRIMARY KEY,
+  at          REAL NOT NULL,
+  kind        TEXT NOT NULL,        -- campaign_done, cell_gone, suspension_fired, ...
+  campaign_id INTEGER,
+  cell_id     TEXT,
+  message     TEXT NOT NULL,
+  event_json  TEXT NOT NULL         -- what the --notify command was given on stdin
+);
+)sql"},
   };
   return kMigrations;
 }

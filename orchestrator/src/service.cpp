@@ -29,9 +29,12 @@
 #include "arena/mechanics/scene_json.hpp"
 #include "arena/orchestrator/adaptive.hpp"
 #include "arena/orchestrator/logging.hpp"
+#include "arena/orchestrator/notifier.hpp"
+#include "arena/orchestrator/suspenders.hpp"
 #include "arena/orchestrator/trial_data.hpp"
 #include "arena/orchestrator/trial_driver.hpp"
 #include "arena/schemas/arena.h"
+#include "service_watch.hpp"
 
 namespace arena::orchestrator {
 
@@ -418,6 +421,11 @@ struct Service::Impl {
   std::unique_ptr<TrialDriver> driver;
   // Adaptive campaigns' next rounds (adaptive.hpp): one call per scheduling pass.
   std::unique_ptr<AdaptivePlanner> adaptive;
+  // Issue 29: suspenders (fed by the driver, gate its claims), the events'
+  // command and the watch that ties them to the store.
+  std::unique_ptr<Suspenders> suspenders;
+  std::unique_ptr<Notifier> notifier;
+  std::unique_ptr<ServiceWatch> watch;
   bool registered = false;
 
   std::atomic<bool> stop_requested{false};
@@ -475,6 +483,14 @@ struct Service::Impl {
     DriverOptions d;
     d.service = o;
     driver = std::make_unique<TrialDriver>(d, me, *trial_store, transport, predictor);
+    const auto t0 = Clock::now();
+    suspenders = std::make_unique<Suspenders>(o.suspenders,
+                                              [t0] { return Seconds(Clock::now() - t0).count(); });
+    driver->SetObserver(suspenders.get());
+    if (!o.notify_command.empty())
+      notifier = std::make_unique<Notifier>(o.notify_command, o.notify_timeout_s,
+                                            static_cast<std::size_t>(o.notify_queue));
+    watch = std::make_unique<ServiceWatch>(*store, opt, *suspenders, notifier.get());
     spdlog::info("service session {} (pid {} on {})", SessionHex(session), me.pid, me.host);
   }
 
@@ -528,6 +544,7 @@ struct Service::Impl {
   int Run() {
     driver->Resume();
     auto last_tick = Clock::now();
+    auto next_watch = Clock::now();
     std::optional<Clock::time_point> drain_deadline;
     for (;;) {
       if (stop_requested && !drain_deadline) {
@@ -549,6 +566,10 @@ struct Service::Impl {
       driver->Tick(stop_requested || drain_deadline.has_value());
 
       const auto now = Clock::now();
+      if (now >= next_watch) {
+        next_watch = now + std::chrono::duration_cast<Clock::duration>(Seconds(opt.watch_period_s));
+        watch->Poll();
+      }
       if (now - last_tick > std::chrono::milliseconds(100)) {
         last_tick = now;
         if (on_tick) on_tick(driver->counters());
@@ -566,6 +587,9 @@ struct Service::Impl {
       }
     }
     ReleaseCells();
+    watch->Poll();  // the last events (a campaign done) before the command is drained
+    if (notifier && !notifier->Drain(opt.notify_timeout_s + 2))
+      spdlog::warn("notify: events still queued at stop (they are in the store's service_events)");
     if (on_tick) on_tick(driver->counters());
     return 0;
   }
@@ -622,6 +646,17 @@ void ValidateServiceOptions(const ServiceOptions& o) {
     throw std::invalid_argument("--predictors: must be 1.." + std::to_string(max_predictors) +
                                 " threads, got " + std::to_string(o.predictor_threads));
   if (o.store_max_pages < 0) throw std::invalid_argument("--store-max-pages: must be >= 0");
+  RequireSeconds(o.cell_backoff_s, "cell_backoff_s", 0, 3600);
+  RequireSeconds(o.cell_backoff_max_s, "--cell-backoff-max", 0, 3600);
+  RequireSeconds(o.notify_timeout_s, "--notify-timeout", 0.01, 3600);
+  RequireSeconds(o.watch_period_s, "watch_period_s", 0.01, 3600);
+  if (o.notify_queue < 1 || o.notify_queue > 100000)
+    throw std::invalid_argument("--notify-queue: must be 1..100000 events, got " +
+                                std::to_string(o.notify_queue));
+  if (!std::isfinite(o.notify_failure_rate) || o.notify_failure_rate < 0 ||
+      o.notify_failure_rate > 1)
+    throw std::invalid_argument("--notify-failure-rate: must be a fraction in [0, 1], got " +
+                                std::to_string(o.notify_failure_rate));
 }
 
 }  // namespace arena::orchestrator

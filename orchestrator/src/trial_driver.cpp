@@ -96,6 +96,7 @@ struct TrialDriver::Impl {
   mutable std::mutex counters_mu;
   ServiceCounters counters;
   std::function<void(const TrialTiming&)> on_trial_timing;
+  TrialObserver* observer = nullptr;  // the suspenders (suspenders.hpp)
 
   struct CellRun {
     std::string id;
@@ -214,6 +215,7 @@ struct TrialDriver::Impl {
     const bool restarted = cell.incarnation != 0 && cell.incarnation != a.started_unix_ns();
     cell.incarnation = a.started_unix_ns();
     cell.alive = true;
+    if (observer) observer->OnCellAlive(id, true);
     cell.speed = a.speed();
     nlohmann::json caps = {{"workspace_min", a.workspace_min()},
                            {"workspace_max", a.workspace_max()},
@@ -270,6 +272,7 @@ struct TrialDriver::Impl {
     }
     if (!cell.alive) return;
     spdlog::warn("cell {}: {}", id, reason);
+    if (observer) observer->OnCellAlive(id, false);
     cell.alive = false;  // (`ours` stays: a process back from a lapse may still serve us;
                          // a new one announces that it serves nobody)
     EndPhase(cell, DecideServiceEvent(cell.phase, ServiceEvent::kCellLost), "cell lost: " + reason);
@@ -281,6 +284,7 @@ struct TrialDriver::Impl {
     if (it == cells.end() || it->second.alive) return;
     CellRun& cell = it->second;
     cell.alive = true;
+    if (observer) observer->OnCellAlive(id, true);
     cell.next_claim = now();
     SendClaim(cell);
     Step("cell " + id + ": alive again", "", [this, id] {
@@ -406,7 +410,8 @@ struct TrialDriver::Impl {
       if (!cell.alive || !cell.ours || cell.quarantined || cell.phase != CellPhase::kIdle ||
           cell.store_waits > 0 || t < cell.next_claim)
         continue;
-      cell.next_claim = t + Dur(opt.dispatch_poll_s);  // poll the store gently when idle
+      cell.next_claim = t + Dur(opt.dispatch_poll_s);        // poll the store gently when idle
+      if (observer && observer->DispatchGate(id)) continue;  // a suspension holds it back
       std::optional<db::ClaimedTrial> claim;
       const std::string cell_id = id;
       Attempt("cell " + id + ": claim", [&] { claim = store.ClaimNextTrial(cell_id); });
@@ -587,6 +592,12 @@ struct TrialDriver::Impl {
     Execution& ex = it->second;
     CellRun& cell = Cell(ex.cell_id);
     CellResult(cell, CellPhase::kExecuting, true, "");
+    if (observer) {
+      const auto dropped = std::count_if(ex.samples.begin(), ex.samples.end(),
+                                         [](const db::Sample& s) { return !s.observed_valid; });
+      observer->OnStream(cell.id, ex.campaign_id, static_cast<std::int64_t>(ex.samples.size()),
+                         dropped);
+    }
     PredictionRequest request{ex.trial_id,           ex.campaign_id,      ex.attempt,
                               std::move(ex.scene),   std::move(ex.truth), ex.scene_json,
                               std::move(ex.commands)};
@@ -670,6 +681,9 @@ struct TrialDriver::Impl {
     }
     if (!run) return;
     ex.commands = assessment::CommandsOf(*run);
+    if (observer && !run->commands.empty())
+      observer->OnClosedLoop(ex.cell_id, ex.campaign_id,
+                             static_cast<std::int64_t>(run->commands.size()), run->held);
     auto shared = std::make_shared<db::ClosedLoopRun>(std::move(*run));
     Step(tag + ": record closed loop", "", [this, shared] { store.RecordClosedLoop(*shared); });
   }
@@ -714,6 +728,8 @@ struct TrialDriver::Impl {
     report.reset_attempts = static_cast<int>(st.reset_attempts());
     report.reason = st.reason();
     report.aimed_at_trial = cell.reset_aimed_at;
+    if (observer && (ok || d.counts_against_cell()))  // the resets CellResult counts
+      observer->OnReset(cell.id, cell.campaign_id, ok, report.pose_observed, report.position_error);
     if (!ok) {
       spdlog::warn("trial {} attempt {}: reset on cell {} failed: {}", cell.trial_id, cell.attempt,
                    cell.id, st.reason());
@@ -981,5 +997,6 @@ void TrialDriver::OnTrialTiming(std::function<void(const TrialTiming&)> callback
   impl_->on_trial_timing = std::move(callback);
 }
 std::size_t TrialDriver::pending_store_steps() const { return impl_->steps.pending(); }
+void TrialDriver::SetObserver(TrialObserver* observer) { impl_->observer = observer; }
 
 }  // namespace arena::orchestrator

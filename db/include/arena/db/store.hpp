@@ -406,6 +406,34 @@ struct CellEvent {
   std::string by_whom;
 };
 
+// A condition that paused dispatch (issue 29, orchestrator/suspender_policy.hpp).
+struct Suspension {
+  std::int64_t id = 0;
+  std::string condition;         // reset_failure_rate, start_pose_drift, sample_drop_rate,
+                                 // cell_silence, store_free_space, deadline_misses
+  std::string scope;             // cell, campaign, service
+  std::int64_t campaign_id = 0;  // campaign scope (0 otherwise)
+  std::string cell_id;           // cell scope ("" otherwise)
+  std::string rule;              // the rule that fired it
+  std::string evidence;          // the reading against its limit
+  double fired_at = 0;           // s since epoch
+  std::optional<double> lifted_at;
+  std::string lifted_by;  // the rule that lifted it, or "arena resume"
+  std::string lift_reason;
+};
+
+// One event of the service (campaign done, cell gone, suspension fired, ...),
+// as given to `arena serve --notify` (event_json) and logged.
+struct EventRecord {
+  std::int64_t id = 0;
+  double at = 0;  // s since epoch
+  std::string kind;
+  std::int64_t campaign_id = 0;  // 0: none
+  std::string cell_id;
+  std::string message;
+  std::string event_json = "{}";
+};
+
 struct CampaignStatus {
   std::int64_t id = 0;
   std::string name;
@@ -550,7 +578,7 @@ class Store {
   Campaign GetCampaign(std::int64_t campaign_id) const;
   std::vector<Campaign> ListCampaigns() const;
   // active -> paused (idempotent). `reason` tells an operator's pause from
-  // an automatic suspension (e.g. "suspended: 3 reset failures in a row").
+  // an automatic suspension (RecordSuspension: "suspended: <condition>: ...").
   void PauseCampaign(std::int64_t campaign_id, const std::string& reason = "paused by operator");
   void ResumeCampaign(std::int64_t campaign_id);  // paused -> active
   // -> cancelled; its planned trials become cancelled, running ones run out.
@@ -739,6 +767,30 @@ class Store {
   // retries the step instead and keeps renewing its cells' claims.
   // @throws std::invalid_argument when ms is negative.
   void SetBusyTimeout(int ms);
+
+  // ---- suspensions and service events (issue 29; suspensions.cpp)
+  // Records a suspension. Campaign scope: an active campaign is paused, its
+  // reason "suspended: <condition>: <evidence>" (an operator's pause stays
+  // as it is). One transaction. @returns its id. @throws kBadInput (scope,
+  // condition), kNotFound (campaign).
+  std::int64_t RecordSuspension(const Suspension& suspension);
+  // Lifts an active suspension (`by`: the rule or "arena resume"). A
+  // campaign paused by its suspensions resumes when none of them is left.
+  // @returns false when it was already lifted.
+  bool LiftSuspension(std::int64_t id, const std::string& by, const std::string& reason);
+  // `arena resume CAMPAIGN [--cell C]`: lifts the campaign's and the
+  // service's active suspensions (and, with a cell, that cell's) by
+  // "arena resume", and resumes the campaign if it is paused. @returns those lifted.
+  std::vector<Suspension> ResumeSuspended(std::int64_t campaign_id,
+                                          const std::optional<std::string>& cell_id);
+  // Active only, or all (newest first, at most `limit`).
+  std::vector<Suspension> ListSuspensions(bool active_only, std::size_t limit = 1000) const;
+  // A condition set aside for a campaign: its planned trials end failed with
+  // `reason` (rule on the audit rows). @returns how many.
+  int SetAsideTrials(std::int64_t campaign_id, const std::string& reason, const std::string& rule);
+  std::int64_t RecordEvent(const EventRecord& event);
+  // Events with id > after_id, oldest first, at most `limit`.
+  std::vector<EventRecord> ListEvents(std::int64_t after_id = 0, std::size_t limit = 1000) const;
 
   // ---- read side
   StatusSummary Status() const;

@@ -50,6 +50,7 @@
 #include <memory>
 #include <string>
 
+#include "arena/orchestrator/suspender_policy.hpp"
 #include "arena/schemas/dds.hpp"
 
 namespace arena::orchestrator {
@@ -83,6 +84,15 @@ struct ServiceOptions {
   // kCorrupt (exit 3) naming it. The open's own check is bounded in time
   // (db::StoreOptions::open_check_budget_s); this one finishes the file.
   double integrity_check_period_s = 300.0;
+  // Issue 29 (docs/operations.md): the suspenders' limits (`--suspenders
+  // FILE`), the command told of each event (`--notify`, notifier.hpp), and
+  // the failed share of a campaign's finished trials that is an event.
+  SuspenderConfig suspenders;
+  std::string notify_command;  // "": events go to the log and the store only
+  double notify_timeout_s = 10.0;
+  int notify_queue = 256;
+  double notify_failure_rate = 0.2;
+  double watch_period_s = 1.0;  // suspenders evaluated, events looked for
 };
 
 // What the service has done since it started (for `arena run`'s summary and tests).

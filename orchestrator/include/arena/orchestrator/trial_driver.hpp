@@ -169,6 +169,24 @@ class PredictionPort {
   virtual int outstanding() const = 0;
 };
 
+// What the driver sees of each trial that a watcher of the campaign's health
+// needs (the suspenders, suspenders.hpp), and the one dispatch gate: asked
+// for every idle cell right before its claim.
+class TrialObserver {
+ public:
+  virtual ~TrialObserver() = default;
+  virtual void OnReset(const std::string& cell_id, std::int64_t campaign_id, bool ok,
+                       bool pose_observed, double position_error_m) = 0;
+  virtual void OnStream(const std::string& cell_id, std::int64_t campaign_id, std::int64_t samples,
+                        std::int64_t dropped) = 0;
+  // A closed-loop attempt: its samples and those held (no fresh command in time).
+  virtual void OnClosedLoop(const std::string& cell_id, std::int64_t campaign_id,
+                            std::int64_t samples, std::int64_t held) = 0;
+  virtual void OnCellAlive(const std::string& cell_id, bool alive) = 0;
+  // nullptr: the cell may claim a trial now; otherwise the rule that holds it back.
+  virtual const char* DispatchGate(const std::string& cell_id) = 0;
+};
+
 // Who this service is, as cells and other services see it.
 struct ServiceIdentity {
   std::uint64_t session = 0;
@@ -221,6 +239,9 @@ class TrialDriver {
   void OnTrialTiming(std::function<void(const TrialTiming&)> callback);
   // Store steps waiting for a busy store to free up.
   std::size_t pending_store_steps() const;
+  // The suspenders (or nullptr): fed every reset, stream, closed loop and
+  // cell liveness; asked before every claim. Not owned.
+  void SetObserver(TrialObserver* observer);
 
  private:
   struct Impl;
