@@ -9,6 +9,7 @@
 
 #include <Eigen/Geometry>
 
+#include "arena/mechanics/pusher_motion.hpp"
 #include "arena/mechanics/scene_json.hpp"
 #include "svg_chart.hpp"
 
@@ -222,11 +223,12 @@ std::string SceneSvg(const mechanics::Scene& scene, const std::string& title) {
   for (const auto& f : scene.fingers)
     for (const auto& p : ContactShape(f)) all.push_back(p);
   Vector3d push_end = Vector3d::Zero();
-  const bool moves = scene.pusher && !scene.pusher->controller &&
-                     scene.pusher->motion.velocity.norm() * scene.duration > 0;
+  // Where the push ends: after a constant motion or along a recorded path.
+  if (scene.pusher) push_end = mechanics::PusherPoseAt(*scene.pusher, scene.duration).position;
+  const bool moves =
+      scene.pusher && !scene.pusher->controller && (push_end - scene.pusher->position).norm() > 0;
   if (scene.pusher) {
     for (const auto& p : ContactShape(*scene.pusher)) all.push_back(p);
-    push_end = scene.pusher->position + scene.pusher->motion.velocity * scene.duration;
     if (moves) all.push_back(push_end);
   }
   const double panel_w = 470, panel_h = 430, top = 70, margin = 20;
@@ -267,8 +269,10 @@ std::string SceneSvg(const mechanics::Scene& scene, const std::string& title) {
     if (scene.pusher->controller)
       object_text += "; pusher closed-loop (" + scene.pusher->controller->name + ")";
     else
-      object_text += "; push " + Length((push_end - scene.pusher->position).norm()) + " at " +
-                     FormatNumber(scene.pusher->motion.velocity.norm() * 1e3, 3) + " mm/s";
+      object_text +=
+          "; push " + Length((push_end - scene.pusher->position).norm()) + " at " +
+          FormatNumber(mechanics::PusherPeakRates(*scene.pusher).velocity.norm() * 1e3, 3) +
+          (scene.pusher->path ? " mm/s at most (recorded path)" : " mm/s");
   }
   svg += Text({width / 2, 48}, object_text, "#333", "middle", 13);
   for (int k = 0; k < 2; ++k) {
