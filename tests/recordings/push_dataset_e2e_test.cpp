@@ -9,6 +9,10 @@
 #include <fstream>
 #include <map>
 #include <nlohmann/json.hpp>
+#include <set>
+#include <string>
+
+#include <sqlite3.h>
 
 #include <gtest/gtest.h>
 
@@ -101,6 +105,70 @@ TEST_F(PushDatasetE2e, ImportsAllFiftyTrialsAndReportsTheirDefects) {
   int lines = 0;
   for (std::string line; std::getline(scenes, line);) lines += !line.empty();
   EXPECT_EQ(lines, 50);
+}
+
+// The real pushes end to end: imported, served by replay cells, each
+// predicted from its measured start along its measured pusher path, and
+// evaluated against the measured truth. Every served trial is done, or
+// refused with the reason its import check gave; none is scored against a
+// stream that failed its check.
+TEST_F(PushDatasetE2e, ImportedPushesRunOnReplayCellsAndAreEvaluatedAgainstTheMeasuredTruth) {
+  const std::string ds = dir_ + "/mit", db = dir_ + "/real.db";
+  auto r = Arena("import push-dataset '" + (data_ / "abs").string() + "' --shapes '" +
+                 (data_ / "shapes.json").string() + "' --out '" + ds + "'");
+  ASSERT_EQ(r.rc, 0) << r.err << r.out;
+  // The recorded trials whose poses failed the import's check (by trial id;
+  // the campaign lists the trials in order, trial id = index + 1).
+  std::set<int> pose_failed;
+  const json manifest = json::parse(std::ifstream(ds + "/manifest.json"));
+  for (const auto& t : manifest["import"]["trials"]) {
+    if (!t["pose_usable"].get<bool>()) pose_failed.insert(t["trial_id"].get<int>());
+  }
+
+  // The cells' own workspace is the campaign's (the lab's table frame).
+  const json campaign = json::parse(std::ifstream(ds + "/campaign.json"));
+  std::ofstream(dir_ + "/cell.json") << campaign["defects"].dump();
+  r = Arena("run '" + ds + "/campaign.json' --backend 'replay:" + ds + "' --db '" + db +
+            "' --cells 2 --cell-defects '" + dir_ + "/cell.json'");
+  ASSERT_EQ(r.rc, 0) << r.err << r.out;
+
+  sqlite3* h = nullptr;
+  ASSERT_EQ(sqlite3_open_v2(db.c_str(), &h, SQLITE_OPEN_READONLY, nullptr), SQLITE_OK);
+  sqlite3_stmt* q = nullptr;
+  ASSERT_EQ(sqlite3_prepare_v2(h,
+                               "SELECT idx, state, coalesce(outcome, ''), coalesce(truth, '') "
+                               "FROM trials WHERE campaign_id = 1 ORDER BY idx",
+                               -1, &q, nullptr),
+            SQLITE_OK)
+      << sqlite3_errmsg(h);
+  int trials = 0, done = 0;
+  std::set<std::string> truths;
+  while (sqlite3_step(q) == SQLITE_ROW) {
+    ++trials;
+    const int idx = sqlite3_column_int(q, 0);
+    const std::string state = reinterpret_cast<const char*>(sqlite3_column_text(q, 1));
+    const std::string outcome = reinterpret_cast<const char*>(sqlite3_column_text(q, 2));
+    truths.insert(reinterpret_cast<const char*>(sqlite3_column_text(q, 3)));
+    if (state == "done") {
+      ++done;
+      EXPECT_FALSE(pose_failed.count(idx + 1)) << "trial " << idx << " failed its check, scored";
+    } else {
+      EXPECT_EQ(state, "failed") << "trial " << idx << ": " << outcome;
+      EXPECT_TRUE(pose_failed.count(idx + 1)) << "trial " << idx << ": " << outcome;
+      EXPECT_NE(outcome.find("failed its import check"), std::string::npos)
+          << "trial " << idx << " refused without its import check's reason: " << outcome;
+    }
+  }
+  sqlite3_finalize(q);
+  sqlite3_close(h);
+  EXPECT_EQ(trials, 50);
+  EXPECT_EQ(done, 50 - static_cast<int>(pose_failed.size()));
+  EXPECT_EQ(truths, (std::set<std::string>{"measured"}));
+
+  r = Arena("evaluate --db '" + db + "' --campaign 1");
+  ASSERT_EQ(r.rc, 0) << r.err << r.out;
+  EXPECT_NE(r.out.find("measured"), std::string::npos) << r.out;
+  EXPECT_EQ(r.out.find("nan"), std::string::npos) << r.out;
 }
 
 TEST_F(PushDatasetE2e, ABadFileStopsTheImportWithExitTwoAndNothingWritten) {
