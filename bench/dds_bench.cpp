@@ -77,7 +77,8 @@ class BenchLab {
   }
   std::string Service() const { return dir_ + "/service"; }
   std::string Cell(int c) const { return dir_ + "/bench" + std::to_string(c); }
-  std::string Controller() const { return dir_ + "/controller"; }
+  // A controller's identity is issued for its name (the host's "bench").
+  std::string Controller() const { return dir_ + "/bench"; }
   ~BenchLab() {
     std::error_code ec;
     std::filesystem::remove_all(dir_, ec);
@@ -98,7 +99,7 @@ class BenchLab {
       arena::dds::IssueIdentity(dir_, o);
     }
     o.role = arena::dds::Role::kController;
-    o.name = "controller";
+    o.name = "bench";
     arena::dds::IssueIdentity(dir_, o);
   }
   std::string dir_;
@@ -388,6 +389,7 @@ void RunCell(int c, const CellPlan& plan, CellSync* sync, bool own_process) {
   if (plan.closed_loop) {
     dds::ReaderOptions ro_cmd{false, id};
     ro_cmd.cell_filter_in_dds = plan.cell_filter;
+    ro_cmd.controller = "bench";  // the controller's own topic, as a cell reads it
     commands = std::make_unique<dds::Reader<msg::PusherCommand>>(participant, ro_cmd);
   }
   log.WaitForMatched(1, 30s);

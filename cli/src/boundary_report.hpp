@@ -19,10 +19,10 @@ struct BoundaryCrossing {
 };
 
 struct BoundaryStatement {
-  std::string outcome;                 // e.g. "pivoted"
-  std::string positive, negative;      // class names, e.g. "pivoted", "not pivoted"
-  std::vector<std::string> parameters;  // the sampled parameters
-  int classified = 0;                  // trials with a class
+  std::string outcome;                      // e.g. "pivoted"
+  std::string positive, negative;           // class names, e.g. "pivoted", "not pivoted"
+  std::vector<std::string> parameters;      // the sampled parameters
+  int classified = 0;                       // trials with a class
   std::vector<BoundaryCrossing> crossings;  // by the first parameter, then the others
 };
 

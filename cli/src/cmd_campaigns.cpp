@@ -42,16 +42,6 @@ std::unique_ptr<db::Store> OpenStore(const std::string& path, bool read_only) {
   }
 }
 
-std::string IsoTime(double unix_s) {
-  if (unix_s <= 0) return "-";
-  const std::time_t t = static_cast<std::time_t>(unix_s);
-  std::tm tm{};
-  gmtime_r(&t, &tm);
-  char buf[32];
-  std::strftime(buf, sizeof buf, "%Y-%m-%dT%H:%M:%SZ", &tm);
-  return buf;
-}
-
 // A service beat within this long counts as running (it beats every second).
 constexpr double kServiceRecent_s = 10.0;
 

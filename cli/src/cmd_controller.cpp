@@ -75,6 +75,9 @@ int RunController(ControllerCliOptions opt) {
           return executors::MakeLibraryController(law, context);
         },
         &stop);
+  } catch (const executors::ControllerNameConflict& e) {
+    code = kExitBadInput;
+    error = e.what();
   } catch (const dds::SecurityError& e) {
     code = kExitBadInput;
     error = e.what();
@@ -103,9 +106,12 @@ void AddControllerCommand(CLI::App& app, Action* action) {
   cmd->footer(
       "Example:\n  arena controller --name pivot_to_angle --domain 42\n"
       "  arena controller --name lab_pivot --law pivot_to_angle --domain 42 --security "
-      "lab-pki/ctl\n"
+      "lab-pki/lab_pivot\n"
       "A scene whose pusher motion is {\"controller\": NAME, ...} is driven by the controller\n"
       "registered under NAME (docs/live_control.md). Laws: pivot_to_angle, sliding_to_position.\n"
+      "One controller per name on a domain: a second one is refused (exit 2). Under\n"
+      "--security the identity must be issued for the name (arena certs issue LAB --role\n"
+      "controller --name NAME): only it may command the pusher of NAME's trials.\n"
       "Stops cleanly on SIGINT/SIGTERM (exit 0).");
   cmd->add_option("--name", opt->host.name, "Name scenes use to pick this controller")->required();
   cmd->add_option("--domain", opt->host.domain_id, "DDS domain id (0..231)")->required();

@@ -55,6 +55,12 @@ int RunPushImport(const ImportCliOptions& o) {
 void AddImportCommand(CLI::App& app, Action* action) {
   auto* cmd = app.add_subcommand("import", "Import recorded experiments as a replayable dataset");
   cmd->require_subcommand(1);
+  cmd->footer(
+      "Example:\n"
+      "  arena import push-dataset data/mit-push/abs --shapes data/mit-push/shapes.json \\\n"
+      "      --out datasets/mit-abs\n"
+      "One adaptor per recording layout (docs/real_data.md); `arena import push-dataset --help`\n"
+      "for the MIT push dataset's.\n");
   auto o = std::make_shared<ImportCliOptions>();
   auto* push = cmd->add_subcommand(
       "push-dataset", "The MIT push dataset's HDF5 files (tip_pose, object_pose, ft_wrench)");

@@ -213,12 +213,13 @@ int Run(RunOptions opt) {
       dds::CheckIdentityDir(identity("service"));
       for (int k = 0; k < opt.cells; ++k)
         dds::CheckIdentityDir(identity("sim" + std::to_string(k + 1)));
-      if (CampaignController(campaign)) dds::CheckIdentityDir(identity("controller"));
+      // A controller's identity is issued for its name (its name is bound to it).
+      if (const auto name = CampaignController(campaign)) dds::CheckIdentityDir(identity(*name));
     } catch (const dds::SecurityError& e) {
       throw CommandError(kExitBadInput, std::string("--security: ") + e.what() +
                                             " (issue it with `arena certs issue " +
                                             opt.security_lab +
-                                            " --role cell|service --name NAME`)");
+                                            " --role cell|service|controller --name NAME`)");
     }
   }
   if (opt.domain < 0) {
@@ -297,8 +298,7 @@ int Run(RunOptions opt) {
                                        "--name",       *name,
                                        "--domain",     std::to_string(opt.domain),
                                        "--parent-pid", std::to_string(getpid())};
-      if (!opt.security_lab.empty())
-        argv.insert(argv.end(), {"--security", identity("controller")});
+      if (!opt.security_lab.empty()) argv.insert(argv.end(), {"--security", identity(*name)});
       controllers.emplace_back(argv, opt.db_path + ".controller.log");
     } else if (!opt.quiet) {
       std::fprintf(stderr,

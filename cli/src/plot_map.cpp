@@ -151,6 +151,14 @@ std::string RenderMapSvg(const MapData& m) {
     svg << " cx=\"" << X(p.x) + offset[i].first << "\" cy=\"" << Y(p.y) + offset[i].second
         << "\" r=\"7\"><title>condition " << p.condition << ": "
         << (p.value ? Num(*p.value) : std::string("no value")) << "</title></circle>\n";
+    // A condition sharing its point says which one it is.
+    const auto shared = at.find({std::lround(X(p.x)), std::lround(Y(p.y))});
+    if (shared != at.end() && shared->second.size() > 1 && !p.label.empty()) {
+      const bool right = offset[i].first >= 0;
+      svg << "<text class=\"condition-label\" x=\"" << X(p.x) + offset[i].first * 1.9 << "\" y=\""
+          << Y(p.y) + offset[i].second * 1.9 + 3 << "\" font-size=\"9\" text-anchor=\""
+          << (right ? "start" : "end") << "\">" << SvgEscape(p.label) << "</text>\n";
+    }
   }
   svg << "</g>\n";
   if (!m.boundary.empty()) {

@@ -22,6 +22,9 @@ struct MapPoint {
   int condition = 0;
   double x = 0, y = 0;  // axis coordinates (a category's index for categorical axes)
   std::optional<double> value;
+  // The condition's other sampled parameters ("finger_type=line"): written
+  // beside it where several conditions share (x, y).
+  std::string label{};
 };
 
 struct MapData {

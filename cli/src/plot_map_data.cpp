@@ -10,6 +10,7 @@
 #include "arena/db/query.hpp"
 #include "plot_map.hpp"
 #include "plot_map_data.hpp"
+#include "svg_chart.hpp"
 
 namespace arena::cli {
 namespace {
@@ -160,6 +161,7 @@ MapData BuildCampaignMap(const db::Store& store, std::int64_t campaign_id, const
   struct Raw {
     int condition;
     json xv, yv;
+    json all;
   };
   std::vector<Raw> raws;
   std::set<std::string> varied;
@@ -170,7 +172,7 @@ MapData BuildCampaignMap(const db::Store& store, std::int64_t campaign_id, const
     json pj = json::parse(*text, nullptr, false);
     if (!pj.is_object()) continue;
     for (auto kv = pj.begin(); kv != pj.end(); ++kv) varied.insert(kv.key());
-    raws.push_back({static_cast<int>(*c), pj.value(x, json()), pj.value(y, json())});
+    raws.push_back({static_cast<int>(*c), pj.value(x, json()), pj.value(y, json()), pj});
   }
   auto list = [&] {
     std::string s;
@@ -203,9 +205,25 @@ MapData BuildCampaignMap(const db::Store& store, std::int64_t campaign_id, const
     }
     return static_cast<double>(f - cats->begin());
   };
+  // The other parameters that differ between conditions: what tells apart
+  // conditions drawn at the same (x, y).
+  std::set<std::string> differing;
+  for (const auto& name : varied) {
+    if (name == x || name == y) continue;
+    std::set<std::string> seen;
+    for (const auto& r : raws) seen.insert(r.all.value(name, json()).dump());
+    if (seen.size() > 1) differing.insert(name);
+  }
   for (const auto& r : raws) {
     MapPoint p;
     p.condition = r.condition;
+    for (const auto& name : differing) {
+      const json v = r.all.value(name, json());
+      p.label += (p.label.empty() ? "" : ", ") + name + "=" +
+                 (v.is_string()   ? v.get<std::string>()
+                  : v.is_number() ? FormatNumber(v.get<double>(), 3)
+                                  : v.dump());
+    }
     p.x = coordinate(r.xv, cx, &map.x_categories);
     p.y = coordinate(r.yv, cy, &map.y_categories);
     if (auto v = values.find(r.condition); v != values.end()) p.value = v->second;

@@ -33,4 +33,7 @@ class ProgressLine {
 // "1h02m", "3m05s", "12s": for ETAs and elapsed times.
 std::string FormatDuration(double seconds);
 
+// "2026-11-28T00:44:06Z" (UTC); "-" for no time (0 or less).
+std::string IsoTime(double unix_s);
+
 }  // namespace arena::cli

@@ -11,20 +11,6 @@
 #include "progress.hpp"
 
 namespace arena::cli {
-namespace {
-
-std::string Iso(double unix_s) {
-  if (unix_s <= 0) return "-";
-  const std::time_t t = static_cast<std::time_t>(unix_s);
-  std::tm tm{};
-  gmtime_r(&t, &tm);
-  char buf[32];
-  std::strftime(buf, sizeof buf, "%Y-%m-%dT%H:%M:%SZ", &tm);
-  return buf;
-}
-
-}  // namespace
-
 std::vector<CellActivity> ReadCellActivity(const db::Store& store,
                                            const std::vector<db::CellInfo>& cells) {
   std::vector<CellActivity> out(cells.size());
@@ -81,7 +67,7 @@ std::string FormatCellTable(const std::vector<db::CellInfo>& cells,
                   : c.state == db::CellState::kHealthy ? "idle"
                                                        : "-",
                   busy ? std::to_string(a.trial_id).c_str() : "-",
-                  busy ? FormatDuration(a.in_phase_s).c_str() : "-", Iso(c.last_seen).c_str(),
+                  busy ? FormatDuration(a.in_phase_s).c_str() : "-", IsoTime(c.last_seen).c_str(),
                   c.consecutive_failures, c.quarantine_reason.empty() ? "" : "  ",
                   c.quarantine_reason.c_str());
     out += line;

@@ -159,9 +159,14 @@ struct Cell::Impl {
   dds::Writer<msg::TrialStatus> status;
   dds::Writer<msg::GroundTruth> ground_truth;
   dds::Reader<msg::TrialCommand> commands;
-  dds::Writer<msg::LiveState> live;                 // one message per sample, best-effort
-  dds::Reader<msg::PusherCommand> pusher_commands;  // closed loop: the controllers' answers
-  StreamPort stream_port;                           // how trials' samples leave (trial_stream.hpp)
+  dds::Writer<msg::LiveState> live;  // one message per sample, best-effort
+  // Closed loop: the answers of each controller a scene named, on that
+  // controller's own topic (dds::ControllerTopic), made at its first trial;
+  // only the worker uses them. Another controller's commands never reach
+  // this cell, and under DDS-Security only the identity the name is bound to
+  // may publish on the topic.
+  std::map<std::string, std::unique_ptr<dds::Reader<msg::PusherCommand>>> pusher_commands;
+  StreamPort stream_port;  // how trials' samples leave (trial_stream.hpp)
 
   // Guarded by `mutex`: shared by the worker, the intake thread and Stop().
   std::mutex mutex;
@@ -210,8 +215,7 @@ struct Cell::Impl {
         status(participant),
         ground_truth(participant),
         commands(participant, dds::ReaderOptions{false}),
-        live(participant),
-        pusher_commands(participant, dds::ReaderOptions{false, o.id}) {
+        live(participant) {
     stream_port.cell_id = o.id;
     stream_port.batch_samples = o.batch_samples;
     stream_port.speed = o.speed;
@@ -542,21 +546,44 @@ struct Cell::Impl {
     Finish(c, s);
   }
 
+  // The reader of the commands of the controller registered under `name`
+  // (its own topic), made at the first trial that names it.
+  dds::Reader<msg::PusherCommand>& ControllerCommands(const std::string& name) {
+    auto& reader = pusher_commands[name];
+    if (!reader) {
+      dds::ReaderOptions o{false, options.id};
+      o.controller = name;
+      reader = std::make_unique<dds::Reader<msg::PusherCommand>>(participant, o);
+    }
+    return *reader;
+  }
+
   // The backend can run it (Execute checked closed_loop before ACCEPTED); the
   // defect layer perturbs the scene as for any trial. closed_loop_trial.hpp
   // runs the loop.
   void ExecuteClosedLoop(const msg::TrialCommand& c, const mechanics::Scene& scene,
                          const TrialContext& trial, Clock::time_point started) {
-    ClosedLoopTrial loop(stream_port, pusher_commands, layer, c, trial, scene);
+    const std::string& name = scene.pusher->controller->name;
+    dds::Reader<msg::PusherCommand>* commands_of = nullptr;
+    try {
+      commands_of = &ControllerCommands(name);
+    } catch (const dds::DdsError& e) {  // the cell's own identity or DDS: not the controller's
+      auto s = BaseStatus(c, msg::STATE_FAILED);
+      s.failure(msg::FAILURE_INTERNAL);
+      s.reason(std::string("controller ") + name + ": cannot read its commands: " + e.what());
+      s.phase_wall_s(std::chrono::duration<double>(Clock::now() - started).count());
+      return Finish(c, s);
+    }
+    dds::Reader<msg::PusherCommand>& answers = *commands_of;
+    ClosedLoopTrial loop(stream_port, answers, layer, c, trial, scene);
     // The controller must be on the domain, its endpoints matched, before
     // the first sample: a lockstep cell waits for it only hold_s.
-    const std::string& name = loop.context().spec.name;
     const auto wait = std::chrono::duration_cast<dds::Millis>(
         std::min(std::chrono::duration<double>(ClosedLoopTrial::kControllerWait_s),
                  std::chrono::duration<double>(trial.deadline - Clock::now())));
-    if (!participant.WaitForPeer("arena.controller." + name, wait) ||
+    if (!participant.WaitForPeer(dds::ControllerParticipantName(name), wait) ||
         !live.WaitForMatched(1, dds::Millis(2000)) ||
-        !pusher_commands.WaitForMatched(1, dds::Millis(2000))) {
+        !answers.WaitForMatched(1, dds::Millis(2000))) {
       auto s = BaseStatus(c, msg::STATE_FAILED);
       s.failure(msg::FAILURE_CONTROLLER);  // not the cell's fault: a retry may find it
       s.reason("controller " + name + ": not on domain " + std::to_string(options.domain_id) +

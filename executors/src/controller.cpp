@@ -226,12 +226,28 @@ ControllerCounters RunController(const ControllerHostOptions& o, const Controlle
   }
   dds::ParticipantOptions po;
   po.domain_id = o.domain_id;
-  po.name = "arena.controller." + o.name;
+  po.name = dds::ControllerParticipantName(o.name);
   po.network = o.network;
   po.lease_s = o.participant_lease_s;
   dds::Participant participant(po);
   dds::Reader<msg::LiveState> live(participant, dds::ReaderOptions{false});
-  dds::Writer<msg::PusherCommand> commands(participant);
+  // Commands go on this name's own topic, which cells running its scenes
+  // read; under DDS-Security only an identity issued for this name may
+  // publish there (a SecurityError naming the binding otherwise).
+  dds::WriterOptions wo;
+  wo.controller = o.name;
+  { dds::Writer<msg::PusherCommand> allowed(participant, wo); }  // refused at once if not
+  // One controller per name: a second one would answer the same samples
+  // with another law. The name is claimed before the writer cells wait for
+  // exists, so no trial starts on a controller that is still claiming it.
+  if (const auto holder = participant.WaitForNamesake(
+          std::chrono::duration_cast<dds::Millis>(std::chrono::duration<double>(o.claim_wait_s)))) {
+    throw ControllerNameConflict(
+        "--name: controller '" + o.name + "' is registered already on domain " +
+        std::to_string(o.domain_id) + " by another controller (" + po.name + ", " + *holder +
+        "); stop that one or choose another name");
+  }
+  dds::Writer<msg::PusherCommand> commands(participant, wo);
   spdlog::info("controller {}: up on domain {}", o.name, o.domain_id);
 
   ControllerCounters counters;

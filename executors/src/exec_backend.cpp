@@ -528,12 +528,14 @@ class ExecBackend final : public Backend {
   // One message; "" or the reason the phase fails.
   std::string Await(const char* phase, Clock::time_point until, json* msg,
                     const std::function<void()>& idle = nullptr) {
+    // Which limit binds, known before waiting: the phase's deadline when it
+    // comes before the reply timeout.
+    const double waited = options_.reply_timeout_s;
+    const bool deadline = until < After(waited - 0.5);
     for (;;) {
       std::string line;
       switch (driver_->ReadLine(until, &line, idle)) {
         case DriverProcess::Read::kTimeout: {
-          const double waited = options_.reply_timeout_s;
-          const bool deadline = Clock::now() >= until && until < After(waited - 0.5);
           if (phase_lines_ > 0 && deadline &&
               Clock::now() - last_line_at_ < std::chrono::seconds(1)) {
             // It talks, it just never finishes: not a hang.

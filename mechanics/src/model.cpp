@@ -123,6 +123,11 @@ using SmallVector = Eigen::Matrix<double, Eigen::Dynamic, 1, 0, 6, 1>;
 // A step whose physical residuals (relative to the force scale) exceed this
 // is a solver failure, not a result.
 constexpr double kAcceptedResidual = 1e-8;
+// Default elastic pads: sinking under the grip force, as a fraction of the
+// object's extent.
+constexpr double kPadSink = 1e-4;
+// Aligned cones: a slip within this angle (rad) of a cone edge is along it.
+constexpr double kEdgeAngle = 1e-6;
 // Solves of one step before an inaccurate answer is reported as a failure.
 constexpr int kAccuracyAttempts = 4;
 
@@ -307,6 +312,10 @@ struct Point {
   // step's number).
   Eigen::Vector3d urel = Eigen::Vector3d::Zero();
   long urel_step = -1;
+  // Aligned cone (tracked, 6 DOF): the direction of its last slip (object
+  // relative to the body it touches; zero before any), which the cone's
+  // first edge opposes (SetEdges).
+  Eigen::Vector3d slip = Eigen::Vector3d::Zero();
 };
 
 struct Contact {
@@ -718,6 +727,7 @@ struct ContactModel::Impl {
   bool SetupReduction();
   void SetupScales();
   void SetupContacts();
+  double DefaultPadStiffness() const;
   void SetupUnknowns();
   void SeatContacts();
   void Geometry();
@@ -1062,6 +1072,14 @@ void ContactModel::Impl::SetupScales() {
   Vs = Fs * dt / mass;
 }
 
+// A line or patch pad without a stiffness (model.pads elastic): one that
+// sinks kPadSink of the object's extent under the grip force. Any stiffness
+// makes the pad's load split determinate (the least-squares split of an
+// elastic pad pressed flush is the uniform one; a rigid pad's is a vertex
+// the solver picks, history-dependent through its warm start); this one is
+// stiff enough that the geometry moves by at most 1e-4 of the extent.
+double ContactModel::Impl::DefaultPadStiffness() const { return scene.grip_force / (kPadSink * L); }
+
 // The contacts and their constituent points: fingers in scene order, then
 // the pusher.
 void ContactModel::Impl::SetupContacts() {
@@ -1075,6 +1093,10 @@ void ContactModel::Impl::SetupContacts() {
     if (ct.spec.type == ContactType::kLine) ct.spec.axis.normalize();
     ct.pusher = scene.pusher && i + 1 == specs.size();
     ct.active = ct.pusher || scene.grip_force > 0;
+    if (!ct.pusher && ct.spec.type != ContactType::kPoint && ct.spec.stiffness == 0 &&
+        opt.pads == PadModel::kElastic && scene.grip_force > 0) {
+      ct.spec.stiffness = DefaultPadStiffness();
+    }
     for (const Eigen::Vector3d& o : ConstituentOffsets(ct.spec, opt.points)) {
       Point pt;
       pt.offset0 = o;
@@ -1241,7 +1263,25 @@ void ContactModel::Impl::SetEdges(Point& pt) {
     pt.edges[1] = -tau;
     return;
   }
-  const Eigen::Vector3d t1 = FirstTangent(pt.n);
+  Eigen::Vector3d t1 = FirstTangent(pt.n);
+  if (scene.model.cone == ConeModel::kAligned && pt.slip.squaredNorm() > 0) {
+    // An edge along the friction of the last slip: a slide in a free
+    // direction then meets the cone at a vertex, where any slip direction
+    // within the vertex's fan is allowed, so the facets no longer steer it
+    // (the polyhedral cone's force opposes the slip exactly once the slip
+    // stops turning). A slip now mostly along the normal keeps the basis.
+    // A slip along an edge of the basis (a slide the facets cannot steer)
+    // keeps the basis and its cheap, exact polyhedral answer.
+    const Eigen::Vector3d f = -(pt.slip - pt.slip.dot(pt.n) * pt.n);
+    const double length = f.norm();
+    if (length > 0.5) {
+      const Eigen::Vector3d u = f / length;
+      const double angle = std::atan2(u.dot(pt.n.cross(t1)), u.dot(t1));
+      const double facet = 2.0 * std::numbers::pi / static_cast<double>(cone_cos.size());
+      const double off = std::remainder(angle, facet);
+      if (std::abs(off) > kEdgeAngle) t1 = u;
+    }
+  }
   const Eigen::Vector3d t2 = pt.n.cross(t1);
   pt.edges.resize(cone_cos.size());
   for (size_t j = 0; j < cone_cos.size(); ++j) pt.edges[j] = cone_cos[j] * t1 + cone_sin[j] * t2;
@@ -1975,7 +2015,10 @@ void ContactModel::Impl::ReportContacts(StepScratch& s) {
                 ? pt.urel
                 : Eigen::Vector3d(ObjectVelocity(s, pt.p) - BodyVelocity(s, ct, pt));
         const Eigen::Vector3d ut = urel - nrm.dot(urel) * nrm;
-        if (lam > 1e-9 * Fs && ut.squaredNorm() > 1e-18 * Vs * Vs) sliding = true;
+        if (lam > 1e-9 * Fs && ut.squaredNorm() > 1e-18 * Vs * Vs) {
+          sliding = true;
+          if (tracked && !planar && pt.beta0 >= 0) pt.slip = ut.normalized();
+        }
         const bool close = pt.gap <= (tracked ? gap_tolerance : 0.0) || lam > 1e-9 * Fs;
         if (close) {
           ++st.touching_points;

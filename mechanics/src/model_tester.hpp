@@ -41,13 +41,13 @@ class ContactModelTester {
   int reduced_coordinates() const;
   int force_unknowns() const;
   int lcp_size() const;
-  Eigen::MatrixXd mass_matrix() const;     // kMassMatrix
-  Eigen::VectorXd known_wrench() const;    // kFreeMotion (reduced)
-  Eigen::VectorXd free_twist() const;      // kFreeMotion (reduced)
-  Eigen::MatrixXd grasp_map() const;       // kGraspMap (reduced x force unknowns)
-  Eigen::MatrixXd lcp_matrix() const;      // kSolve (formed by then; nondimensional)
-  Eigen::VectorXd lcp_vector() const;      // the row phases
-  Eigen::VectorXd forces() const;          // kSolve (N)
+  Eigen::MatrixXd mass_matrix() const;            // kMassMatrix
+  Eigen::VectorXd known_wrench() const;           // kFreeMotion (reduced)
+  Eigen::VectorXd free_twist() const;             // kFreeMotion (reduced)
+  Eigen::MatrixXd grasp_map() const;              // kGraspMap (reduced x force unknowns)
+  Eigen::MatrixXd lcp_matrix() const;             // kSolve (formed by then; nondimensional)
+  Eigen::VectorXd lcp_vector() const;             // the row phases
+  Eigen::VectorXd forces() const;                 // kSolve (N)
   Eigen::Matrix<double, 6, 1> new_twist() const;  // kSolve: (v, ω) of the step's end
 
   // Faults: sets the object's twist as if a step had ended with it (for

@@ -93,6 +93,11 @@ const char* ToString(GripperCoupling coupling) {
   return "?";
 }
 
+const char* ToString(PadModel pads) { return pads == PadModel::kElastic ? "elastic" : "rigid"; }
+const char* ToString(ConeModel cone) {
+  return cone == ConeModel::kAligned ? "aligned" : "polyhedral";
+}
+
 std::optional<ContactTracking> ContactTrackingFromString(std::string_view text) {
   if (text == "tracked") return ContactTracking::kTracked;
   if (text == "fixed") return ContactTracking::kFixed;
@@ -577,7 +582,7 @@ PusherSpec ReadPusher(const json& v, const std::string& path) {
 }
 
 ModelOptions ReadModel(const json& v, const std::string& path) {
-  Obj o(v, path, {"facets", "points", "dt", "reduce", "contacts"});
+  Obj o(v, path, {"facets", "points", "dt", "reduce", "contacts", "pads", "cone"});
   ModelOptions model;
   if (const json* f = o.Find("facets")) model.facets = Integer(*f, o.At("facets"), 3, kMaxFacets);
   if (const json* p = o.Find("points")) model.points = Integer(*p, o.At("points"), 2, kMaxPoints);
@@ -599,6 +604,20 @@ ModelOptions ReadModel(const json& v, const std::string& path) {
     }
     model.contacts = *parsed;
   }
+  // Two-valued choices (issue 31), each with its default first.
+  const auto choice = [&](const char* key, const char* first, const char* second) {
+    const json* c = o.Find(key);
+    if (c == nullptr) return true;
+    const std::string text = String(*c, o.At(key));
+    if (text != first && text != second) {
+      throw SceneError(o.At(key), std::string("must be \"") + first + "\" or \"" + second +
+                                      "\", got " + Quote(text));
+    }
+    return text == first;
+  };
+  model.pads = choice("pads", "rigid", "elastic") ? PadModel::kRigid : PadModel::kElastic;
+  model.cone =
+      choice("cone", "polyhedral", "aligned") ? ConeModel::kPolyhedral : ConeModel::kAligned;
   return model;
 }
 
@@ -849,10 +868,15 @@ void ValidateContact(const ContactSpec& c, const std::string& path, const Scene&
                                                  " m, got " + Num(c.radius));
     }
   }
-  // A point pusher with tracked contacts may start apart from the object
-  // (the contact is made when it arrives), never inside it.
-  const bool may_start_apart = path == "pusher" && c.type == ContactType::kPoint &&
-                               scene.model.contacts == ContactTracking::kTracked;
+  // A point pusher with tracked contacts may start apart from an object a
+  // support holds, or along a recorded path (the contact is made when it
+  // arrives), never inside it. In a grasp, a constant-velocity pusher must
+  // touch at t = 0: one placed off the object (a varied offset past its edge)
+  // is a campaign's mistake, not a push.
+  const bool may_start_apart =
+      path == "pusher" && c.type == ContactType::kPoint &&
+      scene.model.contacts == ContactTracking::kTracked &&
+      (scene.support.has_value() || (scene.pusher && scene.pusher->path.has_value()));
   const Eigen::Vector3d p_O = R_GO.transpose() * (c.position - scene.object.pose.position);
   if (may_start_apart) {
     const double depth = -solid.ClosestTo(p_O).distance;
@@ -1139,10 +1163,9 @@ Scene ParseScene(std::string_view json_text) {
   const json doc = BuildDocument(json_text, JsonLimits{}, &problem);
   if (problem) throw SceneError(problem->path, problem->reason);
 
-  Obj root(
-      doc, "",
-      {"object", "gravity", "duration", "grip_force", "fingers", "pusher", "support", "model",
-       "gripper"});
+  Obj root(doc, "",
+           {"object", "gravity", "duration", "grip_force", "fingers", "pusher", "support", "model",
+            "gripper"});
   Scene scene;
   scene.object = ReadObject(root.Require("object"), "object");
   if (const json* g = root.Find("gravity")) scene.gravity = Vec3(*g, "gravity");
@@ -1315,6 +1338,9 @@ std::string SceneToJson(const Scene& scene, int indent) {
                 {"dt", scene.model.dt},
                 {"reduce", ToString(scene.model.reduce)},
                 {"contacts", ToString(scene.model.contacts)}};
+  // Written when not the default (scenes written before them read the same).
+  if (scene.model.pads != PadModel::kRigid) j["model"]["pads"] = ToString(scene.model.pads);
+  if (scene.model.cone != ConeModel::kPolyhedral) j["model"]["cone"] = ToString(scene.model.cone);
   // Written only when it says something: a scene without it means independent pads.
   if (scene.gripper.coupling != GripperCoupling::kIndependent)
     j["gripper"] = {{"coupling", ToString(scene.gripper.coupling)}};

@@ -128,6 +128,10 @@ std::vector<std::string> ParsePeers(const std::string& text) {
 }
 
 std::string CellParticipantName(const std::string& cell_id) { return "arena.cell." + cell_id; }
+std::string ControllerParticipantName(const std::string& name) {
+  return "arena.controller." + name;
+}
+std::string ControllerTopic(const std::string& name) { return "PusherCommand." + name; }
 
 const char* ToString(PeerEvent::Kind kind) {
   switch (kind) {
@@ -188,6 +192,15 @@ const char* TopicName() {
 // QoS per topic
 
 namespace {
+
+// The DDS topic an endpoint of `topic` uses: a controller's own topic for
+// PusherCommand (ControllerTopic), the type's topic otherwise.
+std::string DdsTopic(const std::string& topic, const std::string& controller) {
+  if (controller.empty()) return topic;
+  if (topic != "PusherCommand")
+    throw DdsError("dds: " + topic + ": only PusherCommand endpoints name a controller");
+  return ControllerTopic(controller);
+}
 
 bool IsRealTime(const std::string& topic) {
   return topic == "LiveState" || topic == "PusherCommand";
@@ -330,8 +343,10 @@ struct ParticipantCore : public fdds::DomainParticipantListener {
   mutable std::mutex mutex;
   std::condition_variable changed;
   std::deque<PeerEvent> events;
-  std::map<frtps::GuidPrefix_t, std::string> peers;  // discovered participants
-  std::set<frtps::GuidPrefix_t> authenticated;       // DDS-Security: handshake done
+  std::map<frtps::GuidPrefix_t, std::string> peers;          // discovered participants
+  std::map<frtps::GuidPrefix_t, std::string> introductions;  // their user data
+  std::set<frtps::GuidPrefix_t> authenticated;               // DDS-Security: handshake done
+  std::uint64_t started_unix_ns = 0;  // when this participant was made (its user data)
 
   ~ParticipantCore() override {
     if (participant != nullptr) {
@@ -365,6 +380,8 @@ struct ParticipantCore : public fdds::DomainParticipantListener {
       {
         std::lock_guard<std::mutex> lock(mutex);
         peers[prefix] = peer;
+        const auto& data = info.info.m_userData.data_vec();
+        introductions[prefix] = std::string(data.begin(), data.end());
       }
       spdlog::debug("dds: {} discovered participant {}", name, peer);
       Push({PeerEvent::Kind::kParticipantJoined, peer, "", {}});
@@ -372,6 +389,7 @@ struct ParticipantCore : public fdds::DomainParticipantListener {
       {
         std::lock_guard<std::mutex> lock(mutex);
         peers.erase(prefix);
+        introductions.erase(prefix);
         authenticated.erase(prefix);
       }
       spdlog::debug("dds: {} lost participant {} ({})", name, peer,
@@ -566,6 +584,18 @@ Participant::Participant(const ParticipantOptions& options)
   }
   fdds::DomainParticipantQos qos = factory->get_default_participant_qos();
   qos.name(options.name);
+  {  // who we are, for a peer that must name us (Participant::WaitForNamesake)
+    char host[256] = {};
+    if (gethostname(host, sizeof host - 1) != 0) std::strcpy(host, "?");
+    // "<unix ns at start> pid P on host H": the start orders namesakes.
+    core_->started_unix_ns =
+        static_cast<std::uint64_t>(std::chrono::duration_cast<std::chrono::nanoseconds>(
+                                       std::chrono::system_clock::now().time_since_epoch())
+                                       .count());
+    const std::string intro = std::to_string(core_->started_unix_ns) + " pid " +
+                              std::to_string(static_cast<long>(getpid())) + " on host " + host;
+    qos.user_data().data_vec(std::vector<frtps::octet>(intro.begin(), intro.end()));
+  }
   auto& discovery = qos.wire_protocol().builtin.discovery_config;
   discovery.leaseDuration = Duration_t(options.lease_s);
   discovery.leaseDuration_announcementperiod = Duration_t(options.lease_s / 5.0);
@@ -650,6 +680,51 @@ bool Participant::WaitForPeer(const std::string& name, Millis timeout) {
   });
 }
 
+namespace {
+
+// core.TopicFor, with a refused topic under DDS-Security reported like a
+// refused endpoint (the grant names the topics an identity may use).
+fdds::Topic* TopicOrDenied(detail::ParticipantCore& core, const std::string& topic,
+                           const std::string& type, bool publish) {
+  try {
+    return core.TopicFor(topic, type);
+  } catch (const DdsError&) {
+    if (core.security_dir.empty()) throw;
+    throw SecurityError(DeniedEndpoint(core.security_dir, topic, publish));
+  }
+}
+
+}  // namespace
+
+std::optional<std::string> Participant::WaitForNamesake(Millis timeout) {
+  const frtps::GuidPrefix_t self = core_->participant->guid().guidPrefix;
+  std::unique_lock<std::mutex> lock(core_->mutex);
+  std::optional<std::string> found;
+  // Only a namesake that started before us counts (ties: the smaller GUID
+  // prefix): one that started after us finds us and yields, so of two
+  // started at once exactly one stays.
+  const auto own = std::make_pair(core_->started_unix_ns, self);
+  core_->changed.wait_for(lock, timeout, [&] {
+    for (const auto& [prefix, n] : core_->peers) {
+      if (n != core_->name || prefix == self) continue;
+      const auto it = core_->introductions.find(prefix);
+      const std::string intro = it == core_->introductions.end() ? "" : it->second;
+      std::uint64_t started = 0;
+      const auto space = intro.find(' ');
+      try {
+        started = std::stoull(intro.substr(0, space));
+      } catch (const std::exception&) {
+        started = 0;  // not an arena participant's introduction: it was there first
+      }
+      if (std::make_pair(started, prefix) > own) continue;
+      found = space == std::string::npos ? std::string("?") : intro.substr(space + 1);
+      return true;
+    }
+    return false;
+  });
+  return found;
+}
+
 int Participant::AuthenticatedPeers() const {
   std::lock_guard<std::mutex> lock(core_->mutex);
   return static_cast<int>(core_->authenticated.size());
@@ -726,8 +801,10 @@ Writer<T>::Writer(Participant& participant, const WriterOptions& options)
     : impl_(std::make_unique<Impl>()) {
   impl_->core = participant.core();
   auto& core = *impl_->core;
-  const std::string topic = Traits<T>::kTopic;
-  fdds::Topic* t = core.TopicFor(topic, typename Traits<T>::PubSub().getName());
+  const std::string topic = Traits<T>::kTopic;  // the QoS are the type's
+  const std::string dds_topic = DdsTopic(topic, options.controller);
+  fdds::Topic* t = TopicOrDenied(core, dds_topic, typename Traits<T>::PubSub().getName(),
+                                 /*publish=*/true);
 
   fdds::DataWriterQos qos = core.publisher->get_default_datawriter_qos();
   ApplyTopicQos(topic, &qos.reliability(), &qos.durability(), &qos.history(),
@@ -760,8 +837,8 @@ Writer<T>::Writer(Participant& participant, const WriterOptions& options)
   if (impl_->writer == nullptr) {
     // Under DDS-Security the usual cause is an identity of another role.
     if (!core.security_dir.empty())
-      throw SecurityError(DeniedEndpoint(core.security_dir, topic, /*publish=*/true));
-    throw DdsError("dds: create_datawriter(" + topic + ") failed");
+      throw SecurityError(DeniedEndpoint(core.security_dir, dds_topic, /*publish=*/true));
+    throw DdsError("dds: create_datawriter(" + dds_topic + ") failed");
   }
   const auto q = impl_->writer->get_qos();
   spdlog::debug(
@@ -899,8 +976,10 @@ Reader<T>::Reader(Participant& participant, const ReaderOptions& options)
   impl_->core = participant.core();
   impl_->report_liveliness = options.report_liveliness;
   auto& core = *impl_->core;
-  const std::string topic = Traits<T>::kTopic;
-  fdds::Topic* t = core.TopicFor(topic, typename Traits<T>::PubSub().getName());
+  const std::string topic = Traits<T>::kTopic;  // the QoS are the type's
+  const std::string dds_topic = DdsTopic(topic, options.controller);
+  fdds::Topic* t = TopicOrDenied(core, dds_topic, typename Traits<T>::PubSub().getName(),
+                                 /*publish=*/false);
 
   fdds::DataReaderQos qos = core.subscriber->get_default_datareader_qos();
   ApplyTopicQos(topic, &qos.reliability(), &qos.durability(), &qos.history(),
@@ -922,7 +1001,7 @@ Reader<T>::Reader(Participant& participant, const ReaderOptions& options)
   fdds::TopicDescription* description = t;
   if (!impl_->only_cell.empty() && options.cell_filter_in_dds) {
     description =
-        core.CellTopicFor(topic, typename Traits<T>::PubSub().getName(), impl_->only_cell);
+        core.CellTopicFor(dds_topic, typename Traits<T>::PubSub().getName(), impl_->only_cell);
   }
   // A best-effort writer sends to every transport's locators of a reader
   // (Fast DDS 2.9: each transport selects its own), so a reader announcing
@@ -954,8 +1033,8 @@ Reader<T>::Reader(Participant& participant, const ReaderOptions& options)
     impl_->reader = core.subscriber->create_datareader(description, qos, impl_.get(), mask);
   if (impl_->reader == nullptr) {
     if (!core.security_dir.empty())
-      throw SecurityError(DeniedEndpoint(core.security_dir, topic, /*publish=*/false));
-    throw DdsError("dds: create_datareader(" + topic + ") failed");
+      throw SecurityError(DeniedEndpoint(core.security_dir, dds_topic, /*publish=*/false));
+    throw DdsError("dds: create_datareader(" + dds_topic + ") failed");
   }
   const auto q = impl_->reader->get_qos();
   spdlog::debug(

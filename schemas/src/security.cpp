@@ -385,7 +385,11 @@ std::string GovernanceXml(const LabOptions& o) {
 // the last <topic> of a <topics> list.
 std::string PermissionsXml(const IdentityOptions& o, const std::string& subject,
                            std::time_t not_before, std::time_t not_after) {
-  const RoleTopics topics = TopicsOf(o.role);
+  RoleTopics topics = TopicsOf(o.role);
+  // The controller's name bound to its identity: it may publish pusher
+  // commands on its own name's topic, which is the only one a cell running
+  // its scenes reads (dds.hpp, ControllerTopic).
+  if (o.role == Role::kController) topics.publish.push_back(ControllerTopic(o.name));
   std::ostringstream x;
   x << "<?xml version=\"1.0\" encoding=\"UTF-8\"?>\n"
     << "<!-- arena " << ToString(o.role) << " permissions (arena certs issue) -->\n"
@@ -487,14 +491,15 @@ RoleTopics TopicsOf(Role role) {
   const std::string live = TopicName<msg::LiveState>();
   const std::string pusher = TopicName<msg::PusherCommand>();
   switch (role) {
-    case Role::kCell:
-      return {{announce, status, truth, live}, {command, pusher}};
+    case Role::kCell:  // pusher commands: of whichever controller its scene names
+      return {{announce, status, truth, live}, {command, pusher, ControllerTopic("*")}};
     case Role::kService:
       return {{command}, {announce, status, truth, live}};
     case Role::kWatcher:
       return {{}, {announce, status, truth, live}};
-    case Role::kController:  // reads what the cells see, answers with pusher commands
-      return {{pusher}, {announce, live}};
+    case Role::kController:  // reads what the cells see, answers with pusher commands on
+                             // its own name's topic only (PermissionsXml adds it)
+      return {{}, {announce, live}};
   }
   return {};
 }
@@ -616,7 +621,7 @@ std::string VerifySignedDocument(const std::string& p7s_path, const std::string&
 
 std::string DeniedEndpoint(const std::string& identity_dir, const std::string& topic,
                            bool publish) {
-  std::string role = "?";
+  std::string role = "?", grant = "?";
   {
     std::ifstream in(Join(identity_dir, kPermissionsXmlFile));
     std::ostringstream text;
@@ -627,7 +632,18 @@ std::string DeniedEndpoint(const std::string& identity_dir, const std::string& t
       const auto begin = at + 13;
       const auto dot = xml.find_first_of(".\"", begin);
       if (dot != std::string::npos) role = xml.substr(begin, dot - begin);
+      const auto quote = xml.find('"', begin);
+      if (quote != std::string::npos) grant = xml.substr(begin, quote - begin);
     }
+  }
+  const std::string pusher = TopicName<msg::PusherCommand>();
+  if (publish && topic.rfind(pusher + ".", 0) == 0) {  // a controller's own topic
+    const std::string wanted = topic.substr(pusher.size() + 1);
+    return "--security " + identity_dir + ": this identity (role '" + role + "', grant '" + grant +
+           "') may not publish pusher commands as controller '" + wanted +
+           "': a controller's name is bound to its identity; issue one for it (arena certs "
+           "issue LAB --role controller --name " +
+           wanted + ")";
   }
   std::string may;
   for (Role r : {Role::kCell, Role::kService, Role::kWatcher, Role::kController}) {

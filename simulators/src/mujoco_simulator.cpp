@@ -409,8 +409,6 @@ std::string SupportPairs(const mechanics::Scene& scene, const MujocoSettings& st
       << Num(scene.support->mu) << " " << Num(scene.support->mu) << " 0 0 0\" solref=\""
       << Num(st.solref_timeconst) << " " << Num(st.solref_damping) << "\" solimp=\"";
     for (int k = 0; k < 5; ++k) x << Num(st.solimp[k]) << (k < 4 ? " " : "");
-    // margin = gap: a foot acts once it has sunk in (distance < 0), as the
-    // support was written; the margin is the scene-scaled one of the pads.
     x << "\" margin=\"" << Num(st.contact_margin) << "\" gap=\"" << Num(st.contact_margin)
       << "\"/>\n";
   }
@@ -453,8 +451,14 @@ void Validate(const MujocoSettings& s) {
 // scales them where the scene is smaller or more loaded, so that the soft
 // contact stays small against the scene (simulators/README.md, "Scaled to the
 // scene").
-constexpr double kReferenceLength = 0.03;      // m: the canonical box's smallest side
-constexpr double kReferenceLoad = 250;         // m/s²: its grip, 10 N x (1/0.05 + 1/0.2) /kg
+constexpr double kReferenceLength = 0.03;  // m: the canonical box's smallest side
+constexpr double kReferenceLoad = 250;     // m/s²: its grip, 10 N x (1/0.05 + 1/0.2) /kg
+// Loads up to this many times the canonical one keep the defaults: their
+// pads sink well within the penetration limit, and a stiffer contact made
+// one pivot-study scene (patch pads, 68 g, 18 N: 2.5x) change 0.24 mm under
+// a 4x finer timestep, against 0.0007 mm at the defaults.
+constexpr double kLoadHeadroom = 4;
+constexpr double kReferencePushLoad = 60;      // m/s²: its push, (2 x 0.5 x 10 + 1.96) N / 0.2 kg
 constexpr double kSlowestUnscaledPush = 1e-3;  // m/s: slower pushes creep at the defaults
 constexpr double kMostImpedance = 0.9999;      // MuJoCo clamps solimp's d to it (mjMAXIMP)
 
@@ -478,7 +482,10 @@ double SmallestDimension(const mechanics::ObjectSpec& o) {
   return o.size.minCoeff();
 }
 
-MujocoSettings ForScene(const mechanics::Scene& scene, const MujocoSettings& in) {
+// `pusher_pairs`: the impedance of the pusher's contact pairs, which carry
+// the push (2 mu N + m g on the object alone) rather than the grip.
+MujocoSettings ForScene(const mechanics::Scene& scene, const MujocoSettings& in,
+                        bool pusher_pairs = false) {
   MujocoSettings st = in;
   if (!in.scale_to_scene) return st;
   // Lengths: pads, margin and the impedance's width shrink with a small
@@ -498,19 +505,22 @@ MujocoSettings ForScene(const mechanics::Scene& scene, const MujocoSettings& in)
   // Load and speed: a soft contact sinks by about (1 - d)/d · a · timeconst²
   // (a: the acceleration its force gives the bodies it separates) and its
   // friction creeps at a speed proportional to (1 - d)/d. The canonical scene
-  // (a = 10 N x (1/0.05 + 1/0.2) /kg = 250 m/s², pusher 1 cm/s) keeps the
-  // settings; a scene that loads its contacts harder
-  // (relative to its size) or pushes slower than 1 mm/s gets (1 - d)/d
-  // divided by the ratio, then the time constant down to 2 timesteps.
+  // (grip a = 10 N x (1/0.05 + 1/0.2) /kg = 250 m/s², push a = 60 m/s²,
+  // pusher 1 cm/s) keeps the settings; pairs loaded harder (the fingers'
+  // more than kLoadHeadroom times; relative to the size) or pushed slower
+  // than 1 mm/s get (1 - d)/d divided by the ratio, then the time constant
+  // down to 2 timesteps.
   const double m_o = scene.object.mass, m_f = st.finger_mass;
   const double weight = m_o * scene.gravity.norm();
-  double a = scene.grip_force * (1 / m_f + 1 / m_o);
-  if (scene.pusher) {
+  double ratio = scene.grip_force * (1 / m_f + 1 / m_o) / (kLoadHeadroom * kReferenceLoad);
+  if (pusher_pairs && scene.pusher) {
+    // The pusher's contact: the canonical push, (2 x 0.5 x 10 N + 1.96 N) /
+    // 0.2 kg = 60 m/s², sinks the pusher as far as the grip sinks a finger.
     double mu_n = 0;
     for (const auto& f : scene.fingers) mu_n += f.mu * scene.grip_force;
-    a = std::max(a, (mu_n + weight) / m_o);
+    ratio = (mu_n + weight) / m_o / kReferencePushLoad;
   }
-  double ratio = std::max(1.0, a / kReferenceLoad / k_len);
+  ratio = std::max(1.0, ratio / k_len);
   if (scene.pusher) {
     // A recorded path's velocity field is unused (zero): its fastest segment.
     const double v = mechanics::PusherPeakRates(*scene.pusher).velocity.norm();
@@ -1418,7 +1428,7 @@ std::string MujocoModelXml(const mechanics::Scene& scene, const MujocoSettings& 
   x << "  </worldbody>\n  <contact>\n";
   for (size_t i = 0; i < scene.fingers.size(); ++i)
     x << Pairs("pad" + std::to_string(i), scene.fingers[i], st, o);
-  if (scene.pusher) x << Pairs("pusher_pad", *scene.pusher, st, o);
+  if (scene.pusher) x << Pairs("pusher_pad", *scene.pusher, ForScene(scene, settings, true), o);
   if (scene.support) x << SupportPairs(scene, st);
   x << "  </contact>\n";
   if (scene.gripper.coupling == mechanics::GripperCoupling::kParallelJaw) {

@@ -16,6 +16,7 @@
 #include "arena/orchestrator/campaign.hpp"
 #include "db/db_test_util.hpp"
 #include "failure_reasons.hpp"
+#include "plot_map.hpp"
 #include "status_cells.hpp"
 
 namespace arena::cli {
@@ -195,6 +196,29 @@ TEST(ExportManifest, ParametersNameEveryVariation) {
   for (const char* name : {"grip_force", "finger_type", "pivot_offset"})
     EXPECT_NE(std::find(parameters.begin(), parameters.end(), name), parameters.end())
         << name << " missing from " << manifest["parameters"].dump();
+}
+
+// Pins: map plots drew conditions that share a point side by side with no
+// label saying which is which.
+TEST(MapPlot, ConditionsSharingAPointAreLabelled) {
+  MapData m;
+  m.x_label = "grip_force (N)";
+  m.y_label = "pivot_offset (m)";
+  m.metric_label = "rotation (rad)";
+  for (int k = 0; k < 3; ++k) {
+    MapPoint p;
+    p.condition = k;
+    p.x = 8;
+    p.y = k < 2 ? 0.0 : 0.01;
+    p.value = 0.1 * k;
+    p.label = std::string("finger_type=") + (k == 0 ? "point" : k == 1 ? "line" : "patch");
+    m.points.push_back(p);
+  }
+  const std::string svg = RenderMapSvg(m);
+  EXPECT_NE(svg.find(">finger_type=point</text>"), std::string::npos) << svg;
+  EXPECT_NE(svg.find(">finger_type=line</text>"), std::string::npos) << svg;
+  // A condition alone at its point needs no label.
+  EXPECT_EQ(svg.find(">finger_type=patch</text>"), std::string::npos) << svg;
 }
 
 std::string Smoke(const std::string& variation, const std::string& value) {

@@ -126,7 +126,9 @@ TEST(ClosedLoop, SlowFirstAnswerIsNotAHoldTimeout) {
   po.name = "arena.controller.pivot_to_angle";
   dds::Participant participant(po);
   dds::Reader<msg::LiveState> live(participant, dds::ReaderOptions{false});
-  dds::Writer<msg::PusherCommand> commands(participant);
+  dds::WriterOptions wo;
+  wo.controller = "pivot_to_angle";  // the name's own topic, which the cell reads
+  dds::Writer<msg::PusherCommand> commands(participant, wo);
   ASSERT_TRUE(driver.WaitForCells({"c1"}, 15s) && driver.commands.WaitForMatched(1, 10s));
   const std::string scene = test::PivotScene(0.2, 0.1, 0.5, 0.25);
   ASSERT_TRUE(driver.Send(driver.Command("c1", 1, msg::PHASE_EXECUTE, scene, 11, 1)));

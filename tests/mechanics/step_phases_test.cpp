@@ -100,8 +100,7 @@ TEST(StepPhases, GraspMapColumnsAreDirectionsAndMoments) {
   const double m = scene.object.mass, dt = scene.model.dt;
   EXPECT_NEAR(tester.known_wrench()[0], scene.grip_force, 1e-12);
   EXPECT_NEAR(tester.known_wrench()[2], m * scene.gravity[2], 1e-12);
-  for (int i = 0; i < 3; ++i)
-    EXPECT_NEAR(m * tw[i] / dt, wrench[i], 1e-9 * scene.grip_force) << i;
+  for (int i = 0; i < 3; ++i) EXPECT_NEAR(m * tw[i] / dt, wrench[i], 1e-9 * scene.grip_force) << i;
 }
 
 // A twist gone bad is refused before the solver sees it, typed, with the
@@ -120,7 +119,8 @@ TEST(StepPhases, NonFiniteTwistIsRefusedTyped) {
   EXPECT_NE(rep.error.find("non-finite free twist"), std::string::npos) << rep.error;
   EXPECT_EQ(model.position(), c0);
   EXPECT_EQ(model.time(), t0);
-  tester.SetTwist(Eigen::Vector3d::Zero(), Eigen::Vector3d(0, std::numeric_limits<double>::infinity(), 0));
+  tester.SetTwist(Eigen::Vector3d::Zero(),
+                  Eigen::Vector3d(0, std::numeric_limits<double>::infinity(), 0));
   EXPECT_EQ(model.Step().failure, StepFailure::kNonFinite);
 }
 

@@ -32,6 +32,7 @@
 #include <functional>
 #include <memory>
 #include <optional>
+#include <stdexcept>
 #include <string>
 #include <vector>
 
@@ -122,6 +123,16 @@ struct ControllerHostOptions {
   int domain_id = 0;
   dds::NetworkOptions network;
   double participant_lease_s = 2.5;
+  // How long it looks for another controller of the same name on the
+  // domain before answering anything (ControllerNameConflict).
+  double claim_wait_s = 1.0;
+};
+
+// Another controller holds the name on the domain: what() names the name,
+// the domain and the other controller ("pid P on host H").
+class ControllerNameConflict : public std::runtime_error {
+ public:
+  using std::runtime_error::runtime_error;
 };
 
 struct ControllerCounters {
@@ -135,7 +146,11 @@ using ControllerFactory = std::function<std::unique_ptr<Controller>(const Contro
 // Joins the domain as "arena.controller.<name>" and answers every closed-loop
 // LiveState sample naming `name` until *stop is true. Each new trial attempt
 // (per cell) gets a fresh Controller from the factory.
-// @throws dds::DdsError when DDS refuses, std::invalid_argument for a bad name.
+// Commands go on the name's own topic (dds::ControllerTopic); under
+// DDS-Security only an identity issued for the name may publish there.
+// @throws dds::DdsError when DDS refuses (dds::SecurityError: the identity is
+// not this name's), std::invalid_argument for a bad name,
+// ControllerNameConflict when another controller holds the name.
 ControllerCounters RunController(const ControllerHostOptions& options,
                                  const ControllerFactory& factory, const std::atomic<bool>* stop);
 

@@ -24,6 +24,15 @@ enum class Reduce { kAuto, kFull, kPlanar };
 // and contacts are made and lost; kFixed: contact frames frozen in the
 // gripper frame (right for small motion only, cheaper).
 enum class ContactTracking { kTracked, kFixed };
+// Line and patch pads without a `stiffness`: kRigid leaves their load split
+// undetermined (the solver's vertex); kElastic gives them the default
+// stiffness (model.cpp, DefaultPadStiffness: sinking 1e-4 of the object's
+// extent under the grip), which decides it.
+enum class PadModel { kRigid, kElastic };
+// kPolyhedral: the cone's edges stay on the docs/scene.md tangent basis;
+// kAligned: a tracked point's cone turns so that an edge opposes its last
+// slip off an edge (the slip direction is not steered by the facets).
+enum class ConeModel { kPolyhedral, kAligned };
 
 struct Pose {
   Eigen::Vector3d position = Eigen::Vector3d::Zero();  // m
@@ -118,6 +127,8 @@ struct ModelOptions {
   double dt = 0.004;  // time step (s)
   Reduce reduce = Reduce::kAuto;
   ContactTracking contacts = ContactTracking::kTracked;
+  PadModel pads = PadModel::kRigid;
+  ConeModel cone = ConeModel::kPolyhedral;
 };
 
 // How the fingers move along their closing directions (JSON "gripper":
@@ -151,5 +162,7 @@ const char* ToString(ContactType type);
 const char* ToString(Reduce reduce);
 const char* ToString(ContactTracking tracking);
 const char* ToString(GripperCoupling coupling);
+const char* ToString(PadModel pads);
+const char* ToString(ConeModel cone);
 
 }  // namespace arena::mechanics

@@ -36,6 +36,9 @@
 //                 needs a writer of infinite liveliness, so this topic's
 //                 writers assert none (a silent controller is found by the
 //                 cell's hold time instead).
+//                 Each controller publishes on a topic of its own name,
+//                 "PusherCommand.<name>" (ControllerTopic), same type and
+//                 QoS; a cell reads the topic of its scene's controller.
 //   Real-time readers  (LiveState, PusherCommand) of a local-only participant
 //                 with shared memory listen on a loopback UDP port of their
 //                 own only: Fast DDS 2.9 sends a best-effort message to every
@@ -48,6 +51,8 @@
 //                 readers request it: a reader sees a dead cell within that
 //                 lease. (A writer offering a longer lease does not match.)
 //   Participants  lease ParticipantOptions::lease_s (2.5 s, not Fast DDS's 20 s).
+//                 Each introduces itself in its user data ("pid P on host H"),
+//                 so a peer can name who holds a name (WaitForNamesake).
 //   Instances     CellAnnounce and TrialCommand are keyed by cell, with no
 //                 instance limit. TrialStatus and GroundTruth have no key:
 //                 Fast DDS 2.9 never frees an instance, so one per trial grew
@@ -183,6 +188,10 @@ class Participant {
   std::vector<std::string> Peers() const;
   // Waits until a participant with this name is known. @returns false on timeout.
   bool WaitForPeer(const std::string& name, Millis timeout);
+  // Waits until another participant with this participant's own name is
+  // known (a name that must be unique on the domain, e.g. a controller's).
+  // @returns how it introduced itself ("pid 123 on host h"), nullopt on timeout.
+  std::optional<std::string> WaitForNamesake(Millis timeout);
   // DDS-Security: remote participants whose authentication handshake this
   // participant completed (0 without security). Discovery reports a peer
   // before that; its endpoints match after it.
@@ -200,6 +209,9 @@ class Participant {
 struct WriterOptions {
   // How long Write() may block on a full history (s).
   double max_blocking_s = 1.0;
+  // PusherCommand only: write on the topic of this controller's commands,
+  // ControllerTopic(controller). Empty: the plain PusherCommand topic.
+  std::string controller;
 };
 
 // A typed DataWriter on the topic of T (one of the six arena::msg types).
@@ -250,6 +262,9 @@ struct ReaderOptions {
   // topic crosses to this reader (how it was before the content filter;
   // bench_dds measures both).
   bool cell_filter_in_dds = true;
+  // PusherCommand only: read the topic of this controller's commands,
+  // ControllerTopic(controller), and no other. Empty: the plain topic.
+  std::string controller;
 };
 
 // What a reader saw and did not hand over (Reader::counters()).
@@ -308,5 +323,14 @@ std::size_t CleanZombieSharedMemory();
 
 // Participant names by role; cells are "arena.cell.<cell id>".
 std::string CellParticipantName(const std::string& cell_id);
+// A controller registered under `name` is "arena.controller.<name>".
+std::string ControllerParticipantName(const std::string& name);
+
+// The topic a controller registered under `name` publishes its pusher
+// commands on: "PusherCommand.<name>". A cell reads only the topic of the
+// controller its scene names, and under DDS-Security a controller identity's
+// grant allows publishing on its own name's topic only (security.hpp), so
+// the name is bound to the identity by access control, not by a field.
+std::string ControllerTopic(const std::string& name);
 
 }  // namespace arena::dds

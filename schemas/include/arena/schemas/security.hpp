@@ -25,6 +25,11 @@
 //                         TrialStatus, GroundTruth
 //                watcher  subscribe CellAnnounce, TrialStatus, GroundTruth;
 //                         publish nothing
+//                controller N  publish PusherCommand.N only (its name's
+//                         own topic, dds::ControllerTopic: the name is bound
+//                         to the identity); subscribe CellAnnounce, LiveState
+//              (the table in SECURITY.md is complete: cells also publish
+//              LiveState and subscribe PusherCommand and PusherCommand.*).
 //              Everything not granted is denied (<default>DENY</default>).
 //
 // Governance (one rule for the lab's domain range)
@@ -84,7 +89,8 @@ struct LabOptions {
 
 struct IdentityOptions {
   Role role = Role::kCell;
-  std::string name;      // [A-Za-z0-9_.-], 1..64; also the directory name
+  std::string name;      // [A-Za-z0-9_.-], 1..64; also the directory name and, for a
+                         // controller, the controller name it may publish as
   int valid_days = 730;  // certificate and grant lifetime (days, 1..36500)
   int domain_min = 0;    // the grant covers domains [min, max] (0..231, dds::kMaxDomainId)
   int domain_max = 231;
