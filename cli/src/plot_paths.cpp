@@ -283,11 +283,13 @@ std::string TrialPathsSvg(const db::Store& store, std::int64_t trial_id, TrialPl
          "\" stroke=\"#000\" stroke-width=\"3\"/>" +
          Text(0.5 * (b0 + b1) + Vector2d(0, -7), Mm(bar), "#000", "middle") + "</g>";
   svg += Text({width / 2, height - 36},
-              "black: the object's true (here: measured) path and outline, orange dashed: the "
-              "prediction's, at the same instants (start, 1/3, 2/3, end; later ones darker)",
+              "black: the object's true (here: measured) path and outline; orange dashed: the "
+              "prediction's",
               "#555", "middle", 12);
   svg += Text({width / 2, height - 18},
-              "red: the pusher's centre path and its tip at those instants", "#555", "middle", 12);
+              "outlines at the start, 1/3, 2/3 and the end (later ones darker); red: the pusher's "
+              "centre path and its tip then",
+              "#555", "middle", 12);
   svg += "</svg>\n";
   return svg;
 }

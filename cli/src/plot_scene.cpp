@@ -414,10 +414,11 @@ std::string SceneSvg(const mechanics::Scene& scene, const std::string& title) {
                  "stroke-dasharray=\"6,4\"/>";
           svg += "<circle cx=\"" + F(b.x()) + "\" cy=\"" + F(b.y()) +
                  "\" r=\"4\" fill=\"none\" stroke=\"#c0392b\"/>";
+          const bool right = b.x() > c.x0() + c.w() / 2;  // the label runs into the panel
           svg += Text(
-              b + Vector2d(8, -8),
+              b + Vector2d(right ? -8 : 8, 18),
               "recorded path, ends " + Length((push_end - scene.pusher->position).norm()) + " away",
-              "#c0392b", "start", 11);
+              "#c0392b", right ? "end" : "start", 11);
         } else if ((b - a).norm() > 3) {
           // Beside the pusher (not over its normal's arrow), with its end drawn hollow.
           const Vector2d u = (b - a).normalized(), side(-u.y() * 14, u.x() * 14);

@@ -153,9 +153,10 @@ TEST_F(PushDatasetE2e, ImportedPushesRunOnReplayCellsAndAreEvaluatedAgainstTheMe
     const std::string truth = reinterpret_cast<const char*>(sqlite3_column_text(q, 3));
     truths.insert(truth);
     // The force stream's failed check is a stated fact of the stored truth.
-    if (state == "done")
+    if (state == "done") {
       EXPECT_EQ(truth, force_failed.count(idx + 1) ? "measured:no-forces" : "measured")
           << "trial " << idx;
+    }
     if (state == "done") {
       ++done;
       EXPECT_FALSE(pose_failed.count(idx + 1)) << "trial " << idx << " failed its check, scored";
@@ -182,7 +183,9 @@ TEST_F(PushDatasetE2e, ImportedPushesRunOnReplayCellsAndAreEvaluatedAgainstTheMe
     const bool no_force = sqlite3_column_int(q, 1) != 0;
     const std::string detail = reinterpret_cast<const char*>(sqlite3_column_text(q, 2));
     EXPECT_EQ(no_force, force_failed.count(idx + 1) == 1) << "trial " << idx << ": " << detail;
-    if (no_force) EXPECT_NE(detail.find("force_not_scored"), std::string::npos) << detail;
+    if (no_force) {
+      EXPECT_NE(detail.find("force_not_scored"), std::string::npos) << detail;
+    }
   }
   sqlite3_finalize(q);
   sqlite3_close(h);
