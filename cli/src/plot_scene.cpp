@@ -416,7 +416,7 @@ std::string SceneSvg(const mechanics::Scene& scene, const std::string& title) {
                  "\" r=\"4\" fill=\"none\" stroke=\"#c0392b\"/>";
           const bool right = b.x() > c.x0() + c.w() / 2;  // the label runs into the panel
           svg += Text(
-              b + Vector2d(right ? -8 : 8, 18),
+              b + Vector2d(right ? -8 : 8, v.v_axis == 2 ? -12 : 18),
               "recorded path, ends " + Length((push_end - scene.pusher->position).norm()) + " away",
               "#c0392b", right ? "end" : "start", 11);
         } else if ((b - a).norm() > 3) {
