@@ -7,6 +7,7 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <iterator>
 #include <map>
 #include <nlohmann/json.hpp>
 #include <set>
@@ -203,6 +204,26 @@ TEST_F(PushDatasetE2e, ImportedPushesRunOnReplayCellsAndAreEvaluatedAgainstTheMe
   EXPECT_NE(r.out.find("truth: measured:no-forces (replay:"), std::string::npos) << r.out;
   EXPECT_NE(r.out.find("35 trials: measured poses"), std::string::npos) << r.out;
   EXPECT_EQ(r.out.find("nan"), std::string::npos) << r.out;
+
+  // A real trial from above: measured and predicted paths, outlines, the
+  // pusher's path; its set-up with the support and the recorded path.
+  const auto read = [](const std::string& path) {
+    std::ifstream f(path);
+    return std::string(std::istreambuf_iterator<char>(f), {});
+  };
+  r = Arena("plot --db '" + db + "' 3 --paths --out '" + dir_ + "/paths.svg'");
+  ASSERT_EQ(r.rc, 0) << r.err;
+  const std::string paths = read(dir_ + "/paths.svg");
+  for (const char* id :
+       {"id=\"measured-path\"", "id=\"predicted-path\"", "id=\"measured-outlines\"",
+        "id=\"predicted-outlines\"", "id=\"pusher-path\"", "id=\"scale-bar\"", "truth: measured"})
+    EXPECT_NE(paths.find(id), std::string::npos) << id;
+  r = Arena("plot --db '" + db + "' 3 --scene --out '" + dir_ + "/scene.svg'");
+  ASSERT_EQ(r.rc, 0) << r.err;
+  const std::string scene = read(dir_ + "/scene.svg");
+  for (const char* id : {"id=\"support\"", "class=\"recorded-path\"", "footprint on the support",
+                         "support mu 0.25, uniform pressure"})
+    EXPECT_NE(scene.find(id), std::string::npos) << id;
 }
 
 TEST_F(PushDatasetE2e, ABadFileStopsTheImportWithExitTwoAndNothingWritten) {
