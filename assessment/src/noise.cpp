@@ -195,6 +195,16 @@ mechanics::Scene ApplyNoise(const mechanics::Scene& scene, const NoiseDraw& d) {
   if (s.pusher) {
     s.pusher->mu *= d.mu_scale;
     s.pusher->motion.velocity = s.pusher->motion.velocity * d.velocity_scale + d.velocity_offset;
+    // A recorded path takes the same actuation error: each displacement from
+    // the start scaled, the offset velocity added over time.
+    if (s.pusher->path) {
+      auto& path = *s.pusher->path;
+      const Eigen::Vector3d p0 = path.position.front();
+      for (size_t k = 0; k < path.t.size(); ++k) {
+        path.position[k] =
+            p0 + (path.position[k] - p0) * d.velocity_scale + d.velocity_offset * path.t[k];
+      }
+    }
   }
   return s;
 }

@@ -121,7 +121,9 @@ std::vector<Parameter> SceneParameters(const Scene& scene) {
          std::max(mean, 0.05), 0, mean - least});
   }
   if (any_mu) add({"mu_scale", "friction", "1", ParameterKind::kMuScale, -1, 0, 1, 1, 0, 0});
-  if (scene.pusher) {
+  // A recorded path has no velocity to perturb (its motion fields are
+  // unused, zero): it has no velocity parameters, and PerturbScene refuses.
+  if (scene.pusher && !scene.pusher->path) {
     const auto& m = scene.pusher->motion;
     const double speed = m.velocity.norm();
     if (speed > 0) {
@@ -200,6 +202,13 @@ Scene PerturbScene(const Scene& scene, const Parameter& p, double delta) {
   const double value = p.nominal + delta;
   if (value < p.lower) {
     throw mechanics::SceneError(p.name, "below its admissible minimum " + Num(p.lower));
+  }
+  const bool velocity = p.kind == ParameterKind::kPushSpeed ||
+                        p.kind == ParameterKind::kPusherVelocity ||
+                        p.kind == ParameterKind::kPusherAngularVelocity;
+  if (velocity && s.pusher && s.pusher->path) {
+    throw mechanics::SceneError("pusher.motion.path",
+                                "a recorded path has no velocity to perturb (" + p.name + ")");
   }
   switch (p.kind) {
     case ParameterKind::kGripForce:

@@ -12,6 +12,7 @@
 #include "arena/assessment/calibration.hpp"
 #include "arena/assessment/predictor.hpp"
 #include "arena/assessment/scoring.hpp"
+#include "arena/mechanics/pusher_motion.hpp"
 #include "arena/mechanics/scene_json.hpp"
 #include "arena/simulators/simulator.hpp"
 
@@ -166,10 +167,13 @@ std::optional<std::string> DivergenceReason(
   if (predicted.empty()) return std::nullopt;
   double travel = 0, turn = 0;
   if (scene.pusher) {
-    travel =
-        scene.pusher->motion.velocity.norm() * scene.duration +
-        scene.pusher->motion.angular_velocity.norm() * scene.duration * LargestExtent(scene.object);
-    turn = scene.pusher->motion.angular_velocity.norm() * scene.duration;
+    // A constant motion's speed, or a recorded path's fastest segment (its
+    // velocity field is unused, zero): a bound on how far it can carry the
+    // object.
+    const mechanics::PusherTwist peak = mechanics::PusherPeakRates(*scene.pusher);
+    travel = peak.velocity.norm() * scene.duration +
+             peak.angular_velocity.norm() * scene.duration * LargestExtent(scene.object);
+    turn = peak.angular_velocity.norm() * scene.duration;
   }
   const double reach = travel + LargestExtent(scene.object);
   const auto& start = predicted.front();

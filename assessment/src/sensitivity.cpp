@@ -14,6 +14,7 @@
 #include <nlohmann/json.hpp>
 
 #include "arena/mechanics/model.hpp"
+#include "arena/mechanics/pusher_motion.hpp"
 #include "arena/mechanics/scene_json.hpp"
 
 namespace arena::assessment {
@@ -28,7 +29,22 @@ constexpr double kNonlinearFloor = 1e-2;   // of a quantity's scale: never "nonl
 // meaningful when the nominal is near zero (docs/sensitivity.md).
 std::array<double, kQuantityCount> QuantityScales(const Scene& scene, const Outcome& o) {
   double travel = 0;
-  if (scene.pusher) travel = scene.pusher->motion.velocity.norm() * scene.duration;
+  if (scene.pusher) {
+    // How far the pusher's reference point moves: |v| T, or a path's length.
+    const auto& pusher = *scene.pusher;
+    travel = pusher.motion.velocity.norm() * scene.duration;
+    if (pusher.path) {
+      travel = 0;
+      Eigen::Vector3d last = mechanics::PusherPoseAt(pusher, 0).position;
+      for (double t : pusher.path->t) {
+        if (t > scene.duration) break;
+        const Eigen::Vector3d here = mechanics::PusherPoseAt(pusher, t).position;
+        travel += (here - last).norm();
+        last = here;
+      }
+      travel += (mechanics::PusherPoseAt(pusher, scene.duration).position - last).norm();
+    }
+  }
   const double length = std::max({o.value(Quantity::kDisplacement), travel, 1e-3});
   const double angle = std::max(o.value(Quantity::kRotation), 1e-2);
   const double force = std::max({o.value(Quantity::kPusherForce), scene.grip_force * 1e-2, 1e-3});

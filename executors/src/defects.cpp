@@ -3,9 +3,12 @@
 #include <algorithm>
 #include <cmath>
 #include <set>
+#include <string>
+#include <vector>
 
 #include <nlohmann/json.hpp>
 
+#include "arena/mechanics/pusher_motion.hpp"
 #include "arena/reset/rng.hpp"
 
 namespace arena::executors {
@@ -289,6 +292,16 @@ mechanics::Scene ApplyPerturbation(const mechanics::Scene& scene, const TrialPer
   if (s.pusher) {
     s.pusher->mu *= p.mu_scale;
     s.pusher->motion.velocity = s.pusher->motion.velocity * p.velocity_scale + p.velocity_offset;
+    // A recorded path is actuated the same way: each displacement from the
+    // start scaled, the offset velocity added over time.
+    if (s.pusher->path) {
+      auto& path = *s.pusher->path;
+      const Eigen::Vector3d p0 = path.position.front();
+      for (size_t k = 0; k < path.t.size(); ++k) {
+        path.position[k] =
+            p0 + (path.position[k] - p0) * p.velocity_scale + p.velocity_offset * path.t[k];
+      }
+    }
   }
   return s;
 }
@@ -317,17 +330,31 @@ std::string CheckCapabilities(const DefectProfile& p, const mechanics::Scene& sc
            str(p.workspace_min) + ".." + str(p.workspace_max);
   }
   if (scene.pusher) {
-    const double speed = scene.pusher->motion.velocity.norm();
+    const mechanics::PusherSpec& pusher = *scene.pusher;
+    // A path pusher's speed is the fastest of its segments; its velocity
+    // field is unused (zero) and would pass any limit.
+    const std::string speed_field = pusher.path ? "pusher.motion.path" : "pusher.motion.velocity";
+    const double speed = mechanics::PusherPeakRates(pusher).velocity.norm();
     if (speed > p.max_pusher_speed) {
-      return "pusher.motion.velocity: " + std::to_string(speed) + " m/s exceeds this cell's " +
+      return speed_field + ": " + std::to_string(speed) + " m/s exceeds this cell's " +
              std::to_string(p.max_pusher_speed) + " m/s";
     }
-    // The object cannot travel further than the pusher moves it.
-    const Eigen::Vector3d end = start + scene.pusher->motion.velocity * scene.duration;
-    if (!inside(end)) {
-      return "pusher.motion: pushing for " + std::to_string(scene.duration) +
-             " s moves the object to " + str(end) + " m, outside the workspace " +
-             str(p.workspace_min) + ".." + str(p.workspace_max);
+    // The object cannot travel further than the pusher moves it: check the
+    // end of a constant motion, every sample of a path up to the duration.
+    std::vector<double> times = {scene.duration};
+    if (pusher.path) {
+      for (double t : pusher.path->t) {
+        if (t < scene.duration) times.push_back(t);
+      }
+    }
+    const Eigen::Vector3d p0 = mechanics::PusherPoseAt(pusher, 0).position;
+    for (double t : times) {
+      const Eigen::Vector3d end = start + (mechanics::PusherPoseAt(pusher, t).position - p0);
+      if (!inside(end)) {
+        return (pusher.path ? std::string("pusher.motion.path") : std::string("pusher.motion")) +
+               ": pushing for " + std::to_string(t) + " s moves the object to " + str(end) +
+               " m, outside the workspace " + str(p.workspace_min) + ".." + str(p.workspace_max);
+      }
     }
   }
   return "";
@@ -425,6 +452,18 @@ dds::PusherState PusherAt(const mechanics::Scene& scene,
   dds::PusherState p;
   p.position = sample.pusher_position;
   if (!scene.pusher) return p;
+  if (scene.pusher->path) {
+    // A recorded path: its velocity over the segment the sample lies in
+    // (ahead of it, so the last sample reads the rest after the path).
+    const auto& t = scene.pusher->path->t;
+    const auto it = std::upper_bound(t.begin(), t.end(), sample.t);
+    const double dt = it == t.end() ? 1e-3 : std::max(*it - sample.t, 1e-9);
+    const mechanics::PusherTwist tw = mechanics::PusherTwistOver(*scene.pusher, sample.t, dt);
+    p.velocity = tw.velocity;
+    p.angular_velocity = tw.angular_velocity;
+    p.orientation = Eigen::Quaterniond(mechanics::PusherPoseAt(*scene.pusher, sample.t).rotation);
+    return p;
+  }
   p.velocity = scene.pusher->motion.velocity;
   p.angular_velocity = scene.pusher->motion.angular_velocity;
   const double angle = p.angular_velocity.norm() * sample.t;

@@ -402,6 +402,12 @@ Scene BuildScene(const Scene& base, const Values& values) {
     const Eigen::Vector3d base_velocity = p.motion.velocity;
     const auto* direction = Get(values, "push_direction");
     const auto* speed = Get(values, "push_speed");
+    // A recorded path has no velocity to vary (its velocity field is unused).
+    if (p.path && (direction || speed || Get(values, "push_distance"))) {
+      throw CampaignError("scene.pusher.motion.path",
+                          "a recorded path cannot take variations.push_direction, push_speed or "
+                          "push_distance (it has no velocity to vary)");
+    }
     if (direction || speed) {
       const double v = speed ? speed->number : base_velocity.norm();
       if (!direction && !(base_velocity.norm() > 0)) {

@@ -12,6 +12,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include "arena/mechanics/pusher_motion.hpp"
 #include "arena/orchestrator/campaign.hpp"
 
 namespace arena::orchestrator {
@@ -80,6 +81,10 @@ void CheckPlausibility(const Campaign& c) {
   if (speed_var) {
     speeds = Numbers(*speed_var);
     speed_field = "variations.push_speed";
+  } else if (s.pusher && s.pusher->path) {
+    // A recorded path: its fastest segment (its velocity field is unused).
+    speeds = {mechanics::PusherPeakRates(*s.pusher).velocity.norm()};
+    speed_field = "scene.pusher.motion.path";
   } else if (s.pusher && !s.pusher->controller) {
     speeds = {s.pusher->motion.velocity.norm()};
   }
@@ -105,6 +110,18 @@ void CheckPlausibility(const Campaign& c) {
                                 G(size) + " m); the value is in metres: " + G(d) + " mm is " +
                                 G(d / 1000));
       }
+    }
+  } else if (size > 0 && s.pusher && s.pusher->path) {
+    // A recorded path: the farthest it takes the pusher from its start.
+    double travel = 0;
+    for (const auto& x : s.pusher->path->position) {
+      travel = std::max(travel, (x - s.pusher->path->position.front()).norm());
+    }
+    if (travel > kMaxPushPerSize * size) {
+      throw CampaignError("scene.pusher.motion.path", "moves the pusher " + G(travel) +
+                                                          " m from its start, " + G(travel / size) +
+                                                          " times the object's largest size (" +
+                                                          G(size) + " m); positions are in metres");
     }
   } else if (size > 0 && s.pusher && !s.pusher->controller) {
     const double travel = s.pusher->motion.velocity.norm() * s.duration;

@@ -14,6 +14,8 @@
 #include <nlohmann/json.hpp>
 #include <set>
 
+#include <Eigen/Core>
+
 #include "arena/db/export.hpp"
 #include "arena/db/store.hpp"
 
@@ -370,6 +372,31 @@ ImportReport ImportRecordings(const std::vector<Recording>& recordings, const Im
   for (const auto& p : prepared) report.trials.push_back(p.trial);
   report.text = ReportText(report.trials, o.out_dir);
 
+  // The campaign's workspace: every recorded start and every place a trial's
+  // pusher path would carry the object (start + the pusher's displacement,
+  // the travel check), 5 cm around. Recordings are in the lab's table frame,
+  // often outside the default +-0.25 m, and `arena submit`/`run` check every
+  // scene against the campaign's profile. A replay cell computes the same
+  // extent from the dataset for its own workspace (a campaign's limits never
+  // widen a cell's).
+  Eigen::Vector3d lo = Eigen::Vector3d::Constant(HUGE_VAL), hi = -lo;
+  for (const auto& p : prepared) {
+    const auto scene = nlohmann::json::parse(p.scene_json);
+    const auto& at = scene["object"]["pose"]["position"];
+    const Eigen::Vector3d start(at[0].get<double>(), at[1].get<double>(), at[2].get<double>());
+    lo = lo.cwiseMin(start);
+    hi = hi.cwiseMax(start);
+    const auto& path = scene["pusher"]["motion"]["path"]["position"];
+    for (const auto& x : path) {
+      const Eigen::Vector3d d(x[0].get<double>() - path[0][0].get<double>(),
+                              x[1].get<double>() - path[0][1].get<double>(),
+                              x[2].get<double>() - path[0][2].get<double>());
+      lo = lo.cwiseMin(start + d);
+      hi = hi.cwiseMax(start + d);
+    }
+  }
+  lo.array() -= 0.05;
+  hi.array() += 0.05;
   // The campaign that commands exactly these trials: the dataset's own scenes.
   const ojson campaign = {
       {"name", name},
@@ -379,6 +406,8 @@ ImportReport ImportRecordings(const std::vector<Recording>& recordings, const Im
       {"seed", 0},
       {"scenes", "scenes.jsonl"},
       {"prediction", {{"facets", 8}, {"points", 3}, {"dt", 0.004}, {"reduce", "auto"}}},
+      {"defects",
+       {{"workspace", {{"min", {lo.x(), lo.y(), lo.z()}}, {"max", {hi.x(), hi.y(), hi.z()}}}}}},
   };
 
   ScratchDir scratch(out);

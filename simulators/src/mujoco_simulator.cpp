@@ -522,7 +522,8 @@ MujocoSettings ForScene(const mechanics::Scene& scene, const MujocoSettings& in,
   }
   ratio = std::max(1.0, ratio / k_len);
   if (scene.pusher) {
-    const double v = scene.pusher->motion.velocity.norm();
+    // A recorded path's velocity field is unused (zero): its fastest segment.
+    const double v = mechanics::PusherPeakRates(*scene.pusher).velocity.norm();
     if (v > 0) ratio = std::max(ratio, kSlowestUnscaledPush / v);
   }
   if (ratio > 1) {
@@ -851,9 +852,18 @@ struct Run {
   }
   // The fastest a point of the pusher's pad near the object moves (m/s).
   double PusherSpeed() const {
-    return PusherVelocity().norm() + scene.pusher->motion.angular_velocity.norm() *
-                                         std::max(scene.pusher->length, 2 * scene.pusher->radius);
+    const double reach = std::max(scene.pusher->length, 2 * scene.pusher->radius);
+    if (scene.pusher->path) {
+      // A recorded path (velocity field unused, zero): its peak rates, once.
+      if (path_speed < 0) {
+        const mechanics::PusherTwist peak = mechanics::PusherPeakRates(*scene.pusher);
+        path_speed = peak.velocity.norm() + peak.angular_velocity.norm() * reach;
+      }
+      return path_speed;
+    }
+    return PusherVelocity().norm() + scene.pusher->motion.angular_velocity.norm() * reach;
   }
+  mutable double path_speed = -1;  // PusherSpeed of a path pusher, < 0 until computed
   // A command from time t on (the pusher stays where it is then). The
   // velocity in force again changes nothing, to the last bit.
   void CommandPusher(double t, const Eigen::Vector3d& velocity) {

@@ -234,6 +234,33 @@ TEST(SensitivityParameters, FiltersPerturbationsAndBadInput) {
   EXPECT_THROW(AnalyseScene(scene, o), std::invalid_argument);
 }
 
+// A recorded path has no velocity to perturb (its velocity field is unused,
+// zero): no velocity parameters, and a perturbation asked for anyway is
+// refused naming the path, never applied to the unused field.
+TEST(SensitivityParameters, ARecordedPathHasNoVelocityToPerturb) {
+  const Scene constant = SlidingPush();
+  Scene s = constant;
+  mechanics::PusherPath path;
+  path.t = {0, 0.5, 1.0};
+  path.position = {s.pusher->position, s.pusher->position + Eigen::Vector3d(0, 0, 0.005),
+                   s.pusher->position + Eigen::Vector3d(0, 0, 0.01)};
+  s.pusher->motion.velocity.setZero();
+  s.pusher->path = path;
+  mechanics::ValidateScene(s);
+  const auto all = SceneParameters(s);
+  EXPECT_THROW(SelectParameters(all, {"velocity"}), std::invalid_argument);
+  EXPECT_THROW(SelectParameters(all, {"angular_velocity"}), std::invalid_argument);
+  EXPECT_EQ(SelectParameters(all, {"pusher.mu"}).size(), 1u);
+  const auto speed = SelectParameters(SceneParameters(constant), {"push_speed"});
+  ASSERT_EQ(speed.size(), 1u);
+  try {
+    PerturbScene(s, speed[0], 0.001);
+    ADD_FAILURE() << "a path pusher's speed was perturbed";
+  } catch (const mechanics::SceneError& e) {
+    EXPECT_EQ(e.field(), "pusher.motion.path");
+  }
+}
+
 TEST(SensitivityReportJson, RankedAndComplete) {
   SensitivityOptions o = DerivativesOnly({"grip_force", "friction", "velocity"});
   const Scene scene = SlidingPush();

@@ -199,5 +199,56 @@ TEST(DefectProfile, CapabilitiesRefuseWithAReason) {
   EXPECT_NE(CheckCapabilities(p, s).find("outside the workspace"), std::string::npos);
 }
 
+// A recorded path's velocity field is unused (zero): the speed limit and the
+// travel check must read the path, or a 10 m/s path would pass any cell.
+TEST(DefectProfile, CapabilitiesReadARecordedPath) {
+  const DefectProfile p = ParseDefectProfile(
+      R"({"workspace": {"min": -0.05, "max": 0.05}, "contact_types": ["point"], "max_pusher_speed": 0.02})");
+  mechanics::Scene s = OneFinger();
+  s.pusher = mechanics::PusherSpec{};
+  mechanics::PusherPath path;
+  path.t = {0, 0.5, 1.0};
+  path.position = {{0, 0, 0}, {0, 0, 0.005}, {0, 0, 0.010}};  // 10 mm/s
+  s.pusher->path = path;
+  s.duration = 1;
+  EXPECT_EQ(CheckCapabilities(p, s), "");
+  s.pusher->path->position[2] = {0, 0, 0.030};  // its last segment at 50 mm/s
+  EXPECT_NE(CheckCapabilities(p, s).find("pusher.motion.path: 0.05"), std::string::npos)
+      << CheckCapabilities(p, s);
+  // Out of the workspace half way and back: the end alone would pass.
+  s.pusher->path->t = {0, 5, 10};
+  s.pusher->path->position = {{0, 0, 0}, {0, 0, 0.08}, {0, 0, 0}};
+  s.duration = 10;
+  const std::string why = CheckCapabilities(p, s);
+  EXPECT_NE(why.find("pusher.motion.path"), std::string::npos) << why;
+  EXPECT_NE(why.find("outside the workspace"), std::string::npos) << why;
+}
+
+TEST(DefectProfile, ActuationErrorAndPusherStateFollowARecordedPath) {
+  mechanics::Scene s = OneFinger();
+  s.pusher = mechanics::PusherSpec{};
+  s.pusher->position = {0, 0, 0.001};
+  mechanics::PusherPath path;
+  path.t = {0, 0.5, 1.0};
+  path.position = {{0, 0, 0.001}, {0, 0, 0.006}, {0, 0.002, 0.006}};
+  s.pusher->path = path;
+  TrialPerturbation t;
+  t.velocity_scale = 2;
+  t.velocity_offset = {0.001, 0, 0};
+  const mechanics::Scene a = ApplyPerturbation(s, t);
+  ASSERT_TRUE(a.pusher->path);
+  EXPECT_EQ(a.pusher->path->position[0], Eigen::Vector3d(0, 0, 0.001));  // the start stays
+  EXPECT_NEAR((a.pusher->path->position[1] - Eigen::Vector3d(0.0005, 0, 0.011)).norm(), 0, 1e-15);
+  EXPECT_NEAR((a.pusher->path->position[2] - Eigen::Vector3d(0.001, 0.004, 0.011)).norm(), 0,
+              1e-15);
+  mechanics::TrajectorySample sample;
+  sample.t = 0.25;
+  EXPECT_NEAR((PusherAt(s, sample).velocity - Eigen::Vector3d(0, 0, 0.01)).norm(), 0, 1e-12);
+  sample.t = 0.75;
+  EXPECT_NEAR((PusherAt(s, sample).velocity - Eigen::Vector3d(0, 0.004, 0)).norm(), 0, 1e-12);
+  sample.t = 2;  // at rest after the path
+  EXPECT_NEAR(PusherAt(s, sample).velocity.norm(), 0, 1e-15);
+}
+
 }  // namespace
 }  // namespace arena::executors
