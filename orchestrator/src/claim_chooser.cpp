@@ -29,8 +29,8 @@ std::optional<ClaimChoice> ChooseClaim(const SchedulingOptions& options,
   const int window = options.window > 0 ? options.window : 1;
   const std::int64_t block = BlockOf(candidates.front().index, window);
   auto cost = [&](const ClaimCandidate& c) {
-    return cell.costs ? schemas::ChangeSeconds(schemas::ChangesBetween(cell.mounted, c.fixtures,
-                                                                       *cell.costs))
+    return cell.costs ? schemas::ChangeSeconds(
+                            schemas::ChangesBetween(cell.mounted, c.fixtures, *cell.costs))
                       : 0.0;
   };
   if (!options.change_aware || window == 1 || !cell.costs) {

@@ -51,7 +51,7 @@ struct ClaimCandidate {
 
 // What the cell did before this claim.
 struct ClaimerState {
-  std::optional<schemas::Fixtures> mounted;  // nullopt: not known (a fresh cell)
+  std::optional<schemas::Fixtures> mounted;   // nullopt: not known (a fresh cell)
   std::optional<schemas::ChangeCosts> costs;  // nullopt: the cell declared none
   std::optional<std::int64_t> last_block;     // the block of its last claim in this campaign
   std::uint64_t draw_seed = 0;                // campaign seed mixed with the cell id
