@@ -40,6 +40,7 @@
 #include "arena/mechanics/scene.hpp"
 #include "arena/mechanics/simulate.hpp"
 #include "arena/reset/reset.hpp"
+#include "arena/schemas/fixtures.hpp"
 
 namespace arena::executors {
 
@@ -72,6 +73,10 @@ struct BackendCapabilities {
   // velocities. Only arena's own model can (`model`); the cell refuses a
   // closed-loop scene on any other backend, with the reason.
   bool closed_loop = false;
+  // Issue 29: what a fixture change costs on this backend (an exec: driver's
+  // hello "fixture_changes"); nullopt: the cell's profile (simulated: the
+  // defect profile's "changes" and reset.swap_time).
+  std::optional<schemas::ChangeCosts> change_costs;
 };
 
 struct TrialContext {
