@@ -12,6 +12,7 @@
 #include <string>
 #include <vector>
 
+#include "arena/orchestrator/campaign.hpp"
 #include "arena/orchestrator/claim_chooser.hpp"
 
 namespace arena::orchestrator {
@@ -211,6 +212,31 @@ TEST(ClaimChooserProperty, SameInputsSameClaims) {
   const SimRun a = Simulate({true, 16}, 11, 200, 8, 3, 20);
   const SimRun b = Simulate({true, 16}, 11, 200, 8, 3, 20);
   EXPECT_EQ(a.order, b.order);
+}
+
+TEST(SchedulingBlock, DefaultsOnAndOffSwitchAndClearErrors) {
+  const SchedulingOptions d = ReadScheduling(R"({"name": "c", "seed": 1})");
+  EXPECT_TRUE(d.change_aware);
+  EXPECT_EQ(d.window, 16);
+  const SchedulingOptions off = ReadScheduling(R"({"scheduling": {"change_aware": false}})");
+  EXPECT_FALSE(off.change_aware);
+  EXPECT_EQ(ReadScheduling(R"({"scheduling": {"window": 64}})").window, 64);
+  auto field_of = [](const char* text) {
+    try {
+      ReadScheduling(text);
+    } catch (const CampaignError& e) {
+      return e.field() + ": " + e.reason();
+    }
+    return std::string("no error");
+  };
+  EXPECT_EQ(field_of(R"({"scheduling": {"window": 0}})").rfind("scheduling.window: ", 0), 0u);
+  EXPECT_EQ(field_of(R"({"scheduling": {"window": 257}})").rfind("scheduling.window: ", 0), 0u);
+  EXPECT_EQ(field_of(R"({"scheduling": {"window": 2.5}})").rfind("scheduling.window: ", 0), 0u);
+  EXPECT_EQ(field_of(R"({"scheduling": {"change_aware": "yes"}})")
+                .rfind("scheduling.change_aware: ", 0),
+            0u);
+  EXPECT_EQ(field_of(R"({"scheduling": {"batch": 3}})").rfind("scheduling.batch: ", 0), 0u);
+  EXPECT_EQ(field_of(R"({"scheduling": 3})").rfind("scheduling: ", 0), 0u);
 }
 
 }  // namespace
