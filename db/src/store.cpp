@@ -699,8 +699,9 @@ std::optional<ClaimedTrial> FindNext(const Store::Impl& impl, const std::string&
 
 // Moves the found trial to dispatched on the cell (ClaimNextTrial's contract);
 // the caller holds the write transaction.
+// `reason`: "claimed", or with the chooser's rule ("claimed by claim.least_change").
 void ClaimFound(const Store::Impl& impl, const ClaimedTrial& t, const std::string& cell_id,
-                const std::string& rule, const char* function);
+                const std::string& reason, const char* function);
 
 }  // namespace
 
@@ -739,7 +740,7 @@ std::optional<ClaimedTrial> Store::ClaimTrial(const std::string& cell_id, std::i
   t.scene_json = s->Text(4);
   t.defects_json = s->Text(5);
   t.index = s->Int(6);
-  ClaimFound(*impl_, t, cell_id, "dispatch.claimed " + std::string(rule), "ClaimTrial");
+  ClaimFound(*impl_, t, cell_id, "claimed by " + std::string(rule), "ClaimTrial");
   tx.Commit();
   return t;
 }
@@ -821,7 +822,7 @@ std::optional<ClaimedTrial> Store::ClaimNextTrial(const std::string& cell_id) {
   Tx tx(impl_->db, true);  // the write lock makes find + update one atomic step
   auto t = FindNext(*impl_, cell_id, "ClaimNextTrial");
   if (!t) return std::nullopt;
-  ClaimFound(*impl_, *t, cell_id, "dispatch.claimed", "ClaimNextTrial");
+  ClaimFound(*impl_, *t, cell_id, "claimed", "ClaimNextTrial");
   tx.Commit();
   return t;
 }
@@ -829,10 +830,10 @@ std::optional<ClaimedTrial> Store::ClaimNextTrial(const std::string& cell_id) {
 namespace {
 
 void ClaimFound(const Store::Impl& impl, const ClaimedTrial& t, const std::string& cell_id,
-                const std::string& rule, const char* function) {
+                const std::string& reason, const char* function) {
   const double now = impl.Now();
   WriteTransition(impl, t.trial_id, t.attempt, TrialState::kPlanned, TrialState::kDispatched,
-                  cell_id, "claimed", rule, function);
+                  cell_id, reason, "dispatch.claimed", function);
   // The start state this trial begins from: the cell's last observed reset
   // result, if that reset was aimed at this trial (or its aim is not known).
   auto u = impl.Prepare(

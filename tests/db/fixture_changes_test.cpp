@@ -66,8 +66,8 @@ TEST(ClaimTrial, ClaimsTheChosenOneOnceAndNamesTheRule) {
   const Trial stored = store->GetTrial(chosen.trial_id);
   EXPECT_EQ(stored.state, TrialState::kDispatched);
   EXPECT_EQ(stored.cell_id, "c1");
-  EXPECT_EQ(store->ListTransitions(chosen.trial_id).back().rule,
-            "dispatch.claimed claim.least_change");
+  EXPECT_EQ(store->ListTransitions(chosen.trial_id).back().rule, "dispatch.claimed");
+  EXPECT_EQ(store->ListTransitions(chosen.trial_id).back().reason, "claimed by claim.least_change");
   // Taken: another cell cannot have it; nor can a cell without its contact type.
   EXPECT_FALSE(store->ClaimTrial("c2", chosen.trial_id, "claim.least_change"));
   EXPECT_FALSE(store->ClaimTrial("patches", w[0].trial_id, "claim.block_entry"));

@@ -628,8 +628,9 @@ class Store {
   // campaign by priority, planned, due, contact types offered). Empty: none.
   std::vector<ClaimedTrial> ClaimWindow(const std::string& cell_id, int limit) const;
   // As ClaimNextTrial, but claims `trial_id` (one of the window), if it is
-  // still claimable by the cell; `rule` (the chooser's) is added to the audit
-  // row's "dispatch.claimed". @returns nullopt when it no longer is.
+  // still claimable by the cell. The audit row's rule is "dispatch.claimed"
+  // as always; its reason names the chooser's `rule` ("claimed by
+  // claim.least_change"). @returns nullopt when it no longer is.
   std::optional<ClaimedTrial> ClaimTrial(const std::string& cell_id, std::int64_t trial_id,
                                          std::string_view rule);
   // Records a cell's fixture changes (migration 17), one transaction.
