@@ -191,8 +191,7 @@ TEST(FixtureChanges, ASimulatedCellReadsItsChangeTimesFromItsProfile) {
   };
   EXPECT_NE(error_of(R"({"changes": {"finger_s": -1}})").find("changes.finger_s"),
             std::string::npos);
-  EXPECT_NE(error_of(R"({"changes": {"pusher_s": 3}})").find("reset.swap_time"),
-            std::string::npos);
+  EXPECT_NE(error_of(R"({"changes": {"pusher_s": 3}})").find("reset.swap_time"), std::string::npos);
   EXPECT_NE(error_of(R"({"changes": {"gripper_s": 3}})").find("gripper_s"), std::string::npos);
 }
 

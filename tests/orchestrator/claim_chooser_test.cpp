@@ -75,8 +75,8 @@ TEST(ClaimChooser, Table) {
        Cell(kA, kCosts, 0), 100, "claim.least_change", 45},
       {"the current block is the first candidate's (indices 5..7 of block 1)", on,
        Window({kD, kA, kD, kA}, 5), Cell(kA, kCosts, 1), 106, "claim.least_change", 0},
-      {"unknown mounting (set up for its first trial): no change, plan order", on,
-       Window({kB, kA}), Cell(std::nullopt, kCosts, 0), 100, "claim.least_change", 0},
+      {"unknown mounting (set up for its first trial): no change, plan order", on, Window({kB, kA}),
+       Cell(std::nullopt, kCosts, 0), 100, "claim.least_change", 0},
   };
   for (const Row& r : rows) {
     SCOPED_TRACE(r.name);
@@ -123,7 +123,7 @@ struct SimRun {
 };
 
 SimRun Simulate(const SchedulingOptions& options, std::uint64_t seed, int trials, int configs,
-             int cells, double trial_s) {
+                int cells, double trial_s) {
   std::mt19937_64 rng(seed);
   std::vector<Fixtures> config_fixtures;
   for (int k = 0; k < configs; ++k) {  // finger x pusher x object, all combinations
@@ -232,9 +232,9 @@ TEST(SchedulingBlock, DefaultsOnAndOffSwitchAndClearErrors) {
   EXPECT_EQ(field_of(R"({"scheduling": {"window": 0}})").rfind("scheduling.window: ", 0), 0u);
   EXPECT_EQ(field_of(R"({"scheduling": {"window": 257}})").rfind("scheduling.window: ", 0), 0u);
   EXPECT_EQ(field_of(R"({"scheduling": {"window": 2.5}})").rfind("scheduling.window: ", 0), 0u);
-  EXPECT_EQ(field_of(R"({"scheduling": {"change_aware": "yes"}})")
-                .rfind("scheduling.change_aware: ", 0),
-            0u);
+  EXPECT_EQ(
+      field_of(R"({"scheduling": {"change_aware": "yes"}})").rfind("scheduling.change_aware: ", 0),
+      0u);
   EXPECT_EQ(field_of(R"({"scheduling": {"batch": 3}})").rfind("scheduling.batch: ", 0), 0u);
   EXPECT_EQ(field_of(R"({"scheduling": 3})").rfind("scheduling: ", 0), 0u);
 }
