@@ -500,6 +500,24 @@ CREATE TABLE IF NOT EXISTS service_events(
   event_json  TEXT NOT NULL         -- what the --notify command was given on stdin
 );
 )sql"},
+      // Issue 29: a cell's fixture changes (finger pads, pusher, object),
+      // each with what it changed from and to and the seconds it cost, so
+      // that change-aware scheduling's saving is measured from the store.
+      {17, "fixture_changes: each change of a cell's fixtures, from, to and seconds", R"sql(
+CREATE TABLE IF NOT EXISTS fixture_changes(
+  id          INTEGER PRIMARY KEY,
+  trial_id    INTEGER NOT NULL REFERENCES trials(id),  -- the trial whose phase made it
+  attempt     INTEGER NOT NULL,
+  cell_id     TEXT NOT NULL REFERENCES cells(id),
+  phase       TEXT NOT NULL CHECK (phase IN ('reset', 'execute')),  -- when the cell made it
+  what        TEXT NOT NULL CHECK (what IN ('finger', 'pusher', 'object')),
+  from_key    TEXT NOT NULL,  -- '' when nothing was known to be mounted
+  to_key      TEXT NOT NULL,
+  seconds     REAL NOT NULL CHECK (seconds >= 0),
+  at          REAL NOT NULL
+);
+CREATE INDEX IF NOT EXISTS fixture_changes_trial ON fixture_changes(trial_id);
+)sql"},
   };
   return kMigrations;
 }

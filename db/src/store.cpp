@@ -648,11 +648,13 @@ namespace {
 constexpr const char* kActiveCampaignsSql =
     "SELECT id FROM campaigns WHERE state = 'active' ORDER BY priority DESC, id";
 constexpr const char* kNextTrialSql =
-    "SELECT id, campaign_id, attempt, seed, scene_json, defects_json FROM trials"
+    "SELECT id, campaign_id, attempt, seed, scene_json, defects_json, idx FROM trials"
     " WHERE state = 'planned' AND campaign_id = ? AND not_before <= ? AND (contact_mask & ~?) = 0"
-    " ORDER BY idx LIMIT 1";
+    " ORDER BY idx LIMIT ?";
 
-std::optional<ClaimedTrial> FindNext(const Store::Impl& impl, const std::string& cell_id,
+// The first `limit` claimable trials of the first campaign (by priority) that
+// has any; empty when the cell is not healthy or nothing is claimable.
+std::vector<ClaimedTrial> FindWindow(const Store::Impl& impl, const std::string& cell_id, int limit,
                                      const char* function) {
   auto cell = impl.Prepare("SELECT state, contact_mask FROM cells WHERE id = ?");
   cell->Bind(1, cell_id);
@@ -660,7 +662,8 @@ std::optional<ClaimedTrial> FindNext(const Store::Impl& impl, const std::string&
     throw StoreError(StoreError::Kind::kNotFound,
                      std::string(function) + ": unknown cell '" + cell_id + "' (UpsertCell first)");
   }
-  if (cell->Text(0) != "healthy") return std::nullopt;
+  std::vector<ClaimedTrial> out;
+  if (cell->Text(0) != "healthy") return out;
   const std::int64_t mask = cell->Int(1);
   std::vector<std::int64_t> campaigns;
   {
@@ -670,21 +673,142 @@ std::optional<ClaimedTrial> FindNext(const Store::Impl& impl, const std::string&
   const double now = impl.Now();
   for (const auto campaign : campaigns) {
     auto s = impl.Prepare(kNextTrialSql);
-    s->Bind(1, campaign).Bind(2, now).Bind(3, mask);
-    if (!s->Step()) continue;
-    ClaimedTrial t;
-    t.trial_id = s->Int(0);
-    t.campaign_id = s->Int(1);
-    t.attempt = static_cast<int>(s->Int(2));
-    t.seed = SeedFromDb(s->Int(3));
-    t.scene_json = s->Text(4);
-    t.defects_json = s->Text(5);
-    return t;
+    s->Bind(1, campaign).Bind(2, now).Bind(3, mask).Bind(4, static_cast<std::int64_t>(limit));
+    while (s->Step()) {
+      ClaimedTrial t;
+      t.trial_id = s->Int(0);
+      t.campaign_id = s->Int(1);
+      t.attempt = static_cast<int>(s->Int(2));
+      t.seed = SeedFromDb(s->Int(3));
+      t.scene_json = s->Text(4);
+      t.defects_json = s->Text(5);
+      t.index = s->Int(6);
+      out.push_back(std::move(t));
+    }
+    if (!out.empty()) return out;
   }
-  return std::nullopt;
+  return out;
 }
 
+std::optional<ClaimedTrial> FindNext(const Store::Impl& impl, const std::string& cell_id,
+                                     const char* function) {
+  auto w = FindWindow(impl, cell_id, 1, function);
+  if (w.empty()) return std::nullopt;
+  return w.front();
+}
+
+// Moves the found trial to dispatched on the cell (ClaimNextTrial's contract);
+// the caller holds the write transaction.
+// `reason`: "claimed", or with the chooser's rule ("claimed by claim.least_change").
+void ClaimFound(const Store::Impl& impl, const ClaimedTrial& t, const std::string& cell_id,
+                const std::string& reason, const char* function);
+
 }  // namespace
+
+std::vector<ClaimedTrial> Store::ClaimWindow(const std::string& cell_id, int limit) const {
+  if (limit < 1 || limit > 1000) BadInput("ClaimWindow: limit must be 1..1000");
+  Tx tx(impl_->db, false);
+  auto w = FindWindow(*impl_, cell_id, limit, "ClaimWindow");
+  tx.Commit();
+  return w;
+}
+
+std::optional<ClaimedTrial> Store::ClaimTrial(const std::string& cell_id, std::int64_t trial_id,
+                                              std::string_view rule) {
+  impl_->RequireWritable("ClaimTrial");
+  Tx tx(impl_->db, true);  // find + update: one atomic step, as ClaimNextTrial
+  // Still claimable: the window's filters, this trial only.
+  auto cell = impl_->Prepare("SELECT state, contact_mask FROM cells WHERE id = ?");
+  cell->Bind(1, cell_id);
+  if (!cell->Step()) {
+    throw StoreError(StoreError::Kind::kNotFound,
+                     "ClaimTrial: unknown cell '" + cell_id + "' (UpsertCell first)");
+  }
+  if (cell->Text(0) != "healthy") return std::nullopt;
+  auto s = impl_->Prepare(
+      "SELECT t.id, t.campaign_id, t.attempt, t.seed, t.scene_json, t.defects_json, t.idx"
+      " FROM trials AS t JOIN campaigns AS c ON c.id = t.campaign_id"
+      " WHERE t.id = ? AND t.state = 'planned' AND c.state = 'active' AND t.not_before <= ?"
+      " AND (t.contact_mask & ~?) = 0");
+  s->Bind(1, trial_id).Bind(2, impl_->Now()).Bind(3, cell->Int(1));
+  if (!s->Step()) return std::nullopt;
+  ClaimedTrial t;
+  t.trial_id = s->Int(0);
+  t.campaign_id = s->Int(1);
+  t.attempt = static_cast<int>(s->Int(2));
+  t.seed = SeedFromDb(s->Int(3));
+  t.scene_json = s->Text(4);
+  t.defects_json = s->Text(5);
+  t.index = s->Int(6);
+  ClaimFound(*impl_, t, cell_id, "claimed by " + std::string(rule), "ClaimTrial");
+  tx.Commit();
+  return t;
+}
+
+void Store::RecordFixtureChanges(const std::vector<FixtureChangeRecord>& changes) {
+  impl_->RequireWritable("RecordFixtureChanges");
+  for (const auto& c : changes) {
+    if (c.phase != "reset" && c.phase != "execute")
+      BadInput("RecordFixtureChanges: phase must be reset or execute, got '" + c.phase + "'");
+    if (c.what != "finger" && c.what != "pusher" && c.what != "object")
+      BadInput("RecordFixtureChanges: what must be finger, pusher or object, got '" + c.what + "'");
+    RequireFinite(c.seconds, "RecordFixtureChanges: seconds");
+    if (c.seconds < 0) BadInput("RecordFixtureChanges: seconds must be >= 0");
+  }
+  Tx tx(impl_->db, true);
+  const double now = impl_->Now();
+  for (const auto& c : changes) {
+    auto t = impl_->Prepare("SELECT 1 FROM trials WHERE id = ?");
+    t->Bind(1, c.trial_id);
+    if (!t->Step())
+      throw StoreError(StoreError::Kind::kNotFound,
+                       "RecordFixtureChanges: no trial " + std::to_string(c.trial_id));
+    auto k = impl_->Prepare("SELECT 1 FROM cells WHERE id = ?");
+    k->Bind(1, c.cell_id);
+    if (!k->Step())
+      throw StoreError(StoreError::Kind::kNotFound,
+                       "RecordFixtureChanges: unknown cell '" + c.cell_id + "'");
+    auto i = impl_->Prepare(
+        "INSERT INTO fixture_changes(trial_id, attempt, cell_id, phase, what, from_key, to_key,"
+        " seconds, at) VALUES(?,?,?,?,?,?,?,?,?)");
+    i->Bind(1, c.trial_id)
+        .Bind(2, c.attempt)
+        .Bind(3, c.cell_id)
+        .Bind(4, c.phase)
+        .Bind(5, c.what)
+        .Bind(6, c.from_key)
+        .Bind(7, c.to_key)
+        .Bind(8, c.seconds)
+        .Bind(9, now);
+    i->Run();
+  }
+  tx.Commit();
+}
+
+std::vector<FixtureChangeRecord> Store::ListFixtureChanges(std::int64_t campaign_id) const {
+  Tx tx(impl_->db, false);
+  auto s = impl_->Prepare(
+      "SELECT f.trial_id, f.attempt, f.cell_id, f.phase, f.what, f.from_key, f.to_key, f.seconds,"
+      " f.at FROM fixture_changes AS f JOIN trials AS t ON t.id = f.trial_id"
+      " WHERE ?1 = 0 OR t.campaign_id = ?1 ORDER BY f.id");
+  s->Bind(1, campaign_id);
+  std::vector<FixtureChangeRecord> out;
+  while (s->Step()) {
+    FixtureChangeRecord r;
+    r.trial_id = s->Int(0);
+    r.attempt = static_cast<int>(s->Int(1));
+    r.cell_id = s->Text(2);
+    r.phase = s->Text(3);
+    r.what = s->Text(4);
+    r.from_key = s->Text(5);
+    r.to_key = s->Text(6);
+    r.seconds = s->Real(7);
+    r.at = s->Real(8);
+    out.push_back(std::move(r));
+  }
+  tx.Commit();
+  return out;
+}
 
 std::optional<ClaimedTrial> Store::PeekNextTrial(const std::string& cell_id) const {
   Tx tx(impl_->db, false);
@@ -698,30 +822,39 @@ std::optional<ClaimedTrial> Store::ClaimNextTrial(const std::string& cell_id) {
   Tx tx(impl_->db, true);  // the write lock makes find + update one atomic step
   auto t = FindNext(*impl_, cell_id, "ClaimNextTrial");
   if (!t) return std::nullopt;
-  const double now = impl_->Now();
-  WriteTransition(*impl_, t->trial_id, t->attempt, TrialState::kPlanned, TrialState::kDispatched,
-                  cell_id, "claimed", "dispatch.claimed", "ClaimNextTrial");
+  ClaimFound(*impl_, *t, cell_id, "claimed", "ClaimNextTrial");
+  tx.Commit();
+  return t;
+}
+
+namespace {
+
+void ClaimFound(const Store::Impl& impl, const ClaimedTrial& t, const std::string& cell_id,
+                const std::string& reason, const char* function) {
+  const double now = impl.Now();
+  WriteTransition(impl, t.trial_id, t.attempt, TrialState::kPlanned, TrialState::kDispatched,
+                  cell_id, reason, "dispatch.claimed", function);
   // The start state this trial begins from: the cell's last observed reset
   // result, if that reset was aimed at this trial (or its aim is not known).
-  auto u = impl_->Prepare(
+  auto u = impl.Prepare(
       "UPDATE trials SET cell_id = ?1, dispatched_at = ?2,"
       " cell_defects_json = (SELECT defects_json FROM cells WHERE id = ?1),"
       " start_x = c.start_x, start_y = c.start_y, start_z = c.start_z, start_qw = c.start_qw,"
       " start_qx = c.start_qx, start_qy = c.start_qy, start_qz = c.start_qz"
       " FROM (SELECT 1) LEFT JOIN cells AS c ON c.id = ?1"
       "  AND (c.start_for_trial IS NULL OR c.start_for_trial = ?3) WHERE trials.id = ?3");
-  u->Bind(1, cell_id).Bind(2, now).Bind(3, t->trial_id).Run();
+  u->Bind(1, cell_id).Bind(2, now).Bind(3, t.trial_id).Run();
   // The trial will move the object: the cell's start state is consumed.
-  auto clear = impl_->Prepare(
+  auto clear = impl.Prepare(
       "UPDATE cells SET start_x = NULL, start_y = NULL, start_z = NULL, start_qw = NULL,"
       " start_qx = NULL, start_qy = NULL, start_qz = NULL, start_observed_at = NULL,"
       " start_for_trial = NULL WHERE id = ?");
   clear->Bind(1, cell_id).Run();
-  auto r = impl_->Prepare(
+  auto r = impl.Prepare(
       "SELECT start_x, start_y, start_z, start_qw, start_qx, start_qy, start_qz,"
       " nominal_x, nominal_y, nominal_z, nominal_qw, nominal_qx, nominal_qy, nominal_qz"
       " FROM trials WHERE id = ?");
-  r->Bind(1, t->trial_id);
+  r->Bind(1, t.trial_id);
   r->Step();
   if (!r->IsNull(0)) {
     double v[14];
@@ -729,18 +862,18 @@ std::optional<ClaimedTrial> Store::ClaimNextTrial(const std::string& cell_id) {
     const double dp = std::sqrt((v[0] - v[7]) * (v[0] - v[7]) + (v[1] - v[8]) * (v[1] - v[8]) +
                                 (v[2] - v[9]) * (v[2] - v[9]));
     const double da = QuatAngle(v + 3, v + 10);
-    auto e = impl_->Prepare(
+    auto e = impl.Prepare(
         "UPDATE trials SET start_position_error = ?, start_angle_error = ? WHERE id = ?");
-    e->Bind(1, dp).Bind(2, da).Bind(3, t->trial_id).Run();
+    e->Bind(1, dp).Bind(2, da).Bind(3, t.trial_id).Run();
   } else {
     // No observed start for this attempt: an earlier attempt's errors must not stay.
-    auto e = impl_->Prepare(
+    auto e = impl.Prepare(
         "UPDATE trials SET start_position_error = NULL, start_angle_error = NULL WHERE id = ?");
-    e->Bind(1, t->trial_id).Run();
+    e->Bind(1, t.trial_id).Run();
   }
-  tx.Commit();
-  return t;
 }
+
+}  // namespace
 
 TrialState Store::RetryTrial(std::int64_t trial_id, int attempt, const std::string& reason,
                              int max_attempts, double backoff_s, std::string_view rule) {

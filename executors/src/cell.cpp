@@ -203,6 +203,7 @@ struct Cell::Impl {
   TrialTruth trial_truth;      // of the trial being executed (Backend::PreparedTruth)
   TrialStart trial_start;      // where trials start (the last reset)
   std::optional<mechanics::PusherSpec> pusher;  // the pusher mounted now
+  std::optional<schemas::Fixtures> mounted;     // the fixtures mounted now (nullopt: not known)
   std::uint64_t started_unix_ns = UnixNanos();
   std::thread worker;
   std::thread intake;
@@ -270,6 +271,26 @@ struct Cell::Impl {
     return !wake.wait_until(lock, until, [&] { return stop; });
   }
 
+  // What a fixture change costs here (issue 29, schemas/fixtures.hpp): the
+  // backend's own (an exec: driver's hello) or the simulated profile's.
+  schemas::ChangeCosts ChangeCosts() const {
+    if (layer.capabilities().change_costs) return *layer.capabilities().change_costs;
+    return {options.defects.finger_change_s, reset_params.swap_time,
+            options.defects.object_change_s};
+  }
+  // Sleeps for a simulated change (scaled like every phase); false: stopping.
+  bool EmulateChange(double seconds) {
+    if (options.speed <= 0 || seconds <= 0) return true;
+    return SleepUntil(Clock::now() + std::chrono::duration_cast<Clock::duration>(
+                                         std::chrono::duration<double>(seconds * options.speed)));
+  }
+  static nlohmann::json ChangesJson(const std::vector<schemas::FixtureChange>& changes) {
+    nlohmann::json out = nlohmann::json::array();
+    for (const auto& c : changes)
+      out.push_back({{"what", c.what}, {"from", c.from}, {"to", c.to}, {"seconds", c.seconds}});
+    return out;
+  }
+
   // Caller holds `mutex` (reads the serving session); only the constructor
   // and the intake thread write announcements.
   void Announce() {
@@ -297,9 +318,14 @@ struct Cell::Impl {
     const BackendCapabilities& caps = layer.capabilities();
     a.backend(caps.name);
     a.truth(ToString(caps.truth));
+    const schemas::ChangeCosts costs = ChangeCosts();
     a.backend_json(json({{"engine", caps.engine},
                          {"emulates_defects", caps.emulates_defects},
-                         {"settings", json::parse(caps.settings_json, nullptr, false)}})
+                         {"settings", json::parse(caps.settings_json, nullptr, false)},
+                         {schemas::kChangeCostsKey,
+                          {{"finger_s", costs.finger_s},
+                           {"pusher_s", costs.pusher_s},
+                           {"object_s", costs.object_s}}}})
                        .dump());
     if (!announce.Write(a)) throw dds::DdsError("cell: announcing the cell failed");
   }
@@ -457,6 +483,21 @@ struct Cell::Impl {
     }
     auto accepted = BaseStatus(c, msg::STATE_ACCEPTED);
     Send(accepted);
+    // Fixtures other than those mounted (a fresh cell; a trial its reset was
+    // not aimed at) are changed first; a simulated cell spends their time.
+    {
+      const schemas::Fixtures needed = schemas::FixturesOf(scene);
+      const auto changes = schemas::ChangesBetween(mounted, needed, ChangeCosts());
+      if (!changes.empty()) {
+        spdlog::info("cell {}: trial {}: {} fixture change(s) before it runs", options.id,
+                     c.trial_id(), changes.size());
+        if (layer.capabilities().emulates_defects &&
+            !EmulateChange(EmulatedChangeSeconds(changes, false)))
+          return;  // stopping
+      }
+      mounted = needed;
+      pusher = scene.pusher;
+    }
     trial_start.TrialRan();                   // the trial moves the object
     if (options.defects.hang_after_accept) {  // fault injection: a hung controller
       spdlog::warn("cell {}: fault injection: hanging after accepting trial {}", options.id,
@@ -694,6 +735,7 @@ struct Cell::Impl {
     request.observed_end = observed_pose;
     request.true_end = true_pose;
     std::optional<mechanics::PusherSpec> next_pusher = pusher;
+    std::optional<schemas::Fixtures> next_fixtures;  // what the next trial needs mounted
     if (!c.scene_json().empty()) {
       mechanics::Scene next;
       try {
@@ -706,9 +748,13 @@ struct Cell::Impl {
       }
       request.target = ToResetPose(next.object.pose);
       next_pusher = next.pusher;
+      next_fixtures = schemas::FixturesOf(next);
     }
+    const std::vector<schemas::FixtureChange> changes =
+        next_fixtures ? schemas::ChangesBetween(mounted, *next_fixtures, ChangeCosts())
+                      : std::vector<schemas::FixtureChange>{};
     const PusherChange change = ChangeOfPusher(pusher, next_pusher);
-    request.swap_pusher = change.swap;
+    request.swap_pusher = change.swap || ChangesPusher(changes);
     request.pusher_move_m = change.move_m;
     auto accepted = BaseStatus(c, msg::STATE_ACCEPTED);
     Send(accepted);
@@ -724,19 +770,25 @@ struct Cell::Impl {
                                               std::chrono::duration<double>(c.deadline_s()))
                               : Clock::time_point::max();
     if (auto own = layer.inner().Reset(backend_request, Context(c, deadline))) {
+      if (own->ok && next_fixtures) mounted = next_fixtures;  // the backend changed them itself
       return FinishBackendReset(c, *own, next_pusher, started);
     }
     const reset::ResetOutcome out =
         reset::ExecuteReset(request, reset_params, c.seed(), c.trial_id());
-    // The reset's own (simulated) duration is paced like a trial.
+    // The changes of fingers and object come before the reset plan (the
+    // pusher's swap is in the plan); the reset's own (simulated) duration
+    // is paced like a trial.
+    const double change_s = EmulatedChangeSeconds(changes, true);
     if (options.speed > 0) {
-      SleepUntil(started + std::chrono::duration_cast<Clock::duration>(
-                               std::chrono::duration<double>(out.time_s * options.speed)));
+      SleepUntil(started +
+                 std::chrono::duration_cast<Clock::duration>(
+                     std::chrono::duration<double>((change_s + out.time_s) * options.speed)));
     }
     true_pose = out.final_true;
     observed_pose = out.final_observed;
     if (out.success) trial_start.ResetEnded(c.seed(), request.target, out.final_true);
     if (out.success) pusher = next_pusher;
+    if (out.success && next_fixtures) mounted = next_fixtures;
     auto s = BaseStatus(c, out.success ? msg::STATE_RESET_DONE : msg::STATE_FAILED);
     s.reason(out.failure);
     if (!out.success) s.failure(msg::FAILURE_RESET);
@@ -752,6 +804,8 @@ struct Cell::Impl {
                         {"time_s", out.time_s},
                         {"swap_pusher", request.swap_pusher},
                         {"pusher_move_m", request.pusher_move_m},
+                        {"changes", ChangesJson(changes)},
+                        {"change_s", change_s},
                         {"retryable", out.retryable}})
                       .dump());
     Finish(c, s);

@@ -99,6 +99,8 @@ void ValidateDefectProfile(const DefectProfile& p) {
   NonNegative(p.velocity_scale_std, "actuation_noise.velocity_scale_std");
   NonNegative(p.velocity_offset_std, "actuation_noise.velocity_offset_std");
   NonNegative(p.latency_ms, "latency_ms");
+  NonNegative(p.finger_change_s, "changes.finger_s");
+  NonNegative(p.object_change_s, "changes.object_s");
   if (p.latency_ms > 10000) throw DefectError("latency_ms", "must be <= 10000");
   if (!(p.drop_probability >= 0 && p.drop_probability < 1)) {
     throw DefectError("drop_probability", "must be in [0, 1)");
@@ -142,7 +144,7 @@ DefectProfile ParseDefectProfile(std::string_view text) {
   CheckKeys(root, "",
             {"pose_noise", "ft_noise", "actuation_noise", "latency_ms", "drop_probability",
              "friction_variability", "workspace", "max_pusher_speed", "contact_types", "reset",
-             "comment", "fault_injection"});
+             "comment", "fault_injection", "changes"});
   DefectProfile p;
   if (const json* o = Object(root, "pose_noise", "pose_noise")) {
     CheckKeys(*o, "pose_noise", {"position_std", "rotation_std"});
@@ -209,6 +211,13 @@ DefectProfile ParseDefectProfile(std::string_view text) {
     ReadScalar(*o, "rotate_speed", "reset.", &r.rotate_speed);
     ReadScalar(*o, "grasp_time", "reset.", &r.grasp_time);
     ReadScalar(*o, "swap_time", "reset.", &r.swap_time);
+  }
+  if (const json* o = Object(root, "changes", "changes")) {
+    if (o->contains("pusher_s"))
+      throw DefectError("changes.pusher_s", "the pusher's change time is reset.swap_time");
+    CheckKeys(*o, "changes", {"finger_s", "object_s"});
+    ReadScalar(*o, "finger_s", "changes.", &p.finger_change_s);
+    ReadScalar(*o, "object_s", "changes.", &p.object_change_s);
   }
   if (const json* o = Object(root, "fault_injection", "fault_injection")) {
     CheckKeys(*o, "fault_injection", {"hang_after_accept", "stream"});

@@ -605,6 +605,22 @@ class ExecBackend final : public Backend {
       c.emulates_defects = hello.value("emulates_defects", false);
       c.settings_json = json({{"hello", hello}}).dump();
       resets_ = hello.value("resets", false);
+      if (auto it = hello.find(schemas::kChangeCostsKey); it != hello.end()) {
+        if (!it->is_object())
+          throw std::invalid_argument("hello.fixture_changes: must be an object");
+        schemas::ChangeCosts costs;
+        for (auto [key, out] :
+             {std::pair{"finger_s", &costs.finger_s}, std::pair{"pusher_s", &costs.pusher_s},
+              std::pair{"object_s", &costs.object_s}}) {
+          if (!it->contains(key) || !(*it)[key].is_number())
+            throw std::invalid_argument(std::string("hello.fixture_changes.") + key +
+                                        ": a number of seconds is required");
+          *out = (*it)[key].get<double>();
+        }
+        if (std::string why = schemas::CheckChangeCosts(costs); !why.empty())
+          throw std::invalid_argument("hello.fixture_changes." + why);
+        c.change_costs = costs;
+      }
       caps_ = c;
     } catch (const std::exception& e) {
       Fail("hello", e.what());

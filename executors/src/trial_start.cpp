@@ -19,6 +19,20 @@ PusherChange ChangeOfPusher(const std::optional<mechanics::PusherSpec>& now,
   return {false, (next->position - now->position).norm()};
 }
 
+double EmulatedChangeSeconds(const std::vector<schemas::FixtureChange>& changes, bool in_reset) {
+  double s = 0;
+  for (const auto& c : changes) {
+    if (in_reset && c.what == "pusher") continue;  // the reset plan's swap_pusher primitive
+    s += c.seconds;
+  }
+  return s;
+}
+
+bool ChangesPusher(const std::vector<schemas::FixtureChange>& changes) {
+  return std::any_of(changes.begin(), changes.end(),
+                     [](const schemas::FixtureChange& c) { return c.what == "pusher"; });
+}
+
 void TrialStart::ResetEnded(std::uint64_t seed, const reset::Pose& target,
                             const reset::Pose& pose) {
   left_ = Left{seed, target, pose};

@@ -8,13 +8,18 @@
 //   StartPose(seed, target, ...)     where that trial starts (nullopt: as planned)
 //   PlacedAt(scene, start)           the scene with its object there, fingers seated
 //   ChangeOfPusher(now, next)        nothing, a move of the same pusher, or a swap
+//   EmulatedChangeSeconds(changes, in_reset)
+//                                    what a simulated cell spends on fixture
+//                                    changes (issue 29) besides its reset plan
 #pragma once
 
 #include <cstdint>
 #include <optional>
+#include <vector>
 
 #include "arena/mechanics/scene.hpp"
 #include "arena/reset/reset.hpp"
+#include "arena/schemas/fixtures.hpp"
 
 namespace arena::executors {
 
@@ -27,6 +32,17 @@ struct PusherChange {
 };
 PusherChange ChangeOfPusher(const std::optional<mechanics::PusherSpec>& now,
                             const std::optional<mechanics::PusherSpec>& next);
+
+// Fixture changes (schemas/fixtures.hpp): a reset aimed at the next trial
+// makes the changes its scene asks for (the finger pads, the pusher, the
+// object); a trial the cell runs with other fixtures than those mounted (a
+// fresh cell, or a trial other than the one its reset was aimed at) has them
+// made first, in EXECUTE. A simulated cell spends the declared seconds
+// (scaled by --speed like every phase); in a reset the pusher's change is
+// the plan's own swap primitive (reset.swap_time), so it is not counted twice.
+double EmulatedChangeSeconds(const std::vector<schemas::FixtureChange>& changes, bool in_reset);
+// Whether `changes` include a change of the pusher tool.
+bool ChangesPusher(const std::vector<schemas::FixtureChange>& changes);
 
 class TrialStart {
  public:

@@ -526,6 +526,21 @@ OutcomeKind ReadOutcome(const json& v, const std::string& path) {
                                 Printable(name, 40) + "\"");
 }
 
+// "scheduling": {"change_aware": bool, "window": K} (claim_chooser.hpp).
+SchedulingOptions ReadSchedulingBlock(const json& v) {
+  RequireObject(v, "scheduling", {"change_aware", "window"});
+  SchedulingOptions s;
+  if (v.contains("change_aware")) {
+    if (!v["change_aware"].is_boolean())
+      throw CampaignError("scheduling.change_aware",
+                          "must be true or false, got " + TypeName(v["change_aware"]));
+    s.change_aware = v["change_aware"].get<bool>();
+  }
+  if (v.contains("window"))
+    s.window = static_cast<int>(Integer(v["window"], "scheduling.window", 1, kMaxSchedulingWindow));
+  return s;
+}
+
 // "sampler": {"adaptive": ...} (orchestrator/README.md, "Adaptive samplers").
 AdaptiveSpec ReadAdaptive(const json& v, SamplerKind* base) {
   if (!v.contains("adaptive"))
@@ -691,12 +706,14 @@ bool ValidName(const std::string& name) {
 Campaign ParseCampaign(std::string_view json_text, const std::string& base_dir,
                        ConditionCheck check) {
   json doc = ParseJson(json_text, "");
-  RequireObject(doc, "",
-                {"name", "description", "seed", "priority", "scene", "scenes", "variations",
-                 "sampler", "conditions", "trials", "replicates", "prediction", "defects"});
+  RequireObject(
+      doc, "",
+      {"name", "description", "seed", "priority", "scene", "scenes", "variations", "sampler",
+       "conditions", "trials", "replicates", "prediction", "defects", "scheduling"});
   const std::filesystem::path dir =
       base_dir.empty() ? std::filesystem::path(".") : std::filesystem::path(base_dir);
   Campaign c;
+  if (doc.contains("scheduling")) c.scheduling = ReadSchedulingBlock(doc["scheduling"]);
 
   if (!doc.contains("name")) throw CampaignError("name", "is required");
   c.name = String(doc["name"], "name");
@@ -1107,6 +1124,12 @@ Campaign ParseCampaign(std::string_view json_text, const std::string& base_dir,
     }
   }
   return c;
+}
+
+SchedulingOptions ReadScheduling(std::string_view campaign_json) {
+  const json doc = ParseJson(campaign_json, "");
+  if (!doc.is_object() || !doc.contains("scheduling")) return SchedulingOptions{};
+  return ReadSchedulingBlock(doc["scheduling"]);
 }
 
 Campaign LoadCampaignFile(const std::string& path) {

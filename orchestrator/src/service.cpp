@@ -175,6 +175,19 @@ class SqliteTrialStore : public TrialStore {
   std::optional<db::ClaimedTrial> ClaimNextTrial(const std::string& cell) override {
     return s_.ClaimNextTrial(cell);
   }
+  std::vector<db::ClaimedTrial> ClaimWindow(const std::string& cell, int limit) override {
+    return s_.ClaimWindow(cell, limit);
+  }
+  std::optional<db::ClaimedTrial> ClaimTrial(const std::string& cell, std::int64_t trial_id,
+                                             const std::string& rule) override {
+    return s_.ClaimTrial(cell, trial_id, rule);
+  }
+  db::Campaign GetCampaign(std::int64_t campaign_id) override {
+    return s_.GetCampaign(campaign_id);
+  }
+  void RecordFixtureChanges(const std::vector<db::FixtureChangeRecord>& changes) override {
+    s_.RecordFixtureChanges(changes);
+  }
   std::optional<db::ClaimedTrial> PeekNextTrial(const std::string& cell) override {
     return s_.PeekNextTrial(cell);
   }

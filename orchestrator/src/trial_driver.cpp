@@ -12,9 +12,12 @@
 
 #include "arena/assessment/truth.hpp"
 #include "arena/mechanics/scene_json.hpp"
+#include "arena/orchestrator/campaign.hpp"
+#include "arena/orchestrator/claim_chooser.hpp"
 #include "arena/orchestrator/closed_loop.hpp"
 #include "arena/orchestrator/logging.hpp"
 #include "arena/orchestrator/trial_data.hpp"
+#include "arena/schemas/fixtures.hpp"
 #include "arena/schemas/ground_truth.hpp"
 #include "store_steps.hpp"
 
@@ -121,6 +124,13 @@ struct TrialDriver::Impl {
     double execute_wall_s = -1;
     int store_waits = 0;  // store steps of this cell waiting after kBusy: deadlines held
     std::int64_t reset_aimed_at = 0;  // the trial the running reset prepares (0: none)
+    // Issue 29: its declared change costs (nullopt: none declared, plan
+    // order), what the service last saw it mount (nullopt: not known), what
+    // its running reset mounts, and the block of its last claim.
+    std::optional<schemas::ChangeCosts> change_costs;
+    std::optional<schemas::Fixtures> mounted;
+    std::optional<schemas::Fixtures> reset_mounts;
+    std::int64_t block_campaign = 0, block = -1;
   };
   std::map<std::string, CellRun> cells;
 
@@ -233,6 +243,13 @@ struct TrialDriver::Impl {
                            {"truth", a.truth()}};
     cell.contact_types = a.contact_types();
     cell.truth = a.truth();
+    cell.change_costs = DeclaredCosts(id, a.backend_json());
+    if (cell.change_costs) {
+      caps[schemas::kChangeCostsKey] = {{"finger_s", cell.change_costs->finger_s},
+                                        {"pusher_s", cell.change_costs->pusher_s},
+                                        {"object_s", cell.change_costs->object_s}};
+    }
+    if (restarted) cell.mounted.reset();  // a new process: nothing known mounted
     cell.capabilities_json = caps.dump();
     cell.defects_json = a.defects_json();
     if (restarted && cell.phase != CellPhase::kIdle)
@@ -410,6 +427,131 @@ struct TrialDriver::Impl {
   }
   std::set<std::int64_t> resets_completing;  // CompleteReset under way (or waiting on the store)
 
+  // ------------------------------------------------------------ fixtures (issue 29)
+  // A cell's change costs from its announcement (backend_json, fixtures.hpp);
+  // nullopt when it declares none or they are unusable (logged: it then
+  // claims in plan order).
+  static std::optional<schemas::ChangeCosts> DeclaredCosts(const std::string& id,
+                                                           const std::string& backend_json) {
+    const auto j = nlohmann::json::parse(backend_json, nullptr, false);
+    if (!j.is_object() || !j.contains(schemas::kChangeCostsKey)) return std::nullopt;
+    const auto& c = j[schemas::kChangeCostsKey];
+    schemas::ChangeCosts costs;
+    std::string why;
+    if (!c.is_object()) why = "not an object";
+    for (auto [key, out] :
+         {std::pair{"finger_s", &costs.finger_s}, std::pair{"pusher_s", &costs.pusher_s},
+          std::pair{"object_s", &costs.object_s}}) {
+      if (!why.empty()) break;
+      if (!c.contains(key) || !c[key].is_number()) {
+        why = std::string(key) + ": a number is required";
+      } else {
+        *out = c[key].get<double>();
+      }
+    }
+    if (why.empty()) why = schemas::CheckChangeCosts(costs);
+    if (!why.empty()) {
+      spdlog::warn("cell {}: announced {}: {}; it claims in plan order", id,
+                   schemas::kChangeCostsKey, why);
+      return std::nullopt;
+    }
+    return costs;
+  }
+
+  // The fixtures a trial's scene needs (cached: a scene never changes).
+  std::map<std::int64_t, schemas::Fixtures> fixtures_of;
+  const schemas::Fixtures& FixturesOfTrial(std::int64_t trial_id, const std::string& scene_json) {
+    auto it = fixtures_of.find(trial_id);
+    if (it != fixtures_of.end()) return it->second;
+    if (fixtures_of.size() > 4096) fixtures_of.clear();  // bounded: weeks of trials
+    schemas::Fixtures f;
+    try {
+      f = schemas::FixturesOf(mechanics::ParseScene(scene_json));
+    } catch (const std::exception&) {
+      f = {"?", "?", "?"};  // the claim fails the trial with the parse error (StartExecution)
+    }
+    return fixtures_of.emplace(trial_id, std::move(f)).first->second;
+  }
+
+  struct CampaignScheduling {
+    SchedulingOptions options;
+    std::uint64_t seed = 0;
+  };
+  std::map<std::int64_t, CampaignScheduling> scheduling;
+  const CampaignScheduling& SchedulingOf(std::int64_t campaign_id) {
+    auto it = scheduling.find(campaign_id);
+    if (it != scheduling.end()) return it->second;
+    const db::Campaign c = store.GetCampaign(campaign_id);
+    CampaignScheduling s;
+    s.seed = c.seed;
+    try {
+      if (!c.spec_json.empty()) s.options = ReadScheduling(c.spec_json);
+    } catch (const std::exception& e) {  // validated at submit; an old or edited store
+      spdlog::warn("campaign {}: scheduling: {}; claims in plan order", campaign_id, e.what());
+      s.options.change_aware = false;
+    }
+    return scheduling.emplace(campaign_id, s).first->second;
+  }
+
+  // The one place the claim chooser (claim_chooser.hpp) is called: the trial
+  // `cell` claims now (`claim`), or would claim (to aim its reset at).
+  std::optional<db::ClaimedTrial> NextTrialFor(CellRun& cell, bool claim) {
+    std::vector<db::ClaimedTrial> window;
+    if (cell.change_costs) window = store.ClaimWindow(cell.id, kMaxSchedulingWindow);
+    if (window.empty()) return claim ? store.ClaimNextTrial(cell.id) : store.PeekNextTrial(cell.id);
+    const std::int64_t campaign = window.front().campaign_id;
+    const CampaignScheduling& cs = SchedulingOf(campaign);
+    const std::int64_t block = BlockOf(window.front().index, cs.options.window);
+    std::vector<ClaimCandidate> candidates;
+    for (const auto& t : window) {
+      if (BlockOf(t.index, cs.options.window) != block) break;
+      candidates.push_back({t.trial_id, t.index, FixturesOfTrial(t.trial_id, t.scene_json)});
+    }
+    ClaimerState who;
+    who.mounted = cell.mounted;
+    who.costs = cell.change_costs;
+    if (cell.block_campaign == campaign) who.last_block = cell.block;
+    who.draw_seed = DrawSeed(cs.seed, cell.id);
+    const std::optional<ClaimChoice> choice = ChooseClaim(cs.options, candidates, who);
+    if (!choice) return std::nullopt;
+    if (!claim) {
+      for (const auto& t : window)
+        if (t.trial_id == choice->trial_id) return t;
+      return std::nullopt;
+    }
+    std::optional<db::ClaimedTrial> claimed =
+        store.ClaimTrial(cell.id, choice->trial_id, choice->rule);
+    if (claimed) {
+      cell.block_campaign = campaign;
+      cell.block = choice->block;
+    }
+    return claimed;
+  }
+
+  // Records the changes from what `cell` has mounted to `next` (the cell
+  // makes them: executors/trial_start.hpp) and takes `next` as mounted.
+  void RecordChanges(CellRun& cell, std::int64_t trial_id, int attempt, const char* phase,
+                     const schemas::Fixtures& next) {
+    if (!cell.change_costs) return;
+    std::vector<db::FixtureChangeRecord> records;
+    for (const auto& c : schemas::ChangesBetween(cell.mounted, next, *cell.change_costs)) {
+      db::FixtureChangeRecord r;
+      r.trial_id = trial_id;
+      r.attempt = attempt;
+      r.cell_id = cell.id;
+      r.phase = phase;
+      r.what = c.what;
+      r.from_key = c.from;
+      r.to_key = c.to;
+      r.seconds = c.seconds;
+      records.push_back(std::move(r));
+    }
+    cell.mounted = next;
+    if (records.empty()) return;
+    Step("cell " + cell.id + ": fixture changes", "",
+         [this, records] { store.RecordFixtureChanges(records); });
+  }
+
   // ------------------------------------------------------------ dispatch
   void Dispatch(bool stopping) {
     if (stopping || !recovered) return;
@@ -422,7 +564,7 @@ struct TrialDriver::Impl {
       if (observer && observer->DispatchGate(id)) continue;  // a suspension holds it back
       std::optional<db::ClaimedTrial> claim;
       const std::string cell_id = id;
-      Attempt("cell " + id + ": claim", [&] { claim = store.ClaimNextTrial(cell_id); });
+      Attempt("cell " + id + ": claim", [&] { claim = NextTrialFor(cell, true); });
       if (!claim) continue;
       cell.claimed_at = t;
       cell.campaign_id = claim->campaign_id;
@@ -449,8 +591,14 @@ struct TrialDriver::Impl {
                 std::string("invalid scene: ") + e.what(), d.outcome, d.rule);
       return;
     }
-    const double budget =
+    double budget =
         opt.service.execute_timeout_s + ex.scene.duration * std::max(cell.speed, 0.0) * 1.5;
+    // Fixtures other than those mounted are changed first (issue 29): their time too.
+    if (cell.change_costs)
+      budget += schemas::ChangeSeconds(schemas::ChangesBetween(
+                    cell.mounted, FixturesOfTrial(claim.trial_id, claim.scene_json),
+                    *cell.change_costs)) *
+                std::max(cell.speed, 0.0);
     cell.trial_id = claim.trial_id;
     cell.attempt = claim.attempt;
     executions.emplace(claim.trial_id, std::move(ex));
@@ -636,8 +784,10 @@ struct TrialDriver::Impl {
         [this, trial_id, attempt, cell_id] {
           CellRun& c = Cell(cell_id);
           // Aim the reset at the start of the trial this cell will most likely run next.
-          std::optional<db::ClaimedTrial> next = store.PeekNextTrial(cell_id);
+          std::optional<db::ClaimedTrial> next = NextTrialFor(c, false);
           store.BeginReset(trial_id, attempt, kResetAfterExecute);
+          c.reset_mounts.reset();
+          if (next) c.reset_mounts = FixturesOfTrial(next->trial_id, next->scene_json);
           msg::TrialCommand cmd = Command(c, msg::PHASE_RESET);
           cmd.trial_id(static_cast<std::uint64_t>(trial_id));
           cmd.attempt(static_cast<std::uint32_t>(attempt));
@@ -723,6 +873,9 @@ struct TrialDriver::Impl {
       case TrialStep::kCollectStream: {
         const auto detail = nlohmann::json::parse(st.detail_json(), nullptr, false);
         if (detail.is_object()) ex.stated_truth = detail.value("truth", std::string());
+        // The cell changed what differed before it ran (executors/trial_start.hpp).
+        RecordChanges(cell, ex.trial_id, ex.attempt, "execute",
+                      FixturesOfTrial(ex.trial_id, ex.scene_json));
       }
         RecordExecution(ex, st);
         RecordClosedLoop(ex, st);
@@ -762,6 +915,10 @@ struct TrialDriver::Impl {
                    cell.id, st.reason());
     }
     CompleteReset(cell.trial_id, cell.attempt, report, cell.id, d.rule);
+    // A reset aimed at a trial mounted its fixtures (only a successful one).
+    if (ok && cell.reset_mounts)
+      RecordChanges(cell, cell.trial_id, cell.attempt, "reset", *cell.reset_mounts);
+    cell.reset_mounts.reset();
     if (ok || d.counts_against_cell()) CellResult(cell, CellPhase::kResetting, ok, st.reason());
     if (ok) ReportTiming(cell, st.phase_wall_s());
     SetPhase(cell, CellPhase::kIdle);

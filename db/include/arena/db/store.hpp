@@ -280,6 +280,24 @@ struct ClaimedTrial {
   std::uint64_t seed = 0;
   std::string scene_json;
   std::string defects_json;
+  std::int64_t index = 0;  // its plan position in the campaign (trials.idx)
+};
+
+// One change of a cell's fixtures (issue 29, migration 17): during which
+// trial's phase ("reset": preparing the next trial; "execute": right before
+// the trial ran), what ("finger", "pusher", "object"), from and to which
+// fixture (arena::schemas::Fixtures keys; from "" = nothing known mounted)
+// and the seconds the cell declared for it.
+struct FixtureChangeRecord {
+  std::int64_t trial_id = 0;
+  int attempt = 1;
+  std::string cell_id;
+  std::string phase;
+  std::string what;
+  std::string from_key;
+  std::string to_key;
+  double seconds = 0;
+  double at = 0;  // s since epoch (set by the store)
 };
 
 struct Transition {
@@ -642,6 +660,22 @@ class Store {
   std::optional<ClaimedTrial> ClaimNextTrial(const std::string& cell_id);
   // What ClaimNextTrial would return now, without writing (to aim a reset).
   std::optional<ClaimedTrial> PeekNextTrial(const std::string& cell_id) const;
+  // Change-aware scheduling (issue 29, orchestrator/claim_chooser.hpp): the
+  // first `limit` (1..1000) trials, in plan order, of the campaign
+  // ClaimNextTrial would take from (the same filters: healthy cell, active
+  // campaign by priority, planned, due, contact types offered). Empty: none.
+  std::vector<ClaimedTrial> ClaimWindow(const std::string& cell_id, int limit) const;
+  // As ClaimNextTrial, but claims `trial_id` (one of the window), if it is
+  // still claimable by the cell. The audit row's rule is "dispatch.claimed"
+  // as always; its reason names the chooser's `rule` ("claimed by
+  // claim.least_change"). @returns nullopt when it no longer is.
+  std::optional<ClaimedTrial> ClaimTrial(const std::string& cell_id, std::int64_t trial_id,
+                                         std::string_view rule);
+  // Records a cell's fixture changes (migration 17), one transaction.
+  // @throws kBadInput (phase, what, seconds), kNotFound (trial, cell).
+  void RecordFixtureChanges(const std::vector<FixtureChangeRecord>& changes);
+  // A campaign's changes (0: all), oldest first.
+  std::vector<FixtureChangeRecord> ListFixtureChanges(std::int64_t campaign_id) const;
   // `rule` (these four): the name of the caller's rule that decided the
   // step, written to the audit row (trial_transitions.rule).
   //

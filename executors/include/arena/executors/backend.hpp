@@ -41,6 +41,7 @@
 #include "arena/mechanics/scene.hpp"
 #include "arena/mechanics/simulate.hpp"
 #include "arena/reset/reset.hpp"
+#include "arena/schemas/fixtures.hpp"
 
 namespace arena::executors {
 
@@ -78,6 +79,10 @@ struct BackendCapabilities {
   // profile leaves the workspace at its default takes this one; a profile
   // that sets a workspace keeps it.
   std::optional<std::pair<Eigen::Vector3d, Eigen::Vector3d>> workspace;
+  // Issue 29: what a fixture change costs on this backend (an exec: driver's
+  // hello "fixture_changes"); nullopt: the cell's profile (simulated: the
+  // defect profile's "changes" and reset.swap_time).
+  std::optional<schemas::ChangeCosts> change_costs;
 };
 
 // What a prepared trial's truth holds beside its kind (TruthSource). A

@@ -58,6 +58,12 @@ struct DefectProfile {
                                                        mechanics::ContactType::kPatch};
   // Reset phase (workspace and sensing noise are filled from the above).
   reset::ResetParams reset;
+  // Fixture changes (issue 29, JSON "changes": {"finger_s", "object_s"}):
+  // seconds a simulated cell spends changing the finger pads or the object
+  // (scaled by --speed like every phase). The pusher's is reset.swap_time.
+  // 0 by default: a simulated cell models only the pusher swap unless told.
+  double finger_change_s = 0.0;
+  double object_change_s = 0.0;
   // Fault injection, for the fault tests only (JSON "fault_injection"; never
   // set it on a cell that does real work):
   //   hang_after_accept: EXECUTE is accepted, then nothing more is sent for

@@ -9,7 +9,14 @@
 //   driver -> cell, first, within hello_timeout:
 //     {"type":"hello","protocol":1,"name":"...","truth":"robot|recorded|simulator",
 //      "engine":"free text","contact_types":["point","line","patch"],
-//      "emulates_defects":false,"resets":true|false}
+//      "emulates_defects":false,"resets":true|false,
+//      "fixture_changes":{"finger_s":S,"pusher_s":S,"object_s":S}}   (optional)
+//     fixture_changes (issue 29, schemas/fixtures.hpp): the seconds a change
+//     of the finger pads, the pusher or the object takes on this rig; the
+//     cell announces them and the service's change-aware scheduling uses
+//     them. Absent: the cell's defect profile's (changes, reset.swap_time).
+//     The driver makes the changes itself (in its reset, or before a trial
+//     whose scene's fixtures differ from the last one's).
 //   cell -> driver                         driver -> cell
 //     {"type":"prepare","trial_id","attempt","seed","scene":{SCENE}}
 //                                            {"type":"ready"} | {"type":"refused","reason"}

@@ -29,6 +29,7 @@
 #include <Eigen/Core>
 
 #include "arena/mechanics/scene.hpp"
+#include "arena/orchestrator/claim_chooser.hpp"
 
 namespace arena::orchestrator {
 
@@ -164,6 +165,9 @@ struct Campaign {
   // scenes[i] (`scene` is scenes[0]); a listed seed is its first replicate's.
   std::vector<mechanics::Scene> scenes;
   std::vector<std::optional<uint64_t>> scene_seeds;
+  // "scheduling" (issue 29): change-aware claims within blocks of the plan
+  // (claim_chooser.hpp); read by ReadScheduling.
+  SchedulingOptions scheduling;
 };
 
 // The largest file of listed scenes a campaign may name (recorded pushes
@@ -195,6 +199,12 @@ enum class ConditionCheck { kAllConditions, kBaseScene };
 // @throws CampaignError naming the first offending field.
 Campaign ParseCampaign(std::string_view json_text, const std::string& base_dir = "",
                        ConditionCheck check = ConditionCheck::kAllConditions);
+
+// The "scheduling" block of a campaign document (the whole campaign JSON
+// text; defaults when it has none): {"change_aware": bool, "window": 1..256}.
+// ParseCampaign calls it; the service reads a stored campaign's with it.
+// @throws CampaignError naming scheduling.<field>.
+SchedulingOptions ReadScheduling(std::string_view campaign_json);
 
 // Reads a campaign file (at most kMaxCampaignBytes); file paths inside it are
 // relative to the campaign file. @throws CampaignError.

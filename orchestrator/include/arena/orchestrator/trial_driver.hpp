@@ -131,6 +131,24 @@ class TrialStore {
   virtual void ServiceBeat(const std::vector<std::string>& cells_alive) = 0;
   // @throws StoreError(kIo) when the file was deleted, renamed or replaced.
   virtual void CheckFileIdentity() = 0;
+  // Change-aware scheduling (issue 29, claim_chooser.hpp). The defaults are a
+  // store without it (the tests' fakes): an empty window, so every cell
+  // claims in plan order through ClaimNextTrial, and no changes recorded.
+  virtual std::vector<db::ClaimedTrial> ClaimWindow(const std::string& /*cell_id*/, int /*limit*/) {
+    return {};
+  }
+  virtual std::optional<db::ClaimedTrial> ClaimTrial(const std::string& /*cell_id*/,
+                                                     std::int64_t /*trial_id*/,
+                                                     const std::string& /*rule*/) {
+    return std::nullopt;
+  }
+  // The campaign's seed and stored document (its "scheduling" block).
+  virtual db::Campaign GetCampaign(std::int64_t campaign_id) {
+    db::Campaign c;
+    c.id = campaign_id;
+    return c;
+  }
+  virtual void RecordFixtureChanges(const std::vector<db::FixtureChangeRecord>& /*changes*/) {}
 };
 
 // Sends commands to cells (the DDS TrialCommand writer in production).
