@@ -587,9 +587,15 @@ struct TrialDriver::Impl {
     Execution& ex = it->second;
     CellRun& cell = Cell(ex.cell_id);
     CellResult(cell, CellPhase::kExecuting, true, "");
-    PredictionRequest request{ex.trial_id,           ex.campaign_id,      ex.attempt,
-                              std::move(ex.scene),   std::move(ex.truth), ex.scene_json,
-                              std::move(ex.commands)};
+    PredictionRequest request{ex.trial_id,
+                              ex.campaign_id,
+                              ex.attempt,
+                              std::move(ex.scene),
+                              std::move(ex.truth),
+                              ex.scene_json,
+                              std::move(ex.commands),
+                              std::nullopt};
+    if (!ex.samples.empty()) request.first_sample = ex.samples.front();
     predictions.Start(std::move(request));
     const std::string tag = TrialTag(ex.campaign_id, ex.trial_id, ex.attempt);
     const int attempt = ex.attempt;

@@ -4,10 +4,12 @@
 
 #include <optional>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include <nlohmann/json_fwd.hpp>
 
+#include "arena/db/sample.hpp"
 #include "arena/db/store.hpp"
 #include "arena/mechanics/scene.hpp"
 #include "arena/mechanics/simulate.hpp"
@@ -116,6 +118,41 @@ struct PredictedRun {
 PredictedRun SimulatePrediction(const mechanics::Scene& trial_scene,
                                 const nlohmann::json& prediction,
                                 const RecordedCommands* commands = nullptr);
+
+// Where a prediction starts (issue 26). A lab predicts from the state it
+// measured: from the start pose the cell reported, the error measures the
+// model and not the reset's placement; from the planned pose (the scene's)
+// it measures both, so the two together give the reset's share.
+enum class StartFrom { kMeasured, kPlanned };
+const char* ToString(StartFrom from);  // "measured", "planned"
+std::optional<StartFrom> StartFromString(std::string_view text);
+// The campaign's `prediction.start` (kMeasured when absent or `prediction` is null).
+// @throws mechanics::SceneError naming "prediction.start" for another value.
+StartFrom StartFromOf(const nlohmann::json& prediction);
+
+struct PredictionStart {
+  StartFrom from = StartFrom::kPlanned;
+  // "planned"; measured: "observed" (the cell's sensors at the first sample
+  // of its stream) or "first_sample" (that sample's pose: the sensors dropped
+  // it, or the backend's truth is its measurement).
+  std::string source = "planned";
+  Eigen::Vector3d position = Eigen::Vector3d::Zero();  // m, gripper frame
+  Eigen::Quaterniond orientation = Eigen::Quaterniond::Identity();
+  double offset_m = 0;    // from the planned position
+  double offset_rad = 0;  // from the planned orientation
+};
+// The start a prediction of `scene` takes: kPlanned (or no sample) the
+// scene's object pose; kMeasured the first sample of the trial's stream.
+PredictionStart StartOf(const mechanics::Scene& scene, const db::Sample* first, StartFrom from);
+// The scene with its object at `start` and the fingers closed on it there,
+// as a cell places it (the pusher where the scene has it); unchanged when the
+// start is the planned pose. @throws mechanics::SceneError when a finger
+// misses the object there.
+mechanics::Scene StartedAt(const mechanics::Scene& scene, const PredictionStart& start);
+// Records the start in p->detail_json as "start": {"from", "source",
+// "position_m", "orientation_wxyz", "offset_m", "offset_rad"}: every stored
+// prediction says which start it used.
+void NoteStart(db::Prediction* p, const PredictionStart& start);
 
 // A prediction that could not be made (status, reason in detail_json).
 db::Prediction PredictionFailure(const std::string& status, const std::string& reason);
