@@ -46,7 +46,11 @@ TEST_F(Honest, RunWithEveryTrialFailedExitsOneAndSaysWhy) {
   EXPECT_NE(r.out.find("2 failed"), std::string::npos) << r.out;
   EXPECT_EQ(r.out.find("nan"), std::string::npos) << r.out;
   EXPECT_NE(r.out.find("failed trials by reason (2):"), std::string::npos) << r.out;
-  EXPECT_NE(r.out.find("2 x cell: refused by cell"), std::string::npos) << r.out;
+  // Grouped by the typed kind (the rule that decided it), the text as detail.
+  EXPECT_NE(
+      r.out.find("2 x cell, the cell refused the trial [execute.refused_by_cell]: refused by cell"),
+      std::string::npos)
+      << r.out;
   EXPECT_NE(r.out.find("exceeds this cell's"), std::string::npos) << r.out;
   EXPECT_NE(r.err.find("2 trials failed"), std::string::npos) << r.err;
 
@@ -64,6 +68,63 @@ TEST_F(Honest, RunWithEveryTrialFailedExitsOneAndSaysWhy) {
   EXPECT_EQ(failures["failed"][0]["count"], 2);
   EXPECT_EQ(failures["failed"][0]["source"], "cell");
   EXPECT_EQ(doc["cells"][0]["backend"], "model");
+}
+
+// Pins issue 26 item 4 on the service's own predictions: they started from
+// the planned pose, so a self-consistent model's error held the reset's
+// placement error. Each stored prediction now says it started from the pose
+// the cell measured, and how far that lay from the planned one; `evaluate
+// --from planned` keeps the old start and says the start's share.
+TEST_F(Honest, LivePredictionsStartFromTheMeasuredStart) {
+  auto c = Smoke();
+  c["replicates"] = 1;
+  const std::string campaign = Write("m.json", c.dump());
+  const std::string db = dir_ + "/m.db";
+  const auto r = Arena("run " + campaign + " --db " + db + " --cells 1 --quiet");
+  ASSERT_EQ(r.rc, 0) << r.out << r.err;
+  const auto q = Arena("query --db " + db +
+                       " \"select count(*) as n, sum(json_extract(detail_json, '$.start.from') = "
+                       "'measured') as measured, sum(json_extract(detail_json, '$.start.offset_m') "
+                       "> 0) as moved from predictions\" --format json");
+  ASSERT_EQ(q.rc, 0) << q.err;
+  const auto rows = nlohmann::json::parse(q.out);
+  ASSERT_EQ(rows.size(), 1u);
+  EXPECT_GT(rows[0]["n"].get<int>(), 0);
+  EXPECT_EQ(rows[0]["measured"], rows[0]["n"]) << q.out;
+  EXPECT_EQ(rows[0]["moved"], rows[0]["n"]) << q.out;  // the reset never places exactly
+  const auto e = Arena("evaluate --db " + db +
+                       " --campaign 1 --facets 8 --dt 0.004 --convergence-trials 0 --json");
+  ASSERT_EQ(e.rc, 0) << e.err;
+  const auto report = nlohmann::json::parse(e.out);
+  EXPECT_EQ(report["start"]["from"], "measured");
+  ASSERT_EQ(report["start"]["explained"].size(), 1u);
+  const auto& pos = report["start"]["explained"][0]["position_median_m"];
+  EXPECT_LT(pos["measured"].get<double>(), pos["planned"].get<double>()) << report["start"];
+  const auto p = Arena("evaluate --db " + db +
+                       " --campaign 1 --facets 8 --dt 0.004 --convergence-trials 0 --from planned");
+  ASSERT_EQ(p.rc, 0) << p.err;
+  EXPECT_NE(p.out.find("start: predictions start from the planned pose (--from planned)"),
+            std::string::npos)
+      << p.out;
+  const auto bad = Arena("evaluate --db " + db + " --campaign 1 --from reset");
+  EXPECT_EQ(bad.rc, 2) << bad.err;
+  EXPECT_NE(bad.err.find("--from"), std::string::npos) << bad.err;
+  // The service's live predictions keep the planned start on request
+  // (prediction.start); any other value is refused naming the field.
+  c["prediction"] = {{"start", "reset"}};
+  const auto refused = Arena("submit " + Write("bad.json", c.dump()) + " --db " + dir_ + "/b.db");
+  EXPECT_EQ(refused.rc, 2) << refused.err;
+  EXPECT_NE(refused.err.find("prediction.start"), std::string::npos) << refused.err;
+  c["prediction"] = {{"start", "planned"}};
+  const std::string planned_db = dir_ + "/p.db";
+  ASSERT_EQ(
+      Arena("run " + Write("p.json", c.dump()) + " --db " + planned_db + " --cells 1 --quiet").rc,
+      0);
+  const auto pq = Arena("query --db " + planned_db +
+                        " \"select count(*) as n, sum(json_extract(detail_json, '$.start.from') = "
+                        "'planned') as planned from predictions\" --format json");
+  const auto prow = nlohmann::json::parse(pq.out);
+  EXPECT_EQ(prow[0]["planned"], prow[0]["n"]) << pq.out;
 }
 
 // Pins: a push the workspace cannot hold was accepted and failed on every
