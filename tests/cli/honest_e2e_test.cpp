@@ -3,8 +3,11 @@
 // reasons and warns only when trials wait; a campaign no cell can run is
 // refused at submit; `arena plot --scene` draws the set-up. Each test names
 // the behaviour it pins.
+#include <algorithm>
 #include <fstream>
+#include <sstream>
 #include <string>
+#include <vector>
 
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
@@ -125,6 +128,42 @@ TEST_F(Honest, LivePredictionsStartFromTheMeasuredStart) {
                         "'planned') as planned from predictions\" --format json");
   const auto prow = nlohmann::json::parse(pq.out);
   EXPECT_EQ(prow[0]["planned"], prow[0]["n"]) << pq.out;
+}
+
+// Pins: force columns were named differently in `simulate --trajectory`
+// (<name>_fn, <name>_ft) and in exports (<name>_fx..fz, <name>_tx..tz). The
+// export's names are appended to the simulate CSV (its contract only grows).
+TEST_F(Honest, SimulateTrajectoryNamesForcesAsExportsDo) {
+  const std::string csv = dir_ + "/t.csv";
+  const auto r = Arena("simulate " + std::string(ARENA_SOURCE_DIR) +
+                       "/examples/scenes/canonical.json --trajectory " + csv);
+  ASSERT_EQ(r.rc, 0) << r.err;
+  std::ifstream in(csv);
+  std::string header, row;
+  std::getline(in, header);
+  std::getline(in, row);
+  std::getline(in, row);  // a sample with the grip closed
+  auto split = [](const std::string& line) {
+    std::vector<std::string> out;
+    std::string cell;
+    std::istringstream s(line);
+    while (std::getline(s, cell, ',')) out.push_back(cell);
+    return out;
+  };
+  const auto names = split(header), values = split(row);
+  ASSERT_EQ(names.size(), values.size()) << header;
+  auto at = [&](const std::string& name) {
+    const auto it = std::find(names.begin(), names.end(), name);
+    EXPECT_NE(it, names.end()) << name << " not in " << header;
+    return it == names.end() ? 0.0 : std::stod(values[it - names.begin()]);
+  };
+  for (const char* n : {"left_fx", "left_fy", "left_fz", "left_tx", "right_fx", "right_tz",
+                        "pusher_fx", "pusher_tx"})
+    (void)at(n);
+  EXPECT_EQ(std::count(names.begin(), names.end(), "pusher_fx"), 1);  // one pusher force
+  // The left finger closes along +x: its force along x is its normal force.
+  EXPECT_NEAR(at("left_fx"), at("left_fn"), 1e-6 * std::max(1.0, at("left_fn")));
+  EXPECT_GT(at("left_fn"), 0);
 }
 
 // Pins: a push the workspace cannot hold was accepted and failed on every
