@@ -32,29 +32,38 @@ class Honest : public ArenaCommandTest {
 };
 
 // Pins: a campaign whose every trial failed ended "0 done, N failed ... nan
-// mm" with exit 0 and no reason anywhere but the log.
+// mm" with exit 0 and no reason anywhere but the log. Here a lab's robot
+// driver (the reference exec: driver) refuses every trial it is given: a
+// refusal the run cannot foresee.
 TEST_F(Honest, RunWithEveryTrialFailedExitsOneAndSaysWhy) {
   auto c = Smoke();
   c["variations"]["finger_type"] = "point";
   c["variations"]["grip_force"] = 10;
   c["variations"]["pivot_offset"] = {{"choices", {0, 0.01}}};
   c["replicates"] = 1;
+  c["defects"].erase("friction_variability");  // a driver cannot emulate it (refused at submit)
   const std::string campaign = Write("c.json", c.dump());
-  // The cells' own profile allows 10 mm/s; the campaign pushes at 20 mm/s.
-  const std::string slow = Write("slow.json", R"({"max_pusher_speed": 0.01})");
+  // A dataset for the driver to serve (it refuses every trial anyway).
+  const std::string data_db = dir_ + "/data.db", data = dir_ + "/data";
+  ASSERT_EQ(Arena("run " + campaign + " --db " + data_db + " --cells 1 --quiet").rc, 0);
+  ASSERT_EQ(
+      Arena("export --db " + data_db + " --campaign 1 --format csv --no-predictions --out " + data)
+          .rc,
+      0);
+  const std::string driver = std::string(ARENA_SOURCE_DIR) + "/examples/drivers/replay.py " + data +
+                             " --fail-mode refuse-all";
   const std::string db = dir_ + "/f.db";
-  const auto r =
-      Arena("run " + campaign + " --db " + db + " --cells 1 --quiet --cell-defects " + slow);
+  const auto r = Arena("run " + campaign + " --db " + db +
+                       " --cells 1 --quiet --backend 'exec:" + driver + "'");
   EXPECT_EQ(r.rc, 1) << r.out << r.err;
   EXPECT_NE(r.out.find("2 failed"), std::string::npos) << r.out;
   EXPECT_EQ(r.out.find("nan"), std::string::npos) << r.out;
   EXPECT_NE(r.out.find("failed trials by reason (2):"), std::string::npos) << r.out;
   // Grouped by the typed kind (the rule that decided it), the text as detail.
-  EXPECT_NE(
-      r.out.find("2 x cell, the cell refused the trial [execute.refused_by_cell]: refused by cell"),
-      std::string::npos)
+  EXPECT_NE(r.out.find("2 x cell, the cell refused the trial [execute.refused_by_cell]: refused "
+                       "by cell"),
+            std::string::npos)
       << r.out;
-  EXPECT_NE(r.out.find("exceeds this cell's"), std::string::npos) << r.out;
   EXPECT_NE(r.err.find("2 trials failed"), std::string::npos) << r.err;
 
   // The same reasons in status, and no "trials wait" warning: nothing waits.
@@ -70,7 +79,50 @@ TEST_F(Honest, RunWithEveryTrialFailedExitsOneAndSaysWhy) {
   ASSERT_EQ(failures["failed"].size(), 1u) << failures.dump();
   EXPECT_EQ(failures["failed"][0]["count"], 2);
   EXPECT_EQ(failures["failed"][0]["source"], "cell");
-  EXPECT_EQ(doc["cells"][0]["backend"], "model");
+  EXPECT_EQ(failures["failed"][0]["kind"], "execute.refused_by_cell");
+  EXPECT_EQ(doc["cells"][0]["backend"].get<std::string>().rfind("exec:", 0), 0u);
+}
+
+// Pins issue 26 item 1: a campaign the run's cells cannot host ran to 100 %
+// failure (a push faster than the cells' pusher, 2 of 2 refused at the
+// cell; defects a robot driver cannot emulate, 36 of 36 in 55 s). `arena
+// run` knows the cells' profile and backend, so it refuses such a campaign
+// before storing anything, with the reason a cell would give.
+TEST_F(Honest, CampaignBeyondTheRunsCellsRefusedBeforeItRuns) {
+  auto c = Smoke();
+  c["variations"]["finger_type"] = "point";
+  c["variations"]["grip_force"] = 10;
+  c["variations"]["pivot_offset"] = {{"choices", {0, 0.01}}};
+  c["replicates"] = 1;
+  const std::string campaign = Write("c.json", c.dump());
+  // The cells' own profile allows 10 mm/s; the campaign pushes at 20 mm/s.
+  const std::string slow = Write("slow.json", R"({"max_pusher_speed": 0.01})");
+  const std::string db = dir_ + "/r.db";
+  const auto r =
+      Arena("run " + campaign + " --db " + db + " --cells 1 --quiet --cell-defects " + slow);
+  EXPECT_EQ(r.rc, 2) << r.out << r.err;
+  EXPECT_NE(r.err.find("every trial of the campaign is beyond what the cells can do"),
+            std::string::npos)
+      << r.err;
+  EXPECT_NE(r.err.find("exceeds this cell's"), std::string::npos) << r.err;
+  EXPECT_FALSE(std::ifstream(db).good()) << "nothing stored";
+  // Friction variability on a backend that cannot perturb its physics (a
+  // replayed dataset: the reference driver says emulates_defects false).
+  const std::string data_db = dir_ + "/d.db", data = dir_ + "/d";
+  c["defects"].erase("friction_variability");
+  ASSERT_EQ(
+      Arena("run " + Write("plain.json", c.dump()) + " --db " + data_db + " --cells 1 --quiet").rc,
+      0);
+  ASSERT_EQ(
+      Arena("export --db " + data_db + " --campaign 1 --format csv --no-predictions --out " + data)
+          .rc,
+      0);
+  const auto e = Arena("run " + campaign + " --db " + db + " --cells 1 --quiet --backend 'exec:" +
+                       std::string(ARENA_SOURCE_DIR) + "/examples/drivers/replay.py " + data + "'");
+  EXPECT_EQ(e.rc, 2) << e.out << e.err;
+  EXPECT_NE(e.err.find("defects: the campaign perturbs the physics"), std::string::npos) << e.err;
+  EXPECT_EQ(e.err.find("serving"), std::string::npos) << "the driver's greeting: " << e.err;
+  EXPECT_FALSE(std::ifstream(db).good()) << "nothing stored";
 }
 
 // Pins issue 26 item 4 on the service's own predictions: they started from
