@@ -480,10 +480,11 @@ db::Prediction PredictTrial(const mechanics::Scene& scene,
 }
 
 PredictedRun SimulatePrediction(const mechanics::Scene& trial_scene,
-                                const nlohmann::json& prediction,
-                                const RecordedCommands* commands) {
+                                const nlohmann::json& prediction, const RecordedCommands* commands,
+                                const db::Sample* first) {
   PredictedRun run;
-  run.scene = ApplyModelSettings(trial_scene, prediction);
+  run.start = StartOf(trial_scene, first, StartFromOf(prediction));
+  run.scene = ApplyModelSettings(StartedAt(trial_scene, run.start), prediction);
   const bool mujoco = prediction.is_object() && prediction.value("predictor", "arena") == "mujoco";
   const bool closed_loop = run.scene.pusher && run.scene.pusher->controller;
   const bool replay = closed_loop && commands != nullptr && !commands->empty();

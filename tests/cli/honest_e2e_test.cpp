@@ -4,6 +4,8 @@
 // refused at submit; `arena plot --scene` draws the set-up. Each test names
 // the behaviour it pins.
 #include <algorithm>
+#include <array>
+#include <cmath>
 #include <fstream>
 #include <sstream>
 #include <string>
@@ -161,6 +163,38 @@ TEST_F(Honest, LivePredictionsStartFromTheMeasuredStart) {
   EXPECT_NE(p.out.find("start: predictions start from the planned pose (--from planned)"),
             std::string::npos)
       << p.out;
+  // The exported predicted stream is the stored prediction's (it started
+  // where the service's did): its final position error is the stored one.
+  const std::string out = dir_ + "/m_csv";
+  ASSERT_EQ(Arena("export --db " + db + " --campaign 1 --format csv --out " + out).rc, 0);
+  auto last_position = [](const std::string& path) {
+    std::ifstream in(path);
+    std::string header, line, last;
+    std::getline(in, header);
+    while (std::getline(in, line))
+      if (!line.empty()) last = line;
+    std::vector<std::string> names, cells;
+    std::string cell;
+    std::istringstream h(header), l(last);
+    while (std::getline(h, cell, ',')) names.push_back(cell);
+    while (std::getline(l, cell, ',')) cells.push_back(cell);
+    std::array<double, 3> p{};
+    for (int k = 0; k < 3; ++k) {
+      const auto it = std::find(names.begin(), names.end(), std::string(1, "xyz"[k]));
+      if (it != names.end()) p[k] = std::stod(cells[it - names.begin()]);
+    }
+    return p;
+  };
+  const auto t = last_position(out + "/streams/1_true.csv");
+  const auto pr = last_position(out + "/streams/1_predicted.csv");
+  const double exported = std::hypot(t[0] - pr[0], t[1] - pr[1], t[2] - pr[2]);
+  const auto stored = nlohmann::json::parse(
+      Arena("query --db " + db +
+            " \"select final_position_error as e from predictions where trial_id = 1\" --format "
+            "json")
+          .out);
+  EXPECT_NEAR(exported, stored[0]["e"].get<double>(), 1e-9);
+
   const auto bad = Arena("evaluate --db " + db + " --campaign 1 --from reset");
   EXPECT_EQ(bad.rc, 2) << bad.err;
   EXPECT_NE(bad.err.find("--from"), std::string::npos) << bad.err;

@@ -97,28 +97,6 @@ db::Prediction PredictTrial(const mechanics::Scene& scene,
                             const std::vector<mechanics::TrajectorySample>& truth,
                             const nlohmann::json& prediction, const RecordedCommands* commands);
 
-// A trial's predicted trajectory, made as the service makes it: `prediction`
-// (the campaign's object, or null) applied to the trial's scene and run on
-// the predictor it names. Plots and exports re-run it this way (the store
-// keeps a prediction's scores, not its samples), so a MuJoCo-predicted
-// campaign is drawn and exported with MuJoCo's trajectory.
-struct PredictedRun {
-  mechanics::Scene scene;  // what the predictor ran (the model settings applied)
-  mechanics::SimulationResult result;
-  std::string predictor;      // "arena" or "mujoco"
-  std::string key;            // the label the service stores the prediction under
-  std::string settings_json;  // the settings it ran with (stored as model_json)
-};
-// A closed-loop scene (issue 19) replays `commands` (RecordedCommands, above);
-// without them, or on a predictor that cannot replay commands, result.status
-// is kInvalidScene with the reason.
-// @throws mechanics::SceneError for bad model settings; std::exception when
-//   the predictor cannot be made. A solver failure or a scene the predictor
-//   refuses is in result.status, not thrown.
-PredictedRun SimulatePrediction(const mechanics::Scene& trial_scene,
-                                const nlohmann::json& prediction,
-                                const RecordedCommands* commands = nullptr);
-
 // Where a prediction starts (issue 26). A lab predicts from the state it
 // measured: from the start pose the cell reported, the error measures the
 // model and not the reset's placement; from the planned pose (the scene's)
@@ -153,6 +131,33 @@ mechanics::Scene StartedAt(const mechanics::Scene& scene, const PredictionStart&
 // "position_m", "orientation_wxyz", "offset_m", "offset_rad"}: every stored
 // prediction says which start it used.
 void NoteStart(db::Prediction* p, const PredictionStart& start);
+
+// A trial's predicted trajectory, made as the service makes it: `prediction`
+// (the campaign's object, or null) applied to the trial's scene and run on
+// the predictor it names. Plots and exports re-run it this way (the store
+// keeps a prediction's scores, not its samples), so a MuJoCo-predicted
+// campaign is drawn and exported with MuJoCo's trajectory.
+struct PredictedRun {
+  mechanics::Scene scene;  // what the predictor ran (the model settings applied)
+  mechanics::SimulationResult result;
+  std::string predictor;      // "arena" or "mujoco"
+  std::string key;            // the label the service stores the prediction under
+  std::string settings_json;  // the settings it ran with (stored as model_json)
+  PredictionStart start;      // where it started (issue 26)
+};
+// A closed-loop scene (issue 19) replays `commands` (RecordedCommands, above);
+// without them, or on a predictor that cannot replay commands, result.status
+// is kInvalidScene with the reason.
+// @throws mechanics::SceneError for bad model settings; std::exception when
+//   the predictor cannot be made. A solver failure or a scene the predictor
+//   refuses is in result.status, not thrown.
+// `first` is the first sample of the trial's stream: the run starts where
+// the service's prediction started (prediction.start: measured by default,
+// from `first`; planned, or no `first`: the scene's pose).
+PredictedRun SimulatePrediction(const mechanics::Scene& trial_scene,
+                                const nlohmann::json& prediction,
+                                const RecordedCommands* commands = nullptr,
+                                const db::Sample* first = nullptr);
 
 // A prediction that could not be made (status, reason in detail_json).
 db::Prediction PredictionFailure(const std::string& status, const std::string& reason);
