@@ -68,8 +68,9 @@ struct LoadedTrial {
   std::int64_t id = -1;
   mechanics::Scene scene;
   std::vector<mechanics::TrajectorySample> truth;
-  RecordedCommands commands;  // closed loop: replayed (issue 19); empty otherwise
-  std::string error;          // non-empty: the trial could not be loaded
+  std::optional<db::Sample> first;  // the stream's first sample: the measured start
+  RecordedCommands commands;        // closed loop: replayed (issue 19); empty otherwise
+  std::string error;                // non-empty: the trial could not be loaded
 };
 
 LoadedTrial LoadTrial(const db::Store& store, const db::Trial& t, const mechanics::Scene* scene) {
@@ -77,7 +78,12 @@ LoadedTrial LoadTrial(const db::Store& store, const db::Trial& t, const mechanic
   out.id = t.id;
   try {
     out.scene = scene ? *scene : mechanics::ParseScene(t.scene_json);
-    out.truth = ReadTruth(store, t.id, out.scene);
+    const db::GroundTruth gt = store.ReadGroundTruth(t.id);
+    const auto normals = ContactNormals(out.scene);
+    out.truth.reserve(gt.samples.size());
+    for (const auto& s : gt.samples)
+      out.truth.push_back(ToTrajectorySample(s, normals, out.scene.pusher.has_value()));
+    if (!gt.samples.empty()) out.first = gt.samples.front();
     if (out.scene.pusher && out.scene.pusher->controller) {
       if (auto run = store.GetClosedLoop(t.id)) out.commands = CommandsOf(*run);
       if (out.commands.empty()) out.error = "closed-loop trial without recorded pusher commands";
@@ -134,6 +140,34 @@ Built BuildPredictors(const std::vector<PredictorRequest>& requests,
   return b;
 }
 
+// Where one trial's predictions start, and the scene placed there.
+struct TrialStart {
+  PredictionStart start;
+  mechanics::Scene scene;
+  std::string key;    // trials with the same key start alike (one run per setting)
+  std::string error;  // non-empty: the start leaves the grasp (an invalid scene)
+};
+
+TrialStart StartFor(const LoadedTrial& l, StartFrom from) {
+  TrialStart out;
+  out.start = StartOf(l.scene, l.first ? &*l.first : nullptr, from);
+  try {
+    out.scene = StartedAt(l.scene, out.start);
+  } catch (const std::exception& e) {
+    out.error = e.what();
+    return out;
+  }
+  if (out.start.from == StartFrom::kPlanned ||
+      (out.start.offset_m == 0 && out.start.offset_rad == 0))
+    return out;  // key "": the planned scene
+  char key[160];
+  std::snprintf(key, sizeof key, "%a %a %a %a %a %a %a", out.start.position.x(),
+                out.start.position.y(), out.start.position.z(), out.start.orientation.w(),
+                out.start.orientation.x(), out.start.orientation.y(), out.start.orientation.z());
+  out.key = key;
+  return out;
+}
+
 // Up to `n` trials spread evenly over the list.
 std::vector<std::size_t> Spread(std::size_t total, int n) {
   std::vector<std::size_t> out;
@@ -144,6 +178,81 @@ std::vector<std::size_t> Spread(std::size_t total, int n) {
 }
 
 }  // namespace
+
+StartReport StartShareOf(const std::vector<SettingInfo>& settings,
+                         const std::vector<TrialEvaluation>& results,
+                         const std::vector<std::optional<db::Prediction>>& planned,
+                         const std::vector<std::optional<PredictionStart>>& starts,
+                         StartFrom from) {
+  StartReport out;
+  out.from = from;
+  std::vector<double> dp, da;
+  for (const auto& st : starts) {
+    if (!st) continue;
+    if (st->source != "planned") ++out.measured_trials;
+    dp.push_back(st->offset_m);
+    da.push_back(st->offset_rad);
+  }
+  if (!dp.empty()) {
+    out.offset_position = Distribution{Percentile(dp, 0.5), Percentile(dp, 0.95),
+                                       *std::max_element(dp.begin(), dp.end())};
+    out.offset_angle = Distribution{Percentile(da, 0.5), Percentile(da, 0.95),
+                                    *std::max_element(da.begin(), da.end())};
+  }
+  if (planned.empty() || settings.empty()) return out;
+  for (std::size_t s = 0; s < settings.size(); ++s) {
+    StartShare share;
+    share.predictor = settings[s].predictor;
+    share.model_key = settings[s].setting.key;
+    std::vector<double> pm, pp, am, ap;
+    for (std::size_t i = s; i < results.size(); i += settings.size()) {
+      const db::Prediction& m = results[i].prediction;
+      const auto& p = planned[i];
+      // Paired: trials predicted from both starts.
+      if (!p || m.status != "ok" || p->status != "ok" || !m.final_position_error ||
+          !p->final_position_error || !m.final_angle_error || !p->final_angle_error)
+        continue;
+      pm.push_back(*m.final_position_error);
+      pp.push_back(*p->final_position_error);
+      am.push_back(*m.final_angle_error);
+      ap.push_back(*p->final_angle_error);
+    }
+    share.trials = static_cast<int>(pm.size());
+    if (!pm.empty()) {
+      share.position_measured = Percentile(pm, 0.5);
+      share.position_planned = Percentile(pp, 0.5);
+      share.angle_measured = Percentile(am, 0.5);
+      share.angle_planned = Percentile(ap, 0.5);
+    }
+    out.settings.push_back(share);
+  }
+  return out;
+}
+
+nlohmann::json ToJson(const StartReport& r) {
+  auto dist = [](const std::optional<Distribution>& d) -> nlohmann::json {
+    if (!d) return nullptr;
+    return {{"median", d->median}, {"p95", d->p95}, {"max", d->max}};
+  };
+  nlohmann::json settings = nlohmann::json::array();
+  for (const auto& s : r.settings) {
+    nlohmann::json j = {{"predictor", s.predictor}, {"setting", s.model_key}, {"trials", s.trials}};
+    if (s.trials > 0) {
+      j["position_median_m"] = {{"measured", s.position_measured},
+                                {"planned", s.position_planned},
+                                {"explained", s.position_planned - s.position_measured}};
+      j["angle_median_rad"] = {{"measured", s.angle_measured},
+                               {"planned", s.angle_planned},
+                               {"explained", s.angle_planned - s.angle_measured}};
+    }
+    settings.push_back(std::move(j));
+  }
+  return {{"from", ToString(r.from)},
+          {"measured_trials", r.measured_trials},
+          {"offset_m", dist(r.offset_position)},
+          {"offset_rad", dist(r.offset_angle)},
+          {"explained", std::move(settings)}};
+}
 
 EvaluationRun EvaluateCampaign(db::Store& store, std::int64_t campaign_id,
                                const EvaluationOptions& options) {
@@ -173,6 +282,11 @@ EvaluationRun EvaluateCampaign(db::Store& store, std::int64_t campaign_id,
   const std::size_t settings = built.infos.size();
   const std::size_t total = trials.size() * settings;
   std::vector<TrialEvaluation> results(total);
+  // From the measured start, each setting is also run from the planned one
+  // (shared by a scene's replicates): the difference is the start's share.
+  const bool also_planned = options.start_from == StartFrom::kMeasured;
+  std::vector<std::optional<db::Prediction>> planned(also_planned ? total : 0);
+  std::vector<std::optional<PredictionStart>> trial_starts(trials.size());
   std::vector<std::optional<FinalPose>> finals(trials.size());
   std::vector<double> durations(trials.size(), 0);
   // Trials with the same scene (the replicates of a condition: their truths
@@ -235,6 +349,12 @@ EvaluationRun EvaluateCampaign(db::Store& store, std::int64_t campaign_id,
                 FinalPose{t.id, t.condition, l.truth.back().position, l.truth.back().orientation};
           }
         }
+        std::vector<TrialStart> starts;
+        starts.reserve(loaded.size());
+        for (std::size_t m = 0; m < loaded.size(); ++m) {
+          starts.push_back(StartFor(loaded[m], options.start_from));
+          if (loaded[m].error.empty()) trial_starts[members[m]] = starts.back().start;
+        }
         // The scene every member was given (the first that loaded).
         const LoadedTrial* with_scene = nullptr;
         for (const LoadedTrial& l : loaded) {
@@ -258,8 +378,33 @@ EvaluationRun EvaluateCampaign(db::Store& store, std::int64_t campaign_id,
             else
               ran.emplace(key, s);
           }
-          std::optional<mechanics::SimulationResult> result;
-          double wall = 0;
+          // This setting's runs in the group, one per start (key "": planned).
+          std::map<std::string, std::pair<mechanics::SimulationResult, double>> runs;
+          const auto& predictor = *built.predictors[pi];
+          auto run_from = [&](const mechanics::Scene& scene, const LoadedTrial& l,
+                              const std::string& key) -> const auto& {
+            auto it = runs.find(key);
+            if (it == runs.end()) {
+              const auto start = std::chrono::steady_clock::now();
+              auto result = l.commands.empty()
+                                ? predictor.Run(scene, si)
+                                : predictor.RunClosedLoop(scene, si, ReplayCommands(l.commands));
+              const double wall =
+                  std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+              it = runs.emplace(key, std::make_pair(std::move(result), wall)).first;
+            }
+            return it->second;
+          };
+          auto score = [&](const mechanics::Scene& scene, const LoadedTrial& l,
+                           const std::string& key, const PredictionStart& from) {
+            const auto& [result, wall] = run_from(scene, l, key);
+            db::Prediction p =
+                ScoreSimulation(l.commands.empty() ? scene : ReplayScoringScene(scene, l.commands),
+                                result, l.truth);
+            p.wall_s = wall;
+            NoteStart(&p, from);
+            return p;
+          };
           for (std::size_t m = 0; m < members.size(); ++m) {
             const std::size_t ti = members[m];
             const auto& t = trials[ti];
@@ -269,24 +414,22 @@ EvaluationRun EvaluateCampaign(db::Store& store, std::int64_t campaign_id,
             r.attempt = t.attempt;
             r.setting = s;
             r.truth_duration_s = durations[ti];
+            const TrialStart& st = starts[m];
             if (same) {
               r.prediction = results[ti * settings + *same].prediction;
+              if (also_planned) planned[ti * settings + s] = planned[ti * settings + *same];
             } else if (!l.error.empty()) {
               r.prediction = PredictionFailure("error", l.error);
             } else {
-              if (!result) {
-                const auto start = std::chrono::steady_clock::now();
-                const auto& predictor = *built.predictors[pi];
-                result = l.commands.empty()
-                             ? predictor.Run(l.scene, si)
-                             : predictor.RunClosedLoop(l.scene, si, ReplayCommands(l.commands));
-                wall =
-                    std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+              if (!st.error.empty()) {
+                r.prediction = PredictionFailure("invalid_scene", st.error);
+                NoteStart(&r.prediction, st.start);
+              } else {
+                r.prediction = score(st.scene, l, st.key, st.start);
               }
-              r.prediction = ScoreSimulation(
-                  l.commands.empty() ? l.scene : ReplayScoringScene(l.scene, l.commands), *result,
-                  l.truth);
-              r.prediction.wall_s = wall;
+              if (also_planned)
+                planned[ti * settings + s] =
+                    score(l.scene, l, "", StartOf(l.scene, nullptr, StartFrom::kPlanned));
             }
             r.prediction.model_key = built.infos[s].setting.key;
             r.prediction.model_json = built.infos[s].setting.knobs_json;
@@ -325,6 +468,7 @@ EvaluationRun EvaluateCampaign(db::Store& store, std::int64_t campaign_id,
   run.report = Summarise(built.infos, results, options.budgets, ComputeNoiseFloor(final_poses));
   run.report.campaign_id = campaign_id;
   run.report.truth = TruthOf(store, campaign_id);
+  run.start = StartShareOf(built.infos, results, planned, trial_starts, options.start_from);
 
   // The convergence table: a few trials, short pieces from the true state.
   if (options.convergence_trials > 0 && !trials.empty()) {
@@ -349,6 +493,7 @@ EvaluationRun EvaluateCampaign(db::Store& store, std::int64_t campaign_id,
   }
 
   nlohmann::json grid = {{"predictors", built.grids},
+                         {"start", ToString(options.start_from)},
                          {"budgets", nlohmann::json::array()},
                          {"threads", threads},
                          {"convergence_trials", options.convergence_trials}};
@@ -368,7 +513,9 @@ EvaluationRun EvaluateCampaign(db::Store& store, std::int64_t campaign_id,
   for (auto& r : results)
     rows.push_back(db::EvaluationResult{r.trial_id, r.attempt, std::move(r.prediction)});
   run.settings_json = grid.dump();
-  const std::string report_json = ToJson(run.report).dump();
+  nlohmann::json report = ToJson(run.report);
+  report["start"] = ToJson(run.start);
+  const std::string report_json = report.dump();
   try {
     db::RetryWhileBusy(
         [&] {

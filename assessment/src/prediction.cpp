@@ -6,12 +6,14 @@
 #include <cstdio>
 #include <map>
 #include <memory>
+#include <numbers>
 
 #include <nlohmann/json.hpp>
 
 #include "arena/assessment/calibration.hpp"
 #include "arena/assessment/predictor.hpp"
 #include "arena/assessment/scoring.hpp"
+#include "arena/mechanics/model.hpp"
 #include "arena/mechanics/pusher_motion.hpp"
 #include "arena/mechanics/scene_json.hpp"
 #include "arena/simulators/simulator.hpp"
@@ -95,6 +97,77 @@ std::string ModelSettingsJson(const mechanics::ModelOptions& model) {
                          {"reduce", mechanics::ToString(model.reduce)},
                          {"contacts", mechanics::ToString(model.contacts)}})
       .dump();
+}
+
+const char* ToString(StartFrom from) {
+  return from == StartFrom::kPlanned ? "planned" : "measured";
+}
+
+std::optional<StartFrom> StartFromString(std::string_view text) {
+  if (text == "measured") return StartFrom::kMeasured;
+  if (text == "planned") return StartFrom::kPlanned;
+  return std::nullopt;
+}
+
+StartFrom StartFromOf(const nlohmann::json& prediction) {
+  if (!prediction.is_object() || !prediction.contains("start")) return StartFrom::kMeasured;
+  const auto& v = prediction["start"];
+  const auto from = v.is_string() ? StartFromString(v.get<std::string>()) : std::nullopt;
+  if (!from) throw mechanics::SceneError("prediction.start", "must be \"measured\" or \"planned\"");
+  return *from;
+}
+
+PredictionStart StartOf(const mechanics::Scene& scene, const db::Sample* first, StartFrom from) {
+  PredictionStart s;
+  s.from = from;
+  const Eigen::Vector3d planned_p = scene.object.pose.position;
+  const Eigen::Quaterniond planned_q(mechanics::RotationFromRpy(scene.object.pose.rpy));
+  s.position = planned_p;
+  s.orientation = planned_q;
+  if (from == StartFrom::kPlanned || first == nullptr) return s;
+  const bool seen = first->observed_valid;
+  const auto& pose = seen ? first->observed_object_pose : first->object_pose;
+  s.source = seen ? "observed" : "first_sample";
+  s.position = {pose[0], pose[1], pose[2]};
+  s.orientation = Eigen::Quaterniond(pose[3], pose[4], pose[5], pose[6]).normalized();
+  s.offset_m = (s.position - planned_p).norm();
+  s.offset_rad = s.orientation.angularDistance(planned_q);
+  return s;
+}
+
+mechanics::Scene StartedAt(const mechanics::Scene& scene, const PredictionStart& start) {
+  // The planned pose, or a start the cell measured exactly there: the scene
+  // as written (bit for bit, so such predictions stay shared and comparable).
+  if (start.from == StartFrom::kPlanned || (start.offset_m == 0 && start.offset_rad == 0))
+    return scene;
+  mechanics::Scene out = scene;
+  const Eigen::Matrix3d R = start.orientation.normalized().toRotationMatrix();
+  out.object.pose.position = start.position;
+  out.object.pose.rpy = {std::atan2(R(2, 1), R(2, 2)), std::asin(std::clamp(-R(2, 0), -1.0, 1.0)),
+                         std::atan2(R(1, 0), R(0, 0))};
+  try {
+    mechanics::SeatFingers(&out);
+  } catch (const mechanics::SceneError& e) {
+    throw mechanics::SceneError(
+        "start", std::string("the measured start pose (") + std::to_string(start.offset_m * 1e3) +
+                     " mm, " + std::to_string(start.offset_rad * 180 / std::numbers::pi) +
+                     " deg from the planned one) leaves the grasp: " + e.what());
+  }
+  return out;
+}
+
+void NoteStart(db::Prediction* p, const PredictionStart& start) {
+  nlohmann::json detail = nlohmann::json::parse(p->detail_json, nullptr, false);
+  if (!detail.is_object()) detail = nlohmann::json::object();
+  detail["start"] = {{"from", ToString(start.from)},
+                     {"source", start.source},
+                     {"position_m", {start.position.x(), start.position.y(), start.position.z()}},
+                     {"orientation_wxyz",
+                      {start.orientation.w(), start.orientation.x(), start.orientation.y(),
+                       start.orientation.z()}},
+                     {"offset_m", start.offset_m},
+                     {"offset_rad", start.offset_rad}};
+  p->detail_json = detail.dump();
 }
 
 db::Prediction PredictionFailure(const std::string& status, const std::string& reason) {
@@ -380,7 +453,7 @@ db::Prediction PredictTrial(const mechanics::Scene& scene,
   if (!mujoco) return PredictTrial(scene, truth);
   nlohmann::json knobs = prediction;
   // A calibration's scales are already in `scene` (ApplyModelSettings).
-  for (const char* k : {"predictor", "calibration", "calibrated"}) knobs.erase(k);
+  for (const char* k : {"predictor", "calibration", "calibrated", "start"}) knobs.erase(k);
   std::unique_ptr<simulators::Simulator> sim;
   try {
     sim = simulators::MakeSimulator("mujoco", knobs.dump());
@@ -411,10 +484,11 @@ db::Prediction PredictTrial(const mechanics::Scene& scene,
 }
 
 PredictedRun SimulatePrediction(const mechanics::Scene& trial_scene,
-                                const nlohmann::json& prediction,
-                                const RecordedCommands* commands) {
+                                const nlohmann::json& prediction, const RecordedCommands* commands,
+                                const db::Sample* first) {
   PredictedRun run;
-  run.scene = ApplyModelSettings(trial_scene, prediction);
+  run.start = StartOf(trial_scene, first, StartFromOf(prediction));
+  run.scene = ApplyModelSettings(StartedAt(trial_scene, run.start), prediction);
   const bool mujoco = prediction.is_object() && prediction.value("predictor", "arena") == "mujoco";
   const bool closed_loop = run.scene.pusher && run.scene.pusher->controller;
   const bool replay = closed_loop && commands != nullptr && !commands->empty();
@@ -435,7 +509,7 @@ PredictedRun SimulatePrediction(const mechanics::Scene& trial_scene,
   }
   nlohmann::json knobs = prediction;
   // A calibration's scales are already in run.scene (ApplyModelSettings).
-  for (const char* k : {"predictor", "calibration", "calibrated"}) knobs.erase(k);
+  for (const char* k : {"predictor", "calibration", "calibrated", "start"}) knobs.erase(k);
   const std::unique_ptr<simulators::Simulator> sim =
       simulators::MakeSimulator("mujoco", knobs.dump());
   run.predictor = "mujoco";

@@ -73,7 +73,7 @@ std::string MujocoKnobs(const CalibrateOptions& o, const nlohmann::json& predict
   if (!o.predictor_settings.empty()) return o.predictor_settings;
   if (!prediction.is_object() || prediction.value("predictor", "arena") != "mujoco") return "{}";
   nlohmann::json knobs = prediction;
-  for (const char* k : {"predictor", "calibration", "calibrated"}) knobs.erase(k);
+  for (const char* k : {"predictor", "calibration", "calibrated", "start"}) knobs.erase(k);
   return knobs.dump();
 }
 

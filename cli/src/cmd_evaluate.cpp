@@ -1,6 +1,6 @@
 // arena evaluate --db FILE --campaign ID [--predictors arena] [--facets 4,8,16,32] [--points 3]
 //                [--dt 0.008,0.004,0.002,0.001] [--reduce auto] [--budget 1mm|2ms|1.5floor ...]
-//                [--convergence-trials 8] [--threads N] [--json]
+//                [--convergence-trials 8] [--threads N] [--from measured|planned] [--json]
 // Replays a campaign's done trials through the model at every fidelity
 // setting of the grid, stores the run (tables evaluations and
 // evaluation_results) and prints the trade: a table or JSON.
@@ -48,8 +48,52 @@ struct EvaluateOptions {
   int threads = 0;
   int convergence_trials = 8;
   bool json = false;
-  std::string out_path;  // --out: the report as JSON, besides the store
+  std::string out_path;           // --out: the report as JSON, besides the store
+  std::string from = "measured";  // --from: where predictions start (issue 26)
 };
+
+// "start: ..." lines: where the predictions started and how much of the
+// error the start pose explains (mm, degrees).
+std::string FormatStart(const assessment::StartReport& r) {
+  std::string out;
+  char line[512];
+  if (r.from == assessment::StartFrom::kPlanned) {
+    return "start: predictions start from the planned pose (--from planned): their errors "
+           "include the reset's placement error\n";
+  }
+  if (r.offset_position) {
+    std::snprintf(line, sizeof line,
+                  "start: predictions start from the pose each trial's cell measured (%d of the "
+                  "trials' streams gave one), median %.3g mm and %.3g deg from the planned pose "
+                  "(max %.3g mm, %.3g deg)\n",
+                  r.measured_trials, r.offset_position->median * 1e3,
+                  r.offset_angle->median * 180 / M_PI, r.offset_position->max * 1e3,
+                  r.offset_angle->max * 180 / M_PI);
+    out += line;
+  }
+  bool head = false;
+  for (const auto& s : r.settings) {
+    if (s.trials == 0) continue;
+    if (!head) {
+      out +=
+          "start pose's share of the error (median final error from the planned start minus "
+          "from the measured one):\n";
+      std::snprintf(line, sizeof line, "  %-8s %-24s %6s %26s %26s\n", "predictor", "setting",
+                    "trials", "pos mm planned/measured/+", "angle deg planned/measured/+");
+      out += line;
+      head = true;
+    }
+    char pos[64], ang[64];
+    std::snprintf(pos, sizeof pos, "%.3g/%.3g/%+.3g", s.position_planned * 1e3,
+                  s.position_measured * 1e3, (s.position_planned - s.position_measured) * 1e3);
+    std::snprintf(ang, sizeof ang, "%.3g/%.3g/%+.3g", s.angle_planned * 180 / M_PI,
+                  s.angle_measured * 180 / M_PI, (s.angle_planned - s.angle_measured) * 180 / M_PI);
+    std::snprintf(line, sizeof line, "  %-8s %-24s %6d %26s %26s\n", s.predictor.c_str(),
+                  s.model_key.c_str(), s.trials, pos, ang);
+    out += line;
+  }
+  return out;
+}
 
 // "0.002:1" -> {0.002, 1}; exactly N finite numbers or a bad-input error
 // naming the flag.
@@ -240,6 +284,11 @@ int RunEvaluate(const EvaluateOptions& o) {
     throw CommandError(kExitBadInput, "--convergence-trials: must be >= 0 (0: no table)");
   eo.threads = o.threads;
   eo.convergence_trials = o.convergence_trials;
+  if (const auto from = assessment::StartFromString(o.from)) {
+    eo.start_from = *from;
+  } else {
+    throw CommandError(kExitBadInput, "--from: must be measured or planned, got '" + o.from + "'");
+  }
   try {
     for (const auto& b : o.budgets) eo.budgets.push_back(assessment::ParseBudget(b));
     if (o.grid_given) (void)assessment::ExpandGrid(grid);
@@ -284,6 +333,7 @@ int RunEvaluate(const EvaluateOptions& o) {
   for (const auto& p : run.report.predictors)
     if (SelfConsistent(p, run.report.truth.source)) self_consistent.push_back(p);
   nlohmann::json j = assessment::ToJson(run.report);
+  j["start"] = assessment::ToJson(run.start);
   j["truth"]["self_consistency_predictors"] = self_consistent;
   j["evaluation_id"] = run.evaluation_id;
   // "truth" is the report's object (source, independent, statement); the
@@ -309,7 +359,7 @@ int RunEvaluate(const EvaluateOptions& o) {
   if (o.json) {
     std::printf("%s\n", j.dump(2).c_str());
   } else {
-    const std::string text = FormatTable(run.report, run.evaluation_id);
+    const std::string text = FormatTable(run.report, run.evaluation_id) + FormatStart(run.start);
     std::fwrite(text.data(), 1, text.size(), stdout);
     for (const auto& t : truths) {
       std::printf("truth: %s (%s backend), %lld trials%s\n",
@@ -406,6 +456,12 @@ void AddEvaluateCommand(CLI::App& app, Action* action) {
   cmd->add_option("--threads", o->threads, "Worker threads (0: one per core)")
       ->capture_default_str();
   cmd->add_flag("--json", o->json, "Print the report as JSON");
+  cmd->add_option("--from", o->from,
+                  "Where predictions start: measured (the start pose each trial's cell "
+                  "measured: errors are the model's) or planned (the scene's pose: errors "
+                  "include the reset's placement); from measured, each setting also runs from "
+                  "planned and the report says how much of the error the start pose explains")
+      ->capture_default_str();
   cmd->add_option("--out", o->out_path,
                   "Also write the report (JSON) to this file; a run the store cannot take "
                   "(locked until Ctrl-C, full) is saved there too");

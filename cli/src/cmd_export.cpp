@@ -77,7 +77,8 @@ db::Sample ToSample(const mechanics::TrajectorySample& p,
 // a closed-loop trial's prediction replays `commands` (the commands its cell
 // applied; issue 19).
 db::PredictedStream PredictWith(const std::string& scene_json, const std::string& spec_json,
-                                const std::vector<db::ClosedLoopCommand>* commands) {
+                                const std::vector<db::ClosedLoopCommand>* commands,
+                                const db::Sample* first = nullptr) {
   db::PredictedStream out;
   const mechanics::Scene scene = mechanics::ParseScene(scene_json);
   nlohmann::json model;
@@ -89,7 +90,9 @@ db::PredictedStream PredictWith(const std::string& scene_json, const std::string
     applied.commands = *commands;
     recorded = assessment::CommandsOf(applied);
   }
-  const assessment::PredictedRun run = assessment::SimulatePrediction(scene, model, &recorded);
+  // From the start the service's prediction took (the cell's measured start).
+  const assessment::PredictedRun run =
+      assessment::SimulatePrediction(scene, model, &recorded, first);
   out.predictor = run.key;
   out.settings_json = run.settings_json;
   switch (run.result.status) {
@@ -118,6 +121,12 @@ db::PredictedStream PredictClosedLoop(const std::string& scene_json, const std::
   return PredictWith(scene_json, spec_json, &commands);
 }
 
+db::PredictedStream PredictFrom(const std::string& scene_json, const std::string& spec_json,
+                                const std::vector<db::ClosedLoopCommand>& commands,
+                                const db::Sample* first) {
+  return PredictWith(scene_json, spec_json, commands.empty() ? nullptr : &commands, first);
+}
+
 int RunExport(const ExportCliOptions& o) {
   RefuseToOverwriteStore(o.out, "--out", o.db_path);
   try {
@@ -135,6 +144,7 @@ int RunExport(const ExportCliOptions& o) {
     if (!o.no_predictions) {
       eo.predict = Predict;
       eo.predict_closed_loop = PredictClosedLoop;
+      eo.predict_from = PredictFrom;
     }
     std::unique_ptr<ProgressLine> progress;
     eo.progress = [&](std::int64_t done, std::int64_t total) {

@@ -9,9 +9,11 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <fstream>
 #include <memory>
 #include <optional>
 #include <random>
+#include <sstream>
 #include <string>
 #include <thread>
 #include <vector>
@@ -19,7 +21,11 @@
 #include <spdlog/spdlog.h>
 
 #include "arena/db/store.hpp"
+#include "arena/executors/backend.hpp"
 #include "arena/executors/controller.hpp"
+#include "arena/executors/defect_layer.hpp"
+#include "arena/executors/defects.hpp"
+#include "arena/mechanics/scene_json.hpp"
 #include "arena/orchestrator/campaign.hpp"
 #include "arena/orchestrator/logging.hpp"
 #include "arena/orchestrator/service.hpp"
@@ -206,6 +212,90 @@ std::optional<std::string> CampaignController(const orchestrator::Campaign& camp
   return pusher->controller->name;
 }
 
+// Issue 26: a campaign the cells this run starts cannot host is refused
+// before anything is stored, with the reason a cell would give (the same
+// checks: executors' defect layer), instead of every trial failing at the
+// cells. The run knows what a service does not: the cells' backend and
+// profile. Physics defects a backend cannot emulate refuse the campaign; so
+// does a limit (workspace, pusher speed, contact types) every trial exceeds;
+// a limit some trials exceed is warned about (those trials will fail).
+void RefuseWhatTheCellsCannotRun(const orchestrator::Campaign& campaign, const RunOptions& opt) {
+  executors::DefectProfile cell_profile;
+  if (!opt.defects_path.empty()) {
+    std::ifstream in(opt.defects_path);
+    if (!in) return;  // the cells say why they cannot read it
+    std::stringstream text;
+    text << in.rdbuf();
+    try {
+      cell_profile = executors::ParseDefectProfile(text.str());
+    } catch (const executors::DefectError& e) {
+      throw CommandError(kExitBadInput, "--cell-defects " + opt.defects_path + ": " + e.what());
+    }
+  }
+  executors::DefectProfile campaign_profile;
+  try {
+    campaign_profile = executors::ParseDefectProfile(campaign.defects_json);
+  } catch (const executors::DefectError& e) {
+    throw CommandError(kExitBadInput, std::string("defects: ") + e.what());
+  }
+  // The backend's capabilities, as a cell sees them (an exec: driver says
+  // hello and is shut down again).
+  executors::BackendCapabilities caps;
+  const auto level = spdlog::get_level();
+  spdlog::set_level(spdlog::level::warn);  // the driver's greeting is not the run's output
+  try {
+    caps = executors::MakeBackend(opt.backend, executors::ModelFidelity{}, opt.backend_settings)
+               ->Capabilities();
+  } catch (const std::exception& e) {
+    spdlog::set_level(level);
+    throw CommandError(kExitBadInput, e.what());
+  }
+  spdlog::set_level(level);
+  if (!caps.emulates_defects && executors::PerturbsPhysics(campaign_profile)) {
+    throw CommandError(
+        kExitBadInput,
+        "defects: the campaign perturbs the physics (friction_variability or actuation noise), "
+        "and the cells' " +
+            caps.name + " backend cannot (" + executors::ToString(caps.truth) +
+            " truth is not simulated): every trial would be refused; run it on model or mujoco "
+            "cells, or without those defects");
+  }
+  if (campaign.adaptive) return;  // its trials are chosen as it runs
+  const executors::DefectProfile effective =
+      executors::CombineProfiles(cell_profile, campaign_profile);
+  const std::int64_t n = orchestrator::TrialCount(campaign);
+  std::int64_t refused = 0;
+  std::string first;
+  // Replicates of a condition share its scene: one check per condition.
+  const std::int64_t step = std::max(1, campaign.replicates);
+  for (std::int64_t i = 0; i < n; i += step) {
+    const mechanics::Scene scene = orchestrator::PlanTrial(campaign, i).scene;
+    std::string why = executors::CheckCapabilities(effective, scene);
+    for (std::size_t f = 0; why.empty() && f < scene.fingers.size(); ++f) {
+      if (!caps.contact_types.empty() &&
+          std::find(caps.contact_types.begin(), caps.contact_types.end(), scene.fingers[f].type) ==
+              caps.contact_types.end())
+        why = "fingers[" + std::to_string(f) + "].type: the " + caps.name + " backend has no " +
+              mechanics::ToString(scene.fingers[f].type) + " contacts";
+    }
+    if (why.empty()) continue;
+    if (refused == 0) first = "trial " + std::to_string(i) + ": " + why;
+    refused += std::min(step, n - i);
+  }
+  if (refused == n && n > 0) {
+    throw CommandError(kExitBadInput,
+                       "every trial of the campaign is beyond what the cells can do (" +
+                           (opt.defects_path.empty() ? std::string("their default profile")
+                                                     : "--cell-defects " + opt.defects_path) +
+                           " with the campaign's defects), e.g. " + first);
+  }
+  if (refused > 0 && !opt.quiet)
+    std::fprintf(stderr,
+                 "warning: %lld of %lld trials are beyond what the cells can do and will be "
+                 "refused, e.g. %s\n",
+                 static_cast<long long>(refused), static_cast<long long>(n), first.c_str());
+}
+
 int Run(RunOptions opt) {
   if (opt.cells < 1 || opt.cells > 64)
     throw CommandError(kExitBadInput, "--cells: must be 1..64, got " + std::to_string(opt.cells));
@@ -221,6 +311,7 @@ int Run(RunOptions opt) {
   });
 
   const orchestrator::Campaign campaign = LoadValidCampaign(opt.campaign_path);
+  RefuseWhatTheCellsCannotRun(campaign, opt);
   // Every identity checked before anything is stored: a missing one is named here.
   const auto identity = [&opt](const std::string& name) { return opt.security_lab + "/" + name; };
   if (!opt.security_lab.empty()) {

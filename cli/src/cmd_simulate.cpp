@@ -70,6 +70,19 @@ void WriteTrajectory(const std::string& path, const mechanics::Scene& scene,
   for (const auto& n : names) {
     out << ',' << n << "_touching," << n << "_px," << n << "_py," << n << "_pz";
   }
+  // Appended (issue 26): each contact's force and torque on the object in G
+  // under the names `arena export` gives them (<name>_fx..fz, <name>_tx..tz);
+  // the pusher's force is the pusher_fx..fz above, so only its torque is new.
+  for (const auto& n : names) {
+    if (n != "pusher") out << ',' << n << "_fx," << n << "_fy," << n << "_fz";
+    out << ',' << n << "_tx," << n << "_ty," << n << "_tz";
+  }
+  const auto normals = [&] {
+    std::vector<Eigen::Vector3d> v;
+    for (const auto& f : scene.fingers) v.push_back(f.normal.normalized());
+    if (scene.pusher) v.push_back(scene.pusher->normal.normalized());
+    return v;
+  }();
   out << '\n' << std::setprecision(10);
   for (const auto& s : result.samples) {
     const auto& q = s.orientation;
@@ -85,6 +98,14 @@ void WriteTrajectory(const std::string& path, const mechanics::Scene& scene,
     for (const auto& c : s.contacts) {
       out << ',' << (c.touching ? 1 : 0) << ',' << c.point.x() << ',' << c.point.y() << ','
           << c.point.z();
+    }
+    for (std::size_t i = 0; i < s.contacts.size() && i < names.size(); ++i) {
+      const auto& c = s.contacts[i];
+      if (names[i] != "pusher") {
+        const Eigen::Vector3d f = c.normal_force * normals[i] + c.tangential_force;
+        out << ',' << f.x() << ',' << f.y() << ',' << f.z();
+      }
+      out << ',' << c.torque.x() << ',' << c.torque.y() << ',' << c.torque.z();
     }
     out << '\n';
   }

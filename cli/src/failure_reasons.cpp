@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cctype>
 #include <map>
+#include <set>
 #include <string>
 #include <variant>
 
@@ -30,14 +31,17 @@ std::int64_t Int(const db::Value& v) {
 // Groups in the order of their first appearance, then by count (largest first).
 class Grouper {
  public:
-  void Add(const std::string& source, const std::string& reason, const std::string& cell_id,
-           std::int64_t trial_id) {
-    const std::string key = source + "\n" + ReasonKey(reason, cell_id);
+  // kind "": grouped by the reason's text (a row written before rules were).
+  void Add(const std::string& source, const std::string& kind, const std::string& label,
+           const std::string& reason, const std::string& cell_id, std::int64_t trial_id) {
+    const std::string text = ReasonKey(reason, cell_id);
+    const std::string key = source + "\n" + (kind.empty() ? "\n" + text : kind);
     auto [it, fresh] = index_.try_emplace(key, groups_.size());
-    if (fresh) groups_.push_back({source, reason, 0, trial_id});
+    if (fresh) groups_.push_back({source, kind, label, reason, 0, trial_id, 0});
     ReasonGroup& g = groups_[it->second];
     ++g.count;
     g.first_trial = std::min(g.first_trial, trial_id);
+    if (texts_[it->second].insert(text).second) ++g.texts;
   }
   std::vector<ReasonGroup> Take() {
     std::stable_sort(groups_.begin(), groups_.end(),
@@ -47,6 +51,7 @@ class Grouper {
 
  private:
   std::map<std::string, size_t> index_;
+  std::map<size_t, std::set<std::string>> texts_;
   std::vector<ReasonGroup> groups_;
 };
 
@@ -55,8 +60,13 @@ std::string FormatGroups(const std::vector<ReasonGroup>& groups, const std::stri
   constexpr size_t kShown = 8;  // the rest are counted, not listed
   for (size_t i = 0; i < groups.size() && i < kShown; ++i) {
     const auto& g = groups[i];
-    out += indent + "  " + std::to_string(g.count) + " x " + g.source + ": " + g.example +
-           " (e.g. trial " + std::to_string(g.first_trial) + ")\n";
+    // "18 x driver, the cell's backend failed [execute.cell_failure]: driver: ... (e.g. trial 3)"
+    std::string head = std::to_string(g.count) + " x " + g.source;
+    if (!g.kind.empty()) head += ", " + g.label + " [" + g.kind + "]";
+    std::string more;
+    if (g.texts > 1) more = "; " + std::to_string(g.texts) + " different texts";
+    out += indent + "  " + head + ": " + g.example + " (e.g. trial " +
+           std::to_string(g.first_trial) + more + ")\n";
   }
   if (groups.size() > kShown) {
     std::int64_t rest = 0;
@@ -71,9 +81,12 @@ nlohmann::json GroupsJson(const std::vector<ReasonGroup>& groups) {
   nlohmann::json out = nlohmann::json::array();
   for (const auto& g : groups)
     out.push_back({{"source", g.source},
+                   {"kind", g.kind},
+                   {"label", g.label},
                    {"reason", g.example},
                    {"count", g.count},
-                   {"first_trial", g.first_trial}});
+                   {"first_trial", g.first_trial},
+                   {"texts", g.texts}});
   return out;
 }
 
@@ -84,6 +97,60 @@ std::string ReasonSource(const std::string& reason) {
   if (r.find("driver") != std::string::npos) return "driver";
   if (r.find("cell") != std::string::npos) return "cell";
   return "service";
+}
+
+FailureKind KindOfRule(const std::string& rule, const std::string& backend) {
+  // The rules of orchestrator's trial policy and the store's own edges.
+  struct Row {
+    const char* kind;
+    const char* source;
+    const char* label;
+  };
+  static constexpr Row kRows[] = {
+      {"execute.simulation_failure", "cell", "the simulation failed (a re-run fails alike)"},
+      {"execute.controller_fault", "controller", "the closed-loop controller failed"},
+      {"execute.cell_deadline", "cell", "the cell's own deadline passed"},
+      {"execute.cell_interrupted", "cell", "the cell shut down mid-trial"},
+      {"execute.cell_failure_typed_as_reset", "cell", "the cell failed (typed as a reset)"},
+      {"execute.cell_failure", "cell", "the cell's backend failed"},
+      {"execute.cell_failure_untyped", "cell", "the cell failed (untyped)"},
+      {"execute.refused_by_cell", "cell", "the cell refused the trial"},
+      {"execute.deadline_missed", "service", "no result by the execute deadline"},
+      {"execute.stream_incomplete", "cell", "the ground truth stream was incomplete"},
+      {"execute.stream_malformed", "cell", "the ground truth stream was malformed"},
+      {"execute.command_not_sent", "service", "the command could not be sent"},
+      {"execute.store_refused_truth", "store", "the store refused the ground truth"},
+      {"execute.cell_lost", "cell", "the cell went away"},
+      {"execute.cell_restarted", "cell", "the cell restarted"},
+      {"execute.cell_claimed_elsewhere", "cell", "the cell serves another service"},
+      {"reset.failed", "cell", "the reset failed"},
+      {"reset.deadline_missed", "cell", "no reset result by its deadline"},
+      {"reset.command_not_sent", "service", "the reset command could not be sent"},
+      {"reset.cell_lost", "cell", "the cell went away while resetting"},
+      {"reset.cell_restarted", "cell", "the cell restarted while resetting"},
+      {"reset.cell_claimed_elsewhere", "cell", "the cell serves another service"},
+      {"dispatch.invalid_scene", "scene", "the scene is invalid"},
+      {"recover.execute_unconfirmed", "service", "the service restarted mid-trial"},
+      {"recover.reset_unconfirmed", "service", "the service restarted mid-reset"},
+      {"operator.cancel_campaign", "operator", "the campaign was cancelled"},
+  };
+  FailureKind out;
+  out.kind = rule.substr(0, rule.find(' '));
+  for (const Row& r : kRows) {
+    if (out.kind != r.kind) continue;
+    out.source = r.source;
+    out.label = r.label;
+    // A backend that is an external robot driver: its failures are the driver's.
+    if (out.source == "cell" && backend.rfind("exec:", 0) == 0 &&
+        (out.kind == "execute.cell_failure" || out.kind == "execute.refused_by_cell" ||
+         out.kind == "execute.cell_deadline" || out.kind == "reset.failed"))
+      out.source = "driver";
+    return out;
+  }
+  // An unknown rule (or "fail.unnamed", or a retry verdict alone) names no
+  // cause: such rows are grouped by their text.
+  out.kind.clear();
+  return out;
 }
 
 std::string ReasonKey(const std::string& reason, const std::string& cell_id) {
@@ -117,7 +184,8 @@ FailureReport CampaignFailures(const db::Store& store, std::int64_t campaign_id)
   // attempt sent back to planned (or a reset that failed and is retried).
   const db::QueryResult moves = db::RunQuery(
       store,
-      "SELECT t.campaign_id, tr.to_state, tr.reason, tr.cell_id, tr.trial_id "
+      "SELECT t.campaign_id, tr.to_state, tr.reason, tr.cell_id, tr.trial_id, tr.rule, "
+      "coalesce(t.backend, '') "
       "FROM trial_transitions tr JOIN trials t ON t.id = tr.trial_id "
       "WHERE tr.from_state <> '' AND (tr.to_state IN ('planned', 'reset_failed') OR "
       "(tr.to_state = 'failed' AND t.state = 'failed' AND tr.id = (SELECT max(id) FROM "
@@ -131,12 +199,14 @@ FailureReport CampaignFailures(const db::Store& store, std::int64_t campaign_id)
     if (reason.empty()) reason = "no reason recorded";
     const std::string cell = Text(row[3]);
     const std::int64_t trial = Int(row[4]);
+    FailureKind kind = KindOfRule(Text(row[5]), Text(row[6]));
+    if (kind.source.empty()) kind.source = ReasonSource(reason);  // no rule or an unknown one
     if (to == "failed") {
-      failures.Add(ReasonSource(reason), reason, cell, trial);
+      failures.Add(kind.source, kind.kind, kind.label, reason, cell, trial);
       ++report.failed_trials;
     } else {
-      retries.Add(ReasonSource(reason), to == "reset_failed" ? "reset failed: " + reason : reason,
-                  cell, trial);
+      retries.Add(kind.source, kind.kind, kind.label,
+                  to == "reset_failed" ? "reset failed: " + reason : reason, cell, trial);
       ++report.retried_attempts;
     }
   }
@@ -149,7 +219,9 @@ FailureReport CampaignFailures(const db::Store& store, std::int64_t campaign_id)
   for (const auto& row : preds.rows) {
     const std::string status = Text(row[1]);
     const std::string error = Text(row[2]);
-    predictions.Add("predictor", error.empty() ? status : status + ": " + error, "", Int(row[3]));
+    // The status is the prediction's typed outcome (assessment::PredictionOutcome).
+    predictions.Add("predictor", status, "the prediction " + status, error.empty() ? status : error,
+                    "", Int(row[3]));
     ++report.failed_predictions;
   }
   report.failures = failures.Take();

@@ -186,7 +186,9 @@ Chart MakeTrialChart(const db::Store& store, std::int64_t trial_id, TrialPlotInf
     if (scene.pusher && scene.pusher->controller) {
       if (auto applied = store.GetClosedLoop(trial_id)) commands = assessment::CommandsOf(*applied);
     }
-    assessment::PredictedRun run = assessment::SimulatePrediction(scene, model, &commands);
+    // From the start the service's prediction took (the cell's measured start).
+    assessment::PredictedRun run = assessment::SimulatePrediction(
+        scene, model, &commands, gt.samples.empty() ? nullptr : &gt.samples.front());
     inf.model_key = run.key;
     predicted = std::move(run.result);
     switch (predicted.status) {

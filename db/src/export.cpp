@@ -897,7 +897,9 @@ void WriteTrial(const Store::Impl& impl, const ExportOptions& o, const Campaign&
   std::optional<PredictedStream> predicted;
   if (o.predict) {
     try {
-      predicted = !applied.empty() && o.predict_closed_loop
+      predicted = o.predict_from ? o.predict_from(index.scenes[i], campaign.spec_json, applied,
+                                                  samples.empty() ? nullptr : &samples.front())
+                  : !applied.empty() && o.predict_closed_loop
                       ? o.predict_closed_loop(index.scenes[i], campaign.spec_json, applied)
                       : o.predict(index.scenes[i], campaign.spec_json);
     } catch (const std::exception& e) {

@@ -976,9 +976,15 @@ Campaign ParseCampaign(std::string_view json_text, const std::string& base_dir,
   c.prediction = c.scene.model;
   if (doc.contains("prediction")) {
     const json& p = doc["prediction"];
-    RequireObject(p, "prediction",
-                  {"predictor", "facets", "points", "dt", "reduce", "contacts", "calibration",
-                   "calibrated", "timestep", "cone", "noslip_iterations", "solref", "solimp"});
+    RequireObject(
+        p, "prediction",
+        {"predictor", "facets", "points", "dt", "reduce", "contacts", "calibration", "calibrated",
+         "timestep", "cone", "noslip_iterations", "solref", "solimp", "start"});
+    // Where each prediction starts (issue 26): the start pose the cell
+    // measured (default) or the planned one.
+    if (p.contains("start") &&
+        !(p["start"].is_string() && (p["start"] == "measured" || p["start"] == "planned")))
+      throw CampaignError("prediction.start", "must be \"measured\" or \"planned\"");
     // Which predictor: arena's model (knobs facets, points, dt, reduce, contacts)
     // or MuJoCo (timestep, cone, noslip_iterations, solref, solimp); knobs of
     // the other are refused. A calibration's scales apply to either
@@ -1003,7 +1009,7 @@ Campaign ParseCampaign(std::string_view json_text, const std::string& base_dir,
     }
     if (mujoco) {
       json knobs = p;
-      for (const char* k : {"predictor", "calibration", "calibrated"}) knobs.erase(k);
+      for (const char* k : {"predictor", "calibration", "calibrated", "start"}) knobs.erase(k);
       try {
         (void)simulators::MakeSimulator("mujoco", knobs.dump());
       } catch (const simulators::SimulatorError& e) {

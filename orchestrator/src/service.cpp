@@ -282,6 +282,7 @@ struct PredictionJob {
   nlohmann::json prediction;  // the campaign's `prediction` (names the predictor)
   // Closed loop: the applied commands, replayed through the model; empty otherwise.
   assessment::RecordedCommands commands;
+  assessment::PredictionStart start;  // where `scene`'s object starts (noted in the prediction)
 };
 
 // Worker threads that run the predictor; jobs in, results out. Start()
@@ -302,14 +303,16 @@ class PredictorPool : public PredictionPort {
   void SetStore(db::Store* store) { store_ = store; }
 
   void Start(PredictionRequest r) override {
-    PredictionJob job{r.trial_id,         r.attempt, r.campaign_id,        {},
-                      std::move(r.truth), {},        std::move(r.commands)};
+    PredictionJob job{r.trial_id,         r.attempt, r.campaign_id,         {},
+                      std::move(r.truth), {},        std::move(r.commands), {}};
+    std::optional<db::Sample> first = std::move(r.first_sample);
     try {
       mechanics::Scene scene = r.scene_json.empty() || !job.truth.empty()
                                    ? std::move(r.scene)
                                    : mechanics::ParseScene(r.scene_json);
       if (job.truth.empty()) {  // a resumed trial: its ground truth is in the store
         const db::GroundTruth gt = store_->ReadGroundTruth(r.trial_id);
+        if (!gt.samples.empty()) first = gt.samples.front();
         const auto normals = ContactNormals(scene);
         for (const auto& s : gt.samples)
           job.truth.push_back(
@@ -320,8 +323,12 @@ class PredictorPool : public PredictionPort {
             job.commands = assessment::CommandsOf(*run);
         }
       }
-      job.scene = ApplyModelSettings(scene, CampaignModel(r.campaign_id));
       job.prediction = CampaignModel(r.campaign_id);
+      // From the start pose the cell measured (issue 26), unless the campaign
+      // asks for the planned one (prediction.start).
+      job.start = assessment::StartOf(scene, first ? &*first : nullptr,
+                                      assessment::StartFromOf(job.prediction));
+      job.scene = ApplyModelSettings(assessment::StartedAt(scene, job.start), job.prediction);
     } catch (const db::StoreError& e) {
       using K = db::StoreError::Kind;
       // A store that cannot be written stops the service; anything else
@@ -393,6 +400,7 @@ class PredictorPool : public PredictionPort {
       PredictionDone done{job.trial_id, job.attempt, job.campaign_id,
                           assessment::PredictTrial(job.scene, job.truth, job.prediction,
                                                    job.commands.empty() ? nullptr : &job.commands)};
+      assessment::NoteStart(&done.prediction, job.start);
       std::lock_guard lock(mu_);
       results_.push_back(std::move(done));
     }

@@ -770,9 +770,15 @@ struct TrialDriver::Impl {
       observer->OnStream(cell.id, ex.campaign_id, static_cast<std::int64_t>(ex.samples.size()),
                          dropped);
     }
-    PredictionRequest request{ex.trial_id,           ex.campaign_id,      ex.attempt,
-                              std::move(ex.scene),   std::move(ex.truth), ex.scene_json,
-                              std::move(ex.commands)};
+    PredictionRequest request{ex.trial_id,
+                              ex.campaign_id,
+                              ex.attempt,
+                              std::move(ex.scene),
+                              std::move(ex.truth),
+                              ex.scene_json,
+                              std::move(ex.commands),
+                              std::nullopt};
+    if (!ex.samples.empty()) request.first_sample = ex.samples.front();
     predictions.Start(std::move(request));
     const std::string tag = TrialTag(ex.campaign_id, ex.trial_id, ex.attempt);
     const int attempt = ex.attempt;

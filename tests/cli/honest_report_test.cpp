@@ -86,6 +86,82 @@ TEST(FailureReasons, GroupedByReasonAndSourceWithCounts) {
   EXPECT_EQ(j["retried"][0]["source"], "cell");
 }
 
+// Pins: failures were grouped by reading their text (the word "driver" made
+// a driver's failure); now by the typed kind the store keeps -- the rule
+// that decided the transition (trial_transitions.rule), the trial's backend
+// for who is to blame, the prediction's status -- with the text as detail.
+// Two texts of one kind are one group; one text of two kinds is two.
+TEST(FailureReasons, GroupedByTheTypedKindWithTheTextAsDetail) {
+  TempDir dir;
+  const std::string path = dir.File("k.db");
+  std::int64_t id = 0;
+  {
+    auto store = db::Store::Open(path);
+    store->UpsertCell("robot1", {"point"});
+    id = store->CreateCampaign(MakeCampaign(), MakeTrials(4));
+    // Trials 1 and 2: the exec: backend failed, in two different words (no
+    // "driver" in either), and the retry rule gave up.
+    for (const char* why : {"backend exec:./arm.py: arm stalled at joint 3",
+                            "backend exec:./arm.py: gripper did not open"}) {
+      auto t = store->ClaimNextTrial("robot1");
+      store->RecordExecution(t->trial_id, t->attempt, "exec:./arm.py", "robot", "{}");
+      store->RetryTrial(t->trial_id, t->attempt, why, 1, 0, "execute.cell_failure");
+    }
+    // Trial 3: the same words as trial 1, but the cell refused the trial.
+    auto t = store->ClaimNextTrial("robot1");
+    store->RecordExecution(t->trial_id, t->attempt, "exec:./arm.py", "robot", "{}");
+    store->RetryTrial(t->trial_id, t->attempt, "backend exec:./arm.py: arm stalled at joint 3", 1,
+                      0, "execute.refused_by_cell");
+    // Trial 4: done, with a prediction whose solver failed.
+    t = store->ClaimNextTrial("robot1");
+    auto ingest = store->BeginIngest(t->trial_id, t->attempt);
+    for (int i = 0; i < 5; ++i) ingest->Add(db::testing::MakeSample(i));
+    ingest->Finish("ok");
+    store->BeginReset(t->trial_id, t->attempt);
+    db::ResetReport reset;
+    reset.ok = true;
+    store->CompleteReset(t->trial_id, t->attempt, reset);
+    db::Prediction p;
+    p.model_key = "g8_k3_dt0.004_auto";
+    p.status = "solver_failure";
+    p.detail_json = R"({"error": "step 12: LCP did not converge"})";
+    store->RecordPrediction(t->trial_id, t->attempt, p);
+    store->FinishTrial(t->trial_id, t->attempt);
+  }
+  db::StoreOptions ro;
+  ro.read_only = true;
+  auto store = db::Store::Open(path, ro);
+  const FailureReport r = CampaignFailures(*store, id);
+  EXPECT_EQ(r.failed_trials, 3);
+  ASSERT_EQ(r.failures.size(), 2u);
+  EXPECT_EQ(r.failures[0].kind, "execute.cell_failure");
+  EXPECT_EQ(r.failures[0].source, "driver");  // the backend is a robot driver: typed, not read
+  EXPECT_EQ(r.failures[0].count, 2);
+  EXPECT_EQ(r.failures[0].texts, 2);
+  EXPECT_EQ(r.failures[1].kind, "execute.refused_by_cell");
+  EXPECT_EQ(r.failures[1].count, 1);
+  ASSERT_EQ(r.predictions.size(), 1u);
+  EXPECT_EQ(r.predictions[0].kind, "solver_failure");
+  EXPECT_EQ(r.predictions[0].example, "step 12: LCP did not converge");
+  const std::string text = FormatFailures(r, "  ");
+  EXPECT_NE(text.find("2 x driver, the cell's backend failed [execute.cell_failure]: backend "
+                      "exec:./arm.py: arm stalled at joint 3"),
+            std::string::npos)
+      << text;
+  EXPECT_NE(text.find("(e.g. trial 1; 2 different texts)"), std::string::npos) << text;
+  EXPECT_NE(text.find("1 x driver, the cell refused the trial [execute.refused_by_cell]"),
+            std::string::npos)
+      << text;
+  EXPECT_NE(text.find("1 x predictor, the prediction solver_failure [solver_failure]: step 12"),
+            std::string::npos)
+      << text;
+  const auto j = FailuresJson(r);
+  EXPECT_EQ(j["failed"][0]["kind"], "execute.cell_failure");
+  EXPECT_EQ(j["failed"][0]["texts"], 2);
+  EXPECT_EQ(KindOfRule("execute.cell_failure retry.attempts_exhausted", "model").source, "cell");
+  EXPECT_EQ(KindOfRule("fail.unnamed", "model").kind, "");  // names no cause: by text
+}
+
 TEST(FailureReasons, KeyIgnoresCellIdsAndNumbersOnly) {
   EXPECT_EQ(ReasonKey("cell a1: 500 s at 1e-3 m/s", "a1"),
             ReasonKey("cell b7: 2.5 s at 4 m/s", "b7"));

@@ -34,6 +34,7 @@
 #include <nlohmann/json_fwd.hpp>
 
 #include "arena/assessment/noise_floor.hpp"
+#include "arena/assessment/prediction.hpp"
 #include "arena/assessment/predictor.hpp"
 #include "arena/db/store.hpp"
 #include "arena/mechanics/scene.hpp"
@@ -226,8 +227,40 @@ struct PredictorRequest {
   std::optional<MujocoGrid> mujoco_grid;
 };
 
+// How much of the error the start pose explains (issue 26): per setting,
+// the median final error predicted from the planned start and from the
+// measured one, over the trials both predicted ("ok"); planned minus
+// measured is the reset's share.
+struct StartShare {
+  std::string predictor;
+  std::string model_key;
+  int trials = 0;                                      // paired: ok from both starts
+  double position_measured = 0, position_planned = 0;  // m, medians
+  double angle_measured = 0, angle_planned = 0;        // rad, medians
+};
+struct StartReport {
+  StartFrom from = StartFrom::kMeasured;  // where the stored predictions start
+  int measured_trials = 0;                // trials whose stream gave a measured start
+  // How far the starts used lie from the planned pose (m, rad; 0 from planned).
+  std::optional<Distribution> offset_position, offset_angle;
+  std::vector<StartShare> settings;  // one per setting; empty when from planned
+};
+// Pure: `planned` holds the same (trial, setting) predictions from the
+// planned start (empty: not run), `starts` each trial's start (by trial).
+StartReport StartShareOf(const std::vector<SettingInfo>& settings,
+                         const std::vector<TrialEvaluation>& results,
+                         const std::vector<std::optional<db::Prediction>>& planned,
+                         const std::vector<std::optional<PredictionStart>>& starts, StartFrom from);
+// {"from", "measured_trials", "offset_m", "offset_rad", "explained": [{"predictor",
+// "setting", "trials", "position_median_m": {"measured", "planned", "explained"},
+// "angle_median_rad": {...}}]} (SI units).
+nlohmann::json ToJson(const StartReport& report);
+
 struct EvaluationOptions {
   std::vector<PredictorRequest> predictors{PredictorRequest{}};
+  // Where predictions start (issue 26): the start pose each trial's cell
+  // measured (the first sample of its stream), or the planned one.
+  StartFrom start_from = StartFrom::kMeasured;
   std::vector<Budget> budgets;
   int threads = 0;             // 0: one per core
   int convergence_trials = 8;  // trials the convergence table restarts pieces of (0: none)
@@ -245,6 +278,7 @@ struct EvaluationRun {
   std::int64_t evaluation_id = 0;  // 0 when cancelled (nothing stored)
   bool cancelled = false;
   EvaluationReport report;
+  StartReport start;  // where predictions started and the start's share of the error
   // Set when the run finished but the store refused its write (locked past
   // the caller's patience, full, read-only, ...): the report is still here
   // for the caller to keep (`arena evaluate` writes it to a file).

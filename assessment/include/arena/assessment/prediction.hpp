@@ -4,10 +4,12 @@
 
 #include <optional>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include <nlohmann/json_fwd.hpp>
 
+#include "arena/db/sample.hpp"
 #include "arena/db/store.hpp"
 #include "arena/mechanics/scene.hpp"
 #include "arena/mechanics/simulate.hpp"
@@ -95,6 +97,41 @@ db::Prediction PredictTrial(const mechanics::Scene& scene,
                             const std::vector<mechanics::TrajectorySample>& truth,
                             const nlohmann::json& prediction, const RecordedCommands* commands);
 
+// Where a prediction starts (issue 26). A lab predicts from the state it
+// measured: from the start pose the cell reported, the error measures the
+// model and not the reset's placement; from the planned pose (the scene's)
+// it measures both, so the two together give the reset's share.
+enum class StartFrom { kMeasured, kPlanned };
+const char* ToString(StartFrom from);  // "measured", "planned"
+std::optional<StartFrom> StartFromString(std::string_view text);
+// The campaign's `prediction.start` (kMeasured when absent or `prediction` is null).
+// @throws mechanics::SceneError naming "prediction.start" for another value.
+StartFrom StartFromOf(const nlohmann::json& prediction);
+
+struct PredictionStart {
+  StartFrom from = StartFrom::kPlanned;
+  // "planned"; measured: "observed" (the cell's sensors at the first sample
+  // of its stream) or "first_sample" (that sample's pose: the sensors dropped
+  // it, or the backend's truth is its measurement).
+  std::string source = "planned";
+  Eigen::Vector3d position = Eigen::Vector3d::Zero();  // m, gripper frame
+  Eigen::Quaterniond orientation = Eigen::Quaterniond::Identity();
+  double offset_m = 0;    // from the planned position
+  double offset_rad = 0;  // from the planned orientation
+};
+// The start a prediction of `scene` takes: kPlanned (or no sample) the
+// scene's object pose; kMeasured the first sample of the trial's stream.
+PredictionStart StartOf(const mechanics::Scene& scene, const db::Sample* first, StartFrom from);
+// The scene with its object at `start` and the fingers closed on it there,
+// as a cell places it (the pusher where the scene has it); unchanged when the
+// start is the planned pose. @throws mechanics::SceneError when a finger
+// misses the object there.
+mechanics::Scene StartedAt(const mechanics::Scene& scene, const PredictionStart& start);
+// Records the start in p->detail_json as "start": {"from", "source",
+// "position_m", "orientation_wxyz", "offset_m", "offset_rad"}: every stored
+// prediction says which start it used.
+void NoteStart(db::Prediction* p, const PredictionStart& start);
+
 // A trial's predicted trajectory, made as the service makes it: `prediction`
 // (the campaign's object, or null) applied to the trial's scene and run on
 // the predictor it names. Plots and exports re-run it this way (the store
@@ -106,6 +143,7 @@ struct PredictedRun {
   std::string predictor;      // "arena" or "mujoco"
   std::string key;            // the label the service stores the prediction under
   std::string settings_json;  // the settings it ran with (stored as model_json)
+  PredictionStart start;      // where it started (issue 26)
 };
 // A closed-loop scene (issue 19) replays `commands` (RecordedCommands, above);
 // without them, or on a predictor that cannot replay commands, result.status
@@ -113,9 +151,13 @@ struct PredictedRun {
 // @throws mechanics::SceneError for bad model settings; std::exception when
 //   the predictor cannot be made. A solver failure or a scene the predictor
 //   refuses is in result.status, not thrown.
+// `first` is the first sample of the trial's stream: the run starts where
+// the service's prediction started (prediction.start: measured by default,
+// from `first`; planned, or no `first`: the scene's pose).
 PredictedRun SimulatePrediction(const mechanics::Scene& trial_scene,
                                 const nlohmann::json& prediction,
-                                const RecordedCommands* commands = nullptr);
+                                const RecordedCommands* commands = nullptr,
+                                const db::Sample* first = nullptr);
 
 // A prediction that could not be made (status, reason in detail_json).
 db::Prediction PredictionFailure(const std::string& status, const std::string& reason);

@@ -93,6 +93,14 @@ struct ExportOptions {
   std::function<PredictedStream(const std::string& scene_json, const std::string& spec_json,
                                 const std::vector<ClosedLoopCommand>& commands)>
       predict_closed_loop;
+  // When set (with `predict`), used instead of both: the prediction also
+  // given the first sample of the trial's stream, the start pose its cell
+  // measured, which the service's prediction started from (issue 26);
+  // `commands` empty for an open-loop trial.
+  std::function<PredictedStream(const std::string& scene_json, const std::string& spec_json,
+                                const std::vector<ClosedLoopCommand>& commands,
+                                const Sample* first_sample)>
+      predict_from;
   // Called after each trial with (trials written, trials to write).
   std::function<void(std::int64_t, std::int64_t)> progress;
   // Files a producer adds to the dataset (path relative to it, '/' separated, no

@@ -171,6 +171,9 @@ struct PredictionRequest {
   // the model; empty: an open-loop trial, or (a resumed trial) read them
   // from the store.
   assessment::RecordedCommands commands;
+  // The first sample of the cell's stream: the start pose it measured, which
+  // the prediction starts from (issue 26); absent: read it from the store.
+  std::optional<db::Sample> first_sample;
 };
 
 struct PredictionDone {
