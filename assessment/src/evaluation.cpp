@@ -158,6 +158,14 @@ EvaluationRun EvaluateCampaign(db::Store& store, std::int64_t campaign_id,
                                 " has no done trials to evaluate yet (arena status shows "
                                 "its progress)");
   }
+  // Every trial's group before any work: a trial without the parameter is
+  // an error naming it, and nothing is evaluated.
+  std::map<std::int64_t, std::string> group_of_trial;
+  if (options.group_of) {
+    if (options.group_by.empty())
+      throw std::invalid_argument("group_by: name the trial parameter to group by");
+    for (const auto& t : trials) group_of_trial[t.id] = options.group_of(t);
+  }
   // Scenes first: the default grids keep only settings every scene takes.
   std::vector<std::optional<mechanics::Scene>> scenes(trials.size());
   std::vector<mechanics::Scene> valid_scenes;
@@ -325,6 +333,10 @@ EvaluationRun EvaluateCampaign(db::Store& store, std::int64_t campaign_id,
   run.report = Summarise(built.infos, results, options.budgets, ComputeNoiseFloor(final_poses));
   run.report.campaign_id = campaign_id;
   run.report.truth = TruthOf(store, campaign_id);
+  if (options.group_of) {
+    run.report.group_by = options.group_by;
+    run.report.groups = SummariseGroups(built.infos, results, group_of_trial);
+  }
 
   // The convergence table: a few trials, short pieces from the true state.
   if (options.convergence_trials > 0 && !trials.empty()) {

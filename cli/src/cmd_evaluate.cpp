@@ -23,6 +23,7 @@
 #include "result_file.hpp"
 #include "signals.hpp"
 #include "store_errors.hpp"
+#include "trial_parameters.hpp"
 #include "truth_relation.hpp"
 
 namespace arena::cli {
@@ -48,7 +49,9 @@ struct EvaluateOptions {
   int threads = 0;
   int convergence_trials = 8;
   bool json = false;
-  std::string out_path;  // --out: the report as JSON, besides the store
+  std::string out_path;          // --out: the report as JSON, besides the store
+  std::string group_by;          // --group-by: a trial parameter
+  std::string trial_parameters;  // --trial-parameters: a CSV with a seed column
 };
 
 // "0.002:1" -> {0.002, 1}; exactly N finite numbers or a bad-input error
@@ -94,6 +97,42 @@ std::string TrialIds(const std::vector<assessment::TrialNote>& notes, std::size_
   }
   if (notes.size() > limit) out += " ...";
   return out;
+}
+
+std::string MedianP95(const std::optional<assessment::Distribution>& d, double scale) {
+  if (!d) return "-";
+  char buf[64];
+  std::snprintf(buf, sizeof buf, "%.3g/%.3g", d->median * scale, d->p95 * scale);
+  return buf;
+}
+
+// The outcome table: per setting, the NMSE of (dx, dy, dtheta) and the final
+// pose, force and time figures beside it.
+std::string OutcomeTable(const std::vector<assessment::SettingSummary>& settings) {
+  std::ostringstream out;
+  char line[640];
+  std::snprintf(line, sizeof line, "  %-8s %-24s %6s %6s %-20s %16s %16s %20s %13s\n", "predictor",
+                "setting", "scored", "NMSE", "dx/dy/dtheta", "pos mm med/p95", "angle deg med/p95",
+                "force N med/p95 (n)", "ms/trial med");
+  out << line;
+  for (const auto& s : settings) {
+    char nmse[24] = "-", parts[48] = "-", force[64] = "-";
+    if (s.nmse) {
+      std::snprintf(nmse, sizeof nmse, "%.3f", s.nmse->mean);
+      std::snprintf(parts, sizeof parts, "%.3f/%.3f/%.3f", s.nmse->dx, s.nmse->dy, s.nmse->dtheta);
+    }
+    if (s.force)
+      std::snprintf(force, sizeof force, "%s (%d)", MedianP95(s.force, 1).c_str(), s.force_trials);
+    char scored[24];
+    std::snprintf(scored, sizeof scored, "%d/%d", s.ok, s.trials);
+    std::snprintf(line, sizeof line, "  %-8s %-24s %6s %6s %-20s %16s %16s %20s %13.3g\n",
+                  s.predictor.c_str(), s.model_key.c_str(), scored, nmse, parts,
+                  MedianP95(s.position, 1e3).c_str(), MedianP95(s.angle, 180 / M_PI).c_str(), force,
+                  s.time.median * 1e3);
+    out << line;
+    if (!s.nmse && !s.nmse_note.empty()) out << "    (no NMSE: " << s.nmse_note << ")\n";
+  }
+  return out.str();
 }
 
 std::string FormatTable(const assessment::EvaluationReport& r, std::int64_t evaluation_id) {
@@ -185,6 +224,16 @@ std::string FormatTable(const assessment::EvaluationReport& r, std::int64_t eval
         Tail(s.position, 1e3).c_str(), s.finest ? "  (finest)" : "");
     out << line;
   }
+  out << "\noutcome: NMSE of the push's outcome (dx, dy, dtheta: the object's final pose in its "
+         "initial frame; each output's mean squared error over its variance across the trials "
+         "scored, averaged over the three; 1 = predicting the mean outcome), final position and "
+         "angle error, force error against the measured force (n: trials whose force was "
+         "scored), wall time per trial:\n";
+  out << OutcomeTable(r.settings);
+  for (const auto& g : r.groups) {
+    out << "\n" << r.group_by << " = " << g.value << " (" << g.trials << " trials):\n";
+    out << OutcomeTable(g.settings);
+  }
   out << "\nfront: " << r.front << "\n";
   out << "recommendation: " << r.recommendation << "\n";
   return out.str();
@@ -245,6 +294,16 @@ int RunEvaluate(const EvaluateOptions& o) {
     if (o.grid_given) (void)assessment::ExpandGrid(grid);
   } catch (const std::invalid_argument& e) {
     throw CommandError(kExitBadInput, std::string("evaluate: ") + e.what());
+  }
+
+  if (o.group_by.empty() && !o.trial_parameters.empty())
+    throw CommandError(kExitBadInput, "--trial-parameters: only with --group-by");
+  const TrialParameters parameters(o.trial_parameters, "--trial-parameters");
+  if (!o.group_by.empty()) {
+    eo.group_by = o.group_by;
+    eo.group_of = [&parameters, &o](const db::Trial& t) {
+      return parameters.Value(t, o.group_by, "--group-by");
+    };
   }
 
   RefuseToOverwriteStore(o.out_path, "--out", o.db_path);
@@ -403,6 +462,13 @@ void AddEvaluateCommand(CLI::App& app, Action* action) {
       "(a minimum)|time_p95");
   cmd->add_option("--threads", o->threads, "Worker threads (0: one per core)")
       ->capture_default_str();
+  cmd->add_option("--group-by", o->group_by,
+                  "Also report every setting per value of this trial parameter (e.g. shape, "
+                  "push_angle_rad, speed_mm_s): the trial's stored parameters, else "
+                  "--trial-parameters");
+  cmd->add_option("--trial-parameters", o->trial_parameters,
+                  "A CSV with a seed column whose rows give the trials of those seeds more "
+                  "parameters (an imported dataset's trials.csv)");
   cmd->add_flag("--json", o->json, "Print the report as JSON");
   cmd->add_option("--out", o->out_path,
                   "Also write the report (JSON) to this file; a run the store cannot take "
