@@ -452,6 +452,14 @@ TrialError CompareTrajectories(const mechanics::Scene& scene,
 
 double Loss(const TrialError& e, const LossScales& s) {
   if (!e.ok) return kFailedTrialLoss;
+  if (s.outcome_variance[0] > 0) {
+    const PlanarOutcome& p = e.predicted_outcome;
+    const PlanarOutcome& t = e.true_outcome;
+    return ((p.dx - t.dx) * (p.dx - t.dx) / s.outcome_variance[0] +
+            (p.dy - t.dy) * (p.dy - t.dy) / s.outcome_variance[1] +
+            (p.dtheta - t.dtheta) * (p.dtheta - t.dtheta) / s.outcome_variance[2]) /
+           3;
+  }
   const double a = e.position / s.position_m, b = e.angle / s.angle_rad, c = e.force / s.force_n;
   return a * a + b * b + c * c;
 }
@@ -551,7 +559,8 @@ void Profile(Fitter& fitter, const std::vector<int>& train, const std::vector<do
 }
 
 CalibrationResult Fitted(const std::vector<CalibrationTrial>& trials, TrialSimulateFn simulate,
-                         const CalibrationOptions& o, Memo* memo) {
+                         const CalibrationOptions& given, Memo* memo) {
+  CalibrationOptions o = given;  // the outcome loss's variances filled in below
   if (o.params.empty()) throw CalibrationError("--params: name at least one parameter");
   for (size_t i = 0; i < o.params.size(); ++i)
     for (size_t j = 0; j < i; ++j)
@@ -608,6 +617,30 @@ CalibrationResult Fitted(const std::vector<CalibrationTrial>& trials, TrialSimul
   std::sort(hold.begin(), hold.end());
   std::sort(train.begin(), train.end());
 
+  if (o.outcome_loss) {
+    // The variances of the training trials' true outcomes (their first to last sample).
+    std::vector<PlanarOutcome> outcomes;
+    for (int i : train) {
+      const auto& truth = trials[static_cast<size_t>(i)].truth;
+      if (truth.empty()) continue;
+      outcomes.push_back(PlanarOutcomeOf(truth.front().position, truth.front().orientation,
+                                         truth.back().position, truth.back().orientation));
+    }
+    std::string why;
+    if (!ComputeNmse(outcomes, outcomes, &why))
+      throw CalibrationError("--loss nmse: the fitted trials' outcomes cannot normalise it: " +
+                             why);
+    for (int k = 0; k < 3; ++k) {
+      double mean = 0, var = 0;
+      auto get = [k](const PlanarOutcome& p) { return k == 0 ? p.dx : k == 1 ? p.dy : p.dtheta; };
+      for (const auto& p : outcomes) mean += get(p) / static_cast<double>(outcomes.size());
+      for (const auto& p : outcomes)
+        var += (get(p) - mean) * (get(p) - mean) / static_cast<double>(outcomes.size());
+      o.scales.outcome_variance[static_cast<size_t>(k)] = var;
+    }
+  } else {
+    o.scales.outcome_variance = {0, 0, 0};
+  }
   CalibrationResult r;
   for (int i : train) r.train_ids.push_back(trials[static_cast<size_t>(i)].trial_id);
   for (int i : hold) r.heldout_ids.push_back(trials[static_cast<size_t>(i)].trial_id);

@@ -16,6 +16,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include "arena/assessment/calibration.hpp"
 #include "arena/assessment/convergence.hpp"
 #include "arena/assessment/prediction.hpp"
 #include "arena/assessment/truth.hpp"
@@ -172,10 +173,21 @@ EvaluationRun EvaluateCampaign(db::Store& store, std::int64_t campaign_id,
   for (std::size_t i = 0; i < trials.size(); ++i) {
     try {
       scenes[i] = mechanics::ParseScene(trials[i].scene_json);
-      valid_scenes.push_back(*scenes[i]);
     } catch (const std::exception&) {
-      // reported per job as an error
+      continue;  // reported per job as an error
     }
+    if (!options.scales.empty()) {
+      // A scale that cannot apply is the caller's error, never a trial
+      // predicted unscaled.
+      try {
+        scenes[i] = ApplyScales(*scenes[i], options.scales);
+        mechanics::ValidateScene(*scenes[i]);
+      } catch (const std::exception& e) {
+        throw std::invalid_argument("calibration scales on trial " + std::to_string(trials[i].id) +
+                                    ": " + e.what());
+      }
+    }
+    valid_scenes.push_back(*scenes[i]);
   }
   const Built built = BuildPredictors(options.predictors, valid_scenes);
   const std::size_t settings = built.infos.size();
@@ -333,6 +345,7 @@ EvaluationRun EvaluateCampaign(db::Store& store, std::int64_t campaign_id,
   run.report = Summarise(built.infos, results, options.budgets, ComputeNoiseFloor(final_poses));
   run.report.campaign_id = campaign_id;
   run.report.truth = TruthOf(store, campaign_id);
+  run.report.scales = options.scales;
   if (options.group_of) {
     run.report.group_by = options.group_by;
     run.report.groups = SummariseGroups(built.infos, results, group_of_trial);
@@ -361,6 +374,7 @@ EvaluationRun EvaluateCampaign(db::Store& store, std::int64_t campaign_id,
   }
 
   nlohmann::json grid = {{"predictors", built.grids},
+                         {"scales", options.scales},
                          {"budgets", nlohmann::json::array()},
                          {"threads", threads},
                          {"convergence_trials", options.convergence_trials}};

@@ -566,6 +566,7 @@ nlohmann::json ToJson(const EvaluationReport& r) {
                         {"recommended_predictor", nullptr},
                         {"recommendation", r.recommendation},
                         {"front", r.front}};
+  out["scales"] = r.scales;
   if (!r.group_by.empty()) {
     nlohmann::json groups = nlohmann::json::array();
     for (const auto& g : r.groups) {

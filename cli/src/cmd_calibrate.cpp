@@ -48,6 +48,7 @@ struct CalibrateOptions {
   int profile_points = -1;  // < 0 = the predictor's default
   bool json = false;
   std::string out_path;          // --out: the result as JSON, besides the store
+  std::string loss = "pose";     // --loss: pose (position, angle, force) or nmse
   std::string holdout_by;        // --holdout-by: a trial parameter
   std::string trial_parameters;  // --trial-parameters: a CSV with a seed column
 };
@@ -223,6 +224,7 @@ std::int64_t StoreResult(db::Store& store, const CalibrateOptions& o,
                           {"seed", o.seed},
                           {"bounds", {o.lower, o.upper}},
                           {"profile_points", co.profile_points},
+                          {"loss", o.loss},
                           {"loss_scales",
                            {{"position_m", co.scales.position_m},
                             {"angle_rad", co.scales.angle_rad},
@@ -288,6 +290,9 @@ int RunCalibrate(const CalibrateOptions& o) {
   } catch (const assessment::CalibrationError& e) {
     throw CommandError(kExitBadInput, e.what());
   }
+  if (o.loss != "pose" && o.loss != "nmse")
+    throw CommandError(kExitBadInput, "--loss: must be pose or nmse, got '" + o.loss + "'");
+  co.outcome_loss = o.loss == "nmse";
   co.holdout = o.holdout;
   co.bootstrap = o.bootstrap;
   co.scales.force_window_s =
@@ -555,6 +560,11 @@ void AddCalibrateCommand(CLI::App& app, Action* action) {
   cmd->add_option("--holdout", o->holdout,
                   "Fraction of trials held out to judge the fit (0: fit and judge every trial)")
       ->check(CLI::Range(0.0, 0.9));
+  cmd->add_option("--loss", o->loss,
+                  "pose: final position (1 mm), angle (0.01 rad) and contact force (0.5 N) "
+                  "errors; nmse: the NMSE of the push's outcome (dx, dy, dtheta in the object's "
+                  "initial frame, each over its variance across the fitted trials)")
+      ->capture_default_str();
   cmd->add_option("--holdout-by", o->holdout_by,
                   "Split by this trial parameter instead (e.g. shape): one fit per value, that "
                   "value's trials held out and every other fitted; a table per held-out value "

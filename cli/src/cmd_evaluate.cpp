@@ -50,6 +50,7 @@ struct EvaluateOptions {
   int convergence_trials = 8;
   bool json = false;
   std::string out_path;          // --out: the report as JSON, besides the store
+  std::int64_t calibration = 0;  // --calibration: its scales applied (0: none)
   std::string group_by;          // --group-by: a trial parameter
   std::string trial_parameters;  // --trial-parameters: a CSV with a seed column
 };
@@ -145,6 +146,14 @@ std::string FormatTable(const assessment::EvaluationReport& r, std::int64_t eval
                 r.predictors.size(), static_cast<long long>(evaluation_id));
   out << line;
   out << "truth: " << r.truth.source << " -- " << r.truth.statement << "\n";
+  if (!r.scales.empty()) {
+    out << "calibrated: every scene scaled before prediction:";
+    for (const auto& [name, k] : r.scales) {
+      std::snprintf(line, sizeof line, " %s x%.4g", name.c_str(), k);
+      out << line;
+    }
+    out << "\n";
+  }
   const double floor_m = r.floor ? r.floor->position_median : 0;
   if (r.floor) {
     std::snprintf(line, sizeof line,
@@ -321,6 +330,21 @@ int RunEvaluate(const EvaluateOptions& o) {
     db::StoreOptions so;
     so.create = false;
     auto store = db::Store::Open(o.db_path, so);
+    if (o.calibration > 0) {
+      const db::Calibration cal = store->GetCalibration(o.calibration);
+      if (cal.campaign_id != o.campaign)
+        throw CommandError(kExitBadInput,
+                           "--calibration: calibration " + std::to_string(o.calibration) +
+                               " was fitted to campaign " + std::to_string(cal.campaign_id) +
+                               ", not " + std::to_string(o.campaign));
+      const auto fitted = nlohmann::json::parse(cal.params_json, nullptr, false);
+      if (!fitted.is_object())
+        throw CommandError(kExitBadInput, "--calibration: calibration " +
+                                              std::to_string(o.calibration) +
+                                              " has no fitted parameters");
+      for (const auto& item : fitted.items())
+        eo.scales[item.key()] = item.value().at("scale").get<double>();
+    }
     std::unique_ptr<ProgressLine> progress;
     eo.progress = [&progress](long done, long failed, long total) {
       if (!progress) progress = std::make_unique<ProgressLine>(total, "replays");
@@ -462,6 +486,10 @@ void AddEvaluateCommand(CLI::App& app, Action* action) {
       "(a minimum)|time_p95");
   cmd->add_option("--threads", o->threads, "Worker threads (0: one per core)")
       ->capture_default_str();
+  cmd->add_option("--calibration", o->calibration,
+                  "Apply this calibration's fitted scales (arena calibrate) to every trial's "
+                  "scene before predicting it, for every predictor")
+      ->check(CLI::PositiveNumber);
   cmd->add_option("--group-by", o->group_by,
                   "Also report every setting per value of this trial parameter (e.g. shape, "
                   "push_angle_rad, speed_mm_s): the trial's stored parameters, else "

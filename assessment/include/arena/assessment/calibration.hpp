@@ -73,6 +73,7 @@
 // once, never twice at once for the same trial.
 #pragma once
 
+#include <array>
 #include <cstdint>
 #include <functional>
 #include <map>
@@ -120,6 +121,11 @@ struct LossScales {
   double angle_rad = 0.01;    // 0.01 rad (0.57 deg) of final angle error weighs 1
   double force_n = 0.5;       // 0.5 N RMS contact-force error weighs 1
   double force_window_s = 0;  // forces compared as means over windows this long (0: per sample)
+  // Outcome loss instead (set by Calibrate from `outcome_loss`): each
+  // output's squared error over its variance across the training trials,
+  // averaged over dx, dy, dtheta -- the mean loss is then the training
+  // trials' NMSE (scoring.hpp). All three > 0 when in use.
+  std::array<double, 3> outcome_variance{0, 0, 0};
 };
 
 // One trial to fit: the scene the predictor runs (the campaign's model
@@ -145,6 +151,9 @@ struct CalibrationOptions {
   int bootstrap = 20;         // resamples for the uncertainty (0: none)
   int threads = 1;            // simulations in parallel
   LossScales scales;
+  // true: fit the outcome's NMSE (LossScales::outcome_variance from the
+  // training trials' true outcomes) instead of the pose and force loss.
+  bool outcome_loss = false;
   int profile_points = 12;  // identifiability profile: scales over the bounds (0: no profile)
   BootstrapMethod bootstrap_method = BootstrapMethod::kRefit;
   std::function<void(const std::string&)> progress;  // optional, one line per stage

@@ -209,6 +209,7 @@ struct EvaluationReport {
   std::optional<std::size_t> recommended;  // index into settings (only with a budget)
   std::string recommendation;              // what and why (or why none)
   std::string front;                       // what the Pareto front looks like
+  std::map<std::string, double> scales;    // calibrated scales applied to every scene
   std::string group_by;                    // the trial parameter grouped by ("" : none)
   std::vector<GroupReport> groups;         // by value, sorted
 };
@@ -269,6 +270,10 @@ struct EvaluationOptions {
   // nothing is evaluated or stored).
   std::string group_by;
   std::function<std::string(const db::Trial&)> group_of;
+  // Calibrated scales (calibration.hpp's names, e.g. mu_pusher) applied to
+  // every trial's scene before any predictor runs it (`arena evaluate
+  // --calibration ID`); empty: the scenes as stored.
+  std::map<std::string, double> scales;
 };
 
 struct EvaluationRun {
