@@ -89,11 +89,15 @@ def build(work, settings_text):
     after = load(f"{work}/evaluate_after.json")
     cal_all = load(f"{work}/calibrate_all.json")
     cal_shape = load(f"{work}/calibrate_by_shape.json")
+    import sqlite3
+    con = sqlite3.connect(f"file:{work}/real.db?mode=ro", uri=True)
+    done, planned = con.execute(
+        "SELECT sum(state = 'done'), count(*) FROM trials WHERE campaign_id = 1").fetchone()
     md = []
-    md.append(f"Settings: {settings_text}.\n")
+    md.append(f"Settings: {settings_text}. Trials done on the replay cells: {done} of {planned}.\n")
     md.append("**Before calibration** (the import's starting values, `mu_pusher` = "
               "`mu_support` = 0.25), all trials:\n")
-    md.append("`arena evaluate --db real.db --campaign 1 --predictors arena,mujoco --dt 0.016,0.004 "
+    md.append("`arena evaluate --db real.db --campaign 1 --predictors arena,mujoco --facets 8 --dt 0.016,0.004 "
               "--mujoco-timestep 0.002,0.001 --group-by shape --trial-parameters "
               "DATASET/trials.csv`\n")
     md.append(table(EVAL_HEADER, eval_rows(before["settings"])) + "\n")

@@ -78,7 +78,11 @@ TrialParameters::TrialParameters(const std::string& csv_path, const std::string&
                                           "trials.csv has one)");
   for (int line = 2; NextRecord(text, &at, &row, &bad); ++line) {
     if (row.size() == 1 && row[0].empty()) continue;  // a blank line
-    if (bad || row.size() != header.size())
+    if (bad)
+      throw CommandError(kExitBadInput, flag + ": '" + csv_path + "' record " +
+                                            std::to_string(line) +
+                                            ": a quote that does not open or close a field");
+    if (row.size() != header.size())
       throw CommandError(kExitBadInput, flag + ": '" + csv_path + "' record " +
                                             std::to_string(line) + " has " +
                                             std::to_string(row.size()) + " fields, the header " +
