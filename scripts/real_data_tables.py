@@ -135,6 +135,10 @@ def build(work, settings_text):
     rows.append(["pooled", pa["trials"], "-", figures_cells(pb)[0]] + figures_cells(pa))
     md.append(table(["held out", "trials", "fitted on the other three", "NMSE before", "NMSE after",
                      "position mm med/p95", "angle ° med/p95"], rows) + "\n")
+    key, far = where_far(work)
+    md.append(f"**Where the calibrated model is far from the data** (arena {key} after "
+              "calibration, per shape and push angle, from the evaluation's per-trial results):\n")
+    md.append(far + "\n")
     return "\n".join(md)
 
 
@@ -209,6 +213,40 @@ def plot(work, out_svg):
     svg.append("</svg>")
     with open(out_svg, "w") as f:
         f.write("\n".join(svg) + "\n")
+
+
+def where_far(work):
+    """Per shape and push angle: the calibrated model's final errors (arena at
+    the first setting), from the evaluation's stored per-trial results."""
+    import csv
+    import sqlite3
+    csv.field_size_limit(1 << 30)
+    after = load(f"{work}/evaluate_after.json")
+    key = after["settings"][0]["model_key"]
+    params = {}
+    with open(f"{work}/dataset/trials.csv", newline="") as f:
+        for row in csv.DictReader(f):
+            params[row["seed"]] = (row["shape"], abs(float(row["push_angle_rad"])) * DEG)
+    con = sqlite3.connect(f"file:{work}/real.db?mode=ro", uri=True)
+    cells = {}
+    for seed, detail, pos, ang in con.execute(
+            "SELECT t.seed, r.detail_json, r.final_position_error, r.final_angle_error "
+            "FROM evaluation_results r JOIN trials t ON t.id = r.trial_id "
+            "WHERE r.evaluation_id = ? AND r.model_key = ? AND r.status = 'ok'",
+            (after["evaluation_id"], key)):
+        shape, angle = params[str(seed)]
+        band = "0-10°" if angle < 10 else "10-45°" if angle < 45 else "45-70°" if angle < 70 \
+            else "70-90°"
+        o = json.loads(detail)["outcome"]
+        cells.setdefault((shape, band), []).append(
+            (pos * 1e3, ang * DEG, abs(o["true"][2]) * DEG))
+    rows = []
+    for (shape, band), v in sorted(cells.items()):
+        rows.append([shape, band, len(v), f"{sum(p for p, _, _ in v) / len(v):.2f}",
+                     f"{max(p for p, _, _ in v):.2f}", f"{sum(a for _, a, _ in v) / len(v):.2f}",
+                     f"{max(a for _, a, _ in v):.2f}", f"{sum(t for _, _, t in v) / len(v):.1f}"])
+    return key, table(["shape", "push angle (abs)", "trials", "position mm mean", "max",
+                       "angle ° mean", "max", "measured turn ° mean"], rows)
 
 
 def cells(text):
