@@ -97,8 +97,8 @@ def build(work, settings_text):
     md.append(f"Settings: {settings_text}. Trials done on the replay cells: {done} of {planned}.\n")
     md.append("**Before calibration** (the import's starting values, `mu_pusher` = "
               "`mu_support` = 0.25), all trials:\n")
-    md.append("`arena evaluate --db real.db --campaign 1 --predictors arena,mujoco --facets 8 --dt 0.016,0.004 "
-              "--mujoco-timestep 0.002,0.001 --group-by shape --trial-parameters "
+    md.append("`arena evaluate --db real.db --campaign 1 --predictors arena,mujoco --facets 8 --dt 0.016,0.008 "
+              "--mujoco-timestep 0.002 --group-by shape --trial-parameters "
               "DATASET/trials.csv`\n")
     md.append(table(EVAL_HEADER, eval_rows(before["settings"])) + "\n")
     md.append("Per shape (the same command; each shape's NMSE over its own trials' variance):\n")
@@ -106,9 +106,11 @@ def build(work, settings_text):
     rep = cal_all["report"]
     md.append("**Calibrated on every trial, scored on the same trials** (the reference's "
               "protocol):\n")
-    md.append("`arena calibrate --db real.db --campaign 1 --params mu_pusher,mu_support --loss nmse "
+    md.append("`arena calibrate --db real.db --campaign 1 --params mu_pusher --loss nmse --max-evaluations 20 "
               "--holdout 0 --predictor-settings '{\"dt\": 0.016}'`\n")
-    rows = [["arena g8_k3_dt0.016, before", "0.25, 0.25"] + figures_cells(rep["train_figures"]["before"]),
+    nominal = ", ".join(f"{n} {p['nominal']:.3f}" for n, p in sorted(cal_all["params"].items())
+                        if "nominal" in p)
+    rows = [["arena g8_k3_dt0.016, before", nominal] + figures_cells(rep["train_figures"]["before"]),
             ["arena g8_k3_dt0.016, after", fitted_text(cal_all["params"])] +
             figures_cells(rep["train_figures"]["after"]),
             ["reference (quasi-static limit surface)", f"mu_pusher {REFERENCE['mu_pusher']}",
@@ -122,7 +124,7 @@ def build(work, settings_text):
     md.append("**Held out by shape** (fit on three shapes, score on the fourth, all four ways; each "
               "held-out NMSE over that shape's own trials; pooled: every trial predicted by the fit "
               "that did not see its shape, NMSE over all 50):\n")
-    md.append("`arena calibrate --db real.db --campaign 1 --params mu_pusher,mu_support --loss nmse "
+    md.append("`arena calibrate --db real.db --campaign 1 --params mu_pusher --loss nmse --max-evaluations 20 "
               "--holdout-by shape --trial-parameters DATASET/trials.csv --predictor-settings "
               "'{\"dt\": 0.016}'`\n")
     rows = []
