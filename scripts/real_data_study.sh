@@ -14,19 +14,19 @@
 # The plot of where the model is far from the data: WORK/real_data_errors.svg.
 # --check  compare the tables with the block between the markers
 #          <!-- real-data-study:begin --> and <!-- real-data-study:end --> in FILE
-#          (every figure but wall times); exit 1 on a difference
+#          (every figure but wall times); exit 1 on a difference; repeatable
 set -euo pipefail
 here="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 data="$here/../shared/data/mit-push"
 arena="$here/build/bin/arena"
 work=""
-check=""
+check=()
 while (($#)); do
   case "$1" in
     --data) data="$2"; shift 2 ;;
     --arena) arena="$2"; shift 2 ;;
     --work) work="$2"; shift 2 ;;
-    --check) check="$2"; shift 2 ;;
+    --check) check+=(--check "$2"); shift 2 ;;
     -h|--help) sed -n '2,18p' "$0"; exit 0 ;;
     *) echo "real_data_study: unknown argument '$1' (see --help)" >&2; exit 2 ;;
   esac
@@ -88,7 +88,7 @@ step evaluate "$arena" evaluate "${common[@]}" --predictors arena,mujoco --facet
   --mujoco-timestep "$mujoco_ts" --out "$work/evaluate_before.json" || fail evaluate $?
 # The reference's protocol: fit every trial, score the same trials.
 cal=(--db "$db" --campaign 1 --params "$fit_params" --loss nmse --bootstrap 0 --profile-points 0
-     --max-evaluations 20
+     --max-evaluations 15
      --predictor-settings "$fit_model" --threads 2 --json)
 rc=0
 step calibrate_all "$arena" calibrate "${cal[@]}" --holdout 0 --out "$work/calibrate_all.json" || rc=$?
@@ -106,4 +106,4 @@ total=$(echo "$(date +%s.%N) - $start" | bc)
 
 python3 "$here/scripts/real_data_tables.py" --work "$work" --total "$total" \
   --settings "arena dt $arena_dt; mujoco timestep $mujoco_ts; fitted $fit_params at $fit_model" \
-  --plot "$work/real_data_errors.svg" ${check:+--check "$check"}
+  --plot "$work/real_data_errors.svg" "${check[@]}"
