@@ -54,7 +54,7 @@ log="$work/study.log"
 # The settings the study compares (docs/real_data.md "Results").
 arena_dt="0.016,0.008"
 mujoco_ts="0.002"
-fit_params="mu_pusher"
+fit_params="mu_pusher,pressure_rim"
 fit_model='{"dt": 0.016}'
 
 start=$(date +%s.%N)
@@ -88,7 +88,7 @@ step evaluate "$arena" evaluate "${common[@]}" --predictors arena,mujoco --facet
   --mujoco-timestep "$mujoco_ts" --out "$work/evaluate_before.json" || fail evaluate $?
 # The reference's protocol: fit every trial, score the same trials.
 cal=(--db "$db" --campaign 1 --params "$fit_params" --loss nmse --bootstrap 0 --profile-points 0
-     --max-evaluations 15
+     --max-evaluations 20 --lower 0.05
      --predictor-settings "$fit_model" --threads 2 --json)
 rc=0
 step calibrate_all "$arena" calibrate "${cal[@]}" --holdout 0 --out "$work/calibrate_all.json" || rc=$?

@@ -106,7 +106,7 @@ def build(work, settings_text):
     rep = cal_all["report"]
     md.append("**Calibrated on every trial, scored on the same trials** (the reference's "
               "protocol):\n")
-    md.append("`arena calibrate --db real.db --campaign 1 --params mu_pusher --loss nmse --max-evaluations 15 "
+    md.append("`arena calibrate --db real.db --campaign 1 --params mu_pusher,pressure_rim --loss nmse --max-evaluations 20 --lower 0.05 "
               "--holdout 0 --predictor-settings '{\"dt\": 0.016}'`\n")
     nominal = ", ".join(f"{n} {p['nominal']:.3f}" for n, p in sorted(cal_all["params"].items())
                         if "nominal" in p)
@@ -124,7 +124,7 @@ def build(work, settings_text):
     md.append("**Held out by shape** (fit on three shapes, score on the fourth, all four ways; each "
               "held-out NMSE over that shape's own trials; pooled: every trial predicted by the fit "
               "that did not see its shape, NMSE over all 50):\n")
-    md.append("`arena calibrate --db real.db --campaign 1 --params mu_pusher --loss nmse --max-evaluations 15 "
+    md.append("`arena calibrate --db real.db --campaign 1 --params mu_pusher,pressure_rim --loss nmse --max-evaluations 20 --lower 0.05 "
               "--holdout-by shape --trial-parameters DATASET/trials.csv --predictor-settings "
               "'{\"dt\": 0.016}'`\n")
     rows = []
