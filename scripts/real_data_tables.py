@@ -87,6 +87,11 @@ def fitted_text(params):
 def build(work, settings_text):
     before = load(f"{work}/evaluate_before.json")
     after = load(f"{work}/evaluate_after.json")
+    after_mujoco = load(f"{work}/evaluate_after_mujoco.json")
+    after["settings"] += after_mujoco["settings"]
+    for g, gm in zip(after["groups"], after_mujoco["groups"]):
+        assert g["value"] == gm["value"]
+        g["settings"] += gm["settings"]
     cal_all = load(f"{work}/calibrate_all.json")
     cal_shape = load(f"{work}/calibrate_by_shape.json")
     import sqlite3
@@ -116,9 +121,13 @@ def build(work, settings_text):
             ["reference (quasi-static limit surface)", f"mu_pusher {REFERENCE['mu_pusher']}",
              f"{REFERENCE['nmse']:.3f}", "%.2f/%.2f" % REFERENCE["pos"], "%.2f/%.2f" % REFERENCE["ang"]]]
     md.append(table(["model", "friction", "NMSE", "position mm med/p95", "angle ° med/p95"], rows) + "\n")
-    md.append(f"**After calibration** (calibration {cal_all['id']}'s scales applied to every scene, "
-              "both predictors):\n")
-    md.append(f"`arena evaluate ... --calibration {cal_all['id']}` (otherwise as before)\n")
+    mu = cal_all["params"]["mu_pusher"]["scale"]
+    md.append(f"**After calibration**: arena with calibration {cal_all['id']}'s scales on every "
+              "scene; MuJoCo with its pusher friction alone (MuJoCo spreads the support's load by "
+              "its own contacts and refuses a weighted pressure):\n")
+    md.append(f"`arena evaluate ... --predictors arena --calibration {cal_all['id']}` and "
+              f"`arena evaluate ... --predictors mujoco --scale mu_pusher={mu:.6g}` (otherwise as "
+              "before)\n")
     md.append(table(EVAL_HEADER, eval_rows(after["settings"])) + "\n")
     md.append(by_shape(after) + "\n")
     md.append("**Held out by shape** (fit on three shapes, score on the fourth, all four ways; each "

@@ -14,6 +14,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include "arena/assessment/calibration.hpp"
 #include "arena/assessment/evaluation.hpp"
 #include "arena/db/store.hpp"
 #include "arena/mechanics/scene_json.hpp"
@@ -49,10 +50,11 @@ struct EvaluateOptions {
   int threads = 0;
   int convergence_trials = 8;
   bool json = false;
-  std::string out_path;          // --out: the report as JSON, besides the store
-  std::int64_t calibration = 0;  // --calibration: its scales applied (0: none)
-  std::string group_by;          // --group-by: a trial parameter
-  std::string trial_parameters;  // --trial-parameters: a CSV with a seed column
+  std::string out_path;             // --out: the report as JSON, besides the store
+  std::int64_t calibration = 0;     // --calibration: its scales applied (0: none)
+  std::vector<std::string> scales;  // --scale NAME=FACTOR, over --calibration's
+  std::string group_by;             // --group-by: a trial parameter
+  std::string trial_parameters;     // --trial-parameters: a CSV with a seed column
 };
 
 // "0.002:1" -> {0.002, 1}; exactly N finite numbers or a bad-input error
@@ -345,6 +347,28 @@ int RunEvaluate(const EvaluateOptions& o) {
       for (const auto& item : fitted.items())
         eo.scales[item.key()] = item.value().at("scale").get<double>();
     }
+    for (const auto& text : o.scales) {
+      const auto eq = text.find('=');
+      double k = 0;
+      std::size_t used = 0;
+      const std::string name = text.substr(0, eq);
+      try {
+        if (eq != std::string::npos) k = std::stod(text.substr(eq + 1), &used);
+      } catch (const std::exception&) {
+        used = 0;
+      }
+      if (eq == std::string::npos || used == 0 || used != text.size() - eq - 1 ||
+          !std::isfinite(k) || !(k > 0))
+        throw CommandError(kExitBadInput, "--scale: '" + text +
+                                              "' must be NAME=FACTOR with a factor > 0 (e.g. "
+                                              "mu_pusher=1.2)");
+      try {
+        (void)assessment::ParseCalibrationParam(name);
+      } catch (const assessment::CalibrationError& e) {
+        throw CommandError(kExitBadInput, std::string("--scale: ") + e.what());
+      }
+      eo.scales[name] = k;
+    }
     std::unique_ptr<ProgressLine> progress;
     eo.progress = [&progress](long done, long failed, long total) {
       if (!progress) progress = std::make_unique<ProgressLine>(total, "replays");
@@ -490,6 +514,10 @@ void AddEvaluateCommand(CLI::App& app, Action* action) {
                   "Apply this calibration's fitted scales (arena calibrate) to every trial's "
                   "scene before predicting it, for every predictor")
       ->check(CLI::PositiveNumber);
+  cmd->add_option("--scale", o->scales,
+                  "NAME=FACTOR, repeatable: scale this parameter (arena calibrate's names: "
+                  "mu_pusher, mu_support, pressure_rim, ...) on every scene, over "
+                  "--calibration's");
   cmd->add_option("--group-by", o->group_by,
                   "Also report every setting per value of this trial parameter (e.g. shape, "
                   "push_angle_rad, speed_mm_s): the trial's stored parameters, else "
