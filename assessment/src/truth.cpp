@@ -28,8 +28,12 @@ std::vector<Eigen::Vector3d> ContactNormals(const mechanics::Scene& scene) {
 
 mechanics::TrajectorySample ToTrajectorySample(const db::Sample& s,
                                                const std::vector<Eigen::Vector3d>& normals,
-                                               bool has_pusher) {
-  if (s.contacts.size() != normals.size()) {
+                                               bool has_pusher, bool forces_measured) {
+  if (!forces_measured && !s.contacts.empty()) {
+    throw std::invalid_argument("sample has " + std::to_string(s.contacts.size()) +
+                                " contacts, and the trial's truth measured no forces");
+  }
+  if (forces_measured && s.contacts.size() != normals.size()) {
     throw std::invalid_argument("sample has " + std::to_string(s.contacts.size()) +
                                 " contacts, the scene " + std::to_string(normals.size()));
   }
@@ -65,7 +69,7 @@ std::vector<mechanics::TrajectorySample> ReadTruth(const db::Store& store, std::
   std::vector<mechanics::TrajectorySample> out;
   out.reserve(gt.samples.size());
   for (const auto& s : gt.samples) {
-    out.push_back(ToTrajectorySample(s, normals, scene.pusher.has_value()));
+    out.push_back(ToTrajectorySample(s, normals, scene.pusher.has_value(), gt.forces_measured()));
   }
   return out;
 }

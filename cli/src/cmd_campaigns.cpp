@@ -244,6 +244,9 @@ int Status(const std::string& db_path, std::int64_t only, bool as_json, bool all
                   t.truth == "self-consistency" ? ": errors are self-consistency, not accuracy"
                   : t.truth == "measured"
                       ? ": the observed streams are the truth (no separate true stream)"
+                  : t.truth == db::kTruthMeasuredNoForces
+                      ? ": measured poses, forces not measured or failed their import check "
+                        "(not scored)"
                       : "");
     }
     const std::string failures = FormatFailures(CampaignFailures(*store, c.id), "      ") +

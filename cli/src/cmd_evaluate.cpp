@@ -426,8 +426,10 @@ int RunEvaluate(const EvaluateOptions& o) {
                       ? ": these errors are arena's model against itself, not accuracy"
                   : t.truth == "measured"
                       ? ": measured, the observed streams are the truth (no separate true "
-                        "stream); trials whose streams failed the import check are not scored "
-                        "on them"
+                        "stream); trials whose poses failed the import check are not served"
+                  : t.truth == db::kTruthMeasuredNoForces
+                      ? ": measured poses; the forces were not measured or failed their import "
+                        "check: poses scored, forces not scored on these trials"
                       : "");
     }
     for (const auto& p : self_consistent)

@@ -310,6 +310,7 @@ struct PlotOptions {
   std::vector<std::string> map;  // X, Y
   std::string metric;
   std::string out;
+  bool paths = false;      // --paths: a TRIAL seen from above (TrialPathsSvg)
   bool scene = false;      // --scene given: a picture of the set-up
   std::string scene_file;  // its file; "" = the TRIAL's stored scene
 };
@@ -448,6 +449,25 @@ int RunPlot(const PlotOptions& o) {
     throw CommandError(kExitBadInput,
                        "plot: --calibration is a plot of its own (no TRIAL, --tradeoff or --map)");
   }
+  if (o.paths && o.trial < 0)
+    throw CommandError(kExitBadInput, "plot --paths: give a TRIAL (--db F TRIAL --paths)");
+  if (o.trial >= 0 && o.paths) {
+    try {
+      db::StoreOptions so;
+      so.read_only = true;
+      so.create = false;
+      auto store = db::Store::Open(o.db_path, so);
+      TrialPlotInfo info;
+      WriteFile(o.out, TrialPathsSvg(*store, o.trial, &info));
+      std::fprintf(stderr, "trial %lld: %zu samples, prediction %s (%s) -> %s\n",
+                   static_cast<long long>(o.trial), info.samples,
+                   info.model_key.empty() ? "-" : info.model_key.c_str(),
+                   info.prediction_status.c_str(), o.out.c_str());
+      return kExitOk;
+    } catch (const db::StoreError& e) {
+      throw StoreCommandError(e);
+    }
+  }
   if (o.trial >= 0) return PlotTrial(o.db_path, o.trial, o.out);
   try {
     db::StoreOptions so;
@@ -492,6 +512,9 @@ void AddPlotCommand(CLI::App& app, Action* action) {
                   "A calibration's loss profile (arena calibrate): the training loss along each "
                   "fitted parameter, the fit, and what the data rule out")
       ->check(CLI::PositiveNumber);
+  cmd->add_flag("--paths", o->paths,
+                "With a TRIAL: the trial seen from above: the object's true (measured) and "
+                "predicted paths with its outline at a few instants, and the pusher's path");
   auto* scene = cmd->add_option("--scene", o->scene_file,
                                 "A picture of the set-up: a scene file's (or, with no FILE, "
                                 "the TRIAL's) object, fingers, pusher and its push, in two views "
@@ -500,6 +523,7 @@ void AddPlotCommand(CLI::App& app, Action* action) {
   cmd->footer(
       "Examples:\n"
       "  arena plot --db lab.db 12 --out trial12.svg\n"
+      "  arena plot --db lab.db 12 --paths --out paths12.svg\n"
       "  arena plot --db lab.db --campaign 3 --map grip_force,pivot_offset --metric unstable "
       "--out map.svg\n"
       "  arena plot --db lab.db --campaign 3 --tradeoff --out tradeoff.svg\n"

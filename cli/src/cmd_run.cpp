@@ -134,7 +134,11 @@ std::int64_t PrintSummary(const std::string& db_path, std::int64_t campaign_id, 
         : t.truth == "measured" ? "measured data (" + t.backend +
                                       "): the observed streams are the truth, no separate "
                                       "true stream"
-                                : "an unreported backend";
+        : t.truth == db::kTruthMeasuredNoForces
+            ? "measured data without forces (" + t.backend +
+                  "): forces not measured or failed their import check, poses scored, forces "
+                  "not"
+            : "an unreported backend";
     self_consistency = self_consistency || t.truth == "self-consistency";
     truth_line += what + ", " + std::to_string(t.trials) + " trials";
   }
@@ -151,10 +155,21 @@ std::int64_t PrintSummary(const std::string& db_path, std::int64_t campaign_id, 
   } else {
     std::printf(
         "  model error (median over %zu predictions): final position %.3g mm, final angle %.3g "
-        "deg,\n"
-        "              contact force %.3g N RMS, contact-mode agreement %.1f %%\n",
-        pos_err.size(), Median(pos_err) * 1e3, Median(ang_err) * 180 / M_PI, Median(force_err),
-        100 * Median(mode));
+        "deg,\n",
+        pos_err.size(), Median(pos_err) * 1e3, Median(ang_err) * 180 / M_PI);
+    // Forces only where the truth measured them (a measured trial without
+    // forces is not scored on them): say over how many.
+    if (force_err.empty())
+      std::printf("              contact force not scored (no truth measured forces)\n");
+    else
+      std::printf("              contact force %.3g N RMS, contact-mode agreement %.1f %%%s\n",
+                  Median(force_err), 100 * Median(mode),
+                  force_err.size() < pos_err.size()
+                      ? (" (over " + std::to_string(force_err.size()) + "; " +
+                         std::to_string(pos_err.size() - force_err.size()) +
+                         " without measured forces not scored)")
+                            .c_str()
+                      : "");
   }
   if (!truth_line.empty()) {
     std::printf("  truth       model error is against %s\n", truth_line.c_str());

@@ -11,6 +11,7 @@
 
 #include "arena/mechanics/pusher_motion.hpp"
 #include "arena/mechanics/scene_json.hpp"
+#include "arena/mechanics/support.hpp"
 #include "svg_chart.hpp"
 
 namespace arena::cli {
@@ -227,9 +228,45 @@ std::string SceneSvg(const mechanics::Scene& scene, const std::string& title) {
   if (scene.pusher) push_end = mechanics::PusherPoseAt(*scene.pusher, scene.duration).position;
   const bool moves =
       scene.pusher && !scene.pusher->controller && (push_end - scene.pusher->position).norm() > 0;
+  // A recorded path is drawn as recorded (at most ~200 of its samples).
+  std::vector<Vector3d> path;
+  if (moves && scene.pusher->path) {
+    const auto& rec = *scene.pusher->path;
+    const std::size_t step = std::max<std::size_t>(1, rec.position.size() / 200);
+    for (std::size_t k = 0; k < rec.position.size(); k += step) path.push_back(rec.position[k]);
+    if (path.back() != rec.position.back()) path.push_back(rec.position.back());
+  }
   if (scene.pusher) {
     for (const auto& p : ContactShape(*scene.pusher)) all.push_back(p);
     if (moves) all.push_back(push_end);
+    for (const auto& p : path) all.push_back(p);
+  }
+  // The support: the face the object rests on (its footprint) and the plane.
+  std::vector<Vector3d> footprint, pressure;
+  std::vector<double> pressure_w;
+  std::string support_text;
+  if (scene.support) {
+    try {
+      const mechanics::SupportPressure sp = mechanics::SupportPressureOf(scene);
+      const Eigen::Matrix3d r = Rotation(scene.object.pose);
+      for (const auto& q : ObjectPoints(scene.object)) {
+        // The object's points on the resting cap (in the object frame z = cap_z).
+        const Vector3d local = r.transpose() * (q - scene.object.pose.position);
+        if (std::abs(local.z() - sp.cap_z_O) < 1e-9) footprint.push_back(q);
+      }
+      if (!scene.support->pressure_points.empty()) {
+        for (std::size_t i = 0; i < sp.points_O.size(); ++i) {
+          pressure.push_back(scene.object.pose.position + r * sp.points_O[i]);
+          pressure_w.push_back(sp.weights[i]);
+        }
+      }
+      support_text = "support mu " + FormatNumber(scene.support->mu, 3) + ", " +
+                     (scene.support->pressure_points.empty()
+                          ? std::string("uniform pressure")
+                          : std::to_string(pressure.size()) + " pressure points");
+    } catch (const std::exception& e) {
+      support_text = std::string("support: ") + e.what();
+    }
   }
   const double panel_w = 470, panel_h = 430, top = 70, margin = 20;
   double scale = std::numeric_limits<double>::infinity();
@@ -291,6 +328,67 @@ std::string SceneSvg(const mechanics::Scene& scene, const std::string& title) {
            "\" fill=\"#e6e6e6\" stroke=\"#555\" stroke-width=\"1.5\"/>";
     svg += "<circle cx=\"" + F(c.Px(o.pose.position).x()) + "\" cy=\"" +
            F(c.Px(o.pose.position).y()) + "\" r=\"2.5\" fill=\"#555\"/></g>";
+    // The support: in a view along the table its plane (a line with hatching
+    // below, across the panel), seen from above the footprint (dashed) and
+    // any weighted pressure points (area by weight).
+    if (!footprint.empty()) {
+      svg += "<g id=\"support\">";
+      std::vector<Vector2d> fp;
+      for (const auto& p : footprint) fp.push_back(c.Project(p));
+      const auto hull = Hull(fp);
+      Vector2d lo = Vector2d::Constant(std::numeric_limits<double>::infinity()), hi = -lo;
+      for (const auto& q : hull) lo = lo.cwiseMin(q), hi = hi.cwiseMax(q);
+      const Vector2d span = hi - lo;
+      if (span.minCoeff() < 1e-9 * std::max(1.0, span.maxCoeff())) {
+        // Edge-on: the plane as a line, hatched on the side away from the object.
+        Vector2d e0 = hull.front(), e1 = hull.front();  // the two points farthest apart
+        for (const auto& p : hull)
+          for (const auto& q : hull)
+            if ((p - q).norm() > (e0 - e1).norm()) e0 = p, e1 = q;
+        const Vector2d a = c.Px2(e0), b = c.Px2(e1);
+        const Vector2d u = (b - a).norm() > 1e-9 ? Vector2d((b - a).normalized()) : Vector2d(1, 0);
+        Vector2d n(-u.y(), u.x());
+        if ((c.Px(scene.object.pose.position) - a).dot(n) > 0) n = -n;  // away from the object
+        const Vector2d l0 = a - 0.45 * c.w() * u, l1 = b + 0.45 * c.w() * u;
+        const auto inside = [&](const Vector2d& q) {
+          return q.x() >= c.x0() && q.x() <= c.x0() + c.w() && q.y() >= c.y0() &&
+                 q.y() <= c.y0() + c.h();
+        };
+        Vector2d p0 = l0, p1 = l1;
+        for (int k = 0; k < 200 && !inside(p0); ++k) p0 += 0.005 * (l1 - l0);
+        for (int k = 0; k < 200 && !inside(p1); ++k) p1 -= 0.005 * (l1 - l0);
+        svg += "<line x1=\"" + F(p0.x()) + "\" y1=\"" + F(p0.y()) + "\" x2=\"" + F(p1.x()) +
+               "\" y2=\"" + F(p1.y()) + "\" stroke=\"#8d6e63\" stroke-width=\"2\"/>";
+        const double len = (p1 - p0).norm();
+        for (double d = 0; d < len; d += 12) {
+          const Vector2d h0 = p0 + d * u, h1 = h0 + 8 * n - 6 * u;
+          if (inside(h1))
+            svg += "<line x1=\"" + F(h0.x()) + "\" y1=\"" + F(h0.y()) + "\" x2=\"" + F(h1.x()) +
+                   "\" y2=\"" + F(h1.y()) + "\" stroke=\"#8d6e63\" stroke-width=\"1\"/>";
+        }
+        svg += Text(p1 + 14 * n + Vector2d(-4, 4), support_text, "#8d6e63", "end", 11);
+      } else {
+        // A prism's face in its outline's order (it may be non-convex), else the hull.
+        const bool prism = scene.object.shape != mechanics::ObjectShape::kBox &&
+                           scene.object.shape != mechanics::ObjectShape::kCylinder;
+        std::string d;
+        for (const auto& q : prism ? fp : hull) d += F(c.Px2(q).x()) + "," + F(c.Px2(q).y()) + " ";
+        svg += "<polygon points=\"" + d +
+               "\" fill=\"none\" stroke=\"#8d6e63\" stroke-width=\"2\" "
+               "stroke-dasharray=\"2,3\"/>";
+        double w_max = 0;
+        for (double w : pressure_w) w_max = std::max(w_max, w);
+        for (std::size_t i = 0; i < pressure.size(); ++i) {
+          const Vector2d q = c.Px(pressure[i]);
+          svg += "<circle cx=\"" + F(q.x()) + "\" cy=\"" + F(q.y()) + "\" r=\"" +
+                 F(1.5 + 4.5 * std::sqrt(pressure_w[i] / std::max(w_max, 1e-300))) +
+                 "\" fill=\"#8d6e63\" fill-opacity=\"0.6\"/>";
+        }
+        svg += Text(c.Px2(Vector2d(0.5 * (lo.x() + hi.x()), lo.y())) + Vector2d(0, 16),
+                    "footprint on the support", "#8d6e63", "middle", 11);
+      }
+      svg += "</g>";
+    }
     // The fingers and the pusher.
     for (size_t i = 0; i < scene.fingers.size(); ++i) {
       const auto& f = scene.fingers[i];
@@ -305,7 +403,22 @@ std::string SceneSvg(const mechanics::Scene& scene, const std::string& title) {
       if (moves) {
         const Vector2d a = c.Px(scene.pusher->position), b = c.Px(push_end);
         svg += "<g id=\"push-motion\">";
-        if ((b - a).norm() > 3) {
+        Vector2d lo = Vector2d::Constant(std::numeric_limits<double>::infinity()), hi = -lo;
+        for (const auto& p : path) lo = lo.cwiseMin(c.Px(p)), hi = hi.cwiseMax(c.Px(p));
+        if (!path.empty() && (hi - lo).norm() > 3) {
+          // The recorded path itself (dashed), its end hollow.
+          std::string d;
+          for (const auto& p : path) d += F(c.Px(p).x()) + "," + F(c.Px(p).y()) + " ";
+          svg += "<polyline class=\"recorded-path\" points=\"" + d +
+                 "\" fill=\"none\" stroke=\"#c0392b\" stroke-width=\"2\" "
+                 "stroke-dasharray=\"6,4\"/>";
+          svg += "<circle cx=\"" + F(b.x()) + "\" cy=\"" + F(b.y()) +
+                 "\" r=\"4\" fill=\"none\" stroke=\"#c0392b\"/>";
+          svg += Text(
+              b + Vector2d(8, -8),
+              "recorded path, ends " + Length((push_end - scene.pusher->position).norm()) + " away",
+              "#c0392b", "start", 11);
+        } else if ((b - a).norm() > 3) {
           // Beside the pusher (not over its normal's arrow), with its end drawn hollow.
           const Vector2d u = (b - a).normalized(), side(-u.y() * 14, u.x() * 14);
           svg += Arrow(a + side, b + side, "#c0392b", true);
@@ -343,6 +456,11 @@ std::string SceneSvg(const mechanics::Scene& scene, const std::string& title) {
               "blue: fingers, red: pusher (arrows point into the object; dashed: the pusher's "
               "path over the push), grey: the object at its start pose",
               "#555", "middle", 12);
+  if (!support_text.empty())
+    svg += Text({width / 2, height - 22},
+                "brown: the support (" + support_text +
+                    "): its plane seen edge-on, the object's footprint on it seen from above",
+                "#555", "middle", 12);
   svg += "</svg>\n";
   return svg;
 }

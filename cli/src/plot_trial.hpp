@@ -34,6 +34,17 @@ Chart MakeTrialChart(const db::Store& store, std::int64_t trial_id, TrialPlotInf
 // @returns kExitOk. @throws CommandError (exit code per README).
 int PlotTrial(const std::string& db_path, std::int64_t trial, const std::string& out);
 
+// `arena plot --db DB TRIAL --paths`: the trial seen from above (x right, y
+// up, one scale): the object's true path (for an imported recording: the
+// measured one) and the prediction's (the campaign's prediction settings),
+// the object's outline at the start, 1/3, 2/3 and the end of both, and the
+// pusher's centre path with its tip at those instants. Groups carry ids:
+// measured-path, predicted-path, measured-outlines, predicted-outlines,
+// pusher-path, scale-bar.
+// @throws CommandError as MakeTrialChart.
+std::string TrialPathsSvg(const db::Store& store, std::int64_t trial_id,
+                          TrialPlotInfo* info = nullptr);
+
 // Writes the chart's SVG to `out` atomically. @throws CommandError(kExitFailure).
 void WriteSvgFile(const Chart& chart, const std::string& out);
 

@@ -355,7 +355,7 @@ std::vector<Sample> internal::ReadStreamSamples(const Store::Impl& impl, std::in
 GroundTruth Store::ReadGroundTruth(std::int64_t trial_id) const {
   Tx tx(impl_->db, false);  // one snapshot: the stream cannot change under us
   auto t = impl_->Prepare(
-      "SELECT t.gt_stream_id, g.attempt, g.cell_id, g.samples FROM trials t"
+      "SELECT t.gt_stream_id, g.attempt, g.cell_id, g.samples, IFNULL(t.truth, '') FROM trials t"
       " LEFT JOIN gt_streams g ON g.id = t.gt_stream_id WHERE t.id = ?");
   t->Bind(1, trial_id);
   if (!t->Step()) {
@@ -373,6 +373,7 @@ GroundTruth Store::ReadGroundTruth(std::int64_t trial_id) const {
   gt.attempt = static_cast<int>(t->Int(1));
   gt.cell_id = t->Text(2);
   const std::int64_t expected = t->Int(3);
+  gt.truth = t->Text(4);
   gt.samples = internal::ReadStreamSamples(*impl_, stream, expected, "ReadGroundTruth");
   tx.Commit();
   return gt;

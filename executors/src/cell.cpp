@@ -92,7 +92,7 @@ std::string CheckStreamLength(const mechanics::Scene& scene,
 // values, a time that does not start at 0 or does not increase.
 std::string CheckTrueSample(const mechanics::TrajectorySample& s,
                             const std::vector<mechanics::TrajectorySample>& before,
-                            const mechanics::Scene& scene) {
+                            const mechanics::Scene& scene, const TrialTruth& truth) {
   bool finite = std::isfinite(s.t) && s.position.allFinite() &&
                 s.orientation.coeffs().allFinite() && s.velocity.allFinite() &&
                 s.angular_velocity.allFinite() && s.pusher_position.allFinite() &&
@@ -114,12 +114,24 @@ std::string CheckTrueSample(const mechanics::TrajectorySample& s,
     return "t = " + std::to_string(s.t) + " s is past the scene's duration of " +
            std::to_string(scene.duration) + " s";
   }
+  if (!truth.forces_measured) {
+    if (!s.contacts.empty())
+      return "the trial's truth measured no contact forces (" + truth.forces_note + "), got " +
+             std::to_string(s.contacts.size()) + " contacts";
+    return "";
+  }
   const size_t contacts = scene.fingers.size() + (scene.pusher ? 1 : 0);
   if (s.contacts.size() != contacts) {
     return "expected " + std::to_string(contacts) + " contacts (fingers, then the pusher), got " +
            std::to_string(s.contacts.size());
   }
   return "";
+}
+
+std::string StoredTruth(TruthSource source, const TrialTruth& truth) {
+  if (source == TruthSource::kMeasured && !truth.forces_measured)
+    return dds::kTruthMeasuredNoForces;
+  return ToString(source);
 }
 
 void ValidateCellOptions(const CellOptions& o) {
@@ -185,10 +197,11 @@ struct Cell::Impl {
                          int>;  // session, trial, attempt, phase
   static constexpr std::size_t kRemembered = 1024;
   std::map<Key, msg::TrialStatus> done;
-  std::deque<Key> done_order;                   // oldest first
-  reset::Pose true_pose;                        // where the object really is now
-  reset::Pose observed_pose;                    // where the sensors saw it last
-  TrialStart trial_start;                       // where trials start (the last reset)
+  std::deque<Key> done_order;  // oldest first
+  reset::Pose true_pose;       // where the object really is now
+  reset::Pose observed_pose;   // where the sensors saw it last
+  TrialTruth trial_truth;      // of the trial being executed (Backend::PreparedTruth)
+  TrialStart trial_start;      // where trials start (the last reset)
   std::optional<mechanics::PusherSpec> pusher;  // the pusher mounted now
   std::uint64_t started_unix_ns = UnixNanos();
   std::thread worker;
@@ -204,12 +217,25 @@ struct Cell::Impl {
     return p;
   }
 
+  // The backend's own workspace (a recording's extent) when the cell's
+  // profile leaves the workspace at its default.
+  static CellOptions WithBackendWorkspace(CellOptions o, const Backend& backend) {
+    const DefectProfile defaults;
+    const auto caps = backend.Capabilities();
+    if (caps.workspace && o.defects.workspace_min == defaults.workspace_min &&
+        o.defects.workspace_max == defaults.workspace_max) {
+      o.defects.workspace_min = caps.workspace->first;
+      o.defects.workspace_max = caps.workspace->second;
+    }
+    return o;
+  }
+
   Impl(const CellOptions& o, std::function<mechanics::Scene(std::string_view)> parser,
        std::unique_ptr<Backend> backend)
-      : options(o),
+      : options(WithBackendWorkspace(o, *backend)),
         parse(std::move(parser)),
-        layer(std::move(backend), o.defects),
-        reset_params(EffectiveResetParams(o.defects)),
+        layer(std::move(backend), options.defects),
+        reset_params(EffectiveResetParams(options.defects)),
         participant(ParticipantFor(o)),
         announce(participant),
         status(participant),
@@ -415,6 +441,20 @@ struct Cell::Impl {
     if (std::string why = layer.Prepare(scene, c.defects_json(), trial); !why.empty()) {
       return Refuse(c, why);
     }
+    // A truth without forces is a measured recording's stated fact; a
+    // simulator or robot always reports every contact.
+    trial_truth = layer.PreparedTruth();
+    if (!trial_truth.forces_measured && layer.capabilities().truth != TruthSource::kMeasured) {
+      return Refuse(c, "backend " + layer.capabilities().name + ": its " +
+                           ToString(layer.capabilities().truth) +
+                           " truth says it measured no contact forces; only a measured "
+                           "recording may lack them");
+    }
+    if (!trial_truth.forces_measured && closed_loop) {
+      return Refuse(c,
+                    "pusher.motion.controller: a truth without contact forces cannot run "
+                    "closed loop");
+    }
     auto accepted = BaseStatus(c, msg::STATE_ACCEPTED);
     Send(accepted);
     trial_start.TrialRan();                   // the trial moves the object
@@ -448,7 +488,7 @@ struct Cell::Impl {
     TrialStream out(stream_port, c, trial.deadline, Pacing::kLive);
     const SampleSink sink = [&](const mechanics::TrajectorySample& s) {
       if (!got.problem.empty() || !out.failure().empty()) return false;
-      if (std::string why = CheckTrueSample(s, got.samples, scene); !why.empty()) {
+      if (std::string why = CheckTrueSample(s, got.samples, scene, trial_truth); !why.empty()) {
         got.problem = why;
         return false;
       }
@@ -487,7 +527,8 @@ struct Cell::Impl {
     detail["dropped_observations"] = dropped;
     detail["batches"] = out.batches();
     detail["backend"] = layer.capabilities().name;
-    detail["truth"] = ToString(layer.capabilities().truth);
+    detail["truth"] = StoredTruth(layer.capabilities().truth, trial_truth);
+    if (!trial_truth.forces_measured) detail["forces_not_measured"] = trial_truth.forces_note;
     detail["defects_applied"] = json::parse(layer.AppliedJson());
     s.detail_json(detail.dump());
     if (!failure.empty()) {

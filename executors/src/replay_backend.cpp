@@ -17,6 +17,7 @@
 #include <nlohmann/json.hpp>
 
 #include "arena/executors/backend.hpp"
+#include "arena/mechanics/pusher_motion.hpp"
 #include "arena/mechanics/scene_json.hpp"
 #include "recorded_stream.hpp"
 
@@ -69,13 +70,14 @@ json Canonical(const json& scene) {
 // (fingers, then the pusher), named as the export names them (a finger's
 // name, "pusher"; "contactK" by position when the recording had another set).
 // One row at a time: a stream is never held whole.
-// A measured recording whose force stream failed its import check has no
-// contact columns at all: its samples then carry no contacts (forces unknown,
-// never scored), when `forces_optional`.
+// A measured recording whose forces were not measured or failed their
+// import check (`forces_measured` false, from the manifest) is served
+// without contacts, whatever columns the stream has: its truth says so
+// (Backend::PreparedTruth) and no force of it is ever scored.
 class RowToSample {
  public:
   RowToSample(const std::vector<std::string>& columns, const mechanics::Scene& scene,
-              bool forces_optional)
+              bool forces_measured)
       : columns_(columns) {
     for (size_t i = 0; i < scene.fingers.size(); ++i) {
       names_.push_back(scene.fingers[i].name.empty() ? "finger" + std::to_string(i)
@@ -90,9 +92,7 @@ class RowToSample {
     pose_ = Cols("", {"x", "y", "z", "qw", "qx", "qy", "qz"});
     twist_ = Cols("", {"vx", "vy", "vz", "wx", "wy", "wz"});
     pusher_pos_ = Cols("pusher_", {"x", "y", "z"});
-    const bool no_forces = forces_optional && Find("pusher_fx") < 0 && Find("contact0_fx") < 0 &&
-                           (scene.fingers.empty() || Find(names_[0] + "_fx") < 0);
-    if (no_forces) names_.clear();
+    if (!forces_measured) names_.clear();
     for (size_t c = 0; c < names_.size(); ++c) {
       const std::string prefix =
           (Find(names_[c] + "_fx") >= 0 ? names_[c] : "contact" + std::to_string(c)) + "_";
@@ -193,6 +193,7 @@ struct Recorded {
   std::string seed;
   json scene;
   std::string refused;        // an imported trial whose poses failed their check: why
+  TrialTruth truth;           // an imported trial whose forces failed their check: says so
   std::uint64_t samples = 0;  // the manifest's count
   fs::path stream;            // csv/jsonl: its true stream file
   FileStamp stamp;            // of that file (hdf5: of dataset.h5) when verified
@@ -280,13 +281,21 @@ class ReplayBackend final : public Backend {
     if (manifest.contains("import") && manifest["import"].is_object() &&
         manifest["import"].contains("trials") && manifest["import"]["trials"].is_array()) {
       for (const auto& t : manifest["import"]["trials"]) {
-        if (!t.is_object() || t.value("pose_usable", true)) continue;
-        for (auto& r : trials_)
-          if (r.trial_id == t.value("trial_id", std::int64_t{-1}))
-            r.refused = "replay: recorded trial " + std::to_string(r.trial_id) + " (" +
-                        t.value("trial", std::string("?")) +
+        if (!t.is_object()) continue;
+        for (auto& r : trials_) {
+          if (r.trial_id != t.value("trial_id", std::int64_t{-1})) continue;
+          const std::string name = t.value("trial", std::string("?"));
+          if (!t.value("pose_usable", true))
+            r.refused = "replay: recorded trial " + std::to_string(r.trial_id) + " (" + name +
                         ") failed its import check of the poses (" + dir +
                         "/import_report.txt): not served, so never scored";
+          if (!t.value("force_usable", true)) {
+            r.truth.forces_measured = false;
+            r.truth.forces_note = "recorded trial " + std::to_string(r.trial_id) + " (" + name +
+                                  "): its force stream failed its import check (" + dir +
+                                  "/import_report.txt)";
+          }
+        }
       }
     }
     // Every served trial's stream is there and well formed before the cell
@@ -306,6 +315,7 @@ class ReplayBackend final : public Backend {
         r.stamp = Stamp(r.stream);
       }
     }
+    caps_.workspace = RecordedWorkspace();
     caps_.name = "replay:" + dir;
     caps_.truth = measured_ ? TruthSource::kMeasured : TruthSource::kRecorded;
     caps_.engine = std::string(measured_ ? "measured" : "recorded") + " dataset " +
@@ -317,6 +327,21 @@ class ReplayBackend final : public Backend {
   }
 
   BackendCapabilities Capabilities() const override { return caps_; }
+  TrialTruth PreparedTruth() const override { return prepared_ ? prepared_->truth : TrialTruth{}; }
+
+  // A recording needs no reset: each recorded trial starts where it was
+  // recorded (the cell places nothing for a backend that does not emulate).
+  // The cell's simulated planner would check a target against the
+  // workspace: the nominal target after the last trial lies outside a lab
+  // frame's workspace, and failed a reset that moves nothing.
+  std::optional<BackendResetOutcome> Reset(const BackendResetRequest& request,
+                                           const TrialContext&) override {
+    BackendResetOutcome out;
+    out.ok = true;
+    out.achieved = request.target;
+    out.attempts = 0;
+    return out;
+  }
 
   std::string Prepare(const mechanics::Scene&, const TrialContext& trial) override {
     prepared_ = nullptr;
@@ -363,7 +388,7 @@ class ReplayBackend final : public Backend {
     std::size_t rows = 0;
     try {
       const ColumnsFn on_columns = [&](const std::vector<std::string>& c) {
-        convert.emplace(c, scene, measured_);
+        convert.emplace(c, scene, r.truth.forces_measured);
       };
       const RowFn on_row = [&](const std::vector<double>& row) {
         if (++rows > r.samples) return false;  // longer than recorded: refused below
@@ -401,6 +426,40 @@ class ReplayBackend final : public Backend {
   }
 
  private:
+  // Where the recorded trials happened: every start and every place the
+  // cell's travel check puts the object along its pusher's motion (start +
+  // the pusher's displacement), 5 cm around. A recording is in its lab's
+  // frame, often outside a cell's default workspace; replay moves nothing,
+  // so the dataset's own extent is the workspace (nullopt: no scene parses).
+  std::optional<std::pair<Eigen::Vector3d, Eigen::Vector3d>> RecordedWorkspace() const {
+    Eigen::Vector3d lo = Eigen::Vector3d::Constant(HUGE_VAL), hi = -lo;
+    for (const auto& r : trials_) {
+      mechanics::Scene scene;
+      try {
+        scene = mechanics::ParseScene(r.scene.dump());
+      } catch (const std::exception&) {
+        continue;  // refused at Prepare (no scene of this arena matches it)
+      }
+      const Eigen::Vector3d start = scene.object.pose.position;
+      lo = lo.cwiseMin(start);
+      hi = hi.cwiseMax(start);
+      if (!scene.pusher) continue;
+      std::vector<double> times = {scene.duration};
+      if (scene.pusher->path)
+        times.insert(times.end(), scene.pusher->path->t.begin(), scene.pusher->path->t.end());
+      const Eigen::Vector3d p0 = mechanics::PusherPoseAt(*scene.pusher, 0).position;
+      for (double t : times) {
+        const Eigen::Vector3d at =
+            start +
+            (mechanics::PusherPoseAt(*scene.pusher, std::min(t, scene.duration)).position - p0);
+        lo = lo.cwiseMin(at);
+        hi = hi.cwiseMax(at);
+      }
+    }
+    if (!(lo.array() <= hi.array()).all()) return std::nullopt;
+    return std::make_pair(Eigen::Vector3d(lo.array() - 0.05), Eigen::Vector3d(hi.array() + 0.05));
+  }
+
   fs::path StreamFile(std::int64_t id) const {
     return fs::path(dir_) / "streams" / (std::to_string(id) + "_true." + format_);
   }

@@ -296,7 +296,8 @@ class PredictorPool : public PredictionPort {
         const db::GroundTruth gt = store_->ReadGroundTruth(r.trial_id);
         const auto normals = ContactNormals(scene);
         for (const auto& s : gt.samples)
-          job.truth.push_back(ToTrajectorySample(s, normals, scene.pusher.has_value()));
+          job.truth.push_back(
+              ToTrajectorySample(s, normals, scene.pusher.has_value(), gt.forces_measured()));
         // Closed loop: the commands it applied, replayed (issue 19).
         if (job.commands.empty() && scene.pusher && scene.pusher->controller) {
           if (auto run = store_->GetClosedLoop(r.trial_id))

@@ -109,6 +109,7 @@ struct TrialDriver::Impl {
     int failures_in_a_row = 0;  // failed phases in a row, whoever caused them (the backoff)
     std::vector<std::string> contact_types;
     std::string capabilities_json = "{}", defects_json = "{}";
+    std::string truth;  // the kind of truth it announced ("measured": an imported recording)
     double speed = 1.0;
     CellPhase phase = CellPhase::kIdle;
     std::int64_t trial_id = 0, campaign_id = 0;
@@ -135,6 +136,12 @@ struct TrialDriver::Impl {
     std::int64_t expected = -1;
     Clock::time_point stream_deadline{};
     std::vector<mechanics::TrajectorySample> truth;
+    // A measured cell may send samples without contacts: a trial whose truth
+    // measured no forces. It must say so in its EXECUTE status (truth
+    // dds::kTruthMeasuredNoForces), and then every sample must be so.
+    bool measured_cell = false;
+    std::int64_t contactless = 0;           // samples received without contacts
+    std::string stated_truth;               // the EXECUTE status's truth (set with `expected`)
     assessment::RecordedCommands commands;  // closed loop: the commands the cell applied
     bool publishing = false;  // the publish step is under way (or waiting on the store)
   };
@@ -223,6 +230,7 @@ struct TrialDriver::Impl {
                            {"backend", a.backend()},
                            {"truth", a.truth()}};
     cell.contact_types = a.contact_types();
+    cell.truth = a.truth();
     cell.capabilities_json = caps.dump();
     cell.defects_json = a.defects_json();
     if (restarted && cell.phase != CellPhase::kIdle)
@@ -425,6 +433,7 @@ struct TrialDriver::Impl {
     ex.campaign_id = claim.campaign_id;
     ex.attempt = claim.attempt;
     ex.cell_id = cell.id;
+    ex.measured_cell = cell.truth == "measured";
     ex.scene_json = claim.scene_json;
     try {
       ex.scene = mechanics::ParseScene(claim.scene_json);
@@ -497,7 +506,8 @@ struct TrialDriver::Impl {
       samples.reserve(batch.samples().size());
       for (const auto& s : batch.samples()) {
         mechanics::TrajectorySample truth;
-        samples.push_back(ToStoreSample(s, ex.normals, &truth));
+        samples.push_back(ToStoreSample(s, ex.normals, &truth, ex.measured_cell));
+        ex.contactless += truth.contacts.empty() && !ex.normals.empty();
         ex.truth.push_back(std::move(truth));
       }
     } catch (const std::exception& e) {  // a value the store would refuse: the cell's
@@ -542,6 +552,20 @@ struct TrialDriver::Impl {
     if (it == executions.end()) return;
     Execution& ex = it->second;
     if (ex.publishing || ex.expected < 0 || ex.next_sample < ex.expected) return;
+    // Samples without contacts only from a trial whose truth says it measured
+    // no forces, and then all of them: never an absence read as a fact.
+    const bool poses_only = ex.stated_truth == dds::kTruthMeasuredNoForces;
+    if (!ex.normals.empty() &&
+        (poses_only ? ex.contactless != ex.next_sample : ex.contactless > 0)) {
+      FailStream(ex,
+                 "ground truth refused: cell " + ex.cell_id + " sent " +
+                     std::to_string(ex.contactless) + " of " + std::to_string(ex.next_sample) +
+                     " samples without contacts, and its truth is '" + ex.stated_truth +
+                     "' (only a measured trial that states it measured no forces, '" +
+                     dds::kTruthMeasuredNoForces + "', may, and then in every sample)",
+                 ServiceEvent::kStreamMalformed);
+      return;
+    }
     ex.publishing = true;
     const std::string tag = TrialTag(ex.campaign_id, ex.trial_id, ex.attempt);
     const std::string cell_id = ex.cell_id;
@@ -682,7 +706,10 @@ struct TrialDriver::Impl {
       case TrialStep::kIgnore:
       case TrialStep::kAwait:
         return;
-      case TrialStep::kCollectStream:
+      case TrialStep::kCollectStream: {
+        const auto detail = nlohmann::json::parse(st.detail_json(), nullptr, false);
+        if (detail.is_object()) ex.stated_truth = detail.value("truth", std::string());
+      }
         RecordExecution(ex, st);
         RecordClosedLoop(ex, st);
         cell.execute_wall_s = st.phase_wall_s();

@@ -372,10 +372,13 @@ ImportReport ImportRecordings(const std::vector<Recording>& recordings, const Im
   for (const auto& p : prepared) report.trials.push_back(p.trial);
   report.text = ReportText(report.trials, o.out_dir);
 
-  // The cell's workspace: every recorded start and every place a trial's
+  // The campaign's workspace: every recorded start and every place a trial's
   // pusher path would carry the object (start + the pusher's displacement,
-  // the cells' travel check), 5 cm around. Recordings are in the lab's
-  // table frame, often outside the default +-0.25 m.
+  // the travel check), 5 cm around. Recordings are in the lab's table frame,
+  // often outside the default +-0.25 m, and `arena submit`/`run` check every
+  // scene against the campaign's profile. A replay cell computes the same
+  // extent from the dataset for its own workspace (a campaign's limits never
+  // widen a cell's).
   Eigen::Vector3d lo = Eigen::Vector3d::Constant(HUGE_VAL), hi = -lo;
   for (const auto& p : prepared) {
     const auto scene = nlohmann::json::parse(p.scene_json);

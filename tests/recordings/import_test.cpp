@@ -22,6 +22,7 @@
 #include "arena/assessment/scoring.hpp"
 #include "arena/db/export.hpp"
 #include "arena/executors/backend.hpp"
+#include "arena/mechanics/scene_json.hpp"
 #include "arena/recordings/import.hpp"
 #include "arena/recordings/push_dataset.hpp"
 
@@ -251,6 +252,38 @@ TEST_F(ImportTest, AFrozenForceStreamIsReportedAndLeftOutOfTheTruth) {
   const auto truth = Replay(root_ / "ds");
   ASSERT_FALSE(truth.empty());
   for (const auto& s : truth) ASSERT_TRUE(s.contacts.empty());
+  // ... and that is the trial's stated truth, not an absence: the cell's check
+  // accepts samples without contacts for it, and only for it.
+  {
+    const fs::path ds = root_ / "ds";
+    std::ifstream lines(ds / "scenes.jsonl");
+    std::string line;
+    std::getline(lines, line);
+    const json entry = json::parse(line);
+    const std::string scene_text = entry["scene"].dump();
+    executors::TrialContext trial;
+    trial.scene_json = scene_text;
+    trial.seed = std::stoull(entry["seed"].get<std::string>());
+    const auto replay = executors::MakeReplayBackend(ds.string());
+    EXPECT_TRUE(replay->PreparedTruth().forces_measured);  // nothing prepared yet
+    const mechanics::Scene scene = mechanics::ParseScene(scene_text);
+    ASSERT_EQ(replay->Prepare(scene, trial), "");
+    const executors::TrialTruth stated = replay->PreparedTruth();
+    EXPECT_FALSE(stated.forces_measured);
+    EXPECT_NE(stated.forces_note.find("force stream failed its import check"), std::string::npos)
+        << stated.forces_note;
+    EXPECT_EQ(executors::StoredTruth(executors::TruthSource::kMeasured, stated),
+              "measured:no-forces");
+    EXPECT_EQ(executors::CheckTrueSample(truth[0], {}, scene, stated), "");
+    // Without that statement a sample without contacts is refused ...
+    EXPECT_NE(executors::CheckTrueSample(truth[0], {}, scene).find("expected 1 contacts"),
+              std::string::npos);
+    // ... and with it, a sample that has contacts contradicts it.
+    mechanics::TrajectorySample with = truth[0];
+    with.contacts.emplace_back();
+    EXPECT_NE(executors::CheckTrueSample(with, {}, scene, stated).find("measured no contact"),
+              std::string::npos);
+  }
   auto predicted = truth;
   for (auto& p : predicted) {
     p.contacts.emplace_back();
@@ -260,6 +293,57 @@ TEST_F(ImportTest, AFrozenForceStreamIsReportedAndLeftOutOfTheTruth) {
   const auto e = assessment::ScorePrediction(predicted, truth);
   EXPECT_EQ(e.contact_pairs, 0);
   EXPECT_NEAR(e.final_position, 0.001, 1e-12);
+}
+
+// Each trial starts from its measured start: the scene's object pose is the
+// measured pose at the first sample of the common clock (the truth's first
+// sample), in the lab's table frame, and a replay cell's workspace holds
+// every recorded start and path (the lab frame lies outside the default).
+TEST_F(ImportTest, TheSceneStartsAtTheMeasuredStartInTheLabFrame) {
+  Rows rows = Push();
+  const double dx = 0.42, dy = -0.08;  // where the lab's table frame puts the push
+  for (auto* stream : {&rows.tip, &rows.object})
+    for (auto& r : *stream) r[1] += dx, r[2] += dy;
+  // The object already drifting before the common clock starts (its first
+  // stamps are earlier than the force's): the start is where it is at t = 0.
+  for (std::size_t k = 0; k < 5; ++k) rows.object[k][1] += 0.00005 * (5.0 - k);
+  WriteH5(data_ / kGoodName, rows);
+  const ImportReport report = Import();
+  ASSERT_TRUE(report.trials[0].checks.pose_usable) << report.text;
+  const fs::path ds = root_ / "ds";
+  std::ifstream lines(ds / "scenes.jsonl");
+  std::string line;
+  std::getline(lines, line);
+  const json scene = json::parse(line)["scene"];
+  const auto& at = scene["object"]["pose"]["position"];
+  // The common clock starts at the force's first stamp (1 ms after the
+  // tip's); the object's pose there, linear between its stamps.
+  const double t_force0 = rows.force[0][0];
+  std::size_t k = 0;
+  while (rows.object[k + 1][0] < t_force0) ++k;
+  const double w = (t_force0 - rows.object[k][0]) / (rows.object[k + 1][0] - rows.object[k][0]);
+  const double x0 = rows.object[k][1] + w * (rows.object[k + 1][1] - rows.object[k][1]);
+  EXPECT_NEAR(at[0].get<double>(), x0, 2e-7);
+  EXPECT_NEAR(at[1].get<double>(), dy, 2e-7);
+  EXPECT_NEAR(scene["object"]["pose"]["rpy"][2].get<double>(), 0.0, 1e-9);
+  // The truth's first sample is that same pose: the prediction starts where
+  // the measurement does.
+  const auto truth = Replay(ds);
+  ASSERT_FALSE(truth.empty());
+  EXPECT_NEAR(truth[0].position.x(), at[0].get<double>(), 2e-7);
+  EXPECT_NEAR(truth[0].position.y(), at[1].get<double>(), 2e-7);
+  // The replay cell's own workspace: around every start and the path's
+  // travel (the campaign's defect profile says the same for `arena submit`).
+  const auto caps = executors::MakeReplayBackend(ds.string())->Capabilities();
+  ASSERT_TRUE(caps.workspace.has_value());
+  const json campaign = json::parse(std::ifstream(ds / "campaign.json"));
+  for (int a = 0; a < 3; ++a) {
+    EXPECT_LT(caps.workspace->first[a], at[a].get<double>() - 0.04) << a;
+    EXPECT_GT(caps.workspace->second[a], at[a].get<double>() + 0.04) << a;
+    EXPECT_NEAR(caps.workspace->first[a], campaign["defects"]["workspace"]["min"][a], 1e-6) << a;
+    EXPECT_NEAR(caps.workspace->second[a], campaign["defects"]["workspace"]["max"][a], 1e-6) << a;
+  }
+  EXPECT_GT(caps.workspace->second[0], at[0].get<double>() + 0.049 + 0.04);  // the push's travel
 }
 
 TEST_F(ImportTest, AForceThatReadsWhileNothingPushesIsAnOffset) {

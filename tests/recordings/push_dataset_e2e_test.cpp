@@ -117,20 +117,22 @@ TEST_F(PushDatasetE2e, ImportedPushesRunOnReplayCellsAndAreEvaluatedAgainstTheMe
   auto r = Arena("import push-dataset '" + (data_ / "abs").string() + "' --shapes '" +
                  (data_ / "shapes.json").string() + "' --out '" + ds + "'");
   ASSERT_EQ(r.rc, 0) << r.err << r.out;
-  // The recorded trials whose poses failed the import's check (by trial id;
-  // the campaign lists the trials in order, trial id = index + 1).
-  std::set<int> pose_failed;
+  // The recorded trials whose poses or forces failed the import's check (by
+  // trial id; the campaign lists the trials in order, trial id = index + 1).
+  std::set<int> pose_failed, force_failed;
   const json manifest = json::parse(std::ifstream(ds + "/manifest.json"));
   for (const auto& t : manifest["import"]["trials"]) {
     if (!t["pose_usable"].get<bool>()) pose_failed.insert(t["trial_id"].get<int>());
+    if (!t["force_usable"].get<bool>()) force_failed.insert(t["trial_id"].get<int>());
   }
+  ASSERT_EQ(force_failed.size(), 35u);
 
-  // The cells' own workspace is the campaign's (the lab's table frame).
-  const json campaign = json::parse(std::ifstream(ds + "/campaign.json"));
-  std::ofstream(dir_ + "/cell.json") << campaign["defects"].dump();
+  // No flag beyond the walk-through's: the replay cells take their workspace
+  // from the dataset (the lab's table frame is outside a cell's default).
   r = Arena("run '" + ds + "/campaign.json' --backend 'replay:" + ds + "' --db '" + db +
-            "' --cells 2 --cell-defects '" + dir_ + "/cell.json'");
+            "' --cells 2");
   ASSERT_EQ(r.rc, 0) << r.err << r.out;
+  EXPECT_NE(r.out.find("measured data without forces"), std::string::npos) << r.out;
 
   sqlite3* h = nullptr;
   ASSERT_EQ(sqlite3_open_v2(db.c_str(), &h, SQLITE_OPEN_READONLY, nullptr), SQLITE_OK);
@@ -148,7 +150,12 @@ TEST_F(PushDatasetE2e, ImportedPushesRunOnReplayCellsAndAreEvaluatedAgainstTheMe
     const int idx = sqlite3_column_int(q, 0);
     const std::string state = reinterpret_cast<const char*>(sqlite3_column_text(q, 1));
     const std::string outcome = reinterpret_cast<const char*>(sqlite3_column_text(q, 2));
-    truths.insert(reinterpret_cast<const char*>(sqlite3_column_text(q, 3)));
+    const std::string truth = reinterpret_cast<const char*>(sqlite3_column_text(q, 3));
+    truths.insert(truth);
+    // The force stream's failed check is a stated fact of the stored truth.
+    if (state == "done")
+      EXPECT_EQ(truth, force_failed.count(idx + 1) ? "measured:no-forces" : "measured")
+          << "trial " << idx;
     if (state == "done") {
       ++done;
       EXPECT_FALSE(pose_failed.count(idx + 1)) << "trial " << idx << " failed its check, scored";
@@ -160,14 +167,38 @@ TEST_F(PushDatasetE2e, ImportedPushesRunOnReplayCellsAndAreEvaluatedAgainstTheMe
     }
   }
   sqlite3_finalize(q);
+  // No force of a trial whose force stream failed its check was scored by
+  // the service's predictions; the others' were.
+  ASSERT_EQ(sqlite3_prepare_v2(h,
+                               "SELECT t.idx, p.force_error IS NULL, p.detail_json FROM trials t "
+                               "JOIN predictions p ON p.trial_id = t.id WHERE p.status = 'ok'",
+                               -1, &q, nullptr),
+            SQLITE_OK)
+      << sqlite3_errmsg(h);
+  int predictions = 0;
+  while (sqlite3_step(q) == SQLITE_ROW) {
+    ++predictions;
+    const int idx = sqlite3_column_int(q, 0);
+    const bool no_force = sqlite3_column_int(q, 1) != 0;
+    const std::string detail = reinterpret_cast<const char*>(sqlite3_column_text(q, 2));
+    EXPECT_EQ(no_force, force_failed.count(idx + 1) == 1) << "trial " << idx << ": " << detail;
+    if (no_force) EXPECT_NE(detail.find("force_not_scored"), std::string::npos) << detail;
+  }
+  sqlite3_finalize(q);
   sqlite3_close(h);
+  EXPECT_GT(predictions, 0);
   EXPECT_EQ(trials, 50);
   EXPECT_EQ(done, 50 - static_cast<int>(pose_failed.size()));
-  EXPECT_EQ(truths, (std::set<std::string>{"measured"}));
+  EXPECT_EQ(truths, (std::set<std::string>{"measured", "measured:no-forces"}));
 
-  r = Arena("evaluate --db '" + db + "' --campaign 1");
+  // One setting each (the default grids take minutes on 50 trials).
+  r = Arena("evaluate --db '" + db +
+            "' --campaign 1 --predictors arena,mujoco --facets 8 --points 3 --dt 0.004 "
+            "--mujoco-timestep 0.002 --convergence-trials 0");
   ASSERT_EQ(r.rc, 0) << r.err << r.out;
-  EXPECT_NE(r.out.find("measured"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("truth: measured (replay:"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("truth: measured:no-forces (replay:"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("35 trials: measured poses"), std::string::npos) << r.out;
   EXPECT_EQ(r.out.find("nan"), std::string::npos) << r.out;
 }
 

@@ -19,14 +19,18 @@ namespace arena::assessment {
 // Unit normals into the object, one per contact: fingers, then the pusher.
 std::vector<Eigen::Vector3d> ContactNormals(const mechanics::Scene& scene);
 
-// The true state of a stored sample as the model's sample.
-// @throws std::invalid_argument when the contact count differs from the normals'.
+// The true state of a stored sample as the model's sample. A truth without
+// forces (`forces_measured` false: db::GroundTruth::forces_measured) has no
+// contacts, and the model's sample then has none either (no force scored).
+// @throws std::invalid_argument when the contact count differs from the
+//   normals' (or, without forces, is not 0).
 mechanics::TrajectorySample ToTrajectorySample(const db::Sample& sample,
                                                const std::vector<Eigen::Vector3d>& normals,
-                                               bool has_pusher);
+                                               bool has_pusher, bool forces_measured = true);
 
 // A stored trial's ground truth as the model's trajectory (ReadGroundTruth
-// then ToTrajectorySample for every sample).
+// then ToTrajectorySample for every sample, with the trial's stated truth:
+// a measured trial without forces has samples without contacts).
 // @throws db::StoreError from the store, std::invalid_argument on a contact mismatch.
 std::vector<mechanics::TrajectorySample> ReadTruth(const db::Store& store, std::int64_t trial_id,
                                                    const mechanics::Scene& scene);

@@ -446,11 +446,21 @@ struct RecoveryReport {
   std::int64_t orphan_streams_deleted = 0;  // incomplete ground truth of requeued attempts
 };
 
+// trials.truth of a measured trial whose contact forces were not measured
+// or failed their import check (the cell states it; the service checks the
+// stream against it): its samples carry no contacts, its poses are scored,
+// its forces never. The same words as dds::kTruthMeasuredNoForces.
+inline constexpr const char* kTruthMeasuredNoForces = "measured:no-forces";
+
 struct GroundTruth {
   std::int64_t trial_id = 0;
   int attempt = 0;
   std::string cell_id;
+  // The trial's kind of truth (trials.truth, RecordExecution; "" when none
+  // was reported). kTruthMeasuredNoForces: no sample has contacts.
+  std::string truth;
   std::vector<Sample> samples;
+  bool forces_measured() const { return truth != kTruthMeasuredNoForces; }
 };
 
 struct IngestOptions {

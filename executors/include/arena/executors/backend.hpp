@@ -35,6 +35,7 @@
 #include <optional>
 #include <string>
 #include <string_view>
+#include <utility>
 #include <vector>
 
 #include "arena/mechanics/scene.hpp"
@@ -72,7 +73,26 @@ struct BackendCapabilities {
   // velocities. Only arena's own model can (`model`); the cell refuses a
   // closed-loop scene on any other backend, with the reason.
   bool closed_loop = false;
+  // Where its trials take place, when the backend knows (a recording: around
+  // every recorded start and pusher path, in the lab's frame). A cell whose
+  // profile leaves the workspace at its default takes this one; a profile
+  // that sets a workspace keeps it.
+  std::optional<std::pair<Eigen::Vector3d, Eigen::Vector3d>> workspace;
 };
+
+// What a prepared trial's truth holds beside its kind (TruthSource). A
+// measured recording may lack its contact forces (not recorded, or the
+// stream failed its import check): its samples then carry no contacts, and
+// that is a stated fact of the trial, never inferred from the absence. Only
+// a kMeasured backend may say so (the cell refuses it from any other).
+struct TrialTruth {
+  bool forces_measured = true;
+  std::string forces_note;  // why not, when !forces_measured (e.g. the import check that failed)
+};
+// The stored kind of a trial's truth (trials.truth): "measured" for a
+// measured trial with its forces, dds::kTruthMeasuredNoForces for one
+// without (poses scored, forces never); otherwise ToString(source).
+std::string StoredTruth(TruthSource source, const TrialTruth& truth);
 
 struct TrialContext {
   std::uint64_t trial_id = 0;
@@ -90,11 +110,12 @@ struct TrialContext {
 
 // Why a backend's true sample is unusable ("" = fine): NaN or infinite
 // values, a non-unit quaternion, a first t other than 0, t not increasing, a
-// contact count other than the scene's (fingers, then the pusher). The cell
-// applies it to every sample a backend streams.
+// contact count other than the scene's (fingers, then the pusher), or, for a
+// trial whose truth measured no forces (`truth`), any contact at all. The
+// cell applies it to every sample a backend streams.
 std::string CheckTrueSample(const mechanics::TrajectorySample& sample,
                             const std::vector<mechanics::TrajectorySample>& before,
-                            const mechanics::Scene& scene);
+                            const mechanics::Scene& scene, const TrialTruth& truth = {});
 
 // Returns false when the backend must stop streaming.
 using SampleSink = std::function<bool(const mechanics::TrajectorySample&)>;
@@ -139,6 +160,9 @@ class Backend {
   virtual std::string Prepare(const mechanics::Scene& scene, const TrialContext& trial) = 0;
   virtual ExecuteOutcome Execute(const mechanics::Scene& scene, const TrialContext& trial,
                                  const SampleSink& sink) = 0;
+  // What the truth of the trial the last Prepare accepted holds (a measured
+  // recording may lack forces); the default: everything the scene has.
+  virtual TrialTruth PreparedTruth() const { return {}; }
   // nullopt: the backend has no reset of its own (simulated physics, replay);
   // the cell then plans and simulates the reset itself (reset/).
   virtual std::optional<BackendResetOutcome> Reset(const BackendResetRequest& request,

@@ -44,6 +44,8 @@ class DefectLayer {
   const Backend& inner() const { return *inner_; }
   Backend& inner() { return *inner_; }
   const BackendCapabilities& capabilities() const { return caps_; }
+  // The inner backend's word on the prepared trial's truth (Backend::PreparedTruth).
+  TrialTruth PreparedTruth() const { return inner_->PreparedTruth(); }
   const DefectProfile& cell_profile() const { return cell_; }
 
   // Sets the trial's campaign profile ("" or "{}" = none) and checks the

@@ -19,10 +19,13 @@ class GroundTruthSample;
 
 namespace arena::orchestrator {
 
-// @pre the sample passed dds::CheckSample and has one contact per normal.
+// @pre the sample passed dds::CheckSample and has one contact per normal,
+//   or none at all when `contactless_ok` (a measured cell's trial whose
+//   truth measured no forces: the service checks the cell's statement of it
+//   against the whole stream when the EXECUTE status arrives).
 // @throws std::invalid_argument when the contact count differs from the normals'.
 db::Sample ToStoreSample(const msg::GroundTruthSample& sample,
                          const std::vector<Eigen::Vector3d>& normals,
-                         mechanics::TrajectorySample* truth = nullptr);
+                         mechanics::TrajectorySample* truth = nullptr, bool contactless_ok = false);
 
 }  // namespace arena::orchestrator

@@ -32,6 +32,13 @@ namespace arena::dds {
 
 using Wrench = Eigen::Matrix<double, 6, 1>;  // force (N), torque (N m)
 
+// The truth of a measured trial whose contact forces were not measured (or
+// failed their import check), as the cell states it in its EXECUTE status
+// ("truth") and the store keeps it (trials.truth): its samples carry no
+// contacts; its poses are scored, its forces never. Beside the kinds of
+// CellAnnounce.truth ("measured" has its forces).
+inline constexpr const char* kTruthMeasuredNoForces = "measured:no-forces";
+
 // The pusher's true pose and twist (the mechanics sample has its position only).
 struct PusherState {
   Eigen::Vector3d position = Eigen::Vector3d::Zero();  // m
