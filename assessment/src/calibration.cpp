@@ -12,6 +12,7 @@
 #include <nlopt.hpp>
 
 #include "arena/mechanics/scene_json.hpp"
+#include "arena/mechanics/support.hpp"
 
 namespace arena::assessment {
 namespace {
@@ -73,11 +74,15 @@ struct Evaluated {
   std::vector<double> losses;  // in the order of the training subset
 };
 
+// Every (trial, log scales) simulated so far: shared by the fits of one
+// campaign's splits, which run one after another.
+using Memo = std::map<std::pair<int, std::vector<double>>, TrialError>;
+
 class Fitter {
  public:
   Fitter(const std::vector<CalibrationTrial>& trials, TrialSimulateFn simulate,
-         const CalibrationOptions& o)
-      : trials_(trials), simulate_(std::move(simulate)), o_(o) {}
+         const CalibrationOptions& o, Memo* memo)
+      : trials_(trials), simulate_(std::move(simulate)), o_(o), memo_(*memo) {}
 
   std::map<std::string, double> ScalesOf(const std::vector<double>& log_x) const {
     std::map<std::string, double> s;
@@ -209,7 +214,7 @@ class Fitter {
   TrialSimulateFn simulate_;
   const CalibrationOptions& o_;
   std::mutex mu_;
-  std::map<std::pair<int, std::vector<double>>, TrialError> memo_;
+  Memo& memo_;
   long simulations_ = 0;
   std::vector<Evaluated> evaluated_;
 };
@@ -231,6 +236,33 @@ void Mean(const Errors& e, double* pos, double* ang, double* force) {
   }
 }
 
+}  // namespace
+
+SetFigures FiguresOf(const std::vector<TrialError>& errors) {
+  SetFigures f;
+  f.trials = static_cast<int>(errors.size());
+  std::vector<PlanarOutcome> predicted, truth;
+  std::vector<double> position, angle;
+  for (const auto& t : errors) {
+    if (!t.ok) continue;
+    predicted.push_back(t.predicted_outcome);
+    truth.push_back(t.true_outcome);
+    position.push_back(t.position);
+    angle.push_back(t.angle);
+  }
+  f.predicted = static_cast<int>(position.size());
+  f.nmse = ComputeNmse(predicted, truth);
+  if (!position.empty()) {
+    f.position_median = Percentile(position, 0.5);
+    f.position_p95 = Percentile(position, 0.95);
+    f.angle_median = Percentile(angle, 0.5);
+    f.angle_p95 = Percentile(angle, 0.95);
+  }
+  return f;
+}
+
+namespace {
+
 std::optional<double> CommonValue(const std::vector<CalibrationTrial>& trials, CalibrationParam p) {
   std::optional<double> value;
   for (const auto& t : trials) {
@@ -248,7 +280,16 @@ std::optional<double> CommonValue(const std::vector<CalibrationTrial>& trials, C
       case CalibrationParam::kObjectMass:
         vs.push_back(t.scene.object.mass);
         break;
+      case CalibrationParam::kMuSupport:
+        if (t.scene.support) vs.push_back(t.scene.support->mu);
+        break;
+      case CalibrationParam::kPressureRim:
+        // Uniform pressure is the family's k = 1; given points have no common value.
+        if (t.scene.support) vs.push_back(t.scene.support->pressure_points.empty() ? 1.0 : NAN);
+        break;
     }
+    for (double v : vs)
+      if (std::isnan(v)) return std::nullopt;
     for (double v : vs) {
       if (!value) value = v;
       if (std::abs(*value - v) > 1e-12 * std::max(1.0, std::abs(v))) return std::nullopt;
@@ -269,17 +310,68 @@ const char* ToString(CalibrationParam p) {
       return "grip_force";
     case CalibrationParam::kObjectMass:
       return "object_mass";
+    case CalibrationParam::kMuSupport:
+      return "mu_support";
+    case CalibrationParam::kPressureRim:
+      return "pressure_rim";
   }
   return "?";
 }
 
+namespace {
+
+// The pressure_rim family (calibration.hpp) at k: the scene's pressure
+// points weighted by k^rho, then tilted (w (1 + a . d)) so that their
+// centre stays under the centre of mass.
+void ScalePressure(mechanics::Scene* s, double k) {
+  if (!s->support || k == 1) return;
+  const mechanics::SupportPressure base = mechanics::SupportPressureOf(*s);
+  // The scene's centre of pressure (under the centre of mass: the scene is valid).
+  Eigen::Vector2d com = Eigen::Vector2d::Zero();
+  for (std::size_t i = 0; i < base.points_O.size(); ++i)
+    com += base.weights[i] * base.points_O[i].head<2>();
+  std::vector<Eigen::Vector2d> d;
+  double far = 0;
+  for (const auto& p : base.points_O) {
+    d.push_back(p.head<2>() - com);
+    far = std::max(far, d.back().norm());
+  }
+  if (!(far > 0)) return;
+  std::vector<double> w(d.size());
+  Eigen::Vector2d m = Eigen::Vector2d::Zero();
+  Eigen::Matrix2d mm = Eigen::Matrix2d::Zero();
+  for (std::size_t i = 0; i < d.size(); ++i) {
+    w[i] = base.weights[i] * std::pow(k, d[i].norm() / far);
+    m += w[i] * d[i];
+    mm += w[i] * d[i] * d[i].transpose();
+  }
+  // Σ w (1 + a.d) d = 0: the centre of pressure back under the centre of mass.
+  Eigen::Vector2d a = Eigen::Vector2d::Zero();
+  if (m.norm() > 1e-12 * far && std::abs(mm.determinant()) > 0) a = -mm.ldlt().solve(m);
+  s->support->pressure_points.clear();
+  for (std::size_t i = 0; i < d.size(); ++i) {
+    const double wi = w[i] * (1 + a.dot(d[i]));
+    if (!(wi >= 0))
+      throw CalibrationError(
+          "pressure_rim: scale " + std::to_string(k) +
+          " needs a negative weight to keep the centre of pressure under the centre of mass "
+          "(a face far from symmetric about it); narrow the bounds");
+    const Eigen::Vector3d& p = base.points_O[i];
+    s->support->pressure_points.emplace_back(p.x(), p.y(), wi);
+  }
+}
+
+}  // namespace
+
 CalibrationParam ParseCalibrationParam(const std::string& name) {
   for (auto p : {CalibrationParam::kMuFingers, CalibrationParam::kMuPusher,
-                 CalibrationParam::kGripForce, CalibrationParam::kObjectMass}) {
+                 CalibrationParam::kGripForce, CalibrationParam::kObjectMass,
+                 CalibrationParam::kMuSupport, CalibrationParam::kPressureRim}) {
     if (name == ToString(p)) return p;
   }
   throw CalibrationError("--params: unknown parameter '" + name +
-                         "' (expected mu_fingers, mu_pusher, grip_force or object_mass)");
+                         "' (expected mu_fingers, mu_pusher, grip_force, object_mass, "
+                         "mu_support or pressure_rim)");
 }
 
 mechanics::Scene ApplyScales(const mechanics::Scene& scene,
@@ -301,6 +393,12 @@ mechanics::Scene ApplyScales(const mechanics::Scene& scene,
       case CalibrationParam::kObjectMass:
         s.object.mass *= k;
         if (s.object.inertia) *s.object.inertia *= k;
+        break;
+      case CalibrationParam::kMuSupport:
+        if (s.support) s.support->mu *= k;
+        break;
+      case CalibrationParam::kPressureRim:
+        ScalePressure(&s, k);
         break;
     }
   }
@@ -345,11 +443,23 @@ TrialError CompareTrajectories(const mechanics::Scene& scene,
   e.angle = predicted[n - 1].orientation.normalized().angularDistance(
       truth[n - 1].orientation.normalized());
   e.force = pairs ? std::sqrt(sum / static_cast<double>(pairs)) : 0;
+  e.predicted_outcome = PlanarOutcomeOf(predicted[0].position, predicted[0].orientation,
+                                        predicted[n - 1].position, predicted[n - 1].orientation);
+  e.true_outcome = PlanarOutcomeOf(truth[0].position, truth[0].orientation, truth[n - 1].position,
+                                   truth[n - 1].orientation);
   return e;
 }
 
 double Loss(const TrialError& e, const LossScales& s) {
   if (!e.ok) return kFailedTrialLoss;
+  if (s.outcome_variance[0] > 0) {
+    const PlanarOutcome& p = e.predicted_outcome;
+    const PlanarOutcome& t = e.true_outcome;
+    return ((p.dx - t.dx) * (p.dx - t.dx) / s.outcome_variance[0] +
+            (p.dy - t.dy) * (p.dy - t.dy) / s.outcome_variance[1] +
+            (p.dtheta - t.dtheta) * (p.dtheta - t.dtheta) / s.outcome_variance[2]) /
+           3;
+  }
   const double a = e.position / s.position_m, b = e.angle / s.angle_rad, c = e.force / s.force_n;
   return a * a + b * b + c * c;
 }
@@ -449,14 +559,15 @@ void Profile(Fitter& fitter, const std::vector<int>& train, const std::vector<do
 }
 
 CalibrationResult Fitted(const std::vector<CalibrationTrial>& trials, TrialSimulateFn simulate,
-                         const CalibrationOptions& o) {
+                         const CalibrationOptions& given, Memo* memo) {
+  CalibrationOptions o = given;  // the outcome loss's variances filled in below
   if (o.params.empty()) throw CalibrationError("--params: name at least one parameter");
   for (size_t i = 0; i < o.params.size(); ++i)
     for (size_t j = 0; j < i; ++j)
       if (o.params[i] == o.params[j])
         throw CalibrationError(std::string("--params: ") + ToString(o.params[i]) + " is repeated");
-  if (!(o.holdout > 0 && o.holdout <= 0.9))
-    throw CalibrationError("--holdout: must be in (0, 0.9]");
+  if (!(o.holdout >= 0 && o.holdout <= 0.9))
+    throw CalibrationError("--holdout: must be in [0, 0.9] (0: fit every trial, none held out)");
   if (!(o.lower > 0 && o.lower < 1 && o.upper > 1 && std::isfinite(o.upper)))
     throw CalibrationError("bounds: need 0 < lower < 1 < upper");
   if (trials.size() < 4)
@@ -477,21 +588,66 @@ CalibrationResult Fitted(const std::vector<CalibrationTrial>& trials, TrialSimul
         Mix(o.seed ^ Mix(static_cast<uint64_t>(trials[static_cast<size_t>(b)].trial_id)));
     return ha != hb ? ha < hb : a < b;
   });
-  const int n_hold =
-      std::clamp(static_cast<int>(std::lround(o.holdout * static_cast<double>(trials.size()))), 1,
-                 static_cast<int>(trials.size()) - 2);
-  std::vector<int> hold(order.begin(), order.begin() + n_hold);
-  std::vector<int> train(order.begin() + n_hold, order.end());
+  std::vector<int> hold, train;
+  if (!o.heldout_ids.empty()) {
+    // A given split (by a trial parameter): these held out, the rest fitted.
+    for (std::int64_t id : o.heldout_ids)
+      if (std::none_of(trials.begin(), trials.end(),
+                       [id](const CalibrationTrial& t) { return t.trial_id == id; }))
+        throw CalibrationError("held-out trial " + std::to_string(id) +
+                               " is not among the campaign's done trials");
+    for (int i = 0; i < static_cast<int>(trials.size()); ++i) {
+      const bool held = std::find(o.heldout_ids.begin(), o.heldout_ids.end(),
+                                  trials[static_cast<size_t>(i)].trial_id) != o.heldout_ids.end();
+      (held ? hold : train).push_back(i);
+    }
+    if (train.size() < 2)
+      throw CalibrationError("the split leaves " + std::to_string(train.size()) +
+                             " trial(s) to fit; it needs at least 2");
+  } else if (o.holdout == 0) {
+    // Every trial fitted and scored (the in-sample protocol): nothing held out.
+    for (int i = 0; i < static_cast<int>(trials.size()); ++i) train.push_back(i);
+  } else {
+    const int n_hold =
+        std::clamp(static_cast<int>(std::lround(o.holdout * static_cast<double>(trials.size()))), 1,
+                   static_cast<int>(trials.size()) - 2);
+    hold.assign(order.begin(), order.begin() + n_hold);
+    train.assign(order.begin() + n_hold, order.end());
+  }
   std::sort(hold.begin(), hold.end());
   std::sort(train.begin(), train.end());
 
+  if (o.outcome_loss) {
+    // The variances of the training trials' true outcomes (their first to last sample).
+    std::vector<PlanarOutcome> outcomes;
+    for (int i : train) {
+      const auto& truth = trials[static_cast<size_t>(i)].truth;
+      if (truth.empty()) continue;
+      outcomes.push_back(PlanarOutcomeOf(truth.front().position, truth.front().orientation,
+                                         truth.back().position, truth.back().orientation));
+    }
+    std::string why;
+    if (!ComputeNmse(outcomes, outcomes, &why))
+      throw CalibrationError("--loss nmse: the fitted trials' outcomes cannot normalise it: " +
+                             why);
+    for (int k = 0; k < 3; ++k) {
+      double mean = 0, var = 0;
+      auto get = [k](const PlanarOutcome& p) { return k == 0 ? p.dx : k == 1 ? p.dy : p.dtheta; };
+      for (const auto& p : outcomes) mean += get(p) / static_cast<double>(outcomes.size());
+      for (const auto& p : outcomes)
+        var += (get(p) - mean) * (get(p) - mean) / static_cast<double>(outcomes.size());
+      o.scales.outcome_variance[static_cast<size_t>(k)] = var;
+    }
+  } else {
+    o.scales.outcome_variance = {0, 0, 0};
+  }
   CalibrationResult r;
   for (int i : train) r.train_ids.push_back(trials[static_cast<size_t>(i)].trial_id);
   for (int i : hold) r.heldout_ids.push_back(trials[static_cast<size_t>(i)].trial_id);
   auto say = [&](const std::string& line) {
     if (o.progress) o.progress(line);
   };
-  Fitter fitter(trials, std::move(simulate), o);
+  Fitter fitter(trials, std::move(simulate), o, memo);
   const auto dims = o.params.size();
   const std::vector<double> zero(dims, 0.0);
   r.optimizer = dims >= 2 ? "LN_BOBYQA" : "LN_COBYLA";
@@ -511,7 +667,14 @@ CalibrationResult Fitted(const std::vector<CalibrationTrial>& trials, TrialSimul
   r.heldout_after = after.MeanLoss(o.scales);
   Mean(before, &r.heldout_position_before, &r.heldout_angle_before, &r.heldout_force_before);
   Mean(after, &r.heldout_position_after, &r.heldout_angle_after, &r.heldout_force_after);
-  r.improved = r.heldout_after < r.heldout_before;
+  // Nothing held out: the fit is judged on the trials it fitted.
+  r.improved = hold.empty() ? r.train_after < r.train_before : r.heldout_after < r.heldout_before;
+  r.heldout_errors_before = before.per_trial;
+  r.heldout_errors_after = after.per_trial;
+  r.heldout_figures_before = FiguresOf(before.per_trial);
+  r.heldout_figures_after = FiguresOf(after.per_trial);
+  r.train_figures_before = FiguresOf(fitter.Evaluate(train, zero).per_trial);
+  r.train_figures_after = FiguresOf(fitter.Evaluate(train, best).per_trial);
 
   // Bootstrap: resample the training trials; refit from the optimum, or
   // take the best point the main fit evaluated (calibration.hpp).
@@ -566,8 +729,31 @@ const char* ToString(BootstrapMethod m) { return m == BootstrapMethod::kReuse ? 
 
 CalibrationResult Calibrate(const std::vector<CalibrationTrial>& trials, const SimulateFn& simulate,
                             const CalibrationOptions& o) {
+  Memo memo;
   return Fitted(
-      trials, [&simulate](int, const mechanics::Scene& scene) { return simulate(scene); }, o);
+      trials, [&simulate](int, const mechanics::Scene& scene) { return simulate(scene); }, o,
+      &memo);
+}
+
+std::vector<CalibrationResult> CalibrateSplits(
+    const std::vector<CalibrationTrial>& trials, const SimulateFn& simulate,
+    const CalibrationOptions& o, const std::vector<std::vector<std::int64_t>>& heldout_sets) {
+  if (heldout_sets.empty()) throw CalibrationError("splits: give at least one held-out set");
+  Memo memo;
+  std::vector<CalibrationResult> out;
+  long simulated = 0;
+  for (const auto& held : heldout_sets) {
+    if (held.empty()) throw CalibrationError("splits: a held-out set is empty");
+    CalibrationOptions so = o;
+    so.heldout_ids = held;
+    out.push_back(Fitted(
+        trials, [&simulate](int, const mechanics::Scene& scene) { return simulate(scene); }, so,
+        &memo));
+    // Fitted counts what its fitter ran; the memo's earlier entries were free.
+    out.back().simulations = static_cast<long>(memo.size()) - simulated;
+    simulated = static_cast<long>(memo.size());
+  }
+  return out;
 }
 
 CalibrationResult Calibrate(const std::vector<CalibrationTrial>& trials,
@@ -576,6 +762,7 @@ CalibrationResult Calibrate(const std::vector<CalibrationTrial>& trials,
   // on two threads at once).
   std::vector<std::unique_ptr<simulators::PreparedScene>> prepared(trials.size());
   std::vector<std::once_flag> once(trials.size());
+  Memo memo;
   CalibrationResult r = Fitted(
       trials,
       [&](int i, const mechanics::Scene& scene) {
@@ -583,7 +770,7 @@ CalibrationResult Calibrate(const std::vector<CalibrationTrial>& trials,
         std::call_once(once[k], [&] { prepared[k] = simulator.Prepare(trials[k].scene); });
         return prepared[k]->Simulate(scene);
       },
-      o);
+      o, &memo);
   for (const auto& p : prepared)
     if (p) r.models_reused += p->reused();
   return r;
@@ -642,6 +829,20 @@ std::string ParamsJson(const CalibrationResult& r) {
   return j.dump();
 }
 
+static nlohmann::json FiguresJson(const SetFigures& f) {
+  nlohmann::json nmse = nullptr;
+  if (f.nmse)
+    nmse = {{"value", f.nmse->mean},
+            {"dx", f.nmse->dx},
+            {"dy", f.nmse->dy},
+            {"dtheta", f.nmse->dtheta}};
+  return {{"trials", f.trials},
+          {"predicted", f.predicted},
+          {"outcome_nmse", nmse},
+          {"position_error_m", {{"median", f.position_median}, {"p95", f.position_p95}}},
+          {"angle_error_rad", {{"median", f.angle_median}, {"p95", f.angle_p95}}}};
+}
+
 std::string ReportJson(const CalibrationResult& r) {
   return nlohmann::json{
       {"train_ids", r.train_ids},
@@ -652,6 +853,12 @@ std::string ReportJson(const CalibrationResult& r) {
        {{"before", r.heldout_position_before}, {"after", r.heldout_position_after}}},
       {"heldout_angle_rad", {{"before", r.heldout_angle_before}, {"after", r.heldout_angle_after}}},
       {"heldout_force_n", {{"before", r.heldout_force_before}, {"after", r.heldout_force_after}}},
+      {"train_figures",
+       {{"before", FiguresJson(r.train_figures_before)},
+        {"after", FiguresJson(r.train_figures_after)}}},
+      {"heldout_figures",
+       {{"before", FiguresJson(r.heldout_figures_before)},
+        {"after", FiguresJson(r.heldout_figures_after)}}},
       {"improved", r.improved},
       {"evaluations", r.evaluations},
       {"optimizer", r.optimizer},

@@ -16,6 +16,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include "arena/assessment/calibration.hpp"
 #include "arena/assessment/convergence.hpp"
 #include "arena/assessment/prediction.hpp"
 #include "arena/assessment/truth.hpp"
@@ -267,16 +268,35 @@ EvaluationRun EvaluateCampaign(db::Store& store, std::int64_t campaign_id,
                                 " has no done trials to evaluate yet (arena status shows "
                                 "its progress)");
   }
+  // Every trial's group before any work: a trial without the parameter is
+  // an error naming it, and nothing is evaluated.
+  std::map<std::int64_t, std::string> group_of_trial;
+  if (options.group_of) {
+    if (options.group_by.empty())
+      throw std::invalid_argument("group_by: name the trial parameter to group by");
+    for (const auto& t : trials) group_of_trial[t.id] = options.group_of(t);
+  }
   // Scenes first: the default grids keep only settings every scene takes.
   std::vector<std::optional<mechanics::Scene>> scenes(trials.size());
   std::vector<mechanics::Scene> valid_scenes;
   for (std::size_t i = 0; i < trials.size(); ++i) {
     try {
       scenes[i] = mechanics::ParseScene(trials[i].scene_json);
-      valid_scenes.push_back(*scenes[i]);
     } catch (const std::exception&) {
-      // reported per job as an error
+      continue;  // reported per job as an error
     }
+    if (!options.scales.empty()) {
+      // A scale that cannot apply is the caller's error, never a trial
+      // predicted unscaled.
+      try {
+        scenes[i] = ApplyScales(*scenes[i], options.scales);
+        mechanics::ValidateScene(*scenes[i]);
+      } catch (const std::exception& e) {
+        throw std::invalid_argument("calibration scales on trial " + std::to_string(trials[i].id) +
+                                    ": " + e.what());
+      }
+    }
+    valid_scenes.push_back(*scenes[i]);
   }
   const Built built = BuildPredictors(options.predictors, valid_scenes);
   const std::size_t settings = built.infos.size();
@@ -469,6 +489,11 @@ EvaluationRun EvaluateCampaign(db::Store& store, std::int64_t campaign_id,
   run.report.campaign_id = campaign_id;
   run.report.truth = TruthOf(store, campaign_id);
   run.start = StartShareOf(built.infos, results, planned, trial_starts, options.start_from);
+  run.report.scales = options.scales;
+  if (options.group_of) {
+    run.report.group_by = options.group_by;
+    run.report.groups = SummariseGroups(built.infos, results, group_of_trial);
+  }
 
   // The convergence table: a few trials, short pieces from the true state.
   if (options.convergence_trials > 0 && !trials.empty()) {
@@ -494,6 +519,7 @@ EvaluationRun EvaluateCampaign(db::Store& store, std::int64_t campaign_id,
 
   nlohmann::json grid = {{"predictors", built.grids},
                          {"start", ToString(options.start_from)},
+                         {"scales", options.scales},
                          {"budgets", nlohmann::json::array()},
                          {"threads", threads},
                          {"convergence_trials", options.convergence_trials}};

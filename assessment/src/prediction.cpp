@@ -363,6 +363,11 @@ db::Prediction ScoreSimulation(const mechanics::Scene& scene,
       detail["force_not_scored"] = "the truth has no measured contact forces";
     }
     detail["samples_compared"] = e.samples_compared;
+    // The push's outcome each made (initial frame), for the NMSE over trials.
+    detail["outcome"] = {
+        {"true", {e.true_outcome.dx, e.true_outcome.dy, e.true_outcome.dtheta}},
+        {"predicted",
+         {e.predicted_outcome.dx, e.predicted_outcome.dy, e.predicted_outcome.dtheta}}};
     detail["force_scale"] = e.force_scale;
   } catch (const std::exception& e) {
     p.status = ToString(PredictionOutcome::kError);

@@ -20,6 +20,54 @@ double ForceSquared(const mechanics::ContactState& c) {
 }
 }  // namespace
 
+PlanarOutcome PlanarOutcomeOf(const Eigen::Vector3d& start_position,
+                              const Eigen::Quaterniond& start_orientation,
+                              const Eigen::Vector3d& end_position,
+                              const Eigen::Quaterniond& end_orientation) {
+  const Eigen::Matrix3d r0 = start_orientation.normalized().toRotationMatrix();
+  const Eigen::Vector3d d = r0.transpose() * (end_position - start_position);
+  // The relative rotation's turn about the initial z axis (exact for a
+  // planar push; the yaw of the relative rotation otherwise).
+  const Eigen::Matrix3d rel = r0.transpose() * end_orientation.normalized().toRotationMatrix();
+  return PlanarOutcome{d.x(), d.y(), std::atan2(rel(1, 0), rel(0, 0))};
+}
+
+std::optional<OutcomeNmse> ComputeNmse(const std::vector<PlanarOutcome>& predicted,
+                                       const std::vector<PlanarOutcome>& truth, std::string* why) {
+  if (predicted.size() != truth.size())
+    throw std::invalid_argument("ComputeNmse: predicted and true outcome counts differ");
+  const std::size_t n = truth.size();
+  if (n < 2) {
+    if (why) *why = "NMSE needs at least 2 trials, got " + std::to_string(n);
+    return std::nullopt;
+  }
+  double out[3];
+  static constexpr const char* kNames[3] = {"dx", "dy", "dtheta"};
+  for (int k = 0; k < 3; ++k) {
+    auto get = [k](const PlanarOutcome& o) { return k == 0 ? o.dx : k == 1 ? o.dy : o.dtheta; };
+    double mean = 0;
+    for (const auto& t : truth) mean += get(t) / static_cast<double>(n);
+    double var = 0, mse = 0;
+    for (std::size_t i = 0; i < n; ++i) {
+      var += (get(truth[i]) - mean) * (get(truth[i]) - mean) / static_cast<double>(n);
+      const double e = get(predicted[i]) - get(truth[i]);
+      mse += e * e / static_cast<double>(n);
+    }
+    if (!(var > 0)) {
+      if (why) *why = std::string("the true ") + kNames[k] + " does not vary across the trials";
+      return std::nullopt;
+    }
+    out[k] = mse / var;
+  }
+  OutcomeNmse r;
+  r.trials = static_cast<int>(n);
+  r.dx = out[0];
+  r.dy = out[1];
+  r.dtheta = out[2];
+  r.mean = (out[0] + out[1] + out[2]) / 3;
+  return r;
+}
+
 PredictionError ScorePrediction(const std::vector<mechanics::TrajectorySample>& predicted,
                                 const std::vector<mechanics::TrajectorySample>& truth) {
   PredictionError error;
@@ -55,6 +103,10 @@ PredictionError ScorePrediction(const std::vector<mechanics::TrajectorySample>& 
     error.force_scale = std::sqrt(force_sum / pairs);
     error.mode_agreement = double(agreeing) / pairs;
   }
+  error.predicted_outcome =
+      PlanarOutcomeOf(predicted[0].position, predicted[0].orientation, p.position, p.orientation);
+  error.true_outcome =
+      PlanarOutcomeOf(truth[0].position, truth[0].orientation, t.position, t.orientation);
   error.samples_compared = static_cast<int>(n);
   error.contact_pairs = pairs;
   return error;

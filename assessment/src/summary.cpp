@@ -114,8 +114,25 @@ struct Collect {
   std::vector<double> position, angle, force, mode, time, per_sim_s;
   std::vector<double> position_all, angle_all;  // failures as +inf
   std::vector<std::pair<double, std::int64_t>> by_error;
-  std::vector<std::pair<double, double>> duration_error;  // ok trials
+  std::vector<std::pair<double, double>> duration_error;       // ok trials
+  std::vector<PlanarOutcome> outcome_predicted, outcome_true;  // ok trials with an outcome
 };
+
+// The outcomes ScoreSimulation put in a prediction's detail, if any.
+bool ReadOutcomes(const std::string& detail_json, PlanarOutcome* predicted, PlanarOutcome* truth) {
+  const auto d = nlohmann::json::parse(detail_json, nullptr, false);
+  if (d.is_discarded() || !d.is_object() || !d.contains("outcome")) return false;
+  const auto& o = d["outcome"];
+  auto read = [](const nlohmann::json& a, PlanarOutcome* out) {
+    if (!a.is_array() || a.size() != 3) return false;
+    for (const auto& v : a)
+      if (!v.is_number()) return false;
+    *out = PlanarOutcome{a[0].get<double>(), a[1].get<double>(), a[2].get<double>()};
+    return true;
+  };
+  return o.is_object() && o.contains("true") && o.contains("predicted") &&
+         read(o["predicted"], predicted) && read(o["true"], truth);
+}
 
 void Add(SettingSummary& s, Collect& c, const TrialEvaluation& r) {
   const auto& p = r.prediction;
@@ -138,11 +155,19 @@ void Add(SettingSummary& s, Collect& c, const TrialEvaluation& r) {
     ++s.ok;
     c.position.push_back(*p.final_position_error);
     c.angle.push_back(*p.final_angle_error);
-    if (p.force_error) c.force.push_back(*p.force_error);
+    if (p.force_error) {
+      c.force.push_back(*p.force_error);
+      ++s.force_trials;
+    }
     if (p.mode_agreement) c.mode.push_back(*p.mode_agreement);
     c.position_all.push_back(*p.final_position_error);
     c.angle_all.push_back(*p.final_angle_error);
     c.by_error.emplace_back(*p.final_position_error, r.trial_id);
+    PlanarOutcome predicted, truth;
+    if (ReadOutcomes(p.detail_json, &predicted, &truth)) {
+      c.outcome_predicted.push_back(predicted);
+      c.outcome_true.push_back(truth);
+    }
     if (r.truth_duration_s > 0)
       c.duration_error.emplace_back(r.truth_duration_s, *p.final_position_error);
   } else if (outcome == PredictionOutcome::kDiverged) {
@@ -359,6 +384,11 @@ EvaluationReport Summarise(const std::vector<SettingInfo>& infos,
     s.time_per_sim_s = Distribute(c[i].per_sim_s);
     s.position_p95_all = c[i].position_all.empty() ? kInf : Percentile(c[i].position_all, 0.95);
     s.angle_p95_all = c[i].angle_all.empty() ? kInf : Percentile(c[i].angle_all, 0.95);
+    if (c[i].outcome_true.size() < static_cast<std::size_t>(s.ok)) {
+      s.nmse_note = "predictions stored without their outcome";
+    } else {
+      s.nmse = ComputeNmse(c[i].outcome_predicted, c[i].outcome_true, &s.nmse_note);
+    }
     auto& by = c[i].by_error;
     std::sort(by.begin(), by.end(), [](const auto& a, const auto& b) { return a.first > b.first; });
     for (std::size_t k = 0; k < std::min(kWorstListed, by.size()); ++k) {
@@ -392,7 +422,35 @@ EvaluationReport Summarise(const std::vector<SettingInfo>& infos,
   return report;
 }
 
+std::vector<GroupReport> SummariseGroups(
+    const std::vector<SettingInfo>& settings, const std::vector<TrialEvaluation>& results,
+    const std::map<std::int64_t, std::string>& group_of_trial) {
+  std::map<std::string, std::vector<TrialEvaluation>> by;
+  for (const auto& r : results) {
+    const auto it = group_of_trial.find(r.trial_id);
+    if (it == group_of_trial.end())
+      throw std::invalid_argument("SummariseGroups: trial " + std::to_string(r.trial_id) +
+                                  " has no group");
+    by[it->second].push_back(r);
+  }
+  std::vector<GroupReport> out;
+  for (const auto& [value, rs] : by) {
+    const EvaluationReport g = Summarise(settings, rs, {});
+    out.push_back(GroupReport{value, g.trials, g.settings});
+  }
+  return out;
+}
+
 namespace {
+
+nlohmann::json Nmse(const SettingSummary& s) {
+  if (!s.nmse) return {{"value", nullptr}, {"note", s.nmse_note}};
+  return {{"value", s.nmse->mean},
+          {"dx", s.nmse->dx},
+          {"dy", s.nmse->dy},
+          {"dtheta", s.nmse->dtheta},
+          {"trials", s.nmse->trials}};
+}
 
 nlohmann::json Dist(const std::optional<Distribution>& d) {
   if (!d) return nullptr;
@@ -437,6 +495,7 @@ nlohmann::json ToJson(const EvaluationReport& r) {
         {"position_error_m", Dist(s.position)},
         {"angle_error_rad", Dist(s.angle)},
         {"force_error_n", Dist(s.force)},
+        {"force_trials", s.force_trials},
         {"mode_agreement", Dist(s.mode_agreement)},
         {"position_floor_multiple", Multiple(s.position, pos_floor)},
         {"angle_floor_multiple", Multiple(s.angle, ang_floor)},
@@ -449,7 +508,8 @@ nlohmann::json ToJson(const EvaluationReport& r) {
         {"failed_trials", Notes(s.failed_trials, false)},
         {"convergence", nullptr},
         {"pareto", s.pareto},
-        {"within_budget", s.within_budget}};
+        {"within_budget", s.within_budget},
+        {"outcome_nmse", Nmse(s)}};
     if (j["knobs"].is_discarded()) j["knobs"] = nlohmann::json::object();
     if (s.model) {
       j["facets"] = s.model->facets;
@@ -506,6 +566,30 @@ nlohmann::json ToJson(const EvaluationReport& r) {
                         {"recommended_predictor", nullptr},
                         {"recommendation", r.recommendation},
                         {"front", r.front}};
+  out["scales"] = r.scales;
+  if (!r.group_by.empty()) {
+    nlohmann::json groups = nlohmann::json::array();
+    for (const auto& g : r.groups) {
+      nlohmann::json gs = nlohmann::json::array();
+      for (const auto& s : g.settings) {
+        gs.push_back({{"predictor", s.predictor},
+                      {"model_key", s.model_key},
+                      {"trials", s.trials},
+                      {"ok", s.ok},
+                      {"diverged", s.diverged},
+                      {"failures", s.failures},
+                      {"position_error_m", Dist(s.position)},
+                      {"angle_error_rad", Dist(s.angle)},
+                      {"force_error_n", Dist(s.force)},
+                      {"force_trials", s.force_trials},
+                      {"time_s", Dist(std::optional<Distribution>(s.time))},
+                      {"outcome_nmse", Nmse(s)}});
+      }
+      groups.push_back({{"value", g.value}, {"trials", g.trials}, {"settings", gs}});
+    }
+    out["group_by"] = r.group_by;
+    out["groups"] = groups;
+  }
   if (r.recommended) {
     out["recommended"] = r.settings[*r.recommended].model_key;
     out["recommended_predictor"] = r.settings[*r.recommended].predictor;

@@ -5,7 +5,9 @@
 // and stores it; a campaign's "prediction": {"calibration": ID} then uses it.
 
 #include <atomic>
+#include <cmath>
 #include <cstdio>
+#include <map>
 #include <memory>
 #include <sstream>
 #include <string>
@@ -24,6 +26,7 @@
 #include "result_file.hpp"
 #include "signals.hpp"
 #include "store_errors.hpp"
+#include "trial_parameters.hpp"
 
 namespace arena::cli {
 namespace {
@@ -44,7 +47,10 @@ struct CalibrateOptions {
   double lower = 0.2, upper = 5.0;
   int profile_points = -1;  // < 0 = the predictor's default
   bool json = false;
-  std::string out_path;  // --out: the result as JSON, besides the store
+  std::string out_path;          // --out: the result as JSON, besides the store
+  std::string loss = "pose";     // --loss: pose (position, angle, force) or nmse
+  std::string holdout_by;        // --holdout-by: a trial parameter
+  std::string trial_parameters;  // --trial-parameters: a CSV with a seed column
 };
 
 std::vector<assessment::CalibrationParam> ParseParams(const std::string& list) {
@@ -146,6 +152,122 @@ nlohmann::json ArenaModelSettings(const std::string& text, nlohmann::json model)
   return model;
 }
 
+std::string NmseText(const assessment::SetFigures& f) {
+  if (!f.nmse) return "-";
+  char buf[32];
+  std::snprintf(buf, sizeof buf, "%.3f", f.nmse->mean);
+  return buf;
+}
+
+std::string PairText(double median, double p95, double scale) {
+  char buf[48];
+  std::snprintf(buf, sizeof buf, "%.3g/%.3g", median * scale, p95 * scale);
+  return buf;
+}
+
+nlohmann::json FiguresJsonOf(const assessment::SetFigures& f) {
+  nlohmann::json nmse = nullptr;
+  if (f.nmse)
+    nmse = {{"value", f.nmse->mean},
+            {"dx", f.nmse->dx},
+            {"dy", f.nmse->dy},
+            {"dtheta", f.nmse->dtheta}};
+  return {{"trials", f.trials},
+          {"predicted", f.predicted},
+          {"outcome_nmse", nmse},
+          {"position_error_m", {{"median", f.position_median}, {"p95", f.position_p95}}},
+          {"angle_error_rad", {{"median", f.angle_median}, {"p95", f.angle_p95}}}};
+}
+
+// The fitted and held-out trials' figures before and after, as `arena
+// evaluate` gives them.
+void PrintFigures(const assessment::CalibrationResult& r) {
+  std::printf("%-22s %6s %7s %-20s %16s %18s\n", "", "trials", "NMSE", "dx/dy/dtheta",
+              "pos mm med/p95", "angle deg med/p95");
+  auto row = [](const char* name, const assessment::SetFigures& f) {
+    if (f.trials == 0) return;
+    char parts[64] = "-";
+    if (f.nmse)
+      std::snprintf(parts, sizeof parts, "%.3f/%.3f/%.3f", f.nmse->dx, f.nmse->dy, f.nmse->dtheta);
+    char trials[32];
+    std::snprintf(trials, sizeof trials, "%d/%d", f.predicted, f.trials);
+    std::printf("%-22s %6s %7s %-20s %16s %18s\n", name, trials, NmseText(f).c_str(), parts,
+                PairText(f.position_median, f.position_p95, 1e3).c_str(),
+                PairText(f.angle_median, f.angle_p95, 180 / M_PI).c_str());
+  };
+  row("fitted, before", r.train_figures_before);
+  row("fitted, after", r.train_figures_after);
+  row("held out, before", r.heldout_figures_before);
+  row("held out, after", r.heldout_figures_after);
+}
+
+// Stores one fit (waiting out a locked store; any other store failure
+// keeps it in a file) and returns its id; *result: its JSON.
+std::int64_t StoreResult(db::Store& store, const CalibrateOptions& o,
+                         const assessment::CalibrationOptions& co, const nlohmann::json& model,
+                         const simulators::Simulator* simulator,
+                         const assessment::CalibrationResult& r, const nlohmann::json& split,
+                         nlohmann::json* result) {
+  db::Calibration cal;
+  cal.campaign_id = o.campaign;
+  cal.params_json = assessment::ParamsJson(r);
+  nlohmann::json predictor_settings = nullptr;
+  if (simulator) predictor_settings = nlohmann::json::parse(simulator->settings_json());
+  nlohmann::json settings{{"params", o.params},
+                          {"predictor", o.predictor},
+                          {"predictor_settings", predictor_settings},
+                          {"bootstrap_method", r.bootstrap_method},
+                          {"model", model},
+                          {"holdout", o.holdout},
+                          {"bootstrap", o.bootstrap},
+                          {"max_evaluations", co.max_evaluations},
+                          {"seed", o.seed},
+                          {"bounds", {o.lower, o.upper}},
+                          {"profile_points", co.profile_points},
+                          {"loss", o.loss},
+                          {"loss_scales",
+                           {{"position_m", co.scales.position_m},
+                            {"angle_rad", co.scales.angle_rad},
+                            {"force_n", co.scales.force_n},
+                            {"force_window_s", co.scales.force_window_s}}}};
+  if (!split.is_null()) settings["split"] = split;
+  cal.settings_json = settings.dump();
+  cal.heldout_error_before = r.heldout_ids.empty() ? r.train_before : r.heldout_before;
+  cal.heldout_error_after = r.heldout_ids.empty() ? r.train_after : r.heldout_after;
+  cal.applied = r.improved;
+  cal.report_json = assessment::ReportJson(r);
+  std::int64_t id = 0;
+  *result = {{"id", nullptr},
+             {"campaign", o.campaign},
+             {"applied", r.improved},
+             {"predictor", o.predictor},
+             {"params", nlohmann::json::parse(cal.params_json)},
+             {"report", nlohmann::json::parse(cal.report_json)}};
+  if (!split.is_null()) (*result)["split"] = split;
+  // The fit is done: a store locked by another process is waited for (Ctrl-C
+  // or any other store failure keeps the result in a file), never a reason
+  // to throw it away.
+  const std::string rescue =
+      o.out_path.empty() ? RescuePath("calibration", o.campaign) : o.out_path;
+  std::atomic<bool> cancel{false};
+  SignalWatcher signals([&cancel](int) { cancel.store(true); });
+  try {
+    db::RetryWhileBusy([&] { id = store.RecordCalibration(cal); },
+                       BusyStoreNotice("calibrate", rescue, [&cancel] { return cancel.load(); }));
+  } catch (const db::StoreError& e) {
+    (*result)["settings"] = nlohmann::json::parse(cal.settings_json);
+    (*result)["heldout_error"] = {{"before", cal.heldout_error_before},
+                                  {"after", cal.heldout_error_after}};
+    (*result)["not_stored"] = e.what();
+    WriteResultFile(rescue, result->dump(2) + "\n");
+    throw CommandError(ExitCodeFor(e),
+                       "calibrate: finished, but the store did not take the result (" +
+                           UserMessage(e.what()) + "); the result is saved in " + rescue);
+  }
+  (*result)["id"] = id;
+  return id;
+}
+
 int RunCalibrate(const CalibrateOptions& o) {
   if (o.predictor != "arena" && o.predictor != "mujoco") {
     throw CommandError(kExitBadInput,
@@ -168,6 +290,9 @@ int RunCalibrate(const CalibrateOptions& o) {
   } catch (const assessment::CalibrationError& e) {
     throw CommandError(kExitBadInput, e.what());
   }
+  if (o.loss != "pose" && o.loss != "nmse")
+    throw CommandError(kExitBadInput, "--loss: must be pose or nmse, got '" + o.loss + "'");
+  co.outcome_loss = o.loss == "nmse";
   co.holdout = o.holdout;
   co.bootstrap = o.bootstrap;
   co.scales.force_window_s =
@@ -219,6 +344,29 @@ int RunCalibrate(const CalibrateOptions& o) {
     }
   }
 
+  // A split by a trial parameter: one fit per value, its trials held out.
+  std::vector<std::pair<std::string, std::vector<std::int64_t>>> splits;
+  if (!o.holdout_by.empty()) {
+    const TrialParameters parameters(o.trial_parameters, "--trial-parameters");
+    std::map<std::int64_t, db::Trial> by_id;
+    try {
+      for (auto& t : store->ListTrials(o.campaign)) by_id.emplace(t.id, std::move(t));
+    } catch (const db::StoreError& e) {
+      throw StoreCommandError(e);
+    }
+    std::map<std::string, std::vector<std::int64_t>> groups;
+    for (const auto& t : trials)
+      groups[parameters.Value(by_id.at(t.trial_id), o.holdout_by, "--holdout-by")].push_back(
+          t.trial_id);
+    if (groups.size() < 2)
+      throw CommandError(kExitBadInput, "--holdout-by: every trial has " + o.holdout_by + " = " +
+                                            groups.begin()->first +
+                                            ": a split needs at least two values");
+    for (auto& [value, ids] : groups) splits.emplace_back(value, std::move(ids));
+  } else if (!o.trial_parameters.empty()) {
+    throw CommandError(kExitBadInput, "--trial-parameters: only with --holdout-by");
+  }
+
   // A bar over the main fit's evaluations on a terminal (silent otherwise).
   ProgressLine bar(co.max_evaluations, "loss evaluations");
   if (bar.enabled()) {
@@ -233,76 +381,122 @@ int RunCalibrate(const CalibrateOptions& o) {
     };
   }
 
-  assessment::CalibrationResult r;
+  std::vector<assessment::CalibrationResult> results;
   try {
-    r = mujoco ? assessment::Calibrate(trials, *simulator, co)
-               : assessment::Calibrate(
-                     trials, [](const mechanics::Scene& s) { return mechanics::Simulate(s); }, co);
+    const auto simulate = [](const mechanics::Scene& s) { return mechanics::Simulate(s); };
+    if (splits.empty()) {
+      results.push_back(mujoco ? assessment::Calibrate(trials, *simulator, co)
+                               : assessment::Calibrate(trials, simulate, co));
+    } else if (!mujoco) {
+      std::vector<std::vector<std::int64_t>> sets;
+      for (const auto& [value, ids] : splits) sets.push_back(ids);
+      results = assessment::CalibrateSplits(trials, simulate, co, sets);
+    } else {
+      for (const auto& [value, ids] : splits) {
+        assessment::CalibrationOptions so = co;
+        so.heldout_ids = ids;
+        results.push_back(assessment::Calibrate(trials, *simulator, so));
+      }
+    }
   } catch (const assessment::CalibrationError& e) {
     throw CommandError(kExitBadInput, e.what());
   }
   bar.Finish();
 
-  db::Calibration cal;
-  cal.campaign_id = o.campaign;
-  cal.params_json = assessment::ParamsJson(r);
-  nlohmann::json predictor_settings = nullptr;
-  if (simulator) predictor_settings = nlohmann::json::parse(simulator->settings_json());
-  cal.settings_json = nlohmann::json{{"params", o.params},
-                                     {"predictor", o.predictor},
-                                     {"predictor_settings", predictor_settings},
-                                     {"bootstrap_method", r.bootstrap_method},
-                                     {"model", model},
-                                     {"holdout", o.holdout},
-                                     {"bootstrap", o.bootstrap},
-                                     {"max_evaluations", co.max_evaluations},
-                                     {"seed", o.seed},
-                                     {"bounds", {o.lower, o.upper}},
-                                     {"profile_points", co.profile_points},
-                                     {"loss_scales",
-                                      {{"position_m", co.scales.position_m},
-                                       {"angle_rad", co.scales.angle_rad},
-                                       {"force_n", co.scales.force_n},
-                                       {"force_window_s", co.scales.force_window_s}}}}
-                          .dump();
-  cal.heldout_error_before = r.heldout_before;
-  cal.heldout_error_after = r.heldout_after;
-  cal.applied = r.improved;
-  cal.report_json = assessment::ReportJson(r);
-  std::int64_t id = 0;
-  nlohmann::json result{{"id", nullptr},
-                        {"campaign", o.campaign},
-                        {"applied", r.improved},
-                        {"predictor", o.predictor},
-                        {"params", nlohmann::json::parse(cal.params_json)},
-                        {"report", nlohmann::json::parse(cal.report_json)}};
-  {
-    // The fit is done: a store locked by another process is waited for (Ctrl-C
-    // or any other store failure keeps the result in a file), never a reason
-    // to throw it away.
-    const std::string rescue =
-        o.out_path.empty() ? RescuePath("calibration", o.campaign) : o.out_path;
-    std::atomic<bool> cancel{false};
-    SignalWatcher signals([&cancel](int) { cancel.store(true); });
-    try {
-      db::RetryWhileBusy([&] { id = store->RecordCalibration(cal); },
-                         BusyStoreNotice("calibrate", rescue, [&cancel] { return cancel.load(); }));
-    } catch (const db::StoreError& e) {
-      result["settings"] = nlohmann::json::parse(cal.settings_json);
-      result["heldout_error"] = {{"before", cal.heldout_error_before},
-                                 {"after", cal.heldout_error_after}};
-      result["not_stored"] = e.what();
-      WriteResultFile(rescue, result.dump(2) + "\n");
-      throw CommandError(ExitCodeFor(e),
-                         "calibrate: finished, but the store did not take the result (" +
-                             UserMessage(e.what()) + "); the result is saved in " + rescue);
-    }
+  std::vector<std::int64_t> ids;
+  nlohmann::json results_json = nlohmann::json::array();
+  for (std::size_t k = 0; k < results.size(); ++k) {
+    nlohmann::json split = nullptr;
+    if (!splits.empty()) split = {{"holdout_by", o.holdout_by}, {"heldout_value", splits[k].first}};
+    nlohmann::json result;
+    ids.push_back(StoreResult(*store, o, co, model, simulator.get(), results[k], split, &result));
+    results_json.push_back(std::move(result));
   }
-  result["id"] = id;
-  if (!o.out_path.empty()) WriteResultFile(o.out_path, result.dump(2) + "\n");
 
+  bool all_improved = true;
+  for (const auto& r : results) all_improved = all_improved && r.improved;
+  nlohmann::json output = results_json.front();
+  if (!splits.empty()) {
+    // Every trial predicted by the fit that did not see its group.
+    std::vector<assessment::TrialError> before, after;
+    for (const auto& r : results) {
+      before.insert(before.end(), r.heldout_errors_before.begin(), r.heldout_errors_before.end());
+      after.insert(after.end(), r.heldout_errors_after.begin(), r.heldout_errors_after.end());
+    }
+    const auto pooled_before = assessment::FiguresOf(before);
+    const auto pooled_after = assessment::FiguresOf(after);
+    output = {{"campaign", o.campaign},
+              {"holdout_by", o.holdout_by},
+              {"splits", results_json},
+              {"pooled_heldout",
+               {{"before", FiguresJsonOf(pooled_before)}, {"after", FiguresJsonOf(pooled_after)}}},
+              {"all_improved", all_improved}};
+    if (!o.out_path.empty()) WriteResultFile(o.out_path, output.dump(2) + "\n");
+    if (o.json) {
+      std::printf("%s\n", output.dump().c_str());
+      return all_improved ? kExitOk : kExitFailure;
+    }
+    std::printf(
+        "calibration of campaign %lld held out by %s: %zu fits (predictor %s), each on every "
+        "trial but one %s's, scored on that %s's trials\n",
+        static_cast<long long>(o.campaign), o.holdout_by.c_str(), results.size(),
+        o.predictor.c_str(), o.holdout_by.c_str(), o.holdout_by.c_str());
+    for (std::size_t k = 0; k < results.size(); ++k) {
+      const auto& r = results[k];
+      std::printf(
+          "\n== held out: %s = %s (%zu trials; fitted on %zu; calibration %lld, %s; %d "
+          "loss evaluations, %ld new simulations)\n",
+          o.holdout_by.c_str(), splits[k].first.c_str(), r.heldout_ids.size(), r.train_ids.size(),
+          static_cast<long long>(ids[k]),
+          r.improved ? "applied" : "NOT applied: no lower held-out loss", r.evaluations,
+          r.simulations);
+      PrintFittedTable(r);
+      std::printf("\n");
+      PrintFigures(r);
+    }
+    std::printf("\nsummary, held out by %s:\n", o.holdout_by.c_str());
+    std::printf("  %-10s %6s %-34s %16s %16s %18s %18s\n", "held out", "trials", "fitted",
+                "NMSE before", "NMSE after", "pos mm med/p95", "angle deg med/p95");
+    for (std::size_t k = 0; k < results.size(); ++k) {
+      const auto& r = results[k];
+      std::string fitted;
+      for (const auto& f : r.fitted) {
+        char buf[64];
+        if (f.nominal)
+          std::snprintf(buf, sizeof buf, "%s%s %.3g", fitted.empty() ? "" : ", ", f.name.c_str(),
+                        *f.nominal * f.scale);
+        else
+          std::snprintf(buf, sizeof buf, "%s%s x%.3g", fitted.empty() ? "" : ", ", f.name.c_str(),
+                        f.scale);
+        fitted += buf;
+      }
+      std::printf("  %-10s %6zu %-34s %16s %16s %18s %18s\n", splits[k].first.c_str(),
+                  r.heldout_ids.size(), fitted.c_str(), NmseText(r.heldout_figures_before).c_str(),
+                  NmseText(r.heldout_figures_after).c_str(),
+                  PairText(r.heldout_figures_after.position_median,
+                           r.heldout_figures_after.position_p95, 1e3)
+                      .c_str(),
+                  PairText(r.heldout_figures_after.angle_median, r.heldout_figures_after.angle_p95,
+                           180 / M_PI)
+                      .c_str());
+    }
+    std::printf("  %-10s %6zu %-34s %16s %16s %18s %18s\n", "pooled", before.size(),
+                "(each trial by the fit without it)", NmseText(pooled_before).c_str(),
+                NmseText(pooled_after).c_str(),
+                PairText(pooled_after.position_median, pooled_after.position_p95, 1e3).c_str(),
+                PairText(pooled_after.angle_median, pooled_after.angle_p95, 180 / M_PI).c_str());
+    std::printf(
+        "  (NMSE: of dx, dy, dtheta in the object's initial frame over the held-out trials' own "
+        "variance; pooled: over every trial, each predicted by the fit that did not see its %s)\n",
+        o.holdout_by.c_str());
+    return all_improved ? kExitOk : kExitFailure;
+  }
+
+  const auto& r = results.front();
+  const std::int64_t id = ids.front();
+  if (!o.out_path.empty()) WriteResultFile(o.out_path, output.dump(2) + "\n");
   if (o.json) {
-    std::printf("%s\n", result.dump().c_str());
+    std::printf("%s\n", output.dump().c_str());
   } else {
     std::printf(
         "calibration %lld of campaign %lld (predictor %s, %s, %d loss evaluations, %zu trials "
@@ -314,18 +508,24 @@ int RunCalibrate(const CalibrateOptions& o) {
     std::printf("; uncertainty: %d bootstrap resamples (%s)\n\n", o.bootstrap,
                 r.bootstrap_method.c_str());
     PrintFittedTable(r);
-    std::printf("\nheld-out error       before      after\n");
-    std::printf("  loss (weighted) %10.4g %10.4g\n", r.heldout_before, r.heldout_after);
-    std::printf("  position (mm)   %10.4f %10.4f\n", r.heldout_position_before * 1e3,
-                r.heldout_position_after * 1e3);
-    std::printf("  angle (deg)     %10.4f %10.4f\n", r.heldout_angle_before * 57.29577951,
-                r.heldout_angle_after * 57.29577951);
-    std::printf("  force RMS (N)   %10.4f %10.4f\n", r.heldout_force_before, r.heldout_force_after);
+    if (!r.heldout_ids.empty()) {
+      std::printf("\nheld-out error       before      after\n");
+      std::printf("  loss (weighted) %10.4g %10.4g\n", r.heldout_before, r.heldout_after);
+      std::printf("  position (mm)   %10.4f %10.4f\n", r.heldout_position_before * 1e3,
+                  r.heldout_position_after * 1e3);
+      std::printf("  angle (deg)     %10.4f %10.4f\n", r.heldout_angle_before * 57.29577951,
+                  r.heldout_angle_after * 57.29577951);
+      std::printf("  force RMS (N)   %10.4f %10.4f\n", r.heldout_force_before,
+                  r.heldout_force_after);
+    }
+    std::printf("\n");
+    PrintFigures(r);
     if (r.improved) {
       std::printf("\napplied: a campaign uses it with \"prediction\": {\"calibration\": %lld}\n",
                   static_cast<long long>(id));
     } else {
-      std::printf("\nNOT applied: the fit does not lower the held-out error\n");
+      std::printf("\nNOT applied: the fit does not lower the %s error\n",
+                  r.heldout_ids.empty() ? "fitted trials'" : "held-out");
     }
   }
   return r.improved ? kExitOk : kExitFailure;
@@ -342,7 +542,8 @@ void AddCalibrateCommand(CLI::App& app, Action* action) {
       ->required()
       ->check(CLI::PositiveNumber);
   cmd->add_option("--params", o->params,
-                  "Comma-separated: mu_fingers, mu_pusher, grip_force, object_mass (scales)")
+                  "Comma-separated: mu_fingers, mu_pusher, grip_force, object_mass, mu_support, "
+                  "pressure_rim (scales)")
       ->required();
   cmd->add_option("--predictor", o->predictor, "The model fitted: arena or mujoco");
   cmd->add_option("--predictor-settings", o->predictor_settings,
@@ -356,8 +557,21 @@ void AddCalibrateCommand(CLI::App& app, Action* action) {
                   "Scales over the bounds at which each parameter's loss is profiled to check "
                   "that the data identify it (0: no profile; default 12 for arena, 6 for mujoco)")
       ->check(CLI::NonNegativeNumber);
-  cmd->add_option("--holdout", o->holdout, "Fraction of trials held out to judge the fit")
-      ->check(CLI::Range(0.05, 0.9));
+  cmd->add_option("--holdout", o->holdout,
+                  "Fraction of trials held out to judge the fit (0: fit and judge every trial)")
+      ->check(CLI::Range(0.0, 0.9));
+  cmd->add_option("--loss", o->loss,
+                  "pose: final position (1 mm), angle (0.01 rad) and contact force (0.5 N) "
+                  "errors; nmse: the NMSE of the push's outcome (dx, dy, dtheta in the object's "
+                  "initial frame, each over its variance across the fitted trials)")
+      ->capture_default_str();
+  cmd->add_option("--holdout-by", o->holdout_by,
+                  "Split by this trial parameter instead (e.g. shape): one fit per value, that "
+                  "value's trials held out and every other fitted; a table per held-out value "
+                  "and their pooled figures");
+  cmd->add_option("--trial-parameters", o->trial_parameters,
+                  "A CSV with a seed column whose rows give the trials of those seeds more "
+                  "parameters (an imported dataset's trials.csv)");
   cmd->add_option("--bootstrap", o->bootstrap, "Resamples for the uncertainty (0: none)")
       ->check(CLI::Range(0, 1000));
   cmd->add_option("--max-evaluations", o->max_evaluations,
@@ -379,6 +593,8 @@ void AddCalibrateCommand(CLI::App& app, Action* action) {
   cmd->footer(
       "Example:\n"
       "  arena calibrate --db lab.db --campaign 1 --params mu_fingers,mu_pusher --holdout 0.3\n"
+      "  arena calibrate --db real.db --campaign 1 --params mu_pusher,mu_support --holdout-by "
+      "shape --trial-parameters DATASET/trials.csv\n"
       "  arena calibrate --db lab.db --campaign 1 --params mu_fingers --predictor mujoco "
       "--threads 2\n"
       "Exit 0: stored and applied; 1: stored, but it did not lower the held-out error (not "

@@ -14,6 +14,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include "arena/assessment/calibration.hpp"
 #include "arena/assessment/evaluation.hpp"
 #include "arena/db/store.hpp"
 #include "arena/mechanics/scene_json.hpp"
@@ -23,6 +24,7 @@
 #include "result_file.hpp"
 #include "signals.hpp"
 #include "store_errors.hpp"
+#include "trial_parameters.hpp"
 #include "truth_relation.hpp"
 
 namespace arena::cli {
@@ -50,6 +52,10 @@ struct EvaluateOptions {
   bool json = false;
   std::string out_path;           // --out: the report as JSON, besides the store
   std::string from = "measured";  // --from: where predictions start (issue 26)
+  std::int64_t calibration = 0;     // --calibration: its scales applied (0: none)
+  std::vector<std::string> scales;  // --scale NAME=FACTOR, over --calibration's
+  std::string group_by;             // --group-by: a trial parameter
+  std::string trial_parameters;     // --trial-parameters: a CSV with a seed column
 };
 
 // "start: ..." lines: where the predictions started and how much of the
@@ -140,6 +146,42 @@ std::string TrialIds(const std::vector<assessment::TrialNote>& notes, std::size_
   return out;
 }
 
+std::string MedianP95(const std::optional<assessment::Distribution>& d, double scale) {
+  if (!d) return "-";
+  char buf[64];
+  std::snprintf(buf, sizeof buf, "%.3g/%.3g", d->median * scale, d->p95 * scale);
+  return buf;
+}
+
+// The outcome table: per setting, the NMSE of (dx, dy, dtheta) and the final
+// pose, force and time figures beside it.
+std::string OutcomeTable(const std::vector<assessment::SettingSummary>& settings) {
+  std::ostringstream out;
+  char line[640];
+  std::snprintf(line, sizeof line, "  %-8s %-24s %6s %6s %-20s %16s %16s %20s %13s\n", "predictor",
+                "setting", "scored", "NMSE", "dx/dy/dtheta", "pos mm med/p95", "angle deg med/p95",
+                "force N med/p95 (n)", "ms/trial med");
+  out << line;
+  for (const auto& s : settings) {
+    char nmse[24] = "-", parts[48] = "-", force[64] = "-";
+    if (s.nmse) {
+      std::snprintf(nmse, sizeof nmse, "%.3f", s.nmse->mean);
+      std::snprintf(parts, sizeof parts, "%.3f/%.3f/%.3f", s.nmse->dx, s.nmse->dy, s.nmse->dtheta);
+    }
+    if (s.force)
+      std::snprintf(force, sizeof force, "%s (%d)", MedianP95(s.force, 1).c_str(), s.force_trials);
+    char scored[24];
+    std::snprintf(scored, sizeof scored, "%d/%d", s.ok, s.trials);
+    std::snprintf(line, sizeof line, "  %-8s %-24s %6s %6s %-20s %16s %16s %20s %13.3g\n",
+                  s.predictor.c_str(), s.model_key.c_str(), scored, nmse, parts,
+                  MedianP95(s.position, 1e3).c_str(), MedianP95(s.angle, 180 / M_PI).c_str(), force,
+                  s.time.median * 1e3);
+    out << line;
+    if (!s.nmse && !s.nmse_note.empty()) out << "    (no NMSE: " << s.nmse_note << ")\n";
+  }
+  return out.str();
+}
+
 std::string FormatTable(const assessment::EvaluationReport& r, std::int64_t evaluation_id) {
   std::ostringstream out;
   char line[640];
@@ -150,6 +192,14 @@ std::string FormatTable(const assessment::EvaluationReport& r, std::int64_t eval
                 r.predictors.size(), static_cast<long long>(evaluation_id));
   out << line;
   out << "truth: " << r.truth.source << " -- " << r.truth.statement << "\n";
+  if (!r.scales.empty()) {
+    out << "calibrated: every scene scaled before prediction:";
+    for (const auto& [name, k] : r.scales) {
+      std::snprintf(line, sizeof line, " %s x%.4g", name.c_str(), k);
+      out << line;
+    }
+    out << "\n";
+  }
   const double floor_m = r.floor ? r.floor->position_median : 0;
   if (r.floor) {
     std::snprintf(line, sizeof line,
@@ -229,6 +279,16 @@ std::string FormatTable(const assessment::EvaluationReport& r, std::int64_t eval
         Tail(s.position, 1e3).c_str(), s.finest ? "  (finest)" : "");
     out << line;
   }
+  out << "\noutcome: NMSE of the push's outcome (dx, dy, dtheta: the object's final pose in its "
+         "initial frame; each output's mean squared error over its variance across the trials "
+         "scored, averaged over the three; 1 = predicting the mean outcome), final position and "
+         "angle error, force error against the measured force (n: trials whose force was "
+         "scored), wall time per trial:\n";
+  out << OutcomeTable(r.settings);
+  for (const auto& g : r.groups) {
+    out << "\n" << r.group_by << " = " << g.value << " (" << g.trials << " trials):\n";
+    out << OutcomeTable(g.settings);
+  }
   out << "\nfront: " << r.front << "\n";
   out << "recommendation: " << r.recommendation << "\n";
   return out.str();
@@ -296,6 +356,16 @@ int RunEvaluate(const EvaluateOptions& o) {
     throw CommandError(kExitBadInput, std::string("evaluate: ") + e.what());
   }
 
+  if (o.group_by.empty() && !o.trial_parameters.empty())
+    throw CommandError(kExitBadInput, "--trial-parameters: only with --group-by");
+  const TrialParameters parameters(o.trial_parameters, "--trial-parameters");
+  if (!o.group_by.empty()) {
+    eo.group_by = o.group_by;
+    eo.group_of = [&parameters, &o](const db::Trial& t) {
+      return parameters.Value(t, o.group_by, "--group-by");
+    };
+  }
+
   RefuseToOverwriteStore(o.out_path, "--out", o.db_path);
   const std::string rescue = o.out_path.empty() ? RescuePath("evaluation", o.campaign) : o.out_path;
 
@@ -311,6 +381,43 @@ int RunEvaluate(const EvaluateOptions& o) {
     db::StoreOptions so;
     so.create = false;
     auto store = db::Store::Open(o.db_path, so);
+    if (o.calibration > 0) {
+      const db::Calibration cal = store->GetCalibration(o.calibration);
+      if (cal.campaign_id != o.campaign)
+        throw CommandError(kExitBadInput,
+                           "--calibration: calibration " + std::to_string(o.calibration) +
+                               " was fitted to campaign " + std::to_string(cal.campaign_id) +
+                               ", not " + std::to_string(o.campaign));
+      const auto fitted = nlohmann::json::parse(cal.params_json, nullptr, false);
+      if (!fitted.is_object())
+        throw CommandError(kExitBadInput, "--calibration: calibration " +
+                                              std::to_string(o.calibration) +
+                                              " has no fitted parameters");
+      for (const auto& item : fitted.items())
+        eo.scales[item.key()] = item.value().at("scale").get<double>();
+    }
+    for (const auto& text : o.scales) {
+      const auto eq = text.find('=');
+      double k = 0;
+      std::size_t used = 0;
+      const std::string name = text.substr(0, eq);
+      try {
+        if (eq != std::string::npos) k = std::stod(text.substr(eq + 1), &used);
+      } catch (const std::exception&) {
+        used = 0;
+      }
+      if (eq == std::string::npos || used == 0 || used != text.size() - eq - 1 ||
+          !std::isfinite(k) || !(k > 0))
+        throw CommandError(kExitBadInput, "--scale: '" + text +
+                                              "' must be NAME=FACTOR with a factor > 0 (e.g. "
+                                              "mu_pusher=1.2)");
+      try {
+        (void)assessment::ParseCalibrationParam(name);
+      } catch (const assessment::CalibrationError& e) {
+        throw CommandError(kExitBadInput, std::string("--scale: ") + e.what());
+      }
+      eo.scales[name] = k;
+    }
     std::unique_ptr<ProgressLine> progress;
     eo.progress = [&progress](long done, long failed, long total) {
       if (!progress) progress = std::make_unique<ProgressLine>(total, "replays");
@@ -455,6 +562,21 @@ void AddEvaluateCommand(CLI::App& app, Action* action) {
       "(a minimum)|time_p95");
   cmd->add_option("--threads", o->threads, "Worker threads (0: one per core)")
       ->capture_default_str();
+  cmd->add_option("--calibration", o->calibration,
+                  "Apply this calibration's fitted scales (arena calibrate) to every trial's "
+                  "scene before predicting it, for every predictor")
+      ->check(CLI::PositiveNumber);
+  cmd->add_option("--scale", o->scales,
+                  "NAME=FACTOR, repeatable: scale this parameter (arena calibrate's names: "
+                  "mu_pusher, mu_support, pressure_rim, ...) on every scene, over "
+                  "--calibration's");
+  cmd->add_option("--group-by", o->group_by,
+                  "Also report every setting per value of this trial parameter (e.g. shape, "
+                  "push_angle_rad, speed_mm_s): the trial's stored parameters, else "
+                  "--trial-parameters");
+  cmd->add_option("--trial-parameters", o->trial_parameters,
+                  "A CSV with a seed column whose rows give the trials of those seeds more "
+                  "parameters (an imported dataset's trials.csv)");
   cmd->add_flag("--json", o->json, "Print the report as JSON");
   cmd->add_option("--from", o->from,
                   "Where predictions start: measured (the start pose each trial's cell "

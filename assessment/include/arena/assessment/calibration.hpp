@@ -8,6 +8,15 @@
 //   mu_pusher    the pusher's friction coefficient
 //   grip_force   the grip force the cell really applies
 //   object_mass  the object's mass (and inertia)
+//   mu_support   the support's friction coefficient (free pushing)
+//   pressure_rim the support's pressure distribution, a one-parameter family:
+//                each pressure point's weight (the scene's points, or the
+//                uniform quadrature of its resting face) times k^rho, rho
+//                its distance from the centre of mass over the farthest
+//                point's, then tilted linearly so that the centre of
+//                pressure stays under the centre of mass. k = 1 is the
+//                scene's own (uniform) pressure, k > 1 loads the rim (k
+//                times the centre's pressure there), k < 1 the centre.
 //
 // Loss of one trial (weights: LossScales, documented in the README):
 //
@@ -64,6 +73,7 @@
 // once, never twice at once for the same trial.
 #pragma once
 
+#include <array>
 #include <cstdint>
 #include <functional>
 #include <map>
@@ -72,6 +82,7 @@
 #include <string>
 #include <vector>
 
+#include "arena/assessment/scoring.hpp"
 #include "arena/db/store.hpp"
 #include "arena/mechanics/scene.hpp"
 #include "arena/mechanics/simulate.hpp"
@@ -88,7 +99,14 @@ class CalibrationError : public std::runtime_error {
   using std::runtime_error::runtime_error;
 };
 
-enum class CalibrationParam { kMuFingers, kMuPusher, kGripForce, kObjectMass };
+enum class CalibrationParam {
+  kMuFingers,
+  kMuPusher,
+  kGripForce,
+  kObjectMass,
+  kMuSupport,
+  kPressureRim
+};
 const char* ToString(CalibrationParam p);  // "mu_fingers", ...
 // @throws CalibrationError naming the unknown name.
 CalibrationParam ParseCalibrationParam(const std::string& name);
@@ -103,6 +121,11 @@ struct LossScales {
   double angle_rad = 0.01;    // 0.01 rad (0.57 deg) of final angle error weighs 1
   double force_n = 0.5;       // 0.5 N RMS contact-force error weighs 1
   double force_window_s = 0;  // forces compared as means over windows this long (0: per sample)
+  // Outcome loss instead (set by Calibrate from `outcome_loss`): each
+  // output's squared error over its variance across the training trials,
+  // averaged over dx, dy, dtheta -- the mean loss is then the training
+  // trials' NMSE (scoring.hpp). All three > 0 when in use.
+  std::array<double, 3> outcome_variance{0, 0, 0};
 };
 
 // One trial to fit: the scene the predictor runs (the campaign's model
@@ -119,12 +142,18 @@ const char* ToString(BootstrapMethod m);  // "refit", "reuse"
 struct CalibrationOptions {
   std::vector<CalibrationParam> params;  // at least one, no repeats
   double lower = 0.2, upper = 5.0;       // bounds of every scale
-  double holdout = 0.3;                  // fraction of trials held out, (0, 0.9]
+  double holdout = 0.3;                  // fraction of trials held out, [0, 0.9] (0: none)
   std::uint64_t seed = 1;                // the hold-out split and the bootstrap
-  int max_evaluations = 150;             // of the loss, for the main fit
-  int bootstrap = 20;                    // resamples for the uncertainty (0: none)
-  int threads = 1;                       // simulations in parallel
+  // Non-empty: exactly these trials are held out (a split by a trial
+  // parameter, e.g. one shape), every other one fitted; `holdout` is unused.
+  std::vector<std::int64_t> heldout_ids;
+  int max_evaluations = 150;  // of the loss, for the main fit
+  int bootstrap = 20;         // resamples for the uncertainty (0: none)
+  int threads = 1;            // simulations in parallel
   LossScales scales;
+  // true: fit the outcome's NMSE (LossScales::outcome_variance from the
+  // training trials' true outcomes) instead of the pose and force loss.
+  bool outcome_loss = false;
   int profile_points = 12;  // identifiability profile: scales over the bounds (0: no profile)
   BootstrapMethod bootstrap_method = BootstrapMethod::kRefit;
   std::function<void(const std::string&)> progress;  // optional, one line per stage
@@ -153,6 +182,25 @@ inline constexpr double kProfileStandardErrors = 2.0;
 // ... and the mean increase is above this fraction of the fit's mean loss.
 inline constexpr double kProfileMinIncrease = 0.01;
 
+// Per-trial error of a prediction against truth (samples paired by index).
+struct TrialError {
+  double position = 0, angle = 0, force = 0;
+  PlanarOutcome predicted_outcome, true_outcome;  // each from its first sample to the last paired
+  bool ok = true;  // false: the simulation failed (the loss then counts kFailedTrialLoss)
+};
+inline constexpr double kFailedTrialLoss = 1e4;
+
+// Figures of a set of trials at one set of scales, as `arena evaluate`
+// gives them: the outcome's NMSE (scoring.hpp; absent with fewer than 2
+// trials or an output that does not vary) and the final errors' median and
+// p95 over the trials predicted.
+struct SetFigures {
+  int trials = 0, predicted = 0;
+  std::optional<OutcomeNmse> nmse;
+  double position_median = 0, position_p95 = 0;  // m
+  double angle_median = 0, angle_p95 = 0;        // rad
+};
+
 struct CalibrationResult {
   std::vector<FittedParam> fitted;
   std::vector<std::int64_t> train_ids, heldout_ids;
@@ -162,7 +210,11 @@ struct CalibrationResult {
   double heldout_position_before = 0, heldout_position_after = 0;
   double heldout_angle_before = 0, heldout_angle_after = 0;
   double heldout_force_before = 0, heldout_force_after = 0;
-  bool improved = false;         // heldout_after < heldout_before
+  // Each held-out trial's errors (in heldout_ids' order), before and after.
+  std::vector<TrialError> heldout_errors_before, heldout_errors_after;
+  SetFigures train_figures_before, train_figures_after;
+  SetFigures heldout_figures_before, heldout_figures_after;
+  bool improved = false;         // heldout_after < heldout_before (nothing held out: train_*)
   int evaluations = 0;           // loss evaluations of the main fit
   std::string optimizer;         // "LN_BOBYQA" / "LN_COBYLA"
   std::string stop;              // NLopt's result
@@ -172,12 +224,6 @@ struct CalibrationResult {
   std::map<std::string, double> Scales() const;
 };
 
-// Per-trial error of a prediction against truth (samples paired by index).
-struct TrialError {
-  double position = 0, angle = 0, force = 0;
-  bool ok = true;  // false: the simulation failed (the loss then counts kFailedTrialLoss)
-};
-inline constexpr double kFailedTrialLoss = 1e4;
 // window_s: the force window (LossScales::force_window_s; 0: per sample).
 TrialError CompareTrajectories(const mechanics::Scene& scene,
                                const std::vector<mechanics::TrajectorySample>& predicted,
@@ -185,9 +231,20 @@ TrialError CompareTrajectories(const mechanics::Scene& scene,
                                double window_s = 0);
 double Loss(const TrialError& e, const LossScales& s);
 
+// The figures of a set of trials' errors (failed simulations: not predicted).
+SetFigures FiguresOf(const std::vector<TrialError>& errors);
+
 // @throws CalibrationError for bad options or fewer than 4 trials.
 CalibrationResult Calibrate(const std::vector<CalibrationTrial>& trials, const SimulateFn& simulate,
                             const CalibrationOptions& options);
+// One fit per held-out set (a split by a trial parameter: each set one
+// value's trials, every other trial fitted), sharing one memo of the
+// simulations, so a (trial, scales) pair that two splits evaluate runs
+// once. result[k].simulations: the runs split k added.
+// @throws CalibrationError as Calibrate, or for no set or an empty one.
+std::vector<CalibrationResult> CalibrateSplits(
+    const std::vector<CalibrationTrial>& trials, const SimulateFn& simulate,
+    const CalibrationOptions& options, const std::vector<std::vector<std::int64_t>>& heldout_sets);
 // The same with `simulator`, each trial's scene prepared once
 // (Simulator::Prepare) and only its friction, grip force and mass changed.
 CalibrationResult Calibrate(const std::vector<CalibrationTrial>& trials,

@@ -26,6 +26,7 @@
 #include <atomic>
 #include <cstdint>
 #include <functional>
+#include <map>
 #include <memory>
 #include <optional>
 #include <string>
@@ -36,6 +37,7 @@
 #include "arena/assessment/noise_floor.hpp"
 #include "arena/assessment/prediction.hpp"
 #include "arena/assessment/predictor.hpp"
+#include "arena/assessment/scoring.hpp"
 #include "arena/db/store.hpp"
 #include "arena/mechanics/scene.hpp"
 
@@ -141,7 +143,8 @@ struct SettingSummary {
   int failures = 0;                            // solver failure, invalid scene, error
   std::optional<Distribution> position;        // m   (absent when ok == 0)
   std::optional<Distribution> angle;           // rad
-  std::optional<Distribution> force;           // N
+  std::optional<Distribution> force;           // N (over force_trials of the ok trials)
+  int force_trials = 0;                        // ok trials whose measured force was scored
   std::optional<Distribution> mode_agreement;  // fraction
   Distribution time;                           // s per trial, over all replayed trials
   std::optional<Distribution> time_per_sim_s;  // wall s per simulated s
@@ -149,6 +152,11 @@ struct SettingSummary {
   std::vector<TrialNote> diverged_trials;      // every one (ids)
   std::vector<TrialNote> failed_trials;        // every one (ids)
   std::optional<Convergence> convergence;
+  // NMSE of the push's outcome (scoring.hpp) over the ok trials; absent, with
+  // the reason in nmse_note, when it cannot be computed (< 2 trials, an
+  // output that does not vary).
+  std::optional<OutcomeNmse> nmse;
+  std::string nmse_note;
   // p95 of position and angle error over all trials, failures as +inf.
   double position_p95_all = 0, angle_p95_all = 0;
   bool pareto = false;
@@ -180,6 +188,15 @@ struct DurationCurve {
   std::vector<DurationPoint> points;  // by duration
 };
 
+// The figures of the trials whose trial parameter `group_by` has one value
+// (`arena evaluate --group-by shape`): every setting summarised over them
+// alone (the NMSE's variance is the group's own).
+struct GroupReport {
+  std::string value;
+  int trials = 0;
+  std::vector<SettingSummary> settings;  // as EvaluationReport::settings
+};
+
 struct EvaluationReport {
   std::int64_t campaign_id = 0;
   int trials = 0;  // done trials replayed
@@ -193,6 +210,9 @@ struct EvaluationReport {
   std::optional<std::size_t> recommended;  // index into settings (only with a budget)
   std::string recommendation;              // what and why (or why none)
   std::string front;                       // what the Pareto front looks like
+  std::map<std::string, double> scales;    // calibrated scales applied to every scene
+  std::string group_by;                    // the trial parameter grouped by ("" : none)
+  std::vector<GroupReport> groups;         // by value, sorted
 };
 
 // One trial's result at one setting (what the workers produce).
@@ -211,6 +231,11 @@ EvaluationReport Summarise(const std::vector<SettingInfo>& settings,
                            const std::vector<TrialEvaluation>& results,
                            const std::vector<Budget>& budgets,
                            const std::optional<NoiseFloor>& floor = std::nullopt);
+// The per-group reports of `results` (a trial's group: group_of_trial).
+std::vector<GroupReport> SummariseGroups(const std::vector<SettingInfo>& settings,
+                                         const std::vector<TrialEvaluation>& results,
+                                         const std::map<std::int64_t, std::string>& group_of_trial);
+
 // arena-only settings (as the grid of one arena predictor).
 std::vector<SettingInfo> ArenaSettings(const std::vector<mechanics::ModelOptions>& models);
 
@@ -272,6 +297,16 @@ struct EvaluationOptions {
   // waits and retries (db::RetryWhileBusy) until the lock is free, `cancel`
   // is set, or this returns false; (seconds waited, SQLite's message).
   std::function<bool(double, const std::string&)> on_store_busy;
+  // Per-group figures (GroupReport): `group_by` names the trial parameter,
+  // `group_of` gives a trial's value of it (it throws, naming the trial,
+  // when the trial has none: the exception propagates before any work,
+  // nothing is evaluated or stored).
+  std::string group_by;
+  std::function<std::string(const db::Trial&)> group_of;
+  // Calibrated scales (calibration.hpp's names, e.g. mu_pusher) applied to
+  // every trial's scene before any predictor runs it (`arena evaluate
+  // --calibration ID`); empty: the scenes as stored.
+  std::map<std::string, double> scales;
 };
 
 struct EvaluationRun {
