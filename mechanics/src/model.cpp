@@ -126,8 +126,15 @@ constexpr double kAcceptedResidual = 1e-8;
 // Default elastic pads: sinking under the grip force, as a fraction of the
 // object's extent.
 constexpr double kPadSink = 1e-4;
-// Aligned cones: a slip within this angle (rad) of a cone edge is along it.
-constexpr double kEdgeAngle = 1e-6;
+// Aligned cones: a slip this far (rad) from opposing its friction turns the
+// cone and the step is solved again, at most kAlignSolves times.
+constexpr double kAlignAngle = 1e-3;
+constexpr int kAlignSolves = 12;
+constexpr double kAlignFirst = 0.5;
+// Quasi-static steps: solved again until the inertial force is below this
+// fraction of the force scale, at most kQuasiStaticSolves more times.
+constexpr double kQuasiStatic = 1e-6;
+constexpr int kQuasiStaticSolves = 50;
 // Solves of one step before an inaccurate answer is reported as a failure.
 constexpr int kAccuracyAttempts = 4;
 
@@ -316,6 +323,19 @@ struct Point {
   // relative to the body it touches; zero before any), which the cone's
   // first edge opposes (SetEdges).
   Eigen::Vector3d slip = Eigen::Vector3d::Zero();
+  // Aligned cone, within one step (AlignCones): the angle of the friction
+  // edge of the last solve (from FirstTangent(n) towards n × it) and how
+  // far the slip's opposite was from it, for the secant update.
+  long align_step = -1;
+  double align_theta = 0, align_miss = 0;
+};
+
+// AlignCones: a sliding point's friction edge angle θ in its tangent basis
+// (t1, t2) and how far the slip's opposite is from it.
+struct AlignMiss {
+  Point* pt;
+  Eigen::Vector3d t1, t2;
+  double theta, miss;
 };
 
 struct Contact {
@@ -713,6 +733,11 @@ struct ContactModel::Impl {
 
   // Tracked geometry.
   bool tracked = false;
+  bool aligned = false;       // aligned cones in use: tracked, 6 DOF, model.cone aligned
+  bool quasi_static = false;  // model.inertia quasi_static
+  // AlignCones: d(miss)/dθ of the last secant (0: none yet) and scratch.
+  double align_slope = 0;
+  std::vector<AlignMiss> align_misses;
   std::unique_ptr<geometry::Solid> solid;
   Eigen::Vector3d com_O = Eigen::Vector3d::Zero();        // centre of mass in the object frame
   double gap_tolerance = 0;                               // m: within it a primitive touches
@@ -798,6 +823,8 @@ struct ContactModel::Impl {
   double CheckResiduals(StepScratch& s);
   bool CheckValues(StepScratch& s, StepReport& rep);
   bool Refuse(StepReport& rep, const std::string& why);  // kNonFinite
+  bool AlignCones(StepScratch& s);
+  double InertialForce(const StepScratch& s) const;
   void ReportContacts(StepScratch& s);
   void Integrate(StepScratch& s);
   // After kSolve: an unknown in physical units, the object's velocity at p,
@@ -982,6 +1009,8 @@ void ContactModel::Impl::Setup() {
   }
 
   if (!SetupReduction()) return;
+  aligned = tracked && !planar && opt.cone == ConeModel::kAligned;
+  quasi_static = opt.inertia == InertiaModel::kQuasiStatic;
   SetupScales();
   SetupContacts();
   SetupUnknowns();
@@ -1279,7 +1308,7 @@ void ContactModel::Impl::SetEdges(Point& pt) {
       const double angle = std::atan2(u.dot(pt.n.cross(t1)), u.dot(t1));
       const double facet = 2.0 * std::numbers::pi / static_cast<double>(cone_cos.size());
       const double off = std::remainder(angle, facet);
-      if (std::abs(off) > kEdgeAngle) t1 = u;
+      if (std::abs(off) > kAlignAngle) t1 = u;
     }
   }
   const Eigen::Vector3d t2 = pt.n.cross(t1);
@@ -1542,9 +1571,122 @@ StepReport ContactModel::Impl::Step() {
   StepReport rep;
   if (!BeginStep(rep)) return rep;
   for (int i = 0; i < kStepPhases; ++i) {
-    if (!RunPhase(static_cast<StepPhase>(i), rep)) return rep;
+    const auto phase = static_cast<StepPhase>(i);
+    if (!RunPhase(phase, rep)) return rep;
+    if (phase != StepPhase::kCheckValues) continue;
+    // Aligned cones: while a sliding point's slip turned away from the
+    // cone edge its friction sits on, turn the edge onto the new slip and
+    // solve the step again (AlignCones); at the fixed point the friction
+    // opposes the slip with its full μ λ, as on the circular cone.
+    for (int k = 0; k < kAlignSolves && AlignCones(scratch); ++k) {
+      ++rep.align_solves;
+      for (int j = static_cast<int>(StepPhase::kGraspMap); j <= i; ++j) {
+        if (!RunPhase(static_cast<StepPhase>(j), rep)) return rep;
+      }
+    }
+    // Quasi-static: the step solved again from its own answer (the mass
+    // a proximal term only) until the inertial force it needs vanishes.
+    for (int k = 0; k < kQuasiStaticSolves && quasi_static && InertialForce(scratch) > kQuasiStatic;
+         ++k) {
+      ++rep.quasi_static_solves;
+      scratch.vr = scratch.vr_new;
+      for (int j = static_cast<int>(StepPhase::kFreeMotion); j <= i; ++j) {
+        if (!RunPhase(static_cast<StepPhase>(j), rep)) return rep;
+      }
+      for (int a = 0; a < kAlignSolves && AlignCones(scratch); ++a) {
+        ++rep.align_solves;
+        for (int j = static_cast<int>(StepPhase::kGraspMap); j <= i; ++j) {
+          if (!RunPhase(static_cast<StepPhase>(j), rep)) return rep;
+        }
+      }
+    }
   }
   return rep;
+}
+
+// The inertial force (and torque over the length scale) of the step's
+// change of twist, relative to the force scale.
+double ContactModel::Impl::InertialForce(const StepScratch& s) const {
+  const SmallVector f = s.Mr * (s.vr_new - s.vr) / dt;
+  double worst = 0;
+  for (int i = 0; i < nd; ++i) {
+    const bool torque = planar ? i == 2 : i >= 3;
+    worst = std::max(worst, std::abs(f[i]) / (Fs * (torque ? L : 1.0)));
+  }
+  return worst;
+}
+
+// Aligned cones (tracked, 6 DOF): for every sliding point, the angle θ of
+// the edge its friction sits on and the angle φ(θ) opposite its slip after
+// the solve; the cone is right where φ(θ) = θ (friction opposing the slip
+// with its full μ λ, the circular cone's answer). Simply turning the edge
+// onto the slip (θ ← φ) need not converge: with the pusher sticking, a
+// small turn of the friction swings the slip by many times as much (the
+// object's small inertia over dt), and the edge flips between two sides.
+// So the first miss moves θ onto the slip and the next ones take the secant
+// step on the miss φ(θ) - θ. True when a cone turned (solve again).
+bool ContactModel::Impl::AlignCones(StepScratch& s) {
+  if (!aligned) return false;
+  using Miss = AlignMiss;
+  std::vector<Miss>& misses = align_misses;
+  misses.clear();
+  bool any = false;
+  double num = 0, den = 0;  // the secant slope, fitted over the sliding points
+  for (Contact& ct : contacts) {
+    if (!ct.active) continue;
+    for (Point& pt : ct.points) {
+      if (!HasRows(pt) || pt.beta0 < 0 || pt.edges.empty()) continue;
+      const double lam = pt.lambda >= 0 ? Unknown(s, pt.lambda) : ct.known_normal;
+      if (!(lam > 1e-9 * Fs)) continue;
+      double bsum = 0;
+      for (int e = 0; e < edges_per_point; ++e) bsum += Unknown(s, pt.beta0 + e);
+      if (ct.spec.mu * lam - bsum > 1e-9 * ct.spec.mu * lam) continue;  // sticking
+      const Eigen::Vector3d ut = pt.urel - pt.n.dot(pt.urel) * pt.n;
+      // A slip this slow has no direction worth aligning to (rounding).
+      if (!(ut.squaredNorm() > 1e-12 * Vs * Vs)) continue;
+      Miss m{&pt, FirstTangent(pt.n), Eigen::Vector3d::Zero(), 0, 0};
+      m.t2 = pt.n.cross(m.t1);
+      const Eigen::Vector3d& e0 = pt.edges[0];
+      m.theta = std::atan2(e0.dot(m.t2), e0.dot(m.t1));
+      const double phi = std::atan2(-ut.dot(m.t2), -ut.dot(m.t1));
+      m.miss = std::remainder(phi - m.theta, 2 * std::numbers::pi);
+      if (std::abs(m.miss) > kAlignAngle) any = true;
+      if (pt.align_step == steps_taken) {
+        const double dtheta = std::remainder(m.theta - pt.align_theta, 2 * std::numbers::pi);
+        num += (m.miss - pt.align_miss) * dtheta;
+        den += dtheta * dtheta;
+      }
+      misses.push_back(m);
+    }
+  }
+  if (!any) return false;
+  // The sliding points sit on one rigid object, so their misses move
+  // together: one slope for all of them (a slope per point lets two
+  // fingers that share a slip fight each other).
+  if (den > 0 && num < 0) align_slope = num / den;
+  const double facet = 2.0 * std::numbers::pi / static_cast<double>(cone_cos.size());
+  for (const Miss& m : misses) {
+    Point& pt = *m.pt;
+    // The secant step (the slope of the last step's solves until this step
+    // has its own), no longer than a facet (the miss is not linear once the
+    // slip leaves the edge's fan); without a slope, half the miss.
+    double next = align_slope < 0 ? m.theta + std::clamp(-m.miss / align_slope, -facet, facet)
+                                  : m.theta + kAlignFirst * m.miss;
+    // Within kAlignAngle of an edge of the tangent basis: that edge, exactly
+    // (a slide along an edge keeps the polyhedral cone's exact answer).
+    const double off = std::remainder(next, facet);
+    const bool on_basis = std::abs(off) <= kAlignAngle;
+    if (on_basis) next -= off;
+    pt.align_step = steps_taken;
+    pt.align_theta = m.theta;
+    pt.align_miss = m.miss;
+    const Eigen::Vector3d u =
+        on_basis ? m.t1 : Eigen::Vector3d(std::cos(next) * m.t1 + std::sin(next) * m.t2);
+    pt.slip = on_basis ? Eigen::Vector3d(-(std::cos(next) * m.t1 + std::sin(next) * m.t2)) : -u;
+    const Eigen::Vector3d u2 = pt.n.cross(u);
+    for (size_t j = 0; j < cone_cos.size(); ++j) pt.edges[j] = cone_cos[j] * u + cone_sin[j] * u2;
+  }
+  return true;
 }
 
 // Phase 1. This step's geometry: points, normals, friction directions, gaps,

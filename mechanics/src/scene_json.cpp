@@ -94,6 +94,9 @@ const char* ToString(GripperCoupling coupling) {
 }
 
 const char* ToString(PadModel pads) { return pads == PadModel::kElastic ? "elastic" : "rigid"; }
+const char* ToString(InertiaModel inertia) {
+  return inertia == InertiaModel::kQuasiStatic ? "quasi_static" : "carried";
+}
 const char* ToString(ConeModel cone) {
   return cone == ConeModel::kAligned ? "aligned" : "polyhedral";
 }
@@ -582,7 +585,7 @@ PusherSpec ReadPusher(const json& v, const std::string& path) {
 }
 
 ModelOptions ReadModel(const json& v, const std::string& path) {
-  Obj o(v, path, {"facets", "points", "dt", "reduce", "contacts", "pads", "cone"});
+  Obj o(v, path, {"facets", "points", "dt", "reduce", "contacts", "pads", "cone", "inertia"});
   ModelOptions model;
   if (const json* f = o.Find("facets")) model.facets = Integer(*f, o.At("facets"), 3, kMaxFacets);
   if (const json* p = o.Find("points")) model.points = Integer(*p, o.At("points"), 2, kMaxPoints);
@@ -618,6 +621,8 @@ ModelOptions ReadModel(const json& v, const std::string& path) {
   model.pads = choice("pads", "rigid", "elastic") ? PadModel::kRigid : PadModel::kElastic;
   model.cone =
       choice("cone", "polyhedral", "aligned") ? ConeModel::kPolyhedral : ConeModel::kAligned;
+  model.inertia = choice("inertia", "carried", "quasi_static") ? InertiaModel::kCarried
+                                                               : InertiaModel::kQuasiStatic;
   return model;
 }
 
@@ -1341,6 +1346,8 @@ std::string SceneToJson(const Scene& scene, int indent) {
   // Written when not the default (scenes written before them read the same).
   if (scene.model.pads != PadModel::kRigid) j["model"]["pads"] = ToString(scene.model.pads);
   if (scene.model.cone != ConeModel::kPolyhedral) j["model"]["cone"] = ToString(scene.model.cone);
+  if (scene.model.inertia != InertiaModel::kCarried)
+    j["model"]["inertia"] = ToString(scene.model.inertia);
   // Written only when it says something: a scene without it means independent pads.
   if (scene.gripper.coupling != GripperCoupling::kIndependent)
     j["gripper"] = {{"coupling", ToString(scene.gripper.coupling)}};

@@ -1,6 +1,9 @@
-// Issue 31's scenes against their closed forms with "pads": "elastic" and
-// "cone": "aligned" (opt-in model options; the defaults keep the model as it
-// was, rigid pads and the polyhedral cone, which these tests also measure).
+// Issue 31's scenes against their closed forms with "pads": "elastic",
+// "cone": "aligned" (and "inertia": "quasi_static" where a mode is
+// excited), and what the defaults (rigid pads, the polyhedral cone, carried
+// momentum) get wrong on them. The defaults stay: with elastic pads and
+// aligned cones, validation_test's LinearPush with a line finger turns
+// (|ω| up to 6e-4 rad/s where it must be 0) — not reviewed yet.
 #include <cmath>
 #include <cstdio>
 #include <numbers>
@@ -96,12 +99,52 @@ TEST(ClosedForms, TiltedPushTurnsWithThePusherSeenFromTheAxis) {
   const TrajectorySample& last = r.samples.back();
   std::printf("tilted: roll %.6f rad (expected %.6f), com (%.4f, %.4f) mm\n", Roll(last), theta,
               1e3 * last.position.y(), 1e3 * last.position.z());
-  // The aligned cone brings this from 56 % too far (the facets
-  // steered the fingers' slip) to 2.9 %; the issue's 1 % is not reached yet
-  // (at dt 0.2 ms it is 4 % short: the rest is no cone effect).
-  EXPECT_NEAR(Roll(last), theta, 0.035 * theta);
+  // The aligned cone, re-solved within the step until the fingers' slip
+  // opposes their friction (AlignCones), brings this from 56 % too far (the
+  // facets steered the fingers' slip) to 0.03 %, at 8, 16 and 64 facets
+  // alike; lagging the alignment by one step (the first version) left
+  // 2.9 %, the edge flipping from side to side of the slip.
+  EXPECT_NEAR(Roll(last), theta, 0.01 * theta);
+  EXPECT_NEAR(last.position.y(), -0.233e-3, 0.01e-3);
+  EXPECT_NEAR(last.position.z(), 4.255e-3, 0.01e-3);
+  for (int facets : {16, 64}) {
+    Scene finer = aligned;
+    finer.model.facets = facets;
+    EXPECT_NEAR(Roll(SimulateOk(finer).samples.back()), theta, 0.01 * theta) << facets;
+  }
   const SimulationResult p = SimulateOk(scene);
   EXPECT_GT(Roll(p.samples.back()), 1.5 * theta) << "the steered slip this scene measures";
+}
+
+// A push tilted by φ = 30° towards the grip axis x, through the centre of
+// mass, with free point pads and no gravity: the pads follow the object
+// along x (no force along x but the pusher's), the fingers slide along z
+// with friction μ N each, and the pusher (μ 0.3) sticks: the force needed
+// along x is 0, along z 2 μ N = 10 N, tan⁻¹(0/10) inside the pusher's cone.
+// So the object moves with the pusher, x(T) = v sin φ T = 1.000 mm and
+// z(T) = v cos φ T = 1.732 mm at T = 0.2 s, and nothing turns it (the force
+// passes through the centre of mass, the finger forces act on the grip
+// axis). Carrying momentum, the start impulse leaves the object drifting
+// along x and pitching: 11 % too far. Quasi-static steps follow the path.
+TEST(ClosedForms, PushAlongTheGripAxisFollowsThePusherWithoutPitch) {
+  Scene scene = Parse(std::string(kBox) + R"(,"gravity":[0,0,0],"duration":0.2,)" +
+                      R"("grip_force":10.0,)" + kPointFingers +
+                      R"(,"model":{"facets":8,"points":3,"dt":0.001,"reduce":"auto",)"
+                      R"("cone":"aligned","inertia":"quasi_static"},)"
+                      R"("pusher":{"type":"point","position":[0,0,-0.05],"normal":[0,0,1],)"
+                      R"("mu":0.3,"motion":{"velocity":[0.004999999999999999,0,)"
+                      R"(0.008660254037844387],"angular_velocity":[0,0,0]}})");
+  const SimulationResult r = SimulateOk(scene);
+  const TrajectorySample& last = r.samples.back();
+  const double angle = Eigen::AngleAxisd(last.orientation).angle();
+  std::printf("grip axis: x %.4f mm, z %.4f mm, angle %.3g rad\n", 1e3 * last.position.x(),
+              1e3 * last.position.z(), angle);
+  EXPECT_NEAR(last.position.x(), 1.000e-3, 0.01e-3);
+  EXPECT_NEAR(last.position.z(), 1.732e-3, 0.01732e-3);
+  EXPECT_LT(angle, 1e-3);
+  scene.model.inertia = InertiaModel::kCarried;
+  const SimulationResult carried = SimulateOk(scene);
+  EXPECT_GT(carried.samples.back().position.x(), 1.05e-3) << "the drift this scene measures";
 }
 
 // The two model options are read, written back when not the default, and a
@@ -112,13 +155,16 @@ TEST(ClosedForms, PadAndConeOptionsRoundTrip) {
   const Scene plain = Parse(base + "}");
   EXPECT_EQ(plain.model.pads, PadModel::kRigid);
   EXPECT_EQ(plain.model.cone, ConeModel::kPolyhedral);
+  EXPECT_EQ(plain.model.inertia, InertiaModel::kCarried);
   EXPECT_EQ(SceneToJson(plain).find("\"pads\""), std::string::npos);
-  const Scene set = Parse(base + R"("pads":"elastic","cone":"aligned"})");
+  const Scene set = Parse(base + R"("pads":"elastic","cone":"aligned","inertia":"quasi_static"})");
   EXPECT_EQ(set.model.pads, PadModel::kElastic);
   EXPECT_EQ(set.model.cone, ConeModel::kAligned);
+  EXPECT_EQ(set.model.inertia, InertiaModel::kQuasiStatic);
   const Scene back = ParseScene(SceneToJson(set));
   EXPECT_EQ(back.model.pads, PadModel::kElastic);
   EXPECT_EQ(back.model.cone, ConeModel::kAligned);
+  EXPECT_EQ(back.model.inertia, InertiaModel::kQuasiStatic);
   try {
     Parse(base + R"("cone":"circular"})");
     ADD_FAILURE() << "accepted cone circular";

@@ -99,6 +99,8 @@ struct StepReport {
   StepFailure failure = StepFailure::kNone;
   int pivots = 0;
   bool warm_start_used = false;
+  int align_solves = 0;         // solves repeated to align cones with the slip
+  int quasi_static_solves = 0;  // solves repeated to balance the forces
   Residuals residuals;
 };
 

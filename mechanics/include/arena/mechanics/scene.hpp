@@ -24,15 +24,23 @@ enum class Reduce { kAuto, kFull, kPlanar };
 // and contacts are made and lost; kFixed: contact frames frozen in the
 // gripper frame (right for small motion only, cheaper).
 enum class ContactTracking { kTracked, kFixed };
-// Line and patch pads without a `stiffness`: kRigid leaves their load split
-// undetermined (the solver's vertex); kElastic gives them the default
+// Line and patch pads without a `stiffness`: kRigid (the default, JSON
+// "rigid" or absent) leaves their load split undetermined (the solver's
+// vertex, history-dependent); kElastic ("elastic") gives them the default
 // stiffness (model.cpp, DefaultPadStiffness: sinking 1e-4 of the object's
 // extent under the grip), which decides it.
 enum class PadModel { kRigid, kElastic };
-// kPolyhedral: the cone's edges stay on the docs/scene.md tangent basis;
-// kAligned: a tracked point's cone turns so that an edge opposes its last
-// slip off an edge (the slip direction is not steered by the facets).
+// kPolyhedral (the default, JSON "polyhedral" or absent): the cone's edges
+// stay on the docs/scene.md tangent basis; kAligned ("aligned"): a tracked
+// sliding point's cone turns until an edge opposes its slip (AlignCones),
+// so the slip direction is not steered by the facets.
 enum class ConeModel { kPolyhedral, kAligned };
+// kCarried ("carried"): each step carries the object's momentum (quasi-
+// dynamic). kQuasiStatic ("quasi_static"): each step is solved again from
+// its own answer until the inertial force M Δv / dt it needs is below 1e-6
+// of the force scale, so the forces balance (the mass only regularises the
+// solve) and the step ends on a balanced path.
+enum class InertiaModel { kCarried, kQuasiStatic };
 
 struct Pose {
   Eigen::Vector3d position = Eigen::Vector3d::Zero();  // m
@@ -129,6 +137,7 @@ struct ModelOptions {
   ContactTracking contacts = ContactTracking::kTracked;
   PadModel pads = PadModel::kRigid;
   ConeModel cone = ConeModel::kPolyhedral;
+  InertiaModel inertia = InertiaModel::kCarried;
 };
 
 // How the fingers move along their closing directions (JSON "gripper":
@@ -164,5 +173,6 @@ const char* ToString(ContactTracking tracking);
 const char* ToString(GripperCoupling coupling);
 const char* ToString(PadModel pads);
 const char* ToString(ConeModel cone);
+const char* ToString(InertiaModel inertia);
 
 }  // namespace arena::mechanics
