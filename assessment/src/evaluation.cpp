@@ -83,7 +83,8 @@ LoadedTrial LoadTrial(const db::Store& store, const db::Trial& t, const mechanic
     const auto normals = ContactNormals(out.scene);
     out.truth.reserve(gt.samples.size());
     for (const auto& s : gt.samples)
-      out.truth.push_back(ToTrajectorySample(s, normals, out.scene.pusher.has_value()));
+      out.truth.push_back(
+          ToTrajectorySample(s, normals, out.scene.pusher.has_value(), gt.forces_measured()));
     if (!gt.samples.empty()) out.first = gt.samples.front();
     if (out.scene.pusher && out.scene.pusher->controller) {
       if (auto run = store.GetClosedLoop(t.id)) out.commands = CommandsOf(*run);

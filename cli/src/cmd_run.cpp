@@ -261,8 +261,10 @@ void RefuseWhatTheCellsCannotRun(const orchestrator::Campaign& campaign, const R
             "cells, or without those defects");
   }
   if (campaign.adaptive) return;  // its trials are chosen as it runs
-  const executors::DefectProfile effective =
-      executors::CombineProfiles(cell_profile, campaign_profile);
+  // The cells' rule: a recording's own extent is their workspace unless
+  // their profile sets one.
+  const executors::DefectProfile effective = executors::CombineProfiles(
+      executors::WithBackendWorkspace(cell_profile, caps), campaign_profile);
   const std::int64_t n = orchestrator::TrialCount(campaign);
   std::int64_t refused = 0;
   std::string first;

@@ -221,13 +221,7 @@ struct Cell::Impl {
   // The backend's own workspace (a recording's extent) when the cell's
   // profile leaves the workspace at its default.
   static CellOptions WithBackendWorkspace(CellOptions o, const Backend& backend) {
-    const DefectProfile defaults;
-    const auto caps = backend.Capabilities();
-    if (caps.workspace && o.defects.workspace_min == defaults.workspace_min &&
-        o.defects.workspace_max == defaults.workspace_max) {
-      o.defects.workspace_min = caps.workspace->first;
-      o.defects.workspace_max = caps.workspace->second;
-    }
+    o.defects = executors::WithBackendWorkspace(std::move(o.defects), backend.Capabilities());
     return o;
   }
 

@@ -14,6 +14,16 @@ Eigen::Vector3d Rss(const Eigen::Vector3d& a, const Eigen::Vector3d& b) {
 
 }  // namespace
 
+DefectProfile WithBackendWorkspace(DefectProfile cell, const BackendCapabilities& caps) {
+  const DefectProfile defaults;
+  if (caps.workspace && cell.workspace_min == defaults.workspace_min &&
+      cell.workspace_max == defaults.workspace_max) {
+    cell.workspace_min = caps.workspace->first;
+    cell.workspace_max = caps.workspace->second;
+  }
+  return cell;
+}
+
 DefectProfile CombineProfiles(const DefectProfile& cell, const DefectProfile& campaign) {
   DefectProfile p = cell;  // limits, reset and fault injection: the cell's
   p.position_std = Rss(cell.position_std, campaign.position_std);

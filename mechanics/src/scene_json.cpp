@@ -1268,7 +1268,16 @@ void SeatFingers(Scene* scene) {
     const Eigen::Vector3d n = p.normal.normalized();
     const auto e = solid.EntryOf(R_GO.transpose() * (p.position - object.pose.position),
                                  R_GO.transpose() * n, tolerance);
-    if (e && e->s < 0) p.position += e->s * n;
+    if (e && e->s < 0) {
+      // A recorded path moves with its start (position[0] is the pusher's
+      // position): the pusher's motion relative to its start is what was
+      // recorded, and a start pose measured a fraction of a millimetre into
+      // the pusher must not break the path's first point.
+      p.position += e->s * n;
+      if (p.path) {
+        for (auto& q : p.path->position) q += e->s * n;
+      }
+    }
   }
 }
 

@@ -34,6 +34,12 @@ namespace arena::executors {
 //   reset parameters and fault injection: the cell's.
 DefectProfile CombineProfiles(const DefectProfile& cell, const DefectProfile& campaign);
 
+// The cell's profile with the backend's own workspace (a recording's extent,
+// BackendCapabilities::workspace) when the profile leaves the workspace at
+// its default; a profile that sets one keeps it. The cell and `arena run`'s
+// check before submitting both apply this one rule.
+DefectProfile WithBackendWorkspace(DefectProfile cell, const BackendCapabilities& caps);
+
 // True when the profile perturbs the physics (friction variability,
 // actuation noise): only a simulated backend can apply that.
 bool PerturbsPhysics(const DefectProfile& profile);
