@@ -518,12 +518,10 @@ EvaluationRun EvaluateCampaign(db::Store& store, std::int64_t campaign_id,
     }
   }
 
-  nlohmann::json grid = {{"predictors", built.grids},
-                         {"start", ToString(options.start_from)},
-                         {"scales", options.scales},
-                         {"budgets", nlohmann::json::array()},
-                         {"threads", threads},
-                         {"convergence_trials", options.convergence_trials}};
+  nlohmann::json grid = {
+      {"predictors", built.grids}, {"start", ToString(options.start_from)},
+      {"scales", options.scales},  {"budgets", nlohmann::json::array()},
+      {"threads", threads},        {"convergence_trials", options.convergence_trials}};
   for (const auto& req : options.predictors) {
     if (req.name == "arena" && req.arena_grid) {
       const auto& g = *req.arena_grid;

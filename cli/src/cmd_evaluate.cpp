@@ -50,8 +50,8 @@ struct EvaluateOptions {
   int threads = 0;
   int convergence_trials = 8;
   bool json = false;
-  std::string out_path;           // --out: the report as JSON, besides the store
-  std::string from = "measured";  // --from: where predictions start (issue 26)
+  std::string out_path;             // --out: the report as JSON, besides the store
+  std::string from = "measured";    // --from: where predictions start (issue 26)
   std::int64_t calibration = 0;     // --calibration: its scales applied (0: none)
   std::vector<std::string> scales;  // --scale NAME=FACTOR, over --calibration's
   std::string group_by;             // --group-by: a trial parameter
