@@ -243,9 +243,9 @@ class Injector {
  public:
   Injector(int domain, const std::string& name, dds::NetworkOptions network)
       : participant_(Named(domain, name, std::move(network))),
-        announce_(participant_, dds::WriterOptions{0.05}),
-        status_(participant_, dds::WriterOptions{0.05}),
-        truth_(participant_, dds::WriterOptions{0.05}) {
+        announce_(participant_, dds::WriterOptions{.max_blocking_s = 0.05, .controller = {}}),
+        status_(participant_, dds::WriterOptions{.max_blocking_s = 0.05, .controller = {}}),
+        truth_(participant_, dds::WriterOptions{.max_blocking_s = 0.05, .controller = {}}) {
     thread_ = std::thread([this] { Run(); });
   }
   ~Injector() {
