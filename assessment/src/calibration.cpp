@@ -829,7 +829,7 @@ std::string ParamsJson(const CalibrationResult& r) {
   return j.dump();
 }
 
-static nlohmann::json FiguresJson(const SetFigures& f) {
+nlohmann::json ToJson(const SetFigures& f) {
   nlohmann::json nmse = nullptr;
   if (f.nmse)
     nmse = {{"value", f.nmse->mean},
@@ -854,11 +854,9 @@ std::string ReportJson(const CalibrationResult& r) {
       {"heldout_angle_rad", {{"before", r.heldout_angle_before}, {"after", r.heldout_angle_after}}},
       {"heldout_force_n", {{"before", r.heldout_force_before}, {"after", r.heldout_force_after}}},
       {"train_figures",
-       {{"before", FiguresJson(r.train_figures_before)},
-        {"after", FiguresJson(r.train_figures_after)}}},
+       {{"before", ToJson(r.train_figures_before)}, {"after", ToJson(r.train_figures_after)}}},
       {"heldout_figures",
-       {{"before", FiguresJson(r.heldout_figures_before)},
-        {"after", FiguresJson(r.heldout_figures_after)}}},
+       {{"before", ToJson(r.heldout_figures_before)}, {"after", ToJson(r.heldout_figures_after)}}},
       {"improved", r.improved},
       {"evaluations", r.evaluations},
       {"optimizer", r.optimizer},

@@ -165,20 +165,6 @@ std::string PairText(double median, double p95, double scale) {
   return buf;
 }
 
-nlohmann::json FiguresJsonOf(const assessment::SetFigures& f) {
-  nlohmann::json nmse = nullptr;
-  if (f.nmse)
-    nmse = {{"value", f.nmse->mean},
-            {"dx", f.nmse->dx},
-            {"dy", f.nmse->dy},
-            {"dtheta", f.nmse->dtheta}};
-  return {{"trials", f.trials},
-          {"predicted", f.predicted},
-          {"outcome_nmse", nmse},
-          {"position_error_m", {{"median", f.position_median}, {"p95", f.position_p95}}},
-          {"angle_error_rad", {{"median", f.angle_median}, {"p95", f.angle_p95}}}};
-}
-
 // The fitted and held-out trials' figures before and after, as `arena
 // evaluate` gives them.
 void PrintFigures(const assessment::CalibrationResult& r) {
@@ -429,7 +415,8 @@ int RunCalibrate(const CalibrateOptions& o) {
               {"holdout_by", o.holdout_by},
               {"splits", results_json},
               {"pooled_heldout",
-               {{"before", FiguresJsonOf(pooled_before)}, {"after", FiguresJsonOf(pooled_after)}}},
+               {{"before", assessment::ToJson(pooled_before)},
+                {"after", assessment::ToJson(pooled_after)}}},
               {"all_improved", all_improved}};
     if (!o.out_path.empty()) WriteResultFile(o.out_path, output.dump(2) + "\n");
     if (o.json) {

@@ -82,6 +82,8 @@
 #include <string>
 #include <vector>
 
+#include <nlohmann/json.hpp>
+
 #include "arena/assessment/scoring.hpp"
 #include "arena/db/store.hpp"
 #include "arena/mechanics/scene.hpp"
@@ -233,6 +235,9 @@ double Loss(const TrialError& e, const LossScales& s);
 
 // The figures of a set of trials' errors (failed simulations: not predicted).
 SetFigures FiguresOf(const std::vector<TrialError>& errors);
+// Those figures as the stored report and `arena calibrate --json` give them
+// (SI: metres, radians).
+nlohmann::json ToJson(const SetFigures& figures);
 
 // @throws CalibrationError for bad options or fewer than 4 trials.
 CalibrationResult Calibrate(const std::vector<CalibrationTrial>& trials, const SimulateFn& simulate,
