@@ -77,7 +77,7 @@ int Submit(const std::string& campaign_path, const std::string& db_path) {
   });
   const orchestrator::Campaign campaign = LoadValidCampaign(campaign_path);
   auto store = OpenStore(db_path, false);
-  try {
+  {
     const std::int64_t id =
         orchestrator::SubmitCampaign(*store, campaign, [&] { return signals.received() != 0; });
     if (signals.received()) throw orchestrator::SubmitInterrupted();
@@ -96,11 +96,6 @@ int Submit(const std::string& campaign_path, const std::string& db_path) {
     }
     if (const std::string w = NoServiceWarning(*store, db_path); !w.empty())
       std::fprintf(stderr, "warning: %s\n", w.c_str());
-  } catch (const orchestrator::SubmitInterrupted& e) {
-    std::fprintf(stderr, "arena: %s\n", e.what());
-    return kExitInterrupted;
-  } catch (const db::StoreError& e) {
-    throw StoreCommandError(e);
   }
   return kExitOk;
 }
@@ -132,14 +127,10 @@ int Status(const std::string& db_path, std::int64_t only, bool as_json, bool all
   std::optional<db::ServiceRecord> service;
   std::string no_service;
   std::vector<CellActivity> activity;
-  try {
-    s = store->Status();
-    service = store->LatestService();
-    no_service = NoServiceWarning(*store, db_path);
-    activity = ReadCellActivity(*store, s.cells);
-  } catch (const db::StoreError& e) {
-    throw StoreCommandError(e);
-  }
+  s = store->Status();
+  service = store->LatestService();
+  no_service = NoServiceWarning(*store, db_path);
+  activity = ReadCellActivity(*store, s.cells);
   // The warning says trials wait: only when some do (an active campaign with
   // trials not yet finished), not on a store whose campaigns are all done.
   std::int64_t waiting = 0;
@@ -292,18 +283,14 @@ int Status(const std::string& db_path, std::int64_t only, bool as_json, bool all
 
 int Control(const std::string& verb, std::int64_t id, const std::string& db_path) {
   auto store = OpenStore(db_path, false);
-  try {
-    if (verb == "pause")
-      store->PauseCampaign(id);
-    else if (verb == "resume")
-      store->ResumeCampaign(id);
-    else
-      store->CancelCampaign(id);
-    std::fprintf(stderr, "campaign %lld: %s\n", static_cast<long long>(id),
-                 db::ToString(store->GetCampaign(id).state));
-  } catch (const db::StoreError& e) {
-    throw StoreCommandError(e);
-  }
+  if (verb == "pause")
+    store->PauseCampaign(id);
+  else if (verb == "resume")
+    store->ResumeCampaign(id);
+  else
+    store->CancelCampaign(id);
+  std::fprintf(stderr, "campaign %lld: %s\n", static_cast<long long>(id),
+               db::ToString(store->GetCampaign(id).state));
   return kExitOk;
 }
 
