@@ -7,6 +7,7 @@
 #include <set>
 #include <sstream>
 #include <string>
+#include <vector>
 
 #include <gtest/gtest.h>
 
@@ -102,11 +103,11 @@ using BadDomain = test::ArenaCommandTest;
 
 // The same bad --domain is bad input (2) from every command that joins DDS.
 TEST_F(BadDomain, ExitsTwoFromEveryCommandThatJoinsDds) {
-  for (const std::string args :
-       {"cell --id c1 --domain 999", "controller --name pivot_to_angle --domain 999",
-        "serve --db " + dir_ + "/s.db --domain 999", "watch 1 --domain 999 --timeout 1",
-        "run " + std::string(ARENA_SOURCE_DIR) + "/examples/campaigns/smoke.json --db " + dir_ +
-            "/r.db --domain 999"}) {
+  for (const std::string& args : std::vector<std::string>{
+           "cell --id c1 --domain 999", "controller --name pivot_to_angle --domain 999",
+           "serve --db " + dir_ + "/s.db --domain 999", "watch 1 --domain 999 --timeout 1",
+           "run " + std::string(ARENA_SOURCE_DIR) + "/examples/campaigns/smoke.json --db " + dir_ +
+               "/r.db --domain 999"}) {
     const auto r = Arena(args);
     EXPECT_EQ(r.rc, 2) << "arena " << args << "\n" << r.err;
     EXPECT_NE(r.err.find("--domain"), std::string::npos) << "arena " << args << "\n" << r.err;
