@@ -60,7 +60,7 @@ TEST(FailureReasons, GroupedByReasonAndSourceWithCounts) {
     t = store->ClaimNextTrial("sim2-3fa2c1");
     store->FailTrial(t->trial_id, t->attempt,
                      "cell sim2-3fa2c1: driver exited with status 3 before its first sample",
-                     "failed");
+                     arena::db::TrialEnd::kFailed);
   }
   db::StoreOptions ro;
   ro.read_only = true;
