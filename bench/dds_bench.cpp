@@ -105,6 +105,24 @@ class BenchLab {
   std::string dir_;
 };
 
+// Every bench participant's options, once: the domain, shared memory unless
+// ARENA_BENCH_NO_SHM is set (as the lab runs it), and an identity directory
+// ("" = an open domain).
+arena::dds::NetworkOptions BenchNetwork(const std::string& identity) {
+  arena::dds::NetworkOptions n;
+  n.shared_memory = std::getenv("ARENA_BENCH_NO_SHM") == nullptr;
+  n.security_dir = identity;
+  return n;
+}
+arena::dds::ParticipantOptions BenchParticipant(int domain, std::string name,
+                                                const std::string& identity) {
+  arena::dds::ParticipantOptions o;
+  o.domain_id = domain;
+  o.name = std::move(name);
+  o.network = BenchNetwork(identity);
+  return o;
+}
+
 arena::msg::GroundTruth MakeBatch(std::uint64_t trial, std::uint32_t index, int samples) {
   arena::msg::GroundTruth g;
   g.trial_id(trial);
@@ -196,19 +214,16 @@ void PrintTailOverTime(const char* what, std::vector<std::pair<std::uint64_t, do
 // secure: every participant with its lab identity (BenchLab).
 Result StreamHere(int cells, int batches, int samples, std::chrono::microseconds period,
                   bool secure) {
-  arena::dds::ParticipantOptions ro;
-  ro.domain_id = Domain();
-  ro.name = "arena.bench.service";
-  ro.network.shared_memory = std::getenv("ARENA_BENCH_NO_SHM") == nullptr;
-  if (secure) ro.network.security_dir = BenchLab::Get().Service();
+  const arena::dds::ParticipantOptions ro =
+      BenchParticipant(Domain(), "arena.bench.service", secure ? BenchLab::Get().Service() : "");
   arena::dds::Participant service(ro);
   arena::dds::Reader<arena::msg::GroundTruth> reader(service);
   std::vector<std::unique_ptr<arena::dds::Participant>> parts;
   std::vector<std::unique_ptr<arena::dds::Writer<arena::msg::GroundTruth>>> writers;
   for (int c = 0; c < cells; ++c) {
-    arena::dds::ParticipantOptions o = ro;
-    o.name = "arena.cell.bench" + std::to_string(c);
-    if (secure) o.network.security_dir = BenchLab::Get().Cell(c);
+    const arena::dds::ParticipantOptions o =
+        BenchParticipant(ro.domain_id, "arena.cell.bench" + std::to_string(c),
+                         secure ? BenchLab::Get().Cell(c) : "");
     parts.push_back(std::make_unique<arena::dds::Participant>(o));
     writers.push_back(std::make_unique<arena::dds::Writer<arena::msg::GroundTruth>>(*parts.back()));
   }
@@ -376,11 +391,9 @@ double CpuSeconds(const rusage& u) {
 
 void RunCell(int c, const CellPlan& plan, CellSync* sync, bool own_process) {
   using namespace arena;
-  dds::ParticipantOptions o;
-  o.domain_id = plan.domain;
-  o.name = "arena.cell.bench" + std::to_string(c);
-  o.network.shared_memory = std::getenv("ARENA_BENCH_NO_SHM") == nullptr;
-  if (plan.secure) o.network.security_dir = BenchLab::Get().Cell(c);
+  const dds::ParticipantOptions o =
+      BenchParticipant(plan.domain, "arena.cell.bench" + std::to_string(c),
+                       plan.secure ? BenchLab::Get().Cell(c) : "");
   dds::Participant participant(o);
   dds::Writer<msg::GroundTruth> log(participant);
   dds::Writer<msg::LiveState> live(participant);
@@ -550,11 +563,8 @@ Result LiveHere(int cells, double seconds, bool secure, bool cell_processes) {
   auto* sync = SharedArray<CellSync>(1);
   Cells cell_side(plan, sync, cell_processes);  // forks first: no DDS here yet
 
-  dds::ParticipantOptions ro;
-  ro.domain_id = plan.domain;
-  ro.name = "arena.bench.service";
-  ro.network.shared_memory = std::getenv("ARENA_BENCH_NO_SHM") == nullptr;
-  if (secure) ro.network.security_dir = BenchLab::Get().Service();
+  const dds::ParticipantOptions ro =
+      BenchParticipant(plan.domain, "arena.bench.service", secure ? BenchLab::Get().Service() : "");
   dds::Participant service(ro);
   dds::Reader<msg::GroundTruth> log_reader(service);
   dds::Reader<msg::LiveState> live_reader(service);
@@ -659,8 +669,7 @@ Result ControlHere(int cells, double seconds, bool secure, bool cell_filter, boo
   executors::ControllerHostOptions host;
   host.name = "bench";
   host.domain_id = plan.domain;
-  host.network.shared_memory = std::getenv("ARENA_BENCH_NO_SHM") == nullptr;
-  if (secure) host.network.security_dir = BenchLab::Get().Controller();
+  host.network = BenchNetwork(secure ? BenchLab::Get().Controller() : "");
   std::atomic<bool> stop_controller{false};
   executors::ControllerCounters controller_counters;
   std::thread controller([&] {
@@ -669,11 +678,8 @@ Result ControlHere(int cells, double seconds, bool secure, bool cell_filter, boo
         &stop_controller);
   });
 
-  dds::ParticipantOptions ro;
-  ro.domain_id = plan.domain;
-  ro.name = "arena.bench.service";
-  ro.network = host.network;
-  if (secure) ro.network.security_dir = BenchLab::Get().Service();
+  const dds::ParticipantOptions ro =
+      BenchParticipant(plan.domain, "arena.bench.service", secure ? BenchLab::Get().Service() : "");
   dds::Participant service(ro);
   dds::Reader<msg::GroundTruth> log_reader(service);
   log_reader.WaitForMatched(cells, 30s);

@@ -440,7 +440,7 @@ EvaluationRun EvaluateCampaign(db::Store& store, std::int64_t campaign_id,
               r.prediction = results[ti * settings + *same].prediction;
               if (also_planned) planned[ti * settings + s] = planned[ti * settings + *same];
             } else if (!l.error.empty()) {
-              r.prediction = PredictionFailure("error", l.error);
+              r.prediction = PredictionFailure(db::PredictionStatus::kError, l.error);
             } else {
               if (!st.error.empty()) {
                 r.prediction = PredictionFailure("invalid_scene", st.error);
@@ -454,7 +454,7 @@ EvaluationRun EvaluateCampaign(db::Store& store, std::int64_t campaign_id,
             }
             r.prediction.model_key = built.infos[s].setting.key;
             r.prediction.model_json = built.infos[s].setting.knobs_json;
-            if (r.prediction.status != "ok") failed.fetch_add(1);
+            if (r.prediction.status != db::PredictionStatus::kOk) failed.fetch_add(1);
             done.fetch_add(1);
           }
         }

@@ -6,6 +6,7 @@
 #include <Eigen/Geometry>
 #include <nlohmann/json.hpp>
 
+#include "arena/mechanics/frames.hpp"
 #include "arena/mechanics/model.hpp"
 #include "arena/mechanics/scene_json.hpp"
 
@@ -139,8 +140,7 @@ mechanics::Scene ApplyStartPose(const mechanics::Scene& scene, const StartPoseDr
   if (const double angle = d.rotation.norm(); angle > 0)
     R = nominal * Eigen::AngleAxisd(angle, d.rotation / angle).toRotationMatrix();
   s.object.pose.position = scene.object.pose.position + d.offset;
-  s.object.pose.rpy = {std::atan2(R(2, 1), R(2, 2)), std::asin(std::clamp(-R(2, 0), -1.0, 1.0)),
-                       std::atan2(R(1, 0), R(0, 0))};
+  s.object.pose.rpy = mechanics::RpyFromRotation(R);
   mechanics::SeatFingers(&s);
   return s;
 }

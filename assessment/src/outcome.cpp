@@ -5,6 +5,7 @@
 
 #include <Eigen/Geometry>
 
+#include "arena/mechanics/frames.hpp"
 #include "arena/mechanics/model.hpp"
 #include "arena/mechanics/scene_json.hpp"
 
@@ -27,9 +28,7 @@ constexpr QuantityInfo kQuantities[kQuantityCount] = {
 
 // Roll-pitch-yaw about fixed x, y, z (R = Rz(yaw) Ry(pitch) Rx(roll)).
 Eigen::Vector3d Rpy(const Eigen::Quaterniond& q) {
-  const Eigen::Matrix3d R = q.normalized().toRotationMatrix();
-  const double pitch = std::asin(std::clamp(-R(2, 0), -1.0, 1.0));
-  return {std::atan2(R(2, 1), R(2, 2)), pitch, std::atan2(R(1, 0), R(0, 0))};
+  return mechanics::RpyFromRotation(q.normalized().toRotationMatrix());
 }
 
 // Is the finger's contact point (fixed in the gripper frame) still on the

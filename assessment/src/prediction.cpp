@@ -170,7 +170,7 @@ void NoteStart(db::Prediction* p, const PredictionStart& start) {
   p->detail_json = detail.dump();
 }
 
-db::Prediction PredictionFailure(const std::string& status, const std::string& reason) {
+db::Prediction PredictionFailure(db::PredictionStatus status, const std::string& reason) {
   db::Prediction p;
   p.model_key = "unknown";
   p.status = status;
@@ -178,31 +178,16 @@ db::Prediction PredictionFailure(const std::string& status, const std::string& r
   return p;
 }
 
-const char* ToString(PredictionOutcome outcome) {
-  switch (outcome) {
-    case PredictionOutcome::kOk:
-      return "ok";
-    case PredictionOutcome::kDiverged:
-      return "diverged";
-    case PredictionOutcome::kSolverFailure:
-      return "solver_failure";
-    case PredictionOutcome::kInvalidScene:
-      return "invalid_scene";
-    case PredictionOutcome::kError:
-      return "error";
+db::PredictionStatus StatusOf(mechanics::SimulationStatus status) {
+  switch (status) {
+    case mechanics::SimulationStatus::kOk:
+      return db::PredictionStatus::kOk;
+    case mechanics::SimulationStatus::kSolverFailure:
+      return db::PredictionStatus::kSolverFailure;
+    case mechanics::SimulationStatus::kInvalidScene:
+      return db::PredictionStatus::kInvalidScene;
   }
-  return "error";
-}
-
-PredictionOutcome OutcomeOf(const std::string& status) {
-  // mechanics' frozen-frame predictions whose fingers left the object are
-  // stored as "left_geometry": they left the grasp too.
-  if (status == "left_geometry") return PredictionOutcome::kDiverged;
-  for (auto o : {PredictionOutcome::kOk, PredictionOutcome::kDiverged,
-                 PredictionOutcome::kSolverFailure, PredictionOutcome::kInvalidScene}) {
-    if (status == ToString(o)) return o;
-  }
-  return PredictionOutcome::kError;
+  return db::PredictionStatus::kError;
 }
 
 namespace {
@@ -315,12 +300,8 @@ db::Prediction ScoreSimulation(const mechanics::Scene& scene,
     case mechanics::SimulationStatus::kOk:
       break;
     case mechanics::SimulationStatus::kSolverFailure:
-      p.status = ToString(PredictionOutcome::kSolverFailure);
-      detail["error"] = result.error;
-      p.detail_json = detail.dump();
-      return p;
     case mechanics::SimulationStatus::kInvalidScene:
-      p.status = ToString(PredictionOutcome::kInvalidScene);
+      p.status = StatusOf(result.status);
       detail["error"] = result.error;
       p.detail_json = detail.dump();
       return p;
@@ -333,7 +314,7 @@ db::Prediction ScoreSimulation(const mechanics::Scene& scene,
   else
     why = DivergenceReason(scene, result.samples, truth);
   if (why) {
-    p.status = ToString(PredictionOutcome::kDiverged);
+    p.status = db::PredictionStatus::kDiverged;
     detail["error"] = *why;
     if (std::none_of(result.samples.begin(), result.samples.end(),
                      [](const auto& s) { return !Finite(s); })) {
@@ -370,7 +351,7 @@ db::Prediction ScoreSimulation(const mechanics::Scene& scene,
          {e.predicted_outcome.dx, e.predicted_outcome.dy, e.predicted_outcome.dtheta}}};
     detail["force_scale"] = e.force_scale;
   } catch (const std::exception& e) {
-    p.status = ToString(PredictionOutcome::kError);
+    p.status = db::PredictionStatus::kError;
     detail["error"] = e.what();
   }
   p.detail_json = detail.dump();
@@ -435,7 +416,8 @@ db::Prediction PredictTrial(const mechanics::Scene& scene,
   const bool mujoco = prediction.is_object() && prediction.value("predictor", "arena") == "mujoco";
   const bool closed_loop = scene.pusher && scene.pusher->controller;
   if (closed_loop && (commands == nullptr || commands->empty())) {
-    return PredictionFailure("error", "closed-loop trial without recorded pusher commands");
+    return PredictionFailure(db::PredictionStatus::kError,
+                             "closed-loop trial without recorded pusher commands");
   }
   if (closed_loop && !mujoco) {
     const auto start = std::chrono::steady_clock::now();
@@ -463,7 +445,7 @@ db::Prediction PredictTrial(const mechanics::Scene& scene,
   try {
     sim = simulators::MakeSimulator("mujoco", knobs.dump());
   } catch (const std::exception& e) {
-    return PredictionFailure("error", e.what());
+    return PredictionFailure(db::PredictionStatus::kError, e.what());
   }
   const auto start = std::chrono::steady_clock::now();
   mechanics::SimulationResult result;

@@ -175,6 +175,8 @@ class MujocoPredictor final : public Predictor {
       if (pt.solimp != DefaultSolimp()) knobs["solimp"] = pt.solimp;
       try {
         simulators_.push_back(simulators::MakeSimulator("mujoco", knobs.dump(), cache_));
+      } catch (const simulators::SimulatorError& e) {
+        throw std::invalid_argument(std::string("mujoco grid: ") + e.what());
       } catch (const std::invalid_argument& e) {
         throw std::invalid_argument(std::string("mujoco grid: ") + e.what());
       }

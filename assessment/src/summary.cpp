@@ -139,19 +139,19 @@ void Add(SettingSummary& s, Collect& c, const TrialEvaluation& r) {
   ++s.trials;
   c.time.push_back(p.wall_s);
   if (r.truth_duration_s > 0) c.per_sim_s.push_back(p.wall_s / r.truth_duration_s);
-  const PredictionOutcome outcome = OutcomeOf(p.status);
+  const db::PredictionStatus outcome = p.status;
   // A measured truth whose force stream failed its import check has no
   // contact forces: the poses are scored, the forces and modes are not.
   const bool scored = p.final_position_error && p.final_angle_error;
   std::string reason;
-  if (outcome != PredictionOutcome::kOk || !scored) {
+  if (outcome != db::PredictionStatus::kOk || !scored) {
     try {
       reason = nlohmann::json::parse(p.detail_json).value("error", "");
     } catch (const std::exception&) {
     }
-    if (reason.empty()) reason = p.status;
+    if (reason.empty()) reason = db::ToString(p.status);
   }
-  if (outcome == PredictionOutcome::kOk && scored) {
+  if (outcome == db::PredictionStatus::kOk && scored) {
     ++s.ok;
     c.position.push_back(*p.final_position_error);
     c.angle.push_back(*p.final_angle_error);
@@ -170,14 +170,15 @@ void Add(SettingSummary& s, Collect& c, const TrialEvaluation& r) {
     }
     if (r.truth_duration_s > 0)
       c.duration_error.emplace_back(r.truth_duration_s, *p.final_position_error);
-  } else if (outcome == PredictionOutcome::kDiverged) {
+  } else if (outcome == db::PredictionStatus::kDiverged) {
     ++s.diverged;
     s.diverged_trials.push_back(TrialNote{r.trial_id, 0, reason});
     c.position_all.push_back(kInf);
     c.angle_all.push_back(kInf);
   } else {
     ++s.failures;
-    s.failed_trials.push_back(TrialNote{r.trial_id, 0, p.status + ": " + reason});
+    s.failed_trials.push_back(
+        TrialNote{r.trial_id, 0, std::string(db::ToString(p.status)) + ": " + reason});
     c.position_all.push_back(kInf);
     c.angle_all.push_back(kInf);
   }

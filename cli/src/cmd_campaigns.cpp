@@ -83,7 +83,7 @@ int Submit(const std::string& campaign_path, const std::string& db_path) {
   });
   const orchestrator::Campaign campaign = LoadValidCampaign(campaign_path);
   auto store = OpenStore(db_path, false);
-  try {
+  {
     const std::int64_t id =
         orchestrator::SubmitCampaign(*store, campaign, [&] { return signals.received() != 0; });
     if (signals.received()) throw orchestrator::SubmitInterrupted();
@@ -102,11 +102,6 @@ int Submit(const std::string& campaign_path, const std::string& db_path) {
     }
     if (const std::string w = NoServiceWarning(*store, db_path); !w.empty())
       std::fprintf(stderr, "warning: %s\n", w.c_str());
-  } catch (const orchestrator::SubmitInterrupted& e) {
-    std::fprintf(stderr, "arena: %s\n", e.what());
-    return kExitInterrupted;
-  } catch (const db::StoreError& e) {
-    throw StoreCommandError(e);
   }
   return kExitOk;
 }
@@ -138,14 +133,10 @@ int Status(const std::string& db_path, std::int64_t only, bool as_json, bool all
   std::optional<db::ServiceRecord> service;
   std::string no_service;
   std::vector<CellActivity> activity;
-  try {
-    s = store->Status();
-    service = store->LatestService();
-    no_service = NoServiceWarning(*store, db_path);
-    activity = ReadCellActivity(*store, s.cells);
-  } catch (const db::StoreError& e) {
-    throw StoreCommandError(e);
-  }
+  s = store->Status();
+  service = store->LatestService();
+  no_service = NoServiceWarning(*store, db_path);
+  activity = ReadCellActivity(*store, s.cells);
   // The warning says trials wait: only when some do (an active campaign with
   // trials not yet finished), not on a store whose campaigns are all done.
   std::int64_t waiting = 0;
@@ -304,26 +295,24 @@ int Status(const std::string& db_path, std::int64_t only, bool as_json, bool all
 int Control(const std::string& verb, std::int64_t id, const std::string& db_path,
             const std::optional<std::string>& cell) {
   auto store = OpenStore(db_path, false);
-  try {
-    if (verb == "pause") {
-      store->PauseCampaign(id);
-    } else if (verb == "resume") {
-      // Also lifts its suspensions (and the service's, and --cell's) and
-      // resets their hold: the service sees it on its next pass (1 s).
-      for (const auto& s : store->ResumeSuspended(id, cell))
-        std::fprintf(stderr, "lifted: %s suspension of %s (%s)\n", s.condition.c_str(),
-                     s.scope == "cell"       ? ("cell " + s.cell_id).c_str()
-                     : s.scope == "campaign" ? ("campaign " + std::to_string(s.campaign_id)).c_str()
-                                             : "every campaign",
-                     s.evidence.c_str());
-    } else
-
-      store->CancelCampaign(id);
-    std::fprintf(stderr, "campaign %lld: %s\n", static_cast<long long>(id),
-                 db::ToString(store->GetCampaign(id).state));
-  } catch (const db::StoreError& e) {
-    throw StoreCommandError(e);
+  if (verb == "pause") {
+    store->PauseCampaign(id);
+  } else if (verb == "resume") {
+    // Also lifts its suspensions (and the service's, and --cell's) and
+    // resets their hold: the service sees it on its next pass (1 s).
+    for (const auto& s : store->ResumeSuspended(id, cell))
+      std::fprintf(stderr, "lifted: %s suspension of %s (%s)
+", s.condition.c_str(),
+                   s.scope == "cell"       ? ("cell " + s.cell_id).c_str()
+                   : s.scope == "campaign" ? ("campaign " + std::to_string(s.campaign_id)).c_str()
+                                           : "every campaign",
+                   s.evidence.c_str());
+  } else {
+    store->CancelCampaign(id);
   }
+  std::fprintf(stderr, "campaign %lld: %s
+", static_cast<long long>(id),
+               db::ToString(store->GetCampaign(id).state));
   return kExitOk;
 }
 

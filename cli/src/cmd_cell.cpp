@@ -20,6 +20,7 @@
 #include "arena/executors/cell.hpp"
 #include "arena/schemas/security.hpp"
 #include "commands.hpp"
+#include "dds_options.hpp"
 #include "signals.hpp"
 
 namespace arena::cli {
@@ -30,7 +31,7 @@ struct CellCliOptions {
   std::string defects_path;
   std::string backend = "model";  // model | mujoco | exec:COMMAND | replay:DATASET
   std::string backend_settings;   // JSON object of the backend's settings (mujoco)
-  std::string peers;
+  DdsCliOptions dds;
   bool verbose = false;
   int parent_pid = 0;  // > 0: stop when that process (arena run) is gone
 };
@@ -51,14 +52,11 @@ int RunCell(CellCliOptions opt) {
     if (!opt.defects_path.empty()) {
       opt.cell.defects = executors::ParseDefectProfile(ReadText(opt.defects_path, "--defects"));
     }
-    if (!opt.peers.empty()) opt.cell.network.peers = dds::ParsePeers(opt.peers);
+    opt.cell.domain_id = opt.dds.domain;
+    opt.cell.network = opt.dds.Network();
     executors::ValidateCellOptions(opt.cell);
   } catch (const executors::DefectError& e) {
     throw CommandError(kExitBadInput, "--defects " + opt.defects_path + ": " + e.what());
-  } catch (const dds::DdsError& e) {
-    throw CommandError(kExitBadInput, e.what());
-  } catch (const std::invalid_argument& e) {
-    throw CommandError(kExitBadInput, e.what());
   }
 
   // Signals are blocked before any thread starts (DDS threads inherit the
@@ -81,7 +79,7 @@ int RunCell(CellCliOptions opt) {
   if (const std::size_t n = dds::CleanZombieSharedMemory(); n > 0)
     spdlog::info("cell {}: removed {} shared-memory files of dead DDS processes", opt.cell.id, n);
   std::unique_ptr<executors::Cell> cell;
-  try {
+  {
     const executors::ModelFidelity fidelity{opt.cell.fidelity.facets, opt.cell.fidelity.points,
                                             opt.cell.fidelity.dt};
     auto backend = executors::MakeBackend(opt.backend, fidelity, opt.backend_settings);
@@ -102,12 +100,6 @@ int RunCell(CellCliOptions opt) {
       }
     }
     cell = std::make_unique<executors::Cell>(opt.cell, std::move(backend));
-  } catch (const std::invalid_argument& e) {
-    throw CommandError(kExitBadInput, e.what());
-  } catch (const dds::SecurityError& e) {
-    throw CommandError(kExitBadInput, e.what());
-  } catch (const dds::DdsError& e) {
-    throw CommandError(kExitCommunication, e.what());
   }
   {
     std::unique_lock<std::mutex> lock(mu);
@@ -135,7 +127,7 @@ void AddCellCommand(CLI::App& app, Action* action) {
       "Stops cleanly on SIGINT/SIGTERM (exit 0).");
   cmd->add_option("--id", opt->cell.id, "Cell id, unique in the deployment ([A-Za-z0-9_.-])")
       ->required();
-  cmd->add_option("--domain", opt->cell.domain_id, "DDS domain id (0..231)")->required();
+  AddDdsOptions(cmd, &opt->dds, "a 'cell' identity directory from `arena certs issue`");
   cmd->add_option("--backend", opt->backend,
                   "What executes the trials: model (arena's model: self-consistency), mujoco, "
                   "exec:COMMAND (a driver, executors/README.md), replay:DATASET (an export)")
@@ -149,16 +141,6 @@ void AddCellCommand(CLI::App& app, Action* action) {
       ->capture_default_str();
   cmd->add_option("--batch", opt->cell.batch_samples, "Ground-truth samples per message (1..256)")
       ->capture_default_str();
-  cmd->add_option("--peers", opt->peers, "Reach other hosts: initial peers host[:port],...");
-  cmd->add_option("--discovery-server", opt->cell.network.discovery_server,
-                  "Reach other hosts through a Fast DDS discovery server [id@]host:port");
-  cmd->add_option("--profile-xml", opt->cell.network.profile_xml,
-                  "Fast DDS XML profile file (its default participant profile sets transports)");
-  cmd->add_option("--security", opt->cell.network.security_dir,
-                  "DDS-Security: a 'cell' identity directory from `arena certs issue`");
-  cmd->add_flag(
-      "--no-shm", [opt](std::int64_t) { opt->cell.network.shared_memory = false; },
-      "Do not use the shared-memory transport (UDP only)");
   cmd->add_option("--parent-pid", opt->parent_pid,
                   "Stop when this process exits (arena run passes its own pid)");
   cmd->add_flag("-v,--verbose", opt->verbose, "Debug log (QoS in effect, discovery)");

@@ -59,11 +59,7 @@ int RunInit(CertsOptions o) {
 
 int RunIssue(CertsOptions o) {
   ParseDomains(o.domains, &o.identity.domain_min, &o.identity.domain_max);
-  try {
-    o.identity.role = dds::ParseRole(o.role);
-  } catch (const dds::SecurityError& e) {
-    throw CommandError(kExitBadInput, e.what());
-  }
+  o.identity.role = dds::ParseRole(o.role);
   std::string dir;
   try {
     dir = dds::IssueIdentity(o.dir, o.identity);

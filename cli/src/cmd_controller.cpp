@@ -15,6 +15,7 @@
 #include "arena/executors/controller.hpp"
 #include "arena/schemas/security.hpp"
 #include "commands.hpp"
+#include "dds_options.hpp"
 #include "signals.hpp"
 
 namespace arena::cli {
@@ -23,7 +24,7 @@ namespace {
 struct ControllerCliOptions {
   executors::ControllerHostOptions host;
   std::string law;  // empty: the name is the law
-  std::string peers;
+  DdsCliOptions dds;
   bool verbose = false;
   int parent_pid = 0;
 };
@@ -46,16 +47,8 @@ int RunController(ControllerCliOptions opt) {
                                           "' in arena's library (one of: " + LawList() +
                                           "; give --law when the name is your own)");
   }
-  try {
-    if (!opt.peers.empty()) opt.host.network.peers = dds::ParsePeers(opt.peers);
-  } catch (const dds::DdsError& e) {
-    throw CommandError(kExitBadInput, e.what());
-  }
-  // A bad --domain is bad input (2), as from `arena cell`, not a DDS failure (4).
-  if (opt.host.domain_id < 0 || opt.host.domain_id > dds::kMaxDomainId) {
-    throw CommandError(kExitBadInput, "--domain: must be 0.." + std::to_string(dds::kMaxDomainId) +
-                                          ", got " + std::to_string(opt.host.domain_id));
-  }
+  opt.host.domain_id = opt.dds.domain;
+  opt.host.network = opt.dds.Network();
   // Signals: blocked before DDS starts its threads, handled on the
   // watcher's thread, which flips `stop` (as `arena cell`).
   std::atomic<bool> stop{false};
@@ -65,30 +58,13 @@ int RunController(ControllerCliOptions opt) {
     stop = true;
   });
   if (!FollowParent(opt.parent_pid)) return kExitOk;
-  executors::ControllerCounters counters;
-  int code = kExitOk;
-  std::string error;
-  try {
-    counters = executors::RunController(
-        opt.host,
-        [law](const executors::ControlContext& context) {
-          return executors::MakeLibraryController(law, context);
-        },
-        &stop);
-  } catch (const executors::ControllerNameConflict& e) {
-    code = kExitBadInput;
-    error = e.what();
-  } catch (const dds::SecurityError& e) {
-    code = kExitBadInput;
-    error = e.what();
-  } catch (const dds::DdsError& e) {
-    code = kExitCommunication;
-    error = e.what();
-  } catch (const std::invalid_argument& e) {
-    code = kExitBadInput;
-    error = e.what();
-  }
-  if (code != kExitOk) throw CommandError(code, error);
+  // A name conflict, a bad identity or a refused set-up: main() maps its category.
+  const executors::ControllerCounters counters = executors::RunController(
+      opt.host,
+      [law](const executors::ControlContext& context) {
+        return executors::MakeLibraryController(law, context);
+      },
+      &stop);
   spdlog::info(
       "controller {}: answered {} samples of {} trials ({} live samples superseded before it "
       "took them, {} reported lost)",
@@ -114,13 +90,9 @@ void AddControllerCommand(CLI::App& app, Action* action) {
       "controller --name NAME): only it may command the pusher of NAME's trials.\n"
       "Stops cleanly on SIGINT/SIGTERM (exit 0).");
   cmd->add_option("--name", opt->host.name, "Name scenes use to pick this controller")->required();
-  cmd->add_option("--domain", opt->host.domain_id, "DDS domain id (0..231)")->required();
   cmd->add_option("--law", opt->law, "Library law to run (default: the name)");
-  cmd->add_option("--peers", opt->peers, "Reach other hosts: initial peers host[:port],...");
-  cmd->add_option("--discovery-server", opt->host.network.discovery_server,
-                  "Reach other hosts through a Fast DDS discovery server [id@]host:port");
-  cmd->add_option("--security", opt->host.network.security_dir,
-                  "DDS-Security: a 'controller' identity directory from `arena certs issue`");
+  AddDdsOptions(cmd, &opt->dds,
+                "a 'controller' identity directory issued for the name (`arena certs issue`)");
   cmd->add_option("--parent-pid", opt->parent_pid,
                   "Stop when this process exits (arena run passes its own pid)");
   cmd->add_flag("-v,--verbose", opt->verbose, "Debug log");

@@ -95,17 +95,10 @@ db::PredictedStream PredictWith(const std::string& scene_json, const std::string
       assessment::SimulatePrediction(scene, model, &recorded, first);
   out.predictor = run.key;
   out.settings_json = run.settings_json;
-  switch (run.result.status) {
-    case mechanics::SimulationStatus::kOk:
-      break;
-    case mechanics::SimulationStatus::kSolverFailure:
-      out.status = "solver_failure";
-      out.error = run.result.error;
-      return out;
-    case mechanics::SimulationStatus::kInvalidScene:
-      out.status = "invalid_scene";
-      out.error = run.result.error;
-      return out;
+  out.status = assessment::StatusOf(run.result.status);
+  if (out.status != db::PredictionStatus::kOk) {
+    out.error = run.result.error;
+    return out;
   }
   const auto normals = assessment::ContactNormals(run.scene);
   for (const auto& p : run.result.samples) out.samples.push_back(ToSample(p, normals, run.scene));
@@ -129,7 +122,7 @@ db::PredictedStream PredictFrom(const std::string& scene_json, const std::string
 
 int RunExport(const ExportCliOptions& o) {
   RefuseToOverwriteStore(o.out, "--out", o.db_path);
-  try {
+  {
     db::StoreOptions so;
     so.read_only = true;
     auto store = db::Store::Open(o.db_path, so);
@@ -159,8 +152,6 @@ int RunExport(const ExportCliOptions& o) {
         static_cast<long long>(o.campaign), static_cast<long long>(r.trials),
         static_cast<long long>(r.samples), r.files.size(), r.dir.c_str());
     return kExitOk;
-  } catch (const db::StoreError& e) {
-    throw StoreCommandError(e);
   }
 }
 

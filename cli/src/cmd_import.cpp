@@ -45,6 +45,8 @@ int RunPushImport(const ImportCliOptions& o) {
     return kExitOk;
   } catch (const recordings::ImportError& e) {
     throw CommandError(kExitBadInput, std::string("import: ") + e.what() + " (nothing written)");
+  } catch (const Error& e) {  // a scene or an output (store) error keeps its category
+    throw CommandError(e.exit_code(), std::string(e.what()) + " (nothing written)");
   } catch (const std::runtime_error& e) {
     throw CommandError(kExitFailure, std::string(e.what()) + " (nothing written)");
   }

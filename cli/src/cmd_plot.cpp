@@ -469,7 +469,7 @@ int RunPlot(const PlotOptions& o) {
     }
   }
   if (o.trial >= 0) return PlotTrial(o.db_path, o.trial, o.out);
-  try {
+  {
     db::StoreOptions so;
     so.read_only = true;
     auto store = db::Store::Open(o.db_path, so);
@@ -479,8 +479,6 @@ int RunPlot(const PlotOptions& o) {
     throw CommandError(kExitBadInput,
                        "plot: choose a plot: a TRIAL id, --campaign ID --tradeoff, "
                        "--campaign ID --map X,Y --metric M, or --calibration ID");
-  } catch (const db::StoreError& e) {
-    throw StoreCommandError(e);
   }
 }
 

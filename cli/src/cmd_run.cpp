@@ -113,7 +113,7 @@ std::int64_t PrintSummary(const std::string& db_path, std::int64_t campaign_id, 
     else
       ++other;
     for (const auto& p : store->ListPredictions(t.id)) {
-      if (p.status != "ok") {
+      if (p.status != db::PredictionStatus::kOk) {
         ++prediction_failures;
         continue;
       }
@@ -331,24 +331,14 @@ int Run(RunOptions opt) {
     }
   }
   if (opt.domain < 0) {
-    try {
-      opt.domain = QuietDomain(opt.network_for_probe);
-    } catch (const dds::DdsError& e) {
-      throw CommandError(kExitCommunication, e.what());
-    }
+    opt.domain = QuietDomain(opt.network_for_probe);
   }
   std::int64_t campaign_id = 0;
-  try {
+  {
     auto store = db::Store::Open(opt.db_path);
     campaign_id = orchestrator::SubmitCampaign(*store, campaign);
-  } catch (const db::StoreError& e) {
-    throw StoreCommandError(e);
   }
-  try {
-    orchestrator::SetUpServiceLog(opt.db_path, opt.log_level, /*to_stderr=*/false);
-  } catch (const std::invalid_argument& e) {
-    throw CommandError(kExitBadInput, e.what());
-  }
+  orchestrator::SetUpServiceLog(opt.db_path, opt.log_level, /*to_stderr=*/false);
   // An adaptive campaign's count is open: its cap bounds the progress bar.
   const std::int64_t trials =
       campaign.adaptive
@@ -394,8 +384,6 @@ int Run(RunOptions opt) {
     service = std::make_unique<orchestrator::Service>(so);
   } catch (const db::StoreError& e) {
     throw StoreCommandError(e);
-  } catch (const dds::DdsError& e) {
-    throw CommandError(kExitCommunication, e.what());
   }
   // A closed-loop campaign's controller (issue 19), started like the cells
   // when arena's library has it; a lab's own one the lab starts.
@@ -447,11 +435,7 @@ int Run(RunOptions opt) {
     }
     if (!opt.quiet) progress.Update(c.done + c.failed, c.failed, std::to_string(alive) + " cells");
   });
-  try {
-    service->Run();
-  } catch (const db::StoreError& e) {
-    throw StoreCommandError(e);
-  }
+  service->Run();
   progress.Finish();
   const double wall =
       std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();

@@ -16,6 +16,7 @@
 #include "arena/orchestrator/service.hpp"
 #include "arena/schemas/security.hpp"
 #include "commands.hpp"
+#include "dds_options.hpp"
 #include "signals.hpp"
 #include "store_errors.hpp"
 
@@ -24,7 +25,7 @@ namespace {
 
 struct ServeCliOptions {
   orchestrator::ServiceOptions service;
-  std::string peers;
+  DdsCliOptions dds;
   std::string log_level = "info";
   std::string suspenders_path;  // --suspenders FILE
 };
@@ -55,31 +56,17 @@ int RunServe(ServeCliOptions opt) {
     if (auto* s = running.load()) s->Stop();
   });
   try {
-    if (!opt.peers.empty()) opt.service.network.peers = dds::ParsePeers(opt.peers);
+    opt.service.domain_id = opt.dds.domain;
+    opt.service.network = opt.dds.Network();
     opt.service.suspenders = LoadSuspenders(opt.suspenders_path);
     orchestrator::ValidateServiceOptions(opt.service);  // before anything is created
     orchestrator::SetUpServiceLog(opt.service.db_path, opt.log_level);
-  } catch (const dds::DdsError& e) {
-    throw CommandError(kExitBadInput, e.what());
-  } catch (const std::invalid_argument& e) {
-    throw CommandError(kExitBadInput, e.what());
   } catch (const spdlog::spdlog_ex& e) {
     throw CommandError(kExitStore,
                        std::string("cannot write the log next to the store: ") + e.what());
   }
   dds::CleanZombieSharedMemory();  // what SIGKILLed predecessors and cells left in /dev/shm
-  std::unique_ptr<orchestrator::Service> service;
-  try {
-    service = std::make_unique<orchestrator::Service>(opt.service);
-  } catch (const db::StoreError& e) {
-    throw StoreCommandError(e);
-  } catch (const dds::SecurityError& e) {
-    throw CommandError(kExitBadInput, e.what());
-  } catch (const dds::DdsError& e) {
-    throw CommandError(kExitCommunication, e.what());
-  } catch (const std::invalid_argument& e) {
-    throw CommandError(kExitBadInput, e.what());
-  }
+  auto service = std::make_unique<orchestrator::Service>(opt.service);
   running = service.get();
   if (signals.received()) service->Stop();  // a signal that came while it was starting
   spdlog::info("serving store {} on DDS domain {}", opt.service.db_path, opt.service.domain_id);
@@ -109,22 +96,13 @@ void AddServeCommand(CLI::App& app, Action* action) {
       "Logs go to FILE.log next to the store (rotated, 16 MiB x 6 at most) and to stderr.\n"
       "SIGTERM stops dispatching and lets phases in flight finish (up to --drain s).");
   cmd->add_option("--db", opt->service.db_path, "SQLite store (created if missing)")->required();
-  cmd->add_option("--domain", opt->service.domain_id, "DDS domain id (0..231)")->required();
-  cmd->add_option("--peers", opt->peers, "Reach other hosts: initial peers host[:port],...");
-  cmd->add_option("--discovery-server", opt->service.network.discovery_server,
-                  "Client of a Fast DDS discovery server [id@]host:port");
-  cmd->add_option("--profile-xml", opt->service.network.profile_xml, "Fast DDS XML profile file");
-  cmd->add_option("--security", opt->service.network.security_dir,
-                  "DDS-Security: a 'service' identity directory from `arena certs issue`");
   // The service is the process that gets restarted after a crash. A SIGKILLed
   // process leaves its shared-memory ports claimed in /dev/shm, and a successor
   // that reuses its participant id could then miss the cells' discovery
   // traffic; over loopback UDP it cannot. Ground truth at 16 x 250 Hz is far
   // below what loopback carries.
-  opt->service.network.shared_memory = false;
-  cmd->add_flag(
-      "--shm", [opt](std::int64_t) { opt->service.network.shared_memory = true; },
-      "Also use shared memory (faster; a restart after a SIGKILL may then be slow to find cells)");
+  opt->dds.network.shared_memory = false;
+  AddDdsOptions(cmd, &opt->dds, "a 'service' identity directory from `arena certs issue`");
   cmd->add_option("--log-level", opt->log_level, "trace, debug, info, warn, error, critical, off")
       ->capture_default_str();
   cmd->add_option("--max-attempts", opt->service.max_attempts,

@@ -15,6 +15,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include "arena/mechanics/frames.hpp"
 #include "arena/mechanics/scene_json.hpp"
 #include "arena/mechanics/simulate.hpp"
 #include "commands.hpp"
@@ -40,11 +41,7 @@ json Vec(const Eigen::Vector3d& v) { return json::array({v.x(), v.y(), v.z()}); 
 
 // Roll-pitch-yaw about fixed x, y, z (R = Rz(yaw) Ry(pitch) Rx(roll)).
 Eigen::Vector3d Rpy(const Eigen::Quaterniond& q) {
-  const Eigen::Matrix3d R = q.normalized().toRotationMatrix();
-  const double pitch = std::asin(std::clamp(-R(2, 0), -1.0, 1.0));
-  const double roll = std::atan2(R(2, 1), R(2, 2));
-  const double yaw = std::atan2(R(1, 0), R(0, 0));
-  return {roll, pitch, yaw};
+  return mechanics::RpyFromRotation(q.normalized().toRotationMatrix());
 }
 
 int PrintError(const std::string& error, int exit_code) {

@@ -25,6 +25,7 @@
 #include "arena/schemas/ground_truth.hpp"
 #include "arena/schemas/security.hpp"
 #include "commands.hpp"
+#include "dds_options.hpp"
 #include "signals.hpp"
 
 namespace arena::cli {
@@ -35,10 +36,7 @@ constexpr std::chrono::milliseconds Millis0() { return std::chrono::milliseconds
 struct WatchOptions {
   std::int64_t trial = -1;
   std::string cell;
-  int domain = -1;
-  std::string peers;
-  std::string discovery_server;
-  std::string security_dir;
+  DdsCliOptions dds;
   double timeout_s = 30;
 };
 
@@ -75,15 +73,9 @@ int RunWatch(const WatchOptions& o) {
   SignalWatcher signals([&stop](int) { stop = true; });  // before DDS starts its threads
 
   dds::ParticipantOptions po;
-  po.domain_id = o.domain;
+  po.domain_id = o.dds.domain;
   po.name = "arena.watch";
-  try {
-    if (!o.peers.empty()) po.network.peers = dds::ParsePeers(o.peers);
-    po.network.discovery_server = o.discovery_server;
-    po.network.security_dir = o.security_dir;
-  } catch (const dds::DdsError& e) {
-    throw CommandError(kExitBadInput, e.what());
-  }
+  po.network = o.dds.Network();
   // The live topic (one sample as it happens) for the readout; the
   // reliable log only to know, for sure, when the trial ended (a best-effort
   // live sample, the last one included, may be lost).
@@ -100,15 +92,16 @@ int RunWatch(const WatchOptions& o) {
     if (!o.cell.empty())
       statuses =
           std::make_unique<dds::Reader<msg::TrialStatus>>(*participant, dds::ReaderOptions{true});
-  } catch (const dds::SecurityError& e) {
-    throw CommandError(kExitBadInput, e.what());
+  } catch (const dds::SecurityError&) {
+    throw;  // the identity is the user's input (main maps it)
   } catch (const dds::DdsError& e) {
-    throw CommandError(kExitCommunication, std::string("cannot join DDS domain ") +
-                                               std::to_string(o.domain) + ": " + e.what());
+    throw CommandError(e.exit_code(), std::string("cannot join DDS domain ") +
+                                          std::to_string(o.dds.domain) + ": " + e.what());
   }
   const bool tty = isatty(STDOUT_FILENO) == 1;
   const std::string what = o.trial >= 0 ? "trial " + std::to_string(o.trial) : "cell " + o.cell;
-  std::fprintf(stderr, "watching %s on DDS domain %d (Ctrl-C to stop)\n", what.c_str(), o.domain);
+  std::fprintf(stderr, "watching %s on DDS domain %d (Ctrl-C to stop)\n", what.c_str(),
+               o.dds.domain);
 
   using Clock = std::chrono::steady_clock;
   const auto timeout =
@@ -210,7 +203,7 @@ int RunWatch(const WatchOptions& o) {
       if (seen == 0 && logged == 0)
         throw CommandError(
             kExitCommunication,
-            "no ground truth for " + what + " on DDS domain " + std::to_string(o.domain) +
+            "no ground truth for " + what + " on DDS domain " + std::to_string(o.dds.domain) +
                 " within " + std::to_string(static_cast<int>(o.timeout_s)) +
                 " s: is it running (`arena status`), and is --domain the one `arena serve` uses? "
                 "(a trial that already ended is in the store: `arena plot`)");
@@ -235,15 +228,8 @@ void AddWatchCommand(CLI::App& app, Action* action) {
   cmd->add_option("trial", o->trial, "Trial id (see `arena status` / `arena query`)")
       ->check(CLI::NonNegativeNumber);
   cmd->add_option("--cell", o->cell, "Instead of a trial: the next trial streamed by this cell");
-  cmd->add_option("--domain", o->domain, "DDS domain id of the service and cells (0..231)")
-      ->required()
-      ->check(CLI::Range(0, dds::kMaxDomainId));
-  cmd->add_option("--peers", o->peers, "Reach cells on other hosts: initial peers host[:port],...");
-  cmd->add_option("--discovery-server", o->discovery_server,
-                  "Client of a Fast DDS discovery server [id@]host:port");
-  cmd->add_option(
-      "--security", o->security_dir,
-      "DDS-Security: a 'watcher' (or 'service') identity directory from `arena certs issue`");
+  AddDdsOptions(cmd, &o->dds,
+                "a 'watcher' (or 'service') identity directory from `arena certs issue`");
   cmd->add_option("--timeout", o->timeout_s, "Give up after this many seconds without a sample")
       ->capture_default_str()
       ->check(CLI::PositiveNumber);

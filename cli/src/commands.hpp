@@ -10,28 +10,26 @@
 
 #include <CLI/CLI.hpp>
 
+#include "arena/errors/error.hpp"
+
 namespace arena::cli {
 
-// Exit codes (documented in README.md).
+// Exit codes (documented in README.md): the error categories' (arena::Error).
 enum ExitCode : int {
   kExitOk = 0,
-  kExitFailure = 1,        // the command ran and failed (a solver failure, a failed campaign)
-  kExitBadInput = 2,       // invalid arguments, scene, campaign or query
-  kExitStore = 3,          // the store cannot be opened, is read-only, full or corrupt
-  kExitCommunication = 4,  // DDS set-up failed, no cell answered in time
-  kExitInterrupted = 130,  // stopped by SIGINT / SIGTERM before finishing
+  kExitFailure = ::arena::ExitCode(ErrorCategory::kFailure),
+  kExitBadInput = ::arena::ExitCode(ErrorCategory::kBadInput),
+  kExitStore = ::arena::ExitCode(ErrorCategory::kStore),
+  kExitCommunication = ::arena::ExitCode(ErrorCategory::kCommunication),
+  kExitInterrupted = ::arena::ExitCode(ErrorCategory::kInterrupted),
 };
 
 // An error a command reports to the user: the message says what went wrong and
 // what to do next; main() prints it to stderr and exits with exit_code.
-class CommandError : public std::runtime_error {
+class CommandError : public Error {
  public:
   CommandError(int exit_code, const std::string& message)
-      : std::runtime_error(message), exit_code_(exit_code) {}
-  int exit_code() const { return exit_code_; }
-
- private:
-  int exit_code_;
+      : Error(CategoryForExitCode(exit_code), message) {}
 };
 
 using Action = std::function<int()>;

@@ -1,12 +1,14 @@
 // arena: one binary, many subcommands (docs/architecture.md, the cli room).
 #include <cstdio>
 #include <exception>
+#include <stdexcept>
 #include <string>
 
 #include <CLI/CLI.hpp>
 
 #include "arena/cli/version.hpp"
 #include "arena/db/store.hpp"
+#include "arena/errors/error.hpp"
 #include "commands.hpp"
 #include "store_errors.hpp"
 
@@ -49,14 +51,20 @@ int main(int argc, char** argv) {
     std::fputs("arena: no command given\n", stderr);
     return kExitBadInput;
   }
+  // The one place an error becomes an exit code (README: exit codes): every
+  // room's typed error carries its category; a plain std::invalid_argument is
+  // a value a command refused (bad input); anything else is a bug of ours.
   try {
     return action();
-  } catch (const CommandError& e) {
-    std::fprintf(stderr, "arena: %s\n", UserMessage(e.what()).c_str());
+  } catch (const arena::Error& e) {
+    // The store's messages lead with the function that refused: noise for a user.
+    const bool from_store = dynamic_cast<const arena::db::StoreError*>(&e) != nullptr ||
+                            dynamic_cast<const CommandError*>(&e) != nullptr;
+    std::fprintf(stderr, "arena: %s\n", from_store ? UserMessage(e.what()).c_str() : e.what());
     return e.exit_code();
-  } catch (const arena::db::StoreError& e) {  // a store error a command did not translate
-    std::fprintf(stderr, "arena: %s\n", UserMessage(e.what()).c_str());
-    return ExitCodeFor(e);
+  } catch (const std::invalid_argument& e) {
+    std::fprintf(stderr, "arena: %s\n", e.what());
+    return kExitBadInput;
   } catch (const std::exception& e) {
     std::fprintf(stderr, "arena: internal error: %s\n", e.what());
     return kExitFailure;

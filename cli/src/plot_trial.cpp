@@ -108,7 +108,7 @@ int PlotTrial(const std::string& db_path, std::int64_t trial, const std::string&
   std::fprintf(stderr, "trial %lld: %zu samples, prediction %s (%s) -> %s\n",
                static_cast<long long>(trial), info.samples,
                info.model_key.empty() ? "-" : info.model_key.c_str(),
-               info.prediction_status.c_str(), out.c_str());
+               db::ToString(info.prediction_status), out.c_str());
   return kExitOk;
 }
 
@@ -152,11 +152,7 @@ Chart MakeTrialChart(const db::Store& store, std::int64_t trial_id, TrialPlotInf
             "with `arena watch " +
             std::to_string(trial_id) + "`");
   }
-  try {
-    gt = store.ReadGroundTruth(trial_id);
-  } catch (const db::StoreError& e) {
-    throw StoreCommandError(e);
-  }
+  gt = store.ReadGroundTruth(trial_id);
   if (gt.samples.empty())
     throw CommandError(kExitFailure,
                        "trial " + std::to_string(trial_id) + ": its ground truth has no samples");
@@ -191,21 +187,11 @@ Chart MakeTrialChart(const db::Store& store, std::int64_t trial_id, TrialPlotInf
         scene, model, &commands, gt.samples.empty() ? nullptr : &gt.samples.front());
     inf.model_key = run.key;
     predicted = std::move(run.result);
-    switch (predicted.status) {
-      case mechanics::SimulationStatus::kOk:
-        inf.prediction_status = "ok";
-        break;
-      case mechanics::SimulationStatus::kSolverFailure:
-        inf.prediction_status = "solver_failure";
-        break;
-      case mechanics::SimulationStatus::kInvalidScene:
-        inf.prediction_status = "invalid_scene";
-        break;
-    }
+    inf.prediction_status = assessment::StatusOf(predicted.status);
     if (predicted.status != mechanics::SimulationStatus::kOk)
       prediction_note = "; " + predicted.error;
   } catch (const std::exception& e) {
-    inf.prediction_status = "error";
+    inf.prediction_status = db::PredictionStatus::kError;
     prediction_note = std::string("; ") + e.what();
     predicted.samples.clear();
   }
@@ -286,12 +272,13 @@ Chart MakeTrialChart(const db::Store& store, std::int64_t trial_id, TrialPlotInf
   }
 
   Chart chart;
-  chart.title =
-      "trial " + std::to_string(trial.id) + " (campaign " + std::to_string(campaign.id) + " '" +
-      campaign.name + "', attempt " + std::to_string(gt.attempt) +
-      (gt.cell_id.empty() ? "" : ", cell " + gt.cell_id) + ")  prediction " +
-      (inf.model_key.empty() ? "-" : inf.model_key) +
-      (inf.prediction_status == "ok" ? "" : " " + inf.prediction_status + prediction_note);
+  chart.title = "trial " + std::to_string(trial.id) + " (campaign " + std::to_string(campaign.id) +
+                " '" + campaign.name + "', attempt " + std::to_string(gt.attempt) +
+                (gt.cell_id.empty() ? "" : ", cell " + gt.cell_id) + ")  prediction " +
+                (inf.model_key.empty() ? "-" : inf.model_key) +
+                (inf.prediction_status == db::PredictionStatus::kOk
+                     ? ""
+                     : " " + std::string(db::ToString(inf.prediction_status)) + prediction_note);
   // A closed-loop trial says how many control deadlines it missed.
   if (scene.pusher && scene.pusher->controller) {
     if (const auto run = store.GetClosedLoop(trial_id)) chart.title += "; " + DeadlineCaption(*run);

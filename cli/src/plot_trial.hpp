@@ -7,6 +7,7 @@
 #include <cstdint>
 #include <string>
 
+#include "arena/db/prediction_status.hpp"
 #include "svg_chart.hpp"
 
 namespace arena::db {
@@ -20,9 +21,9 @@ namespace arena::cli {
 // fingers in scene order then the pusher): "normal true", "normal observed",
 // "normal predicted", "tangential true", "tangential observed", "tangential predicted".
 struct TrialPlotInfo {
-  std::string prediction_status;  // "ok", "solver_failure", "invalid_scene", "error"
-  std::string model_key;          // fidelity label of the prediction ("" if it could not be made)
-  std::size_t samples = 0;        // ground-truth samples plotted
+  db::PredictionStatus prediction_status = db::PredictionStatus::kOk;
+  std::string model_key;    // fidelity label of the prediction ("" if it could not be made)
+  std::size_t samples = 0;  // ground-truth samples plotted
 };
 
 // @throws CommandError: kExitBadInput for an unknown trial or one without

@@ -904,7 +904,7 @@ void WriteTrial(const Store::Impl& impl, const ExportOptions& o, const Campaign&
                       : o.predict(index.scenes[i], campaign.spec_json);
     } catch (const std::exception& e) {
       predicted = PredictedStream{};
-      predicted->status = "error";
+      predicted->status = PredictionStatus::kError;
       predicted->error = e.what();
     }
     for (const auto& s : predicted->samples) {
@@ -913,7 +913,7 @@ void WriteTrial(const Store::Impl& impl, const ExportOptions& o, const Campaign&
     }
     irow->emplace_back(predicted->predictor);
     irow->emplace_back(predicted->settings_json);
-    irow->emplace_back(predicted->status);
+    irow->emplace_back(std::string(ToString(predicted->status)));
     irow->emplace_back(predicted->error);
     irow->emplace_back(static_cast<std::int64_t>(predicted->samples.size()));
     if (out->predicted_cols.empty()) out->predicted_cols = true_cols;

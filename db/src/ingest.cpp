@@ -222,11 +222,11 @@ void Ingest::Poll() {
 
 void Ingest::Flush() { impl_->Flush(); }
 
-std::int64_t Ingest::Finish(const std::string& outcome) {
+std::int64_t Ingest::Finish(TrialEnd outcome) {
   auto& m = *impl_;
   if (m.finished) throw StoreError(StoreError::Kind::kBadInput, "Ingest::Finish: already finished");
-  if (outcome.empty())
-    throw StoreError(StoreError::Kind::kBadInput, "Ingest::Finish: outcome is empty");
+  if (outcome == TrialEnd::kNone)
+    throw StoreError(StoreError::Kind::kBadInput, "Ingest::Finish: outcome is not set");
   m.CloseChunk();
   Tx tx(m.store->db, true);
   const auto row = CheckIngestable(*m.store, m.trial_id, m.attempt, "Ingest::Finish");
@@ -288,7 +288,7 @@ std::int64_t Ingest::Finish(const std::string& outcome) {
                               "ground truth complete (" + std::to_string(m.total) + " samples)",
                               "execute.ground_truth_complete", "Ingest::Finish");
     auto u = m.store->Prepare("UPDATE trials SET outcome = ?, executed_at = ? WHERE id = ?");
-    u->Bind(1, outcome).Bind(2, now).Bind(3, m.trial_id).Run();
+    u->Bind(1, ToString(outcome)).Bind(2, now).Bind(3, m.trial_id).Run();
   }
   tx.Commit();
   m.finished = true;

@@ -134,6 +134,38 @@ std::optional<PredictionStatus> ParsePredictionStatus(const std::string& text) {
   return std::nullopt;
 }
 
+const char* ToString(TrialEnd o) {
+  switch (o) {
+    case TrialEnd::kNone:
+      return "";
+    case TrialEnd::kOk:
+      return "ok";
+    case TrialEnd::kSolverFailure:
+      return "solver_failure";
+    case TrialEnd::kInvalidScene:
+      return "invalid_scene";
+    case TrialEnd::kRefused:
+      return "refused";
+    case TrialEnd::kFailed:
+      return "failed";
+    case TrialEnd::kCancelled:
+      return "cancelled";
+  }
+  return "?";
+}
+
+std::optional<TrialEnd> ParseTrialEnd(const std::string& text) {
+  for (auto o : {TrialEnd::kNone, TrialEnd::kOk, TrialEnd::kSolverFailure, TrialEnd::kInvalidScene,
+                 TrialEnd::kRefused, TrialEnd::kFailed, TrialEnd::kCancelled})
+    if (text == ToString(o)) return o;
+  return std::nullopt;
+}
+
+PredictionStatus StoredPredictionStatus(const std::string& text) {
+  if (text == "left_geometry") return PredictionStatus::kDiverged;
+  return ParsePredictionStatus(text).value_or(PredictionStatus::kError);
+}
+
 namespace {
 
 CampaignState ParseCampaignState(const std::string& t) {
@@ -921,16 +953,16 @@ TrialState Store::RetryTrial(std::int64_t trial_id, int attempt, const std::stri
 }
 
 void Store::FailTrial(std::int64_t trial_id, int attempt, const std::string& reason,
-                      const std::string& outcome, std::string_view rule) {
+                      TrialEnd outcome, std::string_view rule) {
   impl_->RequireWritable("FailTrial");
-  if (outcome.empty()) BadInput("FailTrial: outcome is empty");
+  if (outcome == TrialEnd::kNone) BadInput("FailTrial: outcome is not set");
   Tx tx(impl_->db, true);
   const auto row = LoadTrialRow(*impl_, trial_id, "FailTrial");
   CheckAttempt(row, trial_id, attempt, "FailTrial");
   WriteTransition(*impl_, trial_id, attempt, row.state, TrialState::kFailed, row.cell_id, reason,
                   rule.empty() ? std::string_view("fail.unnamed") : rule, "FailTrial");
   auto o = impl_->Prepare("UPDATE trials SET outcome = ? WHERE id = ?");
-  o->Bind(1, outcome).Bind(2, trial_id).Run();
+  o->Bind(1, ToString(outcome)).Bind(2, trial_id).Run();
   tx.Commit();
 }
 
@@ -1004,10 +1036,6 @@ namespace {
 // @throws kBadInput naming the field (prefix: "Function: ...").
 void CheckPrediction(const Prediction& p, const std::string& prefix) {
   if (p.model_key.empty()) BadInput(prefix + "model_key is empty");
-  if (p.status.empty()) BadInput(prefix + "status is empty");
-  if (!ParsePredictionStatus(p.status))
-    BadInput(prefix + "status '" + p.status +
-             "' is not one of ok, solver_failure, invalid_scene, error");
   ParseObject(p.model_json, prefix + "model_json");
   ParseObject(p.detail_json, prefix + "detail_json");
   for (auto [v, name] :
@@ -1049,7 +1077,7 @@ void Store::RecordPrediction(std::int64_t trial_id, int attempt, const Predictio
       .Bind(2, attempt)
       .Bind(3, p.model_key)
       .Bind(4, p.model_json)
-      .Bind(5, p.status)
+      .Bind(5, ToString(p.status))
       .Bind(6, p.final_position_error)
       .Bind(7, p.final_angle_error)
       .Bind(8, p.force_error)
@@ -1118,7 +1146,7 @@ std::int64_t Store::RecordEvaluation(std::int64_t campaign_id, const std::string
         .Bind(3, r.attempt)
         .Bind(4, p.model_key)
         .Bind(5, p.model_json)
-        .Bind(6, p.status)
+        .Bind(6, ToString(p.status))
         .Bind(7, p.final_position_error)
         .Bind(8, p.final_angle_error)
         .Bind(9, p.force_error)
@@ -1182,7 +1210,7 @@ std::vector<EvaluationResult> Store::ListEvaluationResults(std::int64_t evaluati
     Prediction& p = r.prediction;
     p.model_key = s->Text(2);
     p.model_json = s->Text(3);
-    p.status = s->Text(4);
+    p.status = StoredPredictionStatus(s->Text(4));
     p.final_position_error = s->OptReal(5);
     p.final_angle_error = s->OptReal(6);
     p.force_error = s->OptReal(7);
@@ -1301,7 +1329,12 @@ Trial ReadTrial(const detail::Stmt& s) {
   t.scene_json = s.Text(9);
   t.params_json = s.Text(10);
   t.defects_json = s.Text(11);
-  t.outcome = s.Text(12);
+  const std::string outcome = s.Text(12);
+  const auto parsed = ParseTrialEnd(outcome);
+  if (!parsed)
+    throw StoreError(StoreError::Kind::kCorrupt,
+                     "trial " + std::to_string(t.id) + ": outcome '" + outcome + "' is unknown");
+  t.outcome = *parsed;
   if (!s.IsNull(13)) t.gt_stream_id = s.Int(13);
   t.not_before = s.Real(14);
   t.created_at = s.Real(15);
@@ -1364,7 +1397,7 @@ std::vector<Prediction> Store::ListPredictions(std::int64_t trial_id) const {
     Prediction p;
     p.model_key = s->Text(0);
     p.model_json = s->Text(1);
-    p.status = s->Text(2);
+    p.status = StoredPredictionStatus(s->Text(2));
     p.final_position_error = s->OptReal(3);
     p.final_angle_error = s->OptReal(4);
     p.force_error = s->OptReal(5);

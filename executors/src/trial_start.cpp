@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <cmath>
 
+#include "arena/mechanics/frames.hpp"
 #include "arena/mechanics/scene_json.hpp"
 
 namespace arena::executors {
@@ -54,8 +55,7 @@ mechanics::Scene TrialStart::PlacedAt(mechanics::Scene scene,
   if (!start) return scene;  // the planned pose
   const Eigen::Matrix3d R = start->orientation.normalized().toRotationMatrix();
   scene.object.pose.position = start->position;
-  scene.object.pose.rpy = {std::atan2(R(2, 1), R(2, 2)), std::asin(std::clamp(-R(2, 0), -1.0, 1.0)),
-                           std::atan2(R(1, 0), R(0, 0))};
+  scene.object.pose.rpy = mechanics::RpyFromRotation(R);
   mechanics::SeatFingers(&scene);  // throws SceneError when a finger misses the object
   return scene;
 }

@@ -23,17 +23,6 @@
 
 namespace arena::mechanics {
 
-Eigen::Vector3d FirstTangent(const Eigen::Vector3d& normal) {
-  const Eigen::Vector3d n = normal.normalized();
-  for (const Eigen::Vector3d& axis :
-       {Eigen::Vector3d::UnitZ().eval(), Eigen::Vector3d::UnitY().eval(),
-        Eigen::Vector3d::UnitX().eval()}) {
-    if (std::abs(n.dot(axis)) < 0.9) return (axis - n.dot(axis) * n).normalized();
-  }
-  // Unreachable for a unit normal: some axis has |n·axis| <= 1/sqrt(3).
-  return (Eigen::Vector3d::UnitX() - n.x() * n).normalized();
-}
-
 std::vector<Eigen::Vector3d> ConeEdges(const Eigen::Vector3d& normal, int facets) {
   const Eigen::Vector3d n = normal.normalized();
   const Eigen::Vector3d t1 = FirstTangent(n);
@@ -71,13 +60,6 @@ std::vector<Eigen::Vector3d> ConstituentOffsets(const ContactSpec& contact, int 
     out.push_back(rho * (std::cos(a) * t1 + std::sin(a) * t2));
   }
   return out;
-}
-
-Eigen::Matrix3d RotationFromRpy(const Eigen::Vector3d& rpy) {
-  return (Eigen::AngleAxisd(rpy.z(), Eigen::Vector3d::UnitZ()) *
-          Eigen::AngleAxisd(rpy.y(), Eigen::Vector3d::UnitY()) *
-          Eigen::AngleAxisd(rpy.x(), Eigen::Vector3d::UnitX()))
-      .toRotationMatrix();
 }
 
 Eigen::Matrix3d ObjectInertia(const ObjectSpec& object) {

@@ -10,6 +10,7 @@
 // code).
 #include "arena/mechanics/scene_json.hpp"
 
+#include "arena/mechanics/frames.hpp"
 #include "arena/mechanics/json_path.hpp"
 #include "arena/mechanics/polygon.hpp"
 #include "geometry.hpp"
@@ -33,7 +34,8 @@
 namespace arena::mechanics {
 
 SceneError::SceneError(std::string field, const std::string& reason)
-    : std::runtime_error((field.empty() ? std::string("scene") : field) + ": " + reason),
+    : Error(ErrorCategory::kBadInput,
+            (field.empty() ? std::string("scene") : field) + ": " + reason),
       field_(std::move(field)),
       reason_(reason) {}
 
@@ -668,14 +670,6 @@ void RequireUnit(const Eigen::Vector3d& v, const std::string& path) {
   }
 }
 
-// R = Rz(yaw) Ry(pitch) Rx(roll): roll-pitch-yaw about fixed x, y, z.
-Eigen::Matrix3d RotationFromRpy(const Eigen::Vector3d& rpy) {
-  return (Eigen::AngleAxisd(rpy.z(), Eigen::Vector3d::UnitZ()) *
-          Eigen::AngleAxisd(rpy.y(), Eigen::Vector3d::UnitY()) *
-          Eigen::AngleAxisd(rpy.x(), Eigen::Vector3d::UnitX()))
-      .toRotationMatrix();
-}
-
 // Unsigned distance (m) from point p_G (gripper frame) to the object's surface.
 double DistanceToSurface(const ObjectSpec& object, const Eigen::Vector3d& p_G) {
   const Eigen::Matrix3d R_GO = RotationFromRpy(object.pose.rpy);
@@ -696,15 +690,6 @@ double DistanceToSurface(const ObjectSpec& object, const Eigen::Vector3d& p_G) {
   Eigen::Vector2d q(std::hypot(p_O.x(), p_O.y()) - object.radius,
                     std::abs(p_O.z()) - object.height / 2);
   return std::abs(box_sdf(q));
-}
-
-// docs/scene.md tangent basis: t1 from the first of z, y, x with |n.axis| < 0.9.
-Eigen::Vector3d FirstTangent(const Eigen::Vector3d& n) {
-  for (const Eigen::Vector3d& a : {Eigen::Vector3d::UnitZ().eval(), Eigen::Vector3d::UnitY().eval(),
-                                   Eigen::Vector3d::UnitX().eval()}) {
-    if (std::abs(n.dot(a)) < 0.9) return (a - n.dot(a) * n).normalized();
-  }
-  return Eigen::Vector3d::UnitZ();  // unreachable for a unit n
 }
 
 // Where a contact's constituent points lie (an approximation of the model's

@@ -14,6 +14,7 @@
 #include <Eigen/Geometry>
 #include <nlohmann/json.hpp>
 
+#include "arena/mechanics/frames.hpp"
 #include "arena/mechanics/json_path.hpp"
 #include "arena/mechanics/scene_json.hpp"
 #include "arena/orchestrator/sampler.hpp"
@@ -27,7 +28,8 @@ using mechanics::Scene;
 using nlohmann::json;
 
 CampaignError::CampaignError(std::string field, const std::string& reason)
-    : std::runtime_error((field.empty() ? std::string("campaign") : field) + ": " + reason),
+    : Error(ErrorCategory::kBadInput,
+            (field.empty() ? std::string("campaign") : field) + ": " + reason),
       field_(std::move(field)),
       reason_(reason) {}
 
@@ -279,21 +281,8 @@ Variation ReadVariation(const json& v, const std::string& path, const VariationI
 // ---------------------------------------------------------------------------
 // Applying a condition's values to the base scene.
 
-// docs/scene.md tangent basis: t1 from the first of z, y, x with |n.axis| < 0.9.
-Eigen::Vector3d FirstTangent(const Eigen::Vector3d& n) {
-  for (const Eigen::Vector3d& a : {Eigen::Vector3d::UnitZ().eval(), Eigen::Vector3d::UnitY().eval(),
-                                   Eigen::Vector3d::UnitX().eval()}) {
-    if (std::abs(n.dot(a)) < 0.9) return (a - n.dot(a) * n).normalized();
-  }
-  return Eigen::Vector3d::UnitZ();
-}
-
-Eigen::Matrix3d RotationFromRpy(const Eigen::Vector3d& rpy) {
-  return (Eigen::AngleAxisd(rpy.z(), Eigen::Vector3d::UnitZ()) *
-          Eigen::AngleAxisd(rpy.y(), Eigen::Vector3d::UnitY()) *
-          Eigen::AngleAxisd(rpy.x(), Eigen::Vector3d::UnitX()))
-      .toRotationMatrix();
-}
+using mechanics::FirstTangent;
+using mechanics::RotationFromRpy;
 
 // Stretches the object by k (per axis of the object frame) and carries each
 // contact along: a point on a face stays on that face, normals transform by

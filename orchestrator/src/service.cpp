@@ -81,7 +81,7 @@ class SqliteSink : public GroundTruthSink {
   explicit SqliteSink(std::unique_ptr<db::Ingest> ingest) : ingest_(std::move(ingest)) {}
   void Add(const std::vector<db::Sample>& samples) override { ingest_->Add(samples); }
   void Poll() override { ingest_->Poll(); }
-  std::int64_t Finish() override { return ingest_->Finish("ok"); }
+  std::int64_t Finish() override { return ingest_->Finish(); }
 
  private:
   std::unique_ptr<db::Ingest> ingest_;
@@ -198,8 +198,8 @@ class SqliteTrialStore : public TrialStore {
                             int max_attempts, double backoff_s, const std::string& rule) override {
     return s_.RetryTrial(id, attempt, reason, max_attempts, backoff_s, rule);
   }
-  void FailTrial(std::int64_t id, int attempt, const std::string& reason,
-                 const std::string& outcome, const std::string& rule) override {
+  void FailTrial(std::int64_t id, int attempt, const std::string& reason, db::TrialEnd outcome,
+                 const std::string& rule) override {
     s_.FailTrial(id, attempt, reason, outcome, rule);
   }
   void BeginReset(std::int64_t id, int attempt, const std::string& rule) override {
@@ -369,7 +369,7 @@ class PredictorPool : public PredictionPort {
     std::lock_guard lock(mu_);
     ++outstanding_;
     results_.push_back(PredictionDone{job.trial_id, job.attempt, job.campaign_id,
-                                      PredictionFailure("error", why)});
+                                      PredictionFailure(db::PredictionStatus::kError, why)});
   }
 
   // The campaign's model settings (spec "prediction", or null), cached.

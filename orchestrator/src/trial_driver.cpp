@@ -399,7 +399,7 @@ struct TrialDriver::Impl {
   }
 
   void FailTrial(std::int64_t trial_id, std::int64_t campaign_id, int attempt,
-                 const std::string& reason, const std::string& outcome, const std::string& rule) {
+                 const std::string& reason, db::TrialEnd outcome, const std::string& rule) {
     const std::string tag = TrialTag(campaign_id, trial_id, attempt);
     Step(tag + ": fail", "", [this, tag, trial_id, attempt, reason, outcome, rule] {
       store.FailTrial(trial_id, attempt, reason, outcome, rule);
@@ -1005,7 +1005,7 @@ struct TrialDriver::Impl {
     Step(tag + ": record prediction", "", [this, tag, shared] {
       store.RecordPrediction(shared->trial_id, shared->attempt, shared->prediction);
       spdlog::info("{}: predicted ({}, final position error {:.3g} m)", tag,
-                   shared->prediction.status,
+                   db::ToString(shared->prediction.status),
                    shared->prediction.final_position_error.value_or(NAN));
       Finish(shared->trial_id, shared->campaign_id, shared->attempt);
     });

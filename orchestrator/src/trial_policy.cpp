@@ -8,15 +8,17 @@ namespace arena::orchestrator {
 namespace {
 
 Decision Ignore(const char* rule) {
-  return {TrialStep::kIgnore, Party::kNobody, false, 0, "", rule};
+  return {TrialStep::kIgnore, Party::kNobody, false, 0, db::TrialEnd::kNone, rule};
 }
-Decision Await(const char* rule) { return {TrialStep::kAwait, Party::kNobody, false, 0, "", rule}; }
+Decision Await(const char* rule) {
+  return {TrialStep::kAwait, Party::kNobody, false, 0, db::TrialEnd::kNone, rule};
+}
 // The attempt ended and `blame` caused it; the cell backs off unless nobody is to blame.
 Decision Retry(Party blame, const char* rule) {
-  return {TrialStep::kRetry, blame, blame != Party::kNobody, 0, "", rule};
+  return {TrialStep::kRetry, blame, blame != Party::kNobody, 0, db::TrialEnd::kNone, rule};
 }
 Decision ResetFailed(Party blame, const char* rule) {
-  return {TrialStep::kResetFailed, blame, blame != Party::kNobody, 0, "", rule};
+  return {TrialStep::kResetFailed, blame, blame != Party::kNobody, 0, db::TrialEnd::kNone, rule};
 }
 
 Decision ExecuteFailed(FailureKind failure) {
@@ -27,7 +29,7 @@ Decision ExecuteFailed(FailureKind failure) {
               Party::kScene,
               false,
               0,
-              "solver_failure",
+              db::TrialEnd::kSolverFailure,
               "execute.simulation_failure"};
     case FailureKind::kController:
       return Retry(Party::kController, "execute.controller_fault");
@@ -50,12 +52,13 @@ Decision ExecuteStatus(StatusState state, FailureKind failure) {
     case StatusState::kAccepted:
       return Await("execute.accepted");
     case StatusState::kExecuted:
-      return {TrialStep::kCollectStream, Party::kNobody, false, 0, "", "execute.executed"};
+      return {TrialStep::kCollectStream, Party::kNobody,    false, 0,
+              db::TrialEnd::kNone,       "execute.executed"};
     case StatusState::kRefused:
       // The cell cannot host it (workspace, contact types, defects): not a
       // failure of anyone's; another cell may take it after a short pause.
-      return {TrialStep::kRetry,        Party::kNobody, false, kRefusedPause_s, "",
-              "execute.refused_by_cell"};
+      return {TrialStep::kRetry, Party::kNobody,      false,
+              kRefusedPause_s,   db::TrialEnd::kNone, "execute.refused_by_cell"};
     case StatusState::kFailed:
       return ExecuteFailed(failure);
     case StatusState::kResetDone:
@@ -69,7 +72,8 @@ Decision ResetStatus(StatusState state) {
     case StatusState::kAccepted:
       return Await("reset.accepted");
     case StatusState::kResetDone:
-      return {TrialStep::kResetDone, Party::kNobody, false, 0, "", "reset.verified"};
+      return {TrialStep::kResetDone, Party::kNobody,  false, 0,
+              db::TrialEnd::kNone,   "reset.verified"};
     case StatusState::kFailed:
       return ResetFailed(Party::kCell, "reset.failed");
     case StatusState::kRefused:
@@ -95,7 +99,8 @@ Decision DecideStatus(CellPhase phase, StatusPhase status_phase, StatusState sta
 
 Decision DecideServiceEvent(CellPhase phase, ServiceEvent event) {
   if (event == ServiceEvent::kInvalidScene)  // before any phase: the trial cannot run anywhere
-    return {TrialStep::kFail, Party::kScene, false, 0, "invalid_scene", "dispatch.invalid_scene"};
+    return {TrialStep::kFail,        Party::kScene, false, 0, db::TrialEnd::kInvalidScene,
+            "dispatch.invalid_scene"};
   if (phase == CellPhase::kExecuting) {
     switch (event) {
       case ServiceEvent::kDeadlineMissed:

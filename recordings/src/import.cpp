@@ -434,7 +434,7 @@ ImportReport ImportRecordings(const std::vector<Recording>& recordings, const Im
       const auto& p = prepared[static_cast<std::size_t>(store->GetTrial(claimed->trial_id).index)];
       auto ingest = store->BeginIngest(claimed->trial_id, claimed->attempt);
       ingest->Add(p.samples);
-      ingest->Finish("ok");
+      ingest->Finish();
       store->RecordExecution(claimed->trial_id, claimed->attempt, "import:" + o.adaptor, "measured",
                              "{}");
     }

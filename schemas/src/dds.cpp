@@ -72,11 +72,13 @@ HostPort SplitHostPort(const std::string& entry, const std::string& option) {
     char* end = nullptr;
     const long value = std::strtol(port.c_str(), &end, 10);
     if (port.empty() || *end != '\0' || value < 1 || value > 65535) {
-      throw DdsError(option + ": bad port in '" + entry + "' (want host:1..65535)");
+      throw DdsError(option + ": bad port in '" + entry + "' (want host:1..65535)",
+                     ErrorCategory::kBadInput);
     }
     hp.port = static_cast<int>(value);
   }
-  if (hp.host.empty()) throw DdsError(option + ": empty host in '" + entry + "'");
+  if (hp.host.empty())
+    throw DdsError(option + ": empty host in '" + entry + "'", ErrorCategory::kBadInput);
   return hp;
 }
 
@@ -88,7 +90,7 @@ std::string ResolveIPv4(const std::string& host, const std::string& option) {
   hints.ai_family = AF_INET;
   addrinfo* result = nullptr;
   if (getaddrinfo(host.c_str(), nullptr, &hints, &result) != 0 || result == nullptr) {
-    throw DdsError(option + ": cannot resolve host '" + host + "'");
+    throw DdsError(option + ": cannot resolve host '" + host + "'", ErrorCategory::kBadInput);
   }
   char buf[INET_ADDRSTRLEN] = {};
   inet_ntop(AF_INET, &reinterpret_cast<sockaddr_in*>(result->ai_addr)->sin_addr, buf, sizeof buf);
@@ -119,11 +121,12 @@ std::vector<std::string> ParsePeers(const std::string& text) {
   std::string entry;
   while (std::getline(in, entry, ',')) {
     entry = Trim(entry);
-    if (entry.empty()) throw DdsError("--peers: empty entry in '" + text + "'");
+    if (entry.empty())
+      throw DdsError("--peers: empty entry in '" + text + "'", ErrorCategory::kBadInput);
     SplitHostPort(entry, "--peers");  // validates
     peers.push_back(entry);
   }
-  if (peers.empty()) throw DdsError("--peers: no peer given");
+  if (peers.empty()) throw DdsError("--peers: no peer given", ErrorCategory::kBadInput);
   return peers;
 }
 
@@ -494,7 +497,8 @@ void ApplyNetwork(const ParticipantOptions& opt, fdds::DomainParticipantQos* qos
       char* end = nullptr;
       const long v = std::strtol(id.c_str(), &end, 10);
       if (id.empty() || *end != '\0' || v < 0 || v > 255) {
-        throw DdsError("--discovery-server: bad server id '" + id + "' (want 0..255)");
+        throw DdsError("--discovery-server: bad server id '" + id + "' (want 0..255)",
+                       ErrorCategory::kBadInput);
       }
       server_id = static_cast<int>(v);
       entry = entry.substr(at + 1);
@@ -503,7 +507,8 @@ void ApplyNetwork(const ParticipantOptions& opt, fdds::DomainParticipantQos* qos
     frtps::RemoteServerAttributes server;
     if (!eprosima::fastdds::rtps::get_server_client_default_guidPrefix(server_id,
                                                                        server.guidPrefix)) {
-      throw DdsError("--discovery-server: server id " + std::to_string(server_id) + " not usable");
+      throw DdsError("--discovery-server: server id " + std::to_string(server_id) + " not usable",
+                     ErrorCategory::kBadInput);
     }
     server.metatrafficUnicastLocatorList.push_back(
         UdpLocator(ResolveIPv4(hp.host, "--discovery-server"), hp.port == 0 ? 11811 : hp.port));
@@ -555,10 +560,11 @@ Participant::Participant(const ParticipantOptions& options)
     : core_(std::make_shared<detail::ParticipantCore>()) {
   if (options.domain_id < 0 || options.domain_id > kMaxDomainId) {
     throw DdsError("--domain: must be 0.." + std::to_string(kMaxDomainId) + ", got " +
-                   std::to_string(options.domain_id));
+                       std::to_string(options.domain_id),
+                   ErrorCategory::kBadInput);
   }
   if (!(options.lease_s > 0.2) || options.lease_s > 3600) {
-    throw DdsError("dds: participant lease must be in (0.2, 3600] s");
+    throw DdsError("dds: participant lease must be in (0.2, 3600] s", ErrorCategory::kBadInput);
   }
   auto* factory = fdds::DomainParticipantFactory::get_instance();
   // Fast DDS 2.9.1 deadlocks when a writer delivers intra-process while the
@@ -574,7 +580,8 @@ Participant::Participant(const ParticipantOptions& options)
   // Profiles first, then our overrides, then log what is in effect.
   if (!options.network.profile_xml.empty()) {
     if (factory->load_XML_profiles_file(options.network.profile_xml) != ReturnCode_t::RETCODE_OK) {
-      throw DdsError("--profile-xml: cannot load '" + options.network.profile_xml + "'");
+      throw DdsError("--profile-xml: cannot load '" + options.network.profile_xml + "'",
+                     ErrorCategory::kBadInput);
     }
     // Fast DDS 2.9's load_XML_profiles_file leaves the factory's default
     // participant QoS alone; load_profiles() (its first call in a process)

@@ -58,7 +58,7 @@ TEST(EvaluationStore, ReplicatesShareThePredictionAndKeepTheirOwnTruth) {
         sample.object_pose[0] += (i % 2) * 0.002;
         ingest->Add(sample);
       }
-      ingest->Finish("ok");
+      ingest->Finish();
       store->BeginReset(t->trial_id, t->attempt);
       db::ResetReport r;
       r.ok = true;

@@ -95,7 +95,7 @@ TrialEvaluation Result(std::int64_t trial, std::size_t setting, double position,
   r.trial_id = trial;
   r.attempt = 1;
   r.setting = setting;
-  r.prediction.status = status;
+  r.prediction.status = db::ParsePredictionStatus(status).value();
   r.prediction.wall_s = time;
   if (status == "ok") {
     r.prediction.final_position_error = position;

@@ -44,7 +44,7 @@ TEST(ClosedLoopReplay, ReplayingTheCommandsThatMadeTheTruthPredictsItExactly) {
             1e-4);  // the commands moved the pusher
 
   const db::Prediction p = PredictTrial(scene, truth.samples, nlohmann::json(), &commands);
-  ASSERT_EQ(p.status, "ok") << p.detail_json;
+  ASSERT_EQ(p.status, db::PredictionStatus::kOk) << p.detail_json;
   EXPECT_LT(*p.final_position_error, 1e-12);
   EXPECT_LT(*p.final_angle_error, 1e-12);
   EXPECT_EQ(nlohmann::json::parse(p.detail_json)["replayed_commands"], 51);
@@ -56,7 +56,7 @@ TEST(ClosedLoopReplay, ReplayingTheCommandsThatMadeTheTruthPredictsItExactly) {
     return f;
   }();
   const db::Prediction q = PredictTrial(scene, truth.samples, nlohmann::json(), &faster);
-  ASSERT_EQ(q.status, "ok") << q.detail_json;
+  ASSERT_EQ(q.status, db::PredictionStatus::kOk) << q.detail_json;
   EXPECT_GT(*q.final_position_error + *q.final_angle_error, 1e-5);
 }
 
@@ -65,13 +65,13 @@ TEST(ClosedLoopReplay, WithoutCommandsItSaysWhyInsteadOfRunningOpenLoop) {
   const RecordedCommands commands = Ramp(51);
   const auto truth = mechanics::Simulate(scene, ReplayCommands(commands)).samples;
   const db::Prediction none = PredictTrial(scene, truth, nlohmann::json(), nullptr);
-  EXPECT_EQ(none.status, "error");
+  EXPECT_EQ(none.status, db::PredictionStatus::kError);
   EXPECT_NE(none.detail_json.find("without recorded pusher commands"), std::string::npos);
 
   // MuJoCo replays the recorded commands like arena's model does.
   const db::Prediction mujoco =
       PredictTrial(scene, truth, nlohmann::json({{"predictor", "mujoco"}}), &commands);
-  EXPECT_EQ(mujoco.status, "ok") << mujoco.detail_json;
+  EXPECT_EQ(mujoco.status, db::PredictionStatus::kOk) << mujoco.detail_json;
   ASSERT_TRUE(mujoco.final_position_error.has_value()) << mujoco.detail_json;
   EXPECT_TRUE(std::isfinite(*mujoco.final_position_error));
 

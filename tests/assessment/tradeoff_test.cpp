@@ -70,7 +70,7 @@ TEST(Divergence, ABlownUpPredictionIsItsOwnOutcome) {
   ASSERT_EQ(result.status, mechanics::SimulationStatus::kOk) << result.error;
   const auto truth = result.samples;
   EXPECT_FALSE(DivergenceReason(scene, result.samples, truth));
-  EXPECT_EQ(ScoreSimulation(scene, result, truth).status, "ok");
+  EXPECT_EQ(ScoreSimulation(scene, result, truth).status, db::PredictionStatus::kOk);
 
   // The object flies 1 m away: far beyond the pusher's 2 mm plus the object's 10 cm.
   auto flying = result;
@@ -79,8 +79,8 @@ TEST(Divergence, ABlownUpPredictionIsItsOwnOutcome) {
   ASSERT_TRUE(why);
   EXPECT_NE(why->find("diverged"), std::string::npos) << *why;
   const auto p = ScoreSimulation(scene, flying, truth);
-  EXPECT_EQ(p.status, "diverged");
-  EXPECT_EQ(OutcomeOf(p.status), PredictionOutcome::kDiverged);
+  EXPECT_EQ(p.status, db::PredictionStatus::kDiverged);
+  EXPECT_STREQ(db::ToString(p.status), "diverged");  // the stored text
 
   // Every finger separated at the end while the truth holds: left the grasp.
   auto dropped = result;
@@ -97,7 +97,7 @@ TEST(Divergence, ABlownUpPredictionIsItsOwnOutcome) {
   // A NaN is a divergence, not a number to average.
   auto nan = result;
   nan.samples[3].velocity.x() = std::nan("");
-  EXPECT_EQ(ScoreSimulation(scene, nan, truth).status, "diverged");
+  EXPECT_EQ(ScoreSimulation(scene, nan, truth).status, db::PredictionStatus::kDiverged);
 
   // In a summary it is counted and listed, never in the error distribution.
   std::vector<TrialEvaluation> rows;

@@ -50,17 +50,17 @@ TEST(FailureReasons, GroupedByReasonAndSourceWithCounts) {
     store->FailTrial(t->trial_id, t->attempt,
                      "refused by cell sim1-3fa2c1: pusher.motion: pushing for 500 s moves the "
                      "object outside the workspace",
-                     "refused");
+                     arena::db::TrialEnd::kRefused);
     t = store->ClaimNextTrial("sim2-3fa2c1");
     store->FailTrial(t->trial_id, t->attempt,
                      "refused by cell sim2-3fa2c1: pusher.motion: pushing for 480.5 s moves the "
                      "object outside the workspace",
-                     "refused");
+                     arena::db::TrialEnd::kRefused);
     // Trial 4: the robot driver gave up.
     t = store->ClaimNextTrial("sim2-3fa2c1");
     store->FailTrial(t->trial_id, t->attempt,
                      "cell sim2-3fa2c1: driver exited with status 3 before its first sample",
-                     "failed");
+                     arena::db::TrialEnd::kFailed);
   }
   db::StoreOptions ro;
   ro.read_only = true;

@@ -78,7 +78,7 @@ class PlotTest : public ::testing::Test {
       d.observed_object_pose[2] += 1e-4;
       ingest->Add(d);
     }
-    ingest->Finish("ok");
+    ingest->Finish();
   }
   void TearDown() override {
     if (!HasFailure()) std::filesystem::remove_all(dir_);
@@ -120,7 +120,7 @@ TEST_F(PlotTest, ChartHasPosePanelsAndOneForcePanelPerContact) {
   auto store = db::Store::Open(db_, ro);
   TrialPlotInfo info;
   const Chart chart = MakeTrialChart(*store, trial_, &info);
-  EXPECT_EQ(info.prediction_status, "ok");
+  EXPECT_EQ(info.prediction_status, arena::db::PredictionStatus::kOk);
   EXPECT_EQ(info.model_key,
             "g4_k2_dt0.008_auto");  // the campaign's "prediction", not the scene's model
   EXPECT_EQ(info.samples, samples_);
@@ -181,7 +181,7 @@ TEST_F(MujocoPlotTest, AMujocoPredictedCampaignIsDrawnWithMujocosTrajectory) {
   auto store = db::Store::Open(db_, ro);
   TrialPlotInfo info;
   const Chart chart = MakeTrialChart(*store, trial_, &info);
-  EXPECT_EQ(info.prediction_status, "ok");
+  EXPECT_EQ(info.prediction_status, arena::db::PredictionStatus::kOk);
   EXPECT_EQ(info.model_key.rfind("mujoco_ts0.001", 0), 0u) << info.model_key;
   tinyxml2::XMLDocument doc;
   const std::string svg = RenderSvg(chart);
@@ -238,7 +238,8 @@ TEST_F(PlotTest, AFailedTrialSaysWhyAndTheStoresLogIsNoOutput) {
     auto t = store->ClaimNextTrial("c1");
     ASSERT_TRUE(t.has_value());
     ASSERT_EQ(t->trial_id, planned_);
-    store->FailTrial(t->trial_id, t->attempt, "refused by cell: no such finger", "refused");
+    store->FailTrial(t->trial_id, t->attempt, "refused by cell: no such finger",
+                     arena::db::TrialEnd::kRefused);
   }
   std::string err;
   EXPECT_EQ(

@@ -136,7 +136,7 @@ inline void RunTrialToDone(Store& store, const ClaimedTrial& t, int n,
                            const IngestOptions& options = {}) {
   auto ingest = store.BeginIngest(t.trial_id, t.attempt, options);
   for (int i = 0; i < n; ++i) ingest->Add(MakeSample(i));
-  ingest->Finish("ok");
+  ingest->Finish();
   store.BeginReset(t.trial_id, t.attempt);
   ResetReport r;
   r.ok = true;

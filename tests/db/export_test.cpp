@@ -317,7 +317,7 @@ TEST(ExportRealData, DroppedObservationsAndShortSamplesExportInEveryFormat) {
       if (i == 30) s.contacts.pop_back();                                 // a short sample
       ingest->Add(s);
     }
-    ingest->Finish("ok");
+    ingest->Finish();
   }
   StoreOptions ro;
   ro.read_only = true;
@@ -386,7 +386,7 @@ TEST_F(ExportTest, FailedExportLeavesNothingNamesTheTrialAndCanBeRetried) {
     const auto t = rw->GetTrial(victim);
     auto ingest = rw->BeginIngest(victim, t.attempt);
     for (int i = 0; i < 17; ++i) ingest->Add(testing::MakeSample(i));
-    ingest->Finish("ok");
+    ingest->Finish();
   }
   EXPECT_EQ(Export(ExportFormat::kHdf5, "retry").trials, 3);
   EXPECT_EQ(Export(ExportFormat::kCsv, "made").trials, 3);
@@ -434,7 +434,7 @@ TEST(ExportContents, ParametersSceneContactsAndPredictions) {
     p.predictor = "g4_k3_dt0.008_auto";
     p.settings_json = R"({"facets":4})";
     if (++calls == 2) {
-      p.status = "solver_failure";
+      p.status = PredictionStatus::kSolverFailure;
       p.error = "no pivot";
       return p;
     }

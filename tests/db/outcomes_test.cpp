@@ -119,7 +119,7 @@ TEST(ResultViews, ParametersAreColumnsAndOutcomesAreStoredPerContact) {
       auto t = store->ClaimNextTrial("c");
       auto ingest = store->BeginIngest(t->trial_id, t->attempt);
       ingest->Add(SlidingUp(ContactMode::kSlide, i == 3));
-      ingest->Finish("ok");
+      ingest->Finish();
     }
     EXPECT_TRUE(store->CheckInvariants().empty());
   }
@@ -162,7 +162,7 @@ TEST(ResultViews, MigrationSixComputesOutcomesOfStoredStreams) {
     auto t = store->ClaimNextTrial("c");
     auto ingest = store->BeginIngest(t->trial_id, t->attempt);
     ingest->Add(SlidingUp(ContactMode::kSlide, false));
-    ingest->Finish("ok");
+    ingest->Finish();
   }
   sqlite3* db = nullptr;
   ASSERT_EQ(sqlite3_open(path.c_str(), &db), SQLITE_OK);

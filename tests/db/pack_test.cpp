@@ -312,7 +312,7 @@ TEST(PackedBlock, StoreReadsPackedAndRawChunksAlike) {
     std::vector<Sample> samples = in;
     if (variant == 2) samples[3].contacts.pop_back();  // first chunk not uniform
     for (const auto& s : samples) ingest->Add(s);
-    ingest->Finish("ok");
+    ingest->Finish();
     EXPECT_EQ(FirstChunkMagic(path), variant == 0 ? "AGT2" : "AGT1") << variant;
     const auto gt = store->ReadGroundTruth(t->trial_id);
     ASSERT_EQ(gt.samples.size(), in.size());
@@ -338,7 +338,7 @@ TEST(PackedBlock, VersionThreeStoreMigratesAndReads) {
     raw.pack_chunks = false;
     auto ingest = store->BeginIngest(t->trial_id, t->attempt, raw);
     for (const auto& s : in) ingest->Add(s);
-    ingest->Finish("ok");
+    ingest->Finish();
   }
   {
     sqlite3* db = nullptr;
@@ -367,7 +367,7 @@ TEST(PackedBlock, VersionThreeStoreMigratesAndReads) {
   ASSERT_TRUE(t);
   auto ingest = store->BeginIngest(t->trial_id, t->attempt);
   for (const auto& s : in) ingest->Add(s);
-  ingest->Finish("ok");
+  ingest->Finish();
   EXPECT_EQ(store->ReadGroundTruth(t->trial_id).samples.size(), in.size());
   EXPECT_TRUE(store->CheckInvariants().empty());
 }

@@ -25,7 +25,7 @@ class QueryTest : public ::testing::Test {
       RunTrialToDone(*store, *t, 20);
     }
     auto t = store->ClaimNextTrial("c");
-    store->FailTrial(t->trial_id, t->attempt, "refused by cell", "refused");
+    store->FailTrial(t->trial_id, t->attempt, "refused by cell", arena::db::TrialEnd::kRefused);
     StoreOptions ro;
     ro.read_only = true;
     ro_ = Store::Open(path_, ro);

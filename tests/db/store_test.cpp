@@ -227,7 +227,7 @@ TEST(StoreTrial, FullLifecycleWritesAuditRows) {
   RunTrialToDone(*store, *claimed, 300);
   const auto t = store->GetTrial(claimed->trial_id);
   EXPECT_EQ(t.state, TrialState::kDone);
-  EXPECT_EQ(t.outcome, "ok");
+  EXPECT_EQ(t.outcome, TrialEnd::kOk);
   const auto log = store->ListTransitions(t.id);
   const std::vector<std::string> expected = {"planned",    "dispatched", "executed", "resetting",
                                              "reset_done", "predicted",  "done"};
@@ -293,10 +293,10 @@ TEST(StoreTrial, IllegalTransitionsRejectedAndNothingWritten) {
   EXPECT_STORE_ERROR(store->FailTrial(t->trial_id, 2, "late"), K::kStaleAttempt);
   EXPECT_STORE_ERROR(store->FailTrial(99, 1, "x"), K::kNotFound);
   EXPECT_EQ(store->ListTransitions(t->trial_id).size(), 2u);
-  store->FailTrial(t->trial_id, 1, "scene refused", "refused");
+  store->FailTrial(t->trial_id, 1, "scene refused", arena::db::TrialEnd::kRefused);
   // failed is terminal.
   EXPECT_STORE_ERROR(store->FailTrial(t->trial_id, 1, "again"), K::kIllegalTransition);
-  EXPECT_EQ(store->GetTrial(t->trial_id).outcome, "refused");
+  EXPECT_EQ(store->GetTrial(t->trial_id).outcome, arena::db::TrialEnd::kRefused);
   ExpectHealthy(*store);
 }
 
@@ -433,7 +433,7 @@ TEST(StoreTrial, CancelPauseResume) {
   const auto trials = store->ListTrials(id);
   EXPECT_EQ(trials[0].state, TrialState::kDispatched);  // in flight: runs out
   EXPECT_EQ(trials[1].state, TrialState::kCancelled);
-  EXPECT_EQ(trials[2].outcome, "cancelled");
+  EXPECT_EQ(trials[2].outcome, TrialEnd::kCancelled);
   RunTrialToDone(*store, *running, 10);
   ExpectHealthy(*store);
 }
@@ -615,7 +615,7 @@ TEST(StoreStatus, CountsRateAndEta) {
     RunTrialToDone(*store, *t, 5);
   }
   auto t = store->ClaimNextTrial("c");
-  store->FailTrial(t->trial_id, 1, "refused", "refused");
+  store->FailTrial(t->trial_id, 1, "refused", arena::db::TrialEnd::kRefused);
   auto running = store->ClaimNextTrial("c");
   const auto s = store->Status();
   ASSERT_EQ(s.campaigns.size(), 1u);
@@ -907,7 +907,7 @@ TEST(StoreTrial, AnObservedStartGoesOnlyToTheTrialItsResetWasAimedAt) {
   const auto reset_aimed_at = [&](const ClaimedTrial& t, std::int64_t aim) {
     auto ingest = store->BeginIngest(t.trial_id, t.attempt, {});
     for (int i = 0; i < 10; ++i) ingest->Add(MakeSample(i));
-    ingest->Finish("ok");
+    ingest->Finish();
     store->BeginReset(t.trial_id, t.attempt);
     ResetReport r;
     r.ok = true;

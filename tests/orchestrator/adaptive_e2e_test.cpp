@@ -188,7 +188,7 @@ double MeanForceError(const db::Store& store, std::int64_t campaign) {
   int n = 0;
   for (const auto& t : store.ListTrials(campaign)) {
     for (const auto& p : store.ListPredictions(t.id)) {
-      if (p.status == "ok" && p.force_error) {
+      if (p.status == db::PredictionStatus::kOk && p.force_error) {
         sum += *p.force_error;
         ++n;
       }

@@ -475,7 +475,7 @@ void RunAllToDone(db::Store& store) {
   while (auto t = store.ClaimNextTrial("c")) {
     auto ingest = store.BeginIngest(t->trial_id, t->attempt);
     for (int i = 0; i < 20; ++i) ingest->Add(StickSample(i));
-    ingest->Finish("ok");
+    ingest->Finish();
     store.BeginReset(t->trial_id, t->attempt);
     db::ResetReport r;
     r.ok = true;

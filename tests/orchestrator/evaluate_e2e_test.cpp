@@ -53,7 +53,8 @@ TEST(EvaluateEndToEnd, TwoSettingsStoredReportedAndPlotted) {
   EXPECT_EQ(runs[0].id, report["evaluation_id"].get<std::int64_t>());
   const auto rows = store->ListEvaluationResults(runs[0].id);
   EXPECT_EQ(rows.size(), 12u);  // 6 trials x 2 settings
-  for (const auto& r : rows) EXPECT_EQ(r.prediction.status, "ok") << r.prediction.detail_json;
+  for (const auto& r : rows)
+    EXPECT_EQ(r.prediction.status, db::PredictionStatus::kOk) << r.prediction.detail_json;
   // Evaluating changed no trial.
   EXPECT_EQ(CountStates(db, 1).at("done"), 6);
   EXPECT_TRUE(store->CheckInvariants().empty());

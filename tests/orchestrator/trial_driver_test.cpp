@@ -67,7 +67,7 @@ struct FakeStore : TrialStore {
     db::TrialState state = db::TrialState::kPlanned;
     int attempt = 1;
     std::int64_t samples = -1;
-    std::string outcome;
+    db::TrialEnd outcome = db::TrialEnd::kNone;
     int service_restarts = 0;
     std::vector<std::string> rules;  // the audit rows' rules, in order
   };
@@ -155,7 +155,7 @@ struct FakeStore : TrialStore {
     const db::RetryVerdict verdict = db::DecideRetry(attempt, t.service_restarts, max_attempts);
     if (verdict.give_up) {
       Move(id, attempt, db::TrialState::kFailed);
-      t.outcome = "failed";
+      t.outcome = db::TrialEnd::kFailed;
     } else {
       Move(id, attempt, db::TrialState::kPlanned);
       ++t.attempt;
@@ -163,7 +163,7 @@ struct FakeStore : TrialStore {
     t.rules.push_back(rule + " " + verdict.rule);
     return t.state;
   }
-  void FailTrial(std::int64_t id, int attempt, const std::string&, const std::string& outcome,
+  void FailTrial(std::int64_t id, int attempt, const std::string&, db::TrialEnd outcome,
                  const std::string& rule) override {
     faults.Hit("FailTrial");
     Move(id, attempt, db::TrialState::kFailed);
@@ -576,7 +576,7 @@ TEST(TrialDriver, ASimulationFailureFailsTheTrialAtOnceWithoutBlamingTheCell) {
   h.Start();
   ASSERT_TRUE(h.RunToEnd());
   EXPECT_EQ(h.store.trials[1].state, db::TrialState::kFailed);
-  EXPECT_EQ(h.store.trials[1].outcome, "solver_failure");
+  EXPECT_EQ(h.store.trials[1].outcome, db::TrialEnd::kSolverFailure);
   EXPECT_EQ(h.store.trials[1].attempt, 1);
   EXPECT_EQ(h.store.faults.calls["RecordCellResult"], 0);
 }

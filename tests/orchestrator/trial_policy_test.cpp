@@ -216,9 +216,10 @@ TEST(TrialPolicy, ARefusalPausesTheCellBrieflyWithoutBackingOff) {
   const Decision d = DecideStatus(CP::kExecuting, SP::kExecute, SS::kRefused, FK::kNone);
   EXPECT_FALSE(d.back_off);
   EXPECT_EQ(d.pause_s, kRefusedPause_s);
-  EXPECT_STREQ(DecideStatus(CP::kExecuting, SP::kExecute, SS::kFailed, FK::kSimulation).outcome,
-               "solver_failure");
-  EXPECT_STREQ(DecideServiceEvent(CP::kIdle, ServiceEvent::kInvalidScene).outcome, "invalid_scene");
+  EXPECT_EQ(DecideStatus(CP::kExecuting, SP::kExecute, SS::kFailed, FK::kSimulation).outcome,
+            db::TrialEnd::kSolverFailure);
+  EXPECT_EQ(DecideServiceEvent(CP::kIdle, ServiceEvent::kInvalidScene).outcome,
+            db::TrialEnd::kInvalidScene);
 }
 
 TEST(TrialPolicy, LateMessagesAreDroppedByName) {

@@ -86,6 +86,7 @@
 
 #include "arena/assessment/scoring.hpp"
 #include "arena/db/store.hpp"
+#include "arena/errors/error.hpp"
 #include "arena/mechanics/scene.hpp"
 #include "arena/mechanics/simulate.hpp"
 #include "arena/simulators/simulator.hpp"
@@ -96,9 +97,9 @@ using SimulateFn = std::function<mechanics::SimulationResult(const mechanics::Sc
 
 // Bad calibration input (unknown parameter, too few trials, ...): the
 // message names the option ("--params: ...").
-class CalibrationError : public std::runtime_error {
+class CalibrationError : public Error {
  public:
-  using std::runtime_error::runtime_error;
+  explicit CalibrationError(const std::string& what) : Error(ErrorCategory::kBadInput, what) {}
 };
 
 enum class CalibrationParam {

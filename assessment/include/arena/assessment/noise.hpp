@@ -21,15 +21,16 @@
 
 #include <Eigen/Core>
 
+#include "arena/errors/error.hpp"
 #include "arena/mechanics/scene.hpp"
 
 namespace arena::assessment {
 
 // A profile field of the wrong type or range: what() is "<field>: <reason>".
-class NoiseError : public std::invalid_argument {
+class NoiseError : public Error {
  public:
   NoiseError(const std::string& field, const std::string& reason)
-      : std::invalid_argument(field + ": " + reason), field_(field) {}
+      : Error(ErrorCategory::kBadInput, field + ": " + reason), field_(field) {}
   const std::string& field() const { return field_; }
 
  private:

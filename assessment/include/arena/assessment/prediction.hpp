@@ -16,17 +16,11 @@
 
 namespace arena::assessment {
 
-// What became of one prediction (stored as db::Prediction::status).
-enum class PredictionOutcome {
-  kOk,
-  kDiverged,       // ran, but left the grasp or blew up: counted apart, never averaged in
-  kSolverFailure,  // the solver gave up (experiment data, not an error)
-  kInvalidScene,   // the setting does not fit the scene
-  kError,          // the trial could not be loaded or scored
-};
-const char* ToString(PredictionOutcome outcome);  // "ok", "diverged", "solver_failure", ...
-// The outcome a stored status names (unknown text: kError).
-PredictionOutcome OutcomeOf(const std::string& status);
+// What became of one prediction is a db::PredictionStatus (ok, diverged:
+// ran but left the grasp or blew up, solver_failure: the solver gave up,
+// invalid_scene: the setting does not fit the scene, error: the trial could
+// not be loaded or scored). The status a simulation's status makes:
+db::PredictionStatus StatusOf(mechanics::SimulationStatus status);
 
 // Overrides the scene's `model` with the settings present in `model`
 // (facets, points, dt, reduce; any may be absent; null = none).
@@ -160,6 +154,6 @@ PredictedRun SimulatePrediction(const mechanics::Scene& trial_scene,
                                 const db::Sample* first = nullptr);
 
 // A prediction that could not be made (status, reason in detail_json).
-db::Prediction PredictionFailure(const std::string& status, const std::string& reason);
+db::Prediction PredictionFailure(db::PredictionStatus status, const std::string& reason);
 
 }  // namespace arena::assessment

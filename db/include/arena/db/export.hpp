@@ -68,7 +68,7 @@ inline constexpr int kDatasetFormatVersion = 2;
 // does not run the model (it knows nothing of mechanics): the caller passes
 // a predictor (ExportOptions::predict).
 struct PredictedStream {
-  std::string status = "ok";         // ok, solver_failure, invalid_scene, error
+  PredictionStatus status = PredictionStatus::kOk;
   std::string predictor;             // the model setting's key, e.g. g4_k3_dt0.008_auto
   std::string settings_json = "{}";  // the settings that made it
   std::string error;                 // why there is no prediction ("" when ok)

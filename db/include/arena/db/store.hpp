@@ -80,13 +80,16 @@
 #include <vector>
 
 #include "arena/db/outcomes.hpp"
+#include "arena/db/prediction_status.hpp"
 #include "arena/db/sample.hpp"
+#include "arena/db/trial_end.hpp"
+#include "arena/errors/error.hpp"
 
 namespace arena::db {
 
 // ---------------------------------------------------------------- errors
 
-class StoreError : public std::runtime_error {
+class StoreError : public Error {
  public:
   enum class Kind {
     kBadInput,           // a field is missing, out of range, NaN or infinite
@@ -101,8 +104,25 @@ class StoreError : public std::runtime_error {
     kIo,                 // cannot open / read / write the file
     kOutput,             // an output outside the store (an export directory) cannot be written
   };
-  StoreError(Kind kind, const std::string& message) : std::runtime_error(message), kind_(kind) {}
+  StoreError(Kind kind, const std::string& message)
+      : Error(CategoryOf(kind), message), kind_(kind) {}
   Kind kind() const { return kind_; }
+
+  // The caller's input (2); an output outside the store that cannot be
+  // written is a failure of the command (1); the rest is the store's (3).
+  static constexpr ErrorCategory CategoryOf(Kind kind) {
+    switch (kind) {
+      case Kind::kBadInput:
+      case Kind::kNotFound:
+      case Kind::kIllegalTransition:
+      case Kind::kStaleAttempt:
+        return ErrorCategory::kBadInput;
+      case Kind::kOutput:
+        return ErrorCategory::kFailure;
+      default:
+        return ErrorCategory::kStore;
+    }
+  }
 
  private:
   Kind kind_;
@@ -262,7 +282,7 @@ struct Trial {
   std::string scene_json;
   std::string params_json;
   std::string defects_json;
-  std::string outcome;  // "" until set: ok, solver_failure, refused, failed, cancelled
+  TrialEnd outcome = TrialEnd::kNone;        // kNone until set
   std::optional<std::int64_t> gt_stream_id;  // the published ground truth
   double not_before = 0;                     // s since epoch: a retry waits until then
   double created_at = 0;
@@ -334,9 +354,9 @@ struct ResetReport {
 };
 
 struct Prediction {
-  std::string model_key;                       // fidelity label, e.g. "g8_k3_dt0.004" (non-empty)
-  std::string model_json = "{}";               // the model settings used
-  std::string status = "ok";                   // ok, solver_failure, invalid_scene, error
+  std::string model_key;          // fidelity label, e.g. "g8_k3_dt0.004" (non-empty)
+  std::string model_json = "{}";  // the model settings used
+  PredictionStatus status = PredictionStatus::kOk;
   std::optional<double> final_position_error;  // m, predicted vs true final object position
   std::optional<double> final_angle_error;     // rad
   std::optional<double> force_error;           // N, RMS over samples and contacts
@@ -542,7 +562,7 @@ class Ingest {
   // already past executed at this attempt, swaps the stream in) -- all in one
   // transaction. `outcome` is the cell's result ("ok" normally).
   // @returns the number of samples published.
-  std::int64_t Finish(const std::string& outcome = "ok");
+  std::int64_t Finish(TrialEnd outcome = TrialEnd::kOk);
   std::int64_t samples() const;
 
  private:
@@ -686,9 +706,9 @@ class Store {
   // @returns the new state.
   TrialState RetryTrial(std::int64_t trial_id, int attempt, const std::string& reason,
                         int max_attempts, double backoff_s, std::string_view rule = {});
-  // any non-terminal -> failed, outcome `outcome` (e.g. "refused").
+  // any non-terminal -> failed, outcome `outcome` (e.g. kRefused).
   void FailTrial(std::int64_t trial_id, int attempt, const std::string& reason,
-                 const std::string& outcome = "failed", std::string_view rule = {});
+                 TrialEnd outcome = TrialEnd::kFailed, std::string_view rule = {});
   // executed | reset_failed -> resetting.
   void BeginReset(std::int64_t trial_id, int attempt, std::string_view rule = {});
   // resetting -> reset_done | reset_failed; stores the observed start state on

@@ -39,6 +39,7 @@
 #include <Eigen/Core>
 #include <Eigen/Geometry>
 
+#include "arena/errors/error.hpp"
 #include "arena/mechanics/scene.hpp"
 #include "arena/mechanics/simulate.hpp"
 #include "arena/schemas/dds.hpp"
@@ -130,9 +131,10 @@ struct ControllerHostOptions {
 
 // Another controller holds the name on the domain: what() names the name,
 // the domain and the other controller ("pid P on host H").
-class ControllerNameConflict : public std::runtime_error {
+class ControllerNameConflict : public Error {
  public:
-  using std::runtime_error::runtime_error;
+  explicit ControllerNameConflict(const std::string& what)
+      : Error(ErrorCategory::kBadInput, what) {}
 };
 
 struct ControllerCounters {

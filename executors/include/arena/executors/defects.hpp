@@ -14,6 +14,7 @@
 
 #include <Eigen/Core>
 
+#include "arena/errors/error.hpp"
 #include "arena/mechanics/scene.hpp"
 #include "arena/mechanics/simulate.hpp"
 #include "arena/reset/reset.hpp"
@@ -23,10 +24,10 @@ namespace arena::executors {
 
 // A profile field that is missing its type, out of range or unknown.
 // what() is "<field>: <reason>", e.g. "pose_noise.position_std[1]: must be >= 0".
-class DefectError : public std::runtime_error {
+class DefectError : public Error {
  public:
   DefectError(std::string field, const std::string& reason)
-      : std::runtime_error(field + ": " + reason), field_(std::move(field)) {}
+      : Error(ErrorCategory::kBadInput, field + ": " + reason), field_(std::move(field)) {}
   const std::string& field() const { return field_; }
 
  private:

@@ -47,14 +47,11 @@
 #include <Eigen/Core>
 #include <Eigen/Geometry>
 
+#include "arena/mechanics/frames.hpp"  // FirstTangent, RotationFromRpy (were declared here)
 #include "arena/mechanics/scene.hpp"
 #include "arena/mechanics/simulate.hpp"
 
 namespace arena::mechanics {
-
-// docs/scene.md tangent basis: t1 is the normalised projection onto the contact
-// plane of the first of the gripper's z, y, x axes with |n·axis| < 0.9.
-Eigen::Vector3d FirstTangent(const Eigen::Vector3d& normal);
 
 // Unit edge directions of the inscribed polyhedral cone: angle 2πj/facets
 // from t1 towards t2 = n × t1.
@@ -62,9 +59,6 @@ std::vector<Eigen::Vector3d> ConeEdges(const Eigen::Vector3d& normal, int facets
 
 // Constituent points of a contact as offsets from its position (gripper frame).
 std::vector<Eigen::Vector3d> ConstituentOffsets(const ContactSpec& contact, int points);
-
-// Rotation of roll-pitch-yaw about fixed x, y, z: Rz(yaw) Ry(pitch) Rx(roll).
-Eigen::Matrix3d RotationFromRpy(const Eigen::Vector3d& rpy);
 
 // Inertia about the centre of mass in the object frame (kg m^2).
 Eigen::Matrix3d ObjectInertia(const ObjectSpec& object);

@@ -46,6 +46,7 @@
 #include <string>
 #include <string_view>
 
+#include "arena/errors/error.hpp"
 #include "arena/mechanics/scene.hpp"
 
 namespace arena::mechanics {
@@ -66,7 +67,7 @@ inline constexpr std::size_t kMaxSupportPoints = 1024;  // support.pressure.poin
 // non-finite number or a value out of range. field() is the JSON path
 // ("fingers[1].mu"; empty for the document as a whole), what() is
 // "fingers[1].mu: must be >= 0, got -0.2" ("scene: ..." when field() is empty).
-class SceneError : public std::runtime_error {
+class SceneError : public Error {
  public:
   SceneError(std::string field, const std::string& reason);
   const std::string& field() const { return field_; }

@@ -28,6 +28,7 @@
 
 #include <Eigen/Core>
 
+#include "arena/errors/error.hpp"
 #include "arena/mechanics/scene.hpp"
 #include "arena/orchestrator/claim_chooser.hpp"
 
@@ -43,7 +44,7 @@ inline constexpr int kMaxGridLevels = 1000;
 // Invalid campaign: field() is the JSON path ("variations.grip_force.min";
 // "scene.fingers[0].mu" inside the base scene; empty for the whole document),
 // what() is "<field>: <reason>" ("campaign: <reason>" when field() is empty).
-class CampaignError : public std::runtime_error {
+class CampaignError : public Error {
  public:
   CampaignError(std::string field, const std::string& reason);
   const std::string& field() const { return field_; }

@@ -7,6 +7,7 @@
 #include <stdexcept>
 
 #include "arena/db/store.hpp"
+#include "arena/errors/error.hpp"
 #include "arena/orchestrator/campaign.hpp"
 
 namespace arena::orchestrator {
@@ -14,9 +15,10 @@ namespace arena::orchestrator {
 inline constexpr std::int64_t kPlanChunk = 5000;  // trials planned (in memory) at a time
 
 // `interrupted` returned true: the submit was abandoned and nothing stored.
-class SubmitInterrupted : public std::runtime_error {
+class SubmitInterrupted : public Error {
  public:
-  SubmitInterrupted() : std::runtime_error("submit interrupted; nothing was stored") {}
+  SubmitInterrupted()
+      : Error(ErrorCategory::kInterrupted, "submit interrupted; nothing was stored") {}
 };
 
 // Stores the campaign and plans all of its trials in ONE transaction (planned

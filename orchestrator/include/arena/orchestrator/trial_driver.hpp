@@ -103,7 +103,7 @@ class TrialStore {
                                     int max_attempts, double backoff_s,
                                     const std::string& rule) = 0;
   virtual void FailTrial(std::int64_t trial_id, int attempt, const std::string& reason,
-                         const std::string& outcome, const std::string& rule) = 0;
+                         db::TrialEnd outcome, const std::string& rule) = 0;
   virtual void BeginReset(std::int64_t trial_id, int attempt, const std::string& rule) = 0;
   virtual void CompleteReset(std::int64_t trial_id, int attempt, const db::ResetReport& report,
                              const std::string& rule) = 0;

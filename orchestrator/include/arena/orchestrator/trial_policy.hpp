@@ -33,6 +33,7 @@
 #include <string_view>
 
 #include "arena/db/retry_rule.hpp"
+#include "arena/db/trial_end.hpp"
 
 namespace arena::orchestrator {
 
@@ -85,11 +86,11 @@ enum class TrialStep {
 
 struct Decision {
   TrialStep trial = TrialStep::kIgnore;
-  Party blame = Party::kNobody;  // kCell: counts towards quarantine
-  bool back_off = false;         // the cell waits CellBackoff_s before its next trial
-  double pause_s = 0;            // or (a refusal) this fixed pause
-  const char* outcome = "";      // kFail: the trial's outcome
-  const char* rule = "";         // the rule's name ("execute.controller_fault")
+  Party blame = Party::kNobody;                // kCell: counts towards quarantine
+  bool back_off = false;                       // the cell waits CellBackoff_s before its next trial
+  double pause_s = 0;                          // or (a refusal) this fixed pause
+  db::TrialEnd outcome = db::TrialEnd::kNone;  // kFail: the trial's outcome
+  const char* rule = "";                       // the rule's name ("execute.controller_fault")
 
   bool counts_against_cell() const { return blame == Party::kCell; }
   bool ends_phase() const { return trial != TrialStep::kIgnore && trial != TrialStep::kAwait; }

@@ -19,14 +19,16 @@
 #include <string>
 #include <vector>
 
+#include "arena/errors/error.hpp"
+
 namespace arena::recordings {
 
 // Bad input: names the file (or the shapes table) and the reason. The import
 // writes nothing then.
-class ImportError : public std::runtime_error {
+class ImportError : public Error {
  public:
   ImportError(std::string file, const std::string& reason)
-      : std::runtime_error(file + ": " + reason), file_(std::move(file)) {}
+      : Error(ErrorCategory::kBadInput, file + ": " + reason), file_(std::move(file)) {}
   const std::string& file() const { return file_; }
 
  private:

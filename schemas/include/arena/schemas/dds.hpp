@@ -100,15 +100,19 @@
 #include <utility>
 #include <vector>
 
+#include "arena/errors/error.hpp"
+
 namespace arena::dds {
 
 using Millis = std::chrono::milliseconds;
 
-// Fast DDS refused to create or configure an entity, or an option is invalid.
-// what() starts with the step or the option ("--peers: ...").
-class DdsError : public std::runtime_error {
+// Fast DDS refused to create or configure an entity (communication), or an
+// option is invalid (bad input). what() starts with the step or the option
+// ("--peers: ...").
+class DdsError : public Error {
  public:
-  using std::runtime_error::runtime_error;
+  explicit DdsError(const std::string& what, ErrorCategory category = ErrorCategory::kCommunication)
+      : Error(category, what) {}
 };
 
 inline constexpr double kCellLivelinessLease_s = 1.0;

@@ -65,7 +65,9 @@ namespace arena::dds {
 // be overwritten. what() names the file and the reason.
 class SecurityError : public DdsError {
  public:
-  using DdsError::DdsError;
+  // A missing, unreadable or mismatched identity is the user's input.
+  explicit SecurityError(const std::string& what, ErrorCategory category = ErrorCategory::kBadInput)
+      : DdsError(what, category) {}
 };
 
 enum class Role { kCell, kService, kWatcher, kController };

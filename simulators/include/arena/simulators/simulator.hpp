@@ -21,6 +21,7 @@
 #include <string_view>
 #include <vector>
 
+#include "arena/errors/error.hpp"
 #include "arena/mechanics/scene.hpp"
 #include "arena/mechanics/simulate.hpp"
 
@@ -28,10 +29,10 @@ namespace arena::simulators {
 
 // A name or setting a simulator does not know, or a value out of range.
 // what() is "<field>: <reason>", e.g. "mujoco.timestep: must be in (0, 0.01]".
-class SimulatorError : public std::invalid_argument {
+class SimulatorError : public Error {
  public:
   SimulatorError(std::string field, const std::string& reason)
-      : std::invalid_argument(field + ": " + reason), field_(std::move(field)) {}
+      : Error(ErrorCategory::kBadInput, field + ": " + reason), field_(std::move(field)) {}
   const std::string& field() const { return field_; }
 
  private:
