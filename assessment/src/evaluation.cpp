@@ -211,7 +211,7 @@ StartReport StartShareOf(const std::vector<SettingInfo>& settings,
       const db::Prediction& m = results[i].prediction;
       const auto& p = planned[i];
       // Paired: trials predicted from both starts.
-      if (!p || m.status != "ok" || p->status != "ok" || !m.final_position_error ||
+      if (!p || m.status != db::PredictionStatus::kOk || p->status != db::PredictionStatus::kOk || !m.final_position_error ||
           !p->final_position_error || !m.final_angle_error || !p->final_angle_error)
         continue;
       pm.push_back(*m.final_position_error);
@@ -443,7 +443,7 @@ EvaluationRun EvaluateCampaign(db::Store& store, std::int64_t campaign_id,
               r.prediction = PredictionFailure(db::PredictionStatus::kError, l.error);
             } else {
               if (!st.error.empty()) {
-                r.prediction = PredictionFailure("invalid_scene", st.error);
+                r.prediction = PredictionFailure(db::PredictionStatus::kInvalidScene, st.error);
                 NoteStart(&r.prediction, st.start);
               } else {
                 r.prediction = score(st.scene, l, st.key, st.start);

@@ -301,8 +301,7 @@ int Control(const std::string& verb, std::int64_t id, const std::string& db_path
     // Also lifts its suspensions (and the service's, and --cell's) and
     // resets their hold: the service sees it on its next pass (1 s).
     for (const auto& s : store->ResumeSuspended(id, cell))
-      std::fprintf(stderr, "lifted: %s suspension of %s (%s)
-", s.condition.c_str(),
+      std::fprintf(stderr, "lifted: %s suspension of %s (%s)\n", s.condition.c_str(),
                    s.scope == "cell"       ? ("cell " + s.cell_id).c_str()
                    : s.scope == "campaign" ? ("campaign " + std::to_string(s.campaign_id)).c_str()
                                            : "every campaign",
@@ -310,8 +309,7 @@ int Control(const std::string& verb, std::int64_t id, const std::string& db_path
   } else {
     store->CancelCampaign(id);
   }
-  std::fprintf(stderr, "campaign %lld: %s
-", static_cast<long long>(id),
+  std::fprintf(stderr, "campaign %lld: %s\n", static_cast<long long>(id),
                db::ToString(store->GetCampaign(id).state));
   return kExitOk;
 }

@@ -462,7 +462,7 @@ int RunPlot(const PlotOptions& o) {
       std::fprintf(stderr, "trial %lld: %zu samples, prediction %s (%s) -> %s\n",
                    static_cast<long long>(o.trial), info.samples,
                    info.model_key.empty() ? "-" : info.model_key.c_str(),
-                   info.prediction_status.c_str(), o.out.c_str());
+                   db::ToString(info.prediction_status), o.out.c_str());
       return kExitOk;
     } catch (const db::StoreError& e) {
       throw StoreCommandError(e);

@@ -158,14 +158,11 @@ std::string TrialPathsSvg(const db::Store& store, std::int64_t trial_id, TrialPl
     }
     const assessment::PredictedRun run = assessment::SimulatePrediction(scene, model, &commands);
     inf.model_key = run.key;
-    inf.prediction_status = run.result.status == mechanics::SimulationStatus::kOk ? "ok"
-                            : run.result.status == mechanics::SimulationStatus::kSolverFailure
-                                ? "solver_failure"
-                                : "invalid_scene";
+    inf.prediction_status = assessment::StatusOf(run.result.status);
     if (run.result.status != mechanics::SimulationStatus::kOk) note = ": " + run.result.error;
     for (const auto& s : run.result.samples) predicted.push_back({s.position, s.orientation});
   } catch (const std::exception& e) {
-    inf.prediction_status = "error";
+    inf.prediction_status = db::PredictionStatus::kError;
     note = std::string(": ") + e.what();
   }
 
@@ -221,7 +218,9 @@ std::string TrialPathsSvg(const db::Store& store, std::int64_t trial_id, TrialPl
     const double dp = (predicted[last].position - measured[last].position).norm();
     const double da = predicted[last].orientation.angularDistance(measured[last].orientation);
     errors = "final error " + Mm(dp) + ", " + FormatNumber(da * 180 / kPi, 3) + " deg" +
-             (inf.prediction_status == "ok" ? "" : " (" + inf.prediction_status + note + ")");
+             (inf.prediction_status == db::PredictionStatus::kOk
+                  ? ""
+                  : " (" + std::string(db::ToString(inf.prediction_status)) + note + ")");
   }
   const std::string truth = gt.truth.empty() ? "unreported" : gt.truth;
   std::string svg = "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"" + F(width) +

@@ -184,7 +184,7 @@ TEST(EvaluationStore, PredictsFromTheMeasuredStartAndSaysTheStartsShare) {
       ASSERT_EQ(run.status, mechanics::SimulationStatus::kOk) << run.error;
       auto ingest = store->BeginIngest(t->trial_id, t->attempt);
       for (const auto& sample : AsStream(placed, run)) ingest->Add(sample);
-      ingest->Finish("ok");
+      ingest->Finish(db::TrialEnd::kOk);
       store->BeginReset(t->trial_id, t->attempt);
       db::ResetReport r;
       r.ok = true;
@@ -210,7 +210,7 @@ TEST(EvaluationStore, PredictsFromTheMeasuredStartAndSaysTheStartsShare) {
   ASSERT_EQ(rows.size(), 4u);
   for (const auto& r : rows) {
     SCOPED_TRACE("trial " + std::to_string(r.trial_id));
-    ASSERT_EQ(r.prediction.status, "ok") << r.prediction.detail_json;
+    ASSERT_EQ(r.prediction.status, db::PredictionStatus::kOk) << r.prediction.detail_json;
     EXPECT_LT(*r.prediction.final_position_error, 1e-9);
     EXPECT_LT(*r.prediction.final_angle_error, 1e-9);
     // Every stored prediction says which start it used.

@@ -116,14 +116,14 @@ TEST(FailureReasons, GroupedByTheTypedKindWithTheTextAsDetail) {
     t = store->ClaimNextTrial("robot1");
     auto ingest = store->BeginIngest(t->trial_id, t->attempt);
     for (int i = 0; i < 5; ++i) ingest->Add(db::testing::MakeSample(i));
-    ingest->Finish("ok");
+    ingest->Finish(db::TrialEnd::kOk);
     store->BeginReset(t->trial_id, t->attempt);
     db::ResetReport reset;
     reset.ok = true;
     store->CompleteReset(t->trial_id, t->attempt, reset);
     db::Prediction p;
     p.model_key = "g8_k3_dt0.004_auto";
-    p.status = "solver_failure";
+    p.status = db::PredictionStatus::kSolverFailure;
     p.detail_json = R"({"error": "step 12: LCP did not converge"})";
     store->RecordPrediction(t->trial_id, t->attempt, p);
     store->FinishTrial(t->trial_id, t->attempt);
