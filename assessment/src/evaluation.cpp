@@ -211,8 +211,9 @@ StartReport StartShareOf(const std::vector<SettingInfo>& settings,
       const db::Prediction& m = results[i].prediction;
       const auto& p = planned[i];
       // Paired: trials predicted from both starts.
-      if (!p || m.status != db::PredictionStatus::kOk || p->status != db::PredictionStatus::kOk || !m.final_position_error ||
-          !p->final_position_error || !m.final_angle_error || !p->final_angle_error)
+      if (!p || m.status != db::PredictionStatus::kOk || p->status != db::PredictionStatus::kOk ||
+          !m.final_position_error || !p->final_position_error || !m.final_angle_error ||
+          !p->final_angle_error)
         continue;
       pm.push_back(*m.final_position_error);
       pp.push_back(*p->final_position_error);
