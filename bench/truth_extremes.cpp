@@ -300,8 +300,8 @@ int main(int argc, char** argv) {
     }
     silent += wrong;
     char buf[240];
-    std::snprintf(buf, sizeof buf, "%s: %zu rows, %d right, %d typed errors, %d silent wrong",
-                  name.c_str(), rows.size(), right, typed, wrong);
+    std::snprintf(buf, sizeof buf, "%s: %d rows, %d right, %d typed errors, %d silent wrong",
+                  name.c_str(), right + typed + wrong + model_wrong, right, typed, wrong);
     if (model_wrong > 0) {
       std::snprintf(buf + std::strlen(buf), sizeof buf - std::strlen(buf),
                     " (+ %d wrong on the issue's model items, not counted)", model_wrong);

@@ -659,6 +659,29 @@ class TruthLimits {
   double travel_ = 0;
 };
 
+// A push too short for the soft contact to resolve. The pusher's contact
+// acts from a = margin x kActiveAtTouch before touch (1 µm at the defaults),
+// so at t = 0 it sets the object a little ahead of the pusher, which then
+// has to travel up to a before it loads the object again. A run whose whole
+// travel (its peak speed x duration, an upper bound) is under 4a spends more
+// than a quarter of it unloaded, and the object's motion is the contact's
+// start transient, not the push (the 1e-6 m/s row of the extremes table:
+// 0.2 µm of travel, pusher force 0 N in a jaw where 11.96 N is right, the
+// grasp drifting 0.78 mm with free pads). Refused before the first step;
+// closed-loop runs (commanded speeds) and a pusher at rest are not judged.
+std::string PushBelowResolution(const mechanics::Scene& scene, const MujocoSettings& settings,
+                                bool commanded) {
+  if (commanded || !scene.pusher || scene.pusher->controller) return "";
+  const double travel = mechanics::PusherPeakRates(*scene.pusher).velocity.norm() * scene.duration;
+  const double a = ForScene(scene, settings, true).contact_margin * kActiveAtTouch;
+  if (!(travel > 0) || travel >= 4 * a) return "";
+  return "MuJoCo outside its limits at t = 0 s (push below the contact's resolution): the "
+         "pusher travels at most " +
+         Num(travel) + " m over the run, less than 4 x the " + Num(a) +
+         " m before touch at which its soft contact acts (limit " + Num(4 * a) +
+         " m): the object would follow the contact's start transient, not the push";
+}
+
 // Owns a model and its data; frees them on every path.
 struct MjHandles {
   mjModel* m = nullptr;
@@ -1064,6 +1087,13 @@ void RunLoaded(const mechanics::Scene& scene, const MujocoSettings& settings, mj
                mechanics::SimulationResult* result,
                const mechanics::PusherCommandSource* commands = nullptr) {
   const MujocoSettings st = ForScene(scene, settings);
+  if (std::string why = PushBelowResolution(scene, settings, commands != nullptr); !why.empty()) {
+    result->status = mechanics::SimulationStatus::kSolverFailure;
+    result->failed_step = 0;
+    result->solver.failures = 1;
+    result->error = why;
+    return;
+  }
   const int per_sample = StepsPerSample(st);
   Run run{scene, st, m, d, -1, -1, -1, -1, -1, -1, {}, {}, {}, 0, -1, {}};
   run.pad_of_geom.assign(static_cast<size_t>(m->ngeom), -1);

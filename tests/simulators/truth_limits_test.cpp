@@ -76,6 +76,31 @@ TEST(MujocoLimits, RunsBeyondTheSoftContactAreTypedErrors) {
   EXPECT_NE(c.error.find("a pad sinks"), std::string::npos) << c.error;
 }
 
+// A push shorter than the soft contact resolves: at 1e-6 m/s the pusher
+// travels 0.2 µm in 0.2 s, under 4 x the 1 µm before touch at which its
+// contact acts, and the object followed the contact's start transient (a
+// jaw: pusher force 0 N where 2 mu N + m g = 11.96 N is right; free pads:
+// the grasp drifted 0.78 mm), returned `ok`. Now refused before the first
+// step; a pusher at rest (nothing to resolve) and a 1e-4 m/s push (20 µm)
+// still run.
+TEST(MujocoLimits, APushShorterThanTheContactResolvesIsATypedError) {
+  Scene s = Canonical();
+  s.pusher->motion.velocity = {0, 0, 1e-6};
+  for (const auto coupling : {GripperCoupling::kIndependent, GripperCoupling::kParallelJaw}) {
+    s.gripper.coupling = coupling;
+    const auto r = MakeMujocoSimulator({})->Simulate(s);
+    EXPECT_TRUE(IsLimitError(r, "push below the contact's resolution")) << r.error;
+    EXPECT_TRUE(r.samples.empty());
+  }
+  s.gripper.coupling = GripperCoupling::kIndependent;
+  s.pusher->motion.velocity = {0, 0, 1e-4};
+  EXPECT_EQ(MakeMujocoSimulator({})->Simulate(s).status, SimulationStatus::kOk);
+  s.pusher->motion.velocity = {0, 0, 0};
+  const auto rest = MakeMujocoSimulator({})->Simulate(s);
+  ASSERT_EQ(rest.status, SimulationStatus::kOk) << rest.error;
+  EXPECT_EQ(rest.samples.size(), 51u);
+}
+
 // A parallel jaw whose two slides part: a 1 m/s push through a jaw (its
 // equality is as soft as the contacts) lets the fingers travel more than a
 // tenth of the pad radius apart by t = 0.06 s, and the run stops there.
