@@ -135,7 +135,10 @@ struct MujocoSettings {
   double tolerance = 1e-10;      // Newton solver tolerance
   int iterations = 100;          // solver iterations
   double object_damping = 0.01;  // free-joint damping (N s/m, N m s/rad): a quasi-static truth
-  double finger_mass = 0.05;     // kg, each finger pad body
+  // kg, each finger pad body. 0.02: at 0.05 the free fingers' soft contacts
+  // chattered and the canonical grasp drifted 0.26 mm along its grip axis in
+  // 0.2 s (bench/README.md, the extremes per simulator).
+  double finger_mass = 0.02;
   // Slip speed (m/s) above which a touching contact counts as sliding.
   double slip_speed = 1e-4;
   // Spheres by default: capsules and boxes converged worse or equal on the
