@@ -326,6 +326,9 @@ struct Contact {
   bool active = false;       // has rows (a finger with zero grip force has none)
   double known_normal = -1;  // point finger: its normal force (N), else -1
   int y_plus = -1, y_minus = -1;
+  // Parallel jaw (gripper.coupling): both fingers close at one rate, the
+  // second shares the first's closing unknowns y± (AssemblePadRows).
+  bool jaw = false, jaw_follower = false;
   double pad = 0;  // finger: how far its pad has followed the object along n (m)
   std::vector<Point> points;
   Eigen::Vector3d normal = Eigen::Vector3d::UnitX();  // fixed: the normal; tracked: closing
@@ -797,6 +800,7 @@ struct ContactModel::Impl {
   void AssembleContactRows(StepScratch& s);
   void AssembleConeRows(StepScratch& s);
   void AssemblePadRows(StepScratch& s);
+  void AssembleJawRows(StepScratch& s);
   void AssembleSupportRows(StepScratch& s);
   void SetupSupport();
   void SupportResiduals(StepScratch& s);
@@ -1113,7 +1117,10 @@ void ContactModel::Impl::SetupContacts() {
       pt.offset0 = o;
       ct.points.push_back(pt);
     }
-    if (!ct.pusher && ct.points.size() == 1) ct.known_normal = scene.grip_force;
+    ct.jaw = !ct.pusher && scene.gripper.coupling == GripperCoupling::kParallelJaw;
+    // A jaw's point finger presses with what the mechanism gives it (an
+    // unknown, AssemblePadRows), not a prescribed grip force.
+    if (!ct.pusher && ct.points.size() == 1 && !ct.jaw) ct.known_normal = scene.grip_force;
     if (ct.spec.type == ContactType::kLine && ct.points.size() > 2) {
       const auto along = [&](const Point& pt) { return pt.offset0.dot(ct.spec.axis); };
       const auto [lo, hi] =
@@ -1159,6 +1166,12 @@ void ContactModel::Impl::SetupUnknowns() {
       if (pt.beta0 >= 0) pt.xi = n++;
     }
     if (!ct.pusher && ct.known_normal < 0) {
+      if (ct.jaw && &ct != &contacts.front()) {
+        ct.jaw_follower = true;
+        ct.y_plus = contacts.front().y_plus;
+        ct.y_minus = contacts.front().y_minus;
+        continue;
+      }
       ct.y_plus = n++;
       ct.y_minus = n++;
     }
@@ -1866,7 +1879,11 @@ void ContactModel::Impl::AssembleConeRows(StepScratch& s) {
 // forces sum to the grip force, paired with its free velocity.
 void ContactModel::Impl::AssemblePadRows(StepScratch& s) {
   for (const Contact& ct : contacts) {
-    if (!ct.active || ct.y_plus < 0) continue;
+    if (!ct.active || ct.y_plus < 0 || ct.jaw_follower) continue;
+    if (ct.jaw) {
+      AssembleJawRows(s);
+      continue;
+    }
     if (tracked && !ct.any_active) {
       // The pad has passed the object's edge: it presses on nothing.
       s.A.Set(ct.y_plus, ct.y_plus, 1);
@@ -1883,6 +1900,43 @@ void ContactModel::Impl::AssemblePadRows(StepScratch& s) {
     s.b[ct.y_plus] = -scene.grip_force / Fs;
     s.b[ct.y_minus] = scene.grip_force / Fs;
   }
+}
+
+// A parallel jaw (gripper.coupling): two opposed fingers on one mechanism
+// that closes symmetrically about a centre fixed in the hand. Its one
+// coordinate is the closing travel s: both pads move along their own
+// closing directions c₁ = -c₂ at ṡ = y = y⁺ - y⁻ (the second finger's
+// normal rows use the first's y±, SetupUnknowns), so the centre between
+// them stays put. The motor drives s with each finger's grip force; by
+// virtual work, λ₁ ṡ + λ₂ ṡ = 2 g ṡ, the jaw's row is
+//   Σ₁ λ + Σ₂ λ - 2 g = 0,  y free (the y± pair, as a pad's),
+// and nothing constrains λ₁ - λ₂: that is the force the jaw takes along
+// its axis. Where both fingers press (w = c·(v_obj) - y + gap/dt = 0 on
+// each, c₁ = -c₂) the object's velocity along the axis is zero: the jaw
+// holds its position there; where no net axial force acts, λ₁ = λ₂ = g, the
+// independent pads' answer.
+void ContactModel::Impl::AssembleJawRows(StepScratch& s) {
+  const Contact& lead = contacts.front();
+  bool pressing = false;
+  for (const Contact& ct : contacts) pressing = pressing || (ct.jaw && (!tracked || ct.any_active));
+  if (!pressing) {
+    // Both pads have passed the object's edges: the jaw presses on nothing.
+    s.A.Set(lead.y_plus, lead.y_plus, 1);
+    s.A.Set(lead.y_minus, lead.y_minus, 1);
+    s.b[lead.y_plus] = 1;
+    s.b[lead.y_minus] = 1;
+    return;
+  }
+  for (const Contact& ct : contacts) {
+    if (!ct.jaw) continue;
+    for (const Point& pt : ct.points) {
+      if (!HasRows(pt)) continue;
+      s.A.Set(lead.y_plus, pt.lambda, 1);
+      s.A.Set(lead.y_minus, pt.lambda, -1);
+    }
+  }
+  s.b[lead.y_plus] = -2 * scene.grip_force / Fs;
+  s.b[lead.y_minus] = 2 * scene.grip_force / Fs;
 }
 
 // Phase 8. The support's rows (SupportStage): per friction direction k,
@@ -2044,6 +2098,8 @@ double ContactModel::Impl::CheckResiduals(StepScratch& s) {
   auto comp = [&](double z_nd, double w_nd) {
     res.complementarity = std::max(res.complementarity, std::abs(std::min(z_nd, w_nd)));
   };
+  double jaw_sum = 0;  // a parallel jaw's normal forces, both fingers
+  bool jaw_pressing = false;
   for (Contact& ct : contacts) {
     if (!ct.active) continue;
     double sum = 0;
@@ -2071,7 +2127,16 @@ double ContactModel::Impl::CheckResiduals(StepScratch& s) {
         res.cone = std::max(res.cone, -slack * inv_Fs);
       }
     }
-    if (ct.y_plus >= 0 && (!tracked || ct.any_active)) {
+    if (ct.jaw) {
+      // The jaw's one row (AssembleJawRows), checked once both fingers are summed.
+      jaw_sum += sum;
+      jaw_pressing = jaw_pressing || !tracked || ct.any_active;
+      if (!ct.jaw_follower || !jaw_pressing) continue;
+      const double err = (jaw_sum - 2 * scene.grip_force) * inv_Fs;
+      res.force_balance = std::max(res.force_balance, std::abs(err));
+      comp(Unknown(s, ct.y_plus) * inv_Vs, err);
+      comp(Unknown(s, ct.y_minus) * inv_Vs, -err);
+    } else if (ct.y_plus >= 0 && (!tracked || ct.any_active)) {
       const double err = (sum - scene.grip_force) * inv_Fs;
       res.force_balance = std::max(res.force_balance, std::abs(err));
       comp(Unknown(s, ct.y_plus) * inv_Vs, err);
