@@ -119,6 +119,13 @@ constexpr double kQuasiStatic = 1e-6;
 constexpr int kQuasiStaticSolves = 50;
 // Solves of one step before an inaccurate answer is reported as a failure.
 constexpr int kAccuracyAttempts = 4;
+// A point pad follows the object along its closing direction c and sees the
+// face's normal n: its travel is the gap over n·c, and its friction rows
+// remove (d·c)/(n·c) n. Below this grazing factor (84° between them) the
+// division would amplify the gap and every rounding in it by more than 10,
+// and the pad's force (along n) would push nearly across the jaw: the step
+// is refused with a typed error naming the finger (GrazingFinger).
+constexpr double kGrazingFactor = 0.1;
 
 double LengthScale(const ObjectSpec& object) {
   double L = object.shape == ObjectShape::kBox        ? object.size.maxCoeff()
@@ -801,6 +808,8 @@ struct ContactModel::Impl {
   void AssembleConeRows(StepScratch& s);
   void AssemblePadRows(StepScratch& s);
   void AssembleJawRows(StepScratch& s);
+  // This step's refusal of a point pad on a grazing face (TrackedGeometry).
+  std::string grazing;
   void AssembleSupportRows(StepScratch& s);
   void SetupSupport();
   void SupportResiduals(StepScratch& s);
@@ -1459,7 +1468,17 @@ void ContactModel::Impl::TrackedGeometry() {
       // onto the surface (first order in the gap; the gap is then zero).
       Point& pt = ct.points[0];
       const double along = closing.dot(pt.n);
-      if (along > 1e-6) {
+      if (along < kGrazingFactor && grazing.empty()) {
+        char buf[200];
+        std::snprintf(buf, sizeof buf,
+                      "fingers[%d] '%s': presses on a grazing face (its normal %.3g deg from the "
+                      "closing direction, limit %.3g): the pad cannot press on it as modelled",
+                      static_cast<int>(&ct - contacts.data()), ct.spec.name.c_str(),
+                      std::acos(std::clamp(along, -1.0, 1.0)) * 180 / std::numbers::pi,
+                      std::acos(kGrazingFactor) * 180 / std::numbers::pi);
+        grazing = buf;
+      }
+      if (along >= kGrazingFactor) {
         ct.pad += pt.gap / along;
         ct.position = ct.spec.position + ct.pad * ct.spec.normal;
         pt.gap = 0;
@@ -1515,7 +1534,14 @@ bool ContactModel::Impl::RunPhase(StepPhase phase, StepReport& rep) {
   StepScratch& s = scratch;
   switch (phase) {
     case StepPhase::kPlaceContacts:
+      grazing.clear();
       PlaceContacts(s);
+      if (!grazing.empty()) {
+        rep.ok = false;
+        rep.failure = StepFailure::kModel;
+        rep.error = grazing;
+        return false;
+      }
       return true;
     case StepPhase::kMassMatrix:
       FormMassMatrix(s);
@@ -1787,7 +1813,7 @@ void ContactModel::Impl::FormGraspMap(StepScratch& s) {
       Jv.col(k) = Jc.col(k);
       if (e >= 0 && ct.known_normal >= 0 && !ct.pusher) {
         const double along = pt.n.dot(ct.normal);
-        if (along > 1e-6) {
+        if (along >= kGrazingFactor) {  // else the step is refused (PlaceContacts)
           const Eigen::Vector3d dv = d - (d.dot(ct.normal) / along) * pt.n;
           SetGraspColumn(Jv, k, dv, arm, p_cross_arm);
         }
@@ -1993,7 +2019,7 @@ Eigen::Vector3d ContactModel::Impl::BodyVelocity(const StepScratch& s, const Con
   double vf = Unknown(s, ct.y_plus) - Unknown(s, ct.y_minus);
   if (tracked && ct.known_normal >= 0) {
     const double along = pt.n.dot(ct.normal);
-    vf = along > 1e-6 ? pt.n.dot(ObjectVelocity(s, pt.p)) / along : 0.0;
+    vf = along >= kGrazingFactor ? pt.n.dot(ObjectVelocity(s, pt.p)) / along : 0.0;
   }
   return vf * ct.normal;
 }
