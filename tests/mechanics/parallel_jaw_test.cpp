@@ -36,8 +36,8 @@ TEST(ParallelJaw, HoldsTheObjectAgainstAForceAlongTheGripAxis) {
   s.model.dt = 0.001;
   const SimulationResult free_pads = SimulateOk(s);
   const double n_steps = 40;
-  EXPECT_NEAR(free_pads.samples.back().position.x(),
-              -9.81 * 1e-6 * n_steps * (n_steps + 1) / 2, 1e-9);
+  EXPECT_NEAR(free_pads.samples.back().position.x(), -9.81 * 1e-6 * n_steps * (n_steps + 1) / 2,
+              1e-9);
   EXPECT_NEAR(free_pads.samples.back().contacts[0].normal_force, 10.0, 1e-9);
   EXPECT_NEAR(free_pads.samples.back().contacts[1].normal_force, 10.0, 1e-9);
 
@@ -88,7 +88,9 @@ TEST(ParallelJaw, TakesThePushsAxialComponent) {
   const SimulationResult jaw = SimulateOk(s);
   const TrajectorySample& end = jaw.samples.back();
   const double h = 0.05, a = 0.005 * 0.2, b = 0.008660254037844387 * 0.2;
-  auto miss = [&](double th) { return (b + h * std::cos(th) - h) * std::tan(th) - h * std::sin(th) - a; };
+  auto miss = [&](double th) {
+    return (b + h * std::cos(th) - h) * std::tan(th) - h * std::sin(th) - a;
+  };
   double lo = -0.2, hi = 0.0;  // miss(lo) > 0 > miss(hi)
   for (int i = 0; i < 200; ++i) (miss(0.5 * (lo + hi)) > 0 ? lo : hi) = 0.5 * (lo + hi);
   const double theta = 0.5 * (lo + hi);
@@ -101,7 +103,8 @@ TEST(ParallelJaw, TakesThePushsAxialComponent) {
   double fingers_x = 0;
   for (int i = 0; i < 2; ++i) {
     const ContactState& c = end.contacts[static_cast<size_t>(i)];
-    fingers_x += c.normal_force * s.fingers[static_cast<size_t>(i)].normal.x() + c.tangential_force.x();
+    fingers_x +=
+        c.normal_force * s.fingers[static_cast<size_t>(i)].normal.x() + c.tangential_force.x();
   }
   EXPECT_GT(std::abs(end.pusher_force.x()), 1e-2);  // an axial push the jaw must take
   EXPECT_NEAR(fingers_x, -end.pusher_force.x(), 1e-6);
