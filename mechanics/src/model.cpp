@@ -126,6 +126,9 @@ constexpr int kAccuracyAttempts = 4;
 // and the pad's force (along n) would push nearly across the jaw: the step
 // is refused with a typed error naming the finger (GrazingFinger).
 constexpr double kGrazingFactor = 0.1;
+// The planar reduction: a contact normal farther than this (rad) from the
+// plane is refused (SetEdges).
+constexpr double kOutOfPlane = 1e-6;
 
 double LengthScale(const ObjectSpec& object) {
   double L = object.shape == ObjectShape::kBox        ? object.size.maxCoeff()
@@ -808,8 +811,9 @@ struct ContactModel::Impl {
   void AssembleConeRows(StepScratch& s);
   void AssemblePadRows(StepScratch& s);
   void AssembleJawRows(StepScratch& s);
-  // This step's refusal of a point pad on a grazing face (TrackedGeometry).
-  std::string grazing;
+  // This step's refusal of its geometry (a point pad on a grazing face,
+  // TrackedGeometry; a normal out of the planar model's plane, SetEdges).
+  std::string refused;
   void AssembleSupportRows(StepScratch& s);
   void SetupSupport();
   void SupportResiduals(StepScratch& s);
@@ -1281,15 +1285,26 @@ void ContactModel::Impl::SetEdges(Point& pt) {
   if (planar) {
     // Normals stay in the plane of a planar scene (the solid is symmetric
     // about it, Setup()), so p × n is unit but for rounding and is
-    // normalised only when it is not; a degenerate cross product gives no
-    // friction rather than NaN.
+    // normalised only when it is not. A normal out of the plane (a point
+    // inside a thin solid nearest its side across the plane) has a force
+    // the reduction drops, and along the plane normal no tangent at all: it
+    // gave no friction, silently. Refused, typed, naming the contact.
     const Eigen::Vector3d cr = plane_normal.cross(pt.n);
     const double length2 = cr.squaredNorm();
     Eigen::Vector3d tau = Eigen::Vector3d::Zero();
     if (std::abs(length2 - 1.0) <= 1e-15) {
       tau = cr;
-    } else if (length2 > 1e-24) {
+    } else if (1.0 - length2 <= kOutOfPlane * kOutOfPlane) {
       tau = cr / std::sqrt(length2);
+    } else if (refused.empty()) {
+      char buf[256];
+      std::snprintf(
+          buf, sizeof buf,
+          "a contact normal leaves the plane of the planar model (by %.3g rad; limit "
+          "%.3g): its friction has no in-plane direction; run the scene with model.reduce "
+          "\"full\"",
+          std::asin(std::sqrt(std::clamp(1.0 - length2, 0.0, 1.0))), kOutOfPlane);
+      refused = buf;
     }
     pt.edges.resize(2);
     pt.edges[0] = tau;
@@ -1468,7 +1483,7 @@ void ContactModel::Impl::TrackedGeometry() {
       // onto the surface (first order in the gap; the gap is then zero).
       Point& pt = ct.points[0];
       const double along = closing.dot(pt.n);
-      if (along < kGrazingFactor && grazing.empty()) {
+      if (along < kGrazingFactor && refused.empty()) {
         char buf[200];
         std::snprintf(buf, sizeof buf,
                       "fingers[%d] '%s': presses on a grazing face (its normal %.3g deg from the "
@@ -1476,7 +1491,7 @@ void ContactModel::Impl::TrackedGeometry() {
                       static_cast<int>(&ct - contacts.data()), ct.spec.name.c_str(),
                       std::acos(std::clamp(along, -1.0, 1.0)) * 180 / std::numbers::pi,
                       std::acos(kGrazingFactor) * 180 / std::numbers::pi);
-        grazing = buf;
+        refused = buf;
       }
       if (along >= kGrazingFactor) {
         ct.pad += pt.gap / along;
@@ -1534,12 +1549,12 @@ bool ContactModel::Impl::RunPhase(StepPhase phase, StepReport& rep) {
   StepScratch& s = scratch;
   switch (phase) {
     case StepPhase::kPlaceContacts:
-      grazing.clear();
+      refused.clear();
       PlaceContacts(s);
-      if (!grazing.empty()) {
+      if (!refused.empty()) {
         rep.ok = false;
         rep.failure = StepFailure::kModel;
-        rep.error = grazing;
+        rep.error = refused;
         return false;
       }
       return true;

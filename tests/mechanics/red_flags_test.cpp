@@ -43,12 +43,43 @@ Scene GrazingGrasp(double b) {
 // face normal, nearly across the jaw): a typed refusal naming the finger.
 TEST(RedFlags, APointPadOnAGrazingFaceIsRefusedNamingTheFinger) {
   const SimulationResult r = Simulate(GrazingGrasp(2.5e-6));
-  EXPECT_EQ(r.status, SimulationStatus::kSolverFailure) << "final x " << r.samples.back().position.transpose();
+  EXPECT_EQ(r.status, SimulationStatus::kSolverFailure)
+      << "final x " << r.samples.back().position.transpose();
   EXPECT_NE(r.error.find("fingers[0] 'left'"), std::string::npos) << r.error;
   EXPECT_NE(r.error.find("grazing"), std::string::npos) << r.error;
   // The same grasp on a face 45° from the closing direction is modelled.
   const SimulationResult ok = Simulate(GrazingGrasp(0.025));
   EXPECT_EQ(ok.status, SimulationStatus::kOk) << ok.error;
+}
+
+// A thin box (1.6 mm across the plane of the planar model, x-z) pushed by
+// a point that starts 1 mm inside its bottom: the nearest face is the side
+// across the plane (0.8 mm away), whose normal is the plane's own. Its
+// friction had no in-plane direction and was dropped without a word (its
+// normal force, out of the plane, too): here the LCP left then ended on a
+// ray, an error naming the wrong cause; where the rest solves, a silent
+// wrong answer. Now the step is refused naming the cause and the remedy
+// (the full model, which has the tangent, runs the scene's step).
+TEST(RedFlags, APlanarContactWithoutAnInPlaneTangentIsRefused) {
+  Scene s = testing::HeldBox(0.2, 10, 0.5);
+  s.object.size = {0.05, 0.0016, 0.1};
+  s.gravity = {0, 0, 0};
+  s.duration = 0.01;
+  s.model.dt = 0.001;
+  PusherSpec p;
+  p.name = "pusher";
+  p.position = {0, 0, -0.049};
+  p.normal = {0, 0, 1};
+  p.mu = 0.5;
+  p.motion.velocity = {0, 0, 0.01};
+  s.pusher = p;
+  const SimulationResult r = Simulate(s);
+  ASSERT_EQ(r.model.dof, 3) << "the scene must run planar";
+  EXPECT_EQ(r.status, SimulationStatus::kSolverFailure);
+  EXPECT_NE(r.error.find("leaves the plane of the planar model"), std::string::npos) << r.error;
+  s.model.reduce = Reduce::kFull;
+  const SimulationResult full = Simulate(s);
+  EXPECT_EQ(full.error.find("leaves the plane"), std::string::npos) << full.error;
 }
 
 }  // namespace
@@ -62,8 +93,7 @@ bool Solves(const Eigen::MatrixXd& A, const Eigen::VectorXd& b, const LcpResult&
   if (!r.ok || r.z.size() != b.size()) return false;
   const Eigen::VectorXd w = A * r.z + b;
   const double scale = std::max(b.lpNorm<Eigen::Infinity>(), 1e-300);
-  return r.z.minCoeff() >= -1e-9 * r.z.lpNorm<Eigen::Infinity>() &&
-         w.minCoeff() >= -1e-9 * scale &&
+  return r.z.minCoeff() >= -1e-9 * r.z.lpNorm<Eigen::Infinity>() && w.minCoeff() >= -1e-9 * scale &&
          std::abs(r.z.dot(w)) <= 1e-9 * scale * std::max(1.0, r.z.lpNorm<Eigen::Infinity>());
 }
 
