@@ -698,6 +698,9 @@ struct ContactModel::Impl {
   int edges_per_point = 0;
 
   double mass = 0, L = 1, Fs = 1, Vs = 1, dt = 0;
+  // A contact slides (ContactState::mode) when its slip exceeds this (m/s):
+  // SetupScales.
+  double slip_floor = 0;
   Eigen::Matrix3d inertia_body = Eigen::Matrix3d::Identity();
   std::vector<Contact> contacts;
   int nf = 0;                        // force unknowns (λ, β) come first in the LCP
@@ -1098,6 +1101,19 @@ void ContactModel::Impl::SetupScales() {
   }
   if (!(Fs > 0)) Fs = mass * L / (dt * dt);
   Vs = Fs * dt / mass;
+  // The slip a contact must have to be reported sliding: 1e-9 of the
+  // scene's own speeds (the pusher's, what gravity adds in a step), but no
+  // finer than rounding of the solve's velocity scale (1e-13 Vs). It was
+  // 1e-9 Vs alone, and Vs = Fs dt / m grows as the object gets light under
+  // a firm grip: a 1 g box at 10 N and dt 4 ms called slips below 4e-8 m/s
+  // stick, ~1e-5 m/s at the extremes.
+  double kinematic = dt * scene.gravity.norm();
+  if (scene.pusher) {
+    const PusherTwist peak = PusherPeakRates(*scene.pusher);
+    kinematic = std::max(kinematic, peak.velocity.norm() + peak.angular_velocity.norm() * L);
+  }
+  slip_floor = std::max(1e-9 * kinematic, 1e-13 * Vs);
+  if (!(kinematic > 0)) slip_floor = 1e-9 * Vs;
 }
 
 // A line or patch pad without a stiffness (model.pads elastic): one that
@@ -2245,7 +2261,7 @@ void ContactModel::Impl::ReportContacts(StepScratch& s) {
                 ? pt.urel
                 : Eigen::Vector3d(ObjectVelocity(s, pt.p) - BodyVelocity(s, ct, pt));
         const Eigen::Vector3d ut = urel - nrm.dot(urel) * nrm;
-        if (lam > 1e-9 * Fs && ut.squaredNorm() > 1e-18 * Vs * Vs) {
+        if (lam > 1e-9 * Fs && ut.squaredNorm() > slip_floor * slip_floor) {
           sliding = true;
           if (tracked && !planar && pt.beta0 >= 0) pt.slip = ut.normalized();
         }

@@ -82,6 +82,35 @@ TEST(RedFlags, APlanarContactWithoutAnInPlaneTangentIsRefused) {
   EXPECT_EQ(full.error.find("leaves the plane"), std::string::npos) << full.error;
 }
 
+// A 1 g box held at 10 N by point fingers (μ 0.5), pushed up from below
+// by a sticking pusher at 1e-8 m/s, no gravity: the fingers slide along z
+// at the pusher's speed (nothing else moves the object), whatever that
+// speed. The slide threshold was 1e-9 of the solve's velocity scale
+// Fs dt / m = 40 m/s here, 4e-8 m/s: the fingers were reported sticking
+// while sliding. Now it is 1e-9 of the scene's own speeds (floored at
+// rounding of the solve's scale), and the same scene at 1e-2 m/s agrees.
+TEST(RedFlags, ASlowSlideOfALightObjectIsReportedSliding) {
+  for (double speed : {1e-8, 1e-2}) {
+    Scene s = testing::HeldBox(0.001, 10, 0.5);
+    s.gravity = {0, 0, 0};
+    s.duration = 0.04;
+    PusherSpec p;
+    p.name = "pusher";
+    p.position = {0, 0, -0.05};
+    p.normal = {0, 0, 1};
+    p.mu = 0.5;
+    p.motion.velocity = {0, 0, speed};
+    s.pusher = p;
+    const SimulationResult r = Simulate(s);
+    ASSERT_EQ(r.status, SimulationStatus::kOk) << r.error;
+    const TrajectorySample& end = r.samples.back();
+    EXPECT_NEAR(end.velocity.z(), speed, 1e-6 * speed);
+    EXPECT_EQ(end.contacts[0].mode, ContactMode::kSlide) << "speed " << speed;
+    EXPECT_EQ(end.contacts[1].mode, ContactMode::kSlide) << "speed " << speed;
+    EXPECT_EQ(end.contacts[2].mode, ContactMode::kStick) << "speed " << speed;
+  }
+}
+
 }  // namespace
 }  // namespace arena::mechanics
 
