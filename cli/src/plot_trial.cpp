@@ -156,7 +156,7 @@ void AddPredictedSamples(const mechanics::SimulationResult& predicted, const Eig
 Panel ContactPanel(const std::string& contact, const Triple& normal, const Triple& tangential) {
   Panel p;
   p.title = contact + " contact force on the object";
-  p.y_label = "N";
+  p.y_label = std::string("N");  // not operator=(const char*): GCC 12 -Wrestrict false positive
   p.min_y_span = 1.0;
   p.series.push_back({"normal observed", normal.t_obs, normal.v_obs, "#6baed6", true, false});
   p.series.push_back(
