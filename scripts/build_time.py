@@ -9,6 +9,10 @@
   scripts/build_time.py headers                what a third-party header costs
       each file that includes it, as text and as a precompiled header
       (compiler CPU seconds of a file holding only the #includes; least of 3)
+  scripts/build_time.py ccache                 does ccache still hit with the
+      precompiled headers? A private cache and no user ccache config (the
+      sloppiness comes from CMakeLists.txt), recordings/ built twice in the
+      same fresh directory; exits 1 if the second build misses
   scripts/build_time.py full [--pch ON|OFF]     a fresh build directory,
       ccache off, -j2: wall and CPU seconds to build `arena`, then the rest
       (every test and benchmark); run it on a quiet machine
@@ -109,6 +113,29 @@ def headers(args, root):
         print(f"| {' + '.join(hs)} | {as_text:.2f} | {as_pch:.2f} |")
 
 
+def ccache(args, root):
+    env = dict(os.environ, CCACHE_DIR=os.path.join(root, 'cache'),
+               CCACHE_CONFIGPATH=os.path.join(root, 'ccache.conf'))
+    env.pop('CCACHE_DISABLE', None)
+    open(env['CCACHE_CONFIGPATH'], 'w').close()
+    build = os.path.join(root, 'build')
+    sh = lambda cmd: subprocess.run(['bash', '-c', cmd], env=env, check=True, capture_output=True,
+                                    text=True).stdout
+    for round_ in (1, 2):
+        shutil.rmtree(build, ignore_errors=True)
+        sh(f'cmake -S {HERE} -B {build} -G Ninja -DCMAKE_BUILD_TYPE=Release -DARENA_PCH=ON')
+        objs = sh(f"ninja -C {build} -t targets all | grep -oE '^recordings/CMakeFiles/arena_recordings"
+                  f"\\.dir/(src/[a-z_]+\\.cpp\\.o|cmake_pch\\.hxx\\.gch)' | sort -u").split()
+        sh('ccache -z')
+        sh(f'ninja -C {build} -j2 {" ".join(objs)}')
+        stats = dict(line.split('\t') for line in sh('ccache --print-stats').splitlines() if '\t' in line)
+        hits = int(stats['direct_cache_hit']) + int(stats['preprocessed_cache_hit'])
+        print(f"| build {round_} | {len(objs)} compiles | {hits} hits | {stats['cache_miss']} misses | "
+              f"{stats['could_not_use_precompiled_header']} could not use the PCH |")
+    if int(stats['cache_miss']) != 0:
+        sys.exit('build_time: the second build missed the cache')
+
+
 def full(args, root):
     build = os.path.join(root, 'build')
     shutil.rmtree(build, ignore_errors=True)
@@ -128,12 +155,13 @@ def main():
     s = sub.add_parser('sample')
     s.add_argument('--before', required=True)
     sub.add_parser('headers')
+    sub.add_parser('ccache')
     f = sub.add_parser('full')
     f.add_argument('--pch', default='ON', choices=['ON', 'OFF'])
     args = p.parse_args()
     root = tempfile.mkdtemp(prefix='arena-build-time-')
     try:
-        {'sample': sample, 'headers': headers, 'full': full}[args.mode](args, root)
+        {'sample': sample, 'headers': headers, 'ccache': ccache, 'full': full}[args.mode](args, root)
     finally:
         shutil.rmtree(root, ignore_errors=True)
 
