@@ -138,7 +138,8 @@ struct FakeStore : TrialStore {
     faults.Hit("PeekNextTrial");
     return Next();
   }
-  std::unique_ptr<GroundTruthSink> BeginIngest(std::int64_t id, int attempt) override {
+  std::unique_ptr<GroundTruthSink> BeginIngest(std::int64_t id, int attempt,
+                                               std::vector<db::ContactSite>) override {
     faults.Hit("BeginIngest");
     if (trials.at(id).attempt != attempt) throw db::StoreError(K::kStaleAttempt, "stale");
     return std::make_unique<FakeSink>(faults, [this, id, attempt](std::int64_t n) {
