@@ -681,8 +681,9 @@ struct TrialDriver::Impl {
             if (probe.change_costs) probe.mounted = FixturesOfTrial(trial_id, scene_json);
             c.next_aim = NextTrialFor(probe, false);
             c.aim_known = true;
-          } catch (const db::StoreError& e) {  // looked up again before the reset
-            spdlog::debug("{}: next trial not looked up yet: {}", tag, e.what());
+          } catch (const db::StoreError& e) {
+            if (Judge(e) == StoreVerdict::kStop) throw;  // as any step: the service stops
+            spdlog::debug("{}: next trial looked up at the reset instead: {}", tag, e.what());
           }
         },
         [this, cell_id](const db::StoreError& e) {
