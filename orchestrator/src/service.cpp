@@ -191,8 +191,10 @@ class SqliteTrialStore : public TrialStore {
   std::optional<db::ClaimedTrial> PeekNextTrial(const std::string& cell) override {
     return s_.PeekNextTrial(cell);
   }
-  std::unique_ptr<GroundTruthSink> BeginIngest(std::int64_t trial_id, int attempt) override {
-    return std::make_unique<SqliteSink>(s_.BeginIngest(trial_id, attempt));
+  std::unique_ptr<GroundTruthSink> BeginIngest(std::int64_t trial_id, int attempt,
+                                               std::vector<db::ContactSite> sites) override {
+    return std::make_unique<SqliteSink>(
+        s_.BeginIngest(trial_id, attempt, std::move(sites), db::IngestOptions{}));
   }
   db::TrialState RetryTrial(std::int64_t id, int attempt, const std::string& reason,
                             int max_attempts, double backoff_s, const std::string& rule) override {

@@ -4,6 +4,8 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <deque>
+#include <functional>
 #include <mutex>
 #include <set>
 
@@ -123,13 +125,19 @@ struct TrialDriver::Impl {
     Clock::time_point claimed_at{};
     double execute_wall_s = -1;
     int store_waits = 0;  // store steps of this cell waiting after kBusy: deadlines held
-    std::int64_t reset_aimed_at = 0;  // the trial the running reset prepares (0: none)
+    std::int64_t reset_aimed_at = 0;   // the trial the running reset prepares (0: none)
+    bool store_failures_zero = false;  // the store's count of failures in a row is 0
     // Issue 29: its declared change costs (nullopt: none declared, plan
     // order), what the service last saw it mount (nullopt: not known), what
     // its running reset mounts, and the block of its last claim.
     std::optional<schemas::ChangeCosts> change_costs;
     std::optional<schemas::Fixtures> mounted;
     std::optional<schemas::Fixtures> reset_mounts;
+    // The trial this cell most likely runs next, looked up while it executes
+    // (the lookup is then off the path from its stream to its RESET);
+    // `aim_known` false: not looked up, the reset step looks it up itself.
+    std::optional<db::ClaimedTrial> next_aim;
+    bool aim_known = false;
     std::int64_t block_campaign = 0, block = -1;
   };
   std::map<std::string, CellRun> cells;
@@ -321,18 +329,43 @@ struct TrialDriver::Impl {
 
   // Counts a phase result (quarantine after quarantine_after failures with no
   // fully clean trial between them).
+  // Store writes no cell waits on (a clean trial's prediction and done, a
+  // healthy cell's good result). Tick runs them after Dispatch, so they fall
+  // in a cell's execute phase instead of between its stream and its next
+  // claim (issue 27: the per-trial overhead). A crash before they run loses
+  // nothing the restart does not redo: the trial is predicted again, the
+  // cell's count of failures in a row was already 0.
+  std::deque<std::function<void()>> background;
+  void RunBackground() {
+    while (!background.empty()) {
+      auto work = std::move(background.front());
+      background.pop_front();
+      work();
+    }
+  }
+
   void CellResult(CellRun& cell, CellPhase phase, bool ok, const std::string& reason) {
     int& streak = phase == CellPhase::kResetting ? cell.reset_failures : cell.execute_failures;
     const int other = phase == CellPhase::kResetting ? cell.execute_failures : cell.reset_failures;
+    const bool was_clean = streak == 0 && other == 0 && cell.store_failures_zero;
     if (ok) {
       streak = 0;
       if (other != 0) return;
     } else {
       ++streak;
+      cell.store_failures_zero = false;
     }
     const std::string id = cell.id;
+    if (ok && was_clean) {  // only last_seen moves: once per trial, off the critical path
+      if (phase != CellPhase::kResetting) return;
+      background.push_back([this, id] {
+        Step("cell " + id + ": result", "", [this, id] { store.RecordCellResult(id, true); });
+      });
+      return;
+    }
     Step("cell " + id + ": result", id, [this, id, ok, reason] {
       const int failures = store.RecordCellResult(id, ok);
+      Cell(id).store_failures_zero = failures == 0;
       if (ok || failures < opt.service.quarantine_after) return;
       const std::string why = std::to_string(failures) + " failures in a row, last: " + reason;
       store.QuarantineCell(id, why);
@@ -493,6 +526,14 @@ struct TrialDriver::Impl {
     return scheduling.emplace(campaign_id, s).first->second;
   }
 
+  // The aimed trial went to another cell since it was looked up (one service
+  // claims for every cell of a store: its own record is the truth).
+  bool ClaimedByAnother(const CellRun& cell) const {
+    for (const auto& [id, other] : cells)
+      if (id != cell.id && other.trial_id == cell.next_aim->trial_id) return true;
+    return false;
+  }
+
   // The one place the claim chooser (claim_chooser.hpp) is called: the trial
   // `cell` claims now (`claim`), or would claim (to aim its reset at).
   std::optional<db::ClaimedTrial> NextTrialFor(CellRun& cell, bool claim) {
@@ -615,7 +656,7 @@ struct TrialDriver::Impl {
         [this, tag, cell_id, trial_id, attempt, seed, scene_json, defects_json, budget] {
           auto it = executions.find(trial_id);
           if (it == executions.end() || it->second.attempt != attempt) return;
-          it->second.sink = store.BeginIngest(trial_id, attempt);
+          it->second.sink = store.BeginIngest(trial_id, attempt, ContactSitesOf(it->second.scene));
           CellRun& c = Cell(cell_id);
           msg::TrialCommand cmd = Command(c, msg::PHASE_EXECUTE);
           cmd.trial_id(static_cast<std::uint64_t>(trial_id));
@@ -632,6 +673,18 @@ struct TrialDriver::Impl {
             return;
           }
           spdlog::info("{}: EXECUTE on cell {}", tag, cell_id);
+          // While it executes: the trial its reset will aim at (see Executed),
+          // chosen as if the fixtures of this trial were mounted, as they will be.
+          c.aim_known = false;
+          try {
+            CellRun probe = c;
+            if (probe.change_costs) probe.mounted = FixturesOfTrial(trial_id, scene_json);
+            c.next_aim = NextTrialFor(probe, false);
+            c.aim_known = true;
+          } catch (const db::StoreError& e) {
+            if (Judge(e) == StoreVerdict::kStop) throw;  // as any step: the service stops
+            spdlog::debug("{}: next trial looked up at the reset instead: {}", tag, e.what());
+          }
         },
         [this, cell_id](const db::StoreError& e) {
           CellRun& c = Cell(cell_id);
@@ -730,7 +783,7 @@ struct TrialDriver::Impl {
           if (eit == executions.end() || eit->second.attempt != attempt) return;
           Execution& e = eit->second;
           if (!e.sink) {  // a busy store broke the ingest: write the whole stream again
-            e.sink = store.BeginIngest(e.trial_id, e.attempt);
+            e.sink = store.BeginIngest(e.trial_id, e.attempt, ContactSitesOf(e.scene));
             try {
               e.sink->Add(e.samples);
             } catch (...) {
@@ -789,8 +842,14 @@ struct TrialDriver::Impl {
         tag + ": begin reset", cell_id,
         [this, trial_id, attempt, cell_id] {
           CellRun& c = Cell(cell_id);
-          // Aim the reset at the start of the trial this cell will most likely run next.
-          std::optional<db::ClaimedTrial> next = NextTrialFor(c, false);
+          // Aim the reset at the start of the trial this cell will most likely run next
+          // (looked up while it executed; a trial claimed since by another cell only
+          // costs the next trial its measured start, as a lookup here could too).
+          const bool aim_current = c.aim_known && (!c.next_aim || !ClaimedByAnother(c));
+          std::optional<db::ClaimedTrial> next =
+              aim_current ? std::move(c.next_aim) : NextTrialFor(c, false);
+          c.aim_known = false;
+          c.next_aim.reset();
           store.BeginReset(trial_id, attempt, kResetAfterExecute);
           c.reset_mounts.reset();
           if (next) c.reset_mounts = FixturesOfTrial(next->trial_id, next->scene_json);
@@ -832,8 +891,7 @@ struct TrialDriver::Impl {
 
   // What the trial ran on and which defects were applied (the cell's word).
   // Metadata: a store error here is logged by Step's policy, never blocks the trial.
-  void RecordExecution(const Execution& ex, const msg::TrialStatus& st) {
-    const auto detail = nlohmann::json::parse(st.detail_json(), nullptr, false);
+  void RecordExecution(const Execution& ex, const nlohmann::json& detail) {
     if (!detail.is_object()) return;
     const std::string backend = detail.value("backend", std::string());
     const std::string truth = detail.value("truth", std::string());
@@ -852,6 +910,8 @@ struct TrialDriver::Impl {
   // like RecordExecution; the commands also go to the prediction (replayed).
   void RecordClosedLoop(Execution& ex, const msg::TrialStatus& st) {
     const std::string tag = TrialTag(ex.campaign_id, ex.trial_id, ex.attempt);
+    // Most runs are open loop: no parse of the detail to learn that.
+    if (st.detail_json().find("\"closed_loop\"") == std::string::npos) return;
     std::optional<db::ClosedLoopRun> run;
     try {
       run = ClosedLoopFromDetail(ex.trial_id, ex.attempt, st.reason(), st.detail_json());
@@ -882,8 +942,8 @@ struct TrialDriver::Impl {
         // The cell changed what differed before it ran (executors/trial_start.hpp).
         RecordChanges(cell, ex.trial_id, ex.attempt, "execute",
                       FixturesOfTrial(ex.trial_id, ex.scene_json));
+        RecordExecution(ex, detail);
       }
-        RecordExecution(ex, st);
         RecordClosedLoop(ex, st);
         cell.execute_wall_s = st.phase_wall_s();
         ex.expected = st.samples();
@@ -955,9 +1015,9 @@ struct TrialDriver::Impl {
   void AfterReset(std::int64_t trial_id) {
     auto it = waiting_predictions.find(trial_id);
     if (it == waiting_predictions.end()) return;
-    PredictionDone done = std::move(it->second);
+    auto done = std::make_shared<PredictionDone>(std::move(it->second));
     waiting_predictions.erase(it);
-    RecordPrediction(std::move(done));
+    background.push_back([this, done] { RecordPrediction(std::move(*done)); });
   }
 
   void OnPrediction(PredictionDone done) {
@@ -1129,12 +1189,14 @@ struct TrialDriver::Impl {
       Attempt("completing finished campaigns", [&] { store.CompleteFinishedCampaigns(0); });
     }
     Dispatch(stopping);
+    RunBackground();
   }
 
   bool InFlight() const {
     for (const auto& [id, cell] : cells)
       if (cell.phase != CellPhase::kIdle) return true;
-    return predictions.outstanding() > 0 || !waiting_predictions.empty() || steps.pending() > 0;
+    return predictions.outstanding() > 0 || !waiting_predictions.empty() || steps.pending() > 0 ||
+           !background.empty();
   }
 
   ServiceCounters Snapshot() const {

@@ -774,6 +774,11 @@ class Store {
   //   dispatched (or past executed with its ground truth) at `attempt`.
   std::unique_ptr<Ingest> BeginIngest(std::int64_t trial_id, int attempt,
                                       const IngestOptions& options = {});
+  // The same with the trial's contact sites (outcomes.hpp) from the caller,
+  // which has the scene parsed already (the service: mechanics' Scene); the
+  // overload above reads them from the stored scene (ContactSitesFromScene).
+  std::unique_ptr<Ingest> BeginIngest(std::int64_t trial_id, int attempt,
+                                      std::vector<ContactSite> sites, const IngestOptions& options);
   // The published stream of the trial, read in one snapshot.
   // @throws kNotFound when the trial has no published ground truth.
   GroundTruth ReadGroundTruth(std::int64_t trial_id) const;

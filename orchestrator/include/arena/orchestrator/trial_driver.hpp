@@ -95,7 +95,9 @@ class TrialStore {
   virtual db::Trial GetTrial(std::int64_t trial_id) = 0;
   virtual std::optional<db::ClaimedTrial> ClaimNextTrial(const std::string& cell_id) = 0;
   virtual std::optional<db::ClaimedTrial> PeekNextTrial(const std::string& cell_id) = 0;
-  virtual std::unique_ptr<GroundTruthSink> BeginIngest(std::int64_t trial_id, int attempt) = 0;
+  // `sites`: the trial's contacts (ContactSitesOf its scene), for the outcomes stored at ingest.
+  virtual std::unique_ptr<GroundTruthSink> BeginIngest(std::int64_t trial_id, int attempt,
+                                                       std::vector<db::ContactSite> sites) = 0;
   // `rule` (these four): the trial policy's rule that decided the step
   // (trial_policy.hpp), for the audit row. RetryTrial applies db::DecideRetry
   // (db/retry_rule.hpp), as every implementation must.
