@@ -678,7 +678,9 @@ namespace {
 // each: both walk an index, so a claim costs the same with 10 or 10^6
 // planned trials (one ORDER BY over all planned trials would not).
 constexpr const char* kActiveCampaignsSql =
-    "SELECT id FROM campaigns WHERE state = 'active' ORDER BY priority DESC, id";
+    "SELECT id FROM campaigns WHERE state = 'active'"
+    " AND id NOT IN (SELECT campaign_id FROM campaign_waits)"  // the claim gate (issue 26)
+    " ORDER BY priority DESC, id";
 constexpr const char* kNextTrialSql =
     "SELECT id, campaign_id, attempt, seed, scene_json, defects_json, idx FROM trials"
     " WHERE state = 'planned' AND campaign_id = ? AND not_before <= ? AND (contact_mask & ~?) = 0"

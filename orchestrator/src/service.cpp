@@ -188,6 +188,14 @@ class SqliteTrialStore : public TrialStore {
   void RecordFixtureChanges(const std::vector<db::FixtureChangeRecord>& changes) override {
     s_.RecordFixtureChanges(changes);
   }
+  // The claim gate (issue 26).
+  std::vector<db::PlannedNeed> PlannedNeeds() override { return s_.PlannedNeeds(); }
+  void SetCampaignWait(std::int64_t campaign_id, const std::string& kind, const std::string& reason,
+                       const std::string& rule) override {
+    s_.SetCampaignWait(campaign_id, kind, reason, rule);
+  }
+  void ClearCampaignWait(std::int64_t campaign_id) override { s_.ClearCampaignWait(campaign_id); }
+  std::vector<db::CampaignWait> ListCampaignWaits() override { return s_.ListCampaignWaits(); }
   std::optional<db::ClaimedTrial> PeekNextTrial(const std::string& cell) override {
     return s_.PeekNextTrial(cell);
   }

@@ -16,6 +16,7 @@
 #include "arena/mechanics/scene_json.hpp"
 #include "arena/orchestrator/campaign.hpp"
 #include "arena/orchestrator/claim_chooser.hpp"
+#include "arena/orchestrator/claim_gate.hpp"
 #include "arena/orchestrator/closed_loop.hpp"
 #include "arena/orchestrator/logging.hpp"
 #include "arena/orchestrator/trial_data.hpp"
@@ -139,6 +140,7 @@ struct TrialDriver::Impl {
     std::optional<db::ClaimedTrial> next_aim;
     bool aim_known = false;
     std::int64_t block_campaign = 0, block = -1;
+    HostCell host;  // what it announced it can do (the claim gate, claim_gate.hpp)
   };
   std::map<std::string, CellRun> cells;
 
@@ -171,6 +173,12 @@ struct TrialDriver::Impl {
   StoreSteps steps;
 
   Clock::time_point next_claims{}, next_beat{}, next_file_check{}, next_campaigns{};
+  // The claim gate (issue 26): each waiting campaign's stored reason; the
+  // gate re-decides every kGatePeriod_s and at once when the cells change.
+  std::map<std::int64_t, std::string> campaign_waits;
+  bool waits_loaded = false, gate_dirty = true;
+  Clock::time_point next_gate{};
+  static constexpr double kGatePeriod_s = 5.0;
 
   Impl(DriverOptions o, ServiceIdentity m, TrialStore& s, CommandTransport& t, PredictionPort& p,
        std::function<Clock::time_point()> n)
@@ -251,6 +259,10 @@ struct TrialDriver::Impl {
                            {"truth", a.truth()}};
     cell.contact_types = a.contact_types();
     cell.truth = a.truth();
+    const HostCell host = AnnouncedHost(a);
+    if (!SameHost(host, cell.host)) gate_dirty = true;  // announces repeat: decide on a change
+    cell.host = host;
+    caps["emulates_defects"] = cell.host.emulates_defects;
     cell.change_costs = DeclaredCosts(id, a.backend_json());
     if (cell.change_costs) {
       caps[schemas::kChangeCostsKey] = {{"finger_s", cell.change_costs->finger_s},
@@ -285,6 +297,7 @@ struct TrialDriver::Impl {
       if (ours) spdlog::info("cell {}: serving us", id);
       cell.ours = ours;
       cell.serving = serving;
+      gate_dirty = true;
       Step("cell " + id + ": serving", "",
            [this, id, serving] { store.SetCellServing(id, opt.cell_lease_s, serving); });
     }
@@ -306,8 +319,9 @@ struct TrialDriver::Impl {
     if (!cell.alive) return;
     spdlog::warn("cell {}: {}", id, reason);
     if (observer) observer->OnCellAlive(id, false);
-    cell.alive = false;  // (`ours` stays: a process back from a lapse may still serve us;
-                         // a new one announces that it serves nobody)
+    cell.alive = false;
+    gate_dirty = true;  // (`ours` stays: a process back from a lapse may still serve us;
+                        // a new one announces that it serves nobody)
     EndPhase(cell, DecideServiceEvent(cell.phase, ServiceEvent::kCellLost), "cell lost: " + reason);
     Step("cell " + id + ": gone", "", [this, id, reason] { store.MarkCellGone(id, reason); });
   }
@@ -317,6 +331,7 @@ struct TrialDriver::Impl {
     if (it == cells.end() || it->second.alive) return;
     CellRun& cell = it->second;
     cell.alive = true;
+    gate_dirty = true;
     if (observer) observer->OnCellAlive(id, true);
     cell.next_claim = now();
     SendClaim(cell);
@@ -591,6 +606,77 @@ struct TrialDriver::Impl {
     if (records.empty()) return;
     Step("cell " + cell.id + ": fixture changes", "",
          [this, records] { store.RecordFixtureChanges(records); });
+  }
+
+  // ------------------------------------------------------------ the claim gate (issue 26)
+  static HostCell AnnouncedHost(const msg::CellAnnounce& a) {
+    HostCell h;
+    h.id = a.cell_id();
+    h.backend = a.backend();
+    const auto j = nlohmann::json::parse(a.backend_json(), nullptr, false);
+    // An older cell that does not say: as before the gate (it refuses what it cannot).
+    h.emulates_defects =
+        !(j.is_object() && j.contains("emulates_defects") && j["emulates_defects"].is_boolean() &&
+          !j["emulates_defects"].get<bool>());
+    for (const auto& t : a.contact_types())
+      h.contact_mask |= t == "point" ? 1 : t == "line" ? 2 : t == "patch" ? 4 : 0;
+    for (int k = 0; k < 3; ++k) {
+      h.workspace_min[k] = a.workspace_min()[k];
+      h.workspace_max[k] = a.workspace_max()[k];
+    }
+    h.max_pusher_speed = a.max_pusher_speed();
+    return h;
+  }
+
+  static bool SameHost(const HostCell& a, const HostCell& b) {
+    return a.id == b.id && a.backend == b.backend && a.emulates_defects == b.emulates_defects &&
+           a.contact_mask == b.contact_mask && a.workspace_min == b.workspace_min &&
+           a.workspace_max == b.workspace_max && a.max_pusher_speed == b.max_pusher_speed;
+  }
+
+  // Decides every active campaign's gate and stores what changed: a
+  // campaign no live cell can host waits (the claim skips it), one a cell
+  // can host again is released.
+  void GateCampaigns() {
+    if (!waits_loaded) {  // a restart: the store's waits are decided anew
+      for (const auto& w : store.ListCampaignWaits()) campaign_waits[w.campaign_id] = w.reason;
+      waits_loaded = true;
+    }
+    std::vector<HostCell> live;
+    for (const auto& [id, cell] : cells)
+      if (cell.alive && cell.ours && !cell.quarantined) live.push_back(cell.host);
+    std::map<std::int64_t, CampaignNeeds> needs;
+    for (const db::PlannedNeed& n : store.PlannedNeeds()) {
+      CampaignNeeds& c = needs[n.campaign_id];
+      if (c.trials.empty()) {
+        c.campaign_id = n.campaign_id;
+        c.physics_defects = PhysicsDefects(n.defects_json);
+      }
+      c.trials.push_back(
+          {n.contact_mask, {n.position[0], n.position[1], n.position[2]}, n.pusher_speed});
+    }
+    for (auto it = campaign_waits.begin(); it != campaign_waits.end();) {
+      if (needs.count(it->first)) {
+        ++it;
+        continue;
+      }
+      store.ClearCampaignWait(it->first);  // nothing planned (done, paused, cancelled)
+      it = campaign_waits.erase(it);
+    }
+    for (const auto& [id, c] : needs) {
+      const GateDecision d = DecideClaimGate(c, live);
+      auto it = campaign_waits.find(id);
+      if (d.waits && (it == campaign_waits.end() || it->second != d.reason)) {
+        store.SetCampaignWait(id, std::string(ToString(d.kind)), d.reason, d.rule);
+        campaign_waits[id] = d.reason;
+        spdlog::warn("campaign {} waits: {} ({})", id, d.reason, d.rule);
+      } else if (!d.waits && it != campaign_waits.end()) {
+        store.ClearCampaignWait(id);
+        campaign_waits.erase(it);
+        spdlog::info("campaign {}: a live cell can host it again; dispatch resumes ({})", id,
+                     d.rule);
+      }
+    }
   }
 
   // ------------------------------------------------------------ dispatch
@@ -1187,6 +1273,11 @@ struct TrialDriver::Impl {
     if (t >= next_campaigns) {  // `arena serve` marks finished campaigns done
       next_campaigns = t + Dur(1.0);
       Attempt("completing finished campaigns", [&] { store.CompleteFinishedCampaigns(0); });
+    }
+    if (recovered && (gate_dirty || t >= next_gate)) {
+      gate_dirty = false;
+      next_gate = t + Dur(kGatePeriod_s);
+      Attempt("the claim gate", [&] { GateCampaigns(); });
     }
     Dispatch(stopping);
     RunBackground();

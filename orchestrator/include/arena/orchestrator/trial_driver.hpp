@@ -151,6 +151,13 @@ class TrialStore {
     return c;
   }
   virtual void RecordFixtureChanges(const std::vector<db::FixtureChangeRecord>& /*changes*/) {}
+  // The claim gate (issue 26, claim_gate.hpp). The defaults are a store
+  // without it (the tests' fakes): nothing planned to gate, nothing waits.
+  virtual std::vector<db::PlannedNeed> PlannedNeeds() { return {}; }
+  virtual void SetCampaignWait(std::int64_t /*campaign_id*/, const std::string& /*kind*/,
+                               const std::string& /*reason*/, const std::string& /*rule*/) {}
+  virtual void ClearCampaignWait(std::int64_t /*campaign_id*/) {}
+  virtual std::vector<db::CampaignWait> ListCampaignWaits() { return {}; }
 };
 
 // Sends commands to cells (the DDS TrialCommand writer in production).
