@@ -1,4 +1,4 @@
-// The claim gate's store side (issue 26, migration 19): what active
+// The claim gate's store side (issue 26, migration 18): what active
 // campaigns' planned trials need of a cell, and the campaigns that wait
 // because no live cell can host them. Tables: db/README.md (campaign_waits).
 #include <sqlite3.h>

@@ -522,7 +522,7 @@ CREATE INDEX IF NOT EXISTS fixture_changes_trial ON fixture_changes(trial_id);
       // can host them (orchestrator/claim_gate.hpp). One row per waiting
       // campaign; deleted when a cell that can host it announces. The claim
       // skips a campaign that has one.
-      {19, "campaign_waits: why no live cell can host a campaign's trials", R"sql(
+      {18, "campaign_waits: why no live cell can host a campaign's trials", R"sql(
 CREATE TABLE IF NOT EXISTS campaign_waits(
   campaign_id INTEGER PRIMARY KEY REFERENCES campaigns(id),
   kind        TEXT NOT NULL

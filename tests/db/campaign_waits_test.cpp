@@ -1,4 +1,4 @@
-// Issue 26 in the store (migration 19): what the claim gate reads of the
+// Issue 26 in the store (migration 18): what the claim gate reads of the
 // planned trials, and a waiting campaign skipped by every claim until its
 // wait is cleared. Pins: before the gate, a campaign no cell could host was
 // claimed trial after trial.

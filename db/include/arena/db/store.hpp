@@ -292,7 +292,7 @@ struct Trial {
   std::optional<double> finished_at;  // reached a terminal state
 };
 
-// Issue 26 (migration 19): why no live cell can host a campaign's trials
+// Issue 26 (migration 18): why no live cell can host a campaign's trials
 // (orchestrator/claim_gate.hpp); its trials wait, unclaimed.
 struct CampaignWait {
   std::int64_t campaign_id = 0;
@@ -881,7 +881,7 @@ class Store {
   // Events with id > after_id, oldest first, at most `limit`.
   std::vector<EventRecord> ListEvents(std::int64_t after_id = 0, std::size_t limit = 1000) const;
 
-  // ---- the claim gate (issue 26, migration 19; campaign_waits.cpp)
+  // ---- the claim gate (issue 26, migration 18; campaign_waits.cpp)
   // What an active campaign's planned trials need of a cell, alike trials
   // grouped (at most `limit` groups per campaign), for
   // orchestrator/claim_gate.hpp.
