@@ -91,4 +91,20 @@ std::vector<CampaignWait> Store::ListCampaignWaits() const {
   return out;
 }
 
+
+void Store::RestrictClaimsTo(std::optional<std::vector<std::int64_t>> campaigns) {
+  if (!campaigns) {
+    impl_->claimable.reset();
+    return;
+  }
+  impl_->claimable.emplace(campaigns->begin(), campaigns->end());
+}
+
+std::vector<std::int64_t> Store::ActiveCampaignIds() const {
+  auto s = impl_->Prepare("SELECT id FROM campaigns WHERE state = 'active' ORDER BY id");
+  std::vector<std::int64_t> out;
+  while (s->Step()) out.push_back(s->Int(0));
+  return out;
+}
+
 }  // namespace arena::db

@@ -196,6 +196,10 @@ class SqliteTrialStore : public TrialStore {
   }
   void ClearCampaignWait(std::int64_t campaign_id) override { s_.ClearCampaignWait(campaign_id); }
   std::vector<db::CampaignWait> ListCampaignWaits() override { return s_.ListCampaignWaits(); }
+  void RestrictClaimsTo(std::optional<std::vector<std::int64_t>> campaigns) override {
+    s_.RestrictClaimsTo(std::move(campaigns));
+  }
+  std::vector<std::int64_t> ActiveCampaignIds() override { return s_.ActiveCampaignIds(); }
   std::optional<db::ClaimedTrial> PeekNextTrial(const std::string& cell) override {
     return s_.PeekNextTrial(cell);
   }

@@ -174,8 +174,11 @@ struct TrialDriver::Impl {
 
   Clock::time_point next_claims{}, next_beat{}, next_file_check{}, next_campaigns{};
   // The claim gate (issue 26): each waiting campaign's stored reason; the
-  // gate re-decides every kGatePeriod_s and at once when the cells change.
+  // gate re-decides every kGatePeriod_s, at once when the cells change, and
+  // before a claim when the active campaigns are not those it decided on
+  // (`gated_active`): the store's claims take only from campaigns it opened.
   std::map<std::int64_t, std::string> campaign_waits;
+  std::optional<std::vector<std::int64_t>> gated_active;
   bool waits_loaded = false, gate_dirty = true;
   Clock::time_point next_gate{};
   static constexpr double kGatePeriod_s = 5.0;
@@ -638,6 +641,9 @@ struct TrialDriver::Impl {
   // campaign no live cell can host waits (the claim skips it), one a cell
   // can host again is released.
   void GateCampaigns() {
+    // Read first: a campaign submitted after it is not in `open` below, and
+    // the next claim's check sees the active campaigns changed.
+    const std::vector<std::int64_t> active = store.ActiveCampaignIds();
     if (!waits_loaded) {  // a restart: the store's waits are decided anew
       for (const auto& w : store.ListCampaignWaits()) campaign_waits[w.campaign_id] = w.reason;
       waits_loaded = true;
@@ -677,18 +683,43 @@ struct TrialDriver::Impl {
                      d.rule);
       }
     }
+    std::vector<std::int64_t> open;
+    for (const std::int64_t id : active)
+      if (!campaign_waits.count(id)) open.push_back(id);
+    store.RestrictClaimsTo(std::move(open));
+    gated_active = active;
+  }
+
+  // Before a claim: a campaign submitted or resumed since the gate last ran
+  // is decided now, not dispatched ungated.
+  void GateNewCampaigns() {
+    if (store.ActiveCampaignIds() == gated_active) return;
+    gate_dirty = false;
+    next_gate = now() + Dur(kGatePeriod_s);
+    GateCampaigns();
   }
 
   // ------------------------------------------------------------ dispatch
   void Dispatch(bool stopping) {
     if (stopping || !recovered) return;
     const auto t = now();
+    bool gate_checked = false;
     for (auto& [id, cell] : cells) {
       if (!cell.alive || !cell.ours || cell.quarantined || cell.phase != CellPhase::kIdle ||
           cell.store_waits > 0 || t < cell.next_claim)
         continue;
       cell.next_claim = t + Dur(opt.dispatch_poll_s);        // poll the store gently when idle
       if (observer && observer->DispatchGate(id)) continue;  // a suspension holds it back
+      if (!gate_checked) {
+        gate_checked = true;
+        bool gated = true;
+        Attempt("the claim gate", [&] {
+          gated = false;
+          GateNewCampaigns();
+          gated = true;
+        });
+        if (!gated) return;  // a busy store: no claim past an undecided gate
+      }
       std::optional<db::ClaimedTrial> claim;
       const std::string cell_id = id;
       Attempt("cell " + id + ": claim", [&] { claim = NextTrialFor(cell, true); });
@@ -1171,6 +1202,7 @@ struct TrialDriver::Impl {
   // trial is dispatched before it ran, or it would re-queue our own claims.
   bool recovered = false;
   void Resume() {
+    store.RestrictClaimsTo(std::vector<std::int64_t>{});  // nothing claimable before the gate ran
     Step(
         "recovery after restart", "",
         [this] {

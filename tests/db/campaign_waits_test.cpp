@@ -5,6 +5,8 @@
 #include <gtest/gtest.h>
 
 #include <map>
+#include <optional>
+#include <vector>
 
 #include "db_test_util.hpp"
 
@@ -50,6 +52,41 @@ TEST(CampaignWaits, AWaitingCampaignIsNotClaimedUntilCleared) {
   claim = store->ClaimNextTrial("c1");
   ASSERT_TRUE(claim.has_value());
   EXPECT_EQ(claim->campaign_id, high);
+}
+
+// The gate's allow list (the CI race of stop 34): a campaign submitted after
+// the gate last ran was claimed before the gate saw it, and its trials went
+// to a cell that refused them. Claims now take only from the campaigns the
+// gate opened; ActiveCampaignIds is how the service notices a new one.
+TEST(CampaignWaits, ClaimsTakeOnlyFromTheCampaignsTheGateOpened) {
+  TempDir dir;
+  auto store = Store::Open(dir.File("s.db"));
+  store->UpsertCell("c1", {"point", "line", "patch"});
+  store->RestrictClaimsTo(std::vector<std::int64_t>{});  // before the gate ran: nothing
+  const auto first = store->CreateCampaign(MakeCampaign("first", 0), MakeTrials(2));
+  EXPECT_EQ(store->ActiveCampaignIds(), std::vector<std::int64_t>{first});
+  EXPECT_FALSE(store->ClaimNextTrial("c1").has_value());
+  EXPECT_FALSE(store->PeekNextTrial("c1").has_value());
+  EXPECT_TRUE(store->ClaimWindow("c1", 10).empty());
+  store->RestrictClaimsTo(std::vector<std::int64_t>{first});
+  const auto later = store->CreateCampaign(MakeCampaign("later", 9), MakeTrials(2));
+  EXPECT_EQ(store->ActiveCampaignIds(), (std::vector<std::int64_t>{first, later}));
+  // The later campaign has the higher priority, but the gate has not seen it.
+  for (const auto& t : store->ClaimWindow("c1", 10)) EXPECT_EQ(t.campaign_id, first);
+  const auto window = store->ClaimWindow("c1", 10);
+  ASSERT_FALSE(window.empty());
+  auto claim = store->ClaimNextTrial("c1");
+  ASSERT_TRUE(claim.has_value());
+  EXPECT_EQ(claim->campaign_id, first);
+  // ClaimTrial by id refuses a trial of a campaign outside the list.
+  std::int64_t later_trial = 0;
+  for (const auto& t : store->ListTrials(later)) later_trial = t.id;
+  EXPECT_FALSE(store->ClaimTrial("c1", later_trial, "claim.plan_order").has_value());
+  // Lifted: every active campaign again.
+  store->RestrictClaimsTo(std::nullopt);
+  claim = store->ClaimNextTrial("c1");
+  ASSERT_TRUE(claim.has_value());
+  EXPECT_EQ(claim->campaign_id, later);
 }
 
 TEST(CampaignWaits, BadInputRefusedNothingStored) {

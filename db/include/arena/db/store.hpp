@@ -894,6 +894,15 @@ class Store {
   // @returns false when the campaign did not wait.
   bool ClearCampaignWait(std::int64_t campaign_id);
   std::vector<CampaignWait> ListCampaignWaits() const;
+  // The campaigns this Store's claims (ClaimNextTrial, PeekNextTrial,
+  // ClaimWindow, ClaimTrial) may take from; nullopt (the default): every
+  // active one. Not stored: `arena serve` allows only the campaigns its
+  // claim gate has decided open, so a campaign submitted or resumed between
+  // two gate runs waits for the gate instead of reaching a cell that must
+  // refuse it.
+  void RestrictClaimsTo(std::optional<std::vector<std::int64_t>> campaigns);
+  // Active campaigns' ids, ascending (a cheap look: the gate's change check).
+  std::vector<std::int64_t> ActiveCampaignIds() const;
 
   // ---- read side
   StatusSummary Status() const;

@@ -158,6 +158,10 @@ class TrialStore {
                                const std::string& /*reason*/, const std::string& /*rule*/) {}
   virtual void ClearCampaignWait(std::int64_t /*campaign_id*/) {}
   virtual std::vector<db::CampaignWait> ListCampaignWaits() { return {}; }
+  // db::Store::RestrictClaimsTo and ActiveCampaignIds: the claims take only
+  // from campaigns the gate decided open.
+  virtual void RestrictClaimsTo(std::optional<std::vector<std::int64_t>> /*campaigns*/) {}
+  virtual std::vector<std::int64_t> ActiveCampaignIds() { return {}; }
 };
 
 // Sends commands to cells (the DDS TrialCommand writer in production).
