@@ -91,7 +91,6 @@ std::vector<CampaignWait> Store::ListCampaignWaits() const {
   return out;
 }
 
-
 void Store::RestrictClaimsTo(std::optional<std::vector<std::int64_t>> campaigns) {
   if (!campaigns) {
     impl_->claimable.reset();
