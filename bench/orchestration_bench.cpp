@@ -172,6 +172,143 @@ BENCHMARK(BM_CampaignEndToEnd)
     ->Unit(benchmark::kSecond)
     ->UseRealTime();
 
+// Resident memory (KiB) of this process (the service runs in it).
+long SelfRssKiB() {
+  std::ifstream status("/proc/self/status");
+  std::string line;
+  while (std::getline(status, line)) {
+    if (line.rfind("VmRSS:", 0) == 0) return std::stol(line.substr(6));
+  }
+  return 0;
+}
+
+// A 24/7 run in one campaign (issue 27): `trials` trials on `cells` cells,
+// the service's and each cell's resident memory and the overhead of the
+// last 1,000 trials printed at every 1,000 done, then the growth per 1,000
+// trials after the first 2,000 (warm-up: pools, caches, the store's pages).
+int Soak(int trials, int cells) {
+  spdlog::set_level(spdlog::level::warn);
+  const fs::path dir = fs::temp_directory_path() / ("arena_orch_soak_" + std::to_string(getpid()));
+  fs::create_directories(dir);
+  const int domain = 120 + getpid() % 100;
+  std::vector<std::unique_ptr<CellProcess>> processes;
+  for (int k = 0; k < cells; ++k) {
+    processes.push_back(std::make_unique<CellProcess>(
+        "soak" + std::to_string(k + 1), domain, dir / ("cell" + std::to_string(k + 1) + ".log")));
+  }
+  nlohmann::json spec = nlohmann::json::parse(SmokeCampaign(1));
+  const int conditions = 12;  // smoke.json's
+  spec["replicates"] = (trials + conditions - 1) / conditions;
+  const orchestrator::Campaign campaign =
+      orchestrator::ParseCampaign(spec.dump(), ARENA_SOURCE_DIR "/examples/campaigns");
+  const fs::path db = dir / "soak.db";
+  std::int64_t id = 0;
+  {
+    auto store = db::Store::Open(db.string());
+    id = orchestrator::SubmitCampaign(*store, campaign);
+  }
+  orchestrator::ServiceOptions so;
+  so.db_path = db.string();
+  so.domain_id = domain;
+  so.exit_when_done = true;
+  so.only_campaign = id;
+  so.network.shared_memory = false;
+  orchestrator::Service service(so);
+  std::vector<double> overhead;
+  service.OnTrialTiming(
+      [&](const orchestrator::TrialTiming& t) { overhead.push_back(t.overhead_s); });
+  struct Row {
+    std::int64_t done;
+    double wall_s;
+    long service_kib;
+    std::vector<long> cell_kib;
+    double p50_ms, p95_ms;
+  };
+  std::vector<Row> rows;
+  const auto start = std::chrono::steady_clock::now();
+  std::size_t timed = 0;
+  service.OnTick([&](const orchestrator::ServiceCounters& c) {
+    if (c.done < static_cast<std::int64_t>(rows.size() + 1) * 1000) return;
+    Row r{c.done,
+          std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count(),
+          SelfRssKiB(),
+          {},
+          0,
+          0};
+    for (const auto& p : processes) r.cell_kib.push_back(p->RssKiB());
+    std::vector<double> last(overhead.begin() + static_cast<std::ptrdiff_t>(timed), overhead.end());
+    timed = overhead.size();
+    r.p50_ms = Quantile(last, 0.5) * 1e3;
+    r.p95_ms = Quantile(last, 0.95) * 1e3;
+    rows.push_back(std::move(r));
+  });
+  service.Run();
+  const auto c = service.counters();
+  std::printf("| trials done | wall s | overhead p50 ms | overhead p95 ms | service RSS MiB |");
+  for (int k = 0; k < cells; ++k) std::printf(" cell %d RSS MiB |", k + 1);
+  std::printf("\n|---|---|---|---|---|");
+  for (int k = 0; k < cells; ++k) std::printf("---|");
+  std::printf("\n");
+  for (const auto& r : rows) {
+    std::printf("| %lld | %.0f | %.2f | %.1f | %.1f |", static_cast<long long>(r.done), r.wall_s,
+                r.p50_ms, r.p95_ms, r.service_kib / 1024.0);
+    for (long k : r.cell_kib) std::printf(" %.1f |", k / 1024.0);
+    std::printf("\n");
+  }
+  std::printf("\n%lld done, %lld failed of %d planned\n", static_cast<long long>(c.done),
+              static_cast<long long>(c.failed), conditions * spec["replicates"].get<int>());
+  // Growth after warm-up: from the row at 2,000 to the last.
+  if (rows.size() >= 3) {
+    const Row& a = rows[1];
+    const Row& b = rows.back();
+    const double per_k = 1000.0 / static_cast<double>(b.done - a.done);
+    std::printf("growth per 1,000 trials after %lld: service %.3f MiB",
+                static_cast<long long>(a.done), (b.service_kib - a.service_kib) / 1024.0 * per_k);
+    for (std::size_t k = 0; k < b.cell_kib.size(); ++k)
+      std::printf(", cell %zu %.3f MiB", k + 1, (b.cell_kib[k] - a.cell_kib[k]) / 1024.0 * per_k);
+    std::printf("\n");
+  }
+  processes.clear();
+  std::error_code ec;
+  fs::remove_all(dir, ec);
+  return c.done + c.failed == conditions * spec["replicates"].get<int>() ? 0 : 1;
+}
+
 }  // namespace
 
-BENCHMARK_MAIN();
+// `--soak_trials=N [--soak_cells=K]`: the 24/7 memory run (Soak) instead of
+// the timers; every other flag goes to Google Benchmark.
+int main(int argc, char** argv) {
+  int soak_trials = 0, soak_cells = 1;
+  std::vector<char*> rest;
+  for (int i = 0; i < argc; ++i) {
+    const std::string a = argv[i];
+    try {
+      if (a.rfind("--soak_trials=", 0) == 0) {
+        soak_trials = std::stoi(a.substr(14));
+        continue;
+      }
+      if (a.rfind("--soak_cells=", 0) == 0) {
+        soak_cells = std::stoi(a.substr(13));
+        continue;
+      }
+    } catch (const std::exception&) {
+      std::fprintf(stderr, "%s: must be a whole number\n", a.c_str());
+      return 2;
+    }
+    { rest.push_back(argv[i]); }
+  }
+  if (soak_trials > 0) {
+    if (soak_cells < 1 || soak_cells > 16) {
+      std::fprintf(stderr, "--soak_cells: must be 1..16, got %d\n", soak_cells);
+      return 2;
+    }
+    return Soak(soak_trials, soak_cells);
+  }
+  int n = static_cast<int>(rest.size());
+  benchmark::Initialize(&n, rest.data());
+  if (benchmark::ReportUnrecognizedArguments(n, rest.data())) return 1;
+  benchmark::RunSpecifiedBenchmarks();
+  benchmark::Shutdown();
+  return 0;
+}

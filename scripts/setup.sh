@@ -12,7 +12,8 @@
 # bench/lcp_solvers_bench compares against (Siconos numerics, Bullet, DART;
 # benchmark-only, never runtime dependencies; bench/README.md "LCP solvers").
 #
-# Environment: ARENA_JOBS (default 2).
+# Environment: ARENA_JOBS (default: one job per core, as many as memory
+# holds at about 1.5 GB per compiler; 2 on the 2-core reference machine).
 set -euo pipefail
 bench_peers=0
 targets=()
@@ -26,7 +27,14 @@ done
 here="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 build="${1:-$here/build}"
 shift || true
-jobs="${ARENA_JOBS:-2}"
+# A fresh machine's first build is most of a newcomer's first run: use its
+# cores (bench/README.md "Build time"), not a fixed 2.
+cores="$(nproc 2>/dev/null || echo 2)"
+mem_kb="$(awk '/^MemAvailable:/ {print $2}' /proc/meminfo 2>/dev/null || echo 0)"
+by_memory=$((mem_kb / 1500000))
+jobs_default=$((cores < by_memory ? cores : by_memory))
+((jobs_default >= 1)) || jobs_default=1
+jobs="${ARENA_JOBS:-$jobs_default}"
 
 packages=(
   build-essential cmake ninja-build git pkg-config ccache

@@ -476,6 +476,23 @@ nlohmann::json Multiple(const std::optional<Distribution>& d, double floor) {
   return {{"median", d->median / floor}, {"p95", d->p95 / floor}, {"max", d->max / floor}};
 }
 
+// A setting's counts and error figures: the whole of a group's row, and the
+// part of a report's setting row the two share.
+nlohmann::json SettingErrorsJson(const SettingSummary& s) {
+  return {{"predictor", s.predictor},
+          {"model_key", s.model_key},
+          {"trials", s.trials},
+          {"ok", s.ok},
+          {"diverged", s.diverged},
+          {"failures", s.failures},
+          {"position_error_m", Dist(s.position)},
+          {"angle_error_rad", Dist(s.angle)},
+          {"force_error_n", Dist(s.force)},
+          {"force_trials", s.force_trials},
+          {"time_s", Dist(std::optional<Distribution>(s.time))},
+          {"outcome_nmse", Nmse(s)}};
+}
+
 }  // namespace
 
 nlohmann::json ToJson(const EvaluationReport& r) {
@@ -483,34 +500,23 @@ nlohmann::json ToJson(const EvaluationReport& r) {
   const double ang_floor = r.floor ? r.floor->angle_median : 0;
   nlohmann::json settings = nlohmann::json::array();
   for (const auto& s : r.settings) {
-    nlohmann::json j = {
-        {"predictor", s.predictor},
-        {"model_key", s.model_key},
-        {"knobs", nlohmann::json::parse(s.knobs_json, nullptr, false)},
-        {"step_s", s.step},
-        {"finest", s.finest},
-        {"trials", s.trials},
-        {"ok", s.ok},
-        {"diverged", s.diverged},
-        {"failures", s.failures},
-        {"position_error_m", Dist(s.position)},
-        {"angle_error_rad", Dist(s.angle)},
-        {"force_error_n", Dist(s.force)},
-        {"force_trials", s.force_trials},
-        {"mode_agreement", Dist(s.mode_agreement)},
-        {"position_floor_multiple", Multiple(s.position, pos_floor)},
-        {"angle_floor_multiple", Multiple(s.angle, ang_floor)},
-        {"time_s", Dist(std::optional<Distribution>(s.time))},
-        {"time_per_simulated_s", Dist(s.time_per_sim_s)},
-        {"primary_error", s.Metric(r.primary) ? nlohmann::json(*s.Metric(r.primary)) : nullptr},
-        {"position_p95_all_trials_m", Finite(s.position_p95_all)},
-        {"worst_trials", Notes(s.worst, true)},
-        {"diverged_trials", Notes(s.diverged_trials, false)},
-        {"failed_trials", Notes(s.failed_trials, false)},
-        {"convergence", nullptr},
-        {"pareto", s.pareto},
-        {"within_budget", s.within_budget},
-        {"outcome_nmse", Nmse(s)}};
+    nlohmann::json j = SettingErrorsJson(s);
+    j.update(
+        {{"knobs", nlohmann::json::parse(s.knobs_json, nullptr, false)},
+         {"step_s", s.step},
+         {"finest", s.finest},
+         {"mode_agreement", Dist(s.mode_agreement)},
+         {"position_floor_multiple", Multiple(s.position, pos_floor)},
+         {"angle_floor_multiple", Multiple(s.angle, ang_floor)},
+         {"time_per_simulated_s", Dist(s.time_per_sim_s)},
+         {"primary_error", s.Metric(r.primary) ? nlohmann::json(*s.Metric(r.primary)) : nullptr},
+         {"position_p95_all_trials_m", Finite(s.position_p95_all)},
+         {"worst_trials", Notes(s.worst, true)},
+         {"diverged_trials", Notes(s.diverged_trials, false)},
+         {"failed_trials", Notes(s.failed_trials, false)},
+         {"convergence", nullptr},
+         {"pareto", s.pareto},
+         {"within_budget", s.within_budget}});
     if (j["knobs"].is_discarded()) j["knobs"] = nlohmann::json::object();
     if (s.model) {
       j["facets"] = s.model->facets;
@@ -573,18 +579,7 @@ nlohmann::json ToJson(const EvaluationReport& r) {
     for (const auto& g : r.groups) {
       nlohmann::json gs = nlohmann::json::array();
       for (const auto& s : g.settings) {
-        gs.push_back({{"predictor", s.predictor},
-                      {"model_key", s.model_key},
-                      {"trials", s.trials},
-                      {"ok", s.ok},
-                      {"diverged", s.diverged},
-                      {"failures", s.failures},
-                      {"position_error_m", Dist(s.position)},
-                      {"angle_error_rad", Dist(s.angle)},
-                      {"force_error_n", Dist(s.force)},
-                      {"force_trials", s.force_trials},
-                      {"time_s", Dist(std::optional<Distribution>(s.time))},
-                      {"outcome_nmse", Nmse(s)}});
+        gs.push_back(SettingErrorsJson(s));
       }
       groups.push_back({{"value", g.value}, {"trials", g.trials}, {"settings", gs}});
     }

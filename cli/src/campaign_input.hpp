@@ -7,7 +7,7 @@
 
 #include "arena/executors/defects.hpp"
 #include "arena/orchestrator/campaign.hpp"
-#include "commands.hpp"
+#include "command_error.hpp"
 
 namespace arena::cli {
 

@@ -47,10 +47,11 @@ struct CalibrateOptions {
   double lower = 0.2, upper = 5.0;
   int profile_points = -1;  // < 0 = the predictor's default
   bool json = false;
-  std::string out_path;          // --out: the result as JSON, besides the store
-  std::string loss = "pose";     // --loss: pose (position, angle, force) or nmse
-  std::string holdout_by;        // --holdout-by: a trial parameter
-  std::string trial_parameters;  // --trial-parameters: a CSV with a seed column
+  std::string out_path;           // --out: the result as JSON, besides the store
+  std::string loss = "pose";      // --loss: pose (position, angle, force) or nmse
+  std::string holdout_by;         // --holdout-by: a trial parameter
+  std::string trial_parameters;   // --trial-parameters: a CSV with a seed column
+  std::string from = "measured";  // --from: where predictions start (issue 26)
 };
 
 std::vector<assessment::CalibrationParam> ParseParams(const std::string& list) {
@@ -193,7 +194,7 @@ std::int64_t StoreResult(db::Store& store, const CalibrateOptions& o,
                          const assessment::CalibrationOptions& co, const nlohmann::json& model,
                          const simulators::Simulator* simulator,
                          const assessment::CalibrationResult& r, const nlohmann::json& split,
-                         nlohmann::json* result) {
+                         const nlohmann::json& start, nlohmann::json* result) {
   db::Calibration cal;
   cal.campaign_id = o.campaign;
   cal.params_json = assessment::ParamsJson(r);
@@ -217,6 +218,7 @@ std::int64_t StoreResult(db::Store& store, const CalibrateOptions& o,
                             {"force_n", co.scales.force_n},
                             {"force_window_s", co.scales.force_window_s}}}};
   if (!split.is_null()) settings["split"] = split;
+  settings["start"] = start;  // where the fit's predictions start (issue 26)
   cal.settings_json = settings.dump();
   cal.heldout_error_before = r.heldout_ids.empty() ? r.train_before : r.heldout_before;
   cal.heldout_error_after = r.heldout_ids.empty() ? r.train_after : r.heldout_after;
@@ -227,6 +229,7 @@ std::int64_t StoreResult(db::Store& store, const CalibrateOptions& o,
              {"campaign", o.campaign},
              {"applied", r.improved},
              {"predictor", o.predictor},
+             {"start", start},
              {"params", nlohmann::json::parse(cal.params_json)},
              {"report", nlohmann::json::parse(cal.report_json)}};
   if (!split.is_null()) (*result)["split"] = split;
@@ -254,12 +257,8 @@ std::int64_t StoreResult(db::Store& store, const CalibrateOptions& o,
   return id;
 }
 
-int RunCalibrate(const CalibrateOptions& o) {
-  if (o.predictor != "arena" && o.predictor != "mujoco") {
-    throw CommandError(kExitBadInput,
-                       "--predictor: '" + o.predictor + "' is not a predictor (arena or mujoco)");
-  }
-  const bool mujoco = o.predictor == "mujoco";
+// The fit's options from the command line (the predictor's defaults where unset).
+assessment::CalibrationOptions FitOptions(const CalibrateOptions& o, bool mujoco) {
   assessment::CalibrationOptions co;
   if (o.bootstrap_method.empty()) {
     co.bootstrap_method =
@@ -291,12 +290,50 @@ int RunCalibrate(const CalibrateOptions& o) {
   co.threads = o.threads;
   co.lower = o.lower;
   co.upper = o.upper;
+  return co;
+}
 
-  RefuseToOverwriteStore(o.out_path, "--out", o.db_path);
+// What a calibration fits: the campaign's done trials, each scene with the
+// campaign's prediction settings, started where `--from` says (issue 26: from
+// the start pose each trial's cell measured, like evaluate; or planned).
+struct FitInput {
   std::unique_ptr<db::Store> store;
   std::vector<assessment::CalibrationTrial> trials;
   nlohmann::json model;
   std::unique_ptr<simulators::Simulator> simulator;
+  assessment::StartFrom from = assessment::StartFrom::kMeasured;
+  int moved = 0;  // trials whose measured start is not the planned pose
+};
+
+// Each trial's scene placed at its measured start (the first sample of its
+// stream, as evaluate takes it). @throws CommandError naming the trial when
+// the start leaves the grasp.
+void StartFromMeasured(FitInput& in) {
+  for (auto& t : in.trials) {
+    const auto gt = in.store->ReadGroundTruth(t.trial_id);
+    const db::Sample* first = gt.samples.empty() ? nullptr : &gt.samples.front();
+    const assessment::PredictionStart start = assessment::StartOf(t.scene, first, in.from);
+    try {
+      t.scene = assessment::StartedAt(t.scene, start);
+    } catch (const std::exception& e) {
+      throw CommandError(kExitBadInput, "trial " + std::to_string(t.trial_id) +
+                                            ": its measured start: " + e.what() +
+                                            " (--from planned fits from the planned pose)");
+    }
+    if (start.offset_m > 0 || start.offset_rad > 0) ++in.moved;
+  }
+}
+
+FitInput LoadFitInput(const CalibrateOptions& o, bool mujoco) {
+  FitInput in;
+  const auto from = assessment::StartFromString(o.from);
+  if (!from)
+    throw CommandError(kExitBadInput, "--from: must be measured or planned, got '" + o.from + "'");
+  in.from = *from;
+  RefuseToOverwriteStore(o.out_path, "--out", o.db_path);
+  auto& store = in.store;
+  auto& model = in.model;
+  auto& trials = in.trials;
   try {
     db::StoreOptions so;
     so.create = false;  // calibrating needs a campaign: a missing file is an error
@@ -312,11 +349,13 @@ int RunCalibrate(const CalibrateOptions& o) {
       mechanics::ValidateScene(fitted);
       return fitted;
     });
+    if (in.from == assessment::StartFrom::kMeasured) StartFromMeasured(in);
   } catch (const db::StoreError& e) {
     throw StoreCommandError(e);
   } catch (const mechanics::SceneError& e) {
     throw CommandError(kExitBadInput, std::string("--predictor-settings: ") + e.what());
   }
+  auto& simulator = in.simulator;
   if (mujoco) {
     try {
       simulator = simulators::MakeSimulator("mujoco", MujocoKnobs(o, model));
@@ -330,7 +369,15 @@ int RunCalibrate(const CalibrateOptions& o) {
     }
   }
 
-  // A split by a trial parameter: one fit per value, its trials held out.
+  return in;
+}
+
+using Splits = std::vector<std::pair<std::string, std::vector<std::int64_t>>>;
+
+// A split by a trial parameter: one fit per value, its trials held out.
+Splits SplitsOf(const CalibrateOptions& o, const FitInput& in) {
+  const auto& store = in.store;
+  const auto& trials = in.trials;
   std::vector<std::pair<std::string, std::vector<std::int64_t>>> splits;
   if (!o.holdout_by.empty()) {
     const TrialParameters parameters(o.trial_parameters, "--trial-parameters");
@@ -352,7 +399,14 @@ int RunCalibrate(const CalibrateOptions& o) {
   } else if (!o.trial_parameters.empty()) {
     throw CommandError(kExitBadInput, "--trial-parameters: only with --holdout-by");
   }
+  return splits;
+}
 
+std::vector<assessment::CalibrationResult> RunFits(const FitInput& in,
+                                                   assessment::CalibrationOptions co,
+                                                   const Splits& splits, bool mujoco) {
+  const auto& trials = in.trials;
+  const auto& simulator = in.simulator;
   // A bar over the main fit's evaluations on a terminal (silent otherwise).
   ProgressLine bar(co.max_evaluations, "loss evaluations");
   if (bar.enabled()) {
@@ -388,17 +442,130 @@ int RunCalibrate(const CalibrateOptions& o) {
     throw CommandError(kExitBadInput, e.what());
   }
   bar.Finish();
+  return results;
+}
 
+void PrintSplitResults(const CalibrateOptions& o,
+                       const std::vector<assessment::CalibrationResult>& results,
+                       const Splits& splits, const std::vector<std::int64_t>& ids,
+                       const assessment::SetFigures& pooled_before,
+                       const assessment::SetFigures& pooled_after, std::size_t pooled_trials) {
+  std::printf(
+      "calibration of campaign %lld held out by %s: %zu fits (predictor %s), each on every "
+      "trial but one %s's, scored on that %s's trials\n",
+      static_cast<long long>(o.campaign), o.holdout_by.c_str(), results.size(), o.predictor.c_str(),
+      o.holdout_by.c_str(), o.holdout_by.c_str());
+  for (std::size_t k = 0; k < results.size(); ++k) {
+    const auto& r = results[k];
+    std::printf(
+        "\n== held out: %s = %s (%zu trials; fitted on %zu; calibration %lld, %s; %d "
+        "loss evaluations, %ld new simulations)\n",
+        o.holdout_by.c_str(), splits[k].first.c_str(), r.heldout_ids.size(), r.train_ids.size(),
+        static_cast<long long>(ids[k]),
+        r.improved ? "applied" : "NOT applied: no lower held-out loss", r.evaluations,
+        r.simulations);
+    PrintFittedTable(r);
+    std::printf("\n");
+    PrintFigures(r);
+  }
+  std::printf("\nsummary, held out by %s:\n", o.holdout_by.c_str());
+  std::printf("  %-10s %6s %-34s %16s %16s %18s %18s\n", "held out", "trials", "fitted",
+              "NMSE before", "NMSE after", "pos mm med/p95", "angle deg med/p95");
+  for (std::size_t k = 0; k < results.size(); ++k) {
+    const auto& r = results[k];
+    std::string fitted;
+    for (const auto& f : r.fitted) {
+      char buf[64];
+      if (f.nominal)
+        std::snprintf(buf, sizeof buf, "%s%s %.3g", fitted.empty() ? "" : ", ", f.name.c_str(),
+                      *f.nominal * f.scale);
+      else
+        std::snprintf(buf, sizeof buf, "%s%s x%.3g", fitted.empty() ? "" : ", ", f.name.c_str(),
+                      f.scale);
+      fitted += buf;
+    }
+    std::printf(
+        "  %-10s %6zu %-34s %16s %16s %18s %18s\n", splits[k].first.c_str(), r.heldout_ids.size(),
+        fitted.c_str(), NmseText(r.heldout_figures_before).c_str(),
+        NmseText(r.heldout_figures_after).c_str(),
+        PairText(r.heldout_figures_after.position_median, r.heldout_figures_after.position_p95, 1e3)
+            .c_str(),
+        PairText(r.heldout_figures_after.angle_median, r.heldout_figures_after.angle_p95,
+                 180 / M_PI)
+            .c_str());
+  }
+  std::printf("  %-10s %6zu %-34s %16s %16s %18s %18s\n", "pooled", pooled_trials,
+              "(each trial by the fit without it)", NmseText(pooled_before).c_str(),
+              NmseText(pooled_after).c_str(),
+              PairText(pooled_after.position_median, pooled_after.position_p95, 1e3).c_str(),
+              PairText(pooled_after.angle_median, pooled_after.angle_p95, 180 / M_PI).c_str());
+  std::printf(
+      "  (NMSE: of dx, dy, dtheta in the object's initial frame over the held-out trials' own "
+      "variance; pooled: over every trial, each predicted by the fit that did not see its %s)\n",
+      o.holdout_by.c_str());
+}
+
+void PrintResult(const CalibrateOptions& o, const assessment::CalibrationResult& r, std::int64_t id,
+                 bool mujoco) {
+  std::printf(
+      "calibration %lld of campaign %lld (predictor %s, %s, %d loss evaluations, %zu trials "
+      "fitted, %zu held out)\n",
+      static_cast<long long>(id), static_cast<long long>(o.campaign), o.predictor.c_str(),
+      r.optimizer.c_str(), r.evaluations, r.train_ids.size(), r.heldout_ids.size());
+  std::printf("%ld simulations", r.simulations);
+  if (mujoco) std::printf(" (%ld on a model built once per trial)", r.models_reused);
+  std::printf("; uncertainty: %d bootstrap resamples (%s)\n\n", o.bootstrap,
+              r.bootstrap_method.c_str());
+  PrintFittedTable(r);
+  if (!r.heldout_ids.empty()) {
+    std::printf("\nheld-out error       before      after\n");
+    std::printf("  loss (weighted) %10.4g %10.4g\n", r.heldout_before, r.heldout_after);
+    std::printf("  position (mm)   %10.4f %10.4f\n", r.heldout_position_before * 1e3,
+                r.heldout_position_after * 1e3);
+    std::printf("  angle (deg)     %10.4f %10.4f\n", r.heldout_angle_before * 57.29577951,
+                r.heldout_angle_after * 57.29577951);
+    std::printf("  force RMS (N)   %10.4f %10.4f\n", r.heldout_force_before, r.heldout_force_after);
+  }
+  std::printf("\n");
+  PrintFigures(r);
+  if (r.improved) {
+    std::printf("\napplied: a campaign uses it with \"prediction\": {\"calibration\": %lld}\n",
+                static_cast<long long>(id));
+  } else {
+    std::printf("\nNOT applied: the fit does not lower the %s error\n",
+                r.heldout_ids.empty() ? "fitted trials'" : "held-out");
+  }
+}
+
+const char* StartText(const FitInput& in) {
+  return in.from == assessment::StartFrom::kPlanned
+             ? "start: from the planned pose (--from planned): errors include the reset's "
+               "placement"
+             : "start: from the pose each trial's cell measured (as evaluate)";
+}
+
+int RunCalibrate(const CalibrateOptions& o) {
+  if (o.predictor != "arena" && o.predictor != "mujoco") {
+    throw CommandError(kExitBadInput,
+                       "--predictor: '" + o.predictor + "' is not a predictor (arena or mujoco)");
+  }
+  const bool mujoco = o.predictor == "mujoco";
+  const assessment::CalibrationOptions co = FitOptions(o, mujoco);
+  FitInput in = LoadFitInput(o, mujoco);
+  const Splits splits = SplitsOf(o, in);
+  const std::vector<assessment::CalibrationResult> results = RunFits(in, co, splits, mujoco);
+  const nlohmann::json start = {{"from", assessment::ToString(in.from)},
+                                {"trials_moved", in.moved}};
   std::vector<std::int64_t> ids;
   nlohmann::json results_json = nlohmann::json::array();
   for (std::size_t k = 0; k < results.size(); ++k) {
     nlohmann::json split = nullptr;
     if (!splits.empty()) split = {{"holdout_by", o.holdout_by}, {"heldout_value", splits[k].first}};
     nlohmann::json result;
-    ids.push_back(StoreResult(*store, o, co, model, simulator.get(), results[k], split, &result));
+    ids.push_back(StoreResult(*in.store, o, co, in.model, in.simulator.get(), results[k], split,
+                              start, &result));
     results_json.push_back(std::move(result));
   }
-
   bool all_improved = true;
   for (const auto& r : results) all_improved = all_improved && r.improved;
   nlohmann::json output = results_json.front();
@@ -413,6 +580,7 @@ int RunCalibrate(const CalibrateOptions& o) {
     const auto pooled_after = assessment::FiguresOf(after);
     output = {{"campaign", o.campaign},
               {"holdout_by", o.holdout_by},
+              {"start", start},
               {"splits", results_json},
               {"pooled_heldout",
                {{"before", assessment::ToJson(pooled_before)},
@@ -423,97 +591,17 @@ int RunCalibrate(const CalibrateOptions& o) {
       std::printf("%s\n", output.dump().c_str());
       return all_improved ? kExitOk : kExitFailure;
     }
-    std::printf(
-        "calibration of campaign %lld held out by %s: %zu fits (predictor %s), each on every "
-        "trial but one %s's, scored on that %s's trials\n",
-        static_cast<long long>(o.campaign), o.holdout_by.c_str(), results.size(),
-        o.predictor.c_str(), o.holdout_by.c_str(), o.holdout_by.c_str());
-    for (std::size_t k = 0; k < results.size(); ++k) {
-      const auto& r = results[k];
-      std::printf(
-          "\n== held out: %s = %s (%zu trials; fitted on %zu; calibration %lld, %s; %d "
-          "loss evaluations, %ld new simulations)\n",
-          o.holdout_by.c_str(), splits[k].first.c_str(), r.heldout_ids.size(), r.train_ids.size(),
-          static_cast<long long>(ids[k]),
-          r.improved ? "applied" : "NOT applied: no lower held-out loss", r.evaluations,
-          r.simulations);
-      PrintFittedTable(r);
-      std::printf("\n");
-      PrintFigures(r);
-    }
-    std::printf("\nsummary, held out by %s:\n", o.holdout_by.c_str());
-    std::printf("  %-10s %6s %-34s %16s %16s %18s %18s\n", "held out", "trials", "fitted",
-                "NMSE before", "NMSE after", "pos mm med/p95", "angle deg med/p95");
-    for (std::size_t k = 0; k < results.size(); ++k) {
-      const auto& r = results[k];
-      std::string fitted;
-      for (const auto& f : r.fitted) {
-        char buf[64];
-        if (f.nominal)
-          std::snprintf(buf, sizeof buf, "%s%s %.3g", fitted.empty() ? "" : ", ", f.name.c_str(),
-                        *f.nominal * f.scale);
-        else
-          std::snprintf(buf, sizeof buf, "%s%s x%.3g", fitted.empty() ? "" : ", ", f.name.c_str(),
-                        f.scale);
-        fitted += buf;
-      }
-      std::printf("  %-10s %6zu %-34s %16s %16s %18s %18s\n", splits[k].first.c_str(),
-                  r.heldout_ids.size(), fitted.c_str(), NmseText(r.heldout_figures_before).c_str(),
-                  NmseText(r.heldout_figures_after).c_str(),
-                  PairText(r.heldout_figures_after.position_median,
-                           r.heldout_figures_after.position_p95, 1e3)
-                      .c_str(),
-                  PairText(r.heldout_figures_after.angle_median, r.heldout_figures_after.angle_p95,
-                           180 / M_PI)
-                      .c_str());
-    }
-    std::printf("  %-10s %6zu %-34s %16s %16s %18s %18s\n", "pooled", before.size(),
-                "(each trial by the fit without it)", NmseText(pooled_before).c_str(),
-                NmseText(pooled_after).c_str(),
-                PairText(pooled_after.position_median, pooled_after.position_p95, 1e3).c_str(),
-                PairText(pooled_after.angle_median, pooled_after.angle_p95, 180 / M_PI).c_str());
-    std::printf(
-        "  (NMSE: of dx, dy, dtheta in the object's initial frame over the held-out trials' own "
-        "variance; pooled: over every trial, each predicted by the fit that did not see its %s)\n",
-        o.holdout_by.c_str());
+    std::printf("%s\n", StartText(in));
+    PrintSplitResults(o, results, splits, ids, pooled_before, pooled_after, before.size());
     return all_improved ? kExitOk : kExitFailure;
   }
-
   const auto& r = results.front();
-  const std::int64_t id = ids.front();
   if (!o.out_path.empty()) WriteResultFile(o.out_path, output.dump(2) + "\n");
   if (o.json) {
     std::printf("%s\n", output.dump().c_str());
   } else {
-    std::printf(
-        "calibration %lld of campaign %lld (predictor %s, %s, %d loss evaluations, %zu trials "
-        "fitted, %zu held out)\n",
-        static_cast<long long>(id), static_cast<long long>(o.campaign), o.predictor.c_str(),
-        r.optimizer.c_str(), r.evaluations, r.train_ids.size(), r.heldout_ids.size());
-    std::printf("%ld simulations", r.simulations);
-    if (mujoco) std::printf(" (%ld on a model built once per trial)", r.models_reused);
-    std::printf("; uncertainty: %d bootstrap resamples (%s)\n\n", o.bootstrap,
-                r.bootstrap_method.c_str());
-    PrintFittedTable(r);
-    if (!r.heldout_ids.empty()) {
-      std::printf("\nheld-out error       before      after\n");
-      std::printf("  loss (weighted) %10.4g %10.4g\n", r.heldout_before, r.heldout_after);
-      std::printf("  position (mm)   %10.4f %10.4f\n", r.heldout_position_before * 1e3,
-                  r.heldout_position_after * 1e3);
-      std::printf("  angle (deg)     %10.4f %10.4f\n", r.heldout_angle_before * 57.29577951,
-                  r.heldout_angle_after * 57.29577951);
-      std::printf("  force RMS (N)   %10.4f %10.4f\n", r.heldout_force_before,
-                  r.heldout_force_after);
-    }
-    std::printf("\n");
-    PrintFigures(r);
-    if (r.improved) {
-      std::printf("\napplied: a campaign uses it with \"prediction\": {\"calibration\": %lld}\n",
-                  static_cast<long long>(id));
-    } else {
-      std::printf("\nNOT applied: the fit does not lower the %s error\n",
-                  r.heldout_ids.empty() ? "fitted trials'" : "held-out");
-    }
+    std::printf("%s\n", StartText(in));
+    PrintResult(o, r, ids.front(), mujoco);
   }
   return r.improved ? kExitOk : kExitFailure;
 }
@@ -569,6 +657,11 @@ void AddCalibrateCommand(CLI::App& app, Action* action) {
                   "default 0 for arena, 0.04 for mujoco)")
       ->check(CLI::Range(0.0, 10.0));
   cmd->add_option("--seed", o->seed, "Seed of the hold-out split and the bootstrap");
+  cmd->add_option("--from", o->from,
+                  "Where the fit's predictions start: measured (the start pose each trial's cell "
+                  "measured, as evaluate) or planned (the scene's pose: the fit then also absorbs "
+                  "the reset's placement error)")
+      ->capture_default_str();
   cmd->add_option("--threads", o->threads, "Simulations in parallel")->check(CLI::Range(1, 256));
   cmd->add_option("--lower", o->lower, "Lower bound of every scale")->check(CLI::Range(0.01, 0.99));
   cmd->add_option("--upper", o->upper, "Upper bound of every scale")

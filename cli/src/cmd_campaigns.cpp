@@ -5,6 +5,7 @@
 #include <cstdio>
 #include <cstdlib>
 #include <ctime>
+#include <map>
 #include <memory>
 #include <optional>
 #include <string>
@@ -127,22 +128,196 @@ int List(const std::string& db_path, bool as_json) {
   return kExitOk;
 }
 
+// Everything `arena status` reads, once.
+struct StatusView {
+  db::StatusSummary summary;
+  std::optional<db::ServiceRecord> service;
+  std::string no_service;  // why no service runs ("" = one does)
+  std::vector<CellActivity> activity;
+  std::map<std::int64_t, db::CampaignWait> waits;  // the claim gate's (issue 26)
+};
+
+nlohmann::json CampaignJson(const db::Store& store, const db::CampaignStatus& c,
+                            const StatusView& v) {
+  nlohmann::json j = {{"id", c.id},
+                      {"name", c.name},
+                      {"state", db::ToString(c.state)},
+                      {"planned", c.planned},
+                      {"done", c.done},
+                      {"failed", c.failed},
+                      {"running", c.running},
+                      {"pending", c.pending},
+                      {"cancelled", c.cancelled},
+                      {"rate_per_hour", c.rate_per_hour}};
+  j["eta_s"] = c.eta_s ? nlohmann::json(*c.eta_s) : nlohmann::json();
+  j["waits"] = nullptr;
+  if (auto w = v.waits.find(c.id); w != v.waits.end())
+    j["waits"] = {{"kind", w->second.kind},
+                  {"reason", w->second.reason},
+                  {"rule", w->second.rule},
+                  {"since", IsoTime(w->second.since)}};
+  if (const auto a = orchestrator::ReadAdaptiveProgress(store.GetCampaign(c.id))) {
+    j["adaptive"] = {{"sampler", a->sampler},   {"round", a->round},
+                     {"open", a->open},         {"refining", a->refining},
+                     {"progress", a->progress}, {"fraction", a->fraction}};
+    if (const auto b = FindBoundary(store, c.id)) {
+      nlohmann::json crossings = nlohmann::json::array();
+      for (const auto& x : b->crossings) crossings.push_back({{"at", x.at}, {"half", x.half}});
+      j["adaptive"]["boundary"] = {{"parameters", b->parameters},
+                                   {"classes", {b->positive, b->negative}},
+                                   {"classified", b->classified},
+                                   {"crossings", crossings}};
+    }
+  }
+  // What its model errors are measured against (executors/README.md, "Backends").
+  j["truth"] = nlohmann::json::array();
+  for (const auto& t : store.CampaignTruths(c.id))
+    j["truth"].push_back({{"truth", t.truth}, {"backend", t.backend}, {"trials", t.trials}});
+  j["failures"] = FailuresJson(CampaignFailures(store, c.id));
+  if (const auto d = CampaignDeadlines(store, c.id); d.runs > 0)
+    j["closed_loop"] = DeadlinesJson(d);
+  return j;
+}
+
+void PrintStatusJson(const db::Store& store, const StatusView& v) {
+  const auto& s = v.summary;
+  nlohmann::json out = {{"campaigns", nlohmann::json::array()},
+                        {"cells", nlohmann::json::array()},
+                        {"drift", nlohmann::json::array()}};
+  for (const auto& c : s.campaigns) out["campaigns"].push_back(CampaignJson(store, c, v));
+  // JSON lists every cell (scripts filter); the text view folds old gone ones.
+  for (size_t k = 0; k < s.cells.size(); ++k) {
+    const auto& c = s.cells[k];
+    const auto& a = v.activity[k];
+    out["cells"].push_back(
+        {{"id", c.id},
+         {"state", db::ToString(c.state)},
+         {"last_seen", IsoTime(c.last_seen)},
+         {"consecutive_failures", c.consecutive_failures},
+         {"quarantine_reason", c.quarantine_reason},
+         {"serving", c.serving},
+         {"backend", a.backend},
+         {"phase", a.phase},
+         {"trial", a.trial_id ? nlohmann::json(a.trial_id) : nlohmann::json()},
+         {"in_phase_s", a.trial_id ? nlohmann::json(a.in_phase_s) : nlohmann::json()}});
+  }
+  out["service"] = nullptr;
+  if (const auto& service = v.service) {
+    out["service"] = {{"session", service->session},
+                      {"pid", service->pid},
+                      {"host", service->host},
+                      {"domain", service->domain},
+                      {"started", IsoTime(service->started_at)},
+                      {"last_beat", IsoTime(service->last_beat)},
+                      {"stopped", service->stopped_at ? IsoTime(*service->stopped_at) : ""},
+                      {"running", v.no_service.empty()}};
+  }
+  for (const auto& d : s.drift)
+    out["drift"].push_back({{"campaign", d.campaign_id},
+                            {"cell", d.cell_id},
+                            {"trials", d.trials},
+                            {"mean_offset_m", {d.mean_dx, d.mean_dy, d.mean_dz}},
+                            {"mean_position_error_m", d.mean_position_error},
+                            {"max_position_error_m", d.max_position_error},
+                            {"mean_angle_error_rad", d.mean_angle_error}});
+  out["suspensions"] = SuspensionsJson(Suspensions(store));
+  std::printf("%s\n", out.dump().c_str());
+}
+
+const char* TruthNote(const std::string& truth) {
+  return truth == "self-consistency" ? ": errors are self-consistency, not accuracy"
+         : truth == "measured" ? ": the observed streams are the truth (no separate true stream)"
+         : truth == db::kTruthMeasuredNoForces
+             ? ": measured poses, forces not measured or failed their import check (not scored)"
+             : "";
+}
+
+// The campaign table, then per campaign: why it waits, its truth, its failures.
+void PrintCampaigns(const db::Store& store, const StatusView& v) {
+  const auto& campaigns = v.summary.campaigns;
+  std::printf("%-5s %-20s %-9s %7s %7s %7s %7s %9s %8s\n", "id", "campaign", "state", "planned",
+              "done", "failed", "running", "rate/h", "ETA");
+  for (const auto& c : campaigns)
+    std::printf("%-5lld %-20s %-9s %7lld %7lld %7lld %7lld %9.1f %8s\n",
+                static_cast<long long>(c.id), c.name.c_str(), db::ToString(c.state),
+                static_cast<long long>(c.planned), static_cast<long long>(c.done),
+                static_cast<long long>(c.failed), static_cast<long long>(c.running),
+                c.rate_per_hour, c.eta_s ? FormatDuration(*c.eta_s).c_str() : "-");
+  for (const auto& c : campaigns) {
+    if (auto w = v.waits.find(c.id); w != v.waits.end())
+      std::printf("      campaign %lld waits: %s (since %s)\n", static_cast<long long>(c.id),
+                  w->second.reason.c_str(), IsoTime(w->second.since).c_str());
+    for (const auto& t : store.CampaignTruths(c.id)) {
+      std::printf("      truth of %lld: %s (%s backend), %lld trials%s\n",
+                  static_cast<long long>(c.id), t.truth.empty() ? "unreported" : t.truth.c_str(),
+                  t.backend.empty() ? "?" : t.backend.c_str(), static_cast<long long>(t.trials),
+                  TruthNote(t.truth));
+    }
+    const std::string failures = FormatFailures(CampaignFailures(store, c.id), "      ") +
+                                 FormatDeadlines(CampaignDeadlines(store, c.id), "      ");
+    if (!failures.empty())
+      std::printf("      campaign %lld:\n%s", static_cast<long long>(c.id), failures.c_str());
+  }
+}
+
+void PrintAdaptive(const db::Store& store, const StatusView& v) {
+  bool header = false;
+  for (const auto& c : v.summary.campaigns) {
+    const auto a = orchestrator::ReadAdaptiveProgress(store.GetCampaign(c.id));
+    if (!a) continue;
+    if (!header) std::printf("\nadaptive sampling:\n");
+    header = true;
+    std::printf("%-5lld %-10s round %-3d %3.0f %%  refining %s\n      %s\n",
+                static_cast<long long>(c.id), a->sampler.c_str(), a->round, a->fraction * 100,
+                a->refining.c_str(), a->progress.c_str());
+    if (const auto b = FindBoundary(store, c.id))
+      std::fputs(FormatBoundary(*b, "      ").c_str(), stdout);
+  }
+}
+
+void PrintService(const StatusView& v) {
+  const auto& service = v.service;
+  if (!service) {
+    std::printf("\nservice: none has run on this store\n");
+    return;
+  }
+  std::printf("\nservice: pid %lld on %s, DDS domain %d, session %s, started %s, %s\n",
+              static_cast<long long>(service->pid), service->host.c_str(), service->domain,
+              service->session.c_str(), IsoTime(service->started_at).c_str(),
+              service->stopped_at ? ("stopped " + IsoTime(*service->stopped_at)).c_str()
+                                  : ("last beat " + IsoTime(service->last_beat) +
+                                     (v.no_service.empty() ? " (running)" : " (not running)"))
+                                        .c_str());
+}
+
+void PrintDrift(const std::vector<db::StartStateDrift>& drift) {
+  if (drift.empty()) return;
+  std::printf(
+      "\nstart-state drift (observed after reset - nominal):\n%-5s %-16s %6s %28s %10s %10s\n",
+      "camp", "cell", "trials", "mean offset x,y,z (mm)", "mean |e| mm", "mean deg");
+  for (const auto& d : drift)
+    std::printf("%-5lld %-16s %6lld %9.3f,%8.3f,%8.3f %10.3f %10.3f\n",
+                static_cast<long long>(d.campaign_id), d.cell_id.c_str(),
+                static_cast<long long>(d.trials), d.mean_dx * 1e3, d.mean_dy * 1e3, d.mean_dz * 1e3,
+                d.mean_position_error * 1e3, d.mean_angle_error * 180 / M_PI);
+}
+
 int Status(const std::string& db_path, std::int64_t only, bool as_json, bool all_cells) {
   auto store = OpenStore(db_path, true);
-  db::StatusSummary s;
-  std::optional<db::ServiceRecord> service;
-  std::string no_service;
-  std::vector<CellActivity> activity;
-  s = store->Status();
-  service = store->LatestService();
-  no_service = NoServiceWarning(*store, db_path);
-  activity = ReadCellActivity(*store, s.cells);
+  StatusView v;
+  v.summary = store->Status();
+  v.service = store->LatestService();
+  v.no_service = NoServiceWarning(*store, db_path);
+  v.activity = ReadCellActivity(*store, v.summary.cells);
+  for (auto& w : store->ListCampaignWaits()) v.waits[w.campaign_id] = std::move(w);
+  auto& s = v.summary;
   // The warning says trials wait: only when some do (an active campaign with
   // trials not yet finished), not on a store whose campaigns are all done.
   std::int64_t waiting = 0;
   for (const auto& c : s.campaigns)
     if (c.state == db::CampaignState::kActive) waiting += c.pending + c.running;
-  if (!no_service.empty() && waiting > 0) std::fprintf(stderr, "warning: %s\n", no_service.c_str());
+  if (!v.no_service.empty() && waiting > 0)
+    std::fprintf(stderr, "warning: %s\n", v.no_service.c_str());
   if (only > 0) {
     std::erase_if(s.campaigns, [&](const db::CampaignStatus& c) { return c.id != only; });
     if (s.campaigns.empty())
@@ -150,144 +325,16 @@ int Status(const std::string& db_path, std::int64_t only, bool as_json, bool all
                                             " (see `arena list`)");
   }
   if (as_json) {
-    nlohmann::json out = {{"campaigns", nlohmann::json::array()},
-                          {"cells", nlohmann::json::array()},
-                          {"drift", nlohmann::json::array()}};
-    for (const auto& c : s.campaigns) {
-      nlohmann::json j = {{"id", c.id},
-                          {"name", c.name},
-                          {"state", db::ToString(c.state)},
-                          {"planned", c.planned},
-                          {"done", c.done},
-                          {"failed", c.failed},
-                          {"running", c.running},
-                          {"pending", c.pending},
-                          {"cancelled", c.cancelled},
-                          {"rate_per_hour", c.rate_per_hour}};
-      j["eta_s"] = c.eta_s ? nlohmann::json(*c.eta_s) : nlohmann::json();
-      if (const auto a = orchestrator::ReadAdaptiveProgress(store->GetCampaign(c.id))) {
-        j["adaptive"] = {{"sampler", a->sampler},   {"round", a->round},
-                         {"open", a->open},         {"refining", a->refining},
-                         {"progress", a->progress}, {"fraction", a->fraction}};
-        if (const auto b = FindBoundary(*store, c.id)) {
-          nlohmann::json crossings = nlohmann::json::array();
-          for (const auto& x : b->crossings) crossings.push_back({{"at", x.at}, {"half", x.half}});
-          j["adaptive"]["boundary"] = {{"parameters", b->parameters},
-                                       {"classes", {b->positive, b->negative}},
-                                       {"classified", b->classified},
-                                       {"crossings", crossings}};
-        }
-      }
-      // What its model errors are measured against (executors/README.md, "Backends").
-      j["truth"] = nlohmann::json::array();
-      for (const auto& t : store->CampaignTruths(c.id))
-        j["truth"].push_back({{"truth", t.truth}, {"backend", t.backend}, {"trials", t.trials}});
-      j["failures"] = FailuresJson(CampaignFailures(*store, c.id));
-      if (const auto d = CampaignDeadlines(*store, c.id); d.runs > 0)
-        j["closed_loop"] = DeadlinesJson(d);
-      out["campaigns"].push_back(j);
-    }
-    // JSON lists every cell (scripts filter); the text view folds old gone ones.
-    for (size_t k = 0; k < s.cells.size(); ++k) {
-      const auto& c = s.cells[k];
-      const auto& a = activity[k];
-      out["cells"].push_back(
-          {{"id", c.id},
-           {"state", db::ToString(c.state)},
-           {"last_seen", IsoTime(c.last_seen)},
-           {"consecutive_failures", c.consecutive_failures},
-           {"quarantine_reason", c.quarantine_reason},
-           {"serving", c.serving},
-           {"backend", a.backend},
-           {"phase", a.phase},
-           {"trial", a.trial_id ? nlohmann::json(a.trial_id) : nlohmann::json()},
-           {"in_phase_s", a.trial_id ? nlohmann::json(a.in_phase_s) : nlohmann::json()}});
-    }
-    out["service"] = nullptr;
-    if (service) {
-      out["service"] = {{"session", service->session},
-                        {"pid", service->pid},
-                        {"host", service->host},
-                        {"domain", service->domain},
-                        {"started", IsoTime(service->started_at)},
-                        {"last_beat", IsoTime(service->last_beat)},
-                        {"stopped", service->stopped_at ? IsoTime(*service->stopped_at) : ""},
-                        {"running", no_service.empty()}};
-    }
-    for (const auto& d : s.drift)
-      out["drift"].push_back({{"campaign", d.campaign_id},
-                              {"cell", d.cell_id},
-                              {"trials", d.trials},
-                              {"mean_offset_m", {d.mean_dx, d.mean_dy, d.mean_dz}},
-                              {"mean_position_error_m", d.mean_position_error},
-                              {"max_position_error_m", d.max_position_error},
-                              {"mean_angle_error_rad", d.mean_angle_error}});
-    out["suspensions"] = SuspensionsJson(Suspensions(*store));
-    std::printf("%s\n", out.dump().c_str());
+    PrintStatusJson(*store, v);
     return kExitOk;
   }
-  std::printf("%-5s %-20s %-9s %7s %7s %7s %7s %9s %8s\n", "id", "campaign", "state", "planned",
-              "done", "failed", "running", "rate/h", "ETA");
-  for (const auto& c : s.campaigns)
-    std::printf("%-5lld %-20s %-9s %7lld %7lld %7lld %7lld %9.1f %8s\n",
-                static_cast<long long>(c.id), c.name.c_str(), db::ToString(c.state),
-                static_cast<long long>(c.planned), static_cast<long long>(c.done),
-                static_cast<long long>(c.failed), static_cast<long long>(c.running),
-                c.rate_per_hour, c.eta_s ? FormatDuration(*c.eta_s).c_str() : "-");
-  for (const auto& c : s.campaigns) {
-    for (const auto& t : store->CampaignTruths(c.id)) {
-      std::printf("      truth of %lld: %s (%s backend), %lld trials%s\n",
-                  static_cast<long long>(c.id), t.truth.empty() ? "unreported" : t.truth.c_str(),
-                  t.backend.empty() ? "?" : t.backend.c_str(), static_cast<long long>(t.trials),
-                  t.truth == "self-consistency" ? ": errors are self-consistency, not accuracy"
-                  : t.truth == "measured"
-                      ? ": the observed streams are the truth (no separate true stream)"
-                  : t.truth == db::kTruthMeasuredNoForces
-                      ? ": measured poses, forces not measured or failed their import check "
-                        "(not scored)"
-                      : "");
-    }
-    const std::string failures = FormatFailures(CampaignFailures(*store, c.id), "      ") +
-                                 FormatDeadlines(CampaignDeadlines(*store, c.id), "      ");
-    if (!failures.empty())
-      std::printf("      campaign %lld:\n%s", static_cast<long long>(c.id), failures.c_str());
-  }
-  bool header = false;
-  for (const auto& c : s.campaigns) {
-    const auto a = orchestrator::ReadAdaptiveProgress(store->GetCampaign(c.id));
-    if (!a) continue;
-    if (!header) std::printf("\nadaptive sampling:\n");
-    header = true;
-    std::printf("%-5lld %-10s round %-3d %3.0f %%  refining %s\n      %s\n",
-                static_cast<long long>(c.id), a->sampler.c_str(), a->round, a->fraction * 100,
-                a->refining.c_str(), a->progress.c_str());
-    if (const auto b = FindBoundary(*store, c.id))
-      std::fputs(FormatBoundary(*b, "      ").c_str(), stdout);
-  }
-  if (service) {
-    std::printf("\nservice: pid %lld on %s, DDS domain %d, session %s, started %s, %s\n",
-                static_cast<long long>(service->pid), service->host.c_str(), service->domain,
-                service->session.c_str(), IsoTime(service->started_at).c_str(),
-                service->stopped_at ? ("stopped " + IsoTime(*service->stopped_at)).c_str()
-                                    : ("last beat " + IsoTime(service->last_beat) +
-                                       (no_service.empty() ? " (running)" : " (not running)"))
-                                          .c_str());
-  } else {
-    std::printf("\nservice: none has run on this store\n");
-  }
-  std::fputs(FormatCellTable(s.cells, activity, store->Now(), all_cells).c_str(), stdout);
+  PrintCampaigns(*store, v);
+  PrintAdaptive(*store, v);
+  PrintService(v);
+  std::fputs(FormatCellTable(s.cells, v.activity, store->Now(), all_cells).c_str(), stdout);
   for (const auto& c : s.cells)
     if (!c.serving.empty()) std::printf("cell %s is %s\n", c.id.c_str(), c.serving.c_str());
-  if (!s.drift.empty()) {
-    std::printf(
-        "\nstart-state drift (observed after reset - nominal):\n%-5s %-16s %6s %28s %10s %10s\n",
-        "camp", "cell", "trials", "mean offset x,y,z (mm)", "mean |e| mm", "mean deg");
-    for (const auto& d : s.drift)
-      std::printf("%-5lld %-16s %6lld %9.3f,%8.3f,%8.3f %10.3f %10.3f\n",
-                  static_cast<long long>(d.campaign_id), d.cell_id.c_str(),
-                  static_cast<long long>(d.trials), d.mean_dx * 1e3, d.mean_dy * 1e3,
-                  d.mean_dz * 1e3, d.mean_position_error * 1e3, d.mean_angle_error * 180 / M_PI);
-  }
+  PrintDrift(s.drift);
   std::fputs(FormatSuspensions(Suspensions(*store), store->Now()).c_str(), stdout);
   return kExitOk;
 }

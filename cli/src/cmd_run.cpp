@@ -212,6 +212,25 @@ std::optional<std::string> CampaignController(const orchestrator::Campaign& camp
   return pusher->controller->name;
 }
 
+// Issue 26: the cells this run started and stopped say so in `arena status`
+// ("stopped: its arena run ended"), not "no sign within its lease" as a lost
+// cell would. A cell that never announced is not in the store: nothing to say.
+void MarkRunCellsStopped(const RunOptions& opt, const std::string& run_tag) {
+  try {
+    auto store = db::Store::Open(opt.db_path);
+    for (int k = 0; k < opt.cells; ++k) {
+      try {
+        store->MarkCellGone("sim" + std::to_string(k + 1) + run_tag,
+                            "stopped: its arena run ended");
+      } catch (const db::StoreError& e) {
+        if (e.kind() != db::StoreError::Kind::kNotFound) throw;
+      }
+    }
+  } catch (const db::StoreError& e) {
+    spdlog::warn("arena run: marking its cells stopped: {}", e.what());
+  }
+}
+
 // Issue 26: a campaign the cells this run starts cannot host is refused
 // before anything is stored, with the reason a cell would give (the same
 // checks: executors' defect layer), instead of every trial failing at the
@@ -443,6 +462,7 @@ int Run(RunOptions opt) {
   running = nullptr;
   for (auto& cell : cells) cell.Stop();
   for (auto& controller : controllers) controller.Stop();
+  MarkRunCellsStopped(opt, run_tag);
   spdlog::default_logger()->flush();
 
   const std::int64_t failed = PrintSummary(opt.db_path, campaign_id, wall, overhead_s);

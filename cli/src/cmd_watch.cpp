@@ -65,158 +65,216 @@ std::string Readout(const msg::LiveState& live, std::uint64_t seen) {
   return buf;
 }
 
+using Clock = std::chrono::steady_clock;
+
+// One watch: the DDS readers and what has been seen of the trial so far.
+class Watcher {
+ public:
+  explicit Watcher(const WatchOptions& o)
+      : o_(o),
+        tty_(isatty(STDOUT_FILENO) == 1),
+        what_(o.trial >= 0 ? "trial " + std::to_string(o.trial) : "cell " + o.cell),
+        cell_participant_(o.cell.empty() ? "" : dds::CellParticipantName(o.cell)),
+        trial_(o.trial) {
+    Join();
+  }
+
+  const std::string& what() const { return what_; }
+
+  // With --cell: a FAILED or REFUSED phase, or the cell's disappearance,
+  // ends the watch (a typed error saying what happened).
+  void CheckCell() {
+    if (!statuses_) return;
+    for (const auto& st : statuses_->TakeAll()) {
+      if (st.cell_id() != o_.cell) continue;
+      if (st.state() != msg::STATE_FAILED && st.state() != msg::STATE_REFUSED) continue;
+      if (trial_ >= 0 && st.trial_id() != static_cast<std::uint64_t>(trial_)) continue;
+      EndLine();
+      throw CommandError(kExitFailure,
+                         "cell " + o_.cell + ": trial " + std::to_string(st.trial_id()) +
+                             " attempt " + std::to_string(st.attempt()) + " " +
+                             (st.phase() == msg::PHASE_RESET ? "RESET" : "EXECUTE") + " " +
+                             (st.state() == msg::STATE_REFUSED ? "refused" : "failed") + ": " +
+                             st.reason());
+    }
+    while (auto e = participant_->NextPeerEvent(std::chrono::milliseconds(0))) {
+      using Kind = dds::PeerEvent::Kind;
+      if (e->participant != cell_participant_ ||
+          (e->kind != Kind::kParticipantLeft && e->kind != Kind::kWriterLost))
+        continue;
+      int still = 0;  // a restarted cell's new process keeps the id alive
+      for (const auto& p : participant_->Peers()) still += p == cell_participant_;
+      if (e->kind == Kind::kWriterLost) --still;
+      if (still > 0) continue;
+      EndLine();
+      throw CommandError(kExitCommunication,
+                         "cell " + o_.cell + " disappeared (" + dds::ToString(e->kind) + ")" +
+                             (trial_ >= 0 ? " during trial " + std::to_string(trial_) + " after " +
+                                                std::to_string(seen_) + " live samples"
+                                          : std::string()) +
+                             "; see `arena status`");
+    }
+  }
+
+  // Takes the live samples (waiting up to 20 ms for the first) and shows the
+  // newest at the redraw rate. @returns whether any of the trial's arrived.
+  bool TakeLive() {
+    bool arrived = false;
+    for (auto m = live_->Take(std::chrono::milliseconds(20)); m; m = live_->Take(Millis0())) {
+      if (!Mine(m->cell_id(), m->trial_id())) continue;
+      arrived = true;
+      if (m->attempt() != attempt_) {  // a new attempt restarts the trial
+        if (attempt_ != 0)
+          std::fprintf(stderr, "%strial %lld: attempt %u started\n", tty_ ? "\n" : "",
+                       static_cast<long long>(trial_), m->attempt());
+        attempt_ = m->attempt();
+        seen_ = logged_ = 0;
+      }
+      ++seen_;
+      pending_ = std::move(*m);
+    }
+    // A terminal is redrawn at most 30 times a second, a pipe gets 10 lines a second.
+    const auto redraw = std::chrono::milliseconds(tty_ ? 33 : 100);
+    if (pending_ && Clock::now() - last_print_ >= redraw) {
+      Show(*pending_);
+      pending_.reset();
+    }
+    return arrived;
+  }
+
+  // Takes the reliable log's batches. @returns whether any of the trial's
+  // arrived; *complete when its last one did.
+  bool TakeLog(bool* complete) {
+    bool arrived = false;
+    for (auto b = log_->Take(Millis0()); b; b = log_->Take(Millis0())) {
+      if (!Mine(b->cell_id(), b->trial_id()) || (attempt_ != 0 && b->attempt() != attempt_))
+        continue;
+      arrived = true;
+      logged_ += b->samples().size();
+      *complete = *complete || b->last();
+    }
+    return arrived;
+  }
+
+  int Complete() {
+    if (pending_) Show(*pending_);
+    if (tty_ && seen_ > 0) std::fputc('\n', stdout);
+    std::printf("trial %lld attempt %u: complete, %llu samples logged (%llu seen live)\n",
+                static_cast<long long>(trial_), attempt_, static_cast<unsigned long long>(logged_),
+                static_cast<unsigned long long>(seen_));
+    return kExitOk;
+  }
+
+  [[noreturn]] void TimedOut() {
+    EndLine();
+    const std::string wait = std::to_string(static_cast<int>(o_.timeout_s)) + " s";
+    if (seen_ == 0 && logged_ == 0)
+      throw CommandError(
+          kExitCommunication,
+          "no ground truth for " + what_ + " on DDS domain " + std::to_string(o_.dds.domain) +
+              " within " + wait +
+              ": is it running (`arena status`), and is --domain the one `arena serve` uses? "
+              "(a trial that already ended is in the store: `arena plot`)");
+    throw CommandError(kExitCommunication, what_ + ": the trial stopped after " +
+                                               std::to_string(seen_) +
+                                               " live samples (nothing for " + wait +
+                                               "): did the cell die? see `arena status`");
+  }
+
+  int Interrupted() const {
+    if (tty_) std::fputc('\n', stdout);
+    std::fprintf(stderr, "interrupted\n");
+    return kExitInterrupted;
+  }
+
+ private:
+  // The live topic (one sample as it happens) for the readout; the reliable
+  // log only to know, for sure, when the trial ended (a best-effort live
+  // sample, the last one included, may be lost). With --cell: the cell's
+  // statuses (a FAILED phase) and its liveliness (a dead cell) end the watch
+  // within about a second, saying what happened.
+  void Join() {
+    dds::ParticipantOptions po;
+    po.domain_id = o_.dds.domain;
+    po.name = "arena.watch";
+    po.network = o_.dds.Network();
+    try {
+      participant_ = std::make_unique<dds::Participant>(po);
+      live_ =
+          std::make_unique<dds::Reader<msg::LiveState>>(*participant_, dds::ReaderOptions{false});
+      log_ =
+          std::make_unique<dds::Reader<msg::GroundTruth>>(*participant_, dds::ReaderOptions{false});
+      if (!o_.cell.empty())
+        statuses_ = std::make_unique<dds::Reader<msg::TrialStatus>>(*participant_,
+                                                                    dds::ReaderOptions{true});
+    } catch (const dds::SecurityError&) {
+      throw;  // the identity is the user's input (main maps it)
+    } catch (const dds::DdsError& e) {
+      throw CommandError(e.exit_code(), std::string("cannot join DDS domain ") +
+                                            std::to_string(o_.dds.domain) + ": " + e.what());
+    }
+  }
+
+  // With --cell: the first trial seen on that cell is the one watched.
+  bool Mine(const std::string& cell, std::uint64_t t) {
+    if (!o_.cell.empty() && cell != o_.cell) return false;
+    if (trial_ < 0) trial_ = static_cast<std::int64_t>(t);
+    return t == static_cast<std::uint64_t>(trial_);
+  }
+
+  void Show(const msg::LiveState& m) {
+    const std::string line = Readout(m, seen_);
+    if (tty_)
+      std::printf("\r\033[K%s", line.c_str());
+    else
+      std::printf("%s\n", line.c_str());
+    std::fflush(stdout);
+    last_print_ = Clock::now();
+  }
+
+  // Ends a redrawn line before a message that stops the watch.
+  void EndLine() const {
+    if (tty_ && seen_ > 0) std::fputc('\n', stdout);
+    std::fflush(stdout);
+  }
+
+  const WatchOptions& o_;
+  const bool tty_;
+  const std::string what_;
+  const std::string cell_participant_;
+  std::unique_ptr<dds::Participant> participant_;
+  std::unique_ptr<dds::Reader<msg::LiveState>> live_;
+  std::unique_ptr<dds::Reader<msg::GroundTruth>> log_;
+  std::unique_ptr<dds::Reader<msg::TrialStatus>> statuses_;
+  std::int64_t trial_;  // with --cell: the first trial seen on that cell
+  std::uint32_t attempt_ = 0;
+  std::uint64_t seen_ = 0, logged_ = 0;
+  std::optional<msg::LiveState> pending_;  // newest sample not yet shown
+  Clock::time_point last_print_{};
+};
+
 int RunWatch(const WatchOptions& o) {
   if ((o.trial >= 0) == !o.cell.empty())
     throw CommandError(kExitBadInput,
                        "give either a TRIAL id or --cell ID (see `arena watch --help`)");
   std::atomic<bool> stop{false};
   SignalWatcher signals([&stop](int) { stop = true; });  // before DDS starts its threads
-
-  dds::ParticipantOptions po;
-  po.domain_id = o.dds.domain;
-  po.name = "arena.watch";
-  po.network = o.dds.Network();
-  // The live topic (one sample as it happens) for the readout; the
-  // reliable log only to know, for sure, when the trial ended (a best-effort
-  // live sample, the last one included, may be lost).
-  std::unique_ptr<dds::Participant> participant;
-  std::unique_ptr<dds::Reader<msg::LiveState>> live;
-  std::unique_ptr<dds::Reader<msg::GroundTruth>> log;
-  // With --cell: the cell's statuses (a FAILED phase) and its liveliness (a
-  // dead cell) end the watch within about a second, saying what happened.
-  std::unique_ptr<dds::Reader<msg::TrialStatus>> statuses;
-  try {
-    participant = std::make_unique<dds::Participant>(po);
-    live = std::make_unique<dds::Reader<msg::LiveState>>(*participant, dds::ReaderOptions{false});
-    log = std::make_unique<dds::Reader<msg::GroundTruth>>(*participant, dds::ReaderOptions{false});
-    if (!o.cell.empty())
-      statuses =
-          std::make_unique<dds::Reader<msg::TrialStatus>>(*participant, dds::ReaderOptions{true});
-  } catch (const dds::SecurityError&) {
-    throw;  // the identity is the user's input (main maps it)
-  } catch (const dds::DdsError& e) {
-    throw CommandError(e.exit_code(), std::string("cannot join DDS domain ") +
-                                          std::to_string(o.dds.domain) + ": " + e.what());
-  }
-  const bool tty = isatty(STDOUT_FILENO) == 1;
-  const std::string what = o.trial >= 0 ? "trial " + std::to_string(o.trial) : "cell " + o.cell;
-  std::fprintf(stderr, "watching %s on DDS domain %d (Ctrl-C to stop)\n", what.c_str(),
+  Watcher watcher(o);
+  std::fprintf(stderr, "watching %s on DDS domain %d (Ctrl-C to stop)\n", watcher.what().c_str(),
                o.dds.domain);
-
-  using Clock = std::chrono::steady_clock;
   const auto timeout =
       std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(o.timeout_s));
-  // A terminal is redrawn at most 30 times a second, a pipe gets 10 lines a second.
-  const auto redraw = std::chrono::milliseconds(tty ? 33 : 100);
   auto last_arrival = Clock::now();
-  auto last_print = Clock::time_point{};
-  std::int64_t trial = o.trial;  // with --cell: the first trial seen on that cell
-  std::uint32_t attempt = 0;
-  std::uint64_t seen = 0, logged = 0;
-  std::optional<msg::LiveState> pending;  // newest sample not yet shown
-  auto mine = [&](const std::string& cell, std::uint64_t t) {
-    if (!o.cell.empty() && cell != o.cell) return false;
-    if (trial < 0) trial = static_cast<std::int64_t>(t);
-    return t == static_cast<std::uint64_t>(trial);
-  };
-  auto show = [&](const msg::LiveState& m) {
-    const std::string line = Readout(m, seen);
-    if (tty)
-      std::printf("\r\033[K%s", line.c_str());
-    else
-      std::printf("%s\n", line.c_str());
-    std::fflush(stdout);
-    last_print = Clock::now();
-  };
-  const std::string cell_participant = o.cell.empty() ? "" : dds::CellParticipantName(o.cell);
   while (!stop) {
-    if (statuses) {
-      for (const auto& st : statuses->TakeAll()) {
-        if (st.cell_id() != o.cell) continue;
-        if (st.state() != msg::STATE_FAILED && st.state() != msg::STATE_REFUSED) continue;
-        if (trial >= 0 && st.trial_id() != static_cast<std::uint64_t>(trial)) continue;
-        if (tty && seen > 0) std::fputc('\n', stdout);
-        std::fflush(stdout);
-        throw CommandError(kExitFailure,
-                           "cell " + o.cell + ": trial " + std::to_string(st.trial_id()) +
-                               " attempt " + std::to_string(st.attempt()) + " " +
-                               (st.phase() == msg::PHASE_RESET ? "RESET" : "EXECUTE") + " " +
-                               (st.state() == msg::STATE_REFUSED ? "refused" : "failed") + ": " +
-                               st.reason());
-      }
-      while (auto e = participant->NextPeerEvent(std::chrono::milliseconds(0))) {
-        using Kind = dds::PeerEvent::Kind;
-        if (e->participant != cell_participant ||
-            (e->kind != Kind::kParticipantLeft && e->kind != Kind::kWriterLost))
-          continue;
-        int still = 0;  // a restarted cell's new process keeps the id alive
-        for (const auto& p : participant->Peers()) still += p == cell_participant;
-        if (e->kind == Kind::kWriterLost) --still;
-        if (still > 0) continue;
-        if (tty && seen > 0) std::fputc('\n', stdout);
-        std::fflush(stdout);
-        throw CommandError(kExitCommunication,
-                           "cell " + o.cell + " disappeared (" + dds::ToString(e->kind) + ")" +
-                               (trial >= 0 ? " during trial " + std::to_string(trial) + " after " +
-                                                 std::to_string(seen) + " live samples"
-                                           : std::string()) +
-                               "; see `arena status`");
-      }
-    }
-    bool arrived = false;
-    for (auto m = live->Take(std::chrono::milliseconds(20)); m; m = live->Take(Millis0())) {
-      if (!mine(m->cell_id(), m->trial_id())) continue;
-      arrived = true;
-      if (m->attempt() != attempt) {  // a new attempt restarts the trial
-        if (attempt != 0)
-          std::fprintf(stderr, "%strial %lld: attempt %u started\n", tty ? "\n" : "",
-                       static_cast<long long>(trial), m->attempt());
-        attempt = m->attempt();
-        seen = logged = 0;
-      }
-      ++seen;
-      pending = std::move(*m);
-    }
-    if (pending && Clock::now() - last_print >= redraw) {
-      show(*pending);
-      pending.reset();
-    }
+    watcher.CheckCell();
     bool complete = false;
-    for (auto b = log->Take(Millis0()); b; b = log->Take(Millis0())) {
-      if (!mine(b->cell_id(), b->trial_id()) || (attempt != 0 && b->attempt() != attempt)) continue;
-      arrived = true;
-      logged += b->samples().size();
-      complete = complete || b->last();
-    }
-    if (arrived) last_arrival = Clock::now();
-    if (complete) {
-      if (pending) show(*pending);
-      if (tty && seen > 0) std::fputc('\n', stdout);
-      std::printf("trial %lld attempt %u: complete, %llu samples logged (%llu seen live)\n",
-                  static_cast<long long>(trial), attempt, static_cast<unsigned long long>(logged),
-                  static_cast<unsigned long long>(seen));
-      return kExitOk;
-    }
-    if (Clock::now() - last_arrival > timeout) {
-      if (tty && seen > 0) std::fputc('\n', stdout);
-      std::fflush(stdout);
-      if (seen == 0 && logged == 0)
-        throw CommandError(
-            kExitCommunication,
-            "no ground truth for " + what + " on DDS domain " + std::to_string(o.dds.domain) +
-                " within " + std::to_string(static_cast<int>(o.timeout_s)) +
-                " s: is it running (`arena status`), and is --domain the one `arena serve` uses? "
-                "(a trial that already ended is in the store: `arena plot`)");
-      throw CommandError(kExitCommunication, what + ": the trial stopped after " +
-                                                 std::to_string(seen) +
-                                                 " live samples (nothing for " +
-                                                 std::to_string(static_cast<int>(o.timeout_s)) +
-                                                 " s): did the cell die? see `arena status`");
-    }
+    const bool live = watcher.TakeLive();
+    const bool logged = watcher.TakeLog(&complete);
+    if (live || logged) last_arrival = Clock::now();
+    if (complete) return watcher.Complete();
+    if (Clock::now() - last_arrival > timeout) watcher.TimedOut();
   }
-  if (tty) std::fputc('\n', stdout);
-  std::fprintf(stderr, "interrupted\n");
-  return kExitInterrupted;
+  return watcher.Interrupted();
 }
 
 }  // namespace

@@ -10,27 +10,9 @@
 
 #include <CLI/CLI.hpp>
 
-#include "arena/errors/error.hpp"
+#include "command_error.hpp"
 
 namespace arena::cli {
-
-// Exit codes (documented in README.md): the error categories' (arena::Error).
-enum ExitCode : int {
-  kExitOk = 0,
-  kExitFailure = ::arena::ExitCode(ErrorCategory::kFailure),
-  kExitBadInput = ::arena::ExitCode(ErrorCategory::kBadInput),
-  kExitStore = ::arena::ExitCode(ErrorCategory::kStore),
-  kExitCommunication = ::arena::ExitCode(ErrorCategory::kCommunication),
-  kExitInterrupted = ::arena::ExitCode(ErrorCategory::kInterrupted),
-};
-
-// An error a command reports to the user: the message says what went wrong and
-// what to do next; main() prints it to stderr and exits with exit_code.
-class CommandError : public Error {
- public:
-  CommandError(int exit_code, const std::string& message)
-      : Error(CategoryForExitCode(exit_code), message) {}
-};
 
 using Action = std::function<int()>;
 

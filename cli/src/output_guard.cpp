@@ -6,7 +6,7 @@
 #include <filesystem>
 #include <fstream>
 
-#include "commands.hpp"
+#include "command_error.hpp"
 
 namespace arena::cli {
 namespace {

@@ -13,8 +13,9 @@
 #include "arena/assessment/truth.hpp"
 #include "arena/db/store.hpp"
 #include "arena/mechanics/scene_json.hpp"
-#include "commands.hpp"
+#include "command_error.hpp"
 #include "plot_trial.hpp"
+#include "plotted_trial.hpp"
 #include "store_errors.hpp"
 
 namespace arena::cli {
@@ -28,11 +29,7 @@ const char* const kMeasured = "#222222";
 const char* const kPredicted = "#e6550d";
 const char* const kPusher = "#c0392b";
 
-std::string F(double v) {
-  char b[32];
-  std::snprintf(b, sizeof b, "%.1f", v);
-  return b;
-}
+std::string F(double v) { return FormatFixed(v, 1); }
 
 std::string Mm(double m, int digits = 3) { return FormatNumber(m * 1e3, digits) + " mm"; }
 
@@ -102,193 +99,179 @@ double Yaw(const Eigen::Quaterniond& q) {
   return std::atan2(r(1, 0), r(0, 0));
 }
 
-// A round length of about a quarter of `view_m`.
-double ScaleBarLength(double view_m) {
-  const double target = view_m / 4;
-  const double p = std::pow(10.0, std::floor(std::log10(target)));
-  for (double m : {5.0, 2.0, 1.0})
-    if (m * p <= target) return m * p;
-  return p;
+// Everything drawn, in the scene's frame, and the canvas it is drawn on.
+struct PathsView {
+  std::vector<Pose2> measured, predicted;
+  std::vector<Vector3d> object_path, predicted_path;
+  std::vector<Vector3d> pusher_centres;  // the pusher's drawn disk centre per sample
+  double pusher_r = 0;
+  std::vector<Vector3d> outline;
+  std::vector<std::size_t> at;  // the instants whose outlines are drawn
+  Canvas c{};
+  double width = 0, height = 0;
+};
+
+PathsView MakeView(const PlottedTrial& p, const mechanics::SimulationResult& prediction) {
+  PathsView v;
+  for (const auto& s : prediction.samples) v.predicted.push_back({s.position, s.orientation});
+  for (const auto& s : p.gt.samples) {
+    v.measured.push_back(
+        {{s.object_pose[0], s.object_pose[1], s.object_pose[2]},
+         Eigen::Quaterniond(s.object_pose[3], s.object_pose[4], s.object_pose[5], s.object_pose[6])
+             .normalized()});
+    v.object_path.push_back(v.measured.back().position);
+  }
+  for (const auto& q : v.predicted) v.predicted_path.push_back(q.position);
+  // The pusher's drawn disk: a sphere's centre is its reference point moved
+  // back along the start normal by its radius (the scene's convention).
+  Vector3d to_centre = Vector3d::Zero();
+  const auto& pusher = p.scene.pusher;
+  if (pusher && pusher->type == mechanics::ContactType::kPoint && pusher->radius > 0) {
+    v.pusher_r = pusher->radius;
+    to_centre = -v.pusher_r * pusher->normal.normalized();
+  }
+  for (const auto& s : p.gt.samples)
+    v.pusher_centres.push_back(Vector3d(s.pusher_pose[0], s.pusher_pose[1], s.pusher_pose[2]) +
+                               to_centre);
+
+  v.outline = Outline(p.scene.object);
+  // Outlines at a few instants (samples paired by index, as the scorer pairs them).
+  const std::size_t n = v.measured.size();
+  v.at = {0, n / 3, 2 * n / 3, n - 1};
+  v.at.erase(std::unique(v.at.begin(), v.at.end()), v.at.end());
+
+  std::vector<Vector3d> all = v.object_path;
+  for (std::size_t k : v.at)
+    for (const auto& x : Placed(v.outline, v.measured[k])) all.push_back(x);
+  for (std::size_t k : v.at)
+    if (k < v.predicted.size())
+      for (const auto& x : Placed(v.outline, v.predicted[k])) all.push_back(x);
+  for (const auto& x : v.pusher_centres) all.push_back(x);
+  Vector2d lo = Vector2d::Constant(std::numeric_limits<double>::infinity()), hi = -lo;
+  for (const auto& x : all) {
+    lo = lo.cwiseMin(x.head<2>());
+    hi = hi.cwiseMax(x.head<2>());
+  }
+  const double panel_w = 760, panel_h = 560, top = 78, margin = 20;
+  const Vector2d extent = (hi - lo).cwiseMax(1e-3);
+  const double scale = std::min(0.85 * panel_w / extent.x(), 0.85 * panel_h / extent.y());
+  v.c = Canvas{margin, top, panel_w, panel_h, scale, 0.5 * (lo + hi)};
+  v.width = panel_w + 2 * margin;
+  v.height = top + panel_h + 70;
+  return v;
+}
+
+// Final errors at the last paired sample (the scorer's definition).
+std::string FinalErrors(const PathsView& v, const TrialPlotInfo& inf, const std::string& note) {
+  if (v.predicted.empty()) return "no prediction" + note;
+  const std::size_t last = std::min(v.predicted.size(), v.measured.size()) - 1;
+  const double dp = (v.predicted[last].position - v.measured[last].position).norm();
+  const double da = v.predicted[last].orientation.angularDistance(v.measured[last].orientation);
+  return "final error " + Mm(dp) + ", " + FormatNumber(da * 180 / kPi, 3) + " deg" +
+         (inf.prediction_status == db::PredictionStatus::kOk
+              ? ""
+              : " (" + std::string(db::ToString(inf.prediction_status)) + note + ")");
+}
+
+// The document's start: the two title lines and the panel's frame.
+std::string HeaderSvg(const PlottedTrial& p, const PathsView& v, const TrialPlotInfo& inf,
+                      const std::string& errors) {
+  const std::string truth = p.gt.truth.empty() ? "unreported" : p.gt.truth;
+  std::string svg = "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"" + F(v.width) +
+                    "\" height=\"" + F(v.height) + "\" viewBox=\"0 0 " + F(v.width) + " " +
+                    F(v.height) + "\" font-family=\"sans-serif\">";
+  svg += "<rect width=\"100%\" height=\"100%\" fill=\"white\"/>";
+  svg +=
+      Text({v.width / 2, 24},
+           "trial " + std::to_string(p.trial.id) + " (campaign " + std::to_string(p.campaign.id) +
+               " '" + p.campaign.name + "'), seen from above; truth: " + truth,
+           "#000", "middle", 15);
+  svg += Text({v.width / 2, 46},
+              "prediction " + (inf.model_key.empty() ? std::string("-") : inf.model_key) + ": " +
+                  errors + "; " + FormatNumber(p.gt.samples.back().t, 3) + " s, start yaw " +
+                  FormatNumber(Yaw(v.measured.front().orientation) * 180 / kPi, 3) + " deg",
+              "#333", "middle", 12);
+  const Canvas& c = v.c;
+  svg += "<rect x=\"" + F(c.x0) + "\" y=\"" + F(c.y0) + "\" width=\"" + F(c.w) + "\" height=\"" +
+         F(c.h) + "\" fill=\"none\" stroke=\"#bbb\"/>";
+  svg += Text({c.x0 + 8, c.y0 + 18}, "x right, y up (the scene's frame)", "#333");
+  return svg;
+}
+
+// Outlines (drawn first, paths over them), the later ones darker; then the
+// pusher: its centre path and its disk at the same instants.
+std::string OutlinesAndPusherSvg(const PathsView& v) {
+  const auto opacity = [&](std::size_t i) {
+    return 0.35 + 0.65 * double(i) / std::max<std::size_t>(1, v.at.size() - 1);
+  };
+  std::string svg = "<g id=\"measured-outlines\">";
+  for (std::size_t i = 0; i < v.at.size(); ++i)
+    svg += Polyline(v.c, Placed(v.outline, v.measured[v.at[i]]), kMeasured, 1.3, false, true,
+                    "#888", opacity(i));
+  svg += "</g><g id=\"predicted-outlines\">";
+  for (std::size_t i = 0; i < v.at.size(); ++i)
+    if (v.at[i] < v.predicted.size())
+      svg += Polyline(v.c, Placed(v.outline, v.predicted[v.at[i]]), kPredicted, 1.3, true, true,
+                      "none", opacity(i));
+  svg += "</g>";
+  svg += "<g id=\"pusher-path\">";
+  svg += Polyline(v.c, v.pusher_centres, kPusher, 1.6, false, false);
+  if (v.pusher_r > 0)
+    for (std::size_t k : v.at) {
+      const Vector2d q = v.c.Px(v.pusher_centres[k]);
+      svg += "<circle cx=\"" + F(q.x()) + "\" cy=\"" + F(q.y()) + "\" r=\"" +
+             F(std::max(1.5, v.pusher_r * v.c.scale)) + "\" fill=\"none\" stroke=\"" + kPusher +
+             "\" stroke-width=\"1.2\"/>";
+    }
+  svg += "</g>";
+  return svg;
+}
+
+// The object's paths with start and end marks, the scale bar, the legend.
+std::string PathsAndLegendSvg(const PathsView& v) {
+  const Canvas& c = v.c;
+  std::string svg =
+      "<g id=\"measured-path\">" + Polyline(c, v.object_path, kMeasured, 2, false, false) + "</g>";
+  if (!v.predicted_path.empty())
+    svg += "<g id=\"predicted-path\">" + Polyline(c, v.predicted_path, kPredicted, 2, true, false) +
+           "</g>";
+  const Vector2d s0 = c.Px(v.object_path.front()), s1 = c.Px(v.object_path.back());
+  svg += "<circle cx=\"" + F(s0.x()) + "\" cy=\"" + F(s0.y()) + "\" r=\"3\" fill=\"" + kMeasured +
+         "\"/>" + Text(s0 + Vector2d(6, 14), "start", kMeasured, "start", 11);
+  svg += "<circle cx=\"" + F(s1.x()) + "\" cy=\"" + F(s1.y()) + "\" r=\"3\" fill=\"" + kMeasured +
+         "\"/>";
+  const double bar = ScaleBarLength(c.w / c.scale);
+  const Vector2d b0(c.x0 + 20, c.y0 + c.h - 20), b1 = b0 + Vector2d(bar * c.scale, 0);
+  svg += "<g id=\"scale-bar\" data-metres=\"" + FormatNumber(bar, 6) + "\"><line x1=\"" +
+         F(b0.x()) + "\" y1=\"" + F(b0.y()) + "\" x2=\"" + F(b1.x()) + "\" y2=\"" + F(b1.y()) +
+         "\" stroke=\"#000\" stroke-width=\"3\"/>" +
+         Text(0.5 * (b0 + b1) + Vector2d(0, -7), Mm(bar), "#000", "middle") + "</g>";
+  svg += Text({v.width / 2, v.height - 36},
+              "black: the object's true (here: measured) path and outline; orange dashed: the "
+              "prediction's",
+              "#555", "middle", 12);
+  svg += Text({v.width / 2, v.height - 18},
+              "outlines at the start, 1/3, 2/3 and the end (later ones darker); red: the pusher's "
+              "centre path and its tip then",
+              "#555", "middle", 12);
+  return svg;
 }
 
 }  // namespace
 
 std::string TrialPathsSvg(const db::Store& store, std::int64_t trial_id, TrialPlotInfo* info) {
-  db::Trial trial;
-  db::Campaign campaign;
-  db::GroundTruth gt;
-  try {
-    trial = store.GetTrial(trial_id);
-    campaign = store.GetCampaign(trial.campaign_id);
-    if (!trial.gt_stream_id)
-      throw CommandError(kExitBadInput, "trial " + std::to_string(trial_id) + " (" +
-                                            db::ToString(trial.state) +
-                                            ") has no ground truth: there is no path to plot");
-    gt = store.ReadGroundTruth(trial_id);
-  } catch (const db::StoreError& e) {
-    if (e.kind() == db::StoreError::Kind::kNotFound)
-      throw CommandError(kExitBadInput, "no trial " + std::to_string(trial_id) + " in " +
-                                            store.path() + " (find trial ids with `arena query`)");
-    throw StoreCommandError(e);
-  }
-  if (gt.samples.empty())
-    throw CommandError(kExitFailure,
-                       "trial " + std::to_string(trial_id) + ": its ground truth has no samples");
-  mechanics::Scene scene;
-  try {
-    scene = mechanics::ParseScene(trial.scene_json);
-  } catch (const std::exception& e) {
-    throw CommandError(
-        kExitStore, "trial " + std::to_string(trial_id) + ": stored scene unreadable: " + e.what());
-  }
-
+  const PlottedTrial p = LoadPlottedTrial(store, trial_id);
   // The prediction as the service made it (the campaign's "prediction" settings).
   TrialPlotInfo local;
   TrialPlotInfo& inf = info ? *info : local;
-  inf.samples = gt.samples.size();
-  std::vector<Pose2> predicted;
-  std::string note;
-  try {
-    nlohmann::json model;
-    const auto spec = nlohmann::json::parse(campaign.spec_json);
-    if (spec.is_object() && spec.contains("prediction")) model = spec["prediction"];
-    assessment::RecordedCommands commands;
-    if (scene.pusher && scene.pusher->controller) {
-      if (auto applied = store.GetClosedLoop(trial_id)) commands = assessment::CommandsOf(*applied);
-    }
-    const assessment::PredictedRun run = assessment::SimulatePrediction(scene, model, &commands);
-    inf.model_key = run.key;
-    inf.prediction_status = assessment::StatusOf(run.result.status);
-    if (run.result.status != mechanics::SimulationStatus::kOk) note = ": " + run.result.error;
-    for (const auto& s : run.result.samples) predicted.push_back({s.position, s.orientation});
-  } catch (const std::exception& e) {
-    inf.prediction_status = db::PredictionStatus::kError;
-    note = std::string(": ") + e.what();
-  }
-
-  std::vector<Pose2> measured;
-  std::vector<Vector3d> object_path, pusher_path, predicted_path;
-  for (const auto& s : gt.samples) {
-    measured.push_back(
-        {{s.object_pose[0], s.object_pose[1], s.object_pose[2]},
-         Eigen::Quaterniond(s.object_pose[3], s.object_pose[4], s.object_pose[5], s.object_pose[6])
-             .normalized()});
-    object_path.push_back(measured.back().position);
-    pusher_path.emplace_back(s.pusher_pose[0], s.pusher_pose[1], s.pusher_pose[2]);
-  }
-  for (const auto& p : predicted) predicted_path.push_back(p.position);
-  // The pusher's drawn disk: a sphere's centre is its reference point moved
-  // back along the start normal by its radius (the scene's convention).
-  double pusher_r = 0;
-  Vector3d to_centre = Vector3d::Zero();
-  if (scene.pusher && scene.pusher->type == mechanics::ContactType::kPoint &&
-      scene.pusher->radius > 0) {
-    pusher_r = scene.pusher->radius;
-    to_centre = -pusher_r * scene.pusher->normal.normalized();
-  }
-
-  const std::vector<Vector3d> outline = Outline(scene.object);
-  // Outlines at a few instants (samples paired by index, as the scorer pairs them).
-  const std::size_t n = measured.size();
-  std::vector<std::size_t> at = {0, n / 3, 2 * n / 3, n - 1};
-  at.erase(std::unique(at.begin(), at.end()), at.end());
-
-  std::vector<Vector3d> all = object_path;
-  for (std::size_t k : at)
-    for (const auto& v : Placed(outline, measured[k])) all.push_back(v);
-  for (std::size_t k : at)
-    if (k < predicted.size())
-      for (const auto& v : Placed(outline, predicted[k])) all.push_back(v);
-  for (const auto& p : pusher_path) all.push_back(p + to_centre);
-  Vector2d lo = Vector2d::Constant(std::numeric_limits<double>::infinity()), hi = -lo;
-  for (const auto& p : all) {
-    lo = lo.cwiseMin(p.head<2>());
-    hi = hi.cwiseMax(p.head<2>());
-  }
-  const double panel_w = 760, panel_h = 560, top = 78, margin = 20;
-  const Vector2d extent = (hi - lo).cwiseMax(1e-3);
-  const double scale = std::min(0.85 * panel_w / extent.x(), 0.85 * panel_h / extent.y());
-  const Canvas c{margin, top, panel_w, panel_h, scale, 0.5 * (lo + hi)};
-  const double width = panel_w + 2 * margin, height = top + panel_h + 70;
-
-  // Final errors at the last paired sample (the scorer's definition).
-  std::string errors = "no prediction" + note;
-  if (!predicted.empty()) {
-    const std::size_t last = std::min(predicted.size(), measured.size()) - 1;
-    const double dp = (predicted[last].position - measured[last].position).norm();
-    const double da = predicted[last].orientation.angularDistance(measured[last].orientation);
-    errors = "final error " + Mm(dp) + ", " + FormatNumber(da * 180 / kPi, 3) + " deg" +
-             (inf.prediction_status == db::PredictionStatus::kOk
-                  ? ""
-                  : " (" + std::string(db::ToString(inf.prediction_status)) + note + ")");
-  }
-  const std::string truth = gt.truth.empty() ? "unreported" : gt.truth;
-  std::string svg = "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"" + F(width) +
-                    "\" height=\"" + F(height) + "\" viewBox=\"0 0 " + F(width) + " " + F(height) +
-                    "\" font-family=\"sans-serif\">";
-  svg += "<rect width=\"100%\" height=\"100%\" fill=\"white\"/>";
-  svg += Text({width / 2, 24},
-              "trial " + std::to_string(trial.id) + " (campaign " + std::to_string(campaign.id) +
-                  " '" + campaign.name + "'), seen from above; truth: " + truth,
-              "#000", "middle", 15);
-  svg += Text({width / 2, 46},
-              "prediction " + (inf.model_key.empty() ? std::string("-") : inf.model_key) + ": " +
-                  errors + "; " + FormatNumber(gt.samples.back().t, 3) + " s, start yaw " +
-                  FormatNumber(Yaw(measured.front().orientation) * 180 / kPi, 3) + " deg",
-              "#333", "middle", 12);
-  svg += "<rect x=\"" + F(c.x0) + "\" y=\"" + F(c.y0) + "\" width=\"" + F(c.w) + "\" height=\"" +
-         F(c.h) + "\" fill=\"none\" stroke=\"#bbb\"/>";
-  svg += Text({c.x0 + 8, c.y0 + 18}, "x right, y up (the scene's frame)", "#333");
-
-  // Outlines first (paths drawn over them), the later ones darker.
-  svg += "<g id=\"measured-outlines\">";
-  for (std::size_t i = 0; i < at.size(); ++i)
-    svg += Polyline(c, Placed(outline, measured[at[i]]), kMeasured, 1.3, false, true, "#888",
-                    0.35 + 0.65 * double(i) / std::max<std::size_t>(1, at.size() - 1));
-  svg += "</g><g id=\"predicted-outlines\">";
-  for (std::size_t i = 0; i < at.size(); ++i)
-    if (at[i] < predicted.size())
-      svg += Polyline(c, Placed(outline, predicted[at[i]]), kPredicted, 1.3, true, true, "none",
-                      0.35 + 0.65 * double(i) / std::max<std::size_t>(1, at.size() - 1));
-  svg += "</g>";
-  // The pusher: its path (centre) and its disk at the same instants.
-  svg += "<g id=\"pusher-path\">";
-  std::vector<Vector3d> centres;
-  for (const auto& p : pusher_path) centres.push_back(p + to_centre);
-  svg += Polyline(c, centres, kPusher, 1.6, false, false);
-  if (pusher_r > 0)
-    for (std::size_t k : at) {
-      const Vector2d q = c.Px(centres[k]);
-      svg += "<circle cx=\"" + F(q.x()) + "\" cy=\"" + F(q.y()) + "\" r=\"" +
-             F(std::max(1.5, pusher_r * scale)) + "\" fill=\"none\" stroke=\"" + kPusher +
-             "\" stroke-width=\"1.2\"/>";
-    }
-  svg += "</g>";
-  svg += "<g id=\"measured-path\">" + Polyline(c, object_path, kMeasured, 2, false, false) + "</g>";
-  if (!predicted_path.empty())
-    svg += "<g id=\"predicted-path\">" + Polyline(c, predicted_path, kPredicted, 2, true, false) +
-           "</g>";
-  // Start and end marks.
-  const Vector2d s0 = c.Px(object_path.front()), s1 = c.Px(object_path.back());
-  svg += "<circle cx=\"" + F(s0.x()) + "\" cy=\"" + F(s0.y()) + "\" r=\"3\" fill=\"" + kMeasured +
-         "\"/>" + Text(s0 + Vector2d(6, 14), "start", kMeasured, "start", 11);
-  svg += "<circle cx=\"" + F(s1.x()) + "\" cy=\"" + F(s1.y()) + "\" r=\"3\" fill=\"" + kMeasured +
-         "\"/>";
-  // The scale bar.
-  const double bar = ScaleBarLength(c.w / scale);
-  const Vector2d b0(c.x0 + 20, c.y0 + c.h - 20), b1 = b0 + Vector2d(bar * scale, 0);
-  svg += "<g id=\"scale-bar\" data-metres=\"" + FormatNumber(bar, 6) + "\"><line x1=\"" +
-         F(b0.x()) + "\" y1=\"" + F(b0.y()) + "\" x2=\"" + F(b1.x()) + "\" y2=\"" + F(b1.y()) +
-         "\" stroke=\"#000\" stroke-width=\"3\"/>" +
-         Text(0.5 * (b0 + b1) + Vector2d(0, -7), Mm(bar), "#000", "middle") + "</g>";
-  svg += Text({width / 2, height - 36},
-              "black: the object's true (here: measured) path and outline; orange dashed: the "
-              "prediction's",
-              "#555", "middle", 12);
-  svg += Text({width / 2, height - 18},
-              "outlines at the start, 1/3, 2/3 and the end (later ones darker); red: the pusher's "
-              "centre path and its tip then",
-              "#555", "middle", 12);
+  inf.samples = p.gt.samples.size();
+  std::string reason;
+  const mechanics::SimulationResult prediction = PredictPlottedTrial(store, p, &inf, &reason);
+  const std::string note = reason.empty() ? "" : ": " + reason;
+  const PathsView v = MakeView(p, prediction);
+  std::string svg = HeaderSvg(p, v, inf, FinalErrors(v, inf, note));
+  svg += OutlinesAndPusherSvg(v);
+  svg += PathsAndLegendSvg(v);
   svg += "</svg>\n";
   return svg;
 }

@@ -83,11 +83,7 @@ std::vector<Vector2d> Hull(std::vector<Vector2d> p) {
   return h;
 }
 
-std::string F(double v) {
-  char b[32];
-  std::snprintf(b, sizeof b, "%.1f", v);
-  return b;
-}
+std::string F(double v) { return FormatFixed(v, 1); }
 
 // A length in the unit a person reads: mm below 1 m.
 std::string Length(double m) {
@@ -205,13 +201,263 @@ std::string DrawContact(const Canvas& c, const mechanics::ContactSpec& s, const 
   return g;
 }
 
-// A round length of about a quarter of the view.
-double ScaleBarLength(double view_m) {
-  const double target = view_m / 4;
-  const double p = std::pow(10.0, std::floor(std::log10(target)));
-  for (double m : {5.0, 2.0, 1.0})
-    if (m * p <= target) return m * p;
-  return p;
+// What SceneSvg draws beyond the scene itself: every point (to fit both
+// views at one scale), the push, and the support.
+struct SceneDrawing {
+  std::vector<Vector3d> all;
+  Vector3d push_end = Vector3d::Zero();
+  bool moves = false;
+  std::vector<Vector3d> path;  // a recorded path, at most ~200 of its samples
+  std::vector<Vector3d> footprint, pressure;
+  std::vector<double> pressure_w;
+  std::string support_text;
+};
+
+// Where the push ends: after a constant motion or along a recorded path
+// (drawn as recorded).
+void AddPush(const mechanics::Scene& scene, SceneDrawing* d) {
+  if (!scene.pusher) return;
+  d->push_end = mechanics::PusherPoseAt(*scene.pusher, scene.duration).position;
+  d->moves = !scene.pusher->controller && (d->push_end - scene.pusher->position).norm() > 0;
+  if (d->moves && scene.pusher->path) {
+    const auto& rec = *scene.pusher->path;
+    const std::size_t step = std::max<std::size_t>(1, rec.position.size() / 200);
+    for (std::size_t k = 0; k < rec.position.size(); k += step) d->path.push_back(rec.position[k]);
+    if (d->path.back() != rec.position.back()) d->path.push_back(rec.position.back());
+  }
+  for (const auto& p : ContactShape(*scene.pusher)) d->all.push_back(p);
+  if (d->moves) d->all.push_back(d->push_end);
+  for (const auto& p : d->path) d->all.push_back(p);
+}
+
+// The support: the face the object rests on (its footprint) and the plane.
+void AddSupport(const mechanics::Scene& scene, SceneDrawing* d) {
+  if (!scene.support) return;
+  try {
+    const mechanics::SupportPressure sp = mechanics::SupportPressureOf(scene);
+    const Eigen::Matrix3d r = Rotation(scene.object.pose);
+    for (const auto& q : ObjectPoints(scene.object)) {
+      // The object's points on the resting cap (in the object frame z = cap_z).
+      const Vector3d local = r.transpose() * (q - scene.object.pose.position);
+      if (std::abs(local.z() - sp.cap_z_O) < 1e-9) d->footprint.push_back(q);
+    }
+    if (!scene.support->pressure_points.empty()) {
+      for (std::size_t i = 0; i < sp.points_O.size(); ++i) {
+        d->pressure.push_back(scene.object.pose.position + r * sp.points_O[i]);
+        d->pressure_w.push_back(sp.weights[i]);
+      }
+    }
+    d->support_text = "support mu " + FormatNumber(scene.support->mu, 3) + ", " +
+                      (scene.support->pressure_points.empty()
+                           ? std::string("uniform pressure")
+                           : std::to_string(d->pressure.size()) + " pressure points");
+  } catch (const std::exception& e) {
+    d->support_text = std::string("support: ") + e.what();
+  }
+}
+
+SceneDrawing MakeDrawing(const mechanics::Scene& scene) {
+  SceneDrawing d;
+  d.all = ObjectPoints(scene.object);
+  for (const auto& f : scene.fingers)
+    for (const auto& p : ContactShape(f)) d.all.push_back(p);
+  AddPush(scene, &d);
+  AddSupport(scene, &d);
+  return d;
+}
+
+// The second title line: the object, the grip, the duration and the push.
+std::string SceneCaption(const mechanics::Scene& scene, const SceneDrawing& d) {
+  const auto& o = scene.object;
+  std::string text = std::string(mechanics::ToString(o.shape)) + " ";
+  if (o.shape == mechanics::ObjectShape::kBox)
+    text += FormatNumber(o.size.x() * 1e3, 3) + " x " + FormatNumber(o.size.y() * 1e3, 3) + " x " +
+            FormatNumber(o.size.z() * 1e3, 3) + " mm";
+  else if (o.shape == mechanics::ObjectShape::kCylinder)
+    text += "radius " + Length(o.radius) + ", height " + Length(o.height);
+  else
+    text += std::to_string(o.polygon.size()) + "-gon, height " + Length(o.height);
+  text += ", " + FormatNumber(o.mass * 1e3, 3) + " g; grip " + FormatNumber(scene.grip_force, 3) +
+          " N per finger; " +
+          (scene.duration >= 1 ? FormatNumber(scene.duration, 3) + " s"
+                               : FormatNumber(scene.duration * 1e3, 3) + " ms");
+  if (scene.pusher) {
+    if (scene.pusher->controller)
+      text += "; pusher closed-loop (" + scene.pusher->controller->name + ")";
+    else
+      text += "; push " + Length((d.push_end - scene.pusher->position).norm()) + " at " +
+              FormatNumber(mechanics::PusherPeakRates(*scene.pusher).velocity.norm() * 1e3, 3) +
+              (scene.pusher->path ? " mm/s at most (recorded path)" : " mm/s");
+  }
+  return text;
+}
+
+std::string ObjectSvg(const Canvas& c, const mechanics::ObjectSpec& o) {
+  std::vector<Vector2d> proj;
+  for (const auto& p : ObjectPoints(o)) proj.push_back(c.Project(p));
+  std::string d;
+  for (const auto& q : Hull(proj)) d += F(c.Px2(q).x()) + "," + F(c.Px2(q).y()) + " ";
+  return "<g id=\"object\"><polygon points=\"" + d +
+         "\" fill=\"#e6e6e6\" stroke=\"#555\" stroke-width=\"1.5\"/>" + "<circle cx=\"" +
+         F(c.Px(o.pose.position).x()) + "\" cy=\"" + F(c.Px(o.pose.position).y()) +
+         "\" r=\"2.5\" fill=\"#555\"/></g>";
+}
+
+// The support seen edge-on: its plane as a line across the panel, hatched on
+// the side away from the object.
+std::string SupportEdgeOnSvg(const Canvas& c, const std::vector<Vector2d>& hull,
+                             const Vector3d& object_position, const std::string& support_text) {
+  Vector2d e0 = hull.front(), e1 = hull.front();  // the two points farthest apart
+  for (const auto& p : hull)
+    for (const auto& q : hull)
+      if ((p - q).norm() > (e0 - e1).norm()) e0 = p, e1 = q;
+  const Vector2d a = c.Px2(e0), b = c.Px2(e1);
+  const Vector2d u = (b - a).norm() > 1e-9 ? Vector2d((b - a).normalized()) : Vector2d(1, 0);
+  Vector2d n(-u.y(), u.x());
+  if ((c.Px(object_position) - a).dot(n) > 0) n = -n;  // away from the object
+  const Vector2d l0 = a - 0.45 * c.w() * u, l1 = b + 0.45 * c.w() * u;
+  const auto inside = [&](const Vector2d& q) {
+    return q.x() >= c.x0() && q.x() <= c.x0() + c.w() && q.y() >= c.y0() && q.y() <= c.y0() + c.h();
+  };
+  Vector2d p0 = l0, p1 = l1;
+  for (int k = 0; k < 200 && !inside(p0); ++k) p0 += 0.005 * (l1 - l0);
+  for (int k = 0; k < 200 && !inside(p1); ++k) p1 -= 0.005 * (l1 - l0);
+  std::string svg = "<line x1=\"" + F(p0.x()) + "\" y1=\"" + F(p0.y()) + "\" x2=\"" + F(p1.x()) +
+                    "\" y2=\"" + F(p1.y()) + "\" stroke=\"#8d6e63\" stroke-width=\"2\"/>";
+  const double len = (p1 - p0).norm();
+  for (double d = 0; d < len; d += 12) {
+    const Vector2d h0 = p0 + d * u, h1 = h0 + 8 * n - 6 * u;
+    if (inside(h1))
+      svg += "<line x1=\"" + F(h0.x()) + "\" y1=\"" + F(h0.y()) + "\" x2=\"" + F(h1.x()) +
+             "\" y2=\"" + F(h1.y()) + "\" stroke=\"#8d6e63\" stroke-width=\"1\"/>";
+  }
+  svg += Text(p1 + 14 * n + Vector2d(-4, 4), support_text, "#8d6e63", "end", 11);
+  return svg;
+}
+
+// The support seen from above: the footprint (dashed) and any weighted
+// pressure points (area by weight).
+std::string FootprintSvg(const Canvas& c, const mechanics::Scene& scene, const SceneDrawing& d,
+                         const std::vector<Vector2d>& fp, const std::vector<Vector2d>& hull,
+                         const Vector2d& lo, const Vector2d& hi) {
+  // A prism's face in its outline's order (it may be non-convex), else the hull.
+  const bool prism = scene.object.shape != mechanics::ObjectShape::kBox &&
+                     scene.object.shape != mechanics::ObjectShape::kCylinder;
+  std::string points;
+  for (const auto& q : prism ? fp : hull) points += F(c.Px2(q).x()) + "," + F(c.Px2(q).y()) + " ";
+  std::string svg = "<polygon points=\"" + points +
+                    "\" fill=\"none\" stroke=\"#8d6e63\" stroke-width=\"2\" "
+                    "stroke-dasharray=\"2,3\"/>";
+  double w_max = 0;
+  for (double w : d.pressure_w) w_max = std::max(w_max, w);
+  for (std::size_t i = 0; i < d.pressure.size(); ++i) {
+    const Vector2d q = c.Px(d.pressure[i]);
+    svg += "<circle cx=\"" + F(q.x()) + "\" cy=\"" + F(q.y()) + "\" r=\"" +
+           F(1.5 + 4.5 * std::sqrt(d.pressure_w[i] / std::max(w_max, 1e-300))) +
+           "\" fill=\"#8d6e63\" fill-opacity=\"0.6\"/>";
+  }
+  svg += Text(c.Px2(Vector2d(0.5 * (lo.x() + hi.x()), lo.y())) + Vector2d(0, 16),
+              "footprint on the support", "#8d6e63", "middle", 11);
+  return svg;
+}
+
+// The support: in a view along the table its plane, seen from above the footprint.
+std::string SupportSvg(const Canvas& c, const mechanics::Scene& scene, const SceneDrawing& d) {
+  if (d.footprint.empty()) return "";
+  std::vector<Vector2d> fp;
+  for (const auto& p : d.footprint) fp.push_back(c.Project(p));
+  const auto hull = Hull(fp);
+  Vector2d lo = Vector2d::Constant(std::numeric_limits<double>::infinity()), hi = -lo;
+  for (const auto& q : hull) lo = lo.cwiseMin(q), hi = hi.cwiseMax(q);
+  const Vector2d span = hi - lo;
+  const bool edge_on = span.minCoeff() < 1e-9 * std::max(1.0, span.maxCoeff());
+  return "<g id=\"support\">" +
+         (edge_on ? SupportEdgeOnSvg(c, hull, scene.object.pose.position, d.support_text)
+                  : FootprintSvg(c, scene, d, fp, hull, lo, hi)) +
+         "</g>";
+}
+
+// The push: a recorded path as recorded, a straight push as an arrow beside
+// the pusher, a push along the view direction as a dot-in-circle.
+std::string PushMotionSvg(const Canvas& c, const View& v, const mechanics::Scene& scene,
+                          const SceneDrawing& d) {
+  const Vector2d a = c.Px(scene.pusher->position), b = c.Px(d.push_end);
+  const std::string away = Length((d.push_end - scene.pusher->position).norm());
+  std::string svg = "<g id=\"push-motion\">";
+  Vector2d lo = Vector2d::Constant(std::numeric_limits<double>::infinity()), hi = -lo;
+  for (const auto& p : d.path) lo = lo.cwiseMin(c.Px(p)), hi = hi.cwiseMax(c.Px(p));
+  if (!d.path.empty() && (hi - lo).norm() > 3) {
+    // The recorded path itself (dashed), its end hollow.
+    std::string points;
+    for (const auto& p : d.path) points += F(c.Px(p).x()) + "," + F(c.Px(p).y()) + " ";
+    svg += "<polyline class=\"recorded-path\" points=\"" + points +
+           "\" fill=\"none\" stroke=\"#c0392b\" stroke-width=\"2\" "
+           "stroke-dasharray=\"6,4\"/>";
+    svg += "<circle cx=\"" + F(b.x()) + "\" cy=\"" + F(b.y()) +
+           "\" r=\"4\" fill=\"none\" stroke=\"#c0392b\"/>";
+    const bool right = b.x() > c.x0() + c.w() / 2;  // the label runs into the panel
+    svg += Text(b + Vector2d(right ? -8 : 8, v.v_axis == 2 ? -12 : 18),
+                "recorded path, ends " + away + " away", "#c0392b", right ? "end" : "start", 11);
+  } else if ((b - a).norm() > 3) {
+    // Beside the pusher (not over its normal's arrow), with its end drawn hollow.
+    const Vector2d u = (b - a).normalized(), side(-u.y() * 14, u.x() * 14);
+    svg += Arrow(a + side, b + side, "#c0392b", true);
+    svg += "<circle cx=\"" + F(b.x()) + "\" cy=\"" + F(b.y()) +
+           "\" r=\"4\" fill=\"none\" stroke=\"#c0392b\"/>";
+    svg += Text(0.5 * (a + b) + 2.2 * side + Vector2d(0, 4), "push " + away, "#c0392b",
+                side.x() >= 0 ? "start" : "end", 11);
+  } else {
+    // Along the view direction: a dot-in-circle marks motion out of the page.
+    svg += "<circle cx=\"" + F(a.x()) + "\" cy=\"" + F(a.y()) +
+           "\" r=\"9\" fill=\"none\" stroke=\"#c0392b\" stroke-dasharray=\"3,2\"/>";
+  }
+  svg += "</g>";
+  return svg;
+}
+
+// Gravity, in the corner it points from, and the scale bar.
+std::string GravityAndScaleSvg(const Canvas& c, const View& v, const Vector3d& gravity) {
+  std::string svg;
+  const Vector2d g(gravity[v.h_axis], gravity[v.v_axis]);
+  if (g.norm() > 1e-9) {
+    const Vector2d u(g.x() / g.norm(), -g.y() / g.norm());
+    const Vector2d at(c.x0() + c.w() - 40, c.y0() + 60);
+    svg += "<g id=\"gravity\">" + Arrow(at - 18 * u, at + 18 * u, "#2e7d32", false, 1.5) +
+           Text(at + Vector2d(16, 4), "g", "#2e7d32", "start") + "</g>";
+  }
+  const double bar = ScaleBarLength(c.w() / c.scale());
+  const Vector2d b0(c.x0() + 20, c.y0() + c.h() - 20), b1 = b0 + Vector2d(bar * c.scale(), 0);
+  svg += "<g id=\"scale-bar\" data-metres=\"" + FormatNumber(bar, 6) + "\"><line x1=\"" +
+         F(b0.x()) + "\" y1=\"" + F(b0.y()) + "\" x2=\"" + F(b1.x()) + "\" y2=\"" + F(b1.y()) +
+         "\" stroke=\"#000\" stroke-width=\"3\"/>" +
+         Text(0.5 * (b0 + b1) + Vector2d(0, -7), Length(bar), "#000") + "</g>";
+  return svg;
+}
+
+// One view's panel: frame, object, support, fingers, pusher, gravity, scale.
+std::string ViewSvg(const Canvas& c, const View& v, const mechanics::Scene& scene,
+                    const SceneDrawing& d) {
+  std::string svg = "<g id=\"" + v.id + "\">";
+  svg += "<rect x=\"" + F(c.x0()) + "\" y=\"" + F(c.y0()) + "\" width=\"" + F(c.w()) +
+         "\" height=\"" + F(c.h()) + "\" fill=\"none\" stroke=\"#bbb\"/>";
+  svg += Text({c.x0() + 8, c.y0() + 18}, v.title, "#333", "start", 12);
+  svg += ObjectSvg(c, scene.object);
+  svg += SupportSvg(c, scene, d);
+  for (size_t i = 0; i < scene.fingers.size(); ++i) {
+    const auto& f = scene.fingers[i];
+    const std::string name = f.name.empty() ? "finger " + std::to_string(i) : f.name;
+    svg += DrawContact(c, f, "finger-" + name, name + " (" + mechanics::ToString(f.type) + ")",
+                       "#1f5fbf");
+  }
+  if (scene.pusher) {
+    svg += DrawContact(c, *scene.pusher, "pusher",
+                       std::string("pusher (") + mechanics::ToString(scene.pusher->type) + ")",
+                       "#c0392b");
+    if (d.moves) svg += PushMotionSvg(c, v, scene, d);
+  }
+  svg += GravityAndScaleSvg(c, v, scene.gravity);
+  svg += "</g>";
+  return svg;
 }
 
 }  // namespace
@@ -219,61 +465,13 @@ double ScaleBarLength(double view_m) {
 std::string SceneSvg(const mechanics::Scene& scene, const std::string& title) {
   const View views[2] = {{"view-front", "front: x right, z up (looking along +y)", 0, 2},
                          {"view-top", "top: x right, y up (looking down along -z)", 0, 1}};
-  // Everything drawn, to fit both views at one scale.
-  std::vector<Vector3d> all = ObjectPoints(scene.object);
-  for (const auto& f : scene.fingers)
-    for (const auto& p : ContactShape(f)) all.push_back(p);
-  Vector3d push_end = Vector3d::Zero();
-  // Where the push ends: after a constant motion or along a recorded path.
-  if (scene.pusher) push_end = mechanics::PusherPoseAt(*scene.pusher, scene.duration).position;
-  const bool moves =
-      scene.pusher && !scene.pusher->controller && (push_end - scene.pusher->position).norm() > 0;
-  // A recorded path is drawn as recorded (at most ~200 of its samples).
-  std::vector<Vector3d> path;
-  if (moves && scene.pusher->path) {
-    const auto& rec = *scene.pusher->path;
-    const std::size_t step = std::max<std::size_t>(1, rec.position.size() / 200);
-    for (std::size_t k = 0; k < rec.position.size(); k += step) path.push_back(rec.position[k]);
-    if (path.back() != rec.position.back()) path.push_back(rec.position.back());
-  }
-  if (scene.pusher) {
-    for (const auto& p : ContactShape(*scene.pusher)) all.push_back(p);
-    if (moves) all.push_back(push_end);
-    for (const auto& p : path) all.push_back(p);
-  }
-  // The support: the face the object rests on (its footprint) and the plane.
-  std::vector<Vector3d> footprint, pressure;
-  std::vector<double> pressure_w;
-  std::string support_text;
-  if (scene.support) {
-    try {
-      const mechanics::SupportPressure sp = mechanics::SupportPressureOf(scene);
-      const Eigen::Matrix3d r = Rotation(scene.object.pose);
-      for (const auto& q : ObjectPoints(scene.object)) {
-        // The object's points on the resting cap (in the object frame z = cap_z).
-        const Vector3d local = r.transpose() * (q - scene.object.pose.position);
-        if (std::abs(local.z() - sp.cap_z_O) < 1e-9) footprint.push_back(q);
-      }
-      if (!scene.support->pressure_points.empty()) {
-        for (std::size_t i = 0; i < sp.points_O.size(); ++i) {
-          pressure.push_back(scene.object.pose.position + r * sp.points_O[i]);
-          pressure_w.push_back(sp.weights[i]);
-        }
-      }
-      support_text = "support mu " + FormatNumber(scene.support->mu, 3) + ", " +
-                     (scene.support->pressure_points.empty()
-                          ? std::string("uniform pressure")
-                          : std::to_string(pressure.size()) + " pressure points");
-    } catch (const std::exception& e) {
-      support_text = std::string("support: ") + e.what();
-    }
-  }
+  const SceneDrawing d = MakeDrawing(scene);
   const double panel_w = 470, panel_h = 430, top = 70, margin = 20;
   double scale = std::numeric_limits<double>::infinity();
   Vector2d centres[2];
   for (int k = 0; k < 2; ++k) {
     Vector2d lo = Vector2d::Constant(std::numeric_limits<double>::infinity()), hi = -lo;
-    for (const auto& p : all) {
+    for (const auto& p : d.all) {
       const Vector2d q(p[views[k].h_axis], p[views[k].v_axis]);
       lo = lo.cwiseMin(q);
       hi = hi.cwiseMax(q);
@@ -289,177 +487,19 @@ std::string SceneSvg(const mechanics::Scene& scene, const std::string& title) {
                     "\" font-family=\"sans-serif\">";
   svg += "<rect width=\"100%\" height=\"100%\" fill=\"white\"/>";
   svg += Text({width / 2, 26}, title, "#000", "middle", 16);
-  const auto& o = scene.object;
-  std::string object_text = std::string(mechanics::ToString(o.shape)) + " ";
-  if (o.shape == mechanics::ObjectShape::kBox)
-    object_text += FormatNumber(o.size.x() * 1e3, 3) + " x " + FormatNumber(o.size.y() * 1e3, 3) +
-                   " x " + FormatNumber(o.size.z() * 1e3, 3) + " mm";
-  else if (o.shape == mechanics::ObjectShape::kCylinder)
-    object_text += "radius " + Length(o.radius) + ", height " + Length(o.height);
-  else
-    object_text += std::to_string(o.polygon.size()) + "-gon, height " + Length(o.height);
-  object_text += ", " + FormatNumber(o.mass * 1e3, 3) + " g; grip " +
-                 FormatNumber(scene.grip_force, 3) + " N per finger; " +
-                 (scene.duration >= 1 ? FormatNumber(scene.duration, 3) + " s"
-                                      : FormatNumber(scene.duration * 1e3, 3) + " ms");
-  if (scene.pusher) {
-    if (scene.pusher->controller)
-      object_text += "; pusher closed-loop (" + scene.pusher->controller->name + ")";
-    else
-      object_text +=
-          "; push " + Length((push_end - scene.pusher->position).norm()) + " at " +
-          FormatNumber(mechanics::PusherPeakRates(*scene.pusher).velocity.norm() * 1e3, 3) +
-          (scene.pusher->path ? " mm/s at most (recorded path)" : " mm/s");
-  }
-  svg += Text({width / 2, 48}, object_text, "#333", "middle", 13);
+  svg += Text({width / 2, 48}, SceneCaption(scene, d), "#333", "middle", 13);
   for (int k = 0; k < 2; ++k) {
-    const View& v = views[k];
-    const Canvas c(v, margin + k * (panel_w + margin), top, panel_w, panel_h, scale, centres[k]);
-    svg += "<g id=\"" + v.id + "\">";
-    svg += "<rect x=\"" + F(c.x0()) + "\" y=\"" + F(c.y0()) + "\" width=\"" + F(c.w()) +
-           "\" height=\"" + F(c.h()) + "\" fill=\"none\" stroke=\"#bbb\"/>";
-    svg += Text({c.x0() + 8, c.y0() + 18}, v.title, "#333", "start", 12);
-    // The object.
-    std::vector<Vector2d> proj;
-    for (const auto& p : ObjectPoints(scene.object)) proj.push_back(c.Project(p));
-    std::string d;
-    for (const auto& q : Hull(proj)) d += F(c.Px2(q).x()) + "," + F(c.Px2(q).y()) + " ";
-    svg += "<g id=\"object\"><polygon points=\"" + d +
-           "\" fill=\"#e6e6e6\" stroke=\"#555\" stroke-width=\"1.5\"/>";
-    svg += "<circle cx=\"" + F(c.Px(o.pose.position).x()) + "\" cy=\"" +
-           F(c.Px(o.pose.position).y()) + "\" r=\"2.5\" fill=\"#555\"/></g>";
-    // The support: in a view along the table its plane (a line with hatching
-    // below, across the panel), seen from above the footprint (dashed) and
-    // any weighted pressure points (area by weight).
-    if (!footprint.empty()) {
-      svg += "<g id=\"support\">";
-      std::vector<Vector2d> fp;
-      for (const auto& p : footprint) fp.push_back(c.Project(p));
-      const auto hull = Hull(fp);
-      Vector2d lo = Vector2d::Constant(std::numeric_limits<double>::infinity()), hi = -lo;
-      for (const auto& q : hull) lo = lo.cwiseMin(q), hi = hi.cwiseMax(q);
-      const Vector2d span = hi - lo;
-      if (span.minCoeff() < 1e-9 * std::max(1.0, span.maxCoeff())) {
-        // Edge-on: the plane as a line, hatched on the side away from the object.
-        Vector2d e0 = hull.front(), e1 = hull.front();  // the two points farthest apart
-        for (const auto& p : hull)
-          for (const auto& q : hull)
-            if ((p - q).norm() > (e0 - e1).norm()) e0 = p, e1 = q;
-        const Vector2d a = c.Px2(e0), b = c.Px2(e1);
-        const Vector2d u = (b - a).norm() > 1e-9 ? Vector2d((b - a).normalized()) : Vector2d(1, 0);
-        Vector2d n(-u.y(), u.x());
-        if ((c.Px(scene.object.pose.position) - a).dot(n) > 0) n = -n;  // away from the object
-        const Vector2d l0 = a - 0.45 * c.w() * u, l1 = b + 0.45 * c.w() * u;
-        const auto inside = [&](const Vector2d& q) {
-          return q.x() >= c.x0() && q.x() <= c.x0() + c.w() && q.y() >= c.y0() &&
-                 q.y() <= c.y0() + c.h();
-        };
-        Vector2d p0 = l0, p1 = l1;
-        for (int k = 0; k < 200 && !inside(p0); ++k) p0 += 0.005 * (l1 - l0);
-        for (int k = 0; k < 200 && !inside(p1); ++k) p1 -= 0.005 * (l1 - l0);
-        svg += "<line x1=\"" + F(p0.x()) + "\" y1=\"" + F(p0.y()) + "\" x2=\"" + F(p1.x()) +
-               "\" y2=\"" + F(p1.y()) + "\" stroke=\"#8d6e63\" stroke-width=\"2\"/>";
-        const double len = (p1 - p0).norm();
-        for (double d = 0; d < len; d += 12) {
-          const Vector2d h0 = p0 + d * u, h1 = h0 + 8 * n - 6 * u;
-          if (inside(h1))
-            svg += "<line x1=\"" + F(h0.x()) + "\" y1=\"" + F(h0.y()) + "\" x2=\"" + F(h1.x()) +
-                   "\" y2=\"" + F(h1.y()) + "\" stroke=\"#8d6e63\" stroke-width=\"1\"/>";
-        }
-        svg += Text(p1 + 14 * n + Vector2d(-4, 4), support_text, "#8d6e63", "end", 11);
-      } else {
-        // A prism's face in its outline's order (it may be non-convex), else the hull.
-        const bool prism = scene.object.shape != mechanics::ObjectShape::kBox &&
-                           scene.object.shape != mechanics::ObjectShape::kCylinder;
-        std::string d;
-        for (const auto& q : prism ? fp : hull) d += F(c.Px2(q).x()) + "," + F(c.Px2(q).y()) + " ";
-        svg += "<polygon points=\"" + d +
-               "\" fill=\"none\" stroke=\"#8d6e63\" stroke-width=\"2\" "
-               "stroke-dasharray=\"2,3\"/>";
-        double w_max = 0;
-        for (double w : pressure_w) w_max = std::max(w_max, w);
-        for (std::size_t i = 0; i < pressure.size(); ++i) {
-          const Vector2d q = c.Px(pressure[i]);
-          svg += "<circle cx=\"" + F(q.x()) + "\" cy=\"" + F(q.y()) + "\" r=\"" +
-                 F(1.5 + 4.5 * std::sqrt(pressure_w[i] / std::max(w_max, 1e-300))) +
-                 "\" fill=\"#8d6e63\" fill-opacity=\"0.6\"/>";
-        }
-        svg += Text(c.Px2(Vector2d(0.5 * (lo.x() + hi.x()), lo.y())) + Vector2d(0, 16),
-                    "footprint on the support", "#8d6e63", "middle", 11);
-      }
-      svg += "</g>";
-    }
-    // The fingers and the pusher.
-    for (size_t i = 0; i < scene.fingers.size(); ++i) {
-      const auto& f = scene.fingers[i];
-      const std::string name = f.name.empty() ? "finger " + std::to_string(i) : f.name;
-      svg += DrawContact(c, f, "finger-" + name, name + " (" + mechanics::ToString(f.type) + ")",
-                         "#1f5fbf");
-    }
-    if (scene.pusher) {
-      svg += DrawContact(c, *scene.pusher, "pusher",
-                         std::string("pusher (") + mechanics::ToString(scene.pusher->type) + ")",
-                         "#c0392b");
-      if (moves) {
-        const Vector2d a = c.Px(scene.pusher->position), b = c.Px(push_end);
-        svg += "<g id=\"push-motion\">";
-        Vector2d lo = Vector2d::Constant(std::numeric_limits<double>::infinity()), hi = -lo;
-        for (const auto& p : path) lo = lo.cwiseMin(c.Px(p)), hi = hi.cwiseMax(c.Px(p));
-        if (!path.empty() && (hi - lo).norm() > 3) {
-          // The recorded path itself (dashed), its end hollow.
-          std::string d;
-          for (const auto& p : path) d += F(c.Px(p).x()) + "," + F(c.Px(p).y()) + " ";
-          svg += "<polyline class=\"recorded-path\" points=\"" + d +
-                 "\" fill=\"none\" stroke=\"#c0392b\" stroke-width=\"2\" "
-                 "stroke-dasharray=\"6,4\"/>";
-          svg += "<circle cx=\"" + F(b.x()) + "\" cy=\"" + F(b.y()) +
-                 "\" r=\"4\" fill=\"none\" stroke=\"#c0392b\"/>";
-          const bool right = b.x() > c.x0() + c.w() / 2;  // the label runs into the panel
-          svg += Text(
-              b + Vector2d(right ? -8 : 8, v.v_axis == 2 ? -12 : 18),
-              "recorded path, ends " + Length((push_end - scene.pusher->position).norm()) + " away",
-              "#c0392b", right ? "end" : "start", 11);
-        } else if ((b - a).norm() > 3) {
-          // Beside the pusher (not over its normal's arrow), with its end drawn hollow.
-          const Vector2d u = (b - a).normalized(), side(-u.y() * 14, u.x() * 14);
-          svg += Arrow(a + side, b + side, "#c0392b", true);
-          svg += "<circle cx=\"" + F(b.x()) + "\" cy=\"" + F(b.y()) +
-                 "\" r=\"4\" fill=\"none\" stroke=\"#c0392b\"/>";
-          svg += Text(0.5 * (a + b) + 2.2 * side + Vector2d(0, 4),
-                      "push " + Length((push_end - scene.pusher->position).norm()), "#c0392b",
-                      side.x() >= 0 ? "start" : "end", 11);
-        } else {
-          // Along the view direction: a dot-in-circle marks motion out of the page.
-          svg += "<circle cx=\"" + F(a.x()) + "\" cy=\"" + F(a.y()) +
-                 "\" r=\"9\" fill=\"none\" stroke=\"#c0392b\" stroke-dasharray=\"3,2\"/>";
-        }
-        svg += "</g>";
-      }
-    }
-    // Gravity, in the corner it points from.
-    const Vector2d g(scene.gravity[v.h_axis], scene.gravity[v.v_axis]);
-    if (g.norm() > 1e-9) {
-      const Vector2d u(g.x() / g.norm(), -g.y() / g.norm());
-      const Vector2d at(c.x0() + c.w() - 40, c.y0() + 60);
-      svg += "<g id=\"gravity\">" + Arrow(at - 18 * u, at + 18 * u, "#2e7d32", false, 1.5) +
-             Text(at + Vector2d(16, 4), "g", "#2e7d32", "start") + "</g>";
-    }
-    // The scale bar.
-    const double bar = ScaleBarLength(c.w() / scale);
-    const Vector2d b0(c.x0() + 20, c.y0() + c.h() - 20), b1 = b0 + Vector2d(bar * scale, 0);
-    svg += "<g id=\"scale-bar\" data-metres=\"" + FormatNumber(bar, 6) + "\"><line x1=\"" +
-           F(b0.x()) + "\" y1=\"" + F(b0.y()) + "\" x2=\"" + F(b1.x()) + "\" y2=\"" + F(b1.y()) +
-           "\" stroke=\"#000\" stroke-width=\"3\"/>" +
-           Text(0.5 * (b0 + b1) + Vector2d(0, -7), Length(bar), "#000") + "</g>";
-    svg += "</g>";
+    const Canvas c(views[k], margin + k * (panel_w + margin), top, panel_w, panel_h, scale,
+                   centres[k]);
+    svg += ViewSvg(c, views[k], scene, d);
   }
   svg += Text({width / 2, height - 40},
               "blue: fingers, red: pusher (arrows point into the object; dashed: the pusher's "
               "path over the push), grey: the object at its start pose",
               "#555", "middle", 12);
-  if (!support_text.empty())
+  if (!d.support_text.empty())
     svg += Text({width / 2, height - 22},
-                "brown: the support (" + support_text +
+                "brown: the support (" + d.support_text +
                     "): its plane seen edge-on, the object's footprint on it seen from above",
                 "#555", "middle", 12);
   svg += "</svg>\n";

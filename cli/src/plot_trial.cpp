@@ -14,8 +14,9 @@
 #include "arena/db/store.hpp"
 #include "arena/mechanics/scene_json.hpp"
 #include "arena/mechanics/simulate.hpp"
-#include "commands.hpp"
+#include "command_error.hpp"
 #include "deadline_report.hpp"
+#include "plotted_trial.hpp"
 #include "store_errors.hpp"
 
 namespace arena::cli {
@@ -58,6 +59,133 @@ Panel PosePanel(const std::string& title, const std::string& unit, double min_sp
   p.series.push_back({"true", d.t_true, d.v_true, "#222222", false, false});
   p.series.push_back({"predicted", d.t_pred, d.v_pred, "#e6550d", false, true});
   return p;
+}
+
+// Rotation axis: the true final rotation from the start (z when the object
+// barely turns), with the conventional sign (its largest component positive).
+Eigen::Vector3d RotationAxis(const db::GroundTruth& gt) {
+  const Eigen::Quaterniond q0 = Quat(gt.samples.front().object_pose);
+  Eigen::Vector3d axis = Eigen::Vector3d::UnitZ();
+  const Eigen::AngleAxisd aa(q0.inverse() * Quat(gt.samples.back().object_pose));
+  if (aa.angle() > 1e-4) axis = aa.axis();
+  Eigen::Index k;
+  axis.cwiseAbs().maxCoeff(&k);
+  if (axis[k] < 0) axis = -axis;
+  return axis;
+}
+
+// The plotted quantities: object position (mm), rotation about the axis
+// (deg), and each contact's normal and tangential force (N).
+struct TrialSeries {
+  Triple pos[3], angle;
+  std::vector<Triple> normal, tangential;
+};
+
+// One contact's observed force on the object (false: not observed).
+bool ObservedForce(const db::Sample& s, std::size_t c, std::size_t n_fingers, Eigen::Vector3d* f) {
+  if (!s.observed_valid) return false;
+  if (c < n_fingers) {
+    if (s.observed_finger_wrenches.size() < 6 * (c + 1)) return false;
+    *f = {s.observed_finger_wrenches[6 * c], s.observed_finger_wrenches[6 * c + 1],
+          s.observed_finger_wrenches[6 * c + 2]};
+  } else {
+    *f = {s.observed_pusher_wrench[0], s.observed_pusher_wrench[1], s.observed_pusher_wrench[2]};
+  }
+  return true;
+}
+
+// The true and the observed series of one ground-truth sample.
+void AddTruthSample(const db::Sample& s, const Eigen::Quaterniond& q0, const Eigen::Vector3d& axis,
+                    const std::vector<Eigen::Vector3d>& normals, std::size_t n_fingers,
+                    TrialSeries* d) {
+  const std::size_t n_contacts = normals.size();
+  for (int k = 0; k < 3; ++k) {
+    d->pos[k].t_true.push_back(s.t);
+    d->pos[k].v_true.push_back(s.object_pose[k] * 1e3);
+  }
+  d->angle.t_true.push_back(s.t);
+  d->angle.v_true.push_back(SignedAngle(q0, Quat(s.object_pose), axis) * kRadToDeg);
+  for (size_t c = 0; c < n_contacts && c < s.contacts.size(); ++c) {
+    double fn, ft;
+    Split({s.contacts[c].force[0], s.contacts[c].force[1], s.contacts[c].force[2]}, normals[c], &fn,
+          &ft);
+    d->normal[c].t_true.push_back(s.t);
+    d->normal[c].v_true.push_back(fn);
+    d->tangential[c].t_true.push_back(s.t);
+    d->tangential[c].v_true.push_back(ft);
+  }
+  // Observed: a dropped sample leaves a gap (NaN is skipped by the chart).
+  const bool ok = s.observed_valid;
+  for (int k = 0; k < 3; ++k) {
+    d->pos[k].t_obs.push_back(s.t);
+    d->pos[k].v_obs.push_back(ok ? s.observed_object_pose[k] * 1e3 : kNaN);
+  }
+  d->angle.t_obs.push_back(s.t);
+  d->angle.v_obs.push_back(ok ? SignedAngle(q0, Quat(s.observed_object_pose), axis) * kRadToDeg
+                              : kNaN);
+  for (size_t c = 0; c < n_contacts; ++c) {
+    Eigen::Vector3d f;
+    double fn = kNaN, ft = kNaN;
+    if (ObservedForce(s, c, n_fingers, &f)) Split(f, normals[c], &fn, &ft);
+    d->normal[c].t_obs.push_back(s.t);
+    d->normal[c].v_obs.push_back(fn);
+    d->tangential[c].t_obs.push_back(s.t);
+    d->tangential[c].v_obs.push_back(ft);
+  }
+}
+
+void AddPredictedSamples(const mechanics::SimulationResult& predicted, const Eigen::Quaterniond& q0,
+                         const Eigen::Vector3d& axis, TrialSeries* d) {
+  const std::size_t n_contacts = d->normal.size();
+  for (const auto& s : predicted.samples) {
+    for (int k = 0; k < 3; ++k) {
+      d->pos[k].t_pred.push_back(s.t);
+      d->pos[k].v_pred.push_back(s.position[k] * 1e3);
+    }
+    d->angle.t_pred.push_back(s.t);
+    d->angle.v_pred.push_back(SignedAngle(q0, s.orientation, axis) * kRadToDeg);
+    for (size_t c = 0; c < n_contacts && c < s.contacts.size(); ++c) {
+      d->normal[c].t_pred.push_back(s.t);
+      d->normal[c].v_pred.push_back(s.contacts[c].normal_force);
+      d->tangential[c].t_pred.push_back(s.t);
+      d->tangential[c].v_pred.push_back(s.contacts[c].tangential_force.norm());
+    }
+  }
+}
+
+Panel ContactPanel(const std::string& contact, const Triple& normal, const Triple& tangential) {
+  Panel p;
+  p.title = contact + " contact force on the object";
+  p.y_label = std::string("N");  // not operator=(const char*): GCC 12 -Wrestrict false positive
+  p.min_y_span = 1.0;
+  p.series.push_back({"normal observed", normal.t_obs, normal.v_obs, "#6baed6", true, false});
+  p.series.push_back(
+      {"tangential observed", tangential.t_obs, tangential.v_obs, "#fdae6b", true, false});
+  p.series.push_back({"normal true", normal.t_true, normal.v_true, "#08519c", false, false});
+  p.series.push_back(
+      {"tangential true", tangential.t_true, tangential.v_true, "#a63603", false, false});
+  p.series.push_back({"normal predicted", normal.t_pred, normal.v_pred, "#3182bd", false, true});
+  p.series.push_back(
+      {"tangential predicted", tangential.t_pred, tangential.v_pred, "#e6550d", false, true});
+  return p;
+}
+
+std::string ChartTitle(const db::Store& store, const PlottedTrial& p, const TrialPlotInfo& inf,
+                       const std::string& reason) {
+  std::string title = "trial " + std::to_string(p.trial.id) + " (campaign " +
+                      std::to_string(p.campaign.id) + " '" + p.campaign.name + "', attempt " +
+                      std::to_string(p.gt.attempt) +
+                      (p.gt.cell_id.empty() ? "" : ", cell " + p.gt.cell_id) + ")  prediction " +
+                      (inf.model_key.empty() ? "-" : inf.model_key) +
+                      (inf.prediction_status == db::PredictionStatus::kOk
+                           ? ""
+                           : " " + std::string(db::ToString(inf.prediction_status)) +
+                                 (reason.empty() ? "" : "; " + reason));
+  // A closed-loop trial says how many control deadlines it missed.
+  if (p.scene.pusher && p.scene.pusher->controller) {
+    if (const auto run = store.GetClosedLoop(p.trial.id)) title += "; " + DeadlineCaption(*run);
+  }
+  return title;
 }
 
 }  // namespace
@@ -113,207 +241,41 @@ int PlotTrial(const std::string& db_path, std::int64_t trial, const std::string&
 }
 
 Chart MakeTrialChart(const db::Store& store, std::int64_t trial_id, TrialPlotInfo* info) {
-  db::Trial trial;
-  db::Campaign campaign;
-  db::GroundTruth gt;
-  try {
-    trial = store.GetTrial(trial_id);
-    campaign = store.GetCampaign(trial.campaign_id);
-  } catch (const db::StoreError& e) {
-    if (e.kind() == db::StoreError::Kind::kNotFound)
-      throw CommandError(kExitBadInput, "no trial " + std::to_string(trial_id) + " in " +
-                                            store.path() +
-                                            " (find trial ids with `arena query --db " +
-                                            store.path() + " --campaign ID`)");
-    throw StoreCommandError(e);
-  }
-  if (!trial.gt_stream_id && db::IsTerminal(trial.state)) {
-    // Failed or cancelled before any ground truth was kept: there is
-    // nothing to plot now or later, and nothing to watch.
-    std::string why;
-    try {
-      const auto history = store.ListTransitions(trial_id);
-      if (!history.empty()) why = history.back().reason;
-    } catch (const db::StoreError&) {
-    }
-    throw CommandError(kExitBadInput,
-                       "trial " + std::to_string(trial_id) + " " + db::ToString(trial.state) +
-                           " without ground truth" + (why.empty() ? "" : " (" + why + ")") +
-                           "; there is nothing to plot (`arena query --db " + store.path() +
-                           " \"select * from trial_transitions where trial_id = " +
-                           std::to_string(trial_id) + "\"` shows its history)");
-  }
-  if (!trial.gt_stream_id) {
-    throw CommandError(
-        kExitBadInput,
-        "trial " + std::to_string(trial_id) + " has no ground truth yet (state " +
-            db::ToString(trial.state) +
-            "); plot it once it has executed (`arena status` shows progress), or watch it live "
-            "with `arena watch " +
-            std::to_string(trial_id) + "`");
-  }
-  gt = store.ReadGroundTruth(trial_id);
-  if (gt.samples.empty())
-    throw CommandError(kExitFailure,
-                       "trial " + std::to_string(trial_id) + ": its ground truth has no samples");
-
-  mechanics::Scene scene;
-  try {
-    scene = mechanics::ParseScene(trial.scene_json);
-  } catch (const std::exception& e) {
-    throw CommandError(
-        kExitStore, "trial " + std::to_string(trial_id) + ": stored scene unreadable: " + e.what());
-  }
-  const auto normals = assessment::ContactNormals(scene);
-
-  // The prediction, exactly as the service makes it: the campaign's
-  // "prediction" settings applied to the trial's scene, on its predictor.
+  const PlottedTrial p = LoadPlottedTrial(store, trial_id);
+  const auto normals = assessment::ContactNormals(p.scene);
   TrialPlotInfo local;
   TrialPlotInfo& inf = info ? *info : local;
-  inf.samples = gt.samples.size();
-  mechanics::SimulationResult predicted;
-  std::string prediction_note;
-  try {
-    nlohmann::json model;
-    const auto spec = nlohmann::json::parse(campaign.spec_json);
-    if (spec.is_object() && spec.contains("prediction")) model = spec["prediction"];
-    // A closed-loop trial (issue 19) is predicted by replaying its applied commands.
-    assessment::RecordedCommands commands;
-    if (scene.pusher && scene.pusher->controller) {
-      if (auto applied = store.GetClosedLoop(trial_id)) commands = assessment::CommandsOf(*applied);
-    }
-    // From the start the service's prediction took (the cell's measured start).
-    assessment::PredictedRun run = assessment::SimulatePrediction(
-        scene, model, &commands, gt.samples.empty() ? nullptr : &gt.samples.front());
-    inf.model_key = run.key;
-    predicted = std::move(run.result);
-    inf.prediction_status = assessment::StatusOf(predicted.status);
-    if (predicted.status != mechanics::SimulationStatus::kOk)
-      prediction_note = "; " + predicted.error;
-  } catch (const std::exception& e) {
-    inf.prediction_status = db::PredictionStatus::kError;
-    prediction_note = std::string("; ") + e.what();
-    predicted.samples.clear();
-  }
+  inf.samples = p.gt.samples.size();
+  std::string reason;
+  const mechanics::SimulationResult predicted = PredictPlottedTrial(store, p, &inf, &reason);
 
-  // Rotation axis: the true final rotation from the start (z when the object barely turns).
-  const Eigen::Quaterniond q0 = Quat(gt.samples.front().object_pose);
-  Eigen::Vector3d axis = Eigen::Vector3d::UnitZ();
-  {
-    const Eigen::AngleAxisd aa(q0.inverse() * Quat(gt.samples.back().object_pose));
-    if (aa.angle() > 1e-4) axis = aa.axis();
-    // Prefer the conventional sign: the axis's largest component positive.
-    Eigen::Index k;
-    axis.cwiseAbs().maxCoeff(&k);
-    if (axis[k] < 0) axis = -axis;
-  }
-
-  Triple pos[3], angle;
-  const size_t n_contacts = normals.size();
-  const size_t n_fingers = scene.fingers.size();
-  std::vector<Triple> normal(n_contacts), tangential(n_contacts);
-  for (const auto& s : gt.samples) {
-    for (int k = 0; k < 3; ++k) {
-      pos[k].t_true.push_back(s.t);
-      pos[k].v_true.push_back(s.object_pose[k] * 1e3);
-    }
-    angle.t_true.push_back(s.t);
-    angle.v_true.push_back(SignedAngle(q0, Quat(s.object_pose), axis) * kRadToDeg);
-    for (size_t c = 0; c < n_contacts && c < s.contacts.size(); ++c) {
-      double fn, ft;
-      Split({s.contacts[c].force[0], s.contacts[c].force[1], s.contacts[c].force[2]}, normals[c],
-            &fn, &ft);
-      normal[c].t_true.push_back(s.t);
-      normal[c].v_true.push_back(fn);
-      tangential[c].t_true.push_back(s.t);
-      tangential[c].v_true.push_back(ft);
-    }
-    // Observed: a dropped sample leaves a gap (NaN is skipped by the chart).
-    const bool ok = s.observed_valid;
-    for (int k = 0; k < 3; ++k) {
-      pos[k].t_obs.push_back(s.t);
-      pos[k].v_obs.push_back(ok ? s.observed_object_pose[k] * 1e3 : kNaN);
-    }
-    angle.t_obs.push_back(s.t);
-    angle.v_obs.push_back(ok ? SignedAngle(q0, Quat(s.observed_object_pose), axis) * kRadToDeg
-                             : kNaN);
-    for (size_t c = 0; c < n_contacts; ++c) {
-      Eigen::Vector3d f;
-      bool have = ok;
-      if (c < n_fingers) {
-        have = have && s.observed_finger_wrenches.size() >= 6 * (c + 1);
-        if (have)
-          f = {s.observed_finger_wrenches[6 * c], s.observed_finger_wrenches[6 * c + 1],
-               s.observed_finger_wrenches[6 * c + 2]};
-      } else if (have) {
-        f = {s.observed_pusher_wrench[0], s.observed_pusher_wrench[1], s.observed_pusher_wrench[2]};
-      }
-      double fn = kNaN, ft = kNaN;
-      if (have) Split(f, normals[c], &fn, &ft);
-      normal[c].t_obs.push_back(s.t);
-      normal[c].v_obs.push_back(fn);
-      tangential[c].t_obs.push_back(s.t);
-      tangential[c].v_obs.push_back(ft);
-    }
-  }
-  for (const auto& s : predicted.samples) {
-    for (int k = 0; k < 3; ++k) {
-      pos[k].t_pred.push_back(s.t);
-      pos[k].v_pred.push_back(s.position[k] * 1e3);
-    }
-    angle.t_pred.push_back(s.t);
-    angle.v_pred.push_back(SignedAngle(q0, s.orientation, axis) * kRadToDeg);
-    for (size_t c = 0; c < n_contacts && c < s.contacts.size(); ++c) {
-      normal[c].t_pred.push_back(s.t);
-      normal[c].v_pred.push_back(s.contacts[c].normal_force);
-      tangential[c].t_pred.push_back(s.t);
-      tangential[c].v_pred.push_back(s.contacts[c].tangential_force.norm());
-    }
-  }
+  const Eigen::Quaterniond q0 = Quat(p.gt.samples.front().object_pose);
+  const Eigen::Vector3d axis = RotationAxis(p.gt);
+  const std::size_t n_fingers = p.scene.fingers.size();
+  TrialSeries d;
+  d.normal.resize(normals.size());
+  d.tangential.resize(normals.size());
+  for (const auto& s : p.gt.samples) AddTruthSample(s, q0, axis, normals, n_fingers, &d);
+  AddPredictedSamples(predicted, q0, axis, &d);
 
   Chart chart;
-  chart.title = "trial " + std::to_string(trial.id) + " (campaign " + std::to_string(campaign.id) +
-                " '" + campaign.name + "', attempt " + std::to_string(gt.attempt) +
-                (gt.cell_id.empty() ? "" : ", cell " + gt.cell_id) + ")  prediction " +
-                (inf.model_key.empty() ? "-" : inf.model_key) +
-                (inf.prediction_status == db::PredictionStatus::kOk
-                     ? ""
-                     : " " + std::string(db::ToString(inf.prediction_status)) + prediction_note);
-  // A closed-loop trial says how many control deadlines it missed.
-  if (scene.pusher && scene.pusher->controller) {
-    if (const auto run = store.GetClosedLoop(trial_id)) chart.title += "; " + DeadlineCaption(*run);
-  }
+  chart.title = ChartTitle(store, p, inf, reason);
   chart.x_label = "time since execute started (s)";
   chart.panel_height = 150;
   const char* names[3] = {"x", "y", "z"};
   for (int k = 0; k < 3; ++k)
     chart.panels.push_back(PosePanel(
-        std::string("object position ") + names[k] + " (gripper frame)", "mm", 1.0, pos[k]));
+        std::string("object position ") + names[k] + " (gripper frame)", "mm", 1.0, d.pos[k]));
   char axis_text[96];
   std::snprintf(axis_text, sizeof axis_text, "object rotation from start, about (%.2f, %.2f, %.2f)",
                 axis.x(), axis.y(), axis.z());
-  chart.panels.push_back(PosePanel(axis_text, "deg", 1.0, angle));
-  for (size_t c = 0; c < n_contacts; ++c) {
-    Panel p;
-    p.title = (c < n_fingers ? "finger " + std::to_string(c) + " (" +
-                                   mechanics::ToString(scene.fingers[c].type) + ")"
-                             : std::string("pusher")) +
-              " contact force on the object";
-    p.y_label = "N";
-    p.min_y_span = 1.0;
-    p.series.push_back(
-        {"normal observed", normal[c].t_obs, normal[c].v_obs, "#6baed6", true, false});
-    p.series.push_back(
-        {"tangential observed", tangential[c].t_obs, tangential[c].v_obs, "#fdae6b", true, false});
-    p.series.push_back(
-        {"normal true", normal[c].t_true, normal[c].v_true, "#08519c", false, false});
-    p.series.push_back(
-        {"tangential true", tangential[c].t_true, tangential[c].v_true, "#a63603", false, false});
-    p.series.push_back(
-        {"normal predicted", normal[c].t_pred, normal[c].v_pred, "#3182bd", false, true});
-    p.series.push_back({"tangential predicted", tangential[c].t_pred, tangential[c].v_pred,
-                        "#e6550d", false, true});
-    chart.panels.push_back(std::move(p));
+  chart.panels.push_back(PosePanel(axis_text, "deg", 1.0, d.angle));
+  for (size_t c = 0; c < normals.size(); ++c) {
+    const std::string contact = c < n_fingers
+                                    ? "finger " + std::to_string(c) + " (" +
+                                          mechanics::ToString(p.scene.fingers[c].type) + ")"
+                                    : std::string("pusher");
+    chart.panels.push_back(ContactPanel(contact, d.normal[c], d.tangential[c]));
   }
   return chart;
 }

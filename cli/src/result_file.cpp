@@ -9,7 +9,7 @@
 #include <ctime>
 #include <memory>
 
-#include "commands.hpp"
+#include "command_error.hpp"
 
 namespace arena::cli {
 

@@ -5,7 +5,7 @@
 #include <string>
 
 #include "arena/db/store.hpp"
-#include "commands.hpp"
+#include "command_error.hpp"
 
 namespace arena::cli {
 

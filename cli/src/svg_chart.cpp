@@ -41,11 +41,7 @@ std::string Id(const std::string& s) {
   return out;
 }
 
-std::string Num(double v) {
-  char buf[32];
-  std::snprintf(buf, sizeof buf, "%.2f", v);
-  return buf;
-}
+std::string Num(double v) { return FormatFixed(v, 2); }
 
 std::string TickLabel(double v) {
   char buf[32];
@@ -177,31 +173,163 @@ class LabelPlacer {
   std::vector<Box> boxes_;
 };
 
+// The chart's margins (px): the legend sits in the right one.
+constexpr int kLeft = 80, kRight = 190, kTop = 58, kGap = 60, kBottom = 50;
+
+// The x axis of the panels that share it (only == nullptr) or of one panel
+// with its own.
+Axis XAxisOf(const Chart& chart, bool log, const Panel* only) {
+  Range xr;
+  for (const auto& p : chart.panels) {
+    if (only ? &p != only : p.own_x) continue;
+    for (const auto& s : p.series)
+      for (double x : s.x)
+        if (std::isfinite(x) && (!log || x > 0)) xr.Add(x);
+  }
+  return MakeAxis(xr, log);
+}
+
+// A panel's y axis: its data's range, at least min_y_span wide when linear.
+Axis YAxisOf(const Panel& panel) {
+  Range yr;
+  for (const auto& s : panel.series)
+    for (size_t i = 0; i < s.y.size() && i < s.x.size(); ++i)
+      if (std::isfinite(s.y[i]) && (!panel.log_y || s.y[i] > 0)) yr.Add(s.y[i]);
+  if (!panel.log_y && panel.min_y_span > 0 && !yr.empty() && yr.hi - yr.lo < panel.min_y_span) {
+    const double mid = 0.5 * (yr.lo + yr.hi);
+    yr.lo = mid - 0.5 * panel.min_y_span;
+    yr.hi = mid + 0.5 * panel.min_y_span;
+  }
+  return MakeAxis(yr, panel.log_y);
+}
+
+// One panel's plot area in px.
+struct PanelFrame {
+  int plot_w, y0, h;
+  Axis xa, ya;
+  double Px(double x) const { return kLeft + xa.Frac(x) * plot_w; }
+  double Py(double y) const { return y0 + h - ya.Frac(y) * h; }
+  bool Usable(const Series& s, size_t i) const { return xa.Usable(s.x[i]) && ya.Usable(s.y[i]); }
+};
+
+// The panel's title, frame, grid with tick labels, and axis labels.
+void WriteFrameAndGrid(const PanelFrame& f, const Panel& panel, std::ostringstream& svg) {
+  const int left = kLeft, plot_w = f.plot_w, y0 = f.y0, h = f.h;
+  svg << "<g class=\"panel\" data-title=\"" << SvgEscape(panel.title) << "\"";
+  if (panel.own_x) svg << " data-x-label=\"" << SvgEscape(panel.x_label) << "\"";
+  svg << ">\n"
+      << "<text x=\"" << left << "\" y=\"" << y0 - 8 << "\" font-size=\"13\">"
+      << SvgEscape(panel.title) << "</text>\n"
+      << "<rect x=\"" << left << "\" y=\"" << y0 << "\" width=\"" << plot_w << "\" height=\"" << h
+      << "\" fill=\"none\" stroke=\"#444\"/>\n";
+  for (double t : Ticks(f.ya)) {
+    if (!f.ya.Usable(t)) continue;
+    const double y = f.Py(t);
+    if (y < y0 - 0.5 || y > y0 + h + 0.5) continue;
+    svg << "<line x1=\"" << left << "\" x2=\"" << left + plot_w << "\" y1=\"" << Num(y)
+        << "\" y2=\"" << Num(y) << "\" stroke=\"#ddd\"/>"
+        << "<text x=\"" << left - 6 << "\" y=\"" << Num(y + 4) << "\" text-anchor=\"end\">"
+        << TickLabel(t) << "</text>\n";
+  }
+  for (double t : Ticks(f.xa)) {
+    if (!f.xa.Usable(t)) continue;
+    const double x = f.Px(t);
+    if (x < left - 0.5 || x > left + plot_w + 0.5) continue;
+    svg << "<line x1=\"" << Num(x) << "\" x2=\"" << Num(x) << "\" y1=\"" << y0 << "\" y2=\""
+        << y0 + h << "\" stroke=\"#eee\"/>"
+        << "<text x=\"" << Num(x) << "\" y=\"" << y0 + h + 16 << "\" text-anchor=\"middle\">"
+        << TickLabel(t) << "</text>\n";
+  }
+  if (panel.own_x) {
+    svg << "<text x=\"" << left + plot_w / 2 << "\" y=\"" << y0 + h + 32
+        << "\" text-anchor=\"middle\">" << SvgEscape(panel.x_label) << "</text>\n";
+  }
+  svg << "<text transform=\"translate(" << left - 55 << ',' << y0 + h / 2
+      << ") rotate(-90)\" text-anchor=\"middle\">" << SvgEscape(panel.y_label) << "</text>\n";
+}
+
+void WritePolyline(const PanelFrame& f, const Series& s, const char* width,
+                   std::ostringstream& svg) {
+  svg << "<polyline fill=\"none\" stroke=\"" << s.color << "\" stroke-width=\"" << width << "\""
+      << (s.dashed ? " stroke-dasharray=\"6 3\"" : "") << " points=\"";
+  for (size_t i = 0; i < s.x.size() && i < s.y.size(); ++i) {
+    if (!f.Usable(s, i)) continue;
+    svg << Num(f.Px(s.x[i])) << ',' << Num(f.Py(s.y[i])) << ' ';
+  }
+  svg << "\"/>\n";
+}
+
+// Markers (optionally connected), each with its label where it has one.
+void WriteMarkers(const PanelFrame& f, const Series& s, LabelPlacer& placed,
+                  std::ostringstream& svg) {
+  if (s.connect) WritePolyline(f, s, "1.2", svg);
+  const double r = s.marker_radius > 0 ? s.marker_radius : (s.labels.empty() ? 1.8 : 3.5);
+  for (size_t i = 0; i < s.x.size() && i < s.y.size(); ++i) {
+    if (!f.Usable(s, i)) continue;
+    svg << "<circle cx=\"" << Num(f.Px(s.x[i])) << "\" cy=\"" << Num(f.Py(s.y[i])) << "\" r=\""
+        << Num(r) << "\" "
+        << (s.hollow ? "fill=\"none\" stroke-width=\"2.5\" stroke=\"" : "fill=\"") << s.color
+        << "\"/>\n";
+    if (i < s.labels.size() && !s.labels[i].empty()) {
+      const auto at = placed.Place(f.Px(s.x[i]), f.Py(s.y[i]), r, s.labels[i].size());
+      svg << "<text class=\"point-label\" x=\"" << Num(at.first) << "\" y=\"" << Num(at.second)
+          << "\" font-size=\"9\" fill=\"" << s.color << "\">" << SvgEscape(s.labels[i])
+          << "</text>\n";
+    }
+  }
+}
+
+void WriteLegendEntry(const PanelFrame& f, const Series& s, int legend_y, std::ostringstream& svg) {
+  const int left = kLeft, plot_w = f.plot_w;
+  if (s.markers) {
+    svg << "<circle cx=\"" << left + plot_w + 22 << "\" cy=\"" << legend_y - 4
+        << "\" r=\"3\" fill=\"" << s.color << "\"/>";
+  } else {
+    svg << "<line x1=\"" << left + plot_w + 12 << "\" x2=\"" << left + plot_w + 32 << "\" y1=\""
+        << legend_y - 4 << "\" y2=\"" << legend_y - 4 << "\" stroke=\"" << s.color
+        << "\" stroke-width=\"3\"" << (s.dashed ? " stroke-dasharray=\"6 3\"" : "") << "/>";
+  }
+  svg << "<text x=\"" << left + plot_w + 38 << "\" y=\"" << legend_y << "\">" << SvgEscape(s.name)
+      << "</text>\n";
+}
+
+void WritePanel(const Chart& chart, int pi, const Axis& shared_xa, int plot_w,
+                std::ostringstream& svg) {
+  const Panel& panel = chart.panels[pi];
+  const int y0 = kTop + pi * (chart.panel_height + kGap);
+  const PanelFrame f{plot_w, y0, chart.panel_height,
+                     panel.own_x ? XAxisOf(chart, panel.log_x, &panel) : shared_xa, YAxisOf(panel)};
+  WriteFrameAndGrid(f, panel, svg);
+  int legend_y = y0 + 12;
+  LabelPlacer placed(kLeft, y0, kLeft + plot_w, y0 + f.h);
+  for (const auto& s : panel.series) {
+    svg << "<g class=\"series\" id=\"p" << pi << '_' << Id(s.name) << "\" data-name=\""
+        << SvgEscape(s.name) << "\">\n";
+    if (s.markers) {
+      WriteMarkers(f, s, placed, svg);
+    } else {
+      WritePolyline(f, s, "1.5", svg);
+    }
+    svg << "</g>\n";
+    WriteLegendEntry(f, s, legend_y, svg);
+    legend_y += 16;
+  }
+  svg << "</g>\n";
+}
+
 }  // namespace
 
 std::string RenderSvg(const Chart& chart) {
-  const int left = 80, right = 190, top = 58, gap = 60, bottom = 50;
-  const int plot_w = chart.width - left - right;
+  const int plot_w = chart.width - kLeft - kRight;
   const int n = static_cast<int>(chart.panels.size());
-  const int height = top + n * chart.panel_height + (n - 1) * gap + bottom;
+  const int height = kTop + n * chart.panel_height + (n - 1) * kGap + kBottom;
   // The legend's longest entry widens the picture, never the plot (about 7 px
   // per character at 12 px): a long series name is read whole, not clipped.
   std::size_t longest = 0;
   for (const auto& p : chart.panels)
     for (const auto& s : p.series) longest = std::max(longest, s.name.size());
-  const int width = std::max(chart.width, left + plot_w + 48 + static_cast<int>(7 * longest));
-
-  auto x_axis = [&](bool log, const Panel* only) {
-    Range xr;
-    for (const auto& p : chart.panels) {
-      if (only ? &p != only : p.own_x) continue;
-      for (const auto& s : p.series)
-        for (double x : s.x)
-          if (std::isfinite(x) && (!log || x > 0)) xr.Add(x);
-    }
-    return MakeAxis(xr, log);
-  };
-  const Axis shared_xa = x_axis(chart.log_x, nullptr);
+  const int width = std::max(chart.width, kLeft + plot_w + 48 + static_cast<int>(7 * longest));
+  const Axis shared_xa = XAxisOf(chart, chart.log_x, nullptr);
   const bool any_shared = std::any_of(chart.panels.begin(), chart.panels.end(),
                                       [](const Panel& p) { return !p.own_x; });
 
@@ -213,118 +341,15 @@ std::string RenderSvg(const Chart& chart) {
       << "<rect width=\"100%\" height=\"100%\" fill=\"white\"/>\n"
       << "<text x=\"" << width / 2 << "\" y=\"22\" text-anchor=\"middle\" font-size=\"15\">"
       << SvgEscape(chart.title) << "</text>\n";
-
-  for (int pi = 0; pi < n; ++pi) {
-    const Panel& panel = chart.panels[pi];
-    const int y0 = top + pi * (chart.panel_height + gap);
-    const int h = chart.panel_height;
-    Range yr;
-    for (const auto& s : panel.series)
-      for (size_t i = 0; i < s.y.size() && i < s.x.size(); ++i)
-        if (std::isfinite(s.y[i]) && (!panel.log_y || s.y[i] > 0)) yr.Add(s.y[i]);
-    if (!panel.log_y && panel.min_y_span > 0 && !yr.empty() && yr.hi - yr.lo < panel.min_y_span) {
-      const double mid = 0.5 * (yr.lo + yr.hi);
-      yr.lo = mid - 0.5 * panel.min_y_span;
-      yr.hi = mid + 0.5 * panel.min_y_span;
-    }
-    const Axis ya = MakeAxis(yr, panel.log_y);
-    const Axis xa = panel.own_x ? x_axis(panel.log_x, &panel) : shared_xa;
-    auto px = [&](double x) { return left + xa.Frac(x) * plot_w; };
-    auto py = [&](double y) { return y0 + h - ya.Frac(y) * h; };
-
-    svg << "<g class=\"panel\" data-title=\"" << SvgEscape(panel.title) << "\"";
-    if (panel.own_x) svg << " data-x-label=\"" << SvgEscape(panel.x_label) << "\"";
-    svg << ">\n"
-        << "<text x=\"" << left << "\" y=\"" << y0 - 8 << "\" font-size=\"13\">"
-        << SvgEscape(panel.title) << "</text>\n"
-        << "<rect x=\"" << left << "\" y=\"" << y0 << "\" width=\"" << plot_w << "\" height=\"" << h
-        << "\" fill=\"none\" stroke=\"#444\"/>\n";
-    for (double t : Ticks(ya)) {
-      if (!ya.Usable(t)) continue;
-      const double y = py(t);
-      if (y < y0 - 0.5 || y > y0 + h + 0.5) continue;
-      svg << "<line x1=\"" << left << "\" x2=\"" << left + plot_w << "\" y1=\"" << Num(y)
-          << "\" y2=\"" << Num(y) << "\" stroke=\"#ddd\"/>"
-          << "<text x=\"" << left - 6 << "\" y=\"" << Num(y + 4) << "\" text-anchor=\"end\">"
-          << TickLabel(t) << "</text>\n";
-    }
-    for (double t : Ticks(xa)) {
-      if (!xa.Usable(t)) continue;
-      const double x = px(t);
-      if (x < left - 0.5 || x > left + plot_w + 0.5) continue;
-      svg << "<line x1=\"" << Num(x) << "\" x2=\"" << Num(x) << "\" y1=\"" << y0 << "\" y2=\""
-          << y0 + h << "\" stroke=\"#eee\"/>"
-          << "<text x=\"" << Num(x) << "\" y=\"" << y0 + h + 16 << "\" text-anchor=\"middle\">"
-          << TickLabel(t) << "</text>\n";
-    }
-    if (panel.own_x) {
-      svg << "<text x=\"" << left + plot_w / 2 << "\" y=\"" << y0 + h + 32
-          << "\" text-anchor=\"middle\">" << SvgEscape(panel.x_label) << "</text>\n";
-    }
-    svg << "<text transform=\"translate(" << left - 55 << ',' << y0 + h / 2
-        << ") rotate(-90)\" text-anchor=\"middle\">" << SvgEscape(panel.y_label) << "</text>\n";
-
-    int legend_y = y0 + 12;
-    LabelPlacer placed(left, y0, left + plot_w, y0 + h);
-    for (const auto& s : panel.series) {
-      svg << "<g class=\"series\" id=\"p" << pi << '_' << Id(s.name) << "\" data-name=\""
-          << SvgEscape(s.name) << "\">\n";
-      if (s.markers) {
-        if (s.connect) {
-          svg << "<polyline fill=\"none\" stroke=\"" << s.color << "\" stroke-width=\"1.2\""
-              << (s.dashed ? " stroke-dasharray=\"6 3\"" : "") << " points=\"";
-          for (size_t i = 0; i < s.x.size() && i < s.y.size(); ++i) {
-            if (!xa.Usable(s.x[i]) || !ya.Usable(s.y[i])) continue;
-            svg << Num(px(s.x[i])) << ',' << Num(py(s.y[i])) << ' ';
-          }
-          svg << "\"/>\n";
-        }
-        const double r = s.marker_radius > 0 ? s.marker_radius : (s.labels.empty() ? 1.8 : 3.5);
-        for (size_t i = 0; i < s.x.size() && i < s.y.size(); ++i) {
-          if (!xa.Usable(s.x[i]) || !ya.Usable(s.y[i])) continue;
-          svg << "<circle cx=\"" << Num(px(s.x[i])) << "\" cy=\"" << Num(py(s.y[i])) << "\" r=\""
-              << Num(r) << "\" "
-              << (s.hollow ? "fill=\"none\" stroke-width=\"2.5\" stroke=\"" : "fill=\"") << s.color
-              << "\"/>\n";
-          if (i < s.labels.size() && !s.labels[i].empty()) {
-            const auto at = placed.Place(px(s.x[i]), py(s.y[i]), r, s.labels[i].size());
-            svg << "<text class=\"point-label\" x=\"" << Num(at.first) << "\" y=\""
-                << Num(at.second) << "\" font-size=\"9\" fill=\"" << s.color << "\">"
-                << SvgEscape(s.labels[i]) << "</text>\n";
-          }
-        }
-      } else {
-        svg << "<polyline fill=\"none\" stroke=\"" << s.color << "\" stroke-width=\"1.5\""
-            << (s.dashed ? " stroke-dasharray=\"6 3\"" : "") << " points=\"";
-        for (size_t i = 0; i < s.x.size() && i < s.y.size(); ++i) {
-          if (!xa.Usable(s.x[i]) || !ya.Usable(s.y[i])) continue;
-          svg << Num(px(s.x[i])) << ',' << Num(py(s.y[i])) << ' ';
-        }
-        svg << "\"/>\n";
-      }
-      svg << "</g>\n";
-      if (s.markers) {
-        svg << "<circle cx=\"" << left + plot_w + 22 << "\" cy=\"" << legend_y - 4
-            << "\" r=\"3\" fill=\"" << s.color << "\"/>";
-      } else {
-        svg << "<line x1=\"" << left + plot_w + 12 << "\" x2=\"" << left + plot_w + 32 << "\" y1=\""
-            << legend_y - 4 << "\" y2=\"" << legend_y - 4 << "\" stroke=\"" << s.color
-            << "\" stroke-width=\"3\"" << (s.dashed ? " stroke-dasharray=\"6 3\"" : "") << "/>";
-      }
-      svg << "<text x=\"" << left + plot_w + 38 << "\" y=\"" << legend_y << "\">"
-          << SvgEscape(s.name) << "</text>\n";
-      legend_y += 16;
-    }
-    svg << "</g>\n";
-  }
+  for (int pi = 0; pi < n; ++pi) WritePanel(chart, pi, shared_xa, plot_w, svg);
   if (any_shared) {
     int last_shared = 0;
     for (int pi = 0; pi < n; ++pi)
       if (!chart.panels[pi].own_x) last_shared = pi;
     const int y = last_shared == n - 1
                       ? height - 12
-                      : top + last_shared * (chart.panel_height + gap) + chart.panel_height + 32;
-    svg << "<text x=\"" << left + plot_w / 2 << "\" y=\"" << y << "\" text-anchor=\"middle\">"
+                      : kTop + last_shared * (chart.panel_height + kGap) + chart.panel_height + 32;
+    svg << "<text x=\"" << kLeft + plot_w / 2 << "\" y=\"" << y << "\" text-anchor=\"middle\">"
         << SvgEscape(chart.x_label) << "</text>\n";
   }
   svg << "</svg>\n";
@@ -334,6 +359,20 @@ std::string RenderSvg(const Chart& chart) {
 std::string FormatNumber(double v, int significant) {
   char buf[40];
   std::snprintf(buf, sizeof buf, "%.*g", significant, v);
+  return buf;
+}
+
+double ScaleBarLength(double view_m) {
+  const double target = view_m / 4;
+  const double p = std::pow(10.0, std::floor(std::log10(target)));
+  for (double m : {5.0, 2.0, 1.0})
+    if (m * p <= target) return m * p;
+  return p;
+}
+
+std::string FormatFixed(double v, int decimals) {
+  char buf[64];
+  std::snprintf(buf, sizeof buf, "%.*f", decimals, v);
   return buf;
 }
 

@@ -57,6 +57,14 @@ std::string SvgEscape(const std::string& s);
 // labels, table cells and captions of the plots).
 std::string FormatNumber(double v, int significant);
 
+// v with `decimals` digits after the point, as printf's %.Nf gives it (SVG
+// coordinates: a tenth or a hundredth of a pixel is plenty).
+std::string FormatFixed(double v, int decimals);
+
+// A scale bar's length: a round length (1, 2 or 5 times a power of ten) of
+// at most a quarter of `view_m`, the width the drawing shows (m).
+double ScaleBarLength(double view_m);
+
 // "Nice" axis ticks covering [lo, hi] (about `count` of them).
 std::vector<double> NiceTicks(double lo, double hi, int count = 6);
 

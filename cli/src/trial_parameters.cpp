@@ -6,7 +6,7 @@
 
 #include <nlohmann/json.hpp>
 
-#include "commands.hpp"
+#include "command_error.hpp"
 
 namespace arena::cli {
 namespace {

@@ -297,6 +297,20 @@ std::int64_t Ingest::Finish(TrialEnd outcome) {
 
 std::unique_ptr<Ingest> Store::BeginIngest(std::int64_t trial_id, int attempt,
                                            const IngestOptions& options) {
+  std::string scene;
+  {
+    Tx tx(impl_->db, false);
+    auto p = impl_->Prepare("SELECT scene_json FROM trials WHERE id = ?");
+    p->Bind(1, trial_id);
+    if (p->Step()) scene = p->Text(0);  // an unknown trial: refused below, by name
+    tx.Commit();
+  }
+  return BeginIngest(trial_id, attempt, ContactSitesFromScene(scene), options);
+}
+
+std::unique_ptr<Ingest> Store::BeginIngest(std::int64_t trial_id, int attempt,
+                                           std::vector<ContactSite> sites,
+                                           const IngestOptions& options) {
   impl_->RequireWritable("BeginIngest");
   if (options.samples_per_chunk < 1 ||
       options.samples_per_chunk > static_cast<int>(kMaxBlockSamples)) {
@@ -318,11 +332,11 @@ std::unique_ptr<Ingest> Store::BeginIngest(std::int64_t trial_id, int attempt,
   Tx tx(impl_->db, true);
   const auto row = CheckIngestable(*impl_, trial_id, attempt, "BeginIngest");
   {
-    auto p = impl_->Prepare("SELECT pusher_type IS NOT NULL, scene_json FROM trials WHERE id = ?");
+    auto p = impl_->Prepare("SELECT pusher_type IS NOT NULL FROM trials WHERE id = ?");
     p->Bind(1, trial_id);
     p->Step();
     m->has_pusher = p->Int(0) != 0;
-    m->outcome = std::make_unique<OutcomeAccumulator>(ContactSitesFromScene(p->Text(1)));
+    m->outcome = std::make_unique<OutcomeAccumulator>(std::move(sites));
   }
   auto s = impl_->Prepare(
       "INSERT INTO gt_streams(trial_id, attempt, cell_id, complete, samples, started_at) "

@@ -518,6 +518,20 @@ CREATE TABLE IF NOT EXISTS fixture_changes(
 );
 CREATE INDEX IF NOT EXISTS fixture_changes_trial ON fixture_changes(trial_id);
 )sql"},
+      // Issue 26: why an active campaign's trials wait at claim: no live cell
+      // can host them (orchestrator/claim_gate.hpp). One row per waiting
+      // campaign; deleted when a cell that can host it announces. The claim
+      // skips a campaign that has one.
+      {18, "campaign_waits: why no live cell can host a campaign's trials", R"sql(
+CREATE TABLE IF NOT EXISTS campaign_waits(
+  campaign_id INTEGER PRIMARY KEY REFERENCES campaigns(id),
+  kind        TEXT NOT NULL
+              CHECK (kind IN ('defects', 'contact_types', 'workspace', 'pusher_speed')),
+  reason      TEXT NOT NULL CHECK (reason <> ''),
+  rule        TEXT NOT NULL,
+  since       REAL NOT NULL
+);
+)sql"},
   };
   return kMigrations;
 }

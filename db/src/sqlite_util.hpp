@@ -7,6 +7,7 @@
 #include <map>
 #include <memory>
 #include <optional>
+#include <set>
 #include <string>
 #include <string_view>
 
@@ -137,6 +138,9 @@ struct Store::Impl {
   // renamed or replaced under us.
   unsigned long long file_dev = 0, file_ino = 0;
   Store::QuickCheckResult open_check;  // the read-write open's quick check
+  // Store::RestrictClaimsTo: the campaigns this connection's claims may take
+  // from (nullopt: every active one).
+  std::optional<std::set<std::int64_t>> claimable;
 
   ~Impl();
   detail::StmtRef Prepare(std::string_view sql) const;

@@ -678,7 +678,9 @@ namespace {
 // each: both walk an index, so a claim costs the same with 10 or 10^6
 // planned trials (one ORDER BY over all planned trials would not).
 constexpr const char* kActiveCampaignsSql =
-    "SELECT id FROM campaigns WHERE state = 'active' ORDER BY priority DESC, id";
+    "SELECT id FROM campaigns WHERE state = 'active'"
+    " AND id NOT IN (SELECT campaign_id FROM campaign_waits)"  // the claim gate (issue 26)
+    " ORDER BY priority DESC, id";
 constexpr const char* kNextTrialSql =
     "SELECT id, campaign_id, attempt, seed, scene_json, defects_json, idx FROM trials"
     " WHERE state = 'planned' AND campaign_id = ? AND not_before <= ? AND (contact_mask & ~?) = 0"
@@ -704,6 +706,7 @@ std::vector<ClaimedTrial> FindWindow(const Store::Impl& impl, const std::string&
   }
   const double now = impl.Now();
   for (const auto campaign : campaigns) {
+    if (impl.claimable && !impl.claimable->count(campaign)) continue;  // RestrictClaimsTo
     auto s = impl.Prepare(kNextTrialSql);
     s->Bind(1, campaign).Bind(2, now).Bind(3, mask).Bind(4, static_cast<std::int64_t>(limit));
     while (s->Step()) {
@@ -764,6 +767,7 @@ std::optional<ClaimedTrial> Store::ClaimTrial(const std::string& cell_id, std::i
       " AND (t.contact_mask & ~?) = 0");
   s->Bind(1, trial_id).Bind(2, impl_->Now()).Bind(3, cell->Int(1));
   if (!s->Step()) return std::nullopt;
+  if (impl_->claimable && !impl_->claimable->count(s->Int(1))) return std::nullopt;
   ClaimedTrial t;
   t.trial_id = s->Int(0);
   t.campaign_id = s->Int(1);

@@ -16,8 +16,13 @@
 
 #include <nlohmann/json.hpp>
 
+#include "arena/hdf5/handle.hpp"
+
 namespace arena::executors {
 namespace {
+
+using H5Object = hdf5::Handle;
+using hdf5::Reason;
 
 constexpr double kMissing = std::numeric_limits<double>::quiet_NaN();
 
@@ -40,34 +45,6 @@ std::vector<std::string> SplitCsv(const std::string& line) {
 }
 
 // ---------------------------------------------------------------- HDF5
-
-// The innermost message of HDF5's error stack (where the error was found,
-// e.g. "truncated file: eof = ..."), for a reason a person can act on.
-std::string H5Reason() {
-  std::string reason;
-  H5Ewalk2(
-      H5E_DEFAULT, H5E_WALK_UPWARD,
-      [](unsigned n, const H5E_error2_t* e, void* out) -> herr_t {
-        auto* r = static_cast<std::string*>(out);
-        if (n == 0 && e->desc) *r = e->desc;
-        return 0;
-      },
-      &reason);
-  H5Eclear2(H5E_DEFAULT);
-  return reason.empty() ? "HDF5 error" : reason;
-}
-
-// Closes an HDF5 object when it goes out of scope.
-struct H5Object {
-  hid_t id = -1;
-  herr_t (*close)(hid_t) = nullptr;
-  H5Object(hid_t i, herr_t (*c)(hid_t)) : id(i), close(c) {}
-  ~H5Object() {
-    if (id >= 0) close(id);
-  }
-  H5Object(const H5Object&) = delete;
-  H5Object& operator=(const H5Object&) = delete;
-};
 
 // HDF5 reports errors on its own stack; printing it to stderr is off, per
 // thread (the library keeps one stack per thread).
@@ -205,14 +182,14 @@ RecordedStream ReadJsonlStream(const std::string& path) {
 Hdf5Recording::Hdf5Recording(std::string path) : path_(std::move(path)) {
   QuietHdf5();
   if (const htri_t is = H5Fis_hdf5(path_.c_str()); is <= 0) {
-    const std::string why = is < 0 ? H5Reason() : "no HDF5 signature";
+    const std::string why = is < 0 ? Reason() : "no HDF5 signature";
     std::ifstream probe(path_);
     throw std::invalid_argument(path_ + ": " +
                                 (probe ? "not an HDF5 file (" + why + ")"
                                        : std::string("missing (the export's dataset.h5)")));
   }
   file_ = H5Fopen(path_.c_str(), H5F_ACC_RDONLY, H5P_DEFAULT);
-  if (file_ < 0) throw std::invalid_argument(path_ + ": cannot open it: " + H5Reason());
+  if (file_ < 0) throw std::invalid_argument(path_ + ": cannot open it: " + Reason());
   if (H5Lexists(file_, "trials", H5P_DEFAULT) <= 0) {
     H5Eclear2(H5E_DEFAULT);
     throw std::invalid_argument(path_ + ": no /trials group (not an arena export?)");
@@ -240,9 +217,9 @@ RecordedStream Hdf5Recording::Read(std::int64_t trial_id, bool samples) const {
     }
   }
   H5Object ds(H5Dopen2(file_, name.c_str(), H5P_DEFAULT), H5Dclose);
-  if (ds.id < 0) throw std::invalid_argument(where + "not a dataset: " + H5Reason());
+  if (ds.id < 0) throw std::invalid_argument(where + "not a dataset: " + Reason());
   H5Object type(H5Dget_type(ds.id), H5Tclose);
-  if (type.id < 0) throw std::invalid_argument(where + "unreadable type: " + H5Reason());
+  if (type.id < 0) throw std::invalid_argument(where + "unreadable type: " + Reason());
   if (H5Tget_class(type.id) != H5T_FLOAT || H5Tget_size(type.id) != 8)
     throw std::invalid_argument(where + "holds " + TypeName(type.id) + ", expected 64-bit floats");
   H5Object space(H5Dget_space(ds.id), H5Sclose);
@@ -272,14 +249,14 @@ RecordedStream Hdf5Recording::Read(std::int64_t trial_id, bool samples) const {
     H5Tset_cset(text.id, H5Tget_cset(atype.id));
     std::vector<char*> p(static_cast<size_t>(names), nullptr);
     if (H5Aread(attr.id, text.id, p.data()) < 0)
-      throw std::invalid_argument(where + "cannot read attribute \"columns\": " + H5Reason());
+      throw std::invalid_argument(where + "cannot read attribute \"columns\": " + Reason());
     for (char* name : p) out.columns.emplace_back(name ? name : "");
     H5Dvlen_reclaim(text.id, aspace.id, H5P_DEFAULT, p.data());
   } else {
     const size_t width = H5Tget_size(atype.id);
     std::string buffer(width * static_cast<size_t>(names), '\0');
     if (H5Aread(attr.id, atype.id, buffer.data()) < 0)
-      throw std::invalid_argument(where + "cannot read attribute \"columns\": " + H5Reason());
+      throw std::invalid_argument(where + "cannot read attribute \"columns\": " + Reason());
     for (hssize_t k = 0; k < names; ++k) {
       const char* p = buffer.data() + static_cast<size_t>(k) * width;
       out.columns.emplace_back(p, strnlen(p, width));
@@ -302,7 +279,7 @@ std::size_t Hdf5Recording::Stream(std::int64_t trial_id, const ColumnsFn& on_col
   const std::string where = path_ + ": /" + name + ": ";
   H5Object ds(H5Dopen2(file_, name.c_str(), H5P_DEFAULT), H5Dclose);
   H5Object space(ds.id < 0 ? -1 : H5Dget_space(ds.id), H5Sclose);
-  if (space.id < 0) throw std::invalid_argument(where + "cannot open it: " + H5Reason());
+  if (space.id < 0) throw std::invalid_argument(where + "cannot open it: " + Reason());
   hsize_t dims[2] = {0, 0};
   H5Sget_simple_extent_dims(space.id, dims, nullptr);
   const hsize_t slab = std::max<hsize_t>(
@@ -318,7 +295,7 @@ std::size_t Hdf5Recording::Stream(std::int64_t trial_id, const ColumnsFn& on_col
     if (file_space.id < 0 || mem.id < 0 ||
         H5Sselect_hyperslab(file_space.id, H5S_SELECT_SET, start, nullptr, count, nullptr) < 0 ||
         H5Dread(ds.id, H5T_NATIVE_DOUBLE, mem.id, file_space.id, H5P_DEFAULT, flat.data()) < 0)
-      throw std::invalid_argument(where + "cannot read its samples: " + H5Reason());
+      throw std::invalid_argument(where + "cannot read its samples: " + Reason());
     for (hsize_t i = 0; i < count[0]; ++i) {
       std::copy(flat.begin() + static_cast<std::ptrdiff_t>(i * dims[1]),
                 flat.begin() + static_cast<std::ptrdiff_t>((i + 1) * dims[1]), row.begin());

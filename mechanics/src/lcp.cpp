@@ -21,6 +21,12 @@ namespace {
 
 // Pivots between rebuilds of the basis inverse (drift control).
 constexpr int kRefactorInterval = 32;
+// The lexicographic rule's ties: entries of two scaled basis-inverse rows
+// equal within this fraction of the rows' own size.
+constexpr double kLexicographicTolerance = 1e-12;
+// A refactored basis block whose reciprocal condition number (LU estimate)
+// is below this is singular for the method: 1e-13 leaves ~3 digits.
+constexpr double kMinBasisRcond = 1e-13;
 
 double NaturalResidual(const Eigen::VectorXd& z, const Eigen::VectorXd& w) {
   double worst = 0;
@@ -218,8 +224,10 @@ bool Acceptable(const Eigen::VectorXd& z, const Eigen::VectorXd& w, const Eigen:
                 double tol) {
   if (!AllFinite(z) || !AllFinite(w)) return false;
   // Relative to the data, not to z: a near-singular basis can give a huge z
-  // whose relative residual looks small.
-  return NaturalResidual(z, w) <= tol * std::max(1.0, b.lpNorm<Eigen::Infinity>());
+  // whose relative residual looks small. Only relative: with a floor of 1, a
+  // problem scaled by 1e-15 accepted any z (its residual was below 1e-9
+  // whatever z was) and Lemke's first pivot came back as a solution.
+  return NaturalResidual(z, w) <= tol * b.lpNorm<Eigen::Infinity>();
 }
 
 // Murty's least-index principal pivoting from a basis that is nearly right:
@@ -423,6 +431,11 @@ bool RefactorInverse(const LcpColumns& A, const Eigen::VectorXd& b, const Eigen:
       for (Eigen::Index r = 0; r < k; ++r) w.Cs(r, c) = -a[w.srows[static_cast<size_t>(r)]];
     }
     w.cs_lu.compute(w.Cs);
+    // Near-singular, not only non-finite: below kMinBasisRcond the inverse
+    // has lost all but a few digits, and the ratio tests that follow would
+    // pick rows by rounding (a wrong basis, not a solution). The caller
+    // stops with the typed kSingularBasis.
+    if (!(w.cs_lu.rcond() >= kMinBasisRcond)) return false;
     const Eigen::MatrixXd cs_inv = w.cs_lu.inverse();
     if (!cs_inv.allFinite()) return false;
     for (Eigen::Index c = 0; c < k; ++c) {
@@ -499,16 +512,26 @@ Eigen::Index LeavingRow(LemkeWork& w, Eigen::Index n, Eigen::Index z0, double be
   for (Eigen::Index i : w.ties) {
     if (w.basis[static_cast<size_t>(i)] == z0) return i;
   }
+  // Rows compare equal within rounding of their own size (relative): the
+  // absolute 1e-14 it was made every row of a problem scaled by 1e15 (basis
+  // inverse entries ~1e-15) tie, the first won, and cycling was no longer
+  // excluded.
+  auto row_size = [&](Eigen::Index i) {
+    return Binv.row(i).lpNorm<Eigen::Infinity>() / std::abs(w.d[i]);
+  };
+  double r_size = row_size(r);
   for (size_t t = 1; t < w.ties.size(); ++t) {
     const Eigen::Index c = w.ties[t];
+    const double eps = kLexicographicTolerance * std::max(r_size, row_size(c));
     for (Eigen::Index j = 0; j < n; ++j) {
       const double a = Binv(c, j) / w.d[c];
       const double bb = Binv(r, j) / w.d[r];
-      if (a < bb - 1e-14) {
+      if (a < bb - eps) {
         r = c;
+        r_size = row_size(r);
         break;
       }
-      if (a > bb + 1e-14) break;
+      if (a > bb + eps) break;
     }
   }
   return r;
@@ -618,7 +641,9 @@ void LemkeOnce(const LcpColumns& A, const Eigen::VectorXd& b, const Eigen::Vecto
     // Minimum ratio over rows where the entering variable decreases a basic one.
     // Pivots are judged relative to the column (the problem is scaled, but
     // far-away contacts still make columns of very different sizes).
-    const double dtol = tol * std::max(1.0, w.d.lpNorm<Eigen::Infinity>());
+    // Relative only: with a floor of 1, every entry of a problem scaled by
+    // 1e-15 was below it and the run ended on a false ray.
+    const double dtol = tol * w.d.lpNorm<Eigen::Infinity>();
     double best = std::numeric_limits<double>::infinity();
     for (Eigen::Index i = 0; i < n; ++i) {
       if (w.d[i] > dtol) best = std::min(best, w.x[i] / w.d[i]);
@@ -631,7 +656,8 @@ void LemkeOnce(const LcpColumns& A, const Eigen::VectorXd& b, const Eigen::Vecto
       for (Eigen::Index i = 0; i < n; ++i) {
         if (w.basis[static_cast<size_t>(i)] == z0) z0_value = w.x[i];
       }
-      if (std::abs(z0_value) <= 1e-9 * std::max(1.0, w.x.lpNorm<Eigen::Infinity>())) break;
+      // Relative: with a floor of 1 any z0 of a problem scaled small passed.
+      if (std::abs(z0_value) <= 1e-9 * w.x.lpNorm<Eigen::Infinity>()) break;
       // A ray seen through a drifted inverse may be an artefact of the
       // drift: look again with a fresh one (cheap, see RefactorInverse) first.
       if (fresh_at != pivots) {

@@ -119,6 +119,16 @@ constexpr double kQuasiStatic = 1e-6;
 constexpr int kQuasiStaticSolves = 50;
 // Solves of one step before an inaccurate answer is reported as a failure.
 constexpr int kAccuracyAttempts = 4;
+// A point pad follows the object along its closing direction c and sees the
+// face's normal n: its travel is the gap over n·c, and its friction rows
+// remove (d·c)/(n·c) n. Below this grazing factor (84° between them) the
+// division would amplify the gap and every rounding in it by more than 10,
+// and the pad's force (along n) would push nearly across the jaw: the step
+// is refused with a typed error naming the finger (GrazingFinger).
+constexpr double kGrazingFactor = 0.1;
+// The planar reduction: a contact normal farther than this (rad) from the
+// plane is refused (SetEdges).
+constexpr double kOutOfPlane = 1e-6;
 
 double LengthScale(const ObjectSpec& object) {
   double L = object.shape == ObjectShape::kBox        ? object.size.maxCoeff()
@@ -326,6 +336,9 @@ struct Contact {
   bool active = false;       // has rows (a finger with zero grip force has none)
   double known_normal = -1;  // point finger: its normal force (N), else -1
   int y_plus = -1, y_minus = -1;
+  // Parallel jaw (gripper.coupling): both fingers close at one rate, the
+  // second shares the first's closing unknowns y± (AssemblePadRows).
+  bool jaw = false, jaw_follower = false;
   double pad = 0;  // finger: how far its pad has followed the object along n (m)
   std::vector<Point> points;
   Eigen::Vector3d normal = Eigen::Vector3d::UnitX();  // fixed: the normal; tracked: closing
@@ -685,6 +698,9 @@ struct ContactModel::Impl {
   int edges_per_point = 0;
 
   double mass = 0, L = 1, Fs = 1, Vs = 1, dt = 0;
+  // A contact slides (ContactState::mode) when its slip exceeds this (m/s):
+  // SetupScales.
+  double slip_floor = 0;
   Eigen::Matrix3d inertia_body = Eigen::Matrix3d::Identity();
   std::vector<Contact> contacts;
   int nf = 0;                        // force unknowns (λ, β) come first in the LCP
@@ -797,6 +813,10 @@ struct ContactModel::Impl {
   void AssembleContactRows(StepScratch& s);
   void AssembleConeRows(StepScratch& s);
   void AssemblePadRows(StepScratch& s);
+  void AssembleJawRows(StepScratch& s);
+  // This step's refusal of its geometry (a point pad on a grazing face,
+  // TrackedGeometry; a normal out of the planar model's plane, SetEdges).
+  std::string refused;
   void AssembleSupportRows(StepScratch& s);
   void SetupSupport();
   void SupportResiduals(StepScratch& s);
@@ -1081,6 +1101,19 @@ void ContactModel::Impl::SetupScales() {
   }
   if (!(Fs > 0)) Fs = mass * L / (dt * dt);
   Vs = Fs * dt / mass;
+  // The slip a contact must have to be reported sliding: 1e-9 of the
+  // scene's own speeds (the pusher's, what gravity adds in a step), but no
+  // finer than rounding of the solve's velocity scale (1e-13 Vs). It was
+  // 1e-9 Vs alone, and Vs = Fs dt / m grows as the object gets light under
+  // a firm grip: a 1 g box at 10 N and dt 4 ms called slips below 4e-8 m/s
+  // stick, ~1e-5 m/s at the extremes.
+  double kinematic = dt * scene.gravity.norm();
+  if (scene.pusher) {
+    const PusherTwist peak = PusherPeakRates(*scene.pusher);
+    kinematic = std::max(kinematic, peak.velocity.norm() + peak.angular_velocity.norm() * L);
+  }
+  slip_floor = std::max(1e-9 * kinematic, 1e-13 * Vs);
+  if (!(kinematic > 0)) slip_floor = 1e-9 * Vs;
 }
 
 // A line or patch pad without a stiffness (model.pads elastic): one that
@@ -1113,7 +1146,10 @@ void ContactModel::Impl::SetupContacts() {
       pt.offset0 = o;
       ct.points.push_back(pt);
     }
-    if (!ct.pusher && ct.points.size() == 1) ct.known_normal = scene.grip_force;
+    ct.jaw = !ct.pusher && scene.gripper.coupling == GripperCoupling::kParallelJaw;
+    // A jaw's point finger presses with what the mechanism gives it (an
+    // unknown, AssemblePadRows), not a prescribed grip force.
+    if (!ct.pusher && ct.points.size() == 1 && !ct.jaw) ct.known_normal = scene.grip_force;
     if (ct.spec.type == ContactType::kLine && ct.points.size() > 2) {
       const auto along = [&](const Point& pt) { return pt.offset0.dot(ct.spec.axis); };
       const auto [lo, hi] =
@@ -1159,6 +1195,12 @@ void ContactModel::Impl::SetupUnknowns() {
       if (pt.beta0 >= 0) pt.xi = n++;
     }
     if (!ct.pusher && ct.known_normal < 0) {
+      if (ct.jaw && &ct != &contacts.front()) {
+        ct.jaw_follower = true;
+        ct.y_plus = contacts.front().y_plus;
+        ct.y_minus = contacts.front().y_minus;
+        continue;
+      }
       ct.y_plus = n++;
       ct.y_minus = n++;
     }
@@ -1259,15 +1301,26 @@ void ContactModel::Impl::SetEdges(Point& pt) {
   if (planar) {
     // Normals stay in the plane of a planar scene (the solid is symmetric
     // about it, Setup()), so p × n is unit but for rounding and is
-    // normalised only when it is not; a degenerate cross product gives no
-    // friction rather than NaN.
+    // normalised only when it is not. A normal out of the plane (a point
+    // inside a thin solid nearest its side across the plane) has a force
+    // the reduction drops, and along the plane normal no tangent at all: it
+    // gave no friction, silently. Refused, typed, naming the contact.
     const Eigen::Vector3d cr = plane_normal.cross(pt.n);
     const double length2 = cr.squaredNorm();
     Eigen::Vector3d tau = Eigen::Vector3d::Zero();
     if (std::abs(length2 - 1.0) <= 1e-15) {
       tau = cr;
-    } else if (length2 > 1e-24) {
+    } else if (1.0 - length2 <= kOutOfPlane * kOutOfPlane) {
       tau = cr / std::sqrt(length2);
+    } else if (refused.empty()) {
+      char buf[256];
+      std::snprintf(
+          buf, sizeof buf,
+          "a contact normal leaves the plane of the planar model (by %.3g rad; limit "
+          "%.3g): its friction has no in-plane direction; run the scene with model.reduce "
+          "\"full\"",
+          std::asin(std::sqrt(std::clamp(1.0 - length2, 0.0, 1.0))), kOutOfPlane);
+      refused = buf;
     }
     pt.edges.resize(2);
     pt.edges[0] = tau;
@@ -1446,7 +1499,17 @@ void ContactModel::Impl::TrackedGeometry() {
       // onto the surface (first order in the gap; the gap is then zero).
       Point& pt = ct.points[0];
       const double along = closing.dot(pt.n);
-      if (along > 1e-6) {
+      if (along < kGrazingFactor && refused.empty()) {
+        char buf[200];
+        std::snprintf(buf, sizeof buf,
+                      "fingers[%d] '%s': presses on a grazing face (its normal %.3g deg from the "
+                      "closing direction, limit %.3g): the pad cannot press on it as modelled",
+                      static_cast<int>(&ct - contacts.data()), ct.spec.name.c_str(),
+                      std::acos(std::clamp(along, -1.0, 1.0)) * 180 / std::numbers::pi,
+                      std::acos(kGrazingFactor) * 180 / std::numbers::pi);
+        refused = buf;
+      }
+      if (along >= kGrazingFactor) {
         ct.pad += pt.gap / along;
         ct.position = ct.spec.position + ct.pad * ct.spec.normal;
         pt.gap = 0;
@@ -1502,7 +1565,14 @@ bool ContactModel::Impl::RunPhase(StepPhase phase, StepReport& rep) {
   StepScratch& s = scratch;
   switch (phase) {
     case StepPhase::kPlaceContacts:
+      refused.clear();
       PlaceContacts(s);
+      if (!refused.empty()) {
+        rep.ok = false;
+        rep.failure = StepFailure::kModel;
+        rep.error = refused;
+        return false;
+      }
       return true;
     case StepPhase::kMassMatrix:
       FormMassMatrix(s);
@@ -1774,7 +1844,7 @@ void ContactModel::Impl::FormGraspMap(StepScratch& s) {
       Jv.col(k) = Jc.col(k);
       if (e >= 0 && ct.known_normal >= 0 && !ct.pusher) {
         const double along = pt.n.dot(ct.normal);
-        if (along > 1e-6) {
+        if (along >= kGrazingFactor) {  // else the step is refused (PlaceContacts)
           const Eigen::Vector3d dv = d - (d.dot(ct.normal) / along) * pt.n;
           SetGraspColumn(Jv, k, dv, arm, p_cross_arm);
         }
@@ -1866,7 +1936,11 @@ void ContactModel::Impl::AssembleConeRows(StepScratch& s) {
 // forces sum to the grip force, paired with its free velocity.
 void ContactModel::Impl::AssemblePadRows(StepScratch& s) {
   for (const Contact& ct : contacts) {
-    if (!ct.active || ct.y_plus < 0) continue;
+    if (!ct.active || ct.y_plus < 0 || ct.jaw_follower) continue;
+    if (ct.jaw) {
+      AssembleJawRows(s);
+      continue;
+    }
     if (tracked && !ct.any_active) {
       // The pad has passed the object's edge: it presses on nothing.
       s.A.Set(ct.y_plus, ct.y_plus, 1);
@@ -1883,6 +1957,43 @@ void ContactModel::Impl::AssemblePadRows(StepScratch& s) {
     s.b[ct.y_plus] = -scene.grip_force / Fs;
     s.b[ct.y_minus] = scene.grip_force / Fs;
   }
+}
+
+// A parallel jaw (gripper.coupling): two opposed fingers on one mechanism
+// that closes symmetrically about a centre fixed in the hand. Its one
+// coordinate is the closing travel s: both pads move along their own
+// closing directions c₁ = -c₂ at ṡ = y = y⁺ - y⁻ (the second finger's
+// normal rows use the first's y±, SetupUnknowns), so the centre between
+// them stays put. The motor drives s with each finger's grip force; by
+// virtual work, λ₁ ṡ + λ₂ ṡ = 2 g ṡ, the jaw's row is
+//   Σ₁ λ + Σ₂ λ - 2 g = 0,  y free (the y± pair, as a pad's),
+// and nothing constrains λ₁ - λ₂: that is the force the jaw takes along
+// its axis. Where both fingers press (w = c·(v_obj) - y + gap/dt = 0 on
+// each, c₁ = -c₂) the object's velocity along the axis is zero: the jaw
+// holds its position there; where no net axial force acts, λ₁ = λ₂ = g, the
+// independent pads' answer.
+void ContactModel::Impl::AssembleJawRows(StepScratch& s) {
+  const Contact& lead = contacts.front();
+  bool pressing = false;
+  for (const Contact& ct : contacts) pressing = pressing || (ct.jaw && (!tracked || ct.any_active));
+  if (!pressing) {
+    // Both pads have passed the object's edges: the jaw presses on nothing.
+    s.A.Set(lead.y_plus, lead.y_plus, 1);
+    s.A.Set(lead.y_minus, lead.y_minus, 1);
+    s.b[lead.y_plus] = 1;
+    s.b[lead.y_minus] = 1;
+    return;
+  }
+  for (const Contact& ct : contacts) {
+    if (!ct.jaw) continue;
+    for (const Point& pt : ct.points) {
+      if (!HasRows(pt)) continue;
+      s.A.Set(lead.y_plus, pt.lambda, 1);
+      s.A.Set(lead.y_minus, pt.lambda, -1);
+    }
+  }
+  s.b[lead.y_plus] = -2 * scene.grip_force / Fs;
+  s.b[lead.y_minus] = 2 * scene.grip_force / Fs;
 }
 
 // Phase 8. The support's rows (SupportStage): per friction direction k,
@@ -1939,7 +2050,7 @@ Eigen::Vector3d ContactModel::Impl::BodyVelocity(const StepScratch& s, const Con
   double vf = Unknown(s, ct.y_plus) - Unknown(s, ct.y_minus);
   if (tracked && ct.known_normal >= 0) {
     const double along = pt.n.dot(ct.normal);
-    vf = along > 1e-6 ? pt.n.dot(ObjectVelocity(s, pt.p)) / along : 0.0;
+    vf = along >= kGrazingFactor ? pt.n.dot(ObjectVelocity(s, pt.p)) / along : 0.0;
   }
   return vf * ct.normal;
 }
@@ -2044,6 +2155,8 @@ double ContactModel::Impl::CheckResiduals(StepScratch& s) {
   auto comp = [&](double z_nd, double w_nd) {
     res.complementarity = std::max(res.complementarity, std::abs(std::min(z_nd, w_nd)));
   };
+  double jaw_sum = 0;  // a parallel jaw's normal forces, both fingers
+  bool jaw_pressing = false;
   for (Contact& ct : contacts) {
     if (!ct.active) continue;
     double sum = 0;
@@ -2071,7 +2184,16 @@ double ContactModel::Impl::CheckResiduals(StepScratch& s) {
         res.cone = std::max(res.cone, -slack * inv_Fs);
       }
     }
-    if (ct.y_plus >= 0 && (!tracked || ct.any_active)) {
+    if (ct.jaw) {
+      // The jaw's one row (AssembleJawRows), checked once both fingers are summed.
+      jaw_sum += sum;
+      jaw_pressing = jaw_pressing || !tracked || ct.any_active;
+      if (!ct.jaw_follower || !jaw_pressing) continue;
+      const double err = (jaw_sum - 2 * scene.grip_force) * inv_Fs;
+      res.force_balance = std::max(res.force_balance, std::abs(err));
+      comp(Unknown(s, ct.y_plus) * inv_Vs, err);
+      comp(Unknown(s, ct.y_minus) * inv_Vs, -err);
+    } else if (ct.y_plus >= 0 && (!tracked || ct.any_active)) {
       const double err = (sum - scene.grip_force) * inv_Fs;
       res.force_balance = std::max(res.force_balance, std::abs(err));
       comp(Unknown(s, ct.y_plus) * inv_Vs, err);
@@ -2139,7 +2261,7 @@ void ContactModel::Impl::ReportContacts(StepScratch& s) {
                 ? pt.urel
                 : Eigen::Vector3d(ObjectVelocity(s, pt.p) - BodyVelocity(s, ct, pt));
         const Eigen::Vector3d ut = urel - nrm.dot(urel) * nrm;
-        if (lam > 1e-9 * Fs && ut.squaredNorm() > 1e-18 * Vs * Vs) {
+        if (lam > 1e-9 * Fs && ut.squaredNorm() > slip_floor * slip_floor) {
           sliding = true;
           if (tracked && !planar && pt.beta0 >= 0) pt.slip = ut.normalized();
         }

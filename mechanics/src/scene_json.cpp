@@ -930,8 +930,37 @@ void ValidateContact(const ContactSpec& c, const std::string& path, const Scene&
 
 // ---------------------------------------------------------------------------
 
-void ValidateScene(const Scene& scene) {
-  const ObjectSpec& object = scene.object;
+namespace {
+
+// ValidateScene's checks, one per part of the scene, in the order it runs
+// them (the order decides which of two faults is reported).
+
+void ValidateInertia(const Eigen::Matrix3d& I) {
+  for (int r = 0; r < 3; ++r) {
+    for (int c = 0; c < 3; ++c) {
+      RequireFinite(I(r, c),
+                    Index(Index("object.inertia", static_cast<size_t>(r)), static_cast<size_t>(c)));
+    }
+  }
+  const double scale = I.cwiseAbs().maxCoeff();
+  if ((I - I.transpose()).cwiseAbs().maxCoeff() > 1e-9 * scale) {
+    throw SceneError("object.inertia", "must be symmetric");
+  }
+  const Eigen::Vector3d moments = Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d>(I).eigenvalues();
+  if (!(moments.minCoeff() > 0)) {
+    throw SceneError("object.inertia", "must be positive definite, smallest principal moment " +
+                                           Num(moments.minCoeff()));
+  }
+  // A rigid body's principal moments satisfy the triangle inequality.
+  if (moments[0] + moments[1] < moments[2] * (1 - 1e-9)) {
+    throw SceneError("object.inertia",
+                     "principal moments " + Num(moments[0]) + ", " + Num(moments[1]) + ", " +
+                         Num(moments[2]) +
+                         " violate the triangle inequality (no rigid body has them)");
+  }
+}
+
+void ValidateObject(const ObjectSpec& object) {
   if (object.shape == ObjectShape::kBox) {
     for (int i = 0; i < 3; ++i)
       RequirePositive(object.size[i], Index("object.size", static_cast<size_t>(i)));
@@ -949,33 +978,13 @@ void ValidateScene(const Scene& scene) {
     RequirePositive(object.height, "object.height");
   }
   RequirePositive(object.mass, "object.mass");
-  if (object.inertia) {
-    const Eigen::Matrix3d& I = *object.inertia;
-    for (int r = 0; r < 3; ++r) {
-      for (int c = 0; c < 3; ++c) {
-        RequireFinite(I(r, c), Index(Index("object.inertia", static_cast<size_t>(r)),
-                                     static_cast<size_t>(c)));
-      }
-    }
-    const double scale = I.cwiseAbs().maxCoeff();
-    if ((I - I.transpose()).cwiseAbs().maxCoeff() > 1e-9 * scale) {
-      throw SceneError("object.inertia", "must be symmetric");
-    }
-    const Eigen::Vector3d moments = Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d>(I).eigenvalues();
-    if (!(moments.minCoeff() > 0)) {
-      throw SceneError("object.inertia", "must be positive definite, smallest principal moment " +
-                                             Num(moments.minCoeff()));
-    }
-    // A rigid body's principal moments satisfy the triangle inequality.
-    if (moments[0] + moments[1] < moments[2] * (1 - 1e-9)) {
-      throw SceneError("object.inertia",
-                       "principal moments " + Num(moments[0]) + ", " + Num(moments[1]) + ", " +
-                           Num(moments[2]) +
-                           " violate the triangle inequality (no rigid body has them)");
-    }
-  }
-  RequireFinite(object.pose.position, "object.pose.position");
-  RequireFinite(object.pose.rpy, "object.pose.rpy");
+  if (object.inertia) ValidateInertia(*object.inertia);
+}
+
+// Pose, gravity, duration, grip force and the model's settings.
+void ValidateSettings(const Scene& scene) {
+  RequireFinite(scene.object.pose.position, "object.pose.position");
+  RequireFinite(scene.object.pose.rpy, "object.pose.rpy");
   RequireFinite(scene.gravity, "gravity");
   RequirePositive(scene.duration, "duration");
   if (scene.duration > kMaxDuration) {
@@ -1002,81 +1011,73 @@ void ValidateScene(const Scene& scene) {
     throw SceneError("model.dt", "too small: duration / dt = " + Num(scene.duration / model.dt) +
                                      " steps, more than " + Num(kMaxSteps));
   }
+}
 
-  if (scene.fingers.empty() && !scene.support) {
-    throw SceneError("fingers", "must list at least one finger (or the scene needs a support)");
+// Lines and patches need enough constituent points to be a line or a patch.
+void CheckPatchPoints(const ContactSpec& c, const std::string& path, const ModelOptions& model) {
+  if (c.type == ContactType::kPatch && model.points < 3) {
+    throw SceneError("model.points", "must be >= 3 when the scene has a patch contact (" + path +
+                                         "), got " + std::to_string(model.points));
   }
-  if (scene.support) ValidateSupport(scene);
-  if (scene.fingers.size() > static_cast<size_t>(kMaxFingers)) {
-    throw SceneError("fingers", "must list at most " + std::to_string(kMaxFingers) +
-                                    " fingers, got " + std::to_string(scene.fingers.size()));
-  }
-  // Lines and patches need enough constituent points to be a line or a patch.
-  auto check_points = [&](const ContactSpec& c, const std::string& path) {
-    if (c.type == ContactType::kPatch && model.points < 3) {
-      throw SceneError("model.points", "must be >= 3 when the scene has a patch contact (" + path +
-                                           "), got " + std::to_string(model.points));
-    }
-  };
+}
 
-  std::vector<std::pair<std::string, std::vector<Eigen::Vector3d>>> constituents;
-  for (size_t i = 0; i < scene.fingers.size(); ++i) {
-    const ContactSpec& f = scene.fingers[i];
-    const std::string path = Index("fingers", i);
-    if (f.name.empty()) throw SceneError(Join(path, "name"), "must not be empty");
-    if (f.name.size() > kMaxNameLength) {
-      throw SceneError(Join(path, "name"),
-                       "must be at most " + std::to_string(kMaxNameLength) + " characters");
-    }
-    if (!std::all_of(f.name.begin(), f.name.end(), ValidNameChar)) {
-      throw SceneError(Join(path, "name"),
-                       "may contain only letters, digits, '_', '-' and '.', got " + Quote(f.name));
-    }
-    if (f.name == "pusher")
-      throw SceneError(Join(path, "name"), "\"pusher\" is reserved for the pusher");
-    for (size_t j = 0; j < i; ++j) {
-      if (scene.fingers[j].name == f.name) {
-        throw SceneError(Join(path, "name"), "duplicates the name of fingers[" + std::to_string(j) +
-                                                 "], " + Quote(f.name));
-      }
-    }
-    check_points(f, path);
-    ValidateContact(f, path, scene);
-    constituents.emplace_back(path, ConstituentPoints(f, model.points));
+// fingers[i].name: non-empty, short, plain, not "pusher", unique.
+void ValidateFingerName(const std::vector<ContactSpec>& fingers, size_t i,
+                        const std::string& path) {
+  const ContactSpec& f = fingers[i];
+  if (f.name.empty()) throw SceneError(Join(path, "name"), "must not be empty");
+  if (f.name.size() > kMaxNameLength) {
+    throw SceneError(Join(path, "name"),
+                     "must be at most " + std::to_string(kMaxNameLength) + " characters");
   }
-  if (scene.pusher) {
-    const PusherSpec& p = *scene.pusher;
-    check_points(p, "pusher");
-    ValidateContact(p, "pusher", scene);
-    if (p.stiffness != 0)
-      throw SceneError("pusher.stiffness", "only for finger pads (the pusher is rigid)");
-    RequireFinite(p.motion.velocity, "pusher.motion.velocity");
-    RequireFinite(p.motion.angular_velocity, "pusher.motion.angular_velocity");
-    if (p.path) {
-      if (p.controller)
-        throw SceneError("pusher.motion.path",
-                         "a recorded path and a controller exclude each other");
-      if (p.motion.velocity != Eigen::Vector3d::Zero() ||
-          p.motion.angular_velocity != Eigen::Vector3d::Zero())
-        throw SceneError("pusher.motion.path",
-                         "replaces velocity and angular_velocity (set them zero)");
-      ValidatePath(*p.path, p.position, ObjectExtent(object));
-    }
-    if (p.controller) {
-      if (p.controller->name.empty() || p.controller->name.size() > kMaxNameLength)
-        throw SceneError("pusher.motion.controller", "must be 1..64 characters");
-      if (!std::isfinite(p.controller->target) || !std::isfinite(p.controller->gain))
-        throw SceneError("pusher.motion", "target and gain must be finite");
-      if (!(p.controller->tolerance > 0) || !std::isfinite(p.controller->tolerance))
-        throw SceneError("pusher.motion.tolerance", "must be > 0");
-      if (!(p.controller->hold_s > 0) || p.controller->hold_s > 60)
-        throw SceneError("pusher.motion.hold_s", "must be in (0, 60] s");
-    }
-    constituents.emplace_back("pusher", ConstituentPoints(p, model.points));
+  if (!std::all_of(f.name.begin(), f.name.end(), ValidNameChar)) {
+    throw SceneError(Join(path, "name"),
+                     "may contain only letters, digits, '_', '-' and '.', got " + Quote(f.name));
   }
+  if (f.name == "pusher")
+    throw SceneError(Join(path, "name"), "\"pusher\" is reserved for the pusher");
+  for (size_t j = 0; j < i; ++j) {
+    if (fingers[j].name == f.name) {
+      throw SceneError(Join(path, "name"), "duplicates the name of fingers[" + std::to_string(j) +
+                                               "], " + Quote(f.name));
+    }
+  }
+}
 
-  // Two contacts whose constituent points (nearly) coincide make a
-  // degenerate grasp matrix: refuse them rather than let the solver guess.
+void ValidatePusher(const Scene& scene) {
+  const PusherSpec& p = *scene.pusher;
+  CheckPatchPoints(p, "pusher", scene.model);
+  ValidateContact(p, "pusher", scene);
+  if (p.stiffness != 0)
+    throw SceneError("pusher.stiffness", "only for finger pads (the pusher is rigid)");
+  RequireFinite(p.motion.velocity, "pusher.motion.velocity");
+  RequireFinite(p.motion.angular_velocity, "pusher.motion.angular_velocity");
+  if (p.path) {
+    if (p.controller)
+      throw SceneError("pusher.motion.path", "a recorded path and a controller exclude each other");
+    if (p.motion.velocity != Eigen::Vector3d::Zero() ||
+        p.motion.angular_velocity != Eigen::Vector3d::Zero())
+      throw SceneError("pusher.motion.path",
+                       "replaces velocity and angular_velocity (set them zero)");
+    ValidatePath(*p.path, p.position, ObjectExtent(scene.object));
+  }
+  if (p.controller) {
+    if (p.controller->name.empty() || p.controller->name.size() > kMaxNameLength)
+      throw SceneError("pusher.motion.controller", "must be 1..64 characters");
+    if (!std::isfinite(p.controller->target) || !std::isfinite(p.controller->gain))
+      throw SceneError("pusher.motion", "target and gain must be finite");
+    if (!(p.controller->tolerance > 0) || !std::isfinite(p.controller->tolerance))
+      throw SceneError("pusher.motion.tolerance", "must be > 0");
+    if (!(p.controller->hold_s > 0) || p.controller->hold_s > 60)
+      throw SceneError("pusher.motion.hold_s", "must be in (0, 60] s");
+  }
+}
+
+// Two contacts whose constituent points (nearly) coincide make a
+// degenerate grasp matrix: refuse them rather than let the solver guess.
+void CheckCoincidentContacts(
+    const std::vector<std::pair<std::string, std::vector<Eigen::Vector3d>>>& constituents,
+    const ObjectSpec& object) {
   const double coincident = kCoincidentTolerance * ObjectExtent(object);
   for (size_t a = 0; a < constituents.size(); ++a) {
     for (size_t b = 0; b < a; ++b) {
@@ -1092,6 +1093,9 @@ void ValidateScene(const Scene& scene) {
       }
     }
   }
+}
+
+void CheckGrasp(const Scene& scene) {
   // A parallel-jaw mechanism moves two opposed fingers.
   if (scene.gripper.coupling == GripperCoupling::kParallelJaw) {
     const bool opposed =
@@ -1118,6 +1122,35 @@ void ValidateScene(const Scene& scene) {
                                       " (opposing fingers' normals must cancel)");
     }
   }
+}
+
+}  // namespace
+
+void ValidateScene(const Scene& scene) {
+  ValidateObject(scene.object);
+  ValidateSettings(scene);
+  if (scene.fingers.empty() && !scene.support) {
+    throw SceneError("fingers", "must list at least one finger (or the scene needs a support)");
+  }
+  if (scene.support) ValidateSupport(scene);
+  if (scene.fingers.size() > static_cast<size_t>(kMaxFingers)) {
+    throw SceneError("fingers", "must list at most " + std::to_string(kMaxFingers) +
+                                    " fingers, got " + std::to_string(scene.fingers.size()));
+  }
+  std::vector<std::pair<std::string, std::vector<Eigen::Vector3d>>> constituents;
+  for (size_t i = 0; i < scene.fingers.size(); ++i) {
+    const std::string path = Index("fingers", i);
+    ValidateFingerName(scene.fingers, i, path);
+    CheckPatchPoints(scene.fingers[i], path, scene.model);
+    ValidateContact(scene.fingers[i], path, scene);
+    constituents.emplace_back(path, ConstituentPoints(scene.fingers[i], scene.model.points));
+  }
+  if (scene.pusher) {
+    ValidatePusher(scene);
+    constituents.emplace_back("pusher", ConstituentPoints(*scene.pusher, scene.model.points));
+  }
+  CheckCoincidentContacts(constituents, scene.object);
+  CheckGrasp(scene);
 }
 
 namespace {

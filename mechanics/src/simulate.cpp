@@ -79,16 +79,6 @@ std::string CheckCommand(const Scene& scene, const ModelInfo& info, const Pusher
 SimulationResult Simulate(const Scene& scene, const PusherCommandSource& commands) {
   const auto start = std::chrono::steady_clock::now();
   SimulationResult result;
-  // Refused before anything is built: a coupled gripper silently run as
-  // independent pads would be a wrong answer, not a prediction.
-  if (scene.gripper.coupling == GripperCoupling::kParallelJaw) {
-    result.status = SimulationStatus::kInvalidScene;
-    result.error =
-        "gripper.coupling: \"parallel_jaw\" is not modelled by arena's contact model (its "
-        "fingers are independent pads); run the scene on the mujoco simulator";
-    result.wall_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-    return result;
-  }
   ContactModel model(scene);
   result.model = model.info();
   // Every return goes through finish(): it moves the result out (returned

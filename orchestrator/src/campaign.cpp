@@ -688,150 +688,145 @@ bool ValidName(const std::string& name) {
   });
 }
 
-}  // namespace
+// --- ParseCampaign's readers, one per field group, in the order it calls them
+// (the order decides which of two faults a campaign is refused for first).
 
-// ---------------------------------------------------------------------------
-
-Campaign ParseCampaign(std::string_view json_text, const std::string& base_dir,
-                       ConditionCheck check) {
-  json doc = ParseJson(json_text, "");
-  RequireObject(
-      doc, "",
-      {"name", "description", "seed", "priority", "scene", "scenes", "variations", "sampler",
-       "conditions", "trials", "replicates", "prediction", "defects", "scheduling"});
-  const std::filesystem::path dir =
-      base_dir.empty() ? std::filesystem::path(".") : std::filesystem::path(base_dir);
-  Campaign c;
-  if (doc.contains("scheduling")) c.scheduling = ReadSchedulingBlock(doc["scheduling"]);
-
+// name, description, seed, priority.
+void ReadIdentity(const json& doc, Campaign* c) {
   if (!doc.contains("name")) throw CampaignError("name", "is required");
-  c.name = String(doc["name"], "name");
-  if (!ValidName(c.name)) {
+  c->name = String(doc["name"], "name");
+  if (!ValidName(c->name)) {
     throw CampaignError("name", "must be 1 to 64 letters, digits, '_', '-' or '.', got \"" +
-                                    Printable(c.name, 40) + "\"");
+                                    Printable(c->name, 40) + "\"");
   }
-  if (doc.contains("description")) c.description = String(doc["description"], "description");
+  if (doc.contains("description")) c->description = String(doc["description"], "description");
   if (!doc.contains("seed"))
     throw CampaignError("seed", "is required (sampling is deterministic from it)");
-  {
-    const json& seed = doc["seed"];
-    if (!seed.is_number_integer() || (seed.is_number_integer() && !seed.is_number_unsigned())) {
-      throw CampaignError("seed",
-                          "must be a non-negative integer below 2^64, got " +
-                              (seed.is_number() ? Printable(seed.dump(), 40) : TypeName(seed)));
-    }
-    c.seed = seed.get<uint64_t>();
+  const json& seed = doc["seed"];
+  if (!seed.is_number_integer() || (seed.is_number_integer() && !seed.is_number_unsigned())) {
+    throw CampaignError("seed",
+                        "must be a non-negative integer below 2^64, got " +
+                            (seed.is_number() ? Printable(seed.dump(), 40) : TypeName(seed)));
   }
+  c->seed = seed.get<uint64_t>();
   if (doc.contains("priority"))
-    c.priority = static_cast<int>(Integer(doc["priority"], "priority", -1000, 1000));
+    c->priority = static_cast<int>(Integer(doc["priority"], "priority", -1000, 1000));
+}
 
-  // Listed scenes: each one condition; the first is the base scene.
-  if (doc.contains("scenes")) {
-    for (const char* k : {"scene", "variations", "sampler", "conditions", "trials"}) {
-      if (doc.contains(k))
-        throw CampaignError(k, "a campaign of listed \"scenes\" has no \"" + std::string(k) +
-                                   "\" (each listed scene is one condition)");
-    }
-    json list = json::array();
-    if (doc["scenes"].is_string()) {
-      // JSON lines: {"scene": {...}, "seed": "..."} (an arena dataset's scenes.jsonl) or scenes.
-      const std::filesystem::path path = dir / doc["scenes"].get<std::string>();
-      std::ifstream in(path, std::ios::binary);
-      if (!in) throw CampaignError("scenes", "cannot open '" + path.string() + "'");
-      std::string line;
-      std::size_t bytes = 0;
-      for (int number = 1; std::getline(in, line); ++number) {
-        bytes += line.size() + 1;
-        if (bytes > kMaxScenesFileBytes)
-          throw CampaignError("scenes", "'" + path.string() + "' is larger than " +
-                                            std::to_string(kMaxScenesFileBytes) + " bytes");
-        if (line.empty()) continue;
-        list.push_back(ParseJson(line, "scenes (line " + std::to_string(number) + ")"));
-      }
-    } else if (doc["scenes"].is_array()) {
-      list = doc["scenes"];
-    } else {
-      throw CampaignError("scenes",
-                          "must be an array of scenes or a path to a JSON-lines file, "
-                          "got " +
-                              TypeName(doc["scenes"]));
-    }
-    if (list.empty()) throw CampaignError("scenes", "lists no scene");
-    if (static_cast<int64_t>(list.size()) > kMaxConditions)
-      throw CampaignError("scenes", "lists more than " + std::to_string(kMaxConditions));
-    for (std::size_t i = 0; i < list.size(); ++i) {
-      const std::string field = "scenes[" + std::to_string(i) + "]";
-      json& item = list[i];
-      if (!item.is_object()) throw CampaignError(field, "must be an object");
-      std::optional<uint64_t> seed;
-      if (item.contains("scene")) {  // {"scene": ..., "seed": ...} (other keys: the dataset's)
-        if (item.contains("seed")) {
-          const json& sj = item["seed"];
-          if (sj.is_number_unsigned()) {
-            seed = sj.get<uint64_t>();
-          } else if (sj.is_string()) {
-            const std::string text = sj.get<std::string>();
-            uint64_t v = 0;
-            const auto r = std::from_chars(text.data(), text.data() + text.size(), v);
-            if (r.ec != std::errc() || r.ptr != text.data() + text.size())
-              throw CampaignError(field + ".seed", "must be an integer in [0, 2^64)");
-            seed = v;
-          } else {
-            throw CampaignError(field + ".seed", "must be an integer in [0, 2^64)");
-          }
-        }
-        json scene = item["scene"];
-        item = json{{"scene", scene}};
-        if (seed) item["seed"] = std::to_string(*seed);
-      } else {
-        item = json{{"scene", item}};
-      }
-      try {
-        c.scenes.push_back(mechanics::ParseScene(item["scene"].dump()));
-      } catch (const mechanics::SceneError& e) {
-        throw CampaignError(e.field().empty() ? field : field + "." + e.field(), e.reason());
-      }
-      c.scene_seeds.push_back(seed);
-    }
-    doc["scenes"] = list;  // inline: the stored campaign is whole without the file
-    c.scene = c.scenes.front();
-    c.sampler = SamplerKind::kGrid;
+// A JSON-lines file of scenes: {"scene": {...}, "seed": "..."} (an arena
+// dataset's scenes.jsonl) or bare scenes.
+json ReadScenesFile(const std::filesystem::path& path) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) throw CampaignError("scenes", "cannot open '" + path.string() + "'");
+  json list = json::array();
+  std::string line;
+  std::size_t bytes = 0;
+  for (int number = 1; std::getline(in, line); ++number) {
+    bytes += line.size() + 1;
+    if (bytes > kMaxScenesFileBytes)
+      throw CampaignError("scenes", "'" + path.string() + "' is larger than " +
+                                        std::to_string(kMaxScenesFileBytes) + " bytes");
+    if (line.empty()) continue;
+    list.push_back(ParseJson(line, "scenes (line " + std::to_string(number) + ")"));
   }
+  return list;
+}
 
-  // The base scene: inline or a file.
-  if (!c.scenes.empty()) {
-    // listed above
-  } else if (!doc.contains("scene"))
+// A listed scene's seed: an unsigned integer or its decimal text.
+uint64_t ReadSceneSeed(const json& sj, const std::string& field) {
+  if (sj.is_number_unsigned()) return sj.get<uint64_t>();
+  if (sj.is_string()) {
+    const std::string text = sj.get<std::string>();
+    uint64_t v = 0;
+    const auto r = std::from_chars(text.data(), text.data() + text.size(), v);
+    if (r.ec == std::errc() && r.ptr == text.data() + text.size()) return v;
+  }
+  throw CampaignError(field + ".seed", "must be an integer in [0, 2^64)");
+}
+
+// One listed scene, rewritten in place to {"scene": ..., ["seed": "..."]}.
+void ReadListedScene(json& item, const std::string& field, Campaign* c) {
+  if (!item.is_object()) throw CampaignError(field, "must be an object");
+  std::optional<uint64_t> seed;
+  if (item.contains("scene")) {  // {"scene": ..., "seed": ...} (other keys: the dataset's)
+    if (item.contains("seed")) seed = ReadSceneSeed(item["seed"], field);
+    json scene = item["scene"];
+    item = json{{"scene", scene}};
+    if (seed) item["seed"] = std::to_string(*seed);
+  } else {
+    item = json{{"scene", item}};
+  }
+  try {
+    c->scenes.push_back(mechanics::ParseScene(item["scene"].dump()));
+  } catch (const mechanics::SceneError& e) {
+    throw CampaignError(e.field().empty() ? field : field + "." + e.field(), e.reason());
+  }
+  c->scene_seeds.push_back(seed);
+}
+
+// Listed scenes: each one condition; the first is the base scene.
+void ReadListedScenes(json& doc, const std::filesystem::path& dir, Campaign* c) {
+  for (const char* k : {"scene", "variations", "sampler", "conditions", "trials"}) {
+    if (doc.contains(k))
+      throw CampaignError(k, "a campaign of listed \"scenes\" has no \"" + std::string(k) +
+                                 "\" (each listed scene is one condition)");
+  }
+  json list = json::array();
+  if (doc["scenes"].is_string()) {
+    list = ReadScenesFile(dir / doc["scenes"].get<std::string>());
+  } else if (doc["scenes"].is_array()) {
+    list = doc["scenes"];
+  } else {
+    throw CampaignError("scenes",
+                        "must be an array of scenes or a path to a JSON-lines file, "
+                        "got " +
+                            TypeName(doc["scenes"]));
+  }
+  if (list.empty()) throw CampaignError("scenes", "lists no scene");
+  if (static_cast<int64_t>(list.size()) > kMaxConditions)
+    throw CampaignError("scenes", "lists more than " + std::to_string(kMaxConditions));
+  for (std::size_t i = 0; i < list.size(); ++i) {
+    ReadListedScene(list[i], "scenes[" + std::to_string(i) + "]", c);
+  }
+  doc["scenes"] = list;  // inline: the stored campaign is whole without the file
+  c->scene = c->scenes.front();
+  c->sampler = SamplerKind::kGrid;
+}
+
+// The base scene: inline or a file (then inlined into doc).
+void ReadBaseScene(json& doc, const std::filesystem::path& dir, Campaign* c) {
+  if (!doc.contains("scene"))
     throw CampaignError("scene", "is required (a scene, docs/scene.md, or a path to one)");
-  if (c.scenes.empty()) try {
-      if (doc["scene"].is_string()) {
-        const std::filesystem::path path = dir / doc["scene"].get<std::string>();
-        const std::string text = ReadFileLimited(path, "scene");
-        c.scene = mechanics::ParseScene(text);
-        doc["scene"] = ParseJson(text, "scene");
-      } else if (doc["scene"].is_object()) {
-        c.scene = mechanics::ParseScene(doc["scene"].dump());
-      } else {
-        throw CampaignError("scene",
-                            "must be a scene object or a file path, got " + TypeName(doc["scene"]));
-      }
-    } catch (const mechanics::SceneError& e) {
-      throw CampaignError(e.field().empty() ? "scene" : "scene." + e.field(), e.reason());
+  try {
+    if (doc["scene"].is_string()) {
+      const std::filesystem::path path = dir / doc["scene"].get<std::string>();
+      const std::string text = ReadFileLimited(path, "scene");
+      c->scene = mechanics::ParseScene(text);
+      doc["scene"] = ParseJson(text, "scene");
+    } else if (doc["scene"].is_object()) {
+      c->scene = mechanics::ParseScene(doc["scene"].dump());
+    } else {
+      throw CampaignError("scene",
+                          "must be a scene object or a file path, got " + TypeName(doc["scene"]));
     }
+  } catch (const mechanics::SceneError& e) {
+    throw CampaignError(e.field().empty() ? "scene" : "scene." + e.field(), e.reason());
+  }
+}
 
-  // Sampler and counts.
+void ReadSampler(const json& doc, Campaign* c) {
   if (doc.contains("sampler") && doc["sampler"].is_object()) {
-    c.adaptive = ReadAdaptive(doc["sampler"], &c.sampler);
+    c->adaptive = ReadAdaptive(doc["sampler"], &c->sampler);
   } else if (doc.contains("sampler")) {
     const std::string s = String(doc["sampler"], "sampler");
     if (s == "grid")
-      c.sampler = SamplerKind::kGrid;
+      c->sampler = SamplerKind::kGrid;
     else if (s == "uniform")
-      c.sampler = SamplerKind::kUniform;
+      c->sampler = SamplerKind::kUniform;
     else if (s == "latin_hypercube")
-      c.sampler = SamplerKind::kLatinHypercube;
+      c->sampler = SamplerKind::kLatinHypercube;
     else if (s == "sobol")
-      c.sampler = SamplerKind::kSobol;
+      c->sampler = SamplerKind::kSobol;
     else {
       throw CampaignError(
           "sampler",
@@ -840,31 +835,33 @@ Campaign ParseCampaign(std::string_view json_text, const std::string& base_dir,
               Printable(s, 40) + "\"");
     }
   }
-  const bool boundary = c.adaptive && c.adaptive->kind == AdaptiveKind::kBoundary;
-  const bool grid = c.sampler == SamplerKind::kGrid && !boundary;
+}
 
-  // Variations, in canonical order.
-  if (doc.contains("variations")) {
-    const json& vars = doc["variations"];
-    if (!vars.is_object())
-      throw CampaignError("variations", "must be an object, got " + TypeName(vars));
-    std::vector<std::pair<int, Variation>> read;
-    for (const auto& item : vars.items()) {
-      const std::string path = Join("variations", item.key());
-      const VariationInfo* info = FindVariation(item.key());
-      if (!info) {
-        std::string list;
-        for (const auto& v : kVariationCatalog)
-          list += (list.empty() ? "" : ", ") + std::string(v.name);
-        throw CampaignError(path, "unknown variation (expected one of: " + list + ")");
-      }
-      read.emplace_back(CatalogIndex(item.key()), ReadVariation(item.value(), path, *info, grid));
+// Variations, in canonical order.
+void ReadVariations(const json& doc, bool grid, Campaign* c) {
+  if (!doc.contains("variations")) return;
+  const json& vars = doc["variations"];
+  if (!vars.is_object())
+    throw CampaignError("variations", "must be an object, got " + TypeName(vars));
+  std::vector<std::pair<int, Variation>> read;
+  for (const auto& item : vars.items()) {
+    const std::string path = Join("variations", item.key());
+    const VariationInfo* info = FindVariation(item.key());
+    if (!info) {
+      std::string list;
+      for (const auto& v : kVariationCatalog)
+        list += (list.empty() ? "" : ", ") + std::string(v.name);
+      throw CampaignError(path, "unknown variation (expected one of: " + list + ")");
     }
-    std::sort(read.begin(), read.end(),
-              [](const auto& a, const auto& b) { return a.first < b.first; });
-    for (auto& [index, var] : read) c.variations.push_back(std::move(var));
+    read.emplace_back(CatalogIndex(item.key()), ReadVariation(item.value(), path, *info, grid));
   }
-  // What the base scene must offer for a variation to make sense.
+  std::sort(read.begin(), read.end(),
+            [](const auto& a, const auto& b) { return a.first < b.first; });
+  for (auto& [index, var] : read) c->variations.push_back(std::move(var));
+}
+
+// What the base scene must offer for a variation to make sense.
+void CheckVariationsFitBaseScene(const Campaign& c) {
   const bool box = c.scene.object.shape == mechanics::ObjectShape::kBox;
   for (const auto& var : c.variations) {
     const std::string path = "variations." + var.name;
@@ -884,9 +881,12 @@ Campaign ParseCampaign(std::string_view json_text, const std::string& base_dir,
                             var.name.rfind("pivot_", 0) == 0;
     if (pusher_var && !c.scene.pusher) throw CampaignError(path, "the base scene has no pusher");
   }
+}
 
-  // Counts.
-  int64_t sampled_levels = 1;  // grid: number of conditions
+// The grid's number of conditions (1 when not a grid); refuses a sobol
+// sampler over too many dimensions.
+int64_t GridLevels(const Campaign& c, bool grid) {
+  int64_t sampled_levels = 1;
   int sampled_dims = 0;
   for (const auto& var : c.variations) {
     if (!var.IsSampled()) continue;
@@ -906,17 +906,23 @@ Campaign ParseCampaign(std::string_view json_text, const std::string& base_dir,
                         "sobol supports at most " + std::to_string(kMaxSobolDimensions) +
                             " varied dimensions, got " + std::to_string(sampled_dims));
   }
-  if (c.adaptive && doc.contains("replicates")) {
+  return sampled_levels;
+}
+
+// replicates, conditions, trials.
+void ReadCounts(const json& doc, bool grid, bool boundary, Campaign* c) {
+  const int64_t sampled_levels = GridLevels(*c, grid);
+  if (c->adaptive && doc.contains("replicates")) {
     throw CampaignError("replicates",
                         "an adaptive sampler chooses replicates itself; give "
                         "sampler.min_replicates / sampler.max_replicates instead");
   }
   if (doc.contains("replicates")) {
-    c.replicates = static_cast<int>(Integer(doc["replicates"], "replicates", 1, kMaxReplicates));
+    c->replicates = static_cast<int>(Integer(doc["replicates"], "replicates", 1, kMaxReplicates));
   }
-  if (c.adaptive && c.adaptive->kind == AdaptiveKind::kReplicates)
-    c.replicates = c.adaptive->min_replicates;
-  if (boundary) CheckBoundaryVariations(doc, c);
+  if (c->adaptive && c->adaptive->kind == AdaptiveKind::kReplicates)
+    c->replicates = c->adaptive->min_replicates;
+  if (boundary) CheckBoundaryVariations(doc, *c);
   const bool has_conditions = doc.contains("conditions");
   const bool has_trials = doc.contains("trials");
   if (has_conditions && has_trials) {
@@ -927,153 +933,167 @@ Campaign ParseCampaign(std::string_view json_text, const std::string& base_dir,
   if (has_conditions) conditions = Integer(doc["conditions"], "conditions", 1, kMaxConditions);
   if (has_trials) {
     const int64_t trials = Integer(doc["trials"], "trials", 1, kMaxTrials);
-    if (trials % c.replicates != 0) {
+    if (trials % c->replicates != 0) {
       throw CampaignError("trials", "must be a multiple of replicates (" +
-                                        std::to_string(c.replicates) + "), got " +
+                                        std::to_string(c->replicates) + "), got " +
                                         std::to_string(trials));
     }
-    conditions = trials / c.replicates;
+    conditions = trials / c->replicates;
   }
   if (boundary) {
     conditions = 0;  // points are chosen as results come in
-  } else if (!c.scenes.empty()) {
-    conditions = static_cast<int64_t>(c.scenes.size());
+  } else if (!c->scenes.empty()) {
+    conditions = static_cast<int64_t>(c->scenes.size());
   } else if (grid) {
     if (conditions != 0 && conditions != sampled_levels) {
       throw CampaignError(has_trials ? "trials" : "conditions",
                           "the grid has " + std::to_string(sampled_levels) + " conditions (x " +
-                              std::to_string(c.replicates) +
+                              std::to_string(c->replicates) +
                               " replicates); leave it out or match it");
     }
     conditions = sampled_levels;
   } else if (conditions == 0) {
     throw CampaignError("conditions", "is required for sampler " +
-                                          std::string(ToString(c.sampler)) + " (or give trials)");
+                                          std::string(ToString(c->sampler)) + " (or give trials)");
   }
-  c.conditions = conditions;
-  if (c.adaptive && c.adaptive->kind == AdaptiveKind::kReplicates &&
-      c.conditions * c.adaptive->max_replicates > kMaxTrials) {
+  c->conditions = conditions;
+  if (c->adaptive && c->adaptive->kind == AdaptiveKind::kReplicates &&
+      c->conditions * c->adaptive->max_replicates > kMaxTrials) {
     throw CampaignError("sampler.max_replicates",
                         "conditions x max_replicates must be <= " + std::to_string(kMaxTrials));
   }
-  if (c.conditions * c.replicates > kMaxTrials) {
+  if (c->conditions * c->replicates > kMaxTrials) {
     throw CampaignError("replicates",
                         "conditions x replicates must be <= " + std::to_string(kMaxTrials));
   }
+}
 
-  // Prediction model: the base scene's model, overridden field by field.
-  c.prediction = c.scene.model;
-  if (doc.contains("prediction")) {
-    const json& p = doc["prediction"];
-    RequireObject(
-        p, "prediction",
-        {"predictor", "facets", "points", "dt", "reduce", "contacts", "calibration", "calibrated",
-         "timestep", "cone", "noslip_iterations", "solref", "solimp", "start"});
-    // Where each prediction starts (issue 26): the start pose the cell
-    // measured (default) or the planned one.
-    if (p.contains("start") &&
-        !(p["start"].is_string() && (p["start"] == "measured" || p["start"] == "planned")))
-      throw CampaignError("prediction.start", "must be \"measured\" or \"planned\"");
-    // Which predictor: arena's model (knobs facets, points, dt, reduce, contacts)
-    // or MuJoCo (timestep, cone, noslip_iterations, solref, solimp); knobs of
-    // the other are refused. A calibration's scales apply to either
-    // (SubmitCampaign checks that it was fitted for the campaign's predictor).
-    if (p.contains("predictor")) c.predictor = String(p["predictor"], "prediction.predictor");
-    if (c.predictor != "arena" && c.predictor != "mujoco") {
-      throw CampaignError("prediction.predictor", "must be \"arena\" or \"mujoco\", got \"" +
-                                                      Printable(c.predictor, 40) + "\"");
-    }
-    const bool mujoco = c.predictor == "mujoco";
-    for (const char* k :
-         {"facets", "points", "dt", "reduce", "contacts", "calibration", "calibrated", "timestep",
-          "cone", "noslip_iterations", "solref", "solimp"}) {
-      const std::string key = k;
-      const bool arena_knob = key != "timestep" && key != "cone" && key != "noslip_iterations" &&
-                              key != "solref" && key != "solimp";
-      const bool both = key == "calibration" || key == "calibrated";
-      if (p.contains(k) && !both && arena_knob == mujoco) {
-        throw CampaignError(std::string("prediction.") + k,
-                            std::string("is not a knob of the ") + c.predictor + " predictor");
-      }
-    }
-    if (mujoco) {
-      json knobs = p;
-      for (const char* k : {"predictor", "calibration", "calibrated", "start"}) knobs.erase(k);
-      try {
-        (void)simulators::MakeSimulator("mujoco", knobs.dump());
-      } catch (const simulators::SimulatorError& e) {
-        const std::string field = e.field().rfind("mujoco.", 0) == 0 ? e.field().substr(7) : "";
-        const std::string what = e.what();
-        throw CampaignError("prediction" + (field.empty() ? "" : "." + field),
-                            what.substr(std::min(what.size(), e.field().size() + 2)));
-      }
-      c.predictor_settings_json = knobs.dump();
-    }
-    if (p.contains("calibrated")) {
-      // Written by SubmitCampaign from "calibration" (or given by hand): scales.
-      RequireObject(p["calibrated"], "prediction.calibrated",
-                    {"mu_fingers", "mu_pusher", "grip_force", "object_mass"});
-      for (const auto& item : p["calibrated"].items()) {
-        const std::string path = "prediction.calibrated." + item.key();
-        const double k = Number(item.value(), path);
-        if (!(k > 0)) throw CampaignError(path, "must be > 0, got " + Num(k));
-        c.calibrated_scales[item.key()] = k;
-      }
-    }
-    if (p.contains("calibration")) {
-      c.calibration_id = Integer(p["calibration"], "prediction.calibration", 1,
-                                 std::numeric_limits<int32_t>::max());
-    }
-    if (p.contains("facets")) {
-      c.prediction.facets =
-          static_cast<int>(Integer(p["facets"], "prediction.facets", 3, mechanics::kMaxFacets));
-    }
-    if (p.contains("points")) {
-      c.prediction.points =
-          static_cast<int>(Integer(p["points"], "prediction.points", 2, mechanics::kMaxPoints));
-    }
-    if (p.contains("dt")) c.prediction.dt = Number(p["dt"], "prediction.dt");
-    if (p.contains("reduce")) {
-      const std::string r = String(p["reduce"], "prediction.reduce");
-      const auto reduce = mechanics::ReduceFromString(r);
-      if (!reduce) {
-        throw CampaignError(
-            "prediction.reduce",
-            "must be \"auto\", \"full\" or \"planar\", got \"" + Printable(r, 40) + "\"");
-      }
-      c.prediction.reduce = *reduce;
-    }
-    if (p.contains("contacts")) {
-      const std::string m = String(p["contacts"], "prediction.contacts");
-      const auto mode = mechanics::ContactTrackingFromString(m);
-      if (!mode) {
-        throw CampaignError("prediction.contacts",
-                            "must be \"tracked\" or \"fixed\", got \"" + Printable(m, 40) + "\"");
-      }
-      c.prediction.contacts = *mode;
+// Which predictor: arena's model (knobs facets, points, dt, reduce, contacts)
+// or MuJoCo (timestep, cone, noslip_iterations, solref, solimp); knobs of
+// the other are refused. A calibration's scales apply to either
+// (SubmitCampaign checks that it was fitted for the campaign's predictor).
+void ReadPredictor(const json& p, Campaign* c) {
+  if (p.contains("predictor")) c->predictor = String(p["predictor"], "prediction.predictor");
+  if (c->predictor != "arena" && c->predictor != "mujoco") {
+    throw CampaignError("prediction.predictor", "must be \"arena\" or \"mujoco\", got \"" +
+                                                    Printable(c->predictor, 40) + "\"");
+  }
+  const bool mujoco = c->predictor == "mujoco";
+  for (const char* k : {"facets", "points", "dt", "reduce", "contacts", "calibration", "calibrated",
+                        "timestep", "cone", "noslip_iterations", "solref", "solimp"}) {
+    const std::string key = k;
+    const bool arena_knob = key != "timestep" && key != "cone" && key != "noslip_iterations" &&
+                            key != "solref" && key != "solimp";
+    const bool both = key == "calibration" || key == "calibrated";
+    if (p.contains(k) && !both && arena_knob == mujoco) {
+      throw CampaignError(std::string("prediction.") + k,
+                          std::string("is not a knob of the ") + c->predictor + " predictor");
     }
   }
+}
 
-  // Defect profile: an object passed through, or a file holding one.
-  if (doc.contains("defects")) {
-    json& d = doc["defects"];
-    if (d.is_string()) {
-      c.defects_file = d.get<std::string>();
-      d = ParseJson(ReadFileLimited(dir / c.defects_file, "defects"), "defects");
-      if (!d.is_object())
-        throw CampaignError("defects", "the file must hold a JSON object, got " + TypeName(d));
-    } else if (!d.is_object()) {
-      throw CampaignError("defects", "must be an object or a file path, got " + TypeName(d));
-    }
-    c.defects_json = d.dump();
+// MuJoCo's knobs are checked by the simulator that will use them.
+void ReadMujocoKnobs(const json& p, Campaign* c) {
+  json knobs = p;
+  for (const char* k : {"predictor", "calibration", "calibrated", "start"}) knobs.erase(k);
+  try {
+    (void)simulators::MakeSimulator("mujoco", knobs.dump());
+  } catch (const simulators::SimulatorError& e) {
+    const std::string field = e.field().rfind("mujoco.", 0) == 0 ? e.field().substr(7) : "";
+    const std::string what = e.what();
+    throw CampaignError("prediction" + (field.empty() ? "" : "." + field),
+                        what.substr(std::min(what.size(), e.field().size() + 2)));
   }
-  c.source_json = doc.dump();
+  c->predictor_settings_json = knobs.dump();
+}
 
-  // A unit slip is blamed on the field written, before its consequences are
-  // (at submit: a stored campaign reloads as it was accepted).
-  if (check == ConditionCheck::kAllConditions) CheckPlausibility(c);
-  // Every condition must give a valid scene, for the cells and for the
-  // predictor: refuse the campaign now rather than fail trial 9,000.
+void ReadCalibration(const json& p, Campaign* c) {
+  if (p.contains("calibrated")) {
+    // Written by SubmitCampaign from "calibration" (or given by hand): scales.
+    RequireObject(p["calibrated"], "prediction.calibrated",
+                  {"mu_fingers", "mu_pusher", "grip_force", "object_mass"});
+    for (const auto& item : p["calibrated"].items()) {
+      const std::string path = "prediction.calibrated." + item.key();
+      const double k = Number(item.value(), path);
+      if (!(k > 0)) throw CampaignError(path, "must be > 0, got " + Num(k));
+      c->calibrated_scales[item.key()] = k;
+    }
+  }
+  if (p.contains("calibration")) {
+    c->calibration_id =
+        Integer(p["calibration"], "prediction.calibration", 1, std::numeric_limits<int32_t>::max());
+  }
+}
+
+// arena's own model knobs, overriding the base scene's model.
+void ReadModelKnobs(const json& p, mechanics::ModelOptions* model) {
+  if (p.contains("facets")) {
+    model->facets =
+        static_cast<int>(Integer(p["facets"], "prediction.facets", 3, mechanics::kMaxFacets));
+  }
+  if (p.contains("points")) {
+    model->points =
+        static_cast<int>(Integer(p["points"], "prediction.points", 2, mechanics::kMaxPoints));
+  }
+  if (p.contains("dt")) model->dt = Number(p["dt"], "prediction.dt");
+  if (p.contains("reduce")) {
+    const std::string r = String(p["reduce"], "prediction.reduce");
+    const auto reduce = mechanics::ReduceFromString(r);
+    if (!reduce) {
+      throw CampaignError("prediction.reduce", "must be \"auto\", \"full\" or \"planar\", got \"" +
+                                                   Printable(r, 40) + "\"");
+    }
+    model->reduce = *reduce;
+  }
+  if (p.contains("contacts")) {
+    const std::string m = String(p["contacts"], "prediction.contacts");
+    const auto mode = mechanics::ContactTrackingFromString(m);
+    if (!mode) {
+      throw CampaignError("prediction.contacts",
+                          "must be \"tracked\" or \"fixed\", got \"" + Printable(m, 40) + "\"");
+    }
+    model->contacts = *mode;
+  }
+}
+
+// Prediction model: the base scene's model, overridden field by field.
+void ReadPrediction(const json& doc, Campaign* c) {
+  c->prediction = c->scene.model;
+  if (!doc.contains("prediction")) return;
+  const json& p = doc["prediction"];
+  RequireObject(
+      p, "prediction",
+      {"predictor", "facets", "points", "dt", "reduce", "contacts", "calibration", "calibrated",
+       "timestep", "cone", "noslip_iterations", "solref", "solimp", "start"});
+  // Where each prediction starts (issue 26): the start pose the cell
+  // measured (default) or the planned one.
+  if (p.contains("start") &&
+      !(p["start"].is_string() && (p["start"] == "measured" || p["start"] == "planned")))
+    throw CampaignError("prediction.start", "must be \"measured\" or \"planned\"");
+  ReadPredictor(p, c);
+  if (c->predictor == "mujoco") ReadMujocoKnobs(p, c);
+  ReadCalibration(p, c);
+  ReadModelKnobs(p, &c->prediction);
+}
+
+// Defect profile: an object passed through, or a file holding one (then inlined into doc).
+void ReadDefects(json& doc, const std::filesystem::path& dir, Campaign* c) {
+  if (!doc.contains("defects")) return;
+  json& d = doc["defects"];
+  if (d.is_string()) {
+    c->defects_file = d.get<std::string>();
+    d = ParseJson(ReadFileLimited(dir / c->defects_file, "defects"), "defects");
+    if (!d.is_object())
+      throw CampaignError("defects", "the file must hold a JSON object, got " + TypeName(d));
+  } else if (!d.is_object()) {
+    throw CampaignError("defects", "must be an object or a file path, got " + TypeName(d));
+  }
+  c->defects_json = d.dump();
+}
+
+// The base scene (or, with every condition checked, each listed scene) must
+// be valid for the cells and, with the campaign's model, for the predictor.
+void CheckBaseScenes(const Campaign& c, ConditionCheck check) {
   for (std::size_t i = 0; i < std::max<std::size_t>(1, c.scenes.size()); ++i) {
     if (i > 0 && check != ConditionCheck::kAllConditions) break;
     const std::string where = c.scenes.empty() ? "scene" : "scenes[" + std::to_string(i) + "]";
@@ -1088,25 +1108,29 @@ Campaign ParseCampaign(std::string_view json_text, const std::string& base_dir,
       throw CampaignError(field, e.reason());
     }
   }
-  if (boundary && check == ConditionCheck::kAllConditions) {
-    // The space is a box: its corners are the extremes every chosen point lies between.
-    const int dims = static_cast<int>(SampledVariations(c).size());
-    for (int corner = 0; corner < (1 << dims); ++corner) {
-      std::vector<double> u(static_cast<size_t>(dims));
-      for (int d = 0; d < dims; ++d) u[static_cast<size_t>(d)] = (corner >> d) & 1;
-      const Values values = PointValues(c, u);
-      try {
-        const Scene scene = BuildScene(c.scene, values);
-        mechanics::ValidateScene(scene);
-        mechanics::ValidateScene(WithModel(scene, c.prediction));
-      } catch (const mechanics::SceneError& e) {
-        throw CampaignError("variations", "the corner " + ParametersJson(c, values) +
-                                              " gives an invalid scene: " + e.what());
-      }
+}
+
+// The boundary sampler's space is a box: its corners are the extremes every
+// chosen point lies between.
+void CheckBoundaryCorners(const Campaign& c) {
+  const int dims = static_cast<int>(SampledVariations(c).size());
+  for (int corner = 0; corner < (1 << dims); ++corner) {
+    std::vector<double> u(static_cast<size_t>(dims));
+    for (int d = 0; d < dims; ++d) u[static_cast<size_t>(d)] = (corner >> d) & 1;
+    const Values values = PointValues(c, u);
+    try {
+      const Scene scene = BuildScene(c.scene, values);
+      mechanics::ValidateScene(scene);
+      mechanics::ValidateScene(WithModel(scene, c.prediction));
+    } catch (const mechanics::SceneError& e) {
+      throw CampaignError("variations", "the corner " + ParametersJson(c, values) +
+                                            " gives an invalid scene: " + e.what());
     }
   }
-  const int64_t checked = check == ConditionCheck::kAllConditions ? c.conditions : 0;
-  for (int64_t condition = 0; condition < checked; ++condition) {
+}
+
+void CheckEveryCondition(const Campaign& c) {
+  for (int64_t condition = 0; condition < c.conditions; ++condition) {
     const Values values = ConditionValues(c, condition);
     const Scene scene = BuildScene(c.scene, values);
     try {
@@ -1117,6 +1141,49 @@ Campaign ParseCampaign(std::string_view json_text, const std::string& base_dir,
                                             ParametersJson(c, values) +
                                             " gives an invalid scene: " + e.what());
     }
+  }
+}
+
+}  // namespace
+
+// ---------------------------------------------------------------------------
+
+Campaign ParseCampaign(std::string_view json_text, const std::string& base_dir,
+                       ConditionCheck check) {
+  json doc = ParseJson(json_text, "");
+  RequireObject(
+      doc, "",
+      {"name", "description", "seed", "priority", "scene", "scenes", "variations", "sampler",
+       "conditions", "trials", "replicates", "prediction", "defects", "scheduling"});
+  const std::filesystem::path dir =
+      base_dir.empty() ? std::filesystem::path(".") : std::filesystem::path(base_dir);
+  Campaign c;
+  if (doc.contains("scheduling")) c.scheduling = ReadSchedulingBlock(doc["scheduling"]);
+  ReadIdentity(doc, &c);
+  if (doc.contains("scenes")) {
+    ReadListedScenes(doc, dir, &c);
+  } else {
+    ReadBaseScene(doc, dir, &c);
+  }
+  ReadSampler(doc, &c);
+  const bool boundary = c.adaptive && c.adaptive->kind == AdaptiveKind::kBoundary;
+  const bool grid = c.sampler == SamplerKind::kGrid && !boundary;
+  ReadVariations(doc, grid, &c);
+  CheckVariationsFitBaseScene(c);
+  ReadCounts(doc, grid, boundary, &c);
+  ReadPrediction(doc, &c);
+  ReadDefects(doc, dir, &c);
+  c.source_json = doc.dump();
+
+  // A unit slip is blamed on the field written, before its consequences are
+  // (at submit: a stored campaign reloads as it was accepted).
+  if (check == ConditionCheck::kAllConditions) CheckPlausibility(c);
+  // Every condition must give a valid scene, for the cells and for the
+  // predictor: refuse the campaign now rather than fail trial 9,000.
+  CheckBaseScenes(c, check);
+  if (check == ConditionCheck::kAllConditions) {
+    if (boundary) CheckBoundaryCorners(c);
+    CheckEveryCondition(c);
   }
   return c;
 }

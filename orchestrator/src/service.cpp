@@ -188,11 +188,25 @@ class SqliteTrialStore : public TrialStore {
   void RecordFixtureChanges(const std::vector<db::FixtureChangeRecord>& changes) override {
     s_.RecordFixtureChanges(changes);
   }
+  // The claim gate (issue 26).
+  std::vector<db::PlannedNeed> PlannedNeeds() override { return s_.PlannedNeeds(); }
+  void SetCampaignWait(std::int64_t campaign_id, const std::string& kind, const std::string& reason,
+                       const std::string& rule) override {
+    s_.SetCampaignWait(campaign_id, kind, reason, rule);
+  }
+  void ClearCampaignWait(std::int64_t campaign_id) override { s_.ClearCampaignWait(campaign_id); }
+  std::vector<db::CampaignWait> ListCampaignWaits() override { return s_.ListCampaignWaits(); }
+  void RestrictClaimsTo(std::optional<std::vector<std::int64_t>> campaigns) override {
+    s_.RestrictClaimsTo(std::move(campaigns));
+  }
+  std::vector<std::int64_t> ActiveCampaignIds() override { return s_.ActiveCampaignIds(); }
   std::optional<db::ClaimedTrial> PeekNextTrial(const std::string& cell) override {
     return s_.PeekNextTrial(cell);
   }
-  std::unique_ptr<GroundTruthSink> BeginIngest(std::int64_t trial_id, int attempt) override {
-    return std::make_unique<SqliteSink>(s_.BeginIngest(trial_id, attempt));
+  std::unique_ptr<GroundTruthSink> BeginIngest(std::int64_t trial_id, int attempt,
+                                               std::vector<db::ContactSite> sites) override {
+    return std::make_unique<SqliteSink>(
+        s_.BeginIngest(trial_id, attempt, std::move(sites), db::IngestOptions{}));
   }
   db::TrialState RetryTrial(std::int64_t id, int attempt, const std::string& reason,
                             int max_attempts, double backoff_s, const std::string& rule) override {

@@ -5,6 +5,7 @@
 #include <cmath>
 #include <cstdio>
 #include <stdexcept>
+#include <utility>
 
 #include <nlohmann/json.hpp>
 
@@ -229,6 +230,36 @@ bool Exceeds(Condition c, double value, double threshold) {
   return c == Condition::kStoreFreeSpace ? value < threshold : value > threshold;
 }
 
+namespace {
+
+SuspenderDecision Decided(SuspenderDecision d, SuspenderStep step, const char* rule) {
+  d.step = step;
+  d.rule = rule;
+  if (step == SuspenderStep::kLift) d.next.suspended = false;
+  return d;
+}
+
+// While suspended: a signal lifts once clear for hold_s without a break; an
+// outcome holds (nothing runs) for hold_s, then the next trials probe.
+SuspenderDecision DecideWhileSuspended(Condition c, const SuspenderLimits& l, const Reading& r,
+                                       double now_s, bool past, SuspenderDecision d) {
+  const Names& n = NamesOf(c);
+  const bool hold_over = now_s - d.next.fired_at >= l.hold_s;
+  if (!IsSignal(c))
+    return hold_over ? Decided(std::move(d), SuspenderStep::kLift, n.lifted)
+                     : Decided(std::move(d), SuspenderStep::kHold, n.holding);
+  if (!r.known || past) {
+    d.next.clear_since = -1;
+    return Decided(std::move(d), SuspenderStep::kHold, past ? n.still : n.holding);
+  }
+  if (d.next.clear_since < 0) d.next.clear_since = now_s;
+  if (now_s - d.next.clear_since >= l.hold_s && hold_over)
+    return Decided(std::move(d), SuspenderStep::kLift, n.lifted);
+  return Decided(std::move(d), SuspenderStep::kHold, n.holding);
+}
+
+}  // namespace
+
 SuspenderDecision DecideSuspender(Condition c, const SuspenderLimits& l, const SuspenderState& s,
                                   const Reading& r, double now_s) {
   const Names& n = NamesOf(c);
@@ -251,38 +282,7 @@ SuspenderDecision DecideSuspender(Condition c, const SuspenderLimits& l, const S
   }
   const bool judged = r.known && (IsSignal(c) || r.evidence >= l.min_evidence);
   const bool past = judged && Exceeds(c, r.value, l.threshold);
-  if (s.suspended) {
-    const bool hold_over = now_s - s.fired_at >= l.hold_s;
-    if (IsSignal(c)) {
-      // Lifts once clear for hold_s without a break.
-      if (!r.known || past) {
-        d.next.clear_since = -1;
-        d.step = SuspenderStep::kHold;
-        d.rule = past ? n.still : n.holding;
-        return d;
-      }
-      if (d.next.clear_since < 0) d.next.clear_since = now_s;
-      if (now_s - d.next.clear_since >= l.hold_s && hold_over) {
-        d.step = SuspenderStep::kLift;
-        d.rule = n.lifted;
-        d.next.suspended = false;
-        return d;
-      }
-      d.step = SuspenderStep::kHold;
-      d.rule = n.holding;
-      return d;
-    }
-    // An outcome: nothing runs while it holds; after hold_s the next trials probe.
-    if (hold_over) {
-      d.step = SuspenderStep::kLift;
-      d.rule = n.lifted;
-      d.next.suspended = false;
-      return d;
-    }
-    d.step = SuspenderStep::kHold;
-    d.rule = n.holding;
-    return d;
-  }
+  if (s.suspended) return DecideWhileSuspended(c, l, r, now_s, past, std::move(d));
   if (past) {
     d.evidence = Evidence(c, l, r);
     d.next.clear_since = -1;

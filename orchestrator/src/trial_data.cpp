@@ -91,4 +91,23 @@ db::Sample ToStoreSample(const msg::GroundTruthSample& in,
   return s;
 }
 
+std::vector<db::ContactSite> ContactSitesOf(const mechanics::Scene& scene) {
+  auto site = [](const mechanics::ContactSpec& c, bool pusher) {
+    db::ContactSite s;
+    s.name = pusher ? "pusher" : c.name;
+    s.pusher = pusher;
+    const Eigen::Vector3d n = c.normal.normalized();
+    s.known = c.position.allFinite() && n.allFinite() && c.normal.norm() > 0;
+    for (int i = 0; i < 3; ++i) {
+      s.position[i] = c.position[i];
+      s.normal[i] = s.known ? n[i] : 0.0;
+    }
+    return s;
+  };
+  std::vector<db::ContactSite> sites;
+  for (const auto& f : scene.fingers) sites.push_back(site(f, false));
+  if (scene.pusher) sites.push_back(site(*scene.pusher, true));
+  return sites;
+}
+
 }  // namespace arena::orchestrator

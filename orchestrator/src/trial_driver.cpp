@@ -4,6 +4,8 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <deque>
+#include <functional>
 #include <mutex>
 #include <set>
 
@@ -14,6 +16,7 @@
 #include "arena/mechanics/scene_json.hpp"
 #include "arena/orchestrator/campaign.hpp"
 #include "arena/orchestrator/claim_chooser.hpp"
+#include "arena/orchestrator/claim_gate.hpp"
 #include "arena/orchestrator/closed_loop.hpp"
 #include "arena/orchestrator/logging.hpp"
 #include "arena/orchestrator/trial_data.hpp"
@@ -123,14 +126,21 @@ struct TrialDriver::Impl {
     Clock::time_point claimed_at{};
     double execute_wall_s = -1;
     int store_waits = 0;  // store steps of this cell waiting after kBusy: deadlines held
-    std::int64_t reset_aimed_at = 0;  // the trial the running reset prepares (0: none)
+    std::int64_t reset_aimed_at = 0;   // the trial the running reset prepares (0: none)
+    bool store_failures_zero = false;  // the store's count of failures in a row is 0
     // Issue 29: its declared change costs (nullopt: none declared, plan
     // order), what the service last saw it mount (nullopt: not known), what
     // its running reset mounts, and the block of its last claim.
     std::optional<schemas::ChangeCosts> change_costs;
     std::optional<schemas::Fixtures> mounted;
     std::optional<schemas::Fixtures> reset_mounts;
+    // The trial this cell most likely runs next, looked up while it executes
+    // (the lookup is then off the path from its stream to its RESET);
+    // `aim_known` false: not looked up, the reset step looks it up itself.
+    std::optional<db::ClaimedTrial> next_aim;
+    bool aim_known = false;
     std::int64_t block_campaign = 0, block = -1;
+    HostCell host;  // what it announced it can do (the claim gate, claim_gate.hpp)
   };
   std::map<std::string, CellRun> cells;
 
@@ -163,6 +173,15 @@ struct TrialDriver::Impl {
   StoreSteps steps;
 
   Clock::time_point next_claims{}, next_beat{}, next_file_check{}, next_campaigns{};
+  // The claim gate (issue 26): each waiting campaign's stored reason; the
+  // gate re-decides every kGatePeriod_s, at once when the cells change, and
+  // before a claim when the active campaigns are not those it decided on
+  // (`gated_active`): the store's claims take only from campaigns it opened.
+  std::map<std::int64_t, std::string> campaign_waits;
+  std::optional<std::vector<std::int64_t>> gated_active;
+  bool waits_loaded = false, gate_dirty = true;
+  Clock::time_point next_gate{};
+  static constexpr double kGatePeriod_s = 5.0;
 
   Impl(DriverOptions o, ServiceIdentity m, TrialStore& s, CommandTransport& t, PredictionPort& p,
        std::function<Clock::time_point()> n)
@@ -243,6 +262,10 @@ struct TrialDriver::Impl {
                            {"truth", a.truth()}};
     cell.contact_types = a.contact_types();
     cell.truth = a.truth();
+    const HostCell host = AnnouncedHost(a);
+    if (!SameHost(host, cell.host)) gate_dirty = true;  // announces repeat: decide on a change
+    cell.host = host;
+    caps["emulates_defects"] = cell.host.emulates_defects;
     cell.change_costs = DeclaredCosts(id, a.backend_json());
     if (cell.change_costs) {
       caps[schemas::kChangeCostsKey] = {{"finger_s", cell.change_costs->finger_s},
@@ -277,6 +300,7 @@ struct TrialDriver::Impl {
       if (ours) spdlog::info("cell {}: serving us", id);
       cell.ours = ours;
       cell.serving = serving;
+      gate_dirty = true;
       Step("cell " + id + ": serving", "",
            [this, id, serving] { store.SetCellServing(id, opt.cell_lease_s, serving); });
     }
@@ -298,8 +322,9 @@ struct TrialDriver::Impl {
     if (!cell.alive) return;
     spdlog::warn("cell {}: {}", id, reason);
     if (observer) observer->OnCellAlive(id, false);
-    cell.alive = false;  // (`ours` stays: a process back from a lapse may still serve us;
-                         // a new one announces that it serves nobody)
+    cell.alive = false;
+    gate_dirty = true;  // (`ours` stays: a process back from a lapse may still serve us;
+                        // a new one announces that it serves nobody)
     EndPhase(cell, DecideServiceEvent(cell.phase, ServiceEvent::kCellLost), "cell lost: " + reason);
     Step("cell " + id + ": gone", "", [this, id, reason] { store.MarkCellGone(id, reason); });
   }
@@ -309,6 +334,7 @@ struct TrialDriver::Impl {
     if (it == cells.end() || it->second.alive) return;
     CellRun& cell = it->second;
     cell.alive = true;
+    gate_dirty = true;
     if (observer) observer->OnCellAlive(id, true);
     cell.next_claim = now();
     SendClaim(cell);
@@ -321,18 +347,43 @@ struct TrialDriver::Impl {
 
   // Counts a phase result (quarantine after quarantine_after failures with no
   // fully clean trial between them).
+  // Store writes no cell waits on (a clean trial's prediction and done, a
+  // healthy cell's good result). Tick runs them after Dispatch, so they fall
+  // in a cell's execute phase instead of between its stream and its next
+  // claim (issue 27: the per-trial overhead). A crash before they run loses
+  // nothing the restart does not redo: the trial is predicted again, the
+  // cell's count of failures in a row was already 0.
+  std::deque<std::function<void()>> background;
+  void RunBackground() {
+    while (!background.empty()) {
+      auto work = std::move(background.front());
+      background.pop_front();
+      work();
+    }
+  }
+
   void CellResult(CellRun& cell, CellPhase phase, bool ok, const std::string& reason) {
     int& streak = phase == CellPhase::kResetting ? cell.reset_failures : cell.execute_failures;
     const int other = phase == CellPhase::kResetting ? cell.execute_failures : cell.reset_failures;
+    const bool was_clean = streak == 0 && other == 0 && cell.store_failures_zero;
     if (ok) {
       streak = 0;
       if (other != 0) return;
     } else {
       ++streak;
+      cell.store_failures_zero = false;
     }
     const std::string id = cell.id;
+    if (ok && was_clean) {  // only last_seen moves: once per trial, off the critical path
+      if (phase != CellPhase::kResetting) return;
+      background.push_back([this, id] {
+        Step("cell " + id + ": result", "", [this, id] { store.RecordCellResult(id, true); });
+      });
+      return;
+    }
     Step("cell " + id + ": result", id, [this, id, ok, reason] {
       const int failures = store.RecordCellResult(id, ok);
+      Cell(id).store_failures_zero = failures == 0;
       if (ok || failures < opt.service.quarantine_after) return;
       const std::string why = std::to_string(failures) + " failures in a row, last: " + reason;
       store.QuarantineCell(id, why);
@@ -493,6 +544,14 @@ struct TrialDriver::Impl {
     return scheduling.emplace(campaign_id, s).first->second;
   }
 
+  // The aimed trial went to another cell since it was looked up (one service
+  // claims for every cell of a store: its own record is the truth).
+  bool ClaimedByAnother(const CellRun& cell) const {
+    for (const auto& [id, other] : cells)
+      if (id != cell.id && other.trial_id == cell.next_aim->trial_id) return true;
+    return false;
+  }
+
   // The one place the claim chooser (claim_chooser.hpp) is called: the trial
   // `cell` claims now (`claim`), or would claim (to aim its reset at).
   std::optional<db::ClaimedTrial> NextTrialFor(CellRun& cell, bool claim) {
@@ -552,16 +611,115 @@ struct TrialDriver::Impl {
          [this, records] { store.RecordFixtureChanges(records); });
   }
 
+  // ------------------------------------------------------------ the claim gate (issue 26)
+  static HostCell AnnouncedHost(const msg::CellAnnounce& a) {
+    HostCell h;
+    h.id = a.cell_id();
+    h.backend = a.backend();
+    const auto j = nlohmann::json::parse(a.backend_json(), nullptr, false);
+    // An older cell that does not say: as before the gate (it refuses what it cannot).
+    h.emulates_defects =
+        !(j.is_object() && j.contains("emulates_defects") && j["emulates_defects"].is_boolean() &&
+          !j["emulates_defects"].get<bool>());
+    for (const auto& t : a.contact_types())
+      h.contact_mask |= t == "point" ? 1 : t == "line" ? 2 : t == "patch" ? 4 : 0;
+    for (int k = 0; k < 3; ++k) {
+      h.workspace_min[k] = a.workspace_min()[k];
+      h.workspace_max[k] = a.workspace_max()[k];
+    }
+    h.max_pusher_speed = a.max_pusher_speed();
+    return h;
+  }
+
+  static bool SameHost(const HostCell& a, const HostCell& b) {
+    return a.id == b.id && a.backend == b.backend && a.emulates_defects == b.emulates_defects &&
+           a.contact_mask == b.contact_mask && a.workspace_min == b.workspace_min &&
+           a.workspace_max == b.workspace_max && a.max_pusher_speed == b.max_pusher_speed;
+  }
+
+  // Decides every active campaign's gate and stores what changed: a
+  // campaign no live cell can host waits (the claim skips it), one a cell
+  // can host again is released.
+  void GateCampaigns() {
+    // Read first: a campaign submitted after it is not in `open` below, and
+    // the next claim's check sees the active campaigns changed.
+    const std::vector<std::int64_t> active = store.ActiveCampaignIds();
+    if (!waits_loaded) {  // a restart: the store's waits are decided anew
+      for (const auto& w : store.ListCampaignWaits()) campaign_waits[w.campaign_id] = w.reason;
+      waits_loaded = true;
+    }
+    std::vector<HostCell> live;
+    for (const auto& [id, cell] : cells)
+      if (cell.alive && cell.ours && !cell.quarantined) live.push_back(cell.host);
+    std::map<std::int64_t, CampaignNeeds> needs;
+    for (const db::PlannedNeed& n : store.PlannedNeeds()) {
+      CampaignNeeds& c = needs[n.campaign_id];
+      if (c.trials.empty()) {
+        c.campaign_id = n.campaign_id;
+        c.physics_defects = PhysicsDefects(n.defects_json);
+      }
+      c.trials.push_back(
+          {n.contact_mask, {n.position[0], n.position[1], n.position[2]}, n.pusher_speed});
+    }
+    for (auto it = campaign_waits.begin(); it != campaign_waits.end();) {
+      if (needs.count(it->first)) {
+        ++it;
+        continue;
+      }
+      store.ClearCampaignWait(it->first);  // nothing planned (done, paused, cancelled)
+      it = campaign_waits.erase(it);
+    }
+    for (const auto& [id, c] : needs) {
+      const GateDecision d = DecideClaimGate(c, live);
+      auto it = campaign_waits.find(id);
+      if (d.waits && (it == campaign_waits.end() || it->second != d.reason)) {
+        store.SetCampaignWait(id, std::string(ToString(d.kind)), d.reason, d.rule);
+        campaign_waits[id] = d.reason;
+        spdlog::warn("campaign {} waits: {} ({})", id, d.reason, d.rule);
+      } else if (!d.waits && it != campaign_waits.end()) {
+        store.ClearCampaignWait(id);
+        campaign_waits.erase(it);
+        spdlog::info("campaign {}: a live cell can host it again; dispatch resumes ({})", id,
+                     d.rule);
+      }
+    }
+    std::vector<std::int64_t> open;
+    for (const std::int64_t id : active)
+      if (!campaign_waits.count(id)) open.push_back(id);
+    store.RestrictClaimsTo(std::move(open));
+    gated_active = active;
+  }
+
+  // Before a claim: a campaign submitted or resumed since the gate last ran
+  // is decided now, not dispatched ungated.
+  void GateNewCampaigns() {
+    if (store.ActiveCampaignIds() == gated_active) return;
+    gate_dirty = false;
+    next_gate = now() + Dur(kGatePeriod_s);
+    GateCampaigns();
+  }
+
   // ------------------------------------------------------------ dispatch
   void Dispatch(bool stopping) {
     if (stopping || !recovered) return;
     const auto t = now();
+    bool gate_checked = false;
     for (auto& [id, cell] : cells) {
       if (!cell.alive || !cell.ours || cell.quarantined || cell.phase != CellPhase::kIdle ||
           cell.store_waits > 0 || t < cell.next_claim)
         continue;
       cell.next_claim = t + Dur(opt.dispatch_poll_s);        // poll the store gently when idle
       if (observer && observer->DispatchGate(id)) continue;  // a suspension holds it back
+      if (!gate_checked) {
+        gate_checked = true;
+        bool gated = true;
+        Attempt("the claim gate", [&] {
+          gated = false;
+          GateNewCampaigns();
+          gated = true;
+        });
+        if (!gated) return;  // a busy store: no claim past an undecided gate
+      }
       std::optional<db::ClaimedTrial> claim;
       const std::string cell_id = id;
       Attempt("cell " + id + ": claim", [&] { claim = NextTrialFor(cell, true); });
@@ -615,7 +773,7 @@ struct TrialDriver::Impl {
         [this, tag, cell_id, trial_id, attempt, seed, scene_json, defects_json, budget] {
           auto it = executions.find(trial_id);
           if (it == executions.end() || it->second.attempt != attempt) return;
-          it->second.sink = store.BeginIngest(trial_id, attempt);
+          it->second.sink = store.BeginIngest(trial_id, attempt, ContactSitesOf(it->second.scene));
           CellRun& c = Cell(cell_id);
           msg::TrialCommand cmd = Command(c, msg::PHASE_EXECUTE);
           cmd.trial_id(static_cast<std::uint64_t>(trial_id));
@@ -632,6 +790,18 @@ struct TrialDriver::Impl {
             return;
           }
           spdlog::info("{}: EXECUTE on cell {}", tag, cell_id);
+          // While it executes: the trial its reset will aim at (see Executed),
+          // chosen as if the fixtures of this trial were mounted, as they will be.
+          c.aim_known = false;
+          try {
+            CellRun probe = c;
+            if (probe.change_costs) probe.mounted = FixturesOfTrial(trial_id, scene_json);
+            c.next_aim = NextTrialFor(probe, false);
+            c.aim_known = true;
+          } catch (const db::StoreError& e) {
+            if (Judge(e) == StoreVerdict::kStop) throw;  // as any step: the service stops
+            spdlog::debug("{}: next trial looked up at the reset instead: {}", tag, e.what());
+          }
         },
         [this, cell_id](const db::StoreError& e) {
           CellRun& c = Cell(cell_id);
@@ -730,7 +900,7 @@ struct TrialDriver::Impl {
           if (eit == executions.end() || eit->second.attempt != attempt) return;
           Execution& e = eit->second;
           if (!e.sink) {  // a busy store broke the ingest: write the whole stream again
-            e.sink = store.BeginIngest(e.trial_id, e.attempt);
+            e.sink = store.BeginIngest(e.trial_id, e.attempt, ContactSitesOf(e.scene));
             try {
               e.sink->Add(e.samples);
             } catch (...) {
@@ -789,8 +959,14 @@ struct TrialDriver::Impl {
         tag + ": begin reset", cell_id,
         [this, trial_id, attempt, cell_id] {
           CellRun& c = Cell(cell_id);
-          // Aim the reset at the start of the trial this cell will most likely run next.
-          std::optional<db::ClaimedTrial> next = NextTrialFor(c, false);
+          // Aim the reset at the start of the trial this cell will most likely run next
+          // (looked up while it executed; a trial claimed since by another cell only
+          // costs the next trial its measured start, as a lookup here could too).
+          const bool aim_current = c.aim_known && (!c.next_aim || !ClaimedByAnother(c));
+          std::optional<db::ClaimedTrial> next =
+              aim_current ? std::move(c.next_aim) : NextTrialFor(c, false);
+          c.aim_known = false;
+          c.next_aim.reset();
           store.BeginReset(trial_id, attempt, kResetAfterExecute);
           c.reset_mounts.reset();
           if (next) c.reset_mounts = FixturesOfTrial(next->trial_id, next->scene_json);
@@ -832,8 +1008,7 @@ struct TrialDriver::Impl {
 
   // What the trial ran on and which defects were applied (the cell's word).
   // Metadata: a store error here is logged by Step's policy, never blocks the trial.
-  void RecordExecution(const Execution& ex, const msg::TrialStatus& st) {
-    const auto detail = nlohmann::json::parse(st.detail_json(), nullptr, false);
+  void RecordExecution(const Execution& ex, const nlohmann::json& detail) {
     if (!detail.is_object()) return;
     const std::string backend = detail.value("backend", std::string());
     const std::string truth = detail.value("truth", std::string());
@@ -852,6 +1027,8 @@ struct TrialDriver::Impl {
   // like RecordExecution; the commands also go to the prediction (replayed).
   void RecordClosedLoop(Execution& ex, const msg::TrialStatus& st) {
     const std::string tag = TrialTag(ex.campaign_id, ex.trial_id, ex.attempt);
+    // Most runs are open loop: no parse of the detail to learn that.
+    if (st.detail_json().find("\"closed_loop\"") == std::string::npos) return;
     std::optional<db::ClosedLoopRun> run;
     try {
       run = ClosedLoopFromDetail(ex.trial_id, ex.attempt, st.reason(), st.detail_json());
@@ -882,8 +1059,8 @@ struct TrialDriver::Impl {
         // The cell changed what differed before it ran (executors/trial_start.hpp).
         RecordChanges(cell, ex.trial_id, ex.attempt, "execute",
                       FixturesOfTrial(ex.trial_id, ex.scene_json));
+        RecordExecution(ex, detail);
       }
-        RecordExecution(ex, st);
         RecordClosedLoop(ex, st);
         cell.execute_wall_s = st.phase_wall_s();
         ex.expected = st.samples();
@@ -955,9 +1132,9 @@ struct TrialDriver::Impl {
   void AfterReset(std::int64_t trial_id) {
     auto it = waiting_predictions.find(trial_id);
     if (it == waiting_predictions.end()) return;
-    PredictionDone done = std::move(it->second);
+    auto done = std::make_shared<PredictionDone>(std::move(it->second));
     waiting_predictions.erase(it);
-    RecordPrediction(std::move(done));
+    background.push_back([this, done] { RecordPrediction(std::move(*done)); });
   }
 
   void OnPrediction(PredictionDone done) {
@@ -1025,6 +1202,7 @@ struct TrialDriver::Impl {
   // trial is dispatched before it ran, or it would re-queue our own claims.
   bool recovered = false;
   void Resume() {
+    store.RestrictClaimsTo(std::vector<std::int64_t>{});  // nothing claimable before the gate ran
     Step(
         "recovery after restart", "",
         [this] {
@@ -1128,13 +1306,20 @@ struct TrialDriver::Impl {
       next_campaigns = t + Dur(1.0);
       Attempt("completing finished campaigns", [&] { store.CompleteFinishedCampaigns(0); });
     }
+    if (recovered && (gate_dirty || t >= next_gate)) {
+      gate_dirty = false;
+      next_gate = t + Dur(kGatePeriod_s);
+      Attempt("the claim gate", [&] { GateCampaigns(); });
+    }
     Dispatch(stopping);
+    RunBackground();
   }
 
   bool InFlight() const {
     for (const auto& [id, cell] : cells)
       if (cell.phase != CellPhase::kIdle) return true;
-    return predictions.outstanding() > 0 || !waiting_predictions.empty() || steps.pending() > 0;
+    return predictions.outstanding() > 0 || !waiting_predictions.empty() || steps.pending() > 0 ||
+           !background.empty();
   }
 
   ServiceCounters Snapshot() const {

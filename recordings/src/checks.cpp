@@ -40,99 +40,94 @@ double Motion(const Recording& r, const Resampled& s, std::size_t k) {
          extent * std::abs(s.object[k][2] - s.object[0][2]);
 }
 
-}  // namespace
+// A finding written into the checks: one that fails the pose or the force
+// stream, or a note that keeps both usable.
+void FailPose(TrialChecks* c, std::string check, std::string detail) {
+  c->findings.push_back({std::move(check), std::move(detail), true});
+  c->pose_usable = false;
+}
+void FailForce(TrialChecks* c, std::string check, std::string detail) {
+  c->findings.push_back({std::move(check), std::move(detail), true});
+  c->force_usable = false;
+}
+void Note(TrialChecks* c, std::string check, std::string detail) {
+  c->findings.push_back({std::move(check), std::move(detail), false});
+}
 
-TrialChecks CheckTrial(const Recording& r, const Resampled& s, const CheckOptions& o) {
-  TrialChecks c;
-  const std::size_t n = s.t.size();
-  const auto fail_pose = [&](std::string check, std::string detail) {
-    c.findings.push_back({std::move(check), std::move(detail), true});
-    c.pose_usable = false;
-  };
-  const auto fail_force = [&](std::string check, std::string detail) {
-    c.findings.push_back({std::move(check), std::move(detail), true});
-    c.force_usable = false;
-  };
-  const auto note = [&](std::string check, std::string detail) {
-    c.findings.push_back({std::move(check), std::move(detail), false});
-  };
+void CheckStampOrder(const Recording& r, const Resampled& s, TrialChecks* c) {
   for (const auto& [count, stream] : {std::pair{s.object_out_of_order, r.object_pose.name},
                                       std::pair{s.pusher_out_of_order, r.pusher_pose.name},
                                       std::pair{s.force_out_of_order, r.force.name}}) {
     if (count > 0)
-      note("out_of_order_stamps", stream + ": " + std::to_string(count) +
-                                      " stamp(s) earlier than the one before (sorted)");
+      Note(
+          c, "out_of_order_stamps",
+          stream + ": " + std::to_string(count) + " stamp(s) earlier than the one before (sorted)");
   }
-  c.object_travel =
-      std::hypot(s.object[n - 1][0] - s.object[0][0], s.object[n - 1][1] - s.object[0][1]);
-  c.object_rotation = s.object[n - 1][2] - s.object[0][2];
+}
 
-  // Geometry: the pusher must start outside the outline (a calibration error
-  // shows as a start inside it) and touch it when the object starts to move.
-  c.start_gap = Gap(r, s, 0);
-  if (c.start_gap < -o.inside_fail)
-    fail_pose("pusher_inside_at_start", "the pusher disk starts " + Mm(-c.start_gap) +
-                                            " inside the outline (more than " + Mm(o.inside_fail) +
-                                            ": the poses or the outline are off)");
-  else if (c.start_gap < -o.inside_warn)
-    note("pusher_inside_at_start", "the pusher disk starts " + Mm(-c.start_gap) +
-                                       " inside the outline (calibration; within " +
-                                       Mm(o.inside_fail) + ", kept)");
-  c.onset_t = NAN;
-  c.onset_gap = NAN;
+// Geometry: the pusher must start outside the outline (a calibration error
+// shows as a start inside it) and touch it when the object starts to move.
+void CheckContactGeometry(const Recording& r, const Resampled& s, const CheckOptions& o,
+                          TrialChecks* c) {
+  const std::size_t n = s.t.size();
+  c->start_gap = Gap(r, s, 0);
+  if (c->start_gap < -o.inside_fail)
+    FailPose(c, "pusher_inside_at_start",
+             "the pusher disk starts " + Mm(-c->start_gap) + " inside the outline (more than " +
+                 Mm(o.inside_fail) + ": the poses or the outline are off)");
+  else if (c->start_gap < -o.inside_warn)
+    Note(c, "pusher_inside_at_start",
+         "the pusher disk starts " + Mm(-c->start_gap) +
+             " inside the outline (calibration; within " + Mm(o.inside_fail) + ", kept)");
+  c->onset_t = NAN;
+  c->onset_gap = NAN;
   for (std::size_t k = 0; k < n; ++k) {
     if (Motion(r, s, k) > o.onset_motion) {
-      c.onset_t = s.t[k];
-      c.onset_gap = Gap(r, s, k);
+      c->onset_t = s.t[k];
+      c->onset_gap = Gap(r, s, k);
       break;
     }
   }
-  if (std::isnan(c.onset_t)) {
-    note("object_did_not_move", "no point of the outline moved more than " + Mm(o.onset_motion));
-  } else if (std::abs(c.onset_gap) > o.onset_gap_tol) {
-    fail_pose("contact_gap_at_onset", "the object starts to move at " + S(c.onset_t) +
-                                          " with the pusher disk " + Mm(c.onset_gap) +
-                                          " from the outline (tolerance " + Mm(o.onset_gap_tol) +
-                                          "): frame or calibration off");
+  if (std::isnan(c->onset_t)) {
+    Note(c, "object_did_not_move", "no point of the outline moved more than " + Mm(o.onset_motion));
+  } else if (std::abs(c->onset_gap) > o.onset_gap_tol) {
+    FailPose(c, "contact_gap_at_onset",
+             "the object starts to move at " + S(c->onset_t) + " with the pusher disk " +
+                 Mm(c->onset_gap) + " from the outline (tolerance " + Mm(o.onset_gap_tol) +
+                 "): frame or calibration off");
   }
+}
 
-  // The push angle: from the inward normal at the start contact to the
-  // pusher's travel, in the object's start frame; against the lab's own.
-  {
-    constexpr double kDeg = 180 / 3.14159265358979323846;
-    const double c0 = std::cos(s.object[0][2]), s0 = std::sin(s.object[0][2]);
-    const auto local = [&](double dx, double dy) {
-      return std::array<double, 2>{c0 * dx + s0 * dy, -s0 * dx + c0 * dy};
-    };
-    const auto p0 = local(s.pusher[0][0] - s.object[0][0], s.pusher[0][1] - s.object[0][1]);
-    const auto q = NearestPoint(r.shape.outline, p0[0], p0[1]);
-    const double side = SignedDistance(r.shape.outline, p0[0], p0[1]) < 0 ? -1.0 : 1.0;
-    const double nx = side * (q[0] - p0[0]), ny = side * (q[1] - p0[1]);
-    const auto d = local(s.pusher[n - 1][0] - s.pusher[0][0], s.pusher[n - 1][1] - s.pusher[0][1]);
-    c.push_angle = std::atan2(nx * d[1] - ny * d[0], nx * d[0] + ny * d[1]);
-    if (!std::isnan(r.stated_push_angle)) {
-      const double diff =
-          std::remainder(c.push_angle - r.stated_push_angle, 2 * 3.14159265358979323846);
-      if (std::abs(diff) > o.angle_fail) {
-        char b[200];
-        std::snprintf(b, sizeof b,
-                      "the pusher travels at %.1f deg from the inward normal, the recording "
-                      "states %.1f deg (tolerance %.1f): frame, outline or parameters off",
-                      c.push_angle * kDeg, r.stated_push_angle * kDeg, o.angle_fail * kDeg);
-        fail_pose("push_angle_mismatch", b);
-      }
-    }
+// The push angle: from the inward normal at the start contact to the
+// pusher's travel, in the object's start frame; against the lab's own.
+void CheckPushAngle(const Recording& r, const Resampled& s, const CheckOptions& o, TrialChecks* c) {
+  constexpr double kDeg = 180 / 3.14159265358979323846;
+  const std::size_t n = s.t.size();
+  const double c0 = std::cos(s.object[0][2]), s0 = std::sin(s.object[0][2]);
+  const auto local = [&](double dx, double dy) {
+    return std::array<double, 2>{c0 * dx + s0 * dy, -s0 * dx + c0 * dy};
+  };
+  const auto p0 = local(s.pusher[0][0] - s.object[0][0], s.pusher[0][1] - s.object[0][1]);
+  const auto q = NearestPoint(r.shape.outline, p0[0], p0[1]);
+  const double side = SignedDistance(r.shape.outline, p0[0], p0[1]) < 0 ? -1.0 : 1.0;
+  const double nx = side * (q[0] - p0[0]), ny = side * (q[1] - p0[1]);
+  const auto d = local(s.pusher[n - 1][0] - s.pusher[0][0], s.pusher[n - 1][1] - s.pusher[0][1]);
+  c->push_angle = std::atan2(nx * d[1] - ny * d[0], nx * d[0] + ny * d[1]);
+  if (std::isnan(r.stated_push_angle)) return;
+  const double diff =
+      std::remainder(c->push_angle - r.stated_push_angle, 2 * 3.14159265358979323846);
+  if (std::abs(diff) > o.angle_fail) {
+    char b[200];
+    std::snprintf(b, sizeof b,
+                  "the pusher travels at %.1f deg from the inward normal, the recording "
+                  "states %.1f deg (tolerance %.1f): frame, outline or parameters off",
+                  c->push_angle * kDeg, r.stated_push_angle * kDeg, o.angle_fail * kDeg);
+    FailPose(c, "push_angle_mismatch", b);
   }
+}
 
-  // Force stream: frozen (a sensor that stopped updating repeats its last
-  // row), and its zero (the force read while nothing pushes).
-  c.force_offset = NAN;
-  c.force_drift = NAN;
-  if (r.force.values.empty()) {
-    c.force_usable = false;
-    note("force_not_measured", "the recording has no force stream");
-    return c;
-  }
+// A sensor that stopped updating repeats its last row.
+void CheckForceFrozen(const Recording& r, const CheckOptions& o, TrialChecks* c) {
   std::size_t repeats = 0;
   double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
   for (std::size_t i = 0; i < r.force.values.size(); ++i) {
@@ -145,12 +140,17 @@ TrialChecks CheckTrial(const Recording& r, const Resampled& s, const CheckOption
   const bool constant = hi[0] - lo[0] <= o.frozen_range && hi[1] - lo[1] <= o.frozen_range &&
                         hi[2] - lo[2] <= o.frozen_range;
   if (constant || 2 * repeats > r.force.values.size()) {
-    fail_force("force_frozen", std::to_string(repeats) + " of " +
-                                   std::to_string(r.force.values.size()) +
-                                   " force rows repeat the row before (a sensor that stopped "
-                                   "updating)");
+    FailForce(c, "force_frozen",
+              std::to_string(repeats) + " of " + std::to_string(r.force.values.size()) +
+                  " force rows repeat the row before (a sensor that stopped "
+                  "updating)");
   }
-  // The zero: the mean force before the pusher starts to move (nothing pushes yet).
+}
+
+// The zero: the mean force before the pusher starts to move (nothing pushes
+// yet) and, where the pusher is clear of the object at the end, again.
+void CheckForceZero(const Recording& r, const Resampled& s, const CheckOptions& o, TrialChecks* c) {
+  const std::size_t n = s.t.size();
   std::size_t moves = n;
   for (std::size_t k = 0; k < n; ++k) {
     if (std::hypot(s.pusher[k][0] - s.pusher[0][0], s.pusher[k][1] - s.pusher[0][1]) >
@@ -159,36 +159,59 @@ TrialChecks CheckTrial(const Recording& r, const Resampled& s, const CheckOption
       break;
     }
   }
-  if (moves >= 5) {
-    double fx = 0, fy = 0;
-    for (std::size_t k = 0; k < moves; ++k) {
-      fx += s.force[k][0];
-      fy += s.force[k][1];
-    }
-    fx /= static_cast<double>(moves);
-    fy /= static_cast<double>(moves);
-    c.force_offset = std::hypot(fx, fy);
-    // Where the pusher is clear of the object at the end, its zero again.
-    std::size_t clear = 0;
-    double ex = 0, ey = 0;
-    for (std::size_t k = n; k-- > moves && Gap(r, s, k) > o.clear_gap;) {
-      ex += s.force[k][0];
-      ey += s.force[k][1];
-      ++clear;
-    }
-    if (clear >= 5) c.force_drift = std::hypot(ex / clear - fx, ey / clear - fy);
-    if (c.force_usable && c.force_offset > o.offset_fail)
-      fail_force("force_offset_drift", "the force reads " + N(c.force_offset) +
-                                           " before the pusher moves (over " + S(s.t[moves]) +
-                                           "; more than " + N(o.offset_fail) +
-                                           "): the sensor's zero has drifted");
-    else if (c.force_usable && !std::isnan(c.force_drift) && c.force_drift > o.drift_fail)
-      fail_force("force_offset_drift", "the force's zero moved by " + N(c.force_drift) +
-                                           " between the start and the end (more than " +
-                                           N(o.drift_fail) + ")");
-  } else {
-    note("force_zero_unknown", "the pusher moves from the first sample: the zero is not measured");
+  if (moves < 5) {
+    Note(c, "force_zero_unknown",
+         "the pusher moves from the first sample: the zero is not measured");
+    return;
   }
+  double fx = 0, fy = 0;
+  for (std::size_t k = 0; k < moves; ++k) {
+    fx += s.force[k][0];
+    fy += s.force[k][1];
+  }
+  fx /= static_cast<double>(moves);
+  fy /= static_cast<double>(moves);
+  c->force_offset = std::hypot(fx, fy);
+  std::size_t clear = 0;
+  double ex = 0, ey = 0;
+  for (std::size_t k = n; k-- > moves && Gap(r, s, k) > o.clear_gap;) {
+    ex += s.force[k][0];
+    ey += s.force[k][1];
+    ++clear;
+  }
+  if (clear >= 5) c->force_drift = std::hypot(ex / clear - fx, ey / clear - fy);
+  if (c->force_usable && c->force_offset > o.offset_fail)
+    FailForce(c, "force_offset_drift",
+              "the force reads " + N(c->force_offset) + " before the pusher moves (over " +
+                  S(s.t[moves]) + "; more than " + N(o.offset_fail) +
+                  "): the sensor's zero has drifted");
+  else if (c->force_usable && !std::isnan(c->force_drift) && c->force_drift > o.drift_fail)
+    FailForce(c, "force_offset_drift",
+              "the force's zero moved by " + N(c->force_drift) +
+                  " between the start and the end (more than " + N(o.drift_fail) + ")");
+}
+
+}  // namespace
+
+TrialChecks CheckTrial(const Recording& r, const Resampled& s, const CheckOptions& o) {
+  TrialChecks c;
+  const std::size_t n = s.t.size();
+  CheckStampOrder(r, s, &c);
+  c.object_travel =
+      std::hypot(s.object[n - 1][0] - s.object[0][0], s.object[n - 1][1] - s.object[0][1]);
+  c.object_rotation = s.object[n - 1][2] - s.object[0][2];
+  CheckContactGeometry(r, s, o, &c);
+  CheckPushAngle(r, s, o, &c);
+  // Force stream: frozen, and its zero (the force read while nothing pushes).
+  c.force_offset = NAN;
+  c.force_drift = NAN;
+  if (r.force.values.empty()) {
+    c.force_usable = false;
+    Note(&c, "force_not_measured", "the recording has no force stream");
+    return c;
+  }
+  CheckForceFrozen(r, o, &c);
+  CheckForceZero(r, s, o, &c);
   return c;
 }
 

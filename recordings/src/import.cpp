@@ -302,6 +302,134 @@ std::string CampaignName(const ImportOptions& o) {
   return name;
 }
 
+// The workspace of the imported campaign: every recorded start and every
+// place a trial's pusher path would carry the object (start + the pusher's
+// displacement, the travel check), 5 cm around. Recordings are in the lab's
+// table frame, often outside the default +-0.25 m, and `arena submit`/`run`
+// check every scene against the campaign's profile. A replay cell computes
+// the same extent from the dataset for its own workspace (a campaign's limits
+// never widen a cell's).
+ojson Workspace(const std::vector<Prepared>& prepared) {
+  Eigen::Vector3d lo = Eigen::Vector3d::Constant(HUGE_VAL), hi = -lo;
+  for (const auto& p : prepared) {
+    const auto scene = nlohmann::json::parse(p.scene_json);
+    const auto& at = scene["object"]["pose"]["position"];
+    const Eigen::Vector3d start(at[0].get<double>(), at[1].get<double>(), at[2].get<double>());
+    lo = lo.cwiseMin(start);
+    hi = hi.cwiseMax(start);
+    const auto& path = scene["pusher"]["motion"]["path"]["position"];
+    for (const auto& x : path) {
+      const Eigen::Vector3d d(x[0].get<double>() - path[0][0].get<double>(),
+                              x[1].get<double>() - path[0][1].get<double>(),
+                              x[2].get<double>() - path[0][2].get<double>());
+      lo = lo.cwiseMin(start + d);
+      hi = hi.cwiseMax(start + d);
+    }
+  }
+  lo.array() -= 0.05;
+  hi.array() += 0.05;
+  return {{"min", {lo.x(), lo.y(), lo.z()}}, {"max", {hi.x(), hi.y(), hi.z()}}};
+}
+
+// The campaign that commands exactly these trials: the dataset's own scenes.
+ojson ImportedCampaign(const std::string& name, const ImportOptions& o,
+                       const std::vector<Prepared>& prepared) {
+  return {
+      {"name", name},
+      {"description", "Every recorded trial of " + (o.source.empty() ? name : o.source) +
+                          " (imported by arena import " + o.adaptor +
+                          "); run it with --backend replay:DATASET. The truth is measured."},
+      {"seed", 0},
+      {"scenes", "scenes.jsonl"},
+      {"prediction", {{"facets", 8}, {"points", 3}, {"dt", 0.004}, {"reduce", "auto"}}},
+      {"defects", {{"workspace", Workspace(prepared)}}},
+  };
+}
+
+// What the dataset's manifest says beyond db's export: the truth is measured,
+// and which trials' streams passed their import checks.
+ojson ManifestExtra(const ImportOptions& o, const ojson& per_trial) {
+  return {
+      {"truth", "measured"},
+      {"truth_note",
+       "measured: the lab's recorded streams are the observation and the truth (there is no "
+       "separate true stream). The true stream is the observed one without what failed its "
+       "import check: a trial whose poses failed is not served (replay refuses it); a trial "
+       "whose force stream failed has no contact forces in its truth (poses are scored, "
+       "forces never). import_report.txt says which and why."},
+      {"frames",
+       {{"G",
+         "the table frame: x, y on the table, z up (gravity along -z); every pose, twist and "
+         "wrench is expressed in it; quaternions are (w, x, y, z)"}}},
+      {"import",
+       {{"adaptor", o.adaptor},
+        {"source", o.source},
+        {"rate_hz", o.rate_hz},
+        {"report", "import_report.json"},
+        {"campaign", "campaign.json"},
+        {"trials", per_trial}}},
+  };
+}
+
+// The prepared trials as a campaign of a store, each trial executed with its
+// recorded samples; returns the campaign's id.
+std::int64_t StorePrepared(db::Store& store, const std::string& name, const ojson& campaign,
+                           const std::vector<Prepared>& prepared, const ImportOptions& o) {
+  db::NewCampaign nc;
+  nc.name = name;
+  nc.spec_json = campaign.dump();
+  std::vector<db::PlannedTrial> planned;
+  for (std::size_t i = 0; i < prepared.size(); ++i) {
+    db::PlannedTrial t;
+    t.condition = static_cast<int>(i);
+    t.seed = prepared[i].trial.seed;
+    t.scene_json = prepared[i].scene_json;
+    t.params_json = prepared[i].params_json;
+    planned.push_back(std::move(t));
+  }
+  const std::int64_t campaign_id = store.CreateCampaign(nc, planned);
+  const std::string cell = "recorded";
+  store.UpsertCell(cell, {"point"});
+  for (std::size_t i = 0; i < prepared.size(); ++i) {
+    const auto claimed = store.ClaimNextTrial(cell);
+    if (!claimed) throw std::runtime_error("import: the temporary store handed out no trial");
+    const auto& p = prepared[static_cast<std::size_t>(store.GetTrial(claimed->trial_id).index)];
+    auto ingest = store.BeginIngest(claimed->trial_id, claimed->attempt);
+    ingest->Add(p.samples);
+    ingest->Finish();
+    store.RecordExecution(claimed->trial_id, claimed->attempt, "import:" + o.adaptor, "measured",
+                          "{}");
+  }
+  return campaign_id;
+}
+
+// The dataset, written by db's own export from a private store in `scratch`.
+void WriteImportDataset(const fs::path& scratch, const fs::path& out, const std::string& name,
+                        const ojson& campaign, const std::vector<Prepared>& prepared,
+                        const ImportReport& report, const ImportOptions& o) {
+  auto store = db::Store::Open((scratch / "import.db").string());
+  const std::int64_t campaign_id = StorePrepared(*store, name, campaign, prepared, o);
+  ojson per_trial = ojson::array();
+  for (const auto& t : store->ListTrials(campaign_id)) {
+    const auto& p = prepared[static_cast<std::size_t>(t.index)];
+    per_trial.push_back({{"trial_id", t.id},
+                         {"trial", p.trial.name},
+                         {"pose_usable", p.trial.checks.pose_usable},
+                         {"force_usable", p.trial.checks.force_usable}});
+  }
+  db::ExportOptions eo;
+  eo.campaign_id = campaign_id;
+  eo.format = db::ExportFormat::kHdf5;
+  eo.out_dir = out.string();
+  eo.arena_version = o.arena_version;
+  eo.arena_commit = o.arena_commit;
+  eo.extra_files = {{"campaign.json", campaign.dump(2) + "\n"},
+                    {"import_report.txt", report.text},
+                    {"import_report.json", ReportJson(report.trials).dump(2) + "\n"}};
+  eo.manifest_extra_json = ManifestExtra(o, per_trial).dump();
+  db::ExportCampaign(*store, eo);
+}
+
 }  // namespace
 
 std::string SceneJson(const Recording& r, const Resampled& s, const ImportOptions& o) {
@@ -371,112 +499,11 @@ ImportReport ImportRecordings(const std::vector<Recording>& recordings, const Im
   report.dir = o.out_dir;
   for (const auto& p : prepared) report.trials.push_back(p.trial);
   report.text = ReportText(report.trials, o.out_dir);
-
-  // The campaign's workspace: every recorded start and every place a trial's
-  // pusher path would carry the object (start + the pusher's displacement,
-  // the travel check), 5 cm around. Recordings are in the lab's table frame,
-  // often outside the default +-0.25 m, and `arena submit`/`run` check every
-  // scene against the campaign's profile. A replay cell computes the same
-  // extent from the dataset for its own workspace (a campaign's limits never
-  // widen a cell's).
-  Eigen::Vector3d lo = Eigen::Vector3d::Constant(HUGE_VAL), hi = -lo;
-  for (const auto& p : prepared) {
-    const auto scene = nlohmann::json::parse(p.scene_json);
-    const auto& at = scene["object"]["pose"]["position"];
-    const Eigen::Vector3d start(at[0].get<double>(), at[1].get<double>(), at[2].get<double>());
-    lo = lo.cwiseMin(start);
-    hi = hi.cwiseMax(start);
-    const auto& path = scene["pusher"]["motion"]["path"]["position"];
-    for (const auto& x : path) {
-      const Eigen::Vector3d d(x[0].get<double>() - path[0][0].get<double>(),
-                              x[1].get<double>() - path[0][1].get<double>(),
-                              x[2].get<double>() - path[0][2].get<double>());
-      lo = lo.cwiseMin(start + d);
-      hi = hi.cwiseMax(start + d);
-    }
-  }
-  lo.array() -= 0.05;
-  hi.array() += 0.05;
-  // The campaign that commands exactly these trials: the dataset's own scenes.
-  const ojson campaign = {
-      {"name", name},
-      {"description", "Every recorded trial of " + (o.source.empty() ? name : o.source) +
-                          " (imported by arena import " + o.adaptor +
-                          "); run it with --backend replay:DATASET. The truth is measured."},
-      {"seed", 0},
-      {"scenes", "scenes.jsonl"},
-      {"prediction", {{"facets", 8}, {"points", 3}, {"dt", 0.004}, {"reduce", "auto"}}},
-      {"defects",
-       {{"workspace", {{"min", {lo.x(), lo.y(), lo.z()}}, {"max", {hi.x(), hi.y(), hi.z()}}}}}},
-  };
+  const ojson campaign = ImportedCampaign(name, o, prepared);
 
   ScratchDir scratch(out);
   try {
-    auto store = db::Store::Open((scratch.path() / "import.db").string());
-    db::NewCampaign nc;
-    nc.name = name;
-    nc.spec_json = campaign.dump();
-    std::vector<db::PlannedTrial> planned;
-    for (std::size_t i = 0; i < prepared.size(); ++i) {
-      db::PlannedTrial t;
-      t.condition = static_cast<int>(i);
-      t.seed = prepared[i].trial.seed;
-      t.scene_json = prepared[i].scene_json;
-      t.params_json = prepared[i].params_json;
-      planned.push_back(std::move(t));
-    }
-    const std::int64_t campaign_id = store->CreateCampaign(nc, planned);
-    const std::string cell = "recorded";
-    store->UpsertCell(cell, {"point"});
-    for (std::size_t i = 0; i < prepared.size(); ++i) {
-      const auto claimed = store->ClaimNextTrial(cell);
-      if (!claimed) throw std::runtime_error("import: the temporary store handed out no trial");
-      const auto& p = prepared[static_cast<std::size_t>(store->GetTrial(claimed->trial_id).index)];
-      auto ingest = store->BeginIngest(claimed->trial_id, claimed->attempt);
-      ingest->Add(p.samples);
-      ingest->Finish();
-      store->RecordExecution(claimed->trial_id, claimed->attempt, "import:" + o.adaptor, "measured",
-                             "{}");
-    }
-    ojson per_trial = ojson::array();
-    for (const auto& t : store->ListTrials(campaign_id)) {
-      const auto& p = prepared[static_cast<std::size_t>(t.index)];
-      per_trial.push_back({{"trial_id", t.id},
-                           {"trial", p.trial.name},
-                           {"pose_usable", p.trial.checks.pose_usable},
-                           {"force_usable", p.trial.checks.force_usable}});
-    }
-    db::ExportOptions eo;
-    eo.campaign_id = campaign_id;
-    eo.format = db::ExportFormat::kHdf5;
-    eo.out_dir = out.string();
-    eo.arena_version = o.arena_version;
-    eo.arena_commit = o.arena_commit;
-    eo.extra_files = {{"campaign.json", campaign.dump(2) + "\n"},
-                      {"import_report.txt", report.text},
-                      {"import_report.json", ReportJson(report.trials).dump(2) + "\n"}};
-    const ojson extra = {
-        {"truth", "measured"},
-        {"truth_note",
-         "measured: the lab's recorded streams are the observation and the truth (there is no "
-         "separate true stream). The true stream is the observed one without what failed its "
-         "import check: a trial whose poses failed is not served (replay refuses it); a trial "
-         "whose force stream failed has no contact forces in its truth (poses are scored, "
-         "forces never). import_report.txt says which and why."},
-        {"frames",
-         {{"G",
-           "the table frame: x, y on the table, z up (gravity along -z); every pose, twist and "
-           "wrench is expressed in it; quaternions are (w, x, y, z)"}}},
-        {"import",
-         {{"adaptor", o.adaptor},
-          {"source", o.source},
-          {"rate_hz", o.rate_hz},
-          {"report", "import_report.json"},
-          {"campaign", "campaign.json"},
-          {"trials", per_trial}}},
-    };
-    eo.manifest_extra_json = extra.dump();
-    db::ExportCampaign(*store, eo);
+    WriteImportDataset(scratch.path(), out, name, campaign, prepared, report, o);
   } catch (const db::StoreError& e) {
     throw std::runtime_error(std::string("import: writing the dataset failed: ") + e.what());
   }

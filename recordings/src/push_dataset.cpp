@@ -13,36 +13,15 @@
 #include <nlohmann/json.hpp>
 #include <sstream>
 
+#include "arena/hdf5/handle.hpp"
+
 namespace arena::recordings {
 namespace {
 
 namespace fs = std::filesystem;
 using nlohmann::json;
-
-// HDF5's innermost error message ("truncated file: eof = ..."), then clears the stack.
-std::string H5Reason() {
-  std::string reason;
-  H5Ewalk2(
-      H5E_DEFAULT, H5E_WALK_UPWARD,
-      [](unsigned n, const H5E_error2_t* e, void* out) -> herr_t {
-        if (n == 0 && e->desc) *static_cast<std::string*>(out) = e->desc;
-        return 0;
-      },
-      &reason);
-  H5Eclear2(H5E_DEFAULT);
-  return reason.empty() ? "HDF5 error" : reason;
-}
-
-struct H5Object {
-  hid_t id = -1;
-  herr_t (*close)(hid_t) = nullptr;
-  H5Object(hid_t i, herr_t (*c)(hid_t)) : id(i), close(c) {}
-  ~H5Object() {
-    if (id >= 0) close(id);
-  }
-  H5Object(const H5Object&) = delete;
-  H5Object& operator=(const H5Object&) = delete;
-};
+using H5Object = hdf5::Handle;
+using hdf5::Reason;
 
 // One N x 4 float dataset as a Stream (column 0 the time).
 Stream ReadStream(hid_t file, const std::string& path, const char* name) {
@@ -51,7 +30,7 @@ Stream ReadStream(hid_t file, const std::string& path, const char* name) {
     throw ImportError(path, std::string("no dataset '") + name + "'");
   }
   H5Object ds(H5Dopen2(file, name, H5P_DEFAULT), H5Dclose);
-  if (ds.id < 0) throw ImportError(path, std::string(name) + ": not a dataset: " + H5Reason());
+  if (ds.id < 0) throw ImportError(path, std::string(name) + ": not a dataset: " + Reason());
   H5Object type(H5Dget_type(ds.id), H5Tclose);
   if (type.id < 0 || H5Tget_class(type.id) != H5T_FLOAT)
     throw ImportError(path, std::string(name) + ": must hold floats");
@@ -66,7 +45,7 @@ Stream ReadStream(hid_t file, const std::string& path, const char* name) {
   std::vector<double> flat(dims[0] * 4);
   if (dims[0] > 0 &&
       H5Dread(ds.id, H5T_NATIVE_DOUBLE, H5S_ALL, H5S_ALL, H5P_DEFAULT, flat.data()) < 0)
-    throw ImportError(path, std::string(name) + ": cannot read it: " + H5Reason());
+    throw ImportError(path, std::string(name) + ": cannot read it: " + Reason());
   Stream s;
   s.name = name;
   for (hsize_t r = 0; r < dims[0]; ++r) {
@@ -193,9 +172,9 @@ Recording ReadPushFile(const std::string& path, const ShapesTable& shapes) {
   H5Eset_auto2(H5E_DEFAULT, nullptr, nullptr);  // errors come back as exceptions, not stderr
   if (const htri_t is = H5Fis_hdf5(path.c_str()); is <= 0)
     throw ImportError(
-        path, is < 0 ? "cannot read it as HDF5: " + H5Reason() : std::string("not an HDF5 file"));
+        path, is < 0 ? "cannot read it as HDF5: " + Reason() : std::string("not an HDF5 file"));
   H5Object file(H5Fopen(path.c_str(), H5F_ACC_RDONLY, H5P_DEFAULT), H5Fclose);
-  if (file.id < 0) throw ImportError(path, "cannot open it: " + H5Reason());
+  if (file.id < 0) throw ImportError(path, "cannot open it: " + Reason());
   Recording r;
   r.source = path;
   r.name = fs::path(path).stem().string();

@@ -2,6 +2,7 @@
 // and carries the settings, the Pareto front and the recommendation.
 #include <algorithm>
 #include <cmath>
+#include <fstream>
 #include <functional>
 #include <map>
 #include <string>
@@ -269,6 +270,68 @@ TEST(PlotTradeoff, FrontComputedOnTheAxisDrawn) {
       EXPECT_LT(se.y[i], se.y[i - 1]);
     }
   }
+}
+
+// Pins (issue 26): the slowest settings were drawn on the frame (their
+// markers and labels clipped by it). Every marker, with its radius, and the
+// start of every label lie inside the plot's frame; the SVG is written to
+// tradeoff_frame.svg (the test's working folder) to be looked at.
+TEST(PlotTradeoff, SlowestPointsAndLabelsInsideTheFrame) {
+  nlohmann::json settings = nlohmann::json::array();
+  // Two predictors over three decades of cost; the slowest is recommended.
+  const double steps[] = {0.016, 0.008, 0.004, 0.002, 0.001};
+  for (int i = 0; i < 5; ++i) {
+    settings.push_back(Predicted("arena", "g8_dt" + std::to_string(steps[i]).substr(0, 5), steps[i],
+                                 4e-3 / (i + 1), 1e-3 * std::pow(3.0, i), i == 4));
+    settings.push_back(Predicted("mujoco", "mj_dt" + std::to_string(steps[i]).substr(0, 5),
+                                 steps[i], 3e-3 / (i + 1), 5e-3 * std::pow(3.0, i), false));
+  }
+  const nlohmann::json report = {
+      {"campaign_id", 7},
+      {"trials", 24},
+      {"primary_metric", "position_p95"},
+      {"recommended", settings[8]["model_key"]},
+      {"budgets",
+       {{{"metric", "position_p95"}, {"limit", 1.2e-3}, {"text", "position_p95<=1.2mm"}}}},
+      {"settings", settings}};
+  const std::string svg = RenderSvg(TradeoffChart(report));
+  {
+    std::ofstream out("tradeoff_frame.svg");
+    out << svg;
+  }
+  tinyxml2::XMLDocument doc;
+  ASSERT_EQ(doc.Parse(svg.c_str()), tinyxml2::XML_SUCCESS);
+  int markers = 0, labels = 0;
+  for (const auto* g = doc.RootElement()->FirstChildElement("g"); g;
+       g = g->NextSiblingElement("g")) {
+    const auto* frame = g->FirstChildElement("rect");
+    ASSERT_NE(frame, nullptr);
+    const double x0 = frame->DoubleAttribute("x"), y0 = frame->DoubleAttribute("y");
+    const double x1 = x0 + frame->DoubleAttribute("width");
+    const double y1 = y0 + frame->DoubleAttribute("height");
+    for (const auto* s = g->FirstChildElement("g"); s; s = s->NextSiblingElement("g")) {
+      if (!s->Attribute("data-name")) continue;
+      const std::string name = s->Attribute("data-name");
+      for (const auto* c = s->FirstChildElement("circle"); c; c = c->NextSiblingElement("circle")) {
+        const double cx = c->DoubleAttribute("cx"), cy = c->DoubleAttribute("cy");
+        const double r = c->DoubleAttribute("r");
+        EXPECT_GE(cx - r, x0) << name << " marker on the left frame";
+        EXPECT_LE(cx + r, x1) << name << " marker on the right frame";
+        EXPECT_GE(cy - r, y0) << name << " marker on the top frame";
+        EXPECT_LE(cy + r, y1) << name << " marker on the bottom frame";
+        ++markers;
+      }
+      for (const auto* t = s->FirstChildElement("text"); t; t = t->NextSiblingElement("text")) {
+        if (!t->Attribute("class", "point-label")) continue;
+        const double x = t->DoubleAttribute("x");
+        EXPECT_GT(x, x0) << name << " label " << t->GetText();
+        EXPECT_LT(x, x1) << name << " label " << t->GetText();
+        ++labels;
+      }
+    }
+  }
+  EXPECT_GE(markers, 11);
+  EXPECT_GE(labels, 10);
 }
 
 TEST(PlotTradeoff, MalformedReportRefused) {

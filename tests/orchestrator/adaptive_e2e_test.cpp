@@ -224,6 +224,11 @@ TEST(AdaptiveE2E, CalibrationRecoversTheCellsFrictionScale) {
   EXPECT_TRUE(r["applied"].get<bool>());
   EXPECT_LT(r["report"]["heldout_loss"]["after"].get<double>(),
             r["report"]["heldout_loss"]["before"].get<double>());
+  // Pins issue 26: the fit predicts from the start each trial's cell
+  // measured, as evaluate does (it predicted from the planned pose); these
+  // cells place each trial off its planned pose.
+  EXPECT_EQ(r["start"]["from"], "measured") << text;
+  EXPECT_GT(r["start"]["trials_moved"].get<int>(), 0) << text;
 
   // Fitting arena's model at other settings than the campaign's: a setting
   // that is not arena's, or a bad value, is refused naming it; nothing stored.
@@ -277,6 +282,24 @@ TEST(AdaptiveE2E, CalibrationRecoversTheCellsFrictionScale) {
   EXPECT_EQ(RunArena({"submit", calibrated, "--db", db}, dir / "bad.log", std::chrono::seconds(30)),
             2);
   EXPECT_EQ(OpenReadOnly(db)->ListCampaigns().size(), 2u);
+
+  // --from planned fits from the scene's pose and says so; another value is
+  // refused naming the option, nothing stored.
+  const std::string planned = dir / "planned.json";
+  ASSERT_EQ(RunArena({"calibrate", "--db", db, "--campaign", "1", "--params", "mu_fingers",
+                      "--bootstrap", "2", "--max-evaluations", "10", "--from", "planned", "--json"},
+                     planned, std::chrono::seconds(120)),
+            0)
+      << ReadFile(planned);
+  const std::string planned_text = ReadFile(planned);
+  EXPECT_EQ(json::parse(planned_text.substr(planned_text.find('{')))["start"]["from"], "planned");
+  const std::size_t stored = OpenReadOnly(db)->ListCalibrations(1).size();
+  EXPECT_EQ(RunArena({"calibrate", "--db", db, "--campaign", "1", "--params", "mu_fingers",
+                      "--from", "sideways"},
+                     dir / "from.log", std::chrono::seconds(60)),
+            2);
+  EXPECT_NE(ReadFile(dir / "from.log").find("--from"), std::string::npos);
+  EXPECT_EQ(OpenReadOnly(db)->ListCalibrations(1).size(), stored);
 }
 
 // --predictor mujoco: cells whose physics is MuJoCo (--backend mujoco) with a

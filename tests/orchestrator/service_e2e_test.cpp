@@ -28,6 +28,12 @@ TEST(ServiceEndToEnd, RunsSixtyTrialsOnTwoCells) {
   std::map<std::string, int> per_cell;
   for (const auto& t : store->ListTrials(1)) per_cell[t.cell_id]++;
   EXPECT_EQ(per_cell.size(), 2u);
+  // Pins issue 26: the run's cells, stopped by it, say so in `arena status`
+  // (they read "no sign within its lease", as a lost cell would).
+  for (const auto& c : store->ListCells()) {
+    EXPECT_EQ(c.state, db::CellState::kGone) << c.id;
+    EXPECT_EQ(c.quarantine_reason, "stopped: its arena run ended") << c.id;
+  }
   // The summary names the outcome.
   const std::string out = ReadFile(dir / "run.out");
   EXPECT_NE(out.find("60 done"), std::string::npos) << out;

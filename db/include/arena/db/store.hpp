@@ -292,6 +292,26 @@ struct Trial {
   std::optional<double> finished_at;  // reached a terminal state
 };
 
+// Issue 26 (migration 18): why no live cell can host a campaign's trials
+// (orchestrator/claim_gate.hpp); its trials wait, unclaimed.
+struct CampaignWait {
+  std::int64_t campaign_id = 0;
+  std::string kind;    // defects | contact_types | workspace | pusher_speed
+  std::string reason;  // e.g. "no live cell can emulate defect ... (cells a, b: replay backend)"
+  std::string rule;    // the gate's rule ("claim_gate.waits")
+  double since = 0;    // s since epoch
+};
+
+// Planned trials of an active campaign alike in what they need of a cell.
+struct PlannedNeed {
+  std::int64_t campaign_id = 0;
+  int contact_mask = 0;             // point 1, line 2, patch 4
+  double position[3] = {0, 0, 0};   // nominal object position, gripper frame (m)
+  double pusher_speed = 0;          // m/s (pusher.motion.velocity's norm; 0: none or a path)
+  std::string defects_json = "{}";  // the campaign's defect profile
+  std::int64_t trials = 0;          // how many planned trials are alike
+};
+
 // What ClaimNextTrial hands the service: everything it needs to send EXECUTE.
 struct ClaimedTrial {
   std::int64_t trial_id = 0;
@@ -774,6 +794,11 @@ class Store {
   //   dispatched (or past executed with its ground truth) at `attempt`.
   std::unique_ptr<Ingest> BeginIngest(std::int64_t trial_id, int attempt,
                                       const IngestOptions& options = {});
+  // The same with the trial's contact sites (outcomes.hpp) from the caller,
+  // which has the scene parsed already (the service: mechanics' Scene); the
+  // overload above reads them from the stored scene (ContactSitesFromScene).
+  std::unique_ptr<Ingest> BeginIngest(std::int64_t trial_id, int attempt,
+                                      std::vector<ContactSite> sites, const IngestOptions& options);
   // The published stream of the trial, read in one snapshot.
   // @throws kNotFound when the trial has no published ground truth.
   GroundTruth ReadGroundTruth(std::int64_t trial_id) const;
@@ -855,6 +880,29 @@ class Store {
   std::int64_t RecordEvent(const EventRecord& event);
   // Events with id > after_id, oldest first, at most `limit`.
   std::vector<EventRecord> ListEvents(std::int64_t after_id = 0, std::size_t limit = 1000) const;
+
+  // ---- the claim gate (issue 26, migration 18; campaign_waits.cpp)
+  // What an active campaign's planned trials need of a cell, alike trials
+  // grouped (at most `limit` groups per campaign), for
+  // orchestrator/claim_gate.hpp.
+  std::vector<PlannedNeed> PlannedNeeds(std::size_t limit = 1000) const;
+  // The campaign waits: the claim skips it until ClearCampaignWait. Replaces
+  // an earlier wait of the campaign. @throws kBadInput (kind, empty reason),
+  // kNotFound (campaign).
+  void SetCampaignWait(std::int64_t campaign_id, const std::string& kind, const std::string& reason,
+                       const std::string& rule);
+  // @returns false when the campaign did not wait.
+  bool ClearCampaignWait(std::int64_t campaign_id);
+  std::vector<CampaignWait> ListCampaignWaits() const;
+  // The campaigns this Store's claims (ClaimNextTrial, PeekNextTrial,
+  // ClaimWindow, ClaimTrial) may take from; nullopt (the default): every
+  // active one. Not stored: `arena serve` allows only the campaigns its
+  // claim gate has decided open, so a campaign submitted or resumed between
+  // two gate runs waits for the gate instead of reaching a cell that must
+  // refuse it.
+  void RestrictClaimsTo(std::optional<std::vector<std::int64_t>> campaigns);
+  // Active campaigns' ids, ascending (a cheap look: the gate's change check).
+  std::vector<std::int64_t> ActiveCampaignIds() const;
 
   // ---- read side
   StatusSummary Status() const;

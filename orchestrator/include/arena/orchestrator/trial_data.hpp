@@ -9,6 +9,7 @@
 
 #include <Eigen/Core>
 
+#include "arena/db/outcomes.hpp"
 #include "arena/db/sample.hpp"
 #include "arena/mechanics/scene.hpp"
 #include "arena/mechanics/simulate.hpp"
@@ -27,5 +28,10 @@ namespace arena::orchestrator {
 db::Sample ToStoreSample(const msg::GroundTruthSample& sample,
                          const std::vector<Eigen::Vector3d>& normals,
                          mechanics::TrajectorySample* truth = nullptr, bool contactless_ok = false);
+
+// The scene's contacts as the store's outcomes need them (db/outcomes.hpp):
+// fingers in order, then the pusher, from the scene already parsed, so the
+// store never parses a scene on the ingest path.
+std::vector<db::ContactSite> ContactSitesOf(const mechanics::Scene& scene);
 
 }  // namespace arena::orchestrator

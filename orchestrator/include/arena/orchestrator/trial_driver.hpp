@@ -95,7 +95,9 @@ class TrialStore {
   virtual db::Trial GetTrial(std::int64_t trial_id) = 0;
   virtual std::optional<db::ClaimedTrial> ClaimNextTrial(const std::string& cell_id) = 0;
   virtual std::optional<db::ClaimedTrial> PeekNextTrial(const std::string& cell_id) = 0;
-  virtual std::unique_ptr<GroundTruthSink> BeginIngest(std::int64_t trial_id, int attempt) = 0;
+  // `sites`: the trial's contacts (ContactSitesOf its scene), for the outcomes stored at ingest.
+  virtual std::unique_ptr<GroundTruthSink> BeginIngest(std::int64_t trial_id, int attempt,
+                                                       std::vector<db::ContactSite> sites) = 0;
   // `rule` (these four): the trial policy's rule that decided the step
   // (trial_policy.hpp), for the audit row. RetryTrial applies db::DecideRetry
   // (db/retry_rule.hpp), as every implementation must.
@@ -149,6 +151,17 @@ class TrialStore {
     return c;
   }
   virtual void RecordFixtureChanges(const std::vector<db::FixtureChangeRecord>& /*changes*/) {}
+  // The claim gate (issue 26, claim_gate.hpp). The defaults are a store
+  // without it (the tests' fakes): nothing planned to gate, nothing waits.
+  virtual std::vector<db::PlannedNeed> PlannedNeeds() { return {}; }
+  virtual void SetCampaignWait(std::int64_t /*campaign_id*/, const std::string& /*kind*/,
+                               const std::string& /*reason*/, const std::string& /*rule*/) {}
+  virtual void ClearCampaignWait(std::int64_t /*campaign_id*/) {}
+  virtual std::vector<db::CampaignWait> ListCampaignWaits() { return {}; }
+  // db::Store::RestrictClaimsTo and ActiveCampaignIds: the claims take only
+  // from campaigns the gate decided open.
+  virtual void RestrictClaimsTo(std::optional<std::vector<std::int64_t>> /*campaigns*/) {}
+  virtual std::vector<std::int64_t> ActiveCampaignIds() { return {}; }
 };
 
 // Sends commands to cells (the DDS TrialCommand writer in production).

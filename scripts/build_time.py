@@ -1,0 +1,174 @@
+#!/usr/bin/env python3
+"""How long arena takes to build from nothing (bench/README.md "Build time").
+
+  scripts/build_time.py sample --before REV    compiler CPU seconds of a fixed
+      sample of translation units: at REV (a commit before precompiled
+      headers, e.g. f597acd) without them, and in the working tree with them;
+      ccache off, one compile at a time (CPU time, not wall time: it moves
+      little with the machine's load)
+  scripts/build_time.py headers                what a third-party header costs
+      each file that includes it, as text and as a precompiled header
+      (compiler CPU seconds of a file holding only the #includes; least of 3)
+  scripts/build_time.py ccache                 does ccache still hit with the
+      precompiled headers? A private cache and no user ccache config (the
+      sloppiness comes from CMakeLists.txt), recordings/ built twice in the
+      same fresh directory; exits 1 if the second build misses
+  scripts/build_time.py full [--pch ON|OFF]     a fresh build directory,
+      ccache off, -j2: wall and CPU seconds to build `arena`, then the rest
+      (every test and benchmark); run it on a quiet machine
+
+Exits non-zero when a configure or a compile fails, so a figure it printed
+was made by code that builds. Build directories go under $TMPDIR.
+"""
+import argparse
+import json
+import os
+import resource
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+
+HERE = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+SAMPLE = [  # one or more per precompiled target, and two test files
+    'cli/src/result_file.cpp', 'cli/src/cmd_query.cpp', 'cli/src/plot_map_data.cpp',
+    'assessment/src/scoring.cpp', 'orchestrator/src/sampler.cpp', 'executors/src/defects.cpp',
+    'simulators/src/arena_simulator.cpp',
+    'tests/orchestrator/sampler_test.cpp', 'tests/db/store_test.cpp']
+ENV = dict(os.environ, CCACHE_DISABLE='1')
+
+
+def run(cmd, cwd):
+    """(wall s, CPU s of the children) of a shell command; exits on failure."""
+    r0 = resource.getrusage(resource.RUSAGE_CHILDREN)
+    t0 = time.time()
+    done = subprocess.run(['bash', '-c', cmd], cwd=cwd, env=ENV, capture_output=True, text=True)
+    wall = time.time() - t0
+    r1 = resource.getrusage(resource.RUSAGE_CHILDREN)
+    if done.returncode != 0:
+        sys.exit(f'build_time: `{cmd}` failed in {cwd}:\n{done.stderr[-3000:]}')
+    return wall, (r1.ru_utime - r0.ru_utime) + (r1.ru_stime - r0.ru_stime)
+
+
+def configure(src, build, pch):
+    """A fresh build directory (nothing built: the sample compiles by hand)."""
+    shutil.rmtree(build, ignore_errors=True)
+    run(f'cmake -S {src} -B {build} -G Ninja -DCMAKE_BUILD_TYPE=Release '
+        f'-DCMAKE_CXX_COMPILER_LAUNCHER= -DARENA_PCH={pch} -DARENA_BUILD_BENCH=ON', HERE)
+    return json.load(open(os.path.join(build, 'compile_commands.json')))
+
+
+def compile_cpu(entry, extra=''):
+    return run(entry['command'].replace('/usr/bin/ccache ', '') + extra, entry['directory'])[1]
+
+
+def load():
+    return open('/proc/loadavg').read().split()[0]
+
+
+def sample(args, root):
+    """The sample's files need no generated DDS header, so each compiles alone."""
+    before_src = os.path.join(root, 'before')
+    os.makedirs(before_src)
+    run(f'git archive {args.before} | tar -x -C {before_src}', HERE)
+    cc = {'before': (before_src, configure(before_src, os.path.join(root, 'b-before'), 'OFF')),
+          'after': (HERE, configure(HERE, os.path.join(root, 'b-after'), 'ON'))}
+    # Each target's precompiled header, made once per fresh build.
+    pchs = [e for e in cc['after'][1] if e['file'].endswith('cmake_pch.hxx.cxx')]
+    pch_cpu = sum(compile_cpu(e) for e in pchs)
+    print(f'| file | before: CPU s | after: CPU s |  (load {load()})')
+    print(f'|---|---|---|')
+    print(f'| the {len(pchs)} precompiled headers (once per build) | — | {pch_cpu:.1f} |')
+    totals = {'before': 0.0, 'after': 0.0}
+    files = args.files or SAMPLE
+    for f in files:
+        cpu = {}
+        for name, (src, commands) in cc.items():
+            entry = next(e for e in commands if e['file'] == os.path.join(src, f))
+            # A PCH GCC refuses is parsed as text, silently: fail instead.
+            cpu[name] = compile_cpu(entry, ' -Werror=invalid-pch' if name == 'after' else '')
+            totals[name] += cpu[name]
+        print(f"| `{f}` | {cpu['before']:.2f} | {cpu['after']:.2f} |")
+    print(f"| sum of the {len(files)} files | {totals['before']:.1f} | {totals['after']:.1f} |"
+          f"  (load {load()})")
+
+
+HEADER_SETS = [['nlohmann/json.hpp'], ['Eigen/Core', 'Eigen/Geometry'], ['CLI/CLI.hpp'],
+               ['gtest/gtest.h'], ['nlohmann/json.hpp', 'Eigen/Core', 'Eigen/Geometry'],
+               ['gtest/gtest.h', 'nlohmann/json.hpp']]
+FLAGS = '-std=c++20 -O3 -DNDEBUG -isystem /usr/include/eigen3 -Winvalid-pch -Werror=invalid-pch'
+
+
+def headers(args, root):
+    print(f'| headers | as text: CPU s | precompiled: CPU s |  (load {load()})')
+    empty = os.path.join(root, 'empty.cpp')
+    open(empty, 'w').write('int f() { return 1; }\n')
+    for i, hs in enumerate(HEADER_SETS):
+        hdr = os.path.join(root, f'h{i}.hpp')
+        open(hdr, 'w').write(''.join(f'#include <{h}>\n' for h in hs))
+        text = os.path.join(root, f'h{i}.cpp')
+        shutil.copy(hdr, text)
+        run(f'g++ {FLAGS} -x c++-header {hdr} -o {hdr}.gch', root)
+        as_text = min(run(f'g++ {FLAGS} -c {text} -o /dev/null', root)[1] for _ in range(3))
+        as_pch = min(run(f'g++ {FLAGS} -include {hdr} -c {empty} -o /dev/null', root)[1]
+                     for _ in range(3))
+        print(f"| {' + '.join(hs)} | {as_text:.2f} | {as_pch:.2f} |")
+
+
+def ccache(args, root):
+    env = dict(os.environ, CCACHE_DIR=os.path.join(root, 'cache'),
+               CCACHE_CONFIGPATH=os.path.join(root, 'ccache.conf'))
+    env.pop('CCACHE_DISABLE', None)
+    open(env['CCACHE_CONFIGPATH'], 'w').close()
+    build = os.path.join(root, 'build')
+    sh = lambda cmd: subprocess.run(['bash', '-c', cmd], env=env, check=True, capture_output=True,
+                                    text=True).stdout
+    for round_ in (1, 2):
+        shutil.rmtree(build, ignore_errors=True)
+        sh(f'cmake -S {HERE} -B {build} -G Ninja -DCMAKE_BUILD_TYPE=Release -DARENA_PCH=ON')
+        objs = sh(f"ninja -C {build} -t targets all | grep -oE '^recordings/CMakeFiles/arena_recordings"
+                  f"\\.dir/(src/[a-z_]+\\.cpp\\.o|cmake_pch\\.hxx\\.gch)' | sort -u").split()
+        sh('ccache -z')
+        sh(f'ninja -C {build} -j2 {" ".join(objs)}')
+        stats = dict(line.split('\t') for line in sh('ccache --print-stats').splitlines() if '\t' in line)
+        hits = int(stats['direct_cache_hit']) + int(stats['preprocessed_cache_hit'])
+        print(f"| build {round_} | {len(objs)} compiles | {hits} hits | {stats['cache_miss']} misses | "
+              f"{stats['could_not_use_precompiled_header']} could not use the PCH |")
+    if int(stats['cache_miss']) != 0:
+        sys.exit('build_time: the second build missed the cache')
+
+
+def full(args, root):
+    build = os.path.join(root, 'build')
+    shutil.rmtree(build, ignore_errors=True)
+    run(f'cmake -S {HERE} -B {build} -G Ninja -DCMAKE_BUILD_TYPE=Release '
+        f'-DCMAKE_CXX_COMPILER_LAUNCHER= -DARENA_PCH={args.pch}', HERE)
+    print(f'load {load()}')
+    wall, cpu = run('ninja -j2 bin/arena', build)
+    print(f'| arena | {wall:.0f} | {cpu:.0f} |')
+    wall2, cpu2 = run('ninja -j2', build)
+    print(f'| everything else | {wall2:.0f} | {cpu2:.0f} |')
+    print(f'| all | {wall + wall2:.0f} | {cpu + cpu2:.0f} |  (load {load()})')
+
+
+def main():
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    sub = p.add_subparsers(dest='mode', required=True)
+    s = sub.add_parser('sample')
+    s.add_argument('--before', required=True)
+    s.add_argument('--files', nargs='*', help='these files instead of the fixed sample')
+    sub.add_parser('headers')
+    sub.add_parser('ccache')
+    f = sub.add_parser('full')
+    f.add_argument('--pch', default='ON', choices=['ON', 'OFF'])
+    args = p.parse_args()
+    root = tempfile.mkdtemp(prefix='arena-build-time-')
+    try:
+        {'sample': sample, 'headers': headers, 'ccache': ccache, 'full': full}[args.mode](args, root)
+    finally:
+        shutil.rmtree(root, ignore_errors=True)
+
+
+if __name__ == '__main__':
+    main()
