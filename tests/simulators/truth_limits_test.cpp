@@ -4,6 +4,7 @@
 // gripper coupling is honoured (independent pads or a parallel jaw), while
 // arena's model refuses the jaw it does not model.
 #include <cmath>
+#include <cstdio>
 
 #include <gtest/gtest.h>
 
@@ -114,6 +115,42 @@ TEST(MujocoLimits, AJawWhoseFingersPartIsAConstraintViolation) {
   EXPECT_LT(r.samples.size(), 51u);
   s.gripper.coupling = GripperCoupling::kIndependent;  // nothing to violate
   EXPECT_EQ(MakeMujocoSimulator({})->Simulate(s).status, SimulationStatus::kOk);
+}
+
+// The grip-axis drift limit judges only where its closed form holds. A box
+// turned 5 mrad about y at the start (a cell's placement noise) re-seats
+// flat on the line finger, turning about the pusher's contact, and its
+// centre rightly moves 0.05 m x 5 mrad = 0.25 mm along the grip axis, then
+// stays: `ok` (it had been refused at t = 0.012 s). The same push square to
+// the axis with the former 0.05 kg fingers chatters and drifts: refused.
+TEST(MujocoLimits, TheGripAxisDriftIsJudgedOnlyWhereTheGraspHoldsTheCentre) {
+  Scene turned = Canonical();
+  turned.duration = 0.3;
+  turned.object.pose.rpy = {0, 0.005, 0};
+  mechanics::SeatFingers(&turned);
+  const auto r = MakeMujocoSimulator({})->Simulate(turned);
+  ASSERT_EQ(r.status, SimulationStatus::kOk) << r.error;
+  const double moved = r.samples.back().position.x() - r.samples.front().position.x();
+  const Eigen::Vector3d x_of_box = r.samples.back().orientation * Eigen::Vector3d::UnitX();
+  std::printf(
+      "turned box: centre moved %.4g m along the grip axis (%.3g m in the second half), ends %.3g "
+      "rad off square\n",
+      moved, r.samples.back().position.x() - r.samples[r.samples.size() / 2].position.x(),
+      std::asin(x_of_box.z()));
+  // Square again (as the line finger lies), and moved more than the limit
+  // allows a held centre (0.1 mm) but no more than turning 5 mrad about the
+  // pusher's contact, 5 cm below the centre, can carry it.
+  EXPECT_LT(std::abs(x_of_box.z()), 5e-4);
+  EXPECT_GT(std::abs(moved), 0.1e-3);
+  EXPECT_LT(std::abs(moved), 0.05 * 0.005);
+  // Then it stays: over the second half, within the limit a held centre has.
+  const auto& mid = r.samples[r.samples.size() / 2];
+  EXPECT_LT(std::abs(r.samples.back().position.x() - mid.position.x()),
+            0.01 * 0.01 * (r.samples.back().t - mid.t) + 1e-4);
+  MujocoSettings heavy;
+  heavy.finger_mass = 0.05;
+  const auto drifting = MakeMujocoSimulator(heavy)->Simulate(Canonical());
+  EXPECT_TRUE(IsLimitError(drifting, "drift along the grip axis")) << drifting.error;
 }
 
 // A slow push (0.1 mm/s): at the unscaled defaults soft friction creeps at
