@@ -129,6 +129,56 @@ BENCHMARK_CAPTURE(StepContacts, canonical_planar_tracked, ContactTracking::kTrac
 BENCHMARK_CAPTURE(StepContacts, canonical_planar_fixed, ContactTracking::kFixed, Reduce::kAuto)
     ->Unit(benchmark::kMillisecond);
 
+// Quasi-static vs carried steps (issue 31): the canonical scene and the
+// issue's pivot past its stall (grip 1 kN, dt 1 ms, 600 steps), same
+// counters as Step_*.
+Scene StallPivot() {
+  return ParseScene(
+      R"({"object":{"shape":"box","size":[0.05,0.03,0.1],"mass":0.2,"pose":{"position":[0,0,0],)"
+      R"("rpy":[0,0,0]}},"gravity":[0,0,0],"duration":0.6,"grip_force":1000.0,"fingers":[)"
+      R"({"name":"left","type":"point","position":[-0.025,0,0],"normal":[1,0,0],"mu":0.5},)"
+      R"({"name":"right","type":"point","position":[0.025,0,0],"normal":[-1,0,0],"mu":0.5}],)"
+      R"("model":{"facets":8,"points":3,"dt":0.001,"reduce":"auto"},"pusher":{"type":"point",)"
+      R"("position":[0,0.01,-0.05],"normal":[0,0,1],"mu":0.0,"motion":{"velocity":[0,0,0.01],)"
+      R"("angular_velocity":[0,0,0]}}})");
+}
+void StepInertia(benchmark::State& state, bool pivot, InertiaModel inertia) {
+  Scene s = pivot ? StallPivot() : Make(kCanonical, true, Reduce::kAuto);
+  s.model.inertia = inertia;
+  const int steps = pivot ? 600 : 500;
+  std::vector<double> us;
+  long extra = 0;
+  for (auto _ : state) {
+    ContactModel m(s);
+    extra = 0;
+    for (int k = 0; k < steps; ++k) {
+      const auto t0 = std::chrono::steady_clock::now();
+      const StepReport rep = m.Step();
+      const auto t1 = std::chrono::steady_clock::now();
+      if (!rep.ok) {
+        state.SkipWithError(rep.error.c_str());
+        return;
+      }
+      extra += rep.quasi_static_solves;
+      us.push_back(std::chrono::duration<double, std::micro>(t1 - t0).count());
+    }
+  }
+  std::sort(us.begin(), us.end());
+  double mean = 0;
+  for (double u : us) mean += u;
+  state.counters["step_median_us"] = us[us.size() / 2];
+  state.counters["step_mean_us"] = mean / static_cast<double>(us.size());
+  state.counters["extra_solves"] = static_cast<double>(extra);
+}
+BENCHMARK_CAPTURE(StepInertia, canonical_carried, false, InertiaModel::kCarried)
+    ->Unit(benchmark::kMillisecond);
+BENCHMARK_CAPTURE(StepInertia, canonical_quasi_static, false, InertiaModel::kQuasiStatic)
+    ->Unit(benchmark::kMillisecond);
+BENCHMARK_CAPTURE(StepInertia, pivot_carried, true, InertiaModel::kCarried)
+    ->Unit(benchmark::kMillisecond);
+BENCHMARK_CAPTURE(StepInertia, pivot_quasi_static, true, InertiaModel::kQuasiStatic)
+    ->Unit(benchmark::kMillisecond);
+
 #define ARENA_MECH_BENCH(name, v, pusher, reduce)                                   \
   BENCHMARK_CAPTURE(Trial, name, v, pusher, reduce)->Unit(benchmark::kMillisecond); \
   BENCHMARK_CAPTURE(Step, name, v, pusher, reduce)->Unit(benchmark::kMillisecond)

@@ -296,6 +296,13 @@ db::Prediction ScoreSimulation(const mechanics::Scene& scene,
                             {{"status", mechanics::ToString(result.grasp)},
                              {"changed_t", result.grasp_changed_t},
                              {"note", result.grasp_note}}}};
+  // The final pose of a run that ends oscillating is one phase of it: said.
+  if (result.oscillation.detected) {
+    detail["oscillation"] = {{"amplitude_m", result.oscillation.amplitude_m},
+                             {"amplitude_rad", result.oscillation.amplitude_rad},
+                             {"frequency_hz", result.oscillation.frequency_hz},
+                             {"window_s", result.oscillation.window_s}};
+  }
   switch (result.status) {
     case mechanics::SimulationStatus::kOk:
       break;

@@ -211,6 +211,12 @@ int RunSimulate(const SimulateOptions& opt) {
                {{"status", mechanics::ToString(result.grasp)},
                 {"changed_t", result.grasp_changed_t},
                 {"note", result.grasp_note}}},
+              {"oscillation",
+               {{"detected", result.oscillation.detected},
+                {"amplitude_m", result.oscillation.amplitude_m},
+                {"amplitude_rad", result.oscillation.amplitude_rad},
+                {"frequency_hz", result.oscillation.frequency_hz},
+                {"window_s", result.oscillation.window_s}}},
               {"wall_s", result.wall_s}};
   std::printf("%s\n", out.dump().c_str());
   return kExitOk;

@@ -117,6 +117,11 @@ constexpr double kAlignFirst = 0.5;
 // fraction of the force scale, at most kQuasiStaticSolves more times.
 constexpr double kQuasiStatic = 1e-6;
 constexpr int kQuasiStaticSolves = 50;
+// A quasi-static step's answers converging with a factor ρ (the ratio of two
+// successive changes) above this are extrapolated to their limit; within
+// kNoBalance of 1 they do not converge: no balanced answer (BalanceStep).
+constexpr double kExtrapolateFrom = 0.5;
+constexpr double kNoBalance = 1e-6;
 // Solves of one step before an inaccurate answer is reported as a failure.
 constexpr int kAccuracyAttempts = 4;
 // A point pad follows the object along its closing direction c and sees the
@@ -733,6 +738,16 @@ struct ContactModel::Impl {
   bool tracked = false;
   bool aligned = false;       // aligned cones in use: tracked, 6 DOF, model.cone aligned
   bool quasi_static = false;  // model.inertia quasi_static
+  // Quasi-static, tracked: the step's start (pose, time, pads) while its
+  // geometry is placed at the end the iterate reaches (PlaceAtStepEnd).
+  struct StepStart {
+    Eigen::Vector3d c, v, w;
+    Eigen::Quaterniond q;
+    std::vector<double> pads;
+  };
+  std::optional<StepStart> step_start;
+  double place_lead = 0;     // s: the pusher placed this far after t (PlaceAtStepEnd)
+  bool at_step_end = false;  // PlaceContacts: gaps taken at the iterate's end (PlaceAtStepEnd)
   // AlignCones: d(miss)/dθ of the last secant (0: none yet) and scratch.
   double align_slope = 0;
   std::vector<AlignMiss> align_misses;
@@ -827,6 +842,11 @@ struct ContactModel::Impl {
   bool Refuse(StepReport& rep, const std::string& why);  // kNonFinite
   bool AlignCones(StepScratch& s);
   double InertialForce(const StepScratch& s) const;
+  void PlaceAtStepEnd(const StepScratch& s, const SmallVector& centre);
+  bool RunPhases(int first, int last, StepReport& rep);
+  bool BalanceStep(int last, StepReport& rep);
+  void ReturnToStepStart();
+  void GapsFromStepEnd(const StepScratch& s);
   void ReportContacts(StepScratch& s);
   void Integrate(StepScratch& s);
   // After kSolve: an unknown in physical units, the object's velocity at p,
@@ -857,6 +877,8 @@ const Eigen::Vector3d& ContactModel::angular_velocity() const { return impl_->w;
 const std::vector<ContactState>& ContactModel::contacts() const { return impl_->states; }
 Eigen::Vector3d ContactModel::pusher_force() const { return impl_->pusher_force; }
 double ContactModel::force_scale() const { return impl_->Fs; }
+double ContactModel::length_scale() const { return impl_->L; }
+double ContactModel::gap_tolerance() const { return kGapTolerance * impl_->L; }
 
 GraspStatus ContactModel::Grasp(std::string* note) const {
   const Impl& m = *impl_;
@@ -1468,7 +1490,7 @@ void ContactModel::Impl::TrackedGeometry() {
     Eigen::Vector3d base = ct.spec.position + ct.pad * ct.spec.normal;
     if (ct.pusher && scene.pusher->path) {
       // A recorded path: where it is now, and its mean motion over the step.
-      const PusherPose pose = PusherPoseAt(*scene.pusher, t);
+      const PusherPose pose = PusherPoseAt(*scene.pusher, t + place_lead);
       const PusherTwist twist = PusherTwistOver(*scene.pusher, t, dt);
       vp = twist.velocity;
       wp = twist.angular_velocity;
@@ -1478,8 +1500,8 @@ void ContactModel::Impl::TrackedGeometry() {
     } else if (ct.pusher) {
       vp = scene.pusher->motion.velocity;
       wp = scene.pusher->motion.angular_velocity;
-      base = ct.spec.position + vp * t;
-      const double a = wp.norm() * t;
+      base = ct.spec.position + vp * (t + place_lead);
+      const double a = wp.norm() * (t + place_lead);
       turned = a > 0;
       if (turned) Rp = Eigen::AngleAxisd(a, wp.normalized()).toRotationMatrix();
     }
@@ -1624,6 +1646,7 @@ StepReport ContactModel::Impl::Step() {
   if (!BeginStep(rep)) return rep;
   for (int i = 0; i < kStepPhases; ++i) {
     const auto phase = static_cast<StepPhase>(i);
+    if (phase == StepPhase::kIntegrate) ReturnToStepStart();
     if (!RunPhase(phase, rep)) return rep;
     if (phase != StepPhase::kCheckValues) continue;
     // Aligned cones: while a sliding point's slip turned away from the
@@ -1636,24 +1659,147 @@ StepReport ContactModel::Impl::Step() {
         if (!RunPhase(static_cast<StepPhase>(j), rep)) return rep;
       }
     }
-    // Quasi-static: the step solved again from its own answer (the mass
-    // a proximal term only) until the inertial force it needs vanishes.
-    for (int k = 0; k < kQuasiStaticSolves && quasi_static && InertialForce(scratch) > kQuasiStatic;
-         ++k) {
-      ++rep.quasi_static_solves;
-      scratch.vr = scratch.vr_new;
-      for (int j = static_cast<int>(StepPhase::kFreeMotion); j <= i; ++j) {
-        if (!RunPhase(static_cast<StepPhase>(j), rep)) return rep;
-      }
-      for (int a = 0; a < kAlignSolves && AlignCones(scratch); ++a) {
-        ++rep.align_solves;
-        for (int j = static_cast<int>(StepPhase::kGraspMap); j <= i; ++j) {
-          if (!RunPhase(static_cast<StepPhase>(j), rep)) return rep;
-        }
-      }
-    }
+    if (quasi_static && !BalanceStep(i, rep)) return rep;
   }
   return rep;
+}
+
+// Runs the phases from `first` to `last` (and the aligned cones'
+// re-solves); false when one refused the step (rep says why).
+bool ContactModel::Impl::RunPhases(int first, int last, StepReport& rep) {
+  for (int j = first; j <= last; ++j) {
+    if (!RunPhase(static_cast<StepPhase>(j), rep)) return false;
+  }
+  for (int a = 0; a < kAlignSolves && AlignCones(scratch); ++a) {
+    ++rep.align_solves;
+    for (int j = static_cast<int>(StepPhase::kGraspMap); j <= last; ++j) {
+      if (!RunPhase(static_cast<StepPhase>(j), rep)) return false;
+    }
+  }
+  return true;
+}
+
+// Quasi-static (model.inertia): the step solved again from its own answer
+// (the mass a proximal term only) until the inertial force it needs
+// vanishes. Tracked contacts are placed where that answer ends the step
+// (the object at its end pose, the pusher at t + dt): the forces balance on
+// the geometry the step ends on. Frozen at the step's start instead, a pivot
+// past its stall had no balanced answer (the pusher's line passes the grip
+// axis only at the end pose) and ended 23 % short of its closed form.
+// A soft mode (an object turning about a sticking pusher between sliding
+// fingers) converges linearly with a factor ρ near 1 (0.9993 on the push
+// along the grip axis: thousands of solves); from two successive changes
+// of the answer ρ is estimated and the answer extrapolated to its limit
+// (Aitken), which the next solves check. Where no balanced answer exists
+// (ρ = 1: every solve changes the twist by the same unbalanced force, e.g.
+// an object sliding out of its grasp) or none is found within
+// kQuasiStaticSolves, the step is the carried one: quasi-static where the
+// forces can balance, dynamic where they cannot. False when a phase refused
+// the step.
+bool ContactModel::Impl::BalanceStep(int last, StepReport& rep) {
+  SmallVector previous;  // the last solve's change of twist (none after an extrapolation)
+  bool balanced = InertialForce(scratch) <= kQuasiStatic;
+  for (int k = 0; k < kQuasiStaticSolves && !balanced; ++k) {
+    SmallVector centre = scratch.vr_new;
+    const SmallVector change = scratch.vr_new - scratch.vr;
+    bool extrapolated = false;
+    if (previous.size() == change.size()) {
+      const double den = previous.dot(scratch.Mr * previous);
+      const double rho = den > 0 ? change.dot(scratch.Mr * previous) / den : 0.0;
+      if (std::abs(rho - 1) <= kNoBalance) break;
+      if (rho > kExtrapolateFrom && rho < 1) {
+        centre += rho / (1 - rho) * change;
+        extrapolated = true;
+      }
+    }
+    previous = extrapolated ? SmallVector() : change;
+    ++rep.quasi_static_solves;
+    int first = static_cast<int>(StepPhase::kFreeMotion);
+    if (tracked) {
+      PlaceAtStepEnd(scratch, centre);
+      first = static_cast<int>(StepPhase::kPlaceContacts);
+    } else {
+      scratch.vr = centre;
+    }
+    // An answer the step cannot take there (an extrapolation too far) is
+    // no balance either: the carried step decides.
+    StepReport trial = rep;
+    if (!RunPhases(first, last, trial)) {
+      rep.pivots = trial.pivots;
+      rep.quasi_static_solves = trial.quasi_static_solves;
+      break;
+    }
+    rep = trial;
+    balanced = InertialForce(scratch) <= kQuasiStatic;
+  }
+  if (balanced) return true;
+  // The carried step, solved again where the step starts.
+  ReturnToStepStart();
+  ++rep.quasi_static_carried;
+  return RunPhases(static_cast<int>(StepPhase::kPlaceContacts), last, rep);
+}
+
+// Quasi-static, tracked: moves the state to where the last solve ends the
+// step (pose and twist, the free pads' travel) and places the contacts
+// there on the next kPlaceContacts, the pusher at t + dt. Integrate starts
+// from the step's start again (ReturnToStepStart).
+void ContactModel::Impl::PlaceAtStepEnd(const StepScratch& s, const SmallVector& centre) {
+  const Eigen::Matrix<double, 6, 1> tw = P * centre;
+  const Eigen::Vector3d v_end = tw.head<3>(), w_end = tw.tail<3>();
+  if (!step_start) {
+    StepStart start{c, v, w, q, {}};
+    for (const Contact& ct : contacts) start.pads.push_back(ct.pad);
+    step_start = std::move(start);
+  }
+  const StepStart& start = *step_start;
+  for (size_t i = 0; i < contacts.size(); ++i) {
+    Contact& ct = contacts[i];
+    ct.pad = start.pads[i];
+    if (!ct.pusher && ct.active && ct.y_plus >= 0 && ct.known_normal < 0)
+      ct.pad += dt * (Unknown(s, ct.y_plus) - Unknown(s, ct.y_minus));
+  }
+  c = start.c + dt * v_end;
+  q = start.q;
+  const double angle = w_end.norm() * dt;
+  if (angle > 0)
+    q = (Eigen::Quaterniond(Eigen::AngleAxisd(angle, w_end.normalized())) * q).normalized();
+  v = v_end;
+  w = w_end;
+  place_lead = dt;
+  at_step_end = true;
+}
+
+// Undoes PlaceAtStepEnd before the step integrates (or is refused).
+void ContactModel::Impl::ReturnToStepStart() {
+  place_lead = 0;
+  at_step_end = false;
+  if (!step_start) return;
+  c = step_start->c;
+  q = step_start->q;
+  v = step_start->v;
+  w = step_start->w;
+  for (size_t i = 0; i < contacts.size(); ++i) contacts[i].pad = step_start->pads[i];
+  step_start.reset();
+}
+
+// Placed at the end of the step (PlaceAtStepEnd), a gap g is where the
+// iterate (twist u_k at the point, the body's u_b) leaves it; the rows
+// linearise around that iterate, g + dt n·(u - u_k) >= 0, so each row's gap
+// becomes g - dt n·(u_k - u_b), which the rows add to n·(u - u_b) dt.
+void ContactModel::Impl::GapsFromStepEnd(const StepScratch& s) {
+  for (Contact& ct : contacts) {
+    if (!ct.active) continue;
+    for (Point& pt : ct.points) {
+      if (pt.lambda < 0 || !HasRows(pt)) continue;
+      const Eigen::Vector3d& nrm = NormalOf(ct, pt);
+      const Eigen::Vector3d u_k = v + w.cross(pt.p - c);
+      double u_b = nrm.dot(pt.body_velocity);
+      if (!ct.pusher)
+        u_b = ct.y_plus >= 0 ? nrm.dot(ct.normal) * (Unknown(s, ct.y_plus) - Unknown(s, ct.y_minus))
+                             : 0.0;
+      pt.gap -= dt * (nrm.dot(u_k) - u_b);
+    }
+  }
 }
 
 // The inertial force (and torque over the length scale) of the step's
@@ -1750,6 +1896,7 @@ void ContactModel::Impl::PlaceContacts(StepScratch& s) {
     Geometry();
   }
   if (planar) MarkRedundantPoints();
+  if (at_step_end) GapsFromStepEnd(s);
   // The object's rotation (tracked geometry has just formed it from q).
   s.R = tracked ? pose_R : q.toRotationMatrix();
 }

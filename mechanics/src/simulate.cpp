@@ -9,6 +9,9 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <vector>
+
+#include <Eigen/Cholesky>
 
 #include "arena/mechanics/model.hpp"
 #include "arena/mechanics/pusher_motion.hpp"
@@ -74,7 +77,74 @@ std::string CheckCommand(const Scene& scene, const ModelInfo& info, const Pusher
   return "";
 }
 
+// The least-squares quadratic in τ ∈ [-1, 1] through (τ_i, y_i), subtracted.
+std::vector<double> Detrended(const std::vector<double>& tau, const std::vector<double>& y) {
+  Eigen::Matrix3d A = Eigen::Matrix3d::Zero();
+  Eigen::Vector3d b = Eigen::Vector3d::Zero();
+  for (size_t i = 0; i < y.size(); ++i) {
+    const Eigen::Vector3d phi(1, tau[i], tau[i] * tau[i]);
+    A += phi * phi.transpose();
+    b += phi * y[i];
+  }
+  const Eigen::Vector3d coef = A.ldlt().solve(b);
+  std::vector<double> r(y.size());
+  for (size_t i = 0; i < y.size(); ++i)
+    r[i] = y[i] - (coef[0] + coef[1] * tau[i] + coef[2] * tau[i] * tau[i]);
+  return r;
+}
+
 }  // namespace
+
+Oscillation DetectOscillation(const std::vector<double>& t, const std::vector<Eigen::Vector3d>& c,
+                              const std::vector<Eigen::Quaterniond>& q, double gap_tolerance,
+                              double length_scale) {
+  Oscillation out;
+  const size_t n = std::min({t.size(), c.size(), q.size()});
+  if (n < 16 || !(t[n - 1] > t[0])) return out;
+  out.window_s = t[n - 1] - t[0];
+  const double mid = 0.5 * (t[0] + t[n - 1]), half = 0.5 * out.window_s;
+  std::vector<double> tau(n);
+  for (size_t i = 0; i < n; ++i) tau[i] = (t[i] - mid) / half;
+  const Eigen::Quaterniond ref = q[n / 2].normalized();
+  std::vector<Eigen::Vector3d> rot(n);
+  for (size_t i = 0; i < n; ++i) {
+    const Eigen::AngleAxisd aa(q[i].normalized() * ref.conjugate());
+    rot[i] = aa.angle() * aa.axis();
+  }
+  double worst = 0;  // amplitude over threshold of the strongest oscillating coordinate
+  for (int k = 0; k < 6; ++k) {
+    const bool angle = k >= 3;
+    const double threshold = angle ? gap_tolerance / length_scale : gap_tolerance;
+    std::vector<double> y(n);
+    for (size_t i = 0; i < n; ++i) y[i] = angle ? rot[i][k - 3] : c[i][k];
+    const std::vector<double> r = Detrended(tau, y);
+    double sum2 = 0;
+    for (double x : r) sum2 += x * x;
+    const double amplitude = std::sqrt(2.0 * sum2 / static_cast<double>(n));
+    if (!(amplitude > threshold)) continue;
+    // Swings from beyond +h to beyond -h and back (h = threshold / 2):
+    // rounding or a single kink the quadratic missed does not count.
+    const double h = 0.5 * threshold;
+    int side = 0, crossings = 0;
+    for (double x : r) {
+      const int now = x > h ? 1 : (x < -h ? -1 : 0);
+      if (now != 0 && side != 0 && now != side) ++crossings;
+      if (now != 0) side = now;
+    }
+    if (crossings < kOscillationCrossings) continue;
+    out.detected = true;
+    if (angle) {
+      out.amplitude_rad = std::max(out.amplitude_rad, amplitude);
+    } else {
+      out.amplitude_m = std::max(out.amplitude_m, amplitude);
+    }
+    if (amplitude / threshold > worst) {
+      worst = amplitude / threshold;
+      out.frequency_hz = crossings / (2.0 * out.window_s);
+    }
+  }
+  return out;
+}
 
 SimulationResult Simulate(const Scene& scene, const PusherCommandSource& commands) {
   const auto start = std::chrono::steady_clock::now();
@@ -84,7 +154,21 @@ SimulationResult Simulate(const Scene& scene, const PusherCommandSource& command
   // Every return goes through finish(): it moves the result out (returned
   // by value from a lambda that captures it, it was copied, every sample
   // and its contact states, once per trial).
+  // The object's pose at every step of the run's last quarter (a ring of
+  // at most kOscillationWindowSteps), for DetectOscillation.
+  std::vector<double> ring_t;
+  std::vector<Eigen::Vector3d> ring_c;
+  std::vector<Eigen::Quaterniond> ring_q;
+  size_t ring_size = 0, ring_next = 0;
   auto finish = [&] {
+    if (result.status == SimulationStatus::kOk && ring_t.size() >= 16) {
+      // Oldest first.
+      std::rotate(ring_t.begin(), ring_t.begin() + static_cast<long>(ring_next), ring_t.end());
+      std::rotate(ring_c.begin(), ring_c.begin() + static_cast<long>(ring_next), ring_c.end());
+      std::rotate(ring_q.begin(), ring_q.begin() + static_cast<long>(ring_next), ring_q.end());
+      result.oscillation =
+          DetectOscillation(ring_t, ring_c, ring_q, model.gap_tolerance(), model.length_scale());
+    }
     result.wall_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
     return std::move(result);
   };
@@ -104,6 +188,10 @@ SimulationResult Simulate(const Scene& scene, const PusherCommandSource& command
   const bool closed_loop = commands && scene.pusher;
   Eigen::Vector3d command_v = pusher_v;  // closed loop: the motion in force
 
+  ring_size = static_cast<size_t>(std::clamp(n_steps / 4, 1L, long{kOscillationWindowSteps}));
+  ring_t.reserve(ring_size);
+  ring_c.reserve(ring_size);
+  ring_q.reserve(ring_size);
   long next = 0;  // next sample index
   for (long step = 0; step < n_steps; ++step) {
     const double t0 = model.time();
@@ -127,6 +215,16 @@ SimulationResult Simulate(const Scene& scene, const PusherCommandSource& command
     result.residuals.complementarity =
         std::max(result.residuals.complementarity, rep.residuals.complementarity);
     result.residuals.cone = std::max(result.residuals.cone, rep.residuals.cone);
+    if (ring_t.size() < ring_size) {
+      ring_t.push_back(model.time());
+      ring_c.push_back(model.position());
+      ring_q.push_back(model.orientation());
+    } else {
+      ring_t[ring_next] = model.time();
+      ring_c[ring_next] = model.position();
+      ring_q[ring_next] = model.orientation();
+      ring_next = (ring_next + 1) % ring_size;
+    }
     if (result.grasp == GraspStatus::kHeld) {
       result.grasp = model.Grasp(&result.grasp_note);
       if (result.grasp != GraspStatus::kHeld) result.grasp_changed_t = model.time();

@@ -95,6 +95,9 @@ struct StepReport {
   bool warm_start_used = false;
   int align_solves = 0;         // solves repeated to align cones with the slip
   int quasi_static_solves = 0;  // solves repeated to balance the forces
+  // Quasi-static: 1 when no balanced answer was found and the step carried
+  // the momentum (the object accelerates, e.g. slides out of its grasp).
+  int quasi_static_carried = 0;
   Residuals residuals;
 };
 
@@ -138,6 +141,8 @@ class ContactModel {
   // GraspStatus); *note names the first finger that does not.
   GraspStatus Grasp(std::string* note) const;
   double velocity_scale() const;  // m/s
+  double length_scale() const;    // m: the object's extent
+  double gap_tolerance() const;   // m: within it a tracked contact touches (1e-4 of the extent)
 
  private:
   friend class ContactModelTester;  // runs and reads the step's phases (tests)

@@ -83,6 +83,34 @@ const char* ToString(SimulationStatus status);
 enum class GraspStatus { kHeld, kLost, kLeftGeometry };
 const char* ToString(GraspStatus status);
 
+// Whether a run ends in an undamped oscillation, so that its final pose is
+// one phase of it rather than a settled answer (e.g. an object rocking about
+// the grip axis with its momentum carried). Detected from the object's pose
+// at every step over the last quarter of the run (at most
+// kOscillationWindowSteps steps): each coordinate of the centre of mass and
+// of the rotation (vector, from the window's middle pose) less its
+// least-squares quadratic over the window (the slow path) leaves a
+// residual; a coordinate oscillates when that residual's amplitude (√2 ×
+// its RMS, a sinusoid's amplitude) exceeds the model's contact resolution
+// (its gap tolerance, 1e-4 of the object's extent, for a position; that
+// over the extent, 1e-4 rad, for an angle) and it swings across ± half of
+// that at least kOscillationCrossings times (3 periods). Frequency: the
+// crossings per second over 2.
+inline constexpr int kOscillationWindowSteps = 4096;
+inline constexpr int kOscillationCrossings = 6;
+struct Oscillation {
+  bool detected = false;
+  double amplitude_m = 0;    // largest over the centre of mass's x, y, z (m)
+  double amplitude_rad = 0;  // largest over the rotation vector's x, y, z (rad)
+  double frequency_hz = 0;   // of the coordinate farthest above its threshold
+  double window_s = 0;       // the end of the run analysed (s)
+};
+// The analysis above on one run's step poses (t ascending; at least 16);
+// gap_tolerance (m) and length_scale (m) as ContactModel gives them.
+Oscillation DetectOscillation(const std::vector<double>& t, const std::vector<Eigen::Vector3d>& c,
+                              const std::vector<Eigen::Quaterniond>& q, double gap_tolerance,
+                              double length_scale);
+
 struct SimulationResult {
   SimulationStatus status = SimulationStatus::kOk;
   std::string error;  // empty when ok; names the step and reason otherwise
@@ -98,6 +126,9 @@ struct SimulationResult {
   GraspStatus grasp = GraspStatus::kHeld;
   double grasp_changed_t = -1;  // s: when it first stopped being kHeld (-1: never)
   std::string grasp_note;       // which finger, and why
+  // Whether the run ended in an undamped oscillation (its amplitude and
+  // frequency): the final pose is then a phase of it (see Oscillation).
+  Oscillation oscillation;
 };
 
 // Never throws for a scene that passed ValidateScene(); a step the solver

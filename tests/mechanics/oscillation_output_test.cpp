@@ -1,0 +1,90 @@
+// The oscillation flag where it is read: `arena simulate`'s JSON carries it
+// as an added field (present, detected or not), and a scored prediction's
+// stored detail mentions it when the run ends oscillating. The scenes: the
+// issue 31 pivot past its stall with its momentum carried (ends rocking
+// about 0.026 rad at about 80 Hz: quasi_static_test.cpp) and the canonical
+// scene (ends on its path).
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <array>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <string>
+
+#include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
+
+#include "arena/assessment/prediction.hpp"
+#include "arena/mechanics/scene_json.hpp"
+#include "arena/mechanics/simulate.hpp"
+
+namespace {
+
+namespace fs = std::filesystem;
+using nlohmann::json;
+const fs::path kSourceDir = ARENA_SOURCE_DIR;
+
+constexpr const char* kCarriedPivot =
+    R"({"object":{"shape":"box","size":[0.05,0.03,0.1],"mass":0.2,"pose":{"position":[0,0,0],)"
+    R"("rpy":[0,0,0]}},"gravity":[0,0,0],"duration":0.6,"grip_force":1000.0,"fingers":[)"
+    R"({"name":"left","type":"point","position":[-0.025,0,0],"normal":[1,0,0],"mu":0.5},)"
+    R"({"name":"right","type":"point","position":[0.025,0,0],"normal":[-1,0,0],"mu":0.5}],)"
+    R"("model":{"facets":8,"points":3,"dt":0.001,"reduce":"auto"},"pusher":{"type":"point",)"
+    R"("position":[0,0.01,-0.05],"normal":[0,0,1],"mu":0.0,"motion":{"velocity":[0,0,0.01],)"
+    R"("angular_velocity":[0,0,0]}}})";
+
+json SimulateCli(const fs::path& file) {
+  const std::string command =
+      std::string("'") + ARENA_BINARY + "' simulate '" + file.string() + "' 2>/dev/null";
+  std::string out;
+  FILE* pipe = ::popen(command.c_str(), "r");
+  if (!pipe) return json();
+  std::array<char, 4096> buf{};
+  size_t n;
+  while ((n = std::fread(buf.data(), 1, buf.size(), pipe)) > 0) out.append(buf.data(), n);
+  const int status = ::pclose(pipe);
+  EXPECT_TRUE(WIFEXITED(status) && WEXITSTATUS(status) == 0) << out;
+  return json::parse(out, nullptr, false);
+}
+
+TEST(OscillationOutput, SimulateJsonCarriesTheFlag) {
+  const fs::path dir = fs::temp_directory_path() / ("arena_osc_" + std::to_string(::getpid()));
+  fs::create_directories(dir);
+  const fs::path pivot = dir / "pivot.json";
+  std::ofstream(pivot) << kCarriedPivot;
+  const json rocking = SimulateCli(pivot);
+  ASSERT_TRUE(rocking.is_object());
+  ASSERT_TRUE(rocking.contains("oscillation")) << rocking.dump();
+  EXPECT_EQ(rocking["oscillation"]["detected"], true);
+  EXPECT_GT(rocking["oscillation"]["amplitude_rad"].get<double>(), 0.01);
+  EXPECT_GT(rocking["oscillation"]["frequency_hz"].get<double>(), 50);
+  const json canonical = SimulateCli(kSourceDir / "examples/scenes/canonical.json");
+  ASSERT_TRUE(canonical.contains("oscillation")) << canonical.dump();
+  EXPECT_EQ(canonical["oscillation"]["detected"], false);
+  EXPECT_EQ(canonical["oscillation"]["amplitude_rad"].get<double>(), 0.0);
+  fs::remove_all(dir);
+}
+
+TEST(OscillationOutput, PredictionDetailMentionsIt) {
+  using namespace arena;
+  const mechanics::Scene scene = mechanics::ParseScene(kCarriedPivot);
+  const mechanics::SimulationResult r = mechanics::Simulate(scene);
+  ASSERT_EQ(r.status, mechanics::SimulationStatus::kOk) << r.error;
+  const json detail = json::parse(assessment::ScoreSimulation(scene, r, r.samples).detail_json);
+  ASSERT_TRUE(detail.contains("oscillation")) << detail.dump();
+  EXPECT_NEAR(detail["oscillation"]["amplitude_rad"].get<double>(), r.oscillation.amplitude_rad,
+              1e-12);
+  EXPECT_NEAR(detail["oscillation"]["frequency_hz"].get<double>(), r.oscillation.frequency_hz,
+              1e-12);
+  // Quasi-static, the same scene ends on its path: nothing to mention.
+  mechanics::Scene qs = scene;
+  qs.model.inertia = mechanics::InertiaModel::kQuasiStatic;
+  const mechanics::SimulationResult settled = mechanics::Simulate(qs);
+  const json quiet =
+      json::parse(assessment::ScoreSimulation(qs, settled, settled.samples).detail_json);
+  EXPECT_FALSE(quiet.contains("oscillation")) << quiet.dump();
+}
+
+}  // namespace
