@@ -1,6 +1,9 @@
-// arena evaluate --db FILE --campaign ID [--predictors arena] [--facets 4,8,16,32] [--points 3]
-//                [--dt 0.008,0.004,0.002,0.001] [--reduce auto] [--budget 1mm|2ms|1.5floor ...]
-//                [--convergence-trials 8] [--threads N] [--from measured|planned] [--json]
+// arena evaluate --db FILE --campaign ID [--predictors arena] [--facets
+// 4,8,16,32] [--points 3]
+//                [--dt 0.008,0.004,0.002,0.001] [--reduce auto] [--budget
+//                1mm|2ms|1.5floor ...]
+//                [--convergence-trials 8] [--threads N] [--from
+//                measured|planned] [--json]
 // Replays a campaign's done trials through the model at every fidelity
 // setting of the grid, stores the run (tables evaluations and
 // evaluation_results) and prints the trade: a table or JSON.
@@ -18,6 +21,7 @@
 #include "arena/assessment/evaluation.hpp"
 #include "arena/db/store.hpp"
 #include "arena/mechanics/scene_json.hpp"
+#include "arena/orchestrator/scene_facts.hpp"
 #include "commands.hpp"
 #include "output_guard.hpp"
 #include "progress.hpp"
@@ -64,13 +68,16 @@ std::string FormatStart(const assessment::StartReport& r) {
   std::string out;
   char line[512];
   if (r.from == assessment::StartFrom::kPlanned) {
-    return "start: predictions start from the planned pose (--from planned): their errors "
+    return "start: predictions start from the planned pose (--from planned): "
+           "their errors "
            "include the reset's placement error\n";
   }
   if (r.offset_position) {
     std::snprintf(line, sizeof line,
-                  "start: predictions start from the pose each trial's cell measured (%d of the "
-                  "trials' streams gave one), median %.3g mm and %.3g deg from the planned pose "
+                  "start: predictions start from the pose each trial's cell "
+                  "measured (%d of the "
+                  "trials' streams gave one), median %.3g mm and %.3g deg from "
+                  "the planned pose "
                   "(max %.3g mm, %.3g deg)\n",
                   r.measured_trials, r.offset_position->median * 1e3,
                   r.offset_angle->median * 180 / M_PI, r.offset_position->max * 1e3,
@@ -82,7 +89,8 @@ std::string FormatStart(const assessment::StartReport& r) {
     if (s.trials == 0) continue;
     if (!head) {
       out +=
-          "start pose's share of the error (median final error from the planned start minus "
+          "start pose's share of the error (median final error from the "
+          "planned start minus "
           "from the measured one):\n";
       std::snprintf(line, sizeof line, "  %-8s %-24s %6s %26s %26s\n", "predictor", "setting",
                     "trials", "pos mm planned/measured/+", "angle deg planned/measured/+");
@@ -186,7 +194,8 @@ std::string FormatTable(const assessment::EvaluationReport& r, std::int64_t eval
   std::ostringstream out;
   char line[640];
   std::snprintf(line, sizeof line,
-                "campaign %lld: %d done trials replayed at %zu settings of %zu predictor(s) "
+                "campaign %lld: %d done trials replayed at %zu settings of %zu "
+                "predictor(s) "
                 "(evaluation %lld)\n",
                 static_cast<long long>(r.campaign_id), r.trials, r.settings.size(),
                 r.predictors.size(), static_cast<long long>(evaluation_id));
@@ -203,14 +212,17 @@ std::string FormatTable(const assessment::EvaluationReport& r, std::int64_t eval
   const double floor_m = r.floor ? r.floor->position_median : 0;
   if (r.floor) {
     std::snprintf(line, sizeof line,
-                  "noise floor (replicate spread of the true final pose, %d conditions with >= 2 "
-                  "replicates): position median %.3g mm, p95 %.3g mm; angle median %.3g deg, p95 "
+                  "noise floor (replicate spread of the true final pose, %d "
+                  "conditions with >= 2 "
+                  "replicates): position median %.3g mm, p95 %.3g mm; angle "
+                  "median %.3g deg, p95 "
                   "%.3g deg\n",
                   r.floor->conditions, r.floor->position_median * 1e3, r.floor->position_p95 * 1e3,
                   r.floor->angle_median * 180 / M_PI, r.floor->angle_p95 * 180 / M_PI);
   } else {
     std::snprintf(line, sizeof line,
-                  "noise floor: none (no condition has 2 replicates; errors cannot be judged "
+                  "noise floor: none (no condition has 2 replicates; errors "
+                  "cannot be judged "
                   "against replicate spread)\n");
   }
   out << line;
@@ -244,7 +256,8 @@ std::string FormatTable(const assessment::EvaluationReport& r, std::int64_t eval
                   multiple, Tail(s.angle, 180 / M_PI).c_str(), mode, time, per_sim, marks.c_str());
     out << line;
   }
-  out << "\nworst trials (largest final position error; `arena plot --db FILE TRIAL`), "
+  out << "\nworst trials (largest final position error; `arena plot --db FILE "
+         "TRIAL`), "
          "divergences and failures:\n";
   for (const auto& s : r.settings) {
     if (s.worst.empty() && s.diverged_trials.empty() && s.failed_trials.empty()) continue;
@@ -265,8 +278,10 @@ std::string FormatTable(const assessment::EvaluationReport& r, std::int64_t eval
           << s.failed_trials.front().reason << ")";
     out << "\n";
   }
-  out << "\nconvergence against each predictor's finest setting (pieces restarted from the true "
-         "state) beside the error against the truth, final position mm med/p95:\n";
+  out << "\nconvergence against each predictor's finest setting (pieces "
+         "restarted from the true "
+         "state) beside the error against the truth, final position mm "
+         "med/p95:\n";
   for (const auto& s : r.settings) {
     std::snprintf(
         line, sizeof line, "  %-8s %-24s discretisation %-17s vs truth %s%s\n", s.predictor.c_str(),
@@ -279,10 +294,14 @@ std::string FormatTable(const assessment::EvaluationReport& r, std::int64_t eval
         Tail(s.position, 1e3).c_str(), s.finest ? "  (finest)" : "");
     out << line;
   }
-  out << "\noutcome: NMSE of the push's outcome (dx, dy, dtheta: the object's final pose in its "
-         "initial frame; each output's mean squared error over its variance across the trials "
-         "scored, averaged over the three; 1 = predicting the mean outcome), final position and "
-         "angle error, force error against the measured force (n: trials whose force was "
+  out << "\noutcome: NMSE of the push's outcome (dx, dy, dtheta: the object's "
+         "final pose in its "
+         "initial frame; each output's mean squared error over its variance "
+         "across the trials "
+         "scored, averaged over the three; 1 = predicting the mean outcome), "
+         "final position and "
+         "angle error, force error against the measured force (n: trials whose "
+         "force was "
          "scored), wall time per trial:\n";
   out << OutcomeTable(r.settings);
   for (const auto& g : r.groups) {
@@ -380,6 +399,8 @@ int RunEvaluate(const EvaluateOptions& o) {
   try {
     db::StoreOptions so;
     so.create = false;
+    so.scene_facts = orchestrator::SceneFactsOfJson;  // an older store's
+                                                      // migration reads scenes
     auto store = db::Store::Open(o.db_path, so);
     if (o.calibration > 0) {
       const db::Calibration cal = store->GetCalibration(o.calibration);
@@ -474,17 +495,20 @@ int RunEvaluate(const EvaluateOptions& o) {
                   t.backend.empty() ? "?" : t.backend.c_str(), static_cast<long long>(t.trials),
                   t.truth == "self-consistency"
                       ? ": these errors are arena's model against itself, not accuracy"
-                  : t.truth == "measured"
-                      ? ": measured, the observed streams are the truth (no separate true "
-                        "stream); trials whose poses failed the import check are not served"
+                  : t.truth == "measured" ? ": measured, the observed streams are the "
+                                            "truth (no separate true "
+                                            "stream); trials whose poses failed the "
+                                            "import check are not served"
                   : t.truth == db::kTruthMeasuredNoForces
-                      ? ": measured poses; the forces were not measured or failed their import "
+                      ? ": measured poses; the forces were not measured or failed "
+                        "their import "
                         "check: poses scored, forces not scored on these trials"
                       : "");
     }
     for (const auto& p : self_consistent)
       std::printf(
-          "predictor %s: the truth's own engine (%s backend): its errors are self-consistency, "
+          "predictor %s: the truth's own engine (%s backend): its "
+          "errors are self-consistency, "
           "not accuracy\n",
           p.c_str(), EngineBackend(p).c_str());
   }
@@ -507,7 +531,8 @@ void AddEvaluateCommand(CLI::App& app, Action* action) {
       ->delimiter(',')
       ->capture_default_str();
   cmd->add_option("--facets", o->facets,
-                  "arena: friction cone facets to try (comma separated; default grid: 4,8,16,32 "
+                  "arena: friction cone facets to try (comma separated; default grid: "
+                  "4,8,16,32 "
                   "x dt 8,4,2,1 ms, keeping only settings every trial's scene takes)")
       ->delimiter(',')
       ->each([o](const std::string&) { o->grid_given = true; });
@@ -521,7 +546,8 @@ void AddEvaluateCommand(CLI::App& app, Action* action) {
       ->delimiter(',')
       ->each([o](const std::string&) { o->grid_given = true; });
   cmd->add_option("--contacts", o->contacts,
-                  "arena: contact geometries to try (tracked: follow the object; fixed: frozen "
+                  "arena: contact geometries to try (tracked: follow the "
+                  "object; fixed: frozen "
                   "frame)")
       ->delimiter(',')
       ->each([o](const std::string&) { o->grid_given = true; });
@@ -540,30 +566,37 @@ void AddEvaluateCommand(CLI::App& app, Action* action) {
       ->each(mujoco_given)
       ->capture_default_str();
   cmd->add_option("--mujoco-solref", o->mujoco_solref,
-                  "mujoco: contact solref values to try, each TIMECONST:DAMPRATIO (default "
+                  "mujoco: contact solref values to try, each "
+                  "TIMECONST:DAMPRATIO (default "
                   "0.002:1)")
       ->delimiter(',')
       ->each(mujoco_given);
   cmd->add_option("--mujoco-solimp", o->mujoco_solimp,
-                  "mujoco: contact solimp values to try, each DMIN:DMAX:WIDTH:MID:POWER (default "
+                  "mujoco: contact solimp values to try, each "
+                  "DMIN:DMAX:WIDTH:MID:POWER (default "
                   "0.9:0.95:0.001:0.5:2)")
       ->delimiter(',')
       ->each(mujoco_given);
   cmd->add_option("--convergence-trials", o->convergence_trials,
-                  "Trials whose pieces the convergence table restarts from the true state "
+                  "Trials whose pieces the convergence table restarts from the "
+                  "true state "
                   "(0: no table)")
       ->capture_default_str();
-  cmd->add_option(
-      "--budget", o->budgets,
-      "Budget, repeatable (all must hold), judged on p95: '1mm' = p95 final position error "
-      "<= 1 mm, '2ms' = p95 predictor time per trial <= 2 ms, '1.5floor' = p95 final position "
-      "error <= 1.5 x the noise floor; or METRIC=VALUE[UNIT] with METRIC position_median|"
-      "position_p95|angle_median|angle_p95|force_median|force_p95|mode_agreement_median "
-      "(a minimum)|time_p95");
+  cmd->add_option("--budget", o->budgets,
+                  "Budget, repeatable (all must hold), judged on p95: '1mm' = "
+                  "p95 final position error "
+                  "<= 1 mm, '2ms' = p95 predictor time per trial <= 2 ms, "
+                  "'1.5floor' = p95 final position "
+                  "error <= 1.5 x the noise floor; or METRIC=VALUE[UNIT] with "
+                  "METRIC position_median|"
+                  "position_p95|angle_median|angle_p95|force_median|force_p95|"
+                  "mode_agreement_median "
+                  "(a minimum)|time_p95");
   cmd->add_option("--threads", o->threads, "Worker threads (0: one per core)")
       ->capture_default_str();
   cmd->add_option("--calibration", o->calibration,
-                  "Apply this calibration's fitted scales (arena calibrate) to every trial's "
+                  "Apply this calibration's fitted scales (arena calibrate) to "
+                  "every trial's "
                   "scene before predicting it, for every predictor")
       ->check(CLI::PositiveNumber);
   cmd->add_option("--scale", o->scales,
@@ -571,7 +604,8 @@ void AddEvaluateCommand(CLI::App& app, Action* action) {
                   "mu_pusher, mu_support, pressure_rim, ...) on every scene, over "
                   "--calibration's");
   cmd->add_option("--group-by", o->group_by,
-                  "Also report every setting per value of this trial parameter (e.g. shape, "
+                  "Also report every setting per value of this trial parameter (e.g. "
+                  "shape, "
                   "push_angle_rad, speed_mm_s): the trial's stored parameters, else "
                   "--trial-parameters");
   cmd->add_option("--trial-parameters", o->trial_parameters,
@@ -580,27 +614,42 @@ void AddEvaluateCommand(CLI::App& app, Action* action) {
   cmd->add_flag("--json", o->json, "Print the report as JSON");
   cmd->add_option("--from", o->from,
                   "Where predictions start: measured (the start pose each trial's cell "
-                  "measured: errors are the model's) or planned (the scene's pose: errors "
-                  "include the reset's placement); from measured, each setting also runs from "
-                  "planned and the report says how much of the error the start pose explains")
+                  "measured: errors are the model's) or planned (the scene's pose: "
+                  "errors "
+                  "include the reset's placement); from measured, each setting also "
+                  "runs from "
+                  "planned and the report says how much of the error the start pose "
+                  "explains")
       ->capture_default_str();
   cmd->add_option("--out", o->out_path,
                   "Also write the report (JSON) to this file; a run the store cannot take "
                   "(locked until Ctrl-C, full) is saved there too");
   cmd->footer(
       "Example:\n"
-      "  arena evaluate --db lab.db --campaign 3 --predictors arena --budget 1.5floor\n"
-      "  arena evaluate --db lab.db --campaign 3 --facets 4,8,16 --points 3,5 --budget 1mm\n"
-      "Every done trial is replayed from its stored scene through each predictor at each setting\n"
-      "of its grid (arena: facets x points x dt x reduce), scored against its stored ground\n"
-      "truth, and the run is stored (tables evaluations, evaluation_results). Every error is\n"
-      "median/p95/max over the trials predicted; divergences (left the grasp, blew up) and\n"
-      "failures are counted and listed apart, never averaged in. The noise floor is the spread\n"
-      "of the true final pose between replicates. The Pareto front is the first error budget's\n"
-      "metric (default: p95 final position error) against median time; with a budget the\n"
-      "cheapest setting meeting it on p95 is recommended (with only a time budget, the most\n"
-      "accurate), without one the front is described. The report names its truth.\n"
-      "Plot the trade with: arena plot --db FILE --campaign ID --tradeoff --out FILE.svg\n");
+      "  arena evaluate --db lab.db --campaign 3 --predictors arena "
+      "--budget 1.5floor\n"
+      "  arena evaluate --db lab.db --campaign 3 --facets 4,8,16 "
+      "--points 3,5 --budget 1mm\n"
+      "Every done trial is replayed from its stored scene through each "
+      "predictor at each setting\n"
+      "of its grid (arena: facets x points x dt x reduce), scored "
+      "against its stored ground\n"
+      "truth, and the run is stored (tables evaluations, "
+      "evaluation_results). Every error is\n"
+      "median/p95/max over the trials predicted; divergences (left the "
+      "grasp, blew up) and\n"
+      "failures are counted and listed apart, never averaged in. The "
+      "noise floor is the spread\n"
+      "of the true final pose between replicates. The Pareto front is "
+      "the first error budget's\n"
+      "metric (default: p95 final position error) against median time; "
+      "with a budget the\n"
+      "cheapest setting meeting it on p95 is recommended (with only a "
+      "time budget, the most\n"
+      "accurate), without one the front is described. The report names "
+      "its truth.\n"
+      "Plot the trade with: arena plot --db FILE --campaign ID "
+      "--tradeoff --out FILE.svg\n");
   cmd->callback([o, action] { *action = [o] { return RunEvaluate(*o); }; });
 }
 

@@ -64,31 +64,27 @@ struct Column {
   std::string meaning;
 };
 
-// ---------------------------------------------------------------- stream columns
+// ---------------------------------------------------------------- stream
+// columns
 
 struct StreamShape {
   std::vector<std::string> contact_names;  // scene order: fingers, then pusher
   std::vector<std::string> finger_names;   // for the observed finger wrenches
 };
 
-// Column names from the scene; the widths from the samples (the largest
-// count any sample has: a sample with fewer values is padded with NaN, a
-// dropped observation has none). Positional names when the scene disagrees.
-StreamShape ShapeFromScene(const std::string& scene_json, const std::vector<Sample>& samples) {
+// Column names from the scene's contacts (the caller's: db reads no scene);
+// the widths from the samples (the largest count any sample has: a sample
+// with fewer values is padded with NaN, a dropped observation has none).
+// Positional names when the contacts disagree.
+StreamShape ShapeFromContacts(const std::vector<ContactSite>& sites,
+                              const std::vector<Sample>& samples) {
   std::vector<std::string> fingers;
   bool pusher = false;
-  try {
-    const auto scene = nlohmann::json::parse(scene_json);
-    if (scene.contains("fingers") && scene["fingers"].is_array()) {
-      for (std::size_t i = 0; i < scene["fingers"].size(); ++i) {
-        const auto& f = scene["fingers"][i];
-        fingers.push_back(f.contains("name") && f["name"].is_string()
-                              ? f["name"].get<std::string>()
-                              : "finger" + std::to_string(i));
-      }
-    }
-    pusher = scene.contains("pusher") && scene["pusher"].is_object();
-  } catch (const nlohmann::json::exception&) {
+  for (const auto& c : sites) {
+    if (c.pusher)
+      pusher = true;
+    else
+      fingers.push_back(c.name);
   }
   std::size_t nc = 0, nfv = 0;
   bool any_valid = false;
@@ -153,7 +149,8 @@ std::vector<Column> ObservedColumns(const StreamShape& s) {
   std::vector<Column> c;
   c.push_back({"t", "s", "time since the execute phase started"});
   c.push_back({"valid", "1",
-               "1 if the sensors delivered this sample, 0 if dropped (then the values are not "
+               "1 if the sensors delivered this sample, 0 if dropped (then the "
+               "values are not "
                "measurements)"});
   AddPose(&c, "", "object as seen by motion capture");
   AddWrench(&c, "pusher_", "pusher F/T sensor");
@@ -204,7 +201,8 @@ void FlattenObserved(const Sample& s, std::size_t finger_values, std::vector<dou
 std::string Num(double v) {
   if (!std::isfinite(v)) return "";
   char buf[32];
-  const auto r = std::to_chars(buf, buf + sizeof buf, v);  // shortest text that reads back exactly
+  const auto r = std::to_chars(buf, buf + sizeof buf,
+                               v);  // shortest text that reads back exactly
   return std::string(buf, r.ptr);
 }
 
@@ -427,26 +425,36 @@ const std::map<std::string, std::pair<std::string, std::string>>& IndexColumnDoc
 
 // The trial index; the last three columns are for the export's own use.
 constexpr const char* kIndexSql =
-    "SELECT t.id AS trial_id, t.idx, t.condition, t.replicate, t.seed, t.state, t.attempt,"
-    " t.cell_id, t.outcome, t.object_shape, t.object_mass, t.grip_force, t.finger_type,"
+    "SELECT t.id AS trial_id, t.idx, t.condition, t.replicate, t.seed, "
+    "t.state, t.attempt,"
+    " t.cell_id, t.outcome, t.object_shape, t.object_mass, t.grip_force, "
+    "t.finger_type,"
     " t.finger_count, t.finger_mu, t.pusher_type, t.pusher_mu, t.pusher_speed,"
-    " t.pusher_angular_speed, t.duration, t.start_position_error, t.start_angle_error,"
-    " t.reset_ok, s.samples, s.observed_samples, s.duration_s, s.displacement_m,"
-    " s.rotation_rad, s.max_contact_force_n, s.stick_fraction, s.slide_fraction,"
+    " t.pusher_angular_speed, t.duration, t.start_position_error, "
+    "t.start_angle_error,"
+    " t.reset_ok, s.samples, s.observed_samples, s.duration_s, "
+    "s.displacement_m,"
+    " s.rotation_rad, s.max_contact_force_n, s.stick_fraction, "
+    "s.slide_fraction,"
     " s.separate_fraction, p.model_key, p.status AS prediction_status,"
-    " p.final_position_error, p.final_angle_error, p.force_error, p.mode_agreement,"
-    " p.wall_s AS predictor_wall_s, s.max_pusher_force_n, s.net_dx, s.net_dy, s.net_dz,"
+    " p.final_position_error, p.final_angle_error, p.force_error, "
+    "p.mode_agreement,"
+    " p.wall_s AS predictor_wall_s, s.max_pusher_force_n, s.net_dx, s.net_dy, "
+    "s.net_dz,"
     " s.net_rx, s.net_ry, s.net_rz, s.grasp_kept,"
     " t.gt_stream_id, t.scene_json, t.params_json"
     " FROM trials t JOIN gt_summary s ON s.stream_id = t.gt_stream_id"
     " LEFT JOIN predictions p ON p.id ="
-    "  (SELECT MIN(id) FROM predictions WHERE trial_id = t.id AND attempt = t.attempt)"
+    "  (SELECT MIN(id) FROM predictions WHERE trial_id = t.id AND attempt = "
+    "t.attempt)"
     " WHERE t.campaign_id = ? ORDER BY t.idx";
 constexpr std::size_t kSeedCol = 4, kSamplesCol = 23;
 
 constexpr const char* kContactSql =
-    "SELECT c.trial_id, c.contact, c.name AS contact_name, c.role, c.stick_fraction,"
-    " c.slide_fraction, c.separate_fraction, c.slip_distance_m, c.max_normal_force_n"
+    "SELECT c.trial_id, c.contact, c.name AS contact_name, c.role, "
+    "c.stick_fraction,"
+    " c.slide_fraction, c.separate_fraction, c.slip_distance_m, "
+    "c.max_normal_force_n"
     " FROM contact_outcomes c JOIN trials t ON t.gt_stream_id = c.stream_id"
     " WHERE t.campaign_id = ? ORDER BY t.idx, c.contact";
 
@@ -590,16 +598,21 @@ std::string ScenesJsonl(const TrialIndex& index) {
 // Closed loop (issue 19): the runs and applied commands of the attempts whose
 // ground truth is exported.
 constexpr const char* kClosedLoopRunSql =
-    "SELECT r.trial_id, r.attempt, r.controller, r.lockstep, r.target, r.gain, r.tolerance,"
-    " r.hold_s, r.reached, r.final_error, r.settle_time_s, r.held, r.loop_p50_ms,"
+    "SELECT r.trial_id, r.attempt, r.controller, r.lockstep, r.target, r.gain, "
+    "r.tolerance,"
+    " r.hold_s, r.reached, r.final_error, r.settle_time_s, r.held, "
+    "r.loop_p50_ms,"
     " r.loop_p99_ms, r.failure"
-    " FROM closed_loop_runs r JOIN trials t ON t.id = r.trial_id AND t.attempt = r.attempt"
+    " FROM closed_loop_runs r JOIN trials t ON t.id = r.trial_id AND t.attempt "
+    "= r.attempt"
     " JOIN gt_summary s ON s.stream_id = t.gt_stream_id"
     " WHERE t.campaign_id = ? ORDER BY t.idx";
 constexpr const char* kClosedLoopCommandSql =
-    "SELECT c.trial_id, c.attempt, c.sample, c.t, c.vx, c.vy, c.vz, c.applied_vx, c.applied_vy,"
+    "SELECT c.trial_id, c.attempt, c.sample, c.t, c.vx, c.vy, c.vz, "
+    "c.applied_vx, c.applied_vy,"
     " c.applied_vz, c.loop_ms"
-    " FROM closed_loop_commands c JOIN trials t ON t.id = c.trial_id AND t.attempt = c.attempt"
+    " FROM closed_loop_commands c JOIN trials t ON t.id = c.trial_id AND "
+    "t.attempt = c.attempt"
     " JOIN gt_summary s ON s.stream_id = t.gt_stream_id"
     " WHERE t.campaign_id = ? ORDER BY t.idx, c.sample";
 constexpr std::size_t kCommandFirstCol = 2;  // sample: trial_id and attempt come first
@@ -643,7 +656,9 @@ const std::vector<Column>& ContactColumns() {
 
 const std::vector<Column>& CommandColumns() {
   static const std::vector<Column> kCols = {
-      {"sample", "1", "the live sample the command answered; applied from the next model step"},
+      {"sample", "1",
+       "the live sample the command answered; applied from the next model "
+       "step"},
       {"t", "s", "time of that sample since the trial started"},
       {"vx", "m/s", "commanded pusher velocity, x (gripper frame)"},
       {"vy", "m/s", "commanded pusher velocity, y"},
@@ -652,7 +667,8 @@ const std::vector<Column>& CommandColumns() {
       {"applied_vy", "m/s", "actuated pusher velocity, y"},
       {"applied_vz", "m/s", "actuated pusher velocity, z"},
       {"loop_ms", "ms",
-       "live sample written -> command accepted by the cell; missing: no fresh command, the "
+       "live sample written -> command accepted by the cell; missing: no fresh "
+       "command, the "
        "last one held"}};
   return kCols;
 }
@@ -709,7 +725,8 @@ class StagingDir {
               "': " + std::strerror(errno) + " (is it writable?)");
     }
     path_ = tmpl;
-    // mkdtemp makes it private (0700); the dataset gets what mkdir would give it.
+    // mkdtemp makes it private (0700); the dataset gets what mkdir would give
+    // it.
     const mode_t mask = ::umask(0);
     ::umask(mask);
     ::chmod(path_.c_str(), 0777 & ~mask);
@@ -724,7 +741,8 @@ class StagingDir {
   const fs::path& path() const { return path_; }
 
   void MoveTo(const fs::path& target) {
-    // rename(2) replaces an empty directory atomically; a non-empty one was refused up front.
+    // rename(2) replaces an empty directory atomically; a non-empty one was
+    // refused up front.
     if (::rename(path_.c_str(), target.c_str()) != 0) {
       IoError("export: cannot move the finished dataset to '" + target.string() +
               "': " + std::strerror(errno));
@@ -747,7 +765,8 @@ class DatasetWriter {
  public:
   DatasetWriter(fs::path dir, ExportFormat format) : dir_(std::move(dir)), format_(format) {
     if (format_ == ExportFormat::kHdf5) {
-      H5Eset_auto2(H5E_DEFAULT, nullptr, nullptr);  // errors become exceptions, not stderr noise
+      H5Eset_auto2(H5E_DEFAULT, nullptr,
+                   nullptr);  // errors become exceptions, not stderr noise
       h5_ = std::make_unique<H5Handle>(
           H5Fcreate((dir_ / "dataset.h5").c_str(), H5F_ACC_EXCL, H5P_DEFAULT, H5P_DEFAULT),
           H5Fclose, "create dataset.h5");
@@ -842,6 +861,16 @@ struct TrialsWritten {
   double sample_rate = 0;
 };
 
+// A trial's contacts from the caller's reader of scenes; a scene it cannot
+// read has none (its columns are named by position).
+std::vector<ContactSite> SceneContacts(const ExportOptions& o, const std::string& scene_json) {
+  try {
+    return o.scene_facts(scene_json).contacts;
+  } catch (const std::exception&) {
+    return {};
+  }
+}
+
 // Writes one trial's streams (and HDF5 group); appends its index values.
 // Rows of a by-trial table that belong to one trial.
 struct TrialRows {
@@ -856,7 +885,7 @@ void WriteTrial(const Store::Impl& impl, const ExportOptions& o, const Campaign&
   const auto trial_id = std::get<std::int64_t>((*irow)[0]);
   const auto expected = std::get<std::int64_t>((*irow)[kSamplesCol]);
   const auto samples = internal::ReadStreamSamples(impl, index.stream_ids[i], expected, "export");
-  const StreamShape shape = ShapeFromScene(index.scenes[i], samples);
+  const StreamShape shape = ShapeFromContacts(SceneContacts(o, index.scenes[i]), samples);
   const auto true_cols = TrueColumns(shape);
   const auto obs_cols = ObservedColumns(shape);
   if (out->true_cols.empty()) {
@@ -983,7 +1012,8 @@ void WriteTrial(const Store::Impl& impl, const ExportOptions& o, const Campaign&
 // Writes every file of the dataset into `dir` (the staging directory).
 ExportReport WriteDataset(const Store& store, const ExportOptions& o, const fs::path& dir) {
   const auto& impl = store.impl();
-  detail::Tx snapshot(impl.db, false);  // everything below reads one consistent state
+  detail::Tx snapshot(impl.db,
+                      false);  // everything below reads one consistent state
   const Campaign campaign = store.GetCampaign(o.campaign_id);
   TrialIndex index = ReadIndex(impl, o.campaign_id);
   std::map<std::int64_t, std::vector<std::size_t>> contacts_by_trial;
@@ -1113,7 +1143,8 @@ ExportReport WriteDataset(const Store& store, const ExportOptions& o, const fs::
         {"spec", spec}}},
       {"frames",
        {{"G",
-         "gripper frame at the start of the trial; every pose, twist and wrench is "
+         "gripper frame at the start of the trial; every pose, twist and "
+         "wrench is "
          "expressed in it; quaternions are (w, x, y, z)"}}},
       {"sample_rate_hz", std::round(written.sample_rate * 1000) / 1000},
       {"counts", {{"trials", report.trials}, {"samples", report.samples}, {"files", files.size()}}},
@@ -1123,12 +1154,14 @@ ExportReport WriteDataset(const Store& store, const ExportOptions& o, const fs::
         {"true", ColumnsJson(written.true_cols)},
         {"observed", ColumnsJson(written.obs_cols)}}},
       {"parameters", ojson(std::vector<std::string>(parameters.begin(), parameters.end()))},
-      {"predictions",
-       o.predict ? "re-run per trial with the campaign's \"prediction\" settings, as the service "
-                   "ran it; columns as \"true\" (predicted_by / predicted_settings say which)"
-                 : "not exported"},
+      {"predictions", o.predict ? "re-run per trial with the campaign's "
+                                  "\"prediction\" settings, as the service "
+                                  "ran it; columns as \"true\" (predicted_by / "
+                                  "predicted_settings say which)"
+                                : "not exported"},
       {"missing_values",
-       "CSV: empty field; JSON: null; HDF5: NaN in datasets, absent attribute in groups. A "
+       "CSV: empty field; JSON: null; HDF5: NaN in datasets, absent attribute "
+       "in groups. A "
        "dropped observation (valid = 0) has every observed value missing."},
       {"trials", written.manifest},
       {"files", files},
@@ -1155,10 +1188,14 @@ ExportReport WriteDataset(const Store& store, const ExportOptions& o, const fs::
       cmd_cols.push_back({{"name", c.name}, {"unit", c.unit}, {"meaning", c.meaning}});
     manifest["columns"]["closed_loop_commands"] = cmd_cols;
     manifest["closed_loop"] =
-        "closed_loop.csv: one row per closed-loop trial (controller, its settings and own "
-        "outcome; target, final_error and tolerance in the controller's units: rad for "
-        "pivot_to_angle, m for sliding_to_position); closed_loop_commands.csv: every pusher "
-        "command the cell applied. Predictions of these trials replay the commanded velocities "
+        "closed_loop.csv: one row per closed-loop trial "
+        "(controller, its settings and own "
+        "outcome; target, final_error and tolerance in "
+        "the controller's units: rad for "
+        "pivot_to_angle, m for sliding_to_position); "
+        "closed_loop_commands.csv: every pusher "
+        "command the cell applied. Predictions of these "
+        "trials replay the commanded velocities "
         "through the model.";
   }
   // Last and atomically: a complete manifest marks a complete dataset.
@@ -1192,6 +1229,10 @@ std::uint64_t CountCsvRecords(const fs::path& p) {
 
 ExportReport ExportCampaign(const Store& store, const ExportOptions& o) {
   if (o.out_dir.empty()) throw StoreError(StoreError::Kind::kBadInput, "export: --out is empty");
+  if (!o.scene_facts) {
+    throw StoreError(StoreError::Kind::kBadInput,
+                     "export: ExportOptions::scene_facts is not set (db reads no scene)");
+  }
   fs::path dir = fs::path(o.out_dir).lexically_normal();
   if (!dir.has_filename()) dir = dir.parent_path();  // "out/" names "out"
   store.GetCampaign(o.campaign_id);                  // kNotFound before anything is created

@@ -384,6 +384,7 @@ std::int64_t StorePrepared(db::Store& store, const std::string& name, const ojso
     t.condition = static_cast<int>(i);
     t.seed = prepared[i].trial.seed;
     t.scene_json = prepared[i].scene_json;
+    t.facts = o.scene_facts(t.scene_json);
     t.params_json = prepared[i].params_json;
     planned.push_back(std::move(t));
   }
@@ -393,8 +394,10 @@ std::int64_t StorePrepared(db::Store& store, const std::string& name, const ojso
   for (std::size_t i = 0; i < prepared.size(); ++i) {
     const auto claimed = store.ClaimNextTrial(cell);
     if (!claimed) throw std::runtime_error("import: the temporary store handed out no trial");
-    const auto& p = prepared[static_cast<std::size_t>(store.GetTrial(claimed->trial_id).index)];
-    auto ingest = store.BeginIngest(claimed->trial_id, claimed->attempt);
+    const auto index = static_cast<std::size_t>(store.GetTrial(claimed->trial_id).index);
+    const auto& p = prepared[index];
+    auto ingest =
+        store.BeginIngest(claimed->trial_id, claimed->attempt, planned[index].facts.contacts);
     ingest->Add(p.samples);
     ingest->Finish();
     store.RecordExecution(claimed->trial_id, claimed->attempt, "import:" + o.adaptor, "measured",
@@ -419,6 +422,7 @@ void WriteImportDataset(const fs::path& scratch, const fs::path& out, const std:
   }
   db::ExportOptions eo;
   eo.campaign_id = campaign_id;
+  eo.scene_facts = o.scene_facts;
   eo.format = db::ExportFormat::kHdf5;
   eo.out_dir = out.string();
   eo.arena_version = o.arena_version;
@@ -474,6 +478,7 @@ std::string SceneJson(const Recording& r, const Resampled& s, const ImportOption
 
 ImportReport ImportRecordings(const std::vector<Recording>& recordings, const ImportOptions& o) {
   if (o.out_dir.empty()) throw ImportError("--out", "is empty");
+  if (!o.scene_facts) throw ImportError("ImportOptions", "scene_facts is not set");
   if (recordings.empty()) throw ImportError(o.source, "no recordings to import");
   fs::path out = fs::path(o.out_dir).lexically_normal();
   if (!out.has_filename()) out = out.parent_path();

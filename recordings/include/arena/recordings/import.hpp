@@ -17,6 +17,7 @@
 #include <string>
 #include <vector>
 
+#include "arena/db/scene_facts.hpp"
 #include "arena/recordings/recording.hpp"
 
 namespace arena::recordings {
@@ -32,6 +33,9 @@ struct ImportOptions {
   double pusher_mu = 0.25;
   CheckOptions checks;
   std::string arena_version, arena_commit;  // for the manifest
+  // What the store keeps of each trial's scene (required; the CLI passes
+  // orchestrator::SceneFactsOfJson): the store and its export read no scene.
+  db::SceneFactsFn scene_facts;
   // Called after each trial is prepared with (done, total).
   std::function<void(std::int64_t, std::int64_t)> progress;
 };
