@@ -64,8 +64,7 @@ struct Column {
   std::string meaning;
 };
 
-// ---------------------------------------------------------------- stream
-// columns
+// ---------------------------------------------------------------- stream columns
 
 struct StreamShape {
   std::vector<std::string> contact_names;  // scene order: fingers, then pusher
@@ -149,8 +148,7 @@ std::vector<Column> ObservedColumns(const StreamShape& s) {
   std::vector<Column> c;
   c.push_back({"t", "s", "time since the execute phase started"});
   c.push_back({"valid", "1",
-               "1 if the sensors delivered this sample, 0 if dropped (then the "
-               "values are not "
+               "1 if the sensors delivered this sample, 0 if dropped (then the values are not "
                "measurements)"});
   AddPose(&c, "", "object as seen by motion capture");
   AddWrench(&c, "pusher_", "pusher F/T sensor");
@@ -201,8 +199,7 @@ void FlattenObserved(const Sample& s, std::size_t finger_values, std::vector<dou
 std::string Num(double v) {
   if (!std::isfinite(v)) return "";
   char buf[32];
-  const auto r = std::to_chars(buf, buf + sizeof buf,
-                               v);  // shortest text that reads back exactly
+  const auto r = std::to_chars(buf, buf + sizeof buf, v);  // shortest text that reads back exactly
   return std::string(buf, r.ptr);
 }
 
@@ -425,36 +422,26 @@ const std::map<std::string, std::pair<std::string, std::string>>& IndexColumnDoc
 
 // The trial index; the last three columns are for the export's own use.
 constexpr const char* kIndexSql =
-    "SELECT t.id AS trial_id, t.idx, t.condition, t.replicate, t.seed, "
-    "t.state, t.attempt,"
-    " t.cell_id, t.outcome, t.object_shape, t.object_mass, t.grip_force, "
-    "t.finger_type,"
+    "SELECT t.id AS trial_id, t.idx, t.condition, t.replicate, t.seed, t.state, t.attempt,"
+    " t.cell_id, t.outcome, t.object_shape, t.object_mass, t.grip_force, t.finger_type,"
     " t.finger_count, t.finger_mu, t.pusher_type, t.pusher_mu, t.pusher_speed,"
-    " t.pusher_angular_speed, t.duration, t.start_position_error, "
-    "t.start_angle_error,"
-    " t.reset_ok, s.samples, s.observed_samples, s.duration_s, "
-    "s.displacement_m,"
-    " s.rotation_rad, s.max_contact_force_n, s.stick_fraction, "
-    "s.slide_fraction,"
+    " t.pusher_angular_speed, t.duration, t.start_position_error, t.start_angle_error,"
+    " t.reset_ok, s.samples, s.observed_samples, s.duration_s, s.displacement_m,"
+    " s.rotation_rad, s.max_contact_force_n, s.stick_fraction, s.slide_fraction,"
     " s.separate_fraction, p.model_key, p.status AS prediction_status,"
-    " p.final_position_error, p.final_angle_error, p.force_error, "
-    "p.mode_agreement,"
-    " p.wall_s AS predictor_wall_s, s.max_pusher_force_n, s.net_dx, s.net_dy, "
-    "s.net_dz,"
+    " p.final_position_error, p.final_angle_error, p.force_error, p.mode_agreement,"
+    " p.wall_s AS predictor_wall_s, s.max_pusher_force_n, s.net_dx, s.net_dy, s.net_dz,"
     " s.net_rx, s.net_ry, s.net_rz, s.grasp_kept,"
     " t.gt_stream_id, t.scene_json, t.params_json"
     " FROM trials t JOIN gt_summary s ON s.stream_id = t.gt_stream_id"
     " LEFT JOIN predictions p ON p.id ="
-    "  (SELECT MIN(id) FROM predictions WHERE trial_id = t.id AND attempt = "
-    "t.attempt)"
+    "  (SELECT MIN(id) FROM predictions WHERE trial_id = t.id AND attempt = t.attempt)"
     " WHERE t.campaign_id = ? ORDER BY t.idx";
 constexpr std::size_t kSeedCol = 4, kSamplesCol = 23;
 
 constexpr const char* kContactSql =
-    "SELECT c.trial_id, c.contact, c.name AS contact_name, c.role, "
-    "c.stick_fraction,"
-    " c.slide_fraction, c.separate_fraction, c.slip_distance_m, "
-    "c.max_normal_force_n"
+    "SELECT c.trial_id, c.contact, c.name AS contact_name, c.role, c.stick_fraction,"
+    " c.slide_fraction, c.separate_fraction, c.slip_distance_m, c.max_normal_force_n"
     " FROM contact_outcomes c JOIN trials t ON t.gt_stream_id = c.stream_id"
     " WHERE t.campaign_id = ? ORDER BY t.idx, c.contact";
 
@@ -598,21 +585,16 @@ std::string ScenesJsonl(const TrialIndex& index) {
 // Closed loop (issue 19): the runs and applied commands of the attempts whose
 // ground truth is exported.
 constexpr const char* kClosedLoopRunSql =
-    "SELECT r.trial_id, r.attempt, r.controller, r.lockstep, r.target, r.gain, "
-    "r.tolerance,"
-    " r.hold_s, r.reached, r.final_error, r.settle_time_s, r.held, "
-    "r.loop_p50_ms,"
+    "SELECT r.trial_id, r.attempt, r.controller, r.lockstep, r.target, r.gain, r.tolerance,"
+    " r.hold_s, r.reached, r.final_error, r.settle_time_s, r.held, r.loop_p50_ms,"
     " r.loop_p99_ms, r.failure"
-    " FROM closed_loop_runs r JOIN trials t ON t.id = r.trial_id AND t.attempt "
-    "= r.attempt"
+    " FROM closed_loop_runs r JOIN trials t ON t.id = r.trial_id AND t.attempt = r.attempt"
     " JOIN gt_summary s ON s.stream_id = t.gt_stream_id"
     " WHERE t.campaign_id = ? ORDER BY t.idx";
 constexpr const char* kClosedLoopCommandSql =
-    "SELECT c.trial_id, c.attempt, c.sample, c.t, c.vx, c.vy, c.vz, "
-    "c.applied_vx, c.applied_vy,"
+    "SELECT c.trial_id, c.attempt, c.sample, c.t, c.vx, c.vy, c.vz, c.applied_vx, c.applied_vy,"
     " c.applied_vz, c.loop_ms"
-    " FROM closed_loop_commands c JOIN trials t ON t.id = c.trial_id AND "
-    "t.attempt = c.attempt"
+    " FROM closed_loop_commands c JOIN trials t ON t.id = c.trial_id AND t.attempt = c.attempt"
     " JOIN gt_summary s ON s.stream_id = t.gt_stream_id"
     " WHERE t.campaign_id = ? ORDER BY t.idx, c.sample";
 constexpr std::size_t kCommandFirstCol = 2;  // sample: trial_id and attempt come first
@@ -656,9 +638,7 @@ const std::vector<Column>& ContactColumns() {
 
 const std::vector<Column>& CommandColumns() {
   static const std::vector<Column> kCols = {
-      {"sample", "1",
-       "the live sample the command answered; applied from the next model "
-       "step"},
+      {"sample", "1", "the live sample the command answered; applied from the next model step"},
       {"t", "s", "time of that sample since the trial started"},
       {"vx", "m/s", "commanded pusher velocity, x (gripper frame)"},
       {"vy", "m/s", "commanded pusher velocity, y"},
@@ -667,8 +647,7 @@ const std::vector<Column>& CommandColumns() {
       {"applied_vy", "m/s", "actuated pusher velocity, y"},
       {"applied_vz", "m/s", "actuated pusher velocity, z"},
       {"loop_ms", "ms",
-       "live sample written -> command accepted by the cell; missing: no fresh "
-       "command, the "
+       "live sample written -> command accepted by the cell; missing: no fresh command, the "
        "last one held"}};
   return kCols;
 }
@@ -725,8 +704,7 @@ class StagingDir {
               "': " + std::strerror(errno) + " (is it writable?)");
     }
     path_ = tmpl;
-    // mkdtemp makes it private (0700); the dataset gets what mkdir would give
-    // it.
+    // mkdtemp makes it private (0700); the dataset gets what mkdir would give it.
     const mode_t mask = ::umask(0);
     ::umask(mask);
     ::chmod(path_.c_str(), 0777 & ~mask);
@@ -741,8 +719,7 @@ class StagingDir {
   const fs::path& path() const { return path_; }
 
   void MoveTo(const fs::path& target) {
-    // rename(2) replaces an empty directory atomically; a non-empty one was
-    // refused up front.
+    // rename(2) replaces an empty directory atomically; a non-empty one was refused up front.
     if (::rename(path_.c_str(), target.c_str()) != 0) {
       IoError("export: cannot move the finished dataset to '" + target.string() +
               "': " + std::strerror(errno));
@@ -765,8 +742,7 @@ class DatasetWriter {
  public:
   DatasetWriter(fs::path dir, ExportFormat format) : dir_(std::move(dir)), format_(format) {
     if (format_ == ExportFormat::kHdf5) {
-      H5Eset_auto2(H5E_DEFAULT, nullptr,
-                   nullptr);  // errors become exceptions, not stderr noise
+      H5Eset_auto2(H5E_DEFAULT, nullptr, nullptr);  // errors become exceptions, not stderr noise
       h5_ = std::make_unique<H5Handle>(
           H5Fcreate((dir_ / "dataset.h5").c_str(), H5F_ACC_EXCL, H5P_DEFAULT, H5P_DEFAULT),
           H5Fclose, "create dataset.h5");
@@ -878,6 +854,110 @@ struct TrialRows {
   const std::vector<std::size_t>& rows;
 };
 
+// A closed-loop trial's applied commands: as a matrix (CommandColumns() per
+// row) and as the commands its prediction replays.
+struct AppliedCommands {
+  std::vector<std::vector<double>> matrix;
+  std::vector<ClosedLoopCommand> commands;
+};
+
+AppliedCommands ReadAppliedCommands(TrialRows rows) {
+  AppliedCommands out;
+  for (std::size_t r : rows.rows) {
+    const auto& c = rows.table.rows[r];
+    std::vector<double> m;
+    for (std::size_t k = kCommandFirstCol; k < c.size(); ++k) m.push_back(AsDouble(c[k]));
+    ClosedLoopCommand cmd;
+    cmd.sample = static_cast<int>(std::get<std::int64_t>(c[kCommandFirstCol]));
+    cmd.t = m[1];
+    for (int k = 0; k < 3; ++k) {
+      cmd.commanded[k] = m[2 + k];
+      cmd.applied[k] = m[5 + k];
+    }
+    if (!std::isnan(m[8])) cmd.loop_ms = m[8];
+    out.commands.push_back(cmd);
+    out.matrix.push_back(std::move(m));
+  }
+  return out;
+}
+
+// The caller's prediction of the trial (ExportOptions::predict*); a
+// prediction that throws is a stream with status error and its message.
+PredictedStream PredictTrial(const ExportOptions& o, const std::string& scene_json,
+                             const std::string& spec_json,
+                             const std::vector<ClosedLoopCommand>& applied,
+                             const std::vector<Sample>& samples) {
+  try {
+    return o.predict_from ? o.predict_from(scene_json, spec_json, applied,
+                                           samples.empty() ? nullptr : &samples.front())
+           : !applied.empty() && o.predict_closed_loop
+               ? o.predict_closed_loop(scene_json, spec_json, applied)
+               : o.predict(scene_json, spec_json);
+  } catch (const std::exception& e) {
+    PredictedStream failed;
+    failed.status = PredictionStatus::kError;
+    failed.error = e.what();
+    return failed;
+  }
+}
+
+// Per-contact outcomes as a matrix (contacts x ContactColumns()).
+struct ContactMatrix {
+  std::vector<std::vector<double>> matrix;
+  std::vector<std::string> names, roles;
+};
+
+ContactMatrix ReadContactMatrix(TrialRows rows) {
+  ContactMatrix out;
+  for (std::size_t r : rows.rows) {
+    const auto& c = rows.table.rows[r];
+    out.matrix.push_back({AsDouble(c[1]), AsDouble(c[4]), AsDouble(c[5]), AsDouble(c[6]),
+                          AsDouble(c[7]), AsDouble(c[8])});
+    out.names.push_back(std::get<std::string>(c[2]));
+    out.roles.push_back(std::get<std::string>(c[3]));
+  }
+  return out;
+}
+
+// HDF5: the trial's index values as the group's attributes (a large text as
+// a dataset), its contact outcomes and applied commands as datasets.
+void WriteGroupTables(hid_t gid, const std::vector<std::string>& columns,
+                      const std::vector<Value>& irow, const ContactMatrix& contacts,
+                      const AppliedCommands& commands) {
+  for (std::size_t c = 0; c < columns.size() && c < irow.size(); ++c) {
+    const auto* text = std::get_if<std::string>(&irow[c]);
+    if (text && text->size() > 60000)
+      H5TextDataset(gid, columns[c], *text);
+    else
+      H5ScalarAttr(gid, columns[c], irow[c]);
+  }
+  if (!contacts.matrix.empty()) {
+    H5Matrix(gid, "contacts", ContactColumns(), contacts.matrix);
+    H5Handle ds(H5Dopen2(gid, "contacts", H5P_DEFAULT), H5Dclose, "open contacts");
+    H5StringArrayAttr(ds.id, "contact_names", contacts.names);
+    H5StringArrayAttr(ds.id, "roles", contacts.roles);
+  }
+  if (!commands.matrix.empty()) H5Matrix(gid, "commands", CommandColumns(), commands.matrix);
+}
+
+// The trial's streams as rows of the true and observed columns.
+struct StreamRows {
+  std::vector<std::vector<double>> true_rows, obs_rows;
+};
+
+StreamRows FlattenStreams(const std::vector<Sample>& samples, const StreamShape& shape) {
+  StreamRows out;
+  std::vector<double> row;
+  const std::size_t nfv = 6 * shape.finger_names.size();
+  for (const auto& s : samples) {
+    FlattenTrue(s, shape.contact_names.size(), &row);
+    out.true_rows.push_back(row);
+    FlattenObserved(s, nfv, &row);
+    out.obs_rows.push_back(row);
+  }
+  return out;
+}
+
 void WriteTrial(const Store::Impl& impl, const ExportOptions& o, const Campaign& campaign,
                 const TrialIndex& index, std::size_t i, std::vector<Value>* irow,
                 const std::vector<std::string>& columns, TrialRows contacts, TrialRows commands,
@@ -896,46 +976,13 @@ void WriteTrial(const Store::Impl& impl, const ExportOptions& o, const Campaign&
     out->sample_rate =
         static_cast<double>(samples.size() - 1) / (samples.back().t - samples.front().t);
   }
-  std::vector<std::vector<double>> true_rows, obs_rows, pred_rows;
-  std::vector<double> row;
-  const std::size_t nfv = 6 * shape.finger_names.size();
-  for (const auto& s : samples) {
-    FlattenTrue(s, shape.contact_names.size(), &row);
-    true_rows.push_back(row);
-    FlattenObserved(s, nfv, &row);
-    obs_rows.push_back(row);
-  }
-  // Closed loop: the applied commands (CommandColumns() per row).
-  std::vector<std::vector<double>> command_matrix;
-  std::vector<ClosedLoopCommand> applied;
-  for (std::size_t r : commands.rows) {
-    const auto& c = commands.table.rows[r];
-    std::vector<double> m;
-    for (std::size_t k = kCommandFirstCol; k < c.size(); ++k) m.push_back(AsDouble(c[k]));
-    ClosedLoopCommand cmd;
-    cmd.sample = static_cast<int>(std::get<std::int64_t>(c[kCommandFirstCol]));
-    cmd.t = m[1];
-    for (int k = 0; k < 3; ++k) {
-      cmd.commanded[k] = m[2 + k];
-      cmd.applied[k] = m[5 + k];
-    }
-    if (!std::isnan(m[8])) cmd.loop_ms = m[8];
-    applied.push_back(cmd);
-    command_matrix.push_back(std::move(m));
-  }
+  const StreamRows streams = FlattenStreams(samples, shape);
+  const AppliedCommands applied = ReadAppliedCommands(commands);
   std::optional<PredictedStream> predicted;
+  std::vector<std::vector<double>> pred_rows;
   if (o.predict) {
-    try {
-      predicted = o.predict_from ? o.predict_from(index.scenes[i], campaign.spec_json, applied,
-                                                  samples.empty() ? nullptr : &samples.front())
-                  : !applied.empty() && o.predict_closed_loop
-                      ? o.predict_closed_loop(index.scenes[i], campaign.spec_json, applied)
-                      : o.predict(index.scenes[i], campaign.spec_json);
-    } catch (const std::exception& e) {
-      predicted = PredictedStream{};
-      predicted->status = PredictionStatus::kError;
-      predicted->error = e.what();
-    }
+    predicted = PredictTrial(o, index.scenes[i], campaign.spec_json, applied.commands, samples);
+    std::vector<double> row;
     for (const auto& s : predicted->samples) {
       FlattenTrue(s, shape.contact_names.size(), &row);
       pred_rows.push_back(row);
@@ -946,16 +993,6 @@ void WriteTrial(const Store::Impl& impl, const ExportOptions& o, const Campaign&
     irow->emplace_back(predicted->error);
     irow->emplace_back(static_cast<std::int64_t>(predicted->samples.size()));
     if (out->predicted_cols.empty()) out->predicted_cols = true_cols;
-  }
-  // Per-contact outcomes as a matrix (contacts x ContactColumns()).
-  std::vector<std::vector<double>> contact_matrix;
-  std::vector<std::string> contact_names, contact_roles;
-  for (std::size_t r : contacts.rows) {
-    const auto& c = contacts.table.rows[r];
-    contact_matrix.push_back({AsDouble(c[1]), AsDouble(c[4]), AsDouble(c[5]), AsDouble(c[6]),
-                              AsDouble(c[7]), AsDouble(c[8])});
-    contact_names.push_back(std::get<std::string>(c[2]));
-    contact_roles.push_back(std::get<std::string>(c[3]));
   }
 
   const std::string id = std::to_string(trial_id);
@@ -974,25 +1011,12 @@ void WriteTrial(const Store::Impl& impl, const ExportOptions& o, const Campaign&
     tm["group"] = "/" + gname;
   }
   const hid_t gid = group ? group->id : -1;
-  const std::string tf = writer->Stream(id, "true", true_cols, true_rows, gid);
-  const std::string of = writer->Stream(id, "observed", obs_cols, obs_rows, gid);
+  const std::string tf = writer->Stream(id, "true", true_cols, streams.true_rows, gid);
+  const std::string of = writer->Stream(id, "observed", obs_cols, streams.obs_rows, gid);
   std::string pf;
   if (predicted) pf = writer->Stream(id, "predicted", true_cols, pred_rows, gid);
   if (group) {
-    for (std::size_t c = 0; c < columns.size() && c < irow->size(); ++c) {
-      const auto* text = std::get_if<std::string>(&(*irow)[c]);
-      if (text && text->size() > 60000)
-        H5TextDataset(gid, columns[c], *text);
-      else
-        H5ScalarAttr(gid, columns[c], (*irow)[c]);
-    }
-    if (!contact_matrix.empty()) {
-      H5Matrix(gid, "contacts", ContactColumns(), contact_matrix);
-      H5Handle ds(H5Dopen2(gid, "contacts", H5P_DEFAULT), H5Dclose, "open contacts");
-      H5StringArrayAttr(ds.id, "contact_names", contact_names);
-      H5StringArrayAttr(ds.id, "roles", contact_roles);
-    }
-    if (!command_matrix.empty()) H5Matrix(gid, "commands", CommandColumns(), command_matrix);
+    WriteGroupTables(gid, columns, *irow, ReadContactMatrix(contacts), applied);
   } else {
     irow->emplace_back(tf);
     irow->emplace_back(of);
@@ -1009,64 +1033,77 @@ void WriteTrial(const Store::Impl& impl, const ExportOptions& o, const Campaign&
   report->samples += static_cast<std::int64_t>(samples.size());
 }
 
-// Writes every file of the dataset into `dir` (the staging directory).
-ExportReport WriteDataset(const Store& store, const ExportOptions& o, const fs::path& dir) {
-  const auto& impl = store.impl();
-  detail::Tx snapshot(impl.db,
-                      false);  // everything below reads one consistent state
-  const Campaign campaign = store.GetCampaign(o.campaign_id);
-  TrialIndex index = ReadIndex(impl, o.campaign_id);
-  std::map<std::int64_t, std::vector<std::size_t>> contacts_by_trial;
-  const QueryResult contacts = ReadContacts(impl, o.campaign_id, &contacts_by_trial);
-  std::map<std::int64_t, std::vector<std::size_t>> runs_by_trial, commands_by_trial;
-  const QueryResult runs = ReadByTrial(impl, kClosedLoopRunSql, o.campaign_id, &runs_by_trial);
-  const QueryResult commands =
-      ReadByTrial(impl, kClosedLoopCommandSql, o.campaign_id, &commands_by_trial);
+// The trial parameters of the index: the sampler's columns, and variations
+// written into the scene (grip_force, finger_type, ...) that have their own
+// scene-derived column; they are parameters all the same.
+std::set<std::string> IndexParameters(const Store::Impl& impl, const TrialIndex& index,
+                                      const Campaign& campaign) {
   std::set<std::string> parameters;
-  {
-    const std::size_t base =
-        static_cast<std::size_t>(sqlite3_column_count(detail::Stmt(impl.db, kIndexSql).get())) - 3;
-    for (std::size_t c = base; c + 1 < index.table.columns.size(); ++c)
-      parameters.insert(index.table.columns[c]);
-    // Variations written into the scene (grip_force, finger_type, ...) have
-    // their own scene-derived column; they are parameters all the same.
-    const auto spec = nlohmann::json::parse(campaign.spec_json, nullptr, false);
-    if (spec.is_object() && spec.contains("variations") && spec["variations"].is_object()) {
-      for (const auto& [name, value] : spec["variations"].items()) {
-        if (std::find(index.table.columns.begin(), index.table.columns.end(), name) !=
-            index.table.columns.end())
-          parameters.insert(name);
-      }
+  const std::size_t base =
+      static_cast<std::size_t>(sqlite3_column_count(detail::Stmt(impl.db, kIndexSql).get())) - 3;
+  for (std::size_t c = base; c + 1 < index.table.columns.size(); ++c)
+    parameters.insert(index.table.columns[c]);
+  const auto spec = nlohmann::json::parse(campaign.spec_json, nullptr, false);
+  if (spec.is_object() && spec.contains("variations") && spec["variations"].is_object()) {
+    for (const auto& [name, value] : spec["variations"].items()) {
+      if (std::find(index.table.columns.begin(), index.table.columns.end(), name) !=
+          index.table.columns.end())
+        parameters.insert(name);
     }
   }
-  // The columns each row gets after the stored ones (same order as WriteTrial).
+  return parameters;
+}
+
+// The columns each index row gets: the stored ones, then (same order as
+// WriteTrial) the prediction's and the per-trial files'.
+std::vector<std::string> IndexColumns(const ExportOptions& o, const TrialIndex& index,
+                                      const DatasetWriter& writer) {
   std::vector<std::string> columns = index.table.columns;
   if (o.predict) {
     for (const char* c : {"predicted_by", "predicted_settings", "predicted_status",
                           "predicted_error", "predicted_samples"})
       columns.emplace_back(c);
   }
-  DatasetWriter writer(dir, o.format);
   if (writer.files_per_trial()) {
     columns.emplace_back("true_file");
     columns.emplace_back("observed_file");
     if (o.predict) columns.emplace_back("predicted_file");
   }
+  return columns;
+}
 
-  ExportReport report;
-  TrialsWritten written;
+// The tables read in the export's snapshot, beside the index.
+struct ByTrialTables {
+  QueryResult contacts, runs, commands;
+  std::map<std::int64_t, std::vector<std::size_t>> contacts_by_trial, runs_by_trial,
+      commands_by_trial;
+};
+
+ByTrialTables ReadByTrialTables(const Store::Impl& impl, std::int64_t campaign_id) {
+  ByTrialTables t;
+  t.contacts = ReadContacts(impl, campaign_id, &t.contacts_by_trial);
+  t.runs = ReadByTrial(impl, kClosedLoopRunSql, campaign_id, &t.runs_by_trial);
+  t.commands = ReadByTrial(impl, kClosedLoopCommandSql, campaign_id, &t.commands_by_trial);
+  return t;
+}
+
+// Every trial's streams, in index order; an error names the trial.
+void WriteTrials(const Store::Impl& impl, const ExportOptions& o, const Campaign& campaign,
+                 TrialIndex* index, const std::vector<std::string>& columns,
+                 const ByTrialTables& tables, DatasetWriter* writer, TrialsWritten* written,
+                 ExportReport* report) {
   static const std::vector<std::size_t> kNone;
-  const auto total = static_cast<std::int64_t>(index.table.rows.size());
-  for (std::size_t i = 0; i < index.table.rows.size(); ++i) {
-    auto& irow = index.table.rows[i];
+  const auto total = static_cast<std::int64_t>(index->table.rows.size());
+  for (std::size_t i = 0; i < index->table.rows.size(); ++i) {
+    auto& irow = index->table.rows[i];
     const auto trial_id = std::get<std::int64_t>(irow[0]);
-    const auto it = contacts_by_trial.find(trial_id);
-    const auto ct = commands_by_trial.find(trial_id);
+    const auto it = tables.contacts_by_trial.find(trial_id);
+    const auto ct = tables.commands_by_trial.find(trial_id);
     try {
-      WriteTrial(impl, o, campaign, index, i, &irow, columns,
-                 {contacts, it == contacts_by_trial.end() ? kNone : it->second},
-                 {commands, ct == commands_by_trial.end() ? kNone : ct->second}, &writer, &written,
-                 &report);
+      WriteTrial(impl, o, campaign, *index, i, &irow, columns,
+                 {tables.contacts, it == tables.contacts_by_trial.end() ? kNone : it->second},
+                 {tables.commands, ct == tables.commands_by_trial.end() ? kNone : ct->second},
+                 writer, written, report);
     } catch (const StoreError& e) {
       std::string what = e.what();
       if (what.rfind("export: ", 0) == 0) what = what.substr(8);
@@ -1076,28 +1113,33 @@ ExportReport WriteDataset(const Store& store, const ExportOptions& o, const fs::
     }
     if (o.progress) o.progress(static_cast<std::int64_t>(i) + 1, total);
   }
-  report.trials = total;
-  snapshot.Commit();
-  writer.Close(o.campaign_id);
+  report->trials = total;
+}
 
-  index.table.columns = columns;
+// The by-trial tables as CSV (and JSON lines for the jsonl format), the
+// scenes, and the campaign's latest sensitivity run (db/sensitivity.hpp).
+void WriteTables(const Store& store, const ExportOptions& o, const fs::path& dir,
+                 const TrialIndex& index, const ByTrialTables& tables) {
   WriteText(dir / "trials.csv", FormatCsv(index.table));
-  WriteText(dir / "contacts.csv", FormatCsv(contacts));
+  WriteText(dir / "contacts.csv", FormatCsv(tables.contacts));
   WriteText(dir / "scenes.jsonl", ScenesJsonl(index));
-  // The campaign's latest sensitivity run, if any (db/sensitivity.hpp).
   WriteSensitivityExport(store, o.campaign_id, dir.string());
-  if (!runs.rows.empty()) {
-    WriteText(dir / "closed_loop.csv", FormatCsv(runs));
-    WriteText(dir / "closed_loop_commands.csv", FormatCsv(commands));
+  if (!tables.runs.rows.empty()) {
+    WriteText(dir / "closed_loop.csv", FormatCsv(tables.runs));
+    WriteText(dir / "closed_loop_commands.csv", FormatCsv(tables.commands));
   }
   if (o.format == ExportFormat::kJsonl) {
     WriteJsonLines(dir / "trials.jsonl", index.table);
-    WriteJsonLines(dir / "contacts.jsonl", contacts);
-    if (!runs.rows.empty()) {
-      WriteJsonLines(dir / "closed_loop.jsonl", runs);
-      WriteJsonLines(dir / "closed_loop_commands.jsonl", commands);
+    WriteJsonLines(dir / "contacts.jsonl", tables.contacts);
+    if (!tables.runs.rows.empty()) {
+      WriteJsonLines(dir / "closed_loop.jsonl", tables.runs);
+      WriteJsonLines(dir / "closed_loop_commands.jsonl", tables.commands);
     }
   }
+}
+
+// A producer's own files (ExportOptions::extra_files), inside the dataset only.
+void WriteExtraFiles(const ExportOptions& o, const fs::path& dir) {
   for (const auto& [rel, text] : o.extra_files) {
     const fs::path r(rel);
     if (rel.empty() || r.is_absolute() || rel.find("..") != std::string::npos ||
@@ -1112,14 +1154,9 @@ ExportReport WriteDataset(const Store& store, const ExportOptions& o, const fs::
     if (r.has_parent_path()) fs::create_directories(dir / r.parent_path(), ec);
     WriteText(dir / r, text);
   }
-  const ojson files = ChecksumFiles(dir, &report);
+}
 
-  ojson spec;
-  try {
-    spec = ojson::parse(campaign.spec_json);
-  } catch (const nlohmann::json::exception&) {
-    spec = campaign.spec_json;
-  }
+ojson ContactColumnsJson() {
   ojson contact_cols = ojson::array();
   contact_cols.push_back({{"name", "trial_id"}, {"unit", "1"}, {"meaning", "trial id"}});
   contact_cols.push_back(
@@ -1127,6 +1164,59 @@ ExportReport WriteDataset(const Store& store, const ExportOptions& o, const fs::
   contact_cols.push_back({{"name", "role"}, {"unit", ""}, {"meaning", "finger or pusher"}});
   for (const auto& c : ContactColumns())
     contact_cols.push_back({{"name", c.name}, {"unit", c.unit}, {"meaning", c.meaning}});
+  return contact_cols;
+}
+
+// The keys of manifest_extra_json, set after the export's own.
+void MergeManifestExtra(const ExportOptions& o, ojson* manifest) {
+  if (o.manifest_extra_json.empty()) return;
+  ojson extra;
+  try {
+    extra = ojson::parse(o.manifest_extra_json);
+  } catch (const nlohmann::json::exception& e) {
+    throw StoreError(StoreError::Kind::kBadInput,
+                     std::string("export: manifest_extra_json is not JSON: ") + e.what());
+  }
+  if (!extra.is_object())
+    throw StoreError(StoreError::Kind::kBadInput,
+                     "export: manifest_extra_json must be a JSON object");
+  for (auto it = extra.begin(); it != extra.end(); ++it) (*manifest)[it.key()] = it.value();
+}
+
+void AddClosedLoopManifest(ojson* manifest) {
+  ojson cmd_cols = ojson::array();
+  cmd_cols.push_back({{"name", "trial_id"}, {"unit", "1"}, {"meaning", "trial id"}});
+  cmd_cols.push_back({{"name", "attempt"}, {"unit", "1"}, {"meaning", "the exported attempt"}});
+  for (const auto& c : CommandColumns())
+    cmd_cols.push_back({{"name", c.name}, {"unit", c.unit}, {"meaning", c.meaning}});
+  (*manifest)["columns"]["closed_loop_commands"] = cmd_cols;
+  (*manifest)["closed_loop"] =
+      "closed_loop.csv: one row per closed-loop trial (controller, its settings and own "
+      "outcome; target, final_error and tolerance in the controller's units: rad for "
+      "pivot_to_angle, m for sliding_to_position); closed_loop_commands.csv: every pusher "
+      "command the cell applied. Predictions of these trials replay the commanded velocities "
+      "through the model.";
+}
+
+// What manifest.json says beside the files: the campaign, frames, columns,
+// parameters, counts.
+struct ManifestParts {
+  const std::vector<std::string>& columns;
+  const std::set<std::string>& parameters;
+  const TrialsWritten& written;
+  const ExportReport& report;
+  ojson files;
+  bool closed_loop = false;
+};
+
+ojson Manifest(const Store& store, const ExportOptions& o, const Campaign& campaign,
+               const ManifestParts& m) {
+  ojson spec;
+  try {
+    spec = ojson::parse(campaign.spec_json);
+  } catch (const nlohmann::json::exception&) {
+    spec = campaign.spec_json;
+  }
   ojson manifest = {
       {"format", "arena-dataset"},
       {"format_version", kDatasetFormatVersion},
@@ -1143,68 +1233,67 @@ ExportReport WriteDataset(const Store& store, const ExportOptions& o, const fs::
         {"spec", spec}}},
       {"frames",
        {{"G",
-         "gripper frame at the start of the trial; every pose, twist and "
-         "wrench is "
+         "gripper frame at the start of the trial; every pose, twist and wrench is "
          "expressed in it; quaternions are (w, x, y, z)"}}},
-      {"sample_rate_hz", std::round(written.sample_rate * 1000) / 1000},
-      {"counts", {{"trials", report.trials}, {"samples", report.samples}, {"files", files.size()}}},
+      {"sample_rate_hz", std::round(m.written.sample_rate * 1000) / 1000},
+      {"counts",
+       {{"trials", m.report.trials}, {"samples", m.report.samples}, {"files", m.files.size()}}},
       {"columns",
-       {{"trials", IndexColumnsJson(columns, parameters)},
-        {"contacts", contact_cols},
-        {"true", ColumnsJson(written.true_cols)},
-        {"observed", ColumnsJson(written.obs_cols)}}},
-      {"parameters", ojson(std::vector<std::string>(parameters.begin(), parameters.end()))},
-      {"predictions", o.predict ? "re-run per trial with the campaign's "
-                                  "\"prediction\" settings, as the service "
-                                  "ran it; columns as \"true\" (predicted_by / "
-                                  "predicted_settings say which)"
-                                : "not exported"},
+       {{"trials", IndexColumnsJson(m.columns, m.parameters)},
+        {"contacts", ContactColumnsJson()},
+        {"true", ColumnsJson(m.written.true_cols)},
+        {"observed", ColumnsJson(m.written.obs_cols)}}},
+      {"parameters", ojson(std::vector<std::string>(m.parameters.begin(), m.parameters.end()))},
+      {"predictions",
+       o.predict ? "re-run per trial with the campaign's \"prediction\" settings, as the service "
+                   "ran it; columns as \"true\" (predicted_by / predicted_settings say which)"
+                 : "not exported"},
       {"missing_values",
-       "CSV: empty field; JSON: null; HDF5: NaN in datasets, absent attribute "
-       "in groups. A "
+       "CSV: empty field; JSON: null; HDF5: NaN in datasets, absent attribute in groups. A "
        "dropped observation (valid = 0) has every observed value missing."},
-      {"trials", written.manifest},
-      {"files", files},
+      {"trials", m.written.manifest},
+      {"files", m.files},
   };
-  if (o.predict) manifest["columns"]["predicted"] = ColumnsJson(written.predicted_cols);
-  if (!o.manifest_extra_json.empty()) {
-    ojson extra;
-    try {
-      extra = ojson::parse(o.manifest_extra_json);
-    } catch (const nlohmann::json::exception& e) {
-      throw StoreError(StoreError::Kind::kBadInput,
-                       std::string("export: manifest_extra_json is not JSON: ") + e.what());
-    }
-    if (!extra.is_object())
-      throw StoreError(StoreError::Kind::kBadInput,
-                       "export: manifest_extra_json must be a JSON object");
-    for (auto it = extra.begin(); it != extra.end(); ++it) manifest[it.key()] = it.value();
-  }
-  if (!runs.rows.empty()) {
-    ojson cmd_cols = ojson::array();
-    cmd_cols.push_back({{"name", "trial_id"}, {"unit", "1"}, {"meaning", "trial id"}});
-    cmd_cols.push_back({{"name", "attempt"}, {"unit", "1"}, {"meaning", "the exported attempt"}});
-    for (const auto& c : CommandColumns())
-      cmd_cols.push_back({{"name", c.name}, {"unit", c.unit}, {"meaning", c.meaning}});
-    manifest["columns"]["closed_loop_commands"] = cmd_cols;
-    manifest["closed_loop"] =
-        "closed_loop.csv: one row per closed-loop trial "
-        "(controller, its settings and own "
-        "outcome; target, final_error and tolerance in "
-        "the controller's units: rad for "
-        "pivot_to_angle, m for sliding_to_position); "
-        "closed_loop_commands.csv: every pusher "
-        "command the cell applied. Predictions of these "
-        "trials replay the commanded velocities "
-        "through the model.";
-  }
-  // Last and atomically: a complete manifest marks a complete dataset.
+  if (o.predict) manifest["columns"]["predicted"] = ColumnsJson(m.written.predicted_cols);
+  MergeManifestExtra(o, &manifest);
+  if (m.closed_loop) AddClosedLoopManifest(&manifest);
+  return manifest;
+}
+
+// Last and atomically: a complete manifest marks a complete dataset.
+void WriteManifest(const fs::path& dir, const ojson& manifest) {
   const fs::path tmp = dir / "manifest.json.tmp";
   WriteText(tmp, manifest.dump(2) + "\n");
   SyncFile(tmp);
   std::error_code ec;
   fs::rename(tmp, dir / "manifest.json", ec);
   if (ec) IoError("export: cannot rename the manifest into place: " + ec.message());
+}
+
+// Writes every file of the dataset into `dir` (the staging directory).
+ExportReport WriteDataset(const Store& store, const ExportOptions& o, const fs::path& dir) {
+  const auto& impl = store.impl();
+  detail::Tx snapshot(impl.db, false);  // everything below reads one consistent state
+  const Campaign campaign = store.GetCampaign(o.campaign_id);
+  TrialIndex index = ReadIndex(impl, o.campaign_id);
+  const ByTrialTables tables = ReadByTrialTables(impl, o.campaign_id);
+  const std::set<std::string> parameters = IndexParameters(impl, index, campaign);
+  DatasetWriter writer(dir, o.format);
+  const std::vector<std::string> columns = IndexColumns(o, index, writer);
+
+  ExportReport report;
+  TrialsWritten written;
+  WriteTrials(impl, o, campaign, &index, columns, tables, &writer, &written, &report);
+  snapshot.Commit();
+  writer.Close(o.campaign_id);
+
+  index.table.columns = columns;
+  WriteTables(store, o, dir, index, tables);
+  WriteExtraFiles(o, dir);
+  const ojson files = ChecksumFiles(dir, &report);
+  WriteManifest(dir,
+                Manifest(store, o, campaign,
+                         {columns, parameters, written, report, files, !tables.runs.rows.empty()}));
   return report;
 }
 
