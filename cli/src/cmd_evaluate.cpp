@@ -1,9 +1,6 @@
-// arena evaluate --db FILE --campaign ID [--predictors arena] [--facets
-// 4,8,16,32] [--points 3]
-//                [--dt 0.008,0.004,0.002,0.001] [--reduce auto] [--budget
-//                1mm|2ms|1.5floor ...]
-//                [--convergence-trials 8] [--threads N] [--from
-//                measured|planned] [--json]
+// arena evaluate --db FILE --campaign ID [--predictors arena] [--facets 4,8,16,32] [--points 3]
+//                [--dt 0.008,0.004,0.002,0.001] [--reduce auto] [--budget 1mm|2ms|1.5floor ...]
+//                [--convergence-trials 8] [--threads N] [--from measured|planned] [--json]
 // Replays a campaign's done trials through the model at every fidelity
 // setting of the grid, stores the run (tables evaluations and
 // evaluation_results) and prints the trade: a table or JSON.
@@ -68,16 +65,13 @@ std::string FormatStart(const assessment::StartReport& r) {
   std::string out;
   char line[512];
   if (r.from == assessment::StartFrom::kPlanned) {
-    return "start: predictions start from the planned pose (--from planned): "
-           "their errors "
+    return "start: predictions start from the planned pose (--from planned): their errors "
            "include the reset's placement error\n";
   }
   if (r.offset_position) {
     std::snprintf(line, sizeof line,
-                  "start: predictions start from the pose each trial's cell "
-                  "measured (%d of the "
-                  "trials' streams gave one), median %.3g mm and %.3g deg from "
-                  "the planned pose "
+                  "start: predictions start from the pose each trial's cell measured (%d of the "
+                  "trials' streams gave one), median %.3g mm and %.3g deg from the planned pose "
                   "(max %.3g mm, %.3g deg)\n",
                   r.measured_trials, r.offset_position->median * 1e3,
                   r.offset_angle->median * 180 / M_PI, r.offset_position->max * 1e3,
@@ -89,8 +83,7 @@ std::string FormatStart(const assessment::StartReport& r) {
     if (s.trials == 0) continue;
     if (!head) {
       out +=
-          "start pose's share of the error (median final error from the "
-          "planned start minus "
+          "start pose's share of the error (median final error from the planned start minus "
           "from the measured one):\n";
       std::snprintf(line, sizeof line, "  %-8s %-24s %6s %26s %26s\n", "predictor", "setting",
                     "trials", "pos mm planned/measured/+", "angle deg planned/measured/+");
@@ -194,8 +187,7 @@ std::string FormatTable(const assessment::EvaluationReport& r, std::int64_t eval
   std::ostringstream out;
   char line[640];
   std::snprintf(line, sizeof line,
-                "campaign %lld: %d done trials replayed at %zu settings of %zu "
-                "predictor(s) "
+                "campaign %lld: %d done trials replayed at %zu settings of %zu predictor(s) "
                 "(evaluation %lld)\n",
                 static_cast<long long>(r.campaign_id), r.trials, r.settings.size(),
                 r.predictors.size(), static_cast<long long>(evaluation_id));
@@ -212,17 +204,14 @@ std::string FormatTable(const assessment::EvaluationReport& r, std::int64_t eval
   const double floor_m = r.floor ? r.floor->position_median : 0;
   if (r.floor) {
     std::snprintf(line, sizeof line,
-                  "noise floor (replicate spread of the true final pose, %d "
-                  "conditions with >= 2 "
-                  "replicates): position median %.3g mm, p95 %.3g mm; angle "
-                  "median %.3g deg, p95 "
+                  "noise floor (replicate spread of the true final pose, %d conditions with >= 2 "
+                  "replicates): position median %.3g mm, p95 %.3g mm; angle median %.3g deg, p95 "
                   "%.3g deg\n",
                   r.floor->conditions, r.floor->position_median * 1e3, r.floor->position_p95 * 1e3,
                   r.floor->angle_median * 180 / M_PI, r.floor->angle_p95 * 180 / M_PI);
   } else {
     std::snprintf(line, sizeof line,
-                  "noise floor: none (no condition has 2 replicates; errors "
-                  "cannot be judged "
+                  "noise floor: none (no condition has 2 replicates; errors cannot be judged "
                   "against replicate spread)\n");
   }
   out << line;
@@ -256,8 +245,7 @@ std::string FormatTable(const assessment::EvaluationReport& r, std::int64_t eval
                   multiple, Tail(s.angle, 180 / M_PI).c_str(), mode, time, per_sim, marks.c_str());
     out << line;
   }
-  out << "\nworst trials (largest final position error; `arena plot --db FILE "
-         "TRIAL`), "
+  out << "\nworst trials (largest final position error; `arena plot --db FILE TRIAL`), "
          "divergences and failures:\n";
   for (const auto& s : r.settings) {
     if (s.worst.empty() && s.diverged_trials.empty() && s.failed_trials.empty()) continue;
@@ -278,10 +266,8 @@ std::string FormatTable(const assessment::EvaluationReport& r, std::int64_t eval
           << s.failed_trials.front().reason << ")";
     out << "\n";
   }
-  out << "\nconvergence against each predictor's finest setting (pieces "
-         "restarted from the true "
-         "state) beside the error against the truth, final position mm "
-         "med/p95:\n";
+  out << "\nconvergence against each predictor's finest setting (pieces restarted from the true "
+         "state) beside the error against the truth, final position mm med/p95:\n";
   for (const auto& s : r.settings) {
     std::snprintf(
         line, sizeof line, "  %-8s %-24s discretisation %-17s vs truth %s%s\n", s.predictor.c_str(),
@@ -294,14 +280,10 @@ std::string FormatTable(const assessment::EvaluationReport& r, std::int64_t eval
         Tail(s.position, 1e3).c_str(), s.finest ? "  (finest)" : "");
     out << line;
   }
-  out << "\noutcome: NMSE of the push's outcome (dx, dy, dtheta: the object's "
-         "final pose in its "
-         "initial frame; each output's mean squared error over its variance "
-         "across the trials "
-         "scored, averaged over the three; 1 = predicting the mean outcome), "
-         "final position and "
-         "angle error, force error against the measured force (n: trials whose "
-         "force was "
+  out << "\noutcome: NMSE of the push's outcome (dx, dy, dtheta: the object's final pose in its "
+         "initial frame; each output's mean squared error over its variance across the trials "
+         "scored, averaged over the three; 1 = predicting the mean outcome), final position and "
+         "angle error, force error against the measured force (n: trials whose force was "
          "scored), wall time per trial:\n";
   out << OutcomeTable(r.settings);
   for (const auto& g : r.groups) {
@@ -313,9 +295,8 @@ std::string FormatTable(const assessment::EvaluationReport& r, std::int64_t eval
   return out.str();
 }
 
-int RunEvaluate(const EvaluateOptions& o) {
-  assessment::EvaluationOptions eo;
-  eo.predictors.clear();
+// --facets, --points, --dt, --reduce, --contacts: the arena predictor's grid.
+assessment::FidelityGrid ArenaGrid(const EvaluateOptions& o) {
   assessment::FidelityGrid grid;
   grid.facets = o.facets;
   grid.points = o.points;
@@ -339,6 +320,13 @@ int RunEvaluate(const EvaluateOptions& o) {
     }
     grid.contacts.push_back(*mode);
   }
+  return grid;
+}
+
+// --predictors with their grids (arena's, MuJoCo's).
+std::vector<assessment::PredictorRequest> PredictorRequests(const EvaluateOptions& o,
+                                                            const assessment::FidelityGrid& grid) {
+  std::vector<assessment::PredictorRequest> out;
   for (const auto& name : o.predictors) {
     assessment::PredictorRequest req;
     req.name = name;
@@ -356,8 +344,16 @@ int RunEvaluate(const EvaluateOptions& o) {
           req.mujoco_grid->solimp.push_back(ParseColonList<5>("--mujoco-solimp", v));
       }
     }
-    eo.predictors.push_back(req);
+    out.push_back(req);
   }
+  return out;
+}
+
+// The options that need no store: predictors, threads, start, budgets.
+assessment::EvaluationOptions EvaluationOptionsOf(const EvaluateOptions& o) {
+  assessment::EvaluationOptions eo;
+  const assessment::FidelityGrid grid = ArenaGrid(o);
+  eo.predictors = PredictorRequests(o, grid);
   if (o.threads < 0) throw CommandError(kExitBadInput, "--threads: must be >= 0 (0: one per core)");
   if (o.convergence_trials < 0)
     throw CommandError(kExitBadInput, "--convergence-trials: must be >= 0 (0: no table)");
@@ -374,7 +370,99 @@ int RunEvaluate(const EvaluateOptions& o) {
   } catch (const std::invalid_argument& e) {
     throw CommandError(kExitBadInput, std::string("evaluate: ") + e.what());
   }
+  return eo;
+}
 
+// --calibration's fitted scales (a calibration of this campaign), then --scale's.
+void ReadScales(const EvaluateOptions& o, const db::Store& store,
+                assessment::EvaluationOptions* eo) {
+  if (o.calibration > 0) {
+    const db::Calibration cal = store.GetCalibration(o.calibration);
+    if (cal.campaign_id != o.campaign)
+      throw CommandError(kExitBadInput,
+                         "--calibration: calibration " + std::to_string(o.calibration) +
+                             " was fitted to campaign " + std::to_string(cal.campaign_id) +
+                             ", not " + std::to_string(o.campaign));
+    const auto fitted = nlohmann::json::parse(cal.params_json, nullptr, false);
+    if (!fitted.is_object())
+      throw CommandError(kExitBadInput, "--calibration: calibration " +
+                                            std::to_string(o.calibration) +
+                                            " has no fitted parameters");
+    for (const auto& item : fitted.items())
+      eo->scales[item.key()] = item.value().at("scale").get<double>();
+  }
+  for (const auto& text : o.scales) {
+    const auto eq = text.find('=');
+    double k = 0;
+    std::size_t used = 0;
+    const std::string name = text.substr(0, eq);
+    try {
+      if (eq != std::string::npos) k = std::stod(text.substr(eq + 1), &used);
+    } catch (const std::exception&) {
+      used = 0;
+    }
+    if (eq == std::string::npos || used == 0 || used != text.size() - eq - 1 || !std::isfinite(k) ||
+        !(k > 0))
+      throw CommandError(kExitBadInput, "--scale: '" + text +
+                                            "' must be NAME=FACTOR with a factor > 0 (e.g. "
+                                            "mu_pusher=1.2)");
+    try {
+      (void)assessment::ParseCalibrationParam(name);
+    } catch (const assessment::CalibrationError& e) {
+      throw CommandError(kExitBadInput, std::string("--scale: ") + e.what());
+    }
+    eo->scales[name] = k;
+  }
+}
+
+// The report as JSON: the evaluation's, its start, and what the errors are
+// measured against (self-consistent predictors, trials per truth and backend).
+nlohmann::json EvaluationJson(const assessment::EvaluationRun& run,
+                              const std::vector<db::Store::TruthCount>& truths,
+                              const std::vector<std::string>& self_consistent) {
+  nlohmann::json j = assessment::ToJson(run.report);
+  j["start"] = assessment::ToJson(run.start);
+  j["truth"]["self_consistency_predictors"] = self_consistent;
+  j["evaluation_id"] = run.evaluation_id;
+  // "truth" is the report's object (source, independent, statement); the
+  // per-backend trial counts sit in it.
+  j["truth"]["trials"] = nlohmann::json::array();
+  for (const auto& t : truths) {
+    j["truth"]["trials"].push_back(
+        {{"truth", t.truth}, {"backend", t.backend}, {"trials", t.trials}});
+  }
+  return j;
+}
+
+// The report as text: the table, the start, and what each truth means.
+void PrintEvaluation(const assessment::EvaluationRun& run,
+                     const std::vector<db::Store::TruthCount>& truths,
+                     const std::vector<std::string>& self_consistent) {
+  const std::string text = FormatTable(run.report, run.evaluation_id) + FormatStart(run.start);
+  std::fwrite(text.data(), 1, text.size(), stdout);
+  for (const auto& t : truths) {
+    std::printf("truth: %s (%s backend), %lld trials%s\n",
+                t.truth.empty() ? "unreported" : t.truth.c_str(),
+                t.backend.empty() ? "?" : t.backend.c_str(), static_cast<long long>(t.trials),
+                t.truth == "self-consistency"
+                    ? ": these errors are arena's model against itself, not accuracy"
+                : t.truth == "measured"
+                    ? ": measured, the observed streams are the truth (no separate true "
+                      "stream); trials whose poses failed the import check are not served"
+                : t.truth == db::kTruthMeasuredNoForces
+                    ? ": measured poses; the forces were not measured or failed their import "
+                      "check: poses scored, forces not scored on these trials"
+                    : "");
+  }
+  for (const auto& p : self_consistent)
+    std::printf(
+        "predictor %s: the truth's own engine (%s backend): its errors are self-consistency, "
+        "not accuracy\n",
+        p.c_str(), EngineBackend(p).c_str());
+}
+
+int RunEvaluate(const EvaluateOptions& o) {
+  assessment::EvaluationOptions eo = EvaluationOptionsOf(o);
   if (o.group_by.empty() && !o.trial_parameters.empty())
     throw CommandError(kExitBadInput, "--trial-parameters: only with --group-by");
   const TrialParameters parameters(o.trial_parameters, "--trial-parameters");
@@ -399,46 +487,9 @@ int RunEvaluate(const EvaluateOptions& o) {
   try {
     db::StoreOptions so;
     so.create = false;
-    so.scene_facts = orchestrator::SceneFactsOfJson;  // an older store's
-                                                      // migration reads scenes
+    so.scene_facts = orchestrator::SceneFactsOfJson;  // an older store's migration reads scenes
     auto store = db::Store::Open(o.db_path, so);
-    if (o.calibration > 0) {
-      const db::Calibration cal = store->GetCalibration(o.calibration);
-      if (cal.campaign_id != o.campaign)
-        throw CommandError(kExitBadInput,
-                           "--calibration: calibration " + std::to_string(o.calibration) +
-                               " was fitted to campaign " + std::to_string(cal.campaign_id) +
-                               ", not " + std::to_string(o.campaign));
-      const auto fitted = nlohmann::json::parse(cal.params_json, nullptr, false);
-      if (!fitted.is_object())
-        throw CommandError(kExitBadInput, "--calibration: calibration " +
-                                              std::to_string(o.calibration) +
-                                              " has no fitted parameters");
-      for (const auto& item : fitted.items())
-        eo.scales[item.key()] = item.value().at("scale").get<double>();
-    }
-    for (const auto& text : o.scales) {
-      const auto eq = text.find('=');
-      double k = 0;
-      std::size_t used = 0;
-      const std::string name = text.substr(0, eq);
-      try {
-        if (eq != std::string::npos) k = std::stod(text.substr(eq + 1), &used);
-      } catch (const std::exception&) {
-        used = 0;
-      }
-      if (eq == std::string::npos || used == 0 || used != text.size() - eq - 1 ||
-          !std::isfinite(k) || !(k > 0))
-        throw CommandError(kExitBadInput, "--scale: '" + text +
-                                              "' must be NAME=FACTOR with a factor > 0 (e.g. "
-                                              "mu_pusher=1.2)");
-      try {
-        (void)assessment::ParseCalibrationParam(name);
-      } catch (const assessment::CalibrationError& e) {
-        throw CommandError(kExitBadInput, std::string("--scale: ") + e.what());
-      }
-      eo.scales[name] = k;
-    }
+    ReadScales(o, *store, &eo);
     std::unique_ptr<ProgressLine> progress;
     eo.progress = [&progress](long done, long failed, long total) {
       if (!progress) progress = std::make_unique<ProgressLine>(total, "replays");
@@ -460,17 +511,7 @@ int RunEvaluate(const EvaluateOptions& o) {
   std::vector<std::string> self_consistent;
   for (const auto& p : run.report.predictors)
     if (SelfConsistent(p, run.report.truth.source)) self_consistent.push_back(p);
-  nlohmann::json j = assessment::ToJson(run.report);
-  j["start"] = assessment::ToJson(run.start);
-  j["truth"]["self_consistency_predictors"] = self_consistent;
-  j["evaluation_id"] = run.evaluation_id;
-  // "truth" is the report's object (source, independent, statement); the
-  // per-backend trial counts sit in it.
-  j["truth"]["trials"] = nlohmann::json::array();
-  for (const auto& t : truths) {
-    j["truth"]["trials"].push_back(
-        {{"truth", t.truth}, {"backend", t.backend}, {"trials", t.trials}});
-  }
+  nlohmann::json j = EvaluationJson(run, truths, self_consistent);
   if (!run.not_stored.empty()) {
     // Finished, but the store would not take it: the work is kept in a file.
     j["evaluation_id"] = nullptr;
@@ -484,34 +525,10 @@ int RunEvaluate(const EvaluateOptions& o) {
             UserMessage(run.not_stored) + "); the report is saved in " + rescue);
   }
   if (!o.out_path.empty()) WriteResultFile(o.out_path, j.dump(2) + "\n");
-  if (o.json) {
+  if (o.json)
     std::printf("%s\n", j.dump(2).c_str());
-  } else {
-    const std::string text = FormatTable(run.report, run.evaluation_id) + FormatStart(run.start);
-    std::fwrite(text.data(), 1, text.size(), stdout);
-    for (const auto& t : truths) {
-      std::printf("truth: %s (%s backend), %lld trials%s\n",
-                  t.truth.empty() ? "unreported" : t.truth.c_str(),
-                  t.backend.empty() ? "?" : t.backend.c_str(), static_cast<long long>(t.trials),
-                  t.truth == "self-consistency"
-                      ? ": these errors are arena's model against itself, not accuracy"
-                  : t.truth == "measured" ? ": measured, the observed streams are the "
-                                            "truth (no separate true "
-                                            "stream); trials whose poses failed the "
-                                            "import check are not served"
-                  : t.truth == db::kTruthMeasuredNoForces
-                      ? ": measured poses; the forces were not measured or failed "
-                        "their import "
-                        "check: poses scored, forces not scored on these trials"
-                      : "");
-    }
-    for (const auto& p : self_consistent)
-      std::printf(
-          "predictor %s: the truth's own engine (%s backend): its "
-          "errors are self-consistency, "
-          "not accuracy\n",
-          p.c_str(), EngineBackend(p).c_str());
-  }
+  else
+    PrintEvaluation(run, truths, self_consistent);
   return kExitOk;
 }
 
@@ -531,8 +548,7 @@ void AddEvaluateCommand(CLI::App& app, Action* action) {
       ->delimiter(',')
       ->capture_default_str();
   cmd->add_option("--facets", o->facets,
-                  "arena: friction cone facets to try (comma separated; default grid: "
-                  "4,8,16,32 "
+                  "arena: friction cone facets to try (comma separated; default grid: 4,8,16,32 "
                   "x dt 8,4,2,1 ms, keeping only settings every trial's scene takes)")
       ->delimiter(',')
       ->each([o](const std::string&) { o->grid_given = true; });
@@ -546,8 +562,7 @@ void AddEvaluateCommand(CLI::App& app, Action* action) {
       ->delimiter(',')
       ->each([o](const std::string&) { o->grid_given = true; });
   cmd->add_option("--contacts", o->contacts,
-                  "arena: contact geometries to try (tracked: follow the "
-                  "object; fixed: frozen "
+                  "arena: contact geometries to try (tracked: follow the object; fixed: frozen "
                   "frame)")
       ->delimiter(',')
       ->each([o](const std::string&) { o->grid_given = true; });
@@ -566,37 +581,30 @@ void AddEvaluateCommand(CLI::App& app, Action* action) {
       ->each(mujoco_given)
       ->capture_default_str();
   cmd->add_option("--mujoco-solref", o->mujoco_solref,
-                  "mujoco: contact solref values to try, each "
-                  "TIMECONST:DAMPRATIO (default "
+                  "mujoco: contact solref values to try, each TIMECONST:DAMPRATIO (default "
                   "0.002:1)")
       ->delimiter(',')
       ->each(mujoco_given);
   cmd->add_option("--mujoco-solimp", o->mujoco_solimp,
-                  "mujoco: contact solimp values to try, each "
-                  "DMIN:DMAX:WIDTH:MID:POWER (default "
+                  "mujoco: contact solimp values to try, each DMIN:DMAX:WIDTH:MID:POWER (default "
                   "0.9:0.95:0.001:0.5:2)")
       ->delimiter(',')
       ->each(mujoco_given);
   cmd->add_option("--convergence-trials", o->convergence_trials,
-                  "Trials whose pieces the convergence table restarts from the "
-                  "true state "
+                  "Trials whose pieces the convergence table restarts from the true state "
                   "(0: no table)")
       ->capture_default_str();
-  cmd->add_option("--budget", o->budgets,
-                  "Budget, repeatable (all must hold), judged on p95: '1mm' = "
-                  "p95 final position error "
-                  "<= 1 mm, '2ms' = p95 predictor time per trial <= 2 ms, "
-                  "'1.5floor' = p95 final position "
-                  "error <= 1.5 x the noise floor; or METRIC=VALUE[UNIT] with "
-                  "METRIC position_median|"
-                  "position_p95|angle_median|angle_p95|force_median|force_p95|"
-                  "mode_agreement_median "
-                  "(a minimum)|time_p95");
+  cmd->add_option(
+      "--budget", o->budgets,
+      "Budget, repeatable (all must hold), judged on p95: '1mm' = p95 final position error "
+      "<= 1 mm, '2ms' = p95 predictor time per trial <= 2 ms, '1.5floor' = p95 final position "
+      "error <= 1.5 x the noise floor; or METRIC=VALUE[UNIT] with METRIC position_median|"
+      "position_p95|angle_median|angle_p95|force_median|force_p95|mode_agreement_median "
+      "(a minimum)|time_p95");
   cmd->add_option("--threads", o->threads, "Worker threads (0: one per core)")
       ->capture_default_str();
   cmd->add_option("--calibration", o->calibration,
-                  "Apply this calibration's fitted scales (arena calibrate) to "
-                  "every trial's "
+                  "Apply this calibration's fitted scales (arena calibrate) to every trial's "
                   "scene before predicting it, for every predictor")
       ->check(CLI::PositiveNumber);
   cmd->add_option("--scale", o->scales,
@@ -604,8 +612,7 @@ void AddEvaluateCommand(CLI::App& app, Action* action) {
                   "mu_pusher, mu_support, pressure_rim, ...) on every scene, over "
                   "--calibration's");
   cmd->add_option("--group-by", o->group_by,
-                  "Also report every setting per value of this trial parameter (e.g. "
-                  "shape, "
+                  "Also report every setting per value of this trial parameter (e.g. shape, "
                   "push_angle_rad, speed_mm_s): the trial's stored parameters, else "
                   "--trial-parameters");
   cmd->add_option("--trial-parameters", o->trial_parameters,
@@ -614,42 +621,27 @@ void AddEvaluateCommand(CLI::App& app, Action* action) {
   cmd->add_flag("--json", o->json, "Print the report as JSON");
   cmd->add_option("--from", o->from,
                   "Where predictions start: measured (the start pose each trial's cell "
-                  "measured: errors are the model's) or planned (the scene's pose: "
-                  "errors "
-                  "include the reset's placement); from measured, each setting also "
-                  "runs from "
-                  "planned and the report says how much of the error the start pose "
-                  "explains")
+                  "measured: errors are the model's) or planned (the scene's pose: errors "
+                  "include the reset's placement); from measured, each setting also runs from "
+                  "planned and the report says how much of the error the start pose explains")
       ->capture_default_str();
   cmd->add_option("--out", o->out_path,
                   "Also write the report (JSON) to this file; a run the store cannot take "
                   "(locked until Ctrl-C, full) is saved there too");
   cmd->footer(
       "Example:\n"
-      "  arena evaluate --db lab.db --campaign 3 --predictors arena "
-      "--budget 1.5floor\n"
-      "  arena evaluate --db lab.db --campaign 3 --facets 4,8,16 "
-      "--points 3,5 --budget 1mm\n"
-      "Every done trial is replayed from its stored scene through each "
-      "predictor at each setting\n"
-      "of its grid (arena: facets x points x dt x reduce), scored "
-      "against its stored ground\n"
-      "truth, and the run is stored (tables evaluations, "
-      "evaluation_results). Every error is\n"
-      "median/p95/max over the trials predicted; divergences (left the "
-      "grasp, blew up) and\n"
-      "failures are counted and listed apart, never averaged in. The "
-      "noise floor is the spread\n"
-      "of the true final pose between replicates. The Pareto front is "
-      "the first error budget's\n"
-      "metric (default: p95 final position error) against median time; "
-      "with a budget the\n"
-      "cheapest setting meeting it on p95 is recommended (with only a "
-      "time budget, the most\n"
-      "accurate), without one the front is described. The report names "
-      "its truth.\n"
-      "Plot the trade with: arena plot --db FILE --campaign ID "
-      "--tradeoff --out FILE.svg\n");
+      "  arena evaluate --db lab.db --campaign 3 --predictors arena --budget 1.5floor\n"
+      "  arena evaluate --db lab.db --campaign 3 --facets 4,8,16 --points 3,5 --budget 1mm\n"
+      "Every done trial is replayed from its stored scene through each predictor at each setting\n"
+      "of its grid (arena: facets x points x dt x reduce), scored against its stored ground\n"
+      "truth, and the run is stored (tables evaluations, evaluation_results). Every error is\n"
+      "median/p95/max over the trials predicted; divergences (left the grasp, blew up) and\n"
+      "failures are counted and listed apart, never averaged in. The noise floor is the spread\n"
+      "of the true final pose between replicates. The Pareto front is the first error budget's\n"
+      "metric (default: p95 final position error) against median time; with a budget the\n"
+      "cheapest setting meeting it on p95 is recommended (with only a time budget, the most\n"
+      "accurate), without one the front is described. The report names its truth.\n"
+      "Plot the trade with: arena plot --db FILE --campaign ID --tradeoff --out FILE.svg\n");
   cmd->callback([o, action] { *action = [o] { return RunEvaluate(*o); }; });
 }
 

@@ -10,6 +10,7 @@
 #include <cmath>
 #include <cstdio>
 #include <fstream>
+#include <functional>
 #include <memory>
 #include <optional>
 #include <random>
@@ -55,8 +56,8 @@ struct RunOptions {
   std::string backend_settings;
   std::string log_level = "info";
   bool quiet = false;
-  std::string security_lab;               // DDS-Security: LAB/service and LAB/sim1.. (arena
-                                          // certs); "": open domain
+  std::string
+      security_lab;  // DDS-Security: LAB/service and LAB/sim1.. (arena certs); "": open domain
   dds::NetworkOptions network_for_probe;  // this host only, like the run's participants
 };
 
@@ -97,8 +98,7 @@ double Percentile(std::vector<double> v, double q) {
 }
 
 // overhead_s: arena's own time per clean trial on its cell (TrialTiming).
-// @returns the number of failed trials (the exit code says whether there were
-// any).
+// @returns the number of failed trials (the exit code says whether there were any).
 std::int64_t PrintSummary(const std::string& db_path, std::int64_t campaign_id, double wall_s,
                           const std::vector<double>& overhead_s) {
   db::StoreOptions ro;
@@ -144,8 +144,7 @@ std::int64_t PrintSummary(const std::string& db_path, std::int64_t campaign_id, 
                                       "true stream"
         : t.truth == db::kTruthMeasuredNoForces
             ? "measured data without forces (" + t.backend +
-                  "): forces not measured or failed their import check, poses "
-                  "scored, forces "
+                  "): forces not measured or failed their import check, poses scored, forces "
                   "not"
             : "an unreported backend";
     self_consistency = self_consistency || t.truth == "self-consistency";
@@ -163,33 +162,28 @@ std::int64_t PrintSummary(const std::string& db_path, std::int64_t campaign_id, 
     std::printf("  model error none: no trial was predicted and scored\n");
   } else {
     std::printf(
-        "  model error (median over %zu predictions): final position "
-        "%.3g mm, final angle %.3g "
+        "  model error (median over %zu predictions): final position %.3g mm, final angle %.3g "
         "deg,\n",
         pos_err.size(), Median(pos_err) * 1e3, Median(ang_err) * 180 / M_PI);
     // Forces only where the truth measured them (a measured trial without
     // forces is not scored on them): say over how many.
     if (force_err.empty())
-      std::printf(
-          "              contact force not scored (no truth measured "
-          "forces)\n");
+      std::printf("              contact force not scored (no truth measured forces)\n");
     else
-      std::printf(
-          "              contact force %.3g N RMS, contact-mode "
-          "agreement %.1f %%%s\n",
-          Median(force_err), 100 * Median(mode),
-          force_err.size() < pos_err.size() ? (" (over " + std::to_string(force_err.size()) + "; " +
-                                               std::to_string(pos_err.size() - force_err.size()) +
-                                               " without measured forces not scored)")
-                                                  .c_str()
-                                            : "");
+      std::printf("              contact force %.3g N RMS, contact-mode agreement %.1f %%%s\n",
+                  Median(force_err), 100 * Median(mode),
+                  force_err.size() < pos_err.size()
+                      ? (" (over " + std::to_string(force_err.size()) + "; " +
+                         std::to_string(pos_err.size() - force_err.size()) +
+                         " without measured forces not scored)")
+                            .c_str()
+                      : "");
   }
   if (!truth_line.empty()) {
     std::printf("  truth       model error is against %s\n", truth_line.c_str());
     if (self_consistency)
       std::printf(
-          "              (arena's model against itself at higher "
-          "settings: run --backend mujoco "
+          "              (arena's model against itself at higher settings: run --backend mujoco "
           "for an independent truth)\n");
   }
   if (!pred_time.empty())
@@ -199,8 +193,7 @@ std::int64_t PrintSummary(const std::string& db_path, std::int64_t campaign_id, 
                     : "");
   if (!overhead_s.empty()) {
     std::printf(
-        "  orchestration %.2f ms median, %.2f ms p95 per trial (cell "
-        "busy time minus its own "
+        "  orchestration %.2f ms median, %.2f ms p95 per trial (cell busy time minus its own "
         "execute\n"
         "              and reset time, %zu clean trials)\n",
         Median(overhead_s) * 1e3, Percentile(overhead_s, 0.95) * 1e3, overhead_s.size());
@@ -208,10 +201,8 @@ std::int64_t PrintSummary(const std::string& db_path, std::int64_t campaign_id, 
   // Every failure with its reason (the cell's, the driver's, the predictor's).
   std::fputs(FormatFailures(CampaignFailures(*store, campaign_id), "  ").c_str(), stdout);
   std::fputs(FormatDeadlines(CampaignDeadlines(*store, campaign_id), "  ").c_str(), stdout);
-  std::printf(
-      "  store       %s  (arena status --db %s; arena query --db %s "
-      "\"select ...\")\n",
-      db_path.c_str(), db_path.c_str(), db_path.c_str());
+  std::printf("  store       %s  (arena status --db %s; arena query --db %s \"select ...\")\n",
+              db_path.c_str(), db_path.c_str(), db_path.c_str());
   return failed;
 }
 
@@ -282,14 +273,13 @@ void RefuseWhatTheCellsCannotRun(const orchestrator::Campaign& campaign, const R
   }
   spdlog::set_level(level);
   if (!caps.emulates_defects && executors::PerturbsPhysics(campaign_profile)) {
-    throw CommandError(kExitBadInput,
-                       "defects: the campaign perturbs the physics "
-                       "(friction_variability or actuation noise), "
-                       "and the cells' " +
-                           caps.name + " backend cannot (" + executors::ToString(caps.truth) +
-                           " truth is not simulated): every trial would be "
-                           "refused; run it on model or mujoco "
-                           "cells, or without those defects");
+    throw CommandError(
+        kExitBadInput,
+        "defects: the campaign perturbs the physics (friction_variability or actuation noise), "
+        "and the cells' " +
+            caps.name + " backend cannot (" + executors::ToString(caps.truth) +
+            " truth is not simulated): every trial would be refused; run it on model or mujoco "
+            "cells, or without those defects");
   }
   if (campaign.adaptive) return;  // its trials are chosen as it runs
   // The cells' rule: a recording's own extent is their workspace unless
@@ -324,80 +314,46 @@ void RefuseWhatTheCellsCannotRun(const orchestrator::Campaign& campaign, const R
   }
   if (refused > 0 && !opt.quiet)
     std::fprintf(stderr,
-                 "warning: %lld of %lld trials are beyond what the cells can "
-                 "do and will be "
+                 "warning: %lld of %lld trials are beyond what the cells can do and will be "
                  "refused, e.g. %s\n",
                  static_cast<long long>(refused), static_cast<long long>(n), first.c_str());
 }
 
-int Run(RunOptions opt) {
+void CheckRunOptions(const RunOptions& opt) {
   if (opt.cells < 1 || opt.cells > 64)
     throw CommandError(kExitBadInput, "--cells: must be 1..64, got " + std::to_string(opt.cells));
   if (!(opt.speed >= 0)) throw CommandError(kExitBadInput, "--speed: must be >= 0");
   if (opt.domain > dds::kMaxDomainId || opt.domain < -1)
     throw CommandError(kExitBadInput, "--domain: must be 0.." + std::to_string(dds::kMaxDomainId) +
                                           ", got " + std::to_string(opt.domain));
+}
 
-  // Signals first: the log's flusher, the cells and DDS threads inherit the
-  // blocked mask.
-  std::atomic<orchestrator::Service*> running{nullptr};
-  SignalWatcher signals([&running](int) {
-    if (auto* s = running.load()) s->Stop();
-  });
+// A DDS-Security identity of the lab's (--security): service, simN, a controller.
+std::string RunIdentity(const RunOptions& opt, const std::string& name) {
+  return opt.security_lab + "/" + name;
+}
 
-  const orchestrator::Campaign campaign = LoadValidCampaign(opt.campaign_path);
-  RefuseWhatTheCellsCannotRun(campaign, opt);
-  // Every identity checked before anything is stored: a missing one is named
-  // here.
-  const auto identity = [&opt](const std::string& name) { return opt.security_lab + "/" + name; };
-  if (!opt.security_lab.empty()) {
-    try {
-      dds::CheckIdentityDir(identity("service"));
-      for (int k = 0; k < opt.cells; ++k)
-        dds::CheckIdentityDir(identity("sim" + std::to_string(k + 1)));
-      // A controller's identity is issued for its name (its name is bound to
-      // it).
-      if (const auto name = CampaignController(campaign)) dds::CheckIdentityDir(identity(*name));
-    } catch (const dds::SecurityError& e) {
-      throw CommandError(kExitBadInput, std::string("--security: ") + e.what() +
-                                            " (issue it with `arena certs issue " +
-                                            opt.security_lab +
-                                            " --role cell|service|controller --name NAME`)");
-    }
+// Every identity checked before anything is stored: a missing one is named here.
+void CheckRunIdentities(const RunOptions& opt, const orchestrator::Campaign& campaign) {
+  if (opt.security_lab.empty()) return;
+  try {
+    dds::CheckIdentityDir(RunIdentity(opt, "service"));
+    for (int k = 0; k < opt.cells; ++k)
+      dds::CheckIdentityDir(RunIdentity(opt, "sim" + std::to_string(k + 1)));
+    // A controller's identity is issued for its name (its name is bound to it).
+    if (const auto name = CampaignController(campaign))
+      dds::CheckIdentityDir(RunIdentity(opt, *name));
+  } catch (const dds::SecurityError& e) {
+    throw CommandError(kExitBadInput, std::string("--security: ") + e.what() +
+                                          " (issue it with `arena certs issue " + opt.security_lab +
+                                          " --role cell|service|controller --name NAME`)");
   }
-  if (opt.domain < 0) {
-    opt.domain = QuietDomain(opt.network_for_probe);
-  }
-  std::int64_t campaign_id = 0;
-  {
-    db::StoreOptions so;
-    so.scene_facts = orchestrator::SceneFactsOfJson;  // an older store's
-                                                      // migration reads scenes
-    auto store = db::Store::Open(opt.db_path, so);
-    campaign_id = orchestrator::SubmitCampaign(*store, campaign);
-  }
-  orchestrator::SetUpServiceLog(opt.db_path, opt.log_level,
-                                /*to_stderr=*/false);
-  // An adaptive campaign's count is open: its cap bounds the progress bar.
-  const std::int64_t trials =
-      campaign.adaptive
-          ? std::min<std::int64_t>(campaign.adaptive->max_trials, orchestrator::kMaxTrials)
-          : orchestrator::TrialCount(campaign);
-  if (!opt.quiet)
-    std::fprintf(stderr,
-                 "campaign %lld '%s': %s%lld trials on %d simulated cells (DDS "
-                 "domain %d, log %s)\n",
-                 static_cast<long long>(campaign_id), campaign.name.c_str(),
-                 campaign.adaptive ? "adaptive, up to " : "", static_cast<long long>(trials),
-                 opt.cells, opt.domain, orchestrator::ServiceLogPath(opt.db_path).c_str());
+}
 
-  // Cell ids unique to this run (sim1-3fa2c1, ...): two runs that end up on
-  // one domain still never address each other's cells. With --security the
-  // identities are the lab's sim1..N.
-  const std::string run_tag = opt.security_lab.empty() ? "-" + RunTag() : "";
+// The simulated cells as child processes of this one.
+std::vector<ChildProcess> StartRunCells(const RunOptions& opt, const std::string& run_tag,
+                                        const std::string& self) {
   std::vector<ChildProcess> cells;
-  std::vector<ChildProcess> controllers;
-  const std::string self = SelfExecutable();
   for (int k = 0; k < opt.cells; ++k) {
     std::vector<std::string> argv = {self,           "cell",
                                      "--id",         "sim" + std::to_string(k + 1) + run_tag,
@@ -409,41 +365,124 @@ int Run(RunOptions opt) {
     if (!opt.backend_settings.empty())
       argv.insert(argv.end(), {"--backend-settings", opt.backend_settings});
     if (!opt.security_lab.empty())
-      argv.insert(argv.end(), {"--security", identity("sim" + std::to_string(k + 1))});
+      argv.insert(argv.end(), {"--security", RunIdentity(opt, "sim" + std::to_string(k + 1))});
     cells.emplace_back(argv, opt.db_path + ".sim" + std::to_string(k + 1) + ".log");
   }
+  return cells;
+}
 
+// A closed-loop campaign's controller (issue 19), started like the cells
+// when arena's library has it; a lab's own one the lab starts.
+std::vector<ChildProcess> StartRunController(const RunOptions& opt,
+                                             const orchestrator::Campaign& campaign,
+                                             const std::string& self) {
+  std::vector<ChildProcess> controllers;
+  const auto name = CampaignController(campaign);
+  if (!name) return controllers;
+  const auto laws = executors::LibraryLaws();
+  if (std::find(laws.begin(), laws.end(), *name) != laws.end()) {
+    std::vector<std::string> argv = {self,           "controller",
+                                     "--name",       *name,
+                                     "--domain",     std::to_string(opt.domain),
+                                     "--parent-pid", std::to_string(getpid())};
+    if (!opt.security_lab.empty()) argv.insert(argv.end(), {"--security", RunIdentity(opt, *name)});
+    controllers.emplace_back(argv, opt.db_path + ".controller.log");
+  } else if (!opt.quiet) {
+    std::fprintf(stderr,
+                 "closed loop: start controller '%s' on domain %d yourself (it is not one of "
+                 "arena's own)\n",
+                 name->c_str(), opt.domain);
+  }
+  return controllers;
+}
+
+std::unique_ptr<orchestrator::Service> MakeRunService(const RunOptions& opt,
+                                                      std::int64_t campaign_id) {
   orchestrator::ServiceOptions so;
   so.db_path = opt.db_path;
   so.domain_id = opt.domain;
   so.exit_when_done = true;
   so.only_campaign = campaign_id;
-  if (!opt.security_lab.empty()) so.network.security_dir = identity("service");
-  std::unique_ptr<orchestrator::Service> service;
+  if (!opt.security_lab.empty()) so.network.security_dir = RunIdentity(opt, "service");
   try {
-    service = std::make_unique<orchestrator::Service>(so);
+    return std::make_unique<orchestrator::Service>(so);
   } catch (const db::StoreError& e) {
     throw StoreCommandError(e);
   }
-  // A closed-loop campaign's controller (issue 19), started like the cells
-  // when arena's library has it; a lab's own one the lab starts.
-  if (const auto name = CampaignController(campaign)) {
-    const auto laws = executors::LibraryLaws();
-    if (std::find(laws.begin(), laws.end(), *name) != laws.end()) {
-      std::vector<std::string> argv = {self,           "controller",
-                                       "--name",       *name,
-                                       "--domain",     std::to_string(opt.domain),
-                                       "--parent-pid", std::to_string(getpid())};
-      if (!opt.security_lab.empty()) argv.insert(argv.end(), {"--security", identity(*name)});
-      controllers.emplace_back(argv, opt.db_path + ".controller.log");
-    } else if (!opt.quiet) {
-      std::fprintf(stderr,
-                   "closed loop: start controller '%s' on domain %d yourself "
-                   "(it is not one of "
-                   "arena's own)\n",
-                   name->c_str(), opt.domain);
+}
+
+// Each service tick: stops the run when no cell is left to finish the
+// campaign (every cell process exited, or every cell quarantined or lost
+// for 5 s), and shows the progress line. `failed` says why it stopped.
+std::function<void(const orchestrator::ServiceCounters&)> WatchRunCells(
+    const RunOptions& opt, std::vector<ChildProcess>* cells, orchestrator::Service* service,
+    ProgressLine* progress, std::string* failed) {
+  auto no_usable_since = std::make_shared<std::optional<std::chrono::steady_clock::time_point>>();
+  return [=, &opt](const orchestrator::ServiceCounters& c) {
+    int alive = 0;
+    for (auto& cell : *cells) alive += !cell.Poll().has_value();
+    if (alive == 0 && failed->empty()) {
+      *failed = "every simulated cell exited (see " + opt.db_path + ".sim*.log)";
+      service->Stop();
     }
+    // Quarantined or lost cells get no trials: with none left the campaign cannot finish.
+    const auto now = std::chrono::steady_clock::now();
+    if (c.cells_known > 0 && c.cells_usable == 0) {
+      if (!*no_usable_since) *no_usable_since = now;
+      if (now - **no_usable_since > std::chrono::seconds(5) && failed->empty()) {
+        *failed = "no usable cell left: every cell is quarantined or lost (arena status --db " +
+                  opt.db_path + "; log " + orchestrator::ServiceLogPath(opt.db_path) + ")";
+        service->Stop();
+      }
+    } else {
+      no_usable_since->reset();
+    }
+    if (!opt.quiet) progress->Update(c.done + c.failed, c.failed, std::to_string(alive) + " cells");
+  };
+}
+
+int Run(RunOptions opt) {
+  CheckRunOptions(opt);
+  // Signals first: the log's flusher, the cells and DDS threads inherit the blocked mask.
+  std::atomic<orchestrator::Service*> running{nullptr};
+  SignalWatcher signals([&running](int) {
+    if (auto* s = running.load()) s->Stop();
+  });
+
+  const orchestrator::Campaign campaign = LoadValidCampaign(opt.campaign_path);
+  RefuseWhatTheCellsCannotRun(campaign, opt);
+  CheckRunIdentities(opt, campaign);
+  if (opt.domain < 0) {
+    opt.domain = QuietDomain(opt.network_for_probe);
   }
+  std::int64_t campaign_id = 0;
+  {
+    db::StoreOptions so;
+    so.scene_facts = orchestrator::SceneFactsOfJson;  // an older store's migration reads scenes
+    auto store = db::Store::Open(opt.db_path, so);
+    campaign_id = orchestrator::SubmitCampaign(*store, campaign);
+  }
+  orchestrator::SetUpServiceLog(opt.db_path, opt.log_level, /*to_stderr=*/false);
+  // An adaptive campaign's count is open: its cap bounds the progress bar.
+  const std::int64_t trials =
+      campaign.adaptive
+          ? std::min<std::int64_t>(campaign.adaptive->max_trials, orchestrator::kMaxTrials)
+          : orchestrator::TrialCount(campaign);
+  if (!opt.quiet)
+    std::fprintf(
+        stderr, "campaign %lld '%s': %s%lld trials on %d simulated cells (DDS domain %d, log %s)\n",
+        static_cast<long long>(campaign_id), campaign.name.c_str(),
+        campaign.adaptive ? "adaptive, up to " : "", static_cast<long long>(trials), opt.cells,
+        opt.domain, orchestrator::ServiceLogPath(opt.db_path).c_str());
+
+  // Cell ids unique to this run (sim1-3fa2c1, ...): two runs that end up on
+  // one domain still never address each other's cells. With --security the
+  // identities are the lab's sim1..N.
+  const std::string run_tag = opt.security_lab.empty() ? "-" + RunTag() : "";
+  const std::string self = SelfExecutable();
+  std::vector<ChildProcess> cells = StartRunCells(opt, run_tag, self);
+  std::unique_ptr<orchestrator::Service> service = MakeRunService(opt, campaign_id);
+  std::vector<ChildProcess> controllers = StartRunController(opt, campaign, self);
   running = service.get();
   if (signals.received()) service->Stop();
 
@@ -453,31 +492,7 @@ int Run(RunOptions opt) {
   const auto start = std::chrono::steady_clock::now();
   ProgressLine progress(trials, "trials");
   std::string cells_failed;
-  std::optional<std::chrono::steady_clock::time_point> no_usable_since;
-  service->OnTick([&](const orchestrator::ServiceCounters& c) {
-    int alive = 0;
-    for (auto& cell : cells) alive += !cell.Poll().has_value();
-    if (alive == 0 && cells_failed.empty()) {
-      cells_failed = "every simulated cell exited (see " + opt.db_path + ".sim*.log)";
-      service->Stop();
-    }
-    // Quarantined or lost cells get no trials: with none left the campaign
-    // cannot finish.
-    const auto now = std::chrono::steady_clock::now();
-    if (c.cells_known > 0 && c.cells_usable == 0) {
-      if (!no_usable_since) no_usable_since = now;
-      if (now - *no_usable_since > std::chrono::seconds(5) && cells_failed.empty()) {
-        cells_failed =
-            "no usable cell left: every cell is quarantined or lost "
-            "(arena status --db " +
-            opt.db_path + "; log " + orchestrator::ServiceLogPath(opt.db_path) + ")";
-        service->Stop();
-      }
-    } else {
-      no_usable_since.reset();
-    }
-    if (!opt.quiet) progress.Update(c.done + c.failed, c.failed, std::to_string(alive) + " cells");
-  });
+  service->OnTick(WatchRunCells(opt, &cells, service.get(), &progress, &cells_failed));
   service->Run();
   progress.Finish();
   const double wall =
@@ -505,30 +520,23 @@ void AddRunCommand(CLI::App& app, Action* action) {
   auto opt = std::make_shared<RunOptions>();
   CLI::App* cmd = app.add_subcommand("run", "Run a campaign end to end on local simulated cells");
   cmd->footer(
-      "Example:\n  arena run examples/campaigns/smoke.json --db "
-      "smoke.db --cells 2\n"
-      "Starts the cells as child processes on a private DDS domain "
-      "(this host only), runs the\n"
-      "service until the campaign is finished, prints a summary. "
-      "Ctrl-C stops cleanly; run the\n"
+      "Example:\n  arena run examples/campaigns/smoke.json --db smoke.db --cells 2\n"
+      "Starts the cells as child processes on a private DDS domain (this host only), runs the\n"
+      "service until the campaign is finished, prints a summary. Ctrl-C stops cleanly; run the\n"
       "same store with `arena serve` to finish what was left.\n"
-      "  arena run examples/campaigns/smoke.json --db smoke.db --cells "
-      "2 --security lab-pki\n"
-      "runs it with DDS-Security: identities lab-pki/service and "
-      "lab-pki/sim1, sim2 (arena "
+      "  arena run examples/campaigns/smoke.json --db smoke.db --cells 2 --security lab-pki\n"
+      "runs it with DDS-Security: identities lab-pki/service and lab-pki/sim1, sim2 (arena "
       "certs).");
   cmd->add_option("campaign", opt->campaign_path, "Campaign JSON (orchestrator/README.md)")
       ->required();
   cmd->add_option("--db", opt->db_path, "SQLite store (created if missing)")->capture_default_str();
   cmd->add_option("--cells", opt->cells, "Simulated cells to start")->capture_default_str();
   cmd->add_option("--domain", opt->domain,
-                  "DDS domain id (default: a domain in 100..231 with no "
-                  "participant on it)");
+                  "DDS domain id (default: a domain in 100..231 with no participant on it)");
   cmd->add_option("--speed", opt->speed, "Cells' pacing: 0 = as fast as possible, 1 = wall clock")
       ->capture_default_str();
   cmd->add_option("--backend", opt->backend,
-                  "The cells' backend: model (arena's own model: the error is "
-                  "self-consistency), "
+                  "The cells' backend: model (arena's own model: the error is self-consistency), "
                   "mujoco (an independent engine), exec:COMMAND, replay:DATASET")
       ->capture_default_str();
   cmd->add_option("--backend-settings", opt->backend_settings,
@@ -539,9 +547,9 @@ void AddRunCommand(CLI::App& app, Action* action) {
                   "Service log level (the log is FILE.log next to the store)")
       ->capture_default_str();
   cmd->add_flag("--quiet", opt->quiet, "No progress line");
-  cmd->add_option("--security", opt->security_lab,
-                  "DDS-Security: a lab from `arena certs init` holding "
-                  "identities service, sim1..simN");
+  cmd->add_option(
+      "--security", opt->security_lab,
+      "DDS-Security: a lab from `arena certs init` holding identities service, sim1..simN");
   cmd->callback([opt, action] { *action = [opt] { return Run(*opt); }; });
 }
 
