@@ -7,7 +7,6 @@
 #include <string>
 
 #include "arena/cli/version.hpp"
-#include "arena/orchestrator/scene_facts.hpp"
 #include "arena/recordings/import.hpp"
 #include "arena/recordings/push_dataset.hpp"
 #include "commands.hpp"
@@ -37,7 +36,6 @@ int RunPushImport(const ImportCliOptions& o) {
     io.pusher_mu = o.pusher_mu;
     io.arena_version = arena::Version();
     io.arena_commit = arena::GitCommit();
-    io.scene_facts = orchestrator::SceneFactsOfJson;
     const auto report = recordings::ImportRecordings(recorded, io);
     std::fputs(report.text.c_str(), stdout);
     std::printf(

@@ -23,7 +23,6 @@
 #include "arena/db/export.hpp"
 #include "arena/executors/backend.hpp"
 #include "arena/mechanics/scene_json.hpp"
-#include "arena/orchestrator/scene_facts.hpp"
 #include "arena/recordings/import.hpp"
 #include "arena/recordings/push_dataset.hpp"
 
@@ -107,7 +106,6 @@ class ImportTest : public ::testing::Test {
     o.out_dir = (root_ / out).string();
     o.adaptor = "push-dataset";
     o.source = data_.string();
-    o.scene_facts = orchestrator::SceneFactsOfJson;
     return ImportRecordings(ReadPushDataset(data_.string(), shapes), o);
   }
   // Nothing beside the inputs: no dataset, no staging or scratch directory.

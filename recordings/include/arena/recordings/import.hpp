@@ -33,9 +33,6 @@ struct ImportOptions {
   double pusher_mu = 0.25;
   CheckOptions checks;
   std::string arena_version, arena_commit;  // for the manifest
-  // What the store keeps of each trial's scene (required; the CLI passes
-  // orchestrator::SceneFactsOfJson): the store and its export read no scene.
-  db::SceneFactsFn scene_facts;
   // Called after each trial is prepared with (done, total).
   std::function<void(std::int64_t, std::int64_t)> progress;
 };
@@ -61,6 +58,10 @@ struct ImportReport {
 // fingers, the pusher a sphere following the measured path. JSON text.
 std::string SceneJson(const Recording& recording, const Resampled& streams,
                       const ImportOptions& options);
+// What the store keeps of that scene (db reads no scene), from the same
+// values: a prism, no fingers, a point pusher on the recorded path.
+db::SceneFacts SceneFactsOf(const Recording& recording, const Resampled& streams,
+                            const ImportOptions& options);
 
 // Checks and writes everything, or nothing: the dataset is built in a
 // temporary directory beside out_dir and renamed into place at the end.
