@@ -26,6 +26,26 @@ std::string Scene() {
      "pusher": {"type": "point", "mu": 0.3, "motion": {"velocity": [0, 0, 0.01]}}})";
 }
 
+// What the service hands the store of Scene() (db reads no scene): its
+// columns, and contacts without geometry (the scene gives none).
+SceneFacts Facts() {
+  SceneFacts f;
+  f.object_shape = "box";
+  f.object_mass = 0.2;
+  f.grip_force = 10;
+  f.duration = 10;
+  f.finger_type = "mixed";
+  f.finger_count = 2;
+  f.finger_mu = 0.5;
+  f.pusher_type = "point";
+  f.pusher_mu = 0.3;
+  f.pusher_speed = 0.01;
+  f.contact_mask = kPointBit | kLineBit;
+  f.contacts = {
+      {"l", false, {}, {}, false}, {"r", false, {}, {}, false}, {"pusher", true, {}, {}, false}};
+  return f;
+}
+
 // A realistic sample: 3 contacts (2 fingers + pusher), 12 finger F/T values.
 Sample MakeSample(int i) {
   Sample s;
@@ -147,7 +167,10 @@ struct BenchStore {
       store->UpsertCell("cell" + std::to_string(c), {"point", "line"});
     const NewCampaign nc = MakeNewCampaign("bench", 0);
     std::vector<PlannedTrial> planned(static_cast<std::size_t>(trials));
-    for (auto& p : planned) p.scene_json = Scene();
+    for (auto& p : planned) {
+      p.scene_json = Scene();
+      p.facts = Facts();
+    }
     store->CreateCampaign(nc, planned);
   }
   ~BenchStore() {
@@ -193,7 +216,7 @@ void BM_IngestSamples(benchmark::State& state) {
   BenchStore b(static_cast<int>(state.max_iterations), 1, full, so);
   for (auto _ : state) {
     auto t = b.store->ClaimNextTrial("cell0");
-    auto ingest = b.store->BeginIngest(t->trial_id, t->attempt, io);
+    auto ingest = b.store->BeginIngest(t->trial_id, t->attempt, Facts().contacts, io);
     const auto& samples = streams[k++ % streams.size()];
     for (const auto& s : samples) ingest->Add(s);
     benchmark::DoNotOptimize(ingest->Finish());
@@ -253,7 +276,8 @@ void BM_SixteenCells250Hz(benchmark::State& state) {
         if (k == 0) {
           if (ingests[c]) ingests[c]->Finish();
           trials[c] = *b->store->ClaimNextTrial("cell" + std::to_string(c));
-          ingests[c] = b->store->BeginIngest(trials[c].trial_id, trials[c].attempt, io);
+          ingests[c] =
+              b->store->BeginIngest(trials[c].trial_id, trials[c].attempt, Facts().contacts, io);
         }
         ingests[c]->Add(samples[static_cast<std::size_t>(k)]);
         if (k % kCommitTicks == kCommitTicks - 1) ingests[c]->Flush();
@@ -318,10 +342,18 @@ BENCHMARK(BM_UnpackChunk);
 void BM_ClaimNextTrial(benchmark::State& state) {
   BenchStore b(100000, 1, false);
   std::vector<PlannedTrial> planned(1000);
-  for (auto& p : planned) p.scene_json = Scene();
+  for (auto& p : planned) {
+    p.scene_json = Scene();
+    p.facts = Facts();
+  }
   b.store->CreateCampaign(MakeNewCampaign("more", 1), planned);
   for (auto& p : planned) {
     p.scene_json = R"({"fingers": [{"type": "patch"}], "pusher": {"type": "patch"}})";
+    p.facts = SceneFacts{};
+    p.facts.finger_type = "patch";
+    p.facts.finger_count = 1;
+    p.facts.pusher_type = "patch";
+    p.facts.contact_mask = kPatchBit;
   }
   b.store->CreateCampaign(MakeNewCampaign("patch-only", 2),
                           planned);  // highest priority, but cell0 cannot host it

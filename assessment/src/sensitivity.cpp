@@ -204,6 +204,38 @@ std::string Num(double v) {
   return buf;
 }
 
+// Why the push is unstable, per parameter: the model fails or the outcome
+// changes within its tolerance, a jump within it, a nonlinear response.
+void AddStabilityReasons(const std::vector<Parameter>& params,
+                         const std::vector<ParameterSensitivity>& sens, const StabilityOptions& o,
+                         Stability* st_out) {
+  Stability& st = *st_out;
+  for (size_t i = 0; i < params.size(); ++i) {
+    const ParameterStability& ps = st.parameters[i];
+    // "0.02 N"; a dimensionless parameter (unit "1") gets no unit.
+    const std::string unit = params[i].unit == "1" ? "" : " " + params[i].unit;
+    const std::string tol_text = Num(ps.tolerance) + unit;
+    if (ps.failed) {
+      AddReason(&st, "the model fails within " + params[i].name + " +- " + tol_text);
+    } else if (ps.flips) {
+      AddReason(&st, params[i].name + " within +- " + tol_text + " changes the outcome (" +
+                         ps.change + ") at " + Num(ps.boundary.value_or(0)) + unit);
+    }
+    const ParameterSensitivity& ds = sens[i];
+    if (!ds.jump_quantity.empty() && ps.tolerance > 0 && ds.parameter.step <= ps.tolerance) {
+      AddReason(&st, params[i].name + " +- " + Num(ds.parameter.step) + unit +
+                         " (within the tolerance " + tol_text + ") makes " + ds.jump_quantity +
+                         " jump by " + Num(ds.jump) + " " + UnitOf(ds.jump_quantity) +
+                         ": discontinuous here");
+    }
+    if (ps.nonlinear) {
+      AddReason(&st, params[i].name + " +- " + tol_text + " moves " + ps.nonlinear_quantity + " " +
+                         Num(ps.linear_ratio) + "x its linearised estimate (limit " +
+                         Num(o.linear_multiple) + "x)");
+    }
+  }
+}
+
 Stability CheckStability(const Scene& scene, const std::vector<Parameter>& params,
                          const std::vector<ParameterSensitivity>& sens, const Outcome& nominal,
                          const std::array<double, kQuantityCount>& scales,
@@ -313,30 +345,7 @@ Stability CheckStability(const Scene& scene, const std::vector<Parameter>& param
       st.nearest = Boundary{params[i].name, offset, in_tol, found[k].second};
     }
   }
-  for (size_t i = 0; i < params.size(); ++i) {
-    const ParameterStability& ps = st.parameters[i];
-    // "0.02 N"; a dimensionless parameter (unit "1") gets no unit.
-    const std::string unit = params[i].unit == "1" ? "" : " " + params[i].unit;
-    const std::string tol_text = Num(ps.tolerance) + unit;
-    if (ps.failed) {
-      AddReason(&st, "the model fails within " + params[i].name + " +- " + tol_text);
-    } else if (ps.flips) {
-      AddReason(&st, params[i].name + " within +- " + tol_text + " changes the outcome (" +
-                         ps.change + ") at " + Num(ps.boundary.value_or(0)) + unit);
-    }
-    const ParameterSensitivity& ds = sens[i];
-    if (!ds.jump_quantity.empty() && ps.tolerance > 0 && ds.parameter.step <= ps.tolerance) {
-      AddReason(&st, params[i].name + " +- " + Num(ds.parameter.step) + unit +
-                         " (within the tolerance " + tol_text + ") makes " + ds.jump_quantity +
-                         " jump by " + Num(ds.jump) + " " + UnitOf(ds.jump_quantity) +
-                         ": discontinuous here");
-    }
-    if (ps.nonlinear) {
-      AddReason(&st, params[i].name + " +- " + tol_text + " moves " + ps.nonlinear_quantity + " " +
-                         Num(ps.linear_ratio) + "x its linearised estimate (limit " +
-                         Num(o.linear_multiple) + "x)");
-    }
-  }
+  AddStabilityReasons(params, sens, o, &st);
   st.unstable = !st.reasons.empty();
   return st;
 }

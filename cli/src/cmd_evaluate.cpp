@@ -18,6 +18,7 @@
 #include "arena/assessment/evaluation.hpp"
 #include "arena/db/store.hpp"
 #include "arena/mechanics/scene_json.hpp"
+#include "arena/orchestrator/scene_facts.hpp"
 #include "commands.hpp"
 #include "output_guard.hpp"
 #include "progress.hpp"
@@ -294,9 +295,8 @@ std::string FormatTable(const assessment::EvaluationReport& r, std::int64_t eval
   return out.str();
 }
 
-int RunEvaluate(const EvaluateOptions& o) {
-  assessment::EvaluationOptions eo;
-  eo.predictors.clear();
+// --facets, --points, --dt, --reduce, --contacts: the arena predictor's grid.
+assessment::FidelityGrid ArenaGrid(const EvaluateOptions& o) {
   assessment::FidelityGrid grid;
   grid.facets = o.facets;
   grid.points = o.points;
@@ -320,6 +320,13 @@ int RunEvaluate(const EvaluateOptions& o) {
     }
     grid.contacts.push_back(*mode);
   }
+  return grid;
+}
+
+// --predictors with their grids (arena's, MuJoCo's).
+std::vector<assessment::PredictorRequest> PredictorRequests(const EvaluateOptions& o,
+                                                            const assessment::FidelityGrid& grid) {
+  std::vector<assessment::PredictorRequest> out;
   for (const auto& name : o.predictors) {
     assessment::PredictorRequest req;
     req.name = name;
@@ -337,8 +344,16 @@ int RunEvaluate(const EvaluateOptions& o) {
           req.mujoco_grid->solimp.push_back(ParseColonList<5>("--mujoco-solimp", v));
       }
     }
-    eo.predictors.push_back(req);
+    out.push_back(req);
   }
+  return out;
+}
+
+// The options that need no store: predictors, threads, start, budgets.
+assessment::EvaluationOptions EvaluationOptionsOf(const EvaluateOptions& o) {
+  assessment::EvaluationOptions eo;
+  const assessment::FidelityGrid grid = ArenaGrid(o);
+  eo.predictors = PredictorRequests(o, grid);
   if (o.threads < 0) throw CommandError(kExitBadInput, "--threads: must be >= 0 (0: one per core)");
   if (o.convergence_trials < 0)
     throw CommandError(kExitBadInput, "--convergence-trials: must be >= 0 (0: no table)");
@@ -355,7 +370,99 @@ int RunEvaluate(const EvaluateOptions& o) {
   } catch (const std::invalid_argument& e) {
     throw CommandError(kExitBadInput, std::string("evaluate: ") + e.what());
   }
+  return eo;
+}
 
+// --calibration's fitted scales (a calibration of this campaign), then --scale's.
+void ReadScales(const EvaluateOptions& o, const db::Store& store,
+                assessment::EvaluationOptions* eo) {
+  if (o.calibration > 0) {
+    const db::Calibration cal = store.GetCalibration(o.calibration);
+    if (cal.campaign_id != o.campaign)
+      throw CommandError(kExitBadInput,
+                         "--calibration: calibration " + std::to_string(o.calibration) +
+                             " was fitted to campaign " + std::to_string(cal.campaign_id) +
+                             ", not " + std::to_string(o.campaign));
+    const auto fitted = nlohmann::json::parse(cal.params_json, nullptr, false);
+    if (!fitted.is_object())
+      throw CommandError(kExitBadInput, "--calibration: calibration " +
+                                            std::to_string(o.calibration) +
+                                            " has no fitted parameters");
+    for (const auto& item : fitted.items())
+      eo->scales[item.key()] = item.value().at("scale").get<double>();
+  }
+  for (const auto& text : o.scales) {
+    const auto eq = text.find('=');
+    double k = 0;
+    std::size_t used = 0;
+    const std::string name = text.substr(0, eq);
+    try {
+      if (eq != std::string::npos) k = std::stod(text.substr(eq + 1), &used);
+    } catch (const std::exception&) {
+      used = 0;
+    }
+    if (eq == std::string::npos || used == 0 || used != text.size() - eq - 1 || !std::isfinite(k) ||
+        !(k > 0))
+      throw CommandError(kExitBadInput, "--scale: '" + text +
+                                            "' must be NAME=FACTOR with a factor > 0 (e.g. "
+                                            "mu_pusher=1.2)");
+    try {
+      (void)assessment::ParseCalibrationParam(name);
+    } catch (const assessment::CalibrationError& e) {
+      throw CommandError(kExitBadInput, std::string("--scale: ") + e.what());
+    }
+    eo->scales[name] = k;
+  }
+}
+
+// The report as JSON: the evaluation's, its start, and what the errors are
+// measured against (self-consistent predictors, trials per truth and backend).
+nlohmann::json EvaluationJson(const assessment::EvaluationRun& run,
+                              const std::vector<db::Store::TruthCount>& truths,
+                              const std::vector<std::string>& self_consistent) {
+  nlohmann::json j = assessment::ToJson(run.report);
+  j["start"] = assessment::ToJson(run.start);
+  j["truth"]["self_consistency_predictors"] = self_consistent;
+  j["evaluation_id"] = run.evaluation_id;
+  // "truth" is the report's object (source, independent, statement); the
+  // per-backend trial counts sit in it.
+  j["truth"]["trials"] = nlohmann::json::array();
+  for (const auto& t : truths) {
+    j["truth"]["trials"].push_back(
+        {{"truth", t.truth}, {"backend", t.backend}, {"trials", t.trials}});
+  }
+  return j;
+}
+
+// The report as text: the table, the start, and what each truth means.
+void PrintEvaluation(const assessment::EvaluationRun& run,
+                     const std::vector<db::Store::TruthCount>& truths,
+                     const std::vector<std::string>& self_consistent) {
+  const std::string text = FormatTable(run.report, run.evaluation_id) + FormatStart(run.start);
+  std::fwrite(text.data(), 1, text.size(), stdout);
+  for (const auto& t : truths) {
+    std::printf("truth: %s (%s backend), %lld trials%s\n",
+                t.truth.empty() ? "unreported" : t.truth.c_str(),
+                t.backend.empty() ? "?" : t.backend.c_str(), static_cast<long long>(t.trials),
+                t.truth == "self-consistency"
+                    ? ": these errors are arena's model against itself, not accuracy"
+                : t.truth == "measured"
+                    ? ": measured, the observed streams are the truth (no separate true "
+                      "stream); trials whose poses failed the import check are not served"
+                : t.truth == db::kTruthMeasuredNoForces
+                    ? ": measured poses; the forces were not measured or failed their import "
+                      "check: poses scored, forces not scored on these trials"
+                    : "");
+  }
+  for (const auto& p : self_consistent)
+    std::printf(
+        "predictor %s: the truth's own engine (%s backend): its errors are self-consistency, "
+        "not accuracy\n",
+        p.c_str(), EngineBackend(p).c_str());
+}
+
+int RunEvaluate(const EvaluateOptions& o) {
+  assessment::EvaluationOptions eo = EvaluationOptionsOf(o);
   if (o.group_by.empty() && !o.trial_parameters.empty())
     throw CommandError(kExitBadInput, "--trial-parameters: only with --group-by");
   const TrialParameters parameters(o.trial_parameters, "--trial-parameters");
@@ -380,44 +487,9 @@ int RunEvaluate(const EvaluateOptions& o) {
   try {
     db::StoreOptions so;
     so.create = false;
+    so.scene_facts = orchestrator::SceneFactsOfJson;  // an older store's migration reads scenes
     auto store = db::Store::Open(o.db_path, so);
-    if (o.calibration > 0) {
-      const db::Calibration cal = store->GetCalibration(o.calibration);
-      if (cal.campaign_id != o.campaign)
-        throw CommandError(kExitBadInput,
-                           "--calibration: calibration " + std::to_string(o.calibration) +
-                               " was fitted to campaign " + std::to_string(cal.campaign_id) +
-                               ", not " + std::to_string(o.campaign));
-      const auto fitted = nlohmann::json::parse(cal.params_json, nullptr, false);
-      if (!fitted.is_object())
-        throw CommandError(kExitBadInput, "--calibration: calibration " +
-                                              std::to_string(o.calibration) +
-                                              " has no fitted parameters");
-      for (const auto& item : fitted.items())
-        eo.scales[item.key()] = item.value().at("scale").get<double>();
-    }
-    for (const auto& text : o.scales) {
-      const auto eq = text.find('=');
-      double k = 0;
-      std::size_t used = 0;
-      const std::string name = text.substr(0, eq);
-      try {
-        if (eq != std::string::npos) k = std::stod(text.substr(eq + 1), &used);
-      } catch (const std::exception&) {
-        used = 0;
-      }
-      if (eq == std::string::npos || used == 0 || used != text.size() - eq - 1 ||
-          !std::isfinite(k) || !(k > 0))
-        throw CommandError(kExitBadInput, "--scale: '" + text +
-                                              "' must be NAME=FACTOR with a factor > 0 (e.g. "
-                                              "mu_pusher=1.2)");
-      try {
-        (void)assessment::ParseCalibrationParam(name);
-      } catch (const assessment::CalibrationError& e) {
-        throw CommandError(kExitBadInput, std::string("--scale: ") + e.what());
-      }
-      eo.scales[name] = k;
-    }
+    ReadScales(o, *store, &eo);
     std::unique_ptr<ProgressLine> progress;
     eo.progress = [&progress](long done, long failed, long total) {
       if (!progress) progress = std::make_unique<ProgressLine>(total, "replays");
@@ -439,17 +511,7 @@ int RunEvaluate(const EvaluateOptions& o) {
   std::vector<std::string> self_consistent;
   for (const auto& p : run.report.predictors)
     if (SelfConsistent(p, run.report.truth.source)) self_consistent.push_back(p);
-  nlohmann::json j = assessment::ToJson(run.report);
-  j["start"] = assessment::ToJson(run.start);
-  j["truth"]["self_consistency_predictors"] = self_consistent;
-  j["evaluation_id"] = run.evaluation_id;
-  // "truth" is the report's object (source, independent, statement); the
-  // per-backend trial counts sit in it.
-  j["truth"]["trials"] = nlohmann::json::array();
-  for (const auto& t : truths) {
-    j["truth"]["trials"].push_back(
-        {{"truth", t.truth}, {"backend", t.backend}, {"trials", t.trials}});
-  }
+  nlohmann::json j = EvaluationJson(run, truths, self_consistent);
   if (!run.not_stored.empty()) {
     // Finished, but the store would not take it: the work is kept in a file.
     j["evaluation_id"] = nullptr;
@@ -463,31 +525,10 @@ int RunEvaluate(const EvaluateOptions& o) {
             UserMessage(run.not_stored) + "); the report is saved in " + rescue);
   }
   if (!o.out_path.empty()) WriteResultFile(o.out_path, j.dump(2) + "\n");
-  if (o.json) {
+  if (o.json)
     std::printf("%s\n", j.dump(2).c_str());
-  } else {
-    const std::string text = FormatTable(run.report, run.evaluation_id) + FormatStart(run.start);
-    std::fwrite(text.data(), 1, text.size(), stdout);
-    for (const auto& t : truths) {
-      std::printf("truth: %s (%s backend), %lld trials%s\n",
-                  t.truth.empty() ? "unreported" : t.truth.c_str(),
-                  t.backend.empty() ? "?" : t.backend.c_str(), static_cast<long long>(t.trials),
-                  t.truth == "self-consistency"
-                      ? ": these errors are arena's model against itself, not accuracy"
-                  : t.truth == "measured"
-                      ? ": measured, the observed streams are the truth (no separate true "
-                        "stream); trials whose poses failed the import check are not served"
-                  : t.truth == db::kTruthMeasuredNoForces
-                      ? ": measured poses; the forces were not measured or failed their import "
-                        "check: poses scored, forces not scored on these trials"
-                      : "");
-    }
-    for (const auto& p : self_consistent)
-      std::printf(
-          "predictor %s: the truth's own engine (%s backend): its errors are self-consistency, "
-          "not accuracy\n",
-          p.c_str(), EngineBackend(p).c_str());
-  }
+  else
+    PrintEvaluation(run, truths, self_consistent);
   return kExitOk;
 }
 

@@ -14,6 +14,7 @@
 #include "arena/db/store.hpp"
 #include "arena/mechanics/scene_json.hpp"
 #include "arena/mechanics/simulate.hpp"
+#include "arena/orchestrator/scene_facts.hpp"
 #include "arena/orchestrator/trial_data.hpp"
 #include "commands.hpp"
 #include "output_guard.hpp"
@@ -134,6 +135,7 @@ int RunExport(const ExportCliOptions& o) {
     eo.out_dir = o.out;
     eo.arena_version = arena::Version();
     eo.arena_commit = arena::GitCommit();
+    eo.scene_facts = orchestrator::SceneFactsOfJson;
     if (!o.no_predictions) {
       eo.predict = Predict;
       eo.predict_closed_loop = PredictClosedLoop;

@@ -99,90 +99,92 @@ Panel DurationPanel(const nlohmann::json& report) {
   return panel;
 }
 
-}  // namespace
+// A time budget is on the time per trial (p95): then that is the x axis,
+// so the budget line, the front and the recommendation share it.
+struct TradeoffBudgets {
+  std::optional<double> time, error;  // s; the metric's human unit
+  std::string time_text, error_text;
+};
 
-Chart TradeoffChart(const nlohmann::json& report) {
-  if (!report.is_object() || !report.contains("settings") || !report["settings"].is_array()) {
-    throw std::invalid_argument("evaluation report has no settings list");
+TradeoffBudgets ReadBudgets(const nlohmann::json& report, const std::string& metric) {
+  TradeoffBudgets out;
+  if (!report.contains("budgets") || !report["budgets"].is_array()) return out;
+  for (const auto& b : report["budgets"]) {
+    if (!b.is_object() || !b.contains("limit") || !b["limit"].is_number()) continue;
+    const std::string m = b.value("metric", "");
+    if (m == "time_p95") {
+      out.time = b["limit"].get<double>();
+      out.time_text = b.value("text", "");
+    } else if (m == metric) {
+      out.error = b["limit"].get<double>() * HumanUnit(metric).second;
+      out.error_text = b.value("text", "");
+    }
   }
-  const std::string metric = report.value("primary_metric", "position_median");
+  return out;
+}
+
+// The report's settings sorted into what the chart draws.
+struct TradeoffPoints {
+  // One curve per predictor through its settings: (-step, cost, error, key).
+  std::map<std::string, std::vector<std::tuple<double, double, double, std::string>>> curves;
+  std::vector<std::string> order;                                // predictors, as first seen
+  std::vector<std::pair<double, std::string>> failed;            // cost, label
+  std::vector<std::tuple<double, double, std::string>> plotted;  // cost, error, key
+  Series recommend{"recommended", {}, {}, "#2ca02c", true};
+  double max_error = 0;
+  int hidden = 0;  // settings with zero or no error
+};
+
+TradeoffPoints CollectSettings(const nlohmann::json& report, double unit_scale, bool time_budget,
+                               bool per_sim_s) {
   const std::string recommended =
       report.contains("recommended") && report["recommended"].is_string()
           ? report["recommended"].get<std::string>()
           : "";
-  const auto unit = HumanUnit(metric);
-  // A time budget is on the time per trial (p95): then that is the x axis,
-  // so the budget line, the front and the recommendation share it.
-  std::optional<double> time_budget, error_budget;
-  std::string time_budget_text, error_budget_text;
-  if (report.contains("budgets") && report["budgets"].is_array()) {
-    for (const auto& b : report["budgets"]) {
-      if (!b.is_object() || !b.contains("limit") || !b["limit"].is_number()) continue;
-      const std::string m = b.value("metric", "");
-      if (m == "time_p95") {
-        time_budget = b["limit"].get<double>();
-        time_budget_text = b.value("text", "");
-      } else if (m == metric) {
-        error_budget = b["limit"].get<double>() * HumanUnit(metric).second;
-        error_budget_text = b.value("text", "");
-      }
-    }
-  }
-  const bool per_sim_s =
-      !time_budget && std::any_of(report["settings"].begin(), report["settings"].end(),
-                                  [](const nlohmann::json& s) { return Cost(s, true); });
-  const std::string truth_source = report.contains("truth") && report["truth"].is_object()
-                                       ? report["truth"].value("source", "")
-                                       : "";
-  // One curve per predictor through its settings, coarse to fine.
-  std::map<std::string, std::vector<std::tuple<double, double, double, std::string>>> curves;
-  std::vector<std::string> order;
-  Series failed{"failed settings", {}, {}, "#d62728", true};
-  Series recommend{"recommended", {}, {}, "#2ca02c", true};
-  std::vector<std::pair<double, std::string>> failed_points;
-  std::vector<std::tuple<double, double, std::string>> plotted;  // cost, error, key
-  double max_error = 0;
-  int hidden = 0;
+  TradeoffPoints out;
   for (const auto& s : report["settings"]) {
     const auto cost = time_budget ? Cost95(s) : Cost(s, per_sim_s);
     const std::string predictor = s.value("predictor", "arena");
     const std::string key = s.value("model_key", "");
-    if (std::find(order.begin(), order.end(), predictor) == order.end()) order.push_back(predictor);
+    if (std::find(out.order.begin(), out.order.end(), predictor) == out.order.end())
+      out.order.push_back(predictor);
     const int bad = s.value("failures", 0) + s.value("diverged", 0);
     if (bad > 0 && cost && *cost > 0) {
       // Drawn apart, above every error: its error leaves out what it failed on.
-      failed_points.emplace_back(*cost, key + ": " + std::to_string(s.value("diverged", 0)) +
-                                            " diverged, " + std::to_string(s.value("failures", 0)) +
-                                            " failed");
+      out.failed.emplace_back(*cost, key + ": " + std::to_string(s.value("diverged", 0)) +
+                                         " diverged, " + std::to_string(s.value("failures", 0)) +
+                                         " failed");
       continue;
     }
     if (!cost || !s.contains("primary_error") || !s["primary_error"].is_number()) {
-      ++hidden;
+      ++out.hidden;
       continue;
     }
-    const double err = s["primary_error"].get<double>() * unit.second;
+    const double err = s["primary_error"].get<double>() * unit_scale;
     if (!(err > 0) || !(*cost > 0)) {
-      ++hidden;
+      ++out.hidden;
       continue;
     }
-    max_error = std::max(max_error, err);
-    curves[predictor].emplace_back(-s.value("step_s", 0.0), *cost, err, key);
-    plotted.emplace_back(*cost, err, key);
+    out.max_error = std::max(out.max_error, err);
+    out.curves[predictor].emplace_back(-s.value("step_s", 0.0), *cost, err, key);
+    out.plotted.emplace_back(*cost, err, key);
     if (key == recommended) {
-      recommend.x.push_back(*cost);
-      recommend.y.push_back(err);
-      recommend.labels.push_back("recommended: " + key);
+      out.recommend.x.push_back(*cost);
+      out.recommend.y.push_back(err);
+      out.recommend.labels.push_back("recommended: " + key);
     }
   }
-  Panel panel{"prediction error against predictor cost, one curve per predictor",
-              metric + " (" + unit.first + ")",
-              true,
-              {}};
-  // Per predictor: every setting as a labelled marker, and its curve: the
-  // predictor's own lower envelope (what more time buys it), by cost.
+  return out;
+}
+
+// Per predictor: every setting as a labelled marker (into the panel), and
+// its curve: the predictor's own lower envelope (what more time buys it),
+// by cost (returned, drawn later).
+std::vector<Series> AddPredictorSettings(TradeoffPoints& points, const std::string& truth_source,
+                                         Panel* panel) {
   std::size_t color = 0;
   std::vector<Series> envelopes;
-  for (const auto& name : order) {
+  for (const auto& name : points.order) {
     // The truth's own engine predicting it measures self-consistency.
     Series c{SelfConsistent(name, truth_source)
                  ? name + " (self-consistency: the truth's own engine)"
@@ -191,12 +193,12 @@ Chart TradeoffChart(const nlohmann::json& report) {
              {},
              kPredictorColors[color % 5],
              true};
-    auto points = curves[name];
-    std::stable_sort(points.begin(), points.end(),
+    auto curve = points.curves[name];
+    std::stable_sort(curve.begin(), curve.end(),
                      [](const auto& a, const auto& b) { return std::get<1>(a) < std::get<1>(b); });
     Series envelope{name + " curve", {}, {}, kPredictorColors[color++ % 5]};
     double best = std::numeric_limits<double>::infinity();
-    for (const auto& [step, x, y, key] : points) {
+    for (const auto& [step, x, y, key] : curve) {
       c.x.push_back(x);
       c.y.push_back(y);
       c.labels.push_back(key);
@@ -206,15 +208,14 @@ Chart TradeoffChart(const nlohmann::json& report) {
         envelope.y.push_back(y);
       }
     }
-    panel.series.push_back(std::move(c));
+    panel->series.push_back(std::move(c));
     envelopes.push_back(std::move(envelope));
   }
-  for (const auto& [x, label] : failed_points) {
-    failed.x.push_back(x);
-    failed.y.push_back(max_error > 0 ? 3 * max_error : 1);
-    failed.labels.push_back(label);
-  }
-  // The front on the axis drawn: the settings no other beats on both cost and error.
+  return envelopes;
+}
+
+// The front on the axis drawn: the settings no other beats on both cost and error.
+Series ParetoFront(std::vector<std::tuple<double, double, std::string>> plotted) {
   std::sort(plotted.begin(), plotted.end());
   Series pareto{"pareto front", {}, {}, "#ff7f0e"};
   pareto.dashed = true;
@@ -226,67 +227,113 @@ Chart TradeoffChart(const nlohmann::json& report) {
       pareto.y.push_back(y);
     }
   }
-  panel.series.push_back(failed);
-  for (auto& e : envelopes) panel.series.push_back(std::move(e));
-  panel.series.push_back(pareto);  // over the curves it may coincide with
-  // The noise floor: the error no deterministic predictor can beat.
+  return pareto;
+}
+
+// The noise floor: the error no deterministic predictor can beat.
+void AddNoiseFloor(const nlohmann::json& report, const std::string& metric, double unit_scale,
+                   Panel* panel) {
   const auto& floor = report.contains("noise_floor") ? report["noise_floor"] : nlohmann::json();
-  if (floor.is_object() && UnitOf(metric) == "m" && !panel.series.empty()) {
-    // The median spread, as the table's floor multiples and the 1.5floor
-    // budget use it ("within 1.5x the replicate spread on 95 % of trials").
-    const double f = floor["position_m"].value("median", 0.0) * unit.second;
-    double lo = 0, hi = 0;
-    for (const auto& se : panel.series)
-      for (double x : se.x) {
-        lo = lo > 0 ? std::min(lo, x) : x;
-        hi = std::max(hi, x);
-      }
-    if (f > 0 && lo > 0) {
-      Series line{"noise floor (median replicate spread)", {lo, hi}, {f, f}, "#7f7f7f"};
-      line.dashed = true;
-      panel.series.push_back(line);
+  if (!floor.is_object() || UnitOf(metric) != "m" || panel->series.empty()) return;
+  // The median spread, as the table's floor multiples and the 1.5floor
+  // budget use it ("within 1.5x the replicate spread on 95 % of trials").
+  const double f = floor["position_m"].value("median", 0.0) * unit_scale;
+  double lo = 0, hi = 0;
+  for (const auto& se : panel->series)
+    for (double x : se.x) {
+      lo = lo > 0 ? std::min(lo, x) : x;
+      hi = std::max(hi, x);
     }
+  if (f > 0 && lo > 0) {
+    Series line{"noise floor (median replicate spread)", {lo, hi}, {f, f}, "#7f7f7f"};
+    line.dashed = true;
+    panel->series.push_back(line);
   }
-  // The budget, as a line on the axis it limits.
+}
+
+// The budget, as a line on the axis it limits.
+void AddBudgetLines(const TradeoffBudgets& budgets, Panel* panel) {
   double lo = 0, hi = 0, ylo = 0, yhi = 0;
-  for (const auto& se : panel.series)
+  for (const auto& se : panel->series)
     for (size_t i = 0; i < se.x.size() && i < se.y.size(); ++i) {
       lo = lo > 0 ? std::min(lo, se.x[i]) : se.x[i];
       hi = std::max(hi, se.x[i]);
       ylo = ylo > 0 ? std::min(ylo, se.y[i]) : se.y[i];
       yhi = std::max(yhi, se.y[i]);
     }
-  if (error_budget && *error_budget > 0 && lo > 0) {
-    Series line{"budget " + error_budget_text, {lo, hi}, {*error_budget, *error_budget}, "#2ca02c"};
+  if (budgets.error && *budgets.error > 0 && lo > 0) {
+    Series line{
+        "budget " + budgets.error_text, {lo, hi}, {*budgets.error, *budgets.error}, "#2ca02c"};
     line.dashed = true;
-    panel.series.push_back(line);
+    panel->series.push_back(line);
   }
-  if (time_budget && *time_budget > 0 && ylo > 0) {
-    Series line{"budget " + time_budget_text, {*time_budget, *time_budget}, {ylo, yhi}, "#2ca02c"};
+  if (budgets.time && *budgets.time > 0 && ylo > 0) {
+    Series line{
+        "budget " + budgets.time_text, {*budgets.time, *budgets.time}, {ylo, yhi}, "#2ca02c"};
     line.dashed = true;
-    panel.series.push_back(line);
+    panel->series.push_back(line);
   }
-  // The recommendation last: drawn over every other point, a ring with its label.
-  if (recommend.x.empty()) recommend.name = "recommended: none within the budget";
-  recommend.marker_radius = 8;
-  recommend.hollow = true;
-  panel.series.push_back(recommend);
-  Chart chart;
+}
+
+std::string TradeoffTitle(const nlohmann::json& report, const std::string& metric,
+                          const std::string& truth_source, int hidden) {
   // Reports before the truth statement say nothing about it: claim nothing.
   const bool independent = !report.contains("truth") || !report["truth"].is_object() ||
                            report["truth"].value("independent", true);
   const std::string truth =
       truth_source.empty() ? ""
                            : truth_source + (independent ? "" : ": self-consistency, not accuracy");
-  chart.title =
-      "campaign " + std::to_string(report.value("campaign_id", 0)) + ": " + metric + " vs cost (" +
-      std::to_string(report.value("trials", 0)) + " trials" +
-      (truth.empty() ? "" : ", truth: " + truth) +
-      (hidden ? ", " + std::to_string(hidden) + " settings with zero or no error not shown" : "") +
-      ")";
-  chart.x_label = time_budget ? "p95 predictor time per trial (s)"
-                  : per_sim_s ? "predictor wall time per simulated second (s/s)"
-                              : "median model time per trial (s)";
+  return "campaign " + std::to_string(report.value("campaign_id", 0)) + ": " + metric +
+         " vs cost (" + std::to_string(report.value("trials", 0)) + " trials" +
+         (truth.empty() ? "" : ", truth: " + truth) +
+         (hidden ? ", " + std::to_string(hidden) + " settings with zero or no error not shown"
+                 : "") +
+         ")";
+}
+
+}  // namespace
+
+Chart TradeoffChart(const nlohmann::json& report) {
+  if (!report.is_object() || !report.contains("settings") || !report["settings"].is_array()) {
+    throw std::invalid_argument("evaluation report has no settings list");
+  }
+  const std::string metric = report.value("primary_metric", "position_median");
+  const auto unit = HumanUnit(metric);
+  const TradeoffBudgets budgets = ReadBudgets(report, metric);
+  const bool per_sim_s =
+      !budgets.time && std::any_of(report["settings"].begin(), report["settings"].end(),
+                                   [](const nlohmann::json& s) { return Cost(s, true); });
+  const std::string truth_source = report.contains("truth") && report["truth"].is_object()
+                                       ? report["truth"].value("source", "")
+                                       : "";
+  TradeoffPoints points = CollectSettings(report, unit.second, budgets.time.has_value(), per_sim_s);
+  Panel panel{"prediction error against predictor cost, one curve per predictor",
+              metric + " (" + unit.first + ")",
+              true,
+              {}};
+  std::vector<Series> envelopes = AddPredictorSettings(points, truth_source, &panel);
+  Series failed{"failed settings", {}, {}, "#d62728", true};
+  for (const auto& [x, label] : points.failed) {
+    failed.x.push_back(x);
+    failed.y.push_back(points.max_error > 0 ? 3 * points.max_error : 1);
+    failed.labels.push_back(label);
+  }
+  panel.series.push_back(failed);
+  for (auto& e : envelopes) panel.series.push_back(std::move(e));
+  panel.series.push_back(ParetoFront(points.plotted));  // over the curves it may coincide with
+  AddNoiseFloor(report, metric, unit.second, &panel);
+  AddBudgetLines(budgets, &panel);
+  // The recommendation last: drawn over every other point, a ring with its label.
+  Series recommend = points.recommend;
+  if (recommend.x.empty()) recommend.name = "recommended: none within the budget";
+  recommend.marker_radius = 8;
+  recommend.hollow = true;
+  panel.series.push_back(recommend);
+  Chart chart;
+  chart.title = TradeoffTitle(report, metric, truth_source, points.hidden);
+  chart.x_label = budgets.time ? "p95 predictor time per trial (s)"
+                  : per_sim_s  ? "predictor wall time per simulated second (s/s)"
+                               : "median model time per trial (s)";
   chart.log_x = true;
   chart.panels = {panel};
   if (report.contains("duration_curves") && report["duration_curves"].is_array() &&

@@ -10,6 +10,7 @@
 #include <cmath>
 #include <cstdio>
 #include <fstream>
+#include <functional>
 #include <memory>
 #include <optional>
 #include <random>
@@ -28,6 +29,7 @@
 #include "arena/mechanics/scene_json.hpp"
 #include "arena/orchestrator/campaign.hpp"
 #include "arena/orchestrator/logging.hpp"
+#include "arena/orchestrator/scene_facts.hpp"
 #include "arena/orchestrator/service.hpp"
 #include "arena/orchestrator/submit.hpp"
 #include "arena/schemas/security.hpp"
@@ -317,14 +319,130 @@ void RefuseWhatTheCellsCannotRun(const orchestrator::Campaign& campaign, const R
                  static_cast<long long>(refused), static_cast<long long>(n), first.c_str());
 }
 
-int Run(RunOptions opt) {
+void CheckRunOptions(const RunOptions& opt) {
   if (opt.cells < 1 || opt.cells > 64)
     throw CommandError(kExitBadInput, "--cells: must be 1..64, got " + std::to_string(opt.cells));
   if (!(opt.speed >= 0)) throw CommandError(kExitBadInput, "--speed: must be >= 0");
   if (opt.domain > dds::kMaxDomainId || opt.domain < -1)
     throw CommandError(kExitBadInput, "--domain: must be 0.." + std::to_string(dds::kMaxDomainId) +
                                           ", got " + std::to_string(opt.domain));
+}
 
+// A DDS-Security identity of the lab's (--security): service, simN, a controller.
+std::string RunIdentity(const RunOptions& opt, const std::string& name) {
+  return opt.security_lab + "/" + name;
+}
+
+// Every identity checked before anything is stored: a missing one is named here.
+void CheckRunIdentities(const RunOptions& opt, const orchestrator::Campaign& campaign) {
+  if (opt.security_lab.empty()) return;
+  try {
+    dds::CheckIdentityDir(RunIdentity(opt, "service"));
+    for (int k = 0; k < opt.cells; ++k)
+      dds::CheckIdentityDir(RunIdentity(opt, "sim" + std::to_string(k + 1)));
+    // A controller's identity is issued for its name (its name is bound to it).
+    if (const auto name = CampaignController(campaign))
+      dds::CheckIdentityDir(RunIdentity(opt, *name));
+  } catch (const dds::SecurityError& e) {
+    throw CommandError(kExitBadInput, std::string("--security: ") + e.what() +
+                                          " (issue it with `arena certs issue " + opt.security_lab +
+                                          " --role cell|service|controller --name NAME`)");
+  }
+}
+
+// The simulated cells as child processes of this one.
+std::vector<ChildProcess> StartRunCells(const RunOptions& opt, const std::string& run_tag,
+                                        const std::string& self) {
+  std::vector<ChildProcess> cells;
+  for (int k = 0; k < opt.cells; ++k) {
+    std::vector<std::string> argv = {self,           "cell",
+                                     "--id",         "sim" + std::to_string(k + 1) + run_tag,
+                                     "--domain",     std::to_string(opt.domain),
+                                     "--speed",      std::to_string(opt.speed),
+                                     "--parent-pid", std::to_string(getpid())};
+    if (!opt.defects_path.empty()) argv.insert(argv.end(), {"--defects", opt.defects_path});
+    argv.insert(argv.end(), {"--backend", opt.backend});
+    if (!opt.backend_settings.empty())
+      argv.insert(argv.end(), {"--backend-settings", opt.backend_settings});
+    if (!opt.security_lab.empty())
+      argv.insert(argv.end(), {"--security", RunIdentity(opt, "sim" + std::to_string(k + 1))});
+    cells.emplace_back(argv, opt.db_path + ".sim" + std::to_string(k + 1) + ".log");
+  }
+  return cells;
+}
+
+// A closed-loop campaign's controller (issue 19), started like the cells
+// when arena's library has it; a lab's own one the lab starts.
+std::vector<ChildProcess> StartRunController(const RunOptions& opt,
+                                             const orchestrator::Campaign& campaign,
+                                             const std::string& self) {
+  std::vector<ChildProcess> controllers;
+  const auto name = CampaignController(campaign);
+  if (!name) return controllers;
+  const auto laws = executors::LibraryLaws();
+  if (std::find(laws.begin(), laws.end(), *name) != laws.end()) {
+    std::vector<std::string> argv = {self,           "controller",
+                                     "--name",       *name,
+                                     "--domain",     std::to_string(opt.domain),
+                                     "--parent-pid", std::to_string(getpid())};
+    if (!opt.security_lab.empty()) argv.insert(argv.end(), {"--security", RunIdentity(opt, *name)});
+    controllers.emplace_back(argv, opt.db_path + ".controller.log");
+  } else if (!opt.quiet) {
+    std::fprintf(stderr,
+                 "closed loop: start controller '%s' on domain %d yourself (it is not one of "
+                 "arena's own)\n",
+                 name->c_str(), opt.domain);
+  }
+  return controllers;
+}
+
+std::unique_ptr<orchestrator::Service> MakeRunService(const RunOptions& opt,
+                                                      std::int64_t campaign_id) {
+  orchestrator::ServiceOptions so;
+  so.db_path = opt.db_path;
+  so.domain_id = opt.domain;
+  so.exit_when_done = true;
+  so.only_campaign = campaign_id;
+  if (!opt.security_lab.empty()) so.network.security_dir = RunIdentity(opt, "service");
+  try {
+    return std::make_unique<orchestrator::Service>(so);
+  } catch (const db::StoreError& e) {
+    throw StoreCommandError(e);
+  }
+}
+
+// Each service tick: stops the run when no cell is left to finish the
+// campaign (every cell process exited, or every cell quarantined or lost
+// for 5 s), and shows the progress line. `failed` says why it stopped.
+std::function<void(const orchestrator::ServiceCounters&)> WatchRunCells(
+    const RunOptions& opt, std::vector<ChildProcess>* cells, orchestrator::Service* service,
+    ProgressLine* progress, std::string* failed) {
+  auto no_usable_since = std::make_shared<std::optional<std::chrono::steady_clock::time_point>>();
+  return [=, &opt](const orchestrator::ServiceCounters& c) {
+    int alive = 0;
+    for (auto& cell : *cells) alive += !cell.Poll().has_value();
+    if (alive == 0 && failed->empty()) {
+      *failed = "every simulated cell exited (see " + opt.db_path + ".sim*.log)";
+      service->Stop();
+    }
+    // Quarantined or lost cells get no trials: with none left the campaign cannot finish.
+    const auto now = std::chrono::steady_clock::now();
+    if (c.cells_known > 0 && c.cells_usable == 0) {
+      if (!*no_usable_since) *no_usable_since = now;
+      if (now - **no_usable_since > std::chrono::seconds(5) && failed->empty()) {
+        *failed = "no usable cell left: every cell is quarantined or lost (arena status --db " +
+                  opt.db_path + "; log " + orchestrator::ServiceLogPath(opt.db_path) + ")";
+        service->Stop();
+      }
+    } else {
+      no_usable_since->reset();
+    }
+    if (!opt.quiet) progress->Update(c.done + c.failed, c.failed, std::to_string(alive) + " cells");
+  };
+}
+
+int Run(RunOptions opt) {
+  CheckRunOptions(opt);
   // Signals first: the log's flusher, the cells and DDS threads inherit the blocked mask.
   std::atomic<orchestrator::Service*> running{nullptr};
   SignalWatcher signals([&running](int) {
@@ -333,28 +451,15 @@ int Run(RunOptions opt) {
 
   const orchestrator::Campaign campaign = LoadValidCampaign(opt.campaign_path);
   RefuseWhatTheCellsCannotRun(campaign, opt);
-  // Every identity checked before anything is stored: a missing one is named here.
-  const auto identity = [&opt](const std::string& name) { return opt.security_lab + "/" + name; };
-  if (!opt.security_lab.empty()) {
-    try {
-      dds::CheckIdentityDir(identity("service"));
-      for (int k = 0; k < opt.cells; ++k)
-        dds::CheckIdentityDir(identity("sim" + std::to_string(k + 1)));
-      // A controller's identity is issued for its name (its name is bound to it).
-      if (const auto name = CampaignController(campaign)) dds::CheckIdentityDir(identity(*name));
-    } catch (const dds::SecurityError& e) {
-      throw CommandError(kExitBadInput, std::string("--security: ") + e.what() +
-                                            " (issue it with `arena certs issue " +
-                                            opt.security_lab +
-                                            " --role cell|service|controller --name NAME`)");
-    }
-  }
+  CheckRunIdentities(opt, campaign);
   if (opt.domain < 0) {
     opt.domain = QuietDomain(opt.network_for_probe);
   }
   std::int64_t campaign_id = 0;
   {
-    auto store = db::Store::Open(opt.db_path);
+    db::StoreOptions so;
+    so.scene_facts = orchestrator::SceneFactsOfJson;  // an older store's migration reads scenes
+    auto store = db::Store::Open(opt.db_path, so);
     campaign_id = orchestrator::SubmitCampaign(*store, campaign);
   }
   orchestrator::SetUpServiceLog(opt.db_path, opt.log_level, /*to_stderr=*/false);
@@ -374,54 +479,10 @@ int Run(RunOptions opt) {
   // one domain still never address each other's cells. With --security the
   // identities are the lab's sim1..N.
   const std::string run_tag = opt.security_lab.empty() ? "-" + RunTag() : "";
-  std::vector<ChildProcess> cells;
-  std::vector<ChildProcess> controllers;
   const std::string self = SelfExecutable();
-  for (int k = 0; k < opt.cells; ++k) {
-    std::vector<std::string> argv = {self,           "cell",
-                                     "--id",         "sim" + std::to_string(k + 1) + run_tag,
-                                     "--domain",     std::to_string(opt.domain),
-                                     "--speed",      std::to_string(opt.speed),
-                                     "--parent-pid", std::to_string(getpid())};
-    if (!opt.defects_path.empty()) argv.insert(argv.end(), {"--defects", opt.defects_path});
-    argv.insert(argv.end(), {"--backend", opt.backend});
-    if (!opt.backend_settings.empty())
-      argv.insert(argv.end(), {"--backend-settings", opt.backend_settings});
-    if (!opt.security_lab.empty())
-      argv.insert(argv.end(), {"--security", identity("sim" + std::to_string(k + 1))});
-    cells.emplace_back(argv, opt.db_path + ".sim" + std::to_string(k + 1) + ".log");
-  }
-
-  orchestrator::ServiceOptions so;
-  so.db_path = opt.db_path;
-  so.domain_id = opt.domain;
-  so.exit_when_done = true;
-  so.only_campaign = campaign_id;
-  if (!opt.security_lab.empty()) so.network.security_dir = identity("service");
-  std::unique_ptr<orchestrator::Service> service;
-  try {
-    service = std::make_unique<orchestrator::Service>(so);
-  } catch (const db::StoreError& e) {
-    throw StoreCommandError(e);
-  }
-  // A closed-loop campaign's controller (issue 19), started like the cells
-  // when arena's library has it; a lab's own one the lab starts.
-  if (const auto name = CampaignController(campaign)) {
-    const auto laws = executors::LibraryLaws();
-    if (std::find(laws.begin(), laws.end(), *name) != laws.end()) {
-      std::vector<std::string> argv = {self,           "controller",
-                                       "--name",       *name,
-                                       "--domain",     std::to_string(opt.domain),
-                                       "--parent-pid", std::to_string(getpid())};
-      if (!opt.security_lab.empty()) argv.insert(argv.end(), {"--security", identity(*name)});
-      controllers.emplace_back(argv, opt.db_path + ".controller.log");
-    } else if (!opt.quiet) {
-      std::fprintf(stderr,
-                   "closed loop: start controller '%s' on domain %d yourself (it is not one of "
-                   "arena's own)\n",
-                   name->c_str(), opt.domain);
-    }
-  }
+  std::vector<ChildProcess> cells = StartRunCells(opt, run_tag, self);
+  std::unique_ptr<orchestrator::Service> service = MakeRunService(opt, campaign_id);
+  std::vector<ChildProcess> controllers = StartRunController(opt, campaign, self);
   running = service.get();
   if (signals.received()) service->Stop();
 
@@ -431,29 +492,7 @@ int Run(RunOptions opt) {
   const auto start = std::chrono::steady_clock::now();
   ProgressLine progress(trials, "trials");
   std::string cells_failed;
-  std::optional<std::chrono::steady_clock::time_point> no_usable_since;
-  service->OnTick([&](const orchestrator::ServiceCounters& c) {
-    int alive = 0;
-    for (auto& cell : cells) alive += !cell.Poll().has_value();
-    if (alive == 0 && cells_failed.empty()) {
-      cells_failed = "every simulated cell exited (see " + opt.db_path + ".sim*.log)";
-      service->Stop();
-    }
-    // Quarantined or lost cells get no trials: with none left the campaign cannot finish.
-    const auto now = std::chrono::steady_clock::now();
-    if (c.cells_known > 0 && c.cells_usable == 0) {
-      if (!no_usable_since) no_usable_since = now;
-      if (now - *no_usable_since > std::chrono::seconds(5) && cells_failed.empty()) {
-        cells_failed =
-            "no usable cell left: every cell is quarantined or lost (arena status --db " +
-            opt.db_path + "; log " + orchestrator::ServiceLogPath(opt.db_path) + ")";
-        service->Stop();
-      }
-    } else {
-      no_usable_since.reset();
-    }
-    if (!opt.quiet) progress.Update(c.done + c.failed, c.failed, std::to_string(alive) + " cells");
-  });
+  service->OnTick(WatchRunCells(opt, &cells, service.get(), &progress, &cells_failed));
   service->Run();
   progress.Finish();
   const double wall =

@@ -71,24 +71,19 @@ struct StreamShape {
   std::vector<std::string> finger_names;   // for the observed finger wrenches
 };
 
-// Column names from the scene; the widths from the samples (the largest
-// count any sample has: a sample with fewer values is padded with NaN, a
-// dropped observation has none). Positional names when the scene disagrees.
-StreamShape ShapeFromScene(const std::string& scene_json, const std::vector<Sample>& samples) {
+// Column names from the scene's contacts (the caller's: db reads no scene);
+// the widths from the samples (the largest count any sample has: a sample
+// with fewer values is padded with NaN, a dropped observation has none).
+// Positional names when the contacts disagree.
+StreamShape ShapeFromContacts(const std::vector<ContactSite>& sites,
+                              const std::vector<Sample>& samples) {
   std::vector<std::string> fingers;
   bool pusher = false;
-  try {
-    const auto scene = nlohmann::json::parse(scene_json);
-    if (scene.contains("fingers") && scene["fingers"].is_array()) {
-      for (std::size_t i = 0; i < scene["fingers"].size(); ++i) {
-        const auto& f = scene["fingers"][i];
-        fingers.push_back(f.contains("name") && f["name"].is_string()
-                              ? f["name"].get<std::string>()
-                              : "finger" + std::to_string(i));
-      }
-    }
-    pusher = scene.contains("pusher") && scene["pusher"].is_object();
-  } catch (const nlohmann::json::exception&) {
+  for (const auto& c : sites) {
+    if (c.pusher)
+      pusher = true;
+    else
+      fingers.push_back(c.name);
   }
   std::size_t nc = 0, nfv = 0;
   bool any_valid = false;
@@ -842,6 +837,16 @@ struct TrialsWritten {
   double sample_rate = 0;
 };
 
+// A trial's contacts from the caller's reader of scenes; a scene it cannot
+// read has none (its columns are named by position).
+std::vector<ContactSite> SceneContacts(const ExportOptions& o, const std::string& scene_json) {
+  try {
+    return o.scene_facts(scene_json).contacts;
+  } catch (const std::exception&) {
+    return {};
+  }
+}
+
 // Writes one trial's streams (and HDF5 group); appends its index values.
 // Rows of a by-trial table that belong to one trial.
 struct TrialRows {
@@ -849,38 +854,17 @@ struct TrialRows {
   const std::vector<std::size_t>& rows;
 };
 
-void WriteTrial(const Store::Impl& impl, const ExportOptions& o, const Campaign& campaign,
-                const TrialIndex& index, std::size_t i, std::vector<Value>* irow,
-                const std::vector<std::string>& columns, TrialRows contacts, TrialRows commands,
-                DatasetWriter* writer, TrialsWritten* out, ExportReport* report) {
-  const auto trial_id = std::get<std::int64_t>((*irow)[0]);
-  const auto expected = std::get<std::int64_t>((*irow)[kSamplesCol]);
-  const auto samples = internal::ReadStreamSamples(impl, index.stream_ids[i], expected, "export");
-  const StreamShape shape = ShapeFromScene(index.scenes[i], samples);
-  const auto true_cols = TrueColumns(shape);
-  const auto obs_cols = ObservedColumns(shape);
-  if (out->true_cols.empty()) {
-    out->true_cols = true_cols;
-    out->obs_cols = obs_cols;
-  }
-  if (out->sample_rate == 0 && samples.size() >= 2 && samples.back().t > samples.front().t) {
-    out->sample_rate =
-        static_cast<double>(samples.size() - 1) / (samples.back().t - samples.front().t);
-  }
-  std::vector<std::vector<double>> true_rows, obs_rows, pred_rows;
-  std::vector<double> row;
-  const std::size_t nfv = 6 * shape.finger_names.size();
-  for (const auto& s : samples) {
-    FlattenTrue(s, shape.contact_names.size(), &row);
-    true_rows.push_back(row);
-    FlattenObserved(s, nfv, &row);
-    obs_rows.push_back(row);
-  }
-  // Closed loop: the applied commands (CommandColumns() per row).
-  std::vector<std::vector<double>> command_matrix;
-  std::vector<ClosedLoopCommand> applied;
-  for (std::size_t r : commands.rows) {
-    const auto& c = commands.table.rows[r];
+// A closed-loop trial's applied commands: as a matrix (CommandColumns() per
+// row) and as the commands its prediction replays.
+struct AppliedCommands {
+  std::vector<std::vector<double>> matrix;
+  std::vector<ClosedLoopCommand> commands;
+};
+
+AppliedCommands ReadAppliedCommands(TrialRows rows) {
+  AppliedCommands out;
+  for (std::size_t r : rows.rows) {
+    const auto& c = rows.table.rows[r];
     std::vector<double> m;
     for (std::size_t k = kCommandFirstCol; k < c.size(); ++k) m.push_back(AsDouble(c[k]));
     ClosedLoopCommand cmd;
@@ -891,22 +875,114 @@ void WriteTrial(const Store::Impl& impl, const ExportOptions& o, const Campaign&
       cmd.applied[k] = m[5 + k];
     }
     if (!std::isnan(m[8])) cmd.loop_ms = m[8];
-    applied.push_back(cmd);
-    command_matrix.push_back(std::move(m));
+    out.commands.push_back(cmd);
+    out.matrix.push_back(std::move(m));
   }
+  return out;
+}
+
+// The caller's prediction of the trial (ExportOptions::predict*); a
+// prediction that throws is a stream with status error and its message.
+PredictedStream PredictTrial(const ExportOptions& o, const std::string& scene_json,
+                             const std::string& spec_json,
+                             const std::vector<ClosedLoopCommand>& applied,
+                             const std::vector<Sample>& samples) {
+  try {
+    return o.predict_from ? o.predict_from(scene_json, spec_json, applied,
+                                           samples.empty() ? nullptr : &samples.front())
+           : !applied.empty() && o.predict_closed_loop
+               ? o.predict_closed_loop(scene_json, spec_json, applied)
+               : o.predict(scene_json, spec_json);
+  } catch (const std::exception& e) {
+    PredictedStream failed;
+    failed.status = PredictionStatus::kError;
+    failed.error = e.what();
+    return failed;
+  }
+}
+
+// Per-contact outcomes as a matrix (contacts x ContactColumns()).
+struct ContactMatrix {
+  std::vector<std::vector<double>> matrix;
+  std::vector<std::string> names, roles;
+};
+
+ContactMatrix ReadContactMatrix(TrialRows rows) {
+  ContactMatrix out;
+  for (std::size_t r : rows.rows) {
+    const auto& c = rows.table.rows[r];
+    out.matrix.push_back({AsDouble(c[1]), AsDouble(c[4]), AsDouble(c[5]), AsDouble(c[6]),
+                          AsDouble(c[7]), AsDouble(c[8])});
+    out.names.push_back(std::get<std::string>(c[2]));
+    out.roles.push_back(std::get<std::string>(c[3]));
+  }
+  return out;
+}
+
+// HDF5: the trial's index values as the group's attributes (a large text as
+// a dataset), its contact outcomes and applied commands as datasets.
+void WriteGroupTables(hid_t gid, const std::vector<std::string>& columns,
+                      const std::vector<Value>& irow, const ContactMatrix& contacts,
+                      const AppliedCommands& commands) {
+  for (std::size_t c = 0; c < columns.size() && c < irow.size(); ++c) {
+    const auto* text = std::get_if<std::string>(&irow[c]);
+    if (text && text->size() > 60000)
+      H5TextDataset(gid, columns[c], *text);
+    else
+      H5ScalarAttr(gid, columns[c], irow[c]);
+  }
+  if (!contacts.matrix.empty()) {
+    H5Matrix(gid, "contacts", ContactColumns(), contacts.matrix);
+    H5Handle ds(H5Dopen2(gid, "contacts", H5P_DEFAULT), H5Dclose, "open contacts");
+    H5StringArrayAttr(ds.id, "contact_names", contacts.names);
+    H5StringArrayAttr(ds.id, "roles", contacts.roles);
+  }
+  if (!commands.matrix.empty()) H5Matrix(gid, "commands", CommandColumns(), commands.matrix);
+}
+
+// The trial's streams as rows of the true and observed columns.
+struct StreamRows {
+  std::vector<std::vector<double>> true_rows, obs_rows;
+};
+
+StreamRows FlattenStreams(const std::vector<Sample>& samples, const StreamShape& shape) {
+  StreamRows out;
+  std::vector<double> row;
+  const std::size_t nfv = 6 * shape.finger_names.size();
+  for (const auto& s : samples) {
+    FlattenTrue(s, shape.contact_names.size(), &row);
+    out.true_rows.push_back(row);
+    FlattenObserved(s, nfv, &row);
+    out.obs_rows.push_back(row);
+  }
+  return out;
+}
+
+void WriteTrial(const Store::Impl& impl, const ExportOptions& o, const Campaign& campaign,
+                const TrialIndex& index, std::size_t i, std::vector<Value>* irow,
+                const std::vector<std::string>& columns, TrialRows contacts, TrialRows commands,
+                DatasetWriter* writer, TrialsWritten* out, ExportReport* report) {
+  const auto trial_id = std::get<std::int64_t>((*irow)[0]);
+  const auto expected = std::get<std::int64_t>((*irow)[kSamplesCol]);
+  const auto samples = internal::ReadStreamSamples(impl, index.stream_ids[i], expected, "export");
+  const StreamShape shape = ShapeFromContacts(SceneContacts(o, index.scenes[i]), samples);
+  const auto true_cols = TrueColumns(shape);
+  const auto obs_cols = ObservedColumns(shape);
+  if (out->true_cols.empty()) {
+    out->true_cols = true_cols;
+    out->obs_cols = obs_cols;
+  }
+  if (out->sample_rate == 0 && samples.size() >= 2 && samples.back().t > samples.front().t) {
+    out->sample_rate =
+        static_cast<double>(samples.size() - 1) / (samples.back().t - samples.front().t);
+  }
+  const StreamRows streams = FlattenStreams(samples, shape);
+  const AppliedCommands applied = ReadAppliedCommands(commands);
   std::optional<PredictedStream> predicted;
+  std::vector<std::vector<double>> pred_rows;
   if (o.predict) {
-    try {
-      predicted = o.predict_from ? o.predict_from(index.scenes[i], campaign.spec_json, applied,
-                                                  samples.empty() ? nullptr : &samples.front())
-                  : !applied.empty() && o.predict_closed_loop
-                      ? o.predict_closed_loop(index.scenes[i], campaign.spec_json, applied)
-                      : o.predict(index.scenes[i], campaign.spec_json);
-    } catch (const std::exception& e) {
-      predicted = PredictedStream{};
-      predicted->status = PredictionStatus::kError;
-      predicted->error = e.what();
-    }
+    predicted = PredictTrial(o, index.scenes[i], campaign.spec_json, applied.commands, samples);
+    std::vector<double> row;
     for (const auto& s : predicted->samples) {
       FlattenTrue(s, shape.contact_names.size(), &row);
       pred_rows.push_back(row);
@@ -917,16 +993,6 @@ void WriteTrial(const Store::Impl& impl, const ExportOptions& o, const Campaign&
     irow->emplace_back(predicted->error);
     irow->emplace_back(static_cast<std::int64_t>(predicted->samples.size()));
     if (out->predicted_cols.empty()) out->predicted_cols = true_cols;
-  }
-  // Per-contact outcomes as a matrix (contacts x ContactColumns()).
-  std::vector<std::vector<double>> contact_matrix;
-  std::vector<std::string> contact_names, contact_roles;
-  for (std::size_t r : contacts.rows) {
-    const auto& c = contacts.table.rows[r];
-    contact_matrix.push_back({AsDouble(c[1]), AsDouble(c[4]), AsDouble(c[5]), AsDouble(c[6]),
-                              AsDouble(c[7]), AsDouble(c[8])});
-    contact_names.push_back(std::get<std::string>(c[2]));
-    contact_roles.push_back(std::get<std::string>(c[3]));
   }
 
   const std::string id = std::to_string(trial_id);
@@ -945,25 +1011,12 @@ void WriteTrial(const Store::Impl& impl, const ExportOptions& o, const Campaign&
     tm["group"] = "/" + gname;
   }
   const hid_t gid = group ? group->id : -1;
-  const std::string tf = writer->Stream(id, "true", true_cols, true_rows, gid);
-  const std::string of = writer->Stream(id, "observed", obs_cols, obs_rows, gid);
+  const std::string tf = writer->Stream(id, "true", true_cols, streams.true_rows, gid);
+  const std::string of = writer->Stream(id, "observed", obs_cols, streams.obs_rows, gid);
   std::string pf;
   if (predicted) pf = writer->Stream(id, "predicted", true_cols, pred_rows, gid);
   if (group) {
-    for (std::size_t c = 0; c < columns.size() && c < irow->size(); ++c) {
-      const auto* text = std::get_if<std::string>(&(*irow)[c]);
-      if (text && text->size() > 60000)
-        H5TextDataset(gid, columns[c], *text);
-      else
-        H5ScalarAttr(gid, columns[c], (*irow)[c]);
-    }
-    if (!contact_matrix.empty()) {
-      H5Matrix(gid, "contacts", ContactColumns(), contact_matrix);
-      H5Handle ds(H5Dopen2(gid, "contacts", H5P_DEFAULT), H5Dclose, "open contacts");
-      H5StringArrayAttr(ds.id, "contact_names", contact_names);
-      H5StringArrayAttr(ds.id, "roles", contact_roles);
-    }
-    if (!command_matrix.empty()) H5Matrix(gid, "commands", CommandColumns(), command_matrix);
+    WriteGroupTables(gid, columns, *irow, ReadContactMatrix(contacts), applied);
   } else {
     irow->emplace_back(tf);
     irow->emplace_back(of);
@@ -980,63 +1033,77 @@ void WriteTrial(const Store::Impl& impl, const ExportOptions& o, const Campaign&
   report->samples += static_cast<std::int64_t>(samples.size());
 }
 
-// Writes every file of the dataset into `dir` (the staging directory).
-ExportReport WriteDataset(const Store& store, const ExportOptions& o, const fs::path& dir) {
-  const auto& impl = store.impl();
-  detail::Tx snapshot(impl.db, false);  // everything below reads one consistent state
-  const Campaign campaign = store.GetCampaign(o.campaign_id);
-  TrialIndex index = ReadIndex(impl, o.campaign_id);
-  std::map<std::int64_t, std::vector<std::size_t>> contacts_by_trial;
-  const QueryResult contacts = ReadContacts(impl, o.campaign_id, &contacts_by_trial);
-  std::map<std::int64_t, std::vector<std::size_t>> runs_by_trial, commands_by_trial;
-  const QueryResult runs = ReadByTrial(impl, kClosedLoopRunSql, o.campaign_id, &runs_by_trial);
-  const QueryResult commands =
-      ReadByTrial(impl, kClosedLoopCommandSql, o.campaign_id, &commands_by_trial);
+// The trial parameters of the index: the sampler's columns, and variations
+// written into the scene (grip_force, finger_type, ...) that have their own
+// scene-derived column; they are parameters all the same.
+std::set<std::string> IndexParameters(const Store::Impl& impl, const TrialIndex& index,
+                                      const Campaign& campaign) {
   std::set<std::string> parameters;
-  {
-    const std::size_t base =
-        static_cast<std::size_t>(sqlite3_column_count(detail::Stmt(impl.db, kIndexSql).get())) - 3;
-    for (std::size_t c = base; c + 1 < index.table.columns.size(); ++c)
-      parameters.insert(index.table.columns[c]);
-    // Variations written into the scene (grip_force, finger_type, ...) have
-    // their own scene-derived column; they are parameters all the same.
-    const auto spec = nlohmann::json::parse(campaign.spec_json, nullptr, false);
-    if (spec.is_object() && spec.contains("variations") && spec["variations"].is_object()) {
-      for (const auto& [name, value] : spec["variations"].items()) {
-        if (std::find(index.table.columns.begin(), index.table.columns.end(), name) !=
-            index.table.columns.end())
-          parameters.insert(name);
-      }
+  const std::size_t base =
+      static_cast<std::size_t>(sqlite3_column_count(detail::Stmt(impl.db, kIndexSql).get())) - 3;
+  for (std::size_t c = base; c + 1 < index.table.columns.size(); ++c)
+    parameters.insert(index.table.columns[c]);
+  const auto spec = nlohmann::json::parse(campaign.spec_json, nullptr, false);
+  if (spec.is_object() && spec.contains("variations") && spec["variations"].is_object()) {
+    for (const auto& [name, value] : spec["variations"].items()) {
+      if (std::find(index.table.columns.begin(), index.table.columns.end(), name) !=
+          index.table.columns.end())
+        parameters.insert(name);
     }
   }
-  // The columns each row gets after the stored ones (same order as WriteTrial).
+  return parameters;
+}
+
+// The columns each index row gets: the stored ones, then (same order as
+// WriteTrial) the prediction's and the per-trial files'.
+std::vector<std::string> IndexColumns(const ExportOptions& o, const TrialIndex& index,
+                                      const DatasetWriter& writer) {
   std::vector<std::string> columns = index.table.columns;
   if (o.predict) {
     for (const char* c : {"predicted_by", "predicted_settings", "predicted_status",
                           "predicted_error", "predicted_samples"})
       columns.emplace_back(c);
   }
-  DatasetWriter writer(dir, o.format);
   if (writer.files_per_trial()) {
     columns.emplace_back("true_file");
     columns.emplace_back("observed_file");
     if (o.predict) columns.emplace_back("predicted_file");
   }
+  return columns;
+}
 
-  ExportReport report;
-  TrialsWritten written;
+// The tables read in the export's snapshot, beside the index.
+struct ByTrialTables {
+  QueryResult contacts, runs, commands;
+  std::map<std::int64_t, std::vector<std::size_t>> contacts_by_trial, runs_by_trial,
+      commands_by_trial;
+};
+
+ByTrialTables ReadByTrialTables(const Store::Impl& impl, std::int64_t campaign_id) {
+  ByTrialTables t;
+  t.contacts = ReadContacts(impl, campaign_id, &t.contacts_by_trial);
+  t.runs = ReadByTrial(impl, kClosedLoopRunSql, campaign_id, &t.runs_by_trial);
+  t.commands = ReadByTrial(impl, kClosedLoopCommandSql, campaign_id, &t.commands_by_trial);
+  return t;
+}
+
+// Every trial's streams, in index order; an error names the trial.
+void WriteTrials(const Store::Impl& impl, const ExportOptions& o, const Campaign& campaign,
+                 TrialIndex* index, const std::vector<std::string>& columns,
+                 const ByTrialTables& tables, DatasetWriter* writer, TrialsWritten* written,
+                 ExportReport* report) {
   static const std::vector<std::size_t> kNone;
-  const auto total = static_cast<std::int64_t>(index.table.rows.size());
-  for (std::size_t i = 0; i < index.table.rows.size(); ++i) {
-    auto& irow = index.table.rows[i];
+  const auto total = static_cast<std::int64_t>(index->table.rows.size());
+  for (std::size_t i = 0; i < index->table.rows.size(); ++i) {
+    auto& irow = index->table.rows[i];
     const auto trial_id = std::get<std::int64_t>(irow[0]);
-    const auto it = contacts_by_trial.find(trial_id);
-    const auto ct = commands_by_trial.find(trial_id);
+    const auto it = tables.contacts_by_trial.find(trial_id);
+    const auto ct = tables.commands_by_trial.find(trial_id);
     try {
-      WriteTrial(impl, o, campaign, index, i, &irow, columns,
-                 {contacts, it == contacts_by_trial.end() ? kNone : it->second},
-                 {commands, ct == commands_by_trial.end() ? kNone : ct->second}, &writer, &written,
-                 &report);
+      WriteTrial(impl, o, campaign, *index, i, &irow, columns,
+                 {tables.contacts, it == tables.contacts_by_trial.end() ? kNone : it->second},
+                 {tables.commands, ct == tables.commands_by_trial.end() ? kNone : ct->second},
+                 writer, written, report);
     } catch (const StoreError& e) {
       std::string what = e.what();
       if (what.rfind("export: ", 0) == 0) what = what.substr(8);
@@ -1046,28 +1113,33 @@ ExportReport WriteDataset(const Store& store, const ExportOptions& o, const fs::
     }
     if (o.progress) o.progress(static_cast<std::int64_t>(i) + 1, total);
   }
-  report.trials = total;
-  snapshot.Commit();
-  writer.Close(o.campaign_id);
+  report->trials = total;
+}
 
-  index.table.columns = columns;
+// The by-trial tables as CSV (and JSON lines for the jsonl format), the
+// scenes, and the campaign's latest sensitivity run (db/sensitivity.hpp).
+void WriteTables(const Store& store, const ExportOptions& o, const fs::path& dir,
+                 const TrialIndex& index, const ByTrialTables& tables) {
   WriteText(dir / "trials.csv", FormatCsv(index.table));
-  WriteText(dir / "contacts.csv", FormatCsv(contacts));
+  WriteText(dir / "contacts.csv", FormatCsv(tables.contacts));
   WriteText(dir / "scenes.jsonl", ScenesJsonl(index));
-  // The campaign's latest sensitivity run, if any (db/sensitivity.hpp).
   WriteSensitivityExport(store, o.campaign_id, dir.string());
-  if (!runs.rows.empty()) {
-    WriteText(dir / "closed_loop.csv", FormatCsv(runs));
-    WriteText(dir / "closed_loop_commands.csv", FormatCsv(commands));
+  if (!tables.runs.rows.empty()) {
+    WriteText(dir / "closed_loop.csv", FormatCsv(tables.runs));
+    WriteText(dir / "closed_loop_commands.csv", FormatCsv(tables.commands));
   }
   if (o.format == ExportFormat::kJsonl) {
     WriteJsonLines(dir / "trials.jsonl", index.table);
-    WriteJsonLines(dir / "contacts.jsonl", contacts);
-    if (!runs.rows.empty()) {
-      WriteJsonLines(dir / "closed_loop.jsonl", runs);
-      WriteJsonLines(dir / "closed_loop_commands.jsonl", commands);
+    WriteJsonLines(dir / "contacts.jsonl", tables.contacts);
+    if (!tables.runs.rows.empty()) {
+      WriteJsonLines(dir / "closed_loop.jsonl", tables.runs);
+      WriteJsonLines(dir / "closed_loop_commands.jsonl", tables.commands);
     }
   }
+}
+
+// A producer's own files (ExportOptions::extra_files), inside the dataset only.
+void WriteExtraFiles(const ExportOptions& o, const fs::path& dir) {
   for (const auto& [rel, text] : o.extra_files) {
     const fs::path r(rel);
     if (rel.empty() || r.is_absolute() || rel.find("..") != std::string::npos ||
@@ -1082,14 +1154,9 @@ ExportReport WriteDataset(const Store& store, const ExportOptions& o, const fs::
     if (r.has_parent_path()) fs::create_directories(dir / r.parent_path(), ec);
     WriteText(dir / r, text);
   }
-  const ojson files = ChecksumFiles(dir, &report);
+}
 
-  ojson spec;
-  try {
-    spec = ojson::parse(campaign.spec_json);
-  } catch (const nlohmann::json::exception&) {
-    spec = campaign.spec_json;
-  }
+ojson ContactColumnsJson() {
   ojson contact_cols = ojson::array();
   contact_cols.push_back({{"name", "trial_id"}, {"unit", "1"}, {"meaning", "trial id"}});
   contact_cols.push_back(
@@ -1097,6 +1164,59 @@ ExportReport WriteDataset(const Store& store, const ExportOptions& o, const fs::
   contact_cols.push_back({{"name", "role"}, {"unit", ""}, {"meaning", "finger or pusher"}});
   for (const auto& c : ContactColumns())
     contact_cols.push_back({{"name", c.name}, {"unit", c.unit}, {"meaning", c.meaning}});
+  return contact_cols;
+}
+
+// The keys of manifest_extra_json, set after the export's own.
+void MergeManifestExtra(const ExportOptions& o, ojson* manifest) {
+  if (o.manifest_extra_json.empty()) return;
+  ojson extra;
+  try {
+    extra = ojson::parse(o.manifest_extra_json);
+  } catch (const nlohmann::json::exception& e) {
+    throw StoreError(StoreError::Kind::kBadInput,
+                     std::string("export: manifest_extra_json is not JSON: ") + e.what());
+  }
+  if (!extra.is_object())
+    throw StoreError(StoreError::Kind::kBadInput,
+                     "export: manifest_extra_json must be a JSON object");
+  for (auto it = extra.begin(); it != extra.end(); ++it) (*manifest)[it.key()] = it.value();
+}
+
+void AddClosedLoopManifest(ojson* manifest) {
+  ojson cmd_cols = ojson::array();
+  cmd_cols.push_back({{"name", "trial_id"}, {"unit", "1"}, {"meaning", "trial id"}});
+  cmd_cols.push_back({{"name", "attempt"}, {"unit", "1"}, {"meaning", "the exported attempt"}});
+  for (const auto& c : CommandColumns())
+    cmd_cols.push_back({{"name", c.name}, {"unit", c.unit}, {"meaning", c.meaning}});
+  (*manifest)["columns"]["closed_loop_commands"] = cmd_cols;
+  (*manifest)["closed_loop"] =
+      "closed_loop.csv: one row per closed-loop trial (controller, its settings and own "
+      "outcome; target, final_error and tolerance in the controller's units: rad for "
+      "pivot_to_angle, m for sliding_to_position); closed_loop_commands.csv: every pusher "
+      "command the cell applied. Predictions of these trials replay the commanded velocities "
+      "through the model.";
+}
+
+// What manifest.json says beside the files: the campaign, frames, columns,
+// parameters, counts.
+struct ManifestParts {
+  const std::vector<std::string>& columns;
+  const std::set<std::string>& parameters;
+  const TrialsWritten& written;
+  const ExportReport& report;
+  ojson files;
+  bool closed_loop = false;
+};
+
+ojson Manifest(const Store& store, const ExportOptions& o, const Campaign& campaign,
+               const ManifestParts& m) {
+  ojson spec;
+  try {
+    spec = ojson::parse(campaign.spec_json);
+  } catch (const nlohmann::json::exception&) {
+    spec = campaign.spec_json;
+  }
   ojson manifest = {
       {"format", "arena-dataset"},
       {"format_version", kDatasetFormatVersion},
@@ -1115,14 +1235,15 @@ ExportReport WriteDataset(const Store& store, const ExportOptions& o, const fs::
        {{"G",
          "gripper frame at the start of the trial; every pose, twist and wrench is "
          "expressed in it; quaternions are (w, x, y, z)"}}},
-      {"sample_rate_hz", std::round(written.sample_rate * 1000) / 1000},
-      {"counts", {{"trials", report.trials}, {"samples", report.samples}, {"files", files.size()}}},
+      {"sample_rate_hz", std::round(m.written.sample_rate * 1000) / 1000},
+      {"counts",
+       {{"trials", m.report.trials}, {"samples", m.report.samples}, {"files", m.files.size()}}},
       {"columns",
-       {{"trials", IndexColumnsJson(columns, parameters)},
-        {"contacts", contact_cols},
-        {"true", ColumnsJson(written.true_cols)},
-        {"observed", ColumnsJson(written.obs_cols)}}},
-      {"parameters", ojson(std::vector<std::string>(parameters.begin(), parameters.end()))},
+       {{"trials", IndexColumnsJson(m.columns, m.parameters)},
+        {"contacts", ContactColumnsJson()},
+        {"true", ColumnsJson(m.written.true_cols)},
+        {"observed", ColumnsJson(m.written.obs_cols)}}},
+      {"parameters", ojson(std::vector<std::string>(m.parameters.begin(), m.parameters.end()))},
       {"predictions",
        o.predict ? "re-run per trial with the campaign's \"prediction\" settings, as the service "
                    "ran it; columns as \"true\" (predicted_by / predicted_settings say which)"
@@ -1130,44 +1251,49 @@ ExportReport WriteDataset(const Store& store, const ExportOptions& o, const fs::
       {"missing_values",
        "CSV: empty field; JSON: null; HDF5: NaN in datasets, absent attribute in groups. A "
        "dropped observation (valid = 0) has every observed value missing."},
-      {"trials", written.manifest},
-      {"files", files},
+      {"trials", m.written.manifest},
+      {"files", m.files},
   };
-  if (o.predict) manifest["columns"]["predicted"] = ColumnsJson(written.predicted_cols);
-  if (!o.manifest_extra_json.empty()) {
-    ojson extra;
-    try {
-      extra = ojson::parse(o.manifest_extra_json);
-    } catch (const nlohmann::json::exception& e) {
-      throw StoreError(StoreError::Kind::kBadInput,
-                       std::string("export: manifest_extra_json is not JSON: ") + e.what());
-    }
-    if (!extra.is_object())
-      throw StoreError(StoreError::Kind::kBadInput,
-                       "export: manifest_extra_json must be a JSON object");
-    for (auto it = extra.begin(); it != extra.end(); ++it) manifest[it.key()] = it.value();
-  }
-  if (!runs.rows.empty()) {
-    ojson cmd_cols = ojson::array();
-    cmd_cols.push_back({{"name", "trial_id"}, {"unit", "1"}, {"meaning", "trial id"}});
-    cmd_cols.push_back({{"name", "attempt"}, {"unit", "1"}, {"meaning", "the exported attempt"}});
-    for (const auto& c : CommandColumns())
-      cmd_cols.push_back({{"name", c.name}, {"unit", c.unit}, {"meaning", c.meaning}});
-    manifest["columns"]["closed_loop_commands"] = cmd_cols;
-    manifest["closed_loop"] =
-        "closed_loop.csv: one row per closed-loop trial (controller, its settings and own "
-        "outcome; target, final_error and tolerance in the controller's units: rad for "
-        "pivot_to_angle, m for sliding_to_position); closed_loop_commands.csv: every pusher "
-        "command the cell applied. Predictions of these trials replay the commanded velocities "
-        "through the model.";
-  }
-  // Last and atomically: a complete manifest marks a complete dataset.
+  if (o.predict) manifest["columns"]["predicted"] = ColumnsJson(m.written.predicted_cols);
+  MergeManifestExtra(o, &manifest);
+  if (m.closed_loop) AddClosedLoopManifest(&manifest);
+  return manifest;
+}
+
+// Last and atomically: a complete manifest marks a complete dataset.
+void WriteManifest(const fs::path& dir, const ojson& manifest) {
   const fs::path tmp = dir / "manifest.json.tmp";
   WriteText(tmp, manifest.dump(2) + "\n");
   SyncFile(tmp);
   std::error_code ec;
   fs::rename(tmp, dir / "manifest.json", ec);
   if (ec) IoError("export: cannot rename the manifest into place: " + ec.message());
+}
+
+// Writes every file of the dataset into `dir` (the staging directory).
+ExportReport WriteDataset(const Store& store, const ExportOptions& o, const fs::path& dir) {
+  const auto& impl = store.impl();
+  detail::Tx snapshot(impl.db, false);  // everything below reads one consistent state
+  const Campaign campaign = store.GetCampaign(o.campaign_id);
+  TrialIndex index = ReadIndex(impl, o.campaign_id);
+  const ByTrialTables tables = ReadByTrialTables(impl, o.campaign_id);
+  const std::set<std::string> parameters = IndexParameters(impl, index, campaign);
+  DatasetWriter writer(dir, o.format);
+  const std::vector<std::string> columns = IndexColumns(o, index, writer);
+
+  ExportReport report;
+  TrialsWritten written;
+  WriteTrials(impl, o, campaign, &index, columns, tables, &writer, &written, &report);
+  snapshot.Commit();
+  writer.Close(o.campaign_id);
+
+  index.table.columns = columns;
+  WriteTables(store, o, dir, index, tables);
+  WriteExtraFiles(o, dir);
+  const ojson files = ChecksumFiles(dir, &report);
+  WriteManifest(dir,
+                Manifest(store, o, campaign,
+                         {columns, parameters, written, report, files, !tables.runs.rows.empty()}));
   return report;
 }
 
@@ -1192,6 +1318,10 @@ std::uint64_t CountCsvRecords(const fs::path& p) {
 
 ExportReport ExportCampaign(const Store& store, const ExportOptions& o) {
   if (o.out_dir.empty()) throw StoreError(StoreError::Kind::kBadInput, "export: --out is empty");
+  if (!o.scene_facts) {
+    throw StoreError(StoreError::Kind::kBadInput,
+                     "export: ExportOptions::scene_facts is not set (db reads no scene)");
+  }
   fs::path dir = fs::path(o.out_dir).lexically_normal();
   if (!dir.has_filename()) dir = dir.parent_path();  // "out/" names "out"
   store.GetCampaign(o.campaign_id);                  // kNotFound before anything is created

@@ -296,19 +296,6 @@ std::int64_t Ingest::Finish(TrialEnd outcome) {
 }
 
 std::unique_ptr<Ingest> Store::BeginIngest(std::int64_t trial_id, int attempt,
-                                           const IngestOptions& options) {
-  std::string scene;
-  {
-    Tx tx(impl_->db, false);
-    auto p = impl_->Prepare("SELECT scene_json FROM trials WHERE id = ?");
-    p->Bind(1, trial_id);
-    if (p->Step()) scene = p->Text(0);  // an unknown trial: refused below, by name
-    tx.Commit();
-  }
-  return BeginIngest(trial_id, attempt, ContactSitesFromScene(scene), options);
-}
-
-std::unique_ptr<Ingest> Store::BeginIngest(std::int64_t trial_id, int attempt,
                                            std::vector<ContactSite> sites,
                                            const IngestOptions& options) {
   impl_->RequireWritable("BeginIngest");

@@ -3,7 +3,6 @@
 
 #include <algorithm>
 #include <cmath>
-#include <nlohmann/json.hpp>
 
 namespace arena::db {
 namespace {
@@ -47,53 +46,7 @@ V3 RotationVector(Q q) {
   return {q[1] / s * angle, q[2] / s * angle, q[3] / s * angle};
 }
 
-V3 Vec(const nlohmann::json& v) {
-  if (!v.is_array() || v.size() != 3) throw std::invalid_argument("not a 3-vector");
-  return {v[0].get<double>(), v[1].get<double>(), v[2].get<double>()};
-}
-
-V3 Unit(const V3& v) {
-  const double n = Norm(v);
-  if (!(n > 0)) throw std::invalid_argument("zero normal");
-  return {v[0] / n, v[1] / n, v[2] / n};
-}
-
 }  // namespace
-
-std::vector<ContactSite> ContactSitesFromScene(const std::string& scene_json) {
-  std::vector<ContactSite> sites;
-  nlohmann::json scene;
-  try {
-    scene = nlohmann::json::parse(scene_json);
-  } catch (const nlohmann::json::exception&) {
-    return sites;
-  }
-  if (!scene.is_object()) return sites;
-  auto site = [](const nlohmann::json& c, const std::string& fallback, bool pusher) {
-    ContactSite s;
-    s.pusher = pusher;
-    s.name = c.is_object() && c.contains("name") && c["name"].is_string()
-                 ? c["name"].get<std::string>()
-                 : fallback;
-    try {
-      s.position = Vec(c.at("position"));
-      s.normal = Unit(Vec(c.at("normal")));
-      s.known = true;
-    } catch (const std::exception&) {
-      s.known = false;
-    }
-    return s;
-  };
-  if (scene.contains("fingers") && scene["fingers"].is_array()) {
-    for (std::size_t i = 0; i < scene["fingers"].size(); ++i)
-      sites.push_back(site(scene["fingers"][i], "finger" + std::to_string(i), false));
-  }
-  if (scene.contains("pusher") && scene["pusher"].is_object()) {
-    sites.push_back(site(scene["pusher"], "pusher", true));
-    sites.back().name = "pusher";
-  }
-  return sites;
-}
 
 OutcomeAccumulator::OutcomeAccumulator(std::vector<ContactSite> sites) : sites_(std::move(sites)) {}
 

@@ -153,6 +153,24 @@ void WriteOutcome(const Store::Impl& impl, std::int64_t stream_id, std::int64_t 
   s->Run();
 }
 
+// The contact sites of a stored scene, from the opener's reader (db reads no
+// scene). A scene it cannot read has none: its outcome has no slip distances.
+static std::vector<ContactSite> StoredSceneContacts(const Store::Impl& impl,
+                                                    const std::string& scene_json) {
+  if (!impl.options.scene_facts) {
+    throw StoreError(
+        StoreError::Kind::kIo,
+        "Store::Open: migration 6 computes the outcomes of the streams stored before "
+        "it from their scenes' contacts: open this store with StoreOptions::scene_facts "
+        "set (the caller's reader of scenes)");
+  }
+  try {
+    return impl.options.scene_facts(scene_json).contacts;
+  } catch (const std::exception&) {
+    return {};
+  }
+}
+
 void MigrateToOutcomes(const Store::Impl& impl) {
   std::set<std::string> have;
   {
@@ -179,7 +197,7 @@ void MigrateToOutcomes(const Store::Impl& impl) {
     const auto samples =
         ReadStreamSamples(impl, streams.Int(0), streams.Int(3), "migration 6 (outcomes)");
     WriteOutcome(impl, streams.Int(0), streams.Int(1), static_cast<int>(streams.Int(2)),
-                 ComputeOutcome(samples, ContactSitesFromScene(streams.Text(4))));
+                 ComputeOutcome(samples, StoredSceneContacts(impl, streams.Text(4))));
   }
   RebuildResultViews(impl.db);
 }

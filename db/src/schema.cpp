@@ -722,7 +722,9 @@ int Store::SchemaVersion() { return Migrations().back().version; }
 Store::Store(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
 Store::~Store() = default;
 
-std::unique_ptr<Store> Store::Open(const std::string& path, const StoreOptions& options) {
+namespace {
+
+void CheckOpenOptions(const StoreOptions& options) {
   if (options.wal_autocheckpoint_bytes < 65536) {
     throw StoreError(StoreError::Kind::kBadInput,
                      "Store::Open: wal_autocheckpoint_bytes must be at least 65536 (got " +
@@ -735,41 +737,134 @@ std::unique_ptr<Store> Store::Open(const std::string& path, const StoreOptions& 
         "Store::Open: new_file_page_size must be a power of two in [512, 65536] (got " +
             std::to_string(ps) + ")");
   }
-  auto impl = std::make_unique<Impl>();
-  impl->path = path;
-  impl->options = options;
+}
+
+// A path that names no store: a missing file (read-only) or a directory.
+void RefuseNoStoreAt(const std::string& path, const StoreOptions& options) {
   if (options.read_only && !std::filesystem::exists(path)) {
     throw StoreError(StoreError::Kind::kIo,
                      "Store::Open: no store at '" + path + "' (create one with 'arena submit')");
   }
-  {
-    std::error_code ec;
-    if (std::filesystem::is_directory(path, ec)) {
-      throw StoreError(StoreError::Kind::kIo,
-                       "Store::Open: '" + path +
-                           "' is a directory; --db names the store file (e.g. '" +
-                           (std::filesystem::path(path) / "lab.db").string() + "')");
-    }
+  std::error_code ec;
+  if (std::filesystem::is_directory(path, ec)) {
+    throw StoreError(StoreError::Kind::kIo,
+                     "Store::Open: '" + path +
+                         "' is a directory; --db names the store file (e.g. '" +
+                         (std::filesystem::path(path) / "lab.db").string() + "')");
   }
+}
+
+void OpenConnection(Store::Impl& impl, const StoreOptions& options) {
   int flags = SQLITE_OPEN_NOMUTEX;  // one connection per thread (documented)
   if (options.read_only) {
     flags |= SQLITE_OPEN_READONLY;
   } else {
     flags |= SQLITE_OPEN_READWRITE | (options.create ? SQLITE_OPEN_CREATE : 0);
   }
-  int rc = sqlite3_open_v2(path.c_str(), &impl->db, flags, nullptr);
-  if (rc == SQLITE_OK && options.read_only && NeedsSharedMemory(impl->db)) {
+  int rc = sqlite3_open_v2(impl.path.c_str(), &impl.db, flags, nullptr);
+  if (rc == SQLITE_OK && options.read_only && NeedsSharedMemory(impl.db)) {
     // A WAL store in a directory we cannot write (a copy made for reading,
     // a read-only mount): SQLite cannot create the -shm file next to it.
-    OpenWithoutSharedMemory(*impl);
+    OpenWithoutSharedMemory(impl);
   }
   if (rc != SQLITE_OK) {
-    std::string msg = "Store::Open: cannot open '" + path +
-                      "': " + (impl->db ? sqlite3_errmsg(impl->db) : sqlite3_errstr(rc));
+    std::string msg = "Store::Open: cannot open '" + impl.path +
+                      "': " + (impl.db ? sqlite3_errmsg(impl.db) : sqlite3_errstr(rc));
     throw StoreError(detail::KindOf(rc) == StoreError::Kind::kCorrupt ? StoreError::Kind::kCorrupt
                                                                       : StoreError::Kind::kIo,
                      msg);
   }
+}
+
+// WAL: readers never block the writer and the writer never blocks readers.
+// Switching a new file to WAL needs an exclusive lock and SQLite does not
+// always call the busy handler for it: two processes creating the same
+// store at once (`arena serve` and `arena submit`) saw "database is
+// locked". Retry for up to busy_timeout_ms.
+void SwitchToWal(sqlite3* db, const StoreOptions& options, const std::string& ctx) {
+  std::string mode;
+  const auto give_up =
+      std::chrono::steady_clock::now() + std::chrono::milliseconds(options.busy_timeout_ms);
+  for (;;) {
+    try {
+      detail::Stmt wal(db, "PRAGMA journal_mode = WAL");
+      wal.Step();
+      mode = wal.Text(0);
+      break;
+    } catch (const StoreError& e) {
+      if (e.kind() != StoreError::Kind::kBusy || std::chrono::steady_clock::now() > give_up) throw;
+      std::this_thread::sleep_for(std::chrono::milliseconds(10));
+    }
+  }
+  if (mode != "wal") {
+    throw StoreError(StoreError::Kind::kIo,
+                     ctx + ": cannot switch to WAL mode (got '" + mode + "')");
+  }
+}
+
+// The pragmas of the connection; a read-write one is switched to WAL and migrated.
+void ConfigureAndMigrate(Store::Impl& impl, const StoreOptions& options, const std::string& ctx) {
+  sqlite3* db = impl.db;
+  if (!options.read_only && options.open_check_budget_s > 0) {
+    // Before anything writes: a page of `trials` garbled left SQLite able
+    // to append to the file without a word (the damage shows only when a
+    // reader reaches it), so a writing command refuses it up front.
+    impl.open_check = CheckSound(db, impl.path, options.open_check_budget_s);
+  }
+  Exec(db, "PRAGMA foreign_keys = ON", ctx);
+  if (!options.read_only) {
+    // A new file gets 8 KiB pages (no effect on an existing one, whose
+    // page size is fixed): a ground-truth chunk spans half as many
+    // overflow pages, each a WAL frame write and a checkpoint copy, so
+    // ingest costs ~25 % less CPU; small commits (claims, transitions)
+    // cost about the same as with 4 KiB. 16 KiB and more made each small
+    // commit 2-5x slower (bench/README.md, "Store").
+    Exec(db, "PRAGMA page_size = " + std::to_string(options.new_file_page_size), ctx);
+  }
+  const std::int64_t page_size = PageSize(db);
+  if (options.max_pages > 0) {
+    const std::int64_t pages = std::max<std::int64_t>(1, options.max_pages * 4096 / page_size);
+    Exec(db, "PRAGMA max_page_count = " + std::to_string(pages), ctx);
+  }
+  if (options.read_only) {
+    Exec(db, "PRAGMA query_only = ON", ctx);
+    return;
+  }
+  SwitchToWal(db, options, ctx);
+  Exec(db, options.synchronous_full ? "PRAGMA synchronous = FULL" : "PRAGMA synchronous = NORMAL",
+       ctx);
+  Exec(db,
+       "PRAGMA wal_autocheckpoint = " +
+           std::to_string(std::max<std::int64_t>(1, options.wal_autocheckpoint_bytes / page_size)),
+       ctx);
+  Migrate(impl);
+}
+
+void CheckSchemaVersion(sqlite3* db, const std::string& path) {
+  const int version = UserVersion(db);
+  if (version > Store::SchemaVersion()) {
+    throw StoreError(StoreError::Kind::kTooNew,
+                     "Store::Open: '" + path + "' has schema version " + std::to_string(version) +
+                         ", newer than this arena's " + std::to_string(Store::SchemaVersion()) +
+                         "; use a newer arena binary");
+  }
+  if (version < Store::SchemaVersion()) {
+    throw StoreError(StoreError::Kind::kIo,
+                     "Store::Open: '" + path + "' has schema version " + std::to_string(version) +
+                         " (this arena writes " + std::to_string(Store::SchemaVersion()) +
+                         "); open it read-write once (e.g. 'arena serve') to migrate it");
+  }
+}
+
+}  // namespace
+
+std::unique_ptr<Store> Store::Open(const std::string& path, const StoreOptions& options) {
+  CheckOpenOptions(options);
+  auto impl = std::make_unique<Impl>();
+  impl->path = path;
+  impl->options = options;
+  RefuseNoStoreAt(path, options);
+  OpenConnection(*impl, options);
   sqlite3* db = impl->db;
   sqlite3_extended_result_codes(db, 1);
   sqlite3_busy_timeout(db, options.busy_timeout_ms);
@@ -782,76 +877,8 @@ std::unique_ptr<Store> Store::Open(const std::string& path, const StoreOptions& 
                          "or a read-only file system); fix the permissions or open it read-only");
   }
   try {
-    if (!options.read_only && options.open_check_budget_s > 0) {
-      // Before anything writes: a page of `trials` garbled left SQLite able
-      // to append to the file without a word (the damage shows only when a
-      // reader reaches it), so a writing command refuses it up front.
-      impl->open_check = CheckSound(db, path, options.open_check_budget_s);
-    }
-    Exec(db, "PRAGMA foreign_keys = ON", ctx);
-    if (!options.read_only) {
-      // A new file gets 8 KiB pages (no effect on an existing one, whose
-      // page size is fixed): a ground-truth chunk spans half as many
-      // overflow pages, each a WAL frame write and a checkpoint copy, so
-      // ingest costs ~25 % less CPU; small commits (claims, transitions)
-      // cost about the same as with 4 KiB. 16 KiB and more made each small
-      // commit 2-5x slower (bench/README.md, "Store").
-      Exec(db, "PRAGMA page_size = " + std::to_string(options.new_file_page_size), ctx);
-    }
-    const std::int64_t page_size = PageSize(db);
-    if (options.max_pages > 0) {
-      const std::int64_t pages = std::max<std::int64_t>(1, options.max_pages * 4096 / page_size);
-      Exec(db, "PRAGMA max_page_count = " + std::to_string(pages), ctx);
-    }
-    if (options.read_only) {
-      Exec(db, "PRAGMA query_only = ON", ctx);
-    } else {
-      // WAL: readers never block the writer and the writer never blocks readers.
-      // Switching a new file to WAL needs an exclusive lock and SQLite does
-      // not always call the busy handler for it: two processes creating the
-      // same store at once (`arena serve` and `arena submit`) saw "database
-      // is locked". Retry for up to busy_timeout_ms.
-      std::string mode;
-      const auto give_up =
-          std::chrono::steady_clock::now() + std::chrono::milliseconds(options.busy_timeout_ms);
-      for (;;) {
-        try {
-          detail::Stmt wal(db, "PRAGMA journal_mode = WAL");
-          wal.Step();
-          mode = wal.Text(0);
-          break;
-        } catch (const StoreError& e) {
-          if (e.kind() != StoreError::Kind::kBusy || std::chrono::steady_clock::now() > give_up)
-            throw;
-          std::this_thread::sleep_for(std::chrono::milliseconds(10));
-        }
-      }
-      if (mode != "wal") {
-        throw StoreError(StoreError::Kind::kIo,
-                         ctx + ": cannot switch to WAL mode (got '" + mode + "')");
-      }
-      Exec(db,
-           options.synchronous_full ? "PRAGMA synchronous = FULL" : "PRAGMA synchronous = NORMAL",
-           ctx);
-      Exec(db,
-           "PRAGMA wal_autocheckpoint = " + std::to_string(std::max<std::int64_t>(
-                                                1, options.wal_autocheckpoint_bytes / page_size)),
-           ctx);
-      Migrate(*impl);
-    }
-    const int version = UserVersion(db);
-    if (version > SchemaVersion()) {
-      throw StoreError(StoreError::Kind::kTooNew,
-                       "Store::Open: '" + path + "' has schema version " + std::to_string(version) +
-                           ", newer than this arena's " + std::to_string(SchemaVersion()) +
-                           "; use a newer arena binary");
-    }
-    if (version < SchemaVersion()) {
-      throw StoreError(StoreError::Kind::kIo,
-                       "Store::Open: '" + path + "' has schema version " + std::to_string(version) +
-                           " (this arena writes " + std::to_string(SchemaVersion()) +
-                           "); open it read-write once (e.g. 'arena serve') to migrate it");
-    }
+    ConfigureAndMigrate(*impl, options, ctx);
+    CheckSchemaVersion(db, path);
   } catch (const StoreError& e) {
     if (e.kind() == StoreError::Kind::kBadInput) {
       // "file is not a database" and friends surface as generic errors here.

@@ -223,40 +223,6 @@ void RequireFinite(double v, const std::string& what) {
   if (!std::isfinite(v)) BadInput(what + " is " + (std::isnan(v) ? "NaN" : "infinite"));
 }
 
-// The indexed parameter columns, read from the scene JSON (docs/scene.md).
-struct SceneColumns {
-  std::optional<std::string> object_shape, finger_type, pusher_type;
-  std::optional<double> object_mass, grip_force, finger_mu, pusher_mu, pusher_speed,
-      pusher_angular_speed, duration;
-  int finger_count = 0;
-  int contact_mask = 0;
-  std::array<double, 7> nominal{0, 0, 0, 1, 0, 0, 0};
-};
-
-std::optional<double> Num(const json& j, const char* key, const std::string& where) {
-  if (!j.is_object() || !j.contains(key)) return std::nullopt;
-  const auto& v = j.at(key);
-  if (!v.is_number()) BadInput(where + "." + key + " must be a number");
-  const double d = v.get<double>();
-  RequireFinite(d, where + "." + key);
-  return d;
-}
-
-std::optional<double> Norm3(const json& j, const char* key, const std::string& where) {
-  if (!j.is_object() || !j.contains(key)) return std::nullopt;
-  const auto& v = j.at(key);
-  if (!v.is_array() || v.size() != 3)
-    BadInput(where + "." + key + " must be an array of 3 numbers");
-  double sum = 0;
-  for (int i = 0; i < 3; ++i) {
-    if (!v[i].is_number()) BadInput(where + "." + key + " must be an array of 3 numbers");
-    const double d = v[i].get<double>();
-    RequireFinite(d, where + "." + key + "[" + std::to_string(i) + "]");
-    sum += d * d;
-  }
-  return std::sqrt(sum);
-}
-
 int TypeBit(const std::string& t, const std::string& where) {
   if (t == "point") return kPointBit;
   if (t == "line") return kLineBit;
@@ -264,80 +230,24 @@ int TypeBit(const std::string& t, const std::string& where) {
   BadInput(where + " is '" + t + "'; expected point, line or patch");
 }
 
-SceneColumns ReadSceneColumns(const std::string& scene_text, const std::string& where) {
-  const json scene = ParseObject(scene_text, where);
-  SceneColumns c;
-  if (scene.contains("object")) {
-    const auto& o = scene.at("object");
-    if (o.contains("shape") && o.at("shape").is_string())
-      c.object_shape = o.at("shape").get<std::string>();
-    c.object_mass = Num(o, "mass", where + ".object");
-    if (o.contains("pose") && o.at("pose").is_object()) {
-      const auto& pose = o.at("pose");
-      std::array<double, 3> p{0, 0, 0}, rpy{0, 0, 0};
-      for (auto [key, dst] : {std::pair{"position", &p}, std::pair{"rpy", &rpy}}) {
-        if (!pose.contains(key)) continue;
-        const auto& v = pose.at(key);
-        if (!v.is_array() || v.size() != 3)
-          BadInput(where + ".object.pose." + key + " must be 3 numbers");
-        for (int i = 0; i < 3; ++i) {
-          if (!v[i].is_number()) BadInput(where + ".object.pose." + key + " must be 3 numbers");
-          (*dst)[i] = v[i].get<double>();
-          RequireFinite((*dst)[i], where + ".object.pose." + key);
-        }
-      }
-      // R = Rz(yaw) Ry(pitch) Rx(roll) (docs/scene.md: rpy about fixed x, y, z).
-      const double cr = std::cos(rpy[0] / 2), sr = std::sin(rpy[0] / 2);
-      const double cp = std::cos(rpy[1] / 2), sp = std::sin(rpy[1] / 2);
-      const double cy = std::cos(rpy[2] / 2), sy = std::sin(rpy[2] / 2);
-      c.nominal = {p[0],
-                   p[1],
-                   p[2],
-                   cr * cp * cy + sr * sp * sy,
-                   sr * cp * cy - cr * sp * sy,
-                   cr * sp * cy + sr * cp * sy,
-                   cr * cp * sy - sr * sp * cy};
-    }
+// The caller's facts of a scene (scene_facts.hpp), checked before they are
+// stored: no NaN, no unknown contact type, at least one contact.
+void CheckSceneFacts(const SceneFacts& f, const std::string& where) {
+  for (auto [name, v] :
+       {std::pair{"object_mass", f.object_mass}, std::pair{"grip_force", f.grip_force},
+        std::pair{"finger_mu", f.finger_mu}, std::pair{"pusher_mu", f.pusher_mu},
+        std::pair{"pusher_speed", f.pusher_speed},
+        std::pair{"pusher_angular_speed", f.pusher_angular_speed},
+        std::pair{"duration", f.duration}}) {
+    if (v) RequireFinite(*v, where + "." + name);
   }
-  c.grip_force = Num(scene, "grip_force", where);
-  c.duration = Num(scene, "duration", where);
-  if (scene.contains("fingers")) {
-    const auto& fingers = scene.at("fingers");
-    if (!fingers.is_array()) BadInput(where + ".fingers must be an array");
-    double mu_sum = 0;
-    int mu_n = 0;
-    for (std::size_t i = 0; i < fingers.size(); ++i) {
-      const std::string fw = where + ".fingers[" + std::to_string(i) + "]";
-      const auto& f = fingers[i];
-      const std::string type = f.contains("type") && f.at("type").is_string()
-                                   ? f.at("type").get<std::string>()
-                                   : "point";
-      c.contact_mask |= TypeBit(type, fw + ".type");
-      if (!c.finger_type)
-        c.finger_type = type;
-      else if (*c.finger_type != type)
-        c.finger_type = "mixed";
-      if (auto mu = Num(f, "mu", fw)) {
-        mu_sum += *mu;
-        ++mu_n;
-      }
-    }
-    c.finger_count = static_cast<int>(fingers.size());
-    if (mu_n > 0) c.finger_mu = mu_sum / mu_n;
-  }
-  if (scene.contains("pusher") && scene.at("pusher").is_object()) {
-    const auto& p = scene.at("pusher");
-    const std::string type =
-        p.contains("type") && p.at("type").is_string() ? p.at("type").get<std::string>() : "point";
-    c.contact_mask |= TypeBit(type, where + ".pusher.type");
-    c.pusher_type = type;
-    c.pusher_mu = Num(p, "mu", where + ".pusher");
-    if (p.contains("motion")) {
-      c.pusher_speed = Norm3(p.at("motion"), "velocity", where + ".pusher.motion");
-      c.pusher_angular_speed = Norm3(p.at("motion"), "angular_velocity", where + ".pusher.motion");
-    }
-  }
-  return c;
+  for (std::size_t i = 0; i < f.nominal.size(); ++i)
+    RequireFinite(f.nominal[i], where + ".nominal[" + std::to_string(i) + "]");
+  if (f.finger_type && *f.finger_type != "mixed") TypeBit(*f.finger_type, where + ".finger_type");
+  if (f.pusher_type) TypeBit(*f.pusher_type, where + ".pusher_type");
+  if (f.finger_count < 0) BadInput(where + ".finger_count must be >= 0");
+  if (f.contact_mask < 0 || f.contact_mask > (kPointBit | kLineBit | kPatchBit))
+    BadInput(where + ".contact_mask " + std::to_string(f.contact_mask) + " is not a set of types");
 }
 
 // Angle between two unit quaternions (rad, in [0, pi]).
@@ -476,7 +386,9 @@ std::vector<std::int64_t> InsertPlannedTrials(const Store::Impl& impl, std::int6
     const std::string where = std::string(function) + ": trial " + std::to_string(i);
     if (t.condition < 0) BadInput(where + ": condition must be >= 0");
     if (t.replicate < 0) BadInput(where + ": replicate must be >= 0");
-    const SceneColumns c = ReadSceneColumns(t.scene_json, where + ": scene");
+    const SceneFacts& c = t.facts;
+    ParseObject(t.scene_json, where + ": scene");
+    CheckSceneFacts(c, where + ": scene facts");
     ParseObject(t.params_json, where + ": params_json");
     ParseObject(t.defects_json, where + ": defects_json");
     if (c.contact_mask == 0) BadInput(where + ": scene has no fingers or pusher");

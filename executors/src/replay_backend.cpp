@@ -203,43 +203,76 @@ class ReplayBackend final : public Backend {
  public:
   explicit ReplayBackend(const std::string& dir) : dir_(dir) {
     const fs::path root(dir);
+    const json manifest = ReadManifest(root);
+    RefuseSymlinks(root);
+    ReadScenes(root, ListedTrials(manifest));
+    if (trials_.empty()) throw std::invalid_argument(dir + ": holds no trials");
+    // An imported recording (arena import): measured truth, and the trials
+    // whose poses failed the import's checks are never served (never scored).
+    measured_ = manifest.value("truth", "") == "measured";
+    ApplyImportChecks(manifest);
+    CheckStreams(root);
+    caps_.workspace = RecordedWorkspace();
+    caps_.name = "replay:" + dir;
+    caps_.truth = measured_ ? TruthSource::kMeasured : TruthSource::kRecorded;
+    caps_.engine = std::string(measured_ ? "measured" : "recorded") + " dataset " +
+                   fs::absolute(root).string() + " (" + std::to_string(trials_.size()) +
+                   " trials, " + format_ + ")";
+    caps_.emulates_defects = false;
+    caps_.settings_json =
+        json({{"dataset", fs::absolute(root).string()}, {"trials", trials_.size()}}).dump();
+  }
+
+ private:
+  // manifest.json, with a format arena writes and the scenes beside it.
+  json ReadManifest(const fs::path& root) {
     json manifest;
     try {
       manifest = json::parse(ReadText((root / "manifest.json").string()));
     } catch (const json::exception& e) {
-      throw std::invalid_argument(dir + "/manifest.json: not JSON: " + e.what());
+      throw std::invalid_argument(dir_ + "/manifest.json: not JSON: " + e.what());
     }
     format_ = manifest.value("export_format", "");
     if (format_ != "csv" && format_ != "jsonl" && format_ != "hdf5")
-      throw std::invalid_argument(dir + "/manifest.json: export_format '" + format_ +
+      throw std::invalid_argument(dir_ + "/manifest.json: export_format '" + format_ +
                                   "' is none of the formats arena writes (hdf5, csv, jsonl)");
     if (!fs::exists(root / "scenes.jsonl"))
-      throw std::invalid_argument(dir + ": no scenes.jsonl (exported by an older arena?)");
-    // Nothing in the dataset may point elsewhere: a symlink would serve a
-    // file the manifest's checks never saw.
-    {
-      std::error_code ec;
-      for (auto it = fs::recursive_directory_iterator(root, ec);
-           !ec && it != fs::recursive_directory_iterator(); it.increment(ec)) {
-        if (it->is_symlink())
-          throw std::invalid_argument(it->path().string() +
-                                      ": a symbolic link in the dataset (refused: replay serves "
-                                      "only the dataset's own files)");
-      }
+      throw std::invalid_argument(dir_ + ": no scenes.jsonl (exported by an older arena?)");
+    return manifest;
+  }
+
+  // Nothing in the dataset may point elsewhere: a symlink would serve a
+  // file the manifest's checks never saw.
+  static void RefuseSymlinks(const fs::path& root) {
+    std::error_code ec;
+    for (auto it = fs::recursive_directory_iterator(root, ec);
+         !ec && it != fs::recursive_directory_iterator(); it.increment(ec)) {
+      if (it->is_symlink())
+        throw std::invalid_argument(it->path().string() +
+                                    ": a symbolic link in the dataset (refused: replay serves "
+                                    "only the dataset's own files)");
     }
-    // The manifest's trials: ids unique, each with its sample count (and, for
-    // csv/jsonl, its true stream file inside the dataset).
+  }
+
+  // The manifest's trials: ids unique, each with its sample count (and, for
+  // csv/jsonl, its true stream file inside the dataset).
+  std::map<std::int64_t, const json*> ListedTrials(const json& manifest) const {
     std::map<std::int64_t, const json*> listed;
     if (!manifest.contains("trials") || !manifest["trials"].is_array())
-      throw std::invalid_argument(dir + "/manifest.json: no trials list");
+      throw std::invalid_argument(dir_ + "/manifest.json: no trials list");
     for (const auto& t : manifest["trials"]) {
       if (!t.is_object() || !t.contains("trial_id") || !t["trial_id"].is_number_integer() ||
           !t.contains("samples") || !t["samples"].is_number_unsigned())
-        throw std::invalid_argument(dir + "/manifest.json: a trial without trial_id and samples");
+        throw std::invalid_argument(dir_ + "/manifest.json: a trial without trial_id and samples");
       if (!listed.emplace(t["trial_id"].get<std::int64_t>(), &t).second)
-        throw std::invalid_argument(dir + "/manifest.json: trial " + t["trial_id"].dump() +
+        throw std::invalid_argument(dir_ + "/manifest.json: trial " + t["trial_id"].dump() +
                                     " is listed twice");
     }
+    return listed;
+  }
+
+  // scenes.jsonl: each recorded trial once, each listed in the manifest.
+  void ReadScenes(const fs::path& root, const std::map<std::int64_t, const json*>& listed) {
     std::istringstream lines(ReadText((root / "scenes.jsonl").string()));
     std::string line;
     std::set<std::int64_t> seen;
@@ -248,17 +281,17 @@ class ReplayBackend final : public Backend {
       const json j = json::parse(line, nullptr, false);
       if (j.is_discarded() || !j.is_object() || !j.contains("trial_id") ||
           !j["trial_id"].is_number_integer())
-        throw std::invalid_argument(dir + "/scenes.jsonl: line " + std::to_string(number) +
+        throw std::invalid_argument(dir_ + "/scenes.jsonl: line " + std::to_string(number) +
                                     ": not an object with a trial_id");
       const auto id = j["trial_id"].get<std::int64_t>();
       if (!seen.insert(id).second)
-        throw std::invalid_argument(dir + "/scenes.jsonl: line " + std::to_string(number) +
+        throw std::invalid_argument(dir_ + "/scenes.jsonl: line " + std::to_string(number) +
                                     ": trial " + std::to_string(id) +
                                     " again (each recorded trial once)");
       if (!j.contains("scene") || !j["scene"].is_object()) continue;  // a trial without a scene
       const auto m = listed.find(id);
       if (m == listed.end())
-        throw std::invalid_argument(dir + "/scenes.jsonl: line " + std::to_string(number) +
+        throw std::invalid_argument(dir_ + "/scenes.jsonl: line " + std::to_string(number) +
                                     ": trial " + std::to_string(id) + " is not in the manifest");
       Recorded r;
       r.trial_id = id;
@@ -274,58 +307,54 @@ class ReplayBackend final : public Backend {
       }
       trials_.push_back(std::move(r));
     }
-    if (trials_.empty()) throw std::invalid_argument(dir + ": holds no trials");
-    // An imported recording (arena import): measured truth, and the trials
-    // whose poses failed the import's checks are never served (never scored).
-    measured_ = manifest.value("truth", "") == "measured";
-    if (manifest.contains("import") && manifest["import"].is_object() &&
-        manifest["import"].contains("trials") && manifest["import"]["trials"].is_array()) {
-      for (const auto& t : manifest["import"]["trials"]) {
-        if (!t.is_object()) continue;
-        for (auto& r : trials_) {
-          if (r.trial_id != t.value("trial_id", std::int64_t{-1})) continue;
-          const std::string name = t.value("trial", std::string("?"));
-          if (!t.value("pose_usable", true))
-            r.refused = "replay: recorded trial " + std::to_string(r.trial_id) + " (" + name +
-                        ") failed its import check of the poses (" + dir +
-                        "/import_report.txt): not served, so never scored";
-          if (!t.value("force_usable", true)) {
-            r.truth.forces_measured = false;
-            r.truth.forces_note = "recorded trial " + std::to_string(r.trial_id) + " (" + name +
-                                  "): its force stream failed its import check (" + dir +
-                                  "/import_report.txt)";
-          }
+  }
+
+  // The import's checks (manifest "import"): a trial whose poses failed is
+  // refused, one whose forces failed has no measured forces.
+  void ApplyImportChecks(const json& manifest) {
+    if (!manifest.contains("import") || !manifest["import"].is_object() ||
+        !manifest["import"].contains("trials") || !manifest["import"]["trials"].is_array())
+      return;
+    for (const auto& t : manifest["import"]["trials"]) {
+      if (!t.is_object()) continue;
+      for (auto& r : trials_) {
+        if (r.trial_id != t.value("trial_id", std::int64_t{-1})) continue;
+        const std::string name = t.value("trial", std::string("?"));
+        if (!t.value("pose_usable", true))
+          r.refused = "replay: recorded trial " + std::to_string(r.trial_id) + " (" + name +
+                      ") failed its import check of the poses (" + dir_ +
+                      "/import_report.txt): not served, so never scored";
+        if (!t.value("force_usable", true)) {
+          r.truth.forces_measured = false;
+          r.truth.forces_note = "recorded trial " + std::to_string(r.trial_id) + " (" + name +
+                                "): its force stream failed its import check (" + dir_ +
+                                "/import_report.txt)";
         }
       }
     }
-    // Every served trial's stream is there and well formed before the cell
-    // comes up: a broken dataset stops `arena cell` with the file and the
-    // reason, not a trial in the middle of a campaign.
+  }
+
+  // Every served trial's stream is there and well formed before the cell
+  // comes up: a broken dataset stops `arena cell` with the file and the
+  // reason, not a trial in the middle of a campaign.
+  void CheckStreams(const fs::path& root) {
     if (format_ == "hdf5") {
       h5_ = std::make_unique<Hdf5Recording>((root / "dataset.h5").string());
       for (auto& r : trials_) {
         h5_->Check(r.trial_id);
         r.stamp = Stamp(root / "dataset.h5");
       }
-    } else {
-      for (auto& r : trials_) {
-        if (!fs::is_regular_file(r.stream))
-          throw std::invalid_argument(r.stream.string() + ": missing (trial " +
-                                      std::to_string(r.trial_id) + "'s true stream)");
-        r.stamp = Stamp(r.stream);
-      }
+      return;
     }
-    caps_.workspace = RecordedWorkspace();
-    caps_.name = "replay:" + dir;
-    caps_.truth = measured_ ? TruthSource::kMeasured : TruthSource::kRecorded;
-    caps_.engine = std::string(measured_ ? "measured" : "recorded") + " dataset " +
-                   fs::absolute(root).string() + " (" + std::to_string(trials_.size()) +
-                   " trials, " + format_ + ")";
-    caps_.emulates_defects = false;
-    caps_.settings_json =
-        json({{"dataset", fs::absolute(root).string()}, {"trials", trials_.size()}}).dump();
+    for (auto& r : trials_) {
+      if (!fs::is_regular_file(r.stream))
+        throw std::invalid_argument(r.stream.string() + ": missing (trial " +
+                                    std::to_string(r.trial_id) + "'s true stream)");
+      r.stamp = Stamp(r.stream);
+    }
   }
 
+ public:
   BackendCapabilities Capabilities() const override { return caps_; }
   TrialTruth PreparedTruth() const override { return prepared_ ? prepared_->truth : TrialTruth{}; }
 

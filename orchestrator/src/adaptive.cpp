@@ -15,6 +15,7 @@
 
 #include "arena/mechanics/scene_json.hpp"
 #include "arena/orchestrator/outcome.hpp"
+#include "arena/orchestrator/scene_facts.hpp"
 #include "arena/orchestrator/submit.hpp"
 
 namespace arena::orchestrator {
@@ -40,6 +41,7 @@ db::PlannedTrial ToStoreTrial(const Campaign& c, const PlannedTrial& t) {
   p.replicate = t.replicate;
   p.seed = t.seed;
   p.scene_json = mechanics::SceneToJson(t.scene);
+  p.facts = SceneFactsOf(t.scene);
   p.params_json = t.parameters_json;
   p.defects_json = c.defects_json;
   return p;

@@ -8,6 +8,7 @@
 
 #include "arena/mechanics/scene_json.hpp"
 #include "arena/orchestrator/adaptive.hpp"
+#include "arena/orchestrator/scene_facts.hpp"
 
 namespace arena::orchestrator {
 
@@ -23,6 +24,8 @@ std::vector<db::PlannedTrial> PlanChunk(const Campaign& campaign, std::int64_t b
     p.replicate = t.replicate;
     p.seed = t.seed;
     p.scene_json = mechanics::SceneToJson(t.scene);
+    p.facts = SceneFactsOf(t.scene);
+    p.facts = SceneFactsOf(t.scene);
     p.params_json = t.parameters_json;
     p.defects_json = campaign.defects_json;
     out.push_back(std::move(p));

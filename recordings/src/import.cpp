@@ -11,13 +11,16 @@
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
+#include <map>
 #include <nlohmann/json.hpp>
 #include <set>
 
 #include <Eigen/Core>
+#include <Eigen/Geometry>
 
 #include "arena/db/export.hpp"
 #include "arena/db/store.hpp"
+#include "arena/mechanics/frames.hpp"
 
 namespace arena::recordings {
 namespace {
@@ -106,6 +109,7 @@ double Rate(const std::vector<std::array<double, 3>>& v, const std::vector<doubl
 
 struct Prepared {
   std::string scene_json;
+  db::SceneFacts facts;
   std::vector<db::Sample> samples;
   ImportedTrial trial;
   std::string params_json;
@@ -128,6 +132,7 @@ Prepared Prepare(const Recording& r, const ImportOptions& o) {
   p.trial.samples = static_cast<std::int64_t>(s.t.size());
   p.trial.duration = s.t.back();
   p.scene_json = SceneJson(r, s, o);
+  p.facts = SceneFactsOf(r, s, o);
 
   const double z = r.shape.thickness / 2;
   const Touch start = TouchAt(r, s, 0);
@@ -384,6 +389,7 @@ std::int64_t StorePrepared(db::Store& store, const std::string& name, const ojso
     t.condition = static_cast<int>(i);
     t.seed = prepared[i].trial.seed;
     t.scene_json = prepared[i].scene_json;
+    t.facts = prepared[i].facts;
     t.params_json = prepared[i].params_json;
     planned.push_back(std::move(t));
   }
@@ -393,8 +399,10 @@ std::int64_t StorePrepared(db::Store& store, const std::string& name, const ojso
   for (std::size_t i = 0; i < prepared.size(); ++i) {
     const auto claimed = store.ClaimNextTrial(cell);
     if (!claimed) throw std::runtime_error("import: the temporary store handed out no trial");
-    const auto& p = prepared[static_cast<std::size_t>(store.GetTrial(claimed->trial_id).index)];
-    auto ingest = store.BeginIngest(claimed->trial_id, claimed->attempt);
+    const auto index = static_cast<std::size_t>(store.GetTrial(claimed->trial_id).index);
+    const auto& p = prepared[index];
+    auto ingest =
+        store.BeginIngest(claimed->trial_id, claimed->attempt, planned[index].facts.contacts);
     ingest->Add(p.samples);
     ingest->Finish();
     store.RecordExecution(claimed->trial_id, claimed->attempt, "import:" + o.adaptor, "measured",
@@ -419,6 +427,10 @@ void WriteImportDataset(const fs::path& scratch, const fs::path& out, const std:
   }
   db::ExportOptions eo;
   eo.campaign_id = campaign_id;
+  // The export's column names from the facts computed with each scene.
+  std::map<std::string, const db::SceneFacts*> facts_of;
+  for (const auto& p : prepared) facts_of.emplace(p.scene_json, &p.facts);
+  eo.scene_facts = [&facts_of](const std::string& scene_json) { return *facts_of.at(scene_json); };
   eo.format = db::ExportFormat::kHdf5;
   eo.out_dir = out.string();
   eo.arena_version = o.arena_version;
@@ -470,6 +482,34 @@ std::string SceneJson(const Recording& r, const Resampled& s, const ImportOption
       {"model", {{"facets", 8}, {"points", 3}, {"dt", 0.004}, {"reduce", "auto"}}},
   };
   return scene.dump();
+}
+
+db::SceneFacts SceneFactsOf(const Recording& r, const Resampled& s, const ImportOptions& o) {
+  db::SceneFacts f;
+  f.object_shape = "prism";
+  f.object_mass = r.shape.mass;
+  f.grip_force = 0.0;
+  f.duration = Round(s.t.back(), 1e-6);
+  f.pusher_type = "point";
+  f.pusher_mu = o.pusher_mu;  // a path motion: no speeds
+  f.contact_mask = db::kPointBit;
+  const double z = r.shape.thickness / 2;
+  const Eigen::Vector3d rpy(0.0, 0.0, Round(s.object[0][2], 1e-7));
+  const Eigen::Quaterniond q(mechanics::RotationFromRpy(rpy));
+  f.nominal = {
+      Round(s.object[0][0], 1e-7), Round(s.object[0][1], 1e-7), z, q.w(), q.x(), q.y(), q.z()};
+  const Touch start = TouchAt(r, s, 0);
+  db::ContactSite pusher;
+  pusher.name = "pusher";
+  pusher.pusher = true;
+  pusher.position = {Round(s.pusher[0][0] + r.pusher_radius * start.nx, 1e-7),
+                     Round(s.pusher[0][1] + r.pusher_radius * start.ny, 1e-7), z};
+  const std::array<double, 3> n{Round(start.nx, 1e-9), Round(start.ny, 1e-9), 0.0};
+  const double norm = std::sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
+  pusher.known = norm > 0;
+  for (int k = 0; k < 3; ++k) pusher.normal[k] = pusher.known ? n[k] / norm : 0.0;
+  f.contacts = {pusher};
+  return f;
 }
 
 ImportReport ImportRecordings(const std::vector<Recording>& recordings, const ImportOptions& o) {

@@ -13,6 +13,7 @@
 #include "arena/assessment/truth.hpp"
 #include "arena/mechanics/scene_json.hpp"
 #include "arena/mechanics/simulate.hpp"
+#include "arena/orchestrator/scene_facts.hpp"
 #include "db/db_test_util.hpp"
 
 namespace arena::assessment {
@@ -42,6 +43,7 @@ TEST(EvaluationStore, ReplicatesShareThePredictionAndKeepTheirOwnTruth) {
       t.replicate = i % 2;
       t.seed = 100u + static_cast<unsigned>(i);
       t.scene_json = Scene(6.0 + 2 * (i / 2));
+      t.facts = orchestrator::SceneFactsOfJson(t.scene_json);
       t.params_json = "{}";
       trials.push_back(t);
     }
@@ -52,7 +54,9 @@ TEST(EvaluationStore, ReplicatesShareThePredictionAndKeepTheirOwnTruth) {
     for (int i = 0; i < 6; ++i) {
       const auto t = store->ClaimNextTrial("cell");
       ASSERT_TRUE(t.has_value());
-      auto ingest = store->BeginIngest(t->trial_id, t->attempt);
+      auto ingest = store->BeginIngest(
+          t->trial_id, t->attempt,
+          orchestrator::SceneFactsOfJson(store->GetTrial(t->trial_id).scene_json).contacts);
       for (int k = 0; k < 30; ++k) {
         db::Sample sample = db::testing::MakeSample(k);
         sample.object_pose[0] += (i % 2) * 0.002;
@@ -167,6 +171,7 @@ TEST(EvaluationStore, PredictsFromTheMeasuredStartAndSaysTheStartsShare) {
       t.replicate = i;
       t.seed = 7u + static_cast<unsigned>(i);
       t.scene_json = scene_json;
+      t.facts = orchestrator::SceneFactsOfJson(t.scene_json);
       t.params_json = "{}";
       trials.push_back(t);
     }
@@ -182,7 +187,9 @@ TEST(EvaluationStore, PredictsFromTheMeasuredStartAndSaysTheStartsShare) {
       const mechanics::Scene placed = StartedAt(planned, start);
       const auto run = mechanics::Simulate(placed);
       ASSERT_EQ(run.status, mechanics::SimulationStatus::kOk) << run.error;
-      auto ingest = store->BeginIngest(t->trial_id, t->attempt);
+      auto ingest = store->BeginIngest(
+          t->trial_id, t->attempt,
+          orchestrator::SceneFactsOfJson(store->GetTrial(t->trial_id).scene_json).contacts);
       for (const auto& sample : AsStream(placed, run)) ingest->Add(sample);
       ingest->Finish(db::TrialEnd::kOk);
       store->BeginReset(t->trial_id, t->attempt);

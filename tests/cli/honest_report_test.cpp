@@ -114,7 +114,7 @@ TEST(FailureReasons, GroupedByTheTypedKindWithTheTextAsDetail) {
                       0, "execute.refused_by_cell");
     // Trial 4: done, with a prediction whose solver failed.
     t = store->ClaimNextTrial("robot1");
-    auto ingest = store->BeginIngest(t->trial_id, t->attempt);
+    auto ingest = store->BeginIngest(t->trial_id, t->attempt, db::testing::SceneSites());
     for (int i = 0; i < 5; ++i) ingest->Add(db::testing::MakeSample(i));
     ingest->Finish(db::TrialEnd::kOk);
     store->BeginReset(t->trial_id, t->attempt);
@@ -265,6 +265,7 @@ TEST(ExportManifest, ParametersNameEveryVariation) {
   eo.campaign_id = 1;
   eo.format = db::ExportFormat::kCsv;
   eo.out_dir = dir.File("out");
+  eo.scene_facts = [](const std::string&) { return db::testing::SceneFactsFor(); };
   db::ExportCampaign(*store, eo);
   std::ifstream in(eo.out_dir + "/manifest.json");
   const auto manifest = nlohmann::json::parse(in);

@@ -21,6 +21,7 @@
 #include "arena/mechanics/scene_json.hpp"
 #include "arena/mechanics/simulate.hpp"
 #include "arena/orchestrator/campaign.hpp"
+#include "arena/orchestrator/scene_facts.hpp"
 #include "arena/orchestrator/submit.hpp"
 #include "plot_trial.hpp"
 
@@ -52,7 +53,8 @@ class PlotTest : public ::testing::Test {
     ASSERT_EQ(truth.status, mechanics::SimulationStatus::kOk) << truth.error;
     samples_ = truth.samples.size();
     const auto normals = assessment::ContactNormals(scene);
-    auto ingest = store->BeginIngest(trial_, claimed->attempt);
+    auto ingest =
+        store->BeginIngest(trial_, claimed->attempt, orchestrator::SceneFactsOf(scene).contacts);
     for (size_t i = 0; i < truth.samples.size(); ++i) {
       const auto& s = truth.samples[i];
       db::Sample d;

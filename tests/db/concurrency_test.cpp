@@ -107,7 +107,7 @@ TEST(StoreConcurrency, ReaderNeverSeesHalfWrittenTrial) {
     auto store = Store::Open(path);
     IngestOptions small{25, 50, 10.0};  // many commits per trial: many chances to see a partial one
     while (auto t = store->ClaimNextTrial("c")) {
-      auto in = store->BeginIngest(t->trial_id, t->attempt, small);
+      auto in = store->BeginIngest(t->trial_id, t->attempt, testing::SceneSites(), small);
       const int n = counts[static_cast<std::size_t>(store->GetTrial(t->trial_id).index)];
       for (int i = 0; i < n; ++i) in->Add(MakeSample(i));
       in->Finish();

@@ -28,7 +28,8 @@ using testing::TempDir;
     auto store = Store::Open(path);
     store->RecoverAfterRestart();
     while (auto t = store->ClaimNextTrial("c")) {
-      auto in = store->BeginIngest(t->trial_id, t->attempt, IngestOptions{50, 200, 10.0});
+      auto in = store->BeginIngest(t->trial_id, t->attempt, testing::SceneSites(),
+                                   IngestOptions{50, 200, 10.0});
       for (int i = 0; i < 1500; ++i) in->Add(MakeSample(i));
       in->Finish();
       store->BeginReset(t->trial_id, t->attempt);

@@ -35,6 +35,35 @@ inline std::string SceneJson(double grip_force = 10.0, const std::string& finger
                 "motion": {"velocity": [0, 0, 0.01], "angular_velocity": [0, 0, 0]}}})";
 }
 
+// The contacts of SceneJson (fingers left, right; the pusher), as the
+// caller hands them to the store (db reads no scene).
+inline std::vector<ContactSite> SceneSites() {
+  return {{"left", false, {-0.025, 0, 0}, {1, 0, 0}, true},
+          {"right", false, {0.025, 0, 0}, {-1, 0, 0}, true},
+          {"pusher", true, {0, 0, -0.05}, {0, 0, 1}, true}};
+}
+
+// What the caller (orchestrator::SceneFactsOf) computes of SceneJson(...).
+inline SceneFacts SceneFactsFor(double grip_force = 10.0, const std::string& finger = "point",
+                                double mu = 0.5, double x0 = 0.0) {
+  SceneFacts f;
+  f.object_shape = "box";
+  f.object_mass = 0.2;
+  f.grip_force = grip_force;
+  f.finger_type = finger;
+  f.finger_count = 2;
+  f.finger_mu = mu;
+  f.pusher_type = "point";
+  f.pusher_mu = 0.3;
+  f.pusher_speed = 0.01;
+  f.pusher_angular_speed = 0.0;
+  f.duration = 1.0;
+  f.contact_mask = kPointBit | (finger == "line" ? kLineBit : finger == "patch" ? kPatchBit : 0);
+  f.nominal = {x0, 0, 0, 1, 0, 0, 0};
+  f.contacts = SceneSites();
+  return f;
+}
+
 inline std::vector<PlannedTrial> MakeTrials(int n, const std::string& finger = "point") {
   std::vector<PlannedTrial> out;
   for (int i = 0; i < n; ++i) {
@@ -43,6 +72,7 @@ inline std::vector<PlannedTrial> MakeTrials(int n, const std::string& finger = "
     t.replicate = i % 2;
     t.seed = 1000u + static_cast<unsigned>(i);
     t.scene_json = SceneJson(5.0 + i, finger, 0.3 + 0.01 * i);
+    t.facts = SceneFactsFor(5.0 + i, finger, 0.3 + 0.01 * i);
     t.params_json = R"({"grip_force": )" + std::to_string(5.0 + i) + "}";
     out.push_back(t);
   }
@@ -134,7 +164,7 @@ inline constexpr const char* kUndoMigration7 =
 // Runs one trial through the whole state machine with n samples.
 inline void RunTrialToDone(Store& store, const ClaimedTrial& t, int n,
                            const IngestOptions& options = {}) {
-  auto ingest = store.BeginIngest(t.trial_id, t.attempt, options);
+  auto ingest = store.BeginIngest(t.trial_id, t.attempt, SceneSites(), options);
   for (int i = 0; i < n; ++i) ingest->Add(MakeSample(i));
   ingest->Finish();
   store.BeginReset(t.trial_id, t.attempt);

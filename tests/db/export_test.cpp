@@ -21,6 +21,10 @@ using testing::RunTrialToDone;
 using testing::TempDir;
 namespace fs = std::filesystem;
 
+// The caller's facts of the stores' scenes (all SceneJson: fingers left and
+// right, the pusher), as the CLI's orchestrator::SceneFactsOfJson gives them.
+SceneFacts FactsOfScene(const std::string&) { return testing::SceneFactsFor(); }
+
 // The columns the dataset promises, rebuilt here independently of export.cpp.
 std::vector<double> TrueRow(const Sample& s) {
   std::vector<double> r{s.t};
@@ -118,6 +122,7 @@ class ExportTest : public ::testing::Test {
 
   ExportReport Export(ExportFormat f, const std::string& name) {
     ExportOptions o;
+    o.scene_facts = FactsOfScene;
     o.campaign_id = campaign_;
     o.format = f;
     o.out_dir = dir_.File(name);
@@ -293,9 +298,21 @@ TEST_F(ExportTest, RefusesNonEmptyDirectoryAndUnknownCampaign) {
   std::ofstream(dir_.path() / "full" / "x") << "x";
   EXPECT_THROW(Export(ExportFormat::kCsv, "full"), StoreError);
   ExportOptions o;
+  o.scene_facts = FactsOfScene;
   o.campaign_id = 99;
   o.out_dir = dir_.File("none");
   EXPECT_THROW(ExportCampaign(*store_, o), StoreError);
+  EXPECT_FALSE(fs::exists(dir_.path() / "none"));
+  // db reads no scene: an export without the caller's reader is refused.
+  o.campaign_id = campaign_;
+  o.scene_facts = nullptr;
+  try {
+    ExportCampaign(*store_, o);
+    ADD_FAILURE();
+  } catch (const StoreError& e) {
+    EXPECT_EQ(e.kind(), StoreError::Kind::kBadInput);
+    EXPECT_NE(std::string(e.what()).find("scene_facts"), std::string::npos) << e.what();
+  }
   EXPECT_FALSE(fs::exists(dir_.path() / "none"));
 }
 
@@ -310,7 +327,7 @@ TEST(ExportRealData, DroppedObservationsAndShortSamplesExportInEveryFormat) {
     store->UpsertCell("c", {"point"});
     store->CreateCampaign(MakeCampaign("drops"), MakeTrials(1));
     auto t = store->ClaimNextTrial("c");
-    auto ingest = store->BeginIngest(t->trial_id, t->attempt);
+    auto ingest = store->BeginIngest(t->trial_id, t->attempt, testing::SceneSites());
     for (int i = 0; i < 60; ++i) {
       Sample s = testing::MakeSample(i);
       if (s.observed_valid == false) s.observed_finger_wrenches.clear();  // as the DDS decoder
@@ -324,6 +341,7 @@ TEST(ExportRealData, DroppedObservationsAndShortSamplesExportInEveryFormat) {
   auto store = Store::Open(path, ro);
   for (const auto f : {ExportFormat::kHdf5, ExportFormat::kCsv, ExportFormat::kJsonl}) {
     ExportOptions o;
+    o.scene_facts = FactsOfScene;
     o.campaign_id = 1;
     o.format = f;
     o.out_dir = dir.File(std::string("out_") + ToString(f));
@@ -384,7 +402,7 @@ TEST_F(ExportTest, FailedExportLeavesNothingNamesTheTrialAndCanBeRetried) {
   {
     auto rw = Store::Open(path_);
     const auto t = rw->GetTrial(victim);
-    auto ingest = rw->BeginIngest(victim, t.attempt);
+    auto ingest = rw->BeginIngest(victim, t.attempt, testing::SceneSites());
     for (int i = 0; i < 17; ++i) ingest->Add(testing::MakeSample(i));
     ingest->Finish();
   }
@@ -423,6 +441,7 @@ TEST(ExportContents, ParametersSceneContactsAndPredictions) {
   ro.read_only = true;
   auto store = Store::Open(path, ro);
   ExportOptions o;
+  o.scene_facts = FactsOfScene;
   o.campaign_id = 1;
   o.format = ExportFormat::kCsv;
   o.out_dir = dir.File("d");
@@ -519,6 +538,7 @@ TEST(ExportContents, ClosedLoopRunsAndAppliedCommandsInEveryFormat) {
   auto store = Store::Open(path, ro);
   auto export_as = [&](ExportFormat f, const std::string& name, int* replays) {
     ExportOptions o;
+    o.scene_facts = FactsOfScene;
     o.campaign_id = 1;
     o.format = f;
     o.out_dir = dir.File(name);

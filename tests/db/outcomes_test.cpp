@@ -50,7 +50,7 @@ std::vector<Sample> SlidingUp(ContactMode finger_mode, bool release_at_end) {
 }
 
 TEST(Outcomes, SlipDistanceRotationTranslationAndGraspFromTheSamples) {
-  const auto sites = ContactSitesFromScene(SceneJson());
+  const auto sites = testing::SceneSites();  // the caller's facts of SceneJson()
   ASSERT_EQ(sites.size(), 3u);
   EXPECT_EQ(sites[0].name, "left");
   EXPECT_TRUE(sites[2].pusher);
@@ -82,7 +82,7 @@ TEST(Outcomes, SlipDistanceRotationTranslationAndGraspFromTheSamples) {
 }
 
 TEST(Outcomes, UnknownGeometryKeepsFractionsWithoutSlip) {
-  const auto o = ComputeOutcome(SlidingUp(ContactMode::kSlide, false), ContactSitesFromScene("{"));
+  const auto o = ComputeOutcome(SlidingUp(ContactMode::kSlide, false), {});
   ASSERT_EQ(o.contacts.size(), 3u);
   EXPECT_EQ(o.contacts[0].name, "contact0");
   EXPECT_FALSE(o.contacts[0].slip_distance.has_value());
@@ -117,7 +117,7 @@ TEST(ResultViews, ParametersAreColumnsAndOutcomesAreStoredPerContact) {
     store->CreateCampaign(MakeCampaign("b"), more);
     for (int i = 0; i < 4; ++i) {
       auto t = store->ClaimNextTrial("c");
-      auto ingest = store->BeginIngest(t->trial_id, t->attempt);
+      auto ingest = store->BeginIngest(t->trial_id, t->attempt, testing::SceneSites());
       ingest->Add(SlidingUp(ContactMode::kSlide, i == 3));
       ingest->Finish();
     }
@@ -160,7 +160,7 @@ TEST(ResultViews, MigrationSixComputesOutcomesOfStoredStreams) {
     trials[1].params_json = R"({"pivot_offset": 0.01})";
     store->CreateCampaign(MakeCampaign("old"), trials);
     auto t = store->ClaimNextTrial("c");
-    auto ingest = store->BeginIngest(t->trial_id, t->attempt);
+    auto ingest = store->BeginIngest(t->trial_id, t->attempt, testing::SceneSites());
     ingest->Add(SlidingUp(ContactMode::kSlide, false));
     ingest->Finish();
   }
@@ -182,7 +182,33 @@ TEST(ResultViews, MigrationSixComputesOutcomesOfStoredStreams) {
   ASSERT_EQ(sqlite3_exec(db, back_to_5.c_str(), nullptr, nullptr, nullptr), SQLITE_OK)
       << sqlite3_errmsg(db);
   sqlite3_close(db);
-  Store::Open(path).reset();  // migrates
+  // The migration reads each stored scene's contacts through its opener
+  // (db reads no scene): without that reader the open is refused, unchanged.
+  try {
+    Store::Open(path);
+    ADD_FAILURE() << "opened without StoreOptions::scene_facts";
+  } catch (const StoreError& e) {
+    EXPECT_EQ(e.kind(), StoreError::Kind::kIo);
+    EXPECT_NE(std::string(e.what()).find("scene_facts"), std::string::npos) << e.what();
+  }
+  {
+    sqlite3* raw = nullptr;
+    ASSERT_EQ(sqlite3_open(path.c_str(), &raw), SQLITE_OK);
+    sqlite3_stmt* st = nullptr;
+    sqlite3_prepare_v2(raw, "PRAGMA user_version", -1, &st, nullptr);
+    ASSERT_EQ(sqlite3_step(st), SQLITE_ROW);
+    EXPECT_EQ(sqlite3_column_int(st, 0), 5);
+    sqlite3_finalize(st);
+    sqlite3_close(raw);
+  }
+  StoreOptions migrate;
+  std::vector<std::string> read;
+  migrate.scene_facts = [&read](const std::string& scene_json) {
+    read.push_back(scene_json);
+    return testing::SceneFactsFor();
+  };
+  Store::Open(path, migrate).reset();  // migrates
+  EXPECT_EQ(read.size(), 1u);          // the one published stream's scene
   const auto slip = Query(path,
                           "SELECT contact_name, slip_distance_m, pivot_offset FROM"
                           " contact_results ORDER BY contact");

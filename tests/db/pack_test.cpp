@@ -308,7 +308,7 @@ TEST(PackedBlock, StoreReadsPackedAndRawChunksAlike) {
     ASSERT_TRUE(t);
     IngestOptions o;
     o.pack_chunks = variant != 1;
-    auto ingest = store->BeginIngest(t->trial_id, t->attempt, o);
+    auto ingest = store->BeginIngest(t->trial_id, t->attempt, testing::SceneSites(), o);
     std::vector<Sample> samples = in;
     if (variant == 2) samples[3].contacts.pop_back();  // first chunk not uniform
     for (const auto& s : samples) ingest->Add(s);
@@ -336,7 +336,7 @@ TEST(PackedBlock, VersionThreeStoreMigratesAndReads) {
     auto t = store->ClaimNextTrial("c");
     IngestOptions raw;
     raw.pack_chunks = false;
-    auto ingest = store->BeginIngest(t->trial_id, t->attempt, raw);
+    auto ingest = store->BeginIngest(t->trial_id, t->attempt, testing::SceneSites(), raw);
     for (const auto& s : in) ingest->Add(s);
     ingest->Finish();
   }
@@ -357,7 +357,9 @@ TEST(PackedBlock, VersionThreeStoreMigratesAndReads) {
   StoreOptions ro;
   ro.read_only = true;
   EXPECT_THROW(Store::Open(path, ro), StoreError);  // "open it read-write once"
-  auto store = Store::Open(path);
+  StoreOptions migrate;  // migration 6 reads the stored scenes' contacts through the opener
+  migrate.scene_facts = [](const std::string&) { return testing::SceneFactsFor(); };
+  auto store = Store::Open(path, migrate);
   EXPECT_EQ(store->FileSchemaVersion(), Store::SchemaVersion());
   EXPECT_GE(Store::SchemaVersion(), 4);
   const auto gt = store->ReadGroundTruth(1);
@@ -365,7 +367,7 @@ TEST(PackedBlock, VersionThreeStoreMigratesAndReads) {
   for (std::size_t i = 0; i < in.size(); ++i) ExpectSameBits(gt.samples[i], in[i], i);
   auto t = store->ClaimNextTrial("c");
   ASSERT_TRUE(t);
-  auto ingest = store->BeginIngest(t->trial_id, t->attempt);
+  auto ingest = store->BeginIngest(t->trial_id, t->attempt, testing::SceneSites());
   for (const auto& s : in) ingest->Add(s);
   ingest->Finish();
   EXPECT_EQ(store->ReadGroundTruth(t->trial_id).samples.size(), in.size());

@@ -199,14 +199,32 @@ TEST(StoreCampaign, BadInputRefusedAndNothingStored) {
     EXPECT_NE(std::string(e.what()).find("out of range"), std::string::npos) << e.what();
     EXPECT_EQ(std::string(e.what()).find("not valid JSON"), std::string::npos) << e.what();
   }
-  trials[2].scene_json = R"({"fingers": [{"type": "blob"}]})";
-  try {
-    store->CreateCampaign(MakeCampaign(), trials);
-    ADD_FAILURE();
-  } catch (const StoreError& e) {
-    EXPECT_NE(std::string(e.what()).find("trial 2"), std::string::npos) << e.what();
-    EXPECT_NE(std::string(e.what()).find("fingers[0].type"), std::string::npos) << e.what();
-  }
+  trials = MakeTrials(3);  // the caller's facts of the scene are checked, each by name
+  const auto refused = [&](const char* field) {
+    try {
+      store->CreateCampaign(MakeCampaign(), trials);
+      ADD_FAILURE() << field;
+    } catch (const StoreError& e) {
+      EXPECT_EQ(e.kind(), K::kBadInput);
+      EXPECT_NE(std::string(e.what()).find("trial 2"), std::string::npos) << e.what();
+      EXPECT_NE(std::string(e.what()).find(field), std::string::npos) << e.what();
+    }
+    trials = MakeTrials(3);
+  };
+  trials[2].facts.finger_type = "blob";
+  refused("finger_type");
+  trials[2].facts.pusher_type = "blob";
+  refused("pusher_type");
+  trials[2].facts.grip_force = std::nan("");
+  refused("grip_force is NaN");
+  trials[2].facts.pusher_speed = std::numeric_limits<double>::infinity();
+  refused("pusher_speed is infinite");
+  trials[2].facts.nominal[3] = std::nan("");
+  refused("nominal[3]");
+  trials[2].facts.contact_mask = 0;
+  refused("no fingers or pusher");
+  trials[2].facts.contact_mask = 8;
+  refused("contact_mask");
   trials[2].scene_json = "not json";
   EXPECT_STORE_ERROR(store->CreateCampaign(MakeCampaign(), trials), K::kBadInput);
   EXPECT_STORE_ERROR(store->CreateCampaign(MakeCampaign(""), MakeTrials(1)), K::kBadInput);
@@ -278,7 +296,7 @@ TEST(StoreTrial, IllegalTransitionsRejectedAndNothingWritten) {
   // planned: no reset, no prediction, no finish, no ingest.
   EXPECT_STORE_ERROR(store->BeginReset(1, 1), K::kIllegalTransition);
   EXPECT_STORE_ERROR(store->FinishTrial(1, 1), K::kIllegalTransition);
-  EXPECT_STORE_ERROR(store->BeginIngest(1, 1), K::kIllegalTransition);
+  EXPECT_STORE_ERROR(store->BeginIngest(1, 1, testing::SceneSites()), K::kIllegalTransition);
   Prediction p;
   p.model_key = "m";
   EXPECT_STORE_ERROR(store->RecordPrediction(1, 1, p), K::kIllegalTransition);
@@ -365,7 +383,7 @@ TEST(StoreTrial, ResetFailureStillLetsTrialFinishAndRecordsStartState) {
   store->UpsertCell("c", {"point"});
   store->CreateCampaign(MakeCampaign(), MakeTrials(4));
   auto t = store->ClaimNextTrial("c");
-  auto ingest = store->BeginIngest(t->trial_id, 1);
+  auto ingest = store->BeginIngest(t->trial_id, 1, testing::SceneSites());
   ingest->Add(MakeSample(0));
   ingest->Finish();
   store->BeginReset(t->trial_id, 1);
@@ -401,7 +419,7 @@ TEST(StoreTrial, ResetFailureStillLetsTrialFinishAndRecordsStartState) {
   // The retried attempt started from an unknown state: the first attempt's
   // observation (and its error) no longer describe the trial (issue 16, item 10).
   EXPECT_TRUE(store->Drift().empty());
-  auto in = store->BeginIngest(unknown->trial_id, unknown->attempt);
+  auto in = store->BeginIngest(unknown->trial_id, unknown->attempt, testing::SceneSites());
   in->Add(MakeSample(0));
   in->Finish();
   store->BeginReset(unknown->trial_id, unknown->attempt);
@@ -452,11 +470,11 @@ TEST(StoreTrial, RecoverAfterRestartRequeuesWithNextAttempt) {
     dispatched = a->trial_id;
     resetting = b->trial_id;
     executed = c->trial_id;
-    auto partial = store->BeginIngest(a->trial_id, 1);  // dies half-way
+    auto partial = store->BeginIngest(a->trial_id, 1, testing::SceneSites());  // dies half-way
     for (int i = 0; i < 600; ++i) partial->Add(MakeSample(i));
     partial->Flush();
     for (auto* t : {&*b, &*c}) {
-      auto in = store->BeginIngest(t->trial_id, 1);
+      auto in = store->BeginIngest(t->trial_id, 1, testing::SceneSites());
       in->Add(MakeSample(0));
       in->Finish();
     }
@@ -497,12 +515,12 @@ TEST(StoreIngest, ReingestSameAttemptReplacesNeverDuplicates) {
   store->CreateCampaign(MakeCampaign(), MakeTrials(1));
   auto t = store->ClaimNextTrial("c");
   {
-    auto in = store->BeginIngest(t->trial_id, 1, IngestOptions{10, 25, 1.0});
+    auto in = store->BeginIngest(t->trial_id, 1, testing::SceneSites(), IngestOptions{10, 25, 1.0});
     for (int i = 0; i < 100; ++i) in->Add(MakeSample(i));
     EXPECT_EQ(in->Finish(), 100);
   }
   {
-    auto in = store->BeginIngest(t->trial_id, 1, IngestOptions{10, 25, 1.0});
+    auto in = store->BeginIngest(t->trial_id, 1, testing::SceneSites(), IngestOptions{10, 25, 1.0});
     for (int i = 0; i < 80; ++i) in->Add(MakeSample(i + 1000));
     EXPECT_EQ(in->Finish(), 80);
   }
@@ -523,7 +541,7 @@ TEST(StoreIngest, NanInfAndOutOfOrderRefused) {
   store->UpsertCell("c", {"point"});
   store->CreateCampaign(MakeCampaign(), MakeTrials(1));
   auto t = store->ClaimNextTrial("c");
-  auto in = store->BeginIngest(t->trial_id, 1);
+  auto in = store->BeginIngest(t->trial_id, 1, testing::SceneSites());
   in->Add(MakeSample(0));
   auto nan = MakeSample(1);
   nan.object_pose[3] = std::numeric_limits<double>::quiet_NaN();
@@ -565,7 +583,7 @@ TEST(StoreIngest, StaleAttemptStreamRefused) {
   store->UpsertCell("c", {"point"});
   store->CreateCampaign(MakeCampaign(), MakeTrials(1));
   auto t = store->ClaimNextTrial("c");
-  auto in = store->BeginIngest(t->trial_id, 1);
+  auto in = store->BeginIngest(t->trial_id, 1, testing::SceneSites());
   in->Add(MakeSample(0));
   store->RetryTrial(t->trial_id, 1, "cell lost", 3, 0);  // attempt 1 abandoned meanwhile
   EXPECT_STORE_ERROR(in->Finish(), K::kStaleAttempt);
@@ -905,7 +923,7 @@ TEST(StoreTrial, AnObservedStartGoesOnlyToTheTrialItsResetWasAimedAt) {
   store->UpsertCell("b", {"point"});
   store->CreateCampaign(MakeCampaign(), MakeTrials(4));
   const auto reset_aimed_at = [&](const ClaimedTrial& t, std::int64_t aim) {
-    auto ingest = store->BeginIngest(t.trial_id, t.attempt, {});
+    auto ingest = store->BeginIngest(t.trial_id, t.attempt, testing::SceneSites());
     for (int i = 0; i < 10; ++i) ingest->Add(MakeSample(i));
     ingest->Finish();
     store->BeginReset(t.trial_id, t.attempt);

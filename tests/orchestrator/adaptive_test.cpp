@@ -20,6 +20,7 @@
 #include "arena/orchestrator/adaptive.hpp"
 #include "arena/orchestrator/campaign.hpp"
 #include "arena/orchestrator/outcome.hpp"
+#include "arena/orchestrator/scene_facts.hpp"
 #include "arena/orchestrator/submit.hpp"
 
 namespace arena::orchestrator {
@@ -328,6 +329,7 @@ TEST_F(StoreFile, LaterRoundsArePipelinedAndRegisterTheirParameters) {
   db::PlannedTrial p;
   p.seed = t.seed;
   p.scene_json = mechanics::SceneToJson(t.scene);
+  p.facts = SceneFactsOf(t.scene);
   p.params_json = params.dump();
   round.trials = {p};
   round.reasons = {"test"};
@@ -473,7 +475,8 @@ db::Sample StickSample(int i) {
 
 void RunAllToDone(db::Store& store) {
   while (auto t = store.ClaimNextTrial("c")) {
-    auto ingest = store.BeginIngest(t->trial_id, t->attempt);
+    auto ingest =
+        store.BeginIngest(t->trial_id, t->attempt, SceneFactsOfJson(t->scene_json).contacts);
     for (int i = 0; i < 20; ++i) ingest->Add(StickSample(i));
     ingest->Finish();
     store.BeginReset(t->trial_id, t->attempt);

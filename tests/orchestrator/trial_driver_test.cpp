@@ -715,32 +715,5 @@ TEST(TrialDriver, NoTrialIsDispatchedBeforeRecoveryRan) {
   ASSERT_TRUE(h.RunToEnd());
 }
 
-// The sites the service hands the ingest (from the parsed scene) are those
-// the store read from the scene's JSON before (issue 27): same names, order,
-// positions and unit normals, so stored outcomes are unchanged.
-TEST(TrialData, ContactSitesOfTheParsedSceneMatchTheSceneJson) {
-  for (const char* name : {"canonical.json", "parallel_jaw.json"}) {
-    std::ifstream in(std::string(ARENA_SOURCE_DIR) + "/examples/scenes/" + name);
-    ASSERT_TRUE(in) << name;
-    std::stringstream text;
-    text << in.rdbuf();
-    const auto from_json = db::ContactSitesFromScene(text.str());
-    const auto from_scene = ContactSitesOf(mechanics::ParseScene(text.str()));
-    ASSERT_EQ(from_scene.size(), from_json.size()) << name;
-    ASSERT_FALSE(from_scene.empty()) << name;
-    for (std::size_t i = 0; i < from_scene.size(); ++i) {
-      SCOPED_TRACE(std::string(name) + " contact " + std::to_string(i));
-      EXPECT_EQ(from_scene[i].name, from_json[i].name);
-      EXPECT_EQ(from_scene[i].pusher, from_json[i].pusher);
-      EXPECT_TRUE(from_scene[i].known);
-      EXPECT_EQ(from_scene[i].known, from_json[i].known);
-      for (int k = 0; k < 3; ++k) {
-        EXPECT_NEAR(from_scene[i].position[k], from_json[i].position[k], 1e-15);
-        EXPECT_NEAR(from_scene[i].normal[k], from_json[i].normal[k], 1e-15);
-      }
-    }
-  }
-}
-
 }  // namespace
 }  // namespace arena::orchestrator

@@ -101,6 +101,9 @@ struct ExportOptions {
                                 const std::vector<ClosedLoopCommand>& commands,
                                 const Sample* first_sample)>
       predict_from;
+  // The facts of a stored scene (its contacts name the stream columns);
+  // required: db reads no scene.
+  SceneFactsFn scene_facts;
   // Called after each trial with (trials written, trials to write).
   std::function<void(std::int64_t, std::int64_t)> progress;
   // Files a producer adds to the dataset (path relative to it, '/' separated, no

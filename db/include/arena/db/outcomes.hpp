@@ -16,8 +16,9 @@
 namespace arena::db {
 
 // Where a contact sits, from the scene (gripper frame G at the start of the
-// trial). Fingers are fixed in G; the pusher's contact point moves with the
-// pusher (its position and normal follow the sample's pusher pose).
+// trial), as the caller read it (db reads no scene: SceneFacts::contacts). Fingers are fixed in G;
+// the pusher's contact point moves with the pusher (its position and normal follow the sample's
+// pusher pose).
 struct ContactSite {
   std::string name;                  // the finger's name, "pusher", or "contact<i>"
   bool pusher = false;               // the pusher (last contact) rather than a finger
@@ -25,10 +26,6 @@ struct ContactSite {
   std::array<double, 3> normal{};    // unit, in G (pusher: in its own frame at t = 0)
   bool known = false;                // false: no geometry (slip distance not computed)
 };
-
-// The contacts of a scene (docs/scene.md): fingers in order, then the pusher.
-// Unreadable JSON or missing fields give sites with known = false.
-std::vector<ContactSite> ContactSitesFromScene(const std::string& scene_json);
 
 struct ContactOutcome {
   std::size_t contact = 0;  // index in scene order

@@ -82,6 +82,7 @@
 #include "arena/db/outcomes.hpp"
 #include "arena/db/prediction_status.hpp"
 #include "arena/db/sample.hpp"
+#include "arena/db/scene_facts.hpp"
 #include "arena/db/trial_end.hpp"
 #include "arena/errors/error.hpp"
 
@@ -193,6 +194,10 @@ struct StoreOptions {
   double open_check_budget_s = 10.0;
   // Seconds since the Unix epoch; tests inject a clock. Default: system clock.
   std::function<double()> clock;
+  // The contact sites of a stored scene, for the one migration that needs
+  // them (6: the outcomes of streams stored before it). A file that needs it
+  // and is opened without it is refused (kIo), nothing written.
+  SceneFactsFn scene_facts;
 };
 
 struct NewCampaign {
@@ -207,11 +212,12 @@ struct NewCampaign {
 };
 
 struct PlannedTrial {
-  int condition = 0;       // condition index (>= 0)
-  int replicate = 0;       // replicate of that condition (>= 0)
-  std::uint64_t seed = 0;  // per-trial seed: re-runs the trial bit for bit
-  std::string scene_json;  // scene (docs/scene.md; JSON object); parameter columns come from it
-  std::string params_json = "{}";   // the sampler's own parameter values (JSON object)
+  int condition = 0;               // condition index (>= 0)
+  int replicate = 0;               // replicate of that condition (>= 0)
+  std::uint64_t seed = 0;          // per-trial seed: re-runs the trial bit for bit
+  std::string scene_json;          // scene (docs/scene.md; JSON object), stored as given
+  SceneFacts facts;                // what the store indexes of it (the caller's: db reads no scene)
+  std::string params_json = "{}";  // the sampler's own parameter values (JSON object)
   std::string defects_json = "{}";  // the campaign's defect profile for this trial
 };
 
@@ -792,13 +798,11 @@ class Store {
   // ---- ground truth
   // @throws kNotFound / kStaleAttempt / kIllegalTransition unless the trial is
   //   dispatched (or past executed with its ground truth) at `attempt`.
+  // `sites`: the trial's contacts (outcomes.hpp; SceneFacts::contacts) from
+  // the caller, which has the scene parsed (db reads no scene).
   std::unique_ptr<Ingest> BeginIngest(std::int64_t trial_id, int attempt,
+                                      std::vector<ContactSite> sites,
                                       const IngestOptions& options = {});
-  // The same with the trial's contact sites (outcomes.hpp) from the caller,
-  // which has the scene parsed already (the service: mechanics' Scene); the
-  // overload above reads them from the stored scene (ContactSitesFromScene).
-  std::unique_ptr<Ingest> BeginIngest(std::int64_t trial_id, int attempt,
-                                      std::vector<ContactSite> sites, const IngestOptions& options);
   // The published stream of the trial, read in one snapshot.
   // @throws kNotFound when the trial has no published ground truth.
   GroundTruth ReadGroundTruth(std::int64_t trial_id) const;

@@ -17,6 +17,7 @@
 #include <string>
 #include <vector>
 
+#include "arena/db/scene_facts.hpp"
 #include "arena/recordings/recording.hpp"
 
 namespace arena::recordings {
@@ -57,6 +58,10 @@ struct ImportReport {
 // fingers, the pusher a sphere following the measured path. JSON text.
 std::string SceneJson(const Recording& recording, const Resampled& streams,
                       const ImportOptions& options);
+// What the store keeps of that scene (db reads no scene), from the same
+// values: a prism, no fingers, a point pusher on the recorded path.
+db::SceneFacts SceneFactsOf(const Recording& recording, const Resampled& streams,
+                            const ImportOptions& options);
 
 // Checks and writes everything, or nothing: the dataset is built in a
 // temporary directory beside out_dir and renamed into place at the end.
