@@ -19,6 +19,7 @@
 #include "arena/db/store.hpp"
 #include "arena/mechanics/scene_json.hpp"
 #include "arena/mechanics/simulate.hpp"
+#include "arena/orchestrator/scene_facts.hpp"
 #include "arena/simulators/simulator.hpp"
 #include "commands.hpp"
 #include "output_guard.hpp"
@@ -336,6 +337,7 @@ FitInput LoadFitInput(const CalibrateOptions& o, bool mujoco) {
   auto& trials = in.trials;
   try {
     db::StoreOptions so;
+    so.scene_facts = orchestrator::SceneFactsOfJson;  // an older store's migration reads scenes
     so.create = false;  // calibrating needs a campaign: a missing file is an error
     store = db::Store::Open(o.db_path, so);
     const db::Campaign campaign = store->GetCampaign(o.campaign);

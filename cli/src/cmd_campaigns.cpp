@@ -15,6 +15,7 @@
 #include "arena/db/store.hpp"
 #include "arena/orchestrator/adaptive.hpp"
 #include "arena/orchestrator/campaign.hpp"
+#include "arena/orchestrator/scene_facts.hpp"
 #include "arena/orchestrator/submit.hpp"
 #include "boundary_report.hpp"
 #include "campaign_input.hpp"
@@ -33,6 +34,7 @@ namespace {
 std::unique_ptr<db::Store> OpenStore(const std::string& path, bool read_only) {
   try {
     db::StoreOptions o;
+    o.scene_facts = orchestrator::SceneFactsOfJson;  // an older store's migration reads scenes
     o.read_only = read_only;
     o.create = !read_only;
     return db::Store::Open(path, o);

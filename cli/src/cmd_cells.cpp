@@ -10,6 +10,7 @@
 #include <string>
 
 #include "arena/db/store.hpp"
+#include "arena/orchestrator/scene_facts.hpp"
 #include "commands.hpp"
 #include "store_errors.hpp"
 
@@ -26,6 +27,7 @@ std::string Operator() {
 int Release(const std::string& cell_id, const std::string& db_path, const std::string& reason) {
   try {
     db::StoreOptions o;
+    o.scene_facts = orchestrator::SceneFactsOfJson;  // an older store's migration reads scenes
     o.create = false;
     auto store = db::Store::Open(db_path, o);
     const db::CellInfo before = store->GetCell(cell_id);

@@ -19,6 +19,7 @@
 #include "arena/db/sensitivity.hpp"
 #include "arena/db/store.hpp"
 #include "arena/mechanics/scene_json.hpp"
+#include "arena/orchestrator/scene_facts.hpp"
 #include "arena/simulators/simulator.hpp"
 #include "commands.hpp"
 #include "progress.hpp"
@@ -296,6 +297,7 @@ int RunCampaignSensitivity(const SensitivityCliOptions& o,
   std::int64_t run_id = 0;
   try {
     db::StoreOptions opts;
+    opts.scene_facts = orchestrator::SceneFactsOfJson;  // an older store's migration reads scenes
     opts.create = false;
     opts.read_only = o.no_store;
     auto store = db::Store::Open(o.db_path, opts);

@@ -2,6 +2,7 @@
 // predictor threads around the TrialDriver (trial_driver.hpp), which makes
 // every decision. The contract and a trial's path are in service.hpp.
 #include "arena/orchestrator/service.hpp"
+#include "arena/orchestrator/scene_facts.hpp"
 
 #include <signal.h>
 #include <unistd.h>
@@ -469,6 +470,7 @@ struct Service::Impl {
 
   static db::StoreOptions StoreOptionsFor(const ServiceOptions& o) {
     db::StoreOptions so;
+    so.scene_facts = SceneFactsOfJson;  // an older store's migration reads scenes
     so.max_pages = o.store_max_pages;
     return so;
   }
