@@ -2456,6 +2456,13 @@ void ContactModel::Impl::Integrate(StepScratch& s) {
       const double vf = ct.y_plus >= 0 ? Unknown(s, ct.y_plus) - Unknown(s, ct.y_minus)
                                        : ct.normal.dot(ObjectVelocity(s, ct.points[0].p));
       ct.pad += dt * vf;
+      // An elastic pad in fixed geometry keeps its points' penetration (the
+      // spring's extension); without it the compliance row acted as a damper
+      // (λ = -k dt v_n), which resists no tilt, and a push along a line
+      // pad's axis turned the object.
+      if (!tracked && ct.spec.stiffness > 0) {
+        for (Point& pt : ct.points) pt.gap += dt * (ct.normal.dot(ObjectVelocity(s, pt.p)) - vf);
+      }
     }
   }
   if (support_xi >= 0) support_twist = Eigen::Vector3d(s.vr_new[0], s.vr_new[1], s.vr_new[2]);
