@@ -124,6 +124,11 @@ struct TrialDriver::Impl {
     Clock::time_point deadline{};
     Clock::time_point next_claim{};
     Clock::time_point claimed_at{};
+    // The path's marks (TrialTiming::service_s): EXECUTE sent, the input that
+    // completed the stream (its last batch or its EXECUTED status) taken, the
+    // stream's publish begun from it, RESET sent, RESET_DONE taken.
+    Clock::time_point execute_sent{}, stream_input_at{}, publish_from{}, reset_sent{},
+        reset_taken{};
     double execute_wall_s = -1;
     int store_waits = 0;  // store steps of this cell waiting after kBusy: deadlines held
     std::int64_t reset_aimed_at = 0;   // the trial the running reset prepares (0: none)
@@ -789,6 +794,7 @@ struct TrialDriver::Impl {
                      "EXECUTE command could not be sent");
             return;
           }
+          c.execute_sent = now();
           spdlog::info("{}: EXECUTE on cell {}", tag, cell_id);
           // While it executes: the trial its reset will aim at (see Executed),
           // chosen as if the fixtures of this trial were mounted, as they will be.
@@ -818,6 +824,7 @@ struct TrialDriver::Impl {
         it->second.cell_id != batch.cell_id() || it->second.publishing)
       return;
     Execution& ex = it->second;
+    Cell(ex.cell_id).stream_input_at = now();
     const std::string problem = dds::CheckBatch(batch, ex.next_sample);
     if (!problem.empty()) {
       FailStream(ex, "malformed ground truth from cell " + batch.cell_id() + ": " + problem,
@@ -890,6 +897,8 @@ struct TrialDriver::Impl {
       return;
     }
     ex.publishing = true;
+    CellRun& cell = Cell(ex.cell_id);
+    cell.publish_from = cell.stream_input_at;
     const std::string tag = TrialTag(ex.campaign_id, ex.trial_id, ex.attempt);
     const std::string cell_id = ex.cell_id;
     const int attempt = ex.attempt;
@@ -981,6 +990,7 @@ struct TrialDriver::Impl {
           if (!transport.Send(cmd))
             EndPhase(c, DecideServiceEvent(c.phase, ServiceEvent::kCommandNotSent),
                      "RESET command could not be sent");
+          c.reset_sent = now();
         },
         [this, tag, cell_id](const db::StoreError& e) {
           spdlog::error("{}: {}", tag, e.what());
@@ -997,6 +1007,7 @@ struct TrialDriver::Impl {
     const bool same = cell.trial_id == static_cast<std::int64_t>(st.trial_id()) &&
                       cell.attempt == static_cast<int>(st.attempt());
     if (LateMessageRule(true, cell.phase, same)) return;  // a phase already settled
+    (cell.phase == CellPhase::kResetting ? cell.reset_taken : cell.stream_input_at) = now();
     const Decision d = DecideStatus(cell.phase, ToPolicy(st.phase()), ToPolicy(st.state()),
                                     ToPolicy(st.failure()));
     if (cell.phase == CellPhase::kExecuting && st.phase() == msg::PHASE_EXECUTE) {
@@ -1125,6 +1136,9 @@ struct TrialDriver::Impl {
     t.reset_s = reset_wall_s;
     t.overhead_s = busy - exec - reset_wall_s;
     t.campaign_id = cell.campaign_id;
+    t.service_s = Seconds((cell.execute_sent - cell.claimed_at) +
+                          (cell.reset_sent - cell.publish_from) + (now() - cell.reset_taken))
+                      .count();
     if (on_trial_timing) on_trial_timing(t);
   }
 

@@ -123,6 +123,11 @@ struct TrialTiming {
   double execute_s = 0;    // the cell's own EXECUTE wall time (s)
   double reset_s = 0;      // the cell's own RESET wall time (s)
   double overhead_s = 0;   // cell_busy_s - execute_s - reset_s
+  // Of overhead_s, the service's own work on the trial's path: the claim up to
+  // EXECUTE sent, the stream's last input taken up to RESET sent, RESET_DONE
+  // taken up to this figure. The rest (overhead_s - service_s) is the wire:
+  // four DDS hops, the cell's time outside its phases, the service loop's waits.
+  double service_s = 0;
 };
 
 // @throws std::invalid_argument naming the option ("--reset-timeout: ...")
