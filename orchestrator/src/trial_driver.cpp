@@ -549,6 +549,12 @@ struct TrialDriver::Impl {
     return scheduling.emplace(campaign_id, s).first->second;
   }
 
+  // How many planned trials the chooser weighs for a claim from the campaign.
+  int WindowOf(std::int64_t campaign_id) {
+    const SchedulingOptions& o = SchedulingOf(campaign_id).options;
+    return o.change_aware ? std::clamp(o.window, 1, kMaxSchedulingWindow) : 1;
+  }
+
   // The aimed trial went to another cell since it was looked up (one service
   // claims for every cell of a store: its own record is the truth).
   bool ClaimedByAnother(const CellRun& cell) const {
@@ -561,7 +567,20 @@ struct TrialDriver::Impl {
   // `cell` claims now (`claim`), or would claim (to aim its reset at).
   std::optional<db::ClaimedTrial> NextTrialFor(CellRun& cell, bool claim) {
     std::vector<db::ClaimedTrial> window;
-    if (cell.change_costs) window = store.ClaimWindow(cell.id, kMaxSchedulingWindow);
+    if (cell.change_costs) {
+      // One block of the campaign it claims from is all the chooser reads:
+      // as many trials as that campaign's window (1 in plan order), not
+      // kMaxSchedulingWindow scenes on every claim (issue 27). The campaign
+      // of its last claim sizes the read; another campaign's, read again.
+      const int guess =
+          cell.block_campaign != 0 ? WindowOf(cell.block_campaign) : kMaxSchedulingWindow;
+      window = store.ClaimWindow(cell.id, guess);
+      if (!window.empty() && window.front().campaign_id != cell.block_campaign) {
+        const int need = WindowOf(window.front().campaign_id);
+        if (need > guess && static_cast<int>(window.size()) == guess)
+          window = store.ClaimWindow(cell.id, need);
+      }
+    }
     if (window.empty()) return claim ? store.ClaimNextTrial(cell.id) : store.PeekNextTrial(cell.id);
     const std::int64_t campaign = window.front().campaign_id;
     const CampaignScheduling& cs = SchedulingOf(campaign);
