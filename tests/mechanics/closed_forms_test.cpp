@@ -13,30 +13,16 @@
 
 #include "arena/mechanics/scene_json.hpp"
 #include "arena/mechanics/simulate.hpp"
+#include "issue31_scenes.hpp"
 
 namespace arena::mechanics {
 namespace {
 
-constexpr const char* kBox =
-    R"("object":{"shape":"box","size":[0.05,0.03,0.1],"mass":0.2,"pose":{"position":[0,0,0],"rpy":[0,0,0]}})";
-constexpr const char* kPointFingers =
-    R"("fingers":[{"name":"left","type":"point","position":[-0.025,0,0],"normal":[1,0,0],"mu":0.5},)"
-    R"({"name":"right","type":"point","position":[0.025,0,0],"normal":[-1,0,0],"mu":0.5}])";
-
-Scene Parse(const std::string& body) { return ParseScene("{" + body + "}"); }
-
-// Rotation about the gripper's x axis (the grip axis) of a sample.
-double Roll(const TrajectorySample& s) {
-  const Eigen::AngleAxisd aa(s.orientation);
-  return aa.angle() * aa.axis().x();
-}
-
-SimulationResult SimulateOk(const Scene& scene) {
-  SimulationResult r = Simulate(scene);
-  EXPECT_EQ(r.status, SimulationStatus::kOk) << r.error;
-  EXPECT_FALSE(r.samples.empty());
-  return r;
-}
+using issue31::kBox;
+using issue31::kPointFingers;
+using issue31::Parse;
+using issue31::Roll;
+using issue31::SimulateOk;
 
 // A central push from below on two 4-point patches without a stiffness,
 // with gravity: by symmetry no roll, and the patches slide with their full
