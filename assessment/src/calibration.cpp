@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <atomic>
 #include <cmath>
+#include <cstdio>
 #include <mutex>
 #include <numeric>
 #include <thread>
@@ -808,10 +809,26 @@ std::vector<CalibrationTrial> LoadCalibrationTrials(
   return out;
 }
 
+std::string BootstrapWarning(const FittedParam& f) {
+  if (!f.fit_outside_bootstrap()) return "";
+  char buf[640];
+  std::snprintf(buf, sizeof buf,
+                "%s: the fit %.4f lies outside its own bootstrap interval [%.4f, %.4f]: every "
+                "resampled refit moved %s, so the interval says where the refits went, not how "
+                "uncertain the fit is (the fit may have stopped short of its optimum, or a few "
+                "trials pull it). Read the profile column.",
+                f.name.c_str(), f.scale, f.ci_low, f.ci_high,
+                f.scale > f.ci_high ? "below it" : "above it");
+  return buf;
+}
+
 std::string ParamsJson(const CalibrationResult& r) {
   nlohmann::json j = nlohmann::json::object();
   for (const auto& f : r.fitted) {
-    nlohmann::json p = {{"scale", f.scale}, {"std", f.std}, {"ci95", {f.ci_low, f.ci_high}}};
+    nlohmann::json p = {{"scale", f.scale},
+                        {"std", f.std},
+                        {"ci95", {f.ci_low, f.ci_high}},
+                        {"fit_outside_ci95", f.fit_outside_bootstrap()}};
     if (f.profiled) {
       nlohmann::json loss = nlohmann::json::array();
       for (const auto& [scale, l] : f.profile) loss.push_back({scale, l});

@@ -123,6 +123,10 @@ void PrintFittedTable(const assessment::CalibrationResult& r) {
         f.bounded_high ? "" : " (the upper bound)", f.scale, 100 * assessment::kProfileMinIncrease,
         assessment::kProfileStandardErrors);
   }
+  for (const auto& f : r.fitted) {
+    const std::string warning = assessment::BootstrapWarning(f);
+    if (!warning.empty()) std::printf("\n%s\n", warning.c_str());
+  }
 }
 
 // The arena model a calibration fits: the campaign's prediction settings,

@@ -142,6 +142,43 @@ TEST(Calibrate, AProfileBoundsAnIdentifiedParameterAndFlagsAFlatOne) {
   EXPECT_THROW(Calibrate(trials, StickingPusherSimulate, o), CalibrationError);
 }
 
+// A fit outside its own bootstrap interval is said, in the text and the
+// stored JSON (seen on docs/adaptive.md's walk-through: mu_fingers 1.3354
+// with a bootstrap interval [1.2882, 1.3258], printed with no comment).
+TEST(Calibrate, AFitOutsideItsBootstrapIntervalIsSaid) {
+  FittedParam inside;
+  inside.name = "mu_pusher";
+  inside.scale = 1.1668;
+  inside.ci_low = 1.1493;
+  inside.ci_high = 1.4033;
+  EXPECT_FALSE(inside.fit_outside_bootstrap());
+  EXPECT_EQ(BootstrapWarning(inside), "");
+  FittedParam above = inside;
+  above.name = "mu_fingers";
+  above.scale = 1.3354;
+  above.ci_low = 1.2882;
+  above.ci_high = 1.3258;
+  EXPECT_TRUE(above.fit_outside_bootstrap());
+  const std::string w = BootstrapWarning(above);
+  EXPECT_NE(w.find("mu_fingers: the fit 1.3354 lies outside its own bootstrap interval "
+                   "[1.2882, 1.3258]: every resampled refit moved below it"),
+            std::string::npos)
+      << w;
+  FittedParam below = inside;
+  below.scale = 1.0221;
+  below.ci_low = 1.0507;
+  below.ci_high = 1.8550;
+  EXPECT_NE(BootstrapWarning(below).find("moved above it"), std::string::npos);
+  FittedParam no_bootstrap;  // --bootstrap 0: the interval is the fit itself
+  no_bootstrap.scale = no_bootstrap.ci_low = no_bootstrap.ci_high = 1.2;
+  EXPECT_FALSE(no_bootstrap.fit_outside_bootstrap());
+  CalibrationResult r;
+  r.fitted = {inside, above};
+  const auto j = nlohmann::json::parse(ParamsJson(r));
+  EXPECT_FALSE(j["mu_pusher"]["fit_outside_ci95"].get<bool>());
+  EXPECT_TRUE(j["mu_fingers"]["fit_outside_ci95"].get<bool>());
+}
+
 TEST(Calibrate, RefusesBadOptions) {
   CalibrationOptions o;
   EXPECT_THROW(Calibrate(MakeTrials(1, 1), FakeSimulate, o), CalibrationError);  // no params

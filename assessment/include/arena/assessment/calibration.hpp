@@ -177,7 +177,17 @@ struct FittedParam {
   bool bounded_low = true, bounded_high = true;    // false: the range reaches that bound
   std::vector<std::pair<double, double>> profile;  // (scale, mean training loss), ascending
   bool identified() const { return !profiled || (bounded_low && bounded_high); }
+  // The fit lies outside its own bootstrap interval: every resampled refit
+  // moved the same way (they start at the fit with a third of its
+  // evaluations), so the interval says where the refits went, not how
+  // uncertain the fit is.
+  bool fit_outside_bootstrap() const { return scale < ci_low || scale > ci_high; }
 };
+
+// The sentence `arena calibrate` prints for a parameter whose fit lies
+// outside its bootstrap interval (FittedParam::fit_outside_bootstrap);
+// empty when it does not.
+std::string BootstrapWarning(const FittedParam& f);
 
 // A profile scale fits worse than the fit when the signed-rank statistic of
 // its per-trial loss increases is this many standard deviations above zero.
