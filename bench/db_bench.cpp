@@ -361,6 +361,45 @@ void BM_ClaimNextTrial(benchmark::State& state) {
 }
 BENCHMARK(BM_ClaimNextTrial)->Iterations(2000)->Unit(benchmark::kMicrosecond);
 
+// One trial's store steps on the service's path (issue 27: the overhead
+// per trial), as `arena serve` runs them for a clean smoke trial at
+// --speed 0: claim, begin ingest, 50 samples, record execution, finish
+// (summary, outcomes, executed), begin reset, complete reset (its observed
+// pose aimed at the next trial); the prediction and `done` run after the
+// next dispatch, off the path, and are left out of the time. CPU time per
+// trial of this thread: the store's own cost, without the DDS hops and the
+// scheduling of a loaded machine that blur orchestration_bench.
+void BM_TrialStorePath(benchmark::State& state) {
+  const std::vector<Sample> stream = MakeRealisticStream(50, 7);
+  BenchStore b(static_cast<int>(state.max_iterations) + 1, 1, false);
+  Prediction p;
+  p.model_key = "bench";
+  p.model_json = "{}";
+  p.status = PredictionStatus::kOk;
+  p.final_position_error = 0.001;
+  p.wall_s = 0.01;
+  for (auto _ : state) {
+    auto t = b.store->ClaimNextTrial("cell0");
+    auto ingest = b.store->BeginIngest(t->trial_id, t->attempt, Facts().contacts, {});
+    ingest->Add(stream);
+    b.store->RecordExecution(t->trial_id, t->attempt, "model", "simulated", "{}");
+    benchmark::DoNotOptimize(ingest->Finish());
+    b.store->BeginReset(t->trial_id, t->attempt, "reset.after_execute");
+    ResetReport r;
+    r.ok = true;
+    r.pose_observed = true;
+    r.observed_pose = {0.0004, 0.0002, 0.0, 1, 0, 0, 0};
+    r.position_error = 0.0004;
+    r.aimed_at_trial = t->trial_id + 1;
+    b.store->CompleteReset(t->trial_id, t->attempt, r, "reset.verified");
+    state.PauseTiming();  // after the next dispatch in the service: off the path
+    b.store->RecordPrediction(t->trial_id, t->attempt, p);
+    b.store->FinishTrial(t->trial_id, t->attempt);
+    state.ResumeTiming();
+  }
+}
+BENCHMARK(BM_TrialStorePath)->Iterations(2000)->Unit(benchmark::kMicrosecond);
+
 }  // namespace
 
 BENCHMARK_MAIN();
