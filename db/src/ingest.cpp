@@ -137,7 +137,7 @@ struct Ingest::Impl {
   void Flush() {
     CloseChunk();
     if (ready.empty()) return;
-    Tx tx(store->db, true);
+    Tx tx(*store, true);
     WriteReady();
     tx.Commit();
   }
@@ -228,7 +228,7 @@ std::int64_t Ingest::Finish(TrialEnd outcome) {
   if (outcome == TrialEnd::kNone)
     throw StoreError(StoreError::Kind::kBadInput, "Ingest::Finish: outcome is not set");
   m.CloseChunk();
-  Tx tx(m.store->db, true);
+  Tx tx(*m.store, true);
   const auto row = CheckIngestable(*m.store, m.trial_id, m.attempt, "Ingest::Finish");
   m.WriteReady();
   const double now = m.store->Now();
@@ -316,7 +316,7 @@ std::unique_ptr<Ingest> Store::BeginIngest(std::int64_t trial_id, int attempt,
   m->trial_id = trial_id;
   m->attempt = attempt;
   m->options = options;
-  Tx tx(impl_->db, true);
+  Tx tx(*impl_, true);
   const auto row = CheckIngestable(*impl_, trial_id, attempt, "BeginIngest");
   {
     auto p = impl_->Prepare("SELECT pusher_type IS NOT NULL FROM trials WHERE id = ?");
@@ -354,7 +354,7 @@ std::vector<Sample> internal::ReadStreamSamples(const Store::Impl& impl, std::in
 }
 
 GroundTruth Store::ReadGroundTruth(std::int64_t trial_id) const {
-  Tx tx(impl_->db, false);  // one snapshot: the stream cannot change under us
+  Tx tx(*impl_, false);  // one snapshot: the stream cannot change under us
   auto t = impl_->Prepare(
       "SELECT t.gt_stream_id, g.attempt, g.cell_id, g.samples, IFNULL(t.truth, '') FROM trials t"
       " LEFT JOIN gt_streams g ON g.id = t.gt_stream_id WHERE t.id = ?");
