@@ -232,7 +232,20 @@ std::int64_t Ingest::Finish(TrialEnd outcome) {
   const auto row = CheckIngestable(*m.store, m.trial_id, m.attempt, "Ingest::Finish");
   m.WriteReady();
   const double now = m.store->Now();
-  {
+  // The trial's row is rewritten once: its stream and, from dispatched, its
+  // move to executed (the audit row below) with the outcome.
+  if (row.state == TrialState::kDispatched) {
+    auto u = m.store->Prepare(
+        "UPDATE trials SET gt_stream_id = ?, state = ?, updated_at = ?, outcome = ?,"
+        " executed_at = ? WHERE id = ?");
+    u->Bind(1, m.stream_id)
+        .Bind(2, ToString(TrialState::kExecuted))
+        .Bind(3, now)
+        .Bind(4, ToString(outcome))
+        .Bind(5, now)
+        .Bind(6, m.trial_id)
+        .Run();
+  } else {
     auto u = m.store->Prepare("UPDATE trials SET gt_stream_id = ? WHERE id = ?");
     u->Bind(1, m.stream_id).Bind(2, m.trial_id).Run();
   }
@@ -283,12 +296,10 @@ std::int64_t Ingest::Finish(TrialEnd outcome) {
   }
   internal::WriteOutcome(*m.store, m.stream_id, m.trial_id, m.attempt, m.outcome->Result());
   if (row.state == TrialState::kDispatched) {
-    internal::WriteTransition(*m.store, m.trial_id, m.attempt, row.state, TrialState::kExecuted,
-                              row.cell_id,
-                              "ground truth complete (" + std::to_string(m.total) + " samples)",
-                              "execute.ground_truth_complete", "Ingest::Finish");
-    auto u = m.store->Prepare("UPDATE trials SET outcome = ?, executed_at = ? WHERE id = ?");
-    u->Bind(1, ToString(outcome)).Bind(2, now).Bind(3, m.trial_id).Run();
+    internal::WriteTransitionAudit(
+        *m.store, m.trial_id, m.attempt, row.state, TrialState::kExecuted, row.cell_id,
+        "ground truth complete (" + std::to_string(m.total) + " samples)",
+        "execute.ground_truth_complete", "Ingest::Finish", now);
   }
   tx.Commit();
   m.finished = true;

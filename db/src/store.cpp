@@ -6,10 +6,12 @@
 #include "arena/db/retry_rule.hpp"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstring>
 #include <map>
 #include <nlohmann/json.hpp>
+#include <optional>
 #include <set>
 
 #include "sqlite_util.hpp"
@@ -314,6 +316,14 @@ void WriteTransition(const Store::Impl& impl, std::int64_t trial_id, int attempt
         .Bind(5, trial_id);
     u->Run();
   }
+  WriteTransitionAudit(impl, trial_id, attempt, from, to, cell_id, reason, rule, function, now);
+}
+
+void WriteTransitionAudit(const Store::Impl& impl, std::int64_t trial_id, int attempt,
+                          TrialState from, TrialState to, const std::string& cell_id,
+                          const std::string& reason, std::string_view rule, const char* function,
+                          double now) {
+  CheckEdge(from, to, trial_id, function);
   auto a = impl.Prepare(
       "INSERT INTO trial_transitions(trial_id, attempt, from_state, to_state, at, cell_id, reason,"
       " rule) VALUES(?,?,?,?,?,?,?,?)");
@@ -333,6 +343,7 @@ void WriteTransition(const Store::Impl& impl, std::int64_t trial_id, int attempt
 using internal::CheckAttempt;
 using internal::LoadTrialRow;
 using internal::WriteTransition;
+using internal::WriteTransitionAudit;
 
 int ContactTypeMask(const std::vector<std::string>& types) {
   int mask = 0;
@@ -780,45 +791,56 @@ namespace {
 void ClaimFound(const Store::Impl& impl, const ClaimedTrial& t, const std::string& cell_id,
                 const std::string& reason, const char* function) {
   const double now = impl.Now();
-  WriteTransition(impl, t.trial_id, t.attempt, TrialState::kPlanned, TrialState::kDispatched,
-                  cell_id, reason, "dispatch.claimed", function);
+  WriteTransitionAudit(impl, t.trial_id, t.attempt, TrialState::kPlanned, TrialState::kDispatched,
+                       cell_id, reason, "dispatch.claimed", function, now);
   // The start state this trial begins from: the cell's last observed reset
   // result, if that reset was aimed at this trial (or its aim is not known).
+  // Read here and written with the claim in one UPDATE of the trial.
+  std::optional<std::string> defects;
+  std::array<std::optional<double>, 7> start{};
+  {
+    auto c = impl.Prepare(
+        "SELECT defects_json, start_for_trial IS NULL OR start_for_trial = ?2, start_x, start_y,"
+        " start_z, start_qw, start_qx, start_qy, start_qz FROM cells WHERE id = ?1");
+    c->Bind(1, cell_id).Bind(2, t.trial_id);
+    if (c->Step()) {
+      if (!c->IsNull(0)) defects = c->Text(0);
+      if (c->Int(1) != 0)
+        for (int i = 0; i < 7; ++i)
+          if (!c->IsNull(2 + i)) start[i] = c->Real(2 + i);
+    }
+  }
+  // Its distance from the planned start (no observed start: no errors, and
+  // an earlier attempt's must not stay).
+  std::optional<double> dp, da;
+  if (start[0]) {
+    auto n = impl.Prepare(
+        "SELECT nominal_x, nominal_y, nominal_z, nominal_qw, nominal_qx, nominal_qy, nominal_qz"
+        " FROM trials WHERE id = ?");
+    n->Bind(1, t.trial_id);
+    n->Step();
+    double v[14];
+    for (int i = 0; i < 7; ++i) v[i] = start[i].value_or(0.0);
+    for (int i = 0; i < 7; ++i) v[7 + i] = n->Real(i);
+    dp = std::sqrt((v[0] - v[7]) * (v[0] - v[7]) + (v[1] - v[8]) * (v[1] - v[8]) +
+                   (v[2] - v[9]) * (v[2] - v[9]));
+    da = QuatAngle(v + 3, v + 10);
+  }
   auto u = impl.Prepare(
-      "UPDATE trials SET cell_id = ?1, dispatched_at = ?2,"
-      " cell_defects_json = (SELECT defects_json FROM cells WHERE id = ?1),"
-      " start_x = c.start_x, start_y = c.start_y, start_z = c.start_z, start_qw = c.start_qw,"
-      " start_qx = c.start_qx, start_qy = c.start_qy, start_qz = c.start_qz"
-      " FROM (SELECT 1) LEFT JOIN cells AS c ON c.id = ?1"
-      "  AND (c.start_for_trial IS NULL OR c.start_for_trial = ?3) WHERE trials.id = ?3");
-  u->Bind(1, cell_id).Bind(2, now).Bind(3, t.trial_id).Run();
+      "UPDATE trials SET state = ?, updated_at = ?, cell_id = ?, dispatched_at = ?,"
+      " cell_defects_json = ?, start_x = ?, start_y = ?, start_z = ?, start_qw = ?, start_qx = ?,"
+      " start_qy = ?, start_qz = ?, start_position_error = ?, start_angle_error = ? WHERE id = ?");
+  detail::Binder b(*u);
+  b << std::string(ToString(TrialState::kDispatched)) << now << cell_id << now << defects;
+  for (const auto& v : start) b << v;
+  b << dp << da << t.trial_id;
+  u->Run();
   // The trial will move the object: the cell's start state is consumed.
   auto clear = impl.Prepare(
       "UPDATE cells SET start_x = NULL, start_y = NULL, start_z = NULL, start_qw = NULL,"
       " start_qx = NULL, start_qy = NULL, start_qz = NULL, start_observed_at = NULL,"
       " start_for_trial = NULL WHERE id = ?");
   clear->Bind(1, cell_id).Run();
-  auto r = impl.Prepare(
-      "SELECT start_x, start_y, start_z, start_qw, start_qx, start_qy, start_qz,"
-      " nominal_x, nominal_y, nominal_z, nominal_qw, nominal_qx, nominal_qy, nominal_qz"
-      " FROM trials WHERE id = ?");
-  r->Bind(1, t.trial_id);
-  r->Step();
-  if (!r->IsNull(0)) {
-    double v[14];
-    for (int i = 0; i < 14; ++i) v[i] = r->Real(i);
-    const double dp = std::sqrt((v[0] - v[7]) * (v[0] - v[7]) + (v[1] - v[8]) * (v[1] - v[8]) +
-                                (v[2] - v[9]) * (v[2] - v[9]));
-    const double da = QuatAngle(v + 3, v + 10);
-    auto e = impl.Prepare(
-        "UPDATE trials SET start_position_error = ?, start_angle_error = ? WHERE id = ?");
-    e->Bind(1, dp).Bind(2, da).Bind(3, t.trial_id).Run();
-  } else {
-    // No observed start for this attempt: an earlier attempt's errors must not stay.
-    auto e = impl.Prepare(
-        "UPDATE trials SET start_position_error = NULL, start_angle_error = NULL WHERE id = ?");
-    e->Bind(1, t.trial_id).Run();
-  }
 }
 
 }  // namespace
@@ -906,21 +928,25 @@ void Store::CompleteReset(std::int64_t trial_id, int attempt, const ResetReport&
   const auto row = LoadTrialRow(*impl_, trial_id, "CompleteReset");
   CheckAttempt(row, trial_id, attempt, "CompleteReset");
   const TrialState to = report.ok ? TrialState::kResetDone : TrialState::kResetFailed;
-  WriteTransition(*impl_, trial_id, attempt, row.state, to, row.cell_id,
-                  report.ok ? "reset verified" : report.reason,
-                  !rule.empty() ? rule
-                  : report.ok   ? std::string_view("reset.verified")
-                                : std::string_view("reset.failed"),
-                  "CompleteReset");
+  const double at = impl_->Now();
+  WriteTransitionAudit(*impl_, trial_id, attempt, row.state, to, row.cell_id,
+                       report.ok ? "reset verified" : report.reason,
+                       !rule.empty() ? rule
+                       : report.ok   ? std::string_view("reset.verified")
+                                     : std::string_view("reset.failed"),
+                       "CompleteReset", at);
+  // reset_done and reset_failed are not terminal: finished_at stays as it is.
   auto u = impl_->Prepare(
-      "UPDATE trials SET reset_ok = ?, reset_position_error = ?, reset_angle_error = ?,"
-      " reset_attempts = ?, reset_reason = ? WHERE id = ?");
-  u->Bind(1, report.ok ? 1 : 0)
-      .Bind(2, report.position_error)
-      .Bind(3, report.angle_error)
-      .Bind(4, report.reset_attempts)
-      .Bind(5, report.reason)
-      .Bind(6, trial_id)
+      "UPDATE trials SET state = ?, updated_at = ?, reset_ok = ?, reset_position_error = ?,"
+      " reset_angle_error = ?, reset_attempts = ?, reset_reason = ? WHERE id = ?");
+  u->Bind(1, ToString(to))
+      .Bind(2, at)
+      .Bind(3, report.ok ? 1 : 0)
+      .Bind(4, report.position_error)
+      .Bind(5, report.angle_error)
+      .Bind(6, report.reset_attempts)
+      .Bind(7, report.reason)
+      .Bind(8, trial_id)
       .Run();
   if (!row.cell_id.empty()) {
     // The pose the cell observed is where the next trial on this cell starts,
