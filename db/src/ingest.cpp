@@ -137,7 +137,7 @@ struct Ingest::Impl {
   void Flush() {
     CloseChunk();
     if (ready.empty()) return;
-    Tx tx(*store, true);
+    Tx tx(store->db, true);
     WriteReady();
     tx.Commit();
   }
@@ -228,24 +228,11 @@ std::int64_t Ingest::Finish(TrialEnd outcome) {
   if (outcome == TrialEnd::kNone)
     throw StoreError(StoreError::Kind::kBadInput, "Ingest::Finish: outcome is not set");
   m.CloseChunk();
-  Tx tx(*m.store, true);
+  Tx tx(m.store->db, true);
   const auto row = CheckIngestable(*m.store, m.trial_id, m.attempt, "Ingest::Finish");
   m.WriteReady();
   const double now = m.store->Now();
-  // The trial's row is rewritten once: its stream and, from dispatched, its
-  // move to executed (the audit row below) with the outcome.
-  if (row.state == TrialState::kDispatched) {
-    auto u = m.store->Prepare(
-        "UPDATE trials SET gt_stream_id = ?, state = ?, updated_at = ?, outcome = ?,"
-        " executed_at = ? WHERE id = ?");
-    u->Bind(1, m.stream_id)
-        .Bind(2, ToString(TrialState::kExecuted))
-        .Bind(3, now)
-        .Bind(4, ToString(outcome))
-        .Bind(5, now)
-        .Bind(6, m.trial_id)
-        .Run();
-  } else {
+  {
     auto u = m.store->Prepare("UPDATE trials SET gt_stream_id = ? WHERE id = ?");
     u->Bind(1, m.stream_id).Bind(2, m.trial_id).Run();
   }
@@ -296,10 +283,12 @@ std::int64_t Ingest::Finish(TrialEnd outcome) {
   }
   internal::WriteOutcome(*m.store, m.stream_id, m.trial_id, m.attempt, m.outcome->Result());
   if (row.state == TrialState::kDispatched) {
-    internal::WriteTransitionAudit(
-        *m.store, m.trial_id, m.attempt, row.state, TrialState::kExecuted, row.cell_id,
-        "ground truth complete (" + std::to_string(m.total) + " samples)",
-        "execute.ground_truth_complete", "Ingest::Finish", now);
+    internal::WriteTransition(*m.store, m.trial_id, m.attempt, row.state, TrialState::kExecuted,
+                              row.cell_id,
+                              "ground truth complete (" + std::to_string(m.total) + " samples)",
+                              "execute.ground_truth_complete", "Ingest::Finish");
+    auto u = m.store->Prepare("UPDATE trials SET outcome = ?, executed_at = ? WHERE id = ?");
+    u->Bind(1, ToString(outcome)).Bind(2, now).Bind(3, m.trial_id).Run();
   }
   tx.Commit();
   m.finished = true;
@@ -327,7 +316,7 @@ std::unique_ptr<Ingest> Store::BeginIngest(std::int64_t trial_id, int attempt,
   m->trial_id = trial_id;
   m->attempt = attempt;
   m->options = options;
-  Tx tx(*impl_, true);
+  Tx tx(impl_->db, true);
   const auto row = CheckIngestable(*impl_, trial_id, attempt, "BeginIngest");
   {
     auto p = impl_->Prepare("SELECT pusher_type IS NOT NULL FROM trials WHERE id = ?");
@@ -365,7 +354,7 @@ std::vector<Sample> internal::ReadStreamSamples(const Store::Impl& impl, std::in
 }
 
 GroundTruth Store::ReadGroundTruth(std::int64_t trial_id) const {
-  Tx tx(*impl_, false);  // one snapshot: the stream cannot change under us
+  Tx tx(impl_->db, false);  // one snapshot: the stream cannot change under us
   auto t = impl_->Prepare(
       "SELECT t.gt_stream_id, g.attempt, g.cell_id, g.samples, IFNULL(t.truth, '') FROM trials t"
       " LEFT JOIN gt_streams g ON g.id = t.gt_stream_id WHERE t.id = ?");

@@ -112,43 +112,8 @@ Tx::Tx(sqlite3* db, bool immediate) : db_(db) {
   open_ = true;
 }
 
-namespace {
-// Runs a prepared transaction statement (BEGIN, COMMIT, ROLLBACK), made on
-// first use; errors as Exec's ("context: SQLite's message").
-void RunPrepared(sqlite3* db, std::unique_ptr<Stmt>& stmt, const char* sql, const char* context) {
-  if (!stmt) stmt = std::make_unique<Stmt>(db, sql, true);
-  const int rc = sqlite3_step(stmt->get());
-  sqlite3_reset(stmt->get());
-  if (rc != SQLITE_DONE) {
-    std::string full = std::string(context) + ": " + sqlite3_errmsg(db);
-    if (KindOf(rc) == StoreError::Kind::kReadOnly) full += kReadOnlyHint;
-    throw StoreError(KindOf(rc), full);
-  }
-}
-}  // namespace
-
-Tx::Tx(const Store::Impl& impl, bool immediate) : db_(impl.db), prepared_(&impl.tx_statements) {
-  if (!immediate && sqlite3_get_autocommit(db_) == 0) {
-    joined_ = true;
-    return;
-  }
-  if (immediate)
-    RunPrepared(db_, prepared_->begin_immediate, "BEGIN IMMEDIATE", "begin transaction");
-  else
-    RunPrepared(db_, prepared_->begin, "BEGIN", "begin transaction");
-  open_ = true;
-}
-
 Tx::~Tx() {
-  if (!open_) return;
-  if (prepared_ == nullptr) {
-    sqlite3_exec(db_, "ROLLBACK", nullptr, nullptr, nullptr);
-    return;
-  }
-  try {
-    RunPrepared(db_, prepared_->rollback, "ROLLBACK", "rollback");
-  } catch (const std::exception&) {  // as sqlite3_exec's: nothing more to do
-  }
+  if (open_) sqlite3_exec(db_, "ROLLBACK", nullptr, nullptr, nullptr);
 }
 
 void Tx::Commit() {
@@ -157,10 +122,7 @@ void Tx::Commit() {
   for (sqlite3_stmt* p = sqlite3_next_stmt(db_, nullptr); p; p = sqlite3_next_stmt(db_, p)) {
     if (sqlite3_stmt_busy(p)) sqlite3_reset(p);
   }
-  if (prepared_ != nullptr)
-    RunPrepared(db_, prepared_->commit, "COMMIT", "commit");
-  else
-    Exec(db_, "COMMIT", "commit");
+  Exec(db_, "COMMIT", "commit");
   open_ = false;
 }
 
@@ -185,7 +147,6 @@ namespace arena::db {
 
 Store::Impl::~Impl() {
   cache.clear();  // finalize every statement before closing
-  tx_statements = {};
   if (db) sqlite3_close_v2(db);
   if (!private_copy_dir.empty()) {
     std::error_code ec;

@@ -103,12 +103,6 @@ class StmtRef {
   Stmt* s_;
 };
 
-// BEGIN, BEGIN IMMEDIATE, COMMIT and ROLLBACK of one connection, prepared
-// at its first transaction (Tx).
-struct TxStatements {
-  std::unique_ptr<Stmt> begin, begin_immediate, commit, rollback;
-};
-
 // BEGIN IMMEDIATE (writers) or BEGIN (readers: one snapshot); rolls back
 // unless Commit() was called. A reader inside a transaction already open on
 // the connection joins it (it reads what that transaction sees, and leaves
@@ -117,16 +111,11 @@ struct TxStatements {
 class Tx {
  public:
   Tx(sqlite3* db, bool immediate);
-  // The same, with BEGIN, COMMIT and ROLLBACK prepared once per connection
-  // (Store::Impl::tx_statements): a trial's path runs about ten transactions,
-  // and preparing their BEGIN/COMMIT each time showed in its profile.
-  Tx(const Store::Impl& impl, bool immediate);
   ~Tx();
   void Commit();
 
  private:
   sqlite3* db_;
-  TxStatements* prepared_ = nullptr;  // null: sqlite3_exec (the plain constructor)
   bool open_ = false;
   bool joined_ = false;
 };
@@ -152,7 +141,6 @@ struct Store::Impl {
   // Store::RestrictClaimsTo: the campaigns this connection's claims may take
   // from (nullopt: every active one).
   std::optional<std::set<std::int64_t>> claimable;
-  mutable detail::TxStatements tx_statements;  // Tx(const Impl&, ...)
 
   ~Impl();
   detail::StmtRef Prepare(std::string_view sql) const;

@@ -6,12 +6,10 @@
 #include "arena/db/retry_rule.hpp"
 
 #include <algorithm>
-#include <array>
 #include <cmath>
 #include <cstring>
 #include <map>
 #include <nlohmann/json.hpp>
-#include <optional>
 #include <set>
 
 #include "sqlite_util.hpp"
@@ -316,14 +314,6 @@ void WriteTransition(const Store::Impl& impl, std::int64_t trial_id, int attempt
         .Bind(5, trial_id);
     u->Run();
   }
-  WriteTransitionAudit(impl, trial_id, attempt, from, to, cell_id, reason, rule, function, now);
-}
-
-void WriteTransitionAudit(const Store::Impl& impl, std::int64_t trial_id, int attempt,
-                          TrialState from, TrialState to, const std::string& cell_id,
-                          const std::string& reason, std::string_view rule, const char* function,
-                          double now) {
-  CheckEdge(from, to, trial_id, function);
   auto a = impl.Prepare(
       "INSERT INTO trial_transitions(trial_id, attempt, from_state, to_state, at, cell_id, reason,"
       " rule) VALUES(?,?,?,?,?,?,?,?)");
@@ -343,7 +333,6 @@ void WriteTransitionAudit(const Store::Impl& impl, std::int64_t trial_id, int at
 using internal::CheckAttempt;
 using internal::LoadTrialRow;
 using internal::WriteTransition;
-using internal::WriteTransitionAudit;
 
 int ContactTypeMask(const std::vector<std::string>& types) {
   int mask = 0;
@@ -453,7 +442,7 @@ std::int64_t Store::CreateCampaign(const NewCampaign& campaign,
   if (campaign.name.empty()) BadInput("CreateCampaign: name is empty");
   ParseObject(campaign.spec_json, "CreateCampaign: spec_json");
   ParseObject(campaign.sampler_state_json, "CreateCampaign: sampler_state_json");
-  Tx tx(*impl_, true);
+  Tx tx(impl_->db, true);
   const std::int64_t id = internal::InsertCampaignRow(*impl_, campaign, "CreateCampaign");
   InsertPlannedTrials(*impl_, id, 0, trials, "CreateCampaign");
   internal::RegisterParameters(*impl_, id);
@@ -467,7 +456,7 @@ std::int64_t Store::CreateCampaign(const NewCampaign& campaign,
   if (campaign.name.empty()) BadInput("CreateCampaign: name is empty");
   ParseObject(campaign.spec_json, "CreateCampaign: spec_json");
   ParseObject(campaign.sampler_state_json, "CreateCampaign: sampler_state_json");
-  Tx tx(*impl_, true);  // rolled back by any exception: nothing of the campaign stays
+  Tx tx(impl_->db, true);  // rolled back by any exception: nothing of the campaign stays
   const std::int64_t id = internal::InsertCampaignRow(*impl_, campaign, "CreateCampaign");
   int first = 0;
   for (;;) {
@@ -485,7 +474,7 @@ void Store::AppendPlannedTrials(std::int64_t campaign_id, const std::vector<Plan
                                 const std::string& sampler_state_json) {
   impl_->RequireWritable("AppendPlannedTrials");
   ParseObject(sampler_state_json, "AppendPlannedTrials: sampler_state_json");
-  Tx tx(*impl_, true);
+  Tx tx(impl_->db, true);
   const Campaign c = GetCampaign(campaign_id);
   if (c.state == CampaignState::kCancelled || c.state == CampaignState::kDone) {
     BadInput("AppendPlannedTrials: campaign " + std::to_string(campaign_id) + " is " +
@@ -527,7 +516,7 @@ void SetCampaignState(Store::Impl& impl, std::int64_t id, const char* function,
                       std::initializer_list<CampaignState> from, CampaignState to,
                       const std::string& reason) {
   impl.RequireWritable(function);
-  Tx tx(impl, true);
+  Tx tx(impl.db, true);
   auto s = impl.Prepare("SELECT state FROM campaigns WHERE id = ?");
   s->Bind(1, id);
   if (!s->Step()) {
@@ -577,7 +566,7 @@ void Store::CancelCampaign(std::int64_t id, const std::string& reason) {
 
 std::vector<std::int64_t> Store::CompleteFinishedCampaigns() {
   impl_->RequireWritable("CompleteFinishedCampaigns");
-  Tx tx(*impl_, true);
+  Tx tx(impl_->db, true);
   auto s = impl_->Prepare(
       "SELECT c.id FROM campaigns c WHERE c.state = 'active' AND c.sampler_open = 0"
       " AND NOT EXISTS ("
@@ -665,7 +654,7 @@ void ClaimFound(const Store::Impl& impl, const ClaimedTrial& t, const std::strin
 
 std::vector<ClaimedTrial> Store::ClaimWindow(const std::string& cell_id, int limit) const {
   if (limit < 1 || limit > 1000) BadInput("ClaimWindow: limit must be 1..1000");
-  Tx tx(*impl_, false);
+  Tx tx(impl_->db, false);
   auto w = FindWindow(*impl_, cell_id, limit, "ClaimWindow");
   tx.Commit();
   return w;
@@ -674,7 +663,7 @@ std::vector<ClaimedTrial> Store::ClaimWindow(const std::string& cell_id, int lim
 std::optional<ClaimedTrial> Store::ClaimTrial(const std::string& cell_id, std::int64_t trial_id,
                                               std::string_view rule) {
   impl_->RequireWritable("ClaimTrial");
-  Tx tx(*impl_, true);  // find + update: one atomic step, as ClaimNextTrial
+  Tx tx(impl_->db, true);  // find + update: one atomic step, as ClaimNextTrial
   // Still claimable: the window's filters, this trial only.
   auto cell = impl_->Prepare("SELECT state, contact_mask FROM cells WHERE id = ?");
   cell->Bind(1, cell_id);
@@ -714,7 +703,7 @@ void Store::RecordFixtureChanges(const std::vector<FixtureChangeRecord>& changes
     RequireFinite(c.seconds, "RecordFixtureChanges: seconds");
     if (c.seconds < 0) BadInput("RecordFixtureChanges: seconds must be >= 0");
   }
-  Tx tx(*impl_, true);
+  Tx tx(impl_->db, true);
   const double now = impl_->Now();
   for (const auto& c : changes) {
     auto t = impl_->Prepare("SELECT 1 FROM trials WHERE id = ?");
@@ -745,7 +734,7 @@ void Store::RecordFixtureChanges(const std::vector<FixtureChangeRecord>& changes
 }
 
 std::vector<FixtureChangeRecord> Store::ListFixtureChanges(std::int64_t campaign_id) const {
-  Tx tx(*impl_, false);
+  Tx tx(impl_->db, false);
   auto s = impl_->Prepare(
       "SELECT f.trial_id, f.attempt, f.cell_id, f.phase, f.what, f.from_key, f.to_key, f.seconds,"
       " f.at FROM fixture_changes AS f JOIN trials AS t ON t.id = f.trial_id"
@@ -770,7 +759,7 @@ std::vector<FixtureChangeRecord> Store::ListFixtureChanges(std::int64_t campaign
 }
 
 std::optional<ClaimedTrial> Store::PeekNextTrial(const std::string& cell_id) const {
-  Tx tx(*impl_, false);
+  Tx tx(impl_->db, false);
   auto t = FindNext(*impl_, cell_id, "PeekNextTrial");
   tx.Commit();
   return t;
@@ -778,7 +767,7 @@ std::optional<ClaimedTrial> Store::PeekNextTrial(const std::string& cell_id) con
 
 std::optional<ClaimedTrial> Store::ClaimNextTrial(const std::string& cell_id) {
   impl_->RequireWritable("ClaimNextTrial");
-  Tx tx(*impl_, true);  // the write lock makes find + update one atomic step
+  Tx tx(impl_->db, true);  // the write lock makes find + update one atomic step
   auto t = FindNext(*impl_, cell_id, "ClaimNextTrial");
   if (!t) return std::nullopt;
   ClaimFound(*impl_, *t, cell_id, "claimed", "ClaimNextTrial");
@@ -791,56 +780,45 @@ namespace {
 void ClaimFound(const Store::Impl& impl, const ClaimedTrial& t, const std::string& cell_id,
                 const std::string& reason, const char* function) {
   const double now = impl.Now();
-  WriteTransitionAudit(impl, t.trial_id, t.attempt, TrialState::kPlanned, TrialState::kDispatched,
-                       cell_id, reason, "dispatch.claimed", function, now);
+  WriteTransition(impl, t.trial_id, t.attempt, TrialState::kPlanned, TrialState::kDispatched,
+                  cell_id, reason, "dispatch.claimed", function);
   // The start state this trial begins from: the cell's last observed reset
   // result, if that reset was aimed at this trial (or its aim is not known).
-  // Read here and written with the claim in one UPDATE of the trial.
-  std::optional<std::string> defects;
-  std::array<std::optional<double>, 7> start{};
-  {
-    auto c = impl.Prepare(
-        "SELECT defects_json, start_for_trial IS NULL OR start_for_trial = ?2, start_x, start_y,"
-        " start_z, start_qw, start_qx, start_qy, start_qz FROM cells WHERE id = ?1");
-    c->Bind(1, cell_id).Bind(2, t.trial_id);
-    if (c->Step()) {
-      if (!c->IsNull(0)) defects = c->Text(0);
-      if (c->Int(1) != 0)
-        for (int i = 0; i < 7; ++i)
-          if (!c->IsNull(2 + i)) start[i] = c->Real(2 + i);
-    }
-  }
-  // Its distance from the planned start (no observed start: no errors, and
-  // an earlier attempt's must not stay).
-  std::optional<double> dp, da;
-  if (start[0]) {
-    auto n = impl.Prepare(
-        "SELECT nominal_x, nominal_y, nominal_z, nominal_qw, nominal_qx, nominal_qy, nominal_qz"
-        " FROM trials WHERE id = ?");
-    n->Bind(1, t.trial_id);
-    n->Step();
-    double v[14];
-    for (int i = 0; i < 7; ++i) v[i] = start[i].value_or(0.0);
-    for (int i = 0; i < 7; ++i) v[7 + i] = n->Real(i);
-    dp = std::sqrt((v[0] - v[7]) * (v[0] - v[7]) + (v[1] - v[8]) * (v[1] - v[8]) +
-                   (v[2] - v[9]) * (v[2] - v[9]));
-    da = QuatAngle(v + 3, v + 10);
-  }
   auto u = impl.Prepare(
-      "UPDATE trials SET state = ?, updated_at = ?, cell_id = ?, dispatched_at = ?,"
-      " cell_defects_json = ?, start_x = ?, start_y = ?, start_z = ?, start_qw = ?, start_qx = ?,"
-      " start_qy = ?, start_qz = ?, start_position_error = ?, start_angle_error = ? WHERE id = ?");
-  detail::Binder b(*u);
-  b << std::string(ToString(TrialState::kDispatched)) << now << cell_id << now << defects;
-  for (const auto& v : start) b << v;
-  b << dp << da << t.trial_id;
-  u->Run();
+      "UPDATE trials SET cell_id = ?1, dispatched_at = ?2,"
+      " cell_defects_json = (SELECT defects_json FROM cells WHERE id = ?1),"
+      " start_x = c.start_x, start_y = c.start_y, start_z = c.start_z, start_qw = c.start_qw,"
+      " start_qx = c.start_qx, start_qy = c.start_qy, start_qz = c.start_qz"
+      " FROM (SELECT 1) LEFT JOIN cells AS c ON c.id = ?1"
+      "  AND (c.start_for_trial IS NULL OR c.start_for_trial = ?3) WHERE trials.id = ?3");
+  u->Bind(1, cell_id).Bind(2, now).Bind(3, t.trial_id).Run();
   // The trial will move the object: the cell's start state is consumed.
   auto clear = impl.Prepare(
       "UPDATE cells SET start_x = NULL, start_y = NULL, start_z = NULL, start_qw = NULL,"
       " start_qx = NULL, start_qy = NULL, start_qz = NULL, start_observed_at = NULL,"
       " start_for_trial = NULL WHERE id = ?");
   clear->Bind(1, cell_id).Run();
+  auto r = impl.Prepare(
+      "SELECT start_x, start_y, start_z, start_qw, start_qx, start_qy, start_qz,"
+      " nominal_x, nominal_y, nominal_z, nominal_qw, nominal_qx, nominal_qy, nominal_qz"
+      " FROM trials WHERE id = ?");
+  r->Bind(1, t.trial_id);
+  r->Step();
+  if (!r->IsNull(0)) {
+    double v[14];
+    for (int i = 0; i < 14; ++i) v[i] = r->Real(i);
+    const double dp = std::sqrt((v[0] - v[7]) * (v[0] - v[7]) + (v[1] - v[8]) * (v[1] - v[8]) +
+                                (v[2] - v[9]) * (v[2] - v[9]));
+    const double da = QuatAngle(v + 3, v + 10);
+    auto e = impl.Prepare(
+        "UPDATE trials SET start_position_error = ?, start_angle_error = ? WHERE id = ?");
+    e->Bind(1, dp).Bind(2, da).Bind(3, t.trial_id).Run();
+  } else {
+    // No observed start for this attempt: an earlier attempt's errors must not stay.
+    auto e = impl.Prepare(
+        "UPDATE trials SET start_position_error = NULL, start_angle_error = NULL WHERE id = ?");
+    e->Bind(1, t.trial_id).Run();
+  }
 }
 
 }  // namespace
@@ -851,7 +829,7 @@ TrialState Store::RetryTrial(std::int64_t trial_id, int attempt, const std::stri
   RequireFinite(backoff_s, "RetryTrial: backoff_s");
   if (backoff_s < 0) BadInput("RetryTrial: backoff_s must be >= 0");
   if (max_attempts < 1) BadInput("RetryTrial: max_attempts must be >= 1");
-  Tx tx(*impl_, true);
+  Tx tx(impl_->db, true);
   const auto row = LoadTrialRow(*impl_, trial_id, "RetryTrial");
   CheckAttempt(row, trial_id, attempt, "RetryTrial");
   if (row.state != TrialState::kDispatched) {
@@ -894,7 +872,7 @@ void Store::FailTrial(std::int64_t trial_id, int attempt, const std::string& rea
                       TrialEnd outcome, std::string_view rule) {
   impl_->RequireWritable("FailTrial");
   if (outcome == TrialEnd::kNone) BadInput("FailTrial: outcome is not set");
-  Tx tx(*impl_, true);
+  Tx tx(impl_->db, true);
   const auto row = LoadTrialRow(*impl_, trial_id, "FailTrial");
   CheckAttempt(row, trial_id, attempt, "FailTrial");
   WriteTransition(*impl_, trial_id, attempt, row.state, TrialState::kFailed, row.cell_id, reason,
@@ -906,7 +884,7 @@ void Store::FailTrial(std::int64_t trial_id, int attempt, const std::string& rea
 
 void Store::BeginReset(std::int64_t trial_id, int attempt, std::string_view rule) {
   impl_->RequireWritable("BeginReset");
-  Tx tx(*impl_, true);
+  Tx tx(impl_->db, true);
   const auto row = LoadTrialRow(*impl_, trial_id, "BeginReset");
   CheckAttempt(row, trial_id, attempt, "BeginReset");
   WriteTransition(*impl_, trial_id, attempt, row.state, TrialState::kResetting, row.cell_id,
@@ -924,29 +902,25 @@ void Store::CompleteReset(std::int64_t trial_id, int attempt, const ResetReport&
   }
   RequireFinite(report.position_error, "CompleteReset: position_error");
   RequireFinite(report.angle_error, "CompleteReset: angle_error");
-  Tx tx(*impl_, true);
+  Tx tx(impl_->db, true);
   const auto row = LoadTrialRow(*impl_, trial_id, "CompleteReset");
   CheckAttempt(row, trial_id, attempt, "CompleteReset");
   const TrialState to = report.ok ? TrialState::kResetDone : TrialState::kResetFailed;
-  const double at = impl_->Now();
-  WriteTransitionAudit(*impl_, trial_id, attempt, row.state, to, row.cell_id,
-                       report.ok ? "reset verified" : report.reason,
-                       !rule.empty() ? rule
-                       : report.ok   ? std::string_view("reset.verified")
-                                     : std::string_view("reset.failed"),
-                       "CompleteReset", at);
-  // reset_done and reset_failed are not terminal: finished_at stays as it is.
+  WriteTransition(*impl_, trial_id, attempt, row.state, to, row.cell_id,
+                  report.ok ? "reset verified" : report.reason,
+                  !rule.empty() ? rule
+                  : report.ok   ? std::string_view("reset.verified")
+                                : std::string_view("reset.failed"),
+                  "CompleteReset");
   auto u = impl_->Prepare(
-      "UPDATE trials SET state = ?, updated_at = ?, reset_ok = ?, reset_position_error = ?,"
-      " reset_angle_error = ?, reset_attempts = ?, reset_reason = ? WHERE id = ?");
-  u->Bind(1, ToString(to))
-      .Bind(2, at)
-      .Bind(3, report.ok ? 1 : 0)
-      .Bind(4, report.position_error)
-      .Bind(5, report.angle_error)
-      .Bind(6, report.reset_attempts)
-      .Bind(7, report.reason)
-      .Bind(8, trial_id)
+      "UPDATE trials SET reset_ok = ?, reset_position_error = ?, reset_angle_error = ?,"
+      " reset_attempts = ?, reset_reason = ? WHERE id = ?");
+  u->Bind(1, report.ok ? 1 : 0)
+      .Bind(2, report.position_error)
+      .Bind(3, report.angle_error)
+      .Bind(4, report.reset_attempts)
+      .Bind(5, report.reason)
+      .Bind(6, trial_id)
       .Run();
   if (!row.cell_id.empty()) {
     // The pose the cell observed is where the next trial on this cell starts,
@@ -998,7 +972,7 @@ void CheckPrediction(const Prediction& p, const std::string& prefix) {
 void Store::RecordPrediction(std::int64_t trial_id, int attempt, const Prediction& p) {
   impl_->RequireWritable("RecordPrediction");
   CheckPrediction(p, "RecordPrediction: ");
-  Tx tx(*impl_, true);
+  Tx tx(impl_->db, true);
   const auto row = LoadTrialRow(*impl_, trial_id, "RecordPrediction");
   CheckAttempt(row, trial_id, attempt, "RecordPrediction");
   if (row.state != TrialState::kPredicted) {
@@ -1040,7 +1014,7 @@ std::int64_t Store::RecordEvaluation(std::int64_t campaign_id, const std::string
   for (std::size_t i = 0; i < results.size(); ++i) {
     CheckPrediction(results[i].prediction, "RecordEvaluation: results[" + std::to_string(i) + "].");
   }
-  Tx tx(*impl_, true);
+  Tx tx(impl_->db, true);
   {
     auto c = impl_->Prepare("SELECT 1 FROM campaigns WHERE id = ?");
     c->Bind(1, campaign_id);
@@ -1167,7 +1141,7 @@ std::vector<EvaluationResult> Store::ListEvaluationResults(std::int64_t evaluati
 void Store::RecordExecution(std::int64_t trial_id, int attempt, const std::string& backend,
                             const std::string& truth, const std::string& defects_applied_json) {
   impl_->RequireWritable("RecordExecution");
-  Tx tx(*impl_, true);
+  Tx tx(impl_->db, true);
   const auto row = LoadTrialRow(*impl_, trial_id, "RecordExecution");
   CheckAttempt(row, trial_id, attempt, "RecordExecution");
   auto u =
@@ -1177,7 +1151,7 @@ void Store::RecordExecution(std::int64_t trial_id, int attempt, const std::strin
 }
 
 std::vector<Store::TruthCount> Store::CampaignTruths(std::int64_t campaign_id) const {
-  Tx tx(*impl_, false);
+  Tx tx(impl_->db, false);
   auto s = impl_->Prepare(
       "SELECT IFNULL(truth, ''), IFNULL(backend, ''), COUNT(*) FROM trials"
       " WHERE campaign_id = ? AND gt_stream_id IS NOT NULL GROUP BY 1, 2 ORDER BY 3 DESC");
@@ -1190,7 +1164,7 @@ std::vector<Store::TruthCount> Store::CampaignTruths(std::int64_t campaign_id) c
 
 void Store::FinishTrial(std::int64_t trial_id, int attempt) {
   impl_->RequireWritable("FinishTrial");
-  Tx tx(*impl_, true);
+  Tx tx(impl_->db, true);
   const auto row = LoadTrialRow(*impl_, trial_id, "FinishTrial");
   CheckAttempt(row, trial_id, attempt, "FinishTrial");
   WriteTransition(*impl_, trial_id, attempt, row.state, TrialState::kDone, row.cell_id, "done",
@@ -1200,7 +1174,7 @@ void Store::FinishTrial(std::int64_t trial_id, int attempt) {
 
 RecoveryReport Store::RecoverAfterRestart(const std::string& reason) {
   impl_->RequireWritable("RecoverAfterRestart");
-  Tx tx(*impl_, true);
+  Tx tx(impl_->db, true);
   RecoveryReport report;
   std::vector<std::pair<std::int64_t, int>> dispatched, resetting;
   {
@@ -1374,7 +1348,7 @@ std::vector<std::string> Store::CheckInvariants() const {
       {"a dispatched trial names its cell",
        "SELECT id FROM trials WHERE state = 'dispatched' AND cell_id IS NULL"},
   };
-  Tx tx(*impl_, false);
+  Tx tx(impl_->db, false);
   for (const auto& [what, sql] : checks) {
     detail::Stmt s(impl_->db, sql);
     while (s.Step())
@@ -1393,7 +1367,7 @@ void Store::UpsertCell(const std::string& cell_id, const std::vector<std::string
   const int mask = ContactTypeMask(contact_types);
   ParseObject(capabilities_json, "UpsertCell: capabilities_json");
   ParseObject(defects_json, "UpsertCell: defects_json");
-  Tx tx(*impl_, true);
+  Tx tx(impl_->db, true);
   const double now = impl_->Now();
   auto s = impl_->Prepare(
       "INSERT INTO cells(id, state, contact_mask, capabilities_json, defects_json, last_seen,"
@@ -1429,7 +1403,7 @@ void Store::TouchCell(const std::string& cell_id) {
 
 int Store::RecordCellResult(const std::string& cell_id, bool ok) {
   impl_->RequireWritable("RecordCellResult");
-  Tx tx(*impl_, true);
+  Tx tx(impl_->db, true);
   auto s = impl_->Prepare(
       ok ? "UPDATE cells SET consecutive_failures = 0, last_seen = ?, updated_at = ? WHERE id = ?"
          : "UPDATE cells SET consecutive_failures = consecutive_failures + 1,"
@@ -1456,7 +1430,7 @@ void AddCellEvent(const Store::Impl& impl, const std::string& cell_id, const cha
 
 void Store::QuarantineCell(const std::string& cell_id, const std::string& reason) {
   impl_->RequireWritable("QuarantineCell");
-  Tx tx(*impl_, true);
+  Tx tx(impl_->db, true);
   auto s = impl_->Prepare(
       "UPDATE cells SET state = 'quarantined', quarantine_reason = ?, updated_at = ? WHERE id = ?");
   s->Bind(1, reason).Bind(2, impl_->Now()).Bind(3, cell_id).Run();
@@ -1468,7 +1442,7 @@ void Store::QuarantineCell(const std::string& cell_id, const std::string& reason
 void Store::ReleaseCell(const std::string& cell_id, const std::string& reason,
                         const std::string& by_whom) {
   impl_->RequireWritable("ReleaseCell");
-  Tx tx(*impl_, true);
+  Tx tx(impl_->db, true);
   auto s = impl_->Prepare(
       "UPDATE cells SET state = 'healthy', quarantine_reason = '', consecutive_failures = 0,"
       " updated_at = ? WHERE id = ?");
@@ -1570,7 +1544,7 @@ std::vector<StartStateDrift> Store::Drift(std::optional<std::int64_t> campaign_i
 
 StatusSummary Store::Status() const {
   constexpr double kRateWindowS = 900;  // recent rate: the last 15 minutes
-  Tx tx(*impl_, false);                 // one snapshot for the whole summary
+  Tx tx(impl_->db, false);              // one snapshot for the whole summary
   StatusSummary out;
   const double now = impl_->Now();
   auto s = impl_->Prepare(

@@ -30,14 +30,6 @@ void CheckEdge(TrialState from, TrialState to, std::int64_t trial_id, const char
 void WriteTransition(const Store::Impl& impl, std::int64_t trial_id, int attempt, TrialState from,
                      TrialState to, const std::string& cell_id, const std::string& reason,
                      std::string_view rule, const char* function);
-// WriteTransition's check and audit row alone, at `now`: for a caller that
-// sets trials.state and updated_at (= now; finished_at too for a terminal
-// state) in its own UPDATE of the trial, so the trial's row, scene and all,
-// is rewritten once per step instead of once per statement.
-void WriteTransitionAudit(const Store::Impl& impl, std::int64_t trial_id, int attempt,
-                          TrialState from, TrialState to, const std::string& cell_id,
-                          const std::string& reason, std::string_view rule, const char* function,
-                          double now);
 
 // Inserts an active campaign's row (fields checked, kBadInput naming
 // `function`); no transaction of its own. @returns its id.
