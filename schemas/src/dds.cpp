@@ -906,7 +906,8 @@ struct Reader<T>::Impl : public fdds::DataReaderListener {
   std::atomic<std::uint64_t> rejected{0};
   ReaderCounters counters;  // under mutex
 
-  std::string only_cell;  // real-time topics: this cell's messages only
+  std::string only_cell;           // real-time topics: this cell's messages only
+  std::shared_ptr<Doorbell> bell;  // under mutex; rung after a sample is queued
 
   ~Impl() override {
     if (reader != nullptr) {
@@ -932,11 +933,14 @@ struct Reader<T>::Impl : public fdds::DataReaderListener {
       sample = T();
     }
     if (taken.empty()) return;
+    std::shared_ptr<Doorbell> ring;
     {
       std::lock_guard<std::mutex> lock(mutex);
       for (auto& s : taken) Enqueue(std::move(s));
+      ring = bell;
     }
     arrived.notify_all();
+    if (ring) ring->Ring();
   }
 
   void on_sample_lost(fdds::DataReader*, const fdds::SampleLostStatus& status) override {
@@ -1072,6 +1076,17 @@ std::vector<T> Reader<T>::TakeAll() {
   impl_->queue.clear();
   impl_->counters.taken += all.size();
   return all;
+}
+
+template <class T>
+void Reader<T>::RingOnArrival(std::shared_ptr<Doorbell> bell) {
+  bool queued = false;
+  {
+    std::lock_guard<std::mutex> lock(impl_->mutex);
+    impl_->bell = bell;
+    queued = !impl_->queue.empty();
+  }
+  if (queued && bell) bell->Ring();  // what came before it is input too
 }
 
 template <class T>
