@@ -316,7 +316,6 @@ class PredictorPool : public PredictionPort {
     for (auto& w : workers_) w.join();
   }
   void SetStore(db::Store* store) { store_ = store; }
-  void RingOnResult(std::shared_ptr<dds::Doorbell> bell) { bell_ = std::move(bell); }
 
   void Start(PredictionRequest r) override {
     PredictionJob job{r.trial_id,         r.attempt, r.campaign_id,         {},
@@ -382,13 +381,10 @@ class PredictorPool : public PredictionPort {
   void Fail(const PredictionJob& job, const std::string& why) {
     spdlog::error("{}: cannot predict: {}", TrialTag(job.campaign_id, job.trial_id, job.attempt),
                   why);
-    {
-      std::lock_guard lock(mu_);
-      ++outstanding_;
-      results_.push_back(PredictionDone{job.trial_id, job.attempt, job.campaign_id,
-                                        PredictionFailure(db::PredictionStatus::kError, why)});
-    }
-    if (bell_) bell_->Ring();
+    std::lock_guard lock(mu_);
+    ++outstanding_;
+    results_.push_back(PredictionDone{job.trial_id, job.attempt, job.campaign_id,
+                                      PredictionFailure(db::PredictionStatus::kError, why)});
   }
 
   // The campaign's model settings (spec "prediction", or null), cached.
@@ -420,16 +416,12 @@ class PredictorPool : public PredictionPort {
                           assessment::PredictTrial(job.scene, job.truth, job.prediction,
                                                    job.commands.empty() ? nullptr : &job.commands)};
       assessment::NoteStart(&done.prediction, job.start);
-      {
-        std::lock_guard lock(mu_);
-        results_.push_back(std::move(done));
-      }
-      if (bell_) bell_->Ring();
+      std::lock_guard lock(mu_);
+      results_.push_back(std::move(done));
     }
   }
 
   db::Store* store_ = nullptr;
-  std::shared_ptr<dds::Doorbell> bell_;  // set before any job: read by the workers
   std::map<std::int64_t, nlohmann::json> models_;
   mutable std::mutex mu_;
   std::condition_variable cv_;
@@ -457,8 +449,6 @@ struct Service::Impl {
   dds::Reader<msg::CellAnnounce> announces;
   dds::Reader<msg::TrialStatus> statuses;
   dds::Reader<msg::GroundTruth> truth_reader;
-  // Rung by the readers above and the predictor: the loop's one wait.
-  std::shared_ptr<dds::Doorbell> input = std::make_shared<dds::Doorbell>();
   PredictorPool predictor;
   // After the participant: a bad network or security setting fails before
   // the store file is created or touched (bad input changes nothing stored).
@@ -495,10 +485,6 @@ struct Service::Impl {
         predictor(o.predictor_threads),
         store(db::Store::Open(o.db_path, StoreOptionsFor(o))) {
     predictor.SetStore(store.get());
-    announces.RingOnArrival(input);
-    statuses.RingOnArrival(input);
-    truth_reader.RingOnArrival(input);
-    predictor.RingOnResult(input);
     ServiceIdentity me{session, HostName(), static_cast<std::uint32_t>(getpid()), store->StoreId()};
     // One service per store: a second one refuses to start, naming the first.
     db::ServiceRecord record{SessionHex(session), getpid(), me.host, o.domain_id, 0, 0, {}};
@@ -604,11 +590,8 @@ struct Service::Impl {
         spdlog::info("stopping: no new trials; waiting up to {} s for phases in flight",
                      opt.drain_timeout_s);
       }
-      // Sleep until any input arrives (a status, a ground-truth batch, an
-      // announcement, a prediction) or 1 ms passes for the tick: a batch that
-      // completes a stream is taken when it comes, not after a status wait.
-      input->Wait(std::chrono::milliseconds(1));
-      for (auto& st : statuses.TakeAll()) driver->OnStatus(st);
+      // Statuses are the latency-critical input: wait on them briefly.
+      if (auto st = statuses.Take(std::chrono::milliseconds(1))) driver->OnStatus(*st);
       for (auto& a : announces.TakeAll()) driver->OnAnnounce(a);
       for (auto& b : truth_reader.TakeAll()) driver->OnGroundTruth(b);
       for (auto& st : statuses.TakeAll()) driver->OnStatus(st);

@@ -906,8 +906,7 @@ struct Reader<T>::Impl : public fdds::DataReaderListener {
   std::atomic<std::uint64_t> rejected{0};
   ReaderCounters counters;  // under mutex
 
-  std::string only_cell;           // real-time topics: this cell's messages only
-  std::shared_ptr<Doorbell> bell;  // under mutex; rung after a sample is queued
+  std::string only_cell;  // real-time topics: this cell's messages only
 
   ~Impl() override {
     if (reader != nullptr) {
@@ -933,14 +932,11 @@ struct Reader<T>::Impl : public fdds::DataReaderListener {
       sample = T();
     }
     if (taken.empty()) return;
-    std::shared_ptr<Doorbell> ring;
     {
       std::lock_guard<std::mutex> lock(mutex);
       for (auto& s : taken) Enqueue(std::move(s));
-      ring = bell;
     }
     arrived.notify_all();
-    if (ring) ring->Ring();
   }
 
   void on_sample_lost(fdds::DataReader*, const fdds::SampleLostStatus& status) override {
@@ -1076,17 +1072,6 @@ std::vector<T> Reader<T>::TakeAll() {
   impl_->queue.clear();
   impl_->counters.taken += all.size();
   return all;
-}
-
-template <class T>
-void Reader<T>::RingOnArrival(std::shared_ptr<Doorbell> bell) {
-  bool queued = false;
-  {
-    std::lock_guard<std::mutex> lock(impl_->mutex);
-    impl_->bell = bell;
-    queued = !impl_->queue.empty();
-  }
-  if (queued && bell) bell->Ring();  // what came before it is input too
 }
 
 template <class T>

@@ -90,12 +90,10 @@
 #pragma once
 
 #include <chrono>
-#include <condition_variable>
 #include <cstddef>
 #include <cstdint>
 #include <deque>
 #include <memory>
-#include <mutex>
 #include <optional>
 #include <stdexcept>
 #include <string>
@@ -288,35 +286,6 @@ struct ReaderCounters {
 // parameter 0 the cell id (the topic's key, the first member of the type).
 inline constexpr const char* kCellFilterClass = "arena.cell_id";
 
-// Wakes a thread that serves several readers when any of them queues a
-// sample (Reader::RingOnArrival): such a loop sleeps until there is input,
-// instead of waiting on one reader while another's sample sits queued.
-// A ring is kept until the next Wait, so none is lost between a loop's
-// TakeAll and its next Wait. Thread-safe.
-class Doorbell {
- public:
-  void Ring() {
-    {
-      std::lock_guard<std::mutex> lock(mutex_);
-      rung_ = true;
-    }
-    rang_.notify_all();
-  }
-  // Waits up to timeout for a ring since the last Wait, and clears it.
-  // @returns true when it was rung.
-  bool Wait(std::chrono::nanoseconds timeout) {
-    std::unique_lock<std::mutex> lock(mutex_);
-    const bool rung = rang_.wait_for(lock, timeout, [&] { return rung_; });
-    rung_ = false;
-    return rung;
-  }
-
- private:
-  std::mutex mutex_;
-  std::condition_variable rang_;
-  bool rung_ = false;
-};
-
 // A typed DataReader on the topic of T; samples are queued by the listener
 // and taken by the caller's thread.
 template <class T>
@@ -335,8 +304,6 @@ class Reader {
   std::optional<T> Take(std::chrono::nanoseconds timeout);
   // Every queued sample, without waiting.
   std::vector<T> TakeAll();
-  // Rings `bell` whenever a sample is queued (after it is queued); null: none.
-  void RingOnArrival(std::shared_ptr<Doorbell> bell);
   int Matched() const;
   bool WaitForMatched(int writers, Millis timeout) const;
   // Samples dropped because their schema_version is unknown.
