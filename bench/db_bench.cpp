@@ -361,6 +361,80 @@ void BM_ClaimNextTrial(benchmark::State& state) {
 }
 BENCHMARK(BM_ClaimNextTrial)->Iterations(2000)->Unit(benchmark::kMicrosecond);
 
+// One trial's store steps on the service's path (issue 27: the overhead
+// per trial), as `arena serve` runs them for a clean smoke trial at
+// --speed 0: claim, begin ingest, 50 samples, record execution, finish
+// (summary, outcomes, executed), begin reset, complete reset (its observed
+// pose aimed at the next trial); the prediction and `done` run after the
+// next dispatch, off the path, and are left out of the time. CPU time per
+// trial of this thread: the store's own cost, without the DDS hops and the
+// scheduling of a loaded machine that blur orchestration_bench. Counters
+// `<step>_us`: each step's thread CPU time per trial (each a transaction).
+// Arg: the new file's page size (8192, the default; 4096 as before
+// 2026-11-22): a commit writes each page it dirtied as one WAL frame.
+double ThreadCpuSeconds() {
+  timespec ts{};
+  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
+  return static_cast<double>(ts.tv_sec) + 1e-9 * static_cast<double>(ts.tv_nsec);
+}
+
+void BM_TrialStorePath(benchmark::State& state) {
+  const std::vector<Sample> stream = MakeRealisticStream(50, 7);
+  StoreOptions so;
+  so.new_file_page_size = static_cast<int>(state.range(0));
+  BenchStore b(static_cast<int>(state.max_iterations) + 1, 1, false, so);
+  Prediction p;
+  p.model_key = "bench";
+  p.model_json = "{}";
+  p.status = PredictionStatus::kOk;
+  p.final_position_error = 0.001;
+  p.wall_s = 0.01;
+  const char* names[] = {"claim_us",  "begin_ingest_us", "add_us",           "record_execution_us",
+                         "finish_us", "begin_reset_us",  "complete_reset_us"};
+  double spent[7] = {};
+  for (auto _ : state) {
+    double t0 = ThreadCpuSeconds();
+    int k = 0;
+    const auto step = [&] {
+      const double t1 = ThreadCpuSeconds();
+      spent[k++] += t1 - t0;
+      t0 = t1;
+    };
+    auto t = b.store->ClaimNextTrial("cell0");
+    step();
+    auto ingest = b.store->BeginIngest(t->trial_id, t->attempt, Facts().contacts, {});
+    step();
+    ingest->Add(stream);
+    step();
+    b.store->RecordExecution(t->trial_id, t->attempt, "model", "simulated", "{}");
+    step();
+    benchmark::DoNotOptimize(ingest->Finish());
+    step();
+    b.store->BeginReset(t->trial_id, t->attempt, "reset.after_execute");
+    step();
+    ResetReport r;
+    r.ok = true;
+    r.pose_observed = true;
+    r.observed_pose = {0.0004, 0.0002, 0.0, 1, 0, 0, 0};
+    r.position_error = 0.0004;
+    r.aimed_at_trial = t->trial_id + 1;
+    b.store->CompleteReset(t->trial_id, t->attempt, r, "reset.verified");
+    step();
+    state.PauseTiming();  // after the next dispatch in the service: off the path
+    b.store->RecordPrediction(t->trial_id, t->attempt, p);
+    b.store->FinishTrial(t->trial_id, t->attempt);
+    state.ResumeTiming();
+  }
+  const double n = static_cast<double>(state.iterations());
+  for (int i = 0; i < 7; ++i) state.counters[names[i]] = n > 0 ? 1e6 * spent[i] / n : 0;
+}
+BENCHMARK(BM_TrialStorePath)
+    ->ArgName("page")
+    ->Arg(8192)
+    ->Arg(4096)
+    ->Iterations(2000)
+    ->Unit(benchmark::kMicrosecond);
+
 }  // namespace
 
 BENCHMARK_MAIN();

@@ -98,7 +98,9 @@ std::string SmokeCampaign(int replicates) {
 }
 
 // Arg 0: number of cells. 12 conditions x 10 replicates = 120 trials per campaign.
-void BM_CampaignEndToEnd(benchmark::State& state) {
+// `shared_memory`: the service's participant uses Fast DDS's shared-memory
+// transport beside UDP (the cells always do); false as `arena serve` runs it.
+void CampaignEndToEnd(benchmark::State& state, bool shared_memory) {
   spdlog::set_level(spdlog::level::warn);
   const int cells = static_cast<int>(state.range(0));
   const fs::path dir = fs::temp_directory_path() / ("arena_orch_bench_" + std::to_string(getpid()));
@@ -128,7 +130,7 @@ void BM_CampaignEndToEnd(benchmark::State& state) {
     so.domain_id = domain;
     so.exit_when_done = true;
     so.only_campaign = id;
-    so.network.shared_memory = false;  // as `arena serve` and `arena run`: UDP on loopback
+    so.network.shared_memory = shared_memory;  // false as `arena serve`, `arena run`: UDP
     orchestrator::Service service(so);
     service.OnTrialTiming([&](const orchestrator::TrialTiming& t) {
       overhead.push_back(t.overhead_s);
@@ -171,9 +173,19 @@ void BM_CampaignEndToEnd(benchmark::State& state) {
   state.counters["cell_rss_growth_kib_per_1k_trials"] =
       later_trials > 0 ? 1000.0 * static_cast<double>(rss_growth) / later_trials : 0;
 }
+void BM_CampaignEndToEnd(benchmark::State& state) { CampaignEndToEnd(state, false); }
 BENCHMARK(BM_CampaignEndToEnd)
     ->Arg(1)
     ->Arg(2)
+    ->Iterations(5)
+    ->Unit(benchmark::kSecond)
+    ->UseRealTime();
+
+// The same with the service on shared memory too (issue 27: the wire's share
+// of the overhead; `arena serve` keeps it off, see cli/src/cmd_serve.cpp).
+void BM_CampaignEndToEndSharedMemory(benchmark::State& state) { CampaignEndToEnd(state, true); }
+BENCHMARK(BM_CampaignEndToEndSharedMemory)
+    ->Arg(1)
     ->Iterations(5)
     ->Unit(benchmark::kSecond)
     ->UseRealTime();
