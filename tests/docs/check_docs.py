@@ -144,6 +144,118 @@ def check_topics(src, problems):
             problems.append(f"docs/architecture.md: the topic table has no row for {t}")
 
 
+# ---------------------------------------------------------------- scene.md's simulate output
+
+SIMULATE_UNCHECKED = ("wall_s", "residuals")  # host time; rounding-level residuals
+
+
+def _sig_round(x, literal):
+    """x rounded to as many significant digits as the doc's literal shows."""
+    digits = len(re.sub(r"^[-0.]+", "", literal.split("e")[0].replace(".", ""))) or 1
+    return float(f"{x:.{digits}g}")
+
+
+def _compare_json(doc, got, literals, path, problems):
+    if isinstance(doc, dict):
+        if not isinstance(got, dict) or set(doc) != set(got):
+            problems.append(f"docs/scene.md: simulate output {path or '{}'} has keys "
+                            f"{sorted(got) if isinstance(got, dict) else got}, the doc shows "
+                            f"{sorted(doc)}")
+            return
+        for k in doc:
+            if k not in SIMULATE_UNCHECKED:
+                _compare_json(doc[k], got[k], literals, f"{path}.{k}".lstrip("."), problems)
+    elif isinstance(doc, list):
+        # A list the doc shortens (contacts: the first one) is compared on its length.
+        if not isinstance(got, list) or len(got) < len(doc):
+            problems.append(f"docs/scene.md: simulate output {path} is {got}, the doc shows {doc}")
+            return
+        for i, d in enumerate(doc):
+            _compare_json(d, got[i], literals, f"{path}[{i}]", problems)
+    elif isinstance(doc, bool) or isinstance(doc, str) or doc is None:
+        if doc != got:
+            problems.append(f"docs/scene.md: simulate output {path} is {got!r}, the doc shows "
+                            f"{doc!r}")
+    else:
+        literal = literals.pop(0) if literals else repr(doc)
+        value = 0.0 if abs(got) < 1e-9 else _sig_round(got, literal)
+        if value != float(doc):
+            problems.append(f"docs/scene.md: simulate output {path} is {got}, the doc shows "
+                            f"{literal}")
+
+
+def _number_literals(text):
+    """The doc's numbers in order, as written (for their significant digits)."""
+    strings = re.sub(r'"(?:[^"\\]|\\.)*"', '""', text)
+    return re.findall(r"-?\d+(?:\.\d+)?(?:e-?\d+)?", strings)
+
+
+def check_simulate_example(src, arena, problems, update=False):
+    """docs/scene.md's `arena simulate` output is what the scene at the top of
+    the page prints: same keys, every number to the digits the doc shows."""
+    import json
+    doc_path = os.path.join(src, "docs/scene.md")
+    text = open(doc_path, encoding="utf-8").read()
+    blocks = list(re.finditer(r"```json\n(.*?)```\n", text, re.S))
+    scene = blocks[0].group(1)
+    shown = next((b for b in blocks if b.group(1).startswith('{"ok": true')), None)
+    if shown is None:
+        problems.append("docs/scene.md: no `arena simulate` output block ({\"ok\": true, ...)")
+        return
+    with tempfile.TemporaryDirectory(prefix="arena-docs-scene-") as tmp:
+        path = os.path.join(tmp, "scene.json")
+        open(path, "w").write(scene)
+        got = subprocess.run([arena, "simulate", path], capture_output=True, text=True,
+                             timeout=120)
+    try:
+        actual = json.loads(got.stdout)
+    except ValueError:
+        problems.append(f"docs/scene.md: the scene at the top does not simulate: "
+                        f"{got.stdout}{got.stderr}")
+        return
+    doc = json.loads(shown.group(1))
+    # Literals in document order, skipping the unchecked keys' values.
+    body = shown.group(1)
+    for key in SIMULATE_UNCHECKED:
+        body = re.sub(rf'"{key}": (\{{[^}}]*\}}|[-\d.e]+)', f'"{key}": null', body)
+    before = len(problems)
+    _compare_json(doc, actual, _number_literals(body), "", problems)
+    if update and len(problems) > before:
+        del problems[before:]
+        new = _format_simulate(actual)
+        text = text[:shown.start(1)] + new + text[shown.end(1):]
+        open(doc_path, "w", encoding="utf-8").write(text)
+        print("docs/scene.md: simulate output updated")
+
+
+def _format_simulate(actual):
+    import json
+
+    def rounded(v):
+        if isinstance(v, float):
+            return 0 if abs(v) < 1e-9 else float(f"{v:.4g}")
+        if isinstance(v, list):
+            return [rounded(x) for x in v]
+        if isinstance(v, dict):
+            return {k: rounded(x) for k, x in v.items()}
+        return v
+    order = ["ok", "model", "final", "pusher_force", "contacts", "residuals", "solver", "grasp",
+             "oscillation", "wall_s"]
+    keys = [k for k in order if k in actual] + [k for k in actual if k not in order]
+    lines = []
+    for k in keys:
+        v = actual[k]
+        if k == "contacts":
+            v = v[:1]
+        if k in SIMULATE_UNCHECKED:  # shown to one digit: their order of magnitude
+            v = {r: float(f"{x:.0e}") for r, x in v.items()} if isinstance(v, dict) else \
+                float(f"{v:.0e}")
+        else:
+            v = rounded(v)
+        lines.append(f'"{k}": ' + json.dumps(v, separators=(", ", ": ")))
+    return "{" + ",\n ".join(lines) + "}\n"
+
+
 # ---------------------------------------------------------------- examples
 
 def doc_blocks(text):
@@ -245,6 +357,8 @@ def main():
     ap.add_argument("--examples", action="store_true")
     ap.add_argument("--update", action="store_true")
     a = ap.parse_args()
+    a.arena = os.path.abspath(a.arena)  # the examples run in a scratch directory
+    a.source = os.path.abspath(a.source)
     problems = []
     if a.examples:
         run_examples(a.source, a.arena, a.update, problems)
@@ -257,6 +371,7 @@ def main():
         check_paths(a.source, docs, problems)
         check_commands(a.source, docs, a.arena, problems)
         check_topics(a.source, problems)
+        check_simulate_example(a.source, a.arena, problems, a.update)
     for p in problems:
         print(p)
     return 1 if problems else 0
