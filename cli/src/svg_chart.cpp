@@ -337,6 +337,25 @@ void WritePanel(const Chart& chart, int pi, const Axis& shared_xa, int plot_w,
 
 }  // namespace
 
+// The title on one line, or two when it is wider than the picture (a closed-
+// loop trial's deadline misses end it): split at the "; " or ", " nearest its
+// middle, else at a space.
+std::vector<std::string> TitleLines(const std::string& title, int width) {
+  constexpr double kCharPx = 8.3;  // 15 px sans-serif
+  if (title.size() * kCharPx <= width - 20) return {title};
+  for (const char* sep : {"; ", ", ", " "}) {
+    std::size_t best = std::string::npos;
+    for (auto at = title.find(sep); at != std::string::npos; at = title.find(sep, at + 1))
+      if (best == std::string::npos ||
+          std::abs(2.0 * at - title.size()) < std::abs(2.0 * best - title.size()))
+        best = at;
+    if (best != std::string::npos && best > title.size() / 4 && best < 3 * title.size() / 4)
+      return {title.substr(0, best + (sep[0] == ' ' ? 0 : 1)),
+              title.substr(best + std::string(sep).size())};
+  }
+  return {title};
+}
+
 std::string RenderSvg(const Chart& chart) {
   const int plot_w = chart.width - kLeft - kRight;
   const int n = static_cast<int>(chart.panels.size());
@@ -356,9 +375,12 @@ std::string RenderSvg(const Chart& chart) {
       << "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"" << width << "\" height=\"" << height
       << "\" viewBox=\"0 0 " << width << ' ' << height
       << "\" font-family=\"sans-serif\" font-size=\"12\">\n"
-      << "<rect width=\"100%\" height=\"100%\" fill=\"white\"/>\n"
-      << "<text x=\"" << width / 2 << "\" y=\"22\" text-anchor=\"middle\" font-size=\"15\">"
-      << SvgEscape(chart.title) << "</text>\n";
+      << "<rect width=\"100%\" height=\"100%\" fill=\"white\"/>\n";
+  const auto title = TitleLines(chart.title, width);
+  for (std::size_t k = 0; k < title.size(); ++k)
+    svg << "<text class=\"chart-title\" x=\"" << width / 2 << "\" y=\"" << 20 + 17 * k
+        << "\" text-anchor=\"middle\" font-size=\"" << (k == 0 ? 15 : 13) << "\">"
+        << SvgEscape(title[k]) << "</text>\n";
   for (int pi = 0; pi < n; ++pi) WritePanel(chart, pi, shared_xa, plot_w, svg);
   if (any_shared) {
     int last_shared = 0;

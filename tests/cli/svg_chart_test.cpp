@@ -121,6 +121,35 @@ TEST(SvgChart, DisplacedLabelsAreTiedToTheirPoints) {
   }
 }
 
+// Issue 26: a closed-loop trial's plot title ("...; closed loop: 0 of 376
+// samples held, loop p50 0.257 ms, p99 ...") ran past both edges of the
+// picture, cutting off the deadline misses it is there to report. Pins: a
+// title wider than the picture is split in two lines that each fit, and no
+// word is lost.
+TEST(SvgChart, ALongTitleWrapsInsideThePicture) {
+  Chart chart = TwoPanelChart();
+  chart.title =
+      "trial 1 (campaign 1 'pivot_control', attempt 1, cell sim1-0edbac) prediction "
+      "g8_k3_dt0.004_auto; closed loop: 0 of 376 samples held, loop p50 0.257 ms, p99 1.54 ms "
+      "against a 4 ms period";
+  const std::string svg = RenderSvg(chart);
+  tinyxml2::XMLDocument doc;
+  ASSERT_EQ(doc.Parse(svg.c_str()), tinyxml2::XML_SUCCESS) << doc.ErrorStr();
+  const auto* root = doc.FirstChildElement("svg");
+  const double width = root->DoubleAttribute("width");
+  std::string joined;
+  int lines = 0;
+  for (const auto* t = root->FirstChildElement("text"); t; t = t->NextSiblingElement("text")) {
+    if (!t->Attribute("class", "chart-title")) continue;
+    ++lines;
+    const std::string text = t->GetText();
+    EXPECT_LE(text.size() * 8.3, width - 20) << text;
+    joined += (joined.empty() ? "" : " ") + text;
+  }
+  EXPECT_EQ(lines, 2);
+  EXPECT_EQ(joined, chart.title);
+}
+
 TEST(SvgChart, NiceTicksCoverTheRange) {
   const auto ticks = NiceTicks(0.013, 0.987);
   ASSERT_GE(ticks.size(), 3u);
