@@ -134,6 +134,30 @@ def check_commands(src, docs, arena, problems):
                                 f"({', '.join(sorted(known))})")
 
 
+def check_map_metrics(src, arena, problems):
+    """The metrics README.md names for `arena plot --map` are ones the binary
+    takes (it said "error", which `--metric` refuses)."""
+    out = subprocess.run([arena, "plot", "--help"], capture_output=True, text=True).stdout
+    m = re.search(r"--metric TEXT\s+.*?one of ([a-z_, ]+)", out)
+    if not m:
+        problems.append("arena plot --help lists no --metric names")
+        return
+    known = {w.strip() for w in m.group(1).split(",")}
+    readme = open(os.path.join(src, "README.md"), encoding="utf-8").read()
+    row = next((l for l in readme.split("\n") if "--map X,Y --metric M" in l), "")
+    cells = row.split(" | ")
+    described = cells[1] if len(cells) > 1 else ""
+    m = re.search(r"a metric \(([^)]*)\)", described)
+    if not m:
+        problems.append("README.md: the --map row does not name its metrics as 'a metric (...)'")
+        return
+    for name in re.findall(r"[a-z_]+", re.sub(r"`--metric`|`arena plot --help`[^,)]*", "",
+                                              m.group(1))):
+        if name not in known and name not in ("lists", "them"):
+            problems.append(f"README.md: names --metric {name}, which arena plot refuses "
+                            f"(one of {', '.join(sorted(known))})")
+
+
 def check_topics(src, problems):
     dds = open(os.path.join(src, "schemas/src/dds.cpp"), encoding="utf-8").read()
     topics = re.findall(r'kTopic = "([A-Za-z]+)"', dds)
@@ -525,6 +549,7 @@ def main():
         check_paths(a.source, docs, problems)
         check_commands(a.source, docs, a.arena, problems)
         check_topics(a.source, problems)
+        check_map_metrics(a.source, a.arena, problems)
         check_simulate_example(a.source, a.arena, problems, a.update)
     for p in problems:
         print(p)
