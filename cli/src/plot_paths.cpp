@@ -232,8 +232,8 @@ std::string OutlinesAndPusherSvg(const PathsView& v) {
 // "measured" for a simulated cell.
 std::string TruthWords(const std::string& truth) {
   if (truth.empty()) return "truth unreported";
-  if (truth.rfind("measured", 0) == 0 || truth == "robot" || truth == "recorded")
-    return "here: measured, " + truth;
+  if (truth.rfind("measured", 0) == 0) return "here: measured";
+  if (truth == "robot" || truth == "recorded") return "here: measured, " + truth;
   return "here: simulated, " + truth;
 }
 
