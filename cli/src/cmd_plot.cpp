@@ -558,7 +558,8 @@ void AddPlotCommand(CLI::App& app, Action* action) {
                   "fitted parameter, the fit, and what the data rule out")
       ->check(CLI::PositiveNumber);
   cmd->add_flag("--paths", o->paths,
-                "With a TRIAL: the trial seen from above: the object's true (measured) and "
+                "With a TRIAL: the trial seen from above: the object's true (measured, or the "
+                "simulated cell's) and "
                 "predicted paths with its outline at a few instants, and the pusher's path");
   auto* scene = cmd->add_option("--scene", o->scene_file,
                                 "A picture of the set-up: a scene file's (or, with no FILE, "

@@ -219,14 +219,28 @@ std::string Opt(const std::optional<double>& v, double scale, const char* f) {
   return v ? Fmt(f, *v * scale) : std::string("-");
 }
 
+// A condition in the words of its campaign: its varied parameters as
+// name=value, not its index alone.
+std::string ConditionWords(const std::string& params_json) {
+  const auto j = nlohmann::json::parse(params_json, nullptr, false);
+  if (!j.is_object() || j.empty()) return params_json.empty() ? "-" : params_json;
+  std::string out;
+  for (const auto& [name, value] : j.items()) {
+    out += (out.empty() ? "" : " ") + name + "=";
+    out += value.is_number() ? Fmt("%.4g", value.get<double>())
+                             : (value.is_string() ? value.get<std::string>() : value.dump());
+  }
+  return out;
+}
+
 std::string CampaignText(const assessment::CampaignSensitivityReport& r, std::int64_t run_id) {
   std::ostringstream out;
   char line[512];
   out << "campaign " << r.campaign_id << ": " << r.conditions.size() << " conditions"
       << (run_id > 0 ? ", stored as sensitivity run " + std::to_string(run_id) : "") << "\n";
-  std::snprintf(line, sizeof line, "%5s %4s %5s %21s %21s  %-22s %-8s %s\n", "cond", "reps", "ens",
-                "pos spread mm obs/pred", "rot spread mrad o/p", "verdict", "stable",
-                "nearest boundary");
+  std::snprintf(line, sizeof line, "%5s %4s %5s %21s %21s  %-22s %-8s %-20s %s\n", "cond", "reps",
+                "ens", "pos spread mm obs/pred", "rot spread mrad o/p", "verdict", "stable",
+                "nearest boundary", "condition");
   out << line;
   for (const auto& c : r.conditions) {
     const std::string pos = Opt(c.observed_position_spread, 1e3, "%.3g") + "/" +
@@ -237,9 +251,10 @@ std::string CampaignText(const assessment::CampaignSensitivityReport& r, std::in
     if (!c.boundary_parameter.empty()) {
       boundary = c.boundary_parameter + " at " + Opt(c.boundary_tolerances, 1, "%.2g") + " tol";
     }
-    std::snprintf(line, sizeof line, "%5d %4d %5d %21s %21s  %-22s %-8s %s\n", c.condition,
+    std::snprintf(line, sizeof line, "%5d %4d %5d %21s %21s  %-22s %-8s %-20s %s\n", c.condition,
                   c.replicates, c.ensemble, pos.c_str(), rot.c_str(), c.verdict.c_str(),
-                  c.unstable ? "UNSTABLE" : "stable", boundary.c_str());
+                  c.unstable ? "UNSTABLE" : "stable", boundary.c_str(),
+                  ConditionWords(c.params_json).c_str());
     out << line;
   }
   out << "verdicts: " << r.matches << " match, " << r.underestimates << " model underestimates, "

@@ -28,7 +28,8 @@ std::int64_t Int(const db::Value& v) {
   return 0;
 }
 
-// Groups in the order of their first appearance, then by count (largest first).
+// Groups by count (largest first), ties by the first trial that met them: not
+// by the order the rows were written, which depends on timing.
 class Grouper {
  public:
   // kind "": grouped by the reason's text (a row written before rules were).
@@ -44,8 +45,10 @@ class Grouper {
     if (texts_[it->second].insert(text).second) ++g.texts;
   }
   std::vector<ReasonGroup> Take() {
-    std::stable_sort(groups_.begin(), groups_.end(),
-                     [](const ReasonGroup& a, const ReasonGroup& b) { return a.count > b.count; });
+    std::stable_sort(
+        groups_.begin(), groups_.end(), [](const ReasonGroup& a, const ReasonGroup& b) {
+          return a.count != b.count ? a.count > b.count : a.first_trial < b.first_trial;
+        });
     return std::move(groups_);
   }
 

@@ -1,4 +1,7 @@
 // arena: one binary, many subcommands (docs/architecture.md, the cli room).
+#include <spdlog/sinks/stdout_color_sinks.h>
+#include <spdlog/spdlog.h>
+
 #include <cstdio>
 #include <exception>
 #include <stdexcept>
@@ -14,6 +17,9 @@
 
 int main(int argc, char** argv) {
   using namespace arena::cli;
+  // Logs go to stderr: stdout is a command's answer, which scripts read
+  // (`id=$(arena submit ...)`); spdlog's default logger writes to stdout.
+  spdlog::set_default_logger(spdlog::stderr_color_mt("arena"));
   CLI::App app{"arena: autonomous prehensile-pushing experiment campaigns", "arena"};
   app.require_subcommand(0, 1);
   app.set_version_flag("--version", std::string("arena ") + arena::Version() + " (commit " +

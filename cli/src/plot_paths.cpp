@@ -227,8 +227,31 @@ std::string OutlinesAndPusherSvg(const PathsView& v) {
   return svg;
 }
 
+// What the black path is: the truth the trial's cell reported (a robot's or a
+// recording's measurement, a simulator's run, arena's own model), never
+// "measured" for a simulated cell.
+std::string TruthWords(const std::string& truth) {
+  if (truth.empty()) return "truth unreported";
+  if (truth.rfind("measured", 0) == 0) return "here: measured";
+  if (truth == "robot" || truth == "recorded") return "here: measured, " + truth;
+  return "here: simulated, " + truth;
+}
+
+// A push out of the view (a gripper's push along its z) leaves the top view
+// nearly empty: say how far the object went along z and where to see it.
+std::string OutOfViewNote(const PathsView& v) {
+  double in_plane = 0, along_z = 0;
+  for (const auto& x : v.object_path) {
+    in_plane = std::max(in_plane, (x - v.object_path.front()).head<2>().norm());
+    along_z = std::max(along_z, std::abs(x.z() - v.object_path.front().z()));
+  }
+  if (along_z <= 2 * in_plane) return "";
+  return "the object moved " + Mm(along_z) + " along z, out of this view, and " + Mm(in_plane) +
+         " in it: plot without --paths shows every axis over time";
+}
+
 // The object's paths with start and end marks, the scale bar, the legend.
-std::string PathsAndLegendSvg(const PathsView& v) {
+std::string PathsAndLegendSvg(const PathsView& v, const std::string& truth) {
   const Canvas& c = v.c;
   std::string svg =
       "<g id=\"measured-path\">" + Polyline(c, v.object_path, kMeasured, 2, false, false) + "</g>";
@@ -246,13 +269,17 @@ std::string PathsAndLegendSvg(const PathsView& v) {
          F(b0.x()) + "\" y1=\"" + F(b0.y()) + "\" x2=\"" + F(b1.x()) + "\" y2=\"" + F(b1.y()) +
          "\" stroke=\"#000\" stroke-width=\"3\"/>" +
          Text(0.5 * (b0 + b1) + Vector2d(0, -7), Mm(bar), "#000", "middle") + "</g>";
+  const std::string out_of_view = OutOfViewNote(v);
+  if (!out_of_view.empty())
+    svg += "<g id=\"out-of-view\">" +
+           Text({c.x0 + c.w / 2, c.y0 + 40}, out_of_view, "#a04000", "middle", 12) + "</g>";
   svg += Text({v.width / 2, v.height - 36},
-              "black: the object's true (here: measured) path and outline; orange dashed: the "
-              "prediction's",
+              "black: the object's true (" + TruthWords(truth) +
+                  ") path and outline; orange dashed: the prediction's",
               "#555", "middle", 12);
   svg += Text({v.width / 2, v.height - 18},
               "outlines at the start, 1/3, 2/3 and the end (later ones darker); red: the pusher's "
-              "centre path and its tip then",
+              "centre path and its tip at those instants",
               "#555", "middle", 12);
   return svg;
 }
@@ -271,7 +298,7 @@ std::string TrialPathsSvg(const db::Store& store, std::int64_t trial_id, TrialPl
   const PathsView v = MakeView(p, prediction);
   std::string svg = HeaderSvg(p, v, inf, FinalErrors(v, inf, note));
   svg += OutlinesAndPusherSvg(v);
-  svg += PathsAndLegendSvg(v);
+  svg += PathsAndLegendSvg(v, p.gt.truth);
   svg += "</svg>\n";
   return svg;
 }

@@ -133,8 +133,15 @@ class LabelPlacer {
  public:
   // Labels stay inside the panel's frame (x0, y0)-(x1, y1) when a spot there is free.
   LabelPlacer(double x0, double y0, double x1, double y1) : x0_(x0), y0_(y0), x1_(x1), y1_(y1) {}
-  // @returns the text's baseline start (x, y) for a 9 px label of `chars`.
-  std::pair<double, double> Place(double x, double y, double r, size_t chars) {
+  // Where a label went: its text's baseline start and, when it could not sit
+  // next to its point, the end of a leader line from the point to its box.
+  struct Spot {
+    double x, y;
+    bool displaced;
+    double leader_x, leader_y;
+  };
+  // @returns the spot for a 9 px label of `chars`.
+  Spot Place(double x, double y, double r, size_t chars) {
     const double w = 5.6 * static_cast<double>(chars) + 2, h = 10;  // 9 px sans-serif
     const double gap = r + 2;
     // Candidate boxes (left, top) around the point.
@@ -148,16 +155,23 @@ class LabelPlacer {
       spots.emplace_back(x - gap - w, y + gap + k * (h + 1));
     }
     std::pair<double, double> chosen = spots.front();
-    for (const auto& s : spots) {
+    std::size_t k_chosen = 0;
+    for (std::size_t k = 0; k < spots.size(); ++k) {
+      const auto& s = spots[k];
       const bool inside =
           s.first >= x0_ && s.first + w <= x1_ && s.second >= y0_ && s.second + h <= y1_;
       if (inside && Free(s.first, s.second, w, h)) {
         chosen = s;
+        k_chosen = k;
         break;
       }
     }
     boxes_.push_back({chosen.first, chosen.second, w, h});
-    return {chosen.first, chosen.second + h - 2};
+    // The first six spots touch the point's marker; a label further out is
+    // tied to its point by a leader, else a reader takes it for a neighbour's.
+    const double lx = std::clamp(x, chosen.first, chosen.first + w);
+    const double ly = std::clamp(y, chosen.second, chosen.second + h);
+    return {chosen.first, chosen.second + h - 2, k_chosen >= 6, lx, ly};
   }
 
  private:
@@ -272,7 +286,11 @@ void WriteMarkers(const PanelFrame& f, const Series& s, LabelPlacer& placed,
         << "\"/>\n";
     if (i < s.labels.size() && !s.labels[i].empty()) {
       const auto at = placed.Place(f.Px(s.x[i]), f.Py(s.y[i]), r, s.labels[i].size());
-      svg << "<text class=\"point-label\" x=\"" << Num(at.first) << "\" y=\"" << Num(at.second)
+      if (at.displaced)
+        svg << "<line class=\"label-leader\" x1=\"" << Num(f.Px(s.x[i])) << "\" y1=\""
+            << Num(f.Py(s.y[i])) << "\" x2=\"" << Num(at.leader_x) << "\" y2=\"" << Num(at.leader_y)
+            << "\" stroke=\"" << s.color << "\" stroke-width=\"0.6\" stroke-opacity=\"0.7\"/>\n";
+      svg << "<text class=\"point-label\" x=\"" << Num(at.x) << "\" y=\"" << Num(at.y)
           << "\" font-size=\"9\" fill=\"" << s.color << "\">" << SvgEscape(s.labels[i])
           << "</text>\n";
     }
@@ -319,6 +337,25 @@ void WritePanel(const Chart& chart, int pi, const Axis& shared_xa, int plot_w,
 
 }  // namespace
 
+// The title on one line, or two when it is wider than the picture (a closed-
+// loop trial's deadline misses end it): split at the "; " or ", " nearest its
+// middle, else at a space.
+std::vector<std::string> TitleLines(const std::string& title, int width) {
+  constexpr double kCharPx = 8.3;  // 15 px sans-serif
+  if (title.size() * kCharPx <= width - 20) return {title};
+  for (const char* sep : {"; ", ", ", " "}) {
+    std::size_t best = std::string::npos;
+    for (auto at = title.find(sep); at != std::string::npos; at = title.find(sep, at + 1))
+      if (best == std::string::npos ||
+          std::abs(2.0 * at - title.size()) < std::abs(2.0 * best - title.size()))
+        best = at;
+    if (best != std::string::npos && best > title.size() / 4 && best < 3 * title.size() / 4)
+      return {title.substr(0, best + (sep[0] == ' ' ? 0 : 1)),
+              title.substr(best + std::string(sep).size())};
+  }
+  return {title};
+}
+
 std::string RenderSvg(const Chart& chart) {
   const int plot_w = chart.width - kLeft - kRight;
   const int n = static_cast<int>(chart.panels.size());
@@ -338,9 +375,12 @@ std::string RenderSvg(const Chart& chart) {
       << "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"" << width << "\" height=\"" << height
       << "\" viewBox=\"0 0 " << width << ' ' << height
       << "\" font-family=\"sans-serif\" font-size=\"12\">\n"
-      << "<rect width=\"100%\" height=\"100%\" fill=\"white\"/>\n"
-      << "<text x=\"" << width / 2 << "\" y=\"22\" text-anchor=\"middle\" font-size=\"15\">"
-      << SvgEscape(chart.title) << "</text>\n";
+      << "<rect width=\"100%\" height=\"100%\" fill=\"white\"/>\n";
+  const auto title = TitleLines(chart.title, width);
+  for (std::size_t k = 0; k < title.size(); ++k)
+    svg << "<text class=\"chart-title\" x=\"" << width / 2 << "\" y=\"" << 20 + 17 * k
+        << "\" text-anchor=\"middle\" font-size=\"" << (k == 0 ? 15 : 13) << "\">"
+        << SvgEscape(title[k]) << "</text>\n";
   for (int pi = 0; pi < n; ++pi) WritePanel(chart, pi, shared_xa, plot_w, svg);
   if (any_shared) {
     int last_shared = 0;

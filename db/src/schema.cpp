@@ -746,6 +746,15 @@ void RefuseNoStoreAt(const std::string& path, const StoreOptions& options) {
                      "Store::Open: no store at '" + path + "' (create one with 'arena submit')");
   }
   std::error_code ec;
+  // A new store in a folder that is not there: SQLite says only "unable to
+  // open database file"; name the folder (the README's out/smoke.db).
+  const std::filesystem::path folder = std::filesystem::path(path).parent_path();
+  if (!options.read_only && !folder.empty() && !std::filesystem::exists(path, ec) &&
+      !std::filesystem::is_directory(folder, ec)) {
+    throw StoreError(StoreError::Kind::kIo,
+                     "Store::Open: cannot create '" + path + "': the folder '" + folder.string() +
+                         "' does not exist (mkdir -p " + folder.string() + ")");
+  }
   if (std::filesystem::is_directory(path, ec)) {
     throw StoreError(StoreError::Kind::kIo,
                      "Store::Open: '" + path +

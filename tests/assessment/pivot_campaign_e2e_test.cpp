@@ -8,6 +8,8 @@
 
 #include <nlohmann/json.hpp>
 
+#include <sstream>
+
 #include <gtest/gtest.h>
 
 #include "arena/db/sensitivity.hpp"
@@ -73,6 +75,18 @@ TEST(SensitivityEndToEnd, PivotCampaignReportStoredQueriedExportedAndMapped) {
             0)
       << ReadFile(dir / "sens2.txt");
   EXPECT_NE(ReadFile(dir / "sens2.txt").find("unstable conditions:"), std::string::npos);
+  // Issue 26: the table named each condition by its index alone ("cond 3").
+  // Pins: every row names its condition's varied parameters.
+  {
+    std::istringstream table(ReadFile(dir / "sens2.txt"));
+    std::string row;
+    int named = 0;
+    while (std::getline(table, row))
+      if (row.find("grip_force=") != std::string::npos &&
+          row.find("pivot_offset=") != std::string::npos)
+        ++named;
+    EXPECT_EQ(named, 8) << ReadFile(dir / "sens2.txt");
+  }
   const auto again = db::ListSensitivityConditions(*OpenReadOnly(db), run_id + 1);
   ASSERT_EQ(again.size(), rows.size());
   for (size_t i = 0; i < rows.size(); ++i) {

@@ -34,6 +34,17 @@ class CampaignCommands : public arena::test::ArenaCommandTest {
   std::string db_;
 };
 
+// Issue 26: an adaptive campaign's submit logged its first round on stdout
+// ("[...] [info] campaign 1: adaptive round 0: 16 trials planned"), so
+// `id=$(arena submit ...)` caught a log line. Pins: stdout is the id alone.
+TEST_F(CampaignCommands, AdaptiveSubmitPrintsTheIdAloneOnStdout) {
+  const Result submit = Arena("submit " + std::string(ARENA_SOURCE_DIR) +
+                              "/examples/campaigns/closed_loop.json --db " + db_);
+  ASSERT_EQ(submit.rc, 0) << submit.err;
+  EXPECT_EQ(submit.out, "1\n");
+  EXPECT_NE(submit.err.find("adaptive round 0"), std::string::npos) << submit.err;
+}
+
 TEST_F(CampaignCommands, SubmitListStatusPauseResumeCancel) {
   const Result submit = Arena("submit " + Campaign() + " --db " + db_);
   ASSERT_EQ(submit.rc, 0) << submit.err;

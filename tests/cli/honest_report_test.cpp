@@ -162,6 +162,52 @@ TEST(FailureReasons, GroupedByTheTypedKindWithTheTextAsDetail) {
   EXPECT_EQ(KindOfRule("fail.unnamed", "model").kind, "");  // names no cause: by text
 }
 
+// Issue 26: two reasons with the same count were listed in the order their
+// rows were written (predictions: whichever finished first), so the same
+// campaign printed them in another order from run to run and a doc could not
+// quote its summary. Pins: ties go to the reason met first in trial order.
+TEST(FailureReasons, TiesInTrialOrderWhateverOrderTheRowsWereWritten) {
+  TempDir dir;
+  const std::string path = dir.File("ties.db");
+  std::int64_t id = 0;
+  {
+    auto store = db::Store::Open(path);
+    store->UpsertCell("c1", {"point"});
+    id = store->CreateCampaign(MakeCampaign(), MakeTrials(2));
+    std::vector<db::ClaimedTrial> trials;
+    for (int k = 0; k < 2; ++k) {
+      auto t = store->ClaimNextTrial("c1");
+      auto ingest = store->BeginIngest(t->trial_id, t->attempt, db::testing::SceneSites());
+      for (int i = 0; i < 5; ++i) ingest->Add(db::testing::MakeSample(i));
+      ingest->Finish(db::TrialEnd::kOk);
+      store->BeginReset(t->trial_id, t->attempt);
+      db::ResetReport reset;
+      reset.ok = true;
+      store->CompleteReset(t->trial_id, t->attempt, reset);
+      trials.push_back(*t);
+    }
+    // The later trial's prediction is written first.
+    const std::pair<db::PredictionStatus, const char*> outcome[2] = {
+        {db::PredictionStatus::kSolverFailure, "step 3: LCP did not converge"},
+        {db::PredictionStatus::kDiverged, "diverged: the object turned 92 deg"}};
+    for (int k : {1, 0}) {
+      db::Prediction p;
+      p.model_key = "g8_k3_dt0.004_auto";
+      p.status = outcome[k].first;
+      p.detail_json = nlohmann::json{{"error", outcome[k].second}}.dump();
+      store->RecordPrediction(trials[k].trial_id, trials[k].attempt, p);
+      store->FinishTrial(trials[k].trial_id, trials[k].attempt);
+    }
+  }
+  db::StoreOptions ro;
+  ro.read_only = true;
+  auto store = db::Store::Open(path, ro);
+  const FailureReport r = CampaignFailures(*store, id);
+  ASSERT_EQ(r.predictions.size(), 2u);
+  EXPECT_EQ(r.predictions[0].kind, "solver_failure");
+  EXPECT_EQ(r.predictions[1].kind, "diverged");
+}
+
 TEST(FailureReasons, KeyIgnoresCellIdsAndNumbersOnly) {
   EXPECT_EQ(ReasonKey("cell a1: 500 s at 1e-3 m/s", "a1"),
             ReasonKey("cell b7: 2.5 s at 4 m/s", "b7"));

@@ -232,6 +232,29 @@ TEST_F(PlotTest, CommandWritesTheSvgAndRefusesWhatItCannotPlot) {
   EXPECT_NE(err.find("directory"), std::string::npos) << err;
 }
 
+// Issue 26: the top view (--paths) said its black path was "measured" on
+// every trial, a simulated cell's too, and a gripper's push along z (the
+// object moving out of the view) left an empty picture with no word why.
+// Pins: the caption names the truth the cell reported, and a push out of
+// the view says how far along z and where to look instead.
+TEST_F(PlotTest, PathsViewNamesItsTruthAndAPushOutOfTheView) {
+  {
+    auto store = db::Store::Open(db_);
+    store->RecordExecution(trial_, 1, "model", "self-consistency", "{}");
+  }
+  db::StoreOptions ro;
+  ro.read_only = true;
+  auto store = db::Store::Open(db_, ro);
+  const std::string svg = TrialPathsSvg(*store, trial_);
+  EXPECT_EQ(svg.find("here: measured"), std::string::npos);
+  EXPECT_NE(svg.find("here: simulated, self-consistency"), std::string::npos);
+  // e2e60's pushes move the object along the gripper's z.
+  const auto note = svg.find("<g id=\"out-of-view\">");
+  ASSERT_NE(note, std::string::npos);
+  EXPECT_NE(svg.find("along z, out of this view", note), std::string::npos);
+  EXPECT_NE(svg.find("plot without --paths", note), std::string::npos);
+}
+
 // Issue 28: a failed trial is not "not executed yet" (nothing will come to
 // plot or watch), and the store's own log is not an output file.
 TEST_F(PlotTest, AFailedTrialSaysWhyAndTheStoresLogIsNoOutput) {

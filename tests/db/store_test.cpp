@@ -145,6 +145,26 @@ TEST(StoreOpen, ReadOnlyRefusesEveryWriteAndMissingFile) {
   EXPECT_EQ(store->Status().campaigns.at(0).planned, 1);
 }
 
+// Issue 26: the README's `arena run ... --db out/smoke.db`, typed before
+// `out/` existed, said only "cannot open 'out/smoke.db': unable to open
+// database file". Pins: a store whose folder is missing is refused (I/O,
+// nothing created) naming the folder that does not exist.
+TEST(StoreOpen, MissingFolderIsNamed) {
+  TempDir dir;
+  const auto path = dir.File("out/smoke.db");
+  try {
+    Store::Open(path);
+    ADD_FAILURE() << "opened a store in a missing folder";
+  } catch (const StoreError& e) {
+    EXPECT_EQ(e.kind(), K::kIo);
+    const std::string what = e.what();
+    EXPECT_NE(what.find("folder '" + dir.File("out") + "' does not exist"), std::string::npos)
+        << what;
+    EXPECT_NE(what.find("mkdir -p"), std::string::npos) << what;
+  }
+  EXPECT_FALSE(std::filesystem::exists(dir.File("out")));
+}
+
 TEST(StoreOpen, NotADatabaseIsCorrupt) {
   TempDir dir;
   const auto path = dir.File("junk.db");

@@ -6,6 +6,9 @@ README.md against the repository and the built `arena` binary.
   check_docs.py --source DIR --arena BIN --examples the worked example of
       docs/campaigns.md, run again: every `$ arena query` block's output must
       be what the doc prints (--update rewrites the blocks instead)
+  check_docs.py --source DIR --arena BIN --adaptive [--slow] the walk-through
+      of docs/adaptive.md (run, status, decisions, calibrate, the calibrated
+      campaign), run again and compared the same way
 
 Static checks: no file of the repository names a file it lacks (the shared
 design notes are not in it); README.md links every page of docs/; every
@@ -131,6 +134,30 @@ def check_commands(src, docs, arena, problems):
                                 f"({', '.join(sorted(known))})")
 
 
+def check_map_metrics(src, arena, problems):
+    """The metrics README.md names for `arena plot --map` are ones the binary
+    takes (it said "error", which `--metric` refuses)."""
+    out = subprocess.run([arena, "plot", "--help"], capture_output=True, text=True).stdout
+    m = re.search(r"--metric TEXT\s+.*?one of ([a-z_, ]+)", out)
+    if not m:
+        problems.append("arena plot --help lists no --metric names")
+        return
+    known = {w.strip() for w in m.group(1).split(",")}
+    readme = open(os.path.join(src, "README.md"), encoding="utf-8").read()
+    row = next((l for l in readme.split("\n") if "--map X,Y --metric M" in l), "")
+    cells = row.split(" | ")
+    described = cells[1] if len(cells) > 1 else ""
+    m = re.search(r"a metric \(([^)]*)\)", described)
+    if not m:
+        problems.append("README.md: the --map row does not name its metrics as 'a metric (...)'")
+        return
+    for name in re.findall(r"[a-z_]+", re.sub(r"`--metric`|`arena plot --help`[^,)]*", "",
+                                              m.group(1))):
+        if name not in known and name not in ("lists", "them"):
+            problems.append(f"README.md: names --metric {name}, which arena plot refuses "
+                            f"(one of {', '.join(sorted(known))})")
+
+
 def check_topics(src, problems):
     dds = open(os.path.join(src, "schemas/src/dds.cpp"), encoding="utf-8").read()
     topics = re.findall(r'kTopic = "([A-Za-z]+)"', dds)
@@ -142,6 +169,118 @@ def check_topics(src, problems):
     for t in topics:
         if f"| `{t}` |" not in arch:
             problems.append(f"docs/architecture.md: the topic table has no row for {t}")
+
+
+# ---------------------------------------------------------------- scene.md's simulate output
+
+SIMULATE_UNCHECKED = ("wall_s", "residuals")  # host time; rounding-level residuals
+
+
+def _sig_round(x, literal):
+    """x rounded to as many significant digits as the doc's literal shows."""
+    digits = len(re.sub(r"^[-0.]+", "", literal.split("e")[0].replace(".", ""))) or 1
+    return float(f"{x:.{digits}g}")
+
+
+def _compare_json(doc, got, literals, path, problems):
+    if isinstance(doc, dict):
+        if not isinstance(got, dict) or set(doc) != set(got):
+            problems.append(f"docs/scene.md: simulate output {path or '{}'} has keys "
+                            f"{sorted(got) if isinstance(got, dict) else got}, the doc shows "
+                            f"{sorted(doc)}")
+            return
+        for k in doc:
+            if k not in SIMULATE_UNCHECKED:
+                _compare_json(doc[k], got[k], literals, f"{path}.{k}".lstrip("."), problems)
+    elif isinstance(doc, list):
+        # A list the doc shortens (contacts: the first one) is compared on its length.
+        if not isinstance(got, list) or len(got) < len(doc):
+            problems.append(f"docs/scene.md: simulate output {path} is {got}, the doc shows {doc}")
+            return
+        for i, d in enumerate(doc):
+            _compare_json(d, got[i], literals, f"{path}[{i}]", problems)
+    elif isinstance(doc, bool) or isinstance(doc, str) or doc is None:
+        if doc != got:
+            problems.append(f"docs/scene.md: simulate output {path} is {got!r}, the doc shows "
+                            f"{doc!r}")
+    else:
+        literal = literals.pop(0) if literals else repr(doc)
+        value = 0.0 if abs(got) < 1e-9 else _sig_round(got, literal)
+        if value != float(doc):
+            problems.append(f"docs/scene.md: simulate output {path} is {got}, the doc shows "
+                            f"{literal}")
+
+
+def _number_literals(text):
+    """The doc's numbers in order, as written (for their significant digits)."""
+    strings = re.sub(r'"(?:[^"\\]|\\.)*"', '""', text)
+    return re.findall(r"-?\d+(?:\.\d+)?(?:e-?\d+)?", strings)
+
+
+def check_simulate_example(src, arena, problems, update=False):
+    """docs/scene.md's `arena simulate` output is what the scene at the top of
+    the page prints: same keys, every number to the digits the doc shows."""
+    import json
+    doc_path = os.path.join(src, "docs/scene.md")
+    text = open(doc_path, encoding="utf-8").read()
+    blocks = list(re.finditer(r"```json\n(.*?)```\n", text, re.S))
+    scene = blocks[0].group(1)
+    shown = next((b for b in blocks if b.group(1).startswith('{"ok": true')), None)
+    if shown is None:
+        problems.append("docs/scene.md: no `arena simulate` output block ({\"ok\": true, ...)")
+        return
+    with tempfile.TemporaryDirectory(prefix="arena-docs-scene-") as tmp:
+        path = os.path.join(tmp, "scene.json")
+        open(path, "w").write(scene)
+        got = subprocess.run([arena, "simulate", path], capture_output=True, text=True,
+                             timeout=120)
+    try:
+        actual = json.loads(got.stdout)
+    except ValueError:
+        problems.append(f"docs/scene.md: the scene at the top does not simulate: "
+                        f"{got.stdout}{got.stderr}")
+        return
+    doc = json.loads(shown.group(1))
+    # Literals in document order, skipping the unchecked keys' values.
+    body = shown.group(1)
+    for key in SIMULATE_UNCHECKED:
+        body = re.sub(rf'"{key}": (\{{[^}}]*\}}|[-\d.e]+)', f'"{key}": null', body)
+    before = len(problems)
+    _compare_json(doc, actual, _number_literals(body), "", problems)
+    if update and len(problems) > before:
+        del problems[before:]
+        new = _format_simulate(actual)
+        text = text[:shown.start(1)] + new + text[shown.end(1):]
+        open(doc_path, "w", encoding="utf-8").write(text)
+        print("docs/scene.md: simulate output updated")
+
+
+def _format_simulate(actual):
+    import json
+
+    def rounded(v):
+        if isinstance(v, float):
+            return 0 if abs(v) < 1e-9 else float(f"{v:.4g}")
+        if isinstance(v, list):
+            return [rounded(x) for x in v]
+        if isinstance(v, dict):
+            return {k: rounded(x) for k, x in v.items()}
+        return v
+    order = ["ok", "model", "final", "pusher_force", "contacts", "residuals", "solver", "grasp",
+             "oscillation", "wall_s"]
+    keys = [k for k in order if k in actual] + [k for k in actual if k not in order]
+    lines = []
+    for k in keys:
+        v = actual[k]
+        if k == "contacts":
+            v = v[:1]
+        if k in SIMULATE_UNCHECKED:  # shown to one digit: their order of magnitude
+            v = {r: float(f"{x:.0e}") for r, x in v.items()} if isinstance(v, dict) else \
+                float(f"{v:.0e}")
+        else:
+            v = rounded(v)
+        lines.append(f'"{k}": ' + json.dumps(v, separators=(", ", ": ")))
+    return "{" + ",\n ".join(lines) + "}\n"
 
 
 # ---------------------------------------------------------------- examples
@@ -238,15 +377,168 @@ def run_examples(src, arena, update, problems):
             print("docs/campaigns.md: outputs updated")
 
 
+# ---------------------------------------------------------------- adaptive walk-through
+
+def _lines(text):
+    return [l.rstrip() for l in text.strip("\n").split("\n")]
+
+
+def _section(output, head):
+    """The lines of `output` from the line `head` to the next blank line."""
+    lines = output.split("\n")
+    for i, l in enumerate(lines):
+        if l.rstrip() == head:
+            j = i
+            while j < len(lines) and lines[j].strip():
+                j += 1
+            return "\n".join(lines[i:j]) + "\n"
+    return ""
+
+
+def _check_calibration_claims(out, problems):
+    """What docs/adaptive.md concludes from calibrate's first table: the fingers'
+    scale near the cells' 1.3 with a profile that brackets it, the pusher's not
+    identified, the held-out loss lower after the fit."""
+    m = re.search(r"^mu_fingers\s+([\d.]+)\s+[\d.]+\s+\[\s*([\d.]+),\s*([\d.]+)\]\s+"
+                  r"\[\s*([\d.]+),\s*([\d.]+)\]", out, re.M)
+    if not m:
+        problems.append("docs/adaptive.md: calibrate printed no mu_fingers row with a profile")
+        return
+    fit, lo, hi = float(m.group(1)), float(m.group(4)), float(m.group(5))
+    if abs(fit / 1.3 - 1) > 0.05:
+        problems.append(f"docs/adaptive.md: says mu_fingers fits within 5 % of 1.3; it fits {fit}")
+    if not lo <= 1.3 <= hi:
+        problems.append(f"docs/adaptive.md: says the profile brackets 1.3; it is [{lo}, {hi}]")
+    if "mu_pusher: NOT IDENTIFIED" not in out:
+        problems.append("docs/adaptive.md: says mu_pusher is not identified; calibrate no longer "
+                        "says so")
+    m = re.search(r"loss \(weighted\)\s+([\d.]+)\s+([\d.]+)", out)
+    if not m or float(m.group(2)) >= float(m.group(1)):
+        problems.append("docs/adaptive.md: says the held-out loss falls; it does not")
+    m = re.search(r"position \(mm\)\s+([\d.]+)\s+([\d.]+)", out)
+    if not m or float(m.group(2)) < float(m.group(1)):
+        problems.append("docs/adaptive.md: says the held-out position error does not fall at the "
+                        "campaign's settings; it does")
+
+
+def _model_error(out):
+    m = re.search(r"final position ([\d.]+) mm, final angle ([\d.]+) deg,\s+contact force "
+                  r"([\d.]+) N RMS", out)
+    return tuple(float(g) for g in m.groups()) if m else None
+
+
+def _check_calibrated_run_claims(first, second, problems):
+    """Section 3: the calibrated campaign's median force and angle errors are
+    lower than the uncalibrated one's, its median position error is not."""
+    a, b = _model_error(first), _model_error(second)
+    if not a or not b:
+        problems.append("docs/adaptive.md: a run printed no model error line")
+        return
+    if not (b[2] < a[2] and b[1] < a[1] and b[0] >= a[0]):
+        problems.append(f"docs/adaptive.md: says calibration lowers the median force and angle "
+                        f"errors but not the position error; uncalibrated {a}, calibrated {b} "
+                        f"(position mm, angle deg, force N)")
+
+
+def run_adaptive(src, arena, update, slow, problems):
+    """docs/adaptive.md's walk-through, sections 1-3, run again. The sampler's
+    batch is fixed in the campaign, so which trials it takes does not depend on
+    which cell answers first, and each trial's truth is its own: every figure
+    is reproducible. Blocks compared: `arena run` (its host-dependent lines
+    aside), the "adaptive sampling:" section of `arena status`, `arena query`
+    and `arena calibrate` in full. The calibration at the cell's fidelity is
+    slow (minutes): run only with --slow; without it the doc must say it is a
+    recorded run."""
+    doc_path = os.path.join(src, "docs/adaptive.md")
+    text = open(doc_path, encoding="utf-8").read()
+    end = text.find("### 4.")
+    rel = lambda argv: [os.path.join(src, a) if a.startswith(("examples/", "tests/")) else a
+                        for a in argv]
+    outputs = {}
+    with tempfile.TemporaryDirectory(prefix="arena-docs-adaptive-") as tmp:
+        calibrations = 0
+        runs = []
+        for start, stop, cmd, expected in doc_blocks(text[:end]):
+            argv = shlex.split(cmd)
+            verb = argv[1]
+            if verb == "calibrate" and "--predictor-settings" in argv and not slow:
+                if "recorded run" not in text[stop:stop + 400]:
+                    problems.append("docs/adaptive.md: the calibration at the cell's settings is "
+                                    "not re-run by the docs test, so the text after it must say "
+                                    "'recorded run'")
+                continue
+            extra = ["--quiet"] if verb == "run" else []
+            got = subprocess.run([arena] + rel(argv[1:]) + extra, capture_output=True, text=True,
+                                 cwd=tmp, timeout=3600)
+            output = got.stdout
+            if verb == "calibrate":
+                calibrations += 1
+                if got.returncode != 0:
+                    problems.append(f"docs/adaptive.md: `{cmd[:70]}` exited {got.returncode}: "
+                                    f"{got.stderr.strip()[-400:]}")
+                    return
+                if calibrations == 1:
+                    _check_calibration_claims(output, problems)
+            elif got.returncode != 0:
+                problems.append(f"docs/adaptive.md: `{cmd[:70]}` exited {got.returncode}: "
+                                f"{got.stderr.strip()[-400:]}")
+                return
+            if verb == "run":
+                runs.append(output)
+                if len(runs) == 2:
+                    _check_calibrated_run_claims(runs[0], runs[1], problems)
+                shown = [l for l in _lines(expected)
+                         if l and not l.startswith(VARIABLE_RUN_LINES) and l.strip() != "..."]
+                have = _lines(output)
+                missing = [l for l in shown if l not in have]
+                if missing and not update:
+                    problems.append(f"docs/adaptive.md: `arena run` no longer prints\n"
+                                    + "\n".join(missing) + f"\nit prints\n{output}")
+                if missing:
+                    outputs[(start, stop)] = (expected, output)
+                continue
+            if verb == "calibrate" and calibrations > 1:
+                # The recorded run at the cell's settings is shown from its table on.
+                have = _lines(output)
+                missing = [l for l in _lines(expected) if l and l not in have]
+                if missing:
+                    problems.append(f"docs/adaptive.md: `{cmd[:70]}` no longer prints\n" +
+                                    "\n".join(missing) + f"\nit prints\n{output}")
+                continue
+            if verb == "status":
+                output = _section(output, "adaptive sampling:")
+            if _lines(output) != _lines(expected):
+                if update:
+                    outputs[(start, stop)] = (expected, output)
+                else:
+                    problems.append(f"docs/adaptive.md: `{cmd[:70]}` now prints\n{output}"
+                                    f"where the doc says\n{expected}")
+    new_text = text
+    for (start, stop), (expected, output) in sorted(outputs.items(), reverse=True):
+        body = new_text[start:stop]
+        new_text = new_text[:start] + body[:len(body) - len(expected)] + output + new_text[stop:]
+    if update and new_text != text:
+        open(doc_path, "w", encoding="utf-8").write(new_text)
+        print("docs/adaptive.md: outputs updated")
+
+
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--source", required=True)
     ap.add_argument("--arena", required=True)
     ap.add_argument("--examples", action="store_true")
     ap.add_argument("--update", action="store_true")
+    ap.add_argument("--adaptive", action="store_true",
+                    help="run docs/adaptive.md's walk-through (sections 1-3) again")
+    ap.add_argument("--slow", action="store_true",
+                    help="with --adaptive: also the calibration at the cell's settings")
     a = ap.parse_args()
+    a.arena = os.path.abspath(a.arena)  # the examples run in a scratch directory
+    a.source = os.path.abspath(a.source)
     problems = []
-    if a.examples:
+    if a.adaptive:
+        run_adaptive(a.source, a.arena, a.update, a.slow, problems)
+    elif a.examples:
         run_examples(a.source, a.arena, a.update, problems)
     else:
         files = tracked_files(a.source)
@@ -257,6 +549,8 @@ def main():
         check_paths(a.source, docs, problems)
         check_commands(a.source, docs, a.arena, problems)
         check_topics(a.source, problems)
+        check_map_metrics(a.source, a.arena, problems)
+        check_simulate_example(a.source, a.arena, problems, a.update)
     for p in problems:
         print(p)
     return 1 if problems else 0
