@@ -275,7 +275,8 @@ TEST(PlotTradeoff, FrontComputedOnTheAxisDrawn) {
 // Pins (issue 26): the slowest settings were drawn on the frame (their
 // markers and labels clipped by it). Every marker, with its radius, and the
 // start of every label lie inside the plot's frame; the SVG is written to
-// tradeoff_frame.svg (the test's working folder) to be looked at.
+// tradeoff_frame.svg in the test's temporary folder to be looked at (never
+// into the folder the test was started from).
 TEST(PlotTradeoff, SlowestPointsAndLabelsInsideTheFrame) {
   nlohmann::json settings = nlohmann::json::array();
   // Two predictors over three decades of cost; the slowest is recommended.
@@ -296,7 +297,7 @@ TEST(PlotTradeoff, SlowestPointsAndLabelsInsideTheFrame) {
       {"settings", settings}};
   const std::string svg = RenderSvg(TradeoffChart(report));
   {
-    std::ofstream out("tradeoff_frame.svg");
+    std::ofstream out(::testing::TempDir() + "tradeoff_frame.svg");
     out << svg;
   }
   tinyxml2::XMLDocument doc;
