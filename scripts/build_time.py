@@ -13,9 +13,15 @@
       precompiled headers? A private cache and no user ccache config (the
       sloppiness comes from CMakeLists.txt), recordings/ built twice in the
       same fresh directory; exits 1 if the second build misses
-  scripts/build_time.py full [--pch ON|OFF]     a fresh build directory,
-      ccache off, -j2: wall and CPU seconds to build `arena`, then the rest
-      (every test and benchmark); run it on a quiet machine
+  scripts/build_time.py full [--pch ON|OFF] [--arena-only]   a fresh build
+      directory, ccache off, -j2: wall and CPU seconds to build `arena`, then
+      the rest (every test and benchmark) unless --arena-only; CPU seconds are
+      the figure on a shared machine, wall seconds only on a quiet one
+  scripts/build_time.py steps                  how many build steps
+      `quickstart.sh run` takes (the `arena` target) against the whole tree,
+      and which of them `arena` does not link or include (a fresh build
+      directory, nothing compiled); exits 1 if `arena` builds a test or a
+      benchmark
 
 Exits non-zero when a configure or a compile fails, so a figure it printed
 was made by code that builds. Build directories go under $TMPDIR.
@@ -146,10 +152,33 @@ def full(args, root):
         f'-DCMAKE_CXX_COMPILER_LAUNCHER= -DARENA_PCH={args.pch}', HERE)
     print(f'load {load()}')
     wall, cpu = run('ninja -j2 bin/arena', build)
-    print(f'| arena | {wall:.0f} | {cpu:.0f} |')
+    print(f'| arena | {wall:.0f} | {cpu:.0f} |  (ARENA_PCH={args.pch}, load {load()})')
+    if args.arena_only:
+        return
     wall2, cpu2 = run('ninja -j2', build)
     print(f'| everything else | {wall2:.0f} | {cpu2:.0f} |')
     print(f'| all | {wall + wall2:.0f} | {cpu + cpu2:.0f} |  (load {load()})')
+
+
+def steps(args, root):
+    """What `quickstart.sh run` (setup.sh --target arena) builds: ninja's own plan."""
+    build = os.path.join(root, 'build')
+    run(f'cmake -S {HERE} -B {build} -G Ninja -DCMAKE_BUILD_TYPE=Release', HERE)
+    plan = lambda target: subprocess.run(['ninja', '-C', build, '-t', 'commands'] + target,
+                                         capture_output=True, text=True, check=True).stdout.splitlines()
+    arena, everything = plan(['bin/arena']), plan([])
+    compiles = [c for c in arena if ' -c ' in c]
+    # A test or benchmark source in arena's plan is a step the campaign never runs.
+    waste = [c for c in compiles if ' -c ' + HERE + '/tests/' in c or ' -c ' + HERE + '/bench/' in c
+             or ' -c tests/' in c or ' -c bench/' in c]
+    print(f'| plan | steps | compiles |')
+    print(f'|---|---|---|')
+    print(f'| `arena` (quickstart.sh run) | {len(arena)} | {len(compiles)} |')
+    print(f"| everything (quickstart.sh test) | {len(everything)} | "
+          f"{sum(' -c ' in c for c in everything)} |")
+    print(f'test or benchmark compiles in the arena plan: {len(waste)}')
+    if waste:
+        sys.exit('build_time: `arena` builds a test or a benchmark:\n' + '\n'.join(waste[:10]))
 
 
 def main():
@@ -160,12 +189,15 @@ def main():
     s.add_argument('--files', nargs='*', help='these files instead of the fixed sample')
     sub.add_parser('headers')
     sub.add_parser('ccache')
+    sub.add_parser('steps')
     f = sub.add_parser('full')
     f.add_argument('--pch', default='ON', choices=['ON', 'OFF'])
+    f.add_argument('--arena-only', action='store_true', help='stop after the arena binary')
     args = p.parse_args()
     root = tempfile.mkdtemp(prefix='arena-build-time-')
     try:
-        {'sample': sample, 'headers': headers, 'ccache': ccache, 'full': full}[args.mode](args, root)
+        {'sample': sample, 'headers': headers, 'ccache': ccache, 'full': full,
+         'steps': steps}[args.mode](args, root)
     finally:
         shutil.rmtree(root, ignore_errors=True)
 
