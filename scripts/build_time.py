@@ -177,8 +177,9 @@ def arena_plan(build):
     return generators, pchs, [c for c in compiles if c not in pchs]
 
 
-def source_of(command):
-    return command.split(' -c ')[-1].split()[0]
+def source_of(command, build):
+    """The compiled file; a generated one named relative to its build directory."""
+    return command.split(' -c ')[-1].split()[0].replace(build, '<build>')
 
 
 def compile_by_hand(command, build):
@@ -196,8 +197,8 @@ def arena(args, root):
         run(f'cmake -S {HERE} -B {build} -G Ninja -DCMAKE_BUILD_TYPE=Release '
             f'-DCMAKE_CXX_COMPILER_LAUNCHER= -DARENA_PCH={pch}', HERE)
         plans[pch] = (build,) + arena_plan(build)
-    off_sources = [source_of(c) for c in plans['OFF'][3]]
-    if sorted(off_sources) != sorted(source_of(c) for c in plans['ON'][3]):
+    off_sources = [source_of(c, plans['OFF'][0]) for c in plans['OFF'][3]]
+    if sorted(off_sources) != sorted(source_of(c, plans['ON'][0]) for c in plans['ON'][3]):
         sys.exit('build_time: ARENA_PCH ON and OFF compile different files for arena')
     sample = off_sources[::args.every]
     print(f'| ARENA_PCH | precompiled headers: CPU s | {len(sample)} of {len(off_sources)} files: '
@@ -207,7 +208,7 @@ def arena(args, root):
         for g in generators:
             run(g, build)  # the generated DDS types and version.cpp, not timed
         pch_cpu = sum(compile_by_hand(c, build) for c in pchs)
-        by_source = {source_of(c): c for c in compiles}
+        by_source = {source_of(c, build): c for c in compiles}
         files_cpu = sum(compile_by_hand(by_source[f], build) for f in sample)
         scaled = pch_cpu + files_cpu * len(off_sources) / len(sample)
         print(f'| {pch} | {pch_cpu:.1f} ({len(pchs)}) | {files_cpu:.1f} | {scaled:.0f} |'
