@@ -17,8 +17,9 @@
       directory, ccache off, -j2: wall and CPU seconds to build `arena`, then
       the rest (every test and benchmark) unless --arena-only; CPU seconds are
       the figure on a shared machine, wall seconds only on a quiet one
-  scripts/build_time.py arena [--every N]     the `arena` target's compiler CPU
-      seconds with ARENA_PCH OFF and ON in this tree, from a sample: every
+  scripts/build_time.py arena [--every N] [--pch OFF|ON|both]   the `arena`
+      target's compiler CPU seconds with ARENA_PCH OFF and/or ON in this
+      tree, from a sample: every
       N-th of its compiles (ninja's order; the same files in both), one at a
       time, ccache off, plus (ON) every precompiled header it makes; scaled
       to all of its compiles (links and archives left out: the same in both).
@@ -192,7 +193,7 @@ def compile_by_hand(command, build):
 
 def arena(args, root):
     plans = {}
-    for pch in ('OFF', 'ON'):
+    for pch in ('OFF', 'ON'):  # both configured: the file lists must agree
         build = os.path.join(root, 'b-' + pch)
         run(f'cmake -S {HERE} -B {build} -G Ninja -DCMAKE_BUILD_TYPE=Release '
             f'-DCMAKE_CXX_COMPILER_LAUNCHER= -DARENA_PCH={pch}', HERE)
@@ -205,6 +206,8 @@ def arena(args, root):
           f'CPU s | arena\'s compiles, scaled: CPU s |  (load {load()})')
     print('|---|---|---|---|')
     for pch, (build, generators, pchs, compiles) in plans.items():
+        if args.pch not in (pch, 'both'):
+            continue
         for g in generators:
             run(g, build)  # the generated DDS types and version.cpp, not timed
         pch_cpu = sum(compile_by_hand(c, build) for c in pchs)
@@ -247,6 +250,7 @@ def main():
     sub.add_parser('steps')
     a = sub.add_parser('arena')
     a.add_argument('--every', type=int, default=6, help='compile every N-th of arena\'s files')
+    a.add_argument('--pch', default='both', choices=['OFF', 'ON', 'both'])
     f = sub.add_parser('full')
     f.add_argument('--pch', default='ON', choices=['ON', 'OFF'])
     f.add_argument('--arena-only', action='store_true', help='stop after the arena binary')
