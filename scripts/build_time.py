@@ -13,9 +13,23 @@
       precompiled headers? A private cache and no user ccache config (the
       sloppiness comes from CMakeLists.txt), recordings/ built twice in the
       same fresh directory; exits 1 if the second build misses
-  scripts/build_time.py full [--pch ON|OFF]     a fresh build directory,
-      ccache off, -j2: wall and CPU seconds to build `arena`, then the rest
-      (every test and benchmark); run it on a quiet machine
+  scripts/build_time.py full [--pch ON|OFF] [--arena-only]   a fresh build
+      directory, ccache off, -j2: wall and CPU seconds to build `arena`, then
+      the rest (every test and benchmark) unless --arena-only; CPU seconds are
+      the figure on a shared machine, wall seconds only on a quiet one
+  scripts/build_time.py arena [--every N] [--pch OFF|ON|both]   the `arena`
+      target's compiler CPU seconds with ARENA_PCH OFF and/or ON in this
+      tree, from a sample: every
+      N-th of its compiles (ninja's order; the same files in both), one at a
+      time, ccache off, plus (ON) every precompiled header it makes; scaled
+      to all of its compiles (links and archives left out: the same in both).
+      On a shared machine a whole fresh build takes hours of wall time; the
+      sample's CPU seconds do not depend on the load
+  scripts/build_time.py steps                  how many build steps
+      `quickstart.sh run` takes (the `arena` target) against the whole tree,
+      and which of them `arena` does not link or include (a fresh build
+      directory, nothing compiled); exits 1 if `arena` builds a test or a
+      benchmark
 
 Exits non-zero when a configure or a compile fails, so a figure it printed
 was made by code that builds. Build directories go under $TMPDIR.
@@ -146,10 +160,83 @@ def full(args, root):
         f'-DCMAKE_CXX_COMPILER_LAUNCHER= -DARENA_PCH={args.pch}', HERE)
     print(f'load {load()}')
     wall, cpu = run('ninja -j2 bin/arena', build)
-    print(f'| arena | {wall:.0f} | {cpu:.0f} |')
+    print(f'| arena | {wall:.0f} | {cpu:.0f} |  (ARENA_PCH={args.pch}, load {load()})')
+    if args.arena_only:
+        return
     wall2, cpu2 = run('ninja -j2', build)
     print(f'| everything else | {wall2:.0f} | {cpu2:.0f} |')
     print(f'| all | {wall + wall2:.0f} | {cpu + cpu2:.0f} |  (load {load()})')
+
+
+def arena_plan(build):
+    """ninja's commands for bin/arena: (generators, precompiled headers, compiles)."""
+    cmds = subprocess.run(['ninja', '-C', build, '-t', 'commands', 'bin/arena'], capture_output=True,
+                          text=True, check=True).stdout.splitlines()
+    generators = [c for c in cmds if 'fastddsgen' in c or 'version.cmake' in c]
+    compiles = [c for c in cmds if ' -c ' in c]
+    pchs = [c for c in compiles if 'cmake_pch.hxx.cxx' in c]
+    return generators, pchs, [c for c in compiles if c not in pchs]
+
+
+def source_of(command, build):
+    """The compiled file; a generated one named relative to its build directory."""
+    return command.split(' -c ')[-1].split()[0].replace(build, '<build>')
+
+
+def compile_by_hand(command, build):
+    """CPU seconds of one of ninja's compile commands, run in the build directory."""
+    out = command.split(' -o ')[1].split()[0]
+    os.makedirs(os.path.join(build, os.path.dirname(out)), exist_ok=True)
+    # A precompiled header GCC refuses is parsed as text, silently: fail instead.
+    return run(command.replace('/usr/bin/ccache ', '') + ' -Werror=invalid-pch', build)[1]
+
+
+def arena(args, root):
+    plans = {}
+    for pch in ('OFF', 'ON'):  # both configured: the file lists must agree
+        build = os.path.join(root, 'b-' + pch)
+        run(f'cmake -S {HERE} -B {build} -G Ninja -DCMAKE_BUILD_TYPE=Release '
+            f'-DCMAKE_CXX_COMPILER_LAUNCHER= -DARENA_PCH={pch}', HERE)
+        plans[pch] = (build,) + arena_plan(build)
+    off_sources = [source_of(c, plans['OFF'][0]) for c in plans['OFF'][3]]
+    if sorted(off_sources) != sorted(source_of(c, plans['ON'][0]) for c in plans['ON'][3]):
+        sys.exit('build_time: ARENA_PCH ON and OFF compile different files for arena')
+    sample = off_sources[::args.every]
+    print(f'| ARENA_PCH | precompiled headers: CPU s | {len(sample)} of {len(off_sources)} files: '
+          f'CPU s | arena\'s compiles, scaled: CPU s |  (load {load()})')
+    print('|---|---|---|---|')
+    for pch, (build, generators, pchs, compiles) in plans.items():
+        if args.pch not in (pch, 'both'):
+            continue
+        for g in generators:
+            run(g, build)  # the generated DDS types and version.cpp, not timed
+        pch_cpu = sum(compile_by_hand(c, build) for c in pchs)
+        by_source = {source_of(c, build): c for c in compiles}
+        files_cpu = sum(compile_by_hand(by_source[f], build) for f in sample)
+        scaled = pch_cpu + files_cpu * len(off_sources) / len(sample)
+        print(f'| {pch} | {pch_cpu:.1f} ({len(pchs)}) | {files_cpu:.1f} | {scaled:.0f} |'
+              f'  (load {load()})', flush=True)
+
+
+def steps(args, root):
+    """What `quickstart.sh run` (setup.sh --target arena) builds: ninja's own plan."""
+    build = os.path.join(root, 'build')
+    run(f'cmake -S {HERE} -B {build} -G Ninja -DCMAKE_BUILD_TYPE=Release', HERE)
+    plan = lambda target: subprocess.run(['ninja', '-C', build, '-t', 'commands'] + target,
+                                         capture_output=True, text=True, check=True).stdout.splitlines()
+    arena, everything = plan(['bin/arena']), plan([])
+    compiles = [c for c in arena if ' -c ' in c]
+    # A test or benchmark source in arena's plan is a step the campaign never runs.
+    waste = [c for c in compiles if ' -c ' + HERE + '/tests/' in c or ' -c ' + HERE + '/bench/' in c
+             or ' -c tests/' in c or ' -c bench/' in c]
+    print(f'| plan | steps | compiles |')
+    print(f'|---|---|---|')
+    print(f'| `arena` (quickstart.sh run) | {len(arena)} | {len(compiles)} |')
+    print(f"| everything (quickstart.sh test) | {len(everything)} | "
+          f"{sum(' -c ' in c for c in everything)} |")
+    print(f'test or benchmark compiles in the arena plan: {len(waste)}')
+    if waste:
+        sys.exit('build_time: `arena` builds a test or a benchmark:\n' + '\n'.join(waste[:10]))
 
 
 def main():
@@ -160,12 +247,18 @@ def main():
     s.add_argument('--files', nargs='*', help='these files instead of the fixed sample')
     sub.add_parser('headers')
     sub.add_parser('ccache')
+    sub.add_parser('steps')
+    a = sub.add_parser('arena')
+    a.add_argument('--every', type=int, default=6, help='compile every N-th of arena\'s files')
+    a.add_argument('--pch', default='both', choices=['OFF', 'ON', 'both'])
     f = sub.add_parser('full')
     f.add_argument('--pch', default='ON', choices=['ON', 'OFF'])
+    f.add_argument('--arena-only', action='store_true', help='stop after the arena binary')
     args = p.parse_args()
     root = tempfile.mkdtemp(prefix='arena-build-time-')
     try:
-        {'sample': sample, 'headers': headers, 'ccache': ccache, 'full': full}[args.mode](args, root)
+        {'sample': sample, 'headers': headers, 'ccache': ccache, 'full': full,
+         'steps': steps, 'arena': arena}[args.mode](args, root)
     finally:
         shutil.rmtree(root, ignore_errors=True)
 

@@ -559,9 +559,8 @@ void Profile(Fitter& fitter, const std::vector<int>& train, const std::vector<do
   f->profile_high = std::exp(f->bounded_high ? xs[high + 1] : xs[high]);
 }
 
-CalibrationResult Fitted(const std::vector<CalibrationTrial>& trials, TrialSimulateFn simulate,
-                         const CalibrationOptions& given, Memo* memo) {
-  CalibrationOptions o = given;  // the outcome loss's variances filled in below
+// The options a fit cannot start with, each named by its flag.
+void CheckFitOptions(const std::vector<CalibrationTrial>& trials, const CalibrationOptions& o) {
   if (o.params.empty()) throw CalibrationError("--params: name at least one parameter");
   for (size_t i = 0; i < o.params.size(); ++i)
     for (size_t j = 0; j < i; ++j)
@@ -578,7 +577,14 @@ CalibrationResult Fitted(const std::vector<CalibrationTrial>& trials, TrialSimul
   if (o.bootstrap < 0) throw CalibrationError("--bootstrap: must be >= 0");
   if (o.profile_points != 0 && o.profile_points < 3)
     throw CalibrationError("--profile-points: must be 0 (no profile) or >= 3");
+}
 
+// Which trials are fitted and which held out (indices into the trials, ascending).
+struct TrialSplit {
+  std::vector<int> train, hold;
+};
+
+TrialSplit SplitTrials(const std::vector<CalibrationTrial>& trials, const CalibrationOptions& o) {
   // Seeded split: order trials by a hash of (seed, id), hold out the first part.
   std::vector<int> order(trials.size());
   std::iota(order.begin(), order.end(), 0);
@@ -589,7 +595,9 @@ CalibrationResult Fitted(const std::vector<CalibrationTrial>& trials, TrialSimul
         Mix(o.seed ^ Mix(static_cast<uint64_t>(trials[static_cast<size_t>(b)].trial_id)));
     return ha != hb ? ha < hb : a < b;
   });
-  std::vector<int> hold, train;
+  TrialSplit split;
+  std::vector<int>& hold = split.hold;
+  std::vector<int>& train = split.train;
   if (!o.heldout_ids.empty()) {
     // A given split (by a trial parameter): these held out, the rest fitted.
     for (std::int64_t id : o.heldout_ids)
@@ -617,72 +625,84 @@ CalibrationResult Fitted(const std::vector<CalibrationTrial>& trials, TrialSimul
   }
   std::sort(hold.begin(), hold.end());
   std::sort(train.begin(), train.end());
+  return split;
+}
 
-  if (o.outcome_loss) {
-    // The variances of the training trials' true outcomes (their first to last sample).
-    std::vector<PlanarOutcome> outcomes;
-    for (int i : train) {
-      const auto& truth = trials[static_cast<size_t>(i)].truth;
-      if (truth.empty()) continue;
-      outcomes.push_back(PlanarOutcomeOf(truth.front().position, truth.front().orientation,
-                                         truth.back().position, truth.back().orientation));
-    }
-    std::string why;
-    if (!ComputeNmse(outcomes, outcomes, &why))
-      throw CalibrationError("--loss nmse: the fitted trials' outcomes cannot normalise it: " +
-                             why);
-    for (int k = 0; k < 3; ++k) {
-      double mean = 0, var = 0;
-      auto get = [k](const PlanarOutcome& p) { return k == 0 ? p.dx : k == 1 ? p.dy : p.dtheta; };
-      for (const auto& p : outcomes) mean += get(p) / static_cast<double>(outcomes.size());
-      for (const auto& p : outcomes)
-        var += (get(p) - mean) * (get(p) - mean) / static_cast<double>(outcomes.size());
-      o.scales.outcome_variance[static_cast<size_t>(k)] = var;
-    }
-  } else {
-    o.scales.outcome_variance = {0, 0, 0};
+// The outcome loss's variances (dx, dy, dtheta) over the training trials'
+// true outcomes (their first to last sample); zero without that loss.
+std::array<double, 3> OutcomeVariances(const std::vector<CalibrationTrial>& trials,
+                                       const std::vector<int>& train, const CalibrationOptions& o) {
+  std::array<double, 3> variance = {0, 0, 0};
+  if (!o.outcome_loss) return variance;
+  std::vector<PlanarOutcome> outcomes;
+  for (int i : train) {
+    const auto& truth = trials[static_cast<size_t>(i)].truth;
+    if (truth.empty()) continue;
+    outcomes.push_back(PlanarOutcomeOf(truth.front().position, truth.front().orientation,
+                                       truth.back().position, truth.back().orientation));
   }
-  CalibrationResult r;
-  for (int i : train) r.train_ids.push_back(trials[static_cast<size_t>(i)].trial_id);
-  for (int i : hold) r.heldout_ids.push_back(trials[static_cast<size_t>(i)].trial_id);
-  auto say = [&](const std::string& line) {
-    if (o.progress) o.progress(line);
-  };
-  Fitter fitter(trials, std::move(simulate), o, memo);
-  const auto dims = o.params.size();
-  const std::vector<double> zero(dims, 0.0);
-  r.optimizer = dims >= 2 ? "LN_BOBYQA" : "LN_COBYLA";
-  r.bootstrap_method = ToString(o.bootstrap_method);
+  std::string why;
+  if (!ComputeNmse(outcomes, outcomes, &why))
+    throw CalibrationError("--loss nmse: the fitted trials' outcomes cannot normalise it: " + why);
+  for (int k = 0; k < 3; ++k) {
+    double mean = 0, var = 0;
+    auto get = [k](const PlanarOutcome& p) { return k == 0 ? p.dx : k == 1 ? p.dy : p.dtheta; };
+    for (const auto& p : outcomes) mean += get(p) / static_cast<double>(outcomes.size());
+    for (const auto& p : outcomes)
+      var += (get(p) - mean) * (get(p) - mean) / static_cast<double>(outcomes.size());
+    variance[static_cast<size_t>(k)] = var;
+  }
+  return variance;
+}
 
-  say("fitting " + std::to_string(dims) + " parameter(s) on " + std::to_string(train.size()) +
-      " trials (" + std::to_string(hold.size()) + " held out)");
-  r.train_before = fitter.Evaluate(train, zero).MeanLoss(o.scales);
-  const std::vector<double> best =
-      fitter.Fit(train, zero, o.max_evaluations, 0.3, true, &r.evaluations, &r.stop);
-  r.train_after = fitter.Evaluate(train, best).MeanLoss(o.scales);
+void Say(const CalibrationOptions& o, const std::string& line) {
+  if (o.progress) o.progress(line);
+}
 
-  say("held-out trials before and after");
+// The main fit from the nominal scales (log 0) and its figures before and
+// after, on the fitted and the held-out trials; returns the fit (log scales).
+std::vector<double> FitAndScore(Fitter& fitter, const TrialSplit& split,
+                                const CalibrationOptions& o, CalibrationResult* r) {
+  const std::vector<int>& train = split.train;
+  const std::vector<int>& hold = split.hold;
+  const std::vector<double> zero(o.params.size(), 0.0);
+  Say(o, "fitting " + std::to_string(o.params.size()) + " parameter(s) on " +
+             std::to_string(train.size()) + " trials (" + std::to_string(hold.size()) +
+             " held out)");
+  r->train_before = fitter.Evaluate(train, zero).MeanLoss(o.scales);
+  std::vector<double> best =
+      fitter.Fit(train, zero, o.max_evaluations, 0.3, true, &r->evaluations, &r->stop);
+  r->train_after = fitter.Evaluate(train, best).MeanLoss(o.scales);
+
+  Say(o, "held-out trials before and after");
   const Errors before = fitter.Evaluate(hold, zero);
   const Errors after = fitter.Evaluate(hold, best);
-  r.heldout_before = before.MeanLoss(o.scales);
-  r.heldout_after = after.MeanLoss(o.scales);
-  Mean(before, &r.heldout_position_before, &r.heldout_angle_before, &r.heldout_force_before);
-  Mean(after, &r.heldout_position_after, &r.heldout_angle_after, &r.heldout_force_after);
+  r->heldout_before = before.MeanLoss(o.scales);
+  r->heldout_after = after.MeanLoss(o.scales);
+  Mean(before, &r->heldout_position_before, &r->heldout_angle_before, &r->heldout_force_before);
+  Mean(after, &r->heldout_position_after, &r->heldout_angle_after, &r->heldout_force_after);
   // Nothing held out: the fit is judged on the trials it fitted.
-  r.improved = hold.empty() ? r.train_after < r.train_before : r.heldout_after < r.heldout_before;
-  r.heldout_errors_before = before.per_trial;
-  r.heldout_errors_after = after.per_trial;
-  r.heldout_figures_before = FiguresOf(before.per_trial);
-  r.heldout_figures_after = FiguresOf(after.per_trial);
-  r.train_figures_before = FiguresOf(fitter.Evaluate(train, zero).per_trial);
-  r.train_figures_after = FiguresOf(fitter.Evaluate(train, best).per_trial);
+  r->improved =
+      hold.empty() ? r->train_after < r->train_before : r->heldout_after < r->heldout_before;
+  r->heldout_errors_before = before.per_trial;
+  r->heldout_errors_after = after.per_trial;
+  r->heldout_figures_before = FiguresOf(before.per_trial);
+  r->heldout_figures_after = FiguresOf(after.per_trial);
+  r->train_figures_before = FiguresOf(fitter.Evaluate(train, zero).per_trial);
+  r->train_figures_after = FiguresOf(fitter.Evaluate(train, best).per_trial);
+  return best;
+}
 
-  // Bootstrap: resample the training trials; refit from the optimum, or
-  // take the best point the main fit evaluated (calibration.hpp).
-  std::vector<std::vector<double>> boot(dims);
+// Bootstrap: resample the training trials; refit from the optimum, or
+// take the best point the main fit evaluated (calibration.hpp). The
+// scales (not logs) each replicate found, per parameter.
+std::vector<std::vector<double>> BootstrapScales(Fitter& fitter, const std::vector<int>& train,
+                                                 const std::vector<double>& best,
+                                                 const CalibrationOptions& o) {
+  std::vector<std::vector<double>> boot(o.params.size());
   for (int b = 0; b < o.bootstrap; ++b) {
     if (o.bootstrap_method == BootstrapMethod::kRefit)
-      say("bootstrap " + std::to_string(b + 1) + "/" + std::to_string(o.bootstrap));
+      Say(o, "bootstrap " + std::to_string(b + 1) + "/" + std::to_string(o.bootstrap));
     std::vector<int> resample;
     std::vector<double> weights(train.size(), 0.0);
     for (size_t i = 0; i < train.size(); ++i) {
@@ -694,33 +714,58 @@ CalibrationResult Fitted(const std::vector<CalibrationTrial>& trials, TrialSimul
                        ? fitter.Fit(resample, best, std::max(10, o.max_evaluations / 3), 0.1, false,
                                     nullptr, nullptr)
                        : fitter.BestEvaluated(weights);
-    for (size_t k = 0; k < dims; ++k) boot[k].push_back(std::exp(x[k]));
+    for (size_t k = 0; k < o.params.size(); ++k) boot[k].push_back(std::exp(x[k]));
   }
+  return boot;
+}
+
+// Each parameter's fitted scale, its bootstrap spread and profile, and
+// its nominal value.
+FittedParam FittedParamOf(const std::vector<CalibrationTrial>& trials, const CalibrationOptions& o,
+                          size_t k, double best, const std::vector<double>& boot,
+                          FittedParam profile) {
+  FittedParam f = std::move(profile);
+  f.name = ToString(o.params[k]);
+  f.scale = std::exp(best);
+  f.ci_low = f.ci_high = f.scale;
+  if (boot.size() >= 2) {
+    const double mean =
+        std::accumulate(boot.begin(), boot.end(), 0.0) / static_cast<double>(boot.size());
+    double ss = 0;
+    for (double v : boot) ss += (v - mean) * (v - mean);
+    f.std = std::sqrt(ss / static_cast<double>(boot.size() - 1));
+    f.ci_low = Percentile(boot, 0.025);
+    f.ci_high = Percentile(boot, 0.975);
+  }
+  f.nominal = CommonValue(trials, o.params[k]);
+  return f;
+}
+
+CalibrationResult Fitted(const std::vector<CalibrationTrial>& trials, TrialSimulateFn simulate,
+                         const CalibrationOptions& given, Memo* memo) {
+  CheckFitOptions(trials, given);
+  const TrialSplit split = SplitTrials(trials, given);
+  CalibrationOptions o = given;  // the outcome loss's variances filled in
+  o.scales.outcome_variance = OutcomeVariances(trials, split.train, o);
+  CalibrationResult r;
+  for (int i : split.train) r.train_ids.push_back(trials[static_cast<size_t>(i)].trial_id);
+  for (int i : split.hold) r.heldout_ids.push_back(trials[static_cast<size_t>(i)].trial_id);
+  Fitter fitter(trials, std::move(simulate), o, memo);
+  const auto dims = o.params.size();
+  r.optimizer = dims >= 2 ? "LN_BOBYQA" : "LN_COBYLA";
+  r.bootstrap_method = ToString(o.bootstrap_method);
+  const std::vector<double> best = FitAndScore(fitter, split, o, &r);
+  const std::vector<std::vector<double>> boot = BootstrapScales(fitter, split.train, best, o);
   std::vector<FittedParam> profiles(dims);
   if (o.profile_points > 0) {
     for (size_t k = 0; k < dims; ++k) {
-      say(std::string("profile of ") + ToString(o.params[k]));
-      Profile(fitter, train, best, k, o, &profiles[k]);
+      Say(o, std::string("profile of ") + ToString(o.params[k]));
+      Profile(fitter, split.train, best, k, o, &profiles[k]);
     }
   }
   r.simulations = fitter.simulations();
-  for (size_t k = 0; k < dims; ++k) {
-    FittedParam f = profiles[k];
-    f.name = ToString(o.params[k]);
-    f.scale = std::exp(best[k]);
-    f.ci_low = f.ci_high = f.scale;
-    if (boot[k].size() >= 2) {
-      const double mean = std::accumulate(boot[k].begin(), boot[k].end(), 0.0) /
-                          static_cast<double>(boot[k].size());
-      double ss = 0;
-      for (double v : boot[k]) ss += (v - mean) * (v - mean);
-      f.std = std::sqrt(ss / static_cast<double>(boot[k].size() - 1));
-      f.ci_low = Percentile(boot[k], 0.025);
-      f.ci_high = Percentile(boot[k], 0.975);
-    }
-    f.nominal = CommonValue(trials, o.params[k]);
-    r.fitted.push_back(f);
-  }
+  for (size_t k = 0; k < dims; ++k)
+    r.fitted.push_back(FittedParamOf(trials, o, k, best[k], boot[k], profiles[k]));
   return r;
 }
 

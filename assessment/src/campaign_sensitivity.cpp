@@ -86,37 +86,50 @@ std::vector<std::string> StabilityFilters(const mechanics::Scene& scene,
   return out;
 }
 
-db::SensitivityCondition AnalyseCondition(const Condition& c, const CampaignSensitivityOptions& o,
-                                          const SimulateFn& simulate, long* runs) {
-  db::SensitivityCondition row;
-  row.condition = c.index;
-  row.params_json = c.params_json;
-  row.replicates = static_cast<int>(c.displacements.size());
-  row.observed_position_spread = Spread(c.displacements);
-  row.observed_rotation_spread = Spread(c.rotations);
+// The replicates' observed spread and mean displacement and rotation.
+void NoteObserved(const Condition& c, db::SensitivityCondition* row) {
+  row->replicates = static_cast<int>(c.displacements.size());
+  row->observed_position_spread = Spread(c.displacements);
+  row->observed_rotation_spread = Spread(c.rotations);
   if (!c.displacements.empty()) {
     double d = 0, r = 0;
     for (const auto& v : c.displacements) d += v.norm();
     for (const auto& v : c.rotations) r += v.norm();
-    row.observed_displacement = d / static_cast<double>(c.displacements.size());
-    row.observed_rotation = r / static_cast<double>(c.rotations.size());
+    row->observed_displacement = d / static_cast<double>(c.displacements.size());
+    row->observed_rotation = r / static_cast<double>(c.rotations.size());
   }
-  std::vector<ActuationNoise> noises;
-  std::vector<StartPoseNoise> starts;
+}
+
+// The noise the ensemble draws from: the profiles the replicates ran under,
+// or the campaign's when no trial ran; member k draws from entry k mod n.
+struct ConditionNoise {
+  std::vector<ActuationNoise> actuation;
+  std::vector<StartPoseNoise> start_pose;
+  bool from_cells = false;
+};
+
+ConditionNoise NoiseOf(const Condition& c, const CampaignSensitivityOptions& o) {
+  ConditionNoise n;
   for (const auto& p : c.profiles) {
-    noises.push_back(ParseActuationNoise(p));
-    starts.push_back(ParseStartPoseNoise(p));
+    n.actuation.push_back(ParseActuationNoise(p));
+    n.start_pose.push_back(ParseStartPoseNoise(p));
   }
-  const bool from_cells = !noises.empty();
-  if (!from_cells) {
-    noises.push_back(ParseActuationNoise(c.defects_json));
-    starts.push_back(ParseStartPoseNoise(c.defects_json));
+  n.from_cells = !n.actuation.empty();
+  if (!n.from_cells) {
+    n.actuation.push_back(ParseActuationNoise(c.defects_json));
+    n.start_pose.push_back(ParseStartPoseNoise(c.defects_json));
   }
   if (!o.draw_start_pose) {
-    for (auto& st : starts) st.emulated = false;
+    for (auto& st : n.start_pose) st.emulated = false;
   }
-  const ActuationNoise& noise = noises.front();
-  const StartPoseNoise& start = starts.front();
+  return n;
+}
+
+// The stored detail's account of the noise (the first profile's).
+json NoiseDetail(const Condition& c, const ConditionNoise& n) {
+  const bool from_cells = n.from_cells;
+  const ActuationNoise& noise = n.actuation.front();
+  const StartPoseNoise& start = n.start_pose.front();
   json detail = {
       {"noise_source",
        from_cells ? "the profiles the trials ran under" : "the campaign's profile (no trial ran)"},
@@ -136,30 +149,25 @@ db::SensitivityCondition AnalyseCondition(const Condition& c, const CampaignSens
         {"position_tolerance", start.position_tolerance},
         {"angle_tolerance", start.angle_tolerance},
         {"max_attempts", start.max_attempts}}}};
+  return detail;
+}
 
-  const Outcome nominal = MeasureOutcome(c.scene, simulate(c.scene));
-  ++*runs;
-  if (!nominal.ok) {
-    row.verdict = "no_prediction";
-    row.reason = "the model fails on the nominal scene: " + nominal.error;
-    detail["error"] = nominal.error;
-    row.detail_json = detail.dump();
-    return row;
-  }
-  row.predicted_displacement = nominal.value(Quantity::kDisplacement);
-  row.predicted_rotation = nominal.value(Quantity::kRotation);
-
-  // The ensemble: the cell's draws, from a stream of our own per condition.
+// The ensemble: the cell's draws, from a stream of our own per condition;
+// the predicted spread, the flips of the nominal's discrete outcome and the
+// verdicts against the observed spread.
+void RunEnsemble(const Condition& c, const CampaignSensitivityOptions& o,
+                 const SimulateFn& simulate, const ConditionNoise& n, const Outcome& nominal,
+                 db::SensitivityCondition* row, json* detail, long* runs) {
   std::seed_seq seq{static_cast<std::uint32_t>(o.seed), static_cast<std::uint32_t>(o.seed >> 32),
                     static_cast<std::uint32_t>(c.index), 0x5e57u};
   std::mt19937_64 rng(seq);
   std::vector<Eigen::Vector3d> disp, rot;
   int flips = 0;
   for (int k = 0; k < o.ensemble; ++k) {
-    const size_t from = static_cast<size_t>(k) % noises.size();
+    const size_t from = static_cast<size_t>(k) % n.actuation.size();
     // The start pose the reset leaves, then the trial's own draws (as the cell).
-    const StartPoseDraw start_draw = DrawStartPose(starts[from], &rng);
-    const NoiseDraw noise_draw = DrawNoise(noises[from], &rng);
+    const StartPoseDraw start_draw = DrawStartPose(n.start_pose[from], &rng);
+    const NoiseDraw noise_draw = DrawNoise(n.actuation[from], &rng);
     mechanics::Scene s = c.scene;
     mechanics::SimulationResult r;
     try {
@@ -173,50 +181,80 @@ db::SensitivityCondition AnalyseCondition(const Condition& c, const CampaignSens
     ++*runs;
     const Outcome out = MeasureOutcome(s, r);
     if (!out.ok) {
-      ++row.ensemble_failed;
+      ++row->ensemble_failed;
       continue;
     }
-    ++row.ensemble;
+    ++row->ensemble;
     disp.push_back(r.samples.back().position - r.samples.front().position);
     rot.push_back(out.rotation_vector);
     if (!SameDiscreteOutcome(nominal, out)) ++flips;
   }
-  row.flip_fraction = row.ensemble > 0 ? static_cast<double>(flips) / row.ensemble : 0.0;
-  row.predicted_position_spread = Spread(disp);
-  row.predicted_rotation_spread = Spread(rot);
-  const std::string vp = SpreadVerdict(row.observed_position_spread, row.predicted_position_spread,
-                                       row.replicates, o.position_floor);
-  const std::string vr = SpreadVerdict(row.observed_rotation_spread, row.predicted_rotation_spread,
-                                       row.replicates, o.rotation_floor);
-  row.verdict = vp == "matches" ? vr : vp;
-  detail["position_verdict"] = vp;
-  detail["rotation_verdict"] = vr;
+  row->flip_fraction = row->ensemble > 0 ? static_cast<double>(flips) / row->ensemble : 0.0;
+  row->predicted_position_spread = Spread(disp);
+  row->predicted_rotation_spread = Spread(rot);
+  const std::string vp =
+      SpreadVerdict(row->observed_position_spread, row->predicted_position_spread, row->replicates,
+                    o.position_floor);
+  const std::string vr =
+      SpreadVerdict(row->observed_rotation_spread, row->predicted_rotation_spread, row->replicates,
+                    o.rotation_floor);
+  row->verdict = vp == "matches" ? vr : vp;
+  (*detail)["position_verdict"] = vp;
+  (*detail)["rotation_verdict"] = vr;
+}
 
-  if (o.check_stability) {
-    SensitivityOptions so;
-    so.stability = o.stability;
-    so.stability.noise = noise;
-    so.params = StabilityFilters(c.scene, o, so.stability);
-    so.threads = 1;
-    so.simulate = simulate;
-    if (!so.params.empty()) {
-      const SensitivityReport rep = AnalyseScene(c.scene, so);
-      *runs += rep.model_runs;
-      const Stability& st = rep.stability;
-      row.unstable = st.unstable;
-      if (!st.reasons.empty()) row.reason = st.reasons.front();
-      if (st.nearest) {
-        row.boundary_parameter = st.nearest->parameter;
-        row.boundary_offset = st.nearest->offset;
-        row.boundary_tolerances = st.nearest->tolerances;
-      }
-      detail["stability"] = ToJson(rep, c.scene)["stability"];
-    } else {
-      detail["stability"] =
-          "no parameter has a tolerance (the profile has no actuation or "
-          "friction noise and no --tolerance was given)";
-    }
+// The stability probes of the nominal scene under the condition's noise.
+void ProbeStability(const Condition& c, const CampaignSensitivityOptions& o,
+                    const SimulateFn& simulate, const ActuationNoise& noise,
+                    db::SensitivityCondition* row, json* detail, long* runs) {
+  SensitivityOptions so;
+  so.stability = o.stability;
+  so.stability.noise = noise;
+  so.params = StabilityFilters(c.scene, o, so.stability);
+  so.threads = 1;
+  so.simulate = simulate;
+  if (so.params.empty()) {
+    (*detail)["stability"] =
+        "no parameter has a tolerance (the profile has no actuation or "
+        "friction noise and no --tolerance was given)";
+    return;
   }
+  const SensitivityReport rep = AnalyseScene(c.scene, so);
+  *runs += rep.model_runs;
+  const Stability& st = rep.stability;
+  row->unstable = st.unstable;
+  if (!st.reasons.empty()) row->reason = st.reasons.front();
+  if (st.nearest) {
+    row->boundary_parameter = st.nearest->parameter;
+    row->boundary_offset = st.nearest->offset;
+    row->boundary_tolerances = st.nearest->tolerances;
+  }
+  (*detail)["stability"] = ToJson(rep, c.scene)["stability"];
+}
+
+db::SensitivityCondition AnalyseCondition(const Condition& c, const CampaignSensitivityOptions& o,
+                                          const SimulateFn& simulate, long* runs) {
+  db::SensitivityCondition row;
+  row.condition = c.index;
+  row.params_json = c.params_json;
+  NoteObserved(c, &row);
+  const ConditionNoise noise = NoiseOf(c, o);
+  json detail = NoiseDetail(c, noise);
+
+  const Outcome nominal = MeasureOutcome(c.scene, simulate(c.scene));
+  ++*runs;
+  if (!nominal.ok) {
+    row.verdict = "no_prediction";
+    row.reason = "the model fails on the nominal scene: " + nominal.error;
+    detail["error"] = nominal.error;
+    row.detail_json = detail.dump();
+    return row;
+  }
+  row.predicted_displacement = nominal.value(Quantity::kDisplacement);
+  row.predicted_rotation = nominal.value(Quantity::kRotation);
+  RunEnsemble(c, o, simulate, noise, nominal, &row, &detail, runs);
+  if (o.check_stability)
+    ProbeStability(c, o, simulate, noise.actuation.front(), &row, &detail, runs);
   row.detail_json = detail.dump();
   return row;
 }

@@ -257,8 +257,10 @@ nlohmann::json ToJson(const StartReport& r) {
           {"explained", std::move(settings)}};
 }
 
-EvaluationRun EvaluateCampaign(db::Store& store, std::int64_t campaign_id,
-                               const EvaluationOptions& options) {
+namespace {
+
+// The campaign's done trials with a ground-truth stream.
+std::vector<db::Trial> DoneTrials(db::Store& store, std::int64_t campaign_id) {
   (void)store.GetCampaign(campaign_id);  // kNotFound for an unknown campaign
   std::vector<db::Trial> trials;
   for (auto& t : store.ListTrials(campaign_id)) {
@@ -270,255 +272,336 @@ EvaluationRun EvaluateCampaign(db::Store& store, std::int64_t campaign_id,
                                 " has no done trials to evaluate yet (arena status shows "
                                 "its progress)");
   }
-  // Every trial's group before any work: a trial without the parameter is
-  // an error naming it, and nothing is evaluated.
+  return trials;
+}
+
+// Every trial's group before any work: a trial without the parameter is an
+// error naming it, and nothing is evaluated.
+std::map<std::int64_t, std::string> GroupOfTrial(const std::vector<db::Trial>& trials,
+                                                 const EvaluationOptions& options) {
   std::map<std::int64_t, std::string> group_of_trial;
-  if (options.group_of) {
-    if (options.group_by.empty())
-      throw std::invalid_argument("group_by: name the trial parameter to group by");
-    for (const auto& t : trials) group_of_trial[t.id] = options.group_of(t);
-  }
-  // Scenes first: the default grids keep only settings every scene takes.
-  std::vector<std::optional<mechanics::Scene>> scenes(trials.size());
-  std::vector<mechanics::Scene> valid_scenes;
+  if (!options.group_of) return group_of_trial;
+  if (options.group_by.empty())
+    throw std::invalid_argument("group_by: name the trial parameter to group by");
+  for (const auto& t : trials) group_of_trial[t.id] = options.group_of(t);
+  return group_of_trial;
+}
+
+// The trials' scenes, calibration scales applied; a scene that does not
+// parse stays empty (its jobs report the error).
+struct CampaignScenes {
+  std::vector<std::optional<mechanics::Scene>> of_trial;  // one per trial
+  std::vector<mechanics::Scene> valid;                    // the ones that parsed
+};
+
+CampaignScenes ParseScenes(const std::vector<db::Trial>& trials,
+                           const std::map<std::string, double>& scales) {
+  CampaignScenes out;
+  out.of_trial.resize(trials.size());
   for (std::size_t i = 0; i < trials.size(); ++i) {
     try {
-      scenes[i] = mechanics::ParseScene(trials[i].scene_json);
+      out.of_trial[i] = mechanics::ParseScene(trials[i].scene_json);
     } catch (const std::exception&) {
       continue;  // reported per job as an error
     }
-    if (!options.scales.empty()) {
+    if (!scales.empty()) {
       // A scale that cannot apply is the caller's error, never a trial
       // predicted unscaled.
       try {
-        scenes[i] = ApplyScales(*scenes[i], options.scales);
-        mechanics::ValidateScene(*scenes[i]);
+        out.of_trial[i] = ApplyScales(*out.of_trial[i], scales);
+        mechanics::ValidateScene(*out.of_trial[i]);
       } catch (const std::exception& e) {
         throw std::invalid_argument("calibration scales on trial " + std::to_string(trials[i].id) +
                                     ": " + e.what());
       }
     }
-    valid_scenes.push_back(*scenes[i]);
+    out.valid.push_back(*out.of_trial[i]);
   }
-  const Built built = BuildPredictors(options.predictors, valid_scenes);
-  const std::size_t settings = built.infos.size();
-  const std::size_t total = trials.size() * settings;
-  std::vector<TrialEvaluation> results(total);
-  // From the measured start, each setting is also run from the planned one
-  // (shared by a scene's replicates): the difference is the start's share.
-  const bool also_planned = options.start_from == StartFrom::kMeasured;
-  std::vector<std::optional<db::Prediction>> planned(also_planned ? total : 0);
-  std::vector<std::optional<PredictionStart>> trial_starts(trials.size());
-  std::vector<std::optional<FinalPose>> finals(trials.size());
-  std::vector<double> durations(trials.size(), 0);
-  // Trials with the same scene (the replicates of a condition: their truths
-  // differ, the scene a predictor is given does not) share each prediction:
-  // a predictor is deterministic, so it runs once per scene and setting and
-  // is scored against each trial's truth. A group holds at most
-  // kGroupTrials (their truths are in memory together, and one scene's many
-  // replicates still spread over the threads).
+  return out;
+}
+
+bool ClosedLoop(const std::optional<mechanics::Scene>& scene) {
+  return scene && scene->pusher && scene->pusher->controller;
+}
+
+// Trials with the same scene (the replicates of a condition: their truths
+// differ, the scene a predictor is given does not) share each prediction:
+// a predictor is deterministic, so it runs once per scene and setting and
+// is scored against each trial's truth. A group holds at most
+// kGroupTrials (their truths are in memory together, and one scene's many
+// replicates still spread over the threads).
+std::vector<std::vector<std::size_t>> ReplicateGroups(const std::vector<db::Trial>& trials,
+                                                      const CampaignScenes& scenes) {
   constexpr std::size_t kGroupTrials = 8;
   std::vector<std::vector<std::size_t>> groups;
-  {
-    std::map<std::string, std::size_t> open;  // scene -> its group still taking trials
-    for (std::size_t i = 0; i < trials.size(); ++i) {
-      // A closed-loop trial's prediction replays its own commands: never shared.
-      if (scenes[i] && scenes[i]->pusher && scenes[i]->pusher->controller) {
-        groups.push_back({i});
-        continue;
-      }
-      auto it = open.find(trials[i].scene_json);
-      if (it == open.end() || groups[it->second].size() >= kGroupTrials) {
-        groups.emplace_back();
-        it = open.insert_or_assign(trials[i].scene_json, groups.size() - 1).first;
-      }
-      groups[it->second].push_back(i);
+  std::map<std::string, std::size_t> open;  // scene -> its group still taking trials
+  for (std::size_t i = 0; i < trials.size(); ++i) {
+    // A closed-loop trial's prediction replays its own commands: never shared.
+    if (ClosedLoop(scenes.of_trial[i])) {
+      groups.push_back({i});
+      continue;
     }
+    auto it = open.find(trials[i].scene_json);
+    if (it == open.end() || groups[it->second].size() >= kGroupTrials) {
+      groups.emplace_back();
+      it = open.insert_or_assign(trials[i].scene_json, groups.size() - 1).first;
+    }
+    groups[it->second].push_back(i);
   }
+  return groups;
+}
+
+// What the worker threads share: the campaign's inputs (read only), the
+// slots each job writes (one per (trial, setting) or per trial, never
+// written by two workers) and the counters the calling thread reports.
+struct ReplayWork {
+  ReplayWork(const std::string& store_path_, const std::vector<db::Trial>& trials_,
+             const CampaignScenes& scenes_, const Built& built_, const EvaluationOptions& options_)
+      : store_path(store_path_),
+        trials(trials_),
+        scenes(scenes_),
+        built(built_),
+        options(options_),
+        groups(ReplicateGroups(trials_, scenes_)),
+        settings(built_.infos.size()),
+        total(trials_.size() * settings),
+        also_planned(options_.start_from == StartFrom::kMeasured),
+        results(total),
+        planned(also_planned ? total : 0),
+        trial_starts(trials_.size()),
+        finals(trials_.size()),
+        durations(trials_.size(), 0) {}
+
+  const std::string& store_path;
+  const std::vector<db::Trial>& trials;
+  const CampaignScenes& scenes;
+  const Built& built;
+  const EvaluationOptions& options;
+  const std::vector<std::vector<std::size_t>> groups;
+  const std::size_t settings;  // settings of all predictors
+  const std::size_t total;     // jobs: trials x settings
+  // From the measured start, each setting is also run from the planned one
+  // (shared by a scene's replicates): the difference is the start's share.
+  const bool also_planned;
+
+  std::vector<TrialEvaluation> results;                      // [trial * settings + setting]
+  std::vector<std::optional<db::Prediction>> planned;        // the same, from the planned start
+  std::vector<std::optional<PredictionStart>> trial_starts;  // per trial
+  std::vector<std::optional<FinalPose>> finals;              // per trial
+  std::vector<double> durations;                             // per trial
+
   std::atomic<std::size_t> next_group{0};
   std::atomic<long> done{0}, failed{0};
   std::mutex error_mutex;
   std::string worker_error;
   std::atomic<bool> worker_failed{false};
 
-  int threads =
-      options.threads > 0 ? options.threads : static_cast<int>(std::thread::hardware_concurrency());
-  threads = std::max(
-      1, std::min<int>(threads, static_cast<int>(std::max<std::size_t>(groups.size(), 1))));
+  bool Cancelled() const { return options.cancel && options.cancel->load(); }
+};
 
-  // A worker takes a whole group of trials with one scene (every setting of
-  // every predictor), so each trial's ground truth is read and converted
-  // once, and each setting's prediction is made once for the group.
-  auto worker = [&]() {
-    try {
-      db::StoreOptions ro;
-      ro.read_only = true;
-      auto reader = db::Store::Open(store.path(), ro);
-      for (;;) {
-        if (options.cancel && options.cancel->load()) return;
-        const std::size_t gi = next_group.fetch_add(1);
-        if (gi >= groups.size()) return;
-        const std::vector<std::size_t>& members = groups[gi];
-        std::vector<LoadedTrial> loaded;
-        loaded.reserve(members.size());
-        for (std::size_t ti : members) {
-          const auto& t = trials[ti];
-          loaded.push_back(LoadTrial(*reader, t, scenes[ti] ? &*scenes[ti] : nullptr));
-          const LoadedTrial& l = loaded.back();
-          if (l.error.empty() && !l.truth.empty()) {
-            durations[ti] = l.truth.back().t;
-            finals[ti] =
-                FinalPose{t.id, t.condition, l.truth.back().position, l.truth.back().orientation};
-          }
-        }
-        std::vector<TrialStart> starts;
-        starts.reserve(loaded.size());
-        for (std::size_t m = 0; m < loaded.size(); ++m) {
-          starts.push_back(StartFor(loaded[m], options.start_from));
-          if (loaded[m].error.empty()) trial_starts[members[m]] = starts.back().start;
-        }
-        // The scene every member was given (the first that loaded).
-        const LoadedTrial* with_scene = nullptr;
-        for (const LoadedTrial& l : loaded) {
-          if (l.error.empty()) {
-            with_scene = &l;
-            break;
-          }
-        }
-        // Settings that build the same model for this scene run it once.
-        std::map<std::pair<std::size_t, std::string>, std::size_t> ran;
-        for (std::size_t s = 0; s < settings; ++s) {
-          if (options.cancel && options.cancel->load()) return;
-          const auto [pi, si] = built.index[s];
-          std::optional<std::size_t> same;
-          if (with_scene) {
-            const auto key =
-                std::make_pair(pi, built.predictors[pi]->EffectiveKey(with_scene->scene, si));
-            const auto it = ran.find(key);
-            if (it != ran.end())
-              same = it->second;
-            else
-              ran.emplace(key, s);
-          }
-          // This setting's runs in the group, one per start (key "": planned).
-          std::map<std::string, std::pair<mechanics::SimulationResult, double>> runs;
-          const auto& predictor = *built.predictors[pi];
-          auto run_from = [&](const mechanics::Scene& scene, const LoadedTrial& l,
-                              const std::string& key) -> const auto& {
-            auto it = runs.find(key);
-            if (it == runs.end()) {
-              const auto start = std::chrono::steady_clock::now();
-              auto result = l.commands.empty()
-                                ? predictor.Run(scene, si)
-                                : predictor.RunClosedLoop(scene, si, ReplayCommands(l.commands));
-              const double wall =
-                  std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-              it = runs.emplace(key, std::make_pair(std::move(result), wall)).first;
-            }
-            return it->second;
-          };
-          auto score = [&](const mechanics::Scene& scene, const LoadedTrial& l,
-                           const std::string& key, const PredictionStart& from) {
-            const auto& [result, wall] = run_from(scene, l, key);
-            db::Prediction p =
-                ScoreSimulation(l.commands.empty() ? scene : ReplayScoringScene(scene, l.commands),
-                                result, l.truth);
-            p.wall_s = wall;
-            NoteStart(&p, from);
-            return p;
-          };
-          for (std::size_t m = 0; m < members.size(); ++m) {
-            const std::size_t ti = members[m];
-            const auto& t = trials[ti];
-            const LoadedTrial& l = loaded[m];
-            TrialEvaluation& r = results[ti * settings + s];
-            r.trial_id = t.id;
-            r.attempt = t.attempt;
-            r.setting = s;
-            r.truth_duration_s = durations[ti];
-            const TrialStart& st = starts[m];
-            if (same) {
-              r.prediction = results[ti * settings + *same].prediction;
-              if (also_planned) planned[ti * settings + s] = planned[ti * settings + *same];
-            } else if (!l.error.empty()) {
-              r.prediction = PredictionFailure(db::PredictionStatus::kError, l.error);
-            } else {
-              if (!st.error.empty()) {
-                r.prediction = PredictionFailure(db::PredictionStatus::kInvalidScene, st.error);
-                NoteStart(&r.prediction, st.start);
-              } else {
-                r.prediction = score(st.scene, l, st.key, st.start);
-              }
-              if (also_planned)
-                planned[ti * settings + s] =
-                    score(l.scene, l, "", StartOf(l.scene, nullptr, StartFrom::kPlanned));
-            }
-            r.prediction.model_key = built.infos[s].setting.key;
-            r.prediction.model_json = built.infos[s].setting.knobs_json;
-            if (r.prediction.status != db::PredictionStatus::kOk) failed.fetch_add(1);
-            done.fetch_add(1);
-          }
-        }
-      }
-    } catch (const std::exception& e) {
-      std::lock_guard<std::mutex> lock(error_mutex);
-      if (worker_error.empty()) worker_error = e.what();
-      worker_failed.store(true);
-      next_group.store(groups.size());  // stop the others too
+// One setting's predictions for a group, one run per start (key "":
+// planned), each scored against every trial that starts there.
+class SettingRuns {
+ public:
+  SettingRuns(const Predictor& predictor, std::size_t setting)
+      : predictor_(predictor), setting_(setting) {}
+
+  db::Prediction Score(const mechanics::Scene& scene, const LoadedTrial& l, const std::string& key,
+                       const PredictionStart& from) {
+    const auto& [result, wall] = RunFrom(scene, l, key);
+    db::Prediction p = ScoreSimulation(
+        l.commands.empty() ? scene : ReplayScoringScene(scene, l.commands), result, l.truth);
+    p.wall_s = wall;
+    NoteStart(&p, from);
+    return p;
+  }
+
+ private:
+  const std::pair<mechanics::SimulationResult, double>& RunFrom(const mechanics::Scene& scene,
+                                                                const LoadedTrial& l,
+                                                                const std::string& key) {
+    auto it = runs_.find(key);
+    if (it == runs_.end()) {
+      const auto start = std::chrono::steady_clock::now();
+      auto result = l.commands.empty()
+                        ? predictor_.Run(scene, setting_)
+                        : predictor_.RunClosedLoop(scene, setting_, ReplayCommands(l.commands));
+      const double wall =
+          std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+      it = runs_.emplace(key, std::make_pair(std::move(result), wall)).first;
     }
-  };
+    return it->second;
+  }
+
+  const Predictor& predictor_;
+  std::size_t setting_;
+  std::map<std::string, std::pair<mechanics::SimulationResult, double>> runs_;
+};
+
+// A group's trials read once: truth, start and the measured final pose.
+struct LoadedGroup {
+  const std::vector<std::size_t>& members;
+  std::vector<LoadedTrial> loaded;
+  std::vector<TrialStart> starts;
+
+  // The scene every member was given (the first that loaded); null: none loaded.
+  const LoadedTrial* WithScene() const {
+    for (const LoadedTrial& l : loaded)
+      if (l.error.empty()) return &l;
+    return nullptr;
+  }
+};
+
+LoadedGroup LoadGroup(ReplayWork& w, const db::Store& reader, std::size_t group) {
+  LoadedGroup g{w.groups[group], {}, {}};
+  g.loaded.reserve(g.members.size());
+  for (std::size_t ti : g.members) {
+    const auto& t = w.trials[ti];
+    const auto& scene = w.scenes.of_trial[ti];
+    g.loaded.push_back(LoadTrial(reader, t, scene ? &*scene : nullptr));
+    const LoadedTrial& l = g.loaded.back();
+    if (l.error.empty() && !l.truth.empty()) {
+      w.durations[ti] = l.truth.back().t;
+      w.finals[ti] =
+          FinalPose{t.id, t.condition, l.truth.back().position, l.truth.back().orientation};
+    }
+  }
+  g.starts.reserve(g.loaded.size());
+  for (std::size_t m = 0; m < g.loaded.size(); ++m) {
+    g.starts.push_back(StartFor(g.loaded[m], w.options.start_from));
+    if (g.loaded[m].error.empty()) w.trial_starts[g.members[m]] = g.starts.back().start;
+  }
+  return g;
+}
+
+// Setting s for every member of the group; `same`: an earlier setting that
+// builds the same model for this scene, whose predictions are copied.
+void PredictSetting(ReplayWork& w, const LoadedGroup& g, std::size_t s,
+                    std::optional<std::size_t> same) {
+  const auto [pi, si] = w.built.index[s];
+  SettingRuns runs(*w.built.predictors[pi], si);
+  for (std::size_t m = 0; m < g.members.size(); ++m) {
+    const std::size_t ti = g.members[m];
+    const auto& t = w.trials[ti];
+    const LoadedTrial& l = g.loaded[m];
+    const std::size_t at = ti * w.settings;
+    TrialEvaluation& r = w.results[at + s];
+    r.trial_id = t.id;
+    r.attempt = t.attempt;
+    r.setting = s;
+    r.truth_duration_s = w.durations[ti];
+    const TrialStart& st = g.starts[m];
+    if (same) {
+      r.prediction = w.results[at + *same].prediction;
+      if (w.also_planned) w.planned[at + s] = w.planned[at + *same];
+    } else if (!l.error.empty()) {
+      r.prediction = PredictionFailure(db::PredictionStatus::kError, l.error);
+    } else {
+      if (!st.error.empty()) {
+        r.prediction = PredictionFailure(db::PredictionStatus::kInvalidScene, st.error);
+        NoteStart(&r.prediction, st.start);
+      } else {
+        r.prediction = runs.Score(st.scene, l, st.key, st.start);
+      }
+      if (w.also_planned)
+        w.planned[at + s] =
+            runs.Score(l.scene, l, "", StartOf(l.scene, nullptr, StartFrom::kPlanned));
+    }
+    r.prediction.model_key = w.built.infos[s].setting.key;
+    r.prediction.model_json = w.built.infos[s].setting.knobs_json;
+    if (r.prediction.status != db::PredictionStatus::kOk) w.failed.fetch_add(1);
+    w.done.fetch_add(1);
+  }
+}
+
+// Every setting of every predictor for one group; false when cancelled.
+bool PredictGroup(ReplayWork& w, const db::Store& reader, std::size_t group) {
+  const LoadedGroup g = LoadGroup(w, reader, group);
+  const LoadedTrial* with_scene = g.WithScene();
+  // Settings that build the same model for this scene run it once.
+  std::map<std::pair<std::size_t, std::string>, std::size_t> ran;
+  for (std::size_t s = 0; s < w.settings; ++s) {
+    if (w.Cancelled()) return false;
+    const auto [pi, si] = w.built.index[s];
+    std::optional<std::size_t> same;
+    if (with_scene) {
+      const auto key =
+          std::make_pair(pi, w.built.predictors[pi]->EffectiveKey(with_scene->scene, si));
+      const auto it = ran.find(key);
+      if (it != ran.end())
+        same = it->second;
+      else
+        ran.emplace(key, s);
+    }
+    PredictSetting(w, g, s, same);
+  }
+  return true;
+}
+
+// A worker takes a whole group of trials with one scene (every setting of
+// every predictor), so each trial's ground truth is read and converted
+// once, and each setting's prediction is made once for the group.
+void ReplayWorker(ReplayWork& w) {
+  try {
+    db::StoreOptions ro;
+    ro.read_only = true;
+    auto reader = db::Store::Open(w.store_path, ro);
+    for (;;) {
+      if (w.Cancelled()) return;
+      const std::size_t gi = w.next_group.fetch_add(1);
+      if (gi >= w.groups.size()) return;
+      if (!PredictGroup(w, *reader, gi)) return;
+    }
+  } catch (const std::exception& e) {
+    std::lock_guard<std::mutex> lock(w.error_mutex);
+    if (w.worker_error.empty()) w.worker_error = e.what();
+    w.worker_failed.store(true);
+    w.next_group.store(w.groups.size());  // stop the others too
+  }
+}
+
+// The pool: `threads` workers, progress from the calling thread.
+void ReplayOnThreads(ReplayWork& w, int threads) {
+  const auto& options = w.options;
   std::vector<std::thread> pool;
-  for (int i = 0; i < threads; ++i) pool.emplace_back(worker);
-  while (done.load() < static_cast<long>(total) && !worker_failed.load() &&
-         !(options.cancel && options.cancel->load())) {
-    if (options.progress) options.progress(done.load(), failed.load(), static_cast<long>(total));
+  for (int i = 0; i < threads; ++i) pool.emplace_back(ReplayWorker, std::ref(w));
+  while (w.done.load() < static_cast<long>(w.total) && !w.worker_failed.load() && !w.Cancelled()) {
+    if (options.progress)
+      options.progress(w.done.load(), w.failed.load(), static_cast<long>(w.total));
     std::this_thread::sleep_for(std::chrono::milliseconds(100));
   }
   for (auto& th : pool) th.join();
-  if (options.progress) options.progress(done.load(), failed.load(), static_cast<long>(total));
-  if (!worker_error.empty()) throw std::runtime_error("evaluate: a worker failed: " + worker_error);
+  if (options.progress)
+    options.progress(w.done.load(), w.failed.load(), static_cast<long>(w.total));
+  if (!w.worker_error.empty())
+    throw std::runtime_error("evaluate: a worker failed: " + w.worker_error);
+}
 
-  EvaluationRun run;
-  if (options.cancel && options.cancel->load()) {
-    run.cancelled = true;
-    return run;
-  }
-  std::vector<FinalPose> final_poses;
-  for (const auto& f : finals) {
-    if (f) final_poses.push_back(*f);
-  }
-  run.report = Summarise(built.infos, results, options.budgets, ComputeNoiseFloor(final_poses));
-  run.report.campaign_id = campaign_id;
-  run.report.truth = TruthOf(store, campaign_id);
-  run.start = StartShareOf(built.infos, results, planned, trial_starts, options.start_from);
-  run.report.scales = options.scales;
-  if (options.group_of) {
-    run.report.group_by = options.group_by;
-    run.report.groups = SummariseGroups(built.infos, results, group_of_trial);
-  }
-
-  // The convergence table: a few trials, short pieces from the true state.
-  if (options.convergence_trials > 0 && !trials.empty()) {
-    std::vector<ConvergenceTrial> sample;
-    for (std::size_t ti : Spread(trials.size(), options.convergence_trials)) {
-      // A closed-loop trial's pieces would need its commands replayed from
-      // the restart on; the table is built from open-loop trials only.
-      if (!scenes[ti] || (scenes[ti]->pusher && scenes[ti]->pusher->controller)) continue;
-      try {
-        sample.push_back(
-            ConvergenceTrial{*scenes[ti], ReadTruth(store, trials[ti].id, *scenes[ti])});
-      } catch (const std::exception&) {
-      }
-    }
-    std::size_t flat = 0;
-    for (const auto& p : built.predictors) {
-      const auto table = ConvergenceTable(*p, sample);
-      for (std::size_t i = 0; i < table.size(); ++i)
-        run.report.settings[flat + i].convergence = table[i];
-      flat += table.size();
+// The convergence table: a few trials, short pieces from the true state.
+void AddConvergence(const db::Store& store, const ReplayWork& w, EvaluationReport* report) {
+  if (w.options.convergence_trials <= 0 || w.trials.empty()) return;
+  std::vector<ConvergenceTrial> sample;
+  for (std::size_t ti : Spread(w.trials.size(), w.options.convergence_trials)) {
+    // A closed-loop trial's pieces would need its commands replayed from
+    // the restart on; the table is built from open-loop trials only.
+    const auto& scene = w.scenes.of_trial[ti];
+    if (!scene || ClosedLoop(scene)) continue;
+    try {
+      sample.push_back(ConvergenceTrial{*scene, ReadTruth(store, w.trials[ti].id, *scene)});
+    } catch (const std::exception&) {
     }
   }
+  std::size_t flat = 0;
+  for (const auto& p : w.built.predictors) {
+    const auto table = ConvergenceTable(*p, sample);
+    for (std::size_t i = 0; i < table.size(); ++i)
+      report->settings[flat + i].convergence = table[i];
+    flat += table.size();
+  }
+}
 
+// The run's settings as stored: the grids, the start, scales and budgets.
+nlohmann::json SettingsJson(const EvaluationOptions& options, const Built& built, int threads) {
   nlohmann::json grid = {
       {"predictors", built.grids}, {"start", ToString(options.start_from)},
       {"scales", options.scales},  {"budgets", nlohmann::json::array()},
@@ -534,28 +617,74 @@ EvaluationRun EvaluateCampaign(db::Store& store, std::int64_t campaign_id,
     }
   }
   for (const auto& b : options.budgets) grid["budgets"].push_back(FormatBudget(b));
+  return grid;
+}
+
+// Stores the finished run; a store that refuses it leaves the report with
+// the caller (run->not_stored).
+void StoreRun(db::Store& store, std::int64_t campaign_id, const EvaluationOptions& options,
+              std::vector<TrialEvaluation>* results, EvaluationRun* run) {
   std::vector<db::EvaluationResult> rows;
-  rows.reserve(results.size());
-  for (auto& r : results)
+  rows.reserve(results->size());
+  for (auto& r : *results)
     rows.push_back(db::EvaluationResult{r.trial_id, r.attempt, std::move(r.prediction)});
-  run.settings_json = grid.dump();
-  nlohmann::json report = ToJson(run.report);
-  report["start"] = ToJson(run.start);
+  nlohmann::json report = ToJson(run->report);
+  report["start"] = ToJson(run->start);
   const std::string report_json = report.dump();
   try {
     db::RetryWhileBusy(
         [&] {
-          run.evaluation_id =
-              store.RecordEvaluation(campaign_id, run.settings_json, report_json, rows);
+          run->evaluation_id =
+              store.RecordEvaluation(campaign_id, run->settings_json, report_json, rows);
         },
         [&](double waited, const std::string& why) {
           if (options.cancel && options.cancel->load()) return false;
           return !options.on_store_busy || options.on_store_busy(waited, why);
         });
   } catch (const db::StoreError& e) {
-    run.not_stored = e.what();  // the finished work is the caller's to keep
-    run.not_stored_kind = e.kind();
+    run->not_stored = e.what();  // the finished work is the caller's to keep
+    run->not_stored_kind = e.kind();
   }
+}
+
+}  // namespace
+
+EvaluationRun EvaluateCampaign(db::Store& store, std::int64_t campaign_id,
+                               const EvaluationOptions& options) {
+  const std::vector<db::Trial> trials = DoneTrials(store, campaign_id);
+  const std::map<std::int64_t, std::string> group_of_trial = GroupOfTrial(trials, options);
+  // Scenes first: the default grids keep only settings every scene takes.
+  const CampaignScenes scenes = ParseScenes(trials, options.scales);
+  const Built built = BuildPredictors(options.predictors, scenes.valid);
+
+  ReplayWork w(store.path(), trials, scenes, built, options);
+  int threads =
+      options.threads > 0 ? options.threads : static_cast<int>(std::thread::hardware_concurrency());
+  threads = std::max(
+      1, std::min<int>(threads, static_cast<int>(std::max<std::size_t>(w.groups.size(), 1))));
+  ReplayOnThreads(w, threads);
+
+  EvaluationRun run;
+  if (w.Cancelled()) {
+    run.cancelled = true;
+    return run;
+  }
+  std::vector<FinalPose> final_poses;
+  for (const auto& f : w.finals) {
+    if (f) final_poses.push_back(*f);
+  }
+  run.report = Summarise(built.infos, w.results, options.budgets, ComputeNoiseFloor(final_poses));
+  run.report.campaign_id = campaign_id;
+  run.report.truth = TruthOf(store, campaign_id);
+  run.start = StartShareOf(built.infos, w.results, w.planned, w.trial_starts, options.start_from);
+  run.report.scales = options.scales;
+  if (options.group_of) {
+    run.report.group_by = options.group_by;
+    run.report.groups = SummariseGroups(built.infos, w.results, group_of_trial);
+  }
+  AddConvergence(store, w, &run.report);
+  run.settings_json = SettingsJson(options, built, threads).dump();
+  StoreRun(store, campaign_id, options, &w.results, &run);
   return run;
 }
 
