@@ -201,6 +201,8 @@ SimulationResult Simulate(const Scene& scene, const PusherCommandSource& command
     ++result.solver.steps;
     result.solver.max_pivots = std::max(result.solver.max_pivots, rep.pivots);
     result.solver.total_pivots += rep.pivots;
+    result.solver.quasi_static_solves += rep.quasi_static_solves;
+    result.solver.quasi_static_carried += rep.quasi_static_carried;
     if (!rep.ok) {
       result.solver.failures++;
       result.status = SimulationStatus::kSolverFailure;

@@ -152,6 +152,29 @@ TEST(QuasiStatic, NoBalanceCarriesTheMomentum) {
               -0.5 * a * T * T);
   EXPECT_NEAR(balanced.samples.back().position.z(), carried.samples.back().position.z(), 1e-12);
   EXPECT_NEAR(balanced.samples.back().position.z(), -0.5 * a * T * T, 0.02 * 0.5 * a * T * T);
+  // The output says so: every one of the 100 steps fell back to the carried
+  // step (no balance at any), after at least one solve that found it out.
+  // Before: SolverStatistics had no such count, and a quasi-static run that
+  // was quasi-dynamic throughout looked like a quasi-static one.
+  std::printf("no balance: %d of %d steps carried, %ld extra solves\n",
+              balanced.solver.quasi_static_carried, balanced.solver.steps,
+              balanced.solver.quasi_static_solves);
+  EXPECT_EQ(balanced.solver.steps, 100);
+  EXPECT_EQ(balanced.solver.quasi_static_carried, balanced.solver.steps);
+  EXPECT_GE(balanced.solver.quasi_static_solves, balanced.solver.steps);
+  EXPECT_EQ(carried.solver.quasi_static_carried, 0);
+  EXPECT_EQ(carried.solver.quasi_static_solves, 0);
+}
+
+// A run whose steps all balance reports no carried step, and its extra
+// solves: the pivot past its stall (every step balanced, the closed form
+// above).
+TEST(QuasiStatic, BalancedRunReportsNoCarriedStep) {
+  const SimulationResult r = SimulateOk(Pivot());
+  std::printf("pivot: %d steps carried, %ld extra solves in %d steps\n",
+              r.solver.quasi_static_carried, r.solver.quasi_static_solves, r.solver.steps);
+  EXPECT_EQ(r.solver.quasi_static_carried, 0);
+  EXPECT_GT(r.solver.quasi_static_solves, 0);
 }
 
 // The detector on synthetic poses: a sinusoid about a parabola is found with

@@ -57,6 +57,11 @@ struct SolverStatistics {
   int max_pivots = 0;
   long total_pivots = 0;
   int failures = 0;
+  // Quasi-static (model.inertia): the solves repeated to balance the forces,
+  // summed over the run, and the steps that found no balance and carried the
+  // momentum instead (those steps are quasi-dynamic, not quasi-static).
+  long quasi_static_solves = 0;
+  int quasi_static_carried = 0;
 };
 
 struct ModelInfo {
