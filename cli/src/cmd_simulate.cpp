@@ -218,7 +218,8 @@ int RunSimulate(const SimulateOptions& opt) {
                 {"amplitude_m", result.oscillation.amplitude_m},
                 {"amplitude_rad", result.oscillation.amplitude_rad},
                 {"frequency_hz", result.oscillation.frequency_hz},
-                {"window_s", result.oscillation.window_s}}},
+                {"window_s", result.oscillation.window_s},
+                {"periods", result.oscillation.periods}}},
               {"wall_s", result.wall_s}};
   std::printf("%s\n", out.dump().c_str());
   return kExitOk;
