@@ -206,7 +206,9 @@ int RunSimulate(const SimulateOptions& opt) {
               {"solver",
                {{"steps", result.solver.steps},
                 {"max_pivots", result.solver.max_pivots},
-                {"failures", result.solver.failures}}},
+                {"failures", result.solver.failures},
+                {"quasi_static_solves", result.solver.quasi_static_solves},
+                {"quasi_static_carried", result.solver.quasi_static_carried}}},
               {"grasp",
                {{"status", mechanics::ToString(result.grasp)},
                 {"changed_t", result.grasp_changed_t},
@@ -216,7 +218,8 @@ int RunSimulate(const SimulateOptions& opt) {
                 {"amplitude_m", result.oscillation.amplitude_m},
                 {"amplitude_rad", result.oscillation.amplitude_rad},
                 {"frequency_hz", result.oscillation.frequency_hz},
-                {"window_s", result.oscillation.window_s}}},
+                {"window_s", result.oscillation.window_s},
+                {"periods", result.oscillation.periods}}},
               {"wall_s", result.wall_s}};
   std::printf("%s\n", out.dump().c_str());
   return kExitOk;

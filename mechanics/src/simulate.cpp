@@ -12,6 +12,7 @@
 #include <vector>
 
 #include <Eigen/Cholesky>
+#include <Eigen/QR>
 
 #include "arena/mechanics/model.hpp"
 #include "arena/mechanics/pusher_motion.hpp"
@@ -93,7 +94,96 @@ std::vector<double> Detrended(const std::vector<double>& tau, const std::vector<
   return r;
 }
 
+// Rotation vectors of q relative to its middle pose (small for a run that
+// does not turn far, so each coordinate is an angle about a fixed axis).
+std::vector<Eigen::Vector3d> RotationsFromMiddle(const std::vector<Eigen::Quaterniond>& q,
+                                                 size_t n) {
+  const Eigen::Quaterniond ref = q[n / 2].normalized();
+  std::vector<Eigen::Vector3d> rot(n);
+  for (size_t i = 0; i < n; ++i) {
+    const Eigen::AngleAxisd aa(q[i].normalized() * ref.conjugate());
+    rot[i] = aa.angle() * aa.axis();
+  }
+  return rot;
+}
+
 }  // namespace
+
+Oscillation DetectSlowOscillation(const std::vector<double>& t,
+                                  const std::vector<Eigen::Vector3d>& c,
+                                  const std::vector<Eigen::Quaterniond>& q, double gap_tolerance,
+                                  double length_scale) {
+  Oscillation out;
+  const size_t n = std::min({t.size(), c.size(), q.size()});
+  if (n < 16 || !(t[n - 1] > t[0])) return out;
+  const double window = t[n - 1] - t[0];
+  const double mid = 0.5 * (t[0] + t[n - 1]), half = 0.5 * window;
+  std::vector<double> tau(n);
+  for (size_t i = 0; i < n; ++i) tau[i] = (t[i] - mid) / half;
+  const std::vector<Eigen::Vector3d> rot = RotationsFromMiddle(q, n);
+  double worst = 0;
+  for (int k = 0; k < 6; ++k) {
+    const bool angle = k >= 3;
+    const double threshold = angle ? gap_tolerance / length_scale : gap_tolerance;
+    std::vector<double> y(n);
+    for (size_t i = 0; i < n; ++i) y[i] = angle ? rot[i][k - 3] : c[i][k];
+    const std::vector<double> r = Detrended(tau, y);
+    double sum2 = 0;
+    for (double x : r) sum2 += x * x;
+    if (!(std::sqrt(2.0 * sum2 / static_cast<double>(n)) > threshold)) continue;
+    // The acceleration at the interior steps against [1, τ, τ², y]: y
+    // scaled by its residual's RMS so that the columns are comparable.
+    const double scale = std::sqrt(sum2 / static_cast<double>(n));
+    const long m = static_cast<long>(n) - 2;
+    Eigen::MatrixXd X(m, 4);
+    Eigen::VectorXd acc(m);
+    double mean_step = 0;
+    for (long j = 0; j < m; ++j) {
+      const size_t i = static_cast<size_t>(j) + 1;
+      const double h0 = t[i] - t[i - 1], h1 = t[i + 1] - t[i];
+      acc[j] = 2.0 * ((y[i + 1] - y[i]) / h1 - (y[i] - y[i - 1]) / h0) / (h0 + h1);
+      X.row(j) << 1.0, tau[i], tau[i] * tau[i], y[i] / scale;
+      mean_step += 0.5 * (h0 + h1);
+    }
+    mean_step /= static_cast<double>(m);
+    const Eigen::Vector4d coef = X.colPivHouseholderQr().solve(acc);
+    const double omega2 = -coef[3] / scale;  // the restoring force per unit of y
+    if (!(omega2 > 0)) continue;
+    const double total = (acc.array() - acc.mean()).square().sum();
+    const double unexplained = (acc - X * coef).squaredNorm();
+    if (!(total > 0) || !(1.0 - unexplained / total >= kSlowModeFit)) continue;
+    // ω from the discrete second difference, -(2 - 2 cos ω h) / h² = -ω²_d.
+    const double half_angle = std::sqrt(omega2) * mean_step / 2;
+    if (!(half_angle < 1.0)) continue;  // beyond the steps' resolution
+    const double omega = 2.0 * std::asin(half_angle) / mean_step;
+    const double periods = omega * window / (2 * M_PI);
+    if (periods < kSlowModeMinPeriods) continue;
+    // The path the mode swings about: y'' = q'' - ω² (y - q) for the
+    // quadratic q(τ) = q0 + q1 τ + q2 τ² (q'' = 2 q2 / half² in time).
+    const double q2 = coef[2] / omega2, q1 = coef[1] / omega2;
+    const double q0 = (coef[0] - 2.0 * q2 / (half * half)) / omega2;
+    double swing2 = 0;
+    for (size_t i = 0; i < n; ++i) {
+      const double s = y[i] - (q0 + q1 * tau[i] + q2 * tau[i] * tau[i]);
+      swing2 += s * s;
+    }
+    const double amplitude = std::sqrt(2.0 * swing2 / static_cast<double>(n));
+    if (!(amplitude > threshold)) continue;
+    out.detected = true;
+    if (angle) {
+      out.amplitude_rad = std::max(out.amplitude_rad, amplitude);
+    } else {
+      out.amplitude_m = std::max(out.amplitude_m, amplitude);
+    }
+    if (amplitude / threshold > worst) {
+      worst = amplitude / threshold;
+      out.frequency_hz = omega / (2 * M_PI);
+      out.periods = periods;
+    }
+  }
+  if (out.detected) out.window_s = window;
+  return out;
+}
 
 Oscillation DetectOscillation(const std::vector<double>& t, const std::vector<Eigen::Vector3d>& c,
                               const std::vector<Eigen::Quaterniond>& q, double gap_tolerance,
@@ -105,12 +195,7 @@ Oscillation DetectOscillation(const std::vector<double>& t, const std::vector<Ei
   const double mid = 0.5 * (t[0] + t[n - 1]), half = 0.5 * out.window_s;
   std::vector<double> tau(n);
   for (size_t i = 0; i < n; ++i) tau[i] = (t[i] - mid) / half;
-  const Eigen::Quaterniond ref = q[n / 2].normalized();
-  std::vector<Eigen::Vector3d> rot(n);
-  for (size_t i = 0; i < n; ++i) {
-    const Eigen::AngleAxisd aa(q[i].normalized() * ref.conjugate());
-    rot[i] = aa.angle() * aa.axis();
-  }
+  const std::vector<Eigen::Vector3d> rot = RotationsFromMiddle(q, n);
   double worst = 0;  // amplitude over threshold of the strongest oscillating coordinate
   for (int k = 0; k < 6; ++k) {
     const bool angle = k >= 3;
@@ -141,6 +226,7 @@ Oscillation DetectOscillation(const std::vector<double>& t, const std::vector<Ei
     if (amplitude / threshold > worst) {
       worst = amplitude / threshold;
       out.frequency_hz = crossings / (2.0 * out.window_s);
+      out.periods = crossings / 2.0;
     }
   }
   return out;
@@ -154,20 +240,30 @@ SimulationResult Simulate(const Scene& scene, const PusherCommandSource& command
   // Every return goes through finish(): it moves the result out (returned
   // by value from a lambda that captures it, it was copied, every sample
   // and its contact states, once per trial).
-  // The object's pose at every step of the run's last quarter (a ring of
-  // at most kOscillationWindowSteps), for DetectOscillation.
+  // The object's pose at every step after the run's first tenth (a ring of
+  // at most kOscillationWindowSteps), for DetectSlowOscillation; its last
+  // quarter of the run (at most as many steps) for DetectOscillation.
   std::vector<double> ring_t;
   std::vector<Eigen::Vector3d> ring_c;
   std::vector<Eigen::Quaterniond> ring_q;
-  size_t ring_size = 0, ring_next = 0;
+  size_t ring_size = 0, ring_next = 0, quarter = 0;
   auto finish = [&] {
     if (result.status == SimulationStatus::kOk && ring_t.size() >= 16) {
       // Oldest first.
       std::rotate(ring_t.begin(), ring_t.begin() + static_cast<long>(ring_next), ring_t.end());
       std::rotate(ring_c.begin(), ring_c.begin() + static_cast<long>(ring_next), ring_c.end());
       std::rotate(ring_q.begin(), ring_q.begin() + static_cast<long>(ring_next), ring_q.end());
+      const long from = static_cast<long>(ring_t.size() - std::min(quarter, ring_t.size()));
+      const std::vector<double> tail_t(ring_t.begin() + from, ring_t.end());
+      const std::vector<Eigen::Vector3d> tail_c(ring_c.begin() + from, ring_c.end());
+      const std::vector<Eigen::Quaterniond> tail_q(ring_q.begin() + from, ring_q.end());
       result.oscillation =
-          DetectOscillation(ring_t, ring_c, ring_q, model.gap_tolerance(), model.length_scale());
+          DetectOscillation(tail_t, tail_c, tail_q, model.gap_tolerance(), model.length_scale());
+      if (!result.oscillation.detected) {
+        const Oscillation slow = DetectSlowOscillation(ring_t, ring_c, ring_q,
+                                                       model.gap_tolerance(), model.length_scale());
+        if (slow.detected) result.oscillation = slow;
+      }
     }
     result.wall_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
     return std::move(result);
@@ -188,7 +284,9 @@ SimulationResult Simulate(const Scene& scene, const PusherCommandSource& command
   const bool closed_loop = commands && scene.pusher;
   Eigen::Vector3d command_v = pusher_v;  // closed loop: the motion in force
 
-  ring_size = static_cast<size_t>(std::clamp(n_steps / 4, 1L, long{kOscillationWindowSteps}));
+  ring_size =
+      static_cast<size_t>(std::clamp(n_steps - n_steps / 10, 1L, long{kOscillationWindowSteps}));
+  quarter = static_cast<size_t>(std::clamp(n_steps / 4, 1L, long{kOscillationWindowSteps}));
   ring_t.reserve(ring_size);
   ring_c.reserve(ring_size);
   ring_q.reserve(ring_size);
@@ -201,6 +299,8 @@ SimulationResult Simulate(const Scene& scene, const PusherCommandSource& command
     ++result.solver.steps;
     result.solver.max_pivots = std::max(result.solver.max_pivots, rep.pivots);
     result.solver.total_pivots += rep.pivots;
+    result.solver.quasi_static_solves += rep.quasi_static_solves;
+    result.solver.quasi_static_carried += rep.quasi_static_carried;
     if (!rep.ok) {
       result.solver.failures++;
       result.status = SimulationStatus::kSolverFailure;

@@ -67,6 +67,33 @@ TEST(OscillationOutput, SimulateJsonCarriesTheFlag) {
   fs::remove_all(dir);
 }
 
+// A quasi-static run whose steps found no balance says how many fell back to
+// the carried step (solver.quasi_static_carried, added for issue 31): a
+// grasp too weak for the weight (2 μ N = 1 N < m g = 1.96 N) slides out, so
+// all 25 steps (dt 4 ms, 0.1 s) are carried. Carried runs report 0 of both.
+TEST(OscillationOutput, SimulateJsonCountsCarriedSteps) {
+  const fs::path dir = fs::temp_directory_path() / ("arena_qsc_" + std::to_string(::getpid()));
+  fs::create_directories(dir);
+  const fs::path weak = dir / "weak.json";
+  std::ofstream(weak)
+      << R"({"object":{"shape":"box","size":[0.05,0.03,0.1],"mass":0.2},"gravity":[0,0,-9.81],)"
+         R"("duration":0.1,"grip_force":1.0,"fingers":[)"
+         R"({"name":"left","type":"point","position":[-0.025,0,0],"normal":[1,0,0],"mu":0.5},)"
+         R"({"name":"right","type":"point","position":[0.025,0,0],"normal":[-1,0,0],"mu":0.5}],)"
+         R"("model":{"inertia":"quasi_static"}})";
+  const json sliding = SimulateCli(weak);
+  ASSERT_TRUE(sliding.is_object());
+  ASSERT_TRUE(sliding["solver"].contains("quasi_static_carried")) << sliding.dump();
+  EXPECT_EQ(sliding["solver"]["steps"], 25);
+  EXPECT_EQ(sliding["solver"]["quasi_static_carried"], 25);
+  EXPECT_GE(sliding["solver"]["quasi_static_solves"].get<int>(), 25);
+  const json canonical = SimulateCli(kSourceDir / "examples/scenes/canonical.json");
+  ASSERT_TRUE(canonical["solver"].contains("quasi_static_carried")) << canonical.dump();
+  EXPECT_EQ(canonical["solver"]["quasi_static_carried"], 0);
+  EXPECT_EQ(canonical["solver"]["quasi_static_solves"], 0);
+  fs::remove_all(dir);
+}
+
 TEST(OscillationOutput, PredictionDetailMentionsIt) {
   using namespace arena;
   const mechanics::Scene scene = mechanics::ParseScene(kCarriedPivot);

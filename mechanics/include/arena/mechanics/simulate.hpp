@@ -57,6 +57,11 @@ struct SolverStatistics {
   int max_pivots = 0;
   long total_pivots = 0;
   int failures = 0;
+  // Quasi-static (model.inertia): the solves repeated to balance the forces,
+  // summed over the run, and the steps that found no balance and carried the
+  // momentum instead (those steps are quasi-dynamic, not quasi-static).
+  long quasi_static_solves = 0;
+  int quasi_static_carried = 0;
 };
 
 struct ModelInfo {
@@ -104,12 +109,36 @@ struct Oscillation {
   double amplitude_rad = 0;  // largest over the rotation vector's x, y, z (rad)
   double frequency_hz = 0;   // of the coordinate farthest above its threshold
   double window_s = 0;       // the end of the run analysed (s)
+  // The periods of that coordinate's swing the window held (0 when none
+  // detected): below 3 only for a slow mode (DetectSlowOscillation).
+  double periods = 0;
 };
 // The analysis above on one run's step poses (t ascending; at least 16);
 // gap_tolerance (m) and length_scale (m) as ContactModel gives them.
 Oscillation DetectOscillation(const std::vector<double>& t, const std::vector<Eigen::Vector3d>& c,
                               const std::vector<Eigen::Quaterniond>& q, double gap_tolerance,
                               double length_scale);
+
+// A mode too slow for the crossings above (fewer than 3 periods in the last
+// quarter, e.g. a pitch at 4 Hz in a 0.2 s push), judged over the run after
+// its first tenth (at most kOscillationWindowSteps steps): a coordinate
+// whose least-squares quadratic leaves a residual above its threshold (as
+// above) is a mode when its acceleration (second differences of the step
+// poses) is, to a fraction kSlowModeFit of its variance, a restoring force
+// about a slow path: y'' = a0 + a1 τ + a2 τ² − ω² y with ω² > 0, the
+// equation of an undamped oscillation about a quadratic path. A smooth path
+// (a polynomial, or one that bends where a contact starts to slip) leaves
+// an acceleration no such force explains; a path that is itself a slow arc
+// (a centre of mass turning about a pad) does, so at least
+// kSlowModeMinPeriods of the fitted period must fit in the window. The
+// amplitude is √2 × the RMS of y less that path; the frequency ω / 2π
+// (from the discrete second difference).
+inline constexpr double kSlowModeFit = 0.9;
+inline constexpr double kSlowModeMinPeriods = 0.5;
+Oscillation DetectSlowOscillation(const std::vector<double>& t,
+                                  const std::vector<Eigen::Vector3d>& c,
+                                  const std::vector<Eigen::Quaterniond>& q, double gap_tolerance,
+                                  double length_scale);
 
 struct SimulationResult {
   SimulationStatus status = SimulationStatus::kOk;
