@@ -296,7 +296,7 @@ struct Point {
   int lambda = -1;  // LCP index of λ_n; -1 for a point finger (λ_n = grip force)
   int beta0 = -1;   // first friction index (edges of them); -1 without friction
   int xi = -1;      // LCP index of ξ
-  double gap = 0;   // fixed: pusher only, integrated; tracked: from the geometry (m)
+  double gap = 0;   // fixed: pusher and elastic pads, integrated; tracked: from the geometry (m)
   // This step's geometry.
   Eigen::Vector3d p = Eigen::Vector3d::Zero();
   Eigen::Vector3d body_velocity = Eigen::Vector3d::Zero();  // of the contacting body (pusher)
@@ -1311,6 +1311,12 @@ void ContactModel::Impl::Geometry() {
     for (Point& pt : ct.points) {
       const Eigen::Vector3d o = Rp * pt.offset0;
       pt.p = ct.position + o;
+      // An elastic pad's sunk point (gap < 0: it is -gap inside along n)
+      // pushes on the object's surface, so its force acts there: at the
+      // sunk point, its friction's arm differed from the opposite pad's by
+      // the sinking and turned the object. Along n the velocity rows are
+      // the same (n · (ω × n) = 0), so the gap it integrates is unchanged.
+      if (ct.spec.stiffness > 0 && pt.gap < 0) pt.p += pt.gap * n;
       pt.body_velocity = vp + wp.cross(o);
     }
   }
