@@ -1,9 +1,7 @@
-// Issue 31's scenes against their closed forms with "pads": "elastic",
-// "cone": "aligned" (and "inertia": "quasi_static" where a mode is
-// excited), and what the defaults (rigid pads, the polyhedral cone, carried
-// momentum) get wrong on them. The defaults stay: with elastic pads and
-// aligned cones, validation_test's LinearPush with a line finger turns
-// (|ω| up to 6e-4 rad/s where it must be 0) — not reviewed yet.
+// Issue 31's scenes against their closed forms at the default settings
+// (elastic pads and the aligned cone since issue 31; "inertia":
+// "quasi_static" where a mode is excited), and what the old defaults (rigid
+// pads, the polyhedral cone, set explicitly) get wrong on them.
 #include <cmath>
 #include <cstdio>
 #include <numbers>
@@ -39,9 +37,10 @@ TEST(ClosedForms, CentralPushOnPatchesDoesNotRoll) {
                             R"("reduce":"auto"},"pusher":{"type":"point","position":[0,0,-0.05],)"
                             R"("normal":[0,0,1],"mu":0.0,"motion":{"velocity":[0,0,0.01],)"
                             R"("angular_velocity":[0,0,0]}})");
-  Scene elastic = scene;
-  elastic.model.pads = PadModel::kElastic;
-  elastic.model.cone = ConeModel::kAligned;
+  Scene elastic = scene;  // the defaults
+  Scene rigid = scene;
+  rigid.model.pads = PadModel::kRigid;
+  rigid.model.cone = ConeModel::kPolyhedral;
   const SimulationResult r = SimulateOk(elastic);
   const double expected = 2 * 0.5 * 10.0 + 0.2 * 9.81;
   double worst_angle = 0;
@@ -53,7 +52,7 @@ TEST(ClosedForms, CentralPushOnPatchesDoesNotRoll) {
   EXPECT_NEAR(r.samples.back().pusher_force.z(), expected, 1e-6 * expected);
   // Deterministic: a second run, after another scene ran in between, is
   // identical.
-  const SimulationResult old = SimulateOk(scene);
+  const SimulationResult old = SimulateOk(rigid);
   double rigid_angle = 0;
   for (const TrajectorySample& s : old.samples)
     rigid_angle = std::max(rigid_angle, Eigen::AngleAxisd(s.orientation).angle());
@@ -77,8 +76,9 @@ TEST(ClosedForms, TiltedPushTurnsWithThePusherSeenFromTheAxis) {
                             R"("pusher":{"type":"point","position":[0,0,-0.05],"normal":[0,0,1],)"
                             R"("mu":0.3,"motion":{"velocity":[0,0.004999999999999999,)"
                             R"(0.008660254037844387],"angular_velocity":[0,0,0]}})");
-  Scene aligned = scene;
-  aligned.model.cone = ConeModel::kAligned;
+  Scene aligned = scene;  // the default cone
+  Scene polyhedral = scene;
+  polyhedral.model.cone = ConeModel::kPolyhedral;
   const SimulationResult r = SimulateOk(aligned);
   const double v = 0.01, phi = std::numbers::pi / 6, h = 0.05, T = 0.5;
   const double theta = std::atan2(v * std::sin(phi) * T, h - v * std::cos(phi) * T);
@@ -98,7 +98,7 @@ TEST(ClosedForms, TiltedPushTurnsWithThePusherSeenFromTheAxis) {
     finer.model.facets = facets;
     EXPECT_NEAR(Roll(SimulateOk(finer).samples.back()), theta, 0.01 * theta) << facets;
   }
-  const SimulationResult p = SimulateOk(scene);
+  const SimulationResult p = SimulateOk(polyhedral);
   EXPECT_GT(Roll(p.samples.back()), 1.5 * theta) << "the steered slip this scene measures";
 }
 
@@ -133,23 +133,28 @@ TEST(ClosedForms, PushAlongTheGripAxisFollowsThePusherWithoutPitch) {
   EXPECT_GT(carried.samples.back().position.x(), 1.05e-3) << "the drift this scene measures";
 }
 
-// The two model options are read, written back when not the default, and a
-// wrong value is refused naming the field.
+// The two model options are read, written back when not the default
+// (elastic pads and the aligned cone; before issue 31 rigid and
+// polyhedral), and a wrong value is refused naming the field.
 TEST(ClosedForms, PadAndConeOptionsRoundTrip) {
   const std::string base =
       std::string(kBox) + R"(,"duration":0.1,"grip_force":10.0,)" + kPointFingers + R"(,"model":{)";
   const Scene plain = Parse(base + "}");
-  EXPECT_EQ(plain.model.pads, PadModel::kRigid);
-  EXPECT_EQ(plain.model.cone, ConeModel::kPolyhedral);
+  EXPECT_EQ(plain.model.pads, PadModel::kElastic);
+  EXPECT_EQ(plain.model.cone, ConeModel::kAligned);
   EXPECT_EQ(plain.model.inertia, InertiaModel::kCarried);
+  EXPECT_EQ(Scene{}.model.pads, PadModel::kElastic);  // built in code: the same defaults
+  EXPECT_EQ(Scene{}.model.cone, ConeModel::kAligned);
   EXPECT_EQ(SceneToJson(plain).find("\"pads\""), std::string::npos);
-  const Scene set = Parse(base + R"("pads":"elastic","cone":"aligned","inertia":"quasi_static"})");
-  EXPECT_EQ(set.model.pads, PadModel::kElastic);
-  EXPECT_EQ(set.model.cone, ConeModel::kAligned);
+  EXPECT_EQ(SceneToJson(plain).find("\"cone\""), std::string::npos);
+  EXPECT_EQ(Parse(base + R"("pads":"elastic","cone":"aligned"})").model.pads, PadModel::kElastic);
+  const Scene set = Parse(base + R"("pads":"rigid","cone":"polyhedral","inertia":"quasi_static"})");
+  EXPECT_EQ(set.model.pads, PadModel::kRigid);
+  EXPECT_EQ(set.model.cone, ConeModel::kPolyhedral);
   EXPECT_EQ(set.model.inertia, InertiaModel::kQuasiStatic);
   const Scene back = ParseScene(SceneToJson(set));
-  EXPECT_EQ(back.model.pads, PadModel::kElastic);
-  EXPECT_EQ(back.model.cone, ConeModel::kAligned);
+  EXPECT_EQ(back.model.pads, PadModel::kRigid);
+  EXPECT_EQ(back.model.cone, ConeModel::kPolyhedral);
   EXPECT_EQ(back.model.inertia, InertiaModel::kQuasiStatic);
   try {
     Parse(base + R"("cone":"circular"})");

@@ -24,16 +24,16 @@ enum class Reduce { kAuto, kFull, kPlanar };
 // and contacts are made and lost; kFixed: contact frames frozen in the
 // gripper frame (right for small motion only, cheaper).
 enum class ContactTracking { kTracked, kFixed };
-// Line and patch pads without a `stiffness`: kRigid (the default, JSON
-// "rigid" or absent) leaves their load split undetermined (the solver's
-// vertex, history-dependent); kElastic ("elastic") gives them the default
-// stiffness (model.cpp, DefaultPadStiffness: sinking 1e-4 of the object's
-// extent under the grip), which decides it.
+// Line and patch pads without a `stiffness`: kElastic (the default, JSON
+// "elastic" or absent) gives them the default stiffness (model.cpp,
+// DefaultPadStiffness: sinking 1e-4 of the object's extent under the grip),
+// which decides their load split; kRigid ("rigid") leaves it undetermined
+// (the solver's vertex, history-dependent).
 enum class PadModel { kRigid, kElastic };
-// kPolyhedral (the default, JSON "polyhedral" or absent): the cone's edges
-// stay on the docs/scene.md tangent basis; kAligned ("aligned"): a tracked
-// sliding point's cone turns until an edge opposes its slip (AlignCones),
-// so the slip direction is not steered by the facets.
+// kAligned (the default, JSON "aligned" or absent): a tracked sliding
+// point's cone turns until an edge opposes its slip (AlignCones), so the
+// slip direction is not steered by the facets; kPolyhedral ("polyhedral"):
+// the cone's edges stay on the docs/scene.md tangent basis.
 enum class ConeModel { kPolyhedral, kAligned };
 // kCarried ("carried"): each step carries the object's momentum (quasi-
 // dynamic). kQuasiStatic ("quasi_static"): each step is solved again from
@@ -135,8 +135,8 @@ struct ModelOptions {
   double dt = 0.004;  // time step (s)
   Reduce reduce = Reduce::kAuto;
   ContactTracking contacts = ContactTracking::kTracked;
-  PadModel pads = PadModel::kRigid;
-  ConeModel cone = ConeModel::kPolyhedral;
+  PadModel pads = PadModel::kElastic;
+  ConeModel cone = ConeModel::kAligned;
   InertiaModel inertia = InertiaModel::kCarried;
 };
 
