@@ -133,6 +133,46 @@ TEST(ClosedForms, PushAlongTheGripAxisFollowsThePusherWithoutPitch) {
   EXPECT_GT(carried.samples.back().position.x(), 1.05e-3) << "the drift this scene measures";
 }
 
+// Two 4-point patches (radius 10 mm) hold the box against gravity with
+// nothing else: each pad's friction can carry μ N along the weight (t1 = z
+// is a cone edge, so the octagonal cone holds exactly μ N there), so the
+// holding limit is m* g = 2 μ N, m* = 2 · 0.5 · 10 / 9.81 = 1.0194 kg. At
+// 0.95 m* the box stays; at 1.05 m* it slides down with the closed-form
+// acceleration a = g − 2 μ N / m. On the old defaults (rigid pads, the
+// solver's vertex) the 0.95 m* grasp dropped (0.0297 m/s down at 0.2 s)
+// and the 1.05 m* one slid 39 % too fast (0.1303 m/s against 0.0934).
+TEST(ClosedForms, PatchGraspHoldsBelowItsLimitAndDropsAbove) {
+  const double mu = 0.5, grip = 10.0, g = 9.81, limit = 2 * mu * grip / g;
+  for (double ratio : {0.95, 1.05}) {
+    const double mass = ratio * limit;
+    char object[200];
+    std::snprintf(object, sizeof object,
+                  R"("object":{"shape":"box","size":[0.05,0.03,0.1],"mass":%.17g,)"
+                  R"("pose":{"position":[0,0,0],"rpy":[0,0,0]}})",
+                  mass);
+    const Scene scene = Parse(std::string(object) +
+                              R"(,"gravity":[0,0,-9.81],"duration":0.2,"grip_force":10.0,)"
+                              R"("fingers":[{"name":"left","type":"patch","position":[-0.025,0,0],)"
+                              R"("normal":[1,0,0],"mu":0.5,"radius":0.01},{"name":"right",)"
+                              R"("type":"patch","position":[0.025,0,0],"normal":[-1,0,0],)"
+                              R"("mu":0.5,"radius":0.01}],"model":{"facets":8,"points":4,)"
+                              R"("dt":0.001,"reduce":"auto"})");
+    const SimulationResult r = SimulateOk(scene);
+    const TrajectorySample& last = r.samples.back();
+    const double expected_vz = ratio < 1 ? 0.0 : -(g - 2 * mu * grip / mass) * last.t;
+    std::printf("patch grasp at %.2f of its limit: vz %.6f m/s (expected %.6f)\n", ratio,
+                last.velocity.z(), expected_vz);
+    EXPECT_NEAR(last.velocity.z(), expected_vz, 0.01 * std::abs(expected_vz) + 1e-9) << ratio;
+    EXPECT_LT(Eigen::AngleAxisd(last.orientation).angle(), 1e-6) << ratio;
+    Scene rigid = scene;
+    rigid.model.pads = PadModel::kRigid;
+    rigid.model.cone = ConeModel::kPolyhedral;
+    const double old_vz = SimulateOk(rigid).samples.back().velocity.z();
+    std::printf("  old defaults: vz %.6f m/s\n", old_vz);
+    EXPECT_LT(old_vz, ratio < 1 ? -0.01 : 1.2 * expected_vz) << "the wrong split this measures";
+  }
+}
+
 // The two model options are read, written back when not the default
 // (elastic pads and the aligned cone; before issue 31 rigid and
 // polyhedral), and a wrong value is refused naming the field.
