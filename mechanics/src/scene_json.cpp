@@ -622,7 +622,7 @@ ModelOptions ReadModel(const json& v, const std::string& path) {
   };
   model.pads = choice("pads", "elastic", "rigid") ? PadModel::kElastic : PadModel::kRigid;
   model.cone =
-      choice("cone", "aligned", "polyhedral") ? ConeModel::kAligned : ConeModel::kPolyhedral;
+      choice("cone", "polyhedral", "aligned") ? ConeModel::kPolyhedral : ConeModel::kAligned;
   model.inertia = choice("inertia", "carried", "quasi_static") ? InertiaModel::kCarried
                                                                : InertiaModel::kQuasiStatic;
   return model;
@@ -1372,7 +1372,7 @@ std::string SceneToJson(const Scene& scene, int indent) {
                 {"contacts", ToString(scene.model.contacts)}};
   // Written when not the default (scenes written before them read the same).
   if (scene.model.pads != PadModel::kElastic) j["model"]["pads"] = ToString(scene.model.pads);
-  if (scene.model.cone != ConeModel::kAligned) j["model"]["cone"] = ToString(scene.model.cone);
+  if (scene.model.cone != ConeModel::kPolyhedral) j["model"]["cone"] = ToString(scene.model.cone);
   if (scene.model.inertia != InertiaModel::kCarried)
     j["model"]["inertia"] = ToString(scene.model.inertia);
   // Written only when it says something: a scene without it means independent pads.

@@ -1,7 +1,8 @@
 // Issue 31's scenes against their closed forms at the default settings
-// (elastic pads and the aligned cone since issue 31; "inertia":
-// "quasi_static" where a mode is excited), and what the old defaults (rigid
-// pads, the polyhedral cone, set explicitly) get wrong on them.
+// (elastic pads since issue 31), with "cone": "aligned" where a slip in a
+// free direction needs it (still opt-in: bench/README.md, "Default model
+// step") and "inertia": "quasi_static" where a mode is excited, and what
+// the old defaults (rigid pads, set explicitly) get wrong on them.
 #include <cmath>
 #include <cstdio>
 #include <numbers>
@@ -76,9 +77,9 @@ TEST(ClosedForms, TiltedPushTurnsWithThePusherSeenFromTheAxis) {
                             R"("pusher":{"type":"point","position":[0,0,-0.05],"normal":[0,0,1],)"
                             R"("mu":0.3,"motion":{"velocity":[0,0.004999999999999999,)"
                             R"(0.008660254037844387],"angular_velocity":[0,0,0]}})");
-  Scene aligned = scene;  // the default cone
-  Scene polyhedral = scene;
-  polyhedral.model.cone = ConeModel::kPolyhedral;
+  Scene aligned = scene;
+  aligned.model.cone = ConeModel::kAligned;
+  Scene polyhedral = scene;  // the default cone
   const SimulationResult r = SimulateOk(aligned);
   const double v = 0.01, phi = std::numbers::pi / 6, h = 0.05, T = 0.5;
   const double theta = std::atan2(v * std::sin(phi) * T, h - v * std::cos(phi) * T);
@@ -174,27 +175,28 @@ TEST(ClosedForms, PatchGraspHoldsBelowItsLimitAndDropsAbove) {
 }
 
 // The two model options are read, written back when not the default
-// (elastic pads and the aligned cone; before issue 31 rigid and
-// polyhedral), and a wrong value is refused naming the field.
+// (elastic pads, since issue 31, and the polyhedral cone), and a wrong
+// value is refused naming the field.
 TEST(ClosedForms, PadAndConeOptionsRoundTrip) {
   const std::string base =
       std::string(kBox) + R"(,"duration":0.1,"grip_force":10.0,)" + kPointFingers + R"(,"model":{)";
   const Scene plain = Parse(base + "}");
   EXPECT_EQ(plain.model.pads, PadModel::kElastic);
-  EXPECT_EQ(plain.model.cone, ConeModel::kAligned);
+  EXPECT_EQ(plain.model.cone, ConeModel::kPolyhedral);
   EXPECT_EQ(plain.model.inertia, InertiaModel::kCarried);
   EXPECT_EQ(Scene{}.model.pads, PadModel::kElastic);  // built in code: the same defaults
-  EXPECT_EQ(Scene{}.model.cone, ConeModel::kAligned);
+  EXPECT_EQ(Scene{}.model.cone, ConeModel::kPolyhedral);
   EXPECT_EQ(SceneToJson(plain).find("\"pads\""), std::string::npos);
   EXPECT_EQ(SceneToJson(plain).find("\"cone\""), std::string::npos);
-  EXPECT_EQ(Parse(base + R"("pads":"elastic","cone":"aligned"})").model.pads, PadModel::kElastic);
-  const Scene set = Parse(base + R"("pads":"rigid","cone":"polyhedral","inertia":"quasi_static"})");
+  EXPECT_EQ(Parse(base + R"("pads":"elastic","cone":"polyhedral"})").model.pads,
+            PadModel::kElastic);
+  const Scene set = Parse(base + R"("pads":"rigid","cone":"aligned","inertia":"quasi_static"})");
   EXPECT_EQ(set.model.pads, PadModel::kRigid);
-  EXPECT_EQ(set.model.cone, ConeModel::kPolyhedral);
+  EXPECT_EQ(set.model.cone, ConeModel::kAligned);
   EXPECT_EQ(set.model.inertia, InertiaModel::kQuasiStatic);
   const Scene back = ParseScene(SceneToJson(set));
   EXPECT_EQ(back.model.pads, PadModel::kRigid);
-  EXPECT_EQ(back.model.cone, ConeModel::kPolyhedral);
+  EXPECT_EQ(back.model.cone, ConeModel::kAligned);
   EXPECT_EQ(back.model.inertia, InertiaModel::kQuasiStatic);
   try {
     Parse(base + R"("cone":"circular"})");
