@@ -9,6 +9,7 @@
 // 90th percentile of single steps (µs) over all steps run.
 #include <algorithm>
 #include <chrono>
+#include <cmath>
 #include <fstream>
 #include <sstream>
 #include <string>
@@ -193,6 +194,50 @@ ARENA_MECH_BENCH(lines_pusher_auto, kLines, true, Reduce::kAuto);
 ARENA_MECH_BENCH(lines_no_pusher_full, kLines, false, Reduce::kFull);
 ARENA_MECH_BENCH(patches_pusher_full, kPatches, true, Reduce::kFull);
 ARENA_MECH_BENCH(patches_no_pusher_full, kPatches, false, Reduce::kFull);
+
+// Issue 31's defaults (elastic pads, aligned cone) against the old ones
+// (rigid pads, polyhedral cone) set explicitly: the canonical scene (planar,
+// and full: 6 DOF, where the cone can align) and the pivot past its stall
+// (600 steps at dt 1 ms); step_mean_us, step_median_us and the aligned
+// cones' re-solves per run.
+void StepDefaults(benchmark::State& state, int scene, bool old_defaults) {
+  Scene s = scene == 2 ? StallPivot()
+                       : Make(kCanonical, true, scene == 1 ? Reduce::kFull : Reduce::kAuto);
+  if (old_defaults) {
+    s.model.pads = PadModel::kRigid;
+    s.model.cone = ConeModel::kPolyhedral;
+  }
+  const int steps = static_cast<int>(std::lround(s.duration / s.model.dt));
+  std::vector<double> us;
+  long align = 0;
+  for (auto _ : state) {
+    ContactModel m(s);
+    align = 0;
+    for (int k = 0; k < steps; ++k) {
+      const auto t0 = std::chrono::steady_clock::now();
+      const StepReport rep = m.Step();
+      const auto t1 = std::chrono::steady_clock::now();
+      if (!rep.ok) {
+        state.SkipWithError(rep.error.c_str());
+        return;
+      }
+      align += rep.align_solves;
+      us.push_back(std::chrono::duration<double, std::micro>(t1 - t0).count());
+    }
+  }
+  std::sort(us.begin(), us.end());
+  double mean = 0;
+  for (double u : us) mean += u;
+  state.counters["step_median_us"] = us[us.size() / 2];
+  state.counters["step_mean_us"] = mean / static_cast<double>(us.size());
+  state.counters["align_solves"] = static_cast<double>(align);
+}
+BENCHMARK_CAPTURE(StepDefaults, canonical_old, 0, true)->Unit(benchmark::kMillisecond);
+BENCHMARK_CAPTURE(StepDefaults, canonical_new, 0, false)->Unit(benchmark::kMillisecond);
+BENCHMARK_CAPTURE(StepDefaults, canonical_full_old, 1, true)->Unit(benchmark::kMillisecond);
+BENCHMARK_CAPTURE(StepDefaults, canonical_full_new, 1, false)->Unit(benchmark::kMillisecond);
+BENCHMARK_CAPTURE(StepDefaults, pivot_old, 2, true)->Unit(benchmark::kMillisecond);
+BENCHMARK_CAPTURE(StepDefaults, pivot_new, 2, false)->Unit(benchmark::kMillisecond);
 
 }  // namespace
 

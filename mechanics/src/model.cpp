@@ -296,7 +296,7 @@ struct Point {
   int lambda = -1;  // LCP index of λ_n; -1 for a point finger (λ_n = grip force)
   int beta0 = -1;   // first friction index (edges of them); -1 without friction
   int xi = -1;      // LCP index of ξ
-  double gap = 0;   // fixed: pusher only, integrated; tracked: from the geometry (m)
+  double gap = 0;   // fixed: pusher and elastic pads, integrated; tracked: from the geometry (m)
   // This step's geometry.
   Eigen::Vector3d p = Eigen::Vector3d::Zero();
   Eigen::Vector3d body_velocity = Eigen::Vector3d::Zero();  // of the contacting body (pusher)
@@ -1316,6 +1316,12 @@ void ContactModel::Impl::Geometry() {
     for (Point& pt : ct.points) {
       const Eigen::Vector3d o = Rp * pt.offset0;
       pt.p = ct.position + o;
+      // An elastic pad's sunk point (gap < 0: it is -gap inside along n)
+      // pushes on the object's surface, so its force acts there: at the
+      // sunk point, its friction's arm differed from the opposite pad's by
+      // the sinking and turned the object. Along n the velocity rows are
+      // the same (n · (ω × n) = 0), so the gap it integrates is unchanged.
+      if (ct.spec.stiffness > 0 && pt.gap < 0) pt.p += pt.gap * n;
       pt.body_velocity = vp + wp.cross(o);
     }
   }
@@ -1866,6 +1872,7 @@ bool ContactModel::Impl::AlignCones(StepScratch& s) {
   misses.clear();
   bool any = false;
   double num = 0, den = 0;  // the secant slope, fitted over the sliding points
+  const double facet = 2.0 * std::numbers::pi / static_cast<double>(cone_cos.size());
   for (Contact& ct : contacts) {
     if (!ct.active) continue;
     for (Point& pt : ct.points) {
@@ -1881,9 +1888,15 @@ bool ContactModel::Impl::AlignCones(StepScratch& s) {
       Miss m{&pt, FirstTangent(pt.n), Eigen::Vector3d::Zero(), 0, 0};
       m.t2 = pt.n.cross(m.t1);
       const Eigen::Vector3d& e0 = pt.edges[0];
-      m.theta = std::atan2(e0.dot(m.t2), e0.dot(m.t1));
       const double phi = std::atan2(-ut.dot(m.t2), -ut.dot(m.t1));
-      m.miss = std::remainder(phi - m.theta, 2 * std::numbers::pi);
+      // The edges repeat every facet: the friction sits on the one nearest
+      // the slip's opposite. (Measured from edges[0] alone, a slide along
+      // another edge of the basis, e.g. -t1, which a snap onto the basis
+      // or SetEdges leaves with edges[0] = t1, missed by π every solve and
+      // spent all kAlignSolves re-solves on every step, the answer unchanged.)
+      const double theta0 = std::atan2(e0.dot(m.t2), e0.dot(m.t1));
+      m.miss = std::remainder(phi - theta0, facet);
+      m.theta = phi - m.miss;
       if (std::abs(m.miss) > kAlignAngle) any = true;
       if (pt.align_step == steps_taken) {
         const double dtheta = std::remainder(m.theta - pt.align_theta, 2 * std::numbers::pi);
@@ -1898,7 +1911,6 @@ bool ContactModel::Impl::AlignCones(StepScratch& s) {
   // together: one slope for all of them (a slope per point lets two
   // fingers that share a slip fight each other).
   if (den > 0 && num < 0) align_slope = num / den;
-  const double facet = 2.0 * std::numbers::pi / static_cast<double>(cone_cos.size());
   for (const Miss& m : misses) {
     Point& pt = *m.pt;
     // The secant step (the slope of the last step's solves until this step

@@ -620,7 +620,7 @@ ModelOptions ReadModel(const json& v, const std::string& path) {
     }
     return text == first;
   };
-  model.pads = choice("pads", "rigid", "elastic") ? PadModel::kRigid : PadModel::kElastic;
+  model.pads = choice("pads", "elastic", "rigid") ? PadModel::kElastic : PadModel::kRigid;
   model.cone =
       choice("cone", "polyhedral", "aligned") ? ConeModel::kPolyhedral : ConeModel::kAligned;
   model.inertia = choice("inertia", "carried", "quasi_static") ? InertiaModel::kCarried
@@ -1371,7 +1371,7 @@ std::string SceneToJson(const Scene& scene, int indent) {
                 {"reduce", ToString(scene.model.reduce)},
                 {"contacts", ToString(scene.model.contacts)}};
   // Written when not the default (scenes written before them read the same).
-  if (scene.model.pads != PadModel::kRigid) j["model"]["pads"] = ToString(scene.model.pads);
+  if (scene.model.pads != PadModel::kElastic) j["model"]["pads"] = ToString(scene.model.pads);
   if (scene.model.cone != ConeModel::kPolyhedral) j["model"]["cone"] = ToString(scene.model.cone);
   if (scene.model.inertia != InertiaModel::kCarried)
     j["model"]["inertia"] = ToString(scene.model.inertia);

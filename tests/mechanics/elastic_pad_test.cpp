@@ -141,8 +141,11 @@ TEST(ElasticPad, SceneFieldIsReadCheckedAndWrittenBack) {
 // nothing turns it, the pad's load split uniform as it started. The pad
 // points' penetration was not carried from step to step in fixed frames,
 // so the compliance acted as a damper (λ = -k dt v_n), which resists no
-// tilt: the object turned at up to 1.1e-2 rad/s. Carried, the split's
-// start transient (|ω| peaks near 1.1e-4 rad/s) decays by 0.2 s.
+// tilt: the object turned at up to 1.1e-2 rad/s. Carried, a start
+// transient remained (|ω| 1.1e-4 rad/s, decaying to 3e-14): a sunk pad
+// point's friction acted 1e-5 m inside the surface, an arm longer than the
+// opposite finger's. Applied on the surface, |ω| stays below 1e-9 (the
+// limit of validation_test's LinearPush) from the first step.
 TEST(ElasticPad, FixedFramesKeepTheLinePadsPenetration) {
   Scene s = HeldBox(0.2, 10, 0.5);
   s.fingers[1].type = ContactType::kLine;
@@ -161,8 +164,7 @@ TEST(ElasticPad, FixedFramesKeepTheLinePadsPenetration) {
   ASSERT_EQ(r.status, SimulationStatus::kOk) << r.error;
   double worst = 0;
   for (const TrajectorySample& x : r.samples) worst = std::max(worst, x.angular_velocity.norm());
-  EXPECT_LT(worst, 3e-4);
-  EXPECT_LT(r.samples.back().angular_velocity.norm(), 1e-7);
+  EXPECT_LT(worst, 1e-9);
   EXPECT_NEAR(r.samples.back().pusher_force.z(), 10 + 0.2 * 9.81, 1e-6);
 }
 
