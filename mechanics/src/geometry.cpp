@@ -89,6 +89,11 @@ Solid::Solid(const ObjectSpec& object) : shape_(object.shape) {
 }
 
 Closest Solid::ClosestTo(const Eigen::Vector3d& p) const {
+  return ClosestTo(p, Eigen::Vector3d::Zero(), 0.0);
+}
+
+Closest Solid::ClosestTo(const Eigen::Vector3d& p, const Eigen::Vector3d& prefer,
+                         double tolerance) const {
   Closest out;
   const double tiny = 1e-15 * extent_;
   if (shape_ == ObjectShape::kCylinder) {
@@ -146,6 +151,29 @@ Closest Solid::ClosestTo(const Eigen::Vector3d& p) const {
   if (d_bottom > best) {
     best = d_bottom;
     best_normal = -Eigen::Vector3d::UnitZ();
+  }
+  if (best <= 0 && tolerance > 0 && prefer.squaredNorm() > 0) {
+    // Among the faces whose planes pass within tolerance of the point, the
+    // one nearest the preferred normal (the previous step's face, or the one
+    // the pusher closes onto).
+    double best_dot = prefer.dot(best_normal);
+    double chosen = best;
+    auto consider = [&](double d, const Eigen::Vector3d& n) {
+      if (d < best - tolerance) return;
+      const double dot = prefer.dot(n);
+      if (dot > best_dot) {
+        best_dot = dot;
+        chosen = d;
+        best_normal = n;
+      }
+    };
+    for (size_t i = 0; i < edge_normals_.size(); ++i) {
+      consider(edge_normals_[i].dot(xy) - edge_offsets_[i],
+               {edge_normals_[i].x(), edge_normals_[i].y(), 0});
+    }
+    consider(d_top, Eigen::Vector3d::UnitZ());
+    consider(d_bottom, -Eigen::Vector3d::UnitZ());
+    best = chosen;
   }
   if (best <= 0) {
     out.distance = best;

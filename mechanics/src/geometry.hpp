@@ -48,6 +48,13 @@ class Solid {
   explicit Solid(const ObjectSpec& object);
 
   Closest ClosestTo(const Eigen::Vector3d& p_O) const;
+  // The same, except that a point inside a convex prism within `tolerance`
+  // (m) of several faces' planes takes the one whose outward normal is
+  // nearest `prefer_O` (unit) instead of the least deep: a point on an edge
+  // or vertex otherwise takes whichever face rounding makes least deep, so
+  // its normal flips from step to step.
+  Closest ClosestTo(const Eigen::Vector3d& p_O, const Eigen::Vector3d& prefer_O,
+                    double tolerance) const;
   std::optional<Entry> EntryOf(const Eigen::Vector3d& p_O, const Eigen::Vector3d& d_O,
                                double tolerance) const;
   // The feature minimising dir · x (dir unit), with points within `tolerance`

@@ -320,6 +320,10 @@ struct Point {
   // relative to the body it touches; zero before any), which the cone's
   // first edge opposes (SetEdges).
   Eigen::Vector3d slip = Eigen::Vector3d::Zero();
+  // Tracked point on the solid's closest point (PlaceOnSolid): the outward
+  // normal of the face it pressed last step, in the object frame (zero
+  // before any), which it keeps while it stays within tolerance of it.
+  Eigen::Vector3d face_O = Eigen::Vector3d::Zero();
   // Aligned cone, within one step (AlignCones): the angle of the friction
   // edge of the last solve (from FirstTangent(n) towards n × it) and how
   // far the slip's opposite was from it, for the secant update.
@@ -1415,7 +1419,12 @@ void ContactModel::Impl::PlaceOnSolid(Contact& ct, Point& pt, const Eigen::Vecto
       return;
     }
   }
-  const geometry::Closest cl = solid->ClosestTo(centre_O);
+  // On an edge or a vertex, the face pressed last step, or at first the one
+  // the point closes onto: the least deep face alone flips with rounding.
+  const Eigen::Vector3d prefer_O =
+      pt.face_O.squaredNorm() > 0 ? pt.face_O : Eigen::Vector3d(-(R.transpose() * closing));
+  const geometry::Closest cl = solid->ClosestTo(centre_O, prefer_O, gap_tolerance);
+  pt.face_O = cl.normal_O;
   pt.p = origin + R * cl.point_O;
   pt.n = -(R * cl.normal_O);
   pt.gap = cl.distance - r;
