@@ -428,15 +428,16 @@ def _model_error(out):
 
 
 def _check_calibrated_run_claims(first, second, problems):
-    """Section 3: the calibrated campaign's median force and angle errors are
-    lower than the uncalibrated one's, its median position error is not."""
+    """Section 3: the calibrated campaign's median force error is below half
+    the uncalibrated one's; its median angle and position errors are not
+    lower."""
     a, b = _model_error(first), _model_error(second)
     if not a or not b:
         problems.append("docs/adaptive.md: a run printed no model error line")
         return
-    if not (b[2] < a[2] and b[1] < a[1] and b[0] >= a[0]):
-        problems.append(f"docs/adaptive.md: says calibration lowers the median force and angle "
-                        f"errors but not the position error; uncalibrated {a}, calibrated {b} "
+    if not (b[2] < a[2] / 2 and b[1] >= a[1] and b[0] >= a[0]):
+        problems.append(f"docs/adaptive.md: says calibration lowers the median force error below "
+                        f"half and not the angle or position error; uncalibrated {a}, calibrated {b} "
                         f"(position mm, angle deg, force N)")
 
 
