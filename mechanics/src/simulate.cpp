@@ -232,6 +232,63 @@ Oscillation DetectOscillation(const std::vector<double>& t, const std::vector<Ei
   return out;
 }
 
+namespace {
+
+// The object's pose at every step after the run's first tenth, in a ring of
+// at most kOscillationWindowSteps: DetectSlowOscillation reads all of it,
+// DetectOscillation the run's last quarter (at most as many steps).
+class PoseRing {
+ public:
+  void Size(long n_steps) {
+    capacity_ =
+        static_cast<size_t>(std::clamp(n_steps - n_steps / 10, 1L, long{kOscillationWindowSteps}));
+    quarter_ = static_cast<size_t>(std::clamp(n_steps / 4, 1L, long{kOscillationWindowSteps}));
+    t_.reserve(capacity_);
+    c_.reserve(capacity_);
+    q_.reserve(capacity_);
+  }
+
+  void Push(double t, const Eigen::Vector3d& c, const Eigen::Quaterniond& q) {
+    if (t_.size() < capacity_) {
+      t_.push_back(t);
+      c_.push_back(c);
+      q_.push_back(q);
+      return;
+    }
+    t_[next_] = t;
+    c_[next_] = c;
+    q_[next_] = q;
+    next_ = (next_ + 1) % capacity_;
+  }
+
+  // The run's oscillation, if any (none from fewer than 16 poses): the
+  // fast detector on the last quarter first, the slow one on the whole ring
+  // when that finds nothing. Leaves the ring oldest first.
+  Oscillation Detect(double gap_tolerance, double length_scale) {
+    if (t_.size() < 16) return {};
+    std::rotate(t_.begin(), t_.begin() + static_cast<long>(next_), t_.end());
+    std::rotate(c_.begin(), c_.begin() + static_cast<long>(next_), c_.end());
+    std::rotate(q_.begin(), q_.begin() + static_cast<long>(next_), q_.end());
+    next_ = 0;
+    const long from = static_cast<long>(t_.size() - std::min(quarter_, t_.size()));
+    const std::vector<double> tail_t(t_.begin() + from, t_.end());
+    const std::vector<Eigen::Vector3d> tail_c(c_.begin() + from, c_.end());
+    const std::vector<Eigen::Quaterniond> tail_q(q_.begin() + from, q_.end());
+    const Oscillation fast = DetectOscillation(tail_t, tail_c, tail_q, gap_tolerance, length_scale);
+    if (fast.detected) return fast;
+    const Oscillation slow = DetectSlowOscillation(t_, c_, q_, gap_tolerance, length_scale);
+    return slow.detected ? slow : fast;
+  }
+
+ private:
+  std::vector<double> t_;
+  std::vector<Eigen::Vector3d> c_;
+  std::vector<Eigen::Quaterniond> q_;
+  size_t capacity_ = 0, quarter_ = 0, next_ = 0;
+};
+
+}  // namespace
+
 SimulationResult Simulate(const Scene& scene, const PusherCommandSource& commands) {
   const auto start = std::chrono::steady_clock::now();
   SimulationResult result;
@@ -240,30 +297,10 @@ SimulationResult Simulate(const Scene& scene, const PusherCommandSource& command
   // Every return goes through finish(): it moves the result out (returned
   // by value from a lambda that captures it, it was copied, every sample
   // and its contact states, once per trial).
-  // The object's pose at every step after the run's first tenth (a ring of
-  // at most kOscillationWindowSteps), for DetectSlowOscillation; its last
-  // quarter of the run (at most as many steps) for DetectOscillation.
-  std::vector<double> ring_t;
-  std::vector<Eigen::Vector3d> ring_c;
-  std::vector<Eigen::Quaterniond> ring_q;
-  size_t ring_size = 0, ring_next = 0, quarter = 0;
+  PoseRing poses;
   auto finish = [&] {
-    if (result.status == SimulationStatus::kOk && ring_t.size() >= 16) {
-      // Oldest first.
-      std::rotate(ring_t.begin(), ring_t.begin() + static_cast<long>(ring_next), ring_t.end());
-      std::rotate(ring_c.begin(), ring_c.begin() + static_cast<long>(ring_next), ring_c.end());
-      std::rotate(ring_q.begin(), ring_q.begin() + static_cast<long>(ring_next), ring_q.end());
-      const long from = static_cast<long>(ring_t.size() - std::min(quarter, ring_t.size()));
-      const std::vector<double> tail_t(ring_t.begin() + from, ring_t.end());
-      const std::vector<Eigen::Vector3d> tail_c(ring_c.begin() + from, ring_c.end());
-      const std::vector<Eigen::Quaterniond> tail_q(ring_q.begin() + from, ring_q.end());
-      result.oscillation =
-          DetectOscillation(tail_t, tail_c, tail_q, model.gap_tolerance(), model.length_scale());
-      if (!result.oscillation.detected) {
-        const Oscillation slow = DetectSlowOscillation(ring_t, ring_c, ring_q,
-                                                       model.gap_tolerance(), model.length_scale());
-        if (slow.detected) result.oscillation = slow;
-      }
+    if (result.status == SimulationStatus::kOk) {
+      result.oscillation = poses.Detect(model.gap_tolerance(), model.length_scale());
     }
     result.wall_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
     return std::move(result);
@@ -284,12 +321,7 @@ SimulationResult Simulate(const Scene& scene, const PusherCommandSource& command
   const bool closed_loop = commands && scene.pusher;
   Eigen::Vector3d command_v = pusher_v;  // closed loop: the motion in force
 
-  ring_size =
-      static_cast<size_t>(std::clamp(n_steps - n_steps / 10, 1L, long{kOscillationWindowSteps}));
-  quarter = static_cast<size_t>(std::clamp(n_steps / 4, 1L, long{kOscillationWindowSteps}));
-  ring_t.reserve(ring_size);
-  ring_c.reserve(ring_size);
-  ring_q.reserve(ring_size);
+  poses.Size(n_steps);
   long next = 0;  // next sample index
   for (long step = 0; step < n_steps; ++step) {
     const double t0 = model.time();
@@ -315,16 +347,7 @@ SimulationResult Simulate(const Scene& scene, const PusherCommandSource& command
     result.residuals.complementarity =
         std::max(result.residuals.complementarity, rep.residuals.complementarity);
     result.residuals.cone = std::max(result.residuals.cone, rep.residuals.cone);
-    if (ring_t.size() < ring_size) {
-      ring_t.push_back(model.time());
-      ring_c.push_back(model.position());
-      ring_q.push_back(model.orientation());
-    } else {
-      ring_t[ring_next] = model.time();
-      ring_c[ring_next] = model.position();
-      ring_q[ring_next] = model.orientation();
-      ring_next = (ring_next + 1) % ring_size;
-    }
+    poses.Push(model.time(), model.position(), model.orientation());
     if (result.grasp == GraspStatus::kHeld) {
       result.grasp = model.Grasp(&result.grasp_note);
       if (result.grasp != GraspStatus::kHeld) result.grasp_changed_t = model.time();
