@@ -227,13 +227,15 @@ std::string OutlinesAndPusherSvg(const PathsView& v) {
   return svg;
 }
 
-// What the black path is: the truth the trial's cell reported (a robot's or a
-// recording's measurement, a simulator's run, arena's own model), never
-// "measured" for a simulated cell.
+// What the black path is: the truth the trial's cell reported (a robot's
+// measurement, an imported lab measurement, a dataset recorded elsewhere and
+// replayed, a simulator's run, arena's own model), never "measured" for a
+// simulated cell or for a replayed dataset that does not say it was measured.
 std::string TruthWords(const std::string& truth) {
   if (truth.empty()) return "truth unreported";
   if (truth.rfind("measured", 0) == 0) return "here: measured";
-  if (truth == "robot" || truth == "recorded") return "here: measured, " + truth;
+  if (truth == "robot") return "here: measured, robot";
+  if (truth == "recorded") return "here: recorded elsewhere, replayed";
   return "here: simulated, " + truth;
 }
 

@@ -255,6 +255,21 @@ TEST_F(PlotTest, PathsViewNamesItsTruthAndAPushOutOfTheView) {
   EXPECT_NE(svg.find("plot without --paths", note), std::string::npos);
 }
 
+// A replayed dataset that does not say it was measured (truth "recorded":
+// recorded elsewhere, perhaps by a simulator) is not called measured either.
+TEST_F(PlotTest, PathsViewDoesNotCallARecordedDatasetMeasured) {
+  {
+    auto store = db::Store::Open(db_);
+    store->RecordExecution(trial_, 1, "replay", "recorded", "{}");
+  }
+  db::StoreOptions ro;
+  ro.read_only = true;
+  auto store = db::Store::Open(db_, ro);
+  const std::string svg = TrialPathsSvg(*store, trial_);
+  EXPECT_EQ(svg.find("here: measured"), std::string::npos);
+  EXPECT_NE(svg.find("here: recorded elsewhere, replayed"), std::string::npos);
+}
+
 // Issue 28: a failed trial is not "not executed yet" (nothing will come to
 // plot or watch), and the store's own log is not an output file.
 TEST_F(PlotTest, AFailedTrialSaysWhyAndTheStoresLogIsNoOutput) {
