@@ -107,6 +107,50 @@ std::vector<Eigen::Vector3d> RotationsFromMiddle(const std::vector<Eigen::Quater
   return rot;
 }
 
+// One coordinate of a run's poses for the oscillation detectors: the centre
+// of mass along x, y, z (k = 0..2, m) or the rotation from the middle pose
+// about x, y, z (k = 3..5, rad), its threshold (the gap tolerance, as an
+// angle over the length scale), and what is left of it after its
+// least-squares quadratic in τ with that residual's sum of squares.
+struct PoseCoordinate {
+  bool angle = false;
+  double threshold = 0;
+  std::vector<double> y, residual;
+  double sum2 = 0;
+};
+
+PoseCoordinate CoordinateOf(int k, const std::vector<Eigen::Vector3d>& c,
+                            const std::vector<Eigen::Vector3d>& rot, const std::vector<double>& tau,
+                            double gap_tolerance, double length_scale) {
+  PoseCoordinate out;
+  const size_t n = tau.size();
+  out.angle = k >= 3;
+  out.threshold = out.angle ? gap_tolerance / length_scale : gap_tolerance;
+  out.y.resize(n);
+  for (size_t i = 0; i < n; ++i) out.y[i] = out.angle ? rot[i][k - 3] : c[i][k];
+  out.residual = Detrended(tau, out.y);
+  for (double x : out.residual) out.sum2 += x * x;
+  return out;
+}
+
+// A coordinate found swinging: its amplitude joins the translation's or
+// the rotation's, and the coordinate farthest above its threshold (`worst`,
+// amplitude over threshold so far) names the frequency and periods.
+void NoteMode(const PoseCoordinate& pc, double amplitude, double frequency_hz, double periods,
+              double& worst, Oscillation& out) {
+  out.detected = true;
+  if (pc.angle) {
+    out.amplitude_rad = std::max(out.amplitude_rad, amplitude);
+  } else {
+    out.amplitude_m = std::max(out.amplitude_m, amplitude);
+  }
+  if (amplitude / pc.threshold > worst) {
+    worst = amplitude / pc.threshold;
+    out.frequency_hz = frequency_hz;
+    out.periods = periods;
+  }
+}
+
 }  // namespace
 
 Oscillation DetectSlowOscillation(const std::vector<double>& t,
@@ -123,13 +167,9 @@ Oscillation DetectSlowOscillation(const std::vector<double>& t,
   const std::vector<Eigen::Vector3d> rot = RotationsFromMiddle(q, n);
   double worst = 0;
   for (int k = 0; k < 6; ++k) {
-    const bool angle = k >= 3;
-    const double threshold = angle ? gap_tolerance / length_scale : gap_tolerance;
-    std::vector<double> y(n);
-    for (size_t i = 0; i < n; ++i) y[i] = angle ? rot[i][k - 3] : c[i][k];
-    const std::vector<double> r = Detrended(tau, y);
-    double sum2 = 0;
-    for (double x : r) sum2 += x * x;
+    const PoseCoordinate pc = CoordinateOf(k, c, rot, tau, gap_tolerance, length_scale);
+    const double threshold = pc.threshold, sum2 = pc.sum2;
+    const std::vector<double>& y = pc.y;
     if (!(std::sqrt(2.0 * sum2 / static_cast<double>(n)) > threshold)) continue;
     // The acceleration at the interior steps against [1, τ, τ², y]: y
     // scaled by its residual's RMS so that the columns are comparable.
@@ -169,17 +209,7 @@ Oscillation DetectSlowOscillation(const std::vector<double>& t,
     }
     const double amplitude = std::sqrt(2.0 * swing2 / static_cast<double>(n));
     if (!(amplitude > threshold)) continue;
-    out.detected = true;
-    if (angle) {
-      out.amplitude_rad = std::max(out.amplitude_rad, amplitude);
-    } else {
-      out.amplitude_m = std::max(out.amplitude_m, amplitude);
-    }
-    if (amplitude / threshold > worst) {
-      worst = amplitude / threshold;
-      out.frequency_hz = omega / (2 * M_PI);
-      out.periods = periods;
-    }
+    NoteMode(pc, amplitude, omega / (2 * M_PI), periods, worst, out);
   }
   if (out.detected) out.window_s = window;
   return out;
@@ -198,13 +228,9 @@ Oscillation DetectOscillation(const std::vector<double>& t, const std::vector<Ei
   const std::vector<Eigen::Vector3d> rot = RotationsFromMiddle(q, n);
   double worst = 0;  // amplitude over threshold of the strongest oscillating coordinate
   for (int k = 0; k < 6; ++k) {
-    const bool angle = k >= 3;
-    const double threshold = angle ? gap_tolerance / length_scale : gap_tolerance;
-    std::vector<double> y(n);
-    for (size_t i = 0; i < n; ++i) y[i] = angle ? rot[i][k - 3] : c[i][k];
-    const std::vector<double> r = Detrended(tau, y);
-    double sum2 = 0;
-    for (double x : r) sum2 += x * x;
+    const PoseCoordinate pc = CoordinateOf(k, c, rot, tau, gap_tolerance, length_scale);
+    const double threshold = pc.threshold, sum2 = pc.sum2;
+    const std::vector<double>& r = pc.residual;
     const double amplitude = std::sqrt(2.0 * sum2 / static_cast<double>(n));
     if (!(amplitude > threshold)) continue;
     // Swings from beyond +h to beyond -h and back (h = threshold / 2):
@@ -217,17 +243,7 @@ Oscillation DetectOscillation(const std::vector<double>& t, const std::vector<Ei
       if (now != 0) side = now;
     }
     if (crossings < kOscillationCrossings) continue;
-    out.detected = true;
-    if (angle) {
-      out.amplitude_rad = std::max(out.amplitude_rad, amplitude);
-    } else {
-      out.amplitude_m = std::max(out.amplitude_m, amplitude);
-    }
-    if (amplitude / threshold > worst) {
-      worst = amplitude / threshold;
-      out.frequency_hz = crossings / (2.0 * out.window_s);
-      out.periods = crossings / 2.0;
-    }
+    NoteMode(pc, amplitude, crossings / (2.0 * out.window_s), crossings / 2.0, worst, out);
   }
   return out;
 }
