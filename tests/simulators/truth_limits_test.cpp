@@ -5,6 +5,7 @@
 // arena's model refuses the jaw it does not model.
 #include <cmath>
 #include <cstdio>
+#include <string>
 
 #include <gtest/gtest.h>
 
@@ -102,19 +103,78 @@ TEST(MujocoLimits, APushShorterThanTheContactResolvesIsATypedError) {
   EXPECT_EQ(rest.samples.size(), 51u);
 }
 
-// A parallel jaw whose two slides part: a 1 m/s push through a jaw (its
-// equality is as soft as the contacts) lets the fingers travel more than a
-// tenth of the pad radius apart by t = 0.06 s, and the run stops there.
+// A parallel jaw whose two slides part: a push through a jaw at mu 10 (its
+// equality is as soft as the contacts; the fingers' friction is 100 N each)
+// lets the fingers travel more than a tenth of the pad radius apart by
+// t = 0.005 s, and the run stops there. (The 1 m/s push this test used
+// first now sinks the point pusher's 0.3 mm sphere past half its radius in
+// the first step: a penetration, checked before the jaw.)
 TEST(MujocoLimits, AJawWhoseFingersPartIsAConstraintViolation) {
   Scene s = Canonical();
   s.gripper.coupling = GripperCoupling::kParallelJaw;
-  s.pusher->motion.velocity = {0, 0, 1};
+  for (auto& f : s.fingers) f.mu = 10;
+  s.pusher->mu = 10;
   const auto r = MakeMujocoSimulator({})->Simulate(s);
   EXPECT_TRUE(IsLimitError(r, "constraint violation")) << r.error;
   EXPECT_NE(r.error.find("fingers travel"), std::string::npos) << r.error;
   EXPECT_LT(r.samples.size(), 51u);
-  s.gripper.coupling = GripperCoupling::kIndependent;  // nothing to violate
-  EXPECT_EQ(MakeMujocoSimulator({})->Simulate(s).status, SimulationStatus::kOk);
+}
+
+// A point pusher is a sphere in MuJoCo, and a frictionless push acts along
+// the face's normal through the sphere's centre: issue 31's pivot past the
+// stall (grip 1 kN, no gravity, point fingers, a frictionless pusher 1 cm
+// off the grip axis, 0.6 s) ends at atan(d / (h - v T + r)) for a sphere of
+// radius r. With the pad radius (1 mm) that was 0.21867 rad in a jaw, 2.15 %
+// under the point's atan(d / (h - v T)) = 0.22348 rad, and `ok`; the point
+// pusher's sphere is now 0.3 mm (atan(0.01 / 0.0443) = 0.22201, -0.66 %).
+// Within 1 % of the point's closed form. (With independent pads the grasp
+// drifts along the grip axis and the run is refused: the drift limit.)
+TEST(MujocoLimits, APointPusherPivotsAsAPointInAJaw) {
+  Scene s = mechanics::testing::HeldBox(0.2, 1000, 0.5);
+  s.gravity = Eigen::Vector3d::Zero();
+  s.duration = 0.6;
+  s.gripper.coupling = GripperCoupling::kParallelJaw;
+  mechanics::PusherSpec p;
+  p.name = "pusher";
+  p.position = {0, 0.01, -0.05};
+  p.normal = {0, 0, 1};
+  p.mu = 0.0;
+  p.motion.velocity = {0, 0, 0.01};
+  s.pusher = p;
+  const double expected = std::atan(0.01 / (0.05 - 0.01 * 0.6));
+  const auto r = MakeMujocoSimulator({})->Simulate(s);
+  ASSERT_EQ(r.status, SimulationStatus::kOk) << r.error;
+  const Eigen::AngleAxisd aa(r.samples.back().orientation);
+  EXPECT_NEAR((aa.angle() * aa.axis()).x(), expected, 0.01 * expected);
+  // The sphere is the scene's when it gives the pusher a radius.
+  s.pusher->radius = 0.001;
+  const std::string sphere =
+      "name=\"pusher_pad_0\" type=\"sphere\" contype=\"0\" "
+      "conaffinity=\"0\" mass=\"0\" size=";
+  const auto pusher_sphere = [&sphere](const Scene& scene) {
+    const std::string xml = MujocoModelXml(scene, {});
+    const auto at = xml.find(sphere);
+    return at == std::string::npos ? -1.0 : std::stod(xml.substr(at + sphere.size() + 1));
+  };
+  EXPECT_DOUBLE_EQ(pusher_sphere(s), 0.001);
+  s.pusher->radius = 0;
+  EXPECT_DOUBLE_EQ(pusher_sphere(s), 0.0003);
+}
+
+// Unscaled, a 10 g box: the 10 N push on it sank the pusher 0.37 mm into the
+// box (it lagged the pusher by that, against a 0.12 mm tolerance), `ok`.
+// Past half the point pusher's sphere radius (0.15 mm) it is now refused as
+// a penetration; scaled to the scene it is right.
+TEST(MujocoLimits, AnUnscaledLightBoxThePusherSinksIntoIsATypedError) {
+  Scene s = Canonical();
+  s.object.mass = 0.01;
+  MujocoSettings raw;
+  raw.scale_to_scene = false;
+  const auto unscaled = MakeMujocoSimulator(raw)->Simulate(s);
+  EXPECT_TRUE(IsLimitError(unscaled, "penetration")) << unscaled.error;
+  const auto scaled = MakeMujocoSimulator({})->Simulate(s);
+  ASSERT_EQ(scaled.status, SimulationStatus::kOk) << scaled.error;
+  EXPECT_NEAR(scaled.samples.back().position.z(), 0.002, 1.2e-4);
 }
 
 // The grip-axis drift limit judges only where its closed form holds. A box
@@ -155,8 +215,9 @@ TEST(MujocoLimits, TheGripAxisDriftIsJudgedOnlyWhereTheGraspHoldsTheCentre) {
 
 // A slow push (0.1 mm/s): at the unscaled defaults soft friction creeps at
 // about that speed, so the fingers' friction never builds up and the pusher
-// force came out half the closed form's 11.962 N, `ok`. Scaled to the scene
-// (impedance raised by 1 mm/s / v) it is within 2 %.
+// force came out 4.5 N of the closed form's 11.962 N, `ok`. Now the friction
+// creep limit refuses it (a finger builds mu N only above the push's speed).
+// Scaled to the scene (impedance raised by 1 mm/s / v) it is within 2 %.
 TEST(MujocoScaled, ASlowPushBuildsTheFullFrictionForce) {
   Scene s = Canonical();
   s.pusher->motion.velocity = {0, 0, 1e-4};
@@ -166,9 +227,14 @@ TEST(MujocoScaled, ASlowPushBuildsTheFullFrictionForce) {
   MujocoSettings raw;
   raw.scale_to_scene = false;
   const auto unscaled = MakeMujocoSimulator(raw)->Simulate(s);
-  ASSERT_EQ(unscaled.status, SimulationStatus::kOk) << unscaled.error;
-  EXPECT_LT(MeanPusherForce(unscaled), 0.9 * ExpectedForce(s))
-      << "the unscaled contact is right here: the test proves nothing";
+  EXPECT_TRUE(IsLimitError(unscaled, "friction creep")) << unscaled.error;
+  EXPECT_NE(unscaled.error.find("faster than the pusher's 0.0001 m/s"), std::string::npos)
+      << unscaled.error;
+  // At 1 mm/s the unscaled friction builds: not refused, and right.
+  s.pusher->motion.velocity = {0, 0, 1e-3};
+  const auto faster = MakeMujocoSimulator(raw)->Simulate(s);
+  ASSERT_EQ(faster.status, SimulationStatus::kOk) << faster.error;
+  EXPECT_NEAR(MeanPusherForce(faster), ExpectedForce(s), 0.02 * ExpectedForce(s));
 }
 
 // A 100 N grip in a parallel jaw: scaled (impedance raised with the load),
