@@ -622,9 +622,7 @@ class TruthLimits {
                     double pusher_speed) {
     const double t = d->time;
     const double g = scene_.gravity.norm();
-    // Penetration of an active pad contact (and friction creep, reported
-    // after ejection and energy growth: a thrown object's contacts creep too).
-    std::string creep;
+    // Penetration of an active pad contact.
     for (int i = 0; i < d->ncon; ++i) {
       const mjContact& c = d->contact[i];
       if (c.exclude != 0 || c.efc_address < 0) continue;
@@ -639,7 +637,6 @@ class TruthLimits {
               std::cos(kOffTheFace)) {
         grip_axis_.reset();
       }
-      if (creep.empty()) creep = FrictionCreep(m, d, c, pad, pusher_speed);
       if (-c.dist > PenetrationLimit(m, other)) {
         return Fail("penetration", t,
                     "a pad sinks " + Num(-c.dist) + " m into the object (limit " +
@@ -673,7 +670,6 @@ class TruthLimits {
                       "gravity and the start can give it (" +
                       Num(bound) + " m/s)");
     }
-    if (!creep.empty()) return Fail("friction creep", t, creep);
     // Drift along the grip axis (see FixedGripAxis): the grasp's closed form
     // keeps the object's centre there; beyond the truth's accuracy (1 % of
     // the push so far plus 1e-3 of the object's extent, the tolerance the
@@ -706,30 +702,6 @@ class TruthLimits {
   }
 
  private:
-  // Soft friction creeps: in a contact's friction rows MuJoCo solves
-  // J qacc + R f = -B v, so a steady slip v carries a friction force of at
-  // most B v / R, and the full mu N needs a slip of at least
-  // v_full = R mu N / B. A finger whose v_full exceeds the pusher's speed
-  // cannot slide with Coulomb's mu N at the speed the push drives it: the
-  // friction the scene asks for is never built, and a slow push carried
-  // 4.5 N of the 11.96 N of 2 mu N + m g unscaled at 1e-4 m/s (`ok`). Scaled
-  // to the scene (ForScene raises the impedance for slow pushes) v_full
-  // stays below the push. Elliptic cones only (their friction rows follow
-  // the normal row); a pusher at rest is not judged (no slide is asked for).
-  std::string FrictionCreep(const mjModel* m, const mjData* d, const mjContact& c, size_t pad,
-                            double pusher_speed) const {
-    if (m->opt.cone != mjCONE_ELLIPTIC || c.dim < 3 || pad >= scene_.fingers.size()) return "";
-    if (!(pusher_speed > 0)) return "";
-    const int row = c.efc_address;
-    const double normal = d->efc_force[row];
-    const double damping = d->efc_KBIP[4 * (row + 1) + 1];
-    if (!(normal > 0) || !(damping > 0)) return "";
-    const double full = d->efc_R[row + 1] * c.friction[0] * normal / damping;
-    if (full <= pusher_speed) return "";
-    return "a finger's soft friction builds its full mu N only at a slip of " + Num(full) +
-           " m/s, faster than the pusher's " + Num(pusher_speed) +
-           " m/s: the contact creeps where it should slide with Coulomb friction";
-  }
   static std::string Fail(const char* limit, double t, const std::string& what) {
     return std::string("MuJoCo outside its limits at t = ") + Num(t) + " s (" + limit +
            "): " + what;
@@ -802,6 +774,46 @@ std::string PushBelowResolution(const mechanics::Scene& scene, const MujocoSetti
          Num(travel) + " m over the run, less than 4 x the " + Num(a) +
          " m before touch at which its soft contact acts (limit " + Num(4 * a) +
          " m): the object would follow the contact's start transient, not the push";
+}
+
+// A push slower than the fingers' soft friction creeps. In a contact's
+// friction rows MuJoCo solves J qacc + R f = -B v, so a steady slip v carries
+// a friction force of at most B v / R, and the full mu N needs a slip of at
+// least v_full = R mu N / B. Where a finger's v_full (at the grip, t = 0)
+// exceeds the pusher's speed, the finger cannot slide with Coulomb's mu N at
+// the speed the push drives it, nor tell a slide from a stick: the unscaled
+// 1e-4 m/s push carried 4.5 N of the 11.96 N of 2 mu N + m g, `ok`. Scaled to
+// the scene (ForScene raises the impedance for slow pushes) v_full stays
+// below the push. Judged once, before the first step, on a pusher at its
+// set velocity: not a closed loop (a controller slows down near its target,
+// where the fingers stick) nor a recorded path; elliptic cones only (their
+// friction rows follow the normal row).
+std::string FrictionCreep(const mjModel* m, const mjData* d, const mechanics::Scene& scene,
+                          const std::vector<int>& pad_of_geom, const std::vector<char>& is_object,
+                          bool commanded) {
+  if (commanded || !scene.pusher || scene.pusher->path || scene.pusher->controller) return "";
+  if (m->opt.cone != mjCONE_ELLIPTIC) return "";
+  const double speed = scene.pusher->motion.velocity.norm();
+  if (!(speed > 0)) return "";
+  for (int i = 0; i < d->ncon; ++i) {
+    const mjContact& c = d->contact[i];
+    if (c.exclude != 0 || c.efc_address < 0 || c.dim < 3) continue;
+    const bool object1 = is_object[static_cast<size_t>(c.geom1)] != 0;
+    const int other = object1 ? c.geom2 : c.geom1;
+    if (!object1 && is_object[static_cast<size_t>(c.geom2)] == 0) continue;
+    const int pad = pad_of_geom[static_cast<size_t>(other)];
+    if (pad < 0 || static_cast<size_t>(pad) >= scene.fingers.size()) continue;
+    const int row = c.efc_address;
+    const double normal = d->efc_force[row], damping = d->efc_KBIP[4 * (row + 1) + 1];
+    if (!(normal > 0) || !(damping > 0)) continue;
+    const double full = d->efc_R[row + 1] * c.friction[0] * normal / damping;
+    if (full <= speed) continue;
+    return "MuJoCo outside its limits at t = 0 s (friction creep): finger " + std::to_string(pad) +
+           "'s soft friction builds its full mu N only at a slip of " + Num(full) +
+           " m/s, faster than the pusher's " + Num(speed) +
+           " m/s: it creeps where Coulomb friction would slide or stick";
+  }
+  return "";
 }
 
 // Owns a model and its data; frees them on every path.
@@ -1258,6 +1270,15 @@ void RunLoaded(const mechanics::Scene& scene, const MujocoSettings& settings, mj
   result->samples.reserve(static_cast<size_t>(n_samples));
   run.DrivePusher(0);
   mj_forward(m, d);
+  if (std::string why =
+          FrictionCreep(m, d, scene, run.pad_of_geom, run.is_object, commands != nullptr);
+      !why.empty()) {
+    result->status = mechanics::SimulationStatus::kSolverFailure;
+    result->failed_step = 0;
+    result->solver.failures = 1;
+    result->error = why;
+    return;
+  }
   TruthLimits limits(scene, st);
   const Eigen::Vector3d start(d->qpos[run.object_qpos], d->qpos[run.object_qpos + 1],
                               d->qpos[run.object_qpos + 2]);

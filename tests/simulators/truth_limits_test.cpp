@@ -48,7 +48,7 @@ bool IsLimitError(const mechanics::SimulationResult& r, const std::string& limit
          r.error.find(limit) != std::string::npos;
 }
 
-// A 10 kN grip on the 0.2 kg box and a 0.1 g box: unscaled, MuJoCo's soft
+// A 10 kN grip on the 0.2 kg box and a 1 g box: unscaled, MuJoCo's soft
 // contact throws the object out within the first step (before these checks
 // the 1 kN grip was returned `ok` with the object ejected 7.6 m); each is now
 // a typed error naming the limit. Scaled to the scene (impedance raised with
@@ -61,10 +61,13 @@ TEST(MujocoLimits, RunsBeyondTheSoftContactAreTypedErrors) {
   Scene grip = Canonical();
   grip.grip_force = 1e4;
   Scene light = Canonical();
-  light.object.mass = 1e-4;
+  light.object.mass = 1e-3;
   for (const Scene* s : {&grip, &light}) {
     const auto unscaled = MakeMujocoSimulator(raw)->Simulate(*s);
-    EXPECT_TRUE(IsLimitError(unscaled, "energy growth")) << unscaled.error;
+    // The 10 kN grip is refused before its first step: at that load the
+    // fingers' soft friction creeps faster than the push (friction creep).
+    EXPECT_TRUE(IsLimitError(unscaled, s == &grip ? "friction creep" : "energy growth"))
+        << unscaled.error;
     for (const auto& smp : unscaled.samples) EXPECT_TRUE(smp.position.allFinite());
     const auto scaled = MakeMujocoSimulator({})->Simulate(*s);
     ASSERT_EQ(scaled.status, SimulationStatus::kOk) << scaled.error;
