@@ -111,6 +111,44 @@ TEST(RedFlags, ASlowSlideOfALightObjectIsReportedSliding) {
   }
 }
 
+// Lemke's near-singular basis check (kMinBasisRcond in lcp.cpp): a basis
+// whose refactored block has a reciprocal condition number under 1e-13 is
+// refused with the typed kSingularBasis, not used because its inverse is
+// finite. The LCP (covering vector c = (K, 1), K = 1e3, delta > 0):
+//   A = [[-K, K], [-1 - delta/2, 1 + delta]],  b = (-K, -1 - delta/2).
+// It has no solution: w1 = K (z2 - z1 - 1) >= 0 needs z2 >= 1 + z1 > 0, so
+// w2 = 0, i.e. z2 = (1 + delta/2)(1 + z1) / (1 + delta) < 1 + z1. Lemke's
+// path: z0 enters at row 2 (b/c: -1 - delta/2 < -1), z0 = 1 + delta/2,
+// w1 = K delta/2; z2 enters (column -(K, 1 + delta)), w1 leaves first
+// (ratio 1/2 against about 1); z1 enters with no positive entry in its
+// column, a ray. The basis there, {z2, z0}, has the block
+// [[-K, -K], [-1 - delta, -1]], whose reciprocal condition number is about
+// delta / K: at delta 1e-6 and 1e-9 (1e-9, 1e-12) the ray is seen through a
+// sound inverse and reported; at 1e-12 and 1e-14 (1e-15, 1e-17) the inverse
+// is finite but has lost its digits, and the run stops as a singular basis
+// after the same 2 pivots (with the check at 0, finiteness only, it
+// reported a ray read off that inverse: this test then fails). Never ok
+// (there is no solution), with any covering vector.
+TEST(RedFlags, LemkeRefusesANearSingularBasisInsteadOfReadingItsRoundoff) {
+  const double K = 1e3;
+  for (double delta : {1e-6, 1e-9, 1e-12, 1e-14}) {
+    Eigen::MatrixXd A(2, 2);
+    A << -K, K, -1 - 0.5 * delta, 1 + delta;
+    const Eigen::Vector2d b(-K, -1 - 0.5 * delta);
+    LcpOptions opt;
+    opt.covering = Eigen::Vector2d(K, 1);
+    opt.covering_attempts = 1;
+    const LcpResult r = SolveLcp(A, b, nullptr, opt);
+    EXPECT_FALSE(r.ok) << "delta " << delta << ": the LCP has no solution";
+    EXPECT_EQ(r.status, delta >= 1e-9 ? LcpStatus::kRayTermination : LcpStatus::kSingularBasis)
+        << "delta " << delta << ": " << r.reason;
+    EXPECT_NE(r.reason.find("after 2 pivots"), std::string::npos) << r.reason;
+    const LcpResult any = SolveLcp(A, b, nullptr, LcpOptions{});
+    EXPECT_FALSE(any.ok) << "delta " << delta;
+    EXPECT_FALSE(any.reason.empty());
+  }
+}
+
 }  // namespace
 }  // namespace arena::mechanics
 
