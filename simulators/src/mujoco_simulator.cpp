@@ -19,7 +19,8 @@
 //     to the solver, and contact damping then lags it by ~2·timeconst·v).
 //   pads (fingers and pusher): spheres (r 1 mm): one for a point, 5 spread
 //     over a line, 6 on the 2R/3 ring of arena's patch model for a patch
-//     (they carry its torsion and tilt); every pad's surface touches the
+//     (they carry its torsion and tilt); a point pusher without a radius a
+//     sphere of 0.3 r (PointPusherSphere); every pad's surface touches the
 //     object at t = 0.
 //   support (a scene's `support`): a plane through the resting face and
 //     small sphere feet on an equal-area grid of that face (SupportFeet);
