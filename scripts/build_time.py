@@ -37,6 +37,8 @@
       (ARENA_UNITY_ROOMS, batch 0), ccache off, one compile at a time; exits 1
       when a room's unity translation unit does not compile (two of its files
       define the same file-local name)
+  scripts/build_time.py opt ROOM...            each room's compiler CPU seconds
+      one file at a time at -O3 (Release's flag), -O2 and -O1, ccache off
   scripts/build_time.py packages              what a fresh Debian 12 installs for
       setup.sh: the packages setup.sh names and everything they depend on
       (no recommends, as setup.sh installs them), less the base system
@@ -271,19 +273,40 @@ def unity(args, root):
     for room in args.rooms:
         ours = lambda mode: [c for c in plans[mode][3] if f' -o {room}/CMakeFiles/arena_{room}.dir/' in c]
         files, unity_tus = ours('OFF'), ours('ON')
-        cpu_files = sum(compile_by_hand(c, plans['OFF'][0]) for c in files)
-        try:
+        if not files:
+            sys.exit(f'build_time: {room} is not a room of arena with files of its own')
+        try:  # first: a room whose files clash costs only its failed unity compile
             cpu_unity = sum(compile_by_hand(c, plans['ON'][0]) for c in unity_tus)
         except SystemExit as e:
             errors = [l for l in str(e.code).splitlines() if 'error:' in l]
             print('\n'.join(errors[:20]), file=sys.stderr)
             failed.append(room)
-            print(f'| {room} | {len(files)} | {cpu_files:.1f} | does not compile |', flush=True)
+            print(f'| {room} | {len(files)} | — | does not compile |', flush=True)
             continue
+        cpu_files = sum(compile_by_hand(c, plans['OFF'][0]) for c in files)
         print(f'| {room} | {len(files)} | {cpu_files:.1f} | {cpu_unity:.1f} ({len(unity_tus)} '
               f'compiles) |  (load {load()})', flush=True)
     if failed:
         sys.exit(f'build_time: no unity build for {", ".join(failed)}')
+
+
+def opt(args, root):
+    build = os.path.join(root, 'build')
+    run(f'cmake -S {HERE} -B {build} -G Ninja -DCMAKE_BUILD_TYPE=Release '
+        f'-DCMAKE_CXX_COMPILER_LAUNCHER= -DARENA_PCH=OFF -DARENA_UNITY_ROOMS=', HERE)
+    generators, _, compiles = arena_plan(build)
+    for g in generators:
+        run(g, build)
+    print(f'| room | files | -O3: CPU s | -O2: CPU s | -O1: CPU s |  (load {load()})')
+    print('|---|---|---|---|---|')
+    for room in args.rooms:
+        files = [c for c in compiles if f' -o {room}/CMakeFiles/arena_{room}.dir/' in c]
+        if ' -O3 ' not in files[0]:
+            sys.exit('build_time: Release no longer compiles with -O3')
+        cpu = {o: sum(compile_by_hand(c.replace(' -O3 ', f' {o} '), build) for c in files)
+               for o in ('-O3', '-O2', '-O1')}
+        print(f"| {room} | {len(files)} | {cpu['-O3']:.1f} | {cpu['-O2']:.1f} | {cpu['-O1']:.1f} |"
+              f'  (load {load()})', flush=True)
 
 
 def setup_packages():
@@ -324,6 +347,8 @@ def main():
     sub.add_parser('ccache')
     sub.add_parser('steps')
     sub.add_parser('packages')
+    o = sub.add_parser('opt')
+    o.add_argument('rooms', nargs='+', help='rooms, e.g. simulators')
     u = sub.add_parser('unity')
     u.add_argument('rooms', nargs='+', help='rooms, e.g. mechanics simulators')
     a = sub.add_parser('arena')
@@ -338,7 +363,7 @@ def main():
     root = tempfile.mkdtemp(prefix='arena-build-time-')
     try:
         {'sample': sample, 'headers': headers, 'ccache': ccache, 'full': full,
-         'steps': steps, 'arena': arena, 'packages': packages, 'unity': unity}[args.mode](args, root)
+         'steps': steps, 'arena': arena, 'packages': packages, 'unity': unity, 'opt': opt}[args.mode](args, root)
     finally:
         shutil.rmtree(root, ignore_errors=True)
 
