@@ -13,10 +13,12 @@
       precompiled headers? A private cache and no user ccache config (the
       sloppiness comes from CMakeLists.txt), recordings/ built twice in the
       same fresh directory; exits 1 if the second build misses
-  scripts/build_time.py full [--pch ON|OFF] [--arena-only]   a fresh build
-      directory, ccache off, -j2: wall and CPU seconds to build `arena`, then
-      the rest (every test and benchmark) unless --arena-only; CPU seconds are
-      the figure on a shared machine, wall seconds only on a quiet one
+  scripts/build_time.py full [--pch ON|OFF] [--unity ROOMS] [--batch N] [--arena-only]
+      a fresh build directory, ccache off, -j2: wall and CPU seconds to build
+      `arena`, then the rest (every test and benchmark) unless --arena-only;
+      CPU seconds are the figure on a shared machine, wall seconds only on a
+      quiet one. --unity compiles those rooms (ARENA_UNITY_ROOMS: ; separated,
+      or all) as unity translation units of --batch files (0: the whole room)
   scripts/build_time.py arena [--every N] [--pch OFF|ON|both]   the `arena`
       target's compiler CPU seconds with ARENA_PCH OFF and/or ON in this
       tree, from a sample: every
@@ -30,6 +32,18 @@
       and which of them `arena` does not link or include (a fresh build
       directory, nothing compiled); exits 1 if `arena` builds a test or a
       benchmark
+  scripts/build_time.py unity ROOM...          each room's compiler CPU seconds
+      compiled one file at a time and as one unity translation unit
+      (ARENA_UNITY_ROOMS, batch 0), ccache off, one compile at a time; exits 1
+      when a room's unity translation unit does not compile (two of its files
+      define the same file-local name)
+  scripts/build_time.py opt ROOM...            each room's compiler CPU seconds
+      one file at a time at -O3 (Release's flag), -O2 and -O1, ccache off
+  scripts/build_time.py packages              what a fresh Debian 12 installs for
+      setup.sh: the packages setup.sh names and everything they depend on
+      (no recommends, as setup.sh installs them), less the base system
+      (priority required or important), with their download and installed
+      sizes from this machine's apt lists
 
 Exits non-zero when a configure or a compile fails, so a figure it printed
 was made by code that builds. Build directories go under $TMPDIR.
@@ -69,7 +83,8 @@ def configure(src, build, pch):
     """A fresh build directory (nothing built: the sample compiles by hand)."""
     shutil.rmtree(build, ignore_errors=True)
     run(f'cmake -S {src} -B {build} -G Ninja -DCMAKE_BUILD_TYPE=Release '
-        f'-DCMAKE_CXX_COMPILER_LAUNCHER= -DARENA_PCH={pch} -DARENA_BUILD_BENCH=ON', HERE)
+        f'-DCMAKE_CXX_COMPILER_LAUNCHER= -DARENA_PCH={pch} -DARENA_BUILD_BENCH=ON -DARENA_UNITY_ROOMS=',
+        HERE)
     return json.load(open(os.path.join(build, 'compile_commands.json')))
 
 
@@ -157,10 +172,12 @@ def full(args, root):
     build = os.path.join(root, 'build')
     shutil.rmtree(build, ignore_errors=True)
     run(f'cmake -S {HERE} -B {build} -G Ninja -DCMAKE_BUILD_TYPE=Release '
-        f'-DCMAKE_CXX_COMPILER_LAUNCHER= -DARENA_PCH={args.pch}', HERE)
+        f'-DCMAKE_CXX_COMPILER_LAUNCHER= -DARENA_PCH={args.pch} "-DARENA_UNITY_ROOMS={args.unity}" '
+        f'-DARENA_UNITY_BATCH={args.batch}', HERE)
     print(f'load {load()}')
     wall, cpu = run('ninja -j2 bin/arena', build)
-    print(f'| arena | {wall:.0f} | {cpu:.0f} |  (ARENA_PCH={args.pch}, load {load()})')
+    print(f'| arena | {wall:.0f} | {cpu:.0f} |  (ARENA_PCH={args.pch}, '
+          f'ARENA_UNITY_ROOMS="{args.unity}", batch {args.batch}, load {load()})')
     if args.arena_only:
         return
     wall2, cpu2 = run('ninja -j2', build)
@@ -195,8 +212,9 @@ def arena(args, root):
     plans = {}
     for pch in ('OFF', 'ON'):  # both configured: the file lists must agree
         build = os.path.join(root, 'b-' + pch)
+        # One file per compile: the sample is of files (full --unity measures unity builds).
         run(f'cmake -S {HERE} -B {build} -G Ninja -DCMAKE_BUILD_TYPE=Release '
-            f'-DCMAKE_CXX_COMPILER_LAUNCHER= -DARENA_PCH={pch}', HERE)
+            f'-DCMAKE_CXX_COMPILER_LAUNCHER= -DARENA_PCH={pch} -DARENA_UNITY_ROOMS=', HERE)
         plans[pch] = (build,) + arena_plan(build)
     off_sources = [source_of(c, plans['OFF'][0]) for c in plans['OFF'][3]]
     if sorted(off_sources) != sorted(source_of(c, plans['ON'][0]) for c in plans['ON'][3]):
@@ -239,6 +257,86 @@ def steps(args, root):
         sys.exit('build_time: `arena` builds a test or a benchmark:\n' + '\n'.join(waste[:10]))
 
 
+def unity(args, root):
+    plans = {}
+    for mode, rooms in (('OFF', ''), ('ON', 'all')):
+        build = os.path.join(root, 'u-' + mode)
+        run(f'cmake -S {HERE} -B {build} -G Ninja -DCMAKE_BUILD_TYPE=Release '
+            f'-DCMAKE_CXX_COMPILER_LAUNCHER= -DARENA_PCH=OFF -DARENA_UNITY_ROOMS={rooms} '
+            f'-DARENA_UNITY_BATCH=0', HERE)
+        plans[mode] = (build,) + arena_plan(build)
+        for g in plans[mode][1]:
+            run(g, build)  # the generated DDS types and version.cpp, not timed
+    print(f'| room | files | one at a time: CPU s | unity: CPU s |  (load {load()})')
+    print('|---|---|---|---|')
+    failed = []
+    for room in args.rooms:
+        ours = lambda mode: [c for c in plans[mode][3] if f' -o {room}/CMakeFiles/arena_{room}.dir/' in c]
+        files, unity_tus = ours('OFF'), ours('ON')
+        if not files:
+            sys.exit(f'build_time: {room} is not a room of arena with files of its own')
+        try:  # first: a room whose files clash costs only its failed unity compile
+            cpu_unity = sum(compile_by_hand(c, plans['ON'][0]) for c in unity_tus)
+        except SystemExit as e:
+            errors = [l for l in str(e.code).splitlines() if 'error:' in l]
+            print('\n'.join(errors[:20]), file=sys.stderr)
+            failed.append(room)
+            print(f'| {room} | {len(files)} | — | does not compile |', flush=True)
+            continue
+        cpu_files = sum(compile_by_hand(c, plans['OFF'][0]) for c in files)
+        print(f'| {room} | {len(files)} | {cpu_files:.1f} | {cpu_unity:.1f} ({len(unity_tus)} '
+              f'compiles) |  (load {load()})', flush=True)
+    if failed:
+        sys.exit(f'build_time: no unity build for {", ".join(failed)}')
+
+
+def opt(args, root):
+    build = os.path.join(root, 'build')
+    run(f'cmake -S {HERE} -B {build} -G Ninja -DCMAKE_BUILD_TYPE=Release '
+        f'-DCMAKE_CXX_COMPILER_LAUNCHER= -DARENA_PCH=OFF -DARENA_UNITY_ROOMS=', HERE)
+    generators, _, compiles = arena_plan(build)
+    for g in generators:
+        run(g, build)
+    print(f'| room | files | -O3: CPU s | -O2: CPU s | -O1: CPU s |  (load {load()})')
+    print('|---|---|---|---|---|')
+    for room in args.rooms:
+        files = [c for c in compiles if f' -o {room}/CMakeFiles/arena_{room}.dir/' in c]
+        if ' -O3 ' not in files[0]:
+            sys.exit('build_time: Release no longer compiles with -O3')
+        cpu = {o: sum(compile_by_hand(c.replace(' -O3 ', f' {o} '), build) for c in files)
+               for o in ('-O3', '-O2', '-O1')}
+        print(f"| {room} | {len(files)} | {cpu['-O3']:.1f} | {cpu['-O2']:.1f} | {cpu['-O1']:.1f} |"
+              f'  (load {load()})', flush=True)
+
+
+def setup_packages():
+    """The package names of setup.sh's `packages=(...)` array (comments dropped)."""
+    text = open(os.path.join(HERE, 'scripts', 'setup.sh')).read()
+    body = text.split('packages=(', 1)[1].split('\n)', 1)[0]
+    return [w for line in body.splitlines() for w in line.split('#', 1)[0].split()]
+
+
+def packages(args, root):
+    names = setup_packages()
+    out = subprocess.run(['apt-cache', 'depends', '--recurse', '--no-recommends', '--no-suggests',
+                          '--no-conflicts', '--no-breaks', '--no-replaces', '--no-enhances'] + names,
+                         capture_output=True, text=True, check=True).stdout
+    closure = sorted({l for l in out.splitlines() if l and not l.startswith((' ', '<'))})
+    show = subprocess.run(['apt-cache', 'show', '--no-all-versions'] + closure,
+                          capture_output=True, text=True, check=True).stdout
+    count, download, installed = 0, 0, 0
+    for record in show.split('\n\n'):
+        fields = dict(l.split(': ', 1) for l in record.splitlines() if ': ' in l and l[0] != ' ')
+        if 'Package' not in fields or fields.get('Priority') in ('required', 'important'):
+            continue
+        count += 1
+        download += int(fields.get('Size', 0))
+        installed += int(fields.get('Installed-Size', 0)) * 1024
+    print('| setup.sh names | packages a fresh Debian 12 installs | download: MB | installed: MB |')
+    print('|---|---|---|---|')
+    print(f'| {len(names)} | {count} | {download / 1e6:.0f} | {installed / 1e6:.0f} |')
+
+
 def main():
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     sub = p.add_subparsers(dest='mode', required=True)
@@ -248,17 +346,24 @@ def main():
     sub.add_parser('headers')
     sub.add_parser('ccache')
     sub.add_parser('steps')
+    sub.add_parser('packages')
+    o = sub.add_parser('opt')
+    o.add_argument('rooms', nargs='+', help='rooms, e.g. simulators')
+    u = sub.add_parser('unity')
+    u.add_argument('rooms', nargs='+', help='rooms, e.g. mechanics simulators')
     a = sub.add_parser('arena')
     a.add_argument('--every', type=int, default=6, help='compile every N-th of arena\'s files')
     a.add_argument('--pch', default='both', choices=['OFF', 'ON', 'both'])
     f = sub.add_parser('full')
     f.add_argument('--pch', default='ON', choices=['ON', 'OFF'])
+    f.add_argument('--unity', default='', help='ARENA_UNITY_ROOMS: rooms, ; separated, or all')
+    f.add_argument('--batch', type=int, default=0, help='files per unity translation unit')
     f.add_argument('--arena-only', action='store_true', help='stop after the arena binary')
     args = p.parse_args()
     root = tempfile.mkdtemp(prefix='arena-build-time-')
     try:
         {'sample': sample, 'headers': headers, 'ccache': ccache, 'full': full,
-         'steps': steps, 'arena': arena}[args.mode](args, root)
+         'steps': steps, 'arena': arena, 'packages': packages, 'unity': unity, 'opt': opt}[args.mode](args, root)
     finally:
         shutil.rmtree(root, ignore_errors=True)
 
