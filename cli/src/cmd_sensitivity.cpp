@@ -250,14 +250,15 @@ std::string CampaignText(const assessment::CampaignSensitivityReport& r, std::in
   out << "campaign " << r.campaign_id << ": " << r.conditions.size() << " conditions"
       << (run_id > 0 ? ", stored as sensitivity run " + std::to_string(run_id) : "") << "\n";
   std::snprintf(line, sizeof line, "%5s %4s %5s %21s %21s  %-22s %-8s %-20s %s\n", "cond", "reps",
-                "ens", "pos spread mm obs/pred", "rot spread mrad o/p", "verdict", "stable",
+                "ens", "pos spread mm obs/pred", "rot spread deg o/p", "verdict", "stable",
                 "nearest boundary", "condition");
   out << line;
   for (const auto& c : r.conditions) {
     const std::string pos = Opt(c.observed_position_spread, 1e3, "%.3g") + "/" +
                             Opt(c.predicted_position_spread, 1e3, "%.3g");
-    const std::string rot = Opt(c.observed_rotation_spread, 1e3, "%.3g") + "/" +
-                            Opt(c.predicted_rotation_spread, 1e3, "%.3g");
+    const double deg = assessment::HumanUnitOf("rad").factor;
+    const std::string rot = Opt(c.observed_rotation_spread, deg, "%.3g") + "/" +
+                            Opt(c.predicted_rotation_spread, deg, "%.3g");
     std::string boundary = "-";
     if (!c.boundary_parameter.empty()) {
       boundary = c.boundary_parameter + " at " + Opt(c.boundary_tolerances, 1, "%.2g") + " tol";

@@ -359,5 +359,19 @@ TEST_F(Honest, SensitivityPrintsMillimetresAndDegreesJsonStaysSi) {
   }
 }
 
+// Pins: the campaign view of `arena sensitivity` printed rotation spreads in
+// mrad beside positions in mm; human output gives angles in degrees.
+TEST_F(Honest, CampaignSensitivityPrintsDegrees) {
+  auto c = Smoke();
+  c["replicates"] = 2;
+  const std::string db = dir_ + "/s.db";
+  ASSERT_EQ(Arena("run " + Write("s.json", c.dump()) + " --db " + db + " --cells 1 --quiet").rc, 0);
+  const auto r = Arena("sensitivity --db " + db + " --campaign 1 --ensemble 2 --no-store");
+  ASSERT_EQ(r.rc, 0) << r.err;
+  EXPECT_NE(r.out.find("pos spread mm obs/pred"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("rot spread deg o/p"), std::string::npos) << r.out;
+  EXPECT_EQ(r.out.find("mrad"), std::string::npos) << r.out;
+}
+
 }  // namespace
 }  // namespace arena::test

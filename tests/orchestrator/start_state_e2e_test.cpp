@@ -116,6 +116,12 @@ TEST(StartStateEndToEnd, EveryDoneTrialOfThreeCellsHasItsMeasuredStart) {
   int drift_trials = 0;
   for (const auto& d : store->Drift(1)) drift_trials += static_cast<int>(d.trials);
   EXPECT_EQ(drift_trials, done);
+  // `arena status` says what its drift is of.
+  ASSERT_EQ(RunArena({"status", "--db", db}, dir / "status.out", std::chrono::seconds(30)), 0);
+  const std::string status = ReadFile(dir / "status.out");
+  EXPECT_NE(status.find("start-state drift (the start each trial's cell measured - nominal)"),
+            std::string::npos)
+      << status;
 }
 
 }  // namespace
