@@ -204,6 +204,12 @@ std::string Num(double v) {
   return buf;
 }
 
+// "0.2 mm" for 0.0002 in "m": a reason is read by a person, in human units.
+std::string Human(double v, const std::string& si_unit) {
+  const HumanUnit h = HumanUnitOf(si_unit);
+  return Num(v * h.factor) + (h.unit == "1" || h.unit.empty() ? "" : " " + h.unit);
+}
+
 // Why the push is unstable, per parameter: the model fails or the outcome
 // changes within its tolerance, a jump within it, a nonlinear response.
 void AddStabilityReasons(const std::vector<Parameter>& params,
@@ -212,20 +218,20 @@ void AddStabilityReasons(const std::vector<Parameter>& params,
   Stability& st = *st_out;
   for (size_t i = 0; i < params.size(); ++i) {
     const ParameterStability& ps = st.parameters[i];
-    // "0.02 N"; a dimensionless parameter (unit "1") gets no unit.
-    const std::string unit = params[i].unit == "1" ? "" : " " + params[i].unit;
-    const std::string tol_text = Num(ps.tolerance) + unit;
+    // "0.02 N", "0.2 mm"; a dimensionless parameter (unit "1") gets no unit.
+    const std::string& unit = params[i].unit;
+    const std::string tol_text = Human(ps.tolerance, unit);
     if (ps.failed) {
       AddReason(&st, "the model fails within " + params[i].name + " +- " + tol_text);
     } else if (ps.flips) {
       AddReason(&st, params[i].name + " within +- " + tol_text + " changes the outcome (" +
-                         ps.change + ") at " + Num(ps.boundary.value_or(0)) + unit);
+                         ps.change + ") at " + Human(ps.boundary.value_or(0), unit));
     }
     const ParameterSensitivity& ds = sens[i];
     if (!ds.jump_quantity.empty() && ps.tolerance > 0 && ds.parameter.step <= ps.tolerance) {
-      AddReason(&st, params[i].name + " +- " + Num(ds.parameter.step) + unit +
+      AddReason(&st, params[i].name + " +- " + Human(ds.parameter.step, unit) +
                          " (within the tolerance " + tol_text + ") makes " + ds.jump_quantity +
-                         " jump by " + Num(ds.jump) + " " + UnitOf(ds.jump_quantity) +
+                         " jump by " + Human(ds.jump, UnitOf(ds.jump_quantity)) +
                          ": discontinuous here");
     }
     if (ps.nonlinear) {
@@ -435,6 +441,16 @@ SensitivityReport AnalyseScene(const Scene& scene, const SensitivityOptions& o) 
                      return a.score > b.score;
                    });
   return finish();
+}
+
+HumanUnit HumanUnitOf(const std::string& si_unit) {
+  constexpr double kDeg = 180.0 / 3.14159265358979323846;
+  if (si_unit == "m") return {"mm", 1e3};
+  if (si_unit == "m/s") return {"mm/s", 1e3};
+  if (si_unit == "rad") return {"deg", kDeg};
+  if (si_unit == "rad/s") return {"deg/s", kDeg};
+  if (si_unit == "s") return {"ms", 1e3};
+  return {si_unit, 1};
 }
 
 nlohmann::json ToJson(const SensitivityReport& r, const Scene& scene) {

@@ -289,6 +289,7 @@ std::string DescribeFront(const EvaluationReport& r) {
     const bool fraction = r.primary == ErrorMetric::kModeAgreementMedian;
     const bool force =
         r.primary == ErrorMetric::kForceMedian || r.primary == ErrorMetric::kForceP95;
+    const bool time = r.primary == ErrorMetric::kTimeP95;
     std::snprintf(buf, sizeof buf, " %s %s %.3g ms -> %.4g%s", s->predictor.c_str(),
                   s->model_key.c_str(), s->time.median * 1e3,
                   fraction || force ? e
@@ -297,6 +298,7 @@ std::string DescribeFront(const EvaluationReport& r) {
                   fraction ? ""
                   : force  ? " N"
                   : angle  ? " deg"
+                  : time   ? " ms"
                            : " mm");
     out += buf;
     if (r.floor && r.floor->position_median > 0 &&
@@ -493,6 +495,53 @@ nlohmann::json SettingErrorsJson(const SettingSummary& s) {
           {"outcome_nmse", Nmse(s)}};
 }
 
+// The SI unit of a metric's value.
+const char* SiUnit(ErrorMetric m) {
+  switch (m) {
+    case ErrorMetric::kAngleMedian:
+    case ErrorMetric::kAngleP95:
+      return "rad";
+    case ErrorMetric::kForceMedian:
+    case ErrorMetric::kForceP95:
+      return "N";
+    case ErrorMetric::kModeAgreementMedian:
+      return "1";
+    case ErrorMetric::kTimeP95:
+      return "s";
+    default:
+      return "m";
+  }
+}
+
+// The front's points, cheapest first, in SI: what `front` says in prose.
+nlohmann::json FrontPoints(const EvaluationReport& r) {
+  std::vector<std::size_t> front;
+  for (std::size_t i = 0; i < r.settings.size(); ++i)
+    if (r.settings[i].pareto) front.push_back(i);
+  std::stable_sort(front.begin(), front.end(), [&](std::size_t a, std::size_t b) {
+    return r.settings[a].time.median < r.settings[b].time.median;
+  });
+  const bool position =
+      r.primary == ErrorMetric::kPositionMedian || r.primary == ErrorMetric::kPositionP95;
+  nlohmann::json points = nlohmann::json::array();
+  for (const std::size_t i : front) {
+    const SettingSummary& s = r.settings[i];
+    const double e = s.Judged(r.primary);
+    points.push_back({{"setting", i},
+                      {"predictor", s.predictor},
+                      {"model_key", s.model_key},
+                      {"time_median_s", s.time.median},
+                      {"metric", ToString(r.primary)},
+                      {"error", Finite(e)},
+                      {"error_unit", SiUnit(r.primary)},
+                      {"floor_multiple", position && r.floor && r.floor->position_median > 0
+                                             ? Finite(e / r.floor->position_median)
+                                             : nlohmann::json(nullptr)},
+                      {"recommended", r.recommended && *r.recommended == i}});
+  }
+  return points;
+}
+
 }  // namespace
 
 nlohmann::json ToJson(const EvaluationReport& r) {
@@ -572,7 +621,8 @@ nlohmann::json ToJson(const EvaluationReport& r) {
                         {"recommended", nullptr},
                         {"recommended_predictor", nullptr},
                         {"recommendation", r.recommendation},
-                        {"front", r.front}};
+                        {"front", r.front},
+                        {"front_points", FrontPoints(r)}};
   out["scales"] = r.scales;
   if (!r.group_by.empty()) {
     nlohmann::json groups = nlohmann::json::array();

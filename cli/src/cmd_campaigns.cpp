@@ -295,7 +295,8 @@ void PrintService(const StatusView& v) {
 void PrintDrift(const std::vector<db::StartStateDrift>& drift) {
   if (drift.empty()) return;
   std::printf(
-      "\nstart-state drift (observed after reset - nominal):\n%-5s %-16s %6s %28s %10s %10s\n",
+      "\nstart-state drift (the start each trial's cell measured - nominal):\n%-5s %-16s %6s %28s "
+      "%10s %10s\n",
       "camp", "cell", "trials", "mean offset x,y,z (mm)", "mean |e| mm", "mean deg");
   for (const auto& d : drift)
     std::printf("%-5lld %-16s %6lld %9.3f,%8.3f,%8.3f %10.3f %10.3f\n",

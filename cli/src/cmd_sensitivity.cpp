@@ -109,14 +109,17 @@ std::string Fmt(const char* f, double v) {
   return buf;
 }
 
+// Human output in mm, degrees and N (JSON: SI, `--json`).
 std::string SceneText(const assessment::SensitivityReport& r, const mechanics::Scene& scene) {
+  using assessment::HumanUnitOf;
   std::ostringstream out;
   const auto& n = r.nominal;
-  out << "nominal outcome: position (" << Fmt("%.4g", n.value(Quantity::kPositionX)) << ", "
-      << Fmt("%.4g", n.value(Quantity::kPositionY)) << ", "
-      << Fmt("%.4g", n.value(Quantity::kPositionZ)) << ") m, rotation "
-      << Fmt("%.4g", n.value(Quantity::kRotation)) << " rad, displacement "
-      << Fmt("%.4g", n.value(Quantity::kDisplacement)) << " m, pusher force "
+  const double mm = HumanUnitOf("m").factor, deg = HumanUnitOf("rad").factor;
+  out << "nominal outcome: position (" << Fmt("%.4g", n.value(Quantity::kPositionX) * mm) << ", "
+      << Fmt("%.4g", n.value(Quantity::kPositionY) * mm) << ", "
+      << Fmt("%.4g", n.value(Quantity::kPositionZ) * mm) << ") mm, rotation "
+      << Fmt("%.4g", n.value(Quantity::kRotation) * deg) << " deg, displacement "
+      << Fmt("%.4g", n.value(Quantity::kDisplacement) * mm) << " mm, pusher force "
       << Fmt("%.4g", n.value(Quantity::kPusherForce)) << " N; grasp "
       << (n.grasp_kept ? "kept" : "lost") << "\n  modes:";
   const auto names = assessment::ContactNames(scene);
@@ -126,7 +129,7 @@ std::string SceneText(const assessment::SensitivityReport& r, const mechanics::S
   out << "\n\nparameters ranked by their largest normalised effect (% of the outcome per 1 % of "
          "the parameter's scale):\n";
   char line[400];
-  std::snprintf(line, sizeof line, "%4s  %-28s %11s %6s  %-13s %13s %-10s %10s  %s\n", "rank",
+  std::snprintf(line, sizeof line, "%4s  %-28s %11s %6s  %-13s %13s %-11s %10s  %s\n", "rank",
                 "parameter", "nominal", "unit", "most moves", "d/dp", "unit", "normalised", "note");
   out << line;
   int rank = 0;
@@ -138,11 +141,14 @@ std::string SceneText(const assessment::SensitivityReport& r, const mechanics::S
         best = q;
     }
     const auto& d = p.derivatives[size_t(best)];
-    const std::string unit = std::string(assessment::Unit(Quantity(best))) + "/" +
-                             (p.parameter.unit == "1" ? "1" : p.parameter.unit);
-    std::snprintf(line, sizeof line, "%4d  %-28s %11.4g %6s  %-13s %13.4g %-10s %10.3g  %s\n",
-                  ++rank, p.parameter.name.c_str(), p.parameter.nominal, p.parameter.unit.c_str(),
-                  assessment::Name(Quantity(best)), d.value, unit.c_str(), d.normalised,
+    const auto pu = HumanUnitOf(p.parameter.unit);
+    const auto qu = HumanUnitOf(assessment::Unit(Quantity(best)));
+    const std::string unit =
+        qu.unit + "/" + (pu.unit.find('/') != std::string::npos ? "(" + pu.unit + ")" : pu.unit);
+    std::snprintf(line, sizeof line, "%4d  %-28s %11.4g %6s  %-13s %13.4g %-11s %10.3g  %s\n",
+                  ++rank, p.parameter.name.c_str(), p.parameter.nominal * pu.factor,
+                  pu.unit.c_str(), assessment::Name(Quantity(best)),
+                  d.value * qu.factor / pu.factor, unit.c_str(), d.normalised,
                   p.differentiable ? "" : ("not differentiable here: " + p.note).c_str());
     out << line;
   }
@@ -151,9 +157,14 @@ std::string SceneText(const assessment::SensitivityReport& r, const mechanics::S
     out << "\nstability: " << (s.unstable ? "UNSTABLE" : "stable") << "\n";
     for (const auto& reason : s.reasons) out << "  - " << reason << "\n";
     if (s.nearest) {
+      std::string unit;
+      for (const auto& p : r.parameters)
+        if (p.parameter.name == s.nearest->parameter) unit = p.parameter.unit;
+      const auto hu = HumanUnitOf(unit);
       out << "  nearest boundary: " << s.nearest->parameter << " at "
-          << Fmt("%+.4g", s.nearest->offset) << " (" << Fmt("%.3g", s.nearest->tolerances)
-          << " tolerances): " << s.nearest->change << "\n";
+          << Fmt("%+.4g", s.nearest->offset * hu.factor)
+          << (hu.unit.empty() || hu.unit == "1" ? "" : " " + hu.unit) << " ("
+          << Fmt("%.3g", s.nearest->tolerances) << " tolerances): " << s.nearest->change << "\n";
     } else {
       out << "  no boundary found within the searched range\n";
     }
@@ -239,14 +250,15 @@ std::string CampaignText(const assessment::CampaignSensitivityReport& r, std::in
   out << "campaign " << r.campaign_id << ": " << r.conditions.size() << " conditions"
       << (run_id > 0 ? ", stored as sensitivity run " + std::to_string(run_id) : "") << "\n";
   std::snprintf(line, sizeof line, "%5s %4s %5s %21s %21s  %-22s %-8s %-20s %s\n", "cond", "reps",
-                "ens", "pos spread mm obs/pred", "rot spread mrad o/p", "verdict", "stable",
+                "ens", "pos spread mm obs/pred", "rot spread deg o/p", "verdict", "stable",
                 "nearest boundary", "condition");
   out << line;
   for (const auto& c : r.conditions) {
     const std::string pos = Opt(c.observed_position_spread, 1e3, "%.3g") + "/" +
                             Opt(c.predicted_position_spread, 1e3, "%.3g");
-    const std::string rot = Opt(c.observed_rotation_spread, 1e3, "%.3g") + "/" +
-                            Opt(c.predicted_rotation_spread, 1e3, "%.3g");
+    const double deg = assessment::HumanUnitOf("rad").factor;
+    const std::string rot = Opt(c.observed_rotation_spread, deg, "%.3g") + "/" +
+                            Opt(c.predicted_rotation_spread, deg, "%.3g");
     std::string boundary = "-";
     if (!c.boundary_parameter.empty()) {
       boundary = c.boundary_parameter + " at " + Opt(c.boundary_tolerances, 1, "%.2g") + " tol";

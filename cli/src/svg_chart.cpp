@@ -72,7 +72,13 @@ struct Axis {
   double Frac(double v) const { return (T(v) - lo) / (hi - lo); }
 };
 
-Axis MakeAxis(Range r, bool log) {
+// Pixels kept clear between the data's extremes and the frame: the largest
+// marker (a recommendation's 8 px ring), the 2 px gap and a 10 px label
+// beside it, so no point or its label sits on the frame.
+constexpr double kClearPx = 20;
+
+// `px`: the axis's length in pixels.
+Axis MakeAxis(Range r, bool log, double px) {
   Axis a;
   a.log = log;
   if (r.empty()) r = {log ? 1.0 : 0.0, log ? 10.0 : 1.0};
@@ -83,7 +89,10 @@ Axis MakeAxis(Range r, bool log) {
     a.lo -= pad;
     a.hi += pad;
   } else {  // linear or in decades: points and lines at the ends stay off the frame
-    const double pad = 0.05 * (a.hi - a.lo);
+    // p of the span on each side puts the ends p / (1 + 2p) of the axis, at
+    // least kClearPx, from the frame (and never less than 5 % of the span).
+    const double room = std::max(px - 2 * kClearPx, kClearPx);
+    const double pad = std::max(0.05, kClearPx / room) * (a.hi - a.lo);
     a.lo -= pad;
     a.hi += pad;
   }
@@ -192,7 +201,7 @@ constexpr int kLeft = 80, kRight = 190, kTop = 58, kGap = 60, kBottom = 50;
 
 // The x axis of the panels that share it (only == nullptr) or of one panel
 // with its own.
-Axis XAxisOf(const Chart& chart, bool log, const Panel* only) {
+Axis XAxisOf(const Chart& chart, bool log, const Panel* only, int plot_w) {
   Range xr;
   for (const auto& p : chart.panels) {
     if (only ? &p != only : p.own_x) continue;
@@ -200,11 +209,11 @@ Axis XAxisOf(const Chart& chart, bool log, const Panel* only) {
       for (double x : s.x)
         if (std::isfinite(x) && (!log || x > 0)) xr.Add(x);
   }
-  return MakeAxis(xr, log);
+  return MakeAxis(xr, log, plot_w);
 }
 
 // A panel's y axis: its data's range, at least min_y_span wide when linear.
-Axis YAxisOf(const Panel& panel) {
+Axis YAxisOf(const Panel& panel, int height) {
   Range yr;
   for (const auto& s : panel.series)
     for (size_t i = 0; i < s.y.size() && i < s.x.size(); ++i)
@@ -214,7 +223,7 @@ Axis YAxisOf(const Panel& panel) {
     yr.lo = mid - 0.5 * panel.min_y_span;
     yr.hi = mid + 0.5 * panel.min_y_span;
   }
-  return MakeAxis(yr, panel.log_y);
+  return MakeAxis(yr, panel.log_y, height);
 }
 
 // One panel's plot area in px.
@@ -316,7 +325,8 @@ void WritePanel(const Chart& chart, int pi, const Axis& shared_xa, int plot_w,
   const Panel& panel = chart.panels[pi];
   const int y0 = kTop + pi * (chart.panel_height + kGap);
   const PanelFrame f{plot_w, y0, chart.panel_height,
-                     panel.own_x ? XAxisOf(chart, panel.log_x, &panel) : shared_xa, YAxisOf(panel)};
+                     panel.own_x ? XAxisOf(chart, panel.log_x, &panel, plot_w) : shared_xa,
+                     YAxisOf(panel, chart.panel_height)};
   WriteFrameAndGrid(f, panel, svg);
   int legend_y = y0 + 12;
   LabelPlacer placed(kLeft, y0, kLeft + plot_w, y0 + f.h);
@@ -366,7 +376,7 @@ std::string RenderSvg(const Chart& chart) {
   for (const auto& p : chart.panels)
     for (const auto& s : p.series) longest = std::max(longest, s.name.size());
   const int width = std::max(chart.width, kLeft + plot_w + 48 + static_cast<int>(7 * longest));
-  const Axis shared_xa = XAxisOf(chart, chart.log_x, nullptr);
+  const Axis shared_xa = XAxisOf(chart, chart.log_x, nullptr, plot_w);
   const bool any_shared = std::any_of(chart.panels.begin(), chart.panels.end(),
                                       [](const Panel& p) { return !p.own_x; });
 

@@ -60,6 +60,30 @@ double QuatAngle(const double* a, const double* b) {
   return 2 * std::acos(std::min(1.0, d));
 }
 
+// trials.start_*: the start the executing cell measured, the pose the trial's
+// predictions start from. It replaces the claim's copy of the cell's last
+// reset observation, which a trial lacks when it is a cell's first or another
+// cell claimed the trial that reset was aimed at.
+void WriteMeasuredStart(const Store::Impl& impl, std::int64_t trial_id,
+                        const std::array<double, 7>& start) {
+  auto r = impl.Prepare(
+      "SELECT nominal_x, nominal_y, nominal_z, nominal_qw, nominal_qx, nominal_qy, nominal_qz"
+      " FROM trials WHERE id = ?");
+  r->Bind(1, trial_id);
+  r->Step();
+  double nominal[7];
+  for (int i = 0; i < 7; ++i) nominal[i] = r->Real(i);
+  const double dx = start[0] - nominal[0], dy = start[1] - nominal[1], dz = start[2] - nominal[2];
+  auto u = impl.Prepare(
+      "UPDATE trials SET start_x = ?, start_y = ?, start_z = ?, start_qw = ?, start_qx = ?,"
+      " start_qy = ?, start_qz = ?, start_position_error = ?, start_angle_error = ? WHERE id = ?");
+  detail::Binder b(*u);
+  for (double v : start) b << v;
+  b << std::sqrt(dx * dx + dy * dy + dz * dz) << QuatAngle(start.data() + 3, nominal + 3)
+    << trial_id;
+  u->Run();
+}
+
 struct Chunk {
   std::int64_t first_sample = 0;
   std::uint32_t samples = 0;
@@ -90,6 +114,9 @@ struct Ingest::Impl {
   // Per-trial summary, accumulated as samples arrive.
   double last_t = -INFINITY;
   std::array<double, 7> first_pose{}, last_pose{};
+  // The start the cell measured: the first sample's observed pose, or its own
+  // pose when the sensors dropped it (the rule of assessment::StartOf).
+  std::array<double, 7> measured_start{};
   std::int64_t observed = 0;
   double max_contact_force = 0, max_pusher_force = 0;
   std::int64_t modes[3] = {0, 0, 0};
@@ -165,7 +192,10 @@ void Ingest::Add(const Sample& s) {
                          " s is before the previous sample's " + std::to_string(m.last_t) +
                          " s (out of order); sample refused");
   }
-  if (m.total == 0) m.first_pose = s.object_pose;
+  if (m.total == 0) {
+    m.first_pose = s.object_pose;
+    m.measured_start = s.observed_valid ? s.observed_object_pose : s.object_pose;
+  }
   m.outcome->Add(s);
   m.last_pose = s.object_pose;
   m.last_t = s.t;
@@ -236,6 +266,7 @@ std::int64_t Ingest::Finish(TrialEnd outcome) {
     auto u = m.store->Prepare("UPDATE trials SET gt_stream_id = ? WHERE id = ?");
     u->Bind(1, m.stream_id).Bind(2, m.trial_id).Run();
   }
+  if (m.total > 0) WriteMeasuredStart(*m.store, m.trial_id, m.measured_start);
   {  // Replace, never duplicate: drop every other stream of this (trial, attempt).
     auto d =
         m.store->Prepare("DELETE FROM gt_streams WHERE trial_id = ? AND attempt = ? AND id != ?");

@@ -211,5 +211,38 @@ TEST(EvaluationSummary, EmptyCampaignAndJson) {
   EXPECT_EQ(nlohmann::json::parse(full.dump()), full);
 }
 
+// Pins issue 26: `evaluate --json` gave the front only as prose in mm
+// ("3 setting(s) on the front ...: arena g4_... 1 ms -> 4 mm; ..."), which a
+// script cannot read. `front_points` gives the same points, cheapest first,
+// with named SI fields; `front` keeps the prose (scripts may read it).
+TEST(EvaluationSummary, JsonFrontIsStructuredSi) {
+  const auto report = Summarise(kModels, KnownResults(), {ParseBudget("position_median=2.5mm")});
+  const auto j = ToJson(report);
+  EXPECT_TRUE(j["front"].is_string());
+  const auto& points = j["front_points"];
+  ASSERT_EQ(points.size(), 3u) << points.dump();  // g4, g8, g6 (g16 dominated, g32 failed)
+  const std::vector<std::string> keys = {ModelKey(Model(4)), ModelKey(Model(8)),
+                                         ModelKey(Model(6))};
+  const std::vector<double> errors = {4e-3, 2e-3, 1e-3}, times = {1e-3, 2e-3, 4e-3};
+  for (std::size_t k = 0; k < 3; ++k) {
+    SCOPED_TRACE(points[k].dump());
+    EXPECT_EQ(points[k]["model_key"], keys[k]);
+    EXPECT_EQ(points[k]["predictor"], "arena");
+    EXPECT_EQ(points[k]["metric"], "position_median");
+    EXPECT_EQ(points[k]["error_unit"], "m");
+    EXPECT_NEAR(points[k]["error"].get<double>(), errors[k], 1e-12);         // metres, not mm
+    EXPECT_NEAR(points[k]["time_median_s"].get<double>(), times[k], 1e-12);  // seconds, not ms
+    const auto setting = points[k]["setting"].get<std::size_t>();
+    EXPECT_EQ(j["settings"][setting]["model_key"], keys[k]);
+    EXPECT_EQ(points[k]["recommended"], k == 1);         // g8: the cheapest within 2.5 mm
+    EXPECT_TRUE(points[k]["floor_multiple"].is_null());  // no noise floor here
+  }
+  // An angle metric's front is in radians.
+  const auto angle = ToJson(Summarise(kModels, KnownResults(), {ParseBudget("angle_p95=25mrad")}));
+  ASSERT_FALSE(angle["front_points"].empty());
+  EXPECT_EQ(angle["front_points"][0]["error_unit"], "rad");
+  EXPECT_LT(angle["front_points"][0]["error"].get<double>(), 0.1);
+}
+
 }  // namespace
 }  // namespace arena::assessment

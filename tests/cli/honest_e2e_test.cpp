@@ -6,6 +6,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <cstdio>
 #include <fstream>
 #include <sstream>
 #include <string>
@@ -317,6 +318,59 @@ TEST_F(Honest, BoundaryStatedInStatusAndDecisions) {
     EXPECT_LE(at + half, 0.015);
     EXPECT_LT(half, 0.0015) << "a bracket, not the whole range";
   }
+}
+
+// Pins issue 26 item 3's units in `arena sensitivity SCENE`: its human output
+// printed the nominal outcome (and the table and the reasons) in m and rad.
+// Human output is in mm, degrees and N; --json stays SI.
+TEST_F(Honest, SensitivityPrintsMillimetresAndDegreesJsonStaysSi) {
+  const std::string scene = std::string(ARENA_SOURCE_DIR) + "/examples/scenes/canonical.json";
+  const std::string params = " --params fingers.normal.t1,push_speed";
+  const auto h = Arena("sensitivity " + scene + params);
+  ASSERT_EQ(h.rc, 0) << h.err;
+  const auto j = Arena("sensitivity " + scene + params + " --json");
+  ASSERT_EQ(j.rc, 0) << j.err;
+  const auto doc = nlohmann::json::parse(j.out);
+  const auto& q = doc["nominal"]["quantities"];
+  double x = 0, y = 0, z = 0, rotation = -1, displacement = -1, force = -1;
+  const auto at = h.out.find("nominal outcome: position (");
+  ASSERT_NE(at, std::string::npos) << h.out;
+  ASSERT_EQ(std::sscanf(h.out.c_str() + at,
+                        "nominal outcome: position (%lf, %lf, %lf) mm, rotation %lf deg, "
+                        "displacement %lf mm, pusher force %lf N;",
+                        &x, &y, &z, &rotation, &displacement, &force),
+            6)
+      << h.out;
+  EXPECT_NEAR(z, q["position_z"].get<double>() * 1e3, 1e-3 * std::abs(z) + 1e-9);
+  EXPECT_NEAR(displacement, q["displacement"].get<double>() * 1e3, 1e-3 * displacement);
+  EXPECT_GT(displacement, 1.0) << "a push of millimetres, printed in mm";
+  EXPECT_NEAR(force, q["pusher_force"].get<double>(), 1e-3 * force);
+  EXPECT_LT(q["displacement"].get<double>(), 0.1) << "JSON in metres";
+  // The table and the reasons in the same units: no m, rad or m/s left.
+  for (const char* si : {" m,", " rad,", " rad ", " m/s ", "rad/m", "/m/s", " m)"})
+    EXPECT_EQ(h.out.find(si), std::string::npos) << si << " in\n" << h.out;
+  EXPECT_NE(h.out.find("  mm/s  position_z"), std::string::npos) << h.out;
+  EXPECT_NE(h.out.find(" deg (0."), std::string::npos) << "nearest boundary in deg\n" << h.out;
+  // JSON keeps the parameter's SI unit.
+  for (const auto& p : doc["parameters"]) {
+    if (p["name"] == "push_speed") {
+      EXPECT_EQ(p["unit"], "m/s");
+    }
+  }
+}
+
+// Pins: the campaign view of `arena sensitivity` printed rotation spreads in
+// mrad beside positions in mm; human output gives angles in degrees.
+TEST_F(Honest, CampaignSensitivityPrintsDegrees) {
+  auto c = Smoke();
+  c["replicates"] = 2;
+  const std::string db = dir_ + "/s.db";
+  ASSERT_EQ(Arena("run " + Write("s.json", c.dump()) + " --db " + db + " --cells 1 --quiet").rc, 0);
+  const auto r = Arena("sensitivity --db " + db + " --campaign 1 --ensemble 2 --no-store");
+  ASSERT_EQ(r.rc, 0) << r.err;
+  EXPECT_NE(r.out.find("pos spread mm obs/pred"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("rot spread deg o/p"), std::string::npos) << r.out;
+  EXPECT_EQ(r.out.find("mrad"), std::string::npos) << r.out;
 }
 
 }  // namespace

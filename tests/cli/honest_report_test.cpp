@@ -15,6 +15,7 @@
 #include "arena/db/store.hpp"
 #include "arena/orchestrator/campaign.hpp"
 #include "db/db_test_util.hpp"
+#include "deadline_report.hpp"
 #include "failure_reasons.hpp"
 #include "plot_map.hpp"
 #include "status_cells.hpp"
@@ -399,6 +400,28 @@ TEST(Plausibility, SpeedLimitIsTheCampaignProfiles) {
   EXPECT_EQ(FieldOf(doc.dump()).rfind("variations.push_speed:", 0), 0u);
   doc["defects"]["max_pusher_speed"] = 1.0;
   EXPECT_EQ(FieldOf(doc.dump()), "accepted");
+}
+
+// Pins: "8 of 9 trial attempts missed control deadlines: 0 of 3384 samples
+// held" read as a contradiction: the attempts missed by a loop p99 above the
+// period (late commands, none held while the cell waited) were not counted
+// apart. The line now says how many were late and how many samples held.
+TEST(Deadlines, HeldAndLateAttemptsCountedApart) {
+  DeadlineReport r;
+  r.runs = 9;
+  r.samples = 3384;
+  r.held = 0;
+  r.runs_missing = 8;
+  r.runs_late = 8;
+  r.p50_ms = 0.268;
+  r.worst_p99_ms = 6.91;
+  const std::string line = FormatDeadlines(r, "  ");
+  EXPECT_EQ(line,
+            "  closed loop: 8 of 9 trial attempts missed control deadlines: 0 of 3384 samples "
+            "held (0-0 per attempt); 8 with loop latency p99 above the 4 ms period (p99 up to "
+            "6.91 ms), loop latency p50 0.268 ms\n");
+  EXPECT_EQ(DeadlinesJson(r)["attempts_late"], 8);
+  EXPECT_EQ(FormatDeadlines(DeadlineReport{}, ""), "");  // open loop: nothing
 }
 
 }  // namespace

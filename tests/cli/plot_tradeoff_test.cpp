@@ -273,8 +273,10 @@ TEST(PlotTradeoff, FrontComputedOnTheAxisDrawn) {
 }
 
 // Pins (issue 26): the slowest settings were drawn on the frame (their
-// markers and labels clipped by it). Every marker, with its radius, and the
-// start of every label lie inside the plot's frame; the SVG is written to
+// markers and labels clipped by it), and then the highest points 14 px under
+// it, their labels pushed below them. Every marker keeps room for a label
+// between it and each side of the frame (its radius, a 2 px gap and a 10 px
+// label), and every label's box lies inside the frame; the SVG is written to
 // tradeoff_frame.svg in the test's temporary folder to be looked at (never
 // into the folder the test was started from).
 TEST(PlotTradeoff, SlowestPointsAndLabelsInsideTheFrame) {
@@ -316,17 +318,20 @@ TEST(PlotTradeoff, SlowestPointsAndLabelsInsideTheFrame) {
       for (const auto* c = s->FirstChildElement("circle"); c; c = c->NextSiblingElement("circle")) {
         const double cx = c->DoubleAttribute("cx"), cy = c->DoubleAttribute("cy");
         const double r = c->DoubleAttribute("r");
-        EXPECT_GE(cx - r, x0) << name << " marker on the left frame";
-        EXPECT_LE(cx + r, x1) << name << " marker on the right frame";
-        EXPECT_GE(cy - r, y0) << name << " marker on the top frame";
-        EXPECT_LE(cy + r, y1) << name << " marker on the bottom frame";
+        const double room = r + 2 + 10 - 0.5;  // marker, gap, label (half a px of rounding)
+        EXPECT_GE(cx - x0, room) << name << " marker on the left frame";
+        EXPECT_GE(x1 - cx, room) << name << " marker on the right frame";
+        EXPECT_GE(cy - y0, room) << name << " marker on the top frame";
+        EXPECT_GE(y1 - cy, room) << name << " marker on the bottom frame";
         ++markers;
       }
       for (const auto* t = s->FirstChildElement("text"); t; t = t->NextSiblingElement("text")) {
         if (!t->Attribute("class", "point-label")) continue;
-        const double x = t->DoubleAttribute("x");
+        const double x = t->DoubleAttribute("x"), y = t->DoubleAttribute("y");
         EXPECT_GT(x, x0) << name << " label " << t->GetText();
         EXPECT_LT(x, x1) << name << " label " << t->GetText();
+        EXPECT_GE(y - 8, y0) << name << " label on the top frame " << t->GetText();  // 9 px text
+        EXPECT_LE(y + 2, y1) << name << " label on the bottom frame " << t->GetText();
         ++labels;
       }
     }

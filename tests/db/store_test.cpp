@@ -421,16 +421,24 @@ TEST(StoreTrial, ResetFailureStillLetsTrialFinishAndRecordsStartState) {
   p.model_key = "k";
   store->RecordPrediction(t->trial_id, 1, p);
   store->FinishTrial(t->trial_id, 1);
-  // The next trial on this cell starts where the reset left the object.
+  // The next trial on this cell starts where the reset left the object (until
+  // its own stream says where its cell measured it); the first trial's start
+  // is its stream's first sample, observed 0.5 mm off.
   auto next = store->ClaimNextTrial("c");
   ASSERT_TRUE(next);
   const auto drift = store->Drift();
   ASSERT_EQ(drift.size(), 1u);
   EXPECT_EQ(drift[0].cell_id, "c");
-  EXPECT_EQ(drift[0].trials, 1);
-  EXPECT_NEAR(drift[0].mean_position_error, 0.005, 1e-12);
-  EXPECT_NEAR(drift[0].mean_dx, 0.003, 1e-12);
-  EXPECT_NEAR(drift[0].mean_angle_error, 0.1, 1e-9);
+  EXPECT_EQ(drift[0].trials, 2);
+  EXPECT_NEAR(drift[0].max_position_error, 0.005, 1e-12);
+  EXPECT_NEAR(drift[0].mean_dx, (0.0005 + 0.003) / 2, 1e-12);
+  EXPECT_NEAR(drift[0].max_angle_error, 0.1, 1e-9);
+  const auto only_streams = [&] {
+    const auto d = store->Drift();
+    ASSERT_EQ(d.size(), 1u);
+    EXPECT_NEAR(d[0].max_position_error, 0.0005, 1e-12);
+    EXPECT_NEAR(d[0].max_angle_error, 0.0, 1e-12);
+  };
   // The claim consumed the start state: a trial claimed without a reset in
   // between has none, and a reset that observed nothing leaves none.
   store->RetryTrial(next->trial_id, next->attempt, "cell lost", 3, 0);
@@ -438,7 +446,8 @@ TEST(StoreTrial, ResetFailureStillLetsTrialFinishAndRecordsStartState) {
   ASSERT_TRUE(unknown);
   // The retried attempt started from an unknown state: the first attempt's
   // observation (and its error) no longer describe the trial (issue 16, item 10).
-  EXPECT_TRUE(store->Drift().empty());
+  EXPECT_EQ(store->Drift()[0].trials, 1);
+  only_streams();
   auto in = store->BeginIngest(unknown->trial_id, unknown->attempt, testing::SceneSites());
   in->Add(MakeSample(0));
   in->Finish();
@@ -452,7 +461,56 @@ TEST(StoreTrial, ResetFailureStillLetsTrialFinishAndRecordsStartState) {
   store->RecordPrediction(unknown->trial_id, unknown->attempt, p);
   store->FinishTrial(unknown->trial_id, unknown->attempt);
   ASSERT_TRUE(store->ClaimNextTrial("c"));
-  EXPECT_TRUE(store->Drift().empty());  // a blind reset observed nothing either
+  // A blind reset observed nothing either; the retried attempt's stream did.
+  EXPECT_EQ(store->Drift()[0].trials, 2);
+  only_streams();
+  ExpectHealthy(*store);
+}
+
+// Pins issue 26 item 4 in the store: a trial's start state was only the
+// reset's observation copied at the claim, so a cell's first trial (and one
+// whose cell's reset was aimed at another trial) had none though it ran.
+// Publishing the stream now stores the start its cell measured: the first
+// sample's observed pose, or the sample's own pose when the sensors dropped
+// it (as a prediction starts), with its errors against the nominal start.
+TEST(StoreTrial, PublishedStreamStoresTheStartItsCellMeasured) {
+  TempDir dir;
+  auto store = Store::Open(dir.File("s.db"));
+  store->UpsertCell("c", {"point"});
+  store->CreateCampaign(MakeCampaign(), MakeTrials(2));
+  const auto column = [&](const char* name, std::int64_t id) {
+    return RawScalar(dir.File("s.db"), std::string("SELECT ") + name +
+                                           " FROM trials WHERE id = " + std::to_string(id));
+  };
+  const auto number = [&](const char* name, std::int64_t id) {
+    return std::stod(column(name, id));
+  };
+  auto first = store->ClaimNextTrial("c");  // no reset before it
+  ASSERT_TRUE(first);
+  EXPECT_EQ(column("start_x", first->trial_id), "");
+  auto ingest = store->BeginIngest(first->trial_id, first->attempt, testing::SceneSites());
+  Sample seen = MakeSample(1);
+  seen.observed_object_pose = {0.003, 0.004, 0, std::cos(0.05), 0, 0, std::sin(0.05)};
+  ingest->Add(seen);
+  ingest->Add(MakeSample(2));
+  EXPECT_EQ(column("start_x", first->trial_id), "");  // not before the stream is published
+  ingest->Finish();
+  EXPECT_NEAR(number("start_x", first->trial_id), 0.003, 1e-15);
+  EXPECT_NEAR(number("start_qz", first->trial_id), std::sin(0.05), 1e-15);
+  EXPECT_NEAR(number("start_position_error", first->trial_id), 0.005, 1e-12);
+  EXPECT_NEAR(number("start_angle_error", first->trial_id), 0.1, 1e-9);
+  // The sensors dropped the first sample: the sample's own pose.
+  auto second = store->ClaimNextTrial("c");
+  ASSERT_TRUE(second);
+  auto in = store->BeginIngest(second->trial_id, second->attempt, testing::SceneSites());
+  Sample dropped = MakeSample(3);  // MakeSample(3) is a dropped observation
+  ASSERT_FALSE(dropped.observed_valid);
+  dropped.object_pose = {-0.002, 0, 0, 1, 0, 0, 0};
+  in->Add(dropped);
+  in->Finish();
+  EXPECT_NEAR(number("start_x", second->trial_id), -0.002, 1e-15);
+  EXPECT_NEAR(number("start_position_error", second->trial_id), 0.002, 1e-12);
+  EXPECT_NEAR(number("start_angle_error", second->trial_id), 0.0, 1e-12);
   ExpectHealthy(*store);
 }
 

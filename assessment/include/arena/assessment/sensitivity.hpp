@@ -77,6 +77,14 @@ struct Parameter {
   double lower = -std::numeric_limits<double>::infinity();  // smallest admissible value
 };
 
+// The unit human output shows a value in SI `si_unit` in: mm for m, deg for
+// rad, and so per second; N, kg and "1" as they are. JSON stays SI.
+struct HumanUnit {
+  std::string unit;
+  double factor = 1;  // human value = SI value * factor
+};
+HumanUnit HumanUnitOf(const std::string& si_unit);
+
 // Every parameter the scene has (no pusher: no pusher parameters).
 std::vector<Parameter> SceneParameters(const mechanics::Scene& scene);
 
