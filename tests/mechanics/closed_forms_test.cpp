@@ -222,6 +222,49 @@ TEST(ClosedForms, CarriedPivotAlignsWithinBoundedResolves) {
   EXPECT_NE(r.error.find("model.inertia"), std::string::npos) << r.error;
 }
 
+// A slipping grasp: a 1.5 kg box held by two point fingers (grip 10 N,
+// μ 0.5: 2 μ N = 10 N, below its weight 14.7 N) under gravity tilted by
+// α = 20° from -z towards -y, nothing else. Gravity and both fingers'
+// friction act through the centre of mass (the fingers on the grip axis x),
+// so nothing turns it; friction opposes the slip, and the net tangential
+// load is along gravity from rest on: on the circular cone the box slides
+// straight along gravity's direction, α = 20° from -z in the y-z plane,
+// whatever the facets. The polyhedral cone steers it towards its edges:
+// 25.49° at 4 facets, 20.43° at 8, 18.79° at 16, 19.97° at 64. The aligned
+// cone: 20.0000° at all four, and the same speed at all four.
+TEST(ClosedForms, SlippingGraspSlidesAlongTheNetTangentialLoad) {
+  const double alpha = 20.0 * std::numbers::pi / 180, g = 9.81;
+  char gravity[120];
+  std::snprintf(gravity, sizeof gravity, R"("gravity":[0,%.17g,%.17g],)", -g * std::sin(alpha),
+                -g * std::cos(alpha));
+  const Scene scene = Parse(
+      R"("object":{"shape":"box","size":[0.05,0.03,0.1],"mass":1.5,"pose":{"position":[0,0,0],)"
+      R"("rpy":[0,0,0]}},)" +
+      std::string(gravity) + R"("duration":0.2,"grip_force":10.0,)" + kPointFingers +
+      R"(,"model":{"facets":8,"points":3,"dt":0.001,"reduce":"full","cone":"aligned",)"
+      R"("inertia":"carried"})");
+  double speed8 = 0;
+  for (int facets : {8, 4, 16, 64}) {
+    Scene s = scene;
+    s.model.facets = facets;
+    const TrajectorySample last = SimulateOk(s).samples.back();
+    const double direction = std::atan2(-last.velocity.y(), -last.velocity.z());
+    std::printf("slipping grasp, %d facets: %.4f deg, %.6f m/s\n", facets,
+                direction * 180 / std::numbers::pi, last.velocity.norm());
+    EXPECT_NEAR(direction, alpha, 1.0 * std::numbers::pi / 180) << facets;  // the target: 1°
+    EXPECT_NEAR(direction, alpha, 1e-4) << facets;                          // what it does
+    if (facets == 8) speed8 = last.velocity.norm();
+    EXPECT_NEAR(last.velocity.norm(), speed8, 0.01 * speed8) << facets;
+    EXPECT_LT(std::abs(last.position.x()), 1e-4) << facets;
+  }
+  Scene polyhedral = scene;
+  polyhedral.model.cone = ConeModel::kPolyhedral;
+  polyhedral.model.facets = 4;
+  const TrajectorySample p = SimulateOk(polyhedral).samples.back();
+  EXPECT_GT(std::atan2(-p.velocity.y(), -p.velocity.z()), alpha + 0.05)
+      << "the steered slip this scene measures";
+}
+
 // The two model options are read, written back when not the default
 // (elastic pads, since issue 31, and the polyhedral cone), and a wrong
 // value is refused naming the field.
