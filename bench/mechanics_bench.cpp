@@ -200,12 +200,18 @@ ARENA_MECH_BENCH(patches_no_pusher_full, kPatches, false, Reduce::kFull);
 // and full: 6 DOF, where the cone can align) and the pivot past its stall
 // (600 steps at dt 1 ms); step_mean_us, step_median_us and the aligned
 // cones' re-solves per run.
-void StepDefaults(benchmark::State& state, int scene, bool old_defaults) {
+// `aligned`: the defaults with "cone": "aligned" (carried momentum: it is
+// refused with quasi-static steps in 6 DOF).
+void StepDefaults(benchmark::State& state, int scene, bool old_defaults, bool aligned = false) {
   Scene s = scene == 2 ? StallPivot()
                        : Make(kCanonical, true, scene == 1 ? Reduce::kFull : Reduce::kAuto);
   if (old_defaults) {
     s.model.pads = PadModel::kRigid;
     s.model.cone = ConeModel::kPolyhedral;
+  }
+  if (aligned) {
+    s.model.cone = ConeModel::kAligned;
+    s.model.inertia = InertiaModel::kCarried;
   }
   const int steps = static_cast<int>(std::lround(s.duration / s.model.dt));
   std::vector<double> us;
@@ -238,6 +244,9 @@ BENCHMARK_CAPTURE(StepDefaults, canonical_full_old, 1, true)->Unit(benchmark::kM
 BENCHMARK_CAPTURE(StepDefaults, canonical_full_new, 1, false)->Unit(benchmark::kMillisecond);
 BENCHMARK_CAPTURE(StepDefaults, pivot_old, 2, true)->Unit(benchmark::kMillisecond);
 BENCHMARK_CAPTURE(StepDefaults, pivot_new, 2, false)->Unit(benchmark::kMillisecond);
+BENCHMARK_CAPTURE(StepDefaults, canonical_full_aligned, 1, false, true)
+    ->Unit(benchmark::kMillisecond);
+BENCHMARK_CAPTURE(StepDefaults, pivot_aligned, 2, false, true)->Unit(benchmark::kMillisecond);
 
 }  // namespace
 
