@@ -252,7 +252,9 @@ void Ingest::Poll() {
 
 void Ingest::Flush() { impl_->Flush(); }
 
-std::int64_t Ingest::Finish(TrialEnd outcome) {
+std::int64_t Ingest::Finish(TrialEnd outcome) { return Finish(outcome, FinishAlso{}); }
+
+std::int64_t Ingest::Finish(TrialEnd outcome, const FinishAlso& also) {
   auto& m = *impl_;
   if (m.finished) throw StoreError(StoreError::Kind::kBadInput, "Ingest::Finish: already finished");
   if (outcome == TrialEnd::kNone)
@@ -260,6 +262,8 @@ std::int64_t Ingest::Finish(TrialEnd outcome) {
   m.CloseChunk();
   Tx tx(m.store->db, true);
   const auto row = CheckIngestable(*m.store, m.trial_id, m.attempt, "Ingest::Finish");
+  if (also.execution)
+    internal::WriteExecution(*m.store, m.trial_id, m.attempt, *also.execution, "Ingest::Finish");
   m.WriteReady();
   const double now = m.store->Now();
   {
@@ -321,6 +325,9 @@ std::int64_t Ingest::Finish(TrialEnd outcome) {
     auto u = m.store->Prepare("UPDATE trials SET outcome = ?, executed_at = ? WHERE id = ?");
     u->Bind(1, ToString(outcome)).Bind(2, now).Bind(3, m.trial_id).Run();
   }
+  if (!also.begin_reset_rule.empty())
+    internal::WriteBeginReset(*m.store, m.trial_id, m.attempt, also.begin_reset_rule,
+                              "Ingest::Finish");
   tx.Commit();
   m.finished = true;
   return m.total;

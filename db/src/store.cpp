@@ -882,14 +882,19 @@ void Store::FailTrial(std::int64_t trial_id, int attempt, const std::string& rea
   tx.Commit();
 }
 
+void internal::WriteBeginReset(const Store::Impl& impl, std::int64_t trial_id, int attempt,
+                               std::string_view rule, const char* function) {
+  const auto row = LoadTrialRow(impl, trial_id, function);
+  CheckAttempt(row, trial_id, attempt, function);
+  WriteTransition(impl, trial_id, attempt, row.state, TrialState::kResetting, row.cell_id,
+                  row.state == TrialState::kResetFailed ? "reset retried" : "reset sent",
+                  rule.empty() ? std::string_view("reset.unnamed") : rule, function);
+}
+
 void Store::BeginReset(std::int64_t trial_id, int attempt, std::string_view rule) {
   impl_->RequireWritable("BeginReset");
   Tx tx(impl_->db, true);
-  const auto row = LoadTrialRow(*impl_, trial_id, "BeginReset");
-  CheckAttempt(row, trial_id, attempt, "BeginReset");
-  WriteTransition(*impl_, trial_id, attempt, row.state, TrialState::kResetting, row.cell_id,
-                  row.state == TrialState::kResetFailed ? "reset retried" : "reset sent",
-                  rule.empty() ? std::string_view("reset.unnamed") : rule, "BeginReset");
+  internal::WriteBeginReset(*impl_, trial_id, attempt, rule, "BeginReset");
   tx.Commit();
 }
 
@@ -1138,15 +1143,25 @@ std::vector<EvaluationResult> Store::ListEvaluationResults(std::int64_t evaluati
   return out;
 }
 
+void internal::WriteExecution(const Store::Impl& impl, std::int64_t trial_id, int attempt,
+                              const ExecutionRecord& record, const char* function) {
+  const auto row = LoadTrialRow(impl, trial_id, function);
+  CheckAttempt(row, trial_id, attempt, function);
+  auto u =
+      impl.Prepare("UPDATE trials SET backend = ?, truth = ?, defects_applied = ? WHERE id = ?");
+  u->Bind(1, record.backend)
+      .Bind(2, record.truth)
+      .Bind(3, record.defects_applied_json)
+      .Bind(4, trial_id)
+      .Run();
+}
+
 void Store::RecordExecution(std::int64_t trial_id, int attempt, const std::string& backend,
                             const std::string& truth, const std::string& defects_applied_json) {
   impl_->RequireWritable("RecordExecution");
   Tx tx(impl_->db, true);
-  const auto row = LoadTrialRow(*impl_, trial_id, "RecordExecution");
-  CheckAttempt(row, trial_id, attempt, "RecordExecution");
-  auto u =
-      impl_->Prepare("UPDATE trials SET backend = ?, truth = ?, defects_applied = ? WHERE id = ?");
-  u->Bind(1, backend).Bind(2, truth).Bind(3, defects_applied_json).Bind(4, trial_id).Run();
+  internal::WriteExecution(*impl_, trial_id, attempt, {backend, truth, defects_applied_json},
+                           "RecordExecution");
   tx.Commit();
 }
 

@@ -31,6 +31,13 @@ void WriteTransition(const Store::Impl& impl, std::int64_t trial_id, int attempt
                      TrialState to, const std::string& cell_id, const std::string& reason,
                      std::string_view rule, const char* function);
 
+// Store::RecordExecution's and Store::BeginReset's writes without a
+// transaction of their own (Ingest::Finish joins them to its own).
+void WriteExecution(const Store::Impl& impl, std::int64_t trial_id, int attempt,
+                    const ExecutionRecord& record, const char* function);
+void WriteBeginReset(const Store::Impl& impl, std::int64_t trial_id, int attempt,
+                     std::string_view rule, const char* function);
+
 // Inserts an active campaign's row (fields checked, kBadInput naming
 // `function`); no transaction of its own. @returns its id.
 std::int64_t InsertCampaignRow(const Store::Impl& impl, const NewCampaign& campaign,

@@ -83,6 +83,9 @@ class SqliteSink : public GroundTruthSink {
   void Add(const std::vector<db::Sample>& samples) override { ingest_->Add(samples); }
   void Poll() override { ingest_->Poll(); }
   std::int64_t Finish() override { return ingest_->Finish(); }
+  std::int64_t Finish(const db::FinishAlso& also) {
+    return ingest_->Finish(db::TrialEnd::kOk, also);
+  }
 
  private:
   std::unique_ptr<db::Ingest> ingest_;
@@ -219,6 +222,11 @@ class SqliteTrialStore : public TrialStore {
   }
   void BeginReset(std::int64_t id, int attempt, const std::string& rule) override {
     s_.BeginReset(id, attempt, rule);
+  }
+  // One transaction (Ingest::Finish with `also`): every sink here is a SqliteSink.
+  std::int64_t PublishExecuted(GroundTruthSink& sink, std::int64_t, int,
+                               const db::FinishAlso& also) override {
+    return static_cast<SqliteSink&>(sink).Finish(also);
   }
   void CompleteReset(std::int64_t id, int attempt, const db::ResetReport& r,
                      const std::string& rule) override {

@@ -7,7 +7,9 @@
 #include <deque>
 #include <functional>
 #include <mutex>
+#include <optional>
 #include <set>
+#include <utility>
 
 #include <spdlog/spdlog.h>
 #include <nlohmann/json.hpp>
@@ -91,6 +93,16 @@ db::ResetReport UnobservedReset(const std::string& reason) {
 
 }  // namespace
 
+std::int64_t TrialStore::PublishExecuted(GroundTruthSink& sink, std::int64_t trial_id, int attempt,
+                                         const db::FinishAlso& also) {
+  if (also.execution)
+    RecordExecution(trial_id, attempt, also.execution->backend, also.execution->truth,
+                    also.execution->defects_applied_json);
+  const std::int64_t n = sink.Finish();
+  if (!also.begin_reset_rule.empty()) BeginReset(trial_id, attempt, also.begin_reset_rule);
+  return n;
+}
+
 struct TrialDriver::Impl {
   DriverOptions opt;
   ServiceIdentity me;
@@ -170,6 +182,9 @@ struct TrialDriver::Impl {
     std::string stated_truth;               // the EXECUTE status's truth (set with `expected`)
     assessment::RecordedCommands commands;  // closed loop: the commands the cell applied
     bool publishing = false;  // the publish step is under way (or waiting on the store)
+    // What the EXECUTED status said ran the trial, when it is written with the
+    // publish (PublishExecuted) instead of on its own.
+    std::optional<db::ExecutionRecord> execution;
   };
   std::map<std::int64_t, Execution> executions;
   std::map<std::int64_t, PredictionDone> waiting_predictions;
@@ -896,23 +911,27 @@ struct TrialDriver::Impl {
     EndPhase(cell, DecideServiceEvent(cell.phase, event), reason);
   }
 
+  // Samples without contacts only from a trial whose truth says it measured
+  // no forces, and then all of them: never an absence read as a fact.
+  // @returns "" when the complete stream may be published.
+  static std::string StreamProblem(const Execution& ex) {
+    const bool poses_only = ex.stated_truth == dds::kTruthMeasuredNoForces;
+    if (ex.normals.empty() || !(poses_only ? ex.contactless != ex.next_sample : ex.contactless > 0))
+      return "";
+    return "ground truth refused: cell " + ex.cell_id + " sent " + std::to_string(ex.contactless) +
+           " of " + std::to_string(ex.next_sample) +
+           " samples without contacts, and its truth is '" + ex.stated_truth +
+           "' (only a measured trial that states it measured no forces, '" +
+           dds::kTruthMeasuredNoForces + "', may, and then in every sample)";
+  }
+
   void MaybeFinishExecution(std::int64_t trial_id) {
     auto it = executions.find(trial_id);
     if (it == executions.end()) return;
     Execution& ex = it->second;
     if (ex.publishing || ex.expected < 0 || ex.next_sample < ex.expected) return;
-    // Samples without contacts only from a trial whose truth says it measured
-    // no forces, and then all of them: never an absence read as a fact.
-    const bool poses_only = ex.stated_truth == dds::kTruthMeasuredNoForces;
-    if (!ex.normals.empty() &&
-        (poses_only ? ex.contactless != ex.next_sample : ex.contactless > 0)) {
-      FailStream(ex,
-                 "ground truth refused: cell " + ex.cell_id + " sent " +
-                     std::to_string(ex.contactless) + " of " + std::to_string(ex.next_sample) +
-                     " samples without contacts, and its truth is '" + ex.stated_truth +
-                     "' (only a measured trial that states it measured no forces, '" +
-                     dds::kTruthMeasuredNoForces + "', may, and then in every sample)",
-                 ServiceEvent::kStreamMalformed);
+    if (const std::string problem = StreamProblem(ex); !problem.empty()) {
+      FailStream(ex, problem, ServiceEvent::kStreamMalformed);
       return;
     }
     ex.publishing = true;
@@ -938,7 +957,11 @@ struct TrialDriver::Impl {
           }
           std::int64_t n = 0;
           try {
-            n = e.sink->Finish();
+            // The execution record, the publish and the move to resetting: one commit.
+            db::FinishAlso also;
+            also.execution = e.execution;
+            also.begin_reset_rule = kResetAfterExecute;
+            n = store.PublishExecuted(*e.sink, e.trial_id, e.attempt, also);
           } catch (const db::StoreError& err) {
             if (Judge(err) == StoreVerdict::kRetry) e.sink.reset();
             throw;
@@ -951,6 +974,10 @@ struct TrialDriver::Impl {
           auto eit = executions.find(trial_id);
           if (eit == executions.end()) return;
           spdlog::error("{}: {}", tag, e.what());
+          // Refused with the publish: what ran the trial is still recorded, as before the fold.
+          if (eit->second.execution)
+            WriteExecution(trial_id, eit->second.attempt,
+                           *std::exchange(eit->second.execution, {}));
           CellRun& c = Cell(eit->second.cell_id);
           EndPhase(c, DecideServiceEvent(c.phase, ServiceEvent::kStoreRefusedTruth), e.what());
         });
@@ -995,7 +1022,7 @@ struct TrialDriver::Impl {
               aim_current ? std::move(c.next_aim) : NextTrialFor(c, false);
           c.aim_known = false;
           c.next_aim.reset();
-          store.BeginReset(trial_id, attempt, kResetAfterExecute);
+          // executed -> resetting was written with the publish (PublishExecuted).
           c.reset_mounts.reset();
           if (next) c.reset_mounts = FixturesOfTrial(next->trial_id, next->scene_json);
           msg::TrialCommand cmd = Command(c, msg::PHASE_RESET);
@@ -1038,17 +1065,23 @@ struct TrialDriver::Impl {
 
   // What the trial ran on and which defects were applied (the cell's word).
   // Metadata: a store error here is logged by Step's policy, never blocks the trial.
-  void RecordExecution(const Execution& ex, const nlohmann::json& detail) {
+  // When the stream is complete and sound (it is published at once), the
+  // record joins the publish's transaction (PublishExecuted): one commit less.
+  void RecordExecution(Execution& ex, const nlohmann::json& detail) {
     if (!detail.is_object()) return;
-    const std::string backend = detail.value("backend", std::string());
-    const std::string truth = detail.value("truth", std::string());
-    const std::string applied =
-        detail.contains("defects_applied") ? detail["defects_applied"].dump() : std::string();
-    const std::int64_t trial_id = ex.trial_id;
-    const int attempt = ex.attempt;
+    db::ExecutionRecord record{
+        detail.value("backend", std::string()), detail.value("truth", std::string()),
+        detail.contains("defects_applied") ? detail["defects_applied"].dump() : std::string()};
+    if (ex.next_sample >= ex.expected && StreamProblem(ex).empty()) {
+      ex.execution = std::move(record);
+      return;
+    }
+    WriteExecution(ex.trial_id, ex.attempt, std::move(record));
+  }
+  void WriteExecution(std::int64_t trial_id, int attempt, db::ExecutionRecord r) {
     Step("trial " + std::to_string(trial_id) + ": record execution", "",
-         [this, trial_id, attempt, backend, truth, applied] {
-           store.RecordExecution(trial_id, attempt, backend, truth, applied);
+         [this, trial_id, attempt, r] {
+           store.RecordExecution(trial_id, attempt, r.backend, r.truth, r.defects_applied_json);
          });
   }
 
@@ -1089,11 +1122,12 @@ struct TrialDriver::Impl {
         // The cell changed what differed before it ran (executors/trial_start.hpp).
         RecordChanges(cell, ex.trial_id, ex.attempt, "execute",
                       FixturesOfTrial(ex.trial_id, ex.scene_json));
+        ex.expected = st.samples();
         RecordExecution(ex, detail);
       }
         RecordClosedLoop(ex, st);
         cell.execute_wall_s = st.phase_wall_s();
-        ex.expected = st.samples();
+        ex.expected = st.samples();  // also when the detail was not an object
         ex.stream_deadline = now() + Dur(opt.service.stream_grace_s);
         MaybeFinishExecution(ex.trial_id);
         return;

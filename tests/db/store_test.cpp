@@ -613,6 +613,47 @@ TEST(StoreIngest, ReingestSameAttemptReplacesNeverDuplicates) {
   ExpectHealthy(*store);
 }
 
+// Finish with `also`: the execution record, the publish and the move to
+// resetting in one transaction, each with its checks and audit row; a refusal
+// of the last part leaves nothing of the others.
+TEST(StoreIngest, FinishWithAlsoIsOneStepOfThreeAndAllOrNothing) {
+  TempDir dir;
+  auto store = Store::Open(dir.File("s.db"));
+  store->UpsertCell("c", {"point"});
+  store->CreateCampaign(MakeCampaign(), MakeTrials(1));
+  auto t = store->ClaimNextTrial("c");
+  FinishAlso also;
+  also.execution = ExecutionRecord{"model", "simulator", "{}"};
+  also.begin_reset_rule = "reset.after_execute";
+  {
+    auto in = store->BeginIngest(t->trial_id, 1, testing::SceneSites());
+    for (int i = 0; i < 20; ++i) in->Add(MakeSample(i));
+    EXPECT_EQ(in->Finish(TrialEnd::kOk, also), 20);
+  }
+  EXPECT_EQ(store->GetTrial(t->trial_id).state, TrialState::kResetting);
+  EXPECT_EQ(RawScalar(store->path(), "SELECT backend || '/' || truth FROM trials"),
+            "model/simulator");
+  auto log = store->ListTransitions(t->trial_id);
+  ASSERT_EQ(log.size(), 4u);
+  EXPECT_EQ(log[2].to_state, "executed");
+  EXPECT_EQ(log[3].to_state, "resetting");
+  EXPECT_EQ(log[3].rule, "reset.after_execute");
+  EXPECT_EQ(log[3].reason, "reset sent");
+  // A re-ingest now in resetting: resetting -> resetting is no edge, so the
+  // whole Finish is refused: the old stream stays, the record is not rewritten.
+  also.execution = ExecutionRecord{"mujoco", "robot", "{}"};
+  {
+    auto in = store->BeginIngest(t->trial_id, 1, testing::SceneSites());
+    for (int i = 0; i < 5; ++i) in->Add(MakeSample(i + 100));
+    EXPECT_STORE_ERROR(in->Finish(TrialEnd::kOk, also), K::kIllegalTransition);
+  }
+  EXPECT_EQ(store->GetTrial(t->trial_id).state, TrialState::kResetting);
+  EXPECT_EQ(RawScalar(store->path(), "SELECT backend FROM trials"), "model");
+  EXPECT_EQ(store->ReadGroundTruth(t->trial_id).samples.size(), 20u);
+  EXPECT_EQ(store->ListTransitions(t->trial_id).size(), 4u);
+  ExpectHealthy(*store);
+}
+
 TEST(StoreIngest, NanInfAndOutOfOrderRefused) {
   TempDir dir;
   auto store = Store::Open(dir.File("s.db"));

@@ -180,6 +180,18 @@ struct FakeStore : TrialStore {
     Move(id, attempt, db::TrialState::kResetting);
     trials.at(id).rules.push_back(rule);
   }
+  // As the real store's one transaction: each part's fault comes before any change.
+  std::int64_t PublishExecuted(GroundTruthSink& sink, std::int64_t id, int attempt,
+                               const db::FinishAlso& also) override {
+    if (also.execution) faults.Hit("RecordExecution");
+    if (!also.begin_reset_rule.empty()) faults.Hit("BeginReset");
+    const std::int64_t n = sink.Finish();
+    if (!also.begin_reset_rule.empty()) {
+      Move(id, attempt, db::TrialState::kResetting);
+      trials.at(id).rules.push_back(also.begin_reset_rule);
+    }
+    return n;
+  }
   void CompleteReset(std::int64_t id, int attempt, const db::ResetReport& r,
                      const std::string& rule) override {
     faults.Hit("CompleteReset");

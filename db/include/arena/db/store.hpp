@@ -566,6 +566,24 @@ struct IngestOptions {
 
 class Store;
 
+// What executed a trial (the cell's EXECUTED status): Store::RecordExecution's fields.
+struct ExecutionRecord {
+  std::string backend;
+  std::string truth;
+  std::string defects_applied_json;
+};
+
+// Writes Ingest::Finish adds to its own transaction: on the trial's path one
+// commit where there were three (a commit costs by the pages it writes, not
+// by its statements: bench/README.md, "Overhead, part IV").
+struct FinishAlso {
+  // Written first, as Store::RecordExecution.
+  std::optional<ExecutionRecord> execution;
+  // Non-empty: the trial then moves executed -> resetting, as Store::BeginReset
+  // with this rule (its audit row and edge check the same).
+  std::string begin_reset_rule;
+};
+
 // Buffers the ground truth of one (trial, attempt) and writes it in batched
 // transactions (prepared statements, BLOB chunks). Nothing it writes is
 // visible to readers until Finish() publishes it. Not thread-safe.
@@ -586,9 +604,11 @@ class Ingest {
   // Commits the rest, writes the per-trial summary, publishes the stream and
   // moves the trial dispatched -> executed (or, on a re-ingest of a trial
   // already past executed at this attempt, swaps the stream in) -- all in one
-  // transaction. `outcome` is the cell's result ("ok" normally).
+  // transaction. `outcome` is the cell's result ("ok" normally). `also`: the
+  // writes that join that transaction; any refusal rolls back all of them.
   // @returns the number of samples published.
   std::int64_t Finish(TrialEnd outcome = TrialEnd::kOk);
+  std::int64_t Finish(TrialEnd outcome, const FinishAlso& also);
   std::int64_t samples() const;
 
  private:

@@ -107,6 +107,13 @@ class TrialStore {
   virtual void FailTrial(std::int64_t trial_id, int attempt, const std::string& reason,
                          db::TrialEnd outcome, const std::string& rule) = 0;
   virtual void BeginReset(std::int64_t trial_id, int attempt, const std::string& rule) = 0;
+  // Publishes the stream (sink.Finish) with, in the same step, the trial's
+  // execution record before it (`also.execution`) and its move to resetting
+  // after it (`also.begin_reset_rule`): one transaction in production, so one
+  // commit on the trial's path where there were three; a refusal of any part
+  // refuses all. The default runs the parts one after another.
+  virtual std::int64_t PublishExecuted(GroundTruthSink& sink, std::int64_t trial_id, int attempt,
+                                       const db::FinishAlso& also);
   virtual void CompleteReset(std::int64_t trial_id, int attempt, const db::ResetReport& report,
                              const std::string& rule) = 0;
   // RecordPrediction then FinishTrial (each its own transaction; both idempotent enough
