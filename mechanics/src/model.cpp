@@ -1043,7 +1043,7 @@ void ContactModel::Impl::Setup() {
 
   if (!SetupReduction()) return;
   aligned = tracked && !planar && opt.cone == ConeModel::kAligned;
-  quasi_static = opt.inertia == InertiaModel::kQuasiStatic;
+  quasi_static = InertiaOf(scene) == InertiaModel::kQuasiStatic;
   SetupScales();
   SetupContacts();
   SetupUnknowns();
@@ -1053,6 +1053,7 @@ void ContactModel::Impl::Setup() {
   info.points = opt.points;
   info.dt = dt;
   info.unknowns = n;
+  info.inertia = quasi_static ? InertiaModel::kQuasiStatic : InertiaModel::kCarried;
   states.assign(contacts.size(), ContactState{});
   basis.clear();
   SeatContacts();
