@@ -179,6 +179,11 @@ BENCHMARK_CAPTURE(StepInertia, pivot_carried, true, InertiaModel::kCarried)
     ->Unit(benchmark::kMillisecond);
 BENCHMARK_CAPTURE(StepInertia, pivot_quasi_static, true, InertiaModel::kQuasiStatic)
     ->Unit(benchmark::kMillisecond);
+// "auto" (quasi-static for these held objects).
+BENCHMARK_CAPTURE(StepInertia, canonical_auto, false, InertiaModel::kAuto)
+    ->Unit(benchmark::kMillisecond);
+BENCHMARK_CAPTURE(StepInertia, pivot_auto, true, InertiaModel::kAuto)
+    ->Unit(benchmark::kMillisecond);
 
 #define ARENA_MECH_BENCH(name, v, pusher, reduce)                                   \
   BENCHMARK_CAPTURE(Trial, name, v, pusher, reduce)->Unit(benchmark::kMillisecond); \

@@ -95,7 +95,9 @@ std::string ModelSettingsJson(const mechanics::ModelOptions& model) {
                          {"points", model.points},
                          {"dt", model.dt},
                          {"reduce", mechanics::ToString(model.reduce)},
-                         {"contacts", mechanics::ToString(model.contacts)}})
+                         {"contacts", mechanics::ToString(model.contacts)},
+                         // Whether the steps kept the momentum: it changes the answer.
+                         {"inertia", mechanics::ToString(model.inertia)}})
       .dump();
 }
 
@@ -282,27 +284,23 @@ db::Prediction ScoreSimulation(const mechanics::Scene& scene,
                                const mechanics::SimulationResult& result,
                                const std::vector<mechanics::TrajectorySample>& truth) {
   db::Prediction p;
-  nlohmann::json detail = {{"residuals",
-                            {{"force_balance", result.residuals.force_balance},
-                             {"complementarity", result.residuals.complementarity},
-                             {"cone", result.residuals.cone}}},
-                           {"solver",
-                            {{"steps", result.solver.steps},
-                             {"max_pivots", result.solver.max_pivots},
-                             {"failures", result.solver.failures}}},
-                           {"unknowns", result.model.unknowns},
-                           {"dof", result.model.dof},
-                           {"grasp",
-                            {{"status", mechanics::ToString(result.grasp)},
-                             {"changed_t", result.grasp_changed_t},
-                             {"note", result.grasp_note}}}};
+  nlohmann::json detail = {
+      {"residuals",
+       {{"force_balance", result.residuals.force_balance},
+        {"complementarity", result.residuals.complementarity},
+        {"cone", result.residuals.cone}}},
+      {"solver", nlohmann::json::parse(mechanics::SolverStatisticsJson(result.solver))},
+      {"unknowns", result.model.unknowns},
+      {"dof", result.model.dof},
+      // The inertia model the steps used ("auto" decided by the scene).
+      {"inertia", mechanics::ToString(result.model.inertia)},
+      {"grasp",
+       {{"status", mechanics::ToString(result.grasp)},
+        {"changed_t", result.grasp_changed_t},
+        {"note", result.grasp_note}}}};
   // The final pose of a run that ends oscillating is one phase of it: said.
-  if (result.oscillation.detected) {
-    detail["oscillation"] = {{"amplitude_m", result.oscillation.amplitude_m},
-                             {"amplitude_rad", result.oscillation.amplitude_rad},
-                             {"frequency_hz", result.oscillation.frequency_hz},
-                             {"window_s", result.oscillation.window_s}};
-  }
+  if (result.oscillation.detected)
+    detail["oscillation"] = nlohmann::json::parse(mechanics::OscillationJson(result.oscillation));
   switch (result.status) {
     case mechanics::SimulationStatus::kOk:
       break;

@@ -210,7 +210,7 @@ json ClosedLoopTrial::Detail(const mechanics::SimulationResult& result,
         {"settle_time_s", outcome.settle_time_s < 0 ? json(nullptr) : json(outcome.settle_time_s)}};
   }
   const TrialPerturbation& perturbation = layer_.perturbation();
-  return {
+  json detail = {
       {"mu_scale", perturbation.mu_scale},
       {"velocity_scale", perturbation.velocity_scale},
       {"velocity_offset",
@@ -226,10 +226,7 @@ json ClosedLoopTrial::Detail(const mechanics::SimulationResult& result,
         {"points", result.model.points},
         {"dt", result.model.dt},
         {"unknowns", result.model.unknowns}}},
-      {"solver",
-       {{"steps", result.solver.steps},
-        {"max_pivots", result.solver.max_pivots},
-        {"failures", result.solver.failures}}},
+      {"solver", json::parse(mechanics::SolverStatisticsJson(result.solver))},
       {"simulate_wall_s", result.wall_s},
       {"closed_loop",
        {{"controller", context_.spec.name},
@@ -241,6 +238,10 @@ json ClosedLoopTrial::Detail(const mechanics::SimulationResult& result,
         {"held", held},
         {"loop_ms", {{"p50", pct(0.5)}, {"p99", pct(0.99)}, {"max", pct(1.0)}}},
         {"outcome", score}}}};
+  // The truth's final pose is one phase of a swing when it ends in one: said.
+  if (result.oscillation.detected)
+    detail["oscillation"] = json::parse(mechanics::OscillationJson(result.oscillation));
+  return detail;
 }
 
 }  // namespace arena::executors

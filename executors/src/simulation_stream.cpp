@@ -24,22 +24,23 @@ std::string SimulationFailure(const mechanics::SimulationResult& r) {
 ExecuteOutcome StreamSimulation(const mechanics::SimulationResult& r, const SampleSink& sink) {
   ExecuteOutcome out;
   out.simulate_wall_s = r.wall_s;
-  out.detail_json = nlohmann::json({{"model",
-                                     {{"dof", r.model.dof},
-                                      {"facets", r.model.facets},
-                                      {"points", r.model.points},
-                                      {"dt", r.model.dt},
-                                      {"unknowns", r.model.unknowns}}},
-                                    {"residuals",
-                                     {{"force_balance", r.residuals.force_balance},
-                                      {"complementarity", r.residuals.complementarity},
-                                      {"cone", r.residuals.cone}}},
-                                    {"solver",
-                                     {{"steps", r.solver.steps},
-                                      {"max_pivots", r.solver.max_pivots},
-                                      {"failures", r.solver.failures}}},
-                                    {"simulate_wall_s", r.wall_s}})
-                        .dump();
+  nlohmann::json detail(
+      {{"model",
+        {{"dof", r.model.dof},
+         {"facets", r.model.facets},
+         {"points", r.model.points},
+         {"dt", r.model.dt},
+         {"unknowns", r.model.unknowns}}},
+       {"residuals",
+        {{"force_balance", r.residuals.force_balance},
+         {"complementarity", r.residuals.complementarity},
+         {"cone", r.residuals.cone}}},
+       {"solver", nlohmann::json::parse(mechanics::SolverStatisticsJson(r.solver))},
+       {"simulate_wall_s", r.wall_s}});
+  // The truth's final pose is one phase of a swing when it ends in one: said.
+  if (r.oscillation.detected)
+    detail["oscillation"] = nlohmann::json::parse(mechanics::OscillationJson(r.oscillation));
+  out.detail_json = detail.dump();
   if (r.status != mechanics::SimulationStatus::kOk || r.samples.empty()) {
     out.reason = SimulationFailure(r);
     out.failure = ExecuteFailure::kSimulation;

@@ -1043,7 +1043,7 @@ void ContactModel::Impl::Setup() {
 
   if (!SetupReduction()) return;
   aligned = tracked && !planar && opt.cone == ConeModel::kAligned;
-  quasi_static = opt.inertia == InertiaModel::kQuasiStatic;
+  quasi_static = InertiaOf(scene) == InertiaModel::kQuasiStatic;
   if (aligned && quasi_static) {
     // Refused rather than answered: the cone's re-solves and the balance's
     // re-solves do not settle together (issue 31's tilted push through the
@@ -1051,7 +1051,10 @@ void ContactModel::Impl::Setup() {
     // 0.055 rad turn), and a wrong answer is worse than none.
     status = SimulationStatus::kInvalidScene;
     error =
-        "model.cone \"aligned\" with model.inertia \"quasi_static\" on a 6-DOF scene is not "
+        std::string("model.cone \"aligned\" with model.inertia \"") +
+        (opt.inertia == InertiaModel::kAuto ? "auto\" (quasi-static for this held object)"
+                                            : "quasi_static\"") +
+        " on a 6-DOF scene is not "
         "supported yet (their re-solves do not settle together): use model.cone \"polyhedral\" "
         "or model.inertia \"carried\"";
     return;
@@ -1065,6 +1068,7 @@ void ContactModel::Impl::Setup() {
   info.points = opt.points;
   info.dt = dt;
   info.unknowns = n;
+  info.inertia = quasi_static ? InertiaModel::kQuasiStatic : InertiaModel::kCarried;
   states.assign(contacts.size(), ContactState{});
   basis.clear();
   SeatContacts();

@@ -97,7 +97,20 @@ const char* ToString(GripperCoupling coupling) {
 
 const char* ToString(PadModel pads) { return pads == PadModel::kElastic ? "elastic" : "rigid"; }
 const char* ToString(InertiaModel inertia) {
-  return inertia == InertiaModel::kQuasiStatic ? "quasi_static" : "carried";
+  switch (inertia) {
+    case InertiaModel::kCarried:
+      return "carried";
+    case InertiaModel::kQuasiStatic:
+      return "quasi_static";
+    case InertiaModel::kAuto:
+      return "auto";
+  }
+  return "?";
+}
+InertiaModel InertiaOf(const Scene& scene) {
+  if (scene.model.inertia != InertiaModel::kAuto) return scene.model.inertia;
+  return !scene.fingers.empty() && !scene.support ? InertiaModel::kQuasiStatic
+                                                  : InertiaModel::kCarried;
 }
 const char* ToString(ConeModel cone) {
   return cone == ConeModel::kAligned ? "aligned" : "polyhedral";
@@ -623,8 +636,20 @@ ModelOptions ReadModel(const json& v, const std::string& path) {
   model.pads = choice("pads", "elastic", "rigid") ? PadModel::kElastic : PadModel::kRigid;
   model.cone =
       choice("cone", "polyhedral", "aligned") ? ConeModel::kPolyhedral : ConeModel::kAligned;
-  model.inertia = choice("inertia", "carried", "quasi_static") ? InertiaModel::kCarried
-                                                               : InertiaModel::kQuasiStatic;
+  // Three values: "auto" added for issue 31 beside the two that keep their
+  // meaning ("carried" the default).
+  if (const json* c = o.Find("inertia")) {
+    const std::string text = String(*c, o.At("inertia"));
+    if (text == "auto")
+      model.inertia = InertiaModel::kAuto;
+    else if (text == "carried")
+      model.inertia = InertiaModel::kCarried;
+    else if (text == "quasi_static")
+      model.inertia = InertiaModel::kQuasiStatic;
+    else
+      throw SceneError(o.At("inertia"),
+                       "must be \"auto\", \"carried\" or \"quasi_static\", got " + Quote(text));
+  }
   return model;
 }
 

@@ -13,6 +13,7 @@
 
 #include <Eigen/Cholesky>
 #include <Eigen/QR>
+#include <nlohmann/json.hpp>
 
 #include "arena/mechanics/model.hpp"
 #include "arena/mechanics/pusher_motion.hpp"
@@ -53,6 +54,25 @@ const char* ToString(GraspStatus status) {
       return "left_geometry";
   }
   return "unknown";
+}
+
+std::string SolverStatisticsJson(const SolverStatistics& solver) {
+  return nlohmann::json({{"steps", solver.steps},
+                         {"max_pivots", solver.max_pivots},
+                         {"failures", solver.failures},
+                         {"quasi_static_solves", solver.quasi_static_solves},
+                         {"quasi_static_carried", solver.quasi_static_carried}})
+      .dump();
+}
+
+std::string OscillationJson(const Oscillation& oscillation) {
+  return nlohmann::json({{"detected", oscillation.detected},
+                         {"amplitude_m", oscillation.amplitude_m},
+                         {"amplitude_rad", oscillation.amplitude_rad},
+                         {"frequency_hz", oscillation.frequency_hz},
+                         {"window_s", oscillation.window_s},
+                         {"periods", oscillation.periods}})
+      .dump();
 }
 
 SimulationResult Simulate(const Scene& scene) { return Simulate(scene, nullptr); }

@@ -29,7 +29,7 @@ mechanics::Scene ApplyModelSettings(const mechanics::Scene& scene, const nlohman
 
 // "g8_k3_dt0.004_auto": the fidelity label predictions are stored under.
 std::string ModelKey(const mechanics::ModelOptions& model);
-// {"facets", "points", "dt", "reduce", "contacts"} as JSON text: what an
+// {"facets", "points", "dt", "reduce", "contacts", "inertia"} as JSON text: what an
 // arena prediction is stored with (db::Prediction::model_json).
 std::string ModelSettingsJson(const mechanics::ModelOptions& model);
 

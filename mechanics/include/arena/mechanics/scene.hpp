@@ -42,8 +42,13 @@ enum class ConeModel { kPolyhedral, kAligned };
 // dynamic). kQuasiStatic ("quasi_static"): each step is solved again from
 // its own answer until the inertial force M Δv / dt it needs is below 1e-6
 // of the force scale, so the forces balance (the mass only regularises the
-// solve) and the step ends on a balanced path.
-enum class InertiaModel { kCarried, kQuasiStatic };
+// solve) and the step ends on a balanced path. kAuto ("auto", added for
+// issue 31): quasi-static for an object held in a grasp (fingers and no
+// support), carried for one a support carries or no finger holds: on the
+// pushes of a support the balance is often not found within its solves.
+// Not the default: quasi-static steps with the aligned cone run away on
+// the tilted push (docs/scene.md, "What decides inertia").
+enum class InertiaModel { kCarried, kQuasiStatic, kAuto };
 
 struct Pose {
   Eigen::Vector3d position = Eigen::Vector3d::Zero();  // m
@@ -177,5 +182,9 @@ const char* ToString(GripperCoupling coupling);
 const char* ToString(PadModel pads);
 const char* ToString(ConeModel cone);
 const char* ToString(InertiaModel inertia);
+// The inertia model a scene's steps use: its model.inertia with kAuto
+// decided (kQuasiStatic when fingers hold the object and no support
+// carries it, else kCarried); never kAuto.
+InertiaModel InertiaOf(const Scene& scene);
 
 }  // namespace arena::mechanics

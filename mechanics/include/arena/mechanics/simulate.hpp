@@ -64,12 +64,19 @@ struct SolverStatistics {
   int quasi_static_carried = 0;
 };
 
+// The statistics as one JSON object (steps, max_pivots, failures,
+// quasi_static_solves, quasi_static_carried): the one rendering every
+// output, stored detail and export uses, so none of them drops a field.
+std::string SolverStatisticsJson(const SolverStatistics& solver);
+
 struct ModelInfo {
   int dof = 6;  // 3 when the planar reduction is in use
   int facets = 0;
   int points = 0;
   double dt = 0;
   int unknowns = 0;  // LCP size of one step
+  // The inertia model the steps used (model.inertia, "auto" decided).
+  InertiaModel inertia = InertiaModel::kCarried;
 };
 
 enum class SimulationStatus {
@@ -113,6 +120,10 @@ struct Oscillation {
   // detected): below 3 only for a slow mode (DetectSlowOscillation).
   double periods = 0;
 };
+// The oscillation as one JSON object (detected, amplitude_m, amplitude_rad,
+// frequency_hz, window_s, periods): the one rendering every output, stored
+// detail and export uses.
+std::string OscillationJson(const Oscillation& oscillation);
 // The analysis above on one run's step poses (t ascending; at least 16);
 // gap_tolerance (m) and length_scale (m) as ContactModel gives them.
 Oscillation DetectOscillation(const std::vector<double>& t, const std::vector<Eigen::Vector3d>& c,
