@@ -1050,13 +1050,12 @@ void ContactModel::Impl::Setup() {
     // grip axis left the object kilometres away; its closed form is a
     // 0.055 rad turn), and a wrong answer is worse than none.
     status = SimulationStatus::kInvalidScene;
-    error =
-        std::string("model.cone \"aligned\" with model.inertia \"") +
-        (opt.inertia == InertiaModel::kAuto ? "auto\" (quasi-static for this held object)"
-                                            : "quasi_static\"") +
-        " on a 6-DOF scene is not "
-        "supported yet (their re-solves do not settle together): use model.cone \"polyhedral\" "
-        "or model.inertia \"carried\"";
+    error = std::string("model.cone \"aligned\" with model.inertia \"") +
+            (opt.inertia == InertiaModel::kAuto ? "auto\" (quasi-static for this held object)"
+                                                : "quasi_static\"") +
+            " on a 6-DOF scene is not "
+            "supported yet (their re-solves do not settle together): use model.cone \"polyhedral\" "
+            "or model.inertia \"carried\"";
     return;
   }
   SetupScales();

@@ -220,6 +220,13 @@ TEST(ClosedForms, CarriedPivotAlignsWithinBoundedResolves) {
   EXPECT_EQ(r.status, SimulationStatus::kInvalidScene);
   EXPECT_NE(r.error.find("model.cone"), std::string::npos) << r.error;
   EXPECT_NE(r.error.find("model.inertia"), std::string::npos) << r.error;
+  // "auto" is quasi-static for this held object, so it is refused too and
+  // the message says which value the scene wrote.
+  Scene automatic = scene;
+  automatic.model.inertia = InertiaModel::kAuto;
+  const SimulationResult a = Simulate(automatic);
+  EXPECT_EQ(a.status, SimulationStatus::kInvalidScene);
+  EXPECT_NE(a.error.find("\"auto\""), std::string::npos) << a.error;
 }
 
 // A slipping grasp: a 1.5 kg box held by two point fingers (grip 10 N,
