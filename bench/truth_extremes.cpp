@@ -124,18 +124,8 @@ std::vector<Row> Rows() {
 // 0.22348 rad at T = 0.6 s. Judged within 2 % (a soft contact's pusher sinks
 // and the fingers' slip starts gradually).
 Row PivotPastTheStall() {
-  Row r{"pivot past the stall, grip 1 kN", m::testing::HeldBox(0.2, 1000, 0.5), {}, {}, true};
-  m::Scene& s = r.scene;
-  s.gravity = Eigen::Vector3d::Zero();
-  s.duration = 0.6;
-  m::PusherSpec p;
-  p.name = "pusher";
-  p.position = {0, 0.01, -0.05};
-  p.normal = {0, 0, 1};
-  p.mu = 0.0;
-  p.motion.velocity = {0, 0, 0.01};
-  s.pusher = p;
-  const double expected = std::atan(0.01 / (0.05 - 0.01 * 0.6));
+  Row r{"pivot past the stall, grip 1 kN", m::testing::PivotPastTheStall(), {}, {}, true};
+  const double expected = m::testing::PivotPastTheStallRoll();
   char buf[80];
   std::snprintf(buf, sizeof buf, "roll = atan(d / (h - v T)) = %.5f rad", expected);
   r.closed_form = buf;

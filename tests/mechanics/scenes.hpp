@@ -2,6 +2,8 @@
 // and the textbook set-ups of the validation tests).
 #pragma once
 
+#include <cmath>
+
 #include "arena/mechanics/scene.hpp"
 
 namespace arena::mechanics::testing {
@@ -57,5 +59,24 @@ inline Scene HeldBox(double mass, double grip, double mu, int facets = 8) {
   s.model = {facets, 3, 0.004, Reduce::kAuto};
   return s;
 }
+
+// Issue 31's pivot past its stall: a 0.2 kg box held at 1 kN by two point
+// fingers (μ 0.5), no gravity, a frictionless point pusher 1 cm off the grip
+// axis pushing up at 1 cm/s for 0.6 s. Its closed form is
+// PivotPastTheStallRoll(): the roll atan(d / (h − v T)).
+inline Scene PivotPastTheStall() {
+  Scene s = HeldBox(0.2, 1000, 0.5);
+  s.gravity = Eigen::Vector3d::Zero();
+  s.duration = 0.6;
+  PusherSpec p;
+  p.name = "pusher";
+  p.position = {0, 0.01, -0.05};
+  p.normal = {0, 0, 1};
+  p.mu = 0.0;
+  p.motion.velocity = {0, 0, 0.01};
+  s.pusher = p;
+  return s;
+}
+inline double PivotPastTheStallRoll() { return std::atan(0.01 / (0.05 - 0.01 * 0.6)); }
 
 }  // namespace arena::mechanics::testing

@@ -133,18 +133,9 @@ TEST(MujocoLimits, AJawWhoseFingersPartIsAConstraintViolation) {
 // Within 1 % of the point's closed form. (With independent pads the grasp
 // drifts along the grip axis and the run is refused: the drift limit.)
 TEST(MujocoLimits, APointPusherPivotsAsAPointInAJaw) {
-  Scene s = mechanics::testing::HeldBox(0.2, 1000, 0.5);
-  s.gravity = Eigen::Vector3d::Zero();
-  s.duration = 0.6;
+  Scene s = mechanics::testing::PivotPastTheStall();
   s.gripper.coupling = GripperCoupling::kParallelJaw;
-  mechanics::PusherSpec p;
-  p.name = "pusher";
-  p.position = {0, 0.01, -0.05};
-  p.normal = {0, 0, 1};
-  p.mu = 0.0;
-  p.motion.velocity = {0, 0, 0.01};
-  s.pusher = p;
-  const double expected = std::atan(0.01 / (0.05 - 0.01 * 0.6));
+  const double expected = mechanics::testing::PivotPastTheStallRoll();
   const auto r = MakeMujocoSimulator({})->Simulate(s);
   ASSERT_EQ(r.status, SimulationStatus::kOk) << r.error;
   const Eigen::AngleAxisd aa(r.samples.back().orientation);
