@@ -513,8 +513,9 @@ struct CampaignStatus {
   std::optional<double> eta_s;  // (pending+running)/rate; absent when rate is 0
 };
 
-// Start state observed after the reset that preceded each trial, against the
-// trial's nominal start pose: the reset's bias per campaign and cell.
+// Start state each trial's cell measured (the first sample of its ground
+// truth, stored when the execution is published), against the trial's nominal
+// start pose: the reset's bias per campaign and cell.
 struct StartStateDrift {
   std::int64_t campaign_id = 0;
   std::string cell_id;
