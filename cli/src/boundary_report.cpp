@@ -2,7 +2,6 @@
 
 #include <algorithm>
 #include <cmath>
-#include <cstdio>
 #include <limits>
 #include <map>
 
@@ -12,24 +11,6 @@
 #include "arena/orchestrator/outcome.hpp"
 
 namespace arena::cli {
-namespace {
-
-// A parameter's value in the unit a person reads it in.
-std::string Human(const std::string& name, double v) {
-  char buf[64];
-  const auto has = [&](const char* s) { return name.find(s) != std::string::npos; };
-  if (has("force"))
-    std::snprintf(buf, sizeof buf, "%.3g N", v);
-  else if (has("speed"))
-    std::snprintf(buf, sizeof buf, "%.3g mm/s", v * 1e3);
-  else if (has("offset") || has("distance") || has("length") || has("radius"))
-    std::snprintf(buf, sizeof buf, "%.3g mm", v * 1e3);
-  else
-    std::snprintf(buf, sizeof buf, "%.3g", v);
-  return buf;
-}
-
-}  // namespace
 
 std::optional<BoundaryStatement> FindBoundary(const db::Store& store, std::int64_t campaign_id) {
   const db::Campaign stored = store.GetCampaign(campaign_id);
@@ -126,9 +107,9 @@ std::string FormatBoundary(const BoundaryStatement& b, const std::string& indent
     out += indent + "  ";
     for (size_t k = 0; k < b.parameters.size(); ++k) {
       out += (k ? (k == 1 ? " at " : ", ") : "") + b.parameters[k] + " " +
-             Human(b.parameters[k], x.at[k]);
+             orchestrator::HumanVariationValue(b.parameters[k], x.at[k]);
       if (x.half[k] > 0) {
-        std::string h = Human(b.parameters[k], x.half[k]);
+        std::string h = orchestrator::HumanVariationValue(b.parameters[k], x.half[k]);
         out += " +- " + h;
       }
     }

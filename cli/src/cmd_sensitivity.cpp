@@ -19,6 +19,7 @@
 #include "arena/db/sensitivity.hpp"
 #include "arena/db/store.hpp"
 #include "arena/mechanics/scene_json.hpp"
+#include "arena/orchestrator/campaign.hpp"
 #include "arena/orchestrator/scene_facts.hpp"
 #include "arena/simulators/simulator.hpp"
 #include "commands.hpp"
@@ -231,14 +232,15 @@ std::string Opt(const std::optional<double>& v, double scale, const char* f) {
 }
 
 // A condition in the words of its campaign: its varied parameters as
-// name=value, not its index alone.
+// name=value in the units a person reads (mm, mm/s, N), not its index alone
+// nor the campaign file's SI numbers.
 std::string ConditionWords(const std::string& params_json) {
   const auto j = nlohmann::json::parse(params_json, nullptr, false);
   if (!j.is_object() || j.empty()) return params_json.empty() ? "-" : params_json;
   std::string out;
   for (const auto& [name, value] : j.items()) {
-    out += (out.empty() ? "" : " ") + name + "=";
-    out += value.is_number() ? Fmt("%.4g", value.get<double>())
+    out += (out.empty() ? "" : ", ") + name + "=";
+    out += value.is_number() ? orchestrator::HumanVariationValue(name, value.get<double>())
                              : (value.is_string() ? value.get<std::string>() : value.dump());
   }
   return out;
@@ -279,8 +281,8 @@ std::string CampaignText(const assessment::CampaignSensitivityReport& r, std::in
   out << "unstable conditions: " << r.unstable << "\n";
   for (const auto& c : r.conditions) {
     if (!c.unstable) continue;
-    out << "  condition " << c.condition << " " << c.params_json << ": "
-        << (c.reason.empty() ? "no reason recorded" : c.reason) << " ("
+    out << "  condition " << c.condition << " (" << ConditionWords(c.params_json)
+        << "): " << (c.reason.empty() ? "no reason recorded" : c.reason) << " ("
         << Fmt("%.0f", c.flip_fraction * 100) << " % of the ensemble changed contact modes or "
         << "grasp)\n";
   }

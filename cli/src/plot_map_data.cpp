@@ -8,6 +8,7 @@
 #include <nlohmann/json.hpp>
 
 #include "arena/db/query.hpp"
+#include "arena/orchestrator/campaign.hpp"
 #include "plot_map.hpp"
 #include "plot_map_data.hpp"
 #include "svg_chart.hpp"
@@ -85,31 +86,11 @@ const std::vector<MetricInfo>& Metrics() {
   return kMetrics;
 }
 
-// Units of the campaign variations (orchestrator/README.md's catalogue).
-std::string UnitOf(const std::string& variation) {
-  static const std::map<std::string, std::string> kUnits = {
-      {"object_size_x", "m"},
-      {"object_size_y", "m"},
-      {"object_size_z", "m"},
-      {"object_radius", "m"},
-      {"object_height", "m"},
-      {"object_mass", "kg"},
-      {"finger_length", "m"},
-      {"finger_radius", "m"},
-      {"finger_mu", "1"},
-      {"grip_force", "N"},
-      {"pusher_length", "m"},
-      {"pusher_radius", "m"},
-      {"pusher_mu", "1"},
-      {"pivot_offset", "m"},
-      {"push_speed", "m/s"},
-      {"push_distance", "m"},
-      {"finger_type", "type"},
-      {"pusher_type", "type"},
-      {"push_direction", "unit vector, gripper frame"},
-      {"pivot_axis", "unit vector, gripper frame"}};
-  auto it = kUnits.find(variation);
-  return it == kUnits.end() ? "?" : it->second;
+// An axis label: the variation and its SI unit (the plotted values are SI);
+// a contact type has none.
+std::string AxisLabel(const std::string& variation) {
+  const std::string unit(orchestrator::VariationUnit(variation).value_or("?"));
+  return unit.empty() ? variation : variation + " (" + unit + ")";
 }
 
 std::optional<double> AsNumber(const db::Value& v) {
@@ -153,8 +134,8 @@ MapData BuildCampaignMap(const db::Store& store, std::int64_t campaign_id, const
   map.flag_on = "unstable";
   map.flag_off = "stable";
   map.metric_label = it->label;
-  map.x_label = x + " (" + UnitOf(x) + ")";
-  map.y_label = y + " (" + UnitOf(y) + ")";
+  map.x_label = AxisLabel(x);
+  map.y_label = AxisLabel(y);
   map.title = "campaign " + id + " (" + campaign.name + "): " + metric + " over " + x + " and " + y;
 
   // Axis values: numbers, or categories (text / vectors) in order of first appearance.

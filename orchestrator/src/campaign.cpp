@@ -5,6 +5,7 @@
 #include <array>
 #include <charconv>
 #include <cmath>
+#include <cstdio>
 #include <filesystem>
 #include <fstream>
 #include <initializer_list>
@@ -14,6 +15,7 @@
 #include <Eigen/Geometry>
 #include <nlohmann/json.hpp>
 
+#include "arena/assessment/sensitivity.hpp"
 #include "arena/mechanics/frames.hpp"
 #include "arena/mechanics/json_path.hpp"
 #include "arena/mechanics/scene_json.hpp"
@@ -82,32 +84,34 @@ struct VariationInfo {
   ValueType type;
   double lower;
   bool strict;
+  const char* unit;  // SI (VariationUnit)
 };
 constexpr double kNoBound = -std::numeric_limits<double>::infinity();
 constexpr std::array<VariationInfo, 22> kVariationCatalog = {{
-    {"object_size_x", ValueType::kNumber, 0, true},  // box extents (m)
-    {"object_size_y", ValueType::kNumber, 0, true},
-    {"object_size_z", ValueType::kNumber, 0, true},
-    {"object_radius", ValueType::kNumber, 0, true},  // cylinder (m)
-    {"object_height", ValueType::kNumber, 0, true},
-    {"object_mass", ValueType::kNumber, 0, true},  // kg
-    {"finger_type", ValueType::kContactType, 0, false},
-    {"finger_length", ValueType::kNumber, 0, true},  // line fingers (m)
-    {"finger_radius", ValueType::kNumber, 0, true},  // patch fingers (m)
-    {"finger_mu", ValueType::kNumber, 0, false},
-    {"grip_force", ValueType::kNumber, 0, false},  // N
-    {"pusher_type", ValueType::kContactType, 0, false},
-    {"pusher_length", ValueType::kNumber, 0, true},
-    {"pusher_radius", ValueType::kNumber, 0, true},
-    {"pusher_mu", ValueType::kNumber, 0, false},
-    {"pivot_axis", ValueType::kVector, 0, false},           // unit, in the pusher's contact plane
-    {"pivot_offset", ValueType::kNumber, kNoBound, false},  // m along pivot_axis
-    {"push_direction", ValueType::kVector, 0, false},       // unit, gripper frame
-    {"push_speed", ValueType::kNumber, 0, false},           // m/s
-    {"push_distance", ValueType::kNumber, 0, true},         // m; sets duration = distance / speed
+    {"object_size_x", ValueType::kNumber, 0, true, "m"},  // box extents
+    {"object_size_y", ValueType::kNumber, 0, true, "m"},
+    {"object_size_z", ValueType::kNumber, 0, true, "m"},
+    {"object_radius", ValueType::kNumber, 0, true, "m"},  // cylinder
+    {"object_height", ValueType::kNumber, 0, true, "m"},
+    {"object_mass", ValueType::kNumber, 0, true, "kg"},
+    {"finger_type", ValueType::kContactType, 0, false, ""},
+    {"finger_length", ValueType::kNumber, 0, true, "m"},  // line fingers
+    {"finger_radius", ValueType::kNumber, 0, true, "m"},  // patch fingers
+    {"finger_mu", ValueType::kNumber, 0, false, "1"},
+    {"grip_force", ValueType::kNumber, 0, false, "N"},
+    {"pusher_type", ValueType::kContactType, 0, false, ""},
+    {"pusher_length", ValueType::kNumber, 0, true, "m"},
+    {"pusher_radius", ValueType::kNumber, 0, true, "m"},
+    {"pusher_mu", ValueType::kNumber, 0, false, "1"},
+    {"pivot_axis", ValueType::kVector, 0, false,
+     "unit vector, gripper frame"},                              // in the pusher's contact plane
+    {"pivot_offset", ValueType::kNumber, kNoBound, false, "m"},  // along pivot_axis
+    {"push_direction", ValueType::kVector, 0, false, "unit vector, gripper frame"},
+    {"push_speed", ValueType::kNumber, 0, false, "m/s"},
+    {"push_distance", ValueType::kNumber, 0, true, "m"},  // sets duration = distance / speed
     // Closed loop (issue 19): the scene's pusher.motion controller settings.
-    {"controller_target", ValueType::kNumber, kNoBound, false},  // controller's units
-    {"controller_gain", ValueType::kNumber, kNoBound, false},
+    {"controller_target", ValueType::kNumber, kNoBound, false, ""},  // controller's units
+    {"controller_gain", ValueType::kNumber, kNoBound, false, ""},
 }};
 
 const VariationInfo* FindVariation(std::string_view name) {
@@ -1145,6 +1149,21 @@ void CheckEveryCondition(const Campaign& c) {
 }
 
 }  // namespace
+
+std::optional<std::string_view> VariationUnit(std::string_view name) {
+  const VariationInfo* info = FindVariation(name);
+  if (info == nullptr) return std::nullopt;
+  return std::string_view(info->unit);
+}
+
+std::string HumanVariationValue(std::string_view name, double value) {
+  const std::string unit(VariationUnit(name).value_or(""));
+  const bool scalar = unit == "m" || unit == "m/s" || unit == "N" || unit == "kg";
+  const assessment::HumanUnit h = assessment::HumanUnitOf(scalar ? unit : "1");
+  char buf[64];
+  std::snprintf(buf, sizeof buf, "%.3g", value * h.factor);
+  return scalar ? std::string(buf) + " " + h.unit : std::string(buf);
+}
 
 // ---------------------------------------------------------------------------
 

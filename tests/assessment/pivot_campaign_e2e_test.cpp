@@ -75,15 +75,16 @@ TEST(SensitivityEndToEnd, PivotCampaignReportStoredQueriedExportedAndMapped) {
             0)
       << ReadFile(dir / "sens2.txt");
   EXPECT_NE(ReadFile(dir / "sens2.txt").find("unstable conditions:"), std::string::npos);
-  // Issue 26: the table named each condition by its index alone ("cond 3").
-  // Pins: every row names its condition's varied parameters.
+  // Issue 26: the table named each condition by its index alone ("cond 3"),
+  // then by the campaign file's SI numbers. Pins: every row names its
+  // condition's varied parameters, in N and mm.
   {
     std::istringstream table(ReadFile(dir / "sens2.txt"));
     std::string row;
     int named = 0;
     while (std::getline(table, row))
-      if (row.find("grip_force=") != std::string::npos &&
-          row.find("pivot_offset=") != std::string::npos)
+      if (row.find("grip_force=") != std::string::npos && row.find(" N, ") != std::string::npos &&
+          row.find("pivot_offset=") != std::string::npos && row.find(" mm") != std::string::npos)
         ++named;
     EXPECT_EQ(named, 8) << ReadFile(dir / "sens2.txt");
   }

@@ -468,5 +468,25 @@ TEST(Campaign, PredictionNamesAPredictor) {
   refused({{"predictor", "mujoco"}, {"solimp", {0.9, 0.95, 0.001, 0.5, 0.5}}}, "prediction.solimp");
 }
 
+// One table of variation units (issue 27, one home per idea): plots, the
+// boundary report and the sensitivity table read a variation's unit from the
+// campaign catalogue, and a person reads lengths in mm, speeds in mm/s.
+TEST(VariationUnits, EveryNumericVariationHasItsSiUnitAndAHumanValue) {
+  EXPECT_EQ(VariationUnit("grip_force"), "N");
+  EXPECT_EQ(VariationUnit("push_speed"), "m/s");
+  EXPECT_EQ(VariationUnit("pivot_offset"), "m");
+  EXPECT_EQ(VariationUnit("object_size_x"), "m");
+  EXPECT_EQ(VariationUnit("object_mass"), "kg");
+  EXPECT_EQ(VariationUnit("finger_mu"), "1");
+  EXPECT_EQ(VariationUnit("finger_type"), "");  // a contact type has none
+  EXPECT_EQ(VariationUnit("no_such_variation"), std::nullopt);
+  EXPECT_EQ(HumanVariationValue("push_speed", 0.02), "20 mm/s");
+  EXPECT_EQ(HumanVariationValue("pivot_offset", 0.00813), "8.13 mm");
+  EXPECT_EQ(HumanVariationValue("grip_force", 1.14), "1.14 N");
+  EXPECT_EQ(HumanVariationValue("object_mass", 0.2), "0.2 kg");
+  EXPECT_EQ(HumanVariationValue("finger_mu", 0.5), "0.5");
+  EXPECT_EQ(HumanVariationValue("no_such_variation", 3.0), "3");
+}
+
 }  // namespace
 }  // namespace arena::orchestrator

@@ -226,6 +226,18 @@ int64_t TrialCount(const Campaign& campaign);  // conditions * replicates
 // @pre 0 <= index < TrialCount(campaign), else std::out_of_range.
 PlannedTrial PlanTrial(const Campaign& campaign, int64_t index);
 
+// The SI unit of a catalogue variation's values ("m", "m/s", "N", "kg", "1"
+// when dimensionless, "unit vector, gripper frame" for a direction); "" for a
+// contact type or a controller setting (the controller's own units);
+// std::nullopt for a name the catalogue does not have. The one table of
+// variation units: plots, reports and sensitivity read it from here.
+std::optional<std::string_view> VariationUnit(std::string_view name);
+
+// A variation's value as a person reads it, 3 significant digits in the
+// human unit of its SI value's unit (assessment::HumanUnitOf): "12 mm", "20 mm/s",
+// "1.5 N", "0.2 kg"; a dimensionless or unknown one bare ("0.5").
+std::string HumanVariationValue(std::string_view name, double value);
+
 // The sampled variations' names, in campaign.variations order (the unit
 // point's dimensions).
 std::vector<std::string> SampledVariations(const Campaign& campaign);
