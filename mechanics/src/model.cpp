@@ -150,6 +150,37 @@ Eigen::Vector3d CentreOfMass(const ObjectSpec& object) {
          RotationFromRpy(object.pose.rpy) * geometry::Solid(object).centroid_O();
 }
 
+// A tracked point pusher that starts on the object's surface presses the
+// face the model's geometry gives it (PlaceOnSolid: on an edge or a vertex,
+// the face nearest the one it closes onto), not `pusher.normal`: on an
+// edge whose bisector the pusher pushes along, its normal lies in the
+// bisecting plane and the face's does not. Planar about that plane, the
+// first step was refused ("a contact normal leaves the plane") even under
+// "auto", which must then run the full model. Empty when the face's normal
+// lies in the plane (or the pusher starts off the surface or inside it,
+// where the first step seats it and SetEdges keeps guarding).
+std::string CheckTrackedPusherNormal(const Scene& scene, const Eigen::Vector3d& p) {
+  const PusherSpec& s = *scene.pusher;
+  if (scene.model.contacts != ContactTracking::kTracked || s.type != ContactType::kPoint) return {};
+  const geometry::Solid solid(scene.object);
+  const double tolerance = kGapTolerance * LengthScale(scene.object);
+  const Eigen::Matrix3d R = RotationFromRpy(scene.object.pose.rpy);
+  const Eigen::Vector3d closing = s.normal.normalized();
+  const Eigen::Vector3d centre_O =
+      R.transpose() * (s.position - s.radius * closing - scene.object.pose.position);
+  const geometry::Closest cl = solid.ClosestTo(centre_O, -(R.transpose() * closing), tolerance);
+  if (std::abs(cl.distance - s.radius) > tolerance) return {};
+  const Eigen::Vector3d n = -(R * cl.normal_O);
+  if (std::abs(n.dot(p)) <= kPlaneTolerance) return {};
+  char buf[320];
+  std::snprintf(buf, sizeof buf,
+                "pusher: starts on an edge or a vertex of the object, where it presses the face "
+                "with normal (%.3g, %.3g, %.3g), not pusher.normal, and that face's normal "
+                "leaves the plane",
+                n.x() + 0.0, n.y() + 0.0, n.z() + 0.0);  // + 0.0: no "-0"
+  return buf;
+}
+
 // Checks one candidate plane normal; returns the first failed condition
 // (empty when the scene is planar about p) and counts passed conditions.
 std::string CheckPlane(const Scene& scene, const Eigen::Vector3d& p, int& passed) {
@@ -176,6 +207,13 @@ std::string CheckPlane(const Scene& scene, const Eigen::Vector3d& p, int& passed
   ++passed;
   auto check_contact = [&](const ContactSpec& s, const std::string& name) -> std::string {
     const Eigen::Vector3d n = s.normal.normalized();
+    if (std::abs(std::abs(n.dot(p)) - 1) <= kPlaneTolerance) {
+      // E.g. a grip axis normal to the plane the object moves in: the
+      // reduction's contacts press in its plane with two in-plane friction
+      // directions; a pad pressing across it would need a 2-D friction cone.
+      return name + ": normal along the plane normal (presses across the plane; the planar " +
+             "model's contacts press in it)";
+    }
     if (std::abs(n.dot(p)) > kPlaneTolerance) return name + ": normal leaves the plane";
     if (std::abs((s.position - c).dot(p)) > kPlaneTolerance * L)
       return name + ": position leaves the plane";
@@ -208,6 +246,7 @@ std::string CheckPlane(const Scene& scene, const Eigen::Vector3d& p, int& passed
     const PusherSpec& s = *scene.pusher;
     const std::string e = check_contact(s, "pusher");
     if (!e.empty()) return e;
+    if (const std::string t = CheckTrackedPusherNormal(scene, p); !t.empty()) return t;
     const double v = s.motion.velocity.norm();
     if (std::abs(s.motion.velocity.dot(p)) > kPlaneTolerance * v)
       return "pusher velocity leaves the plane";
@@ -270,20 +309,33 @@ PlaneCheck FindPlane(const Scene& scene) {
   }
   PlaneCheck out;
   int best = -1;
-  for (const Eigen::Vector3d& p : candidates) {
+  std::string across;  // a plane refused only for a contact pressing across it
+  auto about = [](const Eigen::Vector3d& p) {
+    char buf[64];
+    std::snprintf(buf, sizeof buf, "about the plane normal (%.3g, %.3g, %.3g): ", p.x(), p.y(),
+                  p.z());
+    return std::string(buf);
+  };
+  for (const Eigen::Vector3d& candidate : candidates) {
+    const Eigen::Vector3d p = candidate.normalized();
     int passed = 0;
-    const std::string e = CheckPlane(scene, p.normalized(), passed);
+    const std::string e = CheckPlane(scene, p, passed);
     if (e.empty()) {
       out.planar = true;
-      out.normal = p.normalized();
+      out.normal = p;
       out.reason.clear();
       return out;
     }
     if (passed > best) {
       best = passed;
-      out.reason = e;
+      out.reason = about(p) + e;
     }
+    if (across.empty() && e.find("presses across the plane") != std::string::npos)
+      across = about(p) + e;
   }
+  // The plane the motion lies in is often the one a pair of fingers presses
+  // across (the grip axis its normal): say so too, not only the nearest miss.
+  if (!across.empty() && out.reason != across) out.reason += "; " + across;
   return out;
 }
 

@@ -1203,12 +1203,7 @@ bool Finite(const mechanics::TrajectorySample& s) {
   return true;
 }
 
-// Steps a loaded model through `scene`: the model built from `scene`, or
-// from a scene that differs only in friction, grip force and mass with those
-// patched in (MujocoPrepared). `d` is fresh (made or reset). Throws what
-// MuJoCo throws; fills `result` (status kSolverFailure on a divergence).
-// Closed loop: `commands` answers every sample with the pusher's velocity
-// from then on (mechanics::Simulate(scene, commands) has the same contract).
+// A closed loop's command, checked before it is put in force: empty when usable.
 std::string CheckCommand(const mechanics::Scene& scene, const mechanics::PusherMotion& command) {
   if (!command.velocity.allFinite() || !command.angular_velocity.allFinite())
     return "pusher command: not finite";
@@ -1218,54 +1213,137 @@ std::string CheckCommand(const mechanics::Scene& scene, const mechanics::PusherM
   return "";
 }
 
+// RunLoaded's phases, in the order it runs them.
+
+// A run refused or stopped by a failure: one failure, at `failed_step`.
+void Fail(mechanics::SimulationResult* result, int failed_step, std::string why) {
+  result->status = mechanics::SimulationStatus::kSolverFailure;
+  result->failed_step = failed_step;
+  result->solver.failures = 1;
+  result->error = std::move(why);
+}
+
+// Set-up: finds the object's, the fingers' and the pusher's bodies, joints
+// and pad geoms in the loaded model.
+void BindRun(Run* run) {
+  const mechanics::Scene& scene = run->scene;
+  const mjModel* m = run->m;
+  run->pad_of_geom.assign(static_cast<size_t>(m->ngeom), -1);
+  run->n_pads = scene.fingers.size() + (scene.pusher ? 1 : 0);
+  run->object_body = mj_name2id(m, mjOBJ_BODY, "object");
+  run->object_geom = mj_name2id(m, mjOBJ_GEOM, "object");
+  run->is_object.assign(static_cast<size_t>(m->ngeom), 0);
+  for (const std::string& name : ObjectGeomNames(scene.object))
+    run->is_object[static_cast<size_t>(mj_name2id(m, mjOBJ_GEOM, name.c_str()))] = 1;
+  const int oj = m->body_jntadr[run->object_body];
+  run->object_qpos = m->jnt_qposadr[oj];
+  run->object_qvel = m->jnt_dofadr[oj];
+  for (size_t i = 0; i < scene.fingers.size(); ++i) {
+    const std::string k = std::to_string(i);
+    const int j = mj_name2id(m, mjOBJ_JOINT, ("finger" + k).c_str());
+    run->finger_qpos.push_back(m->jnt_qposadr[j]);
+    run->finger_qvel.push_back(m->jnt_dofadr[j]);
+    for (int j = 0; j < PadCount(scene.fingers[i], run->st.pads); ++j) {
+      const int g = mj_name2id(m, mjOBJ_GEOM, ("pad" + k + "_" + std::to_string(j)).c_str());
+      run->pad_of_geom[static_cast<size_t>(g)] = static_cast<int>(i);
+    }
+  }
+  if (scene.pusher) {
+    run->pusher_body = mj_name2id(m, mjOBJ_BODY, "pusher");
+    const int j = m->body_jntadr[run->pusher_body];
+    run->pusher_qpos = m->jnt_qposadr[j];
+    run->pusher_qvel = m->jnt_dofadr[j];
+    for (int j = 0; j < PadCount(*scene.pusher, run->st.pads); ++j) {
+      const int g = mj_name2id(m, mjOBJ_GEOM, ("pusher_pad_" + std::to_string(j)).c_str());
+      run->pad_of_geom[static_cast<size_t>(g)] = static_cast<int>(scene.fingers.size());
+    }
+  }
+  // Grip force along each finger's normal, plus the finger's weight along it.
+  for (size_t i = 0; i < scene.fingers.size(); ++i) {
+    const double weight =
+        run->st.finger_mass * scene.gravity.dot(scene.fingers[i].normal.normalized());
+    run->d->ctrl[i] = scene.grip_force - weight;
+  }
+}
+
+// The steps from one sample to the next (sample k > 0), each checked against
+// the truth's limits; `interval` collects their forces when the settings
+// ask for them. Returns the limit crossed (the steps stop there), else empty.
+// Leaves pusher and time exactly on the sample instant, forces of that state.
+std::string StepToSample(Run& run, TruthLimits& limits, long k, int per_sample,
+                         const Eigen::Vector3d& start, Run::PadReading* interval,
+                         mechanics::SimulationResult* result) {
+  mjModel* m = run.m;
+  mjData* d = run.d;
+  std::string beyond;
+  for (int j = 0; j < per_sample && beyond.empty(); ++j) {
+    run.DrivePusher(d->time);
+    mj_step(m, d);
+    ++result->solver.steps;
+    // After mj_step, d->contact and d->efc_force are the step's own solve.
+    if (run.st.interval_forces) run.Read(interval);
+    beyond = limits.Check(m, d, run.object_qpos, run.object_qvel, run.object_geom, run.pad_of_geom,
+                          run.finger_qpos, start, run.pusher_body < 0 ? 0.0 : run.PusherSpeed());
+  }
+  d->time = static_cast<double>(k) / mechanics::kSampleRateHz;
+  run.DrivePusher(d->time);
+  mj_forward(m, d);
+  return beyond;
+}
+
+// Why sample `s` must not pass for a truth: a limit crossed (`beyond`, it
+// comes first: it says why), a divergence, or contacts MuJoCo dropped (it
+// drops those that do not fit its buffers and goes on). Empty: none.
+std::string SampleFailure(const mechanics::TrajectorySample& s, const std::string& beyond,
+                          const mjModel* m, const mjData* d) {
+  if (!beyond.empty()) return beyond;  // (the samples end before this one)
+  if (!Finite(s) || d->warning[mjWARN_BADQACC].number > 0)
+    return "MuJoCo diverged at t = " + Num(s.t) + " s (non-finite state or acceleration)";
+  if (d->warning[mjWARN_CONTACTFULL].number > 0 || d->warning[mjWARN_CNSTRFULL].number > 0) {
+    return "MuJoCo's contact buffers overflowed by t = " + Num(s.t) + " s (nconmax " +
+           std::to_string(m->nconmax) + ", njmax " + std::to_string(m->njmax) +
+           "): contacts were dropped";
+  }
+  return "";
+}
+
+// Closed loop: asks `commands` for the pusher's velocity after the samples
+// so far and puts it in force. False when the run ends here (stopped by the
+// source, or a command refused: `result` says which).
+bool FollowCommand(Run& run, const mechanics::PusherCommandSource& commands,
+                   mechanics::SimulationResult* result) {
+  std::string why;
+  const std::optional<mechanics::PusherMotion> command = commands(result->samples, &why);
+  if (!command) {
+    result->stopped = why.empty() ? "stopped by the command source" : why;
+    return false;
+  }
+  if (std::string bad = CheckCommand(run.scene, *command); !bad.empty()) {
+    result->status = mechanics::SimulationStatus::kInvalidScene;
+    result->error = bad;
+    return false;
+  }
+  run.CommandPusher(run.d->time, command->velocity);
+  return true;
+}
+
+// Steps a loaded model through `scene`: the model built from `scene`, or
+// from a scene that differs only in friction, grip force and mass with those
+// patched in (MujocoPrepared). `d` is fresh (made or reset). Throws what
+// MuJoCo throws; fills `result` (status kSolverFailure on a divergence).
+// Closed loop: `commands` answers every sample with the pusher's velocity
+// from then on (mechanics::Simulate(scene, commands) has the same contract).
 void RunLoaded(const mechanics::Scene& scene, const MujocoSettings& settings, mjModel* m, mjData* d,
                mechanics::SimulationResult* result,
                const mechanics::PusherCommandSource* commands = nullptr) {
   const MujocoSettings st = ForScene(scene, settings);
   if (std::string why = PushBelowResolution(scene, settings, commands != nullptr); !why.empty()) {
-    result->status = mechanics::SimulationStatus::kSolverFailure;
-    result->failed_step = 0;
-    result->solver.failures = 1;
-    result->error = why;
+    Fail(result, 0, std::move(why));
     return;
   }
   const int per_sample = StepsPerSample(st);
   Run run{scene, st, m, d, -1, -1, -1, -1, -1, -1, {}, {}, {}, 0, -1, {}};
-  run.pad_of_geom.assign(static_cast<size_t>(m->ngeom), -1);
-  run.n_pads = scene.fingers.size() + (scene.pusher ? 1 : 0);
-  run.object_body = mj_name2id(m, mjOBJ_BODY, "object");
-  run.object_geom = mj_name2id(m, mjOBJ_GEOM, "object");
-  run.is_object.assign(static_cast<size_t>(m->ngeom), 0);
-  for (const std::string& name : ObjectGeomNames(scene.object))
-    run.is_object[static_cast<size_t>(mj_name2id(m, mjOBJ_GEOM, name.c_str()))] = 1;
-  const int oj = m->body_jntadr[run.object_body];
-  run.object_qpos = m->jnt_qposadr[oj];
-  run.object_qvel = m->jnt_dofadr[oj];
-  for (size_t i = 0; i < scene.fingers.size(); ++i) {
-    const std::string k = std::to_string(i);
-    const int j = mj_name2id(m, mjOBJ_JOINT, ("finger" + k).c_str());
-    run.finger_qpos.push_back(m->jnt_qposadr[j]);
-    run.finger_qvel.push_back(m->jnt_dofadr[j]);
-    for (int j = 0; j < PadCount(scene.fingers[i], st.pads); ++j) {
-      const int g = mj_name2id(m, mjOBJ_GEOM, ("pad" + k + "_" + std::to_string(j)).c_str());
-      run.pad_of_geom[static_cast<size_t>(g)] = static_cast<int>(i);
-    }
-  }
-  if (scene.pusher) {
-    run.pusher_body = mj_name2id(m, mjOBJ_BODY, "pusher");
-    const int j = m->body_jntadr[run.pusher_body];
-    run.pusher_qpos = m->jnt_qposadr[j];
-    run.pusher_qvel = m->jnt_dofadr[j];
-    for (int j = 0; j < PadCount(*scene.pusher, st.pads); ++j) {
-      const int g = mj_name2id(m, mjOBJ_GEOM, ("pusher_pad_" + std::to_string(j)).c_str());
-      run.pad_of_geom[static_cast<size_t>(g)] = static_cast<int>(scene.fingers.size());
-    }
-  }
-  // Grip force along each finger's normal, plus the finger's weight along it.
-  for (size_t i = 0; i < scene.fingers.size(); ++i) {
-    const double weight = st.finger_mass * scene.gravity.dot(scene.fingers[i].normal.normalized());
-    d->ctrl[i] = scene.grip_force - weight;
-  }
+  BindRun(&run);
   const long n_samples =
       static_cast<long>(std::floor(scene.duration * mechanics::kSampleRateHz + 1e-9)) + 1;
   result->samples.reserve(static_cast<size_t>(n_samples));
@@ -1274,71 +1352,26 @@ void RunLoaded(const mechanics::Scene& scene, const MujocoSettings& settings, mj
   if (std::string why =
           FrictionCreep(m, d, scene, run.pad_of_geom, run.is_object, commands != nullptr);
       !why.empty()) {
-    result->status = mechanics::SimulationStatus::kSolverFailure;
-    result->failed_step = 0;
-    result->solver.failures = 1;
-    result->error = why;
+    Fail(result, 0, std::move(why));
     return;
   }
   TruthLimits limits(scene, st);
   const Eigen::Vector3d start(d->qpos[run.object_qpos], d->qpos[run.object_qpos + 1],
                               d->qpos[run.object_qpos + 2]);
-  std::string beyond;  // a limit the run went past
   for (long k = 0; k < n_samples; ++k) {
     Run::PadReading interval(run.n_pads);  // the steps since the last sample
-    if (k > 0) {
-      for (int j = 0; j < per_sample && beyond.empty(); ++j) {
-        run.DrivePusher(d->time);
-        mj_step(m, d);
-        ++result->solver.steps;
-        // After mj_step, d->contact and d->efc_force are the step's own solve.
-        if (st.interval_forces) run.Read(&interval);
-        beyond =
-            limits.Check(m, d, run.object_qpos, run.object_qvel, run.object_geom, run.pad_of_geom,
-                         run.finger_qpos, start, run.pusher_body < 0 ? 0.0 : run.PusherSpeed());
-      }
-      // Pusher and time exactly on the sample instant; forces of that state.
-      d->time = static_cast<double>(k) / mechanics::kSampleRateHz;
-      run.DrivePusher(d->time);
-      mj_forward(m, d);
-    }
+    const std::string beyond =
+        k > 0 ? StepToSample(run, limits, k, per_sample, start, &interval, result) : "";
     if (interval.solves == 0) run.Read(&interval);  // t = 0, or instant forces
     mechanics::TrajectorySample s = run.Sample(interval);
     s.t = static_cast<double>(k) / mechanics::kSampleRateHz;
-    // MuJoCo drops contacts that do not fit its buffers and goes on: a truth
-    // with contacts missing must not pass for a good one.
-    std::string failure = beyond;  // a limit crossed comes first: it says why
-    if (!failure.empty()) {
-      // (the samples end before this one)
-    } else if (!Finite(s) || d->warning[mjWARN_BADQACC].number > 0) {
-      failure = "MuJoCo diverged at t = " + Num(s.t) + " s (non-finite state or acceleration)";
-    } else if (d->warning[mjWARN_CONTACTFULL].number > 0 ||
-               d->warning[mjWARN_CNSTRFULL].number > 0) {
-      failure = "MuJoCo's contact buffers overflowed by t = " + Num(s.t) + " s (nconmax " +
-                std::to_string(m->nconmax) + ", njmax " + std::to_string(m->njmax) +
-                "): contacts were dropped";
-    }
-    if (!failure.empty()) {
-      result->status = mechanics::SimulationStatus::kSolverFailure;
-      result->failed_step = result->solver.steps;
-      result->solver.failures = 1;
-      result->error = failure;
+    if (std::string failure = SampleFailure(s, beyond, m, d); !failure.empty()) {
+      Fail(result, result->solver.steps, std::move(failure));
       return;
     }
     result->samples.push_back(std::move(s));
     if (!commands || !scene.pusher) continue;
-    std::string why;
-    const std::optional<mechanics::PusherMotion> command = (*commands)(result->samples, &why);
-    if (!command) {
-      result->stopped = why.empty() ? "stopped by the command source" : why;
-      return;
-    }
-    if (std::string bad = CheckCommand(scene, *command); !bad.empty()) {
-      result->status = mechanics::SimulationStatus::kInvalidScene;
-      result->error = bad;
-      return;
-    }
-    run.CommandPusher(d->time, command->velocity);
+    if (!FollowCommand(run, *commands, result)) return;
   }
 }
 
