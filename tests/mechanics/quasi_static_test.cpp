@@ -68,7 +68,7 @@ TEST(QuasiStatic, PivotPastItsStallFollowsTheQuasiStaticPath) {
   }
 }
 
-// The same scene with the momentum carried (the default) ends rocking about
+// The same scene with the momentum carried (the default before "auto") ends rocking about
 // that path: the flag says so, with the amplitude and frequency the
 // trajectory shows (about ±0.026 rad at ~80 Hz, measured by the earlier
 // audit as ±0.028 rad at ~75 Hz), so that the final pose is not reported as
@@ -276,25 +276,27 @@ TEST(QuasiStatic, DetectorFindsASinusoidAboutASlowPath) {
   EXPECT_FALSE(DetectOscillation(t, c, q, 5e-3, 0.1).detected);
 }
 
-// "auto" (added for issue 31; "carried" stays the default): quasi-static
-// where fingers hold the object and no support carries it, carried
-// otherwise; a scene that says "carried" or "quasi_static" keeps it, and
-// only a non-default value is written back. Measured on 10 of the real pushes of a support (dt 16
-// ms, scripts/real_data_study.sh's dataset): quasi-static found no balance on 4-46 % of their steps
-// after up to 50 solves each, 7.2x the carried wall time, so a support's push stays carried.
+// "auto" (added for issue 31, the default since): quasi-static where fingers
+// hold the object and no support carries it, carried otherwise; a scene that
+// says "carried" or "quasi_static" keeps it, and only a non-default value is
+// written back (a scene without the field reads as "auto"). Measured on 10 of the real pushes of a
+// support (dt 16 ms, scripts/real_data_study.sh's dataset): quasi-static found no balance on 4-46 %
+// of their steps after up to 50 solves each, 7.2x the carried wall time, so a support's push stays
+// carried.
 TEST(QuasiStatic, AutoIsQuasiStaticForAHeldObjectOnly) {
   const std::string held = std::string(kBox) + R"(,"gravity":[0,0,-9.81],"duration":0.1,)" +
                            R"("grip_force":10.0,)" + kPointFingers;
   const Scene plain = Parse(held + R"(,"model":{})");
-  EXPECT_EQ(plain.model.inertia, InertiaModel::kCarried);
-  EXPECT_EQ(InertiaOf(plain), InertiaModel::kCarried);
+  EXPECT_EQ(plain.model.inertia, InertiaModel::kAuto);
+  EXPECT_EQ(Scene{}.model.inertia, InertiaModel::kAuto);  // built in code: the same default
+  EXPECT_EQ(InertiaOf(plain), InertiaModel::kQuasiStatic);
   EXPECT_EQ(SceneToJson(plain).find("\"inertia\""), std::string::npos);
   for (const char* value : {"carried", "quasi_static", "auto"}) {
     const Scene s = Parse(held + R"(,"model":{"inertia":")" + value + R"("})");
     EXPECT_STREQ(ToString(s.model.inertia), value);
     EXPECT_EQ(ParseScene(SceneToJson(s)).model.inertia, s.model.inertia) << value;
     EXPECT_EQ(SceneToJson(s).find("\"inertia\"") == std::string::npos,
-              s.model.inertia == InertiaModel::kCarried)
+              s.model.inertia == InertiaModel::kAuto)
         << value;
   }
   EXPECT_EQ(InertiaOf(Parse(held + R"(,"model":{"inertia":"auto"})")), InertiaModel::kQuasiStatic);
@@ -304,8 +306,9 @@ TEST(QuasiStatic, AutoIsQuasiStaticForAHeldObjectOnly) {
   } catch (const SceneError& e) {
     EXPECT_NE(std::string(e.what()).find("model.inertia"), std::string::npos) << e.what();
   }
-  // A free object on a support, pushed (no fingers), "auto": carried, and the run
-  // is the carried run bit for bit, with no extra solve.
+  // A free object on a support, pushed (no fingers), "auto" (written, or the
+  // field absent): carried, and the run is the carried run bit for bit, with
+  // no extra solve.
   const Scene pushed = ParseScene(
       R"({"object":{"shape":"prism","height":0.013,"mass":0.8374,"polygon":[[-0.045,-0.045],)"
       R"([0.045,-0.045],[0.045,0.045],[-0.045,0.045]],"pose":{"position":[0,0,0.0065],)"
@@ -314,6 +317,9 @@ TEST(QuasiStatic, AutoIsQuasiStaticForAHeldObjectOnly) {
       R"("normal":[1,0,0],"mu":0.25,"motion":{"velocity":[0.02,0,0],"angular_velocity":[0,0,0]}},)"
       R"("support":{"mu":0.3,"pressure":"uniform"},"model":{"facets":8,"points":3,"dt":0.004,"inertia":"auto"}})");
   EXPECT_EQ(InertiaOf(pushed), InertiaModel::kCarried);
+  const std::string pushed_text = SceneToJson(pushed);  // "auto" is not written back
+  EXPECT_EQ(pushed_text.find("\"inertia\""), std::string::npos);
+  EXPECT_EQ(InertiaOf(ParseScene(pushed_text)), InertiaModel::kCarried);
   Scene carried = pushed;
   carried.model.inertia = InertiaModel::kCarried;
   const SimulationResult a = SimulateOk(pushed), b = SimulateOk(carried);
@@ -323,10 +329,13 @@ TEST(QuasiStatic, AutoIsQuasiStaticForAHeldObjectOnly) {
   EXPECT_GT(a.samples.back().position.x(), 0.002);  // pushed: 10 mm, less the 4.7 mm gap
   EXPECT_EQ(a.samples.back().position, b.samples.back().position);
   EXPECT_EQ(a.samples.back().orientation.coeffs(), b.samples.back().orientation.coeffs());
-  // The held pivot past its stall, "auto": the quasi-static answer.
-  Scene pivot = Pivot();
-  pivot.model.inertia = InertiaModel::kAuto;
-  const SimulationResult r = SimulateOk(pivot);
+  // The held pivot past its stall at the default ("auto", the field
+  // absent): the quasi-static answer, atan(d / (h − v T)).
+  Scene written = Pivot();
+  written.model.inertia = InertiaModel::kAuto;
+  const std::string pivot_text = SceneToJson(written);
+  ASSERT_EQ(pivot_text.find("\"inertia\""), std::string::npos);
+  const SimulationResult r = SimulateOk(ParseScene(pivot_text));
   EXPECT_EQ(r.model.inertia, InertiaModel::kQuasiStatic);
   EXPECT_NEAR(Roll(r.samples.back()), std::atan(0.01 / (0.05 - 0.01 * 0.6)), 1e-5);
   EXPECT_FALSE(r.oscillation.detected);
