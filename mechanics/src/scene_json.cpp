@@ -637,7 +637,7 @@ ModelOptions ReadModel(const json& v, const std::string& path) {
   model.cone =
       choice("cone", "polyhedral", "aligned") ? ConeModel::kPolyhedral : ConeModel::kAligned;
   // Three values: "auto" added for issue 31 beside the two that keep their
-  // meaning, and the default since (an absent field reads as "auto").
+  // meaning ("carried" the default).
   if (const json* c = o.Find("inertia")) {
     const std::string text = String(*c, o.At("inertia"));
     if (text == "auto")
@@ -1398,7 +1398,7 @@ std::string SceneToJson(const Scene& scene, int indent) {
   // Written when not the default (scenes written before them read the same).
   if (scene.model.pads != PadModel::kElastic) j["model"]["pads"] = ToString(scene.model.pads);
   if (scene.model.cone != ConeModel::kPolyhedral) j["model"]["cone"] = ToString(scene.model.cone);
-  if (scene.model.inertia != InertiaModel::kAuto)
+  if (scene.model.inertia != InertiaModel::kCarried)
     j["model"]["inertia"] = ToString(scene.model.inertia);
   // Written only when it says something: a scene without it means independent pads.
   if (scene.gripper.coupling != GripperCoupling::kIndependent)

@@ -1,9 +1,8 @@
 // Issue 31's scenes against their closed forms at the default settings
 // (elastic pads since issue 31), with "cone": "aligned" where a slip in a
 // free direction needs it (still opt-in: bench/README.md, "Default model
-// step") and "inertia": "quasi_static" where a mode is excited ("auto", the
-// default since, is quasi-static on these held objects), and what the old
-// defaults (rigid pads, carried momentum, set explicitly) get wrong on them.
+// step") and "inertia": "quasi_static" where a mode is excited, and what
+// the old defaults (rigid pads, set explicitly) get wrong on them.
 #include <cmath>
 #include <cstdio>
 #include <numbers>
@@ -274,20 +273,18 @@ TEST(ClosedForms, SlippingGraspSlidesAlongTheNetTangentialLoad) {
 }
 
 // The two model options are read, written back when not the default
-// (elastic pads and "inertia": "auto", since issue 31, and the polyhedral
-// cone), and a wrong value is refused naming the field.
+// (elastic pads, since issue 31, and the polyhedral cone), and a wrong
+// value is refused naming the field.
 TEST(ClosedForms, PadAndConeOptionsRoundTrip) {
   const std::string base =
       std::string(kBox) + R"(,"duration":0.1,"grip_force":10.0,)" + kPointFingers + R"(,"model":{)";
   const Scene plain = Parse(base + "}");
   EXPECT_EQ(plain.model.pads, PadModel::kElastic);
   EXPECT_EQ(plain.model.cone, ConeModel::kPolyhedral);
-  EXPECT_EQ(plain.model.inertia, InertiaModel::kAuto);
+  EXPECT_EQ(plain.model.inertia, InertiaModel::kCarried);
   EXPECT_EQ(Scene{}.model.pads, PadModel::kElastic);  // built in code: the same defaults
   EXPECT_EQ(Scene{}.model.cone, ConeModel::kPolyhedral);
-  EXPECT_EQ(Scene{}.model.inertia, InertiaModel::kAuto);
   EXPECT_EQ(SceneToJson(plain).find("\"pads\""), std::string::npos);
-  EXPECT_EQ(SceneToJson(plain).find("\"inertia\""), std::string::npos);
   EXPECT_EQ(SceneToJson(plain).find("\"cone\""), std::string::npos);
   EXPECT_EQ(Parse(base + R"("pads":"elastic","cone":"polyhedral"})").model.pads,
             PadModel::kElastic);

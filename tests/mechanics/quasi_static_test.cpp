@@ -68,7 +68,7 @@ TEST(QuasiStatic, PivotPastItsStallFollowsTheQuasiStaticPath) {
   }
 }
 
-// The same scene with the momentum carried (the default before "auto") ends rocking about
+// The same scene with the momentum carried (the default) ends rocking about
 // that path: the flag says so, with the amplitude and frequency the
 // trajectory shows (about ±0.026 rad at ~80 Hz, measured by the earlier
 // audit as ±0.028 rad at ~75 Hz), so that the final pose is not reported as
@@ -276,27 +276,25 @@ TEST(QuasiStatic, DetectorFindsASinusoidAboutASlowPath) {
   EXPECT_FALSE(DetectOscillation(t, c, q, 5e-3, 0.1).detected);
 }
 
-// "auto" (added for issue 31, the default since): quasi-static where fingers
-// hold the object and no support carries it, carried otherwise; a scene that
-// says "carried" or "quasi_static" keeps it, and only a non-default value is
-// written back (a scene without the field reads as "auto"). Measured on 10 of the real pushes of a
-// support (dt 16 ms, scripts/real_data_study.sh's dataset): quasi-static found no balance on 4-46 %
-// of their steps after up to 50 solves each, 7.2x the carried wall time, so a support's push stays
-// carried.
+// "auto" (added for issue 31; "carried" stays the default): quasi-static
+// where fingers hold the object and no support carries it, carried
+// otherwise; a scene that says "carried" or "quasi_static" keeps it, and
+// only a non-default value is written back. Measured on 10 of the real pushes of a support (dt 16
+// ms, scripts/real_data_study.sh's dataset): quasi-static found no balance on 4-46 % of their steps
+// after up to 50 solves each, 7.2x the carried wall time, so a support's push stays carried.
 TEST(QuasiStatic, AutoIsQuasiStaticForAHeldObjectOnly) {
   const std::string held = std::string(kBox) + R"(,"gravity":[0,0,-9.81],"duration":0.1,)" +
                            R"("grip_force":10.0,)" + kPointFingers;
   const Scene plain = Parse(held + R"(,"model":{})");
-  EXPECT_EQ(plain.model.inertia, InertiaModel::kAuto);
-  EXPECT_EQ(Scene{}.model.inertia, InertiaModel::kAuto);  // built in code: the same default
-  EXPECT_EQ(InertiaOf(plain), InertiaModel::kQuasiStatic);
+  EXPECT_EQ(plain.model.inertia, InertiaModel::kCarried);
+  EXPECT_EQ(InertiaOf(plain), InertiaModel::kCarried);
   EXPECT_EQ(SceneToJson(plain).find("\"inertia\""), std::string::npos);
   for (const char* value : {"carried", "quasi_static", "auto"}) {
     const Scene s = Parse(held + R"(,"model":{"inertia":")" + value + R"("})");
     EXPECT_STREQ(ToString(s.model.inertia), value);
     EXPECT_EQ(ParseScene(SceneToJson(s)).model.inertia, s.model.inertia) << value;
     EXPECT_EQ(SceneToJson(s).find("\"inertia\"") == std::string::npos,
-              s.model.inertia == InertiaModel::kAuto)
+              s.model.inertia == InertiaModel::kCarried)
         << value;
   }
   EXPECT_EQ(InertiaOf(Parse(held + R"(,"model":{"inertia":"auto"})")), InertiaModel::kQuasiStatic);
@@ -306,9 +304,8 @@ TEST(QuasiStatic, AutoIsQuasiStaticForAHeldObjectOnly) {
   } catch (const SceneError& e) {
     EXPECT_NE(std::string(e.what()).find("model.inertia"), std::string::npos) << e.what();
   }
-  // A free object on a support, pushed (no fingers), "auto" (written, or the
-  // field absent): carried, and the run is the carried run bit for bit, with
-  // no extra solve.
+  // A free object on a support, pushed (no fingers), "auto": carried, and the run
+  // is the carried run bit for bit, with no extra solve.
   const Scene pushed = ParseScene(
       R"({"object":{"shape":"prism","height":0.013,"mass":0.8374,"polygon":[[-0.045,-0.045],)"
       R"([0.045,-0.045],[0.045,0.045],[-0.045,0.045]],"pose":{"position":[0,0,0.0065],)"
@@ -317,9 +314,6 @@ TEST(QuasiStatic, AutoIsQuasiStaticForAHeldObjectOnly) {
       R"("normal":[1,0,0],"mu":0.25,"motion":{"velocity":[0.02,0,0],"angular_velocity":[0,0,0]}},)"
       R"("support":{"mu":0.3,"pressure":"uniform"},"model":{"facets":8,"points":3,"dt":0.004,"inertia":"auto"}})");
   EXPECT_EQ(InertiaOf(pushed), InertiaModel::kCarried);
-  const std::string pushed_text = SceneToJson(pushed);  // "auto" is not written back
-  EXPECT_EQ(pushed_text.find("\"inertia\""), std::string::npos);
-  EXPECT_EQ(InertiaOf(ParseScene(pushed_text)), InertiaModel::kCarried);
   Scene carried = pushed;
   carried.model.inertia = InertiaModel::kCarried;
   const SimulationResult a = SimulateOk(pushed), b = SimulateOk(carried);
@@ -329,13 +323,10 @@ TEST(QuasiStatic, AutoIsQuasiStaticForAHeldObjectOnly) {
   EXPECT_GT(a.samples.back().position.x(), 0.002);  // pushed: 10 mm, less the 4.7 mm gap
   EXPECT_EQ(a.samples.back().position, b.samples.back().position);
   EXPECT_EQ(a.samples.back().orientation.coeffs(), b.samples.back().orientation.coeffs());
-  // The held pivot past its stall at the default ("auto", the field
-  // absent): the quasi-static answer, atan(d / (h − v T)).
-  Scene written = Pivot();
-  written.model.inertia = InertiaModel::kAuto;
-  const std::string pivot_text = SceneToJson(written);
-  ASSERT_EQ(pivot_text.find("\"inertia\""), std::string::npos);
-  const SimulationResult r = SimulateOk(ParseScene(pivot_text));
+  // The held pivot past its stall, "auto": the quasi-static answer.
+  Scene pivot = Pivot();
+  pivot.model.inertia = InertiaModel::kAuto;
+  const SimulationResult r = SimulateOk(pivot);
   EXPECT_EQ(r.model.inertia, InertiaModel::kQuasiStatic);
   EXPECT_NEAR(Roll(r.samples.back()), std::atan(0.01 / (0.05 - 0.01 * 0.6)), 1e-5);
   EXPECT_FALSE(r.oscillation.detected);
@@ -367,6 +358,76 @@ TEST(QuasiStatic, AutoCarriesWhereMomentumIsThePhysics) {
   }
   // The coast: the object moved on past the pusher's 10 mm (momentum).
   EXPECT_GT(SimulateOk(coast).samples.back().position.z(), 0.0105);
+}
+
+// Why "auto" is not the default yet (measured when it was made the default
+// and taken back): two things quasi-static steps get wrong in 6 DOF where
+// carried ones do not. (1) The worked example of docs/campaigns.md: a
+// centred push on two line fingers (grip 4 N, 0.02 m/s for 0.3 s) started
+// from a pose a cell measured a few mrad off the planned one. The tilt makes
+// the grasp 6-DOF and the line fingers slide in a direction the polyhedral
+// cone steers (issue 31 item 3); the centred push should barely roll.
+// Balanced steps follow the steering further than carried ones, whose
+// momentum lags it: at the campaign's coarse setting twice the carried
+// error (its self-consistency error went 2.76 -> 4.11 deg). (2) A line
+// pusher along the grip axis turning under two point fingers: a planar
+// scene whose roll about the grip axis nothing restrains; balanced 6-DOF
+// steps let it drift out of the plane on round-off (2 mm in 1 s, no flag),
+// where carried steps keep it at rest and the planar model has no such mode.
+TEST(QuasiStatic, SixDofBalancedStepsFollowTheSteeredSlipAndDrift) {
+  const Scene base = ParseScene(
+      R"({"object":{"shape":"box","size":[0.05,0.03,0.1],"mass":0.2,"pose":{"position":)"
+      R"([-0.000188218,-0.000197216,-5.77634e-05],"rpy":[-0.00343316,0.00383865,0.00131018]}},)"
+      R"("gravity":[0,0,-9.81],"duration":0.3,"grip_force":4.0,"fingers":[{"name":"left",)"
+      R"("type":"line","position":[-0.025,0,0],"normal":[1,0,0],"axis":[0,0,1],"length":0.02,)"
+      R"("mu":0.5},{"name":"right","type":"line","position":[0.025,0,0],"normal":[-1,0,0],)"
+      R"("axis":[0,0,1],"length":0.02,"mu":0.5}],"pusher":{"type":"point","position":[0,0,-0.05],)"
+      R"("normal":[0,0,1],"mu":0.3,"motion":{"velocity":[0,0,0.02],"angular_velocity":[0,0,0]}},)"
+      R"("model":{"facets":4,"points":3,"dt":0.008,"inertia":"auto"}})");
+  struct Setting {
+    int facets;
+    double dt, roll_quasi_static, roll_carried;
+  };
+  for (const Setting& k : {Setting{4, 0.008, 0.1028, 0.0515}, Setting{8, 0.004, 0.0407, 0.0277},
+                           Setting{16, 0.002, 0.0168, 0.0137}}) {
+    Scene s = base;  // "auto": quasi-static for this held object
+    s.model.facets = k.facets;
+    s.model.dt = k.dt;
+    Scene carried = s;
+    carried.model.inertia = InertiaModel::kCarried;
+    const SimulationResult a = SimulateOk(s), c = SimulateOk(carried);
+    std::printf("centred push, line fingers, %d facets, dt %g: roll auto %.4f, carried %.4f rad\n",
+                k.facets, k.dt, Roll(a.samples.back()), Roll(c.samples.back()));
+    EXPECT_EQ(a.model.dof, 6);
+    EXPECT_EQ(a.model.inertia, InertiaModel::kQuasiStatic);
+    EXPECT_NEAR(Roll(a.samples.back()), k.roll_quasi_static, 5e-4) << k.facets;
+    EXPECT_NEAR(Roll(c.samples.back()), k.roll_carried, 5e-4) << k.facets;
+  }
+  // (2): examples/scenes/canonical.json with point fingers and a turning line pusher.
+  const std::string turning =
+      R"({"object":{"shape":"box","size":[0.05,0.03,0.10],"mass":0.2,"pose":{"position":[0,0,0],)"
+      R"("rpy":[0,0,0]}},"gravity":[0,0,-9.81],"duration":1.0,"grip_force":10.0,"fingers":[)"
+      R"({"name":"left","type":"point","position":[-0.025,0,0],"normal":[1,0,0],"mu":0.5},)"
+      R"({"name":"right","type":"point","position":[0.025,0,0],"normal":[-1,0,0],"mu":0.5}],)"
+      R"("pusher":{"type":"line","axis":[1,0,0],"length":0.01,"position":[0,0,-0.05],)"
+      R"("normal":[0,0,1],"mu":0.3,"motion":{"velocity":[0,0,0.01],"angular_velocity":[0,0.5,0]}},)"
+      R"("model":{"facets":8,"points":3,"dt":0.004,"reduce":")";
+  const SimulationResult carried =
+      SimulateOk(ParseScene(turning + R"(full","inertia":"carried"}})"));
+  const SimulationResult drift = SimulateOk(ParseScene(turning + R"(full","inertia":"auto"}})"));
+  const SimulationResult planar = SimulateOk(ParseScene(turning + R"(auto","inertia":"auto"}})"));
+  const auto out_of_plane = [](const SimulationResult& r) {
+    return std::abs(r.samples.back().position.y());
+  };
+  std::printf(
+      "turning line pusher: out of plane %.3g m (carried, full), %.3g m (auto, full), "
+      "%.3g m (auto, planar)\n",
+      out_of_plane(carried), out_of_plane(drift), out_of_plane(planar));
+  EXPECT_LT(out_of_plane(carried), 1e-12);
+  EXPECT_GT(out_of_plane(drift), 1e-3) << "the drift this measures";
+  EXPECT_FALSE(drift.oscillation.detected) << "and nothing flags it";
+  EXPECT_EQ(planar.model.dof, 3);
+  EXPECT_LT(out_of_plane(planar), 1e-12);
 }
 
 }  // namespace
