@@ -174,9 +174,9 @@ TEST(Planarity, DetectsThePlaneAndRefusesOthers) {
   EXPECT_TRUE(FindPlane(rotated).planar) << FindPlane(rotated).reason;
 }
 
-// With the momentum carried: under "auto" (the default) the planar steps
-// balance and the full ones carry (in 6 DOF a balanced step lets a mode
-// nothing holds drift), so the two reductions are compared on one model.
+// With the momentum carried, written: with quasi-static steps ("auto") the
+// full model drifts out of the plane on the turning pusher (a mode nothing
+// holds; quasi_static_test.cpp), which the planar model has not.
 void ExpectSameTrajectory(const Scene& scene, const char* what) {
   Scene full = scene, planar = scene;
   full.model.reduce = Reduce::kFull;
