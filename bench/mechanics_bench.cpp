@@ -187,9 +187,11 @@ BENCHMARK_CAPTURE(StepInertia, pivot_quasi_static, 2, InertiaModel::kQuasiStatic
 BENCHMARK_CAPTURE(StepInertia, canonical_auto, 0, InertiaModel::kAuto)
     ->Unit(benchmark::kMillisecond);
 BENCHMARK_CAPTURE(StepInertia, pivot_auto, 2, InertiaModel::kAuto)->Unit(benchmark::kMillisecond);
-// The default against "carried" written, on each scene (issue 31: the
-// default step at most 25 % above the carried one).
+// "auto" and the default (ModelOptions as it is) against "carried" written,
+// on each scene (issue 31: a default step at most 25 % above the carried one).
 BENCHMARK_CAPTURE(StepInertia, canonical_full_carried, 1, InertiaModel::kCarried)
+    ->Unit(benchmark::kMillisecond);
+BENCHMARK_CAPTURE(StepInertia, canonical_full_auto, 1, InertiaModel::kAuto)
     ->Unit(benchmark::kMillisecond);
 BENCHMARK_CAPTURE(StepInertia, canonical_default, 0, std::nullopt)->Unit(benchmark::kMillisecond);
 BENCHMARK_CAPTURE(StepInertia, canonical_full_default, 1, std::nullopt)
