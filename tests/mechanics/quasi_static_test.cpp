@@ -1,4 +1,4 @@
-// Issue 31 item 2: "inertia": "quasi_static" (and "auto", the default,
+// Issue 31 item 2: "inertia": "quasi_static" (and "auto", opt-in,
 // for a held object) follows the quasi-static path where the physics is
 // quasi-static, and a run that still ends in an
 // undamped oscillation says so (SimulationResult::oscillation).
