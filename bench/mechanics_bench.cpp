@@ -11,6 +11,7 @@
 #include <chrono>
 #include <cmath>
 #include <fstream>
+#include <optional>
 #include <sstream>
 #include <string>
 #include <vector>
@@ -130,9 +131,10 @@ BENCHMARK_CAPTURE(StepContacts, canonical_planar_tracked, ContactTracking::kTrac
 BENCHMARK_CAPTURE(StepContacts, canonical_planar_fixed, ContactTracking::kFixed, Reduce::kAuto)
     ->Unit(benchmark::kMillisecond);
 
-// Quasi-static vs carried steps (issue 31): the canonical scene and the
-// issue's pivot past its stall (grip 1 kN, dt 1 ms, 600 steps), same
-// counters as Step_*.
+// Quasi-static vs carried steps (issue 31): the canonical scene (planar,
+// and full: 6 DOF) and the issue's pivot past its stall (grip 1 kN, dt 1 ms,
+// 600 steps), same counters as Step_*. The `*_default` captures leave
+// model.inertia as ModelOptions has it ("auto" since issue 31).
 Scene StallPivot() {
   return ParseScene(
       R"({"object":{"shape":"box","size":[0.05,0.03,0.1],"mass":0.2,"pose":{"position":[0,0,0],)"
@@ -143,9 +145,11 @@ Scene StallPivot() {
       R"("position":[0,0.01,-0.05],"normal":[0,0,1],"mu":0.0,"motion":{"velocity":[0,0,0.01],)"
       R"("angular_velocity":[0,0,0]}}})");
 }
-void StepInertia(benchmark::State& state, bool pivot, InertiaModel inertia) {
-  Scene s = pivot ? StallPivot() : Make(kCanonical, true, Reduce::kAuto);
-  s.model.inertia = inertia;
+void StepInertia(benchmark::State& state, int scene, std::optional<InertiaModel> inertia) {
+  const bool pivot = scene == 2;
+  Scene s =
+      pivot ? StallPivot() : Make(kCanonical, true, scene == 1 ? Reduce::kFull : Reduce::kAuto);
+  if (inertia) s.model.inertia = *inertia;
   const int steps = pivot ? 600 : 500;
   std::vector<double> us;
   long extra = 0;
@@ -171,19 +175,28 @@ void StepInertia(benchmark::State& state, bool pivot, InertiaModel inertia) {
   state.counters["step_mean_us"] = mean / static_cast<double>(us.size());
   state.counters["extra_solves"] = static_cast<double>(extra);
 }
-BENCHMARK_CAPTURE(StepInertia, canonical_carried, false, InertiaModel::kCarried)
+BENCHMARK_CAPTURE(StepInertia, canonical_carried, 0, InertiaModel::kCarried)
     ->Unit(benchmark::kMillisecond);
-BENCHMARK_CAPTURE(StepInertia, canonical_quasi_static, false, InertiaModel::kQuasiStatic)
+BENCHMARK_CAPTURE(StepInertia, canonical_quasi_static, 0, InertiaModel::kQuasiStatic)
     ->Unit(benchmark::kMillisecond);
-BENCHMARK_CAPTURE(StepInertia, pivot_carried, true, InertiaModel::kCarried)
+BENCHMARK_CAPTURE(StepInertia, pivot_carried, 2, InertiaModel::kCarried)
     ->Unit(benchmark::kMillisecond);
-BENCHMARK_CAPTURE(StepInertia, pivot_quasi_static, true, InertiaModel::kQuasiStatic)
+BENCHMARK_CAPTURE(StepInertia, pivot_quasi_static, 2, InertiaModel::kQuasiStatic)
     ->Unit(benchmark::kMillisecond);
 // "auto" (quasi-static for these held objects).
-BENCHMARK_CAPTURE(StepInertia, canonical_auto, false, InertiaModel::kAuto)
+BENCHMARK_CAPTURE(StepInertia, canonical_auto, 0, InertiaModel::kAuto)
     ->Unit(benchmark::kMillisecond);
-BENCHMARK_CAPTURE(StepInertia, pivot_auto, true, InertiaModel::kAuto)
+BENCHMARK_CAPTURE(StepInertia, pivot_auto, 2, InertiaModel::kAuto)->Unit(benchmark::kMillisecond);
+// "auto" and the default (ModelOptions as it is) against "carried" written,
+// on each scene (issue 31: a default step at most 25 % above the carried one).
+BENCHMARK_CAPTURE(StepInertia, canonical_full_carried, 1, InertiaModel::kCarried)
     ->Unit(benchmark::kMillisecond);
+BENCHMARK_CAPTURE(StepInertia, canonical_full_auto, 1, InertiaModel::kAuto)
+    ->Unit(benchmark::kMillisecond);
+BENCHMARK_CAPTURE(StepInertia, canonical_default, 0, std::nullopt)->Unit(benchmark::kMillisecond);
+BENCHMARK_CAPTURE(StepInertia, canonical_full_default, 1, std::nullopt)
+    ->Unit(benchmark::kMillisecond);
+BENCHMARK_CAPTURE(StepInertia, pivot_default, 2, std::nullopt)->Unit(benchmark::kMillisecond);
 
 #define ARENA_MECH_BENCH(name, v, pusher, reduce)                                   \
   BENCHMARK_CAPTURE(Trial, name, v, pusher, reduce)->Unit(benchmark::kMillisecond); \
@@ -200,8 +213,9 @@ ARENA_MECH_BENCH(lines_no_pusher_full, kLines, false, Reduce::kFull);
 ARENA_MECH_BENCH(patches_pusher_full, kPatches, true, Reduce::kFull);
 ARENA_MECH_BENCH(patches_no_pusher_full, kPatches, false, Reduce::kFull);
 
-// Issue 31's defaults (elastic pads, aligned cone) against the old ones
-// (rigid pads, polyhedral cone) set explicitly: the canonical scene (planar,
+// Issue 31's defaults (elastic pads, aligned cone; now elastic pads, the
+// polyhedral cone and "inertia": "auto") against the old ones (rigid pads,
+// polyhedral cone, carried momentum) set explicitly: the canonical scene (planar,
 // and full: 6 DOF, where the cone can align) and the pivot past its stall
 // (600 steps at dt 1 ms); step_mean_us, step_median_us and the aligned
 // cones' re-solves per run.
@@ -213,6 +227,7 @@ void StepDefaults(benchmark::State& state, int scene, bool old_defaults, bool al
   if (old_defaults) {
     s.model.pads = PadModel::kRigid;
     s.model.cone = ConeModel::kPolyhedral;
+    s.model.inertia = InertiaModel::kCarried;  // the default until "auto" (issue 31)
   }
   if (aligned) {
     s.model.cone = ConeModel::kAligned;

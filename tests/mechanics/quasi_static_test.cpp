@@ -1,4 +1,4 @@
-// Issue 31 item 2: "inertia": "quasi_static" (and "auto", the default,
+// Issue 31 item 2: "inertia": "quasi_static" (and "auto", opt-in,
 // for a held object) follows the quasi-static path where the physics is
 // quasi-static, and a run that still ends in an
 // undamped oscillation says so (SimulationResult::oscillation).
@@ -358,6 +358,76 @@ TEST(QuasiStatic, AutoCarriesWhereMomentumIsThePhysics) {
   }
   // The coast: the object moved on past the pusher's 10 mm (momentum).
   EXPECT_GT(SimulateOk(coast).samples.back().position.z(), 0.0105);
+}
+
+// Why "auto" is not the default yet (measured when it was made the default
+// and taken back): two things quasi-static steps get wrong in 6 DOF where
+// carried ones do not. (1) The worked example of docs/campaigns.md: a
+// centred push on two line fingers (grip 4 N, 0.02 m/s for 0.3 s) started
+// from a pose a cell measured a few mrad off the planned one. The tilt makes
+// the grasp 6-DOF and the line fingers slide in a direction the polyhedral
+// cone steers (issue 31 item 3); the centred push should barely roll.
+// Balanced steps follow the steering further than carried ones, whose
+// momentum lags it: at the campaign's coarse setting twice the carried
+// error (its self-consistency error went 2.76 -> 4.11 deg). (2) A line
+// pusher along the grip axis turning under two point fingers: a planar
+// scene whose roll about the grip axis nothing restrains; balanced 6-DOF
+// steps let it drift out of the plane on round-off (2 mm in 1 s, no flag),
+// where carried steps keep it at rest and the planar model has no such mode.
+TEST(QuasiStatic, SixDofBalancedStepsFollowTheSteeredSlipAndDrift) {
+  const Scene base = ParseScene(
+      R"({"object":{"shape":"box","size":[0.05,0.03,0.1],"mass":0.2,"pose":{"position":)"
+      R"([-0.000188218,-0.000197216,-5.77634e-05],"rpy":[-0.00343316,0.00383865,0.00131018]}},)"
+      R"("gravity":[0,0,-9.81],"duration":0.3,"grip_force":4.0,"fingers":[{"name":"left",)"
+      R"("type":"line","position":[-0.025,0,0],"normal":[1,0,0],"axis":[0,0,1],"length":0.02,)"
+      R"("mu":0.5},{"name":"right","type":"line","position":[0.025,0,0],"normal":[-1,0,0],)"
+      R"("axis":[0,0,1],"length":0.02,"mu":0.5}],"pusher":{"type":"point","position":[0,0,-0.05],)"
+      R"("normal":[0,0,1],"mu":0.3,"motion":{"velocity":[0,0,0.02],"angular_velocity":[0,0,0]}},)"
+      R"("model":{"facets":4,"points":3,"dt":0.008,"inertia":"auto"}})");
+  struct Setting {
+    int facets;
+    double dt, roll_quasi_static, roll_carried;
+  };
+  for (const Setting& k : {Setting{4, 0.008, 0.1028, 0.0515}, Setting{8, 0.004, 0.0407, 0.0277},
+                           Setting{16, 0.002, 0.0168, 0.0137}}) {
+    Scene s = base;  // "auto": quasi-static for this held object
+    s.model.facets = k.facets;
+    s.model.dt = k.dt;
+    Scene carried = s;
+    carried.model.inertia = InertiaModel::kCarried;
+    const SimulationResult a = SimulateOk(s), c = SimulateOk(carried);
+    std::printf("centred push, line fingers, %d facets, dt %g: roll auto %.4f, carried %.4f rad\n",
+                k.facets, k.dt, Roll(a.samples.back()), Roll(c.samples.back()));
+    EXPECT_EQ(a.model.dof, 6);
+    EXPECT_EQ(a.model.inertia, InertiaModel::kQuasiStatic);
+    EXPECT_NEAR(Roll(a.samples.back()), k.roll_quasi_static, 5e-4) << k.facets;
+    EXPECT_NEAR(Roll(c.samples.back()), k.roll_carried, 5e-4) << k.facets;
+  }
+  // (2): examples/scenes/canonical.json with point fingers and a turning line pusher.
+  const std::string turning =
+      R"({"object":{"shape":"box","size":[0.05,0.03,0.10],"mass":0.2,"pose":{"position":[0,0,0],)"
+      R"("rpy":[0,0,0]}},"gravity":[0,0,-9.81],"duration":1.0,"grip_force":10.0,"fingers":[)"
+      R"({"name":"left","type":"point","position":[-0.025,0,0],"normal":[1,0,0],"mu":0.5},)"
+      R"({"name":"right","type":"point","position":[0.025,0,0],"normal":[-1,0,0],"mu":0.5}],)"
+      R"("pusher":{"type":"line","axis":[1,0,0],"length":0.01,"position":[0,0,-0.05],)"
+      R"("normal":[0,0,1],"mu":0.3,"motion":{"velocity":[0,0,0.01],"angular_velocity":[0,0.5,0]}},)"
+      R"("model":{"facets":8,"points":3,"dt":0.004,"reduce":")";
+  const SimulationResult carried =
+      SimulateOk(ParseScene(turning + R"(full","inertia":"carried"}})"));
+  const SimulationResult drift = SimulateOk(ParseScene(turning + R"(full","inertia":"auto"}})"));
+  const SimulationResult planar = SimulateOk(ParseScene(turning + R"(auto","inertia":"auto"}})"));
+  const auto out_of_plane = [](const SimulationResult& r) {
+    return std::abs(r.samples.back().position.y());
+  };
+  std::printf(
+      "turning line pusher: out of plane %.3g m (carried, full), %.3g m (auto, full), "
+      "%.3g m (auto, planar)\n",
+      out_of_plane(carried), out_of_plane(drift), out_of_plane(planar));
+  EXPECT_LT(out_of_plane(carried), 1e-12);
+  EXPECT_GT(out_of_plane(drift), 1e-3) << "the drift this measures";
+  EXPECT_FALSE(drift.oscillation.detected) << "and nothing flags it";
+  EXPECT_EQ(planar.model.dof, 3);
+  EXPECT_LT(out_of_plane(planar), 1e-12);
 }
 
 }  // namespace

@@ -229,6 +229,9 @@ TEST(PivotingPush, SmallStepsSlipAtTheImpulsiveStartOnly) {
       s.pusher = Pusher({0, -0.015, -d}, {0, 1, 0}, {0, v, 0}, 0.3);
       s.model.dt = dt;
       s.model.contacts = ContactTracking::kFixed;
+      // The start impulse is the carried step's (balanced steps, "auto" on
+      // this held object, have none).
+      s.model.inertia = InertiaModel::kCarried;
       const double Ix = ObjectInertia(s.object)(0, 0);
       const double F = Ix * (v / d) / ((d - 0.3 * 0.015) * dt);
       const double finger = std::hypot(F / 2, (mass * 9.81 - 0.3 * F) / 2);
