@@ -86,8 +86,19 @@ std::string ModelKey(const mechanics::ModelOptions& m) {
   // Tracked contacts are the default; the frozen frame is named by a suffix
   // (stores written before tracking existed hold frozen-frame predictions
   // under the bare key).
-  if (m.contacts == mechanics::ContactTracking::kFixed) return std::string(buf) + "_fixed";
-  return buf;
+  std::string key = buf;
+  if (m.contacts == mechanics::ContactTracking::kFixed) key += "_fixed";
+  // Every other knob that changes the answer is named when it is not the
+  // default, so two settings that differ only there never share a key (one
+  // would be taken for the other's stored prediction). The defaults keep the
+  // bare key stored predictions already have.
+  const mechanics::ModelOptions defaults;
+  if (m.pads != defaults.pads) key += std::string("_pads-") + mechanics::ToString(m.pads);
+  if (m.cone != defaults.cone) key += std::string("_cone-") + mechanics::ToString(m.cone);
+  if (m.inertia != defaults.inertia) {
+    key += std::string("_inertia-") + mechanics::ToString(m.inertia);
+  }
+  return key;
 }
 
 std::string ModelSettingsJson(const mechanics::ModelOptions& model) {

@@ -27,6 +27,24 @@ TEST(EvaluationPercentile, InterpolatesBetweenClosestRanks) {
   EXPECT_THROW(Percentile({1}, std::nan("")), std::invalid_argument);
 }
 
+// A prediction's key names every knob that changes its answer: two settings
+// that differ only in pads, cone or inertia stored under one key would let
+// one be read back as the other's prediction. The defaults keep the bare key
+// (stored predictions keep theirs).
+TEST(ModelKeys, NameEveryKnobThatIsNotItsDefault) {
+  mechanics::ModelOptions m;
+  EXPECT_EQ(ModelKey(m), "g8_k3_dt0.004_auto");
+  m.inertia = mechanics::InertiaModel::kAuto;
+  EXPECT_EQ(ModelKey(m), "g8_k3_dt0.004_auto_inertia-auto");
+  m.cone = mechanics::ConeModel::kAligned;
+  m.pads = mechanics::PadModel::kRigid;
+  m.contacts = mechanics::ContactTracking::kFixed;
+  EXPECT_EQ(ModelKey(m), "g8_k3_dt0.004_auto_fixed_pads-rigid_cone-aligned_inertia-auto");
+  mechanics::ModelOptions quasi_static;
+  quasi_static.inertia = mechanics::InertiaModel::kQuasiStatic;
+  EXPECT_EQ(ModelKey(quasi_static), "g8_k3_dt0.004_auto_inertia-quasi_static");
+}
+
 TEST(EvaluationGrid, CrossProductInOrderAndBadListsRefused) {
   FidelityGrid g;
   g.facets = {4, 8};
