@@ -148,6 +148,7 @@ nlohmann::json CampaignJson(const db::Store& store, const db::CampaignStatus& c,
                       {"done", c.done},
                       {"failed", c.failed},
                       {"running", c.running},
+                      {"awaiting_prediction", c.awaiting_prediction},
                       {"pending", c.pending},
                       {"cancelled", c.cancelled},
                       {"rate_per_hour", c.rate_per_hour}};
@@ -246,6 +247,9 @@ void PrintCampaigns(const db::Store& store, const StatusView& v) {
                 static_cast<long long>(c.failed), static_cast<long long>(c.running),
                 c.rate_per_hour, c.eta_s ? FormatDuration(*c.eta_s).c_str() : "-");
   for (const auto& c : campaigns) {
+    if (c.awaiting_prediction > 0)
+      std::printf("      campaign %lld: %lld of its running trials await their prediction\n",
+                  static_cast<long long>(c.id), static_cast<long long>(c.awaiting_prediction));
     if (auto w = v.waits.find(c.id); w != v.waits.end())
       std::printf("      campaign %lld waits: %s (since %s)\n", static_cast<long long>(c.id),
                   w->second.reason.c_str(), IsoTime(w->second.since).c_str());

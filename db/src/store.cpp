@@ -974,17 +974,18 @@ void CheckPrediction(const Prediction& p, const std::string& prefix) {
 
 }  // namespace
 
-void Store::RecordPrediction(std::int64_t trial_id, int attempt, const Prediction& p) {
-  impl_->RequireWritable("RecordPrediction");
-  CheckPrediction(p, "RecordPrediction: ");
-  Tx tx(impl_->db, true);
-  const auto row = LoadTrialRow(*impl_, trial_id, "RecordPrediction");
-  CheckAttempt(row, trial_id, attempt, "RecordPrediction");
+namespace {
+
+// RecordPrediction's writes; the caller holds the write transaction.
+void WritePrediction(const Store::Impl& impl, std::int64_t trial_id, int attempt,
+                     const Prediction& p, const char* function) {
+  const auto row = LoadTrialRow(impl, trial_id, function);
+  CheckAttempt(row, trial_id, attempt, function);
   if (row.state != TrialState::kPredicted) {
-    WriteTransition(*impl_, trial_id, attempt, row.state, TrialState::kPredicted, row.cell_id,
-                    "predicted (" + p.model_key + ")", "predict.recorded", "RecordPrediction");
+    WriteTransition(impl, trial_id, attempt, row.state, TrialState::kPredicted, row.cell_id,
+                    "predicted (" + p.model_key + ")", "predict.recorded", function);
   }
-  auto s = impl_->Prepare(
+  auto s = impl.Prepare(
       "INSERT INTO predictions(trial_id, attempt, model_key, model_json, status, "
       "final_position_error,"
       " final_angle_error, force_error, mode_agreement, wall_s, detail_json, created_at)"
@@ -1005,8 +1006,35 @@ void Store::RecordPrediction(std::int64_t trial_id, int attempt, const Predictio
       .Bind(9, p.mode_agreement)
       .Bind(10, p.wall_s)
       .Bind(11, p.detail_json)
-      .Bind(12, impl_->Now());
+      .Bind(12, impl.Now());
   s->Run();
+}
+
+// FinishTrial's write (predicted -> done); the caller holds the write transaction.
+void WriteFinish(const Store::Impl& impl, std::int64_t trial_id, int attempt,
+                 const char* function) {
+  const auto row = LoadTrialRow(impl, trial_id, function);
+  CheckAttempt(row, trial_id, attempt, function);
+  WriteTransition(impl, trial_id, attempt, row.state, TrialState::kDone, row.cell_id, "done",
+                  "finish.predicted", function);
+}
+
+}  // namespace
+
+void Store::RecordPrediction(std::int64_t trial_id, int attempt, const Prediction& p) {
+  impl_->RequireWritable("RecordPrediction");
+  CheckPrediction(p, "RecordPrediction: ");
+  Tx tx(impl_->db, true);
+  WritePrediction(*impl_, trial_id, attempt, p, "RecordPrediction");
+  tx.Commit();
+}
+
+void Store::RecordPredictionAndFinish(std::int64_t trial_id, int attempt, const Prediction& p) {
+  impl_->RequireWritable("RecordPredictionAndFinish");
+  CheckPrediction(p, "RecordPredictionAndFinish: ");
+  Tx tx(impl_->db, true);
+  WritePrediction(*impl_, trial_id, attempt, p, "RecordPredictionAndFinish");
+  WriteFinish(*impl_, trial_id, attempt, "RecordPredictionAndFinish");
   tx.Commit();
 }
 
@@ -1180,10 +1208,7 @@ std::vector<Store::TruthCount> Store::CampaignTruths(std::int64_t campaign_id) c
 void Store::FinishTrial(std::int64_t trial_id, int attempt) {
   impl_->RequireWritable("FinishTrial");
   Tx tx(impl_->db, true);
-  const auto row = LoadTrialRow(*impl_, trial_id, "FinishTrial");
-  CheckAttempt(row, trial_id, attempt, "FinishTrial");
-  WriteTransition(*impl_, trial_id, attempt, row.state, TrialState::kDone, row.cell_id, "done",
-                  "finish.predicted", "FinishTrial");
+  WriteFinish(*impl_, trial_id, attempt, "FinishTrial");
   tx.Commit();
 }
 
@@ -1569,7 +1594,8 @@ StatusSummary Store::Status() const {
       "('dispatched','executed','resetting','reset_done','reset_failed','predicted')),"
       " SUM(t.state = 'done'), SUM(t.state = 'failed'), SUM(t.state = 'cancelled'),"
       " SUM(t.state IN ('done','failed') AND t.finished_at >= ?1),"
-      " MIN(t.dispatched_at), MAX(t.finished_at), SUM(t.state IN ('done','failed'))"
+      " MIN(t.dispatched_at), MAX(t.finished_at), SUM(t.state IN ('done','failed')),"
+      " SUM(t.state IN ('executed','resetting','reset_done','reset_failed'))"
       " FROM campaigns c LEFT JOIN trials t ON t.campaign_id = c.id GROUP BY c.id ORDER BY c.id");
   s->Bind(1, now - kRateWindowS);
   while (s->Step()) {
@@ -1585,6 +1611,7 @@ StatusSummary Store::Status() const {
     c.failed = s->Int(8);
     c.cancelled = s->Int(9);
     const std::int64_t recent = s->Int(10);
+    c.awaiting_prediction = s->Int(14);
     const bool finished = c.pending == 0 && c.running == 0 && c.state != CampaignState::kActive;
     if (finished) {
       // Frozen: the rate it ran at, from its first dispatch to its last

@@ -5,6 +5,8 @@
 #include "arena/orchestrator/scene_facts.hpp"
 
 #include <signal.h>
+#include <sys/resource.h>
+#include <sys/syscall.h>
 #include <unistd.h>
 
 #include <algorithm>
@@ -12,6 +14,7 @@
 #include <chrono>
 #include <cmath>
 #include <condition_variable>
+#include <cstring>
 #include <deque>
 #include <map>
 #include <mutex>
@@ -236,6 +239,9 @@ class SqliteTrialStore : public TrialStore {
     s_.RecordPrediction(id, attempt, p);
   }
   void FinishTrial(std::int64_t id, int attempt) override { s_.FinishTrial(id, attempt); }
+  void RecordPredictionAndFinish(std::int64_t id, int attempt, const db::Prediction& p) override {
+    s_.RecordPredictionAndFinish(id, attempt, p);
+  }
   void RecordExecution(std::int64_t id, int attempt, const std::string& backend,
                        const std::string& truth, const std::string& defects_applied) override {
     s_.RecordExecution(id, attempt, backend, truth, defects_applied);
@@ -312,8 +318,12 @@ struct PredictionJob {
 // runs on the service thread (it reads the store for a resumed trial).
 class PredictorPool : public PredictionPort {
  public:
-  explicit PredictorPool(int threads) {
-    for (int i = 0; i < std::max(1, threads); ++i) workers_.emplace_back([this] { Work(); });
+  PredictorPool(int threads, int nice) {
+    for (int i = 0; i < std::max(1, threads); ++i)
+      workers_.emplace_back([this, nice] {
+        LowerPriority(nice);
+        Work();
+      });
   }
   ~PredictorPool() override {
     {
@@ -410,6 +420,17 @@ class PredictorPool : public PredictionPort {
     return models_.emplace(campaign_id, model).first->second;
   }
 
+  // This thread only (Linux: a thread's nice value is its own). A refusal
+  // (a container without the right) costs the priority, not the predictions.
+  static void LowerPriority(int nice) {
+    if (nice <= 0) return;
+    const auto tid = static_cast<id_t>(syscall(SYS_gettid));
+    errno = 0;
+    const int current = getpriority(PRIO_PROCESS, tid);
+    if (errno != 0 || setpriority(PRIO_PROCESS, tid, std::min(19, current + nice)) != 0)
+      spdlog::warn("predictor thread: cannot lower its priority: {}", std::strerror(errno));
+  }
+
   void Work() {
     for (;;) {
       PredictionJob job;
@@ -490,7 +511,7 @@ struct Service::Impl {
         announces(participant),
         statuses(participant),
         truth_reader(participant),
-        predictor(o.predictor_threads),
+        predictor(o.predictor_threads, o.predictor_nice),
         store(db::Store::Open(o.db_path, StoreOptionsFor(o))) {
     predictor.SetStore(store.get());
     ServiceIdentity me{session, HostName(), static_cast<std::uint32_t>(getpid()), store->StoreId()};
@@ -691,6 +712,12 @@ void ValidateServiceOptions(const ServiceOptions& o) {
   if (o.predictor_threads < 1 || o.predictor_threads > max_predictors)
     throw std::invalid_argument("--predictors: must be 1.." + std::to_string(max_predictors) +
                                 " threads, got " + std::to_string(o.predictor_threads));
+  if (o.predictor_nice < 0 || o.predictor_nice > 19)
+    throw std::invalid_argument("predictor_nice: must be 0..19, got " +
+                                std::to_string(o.predictor_nice));
+  if (o.prediction_backlog < 1 || o.prediction_backlog > 100000)
+    throw std::invalid_argument("prediction_backlog: must be 1..100000 trials, got " +
+                                std::to_string(o.prediction_backlog));
   if (o.store_max_pages < 0) throw std::invalid_argument("--store-max-pages: must be >= 0");
   RequireSeconds(o.cell_backoff_s, "cell_backoff_s", 0, 3600);
   RequireSeconds(o.cell_backoff_max_s, "--cell-backoff-max", 0, 3600);

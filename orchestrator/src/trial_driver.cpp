@@ -739,9 +739,21 @@ struct TrialDriver::Impl {
   }
 
   // ------------------------------------------------------------ dispatch
+  bool backlog_held = false;   // the prediction backlog holds dispatch (logged once)
+  int predictions_queued = 0;  // requests waiting in `background` to be started
   void Dispatch(bool stopping) {
     if (stopping || !recovered) return;
     const auto t = now();
+    // A predictor behind by a full backlog: no new trial until it catches up.
+    const int backlog = predictions.outstanding() + predictions_queued;
+    if (backlog >= opt.service.prediction_backlog) {
+      if (!backlog_held)
+        spdlog::warn("{} trials wait for their prediction; no new trial until fewer than {} do",
+                     backlog, opt.service.prediction_backlog);
+      backlog_held = true;
+      return;
+    }
+    backlog_held = false;
     bool gate_checked = false;
     for (auto& [id, cell] : cells) {
       if (!cell.alive || !cell.ours || cell.quarantined || cell.phase != CellPhase::kIdle ||
@@ -1004,7 +1016,15 @@ struct TrialDriver::Impl {
                               std::move(ex.commands),
                               std::nullopt};
     if (!ex.samples.empty()) request.first_sample = ex.samples.front();
-    predictions.Start(std::move(request));
+    // Started after the RESET is sent and the next dispatch (Tick's
+    // background): preparing it (its start pose, the campaign's model) is
+    // off the trial's path, and the model runs on the predictor's threads.
+    auto shared_request = std::make_shared<PredictionRequest>(std::move(request));
+    ++predictions_queued;
+    background.push_back([this, shared_request] {
+      --predictions_queued;
+      predictions.Start(std::move(*shared_request));
+    });
     const std::string tag = TrialTag(ex.campaign_id, ex.trial_id, ex.attempt);
     const int attempt = ex.attempt;
     const std::string cell_id = ex.cell_id;
@@ -1246,12 +1266,14 @@ struct TrialDriver::Impl {
   void RecordPrediction(PredictionDone done) {
     const std::string tag = TrialTag(done.campaign_id, done.trial_id, done.attempt);
     auto shared = std::make_shared<PredictionDone>(std::move(done));
+    // The prediction and `done` in one commit (off the path: after a dispatch).
     Step(tag + ": record prediction", "", [this, tag, shared] {
-      store.RecordPrediction(shared->trial_id, shared->attempt, shared->prediction);
+      store.RecordPredictionAndFinish(shared->trial_id, shared->attempt, shared->prediction);
       spdlog::info("{}: predicted ({}, final position error {:.3g} m)", tag,
                    db::ToString(shared->prediction.status),
                    shared->prediction.final_position_error.value_or(NAN));
-      Finish(shared->trial_id, shared->campaign_id, shared->attempt);
+      Count(&ServiceCounters::done);
+      spdlog::info("{}: done", tag);
     });
   }
 

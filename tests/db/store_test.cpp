@@ -397,6 +397,55 @@ TEST(StoreTrial, RetryKeepsLineageBacksOffAndCaps) {
   ExpectHealthy(*store);
 }
 
+// Issue 27: the service's clean trial stores its prediction and `done` in one
+// commit: both edges and both audit rows, or (refused) nothing at all.
+TEST(StoreTrial, RecordPredictionAndFinishIsBothStepsOrNothing) {
+  TempDir dir;
+  auto store = Store::Open(dir.File("s.db"));
+  store->UpsertCell("c", {"point"});
+  store->CreateCampaign(MakeCampaign(), MakeTrials(2));
+  auto t = store->ClaimNextTrial("c");
+  auto ingest = store->BeginIngest(t->trial_id, 1, testing::SceneSites());
+  ingest->Add(MakeSample(0));
+  ingest->Finish();
+  Prediction p;
+  p.model_key = "k";
+  // Executed, not reset: refused, nothing written.
+  EXPECT_STORE_ERROR(store->RecordPredictionAndFinish(t->trial_id, 1, p), K::kIllegalTransition);
+  EXPECT_TRUE(store->ListPredictions(t->trial_id).empty());
+  EXPECT_EQ(store->Status().campaigns.at(0).awaiting_prediction, 1);
+  store->BeginReset(t->trial_id, 1);
+  ResetReport ok;
+  ok.ok = true;
+  ok.observed_pose = {0, 0, 0, 1, 0, 0, 0};
+  store->CompleteReset(t->trial_id, 1, ok);
+  EXPECT_EQ(store->Status().campaigns.at(0).awaiting_prediction, 1);
+  // A stale attempt: refused, nothing written.
+  EXPECT_STORE_ERROR(store->RecordPredictionAndFinish(t->trial_id, 2, p), K::kStaleAttempt);
+  EXPECT_EQ(store->GetTrial(t->trial_id).state, TrialState::kResetDone);
+  EXPECT_TRUE(store->ListPredictions(t->trial_id).empty());
+  // A NaN in the prediction: refused before any write.
+  Prediction nan = p;
+  nan.final_position_error = std::nan("");
+  EXPECT_STORE_ERROR(store->RecordPredictionAndFinish(t->trial_id, 1, nan), K::kBadInput);
+  EXPECT_EQ(store->GetTrial(t->trial_id).state, TrialState::kResetDone);
+
+  store->RecordPredictionAndFinish(t->trial_id, 1, p);
+  EXPECT_EQ(store->GetTrial(t->trial_id).state, TrialState::kDone);
+  EXPECT_EQ(store->ListPredictions(t->trial_id).size(), 1u);
+  EXPECT_EQ(store->Status().campaigns.at(0).awaiting_prediction, 0);
+  const auto log = store->ListTransitions(t->trial_id);
+  ASSERT_GE(log.size(), 2u);
+  EXPECT_EQ(log[log.size() - 2].to_state, "predicted");
+  EXPECT_EQ(log[log.size() - 2].rule, "predict.recorded");
+  EXPECT_EQ(log.back().to_state, "done");
+  EXPECT_EQ(log.back().rule, "finish.predicted");
+  // Done is terminal: a second one is refused.
+  EXPECT_STORE_ERROR(store->RecordPredictionAndFinish(t->trial_id, 1, p), K::kIllegalTransition);
+  EXPECT_EQ(store->ListPredictions(t->trial_id).size(), 1u);
+  ExpectHealthy(*store);
+}
+
 TEST(StoreTrial, ResetFailureStillLetsTrialFinishAndRecordsStartState) {
   TempDir dir;
   auto store = Store::Open(dir.File("s.db"));

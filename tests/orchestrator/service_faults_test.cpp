@@ -1,6 +1,7 @@
 // Faults with real processes: the service SIGKILLed mid-campaign and
 // restarted, a cell SIGKILLed mid-trial, a cell whose resets keep failing, a
-// closed-loop controller paused (SIGSTOP) for 2 s.
+// closed-loop controller paused (SIGSTOP) for 2 s, the service killed while
+// predictions are pending.
 // After each, every trial ends exactly once and the store is consistent.
 #include <algorithm>
 #include <filesystem>
@@ -102,6 +103,78 @@ TEST(ServiceFaults, ServiceKilledMidCampaignLosesAndDuplicatesNothing) {
   EXPECT_EQ(CountStates(db, 1)["done"], 60);
   ExpectCampaignConsistent(db, 1, 60);
   EXPECT_NE(ReadFile(dir / "serve.log").find("recovered after restart"), std::string::npos);
+}
+
+// Issue 27: predictions are made and stored off the trials' path. A service
+// SIGKILLed while trials wait for theirs (executed .. reset_failed) leaves them
+// in the store, `arena status` counts them, and the next service predicts
+// each; every done trial ends with exactly one prediction.
+TEST(ServiceFaults, ServiceKilledWithPredictionsPendingPredictsThemAfterItsRestart) {
+  TempDir dir;
+  const std::string db = dir / "pending.db";
+  const std::string domain = std::to_string(TestDomain(16));
+  Cells cells(dir, domain, "0", {"c1", "c2"});
+  ASSERT_EQ(RunArena({"submit", TestCampaign("e2e60.json"), "--db", db}, dir / "submit.out",
+                     std::chrono::seconds(30)),
+            0);
+  auto awaiting = [&](db::Store& store) {
+    std::vector<std::int64_t> ids;
+    for (const auto& t : store.ListTrials(1))
+      if (t.state == db::TrialState::kExecuted || t.state == db::TrialState::kResetting ||
+          t.state == db::TrialState::kResetDone || t.state == db::TrialState::kResetFailed)
+        ids.push_back(t.id);
+    return ids;
+  };
+  // Killed the moment the store shows a trial awaiting its prediction; the
+  // kill may still land after it was stored: then once more (bounded).
+  std::vector<std::int64_t> pending;
+  for (int kill = 0; kill < 6 && pending.empty(); ++kill) {
+    const std::string log = dir / ("serve" + std::to_string(kill) + ".log");
+    auto serve = StartArena({"serve", "--db", db, "--domain", domain}, log);
+    std::unique_ptr<db::Store> watch;
+    ASSERT_TRUE(
+        WaitUntil([&] { return (watch = OpenReadOnly(db)) != nullptr; }, std::chrono::seconds(30)));
+    const auto deadline = std::chrono::steady_clock::now() + kCampaignTimeout;
+    bool seen = false;
+    while (!seen && std::chrono::steady_clock::now() < deadline) {
+      try {
+        seen = CountStates(db, 1)["done"] >= 2 && !awaiting(*watch).empty();
+      } catch (const db::StoreError&) {  // busy: look again
+      }
+      if (!seen) std::this_thread::sleep_for(std::chrono::milliseconds(1));
+    }
+    ASSERT_TRUE(seen) << ReadFile(log);
+    serve->Signal(SIGKILL);
+    ASSERT_TRUE(serve->Wait(std::chrono::seconds(10)).has_value());
+    pending = awaiting(*OpenReadOnly(db));
+    if (CountStates(db, 1)["done"] >= 55) break;  // too late to try again
+  }
+  ASSERT_FALSE(pending.empty()) << "no kill landed while a prediction was pending";
+  ASSERT_EQ(RunArena({"status", "--db", db}, dir / "status.out", std::chrono::seconds(30)), 0);
+  EXPECT_NE(
+      ReadFile(dir / "status.out")
+          .find(std::to_string(pending.size()) + " of its running trials await their prediction"),
+      std::string::npos)
+      << ReadFile(dir / "status.out");
+
+  auto serve = StartArena({"serve", "--db", db, "--domain", domain}, dir / "serve-final.log");
+  ASSERT_TRUE(WaitUntil(
+      [&] {
+        auto c = CountStates(db, 1);
+        return c["done"] + c["failed"] == 60;
+      },
+      kCampaignTimeout))
+      << ReadFile(dir / "serve-final.log");
+  serve->Signal(SIGTERM);
+  ASSERT_TRUE(serve->Wait(std::chrono::seconds(40)).has_value());
+  ExpectCampaignConsistent(db, 1, 60);
+  auto store = OpenReadOnly(db);
+  for (const auto& t : store->ListTrials(1)) {
+    if (t.state != db::TrialState::kDone) continue;
+    EXPECT_EQ(store->ListPredictions(t.id).size(), 1u) << "trial " << t.id;
+  }
+  for (const std::int64_t id : pending)
+    EXPECT_EQ(store->GetTrial(id).state, db::TrialState::kDone) << "pending trial " << id;
 }
 
 TEST(ServiceFaults, CellKilledMidTrialIsSeenAndItsTrialRunsElsewhere) {

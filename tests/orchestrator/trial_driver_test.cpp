@@ -74,6 +74,7 @@ struct FakeStore : TrialStore {
     db::TrialEnd outcome = db::TrialEnd::kNone;
     int service_restarts = 0;
     std::vector<std::string> rules;  // the audit rows' rules, in order
+    int predictions = 0;             // RecordPrediction calls that stored one
   };
   Faults faults;
   std::map<std::int64_t, T> trials;
@@ -202,6 +203,7 @@ struct FakeStore : TrialStore {
     faults.Hit("RecordPrediction");
     if (trials.at(id).state != db::TrialState::kPredicted)
       Move(id, attempt, db::TrialState::kPredicted);
+    ++trials.at(id).predictions;
   }
   void FinishTrial(std::int64_t id, int attempt) override {
     faults.Hit("FinishTrial");
@@ -300,10 +302,22 @@ struct Harness {
   msg::FailureKind execute_failure = msg::FAILURE_NONE;
   std::string execute_detail = "{}";  // the EXECUTE status's detail_json
 
-  explicit Harness(int trials = 1) {
+  bool predictor_holds = false;  // the predictor answers nothing (a slow or stopped one)
+
+  explicit Harness(int trials = 1, int prediction_backlog = 64) {
     for (int i = 1; i <= trials; ++i) store.trials[i] = {};
+    backlog = prediction_backlog;
+    NewDriver();
+  }
+  int backlog = 64;
+  // A new driver on the same store (a restarted service): what the old one
+  // held in memory (its predictor's requests) is lost.
+  void NewDriver() {
+    driver.reset();
+    predictions.requests.clear();
     DriverOptions o;
     o.service.max_attempts = 3;
+    o.service.prediction_backlog = backlog;
     driver = std::make_unique<TrialDriver>(o, ServiceIdentity{kSession, "lab1", 42, "store-a"},
                                            store, transport, predictions, [this] { return t; });
   }
@@ -377,7 +391,7 @@ struct Harness {
         driver->OnStatus(Status(c, msg::STATE_RESET_DONE));
       }
     }
-    while (!predictions.requests.empty()) {
+    while (!predictor_holds && !predictions.requests.empty()) {
       const PredictionRequest r = predictions.requests.front();
       predictions.requests.pop_front();
       db::Prediction p;
@@ -661,6 +675,60 @@ TEST(TrialDriver, ALostCellIsGoneAndItsTrialRequeued) {
   EXPECT_TRUE(h.store.gone.count("c1"));
   EXPECT_EQ(h.store.trials[1].state, db::TrialState::kPlanned);
   EXPECT_EQ(h.driver->counters().cells_usable, 0);
+}
+
+// Issue 27: the prediction is off the trial's path. A service stopped with
+// predictions pending (its trials executed, reset, not predicted) leaves
+// them in the store; the next one predicts each, once, and finishes it.
+TEST(TrialDriver, PredictionsPendingAtAStopArePredictedOnceByTheNextService) {
+  Harness h(4);
+  h.predictor_holds = true;
+  h.Start();
+  for (int i = 0; i < 100 && h.Sent(msg::PHASE_RESET) < 4; ++i) {
+    h.t += std::chrono::milliseconds(100);
+    h.driver->Tick(false);
+    h.Answer();
+  }
+  ASSERT_EQ(h.Sent(msg::PHASE_RESET), 4) << "the cell waited for the predictor";
+  h.t += std::chrono::milliseconds(100);
+  h.driver->Tick(false);  // the last prediction is started after its reset is sent
+  for (int i = 1; i <= 4; ++i) {
+    EXPECT_EQ(h.store.trials[i].state, db::TrialState::kResetDone) << "trial " << i;
+    EXPECT_EQ(h.store.trials[i].predictions, 0);
+  }
+  EXPECT_EQ(h.predictions.outstanding(), 4);
+  EXPECT_TRUE(h.driver->InFlight()) << "pending predictions must keep a draining service";
+
+  h.NewDriver();  // the service stops (or is killed); its predictor's queue is gone
+  h.predictor_holds = false;
+  h.driver->Resume();
+  EXPECT_EQ(h.predictions.outstanding(), 4) << "the restart did not ask for the predictions";
+  ASSERT_TRUE(h.RunToEnd());
+  for (int i = 1; i <= 4; ++i) {
+    EXPECT_EQ(h.store.trials[i].state, db::TrialState::kDone) << "trial " << i;
+    EXPECT_EQ(h.store.trials[i].predictions, 1) << "trial " << i;
+  }
+}
+
+// A predictor behind by a full backlog holds new claims (memory bounded, the
+// predictor never left behind for good); dispatch resumes when it catches up.
+TEST(TrialDriver, AFullPredictionBacklogHoldsNewClaimsUntilThePredictorCatchesUp) {
+  Harness h(5, /*prediction_backlog=*/2);
+  h.predictor_holds = true;
+  h.Start();
+  for (int i = 0; i < 50; ++i) {
+    h.t += std::chrono::milliseconds(100);
+    h.driver->Tick(false);
+    h.Answer();
+  }
+  EXPECT_EQ(h.Sent(msg::PHASE_EXECUTE), 2) << "claims went on past the prediction backlog";
+  EXPECT_EQ(h.store.trials[3].state, db::TrialState::kPlanned);
+  h.predictor_holds = false;
+  ASSERT_TRUE(h.RunToEnd());
+  for (int i = 1; i <= 5; ++i) {
+    EXPECT_EQ(h.store.trials[i].state, db::TrialState::kDone) << "trial " << i;
+    EXPECT_EQ(h.store.trials[i].predictions, 1) << "trial " << i;
+  }
 }
 
 TEST(TrialDriver, ResumeFinishesWhatARestartLeftThroughTheSameSteps) {

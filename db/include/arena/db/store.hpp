@@ -60,8 +60,8 @@
 // | executed, reset_failed    | resetting    | BeginReset                       |
 // | resetting                 | reset_done   | CompleteReset (ok)               |
 // | resetting                 | reset_failed | CompleteReset (!ok), RecoverAfterRestart |
-// | reset_done, reset_failed  | predicted    | RecordPrediction                 |
-// | predicted                 | done         | FinishTrial                      |
+// | reset_done, reset_failed  | predicted    | RecordPrediction(AndFinish)      |
+// | predicted                 | done         | FinishTrial, RecordPredictionAndFinish |
 // | any non-terminal          | failed       | FailTrial                        |
 //
 // A failed reset does not spoil the trial (its ground truth is complete); it
@@ -506,6 +506,10 @@ struct CampaignStatus {
   std::int64_t planned = 0;  // all trials of the campaign
   std::int64_t pending = 0;  // state planned
   std::int64_t running = 0;  // dispatched .. predicted
+  // Of running: ground truth stored, prediction not yet (executed ..
+  // reset_failed). The service predicts them off the trials' path; one it
+  // leaves (stopped, killed) predicts them after its restart.
+  std::int64_t awaiting_prediction = 0;
   std::int64_t done = 0;
   std::int64_t failed = 0;
   std::int64_t cancelled = 0;
@@ -773,6 +777,10 @@ class Store {
   std::optional<ClosedLoopRun> GetClosedLoop(std::int64_t trial_id) const;
   // predicted -> done.
   void FinishTrial(std::int64_t trial_id, int attempt);
+  // RecordPrediction then FinishTrial in one transaction (the service's
+  // clean trial: one commit where there were two; both audit rows written).
+  // A refusal of either refuses both.
+  void RecordPredictionAndFinish(std::int64_t trial_id, int attempt, const Prediction& prediction);
   // What executed the trial (from the cell's EXECUTED status): the backend
   // ("model", "mujoco", "exec:...", "replay:..."), its kind of truth
   // ("self-consistency", "simulator", "robot", "recorded") and the defects

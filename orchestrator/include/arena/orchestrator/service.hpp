@@ -56,20 +56,30 @@
 namespace arena::orchestrator {
 
 struct ServiceOptions {
-  std::string db_path;               // the SQLite store (created if missing)
-  int domain_id = 0;                 // DDS domain, 0..dds::kMaxDomainId (231)
-  dds::NetworkOptions network;       // default: this host only
-  int max_attempts = 3;              // executions per trial before it fails
-  double retry_backoff_s = 1.0;      // first retry waits this long; doubles per attempt
-  int quarantine_after = 3;          // consecutive failed phases of a cell (its own fault)
-  double cell_backoff_s = 0.5;       // after a failed phase the cell waits this long before
-  double cell_backoff_max_s = 8.0;   //   its next trial, doubling per failure in a row, to this
-  double execute_timeout_s = 30.0;   // wall-clock budget of EXECUTE beyond the trial's
-                                     //   duration x the cell's speed
-  double reset_timeout_s = 60.0;     // wall-clock budget of RESET
-  double stream_grace_s = 5.0;       // after EXECUTED: wait this long for missing batches
-  double drain_timeout_s = 30.0;     // on Stop(): how long phases in flight may finish
-  int predictor_threads = 1;         // worker threads predicting trials
+  std::string db_path;              // the SQLite store (created if missing)
+  int domain_id = 0;                // DDS domain, 0..dds::kMaxDomainId (231)
+  dds::NetworkOptions network;      // default: this host only
+  int max_attempts = 3;             // executions per trial before it fails
+  double retry_backoff_s = 1.0;     // first retry waits this long; doubles per attempt
+  int quarantine_after = 3;         // consecutive failed phases of a cell (its own fault)
+  double cell_backoff_s = 0.5;      // after a failed phase the cell waits this long before
+  double cell_backoff_max_s = 8.0;  //   its next trial, doubling per failure in a row, to this
+  double execute_timeout_s = 30.0;  // wall-clock budget of EXECUTE beyond the trial's
+                                    //   duration x the cell's speed
+  double reset_timeout_s = 60.0;    // wall-clock budget of RESET
+  double stream_grace_s = 5.0;      // after EXECUTED: wait this long for missing batches
+  double drain_timeout_s = 30.0;    // on Stop(): how long phases in flight may finish
+  int predictor_threads = 1;        // worker threads predicting trials
+  // The predictor threads' niceness, added to the process's (0..19; Linux
+  // threads each have one). A trial's prediction is off its path (it is
+  // stored after the next EXECUTE is sent); at a lower priority its model
+  // yields a shared core to the service thread and the cells at once
+  // (issue 27: the overhead per trial is wall time on shared cores).
+  int predictor_nice = 10;
+  // At most this many trials wait for their prediction; more, and no cell
+  // claims a new trial until the predictor catches up (memory bounded, and a
+  // slow predictor is never left behind for good).
+  int prediction_backlog = 64;
   bool exit_when_done = false;       // `arena run`: stop when no active campaign is left
   std::int64_t only_campaign = 0;    // > 0: exit_when_done looks at this campaign only
   std::int64_t store_max_pages = 0;  // > 0: the store may not grow past this many 4 KiB

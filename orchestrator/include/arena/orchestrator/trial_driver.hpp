@@ -120,6 +120,13 @@ class TrialStore {
   // to be retried: a prediction of the same model_key replaces the previous one).
   virtual void RecordPrediction(std::int64_t trial_id, int attempt, const db::Prediction& p) = 0;
   virtual void FinishTrial(std::int64_t trial_id, int attempt) = 0;
+  // Both in one transaction in production (one commit per clean trial less);
+  // the default runs them one after another.
+  virtual void RecordPredictionAndFinish(std::int64_t trial_id, int attempt,
+                                         const db::Prediction& p) {
+    RecordPrediction(trial_id, attempt, p);
+    FinishTrial(trial_id, attempt);
+  }
   // What executed the trial: backend, its kind of truth, the defects applied.
   virtual void RecordExecution(std::int64_t trial_id, int attempt, const std::string& backend,
                                const std::string& truth, const std::string& defects_applied) = 0;
