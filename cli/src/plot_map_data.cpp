@@ -86,7 +86,7 @@ const std::vector<MetricInfo>& Metrics() {
 }
 
 // Units of the campaign variations (orchestrator/README.md's catalogue).
-std::string UnitOf(const std::string& variation) {
+std::string VariationUnit(const std::string& variation) {
   static const std::map<std::string, std::string> kUnits = {
       {"object_size_x", "m"},
       {"object_size_y", "m"},
@@ -153,8 +153,8 @@ MapData BuildCampaignMap(const db::Store& store, std::int64_t campaign_id, const
   map.flag_on = "unstable";
   map.flag_off = "stable";
   map.metric_label = it->label;
-  map.x_label = x + " (" + UnitOf(x) + ")";
-  map.y_label = y + " (" + UnitOf(y) + ")";
+  map.x_label = x + " (" + VariationUnit(x) + ")";
+  map.y_label = y + " (" + VariationUnit(y) + ")";
   map.title = "campaign " + id + " (" + campaign.name + "): " + metric + " over " + x + " and " + y;
 
   // Axis values: numbers, or categories (text / vectors) in order of first appearance.
