@@ -37,6 +37,10 @@
       (ARENA_UNITY_ROOMS, batch 0), ccache off, one compile at a time; exits 1
       when a room's unity translation unit does not compile (two of its files
       define the same file-local name)
+  scripts/build_time.py clashes [ROOM...]     does every room (or these) still
+      compile as one unity translation unit? Each room's unity file parsed
+      (-fsyntax-only, the room's warning flags: cheap, no code made); exits 1
+      naming the rooms whose files define the same file-local name twice
   scripts/build_time.py opt ROOM...            each room's compiler CPU seconds
       one file at a time at -O3 (Release's flag), -O2 and -O1, ccache off
   scripts/build_time.py packages              what a fresh Debian 12 installs for
@@ -290,6 +294,35 @@ def unity(args, root):
         sys.exit(f'build_time: no unity build for {", ".join(failed)}')
 
 
+def clashes(args, root):
+    build = os.path.join(root, 'build')
+    run(f'cmake -S {HERE} -B {build} -G Ninja -DCMAKE_BUILD_TYPE=Release '
+        f'-DCMAKE_CXX_COMPILER_LAUNCHER= -DARENA_PCH=OFF -DARENA_UNITY_ROOMS=all', HERE)
+    generators, _, compiles = arena_plan(build)
+    for g in generators:
+        run(g, build)  # the generated DDS types the rooms include
+    print('| room | unity translation unit |')
+    print('|---|---|')
+    failed = []
+    for c in compiles:
+        if '/Unity/unity_' not in c:
+            continue
+        room = c.split(' -o ')[1].split('/')[0]
+        if args.rooms and room not in args.rooms:
+            continue
+        cmd = c.split(' -o ')[0] + ' -fsyntax-only -Werror ' + ' '.join(c.split(' -o ')[1].split()[1:])
+        done = subprocess.run(['bash', '-c', cmd.replace('/usr/bin/ccache ', '')], cwd=build,
+                              env=ENV, capture_output=True, text=True)
+        if done.returncode != 0:
+            failed.append(room)
+            errors = [l for l in done.stderr.splitlines() if 'error' in l]
+            print('\n'.join(errors[:20]), file=sys.stderr)
+        print(f"| {room} | {'parses clean' if done.returncode == 0 else 'does not compile'} |",
+              flush=True)
+    if failed:
+        sys.exit(f'build_time: no unity build for {", ".join(failed)}')
+
+
 def opt(args, root):
     build = os.path.join(root, 'build')
     run(f'cmake -S {HERE} -B {build} -G Ninja -DCMAKE_BUILD_TYPE=Release '
@@ -347,6 +380,8 @@ def main():
     sub.add_parser('ccache')
     sub.add_parser('steps')
     sub.add_parser('packages')
+    c = sub.add_parser('clashes')
+    c.add_argument('rooms', nargs='*', help='rooms (default: all)')
     o = sub.add_parser('opt')
     o.add_argument('rooms', nargs='+', help='rooms, e.g. simulators')
     u = sub.add_parser('unity')
@@ -363,7 +398,8 @@ def main():
     root = tempfile.mkdtemp(prefix='arena-build-time-')
     try:
         {'sample': sample, 'headers': headers, 'ccache': ccache, 'full': full,
-         'steps': steps, 'arena': arena, 'packages': packages, 'unity': unity, 'opt': opt}[args.mode](args, root)
+         'steps': steps, 'arena': arena, 'packages': packages, 'unity': unity, 'opt': opt,
+         'clashes': clashes}[args.mode](args, root)
     finally:
         shutil.rmtree(root, ignore_errors=True)
 

@@ -95,25 +95,26 @@ constexpr std::pair<ErrorMetric, const char*> kMetricNames[] = {
     {ErrorMetric::kTimeP95, "time_p95"},
 };
 
-enum class Quantity { kLength, kAngle, kForce, kFraction, kTime };
+// What a budget's metric measures, for its unit (not outcome.hpp's Quantity).
+enum class Dimension { kLength, kAngle, kForce, kFraction, kTime };
 
-Quantity QuantityOf(ErrorMetric m) {
+Dimension DimensionOf(ErrorMetric m) {
   switch (m) {
     case ErrorMetric::kPositionMedian:
     case ErrorMetric::kPositionP95:
-      return Quantity::kLength;
+      return Dimension::kLength;
     case ErrorMetric::kAngleMedian:
     case ErrorMetric::kAngleP95:
-      return Quantity::kAngle;
+      return Dimension::kAngle;
     case ErrorMetric::kForceMedian:
     case ErrorMetric::kForceP95:
-      return Quantity::kForce;
+      return Dimension::kForce;
     case ErrorMetric::kModeAgreementMedian:
-      return Quantity::kFraction;
+      return Dimension::kFraction;
     case ErrorMetric::kTimeP95:
-      return Quantity::kTime;
+      return Dimension::kTime;
   }
-  return Quantity::kLength;
+  return Dimension::kLength;
 }
 
 }  // namespace
@@ -164,24 +165,24 @@ Budget ParseBudget(const std::string& text) {
   const std::string unit = value.substr(used);
   struct UnitScale {
     const char* unit;
-    Quantity quantity;
+    Dimension dimension;
     double scale;
   };
   static const UnitScale kUnits[] = {
-      {"m", Quantity::kLength, 1},      {"mm", Quantity::kLength, 1e-3},
-      {"um", Quantity::kLength, 1e-6},  {"rad", Quantity::kAngle, 1},
-      {"mrad", Quantity::kAngle, 1e-3}, {"deg", Quantity::kAngle, M_PI / 180},
-      {"N", Quantity::kForce, 1},       {"mN", Quantity::kForce, 1e-3},
-      {"%", Quantity::kFraction, 1e-2}, {"s", Quantity::kTime, 1},
-      {"ms", Quantity::kTime, 1e-3},    {"us", Quantity::kTime, 1e-6},
+      {"m", Dimension::kLength, 1},      {"mm", Dimension::kLength, 1e-3},
+      {"um", Dimension::kLength, 1e-6},  {"rad", Dimension::kAngle, 1},
+      {"mrad", Dimension::kAngle, 1e-3}, {"deg", Dimension::kAngle, M_PI / 180},
+      {"N", Dimension::kForce, 1},       {"mN", Dimension::kForce, 1e-3},
+      {"%", Dimension::kFraction, 1e-2}, {"s", Dimension::kTime, 1},
+      {"ms", Dimension::kTime, 1e-3},    {"us", Dimension::kTime, 1e-6},
   };
   // The bare shorthand picks its metric from the unit: a time is time_p95,
   // anything else the p95 final position error.
   if (!named && (unit == "s" || unit == "ms" || unit == "us")) b.metric = ErrorMetric::kTimeP95;
   double scale = 1;
   if (unit == "floor") {
-    const Quantity q = QuantityOf(b.metric);
-    if (q != Quantity::kLength && q != Quantity::kAngle) {
+    const Dimension q = DimensionOf(b.metric);
+    if (q != Dimension::kLength && q != Dimension::kAngle) {
       throw std::invalid_argument("budget '" + text + "': 'floor' fits position and angle only");
     }
     if (!std::isfinite(number) || number <= 0) {
@@ -196,7 +197,7 @@ Budget ParseBudget(const std::string& text) {
       if (unit == candidate.unit) u = &candidate;
     }
     if (!u) throw std::invalid_argument("budget '" + text + "': unknown unit '" + unit + "'");
-    if (u->quantity != QuantityOf(b.metric)) {
+    if (u->dimension != DimensionOf(b.metric)) {
       throw std::invalid_argument("budget '" + text + "': unit '" + unit + "' does not fit " +
                                   ToString(b.metric));
     }
@@ -206,7 +207,7 @@ Budget ParseBudget(const std::string& text) {
   if (!std::isfinite(b.limit) || b.limit < 0) {
     throw std::invalid_argument("budget '" + text + "': must be a finite value >= 0");
   }
-  if (QuantityOf(b.metric) == Quantity::kFraction && b.limit > 1) {
+  if (DimensionOf(b.metric) == Dimension::kFraction && b.limit > 1) {
     throw std::invalid_argument("budget '" + text + "': a fraction must be <= 1 (or <= 100%)");
   }
   return b;
@@ -216,20 +217,20 @@ Budget ParseBudget(const std::string& text) {
 // output: mm, degrees, N, ms); JSON keeps the SI value beside this text.
 std::string HumanLimit(ErrorMetric m, double v) {
   char buf[64];
-  switch (QuantityOf(m)) {
-    case Quantity::kLength:
+  switch (DimensionOf(m)) {
+    case Dimension::kLength:
       std::snprintf(buf, sizeof buf, "%g mm", v * 1e3);
       break;
-    case Quantity::kAngle:
+    case Dimension::kAngle:
       std::snprintf(buf, sizeof buf, "%.4g deg", v * 180 / 3.14159265358979323846);
       break;
-    case Quantity::kTime:
+    case Dimension::kTime:
       std::snprintf(buf, sizeof buf, "%g ms", v * 1e3);
       break;
-    case Quantity::kForce:
+    case Dimension::kForce:
       std::snprintf(buf, sizeof buf, "%g N", v);
       break;
-    case Quantity::kFraction:
+    case Dimension::kFraction:
       std::snprintf(buf, sizeof buf, "%g", v);
       break;
   }

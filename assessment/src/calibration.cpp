@@ -48,7 +48,7 @@ void ParallelFor(int n, int threads, const std::function<void(int)>& fn) {
   for (auto& th : pool) th.join();
 }
 
-double Percentile(std::vector<double> v, double q) {
+double PercentileOrNan(std::vector<double> v, double q) {
   if (v.empty()) return NAN;
   std::sort(v.begin(), v.end());
   const double pos = q * static_cast<double>(v.size() - 1);
@@ -254,10 +254,10 @@ SetFigures FiguresOf(const std::vector<TrialError>& errors) {
   f.predicted = static_cast<int>(position.size());
   f.nmse = ComputeNmse(predicted, truth);
   if (!position.empty()) {
-    f.position_median = Percentile(position, 0.5);
-    f.position_p95 = Percentile(position, 0.95);
-    f.angle_median = Percentile(angle, 0.5);
-    f.angle_p95 = Percentile(angle, 0.95);
+    f.position_median = PercentileOrNan(position, 0.5);
+    f.position_p95 = PercentileOrNan(position, 0.95);
+    f.angle_median = PercentileOrNan(angle, 0.5);
+    f.angle_p95 = PercentileOrNan(angle, 0.95);
   }
   return f;
 }
@@ -734,8 +734,8 @@ FittedParam FittedParamOf(const std::vector<CalibrationTrial>& trials, const Cal
     double ss = 0;
     for (double v : boot) ss += (v - mean) * (v - mean);
     f.std = std::sqrt(ss / static_cast<double>(boot.size() - 1));
-    f.ci_low = Percentile(boot, 0.025);
-    f.ci_high = Percentile(boot, 0.975);
+    f.ci_low = PercentileOrNan(boot, 0.025);
+    f.ci_high = PercentileOrNan(boot, 0.975);
   }
   f.nominal = CommonValue(trials, o.params[k]);
   return f;

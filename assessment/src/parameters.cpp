@@ -17,6 +17,7 @@
 
 #include "arena/mechanics/model.hpp"
 #include "arena/mechanics/scene_json.hpp"
+#include "number_text.hpp"
 
 namespace arena::assessment {
 namespace {
@@ -48,11 +49,7 @@ Eigen::Vector3d Tangent(const Eigen::Vector3d& normal, int axis) {
 
 const char kAxes[] = {'x', 'y', 'z'};
 
-std::string Num(double v) {
-  char buf[32];
-  std::snprintf(buf, sizeof buf, "%.4g", v);
-  return buf;
-}
+using internal::Num;
 
 }  // namespace
 

@@ -16,6 +16,7 @@
 #include "arena/mechanics/model.hpp"
 #include "arena/mechanics/pusher_motion.hpp"
 #include "arena/mechanics/scene_json.hpp"
+#include "number_text.hpp"
 
 namespace arena::assessment {
 namespace {
@@ -198,11 +199,7 @@ const char* UnitOf(const std::string& quantity) {
   return "";
 }
 
-std::string Num(double v) {
-  char buf[32];
-  std::snprintf(buf, sizeof buf, "%.4g", v);
-  return buf;
-}
+using internal::Num;
 
 // "0.2 mm" for 0.0002 in "m": a reason is read by a person, in human units.
 std::string Human(double v, const std::string& si_unit) {

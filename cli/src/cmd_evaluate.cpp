@@ -141,7 +141,8 @@ std::string Tail(const std::optional<assessment::Distribution>& d, double scale)
 std::string TrialIds(const std::vector<assessment::TrialNote>& notes, std::size_t limit) {
   std::string out;
   for (std::size_t i = 0; i < notes.size() && i < limit; ++i) {
-    out += (out.empty() ? "" : " ") + std::to_string(notes[i].trial_id);
+    if (!out.empty()) out += ' ';
+    out += std::to_string(notes[i].trial_id);
   }
   if (notes.size() > limit) out += " ...";
   return out;

@@ -11,9 +11,10 @@
 namespace arena::cli {
 namespace {
 
-std::string Num(double v) { return FormatNumber(v, 6); }
+// Six significant digits: the map's data attributes and tick labels.
+std::string Num6(double v) { return FormatNumber(v, 6); }
 
-struct Axis {
+struct MapAxis {
   double lo = 0, hi = 1;
   std::vector<std::string> categories;
   std::vector<double> ticks;
@@ -36,7 +37,7 @@ struct Axis {
   }
   std::string Label(double t) const {
     if (!categories.empty()) return categories[static_cast<size_t>(std::lround(t))];
-    return Num(t);
+    return Num6(t);
   }
 };
 
@@ -45,7 +46,7 @@ struct MapFrame {
   static constexpr int width = 820, height = 600;
   static constexpr int left = 90, right = 190, top = 90, bottom = 70;
   static constexpr int pw = width - left - right, ph = height - top - bottom;
-  Axis ax, ay;
+  MapAxis ax, ay;
   double vlo = 0, vhi = 1;
   bool flag = false;
   double X(double x) const { return left + (x - ax.lo) / (ax.hi - ax.lo) * pw; }
@@ -138,16 +139,16 @@ void WritePoints(const MapFrame& f, const MapData& m, std::ostringstream& svg) {
   for (size_t i = 0; i < m.points.size(); ++i) {
     const MapPoint& p = m.points[i];
     svg << "<circle class=\"condition\" data-condition=\"" << p.condition << "\" data-x=\""
-        << Num(p.x) << "\" data-y=\"" << Num(p.y) << "\"";
+        << Num6(p.x) << "\" data-y=\"" << Num6(p.y) << "\"";
     if (p.value) {
-      svg << " data-value=\"" << Num(*p.value) << "\" fill=\"" << f.Colour(*p.value)
+      svg << " data-value=\"" << Num6(*p.value) << "\" fill=\"" << f.Colour(*p.value)
           << "\" stroke=\"#222\"";
     } else {
       svg << " fill=\"none\" stroke=\"#999\"";
     }
     svg << " cx=\"" << f.X(p.x) + offset[i].first << "\" cy=\"" << f.Y(p.y) + offset[i].second
         << "\" r=\"7\"><title>condition " << p.condition << ": "
-        << (p.value ? Num(*p.value) : std::string("no value")) << "</title></circle>\n";
+        << (p.value ? Num6(*p.value) : std::string("no value")) << "</title></circle>\n";
     // A condition sharing its point says which one it is.
     const auto shared = at.find({std::lround(f.X(p.x)), std::lround(f.Y(p.y))});
     if (shared != at.end() && shared->second.size() > 1 && !p.label.empty()) {
@@ -213,7 +214,7 @@ void WriteLegend(const MapFrame& f, const MapData& m, std::ostringstream& svg) {
     for (double t : NiceTicks(f.vlo, f.vhi, 5)) {
       if (t < f.vlo || t > f.vhi) continue;
       const double y = top + bar_h - (t - f.vlo) / (f.vhi - f.vlo) * bar_h;
-      svg << "<text x=\"" << lx + 22 << "\" y=\"" << y + 4 << "\">" << Num(t) << "</text>\n";
+      svg << "<text x=\"" << lx + 22 << "\" y=\"" << y + 4 << "\">" << Num6(t) << "</text>\n";
     }
   }
   if (!m.boundary.empty()) {

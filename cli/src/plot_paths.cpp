@@ -3,6 +3,7 @@
 #include <cmath>
 #include <cstdio>
 #include <limits>
+#include <numbers>
 #include <string>
 #include <vector>
 
@@ -17,6 +18,7 @@
 #include "plot_trial.hpp"
 #include "plotted_trial.hpp"
 #include "store_errors.hpp"
+#include "svg_chart.hpp"
 
 namespace arena::cli {
 namespace {
@@ -24,12 +26,9 @@ namespace {
 using Eigen::Vector2d;
 using Eigen::Vector3d;
 
-constexpr double kPi = 3.14159265358979323846;
 const char* const kMeasured = "#222222";
 const char* const kPredicted = "#e6550d";
 const char* const kPusher = "#c0392b";
-
-std::string F(double v) { return FormatFixed(v, 1); }
 
 std::string Mm(double m, int digits = 3) { return FormatNumber(m * 1e3, digits) + " mm"; }
 
@@ -46,8 +45,8 @@ std::vector<Vector3d> Outline(const mechanics::ObjectSpec& o) {
       break;
     case mechanics::ObjectShape::kCylinder:
       for (int k = 0; k < 48; ++k)
-        out.emplace_back(o.radius * std::cos(2 * kPi * k / 48),
-                         o.radius * std::sin(2 * kPi * k / 48), 0);
+        out.emplace_back(o.radius * std::cos(2 * std::numbers::pi * k / 48),
+                         o.radius * std::sin(2 * std::numbers::pi * k / 48), 0);
       break;
     default:
       for (const auto& v : o.polygon) out.emplace_back(v.x(), v.y(), 0);
@@ -62,7 +61,7 @@ struct Pose2 {
 };
 
 // Top view: x right, y up, at one scale.
-struct Canvas {
+struct TopView {
   double x0, y0, w, h, scale;
   Vector2d centre;
   Vector2d Px(const Vector3d& p) const {
@@ -70,20 +69,20 @@ struct Canvas {
   }
 };
 
-std::string Polyline(const Canvas& c, const std::vector<Vector3d>& pts, const std::string& color,
+std::string Polyline(const TopView& c, const std::vector<Vector3d>& pts, const std::string& color,
                      double width, bool dashed, bool closed, const std::string& fill = "none",
                      double opacity = 1) {
   std::string d;
-  for (const auto& p : pts) d += F(c.Px(p).x()) + "," + F(c.Px(p).y()) + " ";
+  for (const auto& p : pts) d += SvgNum(c.Px(p).x()) + "," + SvgNum(c.Px(p).y()) + " ";
   return std::string("<") + (closed ? "polygon" : "polyline") + " points=\"" + d + "\" fill=\"" +
-         fill + "\" fill-opacity=\"0.12\" stroke=\"" + color + "\" stroke-width=\"" + F(width) +
-         "\" stroke-opacity=\"" + FormatNumber(opacity, 3) + "\"" +
+         fill + "\" fill-opacity=\"0.12\" stroke=\"" + color + "\" stroke-width=\"" +
+         SvgNum(width) + "\" stroke-opacity=\"" + FormatNumber(opacity, 3) + "\"" +
          (dashed ? " stroke-dasharray=\"6,4\"" : "") + "/>";
 }
 
-std::string Text(const Vector2d& at, const std::string& text, const std::string& color,
-                 const char* anchor = "start", int size = 12) {
-  return "<text x=\"" + F(at.x()) + "\" y=\"" + F(at.y()) + "\" font-size=\"" +
+std::string TextFrom(const Vector2d& at, const std::string& text, const std::string& color,
+                     const char* anchor = "start", int size = 12) {
+  return "<text x=\"" + SvgNum(at.x()) + "\" y=\"" + SvgNum(at.y()) + "\" font-size=\"" +
          std::to_string(size) + "\" text-anchor=\"" + anchor + "\" fill=\"" + color + "\">" +
          SvgEscape(text) + "</text>";
 }
@@ -107,7 +106,7 @@ struct PathsView {
   double pusher_r = 0;
   std::vector<Vector3d> outline;
   std::vector<std::size_t> at;  // the instants whose outlines are drawn
-  Canvas c{};
+  TopView c{};
   double width = 0, height = 0;
 };
 
@@ -155,7 +154,7 @@ PathsView MakeView(const PlottedTrial& p, const mechanics::SimulationResult& pre
   const double panel_w = 760, panel_h = 560, top = 78, margin = 20;
   const Vector2d extent = (hi - lo).cwiseMax(1e-3);
   const double scale = std::min(0.85 * panel_w / extent.x(), 0.85 * panel_h / extent.y());
-  v.c = Canvas{margin, top, panel_w, panel_h, scale, 0.5 * (lo + hi)};
+  v.c = TopView{margin, top, panel_w, panel_h, scale, 0.5 * (lo + hi)};
   v.width = panel_w + 2 * margin;
   v.height = top + panel_h + 70;
   return v;
@@ -167,7 +166,7 @@ std::string FinalErrors(const PathsView& v, const TrialPlotInfo& inf, const std:
   const std::size_t last = std::min(v.predicted.size(), v.measured.size()) - 1;
   const double dp = (v.predicted[last].position - v.measured[last].position).norm();
   const double da = v.predicted[last].orientation.angularDistance(v.measured[last].orientation);
-  return "final error " + Mm(dp) + ", " + FormatNumber(da * 180 / kPi, 3) + " deg" +
+  return "final error " + Mm(dp) + ", " + FormatNumber(da * 180 / std::numbers::pi, 3) + " deg" +
          (inf.prediction_status == db::PredictionStatus::kOk
               ? ""
               : " (" + std::string(db::ToString(inf.prediction_status)) + note + ")");
@@ -177,24 +176,25 @@ std::string FinalErrors(const PathsView& v, const TrialPlotInfo& inf, const std:
 std::string HeaderSvg(const PlottedTrial& p, const PathsView& v, const TrialPlotInfo& inf,
                       const std::string& errors) {
   const std::string truth = p.gt.truth.empty() ? "unreported" : p.gt.truth;
-  std::string svg = "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"" + F(v.width) +
-                    "\" height=\"" + F(v.height) + "\" viewBox=\"0 0 " + F(v.width) + " " +
-                    F(v.height) + "\" font-family=\"sans-serif\">";
+  std::string svg = "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"" + SvgNum(v.width) +
+                    "\" height=\"" + SvgNum(v.height) + "\" viewBox=\"0 0 " + SvgNum(v.width) +
+                    " " + SvgNum(v.height) + "\" font-family=\"sans-serif\">";
   svg += "<rect width=\"100%\" height=\"100%\" fill=\"white\"/>";
-  svg +=
-      Text({v.width / 2, 24},
-           "trial " + std::to_string(p.trial.id) + " (campaign " + std::to_string(p.campaign.id) +
-               " '" + p.campaign.name + "'), seen from above; truth: " + truth,
-           "#000", "middle", 15);
-  svg += Text({v.width / 2, 46},
-              "prediction " + (inf.model_key.empty() ? std::string("-") : inf.model_key) + ": " +
-                  errors + "; " + FormatNumber(p.gt.samples.back().t, 3) + " s, start yaw " +
-                  FormatNumber(Yaw(v.measured.front().orientation) * 180 / kPi, 3) + " deg",
-              "#333", "middle", 12);
-  const Canvas& c = v.c;
-  svg += "<rect x=\"" + F(c.x0) + "\" y=\"" + F(c.y0) + "\" width=\"" + F(c.w) + "\" height=\"" +
-         F(c.h) + "\" fill=\"none\" stroke=\"#bbb\"/>";
-  svg += Text({c.x0 + 8, c.y0 + 18}, "x right, y up (the scene's frame)", "#333");
+  svg += TextFrom({v.width / 2, 24},
+                  "trial " + std::to_string(p.trial.id) + " (campaign " +
+                      std::to_string(p.campaign.id) + " '" + p.campaign.name +
+                      "'), seen from above; truth: " + truth,
+                  "#000", "middle", 15);
+  svg += TextFrom(
+      {v.width / 2, 46},
+      "prediction " + (inf.model_key.empty() ? std::string("-") : inf.model_key) + ": " + errors +
+          "; " + FormatNumber(p.gt.samples.back().t, 3) + " s, start yaw " +
+          FormatNumber(Yaw(v.measured.front().orientation) * 180 / std::numbers::pi, 3) + " deg",
+      "#333", "middle", 12);
+  const TopView& c = v.c;
+  svg += "<rect x=\"" + SvgNum(c.x0) + "\" y=\"" + SvgNum(c.y0) + "\" width=\"" + SvgNum(c.w) +
+         "\" height=\"" + SvgNum(c.h) + "\" fill=\"none\" stroke=\"#bbb\"/>";
+  svg += TextFrom({c.x0 + 8, c.y0 + 18}, "x right, y up (the scene's frame)", "#333");
   return svg;
 }
 
@@ -219,9 +219,9 @@ std::string OutlinesAndPusherSvg(const PathsView& v) {
   if (v.pusher_r > 0)
     for (std::size_t k : v.at) {
       const Vector2d q = v.c.Px(v.pusher_centres[k]);
-      svg += "<circle cx=\"" + F(q.x()) + "\" cy=\"" + F(q.y()) + "\" r=\"" +
-             F(std::max(1.5, v.pusher_r * v.c.scale)) + "\" fill=\"none\" stroke=\"" + kPusher +
-             "\" stroke-width=\"1.2\"/>";
+      svg += "<circle cx=\"" + SvgNum(q.x()) + "\" cy=\"" + SvgNum(q.y()) + "\" r=\"" +
+             SvgNum(std::max(1.5, v.pusher_r * v.c.scale)) + "\" fill=\"none\" stroke=\"" +
+             kPusher + "\" stroke-width=\"1.2\"/>";
     }
   svg += "</g>";
   return svg;
@@ -254,35 +254,36 @@ std::string OutOfViewNote(const PathsView& v) {
 
 // The object's paths with start and end marks, the scale bar, the legend.
 std::string PathsAndLegendSvg(const PathsView& v, const std::string& truth) {
-  const Canvas& c = v.c;
+  const TopView& c = v.c;
   std::string svg =
       "<g id=\"measured-path\">" + Polyline(c, v.object_path, kMeasured, 2, false, false) + "</g>";
   if (!v.predicted_path.empty())
     svg += "<g id=\"predicted-path\">" + Polyline(c, v.predicted_path, kPredicted, 2, true, false) +
            "</g>";
   const Vector2d s0 = c.Px(v.object_path.front()), s1 = c.Px(v.object_path.back());
-  svg += "<circle cx=\"" + F(s0.x()) + "\" cy=\"" + F(s0.y()) + "\" r=\"3\" fill=\"" + kMeasured +
-         "\"/>" + Text(s0 + Vector2d(6, 14), "start", kMeasured, "start", 11);
-  svg += "<circle cx=\"" + F(s1.x()) + "\" cy=\"" + F(s1.y()) + "\" r=\"3\" fill=\"" + kMeasured +
-         "\"/>";
+  svg += "<circle cx=\"" + SvgNum(s0.x()) + "\" cy=\"" + SvgNum(s0.y()) + "\" r=\"3\" fill=\"" +
+         kMeasured + "\"/>" + TextFrom(s0 + Vector2d(6, 14), "start", kMeasured, "start", 11);
+  svg += "<circle cx=\"" + SvgNum(s1.x()) + "\" cy=\"" + SvgNum(s1.y()) + "\" r=\"3\" fill=\"" +
+         kMeasured + "\"/>";
   const double bar = ScaleBarLength(c.w / c.scale);
   const Vector2d b0(c.x0 + 20, c.y0 + c.h - 20), b1 = b0 + Vector2d(bar * c.scale, 0);
   svg += "<g id=\"scale-bar\" data-metres=\"" + FormatNumber(bar, 6) + "\"><line x1=\"" +
-         F(b0.x()) + "\" y1=\"" + F(b0.y()) + "\" x2=\"" + F(b1.x()) + "\" y2=\"" + F(b1.y()) +
-         "\" stroke=\"#000\" stroke-width=\"3\"/>" +
-         Text(0.5 * (b0 + b1) + Vector2d(0, -7), Mm(bar), "#000", "middle") + "</g>";
+         SvgNum(b0.x()) + "\" y1=\"" + SvgNum(b0.y()) + "\" x2=\"" + SvgNum(b1.x()) + "\" y2=\"" +
+         SvgNum(b1.y()) + "\" stroke=\"#000\" stroke-width=\"3\"/>" +
+         TextFrom(0.5 * (b0 + b1) + Vector2d(0, -7), Mm(bar), "#000", "middle") + "</g>";
   const std::string out_of_view = OutOfViewNote(v);
   if (!out_of_view.empty())
     svg += "<g id=\"out-of-view\">" +
-           Text({c.x0 + c.w / 2, c.y0 + 40}, out_of_view, "#a04000", "middle", 12) + "</g>";
-  svg += Text({v.width / 2, v.height - 36},
-              "black: the object's true (" + TruthWords(truth) +
-                  ") path and outline; orange dashed: the prediction's",
-              "#555", "middle", 12);
-  svg += Text({v.width / 2, v.height - 18},
-              "outlines at the start, 1/3, 2/3 and the end (later ones darker); red: the pusher's "
-              "centre path and its tip at those instants",
-              "#555", "middle", 12);
+           TextFrom({c.x0 + c.w / 2, c.y0 + 40}, out_of_view, "#a04000", "middle", 12) + "</g>";
+  svg += TextFrom({v.width / 2, v.height - 36},
+                  "black: the object's true (" + TruthWords(truth) +
+                      ") path and outline; orange dashed: the prediction's",
+                  "#555", "middle", 12);
+  svg +=
+      TextFrom({v.width / 2, v.height - 18},
+               "outlines at the start, 1/3, 2/3 and the end (later ones darker); red: the pusher's "
+               "centre path and its tip at those instants",
+               "#555", "middle", 12);
   return svg;
 }
 

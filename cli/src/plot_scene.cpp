@@ -83,8 +83,6 @@ std::vector<Vector2d> Hull(std::vector<Vector2d> p) {
   return h;
 }
 
-std::string F(double v) { return FormatFixed(v, 1); }
-
 // A length in the unit a person reads: mm below 1 m.
 std::string Length(double m) {
   return std::abs(m) < 1 ? FormatNumber(m * 1e3, 3) + " mm" : FormatNumber(m, 3) + " m";
@@ -144,22 +142,23 @@ class Canvas {
 
 std::string Arrow(const Vector2d& from, const Vector2d& to, const std::string& color, bool dashed,
                   double width = 2) {
-  std::string s = "<line x1=\"" + F(from.x()) + "\" y1=\"" + F(from.y()) + "\" x2=\"" + F(to.x()) +
-                  "\" y2=\"" + F(to.y()) + "\" stroke=\"" + color + "\" stroke-width=\"" +
-                  F(width) + "\"" + (dashed ? " stroke-dasharray=\"6,4\"" : "") + "/>";
+  std::string s = "<line x1=\"" + SvgNum(from.x()) + "\" y1=\"" + SvgNum(from.y()) + "\" x2=\"" +
+                  SvgNum(to.x()) + "\" y2=\"" + SvgNum(to.y()) + "\" stroke=\"" + color +
+                  "\" stroke-width=\"" + SvgNum(width) + "\"" +
+                  (dashed ? " stroke-dasharray=\"6,4\"" : "") + "/>";
   const Vector2d d = to - from;
   if (d.norm() > 1e-9) {
     const Vector2d u = d.normalized(), n(-u.y(), u.x());
     const Vector2d a = to - 9 * u + 4.5 * n, b = to - 9 * u - 4.5 * n;
-    s += "<polygon points=\"" + F(to.x()) + "," + F(to.y()) + " " + F(a.x()) + "," + F(a.y()) +
-         " " + F(b.x()) + "," + F(b.y()) + "\" fill=\"" + color + "\"/>";
+    s += "<polygon points=\"" + SvgNum(to.x()) + "," + SvgNum(to.y()) + " " + SvgNum(a.x()) + "," +
+         SvgNum(a.y()) + " " + SvgNum(b.x()) + "," + SvgNum(b.y()) + "\" fill=\"" + color + "\"/>";
   }
   return s;
 }
 
 std::string Text(const Vector2d& at, const std::string& text, const std::string& color,
                  const char* anchor = "middle", int size = 12) {
-  return "<text x=\"" + F(at.x()) + "\" y=\"" + F(at.y()) + "\" font-size=\"" +
+  return "<text x=\"" + SvgNum(at.x()) + "\" y=\"" + SvgNum(at.y()) + "\" font-size=\"" +
          std::to_string(size) + "\" text-anchor=\"" + anchor + "\" fill=\"" + color + "\">" +
          SvgEscape(text) + "</text>";
 }
@@ -183,11 +182,11 @@ std::string DrawContact(const Canvas& c, const mechanics::ContactSpec& s, const 
                   mechanics::ToString(s.type) + "\">";
   const auto pts = ContactShape(s);
   if (pts.size() == 1) {
-    g += "<circle cx=\"" + F(c.Px(pts[0]).x()) + "\" cy=\"" + F(c.Px(pts[0]).y()) +
+    g += "<circle cx=\"" + SvgNum(c.Px(pts[0]).x()) + "\" cy=\"" + SvgNum(c.Px(pts[0]).y()) +
          "\" r=\"4\" fill=\"" + color + "\"/>";
   } else {
     std::string d;
-    for (const auto& p : pts) d += F(c.Px(p).x()) + "," + F(c.Px(p).y()) + " ";
+    for (const auto& p : pts) d += SvgNum(c.Px(p).x()) + "," + SvgNum(c.Px(p).y()) + " ";
     g += "<polyline points=\"" + d + "\" fill=\"none\" stroke=\"" + color +
          "\" stroke-width=\"4\" stroke-linecap=\"round\"/>";
   }
@@ -296,10 +295,10 @@ std::string ObjectSvg(const Canvas& c, const mechanics::ObjectSpec& o) {
   std::vector<Vector2d> proj;
   for (const auto& p : ObjectPoints(o)) proj.push_back(c.Project(p));
   std::string d;
-  for (const auto& q : Hull(proj)) d += F(c.Px2(q).x()) + "," + F(c.Px2(q).y()) + " ";
+  for (const auto& q : Hull(proj)) d += SvgNum(c.Px2(q).x()) + "," + SvgNum(c.Px2(q).y()) + " ";
   return "<g id=\"object\"><polygon points=\"" + d +
          "\" fill=\"#e6e6e6\" stroke=\"#555\" stroke-width=\"1.5\"/>" + "<circle cx=\"" +
-         F(c.Px(o.pose.position).x()) + "\" cy=\"" + F(c.Px(o.pose.position).y()) +
+         SvgNum(c.Px(o.pose.position).x()) + "\" cy=\"" + SvgNum(c.Px(o.pose.position).y()) +
          "\" r=\"2.5\" fill=\"#555\"/></g>";
 }
 
@@ -322,14 +321,16 @@ std::string SupportEdgeOnSvg(const Canvas& c, const std::vector<Vector2d>& hull,
   Vector2d p0 = l0, p1 = l1;
   for (int k = 0; k < 200 && !inside(p0); ++k) p0 += 0.005 * (l1 - l0);
   for (int k = 0; k < 200 && !inside(p1); ++k) p1 -= 0.005 * (l1 - l0);
-  std::string svg = "<line x1=\"" + F(p0.x()) + "\" y1=\"" + F(p0.y()) + "\" x2=\"" + F(p1.x()) +
-                    "\" y2=\"" + F(p1.y()) + "\" stroke=\"#8d6e63\" stroke-width=\"2\"/>";
+  std::string svg = "<line x1=\"" + SvgNum(p0.x()) + "\" y1=\"" + SvgNum(p0.y()) + "\" x2=\"" +
+                    SvgNum(p1.x()) + "\" y2=\"" + SvgNum(p1.y()) +
+                    "\" stroke=\"#8d6e63\" stroke-width=\"2\"/>";
   const double len = (p1 - p0).norm();
   for (double d = 0; d < len; d += 12) {
     const Vector2d h0 = p0 + d * u, h1 = h0 + 8 * n - 6 * u;
     if (inside(h1))
-      svg += "<line x1=\"" + F(h0.x()) + "\" y1=\"" + F(h0.y()) + "\" x2=\"" + F(h1.x()) +
-             "\" y2=\"" + F(h1.y()) + "\" stroke=\"#8d6e63\" stroke-width=\"1\"/>";
+      svg += "<line x1=\"" + SvgNum(h0.x()) + "\" y1=\"" + SvgNum(h0.y()) + "\" x2=\"" +
+             SvgNum(h1.x()) + "\" y2=\"" + SvgNum(h1.y()) +
+             "\" stroke=\"#8d6e63\" stroke-width=\"1\"/>";
   }
   svg += Text(p1 + 14 * n + Vector2d(-4, 4), support_text, "#8d6e63", "end", 11);
   return svg;
@@ -344,7 +345,8 @@ std::string FootprintSvg(const Canvas& c, const mechanics::Scene& scene, const S
   const bool prism = scene.object.shape != mechanics::ObjectShape::kBox &&
                      scene.object.shape != mechanics::ObjectShape::kCylinder;
   std::string points;
-  for (const auto& q : prism ? fp : hull) points += F(c.Px2(q).x()) + "," + F(c.Px2(q).y()) + " ";
+  for (const auto& q : prism ? fp : hull)
+    points += SvgNum(c.Px2(q).x()) + "," + SvgNum(c.Px2(q).y()) + " ";
   std::string svg = "<polygon points=\"" + points +
                     "\" fill=\"none\" stroke=\"#8d6e63\" stroke-width=\"2\" "
                     "stroke-dasharray=\"2,3\"/>";
@@ -352,8 +354,8 @@ std::string FootprintSvg(const Canvas& c, const mechanics::Scene& scene, const S
   for (double w : d.pressure_w) w_max = std::max(w_max, w);
   for (std::size_t i = 0; i < d.pressure.size(); ++i) {
     const Vector2d q = c.Px(d.pressure[i]);
-    svg += "<circle cx=\"" + F(q.x()) + "\" cy=\"" + F(q.y()) + "\" r=\"" +
-           F(1.5 + 4.5 * std::sqrt(d.pressure_w[i] / std::max(w_max, 1e-300))) +
+    svg += "<circle cx=\"" + SvgNum(q.x()) + "\" cy=\"" + SvgNum(q.y()) + "\" r=\"" +
+           SvgNum(1.5 + 4.5 * std::sqrt(d.pressure_w[i] / std::max(w_max, 1e-300))) +
            "\" fill=\"#8d6e63\" fill-opacity=\"0.6\"/>";
   }
   svg += Text(c.Px2(Vector2d(0.5 * (lo.x() + hi.x()), lo.y())) + Vector2d(0, 16),
@@ -389,11 +391,11 @@ std::string PushMotionSvg(const Canvas& c, const View& v, const mechanics::Scene
   if (!d.path.empty() && (hi - lo).norm() > 3) {
     // The recorded path itself (dashed), its end hollow.
     std::string points;
-    for (const auto& p : d.path) points += F(c.Px(p).x()) + "," + F(c.Px(p).y()) + " ";
+    for (const auto& p : d.path) points += SvgNum(c.Px(p).x()) + "," + SvgNum(c.Px(p).y()) + " ";
     svg += "<polyline class=\"recorded-path\" points=\"" + points +
            "\" fill=\"none\" stroke=\"#c0392b\" stroke-width=\"2\" "
            "stroke-dasharray=\"6,4\"/>";
-    svg += "<circle cx=\"" + F(b.x()) + "\" cy=\"" + F(b.y()) +
+    svg += "<circle cx=\"" + SvgNum(b.x()) + "\" cy=\"" + SvgNum(b.y()) +
            "\" r=\"4\" fill=\"none\" stroke=\"#c0392b\"/>";
     const bool right = b.x() > c.x0() + c.w() / 2;  // the label runs into the panel
     svg += Text(b + Vector2d(right ? -8 : 8, v.v_axis == 2 ? -12 : 18),
@@ -402,13 +404,13 @@ std::string PushMotionSvg(const Canvas& c, const View& v, const mechanics::Scene
     // Beside the pusher (not over its normal's arrow), with its end drawn hollow.
     const Vector2d u = (b - a).normalized(), side(-u.y() * 14, u.x() * 14);
     svg += Arrow(a + side, b + side, "#c0392b", true);
-    svg += "<circle cx=\"" + F(b.x()) + "\" cy=\"" + F(b.y()) +
+    svg += "<circle cx=\"" + SvgNum(b.x()) + "\" cy=\"" + SvgNum(b.y()) +
            "\" r=\"4\" fill=\"none\" stroke=\"#c0392b\"/>";
     svg += Text(0.5 * (a + b) + 2.2 * side + Vector2d(0, 4), "push " + away, "#c0392b",
                 side.x() >= 0 ? "start" : "end", 11);
   } else {
     // Along the view direction: a dot-in-circle marks motion out of the page.
-    svg += "<circle cx=\"" + F(a.x()) + "\" cy=\"" + F(a.y()) +
+    svg += "<circle cx=\"" + SvgNum(a.x()) + "\" cy=\"" + SvgNum(a.y()) +
            "\" r=\"9\" fill=\"none\" stroke=\"#c0392b\" stroke-dasharray=\"3,2\"/>";
   }
   svg += "</g>";
@@ -428,8 +430,8 @@ std::string GravityAndScaleSvg(const Canvas& c, const View& v, const Vector3d& g
   const double bar = ScaleBarLength(c.w() / c.scale());
   const Vector2d b0(c.x0() + 20, c.y0() + c.h() - 20), b1 = b0 + Vector2d(bar * c.scale(), 0);
   svg += "<g id=\"scale-bar\" data-metres=\"" + FormatNumber(bar, 6) + "\"><line x1=\"" +
-         F(b0.x()) + "\" y1=\"" + F(b0.y()) + "\" x2=\"" + F(b1.x()) + "\" y2=\"" + F(b1.y()) +
-         "\" stroke=\"#000\" stroke-width=\"3\"/>" +
+         SvgNum(b0.x()) + "\" y1=\"" + SvgNum(b0.y()) + "\" x2=\"" + SvgNum(b1.x()) + "\" y2=\"" +
+         SvgNum(b1.y()) + "\" stroke=\"#000\" stroke-width=\"3\"/>" +
          Text(0.5 * (b0 + b1) + Vector2d(0, -7), Length(bar), "#000") + "</g>";
   return svg;
 }
@@ -438,8 +440,8 @@ std::string GravityAndScaleSvg(const Canvas& c, const View& v, const Vector3d& g
 std::string ViewSvg(const Canvas& c, const View& v, const mechanics::Scene& scene,
                     const SceneDrawing& d) {
   std::string svg = "<g id=\"" + v.id + "\">";
-  svg += "<rect x=\"" + F(c.x0()) + "\" y=\"" + F(c.y0()) + "\" width=\"" + F(c.w()) +
-         "\" height=\"" + F(c.h()) + "\" fill=\"none\" stroke=\"#bbb\"/>";
+  svg += "<rect x=\"" + SvgNum(c.x0()) + "\" y=\"" + SvgNum(c.y0()) + "\" width=\"" +
+         SvgNum(c.w()) + "\" height=\"" + SvgNum(c.h()) + "\" fill=\"none\" stroke=\"#bbb\"/>";
   svg += Text({c.x0() + 8, c.y0() + 18}, v.title, "#333", "start", 12);
   svg += ObjectSvg(c, scene.object);
   svg += SupportSvg(c, scene, d);
@@ -482,9 +484,9 @@ std::string SceneSvg(const mechanics::Scene& scene, const std::string& title) {
     scale = std::min({scale, 0.6 * panel_w / extent.x(), 0.6 * (panel_h - 60) / extent.y()});
   }
   const double width = 2 * panel_w + 3 * margin, height = top + panel_h + 90;
-  std::string svg = "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"" + F(width) +
-                    "\" height=\"" + F(height) + "\" viewBox=\"0 0 " + F(width) + " " + F(height) +
-                    "\" font-family=\"sans-serif\">";
+  std::string svg = "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"" + SvgNum(width) +
+                    "\" height=\"" + SvgNum(height) + "\" viewBox=\"0 0 " + SvgNum(width) + " " +
+                    SvgNum(height) + "\" font-family=\"sans-serif\">";
   svg += "<rect width=\"100%\" height=\"100%\" fill=\"white\"/>";
   svg += Text({width / 2, 26}, title, "#000", "middle", 16);
   svg += Text({width / 2, 48}, SceneCaption(scene, d), "#333", "middle", 13);

@@ -61,6 +61,9 @@ std::string FormatNumber(double v, int significant);
 // coordinates: a tenth or a hundredth of a pixel is plenty).
 std::string FormatFixed(double v, int decimals);
 
+// An SVG coordinate or stroke width: a tenth of a pixel (FormatFixed(v, 1)).
+inline std::string SvgNum(double v) { return FormatFixed(v, 1); }
+
 // A scale bar's length: a round length (1, 2 or 5 times a power of ten) of
 // at most a quarter of `view_m`, the width the drawing shows (m).
 double ScaleBarLength(double view_m);

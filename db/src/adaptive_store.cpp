@@ -16,22 +16,21 @@ namespace {
 
 using detail::Tx;
 
-[[noreturn]] void Bad(const std::string& msg) {
-  throw StoreError(StoreError::Kind::kBadInput, msg);
-}
+using detail::BadInput;
 
 void RequireObject(const std::string& text, const std::string& what) {
   nlohmann::json j;
   try {
     j = nlohmann::json::parse(text);
   } catch (const std::exception& e) {
-    Bad(what + " is not valid JSON: " + e.what());
+    BadInput(what + " is not valid JSON: " + e.what());
   }
-  if (!j.is_object()) Bad(what + " must be a JSON object");
+  if (!j.is_object()) BadInput(what + " must be a JSON object");
 }
 
 void RequireFiniteNonNegative(double v, const std::string& what) {
-  if (!std::isfinite(v) || v < 0) Bad(what + " must be finite and >= 0, got " + std::to_string(v));
+  if (!std::isfinite(v) || v < 0)
+    BadInput(what + " must be finite and >= 0, got " + std::to_string(v));
 }
 
 constexpr const char* kCalibrationCols =
@@ -58,18 +57,18 @@ namespace {
 
 // @throws kBadInput for a round whose fields do not fit together.
 void CheckRound(const AdaptiveRound& round, const char* fn) {
-  if (round.round < 0) Bad(std::string(fn) + ": round must be >= 0");
+  if (round.round < 0) BadInput(std::string(fn) + ": round must be >= 0");
   if (round.reasons.size() != round.trials.size() || round.bases_json.size() != round.trials.size())
-    Bad(std::string(fn) + ": one reason and one basis per trial are required");
+    BadInput(std::string(fn) + ": one reason and one basis per trial are required");
   for (std::size_t i = 0; i < round.trials.size(); ++i) {
     if (round.reasons[i].empty())
-      Bad(std::string(fn) + ": trial " + std::to_string(i) + ": reason is empty");
+      BadInput(std::string(fn) + ": trial " + std::to_string(i) + ": reason is empty");
     RequireObject(round.bases_json[i],
                   std::string(fn) + ": trial " + std::to_string(i) + ": basis");
   }
   RequireObject(round.sampler_state_json, std::string(fn) + ": sampler_state_json");
   if (!round.open && round.stop_reason.empty())
-    Bad(std::string(fn) + ": a round that closes the sampler needs a stop_reason");
+    BadInput(std::string(fn) + ": a round that closes the sampler needs a stop_reason");
 }
 
 // The round's trials, one decision each (and a stop row when it closes the
@@ -149,7 +148,8 @@ std::int64_t Store::CreateAdaptiveCampaign(
     const std::function<AdaptiveRound(std::int64_t campaign_id)>& plan_first) {
   constexpr const char* kFn = "CreateAdaptiveCampaign";
   impl_->RequireWritable(kFn);
-  if (!campaign.sampler_open) Bad(std::string(kFn) + ": an adaptive campaign's sampler is open");
+  if (!campaign.sampler_open)
+    BadInput(std::string(kFn) + ": an adaptive campaign's sampler is open");
   Tx tx(impl_->db, true);  // rolled back by any exception: nothing of the campaign stays
   const std::int64_t id = internal::InsertCampaignRow(*impl_, campaign, kFn);
   const AdaptiveRound round = plan_first(id);

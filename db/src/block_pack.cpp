@@ -38,7 +38,7 @@ enum : unsigned char {
   kDelta2 = 2,    // double columns: residual against the linear extrapolation of the two previous
 };
 
-[[noreturn]] void Corrupt(const std::string& what) {
+[[noreturn]] void CorruptBlock(const std::string& what) {
   throw StoreError(StoreError::Kind::kCorrupt, "DecodeSamples: packed block " + what);
 }
 
@@ -208,21 +208,22 @@ bool PackBlock(const void* agt1, std::size_t size, std::string* out) {
 std::string UnpackBlock(const void* agt2, std::size_t size) {
   const auto* in = static_cast<const unsigned char*>(agt2);
   const unsigned char* end = in + size;
-  if (size < kPackedHeader || std::memcmp(in, kPackedMagic, 4) != 0) Corrupt("has a bad header");
+  if (size < kPackedHeader || std::memcmp(in, kPackedMagic, 4) != 0)
+    CorruptBlock("has a bad header");
   std::uint32_t count = 0;
   std::memcpy(&count, in + 4, 4);
   if (count == 0 || count > kMaxBlockSamples) {
-    Corrupt("claims " + std::to_string(count) + " samples (allowed 1.." +
-            std::to_string(kMaxBlockSamples) + ")");
+    CorruptBlock("claims " + std::to_string(count) + " samples (allowed 1.." +
+                 std::to_string(kMaxBlockSamples) + ")");
   }
-  if (in[10] != 0 || in[11] != 0) Corrupt("has unknown flags");
+  if (in[10] != 0 || in[11] != 0) CorruptBlock("has unknown flags");
   const Shape shape = MakeShape(in[8], in[9]);
   if (kRawHeader + std::size_t{count} * shape.row > kMaxBlockBytes) {
-    Corrupt("would expand to more than " + std::to_string(kMaxBlockBytes >> 20) + " MiB");
+    CorruptBlock("would expand to more than " + std::to_string(kMaxBlockBytes >> 20) + " MiB");
   }
   const unsigned char* p = in + kPackedHeader;
   auto need = [&](std::size_t n) {
-    if (static_cast<std::size_t>(end - p) < n) Corrupt("is truncated");
+    if (static_cast<std::size_t>(end - p) < n) CorruptBlock("is truncated");
   };
 
   std::string raw(kRawHeader + std::size_t{count} * shape.row, '\0');
@@ -246,7 +247,7 @@ std::string UnpackBlock(const void* agt2, std::size_t size) {
       need(count);
       for (std::uint32_t i = 0; i < count; ++i) rows[i * shape.row + off] = *p++;
     } else {
-      Corrupt("has an unknown byte-column kind " + std::to_string(kind));
+      CorruptBlock("has an unknown byte-column kind " + std::to_string(kind));
     }
   }
 
@@ -267,13 +268,13 @@ std::string UnpackBlock(const void* agt2, std::size_t size) {
       continue;
     }
     if (kind != kDelta1 && kind != kDelta2)
-      Corrupt("has an unknown column kind " + std::to_string(kind));
+      CorruptBlock("has an unknown column kind " + std::to_string(kind));
     need((count + 1) / 2);
     const unsigned char* lengths = p;
     p += (count + 1) / 2;
     for (std::uint32_t i = 0; i < count; ++i) {
       const int n = (lengths[i / 2] >> (4 * (i % 2))) & 0xF;
-      if (n > 8) Corrupt("has a residual of " + std::to_string(n) + " bytes");
+      if (n > 8) CorruptBlock("has a residual of " + std::to_string(n) + " bytes");
       need(static_cast<std::size_t>(n));
       std::uint64_t z = 0;
       if (end - p >= 8) {  // one load, then drop the bytes that are not this value's
@@ -286,7 +287,7 @@ std::string UnpackBlock(const void* agt2, std::size_t size) {
       v[i] = Unzigzag(z) + Predict(kind, v, i);
     }
   }
-  if (p != end) Corrupt("has trailing bytes");
+  if (p != end) CorruptBlock("has trailing bytes");
   for (std::uint32_t i = 0; i < count; ++i) {
     unsigned char* r = rows + i * shape.row;
     for (std::size_t j = 0; j < columns; ++j)

@@ -17,6 +17,7 @@ namespace arena::db {
 using detail::Tx;
 using internal::CheckAttempt;
 using internal::LoadTrialRow;
+using internal::QuatAngle;
 
 namespace {
 
@@ -50,14 +51,6 @@ internal::TrialRow CheckIngestable(const Store::Impl& impl, std::int64_t trial_i
 
 double Norm3(const std::array<double, 3>& v) {
   return std::sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
-}
-
-double QuatAngle(const double* a, const double* b) {
-  const double na = std::sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2] + a[3] * a[3]);
-  const double nb = std::sqrt(b[0] * b[0] + b[1] * b[1] + b[2] * b[2] + b[3] * b[3]);
-  if (na == 0 || nb == 0) return 0;
-  const double d = std::abs(a[0] * b[0] + a[1] * b[1] + a[2] * b[2] + a[3] * b[3]) / (na * nb);
-  return 2 * std::acos(std::min(1.0, d));
 }
 
 // trials.start_*: the start the executing cell measured, the pose the trial's

@@ -21,22 +21,20 @@ constexpr const char* kColumns =
     "verdict, flip_fraction, unstable, boundary_parameter, boundary_offset, boundary_tolerances, "
     "reason, detail_json";
 
-[[noreturn]] void Bad(const std::string& msg) {
-  throw StoreError(StoreError::Kind::kBadInput, msg);
-}
+using detail::BadInput;
 
 void CheckJson(const std::string& text, const std::string& what) {
   try {
-    if (!nlohmann::json::parse(text).is_object()) Bad(what + " must be a JSON object");
+    if (!nlohmann::json::parse(text).is_object()) BadInput(what + " must be a JSON object");
   } catch (const nlohmann::json::out_of_range& e) {  // 1e999: valid JSON, no double holds it
-    Bad(what + " holds a number out of range (beyond a double): " + e.what());
+    BadInput(what + " holds a number out of range (beyond a double): " + e.what());
   } catch (const nlohmann::json::exception& e) {
-    Bad(what + " is not valid JSON: " + e.what());
+    BadInput(what + " is not valid JSON: " + e.what());
   }
 }
 
 void CheckNumber(std::optional<double> v, const std::string& what) {
-  if (v && !std::isfinite(*v)) Bad(what + " is not finite");
+  if (v && !std::isfinite(*v)) BadInput(what + " is not finite");
 }
 
 SensitivityCondition ReadRow(const detail::Stmt& s) {
@@ -79,9 +77,9 @@ std::int64_t RecordSensitivityRun(Store& store, std::int64_t campaign_id,
   for (const auto& c : conditions) {
     const std::string at = "RecordSensitivityRun: condition " + std::to_string(c.condition) + ": ";
     if (c.condition < 0 || c.replicates < 0 || c.ensemble < 0 || c.ensemble_failed < 0) {
-      Bad(at + "counts and the condition index must be >= 0");
+      BadInput(at + "counts and the condition index must be >= 0");
     }
-    if (!seen.insert(c.condition).second) Bad(at + "appears twice");
+    if (!seen.insert(c.condition).second) BadInput(at + "appears twice");
     CheckJson(c.params_json, at + "params_json");
     CheckJson(c.detail_json, at + "detail_json");
     for (auto [v, name] : {std::pair{c.predicted_position_spread, "predicted_position_spread"},

@@ -17,6 +17,10 @@ namespace arena::db::detail {
 
 StoreError::Kind KindOf(int rc);
 [[noreturn]] void Throw(sqlite3* db, int rc, const std::string& context);
+// The store's refusal of a caller's bad value: kBadInput with `msg`.
+[[noreturn]] inline void BadInput(const std::string& msg) {
+  throw StoreError(StoreError::Kind::kBadInput, msg);
+}
 
 // One prepared statement. Bind indices start at 1, column indices at 0.
 class Stmt {

@@ -190,9 +190,7 @@ TrialState MustParseTrialState(const std::string& t) {
   return *s;
 }
 
-[[noreturn]] void BadInput(const std::string& msg) {
-  throw StoreError(StoreError::Kind::kBadInput, msg);
-}
+using detail::BadInput;
 
 // Seeds are uint64; SQLite integers are int64: stored bit for bit.
 std::int64_t SeedToDb(std::uint64_t v) {
@@ -248,15 +246,6 @@ void CheckSceneFacts(const SceneFacts& f, const std::string& where) {
   if (f.finger_count < 0) BadInput(where + ".finger_count must be >= 0");
   if (f.contact_mask < 0 || f.contact_mask > (kPointBit | kLineBit | kPatchBit))
     BadInput(where + ".contact_mask " + std::to_string(f.contact_mask) + " is not a set of types");
-}
-
-// Angle between two unit quaternions (rad, in [0, pi]).
-double QuatAngle(const double* a, const double* b) {
-  const double na = std::sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2] + a[3] * a[3]);
-  const double nb = std::sqrt(b[0] * b[0] + b[1] * b[1] + b[2] * b[2] + b[3] * b[3]);
-  if (na == 0 || nb == 0) return 0;
-  double d = std::abs(a[0] * b[0] + a[1] * b[1] + a[2] * b[2] + a[3] * b[3]) / (na * nb);
-  return 2 * std::acos(std::min(1.0, d));
 }
 
 }  // namespace
@@ -332,6 +321,7 @@ void WriteTransition(const Store::Impl& impl, std::int64_t trial_id, int attempt
 
 using internal::CheckAttempt;
 using internal::LoadTrialRow;
+using internal::QuatAngle;
 using internal::WriteTransition;
 
 int ContactTypeMask(const std::vector<std::string>& types) {

@@ -1,6 +1,8 @@
 // Helpers shared by the store's translation units (private).
 #pragma once
 
+#include <algorithm>
+#include <cmath>
 #include <cstdint>
 #include <optional>
 #include <string>
@@ -10,6 +12,16 @@
 #include "sqlite_util.hpp"
 
 namespace arena::db::internal {
+
+// Angle between two quaternions (w, x, y, z; rad, in [0, pi]); 0 when
+// either is zero.
+inline double QuatAngle(const double* a, const double* b) {
+  const double na = std::sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2] + a[3] * a[3]);
+  const double nb = std::sqrt(b[0] * b[0] + b[1] * b[1] + b[2] * b[2] + b[3] * b[3]);
+  if (na == 0 || nb == 0) return 0;
+  const double d = std::abs(a[0] * b[0] + a[1] * b[1] + a[2] * b[2] + a[3] * b[3]) / (na * nb);
+  return 2 * std::acos(std::min(1.0, d));
+}
 
 struct TrialRow {
   TrialState state = TrialState::kPlanned;

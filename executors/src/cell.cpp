@@ -23,6 +23,7 @@
 #include "arena/reset/reset.hpp"
 #include "arena/schemas/arena.h"
 #include "arena/schemas/ground_truth.hpp"
+#include "clock.hpp"
 #include "closed_loop_trial.hpp"
 #include "command_intake.hpp"
 #include "trial_start.hpp"
@@ -34,11 +35,7 @@ namespace {
 using Clock = StreamClock;
 using nlohmann::json;
 
-std::uint64_t UnixNanos() {
-  return static_cast<std::uint64_t>(std::chrono::duration_cast<std::chrono::nanoseconds>(
-                                        std::chrono::system_clock::now().time_since_epoch())
-                                        .count());
-}
+using internal::UnixNanos;
 
 reset::Pose ToResetPose(const mechanics::Pose& p) {
   reset::Pose out;

@@ -4,21 +4,16 @@
 #include <cmath>
 
 #include "arena/executors/defects.hpp"
+#include "clock.hpp"
 
 namespace arena::executors {
 namespace {
 
 using nlohmann::json;
 
-std::uint64_t UnixNanos() {
-  return static_cast<std::uint64_t>(std::chrono::duration_cast<std::chrono::nanoseconds>(
-                                        std::chrono::system_clock::now().time_since_epoch())
-                                        .count());
-}
+using internal::UnixNanos;
 
-StreamClock::duration Seconds(double s) {
-  return std::chrono::duration_cast<StreamClock::duration>(std::chrono::duration<double>(s));
-}
+using internal::Seconds;
 
 }  // namespace
 

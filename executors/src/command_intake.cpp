@@ -1,4 +1,5 @@
 #include "command_intake.hpp"
+#include "clock.hpp"
 
 #include <algorithm>
 #include <cmath>
@@ -8,10 +9,7 @@
 namespace arena::executors {
 namespace {
 
-CommandIntake::Clock::duration Seconds(double s) {
-  return std::chrono::duration_cast<CommandIntake::Clock::duration>(
-      std::chrono::duration<double>(s));
-}
+using internal::Seconds;
 
 }  // namespace
 

@@ -16,13 +16,15 @@
 #include "arena/mechanics/model.hpp"
 #include "arena/schemas/arena.h"
 #include "arena/schemas/ground_truth.hpp"
+#include "clock.hpp"
+#include "vector_json.hpp"
 
 namespace arena::executors {
 namespace {
 
 using nlohmann::json;
 
-json Vec(const Eigen::Vector3d& v) { return json::array({v.x(), v.y(), v.z()}); }
+using internal::Vec;
 
 Eigen::Vector3d ReadVec(const json& j, const char* key) {
   if (!j.contains(key) || !j[key].is_array() || j[key].size() != 3)
@@ -195,11 +197,7 @@ ControlOutcome ScoreControl(const std::string& law, const ControlContext& c,
 
 namespace {
 
-std::uint64_t UnixNanos() {
-  return static_cast<std::uint64_t>(std::chrono::duration_cast<std::chrono::nanoseconds>(
-                                        std::chrono::system_clock::now().time_since_epoch())
-                                        .count());
-}
+using internal::UnixNanos;
 
 struct Running {
   std::uint64_t trial = 0;

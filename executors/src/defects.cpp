@@ -10,6 +10,7 @@
 
 #include "arena/mechanics/pusher_motion.hpp"
 #include "arena/reset/rng.hpp"
+#include "vector_json.hpp"
 
 namespace arena::executors {
 namespace {
@@ -81,7 +82,7 @@ const char* TypeName(mechanics::ContactType t) {
   return "?";
 }
 
-json Vec(const Eigen::Vector3d& v) { return json::array({v.x(), v.y(), v.z()}); }
+using internal::Vec;
 
 Eigen::Quaterniond Perturb(const Eigen::Quaterniond& q, const Eigen::Vector3d& w) {
   const double angle = w.norm();

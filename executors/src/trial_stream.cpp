@@ -5,15 +5,12 @@
 #include <spdlog/spdlog.h>
 
 #include "arena/executors/defects.hpp"
+#include "clock.hpp"
 
 namespace arena::executors {
 namespace {
 
-std::uint64_t UnixNanos() {
-  return static_cast<std::uint64_t>(std::chrono::duration_cast<std::chrono::nanoseconds>(
-                                        std::chrono::system_clock::now().time_since_epoch())
-                                        .count());
-}
+using internal::UnixNanos;
 
 }  // namespace
 

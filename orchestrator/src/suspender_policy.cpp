@@ -44,7 +44,7 @@ const Names& NamesOf(Condition c) {
   return kNames[static_cast<int>(c)];
 }
 
-std::string Num(double v) {
+std::string FourDigits(double v) {
   char buf[64];
   std::snprintf(buf, sizeof buf, "%.4g", v);
   return buf;
@@ -63,7 +63,7 @@ const char* Unit(Condition c) {
 
 // Bytes as a person reads them: MiB from 1 MiB on.
 std::string Bytes(double b) {
-  if (b < 1024.0 * 1024) return Num(b) + " bytes";
+  if (b < 1024.0 * 1024) return FourDigits(b) + " bytes";
   char buf[64];
   std::snprintf(buf, sizeof buf, "%.1f MiB", b / (1024.0 * 1024));
   return buf;
@@ -72,7 +72,7 @@ std::string Bytes(double b) {
 std::string Evidence(Condition c, const SuspenderLimits& l, const Reading& r) {
   std::string e = c == Condition::kStoreFreeSpace
                       ? Bytes(r.value) + " < " + Bytes(l.threshold)
-                      : Num(r.value) + Unit(c) + " > " + Num(l.threshold) + Unit(c);
+                      : FourDigits(r.value) + Unit(c) + " > " + FourDigits(l.threshold) + Unit(c);
   switch (c) {
     case Condition::kResetFailureRate:
       return e + " failed over the last " + std::to_string(r.evidence) + " resets";
@@ -146,8 +146,8 @@ double Number(const nlohmann::json& j, const std::string& field, double min, dou
   if (!j.is_number()) Bad(field, std::string("must be ") + what + ", got " + j.dump());
   const double v = j.get<double>();
   if (!std::isfinite(v) || v < min || v > max)
-    Bad(field, std::string("must be ") + what + " in [" + Num(min) + ", " + Num(max) + "], got " +
-                   j.dump());
+    Bad(field, std::string("must be ") + what + " in [" + FourDigits(min) + ", " + FourDigits(max) +
+                   "], got " + j.dump());
   return v;
 }
 int Integer(const nlohmann::json& j, const std::string& field, int min, int max) {
