@@ -33,6 +33,22 @@ struct Cells {
   }
 };
 
+// A fresh `arena serve` carries campaign 1 (60 trials) to its end, then
+// stops cleanly: the restart every service-kill test ends with.
+void ServeUntilTheCampaignEnds(const TempDir& dir, const std::string& db,
+                               const std::string& domain) {
+  auto serve = StartArena({"serve", "--db", db, "--domain", domain}, dir / "serve-final.log");
+  ASSERT_TRUE(WaitUntil(
+      [&] {
+        auto c = CountStates(db, 1);
+        return c["done"] + c["failed"] == 60;
+      },
+      kCampaignTimeout))
+      << ReadFile(dir / "serve-final.log");
+  serve->Signal(SIGTERM);
+  ASSERT_TRUE(serve->Wait(std::chrono::seconds(40)).has_value());
+}
+
 // `arena run`'s cells die with it, even when it is SIGKILLed (no orphans
 // holding the domain and the CPU after a crashed run).
 std::vector<pid_t> CellsStartedBy(pid_t parent) {
@@ -90,16 +106,7 @@ TEST(ServiceFaults, ServiceKilledMidCampaignLosesAndDuplicatesNothing) {
     serve->Signal(SIGKILL);
     ASSERT_TRUE(serve->Wait(std::chrono::seconds(10)).has_value());
   }
-  auto serve = StartArena({"serve", "--db", db, "--domain", domain}, dir / "serve-final.log");
-  ASSERT_TRUE(WaitUntil(
-      [&] {
-        auto c = CountStates(db, 1);
-        return c["done"] + c["failed"] == 60;
-      },
-      kCampaignTimeout))
-      << ReadFile(dir / "serve-final.log");
-  serve->Signal(SIGTERM);
-  ASSERT_TRUE(serve->Wait(std::chrono::seconds(40)).has_value());
+  ASSERT_NO_FATAL_FAILURE(ServeUntilTheCampaignEnds(dir, db, domain));
   EXPECT_EQ(CountStates(db, 1)["done"], 60);
   ExpectCampaignConsistent(db, 1, 60);
   EXPECT_NE(ReadFile(dir / "serve.log").find("recovered after restart"), std::string::npos);
@@ -157,16 +164,7 @@ TEST(ServiceFaults, ServiceKilledWithPredictionsPendingPredictsThemAfterItsResta
       std::string::npos)
       << ReadFile(dir / "status.out");
 
-  auto serve = StartArena({"serve", "--db", db, "--domain", domain}, dir / "serve-final.log");
-  ASSERT_TRUE(WaitUntil(
-      [&] {
-        auto c = CountStates(db, 1);
-        return c["done"] + c["failed"] == 60;
-      },
-      kCampaignTimeout))
-      << ReadFile(dir / "serve-final.log");
-  serve->Signal(SIGTERM);
-  ASSERT_TRUE(serve->Wait(std::chrono::seconds(40)).has_value());
+  ASSERT_NO_FATAL_FAILURE(ServeUntilTheCampaignEnds(dir, db, domain));
   ExpectCampaignConsistent(db, 1, 60);
   auto store = OpenReadOnly(db);
   for (const auto& t : store->ListTrials(1)) {
