@@ -37,6 +37,7 @@
 #include <memory>
 #include <mutex>
 #include <new>
+#include <optional>
 #include <string>
 #include <thread>
 #include <vector>
@@ -63,7 +64,17 @@ std::uint64_t NowNs() {
           .count());
 }
 
-int Domain() { return 201 + static_cast<int>(getpid() % 30); }
+// A domain id no other arena process on this host holds (a test suite, an
+// `arena run`, another bench): claimed host-wide for the bench's life.
+int ClaimedDomain() {
+  static std::optional<arena::dds::HostDomainClaim> claim;
+  const int start = static_cast<int>(getpid() % 30);
+  for (int k = 0; k < 30 && !claim; ++k)
+    claim = arena::dds::HostDomainClaim::TryClaim(201 + (start + k) % 30);
+  return claim ? claim->domain_id() : 201 + start;
+}
+
+int Domain() { return ClaimedDomain(); }
 
 constexpr int kMaxCells = 16;
 

@@ -19,6 +19,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <optional>
 #include <sstream>
 #include <stdexcept>
 #include <string>
@@ -33,6 +34,7 @@
 #include "arena/orchestrator/campaign.hpp"
 #include "arena/orchestrator/service.hpp"
 #include "arena/orchestrator/submit.hpp"
+#include "arena/schemas/dds.hpp"
 
 extern char** environ;
 
@@ -97,6 +99,16 @@ std::string SmokeCampaign(int replicates) {
   return spec.dump();
 }
 
+// A domain id no other arena process on this host holds (a test suite, an
+// `arena run`, another bench): claimed host-wide for the bench's life.
+int ClaimedDomain() {
+  static std::optional<dds::HostDomainClaim> claim;
+  const int start = static_cast<int>(getpid() % 100);
+  for (int k = 0; k < 100 && !claim; ++k)
+    claim = dds::HostDomainClaim::TryClaim(120 + (start + k) % 100);
+  return claim ? claim->domain_id() : 120 + start;
+}
+
 // Arg 0: number of cells. 12 conditions x 10 replicates = 120 trials per campaign.
 // `shared_memory`: the service's participant uses Fast DDS's shared-memory
 // transport beside UDP (the cells always do); false as `arena serve` runs it.
@@ -105,7 +117,7 @@ void CampaignEndToEnd(benchmark::State& state, bool shared_memory) {
   const int cells = static_cast<int>(state.range(0));
   const fs::path dir = fs::temp_directory_path() / ("arena_orch_bench_" + std::to_string(getpid()));
   fs::create_directories(dir);
-  const int domain = 120 + getpid() % 100;
+  const int domain = ClaimedDomain();
   std::vector<std::unique_ptr<CellProcess>> processes;
   for (int k = 0; k < cells; ++k) {
     processes.push_back(std::make_unique<CellProcess>(

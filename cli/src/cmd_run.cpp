@@ -68,18 +68,27 @@ std::string RunTag() {
   return buf;
 }
 
-// A domain on which no participant is heard for a moment: two `arena run`s
-// on one host (or a lab's own domain) do not share a domain by chance.
-int QuietDomain(const dds::NetworkOptions& network) {
+// A domain on which no participant is heard for a moment and that no other
+// arena process on this host has claimed (dds::HostDomainClaim: one that
+// chose its domain a moment ago may have no participant yet): two `arena
+// run`s on one host, a run beside the test suite, or a lab's own domain do
+// not share a domain by chance. The claim is held in `claim` for the run.
+int QuietDomain(const dds::NetworkOptions& network, std::optional<dds::HostDomainClaim>& claim) {
   std::mt19937 pick(std::random_device{}());
   std::uniform_int_distribution<int> domain(100, dds::kMaxDomainId);
   for (int tries = 0; tries < 8; ++tries) {
     const int candidate = domain(pick);
+    claim = dds::HostDomainClaim::TryClaim(candidate);
+    if (!claim) {
+      spdlog::info("domain {} is claimed by another arena process; trying another", candidate);
+      continue;
+    }
     dds::Participant probe(dds::ParticipantOptions{candidate, "arena.run-probe", network, 2.5});
     std::this_thread::sleep_for(std::chrono::milliseconds(400));
     if (probe.Peers().empty()) return candidate;
     spdlog::info("domain {} is in use ({} participants); trying another", candidate,
                  probe.Peers().size());
+    claim.reset();
   }
   throw dds::DdsError("--domain: no quiet DDS domain found in 8 tries; pass --domain");
 }
@@ -452,8 +461,15 @@ int Run(RunOptions opt) {
   const orchestrator::Campaign campaign = LoadValidCampaign(opt.campaign_path);
   RefuseWhatTheCellsCannotRun(campaign, opt);
   CheckRunIdentities(opt, campaign);
+  // Held for the whole run, so no other arena process picks this domain.
+  std::optional<dds::HostDomainClaim> domain_claim;
   if (opt.domain < 0) {
-    opt.domain = QuietDomain(opt.network_for_probe);
+    opt.domain = QuietDomain(opt.network_for_probe, domain_claim);
+  } else {
+    // A domain given by hand is used whether or not another process holds
+    // it (two runs may share one on purpose; their cells never mix); it is
+    // claimed when free so that no quiet-domain pick lands on it.
+    domain_claim = dds::HostDomainClaim::TryClaim(opt.domain);
   }
   std::int64_t campaign_id = 0;
   {

@@ -28,31 +28,27 @@ namespace arena::test {
 using namespace std::chrono_literals;
 
 // A domain id in 10..229 that no other process on this host holds: each
-// (process, salt) claims one by an exclusive lock on
-// /tmp/arena-test-domain-N.lock, held until the process exits (the kernel
-// drops it even on a crash). A pid-derived id alone collided when suites from
-// several worktrees ran at once. The same salt gives the same id within a
-// process; cells started by the test are told the id on their command line.
+// (process, salt) claims one host-wide (dds::HostDomainClaim, the same lock
+// `arena run` takes for the domain it picks), held until the process exits
+// (the kernel drops it even on a crash). A pid-derived id alone collided when
+// suites from several worktrees ran at once. The same salt gives the same id
+// within a process; cells started by the test are told the id on their
+// command line.
 inline int TestDomain(int salt = 0) {
   static std::mutex mutex;
   static std::map<int, int> claimed;  // salt -> domain id
+  static std::vector<dds::HostDomainClaim> held;
   std::lock_guard<std::mutex> lock(mutex);
   if (auto it = claimed.find(salt); it != claimed.end()) return it->second;
   constexpr unsigned kFirst = 10, kCount = 220;  // Fast DDS ports need id <= 232
   const unsigned start = static_cast<unsigned>(getpid()) * 7u + static_cast<unsigned>(salt) * 13u;
   for (unsigned probe = 0; probe < kCount; ++probe) {
     const int domain = static_cast<int>(kFirst + (start + probe) % kCount);
-    bool taken_here = false;
-    for (const auto& [other_salt, other] : claimed) taken_here = taken_here || other == domain;
-    if (taken_here) continue;
-    const std::string path = "/tmp/arena-test-domain-" + std::to_string(domain) + ".lock";
-    const int fd = ::open(path.c_str(), O_RDWR | O_CREAT | O_CLOEXEC, 0666);
-    if (fd < 0) continue;
-    if (::flock(fd, LOCK_EX | LOCK_NB) == 0) {  // kept open: the claim lasts the process
-      claimed[salt] = domain;
-      return domain;
-    }
-    ::close(fd);
+    auto claim = dds::HostDomainClaim::TryClaim(domain);  // fails for ids held here too
+    if (!claim) continue;
+    held.push_back(std::move(*claim));
+    claimed[salt] = domain;
+    return domain;
   }
   // Every id held (220 test processes at once): fall back to the old
   // pid-derived id rather than fail.

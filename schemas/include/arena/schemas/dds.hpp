@@ -325,6 +325,33 @@ const char* TopicName();
 // @returns the number of files removed.
 std::size_t CleanZombieSharedMemory();
 
+// A DDS domain this process holds on this host against every other arena
+// process choosing one at the same moment (`arena run` picking a quiet
+// domain, a test picking its own): an exclusive flock() on
+// /tmp/arena-domain-<id>.lock, held while the claim lives and dropped by the
+// kernel when the process dies. A probe for peers alone cannot see a domain
+// another process has chosen but not joined yet: two test suites met each
+// other's cells that way.
+class HostDomainClaim {
+ public:
+  // The claim, or nothing when another process holds the domain (or the
+  // lock file cannot be opened: then nobody can claim it either).
+  static std::optional<HostDomainClaim> TryClaim(int domain_id);
+  HostDomainClaim(HostDomainClaim&& other) noexcept;
+  HostDomainClaim& operator=(HostDomainClaim&& other) noexcept;
+  HostDomainClaim(const HostDomainClaim&) = delete;
+  HostDomainClaim& operator=(const HostDomainClaim&) = delete;
+  ~HostDomainClaim();
+  int domain_id() const { return domain_id_; }
+  // Where the lock file of `domain_id` lives.
+  static std::string LockPath(int domain_id);
+
+ private:
+  HostDomainClaim(int domain_id, int fd) : domain_id_(domain_id), fd_(fd) {}
+  int domain_id_ = -1;
+  int fd_ = -1;
+};
+
 // Participant names by role; cells are "arena.cell.<cell id>".
 std::string CellParticipantName(const std::string& cell_id);
 // A controller registered under `name` is "arena.controller.<name>".
