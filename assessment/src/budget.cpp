@@ -22,6 +22,9 @@ std::vector<mechanics::ModelOptions> ExpandGrid(const FidelityGrid& g) {
   nonempty_unique(g.dt, "dt");
   nonempty_unique(g.reduce, "reduce");
   nonempty_unique(g.contacts, "contacts");
+  nonempty_unique(g.pads, "pads");
+  nonempty_unique(g.cone, "cone");
+  nonempty_unique(g.inertia, "inertia");
   for (int f : g.facets) {
     if (f < 3) throw std::invalid_argument("facets: must be >= 3, got " + std::to_string(f));
   }
@@ -38,7 +41,11 @@ std::vector<mechanics::ModelOptions> ExpandGrid(const FidelityGrid& g) {
     for (int k : g.points)
       for (double dt : g.dt)
         for (auto r : g.reduce)
-          for (auto c : g.contacts) out.push_back(mechanics::ModelOptions{f, k, dt, r, c});
+          for (auto c : g.contacts)
+            for (auto pads : g.pads)
+              for (auto cone : g.cone)
+                for (auto inertia : g.inertia)
+                  out.push_back(mechanics::ModelOptions{f, k, dt, r, c, pads, cone, inertia});
   return out;
 }
 

@@ -49,13 +49,19 @@ class ArenaPredictor final : public Predictor {
       if (!keys.insert(s.key).second) {
         throw std::invalid_argument("arena predictor: setting " + s.key + " is repeated");
       }
-      s.knobs_json = nlohmann::json({{"predictor", "arena"},
-                                     {"facets", m.facets},
-                                     {"points", m.points},
-                                     {"dt", m.dt},
-                                     {"reduce", mechanics::ToString(m.reduce)},
-                                     {"contacts", mechanics::ToString(m.contacts)}})
-                         .dump();
+      nlohmann::json knobs = {{"predictor", "arena"},
+                              {"facets", m.facets},
+                              {"points", m.points},
+                              {"dt", m.dt},
+                              {"reduce", mechanics::ToString(m.reduce)},
+                              {"contacts", mechanics::ToString(m.contacts)}};
+      // The opt-in choices only where they differ from the model's defaults,
+      // as the key names them: earlier evaluations' knobs stay the same.
+      const mechanics::ModelOptions defaults;
+      if (m.pads != defaults.pads) knobs["pads"] = mechanics::ToString(m.pads);
+      if (m.cone != defaults.cone) knobs["cone"] = mechanics::ToString(m.cone);
+      if (m.inertia != defaults.inertia) knobs["inertia"] = mechanics::ToString(m.inertia);
+      s.knobs_json = knobs.dump();
       s.step = m.dt;
       settings_.push_back(std::move(s));
     }

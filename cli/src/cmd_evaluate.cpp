@@ -1,15 +1,19 @@
 // arena evaluate --db FILE --campaign ID [--predictors arena] [--facets 4,8,16,32] [--points 3]
-//                [--dt 0.008,0.004,0.002,0.001] [--reduce auto] [--budget 1mm|2ms|1.5floor ...]
+//                [--dt 0.008,0.004,0.002,0.001] [--reduce auto] [--contacts tracked]
+//                [--pads elastic] [--cone polyhedral] [--inertia carried]
+//                [--budget 1mm|2ms|1.5floor ...]
 //                [--convergence-trials 8] [--threads N] [--from measured|planned] [--json]
 // Replays a campaign's done trials through the model at every fidelity
 // setting of the grid, stores the run (tables evaluations and
 // evaluation_results) and prints the trade: a table or JSON.
+#include <algorithm>
 #include <array>
 #include <atomic>
 #include <cmath>
 #include <cstdio>
 #include <sstream>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include <nlohmann/json.hpp>
@@ -40,7 +44,11 @@ struct EvaluateOptions {
   std::vector<double> dt{0.008, 0.004, 0.002, 0.001};
   std::vector<std::string> reduce{"auto"};
   std::vector<std::string> contacts{"tracked"};
-  bool grid_given = false;  // any of --facets/--points/--dt/--reduce
+  std::vector<std::string> pads{mechanics::ToString(mechanics::ModelOptions{}.pads)};
+  std::vector<std::string> cone{mechanics::ToString(mechanics::ModelOptions{}.cone)};
+  std::vector<std::string> inertia{mechanics::ToString(mechanics::ModelOptions{}.inertia)};
+  bool grid_given =
+      false;  // any of --facets/--points/--dt/--reduce/--contacts/--pads/--cone/--inertia
   std::vector<double> mujoco_timestep{0.004, 0.002, 0.001, 0.0005};
   std::vector<std::string> mujoco_cone{"elliptic"};
   std::vector<int> mujoco_noslip{0};
@@ -59,9 +67,19 @@ struct EvaluateOptions {
   std::string trial_parameters;     // --trial-parameters: a CSV with a seed column
 };
 
+// The setting column's width: 24, or the longest key (a key naming opt-in
+// choices, "..._cone-aligned_inertia-auto", would push its row's columns).
+template <typename Settings>
+int SettingWidth(const Settings& settings) {
+  std::size_t w = 24;
+  for (const auto& s : settings) w = std::max(w, s.model_key.size());
+  return static_cast<int>(w);
+}
+
 // "start: ..." lines: where the predictions started and how much of the
 // error the start pose explains (mm, degrees).
 std::string FormatStart(const assessment::StartReport& r) {
+  const int w = SettingWidth(r.settings);
   std::string out;
   char line[512];
   if (r.from == assessment::StartFrom::kPlanned) {
@@ -85,7 +103,7 @@ std::string FormatStart(const assessment::StartReport& r) {
       out +=
           "start pose's share of the error (median final error from the planned start minus "
           "from the measured one):\n";
-      std::snprintf(line, sizeof line, "  %-8s %-24s %6s %26s %26s\n", "predictor", "setting",
+      std::snprintf(line, sizeof line, "  %-8s %-*s %6s %26s %26s\n", "predictor", w, "setting",
                     "trials", "pos mm planned/measured/+", "angle deg planned/measured/+");
       out += line;
       head = true;
@@ -95,7 +113,7 @@ std::string FormatStart(const assessment::StartReport& r) {
                   s.position_measured * 1e3, (s.position_planned - s.position_measured) * 1e3);
     std::snprintf(ang, sizeof ang, "%.3g/%.3g/%+.3g", s.angle_planned * 180 / M_PI,
                   s.angle_measured * 180 / M_PI, (s.angle_planned - s.angle_measured) * 180 / M_PI);
-    std::snprintf(line, sizeof line, "  %-8s %-24s %6d %26s %26s\n", s.predictor.c_str(),
+    std::snprintf(line, sizeof line, "  %-8s %-*s %6d %26s %26s\n", s.predictor.c_str(), w,
                   s.model_key.c_str(), s.trials, pos, ang);
     out += line;
   }
@@ -158,11 +176,12 @@ std::string MedianP95(const std::optional<assessment::Distribution>& d, double s
 // The outcome table: per setting, the NMSE of (dx, dy, dtheta) and the final
 // pose, force and time figures beside it.
 std::string OutcomeTable(const std::vector<assessment::SettingSummary>& settings) {
+  const int w = SettingWidth(settings);
   std::ostringstream out;
   char line[640];
-  std::snprintf(line, sizeof line, "  %-8s %-24s %6s %6s %-20s %16s %16s %20s %13s\n", "predictor",
-                "setting", "scored", "NMSE", "dx/dy/dtheta", "pos mm med/p95", "angle deg med/p95",
-                "force N med/p95 (n)", "ms/trial med");
+  std::snprintf(line, sizeof line, "  %-8s %-*s %6s %6s %-20s %16s %16s %20s %13s\n", "predictor",
+                w, "setting", "scored", "NMSE", "dx/dy/dtheta", "pos mm med/p95",
+                "angle deg med/p95", "force N med/p95 (n)", "ms/trial med");
   out << line;
   for (const auto& s : settings) {
     char nmse[24] = "-", parts[48] = "-", force[64] = "-";
@@ -174,8 +193,8 @@ std::string OutcomeTable(const std::vector<assessment::SettingSummary>& settings
       std::snprintf(force, sizeof force, "%s (%d)", MedianP95(s.force, 1).c_str(), s.force_trials);
     char scored[24];
     std::snprintf(scored, sizeof scored, "%d/%d", s.ok, s.trials);
-    std::snprintf(line, sizeof line, "  %-8s %-24s %6s %6s %-20s %16s %16s %20s %13.3g\n",
-                  s.predictor.c_str(), s.model_key.c_str(), scored, nmse, parts,
+    std::snprintf(line, sizeof line, "  %-8s %-*s %6s %6s %-20s %16s %16s %20s %13.3g\n",
+                  s.predictor.c_str(), w, s.model_key.c_str(), scored, nmse, parts,
                   MedianP95(s.position, 1e3).c_str(), MedianP95(s.angle, 180 / M_PI).c_str(), force,
                   s.time.median * 1e3);
     out << line;
@@ -185,6 +204,7 @@ std::string OutcomeTable(const std::vector<assessment::SettingSummary>& settings
 }
 
 std::string FormatTable(const assessment::EvaluationReport& r, std::int64_t evaluation_id) {
+  const int w = SettingWidth(r.settings);
   std::ostringstream out;
   char line[640];
   std::snprintf(line, sizeof line,
@@ -216,8 +236,8 @@ std::string FormatTable(const assessment::EvaluationReport& r, std::int64_t eval
                   "against replicate spread)\n");
   }
   out << line;
-  std::snprintf(line, sizeof line, "%-8s %-24s %9s %20s %9s %20s %17s %15s %15s %s\n", "predictor",
-                "setting", "ok/div/fail", "pos mm med/p95/max", "p95/floor",
+  std::snprintf(line, sizeof line, "%-8s %-*s %9s %20s %9s %20s %17s %15s %15s %s\n", "predictor",
+                w, "setting", "ok/div/fail", "pos mm med/p95/max", "p95/floor",
                 "angle deg med/p95/max", "mode med/p5/min", "ms/trial med/p95", "ms per sim s", "");
   out << line;
   for (std::size_t i = 0; i < r.settings.size(); ++i) {
@@ -241,9 +261,10 @@ std::string FormatTable(const assessment::EvaluationReport& r, std::int64_t eval
     char per_sim[32] = "-";
     if (s.time_per_sim_s)
       std::snprintf(per_sim, sizeof per_sim, "%.3g", s.time_per_sim_s->median * 1e3);
-    std::snprintf(line, sizeof line, "%-8s %-24s %11s %20s %9s %20s %17s %15s %15s%s\n",
-                  s.predictor.c_str(), s.model_key.c_str(), counts, Tail(s.position, 1e3).c_str(),
-                  multiple, Tail(s.angle, 180 / M_PI).c_str(), mode, time, per_sim, marks.c_str());
+    std::snprintf(line, sizeof line, "%-8s %-*s %11s %20s %9s %20s %17s %15s %15s%s\n",
+                  s.predictor.c_str(), w, s.model_key.c_str(), counts,
+                  Tail(s.position, 1e3).c_str(), multiple, Tail(s.angle, 180 / M_PI).c_str(), mode,
+                  time, per_sim, marks.c_str());
     out << line;
   }
   out << "\nworst trials (largest final position error; `arena plot --db FILE TRIAL`), "
@@ -271,8 +292,8 @@ std::string FormatTable(const assessment::EvaluationReport& r, std::int64_t eval
          "state) beside the error against the truth, final position mm med/p95:\n";
   for (const auto& s : r.settings) {
     std::snprintf(
-        line, sizeof line, "  %-8s %-24s discretisation %-17s vs truth %s%s\n", s.predictor.c_str(),
-        s.model_key.c_str(),
+        line, sizeof line, "  %-8s %-*s discretisation %-17s vs truth %s%s\n", s.predictor.c_str(),
+        w, s.model_key.c_str(),
         s.convergence
             ? (Tail(std::optional<assessment::Distribution>(s.convergence->position), 1e3) + " (" +
                std::to_string(s.convergence->pieces) + " pieces)")
@@ -296,7 +317,25 @@ std::string FormatTable(const assessment::EvaluationReport& r, std::int64_t eval
   return out.str();
 }
 
-// --facets, --points, --dt, --reduce, --contacts: the arena predictor's grid.
+// One grid axis of named choices: each text through `parse`, or bad input
+// naming the option and what it takes.
+template <typename Parse>
+auto ChoiceList(const std::vector<std::string>& texts, const char* option, const char* takes,
+                Parse parse) {
+  std::vector<typename decltype(parse(std::string_view()))::value_type> out;
+  for (const auto& t : texts) {
+    const auto value = parse(t);
+    if (!value) {
+      throw CommandError(kExitBadInput,
+                         std::string(option) + ": must be " + takes + ", got '" + t + "'");
+    }
+    out.push_back(*value);
+  }
+  return out;
+}
+
+// --facets, --points, --dt, --reduce, --contacts, --pads, --cone, --inertia:
+// the arena predictor's grid.
 assessment::FidelityGrid ArenaGrid(const EvaluateOptions& o) {
   assessment::FidelityGrid grid;
   grid.facets = o.facets;
@@ -321,6 +360,10 @@ assessment::FidelityGrid ArenaGrid(const EvaluateOptions& o) {
     }
     grid.contacts.push_back(*mode);
   }
+  grid.pads = ChoiceList(o.pads, "--pads", "elastic or rigid", mechanics::PadModelFromString);
+  grid.cone = ChoiceList(o.cone, "--cone", "polyhedral or aligned", mechanics::ConeModelFromString);
+  grid.inertia = ChoiceList(o.inertia, "--inertia", "carried, quasi_static or auto",
+                            mechanics::InertiaModelFromString);
   return grid;
 }
 
@@ -565,6 +608,17 @@ void AddEvaluateCommand(CLI::App& app, Action* action) {
   cmd->add_option("--contacts", o->contacts,
                   "arena: contact geometries to try (tracked: follow the object; fixed: frozen "
                   "frame)")
+      ->delimiter(',')
+      ->each([o](const std::string&) { o->grid_given = true; });
+  cmd->add_option("--pads", o->pads, "arena: pad models to try (elastic, rigid)")
+      ->delimiter(',')
+      ->each([o](const std::string&) { o->grid_given = true; });
+  cmd->add_option("--cone", o->cone,
+                  "arena: friction cones to try (polyhedral; aligned: edges turned onto the slip)")
+      ->delimiter(',')
+      ->each([o](const std::string&) { o->grid_given = true; });
+  cmd->add_option("--inertia", o->inertia,
+                  "arena: inertia models to try (carried, quasi_static, auto)")
       ->delimiter(',')
       ->each([o](const std::string&) { o->grid_given = true; });
   auto mujoco_given = [o](const std::string&) { o->mujoco_grid_given = true; };

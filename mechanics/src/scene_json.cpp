@@ -122,6 +122,25 @@ std::optional<ContactTracking> ContactTrackingFromString(std::string_view text) 
   return std::nullopt;
 }
 
+std::optional<PadModel> PadModelFromString(std::string_view text) {
+  if (text == "elastic") return PadModel::kElastic;
+  if (text == "rigid") return PadModel::kRigid;
+  return std::nullopt;
+}
+
+std::optional<ConeModel> ConeModelFromString(std::string_view text) {
+  if (text == "polyhedral") return ConeModel::kPolyhedral;
+  if (text == "aligned") return ConeModel::kAligned;
+  return std::nullopt;
+}
+
+std::optional<InertiaModel> InertiaModelFromString(std::string_view text) {
+  if (text == "carried") return InertiaModel::kCarried;
+  if (text == "quasi_static") return InertiaModel::kQuasiStatic;
+  if (text == "auto") return InertiaModel::kAuto;
+  return std::nullopt;
+}
+
 std::optional<ObjectShape> ObjectShapeFromString(std::string_view text) {
   if (text == "box") return ObjectShape::kBox;
   if (text == "cylinder") return ObjectShape::kCylinder;

@@ -70,6 +70,39 @@ TEST(EvaluationGrid, CrossProductInOrderAndBadListsRefused) {
   EXPECT_THROW(ExpandGrid(bad), std::invalid_argument);
 }
 
+// The model's opt-in choices are grid axes too (innermost), so an evaluation
+// weighs the aligned cone or quasi-static steps against their cost; left
+// alone they are the model's defaults, and every setting has its own key.
+TEST(EvaluationGrid, OptInChoicesAreAxesWithTheModelsDefaults) {
+  FidelityGrid g;
+  g.facets = {8};
+  g.dt = {0.004};
+  const auto defaults = ExpandGrid(g);
+  ASSERT_EQ(defaults.size(), 1u);
+  const mechanics::ModelOptions model;
+  EXPECT_EQ(defaults[0].pads, model.pads);
+  EXPECT_EQ(defaults[0].cone, model.cone);
+  EXPECT_EQ(defaults[0].inertia, model.inertia);
+  g.cone = {mechanics::ConeModel::kPolyhedral, mechanics::ConeModel::kAligned};
+  g.inertia = {mechanics::InertiaModel::kCarried, mechanics::InertiaModel::kAuto};
+  g.pads = {mechanics::PadModel::kRigid};
+  const auto m = ExpandGrid(g);
+  ASSERT_EQ(m.size(), 4u);
+  EXPECT_EQ(ModelKey(m[0]), "g8_k3_dt0.004_auto_pads-rigid");
+  EXPECT_EQ(ModelKey(m[1]), "g8_k3_dt0.004_auto_pads-rigid_inertia-auto");
+  EXPECT_EQ(ModelKey(m[2]), "g8_k3_dt0.004_auto_pads-rigid_cone-aligned");
+  EXPECT_EQ(ModelKey(m[3]), "g8_k3_dt0.004_auto_pads-rigid_cone-aligned_inertia-auto");
+  auto bad = g;
+  bad.cone = {};
+  EXPECT_THROW(ExpandGrid(bad), std::invalid_argument);
+  auto repeated = g;
+  repeated.inertia = {mechanics::InertiaModel::kAuto, mechanics::InertiaModel::kAuto};
+  EXPECT_THROW(ExpandGrid(repeated), std::invalid_argument);
+  repeated = g;
+  repeated.pads = {};
+  EXPECT_THROW(ExpandGrid(repeated), std::invalid_argument);
+}
+
 TEST(EvaluationBudget, ParsesShorthandMetricsAndUnits) {
   auto b = ParseBudget("1mm");
   EXPECT_EQ(b.metric, ErrorMetric::kPositionP95);  // budgets are met on p95

@@ -373,5 +373,58 @@ TEST_F(Honest, CampaignSensitivityPrintsDegrees) {
   EXPECT_EQ(r.out.find("mrad"), std::string::npos) << r.out;
 }
 
+// The model's opt-in choices (pads, cone, inertia) are `arena evaluate`
+// grid axes beside facets and dt: before, every setting took the defaults,
+// so a lab could not weigh the aligned cone or quasi-static steps on its own
+// trials. Each setting is its own row with its own key and stored knobs; a
+// setting a scene refuses is counted as failures with a reason, never a
+// silent row; a bad choice is bad input that stores nothing.
+TEST_F(Honest, EvaluateWeighsTheModelsOptInChoices) {
+  auto c = Smoke();
+  c["replicates"] = 1;
+  const std::string campaign = Write("o.json", c.dump());
+  const std::string db = dir_ + "/o.db";
+  ASSERT_EQ(Arena("run " + campaign + " --db " + db + " --cells 1 --quiet").rc, 0);
+  const auto e = Arena("evaluate --db " + db +
+                       " --campaign 1 --facets 8 --dt 0.004 --cone polyhedral,aligned "
+                       "--inertia carried,auto --convergence-trials 0 --json");
+  ASSERT_EQ(e.rc, 0) << e.err;
+  const auto report = nlohmann::json::parse(e.out);
+  std::vector<std::string> keys;
+  for (const auto& s : report["settings"]) {
+    keys.push_back(s["model_key"]);
+    const int trials = s["trials"], ok = s["ok"], diverged = s["diverged"],
+              failures = s["failures"];
+    EXPECT_GT(trials, 0) << s;
+    EXPECT_EQ(ok + diverged + failures, trials) << s;
+  }
+  EXPECT_EQ(keys, (std::vector<std::string>{"g8_k3_dt0.004_auto", "g8_k3_dt0.004_auto_inertia-auto",
+                                            "g8_k3_dt0.004_auto_cone-aligned",
+                                            "g8_k3_dt0.004_auto_cone-aligned_inertia-auto"}))
+      << report["settings"];
+  // The knobs stored with the evaluation say which cone each setting used.
+  const auto q =
+      Arena("query --db " + db + " \"select count(*) as n from evaluations\" --format json");
+  ASSERT_EQ(q.rc, 0) << q.err;
+  EXPECT_EQ(nlohmann::json::parse(q.out)[0]["n"], 1);
+  const auto knobs =
+      Arena("query --db " + db + " \"select settings_json as s from evaluations\" --format json");
+  ASSERT_EQ(knobs.rc, 0) << knobs.err;
+  EXPECT_NE(knobs.out.find("aligned"), std::string::npos) << knobs.out;
+  // Bad input names the option and what it takes; nothing more is stored.
+  const auto bad = Arena("evaluate --db " + db + " --campaign 1 --cone round");
+  EXPECT_EQ(bad.rc, 2) << bad.err;
+  EXPECT_NE(bad.err.find("--cone: must be polyhedral or aligned, got 'round'"), std::string::npos)
+      << bad.err;
+  const auto bad_inertia = Arena("evaluate --db " + db + " --campaign 1 --inertia still");
+  EXPECT_EQ(bad_inertia.rc, 2) << bad_inertia.err;
+  EXPECT_NE(bad_inertia.err.find("--inertia: must be carried, quasi_static or auto"),
+            std::string::npos)
+      << bad_inertia.err;
+  const auto after =
+      Arena("query --db " + db + " \"select count(*) as n from evaluations\" --format json");
+  EXPECT_EQ(nlohmann::json::parse(after.out)[0]["n"], 1) << "a refused evaluation was stored";
+}
+
 }  // namespace
 }  // namespace arena::test

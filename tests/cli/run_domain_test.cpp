@@ -28,8 +28,8 @@ TEST_F(RunDomain, ARunNeverTakesAClaimedDomain) {
     }
   }
   ASSERT_GT(held.size(), 0u);
-  const auto r = Arena("run " + std::string(ARENA_SOURCE_DIR) + "/examples/campaigns/smoke.json --db " +
-                       dir_ + "/run.db --quiet");
+  const auto r = Arena("run " + std::string(ARENA_SOURCE_DIR) +
+                       "/examples/campaigns/smoke.json --db " + dir_ + "/run.db --quiet");
   EXPECT_NE(r.rc, 0) << r.out;
   EXPECT_NE(r.err.find("--domain: no quiet DDS domain"), std::string::npos) << r.err;
   EXPECT_FALSE(std::filesystem::exists(dir_ + "/run.db")) << "a refused run created its store";

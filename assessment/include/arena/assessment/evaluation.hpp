@@ -50,10 +50,18 @@ struct FidelityGrid {
   std::vector<double> dt{0.008, 0.004, 0.002, 0.001};
   std::vector<mechanics::Reduce> reduce{mechanics::Reduce::kAuto};
   std::vector<mechanics::ContactTracking> contacts{mechanics::ContactTracking::kTracked};
+  // The model's opt-in choices (issue 31), the model's defaults unless given:
+  // so an evaluation can weigh the aligned cone or quasi-static steps against
+  // their cost on a campaign's own trials.
+  std::vector<mechanics::PadModel> pads{mechanics::ModelOptions{}.pads};
+  std::vector<mechanics::ConeModel> cone{mechanics::ModelOptions{}.cone};
+  std::vector<mechanics::InertiaModel> inertia{mechanics::ModelOptions{}.inertia};
 };
 
 // @throws std::invalid_argument naming the list for an empty list, a
 //   duplicate, facets < 3, points < 2, or dt not finite and > 0.
+//   (Settings a scene then refuses, e.g. the aligned cone with quasi-static
+//   steps in 6 DOF, fail per trial as predictions do, with the reason.)
 std::vector<mechanics::ModelOptions> ExpandGrid(const FidelityGrid& grid);
 
 // The default grid for these scenes: FidelityGrid{}'s settings (16: facets

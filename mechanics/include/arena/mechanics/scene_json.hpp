@@ -123,6 +123,10 @@ std::optional<ContactType> ContactTypeFromString(std::string_view text);
 std::optional<Reduce> ReduceFromString(std::string_view text);
 // "tracked" / "fixed".
 std::optional<ContactTracking> ContactTrackingFromString(std::string_view text);
+// "elastic" / "rigid"; "polyhedral" / "aligned"; "carried" / "quasi_static" / "auto".
+std::optional<PadModel> PadModelFromString(std::string_view text);
+std::optional<ConeModel> ConeModelFromString(std::string_view text);
+std::optional<InertiaModel> InertiaModelFromString(std::string_view text);
 
 // The scene's length scale (m): the largest extent of the object (box: its
 // largest side; cylinder: max(diameter, height)). Tolerances scale with it.
