@@ -11,6 +11,7 @@
 #include <atomic>
 #include <cmath>
 #include <cstdio>
+#include <memory>
 #include <sstream>
 #include <string>
 #include <string_view>
@@ -576,6 +577,40 @@ int RunEvaluate(const EvaluateOptions& o) {
   return kExitOk;
 }
 
+// The arena predictor's grid options: each a comma-separated list; any of
+// them given replaces the default grid.
+void AddArenaGridOptions(CLI::App* cmd, const std::shared_ptr<EvaluateOptions>& o) {
+  auto arena_given = [o](const std::string&) { o->grid_given = true; };
+  cmd->add_option("--facets", o->facets,
+                  "arena: friction cone facets to try (comma separated; default grid: 4,8,16,32 "
+                  "x dt 8,4,2,1 ms, keeping only settings every trial's scene takes)")
+      ->delimiter(',')
+      ->each(arena_given);
+  cmd->add_option("--points", o->points, "arena: constituent points per line/patch to try")
+      ->delimiter(',')
+      ->each(arena_given);
+  cmd->add_option("--dt", o->dt, "arena: time steps to try (s)")->delimiter(',')->each(arena_given);
+  cmd->add_option("--reduce", o->reduce, "arena: model reductions to try (auto, full, planar)")
+      ->delimiter(',')
+      ->each(arena_given);
+  cmd->add_option("--contacts", o->contacts,
+                  "arena: contact geometries to try (tracked: follow the object; fixed: frozen "
+                  "frame)")
+      ->delimiter(',')
+      ->each(arena_given);
+  cmd->add_option("--pads", o->pads, "arena: pad models to try (elastic, rigid)")
+      ->delimiter(',')
+      ->each(arena_given);
+  cmd->add_option("--cone", o->cone,
+                  "arena: friction cones to try (polyhedral; aligned: edges turned onto the slip)")
+      ->delimiter(',')
+      ->each(arena_given);
+  cmd->add_option("--inertia", o->inertia,
+                  "arena: inertia models to try (carried, quasi_static, auto)")
+      ->delimiter(',')
+      ->each(arena_given);
+}
+
 }  // namespace
 
 void AddEvaluateCommand(CLI::App& app, Action* action) {
@@ -591,36 +626,7 @@ void AddEvaluateCommand(CLI::App& app, Action* action) {
                   "Predictors to replay through, comma separated: arena, mujoco")
       ->delimiter(',')
       ->capture_default_str();
-  cmd->add_option("--facets", o->facets,
-                  "arena: friction cone facets to try (comma separated; default grid: 4,8,16,32 "
-                  "x dt 8,4,2,1 ms, keeping only settings every trial's scene takes)")
-      ->delimiter(',')
-      ->each([o](const std::string&) { o->grid_given = true; });
-  cmd->add_option("--points", o->points, "arena: constituent points per line/patch to try")
-      ->delimiter(',')
-      ->each([o](const std::string&) { o->grid_given = true; });
-  cmd->add_option("--dt", o->dt, "arena: time steps to try (s)")
-      ->delimiter(',')
-      ->each([o](const std::string&) { o->grid_given = true; });
-  cmd->add_option("--reduce", o->reduce, "arena: model reductions to try (auto, full, planar)")
-      ->delimiter(',')
-      ->each([o](const std::string&) { o->grid_given = true; });
-  cmd->add_option("--contacts", o->contacts,
-                  "arena: contact geometries to try (tracked: follow the object; fixed: frozen "
-                  "frame)")
-      ->delimiter(',')
-      ->each([o](const std::string&) { o->grid_given = true; });
-  cmd->add_option("--pads", o->pads, "arena: pad models to try (elastic, rigid)")
-      ->delimiter(',')
-      ->each([o](const std::string&) { o->grid_given = true; });
-  cmd->add_option("--cone", o->cone,
-                  "arena: friction cones to try (polyhedral; aligned: edges turned onto the slip)")
-      ->delimiter(',')
-      ->each([o](const std::string&) { o->grid_given = true; });
-  cmd->add_option("--inertia", o->inertia,
-                  "arena: inertia models to try (carried, quasi_static, auto)")
-      ->delimiter(',')
-      ->each([o](const std::string&) { o->grid_given = true; });
+  AddArenaGridOptions(cmd, o);
   auto mujoco_given = [o](const std::string&) { o->mujoco_grid_given = true; };
   cmd->add_option("--mujoco-timestep", o->mujoco_timestep, "mujoco: timesteps to try (s)")
       ->delimiter(',')
