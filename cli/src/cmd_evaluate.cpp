@@ -580,35 +580,23 @@ int RunEvaluate(const EvaluateOptions& o) {
 // The arena predictor's grid options: each a comma-separated list; any of
 // them given replaces the default grid.
 void AddArenaGridOptions(CLI::App* cmd, const std::shared_ptr<EvaluateOptions>& o) {
-  auto arena_given = [o](const std::string&) { o->grid_given = true; };
-  cmd->add_option("--facets", o->facets,
-                  "arena: friction cone facets to try (comma separated; default grid: 4,8,16,32 "
-                  "x dt 8,4,2,1 ms, keeping only settings every trial's scene takes)")
-      ->delimiter(',')
-      ->each(arena_given);
-  cmd->add_option("--points", o->points, "arena: constituent points per line/patch to try")
-      ->delimiter(',')
-      ->each(arena_given);
-  cmd->add_option("--dt", o->dt, "arena: time steps to try (s)")->delimiter(',')->each(arena_given);
-  cmd->add_option("--reduce", o->reduce, "arena: model reductions to try (auto, full, planar)")
-      ->delimiter(',')
-      ->each(arena_given);
-  cmd->add_option("--contacts", o->contacts,
-                  "arena: contact geometries to try (tracked: follow the object; fixed: frozen "
-                  "frame)")
-      ->delimiter(',')
-      ->each(arena_given);
-  cmd->add_option("--pads", o->pads, "arena: pad models to try (elastic, rigid)")
-      ->delimiter(',')
-      ->each(arena_given);
-  cmd->add_option("--cone", o->cone,
-                  "arena: friction cones to try (polyhedral; aligned: edges turned onto the slip)")
-      ->delimiter(',')
-      ->each(arena_given);
-  cmd->add_option("--inertia", o->inertia,
-                  "arena: inertia models to try (carried, quasi_static, auto)")
-      ->delimiter(',')
-      ->each(arena_given);
+  const auto axis = [cmd, o](const char* name, auto& values, const char* help) {
+    cmd->add_option(name, values, help)->delimiter(',')->each([o](const std::string&) {
+      o->grid_given = true;
+    });
+  };
+  axis("--facets", o->facets,
+       "arena: friction cone facets to try (comma separated; default grid: 4,8,16,32 x dt 8,4,2,1 "
+       "ms, keeping only settings every trial's scene takes)");
+  axis("--points", o->points, "arena: constituent points per line/patch to try");
+  axis("--dt", o->dt, "arena: time steps to try (s)");
+  axis("--reduce", o->reduce, "arena: model reductions to try (auto, full, planar)");
+  axis("--contacts", o->contacts,
+       "arena: contact geometries to try (tracked: follow the object; fixed: frozen frame)");
+  axis("--pads", o->pads, "arena: pad models to try (elastic, rigid)");
+  axis("--cone", o->cone,
+       "arena: friction cones to try (polyhedral; aligned: edges turned onto the slip)");
+  axis("--inertia", o->inertia, "arena: inertia models to try (carried, quasi_static, auto)");
 }
 
 }  // namespace
