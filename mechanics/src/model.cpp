@@ -113,6 +113,11 @@ constexpr double kPadSink = 1e-4;
 constexpr double kAlignAngle = 1e-3;
 constexpr int kAlignSolves = 12;
 constexpr double kAlignFirst = 0.5;
+// ... and the slip within this (rad) of opposing the friction; a cone just
+// turned onto its friction's direction turns by kAlignProbe next, for the
+// slope of the miss.
+constexpr double kAlignMiss = 3e-3;
+constexpr double kAlignProbe = 4e-3;
 // Quasi-static steps: solved again until the inertial force is below this
 // fraction of the force scale, at most kQuasiStaticSolves more times.
 constexpr double kQuasiStatic = 1e-6;
@@ -368,9 +373,12 @@ struct Point {
   // step's number).
   Eigen::Vector3d urel = Eigen::Vector3d::Zero();
   long urel_step = -1;
-  // Aligned cone (tracked, 6 DOF): the direction of its last slip (object
-  // relative to the body it touches; zero before any), which the cone's
-  // first edge opposes (SetEdges).
+  // Aligned cone (tracked, 6 DOF): the direction opposite its last
+  // friction on the object (its last slip, object relative to the body it
+  // touches, where the friction had none; zero before any), which the
+  // cone's first edge opposes (SetEdges). The friction, not the slip: where
+  // the balance fixes the friction, the slip of a settled step can still be
+  // kAlignMiss off it, and a step started on that slip began on a face.
   Eigen::Vector3d slip = Eigen::Vector3d::Zero();
   // Tracked point on the solid's closest point (PlaceOnSolid): the outward
   // normal of the face it pressed last step, in the object frame (zero
@@ -381,6 +389,13 @@ struct Point {
   // far the slip's opposite was from it, for the secant update.
   long align_step = -1;
   double align_theta = 0, align_miss = 0;
+  // ... whether the last solve's friction was on a face, when the edge
+  // was last put on the friction's direction (and that direction), and the
+  // last step it was pinned there (see AlignCones).
+  bool align_face = false;
+  long align_jump_step = -1;
+  long align_pinned_step = -10;
+  double align_jump_psi = 0;
 };
 
 // AlignCones: a sliding point's friction edge angle θ in its tangent basis
@@ -389,6 +404,9 @@ struct AlignMiss {
   Point* pt;
   Eigen::Vector3d t1, t2;
   double theta, miss;
+  bool face = false;
+  bool pinned = false;
+  double psi = 0;
 };
 
 struct Contact {
@@ -1973,8 +1991,35 @@ bool ContactModel::Impl::AlignCones(StepScratch& s) {
       const double theta0 = std::atan2(e0.dot(m.t2), e0.dot(m.t1));
       m.miss = std::remainder(phi - theta0, facet);
       m.theta = phi - m.miss;
-      if (std::abs(m.miss) > kAlignAngle) any = true;
-      if (pt.align_step == steps_taken) {
+      // The friction on a face of the cone (between two edges) rather than
+      // on an edge: the slip is then along the face's normal, half a facet
+      // from both edges, and its miss says nothing (its sign is rounding).
+      // The friction's own direction ψ does: where the balance fixes it (the
+      // pusher sticking, the object's inertia over dt small), the slip swings
+      // across the whole fan for a turn of the edge far below kAlignAngle,
+      // and the edge belongs on ψ (the tilted push through the grip axis at
+      // dt 4 ms missed by ±π/8 on every re-solve of every step, 12 each, and
+      // ended 1.8 % short of its closed form; on ψ it is within 0.05 %).
+      Eigen::Vector3d friction = Eigen::Vector3d::Zero();
+      for (int e = 0; e < edges_per_point; ++e) friction += Unknown(s, pt.beta0 + e) * pt.edges[e];
+      m.psi = std::atan2(friction.dot(m.t2), friction.dot(m.t1));
+      m.face = std::abs(std::remainder(m.psi - theta0, facet)) > kAlignAngle;
+      // Pinned: the edge was put on ψ in this step and the friction went
+      // back onto a face at the same ψ (or it was pinned the step before):
+      // the balance fixes the friction, and where the slip falls within the
+      // fan is not resolved by turning the edge (the pivot past its stall,
+      // rocking: 2,900 re-solves in its 600 steps without this rule, 367
+      // with it). It is left where it is.
+      if (m.face && ((pt.align_jump_step == steps_taken &&
+                      std::abs(std::remainder(m.psi - pt.align_jump_psi, 2 * std::numbers::pi)) <=
+                          kAlignAngle) ||
+                     pt.align_pinned_step >= steps_taken - 1)) {
+        m.face = false;
+        m.pinned = true;
+        pt.align_pinned_step = steps_taken;
+      }
+      if (!m.pinned && (m.face || std::abs(m.miss) > kAlignAngle)) any = true;
+      if (pt.align_step == steps_taken && !m.face && !m.pinned && !pt.align_face) {
         const double dtheta = std::remainder(m.theta - pt.align_theta, 2 * std::numbers::pi);
         num += (m.miss - pt.align_miss) * dtheta;
         den += dtheta * dtheta;
@@ -1986,13 +2031,18 @@ bool ContactModel::Impl::AlignCones(StepScratch& s) {
   // The sliding points sit on one rigid object, so their misses move
   // together: one slope for all of them (a slope per point lets two
   // fingers that share a slip fight each other).
-  if (den > 0 && num < 0) align_slope = num / den;
+  // The slope may have either sign: where the friction's direction is
+  // fixed by the balance, the slip turns with the edge, faster than it.
+  if (den > 0 && num != 0) align_slope = num / den;
   // The secant step (the slope of the last step's solves until this step
   // has its own), no longer than a facet (the miss is not linear once the
   // slip leaves the edge's fan); without a slope, half the miss.
   const auto turn = [&](const Miss& m) {
-    return align_slope < 0 ? std::clamp(-m.miss / align_slope, -facet, facet)
-                           : kAlignFirst * m.miss;
+    // Just put on ψ: a small step towards the slip, to measure the slope.
+    if (m.pt->align_face && m.pt->align_step == steps_taken)
+      return std::copysign(kAlignProbe, m.miss);
+    return align_slope != 0 ? std::clamp(-m.miss / align_slope, -facet, facet)
+                            : kAlignFirst * m.miss;
   };
   // Done once no cone would turn by more than kAlignAngle: the friction's
   // direction is then right within it even where the slip itself is not
@@ -2001,11 +2051,24 @@ bool ContactModel::Impl::AlignCones(StepScratch& s) {
   // missed by exactly ±π/8 on 497 of its 600 steps and spent all
   // kAlignSolves re-solves on each; stopped here, 401 re-solves in the run).
   double largest = 0;
-  for (const Miss& m : misses) largest = std::max(largest, std::abs(turn(m)));
-  if (largest <= kAlignAngle) return false;
+  for (const Miss& m : misses)
+    if (!m.pinned) largest = std::max(largest, m.face ? facet : std::abs(turn(m)));
+  // And the slip within kAlignMiss of opposing it: with a steep slope a
+  // turn below kAlignAngle can leave the slip 1e-2 rad off (+0.7 % on the
+  // tilted push at dt 4 ms).
+  double worst_miss = 0;
+  for (const Miss& m : misses)
+    if (!m.pinned) worst_miss = std::max(worst_miss, m.face ? facet : std::abs(m.miss));
+  if (largest <= kAlignAngle && worst_miss <= kAlignMiss) return false;
   for (const Miss& m : misses) {
     Point& pt = *m.pt;
-    double next = m.theta + turn(m);
+    if (m.pinned) continue;
+    double next = m.face ? m.psi : m.theta + turn(m);
+    pt.align_face = m.face;
+    if (m.face) {
+      pt.align_jump_step = steps_taken;
+      pt.align_jump_psi = m.psi;
+    }
     // Within kAlignAngle of an edge of the tangent basis: that edge, exactly
     // (a slide along an edge keeps the polyhedral cone's exact answer).
     const double off = std::remainder(next, facet);
@@ -2546,7 +2609,9 @@ void ContactModel::Impl::ReportContacts(StepScratch& s) {
         const Eigen::Vector3d ut = urel - nrm.dot(urel) * nrm;
         if (lam > 1e-9 * Fs && ut.squaredNorm() > slip_floor * slip_floor) {
           sliding = true;
-          if (tracked && !planar && pt.beta0 >= 0) pt.slip = ut.normalized();
+          if (tracked && !planar && pt.beta0 >= 0)
+            pt.slip = aligned && ft.squaredNorm() > 0 ? Eigen::Vector3d(-ft.normalized())
+                                                      : Eigen::Vector3d(ut.normalized());
         }
         const bool close = pt.gap <= (tracked ? gap_tolerance : 0.0) || lam > 1e-9 * Fs;
         if (close) {

@@ -259,7 +259,10 @@ TEST(ClosedForms, SlippingGraspSlidesAlongTheNetTangentialLoad) {
     std::printf("slipping grasp, %d facets: %.4f deg, %.6f m/s\n", facets,
                 direction * 180 / std::numbers::pi, last.velocity.norm());
     EXPECT_NEAR(direction, alpha, 1.0 * std::numbers::pi / 180) << facets;  // the target: 1°
-    EXPECT_NEAR(direction, alpha, 1e-4) << facets;                          // what it does
+    // What it does: within 3e-4 rad at 4 facets (a step's re-solves stop once
+    // the slip is within 3e-3 rad of opposing the friction and the friction
+    // would turn by less than 1e-3), below 1e-4 at 8 to 64.
+    EXPECT_NEAR(direction, alpha, facets == 4 ? 3e-4 : 1e-4) << facets;
     if (facets == 8) speed8 = last.velocity.norm();
     EXPECT_NEAR(last.velocity.norm(), speed8, 0.01 * speed8) << facets;
     EXPECT_LT(std::abs(last.position.x()), 1e-4) << facets;
