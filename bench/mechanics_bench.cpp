@@ -145,6 +145,19 @@ Scene StallPivot() {
       R"("position":[0,0.01,-0.05],"normal":[0,0,1],"mu":0.0,"motion":{"velocity":[0,0,0.01],)"
       R"("angular_velocity":[0,0,0]}}})");
 }
+// Issue 31's tilted push through the grip axis at the default dt (4 ms,
+// 125 steps): the fingers slide in a free direction (the aligned cone's
+// case; closed form 0.054686 rad).
+Scene TiltedPush() {
+  return ParseScene(
+      R"({"object":{"shape":"box","size":[0.05,0.03,0.1],"mass":0.2,"pose":{"position":[0,0,0],)"
+      R"("rpy":[0,0,0]}},"gravity":[0,0,0],"duration":0.5,"grip_force":10.0,"fingers":[)"
+      R"({"name":"left","type":"point","position":[-0.025,0,0],"normal":[1,0,0],"mu":0.5},)"
+      R"({"name":"right","type":"point","position":[0.025,0,0],"normal":[-1,0,0],"mu":0.5}],)"
+      R"("pusher":{"type":"point","position":[0,0,-0.05],"normal":[0,0,1],"mu":0.3,)"
+      R"("motion":{"velocity":[0,0.004999999999999999,0.008660254037844387],)"
+      R"("angular_velocity":[0,0,0]}}})");
+}
 void StepInertia(benchmark::State& state, int scene, std::optional<InertiaModel> inertia) {
   const bool pivot = scene == 2;
   Scene s =
@@ -217,7 +230,8 @@ ARENA_MECH_BENCH(patches_no_pusher_full, kPatches, false, Reduce::kFull);
 // polyhedral cone and "inertia": "auto") against the old ones (rigid pads,
 // polyhedral cone, carried momentum) set explicitly: the canonical scene (planar,
 // and full: 6 DOF, where the cone can align) and the pivot past its stall
-// (600 steps at dt 1 ms); step_mean_us, step_median_us and the aligned
+// (600 steps at dt 1 ms), and the tilted push through the grip axis at
+// dt 4 ms (`tilted_*`); step_mean_us, step_median_us and the aligned
 // cones' re-solves per run.
 // `aligned`: the defaults with "cone": "aligned", the momentum `inertia`
 // (carried, or "auto": quasi-static steps on these held objects; the 6-DOF
@@ -226,8 +240,9 @@ ARENA_MECH_BENCH(patches_no_pusher_full, kPatches, false, Reduce::kFull);
 // steps_carried count the quasi-static steps' extra solves and fallbacks.
 void StepDefaults(benchmark::State& state, int scene, bool old_defaults, bool aligned = false,
                   InertiaModel inertia = InertiaModel::kCarried) {
-  Scene s = scene == 2 ? StallPivot()
-                       : Make(kCanonical, true, scene == 1 ? Reduce::kFull : Reduce::kAuto);
+  Scene s = scene == 3   ? TiltedPush()
+            : scene == 2 ? StallPivot()
+                         : Make(kCanonical, true, scene == 1 ? Reduce::kFull : Reduce::kAuto);
   if (old_defaults) {
     s.model.pads = PadModel::kRigid;
     s.model.cone = ConeModel::kPolyhedral;
@@ -275,6 +290,8 @@ BENCHMARK_CAPTURE(StepDefaults, pivot_new, 2, false)->Unit(benchmark::kMilliseco
 BENCHMARK_CAPTURE(StepDefaults, canonical_full_aligned, 1, false, true)
     ->Unit(benchmark::kMillisecond);
 BENCHMARK_CAPTURE(StepDefaults, pivot_aligned, 2, false, true)->Unit(benchmark::kMillisecond);
+BENCHMARK_CAPTURE(StepDefaults, tilted_new, 3, false)->Unit(benchmark::kMillisecond);
+BENCHMARK_CAPTURE(StepDefaults, tilted_aligned, 3, false, true)->Unit(benchmark::kMillisecond);
 BENCHMARK_CAPTURE(StepDefaults, canonical_aligned_auto, 0, false, true, InertiaModel::kAuto)
     ->Unit(benchmark::kMillisecond);
 BENCHMARK_CAPTURE(StepDefaults, canonical_full_aligned_auto, 1, false, true, InertiaModel::kAuto)

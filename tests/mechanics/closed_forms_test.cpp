@@ -236,8 +236,23 @@ TEST(ClosedForms, CarriedPivotAlignsWithinBoundedResolves) {
       ASSERT_TRUE(r.ok) << r.error;
       resolves += r.align_solves;
     }
-    std::printf("carried pivot, aligned cone, %d facets: %ld re-solves\n", facets, resolves);
+    std::printf("carried pivot, aligned cone, %d facets: %ld re-solves, y %.4f mm\n", facets,
+                resolves, 1e3 * m.position().y());
     EXPECT_LE(resolves, 600) << facets;  // at most one per step on average
+    // The sideways slide in the grasp, against the polyhedral cone at 64
+    // facets (its slip steered by at most 1/64 of a turn): y −1.007 mm; the
+    // aligned cone −1.042 mm at 8 facets, −0.969 at 32 (turned onto the slip
+    // rather than the friction, −0.57 mm at 8).
+    EXPECT_NEAR(m.position().y(), -1.007e-3, 0.05e-3) << facets;
+  }
+  {
+    Scene fine = scene;
+    fine.model.cone = ConeModel::kPolyhedral;
+    fine.model.facets = 64;
+    const SimulationResult r = SimulateOk(fine);
+    std::printf("carried pivot, polyhedral cone, 64 facets: y %.4f mm\n",
+                1e3 * r.samples.back().position.y());
+    EXPECT_NEAR(r.samples.back().position.y(), -1.007e-3, 0.005e-3);
   }
   // With quasi-static steps the cone's and the balance's re-solves do not
   // settle together (the tilted push ended kilometres away): refused,
