@@ -309,9 +309,10 @@ db::Prediction ScoreSimulation(const mechanics::Scene& scene,
        {{"status", mechanics::ToString(result.grasp)},
         {"changed_t", result.grasp_changed_t},
         {"note", result.grasp_note}}}};
-  // The final pose of a run that ends oscillating is one phase of it: said.
-  if (result.oscillation.detected)
-    detail["oscillation"] = nlohmann::json::parse(mechanics::OscillationJson(result.oscillation));
+  // The final pose of a run that ends oscillating is one phase of it, and a
+  // start that was an impact dt did not resolve may be on another branch:
+  // said.
+  detail.update(nlohmann::json::parse(mechanics::RunFlagsJson(result)));
   switch (result.status) {
     case mechanics::SimulationStatus::kOk:
       break;

@@ -210,6 +210,7 @@ int RunSimulate(const SimulateOptions& opt) {
                 {"changed_t", result.grasp_changed_t},
                 {"note", result.grasp_note}}},
               {"oscillation", json::parse(mechanics::OscillationJson(result.oscillation))},
+              {"impact", json::parse(mechanics::ImpactJson(result.impact))},
               {"wall_s", result.wall_s}};
   std::printf("%s\n", out.dump().c_str());
   return kExitOk;

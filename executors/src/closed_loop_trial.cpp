@@ -233,9 +233,9 @@ json ClosedLoopTrial::Detail(const mechanics::SimulationResult& result,
         {"held", held},
         {"loop_ms", {{"p50", pct(0.5)}, {"p99", pct(0.99)}, {"max", pct(1.0)}}},
         {"outcome", score}}}};
-  // The truth's final pose is one phase of a swing when it ends in one: said.
-  if (result.oscillation.detected)
-    detail["oscillation"] = json::parse(mechanics::OscillationJson(result.oscillation));
+  // The truth's final pose is one phase of a swing when it ends in one, and
+  // its start an impact dt did not resolve when it was one: said.
+  detail.update(json::parse(mechanics::RunFlagsJson(result)));
   return detail;
 }
 

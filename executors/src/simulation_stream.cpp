@@ -37,9 +37,9 @@ ExecuteOutcome StreamSimulation(const mechanics::SimulationResult& r, const Samp
          {"cone", r.residuals.cone}}},
        {"solver", nlohmann::json::parse(mechanics::SolverStatisticsJson(r.solver))},
        {"simulate_wall_s", r.wall_s}});
-  // The truth's final pose is one phase of a swing when it ends in one: said.
-  if (r.oscillation.detected)
-    detail["oscillation"] = nlohmann::json::parse(mechanics::OscillationJson(r.oscillation));
+  // The truth's final pose is one phase of a swing when it ends in one, and
+  // its start an impact dt did not resolve when it was one: said.
+  detail.update(nlohmann::json::parse(mechanics::RunFlagsJson(r)));
   out.detail_json = detail.dump();
   if (r.status != mechanics::SimulationStatus::kOk || r.samples.empty()) {
     out.reason = SimulationFailure(r);

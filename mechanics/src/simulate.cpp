@@ -9,6 +9,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <limits>
 #include <vector>
 
 #include <Eigen/Cholesky>
@@ -73,6 +74,28 @@ std::string OscillationJson(const Oscillation& oscillation) {
                          {"window_s", oscillation.window_s},
                          {"periods", oscillation.periods}})
       .dump();
+}
+
+std::string ImpactJson(const Impact& impact) {
+  nlohmann::json dt_limit = nullptr;  // infinite: nothing holds the object
+  if (std::isfinite(impact.resolving_dt)) dt_limit = impact.resolving_dt;
+  return nlohmann::json({{"detected", impact.detected},
+                         {"t", impact.t},
+                         {"approach_speed", impact.approach_speed},
+                         {"momentum", impact.momentum},
+                         {"holding_force", impact.holding_force},
+                         {"resolving_dt", dt_limit},
+                         {"resolved", impact.resolved}})
+      .dump();
+}
+
+std::string RunFlagsJson(const SimulationResult& result) {
+  nlohmann::json flags = nlohmann::json::object();
+  if (result.oscillation.detected)
+    flags["oscillation"] = nlohmann::json::parse(OscillationJson(result.oscillation));
+  if (result.impact.detected && !result.impact.resolved)
+    flags["impact"] = nlohmann::json::parse(ImpactJson(result.impact));
+  return flags.dump();
 }
 
 SimulationResult Simulate(const Scene& scene) { return Simulate(scene, nullptr); }
@@ -323,6 +346,60 @@ class PoseRing {
   size_t capacity_ = 0, quarter_ = 0, next_ = 0;
 };
 
+// Watches each step for the pusher's first press after not pressing (or
+// at the first step) and measures the impact there (see Impact).
+class ImpactWatch {
+ public:
+  explicit ImpactWatch(const Scene& scene)
+      : scene_(scene), peak_(scene.pusher ? PusherPeakRates(*scene.pusher).velocity.norm() : 0) {}
+
+  // Before a step: the object's state and the pusher's velocity at its start.
+  void Before(const ContactModel& model, const Eigen::Vector3d& pusher_v) {
+    t0_ = model.time();
+    c0_ = model.position();
+    v0_ = model.velocity();
+    w0_ = model.angular_velocity();
+    p0_ = model.pusher_position();
+    pusher_v_ = pusher_v;
+  }
+
+  void After(const ContactModel& model, Impact& worst) {
+    if (!scene_.pusher || model.contacts().empty()) return;
+    const ContactState& pusher = model.contacts().back();
+    const double floor = 1e-9 * model.force_scale();
+    const bool onset = pusher.normal_force > floor && !was_pressing_;
+    was_pressing_ = pusher.normal_force > floor;
+    if (!onset) return;
+    // The contact normal (into the object): the pusher's force less its friction.
+    const Eigen::Vector3d n =
+        (model.pusher_force() - pusher.tangential_force) / pusher.normal_force;
+    const double u = n.dot(pusher_v_ - (v0_ + w0_.cross(p0_ - c0_)));
+    // Slower than kImpactSpeed of the pusher's top speed: a recorded
+    // acceleration's first interval, not an impact that decides a branch.
+    if (!(u > kImpactSpeed * std::max(peak_, pusher_v_.norm()))) return;
+    const double momentum = scene_.object.mass * u;
+    if (momentum <= worst.momentum) return;
+    double holding = 0;
+    for (size_t i = 0; i < scene_.fingers.size() && i < model.contacts().size(); ++i)
+      holding += scene_.fingers[i].mu * model.contacts()[i].normal_force;
+    if (scene_.support) holding += scene_.support->mu * scene_.object.mass * scene_.gravity.norm();
+    worst.detected = true;
+    worst.t = t0_;
+    worst.approach_speed = u;
+    worst.momentum = momentum;
+    worst.holding_force = holding;
+    worst.resolving_dt = holding > 0 ? momentum / holding : std::numeric_limits<double>::infinity();
+    worst.resolved = model.time() - t0_ <= worst.resolving_dt;
+  }
+
+ private:
+  const Scene& scene_;
+  double peak_ = 0;
+  double t0_ = 0;
+  Eigen::Vector3d c0_, v0_, w0_, p0_, pusher_v_;
+  bool was_pressing_ = false;
+};
+
 }  // namespace
 
 SimulationResult Simulate(const Scene& scene, const PusherCommandSource& commands) {
@@ -358,11 +435,17 @@ SimulationResult Simulate(const Scene& scene, const PusherCommandSource& command
   Eigen::Vector3d command_v = pusher_v;  // closed loop: the motion in force
 
   poses.Size(n_steps);
+  ImpactWatch impacts(scene);
   long next = 0;  // next sample index
   for (long step = 0; step < n_steps; ++step) {
     const double t0 = model.time();
     const Eigen::Vector3d c0 = model.position();
     const Eigen::Quaterniond q0 = model.orientation();
+    // The pusher's velocity at the step's start (a path's first interval,
+    // not the step's mean: an acceleration within the step is no impact).
+    impacts.Before(model, closed_loop || !scene.pusher
+                              ? command_v
+                              : PusherTwistOver(*scene.pusher, t0, kImpactProbeDt).velocity);
     const StepReport rep = model.Step();
     ++result.solver.steps;
     result.solver.max_pivots = std::max(result.solver.max_pivots, rep.pivots);
@@ -384,6 +467,7 @@ SimulationResult Simulate(const Scene& scene, const PusherCommandSource& command
         std::max(result.residuals.complementarity, rep.residuals.complementarity);
     result.residuals.cone = std::max(result.residuals.cone, rep.residuals.cone);
     poses.Push(model.time(), model.position(), model.orientation());
+    impacts.After(model, result.impact);
     if (result.grasp == GraspStatus::kHeld) {
       result.grasp = model.Grasp(&result.grasp_note);
       if (result.grasp != GraspStatus::kHeld) result.grasp_changed_t = model.time();

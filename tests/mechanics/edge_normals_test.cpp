@@ -10,6 +10,7 @@
 #include <vector>
 
 #include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
 
 #include "arena/mechanics/simulate.hpp"
 #include "scenes.hpp"
@@ -338,6 +339,47 @@ TEST(EdgeNormals, AnOffCentreEdgePushStartingAtFullSpeedIsAnImpactThatDtMustReso
   const double at_default = SidewaysAtEnd(inside);
   inside.model.dt = 5e-5;
   EXPECT_NEAR(at_default, SidewaysAtEnd(inside), 0.005 * std::abs(at_default));
+}
+
+// The output says when a run's start is such an impact and dt does not
+// resolve it (SimulationResult::impact): the pusher meets the box at
+// u = 1 cm/s, the box takes up m u = 0.2 kg x 0.01 m/s = 2e-3 N s, the
+// fingers hold with 2 mu N = 10 N, so dt must be at most 2e-3 / 10 =
+// 0.2 ms (where the branches above part: 0.3 ms smeared, 0.2 ms resolved).
+// A pusher that accelerates over 2 ms meets no impact at any dt.
+TEST(EdgeNormals, TheOutputSaysWhenDtDoesNotResolveTheStartsImpact) {
+  for (double dt : {4e-3, 1e-3, 3e-4, 1e-4, 5e-5}) {
+    const SimulationResult r = Simulate(OffCentreEdgePush(dt, 0));
+    ASSERT_EQ(r.status, SimulationStatus::kOk) << r.error;
+    std::printf(
+        "full speed, dt %g ms: impact at t %g s, u %.5f m/s, %.4g N s, %.4g N, "
+        "resolving dt %.4g ms, resolved %d\n",
+        dt * 1e3, r.impact.t, r.impact.approach_speed, r.impact.momentum, r.impact.holding_force,
+        r.impact.resolving_dt * 1e3, r.impact.resolved);
+    EXPECT_TRUE(r.impact.detected) << dt;
+    EXPECT_EQ(r.impact.t, 0.0) << dt;
+    EXPECT_NEAR(r.impact.approach_speed, 0.01, 1e-5) << dt;
+    EXPECT_NEAR(r.impact.holding_force, 10.0, 1e-6) << dt;
+    EXPECT_NEAR(r.impact.resolving_dt, 2e-4, 2e-7) << dt;
+    EXPECT_EQ(r.impact.resolved, dt < 2e-4) << dt;
+    const nlohmann::json flags = nlohmann::json::parse(RunFlagsJson(r));
+    EXPECT_EQ(flags.contains("impact"), dt > 2e-4) << flags.dump();
+  }
+  for (double dt : {4e-3, 1e-4}) {
+    const SimulationResult r = Simulate(OffCentreEdgePush(dt, 0.002));
+    ASSERT_EQ(r.status, SimulationStatus::kOk) << r.error;
+    EXPECT_FALSE(r.impact.detected) << dt << ": u " << r.impact.approach_speed;
+    EXPECT_EQ(nlohmann::json::parse(RunFlagsJson(r)).count("impact"), 0u);
+  }
+  // Nothing holds a free box: it takes up the momentum whatever dt is.
+  Scene free_box = OffCentreEdgePush(4e-3, 0);
+  free_box.fingers.clear();
+  const SimulationResult r = Simulate(free_box);
+  ASSERT_EQ(r.status, SimulationStatus::kOk) << r.error;
+  EXPECT_TRUE(r.impact.detected);
+  EXPECT_TRUE(std::isinf(r.impact.resolving_dt));
+  EXPECT_TRUE(r.impact.resolved);
+  EXPECT_TRUE(nlohmann::json::parse(ImpactJson(r.impact))["resolving_dt"].is_null());
 }
 
 }  // namespace

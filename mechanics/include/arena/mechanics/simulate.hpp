@@ -151,6 +151,36 @@ Oscillation DetectSlowOscillation(const std::vector<double>& t,
                                   const std::vector<Eigen::Quaterniond>& q, double gap_tolerance,
                                   double length_scale);
 
+// Whether the pusher meets the object at speed (an impact: a pusher that
+// starts at full speed on it, or reaches it moving) in a step too long to
+// resolve it. The object takes up a momentum p = m u (u: the pusher's
+// approach speed along its force, at the step it first presses) while what
+// holds it (the fingers' friction Σ μ N, a support's μ m g) takes up only
+// its force times dt per step: below dt = p / that force (resolving_dt)
+// the impact is resolved (the answer of the limit dt → 0); above it the
+// first step shares the impact with what holds the object, and a run near a
+// stick/slide threshold can take another branch (docs/scene.md, `dt`).
+// u is the approach along the contact normal of the pusher's velocity at
+// the step's start (over kImpactProbeDt: a recorded path's first interval)
+// against the object's. Detected at approach speeds above kImpactSpeed of
+// the pusher's top speed (slower: a recorded acceleration's first interval,
+// which decides no branch); the largest impact of the run (by momentum) is
+// kept.
+inline constexpr double kImpactSpeed = 0.5;
+inline constexpr double kImpactProbeDt = 1e-6;
+struct Impact {
+  bool detected = false;
+  double t = 0;               // s: the start of the step it happened in
+  double approach_speed = 0;  // m/s
+  double momentum = 0;        // N s: object mass × approach speed
+  double holding_force = 0;   // N: Σ μ N of the fingers, + μ m g of a support
+  double resolving_dt = 0;    // s: momentum / holding_force (infinite: nothing holds)
+  bool resolved = true;       // dt <= resolving_dt
+};
+// The impact as one JSON object (detected, t, approach_speed, momentum,
+// holding_force, resolving_dt (null when infinite), resolved).
+std::string ImpactJson(const Impact& impact);
+
 struct SimulationResult {
   SimulationStatus status = SimulationStatus::kOk;
   std::string error;  // empty when ok; names the step and reason otherwise
@@ -169,7 +199,15 @@ struct SimulationResult {
   // Whether the run ended in an undamped oscillation (its amplitude and
   // frequency): the final pose is then a phase of it (see Oscillation).
   Oscillation oscillation;
+  // The run's largest pusher impact and whether dt resolved it (see Impact).
+  Impact impact;
 };
+
+// The flags a stored result carries beside its numbers, as one JSON object:
+// "oscillation" when one was detected, "impact" when one was detected that
+// dt did not resolve; {} when neither. The one rendering every stored
+// detail (truths, predictions, closed-loop trials) uses.
+std::string RunFlagsJson(const SimulationResult& result);
 
 // Never throws for a scene that passed ValidateScene(); a step the solver
 // cannot solve ends the run with status kSolverFailure. Never returns NaN.
