@@ -918,6 +918,7 @@ struct ContactModel::Impl {
   bool CheckValues(StepScratch& s, StepReport& rep);
   bool Refuse(StepReport& rep, const std::string& why);  // kNonFinite
   bool AlignCones(StepScratch& s);
+  bool MeasureAlignMiss(const StepScratch& s, const Contact& ct, double facet, AlignMiss& m);
   double InertialForce(const StepScratch& s) const;
   void PlaceAtStepEnd(const StepScratch& s, const SmallVector& centre);
   bool PredictStepEnd();
@@ -1950,6 +1951,62 @@ double ContactModel::Impl::InertialForce(const StepScratch& s) const {
   return worst;
 }
 
+// AlignCones, one point: false when it does not slide in a direction worth
+// aligning to; otherwise its miss, the friction's direction ψ, and whether
+// the friction lies on a face (or is pinned there) in m.
+bool ContactModel::Impl::MeasureAlignMiss(const StepScratch& s, const Contact& ct, double facet,
+                                          AlignMiss& m) {
+  Point& pt = *m.pt;
+  const double lam = pt.lambda >= 0 ? Unknown(s, pt.lambda) : ct.known_normal;
+  if (!(lam > 1e-9 * Fs)) return false;
+  double bsum = 0;
+  for (int e = 0; e < edges_per_point; ++e) bsum += Unknown(s, pt.beta0 + e);
+  if (ct.spec.mu * lam - bsum > 1e-9 * ct.spec.mu * lam) return false;  // sticking
+  const Eigen::Vector3d ut = pt.urel - pt.n.dot(pt.urel) * pt.n;
+  // A slip this slow has no direction worth aligning to (rounding).
+  if (!(ut.squaredNorm() > 1e-12 * Vs * Vs)) return false;
+  m.t1 = FirstTangent(pt.n);
+  m.t2 = pt.n.cross(m.t1);
+  const Eigen::Vector3d& e0 = pt.edges[0];
+  const double phi = std::atan2(-ut.dot(m.t2), -ut.dot(m.t1));
+  // The edges repeat every facet: the friction sits on the one nearest
+  // the slip's opposite. (Measured from edges[0] alone, a slide along
+  // another edge of the basis, e.g. -t1, which a snap onto the basis
+  // or SetEdges leaves with edges[0] = t1, missed by π every solve and
+  // spent all kAlignSolves re-solves on every step, the answer unchanged.)
+  const double theta0 = std::atan2(e0.dot(m.t2), e0.dot(m.t1));
+  m.miss = std::remainder(phi - theta0, facet);
+  m.theta = phi - m.miss;
+  // The friction on a face of the cone (between two edges) rather than
+  // on an edge: the slip is then along the face's normal, half a facet
+  // from both edges, and its miss says nothing (its sign is rounding).
+  // The friction's own direction ψ does: where the balance fixes it (the
+  // pusher sticking, the object's inertia over dt small), the slip swings
+  // across the whole fan for a turn of the edge far below kAlignAngle,
+  // and the edge belongs on ψ (the tilted push through the grip axis at
+  // dt 4 ms missed by ±π/8 on every re-solve of every step, 12 each, and
+  // ended 1.8 % short of its closed form; on ψ it is within 0.05 %).
+  Eigen::Vector3d friction = Eigen::Vector3d::Zero();
+  for (int e = 0; e < edges_per_point; ++e) friction += Unknown(s, pt.beta0 + e) * pt.edges[e];
+  m.psi = std::atan2(friction.dot(m.t2), friction.dot(m.t1));
+  m.face = std::abs(std::remainder(m.psi - theta0, facet)) > kAlignAngle;
+  // Pinned: the edge was put on ψ in this step and the friction went
+  // back onto a face at the same ψ (or it was pinned the step before):
+  // the balance fixes the friction, and where the slip falls within the
+  // fan is not resolved by turning the edge (the pivot past its stall,
+  // rocking: 2,900 re-solves in its 600 steps without this rule, 367
+  // with it). It is left where it is.
+  if (m.face &&
+      ((pt.align_jump_step == steps_taken &&
+        std::abs(std::remainder(m.psi - pt.align_jump_psi, 2 * std::numbers::pi)) <= kAlignAngle) ||
+       pt.align_pinned_step >= steps_taken - 1)) {
+    m.face = false;
+    m.pinned = true;
+    pt.align_pinned_step = steps_taken;
+  }
+  return true;
+}
+
 // Aligned cones (tracked, 6 DOF): for every sliding point, the angle θ of
 // the edge its friction sits on and the angle φ(θ) opposite its slip after
 // the solve; the cone is right where φ(θ) = θ (friction opposing the slip
@@ -1958,7 +2015,10 @@ double ContactModel::Impl::InertialForce(const StepScratch& s) const {
 // small turn of the friction swings the slip by many times as much (the
 // object's small inertia over dt), and the edge flips between two sides.
 // So the first miss moves θ onto the slip and the next ones take the secant
-// step on the miss φ(θ) - θ. True when a cone turned (solve again).
+// step on the miss φ(θ) - θ; a friction on a face of the cone (where the
+// miss says nothing) moves θ onto the friction's own direction, and a probe
+// then measures the slope (MeasureAlignMiss). True when a cone turned
+// (solve again).
 bool ContactModel::Impl::AlignCones(StepScratch& s) {
   if (!aligned) return false;
   using Miss = AlignMiss;
@@ -1971,53 +2031,8 @@ bool ContactModel::Impl::AlignCones(StepScratch& s) {
     if (!ct.active) continue;
     for (Point& pt : ct.points) {
       if (!HasRows(pt) || pt.beta0 < 0 || pt.edges.empty()) continue;
-      const double lam = pt.lambda >= 0 ? Unknown(s, pt.lambda) : ct.known_normal;
-      if (!(lam > 1e-9 * Fs)) continue;
-      double bsum = 0;
-      for (int e = 0; e < edges_per_point; ++e) bsum += Unknown(s, pt.beta0 + e);
-      if (ct.spec.mu * lam - bsum > 1e-9 * ct.spec.mu * lam) continue;  // sticking
-      const Eigen::Vector3d ut = pt.urel - pt.n.dot(pt.urel) * pt.n;
-      // A slip this slow has no direction worth aligning to (rounding).
-      if (!(ut.squaredNorm() > 1e-12 * Vs * Vs)) continue;
-      Miss m{&pt, FirstTangent(pt.n), Eigen::Vector3d::Zero(), 0, 0};
-      m.t2 = pt.n.cross(m.t1);
-      const Eigen::Vector3d& e0 = pt.edges[0];
-      const double phi = std::atan2(-ut.dot(m.t2), -ut.dot(m.t1));
-      // The edges repeat every facet: the friction sits on the one nearest
-      // the slip's opposite. (Measured from edges[0] alone, a slide along
-      // another edge of the basis, e.g. -t1, which a snap onto the basis
-      // or SetEdges leaves with edges[0] = t1, missed by π every solve and
-      // spent all kAlignSolves re-solves on every step, the answer unchanged.)
-      const double theta0 = std::atan2(e0.dot(m.t2), e0.dot(m.t1));
-      m.miss = std::remainder(phi - theta0, facet);
-      m.theta = phi - m.miss;
-      // The friction on a face of the cone (between two edges) rather than
-      // on an edge: the slip is then along the face's normal, half a facet
-      // from both edges, and its miss says nothing (its sign is rounding).
-      // The friction's own direction ψ does: where the balance fixes it (the
-      // pusher sticking, the object's inertia over dt small), the slip swings
-      // across the whole fan for a turn of the edge far below kAlignAngle,
-      // and the edge belongs on ψ (the tilted push through the grip axis at
-      // dt 4 ms missed by ±π/8 on every re-solve of every step, 12 each, and
-      // ended 1.8 % short of its closed form; on ψ it is within 0.05 %).
-      Eigen::Vector3d friction = Eigen::Vector3d::Zero();
-      for (int e = 0; e < edges_per_point; ++e) friction += Unknown(s, pt.beta0 + e) * pt.edges[e];
-      m.psi = std::atan2(friction.dot(m.t2), friction.dot(m.t1));
-      m.face = std::abs(std::remainder(m.psi - theta0, facet)) > kAlignAngle;
-      // Pinned: the edge was put on ψ in this step and the friction went
-      // back onto a face at the same ψ (or it was pinned the step before):
-      // the balance fixes the friction, and where the slip falls within the
-      // fan is not resolved by turning the edge (the pivot past its stall,
-      // rocking: 2,900 re-solves in its 600 steps without this rule, 367
-      // with it). It is left where it is.
-      if (m.face && ((pt.align_jump_step == steps_taken &&
-                      std::abs(std::remainder(m.psi - pt.align_jump_psi, 2 * std::numbers::pi)) <=
-                          kAlignAngle) ||
-                     pt.align_pinned_step >= steps_taken - 1)) {
-        m.face = false;
-        m.pinned = true;
-        pt.align_pinned_step = steps_taken;
-      }
+      Miss m{&pt, Eigen::Vector3d::Zero(), Eigen::Vector3d::Zero(), 0, 0};
+      if (!MeasureAlignMiss(s, ct, facet, m)) continue;
       if (!m.pinned && (m.face || std::abs(m.miss) > kAlignAngle)) any = true;
       if (pt.align_step == steps_taken && !m.face && !m.pinned && !pt.align_face) {
         const double dtheta = std::remainder(m.theta - pt.align_theta, 2 * std::numbers::pi);
