@@ -1991,15 +1991,16 @@ bool ContactModel::Impl::MeasureAlignMiss(const StepScratch& s, const Contact& c
   m.psi = std::atan2(friction.dot(m.t2), friction.dot(m.t1));
   m.face = std::abs(std::remainder(m.psi - theta0, facet)) > kAlignAngle;
   // Pinned: the edge was put on ψ in this step and the friction went
-  // back onto a face at the same ψ (or it was pinned the step before):
-  // the balance fixes the friction, and where the slip falls within the
-  // fan is not resolved by turning the edge (the pivot past its stall,
-  // rocking: 2,900 re-solves in its 600 steps without this rule, 367
-  // with it). It is left where it is.
+  // back onto a face at the same ψ, or the friction lies on a face again
+  // after the step before put the edge on ψ (or was pinned): the balance
+  // fixes the friction, and where the slip falls within the fan is not
+  // resolved by turning the edge (the pivot past its stall, rocking:
+  // 2,900 re-solves in its 600 steps without this rule, 367 pinning only
+  // within a step, 109 with it). It is left where it is.
   if (m.face &&
       ((pt.align_jump_step == steps_taken &&
         std::abs(std::remainder(m.psi - pt.align_jump_psi, 2 * std::numbers::pi)) <= kAlignAngle) ||
-       pt.align_pinned_step >= steps_taken - 1)) {
+       pt.align_pinned_step >= steps_taken - 1 || pt.align_jump_step == steps_taken - 1)) {
     m.face = false;
     m.pinned = true;
     pt.align_pinned_step = steps_taken;

@@ -112,7 +112,8 @@ TEST(ClosedForms, TiltedPushTurnsWithThePusherSeenFromTheAxis) {
   // the slip swings across a whole facet for a turn of the edge far below
   // 1e-3 rad and the friction lands on a face of the cone. Turned onto the
   // friction's own direction there, the cone settles in about 1.6 re-solves
-  // per step: 0.054662-0.054669 rad at 4, 8, 16 and 64 facets. (Turned
+  // per step: 0.054662-0.054667 rad at 4, 8 and 16 facets, 0.054753 rad
+  // (+0.12 %) at 64, where faces two steps running are pinned. (Turned
   // onto the slip, every re-solve of every step missed by ±π/8 at 8
   // facets: 1500 re-solves in 125 steps and 0.053704 rad, −1.8 %.)
   for (int facets : {4, 8, 16, 64}) {
@@ -130,7 +131,7 @@ TEST(ClosedForms, TiltedPushTurnsWithThePusherSeenFromTheAxis) {
     const double roll = 2 * std::atan2(m.orientation().x(), m.orientation().w());
     std::printf("tilted at dt 4 ms, %d facets: roll %.6f rad, %ld re-solves\n", facets, roll,
                 resolves);
-    EXPECT_NEAR(roll, theta, 1e-3 * theta) << facets;
+    EXPECT_NEAR(roll, theta, 2e-3 * theta) << facets;
     EXPECT_LE(resolves, 2 * 125) << facets;
   }
 }
@@ -213,9 +214,9 @@ TEST(ClosedForms, PatchGraspHoldsBelowItsLimitAndDropsAbove) {
 // ±π/8 at 8 facets) when the friction turns by less than 1e-3 rad. The
 // re-solves stop once no cone would turn by more than 1e-3 rad (the
 // friction's direction is then right within it), and a friction that
-// comes back to a face at the direction it was just turned onto is left
-// there (pinned: AlignCones): 367 re-solves in the 600 steps at 8 facets,
-// 26 at 32. Before, until the slip's miss was below 1e-3 rad, which it
+// comes back to a face at the direction it was just turned onto, or in the
+// step after, is left there (pinned: MeasureAlignMiss): 109 re-solves in
+// the 600 steps at 8 facets, 26 at 32. Before, until the slip's miss was below 1e-3 rad, which it
 // never was: 5966 (497 steps at the cap of 12).
 TEST(ClosedForms, CarriedPivotAlignsWithinBoundedResolves) {
   const Scene scene =
@@ -238,10 +239,10 @@ TEST(ClosedForms, CarriedPivotAlignsWithinBoundedResolves) {
     }
     std::printf("carried pivot, aligned cone, %d facets: %ld re-solves, y %.4f mm\n", facets,
                 resolves, 1e3 * m.position().y());
-    EXPECT_LE(resolves, 600) << facets;  // at most one per step on average
+    EXPECT_LE(resolves, 150) << facets;  // 109 at 8 facets (367 pinning within a step only)
     // The sideways slide in the grasp, against the polyhedral cone at 64
     // facets (its slip steered by at most 1/64 of a turn): y −1.007 mm; the
-    // aligned cone −1.042 mm at 8 facets, −0.969 at 32 (turned onto the slip
+    // aligned cone −1.009 mm at 8 facets, −0.969 at 32 (turned onto the slip
     // rather than the friction, −0.57 mm at 8).
     EXPECT_NEAR(m.position().y(), -1.007e-3, 0.05e-3) << facets;
   }
