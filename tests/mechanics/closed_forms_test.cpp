@@ -319,6 +319,54 @@ TEST(ClosedForms, SlippingGraspSlidesAlongTheNetTangentialLoad) {
       << "the steered slip this scene measures";
 }
 
+// A centred push on point fingers, under gravity, started 3 mrad off plane
+// (the pose a cell measures, so 6 DOF): the fingers slide almost along an
+// edge of the tangent basis (z), where the aligned cone snaps onto that
+// edge. The polyhedral cone steers the slip: roll at 0.2 s 0.0244 rad at 8
+// facets, 0.0152 at 16, 0.0065 at 64, first order in 1/facets towards
+// about 0.0036 (Richardson from 16 and 64). The aligned cone gives 0.0032
+// at 8 and 32 facets, settling in about one re-solve per step. (Its stop
+// rule once waited for the slip's miss on such a point while the snap
+// undid every turn: all 12 re-solves on every step, 486 in 50.)
+TEST(ClosedForms, AlignedConeSettlesOnAnEdgeOfTheBasis) {
+  const Scene scene =
+      Parse(R"("object":{"shape":"box","size":[0.05,0.03,0.1],"mass":0.2,"pose":{)"
+            R"("position":[0.0002,-0.0003,0.0001],"rpy":[0.003,-0.002,0.001]}},)"
+            R"("gravity":[0,0,-9.81],"duration":0.2,"grip_force":8.0,)" +
+            std::string(kPointFingers) +
+            R"(,"pusher":{"type":"point","position":[0,0,-0.05],"normal":[0,0,1],"mu":0.3,)"
+            R"("motion":{"velocity":[0,0,0.02],"angular_velocity":[0,0,0]}},)"
+            R"("model":{"facets":8,"points":3,"dt":0.004,"reduce":"auto","cone":"aligned"})");
+  const auto roll_of = [](const Scene& s) { return Roll(SimulateOk(s).samples.back()); };
+  Scene polyhedral = scene;
+  polyhedral.model.cone = ConeModel::kPolyhedral;
+  polyhedral.model.facets = 16;
+  const double p16 = roll_of(polyhedral);
+  polyhedral.model.facets = 64;
+  const double p64 = roll_of(polyhedral);
+  const double limit = p64 + (p64 - p16) / 3;
+  for (int facets : {8, 32}) {
+    Scene s = scene;
+    s.model.facets = facets;
+    ContactModel m(s);
+    ASSERT_EQ(m.status(), SimulationStatus::kOk) << m.error();
+    long resolves = 0;
+    for (int k = 0; k < 50; ++k) {
+      const StepReport step = m.Step();
+      ASSERT_TRUE(step.ok) << step.error;
+      resolves += step.align_solves;
+    }
+    const double roll = 2 * std::atan2(m.orientation().x(), m.orientation().w());
+    std::printf(
+        "tilted start, aligned, %d facets: roll %.6f (polyhedral limit %.6f), %ld re-solves\n",
+        facets, roll, limit, resolves);
+    EXPECT_NEAR(roll, limit, 5e-4) << facets;
+    EXPECT_LE(resolves, 2 * 50) << facets;
+  }
+  polyhedral.model.facets = 8;
+  EXPECT_GT(roll_of(polyhedral), 5 * limit) << "the steered slip this scene measures";
+}
+
 // The two model options are read, written back when not the default
 // (elastic pads, since issue 31, and the polyhedral cone), and a wrong
 // value is refused naming the field.
