@@ -480,21 +480,34 @@ struct TrialDriver::Impl {
   }
 
   // resetting -> reset_done | reset_failed, then the prediction waiting for it.
+  // `after_dispatch`: a clean reset's record is written after Tick's dispatch
+  // (Tick's background), so the cell's next EXECUTE goes out before this
+  // commit instead of after it (issue 27: the overhead per trial). Nobody
+  // waits on it: a busy store retries it while the cell runs its next trial,
+  // and a crash before it leaves the trial resetting, which the restart
+  // closes as reset_failed (not observed), as for a status lost in flight.
   void CompleteReset(std::int64_t trial_id, int attempt, const db::ResetReport& report,
-                     const std::string& cell_id, const std::string& rule) {
-    resets_completing.insert(trial_id);
-    Step(
-        "trial " + std::to_string(trial_id) + ": complete reset", cell_id,
-        [this, trial_id, attempt, report, rule] {
-          store.CompleteReset(trial_id, attempt, report, rule);
-          resets_completing.erase(trial_id);
-          if (!report.ok) Count(&ServiceCounters::resets_failed);
-          AfterReset(trial_id);
-        },
-        [this, trial_id](const db::StoreError& e) {
-          resets_completing.erase(trial_id);
-          spdlog::error("trial {}: complete reset: {}", trial_id, e.what());
-        });
+                     const std::string& cell_id, const std::string& rule,
+                     bool after_dispatch = false) {
+    resets_completing.insert(trial_id);  // at once: a prediction waits for it (ResetInFlight)
+    auto step = [this, trial_id, attempt, report, rule](const std::string& waiting_cell) {
+      Step(
+          "trial " + std::to_string(trial_id) + ": complete reset", waiting_cell,
+          [this, trial_id, attempt, report, rule] {
+            store.CompleteReset(trial_id, attempt, report, rule);
+            resets_completing.erase(trial_id);
+            if (!report.ok) Count(&ServiceCounters::resets_failed);
+            AfterReset(trial_id);
+          },
+          [this, trial_id](const db::StoreError& e) {
+            resets_completing.erase(trial_id);
+            spdlog::error("trial {}: complete reset: {}", trial_id, e.what());
+          });
+    };
+    if (after_dispatch)
+      background.push_back([step] { step(""); });
+    else
+      step(cell_id);
   }
   std::set<std::int64_t> resets_completing;  // CompleteReset under way (or waiting on the store)
 
@@ -628,8 +641,10 @@ struct TrialDriver::Impl {
 
   // Records the changes from what `cell` has mounted to `next` (the cell
   // makes them: executors/trial_start.hpp) and takes `next` as mounted.
+  // `after_dispatch`: the records are written after Tick's dispatch (nothing
+  // the claim reads: it reads `mounted`, set here at once).
   void RecordChanges(CellRun& cell, std::int64_t trial_id, int attempt, const char* phase,
-                     const schemas::Fixtures& next) {
+                     const schemas::Fixtures& next, bool after_dispatch = false) {
     if (!cell.change_costs) return;
     std::vector<db::FixtureChangeRecord> records;
     for (const auto& c : schemas::ChangesBetween(cell.mounted, next, *cell.change_costs)) {
@@ -646,8 +661,14 @@ struct TrialDriver::Impl {
     }
     cell.mounted = next;
     if (records.empty()) return;
-    Step("cell " + cell.id + ": fixture changes", "",
-         [this, records] { store.RecordFixtureChanges(records); });
+    auto write = [this, records] {
+      Step("cell " + records.front().cell_id + ": fixture changes", "",
+           [this, records] { store.RecordFixtureChanges(records); });
+    };
+    if (after_dispatch)
+      background.push_back(write);
+    else
+      write();
   }
 
   // ------------------------------------------------------------ the claim gate (issue 26)
@@ -815,51 +836,64 @@ struct TrialDriver::Impl {
     const std::string cell_id = cell.id;
     const std::int64_t trial_id = claim.trial_id;
     const int attempt = claim.attempt;
-    const std::uint64_t seed = claim.seed;
-    const std::string scene_json = claim.scene_json;
-    const std::string defects_json = claim.defects_json;
-    // The sink first (a busy store: this same step again, the cell waits), then EXECUTE.
-    Step(
-        tag + ": begin ingest", cell_id,
-        [this, tag, cell_id, trial_id, attempt, seed, scene_json, defects_json, budget] {
-          auto it = executions.find(trial_id);
-          if (it == executions.end() || it->second.attempt != attempt) return;
-          it->second.sink = store.BeginIngest(trial_id, attempt, ContactSitesOf(it->second.scene));
-          CellRun& c = Cell(cell_id);
-          msg::TrialCommand cmd = Command(c, msg::PHASE_EXECUTE);
-          cmd.trial_id(static_cast<std::uint64_t>(trial_id));
-          cmd.attempt(static_cast<std::uint32_t>(attempt));
-          cmd.scene_json(scene_json);
-          cmd.seed(seed);
-          cmd.deadline_s(budget);
-          cmd.defects_json(defects_json);  // applied by the cell, or the trial is REFUSED
-          SetPhase(c, CellPhase::kExecuting, budget + 2.0);  // the clock starts when it is sent
-          Count(&ServiceCounters::dispatched);
-          if (!transport.Send(cmd)) {
-            EndPhase(c, DecideServiceEvent(c.phase, ServiceEvent::kCommandNotSent),
-                     "EXECUTE command could not be sent");
-            return;
-          }
-          c.execute_sent = now();
-          spdlog::info("{}: EXECUTE on cell {}", tag, cell_id);
-          // While it executes: the trial its reset will aim at (see Executed),
-          // chosen as if the fixtures of this trial were mounted, as they will be.
-          c.aim_known = false;
-          try {
-            CellRun probe = c;
-            if (probe.change_costs) probe.mounted = FixturesOfTrial(trial_id, scene_json);
-            c.next_aim = NextTrialFor(probe, false);
-            c.aim_known = true;
-          } catch (const db::StoreError& e) {
-            if (Judge(e) == StoreVerdict::kStop) throw;  // as any step: the service stops
-            spdlog::debug("{}: next trial looked up at the reset instead: {}", tag, e.what());
-          }
-        },
-        [this, cell_id](const db::StoreError& e) {
-          CellRun& c = Cell(cell_id);
-          EndPhase(c, DecideServiceEvent(c.phase, ServiceEvent::kStoreRefusedTruth),
+    // EXECUTE first, then the sink: no commit between the claim and the
+    // command (issue 27). Nothing the cell sends is read before the sink
+    // exists (this thread takes both). A busy store leaves no sink: the
+    // stream is kept in memory and written whole at its end (the publish
+    // step's re-ingest, as after a busy Add); a refusal ends the phase.
+    msg::TrialCommand cmd = Command(cell, msg::PHASE_EXECUTE);
+    cmd.trial_id(static_cast<std::uint64_t>(trial_id));
+    cmd.attempt(static_cast<std::uint32_t>(attempt));
+    cmd.scene_json(claim.scene_json);
+    cmd.seed(claim.seed);
+    cmd.deadline_s(budget);
+    cmd.defects_json(claim.defects_json);  // applied by the cell, or the trial is REFUSED
+    Count(&ServiceCounters::dispatched);
+    if (!transport.Send(cmd)) {
+      EndPhase(cell, DecideServiceEvent(cell.phase, ServiceEvent::kCommandNotSent),
+               "EXECUTE command could not be sent");
+      return;
+    }
+    cell.execute_sent = now();
+    spdlog::info("{}: EXECUTE on cell {}", tag, cell_id);
+    if (!BeginSink(cell, trial_id, attempt, tag)) return;
+    // While it executes: the trial its reset will aim at (see Executed),
+    // chosen as if the fixtures of this trial were mounted, as they will be.
+    cell.aim_known = false;
+    try {
+      CellRun probe = cell;
+      if (probe.change_costs) probe.mounted = FixturesOfTrial(trial_id, claim.scene_json);
+      cell.next_aim = NextTrialFor(probe, false);
+      cell.aim_known = true;
+    } catch (const db::StoreError& e) {
+      if (Judge(e) == StoreVerdict::kStop) throw;  // as any step: the service stops
+      spdlog::debug("{}: next trial looked up at the reset instead: {}", tag, e.what());
+    }
+  }
+
+  // The ingest of a trial whose EXECUTE is sent. @returns false when the
+  // store refused it (the phase is ended).
+  bool BeginSink(CellRun& cell, std::int64_t trial_id, int attempt, const std::string& tag) {
+    auto it = executions.find(trial_id);
+    if (it == executions.end() || it->second.attempt != attempt) return false;
+    try {
+      it->second.sink = store.BeginIngest(trial_id, attempt, ContactSitesOf(it->second.scene));
+    } catch (const db::StoreError& e) {
+      switch (Judge(e)) {
+        case StoreVerdict::kStop:
+          throw;
+        case StoreVerdict::kRetry:  // no sink: the publish step ingests the whole stream
+          spdlog::warn(
+              "{}: store busy at the ingest's start ({}); the stream is written at its end", tag,
+              e.what());
+          return true;
+        case StoreVerdict::kMoot:
+          EndPhase(cell, DecideServiceEvent(cell.phase, ServiceEvent::kStoreRefusedTruth),
                    std::string("ground truth refused: ") + e.what());
-        });
+          return false;
+      }
+    }
+    return true;
   }
 
   // ------------------------------------------------------------ execute
@@ -1181,10 +1215,12 @@ struct TrialDriver::Impl {
       spdlog::warn("trial {} attempt {}: reset on cell {} failed: {}", cell.trial_id, cell.attempt,
                    cell.id, st.reason());
     }
-    CompleteReset(cell.trial_id, cell.attempt, report, cell.id, d.rule);
+    // A clean reset is written after the cell's next EXECUTE is sent (Tick's
+    // dispatch comes first); a failed one before the cell is idle, as ever.
+    CompleteReset(cell.trial_id, cell.attempt, report, cell.id, d.rule, ok);
     // A reset aimed at a trial mounted its fixtures (only a successful one).
     if (ok && cell.reset_mounts)
-      RecordChanges(cell, cell.trial_id, cell.attempt, "reset", *cell.reset_mounts);
+      RecordChanges(cell, cell.trial_id, cell.attempt, "reset", *cell.reset_mounts, true);
     cell.reset_mounts.reset();
     if (ok || d.counts_against_cell()) CellResult(cell, CellPhase::kResetting, ok, st.reason());
     if (ok) ReportTiming(cell, st.phase_wall_s());
@@ -1384,6 +1420,14 @@ struct TrialDriver::Impl {
       for (auto& [id, cell] : cells)  // also while draining: phases in flight keep their cell
         if (cell.alive) SendClaim(cell);
     }
+    if (recovered && (gate_dirty || t >= next_gate)) {
+      gate_dirty = false;
+      next_gate = t + Dur(kGatePeriod_s);
+      Attempt("the claim gate", [&] { GateCampaigns(); });
+    }
+    Dispatch(stopping);
+    // The periodic writes no claim reads, after the dispatch: a cell whose
+    // reset just ended gets its EXECUTE before these commits (issue 27).
     if (t >= next_beat) {
       next_beat = t + Dur(opt.beat_period_s);
       std::vector<std::string> alive;
@@ -1395,12 +1439,6 @@ struct TrialDriver::Impl {
       next_campaigns = t + Dur(1.0);
       Attempt("completing finished campaigns", [&] { store.CompleteFinishedCampaigns(0); });
     }
-    if (recovered && (gate_dirty || t >= next_gate)) {
-      gate_dirty = false;
-      next_gate = t + Dur(kGatePeriod_s);
-      Attempt("the claim gate", [&] { GateCampaigns(); });
-    }
-    Dispatch(stopping);
     RunBackground();
   }
 

@@ -6,6 +6,7 @@
 
 #include <deque>
 #include <fstream>
+#include <functional>
 #include <map>
 #include <set>
 #include <sstream>
@@ -264,8 +265,10 @@ struct FakeStore : TrialStore {
 
 struct FakeTransport : CommandTransport {
   std::vector<msg::TrialCommand> sent;
+  std::function<void(const msg::TrialCommand&)> on_send;  // sees the store as at the send
   bool Send(msg::TrialCommand& c) override {
     sent.push_back(c);
+    if (on_send) on_send(c);
     return true;
   }
 };
@@ -498,6 +501,99 @@ TEST(TrialDriver, StatusesAndGroundTruthOfAnotherSessionAreDropped) {
   ASSERT_TRUE(h.RunToEnd());
   EXPECT_EQ(h.store.trials[1].state, db::TrialState::kDone);
   EXPECT_EQ(h.store.trials[1].attempt, 1);
+}
+
+// Issue 27: a clean reset is written after the cell's next EXECUTE is sent
+// (Tick's background), not between the cell's RESET_DONE and that EXECUTE;
+// the reset's record and the prediction waiting for it are the same.
+TEST(TrialDriver, AfterACleanResetTheNextExecuteGoesOutBeforeTheResetIsWritten) {
+  Harness h(2);
+  std::vector<db::TrialState> first_at_execute;  // trial 1's state at each EXECUTE
+  std::vector<int> ingests_at_execute;           // BeginIngest calls before each EXECUTE
+  h.transport.on_send = [&](const msg::TrialCommand& c) {
+    if (c.phase() != msg::PHASE_EXECUTE) return;
+    first_at_execute.push_back(h.store.trials[1].state);
+    ingests_at_execute.push_back(h.store.faults.calls["BeginIngest"]);
+  };
+  h.Start();
+  ASSERT_TRUE(h.RunToEnd());
+  ASSERT_EQ(first_at_execute.size(), 2u);
+  EXPECT_EQ(first_at_execute[1], db::TrialState::kResetting);
+  EXPECT_EQ(ingests_at_execute, (std::vector<int>{0, 1}));  // the EXECUTE before its ingest
+  for (const std::int64_t id : {1, 2}) {
+    EXPECT_EQ(h.store.trials[id].state, db::TrialState::kDone);
+    EXPECT_EQ(h.store.trials[id].attempt, 1);
+    EXPECT_EQ(h.store.trials[id].predictions, 1);
+    EXPECT_EQ(h.store.trials[id].rules,
+              (std::vector<std::string>{kResetAfterExecute, "reset.verified"}));
+  }
+}
+
+// The written-later reset on a busy store: taken again while the cell runs
+// its next trial, whose deadlines it does not hold; nothing costs an attempt.
+TEST(TrialDriver, ABusyStoreAtTheWrittenLaterResetDoesNotHoldTheCellsNextTrial) {
+  Harness h(2);
+  h.store.faults.next["CompleteReset"] = {K::kBusy};
+  std::vector<db::TrialState> first_at_execute;
+  h.transport.on_send = [&](const msg::TrialCommand& c) {
+    if (c.phase() == msg::PHASE_EXECUTE) first_at_execute.push_back(h.store.trials[1].state);
+  };
+  h.Start();
+  ASSERT_TRUE(h.RunToEnd());
+  ASSERT_EQ(first_at_execute.size(), 2u);
+  EXPECT_EQ(first_at_execute[1], db::TrialState::kResetting);
+  EXPECT_EQ(h.store.faults.calls["CompleteReset"], 3);  // trial 1 twice, trial 2 once
+  for (const std::int64_t id : {1, 2}) {
+    EXPECT_EQ(h.store.trials[id].state, db::TrialState::kDone);
+    EXPECT_EQ(h.store.trials[id].attempt, 1);
+    EXPECT_EQ(h.store.trials[id].predictions, 1);
+  }
+  EXPECT_EQ(h.driver->counters().retried, 0);
+}
+
+// The EXECUTE goes out before the ingest begins: a store that then refuses
+// the ingest ends the attempt (the store's fault, retried), and what the cell
+// still sends for it is dropped as late.
+TEST(TrialDriver, AnIngestRefusedAfterItsExecuteWentOutRetriesTheTrial) {
+  Harness h;
+  h.store.faults.next["BeginIngest"] = {K::kStaleAttempt};
+  h.Start();
+  ASSERT_TRUE(h.RunToEnd());
+  EXPECT_EQ(h.Sent(msg::PHASE_EXECUTE), 2);
+  EXPECT_EQ(h.store.trials[1].state, db::TrialState::kDone);
+  EXPECT_EQ(h.store.trials[1].attempt, 2);
+  EXPECT_EQ(h.store.trials[1].samples, 10);
+  ASSERT_FALSE(h.store.trials[1].rules.empty());
+  EXPECT_EQ(h.store.trials[1].rules.front().rfind("execute.store_refused_truth", 0), 0u)
+      << h.store.trials[1].rules.front();
+}
+
+// The service stops with a clean reset not yet written (here: held by a busy
+// store) and the cell's next trial sent: the restart closes the reset as not
+// observed (reset_failed; the trial is predicted and done) and re-queues the
+// sent trial, as for any trial in flight at a restart.
+TEST(TrialDriver, AResetNotYetWrittenAtARestartIsClosedAsNotObserved) {
+  Harness h(2);
+  h.store.faults.next["CompleteReset"] = {K::kBusy, K::kBusy, K::kBusy, K::kBusy};
+  h.Start();
+  for (int i = 0; i < 40 && h.Sent(msg::PHASE_EXECUTE) < 2; ++i) {
+    h.t += std::chrono::milliseconds(100);
+    h.driver->Tick(false);
+    if (h.Sent(msg::PHASE_EXECUTE) == 2) break;  // trial 2 sent, not yet answered
+    h.Answer();
+  }
+  ASSERT_EQ(h.Sent(msg::PHASE_EXECUTE), 2);
+  ASSERT_EQ(h.store.trials[1].state, db::TrialState::kResetting);
+  h.store.faults.next["CompleteReset"].clear();
+  h.NewDriver();
+  h.answered = h.transport.sent.size();  // the old session's commands are not answered
+  h.Start();
+  ASSERT_TRUE(h.RunToEnd());
+  EXPECT_EQ(h.store.trials[1].state, db::TrialState::kDone);
+  EXPECT_EQ(h.store.trials[1].attempt, 1);
+  EXPECT_EQ(h.store.trials[1].predictions, 1);
+  EXPECT_EQ(h.store.trials[2].state, db::TrialState::kDone);
+  EXPECT_EQ(h.store.trials[2].attempt, 2);  // sent before the restart: a restart's re-queue
 }
 
 // Busy at any step: the same step is taken again; the trial is never

@@ -26,6 +26,11 @@
 //   its next announce, its liveliness, or when another process with its id is
 //   still there (a restart within the lease).
 //
+// The trial's path (issue 27): a clean RESET_DONE is answered by the cell's
+// next EXECUTE (Tick's dispatch) before its CompleteReset, its fixture
+// changes and the periodic writes (Tick's background); the EXECUTE goes out
+// before BeginIngest (a busy store: the stream is ingested whole at its end).
+//
 // A cell serves one service session at a time (TrialCommand PHASE_CLAIM,
 // renewed every claim_period_s while we live): the driver dispatches only to
 // cells whose announce names our session; a cell serving another service is
