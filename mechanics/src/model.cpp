@@ -825,11 +825,12 @@ struct ContactModel::Impl {
     Eigen::Vector3d c, v, w;
     Eigen::Quaterniond q;
     std::vector<double> pads;
-    // Each tracked point's face (Point::face_O) at the step's start, per
-    // contact: every iterate is placed from these (RestoreStartFaces).
-    std::vector<std::vector<Eigen::Vector3d>> faces;
   };
   std::optional<StepStart> step_start;
+  // ... and each tracked point's face (Point::face_O) there, contact by
+  // contact, point by point: every iterate is placed from these
+  // (RestoreStartFaces). Outside StepStart so its storage is kept.
+  std::vector<Eigen::Vector3d> start_faces;
   // Quasi-static, tracked: the reduced twist of the last step taken, from
   // which the next step's end is predicted (PredictStepEnd).
   SmallVector last_vr;
@@ -2037,11 +2038,11 @@ void ContactModel::Impl::PlaceAtStepEnd(const StepScratch& s, const SmallVector&
   const Eigen::Matrix<double, 6, 1> tw = P * centre;
   const Eigen::Vector3d v_end = tw.head<3>(), w_end = tw.tail<3>();
   if (!step_start) {
-    StepStart start{c, v, w, q, {}, {}};
+    StepStart start{c, v, w, q, {}};
+    start_faces.clear();
     for (const Contact& ct : contacts) {
       start.pads.push_back(ct.pad);
-      start.faces.emplace_back();
-      for (const Point& pt : ct.points) start.faces.back().push_back(pt.face_O);
+      for (const Point& pt : ct.points) start_faces.push_back(pt.face_O);
     }
     step_start = std::move(start);
   }
@@ -2074,10 +2075,9 @@ void ContactModel::Impl::PlaceAtStepEnd(const StepScratch& s, const SmallVector&
 // as balanced (docs/scene.md, the off-centre edge push).
 void ContactModel::Impl::RestoreStartFaces() {
   if (!step_start) return;
-  for (size_t i = 0; i < contacts.size(); ++i) {
-    std::vector<Point>& points = contacts[i].points;
-    for (size_t j = 0; j < points.size(); ++j) points[j].face_O = step_start->faces[i][j];
-  }
+  size_t k = 0;
+  for (Contact& ct : contacts)
+    for (Point& pt : ct.points) pt.face_O = start_faces[k++];
 }
 
 // Undoes PlaceAtStepEnd before the step integrates (start_faces false: the
