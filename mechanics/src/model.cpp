@@ -127,6 +127,13 @@ constexpr int kQuasiStaticSolves = 50;
 // kNoBalance of 1 they do not converge: no balanced answer (BalanceStep).
 constexpr double kExtrapolateFrom = 0.5;
 constexpr double kNoBalance = 1e-6;
+// A balanced twist may differ from the step's start by at most this many
+// times the pusher's speed (plus what the contact forces' impulse gives over
+// dt) at the object's extent (BalanceIsAcceptable): a pusher pressing at an
+// arm a tenth of the object's extent from the turn's axis turns its far end
+// ten times as fast as it moves; an extrapolation that throws the object out
+// of its grasp reached 1e4 times it.
+constexpr double kReachFactor = 10;
 // Solves of one step before an inaccurate answer is reported as a failure.
 constexpr int kAccuracyAttempts = 4;
 // A point pad follows the object along its closing direction c and sees the
@@ -820,11 +827,16 @@ struct ContactModel::Impl {
     std::vector<double> pads;
   };
   std::optional<StepStart> step_start;
+  // ... and each tracked point's face (Point::face_O) there, contact by
+  // contact, point by point: every iterate is placed from these
+  // (RestoreStartFaces). Outside StepStart so its storage is kept.
+  std::vector<Eigen::Vector3d> start_faces;
   // Quasi-static, tracked: the reduced twist of the last step taken, from
   // which the next step's end is predicted (PredictStepEnd).
   SmallVector last_vr;
   double place_lead = 0;     // s: the pusher placed this far after t (PlaceAtStepEnd)
   bool at_step_end = false;  // PlaceContacts: gaps taken at the iterate's end (PlaceAtStepEnd)
+  bool last_step_carried = false;  // BalanceStep: the last step found no acceptable balance
   // AlignCones: d(miss)/dθ of the last secant (0: none yet) and scratch.
   double align_slope = 0;
   std::vector<AlignMiss> align_misses;
@@ -925,7 +937,12 @@ struct ContactModel::Impl {
   bool RunStep(StepReport& rep);
   bool RunPhases(int first, int last, StepReport& rep);
   bool BalanceStep(int last, StepReport& rep);
-  void ReturnToStepStart();
+  bool BalanceIsAcceptable(const StepScratch& s) const;
+  bool PusherSlidesIn(const StepScratch& s) const;
+  double PusherSpeed() const;
+  double PusherDepthAtStepEnd(const SmallVector& twist) const;
+  void RestoreStartFaces();
+  void ReturnToStepStart(bool start_faces = true);
   void GapsFromStepEnd(const StepScratch& s);
   void ReportContacts(StepScratch& s);
   void Integrate(StepScratch& s);
@@ -1509,7 +1526,14 @@ void ContactModel::Impl::PlaceOnSolid(Contact& ct, Point& pt, const Eigen::Vecto
   // the point closes onto: the least deep face alone flips with rounding.
   const Eigen::Vector3d prefer_O =
       pt.face_O.squaredNorm() > 0 ? pt.face_O : Eigen::Vector3d(-(R.transpose() * closing));
-  const geometry::Closest cl = solid->ClosestTo(centre_O, prefer_O, gap_tolerance);
+  // A quasi-static iterate placed at the step's end keeps the pusher's face
+  // from the step's start (RestoreStartFaces) down to the depth its motion
+  // reaches in the step: at the full speed of the off-centre edge push
+  // (1 cm/s, dt 4 ms) the first iterate, the object not yet moved, has the
+  // pusher 40 µm under the bottom face, and the least deep face, the front
+  // one it moves in the plane of, let it slide up the face with no force.
+  const double keep = ct.pusher && at_step_end ? gap_tolerance + dt * PusherSpeed() : gap_tolerance;
+  const geometry::Closest cl = solid->ClosestTo(centre_O, prefer_O, keep);
   pt.face_O = cl.normal_O;
   pt.p = origin + R * cl.point_O;
   pt.n = -(R * cl.normal_O);
@@ -1767,7 +1791,8 @@ StepReport ContactModel::Impl::Step() {
 bool ContactModel::Impl::RunStep(StepReport& rep) {
   for (int i = 0; i < kStepPhases; ++i) {
     const auto phase = static_cast<StepPhase>(i);
-    if (phase == StepPhase::kIntegrate) ReturnToStepStart();
+    // The faces the accepted answer was placed on are the next step's.
+    if (phase == StepPhase::kIntegrate) ReturnToStepStart(false);
     if (!RunPhase(phase, rep)) return false;
     if (phase != StepPhase::kCheckValues) continue;
     // Aligned cones: while a sliding point's slip turned away from the
@@ -1781,6 +1806,15 @@ bool ContactModel::Impl::RunStep(StepReport& rep) {
       }
     }
     if (quasi_static && !BalanceStep(i, rep)) return false;
+    if (quasi_static && tracked && PusherSlidesIn(scratch)) {
+      rep.ok = false;
+      rep.failure = StepFailure::kModel;
+      rep.error =
+          "model.inertia: quasi_static: the pusher moves into the object across a face it does "
+          "not press (its face turned at an edge between balanced and carried steps); "
+          "\"inertia\": \"carried\" models this push";
+      return false;
+    }
   }
   if (quasi_static && tracked) last_vr = scratch.vr_new;
   return true;
@@ -1869,11 +1903,131 @@ bool ContactModel::Impl::BalanceStep(int last, StepReport& rep) {
     rep = trial;
     balanced = InertialForce(scratch) <= kQuasiStatic;
   }
-  if (balanced) return true;
-  // The carried step, solved again where the step starts.
+  if (balanced && BalanceIsAcceptable(scratch)) {
+    last_step_carried = false;
+    return true;
+  }
+  last_step_carried = true;
+  // The carried step, solved again where the step starts (and on the faces
+  // its points pressed there: an iterate's placement must not choose them).
   ReturnToStepStart();
   ++rep.quasi_static_carried;
   return RunPhases(static_cast<int>(StepPhase::kPlaceContacts), last, rep);
+}
+
+// Quasi-static: whether a balanced answer (no inertial force) is one a push
+// gives. The balance weighs forces only, so it passes two answers no push
+// does, which are then refused and the carried step taken
+// (solver.quasi_static_carried): a twist the drive cannot reach in a step
+// (an extrapolation that throws the object out of its grasp is a free
+// flight, trivially balanced), and a pusher that ends the step inside the
+// object (it pushes nothing there). Carried steps reach their twist through
+// the contact forces' impulse; balanced ones may also take up the pusher's
+// motion at once, so the bound is that motion (kReachFactor at the object's
+// extent) plus the impulse of every force in the step.
+bool ContactModel::Impl::BalanceIsAcceptable(const StepScratch& s) const {
+  const Eigen::Matrix<double, 6, 1> tw = P * s.vr_new;
+  const Eigen::Vector3d& v0 = step_start ? step_start->v : v;
+  const Eigen::Vector3d& w0 = step_start ? step_start->w : w;
+  const double change = (tw.head<3>() - v0).norm() + (tw.tail<3>() - w0).norm() * L;
+  const double pusher_speed = PusherSpeed();
+  // Every force's magnitude (λ, β and the support's unknowns; the point
+  // pads' known normals), and the known load.
+  double force = mass * scene.gravity.norm();
+  for (int i = 0; i < nf; ++i) force += std::abs(Unknown(s, i));
+  for (const Contact& ct : contacts)
+    if (ct.known_normal > 0) force += (1 + ct.spec.mu) * ct.known_normal;
+  const double I_min = inertia_body.diagonal().minCoeff();
+  const double reach = kReachFactor * pusher_speed + force * dt * (1 / mass + L * L / I_min);
+  if (!(change <= reach)) return false;
+  // After a carried step, an object that moves while its pusher presses
+  // nothing coasts on what the carried step gave its free modes (along the
+  // grip axis, the pads following; about it, between point fingers): no
+  // inertial force, but momentum, not a balance (the edge push at dt 0.1 ms
+  // after its carried start coasted away from the pusher, x(T) -1.94 mm).
+  if (scene.pusher && last_step_carried &&
+      tw.head<3>().norm() + tw.tail<3>().norm() * L > slip_floor) {
+    double pressed = 0;
+    for (const Contact& ct : contacts)
+      if (ct.pusher)
+        for (const Point& pt : ct.points)
+          if (HasRows(pt) && pt.lambda >= 0) pressed += Unknown(s, pt.lambda);
+    if (!(pressed > 1e-9 * Fs)) return false;
+  }
+  return !tracked || !(PusherDepthAtStepEnd(s.vr_new) < -gap_tolerance);
+}
+
+// Quasi-static, tracked: whether the step's answer has a pusher point that
+// touches a face across its closing direction (|n · closing| < 1/2), presses
+// it with no force, and moves into the object along the closing direction
+// at more than half its speed: it passes into the object through the face
+// it closes onto, which no model does. The off-centre edge push at dt
+// 0.1 ms reached it after its carried start (x(T) 2.3 % off, the pusher on
+// the front face for the last 99 % of the run); the step is refused, typed,
+// rather than run on (docs/scene.md).
+bool ContactModel::Impl::PusherSlidesIn(const StepScratch& s) const {
+  const double speed = PusherSpeed();
+  if (!(speed > 0)) return false;
+  for (const Contact& ct : contacts) {
+    if (!ct.pusher) continue;
+    for (const Point& pt : ct.points) {
+      if (!pt.active || pt.gap > gap_tolerance || std::abs(pt.n.dot(ct.normal)) >= 0.5) continue;
+      const double lam = HasRows(pt) && pt.lambda >= 0 ? Unknown(s, pt.lambda) : 0.0;
+      if (lam > 1e-9 * Fs) continue;
+      const double inward = (pt.body_velocity - ObjectVelocity(s, pt.p)).dot(ct.normal);
+      if (inward > 0.5 * speed) return true;
+    }
+  }
+  return false;
+}
+
+// The fastest the pusher moves over this step at the object's extent (m/s;
+// 0 without a pusher).
+double ContactModel::Impl::PusherSpeed() const {
+  if (!scene.pusher) return 0;
+  const PusherTwist twist = PusherTwistOver(*scene.pusher, t, dt);
+  const Eigen::Vector3d& vp = scene.pusher->path ? twist.velocity : scene.pusher->motion.velocity;
+  const Eigen::Vector3d& wp =
+      scene.pusher->path ? twist.angular_velocity : scene.pusher->motion.angular_velocity;
+  return vp.norm() + wp.norm() * ((scene.pusher->position - c).norm() + L);
+}
+
+// Tracked: the pusher's deepest point inside the object (its signed
+// distance, < 0 inside; 0 without a pusher) where the twist ends the step.
+double ContactModel::Impl::PusherDepthAtStepEnd(const SmallVector& twist) const {
+  const Eigen::Matrix<double, 6, 1> tw = P * twist;
+  const Eigen::Vector3d c0 = step_start ? step_start->c : c;
+  const Eigen::Quaterniond q0 = step_start ? step_start->q : q;
+  Eigen::Quaterniond q_end = q0;
+  const double angle = tw.tail<3>().norm() * dt;
+  if (angle > 0)
+    q_end =
+        (Eigen::Quaterniond(Eigen::AngleAxisd(angle, tw.tail<3>().normalized())) * q0).normalized();
+  const Eigen::Matrix3d R = q_end.toRotationMatrix();
+  const Eigen::Vector3d origin = c0 + dt * tw.head<3>() - R * com_O;
+  double deepest = 0;
+  for (const Contact& ct : contacts) {
+    if (!ct.pusher) continue;
+    Eigen::Vector3d base = ct.spec.position;
+    Eigen::Matrix3d Rp = Eigen::Matrix3d::Identity();
+    if (scene.pusher->path) {
+      const PusherPose pose = PusherPoseAt(*scene.pusher, t + dt);
+      base = pose.position;
+      if (pose.turned) Rp = pose.rotation;
+    } else {
+      const PusherMotion& m = scene.pusher->motion;
+      base += m.velocity * (t + dt);
+      const double a = m.angular_velocity.norm() * (t + dt);
+      if (a > 0) Rp = Eigen::AngleAxisd(a, m.angular_velocity.normalized()).toRotationMatrix();
+    }
+    const double r = ct.spec.type == ContactType::kPoint ? ct.spec.radius : 0.0;
+    const Eigen::Vector3d closing = Rp * ct.spec.normal;
+    for (const Point& pt : ct.points) {
+      const Eigen::Vector3d centre = base + Rp * pt.offset0 - r * closing;
+      deepest = std::min(deepest, solid->ClosestTo(R.transpose() * (centre - origin)).distance - r);
+    }
+  }
+  return deepest;
 }
 
 // Quasi-static, tracked: moves the state to where the last solve ends the
@@ -1885,9 +2039,14 @@ void ContactModel::Impl::PlaceAtStepEnd(const StepScratch& s, const SmallVector&
   const Eigen::Vector3d v_end = tw.head<3>(), w_end = tw.tail<3>();
   if (!step_start) {
     StepStart start{c, v, w, q, {}};
-    for (const Contact& ct : contacts) start.pads.push_back(ct.pad);
+    start_faces.clear();
+    for (const Contact& ct : contacts) {
+      start.pads.push_back(ct.pad);
+      for (const Point& pt : ct.points) start_faces.push_back(pt.face_O);
+    }
     step_start = std::move(start);
   }
+  RestoreStartFaces();
   const StepStart& start = *step_start;
   for (size_t i = 0; i < contacts.size(); ++i) {
     Contact& ct = contacts[i];
@@ -1906,11 +2065,28 @@ void ContactModel::Impl::PlaceAtStepEnd(const StepScratch& s, const SmallVector&
   at_step_end = true;
 }
 
-// Undoes PlaceAtStepEnd before the step integrates (or is refused).
-void ContactModel::Impl::ReturnToStepStart() {
+// Every iterate of a step is placed from the faces its points pressed at
+// the step's start (PlaceOnSolid keeps a face while the point stays within
+// tolerance of it). Kept from the iterate before instead, one extrapolated
+// iterate that sank the pusher on the bottom-front edge deeper than the
+// tolerance under the bottom face put it on the front face for every later
+// iterate: its normal turned across the push, the pusher slid into the
+// object with no force, and the object's slide along the grip axis passed
+// as balanced (docs/scene.md, the off-centre edge push).
+void ContactModel::Impl::RestoreStartFaces() {
+  if (!step_start) return;
+  size_t k = 0;
+  for (Contact& ct : contacts)
+    for (Point& pt : ct.points) pt.face_O = start_faces[k++];
+}
+
+// Undoes PlaceAtStepEnd before the step integrates (start_faces false: the
+// accepted answer's faces stay) or is solved again from its start.
+void ContactModel::Impl::ReturnToStepStart(bool start_faces) {
   place_lead = 0;
   at_step_end = false;
   if (!step_start) return;
+  if (start_faces) RestoreStartFaces();
   c = step_start->c;
   q = step_start->q;
   v = step_start->v;
