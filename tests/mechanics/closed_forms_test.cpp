@@ -63,6 +63,36 @@ TEST(ClosedForms, CentralPushOnPatchesDoesNotRoll) {
   EXPECT_EQ(again.samples.back().position, r.samples.back().position);
 }
 
+// A run of `steps` model steps at the scene's settings, counting the aligned
+// cones' re-solves; `ok` false (with the reason added as a failure) when the
+// scene is refused or a step fails.
+struct AlignedRun {
+  bool ok = false;
+  long resolves = 0;
+  Eigen::Vector3d position = Eigen::Vector3d::Zero();
+  double roll = 0;  // about x, for a turn about the grip axis
+};
+AlignedRun RunCountingResolves(const Scene& scene, int steps) {
+  AlignedRun run;
+  ContactModel m(scene);
+  if (m.status() != SimulationStatus::kOk) {
+    ADD_FAILURE() << m.error();
+    return run;
+  }
+  for (int k = 0; k < steps; ++k) {
+    const StepReport step = m.Step();
+    if (!step.ok) {
+      ADD_FAILURE() << "step " << k << ": " << step.error;
+      return run;
+    }
+    run.resolves += step.align_solves;
+  }
+  run.ok = true;
+  run.position = m.position();
+  run.roll = 2 * std::atan2(m.orientation().x(), m.orientation().w());
+  return run;
+}
+
 // A push tilted by φ = 30° in the y-z plane, through the grip axis, with no
 // gravity: the pusher's contact sticks, moment balance about the grip axis
 // keeps the contact force through the axis, so the object turns with the
@@ -120,19 +150,12 @@ TEST(ClosedForms, TiltedPushTurnsWithThePusherSeenFromTheAxis) {
     Scene coarse = aligned;
     coarse.model.facets = facets;
     coarse.model.dt = 0.004;
-    ContactModel m(coarse);
-    ASSERT_EQ(m.status(), SimulationStatus::kOk) << m.error();
-    long resolves = 0;
-    for (int k = 0; k < 125; ++k) {
-      const StepReport step = m.Step();
-      ASSERT_TRUE(step.ok) << step.error;
-      resolves += step.align_solves;
-    }
-    const double roll = 2 * std::atan2(m.orientation().x(), m.orientation().w());
-    std::printf("tilted at dt 4 ms, %d facets: roll %.6f rad, %ld re-solves\n", facets, roll,
-                resolves);
-    EXPECT_NEAR(roll, theta, 2e-3 * theta) << facets;
-    EXPECT_LE(resolves, 2 * 125) << facets;
+    const AlignedRun run = RunCountingResolves(coarse, 125);
+    ASSERT_TRUE(run.ok) << facets;
+    std::printf("tilted at dt 4 ms, %d facets: roll %.6f rad, %ld re-solves\n", facets, run.roll,
+                run.resolves);
+    EXPECT_NEAR(run.roll, theta, 2e-3 * theta) << facets;
+    EXPECT_LE(run.resolves, 2 * 125) << facets;
   }
 }
 
@@ -229,22 +252,16 @@ TEST(ClosedForms, CarriedPivotAlignsWithinBoundedResolves) {
   for (int facets : {8, 32}) {
     Scene s = scene;
     s.model.facets = facets;
-    ContactModel m(s);
-    ASSERT_EQ(m.status(), SimulationStatus::kOk) << m.error();
-    long resolves = 0;
-    for (int k = 0; k < 600; ++k) {
-      const StepReport r = m.Step();
-      ASSERT_TRUE(r.ok) << r.error;
-      resolves += r.align_solves;
-    }
+    const AlignedRun run = RunCountingResolves(s, 600);
+    ASSERT_TRUE(run.ok) << facets;
     std::printf("carried pivot, aligned cone, %d facets: %ld re-solves, y %.4f mm\n", facets,
-                resolves, 1e3 * m.position().y());
-    EXPECT_LE(resolves, 150) << facets;  // 109 at 8 facets (367 pinning within a step only)
+                run.resolves, 1e3 * run.position.y());
+    EXPECT_LE(run.resolves, 150) << facets;  // 109 at 8 facets (367 pinning within a step only)
     // The sideways slide in the grasp, against the polyhedral cone at 64
     // facets (its slip steered by at most 1/64 of a turn): y −1.007 mm; the
     // aligned cone −1.009 mm at 8 facets, −0.969 at 32 (turned onto the slip
     // rather than the friction, −0.57 mm at 8).
-    EXPECT_NEAR(m.position().y(), -1.007e-3, 0.05e-3) << facets;
+    EXPECT_NEAR(run.position.y(), -1.007e-3, 0.05e-3) << facets;
   }
   {
     Scene fine = scene;
@@ -348,20 +365,13 @@ TEST(ClosedForms, AlignedConeSettlesOnAnEdgeOfTheBasis) {
   for (int facets : {8, 32}) {
     Scene s = scene;
     s.model.facets = facets;
-    ContactModel m(s);
-    ASSERT_EQ(m.status(), SimulationStatus::kOk) << m.error();
-    long resolves = 0;
-    for (int k = 0; k < 50; ++k) {
-      const StepReport step = m.Step();
-      ASSERT_TRUE(step.ok) << step.error;
-      resolves += step.align_solves;
-    }
-    const double roll = 2 * std::atan2(m.orientation().x(), m.orientation().w());
+    const AlignedRun run = RunCountingResolves(s, 50);
+    ASSERT_TRUE(run.ok) << facets;
     std::printf(
         "tilted start, aligned, %d facets: roll %.6f (polyhedral limit %.6f), %ld re-solves\n",
-        facets, roll, limit, resolves);
-    EXPECT_NEAR(roll, limit, 5e-4) << facets;
-    EXPECT_LE(resolves, 2 * 50) << facets;
+        facets, run.roll, limit, run.resolves);
+    EXPECT_NEAR(run.roll, limit, 5e-4) << facets;
+    EXPECT_LE(run.resolves, 2 * 50) << facets;
   }
   polyhedral.model.facets = 8;
   EXPECT_GT(roll_of(polyhedral), 5 * limit) << "the steered slip this scene measures";
