@@ -941,6 +941,12 @@ struct ContactModel::Impl {
   bool PusherSlidesIn(const StepScratch& s) const;
   double PusherSpeed() const;
   double PusherDepthAtStepEnd(const SmallVector& twist) const;
+  struct PusherPlacement {
+    Eigen::Vector3d base = Eigen::Vector3d::Zero();
+    Eigen::Matrix3d rotation = Eigen::Matrix3d::Identity();
+    bool turned = false;
+  };
+  PusherPlacement PusherAt(const Contact& ct, double at) const;
   void RestoreStartFaces();
   void ReturnToStepStart(bool start_faces = true);
   void GapsFromStepEnd(const StepScratch& s);
@@ -1601,6 +1607,29 @@ bool ContactModel::Impl::PlacePatch(Contact& ct, const Eigen::Vector3d& base,
   return true;
 }
 
+// Where the pusher contact `ct` is at time `at`: a recorded path's pose, or
+// its constant motion from its start (the product the model has always
+// computed, so trajectories stay bit for bit); the rotation is the identity
+// unless it turns.
+ContactModel::Impl::PusherPlacement ContactModel::Impl::PusherAt(const Contact& ct,
+                                                                 double at) const {
+  PusherPlacement placed;
+  if (scene.pusher->path) {
+    const PusherPose pose = PusherPoseAt(*scene.pusher, at);
+    placed.base = pose.position;
+    placed.turned = pose.turned;
+    placed.rotation = pose.rotation;
+    return placed;
+  }
+  const PusherMotion& m = scene.pusher->motion;
+  placed.base = ct.spec.position + m.velocity * at;
+  const double a = m.angular_velocity.norm() * at;
+  placed.turned = a > 0;
+  if (placed.turned)
+    placed.rotation = Eigen::AngleAxisd(a, m.angular_velocity.normalized()).toRotationMatrix();
+  return placed;
+}
+
 // Contact geometry at time t from the object's pose: each primitive sits
 // where the hand (fingers: at their pads' travel along the closing
 // direction) or the pusher's motion puts it; its constituent points meet the
@@ -1618,22 +1647,20 @@ void ContactModel::Impl::TrackedGeometry() {
     Eigen::Matrix3d Rp = Eigen::Matrix3d::Identity();
     Eigen::Vector3d vp = Eigen::Vector3d::Zero(), wp = Eigen::Vector3d::Zero();
     Eigen::Vector3d base = ct.spec.position + ct.pad * ct.spec.normal;
-    if (ct.pusher && scene.pusher->path) {
-      // A recorded path: where it is now, and its mean motion over the step.
-      const PusherPose pose = PusherPoseAt(*scene.pusher, t + place_lead);
-      const PusherTwist twist = PusherTwistOver(*scene.pusher, t, dt);
-      vp = twist.velocity;
-      wp = twist.angular_velocity;
-      base = pose.position;
-      turned = pose.turned;
-      Rp = pose.rotation;
-    } else if (ct.pusher) {
-      vp = scene.pusher->motion.velocity;
-      wp = scene.pusher->motion.angular_velocity;
-      base = ct.spec.position + vp * (t + place_lead);
-      const double a = wp.norm() * (t + place_lead);
-      turned = a > 0;
-      if (turned) Rp = Eigen::AngleAxisd(a, wp.normalized()).toRotationMatrix();
+    if (ct.pusher) {
+      const PusherPlacement placed = PusherAt(ct, t + place_lead);
+      base = placed.base;
+      turned = placed.turned;
+      Rp = placed.rotation;
+      if (scene.pusher->path) {
+        // A recorded path: its mean motion over the step.
+        const PusherTwist twist = PusherTwistOver(*scene.pusher, t, dt);
+        vp = twist.velocity;
+        wp = twist.angular_velocity;
+      } else {
+        vp = scene.pusher->motion.velocity;
+        wp = scene.pusher->motion.angular_velocity;
+      }
     }
     const Eigen::Vector3d closing = turned ? Eigen::Vector3d(Rp * ct.spec.normal) : ct.spec.normal;
     ct.normal = closing;
@@ -2008,18 +2035,9 @@ double ContactModel::Impl::PusherDepthAtStepEnd(const SmallVector& twist) const 
   double deepest = 0;
   for (const Contact& ct : contacts) {
     if (!ct.pusher) continue;
-    Eigen::Vector3d base = ct.spec.position;
-    Eigen::Matrix3d Rp = Eigen::Matrix3d::Identity();
-    if (scene.pusher->path) {
-      const PusherPose pose = PusherPoseAt(*scene.pusher, t + dt);
-      base = pose.position;
-      if (pose.turned) Rp = pose.rotation;
-    } else {
-      const PusherMotion& m = scene.pusher->motion;
-      base += m.velocity * (t + dt);
-      const double a = m.angular_velocity.norm() * (t + dt);
-      if (a > 0) Rp = Eigen::AngleAxisd(a, m.angular_velocity.normalized()).toRotationMatrix();
-    }
+    const PusherPlacement placed = PusherAt(ct, t + dt);
+    const Eigen::Vector3d& base = placed.base;
+    const Eigen::Matrix3d& Rp = placed.rotation;
     const double r = ct.spec.type == ContactType::kPoint ? ct.spec.radius : 0.0;
     const Eigen::Vector3d closing = Rp * ct.spec.normal;
     for (const Point& pt : ct.points) {
