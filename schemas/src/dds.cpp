@@ -662,7 +662,10 @@ int Participant::domain_id() const { return core_->domain_id; }
 
 std::optional<PeerEvent> Participant::NextPeerEvent(Millis timeout) {
   std::unique_lock<std::mutex> lock(core_->mutex);
-  if (!core_->changed.wait_for(lock, timeout, [&] { return !core_->events.empty(); })) {
+  // A poll (timeout 0) must not enter a timed wait: an expired futex wait
+  // still yields the CPU, and the service polls here on every loop turn.
+  const auto has_event = [&] { return !core_->events.empty(); };
+  if (timeout.count() <= 0 ? !has_event() : !core_->changed.wait_for(lock, timeout, has_event)) {
     return std::nullopt;
   }
   PeerEvent e = std::move(core_->events.front());
@@ -907,6 +910,7 @@ struct Reader<T>::Impl : public fdds::DataReaderListener {
   ReaderCounters counters;  // under mutex
 
   std::string only_cell;  // real-time topics: this cell's messages only
+  std::shared_ptr<Doorbell> doorbell;
 
   ~Impl() override {
     if (reader != nullptr) {
@@ -937,6 +941,7 @@ struct Reader<T>::Impl : public fdds::DataReaderListener {
       for (auto& s : taken) Enqueue(std::move(s));
     }
     arrived.notify_all();
+    if (doorbell) doorbell->Ring();
   }
 
   void on_sample_lost(fdds::DataReader*, const fdds::SampleLostStatus& status) override {
@@ -982,6 +987,7 @@ Reader<T>::Reader(Participant& participant, const ReaderOptions& options)
     : impl_(std::make_unique<Impl>()) {
   impl_->core = participant.core();
   impl_->report_liveliness = options.report_liveliness;
+  impl_->doorbell = options.doorbell;
   auto& core = *impl_->core;
   const std::string topic = Traits<T>::kTopic;  // the QoS are the type's
   const std::string dds_topic = DdsTopic(topic, options.controller);
@@ -1052,10 +1058,45 @@ Reader<T>::Reader(Participant& participant, const ReaderOptions& options)
 template <class T>
 Reader<T>::~Reader() = default;
 
+// ---------------------------------------------------------------------------
+// Doorbell
+
+struct Doorbell::Impl {
+  mutable std::mutex mutex;
+  std::condition_variable rung_cv;
+  bool rung = false;
+};
+
+Doorbell::Doorbell() : impl_(std::make_unique<Impl>()) {}
+Doorbell::~Doorbell() = default;
+
+void Doorbell::Ring() {
+  {
+    std::lock_guard<std::mutex> lock(impl_->mutex);
+    impl_->rung = true;
+  }
+  impl_->rung_cv.notify_all();
+}
+
+bool Doorbell::Wait(std::chrono::nanoseconds timeout) {
+  std::unique_lock<std::mutex> lock(impl_->mutex);
+  const bool rung = timeout.count() <= 0
+                        ? impl_->rung
+                        : impl_->rung_cv.wait_for(lock, timeout, [&] { return impl_->rung; });
+  impl_->rung = false;
+  return rung;
+}
+
+bool Doorbell::Rung() const {
+  std::lock_guard<std::mutex> lock(impl_->mutex);
+  return impl_->rung;
+}
+
 template <class T>
 std::optional<T> Reader<T>::Take(std::chrono::nanoseconds timeout) {
   std::unique_lock<std::mutex> lock(impl_->mutex);
-  if (!impl_->arrived.wait_for(lock, timeout, [&] { return !impl_->queue.empty(); })) {
+  const auto queued = [&] { return !impl_->queue.empty(); };
+  if (timeout.count() <= 0 ? !queued() : !impl_->arrived.wait_for(lock, timeout, queued)) {
     return std::nullopt;
   }
   T sample = std::move(impl_->queue.front());

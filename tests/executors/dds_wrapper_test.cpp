@@ -95,6 +95,50 @@ TEST(DdsParticipant, LateReaderGetsTheLastAnnouncement) {
   EXPECT_FALSE(reader.Take(200ms));
 }
 
+// Issue 27: one loop serving several topics waits on all of them through a
+// doorbell its readers ring; a wait of 0 is a poll.
+TEST(DdsParticipant, ADoorbellWakesOnAnyOfItsReaders) {
+  auto bell = std::make_shared<dds::Doorbell>();
+  EXPECT_FALSE(bell->Wait(0ms));
+  EXPECT_FALSE(bell->Wait(20ms));  // not rung: the wait times out
+  bell->Ring();
+  EXPECT_TRUE(bell->Rung());
+  EXPECT_TRUE(bell->Rung());  // looking does not clear it
+  EXPECT_TRUE(bell->Wait(0ms));
+  EXPECT_FALSE(bell->Rung());  // a wait does
+
+  dds::Participant a(Named("arena.test.cell", 7));
+  dds::Participant b(Named("arena.test.service", 7));
+  dds::ReaderOptions rung;
+  rung.doorbell = bell;
+  dds::Reader<msg::TrialStatus> statuses(b, rung);
+  dds::Reader<msg::GroundTruth> truth(b, rung);
+  dds::Writer<msg::TrialStatus> status_writer(a);
+  dds::Writer<msg::GroundTruth> truth_writer(a);
+  ASSERT_TRUE(status_writer.WaitForMatched(1, 10s));
+  ASSERT_TRUE(truth_writer.WaitForMatched(1, 10s));
+  EXPECT_FALSE(statuses.Take(0ns));  // a poll of an empty queue
+
+  msg::GroundTruth g;
+  g.trial_id(7);
+  ASSERT_TRUE(truth_writer.Write(g));
+  const auto start = std::chrono::steady_clock::now();
+  ASSERT_TRUE(bell->Wait(10s));  // woken by the ground truth, not a status
+  EXPECT_LT(std::chrono::steady_clock::now() - start, 9s);
+  const auto batches = truth.TakeAll();
+  ASSERT_EQ(batches.size(), 1u);  // queued before the ring
+  EXPECT_EQ(batches[0].trial_id(), 7u);
+  EXPECT_FALSE(statuses.Take(0ns));
+
+  msg::TrialStatus st;
+  st.trial_id(8);
+  ASSERT_TRUE(status_writer.Write(st));
+  ASSERT_TRUE(bell->Wait(10s));
+  const auto taken = statuses.Take(0ns);
+  ASSERT_TRUE(taken);
+  EXPECT_EQ(taken->trial_id(), 8u);
+}
+
 TEST(DdsParticipant, ParticipantLeavingIsReported) {
   dds::Participant b(Named("arena.test.watch", 3));
   dds::Reader<msg::TrialStatus> reader(b);

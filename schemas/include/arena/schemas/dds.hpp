@@ -247,6 +247,27 @@ class Writer {
   std::unique_ptr<Impl> impl_;
 };
 
+// Rung by every reader that names it (ReaderOptions::doorbell) when a sample
+// arrives, so one loop serving several topics waits on all of them at once:
+// a sample of one topic never waits out another topic's timeout (issue 27:
+// a trial's last ground-truth batch sat behind the service's status wait).
+class Doorbell {
+ public:
+  Doorbell();
+  ~Doorbell();
+  Doorbell(const Doorbell&) = delete;
+  Doorbell& operator=(const Doorbell&) = delete;
+  void Ring();
+  // Waits until rung or `timeout`, and clears the ring. @returns true if rung.
+  bool Wait(std::chrono::nanoseconds timeout);
+  // Rung since the last Wait (the ring stays for the next Wait).
+  bool Rung() const;
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
 struct ReaderOptions {
   ReaderOptions() = default;
   // ReaderOptions{false}, ReaderOptions{false, "c1"}.
@@ -269,6 +290,8 @@ struct ReaderOptions {
   // PusherCommand only: read the topic of this controller's commands,
   // ControllerTopic(controller), and no other. Empty: the plain topic.
   std::string controller;
+  // Rung after each arrival queued for Take()/TakeAll(). Empty: none.
+  std::shared_ptr<Doorbell> doorbell;
 };
 
 // What a reader saw and did not hand over (Reader::counters()).
@@ -297,7 +320,8 @@ class Reader {
   Reader(const Reader&) = delete;
   Reader& operator=(const Reader&) = delete;
 
-  // Next sample in arrival order, waiting up to timeout. LiveState and
+  // Next sample in arrival order, waiting up to timeout (0: a poll that
+  // never yields the thread). LiveState and
   // PusherCommand queue keep-last 1 per cell as their QoS does: a newer
   // message of a cell replaces one not yet taken.
   // (Any duration: a real-time reader waits to the microsecond.)
