@@ -26,6 +26,7 @@
 #include "clock.hpp"
 #include "closed_loop_trial.hpp"
 #include "command_intake.hpp"
+#include "defects_json.hpp"
 #include "trial_start.hpp"
 #include "trial_stream.hpp"
 
@@ -561,7 +562,7 @@ struct Cell::Impl {
     detail["backend"] = layer.capabilities().name;
     detail["truth"] = StoredTruth(layer.capabilities().truth, trial_truth);
     if (!trial_truth.forces_measured) detail["forces_not_measured"] = trial_truth.forces_note;
-    detail["defects_applied"] = json::parse(layer.AppliedJson());
+    detail["defects_applied"] = internal::AppliedDefectsTree(layer);
     s.detail_json(detail.dump());
     if (!failure.empty()) {
       spdlog::warn("cell {}: trial {} attempt {} failed: {}", options.id, c.trial_id(), c.attempt(),
@@ -609,7 +610,7 @@ struct Cell::Impl {
     s.samples(static_cast<std::uint32_t>(out.sent()));  // already in the log (not a trial)
     s.phase_wall_s(std::chrono::duration<double>(Clock::now() - started).count());
     s.detail_json(json({{"backend", layer.capabilities().name},
-                        {"defects_applied", json::parse(layer.AppliedJson())},
+                        {"defects_applied", internal::AppliedDefectsTree(layer)},
                         {"streamed_samples", out.sent()},
                         {"backend_detail", json::parse(outcome.detail_json, nullptr, false)}})
                       .dump());

@@ -1,4 +1,5 @@
 #include "closed_loop_trial.hpp"
+#include "defects_json.hpp"
 
 #include <algorithm>
 #include <cmath>
@@ -214,7 +215,7 @@ json ClosedLoopTrial::Detail(const mechanics::SimulationResult& result,
       {"batches", log_batches},
       {"backend", layer_.capabilities().name},
       {"truth", ToString(layer_.capabilities().truth)},
-      {"defects_applied", json::parse(layer_.AppliedJson())},
+      {"defects_applied", internal::AppliedDefectsTree(layer_)},
       {"model",
        {{"dof", result.model.dof},
         {"facets", result.model.facets},

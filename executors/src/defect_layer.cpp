@@ -4,6 +4,8 @@
 
 #include <nlohmann/json.hpp>
 
+#include "defects_json.hpp"
+
 namespace arena::executors {
 namespace {
 
@@ -118,20 +120,26 @@ Observer DefectLayer::MakeObserver(const TrialContext& trial) const {
   return Observer(actual_, effective_, trial.seed, trial.trial_id);
 }
 
-std::string DefectLayer::AppliedJson() const {
+std::string DefectLayer::AppliedJson() const { return internal::AppliedDefectsTree(*this).dump(); }
+
+namespace internal {
+
+nlohmann::json AppliedDefectsTree(const DefectLayer& layer) {
   using nlohmann::json;
-  const auto profile = [](const DefectProfile& p) { return json::parse(DefectProfileToJson(p)); };
-  return json({{"emulated", caps_.emulates_defects},
-               {"cell", profile(cell_)},
-               {"campaign", campaign_ ? profile(*campaign_) : json(nullptr)},
-               {"effective", profile(effective_)},
+  const TrialPerturbation& perturbation = layer.perturbation();
+  const auto& campaign = layer.campaign_profile();
+  return json({{"emulated", layer.capabilities().emulates_defects},
+               {"cell", DefectProfileTree(layer.cell_profile())},
+               {"campaign", campaign ? DefectProfileTree(*campaign) : json(nullptr)},
+               {"effective", DefectProfileTree(layer.effective_profile())},
                {"perturbation",
-                {{"mu_scale", perturbation_.mu_scale},
-                 {"velocity_scale", perturbation_.velocity_scale},
+                {{"mu_scale", perturbation.mu_scale},
+                 {"velocity_scale", perturbation.velocity_scale},
                  {"velocity_offset",
-                  {perturbation_.velocity_offset.x(), perturbation_.velocity_offset.y(),
-                   perturbation_.velocity_offset.z()}}}}})
-      .dump();
+                  {perturbation.velocity_offset.x(), perturbation.velocity_offset.y(),
+                   perturbation.velocity_offset.z()}}}}});
 }
+
+}  // namespace internal
 
 }  // namespace arena::executors

@@ -10,6 +10,7 @@
 
 #include "arena/mechanics/pusher_motion.hpp"
 #include "arena/reset/rng.hpp"
+#include "defects_json.hpp"
 #include "vector_json.hpp"
 
 namespace arena::executors {
@@ -238,7 +239,9 @@ DefectProfile ParseDefectProfile(std::string_view text) {
   return p;
 }
 
-std::string DefectProfileToJson(const DefectProfile& p) {
+namespace internal {
+
+json DefectProfileTree(const DefectProfile& p) {
   json types = json::array();
   for (auto t : p.contact_types) types.push_back(TypeName(t));
   const auto& r = p.reset;
@@ -268,7 +271,13 @@ std::string DefectProfileToJson(const DefectProfile& p) {
   if (p.hang_after_accept || !p.corrupt_stream.empty())
     j["fault_injection"] = {{"hang_after_accept", p.hang_after_accept},
                             {"stream", p.corrupt_stream}};
-  return j.dump();
+  return j;
+}
+
+}  // namespace internal
+
+std::string DefectProfileToJson(const DefectProfile& p) {
+  return internal::DefectProfileTree(p).dump();
 }
 
 reset::ResetParams EffectiveResetParams(const DefectProfile& p) {

@@ -53,6 +53,10 @@ class DefectLayer {
   // The inner backend's word on the prepared trial's truth (Backend::PreparedTruth).
   TrialTruth PreparedTruth() const { return inner_->PreparedTruth(); }
   const DefectProfile& cell_profile() const { return cell_; }
+  // The prepared trial's campaign profile (none: the campaign sets none) and
+  // the combination it runs with.
+  const std::optional<DefectProfile>& campaign_profile() const { return campaign_; }
+  const DefectProfile& effective_profile() const { return effective_; }
 
   // Sets the trial's campaign profile ("" or "{}" = none) and checks the
   // scene against the combined limits and the backend. "" = can run it.
