@@ -475,6 +475,8 @@ struct Service::Impl {
   const std::uint64_t session = NewSession();
   dds::Participant participant;
   DdsTransport transport;
+  // Rung by each input reader: the loop wakes on whichever input comes.
+  std::shared_ptr<dds::Doorbell> input = std::make_shared<dds::Doorbell>();
   dds::Reader<msg::CellAnnounce> announces;
   dds::Reader<msg::TrialStatus> statuses;
   dds::Reader<msg::GroundTruth> truth_reader;
@@ -497,6 +499,12 @@ struct Service::Impl {
   std::atomic<bool> stop_requested{false};
   std::function<void(const ServiceCounters&)> on_tick;
 
+  static dds::ReaderOptions RungBy(std::shared_ptr<dds::Doorbell> doorbell) {
+    dds::ReaderOptions o;
+    o.doorbell = std::move(doorbell);
+    return o;
+  }
+
   static db::StoreOptions StoreOptionsFor(const ServiceOptions& o) {
     db::StoreOptions so;
     so.scene_facts = SceneFactsOfJson;  // an older store's migration reads scenes
@@ -508,9 +516,9 @@ struct Service::Impl {
       : opt(o),
         participant(dds::ParticipantOptions{o.domain_id, "arena.service", o.network, 2.5}),
         transport(participant),
-        announces(participant),
-        statuses(participant),
-        truth_reader(participant),
+        announces(participant, RungBy(input)),
+        statuses(participant, RungBy(input)),
+        truth_reader(participant, RungBy(input)),
         predictor(o.predictor_threads, o.predictor_nice),
         store(db::Store::Open(o.db_path, StoreOptionsFor(o))) {
     predictor.SetStore(store.get());
@@ -550,6 +558,7 @@ struct Service::Impl {
     DriverOptions d;
     d.service = o;
     driver = std::make_unique<TrialDriver>(d, me, *trial_store, transport, predictor);
+    driver->OnInputWaiting([doorbell = input] { return doorbell->Rung(); });
     const auto t0 = Clock::now();
     suspenders = std::make_unique<Suspenders>(o.suspenders,
                                               [t0] { return Seconds(Clock::now() - t0).count(); });
@@ -619,8 +628,9 @@ struct Service::Impl {
         spdlog::info("stopping: no new trials; waiting up to {} s for phases in flight",
                      opt.drain_timeout_s);
       }
-      // Statuses are the latency-critical input: wait on them briefly.
-      if (auto st = statuses.Take(std::chrono::milliseconds(1))) driver->OnStatus(*st);
+      // Wait briefly for any input: a trial's ground truth is stored as it
+      // arrives, so its status finds the stream complete.
+      input->Wait(std::chrono::milliseconds(1));
       for (auto& a : announces.TakeAll()) driver->OnAnnounce(a);
       for (auto& b : truth_reader.TakeAll()) driver->OnGroundTruth(b);
       for (auto& st : statuses.TakeAll()) driver->OnStatus(st);

@@ -374,8 +374,13 @@ struct TrialDriver::Impl {
   // nothing the restart does not redo: the trial is predicted again, the
   // cell's count of failures in a row was already 0.
   std::deque<std::function<void()>> background;
+  std::function<bool()> input_waiting;  // TrialDriver::OnInputWaiting
+  // One at least per Tick (progress under a steady stream of inputs), the
+  // rest only while no input waits: a cell whose reset ended meanwhile gets
+  // its EXECUTE before these writes, not after them (issue 27).
   void RunBackground() {
-    while (!background.empty()) {
+    for (bool first = true; !background.empty(); first = false) {
+      if (!first && input_waiting && input_waiting()) return;
       auto work = std::move(background.front());
       background.pop_front();
       work();
@@ -422,7 +427,9 @@ struct TrialDriver::Impl {
     if (phase == CellPhase::kExecuting) {
       auto it = executions.find(cell.trial_id);
       if (it != executions.end()) {
-        const Execution& ex = it->second;
+        Execution& ex = it->second;
+        // What ran the attempt is recorded though its stream is not published.
+        if (ex.execution) WriteExecution(ex.trial_id, ex.attempt, *std::exchange(ex.execution, {}));
         if (d.trial == TrialStep::kFail)
           FailTrial(ex.trial_id, ex.campaign_id, ex.attempt, reason, d.outcome, d.rule);
         else
@@ -1020,10 +1027,7 @@ struct TrialDriver::Impl {
           auto eit = executions.find(trial_id);
           if (eit == executions.end()) return;
           spdlog::error("{}: {}", tag, e.what());
-          // Refused with the publish: what ran the trial is still recorded, as before the fold.
-          if (eit->second.execution)
-            WriteExecution(trial_id, eit->second.attempt,
-                           *std::exchange(eit->second.execution, {}));
+          // Refused with the publish: EndPhase still records what ran the trial.
           CellRun& c = Cell(eit->second.cell_id);
           EndPhase(c, DecideServiceEvent(c.phase, ServiceEvent::kStoreRefusedTruth), e.what());
         });
@@ -1119,18 +1123,15 @@ struct TrialDriver::Impl {
 
   // What the trial ran on and which defects were applied (the cell's word).
   // Metadata: a store error here is logged by Step's policy, never blocks the trial.
-  // When the stream is complete and sound (it is published at once), the
-  // record joins the publish's transaction (PublishExecuted): one commit less.
+  // Kept until the stream is published, to join the publish's transaction
+  // (PublishExecuted): no commit of its own between the status and the RESET,
+  // also when the status arrives before the stream's last batch. A phase that
+  // ends without a publish writes it then (EndPhase).
   void RecordExecution(Execution& ex, const nlohmann::json& detail) {
     if (!detail.is_object()) return;
-    db::ExecutionRecord record{
+    ex.execution = db::ExecutionRecord{
         detail.value("backend", std::string()), detail.value("truth", std::string()),
         detail.contains("defects_applied") ? detail["defects_applied"].dump() : std::string()};
-    if (ex.next_sample >= ex.expected && StreamProblem(ex).empty()) {
-      ex.execution = std::move(record);
-      return;
-    }
-    WriteExecution(ex.trial_id, ex.attempt, std::move(record));
   }
   void WriteExecution(std::int64_t trial_id, int attempt, db::ExecutionRecord r) {
     Step("trial " + std::to_string(trial_id) + ": record execution", "",
@@ -1175,7 +1176,7 @@ struct TrialDriver::Impl {
         if (detail.is_object()) ex.stated_truth = detail.value("truth", std::string());
         // The cell changed what differed before it ran (executors/trial_start.hpp).
         RecordChanges(cell, ex.trial_id, ex.attempt, "execute",
-                      FixturesOfTrial(ex.trial_id, ex.scene_json));
+                      FixturesOfTrial(ex.trial_id, ex.scene_json), /*after_dispatch=*/true);
         ex.expected = st.samples();
         RecordExecution(ex, detail);
       }
@@ -1495,6 +1496,9 @@ bool TrialDriver::CampaignsFinished() {
   return finished;
 }
 ServiceCounters TrialDriver::counters() const { return impl_->Snapshot(); }
+void TrialDriver::OnInputWaiting(std::function<bool()> waiting) {
+  impl_->input_waiting = std::move(waiting);
+}
 void TrialDriver::OnTrialTiming(std::function<void(const TrialTiming&)> callback) {
   impl_->on_trial_timing = std::move(callback);
 }

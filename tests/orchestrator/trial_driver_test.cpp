@@ -188,6 +188,7 @@ struct FakeStore : TrialStore {
     if (also.execution) faults.Hit("RecordExecution");
     if (!also.begin_reset_rule.empty()) faults.Hit("BeginReset");
     const std::int64_t n = sink.Finish();
+    if (also.execution) ++executions_published;
     if (!also.begin_reset_rule.empty()) {
       Move(id, attempt, db::TrialState::kResetting);
       trials.at(id).rules.push_back(also.begin_reset_rule);
@@ -214,8 +215,11 @@ struct FakeStore : TrialStore {
                        const std::string&) override {
     faults.Hit("RecordExecution");
     last_backend = backend;
+    ++executions_alone;
   }
   std::string last_backend;
+  int executions_alone = 0;      // records written in a commit of their own
+  int executions_published = 0;  // records that joined the publish (PublishExecuted)
   void RecordClosedLoop(const db::ClosedLoopRun& run) override {
     faults.Hit("RecordClosedLoop");
     closed_loops.push_back(run);
@@ -304,6 +308,8 @@ struct Harness {
   msg::TrialState execute_answer = msg::STATE_EXECUTED;
   msg::FailureKind execute_failure = msg::FAILURE_NONE;
   std::string execute_detail = "{}";  // the EXECUTE status's detail_json
+  bool status_before_truth = false;   // the EXECUTED status overtakes the stream's batch
+  int batches_lost = 0;               // this many EXECUTEs' batches never arrive
 
   bool predictor_holds = false;  // the predictor answers nothing (a slow or stopped one)
 
@@ -385,11 +391,13 @@ struct Harness {
       const msg::TrialCommand c = transport.sent[answered];
       if (c.phase() == msg::PHASE_EXECUTE) {
         driver->OnStatus(Status(c, msg::STATE_ACCEPTED));
-        if (execute_answer == msg::STATE_EXECUTED) driver->OnGroundTruth(Batch(c));
+        const bool batch = execute_answer == msg::STATE_EXECUTED && batches_lost-- <= 0;
+        if (batch && !status_before_truth) driver->OnGroundTruth(Batch(c));
         auto st = Status(c, execute_answer);
         st.failure(execute_failure);
         st.detail_json(execute_detail);
         driver->OnStatus(st);
+        if (batch && status_before_truth) driver->OnGroundTruth(Batch(c));
       } else if (c.phase() == msg::PHASE_RESET) {
         driver->OnStatus(Status(c, msg::STATE_RESET_DONE));
       }
@@ -526,6 +534,76 @@ TEST(TrialDriver, AfterACleanResetTheNextExecuteGoesOutBeforeTheResetIsWritten) 
     EXPECT_EQ(h.store.trials[id].predictions, 1);
     EXPECT_EQ(h.store.trials[id].rules,
               (std::vector<std::string>{kResetAfterExecute, "reset.verified"}));
+  }
+}
+
+// Issue 27: what ran a trial (the EXECUTED status's detail) is stored in the
+// publish's transaction, also when the status overtakes the stream's last
+// batch: no commit of its own between the cell's status and its RESET.
+TEST(TrialDriver, TheExecutionRecordJoinsThePublishWhenTheStatusOvertakesTheStream) {
+  for (const bool overtakes : {false, true}) {
+    SCOPED_TRACE(overtakes ? "status first" : "stream first");
+    Harness h(2);
+    h.execute_detail = R"({"backend": "model", "truth": "simulated", "defects_applied": {}})";
+    h.status_before_truth = overtakes;
+    h.Start();
+    ASSERT_TRUE(h.RunToEnd());
+    EXPECT_EQ(h.store.executions_published, 2);
+    EXPECT_EQ(h.store.executions_alone, 0);
+    for (const std::int64_t id : {1, 2}) {
+      EXPECT_EQ(h.store.trials[id].state, db::TrialState::kDone);
+      EXPECT_EQ(h.store.trials[id].attempt, 1);
+    }
+  }
+}
+
+// An attempt whose stream never completes is not published, and its record
+// (what ran it) is written when its phase ends: nothing the cell said is lost.
+TEST(TrialDriver, AnUnpublishedAttemptStillRecordsWhatRanIt) {
+  Harness h;
+  h.execute_detail = R"({"backend": "model", "truth": "simulated", "defects_applied": {}})";
+  h.status_before_truth = true;
+  h.batches_lost = 1;  // the first attempt's stream never comes: its grace runs out
+  h.Start();
+  ASSERT_TRUE(h.RunToEnd());
+  EXPECT_EQ(h.store.trials[1].state, db::TrialState::kDone);
+  EXPECT_EQ(h.store.trials[1].attempt, 2);
+  EXPECT_EQ(h.store.executions_alone, 1);      // attempt 1's, when its phase ended
+  EXPECT_EQ(h.store.executions_published, 1);  // attempt 2's, with its stream
+  EXPECT_EQ(h.store.last_backend, "model");
+}
+
+// Issue 27: while an input waits (the service's doorbell rang), Tick runs one
+// of the writes no cell waits on and leaves the rest for the next Tick, so a
+// cell's status is answered first; every write still runs.
+TEST(TrialDriver, WritesNoCellWaitsOnYieldOneAtATimeToAWaitingInput) {
+  for (const bool waiting : {false, true}) {
+    SCOPED_TRACE(waiting ? "an input waits" : "nothing waits");
+    Harness h(2);
+    h.driver->OnInputWaiting([waiting] { return waiting; });
+    h.Start();
+    h.t += std::chrono::milliseconds(100);
+    h.driver->Tick(false);  // trial 1's EXECUTE
+    h.Answer();             // its stream, its RESET, the cell's RESET_DONE
+    ASSERT_EQ(h.Sent(msg::PHASE_RESET), 1);
+    // Queued: trial 1's prediction, its reset's record, the cell's good result.
+    auto& calls = h.store.faults.calls;
+    const int results = calls["RecordCellResult"];  // the cell's first execute, written at once
+    h.t += std::chrono::milliseconds(100);
+    h.driver->Tick(false);  // trial 2's EXECUTE, then the queued writes
+    ASSERT_EQ(h.Sent(msg::PHASE_EXECUTE), 2);
+    EXPECT_EQ(h.predictions.requests.size(), 1u);
+    EXPECT_EQ(calls["CompleteReset"], waiting ? 0 : 1);
+    EXPECT_EQ(calls["RecordCellResult"], results + (waiting ? 0 : 1));
+    h.t += std::chrono::milliseconds(100);
+    h.driver->Tick(false);
+    EXPECT_EQ(calls["CompleteReset"], 1);
+    EXPECT_EQ(calls["RecordCellResult"], results + (waiting ? 0 : 1));
+    h.t += std::chrono::milliseconds(100);
+    h.driver->Tick(false);
+    EXPECT_EQ(calls["RecordCellResult"], results + 1);
+    ASSERT_TRUE(h.RunToEnd());
+    for (const std::int64_t id : {1, 2}) EXPECT_EQ(h.store.trials[id].state, db::TrialState::kDone);
   }
 }
 

@@ -290,6 +290,9 @@ class TrialDriver {
   bool CampaignsFinished();
   ServiceCounters counters() const;
   void OnTrialTiming(std::function<void(const TrialTiming&)> callback);
+  // True while an input (a status, ground truth) waits to be taken: Tick's
+  // writes that no cell waits on then yield to it. None: they never yield.
+  void OnInputWaiting(std::function<bool()> waiting);
   // Store steps waiting for a busy store to free up.
   std::size_t pending_store_steps() const;
   // The suspenders (or nullptr): fed every reset, stream, closed loop and
