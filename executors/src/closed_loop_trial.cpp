@@ -1,11 +1,11 @@
 #include "closed_loop_trial.hpp"
-#include "defects_json.hpp"
 
 #include <algorithm>
 #include <cmath>
 
 #include "arena/executors/defects.hpp"
 #include "clock.hpp"
+#include "defects_json.hpp"
 
 namespace arena::executors {
 namespace {
