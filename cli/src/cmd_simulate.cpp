@@ -211,6 +211,7 @@ int RunSimulate(const SimulateOptions& opt) {
                 {"note", result.grasp_note}}},
               {"oscillation", json::parse(mechanics::OscillationJson(result.oscillation))},
               {"impact", json::parse(mechanics::ImpactJson(result.impact))},
+              {"steered_slip", json::parse(mechanics::SteeredSlipJson(result.steered_slip))},
               {"wall_s", result.wall_s}};
   std::printf("%s\n", out.dump().c_str());
   return kExitOk;

@@ -950,7 +950,9 @@ struct ContactModel::Impl {
   void RestoreStartFaces();
   void ReturnToStepStart(bool start_faces = true);
   void GapsFromStepEnd(const StepScratch& s);
-  void ReportContacts(StepScratch& s);
+  void ReportContacts(StepScratch& s, SlipSteering& steering);
+  void AddSteering(const Eigen::Vector3d& ft, const Eigen::Vector3d& ut,
+                   SlipSteering& steering) const;
   void Integrate(StepScratch& s);
   // After kSolve: an unknown in physical units, the object's velocity at p,
   // the velocity of the body a point presses on.
@@ -1778,7 +1780,7 @@ bool ContactModel::Impl::RunPhase(StepPhase phase, StepReport& rep) {
     case StepPhase::kCheckValues:
       return CheckValues(s, rep);
     case StepPhase::kContactStates:
-      ReportContacts(s);
+      ReportContacts(s, rep.steering);
       return true;
     case StepPhase::kIntegrate:
       Integrate(s);
@@ -2797,7 +2799,23 @@ bool ContactModel::Impl::Refuse(StepReport& rep, const std::string& why) {
 
 // Phase 11. Contact states (on the object, gripper frame) and modes; the
 // pusher's force.
-void ContactModel::Impl::ReportContacts(StepScratch& s) {
+// One sliding point's friction f_t against its slip u_t (both tangent):
+// its part across the slip and its angle from the slip's opposite
+// (SlipSteering). A friction below 1e-9 of the force scale (a frictionless
+// point) has no direction to judge.
+void ContactModel::Impl::AddSteering(const Eigen::Vector3d& ft, const Eigen::Vector3d& ut,
+                                     SlipSteering& steering) const {
+  const double f = ft.norm();
+  if (!(f > 1e-9 * Fs)) return;
+  const Eigen::Vector3d u = ut.normalized();
+  const double across = ft.cross(u).norm();
+  steering.sliding_friction += f;
+  steering.across += across;
+  steering.max_rad = std::max(steering.max_rad, std::atan2(across, -ft.dot(u)));
+}
+
+void ContactModel::Impl::ReportContacts(StepScratch& s, SlipSteering& steering) {
+  steering = SlipSteering{};
   pusher_force.setZero();
   const Eigen::Vector3d origin = c - s.R * com_O;  // ObjectOrigin(), q unchanged since R
   for (size_t ci = 0; ci < contacts.size(); ++ci) {
@@ -2829,6 +2847,7 @@ void ContactModel::Impl::ReportContacts(StepScratch& s) {
         const Eigen::Vector3d ut = urel - nrm.dot(urel) * nrm;
         if (lam > 1e-9 * Fs && ut.squaredNorm() > slip_floor * slip_floor) {
           sliding = true;
+          AddSteering(ft, ut, steering);
           if (tracked && !planar && pt.beta0 >= 0)
             pt.slip = aligned && ft.squaredNorm() > 0 ? Eigen::Vector3d(-ft.normalized())
                                                       : Eigen::Vector3d(ut.normalized());

@@ -89,12 +89,22 @@ std::string ImpactJson(const Impact& impact) {
       .dump();
 }
 
+std::string SteeredSlipJson(const SteeredSlip& steered) {
+  return nlohmann::json({{"detected", steered.detected},
+                         {"share", steered.share},
+                         {"max_rad", steered.max_rad},
+                         {"steered_s", steered.steered_s}})
+      .dump();
+}
+
 std::string RunFlagsJson(const SimulationResult& result) {
   nlohmann::json flags = nlohmann::json::object();
   if (result.oscillation.detected)
     flags["oscillation"] = nlohmann::json::parse(OscillationJson(result.oscillation));
   if (result.impact.detected && !result.impact.resolved)
     flags["impact"] = nlohmann::json::parse(ImpactJson(result.impact));
+  if (result.steered_slip.detected)
+    flags["steered_slip"] = nlohmann::json::parse(SteeredSlipJson(result.steered_slip));
   return flags.dump();
 }
 
@@ -400,6 +410,28 @@ class ImpactWatch {
   bool was_pressing_ = false;
 };
 
+// Sums each step's SlipSteering over the run (SteeredSlip).
+class SteeringWatch {
+ public:
+  void After(const SlipSteering& step, double dt) {
+    friction_ += step.sliding_friction * dt;
+    across_ += step.across * dt;
+    max_rad_ = std::max(max_rad_, step.max_rad);
+    if (step.max_rad > kSteerAngle) steered_s_ += dt;
+  }
+  SteeredSlip Result() const {
+    SteeredSlip out;
+    out.share = friction_ > 0 ? across_ / friction_ : 0.0;
+    out.max_rad = max_rad_;
+    out.steered_s = steered_s_;
+    out.detected = out.share > kSteerShare;
+    return out;
+  }
+
+ private:
+  double friction_ = 0, across_ = 0, max_rad_ = 0, steered_s_ = 0;
+};
+
 }  // namespace
 
 SimulationResult Simulate(const Scene& scene, const PusherCommandSource& commands) {
@@ -411,10 +443,12 @@ SimulationResult Simulate(const Scene& scene, const PusherCommandSource& command
   // by value from a lambda that captures it, it was copied, every sample
   // and its contact states, once per trial).
   PoseRing poses;
+  SteeringWatch steering;
   auto finish = [&] {
     if (result.status == SimulationStatus::kOk) {
       result.oscillation = poses.Detect(model.gap_tolerance(), model.length_scale());
     }
+    result.steered_slip = steering.Result();
     result.wall_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
     return std::move(result);
   };
@@ -468,6 +502,7 @@ SimulationResult Simulate(const Scene& scene, const PusherCommandSource& command
     result.residuals.cone = std::max(result.residuals.cone, rep.residuals.cone);
     poses.Push(model.time(), model.position(), model.orientation());
     impacts.After(model, result.impact);
+    steering.After(rep.steering, dt);
     if (result.grasp == GraspStatus::kHeld) {
       result.grasp = model.Grasp(&result.grasp_note);
       if (result.grasp != GraspStatus::kHeld) result.grasp_changed_t = model.time();

@@ -86,6 +86,18 @@ enum class StepFailure {
   kNonFinite,   // a force, the twist or the pose came out non-finite
 };
 
+// How far the friction cones steered the slip in one step (issue 31), over
+// the points that slide: the friction's size, its part across the slip
+// (|f_t × û|, û the slip's direction: the circular cone's friction has none;
+// a polyhedral cone's has some wherever a slip falls between two of its
+// edges, and it then turns the slip towards an edge), and the largest angle
+// between a friction and its slip's opposite.
+struct SlipSteering {
+  double sliding_friction = 0;  // N: Σ |f_t|
+  double across = 0;            // N: Σ |f_t × û|
+  double max_rad = 0;
+};
+
 // One step's diagnostics (nondimensional residuals, see Residuals).
 struct StepReport {
   bool ok = true;
@@ -99,6 +111,7 @@ struct StepReport {
   // the momentum (the object accelerates, e.g. slides out of its grasp).
   int quasi_static_carried = 0;
   Residuals residuals;
+  SlipSteering steering;  // of the step's accepted answer
 };
 
 class ContactModel {

@@ -181,6 +181,30 @@ struct Impact {
 // holding_force, resolving_dt (null when infinite), resolved).
 std::string ImpactJson(const Impact& impact);
 
+// Whether the friction cones steered the run's slip (issue 31). A
+// polyhedral cone's friction opposes a slip only along one of its edges; a
+// slip that falls between two edges meets a friction partly across it,
+// which turns the slip towards an edge, so where a contact slides in a free
+// direction the answer depends on `facets` (at first order: the tilted push
+// through the grip axis turns 56 % too far at 8 facets, 3 % at 64) while the
+// circular cone's friction has no part across the slip. Over the run's
+// steps (the accepted answer of each, see SlipSteering): the share of the
+// sliding points' friction impulse that acts across their slip, the largest
+// angle between a friction and its slip's opposite, and how long some point
+// slid with its friction more than kSteerAngle off that opposite. Detected
+// when the share exceeds kSteerShare: `"cone": "aligned"` (the friction of a
+// sliding point opposing its slip) is then the model that scene needs.
+inline constexpr double kSteerAngle = 1e-2;
+inline constexpr double kSteerShare = 1e-2;
+struct SteeredSlip {
+  bool detected = false;
+  double share = 0;      // ∫ Σ |f_t × û| dt / ∫ Σ |f_t| dt (0 when nothing slid)
+  double max_rad = 0;    // rad
+  double steered_s = 0;  // s
+};
+// The steered slip as one JSON object (detected, share, max_rad, steered_s).
+std::string SteeredSlipJson(const SteeredSlip& steered);
+
 struct SimulationResult {
   SimulationStatus status = SimulationStatus::kOk;
   std::string error;  // empty when ok; names the step and reason otherwise
@@ -201,11 +225,14 @@ struct SimulationResult {
   Oscillation oscillation;
   // The run's largest pusher impact and whether dt resolved it (see Impact).
   Impact impact;
+  // Whether the friction cones steered the slip (see SteeredSlip).
+  SteeredSlip steered_slip;
 };
 
 // The flags a stored result carries beside its numbers, as one JSON object:
 // "oscillation" when one was detected, "impact" when one was detected that
-// dt did not resolve; {} when neither. The one rendering every stored
+// dt did not resolve, "steered_slip" when the cones steered it; {} when
+// none. The one rendering every stored
 // detail (truths, predictions, closed-loop trials) uses.
 std::string RunFlagsJson(const SimulationResult& result);
 
