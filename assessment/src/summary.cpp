@@ -134,6 +134,13 @@ bool ReadOutcomes(const std::string& detail_json, PlanarOutcome* predicted, Plan
          read(o["predicted"], predicted) && read(o["true"], truth);
 }
 
+// Whether a prediction's detail carries the run flag `flag`
+// (mechanics::RunFlagsJson).
+bool HasRunFlag(const std::string& detail_json, const char* flag) {
+  const auto d = nlohmann::json::parse(detail_json, nullptr, false);
+  return !d.is_discarded() && d.is_object() && d.contains(flag);
+}
+
 void Add(SettingSummary& s, Collect& c, const TrialEvaluation& r) {
   const auto& p = r.prediction;
   ++s.trials;
@@ -160,6 +167,7 @@ void Add(SettingSummary& s, Collect& c, const TrialEvaluation& r) {
       ++s.force_trials;
     }
     if (p.mode_agreement) c.mode.push_back(*p.mode_agreement);
+    if (HasRunFlag(p.detail_json, "steered_slip")) ++s.steered;
     c.position_all.push_back(*p.final_position_error);
     c.angle_all.push_back(*p.final_angle_error);
     c.by_error.emplace_back(*p.final_position_error, r.trial_id);
@@ -563,6 +571,7 @@ nlohmann::json ToJson(const EvaluationReport& r) {
          {"worst_trials", Notes(s.worst, true)},
          {"diverged_trials", Notes(s.diverged_trials, false)},
          {"failed_trials", Notes(s.failed_trials, false)},
+         {"steered_slip_trials", s.steered},
          {"convergence", nullptr},
          {"pareto", s.pareto},
          {"within_budget", s.within_budget}});

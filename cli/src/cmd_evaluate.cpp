@@ -204,6 +204,23 @@ std::string OutcomeTable(const std::vector<assessment::SettingSummary>& settings
   return out.str();
 }
 
+// The settings whose predictions the friction cones steered (their answer
+// moves with the facets): one line each, only when any was.
+void PrintSteered(std::ostream& out, const assessment::EvaluationReport& r, int w) {
+  bool any = false;
+  for (const auto& s : r.settings) any = any || s.steered > 0;
+  if (!any) return;
+  out << "\nsteered slip (a cone's friction acted across a slide and turned it towards the "
+         "cone's edges, so the answer moves with facets; \"cone\": \"aligned\" models a free "
+         "slide), of the ok trials:\n";
+  char line[256];
+  for (const auto& s : r.settings) {
+    std::snprintf(line, sizeof line, "  %-8s %-*s %d of %d\n", s.predictor.c_str(), w,
+                  s.model_key.c_str(), s.steered, s.ok);
+    out << line;
+  }
+}
+
 std::string FormatTable(const assessment::EvaluationReport& r, std::int64_t evaluation_id) {
   const int w = SettingWidth(r.settings);
   std::ostringstream out;
@@ -289,6 +306,7 @@ std::string FormatTable(const assessment::EvaluationReport& r, std::int64_t eval
           << s.failed_trials.front().reason << ")";
     out << "\n";
   }
+  PrintSteered(out, r, w);
   out << "\nconvergence against each predictor's finest setting (pieces restarted from the true "
          "state) beside the error against the truth, final position mm med/p95:\n";
   for (const auto& s : r.settings) {

@@ -211,6 +211,24 @@ TEST(EvaluationSummary, DistributionsParetoFrontAndFailures) {
   EXPECT_EQ(g4.worst[2].trial_id, 1);
 }
 
+// A prediction whose detail carries the steered-slip flag (issue 31) is
+// counted for its setting, over the ok trials only.
+TEST(EvaluationSummary, CountsTheTrialsTheConeSteered) {
+  auto results = KnownResults();
+  const std::string steered = R"({"steered_slip":{"detected":true,"share":0.3}})";
+  for (auto& r : results) {
+    if (r.setting == 0 && r.trial_id != 2) r.prediction.detail_json = steered;
+    if (r.setting == 3) r.prediction.detail_json = steered;  // one of them failed
+    if (r.setting == 1) r.prediction.detail_json = R"({"oscillation":{"detected":true}})";
+  }
+  const auto report = Summarise(kModels, results, {});
+  EXPECT_EQ(report.settings[0].steered, 2);
+  EXPECT_EQ(report.settings[1].steered, 0);
+  EXPECT_EQ(report.settings[2].steered, 0);
+  EXPECT_EQ(report.settings[3].steered, 2);
+  EXPECT_EQ(ToJson(report)["settings"][0]["steered_slip_trials"], 2);
+}
+
 TEST(EvaluationSummary, RecommendsCheapestWithinBudget) {
   auto report = Summarise(kModels, KnownResults(), {ParseBudget("position_median=2.5mm")});
   ASSERT_TRUE(report.recommended);

@@ -159,6 +159,10 @@ struct SettingSummary {
   std::vector<TrialNote> worst;                // largest position errors, worst first (<= 5)
   std::vector<TrialNote> diverged_trials;      // every one (ids)
   std::vector<TrialNote> failed_trials;        // every one (ids)
+  // Of the ok trials, those whose prediction the friction cones steered
+  // (`steered_slip` in its detail: its answer moves with the facets; see
+  // mechanics::SteeredSlip).
+  int steered = 0;
   std::optional<Convergence> convergence;
   // NMSE of the push's outcome (scoring.hpp) over the ok trials; absent, with
   // the reason in nmse_note, when it cannot be computed (< 2 trials, an
