@@ -30,15 +30,7 @@ using issue31::SimulateOk;
 // 2 μ N + m g = 11.962 N. Rigid pads (the old default) split their load at a
 // vertex the solver picked: 0.18 rad of roll, the force 9.5 % low.
 TEST(ClosedForms, CentralPushOnPatchesDoesNotRoll) {
-  const Scene scene = Parse(std::string(kBox) +
-                            R"(,"gravity":[0,0,-9.81],"duration":0.2,"grip_force":10.0,)"
-                            R"("fingers":[{"name":"left","type":"patch","position":[-0.025,0,0],)"
-                            R"("normal":[1,0,0],"mu":0.5,"radius":0.01},{"name":"right","type":)"
-                            R"("patch","position":[0.025,0,0],"normal":[-1,0,0],"mu":0.5,)"
-                            R"("radius":0.01}],"model":{"facets":8,"points":4,"dt":0.001,)"
-                            R"("reduce":"auto"},"pusher":{"type":"point","position":[0,0,-0.05],)"
-                            R"("normal":[0,0,1],"mu":0.0,"motion":{"velocity":[0,0,0.01],)"
-                            R"("angular_velocity":[0,0,0]}})");
+  const Scene scene = issue31::CentralPushOnPatches("auto");
   Scene elastic = scene;  // the defaults
   Scene rigid = scene;
   rigid.model.pads = PadModel::kRigid;
@@ -207,13 +199,9 @@ TEST(ClosedForms, PatchGraspHoldsBelowItsLimitAndDropsAbove) {
                   R"("object":{"shape":"box","size":[0.05,0.03,0.1],"mass":%.17g,)"
                   R"("pose":{"position":[0,0,0],"rpy":[0,0,0]}})",
                   mass);
-    const Scene scene = Parse(std::string(object) +
-                              R"(,"gravity":[0,0,-9.81],"duration":0.2,"grip_force":10.0,)"
-                              R"("fingers":[{"name":"left","type":"patch","position":[-0.025,0,0],)"
-                              R"("normal":[1,0,0],"mu":0.5,"radius":0.01},{"name":"right",)"
-                              R"("type":"patch","position":[0.025,0,0],"normal":[-1,0,0],)"
-                              R"("mu":0.5,"radius":0.01}],"model":{"facets":8,"points":4,)"
-                              R"("dt":0.001,"reduce":"auto"})");
+    const Scene scene = Parse(
+        std::string(object) + R"(,"gravity":[0,0,-9.81],"duration":0.2,"grip_force":10.0,)" +
+        issue31::kPatchFingers + R"(,"model":{"facets":8,"points":4,"dt":0.001,"reduce":"auto"})");
     const SimulationResult r = SimulateOk(scene);
     const TrajectorySample& last = r.samples.back();
     const double expected_vz = ratio < 1 ? 0.0 : -(g - 2 * mu * grip / mass) * last.t;

@@ -101,23 +101,15 @@ TEST(SteeredSlip, ThePolyhedralConeSteeringTheTiltedPushIsFlagged) {
 // the fingers slide along the push): no friction across any slip. A scene
 // without friction has no friction to judge.
 TEST(SteeredSlip, ASlideAlongAConeEdgeIsNotFlagged) {
-  const Scene central = Parse(std::string(kBox) +
-                              R"(,"gravity":[0,0,-9.81],"duration":0.2,"grip_force":10.0,)"
-                              R"("fingers":[{"name":"left","type":"patch","position":[-0.025,0,0],)"
-                              R"("normal":[1,0,0],"mu":0.5,"radius":0.01},{"name":"right",)"
-                              R"("type":"patch","position":[0.025,0,0],"normal":[-1,0,0],)"
-                              R"("mu":0.5,"radius":0.01}],"model":{"facets":8,"points":4,)"
-                              R"("dt":0.001,"reduce":"full"},"pusher":{"type":"point",)"
-                              R"("position":[0,0,-0.05],"normal":[0,0,1],"mu":0.0,"motion":)"
-                              R"({"velocity":[0,0,0.01],"angular_velocity":[0,0,0]}})");
-  const Scene grip_axis = Parse(std::string(kBox) +
-                                R"(,"gravity":[0,0,0],"duration":0.2,"grip_force":10.0,)" +
-                                kPointFingers +
-                                R"(,"model":{"facets":8,"points":3,"dt":0.001,"reduce":"auto"},)"
-                                R"("pusher":{"type":"point","position":[0,0,-0.05],)"
-                                R"("normal":[0,0,1],"mu":0.3,"motion":{"velocity":)"
-                                R"([0.004999999999999999,0,0.008660254037844387],)"
-                                R"("angular_velocity":[0,0,0]}})");
+  const Scene central = issue31::CentralPushOnPatches("full");
+  const Scene grip_axis =
+      Parse(std::string(kBox) + R"(,"gravity":[0,0,0],"duration":0.2,"grip_force":10.0,)" +
+            kPointFingers +
+            R"(,"model":{"facets":8,"points":3,"dt":0.001,"reduce":"auto"},)"
+            R"("pusher":{"type":"point","position":[0,0,-0.05],)"
+            R"("normal":[0,0,1],"mu":0.3,"motion":{"velocity":)"
+            R"([0.004999999999999999,0,0.008660254037844387],)"
+            R"("angular_velocity":[0,0,0]}})");
   Scene frictionless = central;
   for (ContactSpec& f : frictionless.fingers) f.mu = 0;
   frictionless.gravity.setZero();
@@ -141,15 +133,15 @@ TEST(SteeredSlip, ASlideAlongAConeEdgeIsNotFlagged) {
 // facets), its Richardson limit 2 y(64) - y(32) is the aligned cone's
 // answer, and the aligned cone gives it at every facet count, unflagged.
 TEST(SteeredSlip, ACentredPushStartedOffItsPlaneIsSteeredByTheDefaultCone) {
-  const Scene scene = Parse(
-      R"("object":{"shape":"box","size":[0.05,0.03,0.1],"mass":0.2,"pose":{"position":)"
-      R"([0.0001036173419393789,0.0004457227499648763,5.7735436376925767e-05],"rpy":)"
-      R"([-3.331048201251399e-05,0.001465747667016662,-0.0007815743819955169]}},)"
-      R"("gravity":[0,0,-9.81],"duration":0.2,"grip_force":12.0,)" +
-      std::string(kPointFingers) +
-      R"(,"pusher":{"type":"point","position":[0,0,-0.05],"normal":[0,0,1],"mu":0.3,)"
-      R"("motion":{"velocity":[0,0,0.02],"angular_velocity":[0,0,0]}},)"
-      R"("model":{"facets":8,"points":3,"dt":0.004,"reduce":"auto"})");
+  const Scene scene =
+      Parse(R"("object":{"shape":"box","size":[0.05,0.03,0.1],"mass":0.2,"pose":{"position":)"
+            R"([0.0001036173419393789,0.0004457227499648763,5.7735436376925767e-05],"rpy":)"
+            R"([-3.331048201251399e-05,0.001465747667016662,-0.0007815743819955169]}},)"
+            R"("gravity":[0,0,-9.81],"duration":0.2,"grip_force":12.0,)" +
+            std::string(kPointFingers) +
+            R"(,"pusher":{"type":"point","position":[0,0,-0.05],"normal":[0,0,1],"mu":0.3,)"
+            R"("motion":{"velocity":[0,0,0.02],"angular_velocity":[0,0,0]}},)"
+            R"("model":{"facets":8,"points":3,"dt":0.004,"reduce":"auto"})");
   double y_aligned = 0;
   for (int facets : {8, 64}) {
     const SimulationResult r = SimulateOk(With(scene, ConeModel::kAligned, facets));
