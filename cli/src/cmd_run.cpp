@@ -20,6 +20,7 @@
 #include <vector>
 
 #include <spdlog/spdlog.h>
+#include <nlohmann/json.hpp>
 
 #include "arena/db/store.hpp"
 #include "arena/executors/backend.hpp"
@@ -106,6 +107,12 @@ double Percentile(std::vector<double> v, double q) {
   return v[static_cast<size_t>(q * static_cast<double>(v.size() - 1) + 0.5)];
 }
 
+// Whether a stored detail carries the run flag `flag` (mechanics::RunFlagsJson).
+bool HasRunFlag(const std::string& detail_json, const char* flag) {
+  const auto d = nlohmann::json::parse(detail_json, nullptr, false);
+  return !d.is_discarded() && d.is_object() && d.contains(flag);
+}
+
 // overhead_s: arena's own time per clean trial on its cell (TrialTiming).
 // @returns the number of failed trials (the exit code says whether there were any).
 std::int64_t PrintSummary(const std::string& db_path, std::int64_t campaign_id, double wall_s,
@@ -115,7 +122,7 @@ std::int64_t PrintSummary(const std::string& db_path, std::int64_t campaign_id, 
   auto store = db::Store::Open(db_path, ro);
   const db::Campaign campaign = store->GetCampaign(campaign_id);
   std::vector<double> pos_err, ang_err, force_err, force_rel, mode, pred_time;
-  std::int64_t done = 0, failed = 0, other = 0, prediction_failures = 0;
+  std::int64_t done = 0, failed = 0, other = 0, prediction_failures = 0, steered = 0;
   for (const auto& t : store->ListTrials(campaign_id)) {
     if (t.state == db::TrialState::kDone)
       ++done;
@@ -133,6 +140,7 @@ std::int64_t PrintSummary(const std::string& db_path, std::int64_t campaign_id, 
       if (p.force_error) force_err.push_back(*p.force_error);
       if (p.mode_agreement) mode.push_back(*p.mode_agreement);
       pred_time.push_back(p.wall_s);
+      if (HasRunFlag(p.detail_json, "steered_slip")) ++steered;
     }
   }
   const std::int64_t total = done + failed + other;
@@ -200,6 +208,15 @@ std::int64_t PrintSummary(const std::string& db_path, std::int64_t campaign_id, 
                 prediction_failures
                     ? (", " + std::to_string(prediction_failures) + " predictions failed").c_str()
                     : "");
+  // Issue 31: where the polyhedral cone steered the predictions' slides,
+  // their answers move with facets; say so where the run is read.
+  if (steered > 0)
+    std::printf(
+        "  steered     %lld of %zu predictions slid where the friction cone steered them, so "
+        "their answers\n"
+        "              move with facets (arena evaluate --cone polyhedral,aligned weighs the "
+        "aligned cone)\n",
+        static_cast<long long>(steered), pred_time.size());
   if (!overhead_s.empty()) {
     std::printf(
         "  orchestration %.2f ms median, %.2f ms p95 per trial (cell busy time minus its own "
