@@ -1,0 +1,101 @@
+// Wall time of whole model runs of scene files at their own settings (a
+// study: prints one Markdown row per scene). The steps alone are timed, not
+// parsing or set-up; each scene runs `--runs` times and the fastest and the
+// median run are printed. `--cone polyhedral|aligned` overrides the scenes'
+// cone. Written against ContactModel's oldest API (construct, Step(), ok,
+// error) so that the same file builds against an older commit's mechanics
+// library and compares it with today's in one sitting (bench/README.md,
+// "Steered slip and the defaults' cost").
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
+#include <exception>
+#include <string>
+#include <vector>
+
+#include "arena/mechanics/model.hpp"
+#include "arena/mechanics/scene_json.hpp"
+
+namespace {
+
+using arena::mechanics::ContactModel;
+using arena::mechanics::Scene;
+
+int Usage() {
+  std::fprintf(stderr,
+               "usage: scene_timing [--runs N] [--cone polyhedral|aligned] SCENE.json...\n");
+  return 2;
+}
+
+// Milliseconds of each of `runs` runs of the scene's steps; empty when a
+// step fails (the reason printed).
+std::vector<double> TimeRuns(const Scene& scene, int runs) {
+  const long steps = std::max(1L, std::lround(scene.duration / scene.model.dt));
+  std::vector<double> ms;
+  for (int r = 0; r < runs; ++r) {
+    ContactModel model(scene);
+    const auto t0 = std::chrono::steady_clock::now();
+    for (long k = 0; k < steps; ++k) {
+      const auto report = model.Step();
+      if (!report.ok) {
+        std::fprintf(stderr, "step %ld: %s\n", k, report.error.c_str());
+        return {};
+      }
+    }
+    ms.push_back(
+        std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count());
+  }
+  std::sort(ms.begin(), ms.end());
+  return ms;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  int runs = 40;
+  std::string cone;
+  std::vector<std::string> files;
+  for (int i = 1; i < argc; ++i) {
+    if (std::strcmp(argv[i], "--runs") == 0 && i + 1 < argc) {
+      runs = std::atoi(argv[++i]);
+    } else if (std::strcmp(argv[i], "--cone") == 0 && i + 1 < argc) {
+      cone = argv[++i];
+    } else if (argv[i][0] == '-') {
+      return Usage();
+    } else {
+      files.emplace_back(argv[i]);
+    }
+  }
+  if (files.empty() || runs < 1 || runs > 100000) return Usage();
+  std::printf("| scene | cone | steps | fastest ms | median ms |\n|---|---|---|---|---|\n");
+  for (const std::string& file : files) {
+    Scene scene;
+    try {
+      scene = arena::mechanics::LoadSceneFile(file);
+    } catch (const std::exception& e) {
+      std::fprintf(stderr, "%s: %s\n", file.c_str(), e.what());
+      return 2;
+    }
+    if (!cone.empty() && cone != "aligned" && cone != "polyhedral") return Usage();
+#ifdef ARENA_SCENE_TIMING_CONE
+    if (cone == "aligned") scene.model.cone = arena::mechanics::ConeModel::kAligned;
+    if (cone == "polyhedral") scene.model.cone = arena::mechanics::ConeModel::kPolyhedral;
+#else
+    // An older library without the choice (built by hand, see the top).
+    if (!cone.empty()) {
+      std::fprintf(stderr, "--cone: this build's model has no cone choice\n");
+      return 2;
+    }
+#endif
+    const std::vector<double> ms = TimeRuns(scene, runs);
+    if (ms.empty()) return 1;
+    std::printf("| %s | %s | %ld | %.3f | %.3f |\n", file.c_str(),
+                cone.empty() ? "scene's" : cone.c_str(),
+                std::max(1L, std::lround(scene.duration / scene.model.dt)), ms.front(),
+                ms[ms.size() / 2]);
+  }
+  return 0;
+}
