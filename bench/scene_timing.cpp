@@ -92,10 +92,9 @@ int main(int argc, char** argv) {
 #endif
     const std::vector<double> ms = TimeRuns(scene, runs);
     if (ms.empty()) return 1;
-    std::printf("| %s | %s | %ld | %.3f | %.3f |\n", file.c_str(),
-                cone.empty() ? "scene's" : cone.c_str(),
-                std::max(1L, std::lround(scene.duration / scene.model.dt)), ms.front(),
-                ms[ms.size() / 2]);
+    std::printf(
+        "| %s | %s | %ld | %.3f | %.3f |\n", file.c_str(), cone.empty() ? "scene's" : cone.c_str(),
+        std::max(1L, std::lround(scene.duration / scene.model.dt)), ms.front(), ms[ms.size() / 2]);
   }
   return 0;
 }

@@ -59,6 +59,21 @@ mechanics::Scene ApplyModelSettings(const mechanics::Scene& scene, const nlohman
     if (!mode) throw mechanics::SceneError("model.contacts", "must be tracked or fixed");
     out.model.contacts = *mode;
   }
+  // Issue 31's choices; `cone` is arena's only for arena's model (MuJoCo's
+  // predictor reads its own `cone`).
+  const auto choice = [&](const char* key, const char* values, auto parse, auto* field) {
+    if (!model.contains(key)) return;
+    const auto& v = model[key];
+    const auto parsed = v.is_string() ? parse(v.get<std::string>()) : std::nullopt;
+    if (!parsed) throw mechanics::SceneError(std::string("model.") + key, values);
+    *field = *parsed;
+  };
+  choice("pads", "must be elastic or rigid", mechanics::PadModelFromString, &out.model.pads);
+  if (model.value("predictor", "arena") == "arena")
+    choice("cone", "must be polyhedral or aligned", mechanics::ConeModelFromString,
+           &out.model.cone);
+  choice("inertia", "must be carried, quasi_static or auto", mechanics::InertiaModelFromString,
+         &out.model.inertia);
   // A calibration (arena calibrate) resolved by SubmitCampaign: parameter scales.
   if (model.contains("calibrated")) {
     const auto& c = model["calibrated"];
@@ -102,14 +117,19 @@ std::string ModelKey(const mechanics::ModelOptions& m) {
 }
 
 std::string ModelSettingsJson(const mechanics::ModelOptions& model) {
-  return nlohmann::json({{"facets", model.facets},
-                         {"points", model.points},
-                         {"dt", model.dt},
-                         {"reduce", mechanics::ToString(model.reduce)},
-                         {"contacts", mechanics::ToString(model.contacts)},
-                         // Whether the steps kept the momentum: it changes the answer.
-                         {"inertia", mechanics::ToString(model.inertia)}})
-      .dump();
+  nlohmann::json settings({{"facets", model.facets},
+                           {"points", model.points},
+                           {"dt", model.dt},
+                           {"reduce", mechanics::ToString(model.reduce)},
+                           {"contacts", mechanics::ToString(model.contacts)},
+                           // Whether the steps kept the momentum: it changes the answer.
+                           {"inertia", mechanics::ToString(model.inertia)}});
+  // The other opt-in choices where they differ from the model's defaults,
+  // as ModelKey names them (earlier predictions' settings stay the same).
+  const mechanics::ModelOptions defaults;
+  if (model.pads != defaults.pads) settings["pads"] = mechanics::ToString(model.pads);
+  if (model.cone != defaults.cone) settings["cone"] = mechanics::ToString(model.cone);
+  return settings.dump();
 }
 
 const char* ToString(StartFrom from) {

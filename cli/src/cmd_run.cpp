@@ -113,6 +113,13 @@ bool HasRunFlag(const std::string& detail_json, const char* flag) {
   return !d.is_discarded() && d.is_object() && d.contains(flag);
 }
 
+// Whether a stored prediction's model settings name the aligned cone
+// (assessment::ModelSettingsJson writes `cone` only when it is not the default).
+bool AlignedCone(const std::string& model_json) {
+  const auto m = nlohmann::json::parse(model_json, nullptr, false);
+  return !m.is_discarded() && m.is_object() && m.value("cone", "") == "aligned";
+}
+
 // overhead_s: arena's own time per clean trial on its cell (TrialTiming).
 // @returns the number of failed trials (the exit code says whether there were any).
 std::int64_t PrintSummary(const std::string& db_path, std::int64_t campaign_id, double wall_s,
@@ -122,7 +129,8 @@ std::int64_t PrintSummary(const std::string& db_path, std::int64_t campaign_id, 
   auto store = db::Store::Open(db_path, ro);
   const db::Campaign campaign = store->GetCampaign(campaign_id);
   std::vector<double> pos_err, ang_err, force_err, force_rel, mode, pred_time;
-  std::int64_t done = 0, failed = 0, other = 0, prediction_failures = 0, steered = 0;
+  std::int64_t done = 0, failed = 0, other = 0, prediction_failures = 0, steered = 0,
+               steered_aligned = 0;
   for (const auto& t : store->ListTrials(campaign_id)) {
     if (t.state == db::TrialState::kDone)
       ++done;
@@ -140,7 +148,10 @@ std::int64_t PrintSummary(const std::string& db_path, std::int64_t campaign_id, 
       if (p.force_error) force_err.push_back(*p.force_error);
       if (p.mode_agreement) mode.push_back(*p.mode_agreement);
       pred_time.push_back(p.wall_s);
-      if (HasRunFlag(p.detail_json, "steered_slip")) ++steered;
+      if (HasRunFlag(p.detail_json, "steered_slip")) {
+        ++steered;
+        if (AlignedCone(p.model_json)) ++steered_aligned;
+      }
     }
   }
   const std::int64_t total = done + failed + other;
@@ -214,9 +225,12 @@ std::int64_t PrintSummary(const std::string& db_path, std::int64_t campaign_id, 
     std::printf(
         "  steered     %lld of %zu predictions slid where the friction cone steered them, so "
         "their answers\n"
-        "              move with facets (arena evaluate --cone polyhedral,aligned weighs the "
-        "aligned cone)\n",
-        static_cast<long long>(steered), pred_time.size());
+        "              move with facets (%s)\n",
+        static_cast<long long>(steered), pred_time.size(),
+        steered_aligned == steered
+            ? "the aligned cone's re-solves did not settle there; a finer\n"
+              "              dt settles more: arena evaluate --dt weighs it"
+            : "arena evaluate --cone polyhedral,aligned weighs the aligned cone");
   if (!overhead_s.empty()) {
     std::printf(
         "  orchestration %.2f ms median, %.2f ms p95 per trial (cell busy time minus its own "

@@ -972,10 +972,12 @@ void ReadCounts(const json& doc, bool grid, bool boundary, Campaign* c) {
   }
 }
 
-// Which predictor: arena's model (knobs facets, points, dt, reduce, contacts)
-// or MuJoCo (timestep, cone, noslip_iterations, solref, solimp); knobs of
-// the other are refused. A calibration's scales apply to either
-// (SubmitCampaign checks that it was fitted for the campaign's predictor).
+// Which predictor: arena's model (knobs facets, points, dt, reduce, contacts,
+// pads, cone, inertia) or MuJoCo (timestep, cone, noslip_iterations, solref,
+// solimp); knobs of the other are refused. `cone` is both's, each with its
+// own values (arena: polyhedral | aligned; MuJoCo: pyramidal | elliptic). A
+// calibration's scales apply to either (SubmitCampaign checks that it was
+// fitted for the campaign's predictor).
 void ReadPredictor(const json& p, Campaign* c) {
   if (p.contains("predictor")) c->predictor = String(p["predictor"], "prediction.predictor");
   if (c->predictor != "arena" && c->predictor != "mujoco") {
@@ -983,13 +985,12 @@ void ReadPredictor(const json& p, Campaign* c) {
                                                     Printable(c->predictor, 40) + "\"");
   }
   const bool mujoco = c->predictor == "mujoco";
-  for (const char* k : {"facets", "points", "dt", "reduce", "contacts", "calibration", "calibrated",
-                        "timestep", "cone", "noslip_iterations", "solref", "solimp"}) {
+  for (const char* k : {"facets", "points", "dt", "reduce", "contacts", "pads", "inertia",
+                        "timestep", "noslip_iterations", "solref", "solimp"}) {
     const std::string key = k;
-    const bool arena_knob = key != "timestep" && key != "cone" && key != "noslip_iterations" &&
-                            key != "solref" && key != "solimp";
-    const bool both = key == "calibration" || key == "calibrated";
-    if (p.contains(k) && !both && arena_knob == mujoco) {
+    const bool arena_knob =
+        key != "timestep" && key != "noslip_iterations" && key != "solref" && key != "solimp";
+    if (p.contains(k) && arena_knob == mujoco) {
       throw CampaignError(std::string("prediction.") + k,
                           std::string("is not a knob of the ") + c->predictor + " predictor");
     }
@@ -1058,6 +1059,23 @@ void ReadModelKnobs(const json& p, mechanics::ModelOptions* model) {
     }
     model->contacts = *mode;
   }
+  // Issue 31's choices (docs/scene.md, "Which knob matters for which scene").
+  // `cone` is read here for arena's model only (MuJoCo's is its own knob).
+  const auto choice = [&](const char* key, const char* values, auto parse, auto* out) {
+    if (!p.contains(key)) return;
+    const std::string path = std::string("prediction.") + key;
+    const std::string text = String(p[key], path);
+    const auto value = parse(text);
+    if (!value)
+      throw CampaignError(
+          path, std::string("must be ") + values + ", got \"" + Printable(text, 40) + "\"");
+    *out = *value;
+  };
+  choice("pads", "\"elastic\" or \"rigid\"", mechanics::PadModelFromString, &model->pads);
+  if (p.value("predictor", "arena") == "arena")
+    choice("cone", "\"polyhedral\" or \"aligned\"", mechanics::ConeModelFromString, &model->cone);
+  choice("inertia", "\"carried\", \"quasi_static\" or \"auto\"", mechanics::InertiaModelFromString,
+         &model->inertia);
 }
 
 // Prediction model: the base scene's model, overridden field by field.
@@ -1067,8 +1085,8 @@ void ReadPrediction(const json& doc, Campaign* c) {
   const json& p = doc["prediction"];
   RequireObject(
       p, "prediction",
-      {"predictor", "facets", "points", "dt", "reduce", "contacts", "calibration", "calibrated",
-       "timestep", "cone", "noslip_iterations", "solref", "solimp", "start"});
+      {"predictor", "facets", "points", "dt", "reduce", "contacts", "pads", "cone", "inertia",
+       "calibration", "calibrated", "timestep", "noslip_iterations", "solref", "solimp", "start"});
   // Where each prediction starts (issue 26): the start pose the cell
   // measured (default) or the planned one.
   if (p.contains("start") &&

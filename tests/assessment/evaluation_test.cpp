@@ -8,6 +8,8 @@
 
 #include "arena/assessment/evaluation.hpp"
 #include "arena/assessment/prediction.hpp"
+#include "arena/mechanics/scene_json.hpp"
+#include "arena/mechanics/simulate.hpp"
 
 namespace arena::assessment {
 namespace {
@@ -227,6 +229,38 @@ TEST(EvaluationSummary, CountsTheTrialsTheConeSteered) {
   EXPECT_EQ(report.settings[2].steered, 0);
   EXPECT_EQ(report.settings[3].steered, 2);
   EXPECT_EQ(ToJson(report)["settings"][0]["steered_slip_trials"], 2);
+}
+
+// A campaign's `prediction` may choose issue 31's model options (pads, cone,
+// inertia): they reach the live predictor's scene, its stored settings and
+// its key; MuJoCo's own `cone` is not arena's; a bad value names its field.
+TEST(PredictionSettings, TheModelsChoicesReachThePredictor) {
+  const mechanics::Scene scene =
+      mechanics::LoadSceneFile(std::string(ARENA_SOURCE_DIR) + "/examples/scenes/canonical.json");
+  const mechanics::Scene chosen = ApplyModelSettings(
+      scene, nlohmann::json({{"cone", "aligned"}, {"pads", "rigid"}, {"inertia", "auto"}}));
+  EXPECT_EQ(chosen.model.cone, mechanics::ConeModel::kAligned);
+  EXPECT_EQ(chosen.model.pads, mechanics::PadModel::kRigid);
+  EXPECT_EQ(chosen.model.inertia, mechanics::InertiaModel::kAuto);
+  const mechanics::Scene mujoco =
+      ApplyModelSettings(scene, nlohmann::json({{"predictor", "mujoco"}, {"cone", "elliptic"}}));
+  EXPECT_EQ(mujoco.model.cone, scene.model.cone);
+  for (const char* key : {"cone", "pads", "inertia"}) {
+    try {
+      ApplyModelSettings(scene, nlohmann::json({{key, "round"}}));
+      ADD_FAILURE() << key << " \"round\" was accepted";
+    } catch (const mechanics::SceneError& e) {
+      EXPECT_EQ(e.field(), std::string("model.") + key);
+    }
+  }
+  // The default cone is not written (earlier predictions' settings stay).
+  EXPECT_EQ(nlohmann::json::parse(ModelSettingsJson(scene.model)).count("cone"), 0u);
+  const auto truth = mechanics::Simulate(scene).samples;
+  const nlohmann::json aligned = {{"cone", "aligned"}};
+  const db::Prediction p = PredictTrial(ApplyModelSettings(scene, aligned), truth, aligned);
+  EXPECT_EQ(p.status, db::PredictionStatus::kOk);
+  EXPECT_NE(p.model_key.find("_cone-aligned"), std::string::npos) << p.model_key;
+  EXPECT_EQ(nlohmann::json::parse(p.model_json).value("cone", ""), "aligned");
 }
 
 TEST(EvaluationSummary, RecommendsCheapestWithinBudget) {

@@ -468,6 +468,37 @@ TEST(Campaign, PredictionNamesAPredictor) {
   refused({{"predictor", "mujoco"}, {"solimp", {0.9, 0.95, 0.001, 0.5, 0.5}}}, "prediction.solimp");
 }
 
+// arena's model takes issue 31's choices in `prediction` (pads, cone,
+// inertia); `cone` keeps its MuJoCo meaning for the MuJoCo predictor, and
+// pads and inertia are not MuJoCo's. The smoke example predicts with the
+// aligned cone: its trials start from measured, slightly tilted poses.
+TEST(Campaign, PredictionTakesTheModelsChoices) {
+  json doc = json::parse(ReadText(kSourceDir / "examples/campaigns/smoke.json"));
+  const std::string dir = (kSourceDir / "examples/campaigns").string();
+  EXPECT_EQ(ParseCampaign(doc.dump(), dir).prediction.cone, mechanics::ConeModel::kAligned);
+  doc["prediction"] = {{"cone", "polyhedral"}, {"pads", "rigid"}, {"inertia", "quasi_static"}};
+  const Campaign c = ParseCampaign(doc.dump(), dir);
+  EXPECT_EQ(c.prediction.cone, mechanics::ConeModel::kPolyhedral);
+  EXPECT_EQ(c.prediction.pads, mechanics::PadModel::kRigid);
+  EXPECT_EQ(c.prediction.inertia, mechanics::InertiaModel::kQuasiStatic);
+  auto refused = [&](const json& prediction, const std::string& field) {
+    json bad = doc;
+    bad["prediction"] = prediction;
+    try {
+      ParseCampaign(bad.dump(), dir);
+      ADD_FAILURE() << prediction.dump() << " was accepted";
+    } catch (const CampaignError& e) {
+      EXPECT_EQ(e.field(), field) << e.what();
+    }
+  };
+  refused({{"cone", "elliptic"}}, "prediction.cone");  // MuJoCo's value, not arena's
+  refused({{"pads", "soft"}}, "prediction.pads");
+  refused({{"inertia", 1}}, "prediction.inertia");
+  refused({{"predictor", "mujoco"}, {"pads", "rigid"}}, "prediction.pads");
+  refused({{"predictor", "mujoco"}, {"inertia", "auto"}}, "prediction.inertia");
+  refused({{"predictor", "mujoco"}, {"cone", "aligned"}}, "prediction.cone");
+}
+
 // One table of variation units (issue 27, one home per idea): plots, the
 // boundary report and the sensitivity table read a variation's unit from the
 // campaign catalogue, and a person reads lengths in mm, speeds in mm/s.
