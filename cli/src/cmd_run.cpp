@@ -120,6 +120,21 @@ bool AlignedCone(const std::string& model_json) {
   return !m.is_discarded() && m.is_object() && m.value("cone", "") == "aligned";
 }
 
+// Issue 31: where the friction cone steered the predictions' slides, their
+// answers move with facets; the run's summary says so, with the hint that
+// applies (`aligned` of the `steered` predictions used the aligned cone).
+void PrintSteered(std::int64_t steered, std::int64_t aligned, std::size_t predictions) {
+  if (steered <= 0) return;
+  std::printf(
+      "  steered     %lld of %zu predictions slid where the friction cone steered them, so "
+      "their answers\n"
+      "              move with facets (%s)\n",
+      static_cast<long long>(steered), predictions,
+      aligned == steered ? "the aligned cone's re-solves did not settle there; a finer\n"
+                           "              dt settles more: arena evaluate --dt weighs it"
+                         : "arena evaluate --cone polyhedral,aligned weighs the aligned cone");
+}
+
 // overhead_s: arena's own time per clean trial on its cell (TrialTiming).
 // @returns the number of failed trials (the exit code says whether there were any).
 std::int64_t PrintSummary(const std::string& db_path, std::int64_t campaign_id, double wall_s,
@@ -219,18 +234,7 @@ std::int64_t PrintSummary(const std::string& db_path, std::int64_t campaign_id, 
                 prediction_failures
                     ? (", " + std::to_string(prediction_failures) + " predictions failed").c_str()
                     : "");
-  // Issue 31: where the polyhedral cone steered the predictions' slides,
-  // their answers move with facets; say so where the run is read.
-  if (steered > 0)
-    std::printf(
-        "  steered     %lld of %zu predictions slid where the friction cone steered them, so "
-        "their answers\n"
-        "              move with facets (%s)\n",
-        static_cast<long long>(steered), pred_time.size(),
-        steered_aligned == steered
-            ? "the aligned cone's re-solves did not settle there; a finer\n"
-              "              dt settles more: arena evaluate --dt weighs it"
-            : "arena evaluate --cone polyhedral,aligned weighs the aligned cone");
+  PrintSteered(steered, steered_aligned, pred_time.size());
   if (!overhead_s.empty()) {
     std::printf(
         "  orchestration %.2f ms median, %.2f ms p95 per trial (cell busy time minus its own "

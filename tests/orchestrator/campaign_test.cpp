@@ -434,6 +434,19 @@ TEST(Campaign, OversizedFileIsRefusedBeforeReading) {
 namespace arena::orchestrator {
 namespace {
 
+// `doc` with `prediction` replaced is refused, naming `field`.
+void ExpectPredictionRefused(const json& doc, const std::string& dir, const json& prediction,
+                             const std::string& field) {
+  json bad = doc;
+  bad["prediction"] = prediction;
+  try {
+    ParseCampaign(bad.dump(), dir);
+    ADD_FAILURE() << prediction.dump() << " was accepted";
+  } catch (const CampaignError& e) {
+    EXPECT_EQ(e.field(), field) << e.what();
+  }
+}
+
 // The campaign's `prediction` may name its predictor (issue 14): arena's
 // model or MuJoCo, each with its own knobs only.
 TEST(Campaign, PredictionNamesAPredictor) {
@@ -445,14 +458,7 @@ TEST(Campaign, PredictionNamesAPredictor) {
   EXPECT_EQ(m.predictor, "mujoco");
   EXPECT_EQ(json::parse(m.predictor_settings_json)["timestep"], 0.001);
   auto refused = [&](const json& prediction, const std::string& field) {
-    json bad = doc;
-    bad["prediction"] = prediction;
-    try {
-      ParseCampaign(bad.dump(), dir);
-      ADD_FAILURE() << prediction.dump() << " was accepted";
-    } catch (const CampaignError& e) {
-      EXPECT_EQ(e.field(), field) << e.what();
-    }
+    ExpectPredictionRefused(doc, dir, prediction, field);
   };
   refused({{"predictor", "bullet"}}, "prediction.predictor");
   refused({{"predictor", "mujoco"}, {"facets", 8}}, "prediction.facets");
@@ -482,14 +488,7 @@ TEST(Campaign, PredictionTakesTheModelsChoices) {
   EXPECT_EQ(c.prediction.pads, mechanics::PadModel::kRigid);
   EXPECT_EQ(c.prediction.inertia, mechanics::InertiaModel::kQuasiStatic);
   auto refused = [&](const json& prediction, const std::string& field) {
-    json bad = doc;
-    bad["prediction"] = prediction;
-    try {
-      ParseCampaign(bad.dump(), dir);
-      ADD_FAILURE() << prediction.dump() << " was accepted";
-    } catch (const CampaignError& e) {
-      EXPECT_EQ(e.field(), field) << e.what();
-    }
+    ExpectPredictionRefused(doc, dir, prediction, field);
   };
   refused({{"cone", "elliptic"}}, "prediction.cone");  // MuJoCo's value, not arena's
   refused({{"pads", "soft"}}, "prediction.pads");
