@@ -12,6 +12,7 @@
 
 #include "arena/assessment/evaluation.hpp"
 #include "arena/assessment/prediction.hpp"
+#include "arena/mechanics/simulate.hpp"
 
 namespace arena::assessment {
 
@@ -134,13 +135,6 @@ bool ReadOutcomes(const std::string& detail_json, PlanarOutcome* predicted, Plan
          read(o["predicted"], predicted) && read(o["true"], truth);
 }
 
-// Whether a prediction's detail carries the run flag `flag`
-// (mechanics::RunFlagsJson).
-bool HasRunFlag(const std::string& detail_json, const char* flag) {
-  const auto d = nlohmann::json::parse(detail_json, nullptr, false);
-  return !d.is_discarded() && d.is_object() && d.contains(flag);
-}
-
 void Add(SettingSummary& s, Collect& c, const TrialEvaluation& r) {
   const auto& p = r.prediction;
   ++s.trials;
@@ -167,7 +161,7 @@ void Add(SettingSummary& s, Collect& c, const TrialEvaluation& r) {
       ++s.force_trials;
     }
     if (p.mode_agreement) c.mode.push_back(*p.mode_agreement);
-    if (HasRunFlag(p.detail_json, "steered_slip")) ++s.steered;
+    if (mechanics::HasRunFlag(p.detail_json, "steered_slip")) ++s.steered;
     c.position_all.push_back(*p.final_position_error);
     c.angle_all.push_back(*p.final_angle_error);
     c.by_error.emplace_back(*p.final_position_error, r.trial_id);

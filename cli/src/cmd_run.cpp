@@ -28,6 +28,7 @@
 #include "arena/executors/defect_layer.hpp"
 #include "arena/executors/defects.hpp"
 #include "arena/mechanics/scene_json.hpp"
+#include "arena/mechanics/simulate.hpp"
 #include "arena/orchestrator/campaign.hpp"
 #include "arena/orchestrator/logging.hpp"
 #include "arena/orchestrator/scene_facts.hpp"
@@ -107,12 +108,6 @@ double Percentile(std::vector<double> v, double q) {
   return v[static_cast<size_t>(q * static_cast<double>(v.size() - 1) + 0.5)];
 }
 
-// Whether a stored detail carries the run flag `flag` (mechanics::RunFlagsJson).
-bool HasRunFlag(const std::string& detail_json, const char* flag) {
-  const auto d = nlohmann::json::parse(detail_json, nullptr, false);
-  return !d.is_discarded() && d.is_object() && d.contains(flag);
-}
-
 // Whether a stored prediction's model settings name the aligned cone
 // (assessment::ModelSettingsJson writes `cone` only when it is not the default).
 bool AlignedCone(const std::string& model_json) {
@@ -163,7 +158,7 @@ std::int64_t PrintSummary(const std::string& db_path, std::int64_t campaign_id, 
       if (p.force_error) force_err.push_back(*p.force_error);
       if (p.mode_agreement) mode.push_back(*p.mode_agreement);
       pred_time.push_back(p.wall_s);
-      if (HasRunFlag(p.detail_json, "steered_slip")) {
+      if (mechanics::HasRunFlag(p.detail_json, "steered_slip")) {
         ++steered;
         if (AlignedCone(p.model_json)) ++steered_aligned;
       }

@@ -108,6 +108,11 @@ std::string RunFlagsJson(const SimulationResult& result) {
   return flags.dump();
 }
 
+bool HasRunFlag(const std::string& detail_json, const char* flag) {
+  const auto d = nlohmann::json::parse(detail_json, nullptr, false);
+  return !d.is_discarded() && d.is_object() && d.contains(flag);
+}
+
 SimulationResult Simulate(const Scene& scene) { return Simulate(scene, nullptr); }
 
 namespace {

@@ -208,6 +208,10 @@ TEST(SteeredSlip, TheOutputAndAStoredDetailCarryIt) {
   r.steered_slip.detected = true;
   const nlohmann::json flags = nlohmann::json::parse(RunFlagsJson(r));
   ASSERT_TRUE(flags.contains("steered_slip"));
+  EXPECT_TRUE(HasRunFlag(RunFlagsJson(r), "steered_slip"));
+  EXPECT_FALSE(HasRunFlag(RunFlagsJson(r), "oscillation"));
+  EXPECT_FALSE(HasRunFlag("not json", "steered_slip"));
+  EXPECT_FALSE(HasRunFlag("[1]", "steered_slip"));
   EXPECT_DOUBLE_EQ(flags["steered_slip"]["share"].get<double>(), 0.3);
 }
 

@@ -235,6 +235,10 @@ struct SimulationResult {
 // none. The one rendering every stored
 // detail (truths, predictions, closed-loop trials) uses.
 std::string RunFlagsJson(const SimulationResult& result);
+// Whether a stored detail (a JSON object RunFlagsJson's flags were merged
+// into) carries the flag `flag` ("oscillation", "impact", "steered_slip");
+// false for text that is not a JSON object.
+bool HasRunFlag(const std::string& detail_json, const char* flag);
 
 // Never throws for a scene that passed ValidateScene(); a step the solver
 // cannot solve ends the run with status kSolverFailure. Never returns NaN.
