@@ -2,6 +2,7 @@
 // (closed_forms_test.cpp, quasi_static_test.cpp).
 #pragma once
 
+#include <cmath>
 #include <string>
 
 #include <gtest/gtest.h>
@@ -34,6 +35,36 @@ inline Scene CentralPushOnPatches(const std::string& reduce) {
                R"("},"pusher":{"type":"point","position":[0,0,-0.05],"normal":[0,0,1],)"
                R"("mu":0.0,"motion":{"velocity":[0,0,0.01],"angular_velocity":[0,0,0]}})");
 }
+
+// Issue 31's push tilted by 30° in the y-z plane through the grip axis, no
+// gravity, the pusher (μ 0.3) sticking, the fingers sliding in a free
+// direction (closed form: closed_forms_test.cpp,
+// TiltedPushTurnsWithThePusherSeenFromTheAxis): θ(T) = 0.054686 rad.
+inline std::string TiltedPushBody() {
+  return std::string(kBox) + R"(,"gravity":[0,0,0],"duration":0.5,"grip_force":10.0,)" +
+         kPointFingers +
+         R"(,"model":{"facets":8,"points":3,"dt":0.001,"reduce":"auto"},)"
+         R"("pusher":{"type":"point","position":[0,0,-0.05],"normal":[0,0,1],)"
+         R"("mu":0.3,"motion":{"velocity":[0,0.004999999999999999,)"
+         R"(0.008660254037844387],"angular_velocity":[0,0,0]}})";
+}
+inline double TiltedPushRoll() {
+  const double v = 0.01, phi = 3.14159265358979323846 / 6, h = 0.05, T = 0.5;
+  return std::atan2(v * std::sin(phi) * T, h - v * std::cos(phi) * T);
+}
+
+// Issue 31's pivot past its stall: grip 1 kN, point fingers, a frictionless
+// point pusher 10 mm off the grip axis pushing up at 1 cm/s for 0.6 s, no
+// gravity, the model's choices `model` (JSON members):
+// roll atan(d/(h − vT)) = 0.22348 rad at T (quasi_static_test.cpp).
+inline Scene PivotPastStall(const std::string& model) {
+  return Parse(std::string(kBox) + R"(,"gravity":[0,0,0],"duration":0.6,"grip_force":1000.0,)" +
+               kPointFingers + R"(,"model":{"facets":8,"points":3,"dt":0.001,"reduce":"auto",)" +
+               model +
+               R"(},"pusher":{"type":"point","position":[0,0.01,-0.05],"normal":[0,0,1],)"
+               R"("mu":0.0,"motion":{"velocity":[0,0,0.01],"angular_velocity":[0,0,0]}})");
+}
+inline double PivotPastStallRoll() { return std::atan(0.01 / (0.05 - 0.01 * 0.6)); }
 
 // Rotation about the gripper's x axis (the grip axis) of a sample.
 inline double Roll(const TrajectorySample& s) {

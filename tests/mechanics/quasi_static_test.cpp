@@ -39,26 +39,17 @@ using issue31::SimulateOk;
 // and -0.386 rad (2 ms). Now within 1e-5 rad of the closed form at every dt
 // and facets (the first solve of a step placed where the last step's twist
 // ends it: 0.223475-0.223477 rad when it was placed at the step's start).
-Scene Pivot() {
-  return Parse(std::string(kBox) + R"(,"gravity":[0,0,0],"duration":0.6,"grip_force":1000.0,)" +
-               kPointFingers +
-               R"(,"model":{"facets":8,"points":3,"dt":0.001,"reduce":"auto",)"
-               R"("inertia":"quasi_static"},"pusher":{"type":"point","position":[0,0.01,-0.05],)"
-               R"("normal":[0,0,1],"mu":0.0,"motion":{"velocity":[0,0,0.01],)"
-               R"("angular_velocity":[0,0,0]}})");
-}
+Scene Pivot() { return issue31::PivotPastStall(R"("inertia":"quasi_static")"); }
 
 TEST(QuasiStatic, PivotPastItsStallFollowsTheQuasiStaticPath) {
-  const double theta = std::atan(0.01 / (0.05 - 0.01 * 0.6));
+  const double theta = issue31::PivotPastStallRoll();
   for (double dt : {0.0005, 0.001, 0.002}) {
     for (int facets : {8, 16, 32}) {
       Scene scene = Pivot();
       scene.model.dt = dt;
       scene.model.facets = facets;
-      // The polyhedral cone: quasi-static steps with the aligned cone did
-      // not settle here (dt 0.5 ms, 32 facets ended at 0.1307 rad, and 7 of
-      // the 9 settings were flagged as oscillating); that combination is
-      // now refused on 6-DOF scenes (closed_forms_test.cpp).
+      // The polyhedral cone (the aligned one with quasi-static steps:
+      // closed_forms_test.cpp, AlignedQuasiStaticStepsFollowBothClosedForms).
       scene.model.cone = ConeModel::kPolyhedral;
       const SimulationResult r = SimulateOk(scene);
       const double roll = Roll(r.samples.back());

@@ -37,17 +37,7 @@ using issue31::Parse;
 using issue31::Roll;
 using issue31::SimulateOk;
 
-// Issue 31's push tilted by 30° in the y-z plane through the grip axis (the
-// closed form and its derivation: closed_forms_test.cpp,
-// TiltedPushTurnsWithThePusherSeenFromTheAxis): θ(T) = 0.054686 rad.
-std::string TiltedPush() {
-  return std::string(kBox) + R"(,"gravity":[0,0,0],"duration":0.5,"grip_force":10.0,)" +
-         kPointFingers +
-         R"(,"model":{"facets":8,"points":3,"dt":0.001,"reduce":"auto"},)"
-         R"("pusher":{"type":"point","position":[0,0,-0.05],"normal":[0,0,1],)"
-         R"("mu":0.3,"motion":{"velocity":[0,0.004999999999999999,)"
-         R"(0.008660254037844387],"angular_velocity":[0,0,0]}})";
-}
+std::string TiltedPush() { return issue31::TiltedPushBody(); }
 
 Scene With(Scene scene, ConeModel cone, int facets) {
   scene.model.cone = cone;
