@@ -2,10 +2,10 @@
 // study: prints one Markdown row per scene). The steps alone are timed, not
 // parsing or set-up; each scene runs `--runs` times and the fastest and the
 // median run are printed. `--cone polyhedral|aligned` overrides the scenes'
-// cone. Written against ContactModel's oldest API (construct, Step(), ok,
-// error) so that the same file builds against an older commit's mechanics
-// library and compares it with today's in one sitting (bench/README.md,
-// "Steered slip and the defaults' cost").
+// cone, `--inertia carried|quasi_static|auto` their inertia. Written against ContactModel's oldest
+// API (construct, Step(), ok, error) so that the same file builds against an older commit's
+// mechanics library and compares it with today's in one sitting (bench/README.md, "Steered slip and
+// the defaults' cost").
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -26,7 +26,8 @@ using arena::mechanics::Scene;
 
 int Usage() {
   std::fprintf(stderr,
-               "usage: scene_timing [--runs N] [--cone polyhedral|aligned] SCENE.json...\n");
+               "usage: scene_timing [--runs N] [--cone polyhedral|aligned] "
+               "[--inertia carried|quasi_static|auto] SCENE.json...\n");
   return 2;
 }
 
@@ -56,13 +57,15 @@ std::vector<double> TimeRuns(const Scene& scene, int runs) {
 
 int main(int argc, char** argv) {
   int runs = 40;
-  std::string cone;
+  std::string cone, inertia;
   std::vector<std::string> files;
   for (int i = 1; i < argc; ++i) {
     if (std::strcmp(argv[i], "--runs") == 0 && i + 1 < argc) {
       runs = std::atoi(argv[++i]);
     } else if (std::strcmp(argv[i], "--cone") == 0 && i + 1 < argc) {
       cone = argv[++i];
+    } else if (std::strcmp(argv[i], "--inertia") == 0 && i + 1 < argc) {
+      inertia = argv[++i];
     } else if (argv[i][0] == '-') {
       return Usage();
     } else {
@@ -70,7 +73,10 @@ int main(int argc, char** argv) {
     }
   }
   if (files.empty() || runs < 1 || runs > 100000) return Usage();
-  std::printf("| scene | cone | steps | fastest ms | median ms |\n|---|---|---|---|---|\n");
+  if (!inertia.empty() && inertia != "carried" && inertia != "quasi_static" && inertia != "auto")
+    return Usage();
+  std::printf(
+      "| scene | cone | inertia | steps | fastest ms | median ms |\n|---|---|---|---|---|---|\n");
   for (const std::string& file : files) {
     Scene scene;
     try {
@@ -83,17 +89,22 @@ int main(int argc, char** argv) {
 #ifdef ARENA_SCENE_TIMING_CONE
     if (cone == "aligned") scene.model.cone = arena::mechanics::ConeModel::kAligned;
     if (cone == "polyhedral") scene.model.cone = arena::mechanics::ConeModel::kPolyhedral;
+    using arena::mechanics::InertiaModel;
+    if (inertia == "carried") scene.model.inertia = InertiaModel::kCarried;
+    if (inertia == "quasi_static") scene.model.inertia = InertiaModel::kQuasiStatic;
+    if (inertia == "auto") scene.model.inertia = InertiaModel::kAuto;
 #else
     // An older library without the choice (built by hand, see the top).
-    if (!cone.empty()) {
-      std::fprintf(stderr, "--cone: this build's model has no cone choice\n");
+    if (!cone.empty() || !inertia.empty()) {
+      std::fprintf(stderr, "--cone, --inertia: this build's model has no such choice\n");
       return 2;
     }
 #endif
     const std::vector<double> ms = TimeRuns(scene, runs);
     if (ms.empty()) return 1;
     std::printf(
-        "| %s | %s | %ld | %.3f | %.3f |\n", file.c_str(), cone.empty() ? "scene's" : cone.c_str(),
+        "| %s | %s | %s | %ld | %.3f | %.3f |\n", file.c_str(),
+        cone.empty() ? "scene's" : cone.c_str(), inertia.empty() ? "scene's" : inertia.c_str(),
         std::max(1L, std::lround(scene.duration / scene.model.dt)), ms.front(), ms[ms.size() / 2]);
   }
   return 0;

@@ -7,6 +7,7 @@
 #include <cstdio>
 #include <numbers>
 #include <string>
+#include <utility>
 
 #include <gtest/gtest.h>
 
@@ -299,6 +300,14 @@ TEST(ClosedForms, AlignedQuasiStaticStepsFollowBothClosedForms) {
       EXPECT_NEAR(last.position.y(), -1.083e-3, 0.005e-3) << dt << " " << facets;
       EXPECT_FALSE(r.oscillation.detected) << dt << " " << facets;
     }
+  }
+  for (const auto& [facets, y] : {std::pair{8, -1.950e-3}, std::pair{64, -1.240e-3}}) {
+    Scene s = issue31::PivotPastStall(R"("cone":"polyhedral","inertia":"quasi_static")");
+    s.model.facets = facets;
+    const SimulationResult r = SimulateOk(s);
+    std::printf("pivot, polyhedral, quasi-static, %d facets: y %.4f mm\n", facets,
+                1e3 * r.samples.back().position.y());
+    EXPECT_NEAR(r.samples.back().position.y(), y, 0.01e-3) << "the steering this measures";
   }
   // At dt 4 ms the pivot finds no balance on most steps (the polyhedral
   // cone's quasi-static steps leave the grasp there): the carried steps

@@ -396,6 +396,20 @@ TEST(QuasiStatic, SixDofBalancedStepsFollowTheSteeredSlipAndDrift) {
     EXPECT_NEAR(Roll(a.samples.back()), k.roll_quasi_static, 5e-4) << k.facets;
     EXPECT_NEAR(Roll(c.samples.back()), k.roll_carried, 5e-4) << k.facets;
   }
+  // With the aligned cone the slip is not steered, and balanced steps agree
+  // with carried ones (docs/scene.md, "Aligned cones with quasi-static steps").
+  Scene aligned = base;
+  aligned.model.facets = 8;
+  aligned.model.dt = 0.004;
+  aligned.model.cone = ConeModel::kAligned;
+  Scene aligned_carried = aligned;
+  aligned_carried.model.inertia = InertiaModel::kCarried;
+  const double roll_aligned = Roll(SimulateOk(aligned).samples.back());
+  const double roll_aligned_carried = Roll(SimulateOk(aligned_carried).samples.back());
+  std::printf("centred push, aligned cone: roll auto %.4f, carried %.4f rad\n", roll_aligned,
+              roll_aligned_carried);
+  EXPECT_NEAR(roll_aligned, -0.0029, 2e-4);
+  EXPECT_NEAR(roll_aligned_carried, -0.0032, 2e-4);
   // (2): examples/scenes/canonical.json with point fingers and a turning line pusher.
   const std::string turning =
       R"({"object":{"shape":"box","size":[0.05,0.03,0.10],"mass":0.2,"pose":{"position":[0,0,0],)"

@@ -33,10 +33,11 @@ enum class PadModel { kRigid, kElastic };
 // kPolyhedral (the default, JSON "polyhedral" or absent): the cone's edges
 // stay on the docs/scene.md tangent basis; kAligned ("aligned"): a tracked
 // sliding point's cone turns until an edge opposes its slip (AlignCones),
-// so the slip direction is not steered by the facets. Not the default yet:
-// its re-solves do not converge where the slip swings from solve to solve
-// (a rocking pivot: 12 re-solves on most steps, the answer then depends on
-// rounding, and quasi-static steps do not settle with it).
+// so the slip direction is not steered by the facets; with quasi-static
+// steps the cones turn between balances (BalanceAligned). Not the default
+// yet: on a campaign's 6-DOF trials of line and patch fingers it costs
+// several times the polyhedral cone (docs/scene.md, "Why the aligned cone
+// is not the default").
 enum class ConeModel { kPolyhedral, kAligned };
 // kCarried ("carried"): each step carries the object's momentum (quasi-
 // dynamic). kQuasiStatic ("quasi_static"): each step is solved again from
@@ -46,8 +47,9 @@ enum class ConeModel { kPolyhedral, kAligned };
 // issue 31): quasi-static for an object held in a grasp (fingers and no
 // support), carried for one a support carries or no finger holds: on the
 // pushes of a support the balance is often not found within its solves.
-// Not the default: quasi-static steps with the aligned cone run away on
-// the tilted push (docs/scene.md, "What decides inertia").
+// Not the default: with the polyhedral cone balanced steps follow a
+// steered slip further than carried ones, and a few scenes carried steps
+// answer are refused (docs/scene.md, "What decides inertia").
 enum class InertiaModel { kCarried, kQuasiStatic, kAuto };
 
 struct Pose {
