@@ -162,6 +162,7 @@ void Add(SettingSummary& s, Collect& c, const TrialEvaluation& r) {
     }
     if (p.mode_agreement) c.mode.push_back(*p.mode_agreement);
     if (mechanics::HasRunFlag(p.detail_json, "steered_slip")) ++s.steered;
+    if (mechanics::HasRunFlag(p.detail_json, "oscillation")) ++s.oscillating;
     c.position_all.push_back(*p.final_position_error);
     c.angle_all.push_back(*p.final_angle_error);
     c.by_error.emplace_back(*p.final_position_error, r.trial_id);
@@ -566,6 +567,7 @@ nlohmann::json ToJson(const EvaluationReport& r) {
          {"diverged_trials", Notes(s.diverged_trials, false)},
          {"failed_trials", Notes(s.failed_trials, false)},
          {"steered_slip_trials", s.steered},
+         {"oscillating_trials", s.oscillating},
          {"convergence", nullptr},
          {"pareto", s.pareto},
          {"within_budget", s.within_budget}});

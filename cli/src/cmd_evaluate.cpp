@@ -204,21 +204,33 @@ std::string OutcomeTable(const std::vector<assessment::SettingSummary>& settings
   return out.str();
 }
 
-// The settings whose predictions the friction cones steered (their answer
-// moves with the facets): one line each, only when any was.
-void PrintSteered(std::ostream& out, const assessment::EvaluationReport& r, int w) {
+// The settings whose predictions carry a run flag (`count` of a setting's
+// ok trials): a section headed `heading`, one line each, only when any does.
+void PrintFlagged(std::ostream& out, const assessment::EvaluationReport& r, int w,
+                  int assessment::SettingSummary::*count, const char* heading) {
   bool any = false;
-  for (const auto& s : r.settings) any = any || s.steered > 0;
+  for (const auto& s : r.settings) any = any || s.*count > 0;
   if (!any) return;
-  out << "\nsteered slip (a cone's friction acted across a slide and turned it towards the "
-         "cone's edges, so the answer moves with facets; \"cone\": \"aligned\" models a free "
-         "slide), of the ok trials:\n";
+  out << "\n" << heading << ", of the ok trials:\n";
   char line[256];
   for (const auto& s : r.settings) {
     std::snprintf(line, sizeof line, "  %-8s %-*s %d of %d\n", s.predictor.c_str(), w,
-                  s.model_key.c_str(), s.steered, s.ok);
+                  s.model_key.c_str(), s.*count, s.ok);
     out << line;
   }
+}
+
+// The settings whose predictions the friction cones steered (their answer
+// moves with the facets), and those that ended swinging (their final pose
+// a phase of it).
+void PrintSteered(std::ostream& out, const assessment::EvaluationReport& r, int w) {
+  PrintFlagged(out, r, w, &assessment::SettingSummary::steered,
+               "steered slip (a cone's friction acted across a slide and turned it towards the "
+               "cone's edges, so the answer moves with facets; \"cone\": \"aligned\" models a "
+               "free slide)");
+  PrintFlagged(out, r, w, &assessment::SettingSummary::oscillating,
+               "oscillating (the run ended in a swing nothing damps, so its final pose is a phase "
+               "of it; \"inertia\": \"auto\" follows the balanced path of a held object)");
 }
 
 std::string FormatTable(const assessment::EvaluationReport& r, std::int64_t evaluation_id) {

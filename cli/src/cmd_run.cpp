@@ -110,24 +110,66 @@ double Percentile(std::vector<double> v, double q) {
 
 // Whether a stored prediction's model settings name the aligned cone
 // (assessment::ModelSettingsJson writes `cone` only when it is not the default).
-bool AlignedCone(const std::string& model_json) {
-  const auto m = nlohmann::json::parse(model_json, nullptr, false);
-  return !m.is_discarded() && m.is_object() && m.value("cone", "") == "aligned";
+// The run flags (mechanics::RunFlagsJson) of a campaign's ok predictions.
+struct PredictionFlags {
+  std::int64_t steered = 0;               // a friction cone steered a slide
+  std::int64_t steered_aligned = 0;       // ... though it was the aligned cone
+  std::int64_t oscillating = 0;           // ended in a swing nothing damps
+  std::int64_t oscillating_balanced = 0;  // ... though its steps were quasi-static
+  std::int64_t oscillating_steered = 0;   // ... and steered as well
+};
+
+void CountFlags(const db::Prediction& p, PredictionFlags& f) {
+  const bool steered = mechanics::HasRunFlag(p.detail_json, "steered_slip");
+  const bool oscillating = mechanics::HasRunFlag(p.detail_json, "oscillation");
+  if (!steered && !oscillating) return;
+  const auto model = nlohmann::json::parse(p.model_json, nullptr, false);
+  const auto detail = nlohmann::json::parse(p.detail_json, nullptr, false);
+  if (steered) {
+    ++f.steered;
+    if (model.is_object() && model.value("cone", "") == "aligned") ++f.steered_aligned;
+  }
+  if (oscillating) {
+    ++f.oscillating;
+    if (detail.is_object() && detail.value("inertia", "") == "quasi_static")
+      ++f.oscillating_balanced;
+    if (steered) ++f.oscillating_steered;
+  }
 }
 
 // Issue 31: where the friction cone steered the predictions' slides, their
-// answers move with facets; the run's summary says so, with the hint that
-// applies (`aligned` of the `steered` predictions used the aligned cone).
-void PrintSteered(std::int64_t steered, std::int64_t aligned, std::size_t predictions) {
-  if (steered <= 0) return;
-  std::printf(
-      "  steered     %lld of %zu predictions slid where the friction cone steered them, so "
-      "their answers\n"
-      "              move with facets (%s)\n",
-      static_cast<long long>(steered), predictions,
-      aligned == steered ? "the aligned cone's re-solves did not settle there; a finer\n"
-                           "              dt settles more: arena evaluate --dt weighs it"
-                         : "arena evaluate --cone polyhedral,aligned weighs the aligned cone");
+// answers move with facets; where they ended swinging, their final pose is
+// a phase of the swing. The run's summary says so, with the hint that
+// applies.
+void PrintFlags(const PredictionFlags& f, std::size_t predictions) {
+  if (f.steered > 0) {
+    std::printf(
+        "  steered     %lld of %zu predictions slid where the friction cone steered them, so "
+        "their answers\n"
+        "              move with facets (%s)\n",
+        static_cast<long long>(f.steered), predictions,
+        f.steered_aligned == f.steered
+            ? "the aligned cone's re-solves did not settle there; a finer\n"
+              "              dt settles more: arena evaluate --dt weighs it"
+            : "arena evaluate --cone polyhedral,aligned weighs the aligned cone");
+  }
+  if (f.oscillating > 0) {
+    const char* hint =
+        f.oscillating_balanced == f.oscillating
+            ? "their quasi-static steps found no balance there and carried\n"
+              "              the momentum; a finer dt balances more: arena evaluate --dt weighs it"
+        : f.oscillating_steered > 0
+            ? "\"inertia\": \"auto\" with \"cone\": \"aligned\" follows the\n"
+              "              balanced path unsteered: arena evaluate --cone polyhedral,aligned\n"
+              "              --inertia carried,auto weighs it"
+            : "\"inertia\": \"auto\" follows the balanced path: arena evaluate\n"
+              "              --inertia carried,auto weighs it";
+    std::printf(
+        "  oscillating %lld of %zu predictions ended in a swing nothing damps, so their final pose "
+        "is\n"
+        "              a phase of it (%s)\n",
+        static_cast<long long>(f.oscillating), predictions, hint);
+  }
 }
 
 // overhead_s: arena's own time per clean trial on its cell (TrialTiming).
@@ -139,8 +181,8 @@ std::int64_t PrintSummary(const std::string& db_path, std::int64_t campaign_id, 
   auto store = db::Store::Open(db_path, ro);
   const db::Campaign campaign = store->GetCampaign(campaign_id);
   std::vector<double> pos_err, ang_err, force_err, force_rel, mode, pred_time;
-  std::int64_t done = 0, failed = 0, other = 0, prediction_failures = 0, steered = 0,
-               steered_aligned = 0;
+  std::int64_t done = 0, failed = 0, other = 0, prediction_failures = 0;
+  PredictionFlags flags;
   for (const auto& t : store->ListTrials(campaign_id)) {
     if (t.state == db::TrialState::kDone)
       ++done;
@@ -158,10 +200,7 @@ std::int64_t PrintSummary(const std::string& db_path, std::int64_t campaign_id, 
       if (p.force_error) force_err.push_back(*p.force_error);
       if (p.mode_agreement) mode.push_back(*p.mode_agreement);
       pred_time.push_back(p.wall_s);
-      if (mechanics::HasRunFlag(p.detail_json, "steered_slip")) {
-        ++steered;
-        if (AlignedCone(p.model_json)) ++steered_aligned;
-      }
+      CountFlags(p, flags);
     }
   }
   const std::int64_t total = done + failed + other;
@@ -229,7 +268,7 @@ std::int64_t PrintSummary(const std::string& db_path, std::int64_t campaign_id, 
                 prediction_failures
                     ? (", " + std::to_string(prediction_failures) + " predictions failed").c_str()
                     : "");
-  PrintSteered(steered, steered_aligned, pred_time.size());
+  PrintFlags(flags, pred_time.size());
   if (!overhead_s.empty()) {
     std::printf(
         "  orchestration %.2f ms median, %.2f ms p95 per trial (cell busy time minus its own "

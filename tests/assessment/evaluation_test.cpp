@@ -214,7 +214,8 @@ TEST(EvaluationSummary, DistributionsParetoFrontAndFailures) {
 }
 
 // A prediction whose detail carries the steered-slip flag (issue 31) is
-// counted for its setting, over the ok trials only.
+// counted for its setting, over the ok trials only; so is one that ended
+// oscillating.
 TEST(EvaluationSummary, CountsTheTrialsTheConeSteered) {
   auto results = KnownResults();
   const std::string steered = R"({"steered_slip":{"detected":true,"share":0.3}})";
@@ -229,6 +230,10 @@ TEST(EvaluationSummary, CountsTheTrialsTheConeSteered) {
   EXPECT_EQ(report.settings[2].steered, 0);
   EXPECT_EQ(report.settings[3].steered, 2);
   EXPECT_EQ(ToJson(report)["settings"][0]["steered_slip_trials"], 2);
+  // The oscillation flag is counted the same way, on its own.
+  EXPECT_EQ(report.settings[1].oscillating, 3);
+  EXPECT_EQ(report.settings[0].oscillating, 0);
+  EXPECT_EQ(ToJson(report)["settings"][1]["oscillating_trials"], 3);
 }
 
 // A campaign's `prediction` may choose issue 31's model options (pads, cone,

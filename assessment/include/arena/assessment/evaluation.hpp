@@ -163,6 +163,9 @@ struct SettingSummary {
   // (`steered_slip` in its detail: its answer moves with the facets; see
   // mechanics::SteeredSlip).
   int steered = 0;
+  // ... and those whose prediction ended in a swing nothing damps
+  // (`oscillation` in its detail: its final pose is a phase of the swing).
+  int oscillating = 0;
   std::optional<Convergence> convergence;
   // NMSE of the push's outcome (scoring.hpp) over the ok trials; absent, with
   // the reason in nmse_note, when it cannot be computed (< 2 trials, an
