@@ -950,8 +950,7 @@ struct ContactModel::Impl {
   bool RunStep(StepReport& rep);
   bool RunPhases(int first, int last, StepReport& rep);
   bool BalanceStep(int last, StepReport& rep);
-  enum class Balance { kBalanced, kUnbalanced, kNoAnswer };
-  Balance Rebalance(int last, StepReport& rep, int max_solves);
+  bool Rebalance(int last, StepReport& rep);
   bool CarryStep(int last, StepReport& rep);
   bool BalanceAligned(int last, StepReport& rep);
   bool BalanceIsAcceptable(const StepScratch& s) const;
@@ -1908,18 +1907,16 @@ bool ContactModel::Impl::RunPhases(int first, int last, StepReport& rep) {
 // forces can balance, dynamic where they cannot. False when a phase refused
 // the step.
 bool ContactModel::Impl::BalanceStep(int last, StepReport& rep) {
-  return Rebalance(last, rep, kQuasiStaticSolves) == Balance::kBalanced || CarryStep(last, rep);
+  return Rebalance(last, rep) || CarryStep(last, rep);
 }
 
-// BalanceStep's solves, at most `max_solves` of them: kBalanced when the
-// answer balances and a push gives it (last_step_carried cleared),
-// kUnbalanced when not (the last solve's answer stands), kNoAnswer when a
-// solve found none where it was placed (the step has no answer to go on).
-ContactModel::Impl::Balance ContactModel::Impl::Rebalance(int last, StepReport& rep,
-                                                          int max_solves) {
+// BalanceStep's solves: true when the answer balances and a push gives it
+// (last_step_carried cleared); false when none was found (the caller carries
+// the step: the scratch may hold a solve placed where it found no answer).
+bool ContactModel::Impl::Rebalance(int last, StepReport& rep) {
   SmallVector previous;  // the last solve's change of twist (none after an extrapolation)
   bool balanced = InertialForce(scratch) <= kQuasiStatic;
-  for (int k = 0; k < max_solves && !balanced; ++k) {
+  for (int k = 0; k < kQuasiStaticSolves && !balanced; ++k) {
     SmallVector centre = scratch.vr_new;
     const SmallVector change = scratch.vr_new - scratch.vr;
     bool extrapolated = false;
@@ -1947,16 +1944,16 @@ ContactModel::Impl::Balance ContactModel::Impl::Rebalance(int last, StepReport& 
     if (!RunPhases(first, last, trial)) {
       rep.pivots = trial.pivots;
       rep.quasi_static_solves = trial.quasi_static_solves;
-      return Balance::kNoAnswer;
+      return false;
     }
     rep = trial;
     balanced = InertialForce(scratch) <= kQuasiStatic;
   }
   if (balanced && BalanceIsAcceptable(scratch)) {
     last_step_carried = false;
-    return Balance::kBalanced;
+    return true;
   }
-  return Balance::kUnbalanced;
+  return false;
 }
 
 // The step that found no acceptable balance: the carried one, solved again
@@ -1984,9 +1981,9 @@ bool ContactModel::Impl::CarryStep(int last, StepReport& rep) {
 bool ContactModel::Impl::BalanceAligned(int last, StepReport& rep) {
   for (int a = 0;; ++a) {
     balancing_held_cones = true;
-    const Balance b = Rebalance(last, rep, kQuasiStaticSolves);
+    const bool balanced = Rebalance(last, rep);
     balancing_held_cones = false;
-    if (b != Balance::kBalanced) return CarryStep(last, rep);
+    if (!balanced) return CarryStep(last, rep);
     if (a >= kAlignSolves || !AlignCones(scratch)) return true;
     ++rep.align_solves;
     for (int j = static_cast<int>(StepPhase::kGraspMap); j <= last; ++j) {
