@@ -108,8 +108,6 @@ double Percentile(std::vector<double> v, double q) {
   return v[static_cast<size_t>(q * static_cast<double>(v.size() - 1) + 0.5)];
 }
 
-// Whether a stored prediction's model settings name the aligned cone
-// (assessment::ModelSettingsJson writes `cone` only when it is not the default).
 // The run flags (mechanics::RunFlagsJson) of a campaign's ok predictions.
 struct PredictionFlags {
   std::int64_t steered = 0;               // a friction cone steered a slide
@@ -127,6 +125,7 @@ void CountFlags(const db::Prediction& p, PredictionFlags& f) {
   const auto detail = nlohmann::json::parse(p.detail_json, nullptr, false);
   if (steered) {
     ++f.steered;
+    // (assessment::ModelSettingsJson writes `cone` only when it is not the default.)
     if (model.is_object() && model.value("cone", "") == "aligned") ++f.steered_aligned;
   }
   if (oscillating) {

@@ -3,6 +3,7 @@
 #pragma once
 
 #include <cmath>
+#include <numbers>
 #include <string>
 
 #include <gtest/gtest.h>
@@ -49,7 +50,7 @@ inline std::string TiltedPushBody() {
          R"(0.008660254037844387],"angular_velocity":[0,0,0]}})";
 }
 inline double TiltedPushRoll() {
-  const double v = 0.01, phi = 3.14159265358979323846 / 6, h = 0.05, T = 0.5;
+  const double v = 0.01, phi = std::numbers::pi / 6, h = 0.05, T = 0.5;
   return std::atan2(v * std::sin(phi) * T, h - v * std::cos(phi) * T);
 }
 
