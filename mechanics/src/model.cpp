@@ -118,17 +118,10 @@ constexpr double kAlignFirst = 0.5;
 // slope of the miss.
 constexpr double kAlignMiss = 3e-3;
 constexpr double kAlignProbe = 4e-3;
-// Aligned cones in quasi-static steps: two more edges, this far (rad) on
-// either side of the aligned one. At a vertex of the polyhedral cone the
-// slip may lie anywhere in the vertex's fan (±π/facets); a balance weighs
-// forces only, so nothing picks the slip within it and the balance drifts
-// along that freedom (carried steps' inertia picks it). With the edges
-// beside it the fan is ±kAlignFan/2: the slip opposes the friction within
-// that, as on the circular cone. Below kAlignAngle, so that a friction on
-// one of them counts as on the aligned edge and the cone turns by its miss
-// (issue 31's tilted push through the grip axis within 0.08 % at 4 to 64
-// facets and dt 0.5 to 4 ms at 0.8; at 1.5 times kAlignAngle, +4.4 %).
-constexpr double kAlignFan = 0.8 * kAlignAngle;
+// Aligned cones in quasi-static steps: a sliding point's slip counts for
+// its damper (SetSlipDampers) above this share of the velocity scale (the
+// slip's direction is rounding below it, as in MeasureAlignMiss).
+constexpr double kDamperSlip = 1e-6;
 // Quasi-static steps: solved again until the inertial force is below this
 // fraction of the force scale, at most kQuasiStaticSolves more times.
 constexpr double kQuasiStatic = 1e-6;
@@ -407,6 +400,9 @@ struct Point {
   // far the slip's opposite was from it, for the secant update.
   long align_step = -1;
   double align_theta = 0, align_miss = 0;
+  // Quasi-static, aligned: the slip damper's coefficient (N s/m,
+  // SetSlipDampers), 0 when the point did not slide in the last solve.
+  double damp_c = 0;
   // ... whether the last solve's friction was on a face, when the edge
   // was last put on the friction's direction (and that direction), and the
   // last step it was pinned there (see AlignCones).
@@ -760,6 +756,18 @@ class StepMatrix final : public LcpColumns {
 // One step's quantities, passed from phase to phase (the phases are below,
 // after Step()). Kept between steps only so that its buffers are reused;
 // nothing in it is read before the phase that writes it in the same step.
+// The inverse of a symmetric positive definite reduced matrix; six
+// coordinates (every 6-DOF step) on fixed sizes, which Eigen unrolls (the
+// general triangular solves of the dynamic size were about 5 % of a
+// quasi-static step).
+SmallMatrix InverseOfSpd(const SmallMatrix& M) {
+  if (M.rows() == 6) {
+    const Eigen::Matrix<double, 6, 6> F = M;
+    return F.llt().solve(Eigen::Matrix<double, 6, 6>::Identity());
+  }
+  return M.llt().solve(SmallMatrix::Identity(M.rows(), M.cols()));
+}
+
 struct StepScratch {
   Eigen::Matrix3d R = Eigen::Matrix3d::Identity();  // the object's rotation (kPlaceContacts)
   SmallMatrix Mr, Minv;                             // reduced mass matrix (kMassMatrix)
@@ -773,6 +781,8 @@ struct StepScratch {
   Eigen::VectorXd forces;  // N, per force unknown
   SmallVector Jf;          // contact wrench, reduced
   SmallVector vr_new;      // the new twist, reduced
+  SmallMatrix D;           // the slip dampers, reduced (ApplySlipDampers); empty when none
+  SmallVector Db;          // ... and their known part (the pusher's own motion)
   Eigen::Vector3d v_new = Eigen::Vector3d::Zero(), w_new = Eigen::Vector3d::Zero();
   Residuals res;
 };
@@ -849,6 +859,7 @@ struct ContactModel::Impl {
   bool at_step_end = false;  // PlaceContacts: gaps taken at the iterate's end (PlaceAtStepEnd)
   // BalanceAligned: the balance's solves keep the cones they started with.
   bool balancing_held_cones = false;
+  bool slip_dampers = false;       // aligned and quasi-static: SetSlipDampers
   bool last_step_carried = false;  // BalanceStep: the last step found no acceptable balance
   // AlignCones: d(miss)/dθ of the last secant (0: none yet) and scratch.
   double align_slope = 0;
@@ -943,6 +954,14 @@ struct ContactModel::Impl {
   bool CheckValues(StepScratch& s, StepReport& rep);
   bool Refuse(StepReport& rep, const std::string& why);  // kNonFinite
   bool AlignCones(StepScratch& s);
+  void SetSlipDampers(const StepScratch& s);
+  void ApplySlipDampers(StepScratch& s);
+  Eigen::Vector3d SlipDamperDirection(const Contact& ct, const Point& pt) const;
+  // After a turn of the cones: their edges' rows, and the dampers across
+  // the new edges (ApplySlipDampers, in the free motion) where there are any.
+  int FirstPhaseAfterTurn() const {
+    return static_cast<int>(slip_dampers ? StepPhase::kMassMatrix : StepPhase::kGraspMap);
+  }
   bool MeasureAlignMiss(const StepScratch& s, const Contact& ct, double facet, AlignMiss& m);
   double InertialForce(const StepScratch& s) const;
   void PlaceAtStepEnd(const StepScratch& s, const SmallVector& centre);
@@ -1156,13 +1175,7 @@ void ContactModel::Impl::Setup() {
   if (!SetupReduction()) return;
   aligned = tracked && !planar && opt.cone == ConeModel::kAligned;
   quasi_static = InertiaOf(scene) == InertiaModel::kQuasiStatic;
-  if (aligned && quasi_static) {
-    for (double a : {kAlignFan, -kAlignFan}) {
-      cone_cos.push_back(std::cos(a));
-      cone_sin.push_back(std::sin(a));
-    }
-    edges_per_point = static_cast<int>(cone_cos.size());
-  }
+  slip_dampers = aligned && quasi_static;
   SetupScales();
   SetupContacts();
   SetupUnknowns();
@@ -1837,7 +1850,8 @@ bool ContactModel::Impl::RunStep(StepReport& rep) {
     // cone edge its friction sits on, turn the edge onto the new slip and
     // solve the step again (AlignCones); at the fixed point the friction
     // opposes the slip with its full μ λ, as on the circular cone.
-    for (int k = 0; k < kAlignSolves && AlignCones(scratch); ++k) {
+    // (Quasi-static steps turn their cones between balances: BalanceAligned.)
+    for (int k = 0; k < kAlignSolves && !slip_dampers && AlignCones(scratch); ++k) {
       ++rep.align_solves;
       for (int j = static_cast<int>(StepPhase::kGraspMap); j <= i; ++j) {
         if (!RunPhase(static_cast<StepPhase>(j), rep)) return false;
@@ -1882,7 +1896,8 @@ bool ContactModel::Impl::RunPhases(int first, int last, StepReport& rep) {
   if (balancing_held_cones) return true;
   for (int a = 0; a < kAlignSolves && AlignCones(scratch); ++a) {
     ++rep.align_solves;
-    for (int j = static_cast<int>(StepPhase::kGraspMap); j <= last; ++j) {
+    if (slip_dampers) SetSlipDampers(scratch);
+    for (int j = FirstPhaseAfterTurn(); j <= last; ++j) {
       if (!RunPhase(static_cast<StepPhase>(j), rep)) return false;
     }
   }
@@ -1967,26 +1982,29 @@ bool ContactModel::Impl::CarryStep(int last, StepReport& rep) {
   return RunPhases(static_cast<int>(StepPhase::kPlaceContacts), last, rep);
 }
 
-// Quasi-static with aligned cones: the step balanced with its cones held,
-// then the cones turned onto the balanced answer's slip (AlignCones) and
-// the step balanced again, until no cone turns (at most kAlignSolves
-// turns). Turned inside every solve of the balance instead, each solve met
-// other cones: the balance's changes never fell below the cones' own
-// tolerance, its estimate of their convergence came out near 1 and its
-// extrapolation threw the object off its contacts (issue 31's tilted push
-// through the grip axis ended metres away). Balances resumed after a turn
-// when not yet found (8 solves between turns) ended further off (+2.4 %
-// against +0.09 % on that push at dt 1 ms, 8 facets) at 5 times the solves.
-// A step with no balance is the carried one, its cones turned within it.
+// Quasi-static with aligned cones: the step balanced with its cones held
+// and their slip dampers set (SetSlipDampers), then the cones turned onto
+// the balanced answer's slip (AlignCones) and the step balanced again, until
+// no cone turns (at most kAlignSolves turns). Turned inside every solve of
+// the balance instead, each solve met other cones: the balance's changes
+// never fell below the cones' own tolerance, its estimate of their
+// convergence came out near 1 and its extrapolation threw the object off
+// its contacts (issue 31's tilted push through the grip axis ended metres
+// away). Balances resumed after a turn when not yet found (8 solves between
+// turns) ended further off (+2.4 % against +0.09 % on that push at dt 1 ms,
+// 8 facets) at 5 times the solves. A step with no balance is the carried
+// one, its cones turned within it.
 bool ContactModel::Impl::BalanceAligned(int last, StepReport& rep) {
   for (int a = 0;; ++a) {
     balancing_held_cones = true;
+    if (slip_dampers) SetSlipDampers(scratch);
     const bool balanced = Rebalance(last, rep);
     balancing_held_cones = false;
     if (!balanced) return CarryStep(last, rep);
     if (a >= kAlignSolves || !AlignCones(scratch)) return true;
     ++rep.align_solves;
-    for (int j = static_cast<int>(StepPhase::kGraspMap); j <= last; ++j) {
+    if (slip_dampers) SetSlipDampers(scratch);
+    for (int j = FirstPhaseAfterTurn(); j <= last; ++j) {
       if (!RunPhase(static_cast<StepPhase>(j), rep)) return false;
     }
   }
@@ -2197,6 +2215,87 @@ double ContactModel::Impl::InertialForce(const StepScratch& s) const {
   return worst;
 }
 
+// Quasi-static, aligned cones: a sliding point's friction is its cone's
+// aligned edge (μ λ) plus a damper across the edge, -c (d · u) d for its
+// slip u and d the tangent across the edge, with c = μ λ / |u| of the last
+// solve: the circular cone's -μ λ u / |u| to first order in the slip's turn
+// off the edge. At a vertex of the polyhedral cone alone the slip may lie
+// anywhere in the vertex's fan (±π/facets); a balance weighs forces only,
+// so nothing chose it there and the balance drifted along that freedom
+// (carried steps' inertia chooses it). The damper chooses it smoothly, and
+// where the cones settle (the edge opposing the slip) its force vanishes to
+// second order in the miss. It replaced two extra cone edges 0.8 mrad
+// either side of the aligned one, which chose the slip within ±0.4 mrad but
+// moved the friction between them in steps of μ λ · 8e-4 as the balance's
+// iterate moved: balances stalled near 1e-4 of the force scale (the target
+// is 1e-6) and the warm start failed (20-33 Lemke pivots a solve): 26 to 46
+// times the default model's cost on 6-DOF line and patch fingers, 3 to 4
+// times with the dampers (bench/README.md, "Aligned cones with quasi-static
+// steps"). c is held within a balance, so its solves meet one map.
+void ContactModel::Impl::SetSlipDampers(const StepScratch& s) {
+  for (Contact& ct : contacts) {
+    for (Point& pt : ct.points) {
+      pt.damp_c = 0;
+      if (!ct.active || !HasRows(pt) || pt.beta0 < 0 || pt.edges.empty()) continue;
+      const double lam = pt.lambda >= 0 ? Unknown(s, pt.lambda) : ct.known_normal;
+      if (!(lam > 1e-9 * Fs)) continue;
+      double bsum = 0;
+      for (int e = 0; e < edges_per_point; ++e) bsum += Unknown(s, pt.beta0 + e);
+      if (ct.spec.mu * lam - bsum > 1e-9 * ct.spec.mu * lam) continue;  // sticking
+      const Eigen::Vector3d ut = pt.urel - pt.n.dot(pt.urel) * pt.n;
+      const double speed = ut.norm();
+      if (!(speed > kDamperSlip * Vs)) continue;
+      pt.damp_c = ct.spec.mu * lam / speed;
+    }
+  }
+}
+
+// The tangent across a point's aligned edge along which its damper acts: a
+// point finger's pad follows the object along its closing direction, so
+// the slip across the edge as its friction rows see it (FormGraspMap).
+Eigen::Vector3d ContactModel::Impl::SlipDamperDirection(const Contact& ct, const Point& pt) const {
+  Eigen::Vector3d d = pt.n.cross(pt.edges[0]);
+  if (tracked && ct.known_normal >= 0 && !ct.pusher) {
+    const double along = pt.n.dot(ct.normal);
+    if (along >= kGrazingFactor) d -= d.dot(ct.normal) / along * pt.n;
+  }
+  return d;
+}
+
+// Phase 3, aligned and quasi-static: the dampers in the step's equation,
+// (M/dt + D) v' = M v/dt + Q + Db + J f, so that M⁻¹ and the free twist
+// become those of M + dt D; the force balance's residual counts D v' - Db.
+void ContactModel::Impl::ApplySlipDampers(StepScratch& s) {
+  // Six coordinates (slip dampers need 6 DOF): fixed sizes throughout.
+  Eigen::Matrix<double, 6, 6> D = Eigen::Matrix<double, 6, 6>::Zero();
+  Eigen::Matrix<double, 6, 1> Db = Eigen::Matrix<double, 6, 1>::Zero();
+  bool any = false;
+  for (const Contact& ct : contacts) {
+    if (!ct.active) continue;
+    for (const Point& pt : ct.points) {
+      if (!(pt.damp_c > 0) || !HasRows(pt) || pt.edges.empty()) continue;
+      const Eigen::Vector3d d = SlipDamperDirection(ct, pt);
+      Eigen::Matrix<double, 6, 1> j;
+      j << d, (pt.p - c).cross(d);
+      D.noalias() += pt.damp_c * j * j.transpose();
+      if (ct.pusher) Db += pt.damp_c * d.dot(pt.body_velocity) * j;
+      any = true;
+    }
+  }
+  if (!any) {
+    s.Minv = InverseOfSpd(s.Mr);
+    s.vfree = s.vr + dt * s.Minv * s.Q;
+    return;
+  }
+  // In reduced coordinates (P orthonormal: the identity in full 6 DOF).
+  const SmallMatrix Dr = P.transpose() * D * P;
+  const SmallVector Dbr = P.transpose() * Db;
+  s.Minv = InverseOfSpd(s.Mr + dt * Dr);
+  s.vfree = s.Minv * (s.Mr * s.vr + dt * (s.Q + Dbr));
+  s.D = Dr;
+  s.Db = Dbr;
+}
+
 // AlignCones, one point: false when it does not slide in a direction worth
 // aligning to; otherwise its miss, the friction's direction ψ, and whether
 // the friction lies on a face (or is pinned there) in m.
@@ -2397,7 +2496,8 @@ void ContactModel::Impl::FormMassMatrix(StepScratch& s) {
     M6.topLeftCorner<3, 3>() = mass * Eigen::Matrix3d::Identity();
     M6.bottomRightCorner<3, 3>() = s.R * inertia_body * s.R.transpose();
     s.Mr = P.transpose() * M6 * P;
-    s.Minv = s.Mr.llt().solve(SmallMatrix::Identity(nd, nd));
+    // With slip dampers the inverse is that of M + dt D (ApplySlipDampers).
+    if (!slip_dampers) s.Minv = InverseOfSpd(s.Mr);
     s.vr = P.transpose() * tw;
   }
 }
@@ -2419,7 +2519,12 @@ bool ContactModel::Impl::FormFreeMotion(StepScratch& s, StepReport& rep) {
     }
   }
   s.Q = planar ? SmallVector(Pt3 * known) : SmallVector(P.transpose() * known);
-  s.vfree = s.vr + dt * s.Minv * s.Q;
+  s.D.resize(0, 0);
+  if (slip_dampers) {
+    ApplySlipDampers(s);
+  } else {
+    s.vfree = s.vr + dt * s.Minv * s.Q;
+  }
   if (AllFiniteEntries(s.vfree) && AllFiniteEntries(s.Minv)) return true;
   return Refuse(rep, "non-finite free twist (the object's twist, mass matrix or known wrench)");
 }
@@ -2483,6 +2588,12 @@ void ContactModel::Impl::FormGraspMap(StepScratch& s) {
         s.K(i, j) = acc;
       }
     }
+  } else if (nd == 6) {
+    // Six coordinates on fixed sizes, coefficient by coefficient: Eigen's
+    // general product packs its operands for blocks far larger than 6 x nf.
+    const Eigen::Matrix<double, 6, 6> Minv = s.Minv;
+    s.K.resize(6, nf);
+    s.K.noalias() = Minv.lazyProduct(Jc);
   } else {
     s.K.noalias() = s.Minv * Jc;
   }
@@ -2765,7 +2876,8 @@ double ContactModel::Impl::CheckResiduals(StepScratch& s) {
   Residuals& res = s.res;
   res = Residuals{};
   {
-    const SmallVector newton = s.Mr * (s.vr_new - s.vr) / dt - (s.Jf + s.Q);
+    SmallVector newton = s.Mr * (s.vr_new - s.vr) / dt - (s.Jf + s.Q);
+    if (s.D.size() > 0) newton += s.D * s.vr_new - s.Db;
     for (int i = 0; i < nd; ++i) {
       const bool torque = planar ? i == 2 : i >= 3;
       res.force_balance =
@@ -2888,15 +3000,20 @@ void ContactModel::Impl::ReportContacts(StepScratch& s, SlipSteering& steering) 
           for (int e = 0; e < edges_per_point; ++e)
             ft += Unknown(s, pt.beta0 + e) * EdgeOf(ct, pt, e);
         }
+        const Eigen::Vector3d urel =
+            pt.urel_step == steps_taken
+                ? pt.urel
+                : Eigen::Vector3d(ObjectVelocity(s, pt.p) - BodyVelocity(s, ct, pt));
+        // The slip damper's force is friction too (ApplySlipDampers).
+        if (s.D.size() > 0 && pt.damp_c > 0 && pt.beta0 >= 0 && !pt.edges.empty()) {
+          const Eigen::Vector3d d = SlipDamperDirection(ct, pt);
+          ft -= pt.damp_c * d.dot(urel) * d;
+        }
         const Eigen::Vector3d fp = lam * nrm + ft;
         force += fp;
         st.normal_force += lam;
         st.tangential_force += ft;
         st.torque += (pt.p - ct.position).cross(fp);
-        const Eigen::Vector3d urel =
-            pt.urel_step == steps_taken
-                ? pt.urel
-                : Eigen::Vector3d(ObjectVelocity(s, pt.p) - BodyVelocity(s, ct, pt));
         const Eigen::Vector3d ut = urel - nrm.dot(urel) * nrm;
         if (lam > 1e-9 * Fs && ut.squaredNorm() > slip_floor * slip_floor) {
           sliding = true;
