@@ -34,10 +34,12 @@ enum class PadModel { kRigid, kElastic };
 // stay on the docs/scene.md tangent basis; kAligned ("aligned"): a tracked
 // sliding point's cone turns until an edge opposes its slip (AlignCones),
 // so the slip direction is not steered by the facets; with quasi-static
-// steps the cones turn between balances (BalanceAligned). Not the default
-// yet: on a campaign's 6-DOF trials of line and patch fingers it costs
-// several times the polyhedral cone (docs/scene.md, "Why the aligned cone
-// is not the default").
+// steps the cones turn between balances (BalanceAligned) and a damper
+// across the aligned edge, the circular cone to first order, chooses the
+// slip within the vertex's fan (SetSlipDampers). Not the default yet: on a
+// campaign's 6-DOF trials of line and patch fingers it costs several times
+// the polyhedral cone (docs/scene.md, "Why the aligned cone is not the
+// default").
 enum class ConeModel { kPolyhedral, kAligned };
 // kCarried ("carried"): each step carries the object's momentum (quasi-
 // dynamic). kQuasiStatic ("quasi_static"): each step is solved again from
