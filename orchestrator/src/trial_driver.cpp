@@ -116,6 +116,9 @@ struct TrialDriver::Impl {
   std::function<void(const TrialTiming&)> on_trial_timing;
   TrialObserver* observer = nullptr;  // the suspenders (suspenders.hpp)
 
+  enum class ResetAhead { kNo, kPublishPending, kForNoTrial };
+  static constexpr std::size_t kMaxHeldStatuses = 4;  // a cell sends two per reset
+
   struct CellRun {
     std::string id;
     bool alive = true;
@@ -156,6 +159,12 @@ struct TrialDriver::Impl {
     // `aim_known` false: not looked up, the reset step looks it up itself.
     std::optional<db::ClaimedTrial> next_aim;
     bool aim_known = false;
+    // Issue 27: its RESET went out before the publish of the stream it
+    // follows committed (DecideResetAhead): the statuses of that reset held
+    // until the publish ends, and whether the reset still runs for no trial
+    // (the publish refused). Both cleared when the cell goes idle.
+    ResetAhead reset_ahead = ResetAhead::kNo;
+    std::vector<msg::TrialStatus> held_reset;
     std::int64_t block_campaign = 0, block = -1;
     HostCell host;  // what it announced it can do (the claim gate, claim_gate.hpp)
   };
@@ -241,7 +250,11 @@ struct TrialDriver::Impl {
   void SetPhase(CellRun& cell, CellPhase phase, double deadline_s = 0) {
     cell.phase = phase;
     if (phase == CellPhase::kIdle) {
-      cell.next_claim = now();
+      // A reset run out after a refused publish keeps the refusal's backoff.
+      cell.next_claim =
+          cell.reset_ahead == ResetAhead::kForNoTrial ? std::max(cell.next_claim, now()) : now();
+      cell.reset_ahead = ResetAhead::kNo;
+      cell.held_reset.clear();
     } else {
       cell.deadline = now() + Dur(deadline_s);
     }
@@ -425,6 +438,8 @@ struct TrialDriver::Impl {
     const CellPhase phase = cell.phase;
     if (phase == CellPhase::kIdle || !d.ends_phase()) return;
     if (phase == CellPhase::kExecuting) {
+      if (cell.reset_ahead == ResetAhead::kPublishPending)  // its held statuses go (SetPhase)
+        spdlog::info("cell {}: {}", cell.id, DecideResetAhead(AheadEvent::kAttemptEnded).rule);
       auto it = executions.find(cell.trial_id);
       if (it != executions.end()) {
         Execution& ex = it->second;
@@ -436,7 +451,7 @@ struct TrialDriver::Impl {
           RetryExecution(ex.trial_id, ex.campaign_id, ex.attempt, reason, d.rule);
         executions.erase(it);
       }
-    } else if (phase == CellPhase::kResetting) {
+    } else if (phase == CellPhase::kResetting && cell.reset_ahead != ResetAhead::kForNoTrial) {
       CompleteReset(cell.trial_id, cell.attempt, UnobservedReset(reason), cell.id, d.rule);
     }
     if (d.counts_against_cell()) CellResult(cell, phase, false, reason);
@@ -993,6 +1008,15 @@ struct TrialDriver::Impl {
     const std::string tag = TrialTag(ex.campaign_id, ex.trial_id, ex.attempt);
     const std::string cell_id = ex.cell_id;
     const int attempt = ex.attempt;
+    // Issue 27: the RESET before the publish's commit, so the cell resets
+    // while the commit runs (DecideResetAhead). An aim the store cannot look
+    // up now, or a RESET not sent: it follows the publish, as it did before.
+    try {
+      if (SendReset(cell, trial_id, attempt)) cell.reset_ahead = ResetAhead::kPublishPending;
+    } catch (const db::StoreError& e) {
+      if (Judge(e) == StoreVerdict::kStop) throw;
+      spdlog::debug("{}: the RESET follows the publish: {}", tag, e.what());
+    }
     Step(
         tag + ": publish ground truth", cell_id,
         [this, tag, trial_id, attempt] {
@@ -1029,8 +1053,49 @@ struct TrialDriver::Impl {
           spdlog::error("{}: {}", tag, e.what());
           // Refused with the publish: EndPhase still records what ran the trial.
           CellRun& c = Cell(eit->second.cell_id);
+          const bool ahead = c.reset_ahead == ResetAhead::kPublishPending;
+          std::vector<msg::TrialStatus> held = std::move(c.held_reset);
+          c.reset_ahead = ResetAhead::kNo;  // decided below, not as an attempt ended otherwise
           EndPhase(c, DecideServiceEvent(c.phase, ServiceEvent::kStoreRefusedTruth), e.what());
+          if (ahead) RunOutReset(c, DecideResetAhead(AheadEvent::kPublishRefused), std::move(held));
         });
+  }
+
+  // A publish refused after its RESET went out ended its attempt (retried or
+  // failed, the cell backed off, by EndPhase): the cell still resets, and
+  // that reset, not a new EXECUTE, frees it. Nothing of it is recorded for
+  // the trial (its attempt is over; resetting only ever follows executed).
+  void RunOutReset(CellRun& cell, const AheadDecision& a, std::vector<msg::TrialStatus> held) {
+    if (a.step != AheadStep::kRunOut) return;
+    SetPhase(cell, CellPhase::kResetting, opt.service.reset_timeout_s + 2.0);
+    cell.reset_ahead = ResetAhead::kForNoTrial;
+    spdlog::warn("cell {}: its reset runs out for no trial ({})", cell.id, a.rule);
+    for (const msg::TrialStatus& st : held) TakeStatus(cell, st);
+  }
+
+  // Sends `c` its RESET after (trial_id, attempt), aimed at the start of the
+  // trial it will most likely run next (looked up while it executed; a trial
+  // claimed since by another cell only costs the next trial its measured
+  // start, as a lookup here could too). @returns false when it could not be
+  // sent. @throws db::StoreError from the aim's lookup (nothing sent then).
+  bool SendReset(CellRun& c, std::int64_t trial_id, int attempt) {
+    const bool aim_current = c.aim_known && (!c.next_aim || !ClaimedByAnother(c));
+    std::optional<db::ClaimedTrial> next =
+        aim_current ? std::move(c.next_aim) : NextTrialFor(c, false);
+    c.aim_known = false;
+    c.next_aim.reset();
+    c.reset_mounts.reset();
+    if (next) c.reset_mounts = FixturesOfTrial(next->trial_id, next->scene_json);
+    msg::TrialCommand cmd = Command(c, msg::PHASE_RESET);
+    cmd.trial_id(static_cast<std::uint64_t>(trial_id));
+    cmd.attempt(static_cast<std::uint32_t>(attempt));
+    cmd.scene_json(next ? next->scene_json : std::string());
+    cmd.seed(next ? next->seed : 0);
+    c.reset_aimed_at = next ? next->trial_id : 0;
+    cmd.deadline_s(opt.service.reset_timeout_s);
+    const bool sent = transport.Send(cmd);
+    c.reset_sent = now();
+    return sent;
   }
 
   // The stream is published: predict, and reset the cell towards its next trial.
@@ -1067,34 +1132,26 @@ struct TrialDriver::Impl {
     const int attempt = ex.attempt;
     const std::string cell_id = ex.cell_id;
     executions.erase(it);
+    // executed -> resetting was written with the publish (PublishExecuted).
+    const bool ahead = cell.reset_ahead == ResetAhead::kPublishPending;
+    cell.reset_ahead = ResetAhead::kNo;
     SetPhase(cell, CellPhase::kResetting, opt.service.reset_timeout_s + 2.0);
+    if (ahead) {  // its RESET went out before the commit: what it said meanwhile is taken now
+      const AheadDecision a = DecideResetAhead(AheadEvent::kPublishCommitted);
+      std::vector<msg::TrialStatus> held = std::move(cell.held_reset);
+      cell.held_reset.clear();
+      if (a.step == AheadStep::kTakeHeld)
+        for (const msg::TrialStatus& st : held) TakeStatus(cell, st);
+      return;
+    }
     Step(
         tag + ": begin reset", cell_id,
         [this, trial_id, attempt, cell_id] {
           CellRun& c = Cell(cell_id);
-          // Aim the reset at the start of the trial this cell will most likely run next
-          // (looked up while it executed; a trial claimed since by another cell only
-          // costs the next trial its measured start, as a lookup here could too).
-          const bool aim_current = c.aim_known && (!c.next_aim || !ClaimedByAnother(c));
-          std::optional<db::ClaimedTrial> next =
-              aim_current ? std::move(c.next_aim) : NextTrialFor(c, false);
-          c.aim_known = false;
-          c.next_aim.reset();
-          // executed -> resetting was written with the publish (PublishExecuted).
-          c.reset_mounts.reset();
-          if (next) c.reset_mounts = FixturesOfTrial(next->trial_id, next->scene_json);
-          msg::TrialCommand cmd = Command(c, msg::PHASE_RESET);
-          cmd.trial_id(static_cast<std::uint64_t>(trial_id));
-          cmd.attempt(static_cast<std::uint32_t>(attempt));
-          cmd.scene_json(next ? next->scene_json : std::string());
-          cmd.seed(next ? next->seed : 0);
-          c.reset_aimed_at = next ? next->trial_id : 0;
-          cmd.deadline_s(opt.service.reset_timeout_s);
           SetPhase(c, CellPhase::kResetting, opt.service.reset_timeout_s + 2.0);
-          if (!transport.Send(cmd))
+          if (!SendReset(c, trial_id, attempt))
             EndPhase(c, DecideServiceEvent(c.phase, ServiceEvent::kCommandNotSent),
                      "RESET command could not be sent");
-          c.reset_sent = now();
         },
         [this, tag, cell_id](const db::StoreError& e) {
           spdlog::error("{}: {}", tag, e.what());
@@ -1108,10 +1165,30 @@ struct TrialDriver::Impl {
     auto cit = cells.find(st.cell_id());
     if (cit == cells.end()) return;
     CellRun& cell = cit->second;
-    const bool same = cell.trial_id == static_cast<std::int64_t>(st.trial_id()) &&
-                      cell.attempt == static_cast<int>(st.attempt());
-    if (LateMessageRule(true, cell.phase, same)) return;  // a phase already settled
+    if (LateMessageRule(true, cell.phase, SameAttempt(cell, st))) return;  // a phase settled
+    if (cell.reset_ahead == ResetAhead::kPublishPending && st.phase() == msg::PHASE_RESET) {
+      // Its RESET went out before the publish, which has not committed (a
+      // busy store): recorded only once it has (Executed, RunOutReset).
+      if (DecideResetAhead(AheadEvent::kResetStatus).step == AheadStep::kHold) {
+        if (cell.held_reset.size() == kMaxHeldStatuses)
+          cell.held_reset.erase(cell.held_reset.begin());
+        cell.held_reset.push_back(st);
+        cell.reset_taken = now();  // the wait for the publish is the service's time
+        return;
+      }
+    }
     (cell.phase == CellPhase::kResetting ? cell.reset_taken : cell.stream_input_at) = now();
+    TakeStatus(cell, st);
+  }
+
+  static bool SameAttempt(const CellRun& cell, const msg::TrialStatus& st) {
+    return cell.trial_id == static_cast<std::int64_t>(st.trial_id()) &&
+           cell.attempt == static_cast<int>(st.attempt());
+  }
+
+  // A status of ours, decided by the policy for the cell's phase now.
+  void TakeStatus(CellRun& cell, const msg::TrialStatus& st) {
+    if (LateMessageRule(true, cell.phase, SameAttempt(cell, st))) return;  // a phase settled
     const Decision d = DecideStatus(cell.phase, ToPolicy(st.phase()), ToPolicy(st.state()),
                                     ToPolicy(st.failure()));
     if (cell.phase == CellPhase::kExecuting && st.phase() == msg::PHASE_EXECUTE) {
@@ -1216,17 +1293,19 @@ struct TrialDriver::Impl {
       spdlog::warn("trial {} attempt {}: reset on cell {} failed: {}", cell.trial_id, cell.attempt,
                    cell.id, st.reason());
     }
+    // A reset run out after a refused publish is no trial's (RunOutReset).
+    const bool for_trial = cell.reset_ahead != ResetAhead::kForNoTrial;
     // A clean reset is written after the cell's next EXECUTE is sent (Tick's
     // dispatch comes first); a failed one before the cell is idle, as ever.
-    CompleteReset(cell.trial_id, cell.attempt, report, cell.id, d.rule, ok);
+    if (for_trial) CompleteReset(cell.trial_id, cell.attempt, report, cell.id, d.rule, ok);
     // A reset aimed at a trial mounted its fixtures (only a successful one).
     if (ok && cell.reset_mounts)
       RecordChanges(cell, cell.trial_id, cell.attempt, "reset", *cell.reset_mounts, true);
     cell.reset_mounts.reset();
     if (ok || d.counts_against_cell()) CellResult(cell, CellPhase::kResetting, ok, st.reason());
-    if (ok) ReportTiming(cell, st.phase_wall_s());
+    if (ok && for_trial) ReportTiming(cell, st.phase_wall_s());
     SetPhase(cell, CellPhase::kIdle);
-    if (ok) cell.failures_in_a_row = 0;  // a whole clean trial: the backoff starts over
+    if (ok && for_trial) cell.failures_in_a_row = 0;  // a whole clean trial: backoff starts over
     BackOff(cell, d, "reset failed: " + st.reason());
   }
 

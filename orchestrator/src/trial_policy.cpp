@@ -151,6 +151,22 @@ const char* LateMessageRule(bool our_session, CellPhase phase, bool same_trial_a
   return nullptr;
 }
 
+AheadDecision DecideResetAhead(AheadEvent event) {
+  switch (event) {
+    case AheadEvent::kResetStatus:
+      return {AheadStep::kHold, "reset.held_until_published"};
+    case AheadEvent::kPublishCommitted:
+      return {AheadStep::kTakeHeld, "reset.ahead_of_committed_publish"};
+    case AheadEvent::kPublishRefused:
+      // The cell was told to reset and does: it is freed by that reset, not
+      // sent a trial while it still moves the object.
+      return {AheadStep::kRunOut, "reset.ahead_of_refused_publish"};
+    case AheadEvent::kAttemptEnded:
+      break;
+  }
+  return {AheadStep::kDropHeld, "reset.ahead_of_ended_attempt"};
+}
+
 PredictionDecision DecidePrediction(bool same_attempt, bool awaiting_reset, bool reset_in_flight) {
   if (!same_attempt) return {PredictionStep::kDrop, "predict.stale_attempt"};
   if (awaiting_reset && reset_in_flight)
@@ -267,6 +283,33 @@ const char* ToString(TrialStep s) {
       return "reset done";
     case TrialStep::kResetFailed:
       return "reset failed";
+  }
+  return "?";
+}
+
+const char* ToString(AheadEvent e) {
+  switch (e) {
+    case AheadEvent::kResetStatus:
+      return "reset status";
+    case AheadEvent::kPublishCommitted:
+      return "publish committed";
+    case AheadEvent::kPublishRefused:
+      return "publish refused";
+    case AheadEvent::kAttemptEnded:
+      return "attempt ended";
+  }
+  return "?";
+}
+const char* ToString(AheadStep s) {
+  switch (s) {
+    case AheadStep::kHold:
+      return "hold";
+    case AheadStep::kTakeHeld:
+      return "take held";
+    case AheadStep::kRunOut:
+      return "run out";
+    case AheadStep::kDropHeld:
+      return "drop held";
   }
   return "?";
 }

@@ -607,6 +607,199 @@ TEST(TrialDriver, WritesNoCellWaitsOnYieldOneAtATimeToAWaitingInput) {
   }
 }
 
+// Issue 27: the cell's RESET goes out before the stream's publish commits
+// (the cell resets while the commit runs), aimed at the cell's next trial as
+// before; the store's records are those of the old order.
+TEST(TrialDriver, TheResetGoesOutBeforeThePublishCommitsAimedAtTheNextTrial) {
+  Harness h(2);
+  std::vector<db::TrialState> at_reset;  // the reset trial's state when its RESET is sent
+  std::vector<std::string> aims;         // the scene each RESET aims at
+  h.transport.on_send = [&](const msg::TrialCommand& c) {
+    if (c.phase() != msg::PHASE_RESET) return;
+    at_reset.push_back(h.store.trials[static_cast<std::int64_t>(c.trial_id())].state);
+    aims.push_back(c.scene_json());
+  };
+  h.Start();
+  ASSERT_TRUE(h.RunToEnd());
+  EXPECT_EQ(at_reset, (std::vector<db::TrialState>{db::TrialState::kDispatched,
+                                                   db::TrialState::kDispatched}));
+  EXPECT_EQ(aims, (std::vector<std::string>{Scene(), ""}));  // trial 2's start, then none left
+  for (const std::int64_t id : {1, 2}) {
+    EXPECT_EQ(h.store.trials[id].state, db::TrialState::kDone);
+    EXPECT_EQ(h.store.trials[id].attempt, 1);
+    EXPECT_EQ(h.store.trials[id].predictions, 1);
+    EXPECT_EQ(h.store.trials[id].rules,
+              (std::vector<std::string>{kResetAfterExecute, "reset.verified"}));
+  }
+  EXPECT_EQ(h.Sent(msg::PHASE_RESET), 2);
+}
+
+// The first EXECUTE's command, and the fake cell's answer to it (its stream
+// and EXECUTED), by hand: the test then decides when the reset is answered.
+msg::TrialCommand ExecuteAndAnswer(Harness& h) {
+  h.t += std::chrono::milliseconds(100);
+  h.driver->Tick(false);
+  msg::TrialCommand execute;
+  for (const auto& c : h.transport.sent)
+    if (c.phase() == msg::PHASE_EXECUTE) execute = c;
+  h.driver->OnGroundTruth(h.Batch(execute));
+  h.driver->OnStatus(h.Status(execute, msg::STATE_EXECUTED));
+  h.answered = h.transport.sent.size();
+  return execute;
+}
+msg::TrialCommand LastReset(const Harness& h) {
+  msg::TrialCommand reset;
+  for (const auto& c : h.transport.sent)
+    if (c.phase() == msg::PHASE_RESET) reset = c;
+  return reset;
+}
+
+// A RESET_DONE that comes while a busy store still holds the publish is held:
+// nothing of the reset is written before the trial is executed (resetting
+// only after executed), the cell gets no trial meanwhile, and once the
+// publish commits the reset is recorded as any other and the cell goes on.
+TEST(TrialDriver, AResetDoneWhileABusyStoreHoldsThePublishIsTakenOnlyAfterItCommits) {
+  Harness h(2);
+  h.store.faults.next["Ingest.Finish"] = {K::kBusy, K::kBusy};
+  h.Start();
+  ExecuteAndAnswer(h);
+  ASSERT_EQ(h.Sent(msg::PHASE_RESET), 1) << "the RESET waited for the publish";
+  h.driver->OnStatus(h.Status(LastReset(h), msg::STATE_RESET_DONE));
+  EXPECT_EQ(h.store.trials[1].state, db::TrialState::kDispatched);
+  EXPECT_EQ(h.store.faults.calls["CompleteReset"], 0);
+  EXPECT_EQ(h.driver->IdleCells(), 0);
+  int ticks = 0;
+  for (; ticks < 40 && h.store.trials[1].state == db::TrialState::kDispatched; ++ticks) {
+    EXPECT_EQ(h.Sent(msg::PHASE_EXECUTE), 1) << "a trial sent to a cell its publish holds";
+    EXPECT_EQ(h.store.faults.calls["CompleteReset"], 0);
+    h.t += std::chrono::milliseconds(100);
+    h.driver->Tick(false);
+  }
+  ASSERT_LT(ticks, 40) << "the publish never committed";
+  EXPECT_EQ(h.store.faults.calls["Ingest.Finish"], 3);
+  // The held RESET_DONE was taken with the commit: the next trial went out in that Tick.
+  EXPECT_EQ(h.Sent(msg::PHASE_EXECUTE), 2);
+  ASSERT_TRUE(h.RunToEnd());
+  EXPECT_EQ(h.store.faults.calls["CompleteReset"], 2);  // once per trial, none refused
+  for (const std::int64_t id : {1, 2}) {
+    EXPECT_EQ(h.store.trials[id].state, db::TrialState::kDone);
+    EXPECT_EQ(h.store.trials[id].attempt, 1);
+    EXPECT_EQ(h.store.trials[id].rules,
+              (std::vector<std::string>{kResetAfterExecute, "reset.verified"}));
+  }
+  EXPECT_EQ(h.Sent(msg::PHASE_RESET), 2);
+  EXPECT_EQ(h.driver->counters().retried, 0);
+  EXPECT_EQ(h.driver->counters().resets_failed, 0);
+}
+
+// A publish the store refuses after the cell was told to reset ends the
+// attempt as a refused publish always did (execute.store_refused_truth:
+// retried, the store's fault, the cell backs off); the cell is freed by its
+// reset (its status, whether it came before or after the refusal, or its
+// deadline), never sent a trial while it resets, and nothing of that reset
+// is written for the trial. The trial then runs again on the same cell.
+TEST(TrialDriver, ARefusedPublishWithTheCellResettingRetriesTheTrialAndTheResetFreesTheCell) {
+  enum class Cell { kAnswersAfter, kAnsweredWhileHeld, kNeverAnswers };
+  for (const Cell cell : {Cell::kAnswersAfter, Cell::kAnsweredWhileHeld, Cell::kNeverAnswers}) {
+    SCOPED_TRACE(static_cast<int>(cell));
+    Harness h;
+    h.store.faults.next["Ingest.Finish"] = cell == Cell::kAnsweredWhileHeld
+                                               ? std::deque<K>{K::kBusy, K::kStaleAttempt}
+                                               : std::deque<K>{K::kStaleAttempt};
+    h.Start();
+    ExecuteAndAnswer(h);
+    ASSERT_EQ(h.Sent(msg::PHASE_RESET), 1) << "the RESET waited for the publish";
+    const msg::TrialCommand reset = LastReset(h);
+    if (cell == Cell::kAnsweredWhileHeld) {
+      h.driver->OnStatus(h.Status(reset, msg::STATE_RESET_DONE));  // held
+      for (int i = 0; i < 40 && h.store.trials[1].attempt == 1; ++i) {
+        h.t += std::chrono::milliseconds(100);
+        h.driver->Tick(false);
+      }
+    }
+    EXPECT_EQ(h.store.trials[1].state, db::TrialState::kPlanned);
+    EXPECT_EQ(h.store.trials[1].attempt, 2);
+    EXPECT_EQ(h.store.trials[1].rules,
+              (std::vector<std::string>{"execute.store_refused_truth retry.attempts_left"}));
+    EXPECT_EQ(h.driver->IdleCells(), cell == Cell::kAnsweredWhileHeld ? 1 : 0);
+    if (cell == Cell::kAnswersAfter) {
+      h.t += std::chrono::milliseconds(100);
+      h.driver->Tick(false);
+      EXPECT_EQ(h.Sent(msg::PHASE_EXECUTE), 1) << "a trial sent to a resetting cell";
+      h.driver->OnStatus(h.Status(reset, msg::STATE_RESET_DONE));
+      EXPECT_EQ(h.driver->IdleCells(), 1);
+    } else if (cell == Cell::kNeverAnswers) {
+      h.t += std::chrono::seconds(30);
+      h.driver->Tick(false);
+      EXPECT_EQ(h.Sent(msg::PHASE_EXECUTE), 1) << "a trial sent to a resetting cell";
+      h.t += std::chrono::seconds(33);  // past the reset's deadline (60 s + 2)
+      h.driver->Tick(false);
+      EXPECT_EQ(h.driver->IdleCells(), 1);
+      EXPECT_EQ(h.store.failures, 1) << "the missed reset is the cell's";
+    }
+    EXPECT_EQ(h.store.faults.calls["CompleteReset"], 0);
+    EXPECT_EQ(h.Sent(msg::PHASE_EXECUTE), 1);  // the refusal's backoff holds
+    ASSERT_TRUE(h.RunToEnd());
+    EXPECT_EQ(h.Sent(msg::PHASE_EXECUTE), 2);
+    EXPECT_EQ(h.store.trials[1].state, db::TrialState::kDone);
+    EXPECT_EQ(h.store.trials[1].attempt, 2);
+    EXPECT_EQ(h.store.trials[1].rules,
+              (std::vector<std::string>{"execute.store_refused_truth retry.attempts_left",
+                                        kResetAfterExecute, "reset.verified"}));
+    EXPECT_EQ(h.driver->counters().retried, 1);
+    EXPECT_EQ(h.driver->counters().resets_failed, 0);
+    EXPECT_FALSE(h.store.quarantined.count("c1"));
+  }
+}
+
+// A service killed after the RESET went out and before the publish committed
+// (here: held by a busy store) left the trial dispatched, its stream
+// unpublished: the restart re-queues it, as any trial killed before its
+// publish, and what the old session's cell says is not ours.
+TEST(TrialDriver, AServiceKilledBetweenTheResetAndThePublishsCommitRequeuesTheTrial) {
+  Harness h(2);
+  h.store.faults.next["Ingest.Finish"] = {K::kBusy, K::kBusy, K::kBusy};
+  h.Start();
+  ExecuteAndAnswer(h);
+  ASSERT_EQ(h.Sent(msg::PHASE_RESET), 1);
+  const msg::TrialCommand reset = LastReset(h);
+  ASSERT_EQ(h.store.trials[1].state, db::TrialState::kDispatched);
+  h.store.faults.next["Ingest.Finish"].clear();
+  h.NewDriver();
+  h.Start();
+  h.driver->OnStatus(h.Status(reset, msg::STATE_RESET_DONE));  // late: the cell is idle
+  EXPECT_EQ(h.store.trials[1].state, db::TrialState::kPlanned);
+  EXPECT_EQ(h.store.trials[1].attempt, 2);
+  h.answered = h.transport.sent.size();  // the old session's commands are not answered
+  ASSERT_TRUE(h.RunToEnd());
+  for (const std::int64_t id : {1, 2}) EXPECT_EQ(h.store.trials[id].state, db::TrialState::kDone);
+  EXPECT_EQ(h.store.trials[1].attempt, 2);
+  EXPECT_EQ(h.store.trials[1].rules,
+            (std::vector<std::string>{kResetAfterExecute, "reset.verified"}));
+  EXPECT_EQ(h.store.faults.calls["CompleteReset"], 2);
+}
+
+// The cell lost while a busy store holds the publish its RESET went ahead of:
+// the attempt is retried as before, the reset's held status is dropped.
+TEST(TrialDriver, ACellLostWhileItsPublishIsHeldDropsItsHeldResetStatus) {
+  Harness h;
+  h.store.faults.next["Ingest.Finish"] = {K::kBusy};
+  h.Start();
+  ExecuteAndAnswer(h);
+  h.driver->OnStatus(h.Status(LastReset(h), msg::STATE_RESET_DONE));  // held
+  h.driver->OnCellLost("c1", "participant left", false);
+  EXPECT_EQ(h.store.trials[1].state, db::TrialState::kPlanned);
+  EXPECT_EQ(h.store.trials[1].attempt, 2);
+  h.driver->OnAnnounce(h.Announce("c1", kSession, 2));
+  ASSERT_TRUE(h.RunToEnd());
+  EXPECT_EQ(h.store.trials[1].state, db::TrialState::kDone);
+  EXPECT_EQ(h.store.trials[1].attempt, 2);
+  EXPECT_EQ(h.store.faults.calls["CompleteReset"], 1);  // attempt 2's only
+  EXPECT_EQ(h.store.trials[1].rules,
+            (std::vector<std::string>{"execute.cell_lost retry.attempts_left", kResetAfterExecute,
+                                      "reset.verified"}));
+}
+
 // The written-later reset on a busy store: taken again while the cell runs
 // its next trial, whose deadlines it does not hold; nothing costs an attempt.
 TEST(TrialDriver, ABusyStoreAtTheWrittenLaterResetDoesNotHoldTheCellsNextTrial) {

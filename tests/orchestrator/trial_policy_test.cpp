@@ -229,6 +229,34 @@ TEST(TrialPolicy, LateMessagesAreDroppedByName) {
   EXPECT_EQ(LateMessageRule(true, CP::kExecuting, true), nullptr);
 }
 
+// Issue 27: a RESET sent before the publish it follows committed. Nothing of
+// it is the trial's until the publish committed; a refused publish leaves
+// the cell to be freed by the reset it runs. One row per event, every event.
+TEST(TrialPolicy, AResetAheadOfItsPublishIsTheTrialsOnlyOnceThePublishCommitted) {
+  using E = AheadEvent;
+  using S = AheadStep;
+  struct Row {
+    E event;
+    S step;
+    const char* rule;
+  };
+  const Row rows[] = {
+      {E::kResetStatus, S::kHold, "reset.held_until_published"},
+      {E::kPublishCommitted, S::kTakeHeld, "reset.ahead_of_committed_publish"},
+      {E::kPublishRefused, S::kRunOut, "reset.ahead_of_refused_publish"},
+      {E::kAttemptEnded, S::kDropHeld, "reset.ahead_of_ended_attempt"},
+  };
+  std::set<E> seen;
+  for (const Row& r : rows) {
+    EXPECT_TRUE(seen.insert(r.event).second) << "two rows for " << ToString(r.event);
+    const AheadDecision d = DecideResetAhead(r.event);
+    EXPECT_EQ(d.step, r.step) << ToString(r.event) << ": " << ToString(d.step);
+    EXPECT_STREQ(d.rule, r.rule) << ToString(r.event);
+  }
+  for (E e : {E::kResetStatus, E::kPublishCommitted, E::kPublishRefused, E::kAttemptEnded})
+    EXPECT_TRUE(seen.count(e)) << "no row for " << ToString(e);
+}
+
 TEST(TrialPolicy, APredictionWaitsForItsResetOrClosesAnUnconfirmedOne) {
   using PS = PredictionStep;
   struct Row {

@@ -29,7 +29,13 @@
 // The trial's path (issue 27): a clean RESET_DONE is answered by the cell's
 // next EXECUTE (Tick's dispatch) before its CompleteReset, its fixture
 // changes and the periodic writes (Tick's background); the EXECUTE goes out
-// before BeginIngest (a busy store: the stream is ingested whole at its end).
+// before BeginIngest (a busy store: the stream is ingested whole at its end);
+// the RESET goes out before the publish's commit (Ingest::Finish +
+// BeginReset), so the cell resets while it runs. Until that commit the
+// reset is not the trial's (DecideResetAhead, trial_policy.hpp): a status of
+// it is held and taken once the publish committed; a refused publish ends
+// the attempt by its own rule and the cell, still resetting for no trial,
+// is freed by that reset's status or deadline, nothing of it recorded.
 //
 // A cell serves one service session at a time (TrialCommand PHASE_CLAIM,
 // renewed every claim_period_s while we live): the driver dispatches only to
@@ -52,7 +58,10 @@
 //
 //   RecoverAfterRestart (dispatched -> planned+1, resetting -> reset_failed),
 //   then ListTrialsByState(executed, reset_done, reset_failed, predicted)
-//   and each goes through the same steps as the live path.
+//   and each goes through the same steps as the live path. A service killed
+//   after a RESET went out and before its publish committed left the trial
+//   dispatched (its stream unpublished): it is re-queued, as a trial killed
+//   before its publish always was; the cell's status goes to a dead session.
 #pragma once
 
 #include <chrono>

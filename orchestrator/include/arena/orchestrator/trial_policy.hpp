@@ -109,6 +109,33 @@ Decision DecideServiceEvent(CellPhase phase, ServiceEvent event);
 // nullptr: it is current; otherwise the rule that drops it.
 const char* LateMessageRule(bool our_session, CellPhase phase, bool same_trial_and_attempt);
 
+// ## The RESET ahead of the publish (issue 27)
+//
+// A cell's RESET goes out before the publish of the stream it follows
+// commits, so the cell resets while the commit runs. The store moves a trial
+// to resetting only with that publish (executed first: store.hpp), so until
+// the publish ends the reset is the cell's, not yet the trial's: nothing of
+// it may be recorded for the trial before the publish committed.
+enum class AheadEvent {
+  kResetStatus,       // a status of that reset comes while the publish has not ended
+  kPublishCommitted,  // the publish committed: the trial is resetting
+  kPublishRefused,    // the store refused the publish (the attempt ends by its own rule)
+  kAttemptEnded,      // the attempt ended otherwise first (cell lost, restarted, claimed)
+};
+enum class AheadStep {
+  kHold,      // the status waits for the publish; nothing is recorded yet
+  kTakeHeld,  // the reset is the trial's: held statuses are decided now, as any reset's
+  kRunOut,    // the cell stays resetting for no trial: its (held or next) status or its
+              // deadline frees it, counted and backed off as any reset's; nothing of it
+              // is written for the trial, which ended by the refusal's rule
+  kDropHeld,  // the cell's phase ends by the event's own rule; held statuses are dropped
+};
+struct AheadDecision {
+  AheadStep step = AheadStep::kDropHeld;
+  const char* rule = "";
+};
+AheadDecision DecideResetAhead(AheadEvent event);
+
 // A prediction came back for (trial, attempt).
 enum class PredictionStep {
   kDrop,                  // the trial moved on (another attempt): the prediction is stale
@@ -141,5 +168,7 @@ const char* ToString(FailureKind kind);
 const char* ToString(ServiceEvent event);
 const char* ToString(Party party);
 const char* ToString(TrialStep step);
+const char* ToString(AheadEvent event);
+const char* ToString(AheadStep step);
 
 }  // namespace arena::orchestrator
