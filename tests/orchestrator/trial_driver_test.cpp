@@ -436,6 +436,18 @@ struct Harness {
   }
 };
 
+// Trials 1 and 2 done on their first attempt, each predicted once, with the
+// audit of a clean execute and a verified reset.
+void ExpectTrialsOneAndTwoDoneFirstTime(Harness& h) {
+  for (const std::int64_t id : {1, 2}) {
+    EXPECT_EQ(h.store.trials[id].state, db::TrialState::kDone);
+    EXPECT_EQ(h.store.trials[id].attempt, 1);
+    EXPECT_EQ(h.store.trials[id].predictions, 1);
+    EXPECT_EQ(h.store.trials[id].rules,
+              (std::vector<std::string>{kResetAfterExecute, "reset.verified"}));
+  }
+}
+
 TEST(TrialDriver, OneTrialGoesThroughEveryStepToDone) {
   Harness h;
   h.Start();
@@ -528,13 +540,7 @@ TEST(TrialDriver, AfterACleanResetTheNextExecuteGoesOutBeforeTheResetIsWritten) 
   ASSERT_EQ(first_at_execute.size(), 2u);
   EXPECT_EQ(first_at_execute[1], db::TrialState::kResetting);
   EXPECT_EQ(ingests_at_execute, (std::vector<int>{0, 1}));  // the EXECUTE before its ingest
-  for (const std::int64_t id : {1, 2}) {
-    EXPECT_EQ(h.store.trials[id].state, db::TrialState::kDone);
-    EXPECT_EQ(h.store.trials[id].attempt, 1);
-    EXPECT_EQ(h.store.trials[id].predictions, 1);
-    EXPECT_EQ(h.store.trials[id].rules,
-              (std::vector<std::string>{kResetAfterExecute, "reset.verified"}));
-  }
+  ExpectTrialsOneAndTwoDoneFirstTime(h);
 }
 
 // Issue 27: what ran a trial (the EXECUTED status's detail) is stored in the
@@ -624,13 +630,7 @@ TEST(TrialDriver, TheResetGoesOutBeforeThePublishCommitsAimedAtTheNextTrial) {
   EXPECT_EQ(at_reset, (std::vector<db::TrialState>{db::TrialState::kDispatched,
                                                    db::TrialState::kDispatched}));
   EXPECT_EQ(aims, (std::vector<std::string>{Scene(), ""}));  // trial 2's start, then none left
-  for (const std::int64_t id : {1, 2}) {
-    EXPECT_EQ(h.store.trials[id].state, db::TrialState::kDone);
-    EXPECT_EQ(h.store.trials[id].attempt, 1);
-    EXPECT_EQ(h.store.trials[id].predictions, 1);
-    EXPECT_EQ(h.store.trials[id].rules,
-              (std::vector<std::string>{kResetAfterExecute, "reset.verified"}));
-  }
+  ExpectTrialsOneAndTwoDoneFirstTime(h);
   EXPECT_EQ(h.Sent(msg::PHASE_RESET), 2);
 }
 
