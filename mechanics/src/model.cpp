@@ -118,10 +118,9 @@ constexpr double kAlignFirst = 0.5;
 // slope of the miss.
 constexpr double kAlignMiss = 3e-3;
 constexpr double kAlignProbe = 4e-3;
-// Aligned cones in quasi-static steps: a sliding point's slip counts for
-// its damper (SetSlipDampers) above this share of the velocity scale (the
-// slip's direction is rounding below it, as in MeasureAlignMiss).
-constexpr double kDamperSlip = 1e-6;
+// Aligned cones: a slip below this share of the velocity scale has no
+// direction worth aligning a cone or a slip damper to (rounding): SlideOf.
+constexpr double kAlignSlip = 1e-6;
 // Quasi-static steps: solved again until the inertial force is below this
 // fraction of the force scale, at most kQuasiStaticSolves more times.
 constexpr double kQuasiStatic = 1e-6;
@@ -963,6 +962,8 @@ struct ContactModel::Impl {
     return static_cast<int>(slip_dampers ? StepPhase::kMassMatrix : StepPhase::kGraspMap);
   }
   bool MeasureAlignMiss(const StepScratch& s, const Contact& ct, double facet, AlignMiss& m);
+  bool SlideOf(const StepScratch& s, const Contact& ct, const Point& pt, double& lam,
+               Eigen::Vector3d& ut) const;
   double InertialForce(const StepScratch& s) const;
   void PlaceAtStepEnd(const StepScratch& s, const SmallVector& centre);
   bool PredictStepEnd();
@@ -2237,17 +2238,26 @@ void ContactModel::Impl::SetSlipDampers(const StepScratch& s) {
     for (Point& pt : ct.points) {
       pt.damp_c = 0;
       if (!ct.active || !HasRows(pt) || pt.beta0 < 0 || pt.edges.empty()) continue;
-      const double lam = pt.lambda >= 0 ? Unknown(s, pt.lambda) : ct.known_normal;
-      if (!(lam > 1e-9 * Fs)) continue;
-      double bsum = 0;
-      for (int e = 0; e < edges_per_point; ++e) bsum += Unknown(s, pt.beta0 + e);
-      if (ct.spec.mu * lam - bsum > 1e-9 * ct.spec.mu * lam) continue;  // sticking
-      const Eigen::Vector3d ut = pt.urel - pt.n.dot(pt.urel) * pt.n;
-      const double speed = ut.norm();
-      if (!(speed > kDamperSlip * Vs)) continue;
-      pt.damp_c = ct.spec.mu * lam / speed;
+      double lam = 0;
+      Eigen::Vector3d ut;
+      if (SlideOf(s, ct, pt, lam, ut)) pt.damp_c = ct.spec.mu * lam / ut.norm();
     }
   }
+}
+
+// Whether a point slides in the last solve with its friction on its cone's
+// rim and a slip fast enough to have a direction (kAlignSlip): its normal
+// force in lam and its slip in the tangent plane in ut (aligned cones:
+// MeasureAlignMiss, SetSlipDampers).
+bool ContactModel::Impl::SlideOf(const StepScratch& s, const Contact& ct, const Point& pt,
+                                 double& lam, Eigen::Vector3d& ut) const {
+  lam = pt.lambda >= 0 ? Unknown(s, pt.lambda) : ct.known_normal;
+  if (!(lam > 1e-9 * Fs)) return false;
+  double bsum = 0;
+  for (int e = 0; e < edges_per_point; ++e) bsum += Unknown(s, pt.beta0 + e);
+  if (ct.spec.mu * lam - bsum > 1e-9 * ct.spec.mu * lam) return false;  // sticking
+  ut = pt.urel - pt.n.dot(pt.urel) * pt.n;
+  return ut.squaredNorm() > kAlignSlip * kAlignSlip * Vs * Vs;
 }
 
 // The tangent across a point's aligned edge along which its damper acts: a
@@ -2302,14 +2312,9 @@ void ContactModel::Impl::ApplySlipDampers(StepScratch& s) {
 bool ContactModel::Impl::MeasureAlignMiss(const StepScratch& s, const Contact& ct, double facet,
                                           AlignMiss& m) {
   Point& pt = *m.pt;
-  const double lam = pt.lambda >= 0 ? Unknown(s, pt.lambda) : ct.known_normal;
-  if (!(lam > 1e-9 * Fs)) return false;
-  double bsum = 0;
-  for (int e = 0; e < edges_per_point; ++e) bsum += Unknown(s, pt.beta0 + e);
-  if (ct.spec.mu * lam - bsum > 1e-9 * ct.spec.mu * lam) return false;  // sticking
-  const Eigen::Vector3d ut = pt.urel - pt.n.dot(pt.urel) * pt.n;
-  // A slip this slow has no direction worth aligning to (rounding).
-  if (!(ut.squaredNorm() > 1e-12 * Vs * Vs)) return false;
+  double lam = 0;
+  Eigen::Vector3d ut;
+  if (!SlideOf(s, ct, pt, lam, ut)) return false;
   m.t1 = FirstTangent(pt.n);
   m.t2 = pt.n.cross(m.t1);
   const Eigen::Vector3d& e0 = pt.edges[0];
