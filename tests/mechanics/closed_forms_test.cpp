@@ -256,12 +256,29 @@ TEST(ClosedForms, CarriedPivotAlignsWithinBoundedResolves) {
 // the tilted push through the grip axis, θ(T) = 0.054686 rad, and the
 // pivot past its stall, atan(d/(h − vT)) = 0.22348 rad, at every facets and
 // dt. Each balance keeps its cones, which turn between balances onto the
-// balanced slip, and the aligned edge has an edge kAlignFan either side of
-// it (model.cpp, BalanceAligned). Before: refused on 6-DOF scenes, because
+// balanced slip, and a damper across the aligned edge (the circular cone to
+// first order) chooses the slip within the vertex's fan (model.cpp,
+// BalanceAligned, SetSlipDampers). Every finger's friction stays within its
+// cone, |f_t| <= μ N, at every sample: a damper whose coefficient came from
+// a slower slip, or kept into a carried step, once pushed it 0.6 % and 22 %
+// of μ N across the edge. Before: refused on 6-DOF scenes, because
 // the cones turned inside every solve of a balance threw the tilted push
 // metres out of its grasp (at dt 2 ms: the object at 8.35 m/s after its
 // third step, passed as reachable because the lost fingers' grip still
 // counted in the reach).
+// The largest |f_t| / (μ N) of the two point fingers (μ 0.5) over a run.
+double WorstFrictionShare(const SimulationResult& r) {
+  double worst = 0;
+  for (const TrajectorySample& sample : r.samples) {
+    for (size_t i = 0; i < 2 && i < sample.contacts.size(); ++i) {
+      const ContactState& c = sample.contacts[i];
+      if (c.normal_force > 0)
+        worst = std::max(worst, c.tangential_force.norm() / (0.5 * c.normal_force));
+    }
+  }
+  return worst;
+}
+
 TEST(ClosedForms, AlignedQuasiStaticStepsFollowBothClosedForms) {
   const double tilted_roll = issue31::TiltedPushRoll();
   for (double dt : {0.0005, 0.001, 0.002, 0.004}) {
@@ -279,6 +296,7 @@ TEST(ClosedForms, AlignedQuasiStaticStepsFollowBothClosedForms) {
       EXPECT_NEAR(roll, tilted_roll, 1e-3 * tilted_roll) << dt << " " << facets;  // 0.05-0.08 %
       EXPECT_FALSE(r.steered_slip.detected) << dt << " " << facets;
       EXPECT_FALSE(r.oscillation.detected) << dt << " " << facets;
+      EXPECT_LE(WorstFrictionShare(r), 1 + 1e-5) << dt << " " << facets;
     }
   }
   // The pivot: its roll at every facets and dt up to 2 ms; its slide along y
@@ -299,6 +317,7 @@ TEST(ClosedForms, AlignedQuasiStaticStepsFollowBothClosedForms) {
       EXPECT_NEAR(Roll(last), pivot_roll, 1e-5) << dt << " " << facets;
       EXPECT_NEAR(last.position.y(), -1.083e-3, 0.005e-3) << dt << " " << facets;
       EXPECT_FALSE(r.oscillation.detected) << dt << " " << facets;
+      EXPECT_LE(WorstFrictionShare(r), 1 + 1e-5) << dt << " " << facets;
     }
   }
   for (const auto& [facets, y] : {std::pair{8, -1.950e-3}, std::pair{64, -1.240e-3}}) {
@@ -317,6 +336,9 @@ TEST(ClosedForms, AlignedQuasiStaticStepsFollowBothClosedForms) {
   const SimulationResult rocking = SimulateOk(coarse);
   EXPECT_GT(rocking.solver.quasi_static_carried, 0);
   EXPECT_TRUE(rocking.oscillation.detected);
+  // Within 0.2 % here (1.00196 at its worst sample; not traced further: the
+  // run is flagged), where a damper kept into its carried steps gave 22 %.
+  EXPECT_LE(WorstFrictionShare(rocking), 1.003);
   // "auto" is quasi-static for this held object: the same answer.
   Scene automatic = issue31::PivotPastStall(R"("cone":"aligned","inertia":"auto")");
   const SimulationResult a = SimulateOk(automatic);
