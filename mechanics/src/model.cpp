@@ -400,8 +400,12 @@ struct Point {
   long align_step = -1;
   double align_theta = 0, align_miss = 0;
   // Quasi-static, aligned: the slip damper's coefficient (N s/m,
-  // SetSlipDampers), 0 when the point did not slide in the last solve.
+  // SetSlipDampers), 0 when the point did not slide in the last solve, and
+  // the edge it acts across: the one its friction sat on, edges[0] once
+  // the cone has turned onto the slip, else the edge with the largest share
+  // (a slide along another edge of the basis, e.g. ±t2, never turns it).
   double damp_c = 0;
+  int damp_edge = 0;
   // ... whether the last solve's friction was on a face, when the edge
   // was last put on the friction's direction (and that direction), and the
   // last step it was pinned there (see AlignCones).
@@ -2243,7 +2247,13 @@ void ContactModel::Impl::SetSlipDampers(const StepScratch& s) {
       if (!ct.active || !HasRows(pt) || pt.beta0 < 0 || pt.edges.empty()) continue;
       double lam = 0;
       Eigen::Vector3d ut;
-      if (SlideOf(s, ct, pt, lam, ut)) pt.damp_c = ct.spec.mu * lam / ut.norm();
+      if (!SlideOf(s, ct, pt, lam, ut)) continue;
+      pt.damp_c = ct.spec.mu * lam / ut.norm();
+      pt.damp_edge = 0;
+      if (Unknown(s, pt.beta0) > 0) continue;  // on the turned edge (or beside it on a face)
+      for (int e = 1; e < edges_per_point; ++e) {
+        if (Unknown(s, pt.beta0 + e) > Unknown(s, pt.beta0 + pt.damp_edge)) pt.damp_edge = e;
+      }
     }
   }
 }
@@ -2291,11 +2301,13 @@ bool ContactModel::Impl::SlideOf(const StepScratch& s, const Contact& ct, const 
   return ut.squaredNorm() > kAlignSlip * kAlignSlip * Vs * Vs;
 }
 
-// The tangent across a point's aligned edge along which its damper acts: a
-// point finger's pad follows the object along its closing direction, so
-// the slip across the edge as its friction rows see it (FormGraspMap).
+// The tangent across a point's aligned edge (damp_edge) along which its
+// damper acts: a point finger's pad follows the object along its closing
+// direction, so the slip across the edge as its friction rows see it
+// (FormGraspMap). (Across edges[0] whatever the slip, a finger sliding
+// along ±t2 at 8 facets had a damper along its slip: twice its friction.)
 Eigen::Vector3d ContactModel::Impl::SlipDamperDirection(const Contact& ct, const Point& pt) const {
-  Eigen::Vector3d d = pt.n.cross(pt.edges[0]);
+  Eigen::Vector3d d = pt.n.cross(pt.edges[static_cast<size_t>(pt.damp_edge)]);
   if (tracked && ct.known_normal >= 0 && !ct.pusher) {
     const double along = pt.n.dot(ct.normal);
     if (along >= kGrazingFactor) d -= d.dot(ct.normal) / along * pt.n;
