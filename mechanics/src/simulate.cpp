@@ -450,6 +450,8 @@ SimulationResult Simulate(const Scene& scene, const PusherCommandSource& command
   PoseRing poses;
   SteeringWatch steering;
   auto finish = [&] {
+    // "auto" inertia may turn carried during the run (model.cpp, CarryOnPush).
+    result.model.inertia = model.info().inertia;
     if (result.status == SimulationStatus::kOk) {
       result.oscillation = poses.Detect(model.gap_tolerance(), model.length_scale());
     }
