@@ -855,6 +855,11 @@ struct ContactModel::Impl {
   // contact, point by point: every iterate is placed from these
   // (RestoreStartFaces). Outside StepStart so its storage is kept.
   std::vector<Eigen::Vector3d> start_faces;
+  // ... and each point's slip there (Point::slip, which its aligned cone's
+  // first edge opposes): a step solved again from its start (a carried
+  // step after a balance that failed) starts from the cones it started
+  // with, not the ones the failed balance turned.
+  std::vector<Eigen::Vector3d> start_slips;
   // Quasi-static, tracked: the reduced twist of the last step taken, from
   // which the next step's end is predicted (PredictStepEnd).
   SmallVector last_vr;
@@ -2024,7 +2029,8 @@ bool ContactModel::Impl::BalanceAligned(int last, StepReport& rep) {
 // drops, so the run is neither's answer (the off-centre edge push at dt
 // 0.1 ms, aligned cones: 456 of 2000 steps carried, x(T) 17 % off its
 // resolved branch, "ok"). With "auto" the run turns carried from this step
-// on (the step solved again carried; ModelInfo says carried); with
+// on (the step solved again carried; ModelInfo says carried, and Simulate
+// runs an open-loop scene again carried from its start); with
 // "quasi_static" it is refused naming model.inertia. False when refused.
 bool ContactModel::Impl::CarryOnPush(int last, StepReport& rep) {
   const bool slides_in = tracked && PusherSlidesIn(scratch);
@@ -2170,9 +2176,13 @@ void ContactModel::Impl::PlaceAtStepEnd(const StepScratch& s, const SmallVector&
   if (!step_start) {
     StepStart start{c, v, w, q, {}};
     start_faces.clear();
+    start_slips.clear();
     for (const Contact& ct : contacts) {
       start.pads.push_back(ct.pad);
-      for (const Point& pt : ct.points) start_faces.push_back(pt.face_O);
+      for (const Point& pt : ct.points) {
+        start_faces.push_back(pt.face_O);
+        start_slips.push_back(pt.slip);
+      }
     }
     step_start = std::move(start);
   }
@@ -2216,7 +2226,12 @@ void ContactModel::Impl::ReturnToStepStart(bool start_faces) {
   place_lead = 0;
   at_step_end = false;
   if (!step_start) return;
-  if (start_faces) RestoreStartFaces();
+  if (start_faces) {
+    RestoreStartFaces();
+    size_t k = 0;
+    for (Contact& ct : contacts)
+      for (Point& pt : ct.points) pt.slip = start_slips[k++];
+  }
   c = step_start->c;
   q = step_start->q;
   v = step_start->v;

@@ -654,9 +654,9 @@ ModelOptions ReadModel(const json& v, const std::string& path) {
   };
   model.pads = choice("pads", "elastic", "rigid") ? PadModel::kElastic : PadModel::kRigid;
   model.cone =
-      choice("cone", "polyhedral", "aligned") ? ConeModel::kPolyhedral : ConeModel::kAligned;
+      choice("cone", "aligned", "polyhedral") ? ConeModel::kAligned : ConeModel::kPolyhedral;
   // Three values: "auto" added for issue 31 beside the two that keep their
-  // meaning ("carried" the default).
+  // meaning ("auto" the default since then).
   if (const json* c = o.Find("inertia")) {
     const std::string text = String(*c, o.At("inertia"));
     if (text == "auto")
@@ -1416,8 +1416,8 @@ std::string SceneToJson(const Scene& scene, int indent) {
                 {"contacts", ToString(scene.model.contacts)}};
   // Written when not the default (scenes written before them read the same).
   if (scene.model.pads != PadModel::kElastic) j["model"]["pads"] = ToString(scene.model.pads);
-  if (scene.model.cone != ConeModel::kPolyhedral) j["model"]["cone"] = ToString(scene.model.cone);
-  if (scene.model.inertia != InertiaModel::kCarried)
+  if (scene.model.cone != ConeModel::kAligned) j["model"]["cone"] = ToString(scene.model.cone);
+  if (scene.model.inertia != InertiaModel::kAuto)
     j["model"]["inertia"] = ToString(scene.model.inertia);
   // Written only when it says something: a scene without it means independent pads.
   if (scene.gripper.coupling != GripperCoupling::kIndependent)

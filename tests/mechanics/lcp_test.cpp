@@ -266,7 +266,9 @@ TEST(Lemke, PatchContactProblemsSolveInOneRun) {
   model.SetLcpObserver(
       [&](const Eigen::MatrixXd& A, const Eigen::VectorXd& b) { problems.emplace_back(A, b); });
   for (int i = 0; i < 25; ++i) ASSERT_TRUE(model.Step().ok);
-  ASSERT_EQ(problems.size(), 25u);
+  // At least one solve a step; the held patch's quasi-static steps (the
+  // default since issue 31) add a balance's re-solves.
+  ASSERT_GE(problems.size(), 25u);
   LcpOptions one_run;
   one_run.covering_attempts = 1;
   for (const auto& [A, b] : problems) {

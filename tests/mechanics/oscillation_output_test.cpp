@@ -85,7 +85,9 @@ TEST(OscillationOutput, SimulateJsonCarriesTheFlag) {
 // A quasi-static run whose steps found no balance says how many fell back to
 // the carried step (solver.quasi_static_carried, added for issue 31): a
 // grasp too weak for the weight (2 μ N = 1 N < m g = 1.96 N) slides out, so
-// all 25 steps (dt 4 ms, 0.1 s) are carried. Carried runs report 0 of both.
+// all 25 steps (dt 4 ms, 0.1 s) are carried. A balanced run (the canonical
+// scene, held: "auto" is quasi-static) reports its solves and none carried;
+// a carried run 0 of both.
 TEST(OscillationOutput, SimulateJsonCountsCarriedSteps) {
   const fs::path dir = fs::temp_directory_path() / ("arena_qsc_" + std::to_string(::getpid()));
   fs::create_directories(dir);
@@ -99,8 +101,17 @@ TEST(OscillationOutput, SimulateJsonCountsCarriedSteps) {
   EXPECT_GE(sliding["solver"]["quasi_static_solves"].get<int>(), 25);
   const json canonical = SimulateCli(kSourceDir / "examples/scenes/canonical.json");
   ASSERT_TRUE(canonical["solver"].contains("quasi_static_carried")) << canonical.dump();
+  EXPECT_EQ(canonical["model"]["inertia"], "quasi_static");
   EXPECT_EQ(canonical["solver"]["quasi_static_carried"], 0);
-  EXPECT_EQ(canonical["solver"]["quasi_static_solves"], 0);
+  // Its first step's start is no balance (the object at rest, the pusher
+  // moving): one solve more; every later step balanced at its first solve.
+  EXPECT_EQ(canonical["solver"]["quasi_static_solves"], 1);
+  const fs::path pivot = dir / "pivot.json";
+  std::ofstream(pivot) << kCarriedPivot;
+  const json carried = SimulateCli(pivot);
+  EXPECT_EQ(carried["model"]["inertia"], "carried");
+  EXPECT_EQ(carried["solver"]["quasi_static_carried"], 0);
+  EXPECT_EQ(carried["solver"]["quasi_static_solves"], 0);
   fs::remove_all(dir);
 }
 

@@ -13,6 +13,10 @@
 // Contact forces were re-recorded once since, when a tracked contact's force
 // came to be split along the scene's normal rather than summed over its
 // points' own (docs/scene.md): every other value stayed bit-identical.
+// When issue 31 made the aligned cone and "auto" inertia the defaults, each
+// case's scene gained "cone": "polyhedral" and "inertia": "carried", the
+// model it was recorded with: its trajectory unchanged, bit for bit (the
+// new defaults are checked against closed forms: closed_forms_test.cpp).
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>

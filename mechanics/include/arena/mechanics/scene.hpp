@@ -148,8 +148,8 @@ struct ModelOptions {
   Reduce reduce = Reduce::kAuto;
   ContactTracking contacts = ContactTracking::kTracked;
   PadModel pads = PadModel::kElastic;
-  ConeModel cone = ConeModel::kPolyhedral;
-  InertiaModel inertia = InertiaModel::kCarried;
+  ConeModel cone = ConeModel::kAligned;
+  InertiaModel inertia = InertiaModel::kAuto;
 };
 
 // How the fingers move along their closing directions (JSON "gripper":
