@@ -104,13 +104,17 @@ std::string ModelKey(const mechanics::ModelOptions& m) {
   std::string key = buf;
   if (m.contacts == mechanics::ContactTracking::kFixed) key += "_fixed";
   // Every other knob that changes the answer is named when it is not the
-  // default, so two settings that differ only there never share a key (one
-  // would be taken for the other's stored prediction). The defaults keep the
-  // bare key stored predictions already have.
-  const mechanics::ModelOptions defaults;
-  if (m.pads != defaults.pads) key += std::string("_pads-") + mechanics::ToString(m.pads);
-  if (m.cone != defaults.cone) key += std::string("_cone-") + mechanics::ToString(m.cone);
-  if (m.inertia != defaults.inertia) {
+  // key's baseline, so two settings that differ only there never share a
+  // key (one would be taken for the other's stored prediction). The
+  // baseline is fixed: elastic pads, the polyhedral cone and carried steps,
+  // the defaults when the cone and the inertia were added (issue 31), so a
+  // stored bare key keeps meaning them now that the aligned cone and "auto"
+  // are the defaults (whose key names both).
+  if (m.pads != mechanics::PadModel::kElastic)
+    key += std::string("_pads-") + mechanics::ToString(m.pads);
+  if (m.cone != mechanics::ConeModel::kPolyhedral)
+    key += std::string("_cone-") + mechanics::ToString(m.cone);
+  if (m.inertia != mechanics::InertiaModel::kCarried) {
     key += std::string("_inertia-") + mechanics::ToString(m.inertia);
   }
   return key;
@@ -124,11 +128,13 @@ std::string ModelSettingsJson(const mechanics::ModelOptions& model) {
                            {"contacts", mechanics::ToString(model.contacts)},
                            // Whether the steps kept the momentum: it changes the answer.
                            {"inertia", mechanics::ToString(model.inertia)}});
-  // The other opt-in choices where they differ from the model's defaults,
-  // as ModelKey names them (earlier predictions' settings stay the same).
-  const mechanics::ModelOptions defaults;
-  if (model.pads != defaults.pads) settings["pads"] = mechanics::ToString(model.pads);
-  if (model.cone != defaults.cone) settings["cone"] = mechanics::ToString(model.cone);
+  // Rigid pads where chosen, as ModelKey names them (earlier predictions'
+  // settings stay the same), and the cone always since issue 31 made the
+  // aligned cone the default: settings stored before without a "cone" are
+  // the polyhedral cone's.
+  if (model.pads != mechanics::PadModel::kElastic)
+    settings["pads"] = mechanics::ToString(model.pads);
+  settings["cone"] = mechanics::ToString(model.cone);
   return settings.dump();
 }
 

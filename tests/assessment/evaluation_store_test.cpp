@@ -101,7 +101,8 @@ TEST(EvaluationStore, ReplicatesShareThePredictionAndKeepTheirOwnTruth) {
       s.model.facets = facets;
       s.model.points = 3;
       s.model.dt = 0.008;
-      const std::string key = "g" + std::to_string(facets) + "_k3_dt0.008_auto";
+      const std::string key =
+          "g" + std::to_string(facets) + "_k3_dt0.008_auto_cone-aligned_inertia-auto";
       SCOPED_TRACE("trial " + std::to_string(t.id) + " " + key);
       ASSERT_EQ(by.count({t.id, key}), 1u);
       const db::Prediction& got = by.at({t.id, key});

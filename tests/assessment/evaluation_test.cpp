@@ -31,10 +31,14 @@ TEST(EvaluationPercentile, InterpolatesBetweenClosestRanks) {
 
 // A prediction's key names every knob that changes its answer: two settings
 // that differ only in pads, cone or inertia stored under one key would let
-// one be read back as the other's prediction. The defaults keep the bare key
-// (stored predictions keep theirs).
+// one be read back as the other's prediction. The bare key is the
+// polyhedral cone with carried steps, as stored before issue 31 made the
+// aligned cone and "auto" the defaults: the defaults' key names both.
 TEST(ModelKeys, NameEveryKnobThatIsNotItsDefault) {
   mechanics::ModelOptions m;
+  EXPECT_EQ(ModelKey(m), "g8_k3_dt0.004_auto_cone-aligned_inertia-auto");
+  m.cone = mechanics::ConeModel::kPolyhedral;
+  m.inertia = mechanics::InertiaModel::kCarried;
   EXPECT_EQ(ModelKey(m), "g8_k3_dt0.004_auto");
   m.inertia = mechanics::InertiaModel::kAuto;
   EXPECT_EQ(ModelKey(m), "g8_k3_dt0.004_auto_inertia-auto");
@@ -44,7 +48,7 @@ TEST(ModelKeys, NameEveryKnobThatIsNotItsDefault) {
   EXPECT_EQ(ModelKey(m), "g8_k3_dt0.004_auto_fixed_pads-rigid_cone-aligned_inertia-auto");
   mechanics::ModelOptions quasi_static;
   quasi_static.inertia = mechanics::InertiaModel::kQuasiStatic;
-  EXPECT_EQ(ModelKey(quasi_static), "g8_k3_dt0.004_auto_inertia-quasi_static");
+  EXPECT_EQ(ModelKey(quasi_static), "g8_k3_dt0.004_auto_cone-aligned_inertia-quasi_static");
 }
 
 TEST(EvaluationGrid, CrossProductInOrderAndBadListsRefused) {
@@ -55,9 +59,9 @@ TEST(EvaluationGrid, CrossProductInOrderAndBadListsRefused) {
   g.reduce = {mechanics::Reduce::kAuto};
   const auto m = ExpandGrid(g);
   ASSERT_EQ(m.size(), 12u);
-  EXPECT_EQ(ModelKey(m[0]), "g4_k2_dt0.004_auto");
-  EXPECT_EQ(ModelKey(m[1]), "g4_k2_dt0.002_auto");
-  EXPECT_EQ(ModelKey(m[11]), "g8_k5_dt0.002_auto");
+  EXPECT_EQ(ModelKey(m[0]), "g4_k2_dt0.004_auto_cone-aligned_inertia-auto");
+  EXPECT_EQ(ModelKey(m[1]), "g4_k2_dt0.002_auto_cone-aligned_inertia-auto");
+  EXPECT_EQ(ModelKey(m[11]), "g8_k5_dt0.002_auto_cone-aligned_inertia-auto");
   auto bad = g;
   bad.facets = {};
   EXPECT_THROW(ExpandGrid(bad), std::invalid_argument);
@@ -258,8 +262,10 @@ TEST(PredictionSettings, TheModelsChoicesReachThePredictor) {
       EXPECT_EQ(e.field(), std::string("model.") + key);
     }
   }
-  // The default cone is not written (earlier predictions' settings stay).
-  EXPECT_EQ(nlohmann::json::parse(ModelSettingsJson(scene.model)).count("cone"), 0u);
+  // The cone is written since the aligned one became the default (settings
+  // stored before without it are the polyhedral cone's).
+  EXPECT_EQ(nlohmann::json::parse(ModelSettingsJson(scene.model)).value("cone", ""),
+            mechanics::ToString(scene.model.cone));
   const auto truth = mechanics::Simulate(scene).samples;
   const nlohmann::json aligned = {{"cone", "aligned"}};
   const db::Prediction p = PredictTrial(ApplyModelSettings(scene, aligned), truth, aligned);

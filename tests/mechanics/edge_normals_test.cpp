@@ -132,8 +132,8 @@ TEST(EdgeNormals, AnEdgePushRollsAsItsClosedForm) {
       const double roll = std::atan(d / (h - travel)) - std::atan(mu);
       const SimulationResult r = Simulate(s);
       ASSERT_EQ(r.status, SimulationStatus::kOk) << r.error;
-      const double got = -2 * std::atan2(r.samples.back().orientation.x(),
-                                         r.samples.back().orientation.w());
+      const double got =
+          -2 * std::atan2(r.samples.back().orientation.x(), r.samples.back().orientation.w());
       std::printf("edge push, ramp %g ms, dt %g ms: roll %.5f rad (closed form %.5f), %s\n",
                   ramp * 1e3, dt * 1e3, got, roll, ToString(r.model.inertia));
       EXPECT_NEAR(got, roll, 0.002 * roll) << "ramp " << ramp << " dt " << dt;

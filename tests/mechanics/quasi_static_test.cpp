@@ -356,15 +356,13 @@ TEST(QuasiStatic, AutoCarriesWhereMomentumIsThePhysics) {
 // Why "auto" became the default only with the aligned cone (measured when
 // it was first made the default, with the polyhedral cone, and taken back):
 // two things quasi-static steps get wrong in 6 DOF where carried ones do
-// not, with the polyhedral cone (set explicitly here). (1) The worked example of docs/campaigns.md: a
-// centred push on two line fingers (grip 4 N, 0.02 m/s for 0.3 s) started
-// from a pose a cell measured a few mrad off the planned one. The tilt makes
-// the grasp 6-DOF and the line fingers slide in a direction the polyhedral
-// cone steers (issue 31 item 3); the centred push should barely roll.
-// Balanced steps follow the steering further than carried ones, whose
-// momentum lags it: at the campaign's coarse setting twice the carried
-// error (its self-consistency error went 2.76 -> 4.11 deg). (2) A line
-// pusher along the grip axis turning under two point fingers: a planar
+// not, with the polyhedral cone (set explicitly here). (1) The worked example of docs/campaigns.md:
+// a centred push on two line fingers (grip 4 N, 0.02 m/s for 0.3 s) started from a pose a cell
+// measured a few mrad off the planned one. The tilt makes the grasp 6-DOF and the line fingers
+// slide in a direction the polyhedral cone steers (issue 31 item 3); the centred push should barely
+// roll. Balanced steps follow the steering further than carried ones, whose momentum lags it: at
+// the campaign's coarse setting twice the carried error (its self-consistency error went 2.76
+// -> 4.11 deg). (2) A line pusher along the grip axis turning under two point fingers: a planar
 // scene whose roll about the grip axis nothing restrains; balanced 6-DOF
 // steps let it drift out of the plane on round-off (2 mm in 1 s, no flag),
 // where carried steps keep it at rest and the planar model has no such mode.

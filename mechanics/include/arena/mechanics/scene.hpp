@@ -30,28 +30,27 @@ enum class ContactTracking { kTracked, kFixed };
 // which decides their load split; kRigid ("rigid") leaves it undetermined
 // (the solver's vertex, history-dependent).
 enum class PadModel { kRigid, kElastic };
-// kPolyhedral (the default, JSON "polyhedral" or absent): the cone's edges
-// stay on the docs/scene.md tangent basis; kAligned ("aligned"): a tracked
-// sliding point's cone turns until an edge opposes its slip (AlignCones),
-// so the slip direction is not steered by the facets; with quasi-static
-// steps the cones turn between balances (BalanceAligned) and a damper
-// across the aligned edge, the circular cone to first order, chooses the
-// slip within the vertex's fan (SetSlipDampers). Not the default yet: on a
-// campaign's 6-DOF trials of line and patch fingers it costs several times
-// the polyhedral cone (docs/scene.md, "Why the aligned cone is not the
-// default").
+// kAligned (the default since issue 31, JSON "aligned" or absent): a
+// tracked sliding point's cone turns until an edge opposes its slip
+// (AlignCones), so the slip direction is not steered by the facets; with
+// quasi-static steps the cones turn between balances (BalanceAligned) and a
+// damper across the aligned edge, the circular cone to first order,
+// chooses the slip within the vertex's fan (SetSlipDampers).
+// kPolyhedral ("polyhedral", the default before): the cone's edges stay on
+// the docs/scene.md tangent basis, so a slide in a free direction is
+// steered towards an edge (docs/scene.md, "Which knob matters").
 enum class ConeModel { kPolyhedral, kAligned };
-// kCarried ("carried"): each step carries the object's momentum (quasi-
-// dynamic). kQuasiStatic ("quasi_static"): each step is solved again from
-// its own answer until the inertial force M Δv / dt it needs is below 1e-6
-// of the force scale, so the forces balance (the mass only regularises the
-// solve) and the step ends on a balanced path. kAuto ("auto", added for
+// kCarried ("carried", the default before issue 31): each step carries the
+// object's momentum (quasi-dynamic). kQuasiStatic ("quasi_static"): each
+// step is solved again from its own answer until the inertial force M Δv /
+// dt it needs is below 1e-6 of the force scale, so the forces balance (the
+// mass only regularises the solve) and the step ends on a balanced path; a
+// push that needs the momentum is refused. kAuto ("auto", the default since
 // issue 31): quasi-static for an object held in a grasp (fingers and no
-// support), carried for one a support carries or no finger holds: on the
-// pushes of a support the balance is often not found within its solves.
-// Not the default: with the polyhedral cone balanced steps follow a
-// steered slip further than carried ones, and a few scenes carried steps
-// answer are refused (docs/scene.md, "What decides inertia").
+// support), carried for one a support carries or no finger holds (on the
+// pushes of a support the balance is often not found within its solves),
+// and carried where a held object's push needs its momentum (the run again
+// from its start: simulate.cpp) (docs/scene.md, "What decides inertia").
 enum class InertiaModel { kCarried, kQuasiStatic, kAuto };
 
 struct Pose {
