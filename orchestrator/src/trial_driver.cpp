@@ -117,6 +117,16 @@ struct TrialDriver::Impl {
   TrialObserver* observer = nullptr;  // the suspenders (suspenders.hpp)
 
   enum class ResetAhead { kNo, kPublishPending, kForNoTrial };
+
+  // A trial's scene parsed ahead, while the cell runs the trial before it
+  // (StartExecution), for its claim to use: the parse is then off the path
+  // from the cell's RESET_DONE to its EXECUTE (issue 27).
+  struct ParsedScene {
+    std::int64_t trial_id = 0;
+    std::string scene_json;
+    mechanics::Scene scene;
+    std::vector<Eigen::Vector3d> normals;
+  };
   static constexpr std::size_t kMaxHeldStatuses = 4;  // a cell sends two per reset
 
   struct CellRun {
@@ -159,6 +169,7 @@ struct TrialDriver::Impl {
     // `aim_known` false: not looked up, the reset step looks it up itself.
     std::optional<db::ClaimedTrial> next_aim;
     bool aim_known = false;
+    std::shared_ptr<ParsedScene> aim_scene;  // next_aim's, parsed (null: not parsed)
     // Issue 27: its RESET went out before the publish of the stream it
     // follows committed (DecideResetAhead): the statuses of that reset held
     // until the publish ends, and whether the reset still runs for no trial
@@ -840,9 +851,15 @@ struct TrialDriver::Impl {
     ex.cell_id = cell.id;
     ex.measured_cell = cell.truth == "measured";
     ex.scene_json = claim.scene_json;
+    const std::shared_ptr<ParsedScene> ahead = std::exchange(cell.aim_scene, nullptr);
     try {
-      ex.scene = mechanics::ParseScene(claim.scene_json);
-      ex.normals = ContactNormals(ex.scene);
+      if (ahead && ahead->trial_id == claim.trial_id && ahead->scene_json == claim.scene_json) {
+        ex.scene = std::move(ahead->scene);
+        ex.normals = std::move(ahead->normals);
+      } else {
+        ex.scene = mechanics::ParseScene(claim.scene_json);
+        ex.normals = ContactNormals(ex.scene);
+      }
     } catch (const mechanics::SceneError& e) {
       const Decision d = DecideServiceEvent(CellPhase::kIdle, ServiceEvent::kInvalidScene);
       FailTrial(claim.trial_id, claim.campaign_id, claim.attempt,
@@ -897,6 +914,22 @@ struct TrialDriver::Impl {
       if (Judge(e) == StoreVerdict::kStop) throw;  // as any step: the service stops
       spdlog::debug("{}: next trial looked up at the reset instead: {}", tag, e.what());
     }
+    if (cell.next_aim) cell.aim_scene = ParseAhead(*cell.next_aim);
+  }
+
+  // nullptr when the scene does not parse: its claim parses it again and
+  // fails the trial with the error (StartExecution).
+  static std::shared_ptr<ParsedScene> ParseAhead(const db::ClaimedTrial& trial) {
+    auto parsed = std::make_shared<ParsedScene>();
+    parsed->trial_id = trial.trial_id;
+    parsed->scene_json = trial.scene_json;
+    try {
+      parsed->scene = mechanics::ParseScene(trial.scene_json);
+      parsed->normals = ContactNormals(parsed->scene);
+    } catch (const mechanics::SceneError&) {
+      return nullptr;
+    }
+    return parsed;
   }
 
   // The ingest of a trial whose EXECUTE is sent. @returns false when the
