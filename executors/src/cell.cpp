@@ -562,8 +562,12 @@ struct Cell::Impl {
     detail["backend"] = layer.capabilities().name;
     detail["truth"] = StoredTruth(layer.capabilities().truth, trial_truth);
     if (!trial_truth.forces_measured) detail["forces_not_measured"] = trial_truth.forces_note;
-    detail["defects_applied"] = internal::AppliedDefectsTree(layer);
-    s.detail_json(detail.dump());
+    // The applied defects go in as text, their profiles' part dumped once
+    // per campaign profile (DefectLayer::AppliedProfilesText; issue 27).
+    detail.erase("defects_applied");
+    std::string text = detail.dump();
+    text.insert(text.size() - 1, ",\"defects_applied\":" + internal::AppliedDefectsText(layer));
+    s.detail_json(std::move(text));
     if (!failure.empty()) {
       spdlog::warn("cell {}: trial {} attempt {} failed: {}", options.id, c.trial_id(), c.attempt(),
                    failure);

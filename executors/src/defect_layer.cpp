@@ -59,6 +59,10 @@ DefectLayer::DefectLayer(std::unique_ptr<Backend> inner, DefectProfile cell_prof
 std::string DefectLayer::Prepare(const mechanics::Scene& scene,
                                  std::string_view campaign_defects_json,
                                  const TrialContext& trial) {
+  if (campaign_defects_json != profiles_key_) {
+    profiles_key_ = campaign_defects_json;
+    applied_profiles_text_.clear();
+  }
   campaign_.reset();
   effective_ = cell_;
   if (!campaign_defects_json.empty() && campaign_defects_json != "{}") {
@@ -122,7 +126,29 @@ Observer DefectLayer::MakeObserver(const TrialContext& trial) const {
 
 std::string DefectLayer::AppliedJson() const { return internal::AppliedDefectsTree(*this).dump(); }
 
+const std::string& DefectLayer::AppliedProfilesText() const {
+  if (applied_profiles_text_.empty()) {
+    nlohmann::json tree = internal::AppliedDefectsTree(*this);
+    tree.erase("perturbation");
+    applied_profiles_text_ = tree.dump();
+    applied_profiles_text_.pop_back();  // the closing brace: the perturbation follows
+  }
+  return applied_profiles_text_;
+}
+
 namespace internal {
+
+std::string AppliedDefectsText(const DefectLayer& layer) {
+  const TrialPerturbation& p = layer.perturbation();
+  // "perturbation" sorts after every other key: this is the tree's own dump.
+  return layer.AppliedProfilesText() + ",\"perturbation\":" +
+         nlohmann::json({{"mu_scale", p.mu_scale},
+                         {"velocity_scale", p.velocity_scale},
+                         {"velocity_offset",
+                          {p.velocity_offset.x(), p.velocity_offset.y(), p.velocity_offset.z()}}})
+             .dump() +
+         "}";
+}
 
 nlohmann::json AppliedDefectsTree(const DefectLayer& layer) {
   using nlohmann::json;

@@ -15,5 +15,7 @@ nlohmann::json DefectProfileTree(const DefectProfile& profile);
 
 // {"emulated", "cell", "campaign" (null when none), "effective", "perturbation"}.
 nlohmann::json AppliedDefectsTree(const DefectLayer& layer);
+// AppliedDefectsTree(layer).dump(), from the layer's cached profiles' text.
+std::string AppliedDefectsText(const DefectLayer& layer);
 
 }  // namespace arena::executors::internal

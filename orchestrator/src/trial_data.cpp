@@ -4,6 +4,8 @@
 #include <string>
 #include <string_view>
 
+#include <nlohmann/json.hpp>
+
 #include "arena/db/store.hpp"
 #include "arena/schemas/arena.h"
 #include "arena/schemas/ground_truth.hpp"
@@ -108,6 +110,61 @@ std::vector<db::ContactSite> ContactSitesOf(const mechanics::Scene& scene) {
   for (const auto& f : scene.fingers) sites.push_back(site(f, false));
   if (scene.pusher) sites.push_back(site(*scene.pusher, true));
   return sites;
+}
+
+namespace {
+// SAX events: only the depth and whether the value is the top-level "truth"
+// are tracked; nothing is built. The whole text is read (a malformed detail
+// states no truth, as when it was parsed whole).
+class TruthReader : public nlohmann::json_sax<nlohmann::json> {
+ public:
+  std::string truth;
+
+  bool null() override { return Value(); }
+  bool boolean(bool) override { return Value(); }
+  bool number_integer(number_integer_t) override { return Value(); }
+  bool number_unsigned(number_unsigned_t) override { return Value(); }
+  bool number_float(number_float_t, const string_t&) override { return Value(); }
+  bool binary(binary_t&) override { return Value(); }
+  bool string(string_t& value) override {
+    if (wanted_) truth = value;
+    return Value();
+  }
+  bool start_object(std::size_t) override { return Open(); }
+  bool end_object() override { return Close(); }
+  bool start_array(std::size_t) override { return depth_ > 0 && Open(); }  // top level: no object
+  bool end_array() override { return Close(); }
+  bool key(string_t& key) override {
+    wanted_ = depth_ == 1 && key == "truth";
+    return true;
+  }
+  bool parse_error(std::size_t, const std::string&, const nlohmann::detail::exception&) override {
+    return false;
+  }
+
+ private:
+  bool Value() {
+    wanted_ = false;
+    return depth_ > 0;  // a bare scalar is not an object
+  }
+  bool Open() {
+    wanted_ = false;
+    ++depth_;
+    return true;
+  }
+  bool Close() {
+    --depth_;
+    return true;
+  }
+  int depth_ = 0;
+  bool wanted_ = false;
+};
+}  // namespace
+
+std::string StatedTruth(std::string_view detail_json) {
+  TruthReader reader;
+  if (!nlohmann::json::sax_parse(detail_json.begin(), detail_json.end(), &reader)) return {};
+  return reader.truth;
 }
 
 }  // namespace arena::orchestrator

@@ -117,6 +117,16 @@ struct TrialDriver::Impl {
   TrialObserver* observer = nullptr;  // the suspenders (suspenders.hpp)
 
   enum class ResetAhead { kNo, kPublishPending, kForNoTrial };
+
+  // A trial's scene parsed ahead, while the cell runs the trial before it
+  // (StartExecution), for its claim to use: the parse is then off the path
+  // from the cell's RESET_DONE to its EXECUTE (issue 27).
+  struct ParsedScene {
+    std::int64_t trial_id = 0;
+    std::string scene_json;
+    mechanics::Scene scene;
+    std::vector<Eigen::Vector3d> normals;
+  };
   static constexpr std::size_t kMaxHeldStatuses = 4;  // a cell sends two per reset
 
   struct CellRun {
@@ -159,6 +169,7 @@ struct TrialDriver::Impl {
     // `aim_known` false: not looked up, the reset step looks it up itself.
     std::optional<db::ClaimedTrial> next_aim;
     bool aim_known = false;
+    std::shared_ptr<ParsedScene> aim_scene;  // next_aim's, parsed (null: not parsed)
     // Issue 27: its RESET went out before the publish of the stream it
     // follows committed (DecideResetAhead): the statuses of that reset held
     // until the publish ends, and whether the reset still runs for no trial
@@ -187,8 +198,13 @@ struct TrialDriver::Impl {
     // measured no forces. It must say so in its EXECUTE status (truth
     // dds::kTruthMeasuredNoForces), and then every sample must be so.
     bool measured_cell = false;
-    std::int64_t contactless = 0;           // samples received without contacts
-    std::string stated_truth;               // the EXECUTE status's truth (set with `expected`)
+    std::int64_t contactless = 0;  // samples received without contacts
+    std::string stated_truth;      // the EXECUTE status's truth (set with `expected`)
+    // The EXECUTED status's detail (what ran the trial, ~3 KB of JSON), read
+    // into `execution` only after the RESET went out (ReadExecution): its
+    // parse was the largest step between the stream's end and the RESET
+    // (issue 27). Empty once read.
+    std::string detail_json;
     assessment::RecordedCommands commands;  // closed loop: the commands the cell applied
     bool publishing = false;  // the publish step is under way (or waiting on the store)
     // What the EXECUTED status said ran the trial, when it is written with the
@@ -444,6 +460,7 @@ struct TrialDriver::Impl {
       if (it != executions.end()) {
         Execution& ex = it->second;
         // What ran the attempt is recorded though its stream is not published.
+        ReadExecution(ex);
         if (ex.execution) WriteExecution(ex.trial_id, ex.attempt, *std::exchange(ex.execution, {}));
         if (d.trial == TrialStep::kFail)
           FailTrial(ex.trial_id, ex.campaign_id, ex.attempt, reason, d.outcome, d.rule);
@@ -834,9 +851,15 @@ struct TrialDriver::Impl {
     ex.cell_id = cell.id;
     ex.measured_cell = cell.truth == "measured";
     ex.scene_json = claim.scene_json;
+    const std::shared_ptr<ParsedScene> ahead = std::exchange(cell.aim_scene, nullptr);
     try {
-      ex.scene = mechanics::ParseScene(claim.scene_json);
-      ex.normals = ContactNormals(ex.scene);
+      if (ahead && ahead->trial_id == claim.trial_id && ahead->scene_json == claim.scene_json) {
+        ex.scene = std::move(ahead->scene);
+        ex.normals = std::move(ahead->normals);
+      } else {
+        ex.scene = mechanics::ParseScene(claim.scene_json);
+        ex.normals = ContactNormals(ex.scene);
+      }
     } catch (const mechanics::SceneError& e) {
       const Decision d = DecideServiceEvent(CellPhase::kIdle, ServiceEvent::kInvalidScene);
       FailTrial(claim.trial_id, claim.campaign_id, claim.attempt,
@@ -891,6 +914,22 @@ struct TrialDriver::Impl {
       if (Judge(e) == StoreVerdict::kStop) throw;  // as any step: the service stops
       spdlog::debug("{}: next trial looked up at the reset instead: {}", tag, e.what());
     }
+    if (cell.next_aim) cell.aim_scene = ParseAhead(*cell.next_aim);
+  }
+
+  // nullptr when the scene does not parse: its claim parses it again and
+  // fails the trial with the error (StartExecution).
+  static std::shared_ptr<ParsedScene> ParseAhead(const db::ClaimedTrial& trial) {
+    auto parsed = std::make_shared<ParsedScene>();
+    parsed->trial_id = trial.trial_id;
+    parsed->scene_json = trial.scene_json;
+    try {
+      parsed->scene = mechanics::ParseScene(trial.scene_json);
+      parsed->normals = ContactNormals(parsed->scene);
+    } catch (const mechanics::SceneError&) {
+      return nullptr;
+    }
+    return parsed;
   }
 
   // The ingest of a trial whose EXECUTE is sent. @returns false when the
@@ -1033,6 +1072,7 @@ struct TrialDriver::Impl {
             }
           }
           std::int64_t n = 0;
+          ReadExecution(e);  // the RESET is out: off the cell's path now
           try {
             // The execution record, the publish and the move to resetting: one commit.
             db::FinishAlso also;
@@ -1204,10 +1244,18 @@ struct TrialDriver::Impl {
   // (PublishExecuted): no commit of its own between the status and the RESET,
   // also when the status arrives before the stream's last batch. A phase that
   // ends without a publish writes it then (EndPhase).
-  void RecordExecution(Execution& ex, const nlohmann::json& detail) {
+  // The detail is parsed when first needed after the RESET went out (the
+  // publish step) or when the attempt ends unpublished (EndPhase).
+  static void ReadExecution(Execution& ex) {
+    if (ex.detail_json.empty()) return;
+    const auto detail = nlohmann::json::parse(std::exchange(ex.detail_json, {}), nullptr, false);
     if (!detail.is_object()) return;
+    auto text = [&detail](const char* key) {
+      const auto it = detail.find(key);
+      return it != detail.end() && it->is_string() ? it->get<std::string>() : std::string();
+    };
     ex.execution = db::ExecutionRecord{
-        detail.value("backend", std::string()), detail.value("truth", std::string()),
+        text("backend"), text("truth"),
         detail.contains("defects_applied") ? detail["defects_applied"].dump() : std::string()};
   }
   void WriteExecution(std::int64_t trial_id, int attempt, db::ExecutionRecord r) {
@@ -1249,13 +1297,14 @@ struct TrialDriver::Impl {
       case TrialStep::kAwait:
         return;
       case TrialStep::kCollectStream: {
-        const auto detail = nlohmann::json::parse(st.detail_json(), nullptr, false);
-        if (detail.is_object()) ex.stated_truth = detail.value("truth", std::string());
+        // The stated truth decides whether the stream may be published
+        // (StreamProblem): read now, without building the document.
+        ex.stated_truth = StatedTruth(st.detail_json());
         // The cell changed what differed before it ran (executors/trial_start.hpp).
         RecordChanges(cell, ex.trial_id, ex.attempt, "execute",
                       FixturesOfTrial(ex.trial_id, ex.scene_json), /*after_dispatch=*/true);
         ex.expected = st.samples();
-        RecordExecution(ex, detail);
+        ex.detail_json = st.detail_json();
       }
         RecordClosedLoop(ex, st);
         cell.execute_wall_s = st.phase_wall_s();

@@ -19,6 +19,7 @@
 #include "arena/executors/defect_layer.hpp"
 #include "arena/executors/exec_protocol.hpp"
 #include "arena/mechanics/scene_json.hpp"
+#include "defects_json.hpp"
 
 namespace arena::executors {
 namespace {
@@ -264,6 +265,35 @@ TEST(DefectLayerTest, CombinesProfilesAndRefusesWhatItCannotApply) {
   EXPECT_EQ(sim.Prepare(scene, R"({"friction_variability": {"mu_scale_std": 0.1}})", trial), "");
   EXPECT_NE(sim.Prepare(scene, R"({"latency": 3})", trial).find("defects_json: "),
             std::string::npos);  // a bad campaign profile names its field
+}
+
+// The cell's status carries the applied defects as text spliced from a cache
+// of their profiles' part (issue 27): it must be the tree's own dump, for
+// each trial's perturbation and after the campaign profile changes.
+TEST(DefectLayerTest, TheAppliedDefectsTextIsTheTreesDumpAsTheProfileChanges) {
+  DefectProfile cell;
+  cell.position_std.setConstant(3e-4);
+  DefectLayer layer(MakeBackend("model", ModelFidelity{}), cell);
+  const std::string text = ShortScene();
+  const auto scene = mechanics::ParseScene(text);
+  const char* profiles[] = {R"({"friction_variability": {"mu_scale_std": 0.1}})", "{}",
+                            R"({"latency_ms": 4, "friction_variability": {"mu_scale_std": 0.2}})",
+                            R"({"friction_variability": {"mu_scale_std": 0.1}})"};
+  std::uint64_t seed = 1;
+  for (const char* profile : profiles) {
+    for (int trial_id = 1; trial_id <= 2; ++trial_id) {
+      TrialContext trial;
+      trial.scene_json = text;
+      trial.seed = seed++;
+      trial.trial_id = trial_id;
+      ASSERT_EQ(layer.Prepare(scene, profile, trial), "") << profile;
+      ASSERT_TRUE(
+          layer.Execute(scene, trial, [](const mechanics::TrajectorySample&) { return true; }).ok);
+      EXPECT_EQ(internal::AppliedDefectsText(layer), layer.AppliedJson()) << profile;
+      EXPECT_EQ(json::parse(internal::AppliedDefectsText(layer)),
+                internal::AppliedDefectsTree(layer));
+    }
+  }
 }
 
 TEST_F(Dataset, ReplayServesMatchingScenesAndRefusesOthers) {

@@ -1162,5 +1162,22 @@ TEST(TrialDriver, NoTrialIsDispatchedBeforeRecoveryRan) {
   ASSERT_TRUE(h.RunToEnd());
 }
 
+// The EXECUTED status's truth is read without parsing the detail whole
+// (issue 27): only the top-level "truth" string of an object counts, and a
+// malformed detail states none, as when it was parsed whole.
+TEST(StatedTruth, IsTheTopLevelTruthStringOfAWellFormedObjectOnly) {
+  EXPECT_EQ(StatedTruth(R"({"backend":"model","truth":"simulated","x":[1,{"truth":"no"}]})"),
+            "simulated");
+  EXPECT_EQ(StatedTruth(R"({"a":{"truth":"nested"},"truth":"measured_no_forces"})"),
+            "measured_no_forces");
+  EXPECT_EQ(StatedTruth(R"({"a":{"truth":"nested only"}})"), "");
+  EXPECT_EQ(StatedTruth(R"({"truth":{"kind":"simulated"}})"), "");
+  EXPECT_EQ(StatedTruth(R"({"truth":3,"b":"simulated"})"), "");
+  EXPECT_EQ(StatedTruth(R"({"truth":"simulated","b":)"), "");  // malformed after it
+  EXPECT_EQ(StatedTruth(R"([{"truth":"simulated"}])"), "");
+  EXPECT_EQ(StatedTruth(R"("simulated")"), "");
+  EXPECT_EQ(StatedTruth(""), "");
+}
+
 }  // namespace
 }  // namespace arena::orchestrator

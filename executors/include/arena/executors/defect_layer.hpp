@@ -84,6 +84,11 @@ class DefectLayer {
   const mechanics::Scene& actual_scene() const { return actual_; }
   const TrialPerturbation& perturbation() const { return perturbation_; }
   std::string AppliedJson() const;
+  // AppliedJson's text without its "perturbation" and closing brace, built
+  // once per campaign profile (Prepare keeps it while the profile text is
+  // the same): the trees were most of a cell's time from its last sample to
+  // its status (issue 27).
+  const std::string& AppliedProfilesText() const;
 
  private:
   std::unique_ptr<Backend> inner_;
@@ -93,6 +98,8 @@ class DefectLayer {
   DefectProfile effective_;
   TrialPerturbation perturbation_;
   mechanics::Scene actual_;
+  std::string profiles_key_;                   // the campaign profile text the cache is of
+  mutable std::string applied_profiles_text_;  // "" = not built for it yet
 };
 
 }  // namespace arena::executors

@@ -5,6 +5,8 @@
 // The store-to-model half is assessment/truth.hpp.
 #pragma once
 
+#include <string>
+#include <string_view>
 #include <vector>
 
 #include <Eigen/Core>
@@ -33,5 +35,11 @@ db::Sample ToStoreSample(const msg::GroundTruthSample& sample,
 // fingers in order, then the pusher, from the scene already parsed, so the
 // store never parses a scene on the ingest path.
 std::vector<db::ContactSite> ContactSitesOf(const mechanics::Scene& scene);
+
+// The top-level "truth" of a cell's EXECUTED status detail (a JSON object),
+// read without building the document: "" when the detail is not an object,
+// has no "truth" or it is not a string. The whole detail is parsed later,
+// off the trial's path (trial_driver.cpp, ReadExecution).
+std::string StatedTruth(std::string_view detail_json);
 
 }  // namespace arena::orchestrator
