@@ -118,8 +118,8 @@ TEST(EvaluationStore, ReplicatesShareThePredictionAndKeepTheirOwnTruth) {
   // Replicates: one prediction (the same measured run time), two truths.
   const auto list = store->ListTrials(1);
   for (std::size_t i = 0; i + 1 < list.size(); i += 2) {
-    const auto& a = by.at({list[i].id, "g8_k3_dt0.008_auto"});
-    const auto& b = by.at({list[i + 1].id, "g8_k3_dt0.008_auto"});
+    const auto& a = by.at({list[i].id, "g8_k3_dt0.008_auto_cone-aligned_inertia-auto"});
+    const auto& b = by.at({list[i + 1].id, "g8_k3_dt0.008_auto_cone-aligned_inertia-auto"});
     EXPECT_EQ(a.wall_s, b.wall_s);
     EXPECT_NE(a.final_position_error, b.final_position_error);
   }

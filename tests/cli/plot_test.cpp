@@ -123,8 +123,8 @@ TEST_F(PlotTest, ChartHasPosePanelsAndOneForcePanelPerContact) {
   TrialPlotInfo info;
   const Chart chart = MakeTrialChart(*store, trial_, &info);
   EXPECT_EQ(info.prediction_status, arena::db::PredictionStatus::kOk);
-  EXPECT_EQ(info.model_key,
-            "g4_k2_dt0.008_auto");  // the campaign's "prediction", not the scene's model
+  // The campaign's "prediction", not the scene's model.
+  EXPECT_EQ(info.model_key, "g4_k2_dt0.008_auto_cone-aligned_inertia-auto");
   EXPECT_EQ(info.samples, samples_);
   const std::string svg = RenderSvg(chart);
   tinyxml2::XMLDocument doc;

@@ -50,6 +50,20 @@ Scene EdgePush(double dt, Eigen::Vector3d velocity) {
   return s;
 }
 
+// The pusher's constant upward `speed` reached over `ramp` seconds instead
+// of at once: a recorded path, parabolic then steady, over 0.2 s.
+void RampUp(Scene& s, double ramp, double speed) {
+  PusherPath path;
+  for (int i = 0; i <= 400; ++i) {
+    const double t = 0.0005 * i;
+    const double z = t < ramp ? t * t / (2 * ramp) : ramp / 2 + (t - ramp);
+    path.t.push_back(t);
+    path.position.push_back(s.pusher->position + Eigen::Vector3d(0, 0, speed * z));
+  }
+  s.pusher->motion.velocity.setZero();
+  s.pusher->path = path;
+}
+
 // Signed distance of a point (object frame, centred box) to the box.
 double BoxDistance(const Eigen::Vector3d& p_O, const Eigen::Vector3d& half) {
   const Eigen::Vector3d q = p_O.cwiseAbs() - half;
@@ -118,15 +132,7 @@ TEST(EdgeNormals, AnEdgePushRollsAsItsClosedForm) {
       Scene s = EdgePush(dt, Eigen::Vector3d(0, 0, v));
       double travel = v * s.duration;
       if (ramp > 0) {
-        PusherPath path;
-        for (int i = 0; i <= 400; ++i) {
-          const double t = 0.0005 * i;
-          const double z = t < ramp ? t * t / (2 * ramp) : ramp / 2 + (t - ramp);
-          path.t.push_back(t);
-          path.position.push_back(s.pusher->position + Eigen::Vector3d(0, 0, v * z));
-        }
-        s.pusher->motion.velocity.setZero();
-        s.pusher->path = path;
+        RampUp(s, ramp, v);
         travel = v * (s.duration - ramp / 2);
       }
       const double roll = std::atan(d / (h - travel)) - std::atan(mu);
@@ -348,17 +354,7 @@ Scene OffCentreEdgePush(double dt, double ramp) {
   s.model.cone = ConeModel::kPolyhedral;
   s.model.inertia = InertiaModel::kCarried;
   s.pusher->position.x() = 0.01;
-  if (ramp > 0) {
-    PusherPath path;
-    for (int i = 0; i <= 400; ++i) {
-      const double t = 0.0005 * i;
-      const double z = t < ramp ? t * t / (2 * ramp) : ramp / 2 + (t - ramp);
-      path.t.push_back(t);
-      path.position.push_back(s.pusher->position + Eigen::Vector3d(0, 0, 0.01 * z));
-    }
-    s.pusher->motion.velocity.setZero();
-    s.pusher->path = path;
-  }
+  if (ramp > 0) RampUp(s, ramp, 0.01);
   return s;
 }
 

@@ -498,12 +498,7 @@ TEST(QuasiStatic, OffCentreEdgePushIsRightOrRefused) {
       for (double dt : {4e-3, 1e-3, 1e-4}) {
         Scene s = testing::HeldBox(0.2, 10, 0.5);
         s.gravity.setZero();
-        PusherSpec p;
-        p.name = "pusher";
-        p.position = {0.01, -0.015, -0.05};
-        p.normal = {0, 0, 1};
-        p.mu = 0.3;
-        p.motion.velocity = {0, 0, 0.01};
+        const PusherSpec p = testing::Pusher({0.01, -0.015, -0.05}, {0, 0, 1}, {0, 0, 0.01}, 0.3);
         s.pusher = p;
         s.model.dt = dt;
         s.model.cone = cone;

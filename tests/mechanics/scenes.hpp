@@ -46,6 +46,19 @@ inline Scene CanonicalScene() {
 }
 
 // Two point fingers along ±x holding a box, no pusher.
+// A point pusher (scene defaults otherwise) at `position` pressing along
+// `normal`, moving at constant `velocity`.
+inline PusherSpec Pusher(const Eigen::Vector3d& position, const Eigen::Vector3d& normal,
+                         const Eigen::Vector3d& velocity, double mu) {
+  PusherSpec p;
+  p.name = "pusher";
+  p.position = position;
+  p.normal = normal;
+  p.mu = mu;
+  p.motion.velocity = velocity;
+  return p;
+}
+
 inline Scene HeldBox(double mass, double grip, double mu, int facets = 8) {
   Scene s;
   s.object.shape = ObjectShape::kBox;

@@ -20,6 +20,7 @@ namespace {
 using testing::CanonicalScene;
 using testing::Finger;
 using testing::HeldBox;
+using testing::Pusher;
 
 constexpr double kRel = 1e-9;
 
@@ -43,17 +44,6 @@ void ExpectOk(const SimulationResult& r) {
   EXPECT_LT(r.residuals.force_balance, 1e-10);
   EXPECT_LT(r.residuals.complementarity, 1e-10);
   EXPECT_LE(r.residuals.cone, 1e-12);
-}
-
-PusherSpec Pusher(Eigen::Vector3d position, Eigen::Vector3d normal, Eigen::Vector3d velocity,
-                  double mu) {
-  PusherSpec p;
-  p.name = "pusher";
-  p.position = position;
-  p.normal = normal;
-  p.mu = mu;
-  p.motion.velocity = velocity;
-  return p;
 }
 
 // (a) Gravity along a cone edge (t1 = z for fingers along ±x): the object is

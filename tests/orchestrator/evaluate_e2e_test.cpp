@@ -28,8 +28,8 @@ TEST(EvaluateEndToEnd, TwoSettingsStoredReportedAndPlotted) {
   const auto report = nlohmann::json::parse(ReadFile(dir / "evaluate.json"));
   EXPECT_EQ(report["trials"], 6);
   ASSERT_EQ(report["settings"].size(), 2u);
-  EXPECT_EQ(report["settings"][0]["model_key"], "g4_k2_dt0.004_auto");
-  EXPECT_EQ(report["settings"][1]["model_key"], "g8_k2_dt0.004_auto");
+  EXPECT_EQ(report["settings"][0]["model_key"], "g4_k2_dt0.004_auto_cone-aligned_inertia-auto");
+  EXPECT_EQ(report["settings"][1]["model_key"], "g8_k2_dt0.004_auto_cone-aligned_inertia-auto");
   for (const auto& s : report["settings"]) {
     EXPECT_EQ(s["trials"], 6);
     EXPECT_EQ(s["ok"], 6) << s.dump();
