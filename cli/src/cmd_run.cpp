@@ -114,6 +114,7 @@ struct PredictionFlags {
   std::int64_t steered_aligned = 0;       // ... though it was the aligned cone
   std::int64_t oscillating = 0;           // ended in a swing nothing damps
   std::int64_t oscillating_balanced = 0;  // ... though its steps were quasi-static
+  std::int64_t oscillating_turned = 0;    // ... "auto" that ran carried (push needed momentum)
   std::int64_t oscillating_steered = 0;   // ... and steered as well
 };
 
@@ -125,13 +126,20 @@ void CountFlags(const db::Prediction& p, PredictionFlags& f) {
   const auto detail = nlohmann::json::parse(p.detail_json, nullptr, false);
   if (steered) {
     ++f.steered;
-    // (assessment::ModelSettingsJson writes `cone` only when it is not the default.)
+    // (assessment::ModelSettingsJson has written `cone` since the aligned cone
+    // became the default; settings stored before without it are polyhedral.)
     if (model.is_object() && model.value("cone", "") == "aligned") ++f.steered_aligned;
   }
   if (oscillating) {
     ++f.oscillating;
     if (detail.is_object() && detail.value("inertia", "") == "quasi_static")
       ++f.oscillating_balanced;
+    // "auto" that tried balanced steps and ran the scene carried, where its
+    // push needed the object's momentum (model.cpp, CarryOnPush): "auto" is
+    // no hint there.
+    else if (detail.is_object() && detail.contains("solver") && detail["solver"].is_object() &&
+             detail["solver"].value("quasi_static_solves", 0L) > 0)
+      ++f.oscillating_turned;
     if (steered) ++f.oscillating_steered;
   }
 }
@@ -157,6 +165,9 @@ void PrintFlags(const PredictionFlags& f, std::size_t predictions) {
         f.oscillating_balanced == f.oscillating
             ? "their quasi-static steps found no balance there and carried\n"
               "              the momentum; a finer dt balances more: arena evaluate --dt weighs it"
+        : f.oscillating_balanced + f.oscillating_turned == f.oscillating
+            ? "\"inertia\": \"auto\" ran them carried where the push needed the\n"
+              "              object's momentum, so the swing is the carried model's answer there"
         : f.oscillating_steered > 0
             ? "\"inertia\": \"auto\" with \"cone\": \"aligned\" follows the\n"
               "              balanced path unsteered: arena evaluate --cone polyhedral,aligned\n"
