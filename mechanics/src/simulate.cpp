@@ -441,7 +441,10 @@ class SteeringWatch {
 
 namespace {
 
-SimulationResult SimulateRun(const Scene& scene, const PusherCommandSource& commands) {
+// stop_if_carried: end the run at the step its "auto" inertia turns carried
+// (Simulate then runs the scene again carried; the rest would be discarded).
+SimulationResult SimulateRun(const Scene& scene, const PusherCommandSource& commands,
+                             bool stop_if_carried) {
   const auto start = std::chrono::steady_clock::now();
   SimulationResult result;
   ContactModel model(scene);
@@ -504,6 +507,7 @@ SimulationResult SimulateRun(const Scene& scene, const PusherCommandSource& comm
       result.error = when + rep.error;
       return finish();
     }
+    if (stop_if_carried && model.info().inertia == InertiaModel::kCarried) return finish();
     result.residuals.force_balance =
         std::max(result.residuals.force_balance, rep.residuals.force_balance);
     result.residuals.complementarity =
@@ -564,20 +568,18 @@ SimulationResult SimulateRun(const Scene& scene, const PusherCommandSource& comm
 // from the start, not balanced steps followed by carried ones: those mixed
 // the two (the centred edge push started at full speed, dt 0.1 ms: 9
 // balanced steps through the impact, then carried, a roll 2.7 % past the
-// carried run's and the closed form's). Its solver statistics keep the
-// balanced attempt's solves and carried steps. A closed-loop run is not run
-// twice (its commands came from outside): it goes on carried from the step
-// it turned.
+// carried run's and the closed form's). The balanced attempt stops at the
+// step it turns; the solver statistics keep its solves and carried step. A closed-loop run is not
+// run twice (its commands came from outside): it goes on carried from the step it turned.
 SimulationResult Simulate(const Scene& scene, const PusherCommandSource& commands) {
-  SimulationResult first = SimulateRun(scene, commands);
   const bool closed_loop = commands && scene.pusher;
-  if (closed_loop || scene.model.inertia != InertiaModel::kAuto ||
-      InertiaOf(scene) != InertiaModel::kQuasiStatic ||
-      first.model.inertia != InertiaModel::kCarried)
-    return first;
+  const bool may_turn = !closed_loop && scene.model.inertia == InertiaModel::kAuto &&
+                        InertiaOf(scene) == InertiaModel::kQuasiStatic;
+  SimulationResult first = SimulateRun(scene, commands, may_turn);
+  if (!may_turn || first.model.inertia != InertiaModel::kCarried) return first;
   Scene carried = scene;
   carried.model.inertia = InertiaModel::kCarried;
-  SimulationResult again = SimulateRun(carried, commands);
+  SimulationResult again = SimulateRun(carried, commands, false);
   again.solver.quasi_static_solves += first.solver.quasi_static_solves;
   again.solver.quasi_static_carried += first.solver.quasi_static_carried;
   again.wall_s += first.wall_s;
