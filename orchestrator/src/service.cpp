@@ -38,6 +38,7 @@
 #include "arena/orchestrator/trial_data.hpp"
 #include "arena/orchestrator/trial_driver.hpp"
 #include "arena/schemas/arena.h"
+#include "predictor_yield.hpp"
 #include "service_watch.hpp"
 
 namespace arena::orchestrator {
@@ -318,7 +319,7 @@ struct PredictionJob {
 // runs on the service thread (it reads the store for a resumed trial).
 class PredictorPool : public PredictionPort {
  public:
-  PredictorPool(int threads, int nice) {
+  PredictorPool(int threads, int nice, int backlog_bound) : backlog_bound_(backlog_bound) {
     for (int i = 0; i < std::max(1, threads); ++i)
       workers_.emplace_back([this, nice] {
         LowerPriority(nice);
@@ -330,10 +331,13 @@ class PredictorPool : public PredictionPort {
       std::lock_guard lock(mu_);
       stop_ = true;
     }
+    path_.Stop();
     cv_.notify_all();
     for (auto& w : workers_) w.join();
   }
   void SetStore(db::Store* store) { store_ = store; }
+  // The trials' path, written by the service's loop (TrialDriver::OnPathChange).
+  PathWatch& path() { return path_; }
 
   void Start(PredictionRequest r) override {
     PredictionJob job{r.trial_id,         r.attempt, r.campaign_id,         {},
@@ -441,6 +445,12 @@ class PredictorPool : public PredictionPort {
         job = std::move(jobs_.front());
         jobs_.pop_front();
       }
+      // The model waits for the cells' path to be quiet (predictor_yield.hpp).
+      const char* rule = path_.WaitToStart(backlog_bound_, [this] {
+        std::lock_guard lock(mu_);
+        return outstanding_;
+      });
+      if (*rule == '\0') return;  // stopping
       PredictionDone done{job.trial_id, job.attempt, job.campaign_id,
                           assessment::PredictTrial(job.scene, job.truth, job.prediction,
                                                    job.commands.empty() ? nullptr : &job.commands)};
@@ -451,6 +461,8 @@ class PredictorPool : public PredictionPort {
   }
 
   db::Store* store_ = nullptr;
+  const int backlog_bound_;
+  PathWatch path_;
   std::map<std::int64_t, nlohmann::json> models_;
   mutable std::mutex mu_;
   std::condition_variable cv_;
@@ -519,7 +531,7 @@ struct Service::Impl {
         announces(participant, RungBy(input)),
         statuses(participant, RungBy(input)),
         truth_reader(participant, RungBy(input)),
-        predictor(o.predictor_threads, o.predictor_nice),
+        predictor(o.predictor_threads, o.predictor_nice, o.prediction_backlog),
         store(db::Store::Open(o.db_path, StoreOptionsFor(o))) {
     predictor.SetStore(store.get());
     ServiceIdentity me{session, HostName(), static_cast<std::uint32_t>(getpid()), store->StoreId()};
@@ -559,6 +571,10 @@ struct Service::Impl {
     d.service = o;
     driver = std::make_unique<TrialDriver>(d, me, *trial_store, transport, predictor);
     driver->OnInputWaiting([doorbell = input] { return doorbell->Rung(); });
+    driver->OnPathChange([&path = predictor.path()](const std::string& cell, bool on_path) {
+      const auto t = PathWatch::Clock::now();
+      on_path ? path.OnPath(cell, t) : path.OffPath(cell, t);
+    });
     const auto t0 = Clock::now();
     suspenders = std::make_unique<Suspenders>(o.suspenders,
                                               [t0] { return Seconds(Clock::now() - t0).count(); });

@@ -114,6 +114,7 @@ struct TrialDriver::Impl {
   mutable std::mutex counters_mu;
   ServiceCounters counters;
   std::function<void(const TrialTiming&)> on_trial_timing;
+  std::function<void(const std::string&, bool)> on_path_change;
   TrialObserver* observer = nullptr;  // the suspenders (suspenders.hpp)
 
   enum class ResetAhead { kNo, kPublishPending, kForNoTrial };
@@ -265,6 +266,7 @@ struct TrialDriver::Impl {
   // The one place a cell's phase changes.
   void SetPhase(CellRun& cell, CellPhase phase, double deadline_s = 0) {
     cell.phase = phase;
+    if (on_path_change) on_path_change(cell.id, false);  // handed a phase, or left idle
     if (phase == CellPhase::kIdle) {
       // A reset run out after a refused publish keeps the refusal's backoff.
       cell.next_claim =
@@ -1218,6 +1220,8 @@ struct TrialDriver::Impl {
       }
     }
     (cell.phase == CellPhase::kResetting ? cell.reset_taken : cell.stream_input_at) = now();
+    // A phase ended: the cell waits on the service until SetPhase hands it the next.
+    if (on_path_change && st.state() != msg::STATE_ACCEPTED) on_path_change(cell.id, true);
     TakeStatus(cell, st);
   }
 
@@ -1629,6 +1633,9 @@ void TrialDriver::OnInputWaiting(std::function<bool()> waiting) {
 }
 void TrialDriver::OnTrialTiming(std::function<void(const TrialTiming&)> callback) {
   impl_->on_trial_timing = std::move(callback);
+}
+void TrialDriver::OnPathChange(std::function<void(const std::string&, bool)> callback) {
+  impl_->on_path_change = std::move(callback);
 }
 std::size_t TrialDriver::pending_store_steps() const { return impl_->steps.pending(); }
 void TrialDriver::SetObserver(TrialObserver* observer) { impl_->observer = observer; }

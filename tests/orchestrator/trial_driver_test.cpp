@@ -543,6 +543,40 @@ TEST(TrialDriver, AfterACleanResetTheNextExecuteGoesOutBeforeTheResetIsWritten) 
   ExpectTrialsOneAndTwoDoneFirstTime(h);
 }
 
+// Issue 27: the predictor yields to the trials' path (predictor_yield.hpp),
+// which the driver marks: a cell is on it from the status that ended its
+// phase until it is handed its next phase (or left idle), never left on it,
+// and each command goes out with the cell off it (its hop is the grace's).
+TEST(TrialDriver, ACellIsOnThePathFromEachPhasesEndUntilItsNextPhaseIsHanded) {
+  Harness h(2);
+  std::vector<std::string> events;  // "on", "off", "EXECUTE", "RESET", in order
+  bool on_path = false;
+  h.driver->OnPathChange([&](const std::string& cell, bool on) {
+    EXPECT_EQ(cell, "c1");
+    events.push_back(on ? "on" : "off");
+    on_path = on;
+  });
+  h.transport.on_send = [&](const msg::TrialCommand& c) {
+    if (c.phase() == msg::PHASE_EXECUTE) {
+      events.push_back("EXECUTE");
+      EXPECT_FALSE(on_path) << "an EXECUTE sent with its cell still on the path";
+    }
+    if (c.phase() == msg::PHASE_RESET) events.push_back("RESET");
+  };
+  h.Start();
+  ASSERT_TRUE(h.RunToEnd());
+  ExpectTrialsOneAndTwoDoneFirstTime(h);
+  EXPECT_FALSE(on_path);
+  // Each trial: the EXECUTED status puts the cell on the path, its RESET goes
+  // out (ahead of the publish) and the publish's end hands it the reset; the
+  // RESET_DONE puts it on again until its next EXECUTE or its idling.
+  std::vector<std::string> compact;  // repeated "off"s folded
+  for (const auto& e : events)
+    if (compact.empty() || e != "off" || compact.back() != "off") compact.push_back(e);
+  EXPECT_EQ(compact, (std::vector<std::string>{"off", "EXECUTE", "on", "RESET", "off", "on", "off",
+                                               "EXECUTE", "on", "RESET", "off", "on", "off"}));
+}
+
 // Issue 27: what ran a trial (the EXECUTED status's detail) is stored in the
 // publish's transaction, also when the status overtakes the stream's last
 // batch: no commit of its own between the cell's status and its RESET.

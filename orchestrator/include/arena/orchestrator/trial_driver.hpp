@@ -299,6 +299,11 @@ class TrialDriver {
   bool CampaignsFinished();
   ServiceCounters counters() const;
   void OnTrialTiming(std::function<void(const TrialTiming&)> callback);
+  // Called with (cell, true) when the service takes the status that ended a
+  // cell's phase, (cell, false) when it hands the cell its next phase or
+  // leaves it idle: the trials' path, which the predictor yields to
+  // (predictor_yield.hpp).
+  void OnPathChange(std::function<void(const std::string& cell_id, bool on_path)> callback);
   // True while an input (a status, ground truth) waits to be taken: Tick's
   // writes that no cell waits on then yield to it. None: they never yield.
   void OnInputWaiting(std::function<bool()> waiting);
