@@ -11,7 +11,8 @@ PredictorStart DecidePredictorStart(const PredictorStartInputs& in) {
   if (2 * in.backlog >= in.backlog_bound) return {true, in.now, "predictor.backlog_half_full"};
   const auto give_up = in.waiting_since + Y::kMaxYield;
   if (in.now >= give_up) return {true, in.now, "predictor.yielded_enough"};
-  if (in.cells_on_path == 0 && in.now >= in.quiet_from) return {true, in.now, "predictor.path_quiet"};
+  if (in.cells_on_path == 0 && in.now >= in.quiet_from)
+    return {true, in.now, "predictor.path_quiet"};
   // On the path: a hand-off wakes the waiter; quiet soon: ask again then.
   const auto again = in.cells_on_path == 0 ? std::min(in.quiet_from, give_up) : give_up;
   return {false, again, "predictor.yields_to_path"};
@@ -42,8 +43,8 @@ void PathWatch::Stop() {
   cv_.notify_all();
 }
 
-PredictorStartInputs PathWatch::Inputs(Clock::time_point now, Clock::time_point since,
-                                       int backlog, int backlog_bound) const {
+PredictorStartInputs PathWatch::Inputs(Clock::time_point now, Clock::time_point since, int backlog,
+                                       int backlog_bound) const {
   PredictorStartInputs in;
   in.now = now;
   in.waiting_since = since;

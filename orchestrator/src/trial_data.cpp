@@ -118,7 +118,7 @@ namespace {
 // states no truth, as when it was parsed whole).
 class TruthReader : public nlohmann::json_sax<nlohmann::json> {
  public:
-  std::string truth;
+  std::string truth, backend;
 
   bool null() override { return Value(); }
   bool boolean(bool) override { return Value(); }
@@ -127,7 +127,8 @@ class TruthReader : public nlohmann::json_sax<nlohmann::json> {
   bool number_float(number_float_t, const string_t&) override { return Value(); }
   bool binary(binary_t&) override { return Value(); }
   bool string(string_t& value) override {
-    if (wanted_) truth = value;
+    if (wanted_ == Wanted::kTruth) truth = value;
+    if (wanted_ == Wanted::kBackend) backend = value;
     return Value();
   }
   bool start_object(std::size_t) override { return Open(); }
@@ -135,7 +136,16 @@ class TruthReader : public nlohmann::json_sax<nlohmann::json> {
   bool start_array(std::size_t) override { return depth_ > 0 && Open(); }  // top level: no object
   bool end_array() override { return Close(); }
   bool key(string_t& key) override {
-    wanted_ = depth_ == 1 && key == "truth";
+    wanted_ = Wanted::kNone;
+    if (depth_ != 1) return true;
+    // A repeated key: the last one counts, as in a parsed document.
+    if (key == "truth") {
+      wanted_ = Wanted::kTruth;
+      truth.clear();
+    } else if (key == "backend") {
+      wanted_ = Wanted::kBackend;
+      backend.clear();
+    }
     return true;
   }
   bool parse_error(std::size_t, const std::string&, const nlohmann::detail::exception&) override {
@@ -143,12 +153,13 @@ class TruthReader : public nlohmann::json_sax<nlohmann::json> {
   }
 
  private:
+  enum class Wanted { kNone, kTruth, kBackend };
   bool Value() {
-    wanted_ = false;
+    wanted_ = Wanted::kNone;
     return depth_ > 0;  // a bare scalar is not an object
   }
   bool Open() {
-    wanted_ = false;
+    wanted_ = Wanted::kNone;
     ++depth_;
     return true;
   }
@@ -157,14 +168,91 @@ class TruthReader : public nlohmann::json_sax<nlohmann::json> {
     return true;
   }
   int depth_ = 0;
-  bool wanted_ = false;
+  Wanted wanted_ = Wanted::kNone;
 };
+
+// The end of the JSON value that starts at `at` in well-formed text: a
+// string (escapes skipped), an object or array (nesting counted, strings
+// inside skipped), or a scalar (up to the next delimiter).
+std::size_t ValueEnd(std::string_view text, std::size_t at) {
+  const auto string_end = [&](std::size_t i) {  // i at the opening quote
+    for (++i; i < text.size(); ++i) {
+      if (text[i] == '\\')
+        ++i;
+      else if (text[i] == '"')
+        return i + 1;
+    }
+    return text.size();
+  };
+  if (at >= text.size()) return at;
+  if (text[at] == '"') return string_end(at);
+  if (text[at] == '{' || text[at] == '[') {
+    int depth = 0;
+    for (std::size_t i = at; i < text.size();) {
+      const char c = text[i];
+      if (c == '"') {
+        i = string_end(i);
+        continue;
+      }
+      if (c == '{' || c == '[') ++depth;
+      if ((c == '}' || c == ']') && --depth == 0) return i + 1;
+      ++i;
+    }
+    return text.size();
+  }
+  std::size_t i = at;
+  while (i < text.size() && std::string_view(",}] \t\r\n").find(text[i]) == std::string_view::npos)
+    ++i;
+  return i;
+}
+
+std::size_t SkipSpace(std::string_view text, std::size_t i) {
+  while (i < text.size() &&
+         (text[i] == ' ' || text[i] == '\t' || text[i] == '\r' || text[i] == '\n'))
+    ++i;
+  return i;
+}
+
+// The text of the last top-level member `key` of a well-formed JSON object.
+std::optional<std::string_view> TopLevelValueText(std::string_view object, std::string_view key) {
+  std::optional<std::string_view> found;
+  std::size_t i = SkipSpace(object, 0);
+  if (i >= object.size() || object[i] != '{') return found;
+  i = SkipSpace(object, i + 1);
+  while (i < object.size() && object[i] == '"') {
+    const std::size_t key_end = ValueEnd(object, i);
+    const std::string_view raw_key = object.substr(i + 1, key_end - i - 2);
+    // Keys with escapes are decoded before they are compared.
+    const bool match =
+        raw_key.find('\\') == std::string_view::npos
+            ? raw_key == key
+            : nlohmann::json::parse(object.substr(i, key_end - i)).get<std::string>() == key;
+    i = SkipSpace(object, key_end);
+    if (i >= object.size() || object[i] != ':') break;
+    const std::size_t value_at = SkipSpace(object, i + 1);
+    const std::size_t value_end = ValueEnd(object, value_at);
+    if (match) found = object.substr(value_at, value_end - value_at);
+    i = SkipSpace(object, value_end);
+    if (i >= object.size() || object[i] != ',') break;
+    i = SkipSpace(object, i + 1);
+  }
+  return found;
+}
 }  // namespace
 
 std::string StatedTruth(std::string_view detail_json) {
   TruthReader reader;
   if (!nlohmann::json::sax_parse(detail_json.begin(), detail_json.end(), &reader)) return {};
   return reader.truth;
+}
+
+std::optional<ExecutionDetail> ReadExecutionDetail(std::string_view detail_json) {
+  TruthReader reader;
+  if (!nlohmann::json::sax_parse(detail_json.begin(), detail_json.end(), &reader)) return {};
+  ExecutionDetail d{std::move(reader.backend), std::move(reader.truth), std::nullopt};
+  if (const auto defects = TopLevelValueText(detail_json, "defects_applied"))
+    d.defects_applied = std::string(*defects);
+  return d;
 }
 
 }  // namespace arena::orchestrator

@@ -1252,15 +1252,10 @@ struct TrialDriver::Impl {
   // publish step) or when the attempt ends unpublished (EndPhase).
   static void ReadExecution(Execution& ex) {
     if (ex.detail_json.empty()) return;
-    const auto detail = nlohmann::json::parse(std::exchange(ex.detail_json, {}), nullptr, false);
-    if (!detail.is_object()) return;
-    auto text = [&detail](const char* key) {
-      const auto it = detail.find(key);
-      return it != detail.end() && it->is_string() ? it->get<std::string>() : std::string();
-    };
-    ex.execution = db::ExecutionRecord{
-        text("backend"), text("truth"),
-        detail.contains("defects_applied") ? detail["defects_applied"].dump() : std::string()};
+    auto detail = ReadExecutionDetail(std::exchange(ex.detail_json, {}));
+    if (!detail) return;
+    ex.execution = db::ExecutionRecord{std::move(detail->backend), std::move(detail->truth),
+                                       detail->defects_applied.value_or(std::string())};
   }
   void WriteExecution(std::int64_t trial_id, int attempt, db::ExecutionRecord r) {
     Step("trial " + std::to_string(trial_id) + ": record execution", "",

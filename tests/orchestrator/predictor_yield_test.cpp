@@ -19,16 +19,16 @@ using std::chrono::milliseconds;
 struct Row {
   const char* what;
   int backlog, bound, on_path;
-  int waited_ms;      // since the job was taken
-  int quiet_in_ms;    // quiet_from - now (negative: quiet already)
+  int waited_ms;    // since the job was taken
+  int quiet_in_ms;  // quiet_from - now (negative: quiet already)
   bool start;
   const char* rule;
   int ask_again_in_ms;  // when not started: wait_until - now
 };
 
 TEST(PredictorYield, EachRowOfTheRule) {
-  const int max = static_cast<int>(
-      std::chrono::duration_cast<milliseconds>(PredictorYield::kMaxYield).count());
+  const int max =
+      static_cast<int>(std::chrono::duration_cast<milliseconds>(PredictorYield::kMaxYield).count());
   const Row rows[] = {
       {"quiet path, small backlog: start", 1, 64, 0, 0, -1, true, "predictor.path_quiet", 0},
       {"quiet exactly now: start", 1, 64, 0, 0, 0, true, "predictor.path_quiet", 0},
@@ -38,8 +38,8 @@ TEST(PredictorYield, EachRowOfTheRule) {
        "predictor.yields_to_path", max - 5},
       {"handed off, its hop not over: ask again when it is", 1, 64, 0, 0, 1, false,
        "predictor.yields_to_path", 1},
-      {"hop ends after the yield would: ask again at the yield's end", 1, 64, 0, max - 1, 5,
-       false, "predictor.yields_to_path", 1},
+      {"hop ends after the yield would: ask again at the yield's end", 1, 64, 0, max - 1, 5, false,
+       "predictor.yields_to_path", 1},
       {"yielded the whole time: start though the path is busy", 1, 64, 3, max, -5, true,
        "predictor.yielded_enough", 0},
       {"backlog half full: start though the path is busy", 32, 64, 1, 0, 5, true,

@@ -8,11 +8,13 @@
 #include <fstream>
 #include <functional>
 #include <map>
+#include <random>
 #include <set>
 #include <sstream>
 
 #include <gtest/gtest.h>
 #include <spdlog/spdlog.h>
+#include <nlohmann/json.hpp>
 
 #include "arena/db/outcomes.hpp"
 #include "arena/db/retry_rule.hpp"
@@ -1211,6 +1213,87 @@ TEST(StatedTruth, IsTheTopLevelTruthStringOfAWellFormedObjectOnly) {
   EXPECT_EQ(StatedTruth(R"([{"truth":"simulated"}])"), "");
   EXPECT_EQ(StatedTruth(R"("simulated")"), "");
   EXPECT_EQ(StatedTruth(""), "");
+}
+
+// What ran a trial is read from the EXECUTED status's detail without a
+// document (issue 27): for every detail the cell writes (a compact dump), the
+// same record as parsing it whole and dumping "defects_applied" back.
+TEST(ReadExecutionDetail, GivesWhatAParseAndDumpGaveForEveryCompactDetail) {
+  std::mt19937 rng(27);
+  const std::vector<std::string> keys = {"backend", "truth", "defects_applied", "a",
+                                         "x\"y",    "b\\",   "\u00e9t\u00e9",   "defects"};
+  const std::vector<std::string> words = {"model",   "simulated",   "",
+                                          "q\"uote", "back\\slash", "{not json}",
+                                          "[1,2]",   "tab\there",   "\u00e9"};
+  std::function<nlohmann::json(int)> value = [&](int depth) -> nlohmann::json {
+    switch (std::uniform_int_distribution<int>(0, depth > 2 ? 4 : 6)(rng)) {
+      case 0:
+        return nullptr;
+      case 1:
+        return std::uniform_int_distribution<int>(0, 1)(rng) == 1;
+      case 2:
+        return std::uniform_real_distribution<double>(-1e6, 1e6)(rng);
+      case 3:
+        return std::uniform_int_distribution<int>(-5, 5)(rng);
+      case 4:
+        return words[std::uniform_int_distribution<std::size_t>(0, words.size() - 1)(rng)];
+      case 5: {
+        nlohmann::json a = nlohmann::json::array();
+        for (int i = std::uniform_int_distribution<int>(0, 3)(rng); i > 0; --i)
+          a.push_back(value(depth + 1));
+        return a;
+      }
+      default: {
+        nlohmann::json o = nlohmann::json::object();
+        for (int i = std::uniform_int_distribution<int>(0, 4)(rng); i > 0; --i)
+          o[keys[std::uniform_int_distribution<std::size_t>(0, keys.size() - 1)(rng)]] =
+              value(depth + 1);
+        return o;
+      }
+    }
+  };
+  for (int n = 0; n < 500; ++n) {
+    nlohmann::json detail = nlohmann::json::object();
+    for (int i = std::uniform_int_distribution<int>(0, 6)(rng); i > 0; --i)
+      detail[keys[std::uniform_int_distribution<std::size_t>(0, keys.size() - 1)(rng)]] = value(1);
+    const std::string text = detail.dump();
+    SCOPED_TRACE(text);
+    const auto got = ReadExecutionDetail(text);
+    ASSERT_TRUE(got.has_value());
+    auto string_of = [&](const char* key) {
+      return detail.contains(key) && detail[key].is_string() ? detail[key].get<std::string>()
+                                                             : std::string();
+    };
+    EXPECT_EQ(got->backend, string_of("backend"));
+    EXPECT_EQ(got->truth, string_of("truth"));
+    if (detail.contains("defects_applied")) {
+      ASSERT_TRUE(got->defects_applied.has_value());
+      EXPECT_EQ(*got->defects_applied, detail["defects_applied"].dump());
+    } else {
+      EXPECT_FALSE(got->defects_applied.has_value());
+    }
+  }
+}
+
+TEST(ReadExecutionDetail, KeepsTheCellsTextAndRefusesWhatIsNotAWellFormedObject) {
+  // Spaced out: the value's text as written (the same value), escapes in keys decoded.
+  const auto spaced = ReadExecutionDetail(
+      "{ \"backend\" : \"model\",\n \"defects\\u005fapplied\" : { \"mu\" : [1, 2.5] } ,"
+      " \"truth\":\"simulated\" }");
+  ASSERT_TRUE(spaced.has_value());
+  EXPECT_EQ(spaced->backend, "model");
+  EXPECT_EQ(spaced->truth, "simulated");
+  ASSERT_TRUE(spaced->defects_applied.has_value());
+  EXPECT_EQ(*spaced->defects_applied, "{ \"mu\" : [1, 2.5] }");
+  // The last of a repeated key counts, as in a parsed document.
+  const auto repeated = ReadExecutionDetail(
+      R"({"backend":"a","defects_applied":1,"backend":2,"defects_applied":[3]})");
+  ASSERT_TRUE(repeated.has_value());
+  EXPECT_EQ(repeated->backend, "");
+  EXPECT_EQ(repeated->defects_applied, std::optional<std::string>("[3]"));
+  for (const char* bad : {"", "[]", "\"x\"", R"({"backend":"model","defects_applied":{)",
+                          R"({"backend":"model"} trailing)", "{\"a\":1,}"})
+    EXPECT_FALSE(ReadExecutionDetail(bad).has_value()) << bad;
 }
 
 }  // namespace

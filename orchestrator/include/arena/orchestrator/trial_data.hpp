@@ -5,6 +5,7 @@
 // The store-to-model half is assessment/truth.hpp.
 #pragma once
 
+#include <optional>
 #include <string>
 #include <string_view>
 #include <vector>
@@ -41,5 +42,18 @@ std::vector<db::ContactSite> ContactSitesOf(const mechanics::Scene& scene);
 // has no "truth" or it is not a string. The whole detail is parsed later,
 // off the trial's path (trial_driver.cpp, ReadExecution).
 std::string StatedTruth(std::string_view detail_json);
+
+// What a cell's EXECUTED status detail says ran the trial: its top-level
+// "backend" and "truth" strings ("" when absent or not strings) and the text
+// of its top-level "defects_applied" value as the cell wrote it (nullopt:
+// none). Read with one pass that builds nothing and a scan for that value's
+// extent, not a parse into a document and a dump back (issue 27: it runs
+// while the cell resets, beside the publish's commit). nullopt when the
+// detail is not a well-formed JSON object. A repeated key: the last counts.
+struct ExecutionDetail {
+  std::string backend, truth;
+  std::optional<std::string> defects_applied;
+};
+std::optional<ExecutionDetail> ReadExecutionDetail(std::string_view detail_json);
 
 }  // namespace arena::orchestrator
