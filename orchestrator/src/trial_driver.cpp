@@ -1127,7 +1127,7 @@ struct TrialDriver::Impl {
     c.aim_known = false;
     c.next_aim.reset();
     c.reset_mounts.reset();
-    if (next) c.reset_mounts = FixturesOfTrial(next->trial_id, next->scene_json);
+    if (next && c.change_costs) c.reset_mounts = FixturesOfTrial(next->trial_id, next->scene_json);
     msg::TrialCommand cmd = Command(c, msg::PHASE_RESET);
     cmd.trial_id(static_cast<std::uint64_t>(trial_id));
     cmd.attempt(static_cast<std::uint32_t>(attempt));
@@ -1300,8 +1300,11 @@ struct TrialDriver::Impl {
         // (StreamProblem): read now, without building the document.
         ex.stated_truth = StatedTruth(st.detail_json());
         // The cell changed what differed before it ran (executors/trial_start.hpp).
-        RecordChanges(cell, ex.trial_id, ex.attempt, "execute",
-                      FixturesOfTrial(ex.trial_id, ex.scene_json), /*after_dispatch=*/true);
+        // Only cells that declared change costs track fixtures: no other
+        // cell's path parses a scene for them (issue 27).
+        if (cell.change_costs)
+          RecordChanges(cell, ex.trial_id, ex.attempt, "execute",
+                        FixturesOfTrial(ex.trial_id, ex.scene_json), /*after_dispatch=*/true);
         ex.expected = st.samples();
         ex.detail_json = st.detail_json();
       }
