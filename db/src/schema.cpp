@@ -811,6 +811,22 @@ void SwitchToWal(sqlite3* db, const StoreOptions& options, const std::string& ct
   }
 }
 
+// After each commit of a connection whose checkpoints another thread runs
+// (StoreOptions::wal_checkpoint_due): past the due size it asks for one;
+// past the backstop it runs one itself, as SQLite's autocheckpoint would.
+int WalCommitted(void* arg, sqlite3* db, const char* schema, int frames) {
+  const auto& impl = *static_cast<const Store::Impl*>(arg);
+  if (frames >= impl.wal_backstop_frames) {
+    sqlite3_wal_checkpoint_v2(db, schema, SQLITE_CHECKPOINT_PASSIVE, nullptr, nullptr);
+  } else if (frames >= impl.wal_due_frames) {
+    try {
+      impl.options.wal_checkpoint_due();
+    } catch (...) {  // a callback that threw must not fail a commit that is done
+    }
+  }
+  return SQLITE_OK;
+}
+
 // The pragmas of the connection; a read-write one is switched to WAL and migrated.
 void ConfigureAndMigrate(Store::Impl& impl, const StoreOptions& options, const std::string& ctx) {
   sqlite3* db = impl.db;
@@ -842,10 +858,16 @@ void ConfigureAndMigrate(Store::Impl& impl, const StoreOptions& options, const s
   SwitchToWal(db, options, ctx);
   Exec(db, options.synchronous_full ? "PRAGMA synchronous = FULL" : "PRAGMA synchronous = NORMAL",
        ctx);
-  Exec(db,
-       "PRAGMA wal_autocheckpoint = " +
-           std::to_string(std::max<std::int64_t>(1, options.wal_autocheckpoint_bytes / page_size)),
-       ctx);
+  const std::int64_t due_frames =
+      std::max<std::int64_t>(1, options.wal_autocheckpoint_bytes / page_size);
+  if (options.wal_checkpoint_due) {
+    // One hook slot per connection: it replaces the autocheckpoint's.
+    impl.wal_due_frames = due_frames;
+    impl.wal_backstop_frames = 4 * due_frames;
+    sqlite3_wal_hook(db, &WalCommitted, &impl);
+  } else {
+    Exec(db, "PRAGMA wal_autocheckpoint = " + std::to_string(due_frames), ctx);
+  }
   Migrate(impl);
 }
 
@@ -913,6 +935,16 @@ Store::QuickCheckResult Store::QuickCheck(double budget_s) const {
 }
 
 const Store::QuickCheckResult& Store::open_check() const { return impl_->open_check; }
+
+std::int64_t Store::CheckpointWal() {
+  impl_->RequireWritable("CheckpointWal");
+  int log = 0, copied = 0;
+  const int rc =
+      sqlite3_wal_checkpoint_v2(impl_->db, nullptr, SQLITE_CHECKPOINT_PASSIVE, &log, &copied);
+  if (rc == SQLITE_BUSY) return 0;  // another connection's checkpoint runs
+  if (rc != SQLITE_OK) detail::Throw(impl_->db, rc, "CheckpointWal");
+  return copied;
+}
 
 void Store::Interrupt() const { sqlite3_interrupt(impl_->db); }
 

@@ -145,6 +145,9 @@ struct Store::Impl {
   // Store::RestrictClaimsTo: the campaigns this connection's claims may take
   // from (nullopt: every active one).
   std::optional<std::set<std::int64_t>> claimable;
+  // StoreOptions::wal_checkpoint_due: the WAL sizes (frames) at which a
+  // commit asks for a checkpoint, and at which it runs one itself.
+  std::int64_t wal_due_frames = 0, wal_backstop_frames = 0;
 
   ~Impl();
   detail::StmtRef Prepare(std::string_view sql) const;

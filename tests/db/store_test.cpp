@@ -1189,5 +1189,70 @@ TEST(StoreFaults, AStoreFileDeletedRenamedOrReplacedIsNoticed) {
   EXPECT_STORE_ERROR(store->CheckFileIdentity(), K::kIo);
 }
 
+// Issue 27: a store whose checkpoints another thread runs. Its commits past
+// the due size ask for one (and copy nothing into the database file
+// themselves); CheckpointWal() on a second connection copies the frames,
+// after which the writer starts the WAL over; a checkpointer that never
+// comes leaves the WAL bounded by the writer's own backstop (4 x due).
+std::uintmax_t WalBytes(const std::string& db_path) {
+  std::error_code ec;
+  const auto n = std::filesystem::file_size(db_path + "-wal", ec);
+  return ec ? 0 : n;
+}
+
+TEST(StoreWal, CommitsPastTheDueSizeAskForACheckpointThatAnotherConnectionRuns) {
+  TempDir dir;
+  const auto path = dir.File("a.db");
+  int asked = 0;
+  StoreOptions o;
+  o.wal_autocheckpoint_bytes = 65536;  // 8 frames of 8 KiB pages
+  o.wal_checkpoint_due = [&asked] { ++asked; };
+  auto writer = Store::Open(path, o);
+  RawScalar(path, "PRAGMA wal_checkpoint(TRUNCATE)");  // the schema's frames out of the way
+  const auto db_bytes_before = std::filesystem::file_size(path);
+  for (int i = 0; i < 200 && asked == 0; ++i)
+    writer->UpsertCell(std::string("c").append(std::to_string(i)), {"point"}, "{}", "{}");
+  ASSERT_GT(asked, 0) << "no commit asked for a checkpoint";
+  EXPECT_GE(WalBytes(path), 65536u);
+  // Nothing was copied into the database file by the writer's commits.
+  EXPECT_EQ(std::filesystem::file_size(path), db_bytes_before);
+
+  StoreOptions reader_options;
+  reader_options.create = false;
+  auto checkpointer = Store::Open(path, reader_options);
+  EXPECT_GT(checkpointer->CheckpointWal(), 0);
+  // The WAL starts over: more commits of the same size keep the file's size.
+  const auto wal_after = WalBytes(path);
+  for (int i = 0; i < 3; ++i) writer->UpsertCell("c0", {"point"}, "{}", "{}");
+  EXPECT_EQ(WalBytes(path), wal_after);
+  EXPECT_EQ(checkpointer->ListCells().size(), writer->ListCells().size());
+  ExpectHealthy(*checkpointer);
+}
+
+TEST(StoreWal, WithNoCheckpointerTheWritersBackstopBoundsTheWal) {
+  TempDir dir;
+  const auto path = dir.File("a.db");
+  int asked = 0;
+  StoreOptions o;
+  o.wal_autocheckpoint_bytes = 65536;
+  o.wal_checkpoint_due = [&asked] {
+    ++asked;
+    throw std::runtime_error("a callback that throws fails no commit");
+  };
+  auto writer = Store::Open(path, o);
+  RawScalar(path, "PRAGMA wal_checkpoint(TRUNCATE)");  // the schema's frames out of the way
+  std::uintmax_t largest = 0;
+  for (int i = 0; i < 2000; ++i) {
+    writer->UpsertCell(std::string("c").append(std::to_string(i % 50)), {"point"},
+                       std::string(R"({"k": )").append(std::to_string(i)).append("}"), "{}");
+    largest = std::max(largest, WalBytes(path));
+  }
+  EXPECT_GT(asked, 0);
+  // 4 x 64 KiB, plus one commit's frames and the WAL header.
+  EXPECT_LE(largest, 4u * 65536u + 8u * (8192u + 24u) + 32u);
+  EXPECT_EQ(writer->ListCells().size(), 50u);
+  ExpectHealthy(*writer);
+}
+
 }  // namespace
 }  // namespace arena::db

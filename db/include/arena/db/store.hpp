@@ -182,6 +182,14 @@ struct StoreOptions {
   // the latest commits can be rolled back by an OS crash or power loss
   // (db/README.md, "What survives which crash").
   std::int64_t wal_autocheckpoint_bytes = std::int64_t{16} << 20;
+  // Who checkpoints. Empty (default): the commit that grows the WAL past
+  // wal_autocheckpoint_bytes checkpoints it itself (SQLite's autocheckpoint:
+  // a 14-18 ms stall of that commit every ~40 trials, bench/README.md,
+  // "Overhead, part X"). Set: such a commit calls this instead (cheap, no
+  // throw: it wakes another thread that runs CheckpointWal() on its own
+  // connection), and checkpoints itself only past 4 x wal_autocheckpoint_bytes,
+  // so the WAL stays bounded if that thread falls behind.
+  std::function<void()> wal_checkpoint_due;
   // Page size of a new file (512..65536, a power of two); an existing file
   // keeps its own. 8192: see db/README.md, "Pragmas".
   int new_file_page_size = 8192;
@@ -653,6 +661,12 @@ class Store {
   // What the read-write open's check found (complete = false when it ran out
   // of StoreOptions::open_check_budget_s, or was skipped).
   const QuickCheckResult& open_check() const;
+  // Copies the WAL's committed frames into the database file: a PASSIVE
+  // checkpoint, which waits for no reader or writer (frames a reader still
+  // needs stay). @returns how many of the WAL's frames are now in the
+  // database file (0 when another connection's checkpoint runs).
+  // @throws StoreError (kIo, kFull...) when it fails.
+  std::int64_t CheckpointWal();
   // Stops this connection's running statement (SQLITE_INTERRUPT); the one
   // call that may come from another thread.
   void Interrupt() const;
