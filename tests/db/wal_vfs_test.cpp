@@ -7,6 +7,8 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <atomic>
+#include <cerrno>
 #include <chrono>
 #include <filesystem>
 #include <fstream>
@@ -238,6 +240,65 @@ TEST(WalCoalescingReaders, MmapAndCheckpointThroughTheShim) {
   ASSERT_EQ(sqlite3_open_v2(path.c_str(), &plain, SQLITE_OPEN_READONLY, nullptr), SQLITE_OK);
   EXPECT_EQ(ScalarSql(plain, "SELECT COUNT(*) FROM t"), rows);
   sqlite3_close_v2(plain);
+}
+
+// A failing write: the unix VFS's pwrite replaced (xSetSystemCall) by one
+// that fails with ENOSPC while `g_fail_writes` is set.
+std::atomic<bool> g_fail_writes{false};
+std::atomic<int> g_failed_writes{0};
+ssize_t FailingPwrite(int fd, const void* p, size_t n, off_t off) {
+  if (g_fail_writes.load()) {
+    g_failed_writes.fetch_add(1);
+    errno = ENOSPC;
+    return -1;
+  }
+  return ::pwrite(fd, p, n, off);
+}
+
+// A flush that fails fails the COMMIT that triggered it (SQLITE_FULL, as a
+// failed write of SQLite's own), its frames are never seen, and the next
+// transaction commits as if nothing had happened.
+TEST(WalCoalescingFaults, AFailedFlushFailsTheCommitAndLeavesNoTrace) {
+  TempDir dir;
+  const std::string path = dir.File("f.db");
+  sqlite3_vfs* unix_vfs = sqlite3_vfs_find("unix");
+  ASSERT_NE(unix_vfs, nullptr);
+  ASSERT_NE(unix_vfs->xSetSystemCall, nullptr);
+  sqlite3* db = OpenWal(path, WalCoalescingVfsName());
+  ASSERT_NE(db, nullptr);
+  ASSERT_EQ(ExecSql(db, "CREATE TABLE t(id INTEGER PRIMARY KEY, txn INT, n INT, v BLOB)"),
+            SQLITE_OK);
+  for (int txn = 0; txn < 3; ++txn) ASSERT_EQ(WriteTxn(db, txn, false, true), SQLITE_OK);
+  const std::string before = Digest(db);
+  int replaced = 0;
+  for (const char* name : {"pwrite", "pwrite64"}) {
+    if (unix_vfs->xGetSystemCall(unix_vfs, name) != nullptr &&
+        unix_vfs->xSetSystemCall(
+            unix_vfs, name, reinterpret_cast<sqlite3_syscall_ptr>(FailingPwrite)) == SQLITE_OK) {
+      ++replaced;
+    }
+  }
+  ASSERT_GT(replaced, 0);
+  g_fail_writes = true;
+  const int rc = WriteTxn(db, 3, false, true);
+  g_fail_writes = false;
+  for (const char* name : {"pwrite", "pwrite64"}) unix_vfs->xSetSystemCall(unix_vfs, name, nullptr);
+  EXPECT_EQ(rc & 0xff, SQLITE_FULL) << sqlite3_errstr(rc);
+  EXPECT_EQ(g_failed_writes.load(), 1) << "the commit's frames: one write";
+  if (!sqlite3_get_autocommit(db)) ExecSql(db, "ROLLBACK");
+  EXPECT_EQ(Digest(db), before);
+  sqlite3* reader = nullptr;
+  ASSERT_EQ(sqlite3_open_v2(path.c_str(), &reader, SQLITE_OPEN_READONLY, nullptr), SQLITE_OK);
+  EXPECT_EQ(Digest(reader), before);
+  // The same transaction again, now that the disk has room; then more.
+  for (int txn = 3; txn < 6; ++txn) ASSERT_EQ(WriteTxn(db, txn, txn == 4, true), SQLITE_OK);
+  const std::string after = Digest(db);
+  EXPECT_NE(after, before);
+  EXPECT_EQ(Digest(reader), after);
+  EXPECT_EQ(DigestOfCopy(path, dir.path(), 0), after);
+  EXPECT_EQ(TextSql(db, "PRAGMA integrity_check"), "ok");
+  sqlite3_close_v2(reader);
+  EXPECT_EQ(sqlite3_close_v2(db), SQLITE_OK);
 }
 
 }  // namespace
