@@ -16,6 +16,7 @@
 
 #include "sqlite_util.hpp"
 #include "store_internal.hpp"
+#include "wal_coalescing_vfs.hpp"
 
 namespace arena::db {
 namespace {
@@ -603,8 +604,9 @@ void OpenWithoutSharedMemory(Store::Impl& impl) {
                        "Store::Open: cannot copy '" + path + "' for reading: " + ec.message());
     }
     target = (dir / "store.db").string();
-    const int rc = sqlite3_open_v2(target.c_str(), &impl.db,
-                                   SQLITE_OPEN_NOMUTEX | SQLITE_OPEN_READONLY, nullptr);
+    const int rc =
+        sqlite3_open_v2(target.c_str(), &impl.db, SQLITE_OPEN_NOMUTEX | SQLITE_OPEN_READONLY,
+                        detail::WalCoalescingVfsName());
     if (rc == SQLITE_OK && CanRead(impl.db)) return;
   } else {
     // URI form: the path's own '?' and '#' must not be taken as URI syntax.
@@ -619,9 +621,9 @@ void OpenWithoutSharedMemory(Store::Impl& impl) {
       }
     }
     uri += "?mode=ro&immutable=1";
-    const int rc =
-        sqlite3_open_v2(uri.c_str(), &impl.db,
-                        SQLITE_OPEN_NOMUTEX | SQLITE_OPEN_READONLY | SQLITE_OPEN_URI, nullptr);
+    const int rc = sqlite3_open_v2(uri.c_str(), &impl.db,
+                                   SQLITE_OPEN_NOMUTEX | SQLITE_OPEN_READONLY | SQLITE_OPEN_URI,
+                                   detail::WalCoalescingVfsName());
     if (rc == SQLITE_OK && CanRead(impl.db)) return;
   }
   const std::string why = impl.db ? sqlite3_errmsg(impl.db) : "out of memory";
@@ -770,7 +772,8 @@ void OpenConnection(Store::Impl& impl, const StoreOptions& options) {
   } else {
     flags |= SQLITE_OPEN_READWRITE | (options.create ? SQLITE_OPEN_CREATE : 0);
   }
-  int rc = sqlite3_open_v2(impl.path.c_str(), &impl.db, flags, nullptr);
+  // The WAL's frames of a commit go to the file in one write (wal_coalescing_vfs.cpp).
+  int rc = sqlite3_open_v2(impl.path.c_str(), &impl.db, flags, detail::WalCoalescingVfsName());
   if (rc == SQLITE_OK && options.read_only && NeedsSharedMemory(impl.db)) {
     // A WAL store in a directory we cannot write (a copy made for reading,
     // a read-only mount): SQLite cannot create the -shm file next to it.
