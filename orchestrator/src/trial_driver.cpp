@@ -150,6 +150,7 @@ struct TrialDriver::Impl {
     Clock::time_point deadline{};
     Clock::time_point next_claim{};
     Clock::time_point claimed_at{};
+    Clock::time_point idle_since{};  // when SetPhase last left it idle
     // The path's marks (TrialTiming::service_s): EXECUTE sent, the input that
     // completed the stream (its last batch or its EXECUTED status) taken, the
     // stream's publish begun from it, RESET sent, RESET_DONE taken.
@@ -268,6 +269,7 @@ struct TrialDriver::Impl {
     cell.phase = phase;
     if (on_path_change) on_path_change(cell.id, false);  // handed a phase, or left idle
     if (phase == CellPhase::kIdle) {
+      cell.idle_since = now();
       // A reset run out after a refused publish keeps the refusal's backoff.
       cell.next_claim =
           cell.reset_ahead == ResetAhead::kForNoTrial ? std::max(cell.next_claim, now()) : now();
@@ -801,11 +803,13 @@ struct TrialDriver::Impl {
   }
 
   // ------------------------------------------------------------ dispatch
-  bool backlog_held = false;   // the prediction backlog holds dispatch (logged once)
-  int predictions_queued = 0;  // requests waiting in `background` to be started
+  bool backlog_held = false;          // the prediction backlog holds dispatch (logged once)
+  int predictions_queued = 0;         // requests waiting in `background` to be started
+  Clock::time_point last_dispatch{};  // when the previous Dispatch pass began
   void Dispatch(bool stopping) {
-    if (stopping || !recovered) return;
     const auto t = now();
+    const auto previous_pass = std::exchange(last_dispatch, t);
+    if (stopping || !recovered) return;
     // A predictor behind by a full backlog: no new trial until it catches up.
     const int backlog = predictions.outstanding() + predictions_queued;
     if (backlog >= opt.service.prediction_backlog) {
@@ -837,7 +841,9 @@ struct TrialDriver::Impl {
       const std::string cell_id = id;
       Attempt("cell " + id + ": claim", [&] { claim = NextTrialFor(cell, true); });
       if (!claim) continue;
-      cell.claimed_at = t;
+      // A cell freed since the previous pass waited for this one: that wait
+      // is the service's time on the trial's path too (TrialTiming).
+      cell.claimed_at = cell.idle_since > previous_pass ? cell.idle_since : t;
       cell.campaign_id = claim->campaign_id;
       cell.execute_wall_s = -1;
       StartExecution(cell, *claim);

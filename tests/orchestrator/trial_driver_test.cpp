@@ -579,6 +579,32 @@ TEST(TrialDriver, ACellIsOnThePathFromEachPhasesEndUntilItsNextPhaseIsHanded) {
                                                "EXECUTE", "on", "RESET", "off", "on", "off"}));
 }
 
+// Issue 27: a cell freed since the service's previous dispatch pass is busy
+// from its freeing, not from the claim: the loop's work before the claim
+// kept it waiting, and the overhead figure (TrialTiming) counts that too; a
+// cell that waits for a pass for nothing of the service's (no trial yet)
+// does not.
+TEST(TrialDriver, ACellsWaitForTheNextDispatchPassCountsInItsNextTrialsBusyTime) {
+  Harness h(2);
+  std::map<std::int64_t, double> busy;
+  h.driver->OnTrialTiming([&](const TrialTiming& t) { busy[t.trial_id] = t.cell_busy_s; });
+  h.Start();
+  h.t += std::chrono::milliseconds(100);
+  h.driver->Tick(false);  // claims trial 1
+  ASSERT_EQ(h.Sent(msg::PHASE_EXECUTE), 1);
+  h.t += std::chrono::milliseconds(1);
+  h.Answer();  // trial 1 runs and resets: the cell is free at +1 ms
+  ASSERT_EQ(busy.count(1), 1u);
+  h.t += std::chrono::milliseconds(5);
+  h.driver->Tick(false);  // the next pass, 5 ms later, claims trial 2
+  ASSERT_EQ(h.Sent(msg::PHASE_EXECUTE), 2);
+  h.t += std::chrono::milliseconds(2);
+  h.Answer();
+  ASSERT_EQ(busy.count(2), 1u);
+  EXPECT_NEAR(busy[2], 0.007, 1e-9);  // from the freeing, not 0.002 from the claim
+  EXPECT_NEAR(busy[1], 0.001, 1e-9);  // a first claim counts from the claim
+}
+
 // Issue 27: what ran a trial (the EXECUTED status's detail) is stored in the
 // publish's transaction, also when the status overtakes the stream's last
 // batch: no commit of its own between the cell's status and its RESET.

@@ -124,12 +124,14 @@ struct ServiceCounters {
 // figure (issue 5): the cell is busy from the claim of the trial until the
 // service has taken its RESET_DONE; the cell reports how long it spent in
 // EXECUTE and RESET itself; the rest is arena's (store transactions, DDS
-// hops, polling).
+// hops, polling). A cell freed since the service's previous dispatch pass is
+// busy from its freeing, not the claim: the loop's work before the claim
+// kept it waiting too.
 struct TrialTiming {
   std::int64_t trial_id = 0, campaign_id = 0;
   int attempt = 0;
   std::string cell_id;
-  double cell_busy_s = 0;  // claim -> RESET_DONE taken, service clock (s)
+  double cell_busy_s = 0;  // claim (or freeing, above) -> RESET_DONE taken, service clock (s)
   double execute_s = 0;    // the cell's own EXECUTE wall time (s)
   double reset_s = 0;      // the cell's own RESET wall time (s)
   double overhead_s = 0;   // cell_busy_s - execute_s - reset_s
