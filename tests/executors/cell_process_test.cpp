@@ -205,6 +205,47 @@ TEST(CellProcess, WallClockSpeedPacesTheStream) {
   EXPECT_LT(took, 5.0);
 }
 
+// The cell's intake thread reads commands as they come, so a release sent
+// during a 10 s wall-clock trial is taken at once (the cell announces it is
+// free and the trial stops, interrupted), not after the trial; then the
+// worker takes commands again: a new session's command runs.
+TEST(CellProcess, AReleaseDuringALongTrialIsTakenAtOnce) {
+  const int domain = test::TestDomain(8);
+  auto c1 = StartCell("busy", domain, 1);
+  Driver d(domain);
+  ASSERT_TRUE(d.WaitForCells({"busy"}, 15s));
+  ASSERT_TRUE(d.commands.WaitForMatched(1, 10s));
+  ASSERT_TRUE(d.Send(d.Command("busy", 9, msg::PHASE_EXECUTE, test::CanonicalScene(10.0))));
+  auto first = d.ground_truth.Take(10s);  // the trial runs
+  ASSERT_TRUE(first) << "the trial did not start";
+  ASSERT_EQ(first->trial_id(), 9u);
+  while (d.announcements.Take(0ms)) {
+  }
+
+  ASSERT_TRUE(d.Send(d.Claim("busy", 0)));
+  const auto sent = std::chrono::steady_clock::now();
+  double freed_after = -1;
+  while (freed_after < 0 && std::chrono::steady_clock::now() < sent + 8s) {
+    auto a = d.announcements.Take(100ms);
+    if (a && a->cell_id() == "busy" && a->serving_session() == 0)
+      freed_after = std::chrono::duration<double>(std::chrono::steady_clock::now() - sent).count();
+  }
+  ASSERT_GE(freed_after, 0) << "the release was not taken during the trial";
+  EXPECT_LT(freed_after, 2.0) << "the release waited behind the trial";
+  auto st = d.FinalStatus(9, 8s);
+  ASSERT_TRUE(st) << "the released trial did not stop";
+  EXPECT_EQ(st->state(), msg::STATE_FAILED);
+  EXPECT_EQ(st->failure(), msg::FAILURE_INTERRUPTED) << st->reason();
+  EXPECT_LT(std::chrono::steady_clock::now() - sent, 5s);
+  std::printf("release taken %.3f s after it was sent, mid-trial\n", freed_after);
+
+  d.session += 1;  // a new service: its command claims the free cell and runs
+  ASSERT_TRUE(d.Send(d.Command("busy", 10, msg::PHASE_EXECUTE, test::CanonicalScene(0.2))));
+  auto next = d.FinalStatus(10, 10s);
+  ASSERT_TRUE(next) << "the worker did not read again after the trial";
+  EXPECT_EQ(next->state(), msg::STATE_EXECUTED) << next->reason();
+}
+
 // The leases, not DDS's defaults (tens of seconds), decide how soon a killed
 // cell is seen gone. The slack (3 s past each lease) is for a loaded CI
 // machine whose event thread runs late; the defaults would miss it by far.
