@@ -240,12 +240,6 @@ std::optional<std::string_view> TopLevelValueText(std::string_view object, std::
 }
 }  // namespace
 
-std::string StatedTruth(std::string_view detail_json) {
-  TruthReader reader;
-  if (!nlohmann::json::sax_parse(detail_json.begin(), detail_json.end(), &reader)) return {};
-  return reader.truth;
-}
-
 std::optional<ExecutionDetail> ReadExecutionDetail(std::string_view detail_json) {
   TruthReader reader;
   if (!nlohmann::json::sax_parse(detail_json.begin(), detail_json.end(), &reader)) return {};

@@ -201,12 +201,14 @@ struct TrialDriver::Impl {
     // dds::kTruthMeasuredNoForces), and then every sample must be so.
     bool measured_cell = false;
     std::int64_t contactless = 0;  // samples received without contacts
-    std::string stated_truth;      // the EXECUTE status's truth (set with `expected`)
-    // The EXECUTED status's detail (what ran the trial, ~3 KB of JSON), read
-    // into `execution` only after the RESET went out (ReadExecution): its
-    // parse was the largest step between the stream's end and the RESET
-    // (issue 27). Empty once read.
-    std::string detail_json;
+    // What the EXECUTED status's detail says ran the trial (set with
+    // `expected`; nullopt: no status yet, or a detail that is not a JSON
+    // object): its truth decides StreamProblem; it becomes `execution` after
+    // the RESET went out (ReadExecution). Read in one pass that builds no
+    // document (issue 27: the parse was the largest step between the
+    // stream's end and the RESET).
+    std::optional<ExecutionDetail> detail;
+    std::string StatedTruth() const { return detail ? detail->truth : std::string(); }
     assessment::RecordedCommands commands;  // closed loop: the commands the cell applied
     bool publishing = false;  // the publish step is under way (or waiting on the store)
     // What the EXECUTED status said ran the trial, when it is written with the
@@ -1030,12 +1032,12 @@ struct TrialDriver::Impl {
   // no forces, and then all of them: never an absence read as a fact.
   // @returns "" when the complete stream may be published.
   static std::string StreamProblem(const Execution& ex) {
-    const bool poses_only = ex.stated_truth == dds::kTruthMeasuredNoForces;
+    const bool poses_only = ex.StatedTruth() == dds::kTruthMeasuredNoForces;
     if (ex.normals.empty() || !(poses_only ? ex.contactless != ex.next_sample : ex.contactless > 0))
       return "";
     return "ground truth refused: cell " + ex.cell_id + " sent " + std::to_string(ex.contactless) +
            " of " + std::to_string(ex.next_sample) +
-           " samples without contacts, and its truth is '" + ex.stated_truth +
+           " samples without contacts, and its truth is '" + ex.StatedTruth() +
            "' (only a measured trial that states it measured no forces, '" +
            dds::kTruthMeasuredNoForces + "', may, and then in every sample)";
   }
@@ -1254,14 +1256,14 @@ struct TrialDriver::Impl {
   // (PublishExecuted): no commit of its own between the status and the RESET,
   // also when the status arrives before the stream's last batch. A phase that
   // ends without a publish writes it then (EndPhase).
-  // The detail is parsed when first needed after the RESET went out (the
+  // The record is made when first needed after the RESET went out (the
   // publish step) or when the attempt ends unpublished (EndPhase).
   static void ReadExecution(Execution& ex) {
-    if (ex.detail_json.empty()) return;
-    auto detail = ReadExecutionDetail(std::exchange(ex.detail_json, {}));
-    if (!detail) return;
-    ex.execution = db::ExecutionRecord{std::move(detail->backend), std::move(detail->truth),
-                                       detail->defects_applied.value_or(std::string())};
+    if (!ex.detail) return;
+    ExecutionDetail& d = *ex.detail;
+    ex.execution = db::ExecutionRecord{std::move(d.backend), std::move(d.truth),
+                                       d.defects_applied.value_or(std::string())};
+    ex.detail.reset();
   }
   void WriteExecution(std::int64_t trial_id, int attempt, db::ExecutionRecord r) {
     Step("trial " + std::to_string(trial_id) + ": record execution", "",
@@ -1304,7 +1306,7 @@ struct TrialDriver::Impl {
       case TrialStep::kCollectStream: {
         // The stated truth decides whether the stream may be published
         // (StreamProblem): read now, without building the document.
-        ex.stated_truth = StatedTruth(st.detail_json());
+        ex.detail = ReadExecutionDetail(st.detail_json());
         // The cell changed what differed before it ran (executors/trial_start.hpp).
         // Only cells that declared change costs track fixtures: no other
         // cell's path parses a scene for them (issue 27).
@@ -1312,7 +1314,6 @@ struct TrialDriver::Impl {
           RecordChanges(cell, ex.trial_id, ex.attempt, "execute",
                         FixturesOfTrial(ex.trial_id, ex.scene_json), /*after_dispatch=*/true);
         ex.expected = st.samples();
-        ex.detail_json = st.detail_json();
       }
         RecordClosedLoop(ex, st);
         cell.execute_wall_s = st.phase_wall_s();

@@ -1227,6 +1227,11 @@ TEST(TrialDriver, NoTrialIsDispatchedBeforeRecoveryRan) {
 // The EXECUTED status's truth is read without parsing the detail whole
 // (issue 27): only the top-level "truth" string of an object counts, and a
 // malformed detail states none, as when it was parsed whole.
+std::string StatedTruth(std::string_view detail_json) {
+  const auto d = ReadExecutionDetail(detail_json);
+  return d ? d->truth : std::string();
+}
+
 TEST(StatedTruth, IsTheTopLevelTruthStringOfAWellFormedObjectOnly) {
   EXPECT_EQ(StatedTruth(R"({"backend":"model","truth":"simulated","x":[1,{"truth":"no"}]})"),
             "simulated");

@@ -37,18 +37,12 @@ db::Sample ToStoreSample(const msg::GroundTruthSample& sample,
 // store never parses a scene on the ingest path.
 std::vector<db::ContactSite> ContactSitesOf(const mechanics::Scene& scene);
 
-// The top-level "truth" of a cell's EXECUTED status detail (a JSON object),
-// read without building the document: "" when the detail is not an object,
-// has no "truth" or it is not a string. The whole detail is parsed later,
-// off the trial's path (trial_driver.cpp, ReadExecution).
-std::string StatedTruth(std::string_view detail_json);
-
 // What a cell's EXECUTED status detail says ran the trial: its top-level
 // "backend" and "truth" strings ("" when absent or not strings) and the text
 // of its top-level "defects_applied" value as the cell wrote it (nullopt:
 // none). Read with one pass that builds nothing and a scan for that value's
-// extent, not a parse into a document and a dump back (issue 27: it runs
-// while the cell resets, beside the publish's commit). nullopt when the
+// extent, not a parse into a document and a dump back (issue 27: the stated
+// truth is needed between the stream's end and the RESET). nullopt when the
 // detail is not a well-formed JSON object. A repeated key: the last counts.
 struct ExecutionDetail {
   std::string backend, truth;
