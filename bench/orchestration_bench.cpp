@@ -127,6 +127,7 @@ void CampaignEndToEnd(benchmark::State& state, bool shared_memory) {
       orchestrator::ParseCampaign(SmokeCampaign(10), ARENA_SOURCE_DIR "/examples/campaigns");
 
   std::vector<double> overhead, busy, execute, reset, service_part, wire_part;
+  std::vector<double> leg_claim, leg_execute, leg_stream, leg_reset;  // TrialTiming's legs
   double trials = 0, wall = 0;
   long rss_after_first = 0;  // the first campaign warms the cell up (pools, caches)
   int run = 0;
@@ -151,6 +152,10 @@ void CampaignEndToEnd(benchmark::State& state, bool shared_memory) {
       reset.push_back(t.reset_s);
       service_part.push_back(t.service_s);
       wire_part.push_back(t.overhead_s - t.service_s);
+      leg_claim.push_back(t.claim_to_execute_s);
+      leg_execute.push_back(t.execute_round_trip_s);
+      leg_stream.push_back(t.stream_to_reset_s);
+      leg_reset.push_back(t.reset_round_trip_s);
     });
     // The clock starts when the service runs: cell discovery is part of a campaign's wall time.
     const auto start = std::chrono::steady_clock::now();
@@ -179,6 +184,11 @@ void CampaignEndToEnd(benchmark::State& state, bool shared_memory) {
   // (DDS hops, the cell outside its phases, the service loop's waits).
   state.counters["service_p50_ms"] = Quantile(service_part, 0.5) * 1e3;
   state.counters["wire_p50_ms"] = Quantile(wire_part, 0.5) * 1e3;
+  // The overhead's four legs (TrialTiming), medians in microseconds: where it goes.
+  state.counters["leg_claim_us"] = Quantile(leg_claim, 0.5) * 1e6;
+  state.counters["leg_execute_us"] = Quantile(leg_execute, 0.5) * 1e6;
+  state.counters["leg_stream_reset_us"] = Quantile(leg_stream, 0.5) * 1e6;
+  state.counters["leg_reset_us"] = Quantile(leg_reset, 0.5) * 1e6;
   state.counters["busy_p50_ms"] = Quantile(busy, 0.5) * 1e3;
   state.counters["execute_p50_ms"] = Quantile(execute, 0.5) * 1e3;
   state.counters["reset_p50_ms"] = Quantile(reset, 0.5) * 1e3;

@@ -1386,6 +1386,10 @@ struct TrialDriver::Impl {
     t.service_s = Seconds((cell.execute_sent - cell.claimed_at) +
                           (cell.reset_sent - cell.publish_from) + (now() - cell.reset_taken))
                       .count();
+    t.claim_to_execute_s = Seconds(cell.execute_sent - cell.claimed_at).count();
+    t.execute_round_trip_s = Seconds(cell.stream_input_at - cell.execute_sent).count() - exec;
+    t.stream_to_reset_s = Seconds(cell.reset_sent - cell.stream_input_at).count();
+    t.reset_round_trip_s = Seconds(now() - cell.reset_sent).count() - reset_wall_s;
     if (on_trial_timing) on_trial_timing(t);
   }
 

@@ -605,6 +605,50 @@ TEST(TrialDriver, ACellsWaitForTheNextDispatchPassCountsInItsNextTrialsBusyTime)
   EXPECT_NEAR(busy[1], 0.001, 1e-9);  // a first claim counts from the claim
 }
 
+// Issue 27: the overhead figure in the four legs of the trial's path, each
+// the interval it names, adding up to the overhead: claim -> EXECUTE sent,
+// the EXECUTE's round trip beyond the cell's execute, stream complete ->
+// RESET sent, the RESET's round trip beyond the cell's reset.
+TEST(TrialDriver, TheOverheadIsTheSumOfTheFourLegsOfTheTrialsPath) {
+  Harness h;
+  std::optional<TrialTiming> timing;
+  h.driver->OnTrialTiming([&](const TrialTiming& t) { timing = t; });
+  // Sending a command takes the service 1 ms (EXECUTE) and 3 ms (RESET).
+  h.transport.on_send = [&](const msg::TrialCommand& c) {
+    if (c.phase() == msg::PHASE_EXECUTE) h.t += std::chrono::milliseconds(1);
+    if (c.phase() == msg::PHASE_RESET) h.t += std::chrono::milliseconds(3);
+  };
+  h.Start();
+  h.t += std::chrono::milliseconds(100);
+  h.driver->Tick(false);  // the claim at T, its EXECUTE sent at T + 1 ms
+  msg::TrialCommand execute;
+  for (const auto& c : h.transport.sent)
+    if (c.phase() == msg::PHASE_EXECUTE) execute = c;
+  h.t += std::chrono::milliseconds(20);  // the stream complete at T + 21 ms
+  h.driver->OnGroundTruth(h.Batch(execute));
+  auto executed = h.Status(execute, msg::STATE_EXECUTED);
+  executed.phase_wall_s(0.012);  // of the 20 ms, the cell executed 12
+  h.driver->OnStatus(executed);  // its RESET sent at T + 24 ms
+  msg::TrialCommand reset;
+  for (const auto& c : h.transport.sent)
+    if (c.phase() == msg::PHASE_RESET) reset = c;
+  ASSERT_EQ(reset.phase(), msg::PHASE_RESET);
+  h.t += std::chrono::milliseconds(9);  // RESET_DONE taken at T + 33 ms
+  auto done = h.Status(reset, msg::STATE_RESET_DONE);
+  done.phase_wall_s(0.005);  // of the 9 ms, the cell reset 5
+  h.driver->OnStatus(done);
+  ASSERT_TRUE(timing);
+  EXPECT_NEAR(timing->cell_busy_s, 0.033, 1e-9);
+  EXPECT_NEAR(timing->overhead_s, 0.033 - 0.012 - 0.005, 1e-9);
+  EXPECT_NEAR(timing->claim_to_execute_s, 0.001, 1e-9);
+  EXPECT_NEAR(timing->execute_round_trip_s, 0.020 - 0.012, 1e-9);
+  EXPECT_NEAR(timing->stream_to_reset_s, 0.003, 1e-9);
+  EXPECT_NEAR(timing->reset_round_trip_s, 0.009 - 0.005, 1e-9);
+  EXPECT_NEAR(timing->claim_to_execute_s + timing->execute_round_trip_s +
+                  timing->stream_to_reset_s + timing->reset_round_trip_s,
+              timing->overhead_s, 1e-12);
+}
+
 // Issue 27: what ran a trial (the EXECUTED status's detail) is stored in the
 // publish's transaction, also when the status overtakes the stream's last
 // batch: no commit of its own between the cell's status and its RESET.

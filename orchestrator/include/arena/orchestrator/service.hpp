@@ -140,6 +140,15 @@ struct TrialTiming {
   // taken up to this figure. The rest (overhead_s - service_s) is the wire:
   // four DDS hops, the cell's time outside its phases, the service loop's waits.
   double service_s = 0;
+  // overhead_s in the four legs of the trial's path, which add up to it (s):
+  // the claim (or freeing) until the EXECUTE is sent; the EXECUTE's round
+  // trip beyond the cell's execute (until the input that completed the
+  // stream is taken); from that input until the RESET is sent; the RESET's
+  // round trip beyond the cell's reset (until its RESET_DONE is taken).
+  double claim_to_execute_s = 0;
+  double execute_round_trip_s = 0;
+  double stream_to_reset_s = 0;
+  double reset_round_trip_s = 0;
 };
 
 // @throws std::invalid_argument naming the option ("--reset-timeout: ...")
