@@ -43,12 +43,17 @@ namespace {
 using namespace arena;
 namespace fs = std::filesystem;
 
-// A child `arena cell` process, killed when this goes.
+// A child `arena cell` process, killed when this goes; it also stops when
+// the bench dies without running this destructor (--parent-pid): a stray
+// cell left on a domain would answer whoever uses that domain next.
 class CellProcess {
  public:
   CellProcess(const std::string& id, int domain, const fs::path& log) {
-    std::vector<std::string> args = {ARENA_BINARY,           "cell",    "--id", id, "--domain",
-                                     std::to_string(domain), "--speed", "0"};
+    std::vector<std::string> args = {ARENA_BINARY,   "cell",
+                                     "--id",         id,
+                                     "--domain",     std::to_string(domain),
+                                     "--speed",      "0",
+                                     "--parent-pid", std::to_string(getpid())};
     std::vector<char*> argv;
     for (auto& a : args) argv.push_back(a.data());
     argv.push_back(nullptr);
