@@ -841,7 +841,7 @@ TrialState Store::RetryTrial(std::int64_t trial_id, int attempt, const std::stri
                     reason + " (attempt " + std::to_string(verdict.counted) + " of " +
                         std::to_string(max_attempts) +
                         (restarts != 0 ? " not counting " + std::to_string(restarts) +
-                                             " cut short by service restarts"
+                                             " cut short by service restarts or released"
                                        : std::string()) +
                         ": giving up)",
                     rules, "RetryTrial");
@@ -856,6 +856,28 @@ TrialState Store::RetryTrial(std::int64_t trial_id, int attempt, const std::stri
   }
   tx.Commit();
   return to;
+}
+
+void Store::ReleaseTrial(std::int64_t trial_id, int attempt, const std::string& reason,
+                         std::string_view rule) {
+  impl_->RequireWritable("ReleaseTrial");
+  if (rule.empty()) BadInput("ReleaseTrial: rule is empty");
+  Tx tx(impl_->db, true);
+  const auto row = LoadTrialRow(*impl_, trial_id, "ReleaseTrial");
+  CheckAttempt(row, trial_id, attempt, "ReleaseTrial");
+  if (row.state != TrialState::kDispatched) {
+    throw StoreError(StoreError::Kind::kIllegalTransition,
+                     "ReleaseTrial: trial " + std::to_string(trial_id) + " is " +
+                         ToString(row.state) + "; only a dispatched trial is released");
+  }
+  WriteTransition(*impl_, trial_id, attempt, row.state, TrialState::kPlanned, row.cell_id,
+                  reason + " (not counted: re-run as attempt " + std::to_string(attempt + 1) + ")",
+                  rule, "ReleaseTrial");
+  auto u = impl_->Prepare(
+      "UPDATE trials SET attempt = attempt + 1, not_before = 0,"
+      " service_restarts = service_restarts + 1 WHERE id = ?");
+  u->Bind(1, trial_id).Run();
+  tx.Commit();
 }
 
 void Store::FailTrial(std::int64_t trial_id, int attempt, const std::string& reason,

@@ -187,6 +187,7 @@ struct Cell::Impl {
   CommandIntake intake_state;  // which service is served; its queued commands
 
   // Worker-only state.
+  ResetGate reset_gate;  // an EXECUTE queued behind a RESET runs only after it ended done
   // Phases already finished, to answer a repeated command with its status
   // instead of running it twice. Keyed by the service's session too: trial
   // ids restart at 1 in a new store, and a cell outlives stores and services.
@@ -349,6 +350,10 @@ struct Cell::Impl {
 
   void Finish(const msg::TrialCommand& c, msg::TrialStatus s) {
     Send(s);
+    if (c.phase() == msg::PHASE_RESET)
+      reset_gate.ResetEnded(c, s.state() == msg::STATE_RESET_DONE, s.reason());
+    else
+      reset_gate.OtherEnded();
     const Key key{c.service_session(), c.trial_id(), c.attempt(), static_cast<int>(c.phase())};
     if (done.insert_or_assign(key, s).second) done_order.push_back(key);
     while (done_order.size() > kRemembered) {
@@ -391,12 +396,14 @@ struct Cell::Impl {
       ++counters.duplicates;
       return;
     }
-    if (c.phase() == msg::PHASE_EXECUTE)
+    if (c.phase() == msg::PHASE_EXECUTE) {
+      if (std::string why = reset_gate.Check(c); !why.empty()) return Refuse(c, why);
       Execute(c);
-    else if (c.phase() == msg::PHASE_RESET)
+    } else if (c.phase() == msg::PHASE_RESET) {
       Reset(c);
-    else
+    } else {
       Refuse(c, "phase: unknown value");
+    }
   }
 
   TrialContext Context(const msg::TrialCommand& c, Clock::time_point deadline) const {

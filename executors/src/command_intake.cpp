@@ -116,4 +116,29 @@ bool CommandIntake::Serve(const msg::TrialCommand& c, double lease_s, Clock::tim
   return changed || lease_changed;
 }
 
+void ResetGate::ResetEnded(const msg::TrialCommand& reset, bool done, const std::string& why) {
+  last_is_reset_ = true;
+  done_ = done;
+  session_ = reset.service_session();
+  trial_id_ = reset.trial_id();
+  attempt_ = reset.attempt();
+  why_ = why;
+}
+
+std::string ResetGate::Check(const msg::TrialCommand& execute) const {
+  if (execute.after_reset_trial_id() == 0) return "";
+  const std::string which = "the RESET after trial " +
+                            std::to_string(execute.after_reset_trial_id()) + " attempt " +
+                            std::to_string(execute.after_reset_attempt());
+  if (!last_is_reset_ || session_ != execute.service_session() ||
+      trial_id_ != execute.after_reset_trial_id() || attempt_ != execute.after_reset_attempt())
+    return "after_reset_trial_id: sent to run right after " + which +
+           ", which is not what this cell ran last";
+  if (!done_)
+    return "after_reset_trial_id: " + which + " did not end done (" +
+           (why_.empty() ? std::string("no reason given") : why_) +
+           "); a trial never starts from a failed reset";
+  return "";
+}
+
 }  // namespace arena::executors

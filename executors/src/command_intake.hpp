@@ -77,4 +77,27 @@ class CommandIntake {
   std::deque<msg::TrialCommand> queue_;
 };
 
+// An EXECUTE the service sent while the cell still resets
+// (TrialCommand.after_reset_trial_id / after_reset_attempt: the service's
+// pipelined dispatch) runs only right after that RESET ended RESET_DONE. The
+// intake queues commands in order, so the RESET always runs first; if it
+// failed, was refused, or something else ran in between, the EXECUTE is
+// REFUSED with the reason: a robot never pushes from a failed reset, and the
+// service, which saw the reset's status first, has already released the trial.
+class ResetGate {
+ public:
+  // The worker finished a RESET (`done`: RESET_DONE; otherwise `why` it did not).
+  void ResetEnded(const msg::TrialCommand& reset, bool done, const std::string& why);
+  // The worker finished any other command.
+  void OtherEnded() { last_is_reset_ = false; }
+  // "" when `execute` may run; otherwise why it is refused.
+  std::string Check(const msg::TrialCommand& execute) const;
+
+ private:
+  bool last_is_reset_ = false, done_ = false;
+  std::uint64_t session_ = 0, trial_id_ = 0;
+  std::uint32_t attempt_ = 0;
+  std::string why_;
+};
+
 }  // namespace arena::executors

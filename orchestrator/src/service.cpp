@@ -220,6 +220,10 @@ class SqliteTrialStore : public TrialStore {
                             int max_attempts, double backoff_s, const std::string& rule) override {
     return s_.RetryTrial(id, attempt, reason, max_attempts, backoff_s, rule);
   }
+  void ReleaseTrial(std::int64_t id, int attempt, const std::string& reason,
+                    const std::string& rule) override {
+    s_.ReleaseTrial(id, attempt, reason, rule);
+  }
   void FailTrial(std::int64_t id, int attempt, const std::string& reason, db::TrialEnd outcome,
                  const std::string& rule) override {
     s_.FailTrial(id, attempt, reason, outcome, rule);
@@ -637,6 +641,7 @@ struct Service::Impl {
     adaptive = std::make_unique<AdaptivePlanner>(*store);
     DriverOptions d;
     d.service = o;
+    d.queue_next_execute = true;
     driver = std::make_unique<TrialDriver>(d, me, *trial_store, transport, predictor);
     driver->OnInputWaiting([doorbell = input] { return doorbell->Rung(); });
     driver->OnPathChange([&path = predictor.path()](const std::string& cell, bool on_path) {

@@ -179,6 +179,17 @@ struct TrialDriver::Impl {
     ResetAhead reset_ahead = ResetAhead::kNo;
     std::vector<msg::TrialStatus> held_reset;
     std::int64_t block_campaign = 0, block = -1;
+    // Issue 27: the trial whose EXECUTE went out behind the cell's RESET
+    // (TrialCommand.after_reset_*, QueueNext): the cell runs it right after
+    // that reset ended done (DecideQueued). Its Execution exists from the
+    // send; its statuses wait in `held` until the reset's status is taken.
+    struct Queued {
+      std::int64_t trial_id = 0, campaign_id = 0;
+      int attempt = 0;
+      double budget_s = 0;
+      std::vector<msg::TrialStatus> held;
+    };
+    std::optional<Queued> queued;
     HostCell host;  // what it announced it can do (the claim gate, claim_gate.hpp)
   };
   std::map<std::string, CellRun> cells;
@@ -459,6 +470,7 @@ struct TrialDriver::Impl {
   void EndPhase(CellRun& cell, const Decision& d, const std::string& reason) {
     const CellPhase phase = cell.phase;
     if (phase == CellPhase::kIdle || !d.ends_phase()) return;
+    EndQueued(cell, QueuedEvent::kPhaseEnded, "its cell's phase before it ended: " + reason);
     if (phase == CellPhase::kExecuting) {
       if (cell.reset_ahead == ResetAhead::kPublishPending)  // its held statuses go (SetPhase)
         spdlog::info("cell {}: {}", cell.id, DecideResetAhead(AheadEvent::kAttemptEnded).rule);
@@ -632,7 +644,9 @@ struct TrialDriver::Impl {
   // claims for every cell of a store: its own record is the truth).
   bool ClaimedByAnother(const CellRun& cell) const {
     for (const auto& [id, other] : cells)
-      if (id != cell.id && other.trial_id == cell.next_aim->trial_id) return true;
+      if (id != cell.id && (other.trial_id == cell.next_aim->trial_id ||
+                            (other.queued && other.queued->trial_id == cell.next_aim->trial_id)))
+        return true;
     return false;
   }
 
@@ -853,7 +867,33 @@ struct TrialDriver::Impl {
   }
 
   void StartExecution(CellRun& cell, const db::ClaimedTrial& claim) {
+    const std::optional<double> budget = PrepareExecution(cell, claim);
+    if (!budget) return;
+    cell.trial_id = claim.trial_id;
+    cell.attempt = claim.attempt;
+    SetPhase(cell, CellPhase::kExecuting, *budget + 2.0);
     const std::string tag = TrialTag(claim.campaign_id, claim.trial_id, claim.attempt);
+    // EXECUTE first, then the sink: no commit between the claim and the
+    // command (issue 27). Nothing the cell sends is read before the sink
+    // exists (this thread takes both). A busy store leaves no sink: the
+    // stream is kept in memory and written whole at its end (the publish
+    // step's re-ingest, as after a busy Add); a refusal ends the phase.
+    msg::TrialCommand cmd = ExecuteCommand(cell, claim, *budget);
+    Count(&ServiceCounters::dispatched);
+    if (!transport.Send(cmd)) {
+      EndPhase(cell, DecideServiceEvent(cell.phase, ServiceEvent::kCommandNotSent),
+               "EXECUTE command could not be sent");
+      return;
+    }
+    cell.execute_sent = now();
+    spdlog::info("{}: EXECUTE on cell {}", tag, cell.id);
+    if (!BeginSink(cell, claim.trial_id, claim.attempt, tag)) return;
+    AimAhead(cell, claim.trial_id, claim.scene_json);
+  }
+
+  // The Execution of a claimed trial, in `executions`. @returns its EXECUTE's
+  // budget; nullopt when its scene does not parse (the trial is failed).
+  std::optional<double> PrepareExecution(CellRun& cell, const db::ClaimedTrial& claim) {
     Execution ex;
     ex.trial_id = claim.trial_id;
     ex.campaign_id = claim.campaign_id;
@@ -874,7 +914,7 @@ struct TrialDriver::Impl {
       const Decision d = DecideServiceEvent(CellPhase::kIdle, ServiceEvent::kInvalidScene);
       FailTrial(claim.trial_id, claim.campaign_id, claim.attempt,
                 std::string("invalid scene: ") + e.what(), d.outcome, d.rule);
-      return;
+      return std::nullopt;
     }
     double budget =
         opt.service.execute_timeout_s + ex.scene.duration * std::max(cell.speed, 0.0) * 1.5;
@@ -884,47 +924,138 @@ struct TrialDriver::Impl {
                     cell.mounted, FixturesOfTrial(claim.trial_id, claim.scene_json),
                     *cell.change_costs)) *
                 std::max(cell.speed, 0.0);
-    cell.trial_id = claim.trial_id;
-    cell.attempt = claim.attempt;
-    executions.emplace(claim.trial_id, std::move(ex));
-    SetPhase(cell, CellPhase::kExecuting, budget + 2.0);
-    const std::string cell_id = cell.id;
-    const std::int64_t trial_id = claim.trial_id;
-    const int attempt = claim.attempt;
-    // EXECUTE first, then the sink: no commit between the claim and the
-    // command (issue 27). Nothing the cell sends is read before the sink
-    // exists (this thread takes both). A busy store leaves no sink: the
-    // stream is kept in memory and written whole at its end (the publish
-    // step's re-ingest, as after a busy Add); a refusal ends the phase.
+    executions.insert_or_assign(claim.trial_id, std::move(ex));
+    return budget;
+  }
+
+  msg::TrialCommand ExecuteCommand(const CellRun& cell, const db::ClaimedTrial& claim,
+                                   double budget) {
     msg::TrialCommand cmd = Command(cell, msg::PHASE_EXECUTE);
-    cmd.trial_id(static_cast<std::uint64_t>(trial_id));
-    cmd.attempt(static_cast<std::uint32_t>(attempt));
+    cmd.trial_id(static_cast<std::uint64_t>(claim.trial_id));
+    cmd.attempt(static_cast<std::uint32_t>(claim.attempt));
     cmd.scene_json(claim.scene_json);
     cmd.seed(claim.seed);
     cmd.deadline_s(budget);
     cmd.defects_json(claim.defects_json);  // applied by the cell, or the trial is REFUSED
-    Count(&ServiceCounters::dispatched);
-    if (!transport.Send(cmd)) {
-      EndPhase(cell, DecideServiceEvent(cell.phase, ServiceEvent::kCommandNotSent),
-               "EXECUTE command could not be sent");
-      return;
-    }
-    cell.execute_sent = now();
-    spdlog::info("{}: EXECUTE on cell {}", tag, cell_id);
-    if (!BeginSink(cell, trial_id, attempt, tag)) return;
-    // While it executes: the trial its reset will aim at (see Executed),
-    // chosen as if the fixtures of this trial were mounted, as they will be.
+    return cmd;
+  }
+
+  // While it executes: the trial its reset will aim at (see Executed),
+  // chosen as if the fixtures of this trial were mounted, as they will be.
+  void AimAhead(CellRun& cell, std::int64_t trial_id, const std::string& scene_json) {
     cell.aim_known = false;
     try {
       CellRun probe = cell;
-      if (probe.change_costs) probe.mounted = FixturesOfTrial(trial_id, claim.scene_json);
+      if (probe.change_costs) probe.mounted = FixturesOfTrial(trial_id, scene_json);
       cell.next_aim = NextTrialFor(probe, false);
       cell.aim_known = true;
     } catch (const db::StoreError& e) {
       if (Judge(e) == StoreVerdict::kStop) throw;  // as any step: the service stops
-      spdlog::debug("{}: next trial looked up at the reset instead: {}", tag, e.what());
+      spdlog::debug("trial {}: next trial looked up at the reset instead: {}", trial_id, e.what());
     }
     if (cell.next_aim) cell.aim_scene = ParseAhead(*cell.next_aim);
+  }
+
+  // ------------------------------------------------------------ the queued trial (issue 27)
+  // Right after the RESET after (after_trial, after_attempt) went out: the
+  // trial that reset is aimed at is claimed and its EXECUTE sent at once,
+  // for the cell to run right after that reset ended done (trial_policy.hpp
+  // QueuedEvent). Only where the dispatch would claim for the cell at once:
+  // otherwise (or when the aimed trial is no longer claimable, or the store
+  // is busy) the dispatch claims after the reset, as ever. The suspenders
+  // and the claim gate are asked here, so what the reset itself shows acts
+  // from the trial after the queued one.
+  bool stopping_now = true;  // the last Tick's `stopping`
+  bool MayQueue(const CellRun& cell) const {
+    if (!opt.queue_next_execute || stopping_now || !recovered || backlog_held) return false;
+    // The trial before it is not yet predicted: it counts.
+    if (predictions.outstanding() + predictions_queued + 1 >= opt.service.prediction_backlog)
+      return false;
+    return cell.alive && cell.ours && !cell.quarantined && cell.store_waits == 0 &&
+           cell.failures_in_a_row == 0 && cell.reset_aimed_at != 0 && !cell.queued &&
+           !(observer && observer->DispatchGate(cell.id));
+  }
+
+  void QueueNext(CellRun& cell, std::int64_t after_trial, int after_attempt) {
+    if (!MayQueue(cell)) return;
+    std::optional<db::ClaimedTrial> claim;
+    try {
+      GateNewCampaigns();
+      claim = store.ClaimTrial(cell.id, cell.reset_aimed_at, kQueuedClaimRule);
+    } catch (const db::StoreError& e) {
+      if (Judge(e) == StoreVerdict::kStop) throw;
+      spdlog::debug("cell {}: next trial claimed after the reset: {}", cell.id, e.what());
+      return;
+    }
+    if (!claim) return;
+    if (cell.change_costs) {
+      cell.block_campaign = claim->campaign_id;
+      cell.block = BlockOf(claim->index, SchedulingOf(claim->campaign_id).options.window);
+    }
+    const std::optional<double> budget = PrepareExecution(cell, *claim);
+    if (!budget) return;
+    const std::string tag = TrialTag(claim->campaign_id, claim->trial_id, claim->attempt);
+    cell.queued = CellRun::Queued{claim->trial_id, claim->campaign_id, claim->attempt, *budget, {}};
+    msg::TrialCommand cmd = ExecuteCommand(cell, *claim, *budget);
+    cmd.after_reset_trial_id(static_cast<std::uint64_t>(after_trial));
+    cmd.after_reset_attempt(static_cast<std::uint32_t>(after_attempt));
+    Count(&ServiceCounters::dispatched);
+    if (!transport.Send(cmd)) {
+      EndQueued(cell, QueuedEvent::kNotSent, "EXECUTE command could not be sent");
+      return;
+    }
+    spdlog::info("{}: EXECUTE on cell {}, queued behind its reset", tag, cell.id);
+    // Its sink after the publish before it (Tick's background): nothing of
+    // it arrives before the cell's reset ended. Samples taken before it
+    // exists are written whole at the stream's end (the publish's re-ingest).
+    const std::string cell_id = cell.id;
+    const std::int64_t trial_id = claim->trial_id;
+    const int attempt = claim->attempt;
+    background.push_back([this, cell_id, trial_id, attempt, tag] {
+      auto it = executions.find(trial_id);
+      if (it == executions.end() || it->second.attempt != attempt || it->second.sink ||
+          it->second.next_sample != 0 || it->second.publishing)
+        return;
+      BeginSink(Cell(cell_id), trial_id, attempt, tag);
+    });
+  }
+
+  // The queued trial leaves the cell's queue by `event`'s rule (nothing when
+  // the rule keeps it): back to planned, its attempt not counted.
+  void EndQueued(CellRun& cell, QueuedEvent event, const std::string& reason) {
+    if (!cell.queued) return;
+    const QueuedDecision d = DecideQueued(event);
+    if (d.step != QueuedStep::kRelease) return;
+    const CellRun::Queued q = std::move(*cell.queued);
+    cell.queued.reset();
+    auto it = executions.find(q.trial_id);
+    if (it != executions.end() && it->second.attempt == q.attempt) executions.erase(it);
+    const std::string tag = TrialTag(q.campaign_id, q.trial_id, q.attempt);
+    spdlog::info("{}: not run on cell {}: {} ({})", tag, cell.id, reason, d.rule);
+    const std::string rule = d.rule;
+    Step(tag + ": release", "",
+         [this, q, reason, rule] { store.ReleaseTrial(q.trial_id, q.attempt, reason, rule); });
+  }
+
+  // The reset before it ended done: the cell runs the queued trial now.
+  // Its time on the cell counts from here (TrialTiming: the cell's cycle).
+  void RunQueued(CellRun& cell) {
+    const QueuedDecision d = DecideQueued(QueuedEvent::kResetDone);
+    if (d.step != QueuedStep::kRun) return;
+    CellRun::Queued q = std::move(*cell.queued);
+    cell.queued.reset();
+    auto it = executions.find(q.trial_id);
+    if (it == executions.end() || it->second.attempt != q.attempt) return;
+    cell.trial_id = q.trial_id;
+    cell.attempt = q.attempt;
+    cell.campaign_id = q.campaign_id;
+    cell.execute_wall_s = -1;
+    cell.claimed_at = cell.execute_sent = now();
+    SetPhase(cell, CellPhase::kExecuting, q.budget_s + 2.0);
+    spdlog::debug("{}: running on cell {} ({})", TrialTag(q.campaign_id, q.trial_id, q.attempt),
+                  cell.id, d.rule);
+    AimAhead(cell, q.trial_id, it->second.scene_json);
+    for (const msg::TrialStatus& st : q.held) OnStatus(st);
   }
 
   // nullptr when the scene does not parse: its claim parses it again and
@@ -975,7 +1106,9 @@ struct TrialDriver::Impl {
         it->second.cell_id != batch.cell_id() || it->second.publishing)
       return;
     Execution& ex = it->second;
-    Cell(ex.cell_id).stream_input_at = now();
+    // A queued trial's batches (a held RESET_DONE before them) mark nothing
+    // of the trial the cell's phase still is.
+    if (CellRun& c = Cell(ex.cell_id); c.trial_id == ex.trial_id) c.stream_input_at = now();
     const std::string problem = dds::CheckBatch(batch, ex.next_sample);
     if (!problem.empty()) {
       FailStream(ex, "malformed ground truth from cell " + batch.cell_id() + ": " + problem,
@@ -1061,7 +1194,10 @@ struct TrialDriver::Impl {
     // while the commit runs (DecideResetAhead). An aim the store cannot look
     // up now, or a RESET not sent: it follows the publish, as it did before.
     try {
-      if (SendReset(cell, trial_id, attempt)) cell.reset_ahead = ResetAhead::kPublishPending;
+      if (SendReset(cell, trial_id, attempt)) {
+        cell.reset_ahead = ResetAhead::kPublishPending;
+        QueueNext(cell, trial_id, attempt);
+      }
     } catch (const db::StoreError& e) {
       if (Judge(e) == StoreVerdict::kStop) throw;
       spdlog::debug("{}: the RESET follows the publish: {}", tag, e.what());
@@ -1106,8 +1242,17 @@ struct TrialDriver::Impl {
           const bool ahead = c.reset_ahead == ResetAhead::kPublishPending;
           std::vector<msg::TrialStatus> held = std::move(c.held_reset);
           c.reset_ahead = ResetAhead::kNo;  // decided below, not as an attempt ended otherwise
+          // The reset runs out (below) and the cell then runs its queued trial.
+          std::optional<CellRun::Queued> queued;
+          if (ahead && DecideQueued(QueuedEvent::kPublishRefused).step == QueuedStep::kKeep)
+            queued = std::exchange(c.queued, std::nullopt);
           EndPhase(c, DecideServiceEvent(c.phase, ServiceEvent::kStoreRefusedTruth), e.what());
-          if (ahead) RunOutReset(c, DecideResetAhead(AheadEvent::kPublishRefused), std::move(held));
+          if (!ahead) return;
+          const AheadDecision a = DecideResetAhead(AheadEvent::kPublishRefused);
+          c.queued = std::move(queued);
+          if (a.step != AheadStep::kRunOut)
+            EndQueued(c, QueuedEvent::kPhaseEnded, std::string("publish refused: ") + e.what());
+          RunOutReset(c, a, std::move(held));
         });
   }
 
@@ -1215,6 +1360,15 @@ struct TrialDriver::Impl {
     auto cit = cells.find(st.cell_id());
     if (cit == cells.end()) return;
     CellRun& cell = cit->second;
+    if (cell.queued && cell.queued->trial_id == static_cast<std::int64_t>(st.trial_id()) &&
+        cell.queued->attempt == static_cast<int>(st.attempt()) &&
+        DecideQueued(QueuedEvent::kOwnStatus).step == QueuedStep::kHold) {
+      // Before its reset's status was taken (a held RESET_DONE): taken after it (RunQueued).
+      if (cell.queued->held.size() == 2 * kMaxHeldStatuses)
+        cell.queued->held.erase(cell.queued->held.begin());
+      cell.queued->held.push_back(st);
+      return;
+    }
     if (LateMessageRule(true, cell.phase, SameAttempt(cell, st))) return;  // a phase settled
     if (cell.reset_ahead == ResetAhead::kPublishPending && st.phase() == msg::PHASE_RESET) {
       // Its RESET went out before the publish, which has not committed (a
@@ -1365,6 +1519,12 @@ struct TrialDriver::Impl {
     SetPhase(cell, CellPhase::kIdle);
     if (ok && for_trial) cell.failures_in_a_row = 0;  // a whole clean trial: backoff starts over
     BackOff(cell, d, "reset failed: " + st.reason());
+    if (!cell.queued) return;
+    if (ok)
+      RunQueued(cell);
+    else
+      EndQueued(cell, QueuedEvent::kResetFailed,
+                "queued behind a reset that failed: " + st.reason());
   }
 
   // The split of a clean trial's time on its cell (TrialTiming). A cell's
@@ -1551,6 +1711,7 @@ struct TrialDriver::Impl {
 
   void Tick(bool stopping) {
     const auto t = now();
+    stopping_now = stopping;
     if (t >= next_file_check) {
       next_file_check = t + Dur(0.1);
       store.CheckFileIdentity();  // throws kIo: the service stops naming the file

@@ -167,6 +167,28 @@ AheadDecision DecideResetAhead(AheadEvent event) {
   return {AheadStep::kDropHeld, "reset.ahead_of_ended_attempt"};
 }
 
+QueuedDecision DecideQueued(QueuedEvent event) {
+  switch (event) {
+    case QueuedEvent::kOwnStatus:
+      return {QueuedStep::kHold, "queued.held_until_reset_taken"};
+    case QueuedEvent::kResetDone:
+      return {QueuedStep::kRun, "queued.runs_after_reset_done"};
+    case QueuedEvent::kResetFailed:
+      // The cell refuses it (executors' ResetGate): never a push from a failed reset.
+      return {QueuedStep::kRelease, "queued.behind_failed_reset"};
+    case QueuedEvent::kPublishRefused:
+      // The cell resets anyway (reset.ahead_of_refused_publish) and then runs it.
+      return {QueuedStep::kKeep, "queued.runs_after_run_out_reset"};
+    case QueuedEvent::kPhaseEnded:
+      return {QueuedStep::kRelease, "queued.cell_phase_ended"};
+    case QueuedEvent::kNotSent:
+      return {QueuedStep::kRelease, "queued.command_not_sent"};
+    case QueuedEvent::kTruthRefused:
+      break;
+  }
+  return {QueuedStep::kRelease, "queued.truth_refused"};
+}
+
 PredictionDecision DecidePrediction(bool same_attempt, bool awaiting_reset, bool reset_in_flight) {
   if (!same_attempt) return {PredictionStep::kDrop, "predict.stale_attempt"};
   if (awaiting_reset && reset_in_flight)
@@ -297,6 +319,38 @@ const char* ToString(AheadEvent e) {
       return "publish refused";
     case AheadEvent::kAttemptEnded:
       return "attempt ended";
+  }
+  return "?";
+}
+const char* ToString(QueuedEvent e) {
+  switch (e) {
+    case QueuedEvent::kOwnStatus:
+      return "own status";
+    case QueuedEvent::kResetDone:
+      return "reset done";
+    case QueuedEvent::kResetFailed:
+      return "reset failed";
+    case QueuedEvent::kPublishRefused:
+      return "publish refused";
+    case QueuedEvent::kPhaseEnded:
+      return "phase ended";
+    case QueuedEvent::kNotSent:
+      return "not sent";
+    case QueuedEvent::kTruthRefused:
+      return "truth refused";
+  }
+  return "?";
+}
+const char* ToString(QueuedStep s) {
+  switch (s) {
+    case QueuedStep::kHold:
+      return "hold";
+    case QueuedStep::kRun:
+      return "run";
+    case QueuedStep::kKeep:
+      return "keep";
+    case QueuedStep::kRelease:
+      return "release";
   }
   return "?";
 }

@@ -145,5 +145,53 @@ TEST(CommandIntake, RetiredSessionsAreRememberedUpToABound) {
   EXPECT_TRUE(intake.Take(Command(1, msg::PHASE_EXECUTE), t, kCell).queued);
 }
 
+// ResetGate: an EXECUTE sent ahead runs only right after its RESET ended done.
+msg::TrialCommand Ahead(std::uint64_t session, std::uint64_t trial, std::uint64_t after,
+                        std::uint32_t after_attempt) {
+  msg::TrialCommand c = Command(session, msg::PHASE_EXECUTE, trial);
+  c.after_reset_trial_id(after);
+  c.after_reset_attempt(after_attempt);
+  return c;
+}
+
+TEST(ResetGate, AnExecuteNotSentAheadAlwaysRuns) {
+  ResetGate gate;
+  EXPECT_EQ(gate.Check(Command(7, msg::PHASE_EXECUTE, 3)), "");
+  gate.ResetEnded(Command(7, msg::PHASE_RESET, 2), false, "object dropped");
+  EXPECT_EQ(gate.Check(Command(7, msg::PHASE_EXECUTE, 3)), "");
+}
+
+TEST(ResetGate, AnExecuteSentAheadRunsRightAfterItsResetEndedDone) {
+  ResetGate gate;
+  msg::TrialCommand reset = Command(7, msg::PHASE_RESET, 2);
+  reset.attempt(1);
+  gate.ResetEnded(reset, true, "");
+  EXPECT_EQ(gate.Check(Ahead(7, 3, 2, 1)), "");
+}
+
+TEST(ResetGate, AnExecuteSentAheadIsRefusedAfterAFailedReset) {
+  ResetGate gate;
+  msg::TrialCommand reset = Command(7, msg::PHASE_RESET, 2);
+  reset.attempt(1);
+  gate.ResetEnded(reset, false, "object dropped");
+  const std::string why = gate.Check(Ahead(7, 3, 2, 1));
+  EXPECT_NE(why.find("did not end done (object dropped)"), std::string::npos) << why;
+  EXPECT_NE(why.find("after trial 2 attempt 1"), std::string::npos) << why;
+}
+
+TEST(ResetGate, AnExecuteSentAheadIsRefusedAfterAnyOtherResetOrCommand) {
+  ResetGate gate;
+  EXPECT_NE(gate.Check(Ahead(7, 3, 2, 1)), "");  // nothing ran yet
+  msg::TrialCommand reset = Command(7, msg::PHASE_RESET, 2);
+  reset.attempt(1);
+  gate.ResetEnded(reset, true, "");
+  EXPECT_NE(gate.Check(Ahead(7, 3, 2, 2)), "");  // another attempt
+  EXPECT_NE(gate.Check(Ahead(7, 3, 9, 1)), "");  // another trial
+  EXPECT_NE(gate.Check(Ahead(8, 3, 2, 1)), "");  // another session
+  gate.OtherEnded();                             // an EXECUTE ran in between
+  const std::string why = gate.Check(Ahead(7, 3, 2, 1));
+  EXPECT_NE(why.find("not what this cell ran last"), std::string::npos) << why;
+}
+
 }  // namespace
 }  // namespace arena::executors

@@ -172,6 +172,27 @@ struct FakeStore : TrialStore {
     t.rules.push_back(rule + " " + verdict.rule);
     return t.state;
   }
+  // As the real store: not counted, no backoff.
+  void ReleaseTrial(std::int64_t id, int attempt, const std::string&,
+                    const std::string& rule) override {
+    faults.Hit("ReleaseTrial");
+    Move(id, attempt, db::TrialState::kPlanned);
+    T& t = trials.at(id);
+    ++t.attempt;
+    ++t.service_restarts;
+    t.rules.push_back(rule);
+  }
+  // The queued trial's claim (the aimed trial, while still planned).
+  std::optional<db::ClaimedTrial> ClaimTrial(const std::string&, std::int64_t id,
+                                             const std::string& rule) override {
+    faults.Hit("ClaimTrial");
+    auto it = trials.find(id);
+    if (it == trials.end() || it->second.state != db::TrialState::kPlanned) return std::nullopt;
+    Move(id, it->second.attempt, db::TrialState::kDispatched);
+    claim_rules.push_back(rule);
+    return db::ClaimedTrial{id, 1, it->second.attempt, 7, Scene(), "{}"};
+  }
+  std::vector<std::string> claim_rules;
   void FailTrial(std::int64_t id, int attempt, const std::string&, db::TrialEnd outcome,
                  const std::string& rule) override {
     faults.Hit("FailTrial");
@@ -314,6 +335,12 @@ struct Harness {
   int batches_lost = 0;               // this many EXECUTEs' batches never arrive
 
   bool predictor_holds = false;  // the predictor answers nothing (a slow or stopped one)
+  bool queue_next = false;       // DriverOptions::queue_next_execute
+  msg::TrialState reset_answer = msg::STATE_RESET_DONE;
+  // The fake cell's ResetGate (executors): the last RESET it answered, and how.
+  std::uint64_t last_reset_trial = 0;
+  std::uint32_t last_reset_attempt = 0;
+  bool last_was_reset = false, last_reset_done = false;
 
   explicit Harness(int trials = 1, int prediction_backlog = 64) {
     for (int i = 1; i <= trials; ++i) store.trials[i] = {};
@@ -329,6 +356,7 @@ struct Harness {
     DriverOptions o;
     o.service.max_attempts = 3;
     o.service.prediction_backlog = backlog;
+    o.queue_next_execute = queue_next;
     driver = std::make_unique<TrialDriver>(o, ServiceIdentity{kSession, "lab1", 42, "store-a"},
                                            store, transport, predictions, [this] { return t; });
   }
@@ -391,7 +419,13 @@ struct Harness {
   void Answer() {
     for (; answered < transport.sent.size(); ++answered) {
       const msg::TrialCommand c = transport.sent[answered];
-      if (c.phase() == msg::PHASE_EXECUTE) {
+      if (c.phase() == msg::PHASE_EXECUTE && c.after_reset_trial_id() != 0 &&
+          !(last_was_reset && last_reset_done && last_reset_trial == c.after_reset_trial_id() &&
+            last_reset_attempt == c.after_reset_attempt())) {
+        last_was_reset = false;
+        driver->OnStatus(Status(c, msg::STATE_REFUSED));  // as executors' ResetGate
+      } else if (c.phase() == msg::PHASE_EXECUTE) {
+        last_was_reset = false;
         driver->OnStatus(Status(c, msg::STATE_ACCEPTED));
         const bool batch = execute_answer == msg::STATE_EXECUTED && batches_lost-- <= 0;
         if (batch && !status_before_truth) driver->OnGroundTruth(Batch(c));
@@ -401,7 +435,13 @@ struct Harness {
         driver->OnStatus(st);
         if (batch && status_before_truth) driver->OnGroundTruth(Batch(c));
       } else if (c.phase() == msg::PHASE_RESET) {
-        driver->OnStatus(Status(c, msg::STATE_RESET_DONE));
+        last_was_reset = true;
+        last_reset_done = reset_answer == msg::STATE_RESET_DONE;
+        last_reset_trial = c.trial_id();
+        last_reset_attempt = c.attempt();
+        auto st = Status(c, reset_answer);
+        if (reset_answer == msg::STATE_FAILED) st.failure(msg::FAILURE_RESET);
+        driver->OnStatus(st);
       }
     }
     while (!predictor_holds && !predictions.requests.empty()) {
@@ -758,6 +798,157 @@ msg::TrialCommand LastReset(const Harness& h) {
   for (const auto& c : h.transport.sent)
     if (c.phase() == msg::PHASE_RESET) reset = c;
   return reset;
+}
+
+// ---- Issue 27: the next trial queued behind the cell's reset
+// (The driver's clock points into its Harness: set up in place, never moved.)
+void QueueNext(Harness& h) {
+  h.queue_next = true;
+  h.NewDriver();
+}
+std::vector<msg::TrialCommand> Executes(const Harness& h) {
+  std::vector<msg::TrialCommand> out;
+  for (const auto& c : h.transport.sent)
+    if (c.phase() == msg::PHASE_EXECUTE) out.push_back(c);
+  return out;
+}
+
+// Each trial after the first goes out right behind its cell's RESET, marked
+// to run only after that reset ended done; the cell's reset status lets it
+// run, and every trial is done on its first attempt, as without queuing.
+TEST(TrialDriver, TheNextTrialGoesOutBehindTheResetAndRunsWhenItEndedDone) {
+  Harness h(3);
+  QueueNext(h);
+  h.Start();
+  ASSERT_TRUE(h.RunToEnd());
+  for (const std::int64_t id : {1, 2, 3}) {
+    EXPECT_EQ(h.store.trials[id].state, db::TrialState::kDone) << id;
+    EXPECT_EQ(h.store.trials[id].attempt, 1) << id;
+    EXPECT_EQ(h.store.trials[id].samples, 10) << id;
+  }
+  const auto executes = Executes(h);
+  ASSERT_EQ(executes.size(), 3u);
+  EXPECT_EQ(executes[0].after_reset_trial_id(), 0u) << "the first trial follows no reset";
+  for (std::size_t k = 1; k < 3; ++k) {
+    EXPECT_EQ(executes[k].after_reset_trial_id(), executes[k - 1].trial_id());
+    EXPECT_EQ(executes[k].after_reset_attempt(), executes[k - 1].attempt());
+  }
+  // Sent right behind the RESET it waits for.
+  for (std::size_t k = 0; k + 1 < h.transport.sent.size(); ++k) {
+    if (h.transport.sent[k].phase() == msg::PHASE_RESET && h.transport.sent[k].trial_id() < 3) {
+      EXPECT_EQ(h.transport.sent[k + 1].phase(), msg::PHASE_EXECUTE) << k;
+    }
+  }
+  EXPECT_EQ(h.store.claim_rules, (std::vector<std::string>{kQueuedClaimRule, kQueuedClaimRule}));
+  EXPECT_EQ(h.driver->counters().dispatched, 3);
+  EXPECT_EQ(h.driver->counters().retried, 0);
+}
+
+// A reset that fails: the cell refuses the trial queued behind it (a robot
+// never pushes from a failed reset). The service released it already, not
+// counted and nobody blamed: it runs again as attempt 2 and is done.
+TEST(TrialDriver, ATrialQueuedBehindAFailedResetIsReleasedUncountedAndRunsAgain) {
+  Harness h(2);
+  QueueNext(h);
+  h.reset_answer = msg::STATE_FAILED;
+  h.Start();
+  for (int i = 0; i < 20 && h.store.trials[2].attempt == 1; ++i) {
+    h.t += std::chrono::milliseconds(100);
+    h.driver->Tick(false);
+    h.Answer();
+  }
+  ASSERT_EQ(h.store.trials[2].attempt, 2) << "the queued trial was not released";
+  EXPECT_EQ(h.store.trials[2].state, db::TrialState::kPlanned);
+  EXPECT_EQ(h.store.trials[2].rules, (std::vector<std::string>{"queued.behind_failed_reset"}));
+  EXPECT_EQ(h.store.trials[2].service_restarts, 1) << "the released attempt is not counted";
+  h.reset_answer = msg::STATE_RESET_DONE;
+  ASSERT_TRUE(h.RunToEnd());
+  EXPECT_EQ(h.store.trials[1].state, db::TrialState::kDone);  // its truth is complete
+  EXPECT_EQ(h.store.trials[2].state, db::TrialState::kDone);
+  EXPECT_EQ(h.store.trials[2].attempt, 2);
+  EXPECT_EQ(h.store.trials[2].samples, 10);
+  // The cell's REFUSED of the released attempt failed nothing.
+  EXPECT_EQ(h.store.trials[2].outcome, db::TrialEnd::kNone);
+  EXPECT_EQ(h.driver->counters().failed, 0);
+  EXPECT_EQ(h.driver->counters().resets_failed, 1);
+}
+
+// The cell is lost while it resets: its queued trial is released (not
+// counted) with the reset closed as not observed; the cell back, both run.
+TEST(TrialDriver, ATrialQueuedOnACellLostDuringItsResetIsReleased) {
+  Harness h(2);
+  QueueNext(h);
+  h.Start();
+  const msg::TrialCommand first = ExecuteAndAnswer(h);
+  const auto executes = Executes(h);
+  ASSERT_EQ(executes.size(), 2u) << "the next trial was not queued behind the reset";
+  EXPECT_EQ(executes[1].after_reset_trial_id(), first.trial_id());
+  h.driver->OnCellLost("c1", "participant left", false);
+  EXPECT_EQ(h.store.trials[2].state, db::TrialState::kPlanned);
+  EXPECT_EQ(h.store.trials[2].attempt, 2);
+  EXPECT_EQ(h.store.trials[2].rules, (std::vector<std::string>{"queued.cell_phase_ended"}));
+  EXPECT_EQ(h.store.trials[1].state, db::TrialState::kResetFailed);
+  // Its statuses, from a process that comes back, are late: nothing moves.
+  h.driver->OnStatus(h.Status(LastReset(h), msg::STATE_RESET_DONE));
+  h.driver->OnStatus(h.Status(executes[1], msg::STATE_ACCEPTED));
+  EXPECT_EQ(h.store.trials[2].state, db::TrialState::kPlanned);
+  h.answered = h.transport.sent.size();  // the lost process's commands go unanswered
+  h.driver->OnAnnounce(h.Announce("c1", kSession, 2));
+  ASSERT_TRUE(h.RunToEnd());
+  EXPECT_EQ(h.store.trials[1].state, db::TrialState::kDone);
+  EXPECT_EQ(h.store.trials[2].state, db::TrialState::kDone);
+  EXPECT_EQ(h.store.trials[2].attempt, 2);
+}
+
+// A busy store holds the publish before the queued trial: its reset's
+// RESET_DONE is held, and so are the queued trial's own statuses, which come
+// after it; once the publish commits, the reset is taken, then the queued
+// trial's statuses, in the cell's order, and its stream (kept in memory:
+// it came before its sink) is written whole.
+TEST(TrialDriver, AQueuedTrialsStatusesWaitForItsResetsStatus) {
+  Harness h(2);
+  QueueNext(h);
+  h.store.faults.next["Ingest.Finish"] = {K::kBusy, K::kBusy};
+  h.Start();
+  ExecuteAndAnswer(h);
+  const auto executes = Executes(h);
+  ASSERT_EQ(executes.size(), 2u);
+  h.driver->OnStatus(h.Status(LastReset(h), msg::STATE_RESET_DONE));
+  h.driver->OnStatus(h.Status(executes[1], msg::STATE_ACCEPTED));
+  h.driver->OnGroundTruth(h.Batch(executes[1]));
+  h.driver->OnStatus(h.Status(executes[1], msg::STATE_EXECUTED));
+  h.answered = h.transport.sent.size();
+  EXPECT_EQ(h.store.trials[1].state, db::TrialState::kDispatched);
+  EXPECT_EQ(h.store.trials[2].state, db::TrialState::kDispatched);
+  EXPECT_EQ(h.store.faults.calls["CompleteReset"], 0);
+  ASSERT_TRUE(h.RunToEnd());
+  for (const std::int64_t id : {1, 2}) {
+    EXPECT_EQ(h.store.trials[id].state, db::TrialState::kDone) << id;
+    EXPECT_EQ(h.store.trials[id].attempt, 1) << id;
+    EXPECT_EQ(h.store.trials[id].samples, 10) << id;
+    EXPECT_EQ(h.store.trials[id].rules,
+              (std::vector<std::string>{kResetAfterExecute, "reset.verified"}))
+        << id;
+  }
+  EXPECT_EQ(h.Sent(msg::PHASE_EXECUTE), 2);
+  EXPECT_EQ(h.driver->counters().retried, 0);
+}
+
+// No trial is queued for a service that is stopping: the cell's last reset
+// frees it, and the trial after it stays planned.
+TEST(TrialDriver, NothingIsQueuedWhileTheServiceStops) {
+  Harness h(2);
+  QueueNext(h);
+  h.Start();
+  h.t += std::chrono::milliseconds(100);
+  h.driver->Tick(false);
+  msg::TrialCommand execute = Executes(h).front();
+  h.driver->Tick(true);  // stopping from now on
+  h.driver->OnGroundTruth(h.Batch(execute));
+  h.driver->OnStatus(h.Status(execute, msg::STATE_EXECUTED));
+  EXPECT_EQ(h.Sent(msg::PHASE_RESET), 1);
+  EXPECT_EQ(h.Sent(msg::PHASE_EXECUTE), 1);
+  EXPECT_EQ(h.store.trials[2].state, db::TrialState::kPlanned);
 }
 
 // A RESET_DONE that comes while a busy store still holds the publish is held:

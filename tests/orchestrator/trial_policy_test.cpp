@@ -257,6 +257,38 @@ TEST(TrialPolicy, AResetAheadOfItsPublishIsTheTrialsOnlyOnceThePublishCommitted)
     EXPECT_TRUE(seen.count(e)) << "no row for " << ToString(e);
 }
 
+// Issue 27: the next trial's EXECUTE queued behind the cell's reset. It runs
+// only after a reset that ended done; whenever the cell will not run it for
+// us, it goes back to planned without counting. One row per event.
+TEST(TrialPolicy, AQueuedTrialRunsOnlyAfterItsResetEndedDone) {
+  using E = QueuedEvent;
+  using S = QueuedStep;
+  struct Row {
+    E event;
+    S step;
+    const char* rule;
+  };
+  const Row rows[] = {
+      {E::kOwnStatus, S::kHold, "queued.held_until_reset_taken"},
+      {E::kResetDone, S::kRun, "queued.runs_after_reset_done"},
+      {E::kResetFailed, S::kRelease, "queued.behind_failed_reset"},
+      {E::kPublishRefused, S::kKeep, "queued.runs_after_run_out_reset"},
+      {E::kPhaseEnded, S::kRelease, "queued.cell_phase_ended"},
+      {E::kNotSent, S::kRelease, "queued.command_not_sent"},
+      {E::kTruthRefused, S::kRelease, "queued.truth_refused"},
+  };
+  std::set<E> seen;
+  for (const Row& r : rows) {
+    EXPECT_TRUE(seen.insert(r.event).second) << "two rows for " << ToString(r.event);
+    const QueuedDecision d = DecideQueued(r.event);
+    EXPECT_EQ(d.step, r.step) << ToString(r.event) << ": " << ToString(d.step);
+    EXPECT_STREQ(d.rule, r.rule) << ToString(r.event);
+  }
+  for (E e : {E::kOwnStatus, E::kResetDone, E::kResetFailed, E::kPublishRefused, E::kPhaseEnded,
+              E::kNotSent, E::kTruthRefused})
+    EXPECT_TRUE(seen.count(e)) << "no row for " << ToString(e);
+}
+
 TEST(TrialPolicy, APredictionWaitsForItsResetOrClosesAnUnconfirmedOne) {
   using PS = PredictionStep;
   struct Row {

@@ -55,7 +55,7 @@
 // | planned                   | dispatched   | ClaimNextTrial                   |
 // | planned                   | cancelled    | CancelCampaign                   |
 // | dispatched                | executed     | Ingest::Finish                   |
-// | dispatched                | planned (+1) | RetryTrial, RecoverAfterRestart  |
+// | dispatched                | planned (+1) | RetryTrial, RecoverAfterRestart, ReleaseTrial |
 // | dispatched                | failed       | RetryTrial (attempts exhausted)  |
 // | executed, reset_failed    | resetting    | BeginReset                       |
 // | resetting                 | reset_done   | CompleteReset (ok)               |
@@ -771,6 +771,13 @@ class Store {
   // @returns the new state.
   TrialState RetryTrial(std::int64_t trial_id, int attempt, const std::string& reason,
                         int max_attempts, double backoff_s, std::string_view rule = {});
+  // dispatched -> planned with attempt+1, not counted against the trial (as
+  // an attempt a service restart cut short: trials.service_restarts + 1) and
+  // no backoff: an attempt that never started on its cell through no fault
+  // of its own (an EXECUTE queued behind a reset that failed, or whose cell
+  // was lost before it could run it). The audit row names `rule`.
+  void ReleaseTrial(std::int64_t trial_id, int attempt, const std::string& reason,
+                    std::string_view rule);
   // any non-terminal -> failed, outcome `outcome` (e.g. kRefused).
   void FailTrial(std::int64_t trial_id, int attempt, const std::string& reason,
                  TrialEnd outcome = TrialEnd::kFailed, std::string_view rule = {});

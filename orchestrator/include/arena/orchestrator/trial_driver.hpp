@@ -118,6 +118,11 @@ class TrialStore {
   virtual db::TrialState RetryTrial(std::int64_t trial_id, int attempt, const std::string& reason,
                                     int max_attempts, double backoff_s,
                                     const std::string& rule) = 0;
+  // dispatched -> planned (+1), the attempt not counted and no backoff
+  // (db::Store::ReleaseTrial): an EXECUTE queued behind a reset that never
+  // ran it.
+  virtual void ReleaseTrial(std::int64_t trial_id, int attempt, const std::string& reason,
+                            const std::string& rule) = 0;
   virtual void FailTrial(std::int64_t trial_id, int attempt, const std::string& reason,
                          db::TrialEnd outcome, const std::string& rule) = 0;
   virtual void BeginReset(std::int64_t trial_id, int attempt, const std::string& rule) = 0;
@@ -264,6 +269,11 @@ struct DriverOptions {
   double beat_period_s = 1.0;    // the store heartbeat
   double cell_lease_s = 10.0;    // `status` shows a cell gone after this long without a sign
   double dispatch_poll_s = 0.2;  // an idle cell asks the store for work this often
+  // Issue 27: a cell's next trial is claimed and its EXECUTE sent right after
+  // its RESET, for the cell to run right after that reset ended done
+  // (trial_policy.hpp QueuedEvent). The service turns it on; off, the
+  // dispatch claims only for idle cells (the driver's tests of that path).
+  bool queue_next_execute = false;
 };
 
 class TrialDriver {

@@ -136,6 +136,40 @@ struct AheadDecision {
 };
 AheadDecision DecideResetAhead(AheadEvent event);
 
+// ## The next trial queued behind the reset (issue 27)
+//
+// Right after a cell's RESET goes out, the service claims the trial that
+// reset is aimed at and sends its EXECUTE at once, marked to run only right
+// after that reset ended done (TrialCommand.after_reset_*): the cell goes
+// from its reset straight into its next trial, without waiting for the
+// service to take the reset's status, claim and send. Until the reset's
+// status is taken the queued trial is not the cell's phase: its statuses
+// wait, and the reset's outcome decides whether it runs.
+enum class QueuedEvent {
+  kOwnStatus,       // a status of the queued trial comes before its reset's status was taken
+  kResetDone,       // the reset ended done: the cell is running the queued trial
+  kResetFailed,     // the reset failed or was refused: the cell refuses the queued trial
+  kPublishRefused,  // the publish before it was refused: the reset still runs out, then it
+  kPhaseEnded,      // the cell's phase ended otherwise (lost, restarted, serves another,
+                    // deadline, a command not sent, a bad stream before it)
+  kNotSent,         // its EXECUTE could not be sent
+  kTruthRefused,    // the store refused its ingest
+};
+enum class QueuedStep {
+  kHold,     // the status waits until the reset's status was taken
+  kRun,      // the queued trial becomes the cell's phase (executing) now
+  kKeep,     // it stays queued: the cell still runs it after the reset
+  kRelease,  // the cell never runs it (or not for us): back to planned, the
+             // attempt not counted (TrialStore::ReleaseTrial); nobody is blamed
+};
+struct QueuedDecision {
+  QueuedStep step = QueuedStep::kRelease;
+  const char* rule = "";
+};
+QueuedDecision DecideQueued(QueuedEvent event);
+// The audit rule of the queued trial's claim (planned -> dispatched).
+inline constexpr const char* kQueuedClaimRule = "queued.claimed_behind_reset";
+
 // A prediction came back for (trial, attempt).
 enum class PredictionStep {
   kDrop,                  // the trial moved on (another attempt): the prediction is stale
@@ -169,6 +203,8 @@ const char* ToString(ServiceEvent event);
 const char* ToString(Party party);
 const char* ToString(TrialStep step);
 const char* ToString(AheadEvent event);
+const char* ToString(QueuedEvent event);
+const char* ToString(QueuedStep step);
 const char* ToString(AheadStep step);
 
 }  // namespace arena::orchestrator
