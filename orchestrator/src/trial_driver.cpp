@@ -128,7 +128,8 @@ struct TrialDriver::Impl {
     mechanics::Scene scene;
     std::vector<Eigen::Vector3d> normals;
   };
-  static constexpr std::size_t kMaxHeldStatuses = 4;  // a cell sends two per reset
+  static constexpr std::size_t kMaxHeldStatuses = 4;    // a cell sends two per reset
+  static constexpr std::size_t kMaxHeldBatches = 4096;  // a queued trial's, before it runs
 
   struct CellRun {
     std::string id;
@@ -188,6 +189,7 @@ struct TrialDriver::Impl {
       int attempt = 0;
       double budget_s = 0;
       std::vector<msg::TrialStatus> held;
+      std::vector<msg::GroundTruth> held_truth;  // its batches, likewise
     };
     std::optional<Queued> queued;
     HostCell host;  // what it announced it can do (the claim gate, claim_gate.hpp)
@@ -995,7 +997,8 @@ struct TrialDriver::Impl {
     const std::optional<double> budget = PrepareExecution(cell, *claim);
     if (!budget) return;
     const std::string tag = TrialTag(claim->campaign_id, claim->trial_id, claim->attempt);
-    cell.queued = CellRun::Queued{claim->trial_id, claim->campaign_id, claim->attempt, *budget, {}};
+    cell.queued =
+        CellRun::Queued{claim->trial_id, claim->campaign_id, claim->attempt, *budget, {}, {}};
     msg::TrialCommand cmd = ExecuteCommand(cell, *claim, *budget);
     cmd.after_reset_trial_id(static_cast<std::uint64_t>(after_trial));
     cmd.after_reset_attempt(static_cast<std::uint32_t>(after_attempt));
@@ -1055,6 +1058,7 @@ struct TrialDriver::Impl {
     spdlog::debug("{}: running on cell {} ({})", TrialTag(q.campaign_id, q.trial_id, q.attempt),
                   cell.id, d.rule);
     AimAhead(cell, q.trial_id, it->second.scene_json);
+    for (const msg::GroundTruth& batch : q.held_truth) OnGroundTruth(batch);
     for (const msg::TrialStatus& st : q.held) OnStatus(st);
   }
 
@@ -1090,6 +1094,11 @@ struct TrialDriver::Impl {
               e.what());
           return true;
         case StoreVerdict::kMoot:
+          if (cell.queued && cell.queued->trial_id == trial_id) {  // not the cell's phase yet
+            EndQueued(cell, QueuedEvent::kTruthRefused,
+                      std::string("ground truth refused: ") + e.what());
+            return false;
+          }
           EndPhase(cell, DecideServiceEvent(cell.phase, ServiceEvent::kStoreRefusedTruth),
                    std::string("ground truth refused: ") + e.what());
           return false;
@@ -1106,9 +1115,15 @@ struct TrialDriver::Impl {
         it->second.cell_id != batch.cell_id() || it->second.publishing)
       return;
     Execution& ex = it->second;
-    // A queued trial's batches (a held RESET_DONE before them) mark nothing
-    // of the trial the cell's phase still is.
-    if (CellRun& c = Cell(ex.cell_id); c.trial_id == ex.trial_id) c.stream_input_at = now();
+    CellRun& cell = Cell(ex.cell_id);
+    if (cell.queued && cell.queued->trial_id == ex.trial_id && cell.queued->attempt == ex.attempt &&
+        DecideQueued(QueuedEvent::kOwnStatus).step == QueuedStep::kHold) {
+      // Before its reset's status was taken (a held RESET_DONE): taken after it (RunQueued).
+      if (cell.queued->held_truth.size() < kMaxHeldBatches)
+        cell.queued->held_truth.push_back(batch);
+      return;  // (past the bound: the stream is incomplete, its deadline retries it)
+    }
+    cell.stream_input_at = now();
     const std::string problem = dds::CheckBatch(batch, ex.next_sample);
     if (!problem.empty()) {
       FailStream(ex, "malformed ground truth from cell " + batch.cell_id() + ": " + problem,

@@ -164,6 +164,59 @@ TEST(CellProcess, TwoCellsAndADriverExchangeCommands) {
   EXPECT_TRUE(WIFEXITED(*rc) && WEXITSTATUS(*rc) == 0);
 }
 
+// Issue 27: an EXECUTE sent while the cell still resets (after_reset_*)
+// waits in the cell's queue behind that RESET and runs only if it ended
+// done. Both commands go out back to back, as the service sends them.
+TEST(CellProcess, AnExecuteQueuedBehindAResetRunsOnlyIfThatResetEndedDone) {
+  const int domain = test::TestDomain(9);
+  auto cell = StartCell("c1", domain, 0, R"({"workspace": {"min": -0.05, "max": 0.05}})");
+  Driver d(domain);
+  ASSERT_TRUE(d.WaitForCells({"c1"}, 15s)) << "the cell did not announce itself";
+  ASSERT_TRUE(d.commands.WaitForMatched(1, 10s));
+  const std::string outside =
+      R"({"object": {"shape": "box", "size": [0.05, 0.03, 0.10], "mass": 0.2,
+         "pose": {"position": [0.2, 0, 0], "rpy": [0, 0, 0]}},
+         "duration": 0.1, "grip_force": 10,
+         "fingers": [{"name": "l", "type": "point", "position": [0.175, 0, 0], "normal": [1, 0, 0], "mu": 0.5},
+                     {"name": "r", "type": "point", "position": [0.225, 0, 0], "normal": [-1, 0, 0], "mu": 0.5}]})";
+  auto queued = [&](std::uint64_t trial, std::uint64_t after) {
+    auto e = d.Command("c1", trial, msg::PHASE_EXECUTE, test::CanonicalScene(0.2));
+    e.after_reset_trial_id(after);
+    e.after_reset_attempt(1);
+    return e;
+  };
+  // A reset aimed outside the workspace is refused: the trial behind it too.
+  ASSERT_TRUE(d.Send(d.Command("c1", 100, msg::PHASE_RESET, outside)));
+  ASSERT_TRUE(d.Send(queued(101, 100)));
+  auto r = d.FinalStatus(100, 20s);
+  ASSERT_TRUE(r);
+  EXPECT_EQ(r->state(), msg::STATE_REFUSED) << r->reason();
+  auto refused = d.FinalStatus(101, 20s);
+  ASSERT_TRUE(refused);
+  EXPECT_EQ(refused->state(), msg::STATE_REFUSED);
+  EXPECT_NE(refused->reason().find("did not end done"), std::string::npos) << refused->reason();
+  EXPECT_FALSE(d.ground_truth.Take(300ms)) << "a trial ran from a failed reset";
+  // A reset that ends done: the trial behind it runs and streams.
+  ASSERT_TRUE(d.Send(d.Command("c1", 102, msg::PHASE_RESET, test::CanonicalScene(0.2))));
+  ASSERT_TRUE(d.Send(queued(103, 102)));
+  auto done = d.FinalStatus(102, 20s);
+  ASSERT_TRUE(done);
+  EXPECT_EQ(done->state(), msg::STATE_RESET_DONE) << done->reason();
+  Stream s = Collect(d, 103, 1, 20s);
+  EXPECT_TRUE(s.complete);
+  auto ran = d.FinalStatus(103, 20s);
+  ASSERT_TRUE(ran);
+  EXPECT_EQ(ran->state(), msg::STATE_EXECUTED) << ran->reason();
+  // Sent ahead of another reset than the one it names: refused.
+  ASSERT_TRUE(d.Send(d.Command("c1", 104, msg::PHASE_RESET, test::CanonicalScene(0.2))));
+  ASSERT_TRUE(d.Send(queued(105, 102)));
+  auto other = d.FinalStatus(105, 20s);
+  ASSERT_TRUE(other);
+  EXPECT_EQ(other->state(), msg::STATE_REFUSED);
+  EXPECT_NE(other->reason().find("not what this cell ran last"), std::string::npos)
+      << other->reason();
+}
+
 TEST(CellProcess, TenSecondStreamArrivesCompleteAndInOrder) {
   const int domain = test::TestDomain(2);
   auto c1 = StartCell("long", domain, 0);

@@ -902,9 +902,8 @@ TEST(TrialDriver, ATrialQueuedOnACellLostDuringItsResetIsReleased) {
 
 // A busy store holds the publish before the queued trial: its reset's
 // RESET_DONE is held, and so are the queued trial's own statuses, which come
-// after it; once the publish commits, the reset is taken, then the queued
-// trial's statuses, in the cell's order, and its stream (kept in memory:
-// it came before its sink) is written whole.
+// after it, as are its batches; once the publish commits, the reset is
+// taken, then the queued trial's stream and statuses.
 TEST(TrialDriver, AQueuedTrialsStatusesWaitForItsResetsStatus) {
   Harness h(2);
   QueueNext(h);

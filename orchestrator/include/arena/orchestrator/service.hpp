@@ -126,7 +126,12 @@ struct ServiceCounters {
 // EXECUTE and RESET itself; the rest is arena's (store transactions, DDS
 // hops, polling). A cell freed since the service's previous dispatch pass is
 // busy from its freeing, not the claim: the loop's work before the claim
-// kept it waiting too.
+// kept it waiting too. A trial queued behind its cell's reset (issue 27:
+// its EXECUTE went out with that RESET) is busy from the previous trial's
+// RESET_DONE taken: the figure is then the cell's cycle between two
+// RESET_DONEs less its execute and reset. Its claim leg is 0, and its
+// EXECUTE leg may be below 0 by the head start the queue gave the cell (it
+// began before the service took the RESET_DONE that frees it).
 struct TrialTiming {
   std::int64_t trial_id = 0, campaign_id = 0;
   int attempt = 0;

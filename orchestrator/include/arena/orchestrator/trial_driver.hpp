@@ -36,6 +36,11 @@
 // it is held and taken once the publish committed; a refused publish ends
 // the attempt by its own rule and the cell, still resetting for no trial,
 // is freed by that reset's status or deadline, nothing of it recorded.
+// Right after that RESET the trial it is aimed at is claimed and its EXECUTE
+// sent too (DriverOptions::queue_next_execute; DecideQueued): the cell runs
+// it right after the reset ended done, the driver takes its statuses only
+// after the reset's, and releases it (back to planned, not counted) when the
+// reset fails or the cell's phase ends otherwise first.
 //
 // A cell serves one service session at a time (TrialCommand PHASE_CLAIM,
 // renewed every claim_period_s while we live): the driver dispatches only to
