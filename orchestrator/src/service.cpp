@@ -641,7 +641,7 @@ struct Service::Impl {
     adaptive = std::make_unique<AdaptivePlanner>(*store);
     DriverOptions d;
     d.service = o;
-    d.queue_next_execute = true;
+    d.queue_next_execute = o.queue_next_execute;
     driver = std::make_unique<TrialDriver>(d, me, *trial_store, transport, predictor);
     driver->OnInputWaiting([doorbell = input] { return doorbell->Rung(); });
     driver->OnPathChange([&path = predictor.path()](const std::string& cell, bool on_path) {

@@ -82,6 +82,10 @@ struct ServiceOptions {
   int prediction_backlog = 64;
   bool exit_when_done = false;       // `arena run`: stop when no active campaign is left
   std::int64_t only_campaign = 0;    // > 0: exit_when_done looks at this campaign only
+  // A cell's next trial sent right behind its RESET (issue 27: the queued
+  // trial, DriverOptions::queue_next_execute). Off only to measure what it
+  // saves (orchestration_bench's BM_CampaignEndToEndUnqueued); no option sets it.
+  bool queue_next_execute = true;
   std::int64_t store_max_pages = 0;  // > 0: the store may not grow past this many 4 KiB
                                      //   pages (db::StoreOptions::max_pages; fault tests)
   // Once serving, a write waits this long for another process's lock before
