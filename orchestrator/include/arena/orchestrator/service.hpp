@@ -80,8 +80,8 @@ struct ServiceOptions {
   // claims a new trial until the predictor catches up (memory bounded, and a
   // slow predictor is never left behind for good).
   int prediction_backlog = 64;
-  bool exit_when_done = false;       // `arena run`: stop when no active campaign is left
-  std::int64_t only_campaign = 0;    // > 0: exit_when_done looks at this campaign only
+  bool exit_when_done = false;     // `arena run`: stop when no active campaign is left
+  std::int64_t only_campaign = 0;  // > 0: exit_when_done looks at this campaign only
   // A cell's next trial sent right behind its RESET (issue 27: the queued
   // trial, DriverOptions::queue_next_execute). Off only to measure what it
   // saves (orchestration_bench's BM_CampaignEndToEndUnqueued); no option sets it.
