@@ -400,49 +400,40 @@ TEST(StoreTrial, RetryKeepsLineageBacksOffAndCaps) {
 // Issue 27: an attempt released before its cell ran it (an EXECUTE queued
 // behind a reset that failed) runs again at once (no backoff), and the audit
 // row names the rule.
-TEST(StoreTrial, AReleasedAttemptIsNotCountedAndWaitsForNothing) {
+TEST(StoreTrial, AReleasedAttemptIsNotCountedWaitsForNothingAndNamesItsRule) {
   TempDir dir;
   auto store = Store::Open(dir.File("s.db"));
   store->UpsertCell("c", {"point"});
-  store->CreateCampaign(MakeCampaign(), MakeTrials(1));
+  store->CreateCampaign(MakeCampaign(), MakeTrials(2));
   auto t = store->ClaimNextTrial("c");
   ASSERT_TRUE(t);
   EXPECT_STORE_ERROR(store->ReleaseTrial(t->trial_id, 2, "x", "queued.r"), K::kStaleAttempt);
   EXPECT_STORE_ERROR(store->ReleaseTrial(t->trial_id, 1, "x", ""), K::kBadInput);
   store->ReleaseTrial(t->trial_id, 1, "queued behind a failed reset", "queued.reset_failed");
   EXPECT_EQ(store->GetTrial(t->trial_id).state, TrialState::kPlanned);
-  EXPECT_EQ(store->GetTrial(t->trial_id).attempt, 2);
-  auto again = store->ClaimNextTrial("c");  // no backoff
-  ASSERT_TRUE(again);
-  EXPECT_EQ(again->attempt, 2);
-  // Only dispatched trials are released.
-  auto in = store->BeginIngest(again->trial_id, 2, testing::SceneSites());
-  in->Add(MakeSample(0));
-  in->Finish();
-  EXPECT_STORE_ERROR(store->ReleaseTrial(again->trial_id, 2, "x", "queued.r"),
-                     K::kIllegalTransition);
   const auto log = store->ListTransitions(t->trial_id);
-  ASSERT_GE(log.size(), 3u);
+  ASSERT_EQ(log.size(), 3u);
   EXPECT_EQ(log[2].to_state, "planned");
   EXPECT_EQ(log[2].rule, "queued.reset_failed");
   EXPECT_NE(log[2].reason.find("not counted"), std::string::npos);
-  ExpectHealthy(*store);
-}
-
-TEST(StoreTrial, AReleasedAttemptDoesNotUseUpTheAttempts) {
-  TempDir dir;
-  auto store = Store::Open(dir.File("s.db"));
-  store->UpsertCell("c", {"point"});
-  store->CreateCampaign(MakeCampaign(), MakeTrials(1));
-  auto t = store->ClaimNextTrial("c");
-  store->ReleaseTrial(t->trial_id, 1, "cell lost before it ran", "queued.cell_phase_ended");
-  auto again = store->ClaimNextTrial("c");
+  auto again = store->ClaimNextTrial("c");  // at once: no backoff
   ASSERT_TRUE(again);
-  // max_attempts 2: attempts 2 and 3 are the two counted ones.
-  EXPECT_EQ(store->RetryTrial(again->trial_id, 2, "deadline", 2, 0), TrialState::kPlanned);
+  EXPECT_EQ(again->trial_id, t->trial_id);
+  EXPECT_EQ(again->attempt, 2);
+  // Not counted: with max_attempts 2, attempts 2 and 3 are the two counted ones.
+  EXPECT_EQ(store->RetryTrial(t->trial_id, 2, "deadline", 2, 0), TrialState::kPlanned);
   auto third = store->ClaimNextTrial("c");
   ASSERT_TRUE(third);
-  EXPECT_EQ(store->RetryTrial(third->trial_id, 3, "deadline", 2, 0), TrialState::kFailed);
+  EXPECT_EQ(third->attempt, 3);
+  EXPECT_EQ(store->RetryTrial(t->trial_id, 3, "deadline", 2, 0), TrialState::kFailed);
+  // Only a dispatched trial is released.
+  auto other = store->ClaimNextTrial("c");
+  ASSERT_TRUE(other);
+  auto in = store->BeginIngest(other->trial_id, 1, testing::SceneSites());
+  in->Add(MakeSample(0));
+  in->Finish();
+  EXPECT_STORE_ERROR(store->ReleaseTrial(other->trial_id, 1, "x", "queued.r"),
+                     K::kIllegalTransition);
   ExpectHealthy(*store);
 }
 
