@@ -126,7 +126,11 @@ void ResetGate::ResetEnded(const msg::TrialCommand& reset, bool done, const std:
 }
 
 std::string ResetGate::Check(const msg::TrialCommand& execute) const {
-  if (execute.after_reset_trial_id() == 0) return "";
+  if (execute.after_reset_trial_id() == 0)
+    return execute.after_reset_attempt() == 0
+               ? ""
+               : "after_reset_attempt: set to " + std::to_string(execute.after_reset_attempt()) +
+                     " without after_reset_trial_id (0 = not sent behind a reset)";
   const std::string which = "the RESET after trial " +
                             std::to_string(execute.after_reset_trial_id()) + " attempt " +
                             std::to_string(execute.after_reset_attempt());

@@ -1040,6 +1040,13 @@ struct TrialDriver::Impl {
          [this, q, reason, rule] { store.ReleaseTrial(q.trial_id, q.attempt, reason, rule); });
   }
 
+  // A message of the cell's queued (trial, attempt) waits for its reset's
+  // status to be taken (RunQueued takes it then).
+  static bool HoldsForQueued(const CellRun& cell, std::int64_t trial_id, int attempt) {
+    return cell.queued && cell.queued->trial_id == trial_id && cell.queued->attempt == attempt &&
+           DecideQueued(QueuedEvent::kOwnStatus).step == QueuedStep::kHold;
+  }
+
   // The reset before it ended done: the cell runs the queued trial now.
   // Its time on the cell counts from here (TrialTiming: the cell's cycle).
   void RunQueued(CellRun& cell) {
@@ -1116,8 +1123,7 @@ struct TrialDriver::Impl {
       return;
     Execution& ex = it->second;
     CellRun& cell = Cell(ex.cell_id);
-    if (cell.queued && cell.queued->trial_id == ex.trial_id && cell.queued->attempt == ex.attempt &&
-        DecideQueued(QueuedEvent::kOwnStatus).step == QueuedStep::kHold) {
+    if (HoldsForQueued(cell, ex.trial_id, ex.attempt)) {
       // Before its reset's status was taken (a held RESET_DONE): taken after it (RunQueued).
       if (cell.queued->held_truth.size() < kMaxHeldBatches)
         cell.queued->held_truth.push_back(batch);
@@ -1375,9 +1381,8 @@ struct TrialDriver::Impl {
     auto cit = cells.find(st.cell_id());
     if (cit == cells.end()) return;
     CellRun& cell = cit->second;
-    if (cell.queued && cell.queued->trial_id == static_cast<std::int64_t>(st.trial_id()) &&
-        cell.queued->attempt == static_cast<int>(st.attempt()) &&
-        DecideQueued(QueuedEvent::kOwnStatus).step == QueuedStep::kHold) {
+    if (HoldsForQueued(cell, static_cast<std::int64_t>(st.trial_id()),
+                       static_cast<int>(st.attempt()))) {
       // Before its reset's status was taken (a held RESET_DONE): taken after it (RunQueued).
       if (cell.queued->held.size() == 2 * kMaxHeldStatuses)
         cell.queued->held.erase(cell.queued->held.begin());

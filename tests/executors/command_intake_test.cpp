@@ -161,6 +161,15 @@ TEST(ResetGate, AnExecuteNotSentAheadAlwaysRuns) {
   EXPECT_EQ(gate.Check(Command(7, msg::PHASE_EXECUTE, 3)), "");
 }
 
+TEST(ResetGate, AnAttemptWithoutItsTrialIsRefusedNamingTheField) {
+  ResetGate gate;
+  msg::TrialCommand reset = Command(7, msg::PHASE_RESET, 2);
+  reset.attempt(1);
+  gate.ResetEnded(reset, true, "");
+  const std::string why = gate.Check(Ahead(7, 3, 0, 1));
+  EXPECT_EQ(why.rfind("after_reset_attempt:", 0), 0u) << why;
+}
+
 TEST(ResetGate, AnExecuteSentAheadRunsRightAfterItsResetEndedDone) {
   ResetGate gate;
   msg::TrialCommand reset = Command(7, msg::PHASE_RESET, 2);
