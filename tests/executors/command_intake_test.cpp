@@ -154,6 +154,15 @@ msg::TrialCommand Ahead(std::uint64_t session, std::uint64_t trial, std::uint64_
   return c;
 }
 
+// A gate whose cell just ended the RESET after trial 2 attempt 1 of session 7.
+ResetGate AfterReset(bool done, const std::string& why = "") {
+  ResetGate gate;
+  msg::TrialCommand reset = Command(7, msg::PHASE_RESET, 2);
+  reset.attempt(1);
+  gate.ResetEnded(reset, done, why);
+  return gate;
+}
+
 TEST(ResetGate, AnExecuteNotSentAheadAlwaysRuns) {
   ResetGate gate;
   EXPECT_EQ(gate.Check(Command(7, msg::PHASE_EXECUTE, 3)), "");
@@ -162,27 +171,18 @@ TEST(ResetGate, AnExecuteNotSentAheadAlwaysRuns) {
 }
 
 TEST(ResetGate, AnAttemptWithoutItsTrialIsRefusedNamingTheField) {
-  ResetGate gate;
-  msg::TrialCommand reset = Command(7, msg::PHASE_RESET, 2);
-  reset.attempt(1);
-  gate.ResetEnded(reset, true, "");
+  ResetGate gate = AfterReset(true);
   const std::string why = gate.Check(Ahead(7, 3, 0, 1));
   EXPECT_EQ(why.rfind("after_reset_attempt:", 0), 0u) << why;
 }
 
 TEST(ResetGate, AnExecuteSentAheadRunsRightAfterItsResetEndedDone) {
-  ResetGate gate;
-  msg::TrialCommand reset = Command(7, msg::PHASE_RESET, 2);
-  reset.attempt(1);
-  gate.ResetEnded(reset, true, "");
+  ResetGate gate = AfterReset(true);
   EXPECT_EQ(gate.Check(Ahead(7, 3, 2, 1)), "");
 }
 
 TEST(ResetGate, AnExecuteSentAheadIsRefusedAfterAFailedReset) {
-  ResetGate gate;
-  msg::TrialCommand reset = Command(7, msg::PHASE_RESET, 2);
-  reset.attempt(1);
-  gate.ResetEnded(reset, false, "object dropped");
+  ResetGate gate = AfterReset(false, "object dropped");
   const std::string why = gate.Check(Ahead(7, 3, 2, 1));
   EXPECT_NE(why.find("did not end done (object dropped)"), std::string::npos) << why;
   EXPECT_NE(why.find("after trial 2 attempt 1"), std::string::npos) << why;
@@ -191,9 +191,7 @@ TEST(ResetGate, AnExecuteSentAheadIsRefusedAfterAFailedReset) {
 TEST(ResetGate, AnExecuteSentAheadIsRefusedAfterAnyOtherResetOrCommand) {
   ResetGate gate;
   EXPECT_NE(gate.Check(Ahead(7, 3, 2, 1)), "");  // nothing ran yet
-  msg::TrialCommand reset = Command(7, msg::PHASE_RESET, 2);
-  reset.attempt(1);
-  gate.ResetEnded(reset, true, "");
+  gate = AfterReset(true);
   EXPECT_NE(gate.Check(Ahead(7, 3, 2, 2)), "");  // another attempt
   EXPECT_NE(gate.Check(Ahead(7, 3, 9, 1)), "");  // another trial
   EXPECT_NE(gate.Check(Ahead(8, 3, 2, 1)), "");  // another session
